@@ -1,0 +1,3 @@
+from simfab.cli import entry
+
+entry()

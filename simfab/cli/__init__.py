@@ -1,0 +1,133 @@
+"""The ``simfab`` command: one subcommand per module in this package.
+
+Each subcommand module defines ``HELP`` (one line), ``add_args(parser)`` and
+``run(args) -> dict``. The dict is the run's summary: output paths and key figures; with
+``--json`` it is printed as exactly one JSON object on stdout. A module may also define
+``demo(ctx: DemoContext) -> dict`` to take part in ``simfab demo``.
+
+Exit codes: 0 ok; 2 bad input (one line on stderr naming the file/field, no traceback);
+1 internal failure or a solver that did not converge (one line, traceback only with
+``SIMFAB_DEBUG=1``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import sys
+
+from simfab.errors import ConvergenceError, InputError
+
+#: Subcommands in the order ``simfab --help`` lists them.
+SUBCOMMANDS = ("grow", "couple", "deploy", "crowd", "validate", "demo", "render", "inspect")
+
+_MODULE = {"inspect": "inspect_"}  # avoid shadowing the stdlib ``inspect`` module
+
+
+def subcommand_module(name: str):
+    """Import the module implementing subcommand ``name``."""
+    return importlib.import_module(f"simfab.cli.{_MODULE.get(name, name)}")
+
+
+def add_common_args(p: argparse.ArgumentParser) -> None:
+    """Flags every subcommand takes (also after the subcommand name)."""
+    g = p.add_argument_group("common options")
+    g.add_argument("--out", default=argparse.SUPPRESS, metavar="DIR", help="output folder (default ./simfab-out/<subcommand>)")
+    g.add_argument("--seed", type=int, default=argparse.SUPPRESS, metavar="N", help="random seed (default 0)")
+    g.add_argument("--device", choices=["cpu", "cuda"], default=argparse.SUPPRESS, help="Warp device (default cpu)")
+    g.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars or chatter")
+    g.add_argument("--json", action="store_true", default=argparse.SUPPRESS, help="print exactly one JSON object (outputs and key figures) on stdout")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that raises InputError instead of exiting, so main() owns the exit code."""
+
+    def error(self, message):  # noqa: D401 - argparse API
+        raise InputError(f"{self.prog}: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from simfab import __version__
+
+    parser = _Parser(prog="simfab", description="Computational fabrication design built around physics simulation.")
+    parser.add_argument("--version", action="version", version=f"simfab {__version__}")
+    add_common_args(parser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name in SUBCOMMANDS:
+        mod = subcommand_module(name)
+        sp = sub.add_parser(name, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
+        add_common_args(sp)
+        mod.add_args(sp)
+        sp.set_defaults(_module=mod)
+    return parser
+
+
+DEFAULTS = {"out": None, "seed": 0, "device": "cpu", "quiet": False, "json": False}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the CLI in-process; return the exit code (never calls ``sys.exit``)."""
+    try:
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:  # --help / --version
+            return int(e.code or 0)
+        for k, v in DEFAULTS.items():
+            if not hasattr(args, k):
+                setattr(args, k, v)
+        if args.command is None:
+            parser.print_help(sys.stderr)
+            return 2
+        if args.out is None:
+            args.out = os.path.join("simfab-out", args.command)
+        if args.json:
+            args.quiet = True
+        result = args._module.run(args)
+        _report(result, args)
+        return 0
+    except InputError as e:
+        print(f"simfab: error: {_one_line(e)}", file=sys.stderr)
+        return 2
+    except ConvergenceError as e:
+        print(f"simfab: did not converge: {_one_line(e)}", file=sys.stderr)
+        _debug_trace()
+        return 1
+    except KeyboardInterrupt:
+        print("simfab: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # internal failure: one line unless debugging
+        print(f"simfab: internal error: {type(e).__name__}: {_one_line(e)}", file=sys.stderr)
+        _debug_trace()
+        return 1
+
+
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
+def _debug_trace() -> None:
+    if os.environ.get("SIMFAB_DEBUG"):
+        import traceback
+
+        traceback.print_exc()
+
+
+def _report(result: dict | None, args) -> None:
+    from simfab.io.atomic import to_jsonable
+
+    result = to_jsonable(result or {})
+    if args.json:
+        sys.stdout.write(json.dumps(result) + "\n")
+    elif not args.quiet:
+        for k, v in result.items():
+            if isinstance(v, (dict, list)):
+                v = json.dumps(v)
+            print(f"{k}: {v}")
+
+
+def entry() -> None:
+    """Console-script entry point."""
+    sys.exit(main())

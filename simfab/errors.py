@@ -1,0 +1,23 @@
+"""Exception types that map onto the CLI's exit codes.
+
+- :class:`InputError` -> exit 2: the user's input (file, field, parameter) is unusable.
+  The message is one line naming the file/field and what is wrong.
+- :class:`ConvergenceError` -> exit 1: a solver did not reach its tolerance. It is never
+  swallowed; a result that did not converge is not returned.
+"""
+
+
+class SimfabError(Exception):
+    """Base class of simfab's own errors."""
+
+
+class InputError(SimfabError, ValueError):
+    """Bad user input. ``str(err)`` is a one-line message naming where the problem is."""
+
+    def __init__(self, message: str, *, where: str | None = None):
+        self.where = where
+        super().__init__(f"{where}: {message}" if where else message)
+
+
+class ConvergenceError(SimfabError, RuntimeError):
+    """A solver did not converge to its documented tolerance."""

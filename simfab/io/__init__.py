@@ -1,0 +1,1 @@
+"""File formats at simfab's boundary: USD stages, MJCF scenes, meshes, rendering, atomic writes."""

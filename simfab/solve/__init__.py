@@ -1,0 +1,1 @@
+"""Solver machinery shared by the FEM, contact and rod simulators."""

@@ -1,0 +1,21 @@
+"""Access to the published reference figures in ``../shared/reference/figures.json``."""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+
+_CANDIDATES = [
+    os.environ.get("SIMFAB_REFERENCE", ""),
+    pathlib.Path(__file__).resolve().parents[3] / "shared" / "reference" / "figures.json",
+    pathlib.Path.cwd().parent / "shared" / "reference" / "figures.json",
+]
+
+
+def figures() -> dict:
+    """The reference figures, or ``{}`` when the shared folder is not beside the project."""
+    for c in _CANDIDATES:
+        if c and pathlib.Path(c).is_file():
+            return json.loads(pathlib.Path(c).read_text())
+    return {}
