@@ -1,0 +1,258 @@
+"""Projected Newton's method with a backtracking (Armijo) line search.
+
+Generic over the objective: the caller supplies ``fun(x, need_hessian) -> (f, g, H)`` with a
+positive semi-definite sparse Hessian (e.g. per-element PSD-projected FEM Hessians plus a
+barrier term). Each iteration solves ``H_ff dx_f = -g_f`` on the free dofs with a sparse
+Cholesky factorization (:class:`simfab.solve.linear.SPDSolver`, symbolic analysis reused while
+the pattern is unchanged), then backtracks along ``dx`` until the Armijo sufficient-decrease
+condition holds at an admissible point.
+
+Feasibility hooks (used by barrier-based contact):
+
+- ``max_step(x, dx) -> alpha_max`` caps the step before the line search (e.g. conservative
+  advancement so that no vertex crosses an obstacle within the step);
+- ``admissible(x) -> bool`` rejects trial points (e.g. an inverted element); an objective
+  value of ``+inf`` or NaN is rejected as well.
+
+Convergence (checked at every iterate, on the free dofs only):
+
+1. gradient: ``||g_f||_inf <= grad_tol * scale`` where ``scale = options.grad_scale`` when given
+   (absolute, in the units of ``g``), otherwise ``||g_f(x0)||_inf`` (a relative reduction of
+   the starting residual; a start with ``g_f(x0) == 0`` is converged at once);
+2. Newton step: ``||dx_f||_inf <= step_tol * x_scale`` with ``x_scale = options.x_scale`` when
+   given, otherwise ``max(||x0_f||_inf, 1)`` in the units of ``x`` - the Newton step estimates
+   the distance to the minimizer, so once it is at round-off level nothing further is gained;
+3. round-off: the line search cannot decrease ``f`` and the predicted decrease ``-g.dx`` is
+   below ``roundoff * max(|f|, tiny)``.
+
+Anything else - ``max_iter`` reached, or a line search that fails with a meaningful predicted
+decrease left - raises :class:`simfab.errors.ConvergenceError` naming the iteration count and
+the residual. A result that did not converge is never returned.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from simfab.errors import ConvergenceError
+from simfab.solve.linear import NotPositiveDefinite, SPDSolver
+
+Objective = Callable[[np.ndarray, bool], tuple]
+
+
+@dataclass(frozen=True, kw_only=True)
+class NewtonOptions:
+    """Stopping and line-search parameters of :func:`minimize` (see the module docstring)."""
+
+    max_iter: int = 50
+    grad_tol: float = 1e-8  # relative to ||g_f(x0)||_inf unless grad_scale is given
+    grad_scale: float | None = None  # absolute gradient scale [units of g]; None: ||g_f(x0)||_inf
+    step_tol: float = 1e-12  # Newton step relative to x_scale
+    x_scale: float | None = None  # length scale of x [units of x]; None: max(||x0_f||_inf, 1)
+    armijo: float = 1e-4  # sufficient-decrease constant c1 in f(x+a dx) <= f + c1 a g.dx
+    backtrack: float = 0.5  # step shrink factor per rejected trial
+    max_backtracks: int = 40
+    roundoff: float = 1e-12  # decrease (relative to |f|) below which f cannot resolve it
+    # Regularization when the Cholesky factorization fails: H + shift * mean|diag H| * I with
+    # shift starting at reg_initial, multiplied by reg_growth per failure, at most reg_max.
+    reg_initial: float = 1e-10
+    reg_growth: float = 100.0
+    reg_max: float = 1e2
+
+
+@dataclass
+class NewtonResult:
+    """Outcome of a converged :func:`minimize`.
+
+    x : (N,) float64 minimizer (fixed dofs equal to x0)
+    energy : objective value at x
+    grad_norm : ||g_f(x)||_inf on the free dofs
+    iterations : Newton iterations taken (linear solves)
+    converged : always True for a returned result (non-convergence raises)
+    reason : which criterion stopped the iteration ("gradient", "step", "roundoff")
+    history : one dict per iteration: energy, grad_norm, alpha, backtracks, shift
+    """
+
+    x: np.ndarray
+    energy: float
+    grad_norm: float
+    iterations: int
+    converged: bool
+    reason: str = ""
+    history: list = field(default_factory=list)
+
+
+class _FreeBlock:
+    """Extracts the free-dof submatrix of a CSR matrix, caching the index map per pattern."""
+
+    def __init__(self, free_idx: np.ndarray, n: int):
+        self.free_idx = free_idx
+        self.n = n
+        self._key = None
+        self._sel = None
+        self._indices = None
+        self._indptr = None
+
+    def __call__(self, H: sp.spmatrix) -> sp.csr_matrix:
+        if len(self.free_idx) == self.n:
+            return sp.csr_matrix(H)
+        H = sp.csr_matrix(H)
+        if self._key is None or not (
+            self._key[0].shape == H.indptr.shape
+            and self._key[1].shape == H.indices.shape
+            and np.array_equal(self._key[0], H.indptr)
+            and np.array_equal(self._key[1], H.indices)
+        ):
+            self._build(H)
+        m = len(self.free_idx)
+        return sp.csr_matrix((H.data[self._sel], self._indices, self._indptr), shape=(m, m))
+
+    def _build(self, H: sp.csr_matrix) -> None:
+        new_index = np.full(self.n, -1, dtype=np.int64)
+        new_index[self.free_idx] = np.arange(len(self.free_idx))
+        rows = np.repeat(np.arange(self.n), np.diff(H.indptr))
+        keep = (new_index[rows] >= 0) & (new_index[H.indices] >= 0)
+        self._sel = np.flatnonzero(keep)
+        r = new_index[rows[keep]]
+        self._indices = new_index[H.indices[keep]].astype(np.int32)
+        counts = np.bincount(r, minlength=len(self.free_idx))
+        self._indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+        self._key = (H.indptr.copy(), H.indices.copy())
+
+
+def _solve_regularized(solver: SPDSolver, H: sp.csr_matrix, rhs: np.ndarray, opts: NewtonOptions):
+    """Solve H dx = rhs; on a failed factorization add a growing diagonal shift. Returns (dx, shift)."""
+    try:
+        return solver.solve(H, rhs), 0.0
+    except NotPositiveDefinite:
+        pass
+    diag = np.abs(H.diagonal())
+    base = float(diag.mean()) if diag.size and diag.mean() > 0 else 1.0
+    shift = opts.reg_initial
+    while shift <= opts.reg_max:
+        try:
+            return solver.solve(H + sp.identity(H.shape[0], format="csr") * (shift * base), rhs), shift * base
+        except NotPositiveDefinite:
+            shift *= opts.reg_growth
+    raise ConvergenceError(
+        f"Newton: Hessian could not be factorized even with a diagonal shift of {opts.reg_max:g} x mean|diag|"
+    )
+
+
+def minimize(
+    fun: Objective,
+    x0: np.ndarray,
+    *,
+    free: np.ndarray | None = None,
+    options: NewtonOptions = NewtonOptions(),
+    max_step: Callable[[np.ndarray, np.ndarray], float] | None = None,
+    admissible: Callable[[np.ndarray], bool] | None = None,
+    solver: SPDSolver | None = None,
+) -> NewtonResult:
+    """Minimize ``fun`` from ``x0`` by projected Newton with backtracking line search.
+
+    Parameters
+    ----------
+    fun : callable ``fun(x, need_hessian) -> (f, g, H)``
+        ``x`` (N,) float64; ``f`` float (``+inf`` marks an infeasible point); ``g`` (N,) gradient;
+        ``H`` scipy.sparse (N, N) positive semi-definite (PSD-projected) when ``need_hessian``,
+        else may be None.
+    x0 : (N,) array, start point; must be admissible with a finite ``f``.
+    free : (N,) bool mask of unknown dofs; the others stay at ``x0``'s values. None: all free.
+    options : :class:`NewtonOptions`.
+    max_step : ``max_step(x, dx) -> alpha_max`` in (0, 1], the largest feasible step fraction
+        along the full-length direction ``dx`` (zero on fixed dofs).
+    admissible : ``admissible(x) -> bool``; trial points failing it are rejected.
+    solver : an :class:`SPDSolver` to reuse (keeps the symbolic analysis across calls).
+
+    Returns
+    -------
+    NewtonResult with ``converged=True``. Raises ConvergenceError otherwise.
+    """
+    x = np.array(x0, dtype=np.float64).ravel()
+    n = x.size
+    if free is None:
+        free_idx = np.arange(n)
+    else:
+        free = np.asarray(free, dtype=bool).ravel()
+        if free.shape != (n,):
+            raise ValueError(f"free mask has shape {free.shape}, expected ({n},)")
+        free_idx = np.flatnonzero(free)
+    solver = solver if solver is not None else SPDSolver()
+    opts = options
+    sub = _FreeBlock(free_idx, n)
+    tiny = np.finfo(np.float64).tiny
+
+    if admissible is not None and not admissible(x):
+        raise ConvergenceError("Newton: the start point is not admissible")
+    f, g, H = fun(x, True)
+    if not np.isfinite(f):
+        raise ConvergenceError(f"Newton: the objective is not finite at the start point (f={f})")
+    gnorm = _inf_norm(g[free_idx])
+    gscale = opts.grad_scale if opts.grad_scale is not None else gnorm
+    xscale = opts.x_scale if opts.x_scale is not None else max(_inf_norm(x[free_idx]), 1.0)
+    history: list[dict] = []
+
+    def done(reason: str, it: int) -> NewtonResult:
+        return NewtonResult(x=x, energy=float(f), grad_norm=gnorm, iterations=it, converged=True,
+                            reason=reason, history=history)
+
+    if free_idx.size == 0 or gnorm <= opts.grad_tol * gscale:
+        return done("gradient", 0)
+
+    for it in range(1, opts.max_iter + 1):
+        dx_f, shift = _solve_regularized(solver, sub(H), -g[free_idx], opts)
+        dx = np.zeros(n)
+        dx[free_idx] = dx_f
+        slope = float(g[free_idx] @ dx_f)
+        if not slope < 0.0:  # regularized SPD solve always gives descent unless g ~ 0
+            if -slope <= opts.roundoff * max(abs(f), tiny):
+                return done("roundoff", it - 1)
+            raise ConvergenceError(f"Newton: search direction is not a descent direction at iteration {it} "
+                                   f"(g.dx={slope:.3e}, ||g||_inf={gnorm:.3e})")
+        if _inf_norm(dx_f) <= opts.step_tol * xscale:
+            return done("step", it - 1)
+
+        alpha = 1.0
+        if max_step is not None:
+            alpha = float(min(1.0, max_step(x, dx)))
+            if not alpha > 0.0:
+                raise ConvergenceError(f"Newton: max_step returned {alpha} at iteration {it}")
+        accepted = False
+        for bt in range(opts.max_backtracks + 1):
+            xt = x + alpha * dx
+            if admissible is None or admissible(xt):
+                ft = fun(xt, False)[0]
+                if np.isfinite(ft) and ft <= f + opts.armijo * alpha * slope:
+                    accepted = True
+                    break
+            alpha *= opts.backtrack
+        if not accepted:
+            if -slope <= opts.roundoff * max(abs(f), tiny):
+                # the decrease still available is below what f can resolve in floating point
+                return done("roundoff", it - 1)
+            raise ConvergenceError(
+                f"Newton: line search failed at iteration {it} after {opts.max_backtracks} backtracks "
+                f"(||g_free||_inf={gnorm:.3e}, target {opts.grad_tol * gscale:.3e}, g.dx={slope:.3e})"
+            )
+        x = xt
+        f, g, H = fun(x, True)
+        gnorm = _inf_norm(g[free_idx])
+        history.append(dict(energy=float(f), grad_norm=gnorm, alpha=alpha, backtracks=bt, shift=shift))
+        if gnorm <= opts.grad_tol * gscale:
+            return done("gradient", it)
+        if alpha == 1.0 and _inf_norm(dx_f) <= opts.step_tol * xscale:
+            return done("step", it)
+
+    raise ConvergenceError(
+        f"Newton did not converge in {opts.max_iter} iterations: ||g_free||_inf={gnorm:.3e} > "
+        f"target {opts.grad_tol * gscale:.3e}, f={f:.6e}"
+    )
+
+
+def _inf_norm(v: np.ndarray) -> float:
+    return float(np.max(np.abs(v))) if v.size else 0.0

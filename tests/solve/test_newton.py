@@ -1,0 +1,125 @@
+"""Projected Newton (simfab.solve.newton) on problems with known minimizers."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from simfab.errors import ConvergenceError
+from simfab.solve.newton import NewtonOptions, minimize
+
+
+def _spd(n, seed):
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((n, n))
+    return A @ A.T + n * np.eye(n)
+
+
+def _quadratic(A, b):
+    """f = 1/2 x^T A x - b^T x, g = A x - b, H = A; minimizer x* = A^-1 b."""
+    As = sp.csr_matrix(A)
+
+    def fun(x, need_h):
+        g = A @ x - b
+        return 0.5 * x @ A @ x - b @ x, g, (As if need_h else None)
+
+    return fun
+
+
+def test_convex_quadratic_converges_in_one_step():
+    A = _spd(12, 0)
+    b = np.random.default_rng(1).standard_normal(12)
+    res = minimize(_quadratic(A, b), np.zeros(12))
+    assert res.converged and res.iterations == 1
+    # exact Newton step on a quadratic: x1 = A^-1 b up to round-off of the Cholesky solve
+    np.testing.assert_allclose(res.x, np.linalg.solve(A, b), rtol=1e-10, atol=1e-12)
+
+
+def test_free_mask_keeps_fixed_dofs_and_solves_reduced_problem():
+    A = _spd(10, 2)
+    b = np.random.default_rng(3).standard_normal(10)
+    x0 = np.random.default_rng(4).standard_normal(10)
+    free = np.ones(10, bool)
+    free[[0, 3, 7]] = False
+    res = minimize(_quadratic(A, b), x0, free=free)
+    np.testing.assert_array_equal(res.x[~free], x0[~free])
+    # reduced optimality: A_ff x_f = b_f - A_fc x_c
+    xf = np.linalg.solve(A[np.ix_(free, free)], b[free] - A[np.ix_(free, ~free)] @ x0[~free])
+    np.testing.assert_allclose(res.x[free], xf, rtol=1e-10, atol=1e-12)
+
+
+def test_raises_when_iteration_capped():
+    # Rosenbrock-like nonconvex problem needs many iterations from far away; cap at 2
+    def fun(x, need_h):
+        a, b = 1.0, 100.0
+        f = (a - x[0]) ** 2 + b * (x[1] - x[0] ** 2) ** 2
+        g = np.array([-2 * (a - x[0]) - 4 * b * x[0] * (x[1] - x[0] ** 2), 2 * b * (x[1] - x[0] ** 2)])
+        H = np.array([[2 - 4 * b * (x[1] - 3 * x[0] ** 2), -4 * b * x[0]], [-4 * b * x[0], 2 * b]])
+        w, V = np.linalg.eigh(H)
+        H = (V * np.maximum(w, 1e-8)) @ V.T  # PSD projection
+        return f, g, sp.csr_matrix(H) if need_h else None
+
+    with pytest.raises(ConvergenceError, match="did not converge in 2 iterations"):
+        minimize(fun, np.array([-1.2, 1.0]), options=NewtonOptions(max_iter=2))
+    res = minimize(fun, np.array([-1.2, 1.0]), options=NewtonOptions(max_iter=200, grad_tol=1e-10))
+    np.testing.assert_allclose(res.x, [1.0, 1.0], atol=1e-6)
+
+
+def test_max_step_caps_every_step():
+    A = np.eye(3) * 2.0
+    b = np.array([10.0, 0.0, 0.0])  # minimizer at (5, 0, 0)
+    caps = []
+
+    def max_step(x, dx):
+        # never move more than 1.0 in x[0] per iteration
+        a = min(1.0, 1.0 / max(abs(dx[0]), 1e-300))
+        caps.append(a)
+        return a
+
+    res = minimize(_quadratic(A, b), np.zeros(3), max_step=max_step)
+    np.testing.assert_allclose(res.x, [5.0, 0, 0], atol=1e-9)
+    assert res.iterations >= 5  # 5 units at <= 1 per step
+    assert all(c <= 1.0 for c in caps)
+    assert all(h["alpha"] <= c for h, c in zip(res.history, caps))
+
+
+def test_admissible_rejects_trial_points():
+    # minimizer of the quadratic is x=-1, but only x > 0 is admissible; with a log barrier
+    # f = (x+1)^2/2 - mu log x the minimizer is x* = (-1 + sqrt(1 + 4 mu)) / 2
+    mu = 1e-2
+
+    def fun(x, need_h):
+        if x[0] <= 0:
+            return np.inf, np.full(1, np.nan), None
+        f = 0.5 * (x[0] + 1) ** 2 - mu * np.log(x[0])
+        g = np.array([x[0] + 1 - mu / x[0]])
+        H = sp.csr_matrix([[1 + mu / x[0] ** 2]])
+        return f, g, H if need_h else None
+
+    seen = []
+
+    def admissible(x):
+        seen.append(x[0])
+        return x[0] > 0
+
+    res = minimize(fun, np.array([2.0]), admissible=admissible)
+    np.testing.assert_allclose(res.x[0], (-1 + np.sqrt(1 + 4 * mu)) / 2, rtol=1e-9)
+    assert any(s <= 0 for s in seen)  # a full step went infeasible and was rejected
+    assert all(h["energy"] < np.inf for h in res.history)
+
+
+def test_indefinite_hessian_is_regularized():
+    # a singular (PSD, not PD) Hessian: f = 1/2 (x0 - 1)^2 + 0 * x1 ... plus a tiny quartic in x1
+    def fun(x, need_h):
+        f = 0.5 * (x[0] - 1) ** 2 + 0.25 * x[1] ** 4
+        g = np.array([x[0] - 1, x[1] ** 3])
+        H = sp.csr_matrix(np.diag([1.0, 3 * x[1] ** 2]))
+        return f, g, H if need_h else None
+
+    res = minimize(fun, np.array([0.0, 0.0]))  # H singular at the start: shift needed
+    assert res.x[0] == pytest.approx(1.0, abs=1e-9)
+    assert res.history[0]["shift"] > 0
+
+
+def test_start_point_not_admissible_raises():
+    with pytest.raises(ConvergenceError, match="start point"):
+        minimize(_quadratic(np.eye(2), np.zeros(2)), np.ones(2), admissible=lambda x: False)
