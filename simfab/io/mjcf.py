@@ -1,0 +1,426 @@
+"""MuJoCo scenes: loading MJCF, keyframe trajectories, and generating MJCF from Python.
+
+Scenes in ``scenes/`` are plain MJCF files: ``python -m mujoco.viewer --mjcf=FILE`` opens
+them. simfab reads from them
+
+- the **geometry** of bodies (:meth:`Scene.body_meshes`, world frame at ``qpos0``),
+- **named sites** (roots, targets, obstacles, fixed regions...): :attr:`Scene.sites`,
+- **custom parameters** (``<custom><numeric/><text/>``),
+- **trajectories**: a mocap body plus keyframes ``<key mpos=".." mquat=".."/>``; the
+  object's pose along the path is :class:`Trajectory`.
+
+Quaternions are (w, x, y, z) as in MuJoCo; lengths in metres.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from simfab.errors import InputError
+from simfab.io.atomic import atomic_path
+
+
+def _mujoco():
+    import mujoco
+
+    return mujoco
+
+
+# --------------------------------------------------------------------------- loading
+@dataclasses.dataclass(frozen=True)
+class Scene:
+    """A loaded MJCF scene.
+
+    Attributes
+    ----------
+    path : the MJCF file.
+    model : ``mujoco.MjModel``.
+    sites : site name -> (3,) world position [m] at ``qpos0`` (mocap bodies at their body pos).
+    site_size : site name -> (3,) MuJoCo site size [m] (sphere radius is ``size[0]``).
+    custom_numeric : ``<numeric name data>`` name -> (k,) float array.
+    custom_text : ``<text name data>`` name -> str.
+    """
+
+    path: Path
+    model: object
+    sites: dict
+    site_size: dict
+    custom_numeric: dict
+    custom_text: dict
+
+    def body_names(self) -> list[str]:
+        mj = _mujoco()
+        return [mj.mj_id2name(self.model, mj.mjtObj.mjOBJ_BODY, i) or f"body{i}" for i in range(self.model.nbody)]
+
+    def body_meshes(self, *, include_world: bool = True) -> dict:
+        """Triangle meshes of all visible geoms per body, world frame at ``qpos0``.
+
+        Returns body name -> ``trimesh.Trimesh`` (geoms of one body concatenated). Planes are
+        skipped (infinite); primitives are meshed (spheres subdivided twice, cylinders with 48
+        sides). Bodies without meshable geoms are absent.
+        """
+        import trimesh
+
+        mj = _mujoco()
+        m = self.model
+        d = mj.MjData(m)
+        mj.mj_forward(m, d)
+        names = self.body_names()
+        parts: dict[str, list] = {}
+        for g in range(m.ngeom):
+            b = int(m.geom_bodyid[g])
+            if b == 0 and not include_world:
+                continue
+            mesh = geom_mesh(m, g)
+            if mesh is None:
+                continue
+            T = np.eye(4)
+            T[:3, :3] = d.geom_xmat[g].reshape(3, 3)
+            T[:3, 3] = d.geom_xpos[g]
+            mesh.apply_transform(T)
+            parts.setdefault(names[b], []).append(mesh)
+        return {k: trimesh.util.concatenate(v) if len(v) > 1 else v[0] for k, v in parts.items()}
+
+
+def geom_mesh(model, g: int):
+    """Mesh of geom ``g`` in its own frame (``trimesh.Trimesh``), or None for planes/heightfields."""
+    import trimesh
+
+    mj = _mujoco()
+    t = int(model.geom_type[g])
+    s = np.asarray(model.geom_size[g], dtype=np.float64)
+    G = mj.mjtGeom
+    if t == G.mjGEOM_SPHERE:
+        return trimesh.creation.icosphere(subdivisions=2, radius=s[0])
+    if t == G.mjGEOM_ELLIPSOID:
+        m = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+        m.apply_scale(s)
+        return m
+    if t == G.mjGEOM_BOX:
+        return trimesh.creation.box(extents=2 * s)
+    if t == G.mjGEOM_CYLINDER:
+        return trimesh.creation.cylinder(radius=s[0], height=2 * s[1], sections=48)
+    if t == G.mjGEOM_CAPSULE:
+        return trimesh.creation.capsule(height=2 * s[1], radius=s[0], count=[24, 24])
+    if t == G.mjGEOM_MESH:
+        mid = int(model.geom_dataid[g])
+        va, vn = int(model.mesh_vertadr[mid]), int(model.mesh_vertnum[mid])
+        fa, fn = int(model.mesh_faceadr[mid]), int(model.mesh_facenum[mid])
+        V = np.asarray(model.mesh_vert[va:va + vn], dtype=np.float64)
+        F = np.asarray(model.mesh_face[fa:fa + fn], dtype=np.int64)
+        return trimesh.Trimesh(V, F, process=False)
+    return None
+
+
+def load_model(path: str | os.PathLike):
+    """``mujoco.MjModel`` from an MJCF file; InputError (one line) when missing or invalid."""
+    mj = _mujoco()
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("file not found", where=str(path))
+    try:
+        return mj.MjModel.from_xml_path(str(path))
+    except ValueError as e:
+        raise InputError(f"MuJoCo cannot load this MJCF: {' '.join(str(e).split())}", where=str(path)) from None
+
+
+def load_scene(path: str | os.PathLike) -> Scene:
+    """Load an MJCF scene with its sites and custom parameters (see :class:`Scene`)."""
+    mj = _mujoco()
+    path = Path(path)
+    model = load_model(path)
+    data = mj.MjData(model)
+    mj.mj_forward(model, data)
+    sites, sizes = {}, {}
+    for i in range(model.nsite):
+        name = mj.mj_id2name(model, mj.mjtObj.mjOBJ_SITE, i)
+        if name:
+            sites[name] = np.array(data.site_xpos[i], dtype=np.float64)
+            sizes[name] = np.array(model.site_size[i], dtype=np.float64)
+    numeric = {}
+    for i in range(model.nnumeric):
+        name = mj.mj_id2name(model, mj.mjtObj.mjOBJ_NUMERIC, i)
+        a, n = int(model.numeric_adr[i]), int(model.numeric_size[i])
+        numeric[name] = np.array(model.numeric_data[a:a + n], dtype=np.float64)
+    text = {}
+    for i in range(model.ntext):
+        name = mj.mj_id2name(model, mj.mjtObj.mjOBJ_TEXT, i)
+        a, n = int(model.text_adr[i]), int(model.text_size[i])
+        text[name] = bytes(model.text_data[a:a + n]).split(b"\0", 1)[0].decode()
+    return Scene(path=path, model=model, sites=sites, site_size=sizes, custom_numeric=numeric, custom_text=text)
+
+
+# --------------------------------------------------------------------------- trajectories
+def quat_slerp(q0, q1, u: float) -> np.ndarray:
+    """Spherical linear interpolation of unit quaternions (w, x, y, z), shortest arc."""
+    q0 = np.asarray(q0, dtype=np.float64) / np.linalg.norm(q0)
+    q1 = np.asarray(q1, dtype=np.float64) / np.linalg.norm(q1)
+    dot = float(np.dot(q0, q1))
+    if dot < 0.0:  # q and -q are the same rotation; take the short way round
+        q1, dot = -q1, -dot
+    if dot > 1.0 - 1e-12:
+        q = q0 + u * (q1 - q0)
+        return q / np.linalg.norm(q)
+    theta = np.arccos(min(dot, 1.0))
+    s = np.sin(theta)
+    return (np.sin((1 - u) * theta) * q0 + np.sin(u * theta) * q1) / s
+
+
+def quat_angle(q0, q1) -> float:
+    """Rotation angle [rad] between two unit quaternions."""
+    d = abs(float(np.dot(np.asarray(q0) / np.linalg.norm(q0), np.asarray(q1) / np.linalg.norm(q1))))
+    return 2.0 * np.arccos(min(d, 1.0))
+
+
+def quat_to_matrix(q) -> np.ndarray:
+    """(w, x, y, z) -> 3x3 rotation matrix."""
+    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+@dataclasses.dataclass(frozen=True)
+class Trajectory:
+    """Piecewise path through keyframe poses, parameterized by path length.
+
+    Between keyframes the position is linear and the orientation is slerped with the same
+    parameter. The length of a segment is ``sqrt(|Δp|² + (ρ θ)²)`` where θ is the rotation
+    angle and ρ = ``rot_length_scale`` [m/rad] (the object's bounding radius when built from a
+    scene): a pure rotation advances the path by the distance its farthest point travels,
+    and a pure translation by its length, so that insertion steps of size h make sense for
+    both.
+
+    Attributes
+    ----------
+    positions : (k, 3) keyframe positions [m].
+    quats : (k, 4) keyframe orientations (w, x, y, z).
+    rot_length_scale : ρ [m/rad].
+    """
+
+    positions: np.ndarray
+    quats: np.ndarray
+    rot_length_scale: float = 0.0
+
+    def __post_init__(self):
+        p = np.asarray(self.positions, dtype=np.float64)
+        q = np.asarray(self.quats, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 3 or len(p) < 2 or q.shape != (len(p), 4):
+            raise InputError("a trajectory needs at least 2 keyframes with mpos (3) and mquat (4)")
+        object.__setattr__(self, "positions", p)
+        object.__setattr__(self, "quats", q / np.linalg.norm(q, axis=1, keepdims=True))
+
+    @property
+    def segment_lengths(self) -> np.ndarray:
+        """(k-1,) path length of each keyframe segment [m]."""
+        dp = np.linalg.norm(np.diff(self.positions, axis=0), axis=1)
+        th = np.array([quat_angle(a, b) for a, b in zip(self.quats[:-1], self.quats[1:])])
+        return np.sqrt(dp ** 2 + (self.rot_length_scale * th) ** 2)
+
+    @property
+    def length(self) -> float:
+        """Total path length [m] (for translation-only paths: the arc length of the polyline)."""
+        return float(self.segment_lengths.sum())
+
+    def pose_at_key(self, u: float):
+        """Pose at keyframe parameter u in [0, k-1] (u = 1.5: halfway between keys 1 and 2)."""
+        k = len(self.positions)
+        u = float(np.clip(u, 0.0, k - 1))
+        i = min(int(np.floor(u)), k - 2)
+        f = u - i
+        pos = (1 - f) * self.positions[i] + f * self.positions[i + 1]
+        return pos, quat_slerp(self.quats[i], self.quats[i + 1], f)
+
+    def pose_at(self, s: float):
+        """Pose ``(pos (3,), quat (4,))`` at path length s [m], clamped to [0, length]."""
+        seg = self.segment_lengths
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        s = float(np.clip(s, 0.0, cum[-1]))
+        i = int(np.searchsorted(cum, s, side="right") - 1)
+        i = min(max(i, 0), len(seg) - 1)
+        f = 0.0 if seg[i] <= 0 else (s - cum[i]) / seg[i]
+        return self.pose_at_key(i + f)
+
+    def direction_at(self, s: float) -> np.ndarray:
+        """Unit translation direction (3,) of the segment containing s (zero for pure rotations)."""
+        seg = self.segment_lengths
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
+        d = self.positions[i + 1] - self.positions[i]
+        n = np.linalg.norm(d)
+        return d / n if n > 0 else np.zeros(3)
+
+    def sample(self, h: float, *, length: float | None = None):
+        """Poses every h [m] from 0 to ``length`` (default the whole path), end included.
+
+        Returns a list of ``(s, pos (3,), quat (4,))``; insertion step k is entry k.
+        """
+        if not h > 0:
+            raise InputError(f"step size must be positive, got {h}", where="h_in")
+        L = self.length if length is None else float(length)
+        n = int(np.floor(L / h + 1e-9))
+        ss = [k * h for k in range(n + 1)]
+        if L - ss[-1] > 1e-9 * max(L, 1.0):
+            ss.append(L)
+        return [(s, *self.pose_at(s)) for s in ss]
+
+    @classmethod
+    def from_model(cls, model, body: str = "object", *, rot_length_scale: float | None = None) -> "Trajectory":
+        """Trajectory of mocap ``body`` through the model's keyframes, in keyframe order."""
+        mj = _mujoco()
+        bid = mj.mj_name2id(model, mj.mjtObj.mjOBJ_BODY, body)
+        if bid < 0:
+            raise InputError(f"no body named {body!r} in the scene")
+        mid = int(model.body_mocapid[bid])
+        if mid < 0:
+            raise InputError(f"body {body!r} is not a mocap body (add mocap=\"true\")")
+        if model.nkey < 2:
+            raise InputError(f"the scene needs at least 2 <key> keyframes for body {body!r}, found {model.nkey}")
+        pos = np.array(model.key_mpos).reshape(model.nkey, -1, 3)[:, mid]
+        quat = np.array(model.key_mquat).reshape(model.nkey, -1, 4)[:, mid]
+        if rot_length_scale is None:
+            rot_length_scale = _body_radius(model, bid)
+        return cls(pos, quat, float(rot_length_scale))
+
+    @classmethod
+    def from_scene(cls, scene: Scene, body: str = "object", **kw) -> "Trajectory":
+        """Trajectory of mocap ``body`` in a loaded :class:`Scene`."""
+        return cls.from_model(scene.model, body, **kw)
+
+
+def _body_radius(model, bid: int) -> float:
+    """Largest distance of a body's geometry from the body frame origin [m] (exact for meshes)."""
+    r = 0.0
+    for g in range(model.ngeom):
+        if int(model.geom_bodyid[g]) != bid:
+            continue
+        mesh = geom_mesh(model, g)
+        if mesh is None:
+            continue
+        V = mesh.vertices @ quat_to_matrix(model.geom_quat[g]).T + model.geom_pos[g]
+        r = max(r, float(np.linalg.norm(V, axis=1).max()))
+    return r
+
+
+# --------------------------------------------------------------------------- generation
+def _fmt(v) -> str:
+    if isinstance(v, str):
+        return v
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    a = np.asarray(v)
+    if a.ndim == 0:
+        return f"{float(a):.9g}" if a.dtype.kind == "f" else str(a.item())
+    return " ".join(f"{x:.9g}" if a.dtype.kind == "f" else str(int(x)) for x in a.ravel())
+
+
+class MJCFBuilder:
+    """Build an MJCF model in Python and save it (validated by MuJoCo, atomically).
+
+    Example::
+
+        b = MJCFBuilder("deployed")
+        b.mesh_asset("part", V, F)
+        body = b.body("part", pos=[0, 0, 0])
+        b.geom(body, type="mesh", mesh="part", rgba=[0.8, 0.6, 0.3, 1])
+        b.save("out/deployed.xml")
+
+    Attribute values may be strings, numbers, booleans or arrays (space-separated).
+    """
+
+    def __init__(self, model_name: str = "simfab", *, timestep: float | None = None, gravity=None):
+        self.root = ET.Element("mujoco", model=model_name)
+        self.compiler = ET.SubElement(self.root, "compiler", angle="radian", autolimits="true")
+        opt = ET.SubElement(self.root, "option")
+        if timestep is not None:
+            opt.set("timestep", _fmt(timestep))
+        if gravity is not None:
+            opt.set("gravity", _fmt(gravity))
+        vis = ET.SubElement(self.root, "visual")
+        ET.SubElement(vis, "global", offwidth="1280", offheight="960")
+        ET.SubElement(vis, "headlight", ambient="0.35 0.35 0.35", diffuse="0.6 0.6 0.6")
+        self.asset = ET.SubElement(self.root, "asset")
+        ET.SubElement(self.asset, "texture", name="grid", type="2d", builtin="checker", rgb1=".85 .85 .85",
+                      rgb2=".75 .75 .75", width="256", height="256")
+        ET.SubElement(self.asset, "material", name="grid", texture="grid", texrepeat="8 8", reflectance="0")
+        self.worldbody = ET.SubElement(self.root, "worldbody")
+        ET.SubElement(self.worldbody, "light", name="top", pos="0 0 3", dir="0 0 -1", directional="true")
+        self._sections: dict[str, ET.Element] = {}
+
+    def _section(self, tag: str) -> ET.Element:
+        if tag not in self._sections:
+            self._sections[tag] = ET.SubElement(self.root, tag)
+        return self._sections[tag]
+
+    def add(self, parent: ET.Element, tag: str, **attrs) -> ET.Element:
+        """Generic child element with formatted attributes (None values are skipped)."""
+        return ET.SubElement(parent, tag, {k: _fmt(v) for k, v in attrs.items() if v is not None})
+
+    def mesh_asset(self, name: str, vertices, faces) -> ET.Element:
+        """Inline mesh asset (vertices (n,3) [m], faces (m,3)); the MJCF stays self-contained."""
+        V = np.asarray(vertices, dtype=np.float64)
+        F = np.asarray(faces, dtype=np.int64)
+        if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3:
+            raise ValueError("mesh_asset needs vertices (n,3) and triangle faces (m,3)")
+        return self.add(self.asset, "mesh", name=name, vertex=V, face=F)
+
+    def body(self, name: str, parent: ET.Element | None = None, *, pos=(0, 0, 0), quat=(1, 0, 0, 0),
+             mocap: bool = False, freejoint: bool = False, **attrs) -> ET.Element:
+        """A body under ``parent`` (default worldbody). Mocap bodies must be children of the world."""
+        el = self.add(self.worldbody if parent is None else parent, "body", name=name, pos=pos, quat=quat,
+                      mocap=True if mocap else None, **attrs)
+        if freejoint:
+            ET.SubElement(el, "freejoint", name=f"{name}_free")
+        return el
+
+    def geom(self, body: ET.Element, **attrs) -> ET.Element:
+        """A geom in ``body`` (type, size, mesh, rgba, pos, quat, contype, ...)."""
+        return self.add(body, "geom", **attrs)
+
+    def site(self, body: ET.Element, name: str, pos, size=0.005, **attrs) -> ET.Element:
+        """A named site (roots, targets, regions)."""
+        return self.add(body, "site", name=name, pos=pos, size=size, **attrs)
+
+    def floor(self, z: float = 0.0, size: float = 1.0) -> ET.Element:
+        """A checkered ground plane at height z."""
+        return self.geom(self.worldbody, name="floor", type="plane", pos=[0, 0, z], size=[size, size, 0.01],
+                         material="grid")
+
+    def key(self, name: str | None = None, **attrs) -> ET.Element:
+        """A keyframe (``mpos``, ``mquat``, ``qpos``, ``time``...)."""
+        return self.add(self._section("keyframe"), "key", name=name, **attrs)
+
+    def equality(self, tag: str, **attrs) -> ET.Element:
+        """An equality constraint: ``weld`` (body1, body2, relpose) or ``connect`` (body1, body2, anchor)."""
+        return self.add(self._section("equality"), tag, **attrs)
+
+    def custom_numeric(self, name: str, data) -> ET.Element:
+        return self.add(self._section("custom"), "numeric", name=name, data=np.atleast_1d(np.asarray(data, float)))
+
+    def custom_text(self, name: str, data: str) -> ET.Element:
+        return self.add(self._section("custom"), "text", name=name, data=data)
+
+    def to_xml(self) -> str:
+        """The MJCF document as a string (indented)."""
+        tree = ET.ElementTree(self.root)
+        ET.indent(tree, space="  ")
+        return ET.tostring(self.root, encoding="unicode") + "\n"
+
+    def compile(self):
+        """``mujoco.MjModel`` of the current document (raises ValueError if MuJoCo rejects it)."""
+        return _mujoco().MjModel.from_xml_string(self.to_xml())
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the MJCF atomically after checking that MuJoCo loads it."""
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            tmp.write_text(self.to_xml(), encoding="utf-8")
+            _mujoco().MjModel.from_xml_path(str(tmp))  # raises before the rename if invalid
+        return path
