@@ -1,1 +1,81 @@
-"""File formats at simfab's boundary: USD stages, MJCF scenes, meshes, rendering, atomic writes."""
+"""File formats at simfab's boundary: USD stages, MJCF scenes, meshes, rendering, atomic writes.
+
+- :mod:`simfab.io.usd`    time-sampled USD stages (meshes, curves, points, rigid bodies)
+- :mod:`simfab.io.mjcf`   MuJoCo scenes, keyframe trajectories, MJCF generation
+- :mod:`simfab.io.mesh`   mesh loading with validation and repair
+- :mod:`simfab.io.render` offscreen PNGs (MuJoCo EGL, matplotlib fallback)
+- :mod:`simfab.io.atomic` temp-file-and-rename writes
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+# Headless by default: MuJoCo picks its GL backend when it is first imported.
+if not os.environ.get("DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+
+
+def inspect_file(path, *, units: str = "m") -> dict:
+    """Summary and validation of a mesh, MJCF scene or USD stage (what ``simfab inspect`` prints)."""
+    from simfab.errors import InputError
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("file not found", where=str(path))
+    suf = path.suffix.lower()
+    if suf == ".xml":
+        return _inspect_mjcf(path)
+    if suf in (".usd", ".usda", ".usdc"):
+        return _inspect_usd(path)
+    from simfab.io.mesh import SUFFIXES, inspect_mesh, load_mesh
+
+    if suf in SUFFIXES:
+        import dataclasses
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            mesh = load_mesh(path, units=units)
+        import trimesh
+
+        raw = trimesh.load(str(path), force="mesh", process=False)
+        report = inspect_mesh(raw)
+        return {"kind": "mesh", "file": str(path), **dataclasses.asdict(report), "problems": report.problems(),
+                "usable_after_repair": bool(mesh.is_watertight), "extents_m": [float(x) for x in mesh.extents]}
+    raise InputError(f"unknown file type {suf!r} (mesh, .xml or .usd/.usda/.usdc)", where=str(path))
+
+
+def _inspect_mjcf(path: Path) -> dict:
+    import mujoco
+
+    from simfab.io.mjcf import Trajectory, load_scene
+
+    s = load_scene(path)
+    m = s.model
+    out = {"kind": "mjcf", "file": str(path), "bodies": m.nbody - 1, "geoms": m.ngeom, "meshes": m.nmesh,
+           "sites": sorted(s.sites), "keyframes": m.nkey, "flexes": m.nflex,
+           "custom_numeric": sorted(s.custom_numeric), "custom_text": sorted(s.custom_text), "trajectories": {}}
+    for b in range(1, m.nbody):
+        if m.body_mocapid[b] >= 0 and m.nkey >= 2:
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b)
+            out["trajectories"][name] = {"length_m": Trajectory.from_model(m, name).length}
+    return out
+
+
+def _inspect_usd(path: Path) -> dict:
+    from pxr import Usd, UsdGeom
+
+    from simfab.errors import InputError
+    from simfab.io.usd import check_compliance
+
+    st = Usd.Stage.Open(str(path))
+    if st is None:
+        raise InputError("not a readable USD stage", where=str(path))
+    prims = {str(p.GetPath()): p.GetTypeName() for p in st.Traverse()}
+    return {"kind": "usd", "file": str(path), "default_prim": str(st.GetDefaultPrim().GetPath()) if st.GetDefaultPrim() else None,
+            "up_axis": str(UsdGeom.GetStageUpAxis(st)), "meters_per_unit": UsdGeom.GetStageMetersPerUnit(st),
+            "time_codes_per_second": st.GetTimeCodesPerSecond(), "start_time_code": st.GetStartTimeCode(),
+            "end_time_code": st.GetEndTimeCode(), "prims": prims, "compliance_errors": check_compliance(path)}

@@ -95,19 +95,19 @@ def geom_mesh(model, g: int):
     t = int(model.geom_type[g])
     s = np.asarray(model.geom_size[g], dtype=np.float64)
     G = mj.mjtGeom
-    if t == G.mjGEOM_SPHERE:
+    if t == int(G.mjGEOM_SPHERE):
         return trimesh.creation.icosphere(subdivisions=2, radius=s[0])
-    if t == G.mjGEOM_ELLIPSOID:
+    if t == int(G.mjGEOM_ELLIPSOID):
         m = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
         m.apply_scale(s)
         return m
-    if t == G.mjGEOM_BOX:
+    if t == int(G.mjGEOM_BOX):
         return trimesh.creation.box(extents=2 * s)
-    if t == G.mjGEOM_CYLINDER:
+    if t == int(G.mjGEOM_CYLINDER):
         return trimesh.creation.cylinder(radius=s[0], height=2 * s[1], sections=48)
-    if t == G.mjGEOM_CAPSULE:
+    if t == int(G.mjGEOM_CAPSULE):
         return trimesh.creation.capsule(height=2 * s[1], radius=s[0], count=[24, 24])
-    if t == G.mjGEOM_MESH:
+    if t == int(G.mjGEOM_MESH):
         mid = int(model.geom_dataid[g])
         va, vn = int(model.mesh_vertadr[mid]), int(model.mesh_vertnum[mid])
         fa, fn = int(model.mesh_faceadr[mid]), int(model.mesh_facenum[mid])
@@ -347,8 +347,10 @@ class MJCFBuilder:
         ET.SubElement(vis, "global", offwidth="1280", offheight="960")
         ET.SubElement(vis, "headlight", ambient="0.35 0.35 0.35", diffuse="0.6 0.6 0.6")
         self.asset = ET.SubElement(self.root, "asset")
-        ET.SubElement(self.asset, "texture", name="grid", type="2d", builtin="checker", rgb1=".85 .85 .85",
-                      rgb2=".75 .75 .75", width="256", height="256")
+        ET.SubElement(self.asset, "texture", name="sky", type="skybox", builtin="gradient", rgb1=".55 .65 .75",
+                      rgb2=".12 .12 .15", width="256", height="1536")
+        ET.SubElement(self.asset, "texture", name="grid", type="2d", builtin="checker", rgb1=".72 .72 .72",
+                      rgb2=".62 .62 .62", width="256", height="256")
         ET.SubElement(self.asset, "material", name="grid", texture="grid", texrepeat="8 8", reflectance="0")
         self.worldbody = ET.SubElement(self.root, "worldbody")
         ET.SubElement(self.worldbody, "light", name="top", pos="0 0 3", dir="0 0 -1", directional="true")

@@ -1,0 +1,152 @@
+"""Loading and validating triangle meshes (STL, OBJ, PLY, OFF, GLB through trimesh).
+
+:func:`load_mesh` turns every unusable input into an :class:`~simfab.errors.InputError`
+(one line naming the file and the problem, exit 2 at the CLI) and repairs what can be
+repaired safely with a warning: duplicate/degenerate faces, unreferenced vertices,
+inconsistent winding, inverted orientation.
+
+Units: simfab works in metres. Mesh files from CAD are usually in millimetres; pass
+``units="mm"`` to scale them by 1e-3 on load.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from simfab.errors import InputError
+from simfab.io.atomic import atomic_path
+
+SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
+UNIT_SCALE = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
+
+
+class MeshWarning(UserWarning):
+    """A mesh problem that was repaired on load."""
+
+
+@dataclasses.dataclass
+class MeshReport:
+    """What :func:`inspect_mesh` found. Counts refer to the mesh as loaded (before repair)."""
+
+    vertices: int
+    faces: int
+    degenerate_faces: int
+    duplicate_faces: int
+    unreferenced_vertices: int
+    watertight: bool
+    winding_consistent: bool
+    volume: float | None
+    bodies: int
+    extents: list
+
+    def problems(self) -> list[str]:
+        out = []
+        if self.degenerate_faces:
+            out.append(f"{self.degenerate_faces} degenerate (zero-area) faces")
+        if self.duplicate_faces:
+            out.append(f"{self.duplicate_faces} duplicate faces")
+        if self.unreferenced_vertices:
+            out.append(f"{self.unreferenced_vertices} unreferenced vertices")
+        if not self.watertight:
+            out.append("not watertight (open boundary or non-manifold edges)")
+        if not self.winding_consistent:
+            out.append("inconsistent face winding")
+        return out
+
+
+def inspect_mesh(mesh) -> MeshReport:
+    """Diagnose a ``trimesh.Trimesh`` without modifying it."""
+    import trimesh
+
+    areas = mesh.area_faces if len(mesh.faces) else np.zeros(0)
+    scale = float(np.max(mesh.extents)) if len(mesh.vertices) else 1.0
+    degenerate = int(np.sum(areas <= (1e-12 * scale * scale)))
+    srt = np.sort(mesh.faces, axis=1)
+    dup = len(srt) - len(np.unique(srt, axis=0)) if len(srt) else 0
+    unref = len(mesh.vertices) - len(np.unique(mesh.faces)) if len(mesh.faces) else len(mesh.vertices)
+    watertight = bool(mesh.is_watertight)
+    bodies = len(trimesh.graph.connected_components(mesh.face_adjacency, nodes=np.arange(len(mesh.faces)))) if len(mesh.faces) else 0
+    return MeshReport(
+        vertices=len(mesh.vertices), faces=len(mesh.faces), degenerate_faces=degenerate, duplicate_faces=int(dup),
+        unreferenced_vertices=int(unref), watertight=watertight, winding_consistent=bool(mesh.is_winding_consistent),
+        volume=float(mesh.volume) if watertight else None, bodies=int(bodies),
+        extents=[float(x) for x in (mesh.extents if len(mesh.vertices) else np.zeros(3))])
+
+
+def load_mesh(path: str | os.PathLike, *, units: str = "m", require_watertight: bool = False):
+    """Load a triangle mesh, validate it and repair what is safely repairable.
+
+    Parameters
+    ----------
+    path : STL/OBJ/PLY/OFF/GLB file.
+    units : unit of the file's coordinates ("m", "mm" or "cm"); the result is in metres.
+    require_watertight : raise InputError if the mesh is not a closed, consistently wound
+        volume (needed for signed distances, tetrahedralization and volumes).
+
+    Returns
+    -------
+    ``trimesh.Trimesh`` in metres, outward-facing normals when watertight.
+
+    Raises
+    ------
+    InputError : missing file, unknown format, unreadable content, no faces, non-finite
+        coordinates, and (with ``require_watertight``) open or non-manifold meshes.
+    """
+    import trimesh
+
+    path = Path(path)
+    where = str(path)
+    if units not in UNIT_SCALE:
+        raise InputError(f"unknown units {units!r} (use one of {', '.join(UNIT_SCALE)})", where="--units")
+    if not path.is_file():
+        raise InputError("file not found", where=where)
+    if path.suffix.lower() not in SUFFIXES:
+        raise InputError(f"unsupported mesh format {path.suffix!r} (use {', '.join(SUFFIXES)})", where=where)
+    try:
+        loaded = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as e:  # trimesh raises many types for corrupt files
+        raise InputError(f"cannot read mesh: {' '.join(str(e).split()) or type(e).__name__}", where=where) from None
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise InputError("no triangles in the file", where=where)
+    mesh = loaded
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise InputError("vertex coordinates contain NaN or infinity", where=where)
+    report = inspect_mesh(mesh)
+    repaired = []
+    if report.degenerate_faces or report.duplicate_faces or report.unreferenced_vertices:
+        mesh.merge_vertices()
+        mesh.update_faces(mesh.unique_faces())
+        mesh.update_faces(mesh.nondegenerate_faces())
+        mesh.remove_unreferenced_vertices()
+        repaired += [p for p in report.problems() if "face" in p or "vertices" in p]
+    if len(mesh.faces) == 0:
+        raise InputError("every face is degenerate", where=where)
+    if not mesh.is_watertight:
+        mesh.merge_vertices()  # STL stores unshared vertices; merging closes it when it is closed
+    if not mesh.is_winding_consistent:
+        trimesh.repair.fix_winding(mesh)
+        repaired.append("inconsistent face winding")
+    if mesh.is_watertight and mesh.volume < 0:
+        mesh.invert()
+        repaired.append("inward-facing normals")
+    if require_watertight and not mesh.is_watertight:
+        raise InputError("mesh is not watertight (open boundary or non-manifold edges); a closed surface is required", where=where)
+    if require_watertight and not mesh.is_winding_consistent:
+        raise InputError("face winding could not be made consistent", where=where)
+    if repaired:
+        warnings.warn(f"{where}: repaired {', '.join(repaired)}", MeshWarning, stacklevel=2)
+    mesh.apply_scale(UNIT_SCALE[units])
+    return mesh
+
+
+def save_mesh(mesh, path: str | os.PathLike) -> Path:
+    """Write a ``trimesh.Trimesh`` atomically; the format follows the suffix (.stl, .ply, .obj)."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        mesh.export(str(tmp), file_type=path.suffix.lstrip(".").lower())
+    return path

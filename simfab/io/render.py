@@ -1,0 +1,218 @@
+"""Offscreen PNG rendering of MJCF scenes, meshes and USD stages.
+
+MuJoCo's ``Renderer`` draws headless through EGL (``MUJOCO_GL=egl``, set by
+:mod:`simfab.io` when no display is present). Where no OpenGL is available at all, the
+same views are drawn with matplotlib's 3D polygons instead, so a PNG is always produced.
+
+The camera looks at the bounding box of the visible geometry (planes excluded) from an
+oblique view: azimuth 135°, elevation -25°, distance 1.6 x the box diagonal.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from simfab.errors import InputError
+from simfab.io.atomic import atomic_path
+
+AZIMUTH, ELEVATION, DISTANCE_FACTOR = 135.0, -25.0, 1.6
+COLOR_BINS = 24  # per-face colours are quantized into this many geoms for MuJoCo
+
+
+def _write_png(rgb: np.ndarray, png: str | os.PathLike) -> Path:
+    from PIL import Image
+
+    png = Path(png)
+    with atomic_path(png) as tmp:
+        Image.fromarray(np.ascontiguousarray(rgb)).save(tmp, format="PNG")
+    return png
+
+
+def _scene_bounds(model, data):
+    """Axis-aligned bounds (lo, hi) of all non-plane geoms at the current state."""
+    import mujoco
+
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for g in range(model.ngeom):
+        gtype = int(model.geom_type[g])
+        if gtype in (int(mujoco.mjtGeom.mjGEOM_PLANE), int(mujoco.mjtGeom.mjGEOM_HFIELD)):
+            continue
+        r = model.geom_rbound[g] if model.geom_rbound[g] > 0 else np.max(model.geom_size[g])
+        c = data.geom_xpos[g]
+        if gtype == int(mujoco.mjtGeom.mjGEOM_MESH):
+            mid = model.geom_dataid[g]
+            va, vn = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
+            V = model.mesh_vert[va:va + vn] @ data.geom_xmat[g].reshape(3, 3).T + c
+            lo, hi = np.minimum(lo, V.min(0)), np.maximum(hi, V.max(0))
+        else:
+            lo, hi = np.minimum(lo, c - r), np.maximum(hi, c + r)
+    for i in range(model.nflex):  # flex vertices (cables, deformables)
+        va, vn = model.flex_vertadr[i], model.flex_vertnum[i]
+        V = data.flexvert_xpos[va:va + vn]
+        if len(V):
+            lo, hi = np.minimum(lo, V.min(0)), np.maximum(hi, V.max(0))
+    if not np.all(np.isfinite(lo)):
+        lo, hi = -np.ones(3), np.ones(3)
+    return lo, hi
+
+
+def render_model(model, png, *, data=None, width: int = 640, height: int = 480,
+                 azimuth: float = AZIMUTH, elevation: float = ELEVATION) -> Path:
+    """Render a ``mujoco.MjModel`` (at ``data`` or ``qpos0``) to a PNG."""
+    import mujoco
+
+    if data is None:
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
+    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width)
+    model.vis.global_.offheight = max(int(model.vis.global_.offheight), height)
+    lo, hi = _scene_bounds(model, data)
+    cam = mujoco.MjvCamera()
+    cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+    cam.lookat[:] = (lo + hi) / 2
+    cam.distance = DISTANCE_FACTOR * max(float(np.linalg.norm(hi - lo)), 1e-3)
+    cam.azimuth, cam.elevation = azimuth, elevation
+    renderer = mujoco.Renderer(model, height=height, width=width)
+    try:
+        renderer.update_scene(data, camera=cam)
+        rgb = renderer.render()
+    finally:
+        renderer.close()
+    return _write_png(rgb, png)
+
+
+def render_mjcf(xml, png, *, width: int = 640, height: int = 480) -> Path:
+    """Render an MJCF file (path) or a compiled ``MjModel`` to a PNG; matplotlib fallback without GL."""
+    from simfab.io.mjcf import load_model
+
+    model = load_model(xml) if isinstance(xml, (str, os.PathLike)) else xml
+    try:
+        return render_model(model, png, width=width, height=height)
+    except Exception as e:  # no usable OpenGL: draw the geometry with matplotlib instead
+        if not _is_gl_error(e):
+            raise
+        from simfab.io.mjcf import Scene
+
+        meshes = Scene(path=Path("."), model=model, sites={}, site_size={}, custom_numeric={}, custom_text={}).body_meshes()
+        return _render_matplotlib([(m.vertices, m.faces, None) for m in meshes.values()], png, width, height)
+
+
+def render_meshes(items, png, *, width: int = 640, height: int = 480, floor: bool = True) -> Path:
+    """Render several meshes together.
+
+    items : list of ``(vertices (n,3) [m], faces (m,3), colors)`` where colors is None, an
+        RGB(A) triple for the whole mesh, or per-face RGB (m,3) in [0, 1].
+    """
+    from simfab.io.mjcf import MJCFBuilder
+
+    b = MJCFBuilder("render")
+    if floor and items:
+        allz = np.concatenate([np.asarray(v, np.float64).reshape(len(v), -1)[:, -1] for v, _, _ in items])
+        allv = np.concatenate([np.asarray(v, np.float64) for v, _, _ in items if np.asarray(v).shape[1] == 3] or [np.zeros((1, 3))])
+        diag = float(np.linalg.norm(np.ptp(allv, axis=0))) or 1.0
+        b.floor(z=float(allz.min()) - 0.02 * diag, size=10.0 * diag)  # a little below: no z-fighting
+    palette = np.array([[0.85, 0.55, 0.3], [0.35, 0.55, 0.85], [0.5, 0.75, 0.45], [0.8, 0.4, 0.6]])
+    for i, (V, F, colors) in enumerate(items):
+        V = np.asarray(V, np.float64)
+        F = np.asarray(F, np.int64)
+        if V.shape[1] == 2:
+            V = np.column_stack([V, np.zeros(len(V))])
+        groups = _color_groups(F, colors, palette[i % len(palette)])
+        body = b.body(f"m{i}")
+        for j, (faces, rgb) in enumerate(groups):
+            used, inv = np.unique(faces, return_inverse=True)
+            b.mesh_asset(f"m{i}_{j}", V[used], inv.reshape(-1, 3))
+            b.geom(body, type="mesh", mesh=f"m{i}_{j}", rgba=[*rgb[:3], 1.0], contype=0, conaffinity=0)
+    try:
+        return render_model(b.compile(), png, width=width, height=height)
+    except Exception as e:
+        if not _is_gl_error(e):
+            raise
+        return _render_matplotlib(items, png, width, height)
+
+
+def render_mesh(vertices, faces, png, *, colors=None, width: int = 640, height: int = 480) -> Path:
+    """Render one mesh (see :func:`render_meshes` for ``colors``)."""
+    return render_meshes([(vertices, faces, colors)], png, width=width, height=height)
+
+
+def render_usd(path, png, *, time: float | None = None, width: int = 640, height: int = 480) -> Path:
+    """Render the visible meshes of a USD stage at a time code (default: the last) with their colours."""
+    from simfab.io.usd import read_mesh_at
+
+    items = [(V, F, rgb) for _, V, F, rgb in read_mesh_at(path, time)]
+    if not items:
+        raise InputError("the stage has no visible mesh at this time code", where=str(path))
+    return render_meshes(items, png, width=width, height=height)
+
+
+def render_file(src, png, *, time: float | None = None, width: int = 640, height: int = 480) -> Path:
+    """Render an MJCF (.xml), USD (.usd/.usda/.usdc) or mesh file to a PNG."""
+    src = Path(src)
+    if not src.is_file():
+        raise InputError("file not found", where=str(src))
+    if width <= 0 or height <= 0 or width > 8192 or height > 8192:
+        raise InputError(f"image size {width}x{height} is out of range (1..8192)", where="--width/--height")
+    suf = src.suffix.lower()
+    if suf == ".xml":
+        return render_mjcf(src, png, width=width, height=height)
+    if suf in (".usd", ".usda", ".usdc"):
+        return render_usd(src, png, time=time, width=width, height=height)
+    from simfab.io.mesh import SUFFIXES, load_mesh
+
+    if suf in SUFFIXES:
+        m = load_mesh(src)
+        return render_mesh(m.vertices, m.faces, png, width=width, height=height)
+    raise InputError(f"cannot render {suf!r} files (use .xml, .usd/.usda/.usdc or a mesh)", where=str(src))
+
+
+def _color_groups(F, colors, default):
+    if colors is None:
+        return [(F, np.asarray(default))]
+    c = np.asarray(colors, np.float64)
+    if c.ndim == 1:
+        return [(F, c)]
+    if len(c) != len(F):
+        raise ValueError(f"per-face colors must be (m, 3) with m = {len(F)}, got {c.shape}")
+    # Quantize by luminance-ordered bins so that a colormap survives as a few geoms.
+    key = np.round(c[:, :3] * (COLOR_BINS - 1)).astype(np.int64)
+    uniq, inv = np.unique(key, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    return [(F[inv == k], uniq[k] / (COLOR_BINS - 1)) for k in range(len(uniq))]
+
+
+def _is_gl_error(e: Exception) -> bool:
+    text = f"{type(e).__name__} {e}".lower()
+    return any(s in text for s in ("gl", "egl", "opengl", "context", "display"))
+
+
+def _render_matplotlib(items, png, width, height) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from simfab.io.atomic import save_figure
+
+    fig = plt.figure(figsize=(width / 100, height / 100), dpi=100)
+    ax = fig.add_subplot(projection="3d")
+    allv = []
+    for V, F, colors in items:
+        V = np.asarray(V, np.float64)
+        if V.shape[1] == 2:
+            V = np.column_stack([V, np.zeros(len(V))])
+        fc = colors if colors is not None else (0.85, 0.55, 0.3)
+        ax.add_collection3d(Poly3DCollection(V[np.asarray(F)], facecolors=fc, edgecolors="none", alpha=1.0))
+        allv.append(V)
+    V = np.concatenate(allv)
+    c, r = (V.max(0) + V.min(0)) / 2, max(float(np.ptp(V, axis=0).max()) / 2, 1e-6)
+    ax.set_xlim(c[0] - r, c[0] + r); ax.set_ylim(c[1] - r, c[1] + r); ax.set_zlim(c[2] - r, c[2] + r)
+    ax.view_init(elev=-ELEVATION, azim=AZIMUTH - 90)
+    ax.set_axis_off()
+    path = save_figure(fig, png)
+    plt.close(fig)
+    return path
