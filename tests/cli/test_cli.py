@@ -1,0 +1,87 @@
+"""The simfab command in-process: help, exit codes, one-line errors, JSON output."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from simfab.cli import SUBCOMMANDS, main
+from simfab.io.mjcf import MJCFBuilder
+
+
+def test_help_and_subcommand_help(capsys):
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    for name in SUBCOMMANDS:
+        assert name in out
+    for name in SUBCOMMANDS:
+        assert main([name, "--help"]) == 0, name
+    capsys.readouterr()
+
+
+def test_no_command_is_usage_error(capsys):
+    assert main([]) == 2
+
+
+def test_unknown_flag_one_line(capsys):
+    assert main(["render", "--bogus"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("simfab: error:") and "\n" not in err and "Traceback" not in err
+
+
+def test_missing_file_exit_2(tmp_path, capsys):
+    assert main(["inspect", str(tmp_path / "nope.stl")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "nope.stl: file not found" in err and len(err.splitlines()) == 1
+
+
+def test_inspect_broken_mesh_json(tmp_path, capsys):
+    box = trimesh.creation.box()
+    trimesh.Trimesh(box.vertices, box.faces[:-1]).export(tmp_path / "open.stl")
+    assert main(["inspect", str(tmp_path / "open.stl"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["watertight"] is False and any("watertight" in p for p in out["problems"])
+
+
+def test_render_mjcf_and_json(tmp_path, capsys):
+    b = MJCFBuilder("r")
+    b.floor()
+    b.geom(b.body("ball", pos=[0, 0, 0.2]), type="sphere", size=0.1, rgba=[0.2, 0.6, 0.9, 1])
+    xml = b.save(tmp_path / "r.xml")
+    assert main(["render", str(xml), "-o", str(tmp_path / "r.png"), "--width", "120", "--height", "90", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["png"].endswith("r.png") and (tmp_path / "r.png").stat().st_size > 1000
+
+
+def test_bad_device_is_input_error(capsys):
+    assert main(["--device", "tpu", "inspect", "x"]) == 2
+
+
+def test_internal_error_exit_1(monkeypatch, capsys):
+    import simfab.cli.inspect_ as mod
+
+    def boom(args):
+        raise RuntimeError("kaboom")
+
+    monkeypatch.setattr(mod, "run", boom)
+    assert main(["inspect", "x"]) == 1
+    err = capsys.readouterr().err
+    assert "internal error" in err and "Traceback" not in err
+
+
+def test_python_dash_m_entry_point():
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "simfab", "--version"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "simfab" in r.stdout
+
+
+def test_import_is_fast():
+    import subprocess
+    import sys
+
+    code = "import time; t=time.perf_counter(); import simfab; print(time.perf_counter()-t)"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert float(r.stdout) < 1.5
