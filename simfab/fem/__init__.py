@@ -1,0 +1,12 @@
+"""Finite-element elasticity: linear triangles (2D plane strain) and tetrahedra (3D).
+
+- :mod:`simfab.fem.materials` - isotropic materials (Young's modulus, Poisson ratio, yield stress)
+- :mod:`simfab.fem.model` - the immutable :class:`FemModel` (rest shape, Dm^-1, volumes, Lame parameters)
+- :mod:`simfab.fem.assembly` - fixed-pattern sparse Hessian assembly
+- :mod:`simfab.fem.neohookean` - compressible Neo-Hookean energy, gradient and PSD-projected Hessian (Warp)
+- :mod:`simfab.fem.stress` - Cauchy and von Mises stress
+- :mod:`simfab.fem.meshing` - Triangle (2D) and fTetWild (3D) meshing
+
+Submodules are imported on demand so that ``import simfab.fem`` stays cheap (Warp is imported
+by :mod:`simfab.fem.neohookean` only).
+"""

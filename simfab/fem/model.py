@@ -1,0 +1,184 @@
+"""The immutable FEM model: rest shape, connectivity and per-element precomputations.
+
+A state is just the deformed vertex positions ``x`` (n, dim) [m]; every FEM function is a
+function of ``(model, x)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from simfab.errors import InputError
+from simfab.fem.assembly import HessianPattern
+from simfab.fem.materials import Material
+from simfab.fem.tolerances import DEGENERATE_REL
+
+
+@dataclass(frozen=True, kw_only=True)
+class FemModel:
+    """Linear simplicial FEM discretization of an elastic body (immutable).
+
+    dim : 2 (triangles, plane strain) or 3 (tetrahedra)
+    rest : (n, dim) float64 [m] rest positions X
+    elements : (m, dim+1) int32 vertex indices, positively oriented (det Dm > 0)
+    Dm_inv : (m, dim, dim) float64 [1/m] inverse of the rest edge matrix Dm = [X1-X0, X2-X0(, X3-X0)]
+    volume : (m,) float64 [m^3] rest volume; 2D: triangle area * thickness
+    mu, lam : (m,) float64 [Pa] Lame parameters
+    thickness : [m] out-of-plane extent of a 2D (plane-strain) body; 1.0 for 3D (unused)
+    boundary_facets : 2D (f, 2) boundary edges oriented with the body on their left (counter-
+        clockwise outer boundary; outward normal (dy, -dx)); 3D (f, 3) boundary triangles with
+        counter-clockwise winding seen from outside (right-hand normal points out)
+    boundary_vertices : (b,) int32 sorted vertices on the boundary
+    pattern : :class:`HessianPattern` of the (n*dim, n*dim) Hessian
+    material : the material the Lame parameters came from (None if given per element)
+    device : Warp device the kernels run on ("cpu", "cuda:0")
+    """
+
+    dim: int
+    rest: np.ndarray
+    elements: np.ndarray
+    Dm_inv: np.ndarray
+    volume: np.ndarray
+    mu: np.ndarray
+    lam: np.ndarray
+    thickness: float
+    boundary_facets: np.ndarray
+    boundary_vertices: np.ndarray
+    pattern: HessianPattern
+    material: Material | None = None
+    device: str = "cpu"
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def n_vertices(self) -> int:
+        return self.rest.shape[0]
+
+    @property
+    def n_elements(self) -> int:
+        return self.elements.shape[0]
+
+    @property
+    def n_dofs(self) -> int:
+        return self.rest.size
+
+    def mean_edge_length(self) -> float:
+        """Mean length [m] of the element edges at rest (each element edge counted once per element)."""
+        return _mean_edge_length(self.rest, self.elements)
+
+    def check_positions(self, x, where: str = "x") -> np.ndarray:
+        """``x`` as a (n, dim) float64 array; InputError if the shape is wrong or it holds NaN/inf."""
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape == (self.n_dofs,):
+            x = x.reshape(self.n_vertices, self.dim)
+        if x.shape != self.rest.shape:
+            raise InputError(f"positions have shape {x.shape}, expected {self.rest.shape}", where=where)
+        if not np.all(np.isfinite(x)):
+            raise InputError("positions contain NaN or inf", where=where)
+        return x
+
+
+def _edge_matrices(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    """(m, dim, dim) matrices whose columns are the edge vectors x_i - x_0, i = 1..dim."""
+    p = points[elements]  # (m, dim+1, dim)
+    return np.swapaxes(p[:, 1:, :] - p[:, :1, :], 1, 2)
+
+
+def _mean_edge_length(points: np.ndarray, elements: np.ndarray) -> float:
+    k = elements.shape[1]
+    i, j = np.triu_indices(k, 1)
+    return float(np.linalg.norm(points[elements[:, i]] - points[elements[:, j]], axis=-1).mean())
+
+
+def _boundary(elements: np.ndarray, dim: int) -> np.ndarray:
+    """Facets that belong to exactly one element, oriented outward (elements positively oriented)."""
+    if dim == 2:
+        local = np.array([[0, 1], [1, 2], [2, 0]])  # counter-clockwise around a positive triangle
+    else:
+        local = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])  # outward normals of a positive tet
+    facets = elements[:, local].reshape(-1, dim)
+    key = np.sort(facets, axis=1)
+    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    return facets[np.sort(first[counts == 1])].astype(np.int32)
+
+
+def make_model(points, elements, material: Material, *, thickness: float = 1.0, device: str = "cpu") -> FemModel:
+    """Build a :class:`FemModel` from a simplicial mesh.
+
+    points : (n, 2) or (n, 3) rest positions [m]; dim = points.shape[1]
+    elements : (m, dim+1) vertex indices; negatively oriented elements are re-oriented (two
+        vertices swapped)
+    material : :class:`Material` (homogeneous body)
+    thickness : [m] out-of-plane extent for 2D plane strain (volume = area * thickness)
+    device : Warp device name
+
+    InputError for: wrong shapes, NaN/inf coordinates, out-of-range indices, vertices used by no
+    element, degenerate elements (|det Dm| <= DEGENERATE_REL * h^dim, h = mean edge length),
+    thickness <= 0.
+    """
+    from simfab._warp import device as _validate_device
+
+    where = "mesh"
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] not in (2, 3) or pts.shape[0] < pts.shape[1] + 1:
+        raise InputError(f"points must be an (n, 2) or (n, 3) array with n >= dim+1, got shape {pts.shape}", where=where)
+    if not np.all(np.isfinite(pts)):
+        raise InputError("points contain NaN or inf", where=where)
+    dim = pts.shape[1]
+    el = np.asarray(elements)
+    if el.ndim != 2 or el.shape[1] != dim + 1 or el.shape[0] == 0:
+        raise InputError(f"elements must be an (m, {dim + 1}) array for {dim}D points, got shape {el.shape}", where=where)
+    if not np.issubdtype(el.dtype, np.integer):
+        if not np.all(np.equal(np.mod(el, 1), 0)):
+            raise InputError("element indices must be integers", where=where)
+    el = el.astype(np.int64)
+    n = pts.shape[0]
+    if el.min() < 0 or el.max() >= n:
+        bad = int(np.flatnonzero((el < 0).any(1) | (el >= n).any(1))[0])
+        raise InputError(f"element {bad} has a vertex index out of range [0, {n})", where=where)
+    used = np.zeros(n, bool)
+    used[el.ravel()] = True
+    if not used.all():
+        raise InputError(f"{int((~used).sum())} vertices are not used by any element (first: {int(np.flatnonzero(~used)[0])})",
+                         where=where)
+    repeats = np.any(np.diff(np.sort(el, axis=1), axis=1) == 0, axis=1)
+    if repeats.any():
+        raise InputError(f"element {int(np.flatnonzero(repeats)[0])} repeats a vertex", where=where)
+    if not (np.isfinite(thickness) and thickness > 0):
+        raise InputError(f"thickness must be > 0, got {thickness}", where=where)
+
+    Dm = _edge_matrices(pts, el)
+    det = np.linalg.det(Dm)
+    h = _mean_edge_length(pts, el)
+    degenerate = np.abs(det) <= DEGENERATE_REL * h**dim
+    if degenerate.any():
+        bad = int(np.flatnonzero(degenerate)[0])
+        raise InputError(f"{int(degenerate.sum())} degenerate elements (zero area/volume), first: element {bad}",
+                         where=where)
+    neg = det < 0
+    if neg.any():  # swap the last two vertices: flips the orientation
+        el[neg, -2:] = el[neg, -1:-3:-1]
+        Dm = _edge_matrices(pts, el)
+        det = np.linalg.det(Dm)
+    # simplex measure = det Dm / dim!  (triangle area = det/2, tet volume = det/6)
+    volume = det / 6.0 if dim == 3 else det / 2.0 * thickness
+    mu, lam = material.lame()
+    m = el.shape[0]
+    el32 = el.astype(np.int32)
+    bfacets = _boundary(el32, dim)
+    return FemModel(
+        dim=dim,
+        rest=pts,
+        elements=el32,
+        Dm_inv=np.linalg.inv(Dm),
+        volume=volume,
+        mu=np.full(m, mu),
+        lam=np.full(m, lam),
+        thickness=float(thickness) if dim == 2 else 1.0,
+        boundary_facets=bfacets,
+        boundary_vertices=np.unique(bfacets).astype(np.int32),
+        pattern=HessianPattern(el32, n, dim),
+        material=material,
+        device=_validate_device(device),
+    )

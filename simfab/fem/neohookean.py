@@ -1,0 +1,367 @@
+"""Compressible Neo-Hookean elasticity on linear simplices: energy, gradient, Hessian side by side.
+
+Per element (volume V, Lame parameters mu, lam, dimension d):
+
+    Psi(F) = mu/2 (||F||_F^2 - d) - mu log J + lam/2 (log J)^2,      E_e = V Psi(F),  J = det F
+    F = Ds Dm^-1,  Ds = [x1 - x0, x2 - x0(, x3 - x0)]
+
+First Piola-Kirchhoff stress (dPsi/dF):
+
+    P = mu (F - F^-T) + lam log J F^-T
+
+Nodal gradient: dE/dx_i = V P Dm^-T e_i (i = 1..d), dE/dx_0 = -sum_i dE/dx_i. Sign: the gradient
+is the internal force with the sign of the energy increase; the elastic force on the nodes is
+``-gradient``.
+
+Hessian d2Psi/dF2 via its analytic eigensystem (Smith, De Goes, Kim 2019, "Analytic eigensystems
+for isotropic distortion energies"). With the SVD F = U diag(s) V^T (J > 0, so det U det V = 1) and
+dPsi/dJ = (lam log J - mu) / J:
+
+    twist modes  U T_k V^T:  eigenvalue mu + dPsi/dJ * s_k      (3D; 2D: mu + dPsi/dJ)
+    flip modes   U L_k V^T:  eigenvalue mu - dPsi/dJ * s_k      (3D; 2D: mu - dPsi/dJ)
+    scaling modes U diag(q) V^T: q, eigenvalue of the d x d matrix
+        A_ii = mu + (mu + lam (1 - log J)) / s_i^2,   A_ij = lam / (s_i s_j)
+
+(T_k skew and L_k symmetric unit off-diagonal pairs in the plane orthogonal to axis k; the
+twist/flip values come from the mu ||F||^2 term (2 * mu/2 * I) plus dPsi/dJ times the Hessian of
+det F, whose eigenvalues on those modes are +-s_k.) The element Hessian is
+V sum_modes max(eig, 0) b b^T with b = dF/dx^T : mode, i.e. the projection to PSD is done exactly
+in the d^2-dimensional stress space, which makes the 12x12 (6x6) element block PSD without a
+numerical eigensolver. With ``project_psd=False`` the eigenvalues are used unclamped, giving the
+exact Hessian (validated against finite differences in the tests).
+
+All kernels run in float64, one launch per call for all elements (energy, gradient and Hessian
+blocks in the same kernel when the Hessian is wanted).
+
+An element with det F <= 0 makes the energy +inf (the log barrier of Neo-Hookean); such an
+element contributes nothing to the gradient and Hessian, which are then not meaningful.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from simfab._warp import wp
+from simfab.fem.model import FemModel
+
+_vec6d = wp.types.vector(length=6, dtype=wp.float64)
+_vec12d = wp.types.vector(length=12, dtype=wp.float64)
+_mat66d = wp.types.matrix(shape=(6, 6), dtype=wp.float64)
+_mat1212d = wp.types.matrix(shape=(12, 12), dtype=wp.float64)
+
+_HALF_SQRT2 = 0.7071067811865476  # 1/sqrt(2): unit Frobenius norm of the twist/flip modes
+
+# want flags
+_ENERGY, _GRADIENT, _HESSIAN = 0, 1, 2
+
+
+# ----------------------------------------------------------------------------------------------
+# 3D
+# ----------------------------------------------------------------------------------------------
+@wp.func
+def _nodal3(M: wp.mat33d, Dmi: wp.mat33d):
+    """b = dF/dx^T : M as a 12-vector (vertex-major): columns of M Dm^-T, vertex 0 = -sum."""
+    W = M * wp.transpose(Dmi)
+    b = _vec12d()
+    for a in range(3):
+        b[3 + a] = W[a, 0]
+        b[6 + a] = W[a, 1]
+        b[9 + a] = W[a, 2]
+        b[a] = -(W[a, 0] + W[a, 1] + W[a, 2])
+    return b
+
+
+@wp.func
+def _mode3(U: wp.mat33d, M: wp.mat33d, V: wp.mat33d, Dmi: wp.mat33d):
+    return _nodal3(U * M * wp.transpose(V), Dmi)
+
+
+@wp.func
+def _clamp(lam: wp.float64, project: int):
+    if project != 0 and lam < wp.float64(0.0):
+        return wp.float64(0.0)
+    return lam
+
+
+@wp.kernel
+def _neohookean3(
+    x: wp.array(dtype=wp.vec3d),
+    elements: wp.array2d(dtype=wp.int32),
+    Dm_inv: wp.array(dtype=wp.mat33d),
+    volume: wp.array(dtype=wp.float64),
+    mu_e: wp.array(dtype=wp.float64),
+    lam_e: wp.array(dtype=wp.float64),
+    want: int,
+    project: int,
+    energy: wp.array(dtype=wp.float64),
+    det_F: wp.array(dtype=wp.float64),
+    grad: wp.array2d(dtype=wp.vec3d),
+    hess: wp.array3d(dtype=wp.float64),
+):
+    e = wp.tid()
+    i0 = elements[e, 0]
+    x0 = x[i0]
+    Ds = wp.matrix_from_cols(x[elements[e, 1]] - x0, x[elements[e, 2]] - x0, x[elements[e, 3]] - x0)
+    Dmi = Dm_inv[e]
+    F = Ds * Dmi
+    J = wp.determinant(F)
+    det_F[e] = J
+    V = volume[e]
+    mu = mu_e[e]
+    lam = lam_e[e]
+    zero = wp.float64(0.0)
+    if J <= zero:
+        energy[e] = zero
+        if want >= _GRADIENT:
+            for i in range(4):
+                grad[e, i] = wp.vec3d()
+        if want >= _HESSIAN:
+            for r in range(12):
+                for c in range(12):
+                    hess[e, r, c] = zero
+        return
+    logJ = wp.log(J)
+    energy[e] = V * (wp.float64(0.5) * mu * (wp.ddot(F, F) - wp.float64(3.0)) - mu * logJ
+                     + wp.float64(0.5) * lam * logJ * logJ)
+    if want < _GRADIENT:
+        return
+    FinvT = wp.transpose(wp.inverse(F))
+    P = mu * (F - FinvT) + lam * logJ * FinvT
+    g = _nodal3(P, Dmi)
+    for i in range(4):
+        grad[e, i] = V * wp.vec3d(g[3 * i], g[3 * i + 1], g[3 * i + 2])
+    if want < _HESSIAN:
+        return
+
+    U = wp.mat33d()
+    s = wp.vec3d()
+    Vs = wp.mat33d()
+    wp.svd3(F, U, s, Vs)
+    dPsi_dJ = (lam * logJ - mu) / J
+    h = wp.float64(_HALF_SQRT2)
+    H = _mat1212d()
+    # twist (skew) and flip (symmetric) modes in the (1,2), (0,2), (0,1) planes
+    b = _mode3(U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, Dmi)
+    H += _clamp(mu + dPsi_dJ * s[0], project) * wp.outer(b, b)
+    b = _mode3(U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, Dmi)
+    H += _clamp(mu - dPsi_dJ * s[0], project) * wp.outer(b, b)
+    b = _mode3(U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, Dmi)
+    H += _clamp(mu + dPsi_dJ * s[1], project) * wp.outer(b, b)
+    b = _mode3(U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, Dmi)
+    H += _clamp(mu - dPsi_dJ * s[1], project) * wp.outer(b, b)
+    b = _mode3(U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
+    H += _clamp(mu + dPsi_dJ * s[2], project) * wp.outer(b, b)
+    b = _mode3(U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
+    H += _clamp(mu - dPsi_dJ * s[2], project) * wp.outer(b, b)
+    # scaling modes: eigenvectors of the Hessian of Psi in the singular values
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    A = wp.mat33d(
+        mu + cs / (s[0] * s[0]), lam / (s[0] * s[1]), lam / (s[0] * s[2]),
+        lam / (s[0] * s[1]), mu + cs / (s[1] * s[1]), lam / (s[1] * s[2]),
+        lam / (s[0] * s[2]), lam / (s[1] * s[2]), mu + cs / (s[2] * s[2]),
+    )
+    Q = wp.mat33d()
+    d = wp.vec3d()
+    wp.eig3(A, Q, d)
+    for k in range(3):
+        b = _mode3(U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, Dmi)
+        H += _clamp(d[k], project) * wp.outer(b, b)
+    for r in range(12):
+        for c in range(12):
+            hess[e, r, c] = V * H[r, c]
+
+
+# ----------------------------------------------------------------------------------------------
+# 2D (plane strain)
+# ----------------------------------------------------------------------------------------------
+@wp.func
+def _nodal2(M: wp.mat22d, Dmi: wp.mat22d):
+    W = M * wp.transpose(Dmi)
+    b = _vec6d()
+    for a in range(2):
+        b[2 + a] = W[a, 0]
+        b[4 + a] = W[a, 1]
+        b[a] = -(W[a, 0] + W[a, 1])
+    return b
+
+
+@wp.func
+def _mode2(U: wp.mat22d, M: wp.mat22d, V: wp.mat22d, Dmi: wp.mat22d):
+    return _nodal2(U * M * wp.transpose(V), Dmi)
+
+
+@wp.kernel
+def _neohookean2(
+    x: wp.array(dtype=wp.vec2d),
+    elements: wp.array2d(dtype=wp.int32),
+    Dm_inv: wp.array(dtype=wp.mat22d),
+    volume: wp.array(dtype=wp.float64),
+    mu_e: wp.array(dtype=wp.float64),
+    lam_e: wp.array(dtype=wp.float64),
+    want: int,
+    project: int,
+    energy: wp.array(dtype=wp.float64),
+    det_F: wp.array(dtype=wp.float64),
+    grad: wp.array2d(dtype=wp.vec2d),
+    hess: wp.array3d(dtype=wp.float64),
+):
+    e = wp.tid()
+    x0 = x[elements[e, 0]]
+    Ds = wp.matrix_from_cols(x[elements[e, 1]] - x0, x[elements[e, 2]] - x0)
+    Dmi = Dm_inv[e]
+    F = Ds * Dmi
+    J = wp.determinant(F)
+    det_F[e] = J
+    V = volume[e]
+    mu = mu_e[e]
+    lam = lam_e[e]
+    zero = wp.float64(0.0)
+    if J <= zero:
+        energy[e] = zero
+        if want >= _GRADIENT:
+            for i in range(3):
+                grad[e, i] = wp.vec2d()
+        if want >= _HESSIAN:
+            for r in range(6):
+                for c in range(6):
+                    hess[e, r, c] = zero
+        return
+    logJ = wp.log(J)
+    energy[e] = V * (wp.float64(0.5) * mu * (wp.ddot(F, F) - wp.float64(2.0)) - mu * logJ
+                     + wp.float64(0.5) * lam * logJ * logJ)
+    if want < _GRADIENT:
+        return
+    FinvT = wp.transpose(wp.inverse(F))
+    P = mu * (F - FinvT) + lam * logJ * FinvT
+    g = _nodal2(P, Dmi)
+    for i in range(3):
+        grad[e, i] = V * wp.vec2d(g[2 * i], g[2 * i + 1])
+    if want < _HESSIAN:
+        return
+
+    U = wp.mat22d()
+    s = wp.vec2d()
+    Vs = wp.mat22d()
+    wp.svd2(F, U, s, Vs)
+    dPsi_dJ = (lam * logJ - mu) / J
+    h = wp.float64(_HALF_SQRT2)
+    H = _mat66d()
+    b = _mode2(U, wp.mat22d(zero, -h, h, zero), Vs, Dmi)  # twist
+    H += _clamp(mu + dPsi_dJ, project) * wp.outer(b, b)
+    b = _mode2(U, wp.mat22d(zero, h, h, zero), Vs, Dmi)  # flip
+    H += _clamp(mu - dPsi_dJ, project) * wp.outer(b, b)
+    # scaling modes: closed-form eigensystem of the symmetric 2x2 [[a, o], [o, c2]]
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    a = mu + cs / (s[0] * s[0])
+    c2 = mu + cs / (s[1] * s[1])
+    o = lam / (s[0] * s[1])
+    theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
+    ct = wp.cos(theta)
+    st = wp.sin(theta)
+    l1 = a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st
+    l2 = a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct
+    b = _mode2(U, wp.mat22d(ct, zero, zero, st), Vs, Dmi)
+    H += _clamp(l1, project) * wp.outer(b, b)
+    b = _mode2(U, wp.mat22d(-st, zero, zero, ct), Vs, Dmi)
+    H += _clamp(l2, project) * wp.outer(b, b)
+    for r in range(6):
+        for c in range(6):
+            hess[e, r, c] = V * H[r, c]
+
+
+# ----------------------------------------------------------------------------------------------
+# host side
+# ----------------------------------------------------------------------------------------------
+class _Workspace:
+    """Device copies of the model arrays and reusable output buffers (per model)."""
+
+    def __init__(self, model: FemModel):
+        d, m, k = model.dim, model.n_elements, model.dim + 1
+        dev = model.device
+        vec = wp.vec3d if d == 3 else wp.vec2d
+        mat = wp.mat33d if d == 3 else wp.mat22d
+        self.vec = vec
+        self.kernel = _neohookean3 if d == 3 else _neohookean2
+        self.elements = wp.array(model.elements, dtype=wp.int32, device=dev)
+        self.Dm_inv = wp.array(model.Dm_inv, dtype=mat, device=dev)
+        self.volume = wp.array(model.volume, dtype=wp.float64, device=dev)
+        self.mu = wp.array(model.mu, dtype=wp.float64, device=dev)
+        self.lam = wp.array(model.lam, dtype=wp.float64, device=dev)
+        self.energy = wp.zeros(m, dtype=wp.float64, device=dev)
+        self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
+        self.grad = wp.zeros((m, k), dtype=vec, device=dev)
+        self.hess = None  # allocated on first Hessian request: (m, k*d, k*d) float64
+        self.hess_dummy = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
+        # gradient scatter: (n*d, m*k*d) sparse sum over element copies of each dof
+        dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
+        self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))), shape=(model.n_dofs, dofs.size))
+
+
+def _workspace(model: FemModel) -> _Workspace:
+    ws = model._cache.get("neohookean")
+    if ws is None:
+        ws = model._cache["neohookean"] = _Workspace(model)
+    return ws
+
+
+def _launch(model: FemModel, x, want: int, project: bool) -> _Workspace:
+    x = model.check_positions(x)
+    ws = _workspace(model)
+    if want >= _HESSIAN and ws.hess is None:
+        k = model.dim + 1
+        ws.hess = wp.zeros((model.n_elements, k * model.dim, k * model.dim), dtype=wp.float64, device=model.device)
+    wp.launch(
+        ws.kernel,
+        dim=model.n_elements,
+        inputs=[wp.array(x, dtype=ws.vec, device=model.device), ws.elements, ws.Dm_inv, ws.volume, ws.mu, ws.lam,
+                int(want), int(bool(project))],
+        outputs=[ws.energy, ws.det_F, ws.grad, ws.hess if want >= _HESSIAN else ws.hess_dummy],
+        device=model.device,
+    )
+    return ws
+
+
+def _total(ws: _Workspace) -> float:
+    if np.any(ws.det_F.numpy() <= 0.0):
+        return float("inf")
+    return float(np.sum(ws.energy.numpy()))
+
+
+def _gradient(model: FemModel, ws: _Workspace) -> np.ndarray:
+    return (ws.scatter @ ws.grad.numpy().reshape(-1)).reshape(model.n_vertices, model.dim)
+
+
+def energy(model: FemModel, x) -> float:
+    """Elastic energy [J] at positions x (n, dim) [m]; +inf if any element has det F <= 0."""
+    return _total(_launch(model, x, _ENERGY, False))
+
+
+def energy_gradient(model: FemModel, x) -> tuple[float, np.ndarray]:
+    """(energy [J], gradient dE/dx (n, dim) [N]). The elastic nodal force is ``-gradient``."""
+    ws = _launch(model, x, _GRADIENT, False)
+    return _total(ws), _gradient(model, ws)
+
+
+def element_hessians(model: FemModel, x, *, project_psd: bool = True) -> np.ndarray:
+    """Per-element Hessian blocks (m, (dim+1)*dim, (dim+1)*dim) [N/m], dofs ordered (vertex, axis)."""
+    ws = _launch(model, x, _HESSIAN, project_psd)
+    return ws.hess.numpy().copy()
+
+
+def energy_gradient_hessian(model: FemModel, x, *, project_psd: bool = True) -> tuple[float, np.ndarray, sp.csr_matrix]:
+    """(energy [J], gradient (n, dim) [N], Hessian (n*dim, n*dim) CSR [N/m]).
+
+    With ``project_psd`` (default) every element block is projected to positive semi-definite
+    (clamped eigenvalues of d2Psi/dF2), so the assembled Hessian is PSD; otherwise it is the
+    exact Hessian. The CSR has the model's fixed pattern (``model.pattern``); its ``data`` is a
+    fresh array the caller may modify (e.g. add contact blocks via ``pattern.block_slots``).
+    """
+    ws = _launch(model, x, _HESSIAN, project_psd)
+    H = model.pattern.assemble(ws.hess.numpy())
+    return _total(ws), _gradient(model, ws), H
+
+
+def det_F(model: FemModel, x) -> np.ndarray:
+    """det F per element (m,) at positions x (n, dim); <= 0 means inverted or degenerate."""
+    return _launch(model, x, _ENERGY, False).det_F.numpy().copy()
