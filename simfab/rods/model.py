@@ -1,0 +1,422 @@
+"""Rod networks: immutable model (topology, rest shape, stiffness, attachments) and state.
+
+A network is a set of rods (open polylines) plus rigid bodies (inserts and junction
+frames). Rod ends attach to bodies:
+
+- **clamp**: both nodes of the end edge and the end edge's material frame follow the body;
+- **pin**: only the end node follows the body (the edge turns freely about it).
+
+Degrees of freedom: node positions (3 per node, [m]), one twist angle per edge ([rad]),
+and 6 per free rigid body (translation [m] + rotation-vector update [rad]). Nodes/angles
+that are attached to a body or marked fixed are not unknowns; fixed ones are prescribed by
+the driver (quasi-static loading).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from simfab.errors import InputError
+from simfab.rods import frames as fr
+
+
+# ----------------------------------------------------------------------------- materials
+@dataclass(frozen=True, kw_only=True)
+class Material:
+    """Linear elastic material: Young's modulus ``young`` [Pa], Poisson ratio ``poisson`` [-]."""
+
+    young: float
+    poisson: float = 0.35
+
+    def __post_init__(self):
+        if not (self.young > 0 and -1.0 < self.poisson < 0.5):
+            raise InputError(f"material needs young > 0 and -1 < poisson < 0.5 (got {self.young}, {self.poisson})")
+
+    @property
+    def shear(self) -> float:
+        """Shear modulus G = E / (2 (1 + nu)) [Pa]."""
+        return self.young / (2.0 * (1.0 + self.poisson))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Section:
+    """Rod cross-section.
+
+    ``shape="rect"``: ``width`` [m] along the material director m2 (in the sheet plane for
+    laser-cut beams) and ``thickness`` [m] along m1 (the sheet normal), so bending out of the
+    sheet (kappa1) is the weak direction. ``shape="circle"``: ``radius`` [m].
+    """
+
+    shape: str = "rect"
+    width: float = 0.0
+    thickness: float = 0.0
+    radius: float = 0.0
+
+    def __post_init__(self):
+        if self.shape == "rect":
+            if not (self.width > 0 and self.thickness > 0):
+                raise InputError(f"rectangular section needs width > 0 and thickness > 0 (got {self.width}, {self.thickness})")
+        elif self.shape == "circle":
+            if not self.radius > 0:
+                raise InputError(f"circular section needs radius > 0 (got {self.radius})")
+        else:
+            raise InputError(f"section shape must be 'rect' or 'circle' (got {self.shape!r})")
+
+    def area(self) -> float:
+        return self.width * self.thickness if self.shape == "rect" else np.pi * self.radius**2
+
+    def stiffness(self, mat: Material) -> dict:
+        """Axial EA [N], bending B1 (about m2), B2 (about m1) [N m^2], torsion GJ [N m^2].
+
+        Rectangle: B1 = E w t^3/12, B2 = E t w^3/12, J = a b^3 (1/3 - 0.21 b/a (1 - b^4/(12 a^4)))
+        (a >= b the sides; Roark). Circle: B1 = B2 = E pi r^4/4, J = pi r^4/2.
+        """
+        E, G = mat.young, mat.shear
+        if self.shape == "rect":
+            w, t = self.width, self.thickness
+            a, b = max(w, t), min(w, t)
+            J = a * b**3 * (1.0 / 3.0 - 0.21 * (b / a) * (1.0 - b**4 / (12.0 * a**4)))
+            return dict(EA=E * w * t, B1=E * w * t**3 / 12.0, B2=E * t * w**3 / 12.0, GJ=G * J)
+        r = self.radius
+        return dict(EA=E * np.pi * r**2, B1=E * np.pi * r**4 / 4.0, B2=E * np.pi * r**4 / 4.0, GJ=G * np.pi * r**4 / 2.0)
+
+    def draw_width(self) -> float:
+        """Width [m] used for drawing (USD curve widths, capsule radii)."""
+        return self.width if self.shape == "rect" else 2.0 * self.radius
+
+
+# ----------------------------------------------------------------------------- model/state
+@dataclass(frozen=True)
+class RodInfo:
+    """One rod of a network: its nodes (k+1,) and edges (k,) in the global arrays."""
+
+    name: str
+    nodes: np.ndarray
+    edges: np.ndarray
+    section: Section
+
+
+@dataclass(frozen=True, kw_only=True)
+class RodModel:
+    """Immutable description of a rod network (arrays are float64 / int32, SI units).
+
+    Edges and hinges
+    ----------------
+    edges : (E,2) node indices; edge vector = x[b] - x[a].
+    rest_len : (E,) rest lengths [m].  stretch_stiff : (E,) EA [N].
+    hinge_nodes : (H,3) (x0, x1, x2) of each interior vertex; hinge_edges : (H,2) (e, f).
+    vor_len : (H,) Voronoi length (|e|+|f|)/2 at rest [m].
+    kappa_bar : (H,2) rest material curvatures (kappa1, kappa2) [-] (integrated, 2 tan(phi/2)).
+    bend_stiff : (H,2) (B1, B2) [N m^2]. twist_stiff : (H,) GJ [N m^2]. twist_bar : (H,) rest twist [rad].
+
+    Attachments and boundary conditions
+    -----------------------------------
+    body_names : (B,) names; body_driven : (B,) bool (pose prescribed by the driver).
+    node_body : (N,) body index or -1; node_offset : (N,3) position in the body frame [m].
+    edge_body : (E,) body index or -1 (clamped edges); edge_m1_local : (E,3) m1 in the body frame.
+    node_fixed : (N,3) bool prescribed coordinates; theta_fixed : (E,) bool prescribed angles.
+    length_scale : mean rest edge length [m] (scales angle unknowns so all have length units).
+    force_scale : max bending stiffness / (longest rod)^2 [N], the force unit of tolerances.
+    """
+
+    n_nodes: int
+    edges: np.ndarray
+    rest_len: np.ndarray
+    stretch_stiff: np.ndarray
+    hinge_nodes: np.ndarray
+    hinge_edges: np.ndarray
+    vor_len: np.ndarray
+    kappa_bar: np.ndarray
+    bend_stiff: np.ndarray
+    twist_stiff: np.ndarray
+    twist_bar: np.ndarray
+    rods: tuple
+    body_names: tuple
+    body_driven: np.ndarray
+    node_body: np.ndarray
+    node_offset: np.ndarray
+    edge_body: np.ndarray
+    edge_m1_local: np.ndarray
+    node_fixed: np.ndarray
+    theta_fixed: np.ndarray
+    length_scale: float
+    force_scale: float
+
+    @property
+    def n_edges(self) -> int:
+        return len(self.edges)
+
+    @property
+    def n_hinges(self) -> int:
+        return len(self.hinge_nodes)
+
+    @property
+    def n_bodies(self) -> int:
+        return len(self.body_names)
+
+    def body_index(self, name: str) -> int:
+        try:
+            return self.body_names.index(name)
+        except ValueError:
+            raise InputError(f"no body named {name!r} (bodies: {', '.join(self.body_names)})") from None
+
+    def rod(self, name: str) -> RodInfo:
+        for r in self.rods:
+            if r.name == name:
+                return r
+        raise InputError(f"no rod named {name!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class RodState:
+    """Configuration of a network (a new object per step; arrays are not modified in place).
+
+    x : (N,3) node positions [m]; theta : (E,) twist angles [rad];
+    d1 : (E,3) reference directors (unit, normal to the tangents ``t`` (E,3));
+    ref_twist : (H,) reference twist [rad];
+    body_pos : (B,3) [m]; body_rot : (B,3,3) rotation matrices (body -> world).
+    """
+
+    x: np.ndarray
+    theta: np.ndarray
+    d1: np.ndarray
+    t: np.ndarray
+    ref_twist: np.ndarray
+    body_pos: np.ndarray
+    body_rot: np.ndarray
+
+    def replace(self, **kw) -> "RodState":
+        return dataclasses.replace(self, **kw)
+
+    def material_frames(self) -> tuple[np.ndarray, np.ndarray]:
+        """(m1, m2) each (E,3)."""
+        return fr.material_frames(self.d1, self.t, self.theta)
+
+
+def material_curvatures(model: RodModel, state: RodState) -> np.ndarray:
+    """(H,2) material curvatures (kappa1, kappa2) of ``state`` (same definition as bend.py)."""
+    if model.n_hinges == 0:
+        return np.zeros((0, 2))
+    m1, m2 = state.material_frames()
+    e, f = model.hinge_edges[:, 0], model.hinge_edges[:, 1]
+    te, tf = state.t[e], state.t[f]
+    kb = 2.0 * np.cross(te, tf) / (1.0 + np.einsum("ij,ij->i", te, tf))[:, None]
+    k1 = 0.5 * np.einsum("ij,ij->i", kb, m2[e] + m2[f])
+    k2 = -0.5 * np.einsum("ij,ij->i", kb, m1[e] + m1[f])
+    return np.stack([k1, k2], axis=1)
+
+
+def synchronize(model: RodModel, prev: RodState, x: np.ndarray, theta: np.ndarray,
+                body_pos: np.ndarray, body_rot: np.ndarray) -> RodState:
+    """New state from ``prev`` with new unknowns: attached nodes follow their bodies, reference
+    directors are time-parallel transported to the new tangents, clamped edges take the twist
+    angle that aligns their material frame with the body, and the reference twist is updated
+    continuously."""
+    x = np.array(x, dtype=np.float64, copy=True)
+    theta = np.array(theta, dtype=np.float64, copy=True)
+    att = model.node_body >= 0
+    if att.any():
+        b = model.node_body[att]
+        x[att] = body_pos[b] + np.einsum("kij,kj->ki", body_rot[b], model.node_offset[att])
+    t = fr.tangents(x, model.edges)
+    d1 = fr.transport_directors(prev.d1, prev.t, t)
+    clamped = model.edge_body >= 0
+    if clamped.any():
+        b = model.edge_body[clamped]
+        m1 = np.einsum("kij,kj->ki", body_rot[b], model.edge_m1_local[clamped])
+        ang = fr.signed_angle(d1[clamped], m1 - np.einsum("ij,ij->i", m1, t[clamped])[:, None] * t[clamped], t[clamped])
+        prev_th = prev.theta[clamped]
+        theta[clamped] = prev_th + (ang - prev_th + np.pi) % (2.0 * np.pi) - np.pi
+    ref = fr.reference_twist(d1, t, model.hinge_edges, prev.ref_twist) if model.n_hinges else prev.ref_twist
+    return RodState(x=x, theta=theta, d1=d1, t=t, ref_twist=ref, body_pos=np.array(body_pos, dtype=np.float64),
+                    body_rot=np.array(body_rot, dtype=np.float64))
+
+
+# ----------------------------------------------------------------------------- builder
+@dataclass
+class _RodSpec:
+    name: str
+    points: np.ndarray
+    rest_points: np.ndarray
+    section: Section
+    material: Material
+    director: np.ndarray
+    stretch_stiffness: float | None
+
+
+@dataclass
+class NetworkBuilder:
+    """Assemble a :class:`RodModel` and its initial :class:`RodState`.
+
+    Example::
+
+        nb = NetworkBuilder()
+        ins = nb.add_body("insert", pos=[0.1, 0, 0], driven=True)
+        r = nb.add_rod("beam", pts, section=Section(width=5e-3, thickness=1e-3), material=Material(young=2e9),
+                       director=[0, 0, 1])
+        nb.clamp("beam", "end", "insert")
+        nb.fix("beam", nodes=[0, 1], thetas=[0])
+        model, state = nb.build()
+    """
+
+    rods: list = field(default_factory=list)
+    bodies: list = field(default_factory=list)  # (name, pos (3,), rot (3,3), driven)
+    clamps: list = field(default_factory=list)  # (rod, end, body)
+    pins: list = field(default_factory=list)
+    fixed_nodes: list = field(default_factory=list)  # (rod, local node, comps)
+    fixed_thetas: list = field(default_factory=list)  # (rod, local edge)
+
+    def add_body(self, name: str, *, pos=(0.0, 0.0, 0.0), rot=None, driven: bool = False) -> str:
+        """A rigid body (insert or junction frame) at ``pos`` [m] with rotation ``rot`` (3,3)."""
+        if any(b[0] == name for b in self.bodies):
+            raise InputError(f"duplicate body name {name!r}")
+        R = np.eye(3) if rot is None else np.asarray(rot, dtype=np.float64)
+        self.bodies.append((name, np.asarray(pos, dtype=np.float64), R, bool(driven)))
+        return name
+
+    def add_rod(self, name: str, points, *, section: Section, material: Material, director=(0.0, 0.0, 1.0),
+                rest_points=None, stretch_stiffness: float | None = None) -> str:
+        """A rod through ``points`` (k+1,3) [m], k >= 1. ``rest_points`` (default ``points``) give
+        the natural shape (curvature). ``director`` is the initial m1 of the first edge (the sheet
+        normal for laser-cut beams). ``stretch_stiffness`` overrides EA [N] (e.g. to approach the
+        inextensible limit)."""
+        P = np.asarray(points, dtype=np.float64)
+        if P.ndim != 2 or P.shape[1] != 3 or len(P) < 2:
+            raise InputError(f"rod {name!r}: points must be (k+1, 3) with k >= 1, got {P.shape}")
+        Q = P if rest_points is None else np.asarray(rest_points, dtype=np.float64)
+        if Q.shape != P.shape:
+            raise InputError(f"rod {name!r}: rest_points shape {Q.shape} differs from points {P.shape}")
+        for arr, what in ((P, "points"), (Q, "rest_points")):
+            if not np.all(np.isfinite(arr)) or np.any(np.linalg.norm(np.diff(arr, axis=0), axis=1) <= 0):
+                raise InputError(f"rod {name!r}: {what} must be finite with no repeated consecutive points")
+        if any(r.name == name for r in self.rods):
+            raise InputError(f"duplicate rod name {name!r}")
+        self.rods.append(_RodSpec(name, P, Q, section, material, np.asarray(director, dtype=np.float64),
+                                  stretch_stiffness))
+        return name
+
+    def clamp(self, rod: str, end: str, body: str) -> None:
+        """Clamp the ``end`` ("start"/"end") edge of ``rod`` to ``body`` (position and frame)."""
+        self.clamps.append((rod, _end(end), body))
+
+    def pin(self, rod: str, end: str, body: str) -> None:
+        """Pin the ``end`` node of ``rod`` to ``body`` (position only)."""
+        self.pins.append((rod, _end(end), body))
+
+    def fix(self, rod: str, *, nodes=(), thetas=(), comps=(0, 1, 2)) -> None:
+        """Prescribe coordinates ``comps`` of local ``nodes`` and the angles of local edges ``thetas``."""
+        for n in nodes:
+            self.fixed_nodes.append((rod, int(n), tuple(comps)))
+        for e in thetas:
+            self.fixed_thetas.append((rod, int(e)))
+
+    def build(self) -> tuple[RodModel, RodState]:
+        if not self.rods:
+            raise InputError("a rod network needs at least one rod")
+        body_idx = {b[0]: i for i, b in enumerate(self.bodies)}
+        rod_idx = {r.name: i for i, r in enumerate(self.rods)}
+        X, Xr, edges, rest_len, EA, d1, infos = [], [], [], [], [], [], []
+        hn, he, B, GJ, kb_rest, vor = [], [], [], [], [], []
+        n0 = e0 = 0
+        for r in self.rods:
+            k = len(r.points) - 1
+            nodes = np.arange(n0, n0 + k + 1)
+            eds = np.arange(e0, e0 + k)
+            stiff = r.section.stiffness(r.material)
+            X.append(r.points)
+            Xr.append(r.rest_points)
+            edges.append(np.stack([nodes[:-1], nodes[1:]], axis=1))
+            L = np.linalg.norm(np.diff(r.rest_points, axis=0), axis=1)
+            rest_len.append(L)
+            EA.append(np.full(k, stiff["EA"] if r.stretch_stiffness is None else r.stretch_stiffness))
+            d1.append(fr.space_parallel_frames(fr.normalize(np.diff(r.points, axis=0)), r.director))
+            if k >= 2:
+                hn.append(np.stack([nodes[:-2], nodes[1:-1], nodes[2:]], axis=1))
+                he.append(np.stack([eds[:-1], eds[1:]], axis=1))
+                B.append(np.tile([stiff["B1"], stiff["B2"]], (k - 1, 1)))
+                GJ.append(np.full(k - 1, stiff["GJ"]))
+                vor.append(0.5 * (L[:-1] + L[1:]))
+                # rest curvature measured in the rest shape's own space-parallel frames
+                tr = fr.normalize(np.diff(r.rest_points, axis=0))
+                dr = fr.space_parallel_frames(tr, r.director)
+                m1, m2 = fr.material_frames(dr, tr, np.zeros(k))
+                kb = 2.0 * np.cross(tr[:-1], tr[1:]) / (1.0 + np.einsum("ij,ij->i", tr[:-1], tr[1:]))[:, None]
+                kb_rest.append(np.stack([0.5 * np.einsum("ij,ij->i", kb, m2[:-1] + m2[1:]),
+                                         -0.5 * np.einsum("ij,ij->i", kb, m1[:-1] + m1[1:])], axis=1))
+            infos.append(RodInfo(r.name, nodes, eds, r.section))
+            n0 += k + 1
+            e0 += k
+        N, E = n0, e0
+        x = np.concatenate(X)
+        edges = np.concatenate(edges).astype(np.int32)
+        d1 = np.concatenate(d1)
+        t = fr.tangents(x, edges)
+        cat = lambda a, shape: np.concatenate(a) if a else np.zeros(shape)  # noqa: E731
+        hinge_nodes = cat(hn, (0, 3)).astype(np.int32)
+        hinge_edges = cat(he, (0, 2)).astype(np.int32)
+        nb = len(self.bodies)
+        body_pos = np.array([b[1] for b in self.bodies]).reshape(nb, 3)
+        body_rot = np.array([b[2] for b in self.bodies]).reshape(nb, 3, 3)
+        node_body = np.full(N, -1, dtype=np.int32)
+        node_offset = np.zeros((N, 3))
+        edge_body = np.full(E, -1, dtype=np.int32)
+        edge_m1 = np.zeros((E, 3))
+        m1_all, _ = fr.material_frames(d1, t, np.zeros(E))
+
+        def attach_node(n, b):
+            if node_body[n] >= 0 and node_body[n] != b:
+                raise InputError(f"node {n} is attached to two bodies")
+            node_body[n] = b
+            node_offset[n] = body_rot[b].T @ (x[n] - body_pos[b])
+
+        def lookup(rod, body):
+            if rod not in rod_idx:
+                raise InputError(f"attachment names unknown rod {rod!r}")
+            if body not in body_idx:
+                raise InputError(f"attachment names unknown body {body!r}")
+            return infos[rod_idx[rod]], body_idx[body]
+
+        for rod, end, body in self.clamps:
+            info, b = lookup(rod, body)
+            e = info.edges[0] if end == "start" else info.edges[-1]
+            for n in edges[e]:
+                attach_node(n, b)
+            edge_body[e] = b
+            edge_m1[e] = body_rot[b].T @ m1_all[e]
+        for rod, end, body in self.pins:
+            info, b = lookup(rod, body)
+            attach_node(info.nodes[0] if end == "start" else info.nodes[-1], b)
+        node_fixed = np.zeros((N, 3), dtype=bool)
+        theta_fixed = np.zeros(E, dtype=bool)
+        for rod, n, comps in self.fixed_nodes:
+            info = infos[rod_idx[rod]]
+            node_fixed[info.nodes[n], list(comps)] = True
+        for rod, e in self.fixed_thetas:
+            theta_fixed[infos[rod_idx[rod]].edges[e]] = True
+        if np.any(node_fixed[node_body >= 0]) or np.any(theta_fixed[edge_body >= 0]):
+            raise InputError("a node or edge is both fixed and attached to a body")
+        lengths = [np.sum(np.linalg.norm(np.diff(r.rest_points, axis=0), axis=1)) for r in self.rods]
+        Bmax = max((float(np.max(b)) for b in B), default=max(r.section.stiffness(r.material)["B1"] for r in self.rods))
+        model = RodModel(
+            n_nodes=N, edges=edges, rest_len=np.concatenate(rest_len), stretch_stiff=np.concatenate(EA),
+            hinge_nodes=hinge_nodes, hinge_edges=hinge_edges, vor_len=cat(vor, (0,)), kappa_bar=cat(kb_rest, (0, 2)),
+            bend_stiff=cat(B, (0, 2)), twist_stiff=cat(GJ, (0,)), twist_bar=np.zeros(len(hinge_nodes)),
+            rods=tuple(infos), body_names=tuple(b[0] for b in self.bodies),
+            body_driven=np.array([b[3] for b in self.bodies], dtype=bool),
+            node_body=node_body, node_offset=node_offset, edge_body=edge_body, edge_m1_local=edge_m1,
+            node_fixed=node_fixed, theta_fixed=theta_fixed,
+            length_scale=float(np.mean(np.concatenate(rest_len))), force_scale=Bmax / max(lengths) ** 2,
+        )
+        # the initial reference twist of the initial frames (zero when points == rest_points)
+        ref0 = fr.reference_twist(d1, t, hinge_edges, np.zeros(len(hinge_nodes))) if len(hinge_nodes) else np.zeros(0)
+        state = RodState(x=x, theta=np.zeros(E), d1=d1, t=t, ref_twist=ref0, body_pos=body_pos, body_rot=body_rot)
+        return model, state
+
+
+def _end(end: str) -> str:
+    if end not in ("start", "end"):
+        raise InputError(f"rod end must be 'start' or 'end' (got {end!r})")
+    return end
