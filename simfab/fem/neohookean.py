@@ -39,29 +39,60 @@ element contributes nothing to the gradient and Hessian, which are then not mean
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import scipy.sparse as sp
 
 from simfab._warp import wp
 from simfab.fem.model import FemModel
 
+wp.set_module_options({"enable_backward": False})  # hand-written derivatives; halves compile time
+
 _vec6d = wp.types.vector(length=6, dtype=wp.float64)
 _vec12d = wp.types.vector(length=12, dtype=wp.float64)
-_mat66d = wp.types.matrix(shape=(6, 6), dtype=wp.float64)
-_mat1212d = wp.types.matrix(shape=(12, 12), dtype=wp.float64)
+_vec4d = wp.types.vector(length=4, dtype=wp.float64)
+_vec9d = wp.types.vector(length=9, dtype=wp.float64)
+_mat4x6d = wp.types.matrix(shape=(4, 6), dtype=wp.float64)
+_mat9x12d = wp.types.matrix(shape=(9, 12), dtype=wp.float64)
 
 _HALF_SQRT2 = 0.7071067811865476  # 1/sqrt(2): unit Frobenius norm of the twist/flip modes
 
-# want flags
-_ENERGY, _GRADIENT, _HESSIAN = 0, 1, 2
+
+@wp.func
+def _clamp(lam: wp.float64, project: int):
+    if project != 0 and lam < wp.float64(0.0):
+        return wp.float64(0.0)
+    return lam
+
+
+@wp.func
+def _psi(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64, d: wp.float64):
+    """Neo-Hookean energy density [Pa] (J > 0)."""
+    logJ = wp.log(J)
+    return wp.float64(0.5) * mu * (wp.ddot(F, F) - d) - mu * logJ + wp.float64(0.5) * lam * logJ * logJ
+
+
+@wp.func
+def _pk1(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64):
+    """First Piola-Kirchhoff stress P = mu (F - F^-T) + lam log J F^-T [Pa]."""
+    FinvT = wp.transpose(wp.inverse(F))
+    return mu * (F - FinvT) + lam * wp.log(J) * FinvT
 
 
 # ----------------------------------------------------------------------------------------------
 # 3D
 # ----------------------------------------------------------------------------------------------
 @wp.func
+def _F3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat33d), e: int):
+    x0 = x[elements[e, 0]]
+    Ds = wp.matrix_from_cols(x[elements[e, 1]] - x0, x[elements[e, 2]] - x0, x[elements[e, 3]] - x0)
+    return Ds * Dm_inv[e]
+
+
+@wp.func
 def _nodal3(M: wp.mat33d, Dmi: wp.mat33d):
-    """b = dF/dx^T : M as a 12-vector (vertex-major): columns of M Dm^-T, vertex 0 = -sum."""
+    """b = (dF/dx)^T : M as a 12-vector ordered (vertex, axis): columns of M Dm^-T, vertex 0 = -sum."""
     W = M * wp.transpose(Dmi)
     b = _vec12d()
     for a in range(3):
@@ -78,103 +109,143 @@ def _mode3(U: wp.mat33d, M: wp.mat33d, V: wp.mat33d, Dmi: wp.mat33d):
 
 
 @wp.func
-def _clamp(lam: wp.float64, project: int):
-    if project != 0 and lam < wp.float64(0.0):
-        return wp.float64(0.0)
-    return lam
+def _cholesky3(A: wp.mat33d):
+    """Lower-triangular L with L L^T = A for a symmetric positive definite 3x3 A."""
+    l00 = wp.sqrt(A[0, 0])
+    l10 = A[1, 0] / l00
+    l20 = A[2, 0] / l00
+    l11 = wp.sqrt(A[1, 1] - l10 * l10)
+    l21 = (A[2, 1] - l20 * l10) / l11
+    l22 = wp.sqrt(A[2, 2] - l20 * l20 - l21 * l21)
+    z = wp.float64(0.0)
+    return wp.mat33d(l00, z, z, l10, l11, z, l20, l21, l22)
 
 
 @wp.kernel
-def _neohookean3(
-    x: wp.array(dtype=wp.vec3d),
-    elements: wp.array2d(dtype=wp.int32),
-    Dm_inv: wp.array(dtype=wp.mat33d),
-    volume: wp.array(dtype=wp.float64),
-    mu_e: wp.array(dtype=wp.float64),
-    lam_e: wp.array(dtype=wp.float64),
-    want: int,
-    project: int,
-    energy: wp.array(dtype=wp.float64),
-    det_F: wp.array(dtype=wp.float64),
-    grad: wp.array2d(dtype=wp.vec3d),
-    hess: wp.array3d(dtype=wp.float64),
-):
+def _energy3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat33d),
+             volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
+             energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
     e = wp.tid()
-    i0 = elements[e, 0]
-    x0 = x[i0]
-    Ds = wp.matrix_from_cols(x[elements[e, 1]] - x0, x[elements[e, 2]] - x0, x[elements[e, 3]] - x0)
-    Dmi = Dm_inv[e]
-    F = Ds * Dmi
+    F = _F3(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
+    energy[e] = wp.float64(0.0)
+    if J > wp.float64(0.0):
+        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], wp.float64(3.0))
+
+
+@wp.kernel
+def _gradient3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat33d),
+               volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
+               energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec12d)):
+    e = wp.tid()
+    F = _F3(x, elements, Dm_inv, e)
+    J = wp.determinant(F)
+    det_F[e] = J
+    energy[e] = wp.float64(0.0)
+    grad[e] = _vec12d()
+    if J > wp.float64(0.0):
+        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], wp.float64(3.0))
+        grad[e] = volume[e] * _nodal3(_pk1(F, J, mu[e], lam[e]), Dm_inv[e])
+
+
+@wp.kernel
+def _hessian3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat33d),
+              volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64), lam_e: wp.array(dtype=wp.float64),
+              project: int,
+              energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec12d),
+              hess: wp.array3d(dtype=wp.float64)):
+    e = wp.tid()
+    F = _F3(x, elements, Dm_inv, e)
+    J = wp.determinant(F)
+    det_F[e] = J
+    zero = wp.float64(0.0)
+    energy[e] = zero
+    grad[e] = _vec12d()
+    if J <= zero:
+        for r in range(12):
+            for c in range(12):
+                hess[e, r, c] = zero
+        return
     V = volume[e]
     mu = mu_e[e]
     lam = lam_e[e]
-    zero = wp.float64(0.0)
-    if J <= zero:
-        energy[e] = zero
-        if want >= _GRADIENT:
-            for i in range(4):
-                grad[e, i] = wp.vec3d()
-        if want >= _HESSIAN:
-            for r in range(12):
-                for c in range(12):
-                    hess[e, r, c] = zero
-        return
-    logJ = wp.log(J)
-    energy[e] = V * (wp.float64(0.5) * mu * (wp.ddot(F, F) - wp.float64(3.0)) - mu * logJ
-                     + wp.float64(0.5) * lam * logJ * logJ)
-    if want < _GRADIENT:
-        return
-    FinvT = wp.transpose(wp.inverse(F))
-    P = mu * (F - FinvT) + lam * logJ * FinvT
-    g = _nodal3(P, Dmi)
-    for i in range(4):
-        grad[e, i] = V * wp.vec3d(g[3 * i], g[3 * i + 1], g[3 * i + 2])
-    if want < _HESSIAN:
-        return
+    Dmi = Dm_inv[e]
+    energy[e] = V * _psi(F, J, mu, lam, wp.float64(3.0))
+    grad[e] = V * _nodal3(_pk1(F, J, mu, lam), Dmi)
 
     U = wp.mat33d()
     s = wp.vec3d()
     Vs = wp.mat33d()
     wp.svd3(F, U, s, Vs)
+    logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
     h = wp.float64(_HALF_SQRT2)
-    H = _mat1212d()
+    B = _mat9x12d()  # rows: nodal vectors of the 9 eigenmodes of d2Psi/dF2
+    w = _vec9d()  # their (clamped) eigenvalues
     # twist (skew) and flip (symmetric) modes in the (1,2), (0,2), (0,1) planes
-    b = _mode3(U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, Dmi)
-    H += _clamp(mu + dPsi_dJ * s[0], project) * wp.outer(b, b)
-    b = _mode3(U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, Dmi)
-    H += _clamp(mu - dPsi_dJ * s[0], project) * wp.outer(b, b)
-    b = _mode3(U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, Dmi)
-    H += _clamp(mu + dPsi_dJ * s[1], project) * wp.outer(b, b)
-    b = _mode3(U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, Dmi)
-    H += _clamp(mu - dPsi_dJ * s[1], project) * wp.outer(b, b)
-    b = _mode3(U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
-    H += _clamp(mu + dPsi_dJ * s[2], project) * wp.outer(b, b)
-    b = _mode3(U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
-    H += _clamp(mu - dPsi_dJ * s[2], project) * wp.outer(b, b)
-    # scaling modes: eigenvectors of the Hessian of Psi in the singular values
+    B[0] = _mode3(U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, Dmi)
+    w[0] = _clamp(mu + dPsi_dJ * s[0], project)
+    B[1] = _mode3(U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, Dmi)
+    w[1] = _clamp(mu - dPsi_dJ * s[0], project)
+    B[2] = _mode3(U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, Dmi)
+    w[2] = _clamp(mu + dPsi_dJ * s[1], project)
+    B[3] = _mode3(U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, Dmi)
+    w[3] = _clamp(mu - dPsi_dJ * s[1], project)
+    B[4] = _mode3(U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
+    w[4] = _clamp(mu + dPsi_dJ * s[2], project)
+    B[5] = _mode3(U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
+    w[5] = _clamp(mu - dPsi_dJ * s[2], project)
+    # scaling modes: the Hessian of Psi in the singular values,
+    #   A = mu I + (mu - lam log J) diag(1/s^2) + lam t t^T,  t = 1/s,
+    # acting on the modes U diag(e_i) V^T. When dPsi/dJ <= 0 (i.e. lam log J <= mu: everything
+    # but strong volumetric expansion) every term is PSD and mu I > 0, so A is positive definite
+    # and is used as is through its Cholesky factor (cheaper than an eigensolve); otherwise A is
+    # diagonalized and its eigenvalues clamped.
     cs = mu + lam * (wp.float64(1.0) - logJ)
     A = wp.mat33d(
         mu + cs / (s[0] * s[0]), lam / (s[0] * s[1]), lam / (s[0] * s[2]),
         lam / (s[0] * s[1]), mu + cs / (s[1] * s[1]), lam / (s[1] * s[2]),
         lam / (s[0] * s[2]), lam / (s[1] * s[2]), mu + cs / (s[2] * s[2]),
     )
-    Q = wp.mat33d()
-    d = wp.vec3d()
-    wp.eig3(A, Q, d)
-    for k in range(3):
-        b = _mode3(U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, Dmi)
-        H += _clamp(d[k], project) * wp.outer(b, b)
+    if dPsi_dJ <= zero:
+        b0 = _mode3(U, wp.diag(wp.vec3d(wp.float64(1.0), zero, zero)), Vs, Dmi)
+        b1 = _mode3(U, wp.diag(wp.vec3d(zero, wp.float64(1.0), zero)), Vs, Dmi)
+        b2 = _mode3(U, wp.diag(wp.vec3d(zero, zero, wp.float64(1.0))), Vs, Dmi)
+        L = _cholesky3(A)  # sum_ij A_ij b_i b_j^T = sum_k c_k c_k^T, c_k = sum_i L_ik b_i
+        B[6] = L[0, 0] * b0 + L[1, 0] * b1 + L[2, 0] * b2
+        B[7] = L[1, 1] * b1 + L[2, 1] * b2
+        B[8] = L[2, 2] * b2
+        w[6] = wp.float64(1.0)
+        w[7] = wp.float64(1.0)
+        w[8] = wp.float64(1.0)
+    else:
+        Q = wp.mat33d()
+        d = wp.vec3d()
+        wp.eig3(A, Q, d)
+        for k in range(3):
+            B[6 + k] = _mode3(U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, Dmi)
+            w[6 + k] = _clamp(d[k], project)
+    # H_e = V sum_k w_k b_k b_k^T  (symmetric: compute the upper triangle, mirror)
     for r in range(12):
-        for c in range(12):
-            hess[e, r, c] = V * H[r, c]
+        for c in range(r, 12):
+            acc = zero
+            for k in range(9):
+                acc += w[k] * B[k, r] * B[k, c]
+            hess[e, r, c] = V * acc
+            hess[e, c, r] = V * acc
 
 
 # ----------------------------------------------------------------------------------------------
 # 2D (plane strain)
 # ----------------------------------------------------------------------------------------------
+@wp.func
+def _F2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat22d), e: int):
+    x0 = x[elements[e, 0]]
+    Ds = wp.matrix_from_cols(x[elements[e, 1]] - x0, x[elements[e, 2]] - x0)
+    return Ds * Dm_inv[e]
+
+
 @wp.func
 def _nodal2(M: wp.mat22d, Dmi: wp.mat22d):
     W = M * wp.transpose(Dmi)
@@ -192,65 +263,71 @@ def _mode2(U: wp.mat22d, M: wp.mat22d, V: wp.mat22d, Dmi: wp.mat22d):
 
 
 @wp.kernel
-def _neohookean2(
-    x: wp.array(dtype=wp.vec2d),
-    elements: wp.array2d(dtype=wp.int32),
-    Dm_inv: wp.array(dtype=wp.mat22d),
-    volume: wp.array(dtype=wp.float64),
-    mu_e: wp.array(dtype=wp.float64),
-    lam_e: wp.array(dtype=wp.float64),
-    want: int,
-    project: int,
-    energy: wp.array(dtype=wp.float64),
-    det_F: wp.array(dtype=wp.float64),
-    grad: wp.array2d(dtype=wp.vec2d),
-    hess: wp.array3d(dtype=wp.float64),
-):
+def _energy2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat22d),
+             volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
+             energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
     e = wp.tid()
-    x0 = x[elements[e, 0]]
-    Ds = wp.matrix_from_cols(x[elements[e, 1]] - x0, x[elements[e, 2]] - x0)
-    Dmi = Dm_inv[e]
-    F = Ds * Dmi
+    F = _F2(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
+    energy[e] = wp.float64(0.0)
+    if J > wp.float64(0.0):
+        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], wp.float64(2.0))
+
+
+@wp.kernel
+def _gradient2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat22d),
+               volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
+               energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec6d)):
+    e = wp.tid()
+    F = _F2(x, elements, Dm_inv, e)
+    J = wp.determinant(F)
+    det_F[e] = J
+    energy[e] = wp.float64(0.0)
+    grad[e] = _vec6d()
+    if J > wp.float64(0.0):
+        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], wp.float64(2.0))
+        grad[e] = volume[e] * _nodal2(_pk1(F, J, mu[e], lam[e]), Dm_inv[e])
+
+
+@wp.kernel
+def _hessian2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat22d),
+              volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64), lam_e: wp.array(dtype=wp.float64),
+              project: int,
+              energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec6d),
+              hess: wp.array3d(dtype=wp.float64)):
+    e = wp.tid()
+    F = _F2(x, elements, Dm_inv, e)
+    J = wp.determinant(F)
+    det_F[e] = J
+    zero = wp.float64(0.0)
+    energy[e] = zero
+    grad[e] = _vec6d()
+    if J <= zero:
+        for r in range(6):
+            for c in range(6):
+                hess[e, r, c] = zero
+        return
     V = volume[e]
     mu = mu_e[e]
     lam = lam_e[e]
-    zero = wp.float64(0.0)
-    if J <= zero:
-        energy[e] = zero
-        if want >= _GRADIENT:
-            for i in range(3):
-                grad[e, i] = wp.vec2d()
-        if want >= _HESSIAN:
-            for r in range(6):
-                for c in range(6):
-                    hess[e, r, c] = zero
-        return
-    logJ = wp.log(J)
-    energy[e] = V * (wp.float64(0.5) * mu * (wp.ddot(F, F) - wp.float64(2.0)) - mu * logJ
-                     + wp.float64(0.5) * lam * logJ * logJ)
-    if want < _GRADIENT:
-        return
-    FinvT = wp.transpose(wp.inverse(F))
-    P = mu * (F - FinvT) + lam * logJ * FinvT
-    g = _nodal2(P, Dmi)
-    for i in range(3):
-        grad[e, i] = V * wp.vec2d(g[2 * i], g[2 * i + 1])
-    if want < _HESSIAN:
-        return
+    Dmi = Dm_inv[e]
+    energy[e] = V * _psi(F, J, mu, lam, wp.float64(2.0))
+    grad[e] = V * _nodal2(_pk1(F, J, mu, lam), Dmi)
 
     U = wp.mat22d()
     s = wp.vec2d()
     Vs = wp.mat22d()
     wp.svd2(F, U, s, Vs)
+    logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
     h = wp.float64(_HALF_SQRT2)
-    H = _mat66d()
-    b = _mode2(U, wp.mat22d(zero, -h, h, zero), Vs, Dmi)  # twist
-    H += _clamp(mu + dPsi_dJ, project) * wp.outer(b, b)
-    b = _mode2(U, wp.mat22d(zero, h, h, zero), Vs, Dmi)  # flip
-    H += _clamp(mu - dPsi_dJ, project) * wp.outer(b, b)
+    B = _mat4x6d()
+    w = _vec4d()
+    B[0] = _mode2(U, wp.mat22d(zero, -h, h, zero), Vs, Dmi)  # twist
+    w[0] = _clamp(mu + dPsi_dJ, project)
+    B[1] = _mode2(U, wp.mat22d(zero, h, h, zero), Vs, Dmi)  # flip
+    w[1] = _clamp(mu - dPsi_dJ, project)
     # scaling modes: closed-form eigensystem of the symmetric 2x2 [[a, o], [o, c2]]
     cs = mu + lam * (wp.float64(1.0) - logJ)
     a = mu + cs / (s[0] * s[0])
@@ -259,30 +336,35 @@ def _neohookean2(
     theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
     ct = wp.cos(theta)
     st = wp.sin(theta)
-    l1 = a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st
-    l2 = a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct
-    b = _mode2(U, wp.mat22d(ct, zero, zero, st), Vs, Dmi)
-    H += _clamp(l1, project) * wp.outer(b, b)
-    b = _mode2(U, wp.mat22d(-st, zero, zero, ct), Vs, Dmi)
-    H += _clamp(l2, project) * wp.outer(b, b)
+    B[2] = _mode2(U, wp.mat22d(ct, zero, zero, st), Vs, Dmi)
+    w[2] = _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, project)
+    B[3] = _mode2(U, wp.mat22d(-st, zero, zero, ct), Vs, Dmi)
+    w[3] = _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, project)
     for r in range(6):
-        for c in range(6):
-            hess[e, r, c] = V * H[r, c]
+        for c in range(r, 6):
+            acc = zero
+            for k in range(4):
+                acc += w[k] * B[k, r] * B[k, c]
+            hess[e, r, c] = V * acc
+            hess[e, c, r] = V * acc
 
 
 # ----------------------------------------------------------------------------------------------
 # host side
 # ----------------------------------------------------------------------------------------------
+_ENERGY, _GRADIENT, _HESSIAN = 0, 1, 2  # what a launch computes
+_KERNELS = {2: (_energy2, _gradient2, _hessian2), 3: (_energy3, _gradient3, _hessian3)}
+
+
 class _Workspace:
     """Device copies of the model arrays and reusable output buffers (per model)."""
 
     def __init__(self, model: FemModel):
         d, m, k = model.dim, model.n_elements, model.dim + 1
         dev = model.device
-        vec = wp.vec3d if d == 3 else wp.vec2d
+        self.vec = wp.vec3d if d == 3 else wp.vec2d
         mat = wp.mat33d if d == 3 else wp.mat22d
-        self.vec = vec
-        self.kernel = _neohookean3 if d == 3 else _neohookean2
+        self.kernels = _KERNELS[d]
         self.elements = wp.array(model.elements, dtype=wp.int32, device=dev)
         self.Dm_inv = wp.array(model.Dm_inv, dtype=mat, device=dev)
         self.volume = wp.array(model.volume, dtype=wp.float64, device=dev)
@@ -290,12 +372,12 @@ class _Workspace:
         self.lam = wp.array(model.lam, dtype=wp.float64, device=dev)
         self.energy = wp.zeros(m, dtype=wp.float64, device=dev)
         self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
-        self.grad = wp.zeros((m, k), dtype=vec, device=dev)
+        self.grad = wp.zeros(m, dtype=_vec12d if d == 3 else _vec6d, device=dev)
         self.hess = None  # allocated on first Hessian request: (m, k*d, k*d) float64
-        self.hess_dummy = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
-        # gradient scatter: (n*d, m*k*d) sparse sum over element copies of each dof
+        # gradient scatter: (n*d, m*k*d) sparse sum over the element copies of each dof
         dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
-        self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))), shape=(model.n_dofs, dofs.size))
+        self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))),
+                                     shape=(model.n_dofs, dofs.size))
 
 
 def _workspace(model: FemModel) -> _Workspace:
@@ -305,20 +387,23 @@ def _workspace(model: FemModel) -> _Workspace:
     return ws
 
 
-def _launch(model: FemModel, x, want: int, project: bool) -> _Workspace:
+def _launch(model: FemModel, x, want: int, project: bool = True) -> _Workspace:
+    """One kernel launch over all elements computing what ``want`` asks for."""
     x = model.check_positions(x)
     ws = _workspace(model)
-    if want >= _HESSIAN and ws.hess is None:
-        k = model.dim + 1
-        ws.hess = wp.zeros((model.n_elements, k * model.dim, k * model.dim), dtype=wp.float64, device=model.device)
-    wp.launch(
-        ws.kernel,
-        dim=model.n_elements,
-        inputs=[wp.array(x, dtype=ws.vec, device=model.device), ws.elements, ws.Dm_inv, ws.volume, ws.mu, ws.lam,
-                int(want), int(bool(project))],
-        outputs=[ws.energy, ws.det_F, ws.grad, ws.hess if want >= _HESSIAN else ws.hess_dummy],
-        device=model.device,
-    )
+    dev = model.device
+    common = [wp.array(x, dtype=ws.vec, device=dev), ws.elements, ws.Dm_inv, ws.volume, ws.mu, ws.lam]
+    if want == _ENERGY:
+        wp.launch(ws.kernels[0], dim=model.n_elements, inputs=common, outputs=[ws.energy, ws.det_F], device=dev)
+    elif want == _GRADIENT:
+        wp.launch(ws.kernels[1], dim=model.n_elements, inputs=common, outputs=[ws.energy, ws.det_F, ws.grad],
+                  device=dev)
+    else:
+        if ws.hess is None:
+            k = (model.dim + 1) * model.dim
+            ws.hess = wp.zeros((model.n_elements, k, k), dtype=wp.float64, device=dev)
+        wp.launch(ws.kernels[2], dim=model.n_elements, inputs=common + [int(bool(project))],
+                  outputs=[ws.energy, ws.det_F, ws.grad, ws.hess], device=dev)
     return ws
 
 

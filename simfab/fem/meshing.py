@@ -1,0 +1,124 @@
+"""Simplicial meshing: 2D with Shewchuk's Triangle (quality constrained Delaunay), 3D with fTetWild.
+
+Units are whatever the input is in (SI metres inside simfab).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simfab.errors import InputError
+
+
+def _as_loop(poly, where: str) -> np.ndarray:
+    p = np.asarray(poly, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 3:
+        raise InputError(f"polygon must be a (k>=3, 2) array, got shape {p.shape}", where=where)
+    if not np.all(np.isfinite(p)):
+        raise InputError("polygon contains NaN or inf", where=where)
+    if np.allclose(p[0], p[-1]):  # closed explicitly: drop the repeated vertex
+        p = p[:-1]
+    return p
+
+
+def triangulate_polygon(outline, *, holes=(), max_area: float | None = None, min_angle: float = 30.0):
+    """Quality triangulation of a polygon with holes.
+
+    outline : (k, 2) vertices of the outer boundary (either orientation, not self-intersecting)
+    holes : sequence of (k_i, 2) hole boundaries lying inside the outline
+    max_area : maximum triangle area [units^2]; None: no area constraint
+    min_angle : minimum angle [deg] (Triangle guarantees termination for <= ~33 deg)
+
+    Returns V (n, 2) float64 and F (m, 3) int32, counter-clockwise (positive) triangles. The
+    polygon's boundary segments are kept (Steiner points may split them).
+    """
+    import shapely
+    import triangle
+
+    outer = _as_loop(outline, "outline")
+    loops = [outer] + [_as_loop(h, f"holes[{i}]") for i, h in enumerate(holes)]
+    poly = shapely.Polygon(outer, [h for h in loops[1:]])
+    if not poly.is_valid:
+        raise InputError(f"polygon is not valid ({shapely.is_valid_reason(poly)})", where="outline")
+    if max_area is not None and not (np.isfinite(max_area) and max_area > 0):
+        raise InputError(f"max_area must be > 0, got {max_area}", where="max_area")
+    if not (0.0 <= min_angle <= 34.0):
+        raise InputError(f"min_angle must be in [0, 34] degrees, got {min_angle}", where="min_angle")
+
+    verts, segs, offset = [], [], 0
+    for loop in loops:
+        k = len(loop)
+        verts.append(loop)
+        segs.append(np.stack([np.arange(k), (np.arange(k) + 1) % k], 1) + offset)
+        offset += k
+    data = {"vertices": np.vstack(verts), "segments": np.vstack(segs)}
+    if len(loops) > 1:
+        # a point strictly inside each hole tells Triangle which regions to carve out
+        data["holes"] = np.array([shapely.Polygon(h).representative_point().coords[0] for h in loops[1:]])
+    opts = f"pq{min_angle:g}"
+    if max_area is not None:
+        opts += f"a{max_area:.17g}"
+    out = triangle.triangulate(data, opts + "Q")
+    V = np.asarray(out["vertices"], dtype=np.float64)
+    F = np.asarray(out["triangles"], dtype=np.int32)
+    # drop vertices Triangle leaves unreferenced (none expected; keep the mesh valid regardless)
+    used = np.zeros(len(V), bool)
+    used[F.ravel()] = True
+    if not used.all():
+        remap = np.cumsum(used) - 1
+        V, F = V[used], remap[F].astype(np.int32)
+    e1, e2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    neg = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
+    F[neg] = F[neg][:, [0, 2, 1]]
+    return V, F
+
+
+def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, target_tets: int | None = None):
+    """Tetrahedral mesh of the volume enclosed by a triangle surface (fTetWild via pytetwild).
+
+    vertices : (n, 3) surface vertices; faces : (f, 3) triangles (closed surface)
+    edge_length_fac : target edge length as a fraction of the bounding-box diagonal (fTetWild's
+        default 0.05 when both this and ``target_tets`` are None)
+    target_tets : approximate number of tetrahedra wanted; sets the absolute edge length from the
+        enclosed volume assuming regular tets (V_tet = l^3 / (6 sqrt 2)). The count fTetWild
+        delivers is typically within a factor ~2 of it.
+
+    Returns V (n, 3) float64 and T (m, 4) int32 positively oriented tets.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) < 4 or not np.all(np.isfinite(v)):
+        raise InputError(f"vertices must be a finite (n>=4, 3) array, got shape {v.shape}", where="surface")
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) < 4 or f.min() < 0 or f.max() >= len(v):
+        raise InputError(f"faces must be an (f>=4, 3) array of vertex indices, got shape {f.shape}", where="surface")
+    if edge_length_fac is not None and target_tets is not None:
+        raise InputError("give edge_length_fac or target_tets, not both", where="tetrahedralize")
+    kwargs: dict = {}
+    if target_tets is not None:
+        if target_tets < 1:
+            raise InputError(f"target_tets must be >= 1, got {target_tets}", where="target_tets")
+        vol = _enclosed_volume(v, f)
+        if not vol > 0:
+            raise InputError("surface encloses no volume (open or inward-facing)", where="surface")
+        kwargs["edge_length_abs"] = float((6.0 * np.sqrt(2.0) * vol / target_tets) ** (1.0 / 3.0))
+    elif edge_length_fac is not None:
+        if not (0 < edge_length_fac <= 1):
+            raise InputError(f"edge_length_fac must be in (0, 1], got {edge_length_fac}", where="edge_length_fac")
+        kwargs["edge_length_fac"] = float(edge_length_fac)
+    import pytetwild  # lazy: imports pyvista
+
+    V, T = pytetwild.tetrahedralize(v, f.astype(np.int32), quiet=True, **kwargs)
+    V = np.asarray(V, dtype=np.float64)
+    T = np.asarray(T, dtype=np.int32)
+    if len(T) == 0:
+        raise InputError("fTetWild produced no tetrahedra (is the surface closed?)", where="surface")
+    d = V[T[:, 1:]] - V[T[:, :1]]
+    neg = np.linalg.det(d) < 0
+    T[neg] = T[neg][:, [0, 1, 3, 2]]
+    return V, T
+
+
+def _enclosed_volume(v: np.ndarray, f: np.ndarray) -> float:
+    """Signed volume enclosed by an outward-oriented triangle surface (divergence theorem)."""
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
