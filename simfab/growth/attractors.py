@@ -1,0 +1,129 @@
+"""Random attractor placement: in a volume, on object surfaces, or on a swept 2D profile.
+
+Each sampler takes a ``numpy.random.Generator`` (seeded by the caller) and returns
+``(points (n, 3) [m], area)`` where ``area`` [m²] is the sampled surface area (None for
+volume sampling; it sets the default growth distances, see :func:`simfab.growth.config.resolve`).
+Points inside obstacles (watertight objects, spheres) are rejected.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simfab.errors import InputError
+
+#: rejection sampling rounds before giving up on filling the requested count
+_ROUNDS = 8
+
+
+def in_box(x: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """(n,) bool: points (n, 3) inside the axis-aligned box (2, 3)."""
+    return np.all((x >= box[0]) & (x <= box[1]), axis=1)
+
+
+def volume(box: np.ndarray, n: int, rng: np.random.Generator, obstacles, *, keep=None):
+    """``n`` points uniform in ``box`` (2, 3), outside obstacles (and where ``keep(x)`` holds)."""
+    out = []
+    have = 0
+    for _ in range(_ROUNDS):
+        x = rng.uniform(box[0], box[1], size=(max(n - have, 16) * 2, 3))
+        ok = ~obstacles.inside(x)
+        if keep is not None:
+            ok &= keep(x)
+        x = x[ok][: n - have]
+        out.append(x)
+        have += len(x)
+        if have >= n:
+            break
+    pts = np.concatenate(out)
+    if len(pts) == 0:
+        raise InputError("no free space for attractors in the design box (it lies inside the objects)",
+                         where="growth.box")
+    return pts, None
+
+
+def _surface_points(mesh, n: int, rng: np.random.Generator):
+    """Area-weighted uniform samples on a triangle mesh with their face normals."""
+    area = mesh.area_faces
+    total = float(area.sum())
+    f = rng.choice(len(area), size=n, p=area / total)
+    r1, r2 = rng.random(n), rng.random(n)
+    s = np.sqrt(r1)
+    w = np.column_stack([1 - s, s * (1 - r2), s * r2])
+    tri = mesh.triangles[f]
+    return np.einsum("ij,ijk->ik", w, tri), mesh.face_normals[f], total
+
+
+def surface(meshes: list, n: int, rng: np.random.Generator, obstacles, *, lift: float, box=None, keep=None):
+    """``n`` points on the union of ``meshes`` surfaces, lifted by ``lift`` [m] along the normal.
+
+    With ``box`` only the parts of the surfaces inside the box are sampled. Returns the
+    points and the sampled area [m²] (estimated from the acceptance rate).
+    """
+    areas = np.array([m.area for m in meshes])
+    if not areas.sum() > 0:
+        raise InputError("surface mode: the objects have no surface area", where="growth.surface_objects")
+    out, tried, have = [], 0, 0
+    for _ in range(_ROUNDS):
+        m_count = max(n - have, 16) * 2
+        counts = rng.multinomial(m_count, areas / areas.sum())
+        xs = []
+        for mesh, c in zip(meshes, counts):
+            if c:
+                x, nrm, _ = _surface_points(mesh, int(c), rng)
+                xs.append(x + lift * nrm)
+        x = np.concatenate(xs)
+        tried += len(x)
+        ok = ~obstacles.inside(x) if obstacles is not None else np.ones(len(x), bool)
+        if box is not None:
+            ok &= in_box(x, box)
+        if keep is not None:
+            ok &= keep(x)
+        acc = x[ok][: n - have]
+        out.append(acc)
+        have += len(acc)
+        accepted_fraction = ok.mean()
+        if have >= n:
+            break
+    pts = np.concatenate(out)
+    if len(pts) == 0:
+        raise InputError("surface mode: no attractor could be placed (surfaces outside the box?)",
+                         where="growth.box")
+    return pts, float(areas.sum() * max(accepted_fraction, 1.0 / tried))
+
+
+def profile(spec, n: int, rng: np.random.Generator, obstacles, *, keep=None):
+    """``n`` points on the closed 2D profile swept along the view direction (see ProfileSpec)."""
+    P = np.asarray(spec.points, dtype=np.float64)
+    Q = np.roll(P, -1, axis=0)
+    seg = np.linalg.norm(Q - P, axis=1)
+    perim = float(seg.sum())
+    if not perim > 0:
+        raise InputError("the profile has zero length", where="profile.points")
+    o, u, v = (np.asarray(a, dtype=np.float64) for a in (spec.origin, spec.u, spec.v))
+    view = np.cross(u, v)
+    view /= np.linalg.norm(view)
+    d0, d1 = spec.depth
+    out, have = [], 0
+    for _ in range(_ROUNDS):
+        m = max(n - have, 16) * 2
+        s = rng.random(m) * perim
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
+        f = (s - cum[i]) / np.where(seg[i] > 0, seg[i], 1.0)
+        ab = P[i] + f[:, None] * (Q[i] - P[i])
+        depth = rng.uniform(d0, d1, size=m) if d1 > d0 else np.full(m, d0)
+        x = o + ab[:, :1] * u + ab[:, 1:2] * v + depth[:, None] * view
+        ok = ~obstacles.inside(x)
+        if keep is not None:
+            ok &= keep(x)
+        x = x[ok][: n - have]
+        out.append(x)
+        have += len(x)
+        if have >= n:
+            break
+    pts = np.concatenate(out)
+    if len(pts) == 0:
+        raise InputError("no attractor on the profile lies outside the objects", where="profile")
+    # a zero-depth sweep is a curve: its 'area' is such that sqrt(area / n) = perimeter / n
+    return pts, perim * max(d1 - d0, perim / n)

@@ -1,0 +1,306 @@
+"""Space colonization with target attractors (vectorized per growth step).
+
+One growth step (Runions et al. 2005, with the target attractors of the thesis):
+
+1. every live attractor is associated with its nearest *growing* tree node, if that node is
+   within the attractor's influence distance (ordinary attractors: ``influence``; target
+   attractors: ``target_influence``, infinite by default so that a target keeps pulling
+   after the ordinary attractors are gone);
+2. each attracted node v gets one child v' = v + L n̂, n̂ the normalized sum of the unit
+   vectors from v to its attractors; a node whose target attractor is within reach
+   (``TARGET_REACH`` L) lands exactly on it instead, v' = t, and becomes a tip (a contact
+   with the supported object: it does not grow further);
+3. a new segment v→v' that crosses an object mesh or enters an obstacle sphere is replaced
+   by the best-aligned collision-free direction among ``max_trials`` random unit vectors
+   (none free: the node waits for the next step);
+4. a new node within ``MIN_NODE_SPACING`` L of an existing node is dropped, and the
+   ordinary attractors that pulled it are killed (this stops a node oscillating between two
+   attractors from piling up nodes); a node that is attracted but cannot grow for
+   ``NODE_FAIL_LIMIT`` consecutive steps (boxed in by obstacles, or only producing dropped
+   children) stops growing, and its attractors turn to their next nearest growing node;
+5. ordinary attractors within the kill distance of a new node die; target attractors die
+   only when reached.
+
+Growth stops when every attractor is dead, or reports why it stopped early (step cap,
+node cap, stalled). Nearest-node distances are kept per attractor and updated with the
+new nodes only, so a step costs O(live attractors × new nodes).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.distance import cdist
+
+from simfab.growth import tolerances as tol
+
+
+@dataclasses.dataclass
+class Tree:
+    """Growth state: the tree grown so far (arrays grow by appending).
+
+    nodes : (n, 3) positions [m]. parent : (n,) parent index (-1 for roots).
+    birth : (n,) growth step at which the node was created (roots: 0).
+    target : (n,) index of the target the node landed on (-1 otherwise).
+    root : (n,) index of the root the node descends from.
+    frozen : (n,) True for tips that do not grow (targets reached).
+    """
+
+    nodes: np.ndarray
+    parent: np.ndarray
+    birth: np.ndarray
+    target: np.ndarray
+    root: np.ndarray
+    frozen: np.ndarray
+
+    @classmethod
+    def from_roots(cls, roots: np.ndarray) -> "Tree":
+        r = np.asarray(roots, dtype=np.float64).reshape(-1, 3)
+        k = len(r)
+        return cls(nodes=r.copy(), parent=np.full(k, -1, np.int64), birth=np.zeros(k, np.int64),
+                   target=np.full(k, -1, np.int64), root=np.arange(k, dtype=np.int64),
+                   frozen=np.zeros(k, bool))
+
+    def __len__(self) -> int:
+        return len(self.nodes)
+
+    def append(self, pos, parent, birth, target, frozen) -> None:
+        self.nodes = np.concatenate([self.nodes, pos])
+        self.root = np.concatenate([self.root, self.root[parent]])
+        self.parent = np.concatenate([self.parent, parent])
+        self.birth = np.concatenate([self.birth, np.full(len(pos), birth, np.int64)])
+        self.target = np.concatenate([self.target, target])
+        self.frozen = np.concatenate([self.frozen, frozen])
+
+    def copy(self) -> "Tree":
+        return Tree(**{f.name: getattr(self, f.name).copy() for f in dataclasses.fields(self)})
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ColonizeSettings:
+    """Distances [m] and caps of one colonization run (see :class:`simfab.growth.config.Resolved`)."""
+
+    influence: float
+    kill: float
+    branch_length: float
+    target_influence: float
+    max_steps: int
+    max_nodes: int
+    max_trials: int
+
+
+@dataclasses.dataclass
+class ColonizeReport:
+    """What happened: steps taken, why growth stopped, obstacle-avoidance statistics."""
+
+    steps: int = 0
+    stop_reason: str = ""
+    nodes_added: int = 0
+    collisions_resolved: int = 0
+    collisions_unresolved: int = 0
+    dropped_oscillating: int = 0
+    dead_ends: int = 0
+    targets_reached: list = dataclasses.field(default_factory=list)
+    targets_unreached: list = dataclasses.field(default_factory=list)
+
+
+def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids: np.ndarray, obstacles,
+             s: ColonizeSettings, rng: np.random.Generator, *, step0: int = 0) -> ColonizeReport:
+    """Grow ``tree`` in place towards ``attractors`` (m, 3) and ``targets`` (t, 3).
+
+    ``target_ids`` (t,) are the indices recorded in ``tree.target`` when a target is reached.
+    ``step0`` is the step count of earlier stages (node birth steps continue from it).
+    Returns a :class:`ColonizeReport`; unreached targets are listed there, never silently lost.
+    """
+    L = s.branch_length
+    A = np.concatenate([np.asarray(attractors, np.float64).reshape(-1, 3), np.asarray(targets, np.float64).reshape(-1, 3)])
+    m = len(A) - len(targets)
+    is_t = np.zeros(len(A), bool)
+    is_t[m:] = True
+    tid = np.concatenate([np.full(m, -1, np.int64), np.asarray(target_ids, np.int64).reshape(-1)])
+    infl = np.where(is_t, s.target_influence, s.influence)
+    alive = np.ones(len(A), bool)
+    rep = ColonizeReport()
+
+    # targets already on the tree (e.g. a later stage re-listing a reached target)
+    on_tree = np.isin(tid, tree.target[tree.target >= 0]) & is_t
+    alive[on_tree] = False
+    rep.targets_reached.extend(int(t) for t in tid[on_tree])
+
+    # nearest growing node and nearest node of every attractor
+    near_d = np.full(len(A), np.inf)
+    near_i = np.full(len(A), -1, np.int64)
+    _update_nearest(A, alive, near_d, near_i, tree.nodes, np.arange(len(tree)), ~tree.frozen)
+    _kill(A, alive, is_t, tree.nodes, s.kill)
+
+    idle = 0
+    fails = np.zeros(len(tree), np.int64)  # consecutive steps a node was attracted but could not grow
+    step = step0
+    for step in range(step0 + 1, step0 + s.max_steps + 1):
+        live = np.nonzero(alive)[0]
+        if live.size == 0:
+            rep.stop_reason = "all attractors reached or killed"
+            step -= 1
+            break
+        att = live[near_d[live] <= infl[live]]
+        if att.size == 0:
+            rep.stop_reason = "stalled: no live attractor within influence of a growing node"
+            step -= 1
+            break
+        pos, parent, target_attr, dropped_attr, stuck = _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep)
+        if dropped_attr.size:
+            alive[dropped_attr[~is_t[dropped_attr]]] = False
+        fails = np.concatenate([fails, np.zeros(len(tree) - len(fails), np.int64)])
+        fails[parent] = 0
+        fails[stuck] += 1
+        dead_end = stuck[fails[stuck] >= tol.NODE_FAIL_LIMIT]
+        if dead_end.size:
+            tree.frozen[dead_end] = True
+            rep.dead_ends += int(dead_end.size)
+            _reassociate(A, alive, near_d, near_i, tree, dead_end)
+        if len(pos) == 0:
+            idle += 1
+            if idle >= tol.STALL_PATIENCE:
+                rep.stop_reason = "stalled: no collision-free growth possible"
+                break
+            continue
+        idle = 0
+        first = len(tree)
+        landed = target_attr >= 0
+        tree.append(pos, parent, step, np.where(landed, tid[np.maximum(target_attr, 0)], -1), landed)
+        rep.nodes_added += len(pos)
+        alive[target_attr[landed]] = False
+        rep.targets_reached.extend(int(tid[a]) for a in target_attr[landed])
+        idx = np.arange(first, len(tree))
+        _update_nearest(A, alive, near_d, near_i, pos, idx, ~landed)
+        _kill(A, alive, is_t, pos, s.kill)
+        if len(tree) >= s.max_nodes:
+            rep.stop_reason = f"node cap reached ({s.max_nodes} nodes)"
+            break
+    else:
+        rep.stop_reason = f"step cap reached ({s.max_steps} steps)"
+    rep.steps = step - step0
+    rep.targets_unreached = [int(t) for t in tid[is_t & alive]]
+    return rep
+
+
+def _update_nearest(A, alive, near_d, near_i, pos, idx, growing) -> None:
+    """Fold new nodes ``pos`` (k, 3) with global indices ``idx`` into the nearest-growing-node table."""
+    live = np.nonzero(alive)[0]
+    g = np.nonzero(growing)[0]
+    if live.size == 0 or g.size == 0:
+        return
+    D = cdist(A[live], pos[g])
+    j = np.argmin(D, axis=1)
+    d = D[np.arange(len(live)), j]
+    better = d < near_d[live]
+    near_d[live[better]] = d[better]
+    near_i[live[better]] = idx[g[j[better]]]
+
+
+def _kill(A, alive, is_t, pos, kill) -> None:
+    """Ordinary attractors within ``kill`` of any node in ``pos`` die."""
+    live = np.nonzero(alive & ~is_t)[0]
+    if live.size == 0 or len(pos) == 0:
+        return
+    d = cKDTree(pos).query(A[live], k=1, distance_upper_bound=kill)[0]
+    alive[live[d <= kill]] = False
+
+
+def _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep):
+    """Children of the attracted nodes: (pos (k,3), parent (k,), target attractor or -1 (k,),
+    ordinary attractors of dropped children)."""
+    L = s.branch_length
+    node = near_i[att]
+    X = tree.nodes
+    vec = A[att] - X[node]
+    dist = np.linalg.norm(vec, axis=1)
+    unit = vec / np.where(dist > 0, dist, 1.0)[:, None]
+    uniq, inv = np.unique(node, return_inverse=True)
+    acc = np.zeros((len(uniq), 3))
+    np.add.at(acc, inv, unit)
+    norm = np.linalg.norm(acc, axis=1)
+    # opposite pulls that cancel exactly: follow the first attractor instead
+    first_att = np.full(len(uniq), -1)
+    first_att[inv[::-1]] = np.arange(len(att))[::-1]
+    degenerate = norm < 1e-12
+    acc[degenerate] = unit[first_att[degenerate]]
+    norm[degenerate] = 1.0
+    direction = acc / norm[:, None]
+    start = X[uniq]
+    cand = start + L * direction
+    target_attr = np.full(len(uniq), -1, np.int64)
+
+    # a reachable target: land on it (the closest one if several pull the same node)
+    reach = is_t[att] & (dist <= tol.TARGET_REACH * L)
+    if reach.any():
+        r = np.nonzero(reach)[0]
+        order = r[np.lexsort((dist[r], inv[r]))]
+        first = np.unique(inv[order], return_index=True)[1]
+        pick = order[first]
+        target_attr[inv[pick]] = att[pick]
+        cand[inv[pick]] = A[att[pick]]
+
+    from_root = tree.parent[uniq] < 0  # roots sit on a surface by design
+    hit = obstacles.segment_hits(start, cand, from_root, target_attr >= 0)
+    if hit.any():
+        h = np.nonzero(hit)[0]
+        target_attr[h] = -1
+        ok, new_pos = _avoid(start[h], direction[h], from_root[h], L, obstacles, s.max_trials, rng)
+        cand[h[ok]] = new_pos[ok]
+        rep.collisions_resolved += int(ok.sum())
+        rep.collisions_unresolved += int((~ok).sum())
+        keep = np.ones(len(uniq), bool)
+        keep[h[~ok]] = False
+    else:
+        keep = np.ones(len(uniq), bool)
+
+    # oscillation guard: drop children landing on top of existing nodes or of each other
+    spacing = tol.MIN_NODE_SPACING * L
+    free_cand = keep & (target_attr < 0)
+    if free_cand.any():
+        fc = np.nonzero(free_cand)[0]
+        d, _ = cKDTree(X).query(cand[fc], k=1, distance_upper_bound=spacing)
+        crowded = fc[d < spacing]
+        if fc.size > 1:
+            pairs = cKDTree(cand[fc]).query_pairs(spacing, output_type="ndarray")
+            if len(pairs):
+                crowded = np.union1d(crowded, fc[pairs.max(axis=1)])
+        keep[crowded] = False
+        rep.dropped_oscillating += int(crowded.size)
+        dropped_nodes = np.zeros(len(uniq), bool)
+        dropped_nodes[crowded] = True
+        dropped_attr = att[dropped_nodes[inv]]
+    else:
+        dropped_attr = np.zeros(0, np.int64)
+    return cand[keep], uniq[keep], target_attr[keep], dropped_attr, uniq[~keep]
+
+
+def _reassociate(A, alive, near_d, near_i, tree, dead) -> None:
+    """Attractors whose nearest growing node stopped growing look for the next one."""
+    affected = np.nonzero(alive & np.isin(near_i, dead))[0]
+    near_d[affected] = np.inf
+    near_i[affected] = -1
+    g = np.nonzero(~tree.frozen)[0]
+    if affected.size == 0 or g.size == 0:
+        return
+    d, j = cKDTree(tree.nodes[g]).query(A[affected], k=1)
+    near_d[affected] = d
+    near_i[affected] = g[j]
+
+
+def _avoid(start, direction, on_surface, L, obstacles, trials, rng):
+    """For each blocked branch, the collision-free random direction best aligned with the
+    desired one (``trials`` candidates each, tested in one batch). Returns (ok (k,), pos (k, 3))."""
+    k = len(start)
+    dirs = rng.normal(size=(k, trials, 3))
+    dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
+    p = np.repeat(start, trials, axis=0)
+    q = p + L * dirs.reshape(-1, 3)
+    free = ~obstacles.segment_hits(p, q, np.repeat(on_surface, trials)).reshape(k, trials)
+    score = np.where(free, np.einsum("ktj,kj->kt", dirs, direction), -np.inf)
+    best = np.argmax(score, axis=1)
+    ok = np.isfinite(score[np.arange(k), best])
+    return ok, start + L * dirs[np.arange(k), best]

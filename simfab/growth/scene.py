@@ -1,0 +1,164 @@
+"""Growth scenes: an MJCF file (objects, root/target/obstacle sites) plus a companion TOML.
+
+Scene format
+------------
+``scenes/growth/NAME.xml`` is a plain MJCF file that MuJoCo loads (open it with
+``python -m mujoco.viewer --mjcf=NAME.xml``):
+
+- **objects** are the geoms of the bodies (meshes or primitives: box, sphere, ellipsoid,
+  cylinder, capsule; planes are ignored). Each body is one object, named after the body
+  (geoms directly in ``<worldbody>`` form the object ``world``). The structure must not
+  intersect them; the skin is carved by them.
+- **roots** are sites named ``root_*``: growth starts there.
+- **targets** are sites named ``target_*``: the structure must touch them.
+- **obstacles** are sphere sites named ``obstacle_*`` (radius = ``size[0]``): growth avoids them.
+
+Parameters are in ``NAME.toml`` next to the XML (optional; see :mod:`simfab.growth.config`
+for every key). All lengths are metres.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from simfab.errors import InputError
+from simfab.growth.config import GrowthParams, params_from_toml
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GrowthScene:
+    """Geometry and parameters of one growth problem (world frame, metres).
+
+    objects : body name -> ``trimesh.Trimesh`` (world frame).
+    roots : (k, 3) root points. root_names : k names.
+    targets : (t, 3) target points. target_names : t names.
+    sphere_centers : (s, 3), sphere_radii : (s,) obstacle spheres. sphere_names : s names.
+    params : growth parameters. path : the MJCF file (None when built in Python).
+    """
+
+    objects: dict
+    roots: np.ndarray
+    root_names: tuple
+    targets: np.ndarray
+    target_names: tuple
+    sphere_centers: np.ndarray
+    sphere_radii: np.ndarray
+    sphere_names: tuple = ()
+    params: GrowthParams = dataclasses.field(default_factory=GrowthParams)
+    path: Path | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "roots", np.asarray(self.roots, dtype=np.float64).reshape(-1, 3))
+        object.__setattr__(self, "targets", np.asarray(self.targets, dtype=np.float64).reshape(-1, 3))
+        object.__setattr__(self, "sphere_centers", np.asarray(self.sphere_centers, dtype=np.float64).reshape(-1, 3))
+        object.__setattr__(self, "sphere_radii", np.asarray(self.sphere_radii, dtype=np.float64).reshape(-1))
+        if not self.root_names:
+            object.__setattr__(self, "root_names", tuple(f"root_{i}" for i in range(len(self.roots))))
+        if not self.target_names:
+            object.__setattr__(self, "target_names", tuple(f"target_{i}" for i in range(len(self.targets))))
+        if not self.sphere_names:
+            object.__setattr__(self, "sphere_names", tuple(f"obstacle_{i}" for i in range(len(self.sphere_radii))))
+
+    @property
+    def name(self) -> str:
+        return self.path.stem if self.path is not None else "scene"
+
+    def objects_bbox(self) -> np.ndarray:
+        """(2, 3) bounding box of all objects (and roots/targets) [m]."""
+        pts = [m.bounds for m in self.objects.values()] + [self.roots, self.targets]
+        pts = np.concatenate([np.asarray(p).reshape(-1, 3) for p in pts if len(p)])
+        return np.array([pts.min(axis=0), pts.max(axis=0)])
+
+    def with_params(self, **overrides) -> "GrowthScene":
+        """Copy with some :class:`GrowthParams` fields replaced (``None`` values ignored)."""
+        kw = {k: v for k, v in overrides.items() if v is not None}
+        return dataclasses.replace(self, params=dataclasses.replace(self.params, **kw))
+
+
+def load_growth_scene(path: str | os.PathLike) -> GrowthScene:
+    """Read ``path`` (MJCF) and its companion ``.toml``; InputError on anything unusable."""
+    from simfab.io.mjcf import load_scene
+
+    path = Path(path)
+    if path.suffix.lower() != ".xml":
+        raise InputError("a growth scene is an MJCF .xml file", where=str(path))
+    sc = load_scene(path)
+    toml_path = path.with_suffix(".toml")
+    params = GrowthParams()
+    if toml_path.is_file():
+        try:
+            doc = tomllib.loads(toml_path.read_text(encoding="utf-8"))
+        except tomllib.TOMLDecodeError as e:
+            raise InputError(f"invalid TOML: {e}", where=str(toml_path)) from None
+        params = params_from_toml(doc, str(toml_path))
+
+    def sites(prefix):
+        names = sorted((n for n in sc.sites if n.startswith(prefix)), key=_natural_key)
+        return tuple(names), np.array([sc.sites[n] for n in names]).reshape(-1, 3)
+
+    root_names, roots = sites("root_")
+    target_names, targets = sites("target_")
+    sphere_names, centers = sites("obstacle_")
+    radii = np.array([sc.site_size[n][0] for n in sphere_names], dtype=np.float64)
+    objects = {k: v for k, v in sc.body_meshes().items() if len(v.faces)}
+    scene = GrowthScene(objects=objects, roots=roots, root_names=root_names, targets=targets,
+                        target_names=target_names, sphere_centers=centers, sphere_radii=radii,
+                        sphere_names=sphere_names, params=params, path=path)
+    validate_scene(scene)
+    return scene
+
+
+def _natural_key(name: str):
+    import re
+
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", name)]
+
+
+def validate_scene(scene: GrowthScene) -> None:
+    """Check that the problem is well posed; InputError names the first problem found."""
+    where = str(scene.path) if scene.path else "scene"
+    p = scene.params
+    if len(scene.roots) == 0:
+        raise InputError("no root sites (name them root_0, root_1, ...)", where=where)
+    if p.mode in ("volume", "profile") and len(scene.targets) == 0:
+        raise InputError(f"mode {p.mode!r} needs target sites (target_0, ...)", where=where)
+    if p.mode == "surface" and not scene.objects:
+        raise InputError("surface mode needs objects to sample attractors on", where=where)
+    if p.mode == "profile" and p.profile is None:
+        raise InputError("mode 'profile' needs a [profile] table in the TOML", where=where)
+    if p.surface_objects:
+        missing = [n for n in p.surface_objects if n not in scene.objects]
+        if missing:
+            raise InputError(f"surface_objects names unknown bodies {missing} (bodies: {sorted(scene.objects)})",
+                             where=where)
+    if p.stages:
+        named = set(scene.target_names)
+        for i, st in enumerate(p.stages):
+            bad = [n for n in st if n not in named]
+            if bad:
+                raise InputError(f"stage {i} names unknown target sites {bad}", where=where)
+    if np.any(scene.sphere_radii <= 0):
+        raise InputError("obstacle spheres need a positive radius (site size)", where=where)
+    for name, r in zip(scene.root_names, scene.roots):
+        d = np.linalg.norm(scene.sphere_centers - r, axis=1) - scene.sphere_radii
+        if np.any(d < 0):
+            raise InputError(f"root {name} lies inside an obstacle sphere", where=where)
+    for name, m in scene.objects.items():
+        if m.is_watertight and len(scene.roots):
+            inside = m.contains(scene.roots)
+            # points on the surface may test either way: only reject clearly interior roots
+            if np.any(inside):
+                dist = np.abs(_surface_distance(m, scene.roots[inside]))
+                scale = float(np.linalg.norm(m.extents))
+                if np.any(dist > 1e-3 * scale):
+                    raise InputError(f"a root lies inside object {name!r}", where=where)
+
+
+def _surface_distance(mesh, points) -> np.ndarray:
+    _, d, _ = mesh.nearest.on_surface(points)
+    return d
