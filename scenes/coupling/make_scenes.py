@@ -1,0 +1,170 @@
+#!/usr/bin/env python
+"""Regenerate the bundled coupling scenes (MJCF + companion TOML) in this folder.
+
+``python scenes/coupling/make_scenes.py`` rewrites every ``NAME.xml``/``NAME.toml`` pair from the
+parameters below. Lengths in metres. Each scene:
+
+- MJCF: O as the mocap body ``object`` (its geoms, body frame), keyframes of O's path, the fixed
+  region as the box site ``fixed`` and A's rest shape (body ``part``, display only);
+- TOML: how A is generated (``simfab.coupling.geometry``), meshing target, material, O's
+  sampling and the simulation options (see ``simfab.coupling.scene``).
+
+Scenes
+- cclamp2d      2D C-clamp snapped onto a cylinder, inner radius < R: tight grip (~450 tri, 35 steps)
+- clip2d_loose  same clamp with inner radius > R: holds it loosely (zero steady-state energy)
+- clip2d_eject  an arc that does not wrap past the cylinder's equator: pushes it out (no dip)
+- clip3d        the C-clamp extruded to a 3D clip on a cylinder (~1000 tets, 35 steps)
+- claw3d        four-finger claw (two crossed clamps) on a sphere (~12,000 tets, O with 10,000
+                samples, 25 steps)
+- knocker3d     door-knocker ring: pushed horizontally into a clip, then rotated 90 degrees about
+                its bar (rotating path, ~5,000 tets, 40 steps)
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parents[1]))
+
+R_CYL = 0.010  # cylinder / sphere radius [m]
+
+CLAMP_TIGHT = dict(inner_radius=0.0095, width=0.0025, opening_deg=60.0, base_depth=0.004, base_height=0.020)
+CLAMP_LOOSE = dict(CLAMP_TIGHT, inner_radius=0.0106)
+CLAMP_EJECT = dict(CLAMP_TIGHT, opening_deg=100.0)
+#: Seated position of O's centre for the tight clamps: the cylinder/sphere just touches the back
+#: of the clamp (R - inner radius) while the arm tips still squeeze it.
+X_SEATED = R_CYL - CLAMP_TIGHT["inner_radius"] + 0.0002
+
+
+def x_start(clamp: dict, margin: float = 0.001) -> float:
+    """O's start: ``margin`` before its first touch with the clamp's inner tip corners."""
+    a = math.radians(clamp["opening_deg"])
+    tx, ty = clamp["inner_radius"] * math.cos(a), clamp["inner_radius"] * math.sin(a)
+    return tx + math.sqrt(max(R_CYL**2 - ty**2, 0.0)) + margin
+KNOCK_R, KNOCK_r = 0.020, 0.003  # ring major / tube radius [m]
+CLAMP_KNOCK = dict(inner_radius=0.00285, width=0.0015, opening_deg=60.0, base_depth=0.002, base_height=0.008)
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, float):
+        return repr(v)
+    return str(v)
+
+
+def write_toml(path: Path, header: str, top: dict, tables: dict) -> None:
+    lines = [f"# {line}" if line else "#" for line in header.strip().splitlines()]
+    lines.append("")
+    for k, v in top.items():
+        lines.append(f"{k} = {_toml_value(v)}")
+    for name, tab in tables.items():
+        lines.append("")
+        lines.append(f"[{name}]")
+        for k, v in tab.items():
+            lines.append(f"{k} = {_toml_value(v)}")
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def quat_z(a: float):
+    return [math.cos(a / 2), 0.0, 0.0, math.sin(a / 2)]
+
+
+def scene(name: str, *, doc: str, dim: int, comp: dict, part_mesh, object_geoms, keys, fixed_center, fixed_half,
+          obj: dict, sim: dict, material: str = "PLA", extra_assets=()):
+    from simfab.io.mjcf import MJCFBuilder
+
+    b = MJCFBuilder(name)
+    for aname, V, F in extra_assets:
+        b.mesh_asset(aname, V, F)
+    b.mesh_asset("part", part_mesh.vertices, part_mesh.faces)
+    part = b.body("part")
+    b.geom(part, type="mesh", mesh="part", rgba=[0.85, 0.55, 0.25, 1], contype=0, conaffinity=0)
+    b.site(part, "fixed", pos=list(fixed_center), size=list(fixed_half), type="box", rgba=[0.2, 0.2, 0.9, 0.4])
+    p0, q0 = keys[0]
+    o = b.body("object", pos=p0, quat=q0, mocap=True)
+    for g in object_geoms:
+        b.geom(o, contype=0, conaffinity=0, rgba=[0.5, 0.6, 0.7, 1], **g)
+    for i, (p, q) in enumerate(keys):
+        b.key(f"k{i}", mpos=p, mquat=q)
+    b.save(HERE / f"{name}.xml")
+    write_toml(HERE / f"{name}.toml", doc, {"name": name, "dim": dim},
+               {"material": {"name": material}, "compliant": comp, "object": obj, "fixed": {"site": "fixed"},
+                "simulation": sim})
+
+
+def main() -> None:
+    import trimesh
+
+    from simfab.coupling import geometry as G
+
+    t2d = 0.005  # plane-strain thickness of the 2D parts [m]
+
+    def clamp2d(name, clamp, doc, x_end):
+        outline = G.c_clamp_outline(**clamp)
+        ro = clamp["inner_radius"] + clamp["width"]
+        xb = -ro - clamp["base_depth"]
+        x0 = x_start(clamp)
+        scene(name, doc=doc, dim=2,
+              comp=dict(generator="c_clamp", target_elements=450, thickness=t2d, **clamp),
+              part_mesh=G.extrude(outline, t2d),
+              object_geoms=[dict(type="cylinder", size=[R_CYL, 0.01])],
+              keys=[([x0, 0, 0], [1, 0, 0, 0]), ([x_end, 0, 0], [1, 0, 0, 0])],
+              fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.5 * clamp["base_height"] + 0.001, 0.01],
+              obj=dict(body="object", samples=50), sim=dict(steps=35))
+
+    clamp2d("cclamp2d", CLAMP_TIGHT, "2D C-clamp (plane strain, PLA) pushed onto a 20 mm cylinder: tight grip.", X_SEATED)
+    clamp2d("clip2d_loose", CLAMP_LOOSE, "2D clip whose inner radius exceeds the cylinder's: loose coupling.", 0.0)
+    clamp2d("clip2d_eject", CLAMP_EJECT, "2D arc that does not wrap past the cylinder's equator: ejects it.", 0.0)
+
+    # 3D clip on a cylinder (extruded C-clamp)
+    h3 = 0.008
+    ro = CLAMP_TIGHT["inner_radius"] + CLAMP_TIGHT["width"]
+    xb = -ro - CLAMP_TIGHT["base_depth"]
+    x0 = x_start(CLAMP_TIGHT)
+    scene("clip3d", doc="3D clip (extruded C-clamp, PLA) snapped onto a cylinder along -x.", dim=3,
+          comp=dict(generator="extruded_clamp", target_elements=1040, height=h3, **CLAMP_TIGHT),
+          part_mesh=G.extruded_clamp(height=h3, **CLAMP_TIGHT),
+          object_geoms=[dict(type="cylinder", size=[R_CYL, 0.008])],
+          keys=[([x0, 0, 0], [1, 0, 0, 0]), ([X_SEATED, 0, 0], [1, 0, 0, 0])],
+          fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.01],
+          obj=dict(body="object", samples=1154), sim=dict(steps=35))
+
+    # larger 3D model: four-finger claw on a sphere
+    hc = 0.006
+    claw = G.cross_claw(height=hc, **CLAMP_TIGHT)
+    sph = trimesh.creation.icosphere(subdivisions=4, radius=R_CYL)
+    scene("claw3d", doc="Four-finger claw (two crossed clamps, PLA) latching onto a sphere.", dim=3,
+          comp=dict(generator="cross_claw", target_elements=12063, height=hc, **CLAMP_TIGHT),
+          part_mesh=claw, extra_assets=[("sphere", sph.vertices, sph.faces)],
+          object_geoms=[dict(type="mesh", mesh="sphere")],
+          keys=[([x0, 0, 0], [1, 0, 0, 0]), ([X_SEATED, 0, 0], [1, 0, 0, 0])],
+          fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.011],
+          obj=dict(body="object", samples=10000), sim=dict(steps=25))
+
+    # door knocker: ring bar along z pushed into a clip along -x, then rotated 90 deg about z
+    hk = 0.008
+    ring = trimesh.creation.torus(major_radius=KNOCK_R, minor_radius=KNOCK_r, major_sections=96, minor_sections=24)
+    ring.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))  # axis z -> y
+    ring.apply_translation([KNOCK_R, 0, 0])  # the bar (nearest tube section) through the body origin
+    rok = CLAMP_KNOCK["inner_radius"] + CLAMP_KNOCK["width"]
+    xk = rok + KNOCK_r + 0.0005
+    scene("knocker3d", doc="Door-knocker ring: inserted horizontally into a clip, then rotated about its bar.", dim=3,
+          comp=dict(generator="extruded_clamp", target_elements=5080, height=hk, **CLAMP_KNOCK),
+          part_mesh=G.extruded_clamp(height=hk, **CLAMP_KNOCK), extra_assets=[("ring", ring.vertices, ring.faces)],
+          object_geoms=[dict(type="mesh", mesh="ring")],
+          keys=[([xk, 0, 0], [1, 0, 0, 0]), ([0.0, 0, 0], [1, 0, 0, 0]), ([0.0, 0, 0], quat_z(-np.pi / 2))],
+          fixed_center=[-rok - CLAMP_KNOCK["base_depth"], 0, 0], fixed_half=[0.0004, 0.005, 0.005],
+          obj=dict(body="object", samples=2000, rot_length_scale=0.005),
+          sim=dict(steps=40, fix_all_axes=True))
+
+
+if __name__ == "__main__":
+    main()

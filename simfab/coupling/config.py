@@ -1,0 +1,99 @@
+"""Configuration of the insertion simulation (keyword-only dataclasses) and the area's tolerances.
+
+Lengths are relative to A's mean edge length ``h_A`` where noted (``*_rel``), so one set of
+defaults works at any scale and resolution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+from simfab.errors import InputError
+
+# ---------------------------------------------------------------------------- tolerances (one place)
+#: Max penetration allowed at the end of every step, relative to h_A (checked, else ConvergenceError).
+PENETRATION_TOL_REL = 1e-3
+#: Barrier activation distance d_hat relative to h_A.
+DHAT_REL = 1e-2
+#: Lipschitz bound of the IMLS field used by the conservative step cap (|grad psi| ~ 1 near O).
+PSI_LIPSCHITZ = 2.0
+#: Fraction of the distance to O a point may travel in one Newton step (conservative advancement).
+STEP_FRACTION = 0.9
+#: Points may always travel this many IMLS sigmas per Newton step (sliding in contact); O is
+#: assumed to have no feature thinner than 2 sigma, so this cannot tunnel through it.
+FREE_TRAVEL_SIGMAS = 0.5
+#: Newton: stop when the step is below this fraction of h_A ...
+NEWTON_STEP_TOL_REL = 1e-7
+#: ... or the free-dof force residual is below this fraction of E * h_A^2 (3D) / E * h_A * t (2D).
+NEWTON_GRAD_TOL_REL = 1e-9
+NEWTON_MAX_ITER = 100
+#: Predictor: penalty weight (relative to max |diag H|) pinning dragged vertices to their targets.
+PREDICTOR_PENALTY = 1e4
+#: Predictor: retries adding newly infeasible points to the dragged set before bisecting the step.
+PREDICTOR_RETRIES = 3
+#: Step bisection depth when a step cannot be taken in one go (2^-6 of h_in at most).
+MAX_BISECTIONS = 6
+#: Hessian regularization (relative to mean |diag H|) for the rigid modes left free by the
+#: insertion-axis-only boundary condition; it changes the Newton step, not the minimizer.
+RIGID_MODE_REG = 1e-9
+#: Profile analysis: energies within this fraction of E_max are equal (plateaus, noise).
+ENERGY_REL_TOL = 1e-6
+#: A steady state with E_ss <= LOOSE_REL * E_max is "loose" (zero grip).
+LOOSE_REL = 1e-3
+
+
+@dataclass(frozen=True, kw_only=True)
+class InsertionOptions:
+    """Insertion-simulation parameters (scene TOML table ``[simulation]``).
+
+    h_in : insertion step along the path [m] (path length: translation plus rotation angle times
+        the object's radius); None: ``L_max / steps``.
+    steps : number of steps when ``h_in`` is None.
+    L_max : insertion length [m]; None: the whole keyframe path.
+    fix_all_axes : fix the fixed region in all axes (default: only along the insertion axis).
+    refine : add interpolated constraint points on boundary edges/faces that cross into O.
+    samples_per_edge : 2D refinement points per boundary edge (paper: 10).
+    face_lattice : 3D refinement: barycentric lattice order per boundary face (order m gives
+        (m+1)(m+2)/2 - 3 points; 4 -> 12).
+    dhat_rel : barrier activation distance / h_A.
+    kappa_rel : barrier stiffness kappa = kappa_rel * E * h_A (3D) or E * thickness (2D) [N/m].
+    penetration_tol_rel : max penetration / h_A accepted at the end of a step.
+    """
+
+    h_in: float | None = None
+    steps: int | None = None
+    L_max: float | None = None
+    fix_all_axes: bool = False
+    refine: bool = True
+    samples_per_edge: int = 10
+    face_lattice: int = 4
+    dhat_rel: float = DHAT_REL
+    kappa_rel: float = 1.0
+    penetration_tol_rel: float = PENETRATION_TOL_REL
+
+    def __post_init__(self):
+        def bad(name, why):
+            raise InputError(f"{name}={getattr(self, name)!r} {why}", where="[simulation]")
+
+        if self.h_in is not None and not (isinstance(self.h_in, (int, float)) and self.h_in > 0):
+            bad("h_in", "must be a positive length [m]")
+        if self.steps is not None and not (isinstance(self.steps, int) and self.steps >= 1):
+            bad("steps", "must be an integer >= 1")
+        if self.L_max is not None and not (isinstance(self.L_max, (int, float)) and self.L_max > 0):
+            bad("L_max", "must be a positive length [m]")
+        if not (isinstance(self.samples_per_edge, int) and 1 <= self.samples_per_edge <= 100):
+            bad("samples_per_edge", "must be an integer in [1, 100]")
+        if not (isinstance(self.face_lattice, int) and 2 <= self.face_lattice <= 16):
+            bad("face_lattice", "must be an integer in [2, 16]")
+        for name in ("dhat_rel", "kappa_rel", "penetration_tol_rel"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and v > 0):
+                bad(name, "must be a positive number")
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "[simulation]") -> "InsertionOptions":
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
+        return cls(**d)

@@ -1,0 +1,90 @@
+"""Constraint points: mesh vertices and points interpolated on boundary edges (2D) / faces (3D).
+
+A point is y_j = sum_a w_ja x_{v_ja}; all points of a set carry the same number of parents
+``nv`` (= dim: an edge has 2 vertices, a face 3); a plain vertex repeats its index with weights
+(1, 0[, 0]). Because parents of a point share an element, the contact Hessian blocks land inside
+the FEM sparsity pattern (:meth:`HessianPattern.block_slots`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ContactPoints:
+    """verts : (k, nv) int parent vertices; weights : (k, nv) barycentric weights (rows sum to 1);
+    facet : (k,) int boundary facet a sample belongs to, -1 for plain vertices."""
+
+    verts: np.ndarray
+    weights: np.ndarray
+    facet: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.verts)
+
+    def positions(self, x: np.ndarray) -> np.ndarray:
+        """(k, dim) point positions (or displacements when ``x`` is a displacement field)."""
+        return np.einsum("km,kmd->kd", self.weights, x[self.verts])
+
+    def scatter(self, g_points: np.ndarray, n_vertices: int) -> np.ndarray:
+        """Vertex vectors (n, dim) = sum_j w_ja g_j (transpose of :meth:`positions`)."""
+        dim = g_points.shape[1]
+        contrib = self.weights[:, :, None] * g_points[:, None, :]  # (k, nv, dim)
+        idx = self.verts.ravel()
+        out = np.empty((n_vertices, dim))
+        c = contrib.reshape(-1, dim)
+        for a in range(dim):
+            out[:, a] = np.bincount(idx, weights=c[:, a], minlength=n_vertices)
+        return out
+
+    def concat(self, other: "ContactPoints") -> "ContactPoints":
+        return ContactPoints(verts=np.vstack([self.verts, other.verts]), weights=np.vstack([self.weights, other.weights]),
+                             facet=np.concatenate([self.facet, other.facet]))
+
+
+def vertex_points(vertices: np.ndarray, dim: int) -> ContactPoints:
+    """Plain vertex points for ``vertices`` (b,)."""
+    v = np.asarray(vertices, dtype=np.int64)
+    w = np.zeros((len(v), dim))
+    w[:, 0] = 1.0
+    return ContactPoints(verts=np.repeat(v[:, None], dim, axis=1), weights=w, facet=np.full(len(v), -1))
+
+
+def edge_weights(samples: int) -> np.ndarray:
+    """(s, 2) weights of ``samples`` points evenly spaced strictly inside an edge."""
+    t = np.arange(1, samples + 1) / (samples + 1)
+    return np.c_[1 - t, t]
+
+
+def face_weights(order: int) -> np.ndarray:
+    """(p, 3) barycentric lattice of ``order`` on a triangle, corners excluded."""
+    out = []
+    for i in range(order + 1):
+        for j in range(order + 1 - i):
+            k = order - i - j
+            if max(i, j, k) == order:
+                continue
+            out.append((i / order, j / order, k / order))
+    return np.array(out)
+
+
+def facet_weights(dim: int, samples_per_edge: int, face_lattice: int) -> np.ndarray:
+    """Interpolation weights of refinement points on one boundary facet (2D edge / 3D face)."""
+    return edge_weights(samples_per_edge) if dim == 2 else face_weights(face_lattice)
+
+
+def check_weights(dim: int, samples_per_edge: int, face_lattice: int) -> np.ndarray:
+    """Denser weights used to verify facets (contain the refinement points and points between them)."""
+    return edge_weights(2 * samples_per_edge + 1) if dim == 2 else face_weights(2 * face_lattice)
+
+
+def facet_points(facets: np.ndarray, facet_ids: np.ndarray, weights: np.ndarray) -> ContactPoints:
+    """Points with ``weights`` (p, nv) on each facet ``facets[facet_ids]``."""
+    ids = np.asarray(facet_ids, dtype=np.int64)
+    p = len(weights)
+    verts = np.repeat(facets[ids], p, axis=0)
+    w = np.tile(weights, (len(ids), 1))
+    return ContactPoints(verts=verts.astype(np.int64), weights=w, facet=np.repeat(ids, p))

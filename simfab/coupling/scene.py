@@ -1,0 +1,239 @@
+"""Coupling scenes: an MJCF file plus a companion TOML file with the same stem.
+
+The **MJCF** (``NAME.xml``, opens in the MuJoCo viewer) holds
+- the rigid object O: a mocap body (default ``object``) whose geoms are O's shape, in O's body
+  frame; in 2D scenes O is the cross-section of those geoms with the body's z = 0 plane;
+- O's path: keyframes ``<key mpos=".." mquat=".."/>`` of the mocap body (translations and
+  rotations; see :class:`simfab.io.mjcf.Trajectory`);
+- the fixed region of A: a box site (default ``fixed``, axis-aligned, ``size`` = half extents);
+- A's rest shape as a display mesh (body ``part``), informational only.
+
+The **TOML** (``NAME.toml``) defines A and the run (all lengths in metres, SI units)::
+
+    name = "cclamp2d"
+    dim = 2                              # 2 (plane strain) or 3
+    [material]  name = "PLA"             # or youngs_modulus [Pa], poisson_ratio, yield_stress [Pa]
+    [compliant]
+    generator = "c_clamp"                # c_clamp (2D) | extruded_clamp | cross_claw (3D) | outline | mesh
+    target_elements = 450                # approximate triangle / tetrahedron count
+    thickness = 0.005                    # 2D only: out-of-plane extent [m]
+    ...generator parameters (see simfab.coupling.geometry)...
+    # outline = "part.csv" (2D, x,y per line) or mesh = "part.stl" (3D surface), units = "m" | "mm"
+    [object]  body = "object", samples = 50, sigma = (optional) [m], seed = 0
+    [fixed]   site = "fixed"
+    [simulation]  steps = 35 (or h_in [m]), L_max [m], fix_all_axes, refine, ...  (InsertionOptions)
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from simfab.coupling import geometry
+from simfab.coupling.config import InsertionOptions
+from simfab.errors import InputError
+
+GENERATORS_2D = ("c_clamp", "outline")
+GENERATORS_3D = ("extruded_clamp", "cross_claw", "mesh")
+
+
+def read_toml(path: Path) -> dict:
+    if not path.is_file():
+        raise InputError("companion TOML file not found (a coupling scene is NAME.xml + NAME.toml)", where=str(path))
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"invalid TOML: {e}", where=str(path)) from None
+
+
+def scene_paths(scene) -> tuple[Path, Path]:
+    """(xml, toml) for a scene given as NAME.xml, NAME.toml or NAME (bundled: scenes/coupling/NAME)."""
+    p = Path(scene)
+    if p.suffix in (".xml", ".toml"):
+        return p.with_suffix(".xml"), p.with_suffix(".toml")
+    if not p.exists() and not p.with_suffix(".xml").exists():
+        bundled = bundled_dir() / p.name
+        if bundled.with_suffix(".xml").exists():
+            p = bundled
+    return p.with_suffix(".xml"), p.with_suffix(".toml")
+
+
+def bundled_dir() -> Path:
+    return Path(__file__).resolve().parents[2] / "scenes" / "coupling"
+
+
+def _section(cfg: dict, name: str, where: str) -> dict:
+    v = cfg.get(name, {})
+    if not isinstance(v, dict):
+        raise InputError(f"[{name}] must be a table", where=where)
+    return dict(v)
+
+
+def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "cpu"):
+    """Build a :class:`simfab.coupling.simulate.CouplingModel` from a scene (see module docstring).
+
+    overrides : optional dict of dicts merged into the TOML tables (e.g. ``{"simulation": {"steps": 5}}``).
+    """
+    from simfab.coupling.simulate import make_coupling_model
+    from simfab.fem.materials import Material, material_by_name
+    from simfab.fem.model import make_model
+    from simfab.io.mjcf import Trajectory, load_scene
+
+    xml, toml = scene_paths(scene)
+    if not xml.is_file():
+        raise InputError("scene file not found", where=str(xml))
+    cfg = read_toml(toml)
+    for k, v in (overrides or {}).items():
+        if isinstance(v, dict):
+            cfg.setdefault(k, {}).update(v)
+        else:
+            cfg[k] = v
+    where = str(toml)
+    dim = cfg.get("dim", 2)
+    if dim not in (2, 3):
+        raise InputError(f"dim must be 2 or 3, got {dim!r}", where=where)
+    name = str(cfg.get("name", xml.stem))
+
+    mat = _section(cfg, "material", where)
+    if "youngs_modulus" in mat:
+        try:
+            material = Material(name=str(mat.get("name", "custom")), youngs_modulus=float(mat["youngs_modulus"]),
+                                poisson_ratio=float(mat.get("poisson_ratio", 0.35)),
+                                yield_stress=float(mat.get("yield_stress", 60e6)), density=float(mat.get("density", 1200.0)))
+        except (TypeError, ValueError) as e:
+            raise InputError(f"[material]: {e}", where=where) from None
+    else:
+        material = material_by_name(mat.get("name", "PLA"))
+
+    comp = _section(cfg, "compliant", where)
+    obj = _section(cfg, "object", where)
+    fixed_cfg = _section(cfg, "fixed", where)
+    sim = _section(cfg, "simulation", where)
+    try:
+        options = InsertionOptions.from_dict(sim, where=f"{where} [simulation]")
+    except TypeError as e:
+        raise InputError(f"[simulation]: {e}", where=where) from None
+
+    points, elements, thickness = build_compliant(comp, dim, base=toml.parent, where=f"{where} [compliant]")
+    fem = make_model(points, elements, material, thickness=thickness, device=device)
+
+    sc = load_scene(xml)
+    body = str(obj.get("body", "object"))
+    rho = obj.get("rot_length_scale")
+    path = Trajectory.from_scene(sc, body=body, **({} if rho is None else {"rot_length_scale": float(rho)}))
+    mesh = object_mesh_body_frame(sc, body)
+    n_samples = int(obj.get("samples", 50 if dim == 2 else 2000))
+    if n_samples < 8:
+        raise InputError(f"samples={n_samples} is too few for the object's IMLS field", where=f"{where} [object]")
+    if dim == 2:
+        ov, on = geometry.section_samples(mesh, n_samples)
+        spacing = float(np.linalg.norm(np.diff(np.vstack([ov, ov[:1]]), axis=0), axis=1).mean())
+        disp_v, disp_f = ov, None
+    else:
+        ov, on = geometry.surface_samples(mesh, n_samples, seed=int(obj.get("seed", 0)))
+        spacing = None
+        disp_v, disp_f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    from simfab.contact.imls import build_imls
+
+    sigma = obj.get("sigma")
+    fld = build_imls(ov, on, sigma=None if sigma is None else float(sigma), spacing=spacing, device=device)
+
+    site = str(fixed_cfg.get("site", "fixed"))
+    if site not in sc.sites:
+        raise InputError(f"no site named {site!r} (the fixed region of the compliant part)", where=str(xml))
+    c = sc.sites[site][:dim]
+    half = sc.site_size[site][:dim]
+    if dim == 3 and half[2] == 0:
+        half = np.r_[half[:2], np.inf]
+    inside = np.all(np.abs(fem.rest - c) <= half + 1e-12, axis=1)
+    fixed = np.flatnonzero(inside)
+    return make_coupling_model(name=name, fem=fem, field=fld, path=path, fixed_vertices=fixed, options=options,
+                               object_vertices=disp_v, object_faces=disp_f)
+
+
+def object_mesh_body_frame(sc, body: str):
+    """O's geoms as one trimesh in O's body frame (the mocap body's pose at qpos0 undone)."""
+    import mujoco
+
+    meshes = sc.body_meshes()
+    if body not in meshes:
+        raise InputError(f"body {body!r} has no geometry to build the object from", where=str(sc.path))
+    m = meshes[body].copy()
+    bid = mujoco.mj_name2id(sc.model, mujoco.mjtObj.mjOBJ_BODY, body)
+    from simfab.io.mjcf import quat_to_matrix
+
+    R = quat_to_matrix(sc.model.body_quat[bid])
+    p = np.asarray(sc.model.body_pos[bid])
+    T = np.eye(4)
+    T[:3, :3] = R.T
+    T[:3, 3] = -R.T @ p
+    m.apply_transform(T)
+    return m
+
+
+def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
+    """A's mesh from the [compliant] table: (points (n, dim) [m], elements, thickness [m])."""
+    from simfab.fem.meshing import tetrahedralize, triangulate_polygon
+
+    gen = comp.pop("generator", None)
+    target = comp.pop("target_elements", None)
+    thickness = float(comp.pop("thickness", 1.0)) if dim == 2 else 1.0
+    units = comp.pop("units", "m")
+    scale = {"m": 1.0, "mm": 1e-3}.get(units)
+    if scale is None:
+        raise InputError(f"units must be 'm' or 'mm', got {units!r}", where=where)
+    if dim == 2:
+        if gen == "c_clamp":
+            outline = _call(geometry.c_clamp_outline, comp, where)
+        elif gen == "outline" or "outline" in comp:
+            f = base / str(comp.pop("outline"))
+            if not f.is_file():
+                raise InputError("outline file not found", where=str(f))
+            try:
+                outline = np.loadtxt(f, delimiter=",", ndmin=2) * scale
+            except ValueError as e:
+                raise InputError(f"cannot read the outline CSV: {e}", where=str(f)) from None
+        else:
+            raise InputError(f"2D generator must be one of {GENERATORS_2D}, got {gen!r}", where=where)
+        return _triangulate_to_target(outline, target) + (thickness,)
+    if gen == "extruded_clamp":
+        surf = _call(geometry.extruded_clamp, comp, where)
+    elif gen == "cross_claw":
+        surf = _call(geometry.cross_claw, comp, where)
+    elif gen == "mesh" or "mesh" in comp:
+        from simfab.io.mesh import load_mesh
+
+        surf = load_mesh(base / str(comp.pop("mesh")), units=units, require_watertight=True)
+    else:
+        raise InputError(f"3D generator must be one of {GENERATORS_3D}, got {gen!r}", where=where)
+    V, T = tetrahedralize(np.asarray(surf.vertices), np.asarray(surf.faces), target_tets=target)
+    return V, T, 1.0
+
+
+def _call(fn, kw: dict, where: str):
+    try:
+        return fn(**kw)
+    except TypeError as e:
+        raise InputError(f"bad generator parameters: {e}", where=where) from None
+
+
+def _triangulate_to_target(outline: np.ndarray, target: int | None):
+    """Triangle mesh of the outline with about ``target`` triangles (area bound tuned in 3 passes)."""
+    from simfab.fem.meshing import triangulate_polygon
+
+    if target is None:
+        return triangulate_polygon(outline)
+    x, y = outline[:, 0], outline[:, 1]
+    area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+    max_area = area / target
+    best = None
+    for _ in range(4):
+        V, F = triangulate_polygon(outline, max_area=max_area)
+        if best is None or abs(len(F) - target) < abs(len(best[1]) - target):
+            best = (V, F)
+        if abs(len(F) - target) <= 0.05 * target:
+            break
+        max_area *= len(F) / target
+    return best

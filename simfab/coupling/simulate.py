@@ -1,0 +1,574 @@
+"""Quasi-static insertion of a rigid object O into a compliant part A.
+
+At every insertion step O is moved to its next pose along the path and A settles into
+
+    minimize_x  E_d(x)   subject to  psi(y_j(x)) <= 0   for all constraint points y_j
+
+(E_d: Neo-Hookean energy, psi: IMLS field of O, > 0 inside; y_j: A's boundary vertices plus
+refinement points on boundary edges/faces). Method, per step (interior point / IPC style):
+
+1. **Predictor.** Constraint points that O could reach during the step (distance to O below the
+   Lipschitz bound of psi times O's displacement there, plus d_hat) are carried rigidly with O -
+   rigid motion keeps their distance to O - and the rest of A follows through one linear solve with
+   the tangent stiffness of the previous step (those vertices pinned by a penalty, same sparsity
+   pattern, so the symbolic factorization is reused). The result is a feasible, non-inverted warm
+   start: every point outside O.
+2. **Corrector.** Projected Newton (:func:`simfab.solve.newton.minimize`) on
+   E_d(x) + kappa * sum_j b(-psi(y_j)) with the log barrier b of :mod:`simfab.contact.barrier`.
+   Every step is capped by conservative advancement, alpha <= 0.9 d_j / (L |dy_j|) with L a
+   Lipschitz bound of psi, and the Armijo line search rejects trial points with an inverted
+   element (E_d = +inf) or a point inside O (b = +inf). The iterate therefore stays feasible.
+3. **Refinement.** Boundary facets near O are checked at interpolated points; facets whose interior
+   crosses into O receive ``samples_per_edge`` points per edge (2D) or a barycentric lattice
+   (3D) as extra constraints and the step is solved again from the previous step's state (which
+   is feasible for them, because every earlier step ended with all facets checked outside O).
+   Refined facets keep their points for the rest of the simulation.
+4. **Check.** The step ends only if the max penetration at vertices and at dense check points on
+   facets near O is <= ``penetration_tol_rel * h_A`` and no element is inverted; otherwise
+   ConvergenceError. A step that cannot be taken (predictor infeasible, Newton failure) is
+   bisected along the path up to ``MAX_BISECTIONS`` times before giving up loudly.
+
+Forces: the reaction at the fixed dofs is r = dE_total/dx there (the force the support applies to
+A). By equilibrium of A it equals the force A exerts on O, so the insertion force is
+F = sum r . u (u: unit direction of O's translation), negative when A resists the insertion.
+Contact forces on A are f_a = -dB/dx_a; the grip force is || (1/2 sum |f_x|, 1/2 sum |f_y|,
+1/2 sum |f_z|) ||.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from simfab.contact.barrier import barrier, point_barrier
+from simfab.contact.imls import ImlsField, pose_matrix
+from simfab.coupling import config as C
+from simfab.coupling.config import InsertionOptions
+from simfab.coupling.points import ContactPoints, check_weights, facet_points, facet_weights, vertex_points
+from simfab.errors import ConvergenceError, InputError
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class CouplingModel:
+    """Immutable description of one insertion simulation.
+
+    fem : :class:`simfab.fem.model.FemModel` of A (SI units)
+    field : :class:`ImlsField` of O in O's body frame
+    path : :class:`simfab.io.mjcf.Trajectory` of O's pose, parameterized by path length [m]
+    s_steps : (K+1,) path length at each step [m]; step 0 is the start pose
+    fixed_vertices : (f,) vertices of A in the fixed region
+    free : (n*dim,) bool, dofs solved for (fixed: fixed vertices along the insertion axis, or all axes)
+    axis : (dim,) unit insertion axis (coordinate axis closest to O's overall translation)
+    h : A's mean edge length h_A [m]; dhat [m]; kappa [N/m]; tol : penetration tolerance [m]
+    object_vertices, object_faces : O's display geometry in its body frame (3D mesh, or a closed
+        curve (k, 2) with faces None in 2D)
+    """
+
+    name: str
+    fem: object
+    field: ImlsField
+    path: object
+    s_steps: np.ndarray
+    fixed_vertices: np.ndarray
+    free: np.ndarray
+    axis: np.ndarray
+    options: InsertionOptions
+    h: float
+    dhat: float
+    kappa: float
+    tol: float
+    force_scale: float
+    object_vertices: np.ndarray
+    object_faces: np.ndarray | None = None
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def dim(self) -> int:
+        return self.fem.dim
+
+    def pose(self, s: float):
+        """O's pose at path length s: (R (3, 3), p (3,)) with world x = R x_body + p."""
+        pos, quat = self.path.pose_at(s)
+        return pose_matrix((pos, quat), self.dim)
+
+    def direction(self, s: float) -> np.ndarray:
+        """(dim,) unit translation direction of O at s (zero during a pure rotation)."""
+        u = np.asarray(self.path.direction_at(s))[: self.dim]
+        n = np.linalg.norm(u)
+        return u / n if n > 0 else u
+
+
+def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertices, options: InsertionOptions,
+                        object_vertices, object_faces=None) -> CouplingModel:
+    """Assemble a :class:`CouplingModel`: steps along the path, boundary conditions, barrier scales."""
+    dim = fem.dim
+    n = fem.n_vertices
+    fixed_vertices = np.unique(np.asarray(fixed_vertices, dtype=np.int64))
+    if fixed_vertices.size == 0:
+        raise InputError("the fixed region contains no vertex of the compliant part", where="fixed")
+    total = float(path.length)
+    L = total if options.L_max is None else min(float(options.L_max), total)
+    if not L > 0:
+        raise InputError("the object's path has zero length (keyframes do not move it)", where="keyframes")
+    if options.h_in is not None:
+        k = int(np.floor(L / options.h_in + 1e-9))
+        s = np.arange(k + 1) * options.h_in
+        if L - s[-1] > 1e-9 * L:
+            s = np.append(s, L)
+    else:
+        s = np.linspace(0.0, L, (options.steps or 35) + 1)
+    move = np.asarray(path.positions[-1] - path.positions[0])[:dim]
+    if np.linalg.norm(move) == 0:
+        move = np.asarray(path.direction_at(0.0))[:dim]
+    ax = int(np.argmax(np.abs(move))) if np.linalg.norm(move) > 0 else 0
+    axis = np.zeros(dim)
+    axis[ax] = 1.0
+    free = np.ones((n, dim), dtype=bool)
+    if options.fix_all_axes:
+        free[fixed_vertices] = False
+    else:
+        free[fixed_vertices, ax] = False
+    h = fem.mean_edge_length()
+    E = fem.material.youngs_modulus if fem.material is not None else float(np.mean(fem.mu) * 3)
+    width = h if dim == 3 else fem.thickness
+    return CouplingModel(
+        name=name, fem=fem, field=field, path=path, s_steps=s, fixed_vertices=fixed_vertices, free=free.ravel(),
+        axis=axis, options=options, h=h, dhat=options.dhat_rel * h, kappa=options.kappa_rel * E * width,
+        tol=options.penetration_tol_rel * h, force_scale=E * h * width,
+        object_vertices=np.asarray(object_vertices, float),
+        object_faces=None if object_faces is None else np.asarray(object_faces, int),
+    )
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass(kw_only=True)
+class StepResult:
+    """One insertion step. Units: s, penetration [m]; energy [J]; forces [N]; stress [Pa]."""
+
+    s: float
+    pos: np.ndarray
+    quat: np.ndarray
+    x: np.ndarray  # (n, dim) deformed positions [m]
+    energy: float
+    force: float  # insertion force along O's motion (resisting < 0)
+    grip: float
+    max_von_mises: float
+    von_mises: np.ndarray  # (m,) per element [Pa]
+    penetration: float
+    min_det_F: float
+    iterations: int
+    contact_points: int
+
+
+@dataclass(kw_only=True)
+class InsertionResult:
+    model: CouplingModel
+    steps: list
+    seconds: float
+    timings: dict
+
+    def column(self, name: str) -> np.ndarray:
+        return np.array([getattr(r, name) for r in self.steps], dtype=float)
+
+
+class _Timer:
+    """Accumulates wall time per category (assembly, factorization, contact, ...)."""
+
+    def __init__(self):
+        self.t: dict[str, float] = {}
+
+    def add(self, key: str, dt: float) -> None:
+        self.t[key] = self.t.get(key, 0.0) + dt
+
+
+# ----------------------------------------------------------------------------- objective
+class _StepObjective:
+    """E_d(x) + kappa sum_j b(d_j(x)) for a fixed pose of O and a fixed set of constraint points."""
+
+    def __init__(self, cm: CouplingModel, points: ContactPoints, R: np.ndarray, p: np.ndarray, timer: _Timer):
+        self.cm, self.points, self.R, self.p, self.timer = cm, points, R, p, timer
+        self.n, self.dim = cm.fem.n_vertices, cm.dim
+        nv = points.verts.shape[1]
+        key = ("slots", len(points), id(points))
+        slots = cm._cache.get(key)
+        if slots is None:
+            ia, ib = np.meshgrid(np.arange(nv), np.arange(nv), indexing="ij")
+            rows = points.verts[:, ia.ravel()].ravel()
+            cols = points.verts[:, ib.ravel()].ravel()
+            slots = cm.fem.pattern.block_slots(rows, cols).reshape(len(points), nv, nv, self.dim, self.dim)
+            cm._cache.clear() if len(cm._cache) > 8 else None
+            cm._cache[key] = slots
+        self.slots = slots
+        self.wpair = points.weights[:, :, None] * points.weights[:, None, :]  # (k, nv, nv)
+        self.diag = _diag_slots(cm)
+        self.last_x = None
+        self.last_d = None
+        self.last_H = None
+        self.last_contact_grad = None
+
+    def distances(self, x: np.ndarray, hessian: bool):
+        t0 = time.perf_counter()
+        y = self.points.positions(x)
+        ev = self.cm.field.evaluate(y, (self.R, self.p), hessian=hessian)
+        self.timer.add("contact", time.perf_counter() - t0)
+        return -ev.psi, ev
+
+    def __call__(self, xf: np.ndarray, need_hessian: bool):
+        """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O."""
+        from simfab.fem.neohookean import energy_gradient, energy_gradient_hessian
+
+        cm = self.cm
+        x = xf.reshape(self.n, self.dim)
+        t0 = time.perf_counter()
+        if need_hessian:
+            E, g, H = energy_gradient_hessian(cm.fem, x)
+        else:
+            (E, g), H = energy_gradient(cm.fem, x), None
+        self.timer.add("assembly", time.perf_counter() - t0)
+        if not np.isfinite(E):
+            return np.inf, g.ravel(), H
+        d, ev = self.distances(x, need_hessian)
+        t0 = time.perf_counter()
+        if np.any(d <= 0):
+            return np.inf, g.ravel(), H
+        B, gy, Hy = point_barrier(d, -ev.grad, -ev.hess if need_hessian else None, cm.dhat, cm.kappa)
+        gc = self.points.scatter(gy, self.n)
+        if need_hessian:
+            act = d < cm.dhat
+            if act.any():
+                blocks = self.wpair[act][:, :, :, None, None] * Hy[act][:, None, None, :, :]
+                np.add.at(H.data, self.slots[act].ravel(), blocks.ravel())
+            reg = C.RIGID_MODE_REG * float(np.abs(H.data[self.diag]).mean())
+            H.data[self.diag] += reg
+            self.last_x = xf.copy()
+            self.last_d = d
+            self.last_H = H
+        self.timer.add("contact", time.perf_counter() - t0)
+        return E + B, (g + gc).ravel(), H
+
+    def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
+        """Step cap: no constraint point travels more than max(0.9 d_j / L, c sigma).
+
+        0.9 d_j / L is conservative advancement (psi is L-Lipschitz, so the point cannot reach O).
+        Points in contact must still be able to slide along O: they may travel c sigma (O's
+        sample spacing, c < 1), too little to tunnel through O, which is assumed to have no feature
+        thinner than 2 sigma; the line search rejects any trial point inside O (energy +inf).
+        """
+        if self.last_x is not None and np.array_equal(self.last_x, xf):
+            d = self.last_d
+        else:
+            d, _ = self.distances(xf.reshape(self.n, self.dim), False)
+        dy = np.linalg.norm(self.points.positions(dx.reshape(self.n, self.dim)), axis=1)
+        m = dy > 0
+        if not m.any():
+            return 1.0
+        reach = np.maximum(C.STEP_FRACTION * d[m] / C.PSI_LIPSCHITZ, C.FREE_TRAVEL_SIGMAS * self.cm.field.sigma)
+        return float(min(1.0, np.min(reach / dy[m])))
+
+
+def _diag_slots(cm: CouplingModel) -> np.ndarray:
+    s = cm._cache.get("diag")
+    if s is None:
+        n, dim = cm.fem.n_vertices, cm.dim
+        b = cm.fem.pattern.block_slots(np.arange(n), np.arange(n))
+        s = cm._cache["diag"] = b[:, np.arange(dim), np.arange(dim)].ravel()
+    return s
+
+
+# ----------------------------------------------------------------------------- simulation
+@dataclass(kw_only=True)
+class _State:
+    x: np.ndarray  # (n, dim)
+    s: float
+    points: ContactPoints
+    refined: set
+    H: object = None  # last Hessian (for the predictor)
+
+
+def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> InsertionResult:
+    """Run the insertion along all steps of ``cm``; see the module docstring for the method.
+
+    Returns :class:`InsertionResult` (one :class:`StepResult` per step including the start pose).
+    Raises ConvergenceError when a step cannot be solved to tolerance, InputError when O starts
+    inside A.
+    """
+    from simfab.progress import progress
+    from simfab.solve.linear import SPDSolver
+
+    t_start = time.perf_counter()
+    timer = _Timer()
+    fem = cm.fem
+    dim = cm.dim
+    bverts = np.asarray(fem.boundary_vertices, dtype=np.int64)
+    points = vertex_points(bverts, dim)
+    state = _State(x=np.array(fem.rest, dtype=np.float64), s=0.0, points=points, refined=set())
+    solver = SPDSolver()
+    ctx = dict(timer=timer, solver=solver)
+    _check_start(cm, state, ctx)
+    steps = []
+    for k in progress(range(len(cm.s_steps)), total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
+        s = float(cm.s_steps[k])
+        iters = 0
+        if k > 0:
+            iters = _advance(cm, state, s, ctx, depth=0)
+        else:
+            iters = _solve_at(cm, state, s, ctx)
+        rec = _record(cm, state, iters, ctx)
+        steps.append(rec)
+        if callback is not None:
+            callback(k, rec)
+    timer.add("total", time.perf_counter() - t_start)
+    return InsertionResult(model=cm, steps=steps, seconds=time.perf_counter() - t_start, timings=dict(timer.t))
+
+
+def _check_start(cm: CouplingModel, state: _State, ctx) -> None:
+    """O must start outside A: every boundary vertex outside O and no facet crossing it."""
+    R, p = cm.pose(0.0)
+    y = state.points.positions(state.x)
+    ev = cm.field.evaluate(y, (R, p), hessian=False)
+    if np.any(ev.psi >= 0):
+        raise InputError(f"the object starts inside the compliant part ({int((ev.psi >= 0).sum())} vertices inside "
+                         "it at the first keyframe); move the first keyframe away", where="keyframes")
+
+
+def _objective(cm, points, s, ctx) -> _StepObjective:
+    R, p = cm.pose(s)
+    return _StepObjective(cm, points, R, p, ctx["timer"])
+
+
+def _newton(cm: CouplingModel, obj: _StepObjective, x0: np.ndarray, ctx) -> tuple[np.ndarray, int]:
+    from simfab.solve.newton import NewtonOptions, minimize
+
+    opts = NewtonOptions(
+        max_iter=C.NEWTON_MAX_ITER, grad_tol=C.NEWTON_GRAD_TOL_REL, grad_scale=cm.force_scale,
+        step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h,
+    )
+    solver = _TimedSolver(ctx["solver"], ctx["timer"])
+    res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
+    return res.x.reshape(x0.shape), res.iterations
+
+
+class _TimedSolver:
+    """SPDSolver wrapper that books factorization + solve time."""
+
+    def __init__(self, solver, timer):
+        self.solver, self.timer = solver, timer
+
+    def solve(self, A, b):
+        t0 = time.perf_counter()
+        try:
+            return self.solver.solve(A, b)
+        finally:
+            self.timer.add("factorization", time.perf_counter() - t0)
+
+
+def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
+    """Solve at the current pose without moving O (step 0), with refinement."""
+    total = 0
+    for _ in range(64):
+        obj = _objective(cm, state.points, s, ctx)
+        x, it = _newton(cm, obj, state.x, ctx)
+        total += it
+        new = _crossing_facets(cm, x, s, state)
+        if not new:
+            state.x, state.s, state.H = x, s, obj.last_H
+            return total
+        _add_refinement(cm, state, new)
+    raise ConvergenceError("refinement did not settle at the start pose")
+
+
+def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) -> int:
+    """Move O from state.s to s_new and re-equilibrate A (predictor, Newton, refinement)."""
+    total = 0
+    for _ in range(64):  # refinement restarts
+        try:
+            x0 = _predict(cm, state, s_new, ctx)
+            obj = _objective(cm, state.points, s_new, ctx)
+            x, it = _newton(cm, obj, x0, ctx)
+        except ConvergenceError:
+            if depth >= C.MAX_BISECTIONS:
+                raise
+            mid = 0.5 * (state.s + s_new)
+            total += _advance(cm, state, mid, ctx, depth + 1)
+            total += _advance(cm, state, s_new, ctx, depth + 1)
+            return total
+        total += it
+        new = _crossing_facets(cm, x, s_new, state) if cm.options.refine else []
+        if not new:
+            state.x, state.s, state.H = x, s_new, obj.last_H
+            return total
+        # restart the step from the previous state, which is feasible for the new points
+        _add_refinement(cm, state, new)
+    raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")
+
+
+def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
+    """Feasible warm start at s_new: carry points O can reach rigidly with O, smooth the rest."""
+    timer = ctx["timer"]
+    x = state.x
+    n, dim = cm.fem.n_vertices, cm.dim
+    Ra, pa = cm.pose(state.s)
+    Rb, pb = cm.pose(s_new)
+    M = Rb @ Ra.T  # world rigid map of the step: y -> M (y - pa) + pb
+
+    def carry(z):
+        z3 = np.zeros((len(z), 3))
+        z3[:, :dim] = z
+        return ((z3 - pa) @ M.T + pb)[:, :dim]
+
+    pts = state.points
+    y = pts.positions(x)
+    t0 = time.perf_counter()
+    ev_a = cm.field.evaluate(y, (Ra, pa), hessian=False)
+    timer.add("contact", time.perf_counter() - t0)
+    disp = np.linalg.norm(carry(y) - y, axis=1)
+    drag_pts = -ev_a.psi < C.PSI_LIPSCHITZ * disp + cm.dhat
+    x_carried = carry(x)
+    dragged = np.zeros(n, dtype=bool)
+    for attempt in range(C.PREDICTOR_RETRIES + 1):
+        dragged[np.unique(pts.verts[drag_pts][pts.weights[drag_pts] > 0])] = True
+        if not dragged.any():
+            x0 = x.copy()
+        else:
+            x0 = _smooth_drag(cm, state, x, x_carried, dragged, ctx)
+        d_new = _feasible_distances(cm, x0, s_new, pts, ctx)
+        if d_new is not None and np.all(d_new > 0):
+            return x0
+        if d_new is None:
+            break
+        bad = d_new <= 0
+        if np.all(drag_pts[bad]):
+            break
+        drag_pts |= bad
+    # fall back to the plain rigid carry without smoothing
+    x0 = x.copy()
+    x0[dragged] = x_carried[dragged]
+    x0 = np.where(cm.free.reshape(n, dim), x0, x)
+    d_new = _feasible_distances(cm, x0, s_new, pts, ctx)
+    if d_new is not None and np.all(d_new > 0):
+        return x0
+    raise ConvergenceError(f"no feasible warm start for the step to s={s_new:.6g} m")
+
+
+def _feasible_distances(cm, x0, s, pts, ctx):
+    """Distances to O at s if x0 has no inverted element, else None."""
+    from simfab.fem.neohookean import det_F
+
+    t0 = time.perf_counter()
+    ok = np.all(det_F(cm.fem, x0) > 0)
+    ctx["timer"].add("assembly", time.perf_counter() - t0)
+    if not ok:
+        return None
+    R, p = cm.pose(s)
+    t0 = time.perf_counter()
+    ev = cm.field.evaluate(pts.positions(x0), (R, p), hessian=False)
+    ctx["timer"].add("contact", time.perf_counter() - t0)
+    return -ev.psi
+
+
+def _smooth_drag(cm, state, x, x_carried, dragged, ctx) -> np.ndarray:
+    """u minimizing 1/2 u^T H u + P/2 sum_dragged |u - u_target|^2 over the free dofs."""
+    import scipy.sparse as sp
+
+    from simfab.fem.neohookean import energy_gradient_hessian
+
+    n, dim = cm.fem.n_vertices, cm.dim
+    H = state.H
+    if H is None:
+        t0 = time.perf_counter()
+        _, _, H = energy_gradient_hessian(cm.fem, x)
+        H.data[_diag_slots(cm)] += C.RIGID_MODE_REG * float(np.abs(H.data[_diag_slots(cm)]).mean())
+        ctx["timer"].add("assembly", time.perf_counter() - t0)
+        state.H = H
+    free = cm.free
+    fidx = np.flatnonzero(free)
+    target = (x_carried - x).ravel()
+    pin = np.repeat(dragged, dim) & free
+    pen = C.PREDICTOR_PENALTY * float(np.abs(H.diagonal()).max())
+    Hf = H[fidx][:, fidx] if len(fidx) < H.shape[0] else H
+    A = Hf + sp.diags(pen * pin[fidx].astype(float), format="csr")
+    rhs = pen * (pin * target)[fidx]
+    t0 = time.perf_counter()
+    uf = ctx["solver"].solve(A.tocsr(), rhs)
+    ctx["timer"].add("factorization", time.perf_counter() - t0)
+    u = np.zeros(n * dim)
+    u[fidx] = uf
+    return x + u.reshape(n, dim)
+
+
+def _crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: _State) -> list:
+    """Unrefined boundary facets near O whose interior crosses into O at (x, s)."""
+    if not cm.options.refine:
+        return []
+    ids, psi = _facet_check(cm, x, s)
+    if len(ids) == 0:
+        return []
+    cw = check_weights(cm.dim, cm.options.samples_per_edge, cm.options.face_lattice)
+    hit = (psi.reshape(len(ids), len(cw)) > 0).any(axis=1)
+    return [int(f) for f in ids[hit] if int(f) not in state.refined]
+
+
+def _facet_check(cm: CouplingModel, x: np.ndarray, s: float):
+    """psi at dense check points of the facets that could reach into O: (facet ids, psi (f*p,))."""
+    facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
+    R, p = cm.pose(s)
+    bv = np.asarray(cm.fem.boundary_vertices)
+    ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
+    dv = np.full(cm.fem.n_vertices, np.inf)
+    dv[bv] = -ev.psi
+    pts = x[facets]
+    diam = np.max(np.linalg.norm(pts - np.roll(pts, 1, axis=1), axis=2), axis=1)
+    near = np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * diam
+    ids = np.flatnonzero(near)
+    if len(ids) == 0:
+        return ids, np.zeros(0)
+    cw = check_weights(cm.dim, cm.options.samples_per_edge, cm.options.face_lattice)
+    cp = facet_points(facets, ids, cw)
+    ev = cm.field.evaluate(cp.positions(x), (R, p), hessian=False)
+    return ids, ev.psi
+
+
+def _add_refinement(cm: CouplingModel, state: _State, facet_ids: list) -> None:
+    facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
+    w = facet_weights(cm.dim, cm.options.samples_per_edge, cm.options.face_lattice)
+    state.points = state.points.concat(facet_points(facets, np.array(facet_ids), w))
+    state.refined.update(facet_ids)
+
+
+def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
+    from simfab.fem.neohookean import det_F, energy_gradient
+    from simfab.fem.stress import von_mises
+
+    x = state.x
+    n, dim = cm.fem.n_vertices, cm.dim
+    E, gE = energy_gradient(cm.fem, x)
+    R, p = cm.pose(state.s)
+    pts = state.points
+    ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
+    d = -ev.psi
+    _, gy, _ = point_barrier(d, -ev.grad, None, cm.dhat, cm.kappa)
+    gc = pts.scatter(gy, n)
+    g = gE + gc
+    fixed = ~cm.free.reshape(n, dim)
+    reaction = np.where(fixed, g, 0.0).sum(axis=0)  # force of the support on A = force of A on O
+    u = cm.direction(state.s)
+    force = float(reaction @ u)
+    fc = -gc  # contact force on A's vertices
+    grip = float(np.linalg.norm(0.5 * np.abs(fc).sum(axis=0)))
+    dets = det_F(cm.fem, x)
+    min_det = float(dets.min())
+    if not min_det > 0:
+        raise ConvergenceError(f"an element is inverted at s={state.s:.6g} m (min det F = {min_det:.3e})")
+    vm = von_mises(cm.fem, x)
+    ids, psi_check = _facet_check(cm, x, state.s)
+    pen = float(max(0.0, ev.psi.max(initial=-np.inf), psi_check.max(initial=-np.inf)))
+    if pen > cm.tol:
+        raise ConvergenceError(f"penetration {pen:.3e} m exceeds the tolerance {cm.tol:.3e} m at s={state.s:.6g} m")
+    pos, quat = cm.path.pose_at(state.s)
+    return StepResult(
+        s=state.s, pos=np.asarray(pos), quat=np.asarray(quat), x=x.copy(), energy=float(E), force=force, grip=grip,
+        max_von_mises=float(vm.max()), von_mises=vm, penetration=pen, min_det_F=min_det, iterations=int(iters),
+        contact_points=len(pts),
+    )
