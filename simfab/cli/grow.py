@@ -1,13 +1,162 @@
-"""``simfab grow``: not built yet (placeholder until its issue lands; exits 2)."""
+"""``simfab grow``: generative support structures (space colonization), skinned for printing.
 
-from simfab.cli._pending import not_built
+Usage::
 
-HELP = "grow (not built yet)"
+    simfab grow SCENE.xml [--attractors N --influence D --kill D --branch-length L
+                           --mode volume|surface|profile --symmetric --smooth-iterations K]
+    simfab grow edit SKELETON.json --stroke STROKE.json --camera CAMERA.json [--chain K]
+
+SCENE is an MJCF file with a companion TOML (see ``scenes/growth/README.md``). Outputs
+under ``--out``: skin STL + PLY, skeleton JSON, USD growth replay, MJCF of objects + grown
+part, PNG preview. ``edit`` moves one skeleton chain onto the surface of rays through a
+2D stroke and re-skins the result.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+from pathlib import Path
+
+HELP = "grow a support structure between objects (space colonization) and skin it for 3D printing"
+DESCRIPTION = __doc__
+
+SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes" / "growth"
 
 
 def add_args(p):
-    p.add_argument("rest", nargs="*", help="arguments of the future pipeline")
+    p.add_argument("scene", metavar="SCENE", help="growth scene (MJCF .xml), or the word 'edit' for a sketch edit")
+    p.add_argument("skeleton", nargs="?", metavar="SKELETON_JSON", help="(edit) skeleton JSON written by simfab grow")
+    g = p.add_argument_group("growth")
+    g.add_argument("--attractors", type=int, metavar="N", help="number of random attractors (default 2000)")
+    g.add_argument("--influence", type=float, metavar="D", help="attractor influence distance [m]")
+    g.add_argument("--kill", type=float, metavar="D", help="attractor kill distance [m]")
+    g.add_argument("--branch-length", type=float, metavar="L", help="branch length per growth step [m]")
+    g.add_argument("--mode", choices=["volume", "surface", "profile"], help="attractor placement")
+    g.add_argument("--symmetric", action="store_true", default=None, help="mirror-symmetric growth")
+    g.add_argument("--smooth-iterations", type=int, metavar="K", help="smoothing iterations (0 = none)")
+    g.add_argument("--max-steps", type=int, metavar="K", help="growth step cap")
+    e = p.add_argument_group("edit")
+    e.add_argument("--stroke", metavar="FILE", help="(edit) stroke: JSON {\"points\": [[x, y], ...]} or CSV, pixels")
+    e.add_argument("--camera", metavar="FILE|JSON", help="(edit) camera: eye, target, up, fovy_deg, width, height")
+    e.add_argument("--chain", type=int, metavar="K", help="(edit) chain index (default: the one nearest the stroke)")
 
 
-def run(args):
-    raise not_built("grow")
+def _positive(name, v, integer=False):
+    from simfab.errors import InputError
+
+    if v is not None and not v > 0:
+        raise InputError(f"must be positive, got {v}", where=name)
+    return v
+
+
+def run(args) -> dict:
+    from simfab.errors import InputError
+
+    if args.scene == "edit":
+        return _run_edit(args)
+    if args.skeleton is not None or args.stroke or args.camera or args.chain is not None:
+        raise InputError("SKELETON_JSON, --stroke, --camera and --chain belong to 'simfab grow edit'")
+    return grow_scene(args.scene, out=args.out, seed=args.seed, quiet=args.quiet,
+                      attractors=_positive("--attractors", args.attractors),
+                      influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
+                      branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
+                      symmetric=args.symmetric, smoothing_iterations=_nonneg(args.smooth_iterations),
+                      max_steps=_positive("--max-steps", args.max_steps))
+
+
+def _nonneg(v):
+    from simfab.errors import InputError
+
+    if v is not None and v < 0:
+        raise InputError(f"must be >= 0, got {v}", where="--smooth-iterations")
+    return v
+
+
+def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, **overrides) -> dict:
+    """Grow, skin, check and write every output for one scene; returns the summary."""
+    from simfab.errors import ConvergenceError
+    from simfab.growth import grow, skin_result
+    from simfab.growth.outputs import write_all
+    from simfab.progress import log
+
+    symmetric = overrides.pop("symmetric", None)
+    result = grow(scene, seed=seed, symmetric=symmetric, **overrides)
+    s = result.summary()
+    if s["segments"] == 0:
+        raise ConvergenceError(f"growth produced no structure ({'; '.join(s['stop_reasons'])}); "
+                               f"unreached targets: {', '.join(s['targets_unreached']) or 'none'}")
+    if s["targets_unreached"]:
+        log(f"simfab grow: warning: unreached targets {', '.join(s['targets_unreached'])} "
+            f"({'; '.join(s['stop_reasons'])})", quiet=quiet)
+    mesh, rep, seconds_skin = skin_result(result)
+    paths = write_all(result, mesh, Path(out), stem=stem or result.scene.name)
+    s.update({
+        "watertight": rep.watertight, "is_volume": rep.is_volume, "bodies": rep.bodies, "volume": rep.volume,
+        "nodes_in_skin": rep.nodes_contained, "overlap_volume": rep.overlap_volume,
+        "objects_subtracted": rep.objects_subtracted, "objects_not_manifold": rep.objects_not_manifold,
+        "seconds_skin": seconds_skin,
+    })
+    s.update(paths)
+    return s
+
+
+def _run_edit(args) -> dict:
+    import numpy as np
+
+    from simfab.errors import InputError
+    from simfab.growth.obstacles import Obstacles
+    from simfab.growth.scene import load_growth_scene
+    from simfab.growth.skeleton import load_skeleton_json, to_json_dict
+    from simfab.growth.skin import skin
+    from simfab.growth.sketch import edit_chain, load_camera, load_stroke
+    from simfab.io.atomic import write_json
+    from simfab.io.mesh import save_mesh
+
+    if args.skeleton is None:
+        raise InputError("simfab grow edit needs SKELETON_JSON")
+    if not args.stroke or not args.camera:
+        raise InputError("simfab grow edit needs --stroke FILE and --camera FILE|JSON")
+    for name in ("attractors", "influence", "kill", "branch_length", "mode", "symmetric", "smooth_iterations"):
+        if getattr(args, name) is not None:
+            raise InputError(f"--{name.replace('_', '-')} applies to growth, not to 'edit'")
+    sk, doc = load_skeleton_json(args.skeleton)
+    camera = load_camera(args.camera)
+    stroke = load_stroke(args.stroke)
+    objects, obstacles = {}, None
+    scene_path = doc.get("scene")
+    if scene_path and Path(scene_path).is_file():
+        scene = load_growth_scene(scene_path)
+        objects = scene.objects
+        diag = float(np.linalg.norm(np.ptp(scene.objects_bbox(), axis=0)))
+        obstacles = Obstacles(list(objects.values()), scene.sphere_centers, scene.sphere_radii, end_trim=1e-3 * diag)
+    edited, rep = edit_chain(sk, camera, stroke, chain=args.chain, obstacles=obstacles)
+    mesh, srep = skin(edited.nodes, edited.parent, edited.radius, objects)
+    out = Path(args.out)
+    stem = Path(args.skeleton).stem.removesuffix("_skeleton") + "_edited"
+    paths = {
+        "skeleton_json": str(write_json(out / f"{stem}_skeleton.json",
+                                        to_json_dict(edited, scene=scene_path, seed=doc.get("seed"), edit=rep))),
+        "skin_stl": str(save_mesh(mesh, out / f"{stem}_skin.stl")),
+        "skin_ply": str(save_mesh(mesh, out / f"{stem}_skin.ply")),
+    }
+    return {**rep, "nodes": len(edited.nodes), "segments": int((edited.parent >= 0).sum()),
+            "watertight": srep.watertight, "bodies": srep.bodies, "volume": srep.volume, **paths}
+
+
+def bundled_scenes() -> list[Path]:
+    """The growth scenes shipped in ``scenes/growth``."""
+    return sorted(Path(p) for p in glob.glob(str(SCENES_DIR / "*.xml")))
+
+
+def demo(ctx) -> dict:
+    """Grow and skin every bundled scene (outputs in ctx.out/<scene>/)."""
+    from simfab.progress import log
+
+    res = {}
+    for path in bundled_scenes():
+        log(f"  grow {path.stem}", quiet=ctx.quiet)
+        s = grow_scene(path, out=os.path.join(ctx.out, path.stem), seed=ctx.seed, quiet=ctx.quiet)
+        res[path.stem] = {k: s[k] for k in ("targets_total", "targets_reached", "nodes", "segments", "watertight",
+                                            "bodies", "volume", "seconds_growth", "seconds_skin", "png", "usd")}
+    return {"scenes": res}

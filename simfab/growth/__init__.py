@@ -1,0 +1,35 @@
+"""Generative support structures: space colonization with target attractors, skinned into
+printable meshes (thesis chapter "Generative Interface Structure Design").
+
+Python API (mirrors ``simfab grow``)::
+
+    from simfab.growth import grow, skin
+    result = grow("scenes/growth/phone_stand.xml", seed=0, attractors=2000)
+    mesh = skin(result)            # trimesh.Trimesh, watertight, objects carved out
+    result.summary()               # targets reached, nodes, segments, timings
+
+Modules: :mod:`~simfab.growth.config` (parameters, TOML), :mod:`~simfab.growth.scene`
+(MJCF scenes), :mod:`~simfab.growth.attractors`, :mod:`~simfab.growth.obstacles`,
+:mod:`~simfab.growth.colonize` (the growth algorithm), :mod:`~simfab.growth.skeleton`
+(pruning, smoothing, radii), :mod:`~simfab.growth.skin`, :mod:`~simfab.growth.sketch`
+(sketch edits), :mod:`~simfab.growth.outputs` (files).
+"""
+
+from simfab.growth.config import GrowthParams, ProfileSpec, SymmetrySpec
+from simfab.growth.pipeline import GrowthResult, grow, skin_result
+from simfab.growth.scene import GrowthScene, load_growth_scene
+from simfab.growth.skeleton import Skeleton, smooth_positions
+from simfab.growth.sketch import Camera, edit_chain
+
+
+def skin(result: GrowthResult, **kw):
+    """Skin of a :class:`GrowthResult` as a watertight ``trimesh.Trimesh`` (objects carved out).
+
+    Keywords: ``segments`` (joint-sphere resolution), ``subtract`` (carve the objects).
+    Use :func:`skin_result` for the checks and timing as well.
+    """
+    return skin_result(result, **kw)[0]
+
+
+__all__ = ["GrowthParams", "ProfileSpec", "SymmetrySpec", "GrowthResult", "grow", "skin", "skin_result",
+           "GrowthScene", "load_growth_scene", "Skeleton", "smooth_positions", "Camera", "edit_chain"]

@@ -1,0 +1,113 @@
+"""Files of a growth run: skin (STL, PLY), skeleton (JSON), growth replay (USD), MJCF, PNG.
+
+Every file is written atomically (temporary name + rename). The USD stage replays the
+growth: time code t (0..S) shows the segments grown up to step t with their final radii
+as widths, S+1 the pruned skeleton, S+2 the smoothed one, S+3 the skin (and the objects
+throughout as static meshes).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from simfab.growth.skeleton import radius_by_age, to_json_dict
+
+OBJECT_RGBA = (0.62, 0.64, 0.68, 1.0)
+SKIN_RGBA = (0.86, 0.52, 0.25, 1.0)
+
+
+def _ident(name: str) -> str:
+    s = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return s if re.match(r"^[A-Za-z_]", s) else "_" + s
+
+
+def write_skeleton(result, path: Path, skeleton=None, **extra) -> Path:
+    from simfab.io.atomic import write_json
+
+    sk = skeleton if skeleton is not None else result.skeleton
+    scene = result.scene
+    return write_json(path, to_json_dict(sk, scene=str(scene.path.resolve()) if scene.path else None,
+                                         seed=result.seed, **extra))
+
+
+def write_usd(result, mesh, path: Path) -> Path:
+    """Growth replay stage (see module docstring)."""
+    from simfab.io.usd import StageWriter
+
+    w = StageWriter(path)
+    for name, m in result.scene.objects.items():
+        w.add_mesh(f"objects/{_ident(name)}", np.asarray(m.faces), np.asarray(m.vertices), color=OBJECT_RGBA[:3])
+    if len(result.scene.sphere_radii):
+        w.add_points("obstacles", color=(0.9, 0.6, 0.1))
+        w.set_points("obstacles", result.scene.sphere_centers, 0.0, widths=2 * result.scene.sphere_radii)
+    w.add_points("growth/attractors", color=(0.3, 0.6, 0.3))
+    w.set_points("growth/attractors", result.attractors, 0.0,
+                 widths=np.full(len(result.attractors), 0.15 * result.resolved.kill))
+    w.add_curves("growth/skeleton", color=SKIN_RGBA[:3])
+    h = result.history
+    res = result.resolved
+    r = radius_by_age(h.birth, res.r_min, res.r_max, res.radius_decay)
+    child = np.nonzero(h.parent >= 0)[0]
+    born = h.birth[child]
+    S = int(h.birth.max(initial=0))
+    for t in range(S + 1):
+        c = child[born <= t]
+        _set_segments(w, h.nodes, h.parent, r, c, t)
+    for k, sk in enumerate((result.pruned, result.skeleton)):
+        c = np.nonzero(sk.parent >= 0)[0]
+        _set_segments(w, sk.nodes, sk.parent, sk.radius, c, S + 1 + k)
+    w.add_mesh("growth/skin", np.asarray(mesh.faces), np.asarray(mesh.vertices), color=SKIN_RGBA[:3])
+    w.set_visible("growth/skin", False, 0.0)
+    w.set_visible("growth/skin", True, S + 3)
+    w.set_visible("growth/skeleton", True, 0.0)
+    w.set_visible("growth/skeleton", False, S + 3)
+    return w.save()
+
+
+def _set_segments(w, nodes, parent, radius, child, t):
+    if child.size == 0:  # USD curves need >= 2 points: show a zero-length stub at the roots
+        roots = np.nonzero(parent < 0)[0][:1]
+        w.set_curves("growth/skeleton", [np.repeat(nodes[roots], 2, axis=0)], [np.repeat(2 * radius[roots], 2)], t)
+        return
+    P = np.stack([nodes[parent[child]], nodes[child]], axis=1)
+    W = np.stack([2 * radius[parent[child]], 2 * radius[child]], axis=1)
+    w.set_curves("growth/skeleton", list(P), list(W), t)
+
+
+def write_mjcf(result, mesh, path: Path) -> Path:
+    """MJCF with the objects and the grown part as static mesh bodies (open it in the viewer)."""
+    from simfab.io.mjcf import MJCFBuilder
+
+    b = MJCFBuilder(f"{result.scene.name}_grown")
+    for name, m in result.scene.objects.items():
+        nm = _ident(name)
+        b.mesh_asset(f"obj_{nm}", m.vertices, m.faces)
+        body = b.body(f"obj_{nm}")
+        b.geom(body, type="mesh", mesh=f"obj_{nm}", rgba=OBJECT_RGBA, contype=0, conaffinity=0)
+    b.mesh_asset("grown", mesh.vertices, mesh.faces)
+    body = b.body("grown")
+    b.geom(body, type="mesh", mesh="grown", rgba=SKIN_RGBA)
+    for name, x in zip(result.scene.target_names, result.scene.targets):
+        b.site(body, name, x, size=0.6 * result.resolved.r_min, rgba=[0.2, 0.3, 0.9, 1])
+    return b.save(path)
+
+
+def write_all(result, mesh, out: Path, *, stem: str = "growth") -> dict:
+    """Write every output of a run under ``out``; returns name -> path."""
+    from simfab.io.mesh import save_mesh
+    from simfab.io.render import render_mjcf
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {
+        "skin_stl": save_mesh(mesh, out / f"{stem}_skin.stl"),
+        "skin_ply": save_mesh(mesh, out / f"{stem}_skin.ply"),
+        "skeleton_json": write_skeleton(result, out / f"{stem}_skeleton.json"),
+        "usd": write_usd(result, mesh, out / f"{stem}.usdc"),
+        "mjcf": write_mjcf(result, mesh, out / f"{stem}_grown.xml"),
+    }
+    paths["png"] = render_mjcf(paths["mjcf"], out / f"{stem}_preview.png")
+    return {k: str(v) for k, v in paths.items()}
