@@ -57,7 +57,7 @@ def triangulate_polygon(outline, *, holes=(), max_area: float | None = None, min
         data["holes"] = np.array([shapely.Polygon(h).representative_point().coords[0] for h in loops[1:]])
     opts = f"pq{min_angle:g}"
     if max_area is not None:
-        opts += f"a{max_area:.17g}"
+        opts += "a" + np.format_float_positional(float(max_area), trim="-")  # Triangle cannot parse 1e-6
     out = triangle.triangulate(data, opts + "Q")
     V = np.asarray(out["vertices"], dtype=np.float64)
     F = np.asarray(out["triangles"], dtype=np.int32)

@@ -137,14 +137,14 @@ def make_model(points, elements, material: Material, *, thickness: float = 1.0, 
     if el.min() < 0 or el.max() >= n:
         bad = int(np.flatnonzero((el < 0).any(1) | (el >= n).any(1))[0])
         raise InputError(f"element {bad} has a vertex index out of range [0, {n})", where=where)
+    repeats = np.any(np.diff(np.sort(el, axis=1), axis=1) == 0, axis=1)
+    if repeats.any():
+        raise InputError(f"element {int(np.flatnonzero(repeats)[0])} repeats a vertex", where=where)
     used = np.zeros(n, bool)
     used[el.ravel()] = True
     if not used.all():
         raise InputError(f"{int((~used).sum())} vertices are not used by any element (first: {int(np.flatnonzero(~used)[0])})",
                          where=where)
-    repeats = np.any(np.diff(np.sort(el, axis=1), axis=1) == 0, axis=1)
-    if repeats.any():
-        raise InputError(f"element {int(np.flatnonzero(repeats)[0])} repeats a vertex", where=where)
     if not (np.isfinite(thickness) and thickness > 0):
         raise InputError(f"thickness must be > 0, got {thickness}", where=where)
 

@@ -22,8 +22,9 @@ Convergence (checked at every iterate, on the free dofs only):
 2. Newton step: ``||dx_f||_inf <= step_tol * x_scale`` with ``x_scale = options.x_scale`` when
    given, otherwise ``max(||x0_f||_inf, 1)`` in the units of ``x`` - the Newton step estimates
    the distance to the minimizer, so once it is at round-off level nothing further is gained;
-3. round-off: the line search cannot decrease ``f`` and the predicted decrease ``-g.dx`` is
-   below ``roundoff * max(|f|, tiny)``.
+3. round-off: the predicted decrease ``-g.dx`` is below ``roundoff * max(|f|, tiny)`` (so ``f``
+   cannot resolve it; trial steps are then accepted when they reduce ``||g_f||_inf``) and no
+   step along the Newton direction reduces the gradient norm either.
 
 Anything else - ``max_iter`` reached, or a line search that fails with a meaningful predicted
 decrease left - raises :class:`simfab.errors.ConvergenceError` naming the iteration count and
@@ -222,18 +223,26 @@ def minimize(
             alpha = float(min(1.0, max_step(x, dx)))
             if not alpha > 0.0:
                 raise ConvergenceError(f"Newton: max_step returned {alpha} at iteration {it}")
+        # Near the minimizer the predicted decrease -g.dx can fall below the resolution of f; then
+        # comparing energies is meaningless (round-off decides), and the trial is accepted when it
+        # reduces the gradient norm instead.
+        flat = -slope <= opts.roundoff * max(abs(f), tiny)
         accepted = False
         for bt in range(opts.max_backtracks + 1):
             xt = x + alpha * dx
             if admissible is None or admissible(xt):
-                ft = fun(xt, False)[0]
-                if np.isfinite(ft) and ft <= f + opts.armijo * alpha * slope:
-                    accepted = True
-                    break
+                ft, gt, _ = fun(xt, False)
+                if np.isfinite(ft):
+                    if flat:
+                        accepted = _inf_norm(np.asarray(gt)[free_idx]) < gnorm
+                    else:
+                        accepted = ft <= f + opts.armijo * alpha * slope
+                    if accepted:
+                        break
             alpha *= opts.backtrack
         if not accepted:
-            if -slope <= opts.roundoff * max(abs(f), tiny):
-                # the decrease still available is below what f can resolve in floating point
+            if flat:
+                # neither f nor ||g|| can be improved along the Newton direction: round-off floor
                 return done("roundoff", it - 1)
             raise ConvergenceError(
                 f"Newton: line search failed at iteration {it} after {opts.max_backtracks} backtracks "

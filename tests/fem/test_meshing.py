@@ -1,0 +1,70 @@
+"""Triangle and fTetWild meshing wrappers."""
+
+import numpy as np
+import pytest
+import shapely
+import trimesh
+
+from simfab.errors import InputError
+from simfab.fem.materials import PLA
+from simfab.fem.meshing import tetrahedralize, triangulate_polygon
+from simfab.fem.model import make_model
+
+
+def _areas(V, F):
+    e1, e2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def test_triangulate_polygon_with_hole_area_and_quality():
+    outline = np.array([[0, 0], [0.04, 0], [0.04, 0.02], [0.0, 0.02]])  # metres, clockwise or not
+    th = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    hole = np.c_[0.012 + 0.005 * np.cos(th), 0.01 + 0.005 * np.sin(th)]
+    V, F = triangulate_polygon(outline[::-1], holes=[hole], max_area=2e-6, min_angle=30)
+    A = _areas(V, F)
+    assert np.all(A > 0)
+    exact = shapely.Polygon(outline, [hole]).area  # polygonal hole: the mesh must fill exactly this
+    assert A.sum() == pytest.approx(exact, rel=1e-12)
+    assert A.max() <= 2e-6 * (1 + 1e-9)
+    # minimum angle constraint honoured
+    ang = []
+    for i in range(3):
+        a, b, c = V[F[:, i]], V[F[:, (i + 1) % 3]], V[F[:, (i + 2) % 3]]
+        u, v = b - a, c - a
+        ang.append(np.degrees(np.arccos(np.einsum("ij,ij->i", u, v) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1))))
+    assert np.min(ang) >= 30 - 1e-6
+    # no vertex inside the hole, and the mesh is a valid FEM model with the hole on its boundary
+    assert not np.any(shapely.contains_xy(shapely.Polygon(hole).buffer(-1e-9), V[:, 0], V[:, 1]))
+    m = make_model(V, F, PLA, thickness=0.003)
+    b = m.boundary_facets
+    perim = np.linalg.norm(V[b[:, 1]] - V[b[:, 0]], axis=1).sum()
+    assert perim == pytest.approx(shapely.Polygon(outline, [hole]).length, rel=1e-12)
+
+
+def test_triangulate_rejects_bad_polygons():
+    with pytest.raises(InputError, match="outline"):
+        triangulate_polygon([[0, 0], [1, 1], [1, 0], [0, 1]])  # bow tie
+    with pytest.raises(InputError, match="outline"):
+        triangulate_polygon([[0, 0], [1, 0]])
+    with pytest.raises(InputError, match="max_area"):
+        triangulate_polygon([[0, 0], [1, 0], [0, 1]], max_area=-1)
+
+
+def test_tetrahedralize_box_volume_and_orientation():
+    box = trimesh.creation.box([0.04, 0.02, 0.01])
+    V, T = tetrahedralize(box.vertices, box.faces, target_tets=800)
+    vol = np.linalg.det(V[T[:, 1:]] - V[T[:, :1]]) / 6
+    assert np.all(vol > 0)
+    # fTetWild keeps the surface within an envelope of 1e-3 of the bounding-box diagonal
+    assert vol.sum() == pytest.approx(box.volume, rel=2e-3)
+    assert 200 < len(T) < 4000  # target_tets is approximate (factor ~2)
+    m = make_model(V, T, PLA)
+    assert m.volume.sum() == pytest.approx(box.volume, rel=2e-3)
+
+
+def test_tetrahedralize_rejects_bad_input():
+    with pytest.raises(InputError, match="faces"):
+        tetrahedralize(np.zeros((4, 3)), np.array([[0, 1, 9]] * 4))
+    with pytest.raises(InputError, match="not both"):
+        box = trimesh.creation.box()
+        tetrahedralize(box.vertices, box.faces, edge_length_fac=0.1, target_tets=10)
