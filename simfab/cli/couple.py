@@ -1,13 +1,115 @@
-"""``simfab couple``: not built yet (placeholder until its issue lands; exits 2)."""
+"""``simfab couple``: quasi-static insertion simulation of a rigid object into a compliant part.
 
-from simfab.cli._pending import not_built
+Usage::
 
-HELP = "couple (not built yet)"
+    simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes] [--no-refine]
+    simfab couple scenes
+
+SCENE is a coupling scene: ``NAME.xml`` (MJCF: the object O as the mocap body ``object`` with
+keyframes for its path, the box site ``fixed``) plus ``NAME.toml`` (the compliant part A, its
+material and the simulation options); a bare NAME refers to a bundled scene in
+``scenes/coupling`` (``simfab couple scenes`` lists them). See :mod:`simfab.coupling.scene`.
+
+Outputs under ``--out``: NAME_profile.csv (per step: distance [m], energy [J], force [N], grip
+[N], max von Mises [Pa], max penetration [m], min det F, Newton iterations), NAME_summary.json
+(category, E_max, E_ss [J], coupling_ratio [%], F_in, F_rm, F_grip [N], max_von_mises [Pa],
+max_penetration [m], min_det_F, steps, newton_iterations, seconds and the output paths),
+NAME_profile.png (energy solid, force dashed, markers at E_max and E_ss), NAME.usda (A's deforming
+mesh with a von_mises primvar, O's animated transform, one time code per step) and NAME.xml (MJCF
+for the viewer: A at the steady state, O with one keyframe per step).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+HELP = "simulate inserting a rigid object into a compliant part (deformation profile, grip, forces)"
+DESCRIPTION = __doc__
 
 
 def add_args(p):
-    p.add_argument("rest", nargs="*", help="arguments of the future pipeline")
+    sub = p.add_subparsers(dest="couple_command", metavar="ACTION", parser_class=type(p))
+    s = sub.add_parser("simulate", help="run an insertion simulation of a coupling scene",
+                       description="Run an insertion simulation of a coupling scene and write its profile.")
+    s.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
+    s.add_argument("--steps", type=int, metavar="N", help="number of insertion steps (overrides the scene)")
+    s.add_argument("--h-in", type=float, metavar="H", help="insertion step along the path [m]")
+    s.add_argument("--L-max", dest="L_max", type=float, metavar="L", help="insertion length [m] (default: whole path)")
+    s.add_argument("--fix-all-axes", action="store_true", default=None, help="fix the fixed region in all axes")
+    s.add_argument("--no-refine", action="store_true", help="no refinement points on boundary edges/faces")
+    sub.add_parser("scenes", help="list the bundled coupling scenes")
+    from simfab.cli import add_common_args
+
+    for sp in (s,):
+        add_common_args(sp)
 
 
-def run(args):
-    raise not_built("couple")
+def run(args) -> dict:
+    from simfab.errors import InputError
+
+    cmd = getattr(args, "couple_command", None)
+    if cmd == "scenes":
+        from simfab.coupling.scene import bundled_dir
+
+        return {"scenes": sorted(p.stem for p in bundled_dir().glob("*.xml"))}
+    if cmd != "simulate":
+        raise InputError("choose an action: 'simfab couple simulate SCENE' or 'simfab couple scenes'")
+    sim = {}
+    if args.steps is not None:
+        if args.steps < 1:
+            raise InputError(f"must be >= 1, got {args.steps}", where="--steps")
+        sim["steps"] = args.steps
+        sim["h_in"] = None
+    if args.h_in is not None:
+        if not args.h_in > 0:
+            raise InputError(f"must be a positive length [m], got {args.h_in}", where="--h-in")
+        sim["h_in"] = args.h_in
+    if args.L_max is not None:
+        if not args.L_max > 0:
+            raise InputError(f"must be a positive length [m], got {args.L_max}", where="--L-max")
+        sim["L_max"] = args.L_max
+    if args.fix_all_axes:
+        sim["fix_all_axes"] = True
+    if args.no_refine:
+        sim["refine"] = False
+    return simulate_scene(args.scene, out=args.out, device=args.device, quiet=args.quiet, simulation=sim)
+
+
+def _quiet_warp() -> None:
+    """Keep Warp's start-up and module-load messages off stdout (``--json`` owns it).
+
+    Workaround: ``simfab._warp`` sets ``wp.config.quiet``, which Warp 1.19 no longer reads; its
+    messages are governed by ``wp.config.log_level``, which must be set before ``wp.init()``.
+    """
+    import warp
+
+    if warp.config.log_level < warp.LOG_WARNING:
+        warp.config.log_level = warp.LOG_WARNING
+
+
+def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simulation: dict | None = None,
+                   stem: str | None = None) -> dict:
+    """Load a coupling scene, run the insertion and write every output; returns the summary."""
+    _quiet_warp()
+    from simfab._warp import device as check_device
+    from simfab.coupling.outputs import write_all
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import simulate
+    from simfab.progress import log
+
+    dev = check_device(device)
+    cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}}, device=dev)
+    log(f"couple: {cm.name}: {cm.fem.n_elements} elements, {len(cm.field.vertices)} object samples, "
+        f"{len(cm.s_steps) - 1} steps", quiet=quiet)
+    res = simulate(cm, quiet=quiet)
+    return write_all(res, Path(out), stem=stem)
+
+
+def demo(ctx) -> dict:
+    """The 2D C-clamp (tight grip) and the 3D clip on a cylinder."""
+    out = Path(ctx.out)
+    a = simulate_scene("cclamp2d", out=out, device=ctx.device, quiet=ctx.quiet)
+    b = simulate_scene("clip3d", out=out, device=ctx.device, quiet=ctx.quiet)
+    keys = ("category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises", "seconds",
+            "usd", "plot_png", "mjcf")
+    return {"cclamp2d": {k: a[k] for k in keys}, "clip3d": {k: b[k] for k in keys}}

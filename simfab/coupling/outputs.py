@@ -1,0 +1,211 @@
+"""Outputs of an insertion simulation: profile CSV + JSON summary, plot, USD stage, MJCF.
+
+All files are written atomically (temp + rename). Units: SI (m, J, N, Pa); the plot's axis shows
+the insertion distance in mm.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from simfab.coupling.profile import ProfileSummary, analyze
+from simfab.coupling.simulate import InsertionResult
+
+#: Units of the summary keys (also written into the JSON summary).
+SUMMARY_UNITS = {
+    "E_max": "J", "E_ss": "J", "coupling_ratio": "%", "F_in": "N", "F_rm": "N", "F_grip": "N",
+    "max_von_mises": "Pa", "max_penetration": "m", "min_det_F": "-", "seconds": "s",
+}
+
+CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "grip_N", "max_von_mises_Pa", "max_penetration_m", "min_det_F",
+              "newton_iterations", "contact_points"]
+
+
+def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
+    """(profile summary, JSON-ready dict of the key figures)."""
+    prof = analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"))
+    d = {
+        "scene": res.model.name,
+        "category": prof.category,
+        "E_max": prof.E_max,
+        "E_ss": prof.E_ss,
+        "coupling_ratio": prof.coupling_ratio,
+        "F_in": prof.F_in,
+        "F_rm": prof.F_rm,
+        "F_grip": prof.F_grip,
+        "s_max": float(res.steps[prof.index_max].s),
+        "s_ss": float(res.steps[prof.index_ss].s),
+        "max_von_mises": float(res.column("max_von_mises").max()),
+        "yield_stress": float(res.model.fem.material.yield_stress) if res.model.fem.material else None,
+        "max_penetration": float(res.column("penetration").max()),
+        "penetration_tolerance": float(res.model.tol),
+        "min_det_F": float(res.column("min_det_F").min()),
+        "steps": len(res.steps) - 1,
+        "newton_iterations": int(res.column("iterations").sum()),
+        "elements": int(res.model.fem.n_elements),
+        "object_samples": int(len(res.model.field.vertices)),
+        "seconds": float(res.seconds),
+        "time_split": {k: float(v) for k, v in res.timings.items()},
+        "units": SUMMARY_UNITS,
+    }
+    return prof, d
+
+
+def write_profile_csv(res: InsertionResult, path) -> Path:
+    from simfab.io.atomic import write_csv
+
+    rows = [[k, r.s, r.energy, r.force, r.grip, r.max_von_mises, r.penetration, r.min_det_F, r.iterations,
+             r.contact_points] for k, r in enumerate(res.steps)]
+    return write_csv(path, CSV_HEADER, rows)
+
+
+def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
+    """Energy (solid, left axis) and insertion force (dashed, right axis) against insertion
+    distance, with markers at E_max and E_ss (the style of the thesis' deformation profiles)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from simfab.io.atomic import save_figure
+
+    s = res.column("s") * 1e3
+    E = res.column("energy")
+    F = res.column("force")
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=120)
+    ax.plot(s, E, "-", color="tab:blue", lw=2, label="elastic energy")
+    ax.plot(s[prof.index_max], E[prof.index_max], "o", color="tab:red", ms=8, label=r"$E_d^{max}$")
+    ax.plot(s[prof.index_ss], E[prof.index_ss], "s", color="tab:green", ms=8, label=r"$E_d^{ss}$")
+    ax.set_xlabel("insertion distance [mm]")
+    ax.set_ylabel("elastic energy [J]", color="tab:blue")
+    ax2 = ax.twinx()
+    ax2.plot(s, F, "--", color="tab:orange", lw=1.5, label="insertion force")
+    ax2.axhline(0.0, color="0.7", lw=0.8)
+    ax2.set_ylabel("force on O along the path [N] (resisting < 0)", color="tab:orange")
+    lines = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
+    labels = ax.get_legend_handles_labels()[1] + ax2.get_legend_handles_labels()[1]
+    ax.legend(lines, labels, loc="upper left", fontsize=8)
+    ax.set_title(f"{res.model.name}: {prof.category} (coupling ratio {prof.coupling_ratio:.1f}%)")
+    fig.tight_layout()
+    try:
+        return save_figure(fig, path)
+    finally:
+        plt.close(fig)
+
+
+def vertex_von_mises(fem, vm: np.ndarray) -> np.ndarray:
+    """Per-vertex von Mises stress: mean over incident elements (n,) [Pa]."""
+    n = fem.n_vertices
+    el = np.asarray(fem.elements)
+    k = el.shape[1]
+    s = np.bincount(el.ravel(), weights=np.repeat(vm, k), minlength=n)
+    c = np.bincount(el.ravel(), minlength=n)
+    return s / np.maximum(c, 1)
+
+
+def _display_faces(fem) -> np.ndarray:
+    return np.asarray(fem.elements if fem.dim == 2 else fem.boundary_facets, dtype=np.int64)
+
+
+def _object_display(cm):
+    """O's display mesh in its body frame: (vertices (k, 3), faces (f, 3))."""
+    if cm.object_faces is not None:
+        return cm.object_vertices, cm.object_faces
+    import triangle
+
+    k = len(cm.object_vertices)
+    seg = np.c_[np.arange(k), (np.arange(k) + 1) % k]
+    t = triangle.triangulate({"vertices": cm.object_vertices, "segments": seg}, "p")  # no Steiner points
+    V, F = np.asarray(t["vertices"]), np.asarray(t["triangles"])
+    return np.c_[V, np.zeros(len(V))], F
+
+
+def write_usd(res: InsertionResult, path) -> Path:
+    """USD stage: A's deforming mesh (``part``) with a per-vertex ``von_mises`` primvar [Pa], O's
+    animated transform (``object``); time code k = insertion step k."""
+    from simfab.io.usd import StageWriter
+
+    cm = res.model
+    fem = cm.fem
+    w = StageWriter(path, time_codes_per_second=12.0)
+    faces = _display_faces(fem)
+    w.add_mesh("part", faces, res.steps[0].x)
+    ov, of = _object_display(cm)
+    w.add_rigid("object", points=ov, faces=of, color=[0.55, 0.6, 0.7])
+    vmax = float(max(r.max_von_mises for r in res.steps)) or 1.0
+    for k, r in enumerate(res.steps):
+        w.set_points("part", r.x, k)
+        w.set_scalar("part", "von_mises", vertex_von_mises(fem, r.von_mises), k, interpolation="vertex",
+                     vmin=0.0, vmax=vmax)
+        w.set_pose("object", r.pos, r.quat, k)
+    return w.save()
+
+
+def extrude_triangles(V2: np.ndarray, F: np.ndarray, edges: np.ndarray, thickness: float):
+    """Extrude a 2D triangle mesh along z to a closed slab: (vertices (2n, 3), faces)."""
+    n = len(V2)
+    h = 0.5 * thickness
+    V = np.vstack([np.c_[V2, np.full(n, -h)], np.c_[V2, np.full(n, h)]])
+    top = F + n
+    bottom = F[:, ::-1]
+    a, b = edges[:, 0], edges[:, 1]
+    sides = np.vstack([np.c_[a, b, b + n], np.c_[a, b + n, a + n]])
+    return V, np.vstack([bottom, top, sides])
+
+
+def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
+    """MJCF for the MuJoCo viewer: A deformed at the steady state (body ``part``), O as a mocap body
+    at that step, and one keyframe per insertion step (O's pose) to scrub the path."""
+    from simfab.io.mjcf import MJCFBuilder
+
+    cm = res.model
+    fem = cm.fem
+    r_ss = res.steps[prof.index_ss]
+    if fem.dim == 2:
+        V, F = extrude_triangles(r_ss.x, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
+    else:
+        V, F = r_ss.x, np.asarray(fem.boundary_facets)
+        used = np.unique(F)
+        remap = np.full(len(V), -1)
+        remap[used] = np.arange(len(used))
+        V, F = V[used], remap[F]
+    ov, of = _object_display(cm)
+    if cm.dim == 2:
+        ov, of = extrude_triangles(ov[:, :2], of, _loop_edges(len(cm.object_vertices), len(ov)), fem.thickness * 1.5)
+    b = MJCFBuilder(f"{cm.name}_insertion")
+    b.mesh_asset("part", V, F)
+    b.mesh_asset("object", ov, of)
+    part = b.body("part")
+    b.geom(part, type="mesh", mesh="part", rgba=[0.85, 0.55, 0.25, 1], contype=0, conaffinity=0)
+    o = b.body("object", pos=r_ss.pos, quat=r_ss.quat, mocap=True)
+    b.geom(o, type="mesh", mesh="object", rgba=[0.5, 0.6, 0.7, 0.8], contype=0, conaffinity=0)
+    for k, r in enumerate(res.steps):
+        b.key(f"step{k}", mpos=r.pos, mquat=r.quat)
+    return b.save(path)
+
+
+def _loop_edges(k: int, n: int) -> np.ndarray:
+    """Boundary edges of a triangulated closed curve whose first k vertices are the curve, CCW."""
+    i = np.arange(k)
+    return np.c_[i, (i + 1) % k]
+
+
+def write_all(res: InsertionResult, out: Path, stem: str | None = None) -> dict:
+    """Write every output into ``out``; return the summary dict with the output paths."""
+    out = Path(out)
+    stem = stem or res.model.name
+    prof, summary = summarize(res)
+    paths = {
+        "profile_csv": write_profile_csv(res, out / f"{stem}_profile.csv"),
+        "plot_png": plot_profile(res, prof, out / f"{stem}_profile.png"),
+        "usd": write_usd(res, out / f"{stem}.usda"),
+        "mjcf": write_mjcf(res, prof, out / f"{stem}.xml"),
+    }
+    paths["profile_json"] = out / f"{stem}_summary.json"
+    summary.update({k: str(v) for k, v in paths.items()})
+    from simfab.io.atomic import write_json
+
+    write_json(paths["profile_json"], summary)
+    return summary

@@ -1,0 +1,73 @@
+"""Deformation-profile analysis: E_max, E_ss, coupling ratio, forces and the coupling category.
+
+Definitions (thesis, "Fundamentals and Overview"):
+
+- E_max: the largest elastic energy along the insertion [J].
+- E_ss: backtracking from the last step, the first local minimum of the energy profile. If that
+  minimum is not after the maximum (no dip after the peak), the profile has no steady state and
+  E_ss = E_max.
+- coupling ratio = E_ss / E_max * 100 [%].
+- Category: **ejects** (no dip), **loose** (a dip down to E_ss ~ 0, here E_ss <= LOOSE_REL E_max),
+  **tight** (a dip to a non-zero E_ss < E_max).
+- Insertion force F along O's motion, resisting = negative. F_in = max(0, -min F) is the largest
+  force needed to push O in; removal reverses the traversal (quasi-static, frictionless), so the
+  force needed to pull O out is F_rm = max(0, max F) (A drawing O in) [N].
+- F_grip: grip force at the steady-state step [N].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from simfab.coupling import config as C
+
+
+@dataclass(frozen=True, kw_only=True)
+class ProfileSummary:
+    """Key figures of a deformation profile (units in the field names' docs above)."""
+
+    category: str
+    E_max: float
+    E_ss: float
+    coupling_ratio: float
+    F_in: float
+    F_rm: float
+    F_grip: float
+    index_max: int
+    index_ss: int
+
+
+def steady_state_index(energy: np.ndarray, tol: float) -> int:
+    """Backtrack from the end while the energy keeps decreasing (by more than ``tol``) going back;
+    the index where it stops is the first local minimum seen from the end."""
+    E = np.asarray(energy, float)
+    k = len(E) - 1
+    while k > 0 and E[k - 1] < E[k] - tol:
+        k -= 1
+    return k
+
+
+def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarray) -> ProfileSummary:
+    """Summarize a profile given per-step insertion distance s [m], energy [J], force [N], grip [N]."""
+    E = np.asarray(energy, float)
+    F = np.asarray(force, float)
+    G = np.asarray(grip, float)
+    if E.size == 0:
+        raise ValueError("empty profile")
+    E_max = float(E.max())
+    i_max = int(np.argmax(E))
+    tol = C.ENERGY_REL_TOL * max(E_max, 0.0)
+    i_ss = steady_state_index(E, tol)
+    if E_max <= 0 or i_ss <= i_max:
+        category, E_ss, i_ss = "ejects", E_max, i_max
+    else:
+        E_ss = float(E[i_ss])
+        category = "loose" if E_ss <= C.LOOSE_REL * E_max else "tight"
+    ratio = 100.0 * E_ss / E_max if E_max > 0 else 100.0
+    return ProfileSummary(
+        category=category, E_max=E_max, E_ss=E_ss, coupling_ratio=ratio,
+        F_in=float(max(0.0, -F.min())), F_rm=float(max(0.0, F.max())), F_grip=float(G[i_ss]),
+        index_max=i_max, index_ss=i_ss,
+    )
