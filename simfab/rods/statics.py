@@ -1,0 +1,305 @@
+"""Static equilibrium of rod networks with rigid bodies (Newton with line search).
+
+Unknowns ``q`` (all in length units so one tolerance fits all):
+
+- free node coordinates [m] (not fixed, not attached to a body);
+- free twist angles times ``model.length_scale`` [m] (not fixed, not clamped to a body);
+- per free rigid body: translation [m] and rotation-vector update times ``length_scale``.
+
+``q`` is an *increment* from a base state: node coordinates and angles add, bodies move as
+``c = c0 + dc``, ``R = exp(w) R0``. Attached nodes follow their bodies
+(``x = c + R p``), clamped edges take the body's material frame, reference directors are
+time-parallel transported from the base (see :func:`simfab.rods.model.synchronize`).
+
+The reduced gradient is exact: ``g_q = J^T g`` with ``J = dx/dq`` using the SO(3) left
+Jacobian for rotations. The reduced Hessian is ``J^T H J`` plus the geometric term of the
+attached nodes, ``1/2 (g r^T + r g^T) - (g.r) I`` per node (``r`` its world offset), exact at
+``w = 0``; the second-order change of clamped angles with the body rotation is neglected
+(it only slows Newton's final iterations at large body rotations).
+
+Equilibrium is found with :func:`simfab.solve.newton.minimize` (regularized Cholesky +
+Armijo backtracking); a solve that does not converge raises ConvergenceError.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from simfab.errors import ConvergenceError
+from simfab.rods import frames as fr
+from simfab.rods.energy import Evaluator
+from simfab.rods.model import RodModel, RodState, synchronize
+from simfab.solve.linear import NotPositiveDefinite, SPDSolver
+from simfab.solve.newton import NewtonOptions, minimize
+
+
+@dataclass(frozen=True, kw_only=True)
+class StaticsOptions:
+    """Tolerances of the static solver (the one place they live for rods).
+
+    grad_tol : equilibrium residual ||g_q||_inf <= grad_tol * model.force_scale [N].
+    step_tol : Newton step below step_tol * (longest rod) [m] also counts as converged.
+    max_iter : Newton iterations per solve.
+    max_step : largest change of any unknown per Newton step, in units of the longest rod
+        (keeps the first iterations of a buckling step from overshooting).
+    """
+
+    grad_tol: float = 1e-9
+    step_tol: float = 1e-13
+    max_iter: int = 200
+    max_step: float = 0.05
+
+
+class ShiftedCholesky(SPDSolver):
+    """SPD solver for possibly indefinite Newton systems: on a failed Cholesky factorization it
+    searches the smallest diagonal shift ``mu`` (factor-2 bracket, geometric steps from
+    ``1e-10 * mean|diag|``) that makes ``H + mu I`` positive definite and solves with it.
+
+    Near a buckling point the Hessian has a negative eigenvalue; a shift just above it gives
+    a long step along the buckling mode (capped by ``max_step``) instead of the crawl that a
+    large shift would cause.
+    """
+
+    def solve(self, A, b):
+        try:
+            return super().solve(A, b)
+        except NotPositiveDefinite:
+            pass
+        A = sp.csr_matrix(A)
+        I = sp.identity(A.shape[0], format="csr")
+        base = float(np.mean(np.abs(A.diagonal()))) or 1.0
+        lo, mu = 0.0, 1e-10 * base
+        x = None
+        while mu <= 1e3 * base:
+            try:
+                x = super().solve(A + mu * I, b)
+                break
+            except NotPositiveDefinite:
+                lo, mu = mu, mu * 16.0
+        if x is None:
+            raise NotPositiveDefinite("Hessian not positive definite even with a shift of 1e3 x mean|diag|")
+        for _ in range(3):  # tighten the bracket [lo, mu] to a factor 2
+            mid = np.sqrt(max(lo, 1e-300) * mu) if lo > 0 else 0.5 * mu
+            if mu / max(lo, 1e-300) <= 2.0:
+                break
+            try:
+                x = super().solve(A + mid * I, b)
+                mu = mid
+            except NotPositiveDefinite:
+                lo = mid
+        return x
+
+
+class Reduction:
+    """Map between reduced unknowns ``q`` and full DOFs ``[x (3N), theta (E)]`` (see module doc)."""
+
+    def __init__(self, model: RodModel):
+        self.model = model
+        N, E = model.n_nodes, model.n_edges
+        self.n_full = 3 * N + E
+        free_x = (model.node_body[:, None] < 0) & ~model.node_fixed
+        self.x_dofs = np.flatnonzero(free_x.ravel())
+        self.th_edges = np.flatnonzero((model.edge_body < 0) & ~model.theta_fixed)
+        self.bodies = np.flatnonzero(~model.body_driven)
+        self.ell = model.length_scale
+        nx, nt = len(self.x_dofs), len(self.th_edges)
+        self.body_col = {int(b): nx + nt + 6 * k for k, b in enumerate(self.bodies)}
+        self.nq = nx + nt + 6 * len(self.bodies)
+        # constant part of J (free coordinates and angles)
+        rows = np.concatenate([self.x_dofs, 3 * N + self.th_edges])
+        cols = np.arange(nx + nt)
+        vals = np.concatenate([np.ones(nx), np.full(nt, 1.0 / self.ell)])
+        self._J0 = (rows, cols, vals)
+        self.att_nodes = [np.flatnonzero(model.node_body == b) for b in range(model.n_bodies)]
+        self.att_edges = [np.flatnonzero(model.edge_body == b) for b in range(model.n_bodies)]
+
+    def split(self, q):
+        nx, nt = len(self.x_dofs), len(self.th_edges)
+        body = q[nx + nt:].reshape(-1, 6)
+        return q[:nx], q[nx:nx + nt] / self.ell, body[:, :3], body[:, 3:] / self.ell
+
+    def apply(self, base: RodState, q: np.ndarray) -> RodState:
+        """State at increment ``q`` from ``base``."""
+        dx, dth, dc, dw = self.split(q)
+        x = base.x.copy().ravel()
+        x[self.x_dofs] += dx
+        theta = base.theta.copy()
+        theta[self.th_edges] += dth
+        pos, rot = base.body_pos.copy(), base.body_rot.copy()
+        if len(self.bodies):
+            pos[self.bodies] += dc
+            rot[self.bodies] = fr.expmap(dw) @ rot[self.bodies]
+        return synchronize(self.model, base, x.reshape(-1, 3), theta, pos, rot)
+
+    def jacobian(self, state: RodState, dw: np.ndarray) -> sp.csr_matrix:
+        """J = d(full DOFs)/dq at ``state`` (``dw`` (Bf,3): current rotation increments)."""
+        rows, cols, vals = [self._J0[0]], [self._J0[1]], [self._J0[2]]
+        N = self.model.n_nodes
+        if len(self.bodies):
+            Jl = fr.left_jacobian(dw)
+            for k, b in enumerate(self.bodies):
+                c0 = self.body_col[int(b)]
+                nodes = self.att_nodes[b]
+                if len(nodes):
+                    r = state.x[nodes] - state.body_pos[b]
+                    # translation: identity blocks
+                    rr = (3 * nodes[:, None] + np.arange(3)).ravel()
+                    rows.append(rr)
+                    cols.append(np.tile(c0 + np.arange(3), len(nodes)))
+                    vals.append(np.ones(len(rr)))
+                    # rotation: dx = -[r]x Jl dw / ell
+                    blk = -fr.skew(r) @ Jl[k] / self.ell  # (k,3,3)
+                    rows.append(np.repeat(rr, 3))
+                    cols.append(np.tile(c0 + 3 + np.arange(3), 3 * len(nodes)))
+                    vals.append(blk.reshape(-1))
+                edges = self.att_edges[b]
+                if len(edges):
+                    blk = state.t[edges] @ Jl[k] / self.ell  # (k,3): dtheta = t . (Jl dw)
+                    rows.append(np.repeat(3 * N + edges, 3))
+                    cols.append(np.tile(c0 + 3 + np.arange(3), len(edges)))
+                    vals.append(blk.reshape(-1))
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(self.n_full, self.nq))
+
+    def geometric(self, state: RodState, g: np.ndarray) -> sp.csr_matrix | None:
+        """Second-order term of the body rotations acting on attached-node forces ``g``."""
+        if not len(self.bodies):
+            return None
+        rows, cols, vals = [], [], []
+        gx = g[: 3 * self.model.n_nodes].reshape(-1, 3)
+        for b in self.bodies:
+            nodes = self.att_nodes[b]
+            if not len(nodes):
+                continue
+            r = state.x[nodes] - state.body_pos[b]
+            gn = gx[nodes]
+            G = 0.5 * (gn.T @ r + r.T @ gn) - np.sum(gn * r) * np.eye(3)
+            c = self.body_col[int(b)] + 3 + np.arange(3)
+            rows.append(np.repeat(c, 3))
+            cols.append(np.tile(c, 3))
+            vals.append(G.ravel() / self.ell**2)
+        if not rows:
+            return None
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(self.nq, self.nq))
+
+
+@dataclass
+class StaticResult:
+    """Converged equilibrium: ``state``, total potential ``energy`` [J], Newton ``iterations``,
+    residual ``grad_norm`` [N] and the elastic energy ``parts`` per term [J]."""
+
+    state: RodState
+    energy: float
+    iterations: int
+    grad_norm: float
+    parts: dict
+
+
+class StaticSolver:
+    """Equilibrium solves of one model (keeps the Warp buffers and the Cholesky analysis).
+
+    Loads: ``node_forces`` (N,3) [N] act on nodes (potential ``-f.x``); ``body_forces``
+    (B,3) [N] act on body origins.
+    """
+
+    def __init__(self, model: RodModel, *, device: str = "cpu", options: StaticsOptions = StaticsOptions()):
+        self.model = model
+        self.options = options
+        self.evaluator = Evaluator(model, device=device)
+        self.red = Reduction(model)
+        self.linear = ShiftedCholesky()
+        self.length = max(float(np.sum(model.rest_len[r.edges])) for r in model.rods)
+
+    # -- objective in reduced unknowns -----------------------------------------------------
+    def _objective(self, base: RodState, q, need_hess, node_forces, body_forces):
+        st = self.red.apply(base, q)
+        E, g, H = self.evaluator(st, True, need_hess)
+        if node_forces is not None:
+            E -= float(np.sum(node_forces * st.x))
+            g[: 3 * self.model.n_nodes] -= node_forces.ravel()
+        gq = None
+        Hq = None
+        _, _, _, dw = self.red.split(q)
+        J = self.red.jacobian(st, dw)
+        gq = J.T @ g
+        if body_forces is not None and len(self.red.bodies):
+            for b in self.red.bodies:
+                c0 = self.red.body_col[int(b)]
+                E -= float(body_forces[b] @ st.body_pos[b])
+                gq[c0:c0 + 3] -= body_forces[b]
+        if need_hess:
+            Hq = (J.T @ H @ J).tocsr()
+            G = self.red.geometric(st, g)
+            if G is not None:
+                Hq = Hq + G
+        return E, gq, Hq, st
+
+    def solve(self, state: RodState, *, node_forces=None, body_forces=None) -> StaticResult:
+        """Equilibrium reached from ``state`` (prescribed values already set, e.g. by :func:`prescribe`)."""
+        opts = self.options
+        nf = None if node_forces is None else np.asarray(node_forces, dtype=np.float64)
+        bf = None if body_forces is None else np.asarray(body_forces, dtype=np.float64)
+        if self.red.nq == 0:
+            E, _, _ = self.evaluator(state, False, False)
+            return StaticResult(state, E, 0, 0.0, dict(self.evaluator.parts))
+
+        def fun(q, need_hess):
+            E, gq, Hq, _ = self._objective(state, q, need_hess, nf, bf)
+            return E, gq, Hq
+
+        cap = opts.max_step * self.length
+
+        def max_step(q, dq):
+            m = float(np.max(np.abs(dq)))
+            return 1.0 if m <= cap else cap / m
+
+        nopts = NewtonOptions(max_iter=opts.max_iter, grad_tol=opts.grad_tol, grad_scale=self.model.force_scale,
+                              step_tol=opts.step_tol, x_scale=self.length)
+        res = minimize(fun, np.zeros(self.red.nq), options=nopts, max_step=max_step, solver=self.linear)
+        new = self.red.apply(state, res.x)
+        E, _, _ = self.evaluator(new, False, False)
+        if not np.all(np.isfinite(new.x)):
+            raise ConvergenceError("rod equilibrium produced non-finite positions")
+        return StaticResult(new, res.energy, res.iterations, res.grad_norm, dict(self.evaluator.parts))
+
+    def reduced_system(self, state: RodState):
+        """(gradient (nq,), Hessian CSR (nq,nq)) of the elastic energy in reduced unknowns at ``state``."""
+        _, gq, Hq, _ = self._objective(state, np.zeros(self.red.nq), True, None, None)
+        return gq, Hq
+
+    def is_stable(self, state: RodState) -> bool:
+        """True when the reduced Hessian at ``state`` is positive definite (Cholesky succeeds)."""
+        _, H = self.reduced_system(state)
+        try:
+            SPDSolver().solve(H, np.ones(H.shape[0]))
+            return True
+        except NotPositiveDefinite:
+            return False
+
+    def reactions(self, state: RodState) -> np.ndarray:
+        """Full elastic gradient (3N+E,) at ``state``: on fixed/attached DOFs the force (N) / moment
+        (N m) the rods exert is ``-g``."""
+        _, g, _ = self.evaluator(state, True, False)
+        return g
+
+
+def prescribe(model: RodModel, state: RodState, *, x=None, theta=None, body_pos=None, body_rot=None) -> RodState:
+    """Set prescribed values (fixed node coordinates, fixed angles, driven body poses) and
+    synchronize frames from ``state``. Arguments are full arrays; only prescribed entries are
+    taken from them (``body_*`` for driven bodies only)."""
+    nx = state.x.copy()
+    if x is not None:
+        nx[model.node_fixed] = np.asarray(x, dtype=np.float64)[model.node_fixed]
+    th = state.theta.copy()
+    if theta is not None:
+        th[model.theta_fixed] = np.asarray(theta, dtype=np.float64)[model.theta_fixed]
+    pos, rot = state.body_pos.copy(), state.body_rot.copy()
+    drv = model.body_driven
+    if body_pos is not None:
+        pos[drv] = np.asarray(body_pos, dtype=np.float64)[drv]
+    if body_rot is not None:
+        rot[drv] = np.asarray(body_rot, dtype=np.float64)[drv]
+    return synchronize(model, state, nx, th, pos, rot)
