@@ -301,8 +301,9 @@ def imls_reference(points, vertices, normals, sigma: float, radius: float | None
     dphi = -2.0 / sigma**2 * phi[..., None] * r
     gD = dphi.sum(1)
     gN = (phi[..., None] * n + nr[..., None] * dphi).sum(1)
-    f = N / D
-    gf = (gN - f[:, None] * gD) / D[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):  # D = 0 only for truncated far points
+        f = N / D
+        gf = (gN - f[:, None] * gD) / D[:, None]
     return -f, -gf
 
 
