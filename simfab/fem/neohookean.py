@@ -67,6 +67,20 @@ def _clamp(lam: wp.float64, project: int):
 
 
 @wp.func
+def _store(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dtype=wp.float64),
+           data: wp.array(dtype=wp.float64), e: int, r: int, c: int, val: wp.float64):
+    """Symmetric entry (r, c) and (c, r) of element e's Hessian block: added straight into the CSR
+    values through the precomputed slots (scatter != 0), or stored in the (m, k, k) block array."""
+    if scatter != 0:
+        wp.atomic_add(data, slots[e, r, c], val)
+        if c != r:
+            wp.atomic_add(data, slots[e, c, r], val)
+    else:
+        hess[e, r, c] = val
+        hess[e, c, r] = val
+
+
+@wp.func
 def _psi(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64, d: wp.float64):
     """Neo-Hookean energy density [Pa] (J > 0)."""
     logJ = wp.log(J)
@@ -152,9 +166,9 @@ def _gradient3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32)
 @wp.kernel
 def _hessian3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat33d),
               volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64), lam_e: wp.array(dtype=wp.float64),
-              project: int,
+              project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
               energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec12d),
-              hess: wp.array3d(dtype=wp.float64)):
+              hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64)):
     e = wp.tid()
     F = _F3(x, elements, Dm_inv, e)
     J = wp.determinant(F)
@@ -163,9 +177,10 @@ def _hessian3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32),
     energy[e] = zero
     grad[e] = _vec12d()
     if J <= zero:
-        for r in range(12):
-            for c in range(12):
-                hess[e, r, c] = zero
+        if scatter == 0:
+            for r in range(12):
+                for c in range(12):
+                    hess[e, r, c] = zero
         return
     V = volume[e]
     mu = mu_e[e]
@@ -232,8 +247,7 @@ def _hessian3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32),
             acc = zero
             for k in range(9):
                 acc += w[k] * B[k, r] * B[k, c]
-            hess[e, r, c] = V * acc
-            hess[e, c, r] = V * acc
+            _store(scatter, slots, hess, data, e, r, c, V * acc)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -293,9 +307,9 @@ def _gradient2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32)
 @wp.kernel
 def _hessian2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat22d),
               volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64), lam_e: wp.array(dtype=wp.float64),
-              project: int,
+              project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
               energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec6d),
-              hess: wp.array3d(dtype=wp.float64)):
+              hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64)):
     e = wp.tid()
     F = _F2(x, elements, Dm_inv, e)
     J = wp.determinant(F)
@@ -304,9 +318,10 @@ def _hessian2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),
     energy[e] = zero
     grad[e] = _vec6d()
     if J <= zero:
-        for r in range(6):
-            for c in range(6):
-                hess[e, r, c] = zero
+        if scatter == 0:
+            for r in range(6):
+                for c in range(6):
+                    hess[e, r, c] = zero
         return
     V = volume[e]
     mu = mu_e[e]
@@ -345,14 +360,13 @@ def _hessian2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),
             acc = zero
             for k in range(4):
                 acc += w[k] * B[k, r] * B[k, c]
-            hess[e, r, c] = V * acc
-            hess[e, c, r] = V * acc
+            _store(scatter, slots, hess, data, e, r, c, V * acc)
 
 
 # ----------------------------------------------------------------------------------------------
 # host side
 # ----------------------------------------------------------------------------------------------
-_ENERGY, _GRADIENT, _HESSIAN = 0, 1, 2  # what a launch computes
+_ENERGY, _GRADIENT, _HESSIAN, _BLOCKS = 0, 1, 2, 3  # what a launch computes
 _KERNELS = {2: (_energy2, _gradient2, _hessian2), 3: (_energy3, _gradient3, _hessian3)}
 
 
@@ -373,7 +387,10 @@ class _Workspace:
         self.energy = wp.zeros(m, dtype=wp.float64, device=dev)
         self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
         self.grad = wp.zeros(m, dtype=_vec12d if d == 3 else _vec6d, device=dev)
-        self.hess = None  # allocated on first Hessian request: (m, k*d, k*d) float64
+        self.hess = None  # element blocks (m, k*d, k*d) float64, allocated on first element_hessians()
+        self.slots = None  # model.pattern.element_slots as int32, on first Hessian request
+        self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
+        self.dummy_slots = wp.zeros((1, 1, 1), dtype=wp.int32, device=dev)
         # gradient scatter: (n*d, m*k*d) sparse sum over the element copies of each dof
         dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
         self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))),
@@ -399,11 +416,25 @@ def _launch(model: FemModel, x, want: int, project: bool = True) -> _Workspace:
         wp.launch(ws.kernels[1], dim=model.n_elements, inputs=common, outputs=[ws.energy, ws.det_F, ws.grad],
                   device=dev)
     else:
-        if ws.hess is None:
+        # _HESSIAN: scatter straight into CSR values; _BLOCKS: keep the per-element blocks
+        scatter = want == _HESSIAN
+        if scatter and ws.slots is None:
+            if model.pattern.nnz >= 2**31:
+                raise ValueError("Hessian too large for int32 slots")
+            ws.slots = wp.array(model.pattern.element_slots.astype(np.int32), dtype=wp.int32, device=dev)
+        if not scatter and ws.hess is None:
             k = (model.dim + 1) * model.dim
             ws.hess = wp.zeros((model.n_elements, k, k), dtype=wp.float64, device=dev)
-        wp.launch(ws.kernels[2], dim=model.n_elements, inputs=common + [int(bool(project))],
-                  outputs=[ws.energy, ws.det_F, ws.grad, ws.hess], device=dev)
+        # a fresh values array per call (callers keep and modify returned matrices); on the CPU
+        # numpy owns it and the kernel writes through an alias, so no copy is made
+        data_np = np.zeros(model.pattern.nnz if scatter else 1)
+        data = wp.array(data_np, dtype=wp.float64, device=dev, copy=False) if wp.get_device(dev).is_cpu \
+            else wp.array(data_np, dtype=wp.float64, device=dev)
+        wp.launch(ws.kernels[2], dim=model.n_elements,
+                  inputs=common + [int(bool(project)), int(scatter), ws.slots if scatter else ws.dummy_slots],
+                  outputs=[ws.energy, ws.det_F, ws.grad, ws.dummy3 if scatter else ws.hess, data], device=dev)
+        ws.data = data
+        ws.data_np = data_np
     return ws
 
 
@@ -430,7 +461,7 @@ def energy_gradient(model: FemModel, x) -> tuple[float, np.ndarray]:
 
 def element_hessians(model: FemModel, x, *, project_psd: bool = True) -> np.ndarray:
     """Per-element Hessian blocks (m, (dim+1)*dim, (dim+1)*dim) [N/m], dofs ordered (vertex, axis)."""
-    ws = _launch(model, x, _HESSIAN, project_psd)
+    ws = _launch(model, x, _BLOCKS, project_psd)
     return ws.hess.numpy().copy()
 
 
@@ -443,7 +474,8 @@ def energy_gradient_hessian(model: FemModel, x, *, project_psd: bool = True) -> 
     fresh array the caller may modify (e.g. add contact blocks via ``pattern.block_slots``).
     """
     ws = _launch(model, x, _HESSIAN, project_psd)
-    H = model.pattern.assemble(ws.hess.numpy())
+    data = ws.data_np if wp.get_device(model.device).is_cpu else ws.data.numpy()
+    H = model.pattern.matrix(data)
     return _total(ws), _gradient(model, ws), H
 
 
