@@ -108,7 +108,7 @@ def _run_edit(args) -> dict:
     from simfab.growth.obstacles import Obstacles
     from simfab.growth.scene import load_growth_scene
     from simfab.growth.skeleton import load_skeleton_json, to_json_dict
-    from simfab.growth.skin import skin
+    from simfab.growth.skinning import skin
     from simfab.growth.sketch import edit_chain, load_camera, load_stroke
     from simfab.io.atomic import write_json
     from simfab.io.mesh import save_mesh

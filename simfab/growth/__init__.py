@@ -11,7 +11,7 @@ Python API (mirrors ``simfab grow``)::
 Modules: :mod:`~simfab.growth.config` (parameters, TOML), :mod:`~simfab.growth.scene`
 (MJCF scenes), :mod:`~simfab.growth.attractors`, :mod:`~simfab.growth.obstacles`,
 :mod:`~simfab.growth.colonize` (the growth algorithm), :mod:`~simfab.growth.skeleton`
-(pruning, smoothing, radii), :mod:`~simfab.growth.skin`, :mod:`~simfab.growth.sketch`
+(pruning, smoothing, radii), :mod:`~simfab.growth.skinning`, :mod:`~simfab.growth.sketch`
 (sketch edits), :mod:`~simfab.growth.outputs` (files).
 """
 

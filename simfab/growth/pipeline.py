@@ -382,12 +382,12 @@ class _Symmetry:
 
 def skin_result(result: GrowthResult, *, segments: int | None = None, subtract: bool | None = None):
     """Skin the final skeleton of ``result``: returns (trimesh, SkinReport, seconds)."""
-    from simfab.growth.skin import skin
+    from simfab.growth.skinning import skin
 
     p = result.scene.params
     t0 = time.perf_counter()
     sk = result.skeleton
-    mesh, rep = skin(sk.nodes, sk.parent, sk.radius, result.scene.objects,
+    mesh, rep = skin(sk.nodes, sk.parent, sk.radius, result.scene.objects, fixed=sk.fixed_mask(),
                      segments=segments or p.skin_segments,
                      subtract=p.subtract_objects if subtract is None else subtract)
     return mesh, rep, time.perf_counter() - t0

@@ -29,9 +29,11 @@ SYMMETRY_TOL = 1e-6
 #: A point is "on the symmetry plane" when closer than this fraction of D.
 ON_PLANE_TOL = 1e-4
 
-#: Skeleton nodes count as contained in the skin when inside it or at most this fraction
-#: of r_min outside (nodes on a carved contact face sit exactly on the boundary).
+#: Skeleton nodes count as contained in the skin when inside it, or on its boundary: a ball
+#: of CONTAIN_TOL r_min around the node overlaps the skin by at least TOUCH_FRACTION of its
+#: volume (nodes on a carved contact face sit exactly on the boundary: overlap 1/2).
 CONTAIN_TOL = 0.05
+TOUCH_FRACTION = 0.25
 
 #: Volume of skin ∩ objects that still counts as "not intersecting" [fraction of skin volume].
 OVERLAP_TOL = 1e-6
