@@ -17,8 +17,15 @@ attached nodes, ``1/2 (g r^T + r g^T) - (g.r) I`` per node (``r`` its world offs
 ``w = 0``; the second-order change of clamped angles with the body rotation is neglected
 (it only slows Newton's final iterations at large body rotations).
 
-Equilibrium is found with :func:`simfab.solve.newton.minimize` (regularized Cholesky +
-Armijo backtracking); a solve that does not converge raises ConvergenceError.
+Newton iteration (own loop, not :func:`simfab.solve.newton.minimize`, because DER needs it):
+after every accepted step the state becomes the new base, i.e. reference directors are
+time-parallel transported *between Newton iterates* and ``q`` restarts at 0. The analytic
+Hessians are exact for frames transported from the current iterate; transporting from an
+older base instead differs by a holonomy rotation of the frames, which makes the gradient
+inexact away from the base and Newton only linearly convergent in 3D. Each iteration:
+shifted-Cholesky solve (:class:`ShiftedCholesky`), step capped by ``max_step``, Armijo
+backtracking on the total potential; converged when ``||g_q||_inf <= grad_tol * force_scale``
+(or the step / the predicted decrease reach round-off). Otherwise ConvergenceError.
 """
 
 from __future__ import annotations
@@ -33,7 +40,6 @@ from simfab.rods import frames as fr
 from simfab.rods.energy import Evaluator
 from simfab.rods.model import RodModel, RodState, synchronize
 from simfab.solve.linear import NotPositiveDefinite, SPDSolver
-from simfab.solve.newton import NewtonOptions, minimize
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -45,12 +51,18 @@ class StaticsOptions:
     max_iter : Newton iterations per solve.
     max_step : largest change of any unknown per Newton step, in units of the longest rod
         (keeps the first iterations of a buckling step from overshooting).
+    armijo, max_backtracks : sufficient-decrease constant and backtracking limit.
+    roundoff : relative energy change below which f cannot resolve a decrease; such a step
+        is accepted when it reduces the residual.
     """
 
     grad_tol: float = 1e-9
     step_tol: float = 1e-13
     max_iter: int = 200
     max_step: float = 0.05
+    armijo: float = 1e-4
+    max_backtracks: int = 40
+    roundoff: float = 1e-12
 
 
 class ShiftedCholesky(SPDSolver):
@@ -114,7 +126,29 @@ class Reduction:
         vals = np.concatenate([np.ones(nx), np.full(nt, 1.0 / self.ell)])
         self._J0 = (rows, cols, vals)
         self.att_nodes = [np.flatnonzero(model.node_body == b) for b in range(model.n_bodies)]
+        # no free bodies: J is a constant selection and scaling (fast path)
+        self.simple = len(self.bodies) == 0
+        self.full_index = rows
+        self.full_scale = vals
+        self._blk = None
         self.att_edges = [np.flatnonzero(model.edge_body == b) for b in range(model.n_bodies)]
+
+    def block(self, H: sp.csr_matrix) -> sp.csr_matrix:
+        """``D H[idx][:, idx] D`` for the fast path (index map cached per CSR pattern)."""
+        if self._blk is None or self._blk[0] is not H.indices and not np.array_equal(self._blk[0], H.indices):
+            n = H.shape[0]
+            new = np.full(n, -1, dtype=np.int64)
+            new[self.full_index] = np.arange(len(self.full_index))
+            rows = np.repeat(np.arange(n), np.diff(H.indptr))
+            keep = (new[rows] >= 0) & (new[H.indices] >= 0)
+            r, c = new[rows[keep]], new[H.indices[keep]]
+            order = np.lexsort((c, r))
+            sel = np.flatnonzero(keep)[order]
+            scale = self.full_scale[r[order]] * self.full_scale[c[order]]
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(r, minlength=self.nq))]).astype(np.int32)
+            self._blk = (H.indices, sel, scale, c[order].astype(np.int32), indptr)
+        _, sel, scale, idx, indptr = self._blk
+        return sp.csr_matrix((H.data[sel] * scale, idx, indptr), shape=(self.nq, self.nq))
 
     def split(self, q):
         nx, nt = len(self.x_dofs), len(self.th_edges)
@@ -214,28 +248,34 @@ class StaticSolver:
         self.length = max(float(np.sum(model.rest_len[r.edges])) for r in model.rods)
 
     # -- objective in reduced unknowns -----------------------------------------------------
-    def _objective(self, base: RodState, q, need_hess, node_forces, body_forces):
-        st = self.red.apply(base, q)
-        E, g, H = self.evaluator(st, True, need_hess)
+    def _objective(self, st: RodState, need_grad: bool, need_hess: bool, node_forces, body_forces):
+        """Total potential, reduced gradient and Hessian at ``st`` (q = 0 around ``st``)."""
+        E, g, H = self.evaluator(st, need_grad or need_hess, need_hess)
         if node_forces is not None:
             E -= float(np.sum(node_forces * st.x))
-            g[: 3 * self.model.n_nodes] -= node_forces.ravel()
-        gq = None
-        Hq = None
-        _, _, _, dw = self.red.split(q)
-        J = self.red.jacobian(st, dw)
-        gq = J.T @ g
         if body_forces is not None and len(self.red.bodies):
+            E -= float(np.sum(body_forces[self.red.bodies] * st.body_pos[self.red.bodies]))
+        if not (need_grad or need_hess):
+            return E, None, None
+        if node_forces is not None:
+            g[: 3 * self.model.n_nodes] -= node_forces.ravel()
+        if self.red.simple:
+            gq = g[self.red.full_index] * self.red.full_scale
+            Hq = self.red.block(H) if need_hess else None
+            return E, gq, Hq
+        J = self.red.jacobian(st, np.zeros((len(self.red.bodies), 3)))
+        gq = J.T @ g
+        if body_forces is not None:
             for b in self.red.bodies:
                 c0 = self.red.body_col[int(b)]
-                E -= float(body_forces[b] @ st.body_pos[b])
                 gq[c0:c0 + 3] -= body_forces[b]
+        Hq = None
         if need_hess:
             Hq = (J.T @ H @ J).tocsr()
             G = self.red.geometric(st, g)
             if G is not None:
                 Hq = Hq + G
-        return E, gq, Hq, st
+        return E, gq, Hq
 
     def solve(self, state: RodState, *, node_forces=None, body_forces=None) -> StaticResult:
         """Equilibrium reached from ``state`` (prescribed values already set, e.g. by :func:`prescribe`)."""
@@ -245,29 +285,50 @@ class StaticSolver:
         if self.red.nq == 0:
             E, _, _ = self.evaluator(state, False, False)
             return StaticResult(state, E, 0, 0.0, dict(self.evaluator.parts))
-
-        def fun(q, need_hess):
-            E, gq, Hq, _ = self._objective(state, q, need_hess, nf, bf)
-            return E, gq, Hq
-
+        gtol = opts.grad_tol * self.model.force_scale
         cap = opts.max_step * self.length
-
-        def max_step(q, dq):
-            m = float(np.max(np.abs(dq)))
-            return 1.0 if m <= cap else cap / m
-
-        nopts = NewtonOptions(max_iter=opts.max_iter, grad_tol=opts.grad_tol, grad_scale=self.model.force_scale,
-                              step_tol=opts.step_tol, x_scale=self.length)
-        res = minimize(fun, np.zeros(self.red.nq), options=nopts, max_step=max_step, solver=self.linear)
-        new = self.red.apply(state, res.x)
-        E, _, _ = self.evaluator(new, False, False)
-        if not np.all(np.isfinite(new.x)):
-            raise ConvergenceError("rod equilibrium produced non-finite positions")
-        return StaticResult(new, res.energy, res.iterations, res.grad_norm, dict(self.evaluator.parts))
+        st = state
+        E, gq, Hq = self._objective(st, True, True, nf, bf)
+        gnorm = float(np.max(np.abs(gq)))
+        for it in range(opts.max_iter + 1):
+            if gnorm <= gtol:
+                return StaticResult(st, E, it, gnorm, dict(self.evaluator.parts))
+            if it == opts.max_iter:
+                break
+            d = -self.linear.solve(Hq, gq)
+            slope = float(gq @ d)
+            if not slope < 0.0:
+                d, slope = -gq, -float(gq @ gq)
+            dmax = float(np.max(np.abs(d)))
+            alpha = min(1.0, cap / dmax) if dmax > 0 else 1.0
+            accepted = False
+            for _ in range(opts.max_backtracks):
+                trial = self.red.apply(st, alpha * d)
+                Et, _, _ = self._objective(trial, False, False, nf, bf)
+                if np.isfinite(Et) and Et <= E + opts.armijo * alpha * slope:
+                    accepted = True
+                    break
+                if np.isfinite(Et) and abs(Et - E) <= opts.roundoff * max(abs(E), 1e-300):
+                    # f cannot resolve the decrease: accept when the residual drops
+                    Et2, gt, _ = self._objective(trial, True, False, nf, bf)
+                    if float(np.max(np.abs(gt))) < gnorm:
+                        accepted = True
+                        break
+                alpha *= 0.5
+            if not accepted:
+                raise ConvergenceError(f"rod equilibrium: line search failed at Newton iteration {it + 1} "
+                                       f"(||g||_inf = {gnorm:.3e} N, target {gtol:.3e} N)")
+            st = trial
+            E, gq, Hq = self._objective(st, True, True, nf, bf)
+            gnorm = float(np.max(np.abs(gq)))
+            if alpha * dmax <= opts.step_tol * self.length:
+                return StaticResult(st, E, it + 1, gnorm, dict(self.evaluator.parts))
+        raise ConvergenceError(f"rod equilibrium did not converge in {opts.max_iter} Newton iterations "
+                               f"(||g||_inf = {gnorm:.3e} N > target {gtol:.3e} N)")
 
     def reduced_system(self, state: RodState):
         """(gradient (nq,), Hessian CSR (nq,nq)) of the elastic energy in reduced unknowns at ``state``."""
-        _, gq, Hq, _ = self._objective(state, np.zeros(self.red.nq), True, None, None)
+        _, gq, Hq = self._objective(state, True, True, None, None)
         return gq, Hq
 
     def is_stable(self, state: RodState) -> bool:
