@@ -1,0 +1,158 @@
+"""Timing of the FEM core at the model sizes of the coupling benchmarks.
+
+    python -m simfab.fem.benchmark [--sizes 1040,5080,12063] [--repeat 7] [--seed 0]
+
+prints one JSON object: per tet-mesh size, the median wall time [ms] of
+
+- ``energy``, ``energy_gradient``: one kernel launch each (+ gradient scatter);
+- ``energy_gradient_hessian``: energy, gradient and the PSD-projected Hessian assembled into CSR
+  (analytic eigensystem in the kernel, values added straight into the fixed pattern);
+- ``eigh_projection``: the alternative of projecting the (m, 12, 12) element blocks with numpy's
+  batched ``eigh`` (projection alone, without assembly), for comparison;
+- ``factorization``: one sparse Cholesky solve of the free-dof Hessian (CHOLMOD via
+  :class:`SPDSolver`, symbolic analysis reused, as in every Newton iteration after the first);
+- ``newton_static``: a full static solve (clamped beam-like block under an end load) with
+  :func:`simfab.solve.newton.minimize`, and its iteration count.
+
+Also a 2D plane-strain mesh of ~450 triangles. Meshes: fTetWild / Triangle on a box / rectangle
+(same element counts as the reference insertion benchmarks, within the mesher's tolerance).
+A ``tools/benchmarks`` entry can re-export :func:`run`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+DEFAULT_SIZES = (1040, 5080, 12063)  # tet counts of the reference insertion models
+TRIANGLES_2D = 450
+
+
+def _median_ms(fn, repeat: int) -> float:
+    fn()  # warm-up (kernel load, caches)
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times) * 1e3)
+
+
+def _box_model(target_tets: int):
+    import trimesh
+
+    from simfab.fem.materials import PLA
+    from simfab.fem.meshing import tetrahedralize
+    from simfab.fem.model import make_model
+
+    box = trimesh.creation.box([0.06, 0.02, 0.02])
+    # fTetWild's count is approximate: bisect the target so the mesh lands within ~10%
+    lo, hi, best = target_tets * 0.3, target_tets * 3.0, None
+    for _ in range(8):
+        guess = int(np.sqrt(lo * hi))
+        V, T = tetrahedralize(box.vertices, box.faces, target_tets=guess)
+        if best is None or abs(len(T) - target_tets) < abs(len(best[1]) - target_tets):
+            best = (V, T)
+        if abs(len(T) - target_tets) <= 0.1 * target_tets:
+            break
+        lo, hi = (guess, hi) if len(T) < target_tets else (lo, guess)
+    return make_model(best[0], best[1], PLA)
+
+
+def _rect_model(target_tris: int):
+    from simfab.fem.materials import PLA
+    from simfab.fem.meshing import triangulate_polygon
+    from simfab.fem.model import make_model
+
+    L, H = 0.06, 0.02
+    V, F = triangulate_polygon([[0, 0], [L, 0], [L, H], [0, H]], max_area=L * H / target_tris * 1.6)
+    return make_model(V, F, PLA, thickness=0.005)
+
+
+def _static(model, rng):
+    """End-loaded block clamped at x = min: Newton from rest. Returns (seconds, iterations)."""
+    from simfab.fem import neohookean as nh
+    from simfab.solve.newton import minimize
+
+    X = model.rest
+    # slabs rather than planes: fTetWild moves surface vertices within its envelope, so a plane
+    # could hold too few vertices to clamp the rigid modes
+    clamped = X[:, 0] <= X[:, 0].min() + 0.05 * np.ptp(X[:, 0])
+    end = X[:, 0] >= X[:, 0].max() - 0.05 * np.ptp(X[:, 0])
+    f = np.zeros_like(X)
+    # load giving an end deflection of ~1% of the length (moderately nonlinear)
+    E = model.material.youngs_modulus
+    L = np.ptp(X[:, 0])
+    hy = np.ptp(X[:, 1])
+    width = np.ptp(X[:, 2]) if model.dim == 3 else model.thickness
+    I = width * hy**3 / 12
+    f[end, 1] = -0.03 * E * I / L**2 / end.sum()
+    fl = f.ravel()
+
+    def fun(x, need_h):
+        if need_h:
+            e, g, H = nh.energy_gradient_hessian(model, x)
+            return e - fl @ x, g.ravel() - fl, H
+        e, g = nh.energy_gradient(model, x)
+        return e - fl @ x, g.ravel() - fl, None
+
+    t0 = time.perf_counter()
+    res = minimize(fun, X.ravel(), free=np.repeat(~clamped, model.dim))
+    return time.perf_counter() - t0, res.iterations
+
+
+def _measure(model, repeat: int, rng) -> dict:
+    import scipy.sparse as sp
+
+    from simfab.fem import neohookean as nh
+    from simfab.solve.linear import SPDSolver
+
+    x = model.rest + 1e-3 * model.mean_edge_length() * rng.standard_normal(model.rest.shape)
+    out = {
+        "elements": int(model.n_elements),
+        "vertices": int(model.n_vertices),
+        "dofs": int(model.n_dofs),
+        "hessian_nnz": int(model.pattern.nnz),
+        "energy_ms": _median_ms(lambda: nh.energy(model, x), repeat),
+        "energy_gradient_ms": _median_ms(lambda: nh.energy_gradient(model, x), repeat),
+        "energy_gradient_hessian_ms": _median_ms(lambda: nh.energy_gradient_hessian(model, x), repeat),
+    }
+    blocks = nh.element_hessians(model, x, project_psd=False)
+
+    def eigh_projection():
+        w, Q = np.linalg.eigh(blocks)
+        return (Q * np.maximum(w, 0.0)[:, None, :]) @ np.swapaxes(Q, 1, 2)
+
+    out["eigh_projection_ms"] = _median_ms(eigh_projection, max(1, repeat // 2))
+    H = nh.energy_gradient_hessian(model, x)[2]
+    clamped = model.rest[:, 0] <= model.rest[:, 0].min() + 0.05 * np.ptp(model.rest[:, 0])
+    free = np.repeat(~clamped, model.dim)
+    Hf = sp.csr_matrix(H[free][:, free])
+    solver = SPDSolver()
+    rhs = rng.standard_normal(Hf.shape[0])
+    out["factorization_ms"] = _median_ms(lambda: solver.solve(Hf, rhs), max(1, repeat // 2))
+    secs, iters = _static(model, rng)
+    out["newton_static_s"] = secs
+    out["newton_static_iterations"] = int(iters)
+    return out
+
+
+def run(argv=None) -> dict:
+    """Benchmark entry point (``tools/bench.py`` style): returns the JSON-able summary."""
+    p = argparse.ArgumentParser(prog="simfab.fem.benchmark", description=__doc__.split("\n\n")[0])
+    p.add_argument("--sizes", default=",".join(map(str, DEFAULT_SIZES)), help="comma-separated tet counts")
+    p.add_argument("--repeat", type=int, default=7)
+    p.add_argument("--seed", type=int, default=0)
+    a = p.parse_args(argv)
+    rng = np.random.default_rng(a.seed)
+    result = {"benchmark": "fem_core", "machine_note": "median wall times, Warp CPU (single-threaded kernels)"}
+    result["tri_2d"] = _measure(_rect_model(TRIANGLES_2D), a.repeat, rng)
+    result["tet_3d"] = [_measure(_box_model(int(s)), a.repeat, rng) for s in a.sizes.split(",") if s]
+    return result
+
+
+if __name__ == "__main__":
+    print(json.dumps(run(), indent=1))
