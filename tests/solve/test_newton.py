@@ -123,3 +123,41 @@ def test_indefinite_hessian_is_regularized():
 def test_start_point_not_admissible_raises():
     with pytest.raises(ConvergenceError, match="start point"):
         minimize(_quadratic(np.eye(2), np.zeros(2)), np.ones(2), admissible=lambda x: False)
+
+
+def test_unreachable_gradient_tolerance_stops_at_roundoff_not_stagnation():
+    # f = sum 1e8 (x - 1)^2 + 1e10 offset: at the minimizer g is limited by round-off of
+    # 2e8 (x - 1) with x ~ 1 (~1e-8), far above grad_tol * scale for grad_tol = 1e-30. Newton
+    # must stop by the step / round-off criteria (not iterate until max_iter, not raise).
+    n = 50
+    rng = np.random.default_rng(9)
+    c = 1.0 + 1e-3 * rng.standard_normal(n)
+
+    def fun(x, need_h):
+        r = x - c
+        return 1e10 + 1e8 * r @ r, 2e8 * r, (sp.identity(n, format="csr") * 2e8 if need_h else None)
+
+    res = minimize(fun, np.zeros(n), options=NewtonOptions(grad_tol=1e-30))
+    assert res.reason in ("step", "roundoff")
+    assert res.iterations <= 3
+    np.testing.assert_allclose(res.x, c, rtol=0, atol=1e-14)
+
+
+def test_line_search_failure_raises():
+    # a gradient inconsistent with f (wrong sign): every Newton step increases f
+    def fun(x, need_h):
+        return float(x @ x), -2 * x, (sp.identity(2, format="csr") * 2 if need_h else None)
+
+    with pytest.raises(ConvergenceError, match="line search failed"):
+        minimize(fun, np.array([1.0, -2.0]))
+
+
+def test_free_mask_shape_is_checked_and_all_fixed_returns_x0():
+    A = _spd(4, 5)
+    fun = _quadratic(A, np.ones(4))
+    with pytest.raises(ValueError, match="free mask"):
+        minimize(fun, np.zeros(4), free=np.ones(3, bool))
+    x0 = np.arange(4.0)
+    res = minimize(fun, x0, free=np.zeros(4, bool))
+    np.testing.assert_array_equal(res.x, x0)
+    assert res.iterations == 0
