@@ -1,13 +1,74 @@
-"""``simfab deploy``: not built yet (placeholder until its issue lands; exits 2)."""
+"""``simfab deploy``: deploy a flat beam unit cell with rigid inserts (discrete elastic rods + MuJoCo inserts).
 
-from simfab.cli._pending import not_built
+For every insert body of the scene (default ``scenes/deploy/unit_cell.xml``) the cell's spokes
+are drawn onto the insert in quasi-static increments; writes per insert a USD timeline (rods as
+curves, the insert as an animated rigid mesh, one time code per increment), the deployed MJCF
+(opens in ``python -m mujoco.viewer``) and a PNG preview, and reports the sign of the discrete
+Gaussian curvature (dome / saddle) and whether the deployed state is stable.
+"""
 
-HELP = "deploy (not built yet)"
+from __future__ import annotations
+
+import os
+
+HELP = "deploy a flat beam cell with rigid inserts; report dome vs saddle (USD + MJCF + PNG)"
+DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 
 
-def add_args(p):
-    p.add_argument("rest", nargs="*", help="arguments of the future pipeline")
+def add_args(p) -> None:
+    p.add_argument("--scene", default=None, help="unit-cell MJCF scene (default scenes/deploy/unit_cell.xml)")
+    p.add_argument("--insert", nargs="+", metavar="BODY", help="insert bodies to deploy (default: all 'insert*' bodies)")
+    p.add_argument("--increments", type=int, default=None, help="quasi-static increments (default: scene's cell_increments)")
 
 
-def run(args):
-    raise not_built("deploy")
+def run(args) -> dict:
+    import dataclasses
+
+    from simfab.deploy import export, unitcell
+    from simfab.errors import InputError
+    from simfab.io.atomic import write_json
+    from simfab.progress import log
+
+    import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
+    from simfab._warp import device as _device
+
+    dev = _device(args.device)
+    scene = args.scene or unitcell.default_scene_path()
+    cfg, inserts = unitcell.load_cell_scene(scene)
+    if args.increments is not None:
+        if args.increments < 1:
+            raise InputError(f"must be >= 1 (got {args.increments})", where="--increments")
+        cfg = dataclasses.replace(cfg, increments=args.increments)
+    names = args.insert or sorted(inserts)
+    for n in names:
+        if n not in inserts:
+            raise InputError(f"no insert body {n!r} in the scene (have: {', '.join(sorted(inserts))})", where="--insert")
+    out = os.path.abspath(args.out)
+    results = {}
+    for n in names:
+        ins = inserts[n]
+        log(f"deploy: {n} (half-size {ins.r * 1e3:.1f} mm, gap half-size {cfg.gap * 1e3:.1f} mm)", quiet=args.quiet)
+        d = unitcell.deploy(cfg, ins, device=dev, quiet=args.quiet)
+        folder = os.path.join(out, n)
+        usd = export.write_usd(os.path.join(folder, "deploy.usda"), d)
+        xml = export.write_mjcf(os.path.join(folder, "deployed.xml"), d, name=f"deployed_{n}")
+        png = export.write_png(os.path.join(folder, "deployed.png"), xml)
+        results[n] = dict(insert_half_size=ins.r, gap_half_size=cfg.gap,
+                          relation="larger" if ins.r > cfg.gap else "smaller",
+                          **d.curvature, stable=d.stable, increments=len(d.iterations),
+                          newton_iterations=d.iterations, energy=d.energy,
+                          outputs=dict(usd=str(usd), mjcf=str(xml), png=str(png)))
+    summary = dict(scene=str(scene), inserts=results)
+    summary["summary_json"] = str(write_json(os.path.join(out, "deploy.json"), summary))
+    return summary
+
+
+def demo(ctx) -> dict:
+    """The bundled unit cell with its larger and smaller insert (about 10 s)."""
+    import argparse
+
+    args = argparse.Namespace(out=ctx.out, seed=ctx.seed, device=ctx.device, quiet=ctx.quiet, json=False,
+                              scene=None, insert=None, increments=None)
+    res = run(args)
+    return dict(out=ctx.out, **{k: dict(kind=v["kind"], gaussian_curvature=v["gaussian_curvature"], stable=v["stable"],
+                                        usd=v["outputs"]["usd"]) for k, v in res["inserts"].items()})

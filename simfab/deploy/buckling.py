@@ -98,7 +98,7 @@ def load_insert_scene(path) -> InsertScene:
     meshes = sc.body_meshes(include_world=False)
     if "insert" not in meshes:
         raise InputError("the scene needs a body named 'insert' with geometry", where=str(path))
-    import mujoco
+    import mujoco  # after simfab.io (headless GL set-up)
 
     d = mujoco.MjData(sc.model)
     mujoco.mj_forward(sc.model, d)

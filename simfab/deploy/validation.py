@@ -64,6 +64,7 @@ def run(args) -> dict:
     paths = bk.PATHS if args.path == "both" else (args.path,)
     scene = bk.load_insert_scene(args.scene or bk.default_scene_path())
     setup = scene.setup
+    import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
     from simfab._warp import device as _device
 
     dev = _device(args.device)

@@ -326,6 +326,14 @@ class StaticSolver:
         raise ConvergenceError(f"rod equilibrium did not converge in {opts.max_iter} Newton iterations "
                                f"(||g||_inf = {gnorm:.3e} N > target {gtol:.3e} N)")
 
+    def set_attachment_offsets(self, node_offset: np.ndarray) -> None:
+        """Move attachment points within their bodies (N,3) [m] (e.g. beam ends drawn onto an
+        insert's edge in increments). Topology and stiffness are unchanged."""
+        import dataclasses
+
+        self.model = dataclasses.replace(self.model, node_offset=np.asarray(node_offset, dtype=np.float64))
+        self.red.model = self.model
+
     def reduced_system(self, state: RodState):
         """(gradient (nq,), Hessian CSR (nq,nq)) of the elastic energy in reduced unknowns at ``state``."""
         _, gq, Hq = self._objective(state, True, True, None, None)

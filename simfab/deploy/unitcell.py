@@ -1,0 +1,287 @@
+"""Unit-cell deployment: four spokes around a gap, side beams, torsional-spring corners, an insert.
+
+Geometry (flat, z = 0, centred at the origin; ``u_k`` = +x, +y, -x, -y):
+
+- spoke k: straight beam from ``gap * u_k`` (edge of the central gap) to ``size/2 * u_k``;
+- side k: straight beam through ``size/2 * u_k`` along ``v_k = u_{k+1}``, ending ``corner_gap``
+  before the corners, in two halves joined with the spoke at a rigid T-junction body;
+- corner k: a curved torsional spring (cubic Bezier, natural curvature = its flat shape)
+  joining side k to side k+1 through rigid junction bodies at both ends;
+- the insert: a rigid body at the centre; the four spokes' inner ends are clamped to it at
+  distance ``r`` (its half-size from the MuJoCo box geom) from the centre.
+
+Deployment (quasi-static): the spokes' clamp points are drawn from the gap edge (``gap``) to
+the insert's edge (``r``) in ``increments`` steps, each solved to equilibrium from the last
+(the insert is held at the centre; junctions are free rigid bodies).
+
+Buckling perturbation: while drawing in, a small out-of-plane load acts on the T-junctions
+(``perturbation * B1 / spoke_length^2`` each): all downwards for an insert larger than the gap
+(the dome mode), alternating (+z on the x-spokes, -z on the y-spokes) for a smaller one (the
+saddle mode). It is removed for a final solve, so the reported state is an unloaded
+equilibrium; its stability (positive-definite Hessian) is reported.
+
+Shape descriptors: ``insert_rise`` (height of the insert centre above the ring's mean plane, a
+dome) and ``saddle_amplitude`` (amplitude of the ring's cos/sin 2 phi height pattern).
+
+Discrete Gaussian curvature: angle deficit ``2 pi - sum(angles)`` of the triangle fan from the
+insert centre to the eight ring points (T-junctions and corner-spring midpoints), divided by a
+third of the fan area [1/m^2]. Positive: dome (the interior grew relative to the boundary);
+negative: saddle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from simfab.errors import InputError
+
+U = np.array([[1.0, 0, 0], [0, 1.0, 0], [-1.0, 0, 0], [0, -1.0, 0]])
+
+
+@dataclass(frozen=True, kw_only=True)
+class CellConfig:
+    """Unit-cell parameters (``<numeric name="cell_<field>">`` in the scene). Lengths [m], moduli [Pa].
+
+    size: side of the cell; gap: half-size of the central gap; corner_gap: where sides stop
+    before a corner; spring_bulge: Bezier handle length of the corner springs; beam_width (in
+    plane) and beam_thickness (sheet); young, poisson; segments: rod segments per beam piece;
+    increments: quasi-static steps; perturbation: out-of-plane load factor (see module doc).
+    """
+
+    size: float = 0.08
+    gap: float = 0.015
+    corner_gap: float = 0.008
+    spring_bulge: float = 0.012
+    beam_width: float = 0.004
+    beam_thickness: float = 0.001
+    young: float = 2.5e9
+    poisson: float = 0.35
+    segments: int = 10
+    increments: int = 8
+    perturbation: float = 0.05
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not (np.isfinite(v) and v > 0):
+                raise InputError(f"cell parameter {f.name} must be positive (got {v})")
+        if not self.gap < self.size / 2 - 2 * self.beam_width:
+            raise InputError(f"cell_gap {self.gap} leaves no room for the spokes in a cell of size {self.size}")
+        if not self.corner_gap < self.size / 2:
+            raise InputError("cell_corner_gap must be smaller than half the cell size")
+        if int(self.segments) < 2 or int(self.increments) < 1:
+            raise InputError("cell_segments must be >= 2 and cell_increments >= 1")
+
+
+@dataclass(frozen=True)
+class Insert:
+    """A rigid insert from the MJCF scene: name, half-size ``r`` [m] (box geom along x), mesh in its
+    own frame (trimesh), parking pose ``pos`` (3,) and ``quat`` (w, x, y, z), mass [kg]."""
+
+    name: str
+    r: float
+    mesh: object
+    pos: np.ndarray
+    quat: np.ndarray
+    mass: float
+
+
+def load_cell_scene(path) -> tuple[CellConfig, dict]:
+    """Cell parameters and all inserts (bodies whose name starts with ``insert``) of the scene."""
+    from simfab.io.mjcf import geom_mesh, load_scene  # first: sets up headless GL before mujoco loads
+
+    import mujoco
+
+    sc = load_scene(path)
+    kw = {}
+    for f in fields(CellConfig):
+        key = f"cell_{f.name}"
+        if key in sc.custom_numeric:
+            v = float(sc.custom_numeric[key][0])
+            kw[f.name] = int(round(v)) if f.type in (int, "int") else v
+    cfg = CellConfig(**kw)
+    m = sc.model
+    inserts = {}
+    for b in range(1, m.nbody):
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or ""
+        if not name.startswith("insert"):
+            continue
+        geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == b]
+        boxes = [g for g in geoms if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX]
+        if not boxes:
+            raise InputError(f"insert body {name!r} needs a box geom (its x half-size is the attachment radius)",
+                             where=str(path))
+        g = boxes[0]
+        mesh = geom_mesh(m, g)
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, m.geom_quat[g])
+        T = np.eye(4)
+        T[:3, :3] = R.reshape(3, 3)
+        T[:3, 3] = m.geom_pos[g]
+        mesh.apply_transform(T)
+        inserts[name] = Insert(name=name, r=float(m.geom_size[g][0]), mesh=mesh, pos=np.array(m.body_pos[b]),
+                               quat=np.array(m.body_quat[b]), mass=float(m.body_mass[b]))
+    if not inserts:
+        raise InputError("the scene has no insert body (name starting with 'insert')", where=str(path))
+    return cfg, inserts
+
+
+def default_scene_path() -> str:
+    from importlib.resources import files
+
+    import simfab
+
+    return str(files(simfab).joinpath("..", "scenes", "deploy", "unit_cell.xml"))
+
+
+def _bezier(P0, P1, P2, P3, n):
+    t = np.linspace(0.0, 1.0, n + 1)[:, None]
+    return (1 - t) ** 3 * P0 + 3 * (1 - t) ** 2 * t * P1 + 3 * (1 - t) * t**2 * P2 + t**3 * P3
+
+
+@dataclass
+class Cell:
+    model: object
+    state: object
+    spokes: list  # rod names
+    t_bodies: list  # T-junction body indices
+    spring_mid_nodes: list  # middle node of each corner spring
+    insert_body: int
+    spoke_len: float
+
+
+def build_cell(cfg: CellConfig, insert_name: str = "insert") -> Cell:
+    from simfab.rods.model import Material, NetworkBuilder, Section
+
+    a2 = cfg.size / 2
+    c = cfg.corner_gap
+    n = int(cfg.segments)
+    sec = Section(width=cfg.beam_width, thickness=cfg.beam_thickness)
+    mat = Material(young=cfg.young, poisson=cfg.poisson)
+    nb = NetworkBuilder()
+    nb.add_body(insert_name, pos=(0, 0, 0), driven=True)
+    line = lambda p, q: p + np.linspace(0, 1, n + 1)[:, None] * (q - p)  # noqa: E731
+    spokes = []
+    for k in range(4):
+        u, v = U[k], U[(k + 1) % 4]
+        nb.add_body(f"T{k}", pos=a2 * u)
+        nb.add_body(f"J{k}a", pos=a2 * u + (a2 - c) * v)
+        nb.add_body(f"J{k}b", pos=(a2 - c) * u + a2 * v)
+    for k in range(4):
+        u, v = U[k], U[(k + 1) % 4]
+        name = f"spoke{k}"
+        nb.add_rod(name, line(cfg.gap * u, a2 * u), section=sec, material=mat)
+        nb.clamp(name, "start", insert_name)
+        nb.clamp(name, "end", f"T{k}")
+        spokes.append(name)
+        # side k: from junction J{k-1}b (start of this side) through T{k} to J{k}a
+        p_start = a2 * u - (a2 - c) * v
+        nb.add_rod(f"side{k}a", line(p_start, a2 * u), section=sec, material=mat)
+        nb.add_rod(f"side{k}b", line(a2 * u, a2 * u + (a2 - c) * v), section=sec, material=mat)
+        nb.clamp(f"side{k}a", "start", f"J{(k - 1) % 4}b")
+        nb.clamp(f"side{k}a", "end", f"T{k}")
+        nb.clamp(f"side{k}b", "start", f"T{k}")
+        nb.clamp(f"side{k}b", "end", f"J{k}a")
+        P0 = a2 * u + (a2 - c) * v
+        P3 = (a2 - c) * u + a2 * v
+        b = cfg.spring_bulge
+        pts = _bezier(P0, P0 + b * v, P3 + b * u, P3, n)
+        nb.add_rod(f"spring{k}", pts, section=sec, material=mat)
+        nb.clamp(f"spring{k}", "start", f"J{k}a")
+        nb.clamp(f"spring{k}", "end", f"J{k}b")
+    model, state = nb.build()
+    t_bodies = [model.body_index(f"T{k}") for k in range(4)]
+    mids = [int(model.rod(f"spring{k}").nodes[n // 2]) for k in range(4)]
+    return Cell(model, state, spokes, t_bodies, mids, model.body_index(insert_name), a2 - cfg.gap)
+
+
+def gaussian_curvature(cell: Cell, state) -> dict:
+    """Angle-deficit discrete Gaussian curvature at the insert centre (see module doc)."""
+    C = state.body_pos[cell.insert_body]
+    ring = []
+    for k in range(4):
+        ring.append(state.body_pos[cell.t_bodies[k]])
+        ring.append(state.x[cell.spring_mid_nodes[k]])
+    ring = np.array(ring)
+    d = ring - C
+    nxt = np.roll(d, -1, axis=0)
+    cosang = np.einsum("ij,ij->i", d, nxt) / (np.linalg.norm(d, axis=1) * np.linalg.norm(nxt, axis=1))
+    angles = np.arccos(np.clip(cosang, -1.0, 1.0))
+    area = 0.5 * np.sum(np.linalg.norm(np.cross(d, nxt), axis=1))
+    deficit = 2.0 * np.pi - float(np.sum(angles))
+    # out-of-plane shape of the ring about the centre: z - z_C ~ dome + A cos 2phi + B sin 2phi
+    phi = np.arctan2(d[:, 1], d[:, 0])
+    M = np.stack([np.ones_like(phi), np.cos(2 * phi), np.sin(2 * phi)], axis=1)
+    coef = np.linalg.lstsq(M, d[:, 2], rcond=None)[0]
+    return dict(angle_deficit=deficit, gaussian_curvature=float(deficit / (area / 3.0)),
+                kind="dome" if deficit > 0 else "saddle",
+                insert_rise=float(-coef[0]), saddle_amplitude=float(np.hypot(coef[1], coef[2])))
+
+
+@dataclass
+class Deployment:
+    """Result of one deployment: states per increment (index 0 = flat), the insert, curvature
+    measures of the final state, stability, Newton iterations per increment."""
+
+    cell: Cell
+    insert: Insert
+    states: list
+    curvature: dict
+    stable: bool
+    iterations: list
+    energy: float
+
+
+def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> Deployment:
+    """Draw the spokes onto ``insert`` in ``cfg.increments`` steps and return the deployment."""
+    from simfab.errors import ConvergenceError
+    from simfab.progress import progress
+    from simfab.rods.model import synchronize
+    from simfab.rods.statics import StaticSolver
+
+    cell = build_cell(cfg, insert.name)
+    model = cell.model
+    solver = StaticSolver(model, device=device)
+    offset0 = model.node_offset.copy()
+    grow = insert.r - cfg.gap
+    direction = np.zeros_like(offset0)
+    spoke_nodes = []
+    for k, name in enumerate(cell.spokes):
+        rod = model.rod(name)
+        att = rod.nodes[:2]
+        direction[att] = U[k]
+        spoke_nodes.append((rod.nodes, U[k]))
+    B1 = float(np.min(model.bend_stiff[:, 0]))
+    f = cfg.perturbation * B1 / cell.spoke_len**2
+    pattern = -np.ones(4) if grow > 0 else np.array([1.0, -1.0, 1.0, -1.0])
+    body_forces = np.zeros((model.n_bodies, 3))
+    for k, b in enumerate(cell.t_bodies):
+        body_forces[b, 2] = f * pattern[k]
+    state = cell.state
+    states, iters = [state], []
+    ninc = int(cfg.increments)
+    for i in progress(range(1, ninc + 1), total=ninc, desc=f"deploy {insert.name}", quiet=quiet):
+        lam = i / ninc
+        solver.set_attachment_offsets(offset0 + lam * grow * direction)
+        # predictor: slide each spoke's nodes towards the new clamp point (linearly along the spoke)
+        x = state.x.copy()
+        step = grow / ninc
+        for nodes, u in spoke_nodes:
+            w = np.linspace(1.0, 0.0, len(nodes))[:, None]
+            x[nodes] += w * step * u
+        st = synchronize(solver.model, state, x, state.theta, state.body_pos, state.body_rot)
+        try:
+            res = solver.solve(st, body_forces=body_forces)
+            if i == ninc:  # remove the perturbation
+                res2 = solver.solve(res.state)
+                res = type(res)(res2.state, res2.energy, res.iterations + res2.iterations, res2.grad_norm, res2.parts)
+        except ConvergenceError as e:
+            raise ConvergenceError(f"deploying {insert.name}: increment {i}/{ninc}: {e}") from None
+        state = res.state
+        states.append(state)
+        iters.append(res.iterations)
+    curv = gaussian_curvature(cell, state)
+    return Deployment(cell=cell, insert=insert, states=states, curvature=curv, stable=solver.is_stable(state),
+                      iterations=iters, energy=res.energy)
