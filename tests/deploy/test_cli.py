@@ -1,0 +1,55 @@
+"""``simfab validate buckling`` and ``simfab deploy`` through the CLI: outputs, --json, bad input."""
+
+import json
+
+import mujoco
+import pytest
+
+from simfab.cli import main
+
+
+def test_validate_buckling_small_case_writes_outputs(tmp_path, capsys):
+    out = tmp_path / "vb"
+    rc = main(["validate", "buckling", "--n", "20", "40", "--g-over-L", "0.9", "--support", "pinned",
+               "--path", "direct", "--out", str(out), "--json"])
+    assert rc == 0
+    res = json.loads(capsys.readouterr().out)
+    rows = res["rows"]
+    assert len(rows) == 2
+    for key in ("support", "g_over_L", "n", "delta_over_L", "delta_over_L_exact", "rel_err", "force_rel_err", "seconds"):
+        assert key in rows[0]
+    assert res["convergence_order"]["pinned"] == pytest.approx(2.0, abs=0.2)
+    for f in ("buckling.csv", "buckling.json", "buckling_shapes.png"):
+        assert (out / f).stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv", [
+    ["validate", "buckling", "--g-over-L", "1.5"],
+    ["validate", "buckling", "--n", "21"],
+    ["validate", "buckling", "--n", "abc"],
+    ["validate", "buckling", "--support", "hinged"],
+    ["validate", "buckling", "--scene", "/nonexistent.xml"],
+    ["validate"],
+    ["deploy", "--insert", "no_such_insert"],
+    ["deploy", "--increments", "0"],
+    ["deploy", "--scene", "/nonexistent.xml"],
+])
+def test_bad_input_exits_2_without_outputs(argv, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(argv + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("simfab: error:") and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_deploy_cli_small_insert(tmp_path, capsys):
+    out = tmp_path / "dep"
+    assert main(["deploy", "--insert", "insert_small", "--increments", "4", "--out", str(out), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)["inserts"]["insert_small"]
+    assert res["kind"] == "saddle"
+    m = mujoco.MjModel.from_xml_path(res["outputs"]["mjcf"])
+    assert m.nbody >= 2 and m.ngeom > 100
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(res["outputs"]["usd"])
+    assert stage.GetEndTimeCode() == 4
