@@ -132,6 +132,11 @@ def _run_edit(args) -> dict:
         obstacles = Obstacles(list(objects.values()), scene.sphere_centers, scene.sphere_radii, end_trim=1e-3 * diag)
     edited, rep = edit_chain(sk, camera, stroke, chain=args.chain, obstacles=obstacles)
     mesh, srep = skin(edited.nodes, edited.parent, edited.radius, objects)
+    if rep.get("segments_colliding") or srep.bodies != 1:
+        from simfab.progress import log
+
+        log(f"simfab grow edit: warning: the edited chain crosses objects in {rep.get('segments_colliding', 0)} "
+            f"segment(s); the skin has {srep.bodies} bodies", quiet=args.quiet)
     out = Path(args.out)
     stem = Path(args.skeleton).stem.removesuffix("_skeleton") + "_edited"
     paths = {

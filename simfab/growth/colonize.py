@@ -46,6 +46,7 @@ class Tree:
     target : (n,) index of the target the node landed on (-1 otherwise).
     root : (n,) index of the root the node descends from.
     frozen : (n,) True for tips that do not grow (targets reached).
+    contact : (n,) True for surface-mode contacts (leaves snapped onto an object surface).
     """
 
     nodes: np.ndarray
@@ -54,6 +55,11 @@ class Tree:
     target: np.ndarray
     root: np.ndarray
     frozen: np.ndarray
+    contact: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.contact is None:
+            self.contact = np.zeros(len(self.nodes), bool)
 
     @classmethod
     def from_roots(cls, roots: np.ndarray) -> "Tree":
@@ -73,6 +79,7 @@ class Tree:
         self.birth = np.concatenate([self.birth, np.full(len(pos), birth, np.int64)])
         self.target = np.concatenate([self.target, target])
         self.frozen = np.concatenate([self.frozen, frozen])
+        self.contact = np.concatenate([self.contact, np.zeros(len(pos), bool)])
 
     def copy(self) -> "Tree":
         return Tree(**{f.name: getattr(self, f.name).copy() for f in dataclasses.fields(self)})

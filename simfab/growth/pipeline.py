@@ -241,7 +241,8 @@ def _merge_history(history: Tree | None, tree: Tree) -> Tree:
                 birth=np.concatenate([history.birth, tree.birth[new]]),
                 target=np.concatenate([history.target, tree.target[new]]),
                 root=np.concatenate([history.root, tree.root[new]]),
-                frozen=np.concatenate([history.frozen, tree.frozen[new]]))
+                frozen=np.concatenate([history.frozen, tree.frozen[new]]),
+                contact=np.concatenate([history.contact, tree.contact[new]]))
 
 
 def _contacts(tree: Tree, scene, res: Resolved, obstacles) -> np.ndarray:
@@ -263,6 +264,7 @@ def _contacts(tree: Tree, scene, res: Resolved, obstacles) -> np.ndarray:
         return leaves
     free = ~obstacles.segment_hits(tree.nodes[tree.parent[leaves]], c, None, np.ones(len(c), bool))
     tree.nodes[leaves[free]] = c[free]
+    tree.contact[leaves[free]] = True
     return leaves
 
 
@@ -288,7 +290,7 @@ def _prune(tree: Tree, scene, res: Resolved, obstacles, mode: str) -> Tree:
     idx, par = subset(tree.parent, keep)
     # dead ends may grow again in a later stage; targets stay tips
     return Tree(nodes=tree.nodes[idx], parent=par, birth=tree.birth[idx], target=tree.target[idx],
-                root=tree.root[idx], frozen=tree.target[idx] >= 0)
+                root=tree.root[idx], frozen=tree.target[idx] >= 0, contact=tree.contact[idx])
 
 
 def _skeleton(tree: Tree, scene, res: Resolved) -> Skeleton:
@@ -301,6 +303,7 @@ def _skeleton(tree: Tree, scene, res: Resolved) -> Skeleton:
     idx, par = subset(tree.parent, keep)
     return Skeleton(nodes=tree.nodes[idx].copy(), parent=par, birth=tree.birth[idx], target=tree.target[idx],
                     root=tree.root[idx], radius=radius_by_age(tree.birth[idx], res.r_min, res.r_max, res.radius_decay),
+                    contact=tree.contact[idx],
                     target_names=tuple(scene.target_names))
 
 
@@ -368,7 +371,8 @@ class _Symmetry:
                         parent=np.concatenate([sk.parent, np.where(sk.parent >= 0, sk.parent + k, -1)]),
                         birth=np.concatenate([sk.birth, sk.birth]), target=np.concatenate([sk.target, tgt]),
                         root=np.concatenate([sk.root, sk.root + int(sk.root.max(initial=0)) + 1]),
-                        radius=np.concatenate([sk.radius, sk.radius]), target_names=sk.target_names)
+                        radius=np.concatenate([sk.radius, sk.radius]), target_names=sk.target_names,
+                        contact=np.concatenate([sk.contact_mask(), sk.contact_mask()]))
 
     def mirror_tree(self, t: Tree) -> Tree:
         k = len(t)
@@ -377,7 +381,7 @@ class _Symmetry:
                     parent=np.concatenate([t.parent, np.where(t.parent >= 0, t.parent + k, -1)]),
                     birth=np.concatenate([t.birth, t.birth]), target=np.concatenate([t.target, tgt]),
                     root=np.concatenate([t.root, t.root + int(t.root.max(initial=0)) + 1]),
-                    frozen=np.concatenate([t.frozen, t.frozen]))
+                    frozen=np.concatenate([t.frozen, t.frozen]), contact=np.concatenate([t.contact, t.contact]))
 
 
 def skin_result(result: GrowthResult, *, segments: int | None = None, subtract: bool | None = None):

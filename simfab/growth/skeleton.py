@@ -26,6 +26,7 @@ class Skeleton:
     root : (n,) index of the root the node descends from.
     radius : (n,) skin radius [m].
     target_names : names of the targets (index -> name).
+    contact : (n,) bool, surface-mode contacts (leaves on an object surface), or None.
     """
 
     nodes: np.ndarray
@@ -35,6 +36,10 @@ class Skeleton:
     root: np.ndarray
     radius: np.ndarray
     target_names: tuple = ()
+    contact: np.ndarray | None = None
+
+    def contact_mask(self) -> np.ndarray:
+        return np.zeros(len(self.nodes), bool) if self.contact is None else np.asarray(self.contact, bool)
 
     @property
     def edges(self) -> np.ndarray:
@@ -48,8 +53,8 @@ class Skeleton:
         return np.bincount(e.ravel(), minlength=len(self.nodes))
 
     def on_surface_mask(self) -> np.ndarray:
-        """(n,) nodes lying on an object surface by design: roots and targets."""
-        return (self.parent < 0) | (self.target >= 0)
+        """(n,) nodes lying on an object surface by design: roots, targets and contacts."""
+        return (self.parent < 0) | (self.target >= 0) | self.contact_mask()
 
     def segment_hits(self, obstacles) -> np.ndarray:
         """(e,) bool per segment of :attr:`edges`: crosses an object or sphere."""
@@ -141,6 +146,10 @@ def smooth_positions(nodes: np.ndarray, edges: np.ndarray, fixed: np.ndarray, *,
     free = ~np.asarray(fixed, bool)
     for _ in range(int(iterations)):
         d1 = Lap @ V
+        # Dirichlet condition: Δ := 0 on fixed nodes. Otherwise Δ(Δv) next to a fixed node
+        # sees the fixed node's one-sided difference, which amplifies zig-zags (measured:
+        # the roughness of a 7-node arc goes up, not down, with λ2 = 0.1).
+        d1[~free] = 0.0
         d2 = Lap @ d1
         W = V.copy()
         W[free] += lambda1 * d1[free] + lambda2 * d2[free]
@@ -200,6 +209,7 @@ def to_json_dict(sk: Skeleton, **extra) -> dict:
         "birth_step": sk.birth,
         "target": sk.target,
         "root": sk.root,
+        "contact": sk.contact_mask(),
         "target_names": list(sk.target_names),
         "target_nodes": sk.target_nodes(),
     }
@@ -226,7 +236,8 @@ def load_skeleton_json(path) -> tuple[Skeleton, dict]:
                       target=np.asarray(d["target"], np.int64).reshape(n),
                       root=np.asarray(d["root"], np.int64).reshape(n),
                       radius=np.asarray(d["radius"], np.float64).reshape(n),
-                      target_names=tuple(d.get("target_names", ())))
+                      target_names=tuple(d.get("target_names", ())),
+                      contact=np.asarray(d.get("contact", np.zeros(n, bool)), bool).reshape(n))
     except (KeyError, ValueError, TypeError) as e:
         raise InputError(f"malformed skeleton ({type(e).__name__}: {e})", where=str(path)) from None
     if not np.all(np.isfinite(V)) or np.any(par >= np.arange(n)) or np.any(par < -1) or not np.all(sk.radius > 0):

@@ -106,8 +106,9 @@ def edit_chain(sk: Skeleton, camera: Camera, stroke, *, chain: int | None = None
     """Move one chain onto the ray surface of ``stroke`` (m, 2) [px].
 
     ``chain`` indexes :func:`skeleton_chains` (default: the chain closest to the stroke on
-    screen). Returns the edited skeleton and a report (chain index, nodes moved, largest
-    move [m], segments colliding with ``obstacles`` after the edit).
+    screen). With ``obstacles``, nodes whose new segments would cross an object keep their
+    old position. Returns the edited skeleton and a report (chain index, nodes moved, nodes
+    kept because of collisions, largest move [m], segments colliding after the edit).
     """
     stroke = np.asarray(stroke, np.float64)
     if stroke.ndim != 2 or stroke.shape[1] != 2 or len(stroke) < 2 or not np.all(np.isfinite(stroke)):
@@ -126,8 +127,18 @@ def edit_chain(sk: Skeleton, camera: Camera, stroke, *, chain: int | None = None
     closest, dist, _ = surf.nearest.on_surface(sk.nodes[inner])
     V = sk.nodes.copy()
     V[inner] = closest
+    reverted = 0
+    if obstacles is not None:
+        # a node whose new segments would cross an object keeps its old position
+        from simfab.growth.skeleton import _revert_collisions
+
+        W = _revert_collisions(sk.nodes, V, sk.edges, obstacles, sk.on_surface_mask())
+        reverted = int(np.sum(np.any(W[inner] != V[inner], axis=1)))
+        V = W
     out = sk.replace(nodes=V)
-    rep = {"chain": int(chain), "nodes_moved": int(inner.size), "max_move": float(np.max(dist))}
+    moved = np.any(V[inner] != sk.nodes[inner], axis=1)
+    rep = {"chain": int(chain), "nodes_moved": int(moved.sum()), "nodes_kept_for_collisions": reverted,
+           "max_move": float(np.max(np.linalg.norm(V[inner] - sk.nodes[inner], axis=1)))}
     if obstacles is not None:
         rep["segments_colliding"] = int(out.segment_hits(obstacles).sum())
     return out, rep

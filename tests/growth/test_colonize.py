@@ -1,0 +1,118 @@
+"""The space colonization step and its guards, on hand-made configurations."""
+
+import numpy as np
+import pytest
+
+from simfab.growth.colonize import ColonizeSettings, Tree, colonize
+from simfab.growth.obstacles import Obstacles
+from simfab.growth.skeleton import radius_by_age
+
+
+def _settings(**kw):
+    base = dict(influence=1.0, kill=0.05, branch_length=0.1, target_influence=np.inf, max_steps=200,
+                max_nodes=10000, max_trials=32)
+    base.update(kw)
+    return ColonizeSettings(**base)
+
+
+def _free():
+    return Obstacles([], np.zeros((0, 3)), np.zeros(0), end_trim=1e-6)
+
+
+def test_one_step_moves_along_the_mean_unit_vector():
+    # v' = v + L n^, n^ = normalized sum of unit vectors to the attractors
+    tree = Tree.from_roots([[0.0, 0.0, 0.0]])
+    A = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.0]])
+    colonize(tree, A, np.zeros((0, 3)), np.zeros(0, int), _free(), _settings(max_steps=1, influence=3.0),
+             np.random.default_rng(0))
+    n = np.array([1.0, 1.0, 0.0]) / np.sqrt(2)
+    assert len(tree) == 2
+    assert np.allclose(tree.nodes[1], 0.1 * n, atol=1e-15)
+    assert tree.parent[1] == 0 and tree.birth[1] == 1
+
+
+def test_target_is_reached_exactly_and_becomes_a_tip():
+    tree = Tree.from_roots([[0.0, 0.0, 0.0]])
+    t = np.array([[0.53, 0.2, -0.1]])
+    rep = colonize(tree, np.zeros((0, 3)), t, np.array([7]), _free(), _settings(), np.random.default_rng(0))
+    assert rep.targets_reached == [7] and rep.targets_unreached == []
+    hit = np.nonzero(tree.target == 7)[0]
+    assert len(hit) == 1 and np.array_equal(tree.nodes[hit[0]], t[0])  # v' = t exactly
+    assert tree.frozen[hit[0]]
+    # straight line: ceil(|t| / L) steps, each one branch length except the landing one
+    steps = np.linalg.norm(np.diff(tree.nodes[np.argsort(tree.birth)], axis=0), axis=1)
+    assert np.all(steps <= 0.1 + 1e-12)
+    assert rep.steps == int(np.ceil(np.linalg.norm(t) / 0.1))
+
+
+def test_ordinary_attractors_die_within_kill_distance_targets_do_not():
+    tree = Tree.from_roots([[0.0, 0.0, 0.0]])
+    # an ordinary attractor right next to the root dies at once; a target at the same spot
+    # must still be reached by a node landing on it
+    A = np.array([[0.01, 0.0, 0.0]])
+    T = np.array([[0.0, 0.02, 0.0]])
+    rep = colonize(tree, A, T, np.array([0]), _free(), _settings(max_steps=5), np.random.default_rng(0))
+    assert rep.targets_reached == [0]
+    assert np.array_equal(tree.nodes[tree.target == 0][0], T[0])
+    assert len(tree) == 2  # the dead attractor grew nothing
+
+
+def test_step_cap_is_reported_with_unreached_targets():
+    tree = Tree.from_roots([[0.0, 0.0, 0.0]])
+    rep = colonize(tree, np.zeros((0, 3)), np.array([[5.0, 0, 0]]), np.array([3]), _free(),
+                   _settings(max_steps=4), np.random.default_rng(0))
+    assert rep.stop_reason.startswith("step cap")
+    assert rep.targets_unreached == [3]
+
+
+def test_node_cap_stops_runaway_growth():
+    tree = Tree.from_roots([[0.0, 0.0, 0.0]])
+    A = np.random.default_rng(1).uniform(-1, 1, size=(3000, 3))
+    rep = colonize(tree, A, np.zeros((0, 3)), np.zeros(0, int), _free(), _settings(max_nodes=50, kill=0.01),
+                   np.random.default_rng(0))
+    assert rep.stop_reason.startswith("node cap") and len(tree) >= 50
+
+
+def test_oscillation_guard_drops_crowded_children():
+    # two attractors pulling a node back and forth along a line: without the guard it would
+    # add node after node in the same place
+    tree = Tree.from_roots([[0.0, 0.0, 0.0]])
+    A = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1e-9]])
+    colonize(tree, A, np.zeros((0, 3)), np.zeros(0, int), _free(), _settings(max_steps=50, kill=0.01),
+             np.random.default_rng(0))
+    X = tree.nodes
+    d = np.linalg.norm(X[:, None] - X[None], axis=2) + np.eye(len(X))
+    assert d.min() >= 0.3 * 0.1 - 1e-12
+
+
+def test_blocked_branch_turns_around_a_sphere():
+    tree = Tree.from_roots([[0.0, 0.0, 0.0]])
+    obs = Obstacles([], np.array([[0.5, 0.0, 0.0]]), np.array([0.2]), end_trim=1e-6)
+    rep = colonize(tree, np.zeros((0, 3)), np.array([[1.0, 0.0, 0.0]]), np.array([0]), obs, _settings(),
+                   np.random.default_rng(0))
+    assert rep.targets_reached == [0]
+    assert rep.collisions_resolved > 0
+    c = np.nonzero(tree.parent >= 0)[0]
+    hits = obs.segment_hits(tree.nodes[tree.parent[c]], tree.nodes[c])
+    assert not hits.any()
+
+
+def test_mesh_obstacle_blocks_and_ends_inside_are_rejected():
+    import trimesh
+
+    box = trimesh.creation.box(extents=[1.0, 1.0, 1.0])
+    obs = Obstacles([box], np.zeros((0, 3)), np.zeros(0), end_trim=1e-4)
+    p = np.array([[-1.0, 0, 0], [-1.0, 0, 0], [-1.0, 0, 0], [0.0, 0.0, 0.5]])
+    q = np.array([[1.0, 0, 0], [-0.6, 0, 0], [-0.4, 0, 0], [0.0, 0.0, 0.8]])
+    # crosses; stays outside; ends inside; starts on the top face (a root) and leaves it
+    assert obs.segment_hits(p, q, np.array([0, 0, 0, 1], bool)).tolist() == [True, False, True, False]
+    # a root on the face growing into the box is caught by the inside test
+    assert obs.segment_hits([[0.0, 0, 0.5]], [[0.0, 0, 0.3]], [True]).tolist() == [True]
+
+
+def test_radius_by_age():
+    age = np.arange(0, 200)
+    r = radius_by_age(age, 0.001, 0.004, 0.05)
+    assert r[0] == pytest.approx(0.004)
+    assert np.all(np.diff(r) < 0) and r[-1] == pytest.approx(0.001, abs=1e-6)
+    assert r[20] == pytest.approx(0.001 + 0.003 * np.exp(-1.0))
