@@ -77,9 +77,32 @@ def quat_z(a: float):
     return [math.cos(a / 2), 0.0, 0.0, math.sin(a / 2)]
 
 
+def tet_mesh(name: str, surface, target: int, tol: float = 0.1):
+    """Tetrahedralize ``surface`` to about ``target`` tets (fTetWild, target rescaled up to 4 times)
+    and store it as NAME_part.npz; returns the file name."""
+    from simfab.fem.meshing import tetrahedralize
+
+    t = target
+    best = None
+    for _ in range(4):
+        V, T = tetrahedralize(np.asarray(surface.vertices), np.asarray(surface.faces), target_tets=t)
+        if best is None or abs(len(T) - target) < abs(len(best[1]) - target):
+            best = (V, T)
+        if abs(len(T) - target) <= tol * target:
+            break
+        t = max(8, int(round(t * target / len(T))))
+    fname = f"{name}_part.npz"
+    np.savez_compressed(HERE / fname, points=best[0], elements=best[1].astype(np.int32))
+    print(f"{name}: {len(best[1])} tets (target {target})")
+    return fname
+
+
 def scene(name: str, *, doc: str, dim: int, comp: dict, part_mesh, object_geoms, keys, fixed_center, fixed_half,
           obj: dict, sim: dict, material: str = "PLA", extra_assets=()):
     from simfab.io.mjcf import MJCFBuilder
+
+    if dim == 3:
+        comp = dict(comp, mesh_file=tet_mesh(name, part_mesh, comp["target_elements"]))
 
     b = MJCFBuilder(name)
     for aname, V, F in extra_assets:

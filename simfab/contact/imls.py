@@ -39,18 +39,15 @@ def _imls_eval(
     inv_sigma2: wp.float64,  # 1/sigma^2 [1/m^2]
     radius: wp.float64,  # kernel truncation radius [m]
     far_psi: wp.float64,  # psi reported at far points [m] (negative)
-    rot: wp.mat33d,  # body -> world rotation R
-    trans: wp.vec3d,  # body origin in world p [m]
-    points: wp.array(dtype=wp.vec3d),  # (k,) world query points [m]
-    want_hessian: wp.int32,
+    points: wp.array(dtype=wp.vec3d),  # (k,) query points in O's body frame [m]
+    hess_band: wp.float64,  # Hessian only where psi > -hess_band (e.g. the barrier's d_hat) [m]
     psi_out: wp.array(dtype=wp.float64),
     grad_out: wp.array(dtype=wp.vec3d),
     hess_out: wp.array(dtype=wp.mat33d),
     count_out: wp.array(dtype=wp.int32),
 ):
     tid = wp.tid()
-    xw = points[tid]
-    x = wp.transpose(rot) * (xw - trans)  # body frame
+    x = points[tid]
     zero = wp.float64(0.0)
     two = wp.float64(2.0)
     D = zero
@@ -77,26 +74,37 @@ def _imls_eval(
             N += nr * phi
             gD += dphi
             gN += phi * n + nr * dphi
-            if want_hessian != 0:
-                # hess phi = phi (4 r r^T / sigma^4 - 2 I / sigma^2)
-                hphi = phi * (two * two * inv_sigma2 * inv_sigma2 * wp.outer(r, r) - two * inv_sigma2 * eye)
-                HD += hphi
-                HN += wp.outer(n, dphi) + wp.outer(dphi, n) + nr * hphi
     count_out[tid] = count
     if count == 0:
         psi_out[tid] = far_psi
         grad_out[tid] = wp.vec3d(zero, zero, zero)
         hess_out[tid] = wp.mat33d()
         return
-    # f = N / D; psi = -f.  grad f = (gN - f gD)/D;
-    # hess f = (HN - gf gD^T - gD gf^T - f HD)/D   (from N = f D differentiated twice)
+    # f = N / D; psi = -f.  grad f = (gN - f gD)/D
     f = N / D
     gf = (gN - f * gD) / D
     psi_out[tid] = -f
-    grad_out[tid] = -(rot * gf)
-    if want_hessian != 0:
-        Hf = (HN - wp.outer(gf, gD) - wp.outer(gD, gf) - f * HD) / D
-        hess_out[tid] = -(rot * Hf * wp.transpose(rot))
+    grad_out[tid] = -gf
+    if -f <= -hess_band:
+        hess_out[tid] = wp.mat33d()
+        return
+    # second pass for the Hessian, only near O (the barrier needs it where d < d_hat):
+    # hess phi = phi (4 r r^T / sigma^4 - 2 I / sigma^2)
+    # hess f = (HN - gf gD^T - gD gf^T - f HD)/D   (from N = f D differentiated twice)
+    query = wp.hash_grid_query(grid, x, radius)
+    while wp.hash_grid_query_next(query, i):
+        r = x - verts[i]
+        rr = wp.dot(r, r)
+        if rr < r2max:
+            n = normals[i]
+            phi = wp.exp(-rr * inv_sigma2)
+            nr = wp.dot(n, r)
+            dphi = (-two * inv_sigma2 * phi) * r
+            hphi = phi * (two * two * inv_sigma2 * inv_sigma2 * wp.outer(r, r) - two * inv_sigma2 * eye)
+            HD += hphi
+            HN += wp.outer(n, dphi) + wp.outer(dphi, n) + nr * hphi
+    Hf = (HN - wp.outer(gf, gD) - wp.outer(gD, gf) - f * HD) / D
+    hess_out[tid] = -Hf
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -138,10 +146,11 @@ class ImlsField:
     _wverts: object = field(default=None, repr=False)
     _wnormals: object = field(default=None, repr=False)
     _buffers: dict = field(default_factory=dict, repr=False)
+    _bounds: tuple = field(default=None, repr=False)  # body-frame AABB of the samples (lo (3,), hi (3,))
 
-    def evaluate(self, points, pose=None, *, hessian: bool = True) -> ImlsEval:
+    def evaluate(self, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
         """Evaluate psi, its gradient and Hessian at world points (k, dim); see :func:`evaluate`."""
-        return evaluate(self, points, pose, hessian=hessian)
+        return evaluate(self, points, pose, hessian=hessian, hessian_band=hessian_band)
 
 
 def mean_edge_length(vertices: np.ndarray, edges: np.ndarray) -> float:
@@ -205,6 +214,7 @@ def build_imls(
     return ImlsField(
         vertices=v, normals=n, sigma=float(sigma), radius=float(radius), far_distance=float(far), dim=dim,
         device=device, _grid=grid, _wverts=wverts, _wnormals=wp.array(n3, dtype=wp.vec3d, device=device),
+        _bounds=(v3.min(0), v3.max(0)),
     )
 
 
@@ -226,11 +236,15 @@ def pose_matrix(pose, dim: int):
     return R, p
 
 
-def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True) -> ImlsEval:
+def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
     """Evaluate the IMLS field at world points in one Warp launch.
 
     points : (k, dim) world positions [m]
     pose   : O's pose, world x = R x_body + p: None, (R (3,3), p (3,)) or (pos (3,), quat_wxyz (4,))
+    hessian : compute Hessians; ``hessian_band`` [m] limits them to points with psi > -hessian_band
+        (others get zeros), which is all a barrier with activation distance d_hat needs.
+    Points farther than the kernel radius from O's bounding box are culled before the launch
+    (they are far: ``near`` False).
     Returns :class:`ImlsEval` with world-frame gradient and Hessian.
     """
     pts = np.asarray(points, dtype=np.float64)
@@ -239,18 +253,32 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True) -> Imls
     if k == 0:
         return ImlsEval(psi=np.zeros(0), grad=np.zeros((0, dim)), hess=np.zeros((0, dim, dim)), near=np.zeros(0, bool))
     R, p = pose_matrix(pose, dim)
-    buf = _buffers(fld, k)
-    buf["points"].assign(_pad3(pts))
+    body = (_pad3(pts) - p) @ R  # R^T (x - p) row-wise
+    lo, hi = fld._bounds
+    cand = np.flatnonzero(np.all((body >= lo - fld.radius) & (body <= hi + fld.radius), axis=1))
+    psi = np.full(k, -fld.far_distance)
+    grad = np.zeros((k, dim))
+    hess = np.zeros((k, dim, dim))
+    near = np.zeros(k, dtype=bool)
+    m = len(cand)
+    if m == 0:
+        return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
+    band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
+    buf = _buffers(fld, m)
+    buf["points"].assign(np.ascontiguousarray(body[cand]))
     wp.launch(
-        _imls_eval, dim=k, device=fld.device,
+        _imls_eval, dim=m, device=fld.device,
         inputs=[fld._grid.id, fld._wverts, fld._wnormals, 1.0 / fld.sigma**2, fld.radius, -fld.far_distance,
-                wp.mat33d(*R.ravel()), wp.vec3d(*p), buf["points"], 1 if hessian else 0],
+                buf["points"], band],
         outputs=[buf["psi"], buf["grad"], buf["hess"], buf["count"]],
     )
-    psi = buf["psi"].numpy().copy()
-    grad = buf["grad"].numpy()[:, :dim].copy()
-    hess = buf["hess"].numpy()[:, :dim, :dim].copy() if hessian else np.zeros((k, dim, dim))
-    near = buf["count"].numpy() > 0
+    psi[cand] = buf["psi"].numpy()
+    grad[cand] = buf["grad"].numpy()[:, :dim] @ R[:dim, :dim].T
+    if hessian:
+        Hb = buf["hess"].numpy()[:, :dim, :dim]
+        Rd = R[:dim, :dim]
+        hess[cand] = np.einsum("ij,kjl,ml->kim", Rd, Hb, Rd)
+    near[cand] = buf["count"].numpy() > 0
     return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
 
 

@@ -19,17 +19,14 @@ DHAT_REL = 1e-2
 PSI_LIPSCHITZ = 2.0
 #: Fraction of the distance to O a point may travel in one Newton step (conservative advancement).
 STEP_FRACTION = 0.9
-#: Points may always travel this many IMLS sigmas per Newton step (sliding in contact); O is
-#: assumed to have no feature thinner than 2 sigma, so this cannot tunnel through it.
-FREE_TRAVEL_SIGMAS = 0.5
 #: Newton: stop when the step is below this fraction of h_A ...
 NEWTON_STEP_TOL_REL = 1e-7
 #: ... or the free-dof force residual is below this fraction of E * h_A^2 (3D) / E * h_A * t (2D).
-NEWTON_GRAD_TOL_REL = 1e-9
+NEWTON_GRAD_TOL_REL = 1e-7
 NEWTON_MAX_ITER = 100
-#: Predictor: penalty weight (relative to max |diag H|) pinning dragged vertices to their targets.
+#: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4
-#: Predictor: retries adding newly infeasible points to the dragged set before bisecting the step.
+#: Predictor: retries carrying newly infeasible points fully with O before bisecting the step.
 PREDICTOR_RETRIES = 3
 #: Step bisection depth when a step cannot be taken in one go (2^-6 of h_in at most).
 MAX_BISECTIONS = 6

@@ -8,7 +8,7 @@ the FEM sparsity pattern (:meth:`HessianPattern.block_slots`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -21,6 +21,7 @@ class ContactPoints:
     verts: np.ndarray
     weights: np.ndarray
     facet: np.ndarray
+    cache: dict = field(default_factory=dict, repr=False)  # derived data (e.g. Hessian slots) of this set
 
     def __len__(self) -> int:
         return len(self.verts)

@@ -19,6 +19,8 @@ The **TOML** (``NAME.toml``) defines A and the run (all lengths in metres, SI un
     thickness = 0.005                    # 2D only: out-of-plane extent [m]
     ...generator parameters (see simfab.coupling.geometry)...
     # outline = "part.csv" (2D, x,y per line) or mesh = "part.stl" (3D surface), units = "m" | "mm"
+    # mesh_file = "part.npz": a ready simplicial mesh (arrays points, elements) used instead of
+    #   meshing (the bundled 3D scenes ship theirs: fTetWild is not bit-reproducible)
     [object]  body = "object", samples = 50, sigma = (optional) [m], seed = 0
     [fixed]   site = "fixed"
     [simulation]  steps = 35 (or h_in [m]), L_max [m], fix_all_axes, refine, ...  (InsertionOptions)
@@ -178,6 +180,9 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
     from simfab.fem.meshing import tetrahedralize, triangulate_polygon
 
     gen = comp.pop("generator", None)
+    cached = comp.pop("mesh_file", None)
+    if cached is not None:
+        return load_mesh_file(base / str(cached), dim) + ((float(comp.get("thickness", 1.0)) if dim == 2 else 1.0),)
     target = comp.pop("target_elements", None)
     thickness = float(comp.pop("thickness", 1.0)) if dim == 2 else 1.0
     units = comp.pop("units", "m")
@@ -210,6 +215,25 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
         raise InputError(f"3D generator must be one of {GENERATORS_3D}, got {gen!r}", where=where)
     V, T = tetrahedralize(np.asarray(surf.vertices), np.asarray(surf.faces), target_tets=target)
     return V, T, 1.0
+
+
+def load_mesh_file(path: Path, dim: int):
+    """(points (n, dim) [m], elements (m, dim+1)) from an ``.npz`` with arrays ``points`` and ``elements``.
+
+    Bundled 3D scenes ship their tetrahedral mesh this way: fTetWild is not bit-reproducible across
+    runs, so the mesh generated once by ``scenes/coupling/make_scenes.py`` is stored with the scene.
+    """
+    if not path.is_file():
+        raise InputError("mesh file not found", where=str(path))
+    try:
+        with np.load(path) as z:
+            P, T = np.asarray(z["points"], dtype=np.float64), np.asarray(z["elements"], dtype=np.int64)
+    except (OSError, KeyError, ValueError) as e:
+        raise InputError(f"cannot read the mesh (.npz with 'points' and 'elements'): {e}", where=str(path)) from None
+    if P.ndim != 2 or P.shape[1] != dim or T.ndim != 2 or T.shape[1] != dim + 1:
+        raise InputError(f"mesh arrays have shapes {P.shape}, {T.shape}; expected (n, {dim}), (m, {dim + 1})",
+                         where=str(path))
+    return P, T
 
 
 def _call(fn, kw: dict, where: str):

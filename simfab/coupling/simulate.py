@@ -190,17 +190,7 @@ class _StepObjective:
     def __init__(self, cm: CouplingModel, points: ContactPoints, R: np.ndarray, p: np.ndarray, timer: _Timer):
         self.cm, self.points, self.R, self.p, self.timer = cm, points, R, p, timer
         self.n, self.dim = cm.fem.n_vertices, cm.dim
-        nv = points.verts.shape[1]
-        key = ("slots", len(points), id(points))
-        slots = cm._cache.get(key)
-        if slots is None:
-            ia, ib = np.meshgrid(np.arange(nv), np.arange(nv), indexing="ij")
-            rows = points.verts[:, ia.ravel()].ravel()
-            cols = points.verts[:, ib.ravel()].ravel()
-            slots = cm.fem.pattern.block_slots(rows, cols).reshape(len(points), nv, nv, self.dim, self.dim)
-            cm._cache.clear() if len(cm._cache) > 8 else None
-            cm._cache[key] = slots
-        self.slots = slots
+        self.slots = _point_slots(cm, points)
         self.wpair = points.weights[:, :, None] * points.weights[:, None, :]  # (k, nv, nv)
         self.diag = _diag_slots(cm)
         self.last_x = None
@@ -211,7 +201,7 @@ class _StepObjective:
     def distances(self, x: np.ndarray, hessian: bool):
         t0 = time.perf_counter()
         y = self.points.positions(x)
-        ev = self.cm.field.evaluate(y, (self.R, self.p), hessian=hessian)
+        ev = self.cm.field.evaluate(y, (self.R, self.p), hessian=hessian, hessian_band=self.cm.dhat)
         self.timer.add("contact", time.perf_counter() - t0)
         return -ev.psi, ev
 
@@ -244,28 +234,38 @@ class _StepObjective:
             H.data[self.diag] += reg
             self.last_x = xf.copy()
             self.last_d = d
+            self.last_gd = -ev.grad
             self.last_H = H
         self.timer.add("contact", time.perf_counter() - t0)
         return E + B, (g + gc).ravel(), H
 
     def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
-        """Step cap: no constraint point travels more than max(0.9 d_j / L, c sigma).
+        """Step cap keeping every constraint point outside O along the whole step (see below).
 
-        0.9 d_j / L is conservative advancement (psi is L-Lipschitz, so the point cannot reach O).
-        Points in contact must still be able to slide along O: they may travel c sigma (O's
-        sample spacing, c < 1), too little to tunnel through O, which is assumed to have no feature
-        thinner than 2 sigma; the line search rejects any trial point inside O (energy +inf).
+        Per point, with d its distance to O, a = grad d . dy and K a curvature bound of the field
+        (1/sigma), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2; the cap is the largest alpha
+        keeping this above 0.1 d. It lets points in contact slide along O (a ~ 0) and move away
+        freely, while approaching points stop short of O. Conservative advancement,
+        alpha <= 0.9 d / (L |dy|) with L a Lipschitz bound of psi, is always allowed as well.
+        The line search still rejects any trial point inside O (energy +inf).
         """
         if self.last_x is not None and np.array_equal(self.last_x, xf):
-            d = self.last_d
+            d, gd = self.last_d, self.last_gd
         else:
-            d, _ = self.distances(xf.reshape(self.n, self.dim), False)
-        dy = np.linalg.norm(self.points.positions(dx.reshape(self.n, self.dim)), axis=1)
-        m = dy > 0
+            d, ev = self.distances(xf.reshape(self.n, self.dim), False)
+            gd = -ev.grad
+        dy = self.points.positions(dx.reshape(self.n, self.dim))
+        sp = np.linalg.norm(dy, axis=1)
+        m = sp > 0
         if not m.any():
             return 1.0
-        reach = np.maximum(C.STEP_FRACTION * d[m] / C.PSI_LIPSCHITZ, C.FREE_TRAVEL_SIGMAS * self.cm.field.sigma)
-        return float(min(1.0, np.min(reach / dy[m])))
+        d, gd, dy, sp = d[m], gd[m], dy[m], sp[m]
+        a = np.einsum("kd,kd->k", gd, dy)
+        q = 0.5 * sp**2 / self.cm.field.sigma
+        keep = C.STEP_FRACTION * d
+        curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
+        cons = keep / (C.PSI_LIPSCHITZ * sp)
+        return float(min(1.0, np.min(np.maximum(curv, cons))))
 
 
 def _diag_slots(cm: CouplingModel) -> np.ndarray:
@@ -294,8 +294,8 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     Raises ConvergenceError when a step cannot be solved to tolerance, InputError when O starts
     inside A.
     """
+    from simfab.coupling.linsolve import PatternCholesky
     from simfab.progress import progress
-    from simfab.solve.linear import SPDSolver
 
     t_start = time.perf_counter()
     timer = _Timer()
@@ -304,8 +304,7 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     bverts = np.asarray(fem.boundary_vertices, dtype=np.int64)
     points = vertex_points(bverts, dim)
     state = _State(x=np.array(fem.rest, dtype=np.float64), s=0.0, points=points, refined=set())
-    solver = SPDSolver()
-    ctx = dict(timer=timer, solver=solver)
+    ctx = dict(timer=timer, solver=PatternCholesky())
     _check_start(cm, state, ctx)
     steps = []
     for k in progress(range(len(cm.s_steps)), total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
@@ -405,10 +404,17 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
 
 
 def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
-    """Feasible warm start at s_new: carry points O can reach rigidly with O, smooth the rest."""
+    """Feasible warm start at s_new (see the module docstring, step 1).
+
+    Points O can reach during the step (distance below L |O's displacement there| + d_hat) are
+    pushed along O's normal by O's normal displacement (they may slide tangentially, as in
+    frictionless contact); the rest of A follows through one linear solve with the previous
+    tangent stiffness. Points still inside O afterwards are carried fully (rigidly with O) and the
+    solve is repeated; as a last resort every reachable point is carried rigidly.
+    """
     timer = ctx["timer"]
     x = state.x
-    n, dim = cm.fem.n_vertices, cm.dim
+    dim = cm.dim
     Ra, pa = cm.pose(state.s)
     Rb, pb = cm.pose(s_new)
     M = Rb @ Ra.T  # world rigid map of the step: y -> M (y - pa) + pb
@@ -423,29 +429,31 @@ def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
     t0 = time.perf_counter()
     ev_a = cm.field.evaluate(y, (Ra, pa), hessian=False)
     timer.add("contact", time.perf_counter() - t0)
-    disp = np.linalg.norm(carry(y) - y, axis=1)
-    drag_pts = -ev_a.psi < C.PSI_LIPSCHITZ * disp + cm.dhat
-    x_carried = carry(x)
-    dragged = np.zeros(n, dtype=bool)
-    for attempt in range(C.PREDICTOR_RETRIES + 1):
-        dragged[np.unique(pts.verts[drag_pts][pts.weights[drag_pts] > 0])] = True
-        if not dragged.any():
-            x0 = x.copy()
-        else:
-            x0 = _smooth_drag(cm, state, x, x_carried, dragged, ctx)
+    delta = carry(y) - y
+    reach = (-ev_a.psi < C.PSI_LIPSCHITZ * np.linalg.norm(delta, axis=1) + cm.dhat) & ev_a.near
+    if not reach.any():
+        return x.copy()
+    # O's outward normal at each point, carried with O to the new pose
+    g = -ev_a.grad
+    nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+    nrm = nrm @ M[:dim, :dim].T
+    push = np.einsum("kd,kd->k", nrm, delta)
+    normal = reach & (push > 0)
+    full = np.zeros(len(pts), dtype=bool)
+    for _ in range(C.PREDICTOR_RETRIES + 1):
+        x0 = _penalty_solve(cm, state, x, pts, normal & ~full, full, nrm, delta, ctx)
         d_new = _feasible_distances(cm, x0, s_new, pts, ctx)
         if d_new is not None and np.all(d_new > 0):
             return x0
         if d_new is None:
+            full |= reach  # an element inverted: carry everything reachable rigidly
+            continue
+        bad = (d_new <= 0) & ~full
+        if not bad.any():
             break
-        bad = d_new <= 0
-        if np.all(drag_pts[bad]):
-            break
-        drag_pts |= bad
-    # fall back to the plain rigid carry without smoothing
-    x0 = x.copy()
-    x0[dragged] = x_carried[dragged]
-    x0 = np.where(cm.free.reshape(n, dim), x0, x)
+        full |= bad
+    full = reach
+    x0 = _penalty_solve(cm, state, x, pts, np.zeros_like(full), full, nrm, delta, ctx)
     d_new = _feasible_distances(cm, x0, s_new, pts, ctx)
     if d_new is not None and np.all(d_new > 0):
         return x0
@@ -468,10 +476,21 @@ def _feasible_distances(cm, x0, s, pts, ctx):
     return -ev.psi
 
 
-def _smooth_drag(cm, state, x, x_carried, dragged, ctx) -> np.ndarray:
-    """u minimizing 1/2 u^T H u + P/2 sum_dragged |u - u_target|^2 over the free dofs."""
-    import scipy.sparse as sp
+def _point_slots(cm: CouplingModel, pts: ContactPoints) -> np.ndarray:
+    """(k, nv, nv, dim, dim) positions in the Hessian's data of the blocks coupling each point's parents."""
+    slots = pts.cache.get("slots")
+    if slots is None:
+        nv = pts.verts.shape[1]
+        ia, ib = np.meshgrid(np.arange(nv), np.arange(nv), indexing="ij")
+        rows = pts.verts[:, ia.ravel()].ravel()
+        cols = pts.verts[:, ib.ravel()].ravel()
+        slots = pts.cache["slots"] = cm.fem.pattern.block_slots(rows, cols).reshape(len(pts), nv, nv, cm.dim, cm.dim)
+    return slots
 
+
+def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarray:
+    """x + u, u minimizing 1/2 u^T H u + P/2 sum_j c_j(u)^2 over the free dofs, with
+    c_j = n_j . (y_j(u) - delta_j) for ``normal`` points and |y_j(u) - delta_j| for ``full`` ones."""
     from simfab.fem.neohookean import energy_gradient_hessian
 
     n, dim = cm.fem.n_vertices, cm.dim
@@ -482,16 +501,27 @@ def _smooth_drag(cm, state, x, x_carried, dragged, ctx) -> np.ndarray:
         H.data[_diag_slots(cm)] += C.RIGID_MODE_REG * float(np.abs(H.data[_diag_slots(cm)]).mean())
         ctx["timer"].add("assembly", time.perf_counter() - t0)
         state.H = H
-    free = cm.free
-    fidx = np.flatnonzero(free)
-    target = (x_carried - x).ravel()
-    pin = np.repeat(dragged, dim) & free
-    pen = C.PREDICTOR_PENALTY * float(np.abs(H.diagonal()).max())
-    Hf = H[fidx][:, fidx] if len(fidx) < H.shape[0] else H
-    A = Hf + sp.diags(pen * pin[fidx].astype(float), format="csr")
-    rhs = pen * (pin * target)[fidx]
+    pen = C.PREDICTOR_PENALTY * float(np.abs(H.data[_diag_slots(cm)]).max())
+    sel = normal | full
+    N = np.zeros((len(pts), dim, dim))
+    N[normal] = np.einsum("ki,kj->kij", nrm[normal], nrm[normal])
+    N[full] = np.eye(dim)
+    N = N[sel]
+    w = pts.weights[sel]
+    blocks = pen * w[:, :, None, None, None] * w[:, None, :, None, None] * N[:, None, None, :, :]
+    data = H.data.copy()
+    np.add.at(data, _point_slots(cm, pts)[sel].ravel(), blocks.ravel())
+    A = cm.fem.pattern.matrix(data)
+    f_pt = pen * np.einsum("kij,kj->ki", N, delta[sel])  # penalty force per point
+    rhs = ContactPoints(verts=pts.verts[sel], weights=w, facet=pts.facet[sel]).scatter(f_pt, n).ravel()
+    fidx = np.flatnonzero(cm.free)
+    sub = ctx.get("free_block")
+    if sub is None:
+        from simfab.solve.newton import _FreeBlock
+
+        sub = ctx["free_block"] = _FreeBlock(fidx, n * dim)
     t0 = time.perf_counter()
-    uf = ctx["solver"].solve(A.tocsr(), rhs)
+    uf = ctx["solver"].solve(sub(A), rhs[fidx])
     ctx["timer"].add("factorization", time.perf_counter() - t0)
     u = np.zeros(n * dim)
     u[fidx] = uf
