@@ -1,13 +1,270 @@
-"""``simfab crowd``: not built yet (placeholder until its issue lands; exits 2)."""
+"""``simfab crowd``: wisdom of micro-crowds -- aggregate ratings, study crowd size, compute truths.
 
-from simfab.cli._pending import not_built
+    simfab crowd aggregate RATINGS.csv --scale 1 10 [--truth TRUTH.csv]
+    simfab crowd study RATINGS.csv --scale 1 10 --truth TRUTH.csv [--subcrowds 500]
+    simfab crowd truth MESH [--orientations six | NAME=RX:RY:RZ ...] [--units mm]
+    simfab crowd simulate --tasks 6 --scale 1 10 [--practitioners 15] [--public 100]
 
-HELP = "crowd (not built yet)"
+RATINGS.csv is long-form ``worker,task,label`` (integer labels on the scale); TRUTH.csv is
+``task,truth``. RMS errors are on the unit scale [0, 1] (label - lo) / (hi - lo). The
+bundled 3D-printing survey is in ``scenes/crowd`` (see its README).
+"""
+
+from __future__ import annotations
+
+import os
+
+from simfab.errors import InputError
+
+HELP = "wisdom of micro-crowds: aggregate ratings, micro-crowd study, computed truths, synthetic crowds"
+DESCRIPTION = __doc__
+
+
+def _common(p):
+    from simfab.cli import add_common_args
+
+    add_common_args(p)
+
+
+def _sampler_args(p, *, study: bool):
+    from simfab.crowd.config import STUDY_SAMPLER, SamplerConfig
+
+    d = STUDY_SAMPLER if study else SamplerConfig()
+    g = p.add_argument_group("Bayesian sampler")
+    g.add_argument("--chains", type=int, default=d.chains, help=f"chains per crowd (default {d.chains})")
+    g.add_argument("--burn-in", type=int, default=d.burn_in, help=f"adaptive burn-in sweeps per chain (default {d.burn_in})")
+    g.add_argument("--draws", type=int, default=d.draws, help=f"recorded sweeps per chain{'' if study else ' per round; rounds repeat until converged'} (default {d.draws})")
+    if not study:
+        g.add_argument("--max-draws", type=int, default=d.max_draws, help=f"cap on recorded sweeps per chain (default {d.max_draws})")
+
+
+def _sampler_config(args, *, study: bool):
+    import dataclasses
+
+    from simfab.crowd.config import STUDY_SAMPLER, SamplerConfig
+
+    for name in ("chains", "burn_in", "draws") + (() if study else ("max_draws",)):
+        v = getattr(args, name)
+        lo = 2 if name == "chains" else (0 if name == "burn_in" else 4)
+        if v < lo:
+            raise InputError(f"must be >= {lo}, got {v}", where="--" + name.replace("_", "-"))
+    base = STUDY_SAMPLER if study else SamplerConfig()
+    kw = {"chains": args.chains, "burn_in": args.burn_in, "draws": args.draws}
+    kw["max_draws"] = args.draws if study else max(args.max_draws, args.draws)
+    return dataclasses.replace(base, **kw)
+
+
+def _scale_arg(p):
+    p.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), required=True, help="integer rating scale, e.g. 1 10")
 
 
 def add_args(p):
-    p.add_argument("rest", nargs="*", help="arguments of the future pipeline")
+    sub = p.add_subparsers(dest="crowd_command", metavar="ACTION", parser_class=type(p))
+
+    a = sub.add_parser("aggregate", help="aggregate one crowd's ratings (all methods), score against truth")
+    a.add_argument("ratings", help="long-form CSV: worker,task,label")
+    _scale_arg(a)
+    a.add_argument("--truth", help="CSV task,truth (scale units) to score against")
+    _sampler_args(a, study=False)
+    _common(a)
+
+    s = sub.add_parser("study", help="micro-crowd study: percentile rank and population bias against crowd size")
+    s.add_argument("ratings", help="long-form CSV: worker,task,label")
+    _scale_arg(s)
+    s.add_argument("--truth", required=True, help="CSV task,truth")
+    s.add_argument("--subcrowds", type=int, default=500, help="sub-crowds per size (default 500)")
+    s.add_argument("--min-size", type=int, default=5, help="smallest sub-crowd (default 5); sizes run to N-1")
+    _sampler_args(s, study=True)
+    _common(s)
+
+    t = sub.add_parser("truth", help="support volume / overhang area of a mesh in given orientations")
+    t.add_argument("mesh", help="STL/OBJ/PLY/OFF/GLB; printed with +z up, plate under the lowest point")
+    t.add_argument("--orientations", nargs="+", default=["six"], metavar="O", help="'six' (the six axis directions down) or [NAME=]RX:RY:RZ in degrees (extrinsic x, y, z); default six")
+    t.add_argument("--units", default="m", help="units of the mesh file: m, mm or cm (default m)")
+    t.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), default=[1.0, 10.0], help="survey scale for the scores (default 1 10)")
+    t.add_argument("--no-raycast", action="store_true", help="skip the ray-cast cross-check")
+    _common(t)
+
+    m = sub.add_parser("simulate", help="draw a synthetic crowd from the model (practitioners and general public)")
+    _scale_arg(m)
+    g = m.add_mutually_exclusive_group(required=True)
+    g.add_argument("--tasks", type=int, help="number of questions (truth drawn uniformly on the scale)")
+    g.add_argument("--truth", help="CSV task,truth to rate")
+    m.add_argument("--practitioners", type=int, default=15, help="practitioner raters (default 15)")
+    m.add_argument("--public", type=int, default=0, help="general-public raters (default 0)")
+    m.add_argument("--malicious", type=float, default=None, help="fraction of the general public that is malicious (default 0.1)")
+    m.add_argument("--difficulty", type=float, nargs="+", default=[1.0], help="question difficulty beta (one value or one per question; default 1)")
+    _common(m)
 
 
 def run(args):
-    raise not_built("crowd")
+    cmd = getattr(args, "crowd_command", None)
+    if cmd is None:
+        raise InputError("choose an action: aggregate, study, truth or simulate (see 'simfab crowd --help')")
+    return {"aggregate": run_aggregate, "study": run_study, "truth": run_truth, "simulate": run_simulate}[cmd](args)
+
+
+def _scale(args):
+    from simfab.crowd.data import Scale
+
+    return Scale(lo=args.scale[0], hi=args.scale[1])
+
+
+def _warn(msgs, quiet=False):
+    import sys
+
+    for m in msgs:
+        print(f"simfab: warning: {m}", file=sys.stderr)
+
+
+def aggregate_outputs(ratings, truth, result: dict, out: str, *, title: str = "crowd") -> dict:
+    """Write the aggregate table, rater table, summary JSON and (with truth) figures."""
+    from simfab.crowd import metrics
+    from simfab.crowd.plots import plot_expert_network, plot_method_errors
+    from simfab.io.atomic import write_csv, write_json
+
+    os.makedirs(out, exist_ok=True)
+    methods = result["methods"]
+    names = list(methods)
+    bayes = result["bayes"]
+    header = ["task"] + names + ["bayesian_lo", "bayesian_hi"] + (["truth"] if truth is not None else [])
+    rows = []
+    for j, t in enumerate(ratings.tasks):
+        lo, hi = bayes["x_interval"][t]
+        rows.append([t] + [methods[n]["estimates"][t] for n in names] + [lo, hi] + ([float(truth[j])] if truth is not None else []))
+    outputs = {"aggregates_csv": str(write_csv(os.path.join(out, "aggregates.csv"), header, rows))}
+    rrows = []
+    indiv = result.get("individual_errors", {})
+    for w in ratings.workers:
+        a = bayes["alpha"][w]
+        rrows.append([w, a["mean"], a["interval"][0], a["interval"][1], indiv.get(w, "")])
+    outputs["raters_csv"] = str(write_csv(os.path.join(out, "raters.csv"), ["worker", "alpha_mean", "alpha_lo", "alpha_hi", "rms_error"], rrows))
+    if truth is not None:
+        sc = ratings.scale
+        crowd_err = methods["bayesian"]["rms_continuous"]
+        ind = metrics.individual_errors(ratings.labels, truth, sc)
+        outputs["expert_network_png"] = plot_expert_network(crowd_err, ind, ratings.workers, os.path.join(out, "expert_network.png"), title=f"{title}: Bayesian crowd estimate vs individuals")
+        per_q = {n: abs(sc.to_unit([methods[n]["estimates"][t] for t in ratings.tasks]) - sc.to_unit(truth)) for n in names}
+        outputs["errors_png"] = plot_method_errors(per_q, ratings.tasks, os.path.join(out, "errors_per_question.png"), title=f"{title}: crowd error per question")
+    outputs["summary_json"] = os.path.join(out, "summary.json")
+    summary = dict(result, outputs=outputs, tasks=list(ratings.tasks), workers=len(ratings.workers), scale=[ratings.scale.lo, ratings.scale.hi])
+    write_json(outputs["summary_json"], summary)
+    return summary
+
+
+def run_aggregate(args):
+    from simfab.crowd.analysis import aggregate_all
+    from simfab.crowd.data import load_ratings, load_truth
+
+    scale = _scale(args)
+    cfg = _sampler_config(args, study=False)
+    ratings = load_ratings(args.ratings, scale)
+    truth = load_truth(args.truth, ratings) if args.truth else None
+    result = aggregate_all(ratings, truth, config=cfg, seed=args.seed, quiet=args.quiet)
+    _warn(result["warnings"])
+    summary = aggregate_outputs(ratings, truth, result, args.out, title=os.path.basename(args.ratings))
+    summary["bayes"] = {k: summary["bayes"][k] for k in ("rhat_max", "ess_min", "seconds", "converged", "iterations_per_chain", "chains", "credible_mass", "x_interval")}
+    return summary
+
+
+def study_outputs(result, out: str, *, title: str) -> dict:
+    from simfab.crowd.plots import plot_study
+    from simfab.io.atomic import write_csv, write_json
+
+    rows = result.rows()
+    outputs = {
+        "study_csv": str(write_csv(os.path.join(out, "study.csv"), list(rows[0]), [list(r.values()) for r in rows])),
+        "study_png": plot_study(result, os.path.join(out, "study.png"), title=title),
+    }
+    summary = {"sizes": rows, "seconds": result.seconds, "outputs": outputs}
+    outputs["study_json"] = str(write_json(os.path.join(out, "study.json"), summary))
+    return summary
+
+
+def run_study(args):
+    from simfab.crowd.data import load_ratings, load_truth
+    from simfab.crowd.study import micro_crowd_study
+
+    scale = _scale(args)
+    cfg = _sampler_config(args, study=True)
+    ratings = load_ratings(args.ratings, scale)
+    truth = load_truth(args.truth, ratings)
+    res = micro_crowd_study(ratings, truth, n_sub=args.subcrowds, min_size=args.min_size, config=cfg, seed=args.seed, quiet=args.quiet)
+    return study_outputs(res, args.out, title=f"Micro-crowd study of {os.path.basename(args.ratings)}")
+
+
+def truth_outputs(rows, out: str, *, scale) -> dict:
+    from simfab.io.atomic import write_csv, write_json
+
+    cols = ["orientation", "rx_deg", "ry_deg", "rz_deg", "support_volume_m3", "overhang_area_m2", "raycast_volume_m3", "raycast_rel_diff", "support_score", "finish_score"]
+    table = [[r["orientation"], *r["euler_deg"], r["support_volume"], r["overhang_area"], r.get("raycast_volume", ""), r.get("raycast_rel_diff", ""), r["support_score"], r["finish_score"]] for r in rows]
+    outputs = {
+        "table_csv": str(write_csv(os.path.join(out, "truth_table.csv"), cols, table)),
+        "support_truth_csv": str(write_csv(os.path.join(out, "truth_support.csv"), ["task", "truth"], [[r["orientation"], r["support_score"]] for r in rows])),
+        "finish_truth_csv": str(write_csv(os.path.join(out, "truth_finish.csv"), ["task", "truth"], [[r["orientation"], r["finish_score"]] for r in rows])),
+    }
+    summary = {"orientations": rows, "scale": list(scale), "outputs": outputs}
+    outputs["truth_json"] = str(write_json(os.path.join(out, "truth.json"), summary))
+    return summary
+
+
+def run_truth(args):
+    from simfab.crowd.truth import orientation_table, parse_orientations
+    from simfab.io.mesh import load_mesh
+
+    orients = parse_orientations(args.orientations)
+    lo, hi = args.scale
+    if not lo < hi:
+        raise InputError(f"scale must have lo < hi, got {lo:g} {hi:g}", where="--scale")
+    mesh = load_mesh(args.mesh, units=args.units, require_watertight=True)
+    rows = orientation_table(mesh.vertices, mesh.faces, orients, raycast=not args.no_raycast, scale=(lo, hi))
+    return truth_outputs(rows, args.out, scale=(lo, hi))
+
+
+def run_simulate(args):
+    import dataclasses
+
+    from simfab.crowd import synth
+    from simfab.crowd.config import GENERAL_PUBLIC, PRACTITIONERS
+    from simfab.crowd.data import read_truth
+    from simfab.io.atomic import write_csv, write_json
+
+    scale = _scale(args)
+    if args.practitioners < 0 or args.public < 0 or args.practitioners + args.public < 1:
+        raise InputError("need at least one rater (--practitioners / --public, both >= 0)")
+    mal = GENERAL_PUBLIC.malicious_fraction if args.malicious is None else args.malicious
+    if not 0.0 <= mal <= 1.0:
+        raise InputError(f"must be within [0, 1], got {mal}", where="--malicious")
+    mixes = []
+    if args.practitioners:
+        mixes.append(dataclasses.replace(PRACTITIONERS, size=args.practitioners))
+    if args.public:
+        mixes.append(dataclasses.replace(GENERAL_PUBLIC, size=args.public, malicious_fraction=mal))
+    if args.truth:
+        tasks, truth = read_truth(args.truth, scale)
+    else:
+        if args.tasks < 1:
+            raise InputError(f"must be >= 1, got {args.tasks}", where="--tasks")
+        tasks, truth = None, None
+    Q = len(tasks) if tasks else args.tasks
+    if len(args.difficulty) not in (1, Q):
+        raise InputError(f"give one difficulty or {Q} (one per question), got {len(args.difficulty)}", where="--difficulty")
+    crowd = synth.simulate(mixes, scale=scale, truth=truth, n_tasks=Q, beta=args.difficulty if len(args.difficulty) > 1 else args.difficulty[0], seed=args.seed)
+    r = crowd.ratings
+    if tasks:
+        r = dataclasses.replace(r, tasks=tuple(tasks))
+    os.makedirs(args.out, exist_ok=True)
+    outputs = {
+        "ratings_csv": str(write_csv(os.path.join(args.out, "ratings.csv"), ["worker", "task", "label"], r.to_long())),
+        "truth_csv": str(write_csv(os.path.join(args.out, "truth.csv"), ["task", "truth"], list(zip(r.tasks, crowd.truth.tolist())))),
+    }
+    planted = {"alpha": dict(zip(r.workers, crowd.alpha.tolist())), "malicious": [w for w, b in zip(r.workers, crowd.malicious) if b], "beta": dict(zip(r.tasks, crowd.beta.tolist())), "truth": dict(zip(r.tasks, crowd.truth.tolist()))}
+    outputs["planted_json"] = str(write_json(os.path.join(args.out, "planted.json"), planted))
+    return {"raters": len(r.workers), "tasks": list(r.tasks), "malicious": len(planted["malicious"]), "outputs": outputs}
+
+
+def demo(ctx):
+    """The bundled 3D-printing survey: truth from the mesh, practitioners vs general public."""
+    from simfab.crowd.survey import run_bundled_survey
+
+    return run_bundled_survey(out=ctx.out, seed=ctx.seed, quiet=ctx.quiet)

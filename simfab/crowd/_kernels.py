@@ -17,7 +17,14 @@ Arrays (T = crowds x chains threads, R raters, Q questions):
 
 from __future__ import annotations
 
-from simfab._warp import wp
+import warp as _warp
+
+# Warp 1.19 replaced config.quiet by config.log_level; without this its greeting lands on
+# stdout (which --json reserves) before simfab._warp gets to initialize it quietly.
+if hasattr(_warp, "LOG_WARNING"):
+    _warp.config.log_level = max(_warp.config.log_level, _warp.LOG_WARNING)
+
+from simfab._warp import wp  # noqa: E402
 
 _F = wp.float64
 
@@ -65,9 +72,17 @@ def _inv_sd(a: wp.float64, b: wp.float64, cap: wp.float64) -> wp.float64:
 
 @wp.func
 def _loglik(lo: wp.float64, hi: wp.float64, x: wp.float64, inv_s: wp.float64, rounded: int) -> wp.float64:
-    unit = wp.log(_F(1.0) - _ndtr(-x * inv_s) - _ndtr((x - _F(1.0)) * inv_s))
+    # Beyond 8.3 standard deviations Phi's tail (< 5e-17) vanishes against 1 in double
+    # precision, so skipping the erfc calls there is exact, and frequent: accurate raters.
+    unit = _F(0.0)
+    if wp.min(x, _F(1.0) - x) * inv_s < _F(8.3):
+        unit = wp.log(_F(1.0) - _ndtr(-x * inv_s) - _ndtr((x - _F(1.0)) * inv_s))
     if rounded == 1:
-        return _log_mass((lo - x) * inv_s, (hi - x) * inv_s) - unit
+        a = (lo - x) * inv_s
+        b = (hi - x) * inv_s
+        if a < _F(-8.3) and b > _F(8.3):
+            return -unit
+        return _log_mass(a, b) - unit
     z = (lo - x) * inv_s
     return _F(-0.9189385332046728) + wp.log(inv_s) - _F(0.5) * z * z - unit
 

@@ -34,7 +34,8 @@ class SamplerConfig:
     The sampler runs ``burn_in`` adaptive iterations (proposal scales tuned toward
     ``target_accept`` every ``adapt_every`` iterations, then frozen), then ``draws``
     iterations per chain; while the worst R-hat exceeds ``rhat_target`` or the smallest
-    bulk ESS is below ``ess_target`` it adds ``draws`` more, up to ``max_draws``. Whatever
+    bulk ESS is below ``ess_target`` it extends the run by half (at least ``draws``), up to
+    ``max_draws``. Whatever
     remains unconverged is reported as a warning (chains disagree), never hidden.
     """
 

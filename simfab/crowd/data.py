@@ -192,19 +192,14 @@ def load_ratings(path, scale: Scale) -> Ratings:
     return Ratings(labels=mat, workers=tuple(w_ids), tasks=tuple(t_ids), scale=scale, source=path)
 
 
-def load_truth(path, ratings: Ratings) -> np.ndarray:
-    """Read ``task, truth`` and return truth (Q,) in the order of ``ratings.tasks``.
-
-    Truth values are real numbers within the scale. Every rated task needs a truth and every
-    truth row must name a rated task (a typo would otherwise silently drop a question).
-    """
+def read_truth(path, scale: Scale) -> tuple[list[str], np.ndarray]:
+    """Read ``task, truth`` (real values within the scale): task ids and (Q,) values."""
     path = os.fspath(path)
     df = _read_csv(path, ("task", "truth"))
     if len(df) == 0:
         raise InputError("no rows", where=path)
     tasks = _ids(df, "task", path)
     vals = _numbers(df, "truth", path)
-    scale = ratings.scale
     seen = {}
     for k, (t, v) in enumerate(zip(tasks, vals)):
         if t in seen:
@@ -212,9 +207,22 @@ def load_truth(path, ratings: Ratings) -> np.ndarray:
         seen[t] = k
         if not scale.lo <= v <= scale.hi:
             raise InputError(f"line {k + 2}, column 'truth': {v:g} is outside the scale [{scale.lo:g}, {scale.hi:g}]", where=path)
+    return tasks, vals
+
+
+def load_truth(path, ratings: Ratings) -> np.ndarray:
+    """Read ``task, truth`` and return truth (Q,) in the order of ``ratings.tasks``.
+
+    Truth values are real numbers within the scale. Every rated task needs a truth and every
+    truth row must name a rated task (a typo would otherwise silently drop a question).
+    """
+    path = os.fspath(path)
+    tasks, vals = read_truth(path, ratings.scale)
+    for k, t in enumerate(tasks):
         if t not in ratings.tasks:
             raise InputError(f"line {k + 2}: task {t!r} has a truth but no ratings in {ratings.source}", where=path)
-    missing = [t for t in ratings.tasks if t not in seen]
+    index = {t: k for k, t in enumerate(tasks)}
+    missing = [t for t in ratings.tasks if t not in index]
     if missing:
         raise InputError(f"no truth for rated task {missing[0]!r}", where=path)
-    return np.array([vals[seen[t]] for t in ratings.tasks], dtype=float)
+    return np.array([vals[index[t]] for t in ratings.tasks], dtype=float)

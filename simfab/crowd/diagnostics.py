@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.special import ndtri
-from scipy.stats import rankdata
 
 
 def _split(draws: np.ndarray) -> np.ndarray:
@@ -19,11 +18,30 @@ def _split(draws: np.ndarray) -> np.ndarray:
     return np.concatenate([draws[..., :n], draws[..., -n:]], axis=-2)
 
 
+def average_ranks(a: np.ndarray) -> np.ndarray:
+    """1-based ranks along the last axis, ties (rejected Metropolis steps repeat values)
+    sharing their average rank; same result as ``scipy.stats.rankdata(a, axis=-1)`` but
+    vectorized over the leading axes (scipy loops over them in Python)."""
+    order = np.argsort(a, axis=-1, kind="stable")
+    s = np.take_along_axis(a, order, axis=-1)
+    n = s.shape[-1]
+    pos = np.broadcast_to(np.arange(n), s.shape)
+    starts = np.ones(s.shape, bool)
+    starts[..., 1:] = s[..., 1:] != s[..., :-1]
+    ends = np.ones(s.shape, bool)
+    ends[..., :-1] = starts[..., 1:]
+    first = np.maximum.accumulate(np.where(starts, pos, 0), axis=-1)
+    last = np.flip(np.minimum.accumulate(np.flip(np.where(ends, pos, n), axis=-1), axis=-1), axis=-1)
+    ranks = np.empty(s.shape)
+    np.put_along_axis(ranks, order, 0.5 * (first + last) + 1.0, axis=-1)
+    return ranks
+
+
 def _rank_normalize(draws: np.ndarray) -> np.ndarray:
     """z = Phi^-1((r - 3/8) / (S + 1/4)), r = average rank over all chains pooled."""
     shape = draws.shape
     flat = draws.reshape(shape[:-2] + (-1,))
-    r = rankdata(flat, axis=-1, method="average")
+    r = average_ranks(flat)
     return ndtri((r - 0.375) / (flat.shape[-1] + 0.25)).reshape(shape)
 
 
@@ -40,11 +58,16 @@ def _rhat_basic(chains: np.ndarray) -> np.ndarray:
 
 def rhat(draws: np.ndarray) -> np.ndarray:
     """Rank-normalized split R-hat: max of the bulk and the folded (tail) versions. (...,)"""
+    return diagnose(draws)[0]
+
+
+def diagnose(draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(R-hat, bulk ESS), sharing the rank normalization of the split chains. (...,) each."""
     s = _split(np.asarray(draws, float))
-    bulk = _rhat_basic(_rank_normalize(s))
+    z = _rank_normalize(s)
     folded = np.abs(s - np.median(s, axis=(-2, -1), keepdims=True))
-    tail = _rhat_basic(_rank_normalize(folded))
-    return np.maximum(bulk, tail)
+    r = np.maximum(_rhat_basic(z), _rhat_basic(_rank_normalize(folded)))
+    return r, _ess_split(z)
 
 
 def _autocorr_fft(chains: np.ndarray) -> np.ndarray:
@@ -60,8 +83,10 @@ def ess(draws: np.ndarray, *, rank_normalize: bool = True) -> np.ndarray:
     """Bulk effective sample size (rank-normalized split chains, Geyer's initial monotone
     sequence estimator). (...,) in units of draws over all chains."""
     s = _split(np.asarray(draws, float))
-    if rank_normalize:
-        s = _rank_normalize(s)
+    return _ess_split(_rank_normalize(s) if rank_normalize else s)
+
+
+def _ess_split(s: np.ndarray) -> np.ndarray:
     c, n = s.shape[-2:]
     acov = _autocorr_fft(s)
     w = s.var(axis=-1, ddof=1).mean(axis=-1)

@@ -28,8 +28,7 @@ import numpy as np
 
 from simfab.crowd import model as M
 from simfab.crowd.config import Priors, SamplerConfig
-from simfab.crowd.diagnostics import ess as _ess
-from simfab.crowd.diagnostics import rhat as _rhat
+from simfab.crowd.diagnostics import diagnose
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -273,11 +272,11 @@ def sample(
         draws = {k: np.concatenate(v, axis=0) for k, v in chunks.items()}
         params = np.concatenate([np.moveaxis(d, 0, -1) for d in draws.values()], axis=-2)  # (B, C, P, D)
         params = np.swapaxes(params, 1, 2)  # (B, P, C, D)
-        rh, es = _rhat(params), _ess(params)
+        rh, es = diagnose(params)
         converged = (rh.max(-1) < config.rhat_target) & (es.min(-1) >= config.ess_target)
         if converged.all() or target >= config.max_draws:
             break
-        target = min(target + config.draws, config.max_draws)
+        target = min(target + max(config.draws, target // 2), config.max_draws)  # 1.5x: few re-diagnoses
 
     def per_batch(k):  # (D, B, C, K) -> (B, C, D, K)
         return np.ascontiguousarray(np.moveaxis(draws[k], 0, 2)) if k in draws else None
