@@ -78,6 +78,7 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, **overrides) -> dic
     from simfab.errors import ConvergenceError
     from simfab.growth import grow, skin_result
     from simfab.growth.outputs import write_all
+    from simfab.growth.tolerances import PENETRATION_ROUNDOFF
     from simfab.progress import log
 
     symmetric = overrides.pop("symmetric", None)
@@ -90,10 +91,15 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, **overrides) -> dic
         log(f"simfab grow: warning: unreached targets {', '.join(s['targets_unreached'])} "
             f"({'; '.join(s['stop_reasons'])})", quiet=quiet)
     mesh, rep, seconds_skin = skin_result(result)
+    tol_pen = result.scene.params.skin_tolerance
+    if rep.penetration > tol_pen + PENETRATION_ROUNDOFF * result.resolved.diag:
+        raise ConvergenceError(f"the skin penetrates the objects by {rep.penetration:.3g} m, more than the "
+                               f"tolerance {tol_pen:.3g} m (enable skin.subtract_objects or raise skin.tolerance)")
     paths = write_all(result, mesh, Path(out), stem=stem or result.scene.name)
     s.update({
         "watertight": rep.watertight, "is_volume": rep.is_volume, "bodies": rep.bodies, "volume": rep.volume,
         "nodes_in_skin": rep.nodes_contained, "overlap_volume": rep.overlap_volume,
+        "penetration": rep.penetration, "skin_attempts": rep.attempts,
         "objects_subtracted": rep.objects_subtracted, "objects_not_manifold": rep.objects_not_manifold,
         "seconds_skin": seconds_skin,
     })

@@ -139,8 +139,7 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
     # nearest growing node and nearest node of every attractor
     near_d = np.full(len(A), np.inf)
     near_i = np.full(len(A), -1, np.int64)
-    _update_nearest(A, alive, near_d, near_i, tree.nodes, np.arange(len(tree)), ~tree.frozen)
-    _kill(A, alive, is_t, tree.nodes, s.kill)
+    _absorb(A, alive, is_t, near_d, near_i, tree.nodes, np.arange(len(tree)), ~tree.frozen, s.kill)
 
     idle = 0
     fails = np.zeros(len(tree), np.int64)  # consecutive steps a node was attracted but could not grow
@@ -181,8 +180,7 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
         alive[target_attr[landed]] = False
         rep.targets_reached.extend(int(tid[a]) for a in target_attr[landed])
         idx = np.arange(first, len(tree))
-        _update_nearest(A, alive, near_d, near_i, pos, idx, ~landed)
-        _kill(A, alive, is_t, pos, s.kill)
+        _absorb(A, alive, is_t, near_d, near_i, pos, idx, ~landed, s.kill)
         if len(tree) >= s.max_nodes:
             rep.stop_reason = f"node cap reached ({s.max_nodes} nodes)"
             break
@@ -193,27 +191,24 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
     return rep
 
 
-def _update_nearest(A, alive, near_d, near_i, pos, idx, growing) -> None:
-    """Fold new nodes ``pos`` (k, 3) with global indices ``idx`` into the nearest-growing-node table."""
+def _absorb(A, alive, is_t, near_d, near_i, pos, idx, growing, kill) -> None:
+    """Fold new nodes ``pos`` (k, 3) (global indices ``idx``) into the attractor state: the
+    nearest growing node of every live attractor, and death of ordinary attractors within
+    ``kill`` of any new node. One distance matrix (live attractors × new nodes) serves both."""
     live = np.nonzero(alive)[0]
-    g = np.nonzero(growing)[0]
-    if live.size == 0 or g.size == 0:
-        return
-    D = cdist(A[live], pos[g])
-    j = np.argmin(D, axis=1)
-    d = D[np.arange(len(live)), j]
-    better = d < near_d[live]
-    near_d[live[better]] = d[better]
-    near_i[live[better]] = idx[g[j[better]]]
-
-
-def _kill(A, alive, is_t, pos, kill) -> None:
-    """Ordinary attractors within ``kill`` of any node in ``pos`` die."""
-    live = np.nonzero(alive & ~is_t)[0]
     if live.size == 0 or len(pos) == 0:
         return
-    d = cKDTree(pos).query(A[live], k=1, distance_upper_bound=kill)[0]
-    alive[live[d <= kill]] = False
+    D = cdist(A[live], pos)
+    g = np.nonzero(growing)[0]
+    if g.size:
+        Dg = D[:, g]
+        j = np.argmin(Dg, axis=1)
+        d = Dg[np.arange(len(live)), j]
+        better = d < near_d[live]
+        near_d[live[better]] = d[better]
+        near_i[live[better]] = idx[g[j[better]]]
+    dead = (D.min(axis=1) <= kill) & ~is_t[live]
+    alive[live[dead]] = False
 
 
 def _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep):
@@ -226,8 +221,8 @@ def _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep):
     dist = np.linalg.norm(vec, axis=1)
     unit = vec / np.where(dist > 0, dist, 1.0)[:, None]
     uniq, inv = np.unique(node, return_inverse=True)
-    acc = np.zeros((len(uniq), 3))
-    np.add.at(acc, inv, unit)
+    inv = inv.reshape(-1)
+    acc = np.column_stack([np.bincount(inv, weights=unit[:, k], minlength=len(uniq)) for k in range(3)])
     norm = np.linalg.norm(acc, axis=1)
     # opposite pulls that cancel exactly: follow the first attractor instead
     first_att = np.full(len(uniq), -1)

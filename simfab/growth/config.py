@@ -44,8 +44,9 @@ TOML layout (all tables and keys optional; see ``scenes/growth/README.md``)::
     targets = [["target_0", "target_1"], ["target_2"]]
 
     [skin]
-    segments = 16              # circular resolution of joint spheres
+    segments = 12              # circular resolution of joint spheres (rounded up to a multiple of 4)
     subtract_objects = true    # carve the objects out of the skin
+    tolerance = 0.0            # [m] largest allowed penetration of the skin into an object
 """
 
 from __future__ import annotations
@@ -106,8 +107,11 @@ class GrowthParams:
     symmetry: SymmetrySpec | None = None
     profile: ProfileSpec | None = None
     stages: tuple | None = None
-    skin_segments: int = 16
+    skin_segments: int = 12
     subtract_objects: bool = True
+    #: Largest penetration depth [m] of the skin into an object that is accepted (with
+    #: carving it is 0 up to round-off; without, the run fails above it).
+    skin_tolerance: float = 0.0
     seed: int = 0
 
 
@@ -284,7 +288,11 @@ def params_from_toml(doc: dict, where: str) -> GrowthParams:
         kw["stages"] = tuple(tuple(x) for x in t)
 
     sk = doc.get("skin", {})
-    _check_unknown(sk, {"segments", "subtract_objects"}, f"{where}: [skin]")
+    _check_unknown(sk, {"segments", "subtract_objects", "tolerance"}, f"{where}: [skin]")
+    if "tolerance" in sk:
+        kw["skin_tolerance"] = _num(sk["tolerance"], f"{where}: skin.tolerance", positive=False)
+        if kw["skin_tolerance"] < 0:
+            raise InputError("must be >= 0", where=f"{where}: skin.tolerance")
     if "segments" in sk:
         kw["skin_segments"] = _num(sk["segments"], f"{where}: skin.segments", integer=True)
         if kw["skin_segments"] < 6:

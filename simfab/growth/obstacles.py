@@ -33,8 +33,8 @@ class Obstacles:
 
     # ------------------------------------------------------------------ segments
     def segment_hits(self, p: np.ndarray, q: np.ndarray, p_on_surface=None, q_on_surface=None) -> np.ndarray:
-        """(k,) bool: segment p[i]→q[i] crosses an object surface, ends inside a (watertight)
-        object, or enters a sphere.
+        """(k,) bool: segment p[i]→q[i] crosses an object surface, enters a sphere, or leaves
+        a surface point into a (watertight) object.
 
         ``p_on_surface`` / ``q_on_surface`` (k,) bool mark endpoints that lie on an object
         surface by design (roots, targets, contacts): the mesh test ignores ``end_trim`` at
@@ -54,7 +54,9 @@ class Obstacles:
             todo = np.nonzero(~hit)[0]
             if todo.size:
                 hit[todo] = self.mesh_hits(p[todo], q[todo], ps[todo], qs[todo])
-            todo = np.nonzero(~hit & ~qs)[0]
+            # a segment that starts outside and crosses no surface ends outside; only one
+            # leaving a surface point (the trimmed start may already be inside) needs the test
+            todo = np.nonzero(~hit & ps & ~qs)[0]
             if todo.size:
                 hit[todo] = self.inside(q[todo])
         return hit

@@ -1,8 +1,8 @@
 """Files of a growth run: skin (STL, PLY), skeleton (JSON), growth replay (USD), MJCF, PNG.
 
 Every file is written atomically (temporary name + rename). The USD stage replays the
-growth: time code t (0..S) shows the segments grown up to step t with their final radii
-as widths, S+1 the pruned skeleton, S+2 the smoothed one, S+3 the skin (and the objects
+growth: time code t (0..S) shows the branches grown up to step t (as polylines) with
+widths 2 r (radius by age), S+1 the pruned skeleton, S+2 the smoothed one, S+3 the skin (and the objects
 throughout as static meshes).
 """
 
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simfab.growth.skeleton import radius_by_age, to_json_dict
+from simfab.growth.skeleton import chains, radius_by_age, to_json_dict
 
 OBJECT_RGBA = (0.62, 0.64, 0.68, 1.0)
 SKIN_RGBA = (0.86, 0.52, 0.25, 1.0)
@@ -50,15 +50,15 @@ def write_usd(result, mesh, path: Path) -> Path:
     h = result.history
     res = result.resolved
     r = radius_by_age(h.birth, res.r_min, res.r_max, res.radius_decay)
-    child = np.nonzero(h.parent >= 0)[0]
-    born = h.birth[child]
+    # replay as polylines: every chain of the final tree, cut to the nodes born so far
+    # (births increase along a chain, so the visible part is a prefix)
+    ch = chains(h.parent, np.zeros(len(h), bool))
     S = int(h.birth.max(initial=0))
     for t in range(S + 1):
-        c = child[born <= t]
-        _set_segments(w, h.nodes, h.parent, r, c, t)
+        cut = [(c, int(np.searchsorted(h.birth[c], t, side="right"))) for c in ch]
+        _set_polylines(w, h.nodes, r, [c[:k] for c, k in cut if k >= 2], h.parent, t)
     for k, sk in enumerate((result.pruned, result.skeleton)):
-        c = np.nonzero(sk.parent >= 0)[0]
-        _set_segments(w, sk.nodes, sk.parent, sk.radius, c, S + 1 + k)
+        _set_polylines(w, sk.nodes, sk.radius, chains(sk.parent, np.zeros(len(sk.nodes), bool)), sk.parent, S + 1 + k)
     w.add_mesh("growth/skin", np.asarray(mesh.faces), np.asarray(mesh.vertices), color=SKIN_RGBA[:3])
     w.set_visible("growth/skin", False, 0.0)
     w.set_visible("growth/skin", True, S + 3)
@@ -67,14 +67,12 @@ def write_usd(result, mesh, path: Path) -> Path:
     return w.save()
 
 
-def _set_segments(w, nodes, parent, radius, child, t):
-    if child.size == 0:  # USD curves need >= 2 points: show a zero-length stub at the roots
+def _set_polylines(w, nodes, radius, polylines, parent, t):
+    if not polylines:  # USD curves need >= 2 points: show a zero-length stub at the roots
         roots = np.nonzero(parent < 0)[0][:1]
         w.set_curves("growth/skeleton", [np.repeat(nodes[roots], 2, axis=0)], [np.repeat(2 * radius[roots], 2)], t)
         return
-    P = np.stack([nodes[parent[child]], nodes[child]], axis=1)
-    W = np.stack([2 * radius[parent[child]], 2 * radius[child]], axis=1)
-    w.set_curves("growth/skeleton", list(P), list(W), t)
+    w.set_curves("growth/skeleton", [nodes[c] for c in polylines], [2 * radius[c] for c in polylines], t)
 
 
 def write_mjcf(result, mesh, path: Path) -> Path:

@@ -26,6 +26,7 @@ class SkinReport:
     nodes_contained : skeleton nodes inside the skin or on its boundary (a ball of radius
         CONTAIN_TOL r_min around the node overlaps the skin by TOUCH_FRACTION of its volume).
     overlap_volume : volume of skin ∩ objects [m³] (before the round trip).
+    penetration : largest depth [m] of a skin vertex inside an object (0 when carved).
     objects_subtracted / objects_not_manifold : object names carved out / skipped.
     attempts : skins built until one passed the round trip (see :func:`skin`).
     """
@@ -37,6 +38,7 @@ class SkinReport:
     nodes_total: int = 0
     nodes_contained: int = 0
     overlap_volume: float = 0.0
+    penetration: float = 0.0
     objects_subtracted: list = dataclasses.field(default_factory=list)
     objects_not_manifold: list = dataclasses.field(default_factory=list)
     attempts: int = 1
@@ -82,7 +84,7 @@ def to_trimesh(man):
                            np.asarray(mesh.tri_verts, np.int64), process=False)
 
 
-def skin_solid(nodes: np.ndarray, parent: np.ndarray, radius: np.ndarray, *, segments: int = 16, rotation=None):
+def skin_solid(nodes: np.ndarray, parent: np.ndarray, radius: np.ndarray, *, segments: int = 12, rotation=None):
     """Union of sphere-pair hulls along every segment (isolated nodes become spheres): a Manifold.
 
     ``rotation`` (3, 3) turns the sphere tessellation (used to retry a skin whose STL
@@ -167,6 +169,24 @@ def overlap_volume(solid, cutters: list) -> float:
     return float(sum(m3.Manifold.batch_boolean([solid, c], m3.OpType.Intersect).volume() for c in cutters))
 
 
+def penetration_depth(mesh, objects: dict) -> float:
+    """Largest distance [m] from a skin vertex inside a (watertight) object to that object's surface."""
+    depth = 0.0
+    V = np.asarray(mesh.vertices)
+    for obj in objects.values():
+        if not obj.is_watertight or len(V) == 0:
+            continue
+        lo, hi = obj.bounds
+        cand = np.nonzero(np.all((V > lo) & (V < hi), axis=1))[0]
+        if cand.size == 0:
+            continue
+        inside = cand[obj.contains(V[cand])]
+        if inside.size:
+            _, d, _ = obj.nearest.on_surface(V[inside])
+            depth = max(depth, float(d.max()))
+    return depth
+
+
 def clean_for_stl(mesh):
     """The mesh as an STL reader sees it: float32 vertices merged (trimesh's merge precision),
     then the faces that collapsed (repeated vertex) or doubled up (the same triangle twice,
@@ -220,7 +240,7 @@ def _touches(mesh, x: np.ndarray, radius: float) -> np.ndarray:
     solid = to_manifold(mesh)
     if solid is None or not radius > 0:
         return np.zeros(len(x), bool)
-    ball = m3.Manifold.sphere(radius, 16)
+    ball = m3.Manifold.sphere(radius, 8)
     full = ball.volume()
     out = np.zeros(len(x), bool)
     for i, p in enumerate(x):
@@ -229,7 +249,7 @@ def _touches(mesh, x: np.ndarray, radius: float) -> np.ndarray:
     return out
 
 
-def skin(nodes, parent, radius, objects: dict | None = None, *, segments: int = 16, subtract: bool = True,
+def skin(nodes, parent, radius, objects: dict | None = None, *, segments: int = 12, subtract: bool = True,
          attempts: int = 3, simplify: float | None = 0.25, fixed=None):
     """Skin a skeleton: returns (``trimesh.Trimesh``, :class:`SkinReport`).
 
@@ -263,6 +283,7 @@ def skin(nodes, parent, radius, objects: dict | None = None, *, segments: int = 
         rep.overlap_volume = overlap_volume(solid, cutters)
         mesh = clean_for_stl(to_trimesh(solid))
         check_skin(mesh, nodes, r_min, rep)
+        rep.penetration = penetration_depth(mesh, objects or {})
         rep.attempts = attempt + 1
         if rep.watertight and rep.is_volume:
             break

@@ -49,3 +49,7 @@ SURFACE_LIFT = 0.5
 #: An object is "ground" (a root stands on it) when a root is within this fraction of the
 #: object's diagonal of its surface.
 GROUND_CONTACT = 1e-3
+
+#: Skin penetration below this fraction of D is round-off of the float32 STL cleanup, not a
+#: real overlap (the skin is carved exactly by the objects).
+PENETRATION_ROUNDOFF = 1e-6

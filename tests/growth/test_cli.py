@@ -116,3 +116,19 @@ def test_bad_toml_names_the_key(tmp_path, capsys):
     (tmp_path / "egg.toml").write_text("[growth]\nattractors = -5\n")
     code, out, err = _run(["grow", str(tmp_path / "egg.xml"), "--out", str(tmp_path / "o")], capsys)
     assert code == 2 and "growth.attractors" in err
+
+
+def test_uncarved_skin_beyond_tolerance_fails_without_outputs(tmp_path, capsys):
+    import shutil
+
+    shutil.copy(SCENES / "phone_stand.xml", tmp_path / "p.xml")
+    base = (SCENES / "phone_stand.toml").read_text()
+    (tmp_path / "p.toml").write_text(base + "\n[skin]\nsubtract_objects = false\ntolerance = 0.001\n")
+    code, out, err = _run(["grow", str(tmp_path / "p.xml"), "--out", str(tmp_path / "o")], capsys)
+    assert code == 1 and "penetrates" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+    # carved (the default), the same scene passes with zero tolerance
+    (tmp_path / "p.toml").write_text(base + "\n[skin]\ntolerance = 0.0\n")
+    code, out, err = _run(["grow", str(tmp_path / "p.xml"), "--out", str(tmp_path / "o2"), "--json"], capsys)
+    assert code == 0, err
+    assert json.loads(out)["penetration"] < 1e-6
