@@ -31,6 +31,8 @@ def _deform(model, rng, kind):
         A = A * 0.6
     elif kind == "expanded":
         A = A * 1.6
+    elif kind == "near_rest":  # clustered singular values: stresses the closed-form projectors
+        A = np.eye(d) + 1e-7 * rng.standard_normal((d, d))
     R = Rotation.random(random_state=rng).as_matrix()[:d, :d] if d == 3 else _rot2(rng.uniform(0, 2 * np.pi))
     x = model.rest @ (R @ A).T + rng.standard_normal(d)
     if np.any(nh.det_F(model, x) <= 0):
@@ -76,7 +78,7 @@ def test_gradient_and_hessian_match_finite_differences(dim, kind):
 def test_projected_hessian_is_psd_and_exact_where_already_psd(dim):
     rng = np.random.default_rng(7 + dim)
     saw_indefinite = False
-    for kind in ["general", "compressed", "expanded"] * 3:
+    for kind in ["general", "compressed", "expanded", "near_rest"] * 3:
         model = _element(dim, rng)
         x = _deform(model, rng, kind)
         H = nh.energy_gradient_hessian(model, x, project_psd=False)[2].toarray()
@@ -84,6 +86,7 @@ def test_projected_hessian_is_psd_and_exact_where_already_psd(dim):
         w = np.linalg.eigvalsh(H)
         wp_ = np.linalg.eigvalsh(Hp)
         scale = np.abs(w).max()
+        assert np.all(np.isfinite(Hp))
         assert wp_.min() >= -1e-12 * scale
         if w.min() < -1e-9 * scale:
             saw_indefinite = True
@@ -150,6 +153,12 @@ def test_energy_rotation_invariant_and_zero_at_rest_and_rigid_motion(dim):
         Er, gr = nh.energy_gradient(model, model.rest @ R.T + t)  # rigid motion of the rest shape
         assert abs(Er) <= 1e-12 * scale
         assert np.abs(gr).max() <= 1e-11 * scale
+        # at a rigid pose the exact Hessian is PSD (rotations are its null space): projection is a no-op
+        xr = model.rest @ R.T + t
+        Hx = nh.energy_gradient_hessian(model, xr, project_psd=False)[2].toarray()
+        Hp = nh.energy_gradient_hessian(model, xr)[2].toarray()
+        assert np.all(np.isfinite(Hp))
+        np.testing.assert_allclose(Hp, Hx, atol=1e-9 * np.abs(Hx).max())
         # gradient rotates with the body: g(Rx + t) = g(x) R^T
         np.testing.assert_allclose(nh.energy_gradient(model, x @ R.T + t)[1], nh.energy_gradient(model, x)[1] @ R.T,
                                    atol=1e-10 * scale)
