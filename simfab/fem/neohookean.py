@@ -55,6 +55,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from simfab._warp import wp
+from simfab.fem import tolerances
 from simfab.fem.model import FemModel
 
 wp.set_module_options({"enable_backward": False})  # hand-written derivatives; halves compile time
@@ -67,6 +68,8 @@ _mat4x6d = wp.types.matrix(shape=(4, 6), dtype=wp.float64)
 _mat9x12d = wp.types.matrix(shape=(9, 12), dtype=wp.float64)
 
 _HALF_SQRT2 = 0.7071067811865476  # 1/sqrt(2): unit Frobenius norm of the twist/flip modes
+_POLAR_STEP_SQ_TOL = wp.constant(wp.float64(tolerances.POLAR_STEP_SQ_TOL))
+_POLAR_MAX_ITER = wp.constant(tolerances.POLAR_MAX_ITER)
 
 
 @wp.func
@@ -184,13 +187,13 @@ def _polar_rotation3(F: wp.mat33d):
     """Rotation R of the polar decomposition F = R S (det F > 0), by scaled Newton iteration
     X <- (g X + X^-T / g) / 2 (Higham), quadratically convergent."""
     X = F
-    for it in range(30):
+    for it in range(_POLAR_MAX_ITER):
         Xi = wp.inverse(X)
         g = wp.sqrt(wp.sqrt(wp.ddot(Xi, Xi) / wp.ddot(X, X)))
         Xn = wp.float64(0.5) * (g * X + wp.transpose(Xi) / g)
         dX = Xn - X
         X = Xn
-        if wp.ddot(dX, dX) <= wp.float64(1e-26):
+        if wp.ddot(dX, dX) <= _POLAR_STEP_SQ_TOL:
             break
     return X
 
