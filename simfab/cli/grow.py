@@ -19,7 +19,14 @@ import os
 from pathlib import Path
 
 HELP = "grow a support structure between objects (space colonization) and skin it for 3D printing"
-DESCRIPTION = __doc__
+DESCRIPTION = (
+    "Grow an organic support structure from root sites to target sites of an MJCF scene by space "
+    "colonization with target attractors (volume, surface or extruded-profile attractors, optional mirror "
+    "symmetry, obstacle avoidance), prune, smooth and skin it into one watertight printable mesh. Writes skin "
+    "STL/PLY, skeleton JSON, a USD growth replay, an MJCF of objects + grown part and a PNG preview. "
+    "'simfab grow edit SKELETON_JSON --stroke FILE --camera FILE' moves one skeleton chain onto the surface of "
+    "rays through a 2D stroke and re-skins it. Scene format: scenes/growth/README.md."
+)
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes" / "growth"
 

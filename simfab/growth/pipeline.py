@@ -109,6 +109,10 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
     mean root x). ``seed`` defaults to the scene's seed. Same seed → identical result.
     """
     scene = _as_scene(scene_or_path)
+    known = {f.name for f in dataclasses.fields(scene.params)}
+    unknown = sorted(set(overrides) - known)
+    if unknown:
+        raise InputError(f"unknown growth parameter(s) {', '.join(unknown)}")
     if overrides:
         scene = scene.with_params(**overrides)
         validate_scene(scene)
@@ -167,7 +171,7 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
     sk = _skeleton(tree, scene, res)
     pruned = sk
     V = smooth_positions(sk.nodes, sk.edges, sk.fixed_mask(), lambda1=p.lambda1, lambda2=p.lambda2,
-                         iterations=p.smoothing_iterations, obstacles=obstacles, on_surface=sk.fixed_mask())
+                         iterations=p.smoothing_iterations, obstacles=obstacles, on_surface=sk.on_surface_mask())
     sk = sk.replace(nodes=V)
     if sym:
         pruned = sym.mirror(pruned, obstacles=None)
