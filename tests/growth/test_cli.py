@@ -132,3 +132,19 @@ def test_uncarved_skin_beyond_tolerance_fails_without_outputs(tmp_path, capsys):
     code, out, err = _run(["grow", str(tmp_path / "p.xml"), "--out", str(tmp_path / "o2"), "--json"], capsys)
     assert code == 0, err
     assert json.loads(out)["penetration"] < 1e-6
+
+
+def test_step_cap_is_reported_naming_unreached_targets(tmp_path, capsys):
+    # too few steps to reach anything: nothing to build -> exit 1, the reason and targets named
+    code, out, err = _run(["grow", str(SCENES / "table_legs.xml"), "--max-steps", "3", "--out", str(tmp_path / "a")],
+                          capsys)
+    assert code == 1 and "step cap" in err and "target_0" in err
+    assert not (tmp_path / "a").exists() or not any((tmp_path / "a").iterdir())
+    # enough steps for some targets only: outputs are written, the rest are listed
+    code, out, err = _run(["grow", str(SCENES / "table_legs.xml"), "--max-steps", "32", "--out", str(tmp_path / "b"),
+                           "--json"], capsys)
+    s = json.loads(out)
+    assert code == 0
+    assert 0 < s["targets_reached"] < s["targets_total"]
+    assert len(s["targets_unreached"]) == s["targets_total"] - s["targets_reached"]
+    assert any(r.startswith("step cap") for r in s["stop_reasons"])
