@@ -167,18 +167,15 @@ def make_model(points, elements, material: Material, *, thickness: float = 1.0, 
     m = el.shape[0]
     el32 = el.astype(np.int32)
     bfacets = _boundary(el32, dim)
+    arrays = dict(rest=pts.copy(), elements=el32, Dm_inv=np.linalg.inv(Dm), volume=volume, mu=np.full(m, mu),
+                  lam=np.full(m, lam), boundary_facets=bfacets, boundary_vertices=np.unique(bfacets).astype(np.int32))
+    for a in arrays.values():
+        a.flags.writeable = False  # the model is immutable: states are separate arrays
     return FemModel(
         dim=dim,
-        rest=pts,
-        elements=el32,
-        Dm_inv=np.linalg.inv(Dm),
-        volume=volume,
-        mu=np.full(m, mu),
-        lam=np.full(m, lam),
         thickness=float(thickness) if dim == 2 else 1.0,
-        boundary_facets=bfacets,
-        boundary_vertices=np.unique(bfacets).astype(np.int32),
         pattern=HessianPattern(el32, n, dim),
         material=material,
         device=_validate_device(device),
+        **arrays,
     )
