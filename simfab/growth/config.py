@@ -22,6 +22,8 @@ TOML layout (all tables and keys optional; see ``scenes/growth/README.md``)::
     r_min = 0.0015
     r_max = 0.004
     decay = 0.05               # k [1/step]
+    age = "front"              # "front": age = birth step (roots thickest);
+                               # "since_birth": age = steps lived until the end (tips thickest)
 
     [smoothing]                # v += l1 Lap(v) + l2 Lap(Lap(v))
     iterations = 10
@@ -101,6 +103,10 @@ class GrowthParams:
     r_min: float | None = None
     r_max: float | None = None
     radius_decay: float | None = None
+    #: How a node's age α is counted: "front" (α = its birth step, so the root is oldest in
+    #: growth-front terms and gets r_max) or "since_birth" (α = steps from its birth to the
+    #: end of growth, the literal reading; the root then gets r_min).
+    radius_age: str = "front"
     smoothing_iterations: int = 10
     lambda1: float = 0.2
     lambda2: float = 0.1
@@ -250,7 +256,11 @@ def params_from_toml(doc: dict, where: str) -> GrowthParams:
         kw["surface_objects"] = tuple(so)
 
     r = doc.get("radius", {})
-    _check_unknown(r, {"r_min", "r_max", "decay"}, f"{where}: [radius]")
+    _check_unknown(r, {"r_min", "r_max", "decay", "age"}, f"{where}: [radius]")
+    if "age" in r:
+        if r["age"] not in ("front", "since_birth"):
+            raise InputError(f"expected 'front' or 'since_birth', got {r['age']!r}", where=f"{where}: radius.age")
+        kw["radius_age"] = r["age"]
     for key, name in (("r_min", "r_min"), ("r_max", "r_max")):
         if key in r:
             kw[name] = _num(r[key], f"{where}: radius.{key}")

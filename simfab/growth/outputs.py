@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simfab.growth.pipeline import node_age
 from simfab.growth.skeleton import chains, radius_by_age, to_json_dict
 
 OBJECT_RGBA = (0.62, 0.64, 0.68, 1.0)
@@ -49,11 +50,11 @@ def write_usd(result, mesh, path: Path) -> Path:
     w.add_curves("growth/skeleton", color=SKIN_RGBA[:3])
     h = result.history
     res = result.resolved
-    r = radius_by_age(h.birth, res.r_min, res.r_max, res.radius_decay)
+    S = int(h.birth.max(initial=0))
+    r = radius_by_age(node_age(h.birth, result.scene.params.radius_age, S), res.r_min, res.r_max, res.radius_decay)
     # replay as polylines: every chain of the final tree, cut to the nodes born so far
     # (births increase along a chain, so the visible part is a prefix)
     ch = chains(h.parent, np.zeros(len(h), bool))
-    S = int(h.birth.max(initial=0))
     for t in range(S + 1):
         cut = [(c, int(np.searchsorted(h.birth[c], t, side="right"))) for c in ch]
         _set_polylines(w, h.nodes, r, [c[:k] for c, k in cut if k >= 2], h.parent, t)

@@ -168,7 +168,7 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
         tree = _prune(tree, scene, res, obstacles, p.mode)
     A_all = np.concatenate(placed)
 
-    sk = _skeleton(tree, scene, res)
+    sk = _skeleton(tree, scene, res, steps)
     pruned = sk
     V = smooth_positions(sk.nodes, sk.edges, sk.fixed_mask(), lambda1=p.lambda1, lambda2=p.lambda2,
                          iterations=p.smoothing_iterations, obstacles=obstacles, on_surface=sk.on_surface_mask())
@@ -297,8 +297,14 @@ def _prune(tree: Tree, scene, res: Resolved, obstacles, mode: str) -> Tree:
                 root=tree.root[idx], frozen=tree.target[idx] >= 0, contact=tree.contact[idx])
 
 
-def _skeleton(tree: Tree, scene, res: Resolved) -> Skeleton:
-    """Skeleton with radii by age; roots that grew nothing are dropped."""
+def node_age(birth: np.ndarray, convention: str, last_step: int) -> np.ndarray:
+    """Age α per node for the radius law: ``front`` → birth step; ``since_birth`` → last step − birth."""
+    b = np.asarray(birth, np.int64)
+    return b if convention == "front" else np.maximum(last_step - b, 0)
+
+
+def _skeleton(tree: Tree, scene, res: Resolved, last: int) -> Skeleton:
+    """Skeleton with radii by age (``last`` = final growth step); roots that grew nothing are dropped."""
     has_child = np.zeros(len(tree), bool)
     has_child[tree.parent[tree.parent >= 0]] = True
     keep = (tree.parent >= 0) | has_child
@@ -306,7 +312,8 @@ def _skeleton(tree: Tree, scene, res: Resolved) -> Skeleton:
         keep[:] = True
     idx, par = subset(tree.parent, keep)
     return Skeleton(nodes=tree.nodes[idx].copy(), parent=par, birth=tree.birth[idx], target=tree.target[idx],
-                    root=tree.root[idx], radius=radius_by_age(tree.birth[idx], res.r_min, res.r_max, res.radius_decay),
+                    root=tree.root[idx], radius=radius_by_age(node_age(tree.birth[idx], scene.params.radius_age, last),
+                                                              res.r_min, res.r_max, res.radius_decay),
                     contact=tree.contact[idx],
                     target_names=tuple(scene.target_names))
 

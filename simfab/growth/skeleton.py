@@ -106,10 +106,12 @@ def subset(parent: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def radius_by_age(age: np.ndarray, r_min: float, r_max: float, decay: float) -> np.ndarray:
     """r = r_min + (r_max - r_min) exp(-k α) per node (α = age in growth steps, k = decay).
 
-    The age α of a node is counted along the growth front: roots have α = 0 and every
-    growth step adds 1, so a node born at step s has α = s. The radius therefore goes from
-    r_max at the roots to r_min at the youngest tips (the thesis: "from the root to the
-    targets between maximum radius and minimum radius").
+    ``age`` comes from :func:`simfab.growth.pipeline.node_age`. By default (``radius.age =
+    "front"``) it is counted along the growth front: roots have α = 0 and every growth step
+    adds 1, so a node born at step s has α = s and the radius goes from r_max at the roots to
+    r_min at the youngest tips (the thesis: "from the root to the targets between maximum
+    radius and minimum radius"; a support is thickest at its base). ``"since_birth"`` counts
+    the steps a node has lived until growth ended, which makes the roots the thinnest.
     """
     return r_min + (r_max - r_min) * np.exp(-decay * np.asarray(age, np.float64))
 

@@ -116,3 +116,19 @@ def test_radius_by_age():
     assert r[0] == pytest.approx(0.004)
     assert np.all(np.diff(r) < 0) and r[-1] == pytest.approx(0.001, abs=1e-6)
     assert r[20] == pytest.approx(0.001 + 0.003 * np.exp(-1.0))
+
+
+def test_radius_age_conventions(scenes_dir):
+    from simfab.growth import grow
+
+    front = grow(scenes_dir / "egg_holder_volume.xml", seed=0)
+    lived = grow(scenes_dir / "egg_holder_volume.xml", seed=0, radius_age="since_birth")
+    res = front.resolved
+    for r, root_is_thick in ((front, True), (lived, False)):
+        sk = r.skeleton
+        root = sk.radius[sk.parent < 0][0]
+        tips = sk.radius[sk.target >= 0]
+        assert (root > tips.max()) == root_is_thick
+        assert np.all((sk.radius >= res.r_min - 1e-15) & (sk.radius <= res.r_max + 1e-15))
+    assert front.skeleton.radius[front.skeleton.parent < 0][0] == pytest.approx(res.r_max)
+    assert np.array_equal(front.skeleton.nodes, lived.skeleton.nodes)  # only the radii differ
