@@ -509,14 +509,22 @@ _KERNELS = {2: (_energy2, _gradient2, _hessian2), 3: (_energy3, _gradient3, _hes
 
 
 class _Workspace:
-    """Device copies of the model arrays and reusable output buffers (per model)."""
+    """Device copies of the model arrays, reusable buffers and pre-recorded launches (per model).
+
+    Small meshes are dominated by per-call overhead, so the position buffer is persistent (on the
+    CPU a numpy array the kernels read through an alias) and the launches are recorded once
+    (``record_cmd``) and replayed with only the changing parameters updated.
+    """
 
     def __init__(self, model: FemModel):
         d, m, k = model.dim, model.n_elements, model.dim + 1
         dev = model.device
+        self.cpu = wp.get_device(dev).is_cpu
         self.vec = wp.vec3d if d == 3 else wp.vec2d
         mat = wp.mat33d if d == 3 else wp.mat22d
         self.kernels = _KERNELS[d]
+        self.x_np = np.zeros((model.n_vertices, d))
+        self.x = self._wrap(self.x_np, self.vec, dev)
         self.elements = wp.array(model.elements, dtype=wp.int32, device=dev)
         self.Dm_inv = wp.array(model.Dm_inv, dtype=mat, device=dev)
         self.volume = wp.array(model.volume, dtype=wp.float64, device=dev)
@@ -529,10 +537,50 @@ class _Workspace:
         self.slots = None  # model.pattern.element_slots as int32, on first Hessian request
         self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
         self.dummy_slots = wp.zeros((1, 1, 1), dtype=wp.int32, device=dev)
+        self.dummy_data = wp.zeros(1, dtype=wp.float64, device=dev)
+        self.data_np = None
+        self.data = None
+        self.commands: dict = {}
         # gradient scatter: (n*d, m*k*d) sparse sum over the element copies of each dof
         dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
         self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))),
                                      shape=(model.n_dofs, dofs.size))
+
+    def _wrap(self, arr: np.ndarray, dtype, dev):
+        """Warp view of a numpy array (alias on the CPU, a device copy elsewhere)."""
+        return wp.array(arr, dtype=dtype, device=dev, copy=False) if self.cpu else wp.array(arr, dtype=dtype, device=dev)
+
+    def set_positions(self, x: np.ndarray) -> None:
+        self.x_np[...] = x
+        if not self.cpu:
+            self.x.assign(self.x_np)
+
+    def command(self, model: FemModel, want: int):
+        """The recorded launch for ``want`` (created on first use)."""
+        cmd = self.commands.get(want)
+        if cmd is not None:
+            return cmd
+        common = [self.x, self.elements, self.Dm_inv, self.volume, self.mu, self.lam]
+        dev = model.device
+        if want == _ENERGY:
+            args = dict(inputs=common, outputs=[self.energy, self.det_F])
+        elif want == _GRADIENT:
+            args = dict(inputs=common, outputs=[self.energy, self.det_F, self.grad])
+        elif want == _HESSIAN:  # scatter straight into CSR values
+            if model.pattern.nnz >= 2**31:
+                raise ValueError("Hessian too large for int32 slots")
+            self.slots = wp.array(model.pattern.element_slots.astype(np.int32), dtype=wp.int32, device=dev)
+            args = dict(inputs=common + [1, 1, self.slots],
+                        outputs=[self.energy, self.det_F, self.grad, self.dummy3, self.dummy_data])
+        else:  # _BLOCKS: keep the per-element blocks
+            kk = (model.dim + 1) * model.dim
+            self.hess = wp.zeros((model.n_elements, kk, kk), dtype=wp.float64, device=dev)
+            args = dict(inputs=common + [1, 0, self.dummy_slots],
+                        outputs=[self.energy, self.det_F, self.grad, self.hess, self.dummy_data])
+        kernel = self.kernels[min(want, _HESSIAN)]
+        cmd = wp.launch(kernel, dim=model.n_elements, device=dev, record_cmd=True, **args)
+        self.commands[want] = cmd
+        return cmd
 
 
 def _workspace(model: FemModel) -> _Workspace:
@@ -546,33 +594,17 @@ def _launch(model: FemModel, x, want: int, project: bool = True) -> _Workspace:
     """One kernel launch over all elements computing what ``want`` asks for."""
     x = model.check_positions(x)
     ws = _workspace(model)
-    dev = model.device
-    common = [wp.array(x, dtype=ws.vec, device=dev), ws.elements, ws.Dm_inv, ws.volume, ws.mu, ws.lam]
-    if want == _ENERGY:
-        wp.launch(ws.kernels[0], dim=model.n_elements, inputs=common, outputs=[ws.energy, ws.det_F], device=dev)
-    elif want == _GRADIENT:
-        wp.launch(ws.kernels[1], dim=model.n_elements, inputs=common, outputs=[ws.energy, ws.det_F, ws.grad],
-                  device=dev)
-    else:
-        # _HESSIAN: scatter straight into CSR values; _BLOCKS: keep the per-element blocks
-        scatter = want == _HESSIAN
-        if scatter and ws.slots is None:
-            if model.pattern.nnz >= 2**31:
-                raise ValueError("Hessian too large for int32 slots")
-            ws.slots = wp.array(model.pattern.element_slots.astype(np.int32), dtype=wp.int32, device=dev)
-        if not scatter and ws.hess is None:
-            k = (model.dim + 1) * model.dim
-            ws.hess = wp.zeros((model.n_elements, k, k), dtype=wp.float64, device=dev)
+    ws.set_positions(x)
+    cmd = ws.command(model, want)
+    if want >= _HESSIAN:
+        cmd.set_param_by_name("project", int(bool(project)))
+    if want == _HESSIAN:
         # a fresh values array per call (callers keep and modify returned matrices); on the CPU
         # numpy owns it and the kernel writes through an alias, so no copy is made
-        data_np = np.zeros(model.pattern.nnz if scatter else 1)
-        data = wp.array(data_np, dtype=wp.float64, device=dev, copy=False) if wp.get_device(dev).is_cpu \
-            else wp.array(data_np, dtype=wp.float64, device=dev)
-        wp.launch(ws.kernels[2], dim=model.n_elements,
-                  inputs=common + [int(bool(project)), int(scatter), ws.slots if scatter else ws.dummy_slots],
-                  outputs=[ws.energy, ws.det_F, ws.grad, ws.dummy3 if scatter else ws.hess, data], device=dev)
-        ws.data = data
-        ws.data_np = data_np
+        ws.data_np = np.zeros(model.pattern.nnz)
+        ws.data = ws._wrap(ws.data_np, wp.float64, model.device)
+        cmd.set_param_by_name("data", ws.data)
+    cmd.launch()
     return ws
 
 
@@ -612,8 +644,7 @@ def energy_gradient_hessian(model: FemModel, x, *, project_psd: bool = True) -> 
     fresh array the caller may modify (e.g. add contact blocks via ``pattern.block_slots``).
     """
     ws = _launch(model, x, _HESSIAN, project_psd)
-    data = ws.data_np if wp.get_device(model.device).is_cpu else ws.data.numpy()
-    H = model.pattern.matrix(data)
+    H = model.pattern.matrix(ws.data_np if ws.cpu else ws.data.numpy())
     return _total(ws), _gradient(model, ws), H
 
 
