@@ -1,8 +1,9 @@
 #!/usr/bin/env python
 """Regenerate the bundled coupling scenes (MJCF + companion TOML) in this folder.
 
-``python scenes/coupling/make_scenes.py`` rewrites every ``NAME.xml``/``NAME.toml`` pair from the
-parameters below. Lengths in metres. Each scene:
+``python scenes/coupling/make_scenes.py [--remesh]`` rewrites every ``NAME.xml``/``NAME.toml`` pair
+from the parameters below; 3D parts are tetrahedralized into ``NAME_part.npz`` only when that file
+is missing or ``--remesh`` is given (fTetWild is not bit-reproducible). Lengths in metres. Each scene:
 
 - MJCF: O as the mocap body ``object`` (its geoms, body frame), keyframes of O's path, the fixed
   region as the box site ``fixed`` and A's rest shape (body ``part``, display only);
@@ -41,11 +42,11 @@ CLAMP_EJECT = dict(CLAMP_TIGHT, opening_deg=100.0)
 X_SEATED = R_CYL - CLAMP_TIGHT["inner_radius"] + 0.0002
 
 
-def x_start(clamp: dict, margin: float = 0.001) -> float:
-    """O's start: ``margin`` before its first touch with the clamp's inner tip corners."""
+def x_start(clamp: dict, margin: float = 0.001, radius: float = R_CYL) -> float:
+    """O's start: ``margin`` before a circle of ``radius`` first touches the clamp's inner tip corners."""
     a = math.radians(clamp["opening_deg"])
     tx, ty = clamp["inner_radius"] * math.cos(a), clamp["inner_radius"] * math.sin(a)
-    return tx + math.sqrt(max(R_CYL**2 - ty**2, 0.0)) + margin
+    return tx + math.sqrt(max(radius**2 - ty**2, 0.0)) + margin
 KNOCK_R, KNOCK_r = 0.020, 0.003  # ring major / tube radius [m]
 CLAMP_KNOCK = dict(inner_radius=0.00285, width=0.0015, opening_deg=60.0, base_depth=0.002, base_height=0.008)
 
@@ -82,6 +83,9 @@ def tet_mesh(name: str, surface, target: int, tol: float = 0.1):
     and store it as NAME_part.npz; returns the file name."""
     from simfab.fem.meshing import tetrahedralize
 
+    fname = f"{name}_part.npz"
+    if (HERE / fname).exists() and "--remesh" not in sys.argv:
+        return fname  # fTetWild is not reproducible: keep the stored mesh unless asked to remesh
     t = target
     best = None
     for _ in range(4):
@@ -91,7 +95,6 @@ def tet_mesh(name: str, surface, target: int, tol: float = 0.1):
         if abs(len(T) - target) <= tol * target:
             break
         t = max(8, int(round(t * target / len(T))))
-    fname = f"{name}_part.npz"
     np.savez_compressed(HERE / fname, points=best[0], elements=best[1].astype(np.int32))
     print(f"{name}: {len(best[1])} tets (target {target})")
     return fname
@@ -178,12 +181,13 @@ def main() -> None:
     ring.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))  # axis z -> y
     ring.apply_translation([KNOCK_R, 0, 0])  # the bar (nearest tube section) through the body origin
     rok = CLAMP_KNOCK["inner_radius"] + CLAMP_KNOCK["width"]
-    xk = rok + KNOCK_r + 0.0005
+    xk = x_start(CLAMP_KNOCK, margin=0.0005, radius=KNOCK_r)
+    xs = KNOCK_r - CLAMP_KNOCK["inner_radius"] + 0.0001  # seated: the bar just clears the back of the clip
     scene("knocker3d", doc="Door-knocker ring: inserted horizontally into a clip, then rotated about its bar.", dim=3,
           comp=dict(generator="extruded_clamp", target_elements=5080, height=hk, **CLAMP_KNOCK),
           part_mesh=G.extruded_clamp(height=hk, **CLAMP_KNOCK), extra_assets=[("ring", ring.vertices, ring.faces)],
           object_geoms=[dict(type="mesh", mesh="ring")],
-          keys=[([xk, 0, 0], [1, 0, 0, 0]), ([0.0, 0, 0], [1, 0, 0, 0]), ([0.0, 0, 0], quat_z(-np.pi / 2))],
+          keys=[([xk, 0, 0], [1, 0, 0, 0]), ([xs, 0, 0], [1, 0, 0, 0]), ([xs, 0, 0], quat_z(-np.pi / 2))],
           fixed_center=[-rok - CLAMP_KNOCK["base_depth"], 0, 0], fixed_half=[0.0004, 0.005, 0.005],
           obj=dict(body="object", samples=2000, rot_length_scale=0.005),
           sim=dict(steps=40, fix_all_axes=True))

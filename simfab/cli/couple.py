@@ -94,11 +94,12 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     from simfab._warp import device as check_device
     from simfab.coupling.outputs import write_all
     from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import check_start, simulate
     from simfab.progress import log
 
     dev = check_device(device)
     cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}}, device=dev)
+    check_start(cm)
     log(f"couple: {cm.name}: {cm.fem.n_elements} elements, {len(cm.field.vertices)} object samples, "
         f"{len(cm.s_steps) - 1} steps", quiet=quiet)
     res = simulate(cm, quiet=quiet)

@@ -19,6 +19,10 @@ DHAT_REL = 1e-2
 PSI_LIPSCHITZ = 2.0
 #: Fraction of the distance to O a point may travel in one Newton step (conservative advancement).
 STEP_FRACTION = 0.9
+#: Lazy contact evaluation: points certified (by the Lipschitz bound) farther than
+#: max(LAZY_BAND_DHATS * d_hat, LAZY_BAND_SIGMAS * sigma) from O are not re-evaluated.
+LAZY_BAND_DHATS = 4.0
+LAZY_BAND_SIGMAS = 0.5
 #: Newton: stop when the step is below this fraction of h_A ...
 NEWTON_STEP_TOL_REL = 1e-7
 #: ... or the free-dof force residual is below this fraction of E * h_A^2 (3D) / E * h_A * t (2D).
@@ -28,6 +32,10 @@ NEWTON_MAX_ITER = 100
 PREDICTOR_PENALTY = 1e4
 #: Predictor: retries carrying newly infeasible points fully with O before bisecting the step.
 PREDICTOR_RETRIES = 3
+#: Refinement density limits when it is doubled because refined facets still penetrate O by more
+#: than the tolerance between their points (2D: points per edge, 3D: face lattice order).
+MAX_EDGE_SAMPLES = 160
+MAX_FACE_LATTICE = 16
 #: Step bisection depth when a step cannot be taken in one go (2^-6 of h_in at most).
 MAX_BISECTIONS = 6
 #: Hessian regularization (relative to mean |diag H|) for the rigid modes left free by the

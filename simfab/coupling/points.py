@@ -72,14 +72,16 @@ def face_weights(order: int) -> np.ndarray:
     return np.array(out)
 
 
-def facet_weights(dim: int, samples_per_edge: int, face_lattice: int) -> np.ndarray:
-    """Interpolation weights of refinement points on one boundary facet (2D edge / 3D face)."""
-    return edge_weights(samples_per_edge) if dim == 2 else face_weights(face_lattice)
+def facet_weights(dim: int, order: int) -> np.ndarray:
+    """Refinement points on one boundary facet: ``order`` points inside an edge (2D) or the
+    barycentric lattice of ``order`` on a face (3D)."""
+    return edge_weights(order) if dim == 2 else face_weights(order)
 
 
-def check_weights(dim: int, samples_per_edge: int, face_lattice: int) -> np.ndarray:
-    """Denser weights used to verify facets (contain the refinement points and points between them)."""
-    return edge_weights(2 * samples_per_edge + 1) if dim == 2 else face_weights(2 * face_lattice)
+def check_weights(dim: int, order: int) -> np.ndarray:
+    """Denser check points of a facet: they contain the refinement points of ``order`` and the
+    midpoints between them."""
+    return edge_weights(2 * order + 1) if dim == 2 else face_weights(2 * order)
 
 
 def facet_points(facets: np.ndarray, facet_ids: np.ndarray, weights: np.ndarray) -> ContactPoints:

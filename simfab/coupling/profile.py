@@ -60,7 +60,7 @@ def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarr
     i_max = int(np.argmax(E))
     tol = C.ENERGY_REL_TOL * max(E_max, 0.0)
     i_ss = steady_state_index(E, tol)
-    if E_max <= 0 or i_ss <= i_max:
+    if E_max <= 0 or i_ss <= i_max or E[i_ss] >= E_max - tol:
         category, E_ss, i_ss = "ejects", E_max, i_max
     else:
         E_ss = float(E[i_ss])

@@ -196,14 +196,41 @@ class _StepObjective:
         self.last_x = None
         self.last_d = None
         self.last_H = None
-        self.last_contact_grad = None
+        # Lazy evaluation: psi is L-Lipschitz, so a point that was at distance d_ref when last
+        # evaluated exactly (at y_ref) is still at least d_ref - L |y - y_ref| away. Points whose
+        # bound stays above the band need no evaluation (their barrier term is exactly zero).
+        self.band = max(C.LAZY_BAND_DHATS * cm.dhat, C.LAZY_BAND_SIGMAS * cm.field.sigma)
+        self.y_ref = None
+        self.d_ref = None
 
     def distances(self, x: np.ndarray, hessian: bool):
+        """(d (k,) [m], grad d (k, dim), hess d (k, dim, dim) or None): exact near O, lower bounds
+        (zero derivatives) for points certified farther than the band."""
         t0 = time.perf_counter()
         y = self.points.positions(x)
-        ev = self.cm.field.evaluate(y, (self.R, self.p), hessian=hessian, hessian_band=self.cm.dhat)
+        k, dim = len(y), self.dim
+        if self.y_ref is None:
+            todo = np.arange(k)
+            bound = None
+        else:
+            bound = self.d_ref - C.PSI_LIPSCHITZ * np.linalg.norm(y - self.y_ref, axis=1)
+            todo = np.flatnonzero(bound < self.band)
+        d = np.empty(k) if bound is None else bound.copy()
+        gd = np.zeros((k, dim))
+        hd = np.zeros((k, dim, dim)) if hessian else None
+        if len(todo):
+            ev = self.cm.field.evaluate(y[todo], (self.R, self.p), hessian=hessian, hessian_band=self.cm.dhat)
+            d[todo] = -ev.psi
+            gd[todo] = -ev.grad
+            if hessian:
+                hd[todo] = -ev.hess
+            if self.y_ref is None:
+                self.y_ref, self.d_ref = y.copy(), d.copy()
+            elif hessian:  # re-anchor at accepted iterates only (need_hessian marks them)
+                self.y_ref[todo] = y[todo]
+                self.d_ref[todo] = d[todo]
         self.timer.add("contact", time.perf_counter() - t0)
-        return -ev.psi, ev
+        return d, gd, hd
 
     def __call__(self, xf: np.ndarray, need_hessian: bool):
         """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O."""
@@ -219,22 +246,24 @@ class _StepObjective:
         self.timer.add("assembly", time.perf_counter() - t0)
         if not np.isfinite(E):
             return np.inf, g.ravel(), H
-        d, ev = self.distances(x, need_hessian)
+        d, gd, hd = self.distances(x, need_hessian)
         t0 = time.perf_counter()
         if np.any(d <= 0):
             return np.inf, g.ravel(), H
-        B, gy, Hy = point_barrier(d, -ev.grad, -ev.hess if need_hessian else None, cm.dhat, cm.kappa)
-        gc = self.points.scatter(gy, self.n)
+        act = d < cm.dhat
+        B, gy, Hy = point_barrier(d[act], gd[act], hd[act] if need_hessian else None, cm.dhat, cm.kappa)
+        g_pts = np.zeros_like(gd)
+        g_pts[act] = gy
+        gc = self.points.scatter(g_pts, self.n)
         if need_hessian:
-            act = d < cm.dhat
             if act.any():
-                blocks = self.wpair[act][:, :, :, None, None] * Hy[act][:, None, None, :, :]
+                blocks = self.wpair[act][:, :, :, None, None] * Hy[:, None, None, :, :]
                 np.add.at(H.data, self.slots[act].ravel(), blocks.ravel())
             reg = C.RIGID_MODE_REG * float(np.abs(H.data[self.diag]).mean())
             H.data[self.diag] += reg
             self.last_x = xf.copy()
             self.last_d = d
-            self.last_gd = -ev.grad
+            self.last_gd = gd
             self.last_H = H
         self.timer.add("contact", time.perf_counter() - t0)
         return E + B, (g + gc).ravel(), H
@@ -252,8 +281,7 @@ class _StepObjective:
         if self.last_x is not None and np.array_equal(self.last_x, xf):
             d, gd = self.last_d, self.last_gd
         else:
-            d, ev = self.distances(xf.reshape(self.n, self.dim), False)
-            gd = -ev.grad
+            d, gd, _ = self.distances(xf.reshape(self.n, self.dim), False)
         dy = self.points.positions(dx.reshape(self.n, self.dim))
         sp = np.linalg.norm(dy, axis=1)
         m = sp > 0
@@ -284,6 +312,7 @@ class _State:
     s: float
     points: ContactPoints
     refined: set
+    order: int  # refinement density (2D: points per edge, 3D: face lattice order), doubled on demand
     H: object = None  # last Hessian (for the predictor)
 
 
@@ -303,9 +332,10 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     dim = cm.dim
     bverts = np.asarray(fem.boundary_vertices, dtype=np.int64)
     points = vertex_points(bverts, dim)
-    state = _State(x=np.array(fem.rest, dtype=np.float64), s=0.0, points=points, refined=set())
+    order = cm.options.samples_per_edge if dim == 2 else cm.options.face_lattice
+    state = _State(x=np.array(fem.rest, dtype=np.float64), s=0.0, points=points, refined=set(), order=order)
     ctx = dict(timer=timer, solver=PatternCholesky())
-    _check_start(cm, state, ctx)
+    check_start(cm)
     steps = []
     for k in progress(range(len(cm.s_steps)), total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
         s = float(cm.s_steps[k])
@@ -322,10 +352,10 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     return InsertionResult(model=cm, steps=steps, seconds=time.perf_counter() - t_start, timings=dict(timer.t))
 
 
-def _check_start(cm: CouplingModel, state: _State, ctx) -> None:
-    """O must start outside A: every boundary vertex outside O and no facet crossing it."""
+def check_start(cm: CouplingModel) -> None:
+    """InputError unless O starts outside A (every boundary vertex of A outside O at s = 0)."""
     R, p = cm.pose(0.0)
-    y = state.points.positions(state.x)
+    y = cm.fem.rest[np.asarray(cm.fem.boundary_vertices)]
     ev = cm.field.evaluate(y, (R, p), hessian=False)
     if np.any(ev.psi >= 0):
         raise InputError(f"the object starts inside the compliant part ({int((ev.psi >= 0).sum())} vertices inside "
@@ -398,8 +428,11 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         if not new:
             state.x, state.s, state.H = x, s_new, obj.last_H
             return total
-        # restart the step from the previous state, which is feasible for the new points
+        # restart the step from the previous state, which is feasible for the new points (new
+        # facets were outside O there; denser points of refined facets were within the tolerance
+        # and are pushed out first)
         _add_refinement(cm, state, new)
+        _restore_feasibility(cm, state, ctx)
     raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")
 
 
@@ -458,6 +491,27 @@ def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
     if d_new is not None and np.all(d_new > 0):
         return x0
     raise ConvergenceError(f"no feasible warm start for the step to s={s_new:.6g} m")
+
+
+def _restore_feasibility(cm: CouplingModel, state: _State, ctx) -> None:
+    """Push constraint points that are inside O at (state.x, state.s) (by at most the tolerance)
+    out along O's normal to d_hat / 2, A following through the penalty solve."""
+    R, p = cm.pose(state.s)
+    pts = state.points
+    for _ in range(C.PREDICTOR_RETRIES + 1):
+        ev = cm.field.evaluate(pts.positions(state.x), (R, p), hessian=False)
+        d = -ev.psi
+        bad = d <= 0
+        if not bad.any():
+            return
+        g = -ev.grad
+        nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+        delta = (0.5 * cm.dhat - np.minimum(d, 0.0))[:, None] * nrm
+        x1 = _penalty_solve(cm, state, state.x, pts, bad, np.zeros_like(bad), nrm, delta, ctx)
+        if _feasible_distances(cm, x1, state.s, pts, ctx) is None:
+            break
+        state.x = x1
+    raise ConvergenceError(f"could not push the new refinement points out of the object at s={state.s:.6g} m")
 
 
 def _feasible_distances(cm, x0, s, pts, ctx):
@@ -529,18 +583,30 @@ def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarr
 
 
 def _crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: _State) -> list:
-    """Unrefined boundary facets near O whose interior crosses into O at (x, s)."""
+    """Facets to (re)refine at (x, s): unrefined boundary facets near O whose interior crosses into
+    O, and, when a refined facet still penetrates O by more than the tolerance between its points,
+    every refined facet again at twice the density (returned as the full list)."""
     if not cm.options.refine:
         return []
-    ids, psi = _facet_check(cm, x, s)
+    ids, psi = _facet_check(cm, x, s, state.order)
     if len(ids) == 0:
         return []
-    cw = check_weights(cm.dim, cm.options.samples_per_edge, cm.options.face_lattice)
-    hit = (psi.reshape(len(ids), len(cw)) > 0).any(axis=1)
-    return [int(f) for f in ids[hit] if int(f) not in state.refined]
+    cw = check_weights(cm.dim, state.order)
+    psi = psi.reshape(len(ids), len(cw))
+    refined = np.array([int(f) in state.refined for f in ids], dtype=bool)
+    if np.any(psi[refined] > cm.tol):
+        limit = C.MAX_EDGE_SAMPLES if cm.dim == 2 else C.MAX_FACE_LATTICE
+        if 2 * state.order > limit:
+            raise ConvergenceError(f"refinement at density {state.order} still leaves a penetration of "
+                                   f"{psi[refined].max():.3e} m > {cm.tol:.3e} m at s={s:.6g} m")
+        state.order = 2 * state.order + (1 if cm.dim == 2 else 0)  # new points = the old check points
+        _rebuild_points(cm, state)
+        return sorted(state.refined | {int(f) for f in ids[(psi > 0).any(axis=1)]})
+    hit = (psi > 0).any(axis=1) & ~refined
+    return [int(f) for f in ids[hit]]
 
 
-def _facet_check(cm: CouplingModel, x: np.ndarray, s: float):
+def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, order: int):
     """psi at dense check points of the facets that could reach into O: (facet ids, psi (f*p,))."""
     facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
     R, p = cm.pose(s)
@@ -554,17 +620,24 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float):
     ids = np.flatnonzero(near)
     if len(ids) == 0:
         return ids, np.zeros(0)
-    cw = check_weights(cm.dim, cm.options.samples_per_edge, cm.options.face_lattice)
-    cp = facet_points(facets, ids, cw)
+    cp = facet_points(facets, ids, check_weights(cm.dim, order))
     ev = cm.field.evaluate(cp.positions(x), (R, p), hessian=False)
     return ids, ev.psi
 
 
-def _add_refinement(cm: CouplingModel, state: _State, facet_ids: list) -> None:
+def _rebuild_points(cm: CouplingModel, state: _State) -> None:
+    """Constraint points = boundary vertices + refinement points of every refined facet."""
     facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
-    w = facet_weights(cm.dim, cm.options.samples_per_edge, cm.options.face_lattice)
-    state.points = state.points.concat(facet_points(facets, np.array(facet_ids), w))
-    state.refined.update(facet_ids)
+    pts = vertex_points(np.asarray(cm.fem.boundary_vertices, dtype=np.int64), cm.dim)
+    if state.refined:
+        ids = np.array(sorted(state.refined))
+        pts = pts.concat(facet_points(facets, ids, facet_weights(cm.dim, state.order)))
+    state.points = pts
+
+
+def _add_refinement(cm: CouplingModel, state: _State, facet_ids: list) -> None:
+    state.refined.update(int(f) for f in facet_ids)
+    _rebuild_points(cm, state)
 
 
 def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
@@ -592,7 +665,7 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     if not min_det > 0:
         raise ConvergenceError(f"an element is inverted at s={state.s:.6g} m (min det F = {min_det:.3e})")
     vm = von_mises(cm.fem, x)
-    ids, psi_check = _facet_check(cm, x, state.s)
+    ids, psi_check = _facet_check(cm, x, state.s, state.order)
     pen = float(max(0.0, ev.psi.max(initial=-np.inf), psi_check.max(initial=-np.inf)))
     if pen > cm.tol:
         raise ConvergenceError(f"penetration {pen:.3e} m exceeds the tolerance {cm.tol:.3e} m at s={state.s:.6g} m")

@@ -1,0 +1,85 @@
+"""``simfab couple``: outputs of a run, and bad input -> exit 2 with one line, no outputs."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from simfab.cli import main
+from simfab.coupling.scene import bundled_dir
+
+SUMMARY_KEYS = {"category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises",
+                "max_penetration", "min_det_F", "steps", "newton_iterations", "seconds", "profile_csv", "profile_json",
+                "plot_png", "usd", "mjcf"}
+
+
+def test_simulate_writes_profile_plot_usd_and_mjcf(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["couple", "simulate", "clip2d_loose", "--steps", "10", "--out", str(out), "--json"]) == 0
+    stdout = capsys.readouterr().out
+    summary = json.loads(stdout)  # exactly one JSON object
+    assert SUMMARY_KEYS <= set(summary) and summary["steps"] == 10
+    for k in ("profile_csv", "profile_json", "plot_png", "usd", "mjcf"):
+        assert (out / summary[k].split("/")[-1]).is_file()
+    rows = np.genfromtxt(summary["profile_csv"], delimiter=",", names=True)
+    assert len(rows) == 11 and rows["energy_J"].max() == pytest.approx(summary["E_max"])
+    from simfab.io.usd import read_mesh_at
+
+    meshes = {name: V for name, V, F, rgb in read_mesh_at(summary["usd"], 10)}
+    assert any("part" in k for k in meshes) and any("object" in k for k in meshes)
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_path(summary["mjcf"])
+    assert m.nkey == 11 and m.nmocap == 1
+
+
+def _run_err(args, capsys):
+    code = main(args)
+    err = capsys.readouterr().err.strip().splitlines()
+    return code, err
+
+
+@pytest.mark.parametrize("args", [
+    ["couple", "simulate", "no_such_scene"],
+    ["couple", "simulate", "cclamp2d", "--steps", "0"],
+    ["couple", "simulate", "cclamp2d", "--h-in", "-0.001"],
+    ["couple"],
+])
+def test_bad_arguments_exit_2_with_one_line(args, tmp_path, capsys):
+    out = tmp_path / "out"
+    code, err = _run_err(args + ["--out", str(out)], capsys)
+    assert code == 2 and len(err) == 1 and err[0].startswith("simfab: error:")
+    assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.parametrize("edit, where", [
+    (("[simulation]", "[simulation]\nstepz = 3"), "stepz"),
+    (("samples = 50", "samples = 2"), "samples"),
+    (('generator = "c_clamp"', 'generator = "spiral"'), "generator"),
+    (("opening_deg = 60.0", "opening_deg = 200.0"), "opening_deg"),
+    (('name = "PLA"', 'name = "unobtainium"'), "material"),
+])
+def test_bad_scene_files_exit_2_naming_the_field(edit, where, tmp_path, capsys):
+    src = bundled_dir()
+    shutil.copy(src / "cclamp2d.xml", tmp_path / "s.xml")
+    text = (src / "cclamp2d.toml").read_text()
+    assert edit[0] in text
+    (tmp_path / "s.toml").write_text(text.replace(edit[0], edit[1]))
+    out = tmp_path / "out"
+    code, err = _run_err(["couple", "simulate", str(tmp_path / "s.xml"), "--out", str(out)], capsys)
+    assert code == 2 and len(err) == 1 and where in err[0]
+    assert not out.exists()
+
+
+def test_object_starting_inside_the_part_is_an_input_error(tmp_path, capsys):
+    src = bundled_dir()
+    xml = (src / "cclamp2d.xml").read_text()
+    import re
+
+    # move the first keyframe (and the mocap body) to the clamp's centre: O overlaps A
+    xml = re.sub(r'<key name="k0" mpos="[^"]*"', '<key name="k0" mpos="0 0 0"', xml)
+    (tmp_path / "s.xml").write_text(xml)
+    shutil.copy(src / "cclamp2d.toml", tmp_path / "s.toml")
+    code, err = _run_err(["couple", "simulate", str(tmp_path / "s.xml"), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and len(err) == 1 and "inside" in err[0]

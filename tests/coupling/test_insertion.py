@@ -1,0 +1,96 @@
+"""Insertion simulation: bundled scenes end every step without penetration or inversion and land
+in their intended categories; forces are consistent with the energy profile; refinement catches
+penetrations the vertices alone miss."""
+
+import numpy as np
+import pytest
+
+from simfab.coupling.config import InsertionOptions
+from simfab.coupling.outputs import summarize
+from simfab.coupling.scene import load_coupling_scene
+from simfab.coupling.simulate import make_coupling_model, simulate
+from simfab.errors import ConvergenceError
+
+CATEGORY = {"cclamp2d": "tight", "clip2d_loose": "loose", "clip2d_eject": "ejects"}
+
+
+@pytest.fixture(scope="module")
+def runs():
+    return {name: simulate(load_coupling_scene(name)) for name in CATEGORY}
+
+
+def _check_every_step(res):
+    tol = res.model.tol
+    assert len(res.steps) == len(res.model.s_steps)
+    for r in res.steps:
+        assert r.penetration <= tol, f"s={r.s}: penetration {r.penetration} > {tol}"
+        assert r.min_det_F > 0, f"s={r.s}: inverted element"
+        assert np.all(np.isfinite(r.x)) and np.isfinite(r.energy) and np.isfinite(r.force)
+
+
+@pytest.mark.parametrize("name", sorted(CATEGORY))
+def test_2d_scenes_every_step_feasible_and_category(runs, name):
+    res = runs[name]
+    _check_every_step(res)
+    prof, summary = summarize(res)
+    assert prof.category == CATEGORY[name]
+    assert summary["max_penetration"] <= res.model.tol and summary["min_det_F"] > 0
+    # the object really engaged the part: a non-trivial peak energy and resisting force
+    assert prof.E_max > 1e-4 and prof.F_in > 1.0
+
+
+def test_insertion_force_is_minus_the_energy_slope(runs):
+    # Quasi-static and frictionless: the work of the insertion force equals the change of stored
+    # energy, F(s) = -dE/ds (the barrier energy is negligible: d_hat = 1e-2 h_A). Central
+    # differences on the 35-step profile, compared where the profile is smooth (both neighbours
+    # in contact); tolerance 5% of the peak force (discretization of the derivative, O(h_in^2)).
+    res = runs["cclamp2d"]
+    s, E, F = res.column("s"), res.column("energy"), res.column("force")
+    dEds = (E[2:] - E[:-2]) / (s[2:] - s[:-2])
+    inner = (E[:-2] > 0.02 * E.max()) & (E[2:] > 0.02 * E.max())
+    assert inner.sum() > 15
+    err = np.abs(F[1:-1][inner] + dEds[inner])
+    assert err.max() <= 0.05 * np.abs(F).max()
+
+
+def test_3d_clip_every_step_feasible_and_tight():
+    res = simulate(load_coupling_scene("clip3d", overrides={"simulation": {"steps": 12}}))
+    _check_every_step(res)
+    prof, _ = summarize(res)
+    assert prof.category == "tight" and prof.F_grip > 0
+
+
+def _coarse_block_model(refine: bool):
+    """A 4 x 2 mm PLA block of two triangles (its top edge is a single 4 mm edge) and a circle of
+    radius 3 mm pushed down onto the middle of that edge until its vertices are 0.12 mm outside
+    the circle while the circle reaches 0.6 mm below the undeformed edge."""
+    from simfab.contact.imls import build_imls, curve_normals
+    from simfab.coupling.geometry import circle_samples
+    from simfab.fem.materials import PLA
+    from simfab.fem.model import make_model
+    from simfab.io.mjcf import Trajectory
+
+    P = np.array([[-2, -2], [2, -2], [2, 0], [-2, 0]]) * 1e-3
+    T = np.array([[0, 1, 2], [0, 2, 3]])
+    fem = make_model(P, T, PLA, thickness=1e-3)
+    v, _ = circle_samples(3e-3, 200)
+    fld = build_imls(v, curve_normals(v))
+    path = Trajectory(np.array([[0, 3.3e-3, 0], [0, 2.4e-3, 0]]), np.array([[1.0, 0, 0, 0]] * 2))
+    opts = InsertionOptions(steps=4, fix_all_axes=True, refine=refine, samples_per_edge=20)
+    return make_coupling_model(name="block", fem=fem, field=fld, path=path, fixed_vertices=[0, 1], options=opts,
+                               object_vertices=v)
+
+
+def test_refinement_catches_a_penetration_the_vertices_miss():
+    cm = _coarse_block_model(refine=False)
+    R, p = cm.pose(cm.s_steps[-1])
+    assert np.all(cm.field.evaluate(cm.fem.rest, (R, p), hessian=False).psi < 0)  # vertices all outside
+    with pytest.raises(ConvergenceError, match="penetration"):
+        simulate(cm)  # vertex constraints alone let the circle cut through the top edge
+    res = simulate(_coarse_block_model(refine=True))
+    _check_every_step(res)
+    last = res.steps[-1]
+    assert last.contact_points > 4  # refinement points were added on the top edge
+    assert last.energy > 0 and last.force < 0  # the block is pushed down and resists
+    top = last.x[[2, 3], 1]
+    assert np.all(top < -1e-4)  # the edge moved down under the circle instead of being crossed

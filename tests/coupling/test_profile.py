@@ -1,0 +1,49 @@
+"""Deformation-profile analysis on synthetic profiles with known answers."""
+
+import numpy as np
+import pytest
+
+from simfab.coupling.profile import analyze, steady_state_index
+
+S = np.linspace(0.0, 0.01, 41)
+
+
+def _bump(s, center, width):
+    return np.exp(-((s - center) / width) ** 2)
+
+
+def test_tight_profile_finds_the_dip_after_the_peak():
+    # energy rises to a peak, dips to a non-zero minimum, then rises a little at the end
+    E = 1.0 * _bump(S, 0.004, 0.002) + 0.3 * _bump(S, 0.0105, 0.002)
+    F = -np.gradient(E, S)
+    p = analyze(S, E, F, np.linspace(0, 2, S.size))
+    assert p.category == "tight"
+    assert p.index_max == int(np.argmax(E))
+    # E_ss: the first local minimum seen from the end lies between the two bumps
+    k = p.index_ss
+    assert 0.004 < S[k] < 0.0105 and E[k - 1] >= E[k] <= E[k + 1]
+    assert p.E_ss == pytest.approx(E[k]) and 0 < p.coupling_ratio < 100
+    assert p.F_in == pytest.approx(-F.min()) and p.F_rm == pytest.approx(F.max())
+    assert p.F_grip == pytest.approx(np.linspace(0, 2, S.size)[k])
+
+
+def test_loose_profile_has_zero_steady_state_energy():
+    E = np.where(S < 0.007, _bump(S, 0.004, 0.0015), 0.0)
+    E[S >= 0.007] = 0.0
+    p = analyze(S, E, -np.gradient(E, S), np.zeros_like(S))
+    assert p.category == "loose" and p.E_ss == 0.0 and p.coupling_ratio == 0.0
+    assert S[p.index_ss] == S[-1]
+
+
+def test_monotonic_profile_ejects_and_uses_e_max_as_steady_state():
+    E = np.maximum(S - 0.002, 0.0) ** 2
+    p = analyze(S, E, -np.gradient(E, S), np.zeros_like(S))
+    assert p.category == "ejects" and p.E_ss == p.E_max and p.coupling_ratio == 100.0
+    assert p.index_ss == p.index_max == S.size - 1
+
+
+def test_plateau_and_noise_below_tolerance_do_not_create_minima():
+    E = np.r_[np.zeros(5), 1.0, 2.0, 3.0, 3.0 + 1e-12, 3.0]
+    assert steady_state_index(E, 1e-9) == E.size - 1  # flat end: the end itself is the minimum seen
+    p = analyze(np.arange(E.size) * 1.0, E, np.zeros_like(E), np.zeros_like(E))
+    assert p.category == "ejects"
