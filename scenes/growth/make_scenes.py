@@ -36,6 +36,10 @@ class Doc:
         self.bodies = []
         self.sites = []
 
+    def _assets(self):
+        meshes = getattr(self, "meshes", [])
+        return "  <asset>\n" + "\n".join(meshes) + "\n  </asset>\n" if meshes else ""
+
     def body(self, name, geoms, pos=(0, 0, 0), quat=(1, 0, 0, 0), rgba="0.7 0.7 0.75 1"):
         g = "\n".join(f'      <geom type="{t}" size="{f(s)}" pos="{f(p)}" rgba="{rgba}"/>' for t, s, p in geoms)
         self.bodies.append(f'    <body name="{name}" pos="{f(pos)}" quat="{f(quat)}">\n{g}\n    </body>')
@@ -52,7 +56,7 @@ class Doc:
 <mujoco model="{self.name}">
   <compiler angle="radian"/>
   <visual><global offwidth="1280" offheight="960"/></visual>
-  <worldbody>
+{self._assets()}  <worldbody>
     <light pos="0 0 1" dir="0 0 -1" directional="true"/>
 {chr(10).join(self.bodies)}
 {chr(10).join(self.sites)}
@@ -244,6 +248,49 @@ targets = [["target_0", "target_1"], ["target_2", "target_3"], ["target_4"]]
 """)
 
 
+def _vase_solid():
+    """A thick-walled vase (surface of revolution) with a 60 degree wedge broken out, gap
+    centred on +x: returns (vertices, faces, profile (z, r_outer, r_inner)).
+
+    The wall cross-section (outer and inner radius over height, a closed base) is revolved
+    by 300 degrees with manifold3d and turned so that the missing wedge spans -30..30 deg.
+    """
+    import manifold3d as m3
+
+    H, t, zb = 0.14, 0.004, 0.006
+    z = np.linspace(0.0, H, 15)
+    ro = 0.035 + 0.018 * np.sin(np.pi * z / H * 1.2)
+    ri = ro - t
+    inner = [(r, zz) for r, zz in zip(ri[::-1], z[::-1]) if zz >= zb]
+    poly = [(0.0, 0.0)] + list(zip(ro, z)) + inner + [(float(np.interp(zb, z, ri)), zb), (0.0, zb)]
+    solid = m3.Manifold.revolve(m3.CrossSection([np.array(poly)]), 48, 300.0).rotate((0.0, 0.0, 30.0))
+    mesh = solid.to_mesh64()
+    return np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts), (z, ro, ri)
+
+
+def vase():
+    d = Doc("vase_restoration", "Broken vase: a 60 degree wedge of the wall is missing; the grown part restores it.")
+    desk(d, half=(0.08, 0.08))
+    V, F, (z, ro, ri) = _vase_solid()
+    d.meshes = getattr(d, "meshes", []) + [f'    <mesh name="vase" vertex="{f(V.ravel())}" face="{" ".join(str(int(i)) for i in F.ravel())}"/>']
+    d.bodies.append('    <body name="vase">\n      <geom type="mesh" mesh="vase" rgba="0.75 0.55 0.45 1"/>\n    </body>')
+
+    def on_cut(angle_deg, zz):
+        r = 0.5 * (np.interp(zz, z, ro) + np.interp(zz, z, ri))
+        a = math.radians(angle_deg)
+        return [r * math.cos(a), r * math.sin(a), zz]
+
+    d.site("root_0", on_cut(-30.0, 0.03))
+    for i, (ang, zz) in enumerate([(30.0, 0.03), (30.0, 0.08), (30.0, 0.125), (-30.0, 0.08), (-30.0, 0.125)]):
+        d.site(f"target_{i}", on_cut(ang, zz))
+    d.write("""
+# Vase restoration: volume attractors in the box around the missing wedge of the wall.
+[growth]
+mode = "volume"
+box = [[0.028, -0.032, 0.005], [0.062, 0.032, 0.14]]
+""")
+
+
 if __name__ == "__main__":
     phone_stand()
     egg("egg_holder_volume", "volume")
@@ -253,3 +300,4 @@ if __name__ == "__main__":
     symmetric_stand()
     projection()
     guided()
+    vase()
