@@ -56,7 +56,7 @@ class BeamSetup:
     poisson: float = 0.35
     axial_ratio: float = 1e8
     imperfection: float = 1e-3
-    max_increment: float = 0.025
+    max_increment: float = 0.1
 
     def __post_init__(self):
         for f in fields(self):

@@ -18,6 +18,22 @@ from __future__ import annotations
 import numpy as np
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (k,3) arrays (np.cross has a large fixed overhead)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
+
+
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot product (k,) of (k,3) arrays."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
 def normalize(v: np.ndarray) -> np.ndarray:
     """Rows of ``v`` (..., 3) scaled to unit length."""
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
@@ -29,24 +45,24 @@ def parallel_transport(v: np.ndarray, t1: np.ndarray, t2: np.ndarray) -> np.ndar
     Uses the rotation about ``b = t1 x t2`` written without trigonometry:
     ``P v = (t1.t2) v + b x v + (b.v) b / (1 + t1.t2)`` (exact for ``t1.t2 > -1``).
     """
-    b = np.cross(t1, t2)
-    c = np.einsum("ij,ij->i", t1, t2)[:, None]
-    bv = np.einsum("ij,ij->i", b, v)[:, None]
-    return c * v + np.cross(b, v) + bv * b / (1.0 + c)
+    b = cross(t1, t2)
+    c = dot(t1, t2)[:, None]
+    bv = dot(b, v)[:, None]
+    return c * v + cross(b, v) + bv * b / (1.0 + c)
 
 
 def signed_angle(u: np.ndarray, v: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Signed angle (k,) from ``u`` to ``v`` about the axis ``n`` (rows; u, v orthogonal to n)."""
-    w = np.cross(u, v)
-    return np.arctan2(np.einsum("ij,ij->i", w, n), np.einsum("ij,ij->i", u, v))
+    w = cross(u, v)
+    return np.arctan2(dot(w, n), dot(u, v))
 
 
 def rotate_about(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Rotate rows of ``v`` about unit ``axis`` rows by ``angle`` (Rodrigues)."""
     c = np.cos(angle)[:, None]
     s = np.sin(angle)[:, None]
-    ad = np.einsum("ij,ij->i", axis, v)[:, None]
-    return v * c + np.cross(axis, v) * s + axis * ad * (1.0 - c)
+    ad = dot(axis, v)[:, None]
+    return v * c + cross(axis, v) * s + axis * ad * (1.0 - c)
 
 
 def tangents(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
@@ -56,7 +72,7 @@ def tangents(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
 
 def material_frames(d1: np.ndarray, t: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Material directors ``(m1, m2)`` (E,3) from reference ``d1``, tangent ``t`` and ``theta`` (E,)."""
-    d2 = np.cross(t, d1)
+    d2 = cross(t, d1)
     c = np.cos(theta)[:, None]
     s = np.sin(theta)[:, None]
     return c * d1 + s * d2, -s * d1 + c * d2
@@ -97,7 +113,7 @@ def reference_twist(d1: np.ndarray, t: np.ndarray, hinge_edges: np.ndarray, prev
 def transport_directors(d1: np.ndarray, t_old: np.ndarray, t_new: np.ndarray) -> np.ndarray:
     """Time-parallel transport of reference directors (E,3) from old to new tangents (re-orthonormalized)."""
     d = parallel_transport(d1, t_old, t_new)
-    d -= np.einsum("ij,ij->i", d, t_new)[:, None] * t_new
+    d -= dot(d, t_new)[:, None] * t_new
     return normalize(d)
 
 
