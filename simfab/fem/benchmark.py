@@ -14,8 +14,8 @@ prints one JSON object: per tet-mesh size, the median wall time [ms] of
 - ``newton_static``: a full static solve (clamped beam-like block under an end load) with
   :func:`simfab.solve.newton.minimize`, and its iteration count.
 
-Also a 2D plane-strain mesh of ~450 triangles. Meshes: fTetWild / Triangle on a box / rectangle
-(same element counts as the reference insertion benchmarks, within the mesher's tolerance).
+Also a 2D plane-strain mesh of ~450 triangles. Meshes: a structured tet box (element counts of
+the reference insertion models within a few %) and a Triangle mesh of a rectangle.
 A ``tools/benchmarks`` entry can re-export :func:`run`.
 """
 
@@ -42,24 +42,17 @@ def _median_ms(fn, repeat: int) -> float:
 
 
 def _box_model(target_tets: int):
-    import trimesh
-
+    """Structured 3:1:1 box of 6-tet cubes with about ``target_tets`` tets (valence like fTetWild's)."""
     from simfab.fem.materials import PLA
-    from simfab.fem.meshing import tetrahedralize
+    from simfab.fem.meshing import structured_box
     from simfab.fem.model import make_model
 
-    box = trimesh.creation.box([0.06, 0.02, 0.02])
-    # fTetWild's count is approximate: bisect the target so the mesh lands within ~10%
-    lo, hi, best = target_tets * 0.3, target_tets * 3.0, None
-    for _ in range(8):
-        guess = int(np.sqrt(lo * hi))
-        V, T = tetrahedralize(box.vertices, box.faces, target_tets=guess)
-        if best is None or abs(len(T) - target_tets) < abs(len(best[1]) - target_tets):
-            best = (V, T)
-        if abs(len(T) - target_tets) <= 0.1 * target_tets:
-            break
-        lo, hi = (guess, hi) if len(T) < target_tets else (lo, guess)
-    return make_model(best[0], best[1], PLA)
+    # cells (nx, ny, ny) with nx / ny in [2, 4], 6 nx ny^2 closest to the target
+    options = [(max(1, round(target_tets / (6.0 * ny * ny))), ny, ny) for ny in range(1, 60)]
+    options = [c for c in options if 2 <= c[0] / c[1] <= 4] or options
+    cells = min(options, key=lambda c: abs(6 * c[0] * c[1] * c[2] - target_tets))
+    V, T = structured_box((0.06, 0.02, 0.02), cells)
+    return make_model(V, T, PLA)
 
 
 def _rect_model(target_tris: int):
@@ -78,8 +71,7 @@ def _static(model, rng):
     from simfab.solve.newton import minimize
 
     X = model.rest
-    # slabs rather than planes: fTetWild moves surface vertices within its envelope, so a plane
-    # could hold too few vertices to clamp the rigid modes
+    # slabs rather than planes, so unstructured meshes also clamp the rigid modes
     clamped = X[:, 0] <= X[:, 0].min() + 0.05 * np.ptp(X[:, 0])
     end = X[:, 0] >= X[:, 0].max() - 0.05 * np.ptp(X[:, 0])
     f = np.zeros_like(X)

@@ -122,3 +122,36 @@ def _enclosed_volume(v: np.ndarray, f: np.ndarray) -> float:
     """Signed volume enclosed by an outward-oriented triangle surface (divergence theorem)."""
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def structured_box(lengths, cells):
+    """Tetrahedral mesh of the box [0, lx] x [0, ly] x [0, lz]: nx*ny*nz cubes of 6 tets each
+    (Freudenthal/Kuhn split along the main diagonal, conforming across cubes).
+
+    lengths : (lx, ly, lz) [m]; cells : (nx, ny, nz) >= 1. Returns V ((nx+1)(ny+1)(nz+1), 3) float64
+    and T (6 nx ny nz, 4) int32, positively oriented.
+    """
+    lx, ly, lz = (float(v) for v in lengths)
+    nx, ny, nz = (int(c) for c in cells)
+    if min(nx, ny, nz) < 1 or not min(lx, ly, lz) > 0:
+        raise InputError(f"box needs positive lengths and >= 1 cell per axis, got {lengths}, {cells}", where="box")
+    g = np.stack(np.meshgrid(np.linspace(0, lx, nx + 1), np.linspace(0, ly, ny + 1), np.linspace(0, lz, nz + 1),
+                             indexing="ij"), axis=-1).reshape(-1, 3)
+    i, j, k = (a.ravel() for a in np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij"))
+
+    def vid(di, dj, dk):
+        return ((i + di) * (ny + 1) + (j + dj)) * (nz + 1) + (k + dk)
+
+    tets = []
+    # the 6 monotone lattice paths from corner (0,0,0) to (1,1,1) of each cube
+    for path in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)):
+        c = [0, 0, 0]
+        verts = [vid(0, 0, 0)]
+        for axis in path:
+            c[axis] += 1
+            verts.append(vid(*c))
+        tets.append(np.stack(verts, axis=1))
+    T = np.concatenate(tets).astype(np.int64)
+    neg = np.linalg.det(g[T[:, 1:]] - g[T[:, :1]]) < 0
+    T[neg] = T[neg][:, [0, 1, 3, 2]]
+    return g, T.astype(np.int32)

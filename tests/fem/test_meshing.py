@@ -68,3 +68,19 @@ def test_tetrahedralize_rejects_bad_input():
     with pytest.raises(InputError, match="not both"):
         box = trimesh.creation.box()
         tetrahedralize(box.vertices, box.faces, edge_length_fac=0.1, target_tets=10)
+
+
+def test_structured_box_is_conforming_and_fills_the_box():
+    from simfab.fem.meshing import structured_box
+
+    V, T = structured_box((0.3, 0.2, 0.1), (3, 2, 1))
+    assert T.shape == (36, 4) and V.shape == (4 * 3 * 2, 3)
+    vol = np.linalg.det(V[T[:, 1:]] - V[T[:, :1]]) / 6
+    assert np.all(vol > 0)
+    assert vol.sum() == pytest.approx(0.3 * 0.2 * 0.1, rel=1e-12)
+    m = make_model(V, T, PLA)
+    # conforming: every interior face is shared by two tets, so the boundary is exactly the box
+    # surface (2 triangles per cube face on the outside)
+    assert len(m.boundary_facets) == 2 * 2 * (3 * 2 + 3 * 1 + 2 * 1)
+    with pytest.raises(InputError, match="box"):
+        structured_box((1, 1, 1), (0, 1, 1))
