@@ -49,7 +49,7 @@ def add_args(p):
     e.add_argument("--chain", type=int, metavar="K", help="(edit) chain index (default: the one nearest the stroke)")
 
 
-def _positive(name, v, integer=False):
+def _positive(name, v):
     from simfab.errors import InputError
 
     if v is not None and not v > 0:

@@ -26,7 +26,7 @@ import numpy as np
 from simfab.errors import InputError
 from simfab.growth import attractors as attr
 from simfab.growth import tolerances as tol
-from simfab.growth.colonize import ColonizeReport, ColonizeSettings, Tree, colonize
+from simfab.growth.colonize import ColonizeSettings, Tree, colonize
 from simfab.growth.config import Resolved, resolve
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene, load_growth_scene, validate_scene
