@@ -125,6 +125,20 @@ class _FreeBlock:
         self._key = (H.indptr.copy(), H.indices.copy())
 
 
+_FREE_BLOCKS: dict = {}  # (n, free dofs) -> _FreeBlock: repeated solves (e.g. per insertion step) reuse the map
+_FREE_BLOCKS_MAX = 8
+
+
+def _free_block(free_idx: np.ndarray, n: int) -> _FreeBlock:
+    key = (n, free_idx.size, hash(free_idx.tobytes()))
+    fb = _FREE_BLOCKS.get(key)
+    if fb is None or not np.array_equal(fb.free_idx, free_idx):
+        if len(_FREE_BLOCKS) >= _FREE_BLOCKS_MAX:
+            _FREE_BLOCKS.pop(next(iter(_FREE_BLOCKS)))
+        fb = _FREE_BLOCKS[key] = _FreeBlock(free_idx.copy(), n)
+    return fb
+
+
 def _solve_regularized(solver: SPDSolver, H: sp.csr_matrix, rhs: np.ndarray, opts: NewtonOptions):
     """Solve H dx = rhs; on a failed factorization add a growing diagonal shift. Returns (dx, shift)."""
     try:
@@ -185,7 +199,7 @@ def minimize(
         free_idx = np.flatnonzero(free)
     solver = solver if solver is not None else SPDSolver()
     opts = options
-    sub = _FreeBlock(free_idx, n)
+    sub = _free_block(free_idx, n)
     tiny = np.finfo(np.float64).tiny
 
     if admissible is not None and not admissible(x):
