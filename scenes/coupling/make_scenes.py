@@ -134,6 +134,7 @@ def main() -> None:
     t2d = 0.005  # plane-strain thickness of the 2D parts [m]
 
     def clamp2d(name, clamp, doc, x_end):
+        clamp = dict(clamp, segments=48)  # arc resolution compatible with ~450 triangles
         outline = G.c_clamp_outline(**clamp)
         ro = clamp["inner_radius"] + clamp["width"]
         xb = -ro - clamp["base_depth"]

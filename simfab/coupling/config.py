@@ -24,9 +24,9 @@ STEP_FRACTION = 0.9
 LAZY_BAND_DHATS = 4.0
 LAZY_BAND_SIGMAS = 0.5
 #: Newton: stop when the step is below this fraction of h_A ...
-NEWTON_STEP_TOL_REL = 1e-7
+NEWTON_STEP_TOL_REL = 1e-5
 #: ... or the free-dof force residual is below this fraction of E * h_A^2 (3D) / E * h_A * t (2D).
-NEWTON_GRAD_TOL_REL = 1e-7
+NEWTON_GRAD_TOL_REL = 2e-6
 NEWTON_MAX_ITER = 100
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4

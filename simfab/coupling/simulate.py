@@ -313,6 +313,7 @@ class _State:
     points: ContactPoints
     refined: set
     order: int  # refinement density (2D: points per edge, 3D: face lattice order), doubled on demand
+    check: tuple | None = None  # memo of the last facet check (x, s, order, result)
     H: object = None  # last Hessian (for the predictor)
 
 
@@ -588,26 +589,31 @@ def _crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: _State) 
     every refined facet again at twice the density (returned as the full list)."""
     if not cm.options.refine:
         return []
-    ids, psi = _facet_check(cm, x, s, state.order)
+    ids, psi_max, refined = _facet_check(cm, x, s, state)
     if len(ids) == 0:
         return []
-    cw = check_weights(cm.dim, state.order)
-    psi = psi.reshape(len(ids), len(cw))
-    refined = np.array([int(f) in state.refined for f in ids], dtype=bool)
-    if np.any(psi[refined] > cm.tol):
+    if np.any(psi_max[refined] > cm.tol):
         limit = C.MAX_EDGE_SAMPLES if cm.dim == 2 else C.MAX_FACE_LATTICE
         if 2 * state.order > limit:
             raise ConvergenceError(f"refinement at density {state.order} still leaves a penetration of "
-                                   f"{psi[refined].max():.3e} m > {cm.tol:.3e} m at s={s:.6g} m")
+                                   f"{psi_max[refined].max():.3e} m > {cm.tol:.3e} m at s={s:.6g} m")
         state.order = 2 * state.order + (1 if cm.dim == 2 else 0)  # new points = the old check points
         _rebuild_points(cm, state)
-        return sorted(state.refined | {int(f) for f in ids[(psi > 0).any(axis=1)]})
-    hit = (psi > 0).any(axis=1) & ~refined
-    return [int(f) for f in ids[hit]]
+        return sorted(state.refined | {int(f) for f in ids[psi_max > 0]})
+    return [int(f) for f in ids[(psi_max > 0) & ~refined]]
 
 
-def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, order: int):
-    """psi at dense check points of the facets that could reach into O: (facet ids, psi (f*p,))."""
+def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
+    """Max psi over check points of each boundary facet that could reach into O at (x, s).
+
+    Returns (facet ids (f,), max psi (f,) [m], refined (f,) bool). Unrefined facets are checked
+    at the points refinement would add; refined facets at the denser check points (their own
+    points plus the midpoints between them). A facet can only reach into O if one of its vertices
+    is within L * (its diameter) of O. The result is remembered for the same (x, s).
+    """
+    memo = state.check
+    if memo is not None and memo[0] is x and memo[1] == s and memo[2] == state.order:
+        return memo[3]
     facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
     R, p = cm.pose(s)
     bv = np.asarray(cm.fem.boundary_vertices)
@@ -616,13 +622,17 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, order: int):
     dv[bv] = -ev.psi
     pts = x[facets]
     diam = np.max(np.linalg.norm(pts - np.roll(pts, 1, axis=1), axis=2), axis=1)
-    near = np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * diam
-    ids = np.flatnonzero(near)
-    if len(ids) == 0:
-        return ids, np.zeros(0)
-    cp = facet_points(facets, ids, check_weights(cm.dim, order))
-    ev = cm.field.evaluate(cp.positions(x), (R, p), hessian=False)
-    return ids, ev.psi
+    ids = np.flatnonzero(np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * diam)
+    refined = np.array([int(f) in state.refined for f in ids], dtype=bool)
+    psi_max = np.full(len(ids), -np.inf)
+    for sel, w in ((~refined, facet_weights(cm.dim, state.order)), (refined, check_weights(cm.dim, state.order))):
+        if sel.any():
+            cp = facet_points(facets, ids[sel], w)
+            psi = cm.field.evaluate(cp.positions(x), (R, p), hessian=False).psi
+            psi_max[sel] = psi.reshape(int(sel.sum()), len(w)).max(axis=1)
+    out = (ids, psi_max, refined)
+    state.check = (x, s, state.order, out)
+    return out
 
 
 def _rebuild_points(cm: CouplingModel, state: _State) -> None:
@@ -665,7 +675,7 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     if not min_det > 0:
         raise ConvergenceError(f"an element is inverted at s={state.s:.6g} m (min det F = {min_det:.3e})")
     vm = von_mises(cm.fem, x)
-    ids, psi_check = _facet_check(cm, x, state.s, state.order)
+    _, psi_check, _ = _facet_check(cm, x, state.s, state)
     pen = float(max(0.0, ev.psi.max(initial=-np.inf), psi_check.max(initial=-np.inf)))
     if pen > cm.tol:
         raise ConvergenceError(f"penetration {pen:.3e} m exceeds the tolerance {cm.tol:.3e} m at s={state.s:.6g} m")
