@@ -103,13 +103,13 @@ def _boundary(elements: np.ndarray, dim: int) -> np.ndarray:
     return facets[np.sort(first[counts == 1])].astype(np.int32)
 
 
-def make_model(points, elements, material: Material, *, thickness: float = 1.0, device: str = "cpu") -> FemModel:
+def make_model(points, elements, material: Material | str, *, thickness: float = 1.0, device: str = "cpu") -> FemModel:
     """Build a :class:`FemModel` from a simplicial mesh.
 
     points : (n, 2) or (n, 3) rest positions [m]; dim = points.shape[1]
     elements : (m, dim+1) vertex indices; negatively oriented elements are re-oriented (two
         vertices swapped)
-    material : :class:`Material` (homogeneous body)
+    material : :class:`Material` or a built-in material name ("PLA", "VeroWhite"); homogeneous body
     thickness : [m] out-of-plane extent for 2D plane strain (volume = area * thickness)
     device : Warp device name
 
@@ -118,6 +118,13 @@ def make_model(points, elements, material: Material, *, thickness: float = 1.0, 
     thickness <= 0.
     """
     from simfab._warp import device as _validate_device
+    from simfab.fem.materials import material_by_name
+
+    if isinstance(material, str):
+        material = material_by_name(material)
+    if not isinstance(material, Material):
+        raise InputError(f"material must be a Material or a material name, got {type(material).__name__}",
+                         where="material")
 
     where = "mesh"
     pts = np.asarray(points, dtype=np.float64)

@@ -64,6 +64,24 @@ class NewtonOptions:
     reg_growth: float = 100.0
     reg_max: float = 1e2
 
+    def __post_init__(self):
+        checks = {
+            "max_iter": self.max_iter >= 1,
+            "grad_tol": self.grad_tol >= 0,
+            "grad_scale": self.grad_scale is None or self.grad_scale > 0,
+            "step_tol": self.step_tol >= 0,
+            "x_scale": self.x_scale is None or self.x_scale > 0,
+            "armijo": 0 < self.armijo < 0.5,
+            "backtrack": 0 < self.backtrack < 1,
+            "max_backtracks": self.max_backtracks >= 0,
+            "roundoff": self.roundoff >= 0,
+            "reg_initial": 0 < self.reg_initial <= self.reg_max,
+            "reg_growth": self.reg_growth > 1,
+        }
+        bad = [k for k, ok in checks.items() if not ok]
+        if bad:
+            raise ValueError(f"invalid NewtonOptions: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
+
 
 @dataclass
 class NewtonResult:

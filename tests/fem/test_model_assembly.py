@@ -114,3 +114,10 @@ def test_pattern_assembles_like_dense_scatter_and_block_slots():
         pat.block_slots([far[0]], [far[1]])
     # diagonal blocks always exist
     assert pat.block_slots(np.arange(len(P)), np.arange(len(P))).shape == (len(P), 3, 3)
+
+
+def test_make_model_accepts_material_names():
+    m = make_model(np.vstack([np.zeros(2), np.eye(2)]), [[0, 1, 2]], "pla")
+    assert m.material is PLA
+    with pytest.raises(InputError, match="unknown material"):
+        make_model(np.vstack([np.zeros(2), np.eye(2)]), [[0, 1, 2]], "unobtainium")

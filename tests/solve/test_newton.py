@@ -161,3 +161,10 @@ def test_free_mask_shape_is_checked_and_all_fixed_returns_x0():
     res = minimize(fun, x0, free=np.zeros(4, bool))
     np.testing.assert_array_equal(res.x, x0)
     assert res.iterations == 0
+
+
+def test_invalid_options_are_rejected():
+    with pytest.raises(ValueError, match="armijo"):
+        NewtonOptions(armijo=0.7)
+    with pytest.raises(ValueError, match="max_iter"):
+        NewtonOptions(max_iter=0)
