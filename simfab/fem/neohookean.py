@@ -5,6 +5,10 @@ Per element (volume V, Lame parameters mu, lam, dimension d):
     Psi(F) = mu/2 (||F||_F^2 - d) - mu log J + lam/2 (log J)^2,      E_e = V Psi(F),  J = det F
     F = Ds Dm^-1,  Ds = [x1 - x0, x2 - x0(, x3 - x0)]
 
+2D is plane strain: the body is extruded by ``model.thickness`` with F_zz = 1, for which the 3D
+energy density equals the d = 2 formula above (||F||^2 - 3 = ||F_2D||^2 - 2, det F = det F_2D);
+V = area * thickness.
+
 First Piola-Kirchhoff stress (dPsi/dF):
 
     P = mu (F - F^-T) + lam log J F^-T
