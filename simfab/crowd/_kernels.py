@@ -87,6 +87,19 @@ def _loglik(lo: wp.float64, hi: wp.float64, x: wp.float64, inv_s: wp.float64, ro
     return _F(-0.9189385332046728) + wp.log(inv_s) - _F(0.5) * z * z - unit
 
 
+@wp.func
+def _jump(u: float, z: float) -> wp.float64:
+    # standard normal z times a random scale 1/3, 1 or 3 (u uniform: probabilities 1/4,
+    # 1/2, 1/4): a symmetric mixture proposal (see sampler._jump). The random numbers are
+    # drawn in the kernel: a wp.func gets a copy of the RNG state, whose advance would be lost.
+    m = _F(1.0)
+    if u < 0.25:
+        m = _F(1.0 / 3.0)
+    elif u >= 0.75:
+        m = _F(3.0)
+    return m * _F(z)
+
+
 @wp.kernel
 def _mwg_sweeps(
     lo: wp.array3d(dtype=wp.float64),
@@ -140,7 +153,7 @@ def _mwg_sweeps(
         # ---- alpha block: row i depends on alpha_i only
         for i in range(R):
             a_old = alpha[t, i]
-            a_new = a_old + step_a[t, i] * _F(wp.randn(rng))
+            a_new = a_old + step_a[t, i] * _jump(wp.randf(rng), wp.randn(rng))
             d = _F(0.5) * a_pr * ((a_old - a_mu) * (a_old - a_mu) - (a_new - a_mu) * (a_new - a_mu))
             for j in range(Q):
                 s_new = _inv_sd(a_new, beta[t, j], cap)
@@ -157,7 +170,7 @@ def _mwg_sweeps(
         # ---- log-beta block: column j depends on beta_j only (Jacobian + du)
         for j in range(Q):
             b_old = beta[t, j]
-            du = step_b[t, j] * _F(wp.randn(rng))
+            du = step_b[t, j] * _jump(wp.randf(rng), wp.randn(rng))
             b_new = b_old * wp.exp(du)
             if b_new > b_min:
                 d = du + _F(0.5) * b_pr * ((b_old - b_mu) * (b_old - b_mu) - (b_new - b_mu) * (b_new - b_mu))
@@ -176,7 +189,7 @@ def _mwg_sweeps(
         # ---- logit-x block: column j depends on x_j only (Jacobian x (1 - x))
         for j in range(Q):
             x_old = x[t, j]
-            u = wp.log(x_old) - wp.log(_F(1.0) - x_old) + step_x[t, j] * _F(wp.randn(rng))
+            u = wp.log(x_old) - wp.log(_F(1.0) - x_old) + step_x[t, j] * _jump(wp.randf(rng), wp.randn(rng))
             x_new = _F(1.0) / (_F(1.0) + wp.exp(-u))
             if x_new > zero and x_new < _F(1.0):
                 d = wp.log(x_new * (_F(1.0) - x_new)) - wp.log(x_old * (_F(1.0) - x_old))
@@ -192,7 +205,7 @@ def _mwg_sweeps(
                         ll[t, i, j] = ll_tmp[t, i, j]
         # ---- joint rescaling (alpha, beta) -> c (alpha, beta): likelihood unchanged
         if scale_move == 1:
-            lc = step_s[t] * _F(wp.randn(rng))
+            lc = step_s[t] * _jump(wp.randf(rng), wp.randn(rng))
             cc = wp.exp(lc)
             d = _F(R + Q) * lc
             ok = int(1)

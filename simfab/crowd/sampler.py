@@ -72,6 +72,15 @@ class Posterior:
         return self.ess.min(axis=-1)
 
 
+def _jump(rng: np.random.Generator, shape) -> np.ndarray:
+    """Random-walk increments: N(0, 1) times a scale drawn from {1/3, 1, 3} with
+    probabilities 1/4, 1/2, 1/4. The mixture is still symmetric (the Metropolis ratio is
+    unchanged); the long jumps cross the heavy right tails of difficulty posteriors that a
+    single step tuned to 44 % acceptance crawls through, the short ones help narrow modes."""
+    u = rng.random(shape)
+    return np.where(u < 0.25, 1.0 / 3.0, np.where(u >= 0.75, 3.0, 1.0)) * rng.standard_normal(shape)
+
+
 def _logit(x):
     with np.errstate(divide="ignore"):
         return np.log(x) - np.log1p(-x)
@@ -159,7 +168,7 @@ class _NumpyKernel:
         """One sweep: alpha block, log-beta block, logit-x block, joint rescaling."""
         p, rng = self.p, self.rng
         # alpha block: rows are independent given beta, x
-        a_new = s.alpha + self.step["alpha"] * rng.standard_normal(s.alpha.shape)
+        a_new = s.alpha + self.step["alpha"] * _jump(rng, s.alpha.shape)
         is_new = M.inv_sd(a_new[..., :, None], s.beta[..., None, :])
         ll_new = self._ll(s.x, is_new)
         logr = (ll_new - s.ll).sum(-1) + M.log_prior_alpha(a_new, p) - M.log_prior_alpha(s.alpha, p)
@@ -168,7 +177,7 @@ class _NumpyKernel:
         s.inv_s = np.where(ok[..., None], is_new, s.inv_s)
         s.ll = np.where(ok[..., None], ll_new, s.ll)
         # beta block (random walk on log beta): columns are independent given alpha, x
-        du = self.step["beta"] * rng.standard_normal(s.beta.shape)
+        du = self.step["beta"] * _jump(rng, s.beta.shape)
         b_new = s.beta * np.exp(du)
         is_new = M.inv_sd(s.alpha[..., :, None], b_new[..., None, :])
         ll_new = self._ll(s.x, is_new)
@@ -181,7 +190,7 @@ class _NumpyKernel:
         # x block (random walk on logit x, Jacobian x (1 - x)): columns independent given
         # alpha, beta (delta unchanged). The logit keeps proposals inside [0, 1] and
         # stretches the skewed posteriors of scores near the ends of the scale.
-        u_new = _logit(s.x) + self.step["x"] * rng.standard_normal(s.x.shape)
+        u_new = _logit(s.x) + self.step["x"] * _jump(rng, s.x.shape)
         x_new = _expit(u_new)
         ll_new = self._ll(x_new, s.inv_s)
         with np.errstate(divide="ignore"):
@@ -192,7 +201,7 @@ class _NumpyKernel:
         s.ll = np.where(ok[..., None, :], ll_new, s.ll)
         # joint rescaling alpha -> c alpha, beta -> c beta: likelihood invariant
         if self.cfg.scale_move:
-            lc = self.step["scale"] * rng.standard_normal(self.step["scale"].shape)
+            lc = self.step["scale"] * _jump(rng, self.step["scale"].shape)
             c = np.exp(lc)[..., None]
             a_new, b_new = s.alpha * c, s.beta * c
             with np.errstate(invalid="ignore"):
