@@ -75,7 +75,7 @@ class BandedOrSparseCholesky(SPDSolver):
     a dozen, where the banded factorization costs O(n b^2) with no sparse-setup overhead.
     """
 
-    max_band = 48  # use the banded path when the reordered half-bandwidth is at most this
+    max_band = 16  # banded path when the reordered half-bandwidth is at most this (chains: ~5-12)
 
     def __init__(self):
         super().__init__()

@@ -33,7 +33,7 @@ def run(argv) -> dict:
 
     if warp.config.log_level < warp.LOG_WARNING:  # keep stdout for the JSON object
         warp.config.log_level = warp.LOG_WARNING
-    from _reference import figures
+    from benchmarks._reference import figures
 
     from simfab.coupling.outputs import summarize
     from simfab.coupling.scene import load_coupling_scene
