@@ -111,6 +111,8 @@ class ColonizeReport:
     dead_ends: int = 0
     targets_reached: list = dataclasses.field(default_factory=list)
     targets_unreached: list = dataclasses.field(default_factory=list)
+    #: (m,) growth step at which each ordinary attractor died (-1: alive at the end)
+    attractor_death_step: np.ndarray | None = None
 
 
 def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids: np.ndarray, obstacles,
@@ -141,6 +143,8 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
     near_i = np.full(len(A), -1, np.int64)
     _absorb(A, alive, is_t, near_d, near_i, tree.nodes, np.arange(len(tree)), ~tree.frozen, s.kill)
 
+    died = np.full(len(A), -1, np.int64)
+    died[~alive] = step0
     idle = 0
     fails = np.zeros(len(tree), np.int64)  # consecutive steps a node was attracted but could not grow
     step = step0
@@ -158,6 +162,7 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
         pos, parent, target_attr, dropped_attr, stuck = _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep)
         if dropped_attr.size:
             alive[dropped_attr[~is_t[dropped_attr]]] = False
+            died[~alive & (died < 0)] = step
         fails = np.concatenate([fails, np.zeros(len(tree) - len(fails), np.int64)])
         fails[parent] = 0
         fails[stuck] += 1
@@ -181,6 +186,7 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
         rep.targets_reached.extend(int(tid[a]) for a in target_attr[landed])
         idx = np.arange(first, len(tree))
         _absorb(A, alive, is_t, near_d, near_i, pos, idx, ~landed, s.kill)
+        died[~alive & (died < 0)] = step
         if len(tree) >= s.max_nodes:
             rep.stop_reason = f"node cap reached ({s.max_nodes} nodes)"
             break
@@ -188,6 +194,7 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
         rep.stop_reason = f"step cap reached ({s.max_steps} steps)"
     rep.steps = step - step0
     rep.targets_unreached = [int(t) for t in tid[is_t & alive]]
+    rep.attractor_death_step = died[:m]
     return rep
 
 

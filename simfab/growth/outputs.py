@@ -2,7 +2,7 @@
 
 Every file is written atomically (temporary name + rename). The USD stage replays the
 growth: time code t (0..S) shows the branches grown up to step t (as polylines) with
-widths 2 r (radius by age), S+1 the pruned skeleton, S+2 the smoothed one, S+3 the skin (and the objects
+widths 2 r (radius by age) and the attractors still alive, S+1 the pruned skeleton, S+2 the smoothed one, S+3 the skin (and the objects
 throughout as static meshes).
 """
 
@@ -44,9 +44,6 @@ def write_usd(result, mesh, path: Path) -> Path:
     if len(result.scene.sphere_radii):
         w.add_points("obstacles", color=(0.9, 0.6, 0.1))
         w.set_points("obstacles", result.scene.sphere_centers, 0.0, widths=2 * result.scene.sphere_radii)
-    w.add_points("growth/attractors", color=(0.3, 0.6, 0.3))
-    w.set_points("growth/attractors", result.attractors, 0.0,
-                 widths=np.full(len(result.attractors), 0.15 * result.resolved.kill))
     w.add_curves("growth/skeleton", color=SKIN_RGBA[:3])
     h = result.history
     res = result.resolved
@@ -55,7 +52,14 @@ def write_usd(result, mesh, path: Path) -> Path:
     # replay as polylines: every chain of the final tree, cut to the nodes born so far
     # (births increase along a chain, so the visible part is a prefix)
     ch = chains(h.parent, np.zeros(len(h), bool))
+    A, death = result.attractors, result.attractor_death_step
+    w.add_points("growth/attractors", color=(0.3, 0.6, 0.3))
     for t in range(S + 1):
+        live = (death < 0) | (death > t)
+        if live.any():
+            w.set_points("growth/attractors", A[live], t, widths=np.full(int(live.sum()), 0.15 * res.kill))
+        elif t == 0 or ((death < 0) | (death > t - 1)).any():  # the last ones just died: hide
+            w.set_visible("growth/attractors", False, t)
         cut = [(c, int(np.searchsorted(h.birth[c], t, side="right"))) for c in ch]
         _set_polylines(w, h.nodes, r, [c[:k] for c, k in cut if k >= 2], h.parent, t)
     for k, sk in enumerate((result.pruned, result.skeleton)):

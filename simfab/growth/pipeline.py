@@ -42,6 +42,7 @@ class GrowthResult:
 
     scene : the problem. resolved : the distances actually used. seed : RNG seed.
     attractors : (m, 3) all random attractors placed (both halves when symmetric) [m].
+    attractor_death_step : (m,) growth step at which each attractor died (-1: never).
     history : unpruned tree (replay of the growth; node births are growth steps).
     pruned : skeleton after pruning (before smoothing). skeleton : final skeleton with radii.
     reports : one :class:`ColonizeReport` per stage.
@@ -53,6 +54,7 @@ class GrowthResult:
     resolved: Resolved
     seed: int
     attractors: np.ndarray
+    attractor_death_step: np.ndarray
     history: Tree
     pruned: Skeleton
     skeleton: Skeleton
@@ -167,6 +169,7 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
         history = _merge_history(history, tree)
         tree = _prune(tree, scene, res, obstacles, p.mode)
     A_all = np.concatenate(placed)
+    death = np.concatenate([r.attractor_death_step for r in reports])
 
     sk = _skeleton(tree, scene, res, steps)
     pruned = sk
@@ -178,10 +181,12 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
         sk = sym.mirror(sk, obstacles=obstacles)
         history = sym.mirror_tree(history)
         A_all = np.concatenate([A_all, sym.reflect(A_all)])
+        death = np.concatenate([death, death])
     reached_ids = sorted(set(int(t) for t in sk.target[sk.target >= 0]))
     reached = [scene.target_names[i] for i in reached_ids]
     unreached = [n for i, n in enumerate(scene.target_names) if i not in set(reached_ids)]
-    return GrowthResult(scene=scene, resolved=res, seed=seed, attractors=A_all, history=history, pruned=pruned,
+    return GrowthResult(scene=scene, resolved=res, seed=seed, attractors=A_all, attractor_death_step=death,
+                        history=history, pruned=pruned,
                         skeleton=sk, reports=reports, targets_reached=reached, targets_unreached=unreached,
                         seconds_growth=time.perf_counter() - t0, symmetric=sym is not None)
 

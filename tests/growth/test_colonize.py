@@ -132,3 +132,13 @@ def test_radius_age_conventions(scenes_dir):
         assert np.all((sk.radius >= res.r_min - 1e-15) & (sk.radius <= res.r_max + 1e-15))
     assert front.skeleton.radius[front.skeleton.parent < 0][0] == pytest.approx(res.r_max)
     assert np.array_equal(front.skeleton.nodes, lived.skeleton.nodes)  # only the radii differ
+
+
+def test_attractor_death_steps_are_recorded():
+    tree = Tree.from_roots([[0.0, 0.0, 0.0]])
+    A = np.array([[0.01, 0, 0], [0.35, 0, 0], [0.55, 0, 0]])
+    rep = colonize(tree, A, np.zeros((0, 3)), np.zeros(0, int), _free(), _settings(), np.random.default_rng(0))
+    d = rep.attractor_death_step
+    # next to the root: dead before growth; then killed as the tip passes within 0.05
+    assert d[0] == 0 and 0 < d[1] < d[2]
+    assert np.all(d >= 0)
