@@ -19,6 +19,8 @@ def add_args(p) -> None:
     p.add_argument("--scene", default=None, help="unit-cell MJCF scene (default scenes/deploy/unit_cell.xml)")
     p.add_argument("--insert", nargs="+", metavar="BODY", help="insert bodies to deploy (default: all 'insert*' bodies)")
     p.add_argument("--increments", type=int, default=None, help="quasi-static increments (default: scene's cell_increments)")
+    p.add_argument("--mjcf-rods", choices=["capsules", "flexcomp"], default="capsules",
+                   help="rods in the deployed MJCF: static capsule chains (default) or MuJoCo 1D flexcomp cables")
 
 
 def run(args) -> dict:
@@ -51,7 +53,7 @@ def run(args) -> dict:
         d = unitcell.deploy(cfg, ins, device=dev, quiet=args.quiet)
         folder = os.path.join(out, n)
         usd = export.write_usd(os.path.join(folder, "deploy.usda"), d)
-        xml = export.write_mjcf(os.path.join(folder, "deployed.xml"), d, name=f"deployed_{n}")
+        xml = export.write_mjcf(os.path.join(folder, "deployed.xml"), d, name=f"deployed_{n}", rods=args.mjcf_rods)
         png = export.write_png(os.path.join(folder, "deployed.png"), xml)
         results[n] = dict(insert_half_size=ins.r, gap_half_size=cfg.gap,
                           relation="larger" if ins.r > cfg.gap else "smaller",
@@ -68,7 +70,7 @@ def demo(ctx) -> dict:
     import argparse
 
     args = argparse.Namespace(out=ctx.out, seed=ctx.seed, device=ctx.device, quiet=ctx.quiet, json=False,
-                              scene=None, insert=None, increments=None)
+                              scene=None, insert=None, increments=None, mjcf_rods="capsules")
     res = run(args)
     return dict(out=ctx.out, **{k: dict(kind=v["kind"], gaussian_curvature=v["gaussian_curvature"], stable=v["stable"],
                                         usd=v["outputs"]["usd"]) for k, v in res["inserts"].items()})

@@ -3,9 +3,17 @@
 - USD: rods as linear basis curves with widths (the beam width), one time code per
   increment (0 = flat); each insert as an animated rigid mesh (its MuJoCo geometry); junction
   frames are not drawn.
-- MJCF: the insert as a body at its final pose with its MuJoCo geom and mass, the rods as
-  static capsule chains (one capsule per edge, radius = half the beam thickness, so the
-  viewer shows the deployed shape; the rods are not re-simulated by MuJoCo).
+- MJCF: the insert as a body at its final pose with its MuJoCo geom and mass; the rods as
+  static capsule chains (``rods="capsules"``, default: one capsule per edge, radius half the
+  sheet thickness; stable in the viewer) or as MuJoCo 4 1D ``flexcomp`` cables
+  (``rods="flexcomp"``) through the deployed node
+  positions, with ``<elasticity>`` of the rods' Young's modulus and Poisson ratio, radius half
+  the sheet thickness, and both end vertices pinned (the ends sit in junctions/inserts). Note
+  that MuJoCo takes a flex's initial shape as its rest shape, so the cable is stress-free in
+  MuJoCo: the file shows the deployed geometry and can be probed in the viewer, it does not
+  carry simfab's internal stresses. Thin stiff cables need a very small time step (the axial
+  mode of a 2.5 GPa, 4 mm^2 strip with 2.5 mm edges is near 1e6 rad/s), so the capsule form is
+  the default.
 - PNG: the deployed MJCF rendered offscreen (simfab.io.render).
 """
 
@@ -42,7 +50,7 @@ def write_usd(path, deployment) -> Path:
     return w.save()
 
 
-def write_mjcf(path, deployment, *, name: str = "deployed") -> Path:
+def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsules") -> Path:
     from simfab.io.mjcf import MJCFBuilder
 
     d = deployment
@@ -55,13 +63,27 @@ def write_mjcf(path, deployment, *, name: str = "deployed") -> Path:
     body = b.body(ins.name, pos=st.body_pos[ib], quat=fr.matrix_to_quat(st.body_rot[ib]))
     b.mesh_asset(f"{ins.name}_mesh", ins.mesh.vertices, ins.mesh.faces)
     b.geom(body, type="mesh", mesh=f"{ins.name}_mesh", mass=max(ins.mass, 1e-6), rgba=[0.85, 0.45, 0.2, 1])
-    rods = b.body("rods")
+    if rods not in ("flexcomp", "capsules"):
+        raise ValueError(f"rods must be 'flexcomp' or 'capsules' (got {rods!r})")
+    holder = b.body("rods") if rods == "capsules" else None
+    mats = d.materials if hasattr(d, "materials") else {}
     for r in model.rods:
         P = st.x[r.nodes]
         rad = 0.5 * (r.section.thickness if r.section.shape == "rect" else 2 * r.section.radius)
-        for i in range(len(P) - 1):
-            b.geom(rods, type="capsule", fromto=np.concatenate([P[i], P[i + 1]]), size=[rad], contype=0,
-                   conaffinity=0, mass=0, rgba=[0.95, 0.9, 0.75, 1], name=f"{r.name}_{i}")
+        if rods == "capsules":
+            for i in range(len(P) - 1):
+                b.geom(holder, type="capsule", fromto=np.concatenate([P[i], P[i + 1]]), size=[rad], contype=0,
+                       conaffinity=0, mass=0, rgba=[0.95, 0.9, 0.75, 1], name=f"{r.name}_{i}")
+            continue
+        k = len(P) - 1
+        young, poisson = mats.get(r.name, (None, None))
+        fc = b.add(b.worldbody, "flexcomp", name=r.name, type="direct", dim=1, radius=rad, point=P.ravel(),
+                   element=np.stack([np.arange(k), np.arange(1, k + 1)], axis=1).ravel(), rgba=[0.95, 0.9, 0.75, 1],
+                   mass=max(1e-6, rad * 1e-3))
+        if young is not None:
+            b.add(fc, "elasticity", young=young, poisson=poisson)
+        b.add(fc, "contact", contype=0, conaffinity=0)
+        b.add(fc, "pin", id=[0, k])
     return b.save(path)
 
 

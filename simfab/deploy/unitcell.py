@@ -232,6 +232,7 @@ class Deployment:
     stable: bool
     iterations: list
     energy: float
+    materials: dict  # rod name -> (young [Pa], poisson [-]) for exports
 
 
 def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> Deployment:
@@ -283,5 +284,6 @@ def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool 
         states.append(state)
         iters.append(res.iterations)
     curv = gaussian_curvature(cell, state)
+    mats = {r.name: (cfg.young, cfg.poisson) for r in model.rods}
     return Deployment(cell=cell, insert=insert, states=states, curvature=curv, stable=solver.is_stable(state),
-                      iterations=iters, energy=res.energy)
+                      iterations=iters, energy=res.energy, materials=mats)

@@ -42,13 +42,18 @@ def test_bad_input_exits_2_without_outputs(argv, tmp_path, capsys):
     assert not out.exists()
 
 
-def test_deploy_cli_small_insert(tmp_path, capsys):
+@pytest.mark.parametrize("rods", ["capsules", "flexcomp"])
+def test_deploy_cli_small_insert(tmp_path, capsys, rods):
     out = tmp_path / "dep"
-    assert main(["deploy", "--insert", "insert_small", "--increments", "4", "--out", str(out), "--json"]) == 0
+    assert main(["deploy", "--insert", "insert_small", "--increments", "4", "--mjcf-rods", rods,
+                 "--out", str(out), "--json"]) == 0
     res = json.loads(capsys.readouterr().out)["inserts"]["insert_small"]
     assert res["kind"] == "saddle"
     m = mujoco.MjModel.from_xml_path(res["outputs"]["mjcf"])
-    assert m.nbody >= 2 and m.ngeom > 100
+    if rods == "capsules":
+        assert m.nbody >= 2 and m.ngeom > 100
+    else:
+        assert m.nflex == 16 and m.flex_dim[0] == 1
     from pxr import Usd
 
     stage = Usd.Stage.Open(res["outputs"]["usd"])
