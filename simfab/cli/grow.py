@@ -111,6 +111,7 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, **overrides) -> dic
         "seconds_skin": seconds_skin,
     })
     s.update(paths)
+    s["skin_units"] = "mm"
     return s
 
 
@@ -124,7 +125,7 @@ def _run_edit(args) -> dict:
     from simfab.growth.skinning import skin
     from simfab.growth.sketch import edit_chain, load_camera, load_stroke
     from simfab.io.atomic import write_json
-    from simfab.io.mesh import save_mesh
+    from simfab.growth.outputs import save_skin
 
     if args.skeleton is None:
         raise InputError("simfab grow edit needs SKELETON_JSON")
@@ -155,11 +156,11 @@ def _run_edit(args) -> dict:
     paths = {
         "skeleton_json": str(write_json(out / f"{stem}_skeleton.json",
                                         to_json_dict(edited, scene=scene_path, seed=doc.get("seed"), edit=rep))),
-        "skin_stl": str(save_mesh(mesh, out / f"{stem}_skin.stl")),
-        "skin_ply": str(save_mesh(mesh, out / f"{stem}_skin.ply")),
+        "skin_stl": str(save_skin(mesh, out / f"{stem}_skin.stl")),
+        "skin_ply": str(save_skin(mesh, out / f"{stem}_skin.ply")),
     }
     return {**rep, "nodes": len(edited.nodes), "segments": int((edited.parent >= 0).sum()),
-            "watertight": srep.watertight, "bodies": srep.bodies, "volume": srep.volume, **paths}
+            "watertight": srep.watertight, "bodies": srep.bodies, "volume": srep.volume, "skin_units": "mm", **paths}
 
 
 def bundled_scenes() -> list[Path]:

@@ -1,5 +1,8 @@
 """Files of a growth run: skin (STL, PLY), skeleton (JSON), growth replay (USD), MJCF, PNG.
 
+Units: the skin STL/PLY are in **millimetres** (what slicers expect); everything else
+(skeleton JSON, USD with metersPerUnit = 1, MJCF) is in metres.
+
 Every file is written atomically (temporary name + rename). The USD stage replays the
 growth: time code t (0..S) shows the branches grown up to step t (as polylines) with
 widths 2 r (radius by age) and the attractors still alive, S+1 the pruned skeleton, S+2 the smoothed one, S+3 the skin (and the objects
@@ -98,16 +101,29 @@ def write_mjcf(result, mesh, path: Path) -> Path:
     return b.save(path)
 
 
+#: The skin files are for slicers, which read STL/PLY in millimetres.
+SKIN_FILE_UNITS = "mm"
+
+
+def save_skin(mesh, path: Path) -> Path:
+    """Write the skin for printing: STL/PLY in millimetres (simfab works in metres inside;
+    read it back with ``simfab.io.mesh.load_mesh(path, units="mm")``)."""
+    from simfab.io.mesh import save_mesh
+
+    m = mesh.copy()
+    m.apply_scale(1000.0)
+    return save_mesh(m, path)
+
+
 def write_all(result, mesh, out: Path, *, stem: str = "growth") -> dict:
     """Write every output of a run under ``out``; returns name -> path."""
-    from simfab.io.mesh import save_mesh
     from simfab.io.render import render_mjcf
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {
-        "skin_stl": save_mesh(mesh, out / f"{stem}_skin.stl"),
-        "skin_ply": save_mesh(mesh, out / f"{stem}_skin.ply"),
+        "skin_stl": save_skin(mesh, out / f"{stem}_skin.stl"),
+        "skin_ply": save_skin(mesh, out / f"{stem}_skin.ply"),
         "skeleton_json": write_skeleton(result, out / f"{stem}_skeleton.json"),
         "usd": write_usd(result, mesh, out / f"{stem}.usdc"),
         "mjcf": write_mjcf(result, mesh, out / f"{stem}_grown.xml"),

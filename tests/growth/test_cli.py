@@ -29,6 +29,12 @@ def test_grow_writes_every_output(tmp_path, capsys):
     assert s["watertight"] is True and s["bodies"] == 1 and s["volume"] > 0
     for k in ("skin_stl", "skin_ply", "skeleton_json", "usd", "mjcf", "png"):
         assert pathlib.Path(s[k]).is_file() and pathlib.Path(s[k]).stat().st_size > 0, k
+    # skin files are in millimetres (slicer convention), watertight as written
+    import trimesh
+
+    stl = trimesh.load(s["skin_stl"])
+    assert s["skin_units"] == "mm" and stl.is_watertight
+    assert stl.volume == pytest.approx(s["volume"] * 1e9, rel=1e-4)
     # skeleton JSON: nodes, radii, parents, which node hits which target
     d = json.loads(pathlib.Path(s["skeleton_json"]).read_text())
     assert len(d["nodes"]) == len(d["radius"]) == len(d["parent"]) == s["nodes"]
