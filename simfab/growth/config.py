@@ -16,7 +16,7 @@ TOML layout (all tables and keys optional; see ``scenes/growth/README.md``)::
     max_steps = 400
     max_nodes = 50000
     max_trials = 32            # random directions tried when a branch hits an obstacle
-    seed = 0                   # default seed (the CLI --seed overrides it)
+    seed = 0                   # seed of grow() when none is given (the CLI always passes --seed, default 0)
 
     [radius]                   # r = r_min + (r_max - r_min) exp(-k age)
     r_min = 0.0015
