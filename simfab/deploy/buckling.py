@@ -88,6 +88,11 @@ def load_insert_scene(path) -> InsertScene:
 
     sc = load_scene(path)
     kw = {}
+    known = {f"beam_{f.name}" for f in fields(BeamSetup)}
+    for key in sc.custom_numeric:
+        if key.startswith("beam_") and key not in known:
+            raise InputError(f"unknown beam parameter <numeric name={key!r}> (known: {', '.join(sorted(known))})",
+                             where=str(path))
     for f in fields(BeamSetup):
         key = f"beam_{f.name}"
         if key in sc.custom_numeric:

@@ -96,6 +96,11 @@ def load_cell_scene(path) -> tuple[CellConfig, dict]:
 
     sc = load_scene(path)
     kw = {}
+    known = {f"cell_{f.name}" for f in fields(CellConfig)}
+    for key in sc.custom_numeric:
+        if key.startswith("cell_") and key not in known:
+            raise InputError(f"unknown cell parameter <numeric name={key!r}> (known: {', '.join(sorted(known))})",
+                             where=str(path))
     for f in fields(CellConfig):
         key = f"cell_{f.name}"
         if key in sc.custom_numeric:

@@ -332,7 +332,10 @@ class NetworkBuilder:
             L = np.linalg.norm(np.diff(r.rest_points, axis=0), axis=1)
             rest_len.append(L)
             EA.append(np.full(k, stiff["EA"] if r.stretch_stiffness is None else r.stretch_stiffness))
-            d1.append(fr.space_parallel_frames(fr.normalize(np.diff(r.points, axis=0)), r.director))
+            try:
+                d1.append(fr.space_parallel_frames(fr.normalize(np.diff(r.points, axis=0)), r.director))
+            except ValueError:
+                raise InputError(f"rod {r.name!r}: director {r.director.tolist()} is parallel to the first edge") from None
             if k >= 2:
                 hn.append(np.stack([nodes[:-2], nodes[1:-1], nodes[2:]], axis=1))
                 he.append(np.stack([eds[:-1], eds[1:]], axis=1))

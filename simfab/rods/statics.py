@@ -345,6 +345,8 @@ class StaticSolver:
         st = state
         E, gq, Hq = self._objective(st, True, True, nf, bf)
         gnorm = float(np.max(np.abs(gq)))
+        if not (np.isfinite(E) and np.isfinite(gnorm)):
+            raise ConvergenceError("rod equilibrium: energy or forces are not finite at the start state")
         hist = [(E, gnorm, 0.0)]
         for it in range(opts.max_iter + 1):
             if gnorm <= gtol:
@@ -377,6 +379,8 @@ class StaticSolver:
             st = trial
             E, gq, Hq = self._objective(st, True, True, nf, bf)
             gnorm = float(np.max(np.abs(gq)))
+            if not np.isfinite(gnorm):
+                raise ConvergenceError(f"rod equilibrium: forces became non-finite at Newton iteration {it + 1}")
             hist.append((E, gnorm, alpha))
             if alpha * dmax <= opts.step_tol * self.length:
                 return StaticResult(st, E, it + 1, gnorm, dict(self.evaluator.parts), hist)
