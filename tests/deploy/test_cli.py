@@ -58,3 +58,19 @@ def test_deploy_cli_small_insert(tmp_path, capsys, rods):
 
     stage = Usd.Stage.Open(res["outputs"]["usd"])
     assert stage.GetEndTimeCode() == 4
+
+
+def test_validation_failure_exits_1_after_writing_outputs(tmp_path, capsys):
+    """A soft axial stiffness (extensible beam) misses the inextensible elastica at n = 80: exit 1."""
+    from simfab.deploy.buckling import default_scene_path
+
+    text = open(default_scene_path()).read().replace('name="beam_axial_ratio" data="1e8"', 'name="beam_axial_ratio" data="300"')
+    scene = tmp_path / "soft.xml"
+    scene.write_text(text)
+    out = tmp_path / "vb"
+    rc = main(["validate", "buckling", "--scene", str(scene), "--n", "80", "--g-over-L", "0.9", "--support", "pinned",
+               "--path", "direct", "--out", str(out), "--quiet"])
+    assert rc == 1
+    assert "missed tolerance" in capsys.readouterr().err
+    rows = json.loads((out / "buckling.json").read_text())["rows"]
+    assert rows[0]["passed"] is False
