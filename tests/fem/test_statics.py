@@ -11,6 +11,20 @@ from simfab.fem.model import make_model
 from simfab.solve.newton import minimize
 
 
+def _minimize_energy(model, x0, free_dofs):
+    """Minimize the elastic energy over the free dofs (n, dim) bool; others stay at x0."""
+
+    def fun(x, need_h):
+        if need_h:
+            E, g, H = nh.energy_gradient_hessian(model, x)
+            return E, g.ravel(), H
+        E, g = nh.energy_gradient(model, x)
+        return E, g.ravel(), None
+
+    return minimize(fun, np.asarray(x0, float).ravel(), free=np.asarray(free_dofs).ravel(),
+                    admissible=lambda x: bool(np.all(nh.det_F(model, x) > 0)))
+
+
 def _static_solve(model, x0, free_vertices, force):
     """Minimize E(x) - f.x over the free vertices (others stay at x0): equilibrium grad E = f."""
     f = np.asarray(force, float).ravel()
@@ -99,3 +113,51 @@ def test_cantilever_tip_deflection_matches_euler_bernoulli(dim):
     delta_eb = P_load * L**3 / (3 * E_eff * I)
     assert delta == pytest.approx(delta_eb, rel=0.03)
     assert res.iterations <= 6
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_large_compression_matches_homogeneous_neo_hookean_solution(dim):
+    # Block compressed to a = 0.7 of its length between frictionless plates (x fixed on both end
+    # faces, lateral dofs free; one corner pinned laterally against rigid motion). The exact
+    # solution is homogeneous, F = diag(a, b(, b)), with the lateral stretch b from sigma_yy = 0:
+    #   mu (b^2 - 1) + lam log(J) = 0,  J = a b^(d-1)
+    # and the end-face reaction equals the first Piola-Kirchhoff stress times the rest area:
+    #   P_xx = mu (a - 1/a) + lam log(J) / a.
+    # Linear elements represent it exactly, so the tolerance is the Newton tolerance, not h^2.
+    from scipy.optimize import brentq
+
+    mat = Material(name="t", youngs_modulus=2e9, poisson_ratio=0.35, yield_stress=1e9, density=1.0)
+    mu, lam = mat.lame()
+    a = 0.7
+    if dim == 2:
+        P, T = rect_tri(0.04, 0.02, 8, 4)
+        model = make_model(P, T, mat, thickness=0.005)
+        area0 = 0.02 * 0.005
+    else:
+        P, T = box_tet(0.04, 0.02, 0.02, 6, 3, 3)
+        model = make_model(P, T, mat)
+        area0 = 0.02 * 0.02
+    b = brentq(lambda b: mu * (b * b - 1) + lam * np.log(a * b ** (dim - 1)), 0.5, 3.0)
+    J = a * b ** (dim - 1)
+    X = model.rest
+    left, right = X[:, 0] < 1e-12, X[:, 0] > 0.04 - 1e-12
+    free = np.ones_like(X, dtype=bool)
+    free[left | right, 0] = False
+    corner = np.flatnonzero(left & np.all(X[:, 1:] < 1e-12, axis=1))[0]
+    free[corner, 1:] = False  # lateral translation
+    if dim == 3:  # rotation about the x axis: pin z of the left-face corner at (0, ly, 0)
+        free[np.flatnonzero(left & (X[:, 1] > 0.02 - 1e-12) & (X[:, 2] < 1e-12))[0], 2] = False
+    x0 = X.copy()
+    x0[:, 0] *= a  # compressed in x only: J = a > 0, lateral stretch still to be found
+
+    res = _minimize_energy(model, x0, free)
+    x = res.x.reshape(X.shape)
+    exact = X * np.r_[a, [b] * (dim - 1)]
+    np.testing.assert_allclose(x, exact, atol=1e-9 * 0.04)
+    # force of the right plate on the body: it balances the elastic nodal forces -dE/dx, so it
+    # equals +dE/dx summed over the plate's nodes; it must equal the traction P_xx times the area
+    reaction = nh.energy_gradient(model, x)[1][right, 0].sum()
+    P_xx = mu * (a - 1 / a) + lam * np.log(J) / a
+    # compression: P_xx < 0, and the plate's force on the body points in -x (reaction < 0)
+    assert P_xx < 0
+    assert reaction == pytest.approx(P_xx * area0, rel=1e-8)
