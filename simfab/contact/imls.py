@@ -265,38 +265,45 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
         return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
     band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
     buf = _buffers(fld, m)
-    buf["points"].assign(np.ascontiguousarray(body[cand]))
+    views = buf["views"]  # zero-copy NumPy views of the (CPU) Warp buffers
+    if views is not None:
+        views["points"][:m] = body[cand]
+    else:
+        buf["points"].assign(np.ascontiguousarray(np.pad(body[cand], ((0, buf["capacity"] - m), (0, 0)))))
     wp.launch(
         _imls_eval, dim=m, device=fld.device,
         inputs=[fld._grid.id, fld._wverts, fld._wnormals, 1.0 / fld.sigma**2, fld.radius, -fld.far_distance,
                 buf["points"], band],
         outputs=[buf["psi"], buf["grad"], buf["hess"], buf["count"]],
     )
-    psi[cand] = buf["psi"].numpy()
-    grad[cand] = buf["grad"].numpy()[:, :dim] @ R[:dim, :dim].T
+    v = views if views is not None else {k: buf[k].numpy() for k in ("psi", "grad", "hess", "count")}
+    psi[cand] = v["psi"][:m]
+    grad[cand] = v["grad"][:m, :dim] @ R[:dim, :dim].T
     if hessian:
-        Hb = buf["hess"].numpy()[:, :dim, :dim]
         Rd = R[:dim, :dim]
-        hess[cand] = np.einsum("ij,kjl,ml->kim", Rd, Hb, Rd)
-    near[cand] = buf["count"].numpy() > 0
+        hess[cand] = np.einsum("ij,kjl,ml->kim", Rd, v["hess"][:m, :dim, :dim], Rd)
+    near[cand] = v["count"][:m] > 0
     return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
 
 
 def _buffers(fld: ImlsField, k: int) -> dict:
-    """Reusable Warp work arrays for k query points (allocation costs more than the launch)."""
-    b = fld._buffers.get(k)
-    if b is None:
+    """Reusable Warp work arrays for at least k query points (grown by doubling; a launch uses a
+    prefix). On the CPU, NumPy views of them are kept so that filling and reading cost no copy."""
+    b = fld._buffers.get("work")
+    if b is None or b["capacity"] < k:
+        cap = max(64, 1 << int(np.ceil(np.log2(max(k, 1)))))
         dev = fld.device
         b = {
-            "points": wp.zeros(k, dtype=wp.vec3d, device=dev),
-            "psi": wp.zeros(k, dtype=wp.float64, device=dev),
-            "grad": wp.zeros(k, dtype=wp.vec3d, device=dev),
-            "hess": wp.zeros(k, dtype=wp.mat33d, device=dev),
-            "count": wp.zeros(k, dtype=wp.int32, device=dev),
+            "capacity": cap,
+            "points": wp.zeros(cap, dtype=wp.vec3d, device=dev),
+            "psi": wp.zeros(cap, dtype=wp.float64, device=dev),
+            "grad": wp.zeros(cap, dtype=wp.vec3d, device=dev),
+            "hess": wp.zeros(cap, dtype=wp.mat33d, device=dev),
+            "count": wp.zeros(cap, dtype=wp.int32, device=dev),
         }
-        if len(fld._buffers) > 16:
-            fld._buffers.clear()
-        fld._buffers[k] = b
+        is_cpu = wp.get_device(dev).is_cpu
+        b["views"] = {k2: b[k2].numpy() for k2 in ("points", "psi", "grad", "hess", "count")} if is_cpu else None
+        fld._buffers["work"] = b
     return b
 
 

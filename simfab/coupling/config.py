@@ -19,6 +19,9 @@ DHAT_REL = 1e-2
 PSI_LIPSCHITZ = 2.0
 #: Fraction of the distance to O a point may travel in one Newton step (conservative advancement).
 STEP_FRACTION = 0.9
+#: Step cap curvature bound K = max(CURVATURE_SAFETY * max |hess d| near O, CURVATURE_FLOOR / sigma).
+CURVATURE_SAFETY = 2.0
+CURVATURE_FLOOR = 0.1
 #: Lazy contact evaluation: points certified (by the Lipschitz bound) farther than
 #: max(LAZY_BAND_DHATS * d_hat, LAZY_BAND_SIGMAS * sigma) from O are not re-evaluated.
 LAZY_BAND_DHATS = 4.0
@@ -27,6 +30,8 @@ LAZY_BAND_SIGMAS = 0.5
 NEWTON_STEP_TOL_REL = 1e-5
 #: ... or the free-dof force residual is below this fraction of E * h_A^2 (3D) / E * h_A * t (2D).
 NEWTON_GRAD_TOL_REL = 2e-6
+#: ... or below this fraction of the residual at the step's warm start.
+NEWTON_GRAD_TOL_START = 1e-4
 NEWTON_MAX_ITER = 100
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4
@@ -40,7 +45,7 @@ MAX_FACE_LATTICE = 16
 MAX_BISECTIONS = 6
 #: Hessian regularization (relative to mean |diag H|) for the rigid modes left free by the
 #: insertion-axis-only boundary condition; it changes the Newton step, not the minimizer.
-RIGID_MODE_REG = 1e-9
+RIGID_MODE_REG = 1e-12
 #: Profile analysis: energies within this fraction of E_max are equal (plateaus, noise).
 ENERGY_REL_TOL = 1e-6
 #: A steady state with E_ss <= LOOSE_REL * E_max is "loose" (zero grip).

@@ -202,6 +202,7 @@ class _StepObjective:
         self.band = max(C.LAZY_BAND_DHATS * cm.dhat, C.LAZY_BAND_SIGMAS * cm.field.sigma)
         self.y_ref = None
         self.d_ref = None
+        self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
 
     def distances(self, x: np.ndarray, hessian: bool):
         """(d (k,) [m], grad d (k, dim), hess d (k, dim, dim) or None): exact near O, lower bounds
@@ -237,6 +238,10 @@ class _StepObjective:
         from simfab.fem.neohookean import energy_gradient, energy_gradient_hessian
 
         cm = self.cm
+        memo = self.memo
+        if need_hessian and memo is not None and memo[0].shape == xf.shape and np.array_equal(memo[0], xf):
+            self.memo = None  # hand the cached Hessian out once (the caller may modify it)
+            return memo[1]
         x = xf.reshape(self.n, self.dim)
         t0 = time.perf_counter()
         if need_hessian:
@@ -265,14 +270,21 @@ class _StepObjective:
             self.last_d = d
             self.last_gd = gd
             self.last_H = H
+            # curvature bound for the step cap: twice the largest |hess d| seen near O, at least
+            # CURVATURE_FLOOR / sigma (a violated bound only costs a rejected line-search trial)
+            kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if act.any() else 0.0
+            self.curv = max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / cm.field.sigma)
         self.timer.add("contact", time.perf_counter() - t0)
-        return E + B, (g + gc).ravel(), H
+        out = (E + B, (g + gc).ravel(), H)
+        if need_hessian:
+            self.memo = (xf.copy(), out)
+        return out
 
     def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
         """Step cap keeping every constraint point outside O along the whole step (see below).
 
         Per point, with d its distance to O, a = grad d . dy and K a curvature bound of the field
-        (1/sigma), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2; the cap is the largest alpha
+        (from the Hessians near O, see ``__call__``), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2; the cap is the largest alpha
         keeping this above 0.1 d. It lets points in contact slide along O (a ~ 0) and move away
         freely, while approaching points stop short of O. Conservative advancement,
         alpha <= 0.9 d / (L |dy|) with L a Lipschitz bound of psi, is always allowed as well.
@@ -289,11 +301,17 @@ class _StepObjective:
             return 1.0
         d, gd, dy, sp = d[m], gd[m], dy[m], sp[m]
         a = np.einsum("kd,kd->k", gd, dy)
-        q = 0.5 * sp**2 / self.cm.field.sigma
+        curv = getattr(self, "curv", 1.0 / self.cm.field.sigma)
+        q = 0.5 * sp**2 * curv
         keep = C.STEP_FRACTION * d
-        curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
+        alpha_curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
         cons = keep / (C.PSI_LIPSCHITZ * sp)
-        return float(min(1.0, np.min(np.maximum(curv, cons))))
+        return float(min(1.0, np.min(np.maximum(alpha_curv, cons))))
+
+
+def dim_factor(dim: int) -> float:
+    """Bound of the spectral norm of a dim x dim matrix by its max |entry| times this factor."""
+    return float(dim)
 
 
 def _diag_slots(cm: CouplingModel) -> np.ndarray:
@@ -369,12 +387,18 @@ def _objective(cm, points, s, ctx) -> _StepObjective:
 
 
 def _newton(cm: CouplingModel, obj: _StepObjective, x0: np.ndarray, ctx) -> tuple[np.ndarray, int]:
+    """Barrier Newton from x0. Stops when the free-dof force residual is below
+    max(NEWTON_GRAD_TOL_REL * force_scale, NEWTON_GRAD_TOL_START * |residual at x0|) or the Newton
+    step is below NEWTON_STEP_TOL_REL * h_A (projected Newton converges linearly once the PSD
+    projections are active, so a purely absolute force target would spend many iterations on the
+    last digits)."""
     from simfab.solve.newton import NewtonOptions, minimize
 
-    opts = NewtonOptions(
-        max_iter=C.NEWTON_MAX_ITER, grad_tol=C.NEWTON_GRAD_TOL_REL, grad_scale=cm.force_scale,
-        step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h,
-    )
+    _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
+    g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
+    scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n)
+    opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
+                         step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h)
     solver = _TimedSolver(ctx["solver"], ctx["timer"])
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
     return res.x.reshape(x0.shape), res.iterations
