@@ -207,3 +207,20 @@ def test_bad_positions_raise_input_error():
         nh.energy(model, np.zeros((4, 2)))
     with pytest.raises(InputError, match="NaN"):
         nh.energy(model, np.full((3, 2), np.nan))
+
+
+@pytest.mark.parametrize("stretches", [(1, 1, 1e-3), (1, 1e-2, 1e-3), (50, 1, 1e-2), (1e-3, 1e-3, 1e-3),
+                                       (3, 3, 3), (10, 0.1, 1)])
+def test_projection_robust_for_extreme_deformations(stretches):
+    # F = R1 diag(s) R2 with condition numbers up to 5e3 and J from 1e-9 to 27: both projection
+    # routes (polar/closed-form and SVD) must stay finite, PSD and equal to the eigh reference
+    rng = np.random.default_rng(int(1e3 * sum(stretches)) % 2**32)
+    P = np.vstack([np.zeros(3), np.eye(3)])
+    model = make_model(P, [[0, 1, 2, 3]], MAT)
+    F = Rotation.random(random_state=rng).as_matrix() @ np.diag(stretches) @ Rotation.random(random_state=rng).as_matrix()
+    x = P @ F.T
+    H = nh.energy_gradient_hessian(model, x)[2].toarray()
+    assert np.all(np.isfinite(H))
+    w = np.linalg.eigvalsh(H)
+    assert w.min() >= -1e-12 * np.abs(w).max()
+    _check_projection_reference(model, x, H)
