@@ -45,7 +45,10 @@ Batched numpy ``eigh`` of the 12x12 element blocks instead was ~10x slower than 
 (``python -m simfab.fem.benchmark``).
 
 All kernels run in float64, one launch per call for all elements (energy, gradient and Hessian
-blocks in the same kernel when the Hessian is wanted).
+blocks in the same kernel when the Hessian is wanted); the Hessian kernel adds its values straight
+into the CSR ``data`` of the model's fixed pattern through precomputed slots. Warp CPU kernels
+run single-threaded, so results are bit-reproducible there; on CUDA the additions are atomic and
+their order (hence the last bits) can vary between runs.
 
 An element with det F <= 0 makes the energy +inf (the log barrier of Neo-Hookean); such an
 element contributes nothing to the gradient and Hessian, which are then not meaningful.
