@@ -4,6 +4,7 @@
     simfab crowd study RATINGS.csv --scale 1 10 --truth TRUTH.csv [--subcrowds 500]
     simfab crowd truth MESH [--orientations six | NAME=RX:RY:RZ ...] [--units mm]
     simfab crowd simulate --tasks 6 --scale 1 10 [--practitioners 15] [--public 100]
+    simfab crowd bracket [--designs NAME ...] [--load 20]
 
 RATINGS.csv is long-form ``worker,task,label`` (integer labels on the scale); TRUTH.csv is
 ``task,truth``. RMS errors are on the unit scale [0, 1] (label - lo) / (hi - lo). The
@@ -96,12 +97,18 @@ def add_args(p):
     m.add_argument("--difficulty", type=float, nargs="+", default=[1.0], help="question difficulty beta (one value or one per question; default 1)")
     _common(m)
 
+    b = sub.add_parser("bracket", help="strength truth of the 2D bracket designs (FEM tip deflection, scores 1..5)")
+    b.add_argument("--designs", nargs="+", metavar="NAME", help="subset of the built-in designs (default all)")
+    b.add_argument("--load", type=float, default=None, help="total downward tip load, N (default 20)")
+    b.add_argument("--material", default=None, help="built-in material name (default PLA)")
+    _common(b)
+
 
 def run(args):
     cmd = getattr(args, "crowd_command", None)
     if cmd is None:
-        raise InputError("choose an action: aggregate, study, truth or simulate (see 'simfab crowd --help')")
-    return {"aggregate": run_aggregate, "study": run_study, "truth": run_truth, "simulate": run_simulate}[cmd](args)
+        raise InputError("choose an action: aggregate, study, truth, simulate or bracket (see 'simfab crowd --help')")
+    return {"aggregate": run_aggregate, "study": run_study, "truth": run_truth, "simulate": run_simulate, "bracket": run_bracket}[cmd](args)
 
 
 def _scale(args):
@@ -261,6 +268,49 @@ def run_simulate(args):
     planted = {"alpha": dict(zip(r.workers, crowd.alpha.tolist())), "malicious": [w for w, b in zip(r.workers, crowd.malicious) if b], "beta": dict(zip(r.tasks, crowd.beta.tolist())), "truth": dict(zip(r.tasks, crowd.truth.tolist()))}
     outputs["planted_json"] = str(write_json(os.path.join(args.out, "planted.json"), planted))
     return {"raters": len(r.workers), "tasks": list(r.tasks), "malicious": len(planted["malicious"]), "outputs": outputs}
+
+
+def _quiet_warp():
+    """Warp 1.19 prints its greeting on stdout unless config.log_level is raised before it
+    initializes (simfab._warp still sets the retired config.quiet); --json needs stdout clean."""
+    import warp
+
+    if hasattr(warp, "LOG_WARNING"):
+        warp.config.log_level = max(warp.config.log_level, warp.LOG_WARNING)
+
+
+def run_bracket(args):
+    import dataclasses
+
+    _quiet_warp()
+    from simfab.crowd.bracket import BracketSetup, bracket_survey, plot_brackets, strength_scores
+    from simfab.io.atomic import write_csv, write_json
+
+    setup = BracketSetup()
+    if args.load is not None:
+        if not (args.load > 0 and args.load < float("inf")):
+            raise InputError(f"must be a positive force in N, got {args.load}", where="--load")
+        setup = dataclasses.replace(setup, load=args.load)
+    if args.material is not None:
+        setup = dataclasses.replace(setup, material=args.material)
+    results = bracket_survey(setup, names=args.designs)
+    if len(results) < 2:
+        raise InputError("need at least two designs to scale scores", where="--designs")
+    scores = strength_scores(results)
+    out = args.out
+    rows = [[r.name, r.deflection, r.area, r.n_triangles, r.newton_iterations, float(s)] for r, s in zip(results, scores)]
+    outputs = {
+        "table_csv": str(write_csv(os.path.join(out, "brackets.csv"), ["design", "tip_deflection_m", "area_m2", "triangles", "newton_iterations", "strength_score"], rows)),
+        "truth_csv": str(write_csv(os.path.join(out, "truth_strength.csv"), ["task", "truth"], [[r.name, float(s)] for r, s in zip(results, scores)])),
+        "designs_png": plot_brackets(results, scores, os.path.join(out, "brackets.png")),
+    }
+    summary = {
+        "setup": dataclasses.asdict(setup),
+        "designs": {r.name: {"tip_deflection": r.deflection, "score": float(s), "area": r.area} for r, s in zip(results, scores)},
+        "outputs": outputs,
+    }
+    outputs["summary_json"] = str(write_json(os.path.join(out, "brackets.json"), summary))
+    return summary
 
 
 def demo(ctx):
