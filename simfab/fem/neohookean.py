@@ -38,7 +38,8 @@ block is T = mu I + dPsi/dJ S in the basis R [e_i]x / sqrt 2, with F = R S the p
 (cheap Newton iteration instead of an SVD). The kernel assembles the exact Hessian directly
 (mu I + d2Psi/dJ2 g g^T + dPsi/dJ d2J/dF2, g = cof F) and subtracts the negative part of T, whose
 spectral projectors come from closed-form eigenvalues (accurate also for clustered eigenvalues).
-With dPsi/dJ > 0 the full SVD eigensystem is used. 2D always uses the SVD eigensystem (2x2, cheap).
+With dPsi/dJ > 0 the full SVD eigensystem is used. 2D works the same way with its single twist
+mode (polar rotation in closed form).
 With ``project_psd=False`` the exact Hessian is returned (validated against finite differences;
 the two projected routes agree to round-off, also checked against numpy ``eigh`` in the tests).
 Batched numpy ``eigh`` of the 12x12 element blocks instead was ~10x slower than the whole kernel
@@ -421,6 +422,102 @@ def _mode2(U: wp.mat22d, M: wp.mat22d, V: wp.mat22d, Dmi: wp.mat22d):
     return _nodal2(U * M * wp.transpose(V), Dmi)
 
 
+@wp.func
+def _store_block2(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dtype=wp.float64),
+                  data: wp.array(dtype=wp.float64), e: int, l: int, lp: int, K: wp.mat22d):
+    """Block (l, lp) of element e's 6x6 Hessian (and its transpose at (lp, l) when l != lp)."""
+    for a in range(2):
+        for b in range(2):
+            if l != lp or b >= a:
+                _store(scatter, slots, hess, data, e, 2 * l + a, 2 * lp + b, K[a, b])
+
+
+@wp.func
+def _hessian_direct2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), e: int, F: wp.mat22d,
+                     J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu: wp.float64, lam: wp.float64,
+                     dPsi_dJ: wp.float64, project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64)):
+    """2D analogue of :func:`_hessian_direct3`: exact Hessian (det(Ds) = e1 x e2 is bilinear, so
+    d2/de1 de2 = [[0, 1], [-1, 0]]), and with dPsi/dJ <= 0 only the single twist mode
+    R [[0, -1], [1, 0]] / sqrt 2 (R the polar rotation, closed form in 2D) can have a negative
+    eigenvalue, t = mu + dPsi/dJ, which projection removes: K -= V min(t, 0) b b^T."""
+    zero = wp.float64(0.0)
+    one = wp.float64(1.0)
+    I = wp.identity(n=2, dtype=wp.float64)
+    logJ = wp.log(J)
+    c2 = V * (mu + lam * (one - logJ)) / (J * J)
+    cof = J * wp.transpose(wp.inverse(F))
+    G = cof * wp.transpose(Dmi)  # columns gamma_1, gamma_2
+    g1 = wp.vec2d(G[0, 0], G[1, 0])
+    g2 = wp.vec2d(G[0, 1], G[1, 1])
+    DDt = Dmi * wp.transpose(Dmi)
+    cJ = V * dPsi_dJ * wp.determinant(Dmi)
+    K11 = V * mu * DDt[0, 0] * I + c2 * wp.outer(g1, g1)
+    K22 = V * mu * DDt[1, 1] * I + c2 * wp.outer(g2, g2)
+    K12 = V * mu * DDt[0, 1] * I + c2 * wp.outer(g1, g2) + cJ * wp.mat22d(zero, one, -one, zero)
+    t = mu + dPsi_dJ
+    if project != 0 and t < zero:
+        cr = F[0, 0] + F[1, 1]
+        sr = F[1, 0] - F[0, 1]
+        nr = wp.sqrt(cr * cr + sr * sr)
+        RJ = wp.mat22d(-sr, -cr, cr, -sr) / nr  # R [[0, -1], [1, 0]], R = [[c, -s], [s, c]]
+        b1 = RJ * wp.vec2d(Dmi[0, 0], Dmi[0, 1])
+        b2 = RJ * wp.vec2d(Dmi[1, 0], Dmi[1, 1])
+        ht = wp.float64(0.5) * V * t
+        K11 = K11 - ht * wp.outer(b1, b1)
+        K22 = K22 - ht * wp.outer(b2, b2)
+        K12 = K12 - ht * wp.outer(b1, b2)
+    K21 = wp.transpose(K12)
+    K01 = -(K11 + K21)
+    K02 = -(K12 + K22)
+    K00 = -(K01 + K02)
+    _store_block2(scatter, slots, hess, data, e, 0, 0, K00)
+    _store_block2(scatter, slots, hess, data, e, 0, 1, K01)
+    _store_block2(scatter, slots, hess, data, e, 0, 2, K02)
+    _store_block2(scatter, slots, hess, data, e, 1, 1, K11)
+    _store_block2(scatter, slots, hess, data, e, 1, 2, K12)
+    _store_block2(scatter, slots, hess, data, e, 2, 2, K22)
+
+
+@wp.func
+def _hessian_svd2(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu: wp.float64, lam: wp.float64,
+                  dPsi_dJ: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                  hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
+    """PSD-projected element Hessian from the full eigensystem (SVD of F), for dPsi/dJ > 0."""
+    zero = wp.float64(0.0)
+    project = 1
+    U = wp.mat22d()
+    s = wp.vec2d()
+    Vs = wp.mat22d()
+    wp.svd2(F, U, s, Vs)
+    logJ = wp.log(J)
+    h = wp.float64(_HALF_SQRT2)
+    B = _mat4x6d()
+    w = _vec4d()
+    B[0] = _mode2(U, wp.mat22d(zero, -h, h, zero), Vs, Dmi)  # twist
+    w[0] = _clamp(mu + dPsi_dJ, project)
+    B[1] = _mode2(U, wp.mat22d(zero, h, h, zero), Vs, Dmi)  # flip
+    w[1] = _clamp(mu - dPsi_dJ, project)
+    # scaling modes: closed-form eigensystem of the symmetric 2x2 [[a, o], [o, c2]]
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    a = mu + cs / (s[0] * s[0])
+    c2 = mu + cs / (s[1] * s[1])
+    o = lam / (s[0] * s[1])
+    theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
+    ct = wp.cos(theta)
+    st = wp.sin(theta)
+    B[2] = _mode2(U, wp.mat22d(ct, zero, zero, st), Vs, Dmi)
+    w[2] = _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, project)
+    B[3] = _mode2(U, wp.mat22d(-st, zero, zero, ct), Vs, Dmi)
+    w[3] = _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, project)
+    for r in range(6):
+        for c in range(r, 6):
+            acc = zero
+            for k in range(4):
+                acc += w[k] * B[k, r] * B[k, c]
+            _store(scatter, slots, hess, data, e, r, c, V * acc)
+
+
 @wp.kernel
 def _energy2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat22d),
              volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
@@ -475,37 +572,12 @@ def _hessian2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),
     energy[e] = V * _psi(F, J, mu, lam, wp.float64(2.0))
     grad[e] = V * _nodal2(_pk1(F, J, mu, lam), Dmi)
 
-    U = wp.mat22d()
-    s = wp.vec2d()
-    Vs = wp.mat22d()
-    wp.svd2(F, U, s, Vs)
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
-    h = wp.float64(_HALF_SQRT2)
-    B = _mat4x6d()
-    w = _vec4d()
-    B[0] = _mode2(U, wp.mat22d(zero, -h, h, zero), Vs, Dmi)  # twist
-    w[0] = _clamp(mu + dPsi_dJ, project)
-    B[1] = _mode2(U, wp.mat22d(zero, h, h, zero), Vs, Dmi)  # flip
-    w[1] = _clamp(mu - dPsi_dJ, project)
-    # scaling modes: closed-form eigensystem of the symmetric 2x2 [[a, o], [o, c2]]
-    cs = mu + lam * (wp.float64(1.0) - logJ)
-    a = mu + cs / (s[0] * s[0])
-    c2 = mu + cs / (s[1] * s[1])
-    o = lam / (s[0] * s[1])
-    theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
-    ct = wp.cos(theta)
-    st = wp.sin(theta)
-    B[2] = _mode2(U, wp.mat22d(ct, zero, zero, st), Vs, Dmi)
-    w[2] = _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, project)
-    B[3] = _mode2(U, wp.mat22d(-st, zero, zero, ct), Vs, Dmi)
-    w[3] = _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, project)
-    for r in range(6):
-        for c in range(r, 6):
-            acc = zero
-            for k in range(4):
-                acc += w[k] * B[k, r] * B[k, c]
-            _store(scatter, slots, hess, data, e, r, c, V * acc)
+    if project == 0 or dPsi_dJ <= zero:
+        _hessian_direct2(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, project, scatter, slots, hess, data)
+    else:
+        _hessian_svd2(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -224,3 +224,17 @@ def test_projection_robust_for_extreme_deformations(stretches):
     w = np.linalg.eigvalsh(H)
     assert w.min() >= -1e-12 * np.abs(w).max()
     _check_projection_reference(model, x, H)
+
+
+@pytest.mark.parametrize("stretches", [(1, 1e-3), (50, 1e-2), (1e-3, 1e-3), (3, 3), (10, 0.1)])
+def test_projection_robust_for_extreme_deformations_2d(stretches):
+    rng = np.random.default_rng(int(1e3 * sum(stretches)) % 2**32)
+    P = np.vstack([np.zeros(2), np.eye(2)])
+    model = make_model(P, [[0, 1, 2]], MAT)
+    F = _rot2(rng.uniform(0, 6.3)) @ np.diag(stretches) @ _rot2(rng.uniform(0, 6.3))
+    x = P @ F.T
+    H = nh.energy_gradient_hessian(model, x)[2].toarray()
+    assert np.all(np.isfinite(H))
+    w = np.linalg.eigvalsh(H)
+    assert w.min() >= -1e-12 * np.abs(w).max()
+    _check_projection_reference(model, x, H)
