@@ -7,21 +7,24 @@ Geometry (flat, z = 0, centred at the origin; ``u_k`` = +x, +y, -x, -y):
   before the corners, in two halves joined with the spoke at a rigid T-junction body;
 - corner k: a curved torsional spring (cubic Bezier, natural curvature = its flat shape)
   joining side k to side k+1 through rigid junction bodies at both ends;
-- the insert: a rigid body at the centre; the four spokes' inner ends are clamped to it at
-  distance ``r`` (its half-size from the MuJoCo box geom) from the centre.
+- the insert: a free rigid body (6 DOF) at the centre; the four spokes' inner ends are clamped
+  to it at distance ``r`` (its half-size from the MuJoCo box geom) from the centre;
+- support: a statically determinate 3-2-1 support on three corner-spring midpoints removes the
+  six rigid motions of the free-floating cell without constraining its deformation.
 
 Deployment (quasi-static): the spokes' clamp points are drawn from the gap edge (``gap``) to
 the insert's edge (``r``) in ``increments`` steps, each solved to equilibrium from the last
-(the insert is held at the centre; junctions are free rigid bodies).
+(the insert and all junctions are free rigid bodies).
 
-Buckling perturbation: while drawing in, a small out-of-plane load acts on the T-junctions
-(``perturbation * B1 / spoke_length^2`` each): all downwards for an insert larger than the gap
-(the dome mode), alternating (+z on the x-spokes, -z on the y-spokes) for a smaller one (the
-saddle mode). It is removed for a final solve, so the reported state is an unloaded
+Buckling perturbation: while drawing in, a small out-of-plane load ``f = perturbation * B1 /
+spoke_length^2`` selects the branch: ``4 f`` upwards on the insert for an insert larger than
+the gap (the dome mode), ``f`` alternating on the T-junctions (+z on the x-spokes, -z on the
+y-spokes) for a smaller one (the saddle mode). It is removed for a final solve, so the reported state is an unloaded
 equilibrium; its stability (positive-definite Hessian) is reported.
 
-Shape descriptors: ``insert_rise`` (height of the insert centre above the ring's mean plane, a
-dome) and ``saddle_amplitude`` (amplitude of the ring's cos/sin 2 phi height pattern).
+Shape descriptors, measured in the ring's best-fit plane: ``insert_rise`` (height of the insert
+centre above it, a dome) and ``saddle_amplitude`` (amplitude of the ring's cos/sin 2 phi height
+pattern).
 
 Discrete Gaussian curvature: angle deficit ``2 pi - sum(angles)`` of the triangle fan from the
 insert centre to the eight ring points (T-junctions and corner-spring midpoints), divided by a
@@ -166,7 +169,7 @@ def build_cell(cfg: CellConfig, insert_name: str = "insert") -> Cell:
     sec = Section(width=cfg.beam_width, thickness=cfg.beam_thickness)
     mat = Material(young=cfg.young, poisson=cfg.poisson)
     nb = NetworkBuilder()
-    nb.add_body(insert_name, pos=(0, 0, 0), driven=True)
+    nb.add_body(insert_name, pos=(0, 0, 0))  # a free 6-DOF rigid body
     line = lambda p, q: p + np.linspace(0, 1, n + 1)[:, None] * (q - p)  # noqa: E731
     spokes = []
     for k in range(4):
@@ -196,6 +199,12 @@ def build_cell(cfg: CellConfig, insert_name: str = "insert") -> Cell:
         nb.add_rod(f"spring{k}", pts, section=sec, material=mat)
         nb.clamp(f"spring{k}", "start", f"J{k}a")
         nb.clamp(f"spring{k}", "end", f"J{k}b")
+    # 3-2-1 support on three corner-spring midpoints: removes the six rigid motions of the
+    # free-floating cell without constraining its deformation (statically determinate)
+    m = n // 2
+    nb.fix("spring0", nodes=[m], comps=(0, 1, 2))
+    nb.fix("spring1", nodes=[m], comps=(2,))
+    nb.fix("spring2", nodes=[m], comps=(1, 2))
     model, state = nb.build()
     t_bodies = [model.body_index(f"T{k}") for k in range(4)]
     mids = [int(model.rod(f"spring{k}").nodes[n // 2]) for k in range(4)]
@@ -216,10 +225,19 @@ def gaussian_curvature(cell: Cell, state) -> dict:
     angles = np.arccos(np.clip(cosang, -1.0, 1.0))
     area = 0.5 * np.sum(np.linalg.norm(np.cross(d, nxt), axis=1))
     deficit = 2.0 * np.pi - float(np.sum(angles))
-    # out-of-plane shape of the ring about the centre: z - z_C ~ dome + A cos 2phi + B sin 2phi
-    phi = np.arctan2(d[:, 1], d[:, 0])
+    # out-of-plane shape in the ring's best-fit plane (invariant to rigid motion of the cell):
+    # heights h ~ -rise + A cos 2phi + B sin 2phi about the insert centre
+    ctr = ring.mean(axis=0)
+    normal = np.linalg.svd(ring - ctr)[2][2]
+    if normal[2] < 0:
+        normal = -normal
+    e1 = np.cross([0.0, 1.0, 0.0], normal)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    h = d @ normal
+    phi = np.arctan2(d @ e2, d @ e1)
     M = np.stack([np.ones_like(phi), np.cos(2 * phi), np.sin(2 * phi)], axis=1)
-    coef = np.linalg.lstsq(M, d[:, 2], rcond=None)[0]
+    coef = np.linalg.lstsq(M, h, rcond=None)[0]
     return dict(angle_deficit=deficit, gaussian_curvature=float(deficit / (area / 3.0)),
                 kind="dome" if deficit > 0 else "saddle",
                 insert_rise=float(-coef[0]), saddle_amplitude=float(np.hypot(coef[1], coef[2])))
@@ -261,10 +279,12 @@ def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool 
         spoke_nodes.append((rod.nodes, U[k]))
     B1 = float(np.min(model.bend_stiff[:, 0]))
     f = cfg.perturbation * B1 / cell.spoke_len**2
-    pattern = -np.ones(4) if grow > 0 else np.array([1.0, -1.0, 1.0, -1.0])
     body_forces = np.zeros((model.n_bodies, 3))
-    for k, b in enumerate(cell.t_bodies):
-        body_forces[b, 2] = f * pattern[k]
+    if grow > 0:  # dome mode: lift the insert
+        body_forces[cell.insert_body, 2] = 4.0 * f
+    else:  # saddle mode: alternate the T-junctions
+        for k, b in enumerate(cell.t_bodies):
+            body_forces[b, 2] = f * (1.0 if k % 2 == 0 else -1.0)
     state = cell.state
     states, iters = [state], []
     ninc = int(cfg.increments)

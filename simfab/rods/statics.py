@@ -11,11 +11,11 @@ Unknowns ``q`` (all in length units so one tolerance fits all):
 (``x = c + R p``), clamped edges take the body's material frame, reference directors are
 time-parallel transported from the base (see :func:`simfab.rods.model.synchronize`).
 
-The reduced gradient is exact: ``g_q = J^T g`` with ``J = dx/dq`` using the SO(3) left
-Jacobian for rotations. The reduced Hessian is ``J^T H J`` plus the geometric term of the
-attached nodes, ``1/2 (g r^T + r g^T) - (g.r) I`` per node (``r`` its world offset), exact at
-``w = 0``; the second-order change of clamped angles with the body rotation is neglected
-(it only slows Newton's final iterations at large body rotations).
+The reduced gradient and Hessian are exact at ``q = 0`` (checked against finite differences in
+tests/rods): ``g_q = J^T g`` with ``J = dx/dq``, and ``H_q = J^T H J`` plus the geometric term of
+the attached nodes, ``1/2 (g r^T + r g^T) - (g.r) I`` per node (``r`` its world offset). A
+clamped edge's angle changes by ``t . w`` with no second-order term (swing-twist
+decomposition: the twist part of ``exp(w)`` about ``t`` is ``t . w + O(|w|^3)``).
 
 Newton iteration (own loop, not :func:`simfab.solve.newton.minimize`, because DER needs it):
 after every accepted step the state becomes the new base, i.e. reference directors are

@@ -107,3 +107,19 @@ def test_flat_unit_cell_network_is_stress_free():
     E, _, _ = solver.evaluator(cell.state, False, False)
     assert abs(E) <= 1e-18
     assert np.max(np.abs(g)) <= 1e-9 * cell.model.force_scale
+
+
+def test_reduced_hessian_through_rigid_body_matches_second_differences():
+    """H_q (J^T H J + geometric term of the body rotation) vs d^2/ds^2 E(apply(state, s v)) at s = 0."""
+    model, st = two_rods_on_a_free_body()
+    solver = StaticSolver(model)
+    rng = np.random.default_rng(4)
+    st = solver.red.apply(st, rng.normal(scale=2e-3, size=solver.red.nq))
+    E, _, H = solver._objective(st, True, True, None, None)
+    Hd = H.toarray()
+    hs = 1e-5  # truncation error ~ hs^2 relative
+    for _ in range(4):
+        v = rng.normal(size=solver.red.nq)
+        e2 = (solver._objective(solver.red.apply(st, hs * v), False, False, None, None)[0] - 2 * E
+              + solver._objective(solver.red.apply(st, -hs * v), False, False, None, None)[0]) / hs**2
+        assert v @ Hd @ v == pytest.approx(e2, rel=1e-4)
