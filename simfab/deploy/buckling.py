@@ -115,13 +115,11 @@ def load_insert_scene(path) -> InsertScene:
     return InsertScene(path=str(path), insert_pos=pos, setup=setup, mesh=meshes["insert"])
 
 
-def default_scene_path():
-    from importlib.resources import files
+def default_scene_path() -> str:
+    """The bundled scene ``scenes/deploy/elastica.xml`` of the source tree."""
+    from pathlib import Path
 
-    import simfab
-
-    p = files(simfab).joinpath("..", "scenes", "deploy", "elastica.xml")
-    return str(p)
+    return str(Path(__file__).resolve().parents[2] / "scenes" / "deploy" / "elastica.xml")
 
 
 # ----------------------------------------------------------------------------- the beam

@@ -137,11 +137,10 @@ def load_cell_scene(path) -> tuple[CellConfig, dict]:
 
 
 def default_scene_path() -> str:
-    from importlib.resources import files
+    """The bundled scene ``scenes/deploy/unit_cell.xml`` of the source tree."""
+    from pathlib import Path
 
-    import simfab
-
-    return str(files(simfab).joinpath("..", "scenes", "deploy", "unit_cell.xml"))
+    return str(Path(__file__).resolve().parents[2] / "scenes" / "deploy" / "unit_cell.xml")
 
 
 def _bezier(P0, P1, P2, P3, n):
