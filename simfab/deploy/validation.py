@@ -10,7 +10,10 @@ DESCRIPTION = (
     "axial force with the exact elastica (g/L = 2E/K - 1, delta/L = k/K); also through the rigid-insert "
     "path (the moving end attached to the MuJoCo insert body of scenes/deploy/elastica.xml) and the "
     "critical load from the straight beam's Hessian. Writes buckling.csv, buckling.json and "
-    "buckling_shapes.png to --out. Exit status 1 when a case at n = 80 misses its tolerance."
+    "buckling_shapes.png to --out. Columns: rel_err = |delta - delta_exact| / delta_exact, order = observed "
+    "convergence order against the next coarser n, force_rel_err = |P - P_exact| / P_exact, seconds = wall time "
+    "of the quasi-static continuation from the straight beam to that g/L. Exit status 1 when a case at n = 80 "
+    "misses its tolerance (pinned rise 0.1%, clamped rise 1%, force 1%, pinned critical load 0.5%)."
 )
 
 
