@@ -133,17 +133,22 @@ def _picture(spec: SurveySpec, vertices_m, faces, path):
 
     b = MJCFBuilder("printing_survey")
     b.mesh_asset("part", vertices_m, faces)
-    b.add(b.worldbody, "light", pos=(0.25, -0.3, 0.6), dir=(0, 0.4, -1), diffuse=(0.8, 0.8, 0.8))
-    b.geom(b.worldbody, type="plane", size=(0.5, 0.2, 0.01), rgba=(0.85, 0.85, 0.88, 1))
-    x = 0.0
-    for k, o in enumerate(parse_orientations(spec.orientations)):
+    b.add(b.worldbody, "light", pos=(0.0, -0.3, 0.6), dir=(0, 0.4, -1), diffuse=(0.8, 0.8, 0.8))
+    gap = 0.03
+    placed, x, depth = [], 0.0, 0.0
+    for o in parse_orientations(spec.orientations):
         R = o.matrix
         v = vertices_m @ R.T
         lo, hi = v.min(0), v.max(0)
+        placed.append((o, R, lo, hi, x))
+        x += (hi[0] - lo[0]) + gap
+        depth = max(depth, hi[1] - lo[1])
+    x0 = 0.5 * (x - gap)  # centre the row on the origin
+    b.geom(b.worldbody, type="plane", size=(x0 + gap, depth / 2 + gap, 0.01), rgba=(0.85, 0.85, 0.88, 1))
+    for o, R, lo, hi, xo in placed:
         q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
-        body = b.body(f"o_{o.name}", pos=(x - lo[0], -0.5 * (lo[1] + hi[1]), -lo[2]), quat=(q[3], q[0], q[1], q[2]))
+        body = b.body(f"o_{o.name}", pos=(xo - x0 - lo[0], -0.5 * (lo[1] + hi[1]), -lo[2]), quat=(q[3], q[0], q[1], q[2]))
         b.geom(body, type="mesh", mesh="part", rgba=(0.2, 0.45, 0.8, 1), contype=0, conaffinity=0)
-        x += (hi[0] - lo[0]) + 0.03
     b.save(path)
 
 
