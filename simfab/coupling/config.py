@@ -59,7 +59,8 @@ class InsertionOptions:
     h_in : insertion step along the path [m] (path length: translation plus rotation angle times
         the object's radius); None: ``L_max / steps``.
     steps : number of steps when ``h_in`` is None.
-    L_max : insertion length [m]; None: the whole keyframe path.
+    L_max : insertion length [m]; None: until O's centre passes A's farthest point along the
+        insertion direction, or the whole keyframe path if it ends before that.
     fix_all_axes : fix the fixed region in all axes (default: only along the insertion axis).
     refine : add interpolated constraint points on boundary edges/faces that cross into O.
     samples_per_edge : 2D refinement points per boundary edge (paper: 10).

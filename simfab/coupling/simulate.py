@@ -109,7 +109,7 @@ def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertice
     if fixed_vertices.size == 0:
         raise InputError("the fixed region contains no vertex of the compliant part", where="fixed")
     total = float(path.length)
-    L = total if options.L_max is None else min(float(options.L_max), total)
+    L = default_insertion_length(fem, path) if options.L_max is None else min(float(options.L_max), total)
     if not L > 0:
         raise InputError("the object's path has zero length (keyframes do not move it)", where="keyframes")
     if options.h_in is not None:
@@ -140,6 +140,23 @@ def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertice
         object_vertices=np.asarray(object_vertices, float),
         object_faces=None if object_faces is None else np.asarray(object_faces, int),
     )
+
+
+def default_insertion_length(fem, path, samples: int = 2000) -> float:
+    """L_max by default: the path length at which O's centre passes A's farthest point along the
+    insertion direction (the overall translation of the path), or the whole path if it never does.
+    """
+    dim = fem.dim
+    move = np.asarray(path.positions[-1] - path.positions[0], dtype=float)[:dim]
+    total = float(path.length)
+    if np.linalg.norm(move) == 0:
+        return total
+    u = move / np.linalg.norm(move)
+    far = float(np.max(fem.rest @ u))
+    for s in np.linspace(0.0, total, samples):
+        if float(np.asarray(path.pose_at(s)[0])[:dim] @ u) > far:
+            return float(s)
+    return total
 
 
 # ----------------------------------------------------------------------------- results

@@ -54,7 +54,7 @@ def test_insertion_force_is_minus_the_energy_slope(runs):
 
 
 def test_3d_clip_every_step_feasible_and_tight():
-    res = simulate(load_coupling_scene("clip3d", overrides={"simulation": {"steps": 12}}))
+    res = simulate(load_coupling_scene("clip3d"))
     _check_every_step(res)
     prof, _ = summarize(res)
     assert prof.category == "tight" and prof.F_grip > 0
@@ -94,3 +94,16 @@ def test_refinement_catches_a_penetration_the_vertices_miss():
     assert last.energy > 0 and last.force < 0  # the block is pushed down and resists
     top = last.x[[2, 3], 1]
     assert np.all(top < -1e-4)  # the edge moved down under the circle instead of being crossed
+
+
+def test_default_insertion_length_stops_when_the_centre_passes_the_part():
+    from simfab.coupling.simulate import default_insertion_length
+    from simfab.io.mjcf import Trajectory
+
+    cm = load_coupling_scene("cclamp2d")
+    far = cm.fem.rest[:, 0].min()  # insertion along -x: A's farthest point is its smallest x
+    long_path = Trajectory(np.array([[0.02, 0, 0], [-0.05, 0, 0]]), np.array([[1.0, 0, 0, 0]] * 2))
+    L = default_insertion_length(cm.fem, long_path)
+    assert 0.02 - L == pytest.approx(far, abs=0.07 / 1000)  # within the sampling of the path
+    short = Trajectory(np.array([[0.02, 0, 0], [0.0, 0, 0]]), np.array([[1.0, 0, 0, 0]] * 2))
+    assert default_insertion_length(cm.fem, short) == pytest.approx(short.length)
