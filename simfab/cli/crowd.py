@@ -18,7 +18,14 @@ import os
 from simfab.errors import InputError
 
 HELP = "wisdom of micro-crowds: aggregate ratings, micro-crowd study, computed truths, synthetic crowds"
-DESCRIPTION = __doc__
+DESCRIPTION = (
+    "Wisdom of micro-crowds. Actions: 'aggregate' (all aggregators incl. the Bayesian "
+    "expertise/difficulty model, scored against --truth), 'study' (micro-crowd study over "
+    "sub-crowd sizes), 'truth' (support volume / overhang area of a mesh per orientation), "
+    "'simulate' (synthetic crowds), 'bracket' (FEM strength of bracket designs). Ratings are "
+    "long-form CSV worker,task,label with integer labels; truth is task,truth. RMS errors are "
+    "on the unit scale (label - lo) / (hi - lo). Bundled example: scenes/crowd."
+)
 
 
 def _common(p):
@@ -111,6 +118,13 @@ def run(args):
     return {"aggregate": run_aggregate, "study": run_study, "truth": run_truth, "simulate": run_simulate, "bracket": run_bracket}[cmd](args)
 
 
+def _device(args) -> str:
+    _quiet_warp()
+    from simfab._warp import device
+
+    return device(args.device)
+
+
 def _scale(args):
     from simfab.crowd.data import Scale
 
@@ -167,7 +181,7 @@ def run_aggregate(args):
     cfg = _sampler_config(args, study=False)
     ratings = load_ratings(args.ratings, scale)
     truth = load_truth(args.truth, ratings) if args.truth else None
-    result = aggregate_all(ratings, truth, config=cfg, seed=args.seed, quiet=args.quiet)
+    result = aggregate_all(ratings, truth, config=cfg, seed=args.seed, quiet=args.quiet, device=_device(args))
     _warn(result["warnings"])
     summary = aggregate_outputs(ratings, truth, result, args.out, title=os.path.basename(args.ratings))
     summary["bayes"] = {k: summary["bayes"][k] for k in ("rhat_max", "ess_min", "seconds", "converged", "iterations_per_chain", "chains", "credible_mass", "x_interval")}
@@ -196,7 +210,7 @@ def run_study(args):
     cfg = _sampler_config(args, study=True)
     ratings = load_ratings(args.ratings, scale)
     truth = load_truth(args.truth, ratings)
-    res = micro_crowd_study(ratings, truth, n_sub=args.subcrowds, min_size=args.min_size, config=cfg, seed=args.seed, quiet=args.quiet)
+    res = micro_crowd_study(ratings, truth, n_sub=args.subcrowds, min_size=args.min_size, config=cfg, seed=args.seed, quiet=args.quiet, device=_device(args))
     return study_outputs(res, args.out, title=f"Micro-crowd study of {os.path.basename(args.ratings)}")
 
 

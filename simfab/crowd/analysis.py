@@ -42,11 +42,11 @@ def half_width(ratings: Ratings) -> float:
     return 0.5 / ratings.scale.span
 
 
-def bayesian(ratings: Ratings, *, config: SamplerConfig = SamplerConfig(), priors: Priors = Priors(), seed: int = 0, quiet: bool = True) -> BayesResult:
+def bayesian(ratings: Ratings, *, config: SamplerConfig = SamplerConfig(), priors: Priors = Priors(), seed: int = 0, quiet: bool = True, device: str = "cpu") -> BayesResult:
     """Fit the expertise/difficulty model to one crowd (several chains, R-hat/ESS checked)."""
     from simfab.crowd.sampler import sample
 
-    post = sample(ratings.unit, priors=priors, config=config, seed=seed, half_width=half_width(ratings), quiet=quiet)
+    post = sample(ratings.unit, priors=priors, config=config, seed=seed, half_width=half_width(ratings), quiet=quiet, device=device)
     sc = ratings.scale
     rh, es = float(post.rhat_max[0]), float(post.ess_min[0])
     warnings = []
@@ -82,7 +82,7 @@ def classical(ratings: Ratings) -> dict[str, np.ndarray]:
     return out
 
 
-def aggregate_all(ratings: Ratings, truth=None, *, config: SamplerConfig = SamplerConfig(), priors: Priors = Priors(), seed: int = 0, quiet: bool = True) -> dict:
+def aggregate_all(ratings: Ratings, truth=None, *, config: SamplerConfig = SamplerConfig(), priors: Priors = Priors(), seed: int = 0, quiet: bool = True, device: str = "cpu") -> dict:
     """Every aggregate of one crowd, scored against ``truth`` ((Q,) scale units) when given.
 
     Returns ``{"methods": {name: {"estimates": {task: value}, "rms", "rms_discrete",
@@ -90,7 +90,7 @@ def aggregate_all(ratings: Ratings, truth=None, *, config: SamplerConfig = Sampl
     "individual_errors": {...}}``. RMS figures are on the unit scale [0, 1].
     """
     est = classical(ratings)
-    bres = bayesian(ratings, config=config, priors=priors, seed=seed, quiet=quiet)
+    bres = bayesian(ratings, config=config, priors=priors, seed=seed, quiet=quiet, device=device)
     est["bayesian"] = bres.estimate
     methods = {}
     for name in METHODS:

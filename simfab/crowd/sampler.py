@@ -235,6 +235,7 @@ def sample(
     half_width: float = 0.0,
     keep_latent: bool = True,
     backend: str = "warp",
+    device: str = "cpu",
     quiet: bool = True,
 ) -> Posterior:
     """Sample the posterior of (x, alpha, beta) for one crowd or a batch of crowds.
@@ -245,8 +246,8 @@ def sample(
     unit scale (0.5 / (hi - lo)); the likelihood then is the probability of the answer's
     rounding cell (:func:`~simfab.crowd.model.loglik_rounded`). 0 uses the density.
     Runs ``config.chains`` chains per crowd; see :class:`SamplerConfig` for the schedule.
-    backend: "warp" (compiled kernel, one thread per chain) or "numpy" (same algorithm,
-    broadcast arrays; the reference the tests compare against).
+    backend: "warp" (compiled kernel, one thread per chain, on Warp ``device``) or "numpy"
+    (same algorithm, broadcast arrays; the reference the tests compare against).
     """
     t0 = time.perf_counter()
     y = np.asarray(y, float)
@@ -260,7 +261,7 @@ def sample(
     if backend == "warp":
         from simfab.crowd._kernels import WarpKernel
 
-        kern = WarpKernel(np.where(m, y, 0.5), m, half_width, priors, config, rng, init)
+        kern = WarpKernel(np.where(m, y, 0.5), m, half_width, priors, config, rng, init, device=device)
     elif backend == "numpy":
         obs = M.Observations.make(np.where(m, y, 0.5)[:, None], m[:, None], half_width)
         kern = _NumpyKernel(obs, priors, config, rng, init)

@@ -82,6 +82,7 @@ def micro_crowd_study(
     priors: Priors = Priors(),
     seed: int = 0,
     quiet: bool = True,
+    device: str = "cpu",
 ) -> StudyResult:
     """Run the study on ``ratings`` with ``truth`` ((Q,) scale units). See module docstring."""
     from simfab.crowd.analysis import half_width
@@ -105,7 +106,7 @@ def micro_crowd_study(
     for k in range(min_size, N):
         idx = subcrowds(N, k, n_sub, rng)
         log(f"micro-crowd study: size {k}, {len(idx)} sub-crowds", quiet=quiet)
-        post = sample(unit[idx], config=config, priors=priors, seed=int(rng.integers(2**31 - 1)), half_width=half_width(ratings), keep_latent=False)
+        post = sample(unit[idx], config=config, priors=priors, seed=int(rng.integers(2**31 - 1)), half_width=half_width(ratings), keep_latent=False, device=device)
         est = post.mean("x")  # (S, Q) unit scale
         bias = np.sqrt(np.mean((est - sc.to_unit(truth)[None]) ** 2, axis=1))
         pct = np.array([metrics.percentile_rank(b, indiv[members]) for b, members in zip(bias, idx)])
