@@ -177,7 +177,7 @@ def object_mesh_body_frame(sc, body: str):
 
 def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
     """A's mesh from the [compliant] table: (points (n, dim) [m], elements, thickness [m])."""
-    from simfab.fem.meshing import tetrahedralize, triangulate_polygon
+    from simfab.fem.meshing import tetrahedralize
 
     gen = comp.pop("generator", None)
     cached = comp.pop("mesh_file", None)

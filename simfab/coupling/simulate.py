@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab.contact.barrier import barrier, point_barrier
+from simfab.contact.barrier import point_barrier
 from simfab.contact.imls import ImlsField, pose_matrix
 from simfab.coupling import config as C
 from simfab.coupling.config import InsertionOptions
@@ -89,9 +89,13 @@ class CouplingModel:
         return self.fem.dim
 
     def pose(self, s: float):
-        """O's pose at path length s: (R (3, 3), p (3,)) with world x = R x_body + p."""
-        pos, quat = self.path.pose_at(s)
-        return pose_matrix((pos, quat), self.dim)
+        """O's pose at path length s: (R (3, 3), p (3,)) with world x = R x_body + p (memoized)."""
+        key = ("pose", float(s))
+        out = self._cache.get(key)
+        if out is None:
+            pos, quat = self.path.pose_at(s)
+            out = self._cache[key] = pose_matrix((pos, quat), self.dim)
+        return out
 
     def direction(self, s: float) -> np.ndarray:
         """(dim,) unit translation direction of O at s (zero during a pure rotation)."""

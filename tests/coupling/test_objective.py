@@ -1,0 +1,62 @@
+"""The per-step objective E_d + kappa sum b(d_j): gradient against finite differences and the
+assembled contact Hessian against J^T blockdiag(H_j) J for points interpolated on edges."""
+
+import numpy as np
+
+from simfab.contact.barrier import point_barrier
+from simfab.coupling import config as C
+from simfab.coupling.points import edge_weights, facet_points, vertex_points
+from simfab.coupling.simulate import _StepObjective, _Timer
+from simfab.fem.neohookean import energy_gradient_hessian
+
+from coupling_models import coarse_block_model
+
+
+def _objective_near_contact():
+    cm = coarse_block_model(refine=True)
+    facets = np.asarray(cm.fem.boundary_facets)
+    top = [i for i, f in enumerate(facets) if set(f.tolist()) == {2, 3}]
+    pts = vertex_points(np.asarray(cm.fem.boundary_vertices), 2).concat(facet_points(facets, top, edge_weights(20)))
+    # place the circle so that the top edge's middle points are inside the barrier band
+    R, p = cm.pose(0.0)
+    p = np.array([0.0, 3e-3 + 0.4 * cm.dhat, 0.0])
+    obj = _StepObjective(cm, pts, R, p, _Timer())
+    return cm, pts, obj
+
+
+def test_objective_gradient_matches_finite_differences():
+    cm, pts, obj = _objective_near_contact()
+    x = cm.fem.rest.ravel().copy()
+    f, g, _ = obj(x, True)
+    d, _, _ = obj.distances(x.reshape(-1, 2), False)
+    assert np.isfinite(f) and np.any(d < cm.dhat)  # some points are in the barrier band
+    rng = np.random.default_rng(0)
+    h = 1e-4 * cm.dhat
+    for i in rng.choice(x.size, 6, replace=False).tolist() + [5, 7]:  # include the top vertices' y dofs
+        e = np.zeros_like(x)
+        e[i] = h
+        fd = (obj(x + e, False)[0] - obj(x - e, False)[0]) / (2 * h)
+        assert abs(fd - g[i]) <= 1e-5 * max(abs(g[i]), 1e-3 * np.abs(g).max())
+
+
+def test_contact_hessian_is_jt_h_j():
+    cm, pts, obj = _objective_near_contact()
+    x = cm.fem.rest.copy()
+    _, _, H = obj(x.ravel(), True)
+    _, _, Hf = energy_gradient_hessian(cm.fem, x)
+    Hc = (H - Hf).toarray()
+    reg = C.RIGID_MODE_REG * float(np.abs(Hf.diagonal()).mean() + 0.0)
+    d, gd, hd = obj.distances(x, True)
+    act = d < cm.dhat
+    _, _, Hy = point_barrier(d[act], gd[act], hd[act], cm.dhat, cm.kappa)
+    n = cm.fem.n_vertices
+    J = np.zeros((act.sum(), 2, 2 * n))
+    for k, j in enumerate(np.flatnonzero(act)):
+        for a in range(2):
+            v, w = pts.verts[j, a], pts.weights[j, a]
+            J[k, :, 2 * v:2 * v + 2] += w * np.eye(2)
+    ref = np.einsum("kia,kij,kjb->ab", J, Hy, J)
+    off = Hc - ref
+    # what remains is the diagonal rigid-mode regularization only
+    assert np.allclose(off - np.diag(np.diag(off)), 0.0, atol=1e-9 * np.abs(ref).max())
+    assert np.all(np.abs(np.diag(off)) <= 10 * reg + 1e-9 * np.abs(ref).max())
