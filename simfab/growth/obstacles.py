@@ -1,8 +1,8 @@
 """Collision tests of branch segments against object meshes and obstacle spheres.
 
 Segments are tested in batches: the object meshes are merged into one triangle soup and
-cast against with trimesh's Embree ray engine (one ray per segment, first hit only,
-compared with the segment length), and spheres with a vectorized closest-point test.
+cast against with Embree (one ray per segment, first hit only, compared with the segment
+length; trimesh's ray engine as a fallback), and spheres with a vectorized closest-point test.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ class Obstacles:
         self.centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
         self.radii = np.asarray(radii, dtype=np.float64).reshape(-1)
         self.end_trim = float(end_trim)
+        self._embree = None  # built on first use; False when embreex is unavailable
 
     # ------------------------------------------------------------------ segments
     def segment_hits(self, p: np.ndarray, q: np.ndarray, p_on_surface=None, q_on_surface=None) -> np.ndarray:
@@ -76,11 +77,24 @@ class Obstacles:
         idx = np.nonzero(usable)[0]
         u = d[idx] / length[idx, None]
         origins = p[idx] + t0[idx, None] * u
-        _, ray_id, loc = self.mesh.ray.intersects_id(origins, u, multiple_hits=False, return_locations=True)
+        out[idx] = self._first_hit_distance(origins, u) <= reach[idx]
+        return out
+
+    def _first_hit_distance(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """(k,) distance along each unit ray to the first triangle (inf when none).
+
+        Embree directly (one call, no per-call cache hashing); trimesh's ray engine when
+        embreex is not installed.
+        """
+        if self._embree is None:
+            self._embree = _embree_scene(self.mesh)
+        if self._embree is not False:
+            r = self._embree.run(origins.astype(np.float32), directions.astype(np.float32), output=1)
+            return np.where(r["primID"] >= 0, r["tfar"].astype(np.float64), np.inf)
+        out = np.full(len(origins), np.inf)
+        _, ray_id, loc = self.mesh.ray.intersects_id(origins, directions, multiple_hits=False, return_locations=True)
         if len(ray_id):
-            t = np.einsum("ij,ij->i", loc - origins[ray_id], u[ray_id])
-            close = t <= reach[idx][ray_id]
-            out[idx[ray_id[close]]] = True
+            out[ray_id] = np.einsum("ij,ij->i", loc - origins[ray_id], directions[ray_id])
         return out
 
     def sphere_hits(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -122,3 +136,14 @@ class Obstacles:
             return x.copy(), np.full(len(x), np.inf)
         c, d, _ = self.mesh.nearest.on_surface(x)
         return np.asarray(c), np.asarray(d)
+
+
+def _embree_scene(mesh):
+    """An Embree scene of the mesh triangles (float32), or False without embreex."""
+    try:
+        from embreex import mesh_construction, rtcore_scene
+    except ImportError:
+        return False
+    scene = rtcore_scene.EmbreeScene()
+    mesh_construction.TriangleMesh(scene=scene, vertices=np.ascontiguousarray(mesh.triangles, dtype=np.float32))
+    return scene
