@@ -142,3 +142,22 @@ def test_attractor_death_steps_are_recorded():
     # next to the root: dead before growth; then killed as the tip passes within 0.05
     assert d[0] == 0 and 0 < d[1] < d[2]
     assert np.all(d >= 0)
+
+
+def test_embree_and_trimesh_ray_paths_agree():
+    import trimesh
+
+    mesh = trimesh.creation.icosphere(subdivisions=2, radius=0.3)
+    rng = np.random.default_rng(5)
+    p = rng.uniform(-0.6, 0.6, size=(400, 3))
+    q = p + rng.normal(scale=0.25, size=(400, 3))
+    fast = Obstacles([mesh], np.zeros((0, 3)), np.zeros(0), end_trim=1e-5)
+    slow = Obstacles([mesh], np.zeros((0, 3)), np.zeros(0), end_trim=1e-5)
+    slow._embree = False  # force trimesh's ray engine
+    a, b = fast.segment_hits(p, q), slow.segment_hits(p, q)
+    assert 20 < a.sum() < 380
+    assert np.array_equal(a, b)
+    # and both agree with the exact answer for a sphere-like mesh: a segment crosses the
+    # surface iff exactly one end is inside, or both are outside and it passes the interior
+    inside_p, inside_q = mesh.contains(p), mesh.contains(q)
+    assert np.all(a[inside_p != inside_q])
