@@ -19,6 +19,10 @@ DHAT_REL = 1e-2
 PSI_LIPSCHITZ = 2.0
 #: Fraction of the distance to O a point may travel in one Newton step (conservative advancement).
 STEP_FRACTION = 0.9
+#: Barrier stiffness adaptation: double kappa after a step that ends with a point closer than
+#: KAPPA_GROW_BELOW * d_hat to O, up to KAPPA_MAX_GROWTH times its initial value.
+KAPPA_GROW_BELOW = 1e-3
+KAPPA_MAX_GROWTH = 1e3
 #: Step cap curvature bound K = max(CURVATURE_SAFETY * max |hess d| near O, CURVATURE_FLOOR / sigma).
 CURVATURE_SAFETY = 2.0
 CURVATURE_FLOOR = 0.1
@@ -67,7 +71,8 @@ class InsertionOptions:
     face_lattice : 3D refinement: barycentric lattice order per boundary face (order m gives
         (m+1)(m+2)/2 - 3 points; 4 -> 12).
     dhat_rel : barrier activation distance / h_A.
-    kappa_rel : barrier stiffness kappa = kappa_rel * E * h_A (3D) or E * thickness (2D) [N/m].
+    kappa_rel : initial barrier stiffness kappa = kappa_rel * E * h_A (3D) or E * thickness (2D)
+        [N/m] (the stiffness per node of A's elements); adapted during the run (see simulate).
     penetration_tol_rel : max penetration / h_A accepted at the end of a step.
     """
 

@@ -16,7 +16,8 @@ from simfab.coupling.simulate import InsertionResult
 #: Units of the summary keys (also written into the JSON summary).
 SUMMARY_UNITS = {
     "E_max": "J", "E_ss": "J", "coupling_ratio": "%", "F_in": "N", "F_rm": "N", "F_grip": "N",
-    "max_von_mises": "Pa", "max_penetration": "m", "min_det_F": "-", "seconds": "s",
+    "max_von_mises": "Pa", "max_penetration": "m", "min_det_F": "-", "seconds": "s", "kappa_initial": "N/m",
+    "kappa_final": "N/m", "dhat": "m", "s_max": "m", "s_ss": "m",
 }
 
 CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "grip_N", "max_von_mises_Pa", "max_penetration_m", "min_det_F",
@@ -45,6 +46,9 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
         "steps": len(res.steps) - 1,
         "newton_iterations": int(res.column("iterations").sum()),
         "elements": int(res.model.fem.n_elements),
+        "kappa_initial": float(res.model.kappa),
+        "kappa_final": float(res.steps[-1].kappa),
+        "dhat": float(res.model.dhat),
         "object_samples": int(len(res.model.field.vertices)),
         "seconds": float(res.seconds),
         "time_split": {k: float(v) for k, v in res.timings.items()},

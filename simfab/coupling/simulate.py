@@ -15,9 +15,12 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    start: every point outside O.
 2. **Corrector.** Projected Newton (:func:`simfab.solve.newton.minimize`) on
    E_d(x) + kappa * sum_j b(-psi(y_j)) with the log barrier b of :mod:`simfab.contact.barrier`.
-   Every step is capped by conservative advancement, alpha <= 0.9 d_j / (L |dy_j|) with L a
-   Lipschitz bound of psi, and the Armijo line search rejects trial points with an inverted
-   element (E_d = +inf) or a point inside O (b = +inf). The iterate therefore stays feasible.
+   Every step is capped so that no point can reach O (a curvature-aware bound, with conservative
+   advancement alpha <= 0.9 d_j / (L |dy_j|), L a Lipschitz bound of psi, as a floor), and the
+   Armijo line search rejects trial points with an inverted element (E_d = +inf) or a point
+   inside O (b = +inf). The iterate therefore stays feasible. kappa starts at the nodal stiffness
+   of A's elements and is doubled (IPC-style) after a step that leaves a point closer than
+   1e-3 d_hat to O.
 3. **Refinement.** Boundary facets near O are checked at interpolated points; facets whose interior
    crosses into O receive ``samples_per_edge`` points per edge (2D) or a barycentric lattice
    (3D) as extra constraints and the step is solved again from the previous step's state (which
@@ -181,6 +184,7 @@ class StepResult:
     min_det_F: float
     iterations: int
     contact_points: int
+    kappa: float  # barrier stiffness used for this step [N/m]
 
 
 @dataclass(kw_only=True)
@@ -208,8 +212,10 @@ class _Timer:
 class _StepObjective:
     """E_d(x) + kappa sum_j b(d_j(x)) for a fixed pose of O and a fixed set of constraint points."""
 
-    def __init__(self, cm: CouplingModel, points: ContactPoints, R: np.ndarray, p: np.ndarray, timer: _Timer):
+    def __init__(self, cm: CouplingModel, points: ContactPoints, R: np.ndarray, p: np.ndarray, timer: _Timer,
+                 kappa: float | None = None):
         self.cm, self.points, self.R, self.p, self.timer = cm, points, R, p, timer
+        self.kappa = cm.kappa if kappa is None else float(kappa)
         self.n, self.dim = cm.fem.n_vertices, cm.dim
         self.slots = _point_slots(cm, points)
         self.wpair = points.weights[:, :, None] * points.weights[:, None, :]  # (k, nv, nv)
@@ -277,7 +283,7 @@ class _StepObjective:
         if np.any(d <= 0):
             return np.inf, g.ravel(), H
         act = d < cm.dhat
-        B, gy, Hy = point_barrier(d[act], gd[act], hd[act] if need_hessian else None, cm.dhat, cm.kappa)
+        B, gy, Hy = point_barrier(d[act], gd[act], hd[act] if need_hessian else None, cm.dhat, self.kappa)
         g_pts = np.zeros_like(gd)
         g_pts[act] = gy
         gc = self.points.scatter(g_pts, self.n)
@@ -353,6 +359,7 @@ class _State:
     refined: set
     order: int  # refinement density (2D: points per edge, 3D: face lattice order), doubled on demand
     check: tuple | None = None  # memo of the last facet check (x, s, order, result)
+    kappa: float = 0.0  # current barrier stiffness [N/m] (adapted, see _adapt_kappa)
     H: object = None  # last Hessian (for the predictor)
 
 
@@ -373,7 +380,8 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     bverts = np.asarray(fem.boundary_vertices, dtype=np.int64)
     points = vertex_points(bverts, dim)
     order = cm.options.samples_per_edge if dim == 2 else cm.options.face_lattice
-    state = _State(x=np.array(fem.rest, dtype=np.float64), s=0.0, points=points, refined=set(), order=order)
+    state = _State(x=np.array(fem.rest, dtype=np.float64), s=0.0, points=points, refined=set(), order=order,
+                   kappa=cm.kappa)
     ctx = dict(timer=timer, solver=PatternCholesky())
     check_start(cm)
     steps = []
@@ -402,9 +410,21 @@ def check_start(cm: CouplingModel) -> None:
                          "it at the first keyframe); move the first keyframe away", where="keyframes")
 
 
-def _objective(cm, points, s, ctx) -> _StepObjective:
+def _objective(cm, points, s, ctx, kappa) -> _StepObjective:
     R, p = cm.pose(s)
-    return _StepObjective(cm, points, R, p, ctx["timer"])
+    return _StepObjective(cm, points, R, p, ctx["timer"], kappa)
+
+
+def _adapt_kappa(cm: CouplingModel, state: _State, obj: _StepObjective) -> None:
+    """IPC-style stiffness adaptation: when a converged step leaves a point closer to O than
+    KAPPA_GROW_BELOW * d_hat (the barrier then works in its ill-conditioned 1/d^2 range), double
+    kappa for the following steps (at most KAPPA_MAX_GROWTH times the initial value); a stiffer
+    barrier keeps contact gaps ~ kappa d_hat^2 / f larger."""
+    d = obj.last_d
+    if d is None or not len(d):
+        return
+    if float(d.min()) < C.KAPPA_GROW_BELOW * cm.dhat and state.kappa < C.KAPPA_MAX_GROWTH * cm.kappa:
+        state.kappa = min(2.0 * state.kappa, C.KAPPA_MAX_GROWTH * cm.kappa)
 
 
 def _newton(cm: CouplingModel, obj: _StepObjective, x0: np.ndarray, ctx) -> tuple[np.ndarray, int]:
@@ -443,7 +463,7 @@ def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
     """Solve at the current pose without moving O (step 0), with refinement."""
     total = 0
     for _ in range(64):
-        obj = _objective(cm, state.points, s, ctx)
+        obj = _objective(cm, state.points, s, ctx, state.kappa)
         x, it = _newton(cm, obj, state.x, ctx)
         total += it
         new = _crossing_facets(cm, x, s, state)
@@ -460,7 +480,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
     for _ in range(64):  # refinement restarts
         try:
             x0 = _predict(cm, state, s_new, ctx)
-            obj = _objective(cm, state.points, s_new, ctx)
+            obj = _objective(cm, state.points, s_new, ctx, state.kappa)
             x, it = _newton(cm, obj, x0, ctx)
         except ConvergenceError:
             if depth >= C.MAX_BISECTIONS:
@@ -473,6 +493,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         new = _crossing_facets(cm, x, s_new, state) if cm.options.refine else []
         if not new:
             state.x, state.s, state.H = x, s_new, obj.last_H
+            _adapt_kappa(cm, state, obj)
             return total
         # restart the step from the previous state, which is feasible for the new points (new
         # facets were outside O there; denser points of refined facets were within the tolerance
@@ -706,7 +727,7 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     pts = state.points
     ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
     d = -ev.psi
-    _, gy, _ = point_barrier(d, -ev.grad, None, cm.dhat, cm.kappa)
+    _, gy, _ = point_barrier(d, -ev.grad, None, cm.dhat, state.kappa)
     gc = pts.scatter(gy, n)
     g = gE + gc
     fixed = ~cm.free.reshape(n, dim)
@@ -728,5 +749,5 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     return StepResult(
         s=state.s, pos=np.asarray(pos), quat=np.asarray(quat), x=x.copy(), energy=float(E), force=force, grip=grip,
         max_von_mises=float(vm.max()), von_mises=vm, penetration=pen, min_det_F=min_det, iterations=int(iters),
-        contact_points=len(pts),
+        contact_points=len(pts), kappa=float(state.kappa),
     )
