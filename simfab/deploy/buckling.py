@@ -17,7 +17,8 @@ is exactly straight, so the equilibria found are those of the perfect beam; the 
 only selects the upward branch instead of the unstable straight one.
 Planarity: all y coordinates are held (the problem is planar; this removes the zero-energy
 rotation of a pinned beam about its chord).
-Inextensible limit: EA is set to ``axial_ratio * B1 / L^2`` (1e8 by default).
+Inextensible limit: EA is set to ``axial_ratio * B1 / L^2`` (1e8 by default); each increment
+is first relaxed with EA / 100 (stiffness homotopy) and then solved with the real EA.
 """
 
 from __future__ import annotations
@@ -260,10 +261,11 @@ def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: st
     increments since the flat start [s], Newton iterations, and the shape (x, z) when
     ``keep_states``.
     """
-    from simfab.rods.statics import StaticSolver
+    from simfab.rods.statics import StaticSolver, StaticsOptions
 
     beam = build_beam(setup, n, support, path)
-    solver = StaticSolver(beam.model, device=device)
+    # nearly inextensible beam: relax each increment with EA / 100 first (see StaticsOptions)
+    solver = StaticSolver(beam.model, device=device, options=StaticsOptions(stretch_homotopy=1e-2))
     L = setup.length
     targets = sorted({float(r) for r in ratios}, reverse=True)
     state = beam.state

@@ -63,6 +63,9 @@ class DeviceBuffers:
         self.edges = a(model.edges.astype(np.int32), wp.int32)
         self.rest_len = a(model.rest_len)
         self.stretch_stiff = a(model.stretch_stiff)
+        self._stretch_full = self.stretch_stiff
+        self._stretch_scaled = {}
+        self._model_EA = model.stretch_stiff
         self.edge_dofs = a(edofs.astype(np.int32), wp.int32)
         self.edge_slots = a(slots(edofs), wp.int32)
         self.hinge_nodes = a(model.hinge_nodes.reshape(-1, 3).astype(np.int32), wp.int32)
@@ -83,6 +86,15 @@ class DeviceBuffers:
         self.e_twist = wp.zeros(self.n_hinges, dtype=wp.float64, device=device)
         self.grad = wp.zeros(n, dtype=wp.float64, device=device)
         self.hess = wp.zeros(max(self.nnz, 1), dtype=wp.float64, device=device)
+
+    def set_stretch_scale(self, scale: float) -> None:
+        """Multiply every edge's EA by ``scale`` (1.0 restores the model's values)."""
+        if scale == 1.0:
+            self.stretch_stiff = self._stretch_full
+            return
+        if scale not in self._stretch_scaled:
+            self._stretch_scaled[scale] = wp.array(self._model_EA * scale, dtype=wp.float64, device=self.device)
+        self.stretch_stiff = self._stretch_scaled[scale]
 
     def upload(self, state: RodState) -> None:
         self.x.assign(np.ascontiguousarray(state.x))
