@@ -297,8 +297,7 @@ def run_bracket(args):
     import dataclasses
 
     _quiet_warp()
-    from simfab.crowd.bracket import BracketSetup, bracket_survey, plot_brackets, strength_scores
-    from simfab.io.atomic import write_csv, write_json
+    from simfab.crowd.bracket import BracketSetup, bracket_survey
 
     setup = BracketSetup()
     if args.load is not None:
@@ -310,8 +309,17 @@ def run_bracket(args):
     results = bracket_survey(setup, names=args.designs)
     if len(results) < 2:
         raise InputError("need at least two designs to scale scores", where="--designs")
+    return bracket_outputs(results, setup, args.out)
+
+
+def bracket_outputs(results, setup, out: str) -> dict:
+    """Tables, truth CSV, picture and JSON of a bracket survey."""
+    import dataclasses
+
+    from simfab.crowd.bracket import plot_brackets, strength_scores
+    from simfab.io.atomic import write_csv, write_json
+
     scores = strength_scores(results)
-    out = args.out
     rows = [[r.name, r.deflection, r.area, r.n_triangles, r.newton_iterations, float(s)] for r, s in zip(results, scores)]
     outputs = {
         "table_csv": str(write_csv(os.path.join(out, "brackets.csv"), ["design", "tip_deflection_m", "area_m2", "triangles", "newton_iterations", "strength_score"], rows)),
@@ -328,7 +336,15 @@ def run_bracket(args):
 
 
 def demo(ctx):
-    """The bundled 3D-printing survey: truth from the mesh, practitioners vs general public."""
+    """The bundled 3D-printing survey (truth from the mesh, practitioners vs general public,
+    micro-crowd study) and the bracket-strength truth of the structural survey (FEM)."""
+    from simfab.crowd.bracket import BracketSetup, bracket_survey
     from simfab.crowd.survey import run_bundled_survey
+    from simfab.progress import log
 
-    return run_bundled_survey(out=ctx.out, seed=ctx.seed, quiet=ctx.quiet)
+    _quiet_warp()
+    summary = run_bundled_survey(out=ctx.out, seed=ctx.seed, quiet=ctx.quiet)
+    log("crowd demo: bracket strength truth (FEM)", quiet=ctx.quiet)
+    b = bracket_outputs(bracket_survey(BracketSetup()), BracketSetup(), os.path.join(ctx.out, "bracket"))
+    summary["bracket"] = {"scores": {k: v["score"] for k, v in b["designs"].items()}, "outputs": b["outputs"]}
+    return summary
