@@ -7,6 +7,9 @@ prints one JSON object: per tet-mesh size, the median wall time [ms] of
 - ``energy``, ``energy_gradient``: one kernel launch each (+ gradient scatter);
 - ``energy_gradient_hessian``: energy, gradient and the PSD-projected Hessian assembled into CSR
   (analytic eigensystem in the kernel, values added straight into the fixed pattern);
+- ``hessian_svd_route``: the same through the full SVD eigensystem of every element (the
+  reference route; the default route avoids the SVD where the twist block is the only indefinite
+  part);
 - ``eigh_projection``: the alternative of projecting the (m, 12, 12) element blocks with numpy's
   batched ``eigh`` (projection alone, without assembly), for comparison;
 - ``factorization``: one sparse Cholesky solve of the free-dof Hessian (CHOLMOD via
@@ -112,6 +115,7 @@ def _measure(model, repeat: int, rng) -> dict:
         "energy_gradient_ms": _median_ms(lambda: nh.energy_gradient(model, x), repeat),
         "energy_gradient_hessian_ms": _median_ms(lambda: nh.energy_gradient_hessian(model, x), repeat),
     }
+    out["hessian_svd_route_ms"] = _median_ms(lambda: nh._energy_gradient_hessian_svd(model, x), repeat)
     blocks = nh.element_hessians(model, x, project_psd=False)
 
     def eigh_projection():

@@ -76,6 +76,11 @@ _mat4x6d = wp.types.matrix(shape=(4, 6), dtype=wp.float64)
 _mat9x12d = wp.types.matrix(shape=(9, 12), dtype=wp.float64)
 
 _HALF_SQRT2 = 0.7071067811865476  # 1/sqrt(2): unit Frobenius norm of the twist/flip modes
+# Hessian kernel modes: exact; PSD-projected (direct route where valid, else SVD); PSD-projected
+# always through the SVD eigensystem (reference route for tests and the benchmark)
+_EXACT = wp.constant(0)
+_PROJECT = wp.constant(1)
+_PROJECT_SVD = wp.constant(2)
 _POLAR_STEP_SQ_TOL = wp.constant(wp.float64(tolerances.POLAR_STEP_SQ_TOL))
 _POLAR_MAX_ITER = wp.constant(tolerances.POLAR_MAX_ITER)
 
@@ -390,7 +395,7 @@ def _hessian3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32),
 
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
-    if project == 0 or dPsi_dJ <= zero:
+    if project == _EXACT or (project == _PROJECT and dPsi_dJ <= zero):
         _hessian_direct3(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, project, scatter, slots, hess, data)
     else:
         _hessian_svd3(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
@@ -574,7 +579,7 @@ def _hessian2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),
 
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
-    if project == 0 or dPsi_dJ <= zero:
+    if project == _EXACT or (project == _PROJECT and dPsi_dJ <= zero):
         _hessian_direct2(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, project, scatter, slots, hess, data)
     else:
         _hessian_svd2(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
@@ -669,14 +674,14 @@ def _workspace(model: FemModel) -> _Workspace:
     return ws
 
 
-def _launch(model: FemModel, x, want: int, project: bool = True) -> _Workspace:
+def _launch(model: FemModel, x, want: int, project: int = 1) -> _Workspace:
     """One kernel launch over all elements computing what ``want`` asks for."""
     x = model.check_positions(x)
     ws = _workspace(model)
     ws.set_positions(x)
     cmd = ws.command(model, want)
     if want >= _HESSIAN:
-        cmd.set_param_by_name("project", int(bool(project)))
+        cmd.set_param_by_name("project", int(project))
     if want == _HESSIAN:
         # a fresh values array per call (callers keep and modify returned matrices); on the CPU
         # numpy owns it and the kernel writes through an alias, so no copy is made
@@ -710,7 +715,7 @@ def energy_gradient(model: FemModel, x) -> tuple[float, np.ndarray]:
 
 def element_hessians(model: FemModel, x, *, project_psd: bool = True) -> np.ndarray:
     """Per-element Hessian blocks (m, (dim+1)*dim, (dim+1)*dim) [N/m], dofs ordered (vertex, axis)."""
-    ws = _launch(model, x, _BLOCKS, project_psd)
+    ws = _launch(model, x, _BLOCKS, _PROJECT if project_psd else _EXACT)
     return ws.hess.numpy().copy()
 
 
@@ -722,7 +727,15 @@ def energy_gradient_hessian(model: FemModel, x, *, project_psd: bool = True) -> 
     exact Hessian. The CSR has the model's fixed pattern (``model.pattern``); its ``data`` is a
     fresh array the caller may modify (e.g. add contact blocks via ``pattern.block_slots``).
     """
-    ws = _launch(model, x, _HESSIAN, project_psd)
+    ws = _launch(model, x, _HESSIAN, _PROJECT if project_psd else _EXACT)
+    H = model.pattern.matrix(ws.data_np if ws.cpu else ws.data.numpy())
+    return _total(ws), _gradient(model, ws), H
+
+
+def _energy_gradient_hessian_svd(model: FemModel, x) -> tuple[float, np.ndarray, sp.csr_matrix]:
+    """Like :func:`energy_gradient_hessian` (projected) but always through the SVD eigensystem:
+    the reference route the faster direct route is checked and benchmarked against."""
+    ws = _launch(model, x, _HESSIAN, _PROJECT_SVD)
     H = model.pattern.matrix(ws.data_np if ws.cpu else ws.data.numpy())
     return _total(ws), _gradient(model, ws), H
 
