@@ -98,7 +98,28 @@ def write_mjcf(result, mesh, path: Path) -> Path:
     b.geom(body, type="mesh", mesh="grown", rgba=SKIN_RGBA)
     for name, x in zip(result.scene.target_names, result.scene.targets):
         b.site(body, name, x, size=0.6 * result.resolved.r_min, rgba=[0.2, 0.3, 0.9, 1])
+    for name, x in zip(result.scene.root_names, result.scene.roots):
+        b.site(body, name, x, size=0.6 * result.resolved.r_min, rgba=[0.9, 0.2, 0.2, 1])
+    for name, c, r in zip(result.scene.sphere_names, result.scene.sphere_centers, result.scene.sphere_radii):
+        b.geom(b.worldbody, name=_ident(name), type="sphere", size=[r], pos=c, rgba=[0.9, 0.6, 0.1, 0.3],
+               contype=0, conaffinity=0)
     return b.save(path)
+
+
+def preview_azimuth(result, mesh) -> float:
+    """MuJoCo camera azimuth [deg] that looks at the grown part from its side of the objects
+    (the part is often behind the object it supports, e.g. a phone stand)."""
+    from simfab.io.render import AZIMUTH
+
+    objs = [m.bounds.mean(axis=0) for m in result.scene.objects.values()]
+    if not objs or len(mesh.vertices) == 0:
+        return AZIMUTH
+    v = (np.asarray(mesh.vertices).mean(axis=0) - np.mean(objs, axis=0))[:2]
+    if np.linalg.norm(v) < 1e-3 * result.resolved.diag:
+        return AZIMUTH
+    # the free camera sits at -(cos a, sin a) from the look-at point: put it on the part's side,
+    # turned 35 degrees for an oblique view
+    return float(np.degrees(np.arctan2(-v[1], -v[0]))) + 35.0
 
 
 #: The skin files are for slicers, which read STL/PLY in millimetres.
@@ -117,8 +138,6 @@ def save_skin(mesh, path: Path) -> Path:
 
 def write_all(result, mesh, out: Path, *, stem: str = "growth") -> dict:
     """Write every output of a run under ``out``; returns name -> path."""
-    from simfab.io.render import render_mjcf
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {
@@ -128,5 +147,17 @@ def write_all(result, mesh, out: Path, *, stem: str = "growth") -> dict:
         "usd": write_usd(result, mesh, out / f"{stem}.usdc"),
         "mjcf": write_mjcf(result, mesh, out / f"{stem}_grown.xml"),
     }
-    paths["png"] = render_mjcf(paths["mjcf"], out / f"{stem}_preview.png")
+    paths["png"] = render_preview(paths["mjcf"], out / f"{stem}_preview.png", preview_azimuth(result, mesh))
     return {k: str(v) for k, v in paths.items()}
+
+
+def render_preview(mjcf: Path, png: Path, azimuth: float) -> Path:
+    """PNG of the MJCF from ``azimuth``; falls back to the default view (and matplotlib without
+    OpenGL) through :func:`simfab.io.render.render_mjcf`."""
+    from simfab.io.mjcf import load_model
+    from simfab.io.render import render_mjcf, render_model
+
+    try:
+        return render_model(load_model(mjcf), png, azimuth=azimuth)
+    except Exception:  # no usable OpenGL: render_mjcf knows the fallback
+        return render_mjcf(mjcf, png)

@@ -26,7 +26,8 @@ class SkinReport:
     nodes_contained : skeleton nodes inside the skin or on its boundary (a ball of radius
         CONTAIN_TOL r_min around the node overlaps the skin by TOUCH_FRACTION of its volume).
     overlap_volume : volume of skin ∩ objects [m³] (before the round trip).
-    penetration : largest depth [m] of a skin vertex inside an object (0 when carved).
+    penetration : largest depth [m] of a skin vertex inside an object that was not carved
+        (carved objects are exact: their overlap is ``overlap_volume``).
     objects_subtracted / objects_not_manifold : object names carved out / skipped.
     attempts : skins built until one passed the round trip (see :func:`skin`).
     """
@@ -283,7 +284,10 @@ def skin(nodes, parent, radius, objects: dict | None = None, *, segments: int = 
         rep.overlap_volume = overlap_volume(solid, cutters)
         mesh = clean_for_stl(to_trimesh(solid))
         check_skin(mesh, nodes, r_min, rep)
-        rep.penetration = penetration_depth(mesh, objects or {})
+        # carved objects cannot be penetrated (exact booleans; rep.overlap_volume checks it):
+        # measure the depth only for objects left whole
+        whole = {k: v for k, v in (objects or {}).items() if not subtract or k not in rep.objects_subtracted}
+        rep.penetration = penetration_depth(mesh, whole)
         rep.attempts = attempt + 1
         if rep.watertight and rep.is_volume:
             break
