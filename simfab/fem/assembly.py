@@ -42,7 +42,7 @@ class HessianPattern:
         rows = np.repeat(elements, k, axis=1).ravel()
         cols = np.tile(elements, (1, k)).ravel()
         diag = np.arange(n)
-        vadj = sp.csr_matrix((np.ones(rows.size + n, dtype=np.int8), (np.concatenate([rows, diag]),
+        vadj = sp.csr_matrix((np.ones(rows.size + n, dtype=np.int32), (np.concatenate([rows, diag]),
                                                                       np.concatenate([cols, diag]))), shape=(n, n))
         vadj.sum_duplicates()
         vadj.sort_indices()
