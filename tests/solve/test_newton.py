@@ -62,6 +62,10 @@ def test_raises_when_iteration_capped():
         minimize(fun, np.array([-1.2, 1.0]), options=NewtonOptions(max_iter=2))
     res = minimize(fun, np.array([-1.2, 1.0]), options=NewtonOptions(max_iter=200, grad_tol=1e-10))
     np.testing.assert_allclose(res.x, [1.0, 1.0], atol=1e-6)
+    # Armijo backtracking: the energy never increases
+    energies = [h["energy"] for h in res.history]
+    assert all(b <= a for a, b in zip(energies, energies[1:]))
+    assert any(h["alpha"] < 1 for h in res.history)  # the nonconvex valley needs backtracking
 
 
 def test_max_step_caps_every_step():
