@@ -5,7 +5,11 @@
 - :mod:`simfab.fem.assembly` - fixed-pattern sparse Hessian assembly
 - :mod:`simfab.fem.neohookean` - compressible Neo-Hookean energy, gradient and PSD-projected Hessian (Warp)
 - :mod:`simfab.fem.stress` - Cauchy and von Mises stress
-- :mod:`simfab.fem.meshing` - Triangle (2D) and fTetWild (3D) meshing
+- :mod:`simfab.fem.meshing` - Triangle (2D) and fTetWild (3D) meshing, structured tet boxes
+- :mod:`simfab.fem.tolerances` - the area's numerical tolerances
+- :mod:`simfab.fem.benchmark` - timings (``python -m simfab.fem.benchmark``)
+
+The shared Newton solver lives in :mod:`simfab.solve.newton`.
 
 Submodules are imported on demand so that ``import simfab.fem`` stays cheap (Warp is imported
 by :mod:`simfab.fem.neohookean` only).
