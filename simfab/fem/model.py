@@ -51,6 +51,18 @@ class FemModel:
     device: str = "cpu"
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
+    def __getstate__(self):
+        # the cache holds device buffers and recorded launches: rebuilt on demand, not pickled
+        state = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "_cache"}
+        return state
+
+    def __setstate__(self, state):
+        for k, v in state.items():
+            if isinstance(v, np.ndarray):
+                v.flags.writeable = False  # unpickled arrays are fresh copies: keep them read-only
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "_cache", {})
+
     @property
     def n_vertices(self) -> int:
         return self.rest.shape[0]

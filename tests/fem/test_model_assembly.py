@@ -121,3 +121,21 @@ def test_make_model_accepts_material_names():
     assert m.material is PLA
     with pytest.raises(InputError, match="unknown material"):
         make_model(np.vstack([np.zeros(2), np.eye(2)]), [[0, 1, 2]], "unobtainium")
+
+
+def test_model_pickles_without_device_cache():
+    import pickle
+
+    from simfab.fem import neohookean as nh
+
+    P, T = box_tet(1.0, 0.5, 0.5, 2, 1, 1)
+    m = make_model(P, T, PLA)
+    x = m.rest * 1.01
+    E, g, H = nh.energy_gradient_hessian(m, x)  # fills the cache with Warp buffers
+    m2 = pickle.loads(pickle.dumps(m))
+    assert m2._cache == {}
+    E2, g2, H2 = nh.energy_gradient_hessian(m2, x)
+    assert E2 == E
+    np.testing.assert_array_equal(g2, g)
+    np.testing.assert_array_equal(H2.toarray(), H.toarray())
+    assert not m2.rest.flags.writeable
