@@ -48,7 +48,10 @@ def x_start(clamp: dict, margin: float = 0.001, radius: float = R_CYL) -> float:
     tx, ty = clamp["inner_radius"] * math.cos(a), clamp["inner_radius"] * math.sin(a)
     return tx + math.sqrt(max(radius**2 - ty**2, 0.0)) + margin
 KNOCK_R, KNOCK_r = 0.020, 0.003  # ring major / tube radius [m]
-CLAMP_KNOCK = dict(inner_radius=0.00285, width=0.0015, opening_deg=60.0, base_depth=0.002, base_height=0.008)
+#: The knocker's clip holds the ring's bar loosely (0.3 mm clearance) behind a mouth narrower than the
+#: bar (snap on insertion); the bar's curvature (offset y^2 / 2R = 0.225 mm at the clip's ends) still
+#: clears the clip while the ring rotates: a loose coupling on a rotating path.
+CLAMP_KNOCK = dict(inner_radius=0.0033, width=0.0015, opening_deg=60.0, base_depth=0.002, base_height=0.009)
 
 
 def _toml_value(v) -> str:
@@ -177,13 +180,13 @@ def main() -> None:
           obj=dict(body="object", samples=10000), sim=dict(steps=25))
 
     # door knocker: ring bar along z pushed into a clip along -x, then rotated 90 deg about z
-    hk = 0.008
+    hk = 0.006
     ring = trimesh.creation.torus(major_radius=KNOCK_R, minor_radius=KNOCK_r, major_sections=96, minor_sections=24)
     ring.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))  # axis z -> y
     ring.apply_translation([KNOCK_R, 0, 0])  # the bar (nearest tube section) through the body origin
     rok = CLAMP_KNOCK["inner_radius"] + CLAMP_KNOCK["width"]
     xk = x_start(CLAMP_KNOCK, margin=0.0005, radius=KNOCK_r)
-    xs = KNOCK_r - CLAMP_KNOCK["inner_radius"] + 0.0001  # seated: the bar just clears the back of the clip
+    xs = max(KNOCK_r - CLAMP_KNOCK["inner_radius"], 0.0) + 0.0001  # seated: the bar clears the back of the clip
     scene("knocker3d", doc="Door-knocker ring: inserted horizontally into a clip, then rotated about its bar.", dim=3,
           comp=dict(generator="extruded_clamp", target_elements=5080, height=hk, **CLAMP_KNOCK),
           part_mesh=G.extruded_clamp(height=hk, **CLAMP_KNOCK), extra_assets=[("ring", ring.vertices, ring.faces)],

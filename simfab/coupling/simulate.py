@@ -31,6 +31,12 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    ConvergenceError. A step that cannot be taken (predictor infeasible, Newton failure) is
    bisected along the path up to ``MAX_BISECTIONS`` times before giving up loudly.
 
+Cost control: the contact field is evaluated in one Warp launch per call, only for points that
+are not certified (by the Lipschitz bound and their travel since their last exact evaluation) to
+be farther than a band of a few d_hat from O; Hessians of psi only within d_hat; CHOLMOD's symbolic
+analysis and the value map of the fixed FEM sparsity pattern are reused for every solve
+(:mod:`simfab.coupling.linsolve`); the facet check of a converged state is memoized.
+
 Forces: the reaction at the fixed dofs is r = dE_total/dx there (the force the support applies to
 A). By equilibrium of A it equals the force A exerts on O, so the insertion force is
 F = sum r . u (u: unit direction of O's translation), negative when A resists the insertion.
