@@ -255,6 +255,7 @@ class Deployment:
     iterations: list
     energy: float
     materials: dict  # rod name -> (young [Pa], poisson [-]) for exports
+    curvature_history: list  # discrete Gaussian curvature [1/m^2] per increment (0 = flat)
 
 
 def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> Deployment:
@@ -308,6 +309,7 @@ def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool 
         states.append(state)
         iters.append(res.iterations)
     curv = gaussian_curvature(cell, state)
+    history = [gaussian_curvature(cell, st)["gaussian_curvature"] for st in states]
     mats = {r.name: (cfg.young, cfg.poisson) for r in model.rods}
     return Deployment(cell=cell, insert=insert, states=states, curvature=curv, stable=solver.is_stable(state),
-                      iterations=iters, energy=res.energy, materials=mats)
+                      iterations=iters, energy=res.energy, materials=mats, curvature_history=history)

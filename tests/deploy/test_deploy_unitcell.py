@@ -24,3 +24,5 @@ def test_larger_insert_dome_smaller_insert_saddle(scene):
     # unloaded equilibria (perturbation removed) that are stable
     assert dome.stable and saddle.stable
     assert len(dome.states) == cfg.increments + 1
+    assert dome.curvature_history[0] == pytest.approx(0.0, abs=1e-9)  # flat start
+    assert dome.curvature_history[-1] == pytest.approx(dome.curvature["gaussian_curvature"])
