@@ -60,6 +60,7 @@ def run(args) -> dict:
                           **d.curvature, stable=d.stable, increments=len(d.iterations),
                           newton_iterations=d.iterations, energy=d.energy,
                           gaussian_curvature_per_increment=d.curvature_history,
+                          max_bending_strain=float(export.bending_strain(d.cell.model, d.states[-1]).max()),
                           outputs=dict(usd=str(usd), mjcf=str(xml), png=str(png)))
     summary = dict(scene=str(scene), inserts=results)
     summary["summary_json"] = str(write_json(os.path.join(out, "deploy.json"), summary))

@@ -31,7 +31,28 @@ def rod_polylines(model, state) -> list[np.ndarray]:
     return [state.x[r.nodes] for r in model.rods]
 
 
+def bending_strain(model, state) -> np.ndarray:
+    """Largest bending fibre strain per node (N,) [-]: ``|dk1| t/2 + |dk2| w/2`` over the Voronoi
+    length, with ``dk`` the change of material curvature from the rest shape; 0 at rod ends."""
+    from simfab.rods.model import material_curvatures
+
+    out = np.zeros(model.n_nodes)
+    if model.n_hinges == 0:
+        return out
+    dk = np.abs(material_curvatures(model, state) - model.kappa_bar) / model.vor_len[:, None]
+    half = np.zeros((model.n_edges, 2))
+    for r in model.rods:
+        sec = r.section
+        t, w = (sec.thickness, sec.width) if sec.shape == "rect" else (2 * sec.radius, 2 * sec.radius)
+        half[r.edges] = [0.5 * t, 0.5 * w]
+    h = half[model.hinge_edges[:, 0]]
+    out[model.hinge_nodes[:, 1]] = dk[:, 0] * h[:, 0] + dk[:, 1] * h[:, 1]
+    return out
+
+
 def write_usd(path, deployment) -> Path:
+    """Timeline of the deployment; rods carry a per-vertex ``bending_strain`` primvar (colour scale
+    0 .. the largest strain of the whole timeline)."""
     from simfab.io.usd import StageWriter
 
     d = deployment
@@ -43,8 +64,11 @@ def write_usd(path, deployment) -> Path:
     V = np.asarray(ins.mesh.vertices)
     F = np.asarray(ins.mesh.faces)
     w.add_rigid("deploy/insert", V, F, color=(0.85, 0.45, 0.2))
+    strains = [bending_strain(model, st) for st in d.states]
+    smax = max(float(np.max(e)) for e in strains) or 1.0
     for t, st in enumerate(d.states):
         w.set_curves("deploy/rods", rod_polylines(model, st), widths, t)
+        w.set_scalar("deploy/rods", "bending_strain", strains[t], t, vmin=0.0, vmax=smax)
         b = d.cell.insert_body
         w.set_pose("deploy/insert", st.body_pos[b], fr.matrix_to_quat(st.body_rot[b]), t)
     return w.save()

@@ -56,8 +56,15 @@ def test_deploy_cli_small_insert(tmp_path, capsys, rods):
         assert m.nflex == 16 and m.flex_dim[0] == 1
     from pxr import Usd
 
+    from pxr import UsdGeom
+
     stage = Usd.Stage.Open(res["outputs"]["usd"])
     assert stage.GetEndTimeCode() == 4
+    rods = stage.GetPrimAtPath("/World/deploy/rods")
+    strain = UsdGeom.PrimvarsAPI(rods).GetPrimvar("bending_strain")
+    assert len(strain.Get(4)) == len(UsdGeom.BasisCurves(rods).GetPointsAttr().Get(4))
+    assert max(strain.Get(0)) < 1e-9  # flat start is unstrained
+    assert 0 < res["max_bending_strain"] < 0.1
 
 
 def test_validation_failure_exits_1_after_writing_outputs(tmp_path, capsys):
