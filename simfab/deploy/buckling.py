@@ -307,7 +307,8 @@ def critical_load(setup: BeamSetup, n: int, support: str = "pinned", *, device: 
     P brackets the loss of definiteness to ``CRITICAL_LOAD_BISECTION_RTOL``.
     Compare with pi^2 B / L^2 (pinned) / 4 pi^2 B / L^2 (clamped).
     """
-    from simfab.rods.statics import StaticSolver, prescribe
+    from simfab.rods.model import synchronize
+    from simfab.rods.statics import StaticSolver
 
     beam = build_beam(setup, n, support, "direct", free_end=True)
     model = beam.model
@@ -317,13 +318,10 @@ def critical_load(setup: BeamSetup, n: int, support: str = "pinned", *, device: 
     P_e = elastica.euler_load_factor(support) * setup.B / setup.length**2
 
     def stable(P):
+        # the straight equilibrium under P: every edge shortened by the axial strain -P / EA
         x = beam.state.x.copy()
         x[:, 0] = s0 * (1.0 - P / EA)
-        st = prescribe(model, beam.state, x=x)
-        st = st.replace(x=x)
-        from simfab.rods.model import synchronize
-
-        st = synchronize(model, beam.state, x, st.theta, st.body_pos, st.body_rot)
+        st = synchronize(model, beam.state, x, beam.state.theta, beam.state.body_pos, beam.state.body_rot)
         return solver.is_stable(st)
 
     lo, hi = 0.5 * P_e, 1.5 * P_e
