@@ -81,6 +81,7 @@ _HALF_SQRT2 = 0.7071067811865476  # 1/sqrt(2): unit Frobenius norm of the twist/
 _EXACT = wp.constant(0)
 _PROJECT = wp.constant(1)
 _PROJECT_SVD = wp.constant(2)
+_BOTH = wp.constant(3)  # exact into ``data`` and PSD-projected (default route) into ``data2``
 _POLAR_STEP_SQ_TOL = wp.constant(wp.float64(tolerances.POLAR_STEP_SQ_TOL))
 _POLAR_MAX_ITER = wp.constant(tolerances.POLAR_MAX_ITER)
 
@@ -159,6 +160,30 @@ def _store_block3(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.arra
 
 
 @wp.func
+def _store_all3(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dtype=wp.float64),
+                data: wp.array(dtype=wp.float64), e: int, K11: wp.mat33d, K22: wp.mat33d, K33: wp.mat33d,
+                K12: wp.mat33d, K23: wp.mat33d, K13: wp.mat33d):
+    """Store a 12x12 element Hessian given its vertex 1..3 blocks (vertex 0 = minus their sums)."""
+    K21 = wp.transpose(K12)
+    K32 = wp.transpose(K23)
+    K31 = wp.transpose(K13)
+    K01 = -(K11 + K21 + K31)
+    K02 = -(K12 + K22 + K32)
+    K03 = -(K13 + K23 + K33)
+    K00 = -(K01 + K02 + K03)
+    _store_block3(scatter, slots, hess, data, e, 0, 0, K00)
+    _store_block3(scatter, slots, hess, data, e, 0, 1, K01)
+    _store_block3(scatter, slots, hess, data, e, 0, 2, K02)
+    _store_block3(scatter, slots, hess, data, e, 0, 3, K03)
+    _store_block3(scatter, slots, hess, data, e, 1, 1, K11)
+    _store_block3(scatter, slots, hess, data, e, 1, 2, K12)
+    _store_block3(scatter, slots, hess, data, e, 1, 3, K13)
+    _store_block3(scatter, slots, hess, data, e, 2, 2, K22)
+    _store_block3(scatter, slots, hess, data, e, 2, 3, K23)
+    _store_block3(scatter, slots, hess, data, e, 3, 3, K33)
+
+
+@wp.func
 def _negative_part_sym3(T: wp.mat33d):
     """Negative part sum_{t_k < 0} t_k v_k v_k^T of a symmetric 3x3 matrix, from its eigenvalues only.
 
@@ -214,8 +239,9 @@ def _polar_rotation3(F: wp.mat33d):
 @wp.func
 def _hessian_direct3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), e: int, F: wp.mat33d,
                      J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu: wp.float64, lam: wp.float64,
-                     dPsi_dJ: wp.float64, project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64)):
+                     dPsi_dJ: wp.float64, project: int, both: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
+                     data2: wp.array(dtype=wp.float64)):
     """Element Hessian without an SVD, exact, plus the PSD projection of its twist block.
 
     d2Psi/dF2 = mu I + d2Psi/dJ2 g g^T + dPsi/dJ d2J/dF2 with g = dJ/dF = cof F. Mapped to the
@@ -251,6 +277,8 @@ def _hessian_direct3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.
     K12 = V * mu * DDt[0, 1] * I + c2 * wp.outer(g1, g2) - cJ * wp.skew(e3)
     K23 = V * mu * DDt[1, 2] * I + c2 * wp.outer(g2, g3) - cJ * wp.skew(e1)
     K13 = V * mu * DDt[0, 2] * I + c2 * wp.outer(g1, g3) + cJ * wp.skew(e2)
+    if both != 0:  # exact Hessian into data, projected into data2
+        _store_all3(scatter, slots, hess, data, e, K11, K22, K33, K12, K23, K13)
     if project != 0:
         R = _polar_rotation3(F)
         S = wp.transpose(R) * F
@@ -268,24 +296,10 @@ def _hessian_direct3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.
             K12 = K12 - hV * P1 * N * wp.transpose(P2)
             K23 = K23 - hV * P2 * N * wp.transpose(P3)
             K13 = K13 - hV * P1 * N * wp.transpose(P3)
-    K21 = wp.transpose(K12)
-    K32 = wp.transpose(K23)
-    K31 = wp.transpose(K13)
-    # vertex 0 = -(sum of vertices 1..3)
-    K01 = -(K11 + K21 + K31)
-    K02 = -(K12 + K22 + K32)
-    K03 = -(K13 + K23 + K33)
-    K00 = -(K01 + K02 + K03)
-    _store_block3(scatter, slots, hess, data, e, 0, 0, K00)
-    _store_block3(scatter, slots, hess, data, e, 0, 1, K01)
-    _store_block3(scatter, slots, hess, data, e, 0, 2, K02)
-    _store_block3(scatter, slots, hess, data, e, 0, 3, K03)
-    _store_block3(scatter, slots, hess, data, e, 1, 1, K11)
-    _store_block3(scatter, slots, hess, data, e, 1, 2, K12)
-    _store_block3(scatter, slots, hess, data, e, 1, 3, K13)
-    _store_block3(scatter, slots, hess, data, e, 2, 2, K22)
-    _store_block3(scatter, slots, hess, data, e, 2, 3, K23)
-    _store_block3(scatter, slots, hess, data, e, 3, 3, K33)
+    if both != 0:
+        _store_all3(scatter, slots, hess, data2, e, K11, K22, K33, K12, K23, K13)
+    else:
+        _store_all3(scatter, slots, hess, data, e, K11, K22, K33, K12, K23, K13)
 
 
 @wp.func
@@ -372,7 +386,8 @@ def _hessian3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32),
               volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64), lam_e: wp.array(dtype=wp.float64),
               project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
               energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec12d),
-              hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64)):
+              hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
+              data2: wp.array(dtype=wp.float64)):
     e = wp.tid()
     F = _F3(x, elements, Dm_inv, e)
     J = wp.determinant(F)
@@ -395,8 +410,18 @@ def _hessian3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32),
 
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
-    if project == _EXACT or (project == _PROJECT and dPsi_dJ <= zero):
-        _hessian_direct3(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, project, scatter, slots, hess, data)
+    mode = project
+    both = 0
+    if mode == _BOTH:  # exact Hessian into data, projected into data2
+        mode = _PROJECT
+        both = 1
+    if mode == _EXACT or (mode == _PROJECT and dPsi_dJ <= zero):
+        _hessian_direct3(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, mode, both, scatter, slots, hess, data,
+                          data2)
+    elif both != 0:
+        _hessian_direct3(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, _EXACT, 0, scatter, slots, hess, data,
+                          data)
+        _hessian_svd3(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data2, e)
     else:
         _hessian_svd3(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
 
@@ -438,10 +463,27 @@ def _store_block2(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.arra
 
 
 @wp.func
+def _store_all2(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dtype=wp.float64),
+                data: wp.array(dtype=wp.float64), e: int, K11: wp.mat22d, K22: wp.mat22d, K12: wp.mat22d):
+    """Store a 6x6 element Hessian given its vertex 1..2 blocks (vertex 0 = minus their sums)."""
+    K21 = wp.transpose(K12)
+    K01 = -(K11 + K21)
+    K02 = -(K12 + K22)
+    K00 = -(K01 + K02)
+    _store_block2(scatter, slots, hess, data, e, 0, 0, K00)
+    _store_block2(scatter, slots, hess, data, e, 0, 1, K01)
+    _store_block2(scatter, slots, hess, data, e, 0, 2, K02)
+    _store_block2(scatter, slots, hess, data, e, 1, 1, K11)
+    _store_block2(scatter, slots, hess, data, e, 1, 2, K12)
+    _store_block2(scatter, slots, hess, data, e, 2, 2, K22)
+
+
+@wp.func
 def _hessian_direct2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), e: int, F: wp.mat22d,
                      J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu: wp.float64, lam: wp.float64,
-                     dPsi_dJ: wp.float64, project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64)):
+                     dPsi_dJ: wp.float64, project: int, both: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
+                     data2: wp.array(dtype=wp.float64)):
     """2D analogue of :func:`_hessian_direct3`: exact Hessian (det(Ds) = e1 x e2 is bilinear, so
     d2/de1 de2 = [[0, 1], [-1, 0]]), and with dPsi/dJ <= 0 only the single twist mode
     R [[0, -1], [1, 0]] / sqrt 2 (R the polar rotation, closed form in 2D) can have a negative
@@ -460,6 +502,8 @@ def _hessian_direct2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.
     K11 = V * mu * DDt[0, 0] * I + c2 * wp.outer(g1, g1)
     K22 = V * mu * DDt[1, 1] * I + c2 * wp.outer(g2, g2)
     K12 = V * mu * DDt[0, 1] * I + c2 * wp.outer(g1, g2) + cJ * wp.mat22d(zero, one, -one, zero)
+    if both != 0:  # exact Hessian into data, projected into data2
+        _store_all2(scatter, slots, hess, data, e, K11, K22, K12)
     t = mu + dPsi_dJ
     if project != 0 and t < zero:
         cr = F[0, 0] + F[1, 1]
@@ -472,16 +516,10 @@ def _hessian_direct2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.
         K11 = K11 - ht * wp.outer(b1, b1)
         K22 = K22 - ht * wp.outer(b2, b2)
         K12 = K12 - ht * wp.outer(b1, b2)
-    K21 = wp.transpose(K12)
-    K01 = -(K11 + K21)
-    K02 = -(K12 + K22)
-    K00 = -(K01 + K02)
-    _store_block2(scatter, slots, hess, data, e, 0, 0, K00)
-    _store_block2(scatter, slots, hess, data, e, 0, 1, K01)
-    _store_block2(scatter, slots, hess, data, e, 0, 2, K02)
-    _store_block2(scatter, slots, hess, data, e, 1, 1, K11)
-    _store_block2(scatter, slots, hess, data, e, 1, 2, K12)
-    _store_block2(scatter, slots, hess, data, e, 2, 2, K22)
+    if both != 0:
+        _store_all2(scatter, slots, hess, data2, e, K11, K22, K12)
+    else:
+        _store_all2(scatter, slots, hess, data, e, K11, K22, K12)
 
 
 @wp.func
@@ -556,7 +594,8 @@ def _hessian2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),
               volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64), lam_e: wp.array(dtype=wp.float64),
               project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
               energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec6d),
-              hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64)):
+              hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
+              data2: wp.array(dtype=wp.float64)):
     e = wp.tid()
     F = _F2(x, elements, Dm_inv, e)
     J = wp.determinant(F)
@@ -579,8 +618,18 @@ def _hessian2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),
 
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
-    if project == _EXACT or (project == _PROJECT and dPsi_dJ <= zero):
-        _hessian_direct2(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, project, scatter, slots, hess, data)
+    mode = project
+    both = 0
+    if mode == _BOTH:  # exact Hessian into data, projected into data2
+        mode = _PROJECT
+        both = 1
+    if mode == _EXACT or (mode == _PROJECT and dPsi_dJ <= zero):
+        _hessian_direct2(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, mode, both, scatter, slots, hess, data,
+                          data2)
+    elif both != 0:
+        _hessian_direct2(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, _EXACT, 0, scatter, slots, hess, data,
+                          data)
+        _hessian_svd2(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data2, e)
     else:
         _hessian_svd2(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
 
@@ -655,12 +704,12 @@ class _Workspace:
                 raise ValueError("Hessian too large for int32 slots")
             self.slots = wp.array(model.pattern.element_slots.astype(np.int32), dtype=wp.int32, device=dev)
             args = dict(inputs=common + [1, 1, self.slots],
-                        outputs=[self.energy, self.det_F, self.grad, self.dummy3, self.dummy_data])
+                        outputs=[self.energy, self.det_F, self.grad, self.dummy3, self.dummy_data, self.dummy_data])
         else:  # _BLOCKS: keep the per-element blocks
             kk = (model.dim + 1) * model.dim
             self.hess = wp.zeros((model.n_elements, kk, kk), dtype=wp.float64, device=dev)
             args = dict(inputs=common + [1, 0, self.dummy_slots],
-                        outputs=[self.energy, self.det_F, self.grad, self.hess, self.dummy_data])
+                        outputs=[self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data])
         kernel = self.kernels[min(want, _HESSIAN)]
         cmd = wp.launch(kernel, dim=model.n_elements, device=dev, record_cmd=True, **args)
         self.commands[want] = cmd
@@ -683,11 +732,17 @@ def _launch(model: FemModel, x, want: int, project: int = 1) -> _Workspace:
     if want >= _HESSIAN:
         cmd.set_param_by_name("project", int(project))
     if want == _HESSIAN:
-        # a fresh values array per call (callers keep and modify returned matrices); on the CPU
-        # numpy owns it and the kernel writes through an alias, so no copy is made
+        # fresh values arrays per call (callers keep and modify returned matrices); on the CPU
+        # numpy owns them and the kernel writes through an alias, so no copy is made
         ws.data_np = np.zeros(model.pattern.nnz)
         ws.data = ws._wrap(ws.data_np, wp.float64, model.device)
         cmd.set_param_by_name("data", ws.data)
+        if project == _BOTH:
+            ws.data2_np = np.zeros(model.pattern.nnz)
+            ws.data2 = ws._wrap(ws.data2_np, wp.float64, model.device)
+        else:
+            ws.data2_np, ws.data2 = None, ws.dummy_data
+        cmd.set_param_by_name("data2", ws.data2)
     cmd.launch()
     return ws
 
@@ -730,6 +785,21 @@ def energy_gradient_hessian(model: FemModel, x, *, project_psd: bool = True) -> 
     ws = _launch(model, x, _HESSIAN, _PROJECT if project_psd else _EXACT)
     H = model.pattern.matrix(ws.data_np if ws.cpu else ws.data.numpy())
     return _total(ws), _gradient(model, ws), H
+
+
+def energy_gradient_hessians(model: FemModel, x) -> tuple[float, np.ndarray, sp.csr_matrix, sp.csr_matrix]:
+    """(energy [J], gradient (n, dim) [N], exact Hessian, PSD-projected Hessian), both CSR
+    (n*dim, n*dim) [N/m] with the model's pattern, from a single kernel launch.
+
+    For :func:`simfab.solve.newton.minimize` return ``(H_exact, H_psd)`` as the Hessian: it takes
+    exact Newton steps whenever the exact Hessian is positive definite (quadratic convergence near
+    stable equilibria with large rotations, where per-element projection converges only linearly)
+    and falls back to the projected one otherwise.
+    """
+    ws = _launch(model, x, _HESSIAN, _BOTH)
+    H_exact = model.pattern.matrix(ws.data_np if ws.cpu else ws.data.numpy())
+    H_psd = model.pattern.matrix(ws.data2_np if ws.cpu else ws.data2.numpy())
+    return _total(ws), _gradient(model, ws), H_exact, H_psd
 
 
 def _energy_gradient_hessian_svd(model: FemModel, x) -> tuple[float, np.ndarray, sp.csr_matrix]:

@@ -256,3 +256,21 @@ def test_direct_route_equals_svd_eigensystem_route(dim):
         H = nh.energy_gradient_hessian(model, x)[2].toarray()
         H_svd = nh._energy_gradient_hessian_svd(model, x)[2].toarray()
         np.testing.assert_allclose(H, H_svd, atol=1e-10 * np.abs(H).max())
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_exact_and_projected_hessians_from_one_launch(dim):
+    from _fem_meshes import box_tet, rect_tri
+
+    rng = np.random.default_rng(60 + dim)
+    P, T = rect_tri(1.0, 0.5, 4, 2) if dim == 2 else box_tet(1.0, 0.5, 0.5, 2, 2, 1)
+    model = make_model(P, T, MAT)
+    for scale in (0.8, 1.0, 1.7):  # 1.7: expansion, dPsi/dJ > 0 in every element (SVD route)
+        x = model.rest @ ((np.eye(dim) + 0.05 * rng.standard_normal((dim, dim))) * scale).T
+        E, g, Hx, Hp = nh.energy_gradient_hessians(model, x)
+        E1, g1, Hp1 = nh.energy_gradient_hessian(model, x)
+        Hx1 = nh.energy_gradient_hessian(model, x, project_psd=False)[2]
+        assert E == E1
+        np.testing.assert_array_equal(g, g1)
+        np.testing.assert_array_equal(Hx.toarray(), Hx1.toarray())
+        np.testing.assert_array_equal(Hp.toarray(), Hp1.toarray())

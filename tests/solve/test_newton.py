@@ -172,3 +172,30 @@ def test_invalid_options_are_rejected():
         NewtonOptions(armijo=0.7)
     with pytest.raises(ValueError, match="max_iter"):
         NewtonOptions(max_iter=0)
+
+
+def test_exact_hessian_used_when_positive_definite_else_psd_fallback():
+    # f = 1/2 x^T A x - b^T x with an "exact" Hessian A and a deliberately different PSD one:
+    # with A positive definite the exact one must be used (1 step); with A indefinite the PSD
+    # matrix is used and Newton still converges (on the convex quadratic defined by it)
+    A = _spd(6, 11)
+    b = np.ones(6)
+    B = np.diag(np.diag(A))  # a PSD surrogate
+
+    def fun(x, need_h):
+        return 0.5 * x @ A @ x - b @ x, A @ x - b, ((sp.csr_matrix(A), sp.csr_matrix(B)) if need_h else None)
+
+    res = minimize(fun, np.zeros(6))
+    assert res.iterations == 1 and res.history[0]["hessian"] == "exact"
+
+    A_ind = A - 1.5 * np.abs(np.linalg.eigvalsh(A)).max() * np.eye(6) * np.r_[1, 0, 0, 0, 0, 0][:, None]
+    assert np.linalg.eigvalsh(A_ind).min() < 0
+    Q = sp.csr_matrix(A + np.eye(6))  # convex objective, indefinite "exact" Hessian offered first
+
+    def fun2(x, need_h):
+        return 0.5 * x @ (A + np.eye(6)) @ x - b @ x, (A + np.eye(6)) @ x - b, \
+            ((sp.csr_matrix(A_ind), Q) if need_h else None)
+
+    res2 = minimize(fun2, np.zeros(6))
+    assert all(h["hessian"] == "psd" for h in res2.history)
+    np.testing.assert_allclose(res2.x, np.linalg.solve(A + np.eye(6), b), rtol=1e-9)
