@@ -48,7 +48,7 @@ class StaticsOptions:
 
     grad_tol : equilibrium residual ||g_q||_inf <= grad_tol * model.force_scale [N]. The
         residual moves a rod by about grad_tol * L, far below discretization errors.
-    step_tol : an accepted Newton step below step_tol * (longest rod) [m] also counts as
+    step_tol : a full Newton step below step_tol * (longest rod) [m] (taken) also counts as
         converged: with stiff stretching (EA L^2 / B ~ 1e8) the residual's round-off floor
         can lie above grad_tol * force_scale while the configuration no longer changes.
     max_iter : Newton iterations per solve.
@@ -393,7 +393,7 @@ class StaticSolver:
                     break
                 if np.isfinite(Et) and abs(Et - E) <= opts.roundoff * max(abs(E), 1e-300):
                     # f cannot resolve the decrease: accept when the residual drops
-                    Et2, gt, _ = self._objective(trial, True, False, nf, bf)
+                    _, gt, _ = self._objective(trial, True, False, nf, bf)
                     if float(np.max(np.abs(gt))) < gnorm:
                         accepted = True
                         break
@@ -407,7 +407,7 @@ class StaticSolver:
             if not np.isfinite(gnorm):
                 raise ConvergenceError(f"rod equilibrium: forces became non-finite at Newton iteration {it + 1}")
             hist.append((E, gnorm, alpha))
-            if alpha * dmax <= opts.step_tol * self.length:
+            if dmax <= opts.step_tol * self.length:  # the full Newton step itself is at round-off
                 return StaticResult(st, E, it + 1, gnorm, dict(self.evaluator.parts), hist)
         raise ConvergenceError(f"rod equilibrium did not converge in {opts.max_iter} Newton iterations "
                                f"(||g||_inf = {gnorm:.3e} N > target {gtol:.3e} N)")
