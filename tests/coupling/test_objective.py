@@ -9,10 +9,9 @@ from simfab.coupling.points import edge_weights, facet_points, vertex_points
 from simfab.coupling.simulate import _StepObjective, _Timer
 from simfab.fem.neohookean import energy_gradient_hessian
 
-from coupling_models import coarse_block_model
 
 
-def _objective_near_contact():
+def _objective_near_contact(coarse_block_model):
     cm = coarse_block_model(refine=True)
     facets = np.asarray(cm.fem.boundary_facets)
     top = [i for i, f in enumerate(facets) if set(f.tolist()) == {2, 3}]
@@ -24,8 +23,8 @@ def _objective_near_contact():
     return cm, pts, obj
 
 
-def test_objective_gradient_matches_finite_differences():
-    cm, pts, obj = _objective_near_contact()
+def test_objective_gradient_matches_finite_differences(coarse_block_model):
+    cm, pts, obj = _objective_near_contact(coarse_block_model)
     x = cm.fem.rest.ravel().copy()
     f, g, _ = obj(x, True)
     d, _, _ = obj.distances(x.reshape(-1, 2), False)
@@ -39,8 +38,8 @@ def test_objective_gradient_matches_finite_differences():
         assert abs(fd - g[i]) <= 1e-5 * max(abs(g[i]), 1e-3 * np.abs(g).max())
 
 
-def test_contact_hessian_is_jt_h_j():
-    cm, pts, obj = _objective_near_contact()
+def test_contact_hessian_is_jt_h_j(coarse_block_model):
+    cm, pts, obj = _objective_near_contact(coarse_block_model)
     x = cm.fem.rest.copy()
     _, _, H = obj(x.ravel(), True)
     _, _, Hf = energy_gradient_hessian(cm.fem, x)
