@@ -52,13 +52,6 @@ def test_insertion_force_is_minus_the_energy_slope(runs):
     assert err.max() <= 0.05 * np.abs(F).max()
 
 
-def test_3d_clip_every_step_feasible_and_tight():
-    res = simulate(load_coupling_scene("clip3d"))
-    _check_every_step(res)
-    prof, _ = summarize(res)
-    assert prof.category == "tight" and prof.F_grip > 0
-
-
 def test_refinement_catches_a_penetration_the_vertices_miss(coarse_block_model):
     cm = coarse_block_model(refine=False)
     R, p = cm.pose(cm.s_steps[-1])
