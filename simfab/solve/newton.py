@@ -7,6 +7,11 @@ Cholesky factorization (:class:`simfab.solve.linear.SPDSolver`, symbolic analysi
 the pattern is unchanged), then backtracks along ``dx`` until the Armijo sufficient-decrease
 condition holds at an admissible point.
 
+Exact-first steps: ``fun`` may return the Hessian as a pair ``(H_exact, H_psd)``. The exact
+Hessian is then factorized first; when CHOLMOD succeeds it is positive definite and the step is
+an exact Newton step (quadratic convergence also where element-wise PSD projection would only
+converge linearly, e.g. large rotations); otherwise the projected Hessian is used.
+
 Feasibility hooks (used by barrier-based contact):
 
 - ``max_step(x, dx) -> alpha_max`` caps the step before the line search (e.g. conservative
