@@ -199,3 +199,18 @@ def test_exact_hessian_used_when_positive_definite_else_psd_fallback():
     res2 = minimize(fun2, np.zeros(6))
     assert all(h["hessian"] == "psd" for h in res2.history)
     np.testing.assert_allclose(res2.x, np.linalg.solve(A + np.eye(6), b), rtol=1e-9)
+
+
+def test_zero_max_step_and_inadmissible_trials_raise():
+    A = _spd(3, 12)
+    fun = _quadratic(A, np.ones(3))
+    with pytest.raises(ConvergenceError, match="max_step returned 0"):
+        minimize(fun, np.zeros(3), max_step=lambda x, dx: 0.0)
+    calls = []
+
+    def admissible(x):  # only the start point is admissible: every trial is rejected
+        calls.append(1)
+        return len(calls) == 1
+
+    with pytest.raises(ConvergenceError, match="line search failed"):
+        minimize(fun, np.zeros(3), admissible=admissible)
