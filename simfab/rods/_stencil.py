@@ -20,6 +20,9 @@ f64 = wp.float64
 vec11d = wp.types.vector(length=11, dtype=wp.float64)
 mat11d = wp.types.matrix(shape=(11, 11), dtype=wp.float64)
 
+# analytic derivatives only: no adjoint code (halves compile time)
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def skew(v: wp.vec3d) -> wp.mat33d:

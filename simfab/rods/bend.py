@@ -22,6 +22,9 @@ from __future__ import annotations
 from simfab._warp import wp
 from simfab.rods._stencil import expand_grad, expand_hess, f64, mat11d, material, scatter11, skew, vec11d
 
+# analytic derivatives only: no adjoint code (halves compile time)
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def _outer3(a: wp.vec3d, b: wp.vec3d) -> wp.mat33d:

@@ -14,6 +14,9 @@ from __future__ import annotations
 from simfab._warp import wp
 from simfab.rods._stencil import f64
 
+# analytic derivatives only: no adjoint code (halves compile time)
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.kernel
 def _stretch(x: wp.array(dtype=wp.vec3d), edges: wp.array2d(dtype=wp.int32),

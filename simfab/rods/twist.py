@@ -16,6 +16,9 @@ from __future__ import annotations
 from simfab._warp import wp
 from simfab.rods._stencil import expand_grad, expand_hess, f64, mat11d, scatter11, skew
 
+# analytic derivatives only: no adjoint code (halves compile time)
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.kernel
 def _twist(x: wp.array(dtype=wp.vec3d), theta: wp.array(dtype=wp.float64), ref_twist: wp.array(dtype=wp.float64),
