@@ -9,14 +9,25 @@ move rescales all alpha and beta of a chain by a common factor c (alpha/beta, he
 likelihood, is unchanged; only priors and the Jacobian c^(R+Q) enter), which crosses the
 ridge along which alpha and beta trade off and which one-at-a-time updates crawl along.
 
-beta is sampled as log beta (Jacobian +log beta in the target); the truncations
-(beta > eps, 0 <= x <= 1) reject proposals outside them, which is exact for a symmetric
-random walk. Proposal steps adapt during burn-in toward the 0.44 acceptance rate that is
+beta is sampled as log beta (Jacobian +log beta in the target) and x as logit x (Jacobian
+x (1 - x)); proposals of beta below eps are rejected (exact for a symmetric random walk).
+Increments are normal with a random scale (1/3, 1 or 3 times the step, :func:`_jump`), a
+symmetric mixture. Steps adapt during burn-in toward the 0.44 acceptance rate that is
 optimal in one dimension (Robbins-Monro on log step, gain 1/sqrt(k)) and are frozen after,
 so the recorded chain is a time-homogeneous Markov chain.
 
 Several chains start from over-dispersed points (prior draws, x uniform on [0.05, 0.95]);
 R-hat and ESS (:mod:`simfab.crowd.diagnostics`) decide whether to extend the run.
+
+Two implementations of the identical sweep: a Warp kernel (default; one thread per chain,
+all sweeps of a round in one launch, :mod:`simfab.crowd._kernels`) and numpy broadcasting
+over (crowds, chains, raters, questions) (:class:`_NumpyKernel`, the reference the tests
+compare the kernel against).
+
+The likelihood is the probability of each integer answer's rounding cell
+(:func:`simfab.crowd.model.loglik_rounded`), not the thesis' density at the rounded value:
+with the density, raters who give the identical integer answer make the posterior
+unbounded (delta -> 0), which splits it into spikes no chain can mix between.
 """
 
 from __future__ import annotations
