@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import warp as wp
 
-wp.config.quiet = True
+# Warp prints its start-up banner on stdout at INFO level, which would corrupt ``--json``
+# output; only warnings and errors are wanted (they go to stderr).
+wp.config.log_level = wp.LOG_WARNING
 wp.init()
 
 
