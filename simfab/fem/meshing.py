@@ -5,6 +5,9 @@ Units are whatever the input is in (SI metres inside simfab).
 
 from __future__ import annotations
 
+import contextlib
+import tempfile
+
 import numpy as np
 
 from simfab.errors import InputError
@@ -107,7 +110,10 @@ def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, tar
         kwargs["edge_length_fac"] = float(edge_length_fac)
     import pytetwild  # lazy: imports pyvista
 
-    V, T = pytetwild.tetrahedralize(v, f.astype(np.int32), quiet=True, **kwargs)
+    # fTetWild drops a scratch file (__tracked_surface.stl) into the working directory: run it
+    # from a private temporary directory so callers' folders stay clean.
+    with tempfile.TemporaryDirectory(prefix="simfab-tetwild-") as scratch, contextlib.chdir(scratch):
+        V, T = pytetwild.tetrahedralize(v, f.astype(np.int32), quiet=True, **kwargs)
     V = np.asarray(V, dtype=np.float64)
     T = np.asarray(T, dtype=np.int32)
     if len(T) == 0:
