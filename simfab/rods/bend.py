@@ -20,7 +20,7 @@ frames: d m1/d theta = m2, d m2/d theta = -m1.
 from __future__ import annotations
 
 from simfab._warp import wp
-from simfab.rods._stencil import expand_grad, expand_hess, f64, mat11d, material, scatter11, skew, vec11d
+from simfab.rods._stencil import expand_grad, expand_hess, f64, mat11d, material, scatter11, skew
 
 # analytic derivatives only: no adjoint code (halves compile time)
 wp.set_module_options({"enable_backward": False})

@@ -66,7 +66,6 @@ def test_uniform_curvature_energy_and_anisotropy(plane, stiff):
     nb = NetworkBuilder()
     nb.add_rod("r", np.linspace([0, 0, 0], [L, 0, 0], n + 1), section=SEC, material=MAT, director=(0, 0, 1))
     model, st = nb.build()
-    a = kappa * np.arange(n + 1) * h
     # chord length of each edge = h so the arc is unstretched: radius R with 2 R sin(phi/2) = h
     phi = kappa * h
     Rr = h / (2 * np.sin(phi / 2))
@@ -84,4 +83,3 @@ def test_uniform_curvature_energy_and_anisotropy(plane, stiff):
     assert ev.parts["bend"] == pytest.approx(exact_discrete, rel=1e-10)
     assert ev.parts["bend"] == pytest.approx(0.5 * B * kappa**2 * Lv, rel=phi**2 / 3)
     assert ev.parts["twist"] <= 1e-12 * E
-    del a
