@@ -42,6 +42,7 @@ def _sampler_args(p, *, study: bool):
     g.add_argument("--chains", type=int, default=d.chains, help=f"chains per crowd (default {d.chains})")
     g.add_argument("--burn-in", type=int, default=d.burn_in, help=f"adaptive burn-in sweeps per chain (default {d.burn_in})")
     g.add_argument("--draws", type=int, default=d.draws, help=f"recorded sweeps per chain{'' if study else ' per round; rounds repeat until converged'} (default {d.draws})")
+    g.add_argument("--likelihood", choices=["rounded", "density"], default=d.likelihood, help="rounded: probability of the integer answer's cell (default); density: the thesis' density at the answer")
     if not study:
         g.add_argument("--max-draws", type=int, default=d.max_draws, help=f"cap on recorded sweeps per chain (default {d.max_draws})")
 
@@ -57,7 +58,7 @@ def _sampler_config(args, *, study: bool):
         if v < lo:
             raise InputError(f"must be >= {lo}, got {v}", where="--" + name.replace("_", "-"))
     base = STUDY_SAMPLER if study else SamplerConfig()
-    kw = {"chains": args.chains, "burn_in": args.burn_in, "draws": args.draws}
+    kw = {"chains": args.chains, "burn_in": args.burn_in, "draws": args.draws, "likelihood": args.likelihood}
     kw["max_draws"] = args.draws if study else max(args.max_draws, args.draws)
     return dataclasses.replace(base, **kw)
 

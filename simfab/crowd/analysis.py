@@ -10,6 +10,7 @@ from simfab.crowd import aggregate as A
 from simfab.crowd import metrics
 from simfab.crowd.config import Priors, SamplerConfig
 from simfab.crowd.data import Ratings
+from simfab.errors import InputError
 
 #: Method names in table order (the thesis' columns).
 METHODS = ("arithmetic_mean", "geometric_mean", "median", "majority", "bayesian")
@@ -37,16 +38,19 @@ class BayesResult:
     warnings: tuple[str, ...]
 
 
-def half_width(ratings: Ratings) -> float:
-    """Half the spacing of scale points on the unit scale (answers are rounded to them)."""
-    return 0.5 / ratings.scale.span
+def half_width(ratings: Ratings, config: SamplerConfig = SamplerConfig()) -> float:
+    """Half the spacing of scale points on the unit scale (answers are rounded to them);
+    0 selects the density likelihood."""
+    if config.likelihood not in ("rounded", "density"):
+        raise InputError(f"unknown likelihood {config.likelihood!r} (rounded or density)", where="--likelihood")
+    return 0.5 / ratings.scale.span if config.likelihood == "rounded" else 0.0
 
 
 def bayesian(ratings: Ratings, *, config: SamplerConfig = SamplerConfig(), priors: Priors = Priors(), seed: int = 0, quiet: bool = True, device: str = "cpu") -> BayesResult:
     """Fit the expertise/difficulty model to one crowd (several chains, R-hat/ESS checked)."""
     from simfab.crowd.sampler import sample
 
-    post = sample(ratings.unit, priors=priors, config=config, seed=seed, half_width=half_width(ratings), quiet=quiet, device=device)
+    post = sample(ratings.unit, priors=priors, config=config, seed=seed, half_width=half_width(ratings, config), quiet=quiet, device=device)
     sc = ratings.scale
     rh, es = float(post.rhat_max[0]), float(post.ess_min[0])
     warnings = []

@@ -53,6 +53,10 @@ class SamplerConfig:
     init_step_logit_x: float = 0.3
     init_step_log_scale: float = 0.1
     credible_mass: float = 0.90  #: central credible interval reported
+    #: "rounded": probability of each integer answer's rounding cell (default); "density":
+    #: the thesis' truncated-normal density at the answer (degenerate for tied integer
+    #: answers: expect chains to disagree; meant for continuous ratings)
+    likelihood: str = "rounded"
 
 
 #: Sampler used per sub-crowd in the micro-crowd study (many small fits; fixed length).

@@ -106,7 +106,7 @@ def micro_crowd_study(
     for k in range(min_size, N):
         idx = subcrowds(N, k, n_sub, rng)
         log(f"micro-crowd study: size {k}, {len(idx)} sub-crowds", quiet=quiet)
-        post = sample(unit[idx], config=config, priors=priors, seed=int(rng.integers(2**31 - 1)), half_width=half_width(ratings), keep_latent=False, device=device)
+        post = sample(unit[idx], config=config, priors=priors, seed=int(rng.integers(2**31 - 1)), half_width=half_width(ratings, config), keep_latent=False, device=device)
         est = post.mean("x")  # (S, Q) unit scale
         bias = np.sqrt(np.mean((est - sc.to_unit(truth)[None]) ** 2, axis=1))
         pct = np.array([metrics.percentile_rank(b, indiv[members]) for b, members in zip(bias, idx)])

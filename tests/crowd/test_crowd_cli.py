@@ -147,3 +147,19 @@ def test_study_needs_enough_raters(tmp_path, capsys):
     t = _write(tmp_path / "t.csv", "task,truth\nq1,3\n")
     assert main(["crowd", "study", r, "--scale", "1", "10", "--truth", t, "--out", str(tmp_path / "o")]) == 2
     assert "a crowd of 5 raters has no sub-crowds of sizes 5..4" in capsys.readouterr().err
+
+
+def test_density_likelihood_on_tied_integer_answers_warns_chains_disagree(tmp_path, capsys):
+    """The thesis' density at integer answers is unbounded where raters agree exactly
+    (delta -> 0): the posterior splits into spikes and the chains disagree. The sampler must
+    say so (the default rounded likelihood exists for this reason)."""
+    rows = "".join(f"w{i},q{j},{v}\n" for i, r in enumerate([[2, 7, 5], [2, 7, 5], [2, 8, 4], [3, 7, 5], [2, 6, 5], [4, 7, 6]]) for j, v in enumerate(r))
+    path = _write(tmp_path / "r.csv", "worker,task,label\n" + rows)
+    args = ["crowd", "aggregate", path, "--scale", "1", "10", "--out", str(tmp_path / "o"), "--json", "--burn-in", "300", "--draws", "600", "--max-draws", "600"]
+    assert main(args + ["--likelihood", "density"]) == 0
+    cap = capsys.readouterr()
+    d = json.loads(cap.out)
+    assert d["bayes"]["rhat_max"] > 1.1 and d["warnings"] and "chains disagree" in cap.err
+    assert main(args + ["--max-draws", "4000"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["bayes"]["rhat_max"] < 1.05
