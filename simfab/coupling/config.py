@@ -37,6 +37,8 @@ NEWTON_GRAD_TOL_REL = 2e-6
 #: ... or below this fraction of the residual at the step's warm start.
 NEWTON_GRAD_TOL_START = 1e-4
 NEWTON_MAX_ITER = 100
+#: Hand Newton the exact Hessian too (tried first; the PSD-projected one when it is indefinite).
+EXACT_FIRST_NEWTON = True
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4
 #: Predictor: retries carrying newly infeasible points fully with O before bisecting the step.

@@ -236,6 +236,7 @@ class _StepObjective:
         self.y_ref = None
         self.d_ref = None
         self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
+        self.exact_first = C.EXACT_FIRST_NEWTON
 
     def distances(self, x: np.ndarray, hessian: bool):
         """(d (k,) [m], grad d (k, dim), hess d (k, dim, dim) or None): exact near O, lower bounds
@@ -277,8 +278,11 @@ class _StepObjective:
             return memo[1]
         x = xf.reshape(self.n, self.dim)
         t0 = time.perf_counter()
+        H_exact = None
         if need_hessian:
             E, g, H = energy_gradient_hessian(cm.fem, x)
+            if self.exact_first and np.isfinite(E):
+                H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)[2]
         else:
             (E, g), H = energy_gradient(cm.fem, x), None
         self.timer.add("assembly", time.perf_counter() - t0)
@@ -290,15 +294,21 @@ class _StepObjective:
             return np.inf, g.ravel(), H
         act = d < cm.dhat
         B, gy, Hy = point_barrier(d[act], gd[act], hd[act] if need_hessian else None, cm.dhat, self.kappa)
+        if H_exact is not None:
+            Hy_exact = point_barrier(d[act], gd[act], hd[act], cm.dhat, self.kappa, psd=False)[2]
         g_pts = np.zeros_like(gd)
         g_pts[act] = gy
         gc = self.points.scatter(g_pts, self.n)
         if need_hessian:
+            wp_act = self.wpair[act][:, :, :, None, None]
             if act.any():
-                blocks = self.wpair[act][:, :, :, None, None] * Hy[:, None, None, :, :]
-                np.add.at(H.data, self.slots[act].ravel(), blocks.ravel())
+                np.add.at(H.data, self.slots[act].ravel(), (wp_act * Hy[:, None, None, :, :]).ravel())
             reg = C.RIGID_MODE_REG * float(np.abs(H.data[self.diag]).mean())
             H.data[self.diag] += reg
+            if H_exact is not None:
+                if act.any():
+                    np.add.at(H_exact.data, self.slots[act].ravel(), (wp_act * Hy_exact[:, None, None, :, :]).ravel())
+                H_exact.data[self.diag] += reg
             self.last_x = xf.copy()
             self.last_d = d
             self.last_gd = gd
@@ -308,7 +318,9 @@ class _StepObjective:
             kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if act.any() else 0.0
             self.curv = max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / cm.field.sigma)
         self.timer.add("contact", time.perf_counter() - t0)
-        out = (E + B, (g + gc).ravel(), H)
+        # exact-first Newton (simfab.solve.newton): the exact Hessian is used whenever it is
+        # positive definite (quadratic convergence), the PSD-projected one otherwise
+        out = (E + B, (g + gc).ravel(), H if H_exact is None else (H_exact, H))
         if need_hessian:
             self.memo = (xf.copy(), out)
         return out
