@@ -39,23 +39,26 @@ def test_objective_gradient_matches_finite_differences(coarse_block_model):
 
 
 def test_contact_hessian_is_jt_h_j(coarse_block_model):
+    # Both Hessians handed to Newton (exact first, PSD-projected fallback) carry the contact term
+    # J^T blockdiag(H_j) J, with H_j exact or projected per point, plus the same diagonal
+    # rigid-mode regularization.
     cm, pts, obj = _objective_near_contact(coarse_block_model)
     x = cm.fem.rest.copy()
-    _, _, H = obj(x.ravel(), True)
-    _, _, Hf = energy_gradient_hessian(cm.fem, x)
-    Hc = (H - Hf).toarray()
-    reg = C.RIGID_MODE_REG * float(np.abs(Hf.diagonal()).mean() + 0.0)
+    _, _, (H_exact, H_psd) = obj(x.ravel(), True)
     d, gd, hd = obj.distances(x, True)
     act = d < cm.dhat
-    _, _, Hy = point_barrier(d[act], gd[act], hd[act], cm.dhat, cm.kappa)
     n = cm.fem.n_vertices
     J = np.zeros((act.sum(), 2, 2 * n))
     for k, j in enumerate(np.flatnonzero(act)):
         for a in range(2):
             v, w = pts.verts[j, a], pts.weights[j, a]
             J[k, :, 2 * v:2 * v + 2] += w * np.eye(2)
-    ref = np.einsum("kia,kij,kjb->ab", J, Hy, J)
-    off = Hc - ref
-    # what remains is the diagonal rigid-mode regularization only
-    assert np.allclose(off - np.diag(np.diag(off)), 0.0, atol=1e-9 * np.abs(ref).max())
-    assert np.all(np.abs(np.diag(off)) <= 10 * reg + 1e-9 * np.abs(ref).max())
+    for H, project in ((H_psd, True), (H_exact, False)):
+        _, _, Hf = energy_gradient_hessian(cm.fem, x, project_psd=project)
+        _, _, Hy = point_barrier(d[act], gd[act], hd[act], cm.dhat, cm.kappa, psd=project)
+        ref = np.einsum("kia,kij,kjb->ab", J, Hy, J)
+        off = (H - Hf).toarray() - ref
+        reg = C.RIGID_MODE_REG * float(np.abs(Hf.diagonal()).mean())
+        # what remains is the diagonal rigid-mode regularization only
+        assert np.allclose(off - np.diag(np.diag(off)), 0.0, atol=1e-9 * np.abs(ref).max())
+        assert np.all(np.abs(np.diag(off)) <= 10 * reg + 1e-9 * np.abs(ref).max())
