@@ -2,6 +2,8 @@
 
 - :class:`InputError` -> exit 2: the user's input (file, field, parameter) is unusable.
   The message is one line naming the file/field and what is wrong.
+- :class:`ValidationFailed` -> exit 1: a validation against a closed-form or reference
+  result missed its tolerance (its outputs are still written, for inspection).
 - :class:`ConvergenceError` -> exit 1: a solver did not reach its tolerance. It is never
   swallowed; a result that did not converge is not returned.
 """
@@ -21,3 +23,7 @@ class InputError(SimfabError, ValueError):
 
 class ConvergenceError(SimfabError, RuntimeError):
     """A solver did not converge to its documented tolerance."""
+
+
+class ValidationFailed(SimfabError):
+    """A validation case missed its stated tolerance."""

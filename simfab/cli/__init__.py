@@ -18,7 +18,7 @@ import json
 import os
 import sys
 
-from simfab.errors import ConvergenceError, InputError
+from simfab.errors import ConvergenceError, InputError, ValidationFailed
 
 #: Subcommands in the order ``simfab --help`` lists them.
 SUBCOMMANDS = ("grow", "couple", "deploy", "crowd", "validate", "demo", "render", "inspect")
@@ -91,6 +91,9 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as e:
         print(f"simfab: error: {_one_line(e)}", file=sys.stderr)
         return 2
+    except ValidationFailed as e:
+        print(f"simfab: validation failed: {_one_line(e)}", file=sys.stderr)
+        return 1
     except ConvergenceError as e:
         print(f"simfab: did not converge: {_one_line(e)}", file=sys.stderr)
         _debug_trace()

@@ -37,10 +37,6 @@ DEFAULT_N = (20, 40, 80, 160)
 PATHS = ("direct", "insert")
 
 
-class ValidationFailed(ConvergenceError):
-    """A validation case missed its tolerance (CLI exit 1, after the outputs are written)."""
-
-
 @dataclass(frozen=True, kw_only=True)
 class BeamSetup:
     """Beam of the buckling validation (loaded from ``scenes/deploy/elastica.xml`` custom fields).

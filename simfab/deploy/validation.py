@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import os
 
+from simfab.errors import ValidationFailed
+
 HELP = "discrete elastic rods vs the exact elastica (rise, force, convergence order, critical load)"
 DESCRIPTION = (
     "Push a beam of length L into gaps g < L (pinned or clamped ends) and compare the midspan rise and "
@@ -146,7 +148,7 @@ def run(args) -> dict:
     if not args.json and not args.quiet:
         _print_table(rows)
     if failures:
-        raise bk.ValidationFailed(f"{len(failures)} case(s) missed tolerance: {'; '.join(failures)} (outputs in {out})")
+        raise ValidationFailed(f"{len(failures)} case(s) missed tolerance: {'; '.join(failures)} (outputs in {out})")
     result = dict(summary, outputs=outputs)
     if args.json:
         result["rows"] = rows
