@@ -11,11 +11,5 @@
 Importing this package initializes Warp (kept out of ``import simfab``).
 """
 
-import warp as _warp
-
-# Warp 1.19 ignores ``config.quiet`` (used by simfab._warp) and prints its start-up banner and
-# module-load lines on stdout, which would corrupt ``--json`` output; its log level governs them.
-if getattr(_warp.config, "log_level", None) is not None and hasattr(_warp, "LOG_WARNING"):
-    _warp.config.log_level = max(_warp.config.log_level, _warp.LOG_WARNING)
-
+import simfab._warp  # noqa: F401  (quiet Warp initialization, shared by all kernel modules)
 from simfab.rods.model import Material, NetworkBuilder, RodModel, RodState, Section  # noqa: F401
