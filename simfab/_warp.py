@@ -11,7 +11,40 @@ import warp as wp
 # Warp prints its start-up banner on stdout at INFO level, which would corrupt ``--json``
 # output; only warnings and errors are wanted (they go to stderr).
 wp.config.log_level = wp.LOG_WARNING
-wp.init()
+
+
+def _init_quietly() -> None:
+    """``wp.init()`` without the native 'no CUDA driver' notice on CPU-only machines.
+
+    Warp's native library writes that notice straight to file descriptor 2; it is expected
+    here (CPU is the default device), so it is filtered out and anything else is replayed.
+    """
+    import os
+    import sys
+    import tempfile
+
+    try:
+        saved = os.dup(2)
+    except OSError:  # no real stderr (embedded interpreters): just initialize
+        wp.init()
+        return
+    with tempfile.TemporaryFile(mode="w+b") as buf:
+        sys.stderr.flush()
+        os.dup2(buf.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+        buf.seek(0)
+        text = buf.read().decode(errors="replace")
+    kept = [ln for ln in text.splitlines() if ln.strip() and "CUDA driver" not in ln]
+    if kept:
+        print("\n".join(kept), file=sys.stderr)
+
+
+_init_quietly()
 
 
 def device(name: str | None = None) -> str:
