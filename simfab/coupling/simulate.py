@@ -8,12 +8,14 @@ At every insertion step O is moved to its next pose along the path and A settles
 refinement points on boundary edges/faces). Method, per step (interior point / IPC style):
 
 1. **Predictor.** Constraint points that O could reach during the step (distance to O below the
-   Lipschitz bound of psi times O's displacement there, plus d_hat) are carried rigidly with O -
-   rigid motion keeps their distance to O - and the rest of A follows through one linear solve with
-   the tangent stiffness of the previous step (those vertices pinned by a penalty, same sparsity
-   pattern, so the symbolic factorization is reused). The result is a feasible, non-inverted warm
-   start: every point outside O.
-2. **Corrector.** Projected Newton (:func:`simfab.solve.newton.minimize`) on
+   Lipschitz bound of psi times O's displacement there, plus d_hat) are pushed along O's normal
+   by O's normal displacement (free to slide tangentially) and the rest of A follows through one
+   linear solve with the tangent stiffness of the previous step (a penalty in the same sparsity
+   pattern, so the symbolic factorization is reused). Points still inside O are then carried
+   rigidly with O (rigid motion keeps their distance to O) and the solve repeated. The result is a
+   feasible, non-inverted warm start: every point outside O.
+2. **Corrector.** Newton (:func:`simfab.solve.newton.minimize`, exact Hessian first, the
+   PSD-projected one when the exact one is indefinite) on
    E_d(x) + kappa * sum_j b(-psi(y_j)) with the log barrier b of :mod:`simfab.contact.barrier`.
    Every step is capped so that no point can reach O (a curvature-aware bound, with conservative
    advancement alpha <= 0.9 d_j / (L |dy_j|), L a Lipschitz bound of psi, as a floor), and the
@@ -25,7 +27,9 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    crosses into O receive ``samples_per_edge`` points per edge (2D) or a barycentric lattice
    (3D) as extra constraints and the step is solved again from the previous step's state (which
    is feasible for them, because every earlier step ended with all facets checked outside O).
-   Refined facets keep their points for the rest of the simulation.
+   Refined facets keep their points for the rest of the simulation. If refined facets still
+   penetrate O by more than the tolerance between their points, the density is doubled (the new
+   points are the old check points, pushed out of O first) and the step solved again.
 4. **Check.** The step ends only if the max penetration at vertices and at dense check points on
    facets near O is <= ``penetration_tol_rel * h_A`` and no element is inverted; otherwise
    ConvergenceError. A step that cannot be taken (predictor infeasible, Newton failure) is
