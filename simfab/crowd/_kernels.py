@@ -134,9 +134,12 @@ def _mwg_sweeps(
     out_x: wp.array3d(dtype=wp.float64),
     out_a: wp.array3d(dtype=wp.float64),
     out_b: wp.array3d(dtype=wp.float64),
+    active: wp.array(dtype=wp.int32),
 ):
     t = wp.tid()
     c = t // chains
+    if active[c] == 0:  # this crowd has converged: leave its chains where they are
+        return
     R = alpha.shape[1]
     Q = beta.shape[1]
     rng = wp.rand_init(seed, t)
@@ -312,9 +315,11 @@ class WarpKernel:
     def accept_rates(self) -> dict:
         return {k: float(v.numpy().mean() / max(self.sweeps, 1)) for k, v in self.count.items()}
 
-    def run(self, n: int, *, adapt: bool, record: tuple, quiet: bool = True) -> dict:
-        """n sweeps in one launch; returns {name: (n, B, C, K)} for the recorded names."""
+    def run(self, n: int, *, adapt: bool, record: tuple, quiet: bool = True, active=None) -> dict:
+        """n sweeps in one launch; returns {name: (n, B, C, K)} for the recorded names.
+        ``active`` (B,) bool: crowds to advance (default all); others are left untouched."""
         np = self.np
+        act = np.ones(self.B, np.int32) if active is None else np.asarray(active, np.int32)
         T, R, Q = self.T, self.R, self.Q
         rec = bool(record)
         shape = lambda k: (T, n if rec else 0, k)  # noqa: E731
@@ -333,6 +338,7 @@ class WarpKernel:
                 self.step["alpha"], self.step["beta"], self.step["x"], self.step["scale"],
                 c["alpha"], c["beta"], c["x"], c["scale"], self.n_adapt,
                 self.ll, self.inv_s, self.ll_tmp, self.is_tmp, out_x, out_a, out_b,
+                wp.array(act, dtype=wp.int32, device=self.device),
             ],
             device=self.device,
         )

@@ -47,8 +47,10 @@ class Posterior:
     """Posterior draws of a batch of B crowds.
 
     x: (B, C, D, Q) true scores, unit scale; alpha: (B, C, D, R) or None; beta: (B, C, D, Q)
-    or None (dropped when ``keep_latent=False``). rhat/ess: (B, P) per parameter, P = Q + R + Q
-    (x, alpha, beta) or Q when latents are dropped. converged: (B,) R-hat and ESS targets met.
+    or None (dropped when ``keep_latent=False``). A crowd that converged in an earlier round
+    stops there: its draws beyond ``n_draws[b]`` are NaN (summaries below skip them).
+    rhat/ess: (B, P) per parameter, P = Q + R + Q (x, alpha, beta) or Q when latents are
+    dropped. converged: (B,) R-hat and ESS targets met.
     """
 
     x: np.ndarray
@@ -57,21 +59,22 @@ class Posterior:
     rhat: np.ndarray
     ess: np.ndarray
     converged: np.ndarray
-    iterations: int  #: per chain, burn-in included
+    n_draws: np.ndarray  #: (B,) recorded draws per chain of each crowd
+    iterations: int  #: per chain, burn-in included, of the longest-running crowd
     seconds: float
     accept: dict  #: mean post-burn-in acceptance rate per block
     config: SamplerConfig
 
     def mean(self, name: str = "x") -> np.ndarray:
         """Posterior mean, (B, K)."""
-        return getattr(self, name).mean(axis=(1, 2))
+        return np.nanmean(getattr(self, name), axis=(1, 2))
 
     def interval(self, name: str = "x", mass: float | None = None) -> np.ndarray:
         """Central credible interval, (B, K, 2)."""
         mass = self.config.credible_mass if mass is None else mass
         d = getattr(self, name)
         d = d.reshape(d.shape[0], -1, d.shape[-1])
-        q = np.quantile(d, [(1 - mass) / 2, (1 + mass) / 2], axis=1)  # (2, B, K)
+        q = np.nanquantile(d, [(1 - mass) / 2, (1 + mass) / 2], axis=1)  # (2, B, K)
         return np.moveaxis(q, 0, -1)
 
     @property
@@ -152,9 +155,10 @@ class _NumpyKernel:
     def accept_rates(self) -> dict:
         return {k: float(v.mean() / max(self.sweeps, 1)) for k, v in self.count.items()}
 
-    def run(self, n: int, *, adapt: bool, record: tuple[str, ...], quiet: bool = True) -> dict:
+    def run(self, n: int, *, adapt: bool, record: tuple[str, ...], quiet: bool = True, active=None) -> dict:
         """n sweeps; adapt steps every cfg.adapt_every sweeps if ``adapt``; return the
-        recorded draws {name: (n, B, C, K)}."""
+        recorded draws {name: (n, B, C, K)}. ``active`` is accepted for interface parity:
+        the numpy reference advances every crowd (the caller ignores finished ones)."""
         from simfab.progress import progress
 
         s = self.state
@@ -284,20 +288,32 @@ def sample(
 
     record = ("x", "alpha", "beta") if keep_latent else ("x",)
     chunks = {k: [] for k in record}
-    n_draws, target = 0, config.draws
+    done = np.zeros(B, bool)  # converged in an earlier round: no more sweeps
+    n_draws = np.zeros(B, np.int64)
+    rh = np.full((B, 0), np.inf)
+    total, target = 0, config.draws
     while True:
-        got = kern.run(target - n_draws, adapt=False, record=record, quiet=quiet)
+        n = target - total
+        got = kern.run(n, adapt=False, record=record, quiet=quiet, active=~done)
         for k in record:
-            chunks[k].append(got[k])
-        n_draws = target
+            g = got[k]
+            g[:, done] = np.nan
+            chunks[k].append(g)
+        n_draws[~done] += n
+        total = target
         draws = {k: np.concatenate(v, axis=0) for k, v in chunks.items()}
-        params = np.concatenate([np.moveaxis(d, 0, -1) for d in draws.values()], axis=-2)  # (B, C, P, D)
-        params = np.swapaxes(params, 1, 2)  # (B, P, C, D)
-        rh, es = diagnose(params)
-        converged = (rh.max(-1) < config.rhat_target) & (es.min(-1) >= config.ess_target)
-        if converged.all() or target >= config.max_draws:
+        live = np.flatnonzero(~done)  # these share the full length `total`
+        params = np.concatenate([np.moveaxis(d[:, live], 0, -1) for d in draws.values()], axis=-2)  # (b, C, P, D)
+        r_live, e_live = diagnose(np.swapaxes(params, 1, 2))  # (b, P)
+        if rh.shape[1] == 0:
+            rh, es = np.full((B, r_live.shape[1]), np.inf), np.zeros((B, r_live.shape[1]))
+        rh[live], es[live] = r_live, e_live
+        conv = (rh.max(-1) < config.rhat_target) & (es.min(-1) >= config.ess_target)
+        done = conv.copy()
+        if done.all() or target >= config.max_draws:
             break
         target = min(target + max(config.draws, target // 2), config.max_draws)  # 1.5x: few re-diagnoses
+    converged = conv
 
     def per_batch(k):  # (D, B, C, K) -> (B, C, D, K)
         return np.ascontiguousarray(np.moveaxis(draws[k], 0, 2)) if k in draws else None
@@ -310,7 +326,8 @@ def sample(
         rhat=rh,
         ess=es,
         converged=converged,
-        iterations=config.burn_in + n_draws,
+        n_draws=n_draws,
+        iterations=config.burn_in + int(n_draws.max()),
         seconds=time.perf_counter() - t0,
         accept=accept,
         config=config,

@@ -23,6 +23,9 @@ def test_recovers_planted_truth_better_than_the_mean_over_30_practitioner_crowds
     post = sample(Y, config=cfg, seed=0, half_width=HW)
     assert post.converged.all()
     assert post.rhat_max.max() < 1.05
+    # crowds that converged early stop there: their later draws are NaN, earlier ones finite
+    for k, n in enumerate(post.n_draws):
+        assert np.isfinite(post.x[k, :, :n]).all() and np.isnan(post.x[k, :, n:]).all()
     xb = post.mean("x")
     rms_bayes = np.mean([metrics.rms(xb[k], c.x) for k, c in enumerate(crowds)])
     rms_mean = np.mean([metrics.rms(SCALE.to_unit(aggregate.arithmetic_mean(c.ratings.labels)), c.x) for c in crowds])
