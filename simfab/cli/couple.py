@@ -10,8 +10,10 @@ keyframes for its path, the box site ``fixed``) plus ``NAME.toml`` (the complian
 material and the simulation options); a bare NAME refers to a bundled scene in
 ``scenes/coupling`` (``simfab couple scenes`` lists them). See :mod:`simfab.coupling.scene`.
 
-Outputs under ``--out``: NAME_profile.csv (per step: distance [m], energy [J], force [N], grip
-[N], max von Mises [Pa], max penetration [m], min det F, Newton iterations), NAME_summary.json
+Outputs under ``--out``: NAME_profile.csv (per step: distance [m], energy [J], insertion force
+[N] (support reactions along O's translation), path force [N] (work-conjugate force along the
+path, = -dE/ds, also defined during rotations), grip [N], max von Mises [Pa], max penetration [m],
+min det F, Newton iterations), NAME_summary.json
 (category, E_max, E_ss [J], coupling_ratio [%], F_in, F_rm, F_grip [N], max_von_mises [Pa],
 max_penetration [m], min_det_F, steps, newton_iterations, seconds and the output paths),
 NAME_profile.png (energy solid, force dashed, markers at E_max and E_ss), NAME.usda (A's deforming

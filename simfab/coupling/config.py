@@ -31,11 +31,11 @@ CURVATURE_FLOOR = 0.1
 LAZY_BAND_DHATS = 4.0
 LAZY_BAND_SIGMAS = 0.5
 #: Newton: stop when the step is below this fraction of h_A ...
-NEWTON_STEP_TOL_REL = 1e-5
+NEWTON_STEP_TOL_REL = 1e-7
 #: ... or the free-dof force residual is below this fraction of E * h_A^2 (3D) / E * h_A * t (2D).
-NEWTON_GRAD_TOL_REL = 2e-6
+NEWTON_GRAD_TOL_REL = 2e-7
 #: ... or below this fraction of the residual at the step's warm start.
-NEWTON_GRAD_TOL_START = 1e-4
+NEWTON_GRAD_TOL_START = 1e-5
 NEWTON_MAX_ITER = 100
 #: Hand Newton the exact Hessian too (tried first; the PSD-projected one when it is indefinite).
 EXACT_FIRST_NEWTON = True

@@ -20,7 +20,7 @@ SUMMARY_UNITS = {
     "kappa_final": "N/m", "dhat": "m", "s_max": "m", "s_ss": "m",
 }
 
-CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "grip_N", "max_von_mises_Pa", "max_penetration_m", "min_det_F",
+CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "path_force_N", "grip_N", "max_von_mises_Pa", "max_penetration_m", "min_det_F",
               "newton_iterations", "contact_points"]
 
 
@@ -60,7 +60,7 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
 def write_profile_csv(res: InsertionResult, path) -> Path:
     from simfab.io.atomic import write_csv
 
-    rows = [[k, r.s, r.energy, r.force, r.grip, r.max_von_mises, r.penetration, r.min_det_F, r.iterations,
+    rows = [[k, r.s, r.energy, r.force, r.path_force, r.grip, r.max_von_mises, r.penetration, r.min_det_F, r.iterations,
              r.contact_points] for k, r in enumerate(res.steps)]
     return write_csv(path, CSV_HEADER, rows)
 

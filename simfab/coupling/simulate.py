@@ -186,7 +186,9 @@ class StepResult:
     quat: np.ndarray
     x: np.ndarray  # (n, dim) deformed positions [m]
     energy: float
-    force: float  # insertion force along O's motion (resisting < 0)
+    force: float  # insertion force: support reactions along O's translation (resisting < 0)
+    path_force: float  # generalized force along the path, sum_j f_j(on O) . dy_j/ds = -d(E + B)/ds [N]
+    barrier_energy: float  # kappa sum_j b(d_j) at this state [J] (not part of the elastic energy)
     grip: float
     max_von_mises: float
     von_mises: np.ndarray  # (m,) per element [Pa]
@@ -738,6 +740,23 @@ def _add_refinement(cm: CouplingModel, state: _State, facet_ids: list) -> None:
     _rebuild_points(cm, state)
 
 
+def _path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
+    """(k, dim) velocity per unit path length of O's material points currently at y (central
+    differences of O's pose, one-sided at the ends of the path)."""
+    L = float(cm.path.length)
+    h = 1e-6 * max(L, 1e-12)
+    s0, s1 = max(0.0, s - h), min(L, s + h)
+    R, p = cm.pose(s)
+    dim = cm.dim
+    y3 = np.zeros((len(y), 3))
+    y3[:, :dim] = y
+    out = []
+    for si in (s0, s1):
+        Ri, pi = cm.pose(si)
+        out.append((y3 - p) @ (Ri @ R.T).T + pi)
+    return ((out[1] - out[0]) / (s1 - s0))[:, :dim]
+
+
 def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     from simfab.fem.neohookean import det_F, energy_gradient
     from simfab.fem.stress import von_mises
@@ -749,13 +768,14 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     pts = state.points
     ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
     d = -ev.psi
-    _, gy, _ = point_barrier(d, -ev.grad, None, cm.dhat, state.kappa)
+    B, gy, _ = point_barrier(d, -ev.grad, None, cm.dhat, state.kappa)
     gc = pts.scatter(gy, n)
     g = gE + gc
     fixed = ~cm.free.reshape(n, dim)
     reaction = np.where(fixed, g, 0.0).sum(axis=0)  # force of the support on A = force of A on O
     u = cm.direction(state.s)
     force = float(reaction @ u)
+    path_force = float(np.einsum("kd,kd->", gy, _path_velocity(cm, state.s, pts.positions(x))))
     fc = -gc  # contact force on A's vertices
     grip = float(np.linalg.norm(0.5 * np.abs(fc).sum(axis=0)))
     dets = det_F(cm.fem, x)
@@ -769,7 +789,8 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
         raise ConvergenceError(f"penetration {pen:.3e} m exceeds the tolerance {cm.tol:.3e} m at s={state.s:.6g} m")
     pos, quat = cm.path.pose_at(state.s)
     return StepResult(
-        s=state.s, pos=np.asarray(pos), quat=np.asarray(quat), x=x.copy(), energy=float(E), force=force, grip=grip,
+        s=state.s, pos=np.asarray(pos), quat=np.asarray(quat), x=x.copy(), energy=float(E), force=force,
+        path_force=path_force, barrier_energy=float(B), grip=grip,
         max_von_mises=float(vm.max()), von_mises=vm, penetration=pen, min_det_F=min_det, iterations=int(iters),
         contact_points=len(pts), kappa=float(state.kappa),
     )

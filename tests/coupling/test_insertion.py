@@ -50,6 +50,10 @@ def test_insertion_force_is_minus_the_energy_slope(runs):
     assert inner.sum() > 15
     err = np.abs(F[1:-1][inner] + dEds[inner])
     assert err.max() <= 0.05 * np.abs(F).max()
+    # the work-conjugate force from the contact forces on O agrees with the support reactions
+    # along a pure translation (equilibrium of A; residual = Newton tolerance)
+    P = res.column("path_force")
+    assert np.allclose(P, F, atol=1e-3 * np.abs(F).max())
 
 
 def test_refinement_catches_a_penetration_the_vertices_miss(coarse_block_model):
@@ -88,5 +92,10 @@ def test_rotating_path_keeps_every_step_feasible(ellipse_in_clamp_model):
     _check_every_step(res)
     E = res.column("energy")
     assert E[0] < 1e-9 and E[1] < 1e-9 and E[-1] > 1e-3 and E[-1] >= 0.9 * E.max()
+    # the support reactions see no translation, but the work-conjugate path force does: turning
+    # the ellipse against the arc is resisted (negative) while the energy grows
+    P = res.column("path_force")
+    grows = np.diff(E) > 0.05 * E.max()
+    assert grows.sum() >= 2 and np.all(P[1:][grows] < 0)
     quats = np.array([r.quat for r in res.steps])
     assert abs(abs(quats[-1, 0]) - np.cos(np.pi / 4)) < 1e-9  # O really turned by 90 degrees
