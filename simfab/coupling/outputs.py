@@ -86,6 +86,9 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     ax.set_ylabel("elastic energy [J]", color="tab:blue")
     ax2 = ax.twinx()
     ax2.plot(s, F, "--", color="tab:orange", lw=1.5, label="insertion force")
+    q = np.array([r.quat for r in res.steps])
+    if np.abs(np.abs(q @ q[0]) - 1.0).max() > 1e-9:  # rotating path: also the work-conjugate force
+        ax2.plot(s, res.column("path_force"), ":", color="tab:purple", lw=1.5, label="path force (-dE/ds)")
     ax2.axhline(0.0, color="0.7", lw=0.8)
     ax2.set_ylabel("force on O along the path [N] (resisting < 0)", color="tab:orange")
     lines = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
