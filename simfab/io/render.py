@@ -123,9 +123,10 @@ def render_meshes(items, png, *, width: int = 640, height: int = 480, floor: boo
         groups = _color_groups(F, colors, palette[i % len(palette)])
         body = b.body(f"m{i}")
         for j, (faces, rgb) in enumerate(groups):
-            used, inv = np.unique(faces, return_inverse=True)
-            b.mesh_asset(f"m{i}_{j}", V[used], inv.reshape(-1, 3))
-            b.geom(body, type="mesh", mesh=f"m{i}_{j}", rgba=[*rgb[:3], 1.0], contype=0, conaffinity=0)
+            # Every colour group keeps the whole vertex array: MuJoCo needs >= 4 vertices per
+            # mesh, and "shell" inertia accepts flat (2D) meshes.
+            b.mesh_asset(f"m{i}_{j}", V, faces).set("inertia", "shell")
+            b.geom(body, type="mesh", mesh=f"m{i}_{j}", rgba=[*rgb[:3], 1.0], contype=0, conaffinity=0, group=0)
     try:
         return render_model(b.compile(), png, width=width, height=height)
     except Exception as e:

@@ -69,3 +69,23 @@ def test_render_file_rejects_unknown(tmp_path):
     p.write_text("x")
     with pytest.raises(InputError, match="cannot render"):
         render_file(p, tmp_path / "a.png")
+
+
+def test_render_usd_flat_2d_mesh_with_per_face_colors(tmp_path):
+    # 2D FEM results are flat meshes with a scalar per face: colour groups can be tiny.
+    from simfab.io.render import render_usd
+    from simfab.io.usd import StageWriter
+
+    xs, ys = np.meshgrid(np.linspace(0, 1, 6), np.linspace(0, 0.3, 3))
+    P = np.column_stack([xs.ravel(), ys.ravel()])
+    F = []
+    for j in range(2):
+        for i in range(5):
+            a = j * 6 + i
+            F += [[a, a + 1, a + 7], [a, a + 7, a + 6]]
+    w = StageWriter(tmp_path / "flat.usda")
+    w.add_mesh("part", F, P)
+    w.set_scalar("part", "von_mises", np.arange(len(F), dtype=float), 0, interpolation="uniform")
+    w.save()
+    png = render_usd(tmp_path / "flat.usda", tmp_path / "flat.png", width=120, height=90)
+    assert np.asarray(Image.open(png)).std() > 1.0
