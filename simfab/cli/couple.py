@@ -77,23 +77,10 @@ def run(args) -> dict:
     return simulate_scene(args.scene, out=args.out, device=args.device, quiet=args.quiet, simulation=sim)
 
 
-def _quiet_warp() -> None:
-    """Keep Warp's start-up and module-load messages off stdout (``--json`` owns it).
-
-    Workaround: ``simfab._warp`` sets ``wp.config.quiet``, which Warp 1.19 no longer reads; its
-    messages are governed by ``wp.config.log_level``, which must be set before ``wp.init()``.
-    """
-    import warp
-
-    if warp.config.log_level < warp.LOG_WARNING:
-        warp.config.log_level = warp.LOG_WARNING
-
-
 def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simulation: dict | None = None,
                    stem: str | None = None) -> dict:
     """Load a coupling scene, run the insertion and write every output; returns the summary."""
-    _quiet_warp()
-    from simfab._warp import device as check_device
+    from simfab._warp import device as check_device  # quiet Warp initialization
     from simfab.coupling.outputs import write_all
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import check_start, simulate
