@@ -11,6 +11,11 @@ import os
 import time
 
 HELP = "run every built pipeline on the bundled default scenes (writes ./simfab-out/)"
+DESCRIPTION = """Run every built pipeline (grow, couple, deploy, crowd) on its bundled default scenes.
+Results go to --out (default ./simfab-out/), one folder per pipeline.
+
+--json keys: out (folder), pipelines {name: that pipeline's demo summary (its own output paths
+and key figures, see 'simfab NAME --help'), with seconds}."""
 
 #: Pipelines in the order the demo runs them; each subcommand module may define demo(ctx).
 PIPELINES = ("grow", "couple", "deploy", "crowd")

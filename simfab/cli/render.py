@@ -1,6 +1,11 @@
 """``simfab render FILE -o out.png``: offscreen PNG of an MJCF scene or a USD stage's mesh."""
 
 HELP = "render an MJCF scene or a USD stage (at a time code) to a PNG"
+DESCRIPTION = """Render an MJCF scene (.xml), a USD stage (.usd/.usda/.usdc, its visible meshes with their
+displayColor at --time, default the last time code) or a mesh file to a PNG, offscreen
+(MuJoCo with EGL; matplotlib when no OpenGL is available).
+
+--json keys: png (path of the image), source (the rendered file)."""
 
 
 def add_args(p):
