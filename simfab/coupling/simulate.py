@@ -285,10 +285,13 @@ class _StepObjective:
         x = xf.reshape(self.n, self.dim)
         t0 = time.perf_counter()
         H_exact = None
-        if need_hessian:
+        if need_hessian and self.exact_first:
+            # exact Hessian only (half the cost of the eigen-projected one); the projected one is
+            # assembled on demand, when the exact one turns out indefinite (see _psd_hessian)
+            E, g, H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)
+            H = None
+        elif need_hessian:
             E, g, H = energy_gradient_hessian(cm.fem, x)
-            if self.exact_first and np.isfinite(E):
-                H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)[2]
         else:
             (E, g), H = energy_gradient(cm.fem, x), None
         self.timer.add("assembly", time.perf_counter() - t0)
@@ -299,22 +302,17 @@ class _StepObjective:
         if np.any(d <= 0):
             return np.inf, g.ravel(), H
         act = d < cm.dhat
-        B, gy, Hy = point_barrier(d[act], gd[act], hd[act] if need_hessian else None, cm.dhat, self.kappa)
-        if H_exact is not None:
-            Hy_exact = point_barrier(d[act], gd[act], hd[act], cm.dhat, self.kappa, psd=False)[2]
+        B, gy, _ = point_barrier(d[act], gd[act], None, cm.dhat, self.kappa)
         g_pts = np.zeros_like(gd)
         g_pts[act] = gy
         gc = self.points.scatter(g_pts, self.n)
         if need_hessian:
-            wp_act = self.wpair[act][:, :, :, None, None]
-            if act.any():
-                np.add.at(H.data, self.slots[act].ravel(), (wp_act * Hy[:, None, None, :, :]).ravel())
-            reg = C.RIGID_MODE_REG * float(np.abs(H.data[self.diag]).mean())
-            H.data[self.diag] += reg
+            contact = (act, d[act], gd[act], hd[act])
             if H_exact is not None:
-                if act.any():
-                    np.add.at(H_exact.data, self.slots[act].ravel(), (wp_act * Hy_exact[:, None, None, :, :]).ravel())
-                H_exact.data[self.diag] += reg
+                self._add_contact(H_exact, contact, psd=False)
+                H = _LazyHessian(self, x.copy(), contact)
+            else:
+                self._add_contact(H, contact, psd=True)
             self.last_x = xf.copy()
             self.last_d = d
             self.last_gd = gd
@@ -325,11 +323,27 @@ class _StepObjective:
             self.curv = max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / cm.field.sigma)
         self.timer.add("contact", time.perf_counter() - t0)
         # exact-first Newton (simfab.solve.newton): the exact Hessian is used whenever it is
-        # positive definite (quadratic convergence), the PSD-projected one otherwise
+        # positive definite (quadratic convergence), the PSD-projected one (built lazily) otherwise
         out = (E + B, (g + gc).ravel(), H if H_exact is None else (H_exact, H))
         if need_hessian:
             self.memo = (xf.copy(), out)
         return out
+
+    def _add_contact(self, H, contact, *, psd: bool) -> None:
+        """Add the barrier Hessian blocks (PSD-projected per point if ``psd``) and the rigid-mode
+        regularization to the FEM Hessian ``H`` (in place)."""
+        act, d, gd, hd = contact
+        if act.any():
+            Hy = point_barrier(d, gd, hd, self.cm.dhat, self.kappa, psd=psd)[2]
+            wp_act = self.wpair[act][:, :, :, None, None]
+            np.add.at(H.data, self.slots[act].ravel(), (wp_act * Hy[:, None, None, :, :]).ravel())
+        H.data[self.diag] += C.RIGID_MODE_REG * float(np.abs(H.data[self.diag]).mean())
+
+    def psd_hessian(self):
+        """The PSD-projected Hessian at the last Hessian evaluation (tangent stiffness for the
+        predictor)."""
+        H = self.last_H
+        return H() if isinstance(H, _LazyHessian) else H
 
     def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
         """Step cap keeping every constraint point outside O along the whole step (see below).
@@ -358,6 +372,26 @@ class _StepObjective:
         alpha_curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
         cons = keep / (C.PSI_LIPSCHITZ * sp)
         return float(min(1.0, np.min(np.maximum(alpha_curv, cons))))
+
+
+class _LazyHessian:
+    """PSD-projected Hessian of a :class:`_StepObjective` at x, assembled on first call (once)."""
+
+    def __init__(self, obj, x, contact):
+        self.obj, self.x, self.contact, self.H = obj, x, contact, None
+
+    def __call__(self):
+        if self.H is None:
+            from simfab.fem.neohookean import energy_gradient_hessian
+
+            t0 = time.perf_counter()
+            _, _, H = energy_gradient_hessian(self.obj.cm.fem, self.x)
+            self.obj.timer.add("assembly", time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            self.obj._add_contact(H, self.contact, psd=True)
+            self.obj.timer.add("contact", time.perf_counter() - t0)
+            self.H = H
+        return self.H
 
 
 def dim_factor(dim: int) -> float:
@@ -492,7 +526,7 @@ def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
         total += it
         new = _crossing_facets(cm, x, s, state)
         if not new:
-            state.x, state.s, state.H = x, s, obj.last_H
+            state.x, state.s, state.H = x, s, obj.psd_hessian()
             return total
         _add_refinement(cm, state, new)
     raise ConvergenceError("refinement did not settle at the start pose")
@@ -516,7 +550,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         total += it
         new = _crossing_facets(cm, x, s_new, state) if cm.options.refine else []
         if not new:
-            state.x, state.s, state.H = x, s_new, obj.last_H
+            state.x, state.s, state.H = x, s_new, obj.psd_hessian()
             _adapt_kappa(cm, state, obj)
             return total
         # restart the step from the previous state, which is feasible for the new points (new

@@ -7,7 +7,8 @@ Cholesky factorization (:class:`simfab.solve.linear.SPDSolver`, symbolic analysi
 the pattern is unchanged), then backtracks along ``dx`` until the Armijo sufficient-decrease
 condition holds at an admissible point.
 
-Exact-first steps: ``fun`` may return the Hessian as a pair ``(H_exact, H_psd)``. The exact
+Exact-first steps: ``fun`` may return the Hessian as a pair ``(H_exact, H_psd)`` (``H_psd`` may
+be a zero-argument callable building it on demand, so that it is only assembled when needed). The exact
 Hessian is then factorized first; when CHOLMOD succeeds it is positive definite and the step is
 an exact Newton step (quadratic convergence also where element-wise PSD projection would only
 converge linearly, e.g. large rotations); otherwise the projected Hessian is used.
@@ -172,7 +173,7 @@ def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonOp
         try:
             return solver.solve(sub(H_exact), rhs), 0.0, "exact"
         except NotPositiveDefinite:
-            H = H_psd
+            H = H_psd() if callable(H_psd) else H_psd
     dx, shift = _solve_regularized(solver, sub(H), rhs, opts)
     return dx, shift, "psd"
 
