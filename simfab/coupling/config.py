@@ -39,6 +39,8 @@ NEWTON_GRAD_TOL_START = 1e-5
 NEWTON_MAX_ITER = 100
 #: Hand Newton the exact Hessian too (tried first; the PSD-projected one when it is indefinite).
 EXACT_FIRST_NEWTON = True
+#: Evaluate the Hessian at the first line-search trial (most steps are accepted at once).
+NEWTON_EAGER_HESSIAN = True
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4
 #: Predictor: retries carrying newly infeasible points fully with O before bisecting the step.

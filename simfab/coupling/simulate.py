@@ -497,7 +497,7 @@ def _newton(cm: CouplingModel, obj: _StepObjective, x0: np.ndarray, ctx) -> tupl
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n)
     opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
-                         step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h)
+                         step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=C.NEWTON_EAGER_HESSIAN)
     solver = _TimedSolver(ctx["solver"], ctx["timer"])
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
     return res.x.reshape(x0.shape), res.iterations

@@ -64,6 +64,10 @@ class NewtonOptions:
     backtrack: float = 0.5  # step shrink factor per rejected trial
     max_backtracks: int = 40
     roundoff: float = 1e-12  # decrease (relative to |f|) below which f cannot resolve it
+    # Evaluate the Hessian already at the first trial point of each line search: when most full
+    # (or capped) steps are accepted, this saves a separate value/gradient evaluation per
+    # iteration; a rejected first trial wastes one Hessian evaluation.
+    eager_hessian: bool = False
     # Regularization when the Cholesky factorization fails: H + shift * mean|diag H| * I with
     # shift starting at reg_initial, multiplied by reg_growth per failure, at most reg_max.
     reg_initial: float = 1e-10
@@ -284,10 +288,14 @@ def minimize(
         # reduces the gradient norm instead.
         flat = -slope <= opts.roundoff * max(abs(f), tiny)
         accepted = False
+        Ht = None
         for bt in range(opts.max_backtracks + 1):
             xt = x + alpha * dx
             if admissible is None or admissible(xt):
-                ft, gt, _ = fun(xt, False)
+                eager = opts.eager_hessian and bt == 0
+                ft, gt, Ht = fun(xt, eager)
+                if not eager:
+                    Ht = None
                 if np.isfinite(ft):
                     if flat:
                         accepted = _inf_norm(np.asarray(gt)[free_idx]) < gnorm
@@ -305,7 +313,10 @@ def minimize(
                 f"(||g_free||_inf={gnorm:.3e}, target {opts.grad_tol * gscale:.3e}, g.dx={slope:.3e})"
             )
         x = xt
-        f, g, H = fun(x, True)
+        if Ht is not None:  # the accepted trial was evaluated with its Hessian
+            f, g, H = ft, gt, Ht
+        else:
+            f, g, H = fun(x, True)
         gnorm = _inf_norm(g[free_idx])
         history.append(dict(energy=float(f), grad_norm=gnorm, alpha=alpha, backtracks=bt, shift=shift, hessian=used))
         if gnorm <= opts.grad_tol * gscale:
