@@ -21,11 +21,11 @@ def plot_study(result, path, *, title: str = "Micro-crowd study") -> str:
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
     k = result.sizes
-    for ax, m, s, label, color in (
-        (axes[0], result.percentile_mean, result.percentile_sd, "percentile rank of crowd estimate (%)", "tab:blue"),
-        (axes[1], result.bias_mean, result.bias_sd, "population bias (RMS error, unit scale)", "tab:red"),
+    for ax, m, s, label, color, top in (
+        (axes[0], result.percentile_mean, result.percentile_sd, "percentile rank of crowd estimate (%)", "tab:blue", 100.0),
+        (axes[1], result.bias_mean, result.bias_sd, "population bias (RMS error, unit scale)", "tab:red", np.inf),
     ):
-        ax.fill_between(k, m - s, m + s, color="gold", alpha=0.5, label="+- 1 sd")
+        ax.fill_between(k, np.maximum(m - s, 0.0), np.minimum(m + s, top), color="gold", alpha=0.5, label="+- 1 sd (clipped to the range)")
         ax.plot(k, m, "o-", color=color, label="mean")
         ax.set_xlabel("crowd size")
         ax.set_ylabel(label)
