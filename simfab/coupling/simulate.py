@@ -419,6 +419,7 @@ class _State:
     check: tuple | None = None  # memo of the last facet check (x, s, order, result)
     kappa: float = 0.0  # current barrier stiffness [N/m] (adapted, see _adapt_kappa)
     H: object = None  # last Hessian (for the predictor)
+    prev: tuple | None = None  # (x, s) of the step before (for the extrapolating predictor)
 
 
 def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> InsertionResult:
@@ -539,6 +540,14 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         try:
             x0 = _predict(cm, state, s_new, ctx)
             obj = _objective(cm, state.points, s_new, ctx, state.kappa)
+            if C.PREDICTOR_EXTRAPOLATE and state.prev is not None and state.prev[1] < state.s:
+                xp, sp_ = state.prev
+                xe = state.x + (state.x - xp) * ((s_new - state.s) / (state.s - sp_))
+                fe = obj(xe.ravel(), False)[0]
+                if np.isfinite(fe):
+                    f0 = obj(x0.ravel(), False)[0]
+                    if fe < f0:
+                        x0 = xe
             x, it = _newton(cm, obj, x0, ctx)
         except ConvergenceError:
             if depth >= C.MAX_BISECTIONS:
@@ -550,6 +559,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         total += it
         new = _crossing_facets(cm, x, s_new, state) if cm.options.refine else []
         if not new:
+            state.prev = (state.x, state.s)
             state.x, state.s, state.H = x, s_new, obj.psd_hessian()
             _adapt_kappa(cm, state, obj)
             return total
