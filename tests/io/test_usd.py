@@ -81,3 +81,14 @@ def test_colormap_range():
     assert rgb.shape == (3, 3) and np.all((rgb >= 0) & (rgb <= 1))
     assert not np.allclose(rgb[0], rgb[1])
     np.testing.assert_allclose(rgb[2], 0.5)
+
+
+def test_atomic_outputs_have_default_permissions(tmp_path):
+    import os
+
+    from simfab.io.atomic import write_text
+
+    p = write_text(tmp_path / "a.txt", "x")
+    mask = os.umask(0)
+    os.umask(mask)
+    assert (p.stat().st_mode & 0o777) == (0o666 & ~mask)
