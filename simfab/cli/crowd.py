@@ -120,7 +120,6 @@ def run(args):
 
 
 def _device(args) -> str:
-    _quiet_warp()
     from simfab._warp import device
 
     return device(args.device)
@@ -285,19 +284,9 @@ def run_simulate(args):
     return {"raters": len(r.workers), "tasks": list(r.tasks), "malicious": len(planted["malicious"]), "outputs": outputs}
 
 
-def _quiet_warp():
-    """Warp 1.19 prints its greeting on stdout unless config.log_level is raised before it
-    initializes (simfab._warp still sets the retired config.quiet); --json needs stdout clean."""
-    import warp
-
-    if hasattr(warp, "LOG_WARNING"):
-        warp.config.log_level = max(warp.config.log_level, warp.LOG_WARNING)
-
-
 def run_bracket(args):
     import dataclasses
 
-    _quiet_warp()
     from simfab.crowd.bracket import BracketSetup, bracket_survey
 
     setup = BracketSetup()
@@ -343,7 +332,6 @@ def demo(ctx):
     from simfab.crowd.survey import run_bundled_survey
     from simfab.progress import log
 
-    _quiet_warp()
     summary = run_bundled_survey(out=ctx.out, seed=ctx.seed, quiet=ctx.quiet)
     log("crowd demo: bracket strength truth (FEM)", quiet=ctx.quiet)
     b = bracket_outputs(bracket_survey(BracketSetup()), BracketSetup(), os.path.join(ctx.out, "bracket"))

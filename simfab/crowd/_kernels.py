@@ -17,14 +17,7 @@ Arrays (T = crowds x chains threads, R raters, Q questions):
 
 from __future__ import annotations
 
-import warp as _warp
-
-# Warp 1.19 replaced config.quiet by config.log_level; without this its greeting lands on
-# stdout (which --json reserves) before simfab._warp gets to initialize it quietly.
-if hasattr(_warp, "LOG_WARNING"):
-    _warp.config.log_level = max(_warp.config.log_level, _warp.LOG_WARNING)
-
-from simfab._warp import wp  # noqa: E402
+from simfab._warp import wp  # quiet Warp initialization
 
 _F = wp.float64
 
