@@ -2,7 +2,8 @@
 
 Each subcommand module defines ``HELP`` (one line), ``add_args(parser)`` and
 ``run(args) -> dict``. The dict is the run's summary: output paths and key figures; with
-``--json`` it is printed as exactly one JSON object on stdout. A module may also define
+``--json`` it is printed as exactly one JSON object on stdout, otherwise as ``key: value``
+lines, or by the module's optional ``format_text(summary) -> str``. A module may also define
 ``demo(ctx: DemoContext) -> dict`` to take part in ``simfab demo``.
 
 Exit codes: 0 ok; 2 bad input (one line on stderr naming the file/field, no traceback);
@@ -125,6 +126,8 @@ def _report(result: dict | None, args) -> None:
     result = to_jsonable(result or {})
     if args.json:
         sys.stdout.write(json.dumps(result) + "\n")
+    elif not args.quiet and hasattr(args._module, "format_text"):
+        print(args._module.format_text(result))
     elif not args.quiet:
         for k, v in result.items():
             if isinstance(v, (dict, list)):
