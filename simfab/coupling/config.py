@@ -41,8 +41,8 @@ NEWTON_MAX_ITER = 100
 EXACT_FIRST_NEWTON = True
 #: Evaluate the Hessian at the first line-search trial (most steps are accepted at once).
 NEWTON_EAGER_HESSIAN = True
-#: Predictor: also try the linear extrapolation of the last two steps; the candidate with the
-#: lower objective is the warm start.
+#: Predictor: also try the linear extrapolation of the last two steps and the quadratic one of the
+#: last three; the candidate with the lowest objective is the warm start.
 PREDICTOR_EXTRAPOLATE = True
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4

@@ -13,7 +13,10 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    linear solve with the tangent stiffness of the previous step (a penalty in the same sparsity
    pattern, so the symbolic factorization is reused). Points still inside O are then carried
    rigidly with O (rigid motion keeps their distance to O) and the solve repeated. The result is a
-   feasible, non-inverted warm start: every point outside O.
+   feasible, non-inverted warm start: every point outside O. The linear and quadratic
+   extrapolations of the last two / three converged steps are candidates too; the feasible
+   candidate with the lowest objective E_d + B is the warm start (fewer Newton iterations when the
+   deformation evolves smoothly along the path).
 2. **Corrector.** Newton (:func:`simfab.solve.newton.minimize`, exact Hessian first, the
    PSD-projected one when the exact one is indefinite) on
    E_d(x) + kappa * sum_j b(-psi(y_j)) with the log barrier b of :mod:`simfab.contact.barrier`.
@@ -420,6 +423,7 @@ class _State:
     kappa: float = 0.0  # current barrier stiffness [N/m] (adapted, see _adapt_kappa)
     H: object = None  # last Hessian (for the predictor)
     prev: tuple | None = None  # (x, s) of the step before (for the extrapolating predictor)
+    prev2: tuple | None = None  # (x, s) two steps before
 
 
 def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> InsertionResult:
@@ -543,11 +547,20 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
             if C.PREDICTOR_EXTRAPOLATE and state.prev is not None and state.prev[1] < state.s:
                 xp, sp_ = state.prev
                 xe = state.x + (state.x - xp) * ((s_new - state.s) / (state.s - sp_))
-                fe = obj(xe.ravel(), False)[0]
-                if np.isfinite(fe):
-                    f0 = obj(x0.ravel(), False)[0]
-                    if fe < f0:
-                        x0 = xe
+                cands = [xe]
+                if state.prev2 is not None and state.prev2[1] < sp_:
+                    # quadratic (Lagrange) extrapolation through the last three states
+                    (x2, s2), (x1, s1), (xc, sc) = state.prev2, state.prev, (state.x, state.s)
+                    t = s_new
+                    l2 = (t - s1) * (t - sc) / ((s2 - s1) * (s2 - sc))
+                    l1 = (t - s2) * (t - sc) / ((s1 - s2) * (s1 - sc))
+                    lc = (t - s2) * (t - s1) / ((sc - s2) * (sc - s1))
+                    cands.append(l2 * x2 + l1 * x1 + lc * xc)
+                best = obj(x0.ravel(), False)[0]
+                for xc_ in cands:
+                    fc = obj(xc_.ravel(), False)[0]
+                    if np.isfinite(fc) and fc < best:
+                        x0, best = xc_, fc
             x, it = _newton(cm, obj, x0, ctx)
         except ConvergenceError:
             if depth >= C.MAX_BISECTIONS:
@@ -559,7 +572,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         total += it
         new = _crossing_facets(cm, x, s_new, state) if cm.options.refine else []
         if not new:
-            state.prev = (state.x, state.s)
+            state.prev2, state.prev = state.prev, (state.x, state.s)
             state.x, state.s, state.H = x, s_new, obj.psd_hessian()
             _adapt_kappa(cm, state, obj)
             return total
