@@ -85,3 +85,15 @@ def test_import_is_fast():
     code = "import time; t=time.perf_counter(); import simfab; print(time.perf_counter()-t)"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert float(r.stdout) < 1.5
+
+
+def test_demo_runs_a_pipeline_and_reports_json(tmp_path, capsys):
+    # the fastest pipeline stands for all: the demo wiring, output folder and JSON summary
+    assert main(["demo", "--only", "deploy", "--out", str(tmp_path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["out"] == str(tmp_path)
+    res = out["pipelines"]["deploy"]
+    assert res["seconds"] > 0
+    written = [p for p in (tmp_path / "deploy").rglob("*") if p.is_file()]
+    assert any(p.suffix == ".usda" for p in written) and any(p.suffix == ".xml" for p in written)
+    assert not [p for p in written if ".tmp" in p.name]  # atomic writes leave no temporaries
