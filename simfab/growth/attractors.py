@@ -21,15 +21,19 @@ def in_box(x: np.ndarray, box: np.ndarray) -> np.ndarray:
     return np.all((x >= box[0]) & (x <= box[1]), axis=1)
 
 
-def volume(box: np.ndarray, n: int, rng: np.random.Generator, obstacles, *, keep=None):
-    """``n`` points uniform in ``box`` (2, 3), outside obstacles (and where ``keep(x)`` holds)."""
-    out = []
-    have = 0
+def _rejection_sample(draw, n: int, accept, *, error: str, where: str):
+    """Draw candidates in rounds of about twice the shortfall until ``n`` are accepted.
+
+    draw(m) -> (m, 3) candidate points; accept(x) -> (m,) bool. Gives up after ``_ROUNDS``
+    rounds with what it has. Returns ``(points (<= n, 3), acceptance fraction)``; raises
+    InputError(error, where) when nothing was accepted.
+    """
+    out, have, tried, accepted = [], 0, 0, 0
     for _ in range(_ROUNDS):
-        x = rng.uniform(box[0], box[1], size=(max(n - have, 16) * 2, 3))
-        ok = ~obstacles.inside(x)
-        if keep is not None:
-            ok &= keep(x)
+        x = draw(max(n - have, 16) * 2)
+        ok = accept(x)
+        tried += len(x)
+        accepted += int(ok.sum())
         x = x[ok][: n - have]
         out.append(x)
         have += len(x)
@@ -37,8 +41,25 @@ def volume(box: np.ndarray, n: int, rng: np.random.Generator, obstacles, *, keep
             break
     pts = np.concatenate(out)
     if len(pts) == 0:
-        raise InputError("no free space for attractors in the design box (it lies inside the objects)",
-                         where="growth.box")
+        raise InputError(error, where=where)
+    return pts, accepted / tried
+
+
+def _free(obstacles, keep):
+    """Acceptance test: outside the obstacles and where ``keep`` holds."""
+    def accept(x):
+        ok = ~obstacles.inside(x) if obstacles is not None else np.ones(len(x), bool)
+        if keep is not None:
+            ok &= keep(x)
+        return ok
+    return accept
+
+
+def volume(box: np.ndarray, n: int, rng: np.random.Generator, obstacles, *, keep=None):
+    """``n`` points uniform in ``box`` (2, 3), outside obstacles (and where ``keep(x)`` holds)."""
+    pts, _ = _rejection_sample(lambda m: rng.uniform(box[0], box[1], size=(m, 3)), n, _free(obstacles, keep),
+                               error="no free space for attractors in the design box (it lies inside the objects)",
+                               where="growth.box")
     return pts, None
 
 
@@ -63,33 +84,27 @@ def surface(meshes: list, n: int, rng: np.random.Generator, obstacles, *, lift: 
     areas = np.array([m.area for m in meshes])
     if not areas.sum() > 0:
         raise InputError("surface mode: the objects have no surface area", where="growth.surface_objects")
-    out, tried, have = [], 0, 0
-    for _ in range(_ROUNDS):
-        m_count = max(n - have, 16) * 2
-        counts = rng.multinomial(m_count, areas / areas.sum())
+    free = _free(obstacles, keep)
+
+    def draw(m):
+        counts = rng.multinomial(m, areas / areas.sum())
         xs = []
         for mesh, c in zip(meshes, counts):
             if c:
                 x, nrm, _ = _surface_points(mesh, int(c), rng)
                 xs.append(x + lift * nrm)
-        x = np.concatenate(xs)
-        tried += len(x)
-        ok = ~obstacles.inside(x) if obstacles is not None else np.ones(len(x), bool)
+        return np.concatenate(xs)
+
+    def accept(x):
+        ok = free(x)
         if box is not None:
             ok &= in_box(x, box)
-        if keep is not None:
-            ok &= keep(x)
-        acc = x[ok][: n - have]
-        out.append(acc)
-        have += len(acc)
-        accepted_fraction = ok.mean()
-        if have >= n:
-            break
-    pts = np.concatenate(out)
-    if len(pts) == 0:
-        raise InputError("surface mode: no attractor could be placed (surfaces outside the box?)",
-                         where="growth.box")
-    return pts, float(areas.sum() * max(accepted_fraction, 1.0 / tried))
+        return ok
+
+    pts, accepted_fraction = _rejection_sample(
+        draw, n, accept, error="surface mode: no attractor could be placed (surfaces outside the box?)",
+        where="growth.box")
+    return pts, float(areas.sum() * accepted_fraction)
 
 
 def profile(spec, n: int, rng: np.random.Generator, obstacles, *, keep=None):
@@ -104,26 +119,17 @@ def profile(spec, n: int, rng: np.random.Generator, obstacles, *, keep=None):
     view = np.cross(u, v)
     view /= np.linalg.norm(view)
     d0, d1 = spec.depth
-    out, have = [], 0
-    for _ in range(_ROUNDS):
-        m = max(n - have, 16) * 2
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+
+    def draw(m):
         s = rng.random(m) * perim
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
         i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
         f = (s - cum[i]) / np.where(seg[i] > 0, seg[i], 1.0)
         ab = P[i] + f[:, None] * (Q[i] - P[i])
         depth = rng.uniform(d0, d1, size=m) if d1 > d0 else np.full(m, d0)
-        x = o + ab[:, :1] * u + ab[:, 1:2] * v + depth[:, None] * view
-        ok = ~obstacles.inside(x)
-        if keep is not None:
-            ok &= keep(x)
-        x = x[ok][: n - have]
-        out.append(x)
-        have += len(x)
-        if have >= n:
-            break
-    pts = np.concatenate(out)
-    if len(pts) == 0:
-        raise InputError("no attractor on the profile lies outside the objects", where="profile")
+        return o + ab[:, :1] * u + ab[:, 1:2] * v + depth[:, None] * view
+
+    pts, _ = _rejection_sample(draw, n, _free(obstacles, keep),
+                               error="no attractor on the profile lies outside the objects", where="profile")
     # a zero-depth sweep is a curve: its 'area' is such that sqrt(area / n) = perimeter / n
     return pts, perim * max(d1 - d0, perim / n)
