@@ -74,6 +74,15 @@ def scalar_colors(values, *, cmap: str = "viridis", vmin: float | None = None, v
     return rgb
 
 
+def _constant_color(gprim, color) -> None:
+    """Constant ``displayColor`` (RGB in [0, 1]) on a gprim; None leaves it unset."""
+    if color is None:
+        return
+    from pxr import UsdGeom, Vt
+
+    gprim.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray.FromNumpy(np.asarray([color], np.float32)))
+
+
 class StageWriter:
     """Build a time-sampled USD stage in memory and write it atomically.
 
@@ -165,8 +174,7 @@ class StageWriter:
         self._kinds[path] = "mesh"
         if points is not None:
             self.set_points(name, points, None)
-        if color is not None:
-            mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray.FromNumpy(np.asarray([color], np.float32)))
+        _constant_color(mesh, color)
         return path
 
     def set_points(self, name: str, points, t=None, *, widths=None) -> None:
@@ -225,8 +233,7 @@ class StageWriter:
         c.CreateTypeAttr(UsdGeom.Tokens.linear)
         c.CreateWrapAttr(UsdGeom.Tokens.nonperiodic)
         self._kinds[path] = "curves"
-        if color is not None:
-            c.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray.FromNumpy(np.asarray([color], np.float32)))
+        _constant_color(c, color)
         return path
 
     def set_curves(self, name: str, curves, widths=None, t=None) -> None:
@@ -259,8 +266,7 @@ class StageWriter:
         path = self._path(name)
         p = UsdGeom.Points.Define(self.stage, path)
         self._kinds[path] = "points"
-        if color is not None:
-            p.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray.FromNumpy(np.asarray([color], np.float32)))
+        _constant_color(p, color)
         return path
 
     # ------------------------------------------------------------------ rigid bodies
