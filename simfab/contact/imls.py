@@ -152,6 +152,22 @@ class ImlsField:
         """Evaluate psi, its gradient and Hessian at world points (k, dim); see :func:`evaluate`."""
         return evaluate(self, points, pose, hessian=hessian, hessian_band=hessian_band)
 
+    def far_lower_bound(self, points, pose=None) -> np.ndarray:
+        """(k,) lower bound of the distance [m] from world points (k, dim) that are *far* (no sample
+        within ``radius``; ``near`` False in :func:`evaluate`) to O's surface, sharper than
+        ``far_distance`` for points well beyond the radius: the distance to the nearest sample
+        minus the same 2 sigma surface-to-sample allowance ``far_distance`` is built on, and never
+        below ``far_distance``. Meaningless for near points (use psi there)."""
+        from scipy.spatial import cKDTree
+
+        tree = self._buffers.get("kdtree")
+        if tree is None:
+            tree = self._buffers["kdtree"] = cKDTree(_pad3(self.vertices))
+        R, p = pose_matrix(pose, self.dim)
+        body = (_pad3(np.asarray(points, dtype=np.float64)) - p) @ R
+        nn, _ = tree.query(body, k=1)
+        return np.maximum(self.far_distance, nn - 2.0 * self.sigma)
+
 
 def mean_edge_length(vertices: np.ndarray, edges: np.ndarray) -> float:
     """Mean length of ``edges`` (e, 2) over ``vertices`` (n, d) [m]."""

@@ -767,6 +767,9 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
     dv = np.full(cm.fem.n_vertices, np.inf)
     dv[bv] = -ev.psi
+    far = ~ev.near
+    if far.any():  # far vertices: a sharper lower bound of their distance than far_distance
+        dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
     pts = x[facets]
     diam = np.max(np.linalg.norm(pts - np.roll(pts, 1, axis=1), axis=2), axis=1)
     ids = np.flatnonzero(np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * diam)
@@ -775,7 +778,14 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     for sel, w in ((~refined, facet_weights(cm.dim, state.order)), (refined, check_weights(cm.dim, state.order))):
         if sel.any():
             cp = facet_points(facets, ids[sel], w)
-            psi = cm.field.evaluate(cp.positions(x), (R, p), hessian=False).psi
+            y = cp.positions(x)
+            # psi(y) <= psi(v) + L |y - v| for each parent vertex v: points this bounds below zero
+            # are outside O and need no evaluation (their bound stands in for psi: every use of
+            # psi_max only asks whether it is positive or above the tolerance)
+            psi = np.min(-dv[cp.verts] + C.PSI_LIPSCHITZ * np.linalg.norm(y[:, None, :] - x[cp.verts], axis=2), axis=1)
+            todo = np.flatnonzero(psi >= 0.0)
+            if len(todo):
+                psi[todo] = cm.field.evaluate(y[todo], (R, p), hessian=False).psi
             psi_max[sel] = psi.reshape(int(sel.sum()), len(w)).max(axis=1)
     out = (ids, psi_max, refined)
     state.check = (x, s, state.order, out)
