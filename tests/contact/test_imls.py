@@ -141,3 +141,26 @@ def test_far_points_report_no_neighbours_and_a_safe_distance():
     assert not e.near.any()
     assert np.all(e.psi == -f.far_distance) and np.all(e.grad == 0)
     assert f.far_distance >= 0.5 * f.radius
+
+
+def test_far_lower_bound_is_a_lower_bound_of_the_distance_outside():
+    # Far points outside the sphere (|x| - R = exact distance): the nearest-sample bound never
+    # exceeds the true distance, never drops below far_distance, and is sharp far away (within
+    # the 2 sigma allowance plus the sample spacing of the exact distance).
+    R = 0.01
+    f = _sphere_field(R)
+    rng = np.random.default_rng(3)
+    dirs = _random_dirs(rng, 200)
+    r = R + f.radius + rng.uniform(0.0, 5 * R, size=200)
+    q = dirs * r[:, None]
+    pose = (np.array([0.02, -0.01, 0.005]), np.array([np.cos(0.3), 0.0, np.sin(0.3), 0.0]))
+    Rm, p = pose_matrix(pose, 3)
+    qw = q @ Rm.T + p  # the same body-frame points seen through O's pose
+    e = evaluate(f, qw, pose, hessian=False)
+    far = ~e.near
+    assert far.sum() > 100
+    lb = f.far_lower_bound(qw[far], pose)
+    exact = r[far] - R
+    assert np.all(lb <= exact + 1e-12)
+    assert np.all(lb >= f.far_distance)
+    assert np.all(lb >= exact - 2.0 * f.sigma - 1e-12)  # samples lie on the sphere: nearest >= exact
