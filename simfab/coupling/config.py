@@ -44,6 +44,8 @@ NEWTON_EAGER_HESSIAN = True
 #: Predictor: also try the linear extrapolation of the last two steps and the quadratic one of the
 #: last three; the candidate with the lowest objective is the warm start.
 PREDICTOR_EXTRAPOLATE = True
+#: ... and compute the contact predictor only when no extrapolation is feasible.
+PREDICTOR_PENALTY_FALLBACK_ONLY = True
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4
 #: Predictor: retries carrying newly infeasible points fully with O before bisecting the step.

@@ -14,9 +14,10 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    pattern, so the symbolic factorization is reused). Points still inside O are then carried
    rigidly with O (rigid motion keeps their distance to O) and the solve repeated. The result is a
    feasible, non-inverted warm start: every point outside O. The linear and quadratic
-   extrapolations of the last two / three converged steps are candidates too; the feasible
-   candidate with the lowest objective E_d + B is the warm start (fewer Newton iterations when the
-   deformation evolves smoothly along the path).
+   extrapolations of the last two / three converged steps come first; the feasible one with the
+   lowest objective E_d + B is the warm start (fewer Newton iterations when the deformation
+   evolves smoothly along the path), and the contact predictor above is computed only when
+   neither is feasible (its PSD tangent stiffness is then assembled on demand).
 2. **Corrector.** Newton (:func:`simfab.solve.newton.minimize`, exact Hessian first, the
    PSD-projected one when the exact one is indefinite) on
    E_d(x) + kappa * sum_j b(-psi(y_j)) with the log barrier b of :mod:`simfab.contact.barrier`.
@@ -290,7 +291,7 @@ class _StepObjective:
         H_exact = None
         if need_hessian and self.exact_first:
             # exact Hessian only (half the cost of the eigen-projected one); the projected one is
-            # assembled on demand, when the exact one turns out indefinite (see _psd_hessian)
+            # assembled on demand, when the exact one turns out indefinite (see _LazyHessian)
             E, g, H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)
             H = None
         elif need_hessian:
@@ -341,12 +342,6 @@ class _StepObjective:
             wp_act = self.wpair[act][:, :, :, None, None]
             np.add.at(H.data, self.slots[act].ravel(), (wp_act * Hy[:, None, None, :, :]).ravel())
         H.data[self.diag] += C.RIGID_MODE_REG * float(np.abs(H.data[self.diag]).mean())
-
-    def psd_hessian(self):
-        """The PSD-projected Hessian at the last Hessian evaluation (tangent stiffness for the
-        predictor)."""
-        H = self.last_H
-        return H() if isinstance(H, _LazyHessian) else H
 
     def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
         """Step cap keeping every constraint point outside O along the whole step (see below).
@@ -421,7 +416,7 @@ class _State:
     order: int  # refinement density (2D: points per edge, 3D: face lattice order), doubled on demand
     check: tuple | None = None  # memo of the last facet check (x, s, order, result)
     kappa: float = 0.0  # current barrier stiffness [N/m] (adapted, see _adapt_kappa)
-    H: object = None  # last Hessian (for the predictor)
+    H: object = None  # last PSD Hessian (for the predictor; a _LazyHessian until first needed)
     prev: tuple | None = None  # (x, s) of the step before (for the extrapolating predictor)
     prev2: tuple | None = None  # (x, s) two steps before
 
@@ -531,7 +526,7 @@ def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
         total += it
         new = _crossing_facets(cm, x, s, state)
         if not new:
-            state.x, state.s, state.H = x, s, obj.psd_hessian()
+            state.x, state.s, state.H = x, s, obj.last_H
             return total
         _add_refinement(cm, state, new)
     raise ConvergenceError("refinement did not settle at the start pose")
@@ -542,25 +537,8 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
     total = 0
     for _ in range(64):  # refinement restarts
         try:
-            x0 = _predict(cm, state, s_new, ctx)
             obj = _objective(cm, state.points, s_new, ctx, state.kappa)
-            if C.PREDICTOR_EXTRAPOLATE and state.prev is not None and state.prev[1] < state.s:
-                xp, sp_ = state.prev
-                xe = state.x + (state.x - xp) * ((s_new - state.s) / (state.s - sp_))
-                cands = [xe]
-                if state.prev2 is not None and state.prev2[1] < sp_:
-                    # quadratic (Lagrange) extrapolation through the last three states
-                    (x2, s2), (x1, s1), (xc, sc) = state.prev2, state.prev, (state.x, state.s)
-                    t = s_new
-                    l2 = (t - s1) * (t - sc) / ((s2 - s1) * (s2 - sc))
-                    l1 = (t - s2) * (t - sc) / ((s1 - s2) * (s1 - sc))
-                    lc = (t - s2) * (t - s1) / ((sc - s2) * (sc - s1))
-                    cands.append(l2 * x2 + l1 * x1 + lc * xc)
-                best = obj(x0.ravel(), False)[0]
-                for xc_ in cands:
-                    fc = obj(xc_.ravel(), False)[0]
-                    if np.isfinite(fc) and fc < best:
-                        x0, best = xc_, fc
+            x0 = _warm_start(cm, state, s_new, obj, ctx)
             x, it = _newton(cm, obj, x0, ctx)
         except ConvergenceError:
             if depth >= C.MAX_BISECTIONS:
@@ -573,7 +551,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         new = _crossing_facets(cm, x, s_new, state) if cm.options.refine else []
         if not new:
             state.prev2, state.prev = state.prev, (state.x, state.s)
-            state.x, state.s, state.H = x, s_new, obj.psd_hessian()
+            state.x, state.s, state.H = x, s_new, obj.last_H
             _adapt_kappa(cm, state, obj)
             return total
         # restart the step from the previous state, which is feasible for the new points (new
@@ -582,6 +560,46 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         _add_refinement(cm, state, new)
         _restore_feasibility(cm, state, ctx)
     raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")
+
+
+def _extrapolations(state: _State, s_new: float) -> list:
+    """Linear (last two steps) and quadratic (last three, Lagrange) extrapolations of A's
+    positions to s_new: warm-start candidates when the deformation evolves smoothly."""
+    if state.prev is None or not state.prev[1] < state.s:
+        return []
+    xp, sp_ = state.prev
+    out = [state.x + (state.x - xp) * ((s_new - state.s) / (state.s - sp_))]
+    if state.prev2 is not None and state.prev2[1] < sp_:
+        (x2, s2), (x1, s1), (xc, sc) = state.prev2, state.prev, (state.x, state.s)
+        t = s_new
+        l2 = (t - s1) * (t - sc) / ((s2 - s1) * (s2 - sc))
+        l1 = (t - s2) * (t - sc) / ((s1 - s2) * (s1 - sc))
+        lc = (t - s2) * (t - s1) / ((sc - s2) * (sc - s1))
+        out.append(l2 * x2 + l1 * x1 + lc * xc)
+    return out
+
+
+def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.ndarray:
+    """The feasible warm-start candidate with the lowest objective: the extrapolations and the
+    contact predictor (:func:`_predict`; with PREDICTOR_PENALTY_FALLBACK_ONLY only when no
+    extrapolation is feasible). Raises ConvergenceError when no candidate is feasible."""
+    best_x, best_f = None, np.inf
+    if C.PREDICTOR_EXTRAPOLATE:
+        for xc in _extrapolations(state, s_new):
+            fc = obj(xc.ravel(), False)[0]
+            if np.isfinite(fc) and fc < best_f:
+                best_x, best_f = xc, fc
+    if best_x is not None and C.PREDICTOR_PENALTY_FALLBACK_ONLY:
+        return best_x
+    try:
+        x0 = _predict(cm, state, s_new, ctx)
+    except ConvergenceError:
+        if best_x is None:
+            raise
+        return best_x
+    if best_x is None or obj(x0.ravel(), False)[0] <= best_f:
+        return x0
+    return best_x
 
 
 def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
@@ -697,6 +715,8 @@ def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarr
 
     n, dim = cm.fem.n_vertices, cm.dim
     H = state.H
+    if isinstance(H, _LazyHessian):  # the PSD tangent is assembled only when the predictor runs
+        H = state.H = H()
     if H is None:
         t0 = time.perf_counter()
         _, _, H = energy_gradient_hessian(cm.fem, x)
