@@ -321,6 +321,7 @@ class _StepObjective:
             self.last_d = d
             self.last_gd = gd
             self.last_H = H
+            self.last_fem = (E, g)  # elastic energy and gradient at last_x (reused by _record)
             # curvature bound for the step cap: twice the largest |hess d| seen near O, at least
             # CURVATURE_FLOOR / sigma (a violated bound only costs a rejected line-search trial)
             kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if act.any() else 0.0
@@ -417,6 +418,7 @@ class _State:
     check: tuple | None = None  # memo of the last facet check (x, s, order, result)
     kappa: float = 0.0  # current barrier stiffness [N/m] (adapted, see _adapt_kappa)
     H: object = None  # last PSD Hessian (for the predictor; a _LazyHessian until first needed)
+    final: tuple | None = None  # Newton's last evaluation at x (see _final_eval), for _record
     prev: tuple | None = None  # (x, s) of the step before (for the extrapolating predictor)
     prev2: tuple | None = None  # (x, s) two steps before
 
@@ -527,6 +529,7 @@ def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
         new = _crossing_facets(cm, x, s, state)
         if not new:
             state.x, state.s, state.H = x, s, obj.last_H
+            state.final = _final_eval(obj, x)
             return total
         _add_refinement(cm, state, new)
     raise ConvergenceError("refinement did not settle at the start pose")
@@ -552,6 +555,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         if not new:
             state.prev2, state.prev = state.prev, (state.x, state.s)
             state.x, state.s, state.H = x, s_new, obj.last_H
+            state.final = _final_eval(obj, x)
             _adapt_kappa(cm, state, obj)
             return total
         # restart the step from the previous state, which is feasible for the new points (new
@@ -844,18 +848,34 @@ def _path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
     return ((out[1] - out[0]) / (s1 - s0))[:, :dim]
 
 
+def _final_eval(obj: _StepObjective, x: np.ndarray):
+    """(x, kappa, E, grad E (n, dim), d (k,), grad d (k, dim)) of the objective's last Hessian
+    evaluation when it was at x (Newton's converged point), else None."""
+    if obj.last_x is None or not np.array_equal(obj.last_x, x.ravel()):
+        return None
+    E, gE = obj.last_fem
+    return (x, obj.kappa, E, gE, obj.last_d, obj.last_gd)
+
+
 def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     from simfab.fem.neohookean import det_F, energy_gradient
     from simfab.fem.stress import von_mises
 
     x = state.x
     n, dim = cm.fem.n_vertices, cm.dim
-    E, gE = energy_gradient(cm.fem, x)
     R, p = cm.pose(state.s)
     pts = state.points
-    ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
-    d = -ev.psi
-    B, gy, _ = point_barrier(d, -ev.grad, None, cm.dhat, state.kappa)
+    fin = state.final
+    if fin is not None and fin[0] is x and fin[1] == state.kappa and len(fin[4]) == len(pts):
+        # Newton's last evaluation at x: exact distances within the lazy band (which contains the
+        # barrier's support), certified lower bounds beyond it (zero barrier, outside O)
+        E, gE, d, gd = fin[2], fin[3], fin[4], fin[5]
+        psi_pts = -d
+    else:
+        E, gE = energy_gradient(cm.fem, x)
+        ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
+        d, gd, psi_pts = -ev.psi, -ev.grad, ev.psi
+    B, gy, _ = point_barrier(d, gd, None, cm.dhat, state.kappa)
     gc = pts.scatter(gy, n)
     g = gE + gc
     fixed = ~cm.free.reshape(n, dim)
@@ -871,7 +891,7 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
         raise ConvergenceError(f"an element is inverted at s={state.s:.6g} m (min det F = {min_det:.3e})")
     vm = von_mises(cm.fem, x)
     _, psi_check, _ = _facet_check(cm, x, state.s, state)
-    pen = float(max(0.0, ev.psi.max(initial=-np.inf), psi_check.max(initial=-np.inf)))
+    pen = float(max(0.0, psi_pts.max(initial=-np.inf), psi_check.max(initial=-np.inf)))
     if pen > cm.tol:
         raise ConvergenceError(f"penetration {pen:.3e} m exceeds the tolerance {cm.tol:.3e} m at s={state.s:.6g} m")
     pos, quat = cm.path.pose_at(state.s)
