@@ -419,6 +419,8 @@ class _State:
     kappa: float = 0.0  # current barrier stiffness [N/m] (adapted, see _adapt_kappa)
     H: object = None  # last PSD Hessian (for the predictor; a _LazyHessian until first needed)
     final: tuple | None = None  # Newton's last evaluation at x (see _final_eval), for _record
+    kappa_step: float = 0.0  # barrier stiffness the current x was solved with [N/m] (kappa may
+    # grow for the following steps; forces at x must use the stiffness of its own equilibrium)
     prev: tuple | None = None  # (x, s) of the step before (for the extrapolating predictor)
     prev2: tuple | None = None  # (x, s) two steps before
 
@@ -530,6 +532,7 @@ def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
         if not new:
             state.x, state.s, state.H = x, s, obj.last_H
             state.final = _final_eval(obj, x)
+            state.kappa_step = obj.kappa
             return total
         _add_refinement(cm, state, new)
     raise ConvergenceError("refinement did not settle at the start pose")
@@ -556,6 +559,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
             state.prev2, state.prev = state.prev, (state.x, state.s)
             state.x, state.s, state.H = x, s_new, obj.last_H
             state.final = _final_eval(obj, x)
+            state.kappa_step = obj.kappa
             _adapt_kappa(cm, state, obj)
             return total
         # restart the step from the previous state, which is feasible for the new points (new
@@ -866,7 +870,7 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     R, p = cm.pose(state.s)
     pts = state.points
     fin = state.final
-    if fin is not None and fin[0] is x and fin[1] == state.kappa and len(fin[4]) == len(pts):
+    if fin is not None and fin[0] is x and fin[1] == state.kappa_step and len(fin[4]) == len(pts):
         # Newton's last evaluation at x: exact distances within the lazy band (which contains the
         # barrier's support), certified lower bounds beyond it (zero barrier, outside O)
         E, gE, d, gd = fin[2], fin[3], fin[4], fin[5]
@@ -875,7 +879,7 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
         E, gE = energy_gradient(cm.fem, x)
         ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
         d, gd, psi_pts = -ev.psi, -ev.grad, ev.psi
-    B, gy, _ = point_barrier(d, gd, None, cm.dhat, state.kappa)
+    B, gy, _ = point_barrier(d, gd, None, cm.dhat, state.kappa_step)
     gc = pts.scatter(gy, n)
     g = gE + gc
     fixed = ~cm.free.reshape(n, dim)
@@ -899,5 +903,5 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
         s=state.s, pos=np.asarray(pos), quat=np.asarray(quat), x=x.copy(), energy=float(E), force=force,
         path_force=path_force, barrier_energy=float(B), grip=grip,
         max_von_mises=float(vm.max()), von_mises=vm, penetration=pen, min_det_F=min_det, iterations=int(iters),
-        contact_points=len(pts), kappa=float(state.kappa),
+        contact_points=len(pts), kappa=float(state.kappa_step),
     )

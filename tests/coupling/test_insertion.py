@@ -99,3 +99,18 @@ def test_rotating_path_keeps_every_step_feasible(ellipse_in_clamp_model):
     assert grows.sum() >= 2 and np.all(P[1:][grows] < 0)
     quats = np.array([r.quat for r in res.steps])
     assert abs(abs(quats[-1, 0]) - np.cos(np.pi / 4)) < 1e-9  # O really turned by 90 degrees
+
+
+def test_forces_use_the_barrier_stiffness_of_their_own_step(monkeypatch):
+    # kappa grows for the *following* steps when a step ends very close to O; the recorded forces
+    # of a step must use the stiffness its equilibrium was solved with, or the contact-work force
+    # and the support reactions disagree (forced here by growing kappa after almost every step)
+    from simfab.coupling import config as C
+
+    monkeypatch.setattr(C, "KAPPA_GROW_BELOW", 0.9)
+    res = simulate(load_coupling_scene("cclamp2d"))
+    _check_every_step(res)
+    kappa = res.column("kappa")
+    assert kappa.max() >= 4 * kappa[0]  # the stiffness really changed during the run
+    F, P = res.column("force"), res.column("path_force")
+    assert np.allclose(P, F, atol=1e-3 * np.abs(F).max())
