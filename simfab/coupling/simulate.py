@@ -43,7 +43,12 @@ Cost control: the contact field is evaluated in one Warp launch per call, only f
 are not certified (by the Lipschitz bound and their travel since their last exact evaluation) to
 be farther than a band of a few d_hat from O; Hessians of psi only within d_hat; CHOLMOD's symbolic
 analysis and the value map of the fixed FEM sparsity pattern are reused for every solve
-(:mod:`simfab.coupling.linsolve`); the facet check of a converged state is memoized.
+(:mod:`simfab.coupling.linsolve`); the facet check of a converged state is memoized, and check
+points already certified outside O by the Lipschitz bound from their facet's vertices are not
+evaluated. Per Newton iterate only the exact FEM Hessian is assembled (the PSD-projected one, twice
+as expensive, only when the exact one fails to factorize); the line search evaluates the Hessian
+already at its first trial (most are accepted), and the step record reuses Newton's last
+evaluation. The forces of a step use the barrier stiffness its equilibrium was solved with.
 
 Forces: the reaction at the fixed dofs is r = dE_total/dx there (the force the support applies to
 A). By equilibrium of A it equals the force A exerts on O, so the insertion force is
