@@ -115,15 +115,28 @@ class CouplingModel:
         key = ("pose", float(s))
         out = self._cache.get(key)
         if out is None:
+            out = self._cache[key] = pose_matrix(self.pos_quat(s), self.dim)
+        return out
+
+    def pos_quat(self, s: float):
+        """O's pose at path length s as the path gives it: (pos (3,) [m], quat_wxyz (4,)) (memoized;
+        do not modify the arrays)."""
+        key = ("pos_quat", float(s))
+        out = self._cache.get(key)
+        if out is None:
             pos, quat = self.path.pose_at(s)
-            out = self._cache[key] = pose_matrix((pos, quat), self.dim)
+            out = self._cache[key] = (np.asarray(pos, dtype=float), np.asarray(quat, dtype=float))
         return out
 
     def direction(self, s: float) -> np.ndarray:
-        """(dim,) unit translation direction of O at s (zero during a pure rotation)."""
-        u = np.asarray(self.path.direction_at(s))[: self.dim]
-        n = np.linalg.norm(u)
-        return u / n if n > 0 else u
+        """(dim,) unit translation direction of O at s (zero during a pure rotation; memoized)."""
+        key = ("direction", float(s))
+        out = self._cache.get(key)
+        if out is None:
+            u = np.asarray(self.path.direction_at(s), dtype=float)[: self.dim]
+            n = np.linalg.norm(u)
+            out = self._cache[key] = u / n if n > 0 else u
+        return out.copy()
 
 
 def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertices, options: InsertionOptions,
@@ -903,7 +916,7 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     pen = float(max(0.0, psi_pts.max(initial=-np.inf), psi_check.max(initial=-np.inf)))
     if pen > cm.tol:
         raise ConvergenceError(f"penetration {pen:.3e} m exceeds the tolerance {cm.tol:.3e} m at s={state.s:.6g} m")
-    pos, quat = cm.path.pose_at(state.s)
+    pos, quat = (a.copy() for a in cm.pos_quat(state.s))
     return StepResult(
         s=state.s, pos=np.asarray(pos), quat=np.asarray(quat), x=x.copy(), energy=float(E), force=force,
         path_force=path_force, barrier_energy=float(B), grip=grip,
