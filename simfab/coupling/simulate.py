@@ -64,7 +64,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab.contact.barrier import point_barrier
+from simfab.contact.barrier import barrier, point_barrier
 from simfab.contact.imls import ImlsField, pose_matrix
 from simfab.coupling import config as C
 from simfab.coupling.config import InsertionOptions
@@ -352,6 +352,21 @@ class _StepObjective:
             self.memo = (xf.copy(), out)
         return out
 
+    def value(self, x: np.ndarray) -> float:
+        """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible."""
+        from simfab.fem.neohookean import energy
+
+        t0 = time.perf_counter()
+        E = energy(self.cm.fem, x)
+        self.timer.add("assembly", time.perf_counter() - t0)
+        if not np.isfinite(E):
+            return np.inf
+        d, _, _ = self.distances(np.asarray(x).reshape(self.n, self.dim), False)
+        if np.any(d <= 0):
+            return np.inf
+        act = d < self.cm.dhat
+        return E + self.kappa * float(barrier(d[act], self.cm.dhat).sum())
+
     def _add_contact(self, H, contact, *, psd: bool) -> None:
         """Add the barrier Hessian blocks (PSD-projected per point if ``psd``) and the rigid-mode
         regularization to the FEM Hessian ``H`` (in place)."""
@@ -612,7 +627,7 @@ def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.
     best_x, best_f = None, np.inf
     if C.PREDICTOR_EXTRAPOLATE:
         for xc in _extrapolations(state, s_new):
-            fc = obj(xc.ravel(), False)[0]
+            fc = obj.value(xc)
             if np.isfinite(fc) and fc < best_f:
                 best_x, best_f = xc, fc
     if best_x is not None and C.PREDICTOR_PENALTY_FALLBACK_ONLY:
@@ -623,7 +638,7 @@ def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.
         if best_x is None:
             raise
         return best_x
-    if best_x is None or obj(x0.ravel(), False)[0] <= best_f:
+    if best_x is None or obj.value(x0) <= best_f:
         return x0
     return best_x
 
