@@ -81,19 +81,10 @@ class InsertScene:
 def load_insert_scene(path) -> InsertScene:
     """Read the elastica scene: body ``insert`` (start pose = beam's moving end), site ``anchor``
     (fixed end, origin), beam parameters as ``<numeric name="beam_<field>">``."""
-    from simfab.io.mjcf import load_scene
+    from simfab.io.mjcf import load_scene, numeric_config
 
     sc = load_scene(path)
-    kw = {}
-    known = {f"beam_{f.name}" for f in fields(BeamSetup)}
-    for key in sc.custom_numeric:
-        if key.startswith("beam_") and key not in known:
-            raise InputError(f"unknown beam parameter <numeric name={key!r}> (known: {', '.join(sorted(known))})",
-                             where=str(path))
-    for f in fields(BeamSetup):
-        key = f"beam_{f.name}"
-        if key in sc.custom_numeric:
-            kw[f.name] = float(sc.custom_numeric[key][0])
+    kw = numeric_config(sc, "beam_", BeamSetup)
     setup = BeamSetup(**kw)
     if "anchor" not in sc.sites:
         raise InputError("the scene needs a site named 'anchor' at the fixed beam end", where=str(path))

@@ -93,22 +93,12 @@ class Insert:
 
 def load_cell_scene(path) -> tuple[CellConfig, dict]:
     """Cell parameters and all inserts (bodies whose name starts with ``insert``) of the scene."""
-    from simfab.io.mjcf import geom_mesh, load_scene  # first: sets up headless GL before mujoco loads
+    from simfab.io.mjcf import geom_mesh, load_scene, numeric_config  # first: sets up headless GL before mujoco loads
 
     import mujoco
 
     sc = load_scene(path)
-    kw = {}
-    known = {f"cell_{f.name}" for f in fields(CellConfig)}
-    for key in sc.custom_numeric:
-        if key.startswith("cell_") and key not in known:
-            raise InputError(f"unknown cell parameter <numeric name={key!r}> (known: {', '.join(sorted(known))})",
-                             where=str(path))
-    for f in fields(CellConfig):
-        key = f"cell_{f.name}"
-        if key in sc.custom_numeric:
-            v = float(sc.custom_numeric[key][0])
-            kw[f.name] = int(round(v)) if f.type in (int, "int") else v
+    kw = numeric_config(sc, "cell_", CellConfig)
     cfg = CellConfig(**kw)
     m = sc.model
     inserts = {}

@@ -155,6 +155,28 @@ def load_scene(path: str | os.PathLike) -> Scene:
     return Scene(path=path, model=model, sites=sites, site_size=sizes, custom_numeric=numeric, custom_text=text)
 
 
+def numeric_config(scene: Scene, prefix: str, config_type):
+    """Keyword arguments for dataclass ``config_type`` from ``<numeric name="<prefix><field>">``.
+
+    Integer fields are rounded; a ``<prefix>...`` name that is not a field is an InputError
+    (a typo must not silently fall back to a default). Returns a dict of the fields given.
+    """
+    import dataclasses
+
+    fields = {f.name: f for f in dataclasses.fields(config_type)}
+    kw = {}
+    for key, data in scene.custom_numeric.items():
+        if not key.startswith(prefix):
+            continue
+        f = fields.get(key[len(prefix):])
+        if f is None:
+            known = ", ".join(prefix + n for n in sorted(fields))
+            raise InputError(f"unknown parameter <numeric name={key!r}> (known: {known})", where=str(scene.path))
+        v = float(data[0])
+        kw[f.name] = int(round(v)) if f.type in (int, "int") else v
+    return kw
+
+
 # --------------------------------------------------------------------------- trajectories
 def quat_slerp(q0, q1, u: float) -> np.ndarray:
     """Spherical linear interpolation of unit quaternions (w, x, y, z), shortest arc."""

@@ -96,3 +96,25 @@ def test_invalid_mjcf_is_an_input_error_and_builder_refuses_to_save(tmp_path):
         b.save(tmp_path / "never.xml")
     assert not (tmp_path / "never.xml").exists()
     assert not list(tmp_path.glob(".never*"))
+
+
+def test_numeric_config_reads_prefixed_fields_and_rejects_typos(tmp_path):
+    import dataclasses
+
+    from simfab.io.mjcf import numeric_config
+
+    @dataclasses.dataclass(frozen=True, kw_only=True)
+    class Cfg:
+        width: float = 1.0
+        segments: int = 4
+
+    b = MJCFBuilder("cfg")
+    b.geom(b.body("a"), type="sphere", size=0.1)
+    b.custom_numeric("cell_width", 0.25)
+    b.custom_numeric("cell_segments", 7.0)
+    b.custom_numeric("other_thing", 1.0)
+    kw = numeric_config(load_scene(b.save(tmp_path / "ok.xml")), "cell_", Cfg)
+    assert kw == {"width": 0.25, "segments": 7} and isinstance(kw["segments"], int)
+    b.custom_numeric("cell_widht", 0.3)
+    with pytest.raises(InputError, match="unknown parameter <numeric name='cell_widht'>"):
+        numeric_config(load_scene(b.save(tmp_path / "typo.xml")), "cell_", Cfg)
