@@ -1,5 +1,5 @@
-"""Small programmatic coupling models shared by the coupling tests (as factory fixtures: the
-suite runs in importlib mode, so test modules cannot import each other)."""
+"""Small programmatic coupling models shared by the coupling tests, as factory fixtures (plain
+assertion helpers live in _coupling_checks.py)."""
 
 import numpy as np
 import pytest

@@ -10,6 +10,8 @@ from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
 from simfab.errors import ConvergenceError
 
+from _coupling_checks import check_every_step
+
 CATEGORY = {"cclamp2d": "tight", "clip2d_loose": "loose", "clip2d_eject": "ejects"}
 
 
@@ -18,19 +20,10 @@ def runs():
     return {name: simulate(load_coupling_scene(name)) for name in CATEGORY}
 
 
-def _check_every_step(res):
-    tol = res.model.tol
-    assert len(res.steps) == len(res.model.s_steps)
-    for r in res.steps:
-        assert r.penetration <= tol, f"s={r.s}: penetration {r.penetration} > {tol}"
-        assert r.min_det_F > 0, f"s={r.s}: inverted element"
-        assert np.all(np.isfinite(r.x)) and np.isfinite(r.energy) and np.isfinite(r.force)
-
-
 @pytest.mark.parametrize("name", sorted(CATEGORY))
 def test_2d_scenes_every_step_feasible_and_category(runs, name):
     res = runs[name]
-    _check_every_step(res)
+    check_every_step(res)
     prof, summary = summarize(res)
     assert prof.category == CATEGORY[name]
     assert summary["max_penetration"] <= res.model.tol and summary["min_det_F"] > 0
@@ -63,7 +56,7 @@ def test_refinement_catches_a_penetration_the_vertices_miss(coarse_block_model):
     with pytest.raises(ConvergenceError, match="penetration"):
         simulate(cm)  # vertex constraints alone let the circle cut through the top edge
     res = simulate(coarse_block_model(refine=True))
-    _check_every_step(res)
+    check_every_step(res)
     last = res.steps[-1]
     assert last.contact_points > 4  # refinement points were added on the top edge
     assert last.energy > 0 and last.force < 0  # the block is pushed down and resists
@@ -89,7 +82,7 @@ def test_rotating_path_keeps_every_step_feasible(ellipse_in_clamp_model):
     # clamp's inner radius (10.6 mm) only once it turns across the clamp, so the energy is zero
     # while it is aligned with the path and grows as it turns; every step stays feasible.
     res = simulate(ellipse_in_clamp_model())
-    _check_every_step(res)
+    check_every_step(res)
     E = res.column("energy")
     assert E[0] < 1e-9 and E[1] < 1e-9 and E[-1] > 1e-3 and E[-1] >= 0.9 * E.max()
     # the support reactions see no translation, but the work-conjugate path force does: turning
@@ -109,7 +102,7 @@ def test_forces_use_the_barrier_stiffness_of_their_own_step(monkeypatch):
 
     monkeypatch.setattr(C, "KAPPA_GROW_BELOW", 0.9)
     res = simulate(load_coupling_scene("cclamp2d"))
-    _check_every_step(res)
+    check_every_step(res)
     kappa = res.column("kappa")
     assert kappa.max() >= 4 * kappa[0]  # the stiffness really changed during the run
     F, P = res.column("force"), res.column("path_force")
