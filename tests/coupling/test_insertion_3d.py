@@ -1,7 +1,6 @@
 """Insertion simulation in 3D: the bundled clip on a cylinder (its own module so that the test
 runner can place it on another worker than the 2D scenes)."""
 
-
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
