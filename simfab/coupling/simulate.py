@@ -43,7 +43,7 @@ Cost control: the contact field is evaluated in one Warp launch per call, only f
 are not certified (by the Lipschitz bound and their travel since their last exact evaluation) to
 be farther than a band of a few d_hat from O; Hessians of psi only within d_hat; CHOLMOD's symbolic
 analysis and the value map of the fixed FEM sparsity pattern are reused for every solve
-(:mod:`simfab.coupling.linsolve`); the facet check of a converged state is memoized, and check
+(:class:`simfab.solve.linear.SPDSolver`); the facet check of a converged state is memoized, and check
 points already certified outside O by the Lipschitz bound from their facet's vertices are not
 evaluated. Per Newton iterate only the exact FEM Hessian is assembled (the PSD-projected one, twice
 as expensive, only when the exact one fails to factorize); the line search evaluates the Hessian
@@ -465,7 +465,7 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     Raises ConvergenceError when a step cannot be solved to tolerance, InputError when O starts
     inside A.
     """
-    from simfab.coupling.linsolve import PatternCholesky
+    from simfab.solve.linear import SPDSolver
     from simfab.progress import progress
 
     t_start = time.perf_counter()
@@ -477,7 +477,7 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     order = cm.options.samples_per_edge if dim == 2 else cm.options.face_lattice
     state = _State(x=np.array(fem.rest, dtype=np.float64), s=0.0, points=points, refined=set(), order=order,
                    kappa=cm.kappa)
-    ctx = dict(timer=timer, solver=PatternCholesky())
+    ctx = dict(timer=timer, solver=SPDSolver())
     check_start(cm)
     steps = []
     for k in progress(range(len(cm.s_steps)), total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
