@@ -15,6 +15,7 @@ Quaternions are (w, x, y, z) as in MuJoCo; lengths in metres.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -239,17 +240,29 @@ class Trajectory:
         object.__setattr__(self, "positions", p)
         object.__setattr__(self, "quats", q / np.linalg.norm(q, axis=1, keepdims=True))
 
-    @property
+    @functools.cached_property
     def segment_lengths(self) -> np.ndarray:
-        """(k-1,) path length of each keyframe segment [m]."""
+        """(k-1,) path length of each keyframe segment [m] (computed once: the path is immutable)."""
         dp = np.linalg.norm(np.diff(self.positions, axis=0), axis=1)
         th = np.array([quat_angle(a, b) for a, b in zip(self.quats[:-1], self.quats[1:])])
         return np.sqrt(dp ** 2 + (self.rot_length_scale * th) ** 2)
 
+    @functools.cached_property
+    def _cumulative(self) -> np.ndarray:
+        """(k,) path length at each keyframe [m]."""
+        return np.concatenate([[0.0], np.cumsum(self.segment_lengths)])
+
     @property
     def length(self) -> float:
         """Total path length [m] (for translation-only paths: the arc length of the polyline)."""
-        return float(self.segment_lengths.sum())
+        return float(self._cumulative[-1])
+
+    def _locate(self, s: float) -> tuple[int, float]:
+        """Segment index i and fraction f in [0, 1] of path length s (clamped to the path)."""
+        seg, cum = self.segment_lengths, self._cumulative
+        s = float(np.clip(s, 0.0, cum[-1]))
+        i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
+        return i, (0.0 if seg[i] <= 0 else (s - cum[i]) / seg[i])
 
     def pose_at_key(self, u: float):
         """Pose at keyframe parameter u in [0, k-1] (u = 1.5: halfway between keys 1 and 2)."""
@@ -262,19 +275,12 @@ class Trajectory:
 
     def pose_at(self, s: float):
         """Pose ``(pos (3,), quat (4,))`` at path length s [m], clamped to [0, length]."""
-        seg = self.segment_lengths
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        s = float(np.clip(s, 0.0, cum[-1]))
-        i = int(np.searchsorted(cum, s, side="right") - 1)
-        i = min(max(i, 0), len(seg) - 1)
-        f = 0.0 if seg[i] <= 0 else (s - cum[i]) / seg[i]
+        i, f = self._locate(s)
         return self.pose_at_key(i + f)
 
     def direction_at(self, s: float) -> np.ndarray:
         """Unit translation direction (3,) of the segment containing s (zero for pure rotations)."""
-        seg = self.segment_lengths
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
+        i, _ = self._locate(s)
         d = self.positions[i + 1] - self.positions[i]
         n = np.linalg.norm(d)
         return d / n if n > 0 else np.zeros(3)
