@@ -153,7 +153,4 @@ def run(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    import warp
-
-    warp.config.log_level = warp.LOG_WARNING  # keep Warp's start-up banner off stdout (JSON only)
     print(json.dumps(run(), indent=1))

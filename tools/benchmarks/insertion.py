@@ -32,10 +32,6 @@ TARGET_SPEEDUP = 20.0
 
 
 def run(argv) -> dict:
-    import warp
-
-    if warp.config.log_level < warp.LOG_WARNING:  # keep stdout for the JSON object
-        warp.config.log_level = warp.LOG_WARNING
     from benchmarks._reference import figures
 
     from simfab.coupling.outputs import summarize
