@@ -106,13 +106,22 @@ class BandedOrSparseCholesky(SPDSolver):
         upper = pj >= pi  # LAPACK upper band storage: ab[bw + i - j, j] = A[i, j], j >= i
         return dict(perm=perm, bw=bw, sel=np.flatnonzero(upper), pos=(bw + pi[upper] - pj[upper], pj[upper]))
 
+    def _same_band_pattern(self, A: sp.csr_matrix) -> bool:
+        if self._band_key is None:
+            return False
+        indptr, indices = self._band_key
+        return (indptr.shape == A.indptr.shape and indices.shape == A.indices.shape
+                and np.array_equal(indptr, A.indptr) and np.array_equal(indices, A.indices))
+
     def solve(self, A, b):
         from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
-        A = sp.csr_matrix(A)
-        key = (A.shape[0], A.nnz, hash(A.indptr.tobytes()), hash(A.indices.tobytes()))
-        if key != self._band_key:
-            self._band_key, self._band = key, self._prepare(A)
+        A = A if isinstance(A, sp.csr_matrix) else sp.csr_matrix(A)
+        if not A.has_canonical_format:  # the band map gathers one value per entry, like SPDSolver's value map
+            A = A.copy()
+            A.sum_duplicates()
+        if not self._same_band_pattern(A):
+            self._band_key, self._band = (A.indptr.copy(), A.indices.copy()), self._prepare(A)
         info = self._band
         if info is None:
             return super().solve(A, b)

@@ -90,6 +90,11 @@ def test_banded_cholesky_matches_sparse_and_detects_indefinite():
     b = rng.normal(size=n)
     x = BandedOrSparseCholesky().solve(A, b)
     assert np.allclose(x, SPDSolver().solve(A, b), rtol=1e-12, atol=1e-12)
+    # non-canonical input (each value split into two duplicate entries) is summed, not overwritten
+    A.sort_indices()
+    dup = sp.csr_matrix((np.repeat(0.5 * A.data, 2), np.repeat(A.indices, 2), 2 * A.indptr), shape=A.shape)
+    assert not dup.has_canonical_format
+    assert np.allclose(BandedOrSparseCholesky().solve(dup, b), x, rtol=1e-12, atol=1e-12)
     with pytest.raises(NotPositiveDefinite):
         BandedOrSparseCholesky().solve(A - 20 * sp.identity(n), b)
     # the shifted solver returns a descent direction for an indefinite matrix
