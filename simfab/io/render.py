@@ -107,19 +107,16 @@ def render_meshes(items, png, *, width: int = 640, height: int = 480, floor: boo
         RGB(A) triple for the whole mesh, or per-face RGB (m,3) in [0, 1].
     """
     from simfab.io.mjcf import MJCFBuilder
+    from simfab.io.usd import as_points3
 
+    items = [(as_points3(V), np.asarray(F, np.int64), c) for V, F, c in items]  # 2D meshes go to z = 0
     b = MJCFBuilder("render")
     if floor and items:
-        allz = np.concatenate([np.asarray(v, np.float64).reshape(len(v), -1)[:, -1] for v, _, _ in items])
-        allv = np.concatenate([np.asarray(v, np.float64) for v, _, _ in items if np.asarray(v).shape[1] == 3] or [np.zeros((1, 3))])
+        allv = np.concatenate([V for V, _, _ in items])
         diag = float(np.linalg.norm(np.ptp(allv, axis=0))) or 1.0
-        b.floor(z=float(allz.min()) - 0.02 * diag, size=10.0 * diag)  # a little below: no z-fighting
+        b.floor(z=float(allv[:, 2].min()) - 0.02 * diag, size=10.0 * diag)  # a little below: no z-fighting
     palette = np.array([[0.85, 0.55, 0.3], [0.35, 0.55, 0.85], [0.5, 0.75, 0.45], [0.8, 0.4, 0.6]])
     for i, (V, F, colors) in enumerate(items):
-        V = np.asarray(V, np.float64)
-        F = np.asarray(F, np.int64)
-        if V.shape[1] == 2:
-            V = np.column_stack([V, np.zeros(len(V))])
         groups = _color_groups(F, colors, palette[i % len(palette)])
         body = b.body(f"m{i}")
         for j, (faces, rgb) in enumerate(groups):
@@ -178,7 +175,8 @@ def _color_groups(F, colors, default):
         return [(F, c)]
     if len(c) != len(F):
         raise ValueError(f"per-face colors must be (m, 3) with m = {len(F)}, got {c.shape}")
-    # Quantize by luminance-ordered bins so that a colormap survives as a few geoms.
+    # Quantize the colours to a grid of COLOR_BINS levels per channel: a colormap survives as a
+    # few dozen geoms (one per distinct quantized colour) instead of one per face.
     key = np.round(c[:, :3] * (COLOR_BINS - 1)).astype(np.int64)
     uniq, inv = np.unique(key, axis=0, return_inverse=True)
     inv = inv.ravel()
@@ -186,8 +184,11 @@ def _color_groups(F, colors, default):
 
 
 def _is_gl_error(e: Exception) -> bool:
+    """True when ``e`` says that no OpenGL context could be made (then matplotlib draws instead)."""
+    import re
+
     text = f"{type(e).__name__} {e}".lower()
-    return any(s in text for s in ("gl", "egl", "opengl", "context", "display"))
+    return re.search(r"\b(e?gl|opengl|glfw|osmesa|pyopengl)\b|gl context|display", text) is not None
 
 
 def _render_matplotlib(items, png, width, height) -> Path:
@@ -202,10 +203,7 @@ def _render_matplotlib(items, png, width, height) -> Path:
     fig = plt.figure(figsize=(width / 100, height / 100), dpi=100)
     ax = fig.add_subplot(projection="3d")
     allv = []
-    for V, F, colors in items:
-        V = np.asarray(V, np.float64)
-        if V.shape[1] == 2:
-            V = np.column_stack([V, np.zeros(len(V))])
+    for V, F, colors in items:  # vertices (n, 3)
         fc = colors if colors is not None else (0.85, 0.55, 0.3)
         ax.add_collection3d(Poly3DCollection(V[np.asarray(F)], facecolors=fc, edgecolors="none", alpha=1.0))
         allv.append(V)

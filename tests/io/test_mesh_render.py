@@ -89,3 +89,21 @@ def test_render_usd_flat_2d_mesh_with_per_face_colors(tmp_path):
     w.save()
     png = render_usd(tmp_path / "flat.usda", tmp_path / "flat.png", width=120, height=90)
     assert np.asarray(Image.open(png)).std() > 1.0
+
+
+def test_matplotlib_fallback_without_opengl(tmp_path, monkeypatch):
+    # a machine without OpenGL still gets a PNG: the GL failure is caught and matplotlib draws
+    import simfab.io.render as render
+
+    def no_gl(*a, **k):
+        raise RuntimeError("Failed to initialize OpenGL (EGL) context")
+
+    monkeypatch.setattr(render, "render_model", no_gl)
+    m = trimesh.creation.box()
+    png = render.render_mesh(m.vertices[:, :3], m.faces, tmp_path / "fb.png", width=120, height=90)
+    img = np.asarray(Image.open(png).convert("RGB"))
+    assert img.shape == (90, 120, 3) and img.std() > 1.0
+    # a non-GL error is not swallowed
+    monkeypatch.setattr(render, "render_model", lambda *a, **k: (_ for _ in ()).throw(ValueError("bad mesh")))
+    with pytest.raises(ValueError, match="bad mesh"):
+        render.render_mesh(m.vertices, m.faces, tmp_path / "x.png")
