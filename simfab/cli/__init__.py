@@ -83,8 +83,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command is None:
             parser.print_help(sys.stderr)
             return 2
-        if args.out is None:
-            args.out = os.path.join("simfab-out", args.command)
+        if args.out is None:  # a module may name its own default folder (demo: ./simfab-out)
+            args.out = getattr(args._module, "DEFAULT_OUT", os.path.join("simfab-out", args.command))
         if args.json:
             args.quiet = True
         result = args._module.run(args)

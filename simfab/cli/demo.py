@@ -17,6 +17,9 @@ Results go to --out (default ./simfab-out/), one folder per pipeline.
 --json keys: out (folder), pipelines {name: that pipeline's demo summary (its own output paths
 and key figures, see 'simfab NAME --help'), with seconds}."""
 
+#: Default --out: the demo's pipelines write side by side under ./simfab-out/<pipeline>.
+DEFAULT_OUT = "simfab-out"
+
 #: Pipelines in the order the demo runs them; each subcommand module may define demo(ctx).
 PIPELINES = ("grow", "couple", "deploy", "crowd")
 
@@ -39,7 +42,7 @@ def run(args):
     from simfab.cli import subcommand_module
     from simfab.progress import log
 
-    out = args.out if args.out != os.path.join("simfab-out", "demo") else "simfab-out"
+    out = args.out
     summary = {"out": out, "pipelines": {}}
     for name in args.only or PIPELINES:
         mod = subcommand_module(name)

@@ -107,8 +107,3 @@ class SPDSolver:
         cholmod.options["supernodal"] = 2
         self._F = cholmod.symbolic(self._A)
         self._key = (A.indptr.copy(), A.indices.copy())
-
-
-def solve_spd(A: sp.spmatrix, b: np.ndarray) -> np.ndarray:
-    """One-shot SPD solve (no reuse of the symbolic analysis)."""
-    return SPDSolver().solve(A, b)
