@@ -318,6 +318,7 @@ class StaticSolver:
         self.evaluator = Evaluator(model, device=device)
         self.red = Reduction(model)
         self.linear = ShiftedCholesky()
+        self._definiteness = SPDSolver()  # unshifted factorizations for is_stable (pattern analysis reused)
         self.length = max(float(np.sum(model.rest_len[r.edges])) for r in model.rods)
 
     # -- objective in reduced unknowns -----------------------------------------------------
@@ -438,7 +439,7 @@ class StaticSolver:
         """True when the reduced Hessian at ``state`` is positive definite (Cholesky succeeds)."""
         _, H = self.reduced_system(state)
         try:
-            SPDSolver().solve(H, np.ones(H.shape[0]))
+            self._definiteness.solve(H, np.ones(H.shape[0]))
             return True
         except NotPositiveDefinite:
             return False
