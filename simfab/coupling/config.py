@@ -56,6 +56,8 @@ MAX_EDGE_SAMPLES = 160
 MAX_FACE_LATTICE = 16
 #: Step bisection depth when a step cannot be taken in one go (2^-6 of h_in at most).
 MAX_BISECTIONS = 6
+#: Refinement rounds per step (each adds the facets found crossing O) before ConvergenceError.
+MAX_REFINEMENT_ROUNDS = 64
 #: Hessian regularization (relative to mean |diag H|) for the rigid modes left free by the
 #: insertion-axis-only boundary condition; it changes the Newton step, not the minimizer.
 RIGID_MODE_REG = 1e-12

@@ -482,7 +482,6 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     steps = []
     for k in progress(range(len(cm.s_steps)), total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
         s = float(cm.s_steps[k])
-        iters = 0
         if k > 0:
             iters = _advance(cm, state, s, ctx, depth=0)
         else:
@@ -557,24 +556,30 @@ class _TimedSolver:
 def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
     """Solve at the current pose without moving O (step 0), with refinement."""
     total = 0
-    for _ in range(64):
+    for _ in range(C.MAX_REFINEMENT_ROUNDS):
         obj = _objective(cm, state.points, s, ctx, state.kappa)
         x, it = _newton(cm, obj, state.x, ctx)
         total += it
         new = _crossing_facets(cm, x, s, state)
         if not new:
-            state.x, state.s, state.H = x, s, obj.last_H
-            state.final = _final_eval(obj, x)
-            state.kappa_step = obj.kappa
+            _accept(state, x, s, obj)
             return total
         _add_refinement(cm, state, new)
     raise ConvergenceError("refinement did not settle at the start pose")
 
 
+def _accept(state: _State, x: np.ndarray, s: float, obj: _StepObjective) -> None:
+    """Make the converged x at path length s the current state, with the Hessian, final
+    evaluation and barrier stiffness of the objective it was solved with."""
+    state.x, state.s, state.H = x, s, obj.last_H
+    state.final = _final_eval(obj, x)
+    state.kappa_step = obj.kappa
+
+
 def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) -> int:
     """Move O from state.s to s_new and re-equilibrate A (predictor, Newton, refinement)."""
     total = 0
-    for _ in range(64):  # refinement restarts
+    for _ in range(C.MAX_REFINEMENT_ROUNDS):  # refinement restarts
         try:
             obj = _objective(cm, state.points, s_new, ctx, state.kappa)
             x0 = _warm_start(cm, state, s_new, obj, ctx)
@@ -590,9 +595,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         new = _crossing_facets(cm, x, s_new, state) if cm.options.refine else []
         if not new:
             state.prev2, state.prev = state.prev, (state.x, state.s)
-            state.x, state.s, state.H = x, s_new, obj.last_H
-            state.final = _final_eval(obj, x)
-            state.kappa_step = obj.kappa
+            _accept(state, x, s_new, obj)
             _adapt_kappa(cm, state, obj)
             return total
         # restart the step from the previous state, which is feasible for the new points (new
