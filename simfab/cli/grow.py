@@ -84,7 +84,7 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, **overrides) -> dic
     """Grow, skin, check and write every output for one scene; returns the summary."""
     from simfab.errors import ConvergenceError
     from simfab.growth import grow, skin_result
-    from simfab.growth.outputs import write_all
+    from simfab.growth.outputs import SKIN_FILE_UNITS, write_all
     from simfab.growth.tolerances import PENETRATION_ROUNDOFF
     from simfab.progress import log
 
@@ -111,7 +111,7 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, **overrides) -> dic
         "seconds_skin": seconds_skin,
     })
     s.update(paths)
-    s["skin_units"] = "mm"
+    s["skin_units"] = SKIN_FILE_UNITS
     return s
 
 
@@ -125,7 +125,8 @@ def _run_edit(args) -> dict:
     from simfab.growth.skinning import skin
     from simfab.growth.sketch import edit_chain, load_camera, load_stroke
     from simfab.io.atomic import write_json
-    from simfab.growth.outputs import save_skin
+    from simfab.growth.outputs import SKIN_FILE_UNITS, save_skin
+    from simfab.growth.tolerances import SEGMENT_END_TRIM
 
     if args.skeleton is None:
         raise InputError("simfab grow edit needs SKELETON_JSON")
@@ -143,7 +144,8 @@ def _run_edit(args) -> dict:
         scene = load_growth_scene(scene_path)
         objects = scene.objects
         diag = float(np.linalg.norm(np.ptp(scene.objects_bbox(), axis=0)))
-        obstacles = Obstacles(list(objects.values()), scene.sphere_centers, scene.sphere_radii, end_trim=1e-3 * diag)
+        obstacles = Obstacles(list(objects.values()), scene.sphere_centers, scene.sphere_radii,
+                              end_trim=SEGMENT_END_TRIM * diag)
     edited, rep = edit_chain(sk, camera, stroke, chain=args.chain, obstacles=obstacles)
     mesh, srep = skin(edited.nodes, edited.parent, edited.radius, objects)
     if rep.get("segments_colliding") or srep.bodies != 1:
@@ -160,7 +162,8 @@ def _run_edit(args) -> dict:
         "skin_ply": str(save_skin(mesh, out / f"{stem}_skin.ply")),
     }
     return {**rep, "nodes": len(edited.nodes), "segments": int((edited.parent >= 0).sum()),
-            "watertight": srep.watertight, "bodies": srep.bodies, "volume": srep.volume, "skin_units": "mm", **paths}
+            "watertight": srep.watertight, "bodies": srep.bodies, "volume": srep.volume, "skin_units": SKIN_FILE_UNITS,
+            **paths}
 
 
 def bundled_scenes() -> list[Path]:

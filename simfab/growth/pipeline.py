@@ -333,10 +333,9 @@ class _Symmetry:
         self.scene = scene
         self.on_plane = tol.ON_PLANE_TOL * diag
         where = f"{scene.path}: symmetry" if scene.path else "symmetry"
-        # targets must come in mirror pairs (or lie on the plane)
-        T = scene.targets
-        self.target_mirror = self._pairs(T, "target", where)
-        self.root_mirror = self._pairs(scene.roots, "root", where)
+        # targets and roots must come in mirror pairs (or lie on the plane)
+        self.target_mirror = self._pairs(scene.targets, "target", where)
+        self._pairs(scene.roots, "root", where)
 
     def _pairs(self, X, what, where) -> np.ndarray:
         if len(X) == 0:

@@ -5,7 +5,7 @@ the branch length ``L`` [m]; absolute ones are in metres.
 """
 
 #: A segment that starts or ends on an object surface (roots, targets, surface contacts)
-#: is tested for collisions with both ends pulled in by this fraction of L, so that
+#: is tested for collisions with both ends pulled in by this fraction of D, so that
 #: touching the surface at an endpoint is not a collision.
 SEGMENT_END_TRIM = 1e-3
 
@@ -23,10 +23,8 @@ STALL_PATIENCE = 12
 #: this multiple of L (the node then lands exactly on the target, v' = t).
 TARGET_REACH = 1.0
 
-#: Roots/targets/symmetry pairs match when closer than this fraction of D.
-SYMMETRY_TOL = 1e-6
-
-#: A point is "on the symmetry plane" when closer than this fraction of D.
+#: A point is "on the symmetry plane" when closer than this fraction of D; roots and
+#: targets are mirror partners when one's reflection is this close to the other.
 ON_PLANE_TOL = 1e-4
 
 #: Skeleton nodes count as contained in the skin when inside it, or on its boundary: a ball
@@ -34,9 +32,6 @@ ON_PLANE_TOL = 1e-4
 #: volume (nodes on a carved contact face sit exactly on the boundary: overlap 1/2).
 CONTAIN_TOL = 0.05
 TOUCH_FRACTION = 0.25
-
-#: Volume of skin ∩ objects that still counts as "not intersecting" [fraction of skin volume].
-OVERLAP_TOL = 1e-6
 
 #: Surface-mode leaves within this multiple of the kill distance of an object surface are
 #: contacts (kept by pruning and snapped onto the surface).
