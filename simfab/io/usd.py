@@ -34,17 +34,13 @@ from pathlib import Path
 
 import numpy as np
 
+from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+
 from simfab.errors import InputError
 from simfab.io.atomic import atomic_path
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _INTERP = {"vertex", "uniform", "constant", "faceVarying", "varying"}
-
-
-def _pxr():
-    from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: F401
-
-    return Gf, Sdf, Usd, UsdGeom, Vt
 
 
 def as_points3(points) -> np.ndarray:
@@ -78,8 +74,6 @@ def _constant_color(gprim, color) -> None:
     """Constant ``displayColor`` (RGB in [0, 1]) on a gprim; None leaves it unset."""
     if color is None:
         return
-    from pxr import UsdGeom, Vt
-
     gprim.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray.FromNumpy(np.asarray([color], np.float32)))
 
 
@@ -96,7 +90,6 @@ class StageWriter:
 
     def __init__(self, path: str | os.PathLike, *, up_axis: str = "Z", meters_per_unit: float = 1.0,
                  time_codes_per_second: float = 24.0):
-        Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
         self.path = Path(path)
         if self.path.suffix not in (".usda", ".usdc", ".usd"):
             raise InputError("USD output must end in .usda, .usdc or .usd", where=str(path))
@@ -120,7 +113,6 @@ class StageWriter:
         for p in parts:
             if not _IDENT.match(p):
                 raise ValueError(f"{p!r} is not a valid USD prim name (letters, digits, underscore)")
-        _, _, _, UsdGeom, _ = _pxr()
         acc = "/World"
         for p in parts[:-1]:
             acc += "/" + p
@@ -138,8 +130,6 @@ class StageWriter:
         return prim
 
     def _time(self, t):
-        from pxr import Usd
-
         if t is None:
             return Usd.TimeCode.Default()
         t = float(t)
@@ -147,8 +137,6 @@ class StageWriter:
         return Usd.TimeCode(t)
 
     def _set_extent(self, prim, pts: np.ndarray, pad: float, tc):
-        from pxr import Gf, UsdGeom, Vt
-
         lo = pts.min(axis=0) - pad if len(pts) else np.zeros(3)
         hi = pts.max(axis=0) + pad if len(pts) else np.zeros(3)
         UsdGeom.Boundable(prim).CreateExtentAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*lo), Gf.Vec3f(*hi)]), tc)
@@ -161,7 +149,6 @@ class StageWriter:
         points : optional rest/static points (n, 2|3), written as the default (untimed) value.
         color : optional constant RGB in [0, 1].
         """
-        _, _, _, UsdGeom, Vt = _pxr()
         f = np.asarray(faces, dtype=np.int64)
         if f.ndim != 2:
             raise ValueError(f"faces must be (m, k), got shape {f.shape}")
@@ -182,7 +169,6 @@ class StageWriter:
 
         widths : (n,) per-point widths [stage units] for points prims.
         """
-        _, _, _, UsdGeom, Vt = _pxr()
         prim = self._prim(name)
         pts = as_points3(points)
         tc = self._time(t)
@@ -203,8 +189,6 @@ class StageWriter:
         values : (n,) for interpolation "vertex", (m,) for "uniform" (per face).
         vmin, vmax : colormap range (default: this sample's min and max).
         """
-        from pxr import Sdf, UsdGeom, Vt
-
         if interpolation not in _INTERP:
             raise ValueError(f"interpolation must be one of {sorted(_INTERP)}")
         if not _IDENT.match(primvar):
@@ -227,7 +211,6 @@ class StageWriter:
     # ------------------------------------------------------------------ curves and points
     def add_curves(self, name: str, *, color=None) -> str:
         """Define linear basis curves (skeletons, rods); fill them with :meth:`set_curves`."""
-        _, _, _, UsdGeom, Vt = _pxr()
         path = self._path(name)
         c = UsdGeom.BasisCurves.Define(self.stage, path)
         c.CreateTypeAttr(UsdGeom.Tokens.linear)
@@ -241,7 +224,6 @@ class StageWriter:
 
         The number of curves and points may change between time codes (growth replays).
         """
-        _, _, _, UsdGeom, Vt = _pxr()
         prim = self._prim(name, "curves")
         c = UsdGeom.BasisCurves(prim)
         pts_list = [as_points3(p) for p in curves]
@@ -262,7 +244,6 @@ class StageWriter:
 
     def add_points(self, name: str, *, color=None) -> str:
         """Define a points prim (samples, attractors); fill with :meth:`set_points`."""
-        _, _, _, UsdGeom, Vt = _pxr()
         path = self._path(name)
         p = UsdGeom.Points.Define(self.stage, path)
         self._kinds[path] = "points"
@@ -273,7 +254,6 @@ class StageWriter:
     def add_rigid(self, name: str, points=None, faces=None, *, color=None) -> str:
         """Define an animated rigid body: an Xform (translate + orient ops) with an optional child mesh
         ``geom`` given in the body frame."""
-        _, _, _, UsdGeom, _ = _pxr()
         path = self._path(name)
         x = UsdGeom.Xform.Define(self.stage, path)
         x.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble)
@@ -285,8 +265,6 @@ class StageWriter:
 
     def set_pose(self, name: str, pos, quat_wxyz, t=None) -> None:
         """Pose of a rigid body at time code ``t``: position (3,) and unit quaternion (w, x, y, z)."""
-        from pxr import Gf, UsdGeom
-
         prim = self._prim(name, "rigid")
         q = np.asarray(quat_wxyz, dtype=np.float64)
         q = q / np.linalg.norm(q)
@@ -298,8 +276,6 @@ class StageWriter:
 
     def set_visible(self, name: str, visible: bool, t=None) -> None:
         """Show or hide a prim from time code ``t`` on (visibility is held between samples)."""
-        from pxr import UsdGeom
-
         prim = self._prim(name)
         UsdGeom.Imageable(prim).CreateVisibilityAttr().Set(
             UsdGeom.Tokens.inherited if visible else UsdGeom.Tokens.invisible, self._time(t))
@@ -324,7 +300,7 @@ def check_compliance(path: str | os.PathLike) -> list[str]:
     metadata, composition, attribute types, geometry/shading/physics encapsulation, package
     rules) is run instead. Warnings are not errors.
     """
-    from pxr import Usd, UsdUtils
+    from pxr import UsdUtils
 
     if hasattr(UsdUtils, "ComplianceChecker"):  # USD <= 24.x
         checker = UsdUtils.ComplianceChecker(arkit=False, skipARKitRootLayerCheck=False, rootPackageOnly=False,
@@ -348,8 +324,6 @@ def read_mesh_at(path: str | os.PathLike, time: float | None = None):
     Returns a list of ``(prim_path, points (n, 3), faces (m, 3) triangulated, rgb (m, 3) or None)``;
     ``time=None`` means the stage's end time code. Invisible prims are skipped.
     """
-    from pxr import Usd, UsdGeom
-
     stage = Usd.Stage.Open(str(path))
     if stage is None:
         raise InputError("not a readable USD stage", where=str(path))
