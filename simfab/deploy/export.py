@@ -77,6 +77,8 @@ def write_usd(path, deployment) -> Path:
 def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsules") -> Path:
     from simfab.io.mjcf import MJCFBuilder
 
+    if rods not in ("flexcomp", "capsules"):
+        raise ValueError(f"rods must be 'flexcomp' or 'capsules' (got {rods!r})")
     d = deployment
     model = d.cell.model
     st = d.states[-1]
@@ -87,10 +89,7 @@ def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsule
     body = b.body(ins.name, pos=st.body_pos[ib], quat=fr.matrix_to_quat(st.body_rot[ib]))
     b.mesh_asset(f"{ins.name}_mesh", ins.mesh.vertices, ins.mesh.faces)
     b.geom(body, type="mesh", mesh=f"{ins.name}_mesh", mass=max(ins.mass, 1e-6), rgba=[0.85, 0.45, 0.2, 1])
-    if rods not in ("flexcomp", "capsules"):
-        raise ValueError(f"rods must be 'flexcomp' or 'capsules' (got {rods!r})")
     holder = b.body("rods") if rods == "capsules" else None
-    mats = d.materials if hasattr(d, "materials") else {}
     for r in model.rods:
         P = st.x[r.nodes]
         rad = 0.5 * (r.section.thickness if r.section.shape == "rect" else 2 * r.section.radius)
@@ -100,7 +99,7 @@ def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsule
                        conaffinity=0, mass=0, rgba=[0.95, 0.9, 0.75, 1], name=f"{r.name}_{i}")
             continue
         k = len(P) - 1
-        young, poisson = mats.get(r.name, (None, None))
+        young, poisson = d.materials.get(r.name, (None, None))
         fc = b.add(b.worldbody, "flexcomp", name=r.name, type="direct", dim=1, radius=rad, point=P.ravel(),
                    element=np.stack([np.arange(k), np.arange(1, k + 1)], axis=1).ravel(), rgba=[0.95, 0.9, 0.75, 1],
                    mass=max(1e-6, rad * 1e-3))

@@ -298,8 +298,9 @@ def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool 
         state = res.state
         states.append(state)
         iters.append(res.iterations)
-    curv = gaussian_curvature(cell, state)
-    history = [gaussian_curvature(cell, st)["gaussian_curvature"] for st in states]
+    curvatures = [gaussian_curvature(cell, st) for st in states]
+    curv = curvatures[-1]
+    history = [c["gaussian_curvature"] for c in curvatures]
     mats = {r.name: (cfg.young, cfg.poisson) for r in model.rods}
     return Deployment(cell=cell, insert=insert, states=states, curvature=curv, stable=solver.is_stable(state),
                       iterations=iters, energy=res.energy, materials=mats, curvature_history=history)
