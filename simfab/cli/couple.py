@@ -42,8 +42,7 @@ def add_args(p):
     sub.add_parser("scenes", help="list the bundled coupling scenes")
     from simfab.cli import add_common_args
 
-    for sp in (s,):
-        add_common_args(sp)
+    add_common_args(s)
 
 
 def run(args) -> dict:
@@ -88,7 +87,7 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
 
     dev = check_device(device)
     cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}}, device=dev)
-    check_start(cm)
+    check_start(cm)  # before the log line: bad input gives exactly one line on stderr
     log(f"couple: {cm.name}: {cm.fem.n_elements} elements, {len(cm.field.vertices)} object samples, "
         f"{len(cm.s_steps) - 1} steps", quiet=quiet)
     res = simulate(cm, quiet=quiet)

@@ -249,9 +249,7 @@ def _triangulate_to_target(outline: np.ndarray, target: int | None):
 
     if target is None:
         return triangulate_polygon(outline)
-    x, y = outline[:, 0], outline[:, 1]
-    area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
-    max_area = area / target
+    max_area = abs(geometry._signed_area(outline)) / target
     best = None
     for _ in range(4):
         V, F = triangulate_polygon(outline, max_area=max_area)
