@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 
+from simfab.deploy import tolerances as _tol
 from simfab.errors import ValidationFailed
 
 HELP = "discrete elastic rods vs the exact elastica (rise, force, convergence order, critical load)"
@@ -14,8 +15,10 @@ DESCRIPTION = (
     "critical load from the straight beam's Hessian. Writes buckling.csv, buckling.json and "
     "buckling_shapes.png to --out. Columns: rel_err = |delta - delta_exact| / delta_exact, order = observed "
     "convergence order against the next coarser n, force_rel_err = |P - P_exact| / P_exact, seconds = wall time "
-    "of the quasi-static continuation from the straight beam to that g/L. Exit status 1 when a case at n = 80 "
-    "misses its tolerance (pinned rise 0.1%, clamped rise 1%, force 1%, pinned critical load 0.5%)."
+    "of the quasi-static continuation from the straight beam to that g/L. "
+    f"Exit status 1 when a case at n = {_tol.VALIDATION_N} misses its tolerance (pinned rise "
+    f"{_tol.PINNED_RISE_RTOL:.1%}, clamped rise {_tol.CLAMPED_RISE_RTOL:.0%}, force {_tol.FORCE_RTOL:.0%}, "
+    f"pinned critical load {_tol.CRITICAL_LOAD_RTOL:.1%})."
 )
 
 
