@@ -196,17 +196,22 @@ class RodState:
         return fr.material_frames(self.d1, self.t, self.theta)
 
 
+def _hinge_curvatures(te, tf, m1e, m2e, m1f, m2f) -> np.ndarray:
+    """(H,2) material curvatures (kappa1, kappa2) from the tangents and material directors (H,3)
+    of the incoming (e) and outgoing (f) edges of each hinge (same definition as bend.py)."""
+    kb = 2.0 * np.cross(te, tf) / (1.0 + np.einsum("ij,ij->i", te, tf))[:, None]
+    k1 = 0.5 * np.einsum("ij,ij->i", kb, m2e + m2f)
+    k2 = -0.5 * np.einsum("ij,ij->i", kb, m1e + m1f)
+    return np.stack([k1, k2], axis=1)
+
+
 def material_curvatures(model: RodModel, state: RodState) -> np.ndarray:
     """(H,2) material curvatures (kappa1, kappa2) of ``state`` (same definition as bend.py)."""
     if model.n_hinges == 0:
         return np.zeros((0, 2))
     m1, m2 = state.material_frames()
     e, f = model.hinge_edges[:, 0], model.hinge_edges[:, 1]
-    te, tf = state.t[e], state.t[f]
-    kb = 2.0 * np.cross(te, tf) / (1.0 + np.einsum("ij,ij->i", te, tf))[:, None]
-    k1 = 0.5 * np.einsum("ij,ij->i", kb, m2[e] + m2[f])
-    k2 = -0.5 * np.einsum("ij,ij->i", kb, m1[e] + m1[f])
-    return np.stack([k1, k2], axis=1)
+    return _hinge_curvatures(state.t[e], state.t[f], m1[e], m2[e], m1[f], m2[f])
 
 
 def synchronize(model: RodModel, prev: RodState, x: np.ndarray, theta: np.ndarray,
@@ -346,9 +351,7 @@ class NetworkBuilder:
                 tr = fr.normalize(np.diff(r.rest_points, axis=0))
                 dr = fr.space_parallel_frames(tr, r.director)
                 m1, m2 = fr.material_frames(dr, tr, np.zeros(k))
-                kb = 2.0 * np.cross(tr[:-1], tr[1:]) / (1.0 + np.einsum("ij,ij->i", tr[:-1], tr[1:]))[:, None]
-                kb_rest.append(np.stack([0.5 * np.einsum("ij,ij->i", kb, m2[:-1] + m2[1:]),
-                                         -0.5 * np.einsum("ij,ij->i", kb, m1[:-1] + m1[1:])], axis=1))
+                kb_rest.append(_hinge_curvatures(tr[:-1], tr[1:], m1[:-1], m2[:-1], m1[1:], m2[1:]))
             infos.append(RodInfo(r.name, nodes, eds, r.section))
             n0 += k + 1
             e0 += k
