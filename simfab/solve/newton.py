@@ -321,8 +321,6 @@ def minimize(
         history.append(dict(energy=float(f), grad_norm=gnorm, alpha=alpha, backtracks=bt, shift=shift, hessian=used))
         if gnorm <= opts.grad_tol * gscale:
             return done("gradient", it)
-        if alpha == 1.0 and _inf_norm(dx_f) <= opts.step_tol * xscale:
-            return done("step", it)
 
     raise ConvergenceError(
         f"Newton did not converge in {opts.max_iter} iterations: ||g_free||_inf={gnorm:.3e} > "
