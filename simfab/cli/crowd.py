@@ -131,13 +131,6 @@ def _scale(args):
     return Scale(lo=args.scale[0], hi=args.scale[1])
 
 
-def _warn(msgs, quiet=False):
-    import sys
-
-    for m in msgs:
-        print(f"simfab: warning: {m}", file=sys.stderr)
-
-
 def aggregate_outputs(ratings, truth, result: dict, out: str, *, title: str = "crowd") -> dict:
     """Write the aggregate table, rater table, summary JSON and (with truth) figures."""
     from simfab.crowd import metrics
@@ -176,13 +169,15 @@ def aggregate_outputs(ratings, truth, result: dict, out: str, *, title: str = "c
 def run_aggregate(args):
     from simfab.crowd.analysis import aggregate_all
     from simfab.crowd.data import load_ratings, load_truth
+    from simfab.progress import log
 
     scale = _scale(args)
     cfg = _sampler_config(args, study=False)
     ratings = load_ratings(args.ratings, scale)
     truth = load_truth(args.truth, ratings) if args.truth else None
     result = aggregate_all(ratings, truth, config=cfg, seed=args.seed, quiet=args.quiet, device=_device(args))
-    _warn(result["warnings"])
+    for m in result["warnings"]:  # warnings show even with --quiet
+        log(f"simfab: warning: {m}")
     summary = aggregate_outputs(ratings, truth, result, args.out, title=os.path.basename(args.ratings))
     summary["bayes"] = {k: summary["bayes"][k] for k in ("rhat_max", "ess_min", "seconds", "converged", "iterations_per_chain", "chains", "credible_mass", "x_interval")}
     return summary
