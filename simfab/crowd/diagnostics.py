@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.special import ndtri
+from scipy.stats import rankdata
 
 
 def _split(draws: np.ndarray) -> np.ndarray:
@@ -18,30 +19,11 @@ def _split(draws: np.ndarray) -> np.ndarray:
     return np.concatenate([draws[..., :n], draws[..., -n:]], axis=-2)
 
 
-def average_ranks(a: np.ndarray) -> np.ndarray:
-    """1-based ranks along the last axis, ties (rejected Metropolis steps repeat values)
-    sharing their average rank; same result as ``scipy.stats.rankdata(a, axis=-1)`` but
-    vectorized over the leading axes (scipy loops over them in Python)."""
-    order = np.argsort(a, axis=-1, kind="stable")
-    s = np.take_along_axis(a, order, axis=-1)
-    n = s.shape[-1]
-    pos = np.broadcast_to(np.arange(n), s.shape)
-    starts = np.ones(s.shape, bool)
-    starts[..., 1:] = s[..., 1:] != s[..., :-1]
-    ends = np.ones(s.shape, bool)
-    ends[..., :-1] = starts[..., 1:]
-    first = np.maximum.accumulate(np.where(starts, pos, 0), axis=-1)
-    last = np.flip(np.minimum.accumulate(np.flip(np.where(ends, pos, n), axis=-1), axis=-1), axis=-1)
-    ranks = np.empty(s.shape)
-    np.put_along_axis(ranks, order, 0.5 * (first + last) + 1.0, axis=-1)
-    return ranks
-
-
 def _rank_normalize(draws: np.ndarray) -> np.ndarray:
     """z = Phi^-1((r - 3/8) / (S + 1/4)), r = average rank over all chains pooled."""
     shape = draws.shape
     flat = draws.reshape(shape[:-2] + (-1,))
-    r = average_ranks(flat)
+    r = rankdata(flat, axis=-1)  # average ranks of ties (rejected Metropolis steps repeat values)
     return ndtri((r - 0.375) / (flat.shape[-1] + 0.25)).reshape(shape)
 
 

@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from scipy.stats import rankdata
 
 from simfab.crowd import diagnostics, synth
 from simfab.crowd.config import PRACTITIONERS, SamplerConfig
@@ -20,11 +19,6 @@ def _ar1(phi, shape, rng):
     for t in range(1, shape[-1]):
         x[..., t] = phi * x[..., t - 1] + e[..., t]
     return x
-
-
-def test_average_ranks_match_scipy_with_ties():
-    a = np.random.default_rng(0).integers(0, 30, (3, 2, 400)).astype(float)
-    np.testing.assert_array_equal(diagnostics.average_ranks(a), rankdata(a, axis=-1))
 
 
 def test_rhat_near_one_for_mixed_chains_and_large_for_disagreeing_chains():
