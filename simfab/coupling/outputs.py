@@ -122,8 +122,7 @@ def _object_display(cm):
         return cm.object_vertices, cm.object_faces
     import triangle
 
-    k = len(cm.object_vertices)
-    seg = np.c_[np.arange(k), (np.arange(k) + 1) % k]
+    seg = _loop_edges(len(cm.object_vertices))
     t = triangle.triangulate({"vertices": cm.object_vertices, "segments": seg}, "p")  # no Steiner points
     V, F = np.asarray(t["vertices"]), np.asarray(t["triangles"])
     return np.c_[V, np.zeros(len(V))], F
@@ -180,7 +179,7 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
         V, F = V[used], remap[F]
     ov, of = _object_display(cm)
     if cm.dim == 2:
-        ov, of = extrude_triangles(ov[:, :2], of, _loop_edges(len(cm.object_vertices), len(ov)), fem.thickness * 1.5)
+        ov, of = extrude_triangles(ov[:, :2], of, _loop_edges(len(cm.object_vertices)), fem.thickness * 1.5)
     b = MJCFBuilder(f"{cm.name}_insertion")
     b.mesh_asset("part", V, F)
     b.mesh_asset("object", ov, of)
@@ -193,8 +192,9 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     return b.save(path)
 
 
-def _loop_edges(k: int, n: int) -> np.ndarray:
-    """Boundary edges of a triangulated closed curve whose first k vertices are the curve, CCW."""
+def _loop_edges(k: int) -> np.ndarray:
+    """Edges (k, 2) of a closed curve through vertices 0..k-1 in order (CCW: the first k vertices
+    of O's 2D display triangulation)."""
     i = np.arange(k)
     return np.c_[i, (i + 1) % k]
 
