@@ -46,10 +46,6 @@ def run(n: int, g_over_L: float, delta_exact: float, *, rtol: float = 1e-3, cap_
     g = g_over_L * L
 
     class PinnedDriven(ea.ConstraintBase):
-        def __init__(self, **kw):
-            super().__init__(**kw)
-            self.start = np.zeros(3)
-
         def constrain_values(self, system, time):
             t = time
             system.position_collection[:, 0] = 0.0

@@ -29,8 +29,9 @@ def run(argv) -> dict:
 
     from simfab.deploy import buckling as bk
     from simfab.deploy import elastica
+    from simfab.deploy import tolerances as tol
 
-    rtol = 1e-3
+    rtol = tol.PINNED_RISE_RTOL
     exact = elastica.solve(a.r, "pinned")
     ref_rows = figures().get("elastica_first_mode", {}).get("rows", [])
     ref = next((row["delta_over_L"] for row in ref_rows if abs(row["g_over_L"] - a.r) < 1e-9), None)
@@ -65,5 +66,5 @@ def run(argv) -> dict:
                                        f"PyElastica did NOT reach {rtol:g} within the {a.pyelastica_cap:g} s cap "
                                        f"(rel_err {pe['rel_err']:.2e}); speedup is a lower bound")
                 out["target_speedup"] = 100.0
-                out["meets_target"] = out["speedup"] >= 100.0
+                out["meets_target"] = out["speedup"] >= out["target_speedup"]
     return out
