@@ -30,19 +30,15 @@ def inspect_file(path, *, units: str = "m") -> dict:
         return _inspect_mjcf(path)
     if suf in (".usd", ".usda", ".usdc"):
         return _inspect_usd(path)
-    from simfab.io.mesh import SUFFIXES, inspect_mesh, load_mesh
+    from simfab.io.mesh import SUFFIXES, read_mesh
 
     if suf in SUFFIXES:
         import dataclasses
         import warnings
 
-        with warnings.catch_warnings():
+        with warnings.catch_warnings():  # the report lists what was repaired
             warnings.simplefilter("ignore")
-            mesh = load_mesh(path, units=units)
-        import trimesh
-
-        raw = trimesh.load(str(path), force="mesh", process=False)
-        report = inspect_mesh(raw)
+            mesh, report = read_mesh(path, units=units)
         return {"kind": "mesh", "file": str(path), **dataclasses.asdict(report), "problems": report.problems(),
                 "usable_after_repair": bool(mesh.is_watertight), "extents_m": [float(x) for x in mesh.extents]}
     raise InputError(f"unknown file type {suf!r} (mesh, .xml or .usd/.usda/.usdc)", where=str(path))

@@ -79,6 +79,11 @@ def inspect_mesh(mesh) -> MeshReport:
 
 
 def load_mesh(path: str | os.PathLike, *, units: str = "m", require_watertight: bool = False):
+    """Load a triangle mesh, validate it and repair what is safely repairable (see :func:`read_mesh`)."""
+    return read_mesh(path, units=units, require_watertight=require_watertight)[0]
+
+
+def read_mesh(path: str | os.PathLike, *, units: str = "m", require_watertight: bool = False):
     """Load a triangle mesh, validate it and repair what is safely repairable.
 
     Parameters
@@ -90,7 +95,8 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m", require_watertight: 
 
     Returns
     -------
-    ``trimesh.Trimesh`` in metres, outward-facing normals when watertight.
+    ``(mesh, report)``: the ``trimesh.Trimesh`` in metres (outward-facing normals when
+    watertight) and the :class:`MeshReport` of the file as read, before repair.
 
     Raises
     ------
@@ -116,18 +122,18 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m", require_watertight: 
     mesh = loaded
     if not np.all(np.isfinite(mesh.vertices)):
         raise InputError("vertex coordinates contain NaN or infinity", where=where)
+    # STL stores every triangle's corners separately: share coincident vertices before judging
+    # watertightness (this is the file format, not a repair).
+    mesh.merge_vertices()
     report = inspect_mesh(mesh)
     repaired = []
     if report.degenerate_faces or report.duplicate_faces or report.unreferenced_vertices:
-        mesh.merge_vertices()
         mesh.update_faces(mesh.unique_faces())
         mesh.update_faces(mesh.nondegenerate_faces())
         mesh.remove_unreferenced_vertices()
         repaired += [p for p in report.problems() if "face" in p or "vertices" in p]
     if len(mesh.faces) == 0:
         raise InputError("every face is degenerate", where=where)
-    if not mesh.is_watertight:
-        mesh.merge_vertices()  # STL stores unshared vertices; merging closes it when it is closed
     if not mesh.is_winding_consistent:
         trimesh.repair.fix_winding(mesh)
         repaired.append("inconsistent face winding")
@@ -139,9 +145,9 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m", require_watertight: 
     if require_watertight and not mesh.is_winding_consistent:
         raise InputError("face winding could not be made consistent", where=where)
     if repaired:
-        warnings.warn(f"{where}: repaired {', '.join(repaired)}", MeshWarning, stacklevel=2)
+        warnings.warn(f"{where}: repaired {', '.join(repaired)}", MeshWarning, stacklevel=3)
     mesh.apply_scale(UNIT_SCALE[units])
-    return mesh
+    return mesh, report
 
 
 def save_mesh(mesh, path: str | os.PathLike) -> Path:

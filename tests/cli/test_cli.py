@@ -97,3 +97,11 @@ def test_demo_runs_a_pipeline_and_reports_json(tmp_path, capsys):
     written = [p for p in (tmp_path / "deploy").rglob("*") if p.is_file()]
     assert any(p.suffix == ".usda" for p in written) and any(p.suffix == ".xml" for p in written)
     assert not [p for p in written if ".tmp" in p.name]  # atomic writes leave no temporaries
+
+
+def test_inspect_closed_stl_has_no_problems(tmp_path, capsys):
+    # STL repeats every corner; shared vertices must not be reported as an open mesh
+    trimesh.creation.box().export(tmp_path / "box.stl")
+    assert main(["inspect", str(tmp_path / "box.stl"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["watertight"] is True and out["problems"] == [] and out["vertices"] == 8
