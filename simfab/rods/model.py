@@ -378,12 +378,21 @@ class NetworkBuilder:
             node_body[n] = b
             node_offset[n] = body_rot[b].T @ (x[n] - body_pos[b])
 
-        def lookup(rod, body):
+        def rod_info(rod):
             if rod not in rod_idx:
-                raise InputError(f"attachment names unknown rod {rod!r}")
+                raise InputError(f"a clamp, pin or fix names unknown rod {rod!r}")
+            return infos[rod_idx[rod]]
+
+        def local(items, i, rod, what):  # global index of local node/edge i (Python indexing) of a rod
+            if not -len(items) <= i < len(items):
+                raise InputError(f"rod {rod!r} has no {what} {i} (it has {len(items)})")
+            return items[i]
+
+        def lookup(rod, body):
+            info = rod_info(rod)
             if body not in body_idx:
                 raise InputError(f"attachment names unknown body {body!r}")
-            return infos[rod_idx[rod]], body_idx[body]
+            return info, body_idx[body]
 
         for rod, end, body in self.clamps:
             info, b = lookup(rod, body)
@@ -398,10 +407,9 @@ class NetworkBuilder:
         node_fixed = np.zeros((N, 3), dtype=bool)
         theta_fixed = np.zeros(E, dtype=bool)
         for rod, n, comps in self.fixed_nodes:
-            info = infos[rod_idx[rod]]
-            node_fixed[info.nodes[n], list(comps)] = True
+            node_fixed[local(rod_info(rod).nodes, n, rod, "node"), list(comps)] = True
         for rod, e in self.fixed_thetas:
-            theta_fixed[infos[rod_idx[rod]].edges[e]] = True
+            theta_fixed[local(rod_info(rod).edges, e, rod, "edge")] = True
         if np.any(node_fixed[node_body >= 0]) or np.any(theta_fixed[edge_body >= 0]):
             raise InputError("a node or edge is both fixed and attached to a body")
         lengths = [np.sum(np.linalg.norm(np.diff(r.rest_points, axis=0), axis=1)) for r in self.rods]

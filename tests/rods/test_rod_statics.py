@@ -72,6 +72,12 @@ def test_builder_rejects_bad_input():
     nb.clamp("r", "start", "nobody")
     with pytest.raises(InputError):
         nb.build()
+    for fix in (dict(rod="nowhere", nodes=[0]), dict(rod="r", nodes=[5]), dict(rod="r", thetas=[4])):
+        nb = NetworkBuilder()
+        nb.add_rod("r", np.linspace([0, 0, 0], [1, 0, 0], 5), section=SEC, material=MAT)  # 5 nodes, 4 edges
+        nb.fix(**fix)
+        with pytest.raises(InputError):
+            nb.build()
 
 
 def test_banded_cholesky_matches_sparse_and_detects_indefinite():
