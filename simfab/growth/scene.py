@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from simfab.errors import InputError
+from simfab.growth import tolerances as tol
 from simfab.growth.config import GrowthParams, params_from_toml
 
 
@@ -151,11 +152,11 @@ def validate_scene(scene: GrowthScene) -> None:
     for name, m in scene.objects.items():
         if m.is_watertight and len(scene.roots):
             inside = m.contains(scene.roots)
-            # points on the surface may test either way: only reject clearly interior roots
+            # points on the surface may test either way: only reject roots deeper than the
+            # ground-contact band (the same band that makes an object a root's ground)
             if np.any(inside):
                 dist = np.abs(_surface_distance(m, scene.roots[inside]))
-                scale = float(np.linalg.norm(m.extents))
-                if np.any(dist > 1e-3 * scale):
+                if np.any(dist > tol.GROUND_CONTACT * float(np.linalg.norm(m.extents))):
                     raise InputError(f"a root lies inside object {name!r}", where=where)
 
 
