@@ -163,7 +163,7 @@ class ImlsField:
         tree = self._buffers.get("kdtree")
         if tree is None:
             tree = self._buffers["kdtree"] = cKDTree(_pad3(self.vertices))
-        R, p = pose_matrix(pose, self.dim)
+        R, p = pose_matrix(pose)
         body = (_pad3(np.asarray(points, dtype=np.float64)) - p) @ R
         nn, _ = tree.query(body, k=1)
         return np.maximum(self.far_distance, nn - 2.0 * self.sigma)
@@ -234,7 +234,7 @@ def build_imls(
     )
 
 
-def pose_matrix(pose, dim: int):
+def pose_matrix(pose):
     """(R (3,3), p (3,)) from ``pose``: None (identity), (R, p) or (pos (3,), quat_wxyz (4,))."""
     if pose is None:
         return np.eye(3), np.zeros(3)
@@ -244,10 +244,9 @@ def pose_matrix(pose, dim: int):
     if a.shape == (3, 3):
         R, p = a, b
     else:
-        from scipy.spatial.transform import Rotation
+        from simfab.io.mjcf import quat_to_matrix
 
-        w, x, y, z = b
-        R, p = Rotation.from_quat([x, y, z, w]).as_matrix(), a
+        R, p = quat_to_matrix(b), a
     p = np.resize(p, 3) if p.size < 3 else p
     return R, p
 
@@ -268,7 +267,7 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
     dim = fld.dim
     if k == 0:
         return ImlsEval(psi=np.zeros(0), grad=np.zeros((0, dim)), hess=np.zeros((0, dim, dim)), near=np.zeros(0, bool))
-    R, p = pose_matrix(pose, dim)
+    R, p = pose_matrix(pose)
     body = (_pad3(pts) - p) @ R  # R^T (x - p) row-wise
     lo, hi = fld._bounds
     cand = np.flatnonzero(np.all((body >= lo - fld.radius) & (body <= hi + fld.radius), axis=1))

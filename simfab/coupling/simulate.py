@@ -115,7 +115,7 @@ class CouplingModel:
         key = ("pose", float(s))
         out = self._cache.get(key)
         if out is None:
-            out = self._cache[key] = pose_matrix(self.pos_quat(s), self.dim)
+            out = self._cache[key] = pose_matrix(self.pos_quat(s))
         return out
 
     def pos_quat(self, s: float):

@@ -127,7 +127,7 @@ def test_pose_is_a_rigid_transform_of_the_field():
     rng = np.random.default_rng(8)
     q = rng.normal(size=(50, 3)) * 0.006
     pos, quat = np.array([0.01, -0.02, 0.005]), np.array([0.9, 0.1, -0.3, 0.2])
-    R, p = pose_matrix((pos, quat / np.linalg.norm(quat)), 3)
+    R, p = pose_matrix((pos, quat / np.linalg.norm(quat)))
     e0 = evaluate(f, q)
     e1 = evaluate(f, q @ R.T + p, (pos, quat / np.linalg.norm(quat)))
     assert np.allclose(e1.psi, e0.psi, atol=1e-15)
@@ -154,7 +154,7 @@ def test_far_lower_bound_is_a_lower_bound_of_the_distance_outside():
     r = R + f.radius + rng.uniform(0.0, 5 * R, size=200)
     q = dirs * r[:, None]
     pose = (np.array([0.02, -0.01, 0.005]), np.array([np.cos(0.3), 0.0, np.sin(0.3), 0.0]))
-    Rm, p = pose_matrix(pose, 3)
+    Rm, p = pose_matrix(pose)
     qw = q @ Rm.T + p  # the same body-frame points seen through O's pose
     e = evaluate(f, qw, pose, hessian=False)
     far = ~e.near
