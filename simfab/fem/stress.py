@@ -12,15 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from simfab.fem.model import FemModel
+from simfab.fem.model import FemModel, _edge_matrices
 
 
 def deformation_gradient(model: FemModel, x) -> np.ndarray:
     """F = Ds Dm^-1 per element, (m, dim, dim) [-] at positions x (n, dim) [m]."""
-    x = model.check_positions(x)
-    p = x[model.elements]
-    Ds = np.swapaxes(p[:, 1:, :] - p[:, :1, :], 1, 2)
-    return Ds @ model.Dm_inv
+    return _edge_matrices(model.check_positions(x), model.elements) @ model.Dm_inv
 
 
 def cauchy_stress(model: FemModel, x) -> np.ndarray:
