@@ -256,7 +256,10 @@ class _StepObjective:
         self.diag = _diag_slots(cm)
         self.last_x = None
         self.last_d = None
+        self.last_gd = None
         self.last_H = None
+        self.last_fem = None
+        self.curv = 1.0 / cm.field.sigma  # curvature bound for max_step until a Hessian evaluation sets it
         # Lazy evaluation: psi is L-Lipschitz, so a point that was at distance d_ref when last
         # evaluated exactly (at y_ref) is still at least d_ref - L |y - y_ref| away. Points whose
         # bound stays above the band need no evaluation (their barrier term is exactly zero).
@@ -398,8 +401,7 @@ class _StepObjective:
             return 1.0
         d, gd, dy, sp = d[m], gd[m], dy[m], sp[m]
         a = np.einsum("kd,kd->k", gd, dy)
-        curv = getattr(self, "curv", 1.0 / self.cm.field.sigma)
-        q = 0.5 * sp**2 * curv
+        q = 0.5 * sp**2 * self.curv
         keep = C.STEP_FRACTION * d
         alpha_curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
         cons = keep / (C.PSI_LIPSCHITZ * sp)
