@@ -253,6 +253,7 @@ def _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep):
 
     from_root = tree.parent[uniq] < 0  # roots sit on a surface by design
     hit = obstacles.segment_hits(start, cand, from_root, target_attr >= 0)
+    keep = np.ones(len(uniq), bool)
     if hit.any():
         h = np.nonzero(hit)[0]
         target_attr[h] = -1
@@ -260,10 +261,7 @@ def _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep):
         cand[h[ok]] = new_pos[ok]
         rep.collisions_resolved += int(ok.sum())
         rep.collisions_unresolved += int((~ok).sum())
-        keep = np.ones(len(uniq), bool)
         keep[h[~ok]] = False
-    else:
-        keep = np.ones(len(uniq), bool)
 
     # oscillation guard: drop children landing on top of existing nodes or of each other
     spacing = tol.MIN_NODE_SPACING * L
