@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from simfab.growth import tolerances as tol
 from simfab.growth.colonize import ColonizeSettings, Tree, colonize
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.skeleton import radius_by_age
@@ -78,11 +79,11 @@ def test_oscillation_guard_drops_crowded_children():
     # add node after node in the same place
     tree = Tree.from_roots([[0.0, 0.0, 0.0]])
     A = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1e-9]])
-    colonize(tree, A, np.zeros((0, 3)), np.zeros(0, int), _free(), _settings(max_steps=50, kill=0.01),
-             np.random.default_rng(0))
+    s = _settings(max_steps=50, kill=0.01)
+    colonize(tree, A, np.zeros((0, 3)), np.zeros(0, int), _free(), s, np.random.default_rng(0))
     X = tree.nodes
     d = np.linalg.norm(X[:, None] - X[None], axis=2) + np.eye(len(X))
-    assert d.min() >= 0.3 * 0.1 - 1e-12
+    assert d.min() >= tol.MIN_NODE_SPACING * s.branch_length - 1e-12
 
 
 def test_blocked_branch_turns_around_a_sphere():
