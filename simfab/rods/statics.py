@@ -204,6 +204,17 @@ class Reduction:
         self.full_scale = vals
         self._blk = None
         self.att_edges = [np.flatnonzero(model.edge_body == b) for b in range(model.n_bodies)]
+        # attached nodes / clamped edges of the free bodies, flattened for one vectorized J assembly:
+        # global index, position of the body in ``bodies`` and the body's first column in q
+        k_of = np.full(model.n_bodies + 1, -1)  # last entry: "no body" (index -1)
+        k_of[self.bodies] = np.arange(len(self.bodies))
+        cols0 = np.array([self.body_col.get(b, -1) for b in range(model.n_bodies)] + [-1], dtype=np.int64)
+        self._jn = np.flatnonzero(k_of[model.node_body] >= 0)
+        self._jn_k = k_of[model.node_body[self._jn]]
+        self._jn_c = cols0[model.node_body[self._jn]]
+        self._je = np.flatnonzero(k_of[model.edge_body] >= 0)
+        self._je_k = k_of[model.edge_body[self._je]]
+        self._je_c = cols0[model.edge_body[self._je]]
 
     def block(self, H: sp.csr_matrix) -> sp.csr_matrix:
         """``D H[idx][:, idx] D`` for the fast path (index map cached per CSR pattern)."""
@@ -244,29 +255,28 @@ class Reduction:
         """J = d(full DOFs)/dq at ``state`` (``dw`` (Bf,3): current rotation increments)."""
         rows, cols, vals = [self._J0[0]], [self._J0[1]], [self._J0[2]]
         N = self.model.n_nodes
+        three = np.arange(3)
         if len(self.bodies):
             Jl = fr.left_jacobian(dw)
-            for k, b in enumerate(self.bodies):
-                c0 = self.body_col[int(b)]
-                nodes = self.att_nodes[b]
-                if len(nodes):
-                    r = state.x[nodes] - state.body_pos[b]
-                    # translation: identity blocks
-                    rr = (3 * nodes[:, None] + np.arange(3)).ravel()
-                    rows.append(rr)
-                    cols.append(np.tile(c0 + np.arange(3), len(nodes)))
-                    vals.append(np.ones(len(rr)))
-                    # rotation: dx = -[r]x Jl dw / ell
-                    blk = -fr.skew(r) @ Jl[k] / self.ell  # (k,3,3)
-                    rows.append(np.repeat(rr, 3))
-                    cols.append(np.tile(c0 + 3 + np.arange(3), 3 * len(nodes)))
-                    vals.append(blk.reshape(-1))
-                edges = self.att_edges[b]
-                if len(edges):
-                    blk = state.t[edges] @ Jl[k] / self.ell  # (k,3): dtheta = t . (Jl dw)
-                    rows.append(np.repeat(3 * N + edges, 3))
-                    cols.append(np.tile(c0 + 3 + np.arange(3), len(edges)))
-                    vals.append(blk.reshape(-1))
+            nodes, k, c0 = self._jn, self._jn_k, self._jn_c
+            if len(nodes):
+                r = state.x[nodes] - state.body_pos[self.bodies[k]]
+                rr = (3 * nodes[:, None] + three).ravel()
+                # translation: identity blocks
+                rows.append(rr)
+                cols.append((c0[:, None] + three).ravel())
+                vals.append(np.ones(len(rr)))
+                # rotation: dx = -[r]x Jl dw / ell
+                blk = -fr.skew(r) @ Jl[k] / self.ell  # (m,3,3)
+                rows.append(np.repeat(rr, 3))
+                cols.append(np.broadcast_to(c0[:, None, None] + 3 + three, blk.shape).ravel())
+                vals.append(blk.reshape(-1))
+            edges, k, c0 = self._je, self._je_k, self._je_c
+            if len(edges):
+                blk = (state.t[edges][:, None, :] @ Jl[k])[:, 0] / self.ell  # (m,3): dtheta = t . (Jl dw)
+                rows.append(np.repeat(3 * N + edges, 3))
+                cols.append((c0[:, None] + 3 + three).ravel())
+                vals.append(blk.reshape(-1))
         return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                              shape=(self.n_full, self.nq))
 
