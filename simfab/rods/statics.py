@@ -192,18 +192,14 @@ class Reduction:
         nx, nt = len(self.x_dofs), len(self.th_edges)
         self.body_col = {int(b): nx + nt + 6 * k for k, b in enumerate(self.bodies)}
         self.nq = nx + nt + 6 * len(self.bodies)
-        # constant part of J (free coordinates and angles)
-        rows = np.concatenate([self.x_dofs, 3 * N + self.th_edges])
-        cols = np.arange(nx + nt)
-        vals = np.concatenate([np.ones(nx), np.full(nt, 1.0 / self.ell)])
-        self._J0 = (rows, cols, vals)
+        # constant part of J: q column i (free coordinate / scaled angle) -> full DOF full_index[i],
+        # factor full_scale[i]
+        self.full_index = np.concatenate([self.x_dofs, 3 * N + self.th_edges])
+        self.full_scale = np.concatenate([np.ones(nx), np.full(nt, 1.0 / self.ell)])
         self.att_nodes = [np.flatnonzero(model.node_body == b) for b in range(model.n_bodies)]
         # no free bodies: J is a constant selection and scaling (fast path)
         self.simple = len(self.bodies) == 0
-        self.full_index = rows
-        self.full_scale = vals
         self._blk = None
-        self.att_edges = [np.flatnonzero(model.edge_body == b) for b in range(model.n_bodies)]
         # attached nodes / clamped edges of the free bodies, flattened for one vectorized J assembly:
         # global index, position of the body in ``bodies`` and the body's first column in q
         k_of = np.full(model.n_bodies + 1, -1)  # last entry: "no body" (index -1)
@@ -253,7 +249,7 @@ class Reduction:
 
     def jacobian(self, state: RodState, dw: np.ndarray) -> sp.csr_matrix:
         """J = d(full DOFs)/dq at ``state`` (``dw`` (Bf,3): current rotation increments)."""
-        rows, cols, vals = [self._J0[0]], [self._J0[1]], [self._J0[2]]
+        rows, cols, vals = [self.full_index], [np.arange(len(self.full_index))], [self.full_scale]
         N = self.model.n_nodes
         three = np.arange(3)
         if len(self.bodies):
