@@ -74,7 +74,9 @@ def write_toml(path: Path, header: str, top: dict, tables: dict) -> None:
         lines.append(f"[{name}]")
         for k, v in tab.items():
             lines.append(f"{k} = {_toml_value(v)}")
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    from simfab.io.atomic import write_text
+
+    write_text(path, "\n".join(lines) + "\n")
 
 
 def quat_z(a: float):
@@ -98,7 +100,10 @@ def tet_mesh(name: str, surface, target: int, tol: float = 0.1):
         if abs(len(T) - target) <= tol * target:
             break
         t = max(8, int(round(t * target / len(T))))
-    np.savez_compressed(HERE / fname, points=best[0], elements=best[1].astype(np.int32))
+    from simfab.io.atomic import atomic_path
+
+    with atomic_path(HERE / fname) as tmp, open(tmp, "wb") as fh:  # a file object: savez adds no suffix
+        np.savez_compressed(fh, points=best[0], elements=best[1].astype(np.int32))
     print(f"{name}: {len(best[1])} tets (target {target})")
     return fname
 
