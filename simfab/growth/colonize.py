@@ -104,7 +104,6 @@ class ColonizeReport:
 
     steps: int = 0
     stop_reason: str = ""
-    nodes_added: int = 0
     collisions_resolved: int = 0
     collisions_unresolved: int = 0
     dropped_oscillating: int = 0
@@ -180,7 +179,6 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
         first = len(tree)
         landed = target_attr >= 0
         tree.append(pos, parent, step, np.where(landed, tid[np.maximum(target_attr, 0)], -1), landed)
-        rep.nodes_added += len(pos)
         alive[target_attr[landed]] = False
         rep.targets_reached.extend(int(tid[a]) for a in target_attr[landed])
         idx = np.arange(first, len(tree))

@@ -89,6 +89,8 @@ class GrowthResult:
             "nodes_grown": len(self.history),
             "collisions_resolved": int(sum(r.collisions_resolved for r in self.reports)),
             "collisions_unresolved": int(sum(r.collisions_unresolved for r in self.reports)),
+            "dead_ends": int(sum(r.dead_ends for r in self.reports)),
+            "dropped_oscillating": int(sum(r.dropped_oscillating for r in self.reports)),
             "seconds_growth": self.seconds_growth,
         }
 
