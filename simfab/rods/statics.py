@@ -39,7 +39,7 @@ from simfab.errors import ConvergenceError
 from simfab.rods import frames as fr
 from simfab.rods.energy import Evaluator
 from simfab.rods.model import RodModel, RodState, synchronize
-from simfab.solve.linear import NotPositiveDefinite, SPDSolver
+from simfab.solve.linear import NotPositiveDefinite, SPDSolver, canonical_csr, same_pattern
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -106,21 +106,11 @@ class BandedOrSparseCholesky(SPDSolver):
         upper = pj >= pi  # LAPACK upper band storage: ab[bw + i - j, j] = A[i, j], j >= i
         return dict(perm=perm, bw=bw, sel=np.flatnonzero(upper), pos=(bw + pi[upper] - pj[upper], pj[upper]))
 
-    def _same_band_pattern(self, A: sp.csr_matrix) -> bool:
-        if self._band_key is None:
-            return False
-        indptr, indices = self._band_key
-        return (indptr.shape == A.indptr.shape and indices.shape == A.indices.shape
-                and np.array_equal(indptr, A.indptr) and np.array_equal(indices, A.indices))
-
     def solve(self, A, b):
         from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
-        A = A if isinstance(A, sp.csr_matrix) else sp.csr_matrix(A)
-        if not A.has_canonical_format:  # the band map gathers one value per entry, like SPDSolver's value map
-            A = A.copy()
-            A.sum_duplicates()
-        if not self._same_band_pattern(A):
+        A = canonical_csr(A)  # the band map gathers one value per entry, like SPDSolver's value map
+        if not same_pattern(self._band_key, A):
             self._band_key, self._band = (A.indptr.copy(), A.indices.copy()), self._prepare(A)
         info = self._band
         if info is None:

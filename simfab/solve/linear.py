@@ -21,6 +21,25 @@ class NotPositiveDefinite(ConvergenceError):
     """The matrix handed to :class:`SPDSolver` is not numerically positive definite."""
 
 
+def canonical_csr(A) -> sp.csr_matrix:
+    """``A`` as CSR with sorted, unique entries (a copy only when needed; the caller's matrix is
+    never mutated). Value maps that gather ``A.data`` by position rely on this."""
+    A = A if isinstance(A, sp.csr_matrix) else sp.csr_matrix(A)
+    if not A.has_canonical_format:
+        A = A.copy()
+        A.sum_duplicates()
+    return A
+
+
+def same_pattern(key, A: sp.csr_matrix) -> bool:
+    """Whether CSR ``A`` has the pattern ``key = (indptr, indices)`` (None: no pattern yet)."""
+    if key is None:
+        return False
+    indptr, indices = key
+    return (indptr.shape == A.indptr.shape and indices.shape == A.indices.shape
+            and np.array_equal(indptr, A.indptr) and np.array_equal(indices, A.indices))
+
+
 class SPDSolver:
     """Cholesky solver for sparse SPD matrices, specialised for repeated solves with one pattern.
 
@@ -68,11 +87,8 @@ class SPDSolver:
         import cvxopt
         import cvxopt.cholmod as cholmod
 
-        A = A if isinstance(A, sp.csr_matrix) else sp.csr_matrix(A)
-        if not A.has_canonical_format:  # the value map needs sorted, unique entries; never mutate the caller's
-            A = A.copy()
-            A.sum_duplicates()
-        if not self._same_pattern(A):
+        A = canonical_csr(A)  # the value map gathers one value per entry
+        if not same_pattern(self._key, A):
             self._analyse(A)
         self._A.V = cvxopt.matrix(A.data[self._perm])
         try:
@@ -83,13 +99,6 @@ class SPDSolver:
         x = cvxopt.matrix(np.ascontiguousarray(b.reshape(n, -1)))
         cholmod.solve(self._F, x)
         return np.array(x).reshape(b.shape)
-
-    def _same_pattern(self, A: sp.csr_matrix) -> bool:
-        if self._key is None:
-            return False
-        indptr, indices = self._key
-        return (indptr.shape == A.indptr.shape and indices.shape == A.indices.shape
-                and np.array_equal(indptr, A.indptr) and np.array_equal(indices, A.indices))
 
     def _analyse(self, A: sp.csr_matrix) -> None:
         import cvxopt
