@@ -19,3 +19,13 @@ def figures() -> dict:
         if c and pathlib.Path(c).is_file():
             return json.loads(pathlib.Path(c).read_text())
     return {}
+
+
+def required(key: str) -> dict:
+    """One entry of the reference figures; a benchmark that needs it to define its run stops
+    with a one-line message (exit 2) when the shared file is not beside the project."""
+    entry = figures().get(key)
+    if not entry:
+        raise SystemExit(f"bench: reference figure {key!r} not found: put ../shared/reference/figures.json "
+                         "beside the project or set SIMFAB_REFERENCE=/path/to/figures.json")
+    return entry

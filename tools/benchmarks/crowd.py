@@ -75,15 +75,15 @@ def _crowdkit_rms(crowds):
 
 
 def run(argv):
-    from benchmarks._reference import figures
+    from benchmarks._reference import required
 
     from simfab.crowd import analysis, metrics, synth
     from simfab.crowd.config import PRACTITIONERS, SamplerConfig
     from simfab.crowd.data import Scale
     from simfab.crowd.sampler import sample
 
-    ref = figures().get("crowd_original", {})
-    mc = ref.get("mcmc", {"iterations": 500000, "burn_in": 100000, "thin": 3})
+    ref = required("crowd_original")
+    mc = ref["mcmc"]  # the original's chain: iterations, burn-in, thinning
     ap = argparse.ArgumentParser(prog="bench crowd")
     ap.add_argument("--ref-iterations", type=int, default=mc["iterations"])
     ap.add_argument("--corpus", type=int, default=30, help="synthetic crowds for the accuracy table")
