@@ -26,6 +26,9 @@ def required(key: str) -> dict:
     with a one-line message (exit 2) when the shared file is not beside the project."""
     entry = figures().get(key)
     if not entry:
-        raise SystemExit(f"bench: reference figure {key!r} not found: put ../shared/reference/figures.json "
-                         "beside the project or set SIMFAB_REFERENCE=/path/to/figures.json")
+        import sys
+
+        print(f"bench: reference figure {key!r} not found: put ../shared/reference/figures.json beside the "
+              "project or set SIMFAB_REFERENCE=/path/to/figures.json", file=sys.stderr)
+        raise SystemExit(2)
     return entry
