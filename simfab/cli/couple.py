@@ -2,7 +2,7 @@
 
 Usage::
 
-    simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes] [--no-refine]
+    simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes | --fixed-axes AXES] [--no-refine]
     simfab couple scenes
 
 SCENE is a coupling scene: ``NAME.xml`` (MJCF: the object O as the mocap body ``object`` with
@@ -38,6 +38,8 @@ def add_args(p):
     s.add_argument("--h-in", type=float, metavar="H", help="insertion step along the path [m]")
     s.add_argument("--L-max", dest="L_max", type=float, metavar="L", help="insertion length [m] (default: whole path)")
     s.add_argument("--fix-all-axes", action="store_true", default=None, help="fix the fixed region in all axes")
+    s.add_argument("--fixed-axes", metavar="AXES",
+                   help='axes the fixed region is held along, e.g. "xz" (must include the insertion axis)')
     s.add_argument("--no-refine", action="store_true", help="no refinement points on boundary edges/faces")
     sub.add_parser("scenes", help="list the bundled coupling scenes")
     from simfab.cli import add_common_args
@@ -71,6 +73,10 @@ def run(args) -> dict:
         sim["L_max"] = args.L_max
     if args.fix_all_axes:
         sim["fix_all_axes"] = True
+        sim["fixed_axes"] = None  # overrides the scene's choice
+    elif args.fixed_axes is not None:
+        sim["fixed_axes"] = args.fixed_axes
+        sim["fix_all_axes"] = False
     if args.no_refine:
         sim["refine"] = False
     return simulate_scene(args.scene, out=args.out, device=args.device, quiet=args.quiet, simulation=sim)

@@ -44,6 +44,9 @@ NEWTON_EAGER_HESSIAN = True
 #: Predictor: also try the linear extrapolation of the last two steps and the quadratic one of the
 #: last three; the candidate with the lowest objective is the warm start.
 PREDICTOR_EXTRAPOLATE = True
+#: Predictor: on the chosen extrapolation, move the vertices that were in contact at the end of the
+#: last step back to their last gap to O (see simulate._snap_contacts).
+PREDICTOR_SNAP_CONTACTS = True
 #: ... and compute the contact predictor only when no extrapolation is feasible.
 PREDICTOR_PENALTY_FALLBACK_ONLY = True
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
@@ -77,6 +80,10 @@ class InsertionOptions:
     L_max : insertion length [m]; None: until O's centre passes A's farthest point along the
         insertion direction, or the whole keyframe path if it ends before that.
     fix_all_axes : fix the fixed region in all axes (default: only along the insertion axis).
+    fixed_axes : the axes the fixed region is held along, e.g. "xz" (must include the insertion
+        axis); None: the insertion axis only (or all with ``fix_all_axes``). For a part that could
+        slide freely along a direction O does not resist (a clip on a frictionless cylinder along
+        the cylinder's axis) the equilibrium is not unique along it: hold that axis too.
     refine : add interpolated constraint points on boundary edges/faces that cross into O.
     samples_per_edge : 2D refinement points per boundary edge (paper: 10).
     face_lattice : 3D refinement: barycentric lattice order per boundary face (order m gives
@@ -91,6 +98,7 @@ class InsertionOptions:
     steps: int | None = None
     L_max: float | None = None
     fix_all_axes: bool = False
+    fixed_axes: str | None = None
     refine: bool = True
     samples_per_edge: int = 10
     face_lattice: int = 4
@@ -108,6 +116,12 @@ class InsertionOptions:
             bad("steps", "must be an integer >= 1")
         if self.L_max is not None and not (isinstance(self.L_max, (int, float)) and self.L_max > 0):
             bad("L_max", "must be a positive length [m]")
+        if self.fixed_axes is not None:
+            ax = self.fixed_axes
+            if not (isinstance(ax, str) and ax and set(ax) <= set("xyz") and len(set(ax)) == len(ax)):
+                bad("fixed_axes", 'must be distinct axis letters from "xyz", e.g. "xz"')
+            if self.fix_all_axes:
+                bad("fixed_axes", "cannot be combined with fix_all_axes = true")
         if not (isinstance(self.samples_per_edge, int) and 1 <= self.samples_per_edge <= 100):
             bad("samples_per_edge", "must be an integer in [1, 100]")
         if not (isinstance(self.face_lattice, int) and 2 <= self.face_lattice <= 16):

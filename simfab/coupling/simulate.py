@@ -16,8 +16,10 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    feasible, non-inverted warm start: every point outside O. The linear and quadratic
    extrapolations of the last two / three converged steps come first; the feasible one with the
    lowest objective E_d + B is the warm start (fewer Newton iterations when the deformation
-   evolves smoothly along the path), and the contact predictor above is computed only when
-   neither is feasible (its PSD tangent stiffness is then assembled on demand).
+   evolves smoothly along the path), with the vertices that were in contact moved back to their
+   last gap to O (extrapolation slides them off O's curved surface, out of the barrier's range);
+   the contact predictor above is computed only when no extrapolation is feasible (its PSD
+   tangent stiffness is then assembled on demand).
 2. **Corrector.** Newton (:func:`simfab.solve.newton.minimize`, exact Hessian first, the
    PSD-projected one when the exact one is indefinite) on
    E_d(x) + kappa * sum_j b(-psi(y_j)) with the log barrier b of :mod:`simfab.contact.barrier`.
@@ -167,6 +169,15 @@ def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertice
     free = np.ones((n, dim), dtype=bool)
     if options.fix_all_axes:
         free[fixed_vertices] = False
+    elif options.fixed_axes is not None:
+        held = ["xyz".index(a) for a in options.fixed_axes]
+        if any(a >= dim for a in held):
+            raise InputError(f"fixed_axes={options.fixed_axes!r} names an axis a {dim}D part does not have",
+                             where="[simulation]")
+        if ax not in held:
+            raise InputError(f"fixed_axes={options.fixed_axes!r} must include the insertion axis {'xyz'[ax]!r}",
+                             where="[simulation]")
+        free[np.ix_(fixed_vertices, held)] = False
     else:
         free[fixed_vertices, ax] = False
     h = fem.mean_edge_length()
@@ -555,6 +566,7 @@ class _TimedSolver:
             self.timer.add("factorization", time.perf_counter() - t0)
 
 
+
 def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
     """Solve at the current pose without moving O (step 0), with refinement."""
     total = 0
@@ -626,15 +638,20 @@ def _extrapolations(state: _State, s_new: float) -> list:
 
 
 def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.ndarray:
-    """The feasible warm-start candidate with the lowest objective: the extrapolations and the
-    contact predictor (:func:`_predict`; with PREDICTOR_PENALTY_FALLBACK_ONLY only when no
-    extrapolation is feasible). Raises ConvergenceError when no candidate is feasible."""
+    """The feasible warm-start candidate with the lowest objective: the extrapolations (the chosen
+    one with its contact gaps restored, :func:`_snap_contacts`) and the contact predictor
+    (:func:`_predict`; with PREDICTOR_PENALTY_FALLBACK_ONLY only when no extrapolation is
+    feasible). Raises ConvergenceError when no candidate is feasible."""
     best_x, best_f = None, np.inf
     if C.PREDICTOR_EXTRAPOLATE:
         for xc in _extrapolations(state, s_new):
             fc = obj.value(xc)
             if np.isfinite(fc) and fc < best_f:
                 best_x, best_f = xc, fc
+    if best_x is not None and C.PREDICTOR_SNAP_CONTACTS:
+        xs = _snap_contacts(cm, state, best_x, s_new, ctx)
+        if xs is not None:
+            best_x, best_f = xs, obj.value(xs)
     if best_x is not None and C.PREDICTOR_PENALTY_FALLBACK_ONLY:
         return best_x
     try:
@@ -646,6 +663,39 @@ def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.
     if best_x is None or obj.value(x0) <= best_f:
         return x0
     return best_x
+
+
+def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float, ctx) -> np.ndarray | None:
+    """x with the boundary vertices that were in contact at the end of the last step (d < d_hat)
+    moved along O's normal back to their last distance to O, or None when there are none or the
+    result is infeasible (a point inside O or an inverted element).
+
+    The barrier acts only within d_hat and is much stiffer than A, so the equilibrium gaps of
+    contact points lie in a narrow range inside (0, d_hat). An extrapolated warm start slides
+    contact points along O's curved surface by chords and typically carries them just past d_hat:
+    contact is lost, and the first Newton step, which no longer sees O there, releases A's
+    deformation into O (the step cap then cuts it to a few percent). Restoring the last gaps keeps
+    those points in the barrier's range; the rest of A is left to Newton.
+    """
+    fin = state.final
+    pts = state.points
+    if fin is None or fin[0] is not state.x or len(fin[4]) != len(pts):
+        return None
+    d_prev = fin[4]
+    vert = pts.weights[:, 0] == 1.0  # plain vertex points (refinement points follow their facets)
+    act = vert & (d_prev < cm.dhat)
+    if not act.any():
+        return None
+    R, p = cm.pose(s_new)
+    t0 = time.perf_counter()
+    ev = cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False)
+    ctx["timer"].add("contact", time.perf_counter() - t0)
+    g = -ev.grad
+    nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+    x1 = x.copy()
+    x1[pts.verts[act, 0]] += ((d_prev[act] + ev.psi) * ev.near)[:, None] * nrm
+    d1 = _feasible_distances(cm, x1, s_new, pts, ctx)
+    return x1 if d1 is not None and np.all(d1 > 0) else None
 
 
 def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:

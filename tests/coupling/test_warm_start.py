@@ -1,0 +1,61 @@
+"""Warm start and boundary conditions of the insertion: the contact gaps restored on the
+extrapolated warm start, and the ``fixed_axes`` option."""
+
+import numpy as np
+import pytest
+
+import simfab.coupling.simulate as S
+from simfab.coupling.config import InsertionOptions
+from simfab.coupling.scene import load_coupling_scene
+from simfab.errors import InputError
+
+
+def test_snapped_warm_start_puts_contact_vertices_back_at_their_last_gap(monkeypatch):
+    # Wrap the real _snap_contacts: on every step with contact, the vertices that ended the last
+    # step within d_hat of O must start the next one at their last distance. The move is one
+    # projection along the IMLS normal, exact to first order: the remaining error is the field's
+    # curvature times the squared move, far below 5% of d_hat here (moves are a few d_hat at most).
+    calls = []
+    real = S._snap_contacts
+
+    def spy(cm, state, x, s_new, ctx):
+        out = real(cm, state, x, s_new, ctx)
+        if out is not None:
+            calls.append((cm, state.points, state.final[4].copy(), out, s_new))
+        return out
+
+    monkeypatch.setattr(S, "_snap_contacts", spy)
+    S.simulate(load_coupling_scene("cclamp2d"))
+    assert len(calls) > 10  # the clamp is in contact for most of the insertion
+    for cm, pts, d_prev, x, s in calls:
+        act = (pts.weights[:, 0] == 1.0) & (d_prev < cm.dhat)
+        R, p = cm.pose(s)
+        d_new = -cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False).psi
+        assert np.all(d_new > 0)
+        assert np.abs(d_new - d_prev[act]).max() <= 0.05 * cm.dhat
+
+
+@pytest.mark.parametrize("axes, message", [("xq", "axis letters"), ("xx", "axis letters"), ("", "axis letters")])
+def test_fixed_axes_must_be_distinct_axis_letters(axes, message):
+    with pytest.raises(InputError, match=message):
+        InsertionOptions(fixed_axes=axes)
+
+
+def test_fixed_axes_cannot_be_combined_with_fix_all_axes():
+    with pytest.raises(InputError, match="fix_all_axes"):
+        InsertionOptions(fixed_axes="xz", fix_all_axes=True)
+
+
+def test_fixed_axes_must_include_the_insertion_axis_and_exist_in_2d():
+    with pytest.raises(InputError, match="insertion axis"):
+        load_coupling_scene("clip3d", overrides={"simulation": {"fixed_axes": "yz"}})
+    with pytest.raises(InputError, match="2D part"):
+        load_coupling_scene("cclamp2d", overrides={"simulation": {"fixed_axes": "xz"}})
+
+
+def test_fixed_axes_hold_exactly_the_named_axes_of_the_fixed_region():
+    cm = load_coupling_scene("clip3d")  # the bundled clip holds x (insertion) and z (cylinder axis)
+    free = cm.free.reshape(-1, 3)
+    assert not free[cm.fixed_vertices][:, [0, 2]].any() and free[cm.fixed_vertices][:, 1].all()
+    others = np.setdiff1d(np.arange(cm.fem.n_vertices), cm.fixed_vertices)
+    assert free[others].all()
