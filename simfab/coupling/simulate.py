@@ -650,8 +650,9 @@ def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.
                 best_x, best_f = xc, fc
     if best_x is not None and C.PREDICTOR_SNAP_CONTACTS:
         xs = _snap_contacts(cm, state, best_x, s_new, ctx)
-        if xs is not None:
-            best_x, best_f = xs, obj.value(xs)
+        fs = np.inf if xs is None else obj.value(xs)  # +inf: infeasible (inside O or inverted)
+        if np.isfinite(fs):
+            best_x, best_f = xs, fs
     if best_x is not None and C.PREDICTOR_PENALTY_FALLBACK_ONLY:
         return best_x
     try:
@@ -667,8 +668,8 @@ def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.
 
 def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float, ctx) -> np.ndarray | None:
     """x with the boundary vertices that were in contact at the end of the last step (d < d_hat)
-    moved along O's normal back to their last distance to O, or None when there are none or the
-    result is infeasible (a point inside O or an inverted element).
+    moved along O's normal back to their last distance to O, or None when there are none (the
+    caller checks feasibility: the move may push a neighbour into O or invert an element).
 
     The barrier acts only within d_hat and is much stiffer than A, so the equilibrium gaps of
     contact points lie in a narrow range inside (0, d_hat). An extrapolated warm start slides
@@ -682,8 +683,7 @@ def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float
     if fin is None or fin[0] is not state.x or len(fin[4]) != len(pts):
         return None
     d_prev = fin[4]
-    vert = pts.weights[:, 0] == 1.0  # plain vertex points (refinement points follow their facets)
-    act = vert & (d_prev < cm.dhat)
+    act = d_prev < cm.dhat
     if not act.any():
         return None
     R, p = cm.pose(s_new)
@@ -692,10 +692,15 @@ def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float
     ctx["timer"].add("contact", time.perf_counter() - t0)
     g = -ev.grad
     nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+    move = ((d_prev[act] + ev.psi) * ev.near)[:, None] * nrm  # (a, dim) wanted move per point
+    sub = ContactPoints(verts=pts.verts[act], weights=pts.weights[act], facet=pts.facet[act])
+    n = cm.fem.n_vertices
+    wsum = sub.scatter(np.ones((len(move), 1)), n)[:, 0]
+    shift = sub.scatter(move, n)
+    hit = wsum > 0
     x1 = x.copy()
-    x1[pts.verts[act, 0]] += ((d_prev[act] + ev.psi) * ev.near)[:, None] * nrm
-    d1 = _feasible_distances(cm, x1, s_new, pts, ctx)
-    return x1 if d1 is not None and np.all(d1 > 0) else None
+    x1[hit] += shift[hit] / wsum[hit, None]
+    return x1
 
 
 def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
