@@ -83,9 +83,9 @@ def quat_z(a: float):
     return [math.cos(a / 2), 0.0, 0.0, math.sin(a / 2)]
 
 
-def tet_mesh(name: str, surface, target: int, tol: float = 0.1):
-    """Tetrahedralize ``surface`` to about ``target`` tets (fTetWild, target rescaled up to 4 times)
-    and store it as NAME_part.npz; returns the file name."""
+def tet_mesh(name: str, surface, target: int, tol: float = 0.1, coarsen: bool = False, tries: int = 4):
+    """Tetrahedralize ``surface`` to about ``target`` tets (fTetWild, target rescaled up to ``tries``
+    times, the count closest to the target kept) and store it as NAME_part.npz; returns the file name."""
     from simfab.fem.meshing import tetrahedralize
 
     fname = f"{name}_part.npz"
@@ -93,8 +93,8 @@ def tet_mesh(name: str, surface, target: int, tol: float = 0.1):
         return fname  # fTetWild is not reproducible: keep the stored mesh unless asked to remesh
     t = target
     best = None
-    for _ in range(4):
-        V, T = tetrahedralize(np.asarray(surface.vertices), np.asarray(surface.faces), target_tets=t)
+    for _ in range(tries):
+        V, T = tetrahedralize(np.asarray(surface.vertices), np.asarray(surface.faces), target_tets=t, coarsen=coarsen)
         if best is None or abs(len(T) - target) < abs(len(best[1]) - target):
             best = (V, T)
         if abs(len(T) - target) <= tol * target:
@@ -109,11 +109,11 @@ def tet_mesh(name: str, surface, target: int, tol: float = 0.1):
 
 
 def scene(name: str, *, doc: str, dim: int, comp: dict, part_mesh, object_geoms, keys, fixed_center, fixed_half,
-          obj: dict, sim: dict, material: str = "PLA", extra_assets=()):
+          obj: dict, sim: dict, material: str = "PLA", extra_assets=(), mesh_options=None):
     from simfab.io.mjcf import MJCFBuilder
 
     if dim == 3:
-        comp = dict(comp, mesh_file=tet_mesh(name, part_mesh, comp["target_elements"]))
+        comp = dict(comp, mesh_file=tet_mesh(name, part_mesh, comp["target_elements"], **(mesh_options or {})))
 
     b = MJCFBuilder(name)
     for aname, V, F in extra_assets:
@@ -172,7 +172,9 @@ def main() -> None:
           fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.01],
           # held along the cylinder's axis z too: a frictionless cylinder does not resist sliding
           # along it, so the clip's position along z would be undetermined (it drifted by mm)
-          obj=dict(body="object", samples=1154), sim=dict(steps=35, fixed_axes="xz"))
+          obj=dict(body="object", samples=1154), sim=dict(steps=35, fixed_axes="xz"),
+          # fTetWild refines the thin arms well past the target unless it may coarsen
+          mesh_options=dict(coarsen=True, tol=0.05, tries=8))
 
     # larger 3D model: four-finger claw on a sphere
     hc = 0.006

@@ -76,7 +76,8 @@ def triangulate_polygon(outline, *, holes=(), max_area: float | None = None, min
     return V, F
 
 
-def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, target_tets: int | None = None):
+def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, target_tets: int | None = None,
+                   coarsen: bool = False):
     """Tetrahedral mesh of the volume enclosed by a triangle surface (fTetWild via pytetwild).
 
     vertices : (n, 3) surface vertices; faces : (f, 3) triangles (closed surface)
@@ -85,6 +86,8 @@ def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, tar
     target_tets : approximate number of tetrahedra wanted; sets the absolute edge length from the
         enclosed volume assuming regular tets (V_tet = l^3 / (6 sqrt 2)). The count fTetWild
         delivers is typically within a factor ~2 of it.
+    coarsen : let fTetWild coarsen the result as far as its quality bound allows (closer to the
+        target edge length on thin parts, which fTetWild otherwise refines).
 
     Returns V (n, 3) float64 and T (m, 4) int32 positively oriented tets.
     """
@@ -113,7 +116,7 @@ def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, tar
     # fTetWild drops a scratch file (__tracked_surface.stl) into the working directory: run it
     # from a private temporary directory so callers' folders stay clean.
     with tempfile.TemporaryDirectory(prefix="simfab-tetwild-") as scratch, contextlib.chdir(scratch):
-        V, T = pytetwild.tetrahedralize(v, f.astype(np.int32), quiet=True, **kwargs)
+        V, T = pytetwild.tetrahedralize(v, f.astype(np.int32), quiet=True, coarsen=bool(coarsen), **kwargs)
     V = np.asarray(V, dtype=np.float64)
     T = np.asarray(T, dtype=np.int32)
     if len(T) == 0:
