@@ -894,7 +894,9 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     pts = x[facets]
     diam = np.max(np.linalg.norm(pts - np.roll(pts, 1, axis=1), axis=2), axis=1)
     ids = np.flatnonzero(np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * diam)
-    refined = np.array([int(f) in state.refined for f in ids], dtype=bool)
+    refined = np.zeros(len(facets), dtype=bool)
+    refined[list(state.refined)] = True
+    refined = refined[ids]
     psi_max = np.full(len(ids), -np.inf)
     for sel, w in ((~refined, facet_weights(cm.dim, state.order)), (refined, check_weights(cm.dim, state.order))):
         if sel.any():
