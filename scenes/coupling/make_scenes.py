@@ -203,7 +203,7 @@ def main() -> None:
           keys=[([xk, 0, 0], [1, 0, 0, 0]), ([xs, 0, 0], [1, 0, 0, 0]), ([xs, 0, 0], quat_z(-np.pi / 2))],
           fixed_center=[-rok - CLAMP_KNOCK["base_depth"], 0, 0], fixed_half=[0.0004, 0.005, 0.005],
           obj=dict(body="object", samples=2000, rot_length_scale=0.005),
-          sim=dict(steps=40, fix_all_axes=True))
+          sim=dict(steps=40, fix_all_axes=True), mesh_options=dict(coarsen=True, tol=0.05, tries=8))
 
 
 if __name__ == "__main__":

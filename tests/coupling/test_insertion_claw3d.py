@@ -1,0 +1,16 @@
+"""Insertion of the largest bundled model: the four-finger claw on a sphere (about 12,000 tets,
+an object with 10,000 samples; its own module so that the test runner can place it on another
+worker)."""
+
+from simfab.coupling.outputs import summarize
+from simfab.coupling.scene import load_coupling_scene
+from simfab.coupling.simulate import simulate
+
+from _coupling_checks import check_every_step
+
+
+def test_claw_every_step_feasible_and_tight():
+    res = simulate(load_coupling_scene("claw3d"))
+    check_every_step(res)
+    prof, _ = summarize(res)
+    assert prof.category == "tight" and prof.F_grip > 0
