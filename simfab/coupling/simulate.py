@@ -891,8 +891,8 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     far = ~ev.near
     if far.any():  # far vertices: a sharper lower bound of their distance than far_distance
         dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
-    pts = x[facets]
-    diam = np.max(np.linalg.norm(pts - np.roll(pts, 1, axis=1), axis=2), axis=1)
+    xf = x[facets]  # (F, nv, dim)
+    diam = np.max(np.linalg.norm(xf - np.roll(xf, 1, axis=1), axis=2), axis=1)
     ids = np.flatnonzero(np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * diam)
     refined = np.zeros(len(facets), dtype=bool)
     refined[list(state.refined)] = True
@@ -900,16 +900,18 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     psi_max = np.full(len(ids), -np.inf)
     for sel, w in ((~refined, facet_weights(cm.dim, state.order)), (refined, check_weights(cm.dim, state.order))):
         if sel.any():
-            cp = facet_points(facets, ids[sel], w)
-            y = cp.positions(x)
-            # psi(y) <= psi(v) + L |y - v| for each parent vertex v: points this bounds below zero
-            # are outside O and need no evaluation (their bound stands in for psi: every use of
-            # psi_max only asks whether it is positive or above the tolerance)
-            psi = np.min(-dv[cp.verts] + C.PSI_LIPSCHITZ * np.linalg.norm(y[:, None, :] - x[cp.verts], axis=2), axis=1)
-            todo = np.flatnonzero(psi >= 0.0)
-            if len(todo):
+            f_sel = ids[sel]
+            xv = xf[f_sel]  # (f, nv, dim) the facets' vertices
+            y = w @ xv  # (f, p, dim) check points
+            # psi(y) <= psi(v) + L |y - v| for each vertex v of the facet: points this bounds below
+            # zero are outside O and need no evaluation (their bound stands in for psi: every use
+            # of psi_max only asks whether it is positive or above the tolerance)
+            gap = np.linalg.norm(y[:, :, None, :] - xv[:, None, :, :], axis=3)  # (f, p, nv)
+            psi = np.min(C.PSI_LIPSCHITZ * gap - dv[facets[f_sel]][:, None, :], axis=2)
+            todo = psi >= 0.0
+            if todo.any():
                 psi[todo] = cm.field.evaluate(y[todo], (R, p), hessian=False).psi
-            psi_max[sel] = psi.reshape(int(sel.sum()), len(w)).max(axis=1)
+            psi_max[sel] = psi.max(axis=1)
     out = (ids, psi_max, refined)
     state.check = (x, s, state.order, out)
     return out
