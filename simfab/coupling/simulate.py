@@ -83,7 +83,8 @@ class CouplingModel:
     path : :class:`simfab.io.mjcf.Trajectory` of O's pose, parameterized by path length [m]
     s_steps : (K+1,) path length at each step [m]; step 0 is the start pose
     fixed_vertices : (f,) vertices of A in the fixed region
-    free : (n*dim,) bool, dofs solved for (fixed: fixed vertices along the insertion axis, or all axes)
+    free : (n*dim,) bool, dofs solved for (fixed: the fixed vertices' dofs along the insertion axis,
+        along ``options.fixed_axes``, or along all axes with ``options.fix_all_axes``)
     axis : (dim,) unit insertion axis (coordinate axis closest to O's overall translation)
     h : A's mean edge length h_A [m]; dhat [m]; kappa [N/m]; tol : penetration tolerance [m]
     object_vertices, object_faces : O's display geometry in its body frame (3D mesh, or a closed

@@ -44,6 +44,9 @@ def _run_err(args, capsys):
     ["couple", "simulate", "no_such_scene"],
     ["couple", "simulate", "cclamp2d", "--steps", "0"],
     ["couple", "simulate", "cclamp2d", "--h-in", "-0.001"],
+    ["couple", "simulate", "cclamp2d", "--fixed-axes", "xz"],  # a 2D part has no z axis
+    ["couple", "simulate", "clip3d", "--fixed-axes", "yz"],  # must hold the insertion axis x
+    ["couple", "simulate", "clip3d", "--fixed-axes", "xw"],
     ["couple"],
 ])
 def test_bad_arguments_exit_2_with_one_line(args, tmp_path, capsys):
