@@ -6,7 +6,14 @@ own start-up cost is paid only by code that uses kernels, never by ``import simf
 
 from __future__ import annotations
 
+import threading
+
 import warp as wp
+
+#: Held while a launch is recorded (``record_cmd=True``): the first launch of a kernel loads (and
+#: may build) its module, which must not happen from two threads at once. Replaying recorded
+#: launches from two threads is safe as long as they use different buffers.
+RECORD_LOCK = threading.Lock()
 
 # Warp prints its start-up banner on stdout at INFO level, which would corrupt ``--json``
 # output; only warnings and errors are wanted (they go to stderr).

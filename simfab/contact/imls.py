@@ -21,11 +21,12 @@ kernel runs with z = 0 and returns 2-component gradients and 2x2 Hessians.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab._warp import wp
+from simfab._warp import RECORD_LOCK, wp
 
 #: Default kernel truncation radius in units of sigma (exp(-16) ~ 1.1e-7 at the cut).
 DEFAULT_CUTOFF_SIGMAS = 4.0
@@ -287,13 +288,14 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
         buf["points"].assign(np.ascontiguousarray(np.pad(body[cand], ((0, buf["capacity"] - m), (0, 0)))))
     cmd = buf.get("cmd")
     if cmd is None:  # recorded once per buffer set and replayed (a plain launch re-packs every argument)
-        cmd = buf["cmd"] = wp.launch(
-            _imls_eval, dim=m, device=fld.device,
-            inputs=[fld._grid.id, fld._wverts, fld._wnormals, 1.0 / fld.sigma**2, fld.radius, -fld.far_distance,
-                    buf["points"], band],
-            outputs=[buf["psi"], buf["grad"], buf["hess"], buf["count"]],
-            record_cmd=True,
-        )
+        with RECORD_LOCK:
+            cmd = buf["cmd"] = wp.launch(
+                _imls_eval, dim=m, device=fld.device,
+                inputs=[fld._grid.id, fld._wverts, fld._wnormals, 1.0 / fld.sigma**2, fld.radius, -fld.far_distance,
+                        buf["points"], band],
+                outputs=[buf["psi"], buf["grad"], buf["hess"], buf["count"]],
+                record_cmd=True,
+            )
     cmd.set_dim(m)
     cmd.set_param_by_name("hess_band", band)
     cmd.launch()
@@ -308,9 +310,11 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
 
 
 def _buffers(fld: ImlsField, k: int) -> dict:
-    """Reusable Warp work arrays for at least k query points (grown by doubling; a launch uses a
-    prefix). On the CPU, NumPy views of them are kept so that filling and reading cost no copy."""
-    b = fld._buffers.get("work")
+    """Reusable Warp work arrays of the calling thread for at least k query points (grown by
+    doubling; a launch uses a prefix). On the CPU, NumPy views of them are kept so that filling and
+    reading cost no copy (results are copied out before the next launch of the same thread)."""
+    key = ("work", threading.get_ident())  # one set per thread: evaluations may run concurrently
+    b = fld._buffers.get(key)
     if b is None or b["capacity"] < k:
         cap = max(64, 1 << int(np.ceil(np.log2(max(k, 1)))))
         dev = fld.device
@@ -324,7 +328,7 @@ def _buffers(fld: ImlsField, k: int) -> dict:
         }
         is_cpu = wp.get_device(dev).is_cpu
         b["views"] = {k2: b[k2].numpy() for k2 in ("points", "psi", "grad", "hess", "count")} if is_cpu else None
-        fld._buffers["work"] = b
+        fld._buffers[key] = b
     return b
 
 

@@ -44,6 +44,9 @@ NEWTON_MAX_ITER = 100
 EXACT_FIRST_NEWTON = True
 #: Evaluate the Hessian at the first line-search trial (most steps are accepted at once).
 NEWTON_EAGER_HESSIAN = True
+#: Evaluate the contact field on a second thread while the FEM Hessian is assembled (two cores;
+#: the time split then books both in full, so its parts add up to more than the wall time).
+CONTACT_IN_THREAD = True
 #: Predictor: also try the linear extrapolation of the last two steps and the quadratic one of the
 #: last three; the candidate with the lowest objective is the warm start.
 PREDICTOR_EXTRAPOLATE = True

@@ -66,6 +66,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from simfab._parallel import submit
 from simfab.contact.barrier import barrier, point_barrier
 from simfab.contact.imls import ImlsField, pose_matrix
 from simfab.coupling import config as C
@@ -320,6 +321,9 @@ class _StepObjective:
             self.memo = None  # hand the cached Hessian out once (the caller may modify it)
             return memo[1]
         x = xf.reshape(self.n, self.dim)
+        # with the Hessian wanted, the contact field is evaluated on the second core while this
+        # thread assembles the FEM Hessian (both Warp CPU kernels, which release the GIL)
+        pending = submit(self.distances, x, True) if need_hessian and C.CONTACT_IN_THREAD else None
         t0 = time.perf_counter()
         H_exact = None
         if need_hessian and self.exact_first:
@@ -332,9 +336,11 @@ class _StepObjective:
         else:
             (E, g), H = energy_gradient(cm.fem, x), None
         self.timer.add("assembly", time.perf_counter() - t0)
+        d, gd, hd = pending.result() if pending is not None else (None, None, None)
         if not np.isfinite(E):
             return np.inf, g.ravel(), H
-        d, gd, hd = self.distances(x, need_hessian)
+        if pending is None:
+            d, gd, hd = self.distances(x, need_hessian)
         t0 = time.perf_counter()
         if np.any(d <= 0):
             return np.inf, g.ravel(), H

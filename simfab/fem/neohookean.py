@@ -62,7 +62,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from simfab._warp import wp
+from simfab._warp import RECORD_LOCK, wp
 from simfab.fem import tolerances
 from simfab.fem.model import FemModel
 
@@ -711,7 +711,8 @@ class _Workspace:
             args = dict(inputs=common + [1, 0, self.dummy_slots],
                         outputs=[self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data])
         kernel = self.kernels[min(want, _HESSIAN)]
-        cmd = wp.launch(kernel, dim=model.n_elements, device=dev, record_cmd=True, **args)
+        with RECORD_LOCK:  # the first launch loads the module: one thread at a time
+            cmd = wp.launch(kernel, dim=model.n_elements, device=dev, record_cmd=True, **args)
         self.commands[want] = cmd
         return cmd
 
