@@ -31,7 +31,9 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    1e-3 d_hat to O.
 3. **Refinement.** Boundary facets near O are checked at interpolated points; facets whose interior
    crosses into O receive ``samples_per_edge`` points per edge (2D) or a barycentric lattice
-   (3D) as extra constraints and the step is solved again from the previous step's state (which
+   (3D) as extra constraints and the step is solved again: from the current (converged) state
+   with the new points that lie inside O lifted out along O's normal (a local move of their
+   facets' vertices), or, when that is infeasible or fails, from the previous step's state (which
    is feasible for them, because every earlier step ended with all facets checked outside O).
    Refined facets keep their points for the rest of the simulation. If refined facets still
    penetrate O by more than the tolerance between their points, the density is doubled (the new
@@ -600,12 +602,20 @@ def _accept(state: _State, x: np.ndarray, s: float, obj: _StepObjective) -> None
 def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) -> int:
     """Move O from state.s to s_new and re-equilibrate A (predictor, Newton, refinement)."""
     total = 0
+    resume = None  # converged positions to resume from after a refinement (see below)
     for _ in range(C.MAX_REFINEMENT_ROUNDS):  # refinement restarts
+        resumed = False
         try:
             obj = _objective(cm, state.points, s_new, ctx, state.kappa)
-            x0 = _warm_start(cm, state, s_new, obj, ctx)
+            x0 = None if resume is None else _lift_points(cm, state.points, resume, s_new, obj, ctx)
+            resumed = x0 is not None
+            if x0 is None:
+                x0 = _warm_start(cm, state, s_new, obj, ctx)
             x, it = _newton(cm, obj, x0, ctx)
         except ConvergenceError:
+            if resumed:  # the resumed solve failed: solve from the previous state instead
+                resume = None
+                continue
             if depth >= C.MAX_BISECTIONS:
                 raise
             mid = 0.5 * (state.s + s_new)
@@ -619,12 +629,29 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
             _accept(state, x, s_new, obj)
             _adapt_kappa(cm, state, obj)
             return total
-        # restart the step from the previous state, which is feasible for the new points (new
-        # facets were outside O there; denser points of refined facets were within the tolerance
-        # and are pushed out first)
+        # solve again from x with the new points lifted out of O (see _lift_points); should that
+        # be infeasible or fail, from the previous state, which is feasible for the new points
+        # (new facets were outside O there; denser points of refined facets were within the
+        # tolerance and are pushed out first)
         _add_refinement(cm, state, new)
         _restore_feasibility(cm, state, ctx)
+        resume = x if C.RESUME_AFTER_REFINEMENT else None
     raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")
+
+
+def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, s: float, obj, ctx):
+    """x with the constraint points closer to O than LIFT_TO * d_hat (the new refinement points
+    that cross into O) moved out along O's normal to that distance, their facets' vertices taking
+    the weighted mean of the wanted moves; None when the result is infeasible."""
+    R, p = cm.pose(s)
+    t0 = time.perf_counter()
+    ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
+    ctx["timer"].add("contact", time.perf_counter() - t0)
+    d = -ev.psi
+    lift = (d <= 0.0) & ev.near
+    x1 = _move_points(cm, pts, x, lift, (C.LIFT_TO * cm.dhat - d[lift]), ev.grad[lift] * -1.0)
+    return x1 if np.isfinite(obj.value(x1)) else None
+
 
 
 def _extrapolations(state: _State, s_new: float) -> list:
@@ -698,9 +725,16 @@ def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float
     ev = cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False)
     ctx["timer"].add("contact", time.perf_counter() - t0)
     g = -ev.grad
-    nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-    move = ((d_prev[act] + ev.psi) * ev.near)[:, None] * nrm  # (a, dim) wanted move per point
-    sub = ContactPoints(verts=pts.verts[act], weights=pts.weights[act], facet=pts.facet[act])
+    return _move_points(cm, pts, x, act, (d_prev[act] + ev.psi) * ev.near, g)
+
+
+def _move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.ndarray, dist: np.ndarray,
+                 direction: np.ndarray) -> np.ndarray:
+    """x with the points ``sel`` moved by ``dist`` (s,) [m] along ``direction`` (s, dim) (normalized
+    here): each vertex takes the weighted mean of the moves of the selected points on it."""
+    nrm = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
+    move = dist[:, None] * nrm
+    sub = ContactPoints(verts=pts.verts[sel], weights=pts.weights[sel], facet=pts.facet[sel])
     n = cm.fem.n_vertices
     wsum = sub.scatter(np.ones((len(move), 1)), n)[:, 0]
     shift = sub.scatter(move, n)

@@ -75,3 +75,26 @@ def test_contact_field_on_the_second_thread_changes_nothing(monkeypatch):
     assert [r.iterations for r in a.steps] == [r.iterations for r in b.steps]
     assert np.array_equal(a.column("energy"), b.column("energy"))
     assert np.array_equal(np.stack([r.x for r in a.steps]), np.stack([r.x for r in b.steps]))
+
+
+def test_solving_again_from_the_refined_state_gives_the_same_profile(monkeypatch):
+    # After a refinement the step is solved again from its converged positions (new points lifted
+    # out of O) instead of from the previous step; the equilibrium is the same, so the profile
+    # figures must agree with the restart to the Newton tolerance (1e-6 relative here).
+    import simfab.coupling.config as C
+    from simfab.coupling.outputs import summarize
+
+    from _coupling_checks import check_every_step
+
+    lifted = []
+    real = S._lift_points
+    monkeypatch.setattr(S, "_lift_points", lambda *a: lifted.append(1) or real(*a))
+    figures = []
+    for flag in (False, True):
+        monkeypatch.setattr(C, "RESUME_AFTER_REFINEMENT", flag)
+        res = S.simulate(load_coupling_scene("clip3d"))
+        check_every_step(res)
+        _, summary = summarize(res)
+        figures.append(np.array([summary[k] for k in ("E_max", "E_ss", "F_in", "F_rm")]))
+    assert len(lifted) >= 3  # the clip refines several times on the way in
+    assert np.allclose(figures[0], figures[1], rtol=1e-6)
