@@ -186,7 +186,9 @@ def main() -> None:
           object_geoms=[dict(type="mesh", mesh="sphere")],
           keys=[([x0, 0, 0], [1, 0, 0, 0]), ([X_SEATED, 0, 0], [1, 0, 0, 0])],
           fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.011],
-          obj=dict(body="object", samples=10000), sim=dict(steps=25))
+          # held in all axes: a frictionless sphere does not resist the claw turning about the
+          # insertion axis through its centre, which the x-support alone leaves free
+          obj=dict(body="object", samples=10000), sim=dict(steps=25, fix_all_axes=True))
 
     # door knocker: ring bar along z pushed into a clip along -x, then rotated 90 deg about z
     hk = 0.006

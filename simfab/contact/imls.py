@@ -28,6 +28,8 @@ import numpy as np
 
 from simfab._warp import RECORD_LOCK, wp
 
+#: On the CPU, evaluations at this many points or more run as two launches on two threads.
+PARALLEL_MIN_POINTS = 1024
 #: Default kernel truncation radius in units of sigma (exp(-16) ~ 1.1e-7 at the cut).
 DEFAULT_CUTOFF_SIGMAS = 4.0
 
@@ -280,12 +282,35 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
     if m == 0:
         return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
     band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
+    if m >= PARALLEL_MIN_POINTS and fld._buffers.get("cpu"):
+        # two single-threaded launches on two threads, each with its own buffers
+        from simfab._parallel import submit
+
+        half = m // 2
+        second = submit(_launch, fld, body[cand[half:]], band)
+        parts = [_launch(fld, body[cand[:half]], band), second.result()]
+        v_psi, v_grad, v_hess, v_count = (np.concatenate(a) for a in zip(*parts))
+    else:
+        v_psi, v_grad, v_hess, v_count = _launch(fld, body[cand], band)
+    psi[cand] = v_psi
+    grad[cand] = v_grad[:, :dim] @ R[:dim, :dim].T
+    if hessian:
+        Rd = R[:dim, :dim]
+        hess[cand] = np.einsum("ij,kjl,ml->kim", Rd, v_hess[:, :dim, :dim], Rd)
+    near[cand] = v_count > 0
+    return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
+
+
+def _launch(fld: ImlsField, body: np.ndarray, band: float):
+    """One launch at body-frame points (m, 3) with the calling thread's buffers; returns
+    (psi (m,), grad (m, 3), hess (m, 3, 3), count (m,)) as copies."""
+    m = len(body)
     buf = _buffers(fld, m)
     views = buf["views"]  # zero-copy NumPy views of the (CPU) Warp buffers
     if views is not None:
-        views["points"][:m] = body[cand]
+        views["points"][:m] = body
     else:
-        buf["points"].assign(np.ascontiguousarray(np.pad(body[cand], ((0, buf["capacity"] - m), (0, 0)))))
+        buf["points"].assign(np.ascontiguousarray(np.pad(body, ((0, buf["capacity"] - m), (0, 0)))))
     cmd = buf.get("cmd")
     if cmd is None:  # recorded once per buffer set and replayed (a plain launch re-packs every argument)
         with RECORD_LOCK:
@@ -300,13 +325,8 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
     cmd.set_param_by_name("hess_band", band)
     cmd.launch()
     v = views if views is not None else {k: buf[k].numpy() for k in ("psi", "grad", "hess", "count")}
-    psi[cand] = v["psi"][:m]
-    grad[cand] = v["grad"][:m, :dim] @ R[:dim, :dim].T
-    if hessian:
-        Rd = R[:dim, :dim]
-        hess[cand] = np.einsum("ij,kjl,ml->kim", Rd, v["hess"][:m, :dim, :dim], Rd)
-    near[cand] = v["count"][:m] > 0
-    return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
+    hess = v["hess"][:m].copy() if band > -np.inf else v["hess"][:m]  # unread without Hessians
+    return v["psi"][:m].copy(), v["grad"][:m].copy(), hess, v["count"][:m].copy()
 
 
 def _buffers(fld: ImlsField, k: int) -> dict:
@@ -329,6 +349,7 @@ def _buffers(fld: ImlsField, k: int) -> dict:
         is_cpu = wp.get_device(dev).is_cpu
         b["views"] = {k2: b[k2].numpy() for k2 in ("points", "psi", "grad", "hess", "count")} if is_cpu else None
         fld._buffers[key] = b
+        fld._buffers["cpu"] = is_cpu
     return b
 
 

@@ -575,7 +575,6 @@ class _TimedSolver:
             self.timer.add("factorization", time.perf_counter() - t0)
 
 
-
 def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
     """Solve at the current pose without moving O (step 0), with refinement."""
     total = 0
@@ -640,18 +639,18 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
 
 
 def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, s: float, obj, ctx):
-    """x with the constraint points closer to O than LIFT_TO * d_hat (the new refinement points
-    that cross into O) moved out along O's normal to that distance, their facets' vertices taking
-    the weighted mean of the wanted moves; None when the result is infeasible."""
+    """x with the constraint points inside O (the new refinement points on facets that cross into
+    O) moved out along O's normal to LIFT_TO * d_hat, their facets' vertices taking the weighted
+    mean of the wanted moves (a local move: the rest of A keeps its equilibrium); None when the
+    result is infeasible."""
     R, p = cm.pose(s)
     t0 = time.perf_counter()
     ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
     ctx["timer"].add("contact", time.perf_counter() - t0)
     d = -ev.psi
     lift = (d <= 0.0) & ev.near
-    x1 = _move_points(cm, pts, x, lift, (C.LIFT_TO * cm.dhat - d[lift]), ev.grad[lift] * -1.0)
+    x1 = _move_points(cm, pts, x, lift, (C.LIFT_TO * cm.dhat - d[lift]), -ev.grad[lift])
     return x1 if np.isfinite(obj.value(x1)) else None
-
 
 
 def _extrapolations(state: _State, s_new: float) -> list:

@@ -164,3 +164,25 @@ def test_far_lower_bound_is_a_lower_bound_of_the_distance_outside():
     assert np.all(lb <= exact + 1e-12)
     assert np.all(lb >= f.far_distance)
     assert np.all(lb >= exact - 2.0 * f.sigma - 1e-12)  # samples lie on the sphere: nearest >= exact
+
+
+def test_large_evaluations_split_over_two_threads_give_the_same_values(monkeypatch):
+    # At PARALLEL_MIN_POINTS points or more the CPU evaluation runs as two launches on two threads
+    # (own buffers each); the values must equal the single launch's exactly, with and without
+    # Hessians, and a worker-side evaluation (as the coupling objective does) must too.
+    import simfab.contact.imls as imls
+    from simfab._parallel import submit
+
+    f = _sphere_field()
+    rng = np.random.default_rng(3)
+    q = _random_dirs(rng, 3000) * (0.01 + rng.uniform(-3, 3, 3000) * f.sigma)[:, None]
+    evaluate(f, q[:10])  # first use: the buffers exist and the field knows it runs on the CPU
+    runs = []
+    for n_min in (10**9, 1024):
+        monkeypatch.setattr(imls, "PARALLEL_MIN_POINTS", n_min)
+        runs.append([evaluate(f, q, hessian=h, hessian_band=2 * f.sigma) for h in (True, False)])
+        runs.append([submit(evaluate, f, q, hessian=h, hessian_band=2 * f.sigma).result() for h in (True, False)])
+    for run in runs[1:]:
+        for a, b in zip(runs[0], run):
+            for name in ("psi", "grad", "hess", "near"):
+                assert np.array_equal(getattr(a, name), getattr(b, name))
