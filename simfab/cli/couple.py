@@ -97,6 +97,8 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     log(f"couple: {cm.name}: {cm.fem.n_elements} elements, {len(cm.field.vertices)} object samples, "
         f"{len(cm.s_steps) - 1} steps", quiet=quiet)
     res = simulate(cm, quiet=quiet)
+    for m in res.warnings:  # warnings show even with --quiet
+        log(f"simfab: warning: {m}")
     return write_all(res, Path(out), stem=stem)
 
 

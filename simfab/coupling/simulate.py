@@ -69,9 +69,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from simfab._parallel import submit
-from simfab.contact.barrier import barrier, point_barrier
+from simfab.contact.barrier import barrier, barrier_hessian, point_barrier
 from simfab.contact.imls import ImlsField, pose_matrix
 from simfab.coupling import config as C
+from simfab.coupling import rigid
 from simfab.coupling.config import InsertionOptions
 from simfab.coupling.points import ContactPoints, check_weights, facet_points, facet_weights, vertex_points
 from simfab.errors import ConvergenceError, InputError
@@ -238,10 +239,14 @@ class StepResult:
 
 @dataclass(kw_only=True)
 class InsertionResult:
+    """steps : one :class:`StepResult` per step (the start pose first); seconds : wall time;
+    timings : seconds per category; warnings : one line each (e.g. an unresisted rigid motion)."""
+
     model: CouplingModel
     steps: list
     seconds: float
     timings: dict
+    warnings: list = field(default_factory=list)
 
     def column(self, name: str) -> np.ndarray:
         return np.array([getattr(r, name) for r in self.steps], dtype=float)
@@ -502,6 +507,8 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     ctx = dict(timer=timer, solver=SPDSolver())
     check_start(cm)
     steps = []
+    free_motions = rigid.motion_basis(cm)
+    weakest = None  # (ratio, motion, s, contact radius) of the least resisted rigid motion of A
     for k in progress(range(len(cm.s_steps)), total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
         s = float(cm.s_steps[k])
         if k > 0:
@@ -510,10 +517,41 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
             iters = _solve_at(cm, state, s, ctx)
         rec = _record(cm, state, iters, ctx)
         steps.append(rec)
+        w = _weakest_rigid_motion(cm, state, free_motions)
+        if w is not None and (weakest is None or w[0] < weakest[0]):
+            weakest = w
         if callback is not None:
             callback(k, rec)
     timer.add("total", time.perf_counter() - t_start)
-    return InsertionResult(model=cm, steps=steps, seconds=time.perf_counter() - t_start, timings=dict(timer.t))
+    warnings = []
+    if weakest is not None and weakest[0] < rigid.UNRESISTED_REL:
+        warnings.append(
+            f"{cm.name}: nothing resists the part's rigid {rigid.describe(weakest[1], dim, weakest[3])} at "
+            f"s={weakest[2]:.4g} m (the supports leave it free and the contact normals are perpendicular to "
+            "it): the equilibrium is not unique along it, so positions and forces may depend on solver "
+            "details; hold that axis ([simulation] fixed_axes or fix_all_axes)")
+    return InsertionResult(model=cm, steps=steps, seconds=time.perf_counter() - t_start, timings=dict(timer.t),
+                           warnings=warnings)
+
+
+def _weakest_rigid_motion(cm: CouplingModel, state: _State, free_motions):
+    """(ratio, motion, s, radius) of the rigid motion of A that the contact at the current state
+    resists least (see :func:`simfab.coupling.rigid.weakest_motion`), or None without contact or
+    free motion."""
+    fin = state.final
+    Q, c = free_motions
+    if fin is None or fin[0] is not state.x or Q.shape[1] == 0 or len(fin[4]) != len(state.points):
+        return None
+    d, gd = fin[4], fin[5]
+    act = (d < cm.dhat) & (np.einsum("kd,kd->k", gd, gd) > 0)
+    if not act.any():
+        return None
+    y = state.points.positions(state.x)[act]
+    nrm = gd[act] / np.linalg.norm(gd[act], axis=1, keepdims=True)
+    out = rigid.weakest_motion(Q, c, y, nrm, barrier_hessian(d[act], cm.dhat))
+    if out is None:
+        return None
+    return out[0], out[1], state.s, float(np.sqrt(np.mean(np.sum((y - c) ** 2, axis=1))))
 
 
 def check_start(cm: CouplingModel) -> None:

@@ -5,7 +5,9 @@ import numpy as np
 
 def check_every_step(res):
     """Every insertion step ends feasible: penetration <= the model's tolerance, no inverted
-    element, finite state and figures."""
+    element, finite state and figures; and the run raised no warning (e.g. a rigid motion of the
+    part that nothing resists, which would make the equilibrium non-unique)."""
+    assert not res.warnings, res.warnings
     tol = res.model.tol
     assert len(res.steps) == len(res.model.s_steps)
     for r in res.steps:
