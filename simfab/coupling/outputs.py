@@ -201,19 +201,20 @@ def _loop_edges(k: int) -> np.ndarray:
 
 
 def write_all(res: InsertionResult, out: Path, stem: str | None = None) -> dict:
-    """Write every output into ``out``; return the summary dict with the output paths."""
+    """Write every output into ``out``; return the summary dict with the output paths. The files
+    appear together: a failure while writing any of them leaves none."""
+    from simfab.io.atomic import atomic_paths, write_json
+
     out = Path(out)
     stem = stem or res.model.name
     prof, summary = summarize(res)
-    paths = {
-        "profile_csv": write_profile_csv(res, out / f"{stem}_profile.csv"),
-        "plot_png": plot_profile(res, prof, out / f"{stem}_profile.png"),
-        "usd": write_usd(res, out / f"{stem}.usda"),
-        "mjcf": write_mjcf(res, prof, out / f"{stem}.xml"),
-    }
-    paths["profile_json"] = out / f"{stem}_summary.json"
+    paths = {"profile_csv": out / f"{stem}_profile.csv", "plot_png": out / f"{stem}_profile.png",
+             "usd": out / f"{stem}.usda", "mjcf": out / f"{stem}.xml", "profile_json": out / f"{stem}_summary.json"}
     summary.update({k: str(v) for k, v in paths.items()})
-    from simfab.io.atomic import write_json
-
-    write_json(paths["profile_json"], summary)
+    with atomic_paths(paths) as tmp:
+        write_profile_csv(res, tmp["profile_csv"])
+        plot_profile(res, prof, tmp["plot_png"])
+        write_usd(res, tmp["usd"])
+        write_mjcf(res, prof, tmp["mjcf"])
+        write_json(tmp["profile_json"], summary)
     return summary

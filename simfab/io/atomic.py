@@ -39,6 +39,18 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
         raise
 
 
+@contextlib.contextmanager
+def atomic_paths(paths: dict) -> Iterator[dict]:
+    """Like :func:`atomic_path` for a set of files that belong together (one run's outputs):
+    yields ``{key: temporary path}``; the temporaries are renamed onto ``paths`` only when the
+    whole block succeeds, and all removed otherwise, so a failure halfway leaves none of them."""
+    with contextlib.ExitStack() as stack:
+        tmps = {k: stack.enter_context(atomic_path(v)) for k, v in paths.items()}
+        yield tmps
+        # leaving the stack renames every temporary (in reverse order); an exception above
+        # removes them all instead
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)

@@ -34,6 +34,25 @@ def test_simulate_writes_profile_plot_usd_and_mjcf(tmp_path, capsys):
     assert m.nkey == 11 and m.nmocap == 1
 
 
+def test_a_failing_writer_leaves_no_output_file(tmp_path, monkeypatch):
+    # the outputs of a run appear together: the MJCF writer failing after the CSV, plot and USD
+    # were written leaves none of them (and no temporary) behind
+    import simfab.coupling.outputs as outputs
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import simulate
+
+    res = simulate(load_coupling_scene("clip2d_loose", overrides={"simulation": {"steps": 3}}))
+
+    def broken(*a, **k):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(outputs, "write_mjcf", broken)
+    out = tmp_path / "out"
+    with pytest.raises(OSError, match="disk full"):
+        outputs.write_all(res, out)
+    assert not out.exists() or not any(out.iterdir())
+
+
 def _run_err(args, capsys):
     code = main(args)
     err = capsys.readouterr().err.strip().splitlines()
