@@ -43,8 +43,9 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    ConvergenceError. A step that cannot be taken (predictor infeasible, Newton failure) is
    bisected along the path up to ``MAX_BISECTIONS`` times before giving up loudly.
 
-Cost control: the contact field is evaluated in one Warp launch per call, only for points that
-are not certified (by the Lipschitz bound and their travel since their last exact evaluation) to
+Cost control: the contact field is evaluated in one Warp launch per call (two, on two threads,
+for 1024 points or more), on a second thread while the FEM Hessian is assembled, only for points
+that are not certified (by the Lipschitz bound and their travel since their last exact evaluation) to
 be farther than a band of a few d_hat from O; Hessians of psi only within d_hat; CHOLMOD's symbolic
 analysis and the value map of the fixed FEM sparsity pattern are reused for every solve
 (:class:`simfab.solve.linear.SPDSolver`); the facet check of a converged state is memoized, and check
@@ -53,6 +54,11 @@ evaluated. Per Newton iterate only the exact FEM Hessian is assembled (the PSD-p
 as expensive, only when the exact one fails to factorize); the line search evaluates the Hessian
 already at its first trial (most are accepted), and the step record reuses Newton's last
 evaluation. The forces of a step use the barrier stiffness its equilibrium was solved with.
+
+Well-posedness: a rigid motion of A that the supports leave free and no contact normal opposes
+(a clip sliding along a frictionless cylinder, a claw turning on a sphere) costs no energy, so the
+equilibrium is not unique along it. After every step the rigid motion the contact resists least
+is found (:mod:`simfab.coupling.rigid`); when one is unresisted the run says so in its warnings.
 
 Forces: the reaction at the fixed dofs is r = dE_total/dx there (the force the support applies to
 A). By equilibrium of A it equals the force A exerts on O, so the insertion force is
