@@ -336,7 +336,8 @@ class _StepObjective:
         x = xf.reshape(self.n, self.dim)
         # with the Hessian wanted, the contact field is evaluated on the second core while this
         # thread assembles the FEM Hessian (both Warp CPU kernels, which release the GIL)
-        pending = submit(self.distances, x, True) if need_hessian and C.CONTACT_IN_THREAD else None
+        threaded = need_hessian and C.CONTACT_IN_THREAD and cm.fem.n_elements >= C.CONTACT_THREAD_MIN_ELEMENTS
+        pending = submit(self.distances, x, True) if threaded else None
         t0 = time.perf_counter()
         H_exact = None
         if need_hessian and self.exact_first:

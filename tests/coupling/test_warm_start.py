@@ -67,6 +67,7 @@ def test_contact_field_on_the_second_thread_changes_nothing(monkeypatch):
     import simfab.coupling.config as C
 
     runs = []
+    monkeypatch.setattr(C, "CONTACT_THREAD_MIN_ELEMENTS", 0)  # the 2D clamp is below the default
     for flag in (False, True):
         monkeypatch.setattr(C, "CONTACT_IN_THREAD", flag)
         res = S.simulate(load_coupling_scene("cclamp2d", overrides={"simulation": {"steps": 12}}))
