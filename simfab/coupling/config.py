@@ -74,6 +74,11 @@ MAX_BISECTIONS = 6
 #: iterations, same profile figures).
 RESUME_AFTER_REFINEMENT = True
 LIFT_TO = 0.5
+#: Warm-start points closer to O than WARM_START_FLOOR * d_hat (and not that close at the last
+#: step) are lifted to LIFT_TO * d_hat: from a tiny gap the log barrier's Newton steps only double
+#: it (a point at 4e-4 d_hat cost clip3d's last step 12 extra iterations; clip3d 194 -> 184, knocker3d
+#: 276 -> 270 Newton iterations, same profile figures). 0 disables.
+WARM_START_FLOOR = 0.1
 #: Refinement rounds per step (each adds the facets found crossing O) before ConvergenceError.
 MAX_REFINEMENT_ROUNDS = 64
 #: Hessian regularization (relative to mean |diag H|) for the rigid modes left free by the

@@ -651,7 +651,8 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         resumed = False
         try:
             obj = _objective(cm, state.points, s_new, ctx, state.kappa)
-            x0 = None if resume is None else _lift_points(cm, state.points, resume, s_new, obj, ctx)
+            x0 = None if resume is None else _lift_points(cm, state.points, resume, s_new, obj, ctx, below=0.0,
+                                                          to=C.LIFT_TO * cm.dhat)
             resumed = x0 is not None
             if x0 is None:
                 x0 = _warm_start(cm, state, s_new, obj, ctx)
@@ -683,18 +684,24 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
     raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")
 
 
-def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, s: float, obj, ctx):
-    """x with the constraint points inside O (the new refinement points on facets that cross into
-    O) moved out along O's normal to LIFT_TO * d_hat, their facets' vertices taking the weighted
-    mean of the wanted moves (a local move: the rest of A keeps its equilibrium); None when the
-    result is infeasible."""
+def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, s: float, obj, ctx, *, below: float,
+                 to: float, prev: np.ndarray | None = None):
+    """x with the constraint points at distance <= ``below`` [m] from O (inside it: d <= 0) moved
+    out along O's normal to ``to`` [m], their facets' vertices taking the weighted mean of the
+    wanted moves (a local move: the rest of A keeps its shape). With ``prev`` (k,), the points'
+    gaps at the last step, points that were already that close keep their place. Returns x itself
+    when nothing is that close, None when the result is infeasible."""
     R, p = cm.pose(s)
     t0 = time.perf_counter()
     ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
     ctx["timer"].add("contact", time.perf_counter() - t0)
     d = -ev.psi
-    lift = (d <= 0.0) & ev.near
-    x1 = _move_points(cm, pts, x, lift, (C.LIFT_TO * cm.dhat - d[lift]), -ev.grad[lift])
+    lift = (d <= below) & ev.near
+    if prev is not None:
+        lift &= prev > below
+    if not lift.any():
+        return x
+    x1 = _move_points(cm, pts, x, lift, to - d[lift], -ev.grad[lift])
     return x1 if np.isfinite(obj.value(x1)) else None
 
 
@@ -731,6 +738,15 @@ def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.
         fs = np.inf if xs is None else obj.value(xs)  # +inf: infeasible (inside O or inverted)
         if np.isfinite(fs):
             best_x, best_f = xs, fs
+    if best_x is not None and C.WARM_START_FLOOR > 0:
+        # a point that ends up almost touching O costs one Newton iteration per doubling of its
+        # distance (the log barrier): start such points at LIFT_TO * d_hat instead
+        fin = state.final
+        prev = fin[4] if fin is not None and len(fin[4]) == len(state.points) else None
+        xl = _lift_points(cm, state.points, best_x, s_new, obj, ctx, below=C.WARM_START_FLOOR * cm.dhat,
+                          to=C.LIFT_TO * cm.dhat, prev=prev)
+        if xl is not None and xl is not best_x:
+            best_x, best_f = xl, obj.value(xl)
     if best_x is not None and C.PREDICTOR_PENALTY_FALLBACK_ONLY:
         return best_x
     try:

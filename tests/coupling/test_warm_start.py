@@ -89,7 +89,12 @@ def test_solving_again_from_the_refined_state_gives_the_same_profile(monkeypatch
 
     lifted = []
     real = S._lift_points
-    monkeypatch.setattr(S, "_lift_points", lambda *a: lifted.append(1) or real(*a))
+    def spy(*a, **k):
+        if k.get("below") == 0.0:  # the resumed solves (the warm start lifts near points too)
+            lifted.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(S, "_lift_points", spy)
     figures = []
     for flag in (False, True):
         monkeypatch.setattr(C, "RESUME_AFTER_REFINEMENT", flag)
@@ -99,3 +104,28 @@ def test_solving_again_from_the_refined_state_gives_the_same_profile(monkeypatch
         figures.append(np.array([summary[k] for k in ("E_max", "E_ss", "F_in", "F_rm")]))
     assert len(lifted) >= 3  # the clip refines several times on the way in
     assert np.allclose(figures[0], figures[1], rtol=1e-6)
+
+
+def test_warm_starts_keep_new_points_off_the_object(monkeypatch):
+    # A point starting almost on O costs a Newton iteration per doubling of its gap; every warm
+    # start must have the points that were not that close at the last step at least
+    # WARM_START_FLOOR * d_hat away (half of it allowed for the one-projection lift's curvature error)
+    import simfab.coupling.config as C
+
+    seen = []
+    real = S._warm_start
+
+    def spy(cm, state, s_new, obj, ctx):
+        x0 = real(cm, state, s_new, obj, ctx)
+        fin = state.final
+        if fin is not None and len(fin[4]) == len(state.points):
+            R, p = cm.pose(s_new)
+            d = -cm.field.evaluate(state.points.positions(x0), (R, p), hessian=False).psi
+            new = fin[4] > C.WARM_START_FLOOR * cm.dhat
+            seen.append(float(d[new].min() / cm.dhat))
+        return x0
+
+    assert C.WARM_START_FLOOR >= 0.05  # the floor is on by default
+    monkeypatch.setattr(S, "_warm_start", spy)
+    S.simulate(load_coupling_scene("clip3d"))
+    assert len(seen) > 30 and min(seen) >= 0.5 * C.WARM_START_FLOOR
