@@ -49,8 +49,8 @@ that are not certified (by the Lipschitz bound and their travel since their last
 be farther than a band of a few d_hat from O; Hessians of psi only within d_hat; CHOLMOD's symbolic
 analysis and the value map of the fixed FEM sparsity pattern are reused for every solve
 (:class:`simfab.solve.linear.SPDSolver`); the facet check of a converged state is memoized, and check
-points already certified outside O by the Lipschitz bound from their facet's vertices are not
-evaluated. Per Newton iterate only the exact FEM Hessian is assembled (the PSD-projected one, twice
+points already certified outside O by the Lipschitz bound from their facet's vertices, or from
+their own values at earlier checks, are not evaluated. Per Newton iterate only the exact FEM Hessian is assembled (the PSD-projected one, twice
 as expensive, only when the exact one fails to factorize); the line search evaluates the Hessian
 already at its first trial (most are accepted), and the step record reuses Newton's last
 evaluation. The forces of a step use the barrier stiffness its equilibrium was solved with.
@@ -483,6 +483,7 @@ class _State:
     refined: set
     order: int  # refinement density (2D: points per edge, 3D: face lattice order), doubled on demand
     check: tuple | None = None  # memo of the last facet check (x, s, order, result)
+    check_cache: dict = field(default_factory=dict)  # earlier check points' values (_check_cache)
     kappa: float = 0.0  # current barrier stiffness [N/m] (adapted, see _adapt_kappa)
     H: object = None  # last PSD Hessian (for the predictor; a _LazyHessian until first needed)
     final: tuple | None = None  # Newton's last evaluation at x (see _final_eval), for _record
@@ -978,7 +979,9 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     Returns (facet ids (f,), max psi (f,) [m], refined (f,) bool). Unrefined facets are checked
     at the points refinement would add; refined facets at the denser check points (their own
     points plus the midpoints between them). A facet can only reach into O if one of its vertices
-    is within L * (its diameter) of O. The result is remembered for the same (x, s).
+    is within L * (its diameter) of O. Check points whose Lipschitz bound, from the facet's
+    vertices or from their own values at earlier checks (in O's body frame), is negative are not
+    evaluated; their bound stands in for psi. The result is remembered for the same (x, s).
     """
     memo = state.check
     if memo is not None and memo[0] is x and memo[1] == s and memo[2] == state.order:
@@ -999,7 +1002,8 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     refined[list(state.refined)] = True
     refined = refined[ids]
     psi_max = np.full(len(ids), -np.inf)
-    for sel, w in ((~refined, facet_weights(cm.dim, state.order)), (refined, check_weights(cm.dim, state.order))):
+    for is_refined, w in ((False, facet_weights(cm.dim, state.order)), (True, check_weights(cm.dim, state.order))):
+        sel = refined if is_refined else ~refined
         if sel.any():
             f_sel = ids[sel]
             xv = xf[f_sel]  # (f, nv, dim) the facets' vertices
@@ -1009,13 +1013,42 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
             # of psi_max only asks whether it is positive or above the tolerance)
             gap = np.linalg.norm(y[:, :, None, :] - xv[:, None, :, :], axis=3)  # (f, p, nv)
             psi = np.min(C.PSI_LIPSCHITZ * gap - dv[facets[f_sel]][:, None, :], axis=2)
+            # the same check points' values (or bounds) from earlier checks: O moved rigidly, so in
+            # O's body frame psi is the same L-Lipschitz function and psi(y) <= psi(y') + L |b - b'|
+            # with b, b' the body-frame positions now and then
+            if C.FACET_CHECK_CACHE:
+                body = _body_frame(y, R, p)
+                known_body, known_psi = _check_cache(cm, state, is_refined, len(w))
+                moved = np.linalg.norm(body - known_body[f_sel], axis=2)
+                psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
             todo = psi >= 0.0
             if todo.any():
                 psi[todo] = cm.field.evaluate(y[todo], (R, p), hessian=False).psi
+            if C.FACET_CHECK_CACHE:
+                known_body[f_sel], known_psi[f_sel] = body, psi
             psi_max[sel] = psi.max(axis=1)
     out = (ids, psi_max, refined)
     state.check = (x, s, state.order, out)
     return out
+
+
+def _body_frame(y: np.ndarray, R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Points y (..., dim) in O's body frame (..., 3): R^T (y - p)."""
+    y3 = np.zeros(y.shape[:-1] + (3,))
+    y3[..., : y.shape[-1]] = y
+    return (y3 - p) @ R
+
+
+def _check_cache(cm: CouplingModel, state: _State, refined: bool, p: int):
+    """(body positions (F, p, 3) [m], psi or an upper bound (F, p) [m]) of every boundary facet's
+    check points at its last check (NaN / +inf: never checked) for unrefined or refined facets at
+    the current density; reset when the density changes."""
+    key = (refined, state.order, p)
+    cache = state.check_cache.get(key)
+    if cache is None:
+        F = len(cm.fem.boundary_facets)
+        cache = state.check_cache[key] = (np.full((F, p, 3), np.nan), np.full((F, p), np.inf))
+    return cache
 
 
 def _rebuild_points(cm: CouplingModel, state: _State) -> None:

@@ -129,3 +129,29 @@ def test_warm_starts_keep_new_points_off_the_object(monkeypatch):
     monkeypatch.setattr(S, "_warm_start", spy)
     S.simulate(load_coupling_scene("clip3d"))
     assert len(seen) > 30 and min(seen) >= 0.5 * C.WARM_START_FLOOR
+
+
+def test_facet_checks_bounded_by_earlier_checks_change_nothing(monkeypatch):
+    # check points certified outside O by their values at earlier checks (O moved rigidly) skip
+    # their evaluation; the run must be the same as with every uncertified point evaluated afresh
+    import simfab.coupling.config as C
+    import simfab.contact.imls as imls
+
+    runs, points = [], []
+    real = imls.ImlsField.evaluate
+    for flag in (False, True):
+        monkeypatch.setattr(C, "FACET_CHECK_CACHE", flag)
+        count = [0]
+
+        def counting(self, pts, *a, count=count, **k):
+            count[0] += len(pts)
+            return real(self, pts, *a, **k)
+
+        monkeypatch.setattr(imls.ImlsField, "evaluate", counting)
+        runs.append(S.simulate(load_coupling_scene("clip3d")))
+        points.append(count[0])
+    a, b = runs
+    assert [r.iterations for r in a.steps] == [r.iterations for r in b.steps]
+    assert np.array_equal(np.stack([r.x for r in a.steps]), np.stack([r.x for r in b.steps]))
+    assert np.array_equal(a.column("penetration"), b.column("penetration"))
+    assert points[1] < 0.9 * points[0]  # and it does save evaluations
