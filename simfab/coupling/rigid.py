@@ -26,14 +26,12 @@ def motion_basis(cm) -> tuple[np.ndarray, np.ndarray]:
     every rigid motion."""
     fem, dim = cm.fem, cm.dim
     c = fem.rest.mean(axis=0)
-    held = ~cm.free.reshape(-1, dim)
-    rows = []
-    for v, a in zip(*np.nonzero(held)):
-        rows.append(_rows(fem.rest[v][None] - c, dim)[0, a])
+    verts, axes = np.nonzero(~cm.free.reshape(-1, dim))  # the held dofs
     r = 3 if dim == 2 else 6
-    if not rows:
+    if not len(verts):
         return np.eye(r), c
-    _, s, Vt = np.linalg.svd(np.asarray(rows), full_matrices=True)
+    rows = _rows(fem.rest[verts] - c, dim)[np.arange(len(verts)), axes]  # (held dofs, r)
+    _, s, Vt = np.linalg.svd(rows, full_matrices=True)
     rank = int(np.sum(s > 1e-9 * s.max()))
     return Vt[rank:].T, c
 
