@@ -282,7 +282,7 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
     if m == 0:
         return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
     band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
-    if m >= PARALLEL_MIN_POINTS and fld._buffers.get("cpu"):
+    if m >= PARALLEL_MIN_POINTS and wp.get_device(fld.device).is_cpu:
         # two single-threaded launches on two threads, each with its own buffers
         from simfab._parallel import submit
 
@@ -349,7 +349,6 @@ def _buffers(fld: ImlsField, k: int) -> dict:
         is_cpu = wp.get_device(dev).is_cpu
         b["views"] = {k2: b[k2].numpy() for k2 in ("points", "psi", "grad", "hess", "count")} if is_cpu else None
         fld._buffers[key] = b
-        fld._buffers["cpu"] = is_cpu
     return b
 
 
