@@ -182,11 +182,12 @@ class Reduction:
         nx, nt = len(self.x_dofs), len(self.th_edges)
         self.body_col = {int(b): nx + nt + 6 * k for k, b in enumerate(self.bodies)}
         self.nq = nx + nt + 6 * len(self.bodies)
+        # translation columns of the free bodies, (Bf*3,) in the order of ``bodies``
+        self.body_trans_cols = (nx + nt + 6 * np.arange(len(self.bodies))[:, None] + np.arange(3)).ravel()
         # constant part of J: q column i (free coordinate / scaled angle) -> full DOF full_index[i],
         # factor full_scale[i]
         self.full_index = np.concatenate([self.x_dofs, 3 * N + self.th_edges])
         self.full_scale = np.concatenate([np.ones(nx), np.full(nt, 1.0 / self.ell)])
-        self.att_nodes = [np.flatnonzero(model.node_body == b) for b in range(model.n_bodies)]
         # no free bodies: J is a constant selection and scaling (fast path)
         self.simple = len(self.bodies) == 0
         self._blk = None
@@ -267,25 +268,20 @@ class Reduction:
                              shape=(self.n_full, self.nq))
 
     def geometric(self, state: RodState, g: np.ndarray) -> sp.csr_matrix | None:
-        """Second-order term of the body rotations acting on attached-node forces ``g``."""
-        if not len(self.bodies):
+        """Second-order term of the body rotations acting on attached-node forces ``g``: per
+        attached node ``1/2 (g r^T + r g^T) - (g.r) I`` on its body's rotation block (summed by
+        the sparse assembly), all nodes of all free bodies at once."""
+        nodes, k, c0 = self._jn, self._jn_k, self._jn_c
+        if not len(nodes):
             return None
-        rows, cols, vals = [], [], []
-        gx = g[: 3 * self.model.n_nodes].reshape(-1, 3)
-        for b in self.bodies:
-            nodes = self.att_nodes[b]
-            if not len(nodes):
-                continue
-            r = state.x[nodes] - state.body_pos[b]
-            gn = gx[nodes]
-            G = 0.5 * (gn.T @ r + r.T @ gn) - np.sum(gn * r) * np.eye(3)
-            c = self.body_col[int(b)] + 3 + np.arange(3)
-            rows.append(np.repeat(c, 3))
-            cols.append(np.tile(c, 3))
-            vals.append(G.ravel() / self.ell**2)
-        if not rows:
-            return None
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(self.nq, self.nq))
+        r = state.x[nodes] - state.body_pos[self.bodies[k]]
+        gn = g[: 3 * self.model.n_nodes].reshape(-1, 3)[nodes]
+        gr = gn[:, :, None] * r[:, None, :]  # (m,3,3): g r^T
+        G = 0.5 * (gr + gr.transpose(0, 2, 1)) - np.sum(gn * r, axis=1)[:, None, None] * np.eye(3)
+        c = c0[:, None] + 3 + np.arange(3)  # (m,3): the body's rotation columns
+        rows = np.repeat(c, 3, axis=1)  # row-major (i, j) -> (c_i, c_j)
+        cols = np.tile(c, (1, 3))
+        return sp.csr_matrix((G.reshape(-1) / self.ell**2, (rows.ravel(), cols.ravel())), shape=(self.nq, self.nq))
 
 
 @dataclass
@@ -336,9 +332,7 @@ class StaticSolver:
         J = self.red.jacobian(st, np.zeros((len(self.red.bodies), 3)))
         gq = J.T @ g
         if body_forces is not None:
-            for b in self.red.bodies:
-                c0 = self.red.body_col[int(b)]
-                gq[c0:c0 + 3] -= body_forces[b]
+            gq[self.red.body_trans_cols] -= body_forces[self.red.bodies].ravel()
         Hq = None
         if need_hess:
             Hq = (J.T @ H @ J).tocsr()
