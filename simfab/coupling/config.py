@@ -27,11 +27,10 @@ KAPPA_MAX_GROWTH = 1e3
 CURVATURE_SAFETY = 2.0
 CURVATURE_FLOOR = 0.1
 #: Lazy contact evaluation: points certified (by the Lipschitz bound) farther than
-#: max(LAZY_BAND_DHATS * d_hat, LAZY_BAND_SIGMAS * sigma) from O are not re-evaluated (the barrier
-#: acts within d_hat only; a band of half a sigma as well evaluated 8% more points and 70% more
-#: Hessians of psi on clip3d for the same result).
+#: LAZY_BAND_DHATS * d_hat from O are not re-evaluated (the barrier acts within d_hat only; a band
+#: of half a sigma as well evaluated 8% more points and 70% more Hessians of psi on clip3d for the
+#: same result).
 LAZY_BAND_DHATS = 4.0
-LAZY_BAND_SIGMAS = 0.0
 #: Newton: stop when the step is below this fraction of h_A ...
 NEWTON_STEP_TOL_REL = 1e-7
 #: ... or the free-dof force residual is below this fraction of E * h_A^2 (3D) / E * h_A * t (2D)

@@ -289,7 +289,7 @@ class _StepObjective:
         # Lazy evaluation: psi is L-Lipschitz, so a point that was at distance d_ref when last
         # evaluated exactly (at y_ref) is still at least d_ref - L |y - y_ref| away. Points whose
         # bound stays above the band need no evaluation (their barrier term is exactly zero).
-        self.band = max(C.LAZY_BAND_DHATS * cm.dhat, C.LAZY_BAND_SIGMAS * cm.field.sigma)
+        self.band = C.LAZY_BAND_DHATS * cm.dhat
         self.y_ref = None
         self.d_ref = None
         self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
