@@ -16,6 +16,7 @@ import io
 import numpy as np
 
 from simfab.growth import tolerances as tol
+from simfab.growth.skeleton import chains, subset
 
 
 @dataclasses.dataclass
@@ -116,8 +117,6 @@ def simplify_chains(nodes: np.ndarray, parent: np.ndarray, radius: np.ndarray, k
     dropped nodes stay within ``tolerance`` × (smallest radius on the chain) of the chord
     (so they stay well inside the skin). Heavily overlapping hulls of short segments make
     the union slow and produce slivers; this removes them without changing the shape."""
-    from simfab.growth.skeleton import chains
-
     out = np.ones(len(nodes), bool)
     for c in chains(parent, keep):
         if len(c) < 3:
@@ -308,8 +307,4 @@ def _collapse(parent: np.ndarray, kept: np.ndarray):
         a = anc[i]
         if a >= 0 and not kept[a]:
             anc[i] = anc[a]
-    idx = np.nonzero(kept)[0]
-    new = np.full(len(parent), -1, np.int64)
-    new[idx] = np.arange(len(idx))
-    par = anc[idx]
-    return idx, np.where(par >= 0, new[np.maximum(par, 0)], -1)
+    return subset(anc, kept)
