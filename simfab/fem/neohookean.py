@@ -671,8 +671,8 @@ class _Workspace:
         self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
         self.dummy_slots = wp.zeros((1, 1, 1), dtype=wp.int32, device=dev)
         self.dummy_data = wp.zeros(1, dtype=wp.float64, device=dev)
-        self.data_np = None
-        self.data = None
+        self.data_np = self.data = None  # CSR values of the last Hessian launch (set per call)
+        self.data2_np = self.data2 = None  # second values array (projected Hessian with _BOTH)
         self.commands: dict = {}
         # gradient scatter: (n*d, m*k*d) sparse sum over the element copies of each dof
         dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
@@ -682,6 +682,13 @@ class _Workspace:
     def _wrap(self, arr: np.ndarray, dtype, dev):
         """Warp view of a numpy array (alias on the CPU, a device copy elsewhere)."""
         return wp.array(arr, dtype=dtype, device=dev, copy=False) if self.cpu else wp.array(arr, dtype=dtype, device=dev)
+
+    def hessian_values(self, second: bool = False) -> np.ndarray:
+        """CSR values (nnz,) filled by the last Hessian launch: ``data``, or ``data2`` with
+        ``second``. On the CPU the numpy array the kernel wrote through (no copy), else a host copy."""
+        if second:
+            return self.data2_np if self.cpu else self.data2.numpy()
+        return self.data_np if self.cpu else self.data.numpy()
 
     def set_positions(self, x: np.ndarray) -> None:
         self.x_np[...] = x
@@ -784,7 +791,7 @@ def energy_gradient_hessian(model: FemModel, x, *, project_psd: bool = True) -> 
     fresh array the caller may modify (e.g. add contact blocks via ``pattern.block_slots``).
     """
     ws = _launch(model, x, _HESSIAN, _PROJECT if project_psd else _EXACT)
-    H = model.pattern.matrix(ws.data_np if ws.cpu else ws.data.numpy())
+    H = model.pattern.matrix(ws.hessian_values())
     return _total(ws), _gradient(model, ws), H
 
 
@@ -798,8 +805,8 @@ def energy_gradient_hessians(model: FemModel, x) -> tuple[float, np.ndarray, sp.
     and falls back to the projected one otherwise.
     """
     ws = _launch(model, x, _HESSIAN, _BOTH)
-    H_exact = model.pattern.matrix(ws.data_np if ws.cpu else ws.data.numpy())
-    H_psd = model.pattern.matrix(ws.data2_np if ws.cpu else ws.data2.numpy())
+    H_exact = model.pattern.matrix(ws.hessian_values())
+    H_psd = model.pattern.matrix(ws.hessian_values(second=True))
     return _total(ws), _gradient(model, ws), H_exact, H_psd
 
 
@@ -807,7 +814,7 @@ def _energy_gradient_hessian_svd(model: FemModel, x) -> tuple[float, np.ndarray,
     """Like :func:`energy_gradient_hessian` (projected) but always through the SVD eigensystem:
     the reference route the faster direct route is checked and benchmarked against."""
     ws = _launch(model, x, _HESSIAN, _PROJECT_SVD)
-    H = model.pattern.matrix(ws.data_np if ws.cpu else ws.data.numpy())
+    H = model.pattern.matrix(ws.hessian_values())
     return _total(ws), _gradient(model, ws), H
 
 
