@@ -24,12 +24,13 @@ is first relaxed with EA / 100 (stiffness homotopy) and then solved with the rea
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from simfab.deploy import elastica
 from simfab.deploy import tolerances as tol
+from simfab.deploy._config import require_positive
 from simfab.errors import ConvergenceError, InputError
 
 DEFAULT_RATIOS = (0.99, 0.95, 0.90, 0.80, 0.60)
@@ -56,10 +57,7 @@ class BeamSetup:
     max_increment: float = 0.1
 
     def __post_init__(self):
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if not (np.isfinite(v) and v > 0):
-                raise InputError(f"beam parameter {f.name} must be a positive number (got {v})")
+        require_positive(self, "beam_")
 
     @property
     def B(self) -> float:

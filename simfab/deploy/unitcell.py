@@ -34,10 +34,11 @@ negative: saddle.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
+from simfab.deploy._config import require_positive
 from simfab.errors import InputError
 
 U = np.array([[1.0, 0, 0], [0, 1.0, 0], [-1.0, 0, 0], [0, -1.0, 0]])
@@ -66,10 +67,7 @@ class CellConfig:
     perturbation: float = 0.05
 
     def __post_init__(self):
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if not (np.isfinite(v) and v > 0):
-                raise InputError(f"cell parameter {f.name} must be positive (got {v})")
+        require_positive(self, "cell_")
         if not self.gap < self.size / 2 - 2 * self.beam_width:
             raise InputError(f"cell_gap {self.gap} leaves no room for the spokes in a cell of size {self.size}")
         if not self.corner_gap < self.size / 2:

@@ -81,3 +81,23 @@ def test_validation_failure_exits_1_after_writing_outputs(tmp_path, capsys):
     assert "missed tolerance" in capsys.readouterr().err
     rows = json.loads((out / "buckling.json").read_text())["rows"]
     assert rows[0]["passed"] is False
+
+
+@pytest.mark.parametrize("cmd, scene, field", [
+    (["deploy"], "unit_cell.xml", "cell_young"),
+    (["validate", "buckling"], "elastica.xml", "beam_thickness"),
+])
+def test_non_positive_scene_parameter_is_named(cmd, scene, field, tmp_path, capsys):
+    """A scene parameter that is not positive: exit 2, the one-line error names the <numeric> field."""
+    from pathlib import Path
+
+    src = Path(__file__).resolve().parents[2] / "scenes" / "deploy" / scene
+    text = src.read_text()
+    start = text.index(f'<numeric name="{field}" data="') + len(f'<numeric name="{field}" data="')
+    bad = tmp_path / scene
+    bad.write_text(text[:start] + "-1" + text[text.index('"', start):])
+    out = tmp_path / "o"
+    assert main(cmd + ["--scene", str(bad), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{field}: must be a positive number (got -1" in err
+    assert not out.exists()

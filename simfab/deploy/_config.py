@@ -1,0 +1,18 @@
+"""Checks shared by the deployment area's scene-loaded configuration dataclasses."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from simfab.errors import InputError
+
+
+def require_positive(cfg, prefix: str) -> None:
+    """Raise InputError naming the scene field ``<prefix><field>`` (the ``<numeric>`` name) of the
+    first field of dataclass ``cfg`` that is not a finite positive number."""
+    for f in dataclasses.fields(cfg):
+        v = getattr(cfg, f.name)
+        if not (np.isfinite(v) and v > 0):
+            raise InputError(f"must be a positive number (got {v})", where=f"{prefix}{f.name}")
