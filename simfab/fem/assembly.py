@@ -3,8 +3,9 @@
 The Hessian of an FEM energy on ``n`` vertices in ``dim`` dimensions is an ``(n*dim, n*dim)``
 matrix made of dense ``dim x dim`` blocks, one per pair of vertices sharing an element. The
 pattern depends only on the connectivity, so it is built once; every Newton iteration only
-computes the values: ``data = bincount(slots, weights=blocks)`` with a precomputed map from
-each entry of each element block to its position in ``csr.data``.
+computes the values, added into ``csr.data`` through a precomputed map from each entry of each
+element block to its position there (``element_slots``; the Neo-Hookean kernel adds straight
+into it, :meth:`HessianPattern.assemble` is the numpy equivalent).
 
 Dof numbering: vertex ``v``, axis ``a`` -> row ``v*dim + a``. Within a row, columns are sorted.
 """
@@ -111,24 +112,16 @@ class HessianPattern:
         return self._pair_slots(rows, cols)
 
     # -- assembly ----------------------------------------------------------------------
-    def zeros(self) -> np.ndarray:
-        """A zero ``data`` array of length nnz."""
-        return np.zeros(self.nnz)
-
     def matrix(self, data: np.ndarray) -> sp.csr_matrix:
         """CSR matrix with this pattern and the given ``data`` (nnz,) (not copied)."""
         return sp.csr_matrix((data, self.indices, self.indptr), shape=self.shape, copy=False)
-
-    def assemble_data(self, element_blocks: np.ndarray) -> np.ndarray:
-        """Sum element blocks (m, k*dim, k*dim) into a ``data`` array (nnz,)."""
-        blocks = np.asarray(element_blocks, dtype=np.float64)
-        if blocks.shape != self.element_slots.shape:
-            raise ValueError(f"element_blocks has shape {blocks.shape}, expected {self.element_slots.shape}")
-        return np.bincount(self.element_slots.ravel(), weights=blocks.ravel(), minlength=self.nnz)
 
     def assemble(self, element_blocks: np.ndarray) -> sp.csr_matrix:
         """Assemble element blocks (m, (dim+1)*dim, (dim+1)*dim) into a CSR matrix of this pattern.
 
         Block rows/cols are ordered (local vertex i, axis a) -> i*dim + a.
         """
-        return self.matrix(self.assemble_data(element_blocks))
+        blocks = np.asarray(element_blocks, dtype=np.float64)
+        if blocks.shape != self.element_slots.shape:
+            raise ValueError(f"element_blocks has shape {blocks.shape}, expected {self.element_slots.shape}")
+        return self.matrix(np.bincount(self.element_slots.ravel(), weights=blocks.ravel(), minlength=self.nnz))
