@@ -35,23 +35,25 @@ def test_box_on_its_face_needs_no_support():
         assert m["support_volume"] == 0.0 and m["overhang_area"] == 0.0
 
 
-def test_diamond_prism_closed_form_and_raycast():
-    v, f, vol, area = _diamond_prism()
+@pytest.mark.parametrize(
+    "shape,rel",
+    [
+        (_diamond_prism, 1e-12),
+        (_t_shape, 1e-6),  # exact up to the boolean's float32 vertex rounding (relative 1e-7)
+    ],
+)
+def test_closed_form_and_raycast(shape, rel):
+    v, f, vol, area = shape()
     m = T.support_metrics(v, f)
-    assert m["support_volume"] == pytest.approx(vol, rel=1e-12)
-    assert m["overhang_area"] == pytest.approx(area, rel=1e-12)
+    assert m["support_volume"] == pytest.approx(vol, rel=rel)
+    assert m["overhang_area"] == pytest.approx(area, rel=rel)
     assert T.raycast_support_volume(v, f) == pytest.approx(vol, rel=0.01)
 
 
-def test_t_shape_closed_form_and_raycast():
-    v, f, vol, area = _t_shape()
-    m = T.support_metrics(v, f)
-    # exact up to the boolean's float32 vertex rounding (relative 1e-7)
-    assert m["support_volume"] == pytest.approx(vol, rel=1e-6)
-    assert m["overhang_area"] == pytest.approx(area, rel=1e-6)
-    assert T.raycast_support_volume(v, f) == pytest.approx(vol, rel=0.01)
-    # upside down (180 deg about x): the crossbar lies on the plate and the stem's end
-    # faces up, nothing overhangs
+def test_t_shape_upside_down_needs_no_support():
+    # 180 deg about x: the crossbar lies on the plate and the stem's end faces up, nothing
+    # overhangs
+    v, f, _, _ = _t_shape()
     vu = T.oriented(v, T.Orientation(name="u", euler_deg=(180.0, 0.0, 0.0)))
     assert T.support_metrics(vu, f)["support_volume"] == pytest.approx(0.0, abs=1e-15)
 
