@@ -156,14 +156,14 @@ def make_bundle(spec: SurveySpec | None = None) -> dict:
     """(Re)generate mesh, picture, truth and synthetic responses of a survey from its TOML."""
     from simfab.crowd import synth
     from simfab.crowd.data import Scale
-    from simfab.io.atomic import atomic_path, write_csv
+    from simfab.io.atomic import write_csv
+    from simfab.io.mesh import save_mesh
 
     spec = spec or load_survey()
     import trimesh
 
     V, F = build_part_mm()
-    with atomic_path(spec.root / spec.mesh) as tmp:
-        trimesh.Trimesh(V, F, process=False).export(tmp)
+    save_mesh(trimesh.Trimesh(V, F, process=False), spec.root / spec.mesh)
     rows = survey_truth(spec)
     key = "support_score" if spec.question == "support" else "finish_score"
     truth = np.array([r[key] for r in rows])
