@@ -133,7 +133,6 @@ def _scale(args):
 
 def aggregate_outputs(ratings, truth, result: dict, out: str, *, title: str = "crowd") -> dict:
     """Write the aggregate table, rater table, summary JSON and (with truth) figures."""
-    from simfab.crowd import metrics
     from simfab.crowd.plots import plot_expert_network, plot_method_errors
     from simfab.io.atomic import write_csv, write_json
 
@@ -156,7 +155,7 @@ def aggregate_outputs(ratings, truth, result: dict, out: str, *, title: str = "c
     if truth is not None:
         sc = ratings.scale
         crowd_err = methods["bayesian"]["rms_continuous"]
-        ind = metrics.individual_errors(ratings.labels, truth, sc)
+        ind = [indiv[w] for w in ratings.workers]
         outputs["expert_network_png"] = plot_expert_network(crowd_err, ind, ratings.workers, os.path.join(out, "expert_network.png"), title=f"{title}: Bayesian crowd estimate vs individuals")
         per_q = {n: abs(sc.to_unit([methods[n]["estimates"][t] for t in ratings.tasks]) - sc.to_unit(truth)) for n in names}
         outputs["errors_png"] = plot_method_errors(per_q, ratings.tasks, os.path.join(out, "errors_per_question.png"), title=f"{title}: crowd error per question")
