@@ -648,6 +648,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
     """Move O from state.s to s_new and re-equilibrate A (predictor, Newton, refinement)."""
     total = 0
     resume = None  # converged positions to resume from after a refinement (see below)
+    refined = False  # points were added since the previous state was accepted
     for _ in range(C.MAX_REFINEMENT_ROUNDS):  # refinement restarts
         resumed = False
         try:
@@ -656,6 +657,9 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
                                                           to=C.LIFT_TO * cm.dhat)
             resumed = x0 is not None
             if x0 is None:
+                if refined:  # starting over from the previous state: make it feasible for the new points
+                    _restore_feasibility(cm, state, ctx)
+                    refined = False
                 x0 = _warm_start(cm, state, s_new, obj, ctx)
             x, it = _newton(cm, obj, x0, ctx)
         except ConvergenceError:
@@ -678,9 +682,9 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         # solve again from x with the new points lifted out of O (see _lift_points); should that
         # be infeasible or fail, from the previous state, which is feasible for the new points
         # (new facets were outside O there; denser points of refined facets were within the
-        # tolerance and are pushed out first)
+        # tolerance and are pushed out first, when it comes to that)
         _add_refinement(cm, state, new)
-        _restore_feasibility(cm, state, ctx)
+        refined = True
         resume = x if C.RESUME_AFTER_REFINEMENT else None
     raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")
 
