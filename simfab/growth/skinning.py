@@ -271,21 +271,22 @@ def skin(nodes, parent, radius, objects: dict | None = None, *, segments: int = 
         kept = simplify_chains(nodes, parent, radius, fixed if fixed is not None else parent < 0, simplify)
         idx, sp = _collapse(parent, kept)
         sn, sr = nodes[idx], radius[idx]
+    # the objects' manifolds do not depend on the attempt: build them once
+    found = SkinReport()
+    cutters = object_manifolds(objects, found) if objects else []
+    carved = found.objects_subtracted if subtract else []
+    # carved objects cannot be penetrated (exact booleans; rep.overlap_volume checks it):
+    # measure the depth only for objects left whole
+    whole = {k: v for k, v in (objects or {}).items() if k not in carved}
     for attempt in range(max(1, attempts)):
-        rep = SkinReport()
-        cutters = object_manifolds(objects, rep) if objects else []
+        rep = SkinReport(objects_subtracted=list(carved), objects_not_manifold=list(found.objects_not_manifold))
         rotation = None if attempt == 0 else _random_rotation(rng)
         solid = skin_solid(sn, sp, sr, segments=segments, rotation=rotation)
         if subtract:
             solid = carve(solid, cutters)
-        else:
-            rep.objects_subtracted = []
         rep.overlap_volume = overlap_volume(solid, cutters)
         mesh = clean_for_stl(to_trimesh(solid))
         check_skin(mesh, nodes, r_min, rep)
-        # carved objects cannot be penetrated (exact booleans; rep.overlap_volume checks it):
-        # measure the depth only for objects left whole
-        whole = {k: v for k, v in (objects or {}).items() if not subtract or k not in rep.objects_subtracted}
         rep.penetration = penetration_depth(mesh, whole)
         rep.attempts = attempt + 1
         if rep.watertight and rep.is_volume:
