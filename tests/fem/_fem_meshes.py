@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from simfab.fem.meshing import structured_box
+
 
 def rect_tri(lx, ly, nx, ny, crossed=True):
     """Rectangle [0,lx]x[0,ly]; crossed: 4 triangles per cell around the cell centre (less stiff in
@@ -28,28 +30,7 @@ def rect_tri(lx, ly, nx, ny, crossed=True):
 
 def box_tet(lx, ly, lz, nx, ny, nz):
     """Box [0,lx]x[0,ly]x[0,lz] split into nx*ny*nz cubes of 6 tets each (Freudenthal/Kuhn)."""
-    xs, ys, zs = np.linspace(0, lx, nx + 1), np.linspace(0, ly, ny + 1), np.linspace(0, lz, nz + 1)
-    X, Y, Z = np.meshgrid(xs, ys, zs, indexing="ij")
-    pts = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
-    vid = lambda i, j, k: (i * (ny + 1) + j) * (nz + 1) + k  # noqa: E731
-    # the 6 monotone lattice paths from corner (0,0,0) to (1,1,1)
-    paths = [(0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)]
-    tets = []
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(nz):
-                for p in paths:
-                    c = [0, 0, 0]
-                    tet = [vid(i, j, k)]
-                    for axis in p:
-                        c[axis] += 1
-                        tet.append(vid(i + c[0], j + c[1], k + c[2]))
-                    tets.append(tet)
-    T = np.array(tets, dtype=np.int64)
-    d = pts[T[:, 1:]] - pts[T[:, :1]]
-    neg = np.linalg.det(d) < 0
-    T[neg] = T[neg][:, [0, 1, 3, 2]]
-    return pts, T.astype(np.int32)
+    return structured_box((lx, ly, lz), (nx, ny, nz))
 
 
 def box_tet24(lx, ly, lz, nx, ny, nz):
