@@ -42,9 +42,7 @@ def bending_strain(model, state) -> np.ndarray:
     dk = np.abs(material_curvatures(model, state) - model.kappa_bar) / model.vor_len[:, None]
     half = np.zeros((model.n_edges, 2))
     for r in model.rods:
-        sec = r.section
-        t, w = (sec.thickness, sec.width) if sec.shape == "rect" else (2 * sec.radius, 2 * sec.radius)
-        half[r.edges] = [0.5 * t, 0.5 * w]
+        half[r.edges] = r.section.half_extents()
     h = half[model.hinge_edges[:, 0]]
     out[model.hinge_nodes[:, 1]] = dk[:, 0] * h[:, 0] + dk[:, 1] * h[:, 1]
     return out
@@ -92,7 +90,7 @@ def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsule
     holder = b.body("rods") if rods == "capsules" else None
     for r in model.rods:
         P = st.x[r.nodes]
-        rad = 0.5 * (r.section.thickness if r.section.shape == "rect" else 2 * r.section.radius)
+        rad = r.section.half_extents()[0]  # half the sheet thickness
         if rods == "capsules":
             for i in range(len(P) - 1):
                 b.geom(holder, type="capsule", fromto=np.concatenate([P[i], P[i + 1]]), size=[rad], contype=0,

@@ -83,6 +83,13 @@ class Section:
         r = self.radius
         return dict(EA=E * np.pi * r**2, B1=E * np.pi * r**4 / 4.0, B2=E * np.pi * r**4 / 4.0, GJ=G * np.pi * r**4 / 2.0)
 
+    def half_extents(self) -> tuple[float, float]:
+        """Distances [m] from the centreline to the outer fibre along m1 (half the thickness) and
+        along m2 (half the width); ``(radius, radius)`` for a circle."""
+        if self.shape == "rect":
+            return 0.5 * self.thickness, 0.5 * self.width
+        return self.radius, self.radius
+
     def draw_width(self) -> float:
         """Width [m] used for drawing (USD curve widths, capsule radii)."""
         return self.width if self.shape == "rect" else 2.0 * self.radius

@@ -26,3 +26,29 @@ def test_larger_insert_dome_smaller_insert_saddle(scene):
     assert len(dome.states) == cfg.increments + 1
     assert dome.curvature_history[0] == pytest.approx(0.0, abs=1e-9)  # flat start
     assert dome.curvature_history[-1] == pytest.approx(dome.curvature["gaussian_curvature"])
+
+
+@pytest.mark.parametrize("plane, director, half", [("xy", (0.0, 0.0, 1.0), "width"), ("xz", (0.0, 0.0, 1.0), "thickness")])
+def test_bending_strain_of_a_circular_arc(plane, director, half):
+    """A straight strip (sheet normal +z) bent into an arc of radius R: fibre strain c / R at interior
+    nodes (c: half the width for bending in the sheet plane xy, half the thickness out of it), 0 at
+    the rod ends. Per node the discrete curvature 2 tan(phi/2) over the rest Voronoi length R phi
+    (phi: turning angle) is (1 + phi^2/12 + O(phi^4)) / R, the tolerance below."""
+    import numpy as np
+
+    from simfab.deploy.export import bending_strain
+    from simfab.rods.model import Material, NetworkBuilder, Section
+
+    R, n, L = 0.05, 20, 0.04
+    phi = np.linspace(0.0, L / R, n + 1)
+    a, b = R * np.sin(phi), R * (1.0 - np.cos(phi))
+    arc = np.stack([a, b, 0 * a] if plane == "xy" else [a, 0 * a, b], axis=1)
+    straight = np.stack([np.linspace(0.0, L, n + 1), 0 * a, 0 * a], axis=1)
+    sec = Section(width=4e-3, thickness=1e-3)
+    nb = NetworkBuilder()
+    nb.add_rod("strip", arc, rest_points=straight, section=sec, material=Material(young=1e9), director=director)
+    model, state = nb.build()
+    eps = bending_strain(model, state)
+    c = 0.5 * (sec.width if half == "width" else sec.thickness)
+    assert eps[[0, n]] == pytest.approx([0.0, 0.0], abs=0)
+    np.testing.assert_allclose(eps[1:n], c / R, rtol=1.01 * (L / R / n) ** 2 / 12)
