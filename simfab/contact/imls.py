@@ -166,8 +166,7 @@ class ImlsField:
         tree = self._buffers.get("kdtree")
         if tree is None:
             tree = self._buffers["kdtree"] = cKDTree(_pad3(self.vertices))
-        R, p = pose_matrix(pose)
-        body = (_pad3(np.asarray(points, dtype=np.float64)) - p) @ R
+        body = body_frame(points, pose)
         nn, _ = tree.query(body, k=1)
         return np.maximum(self.far_distance, nn - 2.0 * self.sigma)
 
@@ -254,6 +253,14 @@ def pose_matrix(pose):
     return R, p
 
 
+def body_frame(points, pose=None) -> np.ndarray:
+    """World points (..., dim) in O's body frame (..., 3): R^T (x - p) for O's ``pose`` (as in
+    :func:`pose_matrix`); 2D points get z = 0."""
+    R, p = pose_matrix(pose)
+    pts = np.asarray(points, dtype=np.float64)
+    return (_pad3(pts.reshape(-1, pts.shape[-1])) - p).dot(R).reshape(pts.shape[:-1] + (3,))
+
+
 def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
     """Evaluate the IMLS field at world points in one Warp launch.
 
@@ -271,7 +278,7 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
     if k == 0:
         return ImlsEval(psi=np.zeros(0), grad=np.zeros((0, dim)), hess=np.zeros((0, dim, dim)), near=np.zeros(0, bool))
     R, p = pose_matrix(pose)
-    body = (_pad3(pts) - p) @ R  # R^T (x - p) row-wise
+    body = body_frame(pts, (R, p))
     lo, hi = fld._bounds
     cand = np.flatnonzero(np.all((body >= lo - fld.radius) & (body <= hi + fld.radius), axis=1))
     psi = np.full(k, -fld.far_distance)

@@ -76,7 +76,7 @@ import numpy as np
 
 from simfab._parallel import submit
 from simfab.contact.barrier import barrier, barrier_hessian, point_barrier
-from simfab.contact.imls import ImlsField, pose_matrix
+from simfab.contact.imls import ImlsField, body_frame, pose_matrix
 from simfab.coupling import config as C
 from simfab.coupling import rigid
 from simfab.coupling.config import InsertionOptions
@@ -1021,7 +1021,7 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
             # O's body frame psi is the same L-Lipschitz function and psi(y) <= psi(y') + L |b - b'|
             # with b, b' the body-frame positions now and then
             if C.FACET_CHECK_CACHE:
-                body = _body_frame(y, R, p)
+                body = body_frame(y, (R, p))
                 known_body, known_psi = _check_cache(cm, state, is_refined, len(w))
                 moved = np.linalg.norm(body - known_body[f_sel], axis=2)
                 psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
@@ -1034,13 +1034,6 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     out = (ids, psi_max, refined)
     state.check = (x, s, state.order, out)
     return out
-
-
-def _body_frame(y: np.ndarray, R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Points y (..., dim) in O's body frame (..., 3): R^T (y - p)."""
-    y3 = np.zeros(y.shape[:-1] + (3,))
-    y3[..., : y.shape[-1]] = y
-    return (y3 - p) @ R
 
 
 def _check_cache(cm: CouplingModel, state: _State, refined: bool, p: int):
