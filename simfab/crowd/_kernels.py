@@ -275,15 +275,17 @@ class WarpKernel:
     def __init__(self, y, mask, half_width, priors, cfg, rng, init, device="cpu"):
         import numpy as np
 
+        from simfab.crowd.model import Observations
+
         self.np, self.cfg, self.rng, self.device = np, cfg, rng, device
         B, R, Q = y.shape
         C = cfg.chains
         self.B, self.C, self.R, self.Q, self.T = B, C, R, Q, B * C
-        self.rounded = 1 if half_width > 0 else 0
-        lo = np.clip(y - half_width, 0.0, 1.0) if self.rounded else y
-        hi = np.clip(y + half_width, 0.0, 1.0) if self.rounded else y
+        obs = Observations.make(y, mask, half_width)  # the numpy model's cells and weights
+        self.rounded = 1 if obs.lo is not None else 0
         arr = lambda a: wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=wp.float64, device=device)  # noqa: E731
-        self.lo, self.hi, self.w = arr(lo), arr(hi), arr(np.asarray(mask, float))
+        # the density likelihood reads the rating itself from ``lo`` (see _loglik)
+        self.lo, self.hi, self.w = (arr(obs.y), arr(obs.y), arr(obs.weight)) if obs.lo is None else (arr(obs.lo), arr(obs.hi), arr(obs.weight))
         self.cap = float(_ratio_cap())
         self.prior = arr([priors.alpha_mean, priors.alpha_precision, priors.beta_mean, priors.beta_precision, priors.beta_min, priors.x_mean, priors.x_precision, self.cap])
         T = self.T
