@@ -243,8 +243,8 @@ def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: st
     """Push the beam through the gap ratios (sorted descending) and measure each equilibrium.
 
     Returns one row per ratio: rise, force (simulated and exact), errors, wall time of the
-    increments since the flat start [s], Newton iterations, and the shape (x, z) when
-    ``keep_states``.
+    increments since the flat start [s], Newton iterations and quasi-static increments since the
+    flat start, and the shape (x, z) when ``keep_states``.
     """
     from simfab.rods.statics import StaticSolver, StaticsOptions
 
@@ -257,7 +257,7 @@ def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: st
     rows = []
     r = 1.0
     t0 = time.perf_counter()
-    iters = 0
+    iters = increments = 0
     for target in targets:
         while r > target + 1e-12:
             r_old, r = r, max(target, r - setup.max_increment)
@@ -268,6 +268,7 @@ def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: st
                 raise ConvergenceError(f"elastica {support} n={n} {path}: g/L={r:.4f}: {e}") from None
             state = res.state
             iters += res.iterations
+            increments += 1
         seconds = time.perf_counter() - t0
         ex = elastica.solve(target, support)
         delta = beam.rise(state) / L
@@ -277,7 +278,7 @@ def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: st
         row = dict(support=support, path=path, g_over_L=target, n=n, delta_over_L=delta,
                    delta_over_L_exact=ex.delta_over_L, rel_err=abs(delta - ex.delta_over_L) / ex.delta_over_L,
                    force=force, force_exact=force_ex, force_rel_err=abs(force - force_ex) / force_ex,
-                   seconds=seconds, newton_iterations=iters)
+                   seconds=seconds, newton_iterations=iters, increments=increments)
         if keep_states:
             row["shape"] = state.x[:, [0, 2]].copy()
         rows.append(row)

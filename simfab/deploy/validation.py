@@ -176,7 +176,9 @@ def _plot(path, shapes, rows, ratios, supports, paths, ns, L):
     from simfab.deploy import elastica
     from simfab.io.atomic import save_figure
 
-    n_show = 80 if 80 in ns else max(ns)
+    from simfab.deploy import tolerances as tol
+
+    n_show = tol.VALIDATION_N if tol.VALIDATION_N in ns else max(ns)
     fig, axes = plt.subplots(len(supports), 1, figsize=(8, 3.2 * len(supports)), squeeze=False)
     for ax, support in zip(axes[:, 0], supports):
         for i, r in enumerate(sorted(set(ratios), reverse=True)):

@@ -18,6 +18,7 @@ def test_validate_buckling_small_case_writes_outputs(tmp_path, capsys):
     assert len(rows) == 2
     for key in ("support", "g_over_L", "n", "delta_over_L", "delta_over_L_exact", "rel_err", "force_rel_err", "seconds"):
         assert key in rows[0]
+    assert [r["increments"] for r in rows] == [1, 1]  # g/L 1 -> 0.9 is one step of the scene's beam_max_increment 0.1
     assert res["convergence_order"]["pinned"] == pytest.approx(2.0, abs=0.2)
     for f in ("buckling.csv", "buckling.json", "buckling_shapes.png"):
         assert (out / f).stat().st_size > 0

@@ -44,7 +44,7 @@ def run(argv) -> dict:
         times.append(time.perf_counter() - t0)
     ours = dict(seconds=min(times), seconds_all=times, delta_over_L=row["delta_over_L"], rel_err=row["rel_err"],
                 within_tolerance=row["rel_err"] <= rtol, newton_iterations=row["newton_iterations"],
-                increments=int(round((1.0 - a.r) / setup.max_increment + 0.4999)), force_rel_err=row["force_rel_err"])
+                increments=row["increments"], force_rel_err=row["force_rel_err"])
     out = dict(case=dict(support="pinned", g_over_L=a.r, n=a.n, rise_rtol=rtol),
                exact_delta_over_L=exact.delta_over_L, reference_delta_over_L=ref,
                reference_vs_exact=(abs(ref - exact.delta_over_L) if ref is not None else None),
