@@ -84,6 +84,17 @@ class Tree:
     def copy(self) -> "Tree":
         return Tree(**{f.name: getattr(self, f.name).copy() for f in dataclasses.fields(self)})
 
+    def take(self, idx, **replace) -> "Tree":
+        """The nodes ``idx`` (every per-node field indexed), with fields in ``replace`` set as given
+        (e.g. ``parent`` re-indexed by the caller)."""
+        return Tree(**{f.name: replace[f.name] if f.name in replace else getattr(self, f.name)[idx]
+                       for f in dataclasses.fields(self)})
+
+    def concat(self, other: "Tree") -> "Tree":
+        """This tree's nodes followed by ``other``'s (``other.parent`` must already index the result)."""
+        return Tree(**{f.name: np.concatenate([getattr(self, f.name), getattr(other, f.name)])
+                       for f in dataclasses.fields(self)})
+
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class ColonizeSettings:

@@ -247,13 +247,7 @@ def _merge_history(history: Tree | None, tree: Tree) -> Tree:
         _, j = cKDTree(history.nodes).query(tree.nodes[old])
         mapping[old] = j
     mapping[new] = len(history) + np.arange(new.size)
-    par = mapping[tree.parent[new]]
-    return Tree(nodes=np.concatenate([history.nodes, tree.nodes[new]]), parent=np.concatenate([history.parent, par]),
-                birth=np.concatenate([history.birth, tree.birth[new]]),
-                target=np.concatenate([history.target, tree.target[new]]),
-                root=np.concatenate([history.root, tree.root[new]]),
-                frozen=np.concatenate([history.frozen, tree.frozen[new]]),
-                contact=np.concatenate([history.contact, tree.contact[new]]))
+    return history.concat(tree.take(new, parent=mapping[tree.parent[new]]))
 
 
 def _contacts(tree: Tree, scene, res: Resolved, obstacles) -> np.ndarray:
@@ -300,8 +294,7 @@ def _prune(tree: Tree, scene, res: Resolved, obstacles, mode: str) -> Tree:
     keep[tree.parent < 0] = True  # roots stay (growth of later stages starts there)
     idx, par = subset(tree.parent, keep)
     # dead ends may grow again in a later stage; targets stay tips
-    return Tree(nodes=tree.nodes[idx], parent=par, birth=tree.birth[idx], target=tree.target[idx],
-                root=tree.root[idx], frozen=tree.target[idx] >= 0, contact=tree.contact[idx])
+    return tree.take(idx, parent=par, frozen=tree.target[idx] >= 0)
 
 
 def node_age(birth: np.ndarray, convention: str, last_step: int) -> np.ndarray:
@@ -392,13 +385,12 @@ class _Symmetry:
                         contact=np.concatenate([sk.contact_mask(), sk.contact_mask()]))
 
     def mirror_tree(self, t: Tree) -> Tree:
+        """Tree plus its mirror image (indices, roots and targets of the image renumbered)."""
         k = len(t)
-        tgt = np.where(t.target >= 0, self.target_mirror[np.maximum(t.target, 0)], -1)
-        return Tree(nodes=np.concatenate([t.nodes, self.reflect(t.nodes)]),
-                    parent=np.concatenate([t.parent, np.where(t.parent >= 0, t.parent + k, -1)]),
-                    birth=np.concatenate([t.birth, t.birth]), target=np.concatenate([t.target, tgt]),
-                    root=np.concatenate([t.root, t.root + int(t.root.max(initial=0)) + 1]),
-                    frozen=np.concatenate([t.frozen, t.frozen]), contact=np.concatenate([t.contact, t.contact]))
+        image = t.take(slice(None), nodes=self.reflect(t.nodes), parent=np.where(t.parent >= 0, t.parent + k, -1),
+                       target=np.where(t.target >= 0, self.target_mirror[np.maximum(t.target, 0)], -1),
+                       root=t.root + int(t.root.max(initial=0)) + 1)
+        return t.concat(image)
 
 
 def skin_result(result: GrowthResult, *, segments: int | None = None, subtract: bool | None = None):
