@@ -2,8 +2,6 @@
 
 import json
 
-import numpy as np
-import pytest
 import trimesh
 
 from simfab.cli import SUBCOMMANDS, main
