@@ -1,6 +1,7 @@
 """Outputs of an insertion simulation: profile CSV + JSON summary, plot, USD stage, MJCF.
 
-All files are written atomically (temp + rename). Units: SI (m, J, N, Pa); the plot's axis shows
+All files of a run are written atomically and together (temporaries renamed only when every
+writer succeeded; see :func:`write_all`). Units: SI (m, J, N, Pa); the plot's axis shows
 the insertion distance in mm.
 """
 
