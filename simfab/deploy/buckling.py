@@ -168,13 +168,12 @@ def build_beam(setup: BeamSetup, n: int, support: str, path: str = "direct", *, 
                material=Material(young=setup.young, poisson=setup.poisson), director=(0.0, 0.0, 1.0),
                stretch_stiffness=setup.axial_ratio * setup.B / L**2)
     start, moving = ends[: len(ends) // 2], ends[len(ends) // 2:]
-    nb.fix("beam", nodes=range(last + 1), comps=(1,))  # planar problem
+    attached = moving if path == "insert" else []  # these follow the insert, which stays in the plane
+    nb.fix("beam", nodes=[i for i in range(last + 1) if i not in attached], comps=(1,))  # planar problem
     nb.fix("beam", nodes=start, comps=(0, 1, 2))
     nb.fix("beam", thetas=[0])
     if path == "insert":
         nb.add_body("insert", pos=(L, 0.0, 0.0), driven=True)
-        # attached nodes follow the insert: release their per-coordinate planar fixes
-        nb.fixed_nodes = [f for f in nb.fixed_nodes if f[1] not in moving]
         if support == "pinned":
             nb.pin("beam", "end", "insert")
             nb.fix("beam", thetas=[last - 1])
