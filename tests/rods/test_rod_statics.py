@@ -120,15 +120,26 @@ def test_flat_unit_cell_network_is_stress_free():
     assert np.max(np.abs(g)) <= 1e-9 * cell.model.force_scale
 
 
-def test_reduced_hessian_through_rigid_body_matches_second_differences():
-    """H_q (J^T H J + geometric term of the body rotation) vs d^2/ds^2 E(apply(state, s v)) at s = 0."""
-    model, st = two_rods_on_a_free_body()
+def unit_cell_network():
+    from simfab.deploy.unitcell import CellConfig, build_cell
+
+    cell = build_cell(CellConfig())  # 13 free bodies (insert, T-junctions, corner junctions)
+    return cell.model, cell.state
+
+
+# (network, size of the random deformation [m], second-difference step hs): the unit cell's
+# 2.5 mm edges and 15 mm clamp levers make its energy vary on shorter scales, hence the smaller
+# step; the truncation error ~ hs^2 is below 1e-5 relative in both cases (checked by varying hs)
+@pytest.mark.parametrize("network, deform, hs", [(two_rods_on_a_free_body, 2e-3, 1e-5), (unit_cell_network, 1e-4, 1e-6)])
+def test_reduced_hessian_through_rigid_body_matches_second_differences(network, deform, hs):
+    """H_q (J^T H J + geometric term of the body rotations) vs d^2/ds^2 E(apply(state, s v)) at s = 0,
+    for one free body and for many (the geometric term is assembled for all bodies at once)."""
+    model, st = network()
     solver = StaticSolver(model)
     rng = np.random.default_rng(4)
-    st = solver.red.apply(st, rng.normal(scale=2e-3, size=solver.red.nq))
+    st = solver.red.apply(st, rng.normal(scale=deform, size=solver.red.nq))
     E, _, H = solver._objective(st, True, True, None, None)
     Hd = H.toarray()
-    hs = 1e-5  # truncation error ~ hs^2 relative
     for _ in range(4):
         v = rng.normal(size=solver.red.nq)
         e2 = (solver._objective(solver.red.apply(st, hs * v), False, False, None, None)[0] - 2 * E
