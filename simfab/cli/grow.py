@@ -126,7 +126,6 @@ def _run_edit(args) -> dict:
     from simfab.growth.sketch import edit_chain, load_camera, load_stroke
     from simfab.io.atomic import write_json
     from simfab.growth.outputs import SKIN_FILE_UNITS, save_skin
-    from simfab.growth.tolerances import SEGMENT_END_TRIM
 
     if args.skeleton is None:
         raise InputError("simfab grow edit needs SKELETON_JSON")
@@ -144,8 +143,7 @@ def _run_edit(args) -> dict:
         scene = load_growth_scene(scene_path)
         objects = scene.objects
         diag = float(np.linalg.norm(np.ptp(scene.objects_bbox(), axis=0)))
-        obstacles = Obstacles(list(objects.values()), scene.sphere_centers, scene.sphere_radii,
-                              end_trim=SEGMENT_END_TRIM * diag)
+        obstacles = Obstacles.of_scene(scene, diag)
     edited, rep = edit_chain(sk, camera, stroke, chain=args.chain, obstacles=obstacles)
     mesh, srep = skin(edited.nodes, edited.parent, edited.radius, objects)
     if rep.get("segments_colliding") or srep.bodies != 1:

@@ -32,6 +32,16 @@ class Obstacles:
         self.end_trim = float(end_trim)
         self._embree = None  # built on first use; False when embreex is unavailable
 
+    @classmethod
+    def of_scene(cls, scene, diag: float) -> "Obstacles":
+        """The objects and obstacle spheres of a :class:`~simfab.growth.scene.GrowthScene`;
+        segment ends on a surface are trimmed by ``SEGMENT_END_TRIM`` × ``diag`` (a design-space
+        diagonal [m])."""
+        from simfab.growth.tolerances import SEGMENT_END_TRIM
+
+        return cls(list(scene.objects.values()), scene.sphere_centers, scene.sphere_radii,
+                   end_trim=SEGMENT_END_TRIM * diag)
+
     # ------------------------------------------------------------------ segments
     def segment_hits(self, p: np.ndarray, q: np.ndarray, p_on_surface=None, q_on_surface=None) -> np.ndarray:
         """(k,) bool: segment p[i]→q[i] crosses an object surface, enters a sphere, or leaves

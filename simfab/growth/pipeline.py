@@ -135,8 +135,7 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
 
     box = np.asarray(p.box, np.float64) if p.box is not None else scene.objects_bbox()
     diag = float(np.linalg.norm(box[1] - box[0]))
-    obstacles = Obstacles(list(scene.objects.values()), scene.sphere_centers, scene.sphere_radii,
-                          end_trim=tol.SEGMENT_END_TRIM * diag)
+    obstacles = Obstacles.of_scene(scene, diag)
 
     sym = _Symmetry(scene, diag) if p.symmetry is not None else None
     keep = sym.keep if sym else None
