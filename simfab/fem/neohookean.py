@@ -125,14 +125,14 @@ def _pk1(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64):
 # 3D
 # ----------------------------------------------------------------------------------------------
 @wp.func
-def _F3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat33d), e: int):
+def _F(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat33d), e: int):
     x0 = x[elements[e, 0]]
     Ds = wp.matrix_from_cols(x[elements[e, 1]] - x0, x[elements[e, 2]] - x0, x[elements[e, 3]] - x0)
     return Ds * Dm_inv[e]
 
 
 @wp.func
-def _nodal3(M: wp.mat33d, Dmi: wp.mat33d):
+def _nodal(M: wp.mat33d, Dmi: wp.mat33d):
     """b = (dF/dx)^T : M as a 12-vector ordered (vertex, axis): columns of M Dm^-T, vertex 0 = -sum."""
     W = M * wp.transpose(Dmi)
     b = _vec12d()
@@ -146,7 +146,7 @@ def _nodal3(M: wp.mat33d, Dmi: wp.mat33d):
 
 @wp.func
 def _mode3(U: wp.mat33d, M: wp.mat33d, V: wp.mat33d, Dmi: wp.mat33d):
-    return _nodal3(U * M * wp.transpose(V), Dmi)
+    return _nodal(U * M * wp.transpose(V), Dmi)
 
 
 @wp.func
@@ -237,11 +237,11 @@ def _polar_rotation3(F: wp.mat33d):
 
 
 @wp.func
-def _hessian_direct3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), e: int, F: wp.mat33d,
-                     J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu: wp.float64, lam: wp.float64,
-                     dPsi_dJ: wp.float64, project: int, both: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
-                     data2: wp.array(dtype=wp.float64)):
+def _hessian_direct(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), e: int, F: wp.mat33d,
+                    J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu: wp.float64, lam: wp.float64,
+                    dPsi_dJ: wp.float64, project: int, both: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                    hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
+                    data2: wp.array(dtype=wp.float64)):
     """Element Hessian without an SVD, exact, plus the PSD projection of its twist block.
 
     d2Psi/dF2 = mu I + d2Psi/dJ2 g g^T + dPsi/dJ d2J/dF2 with g = dJ/dF = cof F. Mapped to the
@@ -303,9 +303,9 @@ def _hessian_direct3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.
 
 
 @wp.func
-def _hessian_svd3(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu: wp.float64, lam: wp.float64,
-                  dPsi_dJ: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                  hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
+def _hessian_svd(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu: wp.float64, lam: wp.float64,
+                 dPsi_dJ: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                 hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
     """PSD-projected element Hessian from the full analytic eigensystem (SVD of F). Used when
     dPsi/dJ > 0 (strong volumetric expansion), where flip and scaling eigenvalues can be negative."""
     zero = wp.float64(0.0)
@@ -353,91 +353,19 @@ def _hessian_svd3(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu
             _store(scatter, slots, hess, data, e, r, c, V * acc)
 
 
-@wp.kernel
-def _energy3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat33d),
-             volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
-             energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
-    e = wp.tid()
-    F = _F3(x, elements, Dm_inv, e)
-    J = wp.determinant(F)
-    det_F[e] = J
-    energy[e] = wp.float64(0.0)
-    if J > wp.float64(0.0):
-        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], wp.float64(3.0))
-
-
-@wp.kernel
-def _gradient3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat33d),
-               volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
-               energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec12d)):
-    e = wp.tid()
-    F = _F3(x, elements, Dm_inv, e)
-    J = wp.determinant(F)
-    det_F[e] = J
-    energy[e] = wp.float64(0.0)
-    grad[e] = _vec12d()
-    if J > wp.float64(0.0):
-        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], wp.float64(3.0))
-        grad[e] = volume[e] * _nodal3(_pk1(F, J, mu[e], lam[e]), Dm_inv[e])
-
-
-@wp.kernel
-def _hessian3(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat33d),
-              volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64), lam_e: wp.array(dtype=wp.float64),
-              project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
-              energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec12d),
-              hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
-              data2: wp.array(dtype=wp.float64)):
-    e = wp.tid()
-    F = _F3(x, elements, Dm_inv, e)
-    J = wp.determinant(F)
-    det_F[e] = J
-    zero = wp.float64(0.0)
-    energy[e] = zero
-    grad[e] = _vec12d()
-    if J <= zero:
-        if scatter == 0:
-            for r in range(12):
-                for c in range(12):
-                    hess[e, r, c] = zero
-        return
-    V = volume[e]
-    mu = mu_e[e]
-    lam = lam_e[e]
-    Dmi = Dm_inv[e]
-    energy[e] = V * _psi(F, J, mu, lam, wp.float64(3.0))
-    grad[e] = V * _nodal3(_pk1(F, J, mu, lam), Dmi)
-
-    logJ = wp.log(J)
-    dPsi_dJ = (lam * logJ - mu) / J
-    mode = project
-    both = 0
-    if mode == _BOTH:  # exact Hessian into data, projected into data2
-        mode = _PROJECT
-        both = 1
-    if mode == _EXACT or (mode == _PROJECT and dPsi_dJ <= zero):
-        _hessian_direct3(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, mode, both, scatter, slots, hess, data,
-                          data2)
-    elif both != 0:
-        _hessian_direct3(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, _EXACT, 0, scatter, slots, hess, data,
-                          data)
-        _hessian_svd3(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data2, e)
-    else:
-        _hessian_svd3(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
-
-
 # ----------------------------------------------------------------------------------------------
-# 2D (plane strain)
+# 2D (plane strain): Warp overloads of the 3D functions of the same name (noqa F811)
 # ----------------------------------------------------------------------------------------------
 @wp.func
-def _F2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat22d), e: int):
+def _F(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),  # noqa: F811
+       Dm_inv: wp.array(dtype=wp.mat22d), e: int):
     x0 = x[elements[e, 0]]
     Ds = wp.matrix_from_cols(x[elements[e, 1]] - x0, x[elements[e, 2]] - x0)
     return Ds * Dm_inv[e]
 
 
 @wp.func
-def _nodal2(M: wp.mat22d, Dmi: wp.mat22d):
+def _nodal(M: wp.mat22d, Dmi: wp.mat22d):  # noqa: F811
     W = M * wp.transpose(Dmi)
     b = _vec6d()
     for a in range(2):
@@ -449,7 +377,7 @@ def _nodal2(M: wp.mat22d, Dmi: wp.mat22d):
 
 @wp.func
 def _mode2(U: wp.mat22d, M: wp.mat22d, V: wp.mat22d, Dmi: wp.mat22d):
-    return _nodal2(U * M * wp.transpose(V), Dmi)
+    return _nodal(U * M * wp.transpose(V), Dmi)
 
 
 @wp.func
@@ -479,12 +407,12 @@ def _store_all2(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3
 
 
 @wp.func
-def _hessian_direct2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), e: int, F: wp.mat22d,
-                     J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu: wp.float64, lam: wp.float64,
-                     dPsi_dJ: wp.float64, project: int, both: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
-                     data2: wp.array(dtype=wp.float64)):
-    """2D analogue of :func:`_hessian_direct3`: exact Hessian (det(Ds) = e1 x e2 is bilinear, so
+def _hessian_direct(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),  # noqa: F811
+                    e: int, F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu: wp.float64, lam: wp.float64,
+                    dPsi_dJ: wp.float64, project: int, both: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                    hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
+                    data2: wp.array(dtype=wp.float64)):
+    """2D overload of :func:`_hessian_direct`: exact Hessian (det(Ds) = e1 x e2 is bilinear, so
     d2/de1 de2 = [[0, 1], [-1, 0]]), and with dPsi/dJ <= 0 only the single twist mode
     R [[0, -1], [1, 0]] / sqrt 2 (R the polar rotation, closed form in 2D) can have a negative
     eigenvalue, t = mu + dPsi/dJ, which projection removes: K -= V min(t, 0) b b^T."""
@@ -523,9 +451,10 @@ def _hessian_direct2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.
 
 
 @wp.func
-def _hessian_svd2(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu: wp.float64, lam: wp.float64,
-                  dPsi_dJ: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                  hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
+def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d,  # noqa: F811
+                 V: wp.float64, mu: wp.float64, lam: wp.float64,
+                 dPsi_dJ: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                 hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
     """PSD-projected element Hessian from the full eigensystem (SVD of F), for dPsi/dJ > 0."""
     zero = wp.float64(0.0)
     project = 1
@@ -561,60 +490,75 @@ def _hessian_svd2(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu
             _store(scatter, slots, hess, data, e, r, c, V * acc)
 
 
+# ----------------------------------------------------------------------------------------------
+# kernels: generic over the dimension (element functions above are overloaded for 2D and 3D;
+# explicit overloads below, so the module is built once for both)
+# ----------------------------------------------------------------------------------------------
+@wp.func
+def _dim(F: wp.mat33d):
+    return wp.float64(3.0)
+
+
+@wp.func
+def _dim(F: wp.mat22d):  # noqa: F811
+    return wp.float64(2.0)
+
+
 @wp.kernel
-def _energy2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat22d),
-             volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
-             energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
+def _energy_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
+                   volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
+                   energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
     e = wp.tid()
-    F = _F2(x, elements, Dm_inv, e)
+    F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
     energy[e] = wp.float64(0.0)
     if J > wp.float64(0.0):
-        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], wp.float64(2.0))
+        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], _dim(F))
 
 
 @wp.kernel
-def _gradient2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat22d),
-               volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
-               energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec6d)):
+def _gradient_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
+                     volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
+                     lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
+                     det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any)):
     e = wp.tid()
-    F = _F2(x, elements, Dm_inv, e)
+    F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
     energy[e] = wp.float64(0.0)
-    grad[e] = _vec6d()
+    grad[e] = grad.dtype()
     if J > wp.float64(0.0):
-        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], wp.float64(2.0))
-        grad[e] = volume[e] * _nodal2(_pk1(F, J, mu[e], lam[e]), Dm_inv[e])
+        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], _dim(F))
+        grad[e] = volume[e] * _nodal(_pk1(F, J, mu[e], lam[e]), Dm_inv[e])
 
 
 @wp.kernel
-def _hessian2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=wp.mat22d),
-              volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64), lam_e: wp.array(dtype=wp.float64),
-              project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
-              energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=_vec6d),
-              hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
-              data2: wp.array(dtype=wp.float64)):
+def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
+                    volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
+                    lam_e: wp.array(dtype=wp.float64), project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                    energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
+                    hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
+                    data2: wp.array(dtype=wp.float64)):
     e = wp.tid()
-    F = _F2(x, elements, Dm_inv, e)
+    F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
     zero = wp.float64(0.0)
     energy[e] = zero
-    grad[e] = _vec6d()
+    grad[e] = grad.dtype()
     if J <= zero:
         if scatter == 0:
-            for r in range(6):
-                for c in range(6):
+            for r in range(hess.shape[1]):
+                for c in range(hess.shape[2]):
                     hess[e, r, c] = zero
         return
     V = volume[e]
     mu = mu_e[e]
     lam = lam_e[e]
     Dmi = Dm_inv[e]
-    energy[e] = V * _psi(F, J, mu, lam, wp.float64(2.0))
-    grad[e] = V * _nodal2(_pk1(F, J, mu, lam), Dmi)
+    energy[e] = V * _psi(F, J, mu, lam, _dim(F))
+    grad[e] = V * _nodal(_pk1(F, J, mu, lam), Dmi)
 
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
@@ -624,21 +568,30 @@ def _hessian2(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),
         mode = _PROJECT
         both = 1
     if mode == _EXACT or (mode == _PROJECT and dPsi_dJ <= zero):
-        _hessian_direct2(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, mode, both, scatter, slots, hess, data,
-                          data2)
+        _hessian_direct(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, mode, both, scatter, slots, hess, data, data2)
     elif both != 0:
-        _hessian_direct2(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, _EXACT, 0, scatter, slots, hess, data,
-                          data)
-        _hessian_svd2(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data2, e)
+        _hessian_direct(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, _EXACT, 0, scatter, slots, hess, data, data)
+        _hessian_svd(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data2, e)
     else:
-        _hessian_svd2(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
+        _hessian_svd(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
 
+
+def _declare_overloads():
+    """2D and 3D instances of the kernels: positions, Dm^-1 and per-element gradient types."""
+    for vec, mat, nodal_vec in ((wp.vec2d, wp.mat22d, _vec6d), (wp.vec3d, wp.mat33d, _vec12d)):
+        types = {"x": wp.array(dtype=vec), "Dm_inv": wp.array(dtype=mat)}
+        wp.overload(_energy_kernel, types)
+        wp.overload(_gradient_kernel, {**types, "grad": wp.array(dtype=nodal_vec)})
+        wp.overload(_hessian_kernel, {**types, "grad": wp.array(dtype=nodal_vec)})
+
+
+_declare_overloads()
 
 # ----------------------------------------------------------------------------------------------
 # host side
 # ----------------------------------------------------------------------------------------------
 _ENERGY, _GRADIENT, _HESSIAN, _BLOCKS = 0, 1, 2, 3  # what a launch computes
-_KERNELS = {2: (_energy2, _gradient2, _hessian2), 3: (_energy3, _gradient3, _hessian3)}
+_KERNELS = (_energy_kernel, _gradient_kernel, _hessian_kernel)  # by ``want`` (_BLOCKS: the Hessian kernel)
 
 
 class _Workspace:
@@ -650,12 +603,11 @@ class _Workspace:
     """
 
     def __init__(self, model: FemModel):
-        d, m, k = model.dim, model.n_elements, model.dim + 1
+        d, m = model.dim, model.n_elements
         dev = model.device
         self.cpu = wp.get_device(dev).is_cpu
         self.vec = wp.vec3d if d == 3 else wp.vec2d
         mat = wp.mat33d if d == 3 else wp.mat22d
-        self.kernels = _KERNELS[d]
         self.x_np = np.zeros((model.n_vertices, d))
         self.x = self._wrap(self.x_np, self.vec, dev)
         self.elements = wp.array(model.elements, dtype=wp.int32, device=dev)
@@ -717,7 +669,7 @@ class _Workspace:
             self.hess = wp.zeros((model.n_elements, kk, kk), dtype=wp.float64, device=dev)
             args = dict(inputs=common + [1, 0, self.dummy_slots],
                         outputs=[self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data])
-        kernel = self.kernels[min(want, _HESSIAN)]
+        kernel = _KERNELS[min(want, _HESSIAN)]
         with RECORD_LOCK:  # the first launch loads the module: one thread at a time
             cmd = wp.launch(kernel, dim=model.n_elements, device=dev, record_cmd=True, **args)
         self.commands[want] = cmd
