@@ -28,7 +28,7 @@ def run(args) -> dict:
 
     from simfab.deploy import export, unitcell
     from simfab.errors import InputError
-    from simfab.io.atomic import write_json
+    from simfab.io.atomic import atomic_paths, write_json
     from simfab.progress import log
 
     import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
@@ -46,24 +46,31 @@ def run(args) -> dict:
         if n not in inserts:
             raise InputError(f"no insert body {n!r} in the scene (have: {', '.join(sorted(inserts))})", where="--insert")
     out = os.path.abspath(args.out)
-    results = {}
+    deployments = {}
     for n in names:
         ins = inserts[n]
         log(f"deploy: {n} (half-size {ins.r * 1e3:.1f} mm, gap half-size {cfg.gap * 1e3:.1f} mm)", quiet=args.quiet)
-        d = unitcell.deploy(cfg, ins, device=dev, quiet=args.quiet)
-        folder = os.path.join(out, n)
-        usd = export.write_usd(os.path.join(folder, "deploy.usda"), d)
-        xml = export.write_mjcf(os.path.join(folder, "deployed.xml"), d, name=f"deployed_{n}", rods=args.mjcf_rods)
-        png = export.write_png(os.path.join(folder, "deployed.png"), xml)
-        results[n] = dict(insert_half_size=ins.r, gap_half_size=cfg.gap,
-                          relation="larger" if ins.r > cfg.gap else "smaller",
-                          **d.curvature, stable=d.stable, increments=len(d.iterations),
-                          newton_iterations=d.iterations, energy=d.energy,
-                          gaussian_curvature_per_increment=d.curvature_history,
-                          max_bending_strain=float(export.bending_strain(d.cell.model, d.states[-1]).max()),
-                          outputs=dict(usd=str(usd), mjcf=str(xml), png=str(png)))
-    summary = dict(scene=str(scene), inserts=results)
-    summary["summary_json"] = str(write_json(os.path.join(out, "deploy.json"), summary))
+        deployments[n] = unitcell.deploy(cfg, ins, device=dev, quiet=args.quiet)
+    # every file of every insert plus the summary appear together (none if any write fails)
+    paths = {(n, kind): os.path.join(out, n, f) for n in names
+             for kind, f in (("usd", "deploy.usda"), ("mjcf", "deployed.xml"), ("png", "deployed.png"))}
+    paths["json"] = os.path.join(out, "deploy.json")
+    results = {}
+    with atomic_paths(paths) as tmp:
+        for n, d in deployments.items():
+            ins = d.insert
+            export.write_usd(tmp[n, "usd"], d)
+            export.write_mjcf(tmp[n, "mjcf"], d, name=f"deployed_{n}", rods=args.mjcf_rods)
+            export.write_png(tmp[n, "png"], tmp[n, "mjcf"])
+            results[n] = dict(insert_half_size=ins.r, gap_half_size=cfg.gap,
+                              relation="larger" if ins.r > cfg.gap else "smaller",
+                              **d.curvature, stable=d.stable, increments=len(d.iterations),
+                              newton_iterations=d.iterations, energy=d.energy,
+                              gaussian_curvature_per_increment=d.curvature_history,
+                              max_bending_strain=float(export.bending_strain(d.cell.model, d.states[-1]).max()),
+                              outputs={k: paths[n, k] for k in ("usd", "mjcf", "png")})
+        summary = dict(scene=str(scene), inserts=results, summary_json=paths["json"])
+        write_json(tmp["json"], summary)
     return summary
 
 

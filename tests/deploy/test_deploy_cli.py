@@ -102,3 +102,22 @@ def test_non_positive_scene_parameter_is_named(cmd, scene, field, tmp_path, caps
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{field}: must be a positive number (got -1" in err
     assert not out.exists()
+
+
+def test_deploy_failure_while_writing_leaves_no_output_files(tmp_path, monkeypatch):
+    """Outputs of all inserts and the summary appear together: a writer failing halfway leaves none."""
+    import argparse
+
+    from simfab.cli import deploy as cli_deploy
+    from simfab.deploy import export
+
+    def broken_png(png, mjcf_path):
+        raise RuntimeError("renderer unavailable")
+
+    monkeypatch.setattr(export, "write_png", broken_png)
+    out = tmp_path / "dep"
+    args = argparse.Namespace(out=str(out), seed=0, device="cpu", quiet=True, json=False, scene=None,
+                              insert=["insert_small"], increments=2, mjcf_rods="capsules")
+    with pytest.raises(RuntimeError, match="renderer unavailable"):
+        cli_deploy.run(args)
+    assert not [p for p in out.rglob("*") if p.is_file()]
