@@ -156,13 +156,19 @@ def smooth_positions(nodes: np.ndarray, edges: np.ndarray, fixed: np.ndarray, *,
         W = V.copy()
         W[free] += lambda1 * d1[free] + lambda2 * d2[free]
         if obstacles is not None:
-            W = _revert_collisions(V, W, e, obstacles, on_surface)
+            W = revert_collisions(V, W, e, obstacles, on_surface)
         V = W
     return V
 
 
-def _revert_collisions(V_old, V_new, e, obstacles, on_surface, passes: int = 8):
-    """Move the endpoints of colliding segments back to their previous positions."""
+def revert_collisions(V_old, V_new, e, obstacles, on_surface, passes: int = 8):
+    """Move the endpoints of colliding segments back to their previous positions.
+
+    V_old, V_new : (n, 3) positions [m] before / after a move (V_old collision-free).
+    e : (k, 2) segments. on_surface : (n,) bool, nodes on a surface by design (or None).
+    Returns (n, 3): V_new with the nodes of colliding segments reset, repeated for up to
+    ``passes`` rounds (a reset can expose a new collision); V_old if collisions remain.
+    """
     W = V_new.copy()
     moved = np.any(W != V_old, axis=1)
     for _ in range(passes):

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from simfab.errors import InputError
-from simfab.growth.skeleton import Skeleton, chains
+from simfab.growth.skeleton import Skeleton, chains, revert_collisions
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -130,9 +130,7 @@ def edit_chain(sk: Skeleton, camera: Camera, stroke, *, chain: int | None = None
     reverted = 0
     if obstacles is not None:
         # a node whose new segments would cross an object keeps its old position
-        from simfab.growth.skeleton import _revert_collisions
-
-        W = _revert_collisions(sk.nodes, V, sk.edges, obstacles, sk.on_surface_mask())
+        W = revert_collisions(sk.nodes, V, sk.edges, obstacles, sk.on_surface_mask())
         reverted = int(np.sum(np.any(W[inner] != V[inner], axis=1)))
         V = W
     out = sk.replace(nodes=V)
