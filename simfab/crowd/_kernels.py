@@ -93,6 +93,48 @@ def _jump(u: float, z: float) -> wp.float64:
     return m * _F(z)
 
 
+@wp.func
+def _stage(
+    lo: wp.array3d(dtype=wp.float64),
+    hi: wp.array3d(dtype=wp.float64),
+    w: wp.array3d(dtype=wp.float64),
+    rounded: int,
+    cap: wp.float64,
+    c: int,
+    t: int,
+    i: int,
+    j: int,
+    a: wp.float64,
+    b: wp.float64,
+    xj: wp.float64,
+    ll: wp.array3d(dtype=wp.float64),
+    is_tmp: wp.array3d(dtype=wp.float64),
+    ll_tmp: wp.array3d(dtype=wp.float64),
+) -> wp.float64:
+    # rating (i, j) of chain t under a proposed expertise a or difficulty b: stage its
+    # 1/sqrt(delta) and log-likelihood term, return the term's change
+    s_new = _inv_sd(a, b, cap)
+    l_new = w[c, i, j] * _loglik(lo[c, i, j], hi[c, i, j], xj, s_new, rounded)
+    is_tmp[t, i, j] = s_new
+    ll_tmp[t, i, j] = l_new
+    return l_new - ll[t, i, j]
+
+
+@wp.func
+def _keep(
+    t: int,
+    i: int,
+    j: int,
+    inv_s: wp.array3d(dtype=wp.float64),
+    ll: wp.array3d(dtype=wp.float64),
+    is_tmp: wp.array3d(dtype=wp.float64),
+    ll_tmp: wp.array3d(dtype=wp.float64),
+):
+    # accepted: the staged terms of rating (i, j) become the cached ones
+    inv_s[t, i, j] = is_tmp[t, i, j]
+    ll[t, i, j] = ll_tmp[t, i, j]
+
+
 @wp.kernel
 def _mwg_sweeps(
     lo: wp.array3d(dtype=wp.float64),
@@ -152,17 +194,12 @@ def _mwg_sweeps(
             a_new = a_old + step_a[t, i] * _jump(wp.randf(rng), wp.randn(rng))
             d = _F(0.5) * a_pr * ((a_old - a_mu) * (a_old - a_mu) - (a_new - a_mu) * (a_new - a_mu))
             for j in range(Q):
-                s_new = _inv_sd(a_new, beta[t, j], cap)
-                l_new = w[c, i, j] * _loglik(lo[c, i, j], hi[c, i, j], x[t, j], s_new, rounded)
-                is_tmp[t, i, j] = s_new
-                ll_tmp[t, i, j] = l_new
-                d += l_new - ll[t, i, j]
+                d += _stage(lo, hi, w, rounded, cap, c, t, i, j, a_new, beta[t, j], x[t, j], ll, is_tmp, ll_tmp)
             if wp.log(_F(wp.randf(rng))) < d:
                 alpha[t, i] = a_new
                 cnt_a[t, i] = cnt_a[t, i] + _F(1.0)
                 for j in range(Q):
-                    inv_s[t, i, j] = is_tmp[t, i, j]
-                    ll[t, i, j] = ll_tmp[t, i, j]
+                    _keep(t, i, j, inv_s, ll, is_tmp, ll_tmp)
         # ---- log-beta block: column j depends on beta_j only (Jacobian + du)
         for j in range(Q):
             b_old = beta[t, j]
@@ -171,17 +208,12 @@ def _mwg_sweeps(
             if b_new > b_min:
                 d = du + _F(0.5) * b_pr * ((b_old - b_mu) * (b_old - b_mu) - (b_new - b_mu) * (b_new - b_mu))
                 for i in range(R):
-                    s_new = _inv_sd(alpha[t, i], b_new, cap)
-                    l_new = w[c, i, j] * _loglik(lo[c, i, j], hi[c, i, j], x[t, j], s_new, rounded)
-                    is_tmp[t, i, j] = s_new
-                    ll_tmp[t, i, j] = l_new
-                    d += l_new - ll[t, i, j]
+                    d += _stage(lo, hi, w, rounded, cap, c, t, i, j, alpha[t, i], b_new, x[t, j], ll, is_tmp, ll_tmp)
                 if wp.log(_F(wp.randf(rng))) < d:
                     beta[t, j] = b_new
                     cnt_b[t, j] = cnt_b[t, j] + _F(1.0)
                     for i in range(R):
-                        inv_s[t, i, j] = is_tmp[t, i, j]
-                        ll[t, i, j] = ll_tmp[t, i, j]
+                        _keep(t, i, j, inv_s, ll, is_tmp, ll_tmp)
         # ---- logit-x block: column j depends on x_j only (Jacobian x (1 - x))
         for j in range(Q):
             x_old = x[t, j]
