@@ -57,7 +57,7 @@ def run(args) -> dict:
     from simfab.deploy import elastica
     from simfab.deploy import tolerances as tol
     from simfab.errors import InputError
-    from simfab.io.atomic import write_csv, write_json
+    from simfab.io.atomic import atomic_paths, write_csv, write_json
     from simfab.progress import log
 
     ratios = list(args.g_over_L or bk.DEFAULT_RATIOS)
@@ -138,16 +138,18 @@ def run(args) -> dict:
     out = os.path.abspath(args.out)
     header = ["support", "path", "g_over_L", "n", "delta_over_L", "delta_over_L_exact", "rel_err", "order", "force",
               "force_exact", "force_rel_err", "seconds", "newton_iterations", "tolerance", "passed"]
-    csv_path = write_csv(os.path.join(out, "buckling.csv"), header, [[r[h] for h in header] for r in rows])
-    png_path = _plot(os.path.join(out, "buckling_shapes.png"), shapes, rows, ratios, supports, paths, ns, setup.length)
+    outputs = dict(csv=os.path.join(out, "buckling.csv"), json=os.path.join(out, "buckling.json"),
+                   png=os.path.join(out, "buckling_shapes.png"))
     summary = dict(passed=not failures, failures=failures, convergence_order=order_summary,
                    insert_vs_direct_max_rel_diff=insert_vs_direct, critical_load=crit,
                    tolerances=dict(n=tol.VALIDATION_N, pinned_rise=tol.PINNED_RISE_RTOL,
                                    clamped_rise=tol.CLAMPED_RISE_RTOL, force=tol.FORCE_RTOL,
                                    critical_load=tol.CRITICAL_LOAD_RTOL),
                    beam=dict(vars(setup)), scene=scene.path)
-    json_path = write_json(os.path.join(out, "buckling.json"), dict(summary, rows=rows))
-    outputs = dict(csv=str(csv_path), json=str(json_path), png=str(png_path))
+    with atomic_paths(outputs) as tmp:  # the three files appear together
+        write_csv(tmp["csv"], header, [[r[h] for h in header] for r in rows])
+        _plot(tmp["png"], shapes, rows, ratios, supports, paths, ns, setup.length)
+        write_json(tmp["json"], dict(summary, rows=rows))
     if not args.json and not args.quiet:
         _print_table(rows)
     if failures:
