@@ -121,6 +121,12 @@ def _pk1(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64):
     return mu * (F - FinvT) + lam * wp.log(J) * FinvT
 
 
+@wp.func
+def _mode(U: Any, M: Any, V: Any, Dmi: Any):
+    """Nodal vector of the stress-space mode U M V^T (2D or 3D through the ``_nodal`` overloads)."""
+    return _nodal(U * M * wp.transpose(V), Dmi)
+
+
 # ----------------------------------------------------------------------------------------------
 # 3D
 # ----------------------------------------------------------------------------------------------
@@ -142,11 +148,6 @@ def _nodal(M: wp.mat33d, Dmi: wp.mat33d):
         b[9 + a] = W[a, 2]
         b[a] = -(W[a, 0] + W[a, 1] + W[a, 2])
     return b
-
-
-@wp.func
-def _mode3(U: wp.mat33d, M: wp.mat33d, V: wp.mat33d, Dmi: wp.mat33d):
-    return _nodal(U * M * wp.transpose(V), Dmi)
 
 
 @wp.func
@@ -319,17 +320,17 @@ def _hessian_svd(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu:
     B = _mat9x12d()  # rows: nodal vectors of the 9 eigenmodes of d2Psi/dF2
     w = _vec9d()  # their clamped eigenvalues
     # twist (skew) and flip (symmetric) modes in the (1,2), (0,2), (0,1) planes
-    B[0] = _mode3(U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, Dmi)
+    B[0] = _mode(U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, Dmi)
     w[0] = _clamp(mu + dPsi_dJ * s[0], project)
-    B[1] = _mode3(U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, Dmi)
+    B[1] = _mode(U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, Dmi)
     w[1] = _clamp(mu - dPsi_dJ * s[0], project)
-    B[2] = _mode3(U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, Dmi)
+    B[2] = _mode(U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, Dmi)
     w[2] = _clamp(mu + dPsi_dJ * s[1], project)
-    B[3] = _mode3(U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, Dmi)
+    B[3] = _mode(U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, Dmi)
     w[3] = _clamp(mu - dPsi_dJ * s[1], project)
-    B[4] = _mode3(U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
+    B[4] = _mode(U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
     w[4] = _clamp(mu + dPsi_dJ * s[2], project)
-    B[5] = _mode3(U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
+    B[5] = _mode(U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
     w[5] = _clamp(mu - dPsi_dJ * s[2], project)
     # scaling modes U diag(q) V^T: q eigenvectors of the Hessian of Psi in the singular values
     cs = mu + lam * (wp.float64(1.0) - logJ)
@@ -342,7 +343,7 @@ def _hessian_svd(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu:
     d = wp.vec3d()
     wp.eig3(A, Q, d)
     for k in range(3):
-        B[6 + k] = _mode3(U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, Dmi)
+        B[6 + k] = _mode(U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, Dmi)
         w[6 + k] = _clamp(d[k], project)
     # H_e = V sum_k w_k b_k b_k^T  (symmetric: compute the upper triangle, mirror)
     for r in range(12):
@@ -373,11 +374,6 @@ def _nodal(M: wp.mat22d, Dmi: wp.mat22d):  # noqa: F811
         b[4 + a] = W[a, 1]
         b[a] = -(W[a, 0] + W[a, 1])
     return b
-
-
-@wp.func
-def _mode2(U: wp.mat22d, M: wp.mat22d, V: wp.mat22d, Dmi: wp.mat22d):
-    return _nodal(U * M * wp.transpose(V), Dmi)
 
 
 @wp.func
@@ -466,9 +462,9 @@ def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d,  # noqa: F811
     h = wp.float64(_HALF_SQRT2)
     B = _mat4x6d()
     w = _vec4d()
-    B[0] = _mode2(U, wp.mat22d(zero, -h, h, zero), Vs, Dmi)  # twist
+    B[0] = _mode(U, wp.mat22d(zero, -h, h, zero), Vs, Dmi)  # twist
     w[0] = _clamp(mu + dPsi_dJ, project)
-    B[1] = _mode2(U, wp.mat22d(zero, h, h, zero), Vs, Dmi)  # flip
+    B[1] = _mode(U, wp.mat22d(zero, h, h, zero), Vs, Dmi)  # flip
     w[1] = _clamp(mu - dPsi_dJ, project)
     # scaling modes: closed-form eigensystem of the symmetric 2x2 [[a, o], [o, c2]]
     cs = mu + lam * (wp.float64(1.0) - logJ)
@@ -478,9 +474,9 @@ def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d,  # noqa: F811
     theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
     ct = wp.cos(theta)
     st = wp.sin(theta)
-    B[2] = _mode2(U, wp.mat22d(ct, zero, zero, st), Vs, Dmi)
+    B[2] = _mode(U, wp.mat22d(ct, zero, zero, st), Vs, Dmi)
     w[2] = _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, project)
-    B[3] = _mode2(U, wp.mat22d(-st, zero, zero, ct), Vs, Dmi)
+    B[3] = _mode(U, wp.mat22d(-st, zero, zero, ct), Vs, Dmi)
     w[3] = _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, project)
     for r in range(6):
         for c in range(r, 6):
