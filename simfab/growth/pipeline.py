@@ -367,29 +367,28 @@ class _Symmetry:
                 out.append(r)
         return np.array(out).reshape(-1, 3)
 
+    def _image(self, nodes, parent, target, root) -> dict:
+        """Per-node fields of the mirror image of a forest appended after its ``len(nodes)``
+        nodes: reflected positions, shifted parents and roots, targets renamed to their partners."""
+        return dict(nodes=self.reflect(nodes), parent=np.where(parent >= 0, parent + len(nodes), -1),
+                    target=np.where(target >= 0, self.target_mirror[np.maximum(target, 0)], -1),
+                    root=root + int(root.max(initial=0)) + 1)
+
     def mirror(self, sk: Skeleton, *, obstacles) -> Skeleton:
         """Skeleton plus its mirror image (targets renamed to their mirror partners)."""
-        k = len(sk.nodes)
-        M = self.reflect(sk.nodes)
+        img = self._image(sk.nodes, sk.parent, sk.target, sk.root)
         if obstacles is not None and np.any(sk.parent >= 0):
-            if sk.replace(nodes=M).segment_hits(obstacles).any():
+            if sk.replace(nodes=img["nodes"]).segment_hits(obstacles).any():
                 raise InputError("the objects are not mirror-symmetric: the mirrored half of the structure "
                                  "collides with them", where="symmetry")
-        tgt = np.where(sk.target >= 0, self.target_mirror[np.maximum(sk.target, 0)], -1)
-        return Skeleton(nodes=np.concatenate([sk.nodes, M]),
-                        parent=np.concatenate([sk.parent, np.where(sk.parent >= 0, sk.parent + k, -1)]),
-                        birth=np.concatenate([sk.birth, sk.birth]), target=np.concatenate([sk.target, tgt]),
-                        root=np.concatenate([sk.root, sk.root + int(sk.root.max(initial=0)) + 1]),
-                        radius=np.concatenate([sk.radius, sk.radius]), target_names=sk.target_names,
-                        contact=np.concatenate([sk.contact_mask(), sk.contact_mask()]))
+        both = {name: np.concatenate([a, img.get(name, a)]) for name, a in
+                (("nodes", sk.nodes), ("parent", sk.parent), ("birth", sk.birth), ("target", sk.target),
+                 ("root", sk.root), ("radius", sk.radius), ("contact", sk.contact_mask()))}
+        return Skeleton(**both, target_names=sk.target_names)
 
     def mirror_tree(self, t: Tree) -> Tree:
-        """Tree plus its mirror image (indices, roots and targets of the image renumbered)."""
-        k = len(t)
-        image = t.take(slice(None), nodes=self.reflect(t.nodes), parent=np.where(t.parent >= 0, t.parent + k, -1),
-                       target=np.where(t.target >= 0, self.target_mirror[np.maximum(t.target, 0)], -1),
-                       root=t.root + int(t.root.max(initial=0)) + 1)
-        return t.concat(image)
+        """Tree plus its mirror image (see :meth:`mirror`)."""
+        return t.concat(t.take(slice(None), **self._image(t.nodes, t.parent, t.target, t.root)))
 
 
 def skin_result(result: GrowthResult, *, segments: int | None = None, subtract: bool | None = None):
