@@ -34,7 +34,7 @@ negative: saddle.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -289,8 +289,8 @@ def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool 
         try:
             res = solver.solve(st, body_forces=body_forces)
             if i == ninc:  # remove the perturbation
-                res2 = solver.solve(res.state)
-                res = type(res)(res2.state, res2.energy, res.iterations + res2.iterations, res2.grad_norm, res2.parts)
+                unloaded = solver.solve(res.state)
+                res = replace(unloaded, iterations=res.iterations + unloaded.iterations)
         except ConvergenceError as e:
             raise ConvergenceError(f"deploying {insert.name}: increment {i}/{ninc}: {e}") from None
         state = res.state
