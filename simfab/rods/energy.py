@@ -16,6 +16,7 @@ from simfab.rods import bend, stretch, twist
 from simfab.rods.model import RodModel, RodState
 
 TERMS = ("stretch", "bend", "twist")
+_LAUNCH = {"stretch": stretch.launch, "bend": bend.launch, "twist": twist.launch}
 
 
 def _hinge_dofs(model: RodModel) -> np.ndarray:
@@ -131,9 +132,8 @@ class Evaluator:
             b.grad.zero_()
         if need_hess:
             b.hess.zero_()
-        launchers = {"stretch": stretch.launch, "bend": bend.launch, "twist": twist.launch}
         for name in b.terms:
-            launchers[name](b, need_grad, need_hess)
+            _LAUNCH[name](b, need_grad, need_hess)
         parts = {}
         for name, arr in (("stretch", b.e_stretch), ("bend", b.e_bend), ("twist", b.e_twist)):
             parts[name] = float(np.sum(arr.numpy())) if name in b.terms else 0.0
