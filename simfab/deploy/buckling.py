@@ -131,6 +131,13 @@ class Beam:
         return float((9.0 * z1 - z3) / 8.0)
 
 
+def check_segments(n) -> int:
+    """``n`` as an int; InputError unless it is an even segment count >= 4 (the midspan is a node)."""
+    if int(n) != n or int(n) < 4 or int(n) % 2:
+        raise InputError(f"segment count must be an even integer >= 4 (got {n})", where="--n")
+    return int(n)
+
+
 def build_beam(setup: BeamSetup, n: int, support: str, path: str = "direct", *, free_end: bool = False) -> Beam:
     """The beam with ``n`` segments, start state carrying the first-mode imperfection.
 
@@ -141,9 +148,7 @@ def build_beam(setup: BeamSetup, n: int, support: str, path: str = "direct", *, 
         raise InputError(f"support must be one of {elastica.SUPPORTS} (got {support!r})", where="--support")
     if path not in PATHS:
         raise InputError(f"path must be one of {PATHS} (got {path!r})")
-    if int(n) < 4 or int(n) % 2:
-        raise InputError(f"segment count must be an even integer >= 4 (got {n})", where="--n")
-    n = int(n)
+    n = check_segments(n)
     L = setup.length
     h = L / n
     a = setup.imperfection * L

@@ -78,12 +78,18 @@ def _ellipeinc(phi, m: float) -> np.ndarray:
     return er + 2.0 * n * ellipe(m)
 
 
-def solve(g_over_L: float, support: str = "pinned") -> ElasticaSolution:
-    """Exact first-mode elastica for ``0 < g_over_L < 1`` (brentq on g/L = 2E/K - 1)."""
-    mult = _force_factor(support)
+def check_ratio(g_over_L: float) -> float:
+    """``g_over_L`` as a float; InputError unless 0 < g/L < 1."""
     r = float(g_over_L)
     if not 0.0 < r < 1.0:
         raise InputError(f"g/L must lie strictly between 0 and 1 (got {g_over_L})", where="--g-over-L")
+    return r
+
+
+def solve(g_over_L: float, support: str = "pinned") -> ElasticaSolution:
+    """Exact first-mode elastica for ``0 < g_over_L < 1`` (brentq on g/L = 2E/K - 1)."""
+    mult = _force_factor(support)
+    r = check_ratio(g_over_L)
 
     def residual(k):
         m = k * k

@@ -56,18 +56,15 @@ def run(args) -> dict:
     from simfab.deploy import buckling as bk
     from simfab.deploy import elastica
     from simfab.deploy import tolerances as tol
-    from simfab.errors import InputError
     from simfab.io.atomic import atomic_paths, write_csv, write_json
     from simfab.progress import log
 
     ratios = list(args.g_over_L or bk.DEFAULT_RATIOS)
     ns = sorted(set(args.n or bk.DEFAULT_N))
-    for r in ratios:
-        if not 0.0 < r < 1.0:
-            raise InputError(f"g/L must lie strictly between 0 and 1 (got {r})", where="--g-over-L")
+    for r in ratios:  # checked before any work
+        elastica.check_ratio(r)
     for n in ns:
-        if n < 4 or n % 2:
-            raise InputError(f"segment counts must be even integers >= 4 (got {n})", where="--n")
+        bk.check_segments(n)
     supports = elastica.SUPPORTS if args.support == "both" else (args.support,)
     paths = bk.PATHS if args.path == "both" else (args.path,)
     scene = bk.load_insert_scene(args.scene or bk.default_scene_path())
