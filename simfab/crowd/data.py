@@ -66,19 +66,9 @@ class Ratings:
     source: str = "<memory>"
 
     @property
-    def mask(self) -> np.ndarray:
-        """(R, Q) bool, True where a rating exists."""
-        return np.isfinite(self.labels)
-
-    @property
     def unit(self) -> np.ndarray:
         """(R, Q) ratings on the unit scale (NaN where missing)."""
         return self.scale.to_unit(self.labels)
-
-    def subset(self, rows) -> "Ratings":
-        """The ratings of raters ``rows`` (indices)."""
-        rows = np.asarray(rows)
-        return dataclasses.replace(self, labels=self.labels[rows], workers=tuple(self.workers[i] for i in rows))
 
     def to_long(self) -> list[tuple[str, str, int]]:
         """Long-form rows ``(worker, task, label)``."""
