@@ -28,12 +28,6 @@ DESCRIPTION = (
 )
 
 
-def _common(p):
-    from simfab.cli import add_common_args
-
-    add_common_args(p)
-
-
 def _sampler_args(p, *, study: bool):
     from simfab.crowd.config import STUDY_SAMPLER, SamplerConfig
 
@@ -68,6 +62,8 @@ def _scale_arg(p):
 
 
 def add_args(p):
+    from simfab.cli import add_common_args
+
     sub = p.add_subparsers(dest="crowd_command", metavar="ACTION", parser_class=type(p))
 
     a = sub.add_parser("aggregate", help="aggregate one crowd's ratings (all methods), score against truth")
@@ -75,7 +71,7 @@ def add_args(p):
     _scale_arg(a)
     a.add_argument("--truth", help="CSV task,truth (scale units) to score against")
     _sampler_args(a, study=False)
-    _common(a)
+    add_common_args(a)
 
     s = sub.add_parser("study", help="micro-crowd study: percentile rank and population bias against crowd size")
     s.add_argument("ratings", help="long-form CSV: worker,task,label")
@@ -84,7 +80,7 @@ def add_args(p):
     s.add_argument("--subcrowds", type=int, default=500, help="sub-crowds per size (default 500)")
     s.add_argument("--min-size", type=int, default=5, help="smallest sub-crowd (default 5); sizes run to N-1")
     _sampler_args(s, study=True)
-    _common(s)
+    add_common_args(s)
 
     t = sub.add_parser("truth", help="support volume / overhang area of a mesh in given orientations")
     t.add_argument("mesh", help="STL/OBJ/PLY/OFF/GLB; printed with +z up, plate under the lowest point")
@@ -92,7 +88,7 @@ def add_args(p):
     t.add_argument("--units", default="m", help="units of the mesh file: m, mm or cm (default m)")
     t.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), default=[1.0, 10.0], help="survey scale for the scores (default 1 10)")
     t.add_argument("--no-raycast", action="store_true", help="skip the ray-cast cross-check")
-    _common(t)
+    add_common_args(t)
 
     m = sub.add_parser("simulate", help="draw a synthetic crowd from the model (practitioners and general public)")
     _scale_arg(m)
@@ -103,13 +99,13 @@ def add_args(p):
     m.add_argument("--public", type=int, default=0, help="general-public raters (default 0)")
     m.add_argument("--malicious", type=float, default=None, help="fraction of the general public that is malicious (default 0.1)")
     m.add_argument("--difficulty", type=float, nargs="+", default=[1.0], help="question difficulty beta (one value or one per question; default 1)")
-    _common(m)
+    add_common_args(m)
 
     b = sub.add_parser("bracket", help="strength truth of the 2D bracket designs (FEM tip deflection, scores 1..5)")
     b.add_argument("--designs", nargs="+", metavar="NAME", help="subset of the built-in designs (default all)")
     b.add_argument("--load", type=float, default=None, help="total downward tip load, N (default 20)")
     b.add_argument("--material", default=None, help="built-in material name (default PLA)")
-    _common(b)
+    add_common_args(b)
 
 
 def run(args):
