@@ -204,12 +204,13 @@ def _vec(x, n, where):
     return tuple(float(v) for v in a)
 
 
-def _num(x, where, *, integer=False, positive=True):
+def _num(x, where, *, integer=False, positive=True, allow_inf=False):
+    """A number from the TOML (``allow_inf``: +inf is accepted too); InputError naming ``where``."""
     if isinstance(x, bool) or not isinstance(x, (int, float)):
         raise InputError(f"expected a number, got {x!r}", where=where)
     if integer and not float(x).is_integer():
         raise InputError(f"expected an integer, got {x!r}", where=where)
-    if not math.isfinite(float(x)) and not (where.endswith("target_influence") and x > 0):
+    if not math.isfinite(float(x)) and not (allow_inf and x == math.inf):
         raise InputError(f"expected a finite number, got {x!r}", where=where)
     if positive and not x > 0:
         raise InputError(f"must be positive, got {x!r}", where=where)
@@ -240,7 +241,8 @@ def params_from_toml(doc: dict, where: str) -> GrowthParams:
         kw["seed"] = _num(g["seed"], w + "seed", integer=True, positive=False)
     for key in ("influence", "kill", "branch_length", "target_influence"):
         if key in g:
-            kw[key] = _num(g[key], w + key)
+            # an infinite target influence is the default: a target pulls from anywhere
+            kw[key] = _num(g[key], w + key, allow_inf=key == "target_influence")
     if "box" in g:
         b = g["box"]
         if not (isinstance(b, list) and len(b) == 2):
