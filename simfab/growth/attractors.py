@@ -66,13 +66,12 @@ def volume(box: np.ndarray, n: int, rng: np.random.Generator, obstacles, *, keep
 def _surface_points(mesh, n: int, rng: np.random.Generator):
     """Area-weighted uniform samples on a triangle mesh with their face normals."""
     area = mesh.area_faces
-    total = float(area.sum())
-    f = rng.choice(len(area), size=n, p=area / total)
+    f = rng.choice(len(area), size=n, p=area / area.sum())
     r1, r2 = rng.random(n), rng.random(n)
     s = np.sqrt(r1)
     w = np.column_stack([1 - s, s * (1 - r2), s * r2])
     tri = mesh.triangles[f]
-    return np.einsum("ij,ijk->ik", w, tri), mesh.face_normals[f], total
+    return np.einsum("ij,ijk->ik", w, tri), mesh.face_normals[f]
 
 
 def surface(meshes: list, n: int, rng: np.random.Generator, obstacles, *, lift: float, box=None, keep=None):
@@ -91,7 +90,7 @@ def surface(meshes: list, n: int, rng: np.random.Generator, obstacles, *, lift: 
         xs = []
         for mesh, c in zip(meshes, counts):
             if c:
-                x, nrm, _ = _surface_points(mesh, int(c), rng)
+                x, nrm = _surface_points(mesh, int(c), rng)
                 xs.append(x + lift * nrm)
         return np.concatenate(xs)
 
