@@ -16,6 +16,7 @@ our growth + skin time.
 from __future__ import annotations
 
 import argparse
+import os
 import pathlib
 import statistics
 import time
@@ -70,7 +71,8 @@ def run(argv) -> dict:
             cs.append(time.process_time() - c0)
             s = r.summary()
             rows.append((s, rep))
-        s0, rep0 = rows[0]
+        s0 = rows[0][0]
+        stages = len(s0["stop_reasons"])  # a guided scene grows once per stage (each with its own attractors)
         out[name] = {
             "mode": s0["mode"],
             "growth_seconds_median": statistics.median(tg),
@@ -79,20 +81,17 @@ def run(argv) -> dict:
             "skin_seconds_max": max(ts),
             "growth_cpu_seconds_median": statistics.median(cg),
             "skin_cpu_seconds_median": statistics.median(cs),
-            "stages": len(rows[0][0]["stop_reasons"]),
-            "growth_seconds_per_stage_median": statistics.median(tg) / len(rows[0][0]["stop_reasons"]),
+            "stages": stages,
+            "growth_seconds_per_stage_median": statistics.median(tg) / stages,
             "nodes_grown": s0["nodes_grown"],
             "segments": s0["segments"],
             "targets": f"{min(r[0]['targets_reached'] for r in rows)}/{s0['targets_total']}",
             "skins_ok": all(r[1].ok for r in rows),
-            # a guided scene grows once per stage (each with its own attractors): per growth
-            "growth_target_met": statistics.median(tg) / len(rows[0][0]["stop_reasons"]) <= TARGET_GROWTH_SECONDS,
+            "growth_target_met": statistics.median(tg) / stages <= TARGET_GROWTH_SECONDS,
             "skin_target_met": statistics.median(ts) <= TARGET_SKIN_SECONDS,
         }
     ref, per_example = _reference()
     ours_total = [v["growth_seconds_median"] + v["skin_seconds_median"] for v in out.values()]
-    import os
-
     result = {
         "benchmark": "growth",
         "load_average_1min": os.getloadavg()[0],
