@@ -228,7 +228,7 @@ def _absorb(A, alive, is_t, near_d, near_i, pos, idx, growing, kill) -> None:
 
 def _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep):
     """Children of the attracted nodes: (pos (k,3), parent (k,), target attractor or -1 (k,),
-    ordinary attractors of dropped children)."""
+    attractors of dropped children, attracted nodes that got no child this step)."""
     L = s.branch_length
     node = near_i[att]
     X = tree.nodes
