@@ -137,19 +137,44 @@ class ShiftedCholesky(BandedOrSparseCholesky):
     large shift would cause.
     """
 
+    def __init__(self):
+        super().__init__()
+        self._diag_key = None
+        self._diag = None  # positions of the diagonal in the CSR data (None: not all stored)
+
+    def _shifter(self, A: sp.csr_matrix):
+        """Function mu -> A + mu I. When every diagonal entry is stored (Newton Hessians), the shift
+        is added to those values in a copy (same pattern, no sparse addition per trial shift)."""
+        if not same_pattern(self._diag_key, A):
+            rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+            pos = np.flatnonzero(A.indices == rows)
+            self._diag_key = (A.indptr.copy(), A.indices.copy())
+            self._diag = pos if len(pos) == A.shape[0] else None
+        if self._diag is None:
+            I = sp.identity(A.shape[0], format="csr")
+            return lambda mu: A + mu * I
+        pos = self._diag
+
+        def shifted(mu):
+            B = A.copy()
+            B.data[pos] += mu
+            return B
+
+        return shifted
+
     def solve(self, A, b):
         try:
             return super().solve(A, b)
         except NotPositiveDefinite:
             pass
-        A = sp.csr_matrix(A)
-        I = sp.identity(A.shape[0], format="csr")
+        A = canonical_csr(A)
+        shifted = self._shifter(A)
         base = float(np.mean(np.abs(A.diagonal()))) or 1.0
         lo, mu = 0.0, 1e-10 * base
         x = None
         while mu <= 1e3 * base:
             try:
-                x = super().solve(A + mu * I, b)
+                x = super().solve(shifted(mu), b)
                 break
             except NotPositiveDefinite:
                 lo, mu = mu, mu * 16.0
@@ -160,7 +185,7 @@ class ShiftedCholesky(BandedOrSparseCholesky):
             if mu / max(lo, 1e-300) <= 2.0:
                 break
             try:
-                x = super().solve(A + mid * I, b)
+                x = super().solve(shifted(mid), b)
                 mu = mid
             except NotPositiveDefinite:
                 lo = mid

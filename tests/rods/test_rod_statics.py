@@ -145,3 +145,27 @@ def test_reduced_hessian_through_rigid_body_matches_second_differences(network, 
         e2 = (solver._objective(solver.red.apply(st, hs * v), False, False, None, None)[0] - 2 * E
               + solver._objective(solver.red.apply(st, -hs * v), False, False, None, None)[0]) / hs**2
         assert v @ Hd @ v == pytest.approx(e2, rel=1e-4)
+
+
+def test_shifted_cholesky_shift_is_a_plus_mu_identity():
+    """The in-place diagonal shift equals A + mu I, also for a pattern with an unstored diagonal entry."""
+    import scipy.sparse as sp
+
+    from simfab.rods.statics import ShiftedCholesky
+
+    rng = np.random.default_rng(6)
+    n = 12
+    D = rng.normal(size=(n, n)) * (rng.uniform(size=(n, n)) < 0.3)
+    full = sp.csr_matrix(D + D.T + np.diag(rng.uniform(1, 2, n)))
+    holed = full.tolil()
+    holed[3, 3] = 0.0
+    holed = sp.csr_matrix(holed)
+    holed.eliminate_zeros()
+    assert full.diagonal().all() and holed.nnz < full.nnz
+    solver = ShiftedCholesky()
+    for A in (full, holed, full):  # pattern changes, then back: the diagonal map follows
+        A0 = A.toarray()
+        shifted = solver._shifter(A)
+        for mu in (1e-3, 7.5):
+            np.testing.assert_array_equal(shifted(mu).toarray(), A0 + mu * np.eye(n))
+        np.testing.assert_array_equal(A.toarray(), A0)  # the caller's matrix is not modified
