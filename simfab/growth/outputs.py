@@ -137,17 +137,21 @@ def save_skin(mesh, path: Path) -> Path:
 
 
 def write_all(result, mesh, out: Path, *, stem: str = "growth") -> dict:
-    """Write every output of a run under ``out``; returns name -> path."""
+    """Write every output of a run under ``out``; returns name -> path. The files appear
+    together: a failure in any writer leaves none of them (``atomic_paths``)."""
+    from simfab.io.atomic import atomic_paths
+
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {
-        "skin_stl": save_skin(mesh, out / f"{stem}_skin.stl"),
-        "skin_ply": save_skin(mesh, out / f"{stem}_skin.ply"),
-        "skeleton_json": write_skeleton(result, out / f"{stem}_skeleton.json"),
-        "usd": write_usd(result, mesh, out / f"{stem}.usdc"),
-        "mjcf": write_mjcf(result, mesh, out / f"{stem}_grown.xml"),
-    }
-    paths["png"] = render_preview(paths["mjcf"], out / f"{stem}_preview.png", preview_azimuth(result, mesh))
+    paths = {"skin_stl": out / f"{stem}_skin.stl", "skin_ply": out / f"{stem}_skin.ply",
+             "skeleton_json": out / f"{stem}_skeleton.json", "usd": out / f"{stem}.usdc",
+             "mjcf": out / f"{stem}_grown.xml", "png": out / f"{stem}_preview.png"}
+    with atomic_paths(paths) as tmp:
+        save_skin(mesh, tmp["skin_stl"])
+        save_skin(mesh, tmp["skin_ply"])
+        write_skeleton(result, tmp["skeleton_json"])
+        write_usd(result, mesh, tmp["usd"])
+        write_mjcf(result, mesh, tmp["mjcf"])
+        render_preview(tmp["mjcf"], tmp["png"], preview_azimuth(result, mesh))
     return {k: str(v) for k, v in paths.items()}
 
 
