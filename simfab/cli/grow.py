@@ -124,7 +124,7 @@ def _run_edit(args) -> dict:
     from simfab.growth.skeleton import load_skeleton_json, to_json_dict
     from simfab.growth.skinning import skin
     from simfab.growth.sketch import edit_chain, load_camera, load_stroke
-    from simfab.io.atomic import write_json
+    from simfab.io.atomic import atomic_paths, write_json
     from simfab.growth.outputs import SKIN_FILE_UNITS, save_skin
 
     if args.skeleton is None:
@@ -153,12 +153,13 @@ def _run_edit(args) -> dict:
             f"segment(s); the skin has {srep.bodies} bodies", quiet=args.quiet)
     out = Path(args.out)
     stem = Path(args.skeleton).stem.removesuffix("_skeleton") + "_edited"
-    paths = {
-        "skeleton_json": str(write_json(out / f"{stem}_skeleton.json",
-                                        to_json_dict(edited, scene=scene_path, seed=doc.get("seed"), edit=rep))),
-        "skin_stl": str(save_skin(mesh, out / f"{stem}_skin.stl")),
-        "skin_ply": str(save_skin(mesh, out / f"{stem}_skin.ply")),
-    }
+    paths = {"skeleton_json": out / f"{stem}_skeleton.json", "skin_stl": out / f"{stem}_skin.stl",
+             "skin_ply": out / f"{stem}_skin.ply"}
+    with atomic_paths(paths) as tmp:  # the three files appear together or not at all
+        write_json(tmp["skeleton_json"], to_json_dict(edited, scene=scene_path, seed=doc.get("seed"), edit=rep))
+        save_skin(mesh, tmp["skin_stl"])
+        save_skin(mesh, tmp["skin_ply"])
+    paths = {k: str(v) for k, v in paths.items()}
     return {**rep, "nodes": len(edited.nodes), "segments": int((edited.parent >= 0).sum()),
             "watertight": srep.watertight, "bodies": srep.bodies, "volume": srep.volume, "skin_units": SKIN_FILE_UNITS,
             **paths}
