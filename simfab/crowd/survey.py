@@ -51,6 +51,11 @@ class SurveySpec:
     crowds: tuple[CrowdSpec, ...]
     demo_subcrowds: int
 
+    @property
+    def truth_key(self) -> str:
+        """The orientation-table column (:func:`survey_truth`) that is this survey's truth."""
+        return "support_score" if self.question == "support" else "finish_score"
+
 
 def load_survey(path=SURVEY_TOML) -> SurveySpec:
     """Read and validate a survey TOML (InputError naming the field on problems)."""
@@ -165,8 +170,7 @@ def make_bundle(spec: SurveySpec | None = None) -> dict:
     V, F = build_part_mm()
     save_mesh(trimesh.Trimesh(V, F, process=False), spec.root / spec.mesh)
     rows = survey_truth(spec)
-    key = "support_score" if spec.question == "support" else "finish_score"
-    truth = np.array([r[key] for r in rows])
+    truth = np.array([r[spec.truth_key] for r in rows])
     tasks = [r["orientation"] for r in rows]
     write_csv(spec.root / spec.truth_file, ["task", "truth"], list(zip(tasks, truth.tolist())))
     _picture(spec, V * 1e-3 if spec.units == "mm" else V, F, spec.root / spec.picture)
@@ -194,8 +198,7 @@ def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: Sur
     log("crowd demo: ground truth from the mesh (support volume per orientation)", quiet=quiet)
     rows = survey_truth(spec)
     summary = {"survey": spec.title, "truth": truth_outputs(rows, os.path.join(out, "truth"), scale=spec.scale)}
-    key = "support_score" if spec.question == "support" else "finish_score"
-    bundled = {r["orientation"]: r[key] for r in rows}
+    bundled = {r["orientation"]: r[spec.truth_key] for r in rows}
     crowds = {}
     for c in spec.crowds:
         ratings = load_ratings(spec.root / c.file, scale)
