@@ -300,7 +300,7 @@ def _init_cache(
 class WarpKernel:
     """Chains of a batch of crowds on a Warp device; same interface as the numpy kernel.
 
-    y, mask: (B, R, Q) unit-scale ratings and presence; init: (alpha, beta, x) arrays of
+    y, mask: (B, R, Q) unit-scale ratings (any value, e.g. NaN, where missing) and presence; init: (alpha, beta, x) arrays of
     shape (B, C, R), (B, C, Q), (B, C, Q). Launch seeds come from ``rng`` (reproducible).
     """
 

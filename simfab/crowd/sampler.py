@@ -276,9 +276,9 @@ def sample(
     if backend == "warp":
         from simfab.crowd._kernels import WarpKernel
 
-        kern = WarpKernel(np.where(m, y, 0.5), m, half_width, priors, config, rng, init, device=device)
+        kern = WarpKernel(y, m, half_width, priors, config, rng, init, device=device)
     elif backend == "numpy":
-        obs = M.Observations.make(np.where(m, y, 0.5)[:, None], m[:, None], half_width)
+        obs = M.Observations.make(y[:, None], m[:, None], half_width)  # missing ratings -> weight 0
         kern = _NumpyKernel(obs, priors, config, rng, init)
     else:
         raise ValueError(f"unknown backend {backend!r}")
