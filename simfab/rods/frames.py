@@ -140,18 +140,6 @@ def expmap(w: np.ndarray) -> np.ndarray:
     return np.eye(3) + s[:, None, None] * K + c[:, None, None] * (K @ K)
 
 
-def left_jacobian(w: np.ndarray) -> np.ndarray:
-    """Left Jacobians (k,3,3) of SO(3): ``exp(w + dw) = exp(J_l(w) dw) exp(w)`` to first order."""
-    w = np.atleast_2d(w)
-    a = np.linalg.norm(w, axis=-1)
-    K = skew(w)
-    small = a < 1e-6
-    a_safe = np.where(small, 1.0, a)
-    b = np.where(small, 0.5 - a**2 / 24.0, (1.0 - np.cos(a_safe)) / a_safe**2)
-    c = np.where(small, 1.0 / 6.0 - a**2 / 120.0, (a_safe - np.sin(a_safe)) / a_safe**3)
-    return np.eye(3) + b[:, None, None] * K + c[:, None, None] * (K @ K)
-
-
 def matrix_to_quat(R: np.ndarray) -> np.ndarray:
     """Unit quaternion (w, x, y, z) of a rotation matrix (3,3)."""
     from scipy.spatial.transform import Rotation

@@ -225,7 +225,6 @@ class Reduction:
         self._jn_k = k_of[model.node_body[self._jn]]
         self._jn_c = cols0[model.node_body[self._jn]]
         self._je = np.flatnonzero(k_of[model.edge_body] >= 0)
-        self._je_k = k_of[model.edge_body[self._je]]
         self._je_c = cols0[model.edge_body[self._je]]
 
     def block(self, H: sp.csr_matrix) -> sp.csr_matrix:
@@ -263,13 +262,13 @@ class Reduction:
             rot[self.bodies] = fr.expmap(dw) @ rot[self.bodies]
         return synchronize(self.model, base, x.reshape(-1, 3), theta, pos, rot)
 
-    def jacobian(self, state: RodState, dw: np.ndarray) -> sp.csr_matrix:
-        """J = d(full DOFs)/dq at ``state`` (``dw`` (Bf,3): current rotation increments)."""
+    def jacobian(self, state: RodState) -> sp.csr_matrix:
+        """J = d(full DOFs)/dq at ``q = 0`` around ``state`` (the solver re-bases after every step,
+        so the rotation increments are zero and exp's left Jacobian is the identity)."""
         rows, cols, vals = [self.full_index], [np.arange(len(self.full_index))], [self.full_scale]
         N = self.model.n_nodes
         three = np.arange(3)
         if len(self.bodies):
-            Jl = fr.left_jacobian(dw)
             nodes, k, c0 = self._jn, self._jn_k, self._jn_c
             if len(nodes):
                 r = state.x[nodes] - state.body_pos[self.bodies[k]]
@@ -278,14 +277,14 @@ class Reduction:
                 rows.append(rr)
                 cols.append((c0[:, None] + three).ravel())
                 vals.append(np.ones(len(rr)))
-                # rotation: dx = -[r]x Jl dw / ell
-                blk = -fr.skew(r) @ Jl[k] / self.ell  # (m,3,3)
+                # rotation: dx = w x r = -[r]x w, w = (scaled unknown) / ell
+                blk = -fr.skew(r) / self.ell  # (m,3,3)
                 rows.append(np.repeat(rr, 3))
                 cols.append(np.broadcast_to(c0[:, None, None] + 3 + three, blk.shape).ravel())
                 vals.append(blk.reshape(-1))
-            edges, k, c0 = self._je, self._je_k, self._je_c
+            edges, c0 = self._je, self._je_c
             if len(edges):
-                blk = (state.t[edges][:, None, :] @ Jl[k])[:, 0] / self.ell  # (m,3): dtheta = t . (Jl dw)
+                blk = state.t[edges] / self.ell  # (m,3): dtheta = t . w
                 rows.append(np.repeat(3 * N + edges, 3))
                 cols.append((c0[:, None] + 3 + three).ravel())
                 vals.append(blk.reshape(-1))
@@ -354,7 +353,7 @@ class StaticSolver:
             gq = g[self.red.full_index] * self.red.full_scale
             Hq = self.red.block(H) if need_hess else None
             return E, gq, Hq
-        J = self.red.jacobian(st, np.zeros((len(self.red.bodies), 3)))
+        J = self.red.jacobian(st)
         gq = J.T @ g
         if body_forces is not None:
             gq[self.red.body_trans_cols] -= body_forces[self.red.bodies].ravel()
