@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from simfab.growth.pipeline import node_age
-from simfab.growth.skeleton import chains, radius_by_age, to_json_dict
+from simfab.growth.pipeline import node_radius
+from simfab.growth.skeleton import chains, to_json_dict
 
 OBJECT_RGBA = (0.62, 0.64, 0.68, 1.0)
 SKIN_RGBA = (0.86, 0.52, 0.25, 1.0)
@@ -51,7 +51,7 @@ def write_usd(result, mesh, path: Path) -> Path:
     h = result.history
     res = result.resolved
     S = int(h.birth.max(initial=0))
-    r = radius_by_age(node_age(h.birth, result.scene.params.radius_age, S), res.r_min, res.r_max, res.radius_decay)
+    r = node_radius(h.birth, result.scene.params.radius_age, S, res)
     # replay as polylines: every chain of the final tree, cut to the nodes born so far
     # (births increase along a chain, so the visible part is a prefix)
     ch = chains(h.parent, np.zeros(len(h), bool))

@@ -302,6 +302,11 @@ def node_age(birth: np.ndarray, convention: str, last_step: int) -> np.ndarray:
     return b if convention == "front" else np.maximum(last_step - b, 0)
 
 
+def node_radius(birth: np.ndarray, convention: str, last_step: int, res: Resolved) -> np.ndarray:
+    """(n,) skin radius [m] per node: :func:`radius_by_age` at the age :func:`node_age` gives."""
+    return radius_by_age(node_age(birth, convention, last_step), res.r_min, res.r_max, res.radius_decay)
+
+
 def _skeleton(tree: Tree, scene, res: Resolved, last: int) -> Skeleton:
     """Skeleton with radii by age (``last`` = final growth step); roots that grew nothing are dropped."""
     has_child = np.zeros(len(tree), bool)
@@ -311,8 +316,7 @@ def _skeleton(tree: Tree, scene, res: Resolved, last: int) -> Skeleton:
         keep[:] = True
     idx, par = subset(tree.parent, keep)
     return Skeleton(nodes=tree.nodes[idx].copy(), parent=par, birth=tree.birth[idx], target=tree.target[idx],
-                    root=tree.root[idx], radius=radius_by_age(node_age(tree.birth[idx], scene.params.radius_age, last),
-                                                              res.r_min, res.r_max, res.radius_decay),
+                    root=tree.root[idx], radius=node_radius(tree.birth[idx], scene.params.radius_age, last, res),
                     contact=tree.contact[idx],
                     target_names=tuple(scene.target_names))
 
