@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 SCENES = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "growth"
-SCENE_NAMES = sorted(p.stem for p in SCENES.glob("*.xml"))
 
 
 @pytest.fixture(scope="session")
