@@ -205,10 +205,10 @@ class Reduction:
         self.bodies = np.flatnonzero(~model.body_driven)
         self.ell = model.length_scale
         nx, nt = len(self.x_dofs), len(self.th_edges)
-        self.body_col = {int(b): nx + nt + 6 * k for k, b in enumerate(self.bodies)}
         self.nq = nx + nt + 6 * len(self.bodies)
+        body_col0 = nx + nt + 6 * np.arange(len(self.bodies))  # first q column of each free body
         # translation columns of the free bodies, (Bf*3,) in the order of ``bodies``
-        self.body_trans_cols = (nx + nt + 6 * np.arange(len(self.bodies))[:, None] + np.arange(3)).ravel()
+        self.body_trans_cols = (body_col0[:, None] + np.arange(3)).ravel()
         # constant part of J: q column i (free coordinate / scaled angle) -> full DOF full_index[i],
         # factor full_scale[i]
         self.full_index = np.concatenate([self.x_dofs, 3 * N + self.th_edges])
@@ -220,7 +220,8 @@ class Reduction:
         # global index, position of the body in ``bodies`` and the body's first column in q
         k_of = np.full(model.n_bodies + 1, -1)  # last entry: "no body" (index -1)
         k_of[self.bodies] = np.arange(len(self.bodies))
-        cols0 = np.array([self.body_col.get(b, -1) for b in range(model.n_bodies)] + [-1], dtype=np.int64)
+        cols0 = np.full(model.n_bodies + 1, -1, dtype=np.int64)
+        cols0[self.bodies] = body_col0
         self._jn = np.flatnonzero(k_of[model.node_body] >= 0)
         self._jn_k = k_of[model.node_body[self._jn]]
         self._jn_c = cols0[model.node_body[self._jn]]
