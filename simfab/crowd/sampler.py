@@ -290,7 +290,9 @@ def sample(
     chunks = {k: [] for k in record}
     done = np.zeros(B, bool)  # converged in an earlier round: no more sweeps
     n_draws = np.zeros(B, np.int64)
-    rh = np.full((B, 0), np.inf)
+    n_params = {"x": Q, "alpha": R, "beta": Q}
+    P = sum(n_params[k] for k in record)  # diagnosed parameters per crowd, in record order
+    rh, es = np.full((B, P), np.inf), np.zeros((B, P))
     total, target = 0, config.draws
     while True:
         n = target - total
@@ -305,15 +307,11 @@ def sample(
         live = np.flatnonzero(~done)  # these share the full length `total`
         params = np.concatenate([np.moveaxis(d[:, live], 0, -1) for d in draws.values()], axis=-2)  # (b, C, P, D)
         r_live, e_live = diagnose(np.swapaxes(params, 1, 2))  # (b, P)
-        if rh.shape[1] == 0:
-            rh, es = np.full((B, r_live.shape[1]), np.inf), np.zeros((B, r_live.shape[1]))
         rh[live], es[live] = r_live, e_live
-        conv = (rh.max(-1) < config.rhat_target) & (es.min(-1) >= config.ess_target)
-        done = conv.copy()
+        done = (rh.max(-1) < config.rhat_target) & (es.min(-1) >= config.ess_target)
         if done.all() or target >= config.max_draws:
             break
         target = min(target + max(config.draws, target // 2), config.max_draws)  # 1.5x: few re-diagnoses
-    converged = conv
 
     def per_batch(k):  # (D, B, C, K) -> (B, C, D, K)
         return np.ascontiguousarray(np.moveaxis(draws[k], 0, 2)) if k in draws else None
@@ -325,7 +323,7 @@ def sample(
         beta=per_batch("beta"),
         rhat=rh,
         ess=es,
-        converged=converged,
+        converged=done,
         n_draws=n_draws,
         iterations=config.burn_in + int(n_draws.max()),
         seconds=time.perf_counter() - t0,
