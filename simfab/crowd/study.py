@@ -101,14 +101,14 @@ def micro_crowd_study(
     sc = ratings.scale
     truth = np.asarray(truth, float)
     indiv = metrics.individual_errors(ratings.labels, truth, sc)
-    unit = ratings.unit
+    unit, truth_unit, hw = ratings.unit, sc.to_unit(truth), half_width(ratings, config)
     cols = {k: [] for k in ("k", "n", "pm", "ps", "bm", "bs", "u", "rm")}
     for k in range(min_size, N):
         idx = subcrowds(N, k, n_sub, rng)
         log(f"micro-crowd study: size {k}, {len(idx)} sub-crowds", quiet=quiet)
-        post = sample(unit[idx], config=config, priors=priors, seed=int(rng.integers(2**31 - 1)), half_width=half_width(ratings, config), keep_latent=False, device=device)
+        post = sample(unit[idx], config=config, priors=priors, seed=int(rng.integers(2**31 - 1)), half_width=hw, keep_latent=False, device=device)
         est = post.mean("x")  # (S, Q) unit scale
-        bias = np.sqrt(np.mean((est - sc.to_unit(truth)[None]) ** 2, axis=1))
+        bias = np.sqrt(np.mean((est - truth_unit[None]) ** 2, axis=1))
         pct = np.array([metrics.percentile_rank(b, indiv[members]) for b, members in zip(bias, idx)])
         cols["k"].append(k)
         cols["n"].append(len(idx))
