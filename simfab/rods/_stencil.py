@@ -44,6 +44,22 @@ def material(d1: wp.vec3d, t: wp.vec3d, theta: wp.float64) -> wp.mat33d:
 
 
 @wp.func
+def hinge_geometry(x: wp.array(dtype=wp.vec3d), nodes: wp.array2d(dtype=wp.int32), s: int):
+    """Of hinge ``s``: edge lengths ``|e|``, ``|f|`` [m], unit tangents ``te``, ``tf``,
+    ``chi = 1 + te.tf``, ``tt = (te + tf) / chi`` and the curvature binormal ``kb = 2 te x tf / chi``."""
+    e = x[nodes[s, 1]] - x[nodes[s, 0]]
+    f = x[nodes[s, 2]] - x[nodes[s, 1]]
+    ne = wp.length(e)
+    nf = wp.length(f)
+    te = e / ne
+    tf = f / nf
+    chi = f64(1.0) + wp.dot(te, tf)
+    tt = (te + tf) / chi
+    kb = f64(2.0) * wp.cross(te, tf) / chi
+    return ne, nf, te, tf, chi, tt, kb
+
+
+@wp.func
 def expand_grad(De: wp.vec3d, Df: wp.vec3d, dth_e: wp.float64, dth_f: wp.float64) -> vec11d:
     g = vec11d()
     for k in range(3):

@@ -20,7 +20,7 @@ frames: d m1/d theta = m2, d m2/d theta = -m1.
 from __future__ import annotations
 
 from simfab._warp import wp
-from simfab.rods._stencil import expand_grad, expand_hess, f64, mat11d, material, scatter11, skew
+from simfab.rods._stencil import expand_grad, expand_hess, f64, hinge_geometry, mat11d, material, scatter11, skew
 
 # analytic derivatives only: no adjoint code (halves compile time)
 wp.set_module_options({"enable_backward": False})
@@ -42,24 +42,15 @@ def _bend(x: wp.array(dtype=wp.vec3d), theta: wp.array(dtype=wp.float64), d1: wp
     s = wp.tid()
     ie = edges[s, 0]
     jf = edges[s, 1]
-    e = x[nodes[s, 1]] - x[nodes[s, 0]]
-    f = x[nodes[s, 2]] - x[nodes[s, 1]]
-    ne = wp.length(e)
-    nf = wp.length(f)
-    te = e / ne
-    tf = f / nf
+    ne, nf, te, tf, chi, tt, kb = hinge_geometry(x, nodes, s)
     Me = material(d1[ie], te, theta[ie])
     Mf = material(d1[jf], tf, theta[jf])
     m1e = Me[0]
     m2e = Me[1]
     m1f = Mf[0]
     m2f = Mf[1]
-    one = f64(1.0)
     half = f64(0.5)
     two = f64(2.0)
-    chi = one + wp.dot(te, tf)
-    tt = (te + tf) / chi
-    kb = two * wp.cross(te, tf) / chi
     d1t = (m1e + m1f) / chi
     d2t = (m2e + m2f) / chi
     k1 = half * wp.dot(kb, m2e + m2f)

@@ -14,7 +14,7 @@ Hessian is exact for reference frames updated by time-parallel transport (tests/
 from __future__ import annotations
 
 from simfab._warp import wp
-from simfab.rods._stencil import expand_grad, expand_hess, f64, mat11d, scatter11, skew
+from simfab.rods._stencil import expand_grad, expand_hess, f64, hinge_geometry, mat11d, scatter11, skew
 
 # analytic derivatives only: no adjoint code (halves compile time)
 wp.set_module_options({"enable_backward": False})
@@ -29,8 +29,6 @@ def _twist(x: wp.array(dtype=wp.vec3d), theta: wp.array(dtype=wp.float64), ref_t
            need_grad: int, need_hess: int,
            energy: wp.array(dtype=wp.float64), grad: wp.array(dtype=wp.float64), hess: wp.array(dtype=wp.float64)):
     s = wp.tid()
-    e = x[nodes[s, 1]] - x[nodes[s, 0]]
-    f = x[nodes[s, 2]] - x[nodes[s, 1]]
     m = theta[edges[s, 1]] - theta[edges[s, 0]] + ref_twist[s]
     w = stiff[s] / vor_len[s]
     dm = m - twist_bar[s]
@@ -38,15 +36,9 @@ def _twist(x: wp.array(dtype=wp.vec3d), theta: wp.array(dtype=wp.float64), ref_t
     energy[s] = half * w * dm * dm
     if need_grad == 0 and need_hess == 0:
         return
-    ne = wp.length(e)
-    nf = wp.length(f)
-    te = e / ne
-    tf = f / nf
+    ne, nf, te, tf, chi, tt, kb = hinge_geometry(x, nodes, s)
     one = f64(1.0)
     two = f64(2.0)
-    chi = one + wp.dot(te, tf)
-    tt = (te + tf) / chi
-    kb = two * wp.cross(te, tf) / chi
     gm = expand_grad(kb / (two * ne), kb / (two * nf), -one, one)
     g = (w * dm) * gm
     H = mat11d()
