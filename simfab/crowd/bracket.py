@@ -133,8 +133,7 @@ def tip_deflection(outline, holes=(), *, setup: BracketSetup = BracketSetup(), n
     res = minimize(fun, X.ravel().copy(), free=np.repeat(~clamped, 2), admissible=lambda x: bool(np.all(nh.det_F(model, x) > 0)))
     x = res.x.reshape(-1, 2)
     u = x - X
-    e1, e2 = P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]
-    area = 0.5 * float(np.sum(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))
+    area = float(model.volume.sum()) / setup.thickness  # plane strain: element volume = area * thickness
     return BracketResult(name=name, deflection=float(-u[loaded, 1].mean()), area=area, n_triangles=len(T), newton_iterations=res.iterations, points=P, triangles=T, displacement=u)
 
 
