@@ -51,7 +51,7 @@ def plot_expert_network(crowd_error: float, individual, names, path, *, title: s
     e = np.asarray(individual, float)
     n = e.size
     norm = colors.Normalize(vmin=0.0, vmax=max(float(e.max()), crowd_error) * 1.05)
-    cmap = cm.get_cmap("viridis_r") if hasattr(cm, "get_cmap") else plt.get_cmap("viridis_r")
+    cmap = plt.get_cmap("viridis_r")
     fig, ax = plt.subplots(figsize=(6.4, 6.4), constrained_layout=True)
     ang = np.pi / 2 - 2 * np.pi * np.arange(n) / n
     pos = np.column_stack([np.cos(ang), np.sin(ang)])
