@@ -18,6 +18,7 @@ import dataclasses
 
 import numpy as np
 
+from simfab.crowd.config import TOL
 from simfab.errors import InputError
 
 
@@ -82,7 +83,7 @@ def designs(s: BracketSetup = BracketSetup()) -> dict[str, tuple[np.ndarray, lis
     # inverted taper: deep at the tip, shallow at the wall (the worst use of material)
     d["inverted"] = (np.array([[0, top - 2 * t], [L, 0], [L, top], [0, top]], float), [])
     for name, (o, holes) in d.items():
-        if abs(o[:, 0].min()) > 1e-9 or abs(o[:, 0].max() - L) > 1e-9:
+        if abs(o[:, 0].min()) > TOL.span_rel * L or abs(o[:, 0].max() - L) > TOL.span_rel * L:
             raise AssertionError(f"design {name} does not span the wall to the load point")
     return d
 
@@ -111,11 +112,11 @@ def tip_deflection(outline, holes=(), *, setup: BracketSetup = BracketSetup(), n
     mat = material_by_name(setup.material)
     model = make_model(P, T, mat, thickness=setup.thickness)
     X = model.rest
-    clamped = X[:, 0] <= 1e-9 * setup.length
+    clamped = X[:, 0] <= TOL.span_rel * setup.length
     if clamped.sum() < 2:
         raise InputError(f"design {name!r} touches the wall (x = 0) at fewer than 2 nodes", where=name)
     # load on the free end face x = L only (nodes within load_radius of the load point there)
-    on_tip = X[:, 0] >= setup.length * (1 - 1e-9)
+    on_tip = X[:, 0] >= setup.length * (1 - TOL.span_rel)
     loaded = on_tip & (np.abs(X[:, 1] - setup.load_y) <= setup.load_radius)
     if not loaded.any():
         raise InputError(f"design {name!r} has no end face at x = L within {setup.load_radius} m of the load point", where=name)

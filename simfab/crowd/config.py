@@ -101,6 +101,9 @@ class Tolerances:
     ratio_cap: float = 200.0
     #: equal-error tolerance when ranking the crowd among individuals
     tie: float = 1e-12
+    #: a bracket node lies on the wall (x = 0) or on the loaded end face (x = L) when within
+    #: this fraction of L of it (mesh nodes there are exact up to rounding)
+    span_rel: float = 1e-9
 
 
 TOL = Tolerances()
