@@ -69,6 +69,7 @@ Contact forces on A are f_a = -dB/dx_a; the grip force is || (1/2 sum |f_x|, 1/2
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 
@@ -1000,30 +1001,37 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     if far.any():  # far vertices: a sharper lower bound of their distance than far_distance
         dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
     xf = x[facets]  # (F, nv, dim)
-    diam = np.max(np.linalg.norm(xf - np.roll(xf, 1, axis=1), axis=2), axis=1)
+    a, c = _EDGE_PAIRS[cm.dim]
+    edges2 = np.einsum("fed,fed->fe", xf[:, a] - xf[:, c], xf[:, a] - xf[:, c])  # (F, e) squared edge lengths
+    diam = np.sqrt(edges2.max(axis=1))
     ids = np.flatnonzero(np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * diam)
     refined = np.zeros(len(facets), dtype=bool)
     refined[list(state.refined)] = True
     refined = refined[ids]
     psi_max = np.full(len(ids), -np.inf)
-    for is_refined, w in ((False, facet_weights(cm.dim, state.order)), (True, check_weights(cm.dim, state.order))):
+    for is_refined in (False, True):
         sel = refined if is_refined else ~refined
         if sel.any():
+            w, gap_map = _check_lattice(cm.dim, state.order, is_refined)
             f_sel = ids[sel]
             xv = xf[f_sel]  # (f, nv, dim) the facets' vertices
             y = w @ xv  # (f, p, dim) check points
             # psi(y) <= psi(v) + L |y - v| for each vertex v of the facet: points this bounds below
             # zero are outside O and need no evaluation (their bound stands in for psi: every use
             # of psi_max only asks whether it is positive or above the tolerance)
-            gap = np.linalg.norm(y[:, :, None, :] - xv[:, None, :, :], axis=3)  # (f, p, nv)
-            psi = np.min(C.PSI_LIPSCHITZ * gap - dv[facets[f_sel]][:, None, :], axis=2)
+            gap = np.sqrt(np.maximum(edges2[f_sel] @ gap_map, 0.0)).reshape(len(f_sel), len(w), -1)  # (f, p, nv)
+            bound = C.PSI_LIPSCHITZ * gap - dv[facets[f_sel]][:, None, :]
+            psi = bound[:, :, 0]
+            for v in range(1, bound.shape[2]):  # min over the nv vertices (faster than min(axis=2))
+                psi = np.minimum(psi, bound[:, :, v])
             # the same check points' values (or bounds) from earlier checks: O moved rigidly, so in
             # O's body frame psi is the same L-Lipschitz function and psi(y) <= psi(y') + L |b - b'|
             # with b, b' the body-frame positions now and then
             if C.FACET_CHECK_CACHE:
                 body = body_frame(y, (R, p))
                 known_body, known_psi = _check_cache(cm, state, is_refined, len(w))
-                moved = np.linalg.norm(body - known_body[f_sel], axis=2)
+                step = body - known_body[f_sel]
+                moved = np.sqrt(np.einsum("fpd,fpd->fp", step, step))
                 psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
             todo = psi >= 0.0
             if todo.any():
@@ -1034,6 +1042,30 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     out = (ids, psi_max, refined)
     state.check = (x, s, state.order, out)
     return out
+
+
+_EDGE_PAIRS = {2: (np.array([0]), np.array([1])), 3: (np.array([0, 0, 1]), np.array([1, 2, 2]))}  # facet edges (a, c)
+
+
+@functools.lru_cache(maxsize=32)
+def _check_lattice(dim: int, order: int, refined: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(w (p, nv), G (edges, p * nv)) for the check points of a facet at refinement ``order``:
+    their barycentric weights (refinement points for an unrefined facet, the denser check points
+    for a refined one) and the map from the facet's squared edge lengths (f, edges) to the squared
+    distances (f, p * nv) from each check point to each of the facet's vertices.
+
+    For barycentric y = sum_a w_a v_a, |y - q|^2 = sum_a w_a |v_a - q|^2 - 1/2 sum_ac w_a w_c |v_a - v_c|^2;
+    with q = v_b it is linear in the squared edge lengths: one small product per check instead of
+    f * p * nv difference vectors. (Cached and read-only.)
+    """
+    w = check_weights(dim, order) if refined else facet_weights(dim, order)
+    a, c = _EDGE_PAIRS[dim]
+    b = np.arange(dim)
+    wa, wc = w[:, a].T[:, :, None], w[:, c].T[:, :, None]  # (e, p, 1)
+    G = (wa * (c[:, None, None] == b) + wc * (a[:, None, None] == b) - wa * wc).reshape(len(a), -1)
+    w.flags.writeable = False
+    G.flags.writeable = False
+    return w, G
 
 
 def _check_cache(cm: CouplingModel, state: _State, refined: bool, p: int):
@@ -1090,8 +1122,8 @@ def _final_eval(obj: _StepObjective, x: np.ndarray):
 
 
 def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
-    from simfab.fem.neohookean import det_F, energy_gradient
-    from simfab.fem.stress import von_mises
+    from simfab.fem.neohookean import energy_gradient
+    from simfab.fem.stress import det_and_von_mises
 
     x = state.x
     n, dim = cm.fem.n_vertices, cm.dim
@@ -1117,11 +1149,10 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     path_force = float(np.einsum("kd,kd->", gy, _path_velocity(cm, state.s, pts.positions(x))))
     fc = -gc  # contact force on A's vertices
     grip = float(np.linalg.norm(0.5 * np.abs(fc).sum(axis=0)))
-    dets = det_F(cm.fem, x)
+    dets, vm = det_and_von_mises(cm.fem, x)
     min_det = float(dets.min())
     if not min_det > 0:
         raise ConvergenceError(f"an element is inverted at s={state.s:.6g} m (min det F = {min_det:.3e})")
-    vm = von_mises(cm.fem, x)
     _, psi_check, _ = _facet_check(cm, x, state.s, state)
     pen = float(max(0.0, psi_pts.max(initial=-np.inf), psi_check.max(initial=-np.inf)))
     if pen > cm.tol:

@@ -2,6 +2,7 @@
 assembled contact Hessian against J^T blockdiag(H_j) J for points interpolated on edges."""
 
 import numpy as np
+import pytest
 
 from simfab.contact.barrier import point_barrier
 from simfab.coupling import config as C
@@ -63,3 +64,20 @@ def test_contact_hessian_is_jt_h_j(coarse_block_model):
         # what remains is the diagonal rigid-mode regularization only
         assert np.allclose(off - np.diag(np.diag(off)), 0.0, atol=1e-9 * np.abs(ref).max())
         assert np.all(np.abs(np.diag(off)) <= 10 * reg + 1e-9 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("dim,order,refined", [(2, 10, False), (2, 10, True), (3, 4, False), (3, 4, True), (3, 9, True)])
+def test_check_lattice_gaps_equal_the_distances_to_the_facet_vertices(dim, order, refined):
+    # the facet check bounds psi at a check point from the facet's vertices by L |y - v|; the
+    # distances come from squared edge lengths through a precomputed map: compare with |y - v|
+    from simfab.coupling.simulate import _EDGE_PAIRS, _check_lattice
+
+    rng = np.random.default_rng(3)
+    xv = rng.standard_normal((50, dim, dim)) * rng.uniform(0.01, 3.0, (50, 1, 1))  # 50 facets of dim vertices
+    w, G = _check_lattice(dim, order, refined)
+    a, c = _EDGE_PAIRS[dim]
+    edges2 = np.sum((xv[:, a] - xv[:, c]) ** 2, axis=2)
+    gap = np.sqrt(np.maximum(edges2 @ G, 0.0)).reshape(50, len(w), dim)
+    y = w @ xv
+    ref = np.linalg.norm(y[:, :, None, :] - xv[:, None, :, :], axis=3)
+    np.testing.assert_allclose(gap, ref, rtol=1e-12, atol=1e-12 * np.abs(xv).max())

@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from simfab.fem.materials import Material
 from simfab.fem.model import make_model
-from simfab.fem.stress import cauchy_stress, von_mises, von_mises_from_cauchy
+from simfab.fem.stress import cauchy_stress, deformation_gradient, det_and_von_mises, von_mises, von_mises_from_cauchy
 
 MAT = Material(name="t", youngs_modulus=2.0e9, poisson_ratio=0.35, yield_stress=50e6, density=1000.0)
 
@@ -74,3 +74,22 @@ def test_inverted_element_has_no_stress():
     m = make_model(np.vstack([np.zeros(2), np.eye(2)]), [[0, 1, 2]], MAT)
     with pytest.raises(ValueError, match="inverted"):
         cauchy_stress(m, np.array([[0, 0], [1, 0], [0, -1.0]]))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_closed_form_von_mises_matches_the_cauchy_tensor_route(dim):
+    # sigma_vm = sqrt(3/2) mu |dev(F F^T)| / J must equal sqrt(3/2 s:s) of the full Cauchy tensor
+    # (plane strain: sigma_zz included) on large, random, non-inverted deformations
+    P, T = rect_tri(1.0, 0.5, 4, 3) if dim == 2 else box_tet(1.0, 0.5, 0.5, 3, 2, 2)
+    m = make_model(P, T, MAT)
+    rng = np.random.default_rng(7)
+    x = m.rest @ (np.eye(dim) + 0.3 * rng.standard_normal((dim, dim))).T + 0.02 * rng.standard_normal(m.rest.shape)
+    J, vm = det_and_von_mises(m, x)
+    ok = J > 0
+    assert ok.sum() > len(J) // 2
+    F = deformation_gradient(m, x)
+    np.testing.assert_allclose(J, np.linalg.det(F), rtol=1e-12)
+    assert np.all(np.isinf(vm[~ok]))
+    sub = make_model(P, T[ok], MAT)  # the non-inverted elements only
+    ref = von_mises_from_cauchy(cauchy_stress(sub, x))
+    np.testing.assert_allclose(vm[ok], ref, rtol=1e-10, atol=1e-9 * MAT.youngs_modulus)
