@@ -619,8 +619,14 @@ class _Workspace:
         self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
         self.dummy_slots = wp.zeros((1, 1, 1), dtype=wp.int32, device=dev)
         self.dummy_data = wp.zeros(1, dtype=wp.float64, device=dev)
-        self.data_np = self.data = None  # CSR values of the last Hessian launch (set per call)
-        self.data2_np = self.data2 = None  # second values array (projected Hessian with _BOTH)
+        # host views of the per-element outputs (on the CPU the Warp arrays' own memory: no copy)
+        self.energy_np, self.det_F_np, self.grad_np = (self.host(a) for a in (self.energy, self.det_F, self.grad))
+        # CSR values written by the Hessian kernel: persistent buffers (``data``, and ``data2`` for the
+        # projected Hessian with _BOTH), zeroed before and copied out after each launch, so the
+        # recorded launch keeps its arguments (re-binding fresh arrays per call costs more than the copy)
+        self.data_np = self.data = None
+        self.data2_np = self.data2 = None
+        self.bound = {}  # (launch, parameter name) -> value currently bound in a recorded launch
         self.commands: dict = {}
         # gradient scatter: (n*d, m*k*d) sparse sum over the element copies of each dof
         dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
@@ -631,12 +637,30 @@ class _Workspace:
         """Warp view of a numpy array (alias on the CPU, a device copy elsewhere)."""
         return wp.array(arr, dtype=dtype, device=dev, copy=False) if self.cpu else wp.array(arr, dtype=dtype, device=dev)
 
+    def host(self, arr) -> np.ndarray:
+        """NumPy view of a Warp array on the CPU (shared memory); call again after each launch on
+        other devices, where it is a host copy."""
+        return arr.numpy()
+
     def hessian_values(self, second: bool = False) -> np.ndarray:
-        """CSR values (nnz,) filled by the last Hessian launch: ``data``, or ``data2`` with
-        ``second``. On the CPU the numpy array the kernel wrote through (no copy), else a host copy."""
-        if second:
-            return self.data2_np if self.cpu else self.data2.numpy()
-        return self.data_np if self.cpu else self.data.numpy()
+        """A fresh copy (nnz,) of the CSR values filled by the last Hessian launch: ``data``, or
+        ``data2`` with ``second`` (callers keep and modify the matrices built on it)."""
+        if self.cpu:
+            return (self.data2_np if second else self.data_np).copy()
+        return (self.data2 if second else self.data).numpy()
+
+    def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(energy (m,), det F (m,), nodal gradient blocks) of the last launch, as host arrays."""
+        if self.cpu:
+            return self.energy_np, self.det_F_np, self.grad_np
+        return self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()
+
+    def bind(self, cmd, name: str, value) -> None:
+        """Set a parameter of the recorded Hessian launch when it changes (setting costs ~20 us)."""
+        key = (id(cmd), name)
+        if self.bound.get(key, None) is not value:
+            cmd.set_param_by_name(name, value)
+            self.bound[key] = value
 
     def set_positions(self, x: np.ndarray) -> None:
         self.x_np[...] = x
@@ -658,8 +682,10 @@ class _Workspace:
             if model.pattern.nnz >= 2**31:
                 raise ValueError("Hessian too large for int32 slots")
             self.slots = wp.array(model.pattern.element_slots.astype(np.int32), dtype=wp.int32, device=dev)
+            self.data_np = np.zeros(model.pattern.nnz)
+            self.data = self._wrap(self.data_np, wp.float64, dev)
             args = dict(inputs=common + [1, 1, self.slots],
-                        outputs=[self.energy, self.det_F, self.grad, self.dummy3, self.dummy_data, self.dummy_data])
+                        outputs=[self.energy, self.det_F, self.grad, self.dummy3, self.data, self.dummy_data])
         else:  # _BLOCKS: keep the per-element blocks
             kk = (model.dim + 1) * model.dim
             self.hess = wp.zeros((model.n_elements, kk, kk), dtype=wp.float64, device=dev)
@@ -686,31 +712,40 @@ def _launch(model: FemModel, x, want: int, project: int = 1) -> _Workspace:
     ws.set_positions(x)
     cmd = ws.command(model, want)
     if want >= _HESSIAN:
-        cmd.set_param_by_name("project", int(project))
+        ws.bind(cmd, "project", _PROJECT_MODES[int(project)])
     if want == _HESSIAN:
-        # fresh values arrays per call (callers keep and modify returned matrices); on the CPU
-        # numpy owns them and the kernel writes through an alias, so no copy is made
-        ws.data_np = np.zeros(model.pattern.nnz)
-        ws.data = ws._wrap(ws.data_np, wp.float64, model.device)
-        cmd.set_param_by_name("data", ws.data)
+        _zero(ws, "data")
         if project == _BOTH:
-            ws.data2_np = np.zeros(model.pattern.nnz)
-            ws.data2 = ws._wrap(ws.data2_np, wp.float64, model.device)
+            if ws.data2 is None:
+                ws.data2_np = np.zeros(model.pattern.nnz)
+                ws.data2 = ws._wrap(ws.data2_np, wp.float64, model.device)
+            _zero(ws, "data2")
+            ws.bind(cmd, "data2", ws.data2)
         else:
-            ws.data2_np, ws.data2 = None, ws.dummy_data
-        cmd.set_param_by_name("data2", ws.data2)
+            ws.bind(cmd, "data2", ws.dummy_data)
     cmd.launch()
     return ws
 
 
+_PROJECT_MODES = tuple(range(4))  # the bound "project" value is one of these objects (identity test in bind)
+
+
+def _zero(ws: _Workspace, name: str) -> None:
+    if ws.cpu:
+        getattr(ws, name + "_np").fill(0.0)
+    else:
+        getattr(ws, name).zero_()
+
+
 def _total(ws: _Workspace) -> float:
-    if np.any(ws.det_F.numpy() <= 0.0):
+    energy, det, _ = ws.outputs()
+    if det.min() <= 0.0:
         return float("inf")
-    return float(np.sum(ws.energy.numpy()))
+    return float(energy.sum())
 
 
 def _gradient(model: FemModel, ws: _Workspace) -> np.ndarray:
-    return (ws.scatter @ ws.grad.numpy().reshape(-1)).reshape(model.n_vertices, model.dim)
+    return (ws.scatter @ ws.outputs()[2].reshape(-1)).reshape(model.n_vertices, model.dim)
 
 
 def energy(model: FemModel, x) -> float:
@@ -768,4 +803,4 @@ def _energy_gradient_hessian_svd(model: FemModel, x) -> tuple[float, np.ndarray,
 
 def det_F(model: FemModel, x) -> np.ndarray:
     """det F per element (m,) at positions x (n, dim); <= 0 means inverted or degenerate."""
-    return _launch(model, x, _ENERGY, False).det_F.numpy().copy()
+    return _launch(model, x, _ENERGY, False).outputs()[1].copy()
