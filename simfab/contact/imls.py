@@ -161,14 +161,17 @@ class ImlsField:
         ``far_distance`` for points well beyond the radius: the distance to the nearest sample
         minus the same 2 sigma surface-to-sample allowance ``far_distance`` is built on, and never
         below ``far_distance``. Meaningless for near points (use psi there)."""
+        return np.maximum(self.far_distance, self.nearest_sample(points, pose) - 2.0 * self.sigma)
+
+    def nearest_sample(self, points, pose=None) -> np.ndarray:
+        """(k,) distance [m] from world points (k, dim) to their nearest sample of O; a point is far
+        (``near`` False in :func:`evaluate`) when it is at least ``radius``."""
         from scipy.spatial import cKDTree
 
         tree = self._buffers.get("kdtree")
         if tree is None:
             tree = self._buffers["kdtree"] = cKDTree(_pad3(self.vertices))
-        body = body_frame(points, pose)
-        nn, _ = tree.query(body, k=1)
-        return np.maximum(self.far_distance, nn - 2.0 * self.sigma)
+        return tree.query(body_frame(points, pose), k=1)[0]
 
 
 def mean_edge_length(vertices: np.ndarray, edges: np.ndarray) -> float:

@@ -84,6 +84,11 @@ WARM_START_FLOOR = 0.1
 #: O's body frame psi(y) <= psi(y') + L |b - b'|); skips about a fifth of all contact-field
 #: evaluations on clip3d with identical results.
 FACET_CHECK_CACHE = True
+#: The facet check of a converged state takes its boundary vertices' distances from Newton's last
+#: evaluation there (exact within the lazy band, Lipschitz lower bounds beyond it) instead of
+#: evaluating the field at all of them again; vertices beyond the kernel radius get the
+#: nearest-sample bound.
+FACET_CHECK_REUSE_VERTICES = True
 #: Refinement rounds per step (each adds the facets found crossing O) before ConvergenceError.
 MAX_REFINEMENT_ROUNDS = 64
 #: Hessian regularization (relative to mean |diag H|) for the rigid modes left free by the

@@ -629,7 +629,7 @@ def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
         obj = _objective(cm, state.points, s, ctx, state.kappa)
         x, it = _newton(cm, obj, state.x, ctx)
         total += it
-        new = _crossing_facets(cm, x, s, state)
+        new = _crossing_facets(cm, x, s, state, _final_eval(obj, x))
         if not new:
             _accept(state, x, s, obj)
             return total
@@ -674,7 +674,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
             total += _advance(cm, state, s_new, ctx, depth + 1)
             return total
         total += it
-        new = _crossing_facets(cm, x, s_new, state) if cm.options.refine else []
+        new = _crossing_facets(cm, x, s_new, state, _final_eval(obj, x)) if cm.options.refine else []
         if not new:
             state.prev2, state.prev = state.prev, (state.x, state.s)
             _accept(state, x, s_new, obj)
@@ -958,13 +958,13 @@ def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarr
     return x + u.reshape(n, dim)
 
 
-def _crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: _State) -> list:
+def _crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: _State, final=None) -> list:
     """Facets to (re)refine at (x, s): unrefined boundary facets near O whose interior crosses into
     O, and, when a refined facet still penetrates O by more than the tolerance between its points,
     every refined facet again at twice the density (returned as the full list)."""
     if not cm.options.refine:
         return []
-    ids, psi_max, refined = _facet_check(cm, x, s, state)
+    ids, psi_max, refined = _facet_check(cm, x, s, state, final)
     if len(ids) == 0:
         return []
     if np.any(psi_max[refined] > cm.tol):
@@ -978,7 +978,7 @@ def _crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: _State) 
     return [int(f) for f in ids[(psi_max > 0) & ~refined]]
 
 
-def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
+def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, final=None):
     """Max psi over check points of each boundary facet that could reach into O at (x, s).
 
     Returns (facet ids (f,), max psi (f,) [m], refined (f,) bool). Unrefined facets are checked
@@ -994,12 +994,23 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State):
     facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
     R, p = cm.pose(s)
     bv = np.asarray(cm.fem.boundary_vertices)
-    ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
     dv = np.full(cm.fem.n_vertices, np.inf)
-    dv[bv] = -ev.psi
-    far = ~ev.near
-    if far.any():  # far vertices: a sharper lower bound of their distance than far_distance
-        dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
+    if C.FACET_CHECK_REUSE_VERTICES and final is not None and final[0] is x and len(final[4]) >= len(bv):
+        # Newton's converged evaluation at x (the first len(bv) constraint points are the boundary
+        # vertices, in vertex_points order): exact within the lazy band, lower bounds beyond it;
+        # those beyond the kernel radius get the sharper nearest-sample bound
+        dv[bv] = final[4][: len(bv)]
+        out = np.flatnonzero(dv[bv] > cm.dhat * C.LAZY_BAND_DHATS)
+        nn = cm.field.nearest_sample(x[bv[out]], (R, p))
+        far = out[nn >= cm.field.radius]
+        dv[bv[far]] = np.maximum(dv[bv[far]], np.maximum(cm.field.far_distance,
+                                                         nn[nn >= cm.field.radius] - 2.0 * cm.field.sigma))
+    else:
+        ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
+        dv[bv] = -ev.psi
+        far = ~ev.near
+        if far.any():  # far vertices: a sharper lower bound of their distance than far_distance
+            dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
     xf = x[facets]  # (F, nv, dim)
     a, c = _EDGE_PAIRS[cm.dim]
     edges2 = np.einsum("fed,fed->fe", xf[:, a] - xf[:, c], xf[:, a] - xf[:, c])  # (F, e) squared edge lengths

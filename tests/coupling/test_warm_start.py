@@ -131,16 +131,19 @@ def test_warm_starts_keep_new_points_off_the_object(monkeypatch):
     assert len(seen) > 30 and min(seen) >= 0.5 * C.WARM_START_FLOOR
 
 
-def test_facet_checks_bounded_by_earlier_checks_change_nothing(monkeypatch):
-    # check points certified outside O by their values at earlier checks (O moved rigidly) skip
-    # their evaluation; the run must be the same as with every uncertified point evaluated afresh
+@pytest.mark.parametrize("flag,saving", [("FACET_CHECK_CACHE", 0.9), ("FACET_CHECK_REUSE_VERTICES", 0.9)])
+def test_facet_check_shortcuts_change_nothing(monkeypatch, flag, saving):
+    # FACET_CHECK_CACHE: check points certified outside O by their values at earlier checks (O
+    # moved rigidly) skip their evaluation; FACET_CHECK_REUSE_VERTICES: the vertices' distances come
+    # from Newton's converged evaluation instead of a fresh one. Either way the run must be the same
+    # as with every uncertified point evaluated afresh, with fewer field evaluations
     import simfab.coupling.config as C
     import simfab.contact.imls as imls
 
     runs, points = [], []
     real = imls.ImlsField.evaluate
-    for flag in (False, True):
-        monkeypatch.setattr(C, "FACET_CHECK_CACHE", flag)
+    for on in (False, True):
+        monkeypatch.setattr(C, flag, on)
         count = [0]
 
         def counting(self, pts, *a, count=count, **k):
@@ -154,4 +157,4 @@ def test_facet_checks_bounded_by_earlier_checks_change_nothing(monkeypatch):
     assert [r.iterations for r in a.steps] == [r.iterations for r in b.steps]
     assert np.array_equal(np.stack([r.x for r in a.steps]), np.stack([r.x for r in b.steps]))
     assert np.array_equal(a.column("penetration"), b.column("penetration"))
-    assert points[1] < 0.9 * points[0]  # and it does save evaluations
+    assert points[1] < saving * points[0]  # and it does save evaluations
