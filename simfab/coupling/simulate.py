@@ -654,7 +654,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         resumed = False
         try:
             obj = _objective(cm, state.points, s_new, ctx, state.kappa)
-            x0 = None if resume is None else _lift_points(cm, state.points, resume, s_new, obj, ctx, below=0.0,
+            x0 = None if resume is None else _lift_points(cm, state.points, resume, obj, below=0.0,
                                                           to=C.LIFT_TO * cm.dhat)
             resumed = x0 is not None
             if x0 is None:
@@ -690,24 +690,22 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
     raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")
 
 
-def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, s: float, obj, ctx, *, below: float,
+def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj, *, below: float,
                  to: float, prev: np.ndarray | None = None):
     """x with the constraint points at distance <= ``below`` [m] from O (inside it: d <= 0) moved
     out along O's normal to ``to`` [m], their facets' vertices taking the weighted mean of the
     wanted moves (a local move: the rest of A keeps its shape). With ``prev`` (k,), the points'
     gaps at the last step, points that were already that close keep their place. Returns x itself
     when nothing is that close, None when the result is infeasible."""
-    R, p = cm.pose(s)
-    t0 = time.perf_counter()
-    ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
-    ctx["timer"].add("contact", time.perf_counter() - t0)
-    d = -ev.psi
-    lift = (d <= below) & ev.near
+    # the objective's (lazy) distances: exact with gradients within its band (> below), lower
+    # bounds without gradients beyond it, so only points near O are evaluated
+    d, gd, _ = obj.distances(x, False)
+    lift = (d <= below) & np.any(gd != 0.0, axis=1)
     if prev is not None:
         lift &= prev > below
     if not lift.any():
         return x
-    x1 = _move_points(cm, pts, x, lift, to - d[lift], -ev.grad[lift])
+    x1 = _move_points(cm, pts, x, lift, to - d[lift], gd[lift])
     return x1 if np.isfinite(obj.value(x1)) else None
 
 
@@ -749,7 +747,7 @@ def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.
         # distance (the log barrier): start such points at LIFT_TO * d_hat instead
         fin = state.final
         prev = fin[4] if fin is not None and len(fin[4]) == len(state.points) else None
-        xl = _lift_points(cm, state.points, best_x, s_new, obj, ctx, below=C.WARM_START_FLOOR * cm.dhat,
+        xl = _lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * cm.dhat,
                           to=C.LIFT_TO * cm.dhat, prev=prev)
         if xl is not None and xl is not best_x:
             best_x, best_f = xl, obj.value(xl)
