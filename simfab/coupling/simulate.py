@@ -48,9 +48,10 @@ for 1024 points or more), on a second thread while the FEM Hessian is assembled,
 that are not certified (by the Lipschitz bound and their travel since their last exact evaluation) to
 be farther than a band of a few d_hat from O; Hessians of psi only within d_hat; CHOLMOD's symbolic
 analysis and the value map of the fixed FEM sparsity pattern are reused for every solve
-(:class:`simfab.solve.linear.SPDSolver`); the facet check of a converged state is memoized, and check
-points already certified outside O by the Lipschitz bound from their facet's vertices, or from
-their own values at earlier checks, are not evaluated. Per Newton iterate only the exact FEM Hessian is assembled (the PSD-projected one, twice
+(:class:`simfab.solve.linear.SPDSolver`); the facet check of a converged state is memoized, takes its vertices' distances from Newton's last
+evaluation, and check points already certified outside O by the Lipschitz bound from their facet's
+vertices, or from their own values at earlier checks, are not evaluated; lifting near points reads
+the objective's lazy distances. Per Newton iterate only the exact FEM Hessian is assembled (the PSD-projected one, twice
 as expensive, only when the exact one fails to factorize); the line search evaluates the Hessian
 already at its first trial (most are accepted), and the step record reuses Newton's last
 evaluation. The forces of a step use the barrier stiffness its equilibrium was solved with.
