@@ -619,8 +619,9 @@ class _Workspace:
         self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
         self.dummy_slots = wp.zeros((1, 1, 1), dtype=wp.int32, device=dev)
         self.dummy_data = wp.zeros(1, dtype=wp.float64, device=dev)
-        # host views of the per-element outputs (on the CPU the Warp arrays' own memory: no copy)
-        self.energy_np, self.det_F_np, self.grad_np = (self.host(a) for a in (self.energy, self.det_F, self.grad))
+        # host views of the per-element outputs on the CPU (the Warp arrays' own memory: no copy)
+        self.energy_np, self.det_F_np, self.grad_np = (
+            (self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()) if self.cpu else (None, None, None))
         # CSR values written by the Hessian kernel: persistent buffers (``data``, and ``data2`` for the
         # projected Hessian with _BOTH), zeroed before and copied out after each launch, so the
         # recorded launch keeps its arguments (re-binding fresh arrays per call costs more than the copy)
@@ -637,11 +638,6 @@ class _Workspace:
         """Warp view of a numpy array (alias on the CPU, a device copy elsewhere)."""
         return wp.array(arr, dtype=dtype, device=dev, copy=False) if self.cpu else wp.array(arr, dtype=dtype, device=dev)
 
-    def host(self, arr) -> np.ndarray:
-        """NumPy view of a Warp array on the CPU (shared memory); call again after each launch on
-        other devices, where it is a host copy."""
-        return arr.numpy()
-
     def hessian_values(self, second: bool = False) -> np.ndarray:
         """A fresh copy (nnz,) of the CSR values filled by the last Hessian launch: ``data``, or
         ``data2`` with ``second`` (callers keep and modify the matrices built on it)."""
@@ -656,11 +652,14 @@ class _Workspace:
         return self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()
 
     def bind(self, cmd, name: str, value) -> None:
-        """Set a parameter of the recorded Hessian launch when it changes (setting costs ~20 us)."""
+        """Set a parameter of a recorded launch only when it changes (setting costs ~20 us): ints
+        by value, arrays by identity."""
         key = (id(cmd), name)
-        if self.bound.get(key, None) is not value:
-            cmd.set_param_by_name(name, value)
-            self.bound[key] = value
+        prev = self.bound.get(key)
+        if (prev == value) if isinstance(value, int) else (prev is value):
+            return
+        cmd.set_param_by_name(name, value)
+        self.bound[key] = value
 
     def set_positions(self, x: np.ndarray) -> None:
         self.x_np[...] = x
@@ -712,7 +711,7 @@ def _launch(model: FemModel, x, want: int, project: int = 1) -> _Workspace:
     ws.set_positions(x)
     cmd = ws.command(model, want)
     if want >= _HESSIAN:
-        ws.bind(cmd, "project", _PROJECT_MODES[int(project)])
+        ws.bind(cmd, "project", int(project))
     if want == _HESSIAN:
         _zero(ws, "data")
         if project == _BOTH:
@@ -727,10 +726,8 @@ def _launch(model: FemModel, x, want: int, project: int = 1) -> _Workspace:
     return ws
 
 
-_PROJECT_MODES = tuple(range(4))  # the bound "project" value is one of these objects (identity test in bind)
-
-
 def _zero(ws: _Workspace, name: str) -> None:
+    """Zero the persistent CSR values buffer ``name`` ("data" or "data2") before a launch adds into it."""
     if ws.cpu:
         getattr(ws, name + "_np").fill(0.0)
     else:
