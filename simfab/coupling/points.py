@@ -26,17 +26,35 @@ class ContactPoints:
     def __len__(self) -> int:
         return len(self.verts)
 
+    @property
+    def n_plain(self) -> int:
+        """Number of leading plain-vertex points (facet -1): sets list vertices first, and these
+        are read and scattered directly instead of through their (1, 0[, 0]) weights."""
+        n = self.cache.get("n_plain")
+        if n is None:
+            interp = np.flatnonzero(self.facet >= 0)
+            n = self.cache["n_plain"] = int(interp[0]) if len(interp) else len(self.facet)
+        return n
+
     def positions(self, x: np.ndarray) -> np.ndarray:
         """(k, dim) point positions (or displacements when ``x`` is a displacement field)."""
-        return np.einsum("km,kmd->kd", self.weights, x[self.verts])
+        nb = self.n_plain
+        if nb == len(self):
+            return x[self.verts[:, 0]]
+        out = np.empty((len(self), x.shape[1]))
+        out[:nb] = x[self.verts[:nb, 0]]
+        out[nb:] = np.einsum("km,kmd->kd", self.weights[nb:], x[self.verts[nb:]])
+        return out
 
     def scatter(self, g_points: np.ndarray, n_vertices: int) -> np.ndarray:
         """Vertex vectors (n, dim) = sum_j w_ja g_j (transpose of :meth:`positions`)."""
         dim = g_points.shape[1]
-        contrib = self.weights[:, :, None] * g_points[:, None, :]  # (k, nv, dim)
-        idx = self.verts.ravel()
+        nb = self.n_plain
+        idx = self.cache.get("scatter_idx")
+        if idx is None:
+            idx = self.cache["scatter_idx"] = np.concatenate([self.verts[:nb, 0], self.verts[nb:].ravel()])
+        c = np.concatenate([g_points[:nb], (self.weights[nb:, :, None] * g_points[nb:, None, :]).reshape(-1, dim)])
         out = np.empty((n_vertices, dim))
-        c = contrib.reshape(-1, dim)
         for a in range(dim):
             out[:, a] = np.bincount(idx, weights=c[:, a], minlength=n_vertices)
         return out
