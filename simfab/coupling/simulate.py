@@ -61,6 +61,11 @@ Well-posedness: a rigid motion of A that the supports leave free and no contact 
 equilibrium is not unique along it. After every step the rigid motion the contact resists least
 is found (:mod:`simfab.coupling.rigid`); when one is unresisted the run says so in its warnings.
 
+Certificates: the facet check and the lazy distances certify points outside O from a Lipschitz
+bound L of psi (PSI_LIPSCHITZ = 2; |grad psi| ~ 1 away from sharp features). IMLS fields can be
+steeper near sharp rims of O; the run tracks the largest |grad psi| at its converged constraint
+and check points and warns when it exceeds L (the certificates are then not rigorous there).
+
 Forces: the reaction at the fixed dofs is r = dE_total/dx there (the force the support applies to
 A). By equilibrium of A it equals the force A exerts on O, so the insertion force is
 F = sum r . u (u: unit direction of O's translation), negative when A resists the insertion.
@@ -493,6 +498,7 @@ class _State:
     # grow for the following steps; forces at x must use the stiffness of its own equilibrium)
     prev: tuple | None = None  # (x, s) of the step before (for the extrapolating predictor)
     prev2: tuple | None = None  # (x, s) two steps before
+    grad_peak: float = 0.0  # largest |grad psi| seen at converged constraint and check points [-]
 
 
 def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> InsertionResult:
@@ -540,6 +546,12 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
             f"s={weakest[2]:.4g} m (the supports leave it free and the contact normals are perpendicular to "
             "it): the equilibrium is not unique along it, so positions and forces may depend on solver "
             "details; hold that axis ([simulation] fixed_axes or fix_all_axes)")
+    if state.grad_peak > C.PSI_LIPSCHITZ:
+        warnings.append(
+            f"{cm.name}: the contact field's gradient reached {state.grad_peak:.3g} near the part (sharp features of "
+            f"the object, e.g. rims, at the IMLS width sigma={cm.field.sigma:.3g} m), above the Lipschitz bound "
+            f"{C.PSI_LIPSCHITZ:g} that certifies points outside the object between samples: penetrations between "
+            "constraint points may go undetected there; sample the object more finely (smaller sigma)")
     return InsertionResult(model=cm, steps=steps, seconds=time.perf_counter() - t_start, timings=dict(timer.t),
                            warnings=warnings)
 
@@ -999,6 +1011,7 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
         # vertices, in vertex_points order): exact within the lazy band, lower bounds beyond it;
         # those beyond the kernel radius get the sharper nearest-sample bound
         dv[bv] = final[4][: len(bv)]
+        state.grad_peak = max(state.grad_peak, _max_norm(final[5]))
         out = np.flatnonzero(dv[bv] > cm.dhat * C.LAZY_BAND_DHATS)
         nn = cm.field.nearest_sample(x[bv[out]], (R, p))
         far = out[nn >= cm.field.radius]
@@ -1007,6 +1020,7 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
     else:
         ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
         dv[bv] = -ev.psi
+        state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
         far = ~ev.near
         if far.any():  # far vertices: a sharper lower bound of their distance than far_distance
             dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
@@ -1045,13 +1059,20 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
                 psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
             todo = psi >= 0.0
             if todo.any():
-                psi[todo] = cm.field.evaluate(y[todo], (R, p), hessian=False).psi
+                ev = cm.field.evaluate(y[todo], (R, p), hessian=False)
+                psi[todo] = ev.psi
+                state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
             if C.FACET_CHECK_CACHE:
                 known_body[f_sel], known_psi[f_sel] = body, psi
             psi_max[sel] = psi.max(axis=1)
     out = (ids, psi_max, refined)
     state.check = (x, s, state.order, out)
     return out
+
+
+def _max_norm(v: np.ndarray) -> float:
+    """Largest row norm of (k, dim) v (0 when empty)."""
+    return float(np.sqrt(np.einsum("kd,kd->k", v, v).max())) if len(v) else 0.0
 
 
 _EDGE_PAIRS = {2: (np.array([0]), np.array([1])), 3: (np.array([0, 0, 1]), np.array([1, 2, 2]))}  # facet edges (a, c)

@@ -158,3 +158,16 @@ def test_facet_check_shortcuts_change_nothing(monkeypatch, flag, saving):
     assert np.array_equal(np.stack([r.x for r in a.steps]), np.stack([r.x for r in b.steps]))
     assert np.array_equal(a.column("penetration"), b.column("penetration"))
     assert points[1] < saving * points[0]  # and it does save evaluations
+
+
+def test_a_field_steeper_than_the_lipschitz_bound_is_reported(monkeypatch):
+    # The facet check and the lazy distance bounds certify points outside O with |grad psi| <= L.
+    # The bundled clamp's field has |grad psi| ~ 1.0 at its evaluated points: with L just below
+    # that the run must say that its certificates are not rigorous; with the default L = 2, not.
+    import simfab.coupling.config as C
+
+    res = S.simulate(load_coupling_scene("cclamp2d"))
+    assert not res.warnings
+    monkeypatch.setattr(C, "PSI_LIPSCHITZ", 0.99)
+    res = S.simulate(load_coupling_scene("cclamp2d"))
+    assert any("gradient reached" in w and "above the Lipschitz bound 0.99" in w for w in res.warnings)
