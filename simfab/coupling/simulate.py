@@ -628,9 +628,15 @@ class _TimedSolver:
         self.solver, self.timer = solver, timer
 
     def solve(self, A, b):
+        return self._timed(self.solver.solve, A, b)
+
+    def solve_free(self, A, free, b):
+        return self._timed(self.solver.solve_free, A, free, b)
+
+    def _timed(self, fn, *args):
         t0 = time.perf_counter()
         try:
-            return self.solver.solve(A, b)
+            return fn(*args)
         finally:
             self.timer.add("factorization", time.perf_counter() - t0)
 
@@ -956,13 +962,8 @@ def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarr
     f_pt = pen * np.einsum("kij,kj->ki", N, delta[sel])  # penalty force per point
     rhs = ContactPoints(verts=pts.verts[sel], weights=w, facet=pts.facet[sel]).scatter(f_pt, n).ravel()
     fidx = np.flatnonzero(cm.free)
-    sub = ctx.get("free_block")
-    if sub is None:
-        from simfab.solve.newton import _FreeBlock
-
-        sub = ctx["free_block"] = _FreeBlock(fidx, n * dim)
     t0 = time.perf_counter()
-    uf = ctx["solver"].solve(sub(A), rhs[fidx])
+    uf = ctx["solver"].solve_free(A, fidx, rhs[fidx])
     ctx["timer"].add("factorization", time.perf_counter() - t0)
     u = np.zeros(n * dim)
     u[fidx] = uf

@@ -69,6 +69,7 @@ class SPDSolver:
         self._perm = None  # CSR value index of each CHOLMOD (lower, column-major) entry
         self._A = None  # cvxopt spmatrix holding the lower triangle
         self._F = None  # CHOLMOD symbolic (then numeric) factor
+        self._full = None  # solve_free: (full pattern key, free indices, value map full -> factor input)
 
     def solve(self, A: sp.spmatrix, b: np.ndarray) -> np.ndarray:
         """Solve ``A x = b`` for SPD ``A`` (n, n) and ``b`` (n,) or (n, k); returns x shaped like b.
@@ -82,6 +83,38 @@ class SPDSolver:
             lu = splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
             return lu.solve(b)
         return self._solve_cholmod(A, b)
+
+    def solve_free(self, A: sp.spmatrix, free: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Solve ``A[free][:, free] x = b`` without forming the submatrix: ``free`` (m,) int indices
+        of the unknowns, ``b`` (m,) or (m, k). With CHOLMOD, the map from ``A``'s values straight to
+        the factor's input order is computed once per (pattern, free set), so each later call is
+        one gather and a numeric factorization (Newton on the free dofs of a fixed FEM pattern).
+        Raises :class:`NotPositiveDefinite` when the factorization fails."""
+        free = np.asarray(free)
+        if self.backend != "cholmod" or type(self).solve is not SPDSolver.solve:  # subclasses keep their solve
+            return self.solve(canonical_csr(A)[free][:, free], b)
+        import cvxopt
+        import cvxopt.cholmod as cholmod
+
+        A = canonical_csr(A)
+        full = self._full
+        if full is None or not (full[1].shape == free.shape and np.array_equal(full[1], free)
+                                and same_pattern(full[0], A)):
+            # positions (+1, so that no entry is an explicit zero) of A's values in the submatrix
+            pos = sp.csr_matrix((np.arange(1.0, A.nnz + 1.0), A.indices, A.indptr), shape=A.shape)[free][:, free]
+            pos = canonical_csr(pos)
+            self._analyse(pos)
+            composed = pos.data.astype(np.int64)[self._perm] - 1
+            full = self._full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed)
+        self._A.V = cvxopt.matrix(A.data[full[2]])
+        try:
+            cholmod.numeric(self._A, self._F)
+        except ArithmeticError as e:
+            raise NotPositiveDefinite("Cholesky factorization failed: matrix is not positive definite") from e
+        b = np.asarray(b, dtype=np.float64)
+        x = cvxopt.matrix(np.ascontiguousarray(b.reshape(len(free), -1)))
+        cholmod.solve(self._F, x)
+        return np.array(x).reshape(b.shape)
 
     def _solve_cholmod(self, A, b):
         import cvxopt
@@ -101,6 +134,7 @@ class SPDSolver:
         return np.array(x).reshape(b.shape)
 
     def _analyse(self, A: sp.csr_matrix) -> None:
+        self._full = None  # a value map built on the previous analysis no longer applies
         import cvxopt
         import cvxopt.cholmod as cholmod
 

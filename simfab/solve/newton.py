@@ -175,19 +175,34 @@ def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonOp
     if isinstance(H, tuple):
         H_exact, H_psd = H
         try:
-            return solver.solve(sub(H_exact), rhs), 0.0, "exact"
+            return _solve_block(solver, sub, H_exact, rhs), 0.0, "exact"
         except NotPositiveDefinite:
             H = H_psd() if callable(H_psd) else H_psd
-    dx, shift = _solve_regularized(solver, sub(H), rhs, opts)
+    try:
+        return _solve_block(solver, sub, H, rhs), 0.0, "psd"
+    except NotPositiveDefinite:
+        dx, shift = _solve_regularized(solver, sub(H), rhs, opts, unshifted=False)
     return dx, shift, "psd"
 
 
-def _solve_regularized(solver: SPDSolver, H: sp.csr_matrix, rhs: np.ndarray, opts: NewtonOptions):
-    """Solve H dx = rhs; on a failed factorization add a growing diagonal shift. Returns (dx, shift)."""
-    try:
-        return solver.solve(H, rhs), 0.0
-    except NotPositiveDefinite:
-        pass
+def _solve_block(solver, sub: "_FreeBlock", H, rhs: np.ndarray) -> np.ndarray:
+    """Solve the free-dof block of H: straight from H's values when the solver can
+    (:meth:`SPDSolver.solve_free`, no submatrix built), else through the extracted block."""
+    solve_free = getattr(solver, "solve_free", None)
+    if solve_free is not None and len(sub.free_idx) < sub.n:
+        return solve_free(H, sub.free_idx, rhs)
+    return solver.solve(sub(H), rhs)
+
+
+def _solve_regularized(solver: SPDSolver, H: sp.csr_matrix, rhs: np.ndarray, opts: NewtonOptions,
+                       unshifted: bool = True):
+    """Solve H dx = rhs; on a failed factorization add a growing diagonal shift. Returns (dx, shift).
+    ``unshifted=False``: the caller already found H itself not positive definite."""
+    if unshifted:
+        try:
+            return solver.solve(H, rhs), 0.0
+        except NotPositiveDefinite:
+            pass
     diag = np.abs(H.diagonal())
     base = float(diag.mean()) if diag.size and diag.mean() > 0 else 1.0
     shift = opts.reg_initial
