@@ -181,7 +181,7 @@ def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonOp
     try:
         return _solve_block(solver, sub, H, rhs), 0.0, "psd"
     except NotPositiveDefinite:
-        dx, shift = _solve_regularized(solver, sub(H), rhs, opts, unshifted=False)
+        dx, shift = _solve_shifted(solver, sub(H), rhs, opts)
     return dx, shift, "psd"
 
 
@@ -194,15 +194,9 @@ def _solve_block(solver, sub: "_FreeBlock", H, rhs: np.ndarray) -> np.ndarray:
     return solver.solve(sub(H), rhs)
 
 
-def _solve_regularized(solver: SPDSolver, H: sp.csr_matrix, rhs: np.ndarray, opts: NewtonOptions,
-                       unshifted: bool = True):
-    """Solve H dx = rhs; on a failed factorization add a growing diagonal shift. Returns (dx, shift).
-    ``unshifted=False``: the caller already found H itself not positive definite."""
-    if unshifted:
-        try:
-            return solver.solve(H, rhs), 0.0
-        except NotPositiveDefinite:
-            pass
+def _solve_shifted(solver: SPDSolver, H: sp.csr_matrix, rhs: np.ndarray, opts: NewtonOptions):
+    """Solve (H + shift I) dx = rhs for H found not positive definite, with the smallest shift of
+    a growing sequence that factorizes. Returns (dx, shift)."""
     diag = np.abs(H.diagonal())
     base = float(diag.mean()) if diag.size and diag.mean() > 0 else 1.0
     shift = opts.reg_initial
