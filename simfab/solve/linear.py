@@ -93,9 +93,6 @@ class SPDSolver:
         free = np.asarray(free)
         if self.backend != "cholmod" or type(self).solve is not SPDSolver.solve:  # subclasses keep their solve
             return self.solve(canonical_csr(A)[free][:, free], b)
-        import cvxopt
-        import cvxopt.cholmod as cholmod
-
         A = canonical_csr(A)
         full = self._full
         if full is None or not (full[1].shape == free.shape and np.array_equal(full[1], free)
@@ -106,30 +103,26 @@ class SPDSolver:
             self._analyse(pos)
             composed = pos.data.astype(np.int64)[self._perm] - 1
             full = self._full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed)
-        self._A.V = cvxopt.matrix(A.data[full[2]])
-        try:
-            cholmod.numeric(self._A, self._F)
-        except ArithmeticError as e:
-            raise NotPositiveDefinite("Cholesky factorization failed: matrix is not positive definite") from e
-        b = np.asarray(b, dtype=np.float64)
-        x = cvxopt.matrix(np.ascontiguousarray(b.reshape(len(free), -1)))
-        cholmod.solve(self._F, x)
-        return np.array(x).reshape(b.shape)
+        return self._factor_solve(A.data[full[2]], np.asarray(b, dtype=np.float64))
 
     def _solve_cholmod(self, A, b):
-        import cvxopt
-        import cvxopt.cholmod as cholmod
-
         A = canonical_csr(A)  # the value map gathers one value per entry
         if not same_pattern(self._key, A):
             self._analyse(A)
-        self._A.V = cvxopt.matrix(A.data[self._perm])
+        return self._factor_solve(A.data[self._perm], b)
+
+    def _factor_solve(self, values: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Numeric factorization of the analysed pattern with ``values`` (CHOLMOD's input order),
+        then the solve for ``b`` (n,) or (n, k)."""
+        import cvxopt
+        import cvxopt.cholmod as cholmod
+
+        self._A.V = cvxopt.matrix(values)
         try:
             cholmod.numeric(self._A, self._F)
         except ArithmeticError as e:
             raise NotPositiveDefinite("Cholesky factorization failed: matrix is not positive definite") from e
-        n = A.shape[0]
-        x = cvxopt.matrix(np.ascontiguousarray(b.reshape(n, -1)))
+        x = cvxopt.matrix(np.ascontiguousarray(b.reshape(self._A.size[0], -1)))
         cholmod.solve(self._F, x)
         return np.array(x).reshape(b.shape)
 
