@@ -161,7 +161,11 @@ class ImlsField:
         ``far_distance`` for points well beyond the radius: the distance to the nearest sample
         minus the same 2 sigma surface-to-sample allowance ``far_distance`` is built on, and never
         below ``far_distance``. Meaningless for near points (use psi there)."""
-        return np.maximum(self.far_distance, self.nearest_sample(points, pose) - 2.0 * self.sigma)
+        return self.far_bound(self.nearest_sample(points, pose))
+
+    def far_bound(self, nearest: np.ndarray) -> np.ndarray:
+        """:meth:`far_lower_bound` of far points from their :meth:`nearest_sample` distances (k,) [m]."""
+        return np.maximum(self.far_distance, nearest - 2.0 * self.sigma)
 
     def nearest_sample(self, points, pose=None) -> np.ndarray:
         """(k,) distance [m] from world points (k, dim) to their nearest sample of O; a point is far

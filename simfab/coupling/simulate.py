@@ -560,9 +560,9 @@ def _weakest_rigid_motion(cm: CouplingModel, state: _State, free_motions):
     """(ratio, motion, s, radius) of the rigid motion of A that the contact at the current state
     resists least (see :func:`simfab.coupling.rigid.weakest_motion`), or None without contact or
     free motion."""
-    fin = state.final
+    fin = _state_final(state)
     Q, c = free_motions
-    if fin is None or fin[0] is not state.x or Q.shape[1] == 0 or len(fin[4]) != len(state.points):
+    if fin is None or Q.shape[1] == 0:
         return None
     d, gd = fin[4], fin[5]
     act = (d < cm.dhat) & (np.einsum("kd,kd->k", gd, gd) > 0)
@@ -764,8 +764,8 @@ def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.
     if best_x is not None and C.WARM_START_FLOOR > 0:
         # a point that ends up almost touching O costs one Newton iteration per doubling of its
         # distance (the log barrier): start such points at LIFT_TO * d_hat instead
-        fin = state.final
-        prev = fin[4] if fin is not None and len(fin[4]) == len(state.points) else None
+        fin = _state_final(state)
+        prev = fin[4] if fin is not None else None
         xl = _lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * cm.dhat,
                           to=C.LIFT_TO * cm.dhat, prev=prev)
         if xl is not None and xl is not best_x:
@@ -795,9 +795,9 @@ def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float
     deformation into O (the step cap then cuts it to a few percent). Restoring the last gaps keeps
     those points in the barrier's range; the rest of A is left to Newton.
     """
-    fin = state.final
+    fin = _state_final(state)
     pts = state.points
-    if fin is None or fin[0] is not state.x or len(fin[4]) != len(pts):
+    if fin is None:
         return None
     d_prev = fin[4]
     act = d_prev < cm.dhat
@@ -962,9 +962,7 @@ def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarr
     f_pt = pen * np.einsum("kij,kj->ki", N, delta[sel])  # penalty force per point
     rhs = ContactPoints(verts=pts.verts[sel], weights=w, facet=pts.facet[sel]).scatter(f_pt, n).ravel()
     fidx = np.flatnonzero(cm.free)
-    t0 = time.perf_counter()
-    uf = ctx["solver"].solve_free(A, fidx, rhs[fidx])
-    ctx["timer"].add("factorization", time.perf_counter() - t0)
+    uf = _TimedSolver(ctx["solver"], ctx["timer"]).solve_free(A, fidx, rhs[fidx])
     u = np.zeros(n * dim)
     u[fidx] = uf
     return x + u.reshape(n, dim)
@@ -1015,9 +1013,8 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
         state.grad_peak = max(state.grad_peak, _max_norm(final[5]))
         out = np.flatnonzero(dv[bv] > cm.dhat * C.LAZY_BAND_DHATS)
         nn = cm.field.nearest_sample(x[bv[out]], (R, p))
-        far = out[nn >= cm.field.radius]
-        dv[bv[far]] = np.maximum(dv[bv[far]], np.maximum(cm.field.far_distance,
-                                                         nn[nn >= cm.field.radius] - 2.0 * cm.field.sigma))
+        far = nn >= cm.field.radius
+        dv[bv[out[far]]] = np.maximum(dv[bv[out[far]]], cm.field.far_bound(nn[far]))
     else:
         ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
         dv[bv] = -ev.psi
@@ -1153,6 +1150,16 @@ def _final_eval(obj: _StepObjective, x: np.ndarray):
     return (x, obj.kappa, E, gE, obj.last_d, obj.last_gd)
 
 
+def _state_final(state: _State):
+    """Newton's last evaluation (see :func:`_final_eval`) when it belongs to the current state:
+    at state.x and over the current constraint points (a refinement since changes the points);
+    else None."""
+    fin = state.final
+    if fin is None or fin[0] is not state.x or len(fin[4]) != len(state.points):
+        return None
+    return fin
+
+
 def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     from simfab.fem.neohookean import energy_gradient
     from simfab.fem.stress import det_and_von_mises
@@ -1161,8 +1168,8 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
     n, dim = cm.fem.n_vertices, cm.dim
     R, p = cm.pose(state.s)
     pts = state.points
-    fin = state.final
-    if fin is not None and fin[0] is x and fin[1] == state.kappa_step and len(fin[4]) == len(pts):
+    fin = _state_final(state)
+    if fin is not None and fin[1] == state.kappa_step:
         # Newton's last evaluation at x: exact distances within the lazy band (which contains the
         # barrier's support), certified lower bounds beyond it (zero barrier, outside O)
         E, gE, d, gd = fin[2], fin[3], fin[4], fin[5]
