@@ -317,7 +317,8 @@ class WarpKernel:
         self.rounded = 1 if obs.lo is not None else 0
         arr = lambda a: wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=wp.float64, device=device)  # noqa: E731
         # the density likelihood reads the rating itself from ``lo`` (see _loglik)
-        self.lo, self.hi, self.w = (arr(obs.y), arr(obs.y), arr(obs.weight)) if obs.lo is None else (arr(obs.lo), arr(obs.hi), arr(obs.weight))
+        lo, hi = (obs.y, obs.y) if obs.lo is None else (obs.lo, obs.hi)
+        self.lo, self.hi, self.w = arr(lo), arr(hi), arr(obs.weight)
         self.cap = float(_ratio_cap())
         self.prior = arr([priors.alpha_mean, priors.alpha_precision, priors.beta_mean, priors.beta_precision, priors.beta_min, priors.x_mean, priors.x_precision, self.cap])
         T = self.T
