@@ -28,8 +28,8 @@ def test_larger_insert_dome_smaller_insert_saddle(scene):
     assert dome.curvature_history[-1] == pytest.approx(dome.curvature["gaussian_curvature"])
 
 
-@pytest.mark.parametrize("plane, director, half", [("xy", (0.0, 0.0, 1.0), "width"), ("xz", (0.0, 0.0, 1.0), "thickness")])
-def test_bending_strain_of_a_circular_arc(plane, director, half):
+@pytest.mark.parametrize("plane, half", [("xy", "width"), ("xz", "thickness")])
+def test_bending_strain_of_a_circular_arc(plane, half):
     """A straight strip (sheet normal +z) bent into an arc of radius R: fibre strain c / R at interior
     nodes (c: half the width for bending in the sheet plane xy, half the thickness out of it), 0 at
     the rod ends. Per node the discrete curvature 2 tan(phi/2) over the rest Voronoi length R phi
@@ -46,7 +46,7 @@ def test_bending_strain_of_a_circular_arc(plane, director, half):
     straight = np.stack([np.linspace(0.0, L, n + 1), 0 * a, 0 * a], axis=1)
     sec = Section(width=4e-3, thickness=1e-3)
     nb = NetworkBuilder()
-    nb.add_rod("strip", arc, rest_points=straight, section=sec, material=Material(young=1e9), director=director)
+    nb.add_rod("strip", arc, rest_points=straight, section=sec, material=Material(young=1e9), director=(0.0, 0.0, 1.0))
     model, state = nb.build()
     eps = bending_strain(model, state)
     c = 0.5 * (sec.width if half == "width" else sec.thickness)
