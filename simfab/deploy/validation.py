@@ -173,9 +173,8 @@ def _plot(path, shapes, rows, ratios, supports, paths, ns, L):
     import matplotlib.pyplot as plt
 
     from simfab.deploy import elastica
-    from simfab.io.atomic import save_figure
-
     from simfab.deploy import tolerances as tol
+    from simfab.io.atomic import save_figure
 
     n_show = tol.VALIDATION_N if tol.VALIDATION_N in ns else max(ns)
     fig, axes = plt.subplots(len(supports), 1, figsize=(8, 3.2 * len(supports)), squeeze=False)
