@@ -42,14 +42,17 @@ def _imls_eval(
     inv_sigma2: wp.float64,  # 1/sigma^2 [1/m^2]
     radius: wp.float64,  # kernel truncation radius [m]
     far_psi: wp.float64,  # psi reported at far points [m] (negative)
-    points: wp.array(dtype=wp.vec3d),  # (k,) query points in O's body frame [m]
-    hess_band: wp.float64,  # Hessian only where psi > -hess_band (e.g. the barrier's d_hat) [m]
+    points: wp.array(dtype=wp.vec3d),  # (capacity,) query points in O's body frame [m]
+    n_points: wp.array(dtype=wp.int32),  # (1,) number of points in use (threads beyond it return)
+    hess_band: wp.array(dtype=wp.float64),  # (1,) Hessian only where psi > -hess_band [m] (e.g. d_hat)
     psi_out: wp.array(dtype=wp.float64),
     grad_out: wp.array(dtype=wp.vec3d),
     hess_out: wp.array(dtype=wp.mat33d),
     count_out: wp.array(dtype=wp.int32),
 ):
     tid = wp.tid()
+    if tid >= n_points[0]:
+        return
     x = points[tid]
     zero = wp.float64(0.0)
     two = wp.float64(2.0)
@@ -88,7 +91,7 @@ def _imls_eval(
     gf = (gN - f * gD) / D
     psi_out[tid] = -f
     grad_out[tid] = -gf
-    if -f <= -hess_band:
+    if -f <= -hess_band[0]:
         hess_out[tid] = wp.mat33d()
         return
     # second pass for the Hessian, only near O (the barrier needs it where d < d_hat):
@@ -279,37 +282,68 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
     (they are far: ``near`` False).
     Returns :class:`ImlsEval` with world-frame gradient and Hessian.
     """
-    pts = np.asarray(points, dtype=np.float64)
-    k = len(pts)
-    dim = fld.dim
-    if k == 0:
-        return ImlsEval(psi=np.zeros(0), grad=np.zeros((0, dim)), hess=np.zeros((0, dim, dim)), near=np.zeros(0, bool))
-    R, p = pose_matrix(pose)
-    body = body_frame(pts, (R, p))
-    lo, hi = fld._bounds
-    cand = np.flatnonzero(np.all((body >= lo - fld.radius) & (body <= hi + fld.radius), axis=1))
-    psi = np.full(k, -fld.far_distance)
-    grad = np.zeros((k, dim))
-    hess = np.zeros((k, dim, dim))
-    near = np.zeros(k, dtype=bool)
-    m = len(cand)
-    if m == 0:
-        return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
-    band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
+    q = _prepare(fld, points, pose, hessian, hessian_band)
+    if isinstance(q, ImlsEval):
+        return q
+    m = len(q.body)
     if m >= PARALLEL_MIN_POINTS and wp.get_device(fld.device).is_cpu:
         # two single-threaded launches on two threads, each with its own buffers
         from simfab._parallel import submit
 
         half = m // 2
-        second = submit(_launch, fld, body[cand[half:]], band)
-        parts = [_launch(fld, body[cand[:half]], band), second.result()]
-        v_psi, v_grad, v_hess, v_count = (np.concatenate(a) for a in zip(*parts))
+        second = submit(_launch, fld, q.body[half:], q.band)
+        parts = [_launch(fld, q.body[:half], q.band), second.result()]
+        return _finish(q, tuple(np.concatenate(a) for a in zip(*parts)))
+    return _finish(q, _launch(fld, q.body, q.band))
+
+
+@dataclass(frozen=True)
+class _Query:
+    """An evaluation prepared for launch: ``body`` (m, 3) body-frame points to launch at, ``cand``
+    (m,) their indices among the k query points, ``band`` the Hessian band (-inf: no Hessians)."""
+
+    k: int
+    dim: int
+    far: float
+    R: np.ndarray
+    cand: np.ndarray
+    body: np.ndarray
+    band: float
+    hessian: bool
+
+
+def _prepare(fld: ImlsField, points, pose, hessian: bool, hessian_band: float | None):
+    """A :class:`_Query` for the points that may be near O, or the finished :class:`ImlsEval`
+    when none is (all far)."""
+    pts = np.asarray(points, dtype=np.float64)
+    k = len(pts)
+    dim = fld.dim
+    R, p = pose_matrix(pose)
+    if k:
+        body = body_frame(pts, (R, p))
+        lo, hi = fld._bounds
+        cand = np.flatnonzero(np.all((body >= lo - fld.radius) & (body <= hi + fld.radius), axis=1))
     else:
-        v_psi, v_grad, v_hess, v_count = _launch(fld, body[cand], band)
+        cand = np.zeros(0, dtype=np.int64)
+    if len(cand) == 0:
+        return ImlsEval(psi=np.full(k, -fld.far_distance), grad=np.zeros((k, dim)), hess=np.zeros((k, dim, dim)),
+                        near=np.zeros(k, dtype=bool))
+    band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
+    return _Query(k=k, dim=dim, far=fld.far_distance, R=R, cand=cand, body=body[cand], band=band, hessian=hessian)
+
+
+def _finish(q: _Query, launched) -> ImlsEval:
+    """World-frame :class:`ImlsEval` of all k query points from the launch's body-frame results."""
+    v_psi, v_grad, v_hess, v_count = launched
+    k, dim, cand = q.k, q.dim, q.cand
+    psi = np.full(k, -q.far)
+    grad = np.zeros((k, dim))
+    hess = np.zeros((k, dim, dim))
+    near = np.zeros(k, dtype=bool)
     psi[cand] = v_psi
-    grad[cand] = v_grad[:, :dim] @ R[:dim, :dim].T
-    if hessian:
-        Rd = R[:dim, :dim]
+    grad[cand] = v_grad[:, :dim] @ q.R[:dim, :dim].T
+    if q.hessian:
+        Rd = q.R[:dim, :dim]
         hess[cand] = np.einsum("ij,kjl,ml->kim", Rd, v_hess[:, :dim, :dim], Rd)
     near[cand] = v_count > 0
     return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
@@ -317,26 +351,33 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
 
 def _launch(fld: ImlsField, body: np.ndarray, band: float):
     """One launch at body-frame points (m, 3) with the calling thread's buffers; returns
-    (psi (m,), grad (m, 3), hess (m, 3, 3), count (m,)) as copies."""
+    (psi (m,), grad (m, 3), hess (m, 3, 3), count (m,)) as copies.
+
+    Buffer sets come in power-of-two capacities, each with its launch recorded once over its whole
+    capacity; the point count and the Hessian band are written into one-element arrays the kernel
+    reads, so a launch re-binds nothing (setting the launch size and a parameter cost ~60 us in
+    Python, more than the launch itself at a few hundred points)."""
     m = len(body)
     buf = _buffers(fld, m)
     views = buf["views"]  # zero-copy NumPy views of the (CPU) Warp buffers
     if views is not None:
         views["points"][:m] = body
+        views["n_points"][0] = m
+        views["hess_band"][0] = band
     else:
         buf["points"].assign(np.ascontiguousarray(np.pad(body, ((0, buf["capacity"] - m), (0, 0)))))
+        buf["n_points"].assign(np.array([m], dtype=np.int32))
+        buf["hess_band"].assign(np.array([band]))
     cmd = buf.get("cmd")
     if cmd is None:  # recorded once per buffer set and replayed (a plain launch re-packs every argument)
         with RECORD_LOCK:
             cmd = buf["cmd"] = wp.launch(
-                _imls_eval, dim=m, device=fld.device,
+                _imls_eval, dim=buf["capacity"], device=fld.device,
                 inputs=[fld._grid.id, fld._wverts, fld._wnormals, 1.0 / fld.sigma**2, fld.radius, -fld.far_distance,
-                        buf["points"], band],
+                        buf["points"], buf["n_points"], buf["hess_band"]],
                 outputs=[buf["psi"], buf["grad"], buf["hess"], buf["count"]],
                 record_cmd=True,
             )
-    cmd.set_dim(m)
-    cmd.set_param_by_name("hess_band", band)
     cmd.launch()
     v = views if views is not None else {k: buf[k].numpy() for k in ("psi", "grad", "hess", "count")}
     hess = v["hess"][:m].copy() if band > -np.inf else v["hess"][:m]  # unread without Hessians
@@ -344,24 +385,28 @@ def _launch(fld: ImlsField, body: np.ndarray, band: float):
 
 
 def _buffers(fld: ImlsField, k: int) -> dict:
-    """Reusable Warp work arrays of the calling thread for at least k query points (grown by
-    doubling; a launch uses a prefix). On the CPU, NumPy views of them are kept so that filling and
-    reading cost no copy (results are copied out before the next launch of the same thread)."""
-    key = ("work", threading.get_ident())  # one set per thread: evaluations may run concurrently
+    """Reusable Warp work arrays of the calling thread for k query points: one set per power-of-two
+    capacity (at least 64) and thread, since evaluations may run concurrently. On the CPU, NumPy
+    views of them are kept so that filling and reading cost no copy (results are copied out before
+    the next launch of the same thread)."""
+    cap = max(64, 1 << int(np.ceil(np.log2(max(k, 1)))))
+    key = ("work", threading.get_ident(), cap)
     b = fld._buffers.get(key)
-    if b is None or b["capacity"] < k:
-        cap = max(64, 1 << int(np.ceil(np.log2(max(k, 1)))))
+    if b is None:
         dev = fld.device
         b = {
             "capacity": cap,
             "points": wp.zeros(cap, dtype=wp.vec3d, device=dev),
+            "n_points": wp.zeros(1, dtype=wp.int32, device=dev),
+            "hess_band": wp.zeros(1, dtype=wp.float64, device=dev),
             "psi": wp.zeros(cap, dtype=wp.float64, device=dev),
             "grad": wp.zeros(cap, dtype=wp.vec3d, device=dev),
             "hess": wp.zeros(cap, dtype=wp.mat33d, device=dev),
             "count": wp.zeros(cap, dtype=wp.int32, device=dev),
         }
         is_cpu = wp.get_device(dev).is_cpu
-        b["views"] = {k2: b[k2].numpy() for k2 in ("points", "psi", "grad", "hess", "count")} if is_cpu else None
+        names = ("points", "n_points", "hess_band", "psi", "grad", "hess", "count")
+        b["views"] = {k2: b[k2].numpy() for k2 in names} if is_cpu else None
         fld._buffers[key] = b
     return b
 

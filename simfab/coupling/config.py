@@ -45,12 +45,6 @@ NEWTON_MAX_ITER = 100
 EXACT_FIRST_NEWTON = True
 #: Evaluate the Hessian at the first line-search trial (most steps are accepted at once).
 NEWTON_EAGER_HESSIAN = True
-#: Evaluate the contact field on a second thread while the FEM Hessian is assembled (two cores;
-#: the time split then books both in full, so its parts add up to more than the wall time), for
-#: meshes of at least CONTACT_THREAD_MIN_ELEMENTS elements (below, the hand-off costs more than
-#: the overlap saves: about 0.1 ms against a 0.05 ms FEM assembly for 455 triangles).
-CONTACT_IN_THREAD = True
-CONTACT_THREAD_MIN_ELEMENTS = 1000
 #: Predictor: also try the linear extrapolation of the last two steps and the quadratic one of the
 #: last three; the candidate with the lowest objective is the warm start.
 PREDICTOR_EXTRAPOLATE = True

@@ -44,8 +44,9 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    bisected along the path up to ``MAX_BISECTIONS`` times before giving up loudly.
 
 Cost control: the contact field is evaluated in one Warp launch per call (two, on two threads,
-for 1024 points or more), on a second thread while the FEM Hessian is assembled, only for points
-that are not certified (by the Lipschitz bound and their travel since their last exact evaluation) to
+for 1024 points or more; evaluating it on a second thread while the FEM Hessian is assembled
+gained nothing here once its launch stopped re-binding parameters: waking the worker costs about
+what the overlap saves), only for points that are not certified (by the Lipschitz bound and their travel since their last exact evaluation) to
 be farther than a band of a few d_hat from O; Hessians of psi only within d_hat; CHOLMOD's symbolic
 analysis and the value map of the fixed FEM sparsity pattern are reused for every solve
 (:class:`simfab.solve.linear.SPDSolver`); the facet check of a converged state is memoized, takes its vertices' distances from Newton's last
@@ -81,7 +82,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab._parallel import submit
 from simfab.contact.barrier import barrier, barrier_hessian, point_barrier
 from simfab.contact.imls import ImlsField, body_frame, pose_matrix
 from simfab.coupling import config as C
@@ -341,10 +341,6 @@ class _StepObjective:
             self.memo = None  # hand the cached Hessian out once (the caller may modify it)
             return memo[1]
         x = xf.reshape(self.n, self.dim)
-        # with the Hessian wanted, the contact field is evaluated on the second core while this
-        # thread assembles the FEM Hessian (both Warp CPU kernels, which release the GIL)
-        threaded = need_hessian and C.CONTACT_IN_THREAD and cm.fem.n_elements >= C.CONTACT_THREAD_MIN_ELEMENTS
-        pending = submit(self.distances, x, True) if threaded else None
         t0 = time.perf_counter()
         H_exact = None
         if need_hessian and self.exact_first:
@@ -357,11 +353,9 @@ class _StepObjective:
         else:
             (E, g), H = energy_gradient(cm.fem, x), None
         self.timer.add("assembly", time.perf_counter() - t0)
-        d, gd, hd = pending.result() if pending is not None else (None, None, None)
         if not np.isfinite(E):
             return np.inf, g.ravel(), H
-        if pending is None:
-            d, gd, hd = self.distances(x, need_hessian)
+        d, gd, hd = self.distances(x, need_hessian)
         t0 = time.perf_counter()
         if np.any(d <= 0):
             return np.inf, g.ravel(), H

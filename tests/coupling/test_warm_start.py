@@ -61,23 +61,6 @@ def test_fixed_axes_hold_exactly_the_named_axes_of_the_fixed_region():
     assert free[others].all()
 
 
-def test_contact_field_on_the_second_thread_changes_nothing(monkeypatch):
-    # The contact field may be evaluated on a worker thread while the FEM Hessian is assembled;
-    # the two kernels are independent, so the run must be identical to the sequential one.
-    import simfab.coupling.config as C
-
-    runs = []
-    monkeypatch.setattr(C, "CONTACT_THREAD_MIN_ELEMENTS", 0)  # the 2D clamp is below the default
-    for flag in (False, True):
-        monkeypatch.setattr(C, "CONTACT_IN_THREAD", flag)
-        res = S.simulate(load_coupling_scene("cclamp2d", overrides={"simulation": {"steps": 12}}))
-        runs.append(res)
-    a, b = runs
-    assert [r.iterations for r in a.steps] == [r.iterations for r in b.steps]
-    assert np.array_equal(a.column("energy"), b.column("energy"))
-    assert np.array_equal(np.stack([r.x for r in a.steps]), np.stack([r.x for r in b.steps]))
-
-
 def test_solving_again_from_the_refined_state_gives_the_same_profile(monkeypatch):
     # After a refinement the step is solved again from its converged positions (new points lifted
     # out of O) instead of from the previous step; the equilibrium is the same, so the profile

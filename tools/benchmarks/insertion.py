@@ -10,9 +10,8 @@ Cases (bundled scenes, closest to the sizes of the thesis' timing table):
 Each row reports the simulation seconds (scene loading and meshing excluded, as in the original's
 per-iteration cost), the original's seconds (``figures.json``), the speed-up ratio original/ours,
 Newton iterations and the time split (FEM assembly, sparse factorization + solve, contact =
-IMLS evaluation + barrier; the rest is predictor, refinement checks and Python overhead). The
-contact field is evaluated on a second thread while the FEM Hessian is assembled, so the split
-books both in full and "other" (wall time minus the three) understates the rest by the overlap.
+IMLS evaluation + barrier; "other", the wall time minus the three, is predictor, refinement
+checks and Python overhead).
 The process CPU time, the load average and the time of a fixed reference workload are reported
 too: on a shared (virtual) machine the same run's wall time moves with the machine's momentary
 speed, and the reference workload's time moves with it.
