@@ -122,6 +122,37 @@ def test_warp_kernel_matches_numpy_reference():
     assert np.abs(e.psi[band] - psi_full[band]).max() < 1e-6 * f.sigma
 
 
+@pytest.mark.parametrize("dim,max_cells", [(3, None), (3, 64), (2, None), (2, 16)])
+def test_neighbour_lists_find_every_sample_within_the_radius(monkeypatch, dim, max_cells):
+    # The kernel reads only its query point's cell list: every sample within the radius must be in
+    # it (psi equal to the brute-force truncated sum) and a point is far exactly when no sample is
+    # that close, also beyond the grid and with cells grown past sigma (max_cells).
+    import simfab.contact.imls as imls
+
+    if max_cells is not None:
+        monkeypatch.setattr(imls, "MAX_CELLS", max_cells)
+    rng = np.random.default_rng(11 + dim)
+    if dim == 3:  # an elongated box's surface samples: cells differ per axis
+        m = trimesh.creation.box(extents=(0.03, 0.01, 0.006)).subdivide().subdivide().subdivide()
+        v, n = np.asarray(m.vertices), np.asarray(m.vertex_normals)
+    else:
+        t = np.linspace(0, 2 * np.pi, 90, endpoint=False)
+        v = np.c_[0.02 * np.cos(t), 0.008 * np.sin(t)]
+        n = curve_normals(v)
+    f = build_imls(v, n)
+    lo, hi = v.min(0) - 1.5 * f.radius, v.max(0) + 1.5 * f.radius
+    q = np.vstack([rng.uniform(lo, hi, size=(3000, dim)),
+                   v[rng.integers(0, len(v), 1000)] + rng.normal(size=(1000, dim)) * f.radius])
+    e = evaluate(f, q, hessian=False)
+    dist = np.linalg.norm(q[:, None, :] - v[None], axis=2).min(axis=1)
+    clear = np.abs(dist - f.radius) > 1e-12 * f.radius  # not on the cut itself
+    assert np.array_equal(e.near[clear], dist[clear] < f.radius)
+    assert e.near.sum() > 1000 and (~e.near).sum() > 500
+    psi, grad = imls_reference(q[e.near], v, n, f.sigma, f.radius)
+    assert np.allclose(e.psi[e.near], psi, rtol=1e-10, atol=1e-14)
+    assert np.allclose(e.grad[e.near], grad, rtol=1e-9, atol=1e-12)
+
+
 def test_pose_is_a_rigid_transform_of_the_field():
     f = _sphere_field()
     rng = np.random.default_rng(8)
