@@ -167,7 +167,6 @@ class ImlsField:
     _wverts: object = field(default=None, repr=False)
     _wnormals: object = field(default=None, repr=False)
     _buffers: dict = field(default_factory=dict, repr=False)
-    _bounds: tuple = field(default=None, repr=False)  # body-frame AABB of the samples (lo (3,), hi (3,))
 
     def evaluate(self, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
         """Evaluate psi, its gradient and Hessian at world points (k, dim); see :func:`evaluate`."""
@@ -252,7 +251,6 @@ def build_imls(
     return ImlsField(
         vertices=v, normals=n, sigma=float(sigma), radius=float(radius), far_distance=float(far), dim=dim,
         device=device, _cells=cells, _wverts=wverts, _wnormals=wp.array(n3, dtype=wp.vec3d, device=device),
-        _bounds=(v3.min(0), v3.max(0)),
     )
 
 
@@ -350,14 +348,12 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
     pose   : O's pose, world x = R x_body + p: None, (R (3,3), p (3,)) or (pos (3,), quat_wxyz (4,))
     hessian : compute Hessians; ``hessian_band`` [m] limits them to points with psi > -hessian_band
         (others get zeros), which is all a barrier with activation distance d_hat needs.
-    Points farther than the kernel radius from O's bounding box are culled before the launch
-    (they are far: ``near`` False).
     Returns :class:`ImlsEval` with world-frame gradient and Hessian.
     """
     q = _prepare(fld, points, pose, hessian, hessian_band)
-    if isinstance(q, ImlsEval):
-        return q
     m = len(q.body)
+    if m == 0:
+        return _finish(q, (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, np.int32)))
     if m >= PARALLEL_MIN_POINTS and wp.get_device(fld.device).is_cpu:
         # two single-threaded launches on two threads, each with its own buffers
         from simfab._parallel import submit
@@ -371,54 +367,44 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
 
 @dataclass(frozen=True)
 class _Query:
-    """An evaluation prepared for launch: ``body`` (m, 3) body-frame points to launch at, ``cand``
-    (m,) their indices among the k query points, ``band`` the Hessian band (-inf: no Hessians)."""
+    """An evaluation prepared for launch: ``body`` (k, 3) body-frame query points, ``R`` O's
+    rotation (None: identity, nothing to rotate back), ``band`` the Hessian band (-inf: none)."""
 
-    k: int
     dim: int
-    far: float
-    R: np.ndarray
-    cand: np.ndarray
+    R: np.ndarray | None
     body: np.ndarray
     band: float
     hessian: bool
 
 
-def _prepare(fld: ImlsField, points, pose, hessian: bool, hessian_band: float | None):
-    """A :class:`_Query` for the points that may be near O, or the finished :class:`ImlsEval`
-    when none is (all far)."""
+_EYE3 = np.eye(3)
+
+
+def _prepare(fld: ImlsField, points, pose, hessian: bool, hessian_band: float | None) -> _Query:
+    """The :class:`_Query` of world points (k, dim). Points far from O need no culling here: outside
+    the cell grid the kernel finds no neighbour at once."""
     pts = np.asarray(points, dtype=np.float64)
-    k = len(pts)
-    dim = fld.dim
     R, p = pose_matrix(pose)
-    if k:
-        body = body_frame(pts, (R, p))
-        lo, hi = fld._bounds
-        cand = np.flatnonzero(np.all((body >= lo - fld.radius) & (body <= hi + fld.radius), axis=1))
-    else:
-        cand = np.zeros(0, dtype=np.int64)
-    if len(cand) == 0:
-        return ImlsEval(psi=np.full(k, -fld.far_distance), grad=np.zeros((k, dim)), hess=np.zeros((k, dim, dim)),
-                        near=np.zeros(k, dtype=bool))
+    R = None if np.array_equal(R, _EYE3) else R
+    body = _pad3(pts.reshape(-1, pts.shape[-1])) - p
+    if R is not None:
+        body = body @ R
     band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
-    return _Query(k=k, dim=dim, far=fld.far_distance, R=R, cand=cand, body=body[cand], band=band, hessian=hessian)
+    return _Query(dim=fld.dim, R=R, body=body, band=band, hessian=hessian)
 
 
 def _finish(q: _Query, launched) -> ImlsEval:
-    """World-frame :class:`ImlsEval` of all k query points from the launch's body-frame results."""
+    """World-frame :class:`ImlsEval` from the launch's body-frame results (copies, see _launch)."""
     v_psi, v_grad, v_hess, v_count = launched
-    k, dim, cand = q.k, q.dim, q.cand
-    psi = np.full(k, -q.far)
-    grad = np.zeros((k, dim))
-    hess = np.zeros((k, dim, dim))
-    near = np.zeros(k, dtype=bool)
-    psi[cand] = v_psi
-    grad[cand] = v_grad[:, :dim] @ q.R[:dim, :dim].T
+    dim = q.dim
+    Rd = None if q.R is None else q.R[:dim, :dim]
+    grad = v_grad[:, :dim] if Rd is None else v_grad[:, :dim] @ Rd.T
     if q.hessian:
-        Rd = q.R[:dim, :dim]
-        hess[cand] = np.einsum("ij,kjl,ml->kim", Rd, v_hess[:, :dim, :dim], Rd)
-    near[cand] = v_count > 0
-    return ImlsEval(psi=psi, grad=grad, hess=hess, near=near)
+        hess = v_hess[:, :dim, :dim] if Rd is None else Rd @ v_hess[:, :dim, :dim] @ Rd.T
+        hess = np.ascontiguousarray(hess)
+    else:
+        hess = np.zeros((len(v_psi), dim, dim))
+    return ImlsEval(psi=v_psi, grad=np.ascontiguousarray(grad), hess=hess, near=v_count > 0)
 
 
 def _launch(fld: ImlsField, body: np.ndarray, band: float):
@@ -461,7 +447,7 @@ def _buffers(fld: ImlsField, k: int) -> dict:
     capacity (at least 64) and thread, since evaluations may run concurrently. On the CPU, NumPy
     views of them are kept so that filling and reading cost no copy (results are copied out before
     the next launch of the same thread)."""
-    cap = max(64, 1 << int(np.ceil(np.log2(max(k, 1)))))
+    cap = max(64, 1 << (k - 1).bit_length())
     key = ("work", threading.get_ident(), cap)
     b = fld._buffers.get(key)
     if b is None:
