@@ -22,36 +22,37 @@ from __future__ import annotations
 import numpy as np
 
 
-def barrier(d: np.ndarray, dhat: float) -> np.ndarray:
-    """b(d) [m^2] elementwise; +inf for d <= 0, 0 for d >= dhat."""
+def barrier_terms(d: np.ndarray, dhat: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(b, b', b'') at distances strictly inside the active range, 0 < d < dhat (k,), from one log:
+    the hot path of an objective, which selects its active points first."""
+    r = d - dhat
+    log = np.log(d / dhat)
+    return -(r**2) * log, -2.0 * r * log - r**2 / d, -2.0 * log - 4.0 * r / d + r**2 / d**2
+
+
+def _on_active(d: np.ndarray, dhat: float, term: int, at_zero: float) -> np.ndarray:
     d = np.asarray(d, float)
     out = np.zeros_like(d)
     act = d < dhat
     pos = act & (d > 0)
-    dd = d[pos]
-    out[pos] = -((dd - dhat) ** 2) * np.log(dd / dhat)
-    out[act & ~pos] = np.inf
+    out[pos] = barrier_terms(d[pos], dhat)[term]
+    out[act & ~pos] = at_zero
     return out
+
+
+def barrier(d: np.ndarray, dhat: float) -> np.ndarray:
+    """b(d) [m^2] elementwise; +inf for d <= 0, 0 for d >= dhat."""
+    return _on_active(d, dhat, 0, np.inf)
 
 
 def barrier_gradient(d: np.ndarray, dhat: float) -> np.ndarray:
     """b'(d) [m] elementwise (<= 0); 0 for d >= dhat. Requires d > 0 where active."""
-    d = np.asarray(d, float)
-    out = np.zeros_like(d)
-    act = (d < dhat) & (d > 0)
-    dd = d[act]
-    out[act] = -2.0 * (dd - dhat) * np.log(dd / dhat) - (dd - dhat) ** 2 / dd
-    return out
+    return _on_active(d, dhat, 1, 0.0)
 
 
 def barrier_hessian(d: np.ndarray, dhat: float) -> np.ndarray:
     """b''(d) [-] elementwise (>= 0); 0 for d >= dhat. Requires d > 0 where active."""
-    d = np.asarray(d, float)
-    out = np.zeros_like(d)
-    act = (d < dhat) & (d > 0)
-    dd = d[act]
-    out[act] = -2.0 * np.log(dd / dhat) - 4.0 * (dd - dhat) / dd + (dd - dhat) ** 2 / dd**2
-    return out
+    return _on_active(d, dhat, 2, 0.0)
 
 
 def project_psd(H: np.ndarray) -> np.ndarray:
@@ -71,13 +72,14 @@ def point_barrier(dist: np.ndarray, grad_dist: np.ndarray, hess_dist: np.ndarray
     dist : (k,) d_j [m]; grad_dist : (k, dim); hess_dist : (k, dim, dim) [1/m] or None
     Returns (B [J], g (k, dim) [N], H (k, dim, dim) [N/m] or None), H PSD-projected if ``psd``.
     """
-    b = barrier(dist, dhat)
+    if len(dist) and (dist.min() <= 0.0 or dist.max() >= dhat):  # not all active: general route
+        b, db, ddb = barrier(dist, dhat), barrier_gradient(dist, dhat), barrier_hessian(dist, dhat)
+    else:
+        b, db, ddb = barrier_terms(dist, dhat)
     E = kappa * float(b.sum())
-    db = barrier_gradient(dist, dhat)
     g = kappa * db[:, None] * grad_dist
     if hess_dist is None:
         return E, g, None
-    ddb = barrier_hessian(dist, dhat)
     H = kappa * (ddb[:, None, None] * np.einsum("ki,kj->kij", grad_dist, grad_dist) + db[:, None, None] * hess_dist)
     if psd:
         H = project_psd(H)

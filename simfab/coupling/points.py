@@ -59,6 +59,27 @@ class ContactPoints:
             out[:, a] = np.bincount(idx, weights=c[:, a], minlength=n_vertices)
         return out
 
+    def scatter_rows(self, rows: np.ndarray, g_rows: np.ndarray, n_vertices: int) -> np.ndarray:
+        """:meth:`scatter` of vectors given only at points ``rows`` (a,) (the others zero):
+        ``g_rows`` (a, dim) -> vertex vectors (n, dim)."""
+        dim = g_rows.shape[1]
+        out = np.zeros((n_vertices, dim))
+        plain = rows < self.n_plain
+        unique = self.cache.get("plain_unique")
+        if unique is None:
+            nb = self.n_plain
+            unique = self.cache["plain_unique"] = len(np.unique(self.verts[:nb, 0])) == nb
+        if not unique:  # (not made by simfab, which lists each vertex once) the general route
+            plain = np.zeros(len(rows), dtype=bool)
+        elif plain.all():  # distinct vertices: no two rows add into one
+            out[self.verts[rows, 0]] = g_rows
+            return out
+        out[self.verts[rows[plain], 0]] = g_rows[plain]
+        inner = ~plain
+        contrib = self.weights[rows[inner], :, None] * g_rows[inner, None, :]  # (i, nv, dim)
+        np.add.at(out, self.verts[rows[inner]].ravel(), contrib.reshape(-1, dim))
+        return out
+
     def concat(self, other: "ContactPoints") -> "ContactPoints":
         return ContactPoints(verts=np.vstack([self.verts, other.verts]), weights=np.vstack([self.weights, other.weights]),
                              facet=np.concatenate([self.facet, other.facet]))

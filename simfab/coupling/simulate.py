@@ -82,7 +82,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab.contact.barrier import barrier, barrier_hessian, point_barrier
+from simfab.contact.barrier import barrier, barrier_hessian, point_barrier, project_psd
 from simfab.contact.imls import ImlsField, body_frame, pose_matrix
 from simfab.coupling import config as C
 from simfab.coupling import rigid
@@ -359,13 +359,13 @@ class _StepObjective:
         t0 = time.perf_counter()
         if np.any(d <= 0):
             return np.inf, g.ravel(), H
-        act = d < cm.dhat
-        B, gy, _ = point_barrier(d[act], gd[act], None, cm.dhat, self.kappa)
-        g_pts = np.zeros_like(gd)
-        g_pts[act] = gy
-        gc = self.points.scatter(g_pts, self.n)
+        act = np.flatnonzero(d < cm.dhat)
+        # the barrier's energy, gradient and exact Hessian blocks of the active points, in one pass
+        B, gy, Hy = point_barrier(d[act], gd[act], hd[act] if need_hessian else None, cm.dhat, self.kappa,
+                                  psd=False)
+        gc = self.points.scatter_rows(act, gy, self.n)
         if need_hessian:
-            contact = (act, d[act], gd[act], hd[act])
+            contact = (act, Hy)
             if H_exact is not None:
                 self._add_contact(H_exact, contact, psd=False)
                 H = _LazyHessian(self, x.copy(), contact)
@@ -406,9 +406,10 @@ class _StepObjective:
     def _add_contact(self, H, contact, *, psd: bool) -> None:
         """Add the barrier Hessian blocks (PSD-projected per point if ``psd``) and the rigid-mode
         regularization to the FEM Hessian ``H`` (in place)."""
-        act, d, gd, hd = contact
-        if act.any():
-            Hy = point_barrier(d, gd, hd, self.cm.dhat, self.kappa, psd=psd)[2]
+        act, Hy = contact  # active point indices (a,), exact barrier Hessian blocks (a, dim, dim)
+        if len(act):
+            if psd:
+                Hy = project_psd(Hy)
             wp_act = self.wpair[act][:, :, :, None, None]
             np.add.at(H.data, self.slots[act].ravel(), (wp_act * Hy[:, None, None, :, :]).ravel())
         H.data[self.diag] += C.RIGID_MODE_REG * float(np.abs(H.data[self.diag]).mean())

@@ -81,3 +81,34 @@ def test_check_lattice_gaps_equal_the_distances_to_the_facet_vertices(dim, order
     y = w @ xv
     ref = np.linalg.norm(y[:, :, None, :] - xv[:, None, :, :], axis=3)
     np.testing.assert_allclose(gap, ref, rtol=1e-12, atol=1e-12 * np.abs(xv).max())
+
+
+@pytest.mark.parametrize("repeat_vertices", [False, True])
+def test_scatter_is_the_transpose_of_positions(repeat_vertices):
+    # positions(x) = W x for a fixed weight matrix W; scatter and scatter_rows apply W^T (the
+    # gradient and force route of every point term), also for a set listing a vertex twice.
+    from simfab.coupling.points import ContactPoints, face_weights
+
+    rng = np.random.default_rng(5)
+    n, dim = 30, 3
+    facets = rng.integers(0, n, size=(12, 3))
+    plain = np.arange(0, n, 2) if not repeat_vertices else np.r_[np.arange(0, n, 2), [4, 4]]
+    pts = vertex_points(plain, dim).concat(facet_points(facets, np.arange(12), face_weights(3)))
+    k = len(pts)
+    W = np.zeros((k, n))
+    for j in range(k):
+        np.add.at(W[j], pts.verts[j], pts.weights[j])
+    x = rng.normal(size=(n, dim))
+    assert np.allclose(pts.positions(x), W @ x, rtol=0, atol=1e-14)
+    g = rng.normal(size=(k, dim))
+    assert np.allclose(pts.scatter(g, n), W.T @ g, rtol=0, atol=1e-13)
+    rows = np.sort(rng.choice(k, size=k // 3, replace=False))
+    rows = np.r_[[len(plain) - 1], rows[rows != len(plain) - 1]] if repeat_vertices else rows
+    g_rows = g[rows]
+    dense = np.zeros((k, dim))
+    dense[rows] = g_rows
+    assert np.allclose(pts.scatter_rows(np.sort(rows), dense[np.sort(rows)], n), W.T @ dense, rtol=0, atol=1e-13)
+    only_plain = rows[rows < len(plain)]
+    dense = np.zeros((k, dim))
+    dense[only_plain] = g[only_plain]
+    assert np.allclose(pts.scatter_rows(only_plain, g[only_plain], n), W.T @ dense, rtol=0, atol=1e-13)
