@@ -371,15 +371,15 @@ class _StepObjective:
                 H = _LazyHessian(self, x.copy(), contact)
             else:
                 self._add_contact(H, contact, psd=True)
-            self.last_x = xf.copy()
-            self.last_d = d
-            self.last_gd = gd
-            self.last_H = H
-            self.last_fem = (E, g)  # elastic energy and gradient at last_x (reused by _record)
+            self._remember(xf, d, gd, H, E, g)
             # curvature bound for the step cap: twice the largest |hess d| seen near O, at least
             # CURVATURE_FLOOR / sigma (a violated bound only costs a rejected line-search trial)
-            kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if act.any() else 0.0
+            kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if len(act) else 0.0
             self.curv = max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / cm.field.sigma)
+        else:
+            # Newton may stop at a trial evaluated without its Hessian (see NewtonOptions.
+            # eager_above_tol): this evaluation may be the final one, with the PSD Hessian deferred
+            self._remember(xf, d, gd, _LazyHessian(self, x.copy(), None), E, g)
         self.timer.add("contact", time.perf_counter() - t0)
         # exact-first Newton (simfab.solve.newton): the exact Hessian is used whenever it is
         # positive definite (quadratic convergence), the PSD-projected one (built lazily) otherwise
@@ -387,6 +387,15 @@ class _StepObjective:
         if need_hessian:
             self.memo = (xf.copy(), out)
         return out
+
+    def _remember(self, xf, d, gd, H, E, g) -> None:
+        """Keep the last evaluation's data (x, distances, their gradients, Hessian, elastic energy
+        and gradient): Newton's final evaluation is read from it (see :func:`_final_eval`)."""
+        self.last_x = xf.copy()
+        self.last_d = d
+        self.last_gd = gd
+        self.last_H = H
+        self.last_fem = (E, g)  # elastic energy and gradient at last_x (reused by _record)
 
     def value(self, x: np.ndarray) -> float:
         """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible."""
@@ -443,7 +452,9 @@ class _StepObjective:
 
 
 class _LazyHessian:
-    """PSD-projected Hessian of a :class:`_StepObjective` at x, assembled on first call (once)."""
+    """PSD-projected Hessian of a :class:`_StepObjective` at x, assembled on first call (once);
+    ``contact`` (active points, exact barrier blocks) as found with the exact Hessian, or None to
+    evaluate the distances at x again (deterministic: the same active points and blocks)."""
 
     def __init__(self, obj, x, contact):
         self.obj, self.x, self.contact, self.H = obj, x, contact, None
@@ -455,6 +466,11 @@ class _LazyHessian:
             t0 = time.perf_counter()
             _, _, H = energy_gradient_hessian(self.obj.cm.fem, self.x)
             self.obj.timer.add("assembly", time.perf_counter() - t0)
+            if self.contact is None:
+                obj = self.obj
+                d, gd, hd = obj.distances(self.x, True)
+                act = np.flatnonzero(d < obj.cm.dhat)
+                self.contact = (act, point_barrier(d[act], gd[act], hd[act], obj.cm.dhat, obj.kappa, psd=False)[2])
             t0 = time.perf_counter()
             self.obj._add_contact(H, self.contact, psd=True)
             self.obj.timer.add("contact", time.perf_counter() - t0)
@@ -610,7 +626,8 @@ def _newton(cm: CouplingModel, obj: _StepObjective, x0: np.ndarray, ctx) -> tupl
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n)
     opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
-                         step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=C.NEWTON_EAGER_HESSIAN)
+                         step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=C.NEWTON_EAGER_HESSIAN,
+                         eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL)
     solver = _TimedSolver(ctx["solver"], ctx["timer"])
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
     return res.x.reshape(x0.shape), res.iterations

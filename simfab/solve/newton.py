@@ -68,6 +68,10 @@ class NewtonOptions:
     # (or capped) steps are accepted, this saves a separate value/gradient evaluation per
     # iteration; a rejected first trial wastes one Hessian evaluation.
     eager_hessian: bool = False
+    # ... except when the gradient is already within this factor of the target: Newton converging
+    # quadratically, the trial is then most likely the last iterate and its Hessian never used
+    # (0: always eager)
+    eager_above_tol: float = 0.0
     # Regularization when the Cholesky factorization fails: H + shift * mean|diag H| * I with
     # shift starting at reg_initial, multiplied by reg_growth per failure, at most reg_max.
     reg_initial: float = 1e-10
@@ -87,6 +91,7 @@ class NewtonOptions:
             "roundoff": self.roundoff >= 0,
             "reg_initial": 0 < self.reg_initial <= self.reg_max,
             "reg_growth": self.reg_growth > 1,
+            "eager_above_tol": self.eager_above_tol >= 0,
         }
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
@@ -298,10 +303,11 @@ def minimize(
         flat = -slope <= opts.roundoff * max(abs(f), tiny)
         accepted = False
         Ht = None
+        eager_now = opts.eager_hessian and gnorm > opts.eager_above_tol * opts.grad_tol * gscale
         for bt in range(opts.max_backtracks + 1):
             xt = x + alpha * dx
             if admissible is None or admissible(xt):
-                eager = opts.eager_hessian and bt == 0
+                eager = eager_now and bt == 0
                 ft, gt, Ht = fun(xt, eager)
                 if not eager:
                     Ht = None
@@ -322,14 +328,13 @@ def minimize(
                 f"(||g_free||_inf={gnorm:.3e}, target {opts.grad_tol * gscale:.3e}, g.dx={slope:.3e})"
             )
         x = xt
-        if Ht is not None:  # the accepted trial was evaluated with its Hessian
-            f, g, H = ft, gt, Ht
-        else:
-            f, g, H = fun(x, True)
+        f, g, H = ft, np.asarray(gt), Ht  # H None: the accepted trial was evaluated without it
         gnorm = _inf_norm(g[free_idx])
         history.append(dict(energy=float(f), grad_norm=gnorm, alpha=alpha, backtracks=bt, shift=shift, hessian=used))
         if gnorm <= opts.grad_tol * gscale:
             return done("gradient", it)
+        if H is None:
+            f, g, H = fun(x, True)
 
     raise ConvergenceError(
         f"Newton did not converge in {opts.max_iter} iterations: ||g_free||_inf={gnorm:.3e} > "

@@ -38,3 +38,18 @@ def test_eager_hessian_gives_the_same_iterates():
     assert np.abs(g).max() <= 1e-10
     # eager: an accepted first trial already carries its Hessian, so fewer evaluations overall
     assert len(c1) < len(c0)
+
+
+def test_no_hessian_for_a_trial_that_is_likely_the_last():
+    # Near the target (eager_above_tol), the trial is evaluated without its Hessian and Newton
+    # checks convergence first: the same iterates, one Hessian fewer when the trial converges.
+    results = {}
+    for above in (0.0, 1e6):
+        calls = []
+        fun, b, L, n = _objective(calls)
+        opts = NewtonOptions(grad_tol=1e-12, eager_hessian=True, eager_above_tol=above)
+        results[above] = (minimize(fun, np.full(n, 3.0), options=opts), calls)
+    (r0, c0), (r1, c1) = results[0.0], results[1e6]
+    assert r0.iterations == r1.iterations and np.array_equal(r0.x, r1.x)
+    assert sum(c0) == sum(c1) + 1  # the converged last trial carried no Hessian
+    assert not c1[-1]  # ... and was the last evaluation

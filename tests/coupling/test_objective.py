@@ -66,6 +66,21 @@ def test_contact_hessian_is_jt_h_j(coarse_block_model):
         assert np.all(np.abs(np.diag(off)) <= 10 * reg + 1e-9 * np.abs(ref).max())
 
 
+def test_evaluation_without_hessian_defers_the_same_psd_hessian(coarse_block_model):
+    # Newton may stop at a trial evaluated without its Hessian; the objective then keeps a deferred
+    # PSD Hessian (for the predictor) that must equal the one an evaluation with Hessian builds.
+    cm, pts, obj = _objective_near_contact(coarse_block_model)
+    x = cm.fem.rest.ravel().copy()
+    f1, g1, H = obj(x, False)
+    assert H is None and np.array_equal(obj.last_x, x)
+    deferred = obj.last_H()
+    f2, g2, (_, lazy) = obj(x, True)
+    assert f1 == f2 and np.array_equal(g1, g2)
+    assert np.any(obj.last_d < cm.dhat)  # contact blocks are part of it
+    diff = deferred - lazy()
+    assert diff.nnz == 0 or np.abs(diff.data).max() == 0.0
+
+
 @pytest.mark.parametrize("dim,order,refined", [(2, 10, False), (2, 10, True), (3, 4, False), (3, 4, True), (3, 9, True)])
 def test_check_lattice_gaps_equal_the_distances_to_the_facet_vertices(dim, order, refined):
     # the facet check bounds psi at a check point from the facet's vertices by L |y - v|; the
