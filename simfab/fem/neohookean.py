@@ -572,10 +572,40 @@ def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32)
         _hessian_svd(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
 
 
+@wp.func
+def _minus_eye(B: wp.mat33d):
+    return B - wp.identity(n=3, dtype=wp.float64)
+
+
+@wp.func
+def _minus_eye(B: wp.mat22d):  # noqa: F811
+    return B - wp.identity(n=2, dtype=wp.float64)
+
+
+@wp.kernel
+def _stress_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
+                   mu_e: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64),
+                   von_mises: wp.array(dtype=wp.float64)):
+    """det F and the von Mises stress sqrt(3/2) mu |dev(F F^T - I)| / J per element (see
+    simfab.fem.stress.det_and_von_mises); +inf where det F <= 0 (stress undefined)."""
+    e = wp.tid()
+    F = _F(x, elements, Dm_inv, e)
+    J = wp.determinant(F)
+    det_F[e] = J
+    if J <= wp.float64(0.0):
+        von_mises[e] = wp.float64(wp.inf)
+        return
+    C = _minus_eye(F * wp.transpose(F))
+    tr = wp.trace(C)
+    dev2 = wp.max(wp.ddot(C, C) - tr * tr / wp.float64(3.0), wp.float64(0.0))
+    von_mises[e] = wp.sqrt(wp.float64(1.5) * dev2) * mu_e[e] / J
+
+
 def _declare_overloads():
     """2D and 3D instances of the kernels: positions, Dm^-1 and per-element gradient types."""
     for vec, mat, nodal_vec in ((wp.vec2d, wp.mat22d, _vec6d), (wp.vec3d, wp.mat33d, _vec12d)):
         types = {"x": wp.array(dtype=vec), "Dm_inv": wp.array(dtype=mat)}
+        wp.overload(_stress_kernel, types)
         wp.overload(_energy_kernel, types)
         wp.overload(_gradient_kernel, {**types, "grad": wp.array(dtype=nodal_vec)})
         wp.overload(_hessian_kernel, {**types, "grad": wp.array(dtype=nodal_vec)})
@@ -586,7 +616,7 @@ _declare_overloads()
 # ----------------------------------------------------------------------------------------------
 # host side
 # ----------------------------------------------------------------------------------------------
-_ENERGY, _GRADIENT, _HESSIAN, _BLOCKS = 0, 1, 2, 3  # what a launch computes
+_ENERGY, _GRADIENT, _HESSIAN, _BLOCKS, _STRESS = 0, 1, 2, 3, 4  # what a launch computes
 _KERNELS = (_energy_kernel, _gradient_kernel, _hessian_kernel)  # by ``want`` (_BLOCKS: the Hessian kernel)
 
 
@@ -614,6 +644,7 @@ class _Workspace:
         self.energy = wp.zeros(m, dtype=wp.float64, device=dev)
         self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
         self.grad = wp.zeros(m, dtype=_vec12d if d == 3 else _vec6d, device=dev)
+        self.von_mises = wp.zeros(m, dtype=wp.float64, device=dev)
         self.hess = None  # element blocks (m, k*d, k*d) float64, allocated on first element_hessians()
         self.slots = None  # model.pattern.element_slots as int32, on first Hessian request
         self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
@@ -673,6 +704,12 @@ class _Workspace:
             return cmd
         common = [self.x, self.elements, self.Dm_inv, self.volume, self.mu, self.lam]
         dev = model.device
+        if want == _STRESS:
+            with RECORD_LOCK:
+                cmd = self.commands[want] = wp.launch(
+                    _stress_kernel, dim=model.n_elements, device=dev, record_cmd=True,
+                    inputs=[self.x, self.elements, self.Dm_inv, self.mu], outputs=[self.det_F, self.von_mises])
+            return cmd
         if want == _ENERGY:
             args = dict(inputs=common, outputs=[self.energy, self.det_F])
         elif want == _GRADIENT:
@@ -710,7 +747,7 @@ def _launch(model: FemModel, x, want: int, project: int = 1) -> _Workspace:
     ws = _workspace(model)
     ws.set_positions(x)
     cmd = ws.command(model, want)
-    if want >= _HESSIAN:
+    if want in (_HESSIAN, _BLOCKS):
         ws.bind(cmd, "project", int(project))
     if want == _HESSIAN:
         _zero(ws, "data")
@@ -796,6 +833,13 @@ def _energy_gradient_hessian_svd(model: FemModel, x) -> tuple[float, np.ndarray,
     ws = _launch(model, x, _HESSIAN, _PROJECT_SVD)
     H = model.pattern.matrix(ws.hessian_values())
     return _total(ws), _gradient(model, ws), H
+
+
+def det_and_von_mises(model: FemModel, x) -> tuple[np.ndarray, np.ndarray]:
+    """(det F (m,) [-], von Mises stress (m,) [Pa]) per element in one launch; see
+    :func:`simfab.fem.stress.det_and_von_mises` (the public entry point) for the formula."""
+    ws = _launch(model, x, _STRESS)
+    return ws.det_F.numpy().copy(), ws.von_mises.numpy().copy()
 
 
 def det_F(model: FemModel, x) -> np.ndarray:

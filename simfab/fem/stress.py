@@ -66,7 +66,16 @@ def det_and_von_mises(model: FemModel, x) -> tuple[np.ndarray, np.ndarray]:
     B = diag(F F^T, 1)) drop out of the deviator, so sigma_vm = sqrt(3/2) mu |dev B| / J with
     |dev B|^2 = C:C - tr(C)^2 / 3 (C = B - I): no inverse, logarithm or 3x3 stress tensor per element (this
     runs once per insertion step). Elements with det F <= 0 (stress undefined) get +inf.
+    Computed by a Warp kernel (:func:`simfab.fem.neohookean.det_and_von_mises`);
+    :func:`_det_and_von_mises_numpy` is the same formula in NumPy.
     """
+    from simfab.fem.neohookean import det_and_von_mises as kernel
+
+    return kernel(model, x)
+
+
+def _det_and_von_mises_numpy(model: FemModel, x) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`det_and_von_mises` in NumPy (the reference the kernel is tested against)."""
     F = deformation_gradient(model, x)
     J = _det(F)
     # dev B = dev (B - I); with C = B - I (small near rest) the sum C:C - tr(C)^2 / 3 cancels only

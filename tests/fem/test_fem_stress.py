@@ -93,3 +93,24 @@ def test_closed_form_von_mises_matches_the_cauchy_tensor_route(dim):
     sub = make_model(P, T[ok], MAT)  # the non-inverted elements only
     ref = von_mises_from_cauchy(cauchy_stress(sub, x))
     np.testing.assert_allclose(vm[ok], ref, rtol=1e-10, atol=1e-9 * MAT.youngs_modulus)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_stress_kernel_matches_the_numpy_formula(dim):
+    # the Warp kernel behind det_and_von_mises and the same formula in NumPy, at rest (zero stress
+    # to round-off) and on random deformations with inverted elements (+inf)
+    from simfab.fem.stress import _det_and_von_mises_numpy
+
+    P, T = rect_tri(1.0, 0.5, 4, 3) if dim == 2 else box_tet(1.0, 0.5, 0.5, 3, 2, 2)
+    m = make_model(P, T, MAT)
+    J0, vm0 = det_and_von_mises(m, m.rest)
+    assert np.allclose(J0, 1.0, rtol=1e-12) and np.abs(vm0).max() <= 1e-6 * MAT.youngs_modulus
+    rng = np.random.default_rng(3)
+    x = m.rest @ (np.eye(dim) + 0.4 * rng.standard_normal((dim, dim))).T + 0.05 * rng.standard_normal(m.rest.shape)
+    J, vm = det_and_von_mises(m, x)
+    Jn, vmn = _det_and_von_mises_numpy(m, x)
+    assert (J <= 0).any() and (J > 0).any()
+    np.testing.assert_allclose(J, Jn, rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(np.isinf(vm), np.isinf(vmn))
+    ok = np.isfinite(vmn)
+    np.testing.assert_allclose(vm[ok], vmn[ok], rtol=1e-10, atol=1e-9 * MAT.youngs_modulus)
