@@ -18,6 +18,8 @@ import glob
 import os
 from pathlib import Path
 
+from simfab._bundled import scenes_dir
+
 HELP = "grow a support structure between objects (space colonization) and skin it for 3D printing"
 DESCRIPTION = (
     "Grow an organic support structure from root sites to target sites of an MJCF scene by space "
@@ -28,7 +30,7 @@ DESCRIPTION = (
     "rays through a 2D stroke and re-skins it. Scene format: scenes/growth/README.md."
 )
 
-SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes" / "growth"
+SCENES_DIR = scenes_dir("growth")
 
 
 def add_args(p):

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simfab._bundled import scenes_dir
 from simfab.coupling import geometry
 from simfab.coupling.config import InsertionOptions
 from simfab.errors import InputError
@@ -63,7 +64,7 @@ def scene_paths(scene) -> tuple[Path, Path]:
 
 
 def bundled_dir() -> Path:
-    return Path(__file__).resolve().parents[2] / "scenes" / "coupling"
+    return scenes_dir("coupling")
 
 
 def _section(cfg: dict, name: str, where: str) -> dict:

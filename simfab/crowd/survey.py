@@ -19,10 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
+from simfab._bundled import scenes_dir
 from simfab.crowd.config import CrowdMix
 from simfab.errors import InputError
 
-SURVEY_DIR = Path(__file__).resolve().parents[2] / "scenes" / "crowd"
+SURVEY_DIR = scenes_dir("crowd")
 SURVEY_TOML = SURVEY_DIR / "printing_survey.toml"
 
 

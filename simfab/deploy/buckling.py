@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simfab._bundled import scenes_dir
 from simfab.deploy import elastica
 from simfab.deploy import tolerances as tol
 from simfab.deploy._config import require_positive
@@ -103,9 +104,7 @@ def load_insert_scene(path) -> InsertScene:
 
 def default_scene_path() -> str:
     """The bundled scene ``scenes/deploy/elastica.xml`` of the source tree."""
-    from pathlib import Path
-
-    return str(Path(__file__).resolve().parents[2] / "scenes" / "deploy" / "elastica.xml")
+    return str(scenes_dir("deploy", "elastica.xml"))
 
 
 # ----------------------------------------------------------------------------- the beam

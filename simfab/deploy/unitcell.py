@@ -38,6 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from simfab._bundled import scenes_dir
 from simfab.deploy._config import require_positive
 from simfab.errors import InputError
 
@@ -126,9 +127,7 @@ def load_cell_scene(path) -> tuple[CellConfig, dict]:
 
 def default_scene_path() -> str:
     """The bundled scene ``scenes/deploy/unit_cell.xml`` of the source tree."""
-    from pathlib import Path
-
-    return str(Path(__file__).resolve().parents[2] / "scenes" / "deploy" / "unit_cell.xml")
+    return str(scenes_dir("deploy", "unit_cell.xml"))
 
 
 def _bezier(P0, P1, P2, P3, n):
