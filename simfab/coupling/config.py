@@ -79,8 +79,9 @@ LIFT_TO = 0.8
 #: barrier stiffness kappa of the bundled scenes contact points settle at 0.8-0.95 d_hat (their
 #: residual dominates each step's first iterations while they climb there from ~0.25 d_hat).
 #: Newton iterations with (floor, lift) = (0.1, 0.5) -> (0.5, 0.8): clip3d 184 -> 170, knocker3d
-#: 272 -> 243, claw3d 116 -> 111, cclamp2d 57 -> 57 (same profile figures to ~1e-7 relative; an
-#: adaptive lift to the last step's median contact gap did no better). 0 disables.
+#: 272 -> 243, claw3d 116 -> 111, cclamp2d 57 -> 57 (the profile figures agree within the Newton
+#: force tolerance: energies to 1e-9, forces to 1.2e-5 relative; an adaptive lift to the last
+#: step's median contact gap did no better). 0 disables.
 WARM_START_FLOOR = 0.5
 #: Facet check: bound each check point by its value at earlier checks too (O moves rigidly, so in
 #: O's body frame psi(y) <= psi(y') + L |b - b'|); skips about a fifth of all contact-field
