@@ -289,26 +289,32 @@ def _cell_lists(v3: np.ndarray, radius: float, sigma: float, dim: int, device: s
     origin = lo.copy()
     if dim == 2:
         shape[2], origin[2] = 1, -0.5 * h
-    # every (sample, cell) pair within the cells around the sample's own cell whose box lies
-    # within `radius` of the sample, in chunks of samples to bound memory
+    # every (sample, cell) pair among the cells around the sample's own cell whose box lies within
+    # `radius` of the sample: the squared distance to a box is a sum of per-axis terms, so it is
+    # built from (sample, axis, offset) gaps by broadcasting, in chunks of samples to bound memory
     m = int(np.ceil(radius / h)) + 1
-    rng = np.arange(-m, m + 1)
-    offs = np.stack(np.meshgrid(rng, rng, rng if dim == 3 else np.zeros(1, np.int64), indexing="ij"), -1).reshape(-1, 3)
+    offs = [np.arange(-m, m + 1)] * 2 + [np.arange(-m, m + 1) if dim == 3 else np.zeros(1, np.int64)]
     own = np.floor((v3 - origin) / h).astype(np.int64)
+    r2 = radius * radius
     cell_ids, sample_ids = [], []
-    chunk = max(1, 4_000_000 // len(offs))
+    n_offs = int(np.prod([len(o) for o in offs]))
+    chunk = max(1, 4_000_000 // n_offs)
     for a in range(0, len(v3), chunk):
-        c = own[a:a + chunk, None, :] + offs[None]  # (s, o, 3)
-        box_lo = origin + c * h
-        gap = np.maximum(0.0, np.maximum(box_lo - v3[a:a + chunk, None, :], v3[a:a + chunk, None, :] - (box_lo + h)))
-        keep = (np.einsum("sod,sod->so", gap, gap) < radius * radius) & np.all((c >= 0) & (c < shape), axis=2)
-        s_idx, o_idx = np.nonzero(keep)
-        cc = c[s_idx, o_idx]
-        cell_ids.append((cc[:, 0] * shape[1] + cc[:, 1]) * shape[2] + cc[:, 2])
-        sample_ids.append(s_idx + a)
+        v = v3[a:a + chunk]
+        cax, g2 = [], []
+        for k in range(3):
+            c = own[a:a + chunk, k, None] + offs[k]  # (s, R_k) cell index along axis k
+            lo_k = origin[k] + c * h
+            gap = np.maximum(0.0, np.maximum(lo_k - v[:, k, None], v[:, k, None] - (lo_k + h)))
+            cax.append(c)
+            g2.append(np.where((c >= 0) & (c < shape[k]), gap * gap, np.inf))
+        d2 = g2[0][:, :, None, None] + g2[1][:, None, :, None] + g2[2][:, None, None, :]
+        si, ix, iy, iz = np.nonzero(d2 < r2)
+        cell_ids.append((cax[0][si, ix] * shape[1] + cax[1][si, iy]) * shape[2] + cax[2][si, iz])
+        sample_ids.append(si + a)
     cell_ids = np.concatenate(cell_ids)
     sample_ids = np.concatenate(sample_ids)
-    order = np.lexsort((sample_ids, cell_ids))
+    order = np.argsort(cell_ids, kind="stable")  # pairs come by ascending sample: lists stay ascending
     start = np.zeros(int(np.prod(shape)) + 1, dtype=np.int64)
     np.cumsum(np.bincount(cell_ids, minlength=int(np.prod(shape))), out=start[1:])
     return _CellLists(origin=origin, size=float(h), shape=tuple(int(k) for k in shape),
