@@ -31,6 +31,8 @@ def barrier_terms(d: np.ndarray, dhat: float) -> tuple[np.ndarray, np.ndarray, n
 
 
 def _on_active(d: np.ndarray, dhat: float, term: int, at_zero: float) -> np.ndarray:
+    """Term ``term`` of :func:`barrier_terms` elementwise over any d: 0 for d >= dhat, ``at_zero``
+    for d <= 0."""
     d = np.asarray(d, float)
     out = np.zeros_like(d)
     act = d < dhat

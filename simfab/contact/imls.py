@@ -8,8 +8,9 @@ Gaussian weights phi_i(x) = exp(-|x - v_i|^2 / sigma^2):
 Sign convention: **psi > 0 inside O**, psi < 0 outside, and |psi| approximates the Euclidean
 distance to O's surface within a few sigma of it. The kernel is truncated at ``radius`` (a few
 sigma, default 4 sigma where exp(-16) ~ 1e-7, so the truncation changes psi by ~1e-7 sigma) and
-neighbours are read from lists precomputed per cell of a uniform grid in the body frame; O moves rigidly, so query
-points are mapped into the body frame by the inverse pose and results rotated back.
+neighbours are read from lists precomputed per cell of a uniform grid in the body frame; O moves
+rigidly, so query points are mapped into the body frame by the inverse pose and results rotated
+back.
 
 A query point with no sample within ``radius`` is "far": the field is not defined there. It
 reports ``near = False``, psi = -``far_distance`` (a conservative lower bound of its distance to
@@ -392,7 +393,7 @@ def _prepare(fld: ImlsField, points, pose, hessian: bool, hessian_band: float | 
     pts = np.asarray(points, dtype=np.float64)
     R, p = pose_matrix(pose)
     R = None if np.array_equal(R, _EYE3) else R
-    body = _pad3(pts.reshape(-1, pts.shape[-1])) - p
+    body = _pad3(pts.reshape(-1, fld.dim)) - p if pts.size else np.zeros((0, 3))
     if R is not None:
         body = body @ R
     band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
@@ -437,8 +438,8 @@ def _launch(fld: ImlsField, body: np.ndarray, band: float):
         with RECORD_LOCK:
             cmd = buf["cmd"] = wp.launch(
                 _imls_eval, dim=buf["capacity"], device=fld.device,
-                inputs=[*fld._cells.launch_args(), fld._wverts, fld._wnormals, 1.0 / fld.sigma**2, fld.radius, -fld.far_distance,
-                        buf["points"], buf["n_points"], buf["hess_band"]],
+                inputs=[*fld._cells.launch_args(), fld._wverts, fld._wnormals, 1.0 / fld.sigma**2, fld.radius,
+                        -fld.far_distance, buf["points"], buf["n_points"], buf["hess_band"]],
                 outputs=[buf["psi"], buf["grad"], buf["hess"], buf["count"]],
                 record_cmd=True,
             )

@@ -44,17 +44,20 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    bisected along the path up to ``MAX_BISECTIONS`` times before giving up loudly.
 
 Cost control: the contact field is evaluated in one Warp launch per call (two, on two threads,
-for 1024 points or more; evaluating it on a second thread while the FEM Hessian is assembled
-gained nothing here once its launch stopped re-binding parameters: waking the worker costs about
-what the overlap saves), only for points that are not certified (by the Lipschitz bound and their travel since their last exact evaluation) to
-be farther than a band of a few d_hat from O; Hessians of psi only within d_hat; CHOLMOD's symbolic
-analysis and the value map of the fixed FEM sparsity pattern are reused for every solve
-(:class:`simfab.solve.linear.SPDSolver`); the facet check of a converged state is memoized, takes its vertices' distances from Newton's last
-evaluation, and check points already certified outside O by the Lipschitz bound from their facet's
-vertices, or from their own values at earlier checks, are not evaluated; lifting near points reads
-the objective's lazy distances. Per Newton iterate only the exact FEM Hessian is assembled (the PSD-projected one, twice
-as expensive, only when the exact one fails to factorize); the line search evaluates the Hessian
-already at its first trial (most are accepted), and the step record reuses Newton's last
+for 1024 points or more), with neighbours from per-cell lists, only for points that are not
+certified (by the Lipschitz bound and their travel since their last exact evaluation) to be
+farther than a band of a few d_hat from O; Hessians of psi only within d_hat. (Evaluating it on a
+second thread while the FEM Hessian is assembled gained nothing once its launch stopped re-binding
+parameters: waking the worker cost about what the overlap saved.) CHOLMOD's symbolic analysis and
+the value map of the fixed FEM sparsity pattern are reused for every solve
+(:class:`simfab.solve.linear.SPDSolver`); the facet check of a converged state is memoized, takes
+its vertices' distances from Newton's last evaluation, and check points already certified outside
+O by the Lipschitz bound from their facet's vertices, or from their own values at earlier checks,
+are not evaluated; lifting near points reads the objective's lazy distances. Per Newton iterate
+only the exact FEM Hessian is assembled (the PSD-projected one, twice as expensive, only when the
+exact one fails to factorize); the line search evaluates the Hessian already at its first trial
+(most are accepted) unless the force residual is within NEWTON_EAGER_ABOVE_TOL of the target (the
+trial is then most likely the last iterate), and the step record reuses Newton's last
 evaluation. The forces of a step use the barrier stiffness its equilibrium was solved with.
 
 Well-posedness: a rigid motion of A that the supports leave free and no contact normal opposes
