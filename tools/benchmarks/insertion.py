@@ -8,8 +8,8 @@ Cases (bundled scenes, closest to the sizes of the thesis' timing table):
   knocker3d (~5080 tets, 40 steps)       vs "door knocker"    5080 elements, 40 steps
   claw3d    (~12,063 tets, 25 steps)     vs "claw 3D"        12063 elements, 25 steps
 Each row reports the simulation seconds (fastest run; scene loading and meshing excluded, as in
-the original's per-iteration cost; the median and every run's time too), the original's seconds (``figures.json``), the speed-up ratio original/ours,
-Newton iterations and the time split (FEM assembly, sparse factorization + solve, contact =
+the original's per-iteration cost; the median and every run's time too), the original's seconds
+(``figures.json``), the speed-up ratio original/ours, Newton iterations and the time split (FEM assembly, sparse factorization + solve, contact =
 IMLS evaluation + barrier; "other", the wall time minus the three, is predictor, refinement
 checks and Python overhead).
 The process CPU time, the load average and the time of a fixed reference workload are reported
