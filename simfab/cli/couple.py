@@ -41,10 +41,11 @@ def add_args(p):
     s.add_argument("--fixed-axes", metavar="AXES",
                    help='axes the fixed region is held along, e.g. "xz" (must include the insertion axis)')
     s.add_argument("--no-refine", action="store_true", help="no refinement points on boundary edges/faces")
-    sub.add_parser("scenes", help="list the bundled coupling scenes")
+    listing = sub.add_parser("scenes", help="list the bundled coupling scenes")
     from simfab.cli import add_common_args
 
     add_common_args(s)
+    add_common_args(listing)  # e.g. 'simfab couple scenes --json'
 
 
 def run(args) -> dict:

@@ -105,3 +105,10 @@ def test_object_starting_inside_the_part_is_an_input_error(tmp_path, capsys):
     shutil.copy(src / "cclamp2d.toml", tmp_path / "s.toml")
     code, err = _run_err(["couple", "simulate", str(tmp_path / "s.xml"), "--out", str(tmp_path / "o")], capsys)
     assert code == 2 and len(err) == 1 and "inside" in err[0]
+
+
+def test_scenes_lists_the_bundled_scenes_with_the_shared_flags(capsys, tmp_path):
+    assert main(["couple", "scenes", "--json", "--out", str(tmp_path)]) == 0
+    listed = json.loads(capsys.readouterr().out)["scenes"]
+    assert {"cclamp2d", "clip3d", "clip2d_eject", "clip2d_loose", "knocker3d", "claw3d"} <= set(listed)
+    assert listed == sorted(p.stem for p in bundled_dir().glob("*.xml"))
