@@ -674,8 +674,11 @@ def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
 def _accept(state: _State, x: np.ndarray, s: float, obj: _StepObjective) -> None:
     """Make the converged x at path length s the current state, with the Hessian, final
     evaluation and barrier stiffness of the objective it was solved with."""
-    state.x, state.s, state.H = x, s, obj.last_H
+    state.x, state.s = x, s
     state.final = _final_eval(obj, x)
+    # the objective's last evaluation may be a rejected line-search trial (Newton stopping at the
+    # round-off floor): its Hessian belongs to x only when the evaluation does
+    state.H = obj.last_H if state.final is not None else None
     state.kappa_step = obj.kappa
 
 
