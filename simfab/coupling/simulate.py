@@ -1006,13 +1006,17 @@ def _crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: _State, 
     return [int(f) for f in ids[(psi_max > 0) & ~refined]]
 
 
+_COVER = {2: 0.5, 3: 1.0 / np.sqrt(3.0)}  # max distance from a facet point to its nearest vertex / longest edge
+
+
 def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, final=None):
     """Max psi over check points of each boundary facet that could reach into O at (x, s).
 
     Returns (facet ids (f,), max psi (f,) [m], refined (f,) bool). Unrefined facets are checked
     at the points refinement would add; refined facets at the denser check points (their own
     points plus the midpoints between them). A facet can only reach into O if one of its vertices
-    is within L * (its diameter) of O. Check points whose Lipschitz bound, from the facet's
+    is within L * cover of O, cover the largest distance from a point of the facet to its nearest
+    vertex (at most the longest edge / sqrt(3) on a triangle, half the edge in 2D). Check points whose Lipschitz bound, from the facet's
     vertices or from their own values at earlier checks (in O's body frame), is negative are not
     evaluated; their bound stands in for psi. The result is remembered for the same (x, s).
     """
@@ -1043,8 +1047,12 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
     xf = x[facets]  # (F, nv, dim)
     a, c = _EDGE_PAIRS[cm.dim]
     edges2 = np.einsum("fed,fed->fe", xf[:, a] - xf[:, c], xf[:, a] - xf[:, c])  # (F, e) squared edge lengths
-    diam = np.sqrt(edges2.max(axis=1))
-    ids = np.flatnonzero(np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * diam)
+    # every point of a facet lies within `cover` of one of its vertices: half the edge (2D), and
+    # longest edge / sqrt(3) on a triangle (the farthest point is the circumcentre when acute,
+    # R = c / (2 sin gamma) with gamma >= 60 deg; else within half the longest edge). A facet whose
+    # vertices are all farther than L * cover from O is certified outside by the vertex bounds.
+    cover = np.sqrt(edges2.max(axis=1)) * _COVER[cm.dim]
+    ids = np.flatnonzero(np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * cover)
     refined = np.zeros(len(facets), dtype=bool)
     refined[list(state.refined)] = True
     refined = refined[ids]
