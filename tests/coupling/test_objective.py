@@ -127,3 +127,22 @@ def test_scatter_is_the_transpose_of_positions(repeat_vertices):
     dense = np.zeros((k, dim))
     dense[only_plain] = g[only_plain]
     assert np.allclose(pts.scatter_rows(only_plain, g[only_plain], n), W.T @ dense, rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_every_facet_point_is_within_cover_of_a_vertex(dim):
+    # the facet check leaves out facets whose vertices are all farther than L * cover from O:
+    # sound only if no point of a facet is farther than cover (x longest edge) from every vertex
+    from simfab.coupling.simulate import _COVER
+
+    rng = np.random.default_rng(9)
+    w = rng.dirichlet(np.ones(dim), size=4000)  # points on the facet (barycentric)
+    worst = 0.0
+    for _ in range(300):
+        v = rng.normal(size=(dim, 3)) * rng.uniform(0.1, 3.0, size=(1, 3))  # acute, obtuse, slivers
+        y = w @ v
+        near = np.min(np.linalg.norm(y[:, None, :] - v[None], axis=2), axis=1).max()
+        c = max(np.linalg.norm(v[a] - v[b]) for a in range(dim) for b in range(a))
+        worst = max(worst, near / c)
+    assert worst <= _COVER[dim] * (1 + 1e-12)
+    assert worst > 0.9 * _COVER[dim]  # and the bound is nearly reached (not loose)
