@@ -59,6 +59,9 @@ def device(name: str | None = None) -> str:
     from simfab.errors import InputError
 
     name = name or "cpu"
+    if name.startswith("cuda") and not wp.is_cuda_available():
+        # asking Warp for the device would first print its native driver errors on stderr
+        raise InputError(f"Warp device {name!r} is not available here (no CUDA driver or device)", where="--device")
     try:
         return str(wp.get_device(name))
     except Exception as e:  # Warp raises RuntimeError/ValueError for unknown devices

@@ -2,6 +2,7 @@
 
 import json
 
+import pytest
 import trimesh
 
 from simfab.cli import SUBCOMMANDS, main
@@ -54,6 +55,20 @@ def test_render_mjcf_and_json(tmp_path, capsys):
 
 def test_bad_device_is_input_error(capsys):
     assert main(["--device", "tpu", "inspect", "x"]) == 2
+
+
+def test_cuda_without_a_driver_is_one_line(tmp_path, capfd):
+    # on a machine without CUDA, --device cuda is bad input: exit 2 and one line on stderr (also at
+    # the file-descriptor level, where Warp's native library would print its driver errors)
+    from simfab._warp import wp
+
+    if wp.is_cuda_available():
+        pytest.skip("CUDA is available here")
+    out = tmp_path / "o"
+    assert main(["couple", "simulate", "cclamp2d", "--device", "cuda", "--out", str(out)]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--device" in err[0] and "cuda" in err[0]
+    assert not out.exists() or not any(out.iterdir())
 
 
 def test_internal_error_exit_1(monkeypatch, capsys):
