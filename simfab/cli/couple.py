@@ -15,7 +15,9 @@ Outputs under ``--out``: NAME_profile.csv (per step: distance [m], energy [J], i
 path, = -dE/ds, also defined during rotations), grip [N], max von Mises [Pa], max penetration [m],
 min det F, Newton iterations), NAME_summary.json
 (category, E_max, E_ss [J], coupling_ratio [%], F_in, F_rm, F_grip [N], max_von_mises [Pa],
-max_penetration [m], min_det_F, steps, newton_iterations, seconds and the output paths),
+max_penetration [m], min_det_F, steps, newton_iterations, seconds, time_split [s] per resource
+(assembly, factorization, contact), phase_split [s] per phase of the insertion loop (warm_start,
+newton, facet_check, record, rigid_check, other) and the output paths),
 NAME_profile.png (energy solid, force dashed, markers at E_max and E_ss), NAME.usda (A's deforming
 mesh with a von_mises primvar, O's animated transform, one time code per step) and NAME.xml (MJCF
 for the viewer: A at the steady state, O with one keyframe per step).

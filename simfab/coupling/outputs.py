@@ -53,6 +53,7 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
         "object_samples": int(len(res.model.field.vertices)),
         "seconds": float(res.seconds),
         "time_split": {k: float(v) for k, v in res.timings.items()},
+        "phase_split": {k: float(v) for k, v in res.phases.items()},
         "warnings": list(res.warnings),
         "units": SUMMARY_UNITS,
     }

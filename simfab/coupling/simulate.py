@@ -81,6 +81,7 @@ from __future__ import annotations
 
 import functools
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -256,12 +257,16 @@ class StepResult:
 @dataclass(kw_only=True)
 class InsertionResult:
     """steps : one :class:`StepResult` per step (the start pose first); seconds : wall time;
-    timings : seconds per category; warnings : one line each (e.g. an unresisted rigid motion)."""
+    timings : seconds per resource (assembly, factorization, contact; they cut across phases);
+    phases : wall seconds per phase of the insertion loop, each counted once (warm_start, newton,
+    facet_check, record, rigid_check; "other" is the rest of ``seconds``);
+    warnings : one line each (e.g. an unresisted rigid motion)."""
 
     model: CouplingModel
     steps: list
     seconds: float
     timings: dict
+    phases: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
 
     def column(self, name: str) -> np.ndarray:
@@ -276,6 +281,15 @@ class _Timer:
 
     def add(self, key: str, dt: float) -> None:
         self.t[key] = self.t.get(key, 0.0) + dt
+
+    @contextmanager
+    def timed(self, key: str):
+        """Book the wall time of a ``with`` block under ``key``."""
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.add(key, time.perf_counter() - t0)
 
 
 # ----------------------------------------------------------------------------- objective
@@ -534,7 +548,8 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     order = cm.options.samples_per_edge if dim == 2 else cm.options.face_lattice
     state = _State(x=np.array(fem.rest, dtype=np.float64), s=0.0, points=points, refined=set(), order=order,
                    kappa=cm.kappa)
-    ctx = dict(timer=timer, solver=SPDSolver())
+    phases = _Timer()
+    ctx = dict(timer=timer, phases=phases, solver=SPDSolver())
     check_start(cm)
     steps = []
     free_motions = rigid.motion_basis(cm)
@@ -545,9 +560,11 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
             iters = _advance(cm, state, s, ctx, depth=0)
         else:
             iters = _solve_at(cm, state, s, ctx)
-        rec = _record(cm, state, iters, ctx)
+        with phases.timed("record"):
+            rec = _record(cm, state, iters, ctx)
         steps.append(rec)
-        w = _weakest_rigid_motion(cm, state, free_motions)
+        with phases.timed("rigid_check"):
+            w = _weakest_rigid_motion(cm, state, free_motions)
         if w is not None and (weakest is None or w[0] < weakest[0]):
             weakest = w
         if callback is not None:
@@ -566,7 +583,10 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
             f"the object, e.g. rims, at the IMLS width sigma={cm.field.sigma:.3g} m), above the Lipschitz bound "
             f"{C.PSI_LIPSCHITZ:g} that certifies points outside the object between samples: penetrations between "
             "constraint points may go undetected there; sample the object more finely (smaller sigma)")
-    return InsertionResult(model=cm, steps=steps, seconds=time.perf_counter() - t_start, timings=dict(timer.t),
+    seconds = time.perf_counter() - t_start
+    phase_split = dict(phases.t)
+    phase_split["other"] = seconds - sum(phase_split.values())
+    return InsertionResult(model=cm, steps=steps, seconds=seconds, timings=dict(timer.t), phases=phase_split,
                            warnings=warnings)
 
 
@@ -661,9 +681,11 @@ def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
     total = 0
     for _ in range(C.MAX_REFINEMENT_ROUNDS):
         obj = _objective(cm, state.points, s, ctx, state.kappa)
-        x, it = _newton(cm, obj, state.x, ctx)
+        with ctx["phases"].timed("newton"):
+            x, it = _newton(cm, obj, state.x, ctx)
         total += it
-        new = _crossing_facets(cm, x, s, state, _final_eval(obj, x))
+        with ctx["phases"].timed("facet_check"):
+            new = _crossing_facets(cm, x, s, state, _final_eval(obj, x))
         if not new:
             _accept(state, x, s, obj)
             return total
@@ -690,16 +712,18 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
     for _ in range(C.MAX_REFINEMENT_ROUNDS):  # refinement restarts
         resumed = False
         try:
-            obj = _objective(cm, state.points, s_new, ctx, state.kappa)
-            x0 = None if resume is None else _lift_points(cm, state.points, resume, obj, below=0.0,
-                                                          to=C.LIFT_TO * cm.dhat)
-            resumed = x0 is not None
-            if x0 is None:
-                if refined:  # starting over from the previous state: make it feasible for the new points
-                    _restore_feasibility(cm, state, ctx)
-                    refined = False
-                x0 = _warm_start(cm, state, s_new, obj, ctx)
-            x, it = _newton(cm, obj, x0, ctx)
+            with ctx["phases"].timed("warm_start"):
+                obj = _objective(cm, state.points, s_new, ctx, state.kappa)
+                x0 = None if resume is None else _lift_points(cm, state.points, resume, obj, below=0.0,
+                                                              to=C.LIFT_TO * cm.dhat)
+                resumed = x0 is not None
+                if x0 is None:
+                    if refined:  # starting over from the previous state: make it feasible for the new points
+                        _restore_feasibility(cm, state, ctx)
+                        refined = False
+                    x0 = _warm_start(cm, state, s_new, obj, ctx)
+            with ctx["phases"].timed("newton"):
+                x, it = _newton(cm, obj, x0, ctx)
         except ConvergenceError:
             if resumed:  # the resumed solve failed: solve from the previous state instead
                 resume = None
@@ -711,7 +735,8 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
             total += _advance(cm, state, s_new, ctx, depth + 1)
             return total
         total += it
-        new = _crossing_facets(cm, x, s_new, state, _final_eval(obj, x)) if cm.options.refine else []
+        with ctx["phases"].timed("facet_check"):
+            new = _crossing_facets(cm, x, s_new, state, _final_eval(obj, x)) if cm.options.refine else []
         if not new:
             state.prev2, state.prev = state.prev, (state.x, state.s)
             _accept(state, x, s_new, obj)

@@ -20,6 +20,11 @@ def test_simulate_writes_profile_plot_usd_and_mjcf(tmp_path, capsys):
     stdout = capsys.readouterr().out
     summary = json.loads(stdout)  # exactly one JSON object
     assert SUMMARY_KEYS <= set(summary) and summary["steps"] == 10
+    # the phase split covers the run's wall time once (each phase counted once, "other" the rest)
+    phases = summary["phase_split"]
+    assert {"warm_start", "newton", "facet_check", "record", "rigid_check", "other"} <= set(phases)
+    assert min(phases.values()) >= -1e-6 and sum(phases.values()) == pytest.approx(summary["seconds"], rel=1e-9)
+    assert phases["newton"] > phases["other"]
     for k in ("profile_csv", "profile_json", "plot_png", "usd", "mjcf"):
         assert (out / summary[k].split("/")[-1]).is_file()
     rows = np.genfromtxt(summary["profile_csv"], delimiter=",", names=True)

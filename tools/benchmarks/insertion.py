@@ -11,7 +11,8 @@ Each row reports the simulation seconds (fastest run; scene loading and meshing 
 the original's per-iteration cost; the median and every run's time too), the original's seconds
 (``figures.json``), the speed-up ratio original/ours, Newton iterations and the time split (FEM assembly, sparse factorization + solve, contact =
 IMLS evaluation + barrier; "other", the wall time minus the three, is predictor, refinement
-checks and Python overhead).
+checks and Python overhead), and the same wall time split by phase of the insertion loop
+(warm_start, newton, facet_check, record, rigid_check, other).
 The process CPU time, the load average and the time of a fixed reference workload are reported
 too: on a shared (virtual) machine the same run's wall time moves with the machine's momentary
 speed, and the reference workload's time moves with it.
@@ -121,6 +122,7 @@ def run(argv) -> dict:
             "newton_iterations": summ["newton_iterations"],
             "category": summ["category"],
             "time_split_seconds": split,
+            "phase_split_seconds": {k: round(float(v), 3) for k, v in res.phases.items()},
             "reference_model": ref_name,
             "reference_elements": ref.get("elements"),
             "reference_steps": ref.get("steps"),
