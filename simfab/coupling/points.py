@@ -46,38 +46,25 @@ class ContactPoints:
         out[nb:] = np.einsum("km,kmd->kd", self.weights[nb:], x[self.verts[nb:]])
         return out
 
-    def scatter(self, g_points: np.ndarray, n_vertices: int) -> np.ndarray:
-        """Vertex vectors (n, dim) = sum_j w_ja g_j (transpose of :meth:`positions`)."""
+    def scatter(self, g_points: np.ndarray, n_vertices: int, rows: np.ndarray | None = None) -> np.ndarray:
+        """Vertex vectors (n, dim) = sum_j w_ja g_j (transpose of :meth:`positions`). With ``rows``
+        (a,) int, ``g_points`` (a, dim) is given at those points only (the others are zero)."""
         dim = g_points.shape[1]
         nb = self.n_plain
-        idx = self.cache.get("scatter_idx")
-        if idx is None:
-            idx = self.cache["scatter_idx"] = np.concatenate([self.verts[:nb, 0], self.verts[nb:].ravel()])
-        c = np.concatenate([g_points[:nb], (self.weights[nb:, :, None] * g_points[nb:, None, :]).reshape(-1, dim)])
+        if rows is None:
+            idx = self.cache.get("scatter_idx")
+            if idx is None:
+                idx = self.cache["scatter_idx"] = np.concatenate([self.verts[:nb, 0], self.verts[nb:].ravel()])
+            g_plain, g_inner, w_inner = g_points[:nb], g_points[nb:], self.weights[nb:]
+        else:
+            plain = rows < nb
+            inner = rows[~plain]
+            idx = np.concatenate([self.verts[rows[plain], 0], self.verts[inner].ravel()])
+            g_plain, g_inner, w_inner = g_points[plain], g_points[~plain], self.weights[inner]
+        c = np.concatenate([g_plain, (w_inner[:, :, None] * g_inner[:, None, :]).reshape(-1, dim)])
         out = np.empty((n_vertices, dim))
         for a in range(dim):
             out[:, a] = np.bincount(idx, weights=c[:, a], minlength=n_vertices)
-        return out
-
-    def scatter_rows(self, rows: np.ndarray, g_rows: np.ndarray, n_vertices: int) -> np.ndarray:
-        """:meth:`scatter` of vectors given only at points ``rows`` (a,) (the others zero):
-        ``g_rows`` (a, dim) -> vertex vectors (n, dim)."""
-        dim = g_rows.shape[1]
-        out = np.zeros((n_vertices, dim))
-        plain = rows < self.n_plain
-        unique = self.cache.get("plain_unique")
-        if unique is None:
-            nb = self.n_plain
-            unique = self.cache["plain_unique"] = len(np.unique(self.verts[:nb, 0])) == nb
-        if not unique:  # (not made by simfab, which lists each vertex once) the general route
-            plain = np.zeros(len(rows), dtype=bool)
-        elif plain.all():  # distinct vertices: no two rows add into one
-            out[self.verts[rows, 0]] = g_rows
-            return out
-        out[self.verts[rows[plain], 0]] = g_rows[plain]
-        inner = ~plain
-        contrib = self.weights[rows[inner], :, None] * g_rows[inner, None, :]  # (i, nv, dim)
-        np.add.at(out, self.verts[rows[inner]].ravel(), contrib.reshape(-1, dim))
         return out
 
     def concat(self, other: "ContactPoints") -> "ContactPoints":

@@ -322,30 +322,29 @@ class _StepObjective:
     def distances(self, x: np.ndarray, hessian: bool):
         """(d (k,) [m], grad d (k, dim), hess d (k, dim, dim) or None): exact near O, lower bounds
         (zero derivatives) for points certified farther than the band."""
-        t0 = time.perf_counter()
-        y = self.points.positions(x)
-        k, dim = len(y), self.dim
-        if self.y_ref is None:
-            todo = np.arange(k)
-            bound = None
-        else:
-            bound = self.d_ref - C.PSI_LIPSCHITZ * np.linalg.norm(y - self.y_ref, axis=1)
-            todo = np.flatnonzero(bound < self.band)
-        d = np.empty(k) if bound is None else bound.copy()
-        gd = np.zeros((k, dim))
-        hd = np.zeros((k, dim, dim)) if hessian else None
-        if len(todo):
-            ev = self.cm.field.evaluate(y[todo], (self.R, self.p), hessian=hessian, hessian_band=self.cm.dhat)
-            d[todo] = -ev.psi
-            gd[todo] = -ev.grad
-            if hessian:
-                hd[todo] = -ev.hess
+        with self.timer.timed("contact"):
+            y = self.points.positions(x)
+            k, dim = len(y), self.dim
             if self.y_ref is None:
-                self.y_ref, self.d_ref = y.copy(), d.copy()
-            elif hessian:  # re-anchor at accepted iterates only (need_hessian marks them)
-                self.y_ref[todo] = y[todo]
-                self.d_ref[todo] = d[todo]
-        self.timer.add("contact", time.perf_counter() - t0)
+                todo = np.arange(k)
+                bound = None
+            else:
+                bound = self.d_ref - C.PSI_LIPSCHITZ * np.linalg.norm(y - self.y_ref, axis=1)
+                todo = np.flatnonzero(bound < self.band)
+            d = np.empty(k) if bound is None else bound.copy()
+            gd = np.zeros((k, dim))
+            hd = np.zeros((k, dim, dim)) if hessian else None
+            if len(todo):
+                ev = self.cm.field.evaluate(y[todo], (self.R, self.p), hessian=hessian, hessian_band=self.cm.dhat)
+                d[todo] = -ev.psi
+                gd[todo] = -ev.grad
+                if hessian:
+                    hd[todo] = -ev.hess
+                if self.y_ref is None:
+                    self.y_ref, self.d_ref = y.copy(), d.copy()
+                elif hessian:  # re-anchor at accepted iterates only (need_hessian marks them)
+                    self.y_ref[todo] = y[todo]
+                    self.d_ref[todo] = d[todo]
         return d, gd, hd
 
     def __call__(self, xf: np.ndarray, need_hessian: bool):
@@ -358,52 +357,56 @@ class _StepObjective:
             self.memo = None  # hand the cached Hessian out once (the caller may modify it)
             return memo[1]
         x = xf.reshape(self.n, self.dim)
-        t0 = time.perf_counter()
         H_exact = None
-        if need_hessian and self.exact_first:
-            # exact Hessian only (half the cost of the eigen-projected one); the projected one is
-            # assembled on demand, when the exact one turns out indefinite (see _LazyHessian)
-            E, g, H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)
-            H = None
-        elif need_hessian:
-            E, g, H = energy_gradient_hessian(cm.fem, x)
-        else:
-            (E, g), H = energy_gradient(cm.fem, x), None
-        self.timer.add("assembly", time.perf_counter() - t0)
+        with self.timer.timed("assembly"):
+            if need_hessian and self.exact_first:
+                # exact Hessian only (half the cost of the eigen-projected one); the projected one is
+                # assembled on demand, when the exact one turns out indefinite (see _LazyHessian)
+                E, g, H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)
+                H = None
+            elif need_hessian:
+                E, g, H = energy_gradient_hessian(cm.fem, x)
+            else:
+                (E, g), H = energy_gradient(cm.fem, x), None
         if not np.isfinite(E):
             return np.inf, g.ravel(), H
         d, gd, hd = self.distances(x, need_hessian)
-        t0 = time.perf_counter()
         if np.any(d <= 0):
             return np.inf, g.ravel(), H
-        act = np.flatnonzero(d < cm.dhat)
-        # the barrier's energy, gradient and exact Hessian blocks of the active points, in one pass
-        B, gy, Hy = point_barrier(d[act], gd[act], hd[act] if need_hessian else None, cm.dhat, self.kappa,
-                                  psd=False)
-        gc = self.points.scatter_rows(act, gy, self.n)
-        if need_hessian:
-            contact = (act, Hy)
-            if H_exact is not None:
-                self._add_contact(H_exact, contact, psd=False)
-                H = _LazyHessian(self, x.copy(), contact)
+        with self.timer.timed("contact"):
+            act, B, gy, Hy = self._barrier(d, gd, hd)
+            gc = self.points.scatter(gy, self.n, rows=act)
+            if need_hessian:
+                contact = (act, Hy)
+                if H_exact is not None:
+                    self._add_contact(H_exact, contact, psd=False)
+                    H = _LazyHessian(self, x.copy(), contact)
+                else:
+                    self._add_contact(H, contact, psd=True)
+                self._remember(xf, d, gd, H, E, g)
+                # curvature bound for the step cap: twice the largest |hess d| seen near O, at least
+                # CURVATURE_FLOOR / sigma (a violated bound only costs a rejected line-search trial)
+                kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if len(act) else 0.0
+                self.curv = max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / cm.field.sigma)
             else:
-                self._add_contact(H, contact, psd=True)
-            self._remember(xf, d, gd, H, E, g)
-            # curvature bound for the step cap: twice the largest |hess d| seen near O, at least
-            # CURVATURE_FLOOR / sigma (a violated bound only costs a rejected line-search trial)
-            kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if len(act) else 0.0
-            self.curv = max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / cm.field.sigma)
-        else:
-            # Newton may stop at a trial evaluated without its Hessian (see NewtonOptions.
-            # eager_above_tol): this evaluation may be the final one, with the PSD Hessian deferred
-            self._remember(xf, d, gd, _LazyHessian(self, x.copy(), None), E, g)
-        self.timer.add("contact", time.perf_counter() - t0)
+                # Newton may stop at a trial evaluated without its Hessian (see NewtonOptions.
+                # eager_above_tol): this evaluation may be the final one, with the PSD Hessian deferred
+                self._remember(xf, d, gd, _LazyHessian(self, x.copy(), None), E, g)
         # exact-first Newton (simfab.solve.newton): the exact Hessian is used whenever it is
         # positive definite (quadratic convergence), the PSD-projected one (built lazily) otherwise
         out = (E + B, (g + gc).ravel(), H if H_exact is None else (H_exact, H))
         if need_hessian:
             self.memo = (xf.copy(), out)
         return out
+
+    def _barrier(self, d, gd, hd):
+        """(active point indices (a,), energy [J], gradient (a, dim) [N], exact Hessian blocks
+        (a, dim, dim) [N/m] or None without ``hd``) of the barrier at distances d (k,) with their
+        derivatives (see :func:`simfab.contact.barrier.point_barrier`), in one pass."""
+        act = np.flatnonzero(d < self.cm.dhat)
+        B, gy, Hy = point_barrier(d[act], gd[act], None if hd is None else hd[act], self.cm.dhat, self.kappa,
+                                  psd=False)
+        return act, B, gy, Hy
 
     def _remember(self, xf, d, gd, H, E, g) -> None:
         """Keep the last evaluation's data (x, distances, their gradients, Hessian, elastic energy
@@ -418,9 +421,8 @@ class _StepObjective:
         """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible."""
         from simfab.fem.neohookean import energy
 
-        t0 = time.perf_counter()
-        E = energy(self.cm.fem, x)
-        self.timer.add("assembly", time.perf_counter() - t0)
+        with self.timer.timed("assembly"):
+            E = energy(self.cm.fem, x)
         if not np.isfinite(E):
             return np.inf
         d, _, _ = self.distances(np.asarray(x).reshape(self.n, self.dim), False)
@@ -480,17 +482,14 @@ class _LazyHessian:
         if self.H is None:
             from simfab.fem.neohookean import energy_gradient_hessian
 
-            t0 = time.perf_counter()
-            _, _, H = energy_gradient_hessian(self.obj.cm.fem, self.x)
-            self.obj.timer.add("assembly", time.perf_counter() - t0)
+            obj = self.obj
+            with obj.timer.timed("assembly"):
+                _, _, H = energy_gradient_hessian(obj.cm.fem, self.x)
             if self.contact is None:
-                obj = self.obj
-                d, gd, hd = obj.distances(self.x, True)
-                act = np.flatnonzero(d < obj.cm.dhat)
-                self.contact = (act, point_barrier(d[act], gd[act], hd[act], obj.cm.dhat, obj.kappa, psd=False)[2])
-            t0 = time.perf_counter()
-            self.obj._add_contact(H, self.contact, psd=True)
-            self.obj.timer.add("contact", time.perf_counter() - t0)
+                act, _, _, Hy = obj._barrier(*obj.distances(self.x, True))
+                self.contact = (act, Hy)
+            with obj.timer.timed("contact"):
+                obj._add_contact(H, self.contact, psd=True)
             self.H = H
         return self.H
 
@@ -569,7 +568,8 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
             weakest = w
         if callback is not None:
             callback(k, rec)
-    timer.add("total", time.perf_counter() - t_start)
+    seconds = time.perf_counter() - t_start
+    timer.add("total", seconds)
     warnings = []
     if weakest is not None and weakest[0] < rigid.UNRESISTED_REL:
         warnings.append(
@@ -583,7 +583,6 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
             f"the object, e.g. rims, at the IMLS width sigma={cm.field.sigma:.3g} m), above the Lipschitz bound "
             f"{C.PSI_LIPSCHITZ:g} that certifies points outside the object between samples: penetrations between "
             "constraint points may go undetected there; sample the object more finely (smaller sigma)")
-    seconds = time.perf_counter() - t_start
     phase_split = dict(phases.t)
     phase_split["other"] = seconds - sum(phase_split.values())
     return InsertionResult(model=cm, steps=steps, seconds=seconds, timings=dict(timer.t), phases=phase_split,
@@ -669,11 +668,8 @@ class _TimedSolver:
         return self._timed(self.solver.solve_free, A, free, b)
 
     def _timed(self, fn, *args):
-        t0 = time.perf_counter()
-        try:
+        with self.timer.timed("factorization"):
             return fn(*args)
-        finally:
-            self.timer.add("factorization", time.perf_counter() - t0)
 
 
 def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
@@ -847,9 +843,8 @@ def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float
     if not act.any():
         return None
     R, p = cm.pose(s_new)
-    t0 = time.perf_counter()
-    ev = cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False)
-    ctx["timer"].add("contact", time.perf_counter() - t0)
+    with ctx["timer"].timed("contact"):
+        ev = cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False)
     g = -ev.grad
     return _move_points(cm, pts, x, act, (d_prev[act] + ev.psi) * ev.near, g)
 
@@ -860,10 +855,10 @@ def _move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.n
     here): each vertex takes the weighted mean of the moves of the selected points on it."""
     nrm = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
     move = dist[:, None] * nrm
-    sub = ContactPoints(verts=pts.verts[sel], weights=pts.weights[sel], facet=pts.facet[sel])
+    rows = np.flatnonzero(sel)
     n = cm.fem.n_vertices
-    wsum = sub.scatter(np.ones((len(move), 1)), n)[:, 0]
-    shift = sub.scatter(move, n)
+    wsum = pts.scatter(np.ones((len(move), 1)), n, rows=rows)[:, 0]
+    shift = pts.scatter(move, n, rows=rows)
     hit = wsum > 0
     x1 = x.copy()
     x1[hit] += shift[hit] / wsum[hit, None]
@@ -893,9 +888,8 @@ def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
 
     pts = state.points
     y = pts.positions(x)
-    t0 = time.perf_counter()
-    ev_a = cm.field.evaluate(y, (Ra, pa), hessian=False)
-    timer.add("contact", time.perf_counter() - t0)
+    with timer.timed("contact"):
+        ev_a = cm.field.evaluate(y, (Ra, pa), hessian=False)
     delta = carry(y) - y
     reach = (-ev_a.psi < C.PSI_LIPSCHITZ * np.linalg.norm(delta, axis=1) + cm.dhat) & ev_a.near
     if not reach.any():
@@ -952,15 +946,13 @@ def _feasible_distances(cm, x0, s, pts, ctx):
     """Distances to O at s if x0 has no inverted element, else None."""
     from simfab.fem.neohookean import det_F
 
-    t0 = time.perf_counter()
-    ok = np.all(det_F(cm.fem, x0) > 0)
-    ctx["timer"].add("assembly", time.perf_counter() - t0)
+    with ctx["timer"].timed("assembly"):
+        ok = np.all(det_F(cm.fem, x0) > 0)
     if not ok:
         return None
     R, p = cm.pose(s)
-    t0 = time.perf_counter()
-    ev = cm.field.evaluate(pts.positions(x0), (R, p), hessian=False)
-    ctx["timer"].add("contact", time.perf_counter() - t0)
+    with ctx["timer"].timed("contact"):
+        ev = cm.field.evaluate(pts.positions(x0), (R, p), hessian=False)
     return -ev.psi
 
 
@@ -986,10 +978,9 @@ def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarr
     if isinstance(H, _LazyHessian):  # the PSD tangent is assembled only when the predictor runs
         H = state.H = H()
     if H is None:
-        t0 = time.perf_counter()
-        _, _, H = energy_gradient_hessian(cm.fem, x)
-        H.data[_diag_slots(cm)] += C.RIGID_MODE_REG * float(np.abs(H.data[_diag_slots(cm)]).mean())
-        ctx["timer"].add("assembly", time.perf_counter() - t0)
+        with ctx["timer"].timed("assembly"):
+            _, _, H = energy_gradient_hessian(cm.fem, x)
+            H.data[_diag_slots(cm)] += C.RIGID_MODE_REG * float(np.abs(H.data[_diag_slots(cm)]).mean())
         state.H = H
     pen = C.PREDICTOR_PENALTY * float(np.abs(H.data[_diag_slots(cm)]).max())
     sel = normal | full
@@ -1041,9 +1032,9 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
     at the points refinement would add; refined facets at the denser check points (their own
     points plus the midpoints between them). A facet can only reach into O if one of its vertices
     is within L * cover of O, cover the largest distance from a point of the facet to its nearest
-    vertex (at most the longest edge / sqrt(3) on a triangle, half the edge in 2D). Check points whose Lipschitz bound, from the facet's
-    vertices or from their own values at earlier checks (in O's body frame), is negative are not
-    evaluated; their bound stands in for psi. The result is remembered for the same (x, s).
+    vertex (at most the longest edge / sqrt(3) on a triangle, half the edge in 2D). Check points
+    whose Lipschitz bound, from the facet's vertices or from their own values at earlier checks (in
+    O's body frame), is negative are not evaluated; their bound stands in for psi. The result is remembered for the same (x, s).
     """
     memo = state.check
     if memo is not None and memo[0] is x and memo[1] == s and memo[2] == state.order:

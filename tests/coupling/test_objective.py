@@ -100,7 +100,7 @@ def test_check_lattice_gaps_equal_the_distances_to_the_facet_vertices(dim, order
 
 @pytest.mark.parametrize("repeat_vertices", [False, True])
 def test_scatter_is_the_transpose_of_positions(repeat_vertices):
-    # positions(x) = W x for a fixed weight matrix W; scatter and scatter_rows apply W^T (the
+    # positions(x) = W x for a fixed weight matrix W; scatter applies W^T, also to given rows (the
     # gradient and force route of every point term), also for a set listing a vertex twice.
     from simfab.coupling.points import ContactPoints, face_weights
 
@@ -117,16 +117,13 @@ def test_scatter_is_the_transpose_of_positions(repeat_vertices):
     assert np.allclose(pts.positions(x), W @ x, rtol=0, atol=1e-14)
     g = rng.normal(size=(k, dim))
     assert np.allclose(pts.scatter(g, n), W.T @ g, rtol=0, atol=1e-13)
-    rows = np.sort(rng.choice(k, size=k // 3, replace=False))
-    rows = np.r_[[len(plain) - 1], rows[rows != len(plain) - 1]] if repeat_vertices else rows
-    g_rows = g[rows]
-    dense = np.zeros((k, dim))
-    dense[rows] = g_rows
-    assert np.allclose(pts.scatter_rows(np.sort(rows), dense[np.sort(rows)], n), W.T @ dense, rtol=0, atol=1e-13)
-    only_plain = rows[rows < len(plain)]
-    dense = np.zeros((k, dim))
-    dense[only_plain] = g[only_plain]
-    assert np.allclose(pts.scatter_rows(only_plain, g[only_plain], n), W.T @ dense, rtol=0, atol=1e-13)
+    rows = rng.choice(k, size=k // 3, replace=False)
+    if repeat_vertices:  # both listings of vertex 4
+        rows = np.union1d(rows, [len(plain) - 2, len(plain) - 1])
+    for sub in (np.sort(rows), rows[rows < len(plain)]):  # mixed, plain vertices only
+        dense = np.zeros((k, dim))
+        dense[sub] = g[sub]
+        assert np.allclose(pts.scatter(g[sub], n, rows=sub), W.T @ dense, rtol=0, atol=1e-13)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
