@@ -617,7 +617,7 @@ _declare_overloads()
 # host side
 # ----------------------------------------------------------------------------------------------
 _ENERGY, _GRADIENT, _HESSIAN, _BLOCKS, _STRESS = 0, 1, 2, 3, 4  # what a launch computes
-_KERNELS = (_energy_kernel, _gradient_kernel, _hessian_kernel)  # by ``want`` (_BLOCKS: the Hessian kernel)
+_KERNELS = (_energy_kernel, _gradient_kernel, _hessian_kernel, _hessian_kernel, _stress_kernel)  # by ``want``
 
 
 class _Workspace:
@@ -705,12 +705,8 @@ class _Workspace:
         common = [self.x, self.elements, self.Dm_inv, self.volume, self.mu, self.lam]
         dev = model.device
         if want == _STRESS:
-            with RECORD_LOCK:
-                cmd = self.commands[want] = wp.launch(
-                    _stress_kernel, dim=model.n_elements, device=dev, record_cmd=True,
-                    inputs=[self.x, self.elements, self.Dm_inv, self.mu], outputs=[self.det_F, self.von_mises])
-            return cmd
-        if want == _ENERGY:
+            args = dict(inputs=[self.x, self.elements, self.Dm_inv, self.mu], outputs=[self.det_F, self.von_mises])
+        elif want == _ENERGY:
             args = dict(inputs=common, outputs=[self.energy, self.det_F])
         elif want == _GRADIENT:
             args = dict(inputs=common, outputs=[self.energy, self.det_F, self.grad])
@@ -727,7 +723,7 @@ class _Workspace:
             self.hess = wp.zeros((model.n_elements, kk, kk), dtype=wp.float64, device=dev)
             args = dict(inputs=common + [1, 0, self.dummy_slots],
                         outputs=[self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data])
-        kernel = _KERNELS[min(want, _HESSIAN)]
+        kernel = _KERNELS[want]
         with RECORD_LOCK:  # the first launch loads the module: one thread at a time
             cmd = wp.launch(kernel, dim=model.n_elements, device=dev, record_cmd=True, **args)
         self.commands[want] = cmd
