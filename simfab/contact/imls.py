@@ -340,12 +340,18 @@ def pose_matrix(pose):
     return R, p
 
 
+_EYE3 = np.eye(3)
+
+
 def body_frame(points, pose=None) -> np.ndarray:
     """World points (..., dim) in O's body frame (..., 3): R^T (x - p) for O's ``pose`` (as in
     :func:`pose_matrix`); 2D points get z = 0."""
     R, p = pose_matrix(pose)
     pts = np.asarray(points, dtype=np.float64)
-    return (_pad3(pts.reshape(-1, pts.shape[-1])) - p).dot(R).reshape(pts.shape[:-1] + (3,))
+    body = _pad3(pts.reshape(-1, pts.shape[-1])) - p
+    if not np.array_equal(R, _EYE3):  # (an unrotated O: nothing to rotate)
+        body = body @ R
+    return body.reshape(pts.shape[:-1] + (3,))
 
 
 def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
@@ -384,18 +390,13 @@ class _Query:
     hessian: bool
 
 
-_EYE3 = np.eye(3)
-
-
 def _prepare(fld: ImlsField, points, pose, hessian: bool, hessian_band: float | None) -> _Query:
     """The :class:`_Query` of world points (k, dim). Points far from O need no culling here: outside
     the cell grid the kernel finds no neighbour at once."""
-    pts = np.asarray(points, dtype=np.float64)
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, fld.dim)
     R, p = pose_matrix(pose)
+    body = body_frame(pts, (R, p))
     R = None if np.array_equal(R, _EYE3) else R
-    body = _pad3(pts.reshape(-1, fld.dim)) - p if pts.size else np.zeros((0, 3))
-    if R is not None:
-        body = body @ R
     band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
     return _Query(dim=fld.dim, R=R, body=body, band=band, hessian=hessian)
 
