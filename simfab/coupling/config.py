@@ -46,7 +46,8 @@ EXACT_FIRST_NEWTON = True
 #: Evaluate the Hessian at the first line-search trial (most steps are accepted at once).
 NEWTON_EAGER_HESSIAN = True
 #: ... unless the residual is already within this factor of the target (the trial is then most
-#: likely converged; on clip3d no such trial needed another iteration).
+#: likely converged: on clip3d 34 trials went without their Hessian, backtracking ones included,
+#: and 7 of them then needed it).
 NEWTON_EAGER_ABOVE_TOL = 10.0
 #: Predictor: also try the linear extrapolation of the last two steps and the quadratic one of the
 #: last three; the candidate with the lowest objective is the warm start.
