@@ -102,7 +102,7 @@ def test_check_lattice_gaps_equal_the_distances_to_the_facet_vertices(dim, order
 def test_scatter_is_the_transpose_of_positions(repeat_vertices):
     # positions(x) = W x for a fixed weight matrix W; scatter applies W^T, also to given rows (the
     # gradient and force route of every point term), also for a set listing a vertex twice.
-    from simfab.coupling.points import ContactPoints, face_weights
+    from simfab.coupling.points import face_weights
 
     rng = np.random.default_rng(5)
     n, dim = 30, 3
