@@ -51,19 +51,21 @@ class ContactPoints:
         (a,) int, ``g_points`` (a, dim) is given at those points only (the others are zero)."""
         dim = g_points.shape[1]
         nb = self.n_plain
-        if rows is None:
-            idx = self.cache.get("scatter_idx")
-            if idx is None:
-                idx = self.cache["scatter_idx"] = np.concatenate([self.verts[:nb, 0], self.verts[nb:].ravel()])
-            g_plain, g_inner, w_inner = g_points[:nb], g_points[nb:], self.weights[nb:]
-        else:
+        if rows is not None:  # a few points (e.g. those in contact): accumulate them in place
+            out = np.zeros((n_vertices, dim))
             plain = rows < nb
-            inner = rows[~plain]
-            idx = np.concatenate([self.verts[rows[plain], 0], self.verts[inner].ravel()])
-            g_plain, g_inner, w_inner = g_points[plain], g_points[~plain], self.weights[inner]
-        c = np.concatenate([g_plain, (w_inner[:, :, None] * g_inner[:, None, :]).reshape(-1, dim)])
+            np.add.at(out, self.verts[rows[plain], 0], g_points[plain])
+            if not plain.all():
+                inner = rows[~plain]
+                contrib = self.weights[inner, :, None] * g_points[~plain, None, :]  # (i, nv, dim)
+                np.add.at(out, self.verts[inner].ravel(), contrib.reshape(-1, dim))
+            return out
+        idx = self.cache.get("scatter_idx")
+        if idx is None:
+            idx = self.cache["scatter_idx"] = np.concatenate([self.verts[:nb, 0], self.verts[nb:].ravel()])
+        c = np.concatenate([g_points[:nb], (self.weights[nb:, :, None] * g_points[nb:, None, :]).reshape(-1, dim)])
         out = np.empty((n_vertices, dim))
-        for a in range(dim):
+        for a in range(dim):  # every point: one pass per axis
             out[:, a] = np.bincount(idx, weights=c[:, a], minlength=n_vertices)
         return out
 
