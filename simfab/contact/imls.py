@@ -341,7 +341,13 @@ def pose_matrix(pose):
     return R, p
 
 
-_EYE3 = np.eye(3)
+_EYE3_BYTES = np.eye(3).tobytes()
+
+
+def _unrotated(R: np.ndarray) -> bool:
+    """Whether the (3, 3) float64 rotation R is exactly the identity (a byte comparison: this runs
+    on every field evaluation, where np.array_equal costs several microseconds)."""
+    return R.tobytes() == _EYE3_BYTES
 
 
 def body_frame(points, pose=None) -> np.ndarray:
@@ -350,7 +356,7 @@ def body_frame(points, pose=None) -> np.ndarray:
     R, p = pose_matrix(pose)
     pts = np.asarray(points, dtype=np.float64)
     body = _pad3(pts.reshape(-1, pts.shape[-1])) - p
-    if not np.array_equal(R, _EYE3):  # (an unrotated O: nothing to rotate)
+    if not _unrotated(R):  # (an unrotated O: nothing to rotate)
         body = body @ R
     return body.reshape(pts.shape[:-1] + (3,))
 
@@ -397,7 +403,7 @@ def _prepare(fld: ImlsField, points, pose, hessian: bool, hessian_band: float | 
     pts = np.asarray(points, dtype=np.float64).reshape(-1, fld.dim)
     R, p = pose_matrix(pose)
     body = body_frame(pts, (R, p))
-    R = None if np.array_equal(R, _EYE3) else R
+    R = None if _unrotated(R) else R
     band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
     return _Query(dim=fld.dim, R=R, body=body, band=band, hessian=hessian)
 
