@@ -91,13 +91,18 @@ def test_python_dash_m_entry_point():
     assert r.returncode == 0 and "simfab" in r.stdout
 
 
-def test_import_is_fast():
+def test_import_is_light():
+    # `import simfab` (and so `simfab --help`) must not pull in the heavy libraries: they load on demand.
+    # Asserted on the modules imported, not on a wall time (timed tests flake on a loaded machine).
     import subprocess
     import sys
 
-    code = "import time; t=time.perf_counter(); import simfab; print(time.perf_counter()-t)"
+    code = ("import sys; b=set(sys.modules); import simfab, simfab.cli; "
+            "print(' '.join(sorted({m.split('.')[0] for m in set(sys.modules)-b})))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
-    assert float(r.stdout) < 1.5
+    assert r.returncode == 0, r.stderr
+    heavy = {"warp", "mujoco", "pxr", "trimesh", "scipy", "igl", "pytetwild", "matplotlib"}
+    assert not heavy & set(r.stdout.split()), r.stdout
 
 
 def test_demo_runs_a_pipeline_and_reports_json(tmp_path, capsys):

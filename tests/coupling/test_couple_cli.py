@@ -24,7 +24,7 @@ def test_simulate_writes_profile_plot_usd_and_mjcf(tmp_path, capsys):
     phases = summary["phase_split"]
     assert {"warm_start", "newton", "facet_check", "record", "rigid_check", "other"} <= set(phases)
     assert min(phases.values()) >= -1e-6 and sum(phases.values()) == pytest.approx(summary["seconds"], rel=1e-9)
-    assert phases["newton"] > phases["other"]
+    assert phases["newton"] > 0 and phases["record"] > 0  # the loop's phases were timed, not left to "other"
     for k in ("profile_csv", "profile_json", "plot_png", "usd", "mjcf"):
         assert (out / summary[k].split("/")[-1]).is_file()
     rows = np.genfromtxt(summary["profile_csv"], delimiter=",", names=True)
