@@ -450,7 +450,7 @@ class _StepObjective:
                 Hy = project_psd(Hy)
             wp_act = self.wpair[act][:, :, :, None, None]
             np.add.at(H.data, self.slots[act].ravel(), (wp_act * Hy[:, None, None, :, :]).ravel())
-        H.data[self.diag] += C.RIGID_MODE_REG * float(np.abs(H.data[self.diag]).mean())
+        _regularize_rigid_modes(H, self.diag)
 
     def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
         """Step cap keeping every constraint point outside O along the whole step (see below).
@@ -507,6 +507,12 @@ class _LazyHessian:
 def dim_factor(dim: int) -> float:
     """Bound of the spectral norm of a dim x dim matrix by its max |entry| times this factor."""
     return float(dim)
+
+
+def _regularize_rigid_modes(H, diag: np.ndarray) -> None:
+    """Add RIGID_MODE_REG * mean |diag H| to the diagonal of H in place (``diag``: the CSR slots of
+    the diagonal, :func:`_diag_slots`), for the rigid modes the supports may leave free."""
+    H.data[diag] += C.RIGID_MODE_REG * float(np.abs(H.data[diag]).mean())
 
 
 def _diag_slots(cm: CouplingModel) -> np.ndarray:
@@ -690,20 +696,21 @@ def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
         with ctx["phases"].timed("newton"):
             x, it = _newton(cm, obj, state.x, ctx)
         total += it
+        final = _final_eval(obj, x)
         with ctx["phases"].timed("facet_check"):
-            new = _crossing_facets(cm, x, s, state, _final_eval(obj, x))
+            new = _crossing_facets(cm, x, s, state, final)
         if not new:
-            _accept(state, x, s, obj)
+            _accept(state, x, s, obj, final)
             return total
         _add_refinement(cm, state, new)
     raise ConvergenceError("refinement did not settle at the start pose")
 
 
-def _accept(state: _State, x: np.ndarray, s: float, obj: _StepObjective) -> None:
+def _accept(state: _State, x: np.ndarray, s: float, obj: _StepObjective, final) -> None:
     """Make the converged x at path length s the current state, with the Hessian, final
-    evaluation and barrier stiffness of the objective it was solved with."""
+    evaluation (``_final_eval(obj, x)``) and barrier stiffness of the objective it was solved with."""
     state.x, state.s = x, s
-    state.final = _final_eval(obj, x)
+    state.final = final
     # the objective's last evaluation may be a rejected line-search trial (Newton stopping at the
     # round-off floor): its Hessian belongs to x only when the evaluation does
     state.H = obj.last_H if state.final is not None else None
@@ -741,11 +748,12 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
             total += _advance(cm, state, s_new, ctx, depth + 1)
             return total
         total += it
+        final = _final_eval(obj, x)
         with ctx["phases"].timed("facet_check"):
-            new = _crossing_facets(cm, x, s_new, state, _final_eval(obj, x)) if cm.options.refine else []
+            new = _crossing_facets(cm, x, s_new, state, final) if cm.options.refine else []
         if not new:
             state.prev2, state.prev = state.prev, (state.x, state.s)
-            _accept(state, x, s_new, obj)
+            _accept(state, x, s_new, obj, final)
             _adapt_kappa(cm, state, obj)
             return total
         # solve again from x with the new points lifted out of O (see _lift_points); should that
@@ -990,7 +998,7 @@ def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarr
     if H is None:
         with ctx["timer"].timed("assembly"):
             _, _, H = energy_gradient_hessian(cm.fem, x)
-            H.data[_diag_slots(cm)] += C.RIGID_MODE_REG * float(np.abs(H.data[_diag_slots(cm)]).mean())
+            _regularize_rigid_modes(H, _diag_slots(cm))
         state.H = H
     pen = C.PREDICTOR_PENALTY * float(np.abs(H.data[_diag_slots(cm)]).max())
     sel = normal | full
@@ -1004,7 +1012,7 @@ def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarr
     np.add.at(data, _point_slots(cm, pts)[sel].ravel(), blocks.ravel())
     A = cm.fem.pattern.matrix(data)
     f_pt = pen * np.einsum("kij,kj->ki", N, delta[sel])  # penalty force per point
-    rhs = ContactPoints(verts=pts.verts[sel], weights=w, facet=pts.facet[sel]).scatter(f_pt, n).ravel()
+    rhs = pts.scatter(f_pt, n, rows=np.flatnonzero(sel)).ravel()
     fidx = np.flatnonzero(cm.free)
     uf = _TimedSolver(ctx["solver"], ctx["timer"]).solve_free(A, fidx, rhs[fidx])
     u = np.zeros(n * dim)
