@@ -106,6 +106,12 @@ class BandedOrSparseCholesky(SPDSolver):
         upper = pj >= pi  # LAPACK upper band storage: ab[bw + i - j, j] = A[i, j], j >= i
         return dict(perm=perm, bw=bw, sel=np.flatnonzero(upper), pos=(bw + pi[upper] - pj[upper], pj[upper]))
 
+    def solve_free(self, A, free, b):
+        """The free block's solve through :meth:`solve` (the banded path decides on the block's own
+        pattern; :meth:`SPDSolver.solve_free` maps values straight to CHOLMOD's input)."""
+        free = np.asarray(free)
+        return self.solve(canonical_csr(A)[free][:, free], b)
+
     def solve(self, A, b):
         from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 

@@ -91,9 +91,9 @@ class SPDSolver:
         one gather and a numeric factorization (Newton on the free dofs of a fixed FEM pattern).
         Raises :class:`NotPositiveDefinite` when the factorization fails."""
         free = np.asarray(free)
-        if self.backend != "cholmod" or type(self).solve is not SPDSolver.solve:  # subclasses keep their solve
-            return self.solve(canonical_csr(A)[free][:, free], b)
         A = canonical_csr(A)
+        if self.backend != "cholmod":
+            return self.solve(A[free][:, free], b)
         full = self._full
         if full is None or not (full[1].shape == free.shape and np.array_equal(full[1], free)
                                 and same_pattern(full[0], A)):

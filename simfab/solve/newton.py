@@ -190,12 +190,11 @@ def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonOp
     return dx, shift, "psd"
 
 
-def _solve_block(solver, sub: "_FreeBlock", H, rhs: np.ndarray) -> np.ndarray:
-    """Solve the free-dof block of H: straight from H's values when the solver can
-    (:meth:`SPDSolver.solve_free`, no submatrix built), else through the extracted block."""
-    solve_free = getattr(solver, "solve_free", None)
-    if solve_free is not None and len(sub.free_idx) < sub.n:
-        return solve_free(H, sub.free_idx, rhs)
+def _solve_block(solver: SPDSolver, sub: "_FreeBlock", H, rhs: np.ndarray) -> np.ndarray:
+    """Solve the free-dof block of H (:meth:`SPDSolver.solve_free`: no submatrix built; H as CSR
+    when every dof is free)."""
+    if len(sub.free_idx) < sub.n:
+        return solver.solve_free(H, sub.free_idx, rhs)
     return solver.solve(sub(H), rhs)
 
 

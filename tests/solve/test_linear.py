@@ -66,3 +66,15 @@ def test_solve_free_equals_the_solve_of_the_extracted_block(backend):
     if backend == "cholmod":  # (SuperLU does not test definiteness)
         with pytest.raises(NotPositiveDefinite):
             solver.solve_free(-A, np.arange(n), np.ones(n))
+
+
+def test_banded_solver_solves_the_free_block_through_its_own_solve():
+    # the rods' banded solver overrides solve; its solve_free must solve the same free block
+    from simfab.rods.statics import BandedOrSparseCholesky
+
+    A = _laplacian_2d(8)
+    n = A.shape[0]
+    free = np.arange(3, n - 2)
+    b = np.random.default_rng(2).standard_normal(len(free))
+    x = BandedOrSparseCholesky().solve_free(A, free, b)
+    np.testing.assert_allclose(A[free][:, free] @ x, b, atol=1e-10 * np.abs(b).max())
