@@ -388,13 +388,16 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
 @dataclass(frozen=True)
 class _Query:
     """An evaluation prepared for launch: ``body`` (k, 3) body-frame query points, ``R`` O's
-    rotation (None: identity, nothing to rotate back), ``band`` the Hessian band (-inf: none)."""
+    rotation (None: identity, nothing to rotate back), ``band`` the Hessian band (-inf: no Hessian)."""
 
     dim: int
     R: np.ndarray | None
     body: np.ndarray
     band: float
-    hessian: bool
+
+    @property
+    def hessian(self) -> bool:
+        return self.band > -np.inf
 
 
 def _prepare(fld: ImlsField, points, pose, hessian: bool, hessian_band: float | None) -> _Query:
@@ -405,7 +408,7 @@ def _prepare(fld: ImlsField, points, pose, hessian: bool, hessian_band: float | 
     body = body_frame(pts, (R, p))
     R = None if _unrotated(R) else R
     band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
-    return _Query(dim=fld.dim, R=R, body=body, band=band, hessian=hessian)
+    return _Query(dim=fld.dim, R=R, body=body, band=band)
 
 
 def _finish(q: _Query, launched) -> ImlsEval:
