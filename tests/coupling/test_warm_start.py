@@ -114,8 +114,8 @@ def test_warm_starts_keep_new_points_off_the_object(monkeypatch):
     assert len(seen) > 30 and min(seen) >= 0.5 * C.WARM_START_FLOOR
 
 
-@pytest.mark.parametrize("flag,saving", [("FACET_CHECK_CACHE", 0.9), ("FACET_CHECK_REUSE_VERTICES", 0.9)])
-def test_facet_check_shortcuts_change_nothing(monkeypatch, flag, saving):
+@pytest.mark.parametrize("flag", ["FACET_CHECK_CACHE", "FACET_CHECK_REUSE_VERTICES"])
+def test_facet_check_shortcuts_change_nothing(monkeypatch, flag):
     # FACET_CHECK_CACHE: check points certified outside O by their values at earlier checks (O
     # moved rigidly) skip their evaluation; FACET_CHECK_REUSE_VERTICES: the vertices' distances come
     # from Newton's converged evaluation instead of a fresh one. Either way the run must be the same
@@ -140,7 +140,7 @@ def test_facet_check_shortcuts_change_nothing(monkeypatch, flag, saving):
     assert [r.iterations for r in a.steps] == [r.iterations for r in b.steps]
     assert np.array_equal(np.stack([r.x for r in a.steps]), np.stack([r.x for r in b.steps]))
     assert np.array_equal(a.column("penetration"), b.column("penetration"))
-    assert points[1] < saving * points[0]  # and it does save evaluations
+    assert points[1] < 0.9 * points[0]  # and it saves at least a tenth of the evaluated points
 
 
 def test_a_field_steeper_than_the_lipschitz_bound_is_reported(monkeypatch):

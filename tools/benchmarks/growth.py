@@ -17,14 +17,15 @@ from __future__ import annotations
 
 import argparse
 import os
-import pathlib
 import statistics
 import time
+
+from simfab._bundled import scenes_dir
 
 TARGET_GROWTH_SECONDS = 0.3
 TARGET_SKIN_SECONDS = 1.0
 
-SCENES = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "growth"
+SCENES = scenes_dir("growth")
 
 
 def _seconds(v) -> float:

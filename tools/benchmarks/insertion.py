@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import time
 
 CASES = [
@@ -112,7 +113,7 @@ def run(argv) -> dict:
             "object_samples": int(len(cm.field.vertices)),
             "steps": len(cm.s_steps) - 1,
             "seconds": round(dt, 3),
-            "seconds_median": round(float(sorted(runs)[len(runs) // 2]), 3),
+            "seconds_median": round(statistics.median(runs), 3),
             "seconds_all_runs": [round(v, 3) for v in runs],
             "cpu_seconds": round(dc, 3),
             "machine_reference_ms": machine_reference_ms(),
