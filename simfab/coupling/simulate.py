@@ -1052,7 +1052,8 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
     is within L * cover of O, cover the largest distance from a point of the facet to its nearest
     vertex (at most the longest edge / sqrt(3) on a triangle, half the edge in 2D). Check points
     whose Lipschitz bound, from the facet's vertices or from their own values at earlier checks (in
-    O's body frame), is negative are not evaluated; their bound stands in for psi. The result is remembered for the same (x, s).
+    O's body frame), is negative are not evaluated; their bound stands in for psi. The result is
+    remembered for the same (x, s).
     """
     memo = state.check
     if memo is not None and memo[0] is x and memo[1] == s and memo[2] == state.order:

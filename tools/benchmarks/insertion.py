@@ -9,10 +9,10 @@ Cases (bundled scenes, closest to the sizes of the thesis' timing table):
   claw3d    (~12,063 tets, 25 steps)     vs "claw 3D"        12063 elements, 25 steps
 Each row reports the simulation seconds (fastest run; scene loading and meshing excluded, as in
 the original's per-iteration cost; the median and every run's time too), the original's seconds
-(``figures.json``), the speed-up ratio original/ours, Newton iterations and the time split (FEM assembly, sparse factorization + solve, contact =
-IMLS evaluation + barrier; "other", the wall time minus the three, is predictor, refinement
-checks and Python overhead), and the same wall time split by phase of the insertion loop
-(warm_start, newton, facet_check, record, rigid_check, other).
+(``figures.json``), the speed-up ratio original/ours, Newton iterations and the time split (FEM
+assembly, sparse factorization + solve, contact = IMLS evaluation + barrier; "other", the wall
+time minus the three, is predictor, refinement checks and Python overhead), and the same wall time
+split by phase of the insertion loop (warm_start, newton, facet_check, record, rigid_check, other).
 The process CPU time, the load average and the time of a fixed reference workload are reported
 too: on a shared (virtual) machine the same run's wall time moves with the machine's momentary
 speed, and the reference workload's time moves with it.
