@@ -3,6 +3,8 @@
 Usage::
 
     simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes | --fixed-axes AXES] [--no-refine]
+    simfab couple optimize SCENE [--grip tight|loose] [--insertion-force LO HI] ... [--iterations N]
+    simfab couple study handles SCENE [--counts K ...] [--random N]
     simfab couple scenes
 
 SCENE is a coupling scene: ``NAME.xml`` (MJCF: the object O as the mocap body ``object`` with
@@ -44,10 +46,16 @@ def add_args(p):
                    help='axes the fixed region is held along, e.g. "xz" (must include the insertion axis)')
     s.add_argument("--no-refine", action="store_true", help="no refinement points on boundary edges/faces")
     listing = sub.add_parser("scenes", help="list the bundled coupling scenes")
-    from simfab.cli import add_common_args
+    from simfab.cli import add_common_args, couple_design
 
-    add_common_args(s)
-    add_common_args(listing)  # e.g. 'simfab couple scenes --json'
+    o = sub.add_parser("optimize", help="optimize the part's rest shape for the scene's design brief",
+                       description=couple_design.__doc__.split("\n\n")[1])
+    couple_design.add_optimize_args(o)
+    st = sub.add_parser("study", help="handle-placement study (displacement vs spatial vs random)",
+                        description=couple_design.__doc__.split("\n\n")[3])
+    couple_design.add_study_args(st)
+    for q in (s, listing, o, st):
+        add_common_args(q)  # e.g. 'simfab couple scenes --json'
 
 
 def run(args) -> dict:
@@ -58,8 +66,13 @@ def run(args) -> dict:
         from simfab.coupling.scene import bundled_dir
 
         return {"scenes": sorted(p.stem for p in bundled_dir().glob("*.xml"))}
+    if cmd in ("optimize", "study"):
+        from simfab.cli import couple_design
+
+        return couple_design.run_optimize(args) if cmd == "optimize" else couple_design.run_study(args)
     if cmd != "simulate":
-        raise InputError("choose an action: 'simfab couple simulate SCENE' or 'simfab couple scenes'")
+        raise InputError("choose an action: 'simfab couple simulate SCENE', 'optimize SCENE', 'study handles SCENE' "
+                         "or 'scenes'")
     sim = {}
     if args.steps is not None:
         if args.steps < 1:

@@ -280,6 +280,17 @@ class StageWriter:
         UsdGeom.Imageable(prim).CreateVisibilityAttr().Set(
             UsdGeom.Tokens.inherited if visible else UsdGeom.Tokens.invisible, self._time(t))
 
+    def set_attribute(self, name: str, attr: str, value: float, t=None) -> None:
+        """A custom double attribute ``simfab:<attr>`` on prim ``name`` at time code ``t`` (e.g. an
+        optimization's objective per replayed design)."""
+        if not _IDENT.match(attr):
+            raise ValueError(f"{attr!r} is not a valid attribute name")
+        prim = self._prim(name)
+        a = prim.GetAttribute(f"simfab:{attr}")
+        if not a:
+            a = prim.CreateAttribute(f"simfab:{attr}", Sdf.ValueTypeNames.Double, custom=True)
+        a.Set(float(value), self._time(t))
+
     # ------------------------------------------------------------------ output
     def save(self) -> Path:
         """Set start/end time codes and write the stage atomically; return its path."""

@@ -1,0 +1,108 @@
+"""The design actions of ``simfab couple``: ``optimize`` and ``study handles`` (argument parsing
+only; the work is in :mod:`simfab.design`).
+
+``simfab couple optimize SCENE`` changes the part's rest shape as little as possible (Laplacian
+editing energy of the boundary) until the simulated insertion meets the scene's design brief
+(``[design]`` in NAME.toml: grip tight|loose, grip/insertion/removal force bounds [N], yield
+stress [Pa], or a target force profile). Command-line options override the brief.
+
+JSON keys (``--json``): scene, feasible, objective, objective_initial, E_L, constraints (per
+constraint: value, lo, hi, unit, satisfied, initial), category, category_initial, handles,
+iterations, stopped_early, simulations, accepted, rejected (count per reason), seconds,
+simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_stl, outline_csv
+(2D), scene_xml, scene_toml, scene_mesh, profile_png, shape_png, history_csv, usd, summary_json,
+revolved_stl with --revolve-axis).
+
+``simfab couple study handles SCENE`` runs the handle-placement study: displacement-based and
+spatial placement and ``--random`` random picks, for each handle count of ``--counts``; reports
+the fraction of runs that met every constraint and the final E_L per method (table, CSV, PNG).
+JSON keys: rows (method, handles, runs, converged_fraction, E_L_median, E_L_best), outputs.
+"""
+
+from __future__ import annotations
+
+
+def add_optimize_args(s) -> None:
+    s.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml with a [design] table) or a bundled scene")
+    g = s.add_argument_group("design brief (override the scene's [design] table)")
+    g.add_argument("--grip", choices=["tight", "loose", "any"], help="wanted grip (coupling-ratio constraint)")
+    g.add_argument("--grip-force", nargs=2, type=float, metavar=("LO", "HI"), help="grip force bounds [N]")
+    g.add_argument("--insertion-force", nargs=2, type=float, metavar=("LO", "HI"), help="insertion force bounds [N]")
+    g.add_argument("--removal-force", nargs=2, type=float, metavar=("LO", "HI"), help="removal force bounds [N]")
+    g.add_argument("--yield-stress", type=float, metavar="PA", help="max von Mises bound [Pa] (default: the material's)")
+    g.add_argument("--target-profile", metavar="CSV", help="force profile to match (distance_m, force_N rows)")
+    g.add_argument("--handles", type=int, metavar="K", help="number of active handles")
+    g.add_argument("--placement", choices=["displacement", "spatial", "random"], help="handle placement")
+    g.add_argument("--iterations", type=int, metavar="N", help="simulated-annealing iterations (at most)")
+    g.add_argument("--patience", type=int, metavar="N",
+                   help="stop once the best design is feasible and has not improved for N iterations")
+    s.add_argument("--steps", type=int, metavar="N", help="insertion steps per simulation (overrides the scene)")
+    s.add_argument("--revolve-axis", choices=["x", "y"], help="2D: also revolve the optimized section about this axis")
+    s.add_argument("--revolve-offset", type=float, default=0.0, metavar="M",
+                   help="position of the revolution axis [m] (x = M for axis y, y = M for axis x)")
+
+
+def add_study_args(s) -> None:
+    s.add_argument("study", choices=["handles"], help="which study (handles: handle placement)")
+    s.add_argument("scene", metavar="SCENE", help="design scene")
+    s.add_argument("--counts", type=int, nargs="+", default=[2, 4, 6], metavar="K", help="handle counts (default 2 4 6)")
+    s.add_argument("--random", type=int, default=10, metavar="N", help="random placements per count (default 10)")
+    s.add_argument("--iterations", type=int, metavar="N", help="annealing iterations per run (default: the brief's)")
+    s.add_argument("--steps", type=int, metavar="N", help="insertion steps per simulation")
+    s.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler to run on (default: a local cluster)")
+
+
+def design_overrides(args) -> dict:
+    from simfab.errors import InputError
+
+    d = {}
+    for k in ("grip", "yield_stress", "target_profile", "handles", "placement", "iterations", "patience"):
+        v = getattr(args, k, None)
+        if v is not None:
+            d[k] = v
+    for k in ("grip_force", "insertion_force", "removal_force"):
+        v = getattr(args, k, None)
+        if v is not None:
+            d[k] = list(v)
+    for k in ("handles", "iterations", "patience"):
+        if k in d and d[k] < (0 if k == "iterations" else 1):
+            raise InputError(f"must be >= {0 if k == 'iterations' else 1}, got {d[k]}", where=f"--{k}")
+    return d
+
+
+def simulation_overrides(args) -> dict:
+    from simfab.errors import InputError
+
+    if getattr(args, "steps", None) is None:
+        return {}
+    if args.steps < 1:
+        raise InputError(f"must be >= 1, got {args.steps}", where="--steps")
+    return {"steps": args.steps, "h_in": None}
+
+
+def run_optimize(args) -> dict:
+    from simfab._warp import device as check_device
+    from simfab.design.pipeline import optimize_scene
+
+    dev = check_device(args.device)
+    revolve = (args.revolve_axis, args.revolve_offset) if args.revolve_axis else None
+    return optimize_scene(args.scene, out=args.out, design=design_overrides(args), simulation=simulation_overrides(args),
+                          device=dev, quiet=args.quiet, seed=args.seed, revolve=revolve)
+
+
+def run_study(args) -> dict:
+    from simfab._warp import device as check_device
+    from simfab.design.study import handle_study
+    from simfab.errors import InputError
+
+    check_device(args.device)
+    if any(k < 1 for k in args.counts):
+        raise InputError("handle counts must be >= 1", where="--counts")
+    if args.random < 0:
+        raise InputError(f"must be >= 0, got {args.random}", where="--random")
+    design = {}
+    if args.iterations is not None:
+        design["iterations"] = args.iterations
+    return handle_study(args.scene, out=args.out, counts=args.counts, randoms=args.random, design=design,
+                        simulation=simulation_overrides(args), seed=args.seed, quiet=args.quiet,
+                        scheduler=args.scheduler)

@@ -1,0 +1,19 @@
+"""Rest-shape optimization of a compliant part for a prescribed coupling behaviour.
+
+The user states the behaviour (tight or loose grip, grip-force, insertion- and removal-force
+bounds, no yielding, or a whole target force profile); simfab changes the part's rest shape as
+little as possible until the simulated insertion profile delivers it (thesis, "Rest Shape
+Optimization").
+
+- :mod:`simfab.design.handles` - bounded biharmonic weights and linear blend skinning: rest shape
+  X' = M_LBS T from handle translations and scales
+- :mod:`simfab.design.placement` - where the handles go: displacement clustering (affinity
+  propagation), spatial clustering, random
+- :mod:`simfab.design.modification` - the Laplacian editing energy E_L of the boundary
+- :mod:`simfab.design.brief` - the design brief ([design] table) and its constraint penalties
+- :mod:`simfab.design.anneal` - simulated annealing (seeded, exponential cooling)
+- :mod:`simfab.design.optimize` - the optimization loop: candidate -> validity -> insertion -> objective
+- :mod:`simfab.design.outputs` - optimized part, scene, plots, history, USD, summary
+- :mod:`simfab.design.study` - the handle-placement study
+- :mod:`simfab.design.synthesis` - 2D -> 3D: extrusion and revolution of an optimized section
+"""

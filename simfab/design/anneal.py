@@ -1,0 +1,108 @@
+"""Simulated annealing (Kirkpatrick et al. 1983) over a bounded design vector, seeded.
+
+Per iteration k (thesis, Algorithm "Rest Shape Optimization"):
+
+1. proposal  x_i = clip(x_cur + sigma_k * N(0, I), lower, upper)   (Gaussian around the current state)
+2. temperature  T_k = tau_k * |E_cur|,  tau_k = tau_0 (tau_end / tau_0)^(k / K)   (exponential cooling)
+3. Metropolis: accept if E_i < E_cur, else with probability exp(-(E_i - E_cur) / T_k); the best
+   state seen is kept and returned.
+4. adaptive, decaying step: sigma_{k+1} = sigma_k * GROW after an accepted proposal, * SHRINK
+   after a rejected one, within [SIGMA_MIN_REL sigma_0, sigma_0].
+
+The temperature is relative to the current objective (scale-free Metropolis): the objective of a
+rest-shape design spans orders of magnitude (penalties of violated constraints ~1e6, a feasible
+design's modification energy ~1), and a fixed temperature would either freeze the start or let
+a feasible design wander back into violation. With T_k = tau_k |E_cur| an uphill move by the
+fraction tau_k of the current value is accepted with probability 1/e at every scale.
+
+A candidate whose value is +inf (rejected: invalid shape, failed simulation) is never accepted
+and counts as a rejection. Stops after K iterations or when ``stop(best_info, k)`` says so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+GROW = 1.10
+SHRINK = 0.97
+SIGMA_MIN_REL = 0.05
+
+
+@dataclass(frozen=True, kw_only=True)
+class AnnealOptions:
+    """iterations K; tau_0, tau_end: relative temperatures at the first and last iteration;
+    sigma0 (n,): initial proposal standard deviations; lower, upper (n,): bounds; seed."""
+
+    iterations: int
+    sigma0: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    tau0: float = 0.05
+    tau_end: float = 1e-4
+    seed: int = 0
+
+
+@dataclass(kw_only=True)
+class AnnealResult:
+    """best x (n,), its value and info; history: one dict per iteration (k, value, accepted,
+    current, best, temperature, sigma, info); iterations run; stopped_early."""
+
+    x: np.ndarray
+    value: float
+    info: object
+    history: list = field(default_factory=list)
+    iterations: int = 0
+    stopped_early: bool = False
+
+
+def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=None) -> AnnealResult:
+    """Minimize ``f`` by simulated annealing from ``x0``.
+
+    f : callable x -> (value, info); value may be +inf for a rejected candidate
+    stop : optional callable (best_info, best_value, k, k_best) -> bool, asked after every iteration
+        (k_best: iteration at which the best value was found)
+    callback : optional callable(record dict) after every iteration
+    """
+    rng = np.random.default_rng(options.seed)
+    lower, upper = np.asarray(options.lower, float), np.asarray(options.upper, float)
+    sigma0 = np.asarray(options.sigma0, float)
+    x_cur = np.clip(np.asarray(x0, float), lower, upper)
+    e_cur, info_cur = f(x_cur)
+    best = AnnealResult(x=x_cur.copy(), value=e_cur, info=info_cur)
+    k_best = 0
+    best.history.append(dict(k=0, value=e_cur, accepted=math.isfinite(e_cur), current=e_cur, best=e_cur,
+                             temperature=float("nan"), sigma=float(np.mean(sigma0)), info=info_cur))
+    if callback is not None:
+        callback(best.history[-1])
+    sigma = sigma0.copy()
+    K = max(int(options.iterations), 1)
+    ratio = options.tau_end / options.tau0
+    for k in range(1, int(options.iterations) + 1):
+        x_i = np.clip(x_cur + sigma * rng.standard_normal(x_cur.shape), lower, upper)
+        e_i, info_i = f(x_i)
+        u = rng.random()  # drawn every iteration: the random stream does not depend on the values
+        T = options.tau0 * ratio ** ((k - 1) / K) * abs(e_cur) if math.isfinite(e_cur) else math.inf
+        if not math.isfinite(e_i):
+            accepted = False
+        elif e_i < e_cur or not math.isfinite(e_cur):
+            accepted = True
+        else:
+            accepted = T > 0 and u < math.exp(-(e_i - e_cur) / T)
+        if accepted:
+            x_cur, e_cur = x_i, e_i
+            if e_i < best.value:
+                best.x, best.value, best.info, k_best = x_i.copy(), e_i, info_i, k
+        sigma = np.clip(sigma * (GROW if accepted else SHRINK), SIGMA_MIN_REL * sigma0, sigma0)
+        rec = dict(k=k, value=e_i, accepted=accepted, current=e_cur, best=best.value, temperature=T,
+                   sigma=float(np.mean(sigma / np.where(sigma0 > 0, sigma0, 1.0))), info=info_i)
+        best.history.append(rec)
+        best.iterations = k
+        if callback is not None:
+            callback(rec)
+        if stop is not None and stop(best.info, best.value, k, k_best):
+            best.stopped_early = k < options.iterations
+            break
+    return best

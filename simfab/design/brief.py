@@ -1,0 +1,234 @@
+"""The design brief: what behaviour the user asks of the part, and its constraint penalties.
+
+The ``[design]`` table of a coupling scene's TOML (all optional; SI units)::
+
+    [design]
+    grip = "tight"                 # "tight" | "loose" | "any" (no coupling-ratio constraint)
+    grip_force = [5.0, 40.0]       # [lo, hi] N at the steady state (inf allowed: [5.0, inf])
+    insertion_force = [0.0, 20.0]  # [lo, hi] N, largest force to push the object in
+    removal_force = [0.0, 30.0]    # [lo, hi] N, largest force to pull it out
+    yield_stress = 60e6            # Pa; default: the material's; max von Mises must stay below
+    target_profile = "target.csv"  # optional: match a force profile (distance [m], force [N])
+    handles = 5                    # active handles
+    placement = "displacement"     # "displacement" | "spatial" | "random"
+    keep = ["keep"]                # box sites whose vertices stay unchanged (inactive handles)
+    iterations = 300               # simulated-annealing iterations (at most)
+    patience = 60                  # stop early when the best design is feasible and has not
+                                   #   improved by PATIENCE_REL for this many iterations
+    max_translation = 0.25         # |t| bound per axis, fraction of the part's bounding-box diagonal
+    scale_range = [0.5, 1.6]       # bounds of the per-axis handle scales
+
+The random seed (handle placement, annealing) is the command's ``--seed``.
+
+Constraints (thesis, "Optimization"), each a value with bounds [lo, hi]:
+
+- coupling ratio CR = E_ss / E_max * 100 [%] (E_ss = E_max without a steady state):
+  tight: CR <= kappa_cr = 95 and CR >= 100 * LOOSE_REL (a non-zero steady state, i.e. category
+  "tight"); loose: CR <= kappa_cr = 1e-3;
+- grip force F_g, insertion force F_in, removal force F_rm [N] within their bounds;
+- max von Mises stress over the insertion <= yield stress [Pa].
+
+Penalty: each violation is measured in its natural unit - percent for CR, newtons for forces,
+megapascals for stress (SCALES) - so that one unit of violation of any of them weighs the same:
+a 1 % ratio, 1 N and 1 MPa are about equally significant for hand-sized printed parts (forces of
+1-100 N, yield stresses ~60 MPa). The objective is
+
+    E = E_L + W * sum_c max(0, c / scale_c)^2,      W = PENALTY_WEIGHT,
+
+with c = lo - value or value - hi. E_L (dimensionless, :mod:`simfab.design.modification`) is ~1
+for a modification of one edge length, so W = 1e3 makes a 1 N or 1 MPa violation outweigh any
+shape change the optimizer would consider. Target-profile matching replaces E_L by the mean
+squared force error [N^2] (the constraints, if any are given, still apply).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from simfab.coupling import config as C
+from simfab.errors import InputError
+
+#: Weight of the squared, scaled constraint violations against E_L.
+PENALTY_WEIGHT = 1.0e3
+#: Units in which a violation counts one: percent, newton, newton, newton, megapascal.
+SCALES = {"coupling_ratio": 1.0, "grip_force": 1.0, "insertion_force": 1.0, "removal_force": 1.0,
+          "von_mises": 1.0e6}
+UNITS = {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N", "von_mises": "Pa"}
+#: kappa_cr of the thesis [%]: the steady state must stay this far below the peak energy.
+KAPPA_TIGHT = 95.0
+KAPPA_LOOSE = 1.0e-3
+PLACEMENTS = ("displacement", "spatial", "random")
+GRIPS = ("tight", "loose", "any")
+
+
+@dataclass(frozen=True, kw_only=True)
+class DesignBrief:
+    """The ``[design]`` table (see the module docstring for meanings and units)."""
+
+    grip: str = "any"
+    grip_force: tuple[float, float] | None = None
+    insertion_force: tuple[float, float] | None = None
+    removal_force: tuple[float, float] | None = None
+    yield_stress: float | None = None
+    target_profile: str | None = None
+    handles: int = 5
+    placement: str = "displacement"
+    keep: tuple[str, ...] = ()
+    iterations: int = 300
+    patience: int = 60
+    max_translation: float = 0.25
+    scale_range: tuple[float, float] = (0.5, 1.6)
+
+    @classmethod
+    def from_dict(cls, d: dict, *, where: str = "[design]") -> "DesignBrief":
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise InputError(f"unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})", where=where)
+        kw = {}
+        for k, v in d.items():
+            if k in ("grip_force", "insertion_force", "removal_force", "scale_range"):
+                kw[k] = _bounds(v, f"{where} {k}")
+            elif k == "keep":
+                kw[k] = (v,) if isinstance(v, str) else tuple(str(s) for s in v)
+            else:
+                kw[k] = v
+        try:
+            b = cls(**kw)
+        except TypeError as e:
+            raise InputError(str(e), where=where) from None
+        b.validate(where)
+        return b
+
+    def validate(self, where: str = "[design]") -> None:
+        if self.grip not in GRIPS:
+            raise InputError(f"grip must be one of {GRIPS}, got {self.grip!r}", where=f"{where} grip")
+        if self.placement not in PLACEMENTS:
+            raise InputError(f"placement must be one of {PLACEMENTS}, got {self.placement!r}", where=f"{where} placement")
+        for k in ("handles", "iterations", "patience"):
+            v = getattr(self, k)
+            if not isinstance(v, int) or isinstance(v, bool) or v < (0 if k == "iterations" else 1):
+                raise InputError(f"must be a {'non-negative' if k == 'iterations' else 'positive'} integer, "
+                                 f"got {v!r}", where=f"{where} {k}")
+        if self.yield_stress is not None and not (isinstance(self.yield_stress, (int, float)) and self.yield_stress > 0):
+            raise InputError(f"must be a positive stress [Pa], got {self.yield_stress!r}", where=f"{where} yield_stress")
+        if not (isinstance(self.max_translation, (int, float)) and 0 < self.max_translation <= 1):
+            raise InputError(f"must be in (0, 1], got {self.max_translation!r}", where=f"{where} max_translation")
+        lo, hi = self.scale_range
+        if not 0 < lo <= 1 <= hi:
+            raise InputError(f"must satisfy 0 < lo <= 1 <= hi, got {list(self.scale_range)}", where=f"{where} scale_range")
+
+    def with_overrides(self, **kw) -> "DesignBrief":
+        b = replace(self, **{k: v for k, v in kw.items() if v is not None})
+        b.validate("command line")
+        return b
+
+
+def _bounds(v, where: str) -> tuple[float, float]:
+    if not isinstance(v, (list, tuple)) or len(v) != 2:
+        raise InputError(f"must be a pair [lo, hi], got {v!r}", where=where)
+    try:
+        lo, hi = float(v[0]), float(v[1])
+    except (TypeError, ValueError):
+        raise InputError(f"must be two numbers [lo, hi], got {v!r}", where=where) from None
+    if math.isnan(lo) or math.isnan(hi) or lo > hi or lo < 0:
+        raise InputError(f"need 0 <= lo <= hi, got {v!r}", where=where)
+    return lo, hi
+
+
+@dataclass(frozen=True, kw_only=True)
+class Constraint:
+    """One functional constraint: ``lo <= value <= hi`` in ``unit``; violations count in ``scale``."""
+
+    name: str
+    value: float
+    lo: float
+    hi: float
+    unit: str
+    scale: float
+
+    @property
+    def violation(self) -> float:
+        """max(0, lo - value, value - hi) / scale [-] (0 inside the bounds)."""
+        return max(0.0, self.lo - self.value, self.value - self.hi) / self.scale
+
+    @property
+    def satisfied(self) -> bool:
+        return self.violation == 0.0
+
+    def as_dict(self) -> dict:
+        return {"value": self.value, "lo": self.lo, "hi": self.hi, "unit": self.unit, "satisfied": self.satisfied}
+
+
+def bounds(brief: DesignBrief, yield_stress: float | None) -> dict[str, tuple[float, float]]:
+    """The brief's constraint bounds {name: (lo, hi)} in their units (see :data:`UNITS`)."""
+    out = {}
+    if brief.grip == "tight":
+        out["coupling_ratio"] = (100.0 * C.LOOSE_REL, KAPPA_TIGHT)
+    elif brief.grip == "loose":
+        out["coupling_ratio"] = (0.0, KAPPA_LOOSE)
+    for k in ("grip_force", "insertion_force", "removal_force"):
+        if getattr(brief, k) is not None:
+            out[k] = getattr(brief, k)
+    ys = brief.yield_stress if brief.yield_stress is not None else yield_stress
+    if ys is not None:
+        out["von_mises"] = (0.0, float(ys))
+    return out
+
+
+def constraints(figures: dict, limits: dict[str, tuple[float, float]]) -> list[Constraint]:
+    """Evaluate ``limits`` on a profile's ``figures`` {coupling_ratio, grip_force,
+    insertion_force, removal_force, von_mises} (see :func:`simfab.design.optimize.profile_figures`)."""
+    return [Constraint(name=k, value=float(figures[k]), lo=lo, hi=hi, unit=UNITS[k], scale=SCALES[k])
+            for k, (lo, hi) in limits.items()]
+
+
+def penalty(cons: list[Constraint]) -> float:
+    """W * sum of squared scaled violations [-] (0 when every constraint holds)."""
+    return PENALTY_WEIGHT * float(sum(c.violation ** 2 for c in cons))
+
+
+def read_target_profile(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(s (k,) [m], F (k,) [N]) of a target force profile CSV (distance, force per row; an optional
+    header line; distances strictly increasing)."""
+    if not path.is_file():
+        raise InputError("target profile file not found", where=str(path))
+    try:
+        a = np.genfromtxt(path, delimiter=",", dtype=float)
+    except ValueError as e:
+        raise InputError(f"cannot read the target profile (distance_m, force_N per row): {e}", where=str(path)) from None
+    a = np.atleast_2d(a)
+    a = a[~np.all(np.isnan(a), axis=1)]
+    if a.ndim != 2 or a.shape[1] != 2 or len(a) < 2 or not np.all(np.isfinite(a)):
+        raise InputError("target profile must have two finite columns (distance_m, force_N) and >= 2 rows",
+                         where=str(path))
+    if np.any(np.diff(a[:, 0]) <= 0):
+        raise InputError("target profile distances must be strictly increasing", where=str(path))
+    return a[:, 0], a[:, 1]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TargetProfile:
+    """A force profile to match: distances s [m] and forces F [N] (resisting < 0)."""
+
+    s: np.ndarray
+    force: np.ndarray
+    source: str = ""
+
+    def rms_error(self, s: np.ndarray, force: np.ndarray) -> float:
+        """RMS [N] of the simulated force (interpolated at the target's distances within the
+        simulated range) minus the target."""
+        s = np.asarray(s, float)
+        inside = (self.s >= s[0]) & (self.s <= s[-1])
+        if not inside.any():
+            return float("inf")
+        f = np.interp(self.s[inside], s, np.asarray(force, float))
+        return float(np.sqrt(np.mean((f - self.force[inside]) ** 2)))
+
+
+__all__ = ["DesignBrief", "Constraint", "TargetProfile", "bounds", "constraints", "penalty", "read_target_profile",
+           "PENALTY_WEIGHT", "SCALES", "UNITS"]

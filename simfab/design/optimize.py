@@ -1,0 +1,325 @@
+"""The rest-shape optimization loop (thesis, "Rest Shape Optimization").
+
+    minimize_h  E(h) = E_L(X'(h)) + W sum_c max(0, c(h))^2        (or a target-profile error)
+    X'(h) = M_LBS T(h)                                              (:mod:`simfab.design.handles`)
+
+Each evaluation of a design h:
+
+1. X' = M_LBS T(h); **validity**: every element keeps its orientation and at least
+   QUALITY_REL of its initial shape quality q (mean ratio: 4 sqrt(3) A / sum l^2 for a triangle,
+   12 (3 V)^(2/3) / sum l^2 for a tetrahedron; 1 for the regular simplex, 0 when degenerate,
+   negative when inverted). A candidate that fails is rejected ("inverted element",
+   "degenerate element") without simulating.
+2. The insertion of the initial scene is re-run on X' (same object, path, steps, fixed region,
+   material, simulation options): :func:`simfab.coupling.simulate.simulate`. A simulation that
+   raises (no convergence, the object starting inside the part, a numerical failure) makes a
+   rejected candidate with its reason - never a crash of the optimization.
+3. The profile gives E_ss, E_max, F_grip, F_in, F_rm and max von Mises
+   (:func:`profile_figures`); the objective adds their penalties (:mod:`simfab.design.brief`).
+
+Simulated annealing (:mod:`simfab.design.anneal`) proposes designs; it stops after ``iterations``
+or once the best design satisfies every constraint and has not improved by PATIENCE_REL for
+``patience`` iterations.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from simfab.design import brief as B
+from simfab.design.anneal import AnnealOptions, anneal
+from simfab.design.handles import Handles, make_handles
+from simfab.design.modification import ModificationEnergy
+from simfab.design.placement import place_handles
+from simfab.errors import ConvergenceError, InputError
+
+#: A candidate element must keep this fraction of its initial mean-ratio quality.
+QUALITY_REL = 0.25
+#: Early stop: an improvement of the best objective smaller than this fraction does not count.
+PATIENCE_REL = 1e-3
+#: Initial proposal standard deviation: translations as a fraction of the bounding-box diagonal,
+#: scales (dimensionless).
+SIGMA_TRANSLATION_REL = 0.02
+SIGMA_SCALE = 0.05
+
+
+def element_quality(X: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    """(m,) signed mean-ratio quality of simplices (see module docstring); < 0 means inverted."""
+    p = np.asarray(X, float)[np.asarray(elements)]
+    d = p.shape[-1]
+    D = np.swapaxes(p[:, 1:, :] - p[:, :1, :], 1, 2)
+    det = np.linalg.det(D)
+    k = d + 1
+    i, j = np.triu_indices(k, 1)
+    l2 = np.sum((p[:, i, :] - p[:, j, :]) ** 2, axis=(1, 2))
+    if d == 2:
+        return 4.0 * math.sqrt(3.0) * (det / 2.0) / l2
+    vol = det / 6.0
+    return np.sign(vol) * 12.0 * np.cbrt(3.0 * np.abs(vol)) ** 2 / l2
+
+
+def profile_figures(res) -> dict:
+    """Figures of an insertion the constraints read: coupling_ratio [%], grip_force,
+    insertion_force, removal_force [N], von_mises [Pa] (max over the insertion), and category,
+    E_max, E_ss [J]."""
+    from simfab.coupling.profile import analyze
+
+    prof = analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"))
+    return {"coupling_ratio": prof.coupling_ratio, "grip_force": prof.F_grip, "insertion_force": prof.F_in,
+            "removal_force": prof.F_rm, "von_mises": float(res.column("max_von_mises").max()),
+            "category": prof.category, "E_max": prof.E_max, "E_ss": prof.E_ss}
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class DesignProblem:
+    """Everything fixed during one optimization (the model of the loop).
+
+    base : the initial :class:`simfab.coupling.simulate.CouplingModel`
+    brief : :class:`simfab.design.brief.DesignBrief`; limits : {constraint: (lo, hi)} in UNITS
+    handles : :class:`Handles`; energy : :class:`ModificationEnergy`
+    target : :class:`simfab.design.brief.TargetProfile` or None
+    kept : (k,) vertices held unchanged; q0 : (m,) initial element qualities
+    lower, upper, sigma0 : (n_vars,) design bounds and initial proposal deviations
+    """
+
+    base: object
+    brief: B.DesignBrief
+    limits: dict
+    handles: Handles
+    energy: ModificationEnergy
+    target: B.TargetProfile | None
+    kept: np.ndarray
+    q0: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    sigma0: np.ndarray
+
+
+def make_problem(cm, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetProfile | None = None,
+                 initial=None, handle_vertices=None, seed: int = 0) -> DesignProblem:
+    """Set up the optimization of scene ``cm``'s part.
+
+    kept_regions : vertex index arrays kept unchanged besides the fixed support (keep sites)
+    initial : the initial shape's InsertionResult (displacement placement needs it; simulated
+        here when missing)
+    handle_vertices : explicit active handle vertices (overrides the brief's placement)
+    seed : placement seed (random placement; affinity propagation's tie-breaking)
+    """
+    fem = cm.fem
+    X = np.asarray(fem.rest, float)
+    regions = [np.asarray(cm.fixed_vertices)] + [np.asarray(r) for r in kept_regions if len(r)]
+    kept = np.unique(np.concatenate(regions))
+    if handle_vertices is None:
+        disp = None
+        if brief.placement == "displacement":
+            if initial is None:
+                from simfab.coupling.simulate import simulate
+
+                initial = simulate(cm)
+            disp = max_displacement(initial)
+        handle_vertices = place_handles(X, fem.elements, brief.handles, kept, method=brief.placement,
+                                        displacement=disp, seed=seed)
+    H = make_handles(X, fem.elements, handle_vertices, regions)
+    diag = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0)))
+    d, m = H.dim, H.n_active
+    t_max = brief.max_translation * diag
+    lo_s, hi_s = brief.scale_range
+    lower = np.tile(np.r_[np.full(d, -t_max), np.full(d, lo_s)], m)
+    upper = np.tile(np.r_[np.full(d, t_max), np.full(d, hi_s)], m)
+    sigma0 = np.tile(np.r_[np.full(d, SIGMA_TRANSLATION_REL * diag), np.full(d, SIGMA_SCALE)], m)
+    ys = fem.material.yield_stress if fem.material is not None else None
+    return DesignProblem(base=cm, brief=brief, limits=B.bounds(brief, ys), handles=H,
+                         energy=ModificationEnergy(X, fem.boundary_facets), target=target, kept=kept,
+                         q0=element_quality(X, fem.elements), lower=lower, upper=upper, sigma0=sigma0)
+
+
+def max_displacement(res) -> np.ndarray:
+    """(n,) largest displacement of every vertex over an insertion [m]."""
+    X = res.steps[0].x if not hasattr(res.model.fem, "rest") else np.asarray(res.model.fem.rest)
+    return np.max([np.linalg.norm(np.asarray(r.x) - X, axis=1) for r in res.steps], axis=0)
+
+
+@dataclass(kw_only=True)
+class Evaluation:
+    """One design's evaluation. status: "ok" | "rejected"; reason: why rejected; objective [-]
+    (+inf when rejected); E_L [-]; rms_error [N] (target matching); constraints: list of
+    :class:`simfab.design.brief.Constraint`; figures: :func:`profile_figures`; result: the
+    InsertionResult (kept only while needed); rest: (n, d) [m]; seconds (simulation, total)."""
+
+    h: np.ndarray
+    rest: np.ndarray
+    status: str
+    objective: float = math.inf
+    reason: str = ""
+    E_L: float = math.nan
+    rms_error: float | None = None
+    constraints: list = field(default_factory=list)
+    figures: dict = field(default_factory=dict)
+    result: object = None
+    sim_seconds: float = 0.0
+    seconds: float = 0.0
+
+    @property
+    def feasible(self) -> bool:
+        return self.status == "ok" and all(c.satisfied for c in self.constraints)
+
+
+def candidate_model(problem: DesignProblem, X: np.ndarray):
+    """(CouplingModel on rest shape X, "") or (None, reason) when X is not a valid rest shape."""
+    from simfab.coupling.simulate import make_coupling_model
+    from simfab.fem.model import make_model
+
+    cm = problem.base
+    fem = cm.fem
+    q = element_quality(X, fem.elements)
+    if np.any(q <= 0):
+        return None, "inverted element"
+    if np.any(q < QUALITY_REL * problem.q0):
+        return None, "degenerate element"
+    try:
+        new = make_model(X, fem.elements, fem.material, thickness=fem.thickness, device=fem.device)
+    except InputError as e:
+        return None, f"invalid mesh: {e.message if hasattr(e, 'message') else e}"
+    opts = dataclasses.replace(cm.options, L_max=float(cm.s_steps[-1]))
+    out = make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
+                              options=opts, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
+    if len(out.s_steps) != len(cm.s_steps) or not np.allclose(out.s_steps, cm.s_steps):
+        out = dataclasses.replace(out, s_steps=np.array(cm.s_steps), _cache={})
+    return out, ""
+
+
+def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False) -> Evaluation:
+    """Evaluate design vector h (see the module docstring); never raises for a bad candidate."""
+    from simfab.coupling.simulate import check_start, simulate
+
+    t0 = time.perf_counter()
+    X = problem.handles.apply(h)
+    ev = Evaluation(h=np.array(h, float), rest=X, status="rejected")
+    cm, why = candidate_model(problem, X)
+    if cm is None:
+        ev.reason = why
+        ev.seconds = time.perf_counter() - t0
+        return ev
+    t1 = time.perf_counter()
+    try:
+        check_start(cm)
+        res = simulate(cm)
+    except ConvergenceError as e:
+        ev.reason = f"simulation did not converge: {str(e).splitlines()[0][:160]}"
+    except InputError as e:
+        ev.reason = f"simulation refused the shape: {str(e).splitlines()[0][:160]}"
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError, RuntimeError) as e:
+        ev.reason = f"simulation failed ({type(e).__name__}): {str(e).splitlines()[0][:160] if str(e) else ''}"
+    else:
+        ev.sim_seconds = time.perf_counter() - t1
+        ev.status = "ok"
+        ev.figures = profile_figures(res)
+        ev.constraints = B.constraints(ev.figures, problem.limits)
+        ev.E_L = problem.energy(X)
+        pen = B.penalty(ev.constraints)
+        if problem.target is not None:
+            ev.rms_error = problem.target.rms_error(res.column("s"), res.column("force"))
+            ev.objective = ev.rms_error ** 2 + pen
+        else:
+            ev.objective = ev.E_L + pen
+        if not math.isfinite(ev.objective):
+            ev.status, ev.reason, ev.objective = "rejected", "non-finite profile figures", math.inf
+        if keep_result:
+            ev.result = res
+    if ev.sim_seconds == 0.0:
+        ev.sim_seconds = time.perf_counter() - t1
+    ev.seconds = time.perf_counter() - t0
+    return ev
+
+
+@dataclass(kw_only=True)
+class DesignResult:
+    """Outcome of :func:`optimize`.
+
+    initial, best : :class:`Evaluation` (with their InsertionResults)
+    history : one dict per iteration (see :func:`history_rows`)
+    accepted : [(iteration, rest (n, d) [m], objective)] of every accepted design, in order
+    simulations : insertion simulations run; rejected : {reason: count}
+    seconds : wall time; sim_seconds : of it, inside the simulator; stopped_early : bool
+    """
+
+    problem: DesignProblem
+    initial: Evaluation
+    best: Evaluation
+    history: list
+    accepted: list
+    simulations: int
+    rejected: dict
+    seconds: float
+    sim_seconds: float
+    iterations: int
+    stopped_early: bool
+
+
+def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
+             callback=None) -> DesignResult:
+    """Run simulated annealing on ``problem`` (see the module docstring) with random ``seed``;
+    ``iterations`` defaults to the brief's. Raises ConvergenceError if the initial shape itself cannot be
+    simulated (there is nothing to start from)."""
+    from simfab.progress import progress
+
+    t0 = time.perf_counter()
+    brief = problem.brief
+    K = brief.iterations if iterations is None else int(iterations)
+    counts = {"simulations": 0, "sim_seconds": 0.0}
+    rejected: dict[str, int] = {}
+    accepted: list = []
+
+    def f(h):
+        ev = evaluate(problem, h)
+        if ev.reason.startswith("simulation") or ev.status == "ok":
+            counts["simulations"] += 1
+        counts["sim_seconds"] += ev.sim_seconds
+        if ev.status != "ok":
+            key = ev.reason.split(":")[0]
+            rejected[key] = rejected.get(key, 0) + 1
+        history_evals.append(ev)
+        return ev.objective, ev
+
+    history_evals: list[Evaluation] = []
+    bar = iter(progress(range(K + 1), total=K + 1, desc=f"optimize {problem.base.name}", quiet=quiet))
+
+    def on_iteration(rec):
+        next(bar, None)
+        if rec["accepted"]:
+            accepted.append((rec["k"], rec["info"].rest, rec["value"]))
+        if callback is not None:
+            callback(rec)
+
+    def stop(best_info, best_value, k, k_best):
+        if not best_info.feasible:
+            return False
+        # the last improvement larger than PATIENCE_REL of the best value
+        vals = [r.objective for r in history_evals]
+        last = k_best
+        ref = best_value
+        for i in range(k_best, -1, -1):
+            if math.isfinite(vals[i]) and vals[i] > ref * (1 + PATIENCE_REL) + 1e-12:
+                break
+            if vals[i] <= ref * (1 + PATIENCE_REL) + 1e-12:
+                last = i
+        return k - last >= brief.patience
+
+    opts = AnnealOptions(iterations=K, sigma0=problem.sigma0, lower=problem.lower, upper=problem.upper, seed=seed)
+    out = anneal(f, problem.handles.identity(), opts, stop=stop, callback=on_iteration)
+    initial = history_evals[0]
+    if initial.status != "ok":
+        raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to optimize from")
+    best = out.info
+    # re-run the initial and the best design keeping their profiles (memory: only two kept)
+    initial = evaluate(problem, initial.h, keep_result=True)
+    best = evaluate(problem, best.h, keep_result=True) if best is not history_evals[0] else initial
+    history = [dict(rec, evaluation=history_evals[i]) for i, rec in enumerate(out.history)]
+    return DesignResult(problem=problem, initial=initial, best=best, history=history, accepted=accepted,
+                        simulations=counts["simulations"], rejected=rejected, seconds=time.perf_counter() - t0,
+                        sim_seconds=counts["sim_seconds"], iterations=out.iterations, stopped_early=out.stopped_early)

@@ -1,0 +1,333 @@
+"""Outputs of a rest-shape optimization.
+
+Written together into ``--out`` (temporaries renamed only when all succeeded):
+
+- ``NAME_optimized_part.stl``: the optimized part in millimetres (2D: the section extruded by the
+  scene's thickness; 3D: the boundary surface), 3D-printable (closed, outward normals);
+  2D also ``NAME_optimized_outline.csv`` (loop, x_mm, y_mm: the boundary loops in order);
+- the optimized scene ``NAME_optimized.xml`` + ``.toml`` + ``_part.npz`` (the optimized mesh,
+  same connectivity): ``simfab couple simulate OUT/NAME_optimized.xml`` runs it unchanged;
+- ``NAME_design_profile.png``: initial vs optimized energy and force profiles with the brief's
+  bands; ``NAME_design_shape.png``: initial silhouette under the optimized shape, handles marked;
+- ``NAME_design_history.csv``: one row per iteration;
+- ``NAME_design.usda``: time codes 0..A-1 replay the A accepted rest shapes (custom attribute
+  ``simfab:objective`` per time code), then the final design's insertion (object animated);
+- ``NAME_design_summary.json``: objective, E_L, each constraint's value/bounds/satisfied,
+  iterations, simulations, rejected candidates by reason, seconds.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from simfab.design import brief as B
+
+HISTORY_HEADER = ["iteration", "status", "reason", "objective", "E_L", "rms_error_N", "accepted", "current_objective",
+                  "best_objective", "temperature", "sigma_rel", "coupling_ratio_pct", "grip_force_N",
+                  "insertion_force_N", "removal_force_N", "max_von_mises_Pa", "category", "seconds"]
+
+
+def output_paths(out: Path, stem: str, dim: int, *, target: bool = False) -> dict:
+    out = Path(out)
+    p = {"part_stl": out / f"{stem}_optimized_part.stl", "scene_xml": out / f"{stem}_optimized.xml",
+         "scene_toml": out / f"{stem}_optimized.toml", "scene_mesh": out / f"{stem}_optimized_part.npz",
+         "profile_png": out / f"{stem}_design_profile.png", "shape_png": out / f"{stem}_design_shape.png",
+         "history_csv": out / f"{stem}_design_history.csv", "usd": out / f"{stem}_design.usda",
+         "summary_json": out / f"{stem}_design_summary.json"}
+    if dim == 2:
+        p["outline_csv"] = out / f"{stem}_optimized_outline.csv"
+    if target:
+        p["scene_target"] = out / f"{stem}_optimized_target.csv"
+    return p
+
+
+def summary(res, *, scene: str | None = None) -> dict:
+    """JSON-ready summary of a :class:`simfab.design.optimize.DesignResult`."""
+    best, init = res.best, res.initial
+    cons = {c.name: c.as_dict() for c in best.constraints}
+    for c in init.constraints:
+        cons[c.name]["initial"] = c.value
+    out = {
+        "scene": scene or res.problem.base.name,
+        "feasible": best.feasible,
+        "objective": best.objective,
+        "objective_initial": init.objective,
+        "E_L": best.E_L,
+        "constraints": cons,
+        "category": best.figures.get("category"),
+        "category_initial": init.figures.get("category"),
+        "handles": {"active": int(res.problem.handles.n_active), "inactive": int((~res.problem.handles.active).sum()),
+                    "placement": res.problem.brief.placement},
+        "iterations": res.iterations,
+        "stopped_early": res.stopped_early,
+        "simulations": res.simulations,
+        "accepted": len(res.accepted),
+        "rejected": dict(res.rejected),
+        "seconds": res.seconds,
+        "simulation_seconds": res.sim_seconds,
+        "fraction_outside_simulator": 1.0 - res.sim_seconds / res.seconds if res.seconds > 0 else 0.0,
+        "units": {"objective": "-", "E_L": "-", "seconds": "s", "constraints": dict(B.UNITS)},
+    }
+    if best.rms_error is not None:
+        out["rms_error"] = best.rms_error
+        out["rms_error_initial"] = init.rms_error
+        out["units"]["rms_error"] = "N"
+    warnings = []
+    vm = best.figures.get("von_mises")
+    ys = res.problem.limits.get("von_mises", (0, None))[1]
+    if ys is not None and vm is not None and vm > ys:
+        warnings.append(f"the optimized part exceeds its yield stress: max von Mises {vm / 1e6:.4g} MPa > {ys / 1e6:.4g} MPa")
+    if not best.feasible:
+        bad = [c.name for c in best.constraints if not c.satisfied]
+        warnings.append(f"not every constraint is met after {res.iterations} iterations: {', '.join(bad)}")
+    out["warnings"] = warnings + list(best.result.warnings if best.result is not None else [])
+    return out
+
+
+def history_rows(res):
+    for rec in res.history:
+        ev = rec["evaluation"]
+        f = ev.figures
+        yield [rec["k"], ev.status, ev.reason, ev.objective, ev.E_L, ev.rms_error, int(bool(rec["accepted"])),
+               rec["current"], rec["best"], rec["temperature"], rec["sigma"], f.get("coupling_ratio"),
+               f.get("grip_force"), f.get("insertion_force"), f.get("removal_force"), f.get("von_mises"),
+               f.get("category", ""), ev.seconds]
+
+
+def part_mesh_mm(fem, X: np.ndarray):
+    """trimesh of the part with rest shape X in millimetres (2D: extruded by the thickness)."""
+    import trimesh
+
+    from simfab.coupling.outputs import extrude_triangles
+
+    if fem.dim == 2:
+        V, F = extrude_triangles(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
+    else:
+        V, F = X, np.asarray(fem.boundary_facets)
+    m = trimesh.Trimesh(np.asarray(V) * 1e3, np.asarray(F), process=True)
+    m.remove_unreferenced_vertices()
+    return m
+
+
+def write_outline_csv(fem, X: np.ndarray, path) -> Path:
+    from simfab.design.synthesis import boundary_loops
+    from simfab.io.atomic import write_csv
+
+    rows = []
+    for k, loop in enumerate(boundary_loops(fem.boundary_facets)):
+        rows += [[k, float(X[v, 0] * 1e3), float(X[v, 1] * 1e3)] for v in loop]
+    return write_csv(path, ["loop", "x_mm", "y_mm"], rows)
+
+
+def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, stem: str) -> None:
+    """The optimized scene: the original MJCF with the part's display mesh replaced, the TOML with
+    the optimized mesh as ``mesh_file`` (same material, object, path, fixed region, options)."""
+    import tomllib
+    import xml.etree.ElementTree as ET
+
+    import tomli_w
+
+    from simfab.io.atomic import write_text
+
+    fem = res.problem.base.fem
+    X = res.best.rest
+    np.savez(tmp["scene_mesh"], points=X, elements=np.asarray(fem.elements))
+    cfg = tomllib.loads(Path(scene_toml).read_text(encoding="utf-8"))
+    cfg["name"] = f"{stem}_optimized"
+    comp = {"mesh_file": paths["scene_mesh"].name}
+    if fem.dim == 2:
+        comp["thickness"] = float(fem.thickness)
+    cfg["compliant"] = comp
+    tgt = res.problem.target
+    if tgt is not None:  # the optimized scene carries its own copy of the target profile
+        shutil.copyfile(tgt.source, tmp["scene_target"])
+        cfg.setdefault("design", {})["target_profile"] = paths["scene_target"].name
+    write_text(tmp["scene_toml"], "# written by simfab couple optimize: the optimized rest shape of "
+               f"{Path(scene_toml).name}\n" + tomli_w.dumps(cfg))
+    tree = ET.parse(scene_xml)
+    root = tree.getroot()
+    root.set("model", f"{stem}_optimized")
+    V, F = _display_mesh(fem, X)
+    for m in root.iter("mesh"):
+        if m.get("name") == "part":
+            m.set("vertex", " ".join(f"{v:.9g}" for v in V.ravel()))
+            m.set("face", " ".join(str(int(i)) for i in F.ravel()))
+    write_text(tmp["scene_xml"], ET.tostring(root, encoding="unicode"))
+
+
+def _display_mesh(fem, X):
+    from simfab.coupling.outputs import extrude_triangles
+
+    if fem.dim == 2:
+        return extrude_triangles(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
+    F = np.asarray(fem.boundary_facets)
+    used = np.unique(F)
+    remap = np.full(len(X), -1)
+    remap[used] = np.arange(len(used))
+    return X[used], remap[F]
+
+
+def plot_profiles(res, path) -> Path:
+    """Energy and force profiles of the initial and the optimized design, with the brief's bands."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from simfab.io.atomic import save_figure
+
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.0, 6.4), dpi=120, sharex=True)
+    lim = res.problem.limits
+    for ev, style, label in ((res.initial, "--", "initial"), (res.best, "-", "optimized")):
+        r = ev.result
+        s = r.column("s") * 1e3
+        ax1.plot(s, r.column("energy") * 1e3, style, lw=2, label=f"{label} ({ev.figures.get('category')})")
+        ax2.plot(s, r.column("force"), style, lw=2, label=label)
+    if "insertion_force" in lim:
+        lo, hi = lim["insertion_force"]
+        ax2.axhspan(-min(hi, 1e9), -lo, color="tab:orange", alpha=0.12, label="insertion force bounds (F < 0)")
+    if "removal_force" in lim:
+        lo, hi = lim["removal_force"]
+        ax2.axhspan(lo, min(hi, 1e9), color="tab:green", alpha=0.12, label="removal force bounds (F > 0)")
+    tgt = res.problem.target
+    if tgt is not None:
+        ax2.plot(tgt.s * 1e3, tgt.force, ":", color="k", lw=2, label="target profile")
+    ax2.axhline(0.0, color="0.6", lw=0.8)
+    yl = ax2.get_ylim()
+    init_f = res.initial.result.column("force")
+    best_f = res.best.result.column("force")
+    span = max(np.abs(best_f).max(), np.abs(init_f).max() if np.abs(init_f).max() < 20 * np.abs(best_f).max() else 0)
+    if tgt is not None:
+        span = max(span, np.abs(tgt.force).max())
+    ax2.set_ylim(max(yl[0], -1.3 * span), min(yl[1], 1.3 * span))
+    ax1.set_ylabel("elastic energy [mJ]")
+    ax2.set_ylabel("force on the object [N]\n(resisting insertion < 0)")
+    ax2.set_xlabel("insertion distance [mm]")
+    ax1.legend(fontsize=8, loc="upper left")
+    ax2.legend(fontsize=7, loc="lower left")
+    lines = []
+    for c in res.best.constraints:
+        u = B.UNITS[c.name]
+        k = 1e-6 if u == "Pa" else 1.0
+        uu = "MPa" if u == "Pa" else u
+        hi = "inf" if not np.isfinite(c.hi) else f"{c.hi * k:.3g}"
+        lines.append(f"{c.name} {c.value * k:.3g} {uu} in [{c.lo * k:.3g}, {hi}] {'ok' if c.satisfied else 'VIOLATED'}")
+    ax1.set_title(f"{res.problem.base.name}: before / after rest-shape optimization\n" + "; ".join(lines[:3]), fontsize=8)
+    if len(lines) > 3:
+        ax2.set_title("; ".join(lines[3:]), fontsize=8)
+    fig.tight_layout()
+    try:
+        return save_figure(fig, path)
+    finally:
+        plt.close(fig)
+
+
+def plot_shape(res, path) -> Path:
+    """Initial silhouette (grey) under the optimized shape (colour), handles marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    from simfab.io.atomic import save_figure
+
+    fem = res.problem.base.fem
+    H = res.problem.handles
+    X0, X1 = np.asarray(fem.rest) * 1e3, res.best.rest * 1e3
+    fig, ax = plt.subplots(figsize=(6.4, 5.6), dpi=120)
+    if fem.dim == 2:
+        el = np.asarray(fem.elements)
+        ax.add_collection(PolyCollection(X0[el], facecolor="0.8", edgecolor="0.8", lw=0.3, label="initial"))
+        ax.add_collection(PolyCollection(X1[el], facecolor="tab:orange", edgecolor="0.35", lw=0.2, alpha=0.75,
+                                         label="optimized"))
+        P0, P1 = X0, X1
+    else:  # 3D: the boundary vertices projected onto the two axes of largest extent
+        bv = np.asarray(fem.boundary_vertices)
+        ext = np.ptp(X0, axis=0)
+        ax_ids = np.argsort(ext)[::-1][:2]
+        P0, P1 = X0[:, ax_ids], X1[:, ax_ids]
+        ax.scatter(*P0[bv].T, s=2, color="0.7", label="initial (boundary vertices)")
+        ax.scatter(*P1[bv].T, s=2, color="tab:orange", label="optimized")
+    act = H.vertex[H.active]
+    t, _ = H.split(res.best.h)
+    ax.plot(*P0[act].T[:2], "o", color="tab:red", ms=7, mfc="none", mew=2, label="active handles (initial)")
+    ax.plot(*P1[act].T[:2], "o", color="tab:red", ms=4, label="active handles (optimized)")
+    for a, b in zip(P0[act], P1[act]):
+        ax.annotate("", xy=b[:2], xytext=a[:2], arrowprops=dict(arrowstyle="->", color="tab:red", lw=1))
+    kept = res.problem.kept
+    ax.plot(*P0[kept].T[:2], "x", color="tab:blue", ms=4, label="kept (inactive handles)")
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    lo = np.minimum(P0.min(0), P1.min(0))[:2]
+    hi = np.maximum(P0.max(0), P1.max(0))[:2]
+    pad = 0.08 * (hi - lo).max()
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_xlabel("x [mm]" if fem.dim == 2 else f"{'xyz'[ax_ids[0]]} [mm]")
+    ax.set_ylabel("y [mm]" if fem.dim == 2 else f"{'xyz'[ax_ids[1]]} [mm]")
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title(f"{res.problem.base.name}: optimized rest shape (E_L = {res.best.E_L:.3g})")
+    fig.tight_layout()
+    try:
+        return save_figure(fig, path)
+    finally:
+        plt.close(fig)
+
+
+def write_usd(res, path) -> Path:
+    """Accepted rest shapes (one time code each, ``simfab:objective`` attribute), then the final
+    design's insertion (the object animated)."""
+    from simfab.coupling.outputs import _display_faces, _object_display, vertex_von_mises
+    from simfab.io.usd import StageWriter
+
+    cm = res.problem.base
+    fem = cm.fem
+    w = StageWriter(path, time_codes_per_second=12.0)
+    w.add_mesh("part", _display_faces(fem), fem.rest, color=[0.85, 0.55, 0.25])
+    ov, of = _object_display(cm)
+    w.add_rigid("object", points=ov, faces=of, color=[0.55, 0.6, 0.7])
+    final = res.best.result
+    start_pos, start_quat = final.steps[0].pos, final.steps[0].quat
+    t = 0
+    for k, X, val in res.accepted:
+        w.set_points("part", X, t)
+        w.set_attribute("part", "objective", val, t)
+        w.set_attribute("part", "iteration", k, t)
+        w.set_pose("object", start_pos, start_quat, t)
+        t += 1
+    vmax = float(max(r.max_von_mises for r in final.steps)) or 1.0
+    for r in final.steps:
+        w.set_points("part", r.x, t)
+        w.set_scalar("part", "von_mises", vertex_von_mises(fem, r.von_mises), t, interpolation="vertex", vmin=0.0,
+                     vmax=vmax)
+        w.set_attribute("part", "objective", res.best.objective, t)
+        w.set_pose("object", r.pos, r.quat, t)
+        t += 1
+    return w.save()
+
+
+def write_all(res, out: Path, *, scene_xml: Path, scene_toml: Path, stem: str | None = None) -> dict:
+    """Write every output (see the module docstring) together; return the summary with paths."""
+    from simfab.io.atomic import atomic_paths, write_csv, write_json
+    from simfab.io.mesh import save_mesh
+
+    fem = res.problem.base.fem
+    stem = stem or res.problem.base.name
+    paths = output_paths(out, stem, fem.dim, target=res.problem.target is not None)
+    s = summary(res)
+    s["outputs"] = {k: str(v) for k, v in paths.items()}
+    with atomic_paths(paths) as tmp:
+        save_mesh(part_mesh_mm(fem, res.best.rest), tmp["part_stl"])
+        if fem.dim == 2:
+            write_outline_csv(fem, res.best.rest, tmp["outline_csv"])
+        write_scene(res, scene_xml, scene_toml, paths, tmp, stem)
+        plot_profiles(res, tmp["profile_png"])
+        plot_shape(res, tmp["shape_png"])
+        write_csv(tmp["history_csv"], HISTORY_HEADER, history_rows(res))
+        write_usd(res, tmp["usd"])
+        write_json(tmp["summary_json"], s)
+    return s

@@ -1,0 +1,70 @@
+"""``simfab couple optimize``'s pipeline: load the design scene, place handles (from one
+insertion of the initial shape), anneal, write the outputs (:mod:`simfab.design.outputs`)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from simfab.errors import InputError
+
+
+def check_out_dir(out) -> Path:
+    """``out`` as a Path after making sure it is (or can be made) a writable folder; InputError
+    otherwise (before any computation)."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError("is an existing file, not a folder", where=f"--out {out}")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"cannot create the output folder: {e.strerror}", where=f"--out {out}") from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise InputError("output folder is not writable", where=f"--out {out}")
+    return out
+
+
+def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict | None = None, device: str = "cpu",
+                   quiet: bool = True, seed: int = 0, revolve: tuple[str, float] | None = None) -> dict:
+    """Optimize a design scene's part and write every output into ``out``; returns the summary.
+
+    design : overrides of the ``[design]`` table (e.g. ``{"iterations": 60, "handles": 4}``)
+    simulation : overrides of ``[simulation]``
+    seed : random seed of the handle placement and the annealing
+    revolve : (axis "x"|"y", offset [m]) to also write the optimized 2D section revolved into a
+        3D part (``NAME_optimized_revolved.stl``, mm)
+    """
+    from simfab.coupling.simulate import simulate
+    from simfab.design import outputs
+    from simfab.design.optimize import make_problem, optimize
+    from simfab.design.scene import load_design_scene
+    from simfab.progress import log
+
+    out = check_out_dir(out)
+    ds = load_design_scene(scene, design=design, simulation=simulation, device=device)
+    cm = ds.cm
+    if revolve is not None and cm.dim != 2:
+        raise InputError("only a 2D section can be revolved", where="--revolve-axis")
+    log(f"couple optimize: {cm.name}: {cm.fem.n_elements} elements, {len(cm.s_steps) - 1} steps, "
+        f"{ds.brief.handles} handles ({ds.brief.placement}), up to {ds.brief.iterations} iterations", quiet=quiet)
+    initial = simulate(cm) if ds.brief.placement == "displacement" else None
+    problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed)
+    res = optimize(problem, quiet=quiet, seed=seed)
+    summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml)
+    if revolve is not None:
+        summary["outputs"]["revolved_stl"] = str(write_revolved(res, out, cm.name, *revolve))
+    for w in summary["warnings"]:
+        log(f"simfab: warning: {w}")
+    return summary
+
+
+def write_revolved(res, out: Path, stem: str, axis: str, offset: float) -> Path:
+    """The optimized 2D section's outer outline revolved about ``axis`` (mm STL)."""
+    from simfab.design.synthesis import boundary_loops, revolve_outline
+    from simfab.io.mesh import save_mesh
+
+    fem = res.problem.base.fem
+    loop = boundary_loops(fem.boundary_facets)[0]
+    mesh = revolve_outline(res.best.rest[loop], axis=axis, offset=offset)
+    mesh.apply_scale(1e3)
+    return save_mesh(mesh, Path(out) / f"{stem}_optimized_revolved.stl")

@@ -1,0 +1,68 @@
+"""Design scenes: a coupling scene (:mod:`simfab.coupling.scene`) whose TOML has a ``[design]``
+table (:class:`simfab.design.brief.DesignBrief`). Box sites named in ``keep`` mark regions of the
+part that must stay unchanged (inactive handles), as the fixed support does."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from simfab.design.brief import DesignBrief, TargetProfile, read_target_profile
+from simfab.errors import InputError
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class DesignScene:
+    """cm: the initial CouplingModel; brief; kept_regions: vertex arrays of the keep sites;
+    target: TargetProfile or None; xml, toml: the scene's files."""
+
+    cm: object
+    brief: DesignBrief
+    kept_regions: tuple
+    target: TargetProfile | None
+    xml: Path
+    toml: Path
+
+
+def load_design_scene(scene, *, design: dict | None = None, simulation: dict | None = None,
+                      device: str = "cpu") -> DesignScene:
+    """Load a coupling scene with its design brief; ``design`` overrides keys of ``[design]``
+    (command-line options), ``simulation`` those of ``[simulation]``."""
+    from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
+    from simfab.io.mjcf import load_scene
+
+    xml, toml = scene_paths(scene)
+    if not xml.is_file():
+        raise InputError("scene file not found", where=str(xml))
+    cfg = read_toml(toml)
+    table = cfg.get("design", {})
+    if not isinstance(table, dict):
+        raise InputError("[design] must be a table", where=str(toml))
+    table = dict(table)
+    table.update({k: v for k, v in (design or {}).items() if v is not None})
+    brief = DesignBrief.from_dict(table, where=f"{toml} [design]")
+    cm = load_coupling_scene(xml, overrides={"simulation": simulation or {}}, device=device)
+    target = None
+    if brief.target_profile:
+        p = Path(brief.target_profile)
+        if not p.is_absolute() and not (design or {}).get("target_profile"):
+            p = toml.parent / p
+        s, f = read_target_profile(p)
+        target = TargetProfile(s=s, force=f, source=str(p))
+    regions = []
+    if brief.keep:
+        sc = load_scene(xml)
+        for name in brief.keep:
+            if name not in sc.sites:
+                raise InputError(f"no site named {name!r} (a region to keep unchanged)", where=f"{toml} [design] keep")
+            d = cm.dim
+            c, half = sc.sites[name][:d], np.asarray(sc.site_size[name][:d], float)
+            if d == 3 and half[2] == 0:
+                half = np.r_[half[:2], np.inf]
+            inside = np.flatnonzero(np.all(np.abs(cm.fem.rest - c) <= half + 1e-12, axis=1))
+            if inside.size == 0:
+                raise InputError(f"site {name!r} contains no vertex of the part", where=f"{toml} [design] keep")
+            regions.append(inside)
+    return DesignScene(cm=cm, brief=brief, kept_regions=tuple(regions), target=target, xml=xml, toml=toml)
