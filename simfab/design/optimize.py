@@ -276,7 +276,7 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     accepted: list = []
 
     def f(h):
-        ev = evaluate(problem, h)
+        ev = evaluate(problem, h, keep_result=True)
         if ev.reason.startswith("simulation") or ev.status == "ok":
             counts["simulations"] += 1
         counts["sim_seconds"] += ev.sim_seconds
@@ -289,10 +289,20 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     history_evals: list[Evaluation] = []
     bar = iter(progress(range(K + 1), total=K + 1, desc=f"optimize {problem.base.name}", quiet=quiet))
 
+    kept = {"best": None}
+
     def on_iteration(rec):
         next(bar, None)
+        ev = rec["info"]
         if rec["accepted"]:
-            accepted.append((rec["k"], rec["info"].rest, rec["value"]))
+            accepted.append((rec["k"], ev.rest, rec["value"]))
+        # only the initial and the best design keep their insertion results (memory)
+        if rec["k"] > 0 and ev.status == "ok" and rec["accepted"] and rec["value"] <= rec["best"]:
+            if kept["best"] is not None:
+                kept["best"].result = None
+            kept["best"] = ev
+        elif rec["k"] > 0:
+            ev.result = None
         if callback is not None:
             callback(rec)
 
@@ -316,9 +326,6 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     if initial.status != "ok":
         raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to optimize from")
     best = out.info
-    # re-run the initial and the best design keeping their profiles (memory: only two kept)
-    initial = evaluate(problem, initial.h, keep_result=True)
-    best = evaluate(problem, best.h, keep_result=True) if best is not history_evals[0] else initial
     history = [dict(rec, evaluation=history_evals[i]) for i, rec in enumerate(out.history)]
     return DesignResult(problem=problem, initial=initial, best=best, history=history, accepted=accepted,
                         simulations=counts["simulations"], rejected=rejected, seconds=time.perf_counter() - t0,

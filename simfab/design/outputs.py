@@ -141,6 +141,13 @@ def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, 
     if fem.dim == 2:
         comp["thickness"] = float(fem.thickness)
     cfg["compliant"] = comp
+    # the insertion the optimizer simulated: same path length and steps (the default L_max would
+    # follow the new shape's farthest point)
+    base = res.problem.base
+    simc = dict(cfg.get("simulation", {}))
+    simc.pop("h_in", None)
+    simc.update({"L_max": float(base.s_steps[-1]), "steps": int(len(base.s_steps) - 1)})
+    cfg["simulation"] = simc
     tgt = res.problem.target
     if tgt is not None:  # the optimized scene carries its own copy of the target profile
         shutil.copyfile(tgt.source, tmp["scene_target"])

@@ -1,0 +1,60 @@
+"""Design brief parsing and constraint penalties (simfab.design.brief)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from simfab.design import brief as B
+from simfab.errors import InputError
+
+
+def test_penalty_zero_inside_bounds_and_growing_outside():
+    lim = {"insertion_force": (2.0, 20.0), "von_mises": (0.0, 60e6), "coupling_ratio": (0.1, 95.0),
+           "grip_force": (5.0, math.inf), "removal_force": (0.0, 10.0)}
+    inside = {"insertion_force": 10.0, "von_mises": 50e6, "coupling_ratio": 50.0, "grip_force": 7.0, "removal_force": 3}
+    assert B.penalty(B.constraints(inside, lim)) == 0.0
+    assert all(c.satisfied for c in B.constraints(inside, lim))
+    for key, values in {"insertion_force": [21, 25, 40], "von_mises": [61e6, 70e6, 100e6],
+                        "coupling_ratio": [96, 99, 100], "grip_force": [4, 2, 0], "removal_force": [11, 15, 30]}.items():
+        pens = []
+        for v in values:
+            fig = dict(inside, **{key: v})
+            cons = B.constraints(fig, lim)
+            assert not next(c for c in cons if c.name == key).satisfied
+            pens.append(B.penalty(cons))
+        assert 0 < pens[0] < pens[1] < pens[2], key
+    # scaled units: 1 N over the bound weighs as much as 1 MPa over the yield stress
+    a = B.penalty(B.constraints(dict(inside, insertion_force=21.0), lim))
+    b = B.penalty(B.constraints(dict(inside, von_mises=61e6), lim))
+    assert np.isclose(a, b) and np.isclose(a, B.PENALTY_WEIGHT)
+
+
+def test_bounds_from_grip():
+    assert B.bounds(B.DesignBrief(grip="tight"), 60e6)["coupling_ratio"] == (0.1, 95.0)
+    assert B.bounds(B.DesignBrief(grip="loose"), 60e6)["coupling_ratio"] == (0.0, 1e-3)
+    assert "coupling_ratio" not in B.bounds(B.DesignBrief(grip="any"), 60e6)
+    assert B.bounds(B.DesignBrief(yield_stress=30e6), 60e6)["von_mises"] == (0.0, 30e6)
+
+
+@pytest.mark.parametrize("table, field", [({"grip": "firm"}, "grip"), ({"handles": 0}, "handles"),
+                                          ({"insertion_force": [5, 1]}, "insertion_force"),
+                                          ({"grip_force": 3}, "grip_force"), ({"colour": 1}, "unknown"),
+                                          ({"placement": "k-means"}, "placement"),
+                                          ({"scale_range": [1.2, 2.0]}, "scale_range")])
+def test_bad_brief_names_the_field(table, field):
+    with pytest.raises(InputError) as e:
+        B.DesignBrief.from_dict(table, where="x.toml [design]")
+    assert "x.toml" in str(e.value) and field in str(e.value)
+
+
+def test_target_profile_rms(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text("distance_m,force_N\n0,0\n0.01,-5\n0.02,0\n")
+    s, f = B.read_target_profile(p)
+    t = B.TargetProfile(s=s, force=f)
+    assert t.rms_error(np.array([0, 0.01, 0.02]), np.array([0, -5, 0])) == 0.0
+    assert np.isclose(t.rms_error(np.array([0, 0.02]), np.array([1.0, 1.0])), np.sqrt((1 + 6**2 + 1) / 3))
+    (tmp_path / "bad.csv").write_text("0,0\n0,1\n")
+    with pytest.raises(InputError):
+        B.read_target_profile(tmp_path / "bad.csv")
