@@ -2,10 +2,16 @@
 
 Per iteration k (thesis, Algorithm "Rest Shape Optimization"):
 
-1. proposal  x_i = clip(x_cur + sigma_k * N(0, I), lower, upper)   (Gaussian around the current state)
+1. proposal  x_i = clip(x_cur + sigma_k * N(0, I) * mask, lower, upper)   (Gaussian around the current
+   state; with ``blocks`` (one block per handle) the mask selects each block with probability
+   1 / n_blocks, at least one: mostly one handle moves at a time, a local edit whose effect the
+   acceptance test can judge, instead of every handle at once)
 2. temperature  T_k = tau_k * |E_cur|,  tau_k = tau_0 (tau_end / tau_0)^(k / K)   (exponential cooling)
 3. Metropolis: accept if E_i < E_cur, else with probability exp(-(E_i - E_cur) / T_k); the best
-   state seen is kept and returned.
+   state seen is kept and returned. The uniform number u of the test is drawn before E_i is
+   evaluated, so the test is the threshold E_i < E_cur - T_k ln u; ``f`` receives that threshold
+   and may stop computing as soon as a lower bound of E_i exceeds it (returning the bound: the
+   proposal is rejected exactly as it would have been).
 4. adaptive, decaying step: sigma_{k+1} = sigma_k * GROW after an accepted proposal, * SHRINK
    after a rejected one, within [SIGMA_MIN_REL sigma_0, sigma_0].
 
@@ -34,12 +40,14 @@ SIGMA_MIN_REL = 0.05
 @dataclass(frozen=True, kw_only=True)
 class AnnealOptions:
     """iterations K; tau_0, tau_end: relative temperatures at the first and last iteration;
-    sigma0 (n,): initial proposal standard deviations; lower, upper (n,): bounds; seed."""
+    sigma0 (n,): initial proposal standard deviations; lower, upper (n,): bounds; blocks (n,) int:
+    block id per variable (None: every variable moves in every proposal); seed."""
 
     iterations: int
     sigma0: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
+    blocks: np.ndarray | None = None
     tau0: float = 0.05
     tau_end: float = 1e-4
     seed: int = 0
@@ -61,7 +69,8 @@ class AnnealResult:
 def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=None) -> AnnealResult:
     """Minimize ``f`` by simulated annealing from ``x0``.
 
-    f : callable x -> (value, info); value may be +inf for a rejected candidate
+    f : callable (x, threshold) -> (value, info); value may be +inf for a rejected candidate, or
+        any lower bound of the value larger than ``threshold`` (the acceptance threshold)
     stop : optional callable (best_info, best_value, k, k_best) -> bool, asked after every iteration
         (k_best: iteration at which the best value was found)
     callback : optional callable(record dict) after every iteration
@@ -70,7 +79,7 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
     lower, upper = np.asarray(options.lower, float), np.asarray(options.upper, float)
     sigma0 = np.asarray(options.sigma0, float)
     x_cur = np.clip(np.asarray(x0, float), lower, upper)
-    e_cur, info_cur = f(x_cur)
+    e_cur, info_cur = f(x_cur, math.inf)
     best = AnnealResult(x=x_cur.copy(), value=e_cur, info=info_cur)
     k_best = 0
     best.history.append(dict(k=0, value=e_cur, accepted=math.isfinite(e_cur), current=e_cur, best=e_cur,
@@ -78,19 +87,23 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
     if callback is not None:
         callback(best.history[-1])
     sigma = sigma0.copy()
+    blocks = None if options.blocks is None else np.unique(np.asarray(options.blocks), return_inverse=True)[1]
+    n_blocks = 0 if blocks is None else int(blocks.max()) + 1
     K = max(int(options.iterations), 1)
     ratio = options.tau_end / options.tau0
     for k in range(1, int(options.iterations) + 1):
-        x_i = np.clip(x_cur + sigma * rng.standard_normal(x_cur.shape), lower, upper)
-        e_i, info_i = f(x_i)
-        u = rng.random()  # drawn every iteration: the random stream does not depend on the values
+        step = sigma * rng.standard_normal(x_cur.shape)
+        if blocks is not None:
+            pick = rng.random(n_blocks) < 1.0 / n_blocks
+            pick[rng.integers(n_blocks)] = True
+            step *= pick[blocks]
+        x_i = np.clip(x_cur + step, lower, upper)
+        u = 1.0 - rng.random()  # in (0, 1]; drawn every iteration: the stream does not depend on the values
         T = options.tau0 * ratio ** ((k - 1) / K) * abs(e_cur) if math.isfinite(e_cur) else math.inf
-        if not math.isfinite(e_i):
-            accepted = False
-        elif e_i < e_cur or not math.isfinite(e_cur):
-            accepted = True
-        else:
-            accepted = T > 0 and u < math.exp(-(e_i - e_cur) / T)
+        # accept iff E_i < E_cur, or u < exp(-(E_i - E_cur) / T)  <=>  E_i < E_cur - T ln u
+        threshold = e_cur - T * math.log(u) if math.isfinite(e_cur) and T > 0 else (e_cur if math.isfinite(e_cur) else math.inf)
+        e_i, info_i = f(x_i, threshold)
+        accepted = math.isfinite(e_i) and (e_i < e_cur or e_i < threshold or not math.isfinite(e_cur))
         if accepted:
             x_cur, e_cur = x_i, e_i
             if e_i < best.value:

@@ -20,6 +20,14 @@ Each evaluation of a design h:
 Simulated annealing (:mod:`simfab.design.anneal`) proposes designs; it stops after ``iterations``
 or once the best design satisfies every constraint and has not improved by PATIENCE_REL for
 ``patience`` iterations.
+
+**Early rejection.** The annealer's acceptance test is a threshold known before the candidate is
+simulated (E_i < E_cur - T ln u). E_L is known before simulating, and the running maxima of the
+insertion force, the removal force and the von Mises stress only grow along the insertion, so
+E_L + W sum (violations of their upper bounds so far)^2 is a lower bound of E_i at every step.
+Once it exceeds the threshold the candidate would be rejected whatever the rest of its profile:
+its simulation stops there (status "stopped", objective = the bound). The decisions, hence the
+optimization's result, are exactly those of running every simulation to the end.
 """
 
 from __future__ import annotations
@@ -44,8 +52,8 @@ QUALITY_REL = 0.25
 PATIENCE_REL = 1e-3
 #: Initial proposal standard deviation: translations as a fraction of the bounding-box diagonal,
 #: scales (dimensionless).
-SIGMA_TRANSLATION_REL = 0.02
-SIGMA_SCALE = 0.05
+SIGMA_TRANSLATION_REL = 0.01
+SIGMA_SCALE = 0.03
 
 
 def element_quality(X: np.ndarray, elements: np.ndarray) -> np.ndarray:
@@ -146,8 +154,9 @@ def max_displacement(res) -> np.ndarray:
 
 @dataclass(kw_only=True)
 class Evaluation:
-    """One design's evaluation. status: "ok" | "rejected"; reason: why rejected; objective [-]
-    (+inf when rejected); E_L [-]; rms_error [N] (target matching); constraints: list of
+    """One design's evaluation. status: "ok" | "rejected" (invalid) | "stopped" (provably above the
+    acceptance threshold); reason: why not ok; objective [-] (+inf when rejected, a lower bound
+    when stopped); E_L [-]; rms_error [N] (target matching); constraints: list of
     :class:`simfab.design.brief.Constraint`; figures: :func:`profile_figures`; result: the
     InsertionResult (kept only while needed); rest: (n, d) [m]; seconds (simulation, total)."""
 
@@ -193,8 +202,42 @@ def candidate_model(problem: DesignProblem, X: np.ndarray):
     return out, ""
 
 
-def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False) -> Evaluation:
-    """Evaluate design vector h (see the module docstring); never raises for a bad candidate."""
+class _Exceeded(Exception):
+    """Raised from the insertion's step callback once the objective's lower bound exceeds the
+    acceptance threshold."""
+
+    def __init__(self, bound: float, step: int):
+        self.bound, self.step = bound, step
+
+
+def _bound_watch(problem: DesignProblem, base: float, threshold: float):
+    """Step callback raising :class:`_Exceeded` when base + W * (upper-bound violations of the
+    running F_in, F_rm, max von Mises)^2 exceeds ``threshold`` (None if nothing can be bounded)."""
+    lim = problem.limits
+    ups = [(k, lim[k][1], B.SCALES[k]) for k in ("insertion_force", "removal_force", "von_mises")
+           if k in lim and math.isfinite(lim[k][1])]
+    if not ups or not math.isfinite(threshold):
+        return None
+    run = {"insertion_force": 0.0, "removal_force": 0.0, "von_mises": 0.0}
+
+    def watch(k, rec):
+        run["insertion_force"] = max(run["insertion_force"], -rec.force)
+        run["removal_force"] = max(run["removal_force"], rec.force)
+        run["von_mises"] = max(run["von_mises"], rec.max_von_mises)
+        bound = base + B.PENALTY_WEIGHT * sum(max(0.0, run[name] - hi) ** 2 / sc**2 for name, hi, sc in ups)
+        if bound > threshold:
+            raise _Exceeded(bound, k)
+
+    return watch
+
+
+def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False,
+             threshold: float = math.inf) -> Evaluation:
+    """Evaluate design vector h (see the module docstring); never raises for a bad candidate.
+
+    threshold : acceptance threshold of the annealer; the simulation stops (status "stopped",
+        objective = a lower bound > threshold) as soon as the objective provably exceeds it.
+    """
     from simfab.coupling.simulate import check_start, simulate
 
     t0 = time.perf_counter()
@@ -205,10 +248,19 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
         ev.reason = why
         ev.seconds = time.perf_counter() - t0
         return ev
+    ev.E_L = problem.energy(X)
+    base = 0.0 if problem.target is not None else ev.E_L
+    if base > threshold:
+        ev.status, ev.reason, ev.objective = "stopped", "modification energy above the acceptance threshold", base
+        ev.seconds = time.perf_counter() - t0
+        return ev
     t1 = time.perf_counter()
     try:
         check_start(cm)
-        res = simulate(cm)
+        res = simulate(cm, callback=_bound_watch(problem, base, threshold))
+    except _Exceeded as e:
+        ev.status, ev.objective = "stopped", e.bound
+        ev.reason = f"objective above the acceptance threshold at step {e.step}"
     except ConvergenceError as e:
         ev.reason = f"simulation did not converge: {str(e).splitlines()[0][:160]}"
     except InputError as e:
@@ -220,7 +272,6 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
         ev.status = "ok"
         ev.figures = profile_figures(res)
         ev.constraints = B.constraints(ev.figures, problem.limits)
-        ev.E_L = problem.energy(X)
         pen = B.penalty(ev.constraints)
         if problem.target is not None:
             ev.rms_error = problem.target.rms_error(res.column("s"), res.column("force"))
@@ -244,7 +295,8 @@ class DesignResult:
     initial, best : :class:`Evaluation` (with their InsertionResults)
     history : one dict per iteration (see :func:`history_rows`)
     accepted : [(iteration, rest (n, d) [m], objective)] of every accepted design, in order
-    simulations : insertion simulations run; rejected : {reason: count}
+    simulations : insertion simulations run to the end; stopped_simulations : stopped early (their
+    candidate provably rejected); rejected : {reason: count} of invalid candidates
     seconds : wall time; sim_seconds : of it, inside the simulator; stopped_early : bool
     """
 
@@ -254,6 +306,7 @@ class DesignResult:
     history: list
     accepted: list
     simulations: int
+    stopped_simulations: int
     rejected: dict
     seconds: float
     sim_seconds: float
@@ -271,16 +324,18 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     t0 = time.perf_counter()
     brief = problem.brief
     K = brief.iterations if iterations is None else int(iterations)
-    counts = {"simulations": 0, "sim_seconds": 0.0}
+    counts = {"simulations": 0, "stopped": 0, "sim_seconds": 0.0}
     rejected: dict[str, int] = {}
     accepted: list = []
 
-    def f(h):
-        ev = evaluate(problem, h, keep_result=True)
-        if ev.reason.startswith("simulation") or ev.status == "ok":
+    def f(h, threshold):
+        ev = evaluate(problem, h, keep_result=True, threshold=threshold)
+        if ev.status == "ok" or ev.reason.startswith("simulation"):
             counts["simulations"] += 1
+        elif ev.status == "stopped" and ev.sim_seconds > 0:
+            counts["stopped"] += 1
         counts["sim_seconds"] += ev.sim_seconds
-        if ev.status != "ok":
+        if ev.status == "rejected":
             key = ev.reason.split(":")[0]
             rejected[key] = rejected.get(key, 0) + 1
         history_evals.append(ev)
@@ -307,20 +362,15 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
             callback(rec)
 
     def stop(best_info, best_value, k, k_best):
-        if not best_info.feasible:
-            return False
-        # the last improvement larger than PATIENCE_REL of the best value
-        vals = [r.objective for r in history_evals]
-        last = k_best
-        ref = best_value
-        for i in range(k_best, -1, -1):
-            if math.isfinite(vals[i]) and vals[i] > ref * (1 + PATIENCE_REL) + 1e-12:
-                break
-            if vals[i] <= ref * (1 + PATIENCE_REL) + 1e-12:
-                last = i
-        return k - last >= brief.patience
+        # the best value counts as improved when it fell by more than PATIENCE_REL
+        if best_value < progress_ref["value"] * (1.0 - PATIENCE_REL) or not math.isfinite(progress_ref["value"]):
+            progress_ref.update(value=best_value, k=k)
+        return best_info.feasible and k - progress_ref["k"] >= brief.patience
 
-    opts = AnnealOptions(iterations=K, sigma0=problem.sigma0, lower=problem.lower, upper=problem.upper, seed=seed)
+    progress_ref = {"value": math.inf, "k": 0}
+    blocks = np.repeat(np.arange(problem.handles.n_active), 2 * problem.handles.dim)  # one block per handle
+    opts = AnnealOptions(iterations=K, sigma0=problem.sigma0, lower=problem.lower, upper=problem.upper, blocks=blocks,
+                         seed=seed)
     out = anneal(f, problem.handles.identity(), opts, stop=stop, callback=on_iteration)
     initial = history_evals[0]
     if initial.status != "ok":
@@ -328,5 +378,5 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     best = out.info
     history = [dict(rec, evaluation=history_evals[i]) for i, rec in enumerate(out.history)]
     return DesignResult(problem=problem, initial=initial, best=best, history=history, accepted=accepted,
-                        simulations=counts["simulations"], rejected=rejected, seconds=time.perf_counter() - t0,
+                        simulations=counts["simulations"], stopped_simulations=counts["stopped"], rejected=rejected, seconds=time.perf_counter() - t0,
                         sim_seconds=counts["sim_seconds"], iterations=out.iterations, stopped_early=out.stopped_early)

@@ -64,6 +64,7 @@ def summary(res, *, scene: str | None = None) -> dict:
         "iterations": res.iterations,
         "stopped_early": res.stopped_early,
         "simulations": res.simulations,
+        "simulations_stopped_early": res.stopped_simulations,
         "accepted": len(res.accepted),
         "rejected": dict(res.rejected),
         "seconds": res.seconds,

@@ -1,0 +1,81 @@
+"""Rest-shape optimization benchmark: the stand-side design end to end.
+
+``python tools/bench.py optimize [--scene standside2d] [--iterations N] [--seed S]``
+
+Runs what ``simfab couple optimize standside2d`` runs - the initial insertion (for displacement
+handle placement), the handle placement (bounded biharmonic weights, affinity propagation), the
+annealing with one full insertion simulation per iteration - and reports the wall time, the
+simulations run and simulations per second, the fraction of the time spent outside the
+simulator, the number of iterations to the first design meeting every constraint and whether
+the final design meets them all. Outputs are not written (timed is the computation).
+
+Reference: the original method's 4.8 s per stand-side insertion simulation (shared reference
+figures, "insertion_simulation_seconds_original", row "stand side (2D)") times its up to 300
+iterations (~24 minutes); the target here is <= 30 s for the whole optimization.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+TARGET_SECONDS = 30.0
+
+
+def run(argv) -> dict:
+    ap = argparse.ArgumentParser(prog="bench.py optimize")
+    ap.add_argument("--scene", default="standside2d")
+    ap.add_argument("--iterations", type=int, default=None, help="annealing iterations (default: the brief's)")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+
+    from benchmarks._reference import figures
+    from simfab.coupling.simulate import simulate
+    from simfab.design.optimize import make_problem, optimize
+    from simfab.design.scene import load_design_scene
+
+    ds = load_design_scene(a.scene)
+    simulate(ds.cm)  # warm-up: Warp kernels loaded, caches built (not timed)
+    t0, c0 = time.perf_counter(), time.process_time()
+    ds = load_design_scene(a.scene)
+    t_load = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    initial = simulate(ds.cm)
+    problem = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=a.seed)
+    t_setup = time.perf_counter() - t1
+    res = optimize(problem, iterations=a.iterations, seed=a.seed)
+    total = time.perf_counter() - t0
+    cpu = time.process_time() - c0
+    first = next((r["k"] for r in res.history if r["evaluation"].feasible), None)
+    sims = res.simulations + 1  # + the initial insertion of the placement
+    sim_seconds = res.sim_seconds + initial.seconds
+    ref = figures().get("insertion_simulation_seconds_original")
+    row = next((r for r in (ref or {}).get("rows", []) if r["model"].startswith("stand side")), None)
+    ref_total = row["seconds"] * 300 if row else None
+    return {
+        "benchmark": "optimize",
+        "scene": a.scene,
+        "elements": int(ds.cm.fem.n_elements),
+        "steps": int(len(ds.cm.s_steps) - 1),
+        "handles": int(problem.handles.n_active),
+        "seconds": total,
+        "cpu_seconds": cpu,  # process CPU time: less sensitive to other load on the machine
+        "seconds_setup": t_load + t_setup,
+        "iterations": res.iterations,
+        "stopped_early": res.stopped_early,
+        "first_feasible_iteration": first,
+        "feasible": res.best.feasible,
+        "E_L": res.best.E_L,
+        "simulations": sims,
+        "simulations_stopped_early": res.stopped_simulations,
+        "candidates_rejected_before_simulating": sum(1 for r in res.history if r["evaluation"].sim_seconds == 0),
+        "simulations_per_second": (sims + res.stopped_simulations) / total,  # full + stopped early
+        "seconds_per_simulation": sim_seconds / (sims + res.stopped_simulations),
+        "fraction_outside_simulator": 1.0 - sim_seconds / total,
+        "rejected": res.rejected,
+        "target_seconds": TARGET_SECONDS,
+        "meets_target": total <= TARGET_SECONDS and res.best.feasible,
+        "reference": {"source": "insertion_simulation_seconds_original: stand side (2D) x 300 iterations",
+                      "seconds_per_simulation": row["seconds"] if row else None, "seconds": ref_total},
+        "speedup_vs_reference": ref_total / total if ref_total else None,
+    }
