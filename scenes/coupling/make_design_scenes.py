@@ -105,8 +105,150 @@ def standside(name: str = "standside2d", *, half: float = 0.013, bore: float = 0
         design=brief or dict(grip="tight", grip_force=[2.0, float("inf")], insertion_force=[0.0, 30.0], handles=4))
 
 
+def alligator_outline(*, rod: float, body=(-0.022, 0.008, -0.005, 0.008), pocket: float, mouth: float,
+                      hinge: float = 0.0008, hinge_depth: float = 0.016) -> np.ndarray:
+    """Alligator clip section: a block x0..x1, y0..y1 with a pocket of radius ``pocket`` at the
+    origin, a mouth of width ``mouth`` from the pocket to the +x face and a hinge slot of width
+    ``2 hinge`` from the pocket back to x = -hinge_depth; the upper jaw (y > 0) is thicker than the
+    lower one (y0 closer to the axis): an asymmetric clip."""
+    from shapely.geometry import Point, box
+
+    x0, x1, y0, y1 = body
+    blk = box(x0, y0, x1, y1)
+    cut = Point(0, 0).buffer(pocket, quad_segs=16)
+    cut = cut.union(box(0.0, -mouth / 2, x1 + 1e-3, mouth / 2)).union(box(-hinge_depth, -hinge, 0.0, hinge))
+    return polygon_ring(blk.difference(cut))
+
+
+def alligator2d() -> None:
+    rod = 0.004
+    body = (-0.022, 0.008, -0.005, 0.008)
+    ring = alligator_outline(rod=rod, body=body, pocket=0.0038, mouth=0.0036)
+    x0 = body[1] + math.sqrt(rod**2 - 0.0018**2) + 0.0005
+    design_scene(
+        "alligator2d",
+        doc="Alligator clip (2D, PLA): an asymmetric clip (thick upper jaw, thin lower jaw) whose initial shape\n"
+            "yields when an 8 mm rod is pushed in; optimized to hold the rod tightly without yielding. Held\n"
+            "only along the insertion axis, the clip may shift sideways as the thesis prescribes.",
+        ring=ring, target=420, object_geoms=[dict(type="cylinder", size=[rod, 0.01])],
+        keys=[([x0, 0, 0], [1, 0, 0, 0]), ([rod - 0.0038 + 0.0001, 0, 0], [1, 0, 0, 0])],
+        fixed_center=[body[0], 0, 0], fixed_half=[0.0006, 0.009, 0.01],
+        obj=dict(body="object", samples=50), sim=dict(steps=35),
+        design=dict(grip="tight", insertion_force=[0.0, 40.0], handles=5))
+
+
+def block2d(name: str, doc: str, brief: dict) -> None:
+    """Building block: a socket (C-shape) around a 20 mm ball whose base stays unchanged (keep
+    site at the arms' roots): the same start for the loose, tight and tighter designs."""
+    from simfab.coupling.geometry import c_clamp_outline
+
+    clamp = dict(inner_radius=0.0098, width=0.0028, opening_deg=62.0, base_depth=0.004, base_height=0.02)
+    ring = c_clamp_outline(**clamp, segments=48)
+    ro = clamp["inner_radius"] + clamp["width"]
+    a = math.radians(clamp["opening_deg"])
+    tx, ty = clamp["inner_radius"] * math.cos(a), clamp["inner_radius"] * math.sin(a)
+    x0 = tx + math.sqrt(max(R_CYL**2 - ty**2, 0.0)) + 0.001
+    xb = -ro - clamp["base_depth"]
+    design_scene(
+        name, doc=doc, ring=ring, target=450, object_geoms=[dict(type="sphere", size=[R_CYL])],
+        keys=[([x0, 0, 0], [1, 0, 0, 0]), ([R_CYL - clamp["inner_radius"] + 0.0002, 0, 0], [1, 0, 0, 0])],
+        fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.01],
+        keep_sites=[("keep", [xb + 0.5 * (clamp["base_depth"] + 0.5 * clamp["width"]), 0, 0],
+                     [0.5 * (clamp["base_depth"] + 0.5 * clamp["width"]) + 1e-4, 0.0101, 0.01])],
+        obj=dict(body="object", samples=50), sim=dict(steps=25), design=dict(brief, keep=["keep"]))
+
+
+def profile2d() -> None:
+    """Profile matching: the bundled C-clamp's start; the target is the force profile of another
+    clamp (thinner arm, larger inner radius) simulated along the same path - a target that some
+    shape reaches, so the RMS error measures how close the handles can come."""
+    import tomllib
+
+    from make_scenes import CLAMP_TIGHT, X_SEATED, x_start
+    from simfab.coupling.geometry import c_clamp_outline
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import simulate
+    from simfab.io.atomic import write_text
+
+    clamp = dict(CLAMP_TIGHT)
+    ring = c_clamp_outline(**clamp, segments=48)
+    ro = clamp["inner_radius"] + clamp["width"]
+    xb = -ro - clamp["base_depth"]
+    keys = [([x_start(clamp), 0, 0], [1, 0, 0, 0]), ([X_SEATED, 0, 0], [1, 0, 0, 0])]
+    common = dict(ring=ring, target=450, object_geoms=[dict(type="cylinder", size=[R_CYL, 0.01])], keys=keys,
+                  fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.01], obj=dict(body="object", samples=50),
+                  sim=dict(steps=35, L_max=keys[0][0][0] - keys[1][0][0]))
+    # the target: the same path through a clamp of inner radius 9.8 mm and arm width 2.1 mm
+    variant = dict(clamp, inner_radius=0.0098, width=0.0021)
+    design_scene("_profile_target", doc="temporary", **dict(common, ring=c_clamp_outline(**variant, segments=48)),
+                 design=dict(grip="any"))
+    res = simulate(load_coupling_scene(HERE / "_profile_target.xml"))
+    for suffix in (".xml", ".toml", "_outline.csv"):
+        (HERE / f"_profile_target{suffix}").unlink()
+    write_text(HERE / "profile2d_target.csv",
+               "distance_m,force_N\n" + "".join(f"{r.s:.9g},{r.force:.9g}\n" for r in res.steps))
+    design_scene(
+        "profile2d",
+        doc="Profile matching (2D C-clamp, PLA): change the clamp until its insertion force profile matches\n"
+            "profile2d_target.csv (least squares); compare --handles 2, 4 and 8.",
+        **common, design=dict(grip="any", target_profile="profile2d_target.csv", handles=4, placement="spatial"))
+
+
+def append_design(name: str, design: dict) -> None:
+    """Add a [design] table to a scene TOML written by make_scenes.scene."""
+    from make_scenes import _toml_value
+
+    from simfab.io.atomic import write_text
+
+    p = HERE / f"{name}.toml"
+    lines = ["", "[design]"] + [f"{k} = {_toml_value(v) if not isinstance(v, list) else repr(v)}" for k, v in design.items()]
+    write_text(p, p.read_text() + "\n".join(lines) + "\n")
+
+
+def knocker_design() -> None:
+    """Door knocker (3D, rotating path): the ring of knocker3d, a clip with thick arms (stiff: the
+    initial design needs large forces and yields)."""
+    import trimesh
+
+    from make_scenes import KNOCK_R, KNOCK_r, quat_z, scene, x_start
+    from simfab.coupling import geometry as G
+
+    clamp = dict(inner_radius=0.0032, width=0.0028, opening_deg=55.0, base_depth=0.002, base_height=0.012)
+    hk = 0.006
+    ring = trimesh.creation.torus(major_radius=KNOCK_R, minor_radius=KNOCK_r, major_sections=96, minor_sections=24)
+    ring.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    ring.apply_translation([KNOCK_R, 0, 0])
+    ro = clamp["inner_radius"] + clamp["width"]
+    xk = x_start(clamp, margin=0.0005, radius=KNOCK_r)
+    xs = max(KNOCK_r - clamp["inner_radius"], 0.0) + 0.0001
+    name = "knocker3d_design"
+    scene(name, doc="Door knocker (design): the knocker ring snapped into a stiff clip and rotated about its bar; the\n"
+                    "initial clip needs large forces and yields. Optimize: insertion force <= 20 N, below yield.",
+          dim=3, comp=dict(generator="extruded_clamp", target_elements=1500, height=hk, **clamp),
+          part_mesh=G.extruded_clamp(height=hk, **clamp), extra_assets=[("ring", ring.vertices, ring.faces)],
+          object_geoms=[dict(type="mesh", mesh="ring")],
+          keys=[([xk, 0, 0], [1, 0, 0, 0]), ([xs, 0, 0], [1, 0, 0, 0]), ([xs, 0, 0], quat_z(-np.pi / 2))],
+          fixed_center=[-ro - clamp["base_depth"], 0, 0], fixed_half=[0.0004, 0.007, 0.005],
+          obj=dict(body="object", samples=2000, rot_length_scale=0.005), sim=dict(steps=40, fix_all_axes=True),
+          mesh_options=dict(coarsen=True, tol=0.1, tries=6))
+    append_design(name, dict(grip="loose", insertion_force=[0.0, 20.0], handles=5, iterations=150, patience=40))
+
+
 def main() -> None:
     standside()
+    profile2d()
+    knocker_design()
+    alligator2d()
+    doc = ("Building block (2D section, PLA): a socket that barely holds a 20 mm ball; its base (keep site)\n"
+           "stays unchanged. Optimized to a {} grip; revolve the result into 3D with\n"
+           "simfab couple optimize {} --revolve-axis x.")
+    block2d("block2d_loose", doc.format("loose", "block2d_loose"), dict(grip="loose", handles=4))
+    block2d("block2d_tight", doc.format("tight", "block2d_tight"),
+            dict(grip="tight", grip_force=[3.0, 10.0], handles=4))
+    block2d("block2d_tighter", doc.format("tighter (more grip, lower insertion and removal forces than the tight\n"
+                                          "design)", "block2d_tighter"),
+            dict(grip="tight", grip_force=[15.0, float("inf")], insertion_force=[0.0, 12.0],
+                 removal_force=[0.0, 12.0], handles=4))
 
 
 if __name__ == "__main__":

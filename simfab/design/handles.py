@@ -132,7 +132,15 @@ def make_handles(rest: np.ndarray, elements: np.ndarray, handle_vertices, inacti
     X = np.ascontiguousarray(rest, dtype=np.float64)
     T = np.ascontiguousarray(elements, dtype=np.int64)
     hv = np.asarray(handle_vertices, dtype=np.int64).ravel()
-    regions = [np.unique(np.asarray(r, dtype=np.int64)) for r in inactive_regions if len(r)]
+    # a vertex in several kept regions belongs to the first one only (every constraint row of the
+    # weights' quadratic program must be unique: libigl's active set corrupts memory otherwise)
+    regions, taken = [], np.zeros(len(X), bool)
+    for r in inactive_regions:
+        r = np.unique(np.asarray(r, dtype=np.int64))
+        r = r[~taken[r]]
+        if len(r):
+            regions.append(r)
+            taken[r] = True
     if len(np.unique(hv)) != len(hv):
         raise InputError("two handles on the same vertex", where="[design] handles")
     held = np.concatenate(regions) if regions else np.zeros(0, np.int64)

@@ -64,3 +64,13 @@ def test_tetrahedral_weights():
     np.testing.assert_allclose(H.weights.sum(axis=1), 1.0, atol=1e-12)
     assert H.weights.min() >= 0 and H.weights.max() <= 1
     assert np.abs(H.apply(H.identity()) - V).max() < 1e-15
+
+
+def test_overlapping_kept_regions_are_merged(plate):
+    """The fixed support and a keep site may share vertices; each vertex is constrained once."""
+    V, F, fixed, hv = plate
+    keep = np.flatnonzero(V[:, 0] < 0.008)  # contains the fixed edge x = 0
+    H = make_handles(V, F, hv, [fixed, keep])
+    np.testing.assert_allclose(H.weights.sum(axis=1), 1.0, atol=1e-12)
+    X = H.apply(H.identity() + 0.001)
+    assert np.abs(X[keep] - V[keep]).max() < 1e-15
