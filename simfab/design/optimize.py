@@ -71,6 +71,12 @@ def element_quality(X: np.ndarray, elements: np.ndarray) -> np.ndarray:
     return np.sign(vol) * 12.0 * np.cbrt(3.0 * np.abs(vol)) ** 2 / l2
 
 
+#: A profile whose peak energy is below that of a uniform strain of this size over the whole part
+#: never really touched the object (round-off): it has no coupling ("none", coupling ratio 100 %),
+#: so that a design cannot meet a grip constraint with a ratio of two round-off energies.
+CONTACT_STRAIN_FLOOR = 1e-5
+
+
 def profile_figures(res) -> dict:
     """Figures of an insertion the constraints read: coupling_ratio [%], grip_force,
     insertion_force, removal_force [N], von_mises [Pa] (max over the insertion), and category,
@@ -78,9 +84,14 @@ def profile_figures(res) -> dict:
     from simfab.coupling.profile import analyze
 
     prof = analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"))
-    return {"coupling_ratio": prof.coupling_ratio, "grip_force": prof.F_grip, "insertion_force": prof.F_in,
-            "removal_force": prof.F_rm, "von_mises": float(res.column("max_von_mises").max()),
-            "category": prof.category, "E_max": prof.E_max, "E_ss": prof.E_ss}
+    fem = res.model.fem
+    E = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
+    floor = 0.5 * E * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
+    touched = prof.E_max > floor
+    return {"coupling_ratio": prof.coupling_ratio if touched else 100.0, "grip_force": prof.F_grip,
+            "insertion_force": prof.F_in, "removal_force": prof.F_rm,
+            "von_mises": float(res.column("max_von_mises").max()),
+            "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss}
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

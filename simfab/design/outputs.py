@@ -59,6 +59,8 @@ def summary(res, *, scene: str | None = None) -> dict:
         "constraints": cons,
         "category": best.figures.get("category"),
         "category_initial": init.figures.get("category"),
+        "profile": _figures(best.figures),
+        "profile_initial": _figures(init.figures),
         "handles": {"active": int(res.problem.handles.n_active), "inactive": int((~res.problem.handles.active).sum()),
                     "placement": res.problem.brief.placement},
         "iterations": res.iterations,
@@ -86,6 +88,14 @@ def summary(res, *, scene: str | None = None) -> dict:
         warnings.append(f"not every constraint is met after {res.iterations} iterations: {', '.join(bad)}")
     out["warnings"] = warnings + list(best.result.warnings if best.result is not None else [])
     return out
+
+
+def _figures(f: dict) -> dict:
+    """The profile's figures with unit-bearing names (E in J, forces in N, stress in Pa)."""
+    names = {"category": "category", "coupling_ratio": "coupling_ratio_pct", "E_max": "E_max_J", "E_ss": "E_ss_J",
+             "insertion_force": "F_in_N", "removal_force": "F_rm_N", "grip_force": "F_grip_N",
+             "von_mises": "max_von_mises_Pa"}
+    return {v: f.get(k) for k, v in names.items()}
 
 
 def history_rows(res):
