@@ -84,15 +84,6 @@ LIFT_TO = 0.8
 #: force tolerance: energies to 1e-9, forces to 1.2e-5 relative; an adaptive lift to the last
 #: step's median contact gap did no better). 0 disables.
 WARM_START_FLOOR = 0.5
-#: Facet check: bound each check point by its value at earlier checks too (O moves rigidly, so in
-#: O's body frame psi(y) <= psi(y') + L |b - b'|); skips about a fifth of all contact-field
-#: evaluations on clip3d with identical results.
-FACET_CHECK_CACHE = True
-#: The facet check of a converged state takes its boundary vertices' distances from Newton's last
-#: evaluation there (exact within the lazy band, Lipschitz lower bounds beyond it) instead of
-#: evaluating the field at all of them again; vertices beyond the kernel radius get the
-#: nearest-sample bound.
-FACET_CHECK_REUSE_VERTICES = True
 #: Refinement rounds per step (each adds the facets found crossing O) before ConvergenceError.
 MAX_REFINEMENT_ROUNDS = 64
 #: Hessian regularization (relative to mean |diag H|) for the rigid modes left free by the

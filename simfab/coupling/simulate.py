@@ -81,14 +81,14 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from simfab.contact.barrier import barrier, barrier_hessian, point_barrier, project_psd
 from simfab.contact.imls import ImlsField, body_frame, pose_matrix
 from simfab.coupling import config as C
-from simfab.coupling import rigid
+from simfab.coupling import rigid, settle
 from simfab.coupling.config import InsertionOptions
 from simfab.coupling.points import ContactPoints, check_weights, facet_points, facet_weights, vertex_points
 from simfab.errors import ConvergenceError, InputError
@@ -147,16 +147,37 @@ class CouplingModel:
         key = ("pos_quat", float(s))
         out = self._cache.get(key)
         if out is None:
-            pos, quat = self.path.pose_at(s)
+            L = float(self.path.length)
+            u = self.end_direction
+            if s > L and u is not None:  # past the last keyframe: straight on along the last segment
+                pos, quat = self.path.pose_at(L)
+                pos = np.asarray(pos, dtype=float) + (s - L) * u
+            else:
+                pos, quat = self.path.pose_at(s)
             out = self._cache[key] = (np.asarray(pos, dtype=float), np.asarray(quat, dtype=float))
         return out
+
+    @property
+    def end_direction(self) -> np.ndarray | None:
+        """(3,) unit translation of the path's last segment when that segment is a pure
+        translation (O may then continue past the last keyframe until it comes to rest), else None."""
+        key = "end_direction"
+        if key not in self._cache:
+            pos, quat = self.path.positions, self.path.quats
+            d = np.asarray(pos[-1] - pos[-2], dtype=float)
+            turn = abs(abs(float(np.dot(quat[-1], quat[-2]))) - 1.0) > 1e-12
+            n = float(np.linalg.norm(d))
+            self._cache[key] = None if (turn or n == 0) else d / n
+        return self._cache[key]
 
     def direction(self, s: float) -> np.ndarray:
         """(dim,) unit translation direction of O at s (zero during a pure rotation; memoized)."""
         key = ("direction", float(s))
         out = self._cache.get(key)
         if out is None:
-            u = np.asarray(self.path.direction_at(s), dtype=float)[: self.dim]
+            L = float(self.path.length)
+            past = s > L and self.end_direction is not None
+            u = (self.end_direction if past else np.asarray(self.path.direction_at(s), dtype=float))[: self.dim]
             n = np.linalg.norm(u)
             out = self._cache[key] = u / n if n > 0 else u
         return out.copy()
@@ -569,24 +590,41 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     steps = []
     free_motions = rigid.motion_basis(cm)
     weakest = None  # (ratio, motion, s, contact radius) of the least resisted rigid motion of A
-    for k in progress(range(len(cm.s_steps)), total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
-        s = float(cm.s_steps[k])
-        if k > 0:
-            iters = _advance(cm, state, s, ctx, depth=0)
-        else:
-            iters = _solve_at(cm, state, s, ctx)
-        with phases.timed("record"):
-            rec = _record(cm, state, iters, ctx)
+    weakest = [None]  # (ratio, motion, s, contact radius) of the least resisted rigid motion of A
+
+    def step_to(s, tolerate=False):
+        """Solve the step from the current state to path length s; (record, undo token). With
+        ``tolerate``, a step that cannot be solved gives (None, token) instead of ConvergenceError."""
+        saved = replace(state, refined=set(state.refined))
+        try:
+            iters = _advance(cm, state, s, ctx, depth=0) if steps else _solve_at(cm, state, s, ctx)
+            with phases.timed("record"):
+                return _record(cm, state, iters, ctx), saved
+        except ConvergenceError:
+            if not tolerate:
+                raise
+            return None, saved
+
+    def undo(saved):
+        for f in fields(saved):
+            setattr(state, f.name, getattr(saved, f.name))
+
+    def keep(rec):
         steps.append(rec)
         with phases.timed("rigid_check"):
             w = _weakest_rigid_motion(cm, state, free_motions)
-        if w is not None and (weakest is None or w[0] < weakest[0]):
-            weakest = w
+        if w is not None and (weakest[0] is None or w[0] < weakest[0][0]):
+            weakest[0] = w
         if callback is not None:
-            callback(k, rec)
+            callback(len(steps) - 1, rec)
+
+    for s in progress(cm.s_steps, total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
+        keep(step_to(float(s))[0])
+    rest = settle.to_rest(cm, steps, step_to, undo, keep)
+    weakest = weakest[0]
     seconds = time.perf_counter() - t_start
     timer.add("total", seconds)
-    warnings = []
+    warnings = settle.warnings(cm, steps, rest)
     if weakest is not None and weakest[0] < rigid.UNRESISTED_REL:
         warnings.append(
             f"{cm.name}: nothing resists the part's rigid {rigid.describe(weakest[1], dim, weakest[3])} at "
@@ -1062,7 +1100,7 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
     R, p = cm.pose(s)
     bv = np.asarray(cm.fem.boundary_vertices)
     dv = np.full(cm.fem.n_vertices, np.inf)
-    if C.FACET_CHECK_REUSE_VERTICES and final is not None and final[0] is x and len(final[4]) >= len(bv):
+    if final is not None and final[0] is x and len(final[4]) >= len(bv):
         # Newton's converged evaluation at x (the first len(bv) constraint points are the boundary
         # vertices, in vertex_points order): exact within the lazy band, lower bounds beyond it;
         # those beyond the kernel radius get the sharper nearest-sample bound
@@ -1110,19 +1148,17 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
             # the same check points' values (or bounds) from earlier checks: O moved rigidly, so in
             # O's body frame psi is the same L-Lipschitz function and psi(y) <= psi(y') + L |b - b'|
             # with b, b' the body-frame positions now and then
-            if C.FACET_CHECK_CACHE:
-                body = body_frame(y, (R, p))
-                known_body, known_psi = _check_cache(cm, state, is_refined, len(w))
-                step = body - known_body[f_sel]
-                moved = np.sqrt(np.einsum("fpd,fpd->fp", step, step))
-                psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
+            body = body_frame(y, (R, p))
+            known_body, known_psi = _check_cache(cm, state, is_refined, len(w))
+            step = body - known_body[f_sel]
+            moved = np.sqrt(np.einsum("fpd,fpd->fp", step, step))
+            psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
             todo = psi >= 0.0
             if todo.any():
                 ev = cm.field.evaluate(y[todo], (R, p), hessian=False)
                 psi[todo] = ev.psi
                 state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
-            if C.FACET_CHECK_CACHE:
-                known_body[f_sel], known_psi[f_sel] = body, psi
+            known_body[f_sel], known_psi[f_sel] = body, psi
             psi_max[sel] = psi.max(axis=1)
     out = (ids, psi_max, refined)
     state.check = (x, s, state.order, out)
@@ -1190,7 +1226,8 @@ def _path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
     differences of O's pose, one-sided at the ends of the path)."""
     L = float(cm.path.length)
     h = 1e-6 * max(L, 1e-12)
-    s0, s1 = max(0.0, s - h), min(L, s + h)
+    s0 = max(0.0, s - h)
+    s1 = s + h if cm.end_direction is not None else min(L, s + h)  # straight on past the end
     R, p = cm.pose(s)
     dim = cm.dim
     y3 = np.zeros((len(y), 3))

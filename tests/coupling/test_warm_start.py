@@ -114,35 +114,6 @@ def test_warm_starts_keep_new_points_off_the_object(monkeypatch):
     assert len(seen) > 30 and min(seen) >= 0.5 * C.WARM_START_FLOOR
 
 
-@pytest.mark.parametrize("flag", ["FACET_CHECK_CACHE", "FACET_CHECK_REUSE_VERTICES"])
-def test_facet_check_shortcuts_change_nothing(monkeypatch, flag):
-    # FACET_CHECK_CACHE: check points certified outside O by their values at earlier checks (O
-    # moved rigidly) skip their evaluation; FACET_CHECK_REUSE_VERTICES: the vertices' distances come
-    # from Newton's converged evaluation instead of a fresh one. Either way the run must be the same
-    # as with every uncertified point evaluated afresh, with fewer field evaluations
-    import simfab.coupling.config as C
-    import simfab.contact.imls as imls
-
-    runs, points = [], []
-    real = imls.ImlsField.evaluate
-    for on in (False, True):
-        monkeypatch.setattr(C, flag, on)
-        count = [0]
-
-        def counting(self, pts, *a, count=count, **k):
-            count[0] += len(pts)
-            return real(self, pts, *a, **k)
-
-        monkeypatch.setattr(imls.ImlsField, "evaluate", counting)
-        runs.append(S.simulate(load_coupling_scene("clip3d")))
-        points.append(count[0])
-    a, b = runs
-    assert [r.iterations for r in a.steps] == [r.iterations for r in b.steps]
-    assert np.array_equal(np.stack([r.x for r in a.steps]), np.stack([r.x for r in b.steps]))
-    assert np.array_equal(a.column("penetration"), b.column("penetration"))
-    assert points[1] < 0.9 * points[0]  # and it saves at least a tenth of the evaluated points
-
-
 def test_a_field_steeper_than_the_lipschitz_bound_is_reported(monkeypatch):
     # The facet check and the lazy distance bounds certify points outside O with |grad psi| <= L.
     # The bundled clamp's field has |grad psi| ~ 1.0 at its evaluated points: with L just below
@@ -150,7 +121,7 @@ def test_a_field_steeper_than_the_lipschitz_bound_is_reported(monkeypatch):
     import simfab.coupling.config as C
 
     res = S.simulate(load_coupling_scene("cclamp2d"))
-    assert not res.warnings
+    assert not any("gradient reached" in w for w in res.warnings)
     monkeypatch.setattr(C, "PSI_LIPSCHITZ", 0.99)
     res = S.simulate(load_coupling_scene("cclamp2d"))
     assert any("gradient reached" in w and "above the Lipschitz bound 0.99" in w for w in res.warnings)
