@@ -57,6 +57,7 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
         "time_split": {k: float(v) for k, v in res.timings.items()},
         "phase_split": {k: float(v) for k, v in res.phases.items()},
         "warnings": list(res.warnings),
+        "notes": list(getattr(res, "notes", [])),
         "units": SUMMARY_UNITS,
     }
     return prof, d
