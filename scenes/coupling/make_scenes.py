@@ -172,7 +172,7 @@ def main() -> None:
           fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.01],
           # held along the cylinder's axis z too: a frictionless cylinder does not resist sliding
           # along it, so the clip's position along z would be undetermined (it drifted by mm)
-          obj=dict(body="object", samples=1154), sim=dict(steps=35, fixed_axes="xz"),
+          obj=dict(body="object", samples=1154), sim=dict(steps=35),
           # fTetWild refines the thin arms well past the target unless it may coarsen
           mesh_options=dict(coarsen=True, tol=0.05, tries=8))
 
@@ -188,7 +188,7 @@ def main() -> None:
           fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.011],
           # held in all axes: a frictionless sphere does not resist the claw turning about the
           # insertion axis through its centre, which the x-support alone leaves free
-          obj=dict(body="object", samples=10000), sim=dict(steps=25, fix_all_axes=True))
+          obj=dict(body="object", samples=10000), sim=dict(steps=25))
 
     # door knocker: ring bar along z pushed into a clip along -x, then rotated 90 deg about z
     hk = 0.006

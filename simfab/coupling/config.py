@@ -67,11 +67,10 @@ MAX_EDGE_SAMPLES = 160
 MAX_FACE_LATTICE = 16
 #: Step bisection depth when a step cannot be taken in one go (2^-6 of h_in at most).
 MAX_BISECTIONS = 6
-#: After a refinement, solve the step again from its converged positions with the new points that
-#: lie inside O lifted out to LIFT_TO * d_hat (their facets' vertices move); from the previous
+#: After a refinement the step is solved again from its converged positions with the new points
+#: that lie inside O lifted out to LIFT_TO * d_hat (their facets' vertices move); from the previous
 #: step's state when that is infeasible or fails (clip3d 209 -> 194, knocker3d 295 -> 276 Newton
 #: iterations, same profile figures).
-RESUME_AFTER_REFINEMENT = True
 #: (0.8: near where contact points settle, see WARM_START_FLOOR; 0.5 took clip3d 179 iterations)
 LIFT_TO = 0.8
 #: Warm-start points closer to O than WARM_START_FLOOR * d_hat (and not that close at the last
@@ -84,20 +83,11 @@ LIFT_TO = 0.8
 #: force tolerance: energies to 1e-9, forces to 1.2e-5 relative; an adaptive lift to the last
 #: step's median contact gap did no better). 0 disables.
 WARM_START_FLOOR = 0.5
-#: Facet check: bound each check point by its value at earlier checks too (O moves rigidly, so in
-#: O's body frame psi(y) <= psi(y') + L |b - b'|); skips about a fifth of all contact-field
-#: evaluations on clip3d with identical results.
-FACET_CHECK_CACHE = True
-#: The facet check of a converged state takes its boundary vertices' distances from Newton's last
-#: evaluation there (exact within the lazy band, Lipschitz lower bounds beyond it) instead of
-#: evaluating the field at all of them again; vertices beyond the kernel radius get the
-#: nearest-sample bound.
-FACET_CHECK_REUSE_VERTICES = True
 #: Refinement rounds per step (each adds the facets found crossing O) before ConvergenceError.
 MAX_REFINEMENT_ROUNDS = 64
-#: Hessian regularization (relative to mean |diag H|) for the rigid modes left free by the
-#: insertion-axis-only boundary condition; it changes the Newton step, not the minimizer.
-RIGID_MODE_REG = 1e-12
+#: Diagonal term (relative to A's mean stiffness) that keeps the Hessian factorizable when the
+#: supports leave rigid motions free (Hessian only; the pin, rigid.Pin, fixes those motions).
+FACTOR_REG = 1e-10
 #: Profile analysis: energies within this fraction of E_max are equal (plateaus, noise).
 ENERGY_REL_TOL = 1e-6
 #: A steady state with E_ss <= LOOSE_REL * E_max is "loose" (zero grip).
@@ -115,9 +105,9 @@ class InsertionOptions:
         insertion direction, or the whole keyframe path if it ends before that.
     fix_all_axes : fix the fixed region in all axes (default: only along the insertion axis).
     fixed_axes : the axes the fixed region is held along, e.g. "xz" (must include the insertion
-        axis); None: the insertion axis only (or all with ``fix_all_axes``). For a part that could
-        slide freely along a direction O does not resist (a clip on a frictionless cylinder along
-        the cylinder's axis) the equilibrium is not unique along it: hold that axis too.
+        axis); None: the insertion axis only (or all with ``fix_all_axes``). Hold an axis for the
+        part's physics (how it is mounted), not for the solver: rigid motions that neither the
+        supports nor the contact resist are pinned by the solver (simfab.coupling.rigid).
     refine : add interpolated constraint points on boundary edges/faces that cross into O.
     samples_per_edge : 2D refinement points per boundary edge (paper: 10).
     face_lattice : 3D refinement: barycentric lattice order per boundary face (order m gives

@@ -18,7 +18,7 @@ from simfab.coupling.simulate import InsertionResult
 SUMMARY_UNITS = {
     "E_max": "J", "E_ss": "J", "coupling_ratio": "%", "F_in": "N", "F_rm": "N", "F_grip": "N",
     "max_von_mises": "Pa", "max_penetration": "m", "min_det_F": "-", "seconds": "s", "kappa_initial": "N/m",
-    "kappa_final": "N/m", "dhat": "m", "s_max": "m", "s_ss": "m",
+    "kappa_final": "N/m", "dhat": "m", "s_max": "m", "s_ss": "m", "s_path_end": "m",
 }
 
 CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "path_force_N", "grip_N", "max_von_mises_Pa", "max_penetration_m", "min_det_F",
@@ -39,6 +39,8 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
         "F_grip": prof.F_grip,
         "s_max": float(res.steps[prof.index_max].s),
         "s_ss": float(res.steps[prof.index_ss].s),
+        "E_ss_stationary": prof.stationary,
+        "s_path_end": float(res.model.path.length),
         "max_von_mises": float(res.column("max_von_mises").max()),
         "yield_stress": float(res.model.fem.material.yield_stress) if res.model.fem.material else None,
         "max_penetration": float(res.column("penetration").max()),
@@ -55,6 +57,7 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
         "time_split": {k: float(v) for k, v in res.timings.items()},
         "phase_split": {k: float(v) for k, v in res.phases.items()},
         "warnings": list(res.warnings),
+        "notes": list(getattr(res, "notes", [])),
         "units": SUMMARY_UNITS,
     }
     return prof, d

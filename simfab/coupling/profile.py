@@ -13,6 +13,11 @@ Definitions (thesis, "Fundamentals and Overview"):
   force needed to push O in; removal reverses the traversal (quasi-static, frictionless), so the
   force needed to pull O out is F_rm = max(0, max F) (A drawing O in) [N].
 - F_grip: grip force at the steady-state step [N].
+- Forces are read up to the steady state (the insertion ends there; past it O is pushed into its
+  seat), over the whole run for **ejects**.
+- stationary: E_ss is a local minimum of the energy along the path (the energy rises after it, or
+  the force there does not draw O in by more than REST_FORCE_REL of the peak force), not just
+  the run's last step.
 """
 
 from __future__ import annotations
@@ -22,6 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from simfab.coupling import config as C
+
+#: The force at a steady state at the run's end is ~0 within this fraction of the peak |force|.
+REST_FORCE_REL = 1e-2
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -37,6 +45,7 @@ class ProfileSummary:
     F_grip: float
     index_max: int
     index_ss: int
+    stationary: bool = True  # E_ss is a minimum of the energy along the path (not the run's end)
 
 
 def steady_state_index(energy: np.ndarray, tol: float) -> int:
@@ -66,8 +75,17 @@ def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarr
         E_ss = float(E[i_ss])
         category = "loose" if E_ss <= C.LOOSE_REL * E_max else "tight"
     ratio = 100.0 * E_ss / E_max if E_max > 0 else 100.0
+    # the insertion ends at the steady state: forces past it (O pushed on into A's seat) are not
+    # part of inserting or removing O
+    end = len(F) if category == "ejects" else i_ss + 1
+    Fi = F[:end]
+    # E_ss is a stationary point (a minimum along the path) when the energy rises again after it, or
+    # the force there no longer draws O in (~0, or pushing back: a minimum at a kink, O seated); at
+    # the last step with O still drawn in it is not
+    scale = float(np.abs(Fi).max()) if Fi.size else 0.0
+    stationary = category == "ejects" or i_ss < len(E) - 1 or F[i_ss] <= REST_FORCE_REL * scale
     return ProfileSummary(
         category=category, E_max=E_max, E_ss=E_ss, coupling_ratio=ratio,
-        F_in=float(max(0.0, -F.min())), F_rm=float(max(0.0, F.max())), F_grip=float(G[i_ss]),
-        index_max=i_max, index_ss=i_ss,
+        F_in=float(max(0.0, -Fi.min())), F_rm=float(max(0.0, Fi.max())), F_grip=float(G[i_ss]),
+        index_max=i_max, index_ss=i_ss, stationary=bool(stationary),
     )

@@ -5,7 +5,14 @@ normals. A rigid motion of A that moves no held dof and no contact point along i
 no energy: the equilibrium is then not unique along it (a clip on a frictionless cylinder can
 slide along the cylinder's axis, a claw on a sphere can turn about the axis through the sphere's
 centre), and where A ends up along it, and with it the forces, depends on solver details. This
-module finds such motions so that a run can say so.
+module finds such motions and pins them (:class:`Pin`): the next step's objective carries
+mu/2 |U^T (x - x_start)|^2, U (N, r) the unresisted motions' displacement fields over the free
+dofs (orthonormal), x_start the state the step starts from, mu = PIN_REL times the mean
+diagonal stiffness of A. Along a motion nothing resists the energy is flat, so the pin changes no
+energy and no force (its gradient vanishes at the equilibrium) and only removes the
+non-uniqueness: A stays where the step began along it. U is dense (r <= 6 columns), so the
+Newton solve with H + mu U U^T is a Woodbury update of the sparse factorization
+(:class:`PinnedSolver`). Before any contact every free motion is pinned (nothing acts on A).
 
 A rigid motion is q = (t, w): translation t and rotation w (about A's rest centroid c), moving a
 point y by u(y) = t + w x (y - c) (2D: w is a scalar, w x r = w (-r_y, r_x)).
@@ -17,7 +24,81 @@ import numpy as np
 
 #: A rigid motion whose contact stiffness is below this fraction of the stiffness it would have if
 #: every contact normal were aligned with the motion counts as unresisted.
-UNRESISTED_REL = 1e-3
+UNRESISTED_REL = 1e-2
+#: Pin weight relative to the mean diagonal stiffness of A at rest (see the module docstring).
+PIN_REL = 1.0
+
+
+def mean_stiffness(cm) -> float:
+    """Mean |diagonal| of A's stiffness at rest [N/m] (memoized)."""
+    k = cm._cache.get("mean_stiffness")
+    if k is None:
+        from simfab.fem.neohookean import energy_gradient_hessian
+
+        _, _, H = energy_gradient_hessian(cm.fem, cm.fem.rest, project_psd=False)
+        k = cm._cache["mean_stiffness"] = float(np.abs(H.diagonal()).mean())
+    return k
+
+
+class Pin:
+    """mu/2 |U^T (x - anchor)|^2 over the free dofs: U (N, r) orthonormal displacement fields of
+    rigid motions (zero on held dofs), anchor (N,) positions [m], mu [N/m]."""
+
+    def __init__(self, U: np.ndarray, mu: float, anchor: np.ndarray):
+        self.U, self.mu, self.anchor = U, float(mu), np.asarray(anchor, float).ravel().copy()
+
+    def energy(self, xf: np.ndarray) -> float:
+        q = self.U.T @ (xf - self.anchor)
+        return 0.5 * self.mu * float(q @ q)
+
+    def gradient(self, xf: np.ndarray) -> np.ndarray:
+        return self.mu * (self.U @ (self.U.T @ (xf - self.anchor)))
+
+    def force(self, xf: np.ndarray) -> np.ndarray:
+        """(r,) generalized force the pin exerts along each of its motions at xf [N]."""
+        return -self.mu * (self.U.T @ (xf - self.anchor))
+
+
+def pin_for(cm, Q: np.ndarray, c: np.ndarray, x: np.ndarray) -> Pin | None:
+    """Pin of the rigid motions span(Q) (columns, :func:`motion_basis` coordinates) of A at
+    positions x (n, dim), anchored at x; None when Q has no column."""
+    if Q.shape[1] == 0:
+        return None
+    dim = cm.dim
+    U = (_rows(x - c, dim) @ Q).reshape(-1, Q.shape[1])  # (n*dim, r)
+    U[~cm.free] = 0.0
+    U, sv, _ = np.linalg.svd(U, full_matrices=False)
+    U = U[:, sv > 1e-9 * sv.max()]
+    return Pin(U, PIN_REL * mean_stiffness(cm), x)
+
+
+class PinnedSolver:
+    """Solves (A + mu U U^T)[free] x = b with one factorization of A[free] (Woodbury):
+    y = A^-1 b, Z = A^-1 U, x = y - Z (I/mu + U^T Z)^-1 U^T y. Wraps a solver with
+    ``solve_free(A, free, b)``; A must be factorizable (see simulate: a tiny diagonal term)."""
+
+    def __init__(self, solver, pin: Pin):
+        self.solver, self.pin = solver, pin
+
+    def solve_free(self, A, free, b):
+        Uf = self.pin.U[free]
+        X = self.solver.solve_free(A, free, np.column_stack([b, Uf]))
+        y, Z = X[:, 0], X[:, 1:]
+        S = np.eye(Uf.shape[1]) / self.pin.mu + Uf.T @ Z
+        return y - Z @ np.linalg.solve(S, Uf.T @ y)
+
+    def solve(self, A, b):
+        return self.solve_free(A, np.arange(A.shape[0]), b)
+
+
+def unresisted(Q: np.ndarray, c: np.ndarray, y: np.ndarray, normals: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(k, r') the sub-basis of span(Q) that contact at points y (p, dim) with normals (p, dim) and
+    stiffness weights (p,) resists by less than UNRESISTED_REL (see :func:`weakest_motion`); all
+    of Q without contact."""
+    if Q.shape[1] == 0 or not np.any(weights > 0):
+        return Q
+    lam, V = _generalized(Q, c, y, normals, weights)
+    return Q @ V[:, lam < UNRESISTED_REL]
 
 
 def motion_basis(cm) -> tuple[np.ndarray, np.ndarray]:
@@ -63,14 +144,22 @@ def weakest_motion(Q: np.ndarray, c: np.ndarray, y: np.ndarray, normals: np.ndar
     """
     if Q.shape[1] == 0 or not np.any(weights > 0):
         return None
+    lam, V = _generalized(Q, c, y, normals, weights)
+    return float(max(lam[0], 0.0)), Q @ V[:, 0]
+
+
+def _generalized(Q, c, y, normals, weights):
+    """Eigenpairs (ascending) of K v = lam M v: contact stiffness K and motion metric M of the
+    motions span(Q) at the contact points (see :func:`weakest_motion`)."""
     J = _rows(y - c, y.shape[1]) @ Q  # (p, dim, k): point motion per basis motion
     nJ = np.einsum("pd,pdk->pk", normals, J)
     K = np.einsum("p,pk,pl->kl", weights, nJ, nJ)
     M = np.einsum("p,pdk,pdl->kl", weights, J, J)
     from scipy.linalg import eigh
 
-    lam, V = eigh(K, M + 1e-300 * np.eye(len(M)))
-    return float(max(lam[0], 0.0)), Q @ V[:, 0]
+    # a motion that moves no contact point (M singular along it: few contact points, or all on its
+    # axis) is not resisted either: K <= M, so regularizing M gives it the ratio 0
+    return eigh(K, M + (1e-12 * max(float(np.trace(M)), 1e-300) / len(M)) * np.eye(len(M)))
 
 
 def describe(q: np.ndarray, dim: int, radius: float) -> str:

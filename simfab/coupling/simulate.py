@@ -62,8 +62,11 @@ evaluation. The forces of a step use the barrier stiffness its equilibrium was s
 
 Well-posedness: a rigid motion of A that the supports leave free and no contact normal opposes
 (a clip sliding along a frictionless cylinder, a claw turning on a sphere) costs no energy, so the
-equilibrium is not unique along it. After every step the rigid motion the contact resists least
-is found (:mod:`simfab.coupling.rigid`); when one is unresisted the run says so in its warnings.
+equilibrium is not unique along it. When the supports leave any rigid motion free, every step's
+objective carries a weak pin mu/2 |x - x_start|^2 on the free dofs (:func:`simfab.coupling.rigid.
+pin_stiffness`): along an unresisted motion A stays where the step began, elsewhere the bias is
+~1e-5. After every step the rigid motion the contact resists least is found
+(:mod:`simfab.coupling.rigid`); when one is unresisted the run notes it (``InsertionResult.notes``).
 
 Certificates: the facet check and the lazy distances certify points outside O from a Lipschitz
 bound L of psi (PSI_LIPSCHITZ = 2; |grad psi| ~ 1 away from sharp features). IMLS fields can be
@@ -81,14 +84,14 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from simfab.contact.barrier import barrier, barrier_hessian, point_barrier, project_psd
 from simfab.contact.imls import ImlsField, body_frame, pose_matrix
 from simfab.coupling import config as C
-from simfab.coupling import rigid
+from simfab.coupling import rigid, settle
 from simfab.coupling.config import InsertionOptions
 from simfab.coupling.points import ContactPoints, check_weights, facet_points, facet_weights, vertex_points
 from simfab.errors import ConvergenceError, InputError
@@ -147,16 +150,37 @@ class CouplingModel:
         key = ("pos_quat", float(s))
         out = self._cache.get(key)
         if out is None:
-            pos, quat = self.path.pose_at(s)
+            L = float(self.path.length)
+            u = self.end_direction
+            if s > L and u is not None:  # past the last keyframe: straight on along the last segment
+                pos, quat = self.path.pose_at(L)
+                pos = np.asarray(pos, dtype=float) + (s - L) * u
+            else:
+                pos, quat = self.path.pose_at(s)
             out = self._cache[key] = (np.asarray(pos, dtype=float), np.asarray(quat, dtype=float))
         return out
+
+    @property
+    def end_direction(self) -> np.ndarray | None:
+        """(3,) unit translation of the path's last segment when that segment is a pure
+        translation (O may then continue past the last keyframe until it comes to rest), else None."""
+        key = "end_direction"
+        if key not in self._cache:
+            pos, quat = self.path.positions, self.path.quats
+            d = np.asarray(pos[-1] - pos[-2], dtype=float)
+            turn = abs(abs(float(np.dot(quat[-1], quat[-2]))) - 1.0) > 1e-12
+            n = float(np.linalg.norm(d))
+            self._cache[key] = None if (turn or n == 0) else d / n
+        return self._cache[key]
 
     def direction(self, s: float) -> np.ndarray:
         """(dim,) unit translation direction of O at s (zero during a pure rotation; memoized)."""
         key = ("direction", float(s))
         out = self._cache.get(key)
         if out is None:
-            u = np.asarray(self.path.direction_at(s), dtype=float)[: self.dim]
+            L = float(self.path.length)
+            past = s > L and self.end_direction is not None
+            u = (self.end_direction if past else np.asarray(self.path.direction_at(s), dtype=float))[: self.dim]
             n = np.linalg.norm(u)
             out = self._cache[key] = u / n if n > 0 else u
         return out.copy()
@@ -259,7 +283,9 @@ class InsertionResult:
     timings : seconds per resource (assembly, factorization, contact; they cut across phases);
     phases : wall seconds per phase of the insertion loop, each counted once (warm_start, newton,
     facet_check, record, rigid_check; "other" is the rest of ``seconds``);
-    warnings : one line each (e.g. an unresisted rigid motion)."""
+    warnings : one line each (e.g. steps too coarse, an unfinished insertion, stress above yield);
+    notes : one line each about how the run was solved (e.g. a rigid motion of A that nothing
+    resists, pinned by the solver)."""
 
     model: CouplingModel
     steps: list
@@ -267,6 +293,7 @@ class InsertionResult:
     timings: dict
     phases: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
 
     def column(self, name: str) -> np.ndarray:
         return np.array([getattr(r, name) for r in self.steps], dtype=float)
@@ -307,8 +334,9 @@ class _StepObjective:
     """E_d(x) + kappa sum_j b(d_j(x)) for a fixed pose of O and a fixed set of constraint points."""
 
     def __init__(self, cm: CouplingModel, points: ContactPoints, R: np.ndarray, p: np.ndarray, timer: _Timer,
-                 kappa: float | None = None):
+                 kappa: float | None = None, pin: rigid.Pin | None = None):
         self.cm, self.points, self.R, self.p, self.timer = cm, points, R, p, timer
+        self.pin = pin  # pin of the rigid motions nothing resists (simfab.coupling.rigid.Pin), or None
         self.kappa = cm.kappa if kappa is None else float(kappa)
         self.n, self.dim = cm.fem.n_vertices, cm.dim
         self.slots = _point_slots(cm, points)
@@ -378,6 +406,8 @@ class _StepObjective:
                 E, g, H = energy_gradient_hessian(cm.fem, x)
             else:
                 (E, g), H = energy_gradient(cm.fem, x), None
+        if self.pin is not None:
+            E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
         if not np.isfinite(E):
             return np.inf, g.ravel(), H
         d, gd, hd = self.distances(x, need_hessian)
@@ -432,7 +462,7 @@ class _StepObjective:
         from simfab.fem.neohookean import energy
 
         with self.timer.timed("assembly"):
-            E = energy(self.cm.fem, x)
+            E = energy(self.cm.fem, x) + (self.pin.energy(np.ravel(x)) if self.pin is not None else 0.0)
         if not np.isfinite(E):
             return np.inf
         d, _, _ = self.distances(np.asarray(x).reshape(self.n, self.dim), False)
@@ -450,7 +480,7 @@ class _StepObjective:
                 Hy = project_psd(Hy)
             wp_act = self.wpair[act][:, :, :, None, None]
             np.add.at(H.data, self.slots[act].ravel(), (wp_act * Hy[:, None, None, :, :]).ravel())
-        _regularize_rigid_modes(H, self.diag)
+        _regularize(self.cm, H, self.diag)
 
     def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
         """Step cap keeping every constraint point outside O along the whole step (see below).
@@ -509,10 +539,13 @@ def dim_factor(dim: int) -> float:
     return float(dim)
 
 
-def _regularize_rigid_modes(H, diag: np.ndarray) -> None:
-    """Add RIGID_MODE_REG * mean |diag H| to the diagonal of H in place (``diag``: the CSR slots of
-    the diagonal, :func:`_diag_slots`), for the rigid modes the supports may leave free."""
-    H.data[diag] += C.RIGID_MODE_REG * float(np.abs(H.data[diag]).mean())
+def _regularize(cm: CouplingModel, H, diag: np.ndarray) -> None:
+    """Add FACTOR_REG * mean stiffness to the diagonal of H in place (``diag``: the CSR slots of
+    the diagonal, :func:`_diag_slots`) when the supports leave rigid motions free: the sparse
+    factorization then succeeds, and the Woodbury pin (rigid.PinnedSolver) removes the near-null
+    directions from the solve; the term is in the Hessian only (not the energy)."""
+    if rigid.motion_basis(cm)[0].shape[1]:
+        H.data[diag] += C.FACTOR_REG * rigid.mean_stiffness(cm)
 
 
 def _diag_slots(cm: CouplingModel) -> np.ndarray:
@@ -542,6 +575,8 @@ class _State:
     prev: tuple | None = None  # (x, s) of the step before (for the extrapolating predictor)
     prev2: tuple | None = None  # (x, s) two steps before
     grad_peak: float = 0.0  # largest |grad psi| seen at converged constraint and check points [-]
+    pin_basis: np.ndarray | None = None  # (k, r) rigid motions (rigid.motion_basis coordinates) the
+    # contact of the last step left unresisted: pinned in the next step (rigid.Pin)
 
 
 def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> InsertionResult:
@@ -568,31 +603,58 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     check_start(cm)
     steps = []
     free_motions = rigid.motion_basis(cm)
-    weakest = None  # (ratio, motion, s, contact radius) of the least resisted rigid motion of A
-    for k in progress(range(len(cm.s_steps)), total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
-        s = float(cm.s_steps[k])
-        if k > 0:
-            iters = _advance(cm, state, s, ctx, depth=0)
-        else:
-            iters = _solve_at(cm, state, s, ctx)
-        with phases.timed("record"):
-            rec = _record(cm, state, iters, ctx)
+    state.pin_basis = free_motions[0]  # nothing touches A yet: every free rigid motion is pinned
+    weakest = [None]  # (ratio, motion, s, contact radius) of the least resisted rigid motion of A
+
+    def step_to(s, tolerate=False):
+        """Solve the step from the current state to path length s; (record, undo token). With
+        ``tolerate``, a step that cannot be solved gives (None, token) instead of ConvergenceError."""
+        saved = replace(state, refined=set(state.refined))
+        try:
+            iters = _advance(cm, state, s, ctx, depth=0) if steps else _solve_at(cm, state, s, ctx)
+            with phases.timed("rigid_check"):
+                basis = _unresisted_basis(cm, state, free_motions)
+            if basis.shape[1] < state.pin_basis.shape[1]:
+                # contact now resists a motion this step held pinned: solve the step again without it
+                prev, state.pin_basis = (state.prev, state.prev2), basis
+                iters += _advance(cm, state, s, ctx, depth=0) if steps else _solve_at(cm, state, s, ctx)
+                state.prev, state.prev2 = prev
+                with phases.timed("rigid_check"):
+                    basis = _unresisted_basis(cm, state, free_motions)
+            state.pin_basis = basis
+            with phases.timed("record"):
+                return _record(cm, state, iters, ctx), saved
+        except ConvergenceError:
+            if not tolerate:
+                raise
+            return None, saved
+
+    def undo(saved):
+        for f in fields(saved):
+            setattr(state, f.name, getattr(saved, f.name))
+
+    def keep(rec):
         steps.append(rec)
         with phases.timed("rigid_check"):
             w = _weakest_rigid_motion(cm, state, free_motions)
-        if w is not None and (weakest is None or w[0] < weakest[0]):
-            weakest = w
+        if w is not None and (weakest[0] is None or w[0] < weakest[0][0]):
+            weakest[0] = w
         if callback is not None:
-            callback(k, rec)
+            callback(len(steps) - 1, rec)
+
+    for s in progress(cm.s_steps, total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
+        keep(step_to(float(s))[0])
+    rest = settle.to_rest(cm, steps, step_to, undo, keep)
+    weakest = weakest[0]
     seconds = time.perf_counter() - t_start
     timer.add("total", seconds)
-    warnings = []
+    warnings = settle.warnings(cm, steps, rest)
+    notes = []
     if weakest is not None and weakest[0] < rigid.UNRESISTED_REL:
-        warnings.append(
+        notes.append(
             f"{cm.name}: nothing resists the part's rigid {rigid.describe(weakest[1], dim, weakest[3])} at "
             f"s={weakest[2]:.4g} m (the supports leave it free and the contact normals are perpendicular to "
-            "it): the equilibrium is not unique along it, so positions and forces may depend on solver "
-            "details; hold that axis ([simulation] fixed_axes or fix_all_axes)")
+            "it): the solver pins it where each step starts (no force acts along it)")
     if state.grad_peak > C.PSI_LIPSCHITZ:
         warnings.append(
             f"{cm.name}: the contact field's gradient reached {state.grad_peak:.3g} near the part (sharp features of "
@@ -602,7 +664,25 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     phase_split = dict(phases.t)
     phase_split["other"] = seconds - sum(phase_split.values())
     return InsertionResult(model=cm, steps=steps, seconds=seconds, timings=dict(timer.t), phases=phase_split,
-                           warnings=warnings)
+                           warnings=warnings, notes=notes)
+
+
+def _unresisted_basis(cm: CouplingModel, state: _State, free_motions) -> np.ndarray:
+    """(k, r) the free rigid motions that the contact at the current state leaves unresisted
+    (:func:`simfab.coupling.rigid.unresisted`; all of them without contact)."""
+    fin = _state_final(state)
+    Q, c = free_motions
+    if Q.shape[1] == 0:
+        return Q
+    if fin is None:
+        return state.pin_basis if state.pin_basis is not None else Q
+    d, gd = fin[4], fin[5]
+    act = (d < cm.dhat) & (np.einsum("kd,kd->k", gd, gd) > 0)
+    if not act.any():
+        return Q
+    y = state.points.positions(state.x)[act]
+    nrm = gd[act] / np.linalg.norm(gd[act], axis=1, keepdims=True)
+    return rigid.unresisted(Q, c, y, nrm, barrier_hessian(d[act], cm.dhat))
 
 
 def _weakest_rigid_motion(cm: CouplingModel, state: _State, free_motions):
@@ -635,9 +715,12 @@ def check_start(cm: CouplingModel) -> None:
                          "it at the first keyframe); move the first keyframe away", where="keyframes")
 
 
-def _objective(cm, points, s, ctx, kappa) -> _StepObjective:
+def _objective(cm, state, s, ctx) -> _StepObjective:
+    """The step objective at path length s over the state's points, with its barrier stiffness and
+    the pin of its unresisted rigid motions anchored at the state's positions."""
     R, p = cm.pose(s)
-    return _StepObjective(cm, points, R, p, ctx["timer"], kappa)
+    pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], state.x)
+    return _StepObjective(cm, state.points, R, p, ctx["timer"], state.kappa, pin)
 
 
 def _adapt_kappa(cm: CouplingModel, state: _State, obj: _StepObjective) -> None:
@@ -666,9 +749,14 @@ def _newton(cm: CouplingModel, obj: _StepObjective, x0: np.ndarray, ctx) -> tupl
     opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
                          step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=C.NEWTON_EAGER_HESSIAN,
                          eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL)
-    solver = _TimedSolver(ctx["solver"], ctx["timer"])
+    solver = _TimedSolver(_pinned(ctx["solver"], obj.pin), ctx["timer"])
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
     return res.x.reshape(x0.shape), res.iterations
+
+
+def _pinned(solver, pin):
+    """``solver`` with the rigid-mode pin's Woodbury update (rigid.PinnedSolver) when there is one."""
+    return solver if pin is None else rigid.PinnedSolver(solver, pin)
 
 
 class _TimedSolver:
@@ -692,7 +780,7 @@ def _solve_at(cm: CouplingModel, state: _State, s: float, ctx) -> int:
     """Solve at the current pose without moving O (step 0), with refinement."""
     total = 0
     for _ in range(C.MAX_REFINEMENT_ROUNDS):
-        obj = _objective(cm, state.points, s, ctx, state.kappa)
+        obj = _objective(cm, state, s, ctx)
         with ctx["phases"].timed("newton"):
             x, it = _newton(cm, obj, state.x, ctx)
         total += it
@@ -726,7 +814,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         resumed = False
         try:
             with ctx["phases"].timed("warm_start"):
-                obj = _objective(cm, state.points, s_new, ctx, state.kappa)
+                obj = _objective(cm, state, s_new, ctx)
                 x0 = None if resume is None else _lift_points(cm, state.points, resume, obj, below=0.0,
                                                               to=C.LIFT_TO * cm.dhat)
                 resumed = x0 is not None
@@ -762,7 +850,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
         # tolerance and are pushed out first, when it comes to that)
         _add_refinement(cm, state, new)
         refined = True
-        resume = x if C.RESUME_AFTER_REFINEMENT else None
+        resume = x
     raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")
 
 
@@ -998,7 +1086,7 @@ def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarr
     if H is None:
         with ctx["timer"].timed("assembly"):
             _, _, H = energy_gradient_hessian(cm.fem, x)
-            _regularize_rigid_modes(H, _diag_slots(cm))
+            _regularize(cm, H, _diag_slots(cm))
         state.H = H
     pen = C.PREDICTOR_PENALTY * float(np.abs(H.data[_diag_slots(cm)]).max())
     sel = normal | full
@@ -1014,7 +1102,8 @@ def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarr
     f_pt = pen * np.einsum("kij,kj->ki", N, delta[sel])  # penalty force per point
     rhs = pts.scatter(f_pt, n, rows=np.flatnonzero(sel)).ravel()
     fidx = np.flatnonzero(cm.free)
-    uf = _TimedSolver(ctx["solver"], ctx["timer"]).solve_free(A, fidx, rhs[fidx])
+    pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], x)
+    uf = _TimedSolver(_pinned(ctx["solver"], pin), ctx["timer"]).solve_free(A, fidx, rhs[fidx])
     u = np.zeros(n * dim)
     u[fidx] = uf
     return x + u.reshape(n, dim)
@@ -1062,7 +1151,7 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
     R, p = cm.pose(s)
     bv = np.asarray(cm.fem.boundary_vertices)
     dv = np.full(cm.fem.n_vertices, np.inf)
-    if C.FACET_CHECK_REUSE_VERTICES and final is not None and final[0] is x and len(final[4]) >= len(bv):
+    if final is not None and final[0] is x and len(final[4]) >= len(bv):
         # Newton's converged evaluation at x (the first len(bv) constraint points are the boundary
         # vertices, in vertex_points order): exact within the lazy band, lower bounds beyond it;
         # those beyond the kernel radius get the sharper nearest-sample bound
@@ -1110,19 +1199,17 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
             # the same check points' values (or bounds) from earlier checks: O moved rigidly, so in
             # O's body frame psi is the same L-Lipschitz function and psi(y) <= psi(y') + L |b - b'|
             # with b, b' the body-frame positions now and then
-            if C.FACET_CHECK_CACHE:
-                body = body_frame(y, (R, p))
-                known_body, known_psi = _check_cache(cm, state, is_refined, len(w))
-                step = body - known_body[f_sel]
-                moved = np.sqrt(np.einsum("fpd,fpd->fp", step, step))
-                psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
+            body = body_frame(y, (R, p))
+            known_body, known_psi = _check_cache(cm, state, is_refined, len(w))
+            step = body - known_body[f_sel]
+            moved = np.sqrt(np.einsum("fpd,fpd->fp", step, step))
+            psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
             todo = psi >= 0.0
             if todo.any():
                 ev = cm.field.evaluate(y[todo], (R, p), hessian=False)
                 psi[todo] = ev.psi
                 state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
-            if C.FACET_CHECK_CACHE:
-                known_body[f_sel], known_psi[f_sel] = body, psi
+            known_body[f_sel], known_psi[f_sel] = body, psi
             psi_max[sel] = psi.max(axis=1)
     out = (ids, psi_max, refined)
     state.check = (x, s, state.order, out)
@@ -1190,7 +1277,8 @@ def _path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
     differences of O's pose, one-sided at the ends of the path)."""
     L = float(cm.path.length)
     h = 1e-6 * max(L, 1e-12)
-    s0, s1 = max(0.0, s - h), min(L, s + h)
+    s0 = max(0.0, s - h)
+    s1 = s + h if cm.end_direction is not None else min(L, s + h)  # straight on past the end
     R, p = cm.pose(s)
     dim = cm.dim
     y3 = np.zeros((len(y), 3))

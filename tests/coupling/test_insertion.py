@@ -37,7 +37,8 @@ def test_insertion_force_is_minus_the_energy_slope(runs):
     # differences on the 35-step profile, compared where the profile is smooth (both neighbours
     # in contact); tolerance 5% of the peak force (discretization of the derivative, O(h_in^2)).
     res = runs["cclamp2d"]
-    s, E, F = res.column("s"), res.column("energy"), res.column("force")
+    n = len(res.model.s_steps)  # the planned steps (the search for the rest point past them is not evenly spaced)
+    s, E, F = res.column("s")[:n], res.column("energy")[:n], res.column("force")[:n]
     dEds = (E[2:] - E[:-2]) / (s[2:] - s[:-2])
     inner = (E[:-2] > 0.02 * E.max()) & (E[2:] > 0.02 * E.max())
     assert inner.sum() > 15
@@ -45,7 +46,7 @@ def test_insertion_force_is_minus_the_energy_slope(runs):
     assert err.max() <= 0.05 * np.abs(F).max()
     # the work-conjugate force from the contact forces on O agrees with the support reactions
     # along a pure translation (equilibrium of A; residual = Newton tolerance)
-    P = res.column("path_force")
+    P = res.column("path_force")[:n]
     assert np.allclose(P, F, atol=1e-3 * np.abs(F).max())
 
 

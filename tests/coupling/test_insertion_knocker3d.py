@@ -12,7 +12,9 @@ from _coupling_checks import check_every_step
 def test_knocker_every_step_feasible_through_the_rotation():
     cm = load_coupling_scene("knocker3d")
     res = simulate(cm)
-    check_every_step(res)
+    # the path ends in the prescribed rotation while the energy still falls slowly: the run says so
+    check_every_step(res, allow=("the path ends in a rotation",))
+    assert any("the path ends in a rotation" in w for w in res.warnings)
     # the ring really turned: its last orientation is 90 degrees about its bar from the first
     q0, q1 = res.steps[0].quat, res.steps[-1].quat
     angle = 2.0 * np.degrees(np.arccos(min(1.0, abs(float(np.dot(q0, q1))))))

@@ -6,6 +6,7 @@ import pytest
 
 from simfab.contact.barrier import point_barrier
 from simfab.coupling import config as C
+from simfab.coupling.rigid import mean_stiffness
 from simfab.coupling.points import edge_weights, facet_points, vertex_points
 from simfab.coupling.simulate import _StepObjective, _Timer
 from simfab.fem.neohookean import energy_gradient_hessian
@@ -60,7 +61,7 @@ def test_contact_hessian_is_jt_h_j(coarse_block_model):
         _, _, Hy = point_barrier(d[act], gd[act], hd[act], cm.dhat, cm.kappa, psd=project)
         ref = np.einsum("kia,kij,kjb->ab", J, Hy, J)
         off = (H - Hf).toarray() - ref
-        reg = C.RIGID_MODE_REG * float(np.abs(Hf.diagonal()).mean())
+        reg = C.FACTOR_REG * mean_stiffness(cm)
         # what remains is the diagonal rigid-mode regularization only
         assert np.allclose(off - np.diag(np.diag(off)), 0.0, atol=1e-9 * np.abs(ref).max())
         assert np.all(np.abs(np.diag(off)) <= 10 * reg + 1e-9 * np.abs(ref).max())

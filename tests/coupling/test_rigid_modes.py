@@ -5,9 +5,6 @@ import numpy as np
 from types import SimpleNamespace
 
 from simfab.coupling import rigid
-from simfab.coupling.outputs import summarize
-from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
 
 
 def _held_part(dim, held_axes):
@@ -55,9 +52,3 @@ def test_weakest_motion_of_contact_on_a_cylinder_and_a_sphere():
     ratio, q = rigid.weakest_motion(Qz, c, y, n, np.ones(100))
     assert ratio < 1e-12 and rigid.describe(q, 3, 1.0) == "rotation about z"
     assert rigid.weakest_motion(Qz, c, y, n, np.zeros(100)) is None  # no contact, nothing to say
-
-
-def test_clip_held_only_along_the_insertion_axis_warns_about_sliding_along_the_cylinder():
-    res = simulate(load_coupling_scene("clip3d", overrides={"simulation": {"fixed_axes": "x"}}))
-    assert len(res.warnings) == 1 and "translation along z" in res.warnings[0]
-    assert summarize(res)[1]["warnings"] == res.warnings

@@ -1,0 +1,188 @@
+"""Where an insertion run stops, and the checks of its profile that a designer relies on.
+
+**Steps to rest.** The keyframe path of a scene is drawn by hand and often ends a little before O
+seats: at its last pose A still draws O in (path force > 0) and the energy is still falling, so
+E_ss read there is not the steady state. When the path's last segment is a pure translation and
+the insertion length is the default one, the run continues past the last keyframe straight on,
+with the same step, until the path force has gone through zero (O at rest: the energy at its
+minimum along the path), at most as many steps again as planned. :func:`schedule` yields the path
+lengths of the steps; it reads the records the caller appends as it goes.
+
+**Checks** (:func:`warnings`, one line each, copied into the run's warnings):
+
+- the run ends while A still draws O in (path cannot be continued, or the extension cap was
+  reached): E_ss is then not a stationary point of the energy along the path;
+- step resolution: over every step the work of the path force (trapezoidal rule) must match the
+  change of stored energy, W_k = -h (P_k + P_{k+1}) / 2 = Delta(E + B)_k, to within
+  STEP_WORK_REL * E_max (the trapezoidal error is h^3 |E'''| / 12 per step on a smooth profile,
+  larger where the step skips over a feature of the profile); and F_in read at a step must agree
+  with the peak of the parabola through it and its neighbours to within STEP_PEAK_REL (else the
+  peak falls between steps);
+- max von Mises stress above the material's yield stress (the model is hyperelastic: a part that
+  yields would not spring back as simulated).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: O is at rest when the path force (A drawing O in, > 0) is at most this fraction of the peak |force|.
+from simfab.coupling.profile import REST_FORCE_REL  # noqa: E402 (one definition)
+#: Continue past the path's end by at most this many times the planned number of steps.
+SETTLE_MAX_STEPS_REL = 1.0
+#: Extension steps are at most the path length over this.
+MIN_SETTLE_STEPS = 20
+#: The rest point is found when the energy between the bracket's ends is known to within this fraction of E_max.
+REST_ENERGY_REL = 1e-3
+#: Trials to find the rest point once a step has overshot it.
+REST_TRIALS = 16
+#: Largest mismatch between a step's work and its change of stored energy, relative to E_max.
+STEP_WORK_REL = 0.05
+#: Largest difference between F_in at a step and the peak of the parabola through its neighbours.
+STEP_PEAK_REL = 0.03
+
+
+def can_continue(cm) -> bool:
+    """O may move on past the last keyframe: default insertion length reaching the path's end and a
+    last segment that is a pure translation."""
+    return cm.options.L_max is None and cm.end_direction is not None and \
+        float(cm.s_steps[-1]) >= float(cm.path.length) * (1 - 1e-12)
+
+
+def still_drawn_in(steps) -> bool:
+    """The last record's path force still draws O in (above REST_FORCE_REL of the peak force) and
+    the energy fell over the last step."""
+    if len(steps) < 2:
+        return False
+    P = np.array([r.path_force for r in steps])
+    peak = float(np.abs(P).max())
+    E_prev, E_last = steps[-2].energy + steps[-2].barrier_energy, steps[-1].energy + steps[-1].barrier_energy
+    return peak > 0 and P[-1] > REST_FORCE_REL * peak and E_last < E_prev
+
+
+def to_rest(cm, steps, step_to, undo, keep) -> str:
+    """Continue the run past the path's end until O comes to rest (see the module docstring).
+
+    steps : the records so far (StepResult list); step_to(s, tolerate=True) -> (record or None
+    when the step cannot be solved, token) solves the step from the current state to path length
+    s [m]; undo(token) returns to the state before that step; keep(record) appends a record.
+    Steps of the last planned size (at most 1/MIN_SETTLE_STEPS of the path) go on while
+    :func:`still_drawn_in`; a step that overshoots the rest point (path force below
+    -REST_FORCE_REL * peak: O pushed into a stiffer contact, or no solution: undone) starts the search; the rest
+    point is bracketed (:func:`_bracket`), every trial solved from the last one's state (a step
+    back from past the rest point is short and feasible: O moves away from A). It ends when the path
+    force is within REST_FORCE_REL * peak of zero, or when the energy between the bracket's ends is
+    known to within REST_ENERGY_REL * E_max (see :func:`_bracket`).
+
+    Returns "rest" (O came to rest), "not continued" (the path cannot be continued or was already
+    at rest) or why it stopped short ("cap": the extension limit, "bracket": no rest point found).
+    """
+    if len(steps) < 2 or not can_continue(cm) or not still_drawn_in(steps):
+        return "not continued" if len(steps) < 2 or not still_drawn_in(steps) else "cannot continue"
+    h = min(steps[-1].s - steps[-2].s, float(cm.path.length) / MIN_SETTLE_STEPS)
+    peak = float(max(abs(r.path_force) for r in steps))
+    E_max = float(max(r.energy for r in steps))
+    tol = REST_FORCE_REL * peak
+    for _ in range(int(np.ceil(SETTLE_MAX_STEPS_REL * (len(cm.s_steps) - 1)))):
+        if not still_drawn_in(steps):
+            return "rest"
+        rec, token = step_to(steps[-1].s + h, tolerate=True)
+        if rec is not None and rec.path_force >= -tol:
+            keep(rec)
+            continue
+        if rec is None:
+            undo(token)
+        return _bracket(steps[-1], rec, steps[-1].s + h, step_to, undo, keep, tol, REST_ENERGY_REL * E_max)
+    return "rest" if not still_drawn_in(steps) else "cap"
+
+
+def _bracket(lo, hi, hi_s, step_to, undo, keep, tol, e_tol) -> str:
+    """Find the rest point between the kept record ``lo`` (path force > 0) and an overshoot at
+    ``hi_s`` (record ``hi``, None when unsolvable); see :func:`to_rest`.
+
+    Bisection on the sign of the path force P = -dW/ds (W = E + B), each trial solved from the
+    last trial's state, until P_lo (s_hi - s_lo) <= e_tol [J]: W falls at most that much from the
+    lower end to the rest point (W convex on the bracket, P <= P_lo). The rest point is often a
+    kink (O seating against a stiff part of A: P jumps from drawing in to pushing back within a
+    micrometre), so the two ends are kept as the last records: force through zero between them,
+    the energy's minimum along the path at the lower end.
+    """
+    for _ in range(REST_TRIALS):
+        if lo.path_force * (hi_s - lo.s) <= e_tol:
+            break
+        s_try = 0.5 * (lo.s + hi_s)
+        rec, token = step_to(s_try, tolerate=True)
+        if rec is not None and abs(rec.path_force) <= tol:
+            keep(rec)
+            return "rest"
+        if rec is None:
+            undo(token)
+            hi, hi_s = None, s_try
+        elif rec.path_force > 0:  # still drawn in: the new lower end
+            lo = rec
+        else:
+            hi, hi_s = rec, s_try
+    else:
+        rec, _ = step_to(lo.s, tolerate=True)
+        keep(rec if rec is not None else lo)
+        return "bracket"
+    for end in (lo, hi):  # the state is the last trial's: solve the ends again, in order, to keep them
+        if end is not None:
+            rec, _ = step_to(end.s, tolerate=True)
+            keep(rec if rec is not None else end)
+    return "rest"
+
+
+def warnings(cm, steps, rest: str = "not continued") -> list:
+    """One line per problem found in the profile of ``steps`` (StepResult list), see the module
+    docstring; ``rest`` is :func:`to_rest`'s outcome."""
+    out = []
+    if len(steps) < 2:
+        return out
+    s = np.array([r.s for r in steps])
+    E = np.array([r.energy for r in steps])
+    Et = E + np.array([r.barrier_energy for r in steps])
+    P = np.array([r.path_force for r in steps])
+    name = cm.name
+    if rest != "rest" and still_drawn_in(steps):
+        why = {"cap": f"it was continued past the last keyframe by {SETTLE_MAX_STEPS_REL:g}x the planned steps",
+               "bracket": "no rest point was found past the last keyframe"}.get(rest)
+        if why is None:
+            why = ("the insertion length L_max ends it" if cm.options.L_max is not None else
+                   "the path ends in a rotation" if cm.end_direction is None else "the path ends there")
+        out.append(f"{name}: the run ends at s={s[-1] * 1e3:.4g} mm while the part still draws the object in "
+                   f"(path force {P[-1]:+.4g} N, energy still falling; {why}): E_ss is not a stationary point "
+                   "and the coupling ratio and category come from an unfinished insertion; extend the keyframes "
+                   "(or L_max) to where the object seats")
+    E_max = float(E.max())
+    if E_max > 0:
+        h = np.diff(s)
+        work = -0.5 * h * (P[1:] + P[:-1])
+        mis = np.abs(np.diff(Et) - work)
+        k = int(np.argmax(mis))
+        if mis[k] > STEP_WORK_REL * E_max:
+            out.append(f"{name}: steps too coarse to resolve the profile: over the step to s={s[k + 1] * 1e3:.4g} mm "
+                       f"the work of the insertion force differs from the change of stored energy by "
+                       f"{100 * mis[k] / E_max:.3g}% of E_max (> {100 * STEP_WORK_REL:g}%); use more steps")
+        n = len(cm.s_steps)  # the planned steps (the rest search past them may push O into its seat)
+        i = int(np.argmin(P[:n]))
+        if 0 < i < n - 1 and P[i] < 0:
+            F_peak = _parabola_peak(s[i - 1:i + 2], P[i - 1:i + 2])
+            if abs(F_peak - P[i]) > STEP_PEAK_REL * abs(P[i]):
+                out.append(f"{name}: steps too coarse to resolve the peak insertion force: {-P[i]:.4g} N at a "
+                           f"step, {-F_peak:.4g} N at the peak between steps; use more steps")
+    mat = cm.fem.material
+    if mat is not None:
+        vm = np.array([r.max_von_mises for r in steps])
+        k = int(np.argmax(vm))
+        if vm[k] > mat.yield_stress:
+            out.append(f"{name}: the max von Mises stress {vm[k] / 1e6:.4g} MPa (at s={s[k] * 1e3:.4g} mm) exceeds "
+                       f"the yield stress {mat.yield_stress / 1e6:.4g} MPa of {mat.name}: the part would deform "
+                       "plastically (the model is elastic)")
+    return out
+
+
+def _parabola_peak(x: np.ndarray, y: np.ndarray) -> float:
+    """Extreme value of the parabola through three points (x (3,), y (3,)); y[1] if it is a line."""
+    a, b, c = np.polyfit(x - x[1], y, 2)
+    return float(c - b * b / (4 * a)) if a != 0 else float(y[1])

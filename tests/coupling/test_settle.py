@@ -1,0 +1,74 @@
+"""The run continues past the keyframes until the object comes to rest, says when it cannot, and
+warns when its steps are too coarse for the profile or the part is stressed beyond yield."""
+
+import numpy as np
+import pytest
+
+from simfab.coupling.outputs import summarize
+from simfab.coupling.profile import analyze
+from simfab.coupling.scene import load_coupling_scene
+from simfab.coupling.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def cclamp():
+    return simulate(load_coupling_scene("cclamp2d"))
+
+
+def test_cclamp_continues_past_the_keyframes_until_the_cylinder_seats(cclamp):
+    # cclamp2d's keyframes end ~0.1 mm before the cylinder seats: the clamp still draws it in with
+    # ~18.7 N there. The run goes on until the path force passes through zero: the last two
+    # records bracket the rest point (force > 0 then <= 0, or one record with |force| <= 1% of the peak)
+    res = cclamp
+    n = len(res.model.s_steps)
+    P, E, s = res.column("path_force"), res.column("energy"), res.column("s")
+    assert len(res.steps) > n and s[-1] > res.model.path.length
+    assert P[n - 1] > 0.5 * np.abs(P).max()  # drawn in hard at the last keyframe
+    peak = np.abs(P[:n]).max()
+    assert abs(P[-1]) <= 0.01 * peak or (P[-2] > 0 >= P[-1])
+    prof, summary = summarize(res)
+    # E_ss is the energy's minimum along the path, below the value at the last keyframe, and a
+    # stationary point; the steady state lies past the keyframes
+    assert prof.stationary and prof.E_ss == pytest.approx(E[prof.index_max:].min(), rel=1e-12) and prof.E_ss < 0.95 * E[n - 1]
+    assert summary["s_ss"] > res.model.path.length
+    # no run warning (only the design's yield warning)
+    assert all("yield stress" in w for w in res.warnings)
+
+
+def test_a_run_cut_short_warns_and_its_steady_state_is_not_stationary():
+    cm = load_coupling_scene("cclamp2d", overrides={"simulation": {"L_max": 0.0095}})
+    res = simulate(cm)
+    assert len(res.steps) == len(cm.s_steps)  # an explicit L_max is not extended
+    assert any("still draws the object in" in w and "E_ss is not a stationary point" in w for w in res.warnings)
+    prof, _ = summarize(res)
+    assert not prof.stationary and prof.index_ss == len(res.steps) - 1
+
+
+def test_too_few_steps_warn_and_the_default_steps_do_not(cclamp):
+    # --steps 1 and 2 change the answer (category, F_in by 40%): the work of the force over a step
+    # no longer matches the change of stored energy; the 35-step default resolves the profile
+    for steps in (1, 2):
+        res = simulate(load_coupling_scene("cclamp2d", overrides={"simulation": {"steps": steps}}))
+        assert any("steps too coarse" in w for w in res.warnings), (steps, res.warnings)
+    assert not any("steps too coarse" in w for w in cclamp.warnings)
+
+
+def test_yield_warning_follows_the_material(cclamp):
+    vm = cclamp.column("max_von_mises").max()
+    for yield_stress, warned in ((0.5 * vm, True), (2.0 * vm, False)):
+        res = simulate(load_coupling_scene("cclamp2d", overrides={
+            "material": {"name": "stiff", "youngs_modulus": 3.5e9, "poisson_ratio": 0.36, "yield_stress": yield_stress}}))
+        assert any("exceeds the yield stress" in w for w in res.warnings) == warned
+
+
+def test_profile_forces_stop_at_the_steady_state():
+    # past the steady state O is pushed into its seat: that force is not part of inserting it
+    s = np.linspace(0, 1, 7)
+    E = np.array([0, 2, 3, 2, 1, 1.2, 3.0])
+    F = np.array([0, -2, 0.5, 1.5, 0.5, -1, -20.0])
+    p = analyze(s, E, F, np.zeros(7))
+    assert p.category == "tight" and p.index_ss == 4 and p.stationary
+    assert p.F_in == pytest.approx(2.0) and p.F_rm == pytest.approx(1.5)
+    # ending while the energy still falls and the force still draws O in: not stationary
+    p = analyze(s[:4], E[:4], F[:4], np.zeros(4))
+    assert p.index_ss == 3 and not p.stationary
