@@ -8,6 +8,7 @@ are. Rows of the old table that match no run of the spec are dropped.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import time
@@ -75,11 +76,10 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, quiet: bool = False, retr
     from simfab.progress import log
     from simfab.sweep.plots import plot_sweep
     from simfab.sweep.runner import cell, execute_run, run_task
-    from simfab.sweep.tasks import run_tasks
+    from simfab.sweep.tasks import SERIAL, connect, run_tasks
 
     t0 = time.perf_counter()
     out = Path(out).absolute()
-    _check_out(out)
     _check_derived(spec)
     points = spec.points()
     keys = [spec.run_key(p, __version__) for p in points]
@@ -117,12 +117,16 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, quiet: bool = False, retr
             last[0] = time.perf_counter()
 
     tasks = [run_task(spec, points[i], run_dir=str(out / "runs" / keys[i])) for i in todo]
-    log(f"sweep: {spec.name}: {len(points)} runs, {len(todo)} to run", quiet=quiet)
-    try:
-        run_tasks(execute_run, tasks, scheduler=scheduler, quiet=quiet, desc=spec.name, on_result=on_result)
-    finally:  # an interrupted sweep keeps what finished
-        df = table()
-        paths = write_table(df, out, spec.name)
+    with contextlib.ExitStack() as stack:
+        if todo and scheduler != SERIAL:  # a scheduler that cannot be reached: no output at all
+            scheduler = stack.enter_context(connect(scheduler, quiet=quiet))
+        _check_out(out)
+        log(f"sweep: {spec.name}: {len(points)} runs, {len(todo)} to run", quiet=quiet)
+        try:
+            run_tasks(execute_run, tasks, scheduler=scheduler, quiet=quiet, desc=spec.name, on_result=on_result)
+        finally:  # an interrupted sweep keeps what finished
+            df = table()
+            paths = write_table(df, out, spec.name)
     plots = plot_sweep(spec, df, out)
     counts = df["status"].value_counts().to_dict() if len(df) else {}
     summary = {

@@ -186,6 +186,10 @@ def connect(scheduler=None, *, quiet: bool = False, min_workers: int = 1, timeou
             if "://" not in addr:
                 addr = "tcp://" + addr
             try:
+                if addr.startswith("tcp://"):  # refused at once rather than after Dask's retries
+                    from distributed.comm.addressing import parse_host_port
+
+                    socket.create_connection(parse_host_port(addr[6:]), timeout=timeout).close()
                 client = stack.enter_context(Client(addr, timeout=timeout))
             except (OSError, TimeoutError) as e:
                 raise InputError(f"cannot connect to a Dask scheduler at {addr}: {one_line(e)}", where="--scheduler") from None
