@@ -46,6 +46,10 @@ STATUSES = ("ok", "bad_input", "not_converged", "error", "worker_died", "version
 
 SERIAL = "serial"
 
+#: Shortest interval between two gathers of finished results [s] (a gather is a round trip
+#: to the workers; for short tasks it dominates Dask's per-task overhead).
+GATHER_INTERVAL = 0.1
+
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class TaskResult:
@@ -110,6 +114,10 @@ def call(fn: Callable, kwargs: dict, version: str | None = None) -> dict:
             out.update(status="error", message=one_line(e))
     out["seconds"] = time.perf_counter() - t0
     return out
+
+
+def _call_kw(kwargs: dict, *, fn: Callable, version: str | None) -> dict:
+    return call(fn, kwargs, version)
 
 
 def machine_workers() -> int:
@@ -284,18 +292,31 @@ def _run_dask(client, fn, kwargs_list, version, finish, bar) -> None:
     from distributed.scheduler import KilledWorker
 
     token = f"{getattr(fn, '__name__', 'task')}-{socket.gethostname()}-{os.getpid()}-{time.time_ns()}"
-    futures = [client.submit(call, fn, kw, version, key=f"simfab-{token}-{i}", pure=False) for i, kw in enumerate(kwargs_list)]
+    futures = client.map(_call_kw, kwargs_list, fn=fn, version=version, key=[f"simfab-{token}-{i}" for i in range(len(kwargs_list))], pure=False)
     index = {f.key: i for i, f in enumerate(futures)}
     last = 0.0
     try:
-        for fut in as_completed(futures):
-            i = index[fut.key]
+        done = as_completed(futures)
+        t_gather = 0.0
+        while not done.is_empty():
+            batch = done.next_batch(block=True)
+            wait = GATHER_INTERVAL - (time.perf_counter() - t_gather)
+            if wait > 0:  # many short tasks: collect a few more, then one round trip for all
+                time.sleep(wait)
+                batch += done.next_batch(block=False)
+            t_gather = time.perf_counter()
             try:
-                finish(_result(i, fut.result()))
-            except KilledWorker as e:
-                finish(TaskResult(index=i, status="worker_died", message=one_line(e)))
-            except Exception as e:  # lost in transit (e.g. the result could not be unpickled)
-                finish(TaskResult(index=i, status="error", message=one_line(e)))
+                values = client.gather(batch)
+            except Exception:  # some task of the batch failed outside fn: one by one
+                values = None
+            for j, fut in enumerate(batch):
+                i = index[fut.key]
+                try:
+                    finish(_result(i, values[j] if values is not None else fut.result()))
+                except KilledWorker as e:
+                    finish(TaskResult(index=i, status="worker_died", message=one_line(e)))
+                except Exception as e:  # lost in transit (e.g. the result could not be unpickled)
+                    finish(TaskResult(index=i, status="error", message=one_line(e)))
             now = time.perf_counter()
             if bar._bar is not None and now - last > 0.5:  # a scheduler round trip: throttled
                 last = now
