@@ -294,6 +294,7 @@ def _run_dask(client, fn, kwargs_list, version, finish, bar) -> None:
     token = f"{getattr(fn, '__name__', 'task')}-{socket.gethostname()}-{os.getpid()}-{time.time_ns()}"
     futures = client.map(_call_kw, kwargs_list, fn=fn, version=version, key=[f"simfab-{token}-{i}" for i in range(len(kwargs_list))], pure=False)
     index = {f.key: i for i, f in enumerate(futures)}
+    bar.update(running=min(len(futures), sum(client.nthreads().values())))
     last = 0.0
     try:
         done = as_completed(futures)
@@ -312,11 +313,12 @@ def _run_dask(client, fn, kwargs_list, version, finish, bar) -> None:
             for j, fut in enumerate(batch):
                 i = index[fut.key]
                 try:
-                    finish(_result(i, values[j] if values is not None else fut.result()))
+                    r = _result(i, values[j] if values is not None else fut.result())
                 except KilledWorker as e:
-                    finish(TaskResult(index=i, status="worker_died", message=one_line(e)))
+                    r = TaskResult(index=i, status="worker_died", message=one_line(e))
                 except Exception as e:  # lost in transit (e.g. the result could not be unpickled)
-                    finish(TaskResult(index=i, status="error", message=one_line(e)))
+                    r = TaskResult(index=i, status="error", message=one_line(e))
+                finish(r)
             now = time.perf_counter()
             if bar._bar is not None and now - last > 0.5:  # a scheduler round trip: throttled
                 last = now

@@ -168,3 +168,20 @@ profile = "profile_csv"
     assert runs[1]["F_in"] == pytest.approx(2 * runs[0]["F_in"], rel=1e-4)
     assert runs[1]["E_max"] == pytest.approx(2 * runs[0]["E_max"], rel=1e-4)
     assert runs[0]["profile"].startswith(str(tmp_path / "r0"))  # the run wrote into its own folder
+
+
+def test_bundled_specs_load(tmp_path):
+    """Every bundled spec parses, names existing scenes and edits addresses they have."""
+    from simfab._bundled import scenes_dir
+
+    specs = {p.stem: load_spec(p) for p in scenes_dir("sweeps").glob("*.toml")}
+    assert set(specs) == {"cclamp2d_chart", "unit_cell_inserts"}
+    chart = specs["cclamp2d_chart"]
+    assert len(chart.points()) == 20 and [p.name for p in chart.swept] == ["youngs_modulus", "arm_width"]
+    cell = specs["unit_cell_inserts"]
+    sizes = [p["insert_half_size"] for p in cell.points()]
+    assert min(sizes) < 0.015 < max(sizes) and 0.015 in [round(s, 12) for s in sizes]  # saddle, flat and dome
+    for name, s in specs.items():  # the edited scenes are written and parse
+        kw = run_task(s, s.points()[-1], run_dir=str(tmp_path / name))
+        f = write_scene(kw["scene"], tmp_path / name)
+        assert f.is_file() and f.name == s.scene.name
