@@ -22,7 +22,7 @@ import sys
 from simfab.errors import ConvergenceError, InputError, ValidationFailed
 
 #: Subcommands in the order ``simfab --help`` lists them.
-SUBCOMMANDS = ("grow", "couple", "deploy", "crowd", "validate", "demo", "render", "inspect")
+SUBCOMMANDS = ("grow", "couple", "deploy", "crowd", "sweep", "validate", "demo", "render", "inspect")
 
 _MODULE = {"inspect": "inspect_"}  # avoid shadowing the stdlib ``inspect`` module
 

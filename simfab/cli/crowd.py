@@ -1,7 +1,7 @@
 """``simfab crowd``: wisdom of micro-crowds -- aggregate ratings, study crowd size, compute truths.
 
     simfab crowd aggregate RATINGS.csv --scale 1 10 [--truth TRUTH.csv]
-    simfab crowd study RATINGS.csv --scale 1 10 --truth TRUTH.csv [--subcrowds 500]
+    simfab crowd study RATINGS.csv --scale 1 10 --truth TRUTH.csv [--subcrowds 500] [--scheduler ADDRESS]
     simfab crowd truth MESH [--orientations six | NAME=RX:RY:RZ ...] [--units mm]
     simfab crowd simulate --tasks 6 --scale 1 10 [--practitioners 15] [--public 100]
     simfab crowd bracket [--designs NAME ...] [--load 20]
@@ -79,6 +79,7 @@ def add_args(p):
     s.add_argument("--truth", required=True, help="CSV task,truth")
     s.add_argument("--subcrowds", type=int, default=500, help="sub-crowds per size (default 500)")
     s.add_argument("--min-size", type=int, default=5, help="smallest sub-crowd (default 5); sizes run to N-1")
+    s.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler to run the sizes on (default: a local cluster, one worker per core; 'serial': in this process)")
     _sampler_args(s, study=True)
     add_common_args(s)
 
@@ -200,7 +201,7 @@ def run_study(args):
     cfg = _sampler_config(args, study=True)
     ratings = load_ratings(args.ratings, scale)
     truth = load_truth(args.truth, ratings)
-    res = micro_crowd_study(ratings, truth, n_sub=args.subcrowds, min_size=args.min_size, config=cfg, seed=args.seed, quiet=args.quiet, device=_device(args))
+    res = micro_crowd_study(ratings, truth, n_sub=args.subcrowds, min_size=args.min_size, config=cfg, seed=args.seed, quiet=args.quiet, device=_device(args), scheduler=args.scheduler)
     return study_outputs(res, args.out, title=f"Micro-crowd study of {os.path.basename(args.ratings)}")
 
 

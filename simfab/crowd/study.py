@@ -23,7 +23,7 @@ import numpy as np
 from simfab.crowd import metrics
 from simfab.crowd.config import STUDY_SAMPLER, Priors, SamplerConfig
 from simfab.crowd.data import Ratings
-from simfab.errors import InputError
+from simfab.errors import ConvergenceError, InputError
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -83,11 +83,18 @@ def micro_crowd_study(
     seed: int = 0,
     quiet: bool = True,
     device: str = "cpu",
+    scheduler=None,
 ) -> StudyResult:
-    """Run the study on ``ratings`` with ``truth`` ((Q,) scale units). See module docstring."""
+    """Run the study on ``ratings`` with ``truth`` ((Q,) scale units). See module docstring.
+
+    Each crowd size is one task of :func:`simfab.sweep.run_tasks` (``scheduler``: None for a
+    local Dask cluster sized to this machine, "HOST:PORT" for an existing one, "serial" for
+    this process). The sub-crowds and sampler seeds of all sizes are drawn here, in order,
+    from one generator seeded with ``seed``, so the result does not depend on where or in
+    which order the sizes run.
+    """
     from simfab.crowd.analysis import half_width
-    from simfab.crowd.sampler import sample
-    from simfab.progress import log
+    from simfab.sweep.tasks import run_tasks
 
     t0 = time.perf_counter()
     N = len(ratings.workers)
@@ -100,26 +107,41 @@ def micro_crowd_study(
     rng = np.random.default_rng(seed)
     sc = ratings.scale
     truth = np.asarray(truth, float)
-    indiv = metrics.individual_errors(ratings.labels, truth, sc)
-    unit, truth_unit, hw = ratings.unit, sc.to_unit(truth), half_width(ratings, config)
-    cols = {k: [] for k in ("k", "n", "pm", "ps", "bm", "bs", "u", "rm")}
+    common = {"unit": ratings.unit, "truth_unit": sc.to_unit(truth), "individual": metrics.individual_errors(ratings.labels, truth, sc),
+              "config": config, "priors": priors, "half_width": half_width(ratings, config), "device": device}
+    tasks = []
     for k in range(min_size, N):
         idx = subcrowds(N, k, n_sub, rng)
-        log(f"micro-crowd study: size {k}, {len(idx)} sub-crowds", quiet=quiet)
-        post = sample(unit[idx], config=config, priors=priors, seed=int(rng.integers(2**31 - 1)), half_width=hw, keep_latent=False, device=device)
-        est = post.mean("x")  # (S, Q) unit scale
-        bias = np.sqrt(np.mean((est - truth_unit[None]) ** 2, axis=1))
-        pct = np.array([metrics.percentile_rank(b, indiv[members]) for b, members in zip(bias, idx)])
-        cols["k"].append(k)
-        cols["n"].append(len(idx))
-        cols["pm"].append(pct.mean())
-        cols["ps"].append(pct.std(ddof=1))
-        cols["bm"].append(bias.mean())
-        cols["bs"].append(bias.std(ddof=1))
-        cols["u"].append(float(np.mean(post.rhat_max > config.rhat_target)))
-        cols["rm"].append(float(np.median(post.rhat_max)))
-    a = {k: np.array(v) for k, v in cols.items()}
+        tasks.append(dict(common, members=idx, seed=int(rng.integers(2**31 - 1))))
+    results = run_tasks(study_size, tasks, scheduler=scheduler, quiet=quiet, desc="micro-crowd study")
+    for k, r in zip(range(min_size, N), results):
+        if r.status == "not_converged":
+            raise ConvergenceError(f"micro-crowd study, size {k}: {r.message}")
+        if r.status == "bad_input":
+            raise InputError(f"micro-crowd study, size {k}: {r.message}")
+        if not r.ok:
+            raise RuntimeError(f"micro-crowd study, size {k}: {r.message}")
+    cols = {key: np.array([r.value[key] for r in results]) for key in ("n", "pm", "ps", "bm", "bs", "u", "rm")}
     return StudyResult(
-        sizes=a["k"], n_subcrowds=a["n"], percentile_mean=a["pm"], percentile_sd=a["ps"],
-        bias_mean=a["bm"], bias_sd=a["bs"], unconverged=a["u"], rhat_median=a["rm"], seconds=time.perf_counter() - t0,
+        sizes=np.arange(min_size, N), n_subcrowds=cols["n"], percentile_mean=cols["pm"], percentile_sd=cols["ps"],
+        bias_mean=cols["bm"], bias_sd=cols["bs"], unconverged=cols["u"], rhat_median=cols["rm"], seconds=time.perf_counter() - t0,
     )
+
+
+def study_size(*, unit, truth_unit, individual, members, config: SamplerConfig, priors: Priors, seed: int, half_width, device: str = "cpu") -> dict:
+    """One crowd size of the study (a Dask task): all S sub-crowds in one batched sampler run.
+
+    unit (R, Q) ratings on the unit scale (NaN: missing); truth_unit (Q,); individual (R,)
+    each rater's RMS error; members (S, k) sub-crowd member indices. Returns n (S), mean and
+    sd over sub-crowds of the percentile rank pm/ps [%] and of the population bias bm/bs
+    (unit-scale RMS), u the fraction of fits with R-hat above the target and rm their median
+    worst R-hat.
+    """
+    from simfab.crowd.sampler import sample
+
+    post = sample(unit[members], config=config, priors=priors, seed=seed, half_width=half_width, keep_latent=False, device=device)
+    est = post.mean("x")  # (S, Q) unit scale
+    bias = np.sqrt(np.mean((est - truth_unit[None]) ** 2, axis=1))
+    pct = np.array([metrics.percentile_rank(b, individual[m]) for b, m in zip(bias, members)])
+    return {"n": len(members), "pm": float(pct.mean()), "ps": float(pct.std(ddof=1)), "bm": float(bias.mean()), "bs": float(bias.std(ddof=1)),
+            "u": float(np.mean(post.rhat_max > config.rhat_target)), "rm": float(np.median(post.rhat_max))}

@@ -1,0 +1,382 @@
+"""Sweep specification (``SPEC.toml``): which command, which parameters, which figures.
+
+A spec names a base command (any ``simfab`` subcommand line), optionally a base scene whose
+parameters it varies, the swept parameters with their values, and the figures to collect
+from each run's JSON summary::
+
+    [sweep]
+    name = "cclamp2d_chart"                     # table / plot file stem (default: the spec's stem)
+    command = ["couple", "simulate", "{scene}", "--steps", "20"]
+    scene = "coupling/cclamp2d.toml"            # relative to the spec, else to the bundled scenes/
+    combine = "product"                         # "product" (grid) | "zip" (equal-length lists)
+    seed = 0                                    # --seed of every run, and of random parameters
+    keep_outputs = true                         # keep each run's folder under OUT/runs/
+
+    [set]                                       # fixed for every run (same addresses as below)
+    "material.poisson_ratio" = 0.36
+
+    [parameters.youngs_modulus]                 # a column of the table
+    set = "material.youngs_modulus"             # where the value goes (default: the name)
+    values = [1.0e9, 2.0e9, 3.5e9]              # or range = [lo, hi] + num = N (+ log = true),
+    unit = "Pa"                                 # or random = "uniform" | "loguniform" |
+                                                #   "integers" | "choice", low/high/values, samples
+    [collect]                                   # column = dotted path in the run's summary
+    category = "category"
+    F_in = { path = "F_in", unit = "N" }
+
+    [derived]                                   # columns computed from others (pandas.eval)
+    stiffness_ratio = "youngs_modulus / 3.5e9"
+
+    [plot]                                      # optional (defaults: the 1-2 swept parameters,
+    x = "youngs_modulus"                        #   every collected and derived figure)
+    y = "arm_width"
+    figures = ["category", "F_in"]
+
+Addresses (``set``): ``"--flag"`` is a command-line option of the command (``true`` adds a
+bare flag, ``false`` omits it, a list gives several values); ``"table.key"`` a key of the
+scene's TOML (a coupling scene's ``NAME.toml``); ``"tag:name.attr[i,j]"`` an attribute of the
+MJCF element ``<tag name="name">`` of the scene's XML (``numeric:cell_gap`` sets a custom
+numeric's data; ``[i,j]`` sets those components of a vector attribute to the value).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import itertools
+import json
+import re
+import tomllib
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from simfab.errors import InputError
+
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_MJCF = re.compile(r"^(?P<tag>[A-Za-z_]+):(?P<name>[^.\[\]]+)(?:\.(?P<attr>[A-Za-z_]+))?(?:\[(?P<idx>[0-9, ]+)\])?$")
+#: Columns every table has besides parameters and figures.
+META_COLUMNS = ("run", "key", "status", "message", "seconds", "worker", "outputs")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Address:
+    """Where a value goes: kind "flag" (``--flag``), "toml" (key path) or "mjcf" (tag, name,
+    attr, component indices)."""
+
+    text: str
+    kind: str
+    path: tuple = ()
+    tag: str = ""
+    name: str = ""
+    attr: str = ""
+    index: tuple[int, ...] = ()
+
+    @classmethod
+    def parse(cls, text: str, where: str) -> "Address":
+        text = str(text).strip()
+        if text.startswith("--"):
+            return cls(text=text, kind="flag")
+        if ":" in text:
+            m = _MJCF.match(text)
+            if not m:
+                raise InputError(f"MJCF address {text!r} is not 'tag:name.attr[i,j]'", where=where)
+            tag, attr = m["tag"], m["attr"] or ("data" if m["tag"] == "numeric" else "")
+            if not attr:
+                raise InputError(f"MJCF address {text!r} names no attribute ('{tag}:{m['name']}.ATTR')", where=where)
+            idx = tuple(int(i) for i in m["idx"].split(",")) if m["idx"] else ()
+            return cls(text=text, kind="mjcf", tag=tag, name=m["name"], attr=attr, index=idx)
+        parts = tuple(p for p in text.split("."))
+        if not text or any(not p for p in parts):
+            raise InputError(f"TOML key path {text!r} is empty or has an empty part", where=where)
+        return cls(text=text, kind="toml", path=parts)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Parameter:
+    """One swept parameter: column ``name``, ``address``, its (n,) ``values``, ``unit``, and
+    whether to plot it on a log axis."""
+
+    name: str
+    address: Address
+    values: tuple
+    unit: str = ""
+    log: bool = False
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Figure:
+    """A collected figure: column ``name`` = the value at dotted ``path`` in the summary."""
+
+    name: str
+    path: str
+    unit: str = ""
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class PlotSpec:
+    x: str | None = None
+    y: str | None = None
+    figures: tuple[str, ...] | None = None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SweepSpec:
+    """A parsed spec (see the module docstring). ``source``: the spec file; ``scene``: resolved
+    base scene file or None; ``fixed``: (address, value) applied to every run."""
+
+    name: str
+    source: Path
+    command: tuple[str, ...]
+    scene: Path | None
+    combine: str
+    seed: int
+    keep_outputs: bool
+    fixed: tuple[tuple[Address, object], ...]
+    parameters: tuple[Parameter, ...]
+    figures: tuple[Figure, ...]
+    derived: tuple[tuple[str, str], ...]
+    plot: PlotSpec
+
+    @property
+    def swept(self) -> tuple[Parameter, ...]:
+        """Parameters that take more than one value (the plot axes)."""
+        return tuple(p for p in self.parameters if len(set(map(_canon, p.values))) > 1)
+
+    def points(self) -> list[dict]:
+        """The runs' parameter values, [{name: value}], in the order the spec expands them."""
+        names = [p.name for p in self.parameters]
+        if not names:
+            return [{}]
+        if self.combine == "zip":
+            return [dict(zip(names, vals)) for vals in zip(*(p.values for p in self.parameters))]
+        return [dict(zip(names, vals)) for vals in itertools.product(*(p.values for p in self.parameters))]
+
+    def run_key(self, point: dict, version: str) -> str:
+        """Hash of everything that determines a run: its parameter values, the fixed values,
+        the command, the base scene's content and simfab's ``version`` (16 hex digits)."""
+        scene = ""
+        if self.scene is not None:
+            scene = "".join(hashlib.sha256(f.read_bytes()).hexdigest() for f in scene_files(self.scene))
+        blob = json.dumps({
+            "command": list(self.command), "scene": scene, "version": version,
+            "fixed": [[a.text, _canon(v)] for a, v in self.fixed],
+            "params": {p.name: [p.address.text, _canon(point[p.name])] for p in self.parameters},
+        }, sort_keys=True)
+        return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def _canon(v):
+    """A JSON-stable form of a value (floats by repr, so 0.1 keys the same on every machine)."""
+    if isinstance(v, float):
+        return repr(v)
+    if isinstance(v, (list, tuple)):
+        return [_canon(x) for x in v]
+    return v
+
+
+def scene_files(scene: Path) -> list[Path]:
+    """The base scene and its companion (a coupling scene is NAME.xml + NAME.toml)."""
+    other = scene.with_suffix(".xml" if scene.suffix == ".toml" else ".toml")
+    return [scene] + ([other] if other.is_file() else [])
+
+
+def _plain(v):
+    """numpy scalars -> Python scalars (values must pickle and hash the same everywhere)."""
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, list):
+        return [_plain(x) for x in v]
+    return v
+
+
+def _values(name: str, d: dict, seed: int, where: str) -> tuple[tuple, bool]:
+    """(values, log) of one parameter table."""
+    kinds = [k for k in ("values", "range", "random") if k in d]
+    if len(kinds) != 1 and not (kinds == ["values", "random"] and d.get("random") == "choice"):
+        raise InputError("give exactly one of values = [...], range = [lo, hi] with num, or random = ...", where=where)
+    log = bool(d.get("log", False))
+    if "random" in d:
+        kind = d["random"]
+        n = d.get("samples")
+        if not isinstance(n, int) or n < 1:
+            raise InputError(f"random parameters need samples = N >= 1, got {n!r}", where=where)
+        rng = np.random.default_rng([int(seed), zlib.crc32(name.encode())])
+        if kind == "choice":
+            vals = d.get("values")
+            if not isinstance(vals, list) or not vals:
+                raise InputError("random = 'choice' needs values = [...]", where=where)
+            return tuple(_plain(vals[i]) for i in rng.integers(len(vals), size=n)), log
+        lo, hi = d.get("low"), d.get("high")
+        if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in (lo, hi)) or not lo < hi:
+            raise InputError(f"random = {kind!r} needs numbers low < high, got {lo!r}, {hi!r}", where=where)
+        if kind == "uniform":
+            return tuple(float(x) for x in rng.uniform(lo, hi, n)), log
+        if kind == "loguniform":
+            if lo <= 0:
+                raise InputError(f"loguniform needs low > 0, got {lo!r}", where=where)
+            return tuple(float(x) for x in np.exp(rng.uniform(np.log(lo), np.log(hi), n))), True
+        if kind == "integers":
+            return tuple(int(x) for x in rng.integers(int(lo), int(hi), n, endpoint=True)), log
+        raise InputError(f"random = {kind!r}; use 'uniform', 'loguniform', 'integers' or 'choice'", where=where)
+    if "range" in d:
+        r, n = d["range"], d.get("num")
+        if not (isinstance(r, list) and len(r) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)):
+            raise InputError(f"range must be [lo, hi] (numbers), got {r!r}", where=where)
+        if not isinstance(n, int) or n < 2:
+            raise InputError(f"range needs num = N >= 2 points, got {n!r}", where=where)
+        if log:
+            if min(r) <= 0:
+                raise InputError(f"a log range needs positive ends, got {r!r}", where=where)
+            return tuple(float(x) for x in np.geomspace(r[0], r[1], n)), log
+        return tuple(float(x) for x in np.linspace(r[0], r[1], n)), log
+    vals = d["values"]
+    if not isinstance(vals, list) or not vals:
+        raise InputError(f"values must be a non-empty list, got {vals!r}", where=where)
+    return tuple(_plain(v) for v in vals), log
+
+
+def _ident(name: str, where: str) -> str:
+    if not _IDENT.match(name) or name in META_COLUMNS:
+        raise InputError(f"column name {name!r} must be an identifier (letters, digits, _) and not one of {', '.join(META_COLUMNS)}", where=where)
+    return name
+
+
+def resolve_scene(text: str, base: Path) -> Path:
+    """A scene path from a spec: relative to the spec's folder, else to the bundled scenes/."""
+    from simfab._bundled import scenes_dir
+
+    for p in (base / text, scenes_dir(text)):
+        if p.is_file():
+            return p.resolve()
+    raise InputError(f"scene {text!r} found neither beside the spec nor among the bundled scenes", where="[sweep] scene")
+
+
+def find_spec(text: str) -> Path:
+    """SPEC.toml, or the name of a bundled spec in scenes/sweeps (``cclamp2d_chart``)."""
+    from simfab._bundled import scenes_dir
+
+    p = Path(text)
+    if p.is_file():
+        return p
+    bundled = scenes_dir("sweeps", p.name if p.suffix == ".toml" else p.name + ".toml")
+    if p.parent == Path(".") and bundled.is_file():
+        return bundled
+    raise InputError("sweep spec not found (a TOML file, or a bundled spec: simfab sweep --list)", where=text)
+
+
+_TOP = {"sweep", "set", "parameters", "collect", "derived", "plot"}
+_SWEEP = {"name", "command", "scene", "combine", "seed", "keep_outputs"}
+_PARAM = {"set", "values", "range", "num", "log", "random", "low", "high", "samples", "unit"}
+
+
+def load_spec(path) -> SweepSpec:
+    """Parse and check a sweep spec file (InputError naming the file and field)."""
+    path = find_spec(str(path))
+    f = str(path)
+    try:
+        d = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"not valid TOML: {e}", where=f) from None
+    except OSError as e:
+        raise InputError(f"cannot read: {e.strerror}", where=f) from None
+    for k in d:
+        if k not in _TOP:
+            raise InputError(f"unknown table [{k}] (have: {', '.join(sorted(_TOP))})", where=f)
+    sw = d.get("sweep")
+    if not isinstance(sw, dict):
+        raise InputError("missing the [sweep] table (command = [...])", where=f)
+    for k in sw:
+        if k not in _SWEEP:
+            raise InputError(f"unknown key {k!r} (have: {', '.join(sorted(_SWEEP))})", where=f"{f} [sweep]")
+    cmd = sw.get("command")
+    if isinstance(cmd, str):
+        import shlex
+
+        cmd = shlex.split(cmd)
+    if not (isinstance(cmd, list) and cmd and all(isinstance(c, (str, int, float)) for c in cmd)):
+        raise InputError("command must be a simfab command line, e.g. ['couple', 'simulate', '{scene}']", where=f"{f} [sweep] command")
+    cmd = tuple(str(c) for c in cmd)
+    from simfab.cli import SUBCOMMANDS
+
+    if cmd[0] not in SUBCOMMANDS or cmd[0] == "sweep":
+        raise InputError(f"{cmd[0]!r} is not a subcommand to sweep (have: {', '.join(s for s in SUBCOMMANDS if s != 'sweep')})", where=f"{f} [sweep] command")
+    if any(c in ("--out", "--json") for c in cmd):
+        raise InputError("the sweep sets --out (one folder per run) and reads the summary itself; drop --out/--json", where=f"{f} [sweep] command")
+    scene = resolve_scene(str(sw["scene"]), path.parent) if "scene" in sw else None
+    if scene is not None and scene.suffix not in (".toml", ".xml"):
+        raise InputError(f"the base scene must be a .toml or .xml file, got {scene.name}", where=f"{f} [sweep] scene")
+    if scene is not None and "{scene}" not in cmd:
+        raise InputError("the command must place the scene: put '{scene}' where the scene path goes", where=f"{f} [sweep] command")
+    combine = sw.get("combine", "product")
+    if combine not in ("product", "zip"):
+        raise InputError(f"combine must be 'product' or 'zip', got {combine!r}", where=f"{f} [sweep]")
+    seed = sw.get("seed", 0)
+    if not isinstance(seed, int) or isinstance(seed, bool):
+        raise InputError(f"seed must be an integer, got {seed!r}", where=f"{f} [sweep]")
+
+    def address(text, where):
+        a = Address.parse(text, where)
+        if a.kind == "toml" and (scene is None or not any(s.suffix == ".toml" for s in scene_files(scene))):
+            raise InputError(f"{text!r} is a scene TOML key but the spec has no TOML scene (a command-line option starts with --)", where=where)
+        if a.kind == "mjcf" and (scene is None or not any(s.suffix == ".xml" for s in scene_files(scene))):
+            raise InputError(f"{text!r} is an MJCF address but the spec has no MJCF scene", where=where)
+        if a.kind == "flag" and a.text in ("--out", "--json", "--quiet"):
+            raise InputError(f"{a.text} is set by the sweep", where=where)
+        return a
+
+    fixed = tuple((address(k, f"{f} [set] {k}"), _plain(v)) for k, v in (d.get("set") or {}).items())
+    params = []
+    for name, pd in (d.get("parameters") or {}).items():
+        where = f"{f} [parameters.{name}]"
+        _ident(name, where)
+        if not isinstance(pd, dict):
+            pd = {"values": pd}
+        for k in pd:
+            if k not in _PARAM:
+                raise InputError(f"unknown key {k!r} (have: {', '.join(sorted(_PARAM))})", where=where)
+        vals, log = _values(name, pd, seed, where)
+        params.append(Parameter(name=name, address=address(pd.get("set", name), where), values=vals, unit=str(pd.get("unit", "")), log=log))
+    if combine == "zip" and len({len(p.values) for p in params}) > 1:
+        raise InputError(f"combine = 'zip' needs equally many values per parameter, got {[len(p.values) for p in params]}", where=f"{f} [parameters]")
+    texts = [p.address.text for p in params] + [a.text for a, _ in fixed]
+    dup = {t for t in texts if texts.count(t) > 1}
+    if dup:
+        raise InputError(f"{sorted(dup)[0]!r} is set twice", where=f"{f} [parameters]")
+    figures = []
+    for name, v in (d.get("collect") or {}).items():
+        where = f"{f} [collect] {name}"
+        _ident(name, where)
+        v = {"path": v} if isinstance(v, str) else v
+        if not isinstance(v, dict) or not isinstance(v.get("path"), str):
+            raise InputError("give a dotted path into the run's summary, or {path = ..., unit = ...}", where=where)
+        figures.append(Figure(name=name, path=v["path"], unit=str(v.get("unit", ""))))
+    derived = []
+    for name, expr in (d.get("derived") or {}).items():
+        _ident(name, f"{f} [derived] {name}")
+        if not isinstance(expr, str):
+            raise InputError(f"must be an expression string, got {expr!r}", where=f"{f} [derived] {name}")
+        derived.append((name, expr))
+    cols = [p.name for p in params] + [g.name for g in figures] + [n for n, _ in derived]
+    dup = {c for c in cols if cols.count(c) > 1}
+    if dup:
+        raise InputError(f"column {sorted(dup)[0]!r} is defined twice", where=f)
+    pl = d.get("plot") or {}
+    for k in pl:
+        if k not in ("x", "y", "figures"):
+            raise InputError(f"unknown key {k!r} (have: figures, x, y)", where=f"{f} [plot]")
+    for k in ("x", "y"):
+        if k in pl and pl[k] not in cols:
+            raise InputError(f"{k} = {pl[k]!r} is not a parameter or figure column", where=f"{f} [plot]")
+    figs = pl.get("figures")
+    if figs is not None:
+        bad = [c for c in figs if c not in cols]
+        if bad:
+            raise InputError(f"figure {bad[0]!r} is not a collected or derived column", where=f"{f} [plot]")
+    return SweepSpec(
+        name=str(sw.get("name", path.stem)), source=path.resolve(), command=cmd, scene=scene, combine=combine,
+        seed=seed, keep_outputs=bool(sw.get("keep_outputs", True)), fixed=fixed, parameters=tuple(params),
+        figures=tuple(figures), derived=tuple(derived),
+        plot=PlotSpec(x=pl.get("x"), y=pl.get("y"), figures=tuple(figs) if figs is not None else None),
+    )

@@ -1,0 +1,176 @@
+"""Sweep benchmark: many independent runs on Dask (``simfab.sweep``) against one process.
+
+``python tools/bench.py sweep [--subcrowds 500] [--empty-tasks 400] [--skip-crowd]``
+
+1. Per-task overhead of Dask: W single-threaded worker processes (a LocalCluster sized to
+   this machine, started once and warmed up), T empty tasks through ``run_tasks``:
+   overhead per task = wall * W / T (what each task costs a worker beyond its own work).
+   Target: < 5 % of a 0.2 s task (10 ms). Also the CPU seconds per empty task of the client,
+   scheduler and workers together (barely affected by other load on a shared machine, unlike
+   the wall time). Cross-check: T/4 tasks that sleep 0.2 s, whose efficiency is
+   (T/4 * 0.2 s / W) / wall.
+2. A 16-run insertion sweep: the cclamp2d coupling scene over 4 Young's moduli x 4 arm widths
+   (``simfab sweep`` machinery, each run a full ``couple simulate`` with its outputs), serial
+   (in this process, one run after the other) and on the LocalCluster.
+3. The micro-crowd study of the bundled practitioner crowd (15 raters, sizes 5..14,
+   ``--subcrowds`` per size, one task per size), serial and on the LocalCluster; the two
+   results must be identical.
+
+Parallel efficiency = serial time / (W * Dask time). Dask times are given without the
+cluster's start-up (reported separately: it is paid once per study or once per session).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+import cloudpickle
+
+
+def empty() -> None:
+    """The empty task."""
+
+
+def sleep_02() -> float:
+    time.sleep(0.2)
+    return 0.2
+
+
+def _cpu_seconds() -> float:
+    """CPU time of this process (client and, for a LocalCluster, the scheduler) and of its
+    children (nannies and workers) [s]: unlike wall time, barely affected by other load."""
+    import psutil
+
+    me = psutil.Process()
+    total = sum(me.cpu_times()[:2])
+    for ch in me.children(recursive=True):
+        try:
+            total += sum(ch.cpu_times()[:2])
+        except psutil.Error:
+            pass
+    return total
+
+
+def _overhead(client, workers: int, n: int) -> dict:
+    from simfab.sweep.tasks import run_tasks
+
+    run_tasks(empty, [{}] * (4 * workers), scheduler=client, quiet=True)  # warm: imports on every worker
+    best = cpu = None
+    for _ in range(3):  # the machine is shared: the least disturbed of three
+        c0 = _cpu_seconds()
+        t0 = time.perf_counter()
+        res = run_tasks(empty, [{}] * n, scheduler=client, quiet=True)
+        wall = time.perf_counter() - t0
+        c = _cpu_seconds() - c0
+        assert all(r.ok for r in res)
+        best = wall if best is None else min(best, wall)
+        cpu = c if cpu is None else min(cpu, c)
+    m = max(n // 4, 2 * workers)
+    t0 = time.perf_counter()
+    run_tasks(sleep_02, [{}] * m, scheduler=client, quiet=True)
+    wall_s = time.perf_counter() - t0
+    per_task = best * workers / n
+    return {
+        "workers": workers, "empty_tasks": n, "empty_wall_seconds": best,
+        "overhead_per_task_seconds": per_task,
+        "cpu_seconds_per_task": cpu / n,
+        "overhead_fraction_of_0_2s_task": per_task / 0.2, "target_fraction": 0.05,
+        "ratio_to_target": (per_task / 0.2) / 0.05,
+        "sleep_0_2s_tasks": m, "sleep_wall_seconds": wall_s,
+        "sleep_efficiency": (m * 0.2 / workers) / wall_s,
+        "sleep_overhead_per_task_seconds": (wall_s - m * 0.2 / workers) * workers / m,
+    }
+
+
+INSERTION_SPEC = """
+[sweep]
+name = "insertion16"
+command = ["couple", "simulate", "{scene}"]
+scene = "coupling/cclamp2d.toml"
+[set]
+"material.poisson_ratio" = 0.36
+[parameters.youngs_modulus]
+set = "material.youngs_modulus"
+values = [0.5e9, 1.0e9, 2.0e9, 3.5e9]
+[parameters.arm_width]
+set = "compliant.width"
+values = [0.002, 0.0025, 0.003, 0.0035]
+[collect]
+category = "category"
+F_in = "F_in"
+"""
+
+
+def _insertion(client, workers: int, tmp: str) -> dict:
+    import pandas as pd
+
+    from simfab.sweep.spec import load_spec
+    from simfab.sweep.study import run_sweep
+
+    p = os.path.join(tmp, "insertion16.toml")
+    with open(p, "w") as f:
+        f.write(INSERTION_SPEC)
+    spec = load_spec(p)
+    t0 = time.perf_counter()
+    s = run_sweep(spec, os.path.join(tmp, "serial"), scheduler="serial", quiet=True)
+    serial = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    d = run_sweep(spec, os.path.join(tmp, "dask"), scheduler=client, quiet=True)
+    dask = time.perf_counter() - t0
+    a, b = (pd.read_parquet(x["outputs"]["table_parquet"]).drop(columns=["seconds", "worker"]) for x in (s, d))
+    return {
+        "runs": s["runs"], "ok": d["ok"], "serial_seconds": serial, "dask_seconds": dask,
+        "speedup": serial / dask, "parallel_efficiency": serial / (workers * dask),
+        "mean_run_seconds_serial": s["run_seconds"] / s["runs"], "mean_run_seconds_dask": d["run_seconds"] / d["runs"],
+        "tables_identical": bool(a.equals(b)),
+    }
+
+
+def _crowd(client, workers: int, n_sub: int) -> dict:
+    import numpy as np
+
+    from simfab._bundled import scenes_dir
+    from simfab.crowd.data import Scale, load_ratings, load_truth
+    from simfab.crowd.study import micro_crowd_study
+
+    ratings = load_ratings(str(scenes_dir("crowd", "ratings_practitioners.csv")), Scale(lo=1, hi=10))
+    truth = load_truth(str(scenes_dir("crowd", "truth_support.csv")), ratings)
+    t0 = time.perf_counter()
+    a = micro_crowd_study(ratings, truth, n_sub=n_sub, seed=0, scheduler="serial")
+    serial = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    b = micro_crowd_study(ratings, truth, n_sub=n_sub, seed=0, scheduler=client)
+    dask = time.perf_counter() - t0
+    same = all(np.array_equal(getattr(a, f), getattr(b, f)) for f in ("sizes", "percentile_mean", "percentile_sd", "bias_mean", "bias_sd", "unconverged", "rhat_median"))
+    return {
+        "crowd": f"bundled practitioners, {len(ratings.workers)} raters x {len(ratings.tasks)} questions",
+        "sizes": len(a.sizes), "subcrowds_per_size": n_sub, "tasks": len(a.sizes),
+        "serial_seconds": serial, "dask_seconds": dask, "speedup": serial / dask,
+        "parallel_efficiency": serial / (workers * dask), "results_identical": bool(same),
+    }
+
+
+def run(argv):
+    from simfab.sweep.tasks import connect, machine_workers
+
+    ap = argparse.ArgumentParser(prog="bench sweep")
+    ap.add_argument("--subcrowds", type=int, default=500, help="sub-crowds per size in the crowd study (default 500, the study's)")
+    ap.add_argument("--empty-tasks", type=int, default=400)
+    ap.add_argument("--skip-crowd", action="store_true")
+    a = ap.parse_args(argv)
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # workers need not import tools/
+    workers = machine_workers()
+    out = {"machine": {"cores": workers, "load_average_1min_at_start": os.getloadavg()[0]}}
+    t0 = time.perf_counter()
+    with connect(None, quiet=True) as client, tempfile.TemporaryDirectory(prefix="simfab-bench-sweep-") as tmp:
+        out["cluster_start_seconds"] = time.perf_counter() - t0
+        out["overhead"] = _overhead(client, workers, a.empty_tasks)
+        out["insertion_sweep"] = _insertion(client, workers, tmp)
+        if not a.skip_crowd:
+            out["crowd_study"] = _crowd(client, workers, a.subcrowds)
+    out["machine"]["load_average_1min_at_end"] = os.getloadavg()[0]
+    return out
