@@ -13,7 +13,8 @@ max_von_mises_Pa), handles,
 iterations, stopped_early, simulations, accepted, rejected (count per reason), seconds,
 simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_stl, outline_csv
 (2D), scene_xml, scene_toml, scene_mesh, profile_png, shape_png, history_csv, usd, summary_json,
-revolved_stl with --revolve-axis).
+revolved_stl with --revolve-axis), restarts (with --restarts: per run seed, status, message,
+feasible, objective, E_L, iterations, seconds).
 
 ``simfab couple study handles SCENE`` runs the handle-placement study: displacement-based and
 spatial placement and ``--random`` random picks, for each handle count of ``--counts``; reports
@@ -39,6 +40,10 @@ def add_optimize_args(s) -> None:
     g.add_argument("--patience", type=int, metavar="N",
                    help="stop once the best design is feasible and has not improved for N iterations")
     s.add_argument("--steps", type=int, metavar="N", help="insertion steps per simulation (overrides the scene)")
+    s.add_argument("--restarts", type=int, default=1, metavar="N",
+                   help="independent annealing runs (seeds SEED..SEED+N-1) as Dask tasks; the best design is kept")
+    s.add_argument("--scheduler", metavar="ADDRESS",
+                   help="Dask scheduler for --restarts (default: a local cluster sized to this machine)")
     s.add_argument("--revolve-axis", choices=["x", "y"], help="2D: also revolve the optimized section about this axis")
     s.add_argument("--revolve-offset", type=float, default=0.0, metavar="M",
                    help="position of the revolution axis [m] (x = M for axis y, y = M for axis x)")
@@ -85,11 +90,15 @@ def simulation_overrides(args) -> dict:
 def run_optimize(args) -> dict:
     from simfab._warp import device as check_device
     from simfab.design.pipeline import optimize_scene
+    from simfab.errors import InputError
 
     dev = check_device(args.device)
+    if args.restarts < 1:
+        raise InputError(f"must be >= 1, got {args.restarts}", where="--restarts")
     revolve = (args.revolve_axis, args.revolve_offset) if args.revolve_axis else None
     return optimize_scene(args.scene, out=args.out, design=design_overrides(args), simulation=simulation_overrides(args),
-                          device=dev, quiet=args.quiet, seed=args.seed, revolve=revolve)
+                          device=dev, quiet=args.quiet, seed=args.seed, revolve=revolve, restarts=args.restarts,
+                          scheduler=args.scheduler)
 
 
 def run_study(args) -> dict:

@@ -25,12 +25,16 @@ def check_out_dir(out) -> Path:
 
 
 def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict | None = None, device: str = "cpu",
-                   quiet: bool = True, seed: int = 0, revolve: tuple[str, float] | None = None) -> dict:
+                   quiet: bool = True, seed: int = 0, revolve: tuple[str, float] | None = None, restarts: int = 1,
+                   scheduler: str | None = None) -> dict:
     """Optimize a design scene's part and write every output into ``out``; returns the summary.
 
     design : overrides of the ``[design]`` table (e.g. ``{"iterations": 60, "handles": 4}``)
     simulation : overrides of ``[simulation]``
     seed : random seed of the handle placement and the annealing
+    restarts : independent annealing runs (seeds seed, seed+1, ...) on the same handles, run as
+        Dask tasks (:func:`simfab.sweep.run_tasks`, on ``scheduler`` or a local cluster); the
+        best final design is kept and every run is reported
     revolve : (axis "x"|"y", offset [m]) to also write the optimized 2D section revolved into a
         3D part (``NAME_optimized_revolved.stl``, mm)
     """
@@ -49,8 +53,13 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         f"{ds.brief.handles} handles ({ds.brief.placement}), up to {ds.brief.iterations} iterations", quiet=quiet)
     initial = simulate(cm) if ds.brief.placement == "displacement" else None
     problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed)
-    res = optimize(problem, quiet=quiet, seed=seed)
+    if restarts <= 1:
+        res, runs = optimize(problem, quiet=quiet, seed=seed), None
+    else:
+        res, runs = _restarts(ds, problem, design, simulation, device, seed, restarts, quiet, scheduler)
     summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml)
+    if runs is not None:
+        summary["restarts"] = runs
     if revolve is not None:
         summary["outputs"]["revolved_stl"] = str(write_revolved(res, out, cm.name, *revolve))
     for w in summary["warnings"]:
@@ -68,3 +77,47 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float) -> Path:
     mesh = revolve_outline(res.best.rest[loop], axis=axis, offset=offset)
     mesh.apply_scale(1e3)
     return save_mesh(mesh, Path(out) / f"{stem}_optimized_revolved.stl")
+
+
+def anneal_task(*, scene: str, design: dict, simulation: dict, device: str, handle_vertices: list, seed: int):
+    """One restart (a Dask task): the annealing on the given handles; returns the
+    :class:`simfab.design.optimize.DesignResult` without its unpicklable parts (the problem and
+    the insertion results, which the client rebuilds)."""
+    from simfab._warp import device as check_device
+    from simfab.design.optimize import make_problem, optimize
+    from simfab.design.scene import load_design_scene
+
+    ds = load_design_scene(scene, design=design, simulation=simulation, device=check_device(device))
+    problem = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target,
+                           handle_vertices=handle_vertices, seed=seed)
+    res = optimize(problem, seed=seed)
+    res.problem = None
+    res.initial.result = res.best.result = None
+    return res
+
+
+def _restarts(ds, problem, design, simulation, device, seed, restarts, quiet, scheduler):
+    from simfab.design.optimize import evaluate
+    from simfab.errors import ConvergenceError
+    from simfab.sweep import run_tasks
+
+    hv = [int(v) for v in problem.handles.vertex[problem.handles.active]]
+    tasks = [dict(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}), device=device,
+                  handle_vertices=hv, seed=seed + i) for i in range(restarts)]
+    results = run_tasks(anneal_task, tasks, scheduler=scheduler, quiet=quiet, desc=f"optimize {ds.cm.name} restarts")
+    runs = []
+    for t, r in zip(tasks, results):
+        row = {"seed": t["seed"], "status": r.status, "message": r.message, "seconds": r.seconds}
+        if r.ok:
+            row.update(feasible=r.value.best.feasible, objective=r.value.best.objective, E_L=r.value.best.E_L,
+                       iterations=r.value.iterations)
+        runs.append(row)
+    ok = [r.value for r in results if r.ok]
+    if not ok:
+        raise ConvergenceError(f"every restart failed; first: {results[0].message}")
+    # feasible designs first, then the lowest objective
+    res = min(ok, key=lambda v: (not v.best.feasible, v.best.objective))
+    res.problem = problem
+    res.initial = evaluate(problem, res.initial.h, keep_result=True)  # deterministic: the same figures
+    res.best = evaluate(problem, res.best.h, keep_result=True)
+    return res, runs
