@@ -9,6 +9,16 @@ clockwise). The scenes reproduce the design results of the thesis' coupling chap
 - standside2d   a square block with a bore and a slot (stiff: yields, large forces) that the
                 optimizer turns into a C-clamp-like tight grip on a 20 mm cylinder (the stand side
                 of the paddle holder; the AutoConnect comparison)
+- alligator2d, alligator3d   an asymmetric clip (thick upper, thin lower jaw) that yields on an
+                8 mm rod, to be made to hold it tightly without yielding (3D: the section extruded)
+- block2d_loose, block2d_tight, block2d_tighter   one socket around a 20 mm ball (its base kept
+                unchanged) optimized to three grips; revolve the results into 3D
+- profile2d     the C-clamp with a target force profile to match (profile2d_target.csv)
+- knocker3d_design   a stiff clip holding the door-knocker ring (rotating path), to be made loose
+                with a small insertion force and no yielding
+
+3D parts are tetrahedralized once into NAME_part.npz (kept unless --remesh; fTetWild is not
+bit-reproducible).
 """
 
 from __future__ import annotations
@@ -234,10 +244,31 @@ def knocker_design() -> None:
     append_design(name, dict(grip="loose", insertion_force=[0.0, 20.0], handles=5, iterations=150, patience=40))
 
 
+def alligator3d() -> None:
+    """The 2D alligator's section extruded 6 mm: the 3D version of the same design problem."""
+    from make_scenes import scene
+    from simfab.coupling.geometry import extrude
+
+    rod, body = 0.004, (-0.022, 0.008, -0.005, 0.008)
+    ring = alligator_outline(rod=rod, body=body, pocket=0.0038, mouth=0.0036)
+    x0 = body[1] + math.sqrt(rod**2 - 0.0018**2) + 0.0005
+    name = "alligator3d"
+    scene(name, doc="Alligator clip (3D, PLA): the alligator2d section extruded 6 mm, on an 8 mm rod; held only along\n"
+                    "the insertion axis (the original's boundary condition).",
+          dim=3, comp=dict(generator="mesh", target_elements=1040), part_mesh=extrude(ring, 0.006),
+          object_geoms=[dict(type="cylinder", size=[rod, 0.006])],
+          keys=[([x0, 0, 0], [1, 0, 0, 0]), ([rod - 0.0038 + 0.0001, 0, 0], [1, 0, 0, 0])],
+          fixed_center=[body[0], 0, 0], fixed_half=[0.0006, 0.009, 0.004],
+          obj=dict(body="object", samples=1154), sim=dict(steps=35), mesh_options=dict(coarsen=True, tol=0.1, tries=6))
+    append_design(name, dict(grip="tight", grip_force=[5.0, float("inf")], insertion_force=[0.0, 40.0], handles=5,
+                             iterations=150, patience=40))
+
+
 def main() -> None:
     standside()
     profile2d()
     knocker_design()
+    alligator3d()
     alligator2d()
     doc = ("Building block (2D section, PLA): a socket that barely holds a 20 mm ball; its base (keep site)\n"
            "stays unchanged. Optimized to a {} grip; revolve the result into 3D with\n"
