@@ -264,8 +264,37 @@ def alligator3d() -> None:
                              iterations=150, patience=40))
 
 
+def paddleside() -> None:
+    """Paddle side: a U-channel that matches the paddle blade's rounded edge exactly (no contact,
+    no grip) - the optimizer must create the grip, with a removal force below the stand side's."""
+    from shapely.geometry import Point, box
+
+    r, wall, depth, base = 0.003, 0.0025, 0.012, 0.004  # blade half-thickness, wall, channel depth, base
+    c = 1e-4  # "perfect match": 0.1 mm clearance all around (the barrier acts within ~0.01 mm)
+    slot = box(0.0, -r - c, depth + 1e-3, r + c).union(Point(0.0, 0.0).buffer(r + c, quad_segs=16))
+    blk = box(-r - base, -r - wall, depth, r + wall)
+    ring = polygon_ring(blk.difference(slot))
+    half_len = 0.015  # the blade's straight part beyond its rounded end [m]
+    # the blade: a capsule along x (rounded end centres at the body origin -+ half_len); seated, its
+    # near end's centre is the channel bottom's centre (the origin)
+    x_end = half_len
+    x0 = x_end + depth + 0.001
+    design_scene(
+        "paddleside2d",
+        doc="Paddle side of a paddle holder: a U-channel exactly matching the blade's rounded 6 mm edge (no grip);\n"
+            "optimized to grip the blade tightly with a removal force below the stand side's.",
+        ring=ring, target=500,
+        object_geoms=[dict(type="capsule", size=[r, half_len], quat=[0.7071067811865476, 0, 0.7071067811865476, 0])],
+        keys=[([x0, 0, 0], [1, 0, 0, 0]), ([x_end, 0, 0], [1, 0, 0, 0])],
+        fixed_center=[-r - base, 0, 0], fixed_half=[0.0006, r + wall + 0.001, 0.01],
+        obj=dict(body="object", samples=400), sim=dict(steps=35),
+        design=dict(grip="tight", grip_force=[1.0, float("inf")], removal_force=[0.0, 10.0], handles=4,
+                    placement="spatial"))
+
+
 def main() -> None:
     standside()
+    paddleside()
     profile2d()
     knocker_design()
     alligator3d()

@@ -159,7 +159,7 @@ def make_problem(cm, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetP
 
 def max_displacement(res) -> np.ndarray:
     """(n,) largest displacement of every vertex over an insertion [m]."""
-    X = res.steps[0].x if not hasattr(res.model.fem, "rest") else np.asarray(res.model.fem.rest)
+    X = np.asarray(res.model.fem.rest)
     return np.max([np.linalg.norm(np.asarray(r.x) - X, axis=1) for r in res.steps], axis=0)
 
 
@@ -204,7 +204,7 @@ def candidate_model(problem: DesignProblem, X: np.ndarray):
     try:
         new = make_model(X, fem.elements, fem.material, thickness=fem.thickness, device=fem.device)
     except InputError as e:
-        return None, f"invalid mesh: {e.message if hasattr(e, 'message') else e}"
+        return None, f"invalid mesh: {e}"
     opts = dataclasses.replace(cm.options, L_max=float(cm.s_steps[-1]))
     out = make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
                               options=opts, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
