@@ -187,7 +187,7 @@ def profile2d() -> None:
     keys = [([x_start(clamp), 0, 0], [1, 0, 0, 0]), ([X_SEATED, 0, 0], [1, 0, 0, 0])]
     common = dict(ring=ring, target=450, object_geoms=[dict(type="cylinder", size=[R_CYL, 0.01])], keys=keys,
                   fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.01], obj=dict(body="object", samples=50),
-                  sim=dict(steps=35, L_max=keys[0][0][0] - keys[1][0][0]))
+                  sim=dict(steps=35))
     # the target: the same path through a clamp of inner radius 9.8 mm and arm width 2.1 mm
     variant = dict(clamp, inner_radius=0.0098, width=0.0021)
     design_scene("_profile_target", doc="temporary", **dict(common, ring=c_clamp_outline(**variant, segments=48)),

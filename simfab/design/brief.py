@@ -25,11 +25,16 @@ Constraints (thesis, "Optimization"), each a value with bounds [lo, hi]:
 - coupling ratio CR = E_ss / E_max * 100 [%] (E_ss = E_max without a steady state):
   tight: CR <= kappa_cr = 95 and CR >= 100 * LOOSE_REL (a non-zero steady state, i.e. category
   "tight"); loose: CR <= kappa_cr = 1e-3;
+- tight only, beyond the thesis: the seat clearance (gap between part and object at the steady
+  state) <= 0 [m]. A loose design's grip force and coupling ratio are 0 whatever its clearance,
+  so their penalties are flat over all loose designs and give the annealer no direction back to
+  a grip; the clearance does (it is <= 0, hence free, for every design in contact);
 - grip force F_g, insertion force F_in, removal force F_rm [N] within their bounds;
 - max von Mises stress over the insertion <= yield stress [Pa].
 
 Penalty: each violation is measured in its natural unit - percent for CR, newtons for forces,
-megapascals for stress (SCALES) - so that one unit of violation of any of them weighs the same:
+megapascals for stress, 0.1 mm for the clearance (SCALES) - so that one unit of violation of any
+of them weighs the same:
 a 1 % ratio, 1 N and 1 MPa are about equally significant for hand-sized printed parts (forces of
 1-100 N, yield stresses ~60 MPa). The objective is
 
@@ -54,10 +59,11 @@ from simfab.errors import InputError
 
 #: Weight of the squared, scaled constraint violations against E_L.
 PENALTY_WEIGHT = 1.0e3
-#: Units in which a violation counts one: percent, newton, newton, newton, megapascal.
+#: Units in which a violation counts one: percent, newtons, megapascals, 0.1 mm.
 SCALES = {"coupling_ratio": 1.0, "grip_force": 1.0, "insertion_force": 1.0, "removal_force": 1.0,
-          "von_mises": 1.0e6}
-UNITS = {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N", "von_mises": "Pa"}
+          "von_mises": 1.0e6, "seat_clearance": 1.0e-4}
+UNITS = {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N", "von_mises": "Pa",
+         "seat_clearance": "m"}
 #: kappa_cr of the thesis [%]: the steady state must stay this far below the peak energy.
 KAPPA_TIGHT = 95.0
 KAPPA_LOOSE = 1.0e-3
@@ -169,6 +175,7 @@ def bounds(brief: DesignBrief, yield_stress: float | None) -> dict[str, tuple[fl
     out = {}
     if brief.grip == "tight":
         out["coupling_ratio"] = (100.0 * C.LOOSE_REL, KAPPA_TIGHT)
+        out["seat_clearance"] = (-math.inf, 0.0)
     elif brief.grip == "loose":
         out["coupling_ratio"] = (0.0, KAPPA_LOOSE)
     for k in ("grip_force", "insertion_force", "removal_force"):

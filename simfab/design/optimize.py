@@ -77,10 +77,27 @@ def element_quality(X: np.ndarray, elements: np.ndarray) -> np.ndarray:
 CONTACT_STRAIN_FLOOR = 1e-5
 
 
+def seat_clearance(res, index: int) -> float:
+    """Gap [m] between the part and the object at step ``index`` beyond the contact range: the
+    smallest distance from A's boundary vertices to O (-psi near O, the field's far lower bound
+    beyond its kernel) minus the barrier's activation distance d_hat (<= 0: in contact)."""
+    cm = res.model
+    r = res.steps[index]
+    y = np.asarray(r.x)[np.asarray(cm.fem.boundary_vertices)]
+    pose = cm.pose(r.s)
+    ev = cm.field.evaluate(y, pose, hessian=False)
+    d = -np.asarray(ev.psi, float)
+    far = ~np.asarray(ev.near, bool)
+    if far.any():
+        d[far] = cm.field.far_lower_bound(y[far], pose)
+    return float(d.min() - np.max(cm.dhat))
+
+
 def profile_figures(res) -> dict:
     """Figures of an insertion the constraints read: coupling_ratio [%], grip_force,
-    insertion_force, removal_force [N], von_mises [Pa] (max over the insertion), and category,
-    E_max, E_ss [J]."""
+    insertion_force, removal_force [N], von_mises [Pa] (max over the insertion), seat_clearance
+    [m] (gap between part and object at the steady state, <= 0 in contact), and category, E_max,
+    E_ss [J]."""
     from simfab.coupling.profile import analyze
 
     prof = analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"))
@@ -91,6 +108,7 @@ def profile_figures(res) -> dict:
     return {"coupling_ratio": prof.coupling_ratio if touched else 100.0, "grip_force": prof.F_grip,
             "insertion_force": prof.F_in, "removal_force": prof.F_rm,
             "von_mises": float(res.column("max_von_mises").max()),
+            "seat_clearance": seat_clearance(res, prof.index_ss),
             "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss}
 
 

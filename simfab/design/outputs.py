@@ -27,7 +27,7 @@ from simfab.design import brief as B
 
 HISTORY_HEADER = ["iteration", "status", "reason", "objective", "E_L", "rms_error_N", "accepted", "current_objective",
                   "best_objective", "temperature", "sigma_rel", "coupling_ratio_pct", "grip_force_N",
-                  "insertion_force_N", "removal_force_N", "max_von_mises_Pa", "category", "seconds"]
+                  "insertion_force_N", "removal_force_N", "max_von_mises_Pa", "seat_clearance_m", "category", "seconds"]
 
 
 def output_paths(out: Path, stem: str, dim: int, *, target: bool = False) -> dict:
@@ -94,7 +94,7 @@ def _figures(f: dict) -> dict:
     """The profile's figures with unit-bearing names (E in J, forces in N, stress in Pa)."""
     names = {"category": "category", "coupling_ratio": "coupling_ratio_pct", "E_max": "E_max_J", "E_ss": "E_ss_J",
              "insertion_force": "F_in_N", "removal_force": "F_rm_N", "grip_force": "F_grip_N",
-             "von_mises": "max_von_mises_Pa"}
+             "von_mises": "max_von_mises_Pa", "seat_clearance": "seat_clearance_m"}
     return {v: f.get(k) for k, v in names.items()}
 
 
@@ -105,7 +105,7 @@ def history_rows(res):
         yield [rec["k"], ev.status, ev.reason, ev.objective, ev.E_L, ev.rms_error, int(bool(rec["accepted"])),
                rec["current"], rec["best"], rec["temperature"], rec["sigma"], f.get("coupling_ratio"),
                f.get("grip_force"), f.get("insertion_force"), f.get("removal_force"), f.get("von_mises"),
-               f.get("category", ""), ev.seconds]
+               f.get("seat_clearance"), f.get("category", ""), ev.seconds]
 
 
 def part_mesh_mm(fem, X: np.ndarray):
@@ -229,10 +229,10 @@ def plot_profiles(res, path) -> Path:
     lines = []
     for c in res.best.constraints:
         u = B.UNITS[c.name]
-        k = 1e-6 if u == "Pa" else 1.0
-        uu = "MPa" if u == "Pa" else u
+        k, uu = {"Pa": (1e-6, "MPa"), "m": (1e3, "mm")}.get(u, (1.0, u))
+        lo = "-inf" if not np.isfinite(c.lo) else f"{c.lo * k:.3g}"
         hi = "inf" if not np.isfinite(c.hi) else f"{c.hi * k:.3g}"
-        lines.append(f"{c.name} {c.value * k:.3g} {uu} in [{c.lo * k:.3g}, {hi}] {'ok' if c.satisfied else 'VIOLATED'}")
+        lines.append(f"{c.name} {c.value * k:.3g} {uu} in [{lo}, {hi}] {'ok' if c.satisfied else 'VIOLATED'}")
     ax1.set_title(f"{res.problem.base.name}: before / after rest-shape optimization\n" + "; ".join(lines[:3]), fontsize=8)
     if len(lines) > 3:
         ax2.set_title("; ".join(lines[3:]), fontsize=8)
