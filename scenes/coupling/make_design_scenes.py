@@ -288,7 +288,9 @@ def paddleside() -> None:
         keys=[([x0, 0, 0], [1, 0, 0, 0]), ([x_end, 0, 0], [1, 0, 0, 0])],
         fixed_center=[-r - base, 0, 0], fixed_half=[0.0006, r + wall + 0.001, 0.01],
         obj=dict(body="object", samples=400), sim=dict(steps=35),
-        design=dict(grip="tight", grip_force=[1.0, float("inf")], removal_force=[0.0, 10.0], handles=4,
+        # firm grip (>= 5 N) that still lets go with less than 10 N (the stand side's removal force
+        # is ~30 N), but at least 1 N so the paddle does not drop out
+        design=dict(grip="tight", grip_force=[5.0, float("inf")], removal_force=[1.0, 10.0], handles=4,
                     placement="spatial"))
 
 
