@@ -73,14 +73,14 @@ def plot_sweep(spec, df, out: Path) -> dict[str, str]:
             continue
         fig, ax = plt.subplots(figsize=(7, 5), constrained_layout=True)
         n_fail = int((~ok).sum())
+        if x in logs:  # scales first: the heat map's ticks are set for them
+            ax.set_xscale("log")
+        if y in logs:
+            ax.set_yscale("log")
         if y is None:
             _lines(ax, df, x, f, series, ok, units)
         else:
             _map(fig, ax, df, x, y, f, ok, units, logs)
-            if y in logs:
-                ax.set_yscale("log")
-        if x in logs:
-            ax.set_xscale("log")
         ax.set_xlabel(_label(x, units.get(x, "")))
         fail = f", {n_fail} failed run{'s' if n_fail != 1 else ''} marked" if n_fail else ""
         ax.set_title(f"{spec.name}: {_label(f, units.get(f, ''))}\n{len(df)} runs{fail}", fontsize=11)
@@ -121,6 +121,7 @@ def _lines(ax, df, x, f, series, ok, units):
 def _map(fig, ax, df, x, y, f, ok, units, logs):
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
+    from matplotlib.ticker import NullLocator
 
     xs, ys = np.sort(df[x].dropna().unique()), np.sort(df[y].dropna().unique())
     text = _is_text(df.loc[ok, f])
@@ -143,8 +144,10 @@ def _map(fig, ax, df, x, y, f, ok, units, logs):
             ax.text(xs[j], ys[i], "x", color="red", ha="center", va="center", fontsize=12, fontweight="bold")
         if len(xs) <= 12:
             ax.set_xticks(xs, [f"{v:.3g}" for v in xs])
+            ax.xaxis.set_minor_locator(NullLocator())
         if len(ys) <= 12:
             ax.set_yticks(ys, [f"{v:.3g}" for v in ys])
+            ax.yaxis.set_minor_locator(NullLocator())
         if not text and Z.size <= 64:  # small charts: print the values in the cells
             for (i, j), v in np.ndenumerate(Z):
                 if np.isfinite(v):

@@ -322,6 +322,7 @@ def _run_dask(client, fn, kwargs_list, version, finish, bar) -> None:
             now = time.perf_counter()
             if bar._bar is not None and now - last > 0.5:  # a scheduler round trip: throttled
                 last = now
-                bar.update(running=sum(len(v) for v in client.processing().values()))
+                busy = sum(len(v) for v in client.processing().values())  # incl. queued on a worker
+                bar.update(running=min(busy, sum(client.nthreads().values()), bar.total - bar.done))
     finally:
         client.cancel([f for f in futures if not f.done()])

@@ -185,3 +185,18 @@ def test_bundled_specs_load(tmp_path):
         kw = run_task(s, s.points()[-1], run_dir=str(tmp_path / name))
         f = write_scene(kw["scene"], tmp_path / name)
         assert f.is_file() and f.name == s.scene.name
+
+
+def test_serial_sweep_without_kept_outputs(tmp_path, tiny_spec):
+    import pandas as pd
+
+    from simfab.sweep.study import run_sweep
+
+    p = _spec(tmp_path, tiny_spec.read_text().replace("seed = 3", "seed = 3\nkeep_outputs = false"), "nokeep.toml")
+    s = run_sweep(load_spec(p), tmp_path / "o", scheduler="serial", quiet=True)
+    df = pd.read_parquet(s["outputs"]["table_parquet"])
+    assert (s["runs"], s["ran"], s["ok"], s["failed"]) == (6, 6, 5, {"bad_input": 1})
+    assert set(df["worker"]) == {"serial"} and (df["outputs"].fillna("") == "").all()
+    assert not (tmp_path / "o" / "runs").exists()  # the runs wrote into temporary folders
+    assert set(s["outputs"]["plots"]) == {"raters", "malicious", "first_task", "malicious_share"}
+    assert json.loads((tmp_path / "o" / "tiny.json").read_text())["ok"] == 5

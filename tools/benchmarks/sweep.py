@@ -18,6 +18,10 @@
 
 Parallel efficiency = serial time / (W * Dask time). Dask times are given without the
 cluster's start-up (reported separately: it is paid once per study or once per session).
+``*_cores_used`` = CPU seconds / wall seconds of each phase (this process and its children):
+a serial run already keeps more than one core busy (simfab's second worker thread, threaded
+BLAS and CHOLMOD), while Dask's workers run single-threaded (Dask sets OMP_NUM_THREADS=1),
+so on a machine with few cores the gain of W workers is less than W.
 """
 
 from __future__ import annotations
@@ -115,17 +119,18 @@ def _insertion(client, workers: int, tmp: str) -> dict:
     with open(p, "w") as f:
         f.write(INSERTION_SPEC)
     spec = load_spec(p)
-    t0 = time.perf_counter()
+    c0, t0 = _cpu_seconds(), time.perf_counter()
     s = run_sweep(spec, os.path.join(tmp, "serial"), scheduler="serial", quiet=True)
-    serial = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    serial, serial_cpu = time.perf_counter() - t0, _cpu_seconds() - c0
+    c0, t0 = _cpu_seconds(), time.perf_counter()
     d = run_sweep(spec, os.path.join(tmp, "dask"), scheduler=client, quiet=True)
-    dask = time.perf_counter() - t0
+    dask, dask_cpu = time.perf_counter() - t0, _cpu_seconds() - c0
     a, b = (pd.read_parquet(x["outputs"]["table_parquet"]).drop(columns=["seconds", "worker"]) for x in (s, d))
     return {
         "runs": s["runs"], "ok": d["ok"], "serial_seconds": serial, "dask_seconds": dask,
         "speedup": serial / dask, "parallel_efficiency": serial / (workers * dask),
         "mean_run_seconds_serial": s["run_seconds"] / s["runs"], "mean_run_seconds_dask": d["run_seconds"] / d["runs"],
+        "serial_cores_used": serial_cpu / serial, "dask_cores_used": dask_cpu / dask,
         "tables_identical": bool(a.equals(b)),
     }
 
@@ -139,18 +144,19 @@ def _crowd(client, workers: int, n_sub: int) -> dict:
 
     ratings = load_ratings(str(scenes_dir("crowd", "ratings_practitioners.csv")), Scale(lo=1, hi=10))
     truth = load_truth(str(scenes_dir("crowd", "truth_support.csv")), ratings)
-    t0 = time.perf_counter()
+    c0, t0 = _cpu_seconds(), time.perf_counter()
     a = micro_crowd_study(ratings, truth, n_sub=n_sub, seed=0, scheduler="serial")
-    serial = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    serial, serial_cpu = time.perf_counter() - t0, _cpu_seconds() - c0
+    c0, t0 = _cpu_seconds(), time.perf_counter()
     b = micro_crowd_study(ratings, truth, n_sub=n_sub, seed=0, scheduler=client)
-    dask = time.perf_counter() - t0
+    dask, dask_cpu = time.perf_counter() - t0, _cpu_seconds() - c0
     same = all(np.array_equal(getattr(a, f), getattr(b, f)) for f in ("sizes", "percentile_mean", "percentile_sd", "bias_mean", "bias_sd", "unconverged", "rhat_median"))
     return {
         "crowd": f"bundled practitioners, {len(ratings.workers)} raters x {len(ratings.tasks)} questions",
         "sizes": len(a.sizes), "subcrowds_per_size": n_sub, "tasks": len(a.sizes),
         "serial_seconds": serial, "dask_seconds": dask, "speedup": serial / dask,
         "parallel_efficiency": serial / (workers * dask), "results_identical": bool(same),
+        "serial_cores_used": serial_cpu / serial, "dask_cores_used": dask_cpu / dask,
     }
 
 
