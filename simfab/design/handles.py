@@ -72,14 +72,19 @@ class Handles:
         """(translations (m_active, d) [m], scales (m_active, d)) of a design vector."""
         return unpack(h, self.n_active, self.dim)
 
-    def apply(self, h: np.ndarray) -> np.ndarray:
-        """(n, d) modified rest shape X' = M_LBS T(h)."""
+    def transforms(self, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(translations (m, d) [m], scales (m, d)) of every handle, inactive ones the identity."""
         t, s = self.split(h)
         m, d = len(self.centers), self.dim
         T = np.zeros((m, d))
         S = np.ones((m, d))
         T[self.active] = t
         S[self.active] = s
+        return T, S
+
+    def apply(self, h: np.ndarray) -> np.ndarray:
+        """(n, d) modified rest shape X' = M_LBS T(h)."""
+        T, S = self.transforms(h)
         W = self.weights
         # sum_j w_ij (c_j + s_j (x_i - c_j) + t_j), with sum_j w_ij = 1
         return W @ (self.centers + T) + np.einsum("ij,ijd->id", W, (self.rest[:, None, :] - self.centers[None]) * S[None])
@@ -96,12 +101,8 @@ class Handles:
 
     def transform_stack(self, h: np.ndarray) -> np.ndarray:
         """((d+1) m, d) T of the thesis for design h (pairs with :meth:`lbs_matrix`)."""
-        t, s = self.split(h)
+        T, S = self.transforms(h)
         m, d = len(self.centers), self.dim
-        T = np.zeros((m, d))
-        S = np.ones((m, d))
-        T[self.active] = t
-        S[self.active] = s
         out = np.zeros(((d + 1) * m, d))
         for j in range(m):
             out[(d + 1) * j:(d + 1) * j + d] = np.diag(S[j])
