@@ -58,14 +58,3 @@ def run(args):
         res.setdefault("seconds", time.perf_counter() - t0)
         summary["pipelines"][name] = res
     return summary
-
-
-def format_text(summary: dict) -> str:
-    """One line per pipeline: where its results are and how long it took."""
-    lines = [f"simfab demo: results under {summary['out']}/"]
-    for name, res in summary["pipelines"].items():
-        if res.get("status"):
-            lines.append(f"  {name:7s} {res['status']}")
-        else:
-            lines.append(f"  {name:7s} done in {res.get('seconds', float('nan')):6.1f} s -> {summary['out']}/{name}/")
-    return "\n".join(lines)

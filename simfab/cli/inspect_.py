@@ -22,3 +22,8 @@ def run(args):
     from simfab.io import inspect_file
 
     return inspect_file(args.file, units=args.units)
+
+
+def output_roots(args) -> list:
+    """inspect writes no file."""
+    return []

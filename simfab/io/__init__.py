@@ -62,14 +62,11 @@ def _inspect_mjcf(path: Path) -> dict:
 
 
 def _inspect_usd(path: Path) -> dict:
-    from pxr import Usd, UsdGeom
+    from pxr import UsdGeom
 
-    from simfab.errors import InputError
-    from simfab.io.usd import check_compliance
+    from simfab.io.usd import check_compliance, open_stage
 
-    st = Usd.Stage.Open(str(path))
-    if st is None:
-        raise InputError("not a readable USD stage", where=str(path))
+    st = open_stage(path)
     prims = {str(p.GetPath()): p.GetTypeName() for p in st.Traverse()}
     return {"kind": "usd", "file": str(path), "default_prim": str(st.GetDefaultPrim().GetPath()) if st.GetDefaultPrim() else None,
             "up_axis": str(UsdGeom.GetStageUpAxis(st)), "meters_per_unit": UsdGeom.GetStageMetersPerUnit(st),

@@ -100,36 +100,62 @@ def render_mjcf(xml, png, *, width: int = 640, height: int = 480) -> Path:
         return _render_matplotlib([(m.vertices, m.faces, None) for m in meshes.values()], png, width, height)
 
 
-def render_meshes(items, png, *, width: int = 640, height: int = 480, floor: bool = True) -> Path:
-    """Render several meshes together.
+def render_meshes(items, png, *, width: int = 640, height: int = 480, floor: bool = True,
+                  curves=(), points=()) -> Path:
+    """Render several meshes, polylines and point sets together.
 
     items : list of ``(vertices (n,3) [m], faces (m,3), colors)`` where colors is None, an
         RGB(A) triple for the whole mesh, or per-face RGB (m,3) in [0, 1].
+    curves : list of ``(polylines [(k_i, 3)], widths [(k_i,) or None], rgb or None)``: drawn as
+        capsules of diameter ``width`` (default 0.5 % of the scene's diagonal) per segment.
+    points : list of ``(P (n, 3), widths (n,) or None, rgb or None)``: spheres of diameter ``width``.
+
+    Display geometry only: everything is a static geom of the world body (no masses, so MuJoCo's
+    inertia checks cannot reject a flat or thin mesh), and the floor casts no shadow specks.
     """
     from simfab.io.mjcf import MJCFBuilder
     from simfab.io.usd import as_points3
 
     items = [(as_points3(V), np.asarray(F, np.int64), c) for V, F, c in items]  # 2D meshes go to z = 0
+    curves = [([as_points3(p) for p in pl], ws, c) for pl, ws, c in curves]
+    points = [(as_points3(P), w, c) for P, w, c in points]
+    allv = [V for V, _, _ in items] + [p for pl, _, _ in curves for p in pl] + [P for P, _, _ in points]
+    allv = np.concatenate(allv) if allv else np.zeros((1, 3))
+    diag = float(np.linalg.norm(np.ptp(allv, axis=0))) or 1.0
     b = MJCFBuilder("render")
-    if floor and items:
-        allv = np.concatenate([V for V, _, _ in items])
-        diag = float(np.linalg.norm(np.ptp(allv, axis=0))) or 1.0
+    for light in b.worldbody.iter("light"):
+        light.set("castshadow", "false")  # shadow-map aliasing showed as dark specks on the floor
+    if floor:
         b.floor(z=float(allv[:, 2].min()) - 0.02 * diag, size=10.0 * diag)  # a little below: no z-fighting
     palette = np.array([[0.85, 0.55, 0.3], [0.35, 0.55, 0.85], [0.5, 0.75, 0.45], [0.8, 0.4, 0.6]])
+    world = b.worldbody
     for i, (V, F, colors) in enumerate(items):
         groups = _color_groups(F, colors, palette[i % len(palette)])
-        body = b.body(f"m{i}")
         for j, (faces, rgb) in enumerate(groups):
-            # Every colour group keeps the whole vertex array: MuJoCo needs >= 4 vertices per
-            # mesh, and "shell" inertia accepts flat (2D) meshes.
+            # Every colour group keeps the whole vertex array: MuJoCo needs >= 4 vertices per mesh.
             b.mesh_asset(f"m{i}_{j}", V, faces).set("inertia", "shell")
-            b.geom(body, type="mesh", mesh=f"m{i}_{j}", rgba=[*rgb[:3], 1.0], contype=0, conaffinity=0, group=0)
+            b.geom(world, type="mesh", mesh=f"m{i}_{j}", rgba=[*rgb[:3], 1.0], contype=0, conaffinity=0, group=0)
+    default_w = 0.005 * diag
+    for i, (polylines, widths, rgb) in enumerate(curves):
+        rgba = [*(np.asarray(rgb, float)[:3] if rgb is not None else (0.25, 0.3, 0.35)), 1.0]
+        for pl, w in zip(polylines, widths if widths is not None else [None] * len(polylines)):
+            r = np.full(len(pl), default_w / 2) if w is None else np.maximum(np.asarray(w, float) / 2, 1e-6 * diag)
+            for a in range(len(pl) - 1):
+                if np.linalg.norm(pl[a + 1] - pl[a]) < 1e-9 * diag:
+                    continue
+                b.geom(world, type="capsule", fromto=np.r_[pl[a], pl[a + 1]], size=0.5 * (r[a] + r[a + 1]),
+                       rgba=rgba, contype=0, conaffinity=0)
+    for P, w, rgb in points:
+        rgba = [*(np.asarray(rgb, float)[:3] if rgb is not None else (0.8, 0.2, 0.2)), 1.0]
+        r = np.full(len(P), default_w) if w is None else np.maximum(np.asarray(w, float) / 2, 1e-6 * diag)
+        for p, ri in zip(P, r):
+            b.geom(world, type="sphere", pos=p, size=ri, rgba=rgba, contype=0, conaffinity=0)
     try:
         return render_model(b.compile(), png, width=width, height=height)
     except Exception as e:
         if not _is_gl_error(e):
             raise
-        return _render_matplotlib(items, png, width, height)
+        return _render_matplotlib(items, png, width, height, curves=curves, points=points)
 
 
 def render_mesh(vertices, faces, png, *, colors=None, width: int = 640, height: int = 480) -> Path:
@@ -137,28 +163,43 @@ def render_mesh(vertices, faces, png, *, colors=None, width: int = 640, height: 
     return render_meshes([(vertices, faces, colors)], png, width=width, height=height)
 
 
-def render_usd(path, png, *, time: float | None = None, width: int = 640, height: int = 480) -> Path:
-    """Render the visible meshes of a USD stage at a time code (default: the last) with their colours."""
-    from simfab.io.usd import read_mesh_at
+def render_usd(path, png, *, time: float | None = None, width: int = 640, height: int = 480,
+               info: dict | None = None) -> Path:
+    """Render the visible meshes (with their colours), basis curves (tubes of their widths) and
+    points of a USD stage at a time code (default: the last; outside the stage's range it is
+    clamped with a warning on stderr). ``info`` receives the time code drawn."""
+    from simfab.io.usd import open_stage, read_curves_at, read_mesh_at, stage_time
+    from simfab.progress import log
 
-    items = [(V, F, rgb) for _, V, F, rgb in read_mesh_at(path, time)]
-    if not items:
-        raise InputError("the stage has no visible mesh at this time code", where=str(path))
-    return render_meshes(items, png, width=width, height=height)
+    stage = open_stage(path)
+    t, warning = stage_time(stage, time)
+    if warning:
+        log(f"simfab: warning: {path}: {warning}")
+    if info is not None:
+        info["time"] = t
+    items = [(V, F, rgb) for _, V, F, rgb in read_mesh_at(stage, t)]
+    crv, pts = read_curves_at(stage, t)
+    if not items and not crv and not pts:
+        raise InputError(f"the stage has no visible mesh, curve or point at time code {t:g}", where=str(path))
+    return render_meshes(items, png, width=width, height=height, curves=[(pl, w, c) for _, pl, w, c in crv],
+                         points=[(P, w, c) for _, P, w, c in pts])
 
 
-def render_file(src, png, *, time: float | None = None, width: int = 640, height: int = 480) -> Path:
+def render_file(src, png, *, time: float | None = None, width: int = 640, height: int = 480,
+                info: dict | None = None) -> Path:
     """Render an MJCF (.xml), USD (.usd/.usda/.usdc) or mesh file to a PNG."""
     src = Path(src)
     if not src.is_file():
         raise InputError("file not found", where=str(src))
     if width <= 0 or height <= 0 or width > 8192 or height > 8192:
         raise InputError(f"image size {width}x{height} is out of range (1..8192)", where="--width/--height")
+    if time is not None and not np.isfinite(time):
+        raise InputError(f"must be a finite time code, got {time}", where="--time")
     suf = src.suffix.lower()
     if suf == ".xml":
         return render_mjcf(src, png, width=width, height=height)
     if suf in (".usd", ".usda", ".usdc"):
-        return render_usd(src, png, time=time, width=width, height=height)
+        return render_usd(src, png, time=time, width=width, height=height, info=info)
     from simfab.io.mesh import SUFFIXES, load_mesh
 
     if suf in SUFFIXES:
@@ -191,7 +232,7 @@ def _is_gl_error(e: Exception) -> bool:
     return re.search(r"\b(e?gl|opengl|glfw|osmesa|pyopengl)\b|gl context|display", text) is not None
 
 
-def _render_matplotlib(items, png, width, height) -> Path:
+def _render_matplotlib(items, png, width, height, *, curves=(), points=()) -> Path:
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -207,6 +248,13 @@ def _render_matplotlib(items, png, width, height) -> Path:
         fc = colors if colors is not None else (0.85, 0.55, 0.3)
         ax.add_collection3d(Poly3DCollection(V[np.asarray(F)], facecolors=fc, edgecolors="none", alpha=1.0))
         allv.append(V)
+    for polylines, _, rgb in curves:
+        for pl in polylines:
+            ax.plot(pl[:, 0], pl[:, 1], pl[:, 2], color=rgb if rgb is not None else (0.25, 0.3, 0.35), lw=1.5)
+            allv.append(pl)
+    for P, _, rgb in points:
+        ax.scatter(P[:, 0], P[:, 1], P[:, 2], color=rgb if rgb is not None else (0.8, 0.2, 0.2), s=4)
+        allv.append(P)
     V = np.concatenate(allv)
     c, r = (V.max(0) + V.min(0)) / 2, max(float(np.ptp(V, axis=0).max()) / 2, 1e-6)
     ax.set_xlim(c[0] - r, c[0] + r); ax.set_ylim(c[1] - r, c[1] + r); ax.set_zlim(c[2] - r, c[2] + r)

@@ -1,0 +1,178 @@
+"""The plain-text (non ``--json``) summary: compact rich tables.
+
+A run's summary dict is shown as one table of its top-level figures (4 significant digits,
+with units), one sub-table per nested result (dicts of figures, lists of rows) and a table of
+the output files. Units come from the summary's own ``units`` dict, then the subcommand
+module's ``UNITS``, then the key's suffix (``_m``, ``_m3``, ``_pa``, ``seconds``...).
+With ``--quiet`` only the top-level figures and the output files are shown.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import sys
+
+OUTPUT_SUFFIXES = (".png", ".usda", ".usdc", ".usd", ".xml", ".csv", ".json", ".stl", ".ply", ".obj", ".npz", ".txt")
+SUFFIX_UNITS = (("_m3", "m³"), ("_m2", "m²"), ("_mm", "mm"), ("_m", "m"), ("_pa", "Pa"), ("_n", "N"), ("_j", "J"),
+                ("_deg", "deg"), ("_s", "s"), ("seconds", "s"))
+MAX_ROWS = 20  # rows of a list-of-rows sub-table before it is elided
+MAX_COLS = 9
+MAX_DEPTH = 3
+
+
+def fmt(v) -> str:
+    """A value for a person: floats to 4 significant digits, booleans as yes/no."""
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if v is None:
+        return "–"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    s = str(v)
+    return s if len(s) <= 80 or is_path(s) else s[:77] + "…"
+
+
+INPUT_KEYS = {"source", "file", "scene", "ratings", "mesh", "skeleton", "truth"}  # paths read, not written
+
+
+def is_path(v) -> bool:
+    return isinstance(v, str) and v.lower().endswith(OUTPUT_SUFFIXES) and (os.sep in v or "/" in v)
+
+
+def _scalar(v) -> bool:
+    return v is None or isinstance(v, (bool, int, float, str))
+
+
+def _unit(key: str, units: dict) -> str:
+    if key in units:
+        return "" if units[key] in ("-", None) else str(units[key])
+    k = key.lower()
+    for suf, u in SUFFIX_UNITS:
+        if k.endswith(suf):
+            return u
+    return ""
+
+
+def _list_cell(v: list) -> str:
+    if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        if len(v) <= 6:
+            return ", ".join(fmt(x) for x in v)
+        return f"{len(v)} values, {fmt(min(v))} … {fmt(max(v))}"
+    if all(_scalar(x) for x in v):
+        s = ", ".join(fmt(x) for x in v[:8])
+        return s + (f", … ({len(v)} in all)" if len(v) > 8 else "")
+    return f"{len(v)} entries"
+
+
+def _collect_paths(d, prefix: str, paths: list) -> None:
+    """Every output path in the summary, with its dotted key."""
+    if isinstance(d, dict):
+        for k, v in d.items():
+            _collect_paths(v, f"{prefix}{k}" if not prefix else f"{prefix}.{k}", paths)
+    elif isinstance(d, list):
+        for i, v in enumerate(d):
+            if isinstance(v, (dict, list)):
+                _collect_paths(v, f"{prefix}[{i}]", paths)
+    elif is_path(d) and prefix.rsplit(".", 1)[-1] not in INPUT_KEYS:
+        paths.append((prefix, d))
+
+
+def build_tables(result: dict, *, units: dict | None = None, title: str = "simfab", quiet: bool = False) -> list:
+    """rich renderables for a summary (see the module docstring)."""
+    from rich import box
+    from rich.table import Table
+
+    units = {**(units or {}), **(result.get("units") or {})}
+
+    def figures_table(d: dict, name: str):
+        t = Table(title=name, box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+        t.add_column("quantity", style="bold")
+        t.add_column("value", justify="right")
+        t.add_column("unit")
+        return t
+
+    subs: list = []
+
+    def walk(d: dict, name: str, depth: int):
+        t = figures_table(d, name)
+        nested = []
+        for k, v in d.items():
+            if k == "units" or (is_path(v) and k not in INPUT_KEYS):
+                continue
+            if _scalar(v):
+                t.add_row(str(k), fmt(v), _unit(str(k), units))
+            elif isinstance(v, list) and (not v or all(_scalar(x) for x in v)):
+                t.add_row(str(k), _list_cell(v), _unit(str(k), units))
+            elif isinstance(v, dict) and v and all(is_path(x) for x in v.values()):
+                continue  # an 'outputs' dict: shown in the files table
+            else:
+                nested.append((k, v))
+        if t.row_count:
+            subs.append(t)
+        if quiet and depth == 0:
+            return
+        for k, v in nested:
+            sub = f"{name} › {k}"
+            if depth + 1 > MAX_DEPTH:
+                continue
+            if isinstance(v, dict):
+                walk(v, sub, depth + 1)
+            elif isinstance(v, list) and all(isinstance(x, dict) for x in v):
+                rows_table(v, sub)
+
+    def rows_table(rows: list, name: str):
+        cols = []
+        for r in rows:
+            for k, x in r.items():
+                if k not in cols and (_scalar(x) or (isinstance(x, list) and all(_scalar(y) for y in x))) and not is_path(x):
+                    cols.append(k)
+        cols = cols[:MAX_COLS]
+        t = Table(title=name, box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+        for c in cols:
+            u = _unit(str(c), units)
+            t.add_column(f"{c} [{u}]" if u else str(c), justify="right")
+        for r in rows[:MAX_ROWS]:
+            t.add_row(*(fmt(r.get(c)) if _scalar(r.get(c)) else _list_cell(r.get(c)) for c in cols))
+        if len(rows) > MAX_ROWS:
+            t.add_row(*(["…"] * len(cols)))
+            t.caption = f"{len(rows)} rows; all of them with --json"
+        subs.append(t)
+
+    walk(result, title, 0)
+    paths: list = []
+    _collect_paths(result, "", paths)
+    if paths:
+        t = Table(title="output files", box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+        t.add_column("output", style="bold")
+        t.add_column("path", overflow="fold")
+        for k, p in paths:
+            t.add_row(k, p)
+        subs.append(t)
+    return subs
+
+
+def render_text(result: dict, *, units: dict | None = None, title: str = "simfab", quiet: bool = False,
+                width: int | None = None) -> str:
+    """The summary as plain text (no colour codes), as printed on a non-terminal stdout."""
+    from rich.console import Console
+
+    buf = io.StringIO()
+    con = Console(file=buf, width=width or 110, color_system=None, highlight=False, soft_wrap=False)
+    for t in build_tables(result, units=units, title=title, quiet=quiet):
+        con.print(t)
+    return buf.getvalue().rstrip() + "\n"
+
+
+def print_summary(result: dict, *, units: dict | None = None, title: str = "simfab", quiet: bool = False) -> None:
+    """Print the summary on stdout (colours only on a terminal)."""
+    if sys.stdout.isatty():
+        from rich.console import Console
+
+        con = Console(highlight=False)
+        for t in build_tables(result, units=units, title=title, quiet=quiet):
+            con.print(t)
+    else:
+        sys.stdout.write(render_text(result, units=units, title=title, quiet=quiet))
