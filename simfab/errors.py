@@ -18,7 +18,13 @@ class InputError(SimfabError, ValueError):
 
     def __init__(self, message: str, *, where: str | None = None):
         self.where = where
+        self.message = message
         super().__init__(f"{where}: {message}" if where else message)
+
+    def in_file(self, file) -> "InputError":
+        """The same error located in ``file`` (its field kept): ``FILE: FIELD: message``."""
+        field = f"{self.where}: " if self.where and self.where != str(file) else ""
+        return InputError(f"{field}{self.message}", where=str(file))
 
 
 class ConvergenceError(SimfabError, RuntimeError):

@@ -208,7 +208,9 @@ def write_all(res: InsertionResult, out: Path, stem: str | None = None) -> dict:
     from simfab.io.atomic import atomic_paths, write_json
 
     out = Path(out)
-    stem = stem or res.model.name
+    from simfab.io.outpaths import safe_name
+
+    stem = safe_name(stem or res.model.name)  # the scene's name comes from a file: no separators, no '..'
     prof, summary = summarize(res)
     paths = {"profile_csv": out / f"{stem}_profile.csv", "plot_png": out / f"{stem}_profile.png",
              "usd": out / f"{stem}.usda", "mjcf": out / f"{stem}.xml", "profile_json": out / f"{stem}_summary.json"}

@@ -141,7 +141,10 @@ def write_all(result, mesh, out: Path, *, stem: str = "growth") -> dict:
     together: a failure in any writer leaves none of them (``atomic_paths``)."""
     from simfab.io.atomic import atomic_paths
 
+    from simfab.io.outpaths import safe_name
+
     out = Path(out)
+    stem = safe_name(stem)  # scene names come from files: no separators, no '..'
     paths = {"skin_stl": out / f"{stem}_skin.stl", "skin_ply": out / f"{stem}_skin.ply",
              "skeleton_json": out / f"{stem}_skeleton.json", "usd": out / f"{stem}.usdc",
              "mjcf": out / f"{stem}_grown.xml", "png": out / f"{stem}_preview.png"}
