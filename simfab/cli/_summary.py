@@ -31,8 +31,7 @@ def fmt(v) -> str:
         return str(v)
     if isinstance(v, float):
         return f"{v:.4g}"
-    s = str(v)
-    return s if len(s) <= 80 or is_path(s) else s[:77] + "…"
+    return str(v)
 
 
 INPUT_KEYS = {"source", "file", "scene", "ratings", "mesh", "skeleton", "truth"}  # paths read, not written
@@ -61,10 +60,19 @@ def _list_cell(v: list) -> str:
         if len(v) <= 6:
             return ", ".join(fmt(x) for x in v)
         return f"{len(v)} values, {fmt(min(v))} … {fmt(max(v))}"
+    if all(isinstance(x, str) for x in v) and any(len(x) > 30 for x in v):
+        return "\n".join(v[:8]) + (f"\n… ({len(v)} in all)" if len(v) > 8 else "")
     if all(_scalar(x) for x in v):
         s = ", ".join(fmt(x) for x in v[:8])
         return s + (f", … ({len(v)} in all)" if len(v) > 8 else "")
     return f"{len(v)} entries"
+
+
+def _cell(text: str):
+    """Numbers right-aligned; sentences (and anything with line breaks) left-aligned, folded."""
+    from rich.text import Text
+
+    return Text(text, justify="left" if (len(text) > 24 or "\n" in text) else "right")
 
 
 def _collect_paths(d, prefix: str, paths: list) -> None:
@@ -85,13 +93,14 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
     from rich import box
     from rich.table import Table
 
-    units = {**(units or {}), **(result.get("units") or {})}
+    own = result.get("units")
+    units = {**(units or {}), **(own if isinstance(own, dict) else {})}
 
     def figures_table(d: dict, name: str):
         t = Table(title=name, box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
-        t.add_column("quantity", style="bold")
-        t.add_column("value", justify="right")
-        t.add_column("unit")
+        t.add_column("quantity", style="bold", no_wrap=True)
+        t.add_column("value", justify="right", overflow="fold")
+        t.add_column("unit", no_wrap=True)
         return t
 
     subs: list = []
@@ -100,12 +109,12 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
         t = figures_table(d, name)
         nested = []
         for k, v in d.items():
-            if k == "units" or (is_path(v) and k not in INPUT_KEYS):
+            if (k == "units" and isinstance(v, dict)) or (is_path(v) and k not in INPUT_KEYS):
                 continue
             if _scalar(v):
-                t.add_row(str(k), fmt(v), _unit(str(k), units))
+                t.add_row(str(k), _cell(fmt(v)), _unit(str(k), units))
             elif isinstance(v, list) and (not v or all(_scalar(x) for x in v)):
-                t.add_row(str(k), _list_cell(v), _unit(str(k), units))
+                t.add_row(str(k), _cell(_list_cell(v)), _unit(str(k), units))
             elif isinstance(v, dict) and v and all(is_path(x) for x in v.values()):
                 continue  # an 'outputs' dict: shown in the files table
             else:

@@ -18,6 +18,11 @@ import os
 from simfab.crowd.outputs import aggregate_outputs, bracket_outputs, study_outputs, truth_outputs
 from simfab.errors import InputError
 
+#: units of summary keys for the plain-text table
+UNITS = {"support_volume": "m³", "overhang_area": "m²", "raycast_volume": "m³", "euler_deg": "deg",
+         "tip_deflection": "m", "area": "m²", "load": "N", "seconds": "s", "rms_continuous": "unit scale",
+         "rms_rounded": "unit scale"}
+
 HELP = "wisdom of micro-crowds: aggregate ratings, micro-crowd study, computed truths, synthetic crowds"
 DESCRIPTION = (
     "Wisdom of micro-crowds. Actions: 'aggregate' (all aggregators incl. the Bayesian "
@@ -86,7 +91,7 @@ def add_args(p):
     t = sub.add_parser("truth", help="support volume / overhang area of a mesh in given orientations")
     t.add_argument("mesh", help="STL/OBJ/PLY/OFF/GLB; printed with +z up, plate under the lowest point")
     t.add_argument("--orientations", nargs="+", default=["six"], metavar="O", help="'six' (the six axis directions down) or [NAME=]RX:RY:RZ in degrees (extrinsic x, y, z); default six")
-    t.add_argument("--units", default="m", help="units of the mesh file: m, mm or cm (default m)")
+    t.add_argument("--units", default="m", choices=["m", "mm", "cm"], help="units of the mesh file: m, mm or cm (default m)")
     t.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), default=[1.0, 10.0], help="survey scale for the scores (default 1 10)")
     t.add_argument("--no-raycast", action="store_true", help="skip the ray-cast cross-check")
     add_common_args(t)
@@ -158,16 +163,19 @@ def run_study(args):
 
 
 def run_truth(args):
-    from simfab.crowd.truth import orientation_table, parse_orientations
-    from simfab.io.mesh import load_mesh
+    from simfab.crowd.truth import load_part, orientation_table, parse_orientations
+    from simfab.progress import log
 
     orients = parse_orientations(args.orientations)
     lo, hi = args.scale
     if not lo < hi:
         raise InputError(f"scale must have lo < hi, got {lo:g} {hi:g}", where="--scale")
-    mesh = load_mesh(args.mesh, units=args.units, require_watertight=True)
+    mesh, notes = load_part(args.mesh, units=args.units)
+    for n in notes:  # shown even with --quiet: the part was not taken exactly as read
+        log(f"simfab: warning: {n}")
     rows = orientation_table(mesh.vertices, mesh.faces, orients, raycast=not args.no_raycast, scale=(lo, hi))
-    return truth_outputs(rows, args.out, scale=(lo, hi))
+    summary = truth_outputs(rows, args.out, scale=(lo, hi), notes=notes)
+    return summary
 
 
 def run_simulate(args):

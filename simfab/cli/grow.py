@@ -20,6 +20,10 @@ from pathlib import Path
 
 from simfab._bundled import scenes_dir
 
+#: units of summary keys for the plain-text table (the skin files themselves are in mm: skin_units)
+UNITS = {"influence": "m", "kill": "m", "branch_length": "m", "volume": "m³", "overlap_volume": "m³",
+         "penetration": "m", "seconds_growth": "s", "seconds_skin": "s"}
+
 HELP = "grow a support structure between objects (space colonization) and skin it for 3D printing"
 DESCRIPTION = (
     "Grow an organic support structure from root sites to target sites of an MJCF scene by space "

@@ -56,7 +56,7 @@ def study_outputs(result, out: str, *, title: str) -> dict:
     return summary
 
 
-def truth_outputs(rows, out: str, *, scale) -> dict:
+def truth_outputs(rows, out: str, *, scale, notes=()) -> dict:
     from simfab.io.atomic import write_csv, write_json
 
     cols = ["orientation", "rx_deg", "ry_deg", "rz_deg", "support_volume_m3", "overhang_area_m2", "raycast_volume_m3", "raycast_rel_diff", "support_score", "finish_score"]
@@ -66,7 +66,7 @@ def truth_outputs(rows, out: str, *, scale) -> dict:
         "support_truth_csv": str(write_csv(os.path.join(out, "truth_support.csv"), ["task", "truth"], [[r["orientation"], r["support_score"]] for r in rows])),
         "finish_truth_csv": str(write_csv(os.path.join(out, "truth_finish.csv"), ["task", "truth"], [[r["orientation"], r["finish_score"]] for r in rows])),
     }
-    summary = {"orientations": rows, "scale": list(scale), "outputs": outputs}
+    summary = {"orientations": rows, "scale": list(scale), "mesh_notes": list(notes), "outputs": outputs}
     outputs["truth_json"] = str(write_json(os.path.join(out, "truth.json"), summary))
     return summary
 

@@ -39,8 +39,15 @@ def inspect_file(path, *, units: str = "m") -> dict:
         with warnings.catch_warnings():  # the report lists what was repaired
             warnings.simplefilter("ignore")
             mesh, report = read_mesh(path, units=units)
-        return {"kind": "mesh", "file": str(path), **dataclasses.asdict(report), "problems": report.problems(),
-                "usable_after_repair": bool(mesh.is_watertight), "extents_m": [float(x) for x in mesh.extents]}
+        from simfab.io.mesh import interior_faces, units_warning
+
+        warn = units_warning(mesh.extents, units)
+        inside = int(interior_faces(mesh.vertices, mesh.faces).sum()) if mesh.is_watertight else None
+        problems = report.problems() + ([f"{inside} faces lie inside the solid (overlapping bodies or a "
+                                         "self-intersecting surface)"] if inside else [])
+        return {"kind": "mesh", "file": str(path), **dataclasses.asdict(report), "problems": problems,
+                "usable_after_repair": bool(mesh.is_watertight) and not inside, "extents_m": [float(x) for x in mesh.extents],
+                "units": units, "interior_faces": inside, "warnings": [warn] if warn else []}
     raise InputError(f"unknown file type {suf!r} (mesh, .xml or .usd/.usda/.usdc)", where=str(path))
 
 
