@@ -48,7 +48,10 @@ def add_args(p):
     g.add_argument("--mode", choices=["volume", "surface", "profile"], help="attractor placement")
     g.add_argument("--symmetric", action="store_true", default=None, help="mirror-symmetric growth")
     g.add_argument("--smooth-iterations", type=int, metavar="K", help="smoothing iterations (0 = none)")
-    g.add_argument("--max-steps", type=int, metavar="K", help="growth step cap")
+    g.add_argument("--max-steps", type=int, metavar="K", help="growth step cap (default: the scene's)")
+    g.add_argument("--best-effort", action="store_true",
+                   help="keep and write a structure that leaves targets unreached (default: that is a failed "
+                        "growth, exit 1, nothing written)")
     e = p.add_argument_group("edit")
     e.add_argument("--stroke", metavar="FILE", help="(edit) stroke: JSON {\"points\": [[x, y], ...]} or CSV, pixels")
     e.add_argument("--camera", metavar="FILE|JSON", help="(edit) camera: eye, target, up, fovy_deg, width, height")
@@ -75,7 +78,7 @@ def run(args) -> dict:
                       influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
                       branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
                       symmetric=args.symmetric, smoothing_iterations=_nonneg(args.smooth_iterations),
-                      max_steps=_positive("--max-steps", args.max_steps))
+                      max_steps=_positive("--max-steps", args.max_steps), best_effort=args.best_effort)
 
 
 def _nonneg(v):
@@ -86,8 +89,10 @@ def _nonneg(v):
     return v
 
 
-def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, **overrides) -> dict:
-    """Grow, skin, check and write every output for one scene; returns the summary."""
+def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool = False, **overrides) -> dict:
+    """Grow, skin, check and write every output for one scene; returns the summary.
+
+    A target left unreached is a failed growth (ConvergenceError, exit 1) unless ``best_effort``."""
     from simfab.errors import ConvergenceError
     from simfab.growth import grow, skin_result
     from simfab.growth.outputs import SKIN_FILE_UNITS, write_all
@@ -101,8 +106,12 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, **overrides) -> dic
         raise ConvergenceError(f"growth produced no structure ({'; '.join(s['stop_reasons'])}); "
                                f"unreached targets: {', '.join(s['targets_unreached']) or 'none'}")
     if s["targets_unreached"]:
-        log(f"simfab grow: warning: unreached targets {', '.join(s['targets_unreached'])} "
-            f"({'; '.join(s['stop_reasons'])})", quiet=quiet)
+        msg = (f"{len(s['targets_unreached'])} of {s['targets_total']} targets unreached "
+               f"({', '.join(s['targets_unreached'])}; {'; '.join(s['stop_reasons'])})")
+        if not best_effort:
+            raise ConvergenceError(f"{msg}; change the growth parameters (e.g. --branch-length, --influence, "
+                                   "--max-steps) or pass --best-effort to keep the partial structure")
+        log(f"simfab grow: warning: {msg}")  # shown even with --quiet: the result is partial
     mesh, rep, seconds_skin = skin_result(result)
     tol_pen = result.scene.params.skin_tolerance
     if rep.penetration > tol_pen + PENETRATION_ROUNDOFF * result.resolved.diag:
