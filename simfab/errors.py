@@ -9,6 +9,9 @@
 """
 
 
+import os
+
+
 class SimfabError(Exception):
     """Base class of simfab's own errors."""
 
@@ -23,7 +26,9 @@ class InputError(SimfabError, ValueError):
 
     def in_file(self, file) -> "InputError":
         """The same error located in ``file`` (its field kept): ``FILE: FIELD: message``."""
-        field = f"{self.where}: " if self.where and self.where != str(file) else ""
+        if str(file) in str(self) or (self.where and os.path.basename(str(file)) in str(self.where)):
+            return self  # already located
+        field = f"{self.where}: " if self.where else ""
         return InputError(f"{field}{self.message}", where=str(file))
 
 

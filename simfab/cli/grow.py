@@ -99,14 +99,22 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool =
     from simfab.growth.tolerances import PENETRATION_ROUNDOFF
     from simfab.progress import log
 
+    from simfab.errors import InputError
+
     symmetric = overrides.pop("symmetric", None)
-    result = grow(scene, seed=seed, symmetric=symmetric, **overrides)
+    try:
+        result = grow(scene, seed=seed, symmetric=symmetric, **overrides)
+    except InputError as e:  # name the scene's file with the field (its TOML holds the growth parameters)
+        toml = Path(scene).with_suffix(".toml")
+        if (e.where or "").startswith("--"):
+            raise
+        raise e.in_file(toml if toml.is_file() else scene) from None
     s = result.summary()
     if s["segments"] == 0:
-        raise ConvergenceError(f"growth produced no structure ({'; '.join(s['stop_reasons'])}); "
+        raise ConvergenceError(f"{scene}: growth produced no structure ({'; '.join(s['stop_reasons'])}); "
                                f"unreached targets: {', '.join(s['targets_unreached']) or 'none'}")
     if s["targets_unreached"]:
-        msg = (f"{len(s['targets_unreached'])} of {s['targets_total']} targets unreached "
+        msg = (f"{scene}: {len(s['targets_unreached'])} of {s['targets_total']} targets unreached "
                f"({', '.join(s['targets_unreached'])}; {'; '.join(s['stop_reasons'])})")
         if not best_effort:
             raise ConvergenceError(f"{msg}; change the growth parameters (e.g. --branch-length, --influence, "

@@ -331,7 +331,7 @@ def open_stage(path: str | os.PathLike):
             stage = Usd.Stage.Open(str(path))
     except Tf.ErrorException as e:
         msg = " ".join(str(e).split())
-        m = re.search(r":(\d+):(\d+): parse error", msg)
+        m = re.search(r"\.usda?:(\d+):(\d+): ", msg)
         why = (f"parse error at line {m.group(1)}, column {m.group(2)}: truncated or not USD" if m else
                "corrupt binary crate" if "crate" in msg.lower() else "USD could not parse it")
         raise InputError(f"not a readable USD stage ({why})", where=str(path)) from None
