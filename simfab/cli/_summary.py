@@ -4,7 +4,7 @@ A run's summary dict is shown as one table of its top-level figures (4 significa
 with units), one sub-table per nested result (dicts of figures, lists of rows) and a table of
 the output files. Units come from the summary's own ``units`` dict, then the subcommand
 module's ``UNITS``, then the key's suffix (``_m``, ``_m3``, ``_pa``, ``seconds``...).
-With ``--quiet`` only the top-level figures and the output files are shown.
+``--quiet`` changes nothing here (it silences progress bars and log lines only).
 """
 
 from __future__ import annotations
@@ -121,8 +121,6 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
                 nested.append((k, v))
         if t.row_count:
             subs.append(t)
-        if quiet and depth == 0:
-            return
         for k, v in nested:
             sub = f"{name} › {k}"
             if depth + 1 > MAX_DEPTH:
