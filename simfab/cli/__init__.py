@@ -64,8 +64,30 @@ def _seed(text: str) -> int:
     return v
 
 
+class _Formatter(argparse.RawDescriptionHelpFormatter):
+    """Descriptions keep their line breaks and indentation; lines longer than the terminal are
+    wrapped (hanging indent kept), so both hand-laid lists and one-line paragraphs read well."""
+
+    def _fill_text(self, text, width, indent):
+        import textwrap
+
+        out = []
+        for line in text.splitlines():
+            lead = line[: len(line) - len(line.lstrip())]
+            if len(line) + len(indent) <= width or not line.strip():
+                out.append(indent + line)
+            else:
+                out += textwrap.wrap(line.strip(), width, break_on_hyphens=False, initial_indent=indent + lead,
+                                     subsequent_indent=indent + lead + ("  " if lead else ""))
+        return "\n".join(out)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse that raises InputError instead of exiting, so main() owns the exit code."""
+
+    def __init__(self, *a, **kw):
+        kw["formatter_class"] = _Formatter
+        super().__init__(*a, **kw)
 
     def error(self, message):  # noqa: D401 - argparse API
         raise InputError(f"{self.prog}: {message}")
@@ -80,8 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in SUBCOMMANDS:
         mod = subcommand_module(name)
-        sp = sub.add_parser(name, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP),
-                            formatter_class=argparse.RawDescriptionHelpFormatter)
+        sp = sub.add_parser(name, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
         add_common_args(sp)
         mod.add_args(sp)
         sp.set_defaults(_module=mod)

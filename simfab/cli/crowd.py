@@ -1,4 +1,4 @@
-"""``simfab crowd``: wisdom of micro-crowds -- aggregate ratings, study crowd size, compute truths.
+"""simfab crowd: wisdom of micro-crowds -- aggregate ratings, study crowd size, compute truths.
 
     simfab crowd aggregate RATINGS.csv --scale 1 10 [--truth TRUTH.csv]
     simfab crowd study RATINGS.csv --scale 1 10 --truth TRUTH.csv [--subcrowds 500]
@@ -6,8 +6,8 @@
     simfab crowd simulate --tasks 6 --scale 1 10 [--practitioners 15] [--public 100]
     simfab crowd bracket [--designs NAME ...] [--load 20]
 
-RATINGS.csv is long-form ``worker,task,label`` (integer labels on the scale); TRUTH.csv is
-``task,truth``. RMS errors are on the unit scale [0, 1] (label - lo) / (hi - lo). The
+RATINGS.csv is long-form worker,task,label (integer labels on the scale); TRUTH.csv is
+task,truth. RMS errors are on the unit scale [0, 1] (label - lo) / (hi - lo). The
 bundled 3D-printing survey is in ``scenes/crowd`` (see its README).
 """
 
@@ -67,19 +67,69 @@ def _scale_arg(p):
     p.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), required=True, help="integer rating scale, e.g. 1 10")
 
 
+_RAW = {"formatter_class": __import__("argparse").RawDescriptionHelpFormatter}
+
+AGGREGATE_DESCRIPTION = """Aggregate one crowd's ratings with every method (mean, median, majority, trimmed
+mean, the Bayesian expertise/difficulty model with R-hat/ESS convergence checks) and, with
+--truth, score each against it (RMS on the unit scale). Writes aggregates.csv, raters.csv,
+summary.json and, with --truth, expert_network.png and errors_per_question.png to --out.
+
+--json keys: methods {name: estimates {task: value}, rms, rms_discrete, percentile, ...},
+  bayes {rhat_max, ess_min, seconds, converged, iterations_per_chain, chains, credible_mass,
+  x_interval {task: [lo, hi]}}, warnings, individual_errors {worker: rms} (with --truth),
+  tasks, workers, scale [lo, hi], outputs {aggregates_csv, raters_csv, summary_json,
+  expert_network_png, errors_png}."""
+
+STUDY_DESCRIPTION = """Micro-crowd study: for every sub-crowd size from --min-size to N-1, draw --subcrowds random
+sub-crowds, aggregate each with the Bayesian model and report the crowd estimate's percentile
+rank among the individual raters and the population bias. Writes study.csv, study.png and
+study.json to --out.
+
+--json keys: sizes (rows: size, subcrowds, percentile_mean, percentile_sd, bias_mean, bias_sd,
+  unconverged_fraction, rhat_median), seconds, outputs {study_csv, study_png, study_json}."""
+
+TRUTH_DESCRIPTION = """Computed ground truth of a 3D-printing question: support volume (m^3) and overhang area
+(m^2) of a closed mesh in each orientation (printed with +z up, plate under the lowest point),
+cross-checked by ray casting, scaled onto the survey scale. Overlapping bodies are united
+first and a mesh size implausible for --units is reported (stderr and mesh_notes). Writes
+truth_table.csv, truth_support.csv, truth_finish.csv and truth.json to --out.
+
+--json keys: orientations (rows: orientation, euler_deg, support_volume [m^3], overhang_area
+  [m^2], raycast_volume [m^3], raycast_rel_diff, support_score, finish_score), scale,
+  mesh_notes (what was not taken as read), outputs {table_csv, support_truth_csv,
+  finish_truth_csv, truth_json}."""
+
+SIMULATE_DESCRIPTION = """Draw a synthetic crowd from the expertise/difficulty model: practitioners and general
+public (a fraction of it malicious) rating --tasks questions with truths drawn uniformly on the
+scale, or the questions of --truth. Writes ratings.csv, truth.csv and planted.json (the planted
+expertise, difficulty and malicious raters) to --out.
+
+--json keys: raters, tasks (names), malicious (count), outputs {ratings_csv, truth_csv,
+  planted_json}."""
+
+BRACKET_DESCRIPTION = """Strength ground truth of the 2D bracket designs of the structural survey: plane-stress FEM
+tip deflection under --load, scored 1..5 (stiffest = 5). Writes brackets.csv,
+truth_strength.csv, brackets.png and brackets.json to --out.
+
+--json keys: setup (load [N], material, ...), designs {name: tip_deflection [m], score, area
+  [m^2]}, outputs {table_csv, truth_csv, designs_png, summary_json}."""
+
+
 def add_args(p):
     from simfab.cli import add_common_args
 
     sub = p.add_subparsers(dest="crowd_command", metavar="ACTION", parser_class=type(p))
 
-    a = sub.add_parser("aggregate", help="aggregate one crowd's ratings (all methods), score against truth")
+    a = sub.add_parser("aggregate", help="aggregate one crowd's ratings (all methods), score against truth",
+                       description=AGGREGATE_DESCRIPTION, **_RAW)
     a.add_argument("ratings", help="long-form CSV: worker,task,label")
     _scale_arg(a)
     a.add_argument("--truth", help="CSV task,truth (scale units) to score against")
     _sampler_args(a, study=False)
     add_common_args(a)
 
-    s = sub.add_parser("study", help="micro-crowd study: percentile rank and population bias against crowd size")
+    s = sub.add_parser("study", help="micro-crowd study: percentile rank and population bias against crowd size",
+                       description=STUDY_DESCRIPTION, **_RAW)
     s.add_argument("ratings", help="long-form CSV: worker,task,label")
     _scale_arg(s)
     s.add_argument("--truth", required=True, help="CSV task,truth")
@@ -88,7 +138,8 @@ def add_args(p):
     _sampler_args(s, study=True)
     add_common_args(s)
 
-    t = sub.add_parser("truth", help="support volume / overhang area of a mesh in given orientations")
+    t = sub.add_parser("truth", help="support volume / overhang area of a mesh in given orientations",
+                       description=TRUTH_DESCRIPTION, **_RAW)
     t.add_argument("mesh", help="STL/OBJ/PLY/OFF/GLB; printed with +z up, plate under the lowest point")
     t.add_argument("--orientations", nargs="+", default=["six"], metavar="O", help="'six' (the six axis directions down) or [NAME=]RX:RY:RZ in degrees (extrinsic x, y, z); default six")
     t.add_argument("--units", default="m", choices=["m", "mm", "cm"], help="units of the mesh file: m, mm or cm (default m)")
@@ -96,7 +147,8 @@ def add_args(p):
     t.add_argument("--no-raycast", action="store_true", help="skip the ray-cast cross-check")
     add_common_args(t)
 
-    m = sub.add_parser("simulate", help="draw a synthetic crowd from the model (practitioners and general public)")
+    m = sub.add_parser("simulate", help="draw a synthetic crowd from the model (practitioners and general public)",
+                       description=SIMULATE_DESCRIPTION, **_RAW)
     _scale_arg(m)
     g = m.add_mutually_exclusive_group(required=True)
     g.add_argument("--tasks", type=int, help="number of questions (truth drawn uniformly on the scale)")
@@ -107,7 +159,8 @@ def add_args(p):
     m.add_argument("--difficulty", type=float, nargs="+", default=[1.0], help="question difficulty beta (one value or one per question; default 1)")
     add_common_args(m)
 
-    b = sub.add_parser("bracket", help="strength truth of the 2D bracket designs (FEM tip deflection, scores 1..5)")
+    b = sub.add_parser("bracket", help="strength truth of the 2D bracket designs (FEM tip deflection, scores 1..5)",
+                       description=BRACKET_DESCRIPTION, **_RAW)
     b.add_argument("--designs", nargs="+", metavar="NAME", help="subset of the built-in designs (default all)")
     b.add_argument("--load", type=float, default=None, help="total downward tip load, N (default 20)")
     b.add_argument("--material", default=None, help="built-in material name (default PLA)")

@@ -1,15 +1,13 @@
-"""``simfab grow``: generative support structures (space colonization), skinned for printing.
-
-Usage::
+"""simfab grow: generative support structures (space colonization), skinned for printing.
 
     simfab grow SCENE.xml [--attractors N --influence D --kill D --branch-length L
                            --mode volume|surface|profile --symmetric --smooth-iterations K]
     simfab grow edit SKELETON.json --stroke STROKE.json --camera CAMERA.json [--chain K]
 
-SCENE is an MJCF file with a companion TOML (see ``scenes/growth/README.md``). Outputs
-under ``--out``: skin STL + PLY, skeleton JSON, USD growth replay, MJCF of objects + grown
-part, PNG preview. ``edit`` moves one skeleton chain onto the surface of rays through a
-2D stroke and re-skins the result.
+SCENE is an MJCF file with a companion TOML (see scenes/growth/README.md). Outputs under
+--out: skin STL + PLY (mm), skeleton JSON, USD growth replay, MJCF of objects + grown part,
+PNG preview and the preview's camera (JSON, the --camera of 'grow edit'). 'edit' moves one
+skeleton chain onto the surface of rays through a 2D stroke and re-skins the result.
 """
 
 from __future__ import annotations
@@ -31,7 +29,18 @@ DESCRIPTION = (
     "symmetry, obstacle avoidance), prune, smooth and skin it into one watertight printable mesh. Writes skin "
     "STL/PLY, skeleton JSON, a USD growth replay, an MJCF of objects + grown part and a PNG preview. "
     "'simfab grow edit SKELETON_JSON --stroke FILE --camera FILE' moves one skeleton chain onto the surface of "
-    "rays through a 2D stroke and re-skins it. Scene format: scenes/growth/README.md."
+    "rays through a 2D stroke and re-skins it. Scene format: scenes/growth/README.md.\n\n"
+    "A sample edit: 'simfab grow scenes/growth/phone_stand.xml' then 'simfab grow edit "
+    "simfab-out/grow/phone_stand_skeleton.json --stroke scenes/growth/phone_stand_stroke.json --camera "
+    "simfab-out/grow/phone_stand_preview_camera.json' (the stroke is drawn in the preview PNG's pixels).\n\n"
+    "--json keys (grow): scene, mode, symmetric, seed, attractors, influence, kill, branch_length [m], steps, "
+    "stop_reasons, targets_total, targets_reached, targets_unreached (names), nodes, segments, nodes_grown, "
+    "collisions_resolved, collisions_unresolved, dead_ends, dropped_oscillating, seconds_growth [s], watertight, "
+    "is_volume, bodies, volume [m^3], nodes_in_skin, overlap_volume [m^3], penetration [m], skin_attempts, "
+    "objects_subtracted, objects_not_manifold, seconds_skin [s], skin_units, and the paths skin_stl, skin_ply, "
+    "skeleton_json, usd, mjcf, png, camera_json.\n\n"
+    "--json keys (edit): chain, segments_colliding and the other edit figures, nodes, segments, watertight, bodies, "
+    "volume [m^3], skin_units, skeleton_json, skin_stl, skin_ply."
 )
 
 SCENES_DIR = scenes_dir("growth")

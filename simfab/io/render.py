@@ -5,7 +5,8 @@ MuJoCo's ``Renderer`` draws headless through EGL (``MUJOCO_GL=egl``, set by
 same views are drawn with matplotlib's 3D polygons instead, so a PNG is always produced.
 
 The camera looks at the bounding box of the visible geometry (planes excluded) from an
-oblique view: azimuth 135°, elevation -25°, distance 1.6 x the box diagonal.
+oblique view: azimuth 135°, elevation -25°, distance 1.3 x the box diagonal (the bounding
+sphere just fits the 45° vertical field of view).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import numpy as np
 from simfab.errors import InputError
 from simfab.io.atomic import atomic_path
 
-AZIMUTH, ELEVATION, DISTANCE_FACTOR = 135.0, -25.0, 1.6
+AZIMUTH, ELEVATION, DISTANCE_FACTOR = 135.0, -25.0, 1.3
 COLOR_BINS = 24  # per-face colours are quantized into this many geoms for MuJoCo
 
 
@@ -60,8 +61,12 @@ def _scene_bounds(model, data):
 
 
 def render_model(model, png, *, data=None, width: int = 640, height: int = 480,
-                 azimuth: float = AZIMUTH, elevation: float = ELEVATION) -> Path:
-    """Render a ``mujoco.MjModel`` (at ``data`` or ``qpos0``) to a PNG."""
+                 azimuth: float = AZIMUTH, elevation: float = ELEVATION, camera: dict | None = None) -> Path:
+    """Render a ``mujoco.MjModel`` (at ``data`` or ``qpos0``) to a PNG.
+
+    ``camera`` (a dict) receives the pinhole camera of the image: eye, target, up (3,) [m],
+    fovy_deg (vertical field of view), width, height [px] -- the format of
+    :func:`simfab.growth.sketch.load_camera`, so strokes can be drawn over the PNG."""
     import mujoco
 
     if data is None:
@@ -75,6 +80,12 @@ def render_model(model, png, *, data=None, width: int = 640, height: int = 480,
     cam.lookat[:] = (lo + hi) / 2
     cam.distance = DISTANCE_FACTOR * max(float(np.linalg.norm(hi - lo)), 1e-3)
     cam.azimuth, cam.elevation = azimuth, elevation
+    if camera is not None:
+        # MuJoCo's free camera: forward = (cos el cos az, cos el sin az, sin el), eye = lookat - distance forward
+        a, e = np.radians(azimuth), np.radians(elevation)
+        fwd = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+        camera.update(eye=(np.asarray(cam.lookat) - cam.distance * fwd).tolist(), target=np.asarray(cam.lookat).tolist(),
+                      up=[0.0, 0.0, 1.0], fovy_deg=float(model.vis.global_.fovy), width=int(width), height=int(height))
     renderer = mujoco.Renderer(model, height=height, width=width)
     try:
         renderer.update_scene(data, camera=cam)
@@ -263,3 +274,52 @@ def _render_matplotlib(items, png, width, height, *, curves=(), points=()) -> Pa
     path = save_figure(fig, png)
     plt.close(fig)
     return path
+
+
+def _nice_length(x: float) -> float:
+    """The largest 1, 2 or 5 x 10^k not above x."""
+    k = np.floor(np.log10(x))
+    for m in (5.0, 2.0, 1.0):
+        if m * 10**k <= x:
+            return float(m * 10**k)
+    return float(10**k)
+
+
+def annotate_png(png, camera: dict, *, title: str = "", legend: list | None = None) -> Path:
+    """Add a title (top left), a scale bar valid at the look-at depth (bottom left) and an
+    optional legend ``[(label, rgb), ...]`` (top right) to a PNG rendered with ``camera``
+    (see :func:`render_model`). The image is rewritten in place."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    png = Path(png)
+    img = Image.open(png).convert("RGB")
+    W, H = img.size
+    d = ImageDraw.Draw(img, "RGBA")
+    fs = max(12, H // 32)
+    try:
+        font = ImageFont.load_default(size=fs)
+    except TypeError:  # Pillow < 10.1
+        font = ImageFont.load_default()
+    if title:
+        d.rectangle([0, 0, W, int(1.8 * fs)], fill=(255, 255, 255, 190))
+        d.text((int(0.5 * fs), int(0.35 * fs)), title, fill=(20, 20, 20), font=font)
+    depth = float(np.linalg.norm(np.subtract(camera["target"], camera["eye"])))
+    px_per_m = H / (2.0 * depth * np.tan(np.radians(camera["fovy_deg"]) / 2.0))
+    L = _nice_length(0.25 * W / px_per_m)
+    n = int(round(L * px_per_m))
+    x0, y0 = int(0.5 * fs), H - int(1.2 * fs)
+    label = (f"{L * 1e3:g} mm" if L < 1 else f"{L:g} m") + " (at the look-at point)"
+    tw = int(d.textlength(label, font=font))
+    d.rectangle([x0 - 4, y0 - int(1.6 * fs), x0 + max(n, tw) + 8, H - 2], fill=(255, 255, 255, 190))
+    d.rectangle([x0, y0, x0 + n, y0 + max(3, fs // 4)], fill=(20, 20, 20))
+    d.text((x0, y0 - int(1.3 * fs)), label, fill=(20, 20, 20), font=font)
+    for i, (lab, rgb) in enumerate(legend or []):
+        y = int((2.2 + 1.4 * i) * fs)
+        c = tuple(int(255 * float(v)) for v in rgb[:3])
+        w = int(d.textlength(lab, font=font)) + 2 * fs
+        d.rectangle([W - w - fs, y - 4, W - 4, y + fs + 4], fill=(255, 255, 255, 190))
+        d.rectangle([W - w - int(0.5 * fs), y, W - w + int(0.3 * fs), y + fs], fill=c)
+        d.text((W - w + fs // 2 + 4, y), lab, fill=(20, 20, 20), font=font)
+    with atomic_path(png) as tmp:
+        img.save(tmp, format="PNG")
+    return png
