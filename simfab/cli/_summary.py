@@ -16,6 +16,7 @@ import sys
 OUTPUT_SUFFIXES = (".png", ".usda", ".usdc", ".usd", ".xml", ".csv", ".json", ".stl", ".ply", ".obj", ".npz", ".txt")
 SUFFIX_UNITS = (("_m3", "m³"), ("_m2", "m²"), ("_mm", "mm"), ("_m", "m"), ("_pa", "Pa"), ("_n", "N"), ("_j", "J"),
                 ("_deg", "deg"), ("_s", "s"), ("seconds", "s"))
+CONTAINER_KEYS = {"outputs", "pipelines", "scenes", "inserts"}  # left out of output-file labels
 MAX_ROWS = 20  # rows of a list-of-rows sub-table before it is elided
 MAX_COLS = 9
 MAX_DEPTH = 3
@@ -68,6 +69,18 @@ def _list_cell(v: list) -> str:
     return f"{len(v)} entries"
 
 
+def _row_cell(x) -> bool:
+    """Fits a table cell: a scalar or a short list of scalars."""
+    return _scalar(x) or (isinstance(x, list) and len(x) <= 6 and all(_scalar(y) for y in x))
+
+
+def _same_keys(ds: list) -> bool:
+    """Dicts that share most of their scalar keys (results of the same kind, e.g. per scene)."""
+    keys = [{k for k, v in d.items() if _row_cell(v)} for d in ds]
+    common = set.intersection(*keys) if keys else set()
+    return bool(common) and all(len(common) >= 0.6 * len(k) for k in keys)
+
+
 def _cell(text: str):
     """Numbers right-aligned; sentences (and anything with line breaks) left-aligned, folded."""
     from rich.text import Text
@@ -85,19 +98,23 @@ def _collect_paths(d, prefix: str, paths: list) -> None:
             if isinstance(v, (dict, list)):
                 _collect_paths(v, f"{prefix}[{i}]", paths)
     elif is_path(d) and prefix.rsplit(".", 1)[-1] not in INPUT_KEYS:
-        paths.append((prefix, d))
+        short = ".".join(p for p in prefix.split(".") if p not in CONTAINER_KEYS) or prefix
+        paths.append((short, d))
 
 
 def build_tables(result: dict, *, units: dict | None = None, title: str = "simfab", quiet: bool = False) -> list:
     """rich renderables for a summary (see the module docstring)."""
     from rich import box
+    from rich.markup import escape
     from rich.table import Table
+    from rich.text import Text
 
     own = result.get("units")
     units = {**(units or {}), **(own if isinstance(own, dict) else {})}
 
     def figures_table(d: dict, name: str):
-        t = Table(title=name, box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
+        t = Table(title=escape(name), box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False,
+                  min_width=len(name) + 2)
         t.add_column("quantity", style="bold", no_wrap=True)
         t.add_column("value", justify="right", overflow="fold")
         t.add_column("unit", no_wrap=True)
@@ -112,9 +129,9 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
             if (k == "units" and isinstance(v, dict)) or (is_path(v) and k not in INPUT_KEYS):
                 continue
             if _scalar(v):
-                t.add_row(str(k), _cell(fmt(v)), _unit(str(k), units))
+                t.add_row(Text(str(k)), _cell(fmt(v)), Text(_unit(str(k), units)))
             elif isinstance(v, list) and (not v or all(_scalar(x) for x in v)):
-                t.add_row(str(k), _cell(_list_cell(v)), _unit(str(k), units))
+                t.add_row(Text(str(k)), _cell(_list_cell(v)), Text(_unit(str(k), units)))
             elif isinstance(v, dict) and v and all(is_path(x) for x in v.values()):
                 continue  # an 'outputs' dict: shown in the files table
             else:
@@ -125,7 +142,14 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
             sub = f"{name} › {k}"
             if depth + 1 > MAX_DEPTH:
                 continue
-            if isinstance(v, dict):
+            if isinstance(v, dict) and len(v) > 1 and all(isinstance(x, dict) for x in v.values()) and \
+                    _same_keys(list(v.values())):
+                rows_table([{"name": kk, **vv} for kk, vv in v.items()], sub)  # one row per named result
+                for kk, vv in v.items():  # and what does not fit a row
+                    inner = {a: b for a, b in vv.items() if isinstance(b, (dict, list)) and not _row_cell(b)}
+                    if inner:
+                        walk(inner, f"{sub} › {kk}", depth + 2)
+            elif isinstance(v, dict):
                 walk(v, sub, depth + 1)
             elif isinstance(v, list) and all(isinstance(x, dict) for x in v):
                 rows_table(v, sub)
@@ -134,15 +158,17 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
         cols = []
         for r in rows:
             for k, x in r.items():
-                if k not in cols and (_scalar(x) or (isinstance(x, list) and all(_scalar(y) for y in x))) and not is_path(x):
+                if k not in cols and _row_cell(x) and not is_path(x):
                     cols.append(k)
         cols = cols[:MAX_COLS]
-        t = Table(title=name, box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False)
-        for c in cols:
+        t = Table(title=escape(name), box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False,
+                  min_width=len(name) + 2)
+        for i, c in enumerate(cols):
             u = _unit(str(c), units)
-            t.add_column(f"{c} [{u}]" if u else str(c), justify="right")
+            t.add_column(escape(f"{c} [{u}]" if u else str(c)), justify="left" if i == 0 else "right", overflow="fold",
+                         no_wrap=i == 0)
         for r in rows[:MAX_ROWS]:
-            t.add_row(*(fmt(r.get(c)) if _scalar(r.get(c)) else _list_cell(r.get(c)) for c in cols))
+            t.add_row(*(Text(fmt(r.get(c)) if _scalar(r.get(c)) else _list_cell(r.get(c))) for c in cols))
         if len(rows) > MAX_ROWS:
             t.add_row(*(["…"] * len(cols)))
             t.caption = f"{len(rows)} rows; all of them with --json"
@@ -156,7 +182,7 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
         t.add_column("output", style="bold")
         t.add_column("path", overflow="fold")
         for k, p in paths:
-            t.add_row(k, p)
+            t.add_row(Text(k), Text(p))
         subs.append(t)
     return subs
 

@@ -203,7 +203,10 @@ def bundled_scenes() -> list[Path]:
 
 
 def demo(ctx) -> dict:
-    """Grow and skin every bundled scene (outputs in ctx.out/<scene>/)."""
+    """Grow and skin every bundled scene (outputs in ctx.out/<scene>/), then the sample sketch
+    edit of the phone stand (scenes/growth/phone_stand_stroke.json over its preview)."""
+    import argparse
+
     from simfab.progress import log
 
     res = {}
@@ -212,4 +215,12 @@ def demo(ctx) -> dict:
         s = grow_scene(path, out=os.path.join(ctx.out, path.stem), seed=ctx.seed, quiet=ctx.quiet)
         res[path.stem] = {k: s[k] for k in ("targets_total", "targets_reached", "nodes", "segments", "watertight",
                                             "bodies", "volume", "seconds_growth", "seconds_skin", "png", "usd")}
-    return {"scenes": res}
+        if path.stem == "phone_stand":
+            camera, skeleton = s["camera_json"], s["skeleton_json"]
+    log("  grow edit phone_stand (sample stroke)", quiet=ctx.quiet)
+    args = argparse.Namespace(scene="edit", skeleton=skeleton, stroke=str(SCENES_DIR / "phone_stand_stroke.json"),
+                              camera=camera, chain=None, out=os.path.join(ctx.out, "phone_stand_edit"),
+                              quiet=ctx.quiet, **{k: None for k in ("attractors", "influence", "kill", "branch_length",
+                                                                     "mode", "symmetric", "smooth_iterations")})
+    e = _run_edit(args)
+    return {"scenes": res, "edit": {k: e[k] for k in ("chain", "max_move", "watertight", "bodies", "skin_stl")}}

@@ -92,9 +92,21 @@ def test_crowd_labels_do_not_name_files(tmp_path):
 
 def test_grow_outputs_stay_in_out(tmp_path):
     out = tmp_path / "o"
-    r = _run(["grow", str(SCENES / "growth" / "phone_stand.xml"), "--out", str(out), "--attractors", "300"], tmp_path)
+    r = _run(["grow", str(SCENES / "growth" / "phone_stand.xml"), "--out", str(out)], tmp_path)
     assert r.returncode == 0, r.stderr
     assert _files(tmp_path) and all(out in p.parents for p in _files(tmp_path))
+    # the skin written is clean: closed and without zero-area faces (3 before the fix)
+    from simfab.io.mesh import read_mesh
+
+    s = json.loads(r.stdout)
+    _, rep = read_mesh(s["skin_stl"], units="mm")
+    assert rep.watertight and rep.degenerate_faces == 0 and rep.duplicate_faces == 0
+    # the preview's camera is saved for 'grow edit', and the bundled sample stroke edits this skeleton
+    r = _run(["grow", "edit", s["skeleton_json"], "--stroke", str(SCENES / "growth" / "phone_stand_stroke.json"),
+              "--camera", s["camera_json"], "--out", str(out / "edit")], tmp_path)
+    assert r.returncode == 0, r.stderr
+    e = json.loads(r.stdout)
+    assert e["watertight"] and e["bodies"] == 1 and e["max_move"] > 0
 
 
 def test_render_and_inspect_write_only_where_asked(tmp_path):
