@@ -114,6 +114,9 @@ DEFAULTS = {"out": None, "seed": 0, "device": "cpu", "quiet": False, "json": Fal
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI in-process; return the exit code (never calls ``sys.exit``)."""
+    import warnings
+
+    warnings.showwarning = _show_warning
     try:
         parser = build_parser()
         try:
@@ -163,6 +166,12 @@ def _output_roots(args) -> list:
     """The folders the subcommand will write into (checked before it runs, then enforced)."""
     fn = getattr(args._module, "output_roots", None)
     return list(fn(args)) if fn is not None else [args.out]
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Python warnings (e.g. mesh repairs) as one line on stderr, like simfab's own warnings."""
+    print(f"simfab: warning: {_one_line(message) if isinstance(message, BaseException) else ' '.join(str(message).split())}",
+          file=sys.stderr)
 
 
 def _one_line(e: BaseException) -> str:
