@@ -184,8 +184,9 @@ def interior_faces(vertices, faces, *, rel_offset: float = 1e-4) -> np.ndarray:
 
     For a solid without self-intersections the generalized winding number is ~0 just outside
     every face (w(c + eps n) for centroid c, outward normal n) and ~1 just inside. A face
-    whose outside has w > 0.5 lies inside another part of the surface: overlapping bodies or
-    a self-intersecting surface. Uses libigl's fast winding number (Barill et al. 2018).
+    whose outside has w > 0.5 lies inside another part of the surface (overlapping bodies); a
+    face whose inside has w < 0.5 belongs to a part turned inside out (a surface folded through
+    itself). Uses libigl's fast winding number (Barill et al. 2018).
     """
     import igl
 
@@ -197,9 +198,10 @@ def interior_faces(vertices, faces, *, rel_offset: float = 1e-4) -> np.ndarray:
     ok = ln > 0
     n[ok] /= ln[ok, None]
     eps = rel_offset * float(np.linalg.norm(np.ptp(V, axis=0)))
-    q = tri.mean(axis=1) + eps * n
-    w = igl.fast_winding_number(V, F, q)
-    return ok & (w > 0.5)
+    c = tri.mean(axis=1)
+    w = igl.fast_winding_number(V, F, np.vstack([c + eps * n, c - eps * n]))
+    w_out, w_in = w[: len(F)], w[len(F):]
+    return ok & ((w_out > 0.5) | (w_in < 0.5))
 
 
 def save_mesh(mesh, path: str | os.PathLike) -> Path:

@@ -91,6 +91,13 @@ def _inputs(d: Path) -> dict:
     f["ratings_nolabel"].write_text("worker,task\nw1,t1\n")
     f["open_stl"] = _box_stl(d / "open.stl", open_=True)
     f["huge_stl"] = _box_stl(d / "huge.stl", scale=1e12)
+    import trimesh
+
+    b = trimesh.creation.box(extents=[0.02, 0.02, 0.02])  # one corner pulled through the opposite faces
+    V = b.vertices.copy()
+    V[np.argmax(V.sum(1))] = [-0.03, -0.025, -0.02]
+    trimesh.Trimesh(V, b.faces, process=False).export(d / "folded.stl")
+    f["folded_stl"] = d / "folded.stl"
     f["usda"] = d / "ok.usda"
     f["usda"].write_text('#usda 1.0\n(\n    defaultPrim = "World"\n    startTimeCode = 0\n    endTimeCode = 2\n    '
                          'upAxis = "Z"\n)\n\ndef Xform "World"\n{\n    def Mesh "m"\n    {\n        int[] faceVertexCounts = '
@@ -171,6 +178,7 @@ CASES = [
     ("crowd-simulate-malicious", ["crowd", "simulate", "--tasks", "3", "--scale", "1", "10", "--public", "5",
                                   "--malicious", "2"], 2, ["--malicious"]),
     ("crowd-truth-open-mesh", ["crowd", "truth", "{open_stl}"], 2, ["open.stl", "watertight"]),
+    ("crowd-truth-self-intersecting", ["crowd", "truth", "{folded_stl}"], 2, ["folded.stl", "intersects itself"]),
     ("crowd-truth-huge-coordinates", ["crowd", "truth", "{huge_stl}"], 2, ["huge.stl", "scale"]),
     ("crowd-truth-bad-orientation", ["crowd", "truth", "{open_stl}", "--orientations", "x=1:2"], 2, ["--orientations"]),
     ("crowd-bracket-negative-load", ["crowd", "bracket", "--load", "-1"], 2, ["--load"]),
@@ -235,3 +243,34 @@ def test_enough_cases():
     from simfab.cli import SUBCOMMANDS
 
     assert {c[1][0] for c in CASES} == set(SUBCOMMANDS)
+
+
+def test_crowd_truth_unites_overlapping_bodies_and_says_so(tmp_path):
+    # two overlapping boxes: the support volume is the union's, and the change is stated
+    import json
+
+    import trimesh
+
+    from simfab.crowd.truth import support_metrics
+
+    work = tmp_path / "w"
+    work.mkdir()
+    stl = _box_stl(work / "two.stl", overlap=True)
+    r = _run(["crowd", "truth", str(stl), "--orientations", "a=0:0:0", "--out", str(tmp_path / "o"), "--json"], work)
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert "united" in r.stderr and any("united" in n for n in s["mesh_notes"])
+    a = trimesh.creation.box(extents=[0.02, 0.01, 0.01])
+    b = trimesh.creation.box(extents=[0.01, 0.02, 0.01])
+    b.apply_translation([0.003, 0.004, 0.001])
+    u = a.union(b, engine="manifold")
+    assert s["orientations"][0]["support_volume"] == pytest.approx(support_metrics(u.vertices, u.faces)["support_volume"],
+                                                                   rel=1e-6)
+
+
+def test_implausible_units_are_warned(tmp_path):
+    # a millimetre part read as metres is 60 m across: inspect says so on stderr
+    r = _run(["inspect", str(SCENES / "crowd" / "part.stl")], tmp_path)
+    assert r.returncode == 0 and "60 m across" in r.stderr and "--units mm" in r.stderr
+    r = _run(["inspect", str(SCENES / "crowd" / "part.stl"), "--units", "mm"], tmp_path)
+    assert r.returncode == 0 and r.stderr == ""
