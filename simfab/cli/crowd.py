@@ -284,6 +284,12 @@ def run_bracket(args):
             raise InputError(f"must be a positive force in N, got {args.load}", where="--load")
         setup = dataclasses.replace(setup, load=args.load)
     if args.material is not None:
+        from simfab.fem.materials import material_by_name
+
+        try:
+            material_by_name(args.material)
+        except InputError as e:
+            raise InputError(e.message, where="--material") from None
         setup = dataclasses.replace(setup, material=args.material)
     results = bracket_survey(setup, names=args.designs)
     if len(results) < 2:

@@ -101,14 +101,22 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
 
     mat = _section(cfg, "material", where)
     if "youngs_modulus" in mat:
+        vals = {}
+        for key, default in (("youngs_modulus", None), ("poisson_ratio", 0.35), ("yield_stress", 60e6),
+                             ("density", 1200.0)):
+            try:
+                vals[key] = float(mat.get(key, default))
+            except (TypeError, ValueError):
+                raise InputError(f"[material] {key} must be a number, got {mat.get(key)!r}", where=where) from None
         try:
-            material = Material(name=str(mat.get("name", "custom")), youngs_modulus=float(mat["youngs_modulus"]),
-                                poisson_ratio=float(mat.get("poisson_ratio", 0.35)),
-                                yield_stress=float(mat.get("yield_stress", 60e6)), density=float(mat.get("density", 1200.0)))
+            material = Material(name=str(mat.get("name", "custom")), **vals)
         except (TypeError, ValueError) as e:
             raise InputError(f"[material]: {e}", where=where) from None
     else:
-        material = material_by_name(mat.get("name", "PLA"))
+        try:
+            material = material_by_name(mat.get("name", "PLA"))
+        except InputError as e:
+            raise InputError(f"[material] name: {e.message}", where=where) from None
 
     comp = _section(cfg, "compliant", where)
     obj = _section(cfg, "object", where)

@@ -65,6 +65,7 @@ def _inputs(d: Path) -> dict:
     f["grow_badtoml"] = _copy_scene(g, d, "grow_badtoml", toml_sub=[('mode = "volume"', 'mode = "sideways"')])
     c = SCENES / "coupling" / "cclamp2d.xml"
     f["cc_target0"] = _copy_scene(c, d, "cc_target0", toml_sub=[("target_elements = 450", "target_elements = 0")])
+    f["cc_material"] = _copy_scene(c, d, "cc_material", toml_sub=[('name = "PLA"', 'name = "unobtainium"')])
     f["cc_dim5"] = _copy_scene(c, d, "cc_dim5", toml_sub=[("dim = 2", "dim = 5")])
     f["cc_badtoml"] = _copy_scene(c, d, "cc_badtoml", toml_sub=[("dim = 2", "dim = = 2")])
     (d / "line.csv").write_text("0,0\n0.01,0\n0.02,0\n")
@@ -146,6 +147,7 @@ CASES = [
     ("couple-target-elements-0", ["couple", "simulate", "{cc_target0}"], 2, ["cc_target0.toml", "target_elements"]),
     ("couple-collinear-outline", ["couple", "simulate", "{cc_collinear}"], 2, ["cc_collinear.toml", "outline"]),
     ("couple-sliver-outline", ["couple", "simulate", "{cc_sliver}"], 2, ["cc_sliver.toml", "outline"]),
+    ("couple-unknown-material", ["couple", "simulate", "{cc_material}"], 2, ["cc_material.toml", "[material] name"]),
     ("couple-dim-5", ["couple", "simulate", "{cc_dim5}"], 2, ["cc_dim5.toml", "dim"]),
     ("couple-invalid-toml", ["couple", "simulate", "{cc_badtoml}"], 2, ["cc_badtoml.toml", "line"]),
     ("couple-missing-toml", ["couple", "simulate", "{cc_notoml}"], 2, ["cc_notoml.toml"]),
@@ -181,6 +183,7 @@ CASES = [
     ("crowd-truth-self-intersecting", ["crowd", "truth", "{folded_stl}"], 2, ["folded.stl", "intersects itself"]),
     ("crowd-truth-huge-coordinates", ["crowd", "truth", "{huge_stl}"], 2, ["huge.stl", "scale"]),
     ("crowd-truth-bad-orientation", ["crowd", "truth", "{open_stl}", "--orientations", "x=1:2"], 2, ["--orientations"]),
+    ("crowd-bracket-unknown-material", ["crowd", "bracket", "--material", "foo"], 2, ["--material", "foo"]),
     ("crowd-bracket-negative-load", ["crowd", "bracket", "--load", "-1"], 2, ["--load"]),
     ("crowd-study-out-is-a-file", ["crowd", "study", "{ratings}", "--scale", "1", "10", "--truth", "{truth}",
                                    "--out", "{file}"], 2, ["--out", "afile.txt"]),
