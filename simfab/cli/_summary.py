@@ -17,7 +17,12 @@ OUTPUT_SUFFIXES = (".png", ".usda", ".usdc", ".usd", ".xml", ".csv", ".json", ".
 SUFFIX_UNITS = (("_m3", "m³"), ("_m2", "m²"), ("_mm", "mm"), ("_m", "m"), ("_pa", "Pa"), ("_n", "N"), ("_j", "J"),
                 ("_deg", "deg"), ("_s", "s"), ("seconds", "s"))
 CONTAINER_KEYS = {"outputs", "pipelines", "scenes", "inserts"}  # left out of output-file labels
-MAX_ROWS = 20  # rows of a list-of-rows sub-table before it is elided
+MAX_ROWS = 20
+MAX_SIDE_BY_SIDE = 4  # up to this many like results are shown as columns (quantities as rows)
+#: units of keys common to several subcommands whose modules do not list them
+KNOWN_UNITS = {"insert_half_size": "m", "gap_half_size": "m", "gaussian_curvature": "1/m²", "insert_rise": "m",
+               "saddle_amplitude": "m", "angle_deficit": "rad", "gaussian_curvature_per_increment": "1/m²", "energy": "J", "max_bending_strain": "-",
+               "critical_load": "N", "euler_load": "N", "volume": "m³"}  # rows of a list-of-rows sub-table before it is elided
 MAX_COLS = 9
 MAX_DEPTH = 3
 
@@ -47,6 +52,7 @@ def _scalar(v) -> bool:
 
 
 def _unit(key: str, units: dict) -> str:
+    units = {**KNOWN_UNITS, **units}
     if key in units:
         return "" if units[key] in ("-", None) else str(units[key])
     k = key.lower()
@@ -144,7 +150,10 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
                 continue
             if isinstance(v, dict) and len(v) > 1 and all(isinstance(x, dict) for x in v.values()) and \
                     _same_keys(list(v.values())):
-                rows_table([{"name": kk, **vv} for kk, vv in v.items()], sub)  # one row per named result
+                if len(v) <= MAX_SIDE_BY_SIDE:  # a few named results: one column each
+                    side_by_side(v, sub)
+                else:  # many: one row each
+                    rows_table([{"name": kk, **vv} for kk, vv in v.items()], sub)
                 for kk, vv in v.items():  # and what does not fit a row
                     inner = {a: b for a, b in vv.items() if isinstance(b, (dict, list)) and not _row_cell(b)}
                     if inner:
@@ -153,6 +162,22 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
                 walk(v, sub, depth + 1)
             elif isinstance(v, list) and all(isinstance(x, dict) for x in v):
                 rows_table(v, sub)
+
+    def side_by_side(d: dict, name: str):
+        keys = []
+        for vv in d.values():
+            keys += [k for k, x in vv.items() if k not in keys and _row_cell(x) and not is_path(x)]
+        t = Table(title=escape(name), box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False,
+                  min_width=len(name) + 2)
+        t.add_column("quantity", style="bold", no_wrap=True)
+        for kk in d:
+            t.add_column(escape(str(kk)), justify="right", overflow="fold")
+        t.add_column("unit", no_wrap=True)
+        for k in keys:
+            cells = [d[kk].get(k) for kk in d]
+            t.add_row(Text(str(k)), *(Text(fmt(c) if _scalar(c) else _list_cell(c)) for c in cells),
+                      Text(_unit(str(k), units)))
+        subs.append(t)
 
     def rows_table(rows: list, name: str):
         cols = []
