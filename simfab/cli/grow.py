@@ -67,11 +67,17 @@ def add_args(p):
     e.add_argument("--chain", type=int, metavar="K", help="(edit) chain index (default: the one nearest the stroke)")
 
 
+#: upper bounds of the count options (beyond them a run would exhaust memory rather than finish)
+COUNT_LIMITS = {"--attractors": 1_000_000, "--max-steps": 100_000}
+
+
 def _positive(name, v):
     from simfab.errors import InputError
 
-    if v is not None and not v > 0:
-        raise InputError(f"must be positive, got {v}", where=name)
+    if v is not None and not (v > 0 and v < float("inf")):
+        raise InputError(f"must be a positive finite number, got {v}", where=name)
+    if v is not None and name in COUNT_LIMITS and v > COUNT_LIMITS[name]:
+        raise InputError(f"must be at most {COUNT_LIMITS[name]}, got {v}", where=name)
     return v
 
 

@@ -66,6 +66,7 @@ def _inputs(d: Path) -> dict:
     c = SCENES / "coupling" / "cclamp2d.xml"
     f["cc_target0"] = _copy_scene(c, d, "cc_target0", toml_sub=[("target_elements = 450", "target_elements = 0")])
     f["cc_material"] = _copy_scene(c, d, "cc_material", toml_sub=[('name = "PLA"', 'name = "unobtainium"')])
+    f["cc_segments"] = _copy_scene(c, d, "cc_segments", toml_sub=[("segments = 48", "segments = 1000000000")])
     f["cc_dim5"] = _copy_scene(c, d, "cc_dim5", toml_sub=[("dim = 2", "dim = 5")])
     f["cc_badtoml"] = _copy_scene(c, d, "cc_badtoml", toml_sub=[("dim = 2", "dim = = 2")])
     (d / "line.csv").write_text("0,0\n0.01,0\n0.02,0\n")
@@ -137,6 +138,7 @@ CASES = [
     ("grow-nan-influence", ["grow", "{grow}", "--influence", "nan"], 2, ["--influence"]),
     ("grow-out-is-a-file", ["grow", "{grow}", "--out", "{file}"], 2, ["--out", "afile.txt"]),
     ("grow-out-below-a-file", ["grow", "{grow}", "--out", "{file}/sub"], 2, ["--out", "afile.txt"]),
+    ("grow-huge-attractor-count", ["grow", "{grow}", "--attractors", "1000000000"], 2, ["--attractors"]),
     ("grow-nan-in-mjcf", ["grow", "{grow_nan}"], 2, ["grow_nan.xml", "size"]),
     ("grow-bad-toml-field", ["grow", "{grow_badtoml}"], 2, ["grow_badtoml.toml", "mode"]),
     ("grow-unreached-targets", ["grow", "{grow}", "--branch-length", "6"], 1, ["phone_stand.xml", "unreached", "--best-effort"]),
@@ -148,6 +150,7 @@ CASES = [
     ("couple-collinear-outline", ["couple", "simulate", "{cc_collinear}"], 2, ["cc_collinear.toml", "outline"]),
     ("couple-sliver-outline", ["couple", "simulate", "{cc_sliver}"], 2, ["cc_sliver.toml", "outline"]),
     ("couple-unknown-material", ["couple", "simulate", "{cc_material}"], 2, ["cc_material.toml", "[material] name"]),
+    ("couple-huge-segment-count", ["couple", "simulate", "{cc_segments}"], 2, ["cc_segments.toml", "segments"]),
     ("couple-dim-5", ["couple", "simulate", "{cc_dim5}"], 2, ["cc_dim5.toml", "dim"]),
     ("couple-invalid-toml", ["couple", "simulate", "{cc_badtoml}"], 2, ["cc_badtoml.toml", "line"]),
     ("couple-missing-toml", ["couple", "simulate", "{cc_notoml}"], 2, ["cc_notoml.toml"]),
