@@ -95,13 +95,14 @@ def render_model(model, png, *, data=None, width: int = 640, height: int = 480,
     return _write_png(rgb, png)
 
 
-def render_mjcf(xml, png, *, width: int = 640, height: int = 480) -> Path:
-    """Render an MJCF file (path) or a compiled ``MjModel`` to a PNG; matplotlib fallback without GL."""
+def render_mjcf(xml, png, *, width: int = 640, height: int = 480, camera: dict | None = None) -> Path:
+    """Render an MJCF file (path) or a compiled ``MjModel`` to a PNG; matplotlib fallback without GL.
+    ``camera`` receives the camera (see :func:`render_model`; left empty by the fallback)."""
     from simfab.io.mjcf import load_model
 
     model = load_model(xml) if isinstance(xml, (str, os.PathLike)) else xml
     try:
-        return render_model(model, png, width=width, height=height)
+        return render_model(model, png, width=width, height=height, camera=camera)
     except Exception as e:  # no usable OpenGL: draw the geometry with matplotlib instead
         if not _is_gl_error(e):
             raise
@@ -112,7 +113,7 @@ def render_mjcf(xml, png, *, width: int = 640, height: int = 480) -> Path:
 
 
 def render_meshes(items, png, *, width: int = 640, height: int = 480, floor: bool = True,
-                  curves=(), points=()) -> Path:
+                  curves=(), points=(), camera: dict | None = None) -> Path:
     """Render several meshes, polylines and point sets together.
 
     items : list of ``(vertices (n,3) [m], faces (m,3), colors)`` where colors is None, an
@@ -162,7 +163,7 @@ def render_meshes(items, png, *, width: int = 640, height: int = 480, floor: boo
         for p, ri in zip(P, r):
             b.geom(world, type="sphere", pos=p, size=ri, rgba=rgba, contype=0, conaffinity=0)
     try:
-        return render_model(b.compile(), png, width=width, height=height)
+        return render_model(b.compile(), png, width=width, height=height, camera=camera)
     except Exception as e:
         if not _is_gl_error(e):
             raise
@@ -175,7 +176,7 @@ def render_mesh(vertices, faces, png, *, colors=None, width: int = 640, height: 
 
 
 def render_usd(path, png, *, time: float | None = None, width: int = 640, height: int = 480,
-               info: dict | None = None) -> Path:
+               info: dict | None = None, camera: dict | None = None) -> Path:
     """Render the visible meshes (with their colours), basis curves (tubes of their widths) and
     points of a USD stage at a time code (default: the last; outside the stage's range it is
     clamped with a warning on stderr). ``info`` receives the time code drawn."""
@@ -193,12 +194,13 @@ def render_usd(path, png, *, time: float | None = None, width: int = 640, height
     if not items and not crv and not pts:
         raise InputError(f"the stage has no visible mesh, curve or point at time code {t:g}", where=str(path))
     return render_meshes(items, png, width=width, height=height, curves=[(pl, w, c) for _, pl, w, c in crv],
-                         points=[(P, w, c) for _, P, w, c in pts])
+                         points=[(P, w, c) for _, P, w, c in pts], camera=camera)
 
 
 def render_file(src, png, *, time: float | None = None, width: int = 640, height: int = 480,
-                info: dict | None = None) -> Path:
-    """Render an MJCF (.xml), USD (.usd/.usda/.usdc) or mesh file to a PNG."""
+                info: dict | None = None, annotate: bool = True) -> Path:
+    """Render an MJCF (.xml), USD (.usd/.usda/.usdc) or mesh file to a PNG, titled with the file
+    name (and time code) and a scale bar unless ``annotate`` is False (or the image is tiny)."""
     src = Path(src)
     if not src.is_file():
         raise InputError("file not found", where=str(src))
@@ -207,16 +209,29 @@ def render_file(src, png, *, time: float | None = None, width: int = 640, height
     if time is not None and not np.isfinite(time):
         raise InputError(f"must be a finite time code, got {time}", where="--time")
     suf = src.suffix.lower()
+    cam: dict = {}
+    info = {} if info is None else info
     if suf == ".xml":
-        return render_mjcf(src, png, width=width, height=height)
-    if suf in (".usd", ".usda", ".usdc"):
-        return render_usd(src, png, time=time, width=width, height=height, info=info)
-    from simfab.io.mesh import SUFFIXES, load_mesh
+        out = render_mjcf(src, png, width=width, height=height, camera=cam)
+    elif suf in (".usd", ".usda", ".usdc"):
+        out = render_usd(src, png, time=time, width=width, height=height, info=info, camera=cam)
+    else:
+        from simfab.io.mesh import SUFFIXES, load_mesh
 
-    if suf in SUFFIXES:
+        if suf not in SUFFIXES:
+            raise InputError(f"cannot render {suf!r} files (use .xml, .usd/.usda/.usdc or a mesh)", where=str(src))
+        from simfab.io.mesh import units_warning
+        from simfab.progress import log
+
         m = load_mesh(src)
-        return render_mesh(m.vertices, m.faces, png, width=width, height=height)
-    raise InputError(f"cannot render {suf!r} files (use .xml, .usd/.usda/.usdc or a mesh)", where=str(src))
+        w = units_warning(m.extents, "m")
+        if w:  # the scale bar assumes metres
+            log(f"simfab: warning: {src}: {w.split(';')[0]} (drawn as metres)")
+        out = render_meshes([(m.vertices, m.faces, None)], png, width=width, height=height, camera=cam)
+    if cam and annotate and height >= 120:  # title and scale bar: the picture reads on its own
+        title = src.name + (f"  (time code {info['time']:g})" if "time" in info else "")
+        annotate_png(out, cam, title=title)
+    return out
 
 
 def _color_groups(F, colors, default):
