@@ -22,7 +22,8 @@ MAX_SIDE_BY_SIDE = 4  # up to this many like results are shown as columns (quant
 #: units of keys common to several subcommands whose modules do not list them
 KNOWN_UNITS = {"insert_half_size": "m", "gap_half_size": "m", "gaussian_curvature": "1/m²", "insert_rise": "m",
                "saddle_amplitude": "m", "angle_deficit": "rad", "gaussian_curvature_per_increment": "1/m²", "energy": "J", "max_bending_strain": "-",
-               "critical_load": "N", "euler_load": "N", "volume": "m³"}  # rows of a list-of-rows sub-table before it is elided
+               "critical_load": "N", "euler_load": "N", "volume": "m³", "yield_stress": "Pa",
+               "penetration_tolerance": "m", "time_split": "s", "phase_split": "s"}  # rows of a list-of-rows sub-table before it is elided
 MAX_COLS = 9
 MAX_DEPTH = 3
 
@@ -128,16 +129,16 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
 
     subs: list = []
 
-    def walk(d: dict, name: str, depth: int):
+    def walk(d: dict, name: str, depth: int, inherited: str = ""):
         t = figures_table(d, name)
         nested = []
         for k, v in d.items():
             if (k == "units" and isinstance(v, dict)) or (is_path(v) and k not in INPUT_KEYS):
                 continue
             if _scalar(v):
-                t.add_row(Text(str(k)), _cell(fmt(v)), Text(_unit(str(k), units)))
+                t.add_row(Text(str(k)), _cell(fmt(v)), Text(_unit(str(k), units) or inherited))
             elif isinstance(v, list) and (not v or all(_scalar(x) for x in v)):
-                t.add_row(Text(str(k)), _cell(_list_cell(v)), Text(_unit(str(k), units)))
+                t.add_row(Text(str(k)), _cell(_list_cell(v)), Text(_unit(str(k), units) or inherited))
             elif isinstance(v, dict) and v and all(is_path(x) for x in v.values()):
                 continue  # an 'outputs' dict: shown in the files table
             else:
@@ -159,7 +160,7 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
                     if inner:
                         walk(inner, f"{sub} › {kk}", depth + 2)
             elif isinstance(v, dict):
-                walk(v, sub, depth + 1)
+                walk(v, sub, depth + 1, _unit(str(k), units))  # e.g. time_split [s]: its entries in s
             elif isinstance(v, list) and all(isinstance(x, dict) for x in v):
                 rows_table(v, sub)
 
