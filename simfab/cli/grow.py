@@ -40,7 +40,8 @@ DESCRIPTION = (
     "objects_subtracted, objects_not_manifold, seconds_skin [s], skin_units, and the paths skin_stl, skin_ply, "
     "skeleton_json, usd, mjcf, png, camera_json.\n\n"
     "--json keys (edit): chain, segments_colliding and the other edit figures, nodes, segments, watertight, bodies, "
-    "volume [m^3], skin_units, skeleton_json, skin_stl, skin_ply."
+    "volume [m^3], skin_units, skeleton_json, skin_stl, skin_ply, png (the edit seen through --camera, the "
+    "stroke in red)."
 )
 
 SCENES_DIR = scenes_dir("growth")
@@ -192,15 +193,43 @@ def _run_edit(args) -> dict:
     out = Path(args.out)
     stem = Path(args.skeleton).stem.removesuffix("_skeleton") + "_edited"
     paths = {"skeleton_json": out / f"{stem}_skeleton.json", "skin_stl": out / f"{stem}_skin.stl",
-             "skin_ply": out / f"{stem}_skin.ply"}
-    with atomic_paths(paths) as tmp:  # the three files appear together or not at all
+             "skin_ply": out / f"{stem}_skin.ply", "png": out / f"{stem}_preview.png"}
+    with atomic_paths(paths) as tmp:  # the files appear together or not at all
         write_json(tmp["skeleton_json"], to_json_dict(edited, scene=scene_path, seed=doc.get("seed"), edit=rep))
         save_skin(mesh, tmp["skin_stl"])
         save_skin(mesh, tmp["skin_ply"])
+        edit_preview(tmp["png"], mesh, objects, camera, stroke, title=f"{stem}: chain {rep.get('chain')} moved "
+                                                                         "onto the stroke (red)")
     paths = {k: str(v) for k, v in paths.items()}
     return {**rep, "nodes": len(edited.nodes), "segments": int((edited.parent >= 0).sum()),
             "watertight": srep.watertight, "bodies": srep.bodies, "volume": srep.volume, "skin_units": SKIN_FILE_UNITS,
             **paths}
+
+
+def edit_preview(png, mesh, objects: dict, camera, stroke, *, title: str):
+    """The edited skin with the scene's objects, seen through the edit's camera, the stroke drawn
+    over it in red, titled and with a scale bar."""
+    import dataclasses
+
+    from PIL import Image, ImageDraw
+
+    from simfab.growth.outputs import OBJECT_RGBA, SKIN_RGBA
+    from simfab.io.atomic import atomic_path
+    from simfab.io.render import annotate_png, render_meshes
+
+    cam = dataclasses.asdict(camera)
+    items = [(m.vertices, m.faces, OBJECT_RGBA[:3]) for m in objects.values()] + [(mesh.vertices, mesh.faces,
+                                                                                    SKIN_RGBA[:3])]
+    got: dict = {}
+    render_meshes(items, png, width=camera.width, height=camera.height, view=cam, camera=got, floor=False)
+    img = Image.open(png).convert("RGB")
+    d = ImageDraw.Draw(img)
+    d.line([tuple(map(float, p)) for p in stroke], fill=(230, 30, 30), width=max(2, camera.height // 160))
+    with atomic_path(png) as tmp:
+        img.save(tmp, format="PNG")
+    if got:
+        annotate_png(png, got, title=title)
+    return png
 
 
 def bundled_scenes() -> list[Path]:

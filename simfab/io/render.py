@@ -61,7 +61,8 @@ def _scene_bounds(model, data):
 
 
 def render_model(model, png, *, data=None, width: int = 640, height: int = 480,
-                 azimuth: float = AZIMUTH, elevation: float = ELEVATION, camera: dict | None = None) -> Path:
+                 azimuth: float = AZIMUTH, elevation: float = ELEVATION, camera: dict | None = None,
+                 view: dict | None = None) -> Path:
     """Render a ``mujoco.MjModel`` (at ``data`` or ``qpos0``) to a PNG.
 
     ``camera`` (a dict) receives the pinhole camera of the image: eye, target, up (3,) [m],
@@ -74,11 +75,19 @@ def render_model(model, png, *, data=None, width: int = 640, height: int = 480,
         mujoco.mj_forward(model, data)
     model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width)
     model.vis.global_.offheight = max(int(model.vis.global_.offheight), height)
-    lo, hi = _scene_bounds(model, data)
     cam = mujoco.MjvCamera()
     cam.type = mujoco.mjtCamera.mjCAMERA_FREE
-    cam.lookat[:] = (lo + hi) / 2
-    cam.distance = DISTANCE_FACTOR * max(float(np.linalg.norm(hi - lo)), 1e-3)
+    if view is not None:  # an explicit z-up pinhole camera (eye, target, fovy_deg): the same picture again
+        f = np.subtract(view["target"], view["eye"], dtype=float)
+        cam.lookat[:] = view["target"]
+        cam.distance = float(np.linalg.norm(f))
+        azimuth = float(np.degrees(np.arctan2(f[1], f[0])))
+        elevation = float(np.degrees(np.arcsin(f[2] / cam.distance)))
+        model.vis.global_.fovy = float(view.get("fovy_deg", model.vis.global_.fovy))
+    else:
+        lo, hi = _scene_bounds(model, data)
+        cam.lookat[:] = (lo + hi) / 2
+        cam.distance = DISTANCE_FACTOR * max(float(np.linalg.norm(hi - lo)), 1e-3)
     cam.azimuth, cam.elevation = azimuth, elevation
     if camera is not None:
         # MuJoCo's free camera: forward = (cos el cos az, cos el sin az, sin el), eye = lookat - distance forward
@@ -113,7 +122,7 @@ def render_mjcf(xml, png, *, width: int = 640, height: int = 480, camera: dict |
 
 
 def render_meshes(items, png, *, width: int = 640, height: int = 480, floor: bool = True,
-                  curves=(), points=(), camera: dict | None = None) -> Path:
+                  curves=(), points=(), camera: dict | None = None, view: dict | None = None) -> Path:
     """Render several meshes, polylines and point sets together.
 
     items : list of ``(vertices (n,3) [m], faces (m,3), colors)`` where colors is None, an
@@ -163,7 +172,7 @@ def render_meshes(items, png, *, width: int = 640, height: int = 480, floor: boo
         for p, ri in zip(P, r):
             b.geom(world, type="sphere", pos=p, size=ri, rgba=rgba, contype=0, conaffinity=0)
     try:
-        return render_model(b.compile(), png, width=width, height=height, camera=camera)
+        return render_model(b.compile(), png, width=width, height=height, camera=camera, view=view)
     except Exception as e:
         if not _is_gl_error(e):
             raise

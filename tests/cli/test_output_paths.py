@@ -106,7 +106,7 @@ def test_grow_outputs_stay_in_out(tmp_path):
               "--camera", s["camera_json"], "--out", str(out / "edit")], tmp_path)
     assert r.returncode == 0, r.stderr
     e = json.loads(r.stdout)
-    assert e["watertight"] and e["bodies"] == 1 and e["max_move"] > 0
+    assert e["watertight"] and e["bodies"] == 1 and e["max_move"] > 0 and Path(e["png"]).stat().st_size > 1000
 
 
 def test_render_and_inspect_write_only_where_asked(tmp_path):
