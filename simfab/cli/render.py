@@ -9,8 +9,11 @@ EGL; matplotlib when no OpenGL is available).
 -o/--output is a .png file or an existing folder (the PNG is then FOLDER/<file stem>.png);
 without it the PNG goes to --out/<file stem>.png.
 
+The picture is titled with the file name (and time code), carries a scale bar and, for a stage
+with a scalar field written by simfab (e.g. von Mises stress), a colour bar.
+
 --json keys: png (path of the image), source (the rendered file), time (USD time code drawn,
-USD only)."""
+USD only), colorbar {label, cmap, min, max} (USD with a scalar field only)."""
 
 
 def add_args(p):

@@ -147,7 +147,7 @@ def write_usd(res: InsertionResult, path) -> Path:
     for k, r in enumerate(res.steps):
         w.set_points("part", r.x, k)
         w.set_scalar("part", "von_mises", vertex_von_mises(fem, r.von_mises), k, interpolation="vertex",
-                     vmin=0.0, vmax=vmax)
+                     vmin=0.0, vmax=vmax, units="Pa")
         w.set_pose("object", r.pos, r.quat, k)
     return w.save()
 

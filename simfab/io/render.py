@@ -197,7 +197,13 @@ def render_usd(path, png, *, time: float | None = None, width: int = 640, height
     if warning:
         log(f"simfab: warning: {path}: {warning}")
     if info is not None:
+        from simfab.io.usd import read_scalar_at
+
         info["time"] = t
+        sc = read_scalar_at(stage, t)
+        if sc is not None:
+            name, cmap, (lo, hi), units = sc
+            info["colorbar"] = {"label": name + (f" [{units}]" if units else ""), "cmap": cmap, "min": lo, "max": hi}
     items = [(V, F, rgb) for _, V, F, rgb in read_mesh_at(stage, t)]
     crv, pts = read_curves_at(stage, t)
     if not items and not crv and not pts:
@@ -237,9 +243,9 @@ def render_file(src, png, *, time: float | None = None, width: int = 640, height
         if w:  # the scale bar assumes metres
             log(f"simfab: warning: {src}: {w.split(';')[0]} (drawn as metres)")
         out = render_meshes([(m.vertices, m.faces, None)], png, width=width, height=height, camera=cam)
-    if cam and annotate and height >= 120:  # title and scale bar: the picture reads on its own
+    if cam and annotate and height >= 120:  # title, scale bar, colour bar: the picture reads on its own
         title = src.name + (f"  (time code {info['time']:g})" if "time" in info else "")
-        annotate_png(out, cam, title=title)
+        annotate_png(out, cam, title=title, colorbar=info.get("colorbar"))
     return out
 
 
@@ -309,10 +315,12 @@ def _nice_length(x: float) -> float:
     return float(10**k)
 
 
-def annotate_png(png, camera: dict, *, title: str = "", legend: list | None = None) -> Path:
-    """Add a title (top left), a scale bar valid at the look-at depth (bottom left) and an
-    optional legend ``[(label, rgb), ...]`` (top right) to a PNG rendered with ``camera``
-    (see :func:`render_model`). The image is rewritten in place."""
+def annotate_png(png, camera: dict, *, title: str = "", legend: list | None = None,
+                 colorbar: dict | None = None) -> Path:
+    """Add a title (top left), a scale bar valid at the look-at depth (bottom left), an
+    optional legend ``[(label, rgb), ...]`` (top right) and an optional colour bar
+    ``{"label", "cmap", "min", "max"}`` (right edge) to a PNG rendered with ``camera`` (see
+    :func:`render_model`). The image is rewritten in place."""
     from PIL import Image, ImageDraw, ImageFont
 
     png = Path(png)
@@ -344,6 +352,22 @@ def annotate_png(png, camera: dict, *, title: str = "", legend: list | None = No
         d.rectangle([W - w - fs, y - 4, W - 4, y + fs + 4], fill=(255, 255, 255, 190))
         d.rectangle([W - w - int(0.5 * fs), y, W - w + int(0.3 * fs), y + fs], fill=c)
         d.text((W - w + fs // 2 + 4, y), lab, fill=(20, 20, 20), font=font)
+    if colorbar:
+        import matplotlib
+
+        cm = matplotlib.colormaps[colorbar.get("cmap", "viridis")]
+        bh, bw = int(0.5 * H), max(10, W // 40)
+        labels = [f"{colorbar['max']:.3g}", f"{colorbar['min']:.3g}"]
+        tw = max(int(d.textlength(t, font=font)) for t in labels)
+        box_w = max(bw + tw + 14, int(d.textlength(colorbar["label"], font=font)) + 10)
+        x1, y1 = W - box_w - 4, int(0.25 * H)
+        d.rectangle([x1 - 6, y1 - int(1.8 * fs), W - 2, y1 + bh + 6], fill=(255, 255, 255, 190))
+        for j in range(bh):
+            c = cm(1.0 - j / max(bh - 1, 1))
+            d.line([(x1, y1 + j), (x1 + bw, y1 + j)], fill=tuple(int(255 * x) for x in c[:3]))
+        d.text((x1 + bw + 4, y1 - fs // 2), labels[0], fill=(20, 20, 20), font=font)
+        d.text((x1 + bw + 4, y1 + bh - fs // 2), labels[1], fill=(20, 20, 20), font=font)
+        d.text((x1 - 2, y1 - int(1.5 * fs)), colorbar["label"], fill=(20, 20, 20), font=font)
     with atomic_path(png) as tmp:
         img.save(tmp, format="PNG")
     return png

@@ -183,11 +183,15 @@ class StageWriter:
         self._set_extent(prim, pts, pad, tc)
 
     def set_scalar(self, name: str, primvar: str, values, t=None, *, interpolation: str = "vertex",
-                   cmap: str = "viridis", vmin: float | None = None, vmax: float | None = None) -> None:
+                   cmap: str = "viridis", vmin: float | None = None, vmax: float | None = None,
+                   units: str | None = None) -> None:
         """A float primvar (per vertex or per face) plus ``displayColor`` from ``cmap``.
 
         values : (n,) for interpolation "vertex", (m,) for "uniform" (per face).
         vmin, vmax : colormap range (default: this sample's min and max).
+        units : the values' unit, kept with the colormap and a fixed range in the primvar's
+            customData (``simfab:colormap``, ``simfab:range``, ``simfab:units``) so a renderer can
+            draw the colour bar (:func:`read_scalar_at`).
         """
         if interpolation not in _INTERP:
             raise ValueError(f"interpolation must be one of {sorted(_INTERP)}")
@@ -201,6 +205,12 @@ class StageWriter:
         if not pv:
             pv = api.CreatePrimvar(primvar, Sdf.ValueTypeNames.FloatArray, interpolation)
         pv.Set(Vt.FloatArray.FromNumpy(np.nan_to_num(v).astype(np.float32)), tc)
+        attr = pv.GetAttr()
+        attr.SetCustomDataByKey("simfab:colormap", cmap)
+        if vmin is not None and vmax is not None:
+            attr.SetCustomDataByKey("simfab:range", Vt.DoubleArray([float(vmin), float(vmax)]))
+        if units is not None:
+            attr.SetCustomDataByKey("simfab:units", str(units))
         rgb = scalar_colors(v, cmap=cmap, vmin=vmin, vmax=vmax).astype(np.float32)
         dc = UsdGeom.Gprim(prim).GetDisplayColorPrimvar()
         if not dc or not dc.HasAuthoredValue():
@@ -407,6 +417,31 @@ def read_curves_at(path_or_stage, time: float | None = None):
         curves.append((str(prim.GetPath()), [pts[s:s + k] for s, k in zip(starts, counts)],
                        [None if w is None else w[s:s + k] for s, k in zip(starts, counts)], rgb))
     return curves, points
+
+
+def read_scalar_at(stage, time: float | None = None):
+    """The first scalar primvar written by :meth:`StageWriter.set_scalar` on a visible prim:
+    ``(primvar name, colormap, (lo, hi) of the colours, units or None)`` at the time code, or None.
+    The range is the fixed one the writer was given, else the values' own at that time."""
+    tc = Usd.TimeCode(stage_time(stage, time)[0])
+    for prim in stage.Traverse():
+        if not prim.IsA(UsdGeom.Gprim) or UsdGeom.Imageable(prim).ComputeVisibility(tc) == UsdGeom.Tokens.invisible:
+            continue
+        for pv in UsdGeom.PrimvarsAPI(prim).GetPrimvars():
+            attr = pv.GetAttr()
+            cmap = attr.GetCustomDataByKey("simfab:colormap")
+            if not cmap:
+                continue
+            rng = attr.GetCustomDataByKey("simfab:range")
+            if rng is not None and len(rng) == 2:
+                lo, hi = float(rng[0]), float(rng[1])
+            else:
+                v = np.asarray(pv.Get(tc), np.float64)
+                if not len(v):
+                    continue
+                lo, hi = float(v.min()), float(v.max())
+            return pv.GetPrimvarName(), str(cmap), (lo, hi), attr.GetCustomDataByKey("simfab:units")
+    return None
 
 
 def read_mesh_at(path: str | os.PathLike, time: float | None = None):
