@@ -96,3 +96,19 @@ def test_skins_keep_no_zero_area_faces():
     area = out.area_faces
     assert out.is_watertight and out.is_winding_consistent and area.min() > 1e-6
     assert out.volume == pytest.approx(box.volume, rel=1e-12)
+
+
+def test_scalar_field_gets_a_colour_bar(tmp_path):
+    w = StageWriter(tmp_path / "s.usda")
+    P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
+    w.add_mesh("m", np.array([[0, 1, 2], [0, 2, 3]]), P)
+    w.set_points("m", P, 0)
+    w.set_scalar("m", "stress", [0.0, 1.0, 2.0, 3.0], 0, vmin=0.0, vmax=5.0, units="Pa")
+    w.save()
+    info: dict = {}
+    png = render.render_file(tmp_path / "s.usda", tmp_path / "s.png", width=320, height=240, info=info)
+    assert info["colorbar"] == {"label": "stress [Pa]", "cmap": "viridis", "min": 0.0, "max": 5.0}
+    a = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    right = a[:, 200:]
+    yellow = (right[..., 0] > 200) & (right[..., 1] > 200) & (right[..., 2] < 80)  # the bar's top (viridis max)
+    assert yellow.sum() > 20
