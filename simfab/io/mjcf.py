@@ -32,13 +32,26 @@ def _mujoco():
 
     if not getattr(mujoco, "_simfab_warnings", False):
         # MuJoCo's default warning handler prints to stdout and appends to MUJOCO_LOG.TXT in the
-        # working directory; simfab collects the warnings instead (see :func:`mujoco_warnings`).
-        mujoco.set_mju_user_warning(_WARNINGS.append)
+        # working directory; simfab collects the warnings instead (see :func:`mujoco_warnings`)
+        # and shows each distinct one once on stderr, as one line.
+        mujoco.set_mju_user_warning(_on_warning)
         mujoco._simfab_warnings = True
     return mujoco
 
 
 _WARNINGS: list[str] = []
+_SHOWN: set[str] = set()
+_QUIET_LOAD = [False]  # while a model loads, its warnings become part of the error (if any)
+
+
+def _on_warning(msg: str) -> None:
+    import sys
+
+    msg = " ".join(str(msg).split())
+    _WARNINGS.append(msg)
+    if not _QUIET_LOAD[0] and msg not in _SHOWN:
+        _SHOWN.add(msg)
+        print(f"simfab: warning: MuJoCo: {msg}", file=sys.stderr)
 
 
 def mujoco_warnings(clear: bool = True) -> list[str]:
@@ -161,11 +174,14 @@ def load_model(path: str | os.PathLike):
     if not path.is_file():
         raise InputError("file not found", where=str(path))
     _check_finite_attributes(path)
+    _QUIET_LOAD[0] = True
     try:
         return mj.MjModel.from_xml_path(str(path))
     except ValueError as e:
         mujoco_warnings()
         raise InputError(f"MuJoCo cannot load this MJCF: {' '.join(str(e).split())}", where=str(path)) from None
+    finally:
+        _QUIET_LOAD[0] = False
 
 
 def load_scene(path: str | os.PathLike) -> Scene:
