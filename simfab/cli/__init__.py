@@ -198,7 +198,7 @@ def _report(result: dict | None, args) -> None:
     action = next((getattr(args, a) for a in ("couple_command", "crowd_command", "validation")
                    if isinstance(getattr(args, a, None), str)), None)
     title = f"simfab {args.command}" + (f" {action}" if action else "")
-    print_summary(result, units=getattr(args._module, "UNITS", None), title=title, quiet=args.quiet)
+    print_summary(result, units=getattr(args._module, "UNITS", None), title=title)
 
 
 def entry() -> None:

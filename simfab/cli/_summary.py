@@ -4,7 +4,7 @@ A run's summary dict is shown as one table of its top-level figures (4 significa
 with units), one sub-table per nested result (dicts of figures, lists of rows) and a table of
 the output files. Units come from the summary's own ``units`` dict, then the subcommand
 module's ``UNITS``, then the key's suffix (``_m``, ``_m3``, ``_pa``, ``seconds``...).
-``--quiet`` changes nothing here (it silences progress bars and log lines only).
+``--quiet`` does not change it (it silences progress bars and log lines only).
 """
 
 from __future__ import annotations
@@ -109,7 +109,7 @@ def _collect_paths(d, prefix: str, paths: list) -> None:
         paths.append((short, d))
 
 
-def build_tables(result: dict, *, units: dict | None = None, title: str = "simfab", quiet: bool = False) -> list:
+def build_tables(result: dict, *, units: dict | None = None, title: str = "simfab") -> list:
     """rich renderables for a summary (see the module docstring)."""
     from rich import box
     from rich.markup import escape
@@ -213,25 +213,25 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
     return subs
 
 
-def render_text(result: dict, *, units: dict | None = None, title: str = "simfab", quiet: bool = False,
+def render_text(result: dict, *, units: dict | None = None, title: str = "simfab",
                 width: int | None = None) -> str:
     """The summary as plain text (no colour codes), as printed on a non-terminal stdout."""
     from rich.console import Console
 
     buf = io.StringIO()
     con = Console(file=buf, width=width or 110, color_system=None, highlight=False, soft_wrap=False)
-    for t in build_tables(result, units=units, title=title, quiet=quiet):
+    for t in build_tables(result, units=units, title=title):
         con.print(t)
     return buf.getvalue().rstrip() + "\n"
 
 
-def print_summary(result: dict, *, units: dict | None = None, title: str = "simfab", quiet: bool = False) -> None:
+def print_summary(result: dict, *, units: dict | None = None, title: str = "simfab") -> None:
     """Print the summary on stdout (colours only on a terminal)."""
     if sys.stdout.isatty():
         from rich.console import Console
 
         con = Console(highlight=False)
-        for t in build_tables(result, units=units, title=title, quiet=quiet):
+        for t in build_tables(result, units=units, title=title):
             con.print(t)
     else:
-        sys.stdout.write(render_text(result, units=units, title=title, quiet=quiet))
+        sys.stdout.write(render_text(result, units=units, title=title))
