@@ -101,6 +101,9 @@ def test_grow_outputs_stay_in_out(tmp_path):
     s = json.loads(r.stdout)
     _, rep = read_mesh(s["skin_stl"], units="mm")
     assert rep.watertight and rep.degenerate_faces == 0 and rep.duplicate_faces == 0
+    from simfab.io import inspect_file
+
+    assert inspect_file(s["skin_stl"], units="mm")["interior_faces"] == 0  # a valid solid: no false alarm
     # the preview's camera is saved for 'grow edit', and the bundled sample stroke edits this skeleton
     r = _run(["grow", "edit", s["skeleton_json"], "--stroke", str(SCENES / "growth" / "phone_stand_stroke.json"),
               "--camera", s["camera_json"], "--out", str(out / "edit")], tmp_path)
