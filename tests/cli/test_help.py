@@ -59,3 +59,14 @@ def test_actions_have_descriptions(cmd):
         assert sp.description and len(sp.description) > 40, f"simfab {cmd} {name} has no description"
     helps = {c.dest: c.help for c in acts._choices_actions}
     assert all(helps.values()), helps
+
+
+def test_demo_runs_every_pipeline_and_says_which():
+    # the README's claim: 'simfab demo' covers every pipeline, and its --help says exactly what it runs
+    from simfab.cli import SUBCOMMANDS, demo, subcommand_module
+
+    with_demo = {n for n in SUBCOMMANDS if hasattr(subcommand_module(n), "demo")}
+    assert with_demo == set(demo.PIPELINES) >= {"grow", "couple", "deploy", "crowd", "validate"}
+    for name in demo.PIPELINES:
+        assert f"\n  {name} " in demo.DESCRIPTION
+    assert "grow edit" in demo.DESCRIPTION or "sketch edit" in demo.DESCRIPTION
