@@ -9,6 +9,9 @@
 """
 
 
+import os
+
+
 class SimfabError(Exception):
     """Base class of simfab's own errors."""
 
@@ -18,7 +21,15 @@ class InputError(SimfabError, ValueError):
 
     def __init__(self, message: str, *, where: str | None = None):
         self.where = where
+        self.message = message
         super().__init__(f"{where}: {message}" if where else message)
+
+    def in_file(self, file) -> "InputError":
+        """The same error located in ``file`` (its field kept): ``FILE: FIELD: message``."""
+        if str(file) in str(self) or (self.where and os.path.basename(str(file)) in str(self.where)):
+            return self  # already located
+        field = f"{self.where}: " if self.where else ""
+        return InputError(f"{field}{self.message}", where=str(file))
 
 
 class ConvergenceError(SimfabError, RuntimeError):

@@ -2,9 +2,15 @@
 
 Each subcommand module defines ``HELP`` (one line), ``add_args(parser)`` and
 ``run(args) -> dict``. The dict is the run's summary: output paths and key figures; with
-``--json`` it is printed as exactly one JSON object on stdout, otherwise as ``key: value``
-lines, or by the module's optional ``format_text(summary) -> str``. A module may also define
-``demo(ctx: DemoContext) -> dict`` to take part in ``simfab demo``.
+``--json`` it is printed as exactly one JSON object on stdout, otherwise as compact tables
+(:mod:`simfab.cli._summary`; units from the summary's ``units``, the module's ``UNITS`` and
+key suffixes). A module may also define ``demo(ctx: DemoContext) -> dict`` to take part in
+``simfab demo``, and ``output_roots(args) -> list`` (the folders it writes into; default
+``[args.out]``, empty for commands that write nothing).
+
+Before a subcommand runs, every output folder is checked (an existing file, an unwritable
+folder: exit 2 before any computation), and while it runs every file written through
+:mod:`simfab.io.atomic` must lie inside one of them (:mod:`simfab.io.outpaths`).
 
 Exit codes: 0 ok; 2 bad input (one line on stderr naming the file/field, no traceback);
 1 internal failure or a solver that did not converge (one line, traceback only with
@@ -20,6 +26,7 @@ import os
 import sys
 
 from simfab.errors import ConvergenceError, InputError, ValidationFailed
+from simfab.io.outpaths import check_out_dir, confine
 
 #: Subcommands in the order ``simfab --help`` lists them.
 SUBCOMMANDS = ("grow", "couple", "deploy", "crowd", "sweep", "validate", "demo", "render", "inspect")
@@ -36,14 +43,51 @@ def add_common_args(p: argparse.ArgumentParser) -> None:
     """Flags every subcommand takes (also after the subcommand name)."""
     g = p.add_argument_group("common options")
     g.add_argument("--out", default=argparse.SUPPRESS, metavar="DIR", help="output folder (default ./simfab-out/<subcommand>)")
-    g.add_argument("--seed", type=int, default=argparse.SUPPRESS, metavar="N", help="random seed (default 0)")
+    g.add_argument("--seed", type=_seed, default=argparse.SUPPRESS, metavar="N",
+                   help="random seed, an integer 0 <= N < 2**32 (default 0)")
     g.add_argument("--device", choices=["cpu", "cuda"], default=argparse.SUPPRESS, help="Warp device (default cpu)")
-    g.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars or chatter")
-    g.add_argument("--json", action="store_true", default=argparse.SUPPRESS, help="print exactly one JSON object (outputs and key figures) on stdout")
+    g.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS,
+                   help="no progress bars and no log lines; still prints the short result table and the output "
+                        "paths (warnings and errors still go to stderr)")
+    g.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                   help="for scripts: print exactly one JSON object (output paths and key figures) on stdout, "
+                        "nothing else; implies --quiet")
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+    if not 0 <= v < 2**32:
+        raise argparse.ArgumentTypeError(f"must be in 0 .. 2**32 - 1, got {v}")
+    return v
+
+
+class _Formatter(argparse.RawDescriptionHelpFormatter):
+    """Descriptions keep their line breaks and indentation; lines longer than the terminal are
+    wrapped (hanging indent kept), so both hand-laid lists and one-line paragraphs read well."""
+
+    def _fill_text(self, text, width, indent):
+        import textwrap
+
+        out = []
+        for line in text.splitlines():
+            lead = line[: len(line) - len(line.lstrip())]
+            if len(line) + len(indent) <= width or not line.strip():
+                out.append(indent + line)
+            else:
+                out += textwrap.wrap(line.strip(), width, break_on_hyphens=False, initial_indent=indent + lead,
+                                     subsequent_indent=indent + lead + ("  " if lead else ""))
+        return "\n".join(out)
 
 
 class _Parser(argparse.ArgumentParser):
     """argparse that raises InputError instead of exiting, so main() owns the exit code."""
+
+    def __init__(self, *a, **kw):
+        kw["formatter_class"] = _Formatter
+        super().__init__(*a, **kw)
 
     def error(self, message):  # noqa: D401 - argparse API
         raise InputError(f"{self.prog}: {message}")
@@ -58,8 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in SUBCOMMANDS:
         mod = subcommand_module(name)
-        sp = sub.add_parser(name, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP),
-                            formatter_class=argparse.RawDescriptionHelpFormatter)
+        sp = sub.add_parser(name, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
         add_common_args(sp)
         mod.add_args(sp)
         sp.set_defaults(_module=mod)
@@ -71,6 +114,9 @@ DEFAULTS = {"out": None, "seed": 0, "device": "cpu", "quiet": False, "json": Fal
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI in-process; return the exit code (never calls ``sys.exit``)."""
+    import warnings
+
+    warnings.showwarning = _show_warning
     try:
         parser = build_parser()
         try:
@@ -87,7 +133,11 @@ def main(argv: list[str] | None = None) -> int:
             args.out = getattr(args._module, "DEFAULT_OUT", os.path.join("simfab-out", args.command))
         if args.json:
             args.quiet = True
-        result = args._module.run(args)
+        roots = _output_roots(args)
+        for r in roots:  # before any computation: a bad --out is bad input (exit 2), not a late crash
+            check_out_dir(r, where=_OUT_FLAG.get(args.command, "--out"))
+        with confine(roots):
+            result = args._module.run(args)
         _report(result, args)
         return 0
     except InputError as e:
@@ -109,6 +159,21 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
+_OUT_FLAG = {"render": "-o/--output or --out"}
+
+
+def _output_roots(args) -> list:
+    """The folders the subcommand will write into (checked before it runs, then enforced)."""
+    fn = getattr(args._module, "output_roots", None)
+    return list(fn(args)) if fn is not None else [args.out]
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Python warnings (e.g. mesh repairs) as one line on stderr, like simfab's own warnings."""
+    print(f"simfab: warning: {_one_line(message) if isinstance(message, BaseException) else ' '.join(str(message).split())}",
+          file=sys.stderr)
+
+
 def _one_line(e: BaseException) -> str:
     return " ".join(str(e).split()) or type(e).__name__
 
@@ -123,16 +188,17 @@ def _debug_trace() -> None:
 def _report(result: dict | None, args) -> None:
     from simfab.io.atomic import to_jsonable
 
+    from simfab.cli._summary import print_summary
+
     result = to_jsonable(result or {})
     if args.json:
         sys.stdout.write(json.dumps(result) + "\n")
-    elif not args.quiet and hasattr(args._module, "format_text"):
-        print(args._module.format_text(result))
-    elif not args.quiet:
-        for k, v in result.items():
-            if isinstance(v, (dict, list)):
-                v = json.dumps(v)
-            print(f"{k}: {v}")
+        return
+    sys.stdout.flush()
+    action = next((getattr(args, a) for a in ("couple_command", "crowd_command", "validation")
+                   if isinstance(getattr(args, a, None), str)), None)
+    title = f"simfab {args.command}" + (f" {action}" if action else "")
+    print_summary(result, units=getattr(args._module, "UNITS", None), title=title)
 
 
 def entry() -> None:

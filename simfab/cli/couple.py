@@ -1,33 +1,42 @@
-"""``simfab couple``: quasi-static insertion simulation of a rigid object into a compliant part.
+"""simfab couple: quasi-static insertion simulation of a rigid object into a compliant part.
 
-Usage::
+Usage:
 
     simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes | --fixed-axes AXES] [--no-refine]
     simfab couple optimize SCENE [--grip tight|loose] [--insertion-force LO HI] ... [--iterations N]
     simfab couple study handles SCENE [--counts K ...] [--random N]
     simfab couple scenes
 
-SCENE is a coupling scene: ``NAME.xml`` (MJCF: the object O as the mocap body ``object`` with
-keyframes for its path, the box site ``fixed``) plus ``NAME.toml`` (the compliant part A, its
+SCENE is a coupling scene: NAME.xml (MJCF: the object O as the mocap body 'object' with
+keyframes for its path, the box site 'fixed') plus NAME.toml (the compliant part A, its
 material and the simulation options); a bare NAME refers to a bundled scene in
-``scenes/coupling`` (``simfab couple scenes`` lists them). See :mod:`simfab.coupling.scene`.
+scenes/coupling ('simfab couple scenes' lists them). Scene format: scenes/coupling/README.md.
 
-Outputs under ``--out``: NAME_profile.csv (per step: distance [m], energy [J], insertion force
+Outputs under --out: NAME_profile.csv (per step: distance [m], energy [J], insertion force
 [N] (support reactions along O's translation), path force [N] (work-conjugate force along the
 path, = -dE/ds, also defined during rotations), grip [N], max von Mises [Pa], max penetration [m],
-min det F, Newton iterations), NAME_summary.json
-(category, E_max, E_ss [J], coupling_ratio [%], F_in, F_rm, F_grip [N], max_von_mises [Pa],
-max_penetration [m], min_det_F, steps, newton_iterations, seconds, time_split [s] per resource
-(assembly, factorization, contact), phase_split [s] per phase of the insertion loop (warm_start,
-newton, facet_check, record, rigid_check, other) and the output paths),
-NAME_profile.png (energy solid, force dashed, markers at E_max and E_ss), NAME.usda (A's deforming
-mesh with a von_mises primvar, O's animated transform, one time code per step) and NAME.xml (MJCF
-for the viewer: A at the steady state, O with one keyframe per step).
+min det F, Newton iterations), NAME_summary.json (the --json summary), NAME_profile.png
+(energy solid, force dashed, markers at E_max and E_ss), NAME.usda (A's deforming mesh with a
+von_mises primvar, O's animated transform, one time code per step) and NAME.xml (MJCF for the
+viewer: A at the steady state, O with one keyframe per step).
 """
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
+
+SIMULATE_DESCRIPTION = """Run an insertion simulation of a coupling scene and write its deformation profile
+(CSV, JSON, PNG), a USD replay and an MJCF scene for the viewer under --out.
+
+--json keys: scene, category (tight/loose/...), E_max, E_ss [J], coupling_ratio [%], F_in, F_rm,
+  F_grip [N], s_max, s_ss [m] (path length at E_max / steady state), max_von_mises, yield_stress
+  [Pa], max_penetration, penetration_tolerance [m], min_det_F, steps, newton_iterations,
+  elements, kappa_initial, kappa_final [N/m], dhat [m], object_samples, seconds [s],
+  time_split [s] per resource (assembly, factorization, contact, total), phase_split [s] per
+  phase of the insertion loop (warm_start, newton, facet_check, record, rigid_check, other),
+  warnings, units {key: unit}, and the output paths profile_csv, plot_png, usd, mjcf,
+  profile_json."""
 
 HELP = "simulate inserting a rigid object into a compliant part (deformation profile, grip, forces)"
 DESCRIPTION = __doc__
@@ -36,7 +45,7 @@ DESCRIPTION = __doc__
 def add_args(p):
     sub = p.add_subparsers(dest="couple_command", metavar="ACTION", parser_class=type(p))
     s = sub.add_parser("simulate", help="run an insertion simulation of a coupling scene",
-                       description="Run an insertion simulation of a coupling scene and write its profile.")
+                       description=SIMULATE_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     s.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
     s.add_argument("--steps", type=int, metavar="N", help="number of insertion steps (overrides the scene)")
     s.add_argument("--h-in", type=float, metavar="H", help="insertion step along the path [m]")
@@ -45,14 +54,18 @@ def add_args(p):
     s.add_argument("--fixed-axes", metavar="AXES",
                    help='axes the fixed region is held along, e.g. "xz" (must include the insertion axis)')
     s.add_argument("--no-refine", action="store_true", help="no refinement points on boundary edges/faces")
-    listing = sub.add_parser("scenes", help="list the bundled coupling scenes")
+    listing = sub.add_parser("scenes", help="list the bundled coupling scenes",
+                             description="List the bundled coupling scenes (scenes/coupling); each runs with "
+                                         "'simfab couple simulate NAME'. Writes nothing.\n\n--json keys: scenes "
+                                         "(list of scene names).")
     from simfab.cli import add_common_args, couple_design
 
     o = sub.add_parser("optimize", help="optimize the part's rest shape for the scene's design brief",
-                       description=couple_design.__doc__.split("\n\n")[1])
+                       description=couple_design.OPTIMIZE_DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     couple_design.add_optimize_args(o)
     st = sub.add_parser("study", help="handle-placement study (displacement vs spatial vs random)",
-                        description=couple_design.__doc__.split("\n\n")[3])
+                        description=couple_design.STUDY_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     couple_design.add_study_args(st)
     for q in (s, listing, o, st):
         add_common_args(q)  # e.g. 'simfab couple scenes --json'

@@ -1,12 +1,12 @@
 """The design actions of ``simfab couple``: ``optimize`` and ``study handles`` (argument parsing
 only; the work is in :mod:`simfab.design`).
 
-``simfab couple optimize SCENE`` changes the part's rest shape as little as possible (Laplacian
+simfab couple optimize SCENE changes the part's rest shape as little as possible (Laplacian
 editing energy of the boundary) until the simulated insertion meets the scene's design brief
-(``[design]`` in NAME.toml: grip tight|loose, grip/insertion/removal force bounds [N], yield
+([design] in NAME.toml: grip tight|loose, grip/insertion/removal force bounds [N], yield
 stress [Pa], or a target force profile). Command-line options override the brief.
 
-JSON keys (``--json``): scene, feasible, objective, objective_initial, E_L, constraints (per
+--json keys: scene, feasible, objective, objective_initial, E_L, constraints (per
 constraint: value, lo, hi, unit, satisfied, initial), category, category_initial, profile and
 profile_initial (category, coupling_ratio_pct, E_max_J, E_ss_J, F_in_N, F_rm_N, F_grip_N,
 max_von_mises_Pa), handles,
@@ -16,13 +16,22 @@ simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_s
 revolved_stl with --revolve-axis), restarts (with --restarts: per run seed, status, message,
 feasible, objective, E_L, iterations, seconds).
 
-``simfab couple study handles SCENE`` runs the handle-placement study: displacement-based and
-spatial placement and ``--random`` random picks, for each handle count of ``--counts``; reports
-the fraction of runs that met every constraint and the final E_L per method (table, CSV, PNG).
-JSON keys: rows (method, handles, runs, converged_fraction, E_L_median, E_L_best), outputs.
+simfab couple study handles SCENE runs the handle-placement study: displacement-based and
+spatial placement and --random random picks, for each handle count of --counts, each an
+optimization run as a Dask task (--scheduler); reports the fraction of runs that met every
+constraint and the final E_L per method (table, CSV, PNG).
+
+--json keys: scene, runs, failed_runs, rows (method, handles, runs, converged_fraction, E_L_median, E_L_best), outputs (runs_csv,
+summary_csv, plot_png, summary_json), units.
 """
 
 from __future__ import annotations
+
+import textwrap
+
+_PARTS = [textwrap.fill(" ".join(p.split()), 78) for p in __doc__.split("\n\n")]
+OPTIMIZE_DESCRIPTION = "\n\n".join(_PARTS[1:3])
+STUDY_DESCRIPTION = "\n\n".join(_PARTS[3:5])
 
 
 def add_optimize_args(s) -> None:

@@ -1,4 +1,4 @@
-"""``simfab crowd``: wisdom of micro-crowds -- aggregate ratings, study crowd size, compute truths.
+"""simfab crowd: wisdom of micro-crowds -- aggregate ratings, study crowd size, compute truths.
 
     simfab crowd aggregate RATINGS.csv --scale 1 10 [--truth TRUTH.csv]
     simfab crowd study RATINGS.csv --scale 1 10 --truth TRUTH.csv [--subcrowds 500] [--scheduler ADDRESS]
@@ -6,8 +6,8 @@
     simfab crowd simulate --tasks 6 --scale 1 10 [--practitioners 15] [--public 100]
     simfab crowd bracket [--designs NAME ...] [--load 20]
 
-RATINGS.csv is long-form ``worker,task,label`` (integer labels on the scale); TRUTH.csv is
-``task,truth``. RMS errors are on the unit scale [0, 1] (label - lo) / (hi - lo). The
+RATINGS.csv is long-form worker,task,label (integer labels on the scale); TRUTH.csv is
+task,truth. RMS errors are on the unit scale [0, 1] (label - lo) / (hi - lo). The
 bundled 3D-printing survey is in ``scenes/crowd`` (see its README).
 """
 
@@ -15,7 +15,13 @@ from __future__ import annotations
 
 import os
 
+from simfab.crowd.outputs import aggregate_outputs, bracket_outputs, study_outputs, truth_outputs
 from simfab.errors import InputError
+
+#: units of summary keys for the plain-text table
+UNITS = {"support_volume": "m³", "overhang_area": "m²", "raycast_volume": "m³", "euler_deg": "deg",
+         "tip_deflection": "m", "area": "m²", "load": "N", "seconds": "s", "rms_continuous": "unit scale",
+         "rms_rounded": "unit scale"}
 
 HELP = "wisdom of micro-crowds: aggregate ratings, micro-crowd study, computed truths, synthetic crowds"
 DESCRIPTION = (
@@ -61,19 +67,69 @@ def _scale_arg(p):
     p.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), required=True, help="integer rating scale, e.g. 1 10")
 
 
+_RAW = {"formatter_class": __import__("argparse").RawDescriptionHelpFormatter}
+
+AGGREGATE_DESCRIPTION = """Aggregate one crowd's ratings with every method (mean, median, majority, trimmed
+mean, the Bayesian expertise/difficulty model with R-hat/ESS convergence checks) and, with
+--truth, score each against it (RMS on the unit scale). Writes aggregates.csv, raters.csv,
+summary.json and, with --truth, expert_network.png and errors_per_question.png to --out.
+
+--json keys: methods {name: estimates {task: value}, rms, rms_discrete, percentile, ...},
+  bayes {rhat_max, ess_min, seconds, converged, iterations_per_chain, chains, credible_mass,
+  x_interval {task: [lo, hi]}}, warnings, individual_errors {worker: rms} (with --truth),
+  tasks, workers, scale [lo, hi], outputs {aggregates_csv, raters_csv, summary_json,
+  expert_network_png, errors_png}."""
+
+STUDY_DESCRIPTION = """Micro-crowd study: for every sub-crowd size from --min-size to N-1, draw --subcrowds random
+sub-crowds, aggregate each with the Bayesian model and report the crowd estimate's percentile
+rank among the individual raters and the population bias. Writes study.csv, study.png and
+study.json to --out.
+
+--json keys: sizes (rows: size, subcrowds, percentile_mean, percentile_sd, bias_mean, bias_sd,
+  unconverged_fraction, rhat_median), seconds, outputs {study_csv, study_png, study_json}."""
+
+TRUTH_DESCRIPTION = """Computed ground truth of a 3D-printing question: support volume (m^3) and overhang area
+(m^2) of a closed mesh in each orientation (printed with +z up, plate under the lowest point),
+cross-checked by ray casting, scaled onto the survey scale. Overlapping bodies are united
+first and a mesh size implausible for --units is reported (stderr and mesh_notes). Writes
+truth_table.csv, truth_support.csv, truth_finish.csv and truth.json to --out.
+
+--json keys: orientations (rows: orientation, euler_deg, support_volume [m^3], overhang_area
+  [m^2], raycast_volume [m^3], raycast_rel_diff, support_score, finish_score), scale,
+  mesh_notes (what was not taken as read), outputs {table_csv, support_truth_csv,
+  finish_truth_csv, truth_json}."""
+
+SIMULATE_DESCRIPTION = """Draw a synthetic crowd from the expertise/difficulty model: practitioners and general
+public (a fraction of it malicious) rating --tasks questions with truths drawn uniformly on the
+scale, or the questions of --truth. Writes ratings.csv, truth.csv and planted.json (the planted
+expertise, difficulty and malicious raters) to --out.
+
+--json keys: raters, tasks (names), malicious (count), outputs {ratings_csv, truth_csv,
+  planted_json}."""
+
+BRACKET_DESCRIPTION = """Strength ground truth of the 2D bracket designs of the structural survey: plane-stress FEM
+tip deflection under --load, scored 1..5 (stiffest = 5). Writes brackets.csv,
+truth_strength.csv, brackets.png and brackets.json to --out.
+
+--json keys: setup (load [N], material, ...), designs {name: tip_deflection [m], score, area
+  [m^2]}, outputs {table_csv, truth_csv, designs_png, summary_json}."""
+
+
 def add_args(p):
     from simfab.cli import add_common_args
 
     sub = p.add_subparsers(dest="crowd_command", metavar="ACTION", parser_class=type(p))
 
-    a = sub.add_parser("aggregate", help="aggregate one crowd's ratings (all methods), score against truth")
+    a = sub.add_parser("aggregate", help="aggregate one crowd's ratings (all methods), score against truth",
+                       description=AGGREGATE_DESCRIPTION, **_RAW)
     a.add_argument("ratings", help="long-form CSV: worker,task,label")
     _scale_arg(a)
     a.add_argument("--truth", help="CSV task,truth (scale units) to score against")
     _sampler_args(a, study=False)
     add_common_args(a)
 
-    s = sub.add_parser("study", help="micro-crowd study: percentile rank and population bias against crowd size")
+    s = sub.add_parser("study", help="micro-crowd study: percentile rank and population bias against crowd size",
+                       description=STUDY_DESCRIPTION, **_RAW)
     s.add_argument("ratings", help="long-form CSV: worker,task,label")
     _scale_arg(s)
     s.add_argument("--truth", required=True, help="CSV task,truth")
@@ -83,15 +139,17 @@ def add_args(p):
     _sampler_args(s, study=True)
     add_common_args(s)
 
-    t = sub.add_parser("truth", help="support volume / overhang area of a mesh in given orientations")
+    t = sub.add_parser("truth", help="support volume / overhang area of a mesh in given orientations",
+                       description=TRUTH_DESCRIPTION, **_RAW)
     t.add_argument("mesh", help="STL/OBJ/PLY/OFF/GLB; printed with +z up, plate under the lowest point")
     t.add_argument("--orientations", nargs="+", default=["six"], metavar="O", help="'six' (the six axis directions down) or [NAME=]RX:RY:RZ in degrees (extrinsic x, y, z); default six")
-    t.add_argument("--units", default="m", help="units of the mesh file: m, mm or cm (default m)")
+    t.add_argument("--units", default="m", choices=["m", "mm", "cm"], help="units of the mesh file: m, mm or cm (default m)")
     t.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), default=[1.0, 10.0], help="survey scale for the scores (default 1 10)")
     t.add_argument("--no-raycast", action="store_true", help="skip the ray-cast cross-check")
     add_common_args(t)
 
-    m = sub.add_parser("simulate", help="draw a synthetic crowd from the model (practitioners and general public)")
+    m = sub.add_parser("simulate", help="draw a synthetic crowd from the model (practitioners and general public)",
+                       description=SIMULATE_DESCRIPTION, **_RAW)
     _scale_arg(m)
     g = m.add_mutually_exclusive_group(required=True)
     g.add_argument("--tasks", type=int, help="number of questions (truth drawn uniformly on the scale)")
@@ -102,7 +160,8 @@ def add_args(p):
     m.add_argument("--difficulty", type=float, nargs="+", default=[1.0], help="question difficulty beta (one value or one per question; default 1)")
     add_common_args(m)
 
-    b = sub.add_parser("bracket", help="strength truth of the 2D bracket designs (FEM tip deflection, scores 1..5)")
+    b = sub.add_parser("bracket", help="strength truth of the 2D bracket designs (FEM tip deflection, scores 1..5)",
+                       description=BRACKET_DESCRIPTION, **_RAW)
     b.add_argument("--designs", nargs="+", metavar="NAME", help="subset of the built-in designs (default all)")
     b.add_argument("--load", type=float, default=None, help="total downward tip load, N (default 20)")
     b.add_argument("--material", default=None, help="built-in material name (default PLA)")
@@ -128,40 +187,6 @@ def _scale(args):
     return Scale(lo=args.scale[0], hi=args.scale[1])
 
 
-def aggregate_outputs(ratings, truth, result: dict, out: str, *, title: str = "crowd") -> dict:
-    """Write the aggregate table, rater table, summary JSON and (with truth) figures."""
-    from simfab.crowd.plots import plot_expert_network, plot_method_errors
-    from simfab.io.atomic import write_csv, write_json
-
-    os.makedirs(out, exist_ok=True)
-    methods = result["methods"]
-    names = list(methods)
-    bayes = result["bayes"]
-    header = ["task"] + names + ["bayesian_lo", "bayesian_hi"] + (["truth"] if truth is not None else [])
-    rows = []
-    for j, t in enumerate(ratings.tasks):
-        lo, hi = bayes["x_interval"][t]
-        rows.append([t] + [methods[n]["estimates"][t] for n in names] + [lo, hi] + ([float(truth[j])] if truth is not None else []))
-    outputs = {"aggregates_csv": str(write_csv(os.path.join(out, "aggregates.csv"), header, rows))}
-    rrows = []
-    indiv = result.get("individual_errors", {})
-    for w in ratings.workers:
-        a = bayes["alpha"][w]
-        rrows.append([w, a["mean"], a["interval"][0], a["interval"][1], indiv.get(w, "")])
-    outputs["raters_csv"] = str(write_csv(os.path.join(out, "raters.csv"), ["worker", "alpha_mean", "alpha_lo", "alpha_hi", "rms_error"], rrows))
-    if truth is not None:
-        sc = ratings.scale
-        crowd_err = methods["bayesian"]["rms_continuous"]
-        ind = [indiv[w] for w in ratings.workers]
-        outputs["expert_network_png"] = plot_expert_network(crowd_err, ind, ratings.workers, os.path.join(out, "expert_network.png"), title=f"{title}: Bayesian crowd estimate vs individuals")
-        per_q = {n: abs(sc.to_unit([methods[n]["estimates"][t] for t in ratings.tasks]) - sc.to_unit(truth)) for n in names}
-        outputs["errors_png"] = plot_method_errors(per_q, ratings.tasks, os.path.join(out, "errors_per_question.png"), title=f"{title}: crowd error per question")
-    outputs["summary_json"] = os.path.join(out, "summary.json")
-    summary = dict(result, outputs=outputs, tasks=list(ratings.tasks), workers=len(ratings.workers), scale=[ratings.scale.lo, ratings.scale.hi])
-    write_json(outputs["summary_json"], summary)
-    return summary
-
-
 def run_aggregate(args):
     from simfab.crowd.analysis import aggregate_all
     from simfab.crowd.data import load_ratings, load_truth
@@ -179,20 +204,6 @@ def run_aggregate(args):
     return summary
 
 
-def study_outputs(result, out: str, *, title: str) -> dict:
-    from simfab.crowd.plots import plot_study
-    from simfab.io.atomic import write_csv, write_json
-
-    rows = result.rows()
-    outputs = {
-        "study_csv": str(write_csv(os.path.join(out, "study.csv"), list(rows[0]), [list(r.values()) for r in rows])),
-        "study_png": plot_study(result, os.path.join(out, "study.png"), title=title),
-    }
-    summary = {"sizes": rows, "seconds": result.seconds, "outputs": outputs}
-    outputs["study_json"] = str(write_json(os.path.join(out, "study.json"), summary))
-    return summary
-
-
 def run_study(args):
     from simfab.crowd.data import load_ratings, load_truth
     from simfab.crowd.study import micro_crowd_study
@@ -205,32 +216,20 @@ def run_study(args):
     return study_outputs(res, args.out, title=f"Micro-crowd study of {os.path.basename(args.ratings)}")
 
 
-def truth_outputs(rows, out: str, *, scale) -> dict:
-    from simfab.io.atomic import write_csv, write_json
-
-    cols = ["orientation", "rx_deg", "ry_deg", "rz_deg", "support_volume_m3", "overhang_area_m2", "raycast_volume_m3", "raycast_rel_diff", "support_score", "finish_score"]
-    table = [[r["orientation"], *r["euler_deg"], r["support_volume"], r["overhang_area"], r.get("raycast_volume", ""), r.get("raycast_rel_diff", ""), r["support_score"], r["finish_score"]] for r in rows]
-    outputs = {
-        "table_csv": str(write_csv(os.path.join(out, "truth_table.csv"), cols, table)),
-        "support_truth_csv": str(write_csv(os.path.join(out, "truth_support.csv"), ["task", "truth"], [[r["orientation"], r["support_score"]] for r in rows])),
-        "finish_truth_csv": str(write_csv(os.path.join(out, "truth_finish.csv"), ["task", "truth"], [[r["orientation"], r["finish_score"]] for r in rows])),
-    }
-    summary = {"orientations": rows, "scale": list(scale), "outputs": outputs}
-    outputs["truth_json"] = str(write_json(os.path.join(out, "truth.json"), summary))
-    return summary
-
-
 def run_truth(args):
-    from simfab.crowd.truth import orientation_table, parse_orientations
-    from simfab.io.mesh import load_mesh
+    from simfab.crowd.truth import load_part, orientation_table, parse_orientations
+    from simfab.progress import log
 
     orients = parse_orientations(args.orientations)
     lo, hi = args.scale
     if not lo < hi:
         raise InputError(f"scale must have lo < hi, got {lo:g} {hi:g}", where="--scale")
-    mesh = load_mesh(args.mesh, units=args.units, require_watertight=True)
+    mesh, notes = load_part(args.mesh, units=args.units)
+    for n in notes:  # shown even with --quiet: the part was not taken exactly as read
+        log(f"simfab: warning: {n}")
     rows = orientation_table(mesh.vertices, mesh.faces, orients, raycast=not args.no_raycast, scale=(lo, hi))
-    return truth_outputs(rows, args.out, scale=(lo, hi))
+    summary = truth_outputs(rows, args.out, scale=(lo, hi), notes=notes)
+    return summary
 
 
 def run_simulate(args):
@@ -286,34 +285,17 @@ def run_bracket(args):
             raise InputError(f"must be a positive force in N, got {args.load}", where="--load")
         setup = dataclasses.replace(setup, load=args.load)
     if args.material is not None:
+        from simfab.fem.materials import material_by_name
+
+        try:
+            material_by_name(args.material)
+        except InputError as e:
+            raise InputError(e.message, where="--material") from None
         setup = dataclasses.replace(setup, material=args.material)
     results = bracket_survey(setup, names=args.designs)
     if len(results) < 2:
         raise InputError("need at least two designs to scale scores", where="--designs")
     return bracket_outputs(results, setup, args.out)
-
-
-def bracket_outputs(results, setup, out: str) -> dict:
-    """Tables, truth CSV, picture and JSON of a bracket survey."""
-    import dataclasses
-
-    from simfab.crowd.bracket import plot_brackets, strength_scores
-    from simfab.io.atomic import write_csv, write_json
-
-    scores = strength_scores(results)
-    rows = [[r.name, r.deflection, r.area, r.n_triangles, r.newton_iterations, float(s)] for r, s in zip(results, scores)]
-    outputs = {
-        "table_csv": str(write_csv(os.path.join(out, "brackets.csv"), ["design", "tip_deflection_m", "area_m2", "triangles", "newton_iterations", "strength_score"], rows)),
-        "truth_csv": str(write_csv(os.path.join(out, "truth_strength.csv"), ["task", "truth"], [[r.name, float(s)] for r, s in zip(results, scores)])),
-        "designs_png": plot_brackets(results, scores, os.path.join(out, "brackets.png")),
-    }
-    summary = {
-        "setup": dataclasses.asdict(setup),
-        "designs": {r.name: {"tip_deflection": r.deflection, "score": float(s), "area": r.area} for r, s in zip(results, scores)},
-        "outputs": outputs,
-    }
-    outputs["summary_json"] = str(write_json(os.path.join(out, "brackets.json"), summary))
-    return summary
 
 
 def demo(ctx):

@@ -1,10 +1,15 @@
-"""``simfab deploy``: deploy a flat beam unit cell with rigid inserts (discrete elastic rods + MuJoCo inserts).
+"""simfab deploy: deploy a flat beam unit cell with rigid inserts (discrete elastic rods + MuJoCo inserts).
 
-For every insert body of the scene (default ``scenes/deploy/unit_cell.xml``) the cell's spokes
+For every insert body of the scene (default scenes/deploy/unit_cell.xml) the cell's spokes
 are drawn onto the insert in quasi-static increments; writes per insert a USD timeline (rods as
 curves, the insert as an animated rigid mesh, one time code per increment), the deployed MJCF
-(opens in ``python -m mujoco.viewer``) and a PNG preview, and reports the sign of the discrete
+(opens in python -m mujoco.viewer) and a PNG preview, and reports the sign of the discrete
 Gaussian curvature (dome / saddle) and whether the deployed state is stable.
+
+--json keys: scene, summary_json (path), inserts {BODY: insert_half_size, gap_half_size [m],
+  relation (larger/smaller than the gap), kind (dome/saddle), gaussian_curvature and the other
+  curvature figures [1/m^2], stable, increments, newton_iterations (per increment), energy [J],
+  gaussian_curvature_per_increment, max_bending_strain, outputs {usd, mjcf, png}}.
 """
 
 from __future__ import annotations

@@ -1,15 +1,13 @@
-"""``simfab grow``: generative support structures (space colonization), skinned for printing.
-
-Usage::
+"""simfab grow: generative support structures (space colonization), skinned for printing.
 
     simfab grow SCENE.xml [--attractors N --influence D --kill D --branch-length L
                            --mode volume|surface|profile --symmetric --smooth-iterations K]
     simfab grow edit SKELETON.json --stroke STROKE.json --camera CAMERA.json [--chain K]
 
-SCENE is an MJCF file with a companion TOML (see ``scenes/growth/README.md``). Outputs
-under ``--out``: skin STL + PLY, skeleton JSON, USD growth replay, MJCF of objects + grown
-part, PNG preview. ``edit`` moves one skeleton chain onto the surface of rays through a
-2D stroke and re-skins the result.
+SCENE is an MJCF file with a companion TOML (see scenes/growth/README.md). Outputs under
+--out: skin STL + PLY (mm), skeleton JSON, USD growth replay, MJCF of objects + grown part,
+PNG preview and the preview's camera (JSON, the --camera of 'grow edit'). 'edit' moves one
+skeleton chain onto the surface of rays through a 2D stroke and re-skins the result.
 """
 
 from __future__ import annotations
@@ -20,6 +18,10 @@ from pathlib import Path
 
 from simfab._bundled import scenes_dir
 
+#: units of summary keys for the plain-text table (the skin files themselves are in mm: skin_units)
+UNITS = {"influence": "m", "kill": "m", "branch_length": "m", "volume": "m³", "overlap_volume": "m³",
+         "penetration": "m", "seconds_growth": "s", "seconds_skin": "s"}
+
 HELP = "grow a support structure between objects (space colonization) and skin it for 3D printing"
 DESCRIPTION = (
     "Grow an organic support structure from root sites to target sites of an MJCF scene by space "
@@ -27,7 +29,19 @@ DESCRIPTION = (
     "symmetry, obstacle avoidance), prune, smooth and skin it into one watertight printable mesh. Writes skin "
     "STL/PLY, skeleton JSON, a USD growth replay, an MJCF of objects + grown part and a PNG preview. "
     "'simfab grow edit SKELETON_JSON --stroke FILE --camera FILE' moves one skeleton chain onto the surface of "
-    "rays through a 2D stroke and re-skins it. Scene format: scenes/growth/README.md."
+    "rays through a 2D stroke and re-skins it. Scene format: scenes/growth/README.md.\n\n"
+    "A sample edit: 'simfab grow scenes/growth/phone_stand.xml' then 'simfab grow edit "
+    "simfab-out/grow/phone_stand_skeleton.json --stroke scenes/growth/phone_stand_stroke.json --camera "
+    "simfab-out/grow/phone_stand_preview_camera.json' (the stroke is drawn in the preview PNG's pixels).\n\n"
+    "--json keys (grow): scene, mode, symmetric, seed, attractors, influence, kill, branch_length [m], steps, "
+    "stop_reasons, targets_total, targets_reached, targets_unreached (names), nodes, segments, nodes_grown, "
+    "collisions_resolved, collisions_unresolved, dead_ends, dropped_oscillating, seconds_growth [s], watertight, "
+    "is_volume, bodies, volume [m^3], nodes_in_skin, overlap_volume [m^3], penetration [m], skin_attempts, "
+    "objects_subtracted, objects_not_manifold, seconds_skin [s], skin_units, and the paths skin_stl, skin_ply, "
+    "skeleton_json, usd, mjcf, png, camera_json.\n\n"
+    "--json keys (edit): chain, segments_colliding and the other edit figures, nodes, segments, watertight, bodies, "
+    "volume [m^3], skin_units, skeleton_json, skin_stl, skin_ply, png (the edit seen through --camera, the "
+    "stroke in red)."
 )
 
 SCENES_DIR = scenes_dir("growth")
@@ -44,18 +58,27 @@ def add_args(p):
     g.add_argument("--mode", choices=["volume", "surface", "profile"], help="attractor placement")
     g.add_argument("--symmetric", action="store_true", default=None, help="mirror-symmetric growth")
     g.add_argument("--smooth-iterations", type=int, metavar="K", help="smoothing iterations (0 = none)")
-    g.add_argument("--max-steps", type=int, metavar="K", help="growth step cap")
+    g.add_argument("--max-steps", type=int, metavar="K", help="growth step cap (default: the scene's)")
+    g.add_argument("--best-effort", action="store_true",
+                   help="keep and write a structure that leaves targets unreached (default: that is a failed "
+                        "growth, exit 1, nothing written)")
     e = p.add_argument_group("edit")
     e.add_argument("--stroke", metavar="FILE", help="(edit) stroke: JSON {\"points\": [[x, y], ...]} or CSV, pixels")
     e.add_argument("--camera", metavar="FILE|JSON", help="(edit) camera: eye, target, up, fovy_deg, width, height")
     e.add_argument("--chain", type=int, metavar="K", help="(edit) chain index (default: the one nearest the stroke)")
 
 
+#: upper bounds of the count options (beyond them a run would exhaust memory rather than finish)
+COUNT_LIMITS = {"--attractors": 1_000_000, "--max-steps": 100_000}
+
+
 def _positive(name, v):
     from simfab.errors import InputError
 
-    if v is not None and not v > 0:
-        raise InputError(f"must be positive, got {v}", where=name)
+    if v is not None and not (v > 0 and v < float("inf")):
+        raise InputError(f"must be a positive finite number, got {v}", where=name)
+    if v is not None and name in COUNT_LIMITS and v > COUNT_LIMITS[name]:
+        raise InputError(f"must be at most {COUNT_LIMITS[name]}, got {v}", where=name)
     return v
 
 
@@ -71,7 +94,7 @@ def run(args) -> dict:
                       influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
                       branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
                       symmetric=args.symmetric, smoothing_iterations=_nonneg(args.smooth_iterations),
-                      max_steps=_positive("--max-steps", args.max_steps))
+                      max_steps=_positive("--max-steps", args.max_steps), best_effort=args.best_effort)
 
 
 def _nonneg(v):
@@ -82,23 +105,37 @@ def _nonneg(v):
     return v
 
 
-def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, **overrides) -> dict:
-    """Grow, skin, check and write every output for one scene; returns the summary."""
+def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool = False, **overrides) -> dict:
+    """Grow, skin, check and write every output for one scene; returns the summary.
+
+    A target left unreached is a failed growth (ConvergenceError, exit 1) unless ``best_effort``."""
     from simfab.errors import ConvergenceError
     from simfab.growth import grow, skin_result
     from simfab.growth.outputs import SKIN_FILE_UNITS, write_all
     from simfab.growth.tolerances import PENETRATION_ROUNDOFF
     from simfab.progress import log
 
+    from simfab.errors import InputError
+
     symmetric = overrides.pop("symmetric", None)
-    result = grow(scene, seed=seed, symmetric=symmetric, **overrides)
+    try:
+        result = grow(scene, seed=seed, symmetric=symmetric, **overrides)
+    except InputError as e:  # name the scene's file with the field (its TOML holds the growth parameters)
+        toml = Path(scene).with_suffix(".toml")
+        if (e.where or "").startswith("--"):
+            raise
+        raise e.in_file(toml if toml.is_file() else scene) from None
     s = result.summary()
     if s["segments"] == 0:
-        raise ConvergenceError(f"growth produced no structure ({'; '.join(s['stop_reasons'])}); "
+        raise ConvergenceError(f"{scene}: growth produced no structure ({'; '.join(s['stop_reasons'])}); "
                                f"unreached targets: {', '.join(s['targets_unreached']) or 'none'}")
     if s["targets_unreached"]:
-        log(f"simfab grow: warning: unreached targets {', '.join(s['targets_unreached'])} "
-            f"({'; '.join(s['stop_reasons'])})", quiet=quiet)
+        msg = (f"{scene}: {len(s['targets_unreached'])} of {s['targets_total']} targets unreached "
+               f"({', '.join(s['targets_unreached'])}; {'; '.join(s['stop_reasons'])})")
+        if not best_effort:
+            raise ConvergenceError(f"{msg}; change the growth parameters (e.g. --branch-length, --influence, "
+                                   "--max-steps) or pass --best-effort to keep the partial structure")
+        log(f"simfab grow: warning: {msg}")  # shown even with --quiet: the result is partial
     mesh, rep, seconds_skin = skin_result(result)
     tol_pen = result.scene.params.skin_tolerance
     if rep.penetration > tol_pen + PENETRATION_ROUNDOFF * result.resolved.diag:
@@ -156,15 +193,43 @@ def _run_edit(args) -> dict:
     out = Path(args.out)
     stem = Path(args.skeleton).stem.removesuffix("_skeleton") + "_edited"
     paths = {"skeleton_json": out / f"{stem}_skeleton.json", "skin_stl": out / f"{stem}_skin.stl",
-             "skin_ply": out / f"{stem}_skin.ply"}
-    with atomic_paths(paths) as tmp:  # the three files appear together or not at all
+             "skin_ply": out / f"{stem}_skin.ply", "png": out / f"{stem}_preview.png"}
+    with atomic_paths(paths) as tmp:  # the files appear together or not at all
         write_json(tmp["skeleton_json"], to_json_dict(edited, scene=scene_path, seed=doc.get("seed"), edit=rep))
         save_skin(mesh, tmp["skin_stl"])
         save_skin(mesh, tmp["skin_ply"])
+        edit_preview(tmp["png"], mesh, objects, camera, stroke, title=f"{stem}: chain {rep.get('chain')} moved "
+                                                                         "onto the stroke (red)")
     paths = {k: str(v) for k, v in paths.items()}
     return {**rep, "nodes": len(edited.nodes), "segments": int((edited.parent >= 0).sum()),
             "watertight": srep.watertight, "bodies": srep.bodies, "volume": srep.volume, "skin_units": SKIN_FILE_UNITS,
             **paths}
+
+
+def edit_preview(png, mesh, objects: dict, camera, stroke, *, title: str):
+    """The edited skin with the scene's objects, seen through the edit's camera, the stroke drawn
+    over it in red, titled and with a scale bar."""
+    import dataclasses
+
+    from PIL import Image, ImageDraw
+
+    from simfab.growth.outputs import OBJECT_RGBA, SKIN_RGBA
+    from simfab.io.atomic import atomic_path
+    from simfab.io.render import annotate_png, render_meshes
+
+    cam = dataclasses.asdict(camera)
+    items = [(m.vertices, m.faces, OBJECT_RGBA[:3]) for m in objects.values()] + [(mesh.vertices, mesh.faces,
+                                                                                    SKIN_RGBA[:3])]
+    got: dict = {}
+    render_meshes(items, png, width=camera.width, height=camera.height, view=cam, camera=got, floor=False)
+    img = Image.open(png).convert("RGB")
+    d = ImageDraw.Draw(img)
+    d.line([tuple(map(float, p)) for p in stroke], fill=(230, 30, 30), width=max(2, camera.height // 160))
+    with atomic_path(png) as tmp:
+        img.save(tmp, format="PNG")
+    if got:
+        annotate_png(png, got, title=title)
+    return png
 
 
 def bundled_scenes() -> list[Path]:
@@ -173,7 +238,10 @@ def bundled_scenes() -> list[Path]:
 
 
 def demo(ctx) -> dict:
-    """Grow and skin every bundled scene (outputs in ctx.out/<scene>/)."""
+    """Grow and skin every bundled scene (outputs in ctx.out/<scene>/), then the sample sketch
+    edit of the phone stand (scenes/growth/phone_stand_stroke.json over its preview)."""
+    import argparse
+
     from simfab.progress import log
 
     res = {}
@@ -182,4 +250,12 @@ def demo(ctx) -> dict:
         s = grow_scene(path, out=os.path.join(ctx.out, path.stem), seed=ctx.seed, quiet=ctx.quiet)
         res[path.stem] = {k: s[k] for k in ("targets_total", "targets_reached", "nodes", "segments", "watertight",
                                             "bodies", "volume", "seconds_growth", "seconds_skin", "png", "usd")}
-    return {"scenes": res}
+        if path.stem == "phone_stand":
+            camera, skeleton = s["camera_json"], s["skeleton_json"]
+    log("  grow edit phone_stand (sample stroke)", quiet=ctx.quiet)
+    args = argparse.Namespace(scene="edit", skeleton=skeleton, stroke=str(SCENES_DIR / "phone_stand_stroke.json"),
+                              camera=camera, chain=None, out=os.path.join(ctx.out, "phone_stand_edit"),
+                              quiet=ctx.quiet, **{k: None for k in ("attractors", "influence", "kill", "branch_length",
+                                                                     "mode", "symmetric", "smooth_iterations")})
+    e = _run_edit(args)
+    return {"scenes": res, "edit": {k: e[k] for k in ("chain", "max_move", "watertight", "bodies", "skin_stl")}}

@@ -38,3 +38,15 @@ def run(args) -> dict:
     if mod is None:
         raise InputError(f"choose a validation: {', '.join(VALIDATIONS)}", where="simfab validate")
     return mod.run(args)
+
+
+def demo(ctx) -> dict:
+    """The buckling validation on a small table (n = 20, 40, 80; g/L = 0.9, 0.6; both supports,
+    direct and through the insert): about 15 s."""
+    import argparse
+
+    mod = importlib.import_module(VALIDATIONS["buckling"])
+    args = argparse.Namespace(out=ctx.out, seed=ctx.seed, device=ctx.device, quiet=ctx.quiet, json=True,
+                              g_over_L=[0.9, 0.6], n=[20, 40, 80], support="both", path="both", scene=None)
+    res = mod.run(args)
+    return {"buckling": {k: res[k] for k in ("passed", "convergence_order", "critical_load", "outputs")}}

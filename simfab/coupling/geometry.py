@@ -36,6 +36,8 @@ def c_clamp_outline(*, inner_radius: float, width: float, opening_deg: float, ba
     ri, ro = float(inner_radius), float(inner_radius) + float(width)
     if not (ri > 0 and width > 0 and 0 < opening_deg < 180 and base_depth > 0 and base_height > 0):
         raise InputError("c_clamp needs inner_radius, width, base_depth, base_height > 0 and 0 < opening_deg < 180")
+    if not (isinstance(segments, (int, np.integer)) and 4 <= segments <= 10_000):
+        raise InputError(f"segments must be an integer in 4 .. 10000, got {segments!r}", where="segments")
     a0 = np.deg2rad(opening_deg)
     t = np.linspace(a0, 2 * np.pi - a0, segments)
     outer = np.c_[ro * np.cos(t), ro * np.sin(t)]

@@ -150,7 +150,7 @@ def write_usd(res: InsertionResult, path) -> Path:
     for k, r in enumerate(res.steps):
         w.set_points("part", r.x, k)
         w.set_scalar("part", "von_mises", vertex_von_mises(fem, r.von_mises), k, interpolation="vertex",
-                     vmin=0.0, vmax=vmax)
+                     vmin=0.0, vmax=vmax, units="Pa")
         w.set_pose("object", r.pos, r.quat, k)
     return w.save()
 
@@ -167,10 +167,35 @@ def extrude_triangles(V2: np.ndarray, F: np.ndarray, edges: np.ndarray, thicknes
     return V, np.vstack([bottom, top, sides])
 
 
+#: The viewer's insertion slider: O (display only, no contacts) follows its control as a
+#: critically damped oscillator of this natural frequency [Hz]; mass and inertia are nominal.
+PLAYER_HZ, PLAYER_MASS, PLAYER_INERTIA = 20.0, 0.01, 1e-6
+
+
+def straight_path(res: InsertionResult):
+    """(start (3,), unit direction (3,), s (k,)) when O only translates along one line, else None."""
+    P = np.array([np.r_[np.asarray(r.pos, float), np.zeros(3 - len(r.pos))][:3] for r in res.steps])
+    Q = np.array([np.asarray(r.quat, float) for r in res.steps])
+    d = P[-1] - P[0]
+    L = float(np.linalg.norm(d))
+    if L <= 0 or np.any(np.abs(np.abs(Q @ Q[0]) - 1.0) > 1e-12):
+        return None
+    u = d / L
+    off = (P - P[0]) - np.outer((P - P[0]) @ u, u)
+    if np.linalg.norm(off, axis=1).max() > 1e-9 * L:
+        return None
+    return P[0], u, (P - P[0]) @ u
+
+
 def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
-    """MJCF for the MuJoCo viewer: A deformed at the steady state (body ``part``), O as a mocap body
-    at that step, and one keyframe per insertion step (O's pose) to scrub the path."""
-    from simfab.io.mjcf import MJCFBuilder
+    """MJCF for the MuJoCo viewer: A deformed at the steady state (body ``part``), O at that step,
+    and one keyframe per insertion step to scrub the path (the viewer's Key slider).
+
+    When O's path is a straight translation (the usual insertion), O hangs on a slide joint along
+    it driven by a position actuator ``insertion`` [m along the path]: press play and drag the
+    control slider to move O along the path (gravity off, O has no contacts; keyframes set qpos and
+    ctrl). Otherwise O is a mocap body and the keyframes hold its poses."""
+    from simfab.io.mjcf import MJCFBuilder, quat_to_matrix
 
     cm = res.model
     fem = cm.fem
@@ -186,15 +211,32 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     ov, of = _object_display(cm)
     if cm.dim == 2:
         ov, of = extrude_triangles(ov[:, :2], of, _loop_edges(len(cm.object_vertices)), fem.thickness * 1.5)
-    b = MJCFBuilder(f"{cm.name}_insertion")
+    line = straight_path(res)
+    b = MJCFBuilder(f"{cm.name}_insertion", gravity=[0, 0, 0] if line is not None else None)
     b.mesh_asset("part", V, F)
     b.mesh_asset("object", ov, of)
     part = b.body("part")
     b.geom(part, type="mesh", mesh="part", rgba=[0.85, 0.55, 0.25, 1], contype=0, conaffinity=0)
-    o = b.body("object", pos=r_ss.pos, quat=r_ss.quat, mocap=True)
-    b.geom(o, type="mesh", mesh="object", rgba=[0.5, 0.6, 0.7, 0.8], contype=0, conaffinity=0)
-    for k, r in enumerate(res.steps):
-        b.key(f"step{k}", mpos=r.pos, mquat=r.quat)
+    if line is None:
+        o = b.body("object", pos=r_ss.pos, quat=r_ss.quat, mocap=True)
+        b.geom(o, type="mesh", mesh="object", rgba=[0.5, 0.6, 0.7, 0.8], contype=0, conaffinity=0)
+        for k, r in enumerate(res.steps):
+            b.key(f"step{k}", mpos=r.pos, mquat=r.quat)
+        return b.save(path)
+    p0, u, s = line
+    q0 = np.asarray(res.steps[0].quat, float)
+    o = b.body("object", pos=p0, quat=q0)
+    b.add(o, "inertial", pos=[0, 0, 0], mass=PLAYER_MASS, diaginertia=[PLAYER_INERTIA] * 3)
+    w = 2 * np.pi * PLAYER_HZ
+    lo, hi = float(s.min()), float(s.max())
+    b.add(o, "joint", name="insertion", type="slide", axis=quat_to_matrix(q0).T @ u, range=[lo, hi],
+          damping=2 * PLAYER_MASS * w)
+    b.geom(o, type="mesh", mesh="object", rgba=[0.5, 0.6, 0.7, 0.8], contype=0, conaffinity=0, mass=0)
+    b.add(b._section("actuator"), "position", name="insertion", joint="insertion", kp=PLAYER_MASS * w * w,
+          ctrlrange=[lo, hi])
+    b.root.find("option").set("integrator", "implicitfast")
+    for k, sk in enumerate(s):
+        b.key(f"step{k}", qpos=[sk], ctrl=[sk])
     return b.save(path)
 
 
@@ -211,7 +253,9 @@ def write_all(res: InsertionResult, out: Path, stem: str | None = None) -> dict:
     from simfab.io.atomic import atomic_paths, write_json
 
     out = Path(out)
-    stem = stem or res.model.name
+    from simfab.io.outpaths import safe_name
+
+    stem = safe_name(stem or res.model.name)  # the scene's name comes from a file: no separators, no '..'
     prof, summary = summarize(res)
     paths = {"profile_csv": out / f"{stem}_profile.csv", "plot_png": out / f"{stem}_profile.png",
              "usd": out / f"{stem}.usda", "mjcf": out / f"{stem}.xml", "profile_json": out / f"{stem}_summary.json"}

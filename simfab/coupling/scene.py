@@ -101,14 +101,22 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
 
     mat = _section(cfg, "material", where)
     if "youngs_modulus" in mat:
+        vals = {}
+        for key, default in (("youngs_modulus", None), ("poisson_ratio", 0.35), ("yield_stress", 60e6),
+                             ("density", 1200.0)):
+            try:
+                vals[key] = float(mat.get(key, default))
+            except (TypeError, ValueError):
+                raise InputError(f"[material] {key} must be a number, got {mat.get(key)!r}", where=where) from None
         try:
-            material = Material(name=str(mat.get("name", "custom")), youngs_modulus=float(mat["youngs_modulus"]),
-                                poisson_ratio=float(mat.get("poisson_ratio", 0.35)),
-                                yield_stress=float(mat.get("yield_stress", 60e6)), density=float(mat.get("density", 1200.0)))
+            material = Material(name=str(mat.get("name", "custom")), **vals)
         except (TypeError, ValueError) as e:
             raise InputError(f"[material]: {e}", where=where) from None
     else:
-        material = material_by_name(mat.get("name", "PLA"))
+        try:
+            material = material_by_name(mat.get("name", "PLA"))
+        except InputError as e:
+            raise InputError(f"[material] name: {e.message}", where=where) from None
 
     comp = _section(cfg, "compliant", where)
     obj = _section(cfg, "object", where)
@@ -185,6 +193,8 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
     if cached is not None:
         return load_mesh_file(base / str(cached), dim) + ((float(comp.get("thickness", 1.0)) if dim == 2 else 1.0),)
     target = comp.pop("target_elements", None)
+    if target is not None and (isinstance(target, bool) or not isinstance(target, int) or target < 1):
+        raise InputError(f"target_elements must be an integer >= 1, got {target!r}", where=where)
     thickness = float(comp.pop("thickness", 1.0)) if dim == 2 else 1.0
     units = comp.pop("units", "m")
     scale = {"m": 1.0, "mm": 1e-3}.get(units)
@@ -203,7 +213,12 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
                 raise InputError(f"cannot read the outline CSV: {e}", where=str(f)) from None
         else:
             raise InputError(f"2D generator must be one of {GENERATORS_2D}, got {gen!r}", where=where)
-        return _triangulate_to_target(outline, target) + (thickness,)
+        if not (np.isfinite(thickness) and thickness > 0):
+            raise InputError(f"thickness must be a positive length [m], got {thickness}", where=where)
+        try:
+            return _triangulate_to_target(outline, target) + (thickness,)
+        except InputError as e:
+            raise e.in_file(where) from None
     if gen == "extruded_clamp":
         surf = _call(geometry.extruded_clamp, comp, where)
     elif gen == "cross_claw":
@@ -214,7 +229,10 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
         surf = load_mesh(base / str(comp.pop("mesh")), units=units, require_watertight=True)
     else:
         raise InputError(f"3D generator must be one of {GENERATORS_3D}, got {gen!r}", where=where)
-    V, T = tetrahedralize(np.asarray(surf.vertices), np.asarray(surf.faces), target_tets=target)
+    try:
+        V, T = tetrahedralize(np.asarray(surf.vertices), np.asarray(surf.faces), target_tets=target)
+    except InputError as e:
+        raise e.in_file(where) from None
     return V, T, 1.0
 
 
@@ -242,6 +260,8 @@ def _call(fn, kw: dict, where: str):
         return fn(**kw)
     except TypeError as e:
         raise InputError(f"bad generator parameters: {e}", where=where) from None
+    except InputError as e:
+        raise e.in_file(where) from None
 
 
 def _triangulate_to_target(outline: np.ndarray, target: int | None):

@@ -158,28 +158,36 @@ def strength_scores(results, *, lo: float = 1.0, hi: float = 5.0) -> np.ndarray:
 
 
 def plot_brackets(results, scores, path) -> str:
-    """Each design's mesh coloured by displacement magnitude (deformation exaggerated)."""
+    """Each design's mesh coloured by displacement magnitude |u| [mm] on one shared logarithmic
+    colour scale (so the designs compare), deformation exaggerated by one common factor."""
+    from matplotlib import cm, colors
+
     from simfab.crowd.plots import _plt
     from simfab.io.atomic import save_figure
 
     plt = _plt()
     n = len(results)
-    cols = 4
+    cols = min(4, n)
     rows = (n + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.2 * rows), constrained_layout=True)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols + 1.0, 2.3 * rows + 0.6), constrained_layout=True)
     axes = np.atleast_1d(axes).ravel()
+    umax = max(max(float(np.linalg.norm(r.displacement, axis=1).max()) for r in results), 1e-300)
+    L = max(float(r.points[:, 0].max()) for r in results)
+    k = 0.05 * L / umax  # the largest displacement of all designs drawn as 5 % of the length
+    # the designs' displacements span orders of magnitude: a shared logarithmic scale over 3 decades
+    norm = colors.LogNorm(vmin=umax * 1e3 * 1e-3, vmax=umax * 1e3, clip=True)
     for ax, r, s in zip(axes, results, scores):
-        mag = np.linalg.norm(r.displacement, axis=1)
-        umax = max(float(mag.max()), 1e-300)
-        k = 0.05 * r.points[:, 0].max() / umax  # each design's largest displacement drawn as 5 % of L
+        mag = np.maximum(np.linalg.norm(r.displacement, axis=1) * 1e3, norm.vmin)
         xy = r.points + k * r.displacement
-        ax.tripcolor(xy[:, 0], xy[:, 1], r.triangles, mag, shading="gouraud", cmap="viridis", vmin=0, vmax=umax)
-        ax.set_title(f"{r.name}: {r.deflection * 1e3:.3f} mm, score {s:.1f}", fontsize=8)
+        ax.tripcolor(xy[:, 0], xy[:, 1], r.triangles, mag, shading="gouraud", cmap="viridis", norm=norm)
+        ax.set_title(f"{r.name}: tip {r.deflection * 1e3:.3g} mm, score {s:.1f}", fontsize=8)
         ax.set_aspect("equal")
         ax.axis("off")
     for ax in axes[n:]:
         ax.axis("off")
-    fig.suptitle("Bracket designs under the tip load (colour: |u| per design, deformation exaggerated)", fontsize=9)
+    fig.colorbar(cm.ScalarMappable(norm=norm, cmap="viridis"), ax=axes.tolist(), shrink=0.8,
+                 label="displacement |u| [mm] (log scale)")
+    fig.suptitle(f"Bracket designs under the tip load (deformation x{k:.3g}; score 5 = stiffest)", fontsize=9)
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return str(path)

@@ -50,6 +50,8 @@ def plot_expert_network(crowd_error: float, individual, names, path, *, title: s
 
     e = np.asarray(individual, float)
     n = e.size
+    if n > NETWORK_MAX_NODES:  # a ring of 100 labelled nodes is unreadable: rank them instead
+        return _plot_expert_ranking(crowd_error, e, names, path, title=title)
     norm = colors.Normalize(vmin=0.0, vmax=max(float(e.max()), crowd_error) * 1.05)
     cmap = plt.get_cmap("viridis_r")
     fig, ax = plt.subplots(figsize=(6.4, 6.4), constrained_layout=True)
@@ -74,6 +76,38 @@ def plot_expert_network(crowd_error: float, individual, names, path, *, title: s
     ax.set_ylim(-1.45, 1.45)
     ax.set_aspect("equal")
     ax.axis("off")
+    save_figure(fig, path, dpi=120)
+    plt.close(fig)
+    return str(path)
+
+
+#: Above this many raters the expert network is drawn as a ranking (labels would overlap).
+NETWORK_MAX_NODES = 30
+
+
+def _plot_expert_ranking(crowd_error: float, e: np.ndarray, names, path, *, title: str) -> str:
+    """Every individual's error, sorted, against the crowd's (a horizontal line); individuals
+    better than the crowd are named."""
+    plt = _plt()
+    order = np.argsort(e)
+    n = e.size
+    better = e[order] < crowd_error
+    fig, ax = plt.subplots(figsize=(8.0, 4.6), constrained_layout=True)
+    x = np.arange(1, n + 1)
+    ax.bar(x[~better], e[order][~better], width=0.85, color="0.65", label="individual (worse than the crowd)")
+    ax.bar(x[better], e[order][better], width=0.85, color="crimson", label="individual better than the crowd")
+    ax.axhline(crowd_error, color="tab:blue", lw=2, label=f"Bayesian crowd estimate: {crowd_error:.3f}")
+    for i in np.nonzero(better)[0][:12]:
+        ax.annotate(str(names[order[i]]), (x[i], e[order][i]), textcoords="offset points", xytext=(0, 4),
+                    ha="center", fontsize=7, rotation=90)
+    beaten = int(np.sum(e > crowd_error))
+    ax.set_xlabel(f"individual raters, ranked by error (1 = best of {n})")
+    ax.set_ylabel("RMS error (unit scale, 0..1)")
+    ax.set_xlim(0, n + 1)
+    ax.set_ylim(0, max(float(e.max()), crowd_error) * 1.12)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(f"{title}\ncrowd beats {beaten} of {n} individuals", fontsize=10)
     save_figure(fig, path, dpi=120)
     plt.close(fig)
     return str(path)

@@ -22,6 +22,7 @@ import numpy as np
 from simfab._bundled import scenes_dir
 from simfab.crowd.config import CrowdMix
 from simfab.errors import InputError
+from simfab.io.outpaths import safe_name
 
 SURVEY_DIR = scenes_dir("crowd")
 SURVEY_TOML = SURVEY_DIR / "printing_survey.toml"
@@ -188,7 +189,7 @@ def make_bundle(spec: SurveySpec | None = None) -> dict:
 def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: SurveySpec | None = None, subcrowds: int | None = None) -> dict:
     """The demo: recompute the truth from the mesh, aggregate each crowd, expert network,
     a micro-crowd study of the practitioners, a picture of the six orientations."""
-    from simfab.cli.crowd import aggregate_outputs, study_outputs, truth_outputs
+    from simfab.crowd.outputs import aggregate_outputs, study_outputs, truth_outputs
     from simfab.crowd.analysis import aggregate_all
     from simfab.crowd.data import Scale, load_ratings, load_truth
     from simfab.crowd.study import micro_crowd_study
@@ -209,7 +210,7 @@ def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: Sur
             raise InputError(f"bundled truth differs from the mesh's by {drift:.3g}; rerun scenes/crowd/make_survey.py", where=str(spec.root / spec.truth_file))
         log(f"crowd demo: aggregating {c.name} ({len(ratings.workers)} raters)", quiet=quiet)
         res = aggregate_all(ratings, truth, seed=seed, quiet=quiet)
-        s = aggregate_outputs(ratings, truth, res, os.path.join(out, c.name), title=f"{spec.title}, {c.name.replace('_', ' ')}")
+        s = aggregate_outputs(ratings, truth, res, os.path.join(out, safe_name(c.name)), title=f"{spec.title}, {c.name.replace('_', ' ')}")
         crowds[c.name] = {
             "rms": {m: v["rms"] for m, v in s["methods"].items()},
             "percentile": {m: v["percentile"] for m, v in s["methods"].items()},
@@ -221,7 +222,7 @@ def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: Sur
             n_sub = subcrowds or spec.demo_subcrowds
             log(f"crowd demo: micro-crowd study of {c.name} ({n_sub} sub-crowds per size)", quiet=quiet)
             st = micro_crowd_study(ratings, truth, n_sub=n_sub, seed=seed, quiet=quiet)
-            crowds[c.name]["study"] = study_outputs(st, os.path.join(out, c.name), title=f"{spec.title}, {c.name}")
+            crowds[c.name]["study"] = study_outputs(st, os.path.join(out, safe_name(c.name)), title=f"{spec.title}, {c.name}")
     summary["crowds"] = crowds
     try:
         from simfab.io.render import render_mjcf

@@ -177,3 +177,28 @@ def orientation_table(vertices, faces, orientations, *, raycast: bool = True, sc
         r["support_score"] = float(a)
         r["finish_score"] = float(b)
     return rows
+
+
+def load_part(path, *, units: str = "m"):
+    """The printed part of a truth computation: a closed mesh in metres, checked.
+
+    Returns ``(mesh, notes)``; notes are one-line statements of everything that was not taken
+    as read (repairs, overlapping bodies united, an implausible size for ``units``) -- the
+    caller shows them on stderr and in the summary. InputError for unusable meshes: open,
+    implausible coordinates, mostly degenerate, or self-intersecting beyond a union of bodies.
+    """
+    import warnings
+
+    from simfab.io.mesh import read_mesh, unite_overlaps, units_warning
+
+    with warnings.catch_warnings():  # the repairs are reported as notes
+        warnings.simplefilter("ignore")
+        mesh, report = read_mesh(path, units=units, require_watertight=True)
+    notes = [f"{path}: repaired {', '.join(report.repaired)}"] if report.repaired else []
+    mesh, note = unite_overlaps(mesh, where=str(path))
+    if note:
+        notes.append(f"{path}: {note}")
+    w = units_warning(mesh.extents, units)
+    if w:
+        notes.append(f"{path}: {w}")
+    return mesh, notes

@@ -16,3 +16,5 @@ def require_positive(cfg, prefix: str) -> None:
         v = getattr(cfg, f.name)
         if not (np.isfinite(v) and v > 0):
             raise InputError(f"must be a positive number (got {v})", where=f"{prefix}{f.name}")
+        if f.name == "poisson" and not v < 0.5:
+            raise InputError(f"Poisson ratio must be below 0.5 (got {v})", where=f"{prefix}{f.name}")

@@ -84,7 +84,10 @@ def load_insert_scene(path) -> InsertScene:
 
     sc = load_scene(path)
     kw = numeric_config(sc, "beam_", BeamSetup)
-    setup = BeamSetup(**kw)
+    try:
+        setup = BeamSetup(**kw)
+    except InputError as e:  # name the scene file as well as the field
+        raise e.in_file(path) from None
     if "anchor" not in sc.sites:
         raise InputError("the scene needs a site named 'anchor' at the fixed beam end", where=str(path))
     meshes = sc.body_meshes(include_world=False)

@@ -98,7 +98,10 @@ def load_cell_scene(path) -> tuple[CellConfig, dict]:
 
     sc = load_scene(path)
     kw = numeric_config(sc, "cell_", CellConfig)
-    cfg = CellConfig(**kw)
+    try:
+        cfg = CellConfig(**kw)
+    except InputError as e:  # name the scene file as well as the field
+        raise e.in_file(path) from None
     m = sc.model
     inserts = {}
     for b in range(1, m.nbody):

@@ -18,7 +18,11 @@ DESCRIPTION = (
     "of the quasi-static continuation from the straight beam to that g/L. "
     f"Exit status 1 when a case at n = {_tol.VALIDATION_N} misses its tolerance (pinned rise "
     f"{_tol.PINNED_RISE_RTOL:.1%}, clamped rise {_tol.CLAMPED_RISE_RTOL:.0%}, force {_tol.FORCE_RTOL:.0%}, "
-    f"pinned critical load {_tol.CRITICAL_LOAD_RTOL:.1%})."
+    f"pinned critical load {_tol.CRITICAL_LOAD_RTOL:.1%}).\n\n"
+    "--json keys: passed, failures (list), convergence_order {support: median order}, "
+    "insert_vs_direct_max_rel_diff, critical_load (list per support: support, n, load figures [N], rel_err, tolerance), tolerances {n, pinned_rise, "
+    "clamped_rise, force, critical_load}, beam (setup: lengths [m], young [Pa], poisson, ...), scene, "
+    "outputs {csv, json, png}, rows (one per case, the CSV columns)."
 )
 
 
@@ -44,7 +48,8 @@ def add_args(p) -> None:
     p.add_argument("--g-over-L", dest="g_over_L", nargs="+", type=_float_list, metavar="R",
                    help="gap ratios g/L in (0, 1) (default 0.99 0.95 0.90 0.80 0.60)")
     p.add_argument("--n", nargs="+", type=_int_list, metavar="N", help="segment counts (even, >= 4; default 20 40 80 160)")
-    p.add_argument("--support", choices=["pinned", "clamped", "both"], default="both")
+    p.add_argument("--support", choices=["pinned", "clamped", "both"], default="both",
+                   help="end conditions of the beam (default both)")
     p.add_argument("--path", choices=["direct", "insert", "both"], default="both",
                    help="end displacement applied directly, through the rigid insert, or both (default)")
     p.add_argument("--scene", default=None, help="elastica MJCF scene (default scenes/deploy/elastica.xml)")

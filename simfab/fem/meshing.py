@@ -12,6 +12,10 @@ import numpy as np
 
 from simfab.errors import InputError
 
+#: Refuse meshing requests that would need more elements than this (the mesher would otherwise
+#: run until memory runs out on slivers, near-zero areas or absurd size targets).
+MAX_ELEMENTS = 2_000_000
+
 
 def _as_loop(poly, where: str) -> np.ndarray:
     p = np.asarray(poly, dtype=np.float64)
@@ -42,9 +46,11 @@ def triangulate_polygon(outline, *, holes=(), max_area: float | None = None, min
     loops = [outer] + [_as_loop(h, f"holes[{i}]") for i, h in enumerate(holes)]
     poly = shapely.Polygon(outer, [h for h in loops[1:]])
     if not poly.is_valid:
-        raise InputError(f"polygon is not valid ({shapely.is_valid_reason(poly)})", where="outline")
+        raise InputError(f"polygon is not valid ({shapely.is_valid_reason(poly)}): self-intersecting, "
+                         "collinear or with repeated vertices", where="outline")
     if max_area is not None and not (np.isfinite(max_area) and max_area > 0):
         raise InputError(f"max_area must be > 0, got {max_area}", where="max_area")
+    check_polygon_size(poly, max_area)
     if not (0.0 <= min_angle <= 34.0):
         raise InputError(f"min_angle must be in [0, 34] degrees, got {min_angle}", where="min_angle")
 
@@ -76,6 +82,33 @@ def triangulate_polygon(outline, *, holes=(), max_area: float | None = None, min
     return V, F
 
 
+def check_polygon_size(poly, max_area: float | None = None) -> None:
+    """Fail fast on polygons a quality mesher cannot finish: zero area, slivers whose quality
+    mesh needs more than :data:`MAX_ELEMENTS` triangles, vertices/edges closer than roundoff,
+    or an area bound asking for too many triangles.
+
+    A quality (minimum-angle) triangulation of a strip of width w and length L needs about
+    L / w triangles; with w ~ 2 A / P and L ~ P / 2 that is ~ P^2 / (4 A).
+    """
+    import shapely
+
+    A, P = float(poly.area), float(poly.length)
+    lo, hi = np.asarray(poly.bounds[:2]), np.asarray(poly.bounds[2:])
+    diag = float(np.linalg.norm(hi - lo))
+    if not A > 1e-12 * diag * diag:
+        raise InputError(f"polygon has (near) zero area ({A:.3g}); collinear or degenerate outline", where="outline")
+    if P * P / (4.0 * A) > MAX_ELEMENTS:
+        raise InputError(f"polygon is a sliver (mean width {2 * A / P:.3g} vs perimeter {P:.3g}); a quality mesh "
+                         f"would need more than {MAX_ELEMENTS} triangles", where="outline")
+    clearance = float(shapely.minimum_clearance(poly))
+    if clearance < 1e-9 * diag:
+        raise InputError(f"polygon has vertices or edges {clearance:.3g} apart (bounding box {diag:.3g}); "
+                         "remove near-duplicate vertices", where="outline")
+    if max_area is not None and A / max_area > MAX_ELEMENTS:
+        raise InputError(f"element size asks for about {A / max_area:.3g} triangles (limit {MAX_ELEMENTS})",
+                         where="max_area")
+
+
 def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, target_tets: int | None = None,
                    coarsen: bool = False):
     """Tetrahedral mesh of the volume enclosed by a triangle surface (fTetWild via pytetwild).
@@ -100,16 +133,22 @@ def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, tar
     if edge_length_fac is not None and target_tets is not None:
         raise InputError("give edge_length_fac or target_tets, not both", where="tetrahedralize")
     kwargs: dict = {}
+    vol = _enclosed_volume(v, f)
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    if not vol > 1e-12 * diag**3:
+        raise InputError(f"surface encloses (near) no volume ({vol:.3g}): open, flat or inward-facing", where="surface")
     if target_tets is not None:
-        if target_tets < 1:
-            raise InputError(f"target_tets must be >= 1, got {target_tets}", where="target_tets")
-        vol = _enclosed_volume(v, f)
-        if not vol > 0:
-            raise InputError("surface encloses no volume (open or inward-facing)", where="surface")
+        if not 1 <= target_tets <= MAX_ELEMENTS:
+            raise InputError(f"target_tets must be in 1 .. {MAX_ELEMENTS}, got {target_tets}", where="target_tets")
         kwargs["edge_length_abs"] = float((6.0 * np.sqrt(2.0) * vol / target_tets) ** (1.0 / 3.0))
     elif edge_length_fac is not None:
         if not (0 < edge_length_fac <= 1):
             raise InputError(f"edge_length_fac must be in (0, 1], got {edge_length_fac}", where="edge_length_fac")
+        # regular tets of edge l fill V with V / (l^3 / (6 sqrt 2)) elements
+        n_est = vol / ((edge_length_fac * diag) ** 3 / (6.0 * np.sqrt(2.0)))
+        if n_est > MAX_ELEMENTS:
+            raise InputError(f"edge length asks for about {n_est:.3g} tetrahedra (limit {MAX_ELEMENTS})",
+                             where="edge_length_fac")
         kwargs["edge_length_fac"] = float(edge_length_fac)
     import pytetwild  # lazy: imports pyvista
 

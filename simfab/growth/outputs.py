@@ -141,27 +141,44 @@ def write_all(result, mesh, out: Path, *, stem: str = "growth") -> dict:
     together: a failure in any writer leaves none of them (``atomic_paths``)."""
     from simfab.io.atomic import atomic_paths
 
+    from simfab.io.outpaths import safe_name
+
     out = Path(out)
+    stem = safe_name(stem)  # scene names come from files: no separators, no '..'
     paths = {"skin_stl": out / f"{stem}_skin.stl", "skin_ply": out / f"{stem}_skin.ply",
              "skeleton_json": out / f"{stem}_skeleton.json", "usd": out / f"{stem}.usdc",
-             "mjcf": out / f"{stem}_grown.xml", "png": out / f"{stem}_preview.png"}
+             "mjcf": out / f"{stem}_grown.xml", "png": out / f"{stem}_preview.png",
+             "camera_json": out / f"{stem}_preview_camera.json"}
     with atomic_paths(paths) as tmp:
         save_skin(mesh, tmp["skin_stl"])
         save_skin(mesh, tmp["skin_ply"])
         write_skeleton(result, tmp["skeleton_json"])
         write_usd(result, mesh, tmp["usd"])
         write_mjcf(result, mesh, tmp["mjcf"])
-        render_preview(tmp["mjcf"], tmp["png"], preview_azimuth(result, mesh))
+        render_preview(tmp["mjcf"], tmp["png"], preview_azimuth(result, mesh), tmp["camera_json"],
+                       title=f"{stem}: grown support ({len(result.scene.target_names)} targets)")
     return {k: str(v) for k, v in paths.items()}
 
 
-def render_preview(mjcf: Path, png: Path, azimuth: float) -> Path:
-    """PNG of the MJCF from ``azimuth``; falls back to the default view (and matplotlib without
-    OpenGL) through :func:`simfab.io.render.render_mjcf`."""
+def render_preview(mjcf: Path, png: Path, azimuth: float, camera_json: Path | None = None, *,
+                   title: str = "") -> Path:
+    """PNG of the MJCF from ``azimuth`` with a title and a scale bar; ``camera_json`` receives the
+    camera of the picture (the --camera of ``simfab grow edit``, so a stroke can be drawn over
+    it). Falls back to the default view (and matplotlib without OpenGL) through
+    :func:`simfab.io.render.render_mjcf`."""
+    from simfab.io.atomic import write_json
     from simfab.io.mjcf import load_model
-    from simfab.io.render import render_mjcf, render_model
+    from simfab.io.render import annotate_png, render_mjcf, render_model
 
+    cam: dict = {}
+    model = load_model(mjcf)
     try:
-        return render_model(load_model(mjcf), png, azimuth=azimuth)
+        render_model(model, png, azimuth=azimuth, camera=cam)
     except Exception:  # no usable OpenGL: render_mjcf knows the fallback
-        return render_mjcf(mjcf, png)
+        render_mjcf(mjcf, png)
+        cam = {}
+    if cam:
+        annotate_png(png, cam, title=title)
+    if camera_json is not None:
+        write_json(camera_json, cam or {"note": "no OpenGL: the matplotlib fallback has no pinhole camera"})
+    return png

@@ -199,9 +199,91 @@ def clean_for_stl(mesh):
     F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
     _, inv, cnt = np.unique(np.sort(F, axis=1), axis=0, return_inverse=True, return_counts=True)
     F = F[cnt[inv.reshape(-1)] == 1]
+    F = split_degenerate(np.asarray(rt.vertices), collapse_short_edges(np.asarray(rt.vertices), F))
     out = trimesh.Trimesh(np.asarray(rt.vertices), F, process=False)
     out.remove_unreferenced_vertices()
     return out
+
+
+#: A face is degenerate when its area is below this times the squared largest extent (the
+#: criterion of :func:`simfab.io.mesh.inspect_mesh`).
+DEGENERATE_AREA_REL = 1e-12
+
+
+def collapse_short_edges(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Collapse edges shorter than the length of a degenerate face's edge (a triangle with all
+    edges below sqrt(2 DEGENERATE_AREA_REL) x extent has no area to speak of): their endpoints
+    are merged (union-find), faces that lose a vertex and the fins left behind (the same
+    triangle twice) are removed. Returns the new faces; vertices are not moved."""
+    F = np.asarray(F, np.int64)
+    if not len(F):
+        return F
+    eps = np.sqrt(2.0 * DEGENERATE_AREA_REL) * float(np.max(np.ptp(V, axis=0)))
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    short = E[np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1) < eps]
+    if not len(short):
+        return F
+    root = np.arange(len(V))
+
+    def find(x):
+        while root[x] != x:
+            root[x] = root[root[x]]
+            x = root[x]
+        return x
+
+    for a, b in short:
+        ra, rb = find(int(a)), find(int(b))
+        if ra != rb:
+            root[max(ra, rb)] = min(ra, rb)
+    rep = np.array([find(i) for i in range(len(V))])
+    F = rep[F]
+    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
+    _, inv, cnt = np.unique(np.sort(F, axis=1), axis=0, return_inverse=True, return_counts=True)
+    return F[cnt[inv.reshape(-1)] == 1]
+
+
+def split_degenerate(V: np.ndarray, F: np.ndarray, *, passes: int = 10) -> np.ndarray:
+    """Remove zero-area (collinear) triangles without opening the surface.
+
+    A degenerate triangle (a, c, b) whose middle vertex b lies on its longest edge a-c is
+    dropped, and the neighbour (c, a, d) across that edge is split at b into (c, b, d) and
+    (b, a, d): every edge keeps exactly one twin, so a watertight mesh stays watertight and
+    the surface is unchanged. Repeated until no degenerate face is left (or ``passes``).
+    Returns the new faces (k, 3).
+    """
+    F = np.asarray(F, np.int64)
+    if not len(F):
+        return F
+    scale = float(np.max(np.ptp(V, axis=0)))
+    for _ in range(passes):
+        tri = V[F]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        bad = np.nonzero(area <= DEGENERATE_AREA_REL * scale * scale)[0]
+        if not bad.size:
+            break
+        edge_face = {(int(f[k]), int(f[(k + 1) % 3])): i for i, f in enumerate(F) for k in range(3)}
+        drop, new = set(), []
+        for i in bad:
+            if i in drop:
+                continue
+            f = [int(x) for x in F[i]]
+            lengths = [np.linalg.norm(V[f[(k + 1) % 3]] - V[f[k]]) for k in range(3)]
+            k = int(np.argmax(lengths))
+            a, c, b = f[k], f[(k + 1) % 3], f[(k + 2) % 3]
+            j = edge_face.get((c, a))
+            if j is None or j in drop or j == i:
+                continue
+            d = [int(x) for x in F[j] if x not in (a, c)]
+            if len(d) != 1 or d[0] == b:
+                continue
+            drop.update((i, j))
+            new += [(c, b, d[0]), (b, a, d[0])]
+        if not new:
+            break
+        keep = np.ones(len(F), bool)
+        keep[list(drop)] = False
+        F = np.vstack([F[keep], np.asarray(new, np.int64)])
+    return F
 
 
 def stl_round_trip(mesh):

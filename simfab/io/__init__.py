@@ -39,8 +39,15 @@ def inspect_file(path, *, units: str = "m") -> dict:
         with warnings.catch_warnings():  # the report lists what was repaired
             warnings.simplefilter("ignore")
             mesh, report = read_mesh(path, units=units)
-        return {"kind": "mesh", "file": str(path), **dataclasses.asdict(report), "problems": report.problems(),
-                "usable_after_repair": bool(mesh.is_watertight), "extents_m": [float(x) for x in mesh.extents]}
+        from simfab.io.mesh import interior_faces, units_warning
+
+        warn = units_warning(mesh.extents, units)
+        inside = int(interior_faces(mesh.vertices, mesh.faces).sum()) if mesh.is_watertight else None
+        problems = report.problems() + ([f"{inside} faces lie inside the solid (overlapping bodies or a "
+                                         "self-intersecting surface)"] if inside else [])
+        return {"kind": "mesh", "file": str(path), **dataclasses.asdict(report), "problems": problems,
+                "usable_after_repair": bool(mesh.is_watertight) and not inside, "extents_m": [float(x) for x in mesh.extents],
+                "units": units, "interior_faces": inside, "warnings": [warn] if warn else []}
     raise InputError(f"unknown file type {suf!r} (mesh, .xml or .usd/.usda/.usdc)", where=str(path))
 
 
@@ -62,14 +69,11 @@ def _inspect_mjcf(path: Path) -> dict:
 
 
 def _inspect_usd(path: Path) -> dict:
-    from pxr import Usd, UsdGeom
+    from pxr import UsdGeom
 
-    from simfab.errors import InputError
-    from simfab.io.usd import check_compliance
+    from simfab.io.usd import check_compliance, open_stage
 
-    st = Usd.Stage.Open(str(path))
-    if st is None:
-        raise InputError("not a readable USD stage", where=str(path))
+    st = open_stage(path)
     prims = {str(p.GetPath()): p.GetTypeName() for p in st.Traverse()}
     return {"kind": "usd", "file": str(path), "default_prim": str(st.GetDefaultPrim().GetPath()) if st.GetDefaultPrim() else None,
             "up_axis": str(UsdGeom.GetStageUpAxis(st)), "meters_per_unit": UsdGeom.GetStageMetersPerUnit(st),

@@ -22,7 +22,10 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
     dispatch on the extension (trimesh, USD, matplotlib) pick the right format.
     On an exception the temporary is removed and ``path`` is untouched.
     """
+    from simfab.io.outpaths import check_inside
+
     path = Path(path)
+    check_inside(path)  # inside simfab's CLI, outputs stay in the folders the user named
     path.parent.mkdir(parents=True, exist_ok=True)
     suffix = path.suffix if suffix is None else suffix
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp" + suffix, dir=path.parent)

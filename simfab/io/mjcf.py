@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -29,7 +30,55 @@ from simfab.io.atomic import atomic_path
 def _mujoco():
     import mujoco
 
+    if not getattr(mujoco, "_simfab_warnings", False):
+        # MuJoCo's default warning handler prints to stdout and appends to MUJOCO_LOG.TXT in the
+        # working directory; simfab collects the warnings instead (see :func:`mujoco_warnings`)
+        # and shows each distinct one once on stderr, as one line.
+        mujoco.set_mju_user_warning(_on_warning)
+        mujoco._simfab_warnings = True
     return mujoco
+
+
+_WARNINGS: list[str] = []
+_SHOWN: set[str] = set()
+_QUIET_LOAD = [False]  # while a model loads, its warnings become part of the error (if any)
+
+
+def _on_warning(msg: str) -> None:
+    import sys
+
+    msg = " ".join(str(msg).split())
+    _WARNINGS.append(msg)
+    if not _QUIET_LOAD[0] and msg not in _SHOWN:
+        _SHOWN.add(msg)
+        print(f"simfab: warning: MuJoCo: {msg}", file=sys.stderr)
+
+
+def mujoco_warnings(clear: bool = True) -> list[str]:
+    """MuJoCo warnings since the last call (simfab keeps them off stdout and out of MUJOCO_LOG.TXT)."""
+    out = list(_WARNINGS)
+    if clear:
+        _WARNINGS.clear()
+    return out
+
+
+_NONFINITE = re.compile(r"(?<![A-Za-z0-9_])[-+]?(nan|inf|infinity)(?![A-Za-z0-9_])", re.IGNORECASE)
+
+
+def _check_finite_attributes(path: Path) -> None:
+    """InputError naming the element and attribute of the first NaN/inf number in an MJCF file."""
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as e:
+        raise InputError(f"not well-formed XML: {e}", where=str(path)) from None
+    for el in root.iter():
+        for k, v in el.attrib.items():
+            if k in ("name", "file", "class", "childclass", "mesh", "material", "texture", "body", "body1",
+                     "body2", "joint", "site", "target", "model", "content_type"):
+                continue
+            if _NONFINITE.search(v):
+                who = f"<{el.tag}{' name=' + repr(el.get('name')) if el.get('name') else ''}>"
+                raise InputError(f"{who} attribute {k}={v!r} is not a finite number", where=str(path))
 
 
 # --------------------------------------------------------------------------- loading
@@ -124,10 +173,15 @@ def load_model(path: str | os.PathLike):
     path = Path(path)
     if not path.is_file():
         raise InputError("file not found", where=str(path))
+    _check_finite_attributes(path)
+    _QUIET_LOAD[0] = True
     try:
         return mj.MjModel.from_xml_path(str(path))
     except ValueError as e:
+        mujoco_warnings()
         raise InputError(f"MuJoCo cannot load this MJCF: {' '.join(str(e).split())}", where=str(path)) from None
+    finally:
+        _QUIET_LOAD[0] = False
 
 
 def load_scene(path: str | os.PathLike) -> Scene:

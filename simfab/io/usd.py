@@ -38,6 +38,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
 from simfab.errors import InputError
 from simfab.io.atomic import atomic_path
+from simfab.io.usd_read import open_stage, read_curves_at, read_mesh_at, read_scalar_at, stage_time  # noqa: F401
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _INTERP = {"vertex", "uniform", "constant", "faceVarying", "varying"}
@@ -183,11 +184,15 @@ class StageWriter:
         self._set_extent(prim, pts, pad, tc)
 
     def set_scalar(self, name: str, primvar: str, values, t=None, *, interpolation: str = "vertex",
-                   cmap: str = "viridis", vmin: float | None = None, vmax: float | None = None) -> None:
+                   cmap: str = "viridis", vmin: float | None = None, vmax: float | None = None,
+                   units: str | None = None) -> None:
         """A float primvar (per vertex or per face) plus ``displayColor`` from ``cmap``.
 
         values : (n,) for interpolation "vertex", (m,) for "uniform" (per face).
         vmin, vmax : colormap range (default: this sample's min and max).
+        units : the values' unit, kept with the colormap and a fixed range in the primvar's
+            customData (``simfab:colormap``, ``simfab:range``, ``simfab:units``) so a renderer can
+            draw the colour bar (:func:`read_scalar_at`).
         """
         if interpolation not in _INTERP:
             raise ValueError(f"interpolation must be one of {sorted(_INTERP)}")
@@ -201,6 +206,12 @@ class StageWriter:
         if not pv:
             pv = api.CreatePrimvar(primvar, Sdf.ValueTypeNames.FloatArray, interpolation)
         pv.Set(Vt.FloatArray.FromNumpy(np.nan_to_num(v).astype(np.float32)), tc)
+        attr = pv.GetAttr()
+        attr.SetCustomDataByKey("simfab:colormap", cmap)
+        if vmin is not None and vmax is not None:
+            attr.SetCustomDataByKey("simfab:range", Vt.DoubleArray([float(vmin), float(vmax)]))
+        if units is not None:
+            attr.SetCustomDataByKey("simfab:units", str(units))
         rgb = scalar_colors(v, cmap=cmap, vmin=vmin, vmax=vmax).astype(np.float32)
         dc = UsdGeom.Gprim(prim).GetDisplayColorPrimvar()
         if not dc or not dc.HasAuthoredValue():
@@ -327,57 +338,3 @@ def check_compliance(path: str | os.PathLike) -> list[str]:
     errors = UsdValidation.ValidationContext(validators).Validate(stage)
     return [f"{e.GetValidator().GetMetadata().name if e.GetValidator() else '?'}: {e.GetMessage()}"
             for e in errors if e.GetType() == UsdValidation.ValidationErrorType.Error]
-
-
-def read_mesh_at(path: str | os.PathLike, time: float | None = None):
-    """All meshes of a stage at a time code, in world coordinates.
-
-    Returns a list of ``(prim_path, points (n, 3), faces (m, 3) triangulated, rgb (m, 3) or None)``;
-    ``time=None`` means the stage's end time code. Invisible prims are skipped.
-    """
-    stage = Usd.Stage.Open(str(path))
-    if stage is None:
-        raise InputError("not a readable USD stage", where=str(path))
-    tc = Usd.TimeCode(stage.GetEndTimeCode() if time is None else float(time))
-    cache = UsdGeom.XformCache(tc)
-    out = []
-    for prim in stage.Traverse():
-        if not prim.IsA(UsdGeom.Mesh):
-            continue
-        if UsdGeom.Imageable(prim).ComputeVisibility(tc) == UsdGeom.Tokens.invisible:
-            continue
-        mesh = UsdGeom.Mesh(prim)
-        pts = np.asarray(mesh.GetPointsAttr().Get(tc), dtype=np.float64)
-        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(tc), dtype=np.int64)
-        idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(tc), dtype=np.int64)
-        if len(pts) == 0 or len(counts) == 0:
-            continue
-        m = np.asarray(cache.GetLocalToWorldTransform(prim), dtype=np.float64)  # row-vector convention
-        pts = pts @ m[:3, :3] + m[3, :3]
-        tris, owner = _triangulate(counts, idx)
-        rgb = None
-        dc = UsdGeom.Gprim(prim).GetDisplayColorPrimvar()
-        if dc and dc.HasValue():
-            col = np.asarray(dc.Get(tc), dtype=np.float64)
-            interp = dc.GetInterpolation()
-            if interp == "uniform" and len(col) == len(counts):
-                rgb = col[owner]
-            elif interp in ("vertex", "varying") and len(col) == len(pts):
-                rgb = col[tris].mean(axis=1)
-            elif len(col) >= 1:
-                rgb = np.repeat(col[:1], len(tris), axis=0)
-        out.append((str(prim.GetPath()), pts, tris, rgb))
-    return out
-
-
-def _triangulate(counts: np.ndarray, idx: np.ndarray):
-    """Fan-triangulate polygons; return triangles (t, 3) and the owning face of each."""
-    if np.all(counts == 3):
-        return idx.reshape(-1, 3), np.arange(len(counts))
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    tris, owner = [], []
-    for f, (s, c) in enumerate(zip(starts, counts)):
-        for j in range(1, c - 1):
-            tris.append((idx[s], idx[s + j], idx[s + j + 1]))
-            owner.append(f)
-    return np.asarray(tris, dtype=np.int64).reshape(-1, 3), np.asarray(owner, dtype=np.int64)

@@ -36,7 +36,15 @@ def test_simulate_writes_profile_plot_usd_and_mjcf(tmp_path, capsys):
     import mujoco
 
     m = mujoco.MjModel.from_xml_path(summary["mjcf"])
-    assert m.nkey == 11 and m.nmocap == 1
+    assert m.nkey == 11
+    # the path is a straight push: the viewer plays it on a slide joint driven by the 'insertion' control
+    assert m.nq == 1 and m.nu == 1 and m.nmocap == 0
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    d.ctrl[:] = m.key_ctrl[10]
+    for _ in range(int(1.0 / m.opt.timestep)):
+        mujoco.mj_step(m, d)
+    assert d.qpos[0] == pytest.approx(m.key_qpos[10, 0], abs=1e-6 * abs(m.key_qpos[10, 0]) + 1e-9)
 
 
 def test_a_failing_writer_leaves_no_output_file(tmp_path, monkeypatch):

@@ -146,11 +146,16 @@ def test_step_cap_is_reported_naming_unreached_targets(tmp_path, capsys):
                           capsys)
     assert code == 1 and "step cap" in err and "target_0" in err
     assert not (tmp_path / "a").exists() or not any((tmp_path / "a").iterdir())
-    # enough steps for some targets only: outputs are written, the rest are listed
+    # enough steps for some targets only: a failed growth (exit 1, the count named, nothing written) ...
+    code, out, err = _run(["grow", str(SCENES / "table_legs.xml"), "--max-steps", "32", "--out", str(tmp_path / "b")],
+                          capsys)
+    assert code == 1 and "targets unreached" in err and "--best-effort" in err
+    assert not (tmp_path / "b").exists()
+    # ... unless best effort was asked for: outputs are written, the rest are listed
     code, out, err = _run(["grow", str(SCENES / "table_legs.xml"), "--max-steps", "32", "--out", str(tmp_path / "b"),
-                           "--json"], capsys)
+                           "--json", "--best-effort"], capsys)
     s = json.loads(out)
-    assert code == 0
+    assert code == 0 and "targets unreached" in err
     assert 0 < s["targets_reached"] < s["targets_total"]
     assert len(s["targets_unreached"]) == s["targets_total"] - s["targets_reached"]
     assert any(r.startswith("step cap") for r in s["stop_reasons"])
