@@ -1,19 +1,19 @@
-"""``simfab sweep``: a parameter study over any subcommand, one Dask task per run.
+"""simfab sweep: a parameter study over any subcommand, one Dask task per run.
 
-Usage::
+Usage:
 
     simfab sweep SPEC.toml [--scheduler HOST:PORT] [--retry-failed] [--out DIR]
     simfab sweep --list
 
-SPEC.toml (or the name of a bundled spec in scenes/sweeps, e.g. ``cclamp2d_chart``) names a
+SPEC.toml (or the name of a bundled spec in scenes/sweeps, e.g. cclamp2d_chart) names a
 command, optionally a base scene whose parameters it varies, the parameters' values (lists,
 ranges, seeded random samples) and the figures to collect from each run's JSON summary (see
 :mod:`simfab.sweep.spec` and scenes/sweeps/README.md). Each run executes the subcommand
-in-process on a Dask worker with ``--out OUT/runs/KEY``; by default on a LocalCluster of one
-worker process per core, with ``--scheduler`` on an existing cluster (``dask scheduler`` +
-``dask worker``; every worker needs the same simfab installed, checked at connect time).
+in-process on a Dask worker with --out OUT/runs/KEY; by default on a LocalCluster of one
+worker process per core, with --scheduler on an existing cluster (dask scheduler +
+dask worker; every worker needs the same simfab installed, checked at connect time).
 
-Outputs under ``--out`` (default ./simfab-out/sweep/NAME): NAME.parquet and NAME.csv (one row
+Outputs under --out (default ./simfab-out/sweep/NAME): NAME.parquet and NAME.csv (one row
 per run: run, key, parameters, figures, derived columns, status, message, seconds, worker,
 outputs), NAME_<figure>.png (each figure against the 1-2 swept parameters), NAME.json (the
 summary: runs, ran, skipped, ok, failed per status, seconds, run_seconds, outputs) and
