@@ -16,11 +16,13 @@ dask worker; every worker needs the same simfab installed, checked at connect ti
 Outputs under --out (default ./simfab-out/sweep/NAME): NAME.parquet and NAME.csv (one row
 per run: run, key, parameters, figures, derived columns, status, message, seconds, worker,
 outputs), NAME_<figure>.png (each figure against the 1-2 swept parameters), NAME.json (the
-summary: runs, ran, skipped, ok, failed per status, seconds, run_seconds, outputs) and
-runs/KEY/ (each run's own outputs). A failing run is a row (status bad_input,
+summary) and runs/KEY/ (each run's own outputs). A failing run is a row (status bad_input,
 not_converged, error or worker_died, with its message); the sweep goes on. Started again with
 the same spec and --out, a sweep resumes: runs already in the table are skipped (keyed by a
 hash of their parameters and simfab's version); --retry-failed runs the failed ones again.
+
+--json keys: runs, ran, skipped, ok, failed (count per status), seconds, run_seconds, outputs
+(table and plot paths); with --list: specs.
 """
 
 from __future__ import annotations
