@@ -98,7 +98,7 @@ def design_scene(name: str, *, doc: str, ring: np.ndarray, target: int, object_g
                 "simulation": sim, "design": design})
 
 
-def standside(name: str = "standside2d", *, half: float = 0.013, bore: float = 0.0095, mouth: float = 0.017,
+def standside(name: str = "standside2d", *, half: float = 0.0125, bore: float = 0.0095, mouth: float = 0.018,
               brief: dict | None = None) -> None:
     """Stand side: square block [-half, half]^2, bore slightly smaller than the cylinder, a slot
     narrower than it; the cylinder is pushed in along -x."""
