@@ -39,7 +39,7 @@ REST_TRIALS = 16
 #: Largest mismatch between a step's work and its change of stored energy, relative to E_max.
 STEP_WORK_REL = 0.05
 #: Largest difference between F_in at a step and the peak of the parabola through its neighbours.
-STEP_PEAK_REL = 0.03
+STEP_PEAK_REL = 0.1
 
 
 def can_continue(cm) -> bool:
