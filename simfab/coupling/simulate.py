@@ -130,7 +130,7 @@ class CouplingModel:
     force_scale: float
     object_vertices: np.ndarray
     object_faces: np.ndarray | None = None
-    _cache: dict = field(default_factory=dict, repr=False)
+    _cache: dict = field(default_factory=dict, repr=False, init=False)  # fresh on dataclasses.replace
 
     @property
     def dim(self) -> int:
@@ -351,7 +351,9 @@ class _StepObjective:
         # Lazy evaluation: psi is L-Lipschitz, so a point that was at distance d_ref when last
         # evaluated exactly (at y_ref) is still at least d_ref - L |y - y_ref| away. Points whose
         # bound stays above the band need no evaluation (their barrier term is exactly zero).
-        self.band = C.LAZY_BAND_DHATS * cm.dhat
+        self.dhat = _point_dhat(cm, points)  # (k,) activation distance per point [m]
+        self.dhat_max = float(self.dhat.max()) if len(self.dhat) else cm.dhat
+        self.band = C.LAZY_BAND_DHATS * self.dhat
         self.y_ref = None
         self.d_ref = None
         self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
@@ -373,7 +375,7 @@ class _StepObjective:
             gd = np.zeros((k, dim))
             hd = np.zeros((k, dim, dim)) if hessian else None
             if len(todo):
-                ev = self.cm.field.evaluate(y[todo], (self.R, self.p), hessian=hessian, hessian_band=self.cm.dhat)
+                ev = self.cm.field.evaluate(y[todo], (self.R, self.p), hessian=hessian, hessian_band=self.dhat_max)
                 d[todo] = -ev.psi
                 gd[todo] = -ev.grad
                 if hessian:
@@ -443,8 +445,8 @@ class _StepObjective:
         """(active point indices (a,), energy [J], gradient (a, dim) [N], exact Hessian blocks
         (a, dim, dim) [N/m] or None without ``hd``) of the barrier at distances d (k,) with their
         derivatives (see :func:`simfab.contact.barrier.point_barrier`), in one pass."""
-        act = np.flatnonzero(d < self.cm.dhat)
-        B, gy, Hy = point_barrier(d[act], gd[act], None if hd is None else hd[act], self.cm.dhat, self.kappa,
+        act = np.flatnonzero(d < self.dhat)
+        B, gy, Hy = point_barrier(d[act], gd[act], None if hd is None else hd[act], self.dhat[act], self.kappa,
                                   psd=False)
         return act, B, gy, Hy
 
@@ -468,8 +470,8 @@ class _StepObjective:
         d, _, _ = self.distances(np.asarray(x).reshape(self.n, self.dim), False)
         if np.any(d <= 0):
             return np.inf
-        act = d < self.cm.dhat
-        return E + self.kappa * float(barrier(d[act], self.cm.dhat).sum())
+        act = d < self.dhat
+        return E + self.kappa * float(barrier(d[act], self.dhat[act]).sum())
 
     def _add_contact(self, H, contact, *, psd: bool) -> None:
         """Add the barrier Hessian blocks (PSD-projected per point if ``psd``) and the rigid-mode
@@ -677,12 +679,13 @@ def _unresisted_basis(cm: CouplingModel, state: _State, free_motions) -> np.ndar
     if fin is None:
         return state.pin_basis if state.pin_basis is not None else Q
     d, gd = fin[4], fin[5]
-    act = (d < cm.dhat) & (np.einsum("kd,kd->k", gd, gd) > 0)
+    dh = _point_dhat(cm, state.points)
+    act = (d < dh) & (np.einsum("kd,kd->k", gd, gd) > 0)
     if not act.any():
         return Q
     y = state.points.positions(state.x)[act]
     nrm = gd[act] / np.linalg.norm(gd[act], axis=1, keepdims=True)
-    return rigid.unresisted(Q, c, y, nrm, barrier_hessian(d[act], cm.dhat))
+    return rigid.unresisted(Q, c, y, nrm, barrier_hessian(d[act], dh[act]))
 
 
 def _weakest_rigid_motion(cm: CouplingModel, state: _State, free_motions):
@@ -694,12 +697,13 @@ def _weakest_rigid_motion(cm: CouplingModel, state: _State, free_motions):
     if fin is None or Q.shape[1] == 0:
         return None
     d, gd = fin[4], fin[5]
-    act = (d < cm.dhat) & (np.einsum("kd,kd->k", gd, gd) > 0)
+    dh = _point_dhat(cm, state.points)
+    act = (d < dh) & (np.einsum("kd,kd->k", gd, gd) > 0)
     if not act.any():
         return None
     y = state.points.positions(state.x)[act]
     nrm = gd[act] / np.linalg.norm(gd[act], axis=1, keepdims=True)
-    out = rigid.weakest_motion(Q, c, y, nrm, barrier_hessian(d[act], cm.dhat))
+    out = rigid.weakest_motion(Q, c, y, nrm, barrier_hessian(d[act], dh[act]))
     if out is None:
         return None
     return out[0], out[1], state.s, float(np.sqrt(np.mean(np.sum((y - c) ** 2, axis=1))))
@@ -731,7 +735,7 @@ def _adapt_kappa(cm: CouplingModel, state: _State, obj: _StepObjective) -> None:
     d = obj.last_d
     if d is None or not len(d):
         return
-    if float(d.min()) < C.KAPPA_GROW_BELOW * cm.dhat and state.kappa < C.KAPPA_MAX_GROWTH * cm.kappa:
+    if np.any(d < C.KAPPA_GROW_BELOW * obj.dhat) and state.kappa < C.KAPPA_MAX_GROWTH * cm.kappa:
         state.kappa = min(2.0 * state.kappa, C.KAPPA_MAX_GROWTH * cm.kappa)
 
 
@@ -816,7 +820,7 @@ def _advance(cm: CouplingModel, state: _State, s_new: float, ctx, depth: int) ->
             with ctx["phases"].timed("warm_start"):
                 obj = _objective(cm, state, s_new, ctx)
                 x0 = None if resume is None else _lift_points(cm, state.points, resume, obj, below=0.0,
-                                                              to=C.LIFT_TO * cm.dhat)
+                                                              to=C.LIFT_TO * obj.dhat)
                 resumed = x0 is not None
                 if x0 is None:
                     if refined:  # starting over from the previous state: make it feasible for the new points
@@ -864,12 +868,13 @@ def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj, *, b
     # the objective's (lazy) distances: exact with gradients within its band (> below), lower
     # bounds without gradients beyond it, so only points near O are evaluated
     d, gd, _ = obj.distances(x, False)
+    below, to = np.broadcast_to(below, d.shape), np.broadcast_to(to, d.shape)
     lift = (d <= below) & np.any(gd != 0.0, axis=1)
     if prev is not None:
         lift &= prev > below
     if not lift.any():
         return x
-    x1 = _move_points(cm, pts, x, lift, to - d[lift], gd[lift])
+    x1 = _move_points(cm, pts, x, lift, to[lift] - d[lift], gd[lift])
     return x1 if np.isfinite(obj.value(x1)) else None
 
 
@@ -911,8 +916,8 @@ def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.
         # distance (the log barrier): start such points at LIFT_TO * d_hat instead
         fin = _state_final(state)
         prev = fin[4] if fin is not None else None
-        xl = _lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * cm.dhat,
-                          to=C.LIFT_TO * cm.dhat, prev=prev)
+        xl = _lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * obj.dhat,
+                          to=C.LIFT_TO * obj.dhat, prev=prev)
         if xl is not None and xl is not best_x:
             best_x, best_f = xl, obj.value(xl)
     if best_x is not None and C.PREDICTOR_PENALTY_FALLBACK_ONLY:
@@ -945,7 +950,7 @@ def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float
     if fin is None:
         return None
     d_prev = fin[4]
-    act = d_prev < cm.dhat
+    act = d_prev < _point_dhat(cm, pts)
     if not act.any():
         return None
     R, p = cm.pose(s_new)
@@ -997,7 +1002,7 @@ def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
     with timer.timed("contact"):
         ev_a = cm.field.evaluate(y, (Ra, pa), hessian=False)
     delta = carry(y) - y
-    reach = (-ev_a.psi < C.PSI_LIPSCHITZ * np.linalg.norm(delta, axis=1) + cm.dhat) & ev_a.near
+    reach = (-ev_a.psi < C.PSI_LIPSCHITZ * np.linalg.norm(delta, axis=1) + _point_dhat(cm, pts)) & ev_a.near
     if not reach.any():
         return x.copy()
     # O's outward normal at each point, carried with O to the new pose
@@ -1040,7 +1045,7 @@ def _restore_feasibility(cm: CouplingModel, state: _State, ctx) -> None:
             return
         g = -ev.grad
         nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-        delta = (0.5 * cm.dhat - np.minimum(d, 0.0))[:, None] * nrm
+        delta = (0.5 * _point_dhat(cm, pts) - np.minimum(d, 0.0))[:, None] * nrm
         x1 = _penalty_solve(cm, state, state.x, pts, bad, np.zeros_like(bad), nrm, delta, ctx)
         if _feasible_distances(cm, x1, state.s, pts, ctx) is None:
             break
@@ -1060,6 +1065,27 @@ def _feasible_distances(cm, x0, s, pts, ctx):
     with ctx["timer"].timed("contact"):
         ev = cm.field.evaluate(pts.positions(x0), (R, p), hessian=False)
     return -ev.psi
+
+
+def _point_dhat(cm: CouplingModel, pts: ContactPoints) -> np.ndarray:
+    """(k,) barrier activation distance of each constraint point [m]: dhat_rel times the local
+    edge length there (the mean length of the boundary edges at a vertex, interpolated with the
+    point's weights), so that the standoff stays a fixed small fraction of the local element size
+    on graded meshes (memoized per point set)."""
+    dh = pts.cache.get("dhat")
+    if dh is None:
+        hv = cm._cache.get("vertex_h")
+        if hv is None:
+            facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
+            a, c = _EDGE_PAIRS[cm.dim]
+            e = np.vstack([facets[:, [i, j]] for i, j in zip(a, c)])
+            L = np.linalg.norm(cm.fem.rest[e[:, 0]] - cm.fem.rest[e[:, 1]], axis=1)
+            n = cm.fem.n_vertices
+            cnt = np.bincount(e.ravel(), minlength=n)
+            tot = np.bincount(e.ravel(), weights=np.repeat(L, 2), minlength=n)
+            hv = cm._cache["vertex_h"] = np.where(cnt > 0, tot / np.maximum(cnt, 1), cm.h)
+        dh = pts.cache["dhat"] = cm.options.dhat_rel * np.einsum("km,km->k", pts.weights, hv[pts.verts])
+    return dh
 
 
 def _point_slots(cm: CouplingModel, pts: ContactPoints) -> np.ndarray:
@@ -1157,7 +1183,7 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
         # those beyond the kernel radius get the sharper nearest-sample bound
         dv[bv] = final[4][: len(bv)]
         state.grad_peak = max(state.grad_peak, _max_norm(final[5]))
-        out = np.flatnonzero(dv[bv] > cm.dhat * C.LAZY_BAND_DHATS)
+        out = np.flatnonzero(dv[bv] > _point_dhat(cm, state.points)[: len(bv)] * C.LAZY_BAND_DHATS)
         nn = cm.field.nearest_sample(x[bv[out]], (R, p))
         far = nn >= cm.field.radius
         dv[bv[out[far]]] = np.maximum(dv[bv[out[far]]], cm.field.far_bound(nn[far]))
@@ -1327,7 +1353,7 @@ def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
         E, gE = energy_gradient(cm.fem, x)
         ev = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
         d, gd, psi_pts = -ev.psi, -ev.grad, ev.psi
-    B, gy, _ = point_barrier(d, gd, None, cm.dhat, state.kappa_step)
+    B, gy, _ = point_barrier(d, gd, None, _point_dhat(cm, pts), state.kappa_step)
     gc = pts.scatter(gy, n)
     g = gE + gc
     fixed = ~cm.free.reshape(n, dim)

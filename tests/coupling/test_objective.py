@@ -49,7 +49,7 @@ def test_contact_hessian_is_jt_h_j(coarse_block_model):
     _, _, (H_exact, H_psd) = obj(x.ravel(), True)
     H_psd = H_psd() if callable(H_psd) else H_psd  # the projected Hessian may be built on demand
     d, gd, hd = obj.distances(x, True)
-    act = d < cm.dhat
+    act = d < obj.dhat  # the activation distance of each point (local edge length)
     n = cm.fem.n_vertices
     J = np.zeros((act.sum(), 2, 2 * n))
     for k, j in enumerate(np.flatnonzero(act)):
@@ -58,7 +58,7 @@ def test_contact_hessian_is_jt_h_j(coarse_block_model):
             J[k, :, 2 * v:2 * v + 2] += w * np.eye(2)
     for H, project in ((H_psd, True), (H_exact, False)):
         _, _, Hf = energy_gradient_hessian(cm.fem, x, project_psd=project)
-        _, _, Hy = point_barrier(d[act], gd[act], hd[act], cm.dhat, cm.kappa, psd=project)
+        _, _, Hy = point_barrier(d[act], gd[act], hd[act], obj.dhat[act], cm.kappa, psd=project)
         ref = np.einsum("kia,kij,kjb->ab", J, Hy, J)
         off = (H - Hf).toarray() - ref
         reg = C.FACTOR_REG * mean_stiffness(cm)
