@@ -3,6 +3,7 @@
 Usage::
 
     simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes | --fixed-axes AXES] [--no-refine]
+    simfab couple converge SCENE [--factors 1,2,4,8]
     simfab couple scenes
 
 SCENE is a coupling scene: ``NAME.xml`` (MJCF: the object O as the mocap body ``object`` with
@@ -43,10 +44,16 @@ def add_args(p):
     s.add_argument("--fixed-axes", metavar="AXES",
                    help='axes the fixed region is held along, e.g. "xz" (must include the insertion axis)')
     s.add_argument("--no-refine", action="store_true", help="no refinement points on boundary edges/faces")
+    conv = sub.add_parser("converge", help="mesh-convergence study of a coupling scene",
+                          description="Run a scene at refined meshes (element count x each factor) and report "
+                                      "the profile figures, their extrapolated values and the error of the scene's own mesh.")
+    conv.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
+    conv.add_argument("--factors", default="1,2,4,8", help="refinement factors of the element count (default 1,2,4,8)")
     listing = sub.add_parser("scenes", help="list the bundled coupling scenes")
     from simfab.cli import add_common_args
 
     add_common_args(s)
+    add_common_args(conv)
     add_common_args(listing)  # e.g. 'simfab couple scenes --json'
 
 
@@ -58,6 +65,17 @@ def run(args) -> dict:
         from simfab.coupling.scene import bundled_dir
 
         return {"scenes": sorted(p.stem for p in bundled_dir().glob("*.xml"))}
+    if cmd == "converge":
+        from simfab.coupling.converge import format_table, study
+
+        try:
+            factors = tuple(float(f) for f in args.factors.split(","))
+        except ValueError:
+            raise InputError(f"must be comma-separated numbers, got {args.factors!r}", where="--factors") from None
+        if len(factors) < 2 or min(factors) <= 0:
+            raise InputError("give at least two positive factors", where="--factors")
+        rep = study(args.scene, factors, quiet=args.quiet)
+        return {**rep, "table": "\n" + format_table(rep)}
     if cmd != "simulate":
         raise InputError("choose an action: 'simfab couple simulate SCENE' or 'simfab couple scenes'")
     sim = {}
