@@ -41,22 +41,11 @@ NEWTON_GRAD_TOL_REL = 1e-6
 #: ... or below this fraction of the residual at the step's warm start.
 NEWTON_GRAD_TOL_START = 1e-5
 NEWTON_MAX_ITER = 100
-#: Hand Newton the exact Hessian too (tried first; the PSD-projected one when it is indefinite).
-EXACT_FIRST_NEWTON = True
-#: Evaluate the Hessian at the first line-search trial (most steps are accepted at once).
-NEWTON_EAGER_HESSIAN = True
-#: ... unless the residual is already within this factor of the target (the trial is then most
-#: likely converged: on clip3d 34 trials went without their Hessian, backtracking ones included,
-#: and 7 of them then needed it).
+#: Newton evaluates the Hessian at its first line-search trial (most are accepted at once) unless
+#: the residual is already within this factor of the target (the trial is then most likely
+#: converged: on clip3d 34 trials went without their Hessian, backtracking ones included, and 7 of
+#: them then needed it).
 NEWTON_EAGER_ABOVE_TOL = 10.0
-#: Predictor: also try the linear extrapolation of the last two steps and the quadratic one of the
-#: last three; the candidate with the lowest objective is the warm start.
-PREDICTOR_EXTRAPOLATE = True
-#: Predictor: on the chosen extrapolation, move the vertices that were in contact at the end of the
-#: last step back to their last gap to O (see simulate._snap_contacts).
-PREDICTOR_SNAP_CONTACTS = True
-#: ... and compute the contact predictor only when no extrapolation is feasible.
-PREDICTOR_PENALTY_FALLBACK_ONLY = True
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4
 #: Predictor: retries carrying newly infeasible points fully with O before bisecting the step.

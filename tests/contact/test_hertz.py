@@ -7,7 +7,7 @@ edge length it was ~7% of the travel at d/R = 0.05 and forces read against the t
 import numpy as np
 
 from simfab.coupling.hertz import sphere_on_block
-from simfab.coupling.simulate import _point_dhat
+from simfab.coupling.objective import _point_dhat
 
 
 def test_standoff_is_a_fraction_of_the_local_element_size():

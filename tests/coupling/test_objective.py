@@ -8,7 +8,8 @@ from simfab.contact.barrier import point_barrier
 from simfab.coupling import config as C
 from simfab.coupling.rigid import mean_stiffness
 from simfab.coupling.points import edge_weights, facet_points, vertex_points
-from simfab.coupling.simulate import _StepObjective, _Timer
+from simfab.coupling.objective import _StepObjective
+from simfab.coupling.timing import _Timer
 from simfab.fem.neohookean import energy_gradient_hessian
 
 
@@ -86,7 +87,8 @@ def test_evaluation_without_hessian_defers_the_same_psd_hessian(coarse_block_mod
 def test_check_lattice_gaps_equal_the_distances_to_the_facet_vertices(dim, order, refined):
     # the facet check bounds psi at a check point from the facet's vertices by L |y - v|; the
     # distances come from squared edge lengths through a precomputed map: compare with |y - v|
-    from simfab.coupling.simulate import _EDGE_PAIRS, _check_lattice
+    from simfab.coupling.objective import _EDGE_PAIRS
+    from simfab.coupling.refine import _check_lattice
 
     rng = np.random.default_rng(3)
     xv = rng.standard_normal((50, dim, dim)) * rng.uniform(0.01, 3.0, (50, 1, 1))  # 50 facets of dim vertices
@@ -131,7 +133,7 @@ def test_scatter_is_the_transpose_of_positions(repeat_vertices):
 def test_every_facet_point_is_within_cover_of_a_vertex(dim):
     # the facet check leaves out facets whose vertices are all farther than L * cover from O:
     # sound only if no point of a facet is farther than cover (x longest edge) from every vertex
-    from simfab.coupling.simulate import _COVER
+    from simfab.coupling.refine import _COVER
 
     rng = np.random.default_rng(9)
     w = rng.dirichlet(np.ones(dim), size=4000)  # points on the facet (barycentric)
