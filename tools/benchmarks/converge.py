@@ -3,8 +3,8 @@ extrapolated values and the error of each scene's default mesh; see simfab.coupl
 
 ``python tools/bench.py converge [--scenes cclamp2d,...] [--factors 0.125,0.25,0.5,1,2]``
 
-Factors multiply each scene's target element count (the bundled 2D scenes: ~3,600 triangles, so
-0.125 is the original's ~450). Reported per scene: levels (elements, seconds per run, category),
+Factors multiply each scene's target element count (the bundled 2D scenes: ~4,800 triangles; the
+original's size, ~450, is 0.094). Reported per scene: levels (elements, seconds per run, category),
 per figure the values, the extrapolated value, the observed order in h and the relative errors,
 and ``error_at_bundled`` (the factor-1 level).
 """
@@ -19,7 +19,7 @@ def run(argv) -> dict:
 
     ap = argparse.ArgumentParser(prog="bench converge")
     ap.add_argument("--scenes", default="cclamp2d,clip2d_loose,clip2d_eject")
-    ap.add_argument("--factors", default="0.125,0.25,0.5,1,2")
+    ap.add_argument("--factors", default="0.094,0.1875,0.375,0.75,1,1.5")
     a = ap.parse_args(argv)
     factors = tuple(float(f) for f in a.factors.split(","))
     out = {"benchmark": "converge", "factors": factors, "scenes": {}}
