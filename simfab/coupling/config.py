@@ -13,7 +13,7 @@ from simfab.errors import InputError
 # ---------------------------------------------------------------------------- tolerances (one place)
 #: Max penetration allowed at the end of every step, relative to h_A (checked, else ConvergenceError).
 PENETRATION_TOL_REL = 1e-3
-#: Barrier activation distance d_hat relative to h_A.
+#: Barrier activation distance d_hat relative to the local boundary edge length (objective._point_dhat).
 DHAT_REL = 1e-2
 #: Lipschitz bound of the IMLS field used by the conservative step cap (|grad psi| ~ 1 near O).
 PSI_LIPSCHITZ = 2.0
@@ -101,7 +101,8 @@ class InsertionOptions:
     samples_per_edge : 2D refinement points per boundary edge (paper: 10).
     face_lattice : 3D refinement: barycentric lattice order per boundary face (order m gives
         (m+1)(m+2)/2 - 3 points; 4 -> 12).
-    dhat_rel : barrier activation distance / h_A.
+    dhat_rel : barrier activation distance / the local boundary edge length at each constraint point
+        (CouplingModel.dhat is the same fraction of the mean edge length h_A, for reference).
     kappa_rel : initial barrier stiffness kappa = kappa_rel * E * h_A (3D) or E * thickness (2D)
         [N/m] (the stiffness per node of A's elements); adapted during the run (see simulate).
     penetration_tol_rel : max penetration / h_A accepted at the end of a step.
