@@ -77,6 +77,10 @@ MAX_REFINEMENT_ROUNDS = 64
 #: Diagonal term (relative to A's mean stiffness) that keeps the Hessian factorizable when the
 #: supports leave rigid motions free (Hessian only; the pin, rigid.Pin, fixes those motions).
 FACTOR_REG = 1e-10
+#: A step whose pinned rigid motion the contact turns out to resist is solved again without the pin
+#: only when the pin held it with more than this many Newton force tolerances (else the pinned
+#: motion was in balance and the solution stands).
+PIN_FORCE_TOL = 10.0
 #: Profile analysis: energies within this fraction of E_max are equal (plateaus, noise).
 ENERGY_REL_TOL = 1e-6
 #: A steady state with E_ss <= LOOSE_REL * E_max is "loose" (zero grip).

@@ -186,8 +186,9 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
             iters = _advance(cm, state, s, ctx, depth=0) if steps else _solve_at(cm, state, s, ctx)
             with phases.timed("rigid_check"):
                 basis = _unresisted_basis(cm, state, free_motions)
-            if basis.shape[1] < state.pin_basis.shape[1]:
-                # contact now resists a motion this step held pinned: solve the step again without it
+            if basis.shape[1] < state.pin_basis.shape[1] and _pin_force(cm, state, saved.x) > C.PIN_FORCE_TOL:
+                # contact now resists a motion this step held pinned, and the pin held it with a
+                # force (not merely in balance): solve the step again without it
                 prev, state.pin_basis = (state.prev, state.prev2), basis
                 iters += _advance(cm, state, s, ctx, depth=0) if steps else _solve_at(cm, state, s, ctx)
                 state.prev, state.prev2 = prev
@@ -237,6 +238,16 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None) -> Inserti
     phase_split["other"] = seconds - sum(phase_split.values())
     return InsertionResult(model=cm, steps=steps, seconds=seconds, timings=dict(timer.t), phases=phase_split,
                            warnings=warnings, notes=notes)
+
+
+def _pin_force(cm: CouplingModel, state: _State, anchor: np.ndarray) -> float:
+    """Largest force the step's pin (anchored at ``anchor``, the step's start) exerts along its
+    motions at the converged state, relative to Newton's force tolerance (NEWTON_GRAD_TOL_REL *
+    force_scale): ~1 when the pinned motions were in balance anyway."""
+    pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], anchor)
+    if pin is None:
+        return 0.0
+    return float(np.abs(pin.force(state.x.ravel())).max()) / (C.NEWTON_GRAD_TOL_REL * cm.force_scale)
 
 
 def check_start(cm: CouplingModel) -> None:
