@@ -11,7 +11,7 @@ is missing or ``--remesh`` is given (fTetWild is not bit-reproducible). Lengths 
   sampling and the simulation options (see ``simfab.coupling.scene``).
 
 Scenes
-- cclamp2d      2D C-clamp snapped onto a cylinder, inner radius < R: tight grip (~450 tri, 35 steps)
+- cclamp2d      2D C-clamp snapped onto a cylinder, inner radius < R: tight grip (~4,800 tri, 35 steps)
 - clip2d_loose  same clamp with inner radius > R: holds it loosely (zero steady-state energy)
 - clip2d_eject  an arc that does not wrap past the cylinder's equator: pushes it out (no dip)
 - clip3d        the C-clamp extruded to a 3D clip on a cylinder (~1000 tets, 35 steps)
@@ -148,7 +148,7 @@ def main() -> None:
         xb = -ro - clamp["base_depth"]
         x0 = x_start(clamp)
         scene(name, doc=doc, dim=2,
-              comp=dict(generator="c_clamp", target_elements=450, thickness=t2d, **clamp),
+              comp=dict(generator="c_clamp", target_elements=4800, thickness=t2d, **clamp),
               part_mesh=G.extrude(outline, t2d),
               object_geoms=[dict(type="cylinder", size=[R_CYL, 0.01])],
               keys=[([x0, 0, 0], [1, 0, 0, 0]), ([x_end, 0, 0], [1, 0, 0, 0])],

@@ -5,6 +5,7 @@ Usage:
     simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes | --fixed-axes AXES] [--no-refine]
     simfab couple optimize SCENE [--grip tight|loose] [--insertion-force LO HI] ... [--iterations N]
     simfab couple study handles SCENE [--counts K ...] [--random N]
+    simfab couple converge SCENE [--factors 1,2,4,8]
     simfab couple scenes
 
 SCENE is a coupling scene: NAME.xml (MJCF: the object O as the mocap body 'object' with
@@ -54,6 +55,14 @@ def add_args(p):
     s.add_argument("--fixed-axes", metavar="AXES",
                    help='axes the fixed region is held along, e.g. "xz" (must include the insertion axis)')
     s.add_argument("--no-refine", action="store_true", help="no refinement points on boundary edges/faces")
+    conv = sub.add_parser("converge", help="mesh-convergence study of a coupling scene",
+                          description="Run a scene at refined meshes (element count x each factor) and report "
+                                      "the profile figures, their extrapolated values and the error of the scene's "
+                                      "own mesh.\n\n--json keys: scene, levels (factor, elements, seconds, category), figures (per "
+                                      "figure: values, extrapolated, order, relative_error), error_of_default, table.",
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
+    conv.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
+    conv.add_argument("--factors", default="1,2,4,8", help="refinement factors of the element count (default 1,2,4,8)")
     listing = sub.add_parser("scenes", help="list the bundled coupling scenes",
                              description="List the bundled coupling scenes (scenes/coupling); each runs with "
                                          "'simfab couple simulate NAME'. Writes nothing.\n\n--json keys: scenes "
@@ -67,7 +76,7 @@ def add_args(p):
     st = sub.add_parser("study", help="handle-placement study (displacement vs spatial vs random)",
                         description=couple_design.STUDY_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     couple_design.add_study_args(st)
-    for q in (s, listing, o, st):
+    for q in (s, conv, listing, o, st):
         add_common_args(q)  # e.g. 'simfab couple scenes --json'
 
 
@@ -83,6 +92,17 @@ def run(args) -> dict:
         from simfab.cli import couple_design
 
         return couple_design.run_optimize(args) if cmd == "optimize" else couple_design.run_study(args)
+    if cmd == "converge":
+        from simfab.coupling.converge import format_table, study
+
+        try:
+            factors = tuple(float(f) for f in args.factors.split(","))
+        except ValueError:
+            raise InputError(f"must be comma-separated numbers, got {args.factors!r}", where="--factors") from None
+        if len(factors) < 2 or min(factors) <= 0:
+            raise InputError("give at least two positive factors", where="--factors")
+        rep = study(args.scene, factors, quiet=args.quiet)
+        return {**rep, "table": "\n" + format_table(rep)}
     if cmd != "simulate":
         raise InputError("choose an action: 'simfab couple simulate SCENE', 'optimize SCENE', 'study handles SCENE' "
                          "or 'scenes'")

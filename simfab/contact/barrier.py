@@ -30,14 +30,14 @@ def barrier_terms(d: np.ndarray, dhat: float) -> tuple[np.ndarray, np.ndarray, n
     return -(r**2) * log, -2.0 * r * log - r**2 / d, -2.0 * log - 4.0 * r / d + r**2 / d**2
 
 
-def _on_active(d: np.ndarray, dhat: float, term: int, at_zero: float) -> np.ndarray:
+def _on_active(d: np.ndarray, dhat, term: int, at_zero: float) -> np.ndarray:
     """Term ``term`` of :func:`barrier_terms` elementwise over any d: 0 for d >= dhat, ``at_zero``
-    for d <= 0."""
+    for d <= 0 (``dhat`` a scalar or one per distance)."""
     d = np.asarray(d, float)
     out = np.zeros_like(d)
     act = d < dhat
     pos = act & (d > 0)
-    out[pos] = barrier_terms(d[pos], dhat)[term]
+    out[pos] = barrier_terms(d[pos], dhat if np.ndim(dhat) == 0 else np.asarray(dhat)[pos])[term]
     out[act & ~pos] = at_zero
     return out
 
@@ -71,10 +71,11 @@ def point_barrier(dist: np.ndarray, grad_dist: np.ndarray, hess_dist: np.ndarray
                   *, psd: bool = True):
     """Barrier energy and per-point derivatives from distances and their derivatives.
 
-    dist : (k,) d_j [m]; grad_dist : (k, dim); hess_dist : (k, dim, dim) [1/m] or None
+    dist : (k,) d_j [m]; grad_dist : (k, dim); hess_dist : (k, dim, dim) [1/m] or None;
+    dhat : activation distance [m], a scalar or one per point (k,)
     Returns (B [J], g (k, dim) [N], H (k, dim, dim) [N/m] or None), H PSD-projected if ``psd``.
     """
-    if len(dist) and (dist.min() <= 0.0 or dist.max() >= dhat):  # not all active: general route
+    if len(dist) and (dist.min() <= 0.0 or np.any(dist >= dhat)):  # not all active: general route
         b, db, ddb = barrier(dist, dhat), barrier_gradient(dist, dhat), barrier_hessian(dist, dhat)
     else:
         b, db, ddb = barrier_terms(dist, dhat)

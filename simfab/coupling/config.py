@@ -13,7 +13,7 @@ from simfab.errors import InputError
 # ---------------------------------------------------------------------------- tolerances (one place)
 #: Max penetration allowed at the end of every step, relative to h_A (checked, else ConvergenceError).
 PENETRATION_TOL_REL = 1e-3
-#: Barrier activation distance d_hat relative to h_A.
+#: Barrier activation distance d_hat relative to the local boundary edge length (objective._point_dhat).
 DHAT_REL = 1e-2
 #: Lipschitz bound of the IMLS field used by the conservative step cap (|grad psi| ~ 1 near O).
 PSI_LIPSCHITZ = 2.0
@@ -41,22 +41,11 @@ NEWTON_GRAD_TOL_REL = 1e-6
 #: ... or below this fraction of the residual at the step's warm start.
 NEWTON_GRAD_TOL_START = 1e-5
 NEWTON_MAX_ITER = 100
-#: Hand Newton the exact Hessian too (tried first; the PSD-projected one when it is indefinite).
-EXACT_FIRST_NEWTON = True
-#: Evaluate the Hessian at the first line-search trial (most steps are accepted at once).
-NEWTON_EAGER_HESSIAN = True
-#: ... unless the residual is already within this factor of the target (the trial is then most
-#: likely converged: on clip3d 34 trials went without their Hessian, backtracking ones included,
-#: and 7 of them then needed it).
+#: Newton evaluates the Hessian at its first line-search trial (most are accepted at once) unless
+#: the residual is already within this factor of the target (the trial is then most likely
+#: converged: on clip3d 34 trials went without their Hessian, backtracking ones included, and 7 of
+#: them then needed it).
 NEWTON_EAGER_ABOVE_TOL = 10.0
-#: Predictor: also try the linear extrapolation of the last two steps and the quadratic one of the
-#: last three; the candidate with the lowest objective is the warm start.
-PREDICTOR_EXTRAPOLATE = True
-#: Predictor: on the chosen extrapolation, move the vertices that were in contact at the end of the
-#: last step back to their last gap to O (see simulate._snap_contacts).
-PREDICTOR_SNAP_CONTACTS = True
-#: ... and compute the contact predictor only when no extrapolation is feasible.
-PREDICTOR_PENALTY_FALLBACK_ONLY = True
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4
 #: Predictor: retries carrying newly infeasible points fully with O before bisecting the step.
@@ -88,6 +77,10 @@ MAX_REFINEMENT_ROUNDS = 64
 #: Diagonal term (relative to A's mean stiffness) that keeps the Hessian factorizable when the
 #: supports leave rigid motions free (Hessian only; the pin, rigid.Pin, fixes those motions).
 FACTOR_REG = 1e-10
+#: A step whose pinned rigid motion the contact turns out to resist is solved again without the pin
+#: only when the pin held it with more than this many Newton force tolerances (else the pinned
+#: motion was in balance and the solution stands).
+PIN_FORCE_TOL = 10.0
 #: Profile analysis: energies within this fraction of E_max are equal (plateaus, noise).
 ENERGY_REL_TOL = 1e-6
 #: A steady state with E_ss <= LOOSE_REL * E_max is "loose" (zero grip).
@@ -112,7 +105,8 @@ class InsertionOptions:
     samples_per_edge : 2D refinement points per boundary edge (paper: 10).
     face_lattice : 3D refinement: barycentric lattice order per boundary face (order m gives
         (m+1)(m+2)/2 - 3 points; 4 -> 12).
-    dhat_rel : barrier activation distance / h_A.
+    dhat_rel : barrier activation distance / the local boundary edge length at each constraint point
+        (CouplingModel.dhat is the same fraction of the mean edge length h_A, for reference).
     kappa_rel : initial barrier stiffness kappa = kappa_rel * E * h_A (3D) or E * thickness (2D)
         [N/m] (the stiffness per node of A's elements); adapted during the run (see simulate).
     penetration_tol_rel : max penetration / h_A accepted at the end of a step.

@@ -64,12 +64,17 @@ def pin_for(cm, Q: np.ndarray, c: np.ndarray, x: np.ndarray) -> Pin | None:
     positions x (n, dim), anchored at x; None when Q has no column."""
     if Q.shape[1] == 0:
         return None
+    memo = cm._cache.get("pin_memo")
+    if memo is not None and memo[0] is Q and memo[1] is x:
+        return memo[2]
     dim = cm.dim
     U = (_rows(x - c, dim) @ Q).reshape(-1, Q.shape[1])  # (n*dim, r)
     U[~cm.free] = 0.0
     U, sv, _ = np.linalg.svd(U, full_matrices=False)
     U = U[:, sv > 1e-9 * sv.max()]
-    return Pin(U, PIN_REL * mean_stiffness(cm), x)
+    pin = Pin(U, PIN_REL * mean_stiffness(cm), x)
+    cm._cache["pin_memo"] = (Q, x, pin)  # the same step's objectives and predictor share it
+    return pin
 
 
 class PinnedSolver:
@@ -104,7 +109,16 @@ def unresisted(Q: np.ndarray, c: np.ndarray, y: np.ndarray, normals: np.ndarray,
 def motion_basis(cm) -> tuple[np.ndarray, np.ndarray]:
     """(Q (r, k), c (dim,)): a basis of the rigid motions (columns, r = 3 in 2D, 6 in 3D) that move
     no dof held by the supports, and the centre the rotations are about. k = 0: the supports hold
-    every rigid motion."""
+    every rigid motion. Memoized per model (read-only)."""
+    out = getattr(cm, "_cache", {}).get("motion_basis")
+    if out is None:
+        out = _motion_basis(cm)
+        if hasattr(cm, "_cache"):
+            cm._cache["motion_basis"] = out
+    return out
+
+
+def _motion_basis(cm) -> tuple[np.ndarray, np.ndarray]:
     fem, dim = cm.fem, cm.dim
     c = fem.rest.mean(axis=0)
     verts, axes = np.nonzero(~cm.free.reshape(-1, dim))  # the held dofs

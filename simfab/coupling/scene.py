@@ -22,6 +22,9 @@ The **TOML** (``NAME.toml``) defines A and the run (all lengths in metres, SI un
     # mesh_file = "part.npz": a ready simplicial mesh (arrays points, elements) used instead of
     #   meshing (the bundled 3D scenes ship theirs: fTetWild is not bit-reproducible)
     [object]  body = "object", samples = 50, sigma = (optional) [m], seed = 0
+              (an object made only of sphere / capsule / cylinder / box geoms uses their exact
+              signed distance, simfab.contact.sdf, unless sigma is given: samples then only sets
+              its display samples)
     [fixed]   site = "fixed"
     [simulation]  steps = 35 (or h_in [m]), L_max [m], fix_all_axes, refine, ...  (InsertionOptions)
 """
@@ -138,7 +141,10 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
     n_samples = int(obj.get("samples", 50 if dim == 2 else 2000))
     if n_samples < 8:
         raise InputError(f"samples={n_samples} is too few for the object's IMLS field", where=f"{where} [object]")
-    if dim == 2:
+    fld = primitive_field(sc, body, dim, n_samples) if obj.get("sigma") is None else None
+    if fld is not None:  # exact signed distance of primitive geoms (simfab.contact.sdf)
+        disp_v, disp_f = (fld.vertices, None) if dim == 2 else (np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    elif dim == 2:
         ov, on = geometry.section_samples(mesh, n_samples)
         spacing = float(np.linalg.norm(np.diff(np.vstack([ov, ov[:1]]), axis=0), axis=1).mean())
         disp_v, disp_f = ov, None
@@ -146,10 +152,12 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
         ov, on = geometry.surface_samples(mesh, n_samples, seed=int(obj.get("seed", 0)))
         spacing = None
         disp_v, disp_f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
-    from simfab.contact.imls import build_imls
+    if fld is None:
+        from simfab.contact.imls import build_imls
 
-    sigma = obj.get("sigma")
-    fld = build_imls(ov, on, sigma=None if sigma is None else float(sigma), spacing=spacing, device=device)
+        sigma = obj.get("sigma")
+        fld = build_imls(ov, on, sigma=None if sigma is None else float(sigma), spacing=spacing, device=device,
+                         area=None if dim == 2 else float(mesh.area))
 
     site = str(fixed_cfg.get("site", "fixed"))
     if site not in sc.sites:
@@ -162,6 +170,22 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
     fixed = np.flatnonzero(inside)
     return make_coupling_model(name=name, fem=fem, field=fld, path=path, fixed_vertices=fixed, options=options,
                                object_vertices=disp_v, object_faces=disp_f)
+
+
+def primitive_field(sc, body: str, dim: int, samples: int):
+    """Exact signed-distance field (:class:`simfab.contact.sdf.PrimitiveField`) of O when all its
+    geoms are spheres, capsules, cylinders or boxes (in 2D: whose z = 0 section is a circle or an
+    aligned rectangle), else None (O is then sampled and its IMLS field used). The geoms' poses are
+    taken relative to the mocap body (MuJoCo's geom_pos / geom_quat are in the body frame)."""
+    import mujoco
+
+    from simfab.contact.sdf import build_primitive_field, primitives_of_body, section_primitives
+
+    bid = mujoco.mj_name2id(sc.model, mujoco.mjtObj.mjOBJ_BODY, body)
+    prims = primitives_of_body(sc.model, bid) if bid >= 0 else None
+    if prims is not None and dim == 2:
+        prims = section_primitives(prims)
+    return None if prims is None else build_primitive_field(prims, dim, samples)
 
 
 def object_mesh_body_frame(sc, body: str):

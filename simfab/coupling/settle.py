@@ -4,9 +4,8 @@
 seats: at its last pose A still draws O in (path force > 0) and the energy is still falling, so
 E_ss read there is not the steady state. When the path's last segment is a pure translation and
 the insertion length is the default one, the run continues past the last keyframe straight on,
-with the same step, until the path force has gone through zero (O at rest: the energy at its
-minimum along the path), at most as many steps again as planned. :func:`schedule` yields the path
-lengths of the steps; it reads the records the caller appends as it goes.
+with quarter steps, until the path force has gone through zero (O at rest: the energy at its
+minimum along the path), at most as far again as the planned path (:func:`to_rest`).
 
 **Checks** (:func:`warnings`, one line each, copied into the run's warnings):
 
@@ -28,8 +27,13 @@ import numpy as np
 
 #: O is at rest when the path force (A drawing O in, > 0) is at most this fraction of the peak |force|.
 from simfab.coupling.profile import REST_FORCE_REL  # noqa: E402 (one definition)
-#: Continue past the path's end by at most this many times the planned number of steps.
-SETTLE_MAX_STEPS_REL = 1.0
+#: Continue past the path's end by at most this many times the planned number of steps (of
+#: SETTLE_STEP_REL times the planned size: 4 x 0.25, as far again as the planned path).
+SETTLE_MAX_STEPS_REL = 4.0
+#: Extension steps are this fraction of the last planned step: the rest point is usually a seat
+#: (O meeting a stiff part of A) where a step that overshoots deep costs many Newton iterations
+#: (cclamp2d: a full step 18, a quarter step 7).
+SETTLE_STEP_REL = 0.25
 #: Extension steps are at most the path length over this.
 MIN_SETTLE_STEPS = 20
 #: The rest point is found when the energy between the bracket's ends is known to within this fraction of E_max.
@@ -39,7 +43,7 @@ REST_TRIALS = 16
 #: Largest mismatch between a step's work and its change of stored energy, relative to E_max.
 STEP_WORK_REL = 0.05
 #: Largest difference between F_in at a step and the peak of the parabola through its neighbours.
-STEP_PEAK_REL = 0.03
+STEP_PEAK_REL = 0.1
 
 
 def can_continue(cm) -> bool:
@@ -66,7 +70,7 @@ def to_rest(cm, steps, step_to, undo, keep) -> str:
     steps : the records so far (StepResult list); step_to(s, tolerate=True) -> (record or None
     when the step cannot be solved, token) solves the step from the current state to path length
     s [m]; undo(token) returns to the state before that step; keep(record) appends a record.
-    Steps of the last planned size (at most 1/MIN_SETTLE_STEPS of the path) go on while
+    Steps of SETTLE_STEP_REL times the last planned one (at most 1/MIN_SETTLE_STEPS of the path) go on while
     :func:`still_drawn_in`; a step that overshoots the rest point (path force below
     -REST_FORCE_REL * peak: O pushed into a stiffer contact, or no solution: undone) starts the search; the rest
     point is bracketed (:func:`_bracket`), every trial solved from the last one's state (a step
@@ -79,7 +83,7 @@ def to_rest(cm, steps, step_to, undo, keep) -> str:
     """
     if len(steps) < 2 or not can_continue(cm) or not still_drawn_in(steps):
         return "not continued" if len(steps) < 2 or not still_drawn_in(steps) else "cannot continue"
-    h = min(steps[-1].s - steps[-2].s, float(cm.path.length) / MIN_SETTLE_STEPS)
+    h = min(SETTLE_STEP_REL * (steps[-1].s - steps[-2].s), float(cm.path.length) / MIN_SETTLE_STEPS)
     peak = float(max(abs(r.path_force) for r in steps))
     E_max = float(max(r.energy for r in steps))
     tol = REST_FORCE_REL * peak
@@ -104,9 +108,11 @@ def _bracket(lo, hi, hi_s, step_to, undo, keep, tol, e_tol) -> str:
     last trial's state, until P_lo (s_hi - s_lo) <= e_tol [J]: W falls at most that much from the
     lower end to the rest point (W convex on the bracket, P <= P_lo). The rest point is often a
     kink (O seating against a stiff part of A: P jumps from drawing in to pushing back within a
-    micrometre), so the two ends are kept as the last records: force through zero between them,
-    the energy's minimum along the path at the lower end.
+    micrometre), so the two ends are kept as the last records (the trials' own records; the run's
+    state is then the last trial's): force through zero between them, the energy's minimum along
+    the path at the lower end.
     """
+    steps_last = lo
     for _ in range(REST_TRIALS):
         if lo.path_force * (hi_s - lo.s) <= e_tol:
             break
@@ -123,13 +129,12 @@ def _bracket(lo, hi, hi_s, step_to, undo, keep, tol, e_tol) -> str:
         else:
             hi, hi_s = rec, s_try
     else:
-        rec, _ = step_to(lo.s, tolerate=True)
-        keep(rec if rec is not None else lo)
+        if lo is not steps_last:
+            keep(lo)
         return "bracket"
-    for end in (lo, hi):  # the state is the last trial's: solve the ends again, in order, to keep them
-        if end is not None:
-            rec, _ = step_to(end.s, tolerate=True)
-            keep(rec if rec is not None else end)
+    for end in (lo, hi):  # the ends' records, in order (the trials' own: no solve again)
+        if end is not None and end is not steps_last:
+            keep(end)
     return "rest"
 
 
@@ -145,7 +150,7 @@ def warnings(cm, steps, rest: str = "not continued") -> list:
     P = np.array([r.path_force for r in steps])
     name = cm.name
     if rest != "rest" and still_drawn_in(steps):
-        why = {"cap": f"it was continued past the last keyframe by {SETTLE_MAX_STEPS_REL:g}x the planned steps",
+        why = {"cap": "it was continued past the last keyframe as far again as the planned path",
                "bracket": "no rest point was found past the last keyframe"}.get(rest)
         if why is None:
             why = ("the insertion length L_max ends it" if cm.options.L_max is not None else

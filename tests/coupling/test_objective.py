@@ -8,7 +8,8 @@ from simfab.contact.barrier import point_barrier
 from simfab.coupling import config as C
 from simfab.coupling.rigid import mean_stiffness
 from simfab.coupling.points import edge_weights, facet_points, vertex_points
-from simfab.coupling.simulate import _StepObjective, _Timer
+from simfab.coupling.objective import _StepObjective
+from simfab.coupling.timing import _Timer
 from simfab.fem.neohookean import energy_gradient_hessian
 
 
@@ -49,7 +50,7 @@ def test_contact_hessian_is_jt_h_j(coarse_block_model):
     _, _, (H_exact, H_psd) = obj(x.ravel(), True)
     H_psd = H_psd() if callable(H_psd) else H_psd  # the projected Hessian may be built on demand
     d, gd, hd = obj.distances(x, True)
-    act = d < cm.dhat
+    act = d < obj.dhat  # the activation distance of each point (local edge length)
     n = cm.fem.n_vertices
     J = np.zeros((act.sum(), 2, 2 * n))
     for k, j in enumerate(np.flatnonzero(act)):
@@ -58,7 +59,7 @@ def test_contact_hessian_is_jt_h_j(coarse_block_model):
             J[k, :, 2 * v:2 * v + 2] += w * np.eye(2)
     for H, project in ((H_psd, True), (H_exact, False)):
         _, _, Hf = energy_gradient_hessian(cm.fem, x, project_psd=project)
-        _, _, Hy = point_barrier(d[act], gd[act], hd[act], cm.dhat, cm.kappa, psd=project)
+        _, _, Hy = point_barrier(d[act], gd[act], hd[act], obj.dhat[act], cm.kappa, psd=project)
         ref = np.einsum("kia,kij,kjb->ab", J, Hy, J)
         off = (H - Hf).toarray() - ref
         reg = C.FACTOR_REG * mean_stiffness(cm)
@@ -86,7 +87,8 @@ def test_evaluation_without_hessian_defers_the_same_psd_hessian(coarse_block_mod
 def test_check_lattice_gaps_equal_the_distances_to_the_facet_vertices(dim, order, refined):
     # the facet check bounds psi at a check point from the facet's vertices by L |y - v|; the
     # distances come from squared edge lengths through a precomputed map: compare with |y - v|
-    from simfab.coupling.simulate import _EDGE_PAIRS, _check_lattice
+    from simfab.coupling.objective import _EDGE_PAIRS
+    from simfab.coupling.refine import _check_lattice
 
     rng = np.random.default_rng(3)
     xv = rng.standard_normal((50, dim, dim)) * rng.uniform(0.01, 3.0, (50, 1, 1))  # 50 facets of dim vertices
@@ -131,7 +133,7 @@ def test_scatter_is_the_transpose_of_positions(repeat_vertices):
 def test_every_facet_point_is_within_cover_of_a_vertex(dim):
     # the facet check leaves out facets whose vertices are all farther than L * cover from O:
     # sound only if no point of a facet is farther than cover (x longest edge) from every vertex
-    from simfab.coupling.simulate import _COVER
+    from simfab.coupling.refine import _COVER
 
     rng = np.random.default_rng(9)
     w = rng.dirichlet(np.ones(dim), size=4000)  # points on the facet (barycentric)

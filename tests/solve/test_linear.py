@@ -70,7 +70,7 @@ def test_solve_free_equals_the_solve_of_the_extracted_block(backend):
 
 def test_banded_solver_solves_the_free_block_through_its_own_solve():
     # the rods' banded solver overrides solve; its solve_free must solve the same free block
-    from simfab.rods.statics import BandedOrSparseCholesky
+    from simfab.solve.banded import BandedOrSparseCholesky
 
     A = _laplacian_2d(8)
     n = A.shape[0]

@@ -3,7 +3,8 @@
 ``python tools/bench.py insertion [--only NAME,...] [--repeat K | --budget SECONDS] [--max-repeat K]``
 
 Cases (bundled scenes, closest to the sizes of the thesis' timing table):
-  cclamp2d  (~450 triangles, 35 steps)   vs "stand side (2D)"  450 elements, 35 steps
+  cclamp2d  (450 triangles, 35 steps)    vs "stand side (2D)"  450 elements, 35 steps
+            (run at the original's size; the bundled scene is meshed finer for accuracy)
   clip3d    (~1040 tets, 35 steps)       vs "alligator 3D"    1040 elements, 35 steps
   knocker3d (~5080 tets, 40 steps)       vs "door knocker"    5080 elements, 40 steps
   claw3d    (~12,063 tets, 25 steps)     vs "claw 3D"        12063 elements, 25 steps
@@ -31,8 +32,11 @@ CASES = [
     ("knocker3d", "door knocker (rotating path)"),
     ("claw3d", "claw 3D"),
 ]
+#: Scene overrides that put a case at the original's size (the bundled cclamp2d is meshed finer,
+#: ~4,800 triangles, to be within 5% of its mesh-converged figures; the original's row is 450).
+ORIGINAL_SIZE = {"cclamp2d": {"compliant": {"target_elements": 450}}}
 
-TARGET_SPEEDUP = 20.0
+TARGET_SPEEDUP = 50.0
 #: Without --repeat, each case runs until BUDGET_SECONDS of runs are spent (at least MIN_REPEAT,
 #: at most MAX_REPEAT runs) and the fastest run counts, as timeit and pyperf advise: on a shared
 #: machine interference only ever adds time, so the minimum is the best estimate of the cost.
@@ -90,7 +94,7 @@ def run(argv) -> dict:
     for scene, ref_name in CASES:
         if only and scene not in only:
             continue
-        cm = load_coupling_scene(scene)
+        cm = load_coupling_scene(scene, overrides=ORIGINAL_SIZE.get(scene))
         best = None
         runs = []
         while len(runs) < _runs_wanted(a, runs):
@@ -119,6 +123,8 @@ def run(argv) -> dict:
             "machine_reference_ms": machine_reference_ms(),
             "load_average_1min": round(os.getloadavg()[0], 2),
             "newton_iterations": summ["newton_iterations"],
+            "newton_iterations_per_step": round(summ["newton_iterations"] / max(1, len(res.steps) - 1), 2),
+            "steps_run": len(res.steps) - 1,
             "category": summ["category"],
             "time_split_seconds": split,
             "phase_split_seconds": {k: round(float(v), 3) for k, v in res.phases.items()},

@@ -1,0 +1,118 @@
+"""Mesh-convergence study of a coupling scene: the profile figures at successively refined meshes
+of the compliant part, their extrapolated (mesh-converged) values and the error of the scene's
+own resolution.
+
+The scene is run at ``target_elements`` times each refinement factor (the generator meshes the
+part again; scenes that ship a ready mesh file cannot be refined and raise InputError). With
+element counts N_k and a figure f_k, the discretization error of linear elements falls like
+h^p ~ N^(-p/dim); the extrapolated value f_inf comes from the last three levels (Richardson with
+the observed order p, clamped to [0.5, 4]), or from the last two with p = 1 (first-order energy
+convergence of linear elements in bending, the stiffness error going like h^2 / t^2 ... at the
+coarse end) when the three do not converge monotonically. The error of each level is
+(f_k - f_inf) / f_inf.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+FIGURES = ("E_max", "E_ss", "F_in", "F_rm", "F_grip")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Level:
+    factor: float
+    elements: int
+    seconds: float
+    figures: dict
+    category: str
+
+
+def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True) -> list:
+    """One :class:`Level` per refinement factor (element count times the factor)."""
+    from simfab.coupling.outputs import summarize
+    from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
+    from simfab.coupling.simulate import simulate
+    from simfab.errors import InputError
+
+    _, toml = scene_paths(scene)
+    cfg = read_toml(toml)
+    comp = cfg.get("compliant", {})
+    if "mesh_file" in comp or comp.get("target_elements") is None:
+        raise InputError("a convergence study needs a scene whose part is meshed from target_elements "
+                         "(not a ready mesh_file)", where=str(toml))
+    base = int(comp["target_elements"])
+    out = []
+    for f in factors:
+        ov = {k: dict(v) for k, v in (overrides or {}).items()}
+        ov.setdefault("compliant", {})["target_elements"] = int(round(base * f))
+        cm = load_coupling_scene(scene, overrides=ov)
+        t0 = time.perf_counter()
+        res = simulate(cm, quiet=quiet)
+        dt = time.perf_counter() - t0
+        prof, d = summarize(res)
+        out.append(Level(factor=float(f), elements=int(cm.fem.n_elements), seconds=dt,
+                         figures={k: float(d[k]) for k in FIGURES}, category=prof.category))
+    return out
+
+
+def extrapolate(N: np.ndarray, f: np.ndarray, dim: int) -> tuple[float, float]:
+    """(f_inf, observed order p in h) from figures f at element counts N (ascending), see module."""
+    h = np.asarray(N, float) ** (-1.0 / dim)
+    f = np.asarray(f, float)
+    if len(f) >= 3:
+        d1, d2 = f[-2] - f[-3], f[-1] - f[-2]
+        if d1 != 0 and d2 != 0 and np.sign(d1) == np.sign(d2) and abs(d2) < abs(d1):
+            r1, r2 = h[-3] / h[-2], h[-2] / h[-1]
+            # for r1 ~ r2 = r: d1 / d2 = r^p
+            p = float(np.clip(np.log(abs(d1 / d2)) / np.log(0.5 * (r1 + r2)), 0.5, 4.0))
+            return float(f[-1] + d2 / ((h[-2] / h[-1]) ** p - 1.0)), p
+    if len(f) >= 2 and f[-1] != f[-2]:
+        p = 1.0
+        return float(f[-1] + (f[-1] - f[-2]) / ((h[-2] / h[-1]) ** p - 1.0)), p
+    return float(f[-1]), float("nan")
+
+
+def study(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True) -> dict:
+    """Run the levels and summarize: per figure the values, the extrapolated value, the observed
+    order and each level's relative error; per level the element count and seconds."""
+    levels = run_levels(scene, factors, overrides=overrides, quiet=quiet)
+    dim = 2 if _is_2d(scene) else 3
+    N = np.array([lv.elements for lv in levels])
+    figures = {}
+    for k in FIGURES:
+        f = np.array([lv.figures[k] for lv in levels])
+        f_inf, p = extrapolate(N, f, dim)
+        err = ((f - f_inf) / f_inf).tolist() if f_inf != 0 else [0.0] * len(f)
+        figures[k] = {"values": f.tolist(), "extrapolated": f_inf, "order": p, "relative_error": err}
+    return {
+        "scene": str(scene),
+        "levels": [{"factor": lv.factor, "elements": lv.elements, "seconds": lv.seconds, "category": lv.category}
+                   for lv in levels],
+        "figures": figures,
+        "error_of_default": {k: figures[k]["relative_error"][0] for k in FIGURES},
+    }
+
+
+def _is_2d(scene) -> bool:
+    from simfab.coupling.scene import read_toml, scene_paths
+
+    return read_toml(scene_paths(scene)[1]).get("dim", 2) == 2
+
+
+def format_table(rep: dict) -> str:
+    """A compact text table of :func:`study`'s report (units: J, N; errors in %)."""
+    lv = rep["levels"]
+    head = f"{'figure':8s}" + "".join(f"{'N=' + str(x['elements']):>12s}" for x in lv) + f"{'extrap.':>12s}{'p':>6s}"
+    lines = [f"convergence study: {rep['scene']}", head]
+    for k, v in rep["figures"].items():
+        unit = "J" if k.startswith("E") else "N"
+        lines.append(f"{k + ' [' + unit + ']':8s}" + "".join(f"{x:12.4g}" for x in v["values"])
+                     + f"{v['extrapolated']:12.4g}{v['order']:6.2f}")
+        lines.append(f"{'  err %':8s}" + "".join(f"{100 * e:12.2f}" for e in v["relative_error"]))
+    lines.append(f"{'s/run':8s}" + "".join(f"{x['seconds']:12.3f}" for x in lv))
+    lines.append(f"{'category':8s}" + "".join(f"{x['category']:>12s}" for x in lv))
+    return "\n".join(lines)

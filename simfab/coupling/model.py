@@ -1,0 +1,168 @@
+"""The insertion model: A's FEM model, O's field and path, the steps along it, boundary conditions
+and barrier scales (:class:`CouplingModel`, built by :func:`make_coupling_model`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from simfab.contact.imls import ImlsField, pose_matrix
+from simfab.coupling.config import InsertionOptions
+from simfab.errors import InputError
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class CouplingModel:
+    """Immutable description of one insertion simulation.
+
+    fem : :class:`simfab.fem.model.FemModel` of A (SI units)
+    field : :class:`ImlsField` of O in O's body frame
+    path : :class:`simfab.io.mjcf.Trajectory` of O's pose, parameterized by path length [m]
+    s_steps : (K+1,) path length at each step [m]; step 0 is the start pose
+    fixed_vertices : (f,) vertices of A in the fixed region
+    free : (n*dim,) bool, dofs solved for (fixed: the fixed vertices' dofs along the insertion axis,
+        along ``options.fixed_axes``, or along all axes with ``options.fix_all_axes``)
+    axis : (dim,) unit insertion axis (coordinate axis closest to O's overall translation)
+    h : A's mean edge length h_A [m]; dhat [m]; kappa [N/m]; tol : penetration tolerance [m]
+    object_vertices, object_faces : O's display geometry in its body frame (3D mesh, or a closed
+        curve (k, 2) with faces None in 2D)
+    """
+
+    name: str
+    fem: object
+    field: ImlsField
+    path: object
+    s_steps: np.ndarray
+    fixed_vertices: np.ndarray
+    free: np.ndarray
+    axis: np.ndarray
+    options: InsertionOptions
+    h: float
+    dhat: float
+    kappa: float
+    tol: float
+    force_scale: float
+    object_vertices: np.ndarray
+    object_faces: np.ndarray | None = None
+    _cache: dict = field(default_factory=dict, repr=False, init=False)  # fresh on dataclasses.replace
+
+    @property
+    def dim(self) -> int:
+        return self.fem.dim
+
+    def pose(self, s: float):
+        """O's pose at path length s: (R (3, 3), p (3,)) with world x = R x_body + p (memoized)."""
+        key = ("pose", float(s))
+        out = self._cache.get(key)
+        if out is None:
+            out = self._cache[key] = pose_matrix(self.pos_quat(s))
+        return out
+
+    def pos_quat(self, s: float):
+        """O's pose at path length s as the path gives it: (pos (3,) [m], quat_wxyz (4,)) (memoized;
+        do not modify the arrays)."""
+        key = ("pos_quat", float(s))
+        out = self._cache.get(key)
+        if out is None:
+            L = float(self.path.length)
+            u = self.end_direction
+            if s > L and u is not None:  # past the last keyframe: straight on along the last segment
+                pos, quat = self.path.pose_at(L)
+                pos = np.asarray(pos, dtype=float) + (s - L) * u
+            else:
+                pos, quat = self.path.pose_at(s)
+            out = self._cache[key] = (np.asarray(pos, dtype=float), np.asarray(quat, dtype=float))
+        return out
+
+    @property
+    def end_direction(self) -> np.ndarray | None:
+        """(3,) unit translation of the path's last segment when that segment is a pure
+        translation (O may then continue past the last keyframe until it comes to rest), else None."""
+        key = "end_direction"
+        if key not in self._cache:
+            pos, quat = self.path.positions, self.path.quats
+            d = np.asarray(pos[-1] - pos[-2], dtype=float)
+            turn = abs(abs(float(np.dot(quat[-1], quat[-2]))) - 1.0) > 1e-12
+            n = float(np.linalg.norm(d))
+            self._cache[key] = None if (turn or n == 0) else d / n
+        return self._cache[key]
+
+    def direction(self, s: float) -> np.ndarray:
+        """(dim,) unit translation direction of O at s (zero during a pure rotation; memoized)."""
+        key = ("direction", float(s))
+        out = self._cache.get(key)
+        if out is None:
+            L = float(self.path.length)
+            past = s > L and self.end_direction is not None
+            u = (self.end_direction if past else np.asarray(self.path.direction_at(s), dtype=float))[: self.dim]
+            n = np.linalg.norm(u)
+            out = self._cache[key] = u / n if n > 0 else u
+        return out.copy()
+
+
+def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertices, options: InsertionOptions,
+                        object_vertices, object_faces=None) -> CouplingModel:
+    """Assemble a :class:`CouplingModel`: steps along the path, boundary conditions, barrier scales."""
+    dim = fem.dim
+    n = fem.n_vertices
+    fixed_vertices = np.unique(np.asarray(fixed_vertices, dtype=np.int64))
+    if fixed_vertices.size == 0:
+        raise InputError("the fixed region contains no vertex of the compliant part", where="fixed")
+    total = float(path.length)
+    L = default_insertion_length(fem, path) if options.L_max is None else min(float(options.L_max), total)
+    if not L > 0:
+        raise InputError("the object's path has zero length (keyframes do not move it)", where="keyframes")
+    if options.h_in is not None:
+        k = int(np.floor(L / options.h_in + 1e-9))
+        s = np.arange(k + 1) * options.h_in
+        if L - s[-1] > 1e-9 * L:
+            s = np.append(s, L)
+    else:
+        s = np.linspace(0.0, L, (options.steps or 35) + 1)
+    move = np.asarray(path.positions[-1] - path.positions[0])[:dim]
+    if np.linalg.norm(move) == 0:
+        move = np.asarray(path.direction_at(0.0))[:dim]
+    ax = int(np.argmax(np.abs(move))) if np.linalg.norm(move) > 0 else 0
+    axis = np.zeros(dim)
+    axis[ax] = 1.0
+    free = np.ones((n, dim), dtype=bool)
+    if options.fix_all_axes:
+        free[fixed_vertices] = False
+    elif options.fixed_axes is not None:
+        held = ["xyz".index(a) for a in options.fixed_axes]
+        if any(a >= dim for a in held):
+            raise InputError(f"fixed_axes={options.fixed_axes!r} names an axis a {dim}D part does not have",
+                             where="[simulation]")
+        if ax not in held:
+            raise InputError(f"fixed_axes={options.fixed_axes!r} must include the insertion axis {'xyz'[ax]!r}",
+                             where="[simulation]")
+        free[np.ix_(fixed_vertices, held)] = False
+    else:
+        free[fixed_vertices, ax] = False
+    h = fem.mean_edge_length()
+    E = fem.material.youngs_modulus if fem.material is not None else float(np.mean(fem.mu) * 3)
+    width = h if dim == 3 else fem.thickness
+    return CouplingModel(
+        name=name, fem=fem, field=field, path=path, s_steps=s, fixed_vertices=fixed_vertices, free=free.ravel(),
+        axis=axis, options=options, h=h, dhat=options.dhat_rel * h, kappa=options.kappa_rel * E * width,
+        tol=options.penetration_tol_rel * h, force_scale=E * h * width,
+        object_vertices=np.asarray(object_vertices, float),
+        object_faces=None if object_faces is None else np.asarray(object_faces, int),
+    )
+
+
+def default_insertion_length(fem, path, samples: int = 2000) -> float:
+    """L_max by default: the path length at which O's centre passes A's farthest point along the
+    insertion direction (the overall translation of the path), or the whole path if it never does.
+    """
+    dim = fem.dim
+    move = np.asarray(path.positions[-1] - path.positions[0], dtype=float)[:dim]
+    total = float(path.length)
+    if np.linalg.norm(move) == 0:
+        return total
+    u = move / np.linalg.norm(move)
+    far = float(np.max(fem.rest @ u))
+    for s in np.linspace(0.0, total, samples):
+        if float(np.asarray(path.pose_at(s)[0])[:dim] @ u) > far:
+            return float(s)
+    return total

@@ -1,0 +1,330 @@
+"""The per-step objective E_d(x) + kappa sum_j b(d_j(x)) (+ the rigid-mode pin) and its Newton solve.
+
+See :mod:`simfab.coupling.simulate` for the method; this module holds the objective with its lazy
+contact evaluation and step cap (:class:`_StepObjective`), the deferred PSD Hessian, the
+per-point barrier activation distances, the barrier stiffness adaptation and :func:`_newton`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simfab.contact.barrier import barrier, point_barrier, project_psd
+from simfab.coupling import config as C
+from simfab.coupling import rigid
+from simfab.coupling.model import CouplingModel
+from simfab.coupling.points import ContactPoints
+from simfab.coupling.timing import _TimedSolver, _Timer
+
+_EDGE_PAIRS = {2: (np.array([0]), np.array([1])), 3: (np.array([0, 0, 1]), np.array([1, 2, 2]))}  # facet edges (a, c)
+
+# ----------------------------------------------------------------------------- objective
+class _StepObjective:
+    """E_d(x) + kappa sum_j b(d_j(x)) for a fixed pose of O and a fixed set of constraint points."""
+
+    def __init__(self, cm: CouplingModel, points: ContactPoints, R: np.ndarray, p: np.ndarray, timer: _Timer,
+                 kappa: float | None = None, pin: rigid.Pin | None = None):
+        self.cm, self.points, self.R, self.p, self.timer = cm, points, R, p, timer
+        self.pin = pin  # pin of the rigid motions nothing resists (simfab.coupling.rigid.Pin), or None
+        self.kappa = cm.kappa if kappa is None else float(kappa)
+        self.n, self.dim = cm.fem.n_vertices, cm.dim
+        self.slots = _point_slots(cm, points)
+        self.wpair = points.weights[:, :, None] * points.weights[:, None, :]  # (k, nv, nv)
+        self.diag = _diag_slots(cm)
+        self.last_x = None
+        self.last_d = None
+        self.last_gd = None
+        self.last_H = None
+        self.last_fem = None
+        self.curv = 1.0 / cm.field.sigma  # curvature bound for max_step until a Hessian evaluation sets it
+        # Lazy evaluation: psi is L-Lipschitz, so a point that was at distance d_ref when last
+        # evaluated exactly (at y_ref) is still at least d_ref - L |y - y_ref| away. Points whose
+        # bound stays above the band need no evaluation (their barrier term is exactly zero).
+        self.dhat = _point_dhat(cm, points)  # (k,) activation distance per point [m]
+        self.dhat_max = float(self.dhat.max()) if len(self.dhat) else cm.dhat
+        self.band = C.LAZY_BAND_DHATS * self.dhat
+        self.y_ref = None
+        self.d_ref = None
+        self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
+
+    def distances(self, x: np.ndarray, hessian: bool):
+        """(d (k,) [m], grad d (k, dim), hess d (k, dim, dim) or None): exact near O, lower bounds
+        (zero derivatives) for points certified farther than the band."""
+        with self.timer.timed("contact"):
+            y = self.points.positions(x)
+            k, dim = len(y), self.dim
+            if self.y_ref is None:
+                todo = np.arange(k)
+                bound = None
+            else:
+                bound = self.d_ref - C.PSI_LIPSCHITZ * np.linalg.norm(y - self.y_ref, axis=1)
+                todo = np.flatnonzero(bound < self.band)
+            d = np.empty(k) if bound is None else bound.copy()
+            gd = np.zeros((k, dim))
+            hd = np.zeros((k, dim, dim)) if hessian else None
+            if len(todo):
+                ev = self.cm.field.evaluate(y[todo], (self.R, self.p), hessian=hessian, hessian_band=self.dhat_max)
+                d[todo] = -ev.psi
+                gd[todo] = -ev.grad
+                if hessian:
+                    hd[todo] = -ev.hess
+                if self.y_ref is None:
+                    self.y_ref, self.d_ref = y.copy(), d.copy()
+                elif hessian:  # re-anchor at accepted iterates only (need_hessian marks them)
+                    self.y_ref[todo] = y[todo]
+                    self.d_ref[todo] = d[todo]
+        return d, gd, hd
+
+    def __call__(self, xf: np.ndarray, need_hessian: bool):
+        """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O."""
+        from simfab.fem.neohookean import energy_gradient, energy_gradient_hessian
+
+        cm = self.cm
+        memo = self.memo
+        if need_hessian and memo is not None and memo[0].shape == xf.shape and np.array_equal(memo[0], xf):
+            self.memo = None  # hand the cached Hessian out once (the caller may modify it)
+            return memo[1]
+        x = xf.reshape(self.n, self.dim)
+        H_exact = None
+        with self.timer.timed("assembly"):
+            if need_hessian:
+                # exact Hessian only (half the cost of the eigen-projected one); the projected one is
+                # assembled on demand, when the exact one turns out indefinite (see _LazyHessian)
+                E, g, H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)
+                H = None
+            else:
+                (E, g), H = energy_gradient(cm.fem, x), None
+        if self.pin is not None:
+            E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
+        if not np.isfinite(E):
+            return np.inf, g.ravel(), H
+        d, gd, hd = self.distances(x, need_hessian)
+        if np.any(d <= 0):
+            return np.inf, g.ravel(), H
+        with self.timer.timed("contact"):
+            act, B, gy, Hy = self._barrier(d, gd, hd)
+            gc = self.points.scatter(gy, self.n, rows=act)
+            if need_hessian:
+                contact = (act, Hy)
+                if H_exact is not None:
+                    self._add_contact(H_exact, contact, psd=False)
+                    H = _LazyHessian(self, x.copy(), contact)
+                else:
+                    self._add_contact(H, contact, psd=True)
+                self._remember(xf, d, gd, H, E, g)
+                # curvature bound for the step cap: twice the largest |hess d| seen near O, at least
+                # CURVATURE_FLOOR / sigma (a violated bound only costs a rejected line-search trial)
+                kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if len(act) else 0.0
+                self.curv = max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / cm.field.sigma)
+            else:
+                # Newton may stop at a trial evaluated without its Hessian (see NewtonOptions.
+                # eager_above_tol): this evaluation may be the final one, with the PSD Hessian deferred
+                self._remember(xf, d, gd, _LazyHessian(self, x.copy(), None), E, g)
+        # exact-first Newton (simfab.solve.newton): the exact Hessian is used whenever it is
+        # positive definite (quadratic convergence), the PSD-projected one (built lazily) otherwise
+        out = (E + B, (g + gc).ravel(), H if H_exact is None else (H_exact, H))
+        if need_hessian:
+            self.memo = (xf.copy(), out)
+        return out
+
+    def _barrier(self, d, gd, hd):
+        """(active point indices (a,), energy [J], gradient (a, dim) [N], exact Hessian blocks
+        (a, dim, dim) [N/m] or None without ``hd``) of the barrier at distances d (k,) with their
+        derivatives (see :func:`simfab.contact.barrier.point_barrier`), in one pass."""
+        act = np.flatnonzero(d < self.dhat)
+        B, gy, Hy = point_barrier(d[act], gd[act], None if hd is None else hd[act], self.dhat[act], self.kappa,
+                                  psd=False)
+        return act, B, gy, Hy
+
+    def _remember(self, xf, d, gd, H, E, g) -> None:
+        """Keep the last evaluation's data (x, distances, their gradients, Hessian, elastic energy
+        and gradient): Newton's final evaluation is read from it (see :func:`_final_eval`)."""
+        self.last_x = xf.copy()
+        self.last_d = d
+        self.last_gd = gd
+        self.last_H = H
+        self.last_fem = (E, g)  # elastic energy and gradient at last_x (reused by _record)
+
+    def value(self, x: np.ndarray) -> float:
+        """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible."""
+        from simfab.fem.neohookean import energy
+
+        with self.timer.timed("assembly"):
+            E = energy(self.cm.fem, x) + (self.pin.energy(np.ravel(x)) if self.pin is not None else 0.0)
+        if not np.isfinite(E):
+            return np.inf
+        d, _, _ = self.distances(np.asarray(x).reshape(self.n, self.dim), False)
+        if np.any(d <= 0):
+            return np.inf
+        act = d < self.dhat
+        return E + self.kappa * float(barrier(d[act], self.dhat[act]).sum())
+
+    def _add_contact(self, H, contact, *, psd: bool) -> None:
+        """Add the barrier Hessian blocks (PSD-projected per point if ``psd``) and the rigid-mode
+        regularization to the FEM Hessian ``H`` (in place)."""
+        act, Hy = contact  # active point indices (a,), exact barrier Hessian blocks (a, dim, dim)
+        if len(act):
+            if psd:
+                Hy = project_psd(Hy)
+            wp_act = self.wpair[act][:, :, :, None, None]
+            np.add.at(H.data, self.slots[act].ravel(), (wp_act * Hy[:, None, None, :, :]).ravel())
+        _regularize(self.cm, H, self.diag)
+
+    def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
+        """Step cap keeping every constraint point outside O along the whole step (see below).
+
+        Per point, with d its distance to O, a = grad d . dy and K a curvature bound of the field
+        (from the Hessians near O, see ``__call__``), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2; the cap is the largest alpha
+        keeping this above 0.1 d. It lets points in contact slide along O (a ~ 0) and move away
+        freely, while approaching points stop short of O. Conservative advancement,
+        alpha <= 0.9 d / (L |dy|) with L a Lipschitz bound of psi, is always allowed as well.
+        The line search still rejects any trial point inside O (energy +inf).
+        """
+        if self.last_x is not None and np.array_equal(self.last_x, xf):
+            d, gd = self.last_d, self.last_gd
+        else:
+            d, gd, _ = self.distances(xf.reshape(self.n, self.dim), False)
+        dy = self.points.positions(dx.reshape(self.n, self.dim))
+        sp = np.linalg.norm(dy, axis=1)
+        m = sp > 0
+        if not m.any():
+            return 1.0
+        d, gd, dy, sp = d[m], gd[m], dy[m], sp[m]
+        a = np.einsum("kd,kd->k", gd, dy)
+        q = 0.5 * sp**2 * self.curv
+        keep = C.STEP_FRACTION * d
+        alpha_curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
+        cons = keep / (C.PSI_LIPSCHITZ * sp)
+        return float(min(1.0, np.min(np.maximum(alpha_curv, cons))))
+
+
+class _LazyHessian:
+    """PSD-projected Hessian of a :class:`_StepObjective` at x, assembled on first call (once);
+    ``contact`` (active points, exact barrier blocks) as found with the exact Hessian, or None to
+    evaluate the distances at x again (deterministic: the same active points and blocks)."""
+
+    def __init__(self, obj, x, contact):
+        self.obj, self.x, self.contact, self.H = obj, x, contact, None
+
+    def __call__(self):
+        if self.H is None:
+            from simfab.fem.neohookean import energy_gradient_hessian
+
+            obj = self.obj
+            with obj.timer.timed("assembly"):
+                _, _, H = energy_gradient_hessian(obj.cm.fem, self.x)
+            if self.contact is None:
+                act, _, _, Hy = obj._barrier(*obj.distances(self.x, True))
+                self.contact = (act, Hy)
+            with obj.timer.timed("contact"):
+                obj._add_contact(H, self.contact, psd=True)
+            self.H = H
+        return self.H
+
+
+def dim_factor(dim: int) -> float:
+    """Bound of the spectral norm of a dim x dim matrix by its max |entry| times this factor."""
+    return float(dim)
+
+
+def _regularize(cm: CouplingModel, H, diag: np.ndarray) -> None:
+    """Add FACTOR_REG * mean stiffness to the diagonal of H in place (``diag``: the CSR slots of
+    the diagonal, :func:`_diag_slots`) when the supports leave rigid motions free: the sparse
+    factorization then succeeds, and the Woodbury pin (rigid.PinnedSolver) removes the near-null
+    directions from the solve; the term is in the Hessian only (not the energy)."""
+    if rigid.motion_basis(cm)[0].shape[1]:
+        H.data[diag] += C.FACTOR_REG * rigid.mean_stiffness(cm)
+
+
+def _diag_slots(cm: CouplingModel) -> np.ndarray:
+    s = cm._cache.get("diag")
+    if s is None:
+        n, dim = cm.fem.n_vertices, cm.dim
+        b = cm.fem.pattern.block_slots(np.arange(n), np.arange(n))
+        s = cm._cache["diag"] = b[:, np.arange(dim), np.arange(dim)].ravel()
+    return s
+
+
+def _objective(cm, state, s, ctx) -> _StepObjective:
+    """The step objective at path length s over the state's points, with its barrier stiffness and
+    the pin of its unresisted rigid motions anchored at the state's positions."""
+    R, p = cm.pose(s)
+    pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], state.x)
+    return _StepObjective(cm, state.points, R, p, ctx["timer"], state.kappa, pin)
+
+
+def _adapt_kappa(cm: CouplingModel, state: _State, obj: _StepObjective) -> None:
+    """IPC-style stiffness adaptation: when a converged step leaves a point closer to O than
+    KAPPA_GROW_BELOW * d_hat (the barrier then works in its ill-conditioned 1/d^2 range), double
+    kappa for the following steps (at most KAPPA_MAX_GROWTH times the initial value); a stiffer
+    barrier keeps contact gaps ~ kappa d_hat^2 / f larger."""
+    d = obj.last_d
+    if d is None or not len(d):
+        return
+    if np.any(d < C.KAPPA_GROW_BELOW * obj.dhat) and state.kappa < C.KAPPA_MAX_GROWTH * cm.kappa:
+        state.kappa = min(2.0 * state.kappa, C.KAPPA_MAX_GROWTH * cm.kappa)
+
+
+def _newton(cm: CouplingModel, obj: _StepObjective, x0: np.ndarray, ctx) -> tuple[np.ndarray, int]:
+    """Barrier Newton from x0. Stops when the free-dof force residual is below
+    max(NEWTON_GRAD_TOL_REL * force_scale, NEWTON_GRAD_TOL_START * |residual at x0|) or the Newton
+    step is below NEWTON_STEP_TOL_REL * h_A (projected Newton converges linearly once the PSD
+    projections are active, so a purely absolute force target would spend many iterations on the
+    last digits)."""
+    from simfab.solve.newton import NewtonOptions, minimize
+
+    _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
+    g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
+    scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n)
+    opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
+                         step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=True,
+                         eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL)
+    solver = _TimedSolver(_pinned(ctx["solver"], obj.pin), ctx["timer"])
+    res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
+    return res.x.reshape(x0.shape), res.iterations
+
+
+def _pinned(solver, pin):
+    """``solver`` with the rigid-mode pin's Woodbury update (rigid.PinnedSolver) when there is one."""
+    return solver if pin is None else rigid.PinnedSolver(solver, pin)
+
+
+def _point_dhat(cm: CouplingModel, pts: ContactPoints) -> np.ndarray:
+    """(k,) barrier activation distance of each constraint point [m]: dhat_rel times the local
+    edge length there (the mean length of the boundary edges at a vertex, interpolated with the
+    point's weights), so that the standoff stays a fixed small fraction of the local element size
+    on graded meshes (memoized per point set)."""
+    dh = pts.cache.get("dhat")
+    if dh is None:
+        hv = cm._cache.get("vertex_h")
+        if hv is None:
+            facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
+            a, c = _EDGE_PAIRS[cm.dim]
+            e = np.vstack([facets[:, [i, j]] for i, j in zip(a, c)])
+            L = np.linalg.norm(cm.fem.rest[e[:, 0]] - cm.fem.rest[e[:, 1]], axis=1)
+            n = cm.fem.n_vertices
+            cnt = np.bincount(e.ravel(), minlength=n)
+            tot = np.bincount(e.ravel(), weights=np.repeat(L, 2), minlength=n)
+            hv = cm._cache["vertex_h"] = np.where(cnt > 0, tot / np.maximum(cnt, 1), cm.h)
+        dh = pts.cache["dhat"] = cm.options.dhat_rel * np.einsum("km,km->k", pts.weights, hv[pts.verts])
+    return dh
+
+
+def _point_slots(cm: CouplingModel, pts: ContactPoints) -> np.ndarray:
+    """(k, nv, nv, dim, dim) positions in the Hessian's data of the blocks coupling each point's parents."""
+    slots = pts.cache.get("slots")
+    if slots is None:
+        nv = pts.verts.shape[1]
+        ia, ib = np.meshgrid(np.arange(nv), np.arange(nv), indexing="ij")
+        rows = pts.verts[:, ia.ravel()].ravel()
+        cols = pts.verts[:, ib.ravel()].ravel()
+        slots = pts.cache["slots"] = cm.fem.pattern.block_slots(rows, cols).reshape(len(pts), nv, nv, cm.dim, cm.dim)
+    return slots
+
+
+def _final_eval(obj: _StepObjective, x: np.ndarray):
+    """(x, kappa, E, grad E (n, dim), d (k,), grad d (k, dim)) of the objective's last Hessian
+    evaluation when it was at x (Newton's converged point), else None."""
+    if obj.last_x is None or not np.array_equal(obj.last_x, x.ravel()):
+        return None
+    E, gE = obj.last_fem
+    return (x, obj.kappa, E, gE, obj.last_d, obj.last_gd)

@@ -1,0 +1,248 @@
+"""Warm start of a step (predictor): extrapolations of the last steps with the contact gaps restored and
+near points lifted, and the contact predictor (a penalty solve pushing reachable points with O),
+used when no extrapolation is feasible; see :mod:`simfab.coupling.simulate`, step 1."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simfab.coupling import config as C
+from simfab.coupling import rigid
+from simfab.coupling.model import CouplingModel
+from simfab.coupling.objective import _LazyHessian, _diag_slots, _pinned, _point_dhat, _point_slots, _regularize
+from simfab.coupling.points import ContactPoints
+from simfab.coupling.state import _State, _state_final
+from simfab.coupling.timing import _TimedSolver
+from simfab.errors import ConvergenceError
+
+def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj, *, below: float,
+                 to: float, prev: np.ndarray | None = None):
+    """x with the constraint points at distance <= ``below`` [m] from O (inside it: d <= 0) moved
+    out along O's normal to ``to`` [m], their facets' vertices taking the weighted mean of the
+    wanted moves (a local move: the rest of A keeps its shape). With ``prev`` (k,), the points'
+    gaps at the last step, points that were already that close keep their place. Returns x itself
+    when nothing is that close, None when the result is infeasible."""
+    # the objective's (lazy) distances: exact with gradients within its band (> below), lower
+    # bounds without gradients beyond it, so only points near O are evaluated
+    d, gd, _ = obj.distances(x, False)
+    below, to = np.broadcast_to(below, d.shape), np.broadcast_to(to, d.shape)
+    lift = (d <= below) & np.any(gd != 0.0, axis=1)
+    if prev is not None:
+        lift &= prev > below
+    if not lift.any():
+        return x
+    x1 = _move_points(cm, pts, x, lift, to[lift] - d[lift], gd[lift])
+    return x1 if np.isfinite(obj.value(x1)) else None
+
+
+def _extrapolations(state: _State, s_new: float) -> list:
+    """Linear (last two steps) and quadratic (last three, Lagrange) extrapolations of A's
+    positions to s_new: warm-start candidates when the deformation evolves smoothly."""
+    if state.prev is None or not state.prev[1] < state.s:
+        return []
+    xp, sp_ = state.prev
+    out = [state.x + (state.x - xp) * ((s_new - state.s) / (state.s - sp_))]
+    if state.prev2 is not None and state.prev2[1] < sp_:
+        (x2, s2), (x1, s1), (xc, sc) = state.prev2, state.prev, (state.x, state.s)
+        t = s_new
+        l2 = (t - s1) * (t - sc) / ((s2 - s1) * (s2 - sc))
+        l1 = (t - s2) * (t - sc) / ((s1 - s2) * (s1 - sc))
+        lc = (t - s2) * (t - s1) / ((sc - s2) * (sc - s1))
+        out.append(l2 * x2 + l1 * x1 + lc * xc)
+    return out
+
+
+def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.ndarray:
+    """The feasible warm-start candidate with the lowest objective among the linear and quadratic
+    extrapolations of the last steps, with its contact gaps restored (:func:`_snap_contacts`) and
+    near points lifted; the contact predictor (:func:`_predict`) when no extrapolation is feasible.
+    Raises ConvergenceError when no candidate is feasible."""
+    best_x, best_f = None, np.inf
+    for xc in _extrapolations(state, s_new):
+        fc = obj.value(xc)
+        if np.isfinite(fc) and fc < best_f:
+            best_x, best_f = xc, fc
+    if best_x is None:
+        return _predict(cm, state, s_new, ctx)
+    xs = _snap_contacts(cm, state, best_x, s_new, ctx)
+    if xs is not None and np.isfinite(obj.value(xs)):  # (+inf: infeasible, inside O or inverted)
+        best_x = xs
+    if C.WARM_START_FLOOR > 0:
+        # a point that ends up almost touching O costs one Newton iteration per doubling of its
+        # distance (the log barrier): start such points at LIFT_TO * d_hat instead
+        fin = _state_final(state)
+        prev = fin[4] if fin is not None else None
+        xl = _lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * obj.dhat,
+                          to=C.LIFT_TO * obj.dhat, prev=prev)
+        if xl is not None:
+            best_x = xl
+    return best_x
+
+
+def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float, ctx) -> np.ndarray | None:
+    """x with the boundary vertices that were in contact at the end of the last step (d < d_hat)
+    moved along O's normal back to their last distance to O, or None when there are none (the
+    caller checks feasibility: the move may push a neighbour into O or invert an element).
+
+    The barrier acts only within d_hat and is much stiffer than A, so the equilibrium gaps of
+    contact points lie in a narrow range inside (0, d_hat). An extrapolated warm start slides
+    contact points along O's curved surface by chords and typically carries them just past d_hat:
+    contact is lost, and the first Newton step, which no longer sees O there, releases A's
+    deformation into O (the step cap then cuts it to a few percent). Restoring the last gaps keeps
+    those points in the barrier's range; the rest of A is left to Newton.
+    """
+    fin = _state_final(state)
+    pts = state.points
+    if fin is None:
+        return None
+    d_prev = fin[4]
+    act = d_prev < _point_dhat(cm, pts)
+    if not act.any():
+        return None
+    R, p = cm.pose(s_new)
+    with ctx["timer"].timed("contact"):
+        ev = cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False)
+    g = -ev.grad
+    return _move_points(cm, pts, x, act, (d_prev[act] + ev.psi) * ev.near, g)
+
+
+def _move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.ndarray, dist: np.ndarray,
+                 direction: np.ndarray) -> np.ndarray:
+    """x with the points ``sel`` moved by ``dist`` (s,) [m] along ``direction`` (s, dim) (normalized
+    here): each vertex takes the weighted mean of the moves of the selected points on it."""
+    nrm = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
+    move = dist[:, None] * nrm
+    rows = np.flatnonzero(sel)
+    n = cm.fem.n_vertices
+    wsum = pts.scatter(np.ones((len(move), 1)), n, rows=rows)[:, 0]
+    shift = pts.scatter(move, n, rows=rows)
+    hit = wsum > 0
+    x1 = x.copy()
+    x1[hit] += shift[hit] / wsum[hit, None]
+    return x1
+
+
+def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
+    """Feasible warm start at s_new (see the module docstring, step 1).
+
+    Points O can reach during the step (distance below L |O's displacement there| + d_hat) are
+    pushed along O's normal by O's normal displacement (they may slide tangentially, as in
+    frictionless contact); the rest of A follows through one linear solve with the previous
+    tangent stiffness. Points still inside O afterwards are carried fully (rigidly with O) and the
+    solve is repeated; as a last resort every reachable point is carried rigidly.
+    """
+    timer = ctx["timer"]
+    x = state.x
+    dim = cm.dim
+    Ra, pa = cm.pose(state.s)
+    Rb, pb = cm.pose(s_new)
+    M = Rb @ Ra.T  # world rigid map of the step: y -> M (y - pa) + pb
+
+    def carry(z):
+        z3 = np.zeros((len(z), 3))
+        z3[:, :dim] = z
+        return ((z3 - pa) @ M.T + pb)[:, :dim]
+
+    pts = state.points
+    y = pts.positions(x)
+    with timer.timed("contact"):
+        ev_a = cm.field.evaluate(y, (Ra, pa), hessian=False)
+    delta = carry(y) - y
+    reach = (-ev_a.psi < C.PSI_LIPSCHITZ * np.linalg.norm(delta, axis=1) + _point_dhat(cm, pts)) & ev_a.near
+    if not reach.any():
+        return x.copy()
+    # O's outward normal at each point, carried with O to the new pose
+    g = -ev_a.grad
+    nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+    nrm = nrm @ M[:dim, :dim].T
+    push = np.einsum("kd,kd->k", nrm, delta)
+    normal = reach & (push > 0)
+    full = np.zeros(len(pts), dtype=bool)
+    for _ in range(C.PREDICTOR_RETRIES + 1):
+        x0 = _penalty_solve(cm, state, x, pts, normal & ~full, full, nrm, delta, ctx)
+        d_new = _feasible_distances(cm, x0, s_new, pts, ctx)
+        if d_new is not None and np.all(d_new > 0):
+            return x0
+        if d_new is None:
+            full |= reach  # an element inverted: carry everything reachable rigidly
+            continue
+        bad = (d_new <= 0) & ~full
+        if not bad.any():
+            break
+        full |= bad
+    full = reach
+    x0 = _penalty_solve(cm, state, x, pts, np.zeros_like(full), full, nrm, delta, ctx)
+    d_new = _feasible_distances(cm, x0, s_new, pts, ctx)
+    if d_new is not None and np.all(d_new > 0):
+        return x0
+    raise ConvergenceError(f"no feasible warm start for the step to s={s_new:.6g} m")
+
+
+def _restore_feasibility(cm: CouplingModel, state: _State, ctx) -> None:
+    """Push constraint points that are inside O at (state.x, state.s) (by at most the tolerance)
+    out along O's normal to d_hat / 2, A following through the penalty solve."""
+    R, p = cm.pose(state.s)
+    pts = state.points
+    for _ in range(C.PREDICTOR_RETRIES + 1):
+        ev = cm.field.evaluate(pts.positions(state.x), (R, p), hessian=False)
+        d = -ev.psi
+        bad = d <= 0
+        if not bad.any():
+            return
+        g = -ev.grad
+        nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+        delta = (0.5 * _point_dhat(cm, pts) - np.minimum(d, 0.0))[:, None] * nrm
+        x1 = _penalty_solve(cm, state, state.x, pts, bad, np.zeros_like(bad), nrm, delta, ctx)
+        if _feasible_distances(cm, x1, state.s, pts, ctx) is None:
+            break
+        state.x = x1
+    raise ConvergenceError(f"could not push the new refinement points out of the object at s={state.s:.6g} m")
+
+
+def _feasible_distances(cm, x0, s, pts, ctx):
+    """Distances to O at s if x0 has no inverted element, else None."""
+    from simfab.fem.neohookean import det_F
+
+    with ctx["timer"].timed("assembly"):
+        ok = np.all(det_F(cm.fem, x0) > 0)
+    if not ok:
+        return None
+    R, p = cm.pose(s)
+    with ctx["timer"].timed("contact"):
+        ev = cm.field.evaluate(pts.positions(x0), (R, p), hessian=False)
+    return -ev.psi
+
+
+def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarray:
+    """x + u, u minimizing 1/2 u^T H u + P/2 sum_j c_j(u)^2 over the free dofs, with
+    c_j = n_j . (y_j(u) - delta_j) for ``normal`` points and |y_j(u) - delta_j| for ``full`` ones."""
+    from simfab.fem.neohookean import energy_gradient_hessian
+
+    n, dim = cm.fem.n_vertices, cm.dim
+    H = state.H
+    if isinstance(H, _LazyHessian):  # the PSD tangent is assembled only when the predictor runs
+        H = state.H = H()
+    if H is None:
+        with ctx["timer"].timed("assembly"):
+            _, _, H = energy_gradient_hessian(cm.fem, x)
+            _regularize(cm, H, _diag_slots(cm))
+        state.H = H
+    pen = C.PREDICTOR_PENALTY * float(np.abs(H.data[_diag_slots(cm)]).max())
+    sel = normal | full
+    N = np.zeros((len(pts), dim, dim))
+    N[normal] = np.einsum("ki,kj->kij", nrm[normal], nrm[normal])
+    N[full] = np.eye(dim)
+    N = N[sel]
+    w = pts.weights[sel]
+    blocks = pen * w[:, :, None, None, None] * w[:, None, :, None, None] * N[:, None, None, :, :]
+    data = H.data.copy()
+    np.add.at(data, _point_slots(cm, pts)[sel].ravel(), blocks.ravel())
+    A = cm.fem.pattern.matrix(data)
+    f_pt = pen * np.einsum("kij,kj->ki", N, delta[sel])  # penalty force per point
+    rhs = pts.scatter(f_pt, n, rows=np.flatnonzero(sel)).ravel()
+    fidx = np.flatnonzero(cm.free)
+    pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], x)
+    uf = _TimedSolver(_pinned(ctx["solver"], pin), ctx["timer"]).solve_free(A, fidx, rhs[fidx])
+    u = np.zeros(n * dim)
+    u[fidx] = uf
+    return x + u.reshape(n, dim)

@@ -1,0 +1,178 @@
+"""Facet check and refinement: boundary facets whose interior crosses into O get interpolated
+constraint points (their density doubled when refined facets still penetrate); see
+:mod:`simfab.coupling.simulate`, steps 3-4."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from simfab.contact.imls import body_frame
+from simfab.coupling import config as C
+from simfab.coupling.model import CouplingModel
+from simfab.coupling.objective import _EDGE_PAIRS, _point_dhat
+from simfab.coupling.points import check_weights, facet_points, facet_weights, vertex_points
+from simfab.coupling.state import _State
+from simfab.errors import ConvergenceError
+
+def _crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: _State, final=None) -> list:
+    """Facets to (re)refine at (x, s): unrefined boundary facets near O whose interior crosses into
+    O, and, when a refined facet still penetrates O by more than the tolerance between its points,
+    every refined facet again at twice the density (returned as the full list)."""
+    if not cm.options.refine:
+        return []
+    ids, psi_max, refined = _facet_check(cm, x, s, state, final)
+    if len(ids) == 0:
+        return []
+    if np.any(psi_max[refined] > cm.tol):
+        limit = C.MAX_EDGE_SAMPLES if cm.dim == 2 else C.MAX_FACE_LATTICE
+        if 2 * state.order > limit:
+            raise ConvergenceError(f"refinement at density {state.order} still leaves a penetration of "
+                                   f"{psi_max[refined].max():.3e} m > {cm.tol:.3e} m at s={s:.6g} m")
+        state.order = 2 * state.order + (1 if cm.dim == 2 else 0)  # new points = the old check points
+        _rebuild_points(cm, state)
+        return sorted(state.refined | {int(f) for f in ids[psi_max > 0]})
+    return [int(f) for f in ids[(psi_max > 0) & ~refined]]
+
+
+_COVER = {2: 0.5, 3: 1.0 / np.sqrt(3.0)}  # max distance from a facet point to its nearest vertex / longest edge
+
+
+def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, final=None):
+    """Max psi over check points of each boundary facet that could reach into O at (x, s).
+
+    Returns (facet ids (f,), max psi (f,) [m], refined (f,) bool). Unrefined facets are checked
+    at the points refinement would add; refined facets at the denser check points (their own
+    points plus the midpoints between them). A facet can only reach into O if one of its vertices
+    is within L * cover of O, cover the largest distance from a point of the facet to its nearest
+    vertex (at most the longest edge / sqrt(3) on a triangle, half the edge in 2D). Check points
+    whose Lipschitz bound, from the facet's vertices or from their own values at earlier checks (in
+    O's body frame), is negative are not evaluated; their bound stands in for psi. The result is
+    remembered for the same (x, s).
+    """
+    memo = state.check
+    if memo is not None and memo[0] is x and memo[1] == s and memo[2] == state.order:
+        return memo[3]
+    facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
+    R, p = cm.pose(s)
+    bv = np.asarray(cm.fem.boundary_vertices)
+    dv = np.full(cm.fem.n_vertices, np.inf)
+    if final is not None and final[0] is x and len(final[4]) >= len(bv):
+        # Newton's converged evaluation at x (the first len(bv) constraint points are the boundary
+        # vertices, in vertex_points order): exact within the lazy band, lower bounds beyond it;
+        # those beyond the kernel radius get the sharper nearest-sample bound
+        dv[bv] = final[4][: len(bv)]
+        state.grad_peak = max(state.grad_peak, _max_norm(final[5]))
+        out = np.flatnonzero(dv[bv] > _point_dhat(cm, state.points)[: len(bv)] * C.LAZY_BAND_DHATS)
+        nn = cm.field.nearest_sample(x[bv[out]], (R, p))
+        far = nn >= cm.field.radius
+        dv[bv[out[far]]] = np.maximum(dv[bv[out[far]]], cm.field.far_bound(nn[far]))
+    else:
+        ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
+        dv[bv] = -ev.psi
+        state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
+        far = ~ev.near
+        if far.any():  # far vertices: a sharper lower bound of their distance than far_distance
+            dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
+    xf = x[facets]  # (F, nv, dim)
+    a, c = _EDGE_PAIRS[cm.dim]
+    edges2 = np.einsum("fed,fed->fe", xf[:, a] - xf[:, c], xf[:, a] - xf[:, c])  # (F, e) squared edge lengths
+    # every point of a facet lies within `cover` of one of its vertices: half the edge (2D), and
+    # longest edge / sqrt(3) on a triangle (the farthest point is the circumcentre when acute,
+    # R = c / (2 sin gamma) with gamma >= 60 deg; else within half the longest edge). A facet whose
+    # vertices are all farther than L * cover from O is certified outside by the vertex bounds.
+    cover = np.sqrt(edges2.max(axis=1)) * _COVER[cm.dim]
+    ids = np.flatnonzero(np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * cover)
+    refined = np.zeros(len(facets), dtype=bool)
+    refined[list(state.refined)] = True
+    refined = refined[ids]
+    psi_max = np.full(len(ids), -np.inf)
+    for is_refined in (False, True):
+        sel = refined if is_refined else ~refined
+        if sel.any():
+            w, gap_map = _check_lattice(cm.dim, state.order, is_refined)
+            f_sel = ids[sel]
+            xv = xf[f_sel]  # (f, nv, dim) the facets' vertices
+            y = w @ xv  # (f, p, dim) check points
+            # psi(y) <= psi(v) + L |y - v| for each vertex v of the facet: points this bounds below
+            # zero are outside O and need no evaluation (their bound stands in for psi: every use
+            # of psi_max only asks whether it is positive or above the tolerance)
+            gap = np.sqrt(np.maximum(edges2[f_sel] @ gap_map, 0.0)).reshape(len(f_sel), len(w), -1)  # (f, p, nv)
+            bound = C.PSI_LIPSCHITZ * gap - dv[facets[f_sel]][:, None, :]
+            psi = bound[:, :, 0]
+            for v in range(1, bound.shape[2]):  # min over the nv vertices (faster than min(axis=2))
+                psi = np.minimum(psi, bound[:, :, v])
+            # the same check points' values (or bounds) from earlier checks: O moved rigidly, so in
+            # O's body frame psi is the same L-Lipschitz function and psi(y) <= psi(y') + L |b - b'|
+            # with b, b' the body-frame positions now and then
+            body = body_frame(y, (R, p))
+            known_body, known_psi = _check_cache(cm, state, is_refined, len(w))
+            step = body - known_body[f_sel]
+            moved = np.sqrt(np.einsum("fpd,fpd->fp", step, step))
+            psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
+            todo = psi >= 0.0
+            if todo.any():
+                ev = cm.field.evaluate(y[todo], (R, p), hessian=False)
+                psi[todo] = ev.psi
+                state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
+            known_body[f_sel], known_psi[f_sel] = body, psi
+            psi_max[sel] = psi.max(axis=1)
+    out = (ids, psi_max, refined)
+    state.check = (x, s, state.order, out)
+    return out
+
+
+def _max_norm(v: np.ndarray) -> float:
+    """Largest row norm of (k, dim) v (0 when empty)."""
+    return float(np.sqrt(np.einsum("kd,kd->k", v, v).max())) if len(v) else 0.0
+
+
+
+
+@functools.lru_cache(maxsize=32)
+def _check_lattice(dim: int, order: int, refined: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(w (p, nv), G (edges, p * nv)) for the check points of a facet at refinement ``order``:
+    their barycentric weights (refinement points for an unrefined facet, the denser check points
+    for a refined one) and the map from the facet's squared edge lengths (f, edges) to the squared
+    distances (f, p * nv) from each check point to each of the facet's vertices.
+
+    For barycentric y = sum_a w_a v_a, |y - q|^2 = sum_a w_a |v_a - q|^2 - 1/2 sum_ac w_a w_c |v_a - v_c|^2;
+    with q = v_b it is linear in the squared edge lengths: one small product per check instead of
+    f * p * nv difference vectors. (Cached and read-only.)
+    """
+    w = check_weights(dim, order) if refined else facet_weights(dim, order)
+    a, c = _EDGE_PAIRS[dim]
+    b = np.arange(dim)
+    wa, wc = w[:, a].T[:, :, None], w[:, c].T[:, :, None]  # (e, p, 1)
+    G = (wa * (c[:, None, None] == b) + wc * (a[:, None, None] == b) - wa * wc).reshape(len(a), -1)
+    w.flags.writeable = False
+    G.flags.writeable = False
+    return w, G
+
+
+def _check_cache(cm: CouplingModel, state: _State, refined: bool, p: int):
+    """(body positions (F, p, 3) [m], psi or an upper bound (F, p) [m]) of every boundary facet's
+    check points at its last check (NaN / +inf: never checked) for unrefined or refined facets at
+    the current density; reset when the density changes."""
+    key = (refined, state.order, p)
+    cache = state.check_cache.get(key)
+    if cache is None:
+        F = len(cm.fem.boundary_facets)
+        cache = state.check_cache[key] = (np.full((F, p, 3), np.nan), np.full((F, p), np.inf))
+    return cache
+
+
+def _rebuild_points(cm: CouplingModel, state: _State) -> None:
+    """Constraint points = boundary vertices + refinement points of every refined facet."""
+    facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
+    pts = vertex_points(np.asarray(cm.fem.boundary_vertices, dtype=np.int64), cm.dim)
+    if state.refined:
+        ids = np.array(sorted(state.refined))
+        pts = pts.concat(facet_points(facets, ids, facet_weights(cm.dim, state.order)))
+    state.points = pts
+
+
+def _add_refinement(cm: CouplingModel, state: _State, facet_ids: list) -> None:
+    state.refined.update(int(f) for f in facet_ids)
+    _rebuild_points(cm, state)

@@ -1,0 +1,32 @@
+"""Mesh-convergence study of the bundled 2D coupling scenes (the figures at 4-5 refinements, their
+extrapolated values and the error of each scene's default mesh; see simfab.coupling.converge).
+
+``python tools/bench.py converge [--scenes cclamp2d,...] [--factors 0.125,0.25,0.5,1,2]``
+
+Factors multiply each scene's target element count (the bundled 2D scenes: ~4,800 triangles; the
+original's size, ~450, is 0.094). Reported per scene: levels (elements, seconds per run, category),
+per figure the values, the extrapolated value, the observed order in h and the relative errors,
+and ``error_at_bundled`` (the factor-1 level).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def run(argv) -> dict:
+    from simfab.coupling.converge import format_table, study
+
+    ap = argparse.ArgumentParser(prog="bench converge")
+    ap.add_argument("--scenes", default="cclamp2d,clip2d_loose,clip2d_eject")
+    ap.add_argument("--factors", default="0.094,0.1875,0.375,0.75,1,1.5")
+    a = ap.parse_args(argv)
+    factors = tuple(float(f) for f in a.factors.split(","))
+    out = {"benchmark": "converge", "factors": factors, "scenes": {}}
+    for scene in a.scenes.split(","):
+        rep = study(scene, factors)
+        i = factors.index(1.0) if 1.0 in factors else 0
+        rep["error_at_bundled"] = {k: v["relative_error"][i] for k, v in rep["figures"].items()}
+        rep["table"] = format_table(rep)
+        out["scenes"][scene] = rep
+    return out
