@@ -156,9 +156,9 @@ DEMO_DESIGN_ITERATIONS = 80
 
 
 def demo(ctx) -> dict:
-    """The 2D C-clamp (tight grip) and the 3D clip on a cylinder; then the C-clamp's rest shape
-    optimized for its design brief (tight, F_in <= 20 N, below the yield stress) in at most
-    DEMO_DESIGN_ITERATIONS iterations."""
+    """The 2D C-clamp (tight grip) and the 3D clip on a cylinder; then the building block's rest
+    shape (block2d_tight, 450 triangles) optimized for its design brief (tight, 3-10 N grip,
+    below the yield stress) in at most DEMO_DESIGN_ITERATIONS iterations."""
     from simfab.design.pipeline import optimize_scene
 
     out = Path(ctx.out)
@@ -166,9 +166,9 @@ def demo(ctx) -> dict:
     b = simulate_scene("clip3d", out=out, device=ctx.device, quiet=ctx.quiet)
     keys = ("category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises", "seconds",
             "usd", "plot_png", "mjcf")
-    d = optimize_scene("cclamp2d", out=out / "design", design={"iterations": DEMO_DESIGN_ITERATIONS},
+    d = optimize_scene("block2d_tight", out=out / "design", design={"iterations": DEMO_DESIGN_ITERATIONS},
                        device=ctx.device, quiet=ctx.quiet)
     design = {k: d[k] for k in ("feasible", "E_L", "iterations", "simulations", "seconds")}
     design["constraints"] = {k: v["satisfied"] for k, v in d["constraints"].items()}
     design.update({k: d["outputs"][k] for k in ("profile_png", "shape_png", "scene_xml", "part_stl")})
-    return {"cclamp2d": {k: a[k] for k in keys}, "clip3d": {k: b[k] for k in keys}, "cclamp2d_design": design}
+    return {"cclamp2d": {k: a[k] for k in keys}, "clip3d": {k: b[k] for k in keys}, "block2d_tight_design": design}

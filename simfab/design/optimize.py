@@ -32,7 +32,6 @@ optimization's result, are exactly those of running every simulation to the end.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -223,11 +222,9 @@ def candidate_model(problem: DesignProblem, X: np.ndarray):
         new = make_model(X, fem.elements, fem.material, thickness=fem.thickness, device=fem.device)
     except InputError as e:
         return None, f"invalid mesh: {e}"
-    opts = dataclasses.replace(cm.options, L_max=float(cm.s_steps[-1]))
+    # the scene's own options: the insertion runs as 'couple simulate' would run the candidate
     out = make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
-                              options=opts, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
-    if len(out.s_steps) != len(cm.s_steps) or not np.allclose(out.s_steps, cm.s_steps):
-        out = dataclasses.replace(out, s_steps=np.array(cm.s_steps), _cache={})
+                              options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
     return out, ""
 
 

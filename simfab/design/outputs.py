@@ -152,12 +152,13 @@ def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, 
     if fem.dim == 2:
         comp["thickness"] = float(fem.thickness)
     cfg["compliant"] = comp
-    # the insertion the optimizer simulated: same path length and steps (the default L_max would
-    # follow the new shape's farthest point)
-    base = res.problem.base
+    # the insertion options the optimizer simulated with (command-line overrides included)
+    opts = res.problem.base.options
     simc = dict(cfg.get("simulation", {}))
-    simc.pop("h_in", None)
-    simc.update({"L_max": float(base.s_steps[-1]), "steps": int(len(base.s_steps) - 1)})
+    for k in ("steps", "h_in", "L_max"):
+        simc.pop(k, None)
+        if getattr(opts, k) is not None:
+            simc[k] = getattr(opts, k)
     cfg["simulation"] = simc
     tgt = res.problem.target
     if tgt is not None:  # the optimized scene carries its own copy of the target profile

@@ -16,7 +16,7 @@ STEPS = 12  # a coarse insertion keeps the loop fast; the physics is the bundled
 def scene():
     from simfab.coupling.scene import load_coupling_scene
 
-    return load_coupling_scene("cclamp2d", overrides={"simulation": {"steps": STEPS}})
+    return load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": STEPS}})
 
 
 def test_element_quality():
@@ -59,8 +59,8 @@ def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypat
 
 
 def test_small_design_problem_meets_every_constraint(scene):
-    """The bundled C-clamp exceeds PLA's 60 MPa yield stress; ask for a tight grip with an
-    insertion force <= 12 N and no yielding, and check by re-simulating the optimized shape."""
+    """The building block's socket exceeds PLA's 60 MPa yield stress; ask for a tight grip with
+    an insertion force <= 12 N and no yielding, and check by re-simulating the optimized shape."""
     from simfab.coupling.simulate import simulate
     from simfab.design.optimize import candidate_model, profile_figures
 
@@ -87,7 +87,7 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
     import subprocess, sys
 
     out = tmp_path / "o"
-    r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "cclamp2d", "--iterations", "4",
+    r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "block2d_tight", "--iterations", "4",
                         "--steps", "8", "--handles", "3", "--placement", "spatial", "--revolve-axis", "y",
                         "--revolve-offset", "-0.02", "--out", str(out), "--json"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
@@ -106,7 +106,8 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
                          str(tmp_path / "sim"), "--json"], capture_output=True, text=True)
     assert r2.returncode == 0, r2.stderr
     d = json.loads(r2.stdout)
-    c = s["constraints"]
-    assert np.isclose(d["max_von_mises"], c["von_mises"]["value"], rtol=1e-9)
-    assert np.isclose(d["F_in"], c["insertion_force"]["value"], rtol=1e-9)
-    assert np.isclose(d["coupling_ratio"], c["coupling_ratio"]["value"], rtol=1e-9)
+    p = s["profile"]
+    assert np.isclose(d["max_von_mises"], p["max_von_mises_Pa"], rtol=1e-9)
+    assert np.isclose(d["F_in"], p["F_in_N"], rtol=1e-9)
+    assert np.isclose(d["coupling_ratio"], p["coupling_ratio_pct"], rtol=1e-9)
+    assert d["category"] == p["category"]
