@@ -1,6 +1,6 @@
 """Laser-cut export of a flat pattern: closed outlines (SVG and DXF, millimetres).
 
-Geometry: every beam half and spring arc is a centre-line offset by half the beam width
+Geometry: every beam half and spring arc is a centre-line offset by half its width
 (flat caps at the gaps, round joins), united into closed outlines (shapely); each outline
 ring (outer boundary and holes) is one closed polyline on the **cut** layer. The inserts (one
 common size: a square plate of half-side r + beam_width, so the clamped beam ends rest on
@@ -44,10 +44,11 @@ def layout(pat, *, arc_points: int = 12) -> CutLayout:
     import shapely
 
     w = pat.config.beam_width * MM
-    lines = [shapely.LineString(np.array([a, b]) * MM) for _, _, a, b in pat.beam_halves()]
-    lines += [shapely.LineString(pts * MM) for *_, pts in pat.spring_curves(arc_points)]
-    beams = shapely.unary_union([ln.buffer(0.5 * w, cap_style="flat", join_style="round", quad_segs=4)
-                                 for ln in lines])
+    ws = pat.config.spring_width * MM
+    lines = [(shapely.LineString(np.array([a, b]) * MM), w) for _, _, a, b in pat.beam_halves()]
+    lines += [(shapely.LineString(pts * MM), ws) for *_, pts in pat.spring_curves(arc_points)]
+    beams = shapely.unary_union([ln.buffer(0.5 * wd, cap_style="flat", join_style="round", quad_segs=4)
+                                 for ln, wd in lines])
     # junctions: a round pad where beams and springs meet (midpoints, boundary vertices)
     pads = [shapely.Point(p * MM).buffer(0.5 * w, quad_segs=4) for p in pat.midpoints()]
     pads += [shapely.Point(pat.P[v] * MM).buffer(0.5 * w, quad_segs=4) for v in np.flatnonzero(~pat.interior)]

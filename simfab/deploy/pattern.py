@@ -54,7 +54,8 @@ class PatternConfig:
 
     spacing: grid spacing h; beam_width (in plane) and beam_thickness (sheet); insert_half_size
     r: distance from an insert's centre to where it clamps the beams (one size for all
-    inserts); spring_bulge [-]: Bezier handle pull towards the quad centre; min_gap, min_beam:
+    inserts); spring_bulge [-]: Bezier handle pull towards the quad centre; spring_width: in-plane
+    width of the spring arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:
     achievable-gap limits (see module doc); degenerate_angle_deg [deg]: interior angle above
     which a boundary quad gets no spring.
     """
@@ -64,6 +65,7 @@ class PatternConfig:
     beam_thickness: float = 0.001
     insert_half_size: float = 0.005
     spring_bulge: float = 0.5
+    spring_width: float = 0.0015
     min_gap: float = 0.0015
     min_beam: float = 0.004
     degenerate_angle_deg: float = 160.0
