@@ -41,8 +41,10 @@ def add_args(p) -> None:
     p.add_argument("--scene", default=None, help="unit-cell MJCF scene (default scenes/deploy/unit_cell.xml)")
     p.add_argument("--insert", nargs="+", metavar="BODY", help="insert bodies to deploy (default: all 'insert*' bodies)")
     p.add_argument("--increments", type=int, default=None, help="quasi-static increments (default: scene's cell_increments)")
-    p.add_argument("--mjcf-rods", choices=["capsules", "flexcomp"], default="capsules",
-                   help="rods in the deployed MJCF: static capsule chains (default) or MuJoCo 1D flexcomp cables")
+    p.add_argument("--mjcf-rods", choices=["capsules", "chain", "flexcomp"], default="capsules",
+                   help="rods in the deployed MJCF: static capsule chains (default), 'chain': a scene MuJoCo "
+                        "simulates (flat rest state, hinge springs, free insert welded to the rods, key 'deployed'), "
+                        "or inextensible MuJoCo 1D flexcomp cables")
 
 
 def run(args) -> dict:
