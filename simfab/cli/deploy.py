@@ -191,11 +191,21 @@ def run_cell(args) -> dict:
 
 
 def demo(ctx) -> dict:
-    """The bundled unit cell with its larger and smaller insert (about 10 s)."""
+    """The bundled unit cell with its larger and smaller insert, and the dome surface scene
+    (flattening, laser-cut pattern, deployment, deviation, simulatable MJCF; the MuJoCo stepping
+    check is left to ``simfab deploy surface dome``, it takes minutes)."""
     import argparse
 
     args = argparse.Namespace(out=ctx.out, seed=ctx.seed, device=ctx.device, quiet=ctx.quiet, json=False,
-                              scene=None, insert=None, increments=None, mjcf_rods="capsules")
+                              action=None, target=None, scene=None, insert=None, increments=None, mjcf_rods="capsules")
     res = run(args)
-    return dict(out=ctx.out, **{k: dict(kind=v["kind"], gaussian_curvature=v["gaussian_curvature"], stable=v["stable"],
-                                        usd=v["outputs"]["usd"]) for k, v in res["inserts"].items()})
+    out = dict(out=ctx.out, **{k: dict(kind=v["kind"], gaussian_curvature=v["gaussian_curvature"], stable=v["stable"],
+                                       usd=v["outputs"]["usd"]) for k, v in res["inserts"].items()})
+    sargs = argparse.Namespace(out=os.path.join(ctx.out, "surface_dome"), seed=ctx.seed, device=ctx.device,
+                               quiet=ctx.quiet, json=False, action="surface", target="dome", units=None, spacing=None,
+                               beam_width=None, beam_thickness=None, insert_size=None, young=None, no_mujoco_check=True)
+    sres = run(sargs)
+    out["surface_dome"] = dict(kind=sres["deployment"]["kind"], rms=sres["deviation"]["rms"],
+                               hausdorff=sres["deviation"]["hausdorff"], inserts=sres["inserts"],
+                               svg=sres["outputs"]["svg"], mjcf=sres["outputs"]["mjcf"])
+    return out

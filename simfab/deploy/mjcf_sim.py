@@ -45,7 +45,9 @@ class SimConfig:
     stability_seconds [s]: simulated time of the stability check; relax_seconds [s]: damped
     relaxation from the deployed key for the comparison with simfab; impedance [-]: weld solimp;
     body_inertia_factor [-]: free bodies' rotational inertia / the stiffest hinge's armature;
-    solver: MuJoCo constraint solver (PGS is the fastest per step on these weld-heavy scenes).
+    solver, iterations: MuJoCo constraint solver and its iterations per step (PGS with 20 warm-started
+    iterations is 4x faster per step than Newton on these weld-heavy scenes; the welds converge
+    over the steps of a quasi-static motion).
     """
 
     timestep: float = 2e-3
@@ -58,6 +60,7 @@ class SimConfig:
     impedance: float = 0.999
     body_inertia_factor: float = 10.0
     solver: str = "PGS"
+    iterations: int = 20
 
     def __post_init__(self):
         from simfab.errors import InputError
@@ -106,6 +109,7 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
     b.add(b.root.find("option"), "flag", energy="enable")
     b.root.find("option").set("integrator", "implicitfast")
     b.root.find("option").set("solver", cfg.solver)
+    b.root.find("option").set("iterations", str(int(cfg.iterations)))
     body_geoms = body_geoms or {}
     Rf, Rd = _frames(flat), _frames(deployed)
     # rotational inertia of the free bodies: at least that of the stiffest hinge's armature x
