@@ -86,9 +86,12 @@ def test_mujoco_scene_opens_on_key_and_is_stable(tiny_saddle, tmp_path):
     st = dep.final
     for i, name in enumerate(net.model.body_names):
         assert np.allclose(d.body(name).xpos, st.body_pos[i], atol=1e-9)
-    err = max(np.linalg.norm(d.body(f"{r.name}_{k}").xpos - st.x[r.nodes[k]])
-              for r in net.model.rods for k in range(len(r.edges)))
-    assert err < 1e-2 * pat.config.beam_width
+    # MuJoCo's links have the rest lengths: node k is off by at most the rod's accumulated stretch
+    stretch = np.abs(np.linalg.norm(np.diff(st.x[net.model.edges], axis=1)[:, 0], axis=1) - net.model.rest_len)
+    for r in net.model.rods:
+        for k in range(len(r.edges)):
+            err = np.linalg.norm(d.body(f"{r.name}_{k}").xpos - st.x[r.nodes[k]])
+            assert err <= np.sum(stretch[r.edges[:k]]) + 1e-9
     # the hinge springs' energy at the key matches simfab's bending + twisting energy: the two
     # discretizations differ by phi vs 2 tan(phi/2) per hinge (measured 4-6 % on deployed patterns)
     ev = StaticSolver(net.model).evaluator
