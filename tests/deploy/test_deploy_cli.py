@@ -68,7 +68,10 @@ def test_deploy_cli_small_insert(tmp_path, capsys, rods):
         for _ in range(int(round(2.0 / m.opt.timestep))):
             mujoco.mj_step(m, d)
         assert np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))
-        assert np.max(np.linalg.norm(d.xpos - x0, axis=1)) < 0.01  # [m]; the cell is 80 mm wide
+        from simfab.deploy.mjcf_sim import aligned_drift
+
+        # the scene floats freely: shape change after the best rigid alignment [m]; the cell is 80 mm wide
+        assert aligned_drift(x0[1:], d.xpos[1:]) < 0.01
     from pxr import Usd
 
     from pxr import UsdGeom
