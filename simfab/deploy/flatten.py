@@ -152,8 +152,9 @@ def flatten(V, F) -> Flattening:
     angle_sum = np.bincount(F.ravel(), weights=ang.ravel(), minlength=n)
     omega = 2.0 * np.pi - angle_sum[interior]
     kgeo = np.pi - angle_sum[loop]
-    A_II = A[interior][:, interior]
-    A_IB = A[interior][:, loop]
+    A_I = A[interior]  # rows once; A is symmetric, so A_BI = A_IB^T
+    A_II = A_I[:, interior]
+    A_IB = A_I[:, loop].tocsr()
     t1 = time.perf_counter()
     solver = CholeskyFactor(A_II) if len(interior) else None
     # 1. flat metric, u_B = 0:  A_II u_I = -Omega_I
@@ -162,7 +163,7 @@ def flatten(V, F) -> Flattening:
         u[interior] = solver.solve(-omega)
     t2 = time.perf_counter()
     # 2. Dirichlet-to-Neumann: boundary curvature of the flat metric
-    k_new = kgeo + (A[loop][:, interior] @ u[interior] if len(interior) else 0.0)
+    k_new = kgeo + (A_IB.T @ u[interior] if len(interior) else 0.0)
     # 3. boundary polygon with the original lengths (u_B = 0), closed by the smallest angle change
     Vb = V[loop]
     lengths = np.linalg.norm(np.roll(Vb, -1, axis=0) - Vb, axis=1)  # edge loop[i] -> loop[i+1]
@@ -196,7 +197,8 @@ class CholeskyFactor:
 
         L = sp.tril(A, format="coo")
         self.n = A.shape[0]
-        M = cvxopt.spmatrix(L.data.astype(np.float64), L.row.astype(np.int64), L.col.astype(np.int64), (self.n, self.n))
+        M = cvxopt.spmatrix(cvxopt.matrix(L.data.astype(np.float64)), cvxopt.matrix(L.row.astype(np.int64)),
+                            cvxopt.matrix(L.col.astype(np.int64)), (self.n, self.n))
         cholmod.options["supernodal"] = 2
         try:
             self._F = cholmod.symbolic(M)

@@ -150,3 +150,17 @@ def test_scene_rejects_unknown_fields(tmp_path):
     p.write_text('[target]\nkind = "torus"\n')
     with pytest.raises(InputError, match="torus"):
         scene.load_scene(p)
+
+
+def test_mesh_target_in_millimetres(tmp_path):
+    import trimesh
+
+    from simfab.deploy import scene
+
+    t = surface.spherical_cap(0.1, np.radians(40), 6)
+    trimesh.Trimesh(t.V * 1e3, t.F, process=False).export(tmp_path / "cap.obj")
+    sc = scene.load_scene(tmp_path / "cap.obj", units="mm")
+    assert np.allclose(sc.target.V, t.V, atol=1e-9) and len(sc.target.F) == len(t.F)
+    (tmp_path / "s.toml").write_text('[target]\nmesh = "cap.obj"\nunits = "mm"\n[pattern]\nspacing = 0.02\n')
+    sc = scene.load_scene(tmp_path / "s.toml")
+    assert sc.pattern.spacing == 0.02 and np.allclose(sc.target.V, t.V, atol=1e-9)
