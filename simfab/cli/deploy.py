@@ -8,8 +8,8 @@ or a bundled name: dome, saddle, mixed) or a disk-topology mesh (OBJ/STL/PLY, --
 flattens the target (BFF, u = 0 on the boundary), lays out the beam / spring / insert pattern
 with gaps from the area distortion, writes the laser-cut SVG + DXF (mm), deploys the pattern
 (rods + free inserts), compares it with the target after the best rigid alignment, and writes a
-MuJoCo scene that simulates (flat rest state, deployed keyframe), checked for stability and
-against simfab's equilibrium. Outputs in --out: pattern.svg, pattern.dxf, flattening.png,
+MuJoCo scene that simulates (it opens on the deployed state; the flat pattern is the springs'
+rest state and keyframe 'flat'), checked for stability and against simfab's equilibrium. Outputs in --out: pattern.svg, pattern.dxf, flattening.png,
 pattern.png, deviation.png, deploy.usda, deployed.xml, surface.json.
 
 Unit cell: for every insert body of the scene (default ``scenes/deploy/unit_cell.xml``) the cell's spokes
@@ -43,7 +43,8 @@ def add_args(p) -> None:
     p.add_argument("--increments", type=int, default=None, help="quasi-static increments (default: scene's cell_increments)")
     p.add_argument("--mjcf-rods", choices=["capsules", "chain", "flexcomp"], default="capsules",
                    help="rods in the deployed MJCF: static capsule chains (default), 'chain': a scene MuJoCo "
-                        "simulates (flat rest state, hinge springs, free insert welded to the rods, key 'deployed'), "
+                        "simulates (opens on the deployed state; flat rest state of the hinge springs; free insert "
+                        "welded to the rods), "
                         "or inextensible MuJoCo 1D flexcomp cables")
 
 

@@ -18,9 +18,9 @@
   equality="true">``, inextensible; stable at ``FLEX_TIMESTEP``), carries no bending stiffness
   and has no gravity: a geometry that can be probed in the viewer. Stepping 2 s stays finite
   (tests/deploy/test_deploy_cli.py). ``rods="chain"`` writes the mechanically faithful scene of
-  :mod:`simfab.deploy.mjcf_sim` instead (flat rest state, hinge springs with the rods' bending
-  and twist stiffness, the insert and junctions as free bodies welded to the rod ends, the
-  deployed state as keyframe ``deployed``).
+  :mod:`simfab.deploy.mjcf_sim` instead (opens on the deployed state; hinge springs with the
+  rods' bending and twist stiffness at rest in the flat state; the insert and junctions as free
+  bodies welded to the rod ends).
 - PNG: the deployed MJCF rendered offscreen (simfab.io.render).
 """
 

@@ -14,11 +14,13 @@ Model (built from a :class:`simfab.rods.model.RodModel`, its flat state and a de
 - the rod's last link is welded (``<equality weld>``) to the body its end is clamped to, with the
   relative pose of the *deployed* state (the inserts' clamp offsets are those after insertion).
 
-The body tree is defined in the **flat** configuration: ``qpos0`` is the flat, stress-free
-cut pattern (hinge springs at rest; the welds at the inserts are violated by r - g: the inserts
-are not yet pushed in). The deployed simfab state is the keyframe ``deployed`` (free-body poses
-and hinge angles from the link frames, intrinsic x-y-z angles of R_{k-1}^T R_k relative to the
-flat relation).
+The body tree is defined in simfab's **deployed** state, so ``qpos0`` (what the viewer opens
+on) is the deployed state, also stored as keyframe ``deployed``; the **flat**, stress-free cut
+pattern is the springs' rest configuration: every hinge's ``springref`` is its angle in the
+flat state (intrinsic x-y-z angles of the flat relation R_{k-1}^T R_k relative to the deployed
+one), and keyframe ``flat`` holds the flat pattern (free bodies at their flat poses, hinges at
+their springref; the welds at the inserts are then violated by r - g: the inserts are not yet
+pushed in).
 
 Stability (explicit spring forces, implicit damping with ``implicitfast``): every hinge gets an
 armature ``a = k (dt / omega_dt)^2`` so that its own mode has omega dt <= ``omega_dt`` whatever the
@@ -119,8 +121,7 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
     mb = {}
     key = {}  # joint name -> qpos values of the deployed key
     for i, bn in enumerate(model.body_names):
-        R0 = flat.body_rot[i]
-        el = b.body(bn, pos=flat.body_pos[i], quat=_quat(R0))
+        el = b.body(bn, pos=deployed.body_pos[i], quat=_quat(deployed.body_rot[i]))
         if not model.body_driven[i]:
             b.add(el, "freejoint", name=f"{bn}_free")
         g = body_geoms.get(bn)
@@ -140,7 +141,7 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
         mb[i] = el
     for i, bn in enumerate(model.body_names):
         if not model.body_driven[i]:
-            key[f"{bn}_free"] = np.concatenate([deployed.body_pos[i], _quat(deployed.body_rot[i])])
+            key[f"{bn}_free"] = np.concatenate([flat.body_pos[i], _quat(flat.body_rot[i])])
     for r in model.rods:
         e0, e1 = int(r.edges[0]), int(r.edges[-1])
         sb, eb = int(model.edge_body[e0]), int(model.edge_body[e1])
@@ -163,15 +164,15 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
             B1, B2 = model.bend_stiff[h]
             GJ = model.twist_stiff[h]
             lv = model.vor_len[h]
-            Q = Rf[ea].T @ Rf[eb_]  # flat relation of link k to link k-1
+            Q = Rd[ea].T @ Rd[eb_]  # deployed relation of link k to link k-1 (qpos0)
             child = b.add(parent, "body", name=f"{r.name}_{k}", pos=[L[k - 1], 0.0, 0.0], quat=_quat(Q))
-            J = Q.T @ (Rd[ea].T @ Rd[eb_])  # joint rotation in the deployed state
+            J = Q.T @ (Rf[ea].T @ Rf[eb_])  # joint rotation of the flat state = the springs' rest
             ang = Rotation.from_matrix(J).as_euler("XYZ")
             for ax, axis, kk, a in (("x", "1 0 0", GJ / lv, ang[0]), ("y", "0 1 0", B2 / lv, ang[1]),
                                     ("z", "0 0 1", B1 / lv, ang[2])):
                 arm = kk * (dt / cfg.omega_dt) ** 2
                 jn = f"{r.name}_{k}_{ax}"
-                b.add(child, "joint", name=jn, type="hinge", axis=axis, stiffness=kk, armature=arm,
+                b.add(child, "joint", name=jn, type="hinge", axis=axis, stiffness=kk, springref=a, armature=arm,
                       damping=cfg.damping_ratio * 2.0 * np.sqrt(kk * arm))
                 key[jn] = np.array([a])
             _link_geom(b, child, L[k], w, t, density)
@@ -194,9 +195,9 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
         j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, jn)
         a = m.jnt_qposadr[j]
         qpos[a:a + len(v)] = v
-    b.key("deployed", qpos=qpos)
-    b.key("flat", qpos=np.array(m.qpos0))
-    scene.key_qpos = qpos
+    b.key("deployed", qpos=np.array(m.qpos0))
+    b.key("flat", qpos=qpos)
+    scene.key_qpos = np.array(m.qpos0)
     return scene
 
 

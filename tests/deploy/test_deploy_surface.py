@@ -76,12 +76,19 @@ def test_mujoco_scene_opens_on_key_and_is_stable(tiny_saddle, tmp_path):
     m = mujoco.MjModel.from_xml_path(str(path))
     assert m.nkey == 2 and m.nv > 6 * net.model.n_bodies and m.neq == len(net.model.rods)
     d = mujoco.MjData(m)
-    # qpos0 is the flat cut pattern: every body where the flat state has it
+    # key 'flat' is the cut pattern (the springs' rest): every body and rod node where the flat
+    # state has it
+    mujoco.mj_resetDataKeyframe(m, d, mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "flat"))
     mujoco.mj_forward(m, d)
     for i, name in enumerate(net.model.body_names):
-        assert np.allclose(d.body(name).xpos, net.state.body_pos[i], atol=1e-12)
-    # the key is simfab's deployed state: bodies exactly, rod nodes to the rods' stretch (EA finite)
-    mujoco.mj_resetDataKeyframe(m, d, mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "deployed"))
+        assert np.allclose(d.body(name).xpos, net.state.body_pos[i], atol=1e-9)
+    r = net.model.rods[-1]  # a spring: clamped at junctions, whose offsets do not change
+    for k in range(len(r.edges)):
+        assert np.allclose(d.body(f"{r.name}_{k}").xpos, net.state.x[r.nodes[k]], atol=1e-9)
+    # qpos0 (what the viewer opens on) and key 'deployed' are simfab's deployed state: bodies
+    # exactly, rod nodes to the rods' stretch (EA finite)
+    assert np.allclose(m.key_qpos[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "deployed")], m.qpos0, atol=1e-8)
+    mujoco.mj_resetData(m, d)
     mujoco.mj_forward(m, d)
     st = dep.final
     for i, name in enumerate(net.model.body_names):
