@@ -105,9 +105,16 @@ def test_mujoco_scene_opens_on_key_and_is_stable(tiny_saddle, tmp_path):
     ev(st, False, False)
     e_simfab = ev.parts["bend"] + ev.parts["twist"]
     assert abs(d.energy[0] - e_simfab) < 0.1 * e_simfab
-    # stepping 2 s from the key stays finite and bounded
-    stab, _ = mjcf_sim.step_from_key(m, 2.0)
-    assert stab.finite and stab.max_drift < 0.5 * np.ptp(pat.P[:, 0])
+    # stepping 2 s from the key stays finite, and the damped motion relaxes to MuJoCo's own
+    # equilibrium within a few percent of simfab's (two rod models, one equilibrium; measured
+    # 0.5 % of the out-of-plane height), keeping the elastic energy (measured -3 %)
+    e_key = d.energy[0]
+    stab, d = mjcf_sim.step_from_key(m, 2.0)
+    assert stab.finite and stab.final_kinetic < 1e-3 * e_key
+    X = np.array([d.body(n).xpos for n in net.model.body_names])
+    height = np.ptp(st.body_pos[:, 2])
+    assert mjcf_sim.aligned_drift(st.body_pos, X) < 0.03 * height
+    assert abs(d.energy[0] - e_key) < 0.1 * e_key
 
 
 def test_cli_surface_writes_everything(tmp_path, capsys):
@@ -117,7 +124,7 @@ def test_cli_surface_writes_everything(tmp_path, capsys):
     scene = tmp_path / "tiny.toml"
     scene.write_text('[target]\nkind = "saddle"\ndisk_radius = 0.06\ncurvature_radius = 0.1\nrings = 8\n'
                      '[pattern]\nspacing = 0.03\n[deploy]\nincrements = 4\nperturbation = 0.5\n'
-                     '[mujoco]\nstability_seconds = 0.1\nrelax_seconds = 0.1\n')
+                     '[mujoco]\nstability_seconds = 0.1\n')
     out = tmp_path / "o"
     assert main(["deploy", "surface", str(scene), "--out", str(out), "--json", "--quiet"]) == 0
     res = json.loads(capsys.readouterr().out)
