@@ -127,7 +127,8 @@ def format_text(summary: dict) -> str:
             f"quadric fit K {dp['quadric_gaussian_curvature']:.4g} 1/m^2), "
             f"stable: {dp['stable']}",
             f"deviation         RMS {dv['rms'] * 100:.3g} % ({dv['rms_mm']:.3g} mm), Hausdorff {dv['hausdorff'] * 100:.3g} % "
-            f"({dv['hausdorff_mm']:.3g} mm) of D = {dv['diameter_mm']:.0f} mm"]
+            f"({dv['hausdorff_mm']:.3g} mm) of D = {dv['diameter_mm']:.0f} mm; height {dv['deployed_height_mm']:.3g} mm "
+            f"(target {dv['target_height_mm']:.3g} mm)"]
     mj = s.get("mujoco") or {}
     if mj:
         st, rl = mj["stability"], mj["relaxation"]

@@ -139,6 +139,11 @@ def mujoco_check_run(net, dep, pat, scene):
     return sim, check
 
 
+def out_of_plane_extent(X: np.ndarray) -> float:
+    """Extent [m] of points (n,3) along the normal of their best-fit plane."""
+    return float(np.ptp((X - X.mean(axis=0)) @ np.linalg.svd(X - X.mean(axis=0))[2][2]))
+
+
 def summary(res: SurfaceResult) -> dict:
     """The JSON summary (units in the keys)."""
     from simfab.deploy import lasercut
@@ -162,7 +167,9 @@ def summary(res: SurfaceResult) -> dict:
         deployment=dict(stable=res.deployment.stable, increments=len(res.deployment.iterations),
                         newton_iterations=res.deployment.iterations, energy_J=res.deployment.energy, **res.shape),
         deviation=dict(rms=dv.rms, hausdorff=dv.hausdorff, rms_mm=dv.rms_m * 1e3, hausdorff_mm=dv.hausdorff_m * 1e3,
-                       diameter_mm=dv.diameter * 1e3),
+                       diameter_mm=dv.diameter * 1e3,
+                       deployed_height_mm=out_of_plane_extent(dv.aligned) * 1e3,
+                       target_height_mm=out_of_plane_extent(res.target_points) * 1e3),
         mujoco=res.sim_check,
         seconds=dict(res.seconds, total=float(sum(res.seconds.values()))),
     )
