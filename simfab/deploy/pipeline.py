@@ -9,7 +9,8 @@ rigid alignment).
 
 Deployed shape descriptors: the total angle defect of the deployed quad mesh's interior
 vertices (the inserts) [rad], i.e. its integrated Gaussian curvature (discrete Gauss-Bonnet:
-> 0 dome, < 0 saddle; this sets ``kind``), and the quadric z = a x^2 + b x y + c y^2 + (linear,
+> 0 dome, < 0 saddle), the sign of each insert's angle defect (``kind``: dome / saddle when 90 %
+of them are positive / negative, else mixed), and the quadric z = a x^2 + b x y + c y^2 + (linear,
 constant) fitted to the deployed vertices in their best-fit plane, K_fit = 4 a c - b^2 [1/m^2]
 (the global shape; a deployment whose curvature sits in local bumps at the inserts can have
 total angle defect and K_fit of opposite signs).
@@ -53,6 +54,15 @@ def quadric_curvature(X: np.ndarray) -> float:
     return float(4 * a * cc - b * b)
 
 
+def _kind(K: np.ndarray) -> str:
+    """"dome" / "saddle" when at least 90 % of the inserts' angle defects are positive / negative,
+    else "mixed"."""
+    if len(K) == 0:
+        return "flat"
+    pos = float(np.mean(K > 0))
+    return "dome" if pos >= 0.9 else "saddle" if pos <= 0.1 else "mixed"
+
+
 def shape_descriptors(pat, X: np.ndarray) -> dict:
     from simfab.deploy.network import discrete_gaussian_curvature
 
@@ -60,7 +70,7 @@ def shape_descriptors(pat, X: np.ndarray) -> dict:
     kfit = quadric_curvature(X)
     return dict(quadric_gaussian_curvature=kfit, total_angle_defect=float(np.nansum(K)),
                 curvature_sign_at_inserts=dict(positive=int(np.sum(K > 0)), negative=int(np.sum(K < 0))),
-                kind="dome" if np.nansum(K) > 0 else "saddle")
+                kind=_kind(K[pat.interior]))
 
 
 def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = True) -> SurfaceResult:
