@@ -71,13 +71,13 @@ def test_layout_structure(laid_out):
         assert np.isclose(np.linalg.norm(end - pat.P[v]), pat.gap[v], atol=1e-12)
 
 
-def test_svg_and_dxf_reread_same_outlines_mm(laid_out, tmp_path):
+def test_svg_and_dxf_reread_same_outlines_mm(tmp_path):
     import ezdxf
     from svgelements import SVG, Path
 
-    name, _, _, pat = laid_out
-    if name != "dome":
-        pytest.skip("one scene suffices for the file formats")
+    sc = scene.load_scene(scene.bundled_path("dome"))
+    f = flatten.flatten(sc.target.V, sc.target.F)
+    pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     cut = lasercut.layout(pat)
     svg, dxf = tmp_path / "p.svg", tmp_path / "p.dxf"
     lasercut.write_svg(svg, cut)
