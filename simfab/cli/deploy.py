@@ -1,6 +1,19 @@
-"""simfab deploy: deploy a flat beam unit cell with rigid inserts (discrete elastic rods + MuJoCo inserts).
+"""simfab deploy: deploy flat beam patterns with rigid inserts (discrete elastic rods + MuJoCo inserts).
 
-For every insert body of the scene (default scenes/deploy/unit_cell.xml) the cell's spokes
+    simfab deploy                      # the unit cell (scenes/deploy/unit_cell.xml)
+    simfab deploy surface TARGET       # target surface -> laser-cut pattern -> deployment
+
+surface TARGET: TARGET is a scene TOML (scenes/deploy/dome.toml, saddle.toml, mixed.toml,
+or a bundled name: dome, saddle, mixed) or a disk-topology mesh (OBJ/STL/PLY, --units). It
+flattens the target (BFF, u = 0 on the boundary), lays out the beam / spring / insert pattern
+with gaps from the area distortion, writes the laser-cut SVG + DXF (mm), deploys the pattern
+(rods + free inserts), compares it with the target after the best rigid alignment, and writes a
+MuJoCo scene that simulates (it opens on the deployed state; the flat pattern is the springs'
+rest state and keyframe 'flat'), checked for stability and against simfab's equilibrium.
+Outputs in --out: pattern.svg, pattern.dxf, flattening.png, pattern.png, deviation.png,
+deploy.usda, deployed.xml, surface.json.
+
+Unit cell: for every insert body of the scene (default scenes/deploy/unit_cell.xml) the cell's spokes
 are drawn onto the insert in quasi-static increments; writes per insert a USD timeline (rods as
 curves, the insert as an animated rigid mesh, one time code per increment), the deployed MJCF
 (opens in python -m mujoco.viewer) and a PNG preview, and reports the sign of the discrete
@@ -16,19 +29,125 @@ from __future__ import annotations
 
 import os
 
-HELP = "deploy a flat beam cell with rigid inserts; report dome vs saddle (USD + MJCF + PNG)"
+HELP = "deploy flat beam patterns with rigid inserts: the unit cell, or 'surface TARGET' (target -> laser-cut pattern)"
 DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 
 
 def add_args(p) -> None:
+    p.add_argument("action", nargs="?", choices=["surface"], help="'surface': deploy a pattern onto a target surface")
+    p.add_argument("target", nargs="?", help="surface: scene TOML, bundled name (dome, saddle, mixed) or mesh file")
+    g = p.add_argument_group("surface options (override the scene's)")
+    g.add_argument("--units", choices=["m", "mm", "cm"], default=None, help="units of a target mesh file (default m)")
+    g.add_argument("--spacing", type=float, help="pattern grid spacing [m]")
+    g.add_argument("--beam-width", type=float, help="beam width in the sheet [m]")
+    g.add_argument("--beam-thickness", type=float, help="sheet thickness [m]")
+    g.add_argument("--insert-size", type=float, help="insert half-size r (clamp distance from its centre) [m]")
+    g.add_argument("--young", type=float, help="Young's modulus of the sheet [Pa]")
+    g.add_argument("--no-mujoco-check", action="store_true", help="skip stepping the MuJoCo scene (stability / relaxation)")
     p.add_argument("--scene", default=None, help="unit-cell MJCF scene (default scenes/deploy/unit_cell.xml)")
     p.add_argument("--insert", nargs="+", metavar="BODY", help="insert bodies to deploy (default: all 'insert*' bodies)")
     p.add_argument("--increments", type=int, default=None, help="quasi-static increments (default: scene's cell_increments)")
-    p.add_argument("--mjcf-rods", choices=["capsules", "flexcomp"], default="capsules",
-                   help="rods in the deployed MJCF: static capsule chains (default) or MuJoCo 1D flexcomp cables")
+    p.add_argument("--mjcf-rods", choices=["capsules", "chain", "flexcomp"], default="capsules",
+                   help="rods in the deployed MJCF: static capsule chains (default), 'chain': a scene MuJoCo "
+                        "simulates (opens on the deployed state; flat rest state of the hinge springs; free insert "
+                        "welded to the rods), "
+                        "or inextensible MuJoCo 1D flexcomp cables")
 
 
 def run(args) -> dict:
+    if getattr(args, "action", None) == "surface":
+        return run_surface(args)
+    if getattr(args, "target", None):
+        from simfab.errors import InputError
+
+        raise InputError(f"unexpected argument {args.target!r} (did you mean 'simfab deploy surface TARGET'?)")
+    return run_cell(args)
+
+
+def run_surface(args) -> dict:
+    from simfab.deploy import pipeline, scene as sc
+    from simfab.deploy import surface_outputs as so
+    from simfab.deploy.lasercut import write_dxf, write_svg
+    from simfab.errors import InputError
+    from simfab.io.atomic import atomic_paths, write_json
+
+    if not args.target:
+        raise InputError("needs a TARGET: scene TOML, bundled name (dome, saddle, mixed) or mesh file",
+                         where="simfab deploy surface")
+    target = sc.bundled_path(args.target) if args.target in sc.BUNDLED and not os.path.exists(args.target) else args.target
+    ov = {"pattern": {}, "material": {}}
+    for flag, table, field in (("spacing", "pattern", "spacing"), ("beam_width", "pattern", "beam_width"),
+                               ("beam_thickness", "pattern", "beam_thickness"),
+                               ("insert_size", "pattern", "insert_half_size"), ("young", "material", "young")):
+        v = getattr(args, flag, None)
+        if v is not None:
+            ov[table][field] = v
+    scene = sc.load_scene(target, units=args.units, overrides=ov)
+    out = os.path.abspath(args.out)
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise InputError("output location exists and is not a folder", where=out)
+    import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
+    from simfab._warp import device as _device
+
+    res = pipeline.run(scene, device=_device(args.device), quiet=args.quiet,
+                       mujoco_check=not getattr(args, "no_mujoco_check", False))
+    names = dict(svg="pattern.svg", dxf="pattern.dxf", flat_png="flattening.png", pattern_png="pattern.png",
+                 deviation_png="deviation.png", usd="deploy.usda", mjcf="deployed.xml", json="surface.json")
+    paths = {k: os.path.join(out, v) for k, v in names.items()}
+    summary = pipeline.summary(res)
+    summary["outputs"] = paths
+    with atomic_paths(paths) as tmp:
+        write_svg(tmp["svg"], res.cut)
+        write_dxf(tmp["dxf"], res.cut)
+        so.write_flattening_png(tmp["flat_png"], res)
+        so.write_pattern_png(tmp["pattern_png"], res)
+        so.write_deviation_png(tmp["deviation_png"], res)
+        so.write_usd(tmp["usd"], res)
+        if res.sim is None:
+            from simfab.deploy import mjcf_sim
+
+            res.sim = mjcf_sim.build(res.network.model, res.network.state, res.deployment.final,
+                                     density=scene.deploy.density, cfg=scene.mujoco, name="deployed_surface",
+                                     body_geoms=pipeline.insert_geoms(res.pattern, res.network))
+        res.sim.builder.save(tmp["mjcf"])
+        write_json(tmp["json"], summary)
+    return summary
+
+
+def format_text(summary: dict) -> str:
+    """Compact table of a surface run (the unit-cell run prints key: value lines)."""
+    if "deviation" not in summary:
+        import json
+
+        return "\n".join(f"{k}: {json.dumps(v) if isinstance(v, (dict, list)) else v}" for k, v in summary.items())
+    s, dv, dp, lc = summary, summary["deviation"], summary["deployment"], summary["lasercut"]
+    rows = [f"target            {s['target']} ({s['vertices']} vertices)",
+            f"flattening        u in [{s['u_min']:.4g}, {s['u_max']:.4g}], area ratio in "
+            f"[{s['area_ratio_min']:.4g}, {s['area_ratio_max']:.4g}]",
+            f"pattern           {s['quads']} quads, {s['beams']} beams, {s['springs']} springs, {s['inserts']} inserts "
+            f"(r = {s['insert_half_size_mm']:.3g} mm, gaps {s['gap_min_mm']:.3g}..{s['gap_max_mm']:.3g} mm, "
+            f"{len(s['unreachable_gaps'])} unreachable)",
+            f"laser cut         {lc['parts']} parts, cut length {lc['cut_length_mm'] / 1e3:.4g} m, sheet "
+            f"{lc['sheet_mm'][0]:.0f} x {lc['sheet_mm'][1]:.0f} mm",
+            f"deployed          {dp['kind']} (total angle defect {dp['total_angle_defect']:.4g} rad, "
+            f"quadric fit K {dp['quadric_gaussian_curvature']:.4g} 1/m^2), "
+            f"stable: {dp['stable']}",
+            f"deviation         RMS {dv['rms'] * 100:.3g} % ({dv['rms_mm']:.3g} mm), Hausdorff {dv['hausdorff'] * 100:.3g} % "
+            f"({dv['hausdorff_mm']:.3g} mm) of D = {dv['diameter_mm']:.0f} mm; height {dv['deployed_height_mm']:.3g} mm "
+            f"(target {dv['target_height_mm']:.3g} mm)"]
+    mj = s.get("mujoco") or {}
+    if mj:
+        st, rl = mj["stability"], mj["relaxation"]
+        rows.append(f"MuJoCo            dt {mj['timestep']:.3g} s, {st['seconds']:.3g} s from the key: "
+                    f"{'finite' if st['finite'] else 'BLEW UP'}, max drift {st['max_drift_m'] * 1e3:.3g} mm; "
+                    f"relaxed vs simfab: RMS {rl['rms_m'] * 1e3:.3g} mm = {100 * (rl['rms_rel'] or 0):.3g} % of the "
+                    f"{rl['out_of_plane_extent_m'] * 1e3:.3g} mm height")
+    rows.append("seconds           " + ", ".join(f"{k} {v:.3g}" for k, v in s["seconds"].items()))
+    rows.append(f"outputs           {os.path.dirname(s['outputs']['json'])}/")
+    return "\n".join(rows)
+
+
+def run_cell(args) -> dict:
     import dataclasses
 
     from simfab.deploy import export, unitcell
@@ -80,11 +199,21 @@ def run(args) -> dict:
 
 
 def demo(ctx) -> dict:
-    """The bundled unit cell with its larger and smaller insert (about 10 s)."""
+    """The bundled unit cell with its larger and smaller insert, and the dome surface scene
+    (flattening, laser-cut pattern, deployment, deviation, simulatable MJCF; the MuJoCo stepping
+    check is left to ``simfab deploy surface dome``, it takes minutes)."""
     import argparse
 
     args = argparse.Namespace(out=ctx.out, seed=ctx.seed, device=ctx.device, quiet=ctx.quiet, json=False,
-                              scene=None, insert=None, increments=None, mjcf_rods="capsules")
+                              action=None, target=None, scene=None, insert=None, increments=None, mjcf_rods="capsules")
     res = run(args)
-    return dict(out=ctx.out, **{k: dict(kind=v["kind"], gaussian_curvature=v["gaussian_curvature"], stable=v["stable"],
-                                        usd=v["outputs"]["usd"]) for k, v in res["inserts"].items()})
+    out = dict(out=ctx.out, **{k: dict(kind=v["kind"], gaussian_curvature=v["gaussian_curvature"], stable=v["stable"],
+                                       usd=v["outputs"]["usd"]) for k, v in res["inserts"].items()})
+    sargs = argparse.Namespace(out=os.path.join(ctx.out, "surface_dome"), seed=ctx.seed, device=ctx.device,
+                               quiet=ctx.quiet, json=False, action="surface", target="dome", units=None, spacing=None,
+                               beam_width=None, beam_thickness=None, insert_size=None, young=None, no_mujoco_check=True)
+    sres = run(sargs)
+    out["surface_dome"] = dict(kind=sres["deployment"]["kind"], rms=sres["deviation"]["rms"],
+                               hausdorff=sres["deviation"]["hausdorff"], inserts=sres["inserts"],
+                               svg=sres["outputs"]["svg"], mjcf=sres["outputs"]["mjcf"])
+    return out

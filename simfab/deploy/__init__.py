@@ -5,4 +5,16 @@
   rigid-insert paths, critical load);
 - :mod:`simfab.deploy.unitcell`: the four-beam unit cell deployed by a larger / smaller insert;
 - :mod:`simfab.deploy.export`: USD timelines, MJCF of the deployed state, PNG previews.
+
+Inverse design from a target surface (``simfab deploy surface``), one stage per module:
+
+- :mod:`simfab.deploy.surface`: disk-topology targets (validation, procedural cap / saddle /
+  mixed / cylinder); :mod:`simfab.deploy.scene`: the scene TOML;
+- :mod:`simfab.deploy.flatten`: Boundary First Flattening (u = 0 on the boundary);
+- :mod:`simfab.deploy.pattern`: quad layout, beams, Bezier torsional springs, the gap rule;
+- :mod:`simfab.deploy.lasercut`: SVG / DXF export (mm);
+- :mod:`simfab.deploy.network`: the pattern as a rod network with free inserts, deployment;
+- :mod:`simfab.deploy.compare`: deviation from the target after the best rigid alignment;
+- :mod:`simfab.deploy.mjcf_sim`: a MuJoCo scene of a rod network that MuJoCo simulates;
+- :mod:`simfab.deploy.pipeline`, :mod:`simfab.deploy.surface_outputs`: the run and its files.
 """

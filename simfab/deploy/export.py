@@ -11,9 +11,16 @@
   the sheet thickness, and both end vertices pinned (the ends sit in junctions/inserts). Note
   that MuJoCo takes a flex's initial shape as its rest shape, so the cable is stress-free in
   MuJoCo: the file shows the deployed geometry and can be probed in the viewer, it does not
-  carry simfab's internal stresses. Thin stiff cables need a very small time step (the axial
-  mode of a 2.5 GPa, 4 mm^2 strip with 2.5 mm edges is near 1e6 rad/s), so the capsule form is
-  the default.
+  carry simfab's internal stresses. Stability: with ``<elasticity>`` of the strip's modulus the
+  cable blew up (NaN within 0.004 s at the default step; with mass scaling it still drifted by
+  metres in 2 s: MuJoCo 4's 1D flex elasticity is too ill-conditioned for a 1 mm x 4 mm strip).
+  The flexcomp form therefore keeps the edge lengths by equality constraints (``<edge
+  equality="true">``, inextensible; stable at ``FLEX_TIMESTEP``), carries no bending stiffness
+  and has no gravity: a geometry that can be probed in the viewer. Stepping 2 s stays finite
+  (tests/deploy/test_deploy_cli.py). ``rods="chain"`` writes the mechanically faithful scene of
+  :mod:`simfab.deploy.mjcf_sim` instead (opens on the deployed state; hinge springs with the
+  rods' bending and twist stiffness at rest in the flat state; the insert and junctions as free
+  bodies welded to the rod ends).
 - PNG: the deployed MJCF rendered offscreen (simfab.io.render).
 """
 
@@ -24,6 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from simfab.rods import frames as fr
+
+FLEX_TIMESTEP = 2e-3  # [s] time step of the flexcomp export
 
 
 def rod_polylines(model, state) -> list[np.ndarray]:
@@ -75,12 +84,24 @@ def write_usd(path, deployment) -> Path:
 def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsules") -> Path:
     from simfab.io.mjcf import MJCFBuilder
 
-    if rods not in ("flexcomp", "capsules"):
-        raise ValueError(f"rods must be 'flexcomp' or 'capsules' (got {rods!r})")
+    if rods not in ("flexcomp", "capsules", "chain"):
+        raise ValueError(f"rods must be 'flexcomp', 'capsules' or 'chain' (got {rods!r})")
     d = deployment
+    if rods == "chain":
+        from simfab.deploy import mjcf_sim
+
+        ins = d.insert
+        geoms = {ins.name: dict(mesh=(np.asarray(ins.mesh.vertices), np.asarray(ins.mesh.faces)),
+                                mass=max(ins.mass, 1e-6))}
+        sim = mjcf_sim.build(d.cell.model, d.states[0], d.states[-1], density=1200.0, cfg=mjcf_sim.SimConfig(),
+                             name=name, body_geoms=geoms)
+        return sim.builder.save(path)
     model = d.cell.model
     st = d.states[-1]
-    b = MJCFBuilder(name)
+    b = MJCFBuilder(name, timestep=FLEX_TIMESTEP if rods == "flexcomp" else None,
+                    gravity=[0, 0, 0] if rods == "flexcomp" else None)
+    if rods == "flexcomp":
+        b.root.find("option").set("integrator", "discrete")
     b.floor(z=float(np.min(st.x[:, 2])) - 0.01, size=0.3)
     ins = d.insert
     ib = d.cell.insert_body
@@ -101,8 +122,8 @@ def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsule
         fc = b.add(b.worldbody, "flexcomp", name=r.name, type="direct", dim=1, radius=rad, point=P.ravel(),
                    element=np.stack([np.arange(k), np.arange(1, k + 1)], axis=1).ravel(), rgba=[0.95, 0.9, 0.75, 1],
                    mass=max(1e-6, rad * 1e-3))
-        if young is not None:
-            b.add(fc, "elasticity", young=young, poisson=poisson)
+        del young, poisson  # see the module doc: MuJoCo's 1D flex elasticity is unstable for these strips
+        b.add(fc, "edge", equality="true")
         b.add(fc, "contact", contype=0, conaffinity=0)
         b.add(fc, "pin", id=[0, k])
     return b.save(path)

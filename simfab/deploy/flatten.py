@@ -1,0 +1,231 @@
+"""Boundary First Flattening (Sawhney & Crane 2017) with zero boundary scale factor, cone-free.
+
+Input: a disk-topology triangle mesh V (n,3) [m], F (m,3). Output: flat positions (n,2) [m]
+whose metric is conformal to the input's, ``g_flat = e^{2u} g``, with ``u = 0`` on the
+boundary (boundary edge lengths kept; the flattening of least area distortion, Springborn et
+al. 2008) and no cone singularities.
+
+Discrete quantities (A: the cotan Laplacian, positive semi-definite, ``(A u)_i = sum_j w_ij
+(u_i - u_j)``, ``w_ij = (cot a_ij + cot b_ij) / 2`` over the two angles opposite edge ij):
+
+- angle defect ``Omega_i = 2 pi - sum theta_i`` at interior vertices (integrated Gaussian
+  curvature [rad]) and ``k_i = pi - sum theta_i`` at boundary vertices (integrated geodesic
+  curvature [rad]);
+- discrete Yamabe equation: the conformally scaled metric has curvatures
+  ``Omega~ = Omega + (A u)_I``, ``k~ = k + (A u)_B`` (a vertex with smaller u than its
+  neighbours sees larger angles around it, so its defect drops). Gauss-Bonnet is kept since
+  ``1^T A = 0``.
+
+Steps (one Cholesky factorization of A_II, reused for every solve):
+
+1. interior Dirichlet problem for a flat metric with ``u_B = 0``:
+   ``A_II u_I = -Omega_I``  (u <= 0 where the surface is positively curved);
+2. target boundary curvature ``k~_B = k_B + A_BI u_I`` (Dirichlet-to-Neumann map);
+3. boundary curve: edge lengths ``l~ = e^{(u_i+u_j)/2} l = l`` (u_B = 0), tangent angles
+   ``phi_i = sum_{j<=i} k~_j``; the polygon closes only up to discretization error, so the
+   tangent angles get the least-squares (minimum-norm) correction that closes it (Gauss-Newton
+   on ``sum_i l_i (cos phi_i, sin phi_i) = 0``). The lengths stay exact (to round-off);
+   ``closure_angle_correction`` [rad] reports the largest angle change;
+4. interior: harmonic extension of the boundary positions, ``A_II x_I = -A_IB x_B`` (two more
+   solves with the same factor).
+
+Outputs per vertex ``u`` (n,) [-] and per face the area distortion ``sigma_f = 1/2 log(area_flat
+/ area_3d)`` [-] (the piecewise-constant log scale factor the flat map realizes; sigma ~ u).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from simfab.errors import ConvergenceError, InputError
+
+
+@dataclass(frozen=True)
+class Flattening:
+    """Result of :func:`flatten`.
+
+    uv (n,2) [m]: flat positions; u (n,) [-]: log scale factor (0 on the boundary);
+    sigma (m,) [-]: per-face log area-scale factor 1/2 log(A_flat/A_3d); boundary (b,) int:
+    ordered boundary loop (counter-clockwise in the plane); interior (n-b,) int;
+    closure_angle_correction [rad]: largest tangent-angle change that closed the boundary;
+    seconds: wall time per step {assemble, factor, solve, boundary}.
+    """
+
+    uv: np.ndarray
+    u: np.ndarray
+    sigma: np.ndarray
+    boundary: np.ndarray
+    interior: np.ndarray
+    closure_angle_correction: float
+    seconds: dict
+
+
+def corner_angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(m,3) interior angle of each face at each of its corners [rad]."""
+    P = V[F]  # (m,3,3)
+    out = np.empty(F.shape)
+    for k in range(3):
+        a = P[:, (k + 1) % 3] - P[:, k]
+        b = P[:, (k + 2) % 3] - P[:, k]
+        c = np.linalg.norm(np.cross(a, b), axis=1) if V.shape[1] == 3 else np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+        out[:, k] = np.arctan2(c, np.einsum("ij,ij->i", a, b))
+    return out
+
+
+def cotan_laplacian(V: np.ndarray, F: np.ndarray, angles: np.ndarray | None = None) -> sp.csr_matrix:
+    """Positive semi-definite cotan Laplacian A (n,n) [-]: ``A_ij = -(cot a_ij + cot b_ij)/2``,
+    ``A_ii = -sum_j A_ij``."""
+    n = len(V)
+    ang = corner_angles(V, F) if angles is None else angles
+    cot = 1.0 / np.tan(ang)
+    # the angle at corner k is opposite the edge (k+1, k+2)
+    i = np.concatenate([F[:, 1], F[:, 2], F[:, 0]])
+    j = np.concatenate([F[:, 2], F[:, 0], F[:, 1]])
+    w = 0.5 * np.concatenate([cot[:, 0], cot[:, 1], cot[:, 2]])
+    W = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n)).tocsr()
+    return (sp.diags(np.asarray(W.sum(axis=1)).ravel()) - W).tocsr()
+
+
+def boundary_loop(F: np.ndarray, n: int) -> np.ndarray:
+    """The ordered boundary loop (b,) of a disk-topology mesh, following the face winding.
+
+    Raises InputError unless the boundary is exactly one simple loop (edges in one face only)."""
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    key = np.minimum(e[:, 0], e[:, 1]) * np.int64(n) + np.maximum(e[:, 0], e[:, 1])
+    uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    if np.any(cnt > 2):
+        raise InputError(f"mesh is not manifold: {int(np.sum(cnt > 2))} edges are shared by more than two faces")
+    be = e[cnt[inv] == 1]
+    if len(be) == 0:
+        raise InputError("mesh has no boundary (a closed surface cannot be flattened without cuts)")
+    nxt = np.full(n, -1, dtype=np.int64)
+    if len(np.unique(be[:, 0])) != len(be):
+        raise InputError("mesh boundary is not a simple loop (a boundary vertex is visited twice)")
+    nxt[be[:, 0]] = be[:, 1]
+    loop = [int(be[0, 0])]
+    while True:
+        v = int(nxt[loop[-1]])
+        if v < 0:
+            raise InputError("mesh boundary is not closed")
+        if v == loop[0]:
+            break
+        loop.append(v)
+        if len(loop) > len(be):
+            raise InputError("mesh boundary is not a simple loop")
+    if len(loop) != len(be):
+        raise InputError(f"mesh has {len(be) - len(loop)} boundary edges outside the first boundary loop "
+                         "(more than one boundary loop: not a disk)")
+    return np.asarray(loop)
+
+
+def _close_polygon(lengths: np.ndarray, phi: np.ndarray, *, tol: float = 1e-14, max_iter: int = 20):
+    """Minimum-norm tangent-angle correction so that ``sum l_i (cos phi_i, sin phi_i) = 0``."""
+    phi = phi.copy()
+    total = float(np.sum(lengths))
+    for _ in range(max_iter):
+        c, s = np.cos(phi), np.sin(phi)
+        r = np.array([lengths @ c, lengths @ s])
+        if np.linalg.norm(r) <= tol * total:
+            return phi
+        J = np.stack([-lengths * s, lengths * c])  # (2, b)
+        phi -= J.T @ np.linalg.solve(J @ J.T, r)
+    raise ConvergenceError(f"BFF: boundary polygon did not close (residual {np.linalg.norm(r) / total:.2e} of its length)")
+
+
+def flatten(V, F) -> Flattening:
+    """Boundary First Flattening with u = 0 on the boundary (see module doc). V (n,3) [m], F (m,3)."""
+    import time
+
+    t0 = time.perf_counter()
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    n = len(V)
+    loop = boundary_loop(F, n)
+    is_b = np.zeros(n, dtype=bool)
+    is_b[loop] = True
+    interior = np.flatnonzero(~is_b)
+    ang = corner_angles(V, F)
+    A = cotan_laplacian(V, F, ang)
+    angle_sum = np.bincount(F.ravel(), weights=ang.ravel(), minlength=n)
+    omega = 2.0 * np.pi - angle_sum[interior]
+    kgeo = np.pi - angle_sum[loop]
+    A_I = A[interior]  # rows once; A is symmetric, so A_BI = A_IB^T
+    A_II = A_I[:, interior]
+    A_IB = A_I[:, loop].tocsr()
+    t1 = time.perf_counter()
+    solver = CholeskyFactor(A_II) if len(interior) else None
+    # 1. flat metric, u_B = 0:  A_II u_I = -Omega_I
+    u = np.zeros(n)
+    if len(interior):
+        u[interior] = solver.solve(-omega)
+    t2 = time.perf_counter()
+    # 2. Dirichlet-to-Neumann: boundary curvature of the flat metric
+    k_new = kgeo + (A_IB.T @ u[interior] if len(interior) else 0.0)
+    # 3. boundary polygon with the original lengths (u_B = 0), closed by the smallest angle change
+    Vb = V[loop]
+    lengths = np.linalg.norm(np.roll(Vb, -1, axis=0) - Vb, axis=1)  # edge loop[i] -> loop[i+1]
+    phi0 = np.cumsum(k_new)  # tangent of edge i turns by k~ at its start vertex
+    phi = _close_polygon(lengths, phi0)
+    corr = float(np.max(np.abs(phi - phi0)))
+    xb = np.concatenate([[0.0], np.cumsum(lengths * np.cos(phi))[:-1]])
+    yb = np.concatenate([[0.0], np.cumsum(lengths * np.sin(phi))[:-1]])
+    uv = np.zeros((n, 2))
+    uv[loop, 0], uv[loop, 1] = xb, yb
+    t3 = time.perf_counter()
+    # 4. harmonic extension (same factor)
+    if len(interior):
+        uv[interior] = solver.solve(-(A_IB @ uv[loop]))
+    t4 = time.perf_counter()
+    uv -= 0.5 * (uv.min(axis=0) + uv.max(axis=0))
+    sigma = 0.5 * np.log(_areas(uv, F) / _areas(V, F))
+    if not (np.all(np.isfinite(uv)) and np.all(np.isfinite(sigma))):
+        raise ConvergenceError("BFF: the flat map is not finite (degenerate input triangles?)")
+    return Flattening(uv=uv, u=u, sigma=sigma, boundary=loop, interior=interior, closure_angle_correction=corr,
+                      seconds=dict(assemble=t1 - t0, factor_and_solve_u=t2 - t1, boundary=t3 - t2, extend=t4 - t3))
+
+
+class CholeskyFactor:
+    """Sparse Cholesky factor of an SPD matrix (CHOLMOD through cvxopt), computed once and reused
+    for any number of right-hand sides (the fill-reducing ordering is CHOLMOD's default)."""
+
+    def __init__(self, A: sp.spmatrix):
+        import cvxopt
+        import cvxopt.cholmod as cholmod
+
+        L = sp.tril(A, format="coo")
+        self.n = A.shape[0]
+        M = cvxopt.spmatrix(cvxopt.matrix(L.data.astype(np.float64)), cvxopt.matrix(L.row.astype(np.int64)),
+                            cvxopt.matrix(L.col.astype(np.int64)), (self.n, self.n))
+        cholmod.options["supernodal"] = 2
+        try:
+            self._F = cholmod.symbolic(M)
+            cholmod.numeric(M, self._F)
+        except ArithmeticError:
+            raise ConvergenceError("BFF: the cotan Laplacian is not positive definite "
+                                   "(obtuse/degenerate triangles; remesh the target)") from None
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """x with A x = b; b (n,) or (n,k)."""
+        import cvxopt
+        import cvxopt.cholmod as cholmod
+
+        b = np.asarray(b, dtype=np.float64)
+        x = cvxopt.matrix(np.ascontiguousarray(b.reshape(self.n, -1)))
+        cholmod.solve(self._F, x)
+        return np.array(x).reshape(b.shape)
+
+
+def _areas(P, F) -> np.ndarray:
+    a = P[F[:, 1]] - P[F[:, 0]]
+    b = P[F[:, 2]] - P[F[:, 0]]
+    if P.shape[1] == 2:
+        return 0.5 * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    return 0.5 * np.linalg.norm(np.cross(a, b), axis=1)
+
+
+def face_areas(P, F) -> np.ndarray:
+    """(m,) triangle areas [m^2]; signed (positive counter-clockwise) for 2D points."""
+    return _areas(np.asarray(P, dtype=np.float64), np.asarray(F))

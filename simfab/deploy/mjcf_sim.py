@@ -1,0 +1,265 @@
+"""A MuJoCo scene of a rod network with rigid bodies that MuJoCo can simulate (not a picture).
+
+Model (built from a :class:`simfab.rods.model.RodModel`, its flat state and a deployed state):
+
+- every simfab body (insert, junction) is a free MuJoCo body (``freejoint``) at its flat pose;
+  a *driven* (held) body is attached to the world instead;
+- every rod is a chain of rigid links, one per rod edge (box geom: edge length x thickness x
+  width, no contacts). Link frame: origin at the edge's first node, axes (t, m1, m2) = (tangent,
+  sheet normal, in-plane width direction). The first link is rigidly part of the body the rod
+  starts clamped to; each further link hangs from the previous one by three hinges at the node:
+  twist about t (stiffness GJ / l), in-plane bending about m1 (B2 / l) and out-of-plane bending
+  about m2 (B1 / l), l = the Voronoi length (l_{k-1} + l_k) / 2: the discrete elastic rod's
+  bending/twist energy 1/2 (B / l) phi^2 for a hinge angle phi, stretch-free (links are rigid);
+- the rod's last link is welded (``<equality weld>``) to the body its end is clamped to, with the
+  relative pose of the *deployed* state (the inserts' clamp offsets are those after insertion).
+
+The body tree is defined in simfab's **deployed** state, so ``qpos0`` (what the viewer opens
+on) is the deployed state, also stored as keyframe ``deployed``; the **flat**, stress-free cut
+pattern is the springs' rest configuration: every hinge's ``springref`` is its angle in the
+flat state (intrinsic x-y-z angles of the flat relation R_{k-1}^T R_k relative to the deployed
+one), and keyframe ``flat`` holds the flat pattern (free bodies at their flat poses, hinges at
+their springref; the welds at the inserts are then violated by r - g: the inserts are not yet
+pushed in).
+
+Stability (explicit spring forces, implicit damping with ``implicitfast``): every hinge gets an
+armature ``a = k (dt / omega_dt)^2`` so that its own mode has omega dt <= ``omega_dt`` whatever the
+link's tiny inertia, and damping ``zeta * 2 sqrt(k a)`` (critical for zeta = 1). Both change the
+dynamics, not the equilibria (quasi-static inspection). Welds use ``solref = (2 dt, 1)`` and a
+stiff ``solimp``; gravity is off (simfab's deployment is unloaded).
+
+Measured (tests/deploy small saddle, 2 s from the key, default settings, mass_scale 100):
+dt = 2 ms keeps the elastic energy to -3 % and the shape to 2 % of the out-of-plane height
+(kinetic energy 5e-6 J at the end); 5 ms stays finite but releases 36 % of the energy, 10-20 ms
+stay finite and release ~90 % (the motion is then not a relaxation). Hence ``timestep = 2e-3``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimConfig:
+    """MuJoCo scene settings (scene ``[mujoco]`` table).
+
+    timestep [s]; omega_dt [-]: target hinge frequency x dt; damping_ratio [-] (zeta of every
+    hinge); body_mass [kg] (each junction; inserts get ``insert_mass``); insert_mass [kg];
+    stability_seconds [s]: simulated time of the stability check, a damped relaxation from the
+    deployed key whose end state is compared with simfab's equilibrium; impedance [-]: weld solimp;
+    body_inertia_factor [-]: free bodies' rotational inertia / the stiffest hinge's armature;
+    mass_scale [-]: factor on the links' density and the bodies' masses (mass scaling: with the real
+    strip density the links' own modes make the motion spurious at dt >= 1e-3 - a relaxation
+    then released 95 % of the elastic energy into motion - while equilibria do not depend on it);
+    solver, iterations: MuJoCo constraint solver and its iterations per step (PGS is 2x faster per
+    step than Newton on these weld-heavy scenes; 20 iterations would be 4x faster again but let
+    the welds slip: the unit cell then drifts by 26 mm in 2 s instead of 2 mm).
+    """
+
+    timestep: float = 2e-3
+    omega_dt: float = 0.3
+    damping_ratio: float = 1.0
+    body_mass: float = 2e-4
+    insert_mass: float = 1e-3
+    stability_seconds: float = 2.0
+    impedance: float = 0.999
+    body_inertia_factor: float = 10.0
+    solver: str = "PGS"
+    mass_scale: float = 100.0
+    iterations: int = 100
+
+    def __post_init__(self):
+        from simfab.errors import InputError
+
+        if self.solver not in ("PGS", "CG", "Newton"):
+            raise InputError(f"must be PGS, CG or Newton (got {self.solver!r})", where="mujoco.solver")
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.name != "solver" and not (np.isfinite(v) and v > 0):
+                raise InputError(f"must be a positive number (got {v})", where=f"mujoco.{f.name}")
+
+
+def _frames(state) -> np.ndarray:
+    """(E,3,3) link frames [t m1 m2] (columns) of every edge."""
+    m1, m2 = state.material_frames()
+    return np.stack([state.t, m1, m2], axis=2)
+
+
+def _quat(R) -> np.ndarray:
+    from simfab.rods import frames as fr
+
+    return fr.matrix_to_quat(R)
+
+
+@dataclass
+class SimScene:
+    """What :func:`build` returns: the MJCF builder (``save`` it; keys ``deployed`` and ``flat``
+    are in), the deployed key's values per joint name and its full qpos, the body names."""
+
+    builder: object
+    key_values: dict
+    body_names: list
+    key_qpos: np.ndarray | None = None
+
+
+def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = "deployed",
+          body_geoms: dict | None = None) -> SimScene:
+    """MJCF of the network (see module doc). ``body_geoms``: simfab body name -> dict(mesh=(V,F) or
+    box=half sizes (3,), mass, rgba) for inserts; other bodies get a small sphere."""
+    from scipy.spatial.transform import Rotation
+
+    from simfab.io.mjcf import MJCFBuilder
+
+    dt = cfg.timestep
+    b = MJCFBuilder(name, timestep=dt, gravity=[0, 0, 0])
+    b.add(b.root.find("option"), "flag", energy="enable")
+    b.root.find("option").set("integrator", "implicitfast")
+    b.root.find("option").set("solver", cfg.solver)
+    b.root.find("option").set("iterations", str(int(cfg.iterations)))
+    body_geoms = body_geoms or {}
+    Rf, Rd = _frames(flat), _frames(deployed)
+    # rotational inertia of the free bodies: at least that of the stiffest hinge's armature x
+    # ``body_inertia_factor`` (light inserts would otherwise let the welds' rotations go soft)
+    kmax = float(np.max(model.bend_stiff / model.vor_len[:, None])) if model.n_hinges else 0.0
+    I_body = cfg.body_inertia_factor * kmax * (dt / cfg.omega_dt) ** 2
+    mb = {}
+    key = {}  # joint name -> qpos values of the deployed key
+    for i, bn in enumerate(model.body_names):
+        el = b.body(bn, pos=deployed.body_pos[i], quat=_quat(deployed.body_rot[i]))
+        if not model.body_driven[i]:
+            b.add(el, "freejoint", name=f"{bn}_free")
+        g = body_geoms.get(bn)
+        mass = (g.get("mass", cfg.insert_mass) if g else cfg.body_mass) * cfg.mass_scale
+        b.add(el, "inertial", pos=[0, 0, 0], mass=mass, diaginertia=[I_body] * 3)
+        if g and "mesh" in g:
+            V, F = g["mesh"]
+            b.mesh_asset(f"{bn}_mesh", V, F)
+            b.geom(el, type="mesh", mesh=f"{bn}_mesh", mass=0, contype=0, conaffinity=0,
+                   rgba=g.get("rgba", [0.85, 0.45, 0.2, 1]))
+        elif g and "box" in g:
+            b.geom(el, type="box", size=g["box"], mass=0, contype=0, conaffinity=0,
+                   rgba=g.get("rgba", [0.85, 0.45, 0.2, 1]))
+        else:
+            rad = 0.5 * float(np.max([r.section.draw_width() for r in model.rods]))
+            b.geom(el, type="sphere", size=[rad], mass=0, contype=0, conaffinity=0, rgba=[0.3, 0.3, 0.35, 1])
+        mb[i] = el
+    for i, bn in enumerate(model.body_names):
+        if not model.body_driven[i]:
+            key[f"{bn}_free"] = np.concatenate([flat.body_pos[i], _quat(flat.body_rot[i])])
+    for r in model.rods:
+        e0, e1 = int(r.edges[0]), int(r.edges[-1])
+        sb, eb = int(model.edge_body[e0]), int(model.edge_body[e1])
+        if sb < 0 or eb < 0:
+            raise ValueError(f"rod {r.name!r}: both end edges must be clamped to bodies for the MuJoCo scene")
+        w, t = r.section.width, r.section.thickness
+        L = model.rest_len[r.edges]
+        # link 0: rigid part of the start body; its pose relative to the body from the deployed state
+        n0 = int(r.nodes[0])
+        Rb = deployed.body_rot[sb]
+        rel_p = Rb.T @ (deployed.x[n0] - deployed.body_pos[sb])
+        rel_R = Rb.T @ Rd[e0]
+        parent = b.add(mb[sb], "body", name=f"{r.name}_0", pos=rel_p, quat=_quat(rel_R))
+        _link_geom(b, parent, L[0], w, t, density * cfg.mass_scale)
+        # hinge stiffnesses per interior node (hinges of this rod, in order)
+        hinges = np.flatnonzero(np.isin(model.hinge_edges[:, 0], r.edges))
+        for k in range(1, len(r.edges)):
+            ea, eb_ = int(r.edges[k - 1]), int(r.edges[k])
+            h = hinges[k - 1]
+            B1, B2 = model.bend_stiff[h]
+            GJ = model.twist_stiff[h]
+            lv = model.vor_len[h]
+            Q = Rd[ea].T @ Rd[eb_]  # deployed relation of link k to link k-1 (qpos0)
+            child = b.add(parent, "body", name=f"{r.name}_{k}", pos=[L[k - 1], 0.0, 0.0], quat=_quat(Q))
+            J = Q.T @ (Rf[ea].T @ Rf[eb_])  # joint rotation of the flat state = the springs' rest
+            ang = Rotation.from_matrix(J).as_euler("XYZ")
+            for ax, axis, kk, a in (("x", "1 0 0", GJ / lv, ang[0]), ("y", "0 1 0", B2 / lv, ang[1]),
+                                    ("z", "0 0 1", B1 / lv, ang[2])):
+                arm = kk * (dt / cfg.omega_dt) ** 2
+                jn = f"{r.name}_{k}_{ax}"
+                b.add(child, "joint", name=jn, type="hinge", axis=axis, stiffness=kk, springref=a, armature=arm,
+                      damping=cfg.damping_ratio * 2.0 * np.sqrt(kk * arm))
+                key[jn] = np.array([a])
+            _link_geom(b, child, L[k], w, t, density * cfg.mass_scale)
+            parent = child
+        # weld the last link to the end body (deployed relative pose)
+        n_last = int(model.edges[e1][0])
+        Re = deployed.body_rot[eb]
+        relpos = Re.T @ (deployed.x[n_last] - deployed.body_pos[eb])
+        relq = _quat(Re.T @ Rd[e1])
+        # relpose: pose of body2 (the link) in body1's (the end body's) frame
+        b.equality("weld", body1=model.body_names[eb], body2=f"{r.name}_{len(r.edges) - 1}",
+                   relpose=np.concatenate([relpos, relq]), solref=[2 * dt, 1.0],
+                   solimp=[cfg.impedance, cfg.impedance, 0.001, 0.5, 2])
+    scene = SimScene(builder=b, key_values=key, body_names=list(model.body_names))
+    m = b.compile()
+    qpos = np.array(m.qpos0)
+    import mujoco
+
+    for jn, v in key.items():
+        j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, jn)
+        a = m.jnt_qposadr[j]
+        qpos[a:a + len(v)] = v
+    b.key("deployed", qpos=np.array(m.qpos0))
+    b.key("flat", qpos=qpos)
+    scene.key_qpos = np.array(m.qpos0)
+    return scene
+
+
+def _link_geom(b, body, length, w, t, density):
+    b.geom(body, type="box", size=[0.5 * length, 0.5 * t, 0.5 * w], pos=[0.5 * length, 0, 0], density=density,
+           contype=0, conaffinity=0, rgba=[0.95, 0.9, 0.75, 1])
+
+
+@dataclass(frozen=True)
+class Stability:
+    """Stepping from the key: finite throughout, seconds simulated, timestep [s], max |qvel| [m/s or
+    rad/s], kinetic energy at the end [J], drift (max body displacement from the key after the
+    best rigid alignment: the scene floats freely) [m], wall time [s]."""
+
+    finite: bool
+    seconds: float
+    timestep: float
+    max_speed: float
+    final_kinetic: float
+    max_drift: float
+    wall: float
+
+
+def aligned_drift(X0: np.ndarray, X1: np.ndarray) -> float:
+    """Largest distance [m] between points X1 (n,3) rigidly aligned onto X0 (n,3) and X0."""
+    from simfab.deploy.compare import kabsch
+
+    R, t = kabsch(X1, X0)
+    return float(np.max(np.linalg.norm(X1 @ R.T + t - X0, axis=1)))
+
+
+def step_from_key(m, seconds: float, key: str = "deployed") -> tuple[Stability, object]:
+    """Reset to ``key`` and step ``seconds``; returns the measures and the final MjData."""
+    import time
+
+    import mujoco
+
+    d = mujoco.MjData(m)
+    kid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, key)
+    mujoco.mj_resetDataKeyframe(m, d, kid)
+    mujoco.mj_forward(m, d)
+    x0 = d.xpos.copy()
+    n = int(round(seconds / m.opt.timestep))
+    vmax = 0.0
+    finite = True
+    t0 = time.perf_counter()
+    for i in range(n):
+        mujoco.mj_step(m, d)
+        if i % 10 == 9 or i == n - 1:
+            if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
+                finite = False
+                break
+            vmax = max(vmax, float(np.max(np.abs(d.qvel[:]))) if m.nv else 0.0)
+    wall = time.perf_counter() - t0
+    drift = aligned_drift(x0[1:], d.xpos[1:]) if finite else float("inf")
+    return Stability(finite=finite, seconds=n * m.opt.timestep, timestep=float(m.opt.timestep), max_speed=vmax,
+                     final_kinetic=float(d.energy[1]) if finite else float("inf"), max_drift=drift, wall=wall), d

@@ -1,0 +1,267 @@
+"""Deployment of a flat pattern as a network of discrete elastic rods with rigid inserts.
+
+Network (built from a :class:`simfab.deploy.pattern.Pattern`, flat in z = 0):
+
+- bodies (all free 6-DOF rigid bodies of :mod:`simfab.rods`): one insert per interior quad
+  vertex (``I<id>``), one junction per boundary vertex (``B<v>``) and one per edge midpoint
+  (``J<e>``);
+- rods (rectangular section: width in the sheet, thickness along the sheet normal): each
+  edge is two half beams from its midpoint junction (clamped) to the vertex (clamped to the
+  vertex's insert at the beam end, i.e. at distance g from the insert centre in the flat state,
+  or to the boundary junction); each spring arc is a rod clamped to the junctions of the two
+  edge midpoints it joins. Rest shape = the flat, cut shape (springs carry their Bezier curvature).
+- support: a statically determinate 3-2-1 support on the middle nodes of three spring arcs
+  (near the centre: x, y, z; towards +x: y, z; towards +y: z) removes the six rigid motions
+  without constraining the deformation (as in the unit cell).
+
+Deployment (quasi-static, as in :mod:`simfab.deploy.unitcell`): the beam ends' attachment
+points on the inserts move from the gap (g_i) to the insert's edge (r) in ``increments``
+steps, each solved to equilibrium from the last.
+
+Branch selection (the flat pattern can buckle into many shapes; the target says which one is
+meant): (1) predictor: each increment starts from the last equilibrium moved by 1/increments of
+the displacement field D that takes every node and body from its flat position to the target
+point its flat position maps to (the target rigidly aligned to the flat pattern, D = 0 at the
+fully supported node); it is only the Newton start, the equilibrium is the rods'; (2) while drawing in,
+every insert carries a small out-of-plane load ``f_i = perturbation * B1 / h^2 * s_i`` with
+``s_i`` in [-1, 1] the target's height at the insert above its best-fit plane, minus its
+least-squares plane over the inserts' flat positions (no resultant force or moment), normalised. The
+load is removed for the final solve, so the reported state is an unloaded equilibrium whose
+stability (positive-definite reduced Hessian) is reported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from simfab.deploy._config import require_positive
+from simfab.errors import ConvergenceError, InputError
+
+
+@dataclass(frozen=True, kw_only=True)
+class DeployConfig:
+    """Material and simulation parameters (scene ``[material]`` and ``[deploy]`` tables).
+
+    young [Pa], poisson [-], density [kg/m^3] (sheet material); beam_segments,
+    spring_segments: rod segments per half beam / spring arc; increments: quasi-static steps;
+    perturbation [-]: branch-selection load factor (see module doc).
+    """
+
+    young: float = 2.5e9
+    poisson: float = 0.35
+    density: float = 1200.0
+    beam_segments: int = 3
+    spring_segments: int = 4
+    increments: int = 8
+    perturbation: float = 0.05
+
+    def __post_init__(self):
+        require_positive(self, "")
+        if not -1.0 < self.poisson < 0.5:
+            raise InputError(f"must be in (-1, 0.5) (got {self.poisson})", where="material.poisson")
+        for f in ("beam_segments", "spring_segments", "increments"):
+            if int(getattr(self, f)) != getattr(self, f) or getattr(self, f) < 1:
+                raise InputError(f"must be a positive integer (got {getattr(self, f)})", where=f"deploy.{f}")
+
+
+@dataclass
+class Network:
+    """The rod network of a pattern: model/state (flat), body indices of the pattern vertices
+    (n,) (insert or boundary junction), edge junction bodies (e,), the insert-clamped nodes and
+    their unit direction (k,), (k,3) and grow distance (k,) [m] = r - g of their vertex, the node
+    supported in x, y, z."""
+
+    model: object
+    state: object
+    vertex_body: np.ndarray
+    edge_body: np.ndarray
+    pull_nodes: np.ndarray
+    pull_dir: np.ndarray
+    pull_grow: np.ndarray
+    held_node: int  # the fully supported node (predictor origin)
+
+
+def build_network(pat, cfg: DeployConfig) -> Network:
+    from simfab.rods.model import Material, NetworkBuilder, Section
+
+    pc = pat.config
+    sec = Section(width=pc.beam_width, thickness=pc.beam_thickness)
+    sec_spring = Section(width=pc.spring_width, thickness=pc.beam_thickness)
+    mat = Material(young=cfg.young, poisson=cfg.poisson)
+    nb = NetworkBuilder()
+    P3 = np.column_stack([pat.P, np.zeros(len(pat.P))])
+    mids = np.column_stack([pat.midpoints(), np.zeros(len(pat.edges))])
+    vname = []
+    for v in range(len(pat.P)):
+        vname.append(nb.add_body(f"I{pat.insert_ids[v]}" if pat.interior[v] else f"B{v}", pos=P3[v]))
+    for e in range(len(pat.edges)):
+        nb.add_body(f"J{e}", pos=mids[e])
+    lin = lambda p, q, n: p + np.linspace(0.0, 1.0, n + 1)[:, None] * (q - p)  # noqa: E731
+    nbeam, nspring = int(cfg.beam_segments), int(cfg.spring_segments)
+    pulls = []  # (rod name, direction (3,), grow)
+    for k, (e, v, start, end) in enumerate(pat.beam_halves()):
+        name = f"beam{e}_{v}"
+        s3, e3 = np.append(start, 0.0), np.append(end, 0.0)
+        nb.add_rod(name, lin(s3, e3, nbeam), section=sec, material=mat)
+        nb.clamp(name, "start", f"J{e}")
+        nb.clamp(name, "end", vname[v])
+        if pat.interior[v]:
+            d = s3 - P3[v]
+            pulls.append((name, d / np.linalg.norm(d), pc.insert_half_size - pat.gap[v]))
+    springs = []
+    for i, (q, e0, e1, pts) in enumerate(pat.spring_curves(nspring)):
+        name = f"spring{q}_{i % 4}"
+        nb.add_rod(name, np.column_stack([pts, np.zeros(len(pts))]), section=sec_spring, material=mat)
+        nb.clamp(name, "start", f"J{e0}")
+        nb.clamp(name, "end", f"J{e1}")
+        springs.append((name, pts[nspring // 2]))
+    if len(springs) < 3:
+        raise InputError("the pattern needs at least one quad with a spring (make pattern.spacing smaller)",
+                         where="pattern.spacing")
+    mid = np.array([p for _, p in springs])
+    c = pat.P.mean(axis=0)
+    span = np.ptp(pat.P, axis=0)
+    picks = []
+    for aim, comps in ((c, (0, 1, 2)), (c + [0.5 * span[0], 0.0], (1, 2)), (c + [0.0, 0.5 * span[1]], (2,))):
+        order = np.argsort(np.linalg.norm(mid - aim, axis=1))
+        k = next(int(j) for j in order if int(j) not in picks)
+        picks.append(k)
+        nb.fix(springs[k][0], nodes=[nspring // 2], comps=comps)
+    model, state = nb.build()
+    nodes, dirs, grow = [], [], []
+    for name, d, g in pulls:
+        r = model.rod(name)
+        for n in r.nodes[-2:]:  # the clamped end edge's two nodes
+            nodes.append(int(n))
+            dirs.append(d)
+            grow.append(g)
+    vb = np.array([model.body_index(n) for n in vname])
+    eb = np.array([model.body_index(f"J{e}") for e in range(len(pat.edges))])
+    held = int(model.rod(springs[picks[0]][0]).nodes[nspring // 2])
+    return Network(model=model, state=state, vertex_body=vb, edge_body=eb, pull_nodes=np.array(nodes),
+                   pull_dir=np.array(dirs), pull_grow=np.array(grow), held_node=held)
+
+
+@dataclass
+class Deployment:
+    """States per increment (0 = flat), final unloaded state, stability, Newton iterations,
+    energy [J], seconds."""
+
+    network: Network
+    states: list
+    stable: bool
+    iterations: list
+    energy: float
+    seconds: float
+
+    @property
+    def final(self):
+        return self.states[-1]
+
+    def vertex_positions(self, state=None) -> np.ndarray:
+        """(n,3) [m] positions of the pattern vertices (insert centres / boundary junctions)."""
+        st = self.final if state is None else state
+        return st.body_pos[self.network.vertex_body]
+
+
+def target_heights(pat, target_points: np.ndarray) -> np.ndarray:
+    """s_i in [-1, 1]: height of the target points (n,3) above their best-fit plane, normalised;
+    sign chosen so that the plane normal is +z-ish (positive = towards the target's +z side)."""
+    c = target_points.mean(axis=0)
+    normal = np.linalg.svd(target_points - c)[2][2]
+    if normal[2] < 0:
+        normal = -normal
+    h = (target_points - c) @ normal
+    h -= np.mean(h[pat.interior]) if pat.interior.any() else 0.0
+    m = float(np.max(np.abs(h))) or 1.0
+    return h / m
+
+
+def target_displacement(net: Network, flat_to_target) -> tuple[np.ndarray, np.ndarray]:
+    """Predictor field D (see module doc): (N,3) for the nodes and (B,3) for the bodies [m].
+    ``flat_to_target``: function (k,2) flat points -> (k,3) target points."""
+    from simfab.deploy.compare import kabsch
+
+    X0 = np.vstack([net.state.x, net.state.body_pos])
+    T = flat_to_target(X0[:, :2])
+    R, t = kabsch(T, X0)  # the target rigidly moved onto the flat pattern
+    D = T @ R.T + t - X0
+    D -= D[net.held_node]
+    return D[: len(net.state.x)], D[len(net.state.x):]
+
+
+def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device: str = "cpu", quiet: bool = True,
+           callback=None, predictor=None) -> Deployment:
+    """Draw the beam ends onto the inserts in ``cfg.increments`` steps (see module doc).
+    ``heights`` (n,) [-]: branch-selection signs per pattern vertex (:func:`target_heights`);
+    ``predictor``: (node (N,3), body (B,3)) displacement field towards the target
+    (:func:`target_displacement`) or None."""
+    import time
+
+    from simfab.progress import progress
+    from simfab.rods.model import synchronize
+    from simfab.rods.statics import StaticSolver
+
+    t0 = time.perf_counter()
+    model = net.model
+    solver = StaticSolver(model, device=device)
+    offset0 = model.node_offset.copy()
+    direction = np.zeros_like(offset0)
+    direction[net.pull_nodes] = net.pull_dir * net.pull_grow[:, None]
+    B1 = float(np.min(model.bend_stiff[:, 0]))
+    f = cfg.perturbation * B1 / pat.config.spacing**2
+    body_forces = np.zeros((model.n_bodies, 3))
+    ins = np.flatnonzero(pat.interior)
+    # self-equilibrated: remove the least-squares plane a + b x + c y from the signs so that the
+    # loads have no resultant force or moment (they would tilt the network about the held body)
+    M = np.column_stack([np.ones(len(ins)), pat.P[ins]])
+    s_i = heights[ins] - M @ np.linalg.lstsq(M, heights[ins], rcond=None)[0]
+    s_i /= float(np.max(np.abs(s_i))) or 1.0
+    body_forces[net.vertex_body[ins], 2] = f * s_i
+    state = net.state
+    states, iters = [state], []
+    n = int(cfg.increments)
+    res = None
+    for i in progress(range(1, n + 1), total=n, desc="deploy pattern", quiet=quiet):
+        lam = i / n
+        solver.set_attachment_offsets(offset0 + lam * direction)
+        x, pos = state.x, state.body_pos
+        if predictor is not None:
+            free = ~model.node_fixed.any(axis=1)
+            x = x + (free[:, None] * predictor[0]) / n
+            pos = pos + (~model.body_driven[:, None] * predictor[1]) / n
+        st = synchronize(solver.model, state, x, state.theta, pos, state.body_rot)
+        try:
+            res = solver.solve(st, body_forces=body_forces)
+            its = res.iterations
+            if i == n:  # remove the branch-selection load
+                res = solver.solve(res.state)
+                its += res.iterations
+        except ConvergenceError as e:
+            raise ConvergenceError(f"deploying the pattern: increment {i}/{n}: {e}") from None
+        state = res.state
+        states.append(state)
+        iters.append(its)
+        if callback is not None:
+            callback(i, state)
+    stable = solver.is_stable(state)
+    return Deployment(network=net, states=states, stable=bool(stable), iterations=iters, energy=float(res.energy),
+                      seconds=time.perf_counter() - t0)
+
+
+def discrete_gaussian_curvature(P: np.ndarray, quads: np.ndarray, interior: np.ndarray) -> np.ndarray:
+    """Angle defect 2 pi - sum of quad corner angles at each interior vertex of a quad mesh with
+    3D vertex positions P (n,3) [rad] (NaN on the boundary). Positive: dome, negative: saddle."""
+    n = len(P)
+    s = np.zeros(n)
+    for k in range(4):
+        v = quads[:, k]
+        a = P[quads[:, (k + 1) % 4]] - P[v]
+        b = P[quads[:, (k + 3) % 4]] - P[v]
+        cosang = np.einsum("ij,ij->i", a, b) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+        np.add.at(s, v, np.arccos(np.clip(cosang, -1.0, 1.0)))
+    out = np.full(n, np.nan)
+    out[interior] = 2 * np.pi - s[interior]
+    return out

@@ -1,0 +1,270 @@
+"""Flat pattern layout on a flattened target: quad grid, beams, torsional springs, insert gaps.
+
+Layout (all in the flat domain, metres):
+
+- a square grid of spacing ``h`` centred on the flat domain; nodes inside the boundary are kept,
+  a cell with three or two (adjacent) corners inside gets its outside corners projected to
+  the nearest boundary point; cells that become too small (an edge < h/4) or non-convex are
+  dropped, and the largest edge-connected set of cells is the quad mesh;
+- every quad edge is a **beam** (width ``w``, sheet thickness ``t``), split at its midpoint
+  by a rigid junction; each quad gets a **torsional spring**: four cubic Bezier arcs joining
+  consecutive edge midpoints, pulled towards the quad centre by ``spring_bulge`` (fraction of
+  the midpoint-centre distance); a quad whose neighbouring edges are nearly collinear (an
+  interior angle > ``degenerate_angle_deg``, boundary quads only) gets no spring;
+- at every **interior** quad vertex (four quads around it) the four beams stop short of a
+  gap of half-size ``g_i`` that receives a rigid insert of the common half-size ``r``; the
+  insert clamps the beam ends at distance ``r`` from the vertex. Boundary vertices join their
+  beams rigidly (no insert).
+
+Gap rule (derivation). The flattening scales lengths by ``e^u``: a curve of length ``L`` on the
+target has length ``e^u L`` in the flat domain (u varies slowly over a cell). Deployment must
+give back the target lengths, so around vertex i each half-edge of flat length h/2 must
+become ``(h/2) e^{-u_i}`` long. The beams are (nearly) inextensible; the only length that
+changes at vertex i is the gap: the beam end moves from distance g_i (cut) to r (insert),
+which lengthens each half-edge by ``r - g_i``. Hence
+
+    r - g_i = (h_i / 2) (e^{-u_i} - 1)      =>      g_i = r - (h_i / 2) (e^{-u_i} - 1),
+
+with h_i the mean flat length of the edges at i. u < 0 (the flattening shrank a positively
+curved region): g < r, the insert pushes the beams apart and the grown metric buckles into a
+dome; u > 0 (negative curvature): g > r, the insert pulls them together, a saddle. Since the
+metric error is removed edge by edge, the deployed metric approximates the target's to first
+order in the cell size; the shape follows where the network is stiff enough in bending to pick
+the target among its isometric embeddings (hence the out-of-plane branch selection in
+:mod:`simfab.deploy.network`).
+
+Achievable gaps: ``min_gap <= g <= h_i/2 - min_beam`` (a gap must exist to be cut, and each
+half beam needs ``min_beam`` of length to carry its spring junction). Vertices outside are
+clamped to the range and reported as unreachable (with the gap they would need).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from simfab.deploy._config import require_positive
+from simfab.errors import InputError
+
+
+@dataclass(frozen=True, kw_only=True)
+class PatternConfig:
+    """Pattern parameters (scene ``[pattern]`` table). Lengths [m].
+
+    spacing: grid spacing h; beam_width (in plane) and beam_thickness (sheet); insert_half_size
+    r: distance from an insert's centre to where it clamps the beams (one size for all
+    inserts); spring_bulge [-]: Bezier handle pull towards the quad centre; spring_width: in-plane
+    width of the spring arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:
+    achievable-gap limits (see module doc); degenerate_angle_deg [deg]: interior angle above
+    which a boundary quad gets no spring.
+    """
+
+    spacing: float = 0.025
+    beam_width: float = 0.003
+    beam_thickness: float = 0.001
+    insert_half_size: float = 0.005
+    spring_bulge: float = 0.5
+    spring_width: float = 0.0015
+    min_gap: float = 0.0015
+    min_beam: float = 0.004
+    degenerate_angle_deg: float = 160.0
+
+    def __post_init__(self):
+        require_positive(self, "pattern.")
+        if not self.spring_bulge < 1.0:
+            raise InputError(f"must be < 1 (got {self.spring_bulge})", where="pattern.spring_bulge")
+        if not self.insert_half_size < self.spacing / 2 - self.min_beam:
+            raise InputError(f"insert_half_size {self.insert_half_size} m leaves no beam in a cell of spacing "
+                             f"{self.spacing} m (needs < spacing/2 - min_beam)", where="pattern.insert_half_size")
+
+
+@dataclass(frozen=True)
+class Pattern:
+    """A flat pattern (arrays index the quad-mesh vertices, edges and quads).
+
+    P (n,2) [m]: quad vertices; quads (q,4) CCW; edges (e,2); edge_quads (e,2) (-1: none);
+    interior (n,) bool (insert vertices); u (n,) [-]: flattening log scale factor at the
+    vertices; gap (n,) [m]: gap half-size (0 on boundary vertices); gap_required (n,) [m]
+    (before clamping); unreachable (k,) vertex indices; spring (q,) bool; insert_ids (n,) int
+    (label number, -1 on the boundary); config.
+    """
+
+    P: np.ndarray
+    quads: np.ndarray
+    edges: np.ndarray
+    edge_quads: np.ndarray
+    interior: np.ndarray
+    u: np.ndarray
+    gap: np.ndarray
+    gap_required: np.ndarray
+    unreachable: np.ndarray
+    spring: np.ndarray
+    insert_ids: np.ndarray
+    config: PatternConfig
+
+    @property
+    def n_inserts(self) -> int:
+        return int(np.sum(self.interior))
+
+    def midpoints(self) -> np.ndarray:
+        """(e,2) edge midpoints [m] (junction positions)."""
+        return 0.5 * (self.P[self.edges[:, 0]] + self.P[self.edges[:, 1]])
+
+    def beam_halves(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+        """Per edge and end: (edge, vertex, start = midpoint (2,), end = beam end at the vertex (2,))."""
+        out = []
+        mids = self.midpoints()
+        for e, (a, b) in enumerate(self.edges):
+            for v, o in ((a, b), (b, a)):
+                d = self.P[o] - self.P[v]
+                d /= np.linalg.norm(d)
+                out.append((e, int(v), mids[e], self.P[v] + self.gap[v] * d))
+        return out
+
+    def spring_curves(self, n: int = 12) -> list[tuple[int, int, int, np.ndarray]]:
+        """Per spring arc: (quad, edge from, edge to, points (n+1,2)) cubic Bezier [m]."""
+        out = []
+        mids = self.midpoints()
+        ekey = {tuple(sorted(e)): i for i, e in enumerate(self.edges.tolist())}
+        b = self.config.spring_bulge
+        t = np.linspace(0.0, 1.0, n + 1)[:, None]
+        for q, quad in enumerate(self.quads):
+            if not self.spring[q]:
+                continue
+            c = self.P[quad].mean(axis=0)
+            es = [ekey[tuple(sorted((int(quad[k]), int(quad[(k + 1) % 4]))))] for k in range(4)]
+            for k in range(4):
+                e0, e1 = es[k], es[(k + 1) % 4]
+                P0, P3 = mids[e0], mids[e1]
+                P1, P2 = P0 + b * (c - P0), P3 + b * (c - P3)
+                pts = (1 - t) ** 3 * P0 + 3 * (1 - t) ** 2 * t * P1 + 3 * (1 - t) * t**2 * P2 + t**3 * P3
+                out.append((q, e0, e1, pts))
+        return out
+
+
+def gap_rule(u: np.ndarray, h: np.ndarray, r: float) -> np.ndarray:
+    """Gap half-size g = r - (h/2)(e^{-u} - 1) [m] for log scale factors u (n,) [-] and mean flat
+    edge lengths h (n,) [m] (see module doc)."""
+    return r - 0.5 * h * np.expm1(-np.asarray(u, dtype=np.float64))
+
+
+def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig) -> Pattern:
+    """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,))."""
+    import shapely
+
+    poly = shapely.Polygon(uv[boundary])
+    if not poly.is_valid:
+        raise InputError("the flattened boundary self-intersects; the target needs cuts or cones")
+    h = cfg.spacing
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    ni = np.arange(np.floor(lo[0] / h) - 1, np.ceil(hi[0] / h) + 2)
+    nj = np.arange(np.floor(lo[1] / h) - 1, np.ceil(hi[1] / h) + 2)
+    I, J = np.meshgrid(ni, nj, indexing="ij")
+    G = np.stack([I * h, J * h], axis=-1)  # (a, b, 2)
+    inside = shapely.contains_xy(poly, G[..., 0], G[..., 1])
+    ring = poly.exterior
+    proj = G.copy()
+    out_idx = np.argwhere(~inside)
+    if len(out_idx):
+        pts = shapely.points(G[~inside])
+        near = shapely.line_interpolate_point(ring, shapely.line_locate_point(ring, pts))
+        proj[~inside] = shapely.get_coordinates(near)
+    quads, corners = [], []
+    A, B = inside.shape
+    for i in range(A - 1):
+        for j in range(B - 1):
+            c = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)]
+            ins = [inside[k] for k in c]
+            nin = sum(ins)
+            if nin == 4 or nin == 3 or (nin == 2 and (ins[0] == ins[1] or ins[1] == ins[2])):
+                Q = np.array([proj[k] for k in c])
+                if _good_quad(Q, h):
+                    quads.append([k[0] * B + k[1] for k in c])
+    if not quads:
+        raise InputError(f"no quad fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
+                         where="pattern.spacing")
+    quads = np.array(quads)
+    quads = _largest_component(quads)
+    used, inv = np.unique(quads, return_inverse=True)
+    quads = inv.reshape(-1, 4)
+    P = proj.reshape(-1, 2)[used]
+    # edges and their quads
+    e_all = np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)])
+    q_all = np.tile(np.arange(len(quads)), 4)
+    key = np.sort(e_all, axis=1)
+    edges, inv_e = np.unique(key, axis=0, return_inverse=True)
+    inv_e = inv_e.ravel()
+    edge_quads = np.full((len(edges), 2), -1)
+    for k, (e, q) in enumerate(zip(inv_e, q_all)):
+        edge_quads[e, 0 if edge_quads[e, 0] < 0 else 1] = q
+    bnd_v = np.zeros(len(P), dtype=bool)
+    bnd_v[edges[edge_quads[:, 1] < 0].ravel()] = True
+    valence = np.bincount(edges.ravel(), minlength=len(P))
+    interior = ~bnd_v & (valence == 4)
+    # u at the pattern vertices: linear interpolation on the flat triangulation
+    uP = _interpolate(uv, faces, u, P)
+    elen = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1)
+    hv = np.bincount(edges.ravel(), weights=np.repeat(elen, 2), minlength=len(P)) / np.maximum(valence, 1)
+    req = np.where(interior, gap_rule(uP, hv, cfg.insert_half_size), 0.0)
+    gmax = 0.5 * hv - cfg.min_beam
+    unreachable = np.flatnonzero(interior & ((req < cfg.min_gap) | (req > gmax)))
+    gap = np.where(interior, np.clip(req, cfg.min_gap, gmax), 0.0)
+    # springs: none in quads with nearly collinear neighbouring edges
+    spring = np.array([_max_angle(P[q]) < np.radians(cfg.degenerate_angle_deg) for q in quads])
+    ids = np.full(len(P), -1)
+    order = np.flatnonzero(interior)
+    order = order[np.lexsort((P[order, 0], -P[order, 1]))]  # row by row from the top, left to right
+    ids[order] = np.arange(1, len(order) + 1)
+    return Pattern(P=P, quads=quads, edges=edges, edge_quads=edge_quads, interior=interior, u=uP, gap=gap,
+                   gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, config=cfg)
+
+
+def _good_quad(Q: np.ndarray, h: float) -> bool:
+    d = np.roll(Q, -1, axis=0) - Q
+    if np.min(np.linalg.norm(d, axis=1)) < 0.25 * h:
+        return False
+    cross = d[:, 0] * np.roll(d, -1, axis=0)[:, 1] - d[:, 1] * np.roll(d, -1, axis=0)[:, 0]
+    area = 0.5 * np.sum(Q[:, 0] * np.roll(Q[:, 1], -1) - np.roll(Q[:, 0], -1) * Q[:, 1])
+    return bool(np.all(cross > -1e-12 * h * h) and area > 0.2 * h * h)
+
+
+def _max_angle(Q: np.ndarray) -> float:
+    """Largest interior angle [rad] of a convex quad (4,2)."""
+    out = 0.0
+    for k in range(4):
+        a, b = Q[k - 1] - Q[k], Q[(k + 1) % 4] - Q[k]
+        out = max(out, float(np.arccos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1, 1))))
+    return out
+
+
+def _largest_component(quads: np.ndarray) -> np.ndarray:
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    e = np.sort(np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)]), axis=1)
+    q = np.tile(np.arange(len(quads)), 4)
+    _, inv = np.unique(e, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    M = sp.coo_matrix((np.ones(len(q)), (q, inv)), shape=(len(quads), inv.max() + 1)).tocsr()
+    n, lab = connected_components(M @ M.T, directed=False)
+    return quads[lab == np.argmax(np.bincount(lab))]
+
+
+def _interpolate(uv, faces, values, P) -> np.ndarray:
+    """Piecewise-linear interpolation of per-vertex ``values`` on the flat triangulation at P (k,2);
+    points outside (projected boundary nodes, by round-off) take the nearest vertex's value."""
+    import matplotlib.tri as mtri
+    from scipy.spatial import cKDTree
+
+    tri = mtri.Triangulation(uv[:, 0], uv[:, 1], faces)
+    out = np.asarray(mtri.LinearTriInterpolator(tri, values)(P[:, 0], P[:, 1]).filled(np.nan), dtype=np.float64)
+    bad = ~np.isfinite(out)
+    if bad.any():
+        out[bad] = values[cKDTree(uv).query(P[bad])[1]]
+    return out
+
+
+def map_to_surface(uv, faces, V, P) -> np.ndarray:
+    """3D target points (k,3) [m] of flat points P (k,2): barycentric on the flat triangulation."""
+    return np.stack([_interpolate(uv, faces, V[:, c], P) for c in range(3)], axis=1)

@@ -1,0 +1,185 @@
+"""Target surface -> flat pattern -> deployment -> comparison (``simfab deploy surface``).
+
+Stages (each timed): flatten (:mod:`~simfab.deploy.flatten`), layout
+(:mod:`~simfab.deploy.pattern`), lasercut (:mod:`~simfab.deploy.lasercut`), deploy
+(:mod:`~simfab.deploy.network`), compare (:mod:`~simfab.deploy.compare`) and mujoco
+(:mod:`~simfab.deploy.mjcf_sim`: build the simulatable scene, step it (damped) from the deployed
+key for ``stability_seconds`` and compare the relaxed state with simfab's equilibrium after a
+rigid alignment).
+
+Deployed shape descriptors: the total angle defect of the deployed quad mesh's interior
+vertices (the inserts) [rad], i.e. its integrated Gaussian curvature (discrete Gauss-Bonnet:
+> 0 dome, < 0 saddle), the sign of each insert's angle defect (``kind``: dome / saddle when 90 %
+of them are positive / negative, else mixed), and the quadric z = a x^2 + b x y + c y^2 + (linear,
+constant) fitted to the deployed vertices in their best-fit plane, K_fit = 4 a c - b^2 [1/m^2]
+(the global shape; a deployment whose curvature sits in local bumps at the inserts can have
+total angle defect and K_fit of opposite signs).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class SurfaceResult:
+    """Everything a run produced (for the writers and the summary)."""
+
+    scene: object
+    flat: object
+    pattern: object
+    cut: object
+    network: object
+    deployment: object
+    target_points: np.ndarray
+    deviation: object
+    sim: object
+    sim_check: dict
+    shape: dict
+    seconds: dict
+
+
+def quadric_curvature(X: np.ndarray) -> float:
+    """K_fit = 4 a c - b^2 [1/m^2] of the least-squares quadric over the points' best-fit plane."""
+    c = X.mean(axis=0)
+    _, _, Wt = np.linalg.svd(X - c)
+    e1, e2, n = Wt
+    p = X - c
+    x, y, z = p @ e1, p @ e2, p @ n
+    M = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=1)
+    a, b, cc, *_ = np.linalg.lstsq(M, z, rcond=None)[0]
+    return float(4 * a * cc - b * b)
+
+
+def _kind(K: np.ndarray) -> str:
+    """"dome" / "saddle" when at least 90 % of the inserts' angle defects are positive / negative,
+    else "mixed"."""
+    if len(K) == 0:
+        return "flat"
+    pos = float(np.mean(K > 0))
+    return "dome" if pos >= 0.9 else "saddle" if pos <= 0.1 else "mixed"
+
+
+def shape_descriptors(pat, X: np.ndarray) -> dict:
+    from simfab.deploy.network import discrete_gaussian_curvature
+
+    K = discrete_gaussian_curvature(X, pat.quads, pat.interior)
+    kfit = quadric_curvature(X)
+    return dict(quadric_gaussian_curvature=kfit, total_angle_defect=float(np.nansum(K)),
+                curvature_sign_at_inserts=dict(positive=int(np.sum(K > 0)), negative=int(np.sum(K < 0))),
+                kind=_kind(K[pat.interior]))
+
+
+def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = True) -> SurfaceResult:
+    """Run every stage on a loaded :class:`simfab.deploy.scene.SurfaceScene`."""
+    from simfab.deploy import compare, flatten, lasercut, mjcf_sim, network, pattern
+    from simfab.progress import log
+
+    sec = {}
+    t = time.perf_counter()
+    tgt = scene.target
+    log(f"deploy surface: flatten {len(tgt.V)} vertices (BFF)", quiet=quiet)
+    flat = flatten.flatten(tgt.V, tgt.F)
+    sec["flatten"] = time.perf_counter() - t
+    t = time.perf_counter()
+    pat = pattern.layout(flat.uv, flat.boundary, tgt.F, flat.u, scene.pattern)
+    Y = pattern.map_to_surface(flat.uv, tgt.F, tgt.V, pat.P)
+    sec["layout"] = time.perf_counter() - t
+    t = time.perf_counter()
+    cut = lasercut.layout(pat)
+    sec["lasercut"] = time.perf_counter() - t
+    t = time.perf_counter()
+    log(f"deploy surface: {pat.n_inserts} inserts, {len(pat.edges)} beams, {int(pat.spring.sum())} springs",
+        quiet=quiet)
+    net = network.build_network(pat, scene.deploy)
+    dep = network.deploy(pat, net, scene.deploy, network.target_heights(pat, Y), device=device, quiet=quiet)
+    sec["deploy"] = time.perf_counter() - t
+    t = time.perf_counter()
+    X = dep.vertex_positions()
+    dev = compare.deviation(X, Y, pat.quads, tgt)
+    shape = shape_descriptors(pat, X)
+    sec["compare"] = time.perf_counter() - t
+    sim, check = None, {}
+    if mujoco_check:
+        t = time.perf_counter()
+        log("deploy surface: MuJoCo scene (stability + relaxation check)", quiet=quiet)
+        sim, check = mujoco_check_run(net, dep, pat, scene)
+        sec["mujoco"] = time.perf_counter() - t
+    return SurfaceResult(scene=scene, flat=flat, pattern=pat, cut=cut, network=net, deployment=dep, target_points=Y,
+                         deviation=dev, sim=sim, sim_check=check, shape=shape, seconds=sec)
+
+
+def insert_geoms(pat, net) -> dict:
+    """MuJoCo/USD geometry of the inserts: square plates of half-side r + beam_width, 2 t thick."""
+    pc = pat.config
+    s = pc.insert_half_size + pc.beam_width
+    out = {}
+    for v in np.flatnonzero(pat.interior):
+        out[net.model.body_names[net.vertex_body[v]]] = dict(box=[s, s, pc.beam_thickness], rgba=[0.85, 0.45, 0.2, 1])
+    return out
+
+
+def mujoco_check_run(net, dep, pat, scene):
+    """Build the MuJoCo scene, step it from the key (stability) and relax it (agreement with simfab)."""
+    import mujoco
+
+    from simfab.deploy import compare, mjcf_sim
+
+    cfg = scene.mujoco
+    sim = mjcf_sim.build(net.model, net.state, dep.final, density=scene.deploy.density, cfg=cfg,
+                         name="deployed_surface", body_geoms=insert_geoms(pat, net))
+    m = sim.builder.compile()
+    stab, d = mjcf_sim.step_from_key(m, cfg.stability_seconds)  # damped: also the relaxation
+    Y = dep.final.body_pos
+    X = np.array([d.body(n).xpos for n in net.model.body_names])
+    R, t = compare.kabsch(X, Y)
+    diff = np.linalg.norm(X @ R.T + t - Y, axis=1)
+    height = float(np.ptp(Y @ np.linalg.svd(Y - Y.mean(axis=0))[2][2]))  # out-of-plane extent [m]
+    check = dict(nq=int(m.nq), nv=int(m.nv), welds=int(m.neq), timestep=stab.timestep,
+                 stability=dict(seconds=stab.seconds, finite=stab.finite, max_speed=stab.max_speed,
+                                final_kinetic_energy=stab.final_kinetic, max_drift_m=stab.max_drift, wall_s=stab.wall),
+                 relaxation=dict(seconds=stab.seconds, finite=stab.finite,
+                                 rms_m=float(np.sqrt(np.mean(diff**2))), max_m=float(np.max(diff)),
+                                 out_of_plane_extent_m=height,
+                                 rms_rel=float(np.sqrt(np.mean(diff**2))) / height if height > 0 else None,
+                                 max_rel=float(np.max(diff)) / height if height > 0 else None))
+    return sim, check
+
+
+def out_of_plane_extent(X: np.ndarray) -> float:
+    """Extent [m] of points (n,3) along the normal of their best-fit plane."""
+    return float(np.ptp((X - X.mean(axis=0)) @ np.linalg.svd(X - X.mean(axis=0))[2][2]))
+
+
+def summary(res: SurfaceResult) -> dict:
+    """The JSON summary (units in the keys)."""
+    from simfab.deploy import lasercut
+
+    f, p, dv = res.flat, res.pattern, res.deviation
+    ins = p.interior
+    return dict(
+        scene=res.scene.path, target=res.scene.target.name, vertices=int(len(res.scene.target.V)),
+        faces=int(len(res.scene.target.F)),
+        u_min=float(f.u.min()), u_max=float(f.u.max()),
+        area_distortion_log_min=float(f.sigma.min()), area_distortion_log_max=float(f.sigma.max()),
+        area_ratio_min=float(np.exp(2 * f.sigma.min())), area_ratio_max=float(np.exp(2 * f.sigma.max())),
+        closure_angle_correction_rad=f.closure_angle_correction,
+        quads=int(len(p.quads)), beams=int(len(p.edges)), springs=int(p.spring.sum()), inserts=p.n_inserts,
+        insert_half_size_mm=p.config.insert_half_size * 1e3,
+        gap_min_mm=float(p.gap[ins].min() * 1e3) if ins.any() else None,
+        gap_max_mm=float(p.gap[ins].max() * 1e3) if ins.any() else None,
+        unreachable_gaps=[dict(insert=int(p.insert_ids[v]), required_mm=float(p.gap_required[v] * 1e3))
+                          for v in p.unreachable],
+        lasercut=lasercut.summary(res.cut),
+        deployment=dict(stable=res.deployment.stable, increments=len(res.deployment.iterations),
+                        newton_iterations=res.deployment.iterations, energy_J=res.deployment.energy, **res.shape),
+        deviation=dict(rms=dv.rms, hausdorff=dv.hausdorff, rms_mm=dv.rms_m * 1e3, hausdorff_mm=dv.hausdorff_m * 1e3,
+                       diameter_mm=dv.diameter * 1e3,
+                       deployed_height_mm=out_of_plane_extent(dv.aligned) * 1e3,
+                       target_height_mm=out_of_plane_extent(res.target_points) * 1e3),
+        mujoco=res.sim_check,
+        seconds=dict(res.seconds, total=float(sum(res.seconds.values()))),
+    )

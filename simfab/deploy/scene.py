@@ -1,0 +1,107 @@
+"""Surface-deployment scene files (TOML): the target and every parameter of the pipeline.
+
+    [target]          # either a procedural surface ...
+    kind = "spherical_cap"            # spherical_cap | saddle | mixed | cylinder (simfab.deploy.surface)
+    radius = 0.15                     # kind-specific parameters [m, deg]
+    angle_deg = 50
+    rings = 24                        # triangulation rings
+    # ... or a mesh file (OBJ/STL/PLY, relative to the scene file):
+    # mesh = "lily.obj"
+    # units = "mm"
+
+    [pattern]    # simfab.deploy.pattern.PatternConfig   (spacing, beam_width, ..., lengths in m)
+    [material]   # young [Pa], poisson [-], density [kg/m^3]
+    [deploy]     # increments, perturbation, beam_segments, spring_segments
+    [mujoco]     # simfab.deploy.mjcf_sim.SimConfig
+
+Unknown tables or fields are errors naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from simfab._bundled import scenes_dir
+from simfab.errors import InputError
+
+BUNDLED = ("dome", "saddle", "mixed")
+
+
+@dataclass(frozen=True)
+class SurfaceScene:
+    """A loaded scene: target (:class:`simfab.deploy.surface.Target`), pattern / deploy / MuJoCo
+    configurations, the file path."""
+
+    target: object
+    pattern: object
+    deploy: object
+    mujoco: object
+    path: str
+
+
+def bundled_path(name: str) -> str:
+    """``scenes/deploy/<name>.toml`` of the bundled surface scenes."""
+    return str(scenes_dir("deploy", f"{name}.toml"))
+
+
+def _make(cls, table: dict, where: str, section: str):
+    names = {f.name for f in dataclasses.fields(cls)}
+    bad = sorted(set(table) - names)
+    if bad:
+        raise InputError(f"unknown field(s) {', '.join(bad)} (known: {', '.join(sorted(names))})",
+                         where=f"{where}: [{section}]")
+    try:
+        return cls(**table)
+    except InputError as e:
+        raise InputError(e.args[0] if e.args else str(e), where=f"{where}: {getattr(e, 'where', None) or section}") from None
+    except TypeError as e:
+        raise InputError(str(e), where=f"{where}: [{section}]") from None
+
+
+def load_scene(path, *, units: str | None = None, overrides: dict | None = None) -> SurfaceScene:
+    """Read a scene TOML, or a bare mesh file (then all parameters are defaults + ``overrides``).
+
+    ``overrides``: {"pattern": {...}, "material": {...}, "deploy": {...}, "mujoco": {...}}
+    (command-line values, applied over the file's)."""
+    from simfab.deploy import surface
+    from simfab.deploy.mjcf_sim import SimConfig
+    from simfab.deploy.network import DeployConfig
+    from simfab.deploy.pattern import PatternConfig
+
+    p = Path(path)
+    where = str(p)
+    if not p.is_file():
+        raise InputError("file not found", where=where)
+    overrides = overrides or {}
+    if p.suffix.lower() == ".toml":
+        try:
+            doc = tomllib.loads(p.read_text(encoding="utf-8"))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+            raise InputError(f"not valid TOML: {e}", where=where) from None
+        unknown = sorted(set(doc) - {"target", "pattern", "material", "deploy", "mujoco"})
+        if unknown:
+            raise InputError(f"unknown table(s) {', '.join(unknown)}", where=where)
+        tt = dict(doc.get("target", {}))
+        if "mesh" in tt:
+            mesh = (p.parent / tt.pop("mesh")).resolve()
+            u = units or tt.pop("units", "m")
+            tt.pop("units", None)
+            if tt:
+                raise InputError(f"unknown field(s) {', '.join(sorted(tt))} beside 'mesh'", where=f"{where}: [target]")
+            target = surface.load(mesh, units=u)
+        elif "kind" in tt:
+            kind = tt.pop("kind")
+            target = surface.procedural(kind, tt, where=f"{where}: [target]")
+        else:
+            raise InputError("[target] needs 'kind' (procedural) or 'mesh' (file)", where=where)
+    else:
+        doc = {}
+        target = surface.load(p, units=units or "m")
+    tables = {k: {**doc.get(k, {}), **overrides.get(k, {})} for k in ("pattern", "material", "deploy", "mujoco")}
+    pat = _make(PatternConfig, tables["pattern"], where, "pattern")
+    dep = _make(DeployConfig, {**tables["material"], **tables["deploy"]}, where, "material/deploy")
+    sim = _make(SimConfig, tables["mujoco"], where, "mujoco")
+    return SurfaceScene(target=target, pattern=pat, deploy=dep, mujoco=sim, path=where)

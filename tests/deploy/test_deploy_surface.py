@@ -1,0 +1,180 @@
+"""Surface deployment end to end on small targets: rod network, MuJoCo scene, CLI."""
+
+import json
+
+import mujoco
+import numpy as np
+import pytest
+
+from simfab.deploy import compare, flatten, mjcf_sim, network, pattern, pipeline, surface
+
+
+def _deploy(target, spacing, increments=6):
+    f = flatten.flatten(target.V, target.F)
+    pat = pattern.layout(f.uv, f.boundary, target.F, f.u, pattern.PatternConfig(spacing=spacing))
+    cfg = network.DeployConfig(perturbation=0.5, increments=increments)
+    net = network.build_network(pat, cfg)
+    Y = pattern.map_to_surface(f.uv, target.F, target.V, pat.P)
+    dep = network.deploy(pat, net, cfg, network.target_heights(pat, Y))
+    return pat, net, dep, cfg, Y
+
+
+@pytest.fixture(scope="module")
+def small_dome():
+    return _deploy(surface.spherical_cap(0.1, np.radians(50), 10), 0.03)
+
+
+@pytest.fixture(scope="module")
+def tiny_saddle():
+    return _deploy(surface.saddle(0.06, 0.1, 8), 0.03, increments=4)
+
+
+def test_dome_deploys_to_positive_curvature(small_dome):
+    pat, net, dep, _, Y = small_dome
+    assert pat.n_inserts >= 9 and dep.stable
+    X = dep.vertex_positions()
+    K = network.discrete_gaussian_curvature(X, pat.quads, pat.interior)
+    # every insert vertex of the deployed quad mesh has a positive angle defect and so does the total
+    assert np.all(K[pat.interior] > 0)
+    assert pipeline.shape_descriptors(pat, X)["kind"] == "dome"
+    # the flat pattern has none: the curvature comes from the inserts
+    K0 = network.discrete_gaussian_curvature(dep.vertex_positions(dep.states[0]), pat.quads, pat.interior)
+    assert np.nanmax(np.abs(K0)) < 1e-9
+
+
+def test_saddle_deploys_to_negative_curvature(tiny_saddle):
+    pat, net, dep, _, Y = tiny_saddle
+    X = dep.vertex_positions()
+    K = network.discrete_gaussian_curvature(X, pat.quads, pat.interior)
+    assert dep.stable
+    assert np.all(K[pat.interior] < 0)
+    assert pipeline.shape_descriptors(pat, X)["quadric_gaussian_curvature"] < 0
+    # and it is close to the target after the best rigid alignment (measured 0.9 % RMS at this size)
+    tgt = surface.saddle(0.06, 0.1, 8)
+    dv = compare.deviation(X, Y, pat.quads, tgt)
+    assert dv.rms < 0.03
+
+
+def test_kabsch_recovers_a_rigid_motion():
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(20, 3))
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_rotvec([0.3, -0.2, 1.0]).as_matrix()
+    t = np.array([0.1, 2.0, -0.5])
+    R2, t2 = compare.kabsch(X, X @ R.T + t)
+    assert np.allclose(R2, R, atol=1e-12) and np.allclose(t2, t, atol=1e-12)
+
+
+def test_mujoco_scene_opens_on_key_and_is_stable(tiny_saddle, tmp_path):
+    from simfab.rods.statics import StaticSolver
+
+    pat, net, dep, cfg, _ = tiny_saddle
+    sc = mjcf_sim.SimConfig()
+    sim = mjcf_sim.build(net.model, net.state, dep.final, density=cfg.density, cfg=sc)
+    path = sim.builder.save(tmp_path / "deployed.xml")
+    m = mujoco.MjModel.from_xml_path(str(path))
+    assert m.nkey == 2 and m.nv > 6 * net.model.n_bodies and m.neq == len(net.model.rods)
+    d = mujoco.MjData(m)
+    # key 'flat' is the cut pattern (the springs' rest): every body and rod node where the flat
+    # state has it
+    mujoco.mj_resetDataKeyframe(m, d, mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "flat"))
+    mujoco.mj_forward(m, d)
+    for i, name in enumerate(net.model.body_names):
+        assert np.allclose(d.body(name).xpos, net.state.body_pos[i], atol=1e-9)
+    r = net.model.rods[-1]  # a spring: clamped at junctions, whose offsets do not change
+    for k in range(len(r.edges)):
+        assert np.allclose(d.body(f"{r.name}_{k}").xpos, net.state.x[r.nodes[k]], atol=1e-9)
+    # qpos0 (what the viewer opens on) and key 'deployed' are simfab's deployed state: bodies
+    # exactly, rod nodes to the rods' stretch (EA finite)
+    assert np.allclose(m.key_qpos[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "deployed")], m.qpos0, atol=1e-8)
+    mujoco.mj_resetData(m, d)
+    mujoco.mj_forward(m, d)
+    st = dep.final
+    for i, name in enumerate(net.model.body_names):
+        assert np.allclose(d.body(name).xpos, st.body_pos[i], atol=1e-9)
+    # MuJoCo's links have the rest lengths: node k is off by at most the rod's accumulated stretch
+    stretch = np.abs(np.linalg.norm(np.diff(st.x[net.model.edges], axis=1)[:, 0], axis=1) - net.model.rest_len)
+    for r in net.model.rods:
+        for k in range(len(r.edges)):
+            err = np.linalg.norm(d.body(f"{r.name}_{k}").xpos - st.x[r.nodes[k]])
+            assert err <= np.sum(stretch[r.edges[:k]]) + 1e-9
+    # the hinge springs' energy at the key matches simfab's bending + twisting energy: the two
+    # discretizations differ by phi vs 2 tan(phi/2) per hinge (measured 4-6 % on deployed patterns)
+    ev = StaticSolver(net.model).evaluator
+    ev(st, False, False)
+    e_simfab = ev.parts["bend"] + ev.parts["twist"]
+    assert abs(d.energy[0] - e_simfab) < 0.1 * e_simfab
+    # stepping 2 s from the key stays finite, and the damped motion relaxes to MuJoCo's own
+    # equilibrium within a few percent of simfab's (two rod models, one equilibrium; measured
+    # 0.5 % of the out-of-plane height), keeping the elastic energy (measured -3 %)
+    e_key = d.energy[0]
+    stab, d = mjcf_sim.step_from_key(m, 2.0)
+    assert stab.finite and stab.final_kinetic < 1e-3 * e_key
+    X = np.array([d.body(n).xpos for n in net.model.body_names])
+    height = np.ptp(st.body_pos[:, 2])
+    assert mjcf_sim.aligned_drift(st.body_pos, X) < 0.03 * height
+    assert abs(d.energy[0] - e_key) < 0.1 * e_key
+
+
+def test_cli_surface_writes_everything(tmp_path, capsys):
+    from simfab.cli import main
+    from simfab.io.usd import check_compliance
+
+    scene = tmp_path / "tiny.toml"
+    scene.write_text('[target]\nkind = "saddle"\ndisk_radius = 0.06\ncurvature_radius = 0.1\nrings = 8\n'
+                     '[pattern]\nspacing = 0.03\n[deploy]\nincrements = 4\nperturbation = 0.5\n'
+                     '[mujoco]\nstability_seconds = 0.1\n')
+    out = tmp_path / "o"
+    assert main(["deploy", "surface", str(scene), "--out", str(out), "--json", "--quiet"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    for p in res["outputs"].values():
+        assert (out / p.split("/")[-1]).is_file()
+    assert res["u_min"] >= 0 < res["u_max"] and res["gap_min_mm"] > res["insert_half_size_mm"]
+    assert res["deployment"]["kind"] == "saddle" and res["deviation"]["rms"] < 0.03
+    assert res["mujoco"]["stability"]["finite"]
+    assert set(res["seconds"]) >= {"flatten", "layout", "lasercut", "deploy", "compare", "mujoco", "total"}
+    assert check_compliance(res["outputs"]["usd"]) == []
+
+
+@pytest.mark.parametrize("argv, field", [
+    (["deploy", "surface"], "TARGET"),
+    (["deploy", "surface", "/nonexistent.obj"], "file not found"),
+    (["deploy", "surface", "dome", "--spacing", "-1"], "pattern.spacing"),
+    (["deploy", "surface", "dome", "--insert-size", "0.5"], "insert_half_size"),
+])
+def test_cli_surface_bad_input(argv, field, tmp_path, capsys):
+    from simfab.cli import main
+
+    out = tmp_path / "o"
+    assert main(argv + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and field in err
+    assert not out.exists()
+
+
+def test_scene_rejects_unknown_fields(tmp_path):
+    from simfab.deploy import scene
+    from simfab.errors import InputError
+
+    p = tmp_path / "s.toml"
+    p.write_text('[target]\nkind = "saddle"\ndisk_radius = 0.06\ncurvature_radius = 0.1\n[pattern]\nspcing = 0.03\n')
+    with pytest.raises(InputError, match="spcing"):
+        scene.load_scene(p)
+    p.write_text('[target]\nkind = "torus"\n')
+    with pytest.raises(InputError, match="torus"):
+        scene.load_scene(p)
+
+
+def test_mesh_target_in_millimetres(tmp_path):
+    import trimesh
+
+    from simfab.deploy import scene
+
+    t = surface.spherical_cap(0.1, np.radians(40), 6)
+    trimesh.Trimesh(t.V * 1e3, t.F, process=False).export(tmp_path / "cap.obj")
+    sc = scene.load_scene(tmp_path / "cap.obj", units="mm")
+    assert np.allclose(sc.target.V, t.V, atol=1e-9) and len(sc.target.F) == len(t.F)
+    (tmp_path / "s.toml").write_text('[target]\nmesh = "cap.obj"\nunits = "mm"\n[pattern]\nspacing = 0.02\n')
+    sc = scene.load_scene(tmp_path / "s.toml")
+    assert sc.pattern.spacing == 0.02 and np.allclose(sc.target.V, t.V, atol=1e-9)
