@@ -3,7 +3,7 @@
 Usage::
 
     simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes | --fixed-axes AXES] [--no-refine]
-    simfab couple converge SCENE [--factors 1,2,4,8]
+    simfab couple converge SCENE [--factors 0.25,0.5,1,1.5]
     simfab couple scenes
 
 SCENE is a coupling scene: ``NAME.xml`` (MJCF: the object O as the mocap body ``object`` with
@@ -48,7 +48,8 @@ def add_args(p):
                           description="Run a scene at refined meshes (element count x each factor) and report "
                                       "the profile figures, their extrapolated values and the error of the scene's own mesh.")
     conv.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
-    conv.add_argument("--factors", default="1,2,4,8", help="refinement factors of the element count (default 1,2,4,8)")
+    conv.add_argument("--factors", default="0.25,0.5,1,1.5",
+                      help="refinement factors of the scene's element count (default 0.25,0.5,1,1.5)")
     listing = sub.add_parser("scenes", help="list the bundled coupling scenes")
     from simfab.cli import add_common_args
 
