@@ -5,7 +5,7 @@ Usage:
     simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes | --fixed-axes AXES] [--no-refine]
     simfab couple optimize SCENE [--grip tight|loose] [--insertion-force LO HI] ... [--iterations N]
     simfab couple study handles SCENE [--counts K ...] [--random N]
-    simfab couple converge SCENE [--factors 1,2,4,8]
+    simfab couple converge SCENE [--factors 0.25,0.5,1,1.5]
     simfab couple scenes
 
 SCENE is a coupling scene: NAME.xml (MJCF: the object O as the mocap body 'object' with
@@ -62,7 +62,8 @@ def add_args(p):
                                       "figure: values, extrapolated, order, relative_error), error_of_default, table.",
                           formatter_class=argparse.RawDescriptionHelpFormatter)
     conv.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
-    conv.add_argument("--factors", default="1,2,4,8", help="refinement factors of the element count (default 1,2,4,8)")
+    conv.add_argument("--factors", default="0.25,0.5,1,1.5",
+                      help="refinement factors of the scene's element count (default 0.25,0.5,1,1.5)")
     listing = sub.add_parser("scenes", help="list the bundled coupling scenes",
                              description="List the bundled coupling scenes (scenes/coupling); each runs with "
                                          "'simfab couple simulate NAME'. Writes nothing.\n\n--json keys: scenes "
