@@ -64,7 +64,7 @@ def _inputs(d: Path) -> dict:
     f["grow_nan"].write_text(xml[:i] + 'size="nan' + xml[xml.index('"', i + 6):])
     f["grow_badtoml"] = _copy_scene(g, d, "grow_badtoml", toml_sub=[('mode = "volume"', 'mode = "sideways"')])
     c = SCENES / "coupling" / "cclamp2d.xml"
-    f["cc_target0"] = _copy_scene(c, d, "cc_target0", toml_sub=[("target_elements = 450", "target_elements = 0")])
+    f["cc_target0"] = _copy_scene(c, d, "cc_target0", toml_sub=[("target_elements = 4800", "target_elements = 0")])
     f["cc_material"] = _copy_scene(c, d, "cc_material", toml_sub=[('name = "PLA"', 'name = "unobtainium"')])
     f["cc_segments"] = _copy_scene(c, d, "cc_segments", toml_sub=[("segments = 48", "segments = 1000000000")])
     f["cc_dim5"] = _copy_scene(c, d, "cc_dim5", toml_sub=[("dim = 2", "dim = 5")])
