@@ -8,7 +8,7 @@ Usage:
 SPEC.toml (or the name of a bundled spec in scenes/sweeps, e.g. cclamp2d_chart) names a
 command, optionally a base scene whose parameters it varies, the parameters' values (lists,
 ranges, seeded random samples) and the figures to collect from each run's JSON summary (see
-simfab.sweep.spec and scenes/sweeps/README.md). Each run executes the subcommand
+simfab.cli.sweep_spec and scenes/sweeps/README.md). Each run executes the subcommand
 in-process on a Dask worker with --out OUT/runs/KEY; by default on a LocalCluster of one
 worker process per core, with --scheduler on an existing cluster (dask scheduler +
 dask worker; every worker needs the same simfab installed, checked at connect time).
@@ -43,8 +43,8 @@ def add_args(p) -> None:
 def run(args) -> dict:
     from simfab._bundled import scenes_dir
     from simfab.errors import InputError
-    from simfab.sweep.spec import load_spec
-    from simfab.sweep.study import run_sweep
+    from simfab.cli.sweep_spec import load_spec
+    from simfab.cli.sweep_study import run_sweep
 
     if args.list:
         return {"specs": sorted(p.stem for p in scenes_dir("sweeps").glob("*.toml"))}

@@ -191,6 +191,8 @@ CASES = [
     ("crowd-study-out-is-a-file", ["crowd", "study", "{ratings}", "--scale", "1", "10", "--truth", "{truth}",
                                    "--out", "{file}"], 2, ["--out", "afile.txt"]),
     # --- render and inspect
+    ("sweep-missing-spec", ["sweep", "nope.toml"], 2, ["nope.toml"]),
+    ("sweep-bad-scheduler", ["sweep", "cclamp2d_chart", "--scheduler", "127.0.0.1:9"], 2, ["--scheduler"]),
     ("render-time-nan", ["render", "{usda}", "--time", "nan"], 2, ["--time"]),
     ("render-truncated-usda", ["render", "{trunc_usda}"], 2, ["trunc.usda", "line"]),
     ("render-garbage-usdc", ["render", "{garbage_usdc}"], 2, ["garbage.usdc"]),

@@ -8,8 +8,8 @@ import pytest
 
 from simfab.cli import main
 from simfab.errors import InputError
-from simfab.sweep.runner import execute_run, lookup, run_task, write_scene
-from simfab.sweep.spec import load_spec
+from simfab.cli.sweep_runner import execute_run, lookup, run_task, write_scene
+from simfab.cli.sweep_spec import load_spec
 
 
 def _spec(tmp_path, text, name="s.toml"):
@@ -190,7 +190,7 @@ def test_bundled_specs_load(tmp_path):
 def test_serial_sweep_without_kept_outputs(tmp_path, tiny_spec):
     import pandas as pd
 
-    from simfab.sweep.study import run_sweep
+    from simfab.cli.sweep_study import run_sweep
 
     p = _spec(tmp_path, tiny_spec.read_text().replace("seed = 3", "seed = 3\nkeep_outputs = false"), "nokeep.toml")
     s = run_sweep(load_spec(p), tmp_path / "o", scheduler="serial", quiet=True)

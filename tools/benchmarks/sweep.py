@@ -112,8 +112,8 @@ F_in = "F_in"
 def _insertion(client, workers: int, tmp: str) -> dict:
     import pandas as pd
 
-    from simfab.sweep.spec import load_spec
-    from simfab.sweep.study import run_sweep
+    from simfab.cli.sweep_spec import load_spec
+    from simfab.cli.sweep_study import run_sweep
 
     p = os.path.join(tmp, "insertion16.toml")
     with open(p, "w") as f:

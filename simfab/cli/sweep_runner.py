@@ -17,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 from simfab.errors import InputError
-from simfab.sweep.spec import SweepSpec, scene_files
+from simfab.cli.sweep_spec import SweepSpec, scene_files
 
 _PARSER = None  # one argparse tree per worker process (building it imports every subcommand)
 

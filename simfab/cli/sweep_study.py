@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from simfab.errors import InputError
-from simfab.sweep.spec import META_COLUMNS, SweepSpec
+from simfab.cli.sweep_spec import META_COLUMNS, SweepSpec
 from simfab.sweep.table import FINAL, frame, read_table, table_paths, write_table
 
 #: Seconds between rewrites of the table while results arrive.
@@ -75,7 +75,7 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, quiet: bool = False, retr
     from simfab.io.atomic import write_json
     from simfab.progress import log
     from simfab.sweep.plots import plot_sweep
-    from simfab.sweep.runner import cell, execute_run, run_task
+    from simfab.cli.sweep_runner import cell, execute_run, run_task
     from simfab.sweep.tasks import SERIAL, connect, run_tasks
 
     t0 = time.perf_counter()
