@@ -1,8 +1,9 @@
 """The bundled design scenes end to end: optimize, then re-simulate the optimized scene.
 
-``python tools/bench.py design_scenes [--scenes a,b,...] [--out DIR] [--profile-handles 2,4,8]``
+``python tools/bench.py design_scenes [--scenes a,b,...] [--out DIR] [--profile-handles 2,4,8] [--restarts 2]``
 
-For every scene: ``simfab couple optimize NAME`` (its [design] brief, seed 0) writes its outputs
+For every scene: ``simfab couple optimize NAME --restarts 2`` (its [design] brief, seeds 0 and 1 as
+two Dask tasks, the better design kept) writes its outputs
 under ``--out`` (default ``./simfab-out/design_scenes``); the optimized scene it writes is then
 simulated afresh, as ``simfab couple simulate OUT/NAME_optimized.xml`` would, and every
 constraint of the brief is checked on that fresh profile. Reported per scene: the initial and
@@ -46,6 +47,7 @@ def run(argv) -> dict:
     ap.add_argument("--scenes", default=",".join(SCENES_2D), help=f"comma-separated (3D ones: {','.join(SCENES_3D)})")
     ap.add_argument("--out", default="simfab-out/design_scenes")
     ap.add_argument("--profile-handles", default="2,4,8")
+    ap.add_argument("--restarts", type=int, default=2)
     a = ap.parse_args(argv)
 
     from simfab.design.pipeline import optimize_scene
@@ -54,15 +56,15 @@ def run(argv) -> dict:
     report = {}
     for name in a.scenes.split(","):
         t0 = time.perf_counter()
-        s = optimize_scene(name, out=out / name, seed=0)
+        s = optimize_scene(name, out=out / name, seed=0, restarts=a.restarts)
         re = _resimulate(s, out / name)
-        report[name] = {"feasible": s["feasible"], "E_L": s["E_L"], "iterations": s["iterations"],
+        report[name] = {"restarts": s.get("restarts"), "feasible": s["feasible"], "E_L": s["E_L"], "iterations": s["iterations"],
                         "simulations": s["simulations"], "seconds": time.perf_counter() - t0,
                         "initial": s["profile_initial"], "final": s["profile"], "resimulated": re}
         if name == "profile2d":
             rms = {}
             for k in [int(x) for x in a.profile_handles.split(",")]:
-                sk = optimize_scene(name, out=out / f"{name}_h{k}", design={"handles": k}, seed=0)
+                sk = optimize_scene(name, out=out / f"{name}_h{k}", design={"handles": k}, seed=0, restarts=a.restarts)
                 rms[k] = {"rms_error_N": sk.get("rms_error"), "rms_error_initial_N": sk.get("rms_error_initial"),
                           "iterations": sk["iterations"]}
             report[name]["rms_by_handles"] = rms
