@@ -329,8 +329,10 @@ def write_usd(res, path) -> Path:
     return w.save()
 
 
-def write_all(res, out: Path, *, scene_xml: Path, scene_toml: Path, stem: str | None = None) -> dict:
-    """Write every output (see the module docstring) together; return the summary with paths."""
+def write_all(res, out: Path, *, scene_xml: Path, scene_toml: Path, stem: str | None = None,
+              extra: dict | None = None) -> dict:
+    """Write every output (see the module docstring) together; return the summary with paths
+    (``extra`` keys added to it, e.g. the restarts)."""
     from simfab.io.atomic import atomic_paths, write_csv, write_json
     from simfab.io.mesh import save_mesh
 
@@ -338,6 +340,7 @@ def write_all(res, out: Path, *, scene_xml: Path, scene_toml: Path, stem: str | 
     stem = stem or res.problem.base.name
     paths = output_paths(out, stem, fem.dim, target=res.problem.target is not None)
     s = summary(res)
+    s.update(extra or {})
     s["outputs"] = {k: str(v) for k, v in paths.items()}
     with atomic_paths(paths) as tmp:
         save_mesh(part_mesh_mm(fem, res.best.rest), tmp["part_stl"])

@@ -57,9 +57,8 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         res, runs = optimize(problem, quiet=quiet, seed=seed), None
     else:
         res, runs = _restarts(ds, problem, design, simulation, device, seed, restarts, quiet, scheduler)
-    summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml)
-    if runs is not None:
-        summary["restarts"] = runs
+    summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml,
+                                extra=None if runs is None else {"restarts": runs})
     if revolve is not None:
         summary["outputs"]["revolved_stl"] = str(write_revolved(res, out, cm.name, *revolve))
     for w in summary["warnings"]:
