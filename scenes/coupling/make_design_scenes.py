@@ -69,33 +69,15 @@ def write_outline(name: str, ring: np.ndarray) -> str:
     return fname
 
 
-def design_scene(name: str, *, doc: str, ring: np.ndarray, target: int, object_geoms, keys, fixed_center,
-                 fixed_half, obj: dict, sim: dict, design: dict, material: str = "PLA", keep_sites=(),
-                 extra_assets=()):
-    from simfab.coupling.geometry import extrude
-    from simfab.io.mjcf import MJCFBuilder
+def design_scene(name: str, *, doc: str, ring: np.ndarray, target: int, design: dict, **kw):
+    """A 2D design scene: the outline as NAME_outline.csv, meshed to ``target`` triangles by the
+    scene loader; ``kw`` as for make_scenes.scene (object, path, fixed region, keep sites...)."""
+    from make_scenes import scene
 
-    part_mesh = extrude(ring, T2D)
-    b = MJCFBuilder(name)
-    for aname, V, F in extra_assets:
-        b.mesh_asset(aname, V, F)
-    b.mesh_asset("part", part_mesh.vertices, part_mesh.faces)
-    part = b.body("part")
-    b.geom(part, type="mesh", mesh="part", rgba=[0.85, 0.55, 0.25, 1], contype=0, conaffinity=0)
-    b.site(part, "fixed", pos=list(fixed_center), size=list(fixed_half), type="box", rgba=[0.2, 0.2, 0.9, 0.4])
-    for sname, c, h in keep_sites:
-        b.site(part, sname, pos=list(c), size=list(h), type="box", rgba=[0.9, 0.5, 0.1, 0.4])
-    p0, q0 = keys[0]
-    o = b.body("object", pos=p0, quat=q0, mocap=True)
-    for g in object_geoms:
-        b.geom(o, contype=0, conaffinity=0, rgba=[0.5, 0.6, 0.7, 1], **g)
-    for i, (p, q) in enumerate(keys):
-        b.key(f"k{i}", mpos=p, mquat=q)
-    b.save(HERE / f"{name}.xml")
+    from simfab.coupling.geometry import extrude
+
     comp = dict(generator="outline", outline=write_outline(name, ring), target_elements=target, thickness=T2D)
-    write_toml(HERE / f"{name}.toml", doc, {"name": name, "dim": 2},
-               {"material": {"name": material}, "compliant": comp, "object": obj, "fixed": {"site": "fixed"},
-                "simulation": sim, "design": design})
+    scene(name, doc=doc, dim=2, comp=comp, part_mesh=extrude(ring, T2D), design=design, **kw)
 
 
 def standside(name: str = "standside2d", *, half: float = 0.0125, bore: float = 0.0095, mouth: float = 0.018,
@@ -204,17 +186,6 @@ def profile2d() -> None:
         **common, design=dict(grip="any", target_profile="profile2d_target.csv", handles=4, placement="spatial"))
 
 
-def append_design(name: str, design: dict) -> None:
-    """Add a [design] table to a scene TOML written by make_scenes.scene."""
-    from make_scenes import _toml_value
-
-    from simfab.io.atomic import write_text
-
-    p = HERE / f"{name}.toml"
-    lines = ["", "[design]"] + [f"{k} = {_toml_value(v) if not isinstance(v, list) else repr(v)}" for k, v in design.items()]
-    write_text(p, p.read_text() + "\n".join(lines) + "\n")
-
-
 def knocker_design() -> None:
     """Door knocker (3D, rotating path): the ring of knocker3d, a clip with thick arms (stiff: the
     initial design needs large forces and yields)."""
@@ -240,8 +211,8 @@ def knocker_design() -> None:
           keys=[([xk, 0, 0], [1, 0, 0, 0]), ([xs, 0, 0], [1, 0, 0, 0]), ([xs, 0, 0], quat_z(-np.pi / 2))],
           fixed_center=[-ro - clamp["base_depth"], 0, 0], fixed_half=[0.0004, 0.007, 0.005],
           obj=dict(body="object", samples=2000, rot_length_scale=0.005), sim=dict(steps=40, fix_all_axes=True),
-          mesh_options=dict(coarsen=True, tol=0.1, tries=6))
-    append_design(name, dict(grip="loose", insertion_force=[0.0, 20.0], handles=5, iterations=150, patience=40))
+          mesh_options=dict(coarsen=True, tol=0.1, tries=6),
+          design=dict(grip="loose", insertion_force=[0.0, 20.0], handles=5, iterations=150, patience=40))
 
 
 def alligator3d() -> None:
@@ -259,9 +230,9 @@ def alligator3d() -> None:
           object_geoms=[dict(type="cylinder", size=[rod, 0.006])],
           keys=[([x0, 0, 0], [1, 0, 0, 0]), ([rod - 0.0038 + 0.0001, 0, 0], [1, 0, 0, 0])],
           fixed_center=[body[0], 0, 0], fixed_half=[0.0006, 0.009, 0.004],
-          obj=dict(body="object", samples=1154), sim=dict(steps=35), mesh_options=dict(coarsen=True, tol=0.1, tries=6))
-    append_design(name, dict(grip="tight", grip_force=[5.0, float("inf")], insertion_force=[0.0, 40.0], handles=5,
-                             iterations=150, patience=40))
+          obj=dict(body="object", samples=1154), sim=dict(steps=35), mesh_options=dict(coarsen=True, tol=0.1, tries=6),
+          design=dict(grip="tight", grip_force=[5.0, float("inf")], insertion_force=[0.0, 40.0], handles=5,
+                      iterations=150, patience=40))
 
 
 def paddleside() -> None:

@@ -109,7 +109,10 @@ def tet_mesh(name: str, surface, target: int, tol: float = 0.1, coarsen: bool = 
 
 
 def scene(name: str, *, doc: str, dim: int, comp: dict, part_mesh, object_geoms, keys, fixed_center, fixed_half,
-          obj: dict, sim: dict, material: str = "PLA", extra_assets=(), mesh_options=None):
+          obj: dict, sim: dict, material: str = "PLA", extra_assets=(), mesh_options=None, keep_sites=(),
+          design: dict | None = None):
+    """Write NAME.xml + NAME.toml (and NAME_part.npz in 3D). keep_sites: (name, centre, half extents)
+    box sites of regions a design keeps unchanged; design: the TOML's [design] table (design scenes)."""
     from simfab.io.mjcf import MJCFBuilder
 
     if dim == 3:
@@ -122,6 +125,8 @@ def scene(name: str, *, doc: str, dim: int, comp: dict, part_mesh, object_geoms,
     part = b.body("part")
     b.geom(part, type="mesh", mesh="part", rgba=[0.85, 0.55, 0.25, 1], contype=0, conaffinity=0)
     b.site(part, "fixed", pos=list(fixed_center), size=list(fixed_half), type="box", rgba=[0.2, 0.2, 0.9, 0.4])
+    for sname, c, h in keep_sites:
+        b.site(part, sname, pos=list(c), size=list(h), type="box", rgba=[0.9, 0.5, 0.1, 0.4])
     p0, q0 = keys[0]
     o = b.body("object", pos=p0, quat=q0, mocap=True)
     for g in object_geoms:
@@ -131,7 +136,7 @@ def scene(name: str, *, doc: str, dim: int, comp: dict, part_mesh, object_geoms,
     b.save(HERE / f"{name}.xml")
     write_toml(HERE / f"{name}.toml", doc, {"name": name, "dim": dim},
                {"material": {"name": material}, "compliant": comp, "object": obj, "fixed": {"site": "fixed"},
-                "simulation": sim})
+                "simulation": sim, **({"design": design} if design else {})})
 
 
 def main() -> None:
