@@ -208,6 +208,16 @@ class Evaluation:
         return self.status == "ok" and all(c.satisfied for c in self.constraints)
 
 
+def shape_defect(problem: DesignProblem, X: np.ndarray) -> str:
+    """Why X is not a valid rest shape ("inverted element", "degenerate element"), or ""."""
+    q = element_quality(X, problem.base.fem.elements)
+    if np.any(q <= 0):
+        return "inverted element"
+    if np.any(q < QUALITY_REL * problem.q0):
+        return "degenerate element"
+    return ""
+
+
 def candidate_model(problem: DesignProblem, X: np.ndarray):
     """(CouplingModel on rest shape X, "") or (None, reason) when X is not a valid rest shape."""
     from simfab.coupling.simulate import make_coupling_model
@@ -215,11 +225,9 @@ def candidate_model(problem: DesignProblem, X: np.ndarray):
 
     cm = problem.base
     fem = cm.fem
-    q = element_quality(X, fem.elements)
-    if np.any(q <= 0):
-        return None, "inverted element"
-    if np.any(q < QUALITY_REL * problem.q0):
-        return None, "degenerate element"
+    why = shape_defect(problem, X)
+    if why:
+        return None, why
     try:
         new = make_model(X, fem.elements, fem.material, thickness=fem.thickness, device=fem.device)
     except InputError as e:
@@ -268,15 +276,16 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     t0 = time.perf_counter()
     X = problem.handles.apply(h)
     ev = Evaluation(h=np.array(h, float), rest=X, status="rejected")
-    cm, why = candidate_model(problem, X)
-    if cm is None:
-        ev.reason = why
-        ev.seconds = time.perf_counter() - t0
-        return ev
-    ev.E_L = problem.energy(X)
-    base = 0.0 if problem.target is not None else ev.E_L
-    if base > threshold:
-        ev.status, ev.reason, ev.objective = "stopped", "modification energy above the acceptance threshold", base
+    # cheap checks first: shape validity and E_L against the threshold, before any model is built
+    ev.reason = shape_defect(problem, X)
+    if not ev.reason:
+        ev.E_L = problem.energy(X)
+        base = 0.0 if problem.target is not None else ev.E_L
+        if base > threshold:
+            ev.status, ev.reason, ev.objective = "stopped", "modification energy above the acceptance threshold", base
+        else:
+            cm, ev.reason = candidate_model(problem, X)
+    if ev.reason:
         ev.seconds = time.perf_counter() - t0
         return ev
     t1 = time.perf_counter()
