@@ -16,4 +16,7 @@ Optimization").
 - :mod:`simfab.design.outputs` - optimized part, scene, plots, history, USD, summary
 - :mod:`simfab.design.study` - the handle-placement study
 - :mod:`simfab.design.synthesis` - 2D -> 3D: extrusion and revolution of an optimized section
+- :mod:`simfab.design.scene` - design scenes (a coupling scene with a [design] table, keep sites)
+- :mod:`simfab.design.pipeline` - ``simfab couple optimize``: load, place, anneal (or restarts on
+  Dask), write
 """
