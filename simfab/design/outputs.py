@@ -238,10 +238,7 @@ def plot_profiles(res, path) -> Path:
     if len(lines) > 3:
         ax2.set_title("; ".join(lines[3:]), fontsize=8)
     fig.tight_layout()
-    try:
-        return save_figure(fig, path)
-    finally:
-        plt.close(fig)
+    return save_figure(fig, path, close=True)
 
 
 def plot_shape(res, path) -> Path:
@@ -291,10 +288,7 @@ def plot_shape(res, path) -> Path:
     ax.legend(fontsize=7, loc="best")
     ax.set_title(f"{res.problem.base.name}: optimized rest shape (E_L = {res.best.E_L:.3g})")
     fig.tight_layout()
-    try:
-        return save_figure(fig, path)
-    finally:
-        plt.close(fig)
+    return save_figure(fig, path, close=True)
 
 
 def write_usd(res, path) -> Path:

@@ -119,7 +119,4 @@ def plot(rows: list[dict], name: str, path) -> Path:
     a2.set_ylabel("final E_L, median of converged runs [-]")
     fig.suptitle(f"{name}: handle placement study (random: several seeds per count)")
     fig.tight_layout()
-    try:
-        return save_figure(fig, path)
-    finally:
-        plt.close(fig)
+    return save_figure(fig, path, close=True)

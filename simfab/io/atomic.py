@@ -85,10 +85,17 @@ def write_csv(path: str | os.PathLike, header: list[str], rows) -> Path:
     return write_text(path, buf.getvalue())
 
 
-def save_figure(fig, path: str | os.PathLike, **kw) -> Path:
-    """Atomically save a matplotlib figure (format from the suffix of ``path``)."""
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, **kw)
+def save_figure(fig, path: str | os.PathLike, *, close: bool = False, **kw) -> Path:
+    """Atomically save a matplotlib figure (format from the suffix of ``path``); ``close`` closes
+    the figure afterwards, also when saving fails."""
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, **kw)
+    finally:
+        if close:
+            import matplotlib.pyplot as plt
+
+            plt.close(fig)
     return Path(path)
 
 
