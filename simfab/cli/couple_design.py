@@ -10,7 +10,7 @@ stress [Pa], or a target force profile). Command-line options override the brief
 constraint: value, lo, hi, unit, satisfied, initial), category, category_initial, profile and
 profile_initial (category, coupling_ratio_pct, E_max_J, E_ss_J, F_in_N, F_rm_N, F_grip_N,
 max_von_mises_Pa), handles,
-iterations, stopped_early, simulations, accepted, rejected (count per reason), seconds,
+iterations, stopped_early, simulations, simulations_stopped_early, speculative_simulations, workers, accepted, rejected (count per reason), seconds,
 simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_stl, outline_csv
 (2D), scene_xml, scene_toml, scene_mesh, profile_png, shape_png, history_csv, usd, summary_json,
 revolved_stl with --revolve-axis), restarts (with --restarts: per run seed, status, message,
@@ -27,6 +27,7 @@ summary_csv, plot_png, summary_json), units.
 
 from __future__ import annotations
 
+import os
 import textwrap
 
 _PARTS = [textwrap.fill(" ".join(p.split()), 78) for p in __doc__.split("\n\n")]
@@ -49,6 +50,9 @@ def add_optimize_args(s) -> None:
     g.add_argument("--patience", type=int, metavar="N",
                    help="stop once the best design is feasible and has not improved for N iterations")
     s.add_argument("--steps", type=int, metavar="N", help="insertion steps per simulation (overrides the scene)")
+    s.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="processes evaluating the annealer's proposals at once (speculatively; the design "
+                        "does not depend on it; default: this machine's cores, at most 4; 1 with --restarts)")
     s.add_argument("--restarts", type=int, default=1, metavar="N",
                    help="independent annealing runs (seeds SEED..SEED+N-1) as Dask tasks; the best design is kept")
     s.add_argument("--scheduler", metavar="ADDRESS",
@@ -104,10 +108,13 @@ def run_optimize(args) -> dict:
     dev = check_device(args.device)
     if args.restarts < 1:
         raise InputError(f"must be >= 1, got {args.restarts}", where="--restarts")
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"must be >= 1, got {args.workers}", where="--workers")
+    workers = args.workers if args.workers is not None else (1 if args.restarts > 1 else min(os.cpu_count() or 1, 4))
     revolve = (args.revolve_axis, args.revolve_offset) if args.revolve_axis else None
     return optimize_scene(args.scene, out=args.out, design=design_overrides(args), simulation=simulation_overrides(args),
                           device=dev, quiet=args.quiet, seed=args.seed, revolve=revolve, restarts=args.restarts,
-                          scheduler=args.scheduler)
+                          scheduler=args.scheduler, workers=workers)
 
 
 def run_study(args) -> dict:

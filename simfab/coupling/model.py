@@ -162,7 +162,5 @@ def default_insertion_length(fem, path, samples: int = 2000) -> float:
         return total
     u = move / np.linalg.norm(move)
     far = float(np.max(fem.rest @ u))
-    for s in np.linspace(0.0, total, samples):
-        if float(np.asarray(path.pose_at(s)[0])[:dim] @ u) > far:
-            return float(s)
-    return total
+    past = np.flatnonzero(path.sampled_positions(samples)[:, :dim] @ u > far)
+    return float(np.linspace(0.0, total, samples)[past[0]]) if past.size else total

@@ -23,6 +23,14 @@ fraction tau_k of the current value is accepted with probability 1/e at every sc
 
 A candidate whose value is +inf (rejected: invalid shape, failed simulation) is never accepted
 and counts as a rejection. Stops after K iterations or when ``stop(best_info, k)`` says so.
+
+**Speculative lookahead.** Most proposals are rejected, and a rejection leaves the current state
+unchanged, so the next P proposals can be drawn at once, each assuming the ones before it are
+rejected (sigma shrunk accordingly), and evaluated in parallel (``f_many``). They are then
+decided in order; at the first accepted one the rest are discarded and the random stream is
+rewound to where that proposal's draws ended. Every decision, and so the result, is exactly that
+of the serial loop (P = 1) with the same seed; only wall time changes (with acceptance rate a,
+one round decides 1 + (1 - a) + ... + (1 - a)^(P-1) iterations).
 """
 
 from __future__ import annotations
@@ -56,7 +64,8 @@ class AnnealOptions:
 @dataclass(kw_only=True)
 class AnnealResult:
     """best x (n,), its value and info; history: one dict per iteration (k, value, accepted,
-    current, best, temperature, sigma, info); iterations run; stopped_early."""
+    current, best, temperature, sigma, info); iterations run; stopped_early; discarded: infos of
+    speculative evaluations that were not needed (a proposal before them was accepted)."""
 
     x: np.ndarray
     value: float
@@ -64,9 +73,11 @@ class AnnealResult:
     history: list = field(default_factory=list)
     iterations: int = 0
     stopped_early: bool = False
+    discarded: list = field(default_factory=list)
 
 
-def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=None) -> AnnealResult:
+def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=None, f_many=None,
+           lookahead: int = 1) -> AnnealResult:
     """Minimize ``f`` by simulated annealing from ``x0``.
 
     f : callable (x, threshold) -> (value, info); value may be +inf for a rejected candidate, or
@@ -74,6 +85,10 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
     stop : optional callable (best_info, best_value, k, k_best) -> bool, asked after every iteration
         (k_best: iteration at which the best value was found)
     callback : optional callable(record dict) after every iteration
+    f_many : optional callable [(x, threshold), ...] -> [(value, info), ...], the same as ``f`` on
+        each item (e.g. in parallel); used with ``lookahead`` > 1
+    lookahead : proposals drawn and evaluated per round (see the module docstring); the result
+        does not depend on it
     """
     rng = np.random.default_rng(options.seed)
     lower, upper = np.asarray(options.lower, float), np.asarray(options.upper, float)
@@ -91,8 +106,15 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
     n_blocks = 0 if blocks is None else int(blocks.max()) + 1
     K = max(int(options.iterations), 1)
     ratio = options.tau_end / options.tau0
-    for k in range(1, int(options.iterations) + 1):
-        step = sigma * rng.standard_normal(x_cur.shape)
+    if f_many is None or lookahead <= 1:
+        f_many, lookahead = (lambda items: [f(x, t) for x, t in items]), 1
+
+    def shrunk(s, accepted):
+        return np.clip(s * (GROW if accepted else SHRINK), SIGMA_MIN_REL * sigma0, sigma0)
+
+    def propose(k, sig):
+        """Proposal k from the current state with step sigma ``sig``: (x_i, threshold, T)."""
+        step = sig * rng.standard_normal(x_cur.shape)
         if blocks is not None:
             pick = rng.random(n_blocks) < 1.0 / n_blocks
             pick[rng.integers(n_blocks)] = True
@@ -102,20 +124,37 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
         T = options.tau0 * ratio ** ((k - 1) / K) * abs(e_cur) if math.isfinite(e_cur) else math.inf
         # accept iff E_i < E_cur, or u < exp(-(E_i - E_cur) / T)  <=>  E_i < E_cur - T ln u
         threshold = e_cur - T * math.log(u) if math.isfinite(e_cur) and T > 0 else (e_cur if math.isfinite(e_cur) else math.inf)
-        e_i, info_i = f(x_i, threshold)
-        accepted = math.isfinite(e_i) and (e_i < e_cur or e_i < threshold or not math.isfinite(e_cur))
-        if accepted:
-            x_cur, e_cur = x_i, e_i
-            if e_i < best.value:
-                best.x, best.value, best.info, k_best = x_i.copy(), e_i, info_i, k
-        sigma = np.clip(sigma * (GROW if accepted else SHRINK), SIGMA_MIN_REL * sigma0, sigma0)
-        rec = dict(k=k, value=e_i, accepted=accepted, current=e_cur, best=best.value, temperature=T,
-                   sigma=float(np.mean(sigma / np.where(sigma0 > 0, sigma0, 1.0))), info=info_i)
-        best.history.append(rec)
-        best.iterations = k
-        if callback is not None:
-            callback(rec)
-        if stop is not None and stop(best.info, best.value, k, k_best):
-            best.stopped_early = k < options.iterations
-            break
+        return x_i, threshold, T
+
+    k = 1
+    while k <= int(options.iterations):
+        # a round: proposals k .. k+P-1, each assuming every one before it is rejected
+        plans, states, sig = [], [], sigma
+        for j in range(min(lookahead, int(options.iterations) - k + 1)):
+            plans.append(propose(k + j, sig))
+            states.append(rng.bit_generator.state)  # where proposal k+j's draws end
+            sig = shrunk(sig, False)
+        values = f_many([(x_i, threshold) for x_i, threshold, _ in plans])
+        for j, ((x_i, threshold, T), (e_i, info_i)) in enumerate(zip(plans, values)):
+            accepted = math.isfinite(e_i) and (e_i < e_cur or e_i < threshold or not math.isfinite(e_cur))
+            if accepted:
+                x_cur, e_cur = x_i, e_i
+                if e_i < best.value:
+                    best.x, best.value, best.info, k_best = x_i.copy(), e_i, info_i, k
+            sigma = shrunk(sigma, accepted)
+            rec = dict(k=k, value=e_i, accepted=accepted, current=e_cur, best=best.value, temperature=T,
+                       sigma=float(np.mean(sigma / np.where(sigma0 > 0, sigma0, 1.0))), info=info_i)
+            best.history.append(rec)
+            best.iterations = k
+            if callback is not None:
+                callback(rec)
+            if stop is not None and stop(best.info, best.value, k, k_best):
+                best.stopped_early = k < options.iterations
+                best.discarded.extend(info for _, info in values[j + 1:])
+                return best
+            k += 1
+            if accepted and j + 1 < len(plans):  # the later proposals assumed a rejection: redraw them
+                best.discarded.extend(info for _, info in values[j + 1:])
+                rng.bit_generator.state = states[j]
+                break
     return best

@@ -34,6 +34,7 @@ optimization's result, are exactly those of running every simulation to the end.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -123,6 +124,8 @@ class DesignProblem:
     target : :class:`simfab.design.brief.TargetProfile` or None
     kept : (k,) vertices held unchanged; q0 : (m,) initial element qualities
     lower, upper, sigma0 : (n_vars,) design bounds and initial proposal deviations
+    source : :class:`simfab.design.parallel.ProblemSource` that rebuilds this problem in another
+        process (parallel evaluation, restarts), or None
     """
 
     base: object
@@ -136,10 +139,11 @@ class DesignProblem:
     lower: np.ndarray
     upper: np.ndarray
     sigma0: np.ndarray
+    source: object = None
 
 
 def make_problem(cm, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetProfile | None = None,
-                 initial=None, handle_vertices=None, seed: int = 0) -> DesignProblem:
+                 initial=None, handle_vertices=None, seed: int = 0, source=None) -> DesignProblem:
     """Set up the optimization of scene ``cm``'s part.
 
     kept_regions : vertex index arrays kept unchanged besides the fixed support (keep sites)
@@ -147,6 +151,8 @@ def make_problem(cm, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetP
         here when missing)
     handle_vertices : explicit active handle vertices (overrides the brief's placement)
     seed : placement seed (random placement; affinity propagation's tie-breaking)
+    source : a :class:`simfab.design.parallel.ProblemSource` naming the scene this problem was
+        loaded from (its handle vertices are filled in here); needed by parallel evaluation
     """
     fem = cm.fem
     X = np.asarray(fem.rest, float)
@@ -173,7 +179,9 @@ def make_problem(cm, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetP
     ys = fem.material.yield_stress if fem.material is not None else None
     return DesignProblem(base=cm, brief=brief, limits=B.bounds(brief, ys), handles=H,
                          energy=ModificationEnergy(X, fem.boundary_facets), target=target, kept=kept,
-                         q0=element_quality(X, fem.elements), lower=lower, upper=upper, sigma0=sigma0)
+                         q0=element_quality(X, fem.elements), lower=lower, upper=upper, sigma0=sigma0,
+                         source=None if source is None else dataclasses.replace(
+                             source, handle_vertices=tuple(int(v) for v in H.vertex[H.active]), seed=seed))
 
 
 def max_displacement(res) -> np.ndarray:
@@ -331,7 +339,10 @@ class DesignResult:
     accepted : [(iteration, rest (n, d) [m], objective)] of every accepted design, in order
     simulations : insertion simulations run to the end; stopped_simulations : stopped early (their
     candidate provably rejected); rejected : {reason: count} of invalid candidates
-    seconds : wall time; sim_seconds : of it, inside the simulator; stopped_early : bool
+    speculative : insertion simulations run ahead on a worker and not needed (a proposal before
+    them was accepted); workers : processes that evaluated candidates
+    seconds : wall time; sim_seconds : inside the simulator, summed over the evaluations used (with
+    several workers it may exceed the wall time); stopped_early : bool
     """
 
     problem: DesignProblem
@@ -346,13 +357,18 @@ class DesignResult:
     sim_seconds: float
     iterations: int
     stopped_early: bool
+    speculative: int = 0
+    workers: int = 1
 
 
 def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
-             callback=None) -> DesignResult:
+             callback=None, workers: int = 1) -> DesignResult:
     """Run simulated annealing on ``problem`` (see the module docstring) with random ``seed``;
-    ``iterations`` defaults to the brief's. Raises ConvergenceError if the initial shape itself cannot be
-    simulated (there is nothing to start from)."""
+    ``iterations`` defaults to the brief's. ``workers`` > 1 evaluates that many proposals at once
+    (:mod:`simfab.design.parallel`; needs ``problem.source``): the same result, sooner. Raises
+    ConvergenceError if the initial shape itself cannot be simulated (there is nothing to start
+    from)."""
+    from simfab.design.parallel import EvaluationPool
     from simfab.progress import progress
 
     t0 = time.perf_counter()
@@ -361,9 +377,20 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     counts = {"simulations": 0, "stopped": 0, "sim_seconds": 0.0}
     rejected: dict[str, int] = {}
     accepted: list = []
+    history_evals: list[Evaluation] = []
 
     def f(h, threshold):
         ev = evaluate(problem, h, keep_result=True, threshold=threshold)
+        return ev.objective, ev
+
+    bar = iter(progress(range(K + 1), total=K + 1, desc=f"optimize {problem.base.name}", quiet=quiet))
+
+    kept = {"best": None}
+
+    def on_iteration(rec):
+        next(bar, None)
+        ev = rec["info"]
+        history_evals.append(ev)
         if ev.status == "ok" or ev.reason.startswith("simulation"):
             counts["simulations"] += 1
         elif ev.status == "stopped" and ev.sim_seconds > 0:
@@ -372,17 +399,6 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
         if ev.status == "rejected":
             key = ev.reason.split(":")[0]
             rejected[key] = rejected.get(key, 0) + 1
-        history_evals.append(ev)
-        return ev.objective, ev
-
-    history_evals: list[Evaluation] = []
-    bar = iter(progress(range(K + 1), total=K + 1, desc=f"optimize {problem.base.name}", quiet=quiet))
-
-    kept = {"best": None}
-
-    def on_iteration(rec):
-        next(bar, None)
-        ev = rec["info"]
         if rec["accepted"]:
             accepted.append((rec["k"], ev.rest, rec["value"]))
         # only the initial and the best design keep their insertion results (memory)
@@ -405,12 +421,22 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     blocks = np.repeat(np.arange(problem.handles.n_active), 2 * problem.handles.dim)  # one block per handle
     opts = AnnealOptions(iterations=K, sigma0=problem.sigma0, lower=problem.lower, upper=problem.upper, blocks=blocks,
                          seed=seed)
-    out = anneal(f, problem.handles.identity(), opts, stop=stop, callback=on_iteration)
+    workers = max(1, min(int(workers), K))
+    if workers > 1:
+        with EvaluationPool(problem, workers) as pool:
+            out = anneal(f, problem.handles.identity(), opts, stop=stop, callback=on_iteration,
+                         f_many=lambda items: [(ev.objective, ev) for ev in pool(items)], lookahead=workers)
+    else:
+        out = anneal(f, problem.handles.identity(), opts, stop=stop, callback=on_iteration)
     initial = history_evals[0]
     if initial.status != "ok":
         raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to optimize from")
     best = out.info
+    if best.status == "ok" and best.result is None:  # evaluated on a worker: its insertion again, here
+        best.result = evaluate(problem, best.h, keep_result=True).result
     history = [dict(rec, evaluation=history_evals[i]) for i, rec in enumerate(out.history)]
+    speculative = sum(1 for ev in out.discarded if ev.sim_seconds > 0)
     return DesignResult(problem=problem, initial=initial, best=best, history=history, accepted=accepted,
-                        simulations=counts["simulations"], stopped_simulations=counts["stopped"], rejected=rejected, seconds=time.perf_counter() - t0,
-                        sim_seconds=counts["sim_seconds"], iterations=out.iterations, stopped_early=out.stopped_early)
+                        simulations=counts["simulations"], stopped_simulations=counts["stopped"], rejected=rejected,
+                        seconds=time.perf_counter() - t0, sim_seconds=counts["sim_seconds"], iterations=out.iterations,
+                        stopped_early=out.stopped_early, speculative=speculative, workers=workers)

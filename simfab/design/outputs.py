@@ -67,11 +67,14 @@ def summary(res, *, scene: str | None = None) -> dict:
         "stopped_early": res.stopped_early,
         "simulations": res.simulations,
         "simulations_stopped_early": res.stopped_simulations,
+        "speculative_simulations": res.speculative,
+        "workers": res.workers,
         "accepted": len(res.accepted),
         "rejected": dict(res.rejected),
         "seconds": res.seconds,
         "simulation_seconds": res.sim_seconds,
-        "fraction_outside_simulator": 1.0 - res.sim_seconds / res.seconds if res.seconds > 0 else 0.0,
+        # with several workers the simulations overlap: the share of the workers' time they took
+        "fraction_outside_simulator": max(0.0, 1.0 - res.sim_seconds / (res.seconds * res.workers)) if res.seconds > 0 else 0.0,
         "units": {"objective": "-", "E_L": "-", "seconds": "s", "constraints": dict(B.UNITS)},
     }
     if best.rms_error is not None:

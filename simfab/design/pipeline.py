@@ -26,7 +26,7 @@ def check_out_dir(out) -> Path:
 
 def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict | None = None, device: str = "cpu",
                    quiet: bool = True, seed: int = 0, revolve: tuple[str, float] | None = None, restarts: int = 1,
-                   scheduler: str | None = None) -> dict:
+                   scheduler: str | None = None, workers: int = 1) -> dict:
     """Optimize a design scene's part and write every output into ``out``; returns the summary.
 
     design : overrides of the ``[design]`` table (e.g. ``{"iterations": 60, "handles": 4}``)
@@ -37,10 +37,13 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         best final design is kept and every run is reported
     revolve : (axis "x"|"y", offset [m]) to also write the optimized 2D section revolved into a
         3D part (``NAME_optimized_revolved.stl``, mm)
+    workers : processes evaluating the annealer's proposals (:mod:`simfab.design.parallel`; the
+        result does not depend on it); without restarts only
     """
     from simfab.coupling.simulate import simulate
     from simfab.design import outputs
     from simfab.design.optimize import make_problem, optimize
+    from simfab.design.parallel import ProblemSource
     from simfab.design.scene import load_design_scene
     from simfab.progress import log
 
@@ -52,11 +55,13 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     log(f"couple optimize: {cm.name}: {cm.fem.n_elements} elements, {len(cm.s_steps) - 1} steps, "
         f"{ds.brief.handles} handles ({ds.brief.placement}), up to {ds.brief.iterations} iterations", quiet=quiet)
     initial = simulate(cm) if ds.brief.placement == "displacement" else None
-    problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed)
+    source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}), device=device)
+    problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed,
+                           source=source)
     if restarts <= 1:
-        res, runs = optimize(problem, quiet=quiet, seed=seed), None
+        res, runs = optimize(problem, quiet=quiet, seed=seed, workers=workers), None
     else:
-        res, runs = _restarts(ds, problem, design, simulation, device, seed, restarts, quiet, scheduler)
+        res, runs = _restarts(problem, seed, restarts, quiet, scheduler)
     summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml,
                                 extra=None if runs is None else {"restarts": runs})
     if revolve is not None:
@@ -78,32 +83,27 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float) -> Path:
     return save_mesh(mesh, Path(out) / f"{stem}_optimized_revolved.stl")
 
 
-def anneal_task(*, scene: str, design: dict, simulation: dict, device: str, handle_vertices: list, seed: int):
-    """One restart (a Dask task): the annealing on the given handles; returns the
-    :class:`simfab.design.optimize.DesignResult` without its unpicklable parts (the problem and
-    the insertion results, which the client rebuilds)."""
-    from simfab._warp import device as check_device
-    from simfab.design.optimize import make_problem, optimize
-    from simfab.design.scene import load_design_scene
+def anneal_task(*, source, seed: int):
+    """One restart (a Dask task): the annealing of the problem ``source`` rebuilds
+    (:class:`simfab.design.parallel.ProblemSource`, handles already placed) with ``seed``;
+    returns the :class:`simfab.design.optimize.DesignResult` without its unpicklable parts (the
+    problem and the insertion results, which the client rebuilds)."""
+    from simfab.design.optimize import optimize
+    from simfab.design.parallel import rebuild
 
-    ds = load_design_scene(scene, design=design, simulation=simulation, device=check_device(device))
-    problem = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target,
-                           handle_vertices=handle_vertices, seed=seed)
-    res = optimize(problem, seed=seed)
+    res = optimize(rebuild(source), seed=seed)
     res.problem = None
     res.initial.result = res.best.result = None
     return res
 
 
-def _restarts(ds, problem, design, simulation, device, seed, restarts, quiet, scheduler):
+def _restarts(problem, seed, restarts, quiet, scheduler):
     from simfab.design.optimize import evaluate
     from simfab.errors import ConvergenceError
     from simfab.sweep import run_tasks
 
-    hv = [int(v) for v in problem.handles.vertex[problem.handles.active]]
-    tasks = [dict(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}), device=device,
-                  handle_vertices=hv, seed=seed + i) for i in range(restarts)]
-    results = run_tasks(anneal_task, tasks, scheduler=scheduler, quiet=quiet, desc=f"optimize {ds.cm.name} restarts")
+    tasks = [dict(source=problem.source, seed=seed + i) for i in range(restarts)]
+    results = run_tasks(anneal_task, tasks, scheduler=scheduler, quiet=quiet, desc=f"optimize {problem.base.name} restarts")
     runs = []
     for t, r in zip(tasks, results):
         row = {"seed": t["seed"], "status": r.status, "message": r.message, "seconds": r.seconds}

@@ -318,6 +318,14 @@ class Trajectory:
         i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
         return i, (0.0 if seg[i] <= 0 else (s - cum[i]) / seg[i])
 
+    def sampled_positions(self, samples: int) -> np.ndarray:
+        """(samples, 3) positions [m] at ``samples`` evenly spaced path lengths from 0 to the end
+        (computed once per count: the path is immutable)."""
+        cache = self.__dict__.setdefault("_sampled", {})
+        if samples not in cache:
+            cache[samples] = np.array([self.pose_at(s)[0] for s in np.linspace(0.0, self.length, samples)])
+        return cache[samples]
+
     def pose_at_key(self, u: float):
         """Pose at keyframe parameter u in [0, k-1] (u = 1.5: halfway between keys 1 and 2)."""
         k = len(self.positions)

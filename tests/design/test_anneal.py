@@ -1,6 +1,7 @@
 """Simulated annealing (simfab.design.anneal) on analytic functions with known minima."""
 
 import numpy as np
+import pytest
 
 from simfab.design.anneal import AnnealOptions, anneal
 
@@ -62,3 +63,30 @@ def test_threshold_is_the_metropolis_test():
                                                       upper=np.full(2, 5.0), seed=3))
     for (v, thr), rec in zip(seen[1:], r.history[1:]):
         assert rec["accepted"] == (v < thr)
+
+
+@pytest.mark.parametrize("lookahead", [2, 3, 5])
+def test_speculative_lookahead_makes_exactly_the_serial_decisions(lookahead):
+    # Rounds of P proposals drawn from the same state (each assuming the ones before are rejected),
+    # rewound at the first acceptance, must reproduce the serial chain bit for bit; the discarded
+    # evaluations are the only difference.
+    def f(x, threshold):
+        return float((x[0] - 1) ** 2 + 10 * (x[1] + x[0] ** 2) ** 2), {"x": x.copy()}
+
+    calls = []
+
+    def f_many(items):
+        calls.append(len(items))
+        return [f(x, t) for x, t in items]
+
+    opts = AnnealOptions(iterations=150, sigma0=np.array([0.4, 0.4, 0.2]), lower=np.full(3, -3.0),
+                         upper=np.full(3, 3.0), blocks=np.array([0, 0, 1]), seed=3)
+    serial = anneal(f, np.array([-1.5, 2.0, 0.0]), opts)
+    spec = anneal(f, np.array([-1.5, 2.0, 0.0]), opts, f_many=f_many, lookahead=lookahead)
+    assert [r["value"] for r in spec.history] == [r["value"] for r in serial.history]
+    assert [r["accepted"] for r in spec.history] == [r["accepted"] for r in serial.history]
+    assert np.array_equal(spec.x, serial.x) and spec.iterations == serial.iterations == 150
+    assert max(calls) == lookahead and len(calls) < 150  # it did batch
+    assert sum(calls) == 150 + len(spec.discarded)
+    n_acc = sum(r["accepted"] for r in serial.history[1:])
+    assert 0 < len(spec.discarded) <= n_acc * (lookahead - 1)
