@@ -14,7 +14,10 @@ iterations, stopped_early, simulations, simulations_stopped_early, speculative_s
 simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_stl, outline_csv
 (2D), scene_xml, scene_toml, scene_mesh, profile_png, shape_png, history_csv, usd, summary_json,
 revolved_stl with --revolve-axis), restarts (with --restarts: per run seed, status, message,
-feasible, objective, E_L, iterations, seconds).
+feasible, objective, E_L, iterations, seconds), mesh_check (unless --no-mesh-check: levels
+(subdivisions, elements, seconds, category), figures (per figure: values per level,
+extrapolated, order, converging, difference_of_optimization_mesh), constraints at the finest
+level, feasible_fine, reference, units).
 
 simfab couple study handles SCENE runs the handle-placement study: displacement-based and
 spatial placement and --random random picks, for each handle count of --counts, each an
@@ -57,6 +60,9 @@ def add_optimize_args(s) -> None:
                    help="independent annealing runs (seeds SEED..SEED+N-1) as Dask tasks; the best design is kept")
     s.add_argument("--scheduler", metavar="ADDRESS",
                    help="Dask scheduler for --restarts (default: a local cluster sized to this machine)")
+    s.add_argument("--no-mesh-check", action="store_true",
+                   help="skip re-running the optimized shape on uniformly refined meshes (2D: 4x and 16x the "
+                        "elements, 3D: 8x), which reports the optimization mesh's discretization error")
     s.add_argument("--revolve-axis", choices=["x", "y"], help="2D: also revolve the optimized section about this axis")
     s.add_argument("--revolve-offset", type=float, default=0.0, metavar="M",
                    help="position of the revolution axis [m] (x = M for axis y, y = M for axis x)")
@@ -114,7 +120,7 @@ def run_optimize(args) -> dict:
     revolve = (args.revolve_axis, args.revolve_offset) if args.revolve_axis else None
     return optimize_scene(args.scene, out=args.out, design=design_overrides(args), simulation=simulation_overrides(args),
                           device=dev, quiet=args.quiet, seed=args.seed, revolve=revolve, restarts=args.restarts,
-                          scheduler=args.scheduler, workers=workers)
+                          scheduler=args.scheduler, workers=workers, mesh_check=not args.no_mesh_check)
 
 
 def run_study(args) -> dict:

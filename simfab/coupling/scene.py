@@ -59,7 +59,8 @@ def scene_paths(scene) -> tuple[Path, Path]:
     p = Path(scene)
     if p.suffix in (".xml", ".toml"):
         return p.with_suffix(".xml"), p.with_suffix(".toml")
-    if not p.exists() and not p.with_suffix(".xml").exists():
+    # a folder of that name (e.g. the --out folder of an earlier run) does not hide a bundled scene
+    if not p.is_file() and not p.with_suffix(".xml").is_file():
         bundled = bundled_dir() / p.name
         if bundled.with_suffix(".xml").exists():
             p = bundled

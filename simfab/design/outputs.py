@@ -338,6 +338,10 @@ def write_all(res, out: Path, *, scene_xml: Path, scene_toml: Path, stem: str | 
     paths = output_paths(out, stem, fem.dim, target=res.problem.target is not None)
     s = summary(res)
     s.update(extra or {})
+    if s.get("mesh_check"):
+        from simfab.design.verify import check_warnings
+
+        s["warnings"] = s["warnings"] + check_warnings(s["mesh_check"])
     s["outputs"] = {k: str(v) for k, v in paths.items()}
     with atomic_paths(paths) as tmp:
         save_mesh(part_mesh_mm(fem, res.best.rest), tmp["part_stl"])

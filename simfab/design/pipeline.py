@@ -26,7 +26,7 @@ def check_out_dir(out) -> Path:
 
 def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict | None = None, device: str = "cpu",
                    quiet: bool = True, seed: int = 0, revolve: tuple[str, float] | None = None, restarts: int = 1,
-                   scheduler: str | None = None, workers: int = 1) -> dict:
+                   scheduler: str | None = None, workers: int = 1, mesh_check: bool = True) -> dict:
     """Optimize a design scene's part and write every output into ``out``; returns the summary.
 
     design : overrides of the ``[design]`` table (e.g. ``{"iterations": 60, "handles": 4}``)
@@ -39,6 +39,9 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         3D part (``NAME_optimized_revolved.stl``, mm)
     workers : processes evaluating the annealer's proposals (:mod:`simfab.design.parallel`; the
         result does not depend on it); without restarts only
+    mesh_check : re-run the optimized shape on uniformly refined meshes
+        (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
+        the mesh-converged ones, warning when a constraint holds only on the coarse mesh
     """
     from simfab.coupling.simulate import simulate
     from simfab.design import outputs
@@ -62,8 +65,13 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         res, runs = optimize(problem, quiet=quiet, seed=seed, workers=workers), None
     else:
         res, runs = _restarts(problem, seed, restarts, quiet, scheduler)
-    summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml,
-                                extra=None if runs is None else {"restarts": runs})
+    extra = {} if runs is None else {"restarts": runs}
+    if mesh_check and res.best.status == "ok":
+        from simfab.design.verify import mesh_check as check
+
+        log(f"couple optimize: {cm.name}: mesh check of the optimized shape on refined meshes", quiet=quiet)
+        extra["mesh_check"] = check(problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
+    summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
     if revolve is not None:
         summary["outputs"]["revolved_stl"] = str(write_revolved(res, out, cm.name, *revolve))
     for w in summary["warnings"]:
