@@ -9,8 +9,10 @@ stress [Pa], or a target force profile). Command-line options override the brief
 --json keys: scene, feasible, objective, objective_initial, E_L, constraints (per
 constraint: value, lo, hi, unit, satisfied, initial), category, category_initial, profile and
 profile_initial (category, coupling_ratio_pct, E_max_J, E_ss_J, F_in_N, F_rm_N, F_grip_N,
-max_von_mises_Pa), handles,
-iterations, stopped_early, simulations, simulations_stopped_early, speculative_simulations, workers, accepted, rejected (count per reason), seconds,
+max_von_mises_Pa (largest element stress), von_mises_avg_Pa (averaged over [design]
+stress_radius: what the yield constraint reads)), handles, iterations, stopped_early,
+simulations, simulations_stopped_early, speculative_simulations, workers, accepted, rejected
+(count per reason), seconds,
 simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_stl, outline_csv
 (2D), scene_xml, scene_toml, scene_mesh, profile_png, shape_png, history_csv, usd, summary_json,
 revolved_stl with --revolve-axis), restarts (with --restarts: per run seed, status, message,

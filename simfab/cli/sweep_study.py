@@ -17,6 +17,7 @@ from pathlib import Path
 from simfab.errors import InputError
 from simfab.cli.sweep_spec import META_COLUMNS, SweepSpec
 from simfab.sweep.table import FINAL, frame, read_table, table_paths, write_table
+from simfab.io.outpaths import make_out_dir
 
 #: Seconds between rewrites of the table while results arrive.
 SAVE_INTERVAL = 2.0
@@ -26,15 +27,6 @@ def columns(spec: SweepSpec) -> list[str]:
     """The table's columns in order."""
     return (["run", "key"] + [p.name for p in spec.parameters] + [g.name for g in spec.figures]
             + [n for n, _ in spec.derived] + [c for c in META_COLUMNS if c not in ("run", "key")])
-
-
-def _check_out(out: Path) -> None:
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"cannot create the output folder: {e.strerror}", where=str(out)) from None
-    if not os.access(out, os.W_OK):
-        raise InputError("the output folder is not writable", where=str(out))
 
 
 def _check_derived(spec: SweepSpec) -> None:
@@ -120,7 +112,7 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, quiet: bool = False, retr
     with contextlib.ExitStack() as stack:
         if todo and scheduler != SERIAL:  # a scheduler that cannot be reached: no output at all
             scheduler = stack.enter_context(connect(scheduler, quiet=quiet))
-        _check_out(out)
+        make_out_dir(out)
         log(f"sweep: {spec.name}: {len(points)} runs, {len(todo)} to run", quiet=quiet)
         try:
             run_tasks(execute_run, tasks, scheduler=scheduler, quiet=quiet, desc=spec.name, on_result=on_result)

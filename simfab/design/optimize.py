@@ -46,6 +46,7 @@ from simfab.design.anneal import AnnealOptions, anneal
 from simfab.design.handles import Handles, make_handles
 from simfab.design.modification import ModificationEnergy
 from simfab.design.placement import place_handles
+from simfab.design.stress import STRESS_RADIUS, averaged_von_mises
 from simfab.errors import ConvergenceError, InputError
 
 #: A candidate element must keep this fraction of its initial mean-ratio quality.
@@ -95,11 +96,12 @@ def seat_clearance(res, index: int) -> float:
     return float(d.min() - np.max(cm.dhat))
 
 
-def profile_figures(res) -> dict:
+def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
     """Figures of an insertion the constraints read: coupling_ratio [%], grip_force,
-    insertion_force, removal_force [N], von_mises [Pa] (max over the insertion), seat_clearance
-    [m] (gap between part and object at the steady state, <= 0 in contact), and category, E_max,
-    E_ss [J]."""
+    insertion_force, removal_force [N], von_mises [Pa] (max over the insertion of the von Mises
+    stress averaged over ``stress_radius`` [m], :mod:`simfab.design.stress`), seat_clearance [m]
+    (gap between part and object at the steady state, <= 0 in contact), and category, E_max, E_ss
+    [J], von_mises_peak [Pa] (the largest element stress, mesh-dependent at sharp corners)."""
     from simfab.coupling.profile import analyze
 
     prof = analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"))
@@ -109,7 +111,8 @@ def profile_figures(res) -> dict:
     touched = prof.E_max > floor
     return {"coupling_ratio": prof.coupling_ratio if touched else 100.0, "grip_force": prof.F_grip,
             "insertion_force": prof.F_in, "removal_force": prof.F_rm,
-            "von_mises": float(res.column("max_von_mises").max()),
+            "von_mises": max(averaged_von_mises(fem, r.von_mises, stress_radius) for r in res.steps),
+            "von_mises_peak": float(res.column("max_von_mises").max()),
             "seat_clearance": seat_clearance(res, prof.index_ss),
             "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss}
 
@@ -126,6 +129,9 @@ class DesignProblem:
     lower, upper, sigma0 : (n_vars,) design bounds and initial proposal deviations
     source : :class:`simfab.design.parallel.ProblemSource` that rebuilds this problem in another
         process (parallel evaluation, restarts), or None
+    corrections : {figure: factor} applied to the simulated figures before the constraints read
+        them (mesh correction of a coarse model, :func:`simfab.design.verify.correction_factors`);
+        empty: none
     """
 
     base: object
@@ -140,6 +146,13 @@ class DesignProblem:
     upper: np.ndarray
     sigma0: np.ndarray
     source: object = None
+    corrections: dict = field(default_factory=dict)
+
+    def constraints(self, figures: dict) -> list:
+        """The brief's constraints on simulated ``figures``, mesh-corrected (see ``corrections``)."""
+        c = self.corrections
+        return B.constraints({k: v * c.get(k, 1.0) if isinstance(v, float) else v for k, v in figures.items()},
+                             self.limits)
 
 
 def make_problem(cm, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetProfile | None = None,
@@ -254,17 +267,19 @@ class _Exceeded(Exception):
         self.bound, self.step = bound, step
 
 
-def _bound_watch(problem: DesignProblem, base: float, threshold: float):
+def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float):
     """Step callback raising :class:`_Exceeded` when base + W * (violation of the yield bound by
-    the running max von Mises)^2 exceeds ``threshold`` (None if nothing can be bounded)."""
+    the running max of the averaged von Mises stress on ``cm``'s mesh)^2 exceeds ``threshold``
+    (None if nothing can be bounded)."""
     lo_hi = problem.limits.get("von_mises")
     if lo_hi is None or not math.isfinite(lo_hi[1]) or not math.isfinite(threshold):
         return None
     hi, sc = lo_hi[1], B.SCALES["von_mises"]
     peak = [0.0]
+    radius, factor = problem.brief.stress_radius, problem.corrections.get("von_mises", 1.0)
 
     def watch(k, rec):
-        peak[0] = max(peak[0], rec.max_von_mises)
+        peak[0] = max(peak[0], factor * averaged_von_mises(cm.fem, rec.von_mises, radius))
         bound = base + B.PENALTY_WEIGHT * max(0.0, peak[0] - hi) ** 2 / sc**2
         if bound > threshold:
             raise _Exceeded(bound, k)
@@ -299,7 +314,7 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     t1 = time.perf_counter()
     try:
         check_start(cm)
-        res = simulate(cm, callback=_bound_watch(problem, base, threshold))
+        res = simulate(cm, callback=_bound_watch(problem, cm, base, threshold))
     except _Exceeded as e:
         ev.status, ev.objective = "stopped", e.bound
         ev.reason = f"objective above the acceptance threshold at step {e.step}"
@@ -312,8 +327,8 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     else:
         ev.sim_seconds = time.perf_counter() - t1
         ev.status = "ok"
-        ev.figures = profile_figures(res)
-        ev.constraints = B.constraints(ev.figures, problem.limits)
+        ev.figures = profile_figures(res, problem.brief.stress_radius)
+        ev.constraints = problem.constraints(ev.figures)
         pen = B.penalty(ev.constraints)
         if problem.target is not None:
             ev.rms_error = problem.target.rms_error(res.column("s"), res.column("force"))
@@ -362,10 +377,12 @@ class DesignResult:
 
 
 def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
-             callback=None, workers: int = 1) -> DesignResult:
+             callback=None, workers: int = 1, start=None) -> DesignResult:
     """Run simulated annealing on ``problem`` (see the module docstring) with random ``seed``;
     ``iterations`` defaults to the brief's. ``workers`` > 1 evaluates that many proposals at once
-    (:mod:`simfab.design.parallel`; needs ``problem.source``): the same result, sooner. Raises
+    (:mod:`simfab.design.parallel`; needs ``problem.source``): the same result, sooner. ``start``:
+    the design vector to start from (default: the unmodified shape; the initial evaluation is
+    always of that shape, a start's is the annealer's first). Raises
     ConvergenceError if the initial shape itself cannot be simulated (there is nothing to start
     from)."""
     from simfab.design.parallel import EvaluationPool
@@ -422,13 +439,14 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     opts = AnnealOptions(iterations=K, sigma0=problem.sigma0, lower=problem.lower, upper=problem.upper, blocks=blocks,
                          seed=seed)
     workers = max(1, min(int(workers), K))
+    x0 = problem.handles.identity() if start is None else np.asarray(start, float)
     if workers > 1:
         with EvaluationPool(problem, workers) as pool:
-            out = anneal(f, problem.handles.identity(), opts, stop=stop, callback=on_iteration,
+            out = anneal(f, x0, opts, stop=stop, callback=on_iteration,
                          f_many=lambda items: [(ev.objective, ev) for ev in pool(items)], lookahead=workers)
     else:
-        out = anneal(f, problem.handles.identity(), opts, stop=stop, callback=on_iteration)
-    initial = history_evals[0]
+        out = anneal(f, x0, opts, stop=stop, callback=on_iteration)
+    initial = history_evals[0] if start is None else evaluate(problem, problem.handles.identity(), keep_result=True)
     if initial.status != "ok":
         raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to optimize from")
     best = out.info

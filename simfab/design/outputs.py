@@ -27,7 +27,8 @@ from simfab.design import brief as B
 
 HISTORY_HEADER = ["iteration", "status", "reason", "objective", "E_L", "rms_error_N", "accepted", "current_objective",
                   "best_objective", "temperature", "sigma_rel", "coupling_ratio_pct", "grip_force_N",
-                  "insertion_force_N", "removal_force_N", "max_von_mises_Pa", "seat_clearance_m", "category", "seconds"]
+                  "insertion_force_N", "removal_force_N", "von_mises_avg_Pa", "max_von_mises_Pa", "seat_clearance_m", "category",
+                  "seconds"]
 
 
 def output_paths(out: Path, stem: str, dim: int, *, target: bool = False) -> dict:
@@ -85,7 +86,8 @@ def summary(res, *, scene: str | None = None) -> dict:
     vm = best.figures.get("von_mises")
     ys = res.problem.limits.get("von_mises", (0, None))[1]
     if ys is not None and vm is not None and vm > ys:
-        warnings.append(f"the optimized part exceeds its yield stress: max von Mises {vm / 1e6:.4g} MPa > {ys / 1e6:.4g} MPa")
+        warnings.append(f"the optimized part exceeds its yield stress: von Mises averaged over "
+                        f"{res.problem.brief.stress_radius * 1e3:.3g} mm {vm / 1e6:.4g} MPa > {ys / 1e6:.4g} MPa")
     if not best.feasible:
         bad = [c.name for c in best.constraints if not c.satisfied]
         warnings.append(f"not every constraint is met after {res.iterations} iterations: {', '.join(bad)}")
@@ -97,7 +99,7 @@ def _figures(f: dict) -> dict:
     """The profile's figures with unit-bearing names (E in J, forces in N, stress in Pa)."""
     names = {"category": "category", "coupling_ratio": "coupling_ratio_pct", "E_max": "E_max_J", "E_ss": "E_ss_J",
              "insertion_force": "F_in_N", "removal_force": "F_rm_N", "grip_force": "F_grip_N",
-             "von_mises": "max_von_mises_Pa", "seat_clearance": "seat_clearance_m"}
+             "von_mises": "von_mises_avg_Pa", "von_mises_peak": "max_von_mises_Pa", "seat_clearance": "seat_clearance_m"}
     return {v: f.get(k) for k, v in names.items()}
 
 
@@ -108,7 +110,7 @@ def history_rows(res):
         yield [rec["k"], ev.status, ev.reason, ev.objective, ev.E_L, ev.rms_error, int(bool(rec["accepted"])),
                rec["current"], rec["best"], rec["temperature"], rec["sigma"], f.get("coupling_ratio"),
                f.get("grip_force"), f.get("insertion_force"), f.get("removal_force"), f.get("von_mises"),
-               f.get("seat_clearance"), f.get("category", ""), ev.seconds]
+               f.get("von_mises_peak"), f.get("seat_clearance"), f.get("category", ""), ev.seconds]
 
 
 def part_mesh_mm(fem, X: np.ndarray):

@@ -17,6 +17,7 @@ Measured (``python tools/bench.py optimize``, stand side, 2 cores): see the benc
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -28,7 +29,7 @@ import numpy as np
 class ProblemSource:
     """What rebuilds a design problem in another process: the scene (MJCF path), the overrides of
     its ``[design]`` and ``[simulation]`` tables, the Warp device, the active handle vertices
-    (placed once, by the caller) and the seed."""
+    (placed once, by the caller), the seed and the mesh corrections of the figures."""
 
     scene: str
     design: dict = field(default_factory=dict)
@@ -36,6 +37,7 @@ class ProblemSource:
     device: str = "cpu"
     handle_vertices: tuple = ()
     seed: int = 0
+    corrections: dict = field(default_factory=dict)
 
 
 def rebuild(source: ProblemSource):
@@ -46,8 +48,9 @@ def rebuild(source: ProblemSource):
 
     ds = load_design_scene(source.scene, design=source.design, simulation=source.simulation,
                            device=check_device(source.device))
-    return make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target,
-                        handle_vertices=list(source.handle_vertices), seed=source.seed, source=source)
+    p = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target,
+                     handle_vertices=list(source.handle_vertices), seed=source.seed, source=source)
+    return dataclasses.replace(p, corrections=dict(source.corrections))
 
 
 _WORKER_PROBLEM = None
@@ -56,6 +59,10 @@ _WORKER_PROBLEM = None
 def _init_worker(source: ProblemSource) -> None:
     global _WORKER_PROBLEM
     _WORKER_PROBLEM = rebuild(source)
+
+
+def _ready() -> bool:
+    return _WORKER_PROBLEM is not None
 
 
 def _evaluate_remote(h: np.ndarray, threshold: float):
@@ -75,6 +82,9 @@ class EvaluationPool:
         ctx = multiprocessing.get_context("spawn")
         self._ex = ProcessPoolExecutor(max_workers=self.workers - 1, mp_context=ctx, initializer=_init_worker,
                                        initargs=(problem.source,))
+        # start the workers now (they rebuild the problem while this process evaluates the start)
+        for _ in range(self.workers - 1):
+            self._ex.submit(_ready)
 
     def __call__(self, items):
         from simfab.design.optimize import evaluate

@@ -3,25 +3,9 @@ insertion of the initial shape), anneal, write the outputs (:mod:`simfab.design.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from simfab.errors import InputError
-
-
-def check_out_dir(out) -> Path:
-    """``out`` as a Path after making sure it is (or can be made) a writable folder; InputError
-    otherwise (before any computation)."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError("is an existing file, not a folder", where=f"--out {out}")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"cannot create the output folder: {e.strerror}", where=f"--out {out}") from None
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise InputError("output folder is not writable", where=f"--out {out}")
-    return out
 
 
 def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict | None = None, device: str = "cpu",
@@ -48,9 +32,10 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     from simfab.design.optimize import make_problem, optimize
     from simfab.design.parallel import ProblemSource
     from simfab.design.scene import load_design_scene
+    from simfab.io.outpaths import make_out_dir
     from simfab.progress import log
 
-    out = check_out_dir(out)
+    out = make_out_dir(out)
     ds = load_design_scene(scene, design=design, simulation=simulation, device=device)
     cm = ds.cm
     if revolve is not None and cm.dim != 2:
@@ -67,16 +52,47 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         res, runs = _restarts(problem, seed, restarts, quiet, scheduler)
     extra = {} if runs is None else {"restarts": runs}
     if mesh_check and res.best.status == "ok":
-        from simfab.design.verify import mesh_check as check
-
-        log(f"couple optimize: {cm.name}: mesh check of the optimized shape on refined meshes", quiet=quiet)
-        extra["mesh_check"] = check(problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
+        res, extra["mesh_check"], extra["correction_rounds"] = _mesh_corrected(res, seed, workers, quiet)
     summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
     if revolve is not None:
         summary["outputs"]["revolved_stl"] = str(write_revolved(res, out, cm.name, *revolve))
     for w in summary["warnings"]:
         log(f"simfab: warning: {w}")
     return summary
+
+
+def _mesh_corrected(res, seed: int, workers: int, quiet: bool):
+    """Mesh check of the optimized shape (:mod:`simfab.design.verify`); while the mesh-converged
+    figures miss the brief (at most ``[design] correction_rounds`` times), optimize again from
+    the best design with the coarse figures multiplied by the check's correction factors (output
+    space mapping: the coarse model stays the fast one, its bias is measured on the design it
+    produced) and check again. Returns (result, last check, [per round: factors, feasible])."""
+    import dataclasses
+
+    from simfab.design.optimize import optimize
+    from simfab.design.verify import correction_factors, mesh_check
+    from simfab.progress import log
+
+    problem = res.problem
+    name = problem.base.name
+    log(f"couple optimize: {name}: mesh check of the optimized shape on refined meshes", quiet=quiet)
+    check = mesh_check(problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
+    rounds = []
+    for r in range(problem.brief.correction_rounds):
+        if check["feasible_fine"]:
+            break
+        factors = correction_factors(check)
+        src = None if problem.source is None else dataclasses.replace(problem.source, corrections=factors)
+        problem = dataclasses.replace(problem, corrections=factors, source=src)
+        log(f"couple optimize: {name}: correction round {r + 1}: the coarse figures times "
+            + ", ".join(f"{k} {v:.3g}" for k, v in factors.items()), quiet=quiet)
+        nxt = optimize(problem, seed=seed + 1 + r, quiet=quiet, workers=workers if src is not None else 1,
+                       start=res.best.h, iterations=max(problem.brief.iterations // 2, 1))
+        check = mesh_check(problem, nxt.best.rest, figures0=nxt.best.figures, quiet=quiet)
+        rounds.append({"round": r + 1, "factors": factors, "feasible_fine": check["feasible_fine"],
+                       "iterations": nxt.iterations, "seconds": nxt.seconds})
+        res = nxt
+    return res, check, rounds
 
 
 def write_revolved(res, out: Path, stem: str, axis: str, offset: float) -> Path:

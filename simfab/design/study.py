@@ -39,11 +39,11 @@ def handle_study(scene, *, out, counts=(2, 4, 6), randoms: int = 10, design: dic
                  simulation: dict | None = None, seed: int = 0, quiet: bool = True, scheduler: str | None = None) -> dict:
     """Run the study and write ``NAME_handle_study.csv`` (one row per run), ``..._summary.csv``,
     ``.png`` and ``.json`` into ``out``; returns the summary."""
-    from simfab.design.pipeline import check_out_dir
+    from simfab.io.outpaths import make_out_dir
     from simfab.design.scene import load_design_scene
     from simfab.sweep import run_tasks
 
-    out = check_out_dir(out)
+    out = make_out_dir(out)
     ds = load_design_scene(scene, design=design, simulation=simulation)  # validates before any task runs
     name = ds.cm.name
     scene_path = str(ds.xml)

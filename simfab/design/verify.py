@@ -12,8 +12,11 @@ Reported per figure: the value at every level, the extrapolated value (three lev
 changes shrink: f = f_inf + b h^p fitted, :func:`simfab.coupling.converge.extrapolate`; else
 none, and a figure whose changes grow - the max von Mises stress at a sharp re-entrant corner is
 singular - is flagged as not converging), and the relative difference of the optimization mesh
-from the extrapolated value (else the finest level); per constraint: satisfied at the finest
-level. A design that meets its brief only on the coarse mesh gets a warning in the summary.
+from the extrapolated value (else the finest level); per constraint: its value there (the
+mesh-converged answer as far as the levels tell) and whether it is satisfied. A design that meets
+its brief only on the coarse mesh gets a warning in the summary, and
+:func:`correction_factors` turn the check into the next round's correction of the coarse figures
+(:func:`simfab.design.pipeline.optimize_scene`).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from simfab.design import brief as B
 
 #: Refinement levels (number of uniform subdivisions) of the check, per dimension.
 LEVELS = {2: (0, 1, 2), 3: (0, 1)}
-FIGURES = ("coupling_ratio", "grip_force", "insertion_force", "removal_force", "von_mises")
+FIGURES = ("coupling_ratio", "grip_force", "insertion_force", "removal_force", "von_mises", "von_mises_peak")
 
 
 def refined_model(cm, rest: np.ndarray, times: int):
@@ -53,8 +56,8 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
 
     figures0 : the optimizer's figures of ``rest`` (level 0), reused instead of simulating again
     Returns {"levels": [{elements, seconds}], "figures": {name: {values, extrapolated, order,
-    difference_of_optimization_mesh}}, "constraints": [{name, value, lo, hi, satisfied}] at the
-    finest level, "feasible_fine": bool, "units"}.
+    converging, difference_of_optimization_mesh}}, "constraints": [{name, value, lo, hi,
+    satisfied}] at the reference values, "feasible_fine": bool, "reference", "units"}.
     """
     from simfab.coupling.converge import extrapolate
     from simfab.coupling.simulate import simulate
@@ -69,7 +72,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
             f, n = figures0, cm.fem.n_elements
         else:
             m = refined_model(cm, rest, t)
-            f, n = profile_figures(simulate(m, quiet=quiet)), m.fem.n_elements
+            f, n = profile_figures(simulate(m, quiet=quiet), problem.brief.stress_radius), m.fem.n_elements
         rows.append({"subdivisions": int(t), "elements": int(n), "seconds": time.perf_counter() - t0,
                      "category": f["category"]})
         figs.append(f)
@@ -85,15 +88,17 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
         ref = float(v[-1]) if f_inf is None else f_inf
         out[k] = {"values": v.tolist(), "extrapolated": f_inf, "order": p, "converging": converging,
                   "difference_of_optimization_mesh": float((v[0] - ref) / ref) if ref else 0.0}
-    fine = figs[-1]
+    # the mesh-converged answer: extrapolated values where they exist, else the finest level's
+    fine = dict(figs[-1], **{k: (v["values"][-1] if v["extrapolated"] is None else v["extrapolated"])
+                             for k, v in out.items()})
     cons = B.constraints(fine, problem.limits)
     return {"levels": rows, "figures": out,
             "constraints": [{"name": c.name, "value": c.value, "lo": c.lo, "hi": c.hi, "satisfied": c.satisfied}
                             for c in cons],
             "feasible_fine": all(c.satisfied for c in cons),
-            "reference": "extrapolated" if len(levels) >= 3 else "finest level",
+            "reference": "extrapolated where converging, else the finest level",
             "units": {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N",
-                      "von_mises": "Pa"}}
+                      "von_mises": "Pa", "von_mises_peak": "Pa"}}
 
 
 def check_warnings(check: dict) -> list[str]:
@@ -103,4 +108,16 @@ def check_warnings(check: dict) -> list[str]:
     if not bad:
         return []
     what = ", ".join(f"{c['name']} {c['value']:.4g} (bounds {c['lo']:.4g}..{c['hi']:.4g})" for c in bad)
-    return [f"on the refined mesh ({lv[-1]['elements']} elements instead of {lv[0]['elements']}) the design misses: {what}"]
+    return [f"mesh-converged (refined up to {lv[-1]['elements']} elements from {lv[0]['elements']}) the design misses: {what}"]
+
+
+def correction_factors(check: dict) -> dict:
+    """{figure: reference value / optimization-mesh value} of a :func:`mesh_check` (space mapping
+    of the coarse model's outputs: the optimizer multiplies its coarse figures by these, so that
+    the next round aims at the mesh-converged values; figures with a zero coarse value keep 1)."""
+    out = {}
+    for k, v in check["figures"].items():
+        coarse = v["values"][0]
+        ref = v["values"][-1] if v["extrapolated"] is None else v["extrapolated"]
+        out[k] = float(ref / coarse) if coarse and np.isfinite(ref / coarse) and ref / coarse > 0 else 1.0
+    return out

@@ -58,6 +58,16 @@ def check_out_dir(out: str | os.PathLike, *, where: str = "--out") -> Path:
     return p
 
 
+def make_out_dir(out: str | os.PathLike, *, where: str = "--out") -> Path:
+    """:func:`check_out_dir`, then create the folder (InputError if that fails)."""
+    p = check_out_dir(out, where=where)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"{out}: cannot create the output folder: {e.strerror}", where=where) from None
+    return p
+
+
 def check_out_file(path: str | os.PathLike, *, where: str, suffixes: tuple[str, ...] = ()) -> Path:
     """Check an explicit output file: not an existing folder, allowed suffix, writable folder."""
     p = Path(path)

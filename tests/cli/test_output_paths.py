@@ -57,6 +57,27 @@ def test_check_out_dir(tmp_path):
     assert not (tmp_path / "new").exists()  # the check creates nothing
 
 
+def test_unwritable_out_folder_is_refused_before_computing(tmp_path, monkeypatch, capsys):
+    # the suite runs as root, for whom every folder is writable: the permission bits are what
+    # os.access reports, so deny it for the chosen folder and check every command's answer
+    import os
+
+    from simfab.cli import main
+
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if os.path.abspath(p) == str(locked) else real(p, mode, **kw))
+    with pytest.raises(InputError, match="no permission"):
+        check_out_dir(locked / "sub")
+    for argv in (["couple", "simulate", "cclamp2d", "--steps", "1"], ["couple", "optimize", "block2d_tight", "--iterations", "1"],
+                 ["grow", "phone_stand"]):
+        code = main(argv + ["--out", str(locked / "o")])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1 and "no permission" in err[0] and "--out" in err[0], (argv, err)
+    assert list(locked.iterdir()) == []  # nothing written
+
+
 def test_couple_scene_name_cannot_escape(tmp_path):
     src = SCENES / "coupling" / "cclamp2d"
     (tmp_path / "s.xml").write_text(src.with_suffix(".xml").read_text())

@@ -29,7 +29,7 @@ def test_element_quality():
 
 
 def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypatch):
-    P = make_problem(scene, DesignBrief(grip="tight", handles=3, placement="spatial"))
+    P = make_problem(scene, DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=3, placement="spatial"))
     h = P.handles.identity()
     t, s = P.handles.split(h)
     bad = h.copy().reshape(P.handles.n_active, -1)

@@ -32,7 +32,7 @@ def _resimulate(summary: dict, out: Path) -> dict:
     xml = summary["outputs"]["scene_xml"]
     ds = load_design_scene(xml)
     res = simulate(load_coupling_scene(xml))
-    fig = profile_figures(res)
+    fig = profile_figures(res, ds.brief.stress_radius)
     ys = ds.cm.fem.material.yield_stress
     cons = B.constraints(fig, B.bounds(ds.brief, ys))
     out = {"figures": fig, "constraints": {c.name: c.as_dict() for c in cons},
