@@ -55,6 +55,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
     """Run the design ``rest`` at each refinement level and compare (see the module docstring).
 
     figures0 : the optimizer's figures of ``rest`` (level 0), reused instead of simulating again
+        (not for target matching: its RMS force error per level needs the profiles)
     Returns {"levels": [{elements, seconds}], "figures": {name: {values, extrapolated, order,
     converging, difference_of_optimization_mesh}}, "constraints": [{name, value, lo, hi,
     satisfied}] at the reference values, "feasible_fine": bool, "reference", "units"}.
@@ -68,17 +69,20 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
     rows, figs = [], []
     for t in levels:
         t0 = time.perf_counter()
-        if t == 0 and figures0 is not None:
+        if t == 0 and figures0 is not None and problem.target is None:
             f, n = figures0, cm.fem.n_elements
         else:
             m = refined_model(cm, rest, t)
-            f, n = profile_figures(simulate(m, quiet=quiet), problem.brief.stress_radius), m.fem.n_elements
+            res = simulate(m, quiet=quiet)
+            f, n = profile_figures(res, problem.brief.stress_radius), m.fem.n_elements
+            if problem.target is not None:  # the profile-matching error, a figure like the others
+                f = dict(f, rms_error=problem.target.rms_error(res.column("s"), res.column("force")))
         rows.append({"subdivisions": int(t), "elements": int(n), "seconds": time.perf_counter() - t0,
                      "category": f["category"]})
         figs.append(f)
     N = np.array([r["elements"] for r in rows], float)
     out = {}
-    for k in FIGURES:
+    for k in FIGURES + (("rms_error",) if problem.target is not None else ()):
         v = np.array([f[k] for f in figs], float)
         d = np.abs(np.diff(v))
         # converging: the changes shrink with refinement (a stress at a sharp re-entrant corner is
@@ -98,7 +102,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
             "feasible_fine": all(c.satisfied for c in cons),
             "reference": "extrapolated where converging, else the finest level",
             "units": {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N",
-                      "von_mises": "Pa", "von_mises_peak": "Pa"}}
+                      "von_mises": "Pa", "von_mises_peak": "Pa", "rms_error": "N"}}
 
 
 def check_warnings(check: dict) -> list[str]:
