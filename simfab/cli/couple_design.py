@@ -7,7 +7,8 @@ editing energy of the boundary) until the simulated insertion meets the scene's 
 stress [Pa], or a target force profile). Command-line options override the brief.
 
 --json keys: scene, feasible, objective, objective_initial, E_L, constraints (per
-constraint: value, lo, hi, unit, satisfied, initial), category, category_initial, profile and
+constraint: value, lo, hi, unit, satisfied, initial; values mesh-corrected), corrections
+(per figure: factor applied to the coarse figure, from the mesh check), category, category_initial, profile and
 profile_initial (category, coupling_ratio_pct, E_max_J, E_ss_J, F_in_N, F_rm_N, F_grip_N,
 max_von_mises_Pa (largest element stress), von_mises_avg_Pa (averaged over [design]
 stress_radius: what the yield constraint reads)), handles, iterations, stopped_early,
@@ -18,8 +19,9 @@ simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_s
 revolved_stl with --revolve-axis), restarts (with --restarts: per run seed, status, message,
 feasible, objective, E_L, iterations, seconds), mesh_check (unless --no-mesh-check: levels
 (subdivisions, elements, seconds, category), figures (per figure: values per level,
-extrapolated, order, converging, difference_of_optimization_mesh), constraints at the finest
-level, feasible_fine, reference, units).
+extrapolated, order, converging, difference_of_optimization_mesh), constraints at the
+mesh-converged values, feasible_fine, reference, units), correction_rounds (per round:
+factors, feasible_fine, iterations, seconds).
 
 simfab couple study handles SCENE runs the handle-placement study: displacement-based and
 spatial placement and --random random picks, for each handle count of --counts, each an

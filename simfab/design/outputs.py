@@ -58,6 +58,8 @@ def summary(res, *, scene: str | None = None) -> dict:
         "objective_initial": init.objective,
         "E_L": best.E_L,
         "constraints": cons,
+        # the constraints read the coarse figures times these (mesh correction rounds; {} without)
+        "corrections": dict(res.problem.corrections),
         "category": best.figures.get("category"),
         "category_initial": init.figures.get("category"),
         "profile": _figures(best.figures),
