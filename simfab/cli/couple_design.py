@@ -54,6 +54,8 @@ def add_optimize_args(s) -> None:
     g.add_argument("--handles", type=int, metavar="K", help="number of active handles")
     g.add_argument("--placement", choices=["displacement", "spatial", "random"], help="handle placement")
     g.add_argument("--iterations", type=int, metavar="N", help="simulated-annealing iterations (at most)")
+    g.add_argument("--correction-rounds", type=int, metavar="N",
+                   help="re-optimizations with mesh-corrected figures while the mesh check finds the brief missed")
     g.add_argument("--patience", type=int, metavar="N",
                    help="stop once the best design is feasible and has not improved for N iterations")
     s.add_argument("--steps", type=int, metavar="N", help="insertion steps per simulation (overrides the scene)")
@@ -86,7 +88,8 @@ def design_overrides(args) -> dict:
     from simfab.errors import InputError
 
     d = {}
-    for k in ("grip", "yield_stress", "target_profile", "handles", "placement", "iterations", "patience"):
+    for k in ("grip", "yield_stress", "target_profile", "handles", "placement", "iterations", "patience",
+              "correction_rounds"):
         v = getattr(args, k, None)
         if v is not None:
             d[k] = v
@@ -94,9 +97,10 @@ def design_overrides(args) -> dict:
         v = getattr(args, k, None)
         if v is not None:
             d[k] = list(v)
-    for k in ("handles", "iterations", "patience"):
-        if k in d and d[k] < (0 if k == "iterations" else 1):
-            raise InputError(f"must be >= {0 if k == 'iterations' else 1}, got {d[k]}", where=f"--{k}")
+    for k in ("handles", "iterations", "patience", "correction_rounds"):
+        lo = 0 if k in ("iterations", "correction_rounds") else 1
+        if k in d and d[k] < lo:
+            raise InputError(f"must be >= {lo}, got {d[k]}", where=f"--{k.replace('_', '-')}")
     return d
 
 

@@ -89,12 +89,24 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
     out = tmp_path / "o"
     r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "block2d_tight", "--iterations", "4",
                         "--steps", "8", "--handles", "3", "--placement", "spatial", "--revolve-axis", "y",
+                        "--workers", "1", "--correction-rounds", "1",
                         "--revolve-offset", "-0.02", "--out", str(out), "--json"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
     for k, p in s["outputs"].items():
         assert (out / p.split("/")[-1]).is_file(), k
-    assert s["iterations"] == 4 and s["simulations"] >= 1
+    assert s["simulations"] >= 1
+    # the mesh check ran (2D: 1x, 4x, 16x the elements) and, if the brief was missed there, one
+    # correction round optimized again (half the iterations) with the check's factors
+    mc = s["mesh_check"]
+    n = [lv["elements"] for lv in mc["levels"]]
+    assert n[1] == 4 * n[0] and n[2] == 16 * n[0]
+    rounds = s["correction_rounds"]
+    assert len(rounds) == (0 if mc["feasible_fine"] and not rounds else 1)
+    if rounds:
+        assert s["iterations"] == 2 and s["corrections"] == rounds[0]["factors"]
+    else:
+        assert s["iterations"] == 4 and s["corrections"] == {}
     assert check_compliance(s["outputs"]["usd"]) == []
     import trimesh
 
