@@ -24,13 +24,15 @@ fraction tau_k of the current value is accepted with probability 1/e at every sc
 A candidate whose value is +inf (rejected: invalid shape, failed simulation) is never accepted
 and counts as a rejection. Stops after K iterations or when ``stop(best_info, k)`` says so.
 
-**Speculative lookahead.** Most proposals are rejected, and a rejection leaves the current state
-unchanged, so the next P proposals can be drawn at once, each assuming the ones before it are
-rejected (sigma shrunk accordingly), and evaluated in parallel (``f_many``). They are then
-decided in order; at the first accepted one the rest are discarded and the random stream is
-rewound to where that proposal's draws ended. Every decision, and so the result, is exactly that
-of the serial loop (P = 1) with the same seed; only wall time changes (with acceptance rate a,
-one round decides 1 + (1 - a) + ... + (1 - a)^(P-1) iterations).
+**Speculative evaluation** (``evaluator``). Most proposals are rejected, and a rejection leaves
+the current state unchanged, so proposals k+1, k+2, ... can be drawn before k is decided, each
+assuming every pending one before it is rejected (sigma shrunk accordingly). Each is first
+screened cheaply (e.g. its modification energy alone exceeds its threshold: decided at once);
+those that need the expensive evaluation run concurrently on the evaluator's ``slots``.
+Decisions are still taken in order; at the first acceptance the later proposals are discarded
+(running ones finish unused) and the random stream is rewound to where the accepted proposal's
+draws ended. Every decision, hence the result, is exactly that of the serial loop with the same
+seed; only the wall time changes.
 """
 
 from __future__ import annotations
@@ -76,8 +78,7 @@ class AnnealResult:
     discarded: list = field(default_factory=list)
 
 
-def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=None, f_many=None,
-           lookahead: int = 1) -> AnnealResult:
+def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=None, evaluator=None) -> AnnealResult:
     """Minimize ``f`` by simulated annealing from ``x0``.
 
     f : callable (x, threshold) -> (value, info); value may be +inf for a rejected candidate, or
@@ -85,10 +86,10 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
     stop : optional callable (best_info, best_value, k, k_best) -> bool, asked after every iteration
         (k_best: iteration at which the best value was found)
     callback : optional callable(record dict) after every iteration
-    f_many : optional callable [(x, threshold), ...] -> [(value, info), ...], the same as ``f`` on
-        each item (e.g. in parallel); used with ``lookahead`` > 1
-    lookahead : proposals drawn and evaluated per round (see the module docstring); the result
-        does not depend on it
+    evaluator : optional speculative evaluator (see the module docstring) with ``slots`` (int),
+        ``screen(x, threshold) -> (value, info) | None`` (None: needs the full evaluation) and
+        ``submit(x, threshold)`` returning an object whose ``result()`` is ``f(x, threshold)``;
+        the result does not depend on it
     """
     rng = np.random.default_rng(options.seed)
     lower, upper = np.asarray(options.lower, float), np.asarray(options.upper, float)
@@ -104,10 +105,8 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
     sigma = sigma0.copy()
     blocks = None if options.blocks is None else np.unique(np.asarray(options.blocks), return_inverse=True)[1]
     n_blocks = 0 if blocks is None else int(blocks.max()) + 1
-    K = max(int(options.iterations), 1)
+    K = int(options.iterations)
     ratio = options.tau_end / options.tau0
-    if f_many is None or lookahead <= 1:
-        f_many, lookahead = (lambda items: [f(x, t) for x, t in items]), 1
 
     def shrunk(s, accepted):
         return np.clip(s * (GROW if accepted else SHRINK), SIGMA_MIN_REL * sigma0, sigma0)
@@ -121,40 +120,64 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
             step *= pick[blocks]
         x_i = np.clip(x_cur + step, lower, upper)
         u = 1.0 - rng.random()  # in (0, 1]; drawn every iteration: the stream does not depend on the values
-        T = options.tau0 * ratio ** ((k - 1) / K) * abs(e_cur) if math.isfinite(e_cur) else math.inf
+        T = options.tau0 * ratio ** ((k - 1) / max(K, 1)) * abs(e_cur) if math.isfinite(e_cur) else math.inf
         # accept iff E_i < E_cur, or u < exp(-(E_i - E_cur) / T)  <=>  E_i < E_cur - T ln u
         threshold = e_cur - T * math.log(u) if math.isfinite(e_cur) and T > 0 else (e_cur if math.isfinite(e_cur) else math.inf)
         return x_i, threshold, T
 
+    # pending proposals in order: [k, x, threshold, T, rng state after its draws, (value, info) or a future]
+    pending: list = []
+    draining: list = []  # discarded evaluations still running (they hold a slot until they finish)
+    unused: list = []  # every discarded evaluation that was running
+    sig_next, k_next, busy = sigma, 1, 0
+    slots = 1 if evaluator is None else max(int(evaluator.slots), 1)
+    max_pending = 1 if evaluator is None else 8 * slots  # screened proposals are cheap; bound the queue
     k = 1
-    while k <= int(options.iterations):
-        # a round: proposals k .. k+P-1, each assuming every one before it is rejected
-        plans, states, sig = [], [], sigma
-        for j in range(min(lookahead, int(options.iterations) - k + 1)):
-            plans.append(propose(k + j, sig))
-            states.append(rng.bit_generator.state)  # where proposal k+j's draws end
-            sig = shrunk(sig, False)
-        values = f_many([(x_i, threshold) for x_i, threshold, _ in plans])
-        for j, ((x_i, threshold, T), (e_i, info_i)) in enumerate(zip(plans, values)):
-            accepted = math.isfinite(e_i) and (e_i < e_cur or e_i < threshold or not math.isfinite(e_cur))
-            if accepted:
-                x_cur, e_cur = x_i, e_i
-                if e_i < best.value:
-                    best.x, best.value, best.info, k_best = x_i.copy(), e_i, info_i, k
-            sigma = shrunk(sigma, accepted)
-            rec = dict(k=k, value=e_i, accepted=accepted, current=e_cur, best=best.value, temperature=T,
-                       sigma=float(np.mean(sigma / np.where(sigma0 > 0, sigma0, 1.0))), info=info_i)
-            best.history.append(rec)
-            best.iterations = k
-            if callback is not None:
-                callback(rec)
-            if stop is not None and stop(best.info, best.value, k, k_best):
-                best.stopped_early = k < options.iterations
-                best.discarded.extend(info for _, info in values[j + 1:])
-                return best
-            k += 1
-            if accepted and j + 1 < len(plans):  # the later proposals assumed a rejection: redraw them
-                best.discarded.extend(info for _, info in values[j + 1:])
-                rng.bit_generator.state = states[j]
+    while k <= K:
+        while k_next <= K and len(pending) < max_pending and (busy < slots or not pending):
+            draining = [d for d in draining if not d.done()]
+            if pending and busy + len(draining) >= slots:
                 break
+            x_i, thr, T = propose(k_next, sig_next)
+            st = rng.bit_generator.state
+            if evaluator is None:
+                out = f(x_i, thr)
+            else:
+                out = evaluator.screen(x_i, thr)
+                if out is None:
+                    out, busy = evaluator.submit(x_i, thr), busy + 1
+            pending.append([k_next, x_i, thr, T, st, out])
+            sig_next, k_next = shrunk(sig_next, False), k_next + 1
+        _, x_i, threshold, T, st, out = pending.pop(0)
+        if not isinstance(out, tuple):
+            out, busy = out.result(), busy - 1
+        e_i, info_i = out
+        accepted = math.isfinite(e_i) and (e_i < e_cur or e_i < threshold or not math.isfinite(e_cur))
+        if accepted:
+            x_cur, e_cur = x_i, e_i
+            if e_i < best.value:
+                best.x, best.value, best.info, k_best = x_i.copy(), e_i, info_i, k
+        sigma = shrunk(sigma, accepted)
+        rec = dict(k=k, value=e_i, accepted=accepted, current=e_cur, best=best.value, temperature=T,
+                   sigma=float(np.mean(sigma / np.where(sigma0 > 0, sigma0, 1.0))), info=info_i)
+        best.history.append(rec)
+        best.iterations = k
+        if callback is not None:
+            callback(rec)
+        done = stop is not None and stop(best.info, best.value, k, k_best)
+        if accepted or done:  # the later proposals assumed a rejection: drop them, redraw from here
+            for p in pending:
+                if isinstance(p[5], tuple):
+                    best.discarded.append(p[5][1])
+                else:  # a running evaluation finishes unused
+                    draining.append(p[5])
+                    unused.append(p[5])
+            pending, busy = [], 0
+            rng.bit_generator.state = st
+            sig_next, k_next = sigma, k + 1
+        if done:
+            best.stopped_early = k < K
+            break
+        k += 1
+    best.discarded += [u.result()[1] for u in unused]  # once the running ones are done
     return best

@@ -287,6 +287,23 @@ def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float):
     return watch
 
 
+def screen(problem: DesignProblem, h: np.ndarray, threshold: float = math.inf) -> Evaluation:
+    """The cheap part of :func:`evaluate`: the rest shape, its validity and E_L against the
+    acceptance threshold. A returned evaluation with a ``reason`` is decided (rejected, or
+    stopped with objective E_L > threshold); without one, the candidate needs its simulation."""
+    t0 = time.perf_counter()
+    X = problem.handles.apply(h)
+    ev = Evaluation(h=np.array(h, float), rest=X, status="rejected")
+    ev.reason = shape_defect(problem, X)
+    if not ev.reason:
+        ev.E_L = problem.energy(X)
+        base = 0.0 if problem.target is not None else ev.E_L
+        if base > threshold:
+            ev.status, ev.reason, ev.objective = "stopped", "modification energy above the acceptance threshold", base
+    ev.seconds = time.perf_counter() - t0
+    return ev
+
+
 def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False,
              threshold: float = math.inf) -> Evaluation:
     """Evaluate design vector h (see the module docstring); never raises for a bad candidate.
@@ -297,20 +314,14 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     from simfab.coupling.simulate import check_start, simulate
 
     t0 = time.perf_counter()
-    X = problem.handles.apply(h)
-    ev = Evaluation(h=np.array(h, float), rest=X, status="rejected")
-    # cheap checks first: shape validity and E_L against the threshold, before any model is built
-    ev.reason = shape_defect(problem, X)
-    if not ev.reason:
-        ev.E_L = problem.energy(X)
-        base = 0.0 if problem.target is not None else ev.E_L
-        if base > threshold:
-            ev.status, ev.reason, ev.objective = "stopped", "modification energy above the acceptance threshold", base
-        else:
-            cm, ev.reason = candidate_model(problem, X)
+    ev = screen(problem, h, threshold)
+    if ev.reason:
+        return ev
+    cm, ev.reason = candidate_model(problem, ev.rest)
     if ev.reason:
         ev.seconds = time.perf_counter() - t0
         return ev
+    base = 0.0 if problem.target is not None else ev.E_L
     t1 = time.perf_counter()
     try:
         check_start(cm)
@@ -442,8 +453,7 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     x0 = problem.handles.identity() if start is None else np.asarray(start, float)
     if workers > 1:
         with EvaluationPool(problem, workers) as pool:
-            out = anneal(f, x0, opts, stop=stop, callback=on_iteration,
-                         f_many=lambda items: [(ev.objective, ev) for ev in pool(items)], lookahead=workers)
+            out = anneal(f, x0, opts, stop=stop, callback=on_iteration, evaluator=pool)
     else:
         out = anneal(f, x0, opts, stop=stop, callback=on_iteration)
     initial = history_evals[0] if start is None else evaluate(problem, problem.handles.identity(), keep_result=True)

@@ -2,9 +2,10 @@
 ``lookahead``) on worker processes.
 
 One optimization is a chain of decisions, but most proposals are rejected, so the annealer can
-draw the next P proposals from the same state and have them evaluated at once. This module
-evaluates the first of a round in this process and the others on P - 1 worker processes. Each
-worker holds its own :class:`~simfab.design.optimize.DesignProblem`, rebuilt from a
+draw the next proposals before the current one is decided. This module screens each in this
+process (shape validity and E_L against the threshold decide most of them at once) and runs the
+insertion simulations of the others on worker processes, as many at a time as there are
+workers. Each worker holds its own :class:`~simfab.design.optimize.DesignProblem`, rebuilt from a
 :class:`ProblemSource` (the scene file, the overrides and the placed handles): the problem's
 Warp arrays and caches do not cross process boundaries, and workers are spawned, not forked
 (Warp's runtime is not fork-safe). Rebuilding is deterministic, so a worker evaluates a design
@@ -72,27 +73,30 @@ def _evaluate_remote(h: np.ndarray, threshold: float):
 
 
 class EvaluationPool:
-    """``pool(items)`` evaluates ``[(h, threshold), ...]``: the first here (with its
-    InsertionResult), the others on the workers; a context manager (shuts the workers down)."""
+    """The annealer's speculative evaluator (:func:`simfab.design.anneal.anneal`, ``evaluator``):
+    ``screen`` runs the cheap checks here (shape validity, E_L against the threshold), ``submit``
+    sends a candidate's insertion simulation to one of ``workers`` worker processes (``slots``).
+    A context manager (shuts the workers down)."""
 
     def __init__(self, problem, workers: int):
         if problem.source is None:
             raise ValueError("parallel evaluation needs a problem built from a scene file (problem.source)")
-        self.problem, self.workers = problem, int(workers)
+        self.problem, self.slots = problem, int(workers)
         ctx = multiprocessing.get_context("spawn")
-        self._ex = ProcessPoolExecutor(max_workers=self.workers - 1, mp_context=ctx, initializer=_init_worker,
+        self._ex = ProcessPoolExecutor(max_workers=self.slots, mp_context=ctx, initializer=_init_worker,
                                        initargs=(problem.source,))
         # start the workers now (they rebuild the problem while this process evaluates the start)
-        for _ in range(self.workers - 1):
+        for _ in range(self.slots):
             self._ex.submit(_ready)
 
-    def __call__(self, items):
-        from simfab.design.optimize import evaluate
+    def screen(self, h, threshold):
+        from simfab.design.optimize import screen
 
-        futures = [self._ex.submit(_evaluate_remote, h, t) for h, t in items[1:]]
-        h, t = items[0]
-        first = evaluate(self.problem, h, keep_result=True, threshold=t)
-        return [first] + [f.result() for f in futures]
+        ev = screen(self.problem, h, threshold)
+        return (ev.objective, ev) if ev.reason else None
+
+    def submit(self, h, threshold):
+        return _Pending(self._ex.submit(_evaluate_remote, h, threshold))
 
     def close(self) -> None:
         self._ex.shutdown(wait=True, cancel_futures=True)
@@ -102,3 +106,17 @@ class EvaluationPool:
 
     def __exit__(self, *exc):
         self.close()
+
+
+class _Pending:
+    """A submitted evaluation: ``result()`` -> (objective, Evaluation)."""
+
+    def __init__(self, future):
+        self._f = future
+
+    def done(self) -> bool:
+        return self._f.done()
+
+    def result(self):
+        ev = self._f.result()
+        return ev.objective, ev
