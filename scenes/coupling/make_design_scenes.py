@@ -255,7 +255,7 @@ def paddleside() -> None:
         "paddleside2d",
         doc="Paddle side of a paddle holder: a U-channel exactly matching the blade's rounded 6 mm edge (no grip);\n"
             "optimized to grip the blade tightly with a removal force below the stand side's.",
-        ring=ring, target=500,
+        ring=ring, target=2000,  # thin bending walls: ~4 triangles across (500 gave a grip 3x too stiff)
         object_geoms=[dict(type="capsule", size=[r, half_len], quat=[0.7071067811865476, 0, 0.7071067811865476, 0])],
         keys=[([x0, 0, 0], [1, 0, 0, 0]), ([x_end, 0, 0], [1, 0, 0, 0])],
         fixed_center=[-r - base, 0, 0], fixed_half=[0.0006, r + wall + 0.001, 0.01],
