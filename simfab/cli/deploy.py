@@ -129,9 +129,12 @@ def format_text(summary: dict) -> str:
             f"{len(s['unreachable_gaps'])} unreachable)",
             f"laser cut         {lc['parts']} parts, cut length {lc['cut_length_mm'] / 1e3:.4g} m, sheet "
             f"{lc['sheet_mm'][0]:.0f} x {lc['sheet_mm'][1]:.0f} mm",
-            f"deployed          {dp['kind']} (total angle defect {dp['total_angle_defect']:.4g} rad, "
-            f"quadric fit K {dp['quadric_gaussian_curvature']:.4g} 1/m^2), "
-            f"stable: {dp['stable']}",
+            f"deployed          {dp['kind']} (inserts' local K: {dp['curvature_sign_at_inserts']['positive']} > 0, "
+            f"{dp['curvature_sign_at_inserts']['negative']} < 0, target's sign at "
+            f"{100 * dp.get('curvature_sign_agreement', float('nan')):.3g} %; quadric fit K "
+            f"{dp['quadric_gaussian_curvature']:.4g} 1/m^2), stable: {dp['stable']}",
+            f"springs           bulge {s['spring_bulge_min']:.3g}..{s['spring_bulge_max']:.3g} for quad growth up to "
+            f"{s['quad_growth_max']:.3g}; {len(s['springs_short_of_slack'])} quads short of the slack",
             f"deviation         RMS {dv['rms'] * 100:.3g} % ({dv['rms_mm']:.3g} mm), Hausdorff {dv['hausdorff'] * 100:.3g} % "
             f"({dv['hausdorff_mm']:.3g} mm) of D = {dv['diameter_mm']:.0f} mm; height {dv['deployed_height_mm']:.3g} mm "
             f"(target {dv['target_height_mm']:.3g} mm)"]

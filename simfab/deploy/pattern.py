@@ -131,8 +131,9 @@ class Pattern:
                 out.append((e, int(v), mids[e], self.P[v] + self.gap[v] * d))
         return out
 
-    def spring_curves(self, n: int = 12) -> list[tuple[int, int, int, np.ndarray]]:
-        """Per spring arc: (quad, edge from, edge to, points (n+1,2)) cubic Bezier [m]."""
+    def spring_curves(self, n=12) -> list[tuple[int, int, int, np.ndarray]]:
+        """Per spring arc: (quad, edge from, edge to, points (n+1,2)) cubic Bezier [m] at n+1 uniform
+        parameters (n int) or at the Bezier parameters n (array in [0, 1])."""
         from simfab.deploy.springs import bezier
 
         out = []

@@ -18,12 +18,12 @@ the network growing into the target - measured on the bundled dome: a 16 mm high
 for a 54 mm target with the earlier fixed b = 0.7, S/c = 1.16 < s_q = 1.22 at the centre).
 Hence each quad's b is the smallest b >= ``spring_bulge`` with
 
-    S(b) / c >= (1 + spring_slack) s_q                       for all four arcs of the quad,
+    S(b) / c >= (1 + spring_slack) max(s_q, 1)               for all four arcs of the quad,
 
 found by bisection (S/c grows monotonically with b). b is capped where an arc would come within
 ``spring_width`` of the quad centre (the four arcs of a quad must stay apart for the cut); a
 quad that needs more is reported (``tight``) and keeps the capped b. Shrinking quads (u > 0,
-saddles) need no slack: their arcs bend further, and keep b = ``spring_bulge``.
+saddles) need no growth slack (their arcs bend further); they keep the plain margin.
 """
 
 from __future__ import annotations
@@ -35,9 +35,10 @@ _BISECTION_STEPS = 30
 _B_UPPER = 2.0  # bisection bracket of the cap search (the arc reaches the centre well before)
 
 
-def bezier(M0: np.ndarray, M1: np.ndarray, c: np.ndarray, b: float, n: int) -> np.ndarray:
-    """(n+1,2) points of the arc from M0 to M1 (2,) with handles pulled by b towards c (2,) [m]."""
-    t = np.linspace(0.0, 1.0, n + 1)[:, None]
+def bezier(M0: np.ndarray, M1: np.ndarray, c: np.ndarray, b: float, n) -> np.ndarray:
+    """(n+1,2) points of the arc from M0 to M1 (2,) with handles pulled by b towards c (2,) [m], at
+    n+1 uniform parameters (n int) or at the parameters n (array, in [0, 1])."""
+    t = (np.linspace(0.0, 1.0, n + 1) if np.ndim(n) == 0 else np.asarray(n, dtype=np.float64))[:, None]
     P1, P2 = M0 + b * (c - M0), M1 + b * (c - M1)
     return (1 - t) ** 3 * M0 + 3 * (1 - t) ** 2 * t * P1 + 3 * (1 - t) * t**2 * P2 + t**3 * M1
 
@@ -76,12 +77,12 @@ def size_bulges(P: np.ndarray, quads: np.ndarray, mids_of_quad: np.ndarray, grow
     ratio = np.empty(nq)
     tight = np.zeros(nq, dtype=bool)
     for q in range(nq):
-        c = P[quads[q]].mean(axis=0)
         M = mids_of_quad[q]
+        c = P[quads[q]].mean(axis=0)
         arcs = [(M[k], M[(k + 1) % 4]) for k in range(4)]
         cap = _bisect(lambda x: min(_clearance(m0, m1, c, x) for m0, m1 in arcs) < width, bulge_min, _B_UPPER)
         cap = max(cap, bulge_min)
-        need = (1.0 + slack) * float(growth[q])
+        need = (1.0 + slack) * max(float(growth[q]), 1.0)
         bq = _bisect(lambda x: min(_length_ratio(m0, m1, c, x) for m0, m1 in arcs) >= need, bulge_min, cap)
         b[q] = bq
         ratio[q] = min(_length_ratio(m0, m1, c, bq) for m0, m1 in arcs)
