@@ -141,7 +141,9 @@ def format_text(summary: dict) -> str:
     mj = s.get("mujoco") or {}
     if mj:
         st, rl = mj["stability"], mj["relaxation"]
-        rows.append(f"MuJoCo            dt {mj['timestep']:.3g} s, {st['seconds']:.3g} s from the key: "
+        rest = "at rest" if st.get("settled") else f"not at rest within {st.get('max_seconds', st['seconds']):.3g} s"
+        rows.append(f"MuJoCo            dt {mj['timestep']:.3g} s, {st['seconds']:.3g} s from the key ({rest}, "
+                    f"{st['wall_s']:.3g} s wall): "
                     f"{'finite' if st['finite'] else 'BLEW UP'}, max drift {st['max_drift_m'] * 1e3:.3g} mm; "
                     f"relaxed vs simfab: RMS {rl['rms_m'] * 1e3:.3g} mm = {100 * (rl['rms_rel'] or 0):.3g} % of the "
                     f"{rl['out_of_plane_extent_m'] * 1e3:.3g} mm height")

@@ -4,8 +4,9 @@ Stages (each timed): flatten (:mod:`~simfab.deploy.flatten`), layout
 (:mod:`~simfab.deploy.pattern`), lasercut (:mod:`~simfab.deploy.lasercut`), deploy
 (:mod:`~simfab.deploy.network`), compare (:mod:`~simfab.deploy.compare`) and mujoco
 (:mod:`~simfab.deploy.mjcf_sim`: build the simulatable scene, step it (damped) from the deployed
-key for ``stability_seconds`` and compare the relaxed state with simfab's equilibrium after a
-rigid alignment).
+key until it is at rest - its convergence test, ``settle_tol`` - or for at most
+``stability_seconds``, and compare the relaxed state with simfab's equilibrium after a rigid
+alignment).
 
 Deployed shape descriptors: the total angle defect of the deployed quad mesh's interior
 vertices (the inserts) [rad] (its integrated Gaussian curvature when the quads are planar; the
@@ -145,22 +146,22 @@ def insert_geoms(pat, net) -> dict:
 
 def mujoco_check_run(net, dep, pat, scene):
     """Build the MuJoCo scene, step it from the key (stability) and relax it (agreement with simfab)."""
-    import mujoco
-
     from simfab.deploy import compare, mjcf_sim
 
     cfg = scene.mujoco
     sim = mjcf_sim.build(net.model, net.state, dep.final, density=scene.deploy.density, cfg=cfg,
                          name="deployed_surface", body_geoms=insert_geoms(pat, net))
-    m = sim.builder.compile()
-    stab, d = mjcf_sim.step_from_key(m, cfg.stability_seconds)  # damped: also the relaxation
+    m = sim.model
     Y = dep.final.body_pos
+    height = out_of_plane_extent(Y)
+    # damped: also the relaxation; stops once at rest (within settle_tol of the height)
+    stab, d = mjcf_sim.step_from_key(m, cfg.stability_seconds, key=None, settle=cfg.settle_tol * height)
     X = np.array([d.body(n).xpos for n in net.model.body_names])
     R, t = compare.kabsch(X, Y)
     diff = np.linalg.norm(X @ R.T + t - Y, axis=1)
-    height = float(np.ptp(Y @ np.linalg.svd(Y - Y.mean(axis=0))[2][2]))  # out-of-plane extent [m]
     check = dict(nq=int(m.nq), nv=int(m.nv), welds=int(m.neq), timestep=stab.timestep,
-                 stability=dict(seconds=stab.seconds, finite=stab.finite, max_speed=stab.max_speed,
+                 stability=dict(seconds=stab.seconds, max_seconds=cfg.stability_seconds, settled=stab.settled,
+                                steps=stab.steps, finite=stab.finite, max_speed=stab.max_speed,
                                 final_kinetic_energy=stab.final_kinetic, max_drift_m=stab.max_drift, wall_s=stab.wall),
                  relaxation=dict(seconds=stab.seconds, finite=stab.finite,
                                  rms_m=float(np.sqrt(np.mean(diff**2))), max_m=float(np.max(diff)),
