@@ -140,6 +140,13 @@ def test_mujoco_scene_opens_on_key_and_is_stable(tiny_saddle, tmp_path):
     height = np.ptp(st.body_pos[:, 2])
     assert mjcf_sim.aligned_drift(st.body_pos, X) < 0.03 * height
     assert abs(d.energy[0] - e_key) < 0.1 * e_key
+    # the early-stopped relaxation (the pipeline's check) ends within its tolerance of where the
+    # full 2 s end, and earlier
+    tol = sc.settle_tol * height
+    stab2, d2 = mjcf_sim.step_from_key(m, 2.0, key=None, settle=tol)
+    X2 = np.array([d2.body(n).xpos for n in net.model.body_names])
+    assert stab2.settled and stab2.seconds < 2.0 and stab2.finite
+    assert mjcf_sim.aligned_drift(X, X2) < 2 * tol
 
 
 def test_cli_surface_writes_everything(tmp_path, capsys):
