@@ -36,32 +36,45 @@ _B_UPPER = 2.0  # bisection bracket of the cap search (the arc reaches the centr
 
 
 def bezier(M0: np.ndarray, M1: np.ndarray, c: np.ndarray, b: float, n) -> np.ndarray:
-    """(n+1,2) points of the arc from M0 to M1 (2,) with handles pulled by b towards c (2,) [m], at
+    """(n+1,2) points of one arc from M0 to M1 (2,) with handles pulled by b towards c (2,) [m], at
     n+1 uniform parameters (n int) or at the parameters n (array, in [0, 1])."""
     t = (np.linspace(0.0, 1.0, n + 1) if np.ndim(n) == 0 else np.asarray(n, dtype=np.float64))[:, None]
     P1, P2 = M0 + b * (c - M0), M1 + b * (c - M1)
     return (1 - t) ** 3 * M0 + 3 * (1 - t) ** 2 * t * P1 + 3 * (1 - t) * t**2 * P2 + t**3 * M1
 
 
-def _length_ratio(M0, M1, c, b) -> float:
-    p = bezier(M0, M1, c, b, _ARC_SAMPLES)
-    return float(np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1)) / np.linalg.norm(M1 - M0))
+def _arcs(M0, M1, c, b) -> np.ndarray:
+    """(q,4,k,2) sample points of every quad's four arcs: M0, M1 (q,4,2), c (q,1,2), b (q,)."""
+    t = np.linspace(0.0, 1.0, _ARC_SAMPLES + 1)[None, None, :, None]
+    bb = np.asarray(b, dtype=np.float64)[:, None, None]
+    P1, P2 = M0 + bb * (c - M0), M1 + bb * (c - M1)
+    P0, P1, P2, P3 = (a[:, :, None, :] for a in (M0, P1, P2, M1))
+    return (1 - t) ** 3 * P0 + 3 * (1 - t) ** 2 * t * P1 + 3 * (1 - t) * t**2 * P2 + t**3 * P3
 
 
-def _clearance(M0, M1, c, b) -> float:
-    return float(np.min(np.linalg.norm(bezier(M0, M1, c, b, _ARC_SAMPLES) - c, axis=1)))
+def _length_ratio(M0, M1, c, b) -> np.ndarray:
+    """(q,) smallest arc length / chord over each quad's four arcs."""
+    p = _arcs(M0, M1, c, b)
+    S = np.sum(np.linalg.norm(np.diff(p, axis=2), axis=3), axis=2)
+    return np.min(S / np.linalg.norm(M1 - M0, axis=2), axis=1)
 
 
-def _bisect(f, lo: float, hi: float) -> float:
-    """Smallest b in [lo, hi] with f(b) True (f monotone: False then True); hi if none."""
-    if f(lo):
-        return lo
-    if not f(hi):
-        return hi
+def _clearance(M0, M1, c, b) -> np.ndarray:
+    """(q,) smallest distance of each quad's arcs from its centre [m]."""
+    return np.min(np.linalg.norm(_arcs(M0, M1, c, b) - c[:, :, None, :], axis=3), axis=(1, 2))
+
+
+def _bisect(ok, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Per quad, the smallest b in [lo, hi] with ok(b) True (ok monotone in b: False then True;
+    vectorized over quads); hi where none, lo where already."""
+    lo, hi = lo.copy(), hi.copy()
+    at_lo = ok(lo)
     for _ in range(_BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if f(mid) else (mid, hi)
-    return hi
+        good = ok(mid)
+        hi = np.where(good, mid, hi)
+        lo = np.where(good, lo, mid)
+    return np.where(at_lo, lo, hi)  # hi stays where no b in the range is ok
 
 
 def size_bulges(P: np.ndarray, quads: np.ndarray, mids_of_quad: np.ndarray, growth: np.ndarray, *, bulge_min: float,
@@ -73,18 +86,15 @@ def size_bulges(P: np.ndarray, quads: np.ndarray, mids_of_quad: np.ndarray, grow
     edges k = (v_k, v_{k+1}); growth (q,) [-] s_q; bulge_min, slack [-]; width [m] spring width
     (the clearance kept from the quad centre)."""
     nq = len(quads)
-    b = np.empty(nq)
-    ratio = np.empty(nq)
-    tight = np.zeros(nq, dtype=bool)
-    for q in range(nq):
-        M = mids_of_quad[q]
-        c = P[quads[q]].mean(axis=0)
-        arcs = [(M[k], M[(k + 1) % 4]) for k in range(4)]
-        cap = _bisect(lambda x: min(_clearance(m0, m1, c, x) for m0, m1 in arcs) < width, bulge_min, _B_UPPER)
-        cap = max(cap, bulge_min)
-        need = (1.0 + slack) * max(float(growth[q]), 1.0)
-        bq = _bisect(lambda x: min(_length_ratio(m0, m1, c, x) for m0, m1 in arcs) >= need, bulge_min, cap)
-        b[q] = bq
-        ratio[q] = min(_length_ratio(m0, m1, c, bq) for m0, m1 in arcs)
-        tight[q] = ratio[q] < need - 1e-9
-    return b, ratio, tight
+    if nq == 0:
+        return np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
+    M0 = np.asarray(mids_of_quad, dtype=np.float64)
+    M1 = np.roll(M0, -1, axis=1)
+    c = P[quads].mean(axis=1)[:, None, :]
+    bmin = np.full(nq, float(bulge_min))
+    # cap: the largest b whose arcs keep ``width`` from the centre (the first b that does not, by bisection)
+    cap = np.maximum(_bisect(lambda b: _clearance(M0, M1, c, b) < width, bmin, np.full(nq, _B_UPPER)), bmin)
+    need = (1.0 + slack) * np.maximum(np.asarray(growth, dtype=np.float64), 1.0)
+    b = _bisect(lambda x: _length_ratio(M0, M1, c, x) >= need, bmin, cap)
+    ratio = _length_ratio(M0, M1, c, b)
+    return b, ratio, ratio < need - 1e-9

@@ -115,10 +115,10 @@ def test_spring_arc_length_closed_form():
     polyline converges to the arc length at second order in the sample spacing."""
     from simfab.deploy import springs
 
-    M0, M1, c = np.array([0.5, 0.0]), np.array([1.0, 0.5]), np.array([0.5, 0.5])
-    assert abs(springs._length_ratio(M0, M1, c, 0.0) - 1.0) < 1e-12
+    M0, M1, c = np.array([[[0.5, 0.0]]]), np.array([[[1.0, 0.5]]]), np.array([[0.5, 0.5]])
+    assert abs(springs._length_ratio(M0, M1, c, [0.0])[0] - 1.0) < 1e-12
     # the arc length grows with the bulge (the sizing's bisection relies on it)
-    r = [springs._length_ratio(M0, M1, c, b) for b in (0.3, 0.6, 0.9, 1.2)]
+    r = [springs._length_ratio(M0, M1, c, [b])[0] for b in (0.3, 0.6, 0.9, 1.2)]
     assert np.all(np.diff(r) > 0)
 
 
