@@ -146,6 +146,8 @@ def insert_geoms(pat, net) -> dict:
 
 def mujoco_check_run(net, dep, pat, scene):
     """Build the MuJoCo scene, step it from the key (stability) and relax it (agreement with simfab)."""
+    import mujoco
+
     from simfab.deploy import compare, mjcf_sim
 
     cfg = scene.mujoco
@@ -155,7 +157,8 @@ def mujoco_check_run(net, dep, pat, scene):
     Y = dep.final.body_pos
     height = out_of_plane_extent(Y)
     # damped: also the relaxation; stops once at rest (within settle_tol of the height)
-    stab, d = mjcf_sim.step_from_key(m, cfg.stability_seconds, key=None, settle=cfg.settle_tol * height)
+    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in net.model.body_names]
+    stab, d = mjcf_sim.step_from_key(m, cfg.stability_seconds, key=None, settle=cfg.settle_tol * height, bodies=ids)
     X = np.array([d.body(n).xpos for n in net.model.body_names])
     R, t = compare.kabsch(X, Y)
     diff = np.linalg.norm(X @ R.T + t - Y, axis=1)
