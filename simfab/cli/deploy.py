@@ -129,16 +129,21 @@ def format_text(summary: dict) -> str:
             f"{len(s['unreachable_gaps'])} unreachable)",
             f"laser cut         {lc['parts']} parts, cut length {lc['cut_length_mm'] / 1e3:.4g} m, sheet "
             f"{lc['sheet_mm'][0]:.0f} x {lc['sheet_mm'][1]:.0f} mm",
-            f"deployed          {dp['kind']} (total angle defect {dp['total_angle_defect']:.4g} rad, "
-            f"quadric fit K {dp['quadric_gaussian_curvature']:.4g} 1/m^2), "
-            f"stable: {dp['stable']}",
+            f"deployed          {dp['kind']} (inserts' local K: {dp['curvature_sign_at_inserts']['positive']} > 0, "
+            f"{dp['curvature_sign_at_inserts']['negative']} < 0, target's sign at "
+            f"{100 * dp.get('curvature_sign_agreement', float('nan')):.3g} %; quadric fit K "
+            f"{dp['quadric_gaussian_curvature']:.4g} 1/m^2), stable: {dp['stable']}",
+            f"springs           bulge {s['spring_bulge_min']:.3g}..{s['spring_bulge_max']:.3g} for quad growth up to "
+            f"{s['quad_growth_max']:.3g}; {len(s['springs_short_of_slack'])} quads short of the slack",
             f"deviation         RMS {dv['rms'] * 100:.3g} % ({dv['rms_mm']:.3g} mm), Hausdorff {dv['hausdorff'] * 100:.3g} % "
             f"({dv['hausdorff_mm']:.3g} mm) of D = {dv['diameter_mm']:.0f} mm; height {dv['deployed_height_mm']:.3g} mm "
             f"(target {dv['target_height_mm']:.3g} mm)"]
     mj = s.get("mujoco") or {}
     if mj:
         st, rl = mj["stability"], mj["relaxation"]
-        rows.append(f"MuJoCo            dt {mj['timestep']:.3g} s, {st['seconds']:.3g} s from the key: "
+        rest = "at rest" if st.get("settled") else f"not at rest within {st.get('max_seconds', st['seconds']):.3g} s"
+        rows.append(f"MuJoCo            dt {mj['timestep']:.3g} s, {st['seconds']:.3g} s from the key ({rest}, "
+                    f"{st['wall_s']:.3g} s wall): "
                     f"{'finite' if st['finite'] else 'BLEW UP'}, max drift {st['max_drift_m'] * 1e3:.3g} mm; "
                     f"relaxed vs simfab: RMS {rl['rms_m'] * 1e3:.3g} mm = {100 * (rl['rms_rel'] or 0):.3g} % of the "
                     f"{rl['out_of_plane_extent_m'] * 1e3:.3g} mm height")

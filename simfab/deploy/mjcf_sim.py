@@ -50,7 +50,10 @@ class SimConfig:
     timestep [s]; omega_dt [-]: target hinge frequency x dt; damping_ratio [-] (zeta of every
     hinge); body_mass [kg] (each junction; inserts get ``insert_mass``); insert_mass [kg];
     stability_seconds [s]: simulated time of the stability check, a damped relaxation from the
-    deployed key whose end state is compared with simfab's equilibrium; impedance [-]: weld solimp;
+    deployed key whose end state is compared with simfab's equilibrium; settle_tol [-]: the
+    relaxation stops early once its bodies' speed, kept up for ``stability_seconds``, would move
+    none of them by more than settle_tol x the deployment's out-of-plane height (see
+    :func:`step_from_key`); impedance [-]: weld solimp;
     body_inertia_factor [-]: free bodies' rotational inertia / the stiffest hinge's armature;
     mass_scale [-]: factor on the links' density and the bodies' masses (mass scaling: with the real
     strip density the links' own modes make the motion spurious at dt >= 1e-3 - a relaxation
@@ -66,6 +69,7 @@ class SimConfig:
     body_mass: float = 2e-4
     insert_mass: float = 1e-3
     stability_seconds: float = 2.0
+    settle_tol: float = 5e-3
     impedance: float = 0.999
     body_inertia_factor: float = 10.0
     solver: str = "PGS"
@@ -98,12 +102,14 @@ def _quat(R) -> np.ndarray:
 @dataclass
 class SimScene:
     """What :func:`build` returns: the MJCF builder (``save`` it; keys ``deployed`` and ``flat``
-    are in), the deployed key's values per joint name and its full qpos, the body names."""
+    are in), the deployed key's values per joint name and its full qpos, the body names, and the
+    compiled ``mujoco.MjModel`` (without the keys; its ``qpos0`` is the deployed key)."""
 
     builder: object
     key_values: dict
     body_names: list
     key_qpos: np.ndarray | None = None
+    model: object = None
 
 
 def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = "deployed",
@@ -206,6 +212,7 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
     b.key("deployed", qpos=np.array(m.qpos0))
     b.key("flat", qpos=qpos)
     scene.key_qpos = np.array(m.qpos0)
+    scene.model = m
     return scene
 
 
@@ -218,7 +225,8 @@ def _link_geom(b, body, length, w, t, density):
 class Stability:
     """Stepping from the key: finite throughout, seconds simulated, timestep [s], max |qvel| [m/s or
     rad/s], kinetic energy at the end [J], drift (max body displacement from the key after the
-    best rigid alignment: the scene floats freely) [m], wall time [s]."""
+    best rigid alignment: the scene floats freely) [m], wall time [s], settled (the relaxation met
+    its convergence test before ``seconds``; None when not asked for), steps taken."""
 
     finite: bool
     seconds: float
@@ -227,6 +235,8 @@ class Stability:
     final_kinetic: float
     max_drift: float
     wall: float
+    settled: bool | None = None
+    steps: int = 0
 
 
 def aligned_drift(X0: np.ndarray, X1: np.ndarray) -> float:
@@ -237,29 +247,67 @@ def aligned_drift(X0: np.ndarray, X1: np.ndarray) -> float:
     return float(np.max(np.linalg.norm(X1 @ R.T + t - X0, axis=1)))
 
 
-def step_from_key(m, seconds: float, key: str = "deployed") -> tuple[Stability, object]:
-    """Reset to ``key`` and step ``seconds``; returns the measures and the final MjData."""
+def step_from_key(m, seconds: float, key: str | None = "deployed", *, settle: float | None = None,
+                  window: float = 0.05, bodies=None) -> tuple[Stability, object]:
+    """Reset to ``key`` (None: ``qpos0``, which is the deployed key of :func:`build`'s scenes) and
+    step up to ``seconds``; returns the measures and the final MjData.
+
+    ``settle`` [m] (optional convergence test of a damped relaxation): over windows of simulated
+    time alternating between ``window`` and 0.6 ``window`` [s] (incommensurate, so that an
+    oscillation cannot return to the same place at both ends of two consecutive windows), the
+    bodies' largest displacement over the window (after the best rigid alignment) gives their
+    speed; stepping stops once, in two consecutive windows, that speed kept up for the whole
+    ``seconds`` would move no body by more than ``settle``. The end state is then within about
+    ``settle`` of the one stepping the full ``seconds`` would reach, as long as the motion only
+    slows down (the hinges' damping is stiffness-proportional, so slow modes oscillate rather
+    than creep: a state still moving keeps stepping). ``bodies``: MuJoCo body ids the test
+    watches (default: all but the world; the pipeline watches the bodies it compares, not the
+    rods' links, whose small vibration would otherwise keep the test from ever passing)."""
     import time
 
     import mujoco
 
     d = mujoco.MjData(m)
-    kid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, key)
-    mujoco.mj_resetDataKeyframe(m, d, kid)
+    if key is None:
+        mujoco.mj_resetData(m, d)
+    else:
+        mujoco.mj_resetDataKeyframe(m, d, mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, key))
     mujoco.mj_forward(m, d)
     x0 = d.xpos.copy()
-    n = int(round(seconds / m.opt.timestep))
+    dt = float(m.opt.timestep)
+    n = int(round(seconds / dt))
+    every = max(1, int(round(window / dt)))
     vmax = 0.0
     finite = True
+    settled = None if settle is None else False
+    watch = np.arange(1, m.nbody) if bodies is None else np.asarray(bodies, dtype=int)
+    prev = x0[watch].copy()
+    calm = 0
+    steps = 0
+    short = max(1, int(round(0.6 * every)))
+    span, next_check = every, every
     t0 = time.perf_counter()
     for i in range(n):
         mujoco.mj_step(m, d)
+        steps = i + 1
         if i % 10 == 9 or i == n - 1:
             if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
                 finite = False
                 break
             vmax = max(vmax, float(np.max(np.abs(d.qvel[:]))) if m.nv else 0.0)
+        if settle is not None and steps == next_check:
+            X = d.xpos[watch].copy()
+            speed = aligned_drift(prev, X) / (span * dt)
+            prev = X
+            calm = calm + 1 if speed * seconds <= settle else 0
+            if calm >= 2:
+                settled = True
+                break
+            span = every if span != every else short  # alternate window lengths (no aliasing)
+            next_check = steps + span
     wall = time.perf_counter() - t0
     drift = aligned_drift(x0[1:], d.xpos[1:]) if finite else float("inf")
-    return Stability(finite=finite, seconds=n * m.opt.timestep, timestep=float(m.opt.timestep), max_speed=vmax,
-                     final_kinetic=float(d.energy[1]) if finite else float("inf"), max_drift=drift, wall=wall), d
+    return Stability(finite=finite, seconds=steps * dt, timestep=dt, max_speed=vmax,
+                     final_kinetic=float(d.energy[1]) if finite else float("inf"), max_drift=drift, wall=wall,
+                     settled=settled, steps=steps), d
+

@@ -45,15 +45,18 @@ class DeployConfig:
     """Material and simulation parameters (scene ``[material]`` and ``[deploy]`` tables).
 
     young [Pa], poisson [-], density [kg/m^3] (sheet material); beam_segments,
-    spring_segments: rod segments per half beam / spring arc; increments: quasi-static steps;
-    perturbation [-]: branch-selection load factor (see module doc).
+    spring_segments: rod segments per half beam / spring arc; clamp_edge [-]: length of a rod's
+    two clamped end edges relative to its other edges (a clamped edge is rigid within its body,
+    so uniform edges would stiffen a 3-segment beam by leaving only its middle third free);
+    increments: quasi-static steps; perturbation [-]: branch-selection load factor (see module doc).
     """
 
     young: float = 2.5e9
     poisson: float = 0.35
     density: float = 1200.0
     beam_segments: int = 3
-    spring_segments: int = 4
+    spring_segments: int = 6
+    clamp_edge: float = 0.2
     increments: int = 8
     perturbation: float = 0.05
 
@@ -61,6 +64,8 @@ class DeployConfig:
         require_positive(self, "")
         if not -1.0 < self.poisson < 0.5:
             raise InputError(f"must be in (-1, 0.5) (got {self.poisson})", where="material.poisson")
+        if not self.clamp_edge <= 1.0:
+            raise InputError(f"must be in (0, 1] (got {self.clamp_edge})", where="deploy.clamp_edge")
         for f in ("beam_segments", "spring_segments", "increments"):
             if int(getattr(self, f)) != getattr(self, f) or getattr(self, f) < 1:
                 raise InputError(f"must be a positive integer (got {getattr(self, f)})", where=f"deploy.{f}")
@@ -83,6 +88,15 @@ class Network:
     held_node: int  # the fully supported node (predictor origin)
 
 
+def rod_parameters(n: int, clamp_edge: float) -> np.ndarray:
+    """(n+1,) node parameters in [0, 1] of a rod of n segments whose two end edges are
+    ``clamp_edge`` times as long as the n - 2 uniform inner ones (n = 1, 2: uniform)."""
+    if n <= 2:
+        return np.linspace(0.0, 1.0, n + 1)
+    d = clamp_edge / (n - 2 + 2 * clamp_edge)
+    return np.concatenate([[0.0], np.linspace(d, 1.0 - d, n - 1), [1.0]])
+
+
 def build_network(pat, cfg: DeployConfig) -> Network:
     from simfab.rods.model import Material, NetworkBuilder, Section
 
@@ -98,20 +112,21 @@ def build_network(pat, cfg: DeployConfig) -> Network:
         vname.append(nb.add_body(f"I{pat.insert_ids[v]}" if pat.interior[v] else f"B{v}", pos=P3[v]))
     for e in range(len(pat.edges)):
         nb.add_body(f"J{e}", pos=mids[e])
-    lin = lambda p, q, n: p + np.linspace(0.0, 1.0, n + 1)[:, None] * (q - p)  # noqa: E731
     nbeam, nspring = int(cfg.beam_segments), int(cfg.spring_segments)
+    sb, ss = rod_parameters(nbeam, cfg.clamp_edge), rod_parameters(nspring, cfg.clamp_edge)
+    lin = lambda p, q: p + sb[:, None] * (q - p)  # noqa: E731
     pulls = []  # (rod name, direction (3,), grow)
     for k, (e, v, start, end) in enumerate(pat.beam_halves()):
         name = f"beam{e}_{v}"
         s3, e3 = np.append(start, 0.0), np.append(end, 0.0)
-        nb.add_rod(name, lin(s3, e3, nbeam), section=sec, material=mat)
+        nb.add_rod(name, lin(s3, e3), section=sec, material=mat)
         nb.clamp(name, "start", f"J{e}")
         nb.clamp(name, "end", vname[v])
         if pat.interior[v]:
             d = s3 - P3[v]
             pulls.append((name, d / np.linalg.norm(d), pc.insert_half_size - pat.gap[v]))
     springs = []
-    for i, (q, e0, e1, pts) in enumerate(pat.spring_curves(nspring)):
+    for i, (q, e0, e1, pts) in enumerate(pat.spring_curves(ss)):
         name = f"spring{q}_{i % 4}"
         nb.add_rod(name, np.column_stack([pts, np.zeros(len(pts))]), section=sec_spring, material=mat)
         nb.clamp(name, "start", f"J{e0}")

@@ -8,8 +8,9 @@ Layout (all in the flat domain, metres):
   dropped, and the largest edge-connected set of cells is the quad mesh;
 - every quad edge is a **beam** (width ``w``, sheet thickness ``t``), split at its midpoint
   by a rigid junction; each quad gets a **torsional spring**: four cubic Bezier arcs joining
-  consecutive edge midpoints, pulled towards the quad centre by ``spring_bulge`` (fraction of
-  the midpoint-centre distance); a quad whose neighbouring edges are nearly collinear (an
+  consecutive edge midpoints, bulging towards the quad centre, each quad's bulge sized so that
+  the arcs are long enough for the growth the quad undergoes in deployment
+  (:mod:`simfab.deploy.springs`); a quad whose neighbouring edges are nearly collinear (an
   interior angle > ``degenerate_angle_deg``, boundary quads only) gets no spring;
 - at every **interior** quad vertex (four quads around it) the four beams stop short of a
   gap of half-size ``g_i`` that receives a rigid insert of the common half-size ``r``; the
@@ -54,8 +55,10 @@ class PatternConfig:
 
     spacing: grid spacing h; beam_width (in plane) and beam_thickness (sheet); insert_half_size
     r: distance from an insert's centre to where it clamps the beams (one size for all
-    inserts); spring_bulge [-]: Bezier handle pull towards the quad centre; spring_width: in-plane
-    width of the spring arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:
+    inserts); spring_bulge [-]: smallest Bezier handle pull towards the quad centre; spring_slack
+    [-]: arc length margin over the deployed chord (see :mod:`simfab.deploy.springs`);
+    spring_width: in-plane width of the spring arcs (narrower than the beams: the springs let the
+    cells grow in plane); min_gap, min_beam:
     achievable-gap limits (see module doc); degenerate_angle_deg [deg]: interior angle above
     which a boundary quad gets no spring.
     """
@@ -65,6 +68,7 @@ class PatternConfig:
     beam_thickness: float = 0.001
     insert_half_size: float = 0.005
     spring_bulge: float = 0.5
+    spring_slack: float = 0.1
     spring_width: float = 0.0015
     min_gap: float = 0.0015
     min_beam: float = 0.004
@@ -72,8 +76,6 @@ class PatternConfig:
 
     def __post_init__(self):
         require_positive(self, "pattern.")
-        if not self.spring_bulge < 1.0:
-            raise InputError(f"must be < 1 (got {self.spring_bulge})", where="pattern.spring_bulge")
         if not self.insert_half_size < self.spacing / 2 - self.min_beam:
             raise InputError(f"insert_half_size {self.insert_half_size} m leaves no beam in a cell of spacing "
                              f"{self.spacing} m (needs < spacing/2 - min_beam)", where="pattern.insert_half_size")
@@ -87,7 +89,10 @@ class Pattern:
     interior (n,) bool (insert vertices); u (n,) [-]: flattening log scale factor at the
     vertices; gap (n,) [m]: gap half-size (0 on boundary vertices); gap_required (n,) [m]
     (before clamping); unreachable (k,) vertex indices; spring (q,) bool; insert_ids (n,) int
-    (label number, -1 on the boundary); config.
+    (label number, -1 on the boundary); bulge (q,) [-]: spring handle pull per quad; growth (q,)
+    [-]: the quad's deployment scale e^{-u}; spring_ratio (q,) [-]: its arcs' smallest
+    length/chord; tight_springs (k,) quads whose arcs cannot get the slack (see
+    :mod:`simfab.deploy.springs`); config.
     """
 
     P: np.ndarray
@@ -101,6 +106,10 @@ class Pattern:
     unreachable: np.ndarray
     spring: np.ndarray
     insert_ids: np.ndarray
+    bulge: np.ndarray
+    growth: np.ndarray
+    spring_ratio: np.ndarray
+    tight_springs: np.ndarray
     config: PatternConfig
 
     @property
@@ -122,13 +131,14 @@ class Pattern:
                 out.append((e, int(v), mids[e], self.P[v] + self.gap[v] * d))
         return out
 
-    def spring_curves(self, n: int = 12) -> list[tuple[int, int, int, np.ndarray]]:
-        """Per spring arc: (quad, edge from, edge to, points (n+1,2)) cubic Bezier [m]."""
+    def spring_curves(self, n=12) -> list[tuple[int, int, int, np.ndarray]]:
+        """Per spring arc: (quad, edge from, edge to, points (n+1,2)) cubic Bezier [m] at n+1 uniform
+        parameters (n int) or at the Bezier parameters n (array in [0, 1])."""
+        from simfab.deploy.springs import bezier
+
         out = []
         mids = self.midpoints()
         ekey = {tuple(sorted(e)): i for i, e in enumerate(self.edges.tolist())}
-        b = self.config.spring_bulge
-        t = np.linspace(0.0, 1.0, n + 1)[:, None]
         for q, quad in enumerate(self.quads):
             if not self.spring[q]:
                 continue
@@ -136,10 +146,7 @@ class Pattern:
             es = [ekey[tuple(sorted((int(quad[k]), int(quad[(k + 1) % 4]))))] for k in range(4)]
             for k in range(4):
                 e0, e1 = es[k], es[(k + 1) % 4]
-                P0, P3 = mids[e0], mids[e1]
-                P1, P2 = P0 + b * (c - P0), P3 + b * (c - P3)
-                pts = (1 - t) ** 3 * P0 + 3 * (1 - t) ** 2 * t * P1 + 3 * (1 - t) * t**2 * P2 + t**3 * P3
-                out.append((q, e0, e1, pts))
+                out.append((q, e0, e1, bezier(mids[e0], mids[e1], c, float(self.bulge[q]), n)))
         return out
 
 
@@ -152,6 +159,8 @@ def gap_rule(u: np.ndarray, h: np.ndarray, r: float) -> np.ndarray:
 def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig) -> Pattern:
     """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,))."""
     import shapely
+
+    from simfab.deploy.springs import size_bulges
 
     poly = shapely.Polygon(uv[boundary])
     if not poly.is_valid:
@@ -212,12 +221,17 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     gap = np.where(interior, np.clip(req, cfg.min_gap, gmax), 0.0)
     # springs: none in quads with nearly collinear neighbouring edges
     spring = np.array([_max_angle(P[q]) < np.radians(cfg.degenerate_angle_deg) for q in quads])
+    growth = np.exp(-uP[quads].mean(axis=1))
+    qmids = 0.5 * (P[quads] + P[np.roll(quads, -1, axis=1)])  # (q,4,2) midpoint of edge (v_k, v_k+1)
+    bulge, ratio, tight = size_bulges(P, quads, qmids, growth, bulge_min=cfg.spring_bulge, slack=cfg.spring_slack,
+                                      width=cfg.spring_width)
     ids = np.full(len(P), -1)
     order = np.flatnonzero(interior)
     order = order[np.lexsort((P[order, 0], -P[order, 1]))]  # row by row from the top, left to right
     ids[order] = np.arange(1, len(order) + 1)
     return Pattern(P=P, quads=quads, edges=edges, edge_quads=edge_quads, interior=interior, u=uP, gap=gap,
-                   gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, config=cfg)
+                   gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, bulge=bulge, growth=growth,
+                   spring_ratio=ratio, tight_springs=np.flatnonzero(tight & spring), config=cfg)
 
 
 def _good_quad(Q: np.ndarray, h: float) -> bool:

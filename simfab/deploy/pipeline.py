@@ -4,16 +4,21 @@ Stages (each timed): flatten (:mod:`~simfab.deploy.flatten`), layout
 (:mod:`~simfab.deploy.pattern`), lasercut (:mod:`~simfab.deploy.lasercut`), deploy
 (:mod:`~simfab.deploy.network`), compare (:mod:`~simfab.deploy.compare`) and mujoco
 (:mod:`~simfab.deploy.mjcf_sim`: build the simulatable scene, step it (damped) from the deployed
-key for ``stability_seconds`` and compare the relaxed state with simfab's equilibrium after a
-rigid alignment).
+key until it is at rest - its convergence test, ``settle_tol`` - or for at most
+``stability_seconds``, and compare the relaxed state with simfab's equilibrium after a rigid
+alignment).
 
 Deployed shape descriptors: the total angle defect of the deployed quad mesh's interior
-vertices (the inserts) [rad], i.e. its integrated Gaussian curvature (discrete Gauss-Bonnet:
-> 0 dome, < 0 saddle), the sign of each insert's angle defect (``kind``: dome / saddle when 90 %
-of them are positive / negative, else mixed), and the quadric z = a x^2 + b x y + c y^2 + (linear,
-constant) fitted to the deployed vertices in their best-fit plane, K_fit = 4 a c - b^2 [1/m^2]
-(the global shape; a deployment whose curvature sits in local bumps at the inserts can have
-total angle defect and K_fit of opposite signs).
+vertices (the inserts) [rad] (its integrated Gaussian curvature when the quads are planar; the
+deployed quads are skew, and a 1 mm local bump at an insert 30 mm from its neighbours changes
+its angle defect by ~4 (1 mm / 30 mm)^2 = 0.004 rad, as much as a whole saddle cell's curvature,
+so the per-insert sign is not read from it); per insert, the Gaussian curvature of the
+least-squares quadric through the insert and its one-ring of the quad mesh (its 4 quads' 9
+vertices) in their best-fit plane - ``curvature_sign_at_inserts`` counts their signs, ``kind``
+is dome / saddle when 90 % of them are positive / negative, else mixed, and
+``curvature_sign_agreement`` is the fraction of inserts whose sign is the target's (the same fit
+on the target points); and the quadric z = a x^2 + b x y + c y^2 + (linear, constant) fitted to
+all deployed vertices in their best-fit plane, K_fit = 4 a c - b^2 [1/m^2] (the global shape).
 """
 
 from __future__ import annotations
@@ -55,22 +60,37 @@ def quadric_curvature(X: np.ndarray) -> float:
 
 
 def _kind(K: np.ndarray) -> str:
-    """"dome" / "saddle" when at least 90 % of the inserts' angle defects are positive / negative,
-    else "mixed"."""
+    """"dome" / "saddle" when at least 90 % of the inserts' local curvatures K are positive /
+    negative, else "mixed"."""
     if len(K) == 0:
         return "flat"
     pos = float(np.mean(K > 0))
     return "dome" if pos >= 0.9 else "saddle" if pos <= 0.1 else "mixed"
 
 
-def shape_descriptors(pat, X: np.ndarray) -> dict:
+def local_curvature(pat, X: np.ndarray) -> np.ndarray:
+    """(n,) [1/m^2] per insert: K_fit of the quadric through the insert and its one-ring of the
+    quad mesh (NaN at boundary vertices); X (n,3) [m] vertex positions."""
+    out = np.full(len(X), np.nan)
+    for v in np.flatnonzero(pat.interior):
+        ring = np.unique(pat.quads[np.any(pat.quads == v, axis=1)])
+        out[v] = quadric_curvature(X[ring])
+    return out
+
+
+def shape_descriptors(pat, X: np.ndarray, Y: np.ndarray | None = None) -> dict:
+    """Shape of the deployed vertices X (n,3) [m] (see module doc); Y (n,3) [m]: the target points
+    (for the sign agreement)."""
     from simfab.deploy.network import discrete_gaussian_curvature
 
     K = discrete_gaussian_curvature(X, pat.quads, pat.interior)
-    kfit = quadric_curvature(X)
-    return dict(quadric_gaussian_curvature=kfit, total_angle_defect=float(np.nansum(K)),
-                curvature_sign_at_inserts=dict(positive=int(np.sum(K > 0)), negative=int(np.sum(K < 0))),
-                kind=_kind(K[pat.interior]))
+    Kl = local_curvature(pat, X)[pat.interior]
+    out = dict(quadric_gaussian_curvature=quadric_curvature(X), total_angle_defect=float(np.nansum(K)),
+               curvature_sign_at_inserts=dict(positive=int(np.sum(Kl > 0)), negative=int(np.sum(Kl < 0))),
+               kind=_kind(Kl))
+    if Y is not None and len(Kl):
+        out["curvature_sign_agreement"] = float(np.mean(np.sign(Kl) == np.sign(local_curvature(pat, Y)[pat.interior])))
+    return out
 
 
 def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = True) -> SurfaceResult:
@@ -95,12 +115,14 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     log(f"deploy surface: {pat.n_inserts} inserts, {len(pat.edges)} beams, {int(pat.spring.sum())} springs",
         quiet=quiet)
     net = network.build_network(pat, scene.deploy)
-    dep = network.deploy(pat, net, scene.deploy, network.target_heights(pat, Y), device=device, quiet=quiet)
+    to_target = lambda p: pattern.map_to_surface(flat.uv, tgt.F, tgt.V, p)  # noqa: E731
+    dep = network.deploy(pat, net, scene.deploy, network.target_heights(pat, Y), device=device, quiet=quiet,
+                         predictor=network.target_displacement(net, to_target))
     sec["deploy"] = time.perf_counter() - t
     t = time.perf_counter()
     X = dep.vertex_positions()
     dev = compare.deviation(X, Y, pat.quads, tgt)
-    shape = shape_descriptors(pat, X)
+    shape = shape_descriptors(pat, X, Y)
     sec["compare"] = time.perf_counter() - t
     sim, check = None, {}
     if mujoco_check:
@@ -131,15 +153,18 @@ def mujoco_check_run(net, dep, pat, scene):
     cfg = scene.mujoco
     sim = mjcf_sim.build(net.model, net.state, dep.final, density=scene.deploy.density, cfg=cfg,
                          name="deployed_surface", body_geoms=insert_geoms(pat, net))
-    m = sim.builder.compile()
-    stab, d = mjcf_sim.step_from_key(m, cfg.stability_seconds)  # damped: also the relaxation
+    m = sim.model
     Y = dep.final.body_pos
+    height = out_of_plane_extent(Y)
+    # damped: also the relaxation; stops once at rest (within settle_tol of the height)
+    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in net.model.body_names]
+    stab, d = mjcf_sim.step_from_key(m, cfg.stability_seconds, key=None, settle=cfg.settle_tol * height, bodies=ids)
     X = np.array([d.body(n).xpos for n in net.model.body_names])
     R, t = compare.kabsch(X, Y)
     diff = np.linalg.norm(X @ R.T + t - Y, axis=1)
-    height = float(np.ptp(Y @ np.linalg.svd(Y - Y.mean(axis=0))[2][2]))  # out-of-plane extent [m]
     check = dict(nq=int(m.nq), nv=int(m.nv), welds=int(m.neq), timestep=stab.timestep,
-                 stability=dict(seconds=stab.seconds, finite=stab.finite, max_speed=stab.max_speed,
+                 stability=dict(seconds=stab.seconds, max_seconds=cfg.stability_seconds, settled=stab.settled,
+                                steps=stab.steps, finite=stab.finite, max_speed=stab.max_speed,
                                 final_kinetic_energy=stab.final_kinetic, max_drift_m=stab.max_drift, wall_s=stab.wall),
                  relaxation=dict(seconds=stab.seconds, finite=stab.finite,
                                  rms_m=float(np.sqrt(np.mean(diff**2))), max_m=float(np.max(diff)),
@@ -173,6 +198,11 @@ def summary(res: SurfaceResult) -> dict:
         gap_max_mm=float(p.gap[ins].max() * 1e3) if ins.any() else None,
         unreachable_gaps=[dict(insert=int(p.insert_ids[v]), required_mm=float(p.gap_required[v] * 1e3))
                           for v in p.unreachable],
+        spring_bulge_min=float(p.bulge[p.spring].min()) if p.spring.any() else None,
+        spring_bulge_max=float(p.bulge[p.spring].max()) if p.spring.any() else None,
+        quad_growth_max=float(p.growth.max()),
+        springs_short_of_slack=[dict(quad=int(q), growth=float(p.growth[q]), arc_over_chord=float(p.spring_ratio[q]))
+                                for q in p.tight_springs],
         lasercut=lasercut.summary(res.cut),
         deployment=dict(stable=res.deployment.stable, increments=len(res.deployment.iterations),
                         newton_iterations=res.deployment.iterations, energy_J=res.deployment.energy, **res.shape),

@@ -108,3 +108,51 @@ def test_svg_and_dxf_reread_same_outlines_mm(tmp_path):
     # total cut length matches the outlines'
     per = sum(np.sum(np.linalg.norm(np.roll(r, -1, axis=0) - r, axis=1)) for r in cut.rings)
     assert np.isclose(per, cut.cut_length)
+
+
+def test_spring_arc_length_closed_form():
+    """b = 0 puts the handles on the chord: the arc is the straight chord (S/c = 1); the Bezier
+    polyline converges to the arc length at second order in the sample spacing."""
+    from simfab.deploy import springs
+
+    M0, M1, c = np.array([[[0.5, 0.0]]]), np.array([[[1.0, 0.5]]]), np.array([[0.5, 0.5]])
+    assert abs(springs._length_ratio(M0, M1, c, [0.0])[0] - 1.0) < 1e-12
+    # the arc length grows with the bulge (the sizing's bisection relies on it)
+    r = [springs._length_ratio(M0, M1, c, [b])[0] for b in (0.3, 0.6, 0.9, 1.2)]
+    assert np.all(np.diff(r) > 0)
+
+
+def test_springs_are_long_enough_for_the_growth(laid_out):
+    """Every quad's arcs are at least (1 + slack) max(e^{-u}, 1) times their chord unless the
+    quad is reported short of slack, and even then longer than the deployed chord e^{-u} c (an
+    arc shorter than that would have to stretch: the beams buckle locally instead of the network
+    growing - the bundled dome's failure mode before the sizing)."""
+    name, sc, f, pat = laid_out
+    slack = sc.pattern.spring_slack
+    need = (1 + slack) * np.maximum(pat.growth, 1.0)
+    short = np.zeros(len(pat.quads), dtype=bool)
+    short[pat.tight_springs] = True
+    ok = pat.spring & ~short
+    assert np.all(pat.spring_ratio[ok] >= need[ok] - 1e-9)
+    assert np.all(pat.spring_ratio[pat.spring] > pat.growth[pat.spring])
+    # the stored ratio is the drawn arcs' (independent re-measurement on the curves themselves)
+    mids = pat.midpoints()
+    for q, e0, e1, pts in pat.spring_curves(200):
+        S = np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1))
+        assert S / np.linalg.norm(mids[e1] - mids[e0]) >= pat.spring_ratio[q] - 1e-3
+    # the arcs keep the spring width clear of the quad centre (the four arcs of a quad stay apart)
+    for q, e0, e1, pts in pat.spring_curves(64):
+        c = pat.P[pat.quads[q]].mean(axis=0)
+        assert np.min(np.linalg.norm(pts - c, axis=1)) >= sc.pattern.spring_width * (1 - 1e-6)
+    if name == "dome":  # all its quads grow (u < 0): up to 20 % at the centre
+        assert pat.growth.max() > 1.15 and len(pat.tight_springs) == 0
+
+
+def test_rod_parameters_short_clamped_ends():
+    from simfab.deploy.network import rod_parameters
+
+    s = rod_parameters(5, 0.2)
+    d = np.diff(s)
+    assert s[0] == 0 and s[-1] == 1 and np.all(d > 0)
+    assert np.allclose(d[1:-1], d[1]) and np.allclose(d[[0, -1]], 0.2 * d[1])
+    assert np.allclose(rod_parameters(4, 1.0), np.linspace(0, 1, 5))

@@ -13,7 +13,8 @@ Target (issue 13): <= 1 s at 100k vertices; ``ratio`` = measured / target.
 
 Scenes: ``simfab.deploy.pipeline.run`` on each bundled scene (scenes/deploy/<name>.toml), with
 the seconds per stage (flatten, layout, lasercut, deploy, compare, mujoco) and the figures of
-the run (RMS / Hausdorff deviation, MuJoCo stability and relaxation agreement).
+the run (RMS / Hausdorff deviation, deployed vs target height, MuJoCo stability and relaxation
+agreement).
 """
 
 from __future__ import annotations
@@ -83,6 +84,8 @@ def run(argv) -> dict:
             s = pipeline.summary(res)
             scenes[name] = dict(seconds_total=total, seconds=s["seconds"], vertices=s["vertices"], inserts=s["inserts"],
                                 rms=s["deviation"]["rms"], hausdorff=s["deviation"]["hausdorff"],
+                                deployed_height_mm=s["deviation"]["deployed_height_mm"],
+                                target_height_mm=s["deviation"]["target_height_mm"],
                                 kind=s["deployment"]["kind"], stable=s["deployment"]["stable"], mujoco=s["mujoco"])
         out["scenes"] = scenes
     out["load_average_1min"] = _load()
