@@ -213,7 +213,8 @@ def knocker_design() -> None:
           fixed_center=[-ro - clamp["base_depth"], 0, 0], fixed_half=[0.0004, 0.011, 0.0065],
           obj=dict(body="object", samples=2000, rot_length_scale=0.005), sim=dict(steps=40, fix_all_axes=True),
           mesh_options=dict(coarsen=True, tol=0.1, tries=6),
-          design=dict(grip="loose", insertion_force=[0.0, 20.0], handles=5, iterations=150, patience=40))
+          # a snap (at least 5 N to push the ring in, so that it does not fall out) of at most 20 N
+          design=dict(grip="loose", insertion_force=[5.0, 20.0], handles=5, iterations=150, patience=40))
 
 
 def alligator3d() -> None:
