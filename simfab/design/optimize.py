@@ -342,7 +342,8 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
         ev.constraints = problem.constraints(ev.figures)
         pen = B.penalty(ev.constraints)
         if problem.target is not None:
-            ev.rms_error = problem.target.rms_error(res.column("s"), res.column("force"))
+            scale = problem.corrections.get("force_profile", 1.0)  # mesh correction of the whole profile
+            ev.rms_error = problem.target.rms_error(res.column("s"), scale * res.column("force"))
             ev.objective = ev.rms_error ** 2 + pen
         else:
             ev.objective = ev.E_L + pen

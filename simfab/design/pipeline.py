@@ -63,14 +63,16 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
 
 def _mesh_corrected(res, seed: int, workers: int, quiet: bool):
     """Mesh check of the optimized shape (:mod:`simfab.design.verify`); while the mesh-converged
-    figures miss the brief (at most ``[design] correction_rounds`` times), optimize again from
+    figures miss the brief, or a target profile is matched only on the coarse mesh
+    (:func:`simfab.design.verify.needs_correction`; at most ``[design] correction_rounds``
+    times), optimize again from
     the best design with the coarse figures multiplied by the check's correction factors (output
     space mapping: the coarse model stays the fast one, its bias is measured on the design it
     produced) and check again. Returns (result, last check, [per round: factors, feasible])."""
     import dataclasses
 
     from simfab.design.optimize import optimize
-    from simfab.design.verify import correction_factors, mesh_check
+    from simfab.design.verify import correction_factors, mesh_check, needs_correction
     from simfab.progress import log
 
     problem = res.problem
@@ -79,7 +81,7 @@ def _mesh_corrected(res, seed: int, workers: int, quiet: bool):
     check = mesh_check(problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
     rounds = []
     for r in range(problem.brief.correction_rounds):
-        if check["feasible_fine"]:
+        if not needs_correction(check, problem.corrections):
             break
         factors = correction_factors(check)
         src = None if problem.source is None else dataclasses.replace(problem.source, corrections=factors)

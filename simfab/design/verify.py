@@ -29,6 +29,9 @@ from simfab.design import brief as B
 
 #: Refinement levels (number of uniform subdivisions) of the check, per dimension.
 LEVELS = {2: (0, 1, 2), 3: (0, 1)}
+#: Target matching: the corrected coarse force profile may differ from the finest level's by this
+#: fraction (least-squares scale) before another correction round runs.
+PROFILE_TOL = 0.05
 FIGURES = ("coupling_ratio", "grip_force", "insertion_force", "removal_force", "von_mises", "von_mises_peak")
 
 
@@ -66,7 +69,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
 
     cm = problem.base
     levels = LEVELS[cm.dim] if levels is None else tuple(levels)
-    rows, figs = [], []
+    rows, figs, profiles = [], [], []
     for t in levels:
         t0 = time.perf_counter()
         if t == 0 and figures0 is not None and problem.target is None:
@@ -77,6 +80,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
             f, n = profile_figures(res, problem.brief.stress_radius), m.fem.n_elements
             if problem.target is not None:  # the profile-matching error, a figure like the others
                 f = dict(f, rms_error=problem.target.rms_error(res.column("s"), res.column("force")))
+                profiles.append((res.column("s"), res.column("force")))
         rows.append({"subdivisions": int(t), "elements": int(n), "seconds": time.perf_counter() - t0,
                      "category": f["category"]})
         figs.append(f)
@@ -96,7 +100,12 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
     fine = dict(figs[-1], **{k: (v["values"][-1] if v["extrapolated"] is None else v["extrapolated"])
                              for k, v in out.items()})
     cons = B.constraints(fine, problem.limits)
-    return {"levels": rows, "figures": out,
+    extra = {}
+    if profiles:  # least-squares factor c of c F_coarse(s) ~ F_finest(s): the profile's mesh correction
+        (s0, f0), (s1, f1) = profiles[0], profiles[-1]
+        ref = np.interp(s0, s1, f1)
+        extra["profile_force_factor"] = float(f0 @ ref / (f0 @ f0)) if f0 @ f0 > 0 else 1.0
+    return {**extra, "levels": rows, "figures": out,
             "constraints": [{"name": c.name, "value": c.value, "lo": c.lo, "hi": c.hi, "satisfied": c.satisfied}
                             for c in cons],
             "feasible_fine": all(c.satisfied for c in cons),
@@ -124,4 +133,16 @@ def correction_factors(check: dict) -> dict:
         coarse = v["values"][0]
         ref = v["values"][-1] if v["extrapolated"] is None else v["extrapolated"]
         out[k] = float(ref / coarse) if coarse and np.isfinite(ref / coarse) and ref / coarse > 0 else 1.0
+    if "profile_force_factor" in check:  # target matching: the whole force profile, scaled
+        out["force_profile"] = check["profile_force_factor"]
     return out
+
+
+def needs_correction(check: dict, applied: dict) -> bool:
+    """Another correction round is due when the mesh-converged figures miss the brief, or (target
+    matching) when the coarse force profile, as corrected so far, is still more than
+    PROFILE_TOL off the finest level's."""
+    if not check["feasible_fine"]:
+        return True
+    c = check.get("profile_force_factor")
+    return c is not None and abs(c / applied.get("force_profile", 1.0) - 1.0) > PROFILE_TOL

@@ -65,3 +65,19 @@ def test_correction_factors_map_the_coarse_figures_to_the_reference(problem):
     coarse = {k: v["values"][0] for k, v in r["figures"].items()}
     vals = {x.name: x.value for x in corrected.constraints(dict(coarse, seat_clearance=0.0))}
     assert np.isclose(vals["grip_force"], r["figures"]["grip_force"]["values"][-1])
+
+
+def test_target_matching_gets_a_profile_correction():
+    """A target-matching design: the mesh check reports the RMS error per level and the factor
+    that maps the coarse force profile onto the finest level's (linear triangles: too stiff, < 1)."""
+    from simfab.design.scene import load_design_scene
+    from simfab.design.verify import correction_factors, needs_correction
+
+    ds = load_design_scene("profile2d", design={"handles": 2, "placement": "spatial"}, simulation={"steps": 8})
+    P = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target)
+    r = mesh_check(P, ds.cm.fem.rest, levels=(0, 1))
+    c = r["profile_force_factor"]
+    assert 0.5 < c < 0.98
+    assert len(r["figures"]["rms_error"]["values"]) == 2
+    assert correction_factors(r)["force_profile"] == c
+    assert needs_correction(r, {}) and not needs_correction(r, {"force_profile": c})
