@@ -52,7 +52,9 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         res, runs = _restarts(problem, seed, restarts, quiet, scheduler)
     extra = {} if runs is None else {"restarts": runs}
     if mesh_check and res.best.status == "ok":
+        first = res.iterations
         res, extra["mesh_check"], extra["correction_rounds"] = _mesh_corrected(res, seed, workers, quiet)
+        extra["iterations_total"] = first + sum(r["iterations"] for r in extra["correction_rounds"])
     summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
     if revolve is not None:
         summary["outputs"]["revolved_stl"] = str(write_revolved(res, out, cm.name, *revolve))
