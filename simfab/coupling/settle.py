@@ -16,7 +16,9 @@ minimum along the path), at most as far again as the planned path (:func:`to_res
   STEP_WORK_REL * E_max (the trapezoidal error is h^3 |E'''| / 12 per step on a smooth profile,
   larger where the step skips over a feature of the profile); and F_in read at a step must agree
   with the peak of the parabola through it and its neighbours to within STEP_PEAK_REL (else the
-  peak falls between steps);
+  peak falls between steps). Both are skipped on a negligible profile (E_max within the energy
+  Newton's force tolerance leaves unresolved over the travel, NEGLIGIBLE_NOISE): a run that barely
+  touched O has nothing to resolve, and its work and forces are noise;
 - max von Mises stress above the material's yield stress (the model is hyperelastic: a part that
   yields would not spring back as simulated).
 """
@@ -24,6 +26,8 @@ minimum along the path), at most as far again as the planned path (:func:`to_res
 from __future__ import annotations
 
 import numpy as np
+
+from simfab.coupling import config as C
 
 #: O is at rest when the path force (A drawing O in, > 0) is at most this fraction of the peak |force|.
 from simfab.coupling.profile import REST_FORCE_REL  # noqa: E402 (one definition)
@@ -44,6 +48,12 @@ REST_TRIALS = 16
 STEP_WORK_REL = 0.05
 #: Largest difference between F_in at a step and the peak of the parabola through its neighbours.
 STEP_PEAK_REL = 0.1
+#: The step checks need a profile to check: they are skipped when E_max is at most this many times
+#: the energy Newton's force tolerance f_tol (NEWTON_GRAD_TOL_REL * force_scale) leaves unresolved
+#: over the run's travel, f_tol * (s_end - s_0) [J] (a run that barely touched O: E_max 1e-14 J),
+#: and a step's work mismatch or its force peak counts only above that many times the same noise
+#: (f_tol * h for one step of length h, f_tol for a force).
+NEGLIGIBLE_NOISE = 2.0
 
 
 def can_continue(cm) -> bool:
@@ -160,10 +170,12 @@ def warnings(cm, steps, rest: str = "not continued") -> list:
                    "and the coupling ratio and category come from an unfinished insertion; extend the keyframes "
                    "(or L_max) to where the object seats")
     E_max = float(E.max())
-    if E_max > 0:
+    f_tol = C.NEWTON_GRAD_TOL_REL * cm.force_scale  # force noise of a converged step [N]
+    if E_max > NEGLIGIBLE_NOISE * f_tol * (s[-1] - s[0]):
         h = np.diff(s)
         work = -0.5 * h * (P[1:] + P[:-1])
         mis = np.abs(np.diff(Et) - work)
+        mis = np.where(mis > NEGLIGIBLE_NOISE * f_tol * h, mis, 0.0)
         k = int(np.argmax(mis))
         if mis[k] > STEP_WORK_REL * E_max:
             out.append(f"{name}: steps too coarse to resolve the profile: over the step to s={s[k + 1] * 1e3:.4g} mm "
@@ -171,7 +183,7 @@ def warnings(cm, steps, rest: str = "not continued") -> list:
                        f"{100 * mis[k] / E_max:.3g}% of E_max (> {100 * STEP_WORK_REL:g}%); use more steps")
         n = len(cm.s_steps)  # the planned steps (the rest search past them may push O into its seat)
         i = int(np.argmin(P[:n]))
-        if 0 < i < n - 1 and P[i] < 0:
+        if 0 < i < n - 1 and P[i] < -NEGLIGIBLE_NOISE * f_tol:
             F_peak = _parabola_peak(s[i - 1:i + 2], P[i - 1:i + 2])
             if abs(F_peak - P[i]) > STEP_PEAK_REL * abs(P[i]):
                 out.append(f"{name}: steps too coarse to resolve the peak insertion force: {-P[i]:.4g} N at a "
