@@ -48,6 +48,9 @@ REST_TRIALS = 16
 STEP_WORK_REL = 0.05
 #: Largest difference between F_in at a step and the peak of the parabola through its neighbours.
 STEP_PEAK_REL = 0.1
+#: work_energy_mismatch: a step whose barrier energy changes by more than this factor engages a new
+#: contact zone (its force has a kink inside the step).
+BARRIER_JUMP = 4.0
 #: The step checks need a profile to check: they are skipped when E_max is at most this many times
 #: the energy Newton's force tolerance f_tol (NEWTON_GRAD_TOL_REL * force_scale) leaves unresolved
 #: over the run's travel, f_tol * (s_end - s_0) [J] (a run that barely touched O: E_max 1e-14 J),
@@ -197,6 +200,44 @@ def warnings(cm, steps, rest: str = "not continued") -> list:
                        f"the yield stress {mat.yield_stress / 1e6:.4g} MPa of {mat.name}: the part would deform "
                        "plastically (the model is elastic)")
     return out
+
+
+def work_energy_mismatch(steps, planned: int | None = None) -> dict:
+    """How well the profile's forces and energies agree, step by step (quasi-static, frictionless:
+    the work of the path force over a step is the change of stored energy, -int P ds = Delta(E + B)).
+
+    Per step k (records k, k+1, the rest search's included): m_k = Delta(E + B)_k + h_k (P_k + P_{k+1}) / 2
+    (trapezoidal rule, error h^3 |P''| / 12 on a smooth profile). Returns the largest |m_k| / E_max
+    ("work": over all steps, "work_refined": over steps where refinement points were added) and the
+    largest |m_k| / (h_k max |P|) ("force": the step's secant -Delta(E + B) / h against its mean
+    force) over all steps and over "smooth" steps only: among the first ``planned`` records (the
+    planned steps, not the rest search's bracket around the seat), the object in contact at both
+    ends (B > 0) with the barrier energy within a factor BARRIER_JUMP between them and the force
+    keeping its sign (no contact starting, ending, or a new contact zone engaging inside the step,
+    where the force has a kink the trapezoidal rule resolves only to first order in h); with the
+    worst step's index (1 = the step to record 1)."""
+    s = np.array([r.s for r in steps])
+    B = np.array([r.barrier_energy for r in steps])
+    Et = np.array([r.energy for r in steps]) + B
+    P = np.array([r.path_force for r in steps])
+    cp = np.array([r.contact_points for r in steps])
+    E_max = float(max(r.energy for r in steps))
+    P_max = float(np.abs(P).max())
+    if len(steps) < 2 or E_max <= 0 or P_max <= 0:
+        return {"work": 0.0, "work_refined": 0.0, "force": 0.0, "force_smooth": 0.0, "worst_step": None,
+                "worst_smooth_step": None}
+    h = np.diff(s)
+    m = np.diff(Et) + 0.5 * h * (P[1:] + P[:-1])
+    refined = np.diff(cp) > 0
+    smooth = (B[1:] > 0) & (B[:-1] > 0) & (P[1:] * P[:-1] > 0)
+    smooth &= np.maximum(B[1:], B[:-1]) <= BARRIER_JUMP * np.minimum(B[1:], B[:-1])
+    smooth[(len(steps) if planned is None else planned) - 1:] = False
+    f = np.abs(m) / (h * P_max)
+    fs = np.where(smooth, f, 0.0)
+    return {"work": float(np.abs(m).max() / E_max),
+            "work_refined": float(np.abs(m[refined]).max() / E_max) if refined.any() else 0.0,
+            "force": float(f.max()), "force_smooth": float(fs.max()),
+            "worst_step": int(np.argmax(f)) + 1, "worst_smooth_step": int(np.argmax(fs)) + 1 if smooth.any() else None}
 
 
 def _parabola_peak(x: np.ndarray, y: np.ndarray) -> float:
