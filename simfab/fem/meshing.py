@@ -275,3 +275,35 @@ def graded_box(lo, hi, *, centre, h0: float, growth: float, h_max: float | None 
     neg = np.linalg.det(V[T[:, 1:]] - V[T[:, :1]]) < 0
     T[neg] = T[neg][:, [0, 1, 3, 2]]
     return V, T
+
+
+def extrude_triangles(points, triangles, z0: float, z1: float, layers: int = 1):
+    """Tetrahedral mesh of a 2D triangle mesh extruded along z over [z0, z1] in ``layers`` layers:
+    each prism is split into 3 tets, the diagonal of each side quad running from the lower-index
+    vertex's bottom to the other's top, so neighbouring prisms conform.
+
+    A displacement that does not vary along z is represented exactly (it is the 2D linear triangle
+    field), so in-plane bending is resolved as finely as by the 2D mesh: an extruded part bending
+    in its plane needs layers only for what varies along z (e.g. the Poisson thickening).
+
+    points : (n, 2) [m]; triangles : (m, 3); layers >= 1. Returns V (n (layers + 1), 3) float64
+    (layer-major: V[l * n + i] is point i at layer l) and T (3 m layers, 4) int32 positively oriented.
+    """
+    P = np.asarray(points, dtype=np.float64)
+    F = np.asarray(triangles, dtype=np.int64)
+    layers = int(layers)
+    if layers < 1 or not z1 > z0:
+        raise InputError(f"extrusion needs layers >= 1 and z1 > z0 (got {layers}, {z0}, {z1})", where="extrude")
+    n = len(P)
+    z = np.linspace(z0, z1, layers + 1)
+    V = np.c_[np.tile(P, (layers + 1, 1)), np.repeat(z, n)]
+    a, b, c = np.sort(F, axis=1).T  # a < b < c: the diagonal rule depends on the edge's two indices only
+    T = []
+    for lay in range(layers):
+        o0, o1 = lay * n, (lay + 1) * n
+        T += [np.c_[a + o0, b + o0, c + o0, c + o1], np.c_[a + o0, b + o0, b + o1, c + o1],
+              np.c_[a + o0, a + o1, b + o1, c + o1]]
+    T = np.vstack(T).astype(np.int32)
+    neg = np.linalg.det(V[T[:, 1:]] - V[T[:, :1]]) < 0
+    T[neg] = T[neg][:, [0, 1, 3, 2]]
+    return V, T

@@ -112,3 +112,21 @@ def test_graded_box_fills_the_box_and_grades_toward_its_centre():
     assert np.array_equal(T, T2) and np.array_equal(V, V2)
     with pytest.raises(InputError):
         graded_box((0, 0, 0), (1, 1, 1), centre=(0, 0, 0), h0=1e-6, growth=0.01)
+
+
+def test_extruded_triangles_conform_and_fill_the_prism():
+    from simfab.fem.meshing import extrude_triangles
+
+    P2, F2 = triangulate_polygon(np.array([[0, 0], [2, 0], [2, 1], [0, 1.0]]), max_area=0.05)
+    V, T = extrude_triangles(P2, F2, -0.5, 1.0, layers=3)
+    assert len(T) == 9 * len(F2) and len(V) == 4 * len(P2)
+    vol = np.linalg.det(V[T[:, 1:]] - V[T[:, :1]]) / 6
+    assert vol.min() > 0 and vol.sum() == pytest.approx(2.0 * 1.5, rel=1e-12)
+    # conforming: the side quads of neighbouring prisms are split along the same diagonal, so every
+    # face is shared by at most two tets and the boundary is exactly the prism's surface
+    faces = np.sort(T[:, [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]].reshape(-1, 3), axis=1)
+    uniq, count = np.unique(faces, axis=0, return_counts=True)
+    assert count.max() == 2
+    bnd = uniq[count == 1]
+    area = 0.5 * np.linalg.norm(np.cross(V[bnd[:, 1]] - V[bnd[:, 0]], V[bnd[:, 2]] - V[bnd[:, 0]]), axis=1)
+    assert area.sum() == pytest.approx(2 * 2.0 + 2 * (2.0 + 1.0) * 1.5, rel=1e-12)
