@@ -115,9 +115,12 @@ def report(scene: str, levels: list, dim: int) -> dict:
 
 
 def _is_2d(scene) -> bool:
+    """The refinement is two-dimensional: a 2D scene, or an extruded 3D part (its layers stay, the
+    element count grows with the refinement of its 2D section: h ~ N^(-1/2))."""
     from simfab.coupling.scene import read_toml, scene_paths
 
-    return read_toml(scene_paths(scene)[1]).get("dim", 2) == 2
+    cfg = read_toml(scene_paths(scene)[1])
+    return cfg.get("dim", 2) == 2 or cfg.get("compliant", {}).get("generator") == "extruded_clamp"
 
 
 def format_table(rep: dict) -> str:
