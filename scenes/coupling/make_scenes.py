@@ -115,7 +115,7 @@ def scene(name: str, *, doc: str, dim: int, comp: dict, part_mesh, object_geoms,
     box sites of regions a design keeps unchanged; design: the TOML's [design] table (design scenes)."""
     from simfab.io.mjcf import MJCFBuilder
 
-    if dim == 3 and comp.get("generator") != "extruded_clamp":  # extrusions are meshed reproducibly on load
+    if dim == 3 and "layers" not in comp:  # extrusions in layers are meshed reproducibly on load
         comp = dict(comp, mesh_file=tet_mesh(name, part_mesh, comp["target_elements"], **(mesh_options or {})))
 
     b = MJCFBuilder(name)

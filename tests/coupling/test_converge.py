@@ -17,16 +17,19 @@ def test_extrapolation_recovers_the_limit_of_a_power_law():
 
 
 def test_scenes_with_only_a_ready_mesh_cannot_be_refined(tmp_path):
-    # clip3d ships its tet mesh but has a generator (refined levels mesh it again); without the
-    # generator the part is a ready mesh only
+    # a part given only as a ready mesh file (no generator to mesh it again) cannot be refined
     import shutil
 
-    from simfab.coupling.scene import scene_paths
+    from simfab.coupling.scene import load_coupling_scene, scene_paths
+    from simfab.fem.meshing import extrude_triangles, triangulate_polygon
 
     xml, toml = scene_paths("clip3d")
-    for f in (xml, xml.with_name("clip3d_part.npz")):
-        shutil.copy(f, tmp_path / f.name)
-    text = toml.read_text().replace('generator = "extruded_clamp"', "")
+    shutil.copy(xml, tmp_path / xml.name)
+    V, T = extrude_triangles(*triangulate_polygon(np.array([[-0.0163, -0.01], [-0.012, -0.01], [-0.012, 0.01],
+                                                            [-0.0163, 0.01]])), -0.004, 0.004)
+    np.savez(tmp_path / "part.npz", points=V, elements=T)
+    text = toml.read_text().replace('generator = "extruded_clamp"', 'mesh_file = "part.npz"')
     (tmp_path / "clip3d.toml").write_text(text)
+    assert load_coupling_scene(tmp_path / "clip3d.toml").fem.n_elements == len(T)  # the file is used
     with pytest.raises(InputError, match="target_elements"):
         run_levels(tmp_path / "clip3d.toml", (1, 2))
