@@ -3,7 +3,10 @@ of the compliant part, their extrapolated (mesh-converged) values and the error 
 own resolution.
 
 The scene is run at ``target_elements`` times each refinement factor (the generator meshes the
-part again; scenes that ship a ready mesh file cannot be refined and raise InputError). With
+part again). A 3D scene that ships its part's mesh (``mesh_file``, fTetWild output stored because
+fTetWild is not reproducible) keeps that mesh at factor 1 (the error of what users run) and is
+meshed again from its generator at the other factors; a part with no generator (a ready mesh
+only) cannot be refined and raises InputError. With
 element counts N_k and a figure f_k, the discretization error of linear elements falls like
 h^p ~ N^(-p/dim); the extrapolated value f_inf and the observed order p come from a
 least-squares fit of f = f_inf + b h^p to the finest four levels (:func:`extrapolate`). The error
@@ -39,14 +42,16 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     _, toml = scene_paths(scene)
     cfg = read_toml(toml)
     comp = cfg.get("compliant", {})
-    if "mesh_file" in comp or comp.get("target_elements") is None:
+    if comp.get("target_elements") is None or ("mesh_file" in comp and comp.get("generator") in (None, "mesh")):
         raise InputError("a convergence study needs a scene whose part is meshed from target_elements "
-                         "(not a ready mesh_file)", where=str(toml))
+                         "by a generator (not only a ready mesh_file)", where=str(toml))
     base = int(comp["target_elements"])
     out = []
     for f in factors:
         ov = {k: dict(v) for k, v in (overrides or {}).items()}
         ov.setdefault("compliant", {})["target_elements"] = int(round(base * f))
+        if "mesh_file" in comp and f != 1.0:
+            ov["compliant"]["mesh_file"] = None  # mesh again from the generator
         cm = load_coupling_scene(scene, overrides=ov)
         t0 = time.perf_counter()
         res = simulate(cm, quiet=quiet)
@@ -110,9 +115,12 @@ def report(scene: str, levels: list, dim: int) -> dict:
 
 
 def _is_2d(scene) -> bool:
+    """The refinement is two-dimensional: a 2D scene, or an extruded 3D part (its layers stay, the
+    element count grows with the refinement of its 2D section: h ~ N^(-1/2))."""
     from simfab.coupling.scene import read_toml, scene_paths
 
-    return read_toml(scene_paths(scene)[1]).get("dim", 2) == 2
+    cfg = read_toml(scene_paths(scene)[1])
+    return cfg.get("dim", 2) == 2 or cfg.get("compliant", {}).get("generator") == "extruded_clamp"
 
 
 def format_table(rep: dict) -> str:

@@ -290,9 +290,12 @@ def _pinned(solver, pin):
 
 def _point_dhat(cm: CouplingModel, pts: ContactPoints) -> np.ndarray:
     """(k,) barrier activation distance of each constraint point [m]: dhat_rel times the local
-    edge length there (the mean length of the boundary edges at a vertex, interpolated with the
-    point's weights), so that the standoff stays a fixed small fraction of the local element size
-    on graded meshes (memoized per point set)."""
+    edge length there (the shortest boundary edge at a vertex, interpolated with the point's
+    weights), so that the standoff stays a fixed small fraction of the local element size on
+    graded meshes, and of the smallest size on stretched ones: on clip3d's extrusion (0.3 mm
+    triangles, layers 4 mm apart) the mean edge length made d_hat 25 um, the standoff ~4% of the
+    cylinder's 0.5 mm interference and E_max 3% higher per halving of the layer height (memoized
+    per point set)."""
     dh = pts.cache.get("dhat")
     if dh is None:
         hv = cm._cache.get("vertex_h")
@@ -302,9 +305,9 @@ def _point_dhat(cm: CouplingModel, pts: ContactPoints) -> np.ndarray:
             e = np.vstack([facets[:, [i, j]] for i, j in zip(a, c)])
             L = np.linalg.norm(cm.fem.rest[e[:, 0]] - cm.fem.rest[e[:, 1]], axis=1)
             n = cm.fem.n_vertices
-            cnt = np.bincount(e.ravel(), minlength=n)
-            tot = np.bincount(e.ravel(), weights=np.repeat(L, 2), minlength=n)
-            hv = cm._cache["vertex_h"] = np.where(cnt > 0, tot / np.maximum(cnt, 1), cm.h)
+            hv = np.full(n, np.inf)
+            np.minimum.at(hv, e.ravel(), np.repeat(L, 2))
+            hv = cm._cache["vertex_h"] = np.where(np.isfinite(hv), hv, cm.h)
         dh = pts.cache["dhat"] = cm.options.dhat_rel * np.einsum("km,km->k", pts.weights, hv[pts.verts])
     return dh
 

@@ -12,7 +12,12 @@ Definitions (thesis, "Fundamentals and Overview"):
 - Insertion force F along O's motion, resisting = negative. F_in = max(0, -min F) is the largest
   force needed to push O in; removal reverses the traversal (quasi-static, frictionless), so the
   force needed to pull O out is F_rm = max(0, max F) (A drawing O in) [N].
-- F_grip: grip force at the steady-state step [N].
+- F_grip: grip force at the steady state [N]. When the force passes through zero between the
+  steady-state step and the next one (O at rest between them: the run's rest search brackets it),
+  the grip is interpolated linearly in the force to where it is zero: at a seat the grip jumps
+  within micrometres (cclamp2d: 17 N just before the seat engages, 39 N 0.02 mm on), so the value
+  at the bracket's lower end depends on how close the search came (22.5 N vs 21.5 N at two mesh
+  sizes; interpolated 23.4 N vs 23.2 N).
 - Forces are read up to the steady state (the insertion ends there; past it O is pushed into its
   seat), over the whole run for **ejects**.
 - stationary: E_ss is a local minimum of the energy along the path (the energy rises after it, or
@@ -84,8 +89,12 @@ def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarr
     # the last step with O still drawn in it is not
     scale = float(np.abs(Fi).max()) if Fi.size else 0.0
     stationary = category == "ejects" or i_ss < len(E) - 1 or F[i_ss] <= REST_FORCE_REL * scale
+    grip_ss = float(G[i_ss])
+    if category != "ejects" and i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
+        w = F[i_ss] / (F[i_ss] - F[i_ss + 1])  # the rest point, F = 0, between the two records
+        grip_ss = float(G[i_ss] + w * (G[i_ss + 1] - G[i_ss]))
     return ProfileSummary(
         category=category, E_max=E_max, E_ss=E_ss, coupling_ratio=ratio,
-        F_in=float(max(0.0, -Fi.min())), F_rm=float(max(0.0, Fi.max())), F_grip=float(G[i_ss]),
+        F_in=float(max(0.0, -Fi.min())), F_rm=float(max(0.0, Fi.max())), F_grip=grip_ss,
         index_max=i_max, index_ss=i_ss, stationary=bool(stationary),
     )

@@ -16,7 +16,9 @@ minimum along the path), at most as far again as the planned path (:func:`to_res
   STEP_WORK_REL * E_max (the trapezoidal error is h^3 |E'''| / 12 per step on a smooth profile,
   larger where the step skips over a feature of the profile); and F_in read at a step must agree
   with the peak of the parabola through it and its neighbours to within STEP_PEAK_REL (else the
-  peak falls between steps);
+  peak falls between steps). Both are skipped on a negligible profile (E_max within the energy
+  Newton's force tolerance leaves unresolved over the travel, NEGLIGIBLE_NOISE): a run that barely
+  touched O has nothing to resolve, and its work and forces are noise;
 - max von Mises stress above the material's yield stress (the model is hyperelastic: a part that
   yields would not spring back as simulated).
 """
@@ -24,6 +26,8 @@ minimum along the path), at most as far again as the planned path (:func:`to_res
 from __future__ import annotations
 
 import numpy as np
+
+from simfab.coupling import config as C
 
 #: O is at rest when the path force (A drawing O in, > 0) is at most this fraction of the peak |force|.
 from simfab.coupling.profile import REST_FORCE_REL  # noqa: E402 (one definition)
@@ -44,6 +48,15 @@ REST_TRIALS = 16
 STEP_WORK_REL = 0.05
 #: Largest difference between F_in at a step and the peak of the parabola through its neighbours.
 STEP_PEAK_REL = 0.1
+#: work_energy_mismatch: a step whose barrier energy changes by more than this factor engages a new
+#: contact zone (its force has a kink inside the step).
+BARRIER_JUMP = 4.0
+#: The step checks need a profile to check: they are skipped when E_max is at most this many times
+#: the energy Newton's force tolerance f_tol (NEWTON_GRAD_TOL_REL * force_scale) leaves unresolved
+#: over the run's travel, f_tol * (s_end - s_0) [J] (a run that barely touched O: E_max 1e-14 J),
+#: and a step's work mismatch or its force peak counts only above that many times the same noise
+#: (f_tol * h for one step of length h, f_tol for a force).
+NEGLIGIBLE_NOISE = 2.0
 
 
 def can_continue(cm) -> bool:
@@ -160,10 +173,12 @@ def warnings(cm, steps, rest: str = "not continued") -> list:
                    "and the coupling ratio and category come from an unfinished insertion; extend the keyframes "
                    "(or L_max) to where the object seats")
     E_max = float(E.max())
-    if E_max > 0:
+    f_tol = C.NEWTON_GRAD_TOL_REL * cm.force_scale  # force noise of a converged step [N]
+    if E_max > NEGLIGIBLE_NOISE * f_tol * (s[-1] - s[0]):
         h = np.diff(s)
         work = -0.5 * h * (P[1:] + P[:-1])
         mis = np.abs(np.diff(Et) - work)
+        mis = np.where(mis > NEGLIGIBLE_NOISE * f_tol * h, mis, 0.0)
         k = int(np.argmax(mis))
         if mis[k] > STEP_WORK_REL * E_max:
             out.append(f"{name}: steps too coarse to resolve the profile: over the step to s={s[k + 1] * 1e3:.4g} mm "
@@ -171,7 +186,7 @@ def warnings(cm, steps, rest: str = "not continued") -> list:
                        f"{100 * mis[k] / E_max:.3g}% of E_max (> {100 * STEP_WORK_REL:g}%); use more steps")
         n = len(cm.s_steps)  # the planned steps (the rest search past them may push O into its seat)
         i = int(np.argmin(P[:n]))
-        if 0 < i < n - 1 and P[i] < 0:
+        if 0 < i < n - 1 and P[i] < -NEGLIGIBLE_NOISE * f_tol:
             F_peak = _parabola_peak(s[i - 1:i + 2], P[i - 1:i + 2])
             if abs(F_peak - P[i]) > STEP_PEAK_REL * abs(P[i]):
                 out.append(f"{name}: steps too coarse to resolve the peak insertion force: {-P[i]:.4g} N at a "
@@ -185,6 +200,44 @@ def warnings(cm, steps, rest: str = "not continued") -> list:
                        f"the yield stress {mat.yield_stress / 1e6:.4g} MPa of {mat.name}: the part would deform "
                        "plastically (the model is elastic)")
     return out
+
+
+def work_energy_mismatch(steps, planned: int | None = None) -> dict:
+    """How well the profile's forces and energies agree, step by step (quasi-static, frictionless:
+    the work of the path force over a step is the change of stored energy, -int P ds = Delta(E + B)).
+
+    Per step k (records k, k+1, the rest search's included): m_k = Delta(E + B)_k + h_k (P_k + P_{k+1}) / 2
+    (trapezoidal rule, error h^3 |P''| / 12 on a smooth profile). Returns the largest |m_k| / E_max
+    ("work": over all steps, "work_refined": over steps where refinement points were added) and the
+    largest |m_k| / (h_k max |P|) ("force": the step's secant -Delta(E + B) / h against its mean
+    force) over all steps and over "smooth" steps only: among the first ``planned`` records (the
+    planned steps, not the rest search's bracket around the seat), the object in contact at both
+    ends (B > 0) with the barrier energy within a factor BARRIER_JUMP between them and the force
+    keeping its sign (no contact starting, ending, or a new contact zone engaging inside the step,
+    where the force has a kink the trapezoidal rule resolves only to first order in h); with the
+    worst step's index (1 = the step to record 1)."""
+    s = np.array([r.s for r in steps])
+    B = np.array([r.barrier_energy for r in steps])
+    Et = np.array([r.energy for r in steps]) + B
+    P = np.array([r.path_force for r in steps])
+    cp = np.array([r.contact_points for r in steps])
+    E_max = float(max(r.energy for r in steps))
+    P_max = float(np.abs(P).max())
+    if len(steps) < 2 or E_max <= 0 or P_max <= 0:
+        return {"work": 0.0, "work_refined": 0.0, "force": 0.0, "force_smooth": 0.0, "worst_step": None,
+                "worst_smooth_step": None}
+    h = np.diff(s)
+    m = np.diff(Et) + 0.5 * h * (P[1:] + P[:-1])
+    refined = np.diff(cp) > 0
+    smooth = (B[1:] > 0) & (B[:-1] > 0) & (P[1:] * P[:-1] > 0)
+    smooth &= np.maximum(B[1:], B[:-1]) <= BARRIER_JUMP * np.minimum(B[1:], B[:-1])
+    smooth[(len(steps) if planned is None else planned) - 1:] = False
+    f = np.abs(m) / (h * P_max)
+    fs = np.where(smooth, f, 0.0)
+    return {"work": float(np.abs(m).max() / E_max),
+            "work_refined": float(np.abs(m[refined]).max() / E_max) if refined.any() else 0.0,
+            "force": float(f.max()), "force_smooth": float(fs.max()),
+            "worst_step": int(np.argmax(f)) + 1, "worst_smooth_step": int(np.argmax(fs)) + 1 if smooth.any() else None}
 
 
 def _parabola_peak(x: np.ndarray, y: np.ndarray) -> float:

@@ -81,7 +81,6 @@ def _run_err(args, capsys):
     ["couple", "simulate", "clip3d", "--fixed-axes", "xw"],
     ["couple", "converge", "cclamp2d", "--factors", "1"],  # a study needs two levels
     ["couple", "converge", "cclamp2d", "--factors", "1,x"],
-    ["couple", "converge", "clip3d"],  # ships a ready mesh: cannot be refined
     ["couple"],
 ])
 def test_bad_arguments_exit_2_with_one_line(args, tmp_path, capsys):

@@ -12,9 +12,14 @@ from _coupling_checks import check_every_step
 def test_knocker_every_step_feasible_through_the_rotation():
     cm = load_coupling_scene("knocker3d")
     res = simulate(cm)
-    # the path ends in the prescribed rotation while the energy still falls slowly: the run says so
+    # the path ends in the prescribed rotation, which a run cannot continue: when the ring is still
+    # drawn in at its last step the run says so (the sign of that small last force, ~5% of the
+    # peak, is not robust: the torus' sampled field and refinement events make the rotation
+    # phase's force ripple by +-0.35 N), and it never says so otherwise
+    from simfab.coupling.settle import still_drawn_in
+
     check_every_step(res, allow=("the path ends in a rotation",))
-    assert any("the path ends in a rotation" in w for w in res.warnings)
+    assert any("the path ends in a rotation" in w for w in res.warnings) == still_drawn_in(res.steps)
     # the ring really turned: its last orientation is 90 degrees about its bar from the first
     q0, q1 = res.steps[0].quat, res.steps[-1].quat
     angle = 2.0 * np.degrees(np.arccos(min(1.0, abs(float(np.dot(q0, q1))))))

@@ -72,3 +72,29 @@ def test_profile_forces_stop_at_the_steady_state():
     # ending while the energy still falls and the force still draws O in: not stationary
     p = analyze(s[:4], E[:4], F[:4], np.zeros(4))
     assert p.index_ss == 3 and not p.stationary
+
+
+def _records(s, E, P):
+    from types import SimpleNamespace
+    return [SimpleNamespace(s=si, energy=e, barrier_energy=0.0, path_force=p, max_von_mises=0.0)
+            for si, e, p in zip(s, E, P)]
+
+
+@pytest.mark.parametrize("scale, coarse", [(1e-14, False), (1e-3, False), (1e3, True)])
+def test_step_checks_ignore_a_negligible_profile(scale, coarse):
+    # a profile whose steps do not resolve it (the work of the force over each step misses the
+    # change of energy by ~50% of E_max, and the force peak lies between steps) warns, unless its
+    # E_max is within what Newton's force tolerance f_tol leaves unresolved over the travel
+    # (f_tol * travel, NEGLIGIBLE_NOISE of it): a run that barely touched the object (E_max 1e-14 J)
+    from types import SimpleNamespace
+    from simfab.coupling import config as C
+    from simfab.coupling import settle
+
+    s = np.linspace(0.0, 0.01, 5)
+    cm = SimpleNamespace(name="t", s_steps=s, force_scale=1e4, fem=SimpleNamespace(material=None),
+                         options=SimpleNamespace(L_max=0.01), end_direction=None)
+    floor = C.NEWTON_GRAD_TOL_REL * cm.force_scale * s[-1]  # 1e-4 J
+    E = scale * floor * np.array([0.0, 0.2, 1.0, 0.3, 0.1])
+    P = scale * floor / s[-1] * np.array([0.0, -40.0, -10.0, 80.0, 5.0])
+    out = settle.warnings(cm, _records(s, E, P))
+    assert any("steps too coarse" in w for w in out) == coarse, out

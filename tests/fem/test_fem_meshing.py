@@ -84,3 +84,49 @@ def test_structured_box_is_conforming_and_fills_the_box():
     assert len(m.boundary_facets) == 2 * 2 * (3 * 2 + 3 * 1 + 2 * 1)
     with pytest.raises(InputError, match="box"):
         structured_box((1, 1, 1), (0, 1, 1))
+
+
+def test_graded_box_fills_the_box_and_grades_toward_its_centre():
+    from simfab.fem.meshing import graded_box
+
+    h0, g = 0.02, 0.3
+    V, T = graded_box((0, 0, -1), (1, 1, 0), centre=(0, 0, 0), h0=h0, growth=g, h_max=0.25)
+    vol = np.linalg.det(V[T[:, 1:]] - V[T[:, :1]]) / 6
+    assert vol.min() > 0 and vol.sum() == pytest.approx(1.0, rel=1e-9)  # positively oriented, fills the box
+    # conforming: every interior face shared by exactly two tets, boundary faces lie on the box
+    faces = np.sort(T[:, [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]].reshape(-1, 3), axis=1)
+    uniq, count = np.unique(faces, axis=0, return_counts=True)
+    assert count.max() == 2
+    bnd = V[uniq[count == 1]]
+    on_side = np.any(np.all((np.abs(bnd) < 1e-12) | (np.abs(np.abs(bnd) - 1) < 1e-12), axis=1), axis=1)
+    assert on_side.all()
+    # edge length follows h(r) = min(h_max, h0 + g r) within a factor ~1.5 (Delaunay sizing)
+    e = np.r_[T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 3]], T[:, [0, 3]]]
+    mid = 0.5 * (V[e[:, 0]] + V[e[:, 1]])
+    ratio = np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1) / np.minimum(0.25, h0 + g * np.linalg.norm(mid, axis=1))
+    assert 0.6 < np.median(ratio) < 1.5
+    near = np.linalg.norm(mid, axis=1) < 2 * h0
+    assert near.any() and np.linalg.norm(V[e[near, 0]] - V[e[near, 1]], axis=1).max() < 3 * h0
+    # deterministic
+    V2, T2 = graded_box((0, 0, -1), (1, 1, 0), centre=(0, 0, 0), h0=h0, growth=g, h_max=0.25)
+    assert np.array_equal(T, T2) and np.array_equal(V, V2)
+    with pytest.raises(InputError):
+        graded_box((0, 0, 0), (1, 1, 1), centre=(0, 0, 0), h0=1e-6, growth=0.01)
+
+
+def test_extruded_triangles_conform_and_fill_the_prism():
+    from simfab.fem.meshing import extrude_triangles
+
+    P2, F2 = triangulate_polygon(np.array([[0, 0], [2, 0], [2, 1], [0, 1.0]]), max_area=0.05)
+    V, T = extrude_triangles(P2, F2, -0.5, 1.0, layers=3)
+    assert len(T) == 9 * len(F2) and len(V) == 4 * len(P2)
+    vol = np.linalg.det(V[T[:, 1:]] - V[T[:, :1]]) / 6
+    assert vol.min() > 0 and vol.sum() == pytest.approx(2.0 * 1.5, rel=1e-12)
+    # conforming: the side quads of neighbouring prisms are split along the same diagonal, so every
+    # face is shared by at most two tets and the boundary is exactly the prism's surface
+    faces = np.sort(T[:, [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]].reshape(-1, 3), axis=1)
+    uniq, count = np.unique(faces, axis=0, return_counts=True)
+    assert count.max() == 2
+    bnd = uniq[count == 1]
+    area = 0.5 * np.linalg.norm(np.cross(V[bnd[:, 1]] - V[bnd[:, 0]], V[bnd[:, 2]] - V[bnd[:, 0]]), axis=1)
+    assert area.sum() == pytest.approx(2 * 2.0 + 2 * (2.0 + 1.0) * 1.5, rel=1e-12)
