@@ -206,6 +206,21 @@ def structured_box(lengths, cells):
     return g, T.astype(np.int32)
 
 
+GMSH_MISSING = ("graded meshes need Gmsh: pip install gmsh (an optional dependency: pip install -e '.[bench]'); "
+                "its wheel also needs the system libraries libGLU, libXcursor, libXft and libXinerama "
+                "(Debian: apt install libglu1-mesa libxcursor1 libxft2 libxinerama1)")
+
+
+def load_gmsh():
+    """The ``gmsh`` module, or RuntimeError(GMSH_MISSING) when it is not installed or cannot load
+    its library (a bare system lacks the X11/GLU libraries the PyPI wheel links against)."""
+    try:
+        import gmsh
+    except (ImportError, OSError) as e:
+        raise RuntimeError(f"{GMSH_MISSING} ({type(e).__name__}: {e})") from None
+    return gmsh
+
+
 def graded_box(lo, hi, *, centre, h0: float, growth: float, h_max: float | None = None):
     """Tetrahedral mesh of the box [lo, hi] graded toward a point (Gmsh, Delaunay + optimization).
 
@@ -241,8 +256,7 @@ def graded_box(lo, hi, *, centre, h0: float, growth: float, h_max: float | None 
     n_est = float(np.sum(6 * np.sqrt(2) / h**3 * dx[:, None, None] * dy[None, :, None] * dz[None, None, :]))
     if n_est > MAX_ELEMENTS:
         raise InputError(f"graded mesh asks for about {n_est:.3g} tetrahedra (limit {MAX_ELEMENTS})", where="h0")
-    import gmsh
-
+    gmsh = load_gmsh()
     gmsh.initialize(interruptible=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
