@@ -21,8 +21,9 @@ feasible, objective, E_L, iterations, seconds), mesh_check (unless --no-mesh-che
 (subdivisions, elements, seconds, category), figures (per figure: values per level,
 extrapolated, order, converging, difference_of_optimization_mesh), constraints at the
 mesh-converged values, feasible_fine, reference, units), correction_rounds (per round:
-factors, feasible_fine, iterations, seconds; the history, USD and iterations are the last
-round's), iterations_total (every round's).
+factors, feasible_fine, objective_fine, iterations, seconds, kept: whether its design was
+better on the refined meshes; the outputs are the kept design's run), iterations_total (every
+round's), objective_fine (the kept design's objective with mesh-converged figures).
 
 simfab couple study handles SCENE runs the handle-placement study: displacement-based and
 spatial placement and --random random picks, for each handle count of --counts, each an

@@ -52,9 +52,12 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         res, runs = _restarts(problem, seed, restarts, quiet, scheduler)
     extra = {} if runs is None else {"restarts": runs}
     if mesh_check and res.best.status == "ok":
+        from simfab.design.verify import checked_objective
+
         first = res.iterations
         res, extra["mesh_check"], extra["correction_rounds"] = _mesh_corrected(res, seed, workers, quiet)
         extra["iterations_total"] = first + sum(r["iterations"] for r in extra["correction_rounds"])
+        extra["objective_fine"] = checked_objective(res.problem, res.best, extra["mesh_check"])
     summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
     if revolve is not None:
         summary["outputs"]["revolved_stl"] = str(write_revolved(res, out, cm.name, *revolve))
@@ -67,36 +70,50 @@ def _mesh_corrected(res, seed: int, workers: int, quiet: bool):
     """Mesh check of the optimized shape (:mod:`simfab.design.verify`); while the mesh-converged
     figures miss the brief, or a target profile is matched only on the coarse mesh
     (:func:`simfab.design.verify.needs_correction`; at most ``[design] correction_rounds``
-    times), optimize again from
-    the best design with the coarse figures multiplied by the check's correction factors (output
-    space mapping: the coarse model stays the fast one, its bias is measured on the design it
-    produced) and check again. Returns (result, last check, [per round: factors, feasible])."""
+    times), optimize again from the best checked design with the coarse figures multiplied by
+    its check's correction factors (output space mapping: the coarse model stays the fast one,
+    its bias is measured on the design it produced) and check again. A round can make things
+    worse (the factors change along the way, e.g. when a contact event moves with the mesh), so
+    the best checked design is kept: feasible on the refined meshes first, then the lowest
+    objective there (:func:`simfab.design.verify.checked_objective`).
+
+    Returns (result, its check, [per round: factors, feasible_fine, checked objective, iterations,
+    seconds, kept]).
+    """
     import dataclasses
 
     from simfab.design.optimize import optimize
-    from simfab.design.verify import correction_factors, mesh_check, needs_correction
+    from simfab.design.verify import checked_objective, correction_factors, mesh_check, needs_correction
     from simfab.progress import log
 
-    problem = res.problem
-    name = problem.base.name
+    name = res.problem.base.name
     log(f"couple optimize: {name}: mesh check of the optimized shape on refined meshes", quiet=quiet)
-    check = mesh_check(problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
-    rounds = []
-    for r in range(problem.brief.correction_rounds):
-        if not needs_correction(check, problem.corrections):
+    check = mesh_check(res.problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
+
+    def key(r, c):
+        return (not c["feasible_fine"], checked_objective(r.problem, r.best, c))
+
+    best, rounds = (res, check), []
+    for k in range(res.problem.brief.correction_rounds):
+        res_b, check_b = best
+        if not needs_correction(check_b, res_b.problem.corrections):
             break
-        factors = correction_factors(check)
-        src = None if problem.source is None else dataclasses.replace(problem.source, corrections=factors)
-        problem = dataclasses.replace(problem, corrections=factors, source=src)
-        log(f"couple optimize: {name}: correction round {r + 1}: the coarse figures times "
-            + ", ".join(f"{k} {v:.3g}" for k, v in factors.items()), quiet=quiet)
-        nxt = optimize(problem, seed=seed + 1 + r, quiet=quiet, workers=workers if src is not None else 1,
-                       start=res.best.h, iterations=max(problem.brief.iterations // 2, 1))
-        check = mesh_check(problem, nxt.best.rest, figures0=nxt.best.figures, quiet=quiet)
-        rounds.append({"round": r + 1, "factors": factors, "feasible_fine": check["feasible_fine"],
-                       "iterations": nxt.iterations, "seconds": nxt.seconds})
-        res = nxt
-    return res, check, rounds
+        factors = correction_factors(check_b)
+        p = res_b.problem
+        src = None if p.source is None else dataclasses.replace(p.source, corrections=factors)
+        problem = dataclasses.replace(p, corrections=factors, source=src)
+        log(f"couple optimize: {name}: correction round {k + 1}: the coarse figures times "
+            + ", ".join(f"{n} {v:.3g}" for n, v in factors.items()), quiet=quiet)
+        nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet, workers=workers if src is not None else 1,
+                       start=res_b.best.h, iterations=max(problem.brief.iterations // 2, 1))
+        c = mesh_check(problem, nxt.best.rest, figures0=nxt.best.figures, quiet=quiet)
+        better = key(nxt, c) < key(*best)
+        rounds.append({"round": k + 1, "factors": factors, "feasible_fine": c["feasible_fine"],
+                       "objective_fine": key(nxt, c)[1], "iterations": nxt.iterations, "seconds": nxt.seconds,
+                       "kept": better})
+        if better:
+            best = (nxt, c)
+    return best[0], best[1], rounds
 
 
 def write_revolved(res, out: Path, stem: str, axis: str, offset: float) -> Path:

@@ -146,3 +146,17 @@ def needs_correction(check: dict, applied: dict) -> bool:
         return True
     c = check.get("profile_force_factor")
     return c is not None and abs(c / applied.get("force_profile", 1.0) - 1.0) > PROFILE_TOL
+
+
+def checked_objective(problem, ev, check: dict) -> float:
+    """The design objective with the mesh-converged figures of ``check``: E_L (or, for target
+    matching, the squared RMS force error of the finest level) plus the penalties of the
+    constraints at the reference values."""
+    cons = [B.Constraint(name=c["name"], value=c["value"], lo=c["lo"], hi=c["hi"], unit=B.UNITS[c["name"]],
+                         scale=B.SCALES[c["name"]]) for c in check["constraints"]]
+    if problem.target is not None:
+        v = check["figures"]["rms_error"]
+        base = (v["values"][-1] if v["extrapolated"] is None else v["extrapolated"]) ** 2
+    else:
+        base = ev.E_L
+    return float(base + B.penalty(cons))
