@@ -20,10 +20,7 @@ R, E, NU = 0.01, 1e6, 0.3
 
 
 @pytest.fixture(scope="module")
-def pressed():
-    from conftest import require_gmsh
-
-    require_gmsh()
+def pressed(require_gmsh):
     return sphere_on_block(h0=0.01, growth=0.2, W=10.0, D=10.0, R=R, E=E, nu=NU, d_max=0.05, steps=2)
 
 

@@ -86,11 +86,9 @@ def test_structured_box_is_conforming_and_fills_the_box():
         structured_box((1, 1, 1), (0, 1, 1))
 
 
-def test_graded_box_fills_the_box_and_grades_toward_its_centre():
-    from conftest import require_gmsh
+def test_graded_box_fills_the_box_and_grades_toward_its_centre(require_gmsh):
     from simfab.fem.meshing import graded_box
 
-    require_gmsh()
     h0, g = 0.02, 0.3
     V, T = graded_box((0, 0, -1), (1, 1, 0), centre=(0, 0, 0), h0=h0, growth=g, h_max=0.25)
     vol = np.linalg.det(V[T[:, 1:]] - V[T[:, :1]]) / 6
