@@ -29,6 +29,10 @@ from simfab.design import brief as B
 
 #: Refinement levels (number of uniform subdivisions) of the check, per dimension.
 LEVELS = {2: (0, 1, 2), 3: (0, 1)}
+#: Correction factors are clipped to this range (a coarse linear mesh is too stiff by tens of percent,
+#: not by orders of magnitude; a larger ratio means the figure changed character, e.g. a contact
+#: that exists on one mesh only).
+FACTOR_RANGE = (0.25, 4.0)
 #: Target matching: the corrected coarse force profile may differ from the finest level's by this
 #: fraction (least-squares scale) before another correction round runs.
 PROFILE_TOL = 0.05
@@ -132,7 +136,13 @@ def correction_factors(check: dict) -> dict:
     for k, v in check["figures"].items():
         coarse = v["values"][0]
         ref = v["values"][-1] if v["extrapolated"] is None else v["extrapolated"]
-        out[k] = float(ref / coarse) if coarse and np.isfinite(ref / coarse) and ref / coarse > 0 else 1.0
+        # a figure below its constraint unit (1 N, 1 %, 1 MPa: B.SCALES) is noise, not a biased
+        # value: its ratio (e.g. 1e-8 N / 1e-11 N) says nothing about the mesh
+        if abs(coarse) < B.SCALES.get(k, B.SCALES["von_mises"] if k.startswith("von_mises") else 0.0):
+            out[k] = 1.0
+            continue
+        r = ref / coarse if coarse else 1.0
+        out[k] = float(np.clip(r, *FACTOR_RANGE)) if np.isfinite(r) and r > 0 else 1.0
     if "profile_force_factor" in check:  # target matching: the whole force profile, scaled
         out["force_profile"] = check["profile_force_factor"]
     return out
