@@ -13,10 +13,13 @@ Optimization").
 - :mod:`simfab.design.brief` - the design brief ([design] table) and its constraint penalties
 - :mod:`simfab.design.anneal` - simulated annealing (seeded, exponential cooling)
 - :mod:`simfab.design.optimize` - the optimization loop: candidate -> validity -> insertion -> objective
+- :mod:`simfab.design.parallel` - speculative evaluation of proposals on worker processes
+- :mod:`simfab.design.stress` - the von Mises stress averaged over a critical distance (yield)
+- :mod:`simfab.design.verify` - the design on refined meshes: mesh-converged figures, corrections
 - :mod:`simfab.design.outputs` - optimized part, scene, plots, history, USD, summary
 - :mod:`simfab.design.study` - the handle-placement study
 - :mod:`simfab.design.synthesis` - 2D -> 3D: extrusion and revolution of an optimized section
 - :mod:`simfab.design.scene` - design scenes (a coupling scene with a [design] table, keep sites)
 - :mod:`simfab.design.pipeline` - ``simfab couple optimize``: load, place, anneal (or restarts on
-  Dask), write
+  Dask), mesh check and correction rounds, write
 """
