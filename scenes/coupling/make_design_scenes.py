@@ -214,7 +214,8 @@ def knocker_design() -> None:
           obj=dict(body="object", samples=2000, rot_length_scale=0.005), sim=dict(steps=40, fix_all_axes=True),
           mesh_options=dict(coarsen=True, tol=0.1, tries=6),
           # a snap (at least 5 N to push the ring in, so that it does not fall out) of at most 20 N
-          design=dict(grip="loose", insertion_force=[5.0, 20.0], handles=5, iterations=150, patience=40))
+          # (150 iterations found no snap within the bounds; 300, the default, and a correction round do)
+          design=dict(grip="loose", insertion_force=[5.0, 20.0], handles=5))
 
 
 def alligator3d() -> None:
