@@ -93,7 +93,13 @@ def summary(res, *, scene: str | None = None) -> dict:
     if not best.feasible:
         bad = [c.name for c in best.constraints if not c.satisfied]
         warnings.append(f"not every constraint is met after {res.iterations} iterations: {', '.join(bad)}")
-    out["warnings"] = warnings + list(best.result.warnings if best.result is not None else [])
+    radius = res.problem.brief.stress_radius
+    for w in (best.result.warnings if best.result is not None else []):
+        if "exceeds the yield stress" in w and vm is not None:  # the simulator reads the raw element peak
+            w += (f"; that is the largest element stress, singular at sharp corners: the yield constraint reads "
+                  f"the stress averaged over {radius * 1e3:.3g} mm, {vm / 1e6:.4g} MPa")
+        warnings.append(w)
+    out["warnings"] = warnings
     return out
 
 
