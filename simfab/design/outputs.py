@@ -247,7 +247,9 @@ def plot_profiles(res, path) -> Path:
         lo = "-inf" if not np.isfinite(c.lo) else f"{c.lo * k:.3g}"
         hi = "inf" if not np.isfinite(c.hi) else f"{c.hi * k:.3g}"
         lines.append(f"{c.name} {c.value * k:.3g} {uu} in [{lo}, {hi}] {'ok' if c.satisfied else 'VIOLATED'}")
-    ax1.set_title(f"{res.problem.base.name}: before / after rest-shape optimization\n" + "; ".join(lines[:3]), fontsize=8)
+    what = " (constraints on mesh-corrected figures)" if res.problem.corrections else ""
+    ax1.set_title(f"{res.problem.base.name}: before / after rest-shape optimization{what}\n"
+                  + "; ".join(lines[:3]), fontsize=8)
     if len(lines) > 3:
         ax2.set_title("; ".join(lines[3:]), fontsize=8)
     fig.tight_layout()
