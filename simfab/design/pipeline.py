@@ -58,7 +58,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         from simfab.design.verify import checked_objective
 
         first = res.iterations
-        res, extra["mesh_check"], extra["correction_rounds"] = _mesh_corrected(res, seed, workers, quiet)
+        res, extra["mesh_check"], extra["correction_rounds"] = mesh_corrected(res, seed, workers, quiet)
         extra["iterations_total"] = first + sum(r["iterations"] for r in extra["correction_rounds"])
         extra["objective_fine"] = checked_objective(res.problem, res.best, extra["mesh_check"])
     summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
@@ -69,7 +69,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     return summary
 
 
-def _mesh_corrected(res, seed: int, workers: int, quiet: bool):
+def mesh_corrected(res, seed: int, workers: int, quiet: bool):
     """Mesh check of the optimized shape (:mod:`simfab.design.verify`); while the mesh-converged
     figures miss the brief, or a target profile is matched only on the coarse mesh
     (:func:`simfab.design.verify.needs_correction`; at most ``[design] correction_rounds``

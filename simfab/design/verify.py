@@ -128,6 +128,12 @@ def check_warnings(check: dict) -> list[str]:
     return [f"mesh-converged (refined up to {lv[-1]['elements']} elements from {lv[0]['elements']}) the design misses: {what}"]
 
 
+def figure_unit(name: str) -> float:
+    """The constraint unit of a mesh-check figure (:data:`simfab.design.brief.SCALES`; the raw
+    stress peak like the averaged stress; 0 for figures without a constraint)."""
+    return B.SCALES.get("von_mises" if name.startswith("von_mises") else name, 0.0)
+
+
 def correction_factors(check: dict) -> dict:
     """{figure: reference value / optimization-mesh value} of a :func:`mesh_check` (space mapping
     of the coarse model's outputs: the optimizer multiplies its coarse figures by these, so that
@@ -138,7 +144,7 @@ def correction_factors(check: dict) -> dict:
         ref = v["values"][-1] if v["extrapolated"] is None else v["extrapolated"]
         # a figure below its constraint unit (1 N, 1 %, 1 MPa: B.SCALES) is noise, not a biased
         # value: its ratio (e.g. 1e-8 N / 1e-11 N) says nothing about the mesh
-        if abs(coarse) < B.SCALES.get(k, B.SCALES["von_mises"] if k.startswith("von_mises") else 0.0):
+        if abs(coarse) < figure_unit(k):
             out[k] = 1.0
             continue
         r = ref / coarse if coarse else 1.0

@@ -59,10 +59,10 @@ def run(argv) -> dict:
     cpu = time.process_time() - c0
     check = None
     if not a.no_mesh_check:  # what `couple optimize` runs next (simfab.design.pipeline)
-        from simfab.design.pipeline import _mesh_corrected
+        from simfab.design.pipeline import mesh_corrected
 
         t2 = time.perf_counter()
-        res_c, mc, rounds = _mesh_corrected(res, a.seed, a.workers, True)
+        _, mc, rounds = mesh_corrected(res, a.seed, a.workers, True)
         check = {"seconds": time.perf_counter() - t2, "feasible_mesh_converged": mc["feasible_fine"],
                  "correction_rounds": len(rounds), "elements": [lv["elements"] for lv in mc["levels"]],
                  "constraints_mesh_converged": {c["name"]: c["value"] for c in mc["constraints"]}}
