@@ -34,6 +34,7 @@ optimization's result, are exactly those of running every simulation to the end.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import time
@@ -132,6 +133,8 @@ class DesignProblem:
     corrections : {figure: factor} applied to the simulated figures before the constraints read
         them (mesh correction of a coarse model, :func:`simfab.design.verify.correction_factors`);
         empty: none
+    refined : boundary facet ids every candidate's insertion starts refined with (``simulate``'s
+        ``refined``): those the initial shape's insertion refined, set by :func:`optimize`
     """
 
     base: object
@@ -147,6 +150,7 @@ class DesignProblem:
     sigma0: np.ndarray
     source: object = None
     corrections: dict = field(default_factory=dict)
+    refined: tuple = ()
 
     def constraints(self, figures: dict) -> list:
         """The brief's constraints on simulated ``figures``, mesh-corrected (see ``corrections``)."""
@@ -325,7 +329,7 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     t1 = time.perf_counter()
     try:
         check_start(cm)
-        res = simulate(cm, callback=_bound_watch(problem, cm, base, threshold))
+        res = simulate(cm, callback=_bound_watch(problem, cm, base, threshold), refined=problem.refined)
     except _Exceeded as e:
         ev.status, ev.objective = "stopped", e.bound
         ev.reason = f"objective above the acceptance threshold at step {e.step}"
@@ -409,6 +413,8 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     history_evals: list[Evaluation] = []
 
     def f(h, threshold):
+        if start is None and not history_evals:  # the annealer's start: the initial shape, evaluated below
+            return initial.objective, initial
         ev = evaluate(problem, h, keep_result=True, threshold=threshold)
         return ev.objective, ev
 
@@ -452,17 +458,32 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
                          seed=seed)
     workers = max(1, min(int(workers), K))
     x0 = problem.handles.identity() if start is None else np.asarray(start, float)
-    if workers > 1:
-        with EvaluationPool(problem, workers) as pool:
-            out = anneal(f, x0, opts, stop=stop, callback=on_iteration, evaluator=pool)
-    else:
-        out = anneal(f, x0, opts, stop=stop, callback=on_iteration)
-    initial = history_evals[0] if start is None else evaluate(problem, problem.handles.identity(), keep_result=True)
-    if initial.status != "ok":
-        raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to optimize from")
+    with contextlib.ExitStack() as stack:
+        # workers start first: they rebuild the problem while this process evaluates the initial shape
+        pool = stack.enter_context(EvaluationPool(problem, workers)) if workers > 1 else None
+        # the unmodified shape's insertion gives the facets every candidate's run starts refined
+        # with (problem.refined; the pool sends them with each candidate)
+        initial = evaluate(problem, problem.handles.identity(), keep_result=True)
+        if initial.status != "ok":
+            raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to "
+                                   "optimize from")
+        if not problem.refined and initial.result.refined_facets:
+            r = tuple(int(i) for i in initial.result.refined_facets)
+            src = None if problem.source is None else dataclasses.replace(problem.source, refined=r)
+            problem = dataclasses.replace(problem, refined=r, source=src)
+            if pool is not None:
+                pool.problem = problem
+        out = anneal(f, x0, opts, stop=stop, callback=on_iteration, evaluator=pool)
     best = out.info
-    if best.status == "ok" and best.result is None:  # evaluated on a worker: its insertion again, here
-        best.result = evaluate(problem, best.h, keep_result=True).result
+    if best.status == "ok" and (best.result is None or problem.refined):
+        # the best design's insertion again, here (it may have run on a worker) and as `couple
+        # simulate` runs it: without the seeded refinement, whose figures differ by the contact
+        # discretization (~1e-4 relative, up to ~1% on a force read at a single step)
+        plain = evaluate(dataclasses.replace(problem, refined=()), best.h, keep_result=True)
+        if plain.status == "ok":
+            best = plain
+        elif best.result is None:  # (should the plain run fail where the seeded one converged)
+            best.result = evaluate(problem, best.h, keep_result=True).result
     history = [dict(rec, evaluation=history_evals[i]) for i, rec in enumerate(out.history)]
     speculative = sum(1 for ev in out.discarded if ev.sim_seconds > 0)
     return DesignResult(problem=problem, initial=initial, best=best, history=history, accepted=accepted,

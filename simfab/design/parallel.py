@@ -32,7 +32,8 @@ import numpy as np
 class ProblemSource:
     """What rebuilds a design problem in another process: the scene (MJCF path), the overrides of
     its ``[design]`` and ``[simulation]`` tables, the Warp device, the active handle vertices
-    (placed once, by the caller), the seed and the mesh corrections of the figures."""
+    (placed once, by the caller), the seed, the mesh corrections of the figures and the facets
+    every candidate's insertion starts refined with (``DesignProblem.refined``)."""
 
     scene: str
     design: dict = field(default_factory=dict)
@@ -41,6 +42,7 @@ class ProblemSource:
     handle_vertices: tuple = ()
     seed: int = 0
     corrections: dict = field(default_factory=dict)
+    refined: tuple = ()
 
 
 def rebuild(source: ProblemSource):
@@ -53,7 +55,7 @@ def rebuild(source: ProblemSource):
                            device=check_device(source.device))
     p = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target,
                      handle_vertices=list(source.handle_vertices), seed=source.seed, source=source)
-    return dataclasses.replace(p, corrections=dict(source.corrections))
+    return dataclasses.replace(p, corrections=dict(source.corrections), refined=tuple(source.refined))
 
 
 _WORKER_PROBLEM = None
@@ -68,9 +70,12 @@ def _ready() -> bool:
     return _WORKER_PROBLEM is not None
 
 
-def _evaluate_remote(h: np.ndarray, threshold: float):
+def _evaluate_remote(h: np.ndarray, threshold: float, refined: tuple):
+    global _WORKER_PROBLEM
     from simfab.design.optimize import evaluate
 
+    if refined != _WORKER_PROBLEM.refined:  # set by optimize() after the initial insertion
+        _WORKER_PROBLEM = dataclasses.replace(_WORKER_PROBLEM, refined=refined)
     return evaluate(_WORKER_PROBLEM, h, threshold=threshold)  # without its InsertionResult (not sent back)
 
 
@@ -98,7 +103,7 @@ class EvaluationPool:
         return (ev.objective, ev) if ev.reason else None
 
     def submit(self, h, threshold):
-        return _Pending(self._ex.submit(_evaluate_remote, h, threshold))
+        return _Pending(self._ex.submit(_evaluate_remote, h, threshold, self.problem.refined))
 
     def close(self) -> None:
         self._ex.shutdown(wait=True, cancel_futures=True)
