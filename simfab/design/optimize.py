@@ -210,7 +210,7 @@ def max_displacement(res) -> np.ndarray:
 @dataclass(kw_only=True)
 class Evaluation:
     """One design's evaluation. status: "ok" | "rejected" (invalid) | "stopped" (provably above the
-    acceptance threshold); reason: why not ok; objective [-] (+inf when rejected, a lower bound
+    acceptance threshold) | "aborted" (a speculative run no longer needed, never decided on); reason: why not ok; objective [-] (+inf when rejected, a lower bound
     when stopped); E_L [-]; rms_error [N] (target matching); constraints: list of
     :class:`simfab.design.brief.Constraint`; figures: :func:`profile_figures`; result: the
     InsertionResult (kept only while needed); rest: (n, d) [m]; seconds (simulation, total)."""
@@ -227,10 +227,30 @@ class Evaluation:
     result: object = None
     sim_seconds: float = 0.0
     seconds: float = 0.0
+    bounds: list = field(default_factory=list)  # the objective's lower bound after each insertion step
 
     @property
     def feasible(self) -> bool:
         return self.status == "ok" and all(c.satisfied for c in self.constraints)
+
+
+def restricted(problem: DesignProblem, ev: Evaluation, threshold: float) -> Evaluation:
+    """``ev``, evaluated with a threshold at least ``threshold``, as :func:`evaluate` with
+    ``threshold`` returns it: screened out when E_L alone exceeds it, stopped at the first step
+    whose objective bound exceeds it, else ``ev`` itself."""
+    if ev.status not in ("ok", "stopped"):
+        return ev
+    lead = 0.0 if problem.target is not None else ev.E_L
+    if lead > threshold:
+        return dataclasses.replace(ev, status="stopped", reason="modification energy above the acceptance threshold",
+                                   objective=lead, figures={}, constraints=[], rms_error=None, result=None,
+                                   sim_seconds=0.0, bounds=[])
+    for i, b in enumerate(ev.bounds):
+        if b > threshold:
+            return dataclasses.replace(ev, status="stopped", reason=f"objective above the acceptance threshold at step {i}",
+                                       objective=b, figures={}, constraints=[], rms_error=None, result=None,
+                                       bounds=ev.bounds[: i + 1])
+    return ev
 
 
 def shape_defect(problem: DesignProblem, X: np.ndarray) -> str:
@@ -271,10 +291,10 @@ class _Exceeded(Exception):
         self.bound, self.step = bound, step
 
 
-def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float):
+def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float, trace: list):
     """Step callback raising :class:`_Exceeded` when base + W * (violation of the yield bound by
     the running max of the averaged von Mises stress on ``cm``'s mesh)^2 exceeds ``threshold``
-    (None if nothing can be bounded)."""
+    (None if nothing can be bounded); appends each step's bound to ``trace``."""
     lo_hi = problem.limits.get("von_mises")
     if lo_hi is None or not math.isfinite(lo_hi[1]) or not math.isfinite(threshold):
         return None
@@ -285,8 +305,30 @@ def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float):
     def watch(k, rec):
         peak[0] = max(peak[0], factor * averaged_von_mises(cm.fem, rec.von_mises, radius))
         bound = base + B.PENALTY_WEIGHT * max(0.0, peak[0] - hi) ** 2 / sc**2
+        trace.append(bound)
         if bound > threshold:
             raise _Exceeded(bound, k)
+
+    return watch
+
+
+class _Aborted(Exception):
+    """Raised from the insertion's step callback when the evaluation is no longer needed."""
+
+    def __init__(self, step: int):
+        self.step = step
+
+
+def _step_watch(bound, abort):
+    """The insertion's step callback: the objective bound's watch (or None), then ``abort``."""
+    if abort is None:
+        return bound
+
+    def watch(k, rec):
+        if bound is not None:
+            bound(k, rec)
+        if abort():
+            raise _Aborted(k)
 
     return watch
 
@@ -309,11 +351,13 @@ def screen(problem: DesignProblem, h: np.ndarray, threshold: float = math.inf) -
 
 
 def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False,
-             threshold: float = math.inf) -> Evaluation:
+             threshold: float = math.inf, abort=None) -> Evaluation:
     """Evaluate design vector h (see the module docstring); never raises for a bad candidate.
 
     threshold : acceptance threshold of the annealer; the simulation stops (status "stopped",
         objective = a lower bound > threshold) as soon as the objective provably exceeds it.
+    abort : optional callable () -> bool polled after every insertion step; when it returns True
+        the simulation stops (status "aborted": a speculative evaluation no longer needed).
     """
     from simfab.coupling.simulate import check_start, simulate
 
@@ -329,7 +373,10 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     t1 = time.perf_counter()
     try:
         check_start(cm)
-        res = simulate(cm, callback=_bound_watch(problem, cm, base, threshold), refined=problem.refined)
+        res = simulate(cm, callback=_step_watch(_bound_watch(problem, cm, base, threshold, ev.bounds), abort),
+                       refined=problem.refined)
+    except _Aborted as e:
+        ev.status, ev.reason = "aborted", f"no longer needed at step {e.step}"
     except _Exceeded as e:
         ev.status, ev.objective = "stopped", e.bound
         ev.reason = f"objective above the acceptance threshold at step {e.step}"

@@ -59,24 +59,29 @@ def rebuild(source: ProblemSource):
 
 
 _WORKER_PROBLEM = None
+_CANCEL = None  # shared flags: _CANCEL[ticket % CANCEL_SLOTS] set when submission `ticket` is not needed
+CANCEL_SLOTS = 1024  # more than the submissions ever in flight (the annealer bounds them)
 
 
-def _init_worker(source: ProblemSource) -> None:
-    global _WORKER_PROBLEM
+def _init_worker(source: ProblemSource, cancel) -> None:
+    global _WORKER_PROBLEM, _CANCEL
     _WORKER_PROBLEM = rebuild(source)
+    _CANCEL = cancel
 
 
 def _ready() -> bool:
     return _WORKER_PROBLEM is not None
 
 
-def _evaluate_remote(h: np.ndarray, threshold: float, refined: tuple):
+def _evaluate_remote(h: np.ndarray, threshold: float, refined: tuple, ticket: int):
     global _WORKER_PROBLEM
     from simfab.design.optimize import evaluate
 
     if refined != _WORKER_PROBLEM.refined:  # set by optimize() after the initial insertion
         _WORKER_PROBLEM = dataclasses.replace(_WORKER_PROBLEM, refined=refined)
-    return evaluate(_WORKER_PROBLEM, h, threshold=threshold)  # without its InsertionResult (not sent back)
+    # without its InsertionResult (not sent back); aborted once the annealer cancels it
+    slot = ticket % CANCEL_SLOTS
+    return evaluate(_WORKER_PROBLEM, h, threshold=threshold, abort=lambda: _CANCEL[slot] != 0)
 
 
 class EvaluationPool:
@@ -90,8 +95,10 @@ class EvaluationPool:
             raise ValueError("parallel evaluation needs a problem built from a scene file (problem.source)")
         self.problem, self.slots = problem, int(workers)
         ctx = multiprocessing.get_context("spawn")
+        self._cancel = ctx.Array("b", CANCEL_SLOTS, lock=False)  # written here only; workers read it
+        self._tickets = 0
         self._ex = ProcessPoolExecutor(max_workers=self.slots, mp_context=ctx, initializer=_init_worker,
-                                       initargs=(problem.source,))
+                                       initargs=(problem.source, self._cancel))
         # start the workers now (they rebuild the problem while this process evaluates the start)
         for _ in range(self.slots):
             self._ex.submit(_ready)
@@ -103,7 +110,17 @@ class EvaluationPool:
         return (ev.objective, ev) if ev.reason else None
 
     def submit(self, h, threshold):
-        return _Pending(self._ex.submit(_evaluate_remote, h, threshold, self.problem.refined))
+        t, self._tickets = self._tickets, self._tickets + 1
+        self._cancel[t % CANCEL_SLOTS] = 0
+        return _Pending(self._ex.submit(_evaluate_remote, h, threshold, self.problem.refined, t), self._cancel,
+                        t % CANCEL_SLOTS)
+
+    def restrict(self, out, threshold):
+        """An evaluation run with a looser threshold, as if run with ``threshold``."""
+        from simfab.design.optimize import restricted
+
+        ev = restricted(self.problem, out[1], threshold)
+        return ev.objective, ev
 
     def close(self) -> None:
         self._ex.shutdown(wait=True, cancel_futures=True)
@@ -118,11 +135,16 @@ class EvaluationPool:
 class _Pending:
     """A submitted evaluation: ``result()`` -> (objective, Evaluation)."""
 
-    def __init__(self, future):
-        self._f = future
+    def __init__(self, future, flags, slot: int):
+        self._f, self._flags, self._slot = future, flags, slot
 
     def done(self) -> bool:
         return self._f.done()
+
+    def cancel(self) -> None:
+        """Not needed any more: a running simulation stops at its next step (it would otherwise
+        hold its worker until it ends)."""
+        self._flags[self._slot] = 1
 
     def result(self):
         ev = self._f.result()

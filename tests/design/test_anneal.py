@@ -116,3 +116,41 @@ def test_speculative_evaluation_makes_exactly_the_serial_decisions(slots):
     assert len(spec.discarded) <= n_acc * 8 * slots
     if slots > 1:
         assert len(spec.discarded) > 0  # it did draw ahead
+
+
+class _Branching(_Speculative):
+    """A speculative evaluator that also serves the acceptance branch: ``f`` returns a lower bound
+    (halfway between the threshold and the value) once the value exceeds its threshold, as the
+    design objective stops early; ``restrict`` reads a looser-threshold result as ``f`` would."""
+
+    def __init__(self, f, slots):
+        super().__init__(f, slots)
+        self.restricted = 0
+
+    def restrict(self, out, threshold):
+        self.restricted += 1
+        return self.f(out[1]["x"], threshold)
+
+
+@pytest.mark.parametrize("slots", [2, 3])
+def test_acceptance_branch_makes_exactly_the_serial_decisions(slots):
+    # with a hot schedule most proposals are accepted, so free slots evaluate the proposal after
+    # the running one as if it were accepted, with an upper bound of its unknown threshold; the
+    # record, value by value (including early-stop lower bounds), must be the serial one
+    def f(x, threshold):
+        v = float((x[0] - 1) ** 2 + 10 * (x[1] + x[0] ** 2) ** 2 + x[2] ** 2)
+        if v > threshold:  # stops early: a lower bound above the threshold
+            v = threshold + 0.5 * (v - threshold)
+        return v, {"x": x.copy()}
+
+    opts = AnnealOptions(iterations=200, sigma0=np.array([0.2, 0.2, 0.1]), lower=np.full(3, -3.0),
+                         upper=np.full(3, 3.0), seed=5, tau0=2.0, tau_end=0.5)
+    serial = anneal(f, np.array([-1.5, 2.0, 0.5]), opts)
+    ev = _Branching(f, slots)
+    spec = anneal(f, np.array([-1.5, 2.0, 0.5]), opts, evaluator=ev)
+    assert sum(r["accepted"] for r in serial.history[1:]) > 100  # the branch is the likelier outcome
+    assert [r["value"] for r in spec.history] == [r["value"] for r in serial.history]
+    assert [r["accepted"] for r in spec.history] == [r["accepted"] for r in serial.history]
+    assert [r["temperature"] for r in spec.history[1:]] == [r["temperature"] for r in serial.history[1:]]
+    assert np.array_equal(spec.x, serial.x)
+    assert ev.restricted > 20  # branch evaluations were adopted and read at their exact thresholds
