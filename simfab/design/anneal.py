@@ -50,10 +50,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+#: Speculative evaluation: how often the loop checks whether the head's evaluation or a slot is done [s].
+POLL_SECONDS = 0.002
 GROW = 1.10
 SHRINK = 0.97
 SIGMA_MIN_REL = 0.05
@@ -96,6 +99,11 @@ class _Proposal:
         return not isinstance(self.out, tuple)
 
 
+def _live(q) -> bool:
+    """Whether proposal q (or None) has an evaluation still running."""
+    return q is not None and q.running and not q.out.done()
+
+
 @dataclass(kw_only=True, eq=False)
 class _Branch:
     """Proposals drawn after ``head`` assuming it is accepted; sig and k_next continue the draws."""
@@ -104,10 +112,6 @@ class _Branch:
     props: list
     sig: np.ndarray
     k_next: int
-
-    @property
-    def running(self) -> int:
-        return sum(q.running for q in self.props)
 
 
 class _Restricted:
@@ -132,7 +136,9 @@ class _Restricted:
 class AnnealResult:
     """best x (n,), its value and info; history: one dict per iteration (k, value, accepted,
     current, best, temperature, sigma, info); iterations run; stopped_early; discarded: infos of
-    speculative evaluations that were not needed (a proposal before them was accepted)."""
+    speculative evaluations that were not needed (a proposal before them was accepted, or the one
+    an acceptance branch assumed accepted was rejected); branches: acceptance branches [drawn,
+    adopted]."""
 
     x: np.ndarray
     value: float
@@ -141,6 +147,7 @@ class AnnealResult:
     iterations: int = 0
     stopped_early: bool = False
     discarded: list = field(default_factory=list)
+    branches: list = field(default_factory=lambda: [0, 0])  # acceptance branches drawn, adopted
 
 
 def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=None, evaluator=None) -> AnnealResult:
@@ -265,16 +272,20 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
     while k <= K:
         while True:
             draining = [d for d in draining if not d.done()]
-            used = sum(q.running for q in pending) + len(draining) + (branch is not None and branch.running)
+            used = sum(map(_live, pending)) + len(draining) + (0 if branch is None else sum(map(_live, branch.props)))
             head = pending[0] if pending else None
             if (can_branch and branch is None and head is not None and head.running and used < slots
                     and head.thr >= 0 and math.isfinite(head.thr) and (sims[1] + 1) / (sims[0] + 2) > 0.5):
                 # acceptance is the likelier outcome: the free slot evaluates the next proposal as if
                 # the head were accepted rather than the one after it as if rejected
                 branch = grow_branch(head)
+                best.branches[0] += 1
                 continue
             if k_next > K or len(pending) >= max_pending or (pending and used >= slots):
-                break
+                if not _live(head):
+                    break
+                time.sleep(POLL_SECONDS)  # the head is running: wait for it, or for a slot to free
+                continue
             x_i, u, c = draw(rng, x_cur, k_next, sig_next)
             thr, T = threshold(e_cur, u, c)
             q = _Proposal(k=k_next, x=x_i, u=u, c=c, thr=thr, T=T, st=rng.bit_generator.state)
@@ -309,6 +320,7 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
             drop(pending)
             pending = adopt(b, e_i) if b is not None and accepted and not done else None
             if pending is not None:  # continue from the branch drawn for this acceptance
+                best.branches[1] += 1
                 rng.bit_generator.state = b.props[-1].st
                 sig_next, k_next = b.sig, b.k_next
             else:  # redraw from here

@@ -418,7 +418,8 @@ class DesignResult:
     simulations : insertion simulations run to the end; stopped_simulations : stopped early (their
     candidate provably rejected); rejected : {reason: count} of invalid candidates
     speculative : insertion simulations run ahead on a worker and not needed (a proposal before
-    them was accepted); workers : processes that evaluated candidates
+    them was accepted, or an acceptance branch's head rejected); workers : processes that
+    evaluated candidates; branches : the annealer's acceptance branches (drawn, adopted)
     seconds : wall time; sim_seconds : inside the simulator, summed over the evaluations used (with
     several workers it may exceed the wall time); stopped_early : bool
     """
@@ -437,6 +438,7 @@ class DesignResult:
     stopped_early: bool
     speculative: int = 0
     workers: int = 1
+    branches: tuple = (0, 0)
 
 
 def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
@@ -536,4 +538,5 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     return DesignResult(problem=problem, initial=initial, best=best, history=history, accepted=accepted,
                         simulations=counts["simulations"], stopped_simulations=counts["stopped"], rejected=rejected,
                         seconds=time.perf_counter() - t0, sim_seconds=counts["sim_seconds"], iterations=out.iterations,
-                        stopped_early=out.stopped_early, speculative=speculative, workers=workers)
+                        stopped_early=out.stopped_early, speculative=speculative, workers=workers,
+                        branches=tuple(out.branches))

@@ -154,3 +154,75 @@ def test_acceptance_branch_makes_exactly_the_serial_decisions(slots):
     assert [r["temperature"] for r in spec.history[1:]] == [r["temperature"] for r in serial.history[1:]]
     assert np.array_equal(spec.x, serial.x)
     assert ev.restricted > 20  # branch evaluations were adopted and read at their exact thresholds
+
+
+class _Threaded(_Branching):
+    """The same evaluator with submitted evaluations running on threads that take a few ms and
+    finish out of order, so the annealer waits, polls and cancels as with worker processes."""
+
+    def __init__(self, f, slots, pool):
+        import threading
+
+        super().__init__(f, slots)
+        self.pool, self.cancelled = pool, 0
+        self.lock, self.running, self.most = threading.Lock(), 0, 0
+
+    def submit(self, x, threshold):
+        import time
+
+        self.submitted += 1
+        state = {"needed": True}
+        with self.lock:  # evaluations still needed and running, at most `slots` of them
+            self.running += 1
+            self.most = max(self.most, self.running)
+        delay = 0.001 * (1 + int(abs(x[0]) * 1e3) % 5)
+
+        def work():
+            time.sleep(delay)
+            out = self.f(x, threshold)
+            with self.lock:
+                if state["needed"]:
+                    self.running -= 1
+                state["needed"] = False
+            return out
+
+        fut = self.pool.submit(work)
+        outer = self
+
+        class Handle:
+            def done(self):
+                return fut.done()
+
+            def result(self):
+                return fut.result()
+
+            def cancel(self):
+                outer.cancelled += 1
+                with outer.lock:
+                    if state["needed"]:
+                        outer.running -= 1
+                    state["needed"] = False
+
+        return Handle()
+
+
+def test_asynchronous_evaluations_make_exactly_the_serial_decisions():
+    # real concurrency: the head may still run while later ones finish; the loop must wait for it
+    # (polling), keep at most `slots` evaluations running, and decide exactly as the serial loop
+    from concurrent.futures import ThreadPoolExecutor
+
+    def f(x, threshold):
+        v = float((x[0] - 1) ** 2 + 10 * (x[1] + x[0] ** 2) ** 2 + x[2] ** 2)
+        return (threshold + 0.5 * (v - threshold) if v > threshold else v), {"x": x.copy()}
+
+    opts = AnnealOptions(iterations=120, sigma0=np.array([0.2, 0.2, 0.1]), lower=np.full(3, -3.0),
+                         upper=np.full(3, 3.0), seed=7, tau0=2.0, tau_end=0.5)
+    serial = anneal(f, np.array([-1.5, 2.0, 0.5]), opts)
+    with ThreadPoolExecutor(max_workers=8) as pool:  # more threads than slots: the annealer must hold back
+        ev = _Threaded(f, 2, pool)
+        spec = anneal(f, np.array([-1.5, 2.0, 0.5]), opts, evaluator=ev)
+    assert [r["value"] for r in spec.history] == [r["value"] for r in serial.history]
+    assert [r["accepted"] for r in spec.history] == [r["accepted"] for r in serial.history]
+    assert np.array_equal(spec.x, serial.x) and spec.iterations == serial.iterations
+    assert ev.restricted > 0 and ev.cancelled > 0
+    assert ev.most <= 2  # never more needed evaluations running than slots

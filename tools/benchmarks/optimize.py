@@ -90,6 +90,7 @@ def run(argv) -> dict:
         "simulations_stopped_early": res.stopped_simulations,
         "workers": res.workers,
         "speculative_simulations": res.speculative,  # run ahead on a worker, not needed
+        "acceptance_branches": {"drawn": res.branches[0], "adopted": res.branches[1]},
         "load_average_1min": os.getloadavg()[0],
         "candidates_rejected_before_simulating": sum(1 for r in res.history if r["evaluation"].sim_seconds == 0),
         "simulations_per_second": (sims + res.stopped_simulations) / total,  # full + stopped early
