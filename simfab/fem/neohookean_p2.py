@@ -1,0 +1,659 @@
+"""Compressible Neo-Hookean elasticity on quadratic (P2) simplices: energy, gradient, Hessian.
+
+Same energy density as :mod:`simfab.fem.neohookean` (2D = plane strain with thickness):
+
+    Psi(F) = mu/2 (||F||_F^2 - d) - mu log J + lam/2 (log J)^2,     J = det F
+
+but F varies linearly over a P2 element, so the element energy is a quadrature sum over the
+points q of the model's rule (:data:`simfab.fem.p2.RULES`, weights w_q = volume * rule weight):
+
+    E_e = sum_q w_q Psi(F_q),    F_q = sum_a x_a (x) g_qa,    g_qa = grad N_a(X_q)  (model.grad_N)
+
+Gradient (sign: energy increase; the elastic nodal force is ``-gradient``):
+
+    dE/dx_a = sum_q w_q P(F_q) g_qa,     P = mu (F - F^-T) + lam log J F^-T
+
+Hessian: block (a, b), entries (i, j), through the stress-space Hessian A = d2Psi/dF2 (a d^2 x d^2
+matrix indexed by vec(F)_(i,k) = F_ik, row-major):
+
+    K_ab[i, j] = sum_q w_q sum_{k,l} A_q[(i,k), (j,l)] g_qa[k] g_qb[l]
+    A = mu I + d2Psi/dJ2 vec(g) vec(g)^T + dPsi/dJ d2J/dF2,   g = cof F,
+    dPsi/dJ = (lam log J - mu) / J,  d2Psi/dJ2 = (mu + lam (1 - log J)) / J^2,
+    d2J/dF_ik dF_jl = eps_ijm eps_klp F_mp (3D),  eps_ij eps_kl (2D)
+
+PSD projection (``project_psd=True``) clamps the negative eigenvalues of each A_q; with positive
+quadrature weights the element Hessian sum_q w_q G_q^T A_q G_q is then PSD. The eigensystem is the
+analytic one of :mod:`simfab.fem.neohookean` (Smith, De Goes, Kim 2019), reused from there: with
+dPsi/dJ <= 0 only the twist block T = mu I + dPsi/dJ S (F = R S) can be indefinite and its negative
+part (``_negative_part_sym3``, ``_polar_rotation3``) is removed in the basis R [e_i]x / sqrt 2
+(2D: one twist mode, eigenvalue mu + dPsi/dJ); with dPsi/dJ > 0 A is rebuilt from the full
+SVD eigensystem with clamped eigenvalues.
+
+Inversion: the energy is +inf when J <= 0 at any quadrature point of any element; such an element
+contributes nothing to the gradient and Hessian (not meaningful then). Inversion between the
+quadrature points is not detected. :func:`det_F` reports the smallest J over each element's
+quadrature points and :func:`det_and_von_mises` the largest von Mises stress over them
+(conservative for inversion and yield checks).
+
+Kernels run in float64, one launch per call for all elements (one thread per element, quadrature
+loop inside); the Hessian launch adds straight into the CSR ``data`` of ``model.pattern`` through
+precomputed slots, like the linear kernel. Measured cost per element and call (CPU, 1 thread,
+``python tools/bench.py p2 --cost``), relative to the linear kernel on the same corner mesh: see the
+benchmark output; roughly (nodes^2 x quadrature points) / (corners^2), e.g. 10-node tets with the
+14-point rule cost ~60x a linear tet's Hessian but have ~7x the nodes per element count of dofs.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from simfab._warp import wp
+from simfab.fem.neohookean import (_HALF_SQRT2, _clamp, _dim, _negative_part_sym3, _pk1, _polar_rotation3, _psi,
+                                   _store)
+from simfab.fem.p2 import P2Model
+
+wp.set_module_options({"enable_backward": False})
+
+_vec12d = wp.types.vector(length=12, dtype=wp.float64)
+_vec30d = wp.types.vector(length=30, dtype=wp.float64)
+_mat44d = wp.types.matrix(shape=(4, 4), dtype=wp.float64)
+_mat99d = wp.types.matrix(shape=(9, 9), dtype=wp.float64)
+_mat12x4d = wp.types.matrix(shape=(12, 4), dtype=wp.float64)
+_mat30x9d = wp.types.matrix(shape=(30, 9), dtype=wp.float64)
+_mat12d = wp.types.matrix(shape=(12, 12), dtype=wp.float64)
+_mat30d = wp.types.matrix(shape=(30, 30), dtype=wp.float64)
+
+# stress-Hessian modes (same meaning as in neohookean.py)
+_EXACT = wp.constant(0)
+_PROJECT = wp.constant(1)
+_PROJECT_SVD = wp.constant(2)
+_BOTH = wp.constant(3)
+
+
+# ----------------------------------------------------------------------------------------------
+# per-dimension helpers (Warp overloads on the matrix type)
+# ----------------------------------------------------------------------------------------------
+@wp.func
+def _F_at(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=wp.vec3d),
+          e: int, q: int):
+    """F at quadrature point q of element e: sum_a x_a (x) g_qa."""
+    F = wp.mat33d()
+    for a in range(elements.shape[1]):
+        F += wp.outer(x[elements[e, a]], gN[e, q, a])
+    return F
+
+
+@wp.func
+def _F_at(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),  # noqa: F811
+          gN: wp.array3d(dtype=wp.vec2d), e: int, q: int):
+    F = wp.mat22d()
+    for a in range(elements.shape[1]):
+        F += wp.outer(x[elements[e, a]], gN[e, q, a])
+    return F
+
+
+@wp.func
+def _zero_hess(F: wp.mat33d):
+    return _mat30d()
+
+
+@wp.func
+def _zero_hess(F: wp.mat22d):  # noqa: F811
+    return _mat12d()
+
+
+@wp.func
+def _zero_contract(F: wp.mat33d):
+    return _mat30x9d()
+
+
+@wp.func
+def _zero_contract(F: wp.mat22d):  # noqa: F811
+    return _mat12x4d()
+
+
+@wp.func
+def _eps3(i: int, j: int, k: int):
+    """Levi-Civita symbol for indices in 0..2."""
+    return wp.float64((i - j) * (j - k) * (k - i)) * wp.float64(0.5)
+
+
+@wp.func
+def _dimi(M: wp.mat33d):
+    return 3
+
+
+@wp.func
+def _dimi(M: wp.mat22d):  # noqa: F811
+    return 2
+
+
+@wp.func
+def _outer_vec(A: Any, M: Any, c: wp.float64):
+    """A + c vec(M) vec(M)^T (vec row-major, M d x d)."""
+    d = _dimi(M)
+    B = A
+    for i in range(d):
+        for k in range(d):
+            for j in range(d):
+                for l in range(d):
+                    B[d * i + k, d * j + l] = B[d * i + k, d * j + l] + c * M[i, k] * M[j, l]
+    return B
+
+
+@wp.func
+def _stress_hessian_exact(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
+    """Exact d2Psi/dF2 (9 x 9, vec(F) row-major) [Pa]."""
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    d2 = (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)
+    A = _mat99d()
+    for r in range(9):
+        A[r, r] = mu
+    A = _outer_vec(A, J * wp.transpose(wp.inverse(F)), d2)
+    for i in range(3):
+        for j in range(3):
+            if i != j:
+                m = 3 - i - j
+                for k in range(3):
+                    for l in range(3):
+                        if k != l:
+                            p = 3 - k - l
+                            A[3 * i + k, 3 * j + l] = A[3 * i + k, 3 * j + l] + dPsi_dJ * _eps3(i, j, m) * _eps3(
+                                k, l, p) * F[m, p]
+    return A
+
+
+@wp.func
+def _stress_hessian_exact(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
+    """Exact d2Psi/dF2 (4 x 4, vec(F) row-major) [Pa]; d2J/dF_ik dF_jl = eps_ij eps_kl."""
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    d2 = (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)
+    A = _mat44d()
+    for r in range(4):
+        A[r, r] = mu
+    A = _outer_vec(A, J * wp.transpose(wp.inverse(F)), d2)
+    # nonzero for i != j and k != l (index 2 i + k): eps_01 = 1, eps_10 = -1
+    A[0, 3] = A[0, 3] + dPsi_dJ  # (0,0), (1,1)
+    A[3, 0] = A[3, 0] + dPsi_dJ  # (1,1), (0,0)
+    A[1, 2] = A[1, 2] - dPsi_dJ  # (0,1), (1,0)
+    A[2, 1] = A[2, 1] - dPsi_dJ  # (1,0), (0,1)
+    return A
+
+
+@wp.func
+def _svd_mode(A: Any, U: Any, M: Any, Vs: Any, lam_k: wp.float64):
+    """A + lam_k vec(U M V^T) vec(U M V^T)^T."""
+    return _outer_vec(A, U * M * wp.transpose(Vs), lam_k)
+
+
+@wp.func
+def _stress_hessian_svd(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
+    """d2Psi/dF2 rebuilt from its analytic eigensystem with clamped eigenvalues (PSD)."""
+    zero = wp.float64(0.0)
+    U = wp.mat33d()
+    s = wp.vec3d()
+    Vs = wp.mat33d()
+    wp.svd3(F, U, s, Vs)
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    h = wp.float64(_HALF_SQRT2)
+    A = _mat99d()
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, _clamp(mu + dPsi_dJ * s[0], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, _clamp(mu - dPsi_dJ * s[0], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[1], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[1], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[2], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[2], 1))
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    S = wp.mat33d(
+        mu + cs / (s[0] * s[0]), lam / (s[0] * s[1]), lam / (s[0] * s[2]),
+        lam / (s[0] * s[1]), mu + cs / (s[1] * s[1]), lam / (s[1] * s[2]),
+        lam / (s[0] * s[2]), lam / (s[1] * s[2]), mu + cs / (s[2] * s[2]),
+    )
+    Q = wp.mat33d()
+    d = wp.vec3d()
+    wp.eig3(S, Q, d)
+    for k in range(3):
+        A = _svd_mode(A, U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, _clamp(d[k], 1))
+    return A
+
+
+@wp.func
+def _stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
+    zero = wp.float64(0.0)
+    U = wp.mat22d()
+    s = wp.vec2d()
+    Vs = wp.mat22d()
+    wp.svd2(F, U, s, Vs)
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    h = wp.float64(_HALF_SQRT2)
+    A = _mat44d()
+    A = _svd_mode(A, U, wp.mat22d(zero, -h, h, zero), Vs, _clamp(mu + dPsi_dJ, 1))  # twist
+    A = _svd_mode(A, U, wp.mat22d(zero, h, h, zero), Vs, _clamp(mu - dPsi_dJ, 1))  # flip
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    a = mu + cs / (s[0] * s[0])
+    c2 = mu + cs / (s[1] * s[1])
+    o = lam / (s[0] * s[1])
+    theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
+    ct = wp.cos(theta)
+    st = wp.sin(theta)
+    A = _svd_mode(A, U, wp.mat22d(ct, zero, zero, st), Vs,
+                  _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, 1))
+    A = _svd_mode(A, U, wp.mat22d(-st, zero, zero, ct), Vs,
+                  _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, 1))
+    return A
+
+
+@wp.func
+def _project_twist(A: _mat99d, F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
+    """Exact A minus the negative part of its twist block (valid when dPsi/dJ <= 0): in the
+    orthonormal twist basis Q_i = R [e_i]x / sqrt 2 the block is T = mu I + dPsi/dJ S, S = R^T F."""
+    dPsi_dJ = (lam * wp.log(J) - mu) / J
+    I = wp.identity(n=3, dtype=wp.float64)
+    R = _polar_rotation3(F)
+    S = wp.transpose(R) * F
+    S = wp.float64(0.5) * (S + wp.transpose(S))
+    N = _negative_part_sym3(mu * I + dPsi_dJ * S)
+    B = A
+    if wp.ddot(N, N) > wp.float64(0.0):
+        Q0 = R * wp.skew(wp.vec3d(wp.float64(1.0), wp.float64(0.0), wp.float64(0.0)))
+        Q1 = R * wp.skew(wp.vec3d(wp.float64(0.0), wp.float64(1.0), wp.float64(0.0)))
+        Q2 = R * wp.skew(wp.vec3d(wp.float64(0.0), wp.float64(0.0), wp.float64(1.0)))
+        for r in range(9):
+            i = r // 3
+            k = r - 3 * i
+            qr = wp.vec3d(Q0[i, k], Q1[i, k], Q2[i, k])
+            for c in range(9):
+                j = c // 3
+                l = c - 3 * j
+                qc = wp.vec3d(Q0[j, l], Q1[j, l], Q2[j, l])
+                B[r, c] = B[r, c] - wp.float64(0.5) * wp.dot(qr, N * qc)
+    return B
+
+
+@wp.func
+def _project_twist(A: _mat44d, F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
+    """2D: the single twist mode R [[0, -1], [1, 0]] / sqrt 2 has eigenvalue t = mu + dPsi/dJ."""
+    t = mu + (lam * wp.log(J) - mu) / J
+    B = A
+    if t < wp.float64(0.0):
+        cr = F[0, 0] + F[1, 1]
+        sr = F[1, 0] - F[0, 1]
+        nr = wp.sqrt(cr * cr + sr * sr)
+        RJ = wp.mat22d(-sr, -cr, cr, -sr) / nr
+        B = _outer_vec(A, RJ, -wp.float64(0.5) * t)
+    return B
+
+
+@wp.func
+def _stress_hessian(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64, mode: int):
+    """d2Psi/dF2: exact (_EXACT), PSD-projected (_PROJECT: twist projection when dPsi/dJ <= 0,
+    else the SVD eigensystem), or PSD-projected always through the SVD (_PROJECT_SVD)."""
+    dPsi_dJ = (lam * wp.log(J) - mu) / J
+    if mode == _PROJECT_SVD or (mode == _PROJECT and dPsi_dJ > wp.float64(0.0)):
+        return _stress_hessian_svd(F, J, mu, lam)
+    A = _stress_hessian_exact(F, J, mu, lam)
+    if mode == _PROJECT:
+        return _project_twist(A, F, J, mu, lam)
+    return A
+
+
+@wp.func
+def _accumulate(K: Any, C0: Any, A: Any, gN: wp.array3d(dtype=Any), e: int, q: int, k: int, d: int,
+                w: wp.float64):
+    """K + w G_q^T A G_q (upper block triangle b >= a only): C[(a,i), (j,l)] = sum_kk A[(i,kk),
+    (j,l)] g_a[kk] first (k d x d^2), then K[(a,i), (b,j)] += w sum_l C[(a,i), (j,l)] g_b[l]."""
+    C = C0
+    for a in range(k):
+        ga = gN[e, q, a]
+        for i in range(d):
+            for c in range(d * d):
+                acc = wp.float64(0.0)
+                for kk in range(d):
+                    acc += A[d * i + kk, c] * ga[kk]
+                C[d * a + i, c] = acc
+    Kn = K
+    for a in range(k):
+        for b in range(a, k):
+            gb = gN[e, q, b]
+            for i in range(d):
+                for j in range(d):
+                    acc = wp.float64(0.0)
+                    for l in range(d):
+                        acc += C[d * a + i, d * j + l] * gb[l]
+                    Kn[d * a + i, d * b + j] = Kn[d * a + i, d * b + j] + w * acc
+    return Kn
+
+
+# ----------------------------------------------------------------------------------------------
+# kernels (generic over the dimension; explicit overloads below)
+# ----------------------------------------------------------------------------------------------
+@wp.kernel
+def _energy_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+                   wq: wp.array2d(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
+                   energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
+    e = wp.tid()
+    E = wp.float64(0.0)
+    Jmin = wp.float64(wp.inf)
+    for q in range(wq.shape[1]):
+        F = _F_at(x, elements, gN, e, q)
+        J = wp.determinant(F)
+        Jmin = wp.min(Jmin, J)
+        if J > wp.float64(0.0):
+            E += wq[e, q] * _psi(F, J, mu[e], lam[e], _dim(F))
+    det_F[e] = Jmin
+    energy[e] = wp.where(Jmin > wp.float64(0.0), E, wp.float64(0.0))
+
+
+@wp.kernel
+def _gradient_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+                     wq: wp.array2d(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
+                     lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
+                     det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any)):
+    e = wp.tid()
+    E = wp.float64(0.0)
+    Jmin = wp.float64(wp.inf)
+    g = grad.dtype()
+    k = elements.shape[1]
+    for q in range(wq.shape[1]):
+        F = _F_at(x, elements, gN, e, q)
+        J = wp.determinant(F)
+        Jmin = wp.min(Jmin, J)
+        if J > wp.float64(0.0):
+            w = wq[e, q]
+            E += w * _psi(F, J, mu[e], lam[e], _dim(F))
+            P = _pk1(F, J, mu[e], lam[e])
+            d = _dimi(F)
+            for a in range(k):
+                f = w * (P * gN[e, q, a])
+                for i in range(d):
+                    g[d * a + i] = g[d * a + i] + f[i]
+    det_F[e] = Jmin
+    energy[e] = wp.float64(0.0)
+    grad[e] = grad.dtype()
+    if Jmin > wp.float64(0.0):
+        energy[e] = E
+        grad[e] = g
+
+
+@wp.kernel
+def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+                    wq: wp.array2d(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
+                    lam_e: wp.array(dtype=wp.float64), project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                    energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
+                    hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
+                    data2: wp.array(dtype=wp.float64)):
+    e = wp.tid()
+    zero = wp.float64(0.0)
+    k = elements.shape[1]
+    nq = wq.shape[1]
+    mu = mu_e[e]
+    lam = lam_e[e]
+    # first pass: det F at every quadrature point (an inverted point voids the whole element)
+    Jmin = wp.float64(wp.inf)
+    for q in range(nq):
+        Jmin = wp.min(Jmin, wp.determinant(_F_at(x, elements, gN, e, q)))
+    det_F[e] = Jmin
+    energy[e] = zero
+    grad[e] = grad.dtype()
+    if Jmin <= zero:
+        if scatter == 0:
+            for r in range(hess.shape[1]):
+                for c in range(hess.shape[2]):
+                    hess[e, r, c] = zero
+        return
+    mode = project
+    both = 0
+    if mode == _BOTH:
+        mode = _PROJECT
+        both = 1
+    E = zero
+    g = grad.dtype()
+    F0 = _F_at(x, elements, gN, e, 0)
+    K = _zero_hess(F0)
+    K2 = _zero_hess(F0)
+    C0 = _zero_contract(F0)
+    for q in range(nq):
+        F = _F_at(x, elements, gN, e, q)
+        J = wp.determinant(F)
+        w = wq[e, q]
+        E += w * _psi(F, J, mu, lam, _dim(F))
+        P = _pk1(F, J, mu, lam)
+        d = _dimi(F)
+        for a in range(k):
+            f = w * (P * gN[e, q, a])
+            for i in range(d):
+                g[d * a + i] = g[d * a + i] + f[i]
+        if both != 0:
+            K2 = _accumulate(K2, C0, _stress_hessian(F, J, mu, lam, _EXACT), gN, e, q, k, d, w)
+        K = _accumulate(K, C0, _stress_hessian(F, J, mu, lam, mode), gN, e, q, k, d, w)
+    energy[e] = E
+    grad[e] = g
+    kd = k * _dimi(F0)
+    for r in range(kd):
+        for c in range(r, kd):
+            if both != 0:  # exact into data, projected into data2
+                _store(scatter, slots, hess, data, e, r, c, K2[r, c])
+                _store(scatter, slots, hess, data2, e, r, c, K[r, c])
+            else:
+                _store(scatter, slots, hess, data, e, r, c, K[r, c])
+
+
+@wp.kernel
+def _stress_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+                   wq: wp.array2d(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
+                   det_F: wp.array(dtype=wp.float64), von_mises: wp.array(dtype=wp.float64)):
+    """min det F and max von Mises sqrt(3/2) mu |dev(F F^T - I)| / J over the quadrature points
+    (see simfab.fem.stress.det_and_von_mises); +inf stress where any det F <= 0."""
+    e = wp.tid()
+    Jmin = wp.float64(wp.inf)
+    vm = wp.float64(0.0)
+    for q in range(wq.shape[1]):
+        F = _F_at(x, elements, gN, e, q)
+        J = wp.determinant(F)
+        Jmin = wp.min(Jmin, J)
+        if J > wp.float64(0.0):
+            C = F * wp.transpose(F)
+            for i in range(_dimi(F)):
+                C[i, i] = C[i, i] - wp.float64(1.0)
+            tr = wp.trace(C)
+            dev2 = wp.max(wp.ddot(C, C) - tr * tr / wp.float64(3.0), wp.float64(0.0))
+            vm = wp.max(vm, wp.sqrt(wp.float64(1.5) * dev2) * mu_e[e] / J)
+    det_F[e] = Jmin
+    von_mises[e] = wp.where(Jmin > wp.float64(0.0), vm, wp.float64(wp.inf))
+
+
+@wp.kernel
+def _stress_hessian_kernel(F: wp.array(dtype=Any), J: wp.array(dtype=wp.float64), mu: wp.float64, lam: wp.float64,
+                           mode: int, out: wp.array(dtype=Any)):
+    """d2Psi/dF2 of a batch of deformation gradients (for the tests and the benchmark)."""
+    t = wp.tid()
+    out[t] = _stress_hessian(F[t], J[t], mu, lam, mode)
+
+
+def _declare_overloads():
+    for vec, mat, gvec, amat in ((wp.vec2d, wp.mat22d, _vec12d, _mat44d), (wp.vec3d, wp.mat33d, _vec30d, _mat99d)):
+        types = {"x": wp.array(dtype=vec), "gN": wp.array3d(dtype=vec)}
+        wp.overload(_energy_kernel, types)
+        wp.overload(_stress_kernel, types)
+        wp.overload(_gradient_kernel, {**types, "grad": wp.array(dtype=gvec)})
+        wp.overload(_hessian_kernel, {**types, "grad": wp.array(dtype=gvec)})
+        wp.overload(_stress_hessian_kernel, {"F": wp.array(dtype=mat), "out": wp.array(dtype=amat)})
+
+
+_declare_overloads()
+
+# ----------------------------------------------------------------------------------------------
+# host side
+# ----------------------------------------------------------------------------------------------
+_MODES = {"exact": 0, "project": 1, "project_svd": 2}
+
+
+class _Workspace:
+    """Device copies of the model arrays and reusable output buffers (per model)."""
+
+    def __init__(self, model: P2Model):
+        d, m, k = model.dim, model.n_elements, model.elements.shape[1]
+        dev = model.device
+        self.cpu = wp.get_device(dev).is_cpu
+        vec = wp.vec3d if d == 3 else wp.vec2d
+        self.vec = vec
+        self.x_np = np.zeros((model.n_vertices, d))
+        self.x = self._wrap(self.x_np, vec, dev)
+        self.elements = wp.array(model.elements, dtype=wp.int32, device=dev)
+        self.gN = wp.array(model.grad_N, dtype=vec, device=dev)  # (m, nq, k) of vec
+        self.wq = wp.array(model.qp_weight, dtype=wp.float64, device=dev)
+        self.mu = wp.array(model.mu, dtype=wp.float64, device=dev)
+        self.lam = wp.array(model.lam, dtype=wp.float64, device=dev)
+        self.energy = wp.zeros(m, dtype=wp.float64, device=dev)
+        self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
+        self.von_mises = wp.zeros(m, dtype=wp.float64, device=dev)
+        self.grad = wp.zeros(m, dtype=_vec30d if d == 3 else _vec12d, device=dev)
+        self.slots = None
+        self.data = self.data2 = None
+        self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
+        self.dummy_slots = wp.zeros((1, 1, 1), dtype=wp.int32, device=dev)
+        self.dummy_data = wp.zeros(1, dtype=wp.float64, device=dev)
+        dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
+        self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))),
+                                     shape=(model.n_dofs, dofs.size))
+        self.kk = k * d
+
+    def _wrap(self, arr, dtype, dev):
+        return wp.array(arr, dtype=dtype, device=dev, copy=False) if self.cpu else wp.array(arr, dtype=dtype, device=dev)
+
+    def set_positions(self, x: np.ndarray) -> None:
+        self.x_np[...] = x
+        if not self.cpu:
+            self.x.assign(self.x_np)
+
+    def csr_buffers(self, model: P2Model, two: bool):
+        """Zeroed CSR value buffers (data, data2 or a dummy) for a scatter launch."""
+        if self.slots is None:
+            if model.pattern.nnz >= 2**31:
+                raise ValueError("Hessian too large for int32 slots")
+            self.slots = wp.array(model.pattern.element_slots.astype(np.int32), dtype=wp.int32, device=model.device)
+            self.data = wp.zeros(model.pattern.nnz, dtype=wp.float64, device=model.device)
+        self.data.zero_()
+        if two:
+            if self.data2 is None:
+                self.data2 = wp.zeros(model.pattern.nnz, dtype=wp.float64, device=model.device)
+            self.data2.zero_()
+            return self.data, self.data2
+        return self.data, self.dummy_data
+
+
+def _workspace(model: P2Model) -> _Workspace:
+    ws = model._cache.get("neohookean_p2")
+    if ws is None:
+        ws = model._cache["neohookean_p2"] = _Workspace(model)
+    return ws
+
+
+def _prepare(model: P2Model, x) -> _Workspace:
+    if not isinstance(model, P2Model):
+        raise TypeError(f"expected a P2Model, got {type(model).__name__} (linear models: simfab.fem.neohookean)")
+    ws = _workspace(model)
+    ws.set_positions(model.check_positions(x))
+    return ws
+
+
+def _common(ws: _Workspace) -> list:
+    return [ws.x, ws.elements, ws.gN, ws.wq, ws.mu, ws.lam]
+
+
+def _total(ws: _Workspace) -> float:
+    if ws.det_F.numpy().min() <= 0.0:
+        return float("inf")
+    return float(ws.energy.numpy().sum())
+
+
+def _gradient(model: P2Model, ws: _Workspace) -> np.ndarray:
+    return (ws.scatter @ ws.grad.numpy().reshape(-1)).reshape(model.n_vertices, model.dim)
+
+
+def _launch_hessian(model: P2Model, x, project: int) -> _Workspace:
+    ws = _prepare(model, x)
+    data, data2 = ws.csr_buffers(model, project == 3)
+    wp.launch(_hessian_kernel, dim=model.n_elements, device=model.device,
+              inputs=_common(ws) + [project, 1, ws.slots],
+              outputs=[ws.energy, ws.det_F, ws.grad, ws.dummy3, data, data2])
+    return ws
+
+
+def energy(model: P2Model, x) -> float:
+    """Elastic energy [J] at node positions x (n, dim) [m]; +inf if det F <= 0 at any quadrature point."""
+    ws = _prepare(model, x)
+    wp.launch(_energy_kernel, dim=model.n_elements, device=model.device, inputs=_common(ws),
+              outputs=[ws.energy, ws.det_F])
+    return _total(ws)
+
+
+def energy_gradient(model: P2Model, x) -> tuple[float, np.ndarray]:
+    """(energy [J], gradient dE/dx (n, dim) [N]). The elastic nodal force is ``-gradient``."""
+    ws = _prepare(model, x)
+    wp.launch(_gradient_kernel, dim=model.n_elements, device=model.device, inputs=_common(ws),
+              outputs=[ws.energy, ws.det_F, ws.grad])
+    return _total(ws), _gradient(model, ws)
+
+
+def energy_gradient_hessian(model: P2Model, x, *, project_psd: bool = True) -> tuple[float, np.ndarray, sp.csr_matrix]:
+    """(energy [J], gradient (n, dim) [N], Hessian (n*dim, n*dim) CSR [N/m]) with the model's
+    fixed pattern; ``project_psd`` clamps each quadrature point's d2Psi/dF2 to PSD (so the
+    assembled Hessian is PSD), otherwise the Hessian is exact. ``data`` is a fresh array."""
+    ws = _launch_hessian(model, x, 1 if project_psd else 0)
+    return _total(ws), _gradient(model, ws), model.pattern.matrix(ws.data.numpy().copy())
+
+
+def energy_gradient_hessians(model: P2Model, x) -> tuple[float, np.ndarray, sp.csr_matrix, sp.csr_matrix]:
+    """(energy, gradient, exact Hessian, PSD-projected Hessian) from one launch; for
+    :func:`simfab.solve.newton.minimize` pass ``(H_exact, H_psd)`` (exact steps where possible)."""
+    ws = _launch_hessian(model, x, 3)
+    return (_total(ws), _gradient(model, ws), model.pattern.matrix(ws.data.numpy().copy()),
+            model.pattern.matrix(ws.data2.numpy().copy()))
+
+
+def element_hessians(model: P2Model, x, *, project_psd: bool = True) -> np.ndarray:
+    """Per-element Hessian blocks (m, k*dim, k*dim) [N/m], dofs ordered (local node, axis)."""
+    ws = _prepare(model, x)
+    hess = wp.zeros((model.n_elements, ws.kk, ws.kk), dtype=wp.float64, device=model.device)
+    wp.launch(_hessian_kernel, dim=model.n_elements, device=model.device,
+              inputs=_common(ws) + [1 if project_psd else 0, 0, ws.dummy_slots],
+              outputs=[ws.energy, ws.det_F, ws.grad, hess, ws.dummy_data, ws.dummy_data])
+    return hess.numpy()
+
+
+def stress_hessian(F, mu: float, lam: float, *, mode: str = "exact") -> np.ndarray:
+    """d2Psi/dF2 (b, d^2, d^2) [Pa] of a batch of deformation gradients F (b, d, d), vec(F)
+    row-major; mode "exact", "project" (the kernels' projection) or "project_svd"."""
+    F = np.ascontiguousarray(F, dtype=np.float64)
+    d = F.shape[-1]
+    mat, amat = (wp.mat33d, _mat99d) if d == 3 else (wp.mat22d, _mat44d)
+    out = wp.zeros(F.shape[0], dtype=amat, device="cpu")
+    wp.launch(_stress_hessian_kernel, dim=F.shape[0], device="cpu",
+              inputs=[wp.array(F, dtype=mat, device="cpu"), wp.array(np.linalg.det(F), dtype=wp.float64, device="cpu"),
+                      float(mu), float(lam), _MODES[mode]], outputs=[out])
+    return out.numpy()
+
+
+def det_and_von_mises(model: P2Model, x) -> tuple[np.ndarray, np.ndarray]:
+    """(min det F (m,) [-], max von Mises stress (m,) [Pa]) over each element's quadrature points;
+    +inf stress where any det F <= 0 (formula: :func:`simfab.fem.stress.det_and_von_mises`)."""
+    ws = _prepare(model, x)
+    wp.launch(_stress_kernel, dim=model.n_elements, device=model.device,
+              inputs=[ws.x, ws.elements, ws.gN, ws.wq, ws.mu], outputs=[ws.det_F, ws.von_mises])
+    return ws.det_F.numpy().copy(), ws.von_mises.numpy().copy()
+
+
+def det_F(model: P2Model, x) -> np.ndarray:
+    """Smallest det F over each element's quadrature points (m,); <= 0 means inverted there."""
+    ws = _prepare(model, x)
+    wp.launch(_energy_kernel, dim=model.n_elements, device=model.device, inputs=_common(ws),
+              outputs=[ws.energy, ws.det_F])
+    return ws.det_F.numpy().copy()
