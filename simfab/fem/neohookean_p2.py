@@ -61,8 +61,6 @@ _vec12d = wp.types.vector(length=12, dtype=wp.float64)
 _vec30d = wp.types.vector(length=30, dtype=wp.float64)
 _mat44d = wp.types.matrix(shape=(4, 4), dtype=wp.float64)
 _mat99d = wp.types.matrix(shape=(9, 9), dtype=wp.float64)
-_mat12x4d = wp.types.matrix(shape=(12, 4), dtype=wp.float64)
-_mat30x9d = wp.types.matrix(shape=(30, 9), dtype=wp.float64)
 _mat12d = wp.types.matrix(shape=(12, 12), dtype=wp.float64)
 _mat30d = wp.types.matrix(shape=(30, 30), dtype=wp.float64)
 
@@ -106,22 +104,6 @@ def _zero_hess(F: wp.mat22d):  # noqa: F811
 
 
 @wp.func
-def _zero_contract(F: wp.mat33d):
-    return _mat30x9d()
-
-
-@wp.func
-def _zero_contract(F: wp.mat22d):  # noqa: F811
-    return _mat12x4d()
-
-
-@wp.func
-def _eps3(i: int, j: int, k: int):
-    """Levi-Civita symbol for indices in 0..2."""
-    return wp.float64((i - j) * (j - k) * (k - i)) * wp.float64(0.5)
-
-
-@wp.func
 def _dimi(M: wp.mat33d):
     return 3
 
@@ -142,47 +124,6 @@ def _outer_vec(A: Any, M: Any, c: wp.float64):
                 for l in range(d):
                     B[d * i + k, d * j + l] = B[d * i + k, d * j + l] + c * M[i, k] * M[j, l]
     return B
-
-
-@wp.func
-def _stress_hessian_exact(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
-    """Exact d2Psi/dF2 (9 x 9, vec(F) row-major) [Pa]."""
-    logJ = wp.log(J)
-    dPsi_dJ = (lam * logJ - mu) / J
-    d2 = (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)
-    A = _mat99d()
-    for r in range(9):
-        A[r, r] = mu
-    A = _outer_vec(A, J * wp.transpose(wp.inverse(F)), d2)
-    for i in range(3):
-        for j in range(3):
-            if i != j:
-                m = 3 - i - j
-                for k in range(3):
-                    for l in range(3):
-                        if k != l:
-                            p = 3 - k - l
-                            A[3 * i + k, 3 * j + l] = A[3 * i + k, 3 * j + l] + dPsi_dJ * _eps3(i, j, m) * _eps3(
-                                k, l, p) * F[m, p]
-    return A
-
-
-@wp.func
-def _stress_hessian_exact(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
-    """Exact d2Psi/dF2 (4 x 4, vec(F) row-major) [Pa]; d2J/dF_ik dF_jl = eps_ij eps_kl."""
-    logJ = wp.log(J)
-    dPsi_dJ = (lam * logJ - mu) / J
-    d2 = (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)
-    A = _mat44d()
-    for r in range(4):
-        A[r, r] = mu
-    A = _outer_vec(A, J * wp.transpose(wp.inverse(F)), d2)
-    # nonzero for i != j and k != l (index 2 i + k): eps_01 = 1, eps_10 = -1
-    A[0, 3] = A[0, 3] + dPsi_dJ  # (0,0), (1,1)
-    A[3, 0] = A[3, 0] + dPsi_dJ  # (1,1), (0,0)
-    A[1, 2] = A[1, 2] - dPsi_dJ  # (0,1), (1,0)
-    A[2, 1] = A[2, 1] - dPsi_dJ  # (1,0), (0,1)
-    return A
 
 
 @wp.func
@@ -251,83 +192,111 @@ def _stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.flo
 
 
 @wp.func
-def _project_twist(A: _mat99d, F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
-    """Exact A minus the negative part of its twist block (valid when dPsi/dJ <= 0): in the
-    orthonormal twist basis Q_i = R [e_i]x / sqrt 2 the block is T = mu I + dPsi/dJ S, S = R^T F."""
-    dPsi_dJ = (lam * wp.log(J) - mu) / J
-    I = wp.identity(n=3, dtype=wp.float64)
-    R = _polar_rotation3(F)
-    S = wp.transpose(R) * F
-    S = wp.float64(0.5) * (S + wp.transpose(S))
-    N = _negative_part_sym3(mu * I + dPsi_dJ * S)
-    B = A
-    if wp.ddot(N, N) > wp.float64(0.0):
-        Q0 = R * wp.skew(wp.vec3d(wp.float64(1.0), wp.float64(0.0), wp.float64(0.0)))
-        Q1 = R * wp.skew(wp.vec3d(wp.float64(0.0), wp.float64(1.0), wp.float64(0.0)))
-        Q2 = R * wp.skew(wp.vec3d(wp.float64(0.0), wp.float64(0.0), wp.float64(1.0)))
-        for r in range(9):
-            i = r // 3
-            k = r - 3 * i
-            qr = wp.vec3d(Q0[i, k], Q1[i, k], Q2[i, k])
-            for c in range(9):
-                j = c // 3
-                l = c - 3 * j
-                qc = wp.vec3d(Q0[j, l], Q1[j, l], Q2[j, l])
-                B[r, c] = B[r, c] - wp.float64(0.5) * wp.dot(qr, N * qc)
-    return B
-
-
-@wp.func
-def _project_twist(A: _mat44d, F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
-    """2D: the single twist mode R [[0, -1], [1, 0]] / sqrt 2 has eigenvalue t = mu + dPsi/dJ."""
-    t = mu + (lam * wp.log(J) - mu) / J
-    B = A
-    if t < wp.float64(0.0):
-        cr = F[0, 0] + F[1, 1]
-        sr = F[1, 0] - F[0, 1]
-        nr = wp.sqrt(cr * cr + sr * sr)
-        RJ = wp.mat22d(-sr, -cr, cr, -sr) / nr
-        B = _outer_vec(A, RJ, -wp.float64(0.5) * t)
-    return B
-
-
-@wp.func
-def _stress_hessian(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64, mode: int):
-    """d2Psi/dF2: exact (_EXACT), PSD-projected (_PROJECT: twist projection when dPsi/dJ <= 0,
-    else the SVD eigensystem), or PSD-projected always through the SVD (_PROJECT_SVD)."""
-    dPsi_dJ = (lam * wp.log(J) - mu) / J
-    if mode == _PROJECT_SVD or (mode == _PROJECT and dPsi_dJ > wp.float64(0.0)):
-        return _stress_hessian_svd(F, J, mu, lam)
-    A = _stress_hessian_exact(F, J, mu, lam)
-    if mode == _PROJECT:
-        return _project_twist(A, F, J, mu, lam)
-    return A
-
-
-@wp.func
-def _accumulate(K: Any, C0: Any, A: Any, gN: wp.array3d(dtype=Any), e: int, q: int, k: int, d: int,
-                w: wp.float64):
-    """K + w G_q^T A G_q (upper block triangle b >= a only): C[(a,i), (j,l)] = sum_kk A[(i,kk),
-    (j,l)] g_a[kk] first (k d x d^2), then K[(a,i), (b,j)] += w sum_l C[(a,i), (j,l)] g_b[l]."""
-    C = C0
+def _add_svd_route(K: Any, A: Any, gN: wp.array3d(dtype=Any), e: int, q: int, d: int, w: wp.float64):
+    """K + w G_q^T A G_q for a full stress Hessian A (d^2 x d^2): the rare dPsi/dJ > 0 route."""
+    Kn = K
+    k = gN.shape[2]
     for a in range(k):
         ga = gN[e, q, a]
-        for i in range(d):
-            for c in range(d * d):
-                acc = wp.float64(0.0)
-                for kk in range(d):
-                    acc += A[d * i + kk, c] * ga[kk]
-                C[d * a + i, c] = acc
-    Kn = K
-    for a in range(k):
         for b in range(a, k):
             gb = gN[e, q, b]
             for i in range(d):
                 for j in range(d):
                     acc = wp.float64(0.0)
-                    for l in range(d):
-                        acc += C[d * a + i, d * j + l] * gb[l]
+                    for kk in range(d):
+                        for l in range(d):
+                            acc += A[d * i + kk, d * j + l] * ga[kk] * gb[l]
                     Kn[d * a + i, d * b + j] = Kn[d * a + i, d * b + j] + w * acc
+    return Kn
+
+
+@wp.func
+def _add_qp_hessian(K: _mat30d, F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64, w: wp.float64,
+                    mode: int, gN: wp.array3d(dtype=wp.vec3d), e: int, q: int):
+    """K + w * (quadrature point q's Hessian) in the blocks b >= a (10-node tet, 3D).
+
+    Exact block (a, b): mu (g_a . g_b) I + d2Psi/dJ2 gamma_a gamma_b^T - dPsi/dJ [F (g_a x g_b)]x,
+    gamma_a = cof(F) g_a (from d2J/dF_ik dF_jl = eps_ijm eps_klp F_mp contracted with g_a, g_b).
+    Projection with dPsi/dJ <= 0: minus 1/2 P_a N P_b^T, P_a = R [g_a]x = [R g_a]x R (the twist
+    modes R [e_i]x / sqrt 2 seen at node a; N the negative part of T = mu I + dPsi/dJ S), as
+    in the linear kernel's direct route. With dPsi/dJ > 0 (or _PROJECT_SVD): the SVD eigensystem.
+    """
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    if mode == _PROJECT_SVD or (mode == _PROJECT and dPsi_dJ > wp.float64(0.0)):
+        return _add_svd_route(K, _stress_hessian_svd(F, J, mu, lam), gN, e, q, 3, w)
+    d2 = (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)
+    I = wp.identity(n=3, dtype=wp.float64)
+    cof = J * wp.transpose(wp.inverse(F))
+    project = 0
+    R = I
+    Nt = wp.mat33d()
+    if mode == _PROJECT:
+        R = _polar_rotation3(F)
+        S = wp.transpose(R) * F
+        S = wp.float64(0.5) * (S + wp.transpose(S))
+        N = _negative_part_sym3(mu * I + dPsi_dJ * S)
+        if wp.ddot(N, N) > wp.float64(0.0):
+            project = 1
+            Nt = wp.float64(0.5) * w * (R * N * wp.transpose(R))
+    Kn = K
+    k = gN.shape[2]
+    for a in range(k):
+        ga = gN[e, q, a]
+        ca = w * (cof * ga)
+        Ra = wp.skew(R * ga)
+        for b in range(a, k):
+            gb = gN[e, q, b]
+            B = (w * mu * wp.dot(ga, gb)) * I + d2 * wp.outer(ca, cof * gb) - (w * dPsi_dJ) * wp.skew(
+                F * wp.cross(ga, gb))
+            if project != 0:
+                B = B + Ra * Nt * wp.skew(R * gb)  # - [R g_a]x Nt [R g_b]x^T, [v]x^T = -[v]x
+            for i in range(3):
+                for j in range(3):
+                    Kn[3 * a + i, 3 * b + j] = Kn[3 * a + i, 3 * b + j] + B[i, j]
+    return Kn
+
+
+@wp.func
+def _add_qp_hessian(K: _mat12d, F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64,  # noqa: F811
+                    w: wp.float64, mode: int, gN: wp.array3d(dtype=wp.vec2d), e: int, q: int):
+    """2D (6-node triangle): exact block mu (g_a . g_b) I + d2Psi/dJ2 gamma_a gamma_b^T +
+    dPsi/dJ (g_a x g_b) [[0, 1], [-1, 0]] (d2J/dF_ik dF_jl = eps_ij eps_kl); projection with
+    dPsi/dJ <= 0 removes the twist mode R [[0, -1], [1, 0]] / sqrt 2 when t = mu + dPsi/dJ < 0:
+    minus t/2 (RJ g_a)(RJ g_b)^T."""
+    zero = wp.float64(0.0)
+    one = wp.float64(1.0)
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    if mode == _PROJECT_SVD or (mode == _PROJECT and dPsi_dJ > zero):
+        return _add_svd_route(K, _stress_hessian_svd(F, J, mu, lam), gN, e, q, 2, w)
+    d2 = (mu + lam * (one - logJ)) / (J * J)
+    I = wp.identity(n=2, dtype=wp.float64)
+    E2 = wp.mat22d(zero, one, -one, zero)
+    cof = J * wp.transpose(wp.inverse(F))
+    t = mu + dPsi_dJ
+    project = 0
+    RJ = wp.mat22d()
+    if mode == _PROJECT and t < zero:
+        project = 1
+        cr = F[0, 0] + F[1, 1]
+        sr = F[1, 0] - F[0, 1]
+        RJ = wp.mat22d(-sr, -cr, cr, -sr) / wp.sqrt(cr * cr + sr * sr)
+    Kn = K
+    k = gN.shape[2]
+    for a in range(k):
+        ga = gN[e, q, a]
+        ca = w * (cof * ga)
+        ra = RJ * ga
+        for b in range(a, k):
+            gb = gN[e, q, b]
+            B = (w * mu * wp.dot(ga, gb)) * I + d2 * wp.outer(ca, cof * gb) + (
+                w * dPsi_dJ * (ga[0] * gb[1] - ga[1] * gb[0])) * E2
+            if project != 0:
+                B = B - (wp.float64(0.5) * w * t) * wp.outer(ra, RJ * gb)
+            for i in range(2):
+                for j in range(2):
+                    Kn[2 * a + i, 2 * b + j] = Kn[2 * a + i, 2 * b + j] + B[i, j]
     return Kn
 
 
@@ -418,7 +387,6 @@ def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32)
     F0 = _F_at(x, elements, gN, e, 0)
     K = _zero_hess(F0)
     K2 = _zero_hess(F0)
-    C0 = _zero_contract(F0)
     for q in range(nq):
         F = _F_at(x, elements, gN, e, q)
         J = wp.determinant(F)
@@ -430,9 +398,9 @@ def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32)
             f = w * (P * gN[e, q, a])
             for i in range(d):
                 g[d * a + i] = g[d * a + i] + f[i]
-        if both != 0:
-            K2 = _accumulate(K2, C0, _stress_hessian(F, J, mu, lam, _EXACT), gN, e, q, k, d, w)
-        K = _accumulate(K, C0, _stress_hessian(F, J, mu, lam, mode), gN, e, q, k, d, w)
+        if both != 0:  # exact Hessian into K2
+            K2 = _add_qp_hessian(K2, F, J, mu, lam, w, _EXACT, gN, e, q)
+        K = _add_qp_hessian(K, F, J, mu, lam, w, mode, gN, e, q)
     energy[e] = E
     grad[e] = g
     kd = k * _dimi(F0)
@@ -471,10 +439,10 @@ def _stress_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
 
 @wp.kernel
 def _stress_hessian_kernel(F: wp.array(dtype=Any), J: wp.array(dtype=wp.float64), mu: wp.float64, lam: wp.float64,
-                           mode: int, out: wp.array(dtype=Any)):
-    """d2Psi/dF2 of a batch of deformation gradients (for the tests and the benchmark)."""
+                           out: wp.array(dtype=Any)):
+    """PSD-projected d2Psi/dF2 from the SVD eigensystem, for a batch of F (tests)."""
     t = wp.tid()
-    out[t] = _stress_hessian(F[t], J[t], mu, lam, mode)
+    out[t] = _stress_hessian_svd(F[t], J[t], mu, lam)
 
 
 def _declare_overloads():
@@ -492,9 +460,6 @@ _declare_overloads()
 # ----------------------------------------------------------------------------------------------
 # host side
 # ----------------------------------------------------------------------------------------------
-_MODES = {"exact": 0, "project": 1, "project_svd": 2}
-
-
 class _Workspace:
     """Device copies of the model arrays and reusable output buffers (per model)."""
 
@@ -619,26 +584,27 @@ def energy_gradient_hessians(model: P2Model, x) -> tuple[float, np.ndarray, sp.c
             model.pattern.matrix(ws.data2.numpy().copy()))
 
 
-def element_hessians(model: P2Model, x, *, project_psd: bool = True) -> np.ndarray:
-    """Per-element Hessian blocks (m, k*dim, k*dim) [N/m], dofs ordered (local node, axis)."""
+def element_hessians(model: P2Model, x, *, project_psd: bool = True, _svd: bool = False) -> np.ndarray:
+    """Per-element Hessian blocks (m, k*dim, k*dim) [N/m], dofs ordered (local node, axis);
+    ``_svd``: projected through the full SVD eigensystem at every point (reference route, tests)."""
     ws = _prepare(model, x)
     hess = wp.zeros((model.n_elements, ws.kk, ws.kk), dtype=wp.float64, device=model.device)
     wp.launch(_hessian_kernel, dim=model.n_elements, device=model.device,
-              inputs=_common(ws) + [1 if project_psd else 0, 0, ws.dummy_slots],
+              inputs=_common(ws) + [2 if _svd else (1 if project_psd else 0), 0, ws.dummy_slots],
               outputs=[ws.energy, ws.det_F, ws.grad, hess, ws.dummy_data, ws.dummy_data])
     return hess.numpy()
 
 
-def stress_hessian(F, mu: float, lam: float, *, mode: str = "exact") -> np.ndarray:
-    """d2Psi/dF2 (b, d^2, d^2) [Pa] of a batch of deformation gradients F (b, d, d), vec(F)
-    row-major; mode "exact", "project" (the kernels' projection) or "project_svd"."""
+def _projected_stress_hessian(F, mu: float, lam: float) -> np.ndarray:
+    """d2Psi/dF2 with clamped eigenvalues (b, d^2, d^2) [Pa] of a batch F (b, d, d), vec(F)
+    row-major, from the kernels' analytic eigensystem (the SVD route; for the tests)."""
     F = np.ascontiguousarray(F, dtype=np.float64)
     d = F.shape[-1]
     mat, amat = (wp.mat33d, _mat99d) if d == 3 else (wp.mat22d, _mat44d)
     out = wp.zeros(F.shape[0], dtype=amat, device="cpu")
     wp.launch(_stress_hessian_kernel, dim=F.shape[0], device="cpu",
               inputs=[wp.array(F, dtype=mat, device="cpu"), wp.array(np.linalg.det(F), dtype=wp.float64, device="cpu"),
-                      float(mu), float(lam), _MODES[mode]], outputs=[out])
+                      wp.float64(mu), wp.float64(lam)], outputs=[out])
     return out.numpy()
 
 
