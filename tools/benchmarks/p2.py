@@ -1,0 +1,149 @@
+"""P2 vs linear elements: cantilever convergence (accuracy per second) and kernel cost per element.
+
+``python tools/bench.py p2 [--dims 2,3] [--levels3 ...] [--no-cost]``
+
+Cantilever (simfab.fem.cantilever): L/h = 10, clamped, tip shear load for a 1e-3 L deflection,
+n cells through the height (structured: 6-tet cubes / two triangles per square). Per dimension,
+element order and level: elements, free dofs, delta / Timoshenko, the error against the
+mesh-converged value (Richardson extrapolation of the three finest P2 levels; its difference from
+Timoshenko is the clamp's restraint of the Poisson contraction, which beam theory ignores), the
+static-solve seconds (Newton with exact-first Hessians, CHOLMOD) and Newton iterations. Summary per
+dimension: seconds to get within 2% of the converged value for each order (None: not reached
+at the levels run) and linear's error at P2's time to 2%.
+
+Cost: median wall time per element [us] of ``energy_gradient`` and ``energy_gradient_hessian``
+(PSD-projected, assembled into CSR) for linear and P2 (both quadrature rules) on the same corner
+mesh (3D: 6-tet box of 3840 tets; 2D: 1280 triangles), slightly stretched (F = 1.01 I).
+No published reference figure exists for this comparison (issue 15 quotes 50/79/93% of
+Timoshenko's deflection for 2/4/8 linear tets through the thickness).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+TARGET = 0.02  # accuracy target of the summary: within 2% of the converged deflection
+
+
+def _median_us_per_element(fn, m: int, repeat: int = 5) -> float:
+    fn()
+    t = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        t.append(time.perf_counter() - t0)
+    return round(float(np.median(t)) / m * 1e6, 3)
+
+
+def _cost(dim: int) -> dict:
+    from simfab.fem import neohookean as nh1
+    from simfab.fem import neohookean_p2 as nh2
+    from simfab.fem.cantilever import cantilever_model
+    from simfab.fem.p2 import RULES, to_p2
+
+    lin = cantilever_model(dim, 4 if dim == 3 else 8)
+    x1 = lin.rest * 1.01
+    out = {"elements": lin.n_elements,
+           "linear": {"grad_us": _median_us_per_element(lambda: nh1.energy_gradient(lin, x1), lin.n_elements),
+                      "hess_us": _median_us_per_element(lambda: nh1.energy_gradient_hessian(lin, x1), lin.n_elements)}}
+    for (d, degree) in sorted(RULES):
+        if d != dim:
+            continue
+        p2 = to_p2(lin, degree=degree)
+        x2 = p2.rest * 1.01
+        out[f"p2_degree{degree}"] = {
+            "quadrature_points": p2.n_quadrature,
+            "grad_us": _median_us_per_element(lambda: nh2.energy_gradient(p2, x2), p2.n_elements),
+            "hess_us": _median_us_per_element(lambda: nh2.energy_gradient_hessian(p2, x2), p2.n_elements)}
+        out[f"p2_degree{degree}"]["hess_ratio_to_linear"] = round(
+            out[f"p2_degree{degree}"]["hess_us"] / out["linear"]["hess_us"], 1)
+    return out
+
+
+def _richardson(levels: list[int], values: list[float]) -> float:
+    """Extrapolated limit of values at cell counts n (h ~ 1/n), from the three finest levels with
+    the observed order (falls back to the finest value when the sequence is not monotone)."""
+    (n1, n2, n3), (v1, v2, v3) = levels[-3:], values[-3:]
+    d1, d2 = v2 - v1, v3 - v2
+    if d1 == 0 or d2 / d1 <= 0 or d2 / d1 >= 1:
+        return v3
+    r = n2 / n1
+    p = np.log(d1 / d2) / np.log(r)  # assumes n3 / n2 == n2 / n1
+    return v3 + d2 / ((n3 / n2) ** p - 1)
+
+
+def _study(dim: int, levels1: list[int], levels2: list[int], degree: int | None) -> dict:
+    from simfab.fem.cantilever import cantilever_model, solve_cantilever
+
+    rows = {1: [], 2: []}
+    solve_cantilever(cantilever_model(dim, 1, order=2, degree=degree))  # warm-up: kernel loads
+    solve_cantilever(cantilever_model(dim, 2, order=1))
+    for order, levels in ((1, levels1), (2, levels2)):
+        for n in levels:
+            model = cantilever_model(dim, n, order=order, degree=degree)
+            r = solve_cantilever(model)
+            rows[order].append(dict(order=order, cells_through=n, elements=model.n_elements, dofs=r.dofs,
+                                    ratio_timoshenko=r.ratio, seconds=r.seconds, newton_iterations=r.iterations))
+    p2 = rows[2]
+    converged = _richardson([r["cells_through"] for r in p2], [r["ratio_timoshenko"] for r in p2])
+    summary = {"converged_over_timoshenko": round(converged, 5)}
+    for order in (1, 2):
+        for r in rows[order]:
+            r["error_vs_converged"] = r["ratio_timoshenko"] / converged - 1
+        ok = [r["seconds"] for r in rows[order] if abs(r["error_vs_converged"]) <= TARGET]
+        summary[f"{'linear' if order == 1 else 'p2'}_seconds_to_2pct"] = round(min(ok), 4) if ok else None
+    t2 = summary["p2_seconds_to_2pct"]
+    if t2 is not None:
+        # linear's best error among its runs that took no longer than P2 at 2%
+        errs = [abs(r["error_vs_converged"]) for r in rows[1] if r["seconds"] <= t2]
+        summary["linear_error_at_p2_time"] = round(min(errs), 4) if errs else None
+    t1 = summary["linear_seconds_to_2pct"]
+    summary["speedup_to_2pct"] = round(t1 / t2, 1) if (t1 and t2) else None
+    table = []
+    for r in rows[1] + rows[2]:
+        table.append({k: (round(v, 5) if isinstance(v, float) else v) for k, v in r.items()})
+    return {"rows": table, "summary": summary}
+
+
+def _print_table(study: dict, dim: int) -> None:
+    import sys
+
+    print(f"{dim}D cantilever, L/h = 10 (delta / Timoshenko; error vs converged {study['summary']['converged_over_timoshenko']})",
+          file=sys.stderr)
+    print(f"{'order':>5} {'n':>3} {'elements':>8} {'dofs':>7} {'delta/Tim':>9} {'error':>8} {'solve s':>8} {'its':>3}",
+          file=sys.stderr)
+    for r in study["rows"]:
+        print(f"{'P' + str(r['order']):>5} {r['cells_through']:>3} {r['elements']:>8} {r['dofs']:>7} "
+              f"{r['ratio_timoshenko']:>9.4f} {100 * r['error_vs_converged']:>7.2f}% {r['seconds']:>8.3f} "
+              f"{r['newton_iterations']:>3}", file=sys.stderr)
+
+
+def run(argv) -> dict:
+    ap = argparse.ArgumentParser(prog="bench p2")
+    ap.add_argument("--dims", default="2,3")
+    ap.add_argument("--levels1-2d", default="1,2,4,8,16", help="linear, 2D: cells through the height")
+    ap.add_argument("--levels2-2d", default="1,2,4,8", help="P2, 2D (ratio 2 between the last three)")
+    ap.add_argument("--levels1-3d", default="1,2,3,4,6,8", help="linear, 3D")
+    ap.add_argument("--levels2-3d", default="1,2,4", help="P2, 3D (ratio 2 between the last three)")
+    ap.add_argument("--degree", type=int, default=None, help="P2 quadrature degree (default: the model default)")
+    ap.add_argument("--no-cost", action="store_true", help="skip the per-element kernel cost")
+    ap.add_argument("--table", action="store_true", help="also print readable tables on stderr")
+    a = ap.parse_args(argv)
+    from simfab.fem.p2 import DEFAULT_DEGREE
+
+    out = {"benchmark": "p2", "target_error": TARGET}
+    for dim in (int(d) for d in a.dims.split(",")):
+        parse = lambda s: [int(v) for v in s.split(",")]  # noqa: E731
+        l1 = parse(getattr(a, f"levels1_{dim}d"))
+        l2 = parse(getattr(a, f"levels2_{dim}d"))
+        study = _study(dim, l1, l2, a.degree)
+        study["quadrature_degree"] = a.degree or DEFAULT_DEGREE[dim]
+        if a.table:
+            _print_table(study, dim)
+        if not a.no_cost:
+            study["cost_per_element"] = _cost(dim)
+        out[f"cantilever_{dim}d"] = study
+    return out
