@@ -25,16 +25,17 @@ over the element and the energy is integrated by quadrature (see :data:`RULES`).
 Quadrature (all rules have positive weights, so the sum of per-point PSD-projected stress
 Hessians is PSD):
 
-    degree 2: 3-point triangle / 4-point tet. Exact for the small-strain stiffness of affine P2
-        (grad N . grad N is quadratic) and rank-sufficient (3 x 3 >= 12 - 3 and 4 x 6 >= 30 - 6
-        strain samples vs deformation modes), and by Strang's lemma degree 2p - 2 = 2 keeps the
-        optimal convergence order. Not exact beyond small strain: the geometric stiffness
-        (stress x grad N grad N) is cubic and Psi(F) is not polynomial.
-    degree 4 (triangle, 6 points, Dunavant) / degree 5 (tet, 14 points, Walkington): exact for
-        the geometric stiffness of a linear stress field and for the quartic ||F||^4-type terms of
-        the energy's expansion; samples det F at more points (inversion is checked at the
-        quadrature points only). Default: this rule (accuracy first; its cost is measured in
-        :mod:`simfab.fem.neohookean_p2`'s docstring).
+    degree 2 (default): 3-point triangle / 4-point tet. Exact for the small-strain stiffness of
+        affine P2 (grad N . grad N is quadratic, d2Psi/dF2 constant) and rank-sufficient (3 x 3 >=
+        12 - 3 and 4 x 6 >= 30 - 6 strain samples vs deformation modes: no spurious zero-energy
+        modes), and by Strang's lemma degree 2p - 2 = 2 keeps the optimal convergence order. Not
+        exact beyond small strain (the geometric stiffness, stress x grad N grad N, is cubic and
+        Psi(F) is not polynomial), but measured on a cantilever bent to 30% tip deflection
+        (``python tools/bench.py p2``, "large_deflection") it differs from the degree 4/5 rules by
+        < 0.05% of the deflection, at 0.5-0.6x their Hessian cost.
+    degree 4 (triangle, 6 points, Dunavant) / degree 5 (tet, 14 points, Walkington): exact for the
+        geometric stiffness of a linear stress field; samples det F at more points (inversion is
+        checked at the quadrature points only), for strongly nonlinear states where that matters.
 """
 
 from __future__ import annotations
@@ -92,7 +93,7 @@ RULES = {
                    (_orbit_tet4(0.3108859192633006), 6 * 0.01878132095300264),
                    (_orbit_tet6(0.0455037041256496), 6 * 0.007091003462846911)]),
 }
-DEFAULT_DEGREE = {2: 4, 3: 5}
+DEFAULT_DEGREE = {2: 2, 3: 2}
 
 
 def shape_functions(L: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:

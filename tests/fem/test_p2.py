@@ -119,8 +119,8 @@ def test_p2_model_structure_midpoints_and_boundary(dim):
 # ----------------------------------------------------------------------------------------------
 # derivatives
 # ----------------------------------------------------------------------------------------------
-def _small_mesh(dim, rng):
-    """Two (2D) / three (3D) perturbed simplices sharing facets, lifted to P2, random size."""
+def _small_mesh(dim, rng, degree=None):
+    """Two perturbed simplices sharing a facet, lifted to P2, random size."""
     if dim == 2:
         P = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
         T = np.array([[0, 1, 2], [0, 2, 3]])
@@ -128,7 +128,7 @@ def _small_mesh(dim, rng):
         P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], float)
         T = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
     P = (P + 0.1 * rng.standard_normal(P.shape)) * rng.uniform(0.5, 2.0)
-    return make_p2_model(P, T, MAT, thickness=0.3)
+    return make_p2_model(P, T, MAT, thickness=0.3, degree=degree)
 
 
 def _rotation(dim, rng):
@@ -170,7 +170,8 @@ def _fd(model, x, eps):
 @pytest.mark.parametrize("kind", ["general", "compressed", "expanded"])
 def test_gradient_and_hessian_match_finite_differences(dim, kind):
     rng = np.random.default_rng(10 * dim + len(kind))
-    model = _small_mesh(dim, rng)
+    # the general state with the higher-degree rule (same kernels, other points and weights)
+    model = _small_mesh(dim, rng, degree=max(d for (dd, d) in RULES if dd == dim) if kind == "general" else None)
     x = _deform(model, rng, kind)
     E, g, H = nh.energy_gradient_hessian(model, x, project_psd=False)
     assert E == pytest.approx(nh.energy(model, x), rel=1e-14)
@@ -240,6 +241,22 @@ def test_projected_stress_hessian_is_the_eigenvalue_clamp_of_the_exact_one(dim):
         w, V = np.linalg.eigh(0.5 * (A + A.T))
         ref = (V * np.maximum(w, 0)) @ V.T
         np.testing.assert_allclose(A_proj, ref, atol=1e-7 * np.abs(A).max())
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_quadrature_rules_agree_exactly_on_the_small_strain_stiffness(dim):
+    # at rest d2Psi/dF2 is constant and grad N . grad N quadratic: every rule of degree >= 2 gives
+    # the same stiffness matrix to round-off; away from rest they differ (the default degree-2 rule
+    # is then an approximation; its size is measured in tools/benchmarks/p2.py)
+    rng = np.random.default_rng(90 + dim)
+    lin = _small_mesh(dim, rng).linear
+    degrees = sorted(d for (dd, d) in RULES if dd == dim)
+    models = [to_p2(lin, degree=d) for d in degrees]
+    K = [nh.energy_gradient_hessian(m, m.rest)[2].toarray() for m in models]
+    np.testing.assert_allclose(K[1], K[0], atol=1e-12 * np.abs(K[0]).max())
+    x = _deform(models[0], rng, "general")
+    K = [nh.energy_gradient_hessian(m, x, project_psd=False)[2].toarray() for m in models]
+    assert np.abs(K[1] - K[0]).max() > 1e-4 * np.abs(K[0]).max()
 
 
 @pytest.mark.parametrize("dim", [2, 3])

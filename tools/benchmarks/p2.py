@@ -11,6 +11,12 @@ static-solve seconds (Newton with exact-first Hessians, CHOLMOD) and Newton iter
 dimension: seconds to get within 2% of the converged value for each order (None: not reached
 at the levels run) and linear's error at P2's time to 2%.
 
+Large deflection ("large_deflection"): the same beam with P2 (1 and 2 cells through the height)
+under alpha = P L^2 / (E' I) = 1 (tip deflection ~30% of L), for each quadrature rule: tip
+deflection over the inextensible elastica's 0.30172 L (Bisshopp & Drucker; shear adds ~+0.5% at
+L/h = 10), Newton iterations and seconds: how much the higher-degree rule changes a strongly
+nonlinear answer, for its cost.
+
 Cost: median wall time per element [us] of ``energy_gradient`` and ``energy_gradient_hessian``
 (PSD-projected, assembled into CSR) for linear and P2 (both quadrature rules) on the same corner
 mesh (3D: 6-tet box of 3840 tets; 2D: 1280 triangles), slightly stretched (F = 1.01 I).
@@ -108,6 +114,20 @@ def _study(dim: int, levels1: list[int], levels2: list[int], degree: int | None)
     return {"rows": table, "summary": summary}
 
 
+def _large_deflection(dim: int) -> list[dict]:
+    from simfab.fem.cantilever import cantilever_model, solve_cantilever
+    from simfab.fem.p2 import RULES
+
+    elastica = 0.3017207738  # tip deflection / L at alpha = 1 (tests/fem/test_fem_statics.py shoots it)
+    rows = []
+    for n in (1, 2):
+        for degree in sorted(d for (dd, d) in RULES if dd == dim):
+            r = solve_cantilever(cantilever_model(dim, n, order=2, degree=degree), rel_deflection=1.0 / 3.0)
+            rows.append(dict(cells_through=n, quadrature_degree=degree, delta_over_elastica=round(r.delta / elastica, 5),
+                             newton_iterations=r.iterations, seconds=round(r.seconds, 4)))
+    return rows
+
+
 def _print_table(study: dict, dim: int) -> None:
     import sys
 
@@ -143,6 +163,7 @@ def run(argv) -> dict:
         study["quadrature_degree"] = a.degree or DEFAULT_DEGREE[dim]
         if a.table:
             _print_table(study, dim)
+        study["large_deflection"] = _large_deflection(dim)
         if not a.no_cost:
             study["cost_per_element"] = _cost(dim)
         out[f"cantilever_{dim}d"] = study
