@@ -391,3 +391,52 @@ def test_cantilever_p2_matches_timoshenko_where_linear_locks(dim):
     assert r1.ratio < r2.ratio  # converges from below (stiff), as a conforming displacement method must
     assert lin.ratio < 0.6
     assert r2.iterations <= 4
+
+
+# ----------------------------------------------------------------------------------------------
+# stress, and the benchmark's output
+# ----------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("dim", [2, 3])
+def test_det_and_von_mises_are_min_and_max_over_quadrature_points(dim):
+    rng = np.random.default_rng(60 + dim)
+    model = _block(dim)
+    # affine: every quadrature point has the linear element's F -> identical figures
+    A = np.eye(dim) + 0.1 * rng.standard_normal((dim, dim))
+    x = model.rest @ A.T
+    J2, vm2 = nh.det_and_von_mises(model, x)
+    J1, vm1 = nh1.det_and_von_mises(model.linear, x[: model.n_corners])
+    np.testing.assert_allclose(J2, J1, rtol=1e-12)
+    np.testing.assert_allclose(vm2, vm1, rtol=1e-10)
+    # general smooth field: min det F and max von Mises over the points, against NumPy
+    x = _deform(model, rng, "general")
+    Fq = np.einsum("mqad,mai->mqid", model.grad_N, x[model.elements])
+    J = np.linalg.det(Fq)
+    C = Fq @ np.swapaxes(Fq, -1, -2) - np.eye(dim)
+    tr = np.einsum("mqii->mq", C)
+    vm = np.sqrt(1.5 * np.maximum(np.einsum("mqij,mqij->mq", C, C) - tr**2 / 3, 0)) * model.mu[:, None] / J
+    J2, vm2 = nh.det_and_von_mises(model, x)
+    np.testing.assert_allclose(J2, J.min(1), rtol=1e-12)
+    np.testing.assert_allclose(vm2, vm.max(1), rtol=1e-10)
+    assert np.any(vm.max(1) > 1.05 * vm.min(1))  # the points differ: max is not just any point
+    np.testing.assert_allclose(nh.det_F(model, x), J.min(1), rtol=1e-12)
+
+
+def test_benchmark_reports_p2_ahead_of_linear():
+    # the benchmark's study at small levels (2D only): the JSON it prints has the figures the
+    # README quotes, P2 within 2% at one cell through the height while linear is not
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
+    from benchmarks import p2 as bench
+
+    out = bench.run(["--dims", "2", "--levels1-2d", "1,2", "--levels2-2d", "1,2,4", "--no-cost"])
+    study = out["cantilever_2d"]
+    rows = {(r["order"], r["cells_through"]): r for r in study["rows"]}
+    assert abs(rows[(2, 1)]["error_vs_converged"]) < 0.02
+    assert rows[(1, 2)]["error_vs_converged"] < -0.3
+    assert study["summary"]["p2_seconds_to_2pct"] is not None
+    assert study["summary"]["linear_seconds_to_2pct"] is None
+    assert 0.99 < study["summary"]["converged_over_timoshenko"] < 1.0
+    ld = study["large_deflection"]
+    assert len(ld) == 4 and all(0.98 < r["delta_over_elastica"] < 1.02 for r in ld)
