@@ -31,7 +31,8 @@ SVD eigensystem with clamped eigenvalues.
 
 Inversion: the energy is +inf when J <= 0 at any quadrature point of any element; such an element
 contributes nothing to the gradient and Hessian (not meaningful then). Inversion between the
-quadrature points is not detected. :func:`det_F` reports the smallest J over each element's
+quadrature points is not seen by the energy; :func:`simfab.fem.p2.det_F_lower_bound` bounds det F
+over whole elements (Bernstein coefficients) for a stricter admissibility test. :func:`det_F` reports the smallest J over each element's
 quadrature points and :func:`det_and_von_mises` the largest von Mises stress over them
 (conservative for inversion and yield checks).
 

@@ -20,7 +20,9 @@ Shape functions in barycentric coordinates L_0..L_d of the (affine) element:
 
 Their gradients are linear in X, ``grad N = sum_i dN/dL_i grad L_i`` with constant ``grad L``
 (rows of Dm^-1 for i = 1..d, minus their sum for i = 0), so F = sum_a x_a (x) grad N_a is linear
-over the element and the energy is integrated by quadrature (see :data:`RULES`).
+over the element and the energy is integrated by quadrature (see :data:`RULES`). det F is then a
+polynomial of degree dim over the element: :func:`det_F_lower_bound` bounds it from below
+everywhere (not just at the quadrature points) through its Bernstein coefficients.
 
 Quadrature (all rules have positive weights, so the sum of per-point PSD-projected stress
 Hessians is PSD):
@@ -40,6 +42,7 @@ Hessians is PSD):
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -233,6 +236,47 @@ class P2Model:
         return np.einsum("qa,mad->mqd", N, self.check_positions(x)[self.elements])
 
 
+def corner_gradients(model: P2Model, x) -> np.ndarray:
+    """F at the corners of every element (m, dim+1, dim, dim) [-]: F is affine over a P2 element,
+    F(L) = sum_i L_i F_i, so these determine it everywhere."""
+    x = model.check_positions(x)
+    dim = model.dim
+    _, dNdL = shape_functions(np.eye(dim + 1), dim)  # (dim+1 corners, k, dim+1)
+    gradL = np.concatenate([-model.Dm_inv.sum(axis=1, keepdims=True), model.Dm_inv], axis=1)  # (m, dim+1, dim)
+    grad_N = np.einsum("cal,mld->mcad", dNdL, gradL)
+    return np.einsum("mai,mcad->mcid", x[model.elements], grad_N)
+
+
+def det_F_lower_bound(model: P2Model, x) -> np.ndarray:
+    """A guaranteed lower bound (m,) of det F over each whole element (not just its quadrature
+    points): the smallest Bernstein coefficient of J(L) = det(sum_i L_i F_i), a homogeneous
+    polynomial of degree dim in the barycentrics (Bernstein polynomials are non-negative and sum
+    to 1, so J >= min coefficient; equal to J where J is constant, e.g. affine states).
+
+    Coefficients: the symmetric multilinear form D of det at the corner gradients F_i: b_(ii..i) =
+    det F_i, 2D b_ij = D(F_i, F_j) = (det(F_i + F_j) - det F_i - det F_j) / 2, 3D b_ijk = D(F_i, F_j,
+    F_k) by polarization, (det(A+B+C) - det(A+B) - det(A+C) - det(B+C) + det A + det B + det C) / 6.
+    A bound > 0 proves the element is nowhere inverted (use it as the admissibility test of a
+    line search where elements bend strongly); <= 0 is conservative (J may still be positive).
+    """
+    Fc = corner_gradients(model, x)
+    det = np.linalg.det
+    nb = model.dim + 1
+    coeffs = [det(Fc[:, i]) for i in range(nb)]
+    if model.dim == 2:
+        for i, j in itertools.combinations(range(nb), 2):
+            coeffs.append(0.5 * (det(Fc[:, i] + Fc[:, j]) - coeffs[i] - coeffs[j]))
+    else:
+        def D(A, B, C):
+            return (det(A + B + C) - det(A + B) - det(A + C) - det(B + C) + det(A) + det(B) + det(C)) / 6.0
+
+        for i, j in itertools.permutations(range(nb), 2):
+            coeffs.append(D(Fc[:, i], Fc[:, i], Fc[:, j]))
+        for i, j, k in itertools.combinations(range(nb), 3):
+            coeffs.append(D(Fc[:, i], Fc[:, j], Fc[:, k]))
+    return np.min(np.stack(coeffs, axis=1), axis=1)
+
+
 def to_p2(model: FemModel, *, degree: int | None = None) -> P2Model:
     """The P2 counterpart of a linear model: same corners, material, thickness and device, one
     midpoint node per edge.
@@ -240,6 +284,8 @@ def to_p2(model: FemModel, *, degree: int | None = None) -> P2Model:
     degree : quadrature degree, one of :data:`RULES` for the dimension (default
         :data:`DEFAULT_DEGREE`)
     """
+    if not isinstance(model, FemModel):
+        raise InputError(f"to_p2 needs a linear FemModel, got {type(model).__name__}", where="model")
     dim = model.dim
     if degree is None:
         degree = DEFAULT_DEGREE[dim]
