@@ -230,6 +230,15 @@ class P2Model:
                              where="x")
         return np.vstack([xc, 0.5 * (xc[self.edges[:, 0]] + xc[self.edges[:, 1]])])
 
+    def sub_elements(self) -> np.ndarray:
+        """Linear simplices on the same nodes (4m triangles / 8m tets, positively oriented): the red
+        refinement of the corner mesh (:func:`simfab.fem.subdivide.subdivide`, whose midpoint
+        numbering this model shares), e.g. to write a P2 state as a linear mesh (USD) or to run
+        linear-mesh geometry (contact, stress plots) on it."""
+        from simfab.fem.subdivide import subdivide
+
+        return subdivide(self.linear.rest, self.corner_elements)[1].astype(np.int32)
+
     def interpolate(self, x, L) -> np.ndarray:
         """Deformed positions at barycentric points L (q, dim+1) of every element: (m, q, dim)."""
         N, _ = shape_functions(np.atleast_2d(L), self.dim)

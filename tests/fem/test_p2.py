@@ -111,6 +111,15 @@ def test_p2_model_structure_midpoints_and_boundary(dim):
         assert np.linalg.norm(nrm, axis=1).sum() == pytest.approx(2 * (2 + 2 + 1), rel=1e-12)
     on_box = np.any(np.isclose(m.rest, 0) | np.isclose(m.rest, m.rest.max(0)), axis=1)
     np.testing.assert_array_equal(m.boundary_vertices, np.flatnonzero(on_box))
+    # the node numbering is the red refinement's (simfab.fem.subdivide): its sub-simplices live on
+    # the same nodes and tile the element volume
+    from simfab.fem.subdivide import subdivide
+
+    X2, sub, edges = subdivide(lin.rest, lin.elements)
+    np.testing.assert_array_equal(m.edges, edges)
+    np.testing.assert_array_equal(m.rest, X2)
+    np.testing.assert_array_equal(m.sub_elements(), sub)
+    assert make_model(m.rest, m.sub_elements(), MAT, thickness=0.1).volume.sum() == pytest.approx(lin.volume.sum())
     # lifting corner positions puts midpoints between them
     xc = lin.rest * 1.1 + 0.3
     np.testing.assert_allclose(m.lift(xc), m.rest * 1.1 + 0.3, atol=1e-14)
