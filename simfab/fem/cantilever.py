@@ -88,30 +88,13 @@ def timoshenko_deflection(load: float, *, dim: int, length: float = 1.0, height:
 
 def tip_loads(model: FemModel | P2Model, load: float, length: float) -> np.ndarray:
     """Consistent nodal forces (n, dim) [N] of a uniform -y traction with resultant ``load`` on the
-    face X = length: integral of each shape function over the boundary facets there.
+    face X = length (:func:`simfab.fem.loads.traction_loads`)."""
+    from simfab.fem.loads import traction_loads
 
-    Linear facets: 1/2, 1/2 (segment) or 1/3 each (triangle) of the facet measure; quadratic
-    facets: 1/6, 1/6, 2/3 (3-node edge) or 0 at the corners and 1/3 at the midpoints (6-node
-    triangle)."""
     X = model.rest
-    facets = model.boundary_facets
-    on_tip = np.all(np.abs(X[facets, 0] - length) < 1e-9 * length, axis=1)
-    f = facets[on_tip]
-    dim = model.dim
-    corners = X[f[:, :dim]]
-    if dim == 2:
-        measure = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1) * model.thickness
-    else:
-        measure = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    if f.shape[1] == dim:  # linear facet
-        w = np.full(dim, 1.0 / dim)
-    else:
-        w = np.array([1 / 6, 1 / 6, 2 / 3]) if dim == 2 else np.array([0, 0, 0, 1 / 3, 1 / 3, 1 / 3])
-    share = np.zeros(model.n_vertices)
-    np.add.at(share, f, measure[:, None] * w[None, :])
-    forces = np.zeros_like(X)
-    forces[:, 1] = -load * share / share.sum()
-    return forces
+    on_tip = np.all(np.abs(X[model.boundary_facets, 0] - length) < 1e-9 * length, axis=1)
+    f = traction_loads(model, on_tip, np.eye(model.dim)[1])
+    return -load * f / f[:, 1].sum()
 
 
 def static_solve(model: FemModel | P2Model, x0, free_vertices, forces):

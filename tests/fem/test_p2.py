@@ -484,3 +484,33 @@ def test_det_F_lower_bound_bounds_J_everywhere_and_catches_folds_between_quadrat
     assert nh.det_F(model, x)[0] > 0
     assert J_sampled(x)[0].min() < 0
     assert det_F_lower_bound(model, x)[0] < 0
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_consistent_loads_carry_the_resultant_and_moment(dim):
+    from simfab.fem.loads import body_force_loads, traction_loads
+
+    rng = np.random.default_rng(100 + dim)
+    model = _block(dim)
+    # one element, uniform load: P2 tet corners -V/20, edge nodes V/5; 6-node triangle 0 and V/3
+    one = make_p2_model(model.linear.rest[model.corner_elements[0]], np.arange(dim + 1)[None], MAT, thickness=0.2)
+    f = body_force_loads(one, lambda X: np.tile(np.eye(dim)[0], (len(X), 1)))[:, 0] / one.volume[0]
+    np.testing.assert_allclose(f, [-1 / 20] * 4 + [1 / 5] * 6 if dim == 3 else [0] * 3 + [1 / 3] * 3, atol=1e-14)
+    # a linear density b(X) = c + G X: resultant and first moment integrated exactly by both orders
+    # (sum_a X_a N_a = X for P1 and P2, so sum_a X_a f_a = integral of X b, a quadratic)
+    c, G = rng.standard_normal(dim), rng.standard_normal((dim, dim))
+    density = lambda X: c + X @ G.T  # noqa: E731
+    L, w = RULES[(dim, 2)]
+    Xq = np.einsum("ql,mld->mqd", L, model.rest[model.corner_elements])
+    exact_R = np.einsum("m,q,mqd->d", model.volume, w, density(Xq.reshape(-1, dim)).reshape(Xq.shape))
+    exact_M = np.einsum("m,q,mqi,mqj->ij", model.volume, w, Xq, density(Xq.reshape(-1, dim)).reshape(Xq.shape))
+    for m in (model, model.linear):
+        f = body_force_loads(m, density)
+        np.testing.assert_allclose(f.sum(0), exact_R, rtol=1e-12)
+        np.testing.assert_allclose(np.einsum("ai,aj->ij", m.rest, f), exact_M, rtol=1e-11, atol=1e-14)
+    # traction on the X = max face: resultant traction * face area, for both orders
+    for m in (model, model.linear):
+        face = np.all(np.isclose(m.rest[m.boundary_facets, 0], 1.0), axis=1)
+        f = traction_loads(m, face, np.eye(dim)[1] * 3.0)
+        area = 0.8 * (0.2 if dim == 2 else 0.6)
+        assert f[:, 1].sum() == pytest.approx(3.0 * area, rel=1e-12)
