@@ -439,7 +439,7 @@ def test_benchmark_reports_p2_ahead_of_linear():
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
     from benchmarks import p2 as bench
 
-    out = bench.run(["--dims", "2", "--levels1-2d", "1,2", "--levels2-2d", "1,2,4", "--no-cost"])
+    out = bench.run(["--dims", "2", "--levels1-2d", "1,2", "--levels2-2d", "1,2,4", "--no-cost", "--no-knocker"])
     study = out["cantilever_2d"]
     rows = {(r["order"], r["cells_through"]): r for r in study["rows"]}
     assert abs(rows[(2, 1)]["error_vs_converged"]) < 0.02
