@@ -32,9 +32,9 @@ SVD eigensystem with clamped eigenvalues.
 Inversion: the energy is +inf when J <= 0 at any quadrature point of any element; such an element
 contributes nothing to the gradient and Hessian (not meaningful then). Inversion between the
 quadrature points is not seen by the energy; :func:`simfab.fem.p2.det_F_lower_bound` bounds det F
-over whole elements (Bernstein coefficients) for a stricter admissibility test. :func:`det_F` reports the smallest J over each element's
-quadrature points and :func:`det_and_von_mises` the largest von Mises stress over them
-(conservative for inversion and yield checks).
+over whole elements (Bernstein coefficients) for a stricter admissibility test. :func:`det_F`
+reports the smallest J over each element's quadrature points and :func:`det_and_von_mises` the
+largest von Mises stress over them (conservative for inversion and yield checks).
 
 Kernels run in float64, one launch per call for all elements (one thread per element, quadrature
 loop inside); the Hessian launch adds straight into the CSR ``data`` of ``model.pattern`` through
@@ -499,7 +499,9 @@ class _Workspace:
         self.kk = k * d
 
     def _wrap(self, arr, dtype, dev):
-        return wp.array(arr, dtype=dtype, device=dev, copy=False) if self.cpu else wp.array(arr, dtype=dtype, device=dev)
+        if self.cpu:
+            return wp.array(arr, dtype=dtype, device=dev, copy=False)
+        return wp.array(arr, dtype=dtype, device=dev)
 
     def set_positions(self, x: np.ndarray) -> None:
         self.x_np[...] = x

@@ -123,6 +123,13 @@ def test_p2_model_structure_midpoints_and_boundary(dim):
     # lifting corner positions puts midpoints between them
     xc = lin.rest * 1.1 + 0.3
     np.testing.assert_allclose(m.lift(xc), m.rest * 1.1 + 0.3, atol=1e-14)
+    # the model pickles (for Dask workers) without its kernel workspace, and stays read-only
+    import pickle
+
+    x = m.lift(xc)
+    E = nh.energy(m, x)
+    m2 = pickle.loads(pickle.dumps(m))
+    assert nh.energy(m2, x) == E and not m2.grad_N.flags.writeable
 
 
 # ----------------------------------------------------------------------------------------------
