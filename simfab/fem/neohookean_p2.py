@@ -249,16 +249,17 @@ def _add_qp_hessian(K: _mat30d, F: wp.mat33d, J: wp.float64, mu: wp.float64, lam
             Nt = wp.float64(0.5) * w * (R * N * wp.transpose(R))
     Kn = K
     k = gN.shape[2]
+    wmu = w * mu
+    wdJ = w * dPsi_dJ
     for a in range(k):
         ga = gN[e, q, a]
-        ca = w * (cof * ga)
-        Ra = wp.skew(R * ga)
+        ca = (w * d2) * (cof * ga)
+        RaN = wp.skew(R * ga) * Nt
         for b in range(a, k):
             gb = gN[e, q, b]
-            B = (w * mu * wp.dot(ga, gb)) * I + d2 * wp.outer(ca, cof * gb) - (w * dPsi_dJ) * wp.skew(
-                F * wp.cross(ga, gb))
+            B = (wmu * wp.dot(ga, gb)) * I + wp.outer(ca, cof * gb) - wdJ * wp.skew(F * wp.cross(ga, gb))
             if project != 0:
-                B = B + Ra * Nt * wp.skew(R * gb)  # - [R g_a]x Nt [R g_b]x^T, [v]x^T = -[v]x
+                B = B + RaN * wp.skew(R * gb)  # - [R g_a]x Nt [R g_b]x^T, [v]x^T = -[v]x
             for i in range(3):
                 for j in range(3):
                     Kn[3 * a + i, 3 * b + j] = Kn[3 * a + i, 3 * b + j] + B[i, j]
