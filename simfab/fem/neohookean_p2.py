@@ -43,12 +43,14 @@ above (mu, cofactor and cross-product terms plus the twist correction) rather th
 the 9 x 9 d2Psi/dF2 (that was 4x slower); the SVD route contracts it (rare: strong expansion).
 
 Measured cost per element and call (CPU, one thread, ``python tools/bench.py p2``, "cost_per_element";
-box meshes of 3840 tets / 1280 triangles at F = 1.01 I), PSD-projected Hessian assembled into CSR:
-linear tet 0.69 us, 10-node tet 18 us with the default 4-point rule (26x) and 34 us with the
-14-point rule (49x); linear triangle 0.16 us, 6-node triangle 2.0 us (3 points, 13x) and 3.5 us
-(6 points, 22x). Gradient: 0.09 us vs 1.3 us (tet, 4 points), 0.07 vs 0.5 us (triangle). Per degree
-of freedom (a P2 mesh has ~8x fewer tets than a linear one with the same dofs) the 3D Hessian costs
-~3x the linear one; in a static solve the sparse factorization of the denser P2 pattern dominates.
+box meshes of 3840 tets / 1280 triangles at F = 1.01 I; ranges over runs on a shared 2-core machine),
+PSD-projected Hessian assembled into CSR: linear tet 0.7-0.9 us, 10-node tet 12-18 us with the
+default 4-point rule (~20x) and ~33 us with the 14-point rule (~40x); linear triangle 0.16-0.22 us,
+6-node triangle 2.0-3.0 us (3 points, ~13x) and 3.5-4.5 us (6 points, ~20x). Gradient: 0.1 us vs
+1.3 us (tet, 4 points), 0.07-0.1 vs 0.5 us (triangle, 3 points). Per degree of freedom (a P2 tet
+mesh has ~8x fewer elements than a linear one with the same dofs) the 3D Hessian costs ~3x the
+linear one; in a static solve the sparse factorization of the denser P2 pattern dominates (~80%
+of the time on the knocker3d part).
 """
 
 from __future__ import annotations
