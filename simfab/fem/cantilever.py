@@ -100,12 +100,9 @@ def tip_loads(model: FemModel | P2Model, load: float, length: float) -> np.ndarr
 def static_solve(model: FemModel | P2Model, x0, free_vertices, forces):
     """Minimize E(x) - f.x over the free vertices (others stay at x0), exact-first Newton steps
     (:func:`simfab.solve.newton.minimize`). Returns (x (n, dim), NewtonResult)."""
+    from simfab.fem import elastic as nh
     from simfab.solve.newton import minimize
 
-    if isinstance(model, P2Model):
-        from simfab.fem import neohookean_p2 as nh
-    else:
-        from simfab.fem import neohookean as nh
     f = np.asarray(forces, float).ravel()
 
     def fun(x, need_h):

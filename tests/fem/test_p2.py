@@ -521,3 +521,17 @@ def test_consistent_loads_carry_the_resultant_and_moment(dim):
         f = traction_loads(m, face, np.eye(dim)[1] * 3.0)
         area = 0.8 * (0.2 if dim == 2 else 0.6)
         assert f[:, 1].sum() == pytest.approx(3.0 * area, rel=1e-12)
+
+
+def test_elastic_dispatches_on_the_element_order():
+    from simfab.fem import elastic
+
+    rng = np.random.default_rng(7)
+    model = _small_mesh(3, rng)
+    x = _deform(model, rng, "general")
+    for m, mod, xm in ((model, nh, x), (model.linear, nh1, x[: model.n_corners])):
+        assert elastic.kernels(m) is mod
+        assert elastic.energy(m, xm) == mod.energy(m, xm)
+        np.testing.assert_array_equal(elastic.energy_gradient_hessian(m, xm)[2].data,
+                                      mod.energy_gradient_hessian(m, xm)[2].data)
+        np.testing.assert_array_equal(elastic.det_and_von_mises(m, xm)[1], mod.det_and_von_mises(m, xm)[1])
