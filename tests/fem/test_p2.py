@@ -276,6 +276,20 @@ def test_quadrature_rules_agree_exactly_on_the_small_strain_stiffness(dim):
 
 
 @pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("degree", [2, None])
+def test_element_stiffness_has_only_rigid_zero_modes(dim, degree):
+    # one element at rest: exactly dim (dim + 1) / 2 zero eigenvalues (translations, rotations),
+    # also with the minimal degree-2 rule (no spurious zero-energy modes)
+    rng = np.random.default_rng(dim)
+    P = np.vstack([np.zeros(dim), np.eye(dim)]) + 0.1 * rng.standard_normal((dim + 1, dim))
+    m = make_p2_model(P, np.arange(dim + 1)[None], MAT, degree=degree or max(d for (dd, d) in RULES if dd == dim))
+    ev = np.linalg.eigvalsh(nh.element_hessians(m, m.rest)[0])
+    n_rigid = dim * (dim + 1) // 2
+    assert np.all(np.abs(ev[:n_rigid]) < 1e-10 * ev[-1])
+    assert ev[n_rigid] > 1e-4 * ev[-1]
+
+
+@pytest.mark.parametrize("dim", [2, 3])
 def test_rigid_motion_costs_nothing_and_inversion_at_a_quadrature_point_is_infinite(dim):
     rng = np.random.default_rng(3 * dim)
     model = _small_mesh(dim, rng)
