@@ -1,6 +1,6 @@
 """P2 vs linear elements: cantilever convergence (accuracy per second) and kernel cost per element.
 
-``python tools/bench.py p2 [--dims 2,3] [--levels3 ...] [--no-cost]``
+``python tools/bench.py p2 [--dims 2,3] [--levels2-3d 1,2,4 ...] [--no-cost] [--no-knocker] [--table] [--plot P.png]``
 
 Cantilever (simfab.fem.cantilever): L/h = 10, clamped, tip shear load for a 1e-3 L deflection,
 n cells through the height (structured: 6-tet cubes / two triangles per square). Per dimension,
@@ -182,6 +182,44 @@ def _knocker3d(reference: bool) -> dict:
     return {"rows": rows, "note": "conforming displacement FEM underestimates the work: each value is a lower bound"}
 
 
+def _plot(out: dict, path: str) -> str:
+    """|error vs the converged deflection| against solve seconds, linear and P2, per dimension."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+
+    from simfab.io.atomic import atomic_path
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
+    for ax, dim in zip(axes, (2, 3)):
+        study = out.get(f"cantilever_{dim}d")
+        if study is None:
+            ax.set_visible(False)
+            continue
+        for order, style, label in ((1, "o-", "linear (P1)"), (2, "s-", "quadratic (P2)")):
+            rows = [r for r in study["rows"] if r["order"] == order]
+            t = [r["seconds"] for r in rows]
+            err = [100 * abs(r["error_vs_converged"]) for r in rows]
+            ax.loglog(t, err, style, label=label)
+            for r, ti, ei in zip(rows, t, err):
+                ax.annotate(f"{r['cells_through']}", (ti, ei), textcoords="offset points", xytext=(4, 4), fontsize=7)
+        ax.axhline(100 * TARGET, color="gray", ls="--", lw=1, label=f"{100 * TARGET:.0f}% target")
+        ax.set_xlabel("static solve time [s]")
+        ax.set_ylabel("|tip deflection error| vs mesh-converged [%]")
+        ax.set_title(f"{dim}D cantilever L/h = 10 ({'6-tet cubes' if dim == 3 else '2 triangles per square'})\n"
+                     "labels: cells through the height", fontsize=9)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.grid(True, which="both", lw=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle("Accuracy per second: linear vs P2 Neo-Hookean elements (python tools/bench.py p2)", fontsize=10)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+    return path
+
+
 def _print_table(study: dict, dim: int) -> None:
     import sys
 
@@ -206,6 +244,7 @@ def run(argv) -> dict:
     ap.add_argument("--degree", type=int, default=None, help="P2 quadrature degree (default: the model default)")
     ap.add_argument("--no-cost", action="store_true", help="skip the per-element kernel cost")
     ap.add_argument("--table", action="store_true", help="also print readable tables on stderr")
+    ap.add_argument("--plot", default=None, help="write the accuracy-per-second plot to this PNG")
     ap.add_argument("--no-knocker", action="store_true", help="skip the knocker3d real-geometry check")
     ap.add_argument("--knocker-reference", action="store_true", help="add P2 on the refined knocker mesh (minutes)")
     a = ap.parse_args(argv)
@@ -224,6 +263,8 @@ def run(argv) -> dict:
         if not a.no_cost:
             study["cost_per_element"] = _cost(dim)
         out[f"cantilever_{dim}d"] = study
+    if a.plot:
+        out["plot"] = _plot(out, a.plot)
     if not a.no_knocker:
         out["knocker3d_opening"] = _knocker3d(a.knocker_reference)
         if a.table:
