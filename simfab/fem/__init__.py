@@ -1,9 +1,14 @@
-"""Finite-element elasticity: linear triangles (2D plane strain) and tetrahedra (3D).
+"""Finite-element elasticity: linear and quadratic triangles (2D plane strain) and tetrahedra (3D).
 
 - :mod:`simfab.fem.materials` - isotropic materials (Young's modulus, Poisson ratio, yield stress)
 - :mod:`simfab.fem.model` - the immutable :class:`FemModel` (rest shape, Dm^-1, volumes, Lame parameters)
 - :mod:`simfab.fem.assembly` - fixed-pattern sparse Hessian assembly
 - :mod:`simfab.fem.neohookean` - compressible Neo-Hookean energy, gradient and PSD-projected Hessian (Warp)
+- :mod:`simfab.fem.p2` - quadratic elements: :class:`P2Model` (6-node triangles, 10-node tets) from a linear mesh (``to_p2``)
+- :mod:`simfab.fem.neohookean_p2` - the Neo-Hookean energy, gradient and Hessian on P2 elements (Warp, quadrature)
+- :mod:`simfab.fem.elastic` - the same energy functions for either element order (dispatch on the model type)
+- :mod:`simfab.fem.loads` - consistent nodal loads (body force, traction) for linear and P2 models
+- :mod:`simfab.fem.cantilever` - the cantilever bending verification problem (linear and P2 vs Timoshenko)
 - :mod:`simfab.fem.stress` - Cauchy and von Mises stress
 - :mod:`simfab.fem.meshing` - Triangle (2D) and fTetWild (3D) meshing, structured tet boxes
 - :mod:`simfab.fem.tolerances` - the area's numerical tolerances

@@ -1,0 +1,670 @@
+"""Compressible Neo-Hookean elasticity on quadratic (P2) simplices: energy, gradient, Hessian.
+
+Same energy density as :mod:`simfab.fem.neohookean` (2D = plane strain with thickness):
+
+    Psi(F) = mu/2 (||F||_F^2 - d) - mu log J + lam/2 (log J)^2,     J = det F
+
+but F varies linearly over a P2 element, so the element energy is a quadrature sum over the
+points q of the model's rule (:data:`simfab.fem.p2.RULES`, weights w_q = volume * rule weight):
+
+    E_e = sum_q w_q Psi(F_q),    F_q = sum_a x_a (x) g_qa,    g_qa = grad N_a(X_q)  (model.grad_N)
+
+Gradient (sign: energy increase; the elastic nodal force is ``-gradient``):
+
+    dE/dx_a = sum_q w_q P(F_q) g_qa,     P = mu (F - F^-T) + lam log J F^-T
+
+Hessian: block (a, b), entries (i, j), through the stress-space Hessian A = d2Psi/dF2 (a d^2 x d^2
+matrix indexed by vec(F)_(i,k) = F_ik, row-major):
+
+    K_ab[i, j] = sum_q w_q sum_{k,l} A_q[(i,k), (j,l)] g_qa[k] g_qb[l]
+    A = mu I + d2Psi/dJ2 vec(g) vec(g)^T + dPsi/dJ d2J/dF2,   g = cof F,
+    dPsi/dJ = (lam log J - mu) / J,  d2Psi/dJ2 = (mu + lam (1 - log J)) / J^2,
+    d2J/dF_ik dF_jl = eps_ijm eps_klp F_mp (3D),  eps_ij eps_kl (2D)
+
+PSD projection (``project_psd=True``) clamps the negative eigenvalues of each A_q; with positive
+quadrature weights the element Hessian sum_q w_q G_q^T A_q G_q is then PSD. The eigensystem is the
+analytic one of :mod:`simfab.fem.neohookean` (Smith, De Goes, Kim 2019), reused from there: with
+dPsi/dJ <= 0 only the twist block T = mu I + dPsi/dJ S (F = R S) can be indefinite and its negative
+part (``_negative_part_sym3``, ``_polar_rotation3``) is removed in the basis R [e_i]x / sqrt 2
+(2D: one twist mode, eigenvalue mu + dPsi/dJ); with dPsi/dJ > 0 A is rebuilt from the full
+SVD eigensystem with clamped eigenvalues.
+
+Inversion: the energy is +inf when J <= 0 at any quadrature point of any element; such an element
+contributes nothing to the gradient and Hessian (not meaningful then). Inversion between the
+quadrature points is not seen by the energy; :func:`simfab.fem.p2.det_F_lower_bound` bounds det F
+over whole elements (Bernstein coefficients) for a stricter admissibility test. :func:`det_F`
+reports the smallest J over each element's quadrature points and :func:`det_and_von_mises` the
+largest von Mises stress over them (conservative for inversion and yield checks).
+
+Kernels run in float64, one launch per call for all elements (one thread per element, quadrature
+loop inside); the Hessian launch adds straight into the CSR ``data`` of ``model.pattern`` through
+precomputed slots, like the linear kernel. Each quadrature point's blocks come from the closed form
+above (mu, cofactor and cross-product terms plus the twist correction) rather than by contracting
+the 9 x 9 d2Psi/dF2 (that was 4x slower); the SVD route contracts it (rare: strong expansion).
+
+Measured cost per element and call (CPU, one thread, ``python tools/bench.py p2``, "cost_per_element";
+box meshes of 3840 tets / 1280 triangles at F = 1.01 I; ranges over runs on a shared 2-core machine),
+PSD-projected Hessian assembled into CSR: linear tet 0.7-0.9 us, 10-node tet 12-18 us with the
+default 4-point rule (~20x) and ~33 us with the 14-point rule (~40x); linear triangle 0.16-0.22 us,
+6-node triangle 2.0-3.0 us (3 points, ~13x) and 3.5-4.5 us (6 points, ~20x). Gradient: 0.1 us vs
+1.3 us (tet, 4 points), 0.07-0.1 vs 0.5 us (triangle, 3 points). Per degree of freedom (a P2 tet
+mesh has ~8x fewer elements than a linear one with the same dofs) the 3D Hessian costs ~3x the
+linear one; in a static solve the sparse factorization of the denser P2 pattern dominates (~80%
+of the time on the knocker3d part).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from simfab._warp import RECORD_LOCK, wp
+from simfab.fem.neohookean import (_HALF_SQRT2, _clamp, _dim, _negative_part_sym3, _pk1, _polar_rotation3, _psi,
+                                   _store)
+from simfab.fem.p2 import P2Model
+
+wp.set_module_options({"enable_backward": False})
+
+_vec12d = wp.types.vector(length=12, dtype=wp.float64)
+_vec30d = wp.types.vector(length=30, dtype=wp.float64)
+_mat44d = wp.types.matrix(shape=(4, 4), dtype=wp.float64)
+_mat99d = wp.types.matrix(shape=(9, 9), dtype=wp.float64)
+_mat12d = wp.types.matrix(shape=(12, 12), dtype=wp.float64)
+_mat30d = wp.types.matrix(shape=(30, 30), dtype=wp.float64)
+
+# stress-Hessian modes (same meaning as in neohookean.py)
+_EXACT = wp.constant(0)
+_PROJECT = wp.constant(1)
+_PROJECT_SVD = wp.constant(2)
+_BOTH = wp.constant(3)
+
+
+# ----------------------------------------------------------------------------------------------
+# per-dimension helpers (Warp overloads on the matrix type)
+# ----------------------------------------------------------------------------------------------
+@wp.func
+def _F_at(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=wp.vec3d),
+          e: int, q: int):
+    """F at quadrature point q of element e: sum_a x_a (x) g_qa."""
+    F = wp.mat33d()
+    for a in range(elements.shape[1]):
+        F += wp.outer(x[elements[e, a]], gN[e, q, a])
+    return F
+
+
+@wp.func
+def _F_at(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),  # noqa: F811
+          gN: wp.array3d(dtype=wp.vec2d), e: int, q: int):
+    F = wp.mat22d()
+    for a in range(elements.shape[1]):
+        F += wp.outer(x[elements[e, a]], gN[e, q, a])
+    return F
+
+
+@wp.func
+def _zero_hess(F: wp.mat33d):
+    return _mat30d()
+
+
+@wp.func
+def _zero_hess(F: wp.mat22d):  # noqa: F811
+    return _mat12d()
+
+
+@wp.func
+def _dimi(M: wp.mat33d):
+    return 3
+
+
+@wp.func
+def _dimi(M: wp.mat22d):  # noqa: F811
+    return 2
+
+
+@wp.func
+def _outer_vec(A: Any, M: Any, c: wp.float64):
+    """A + c vec(M) vec(M)^T (vec row-major, M d x d)."""
+    d = _dimi(M)
+    B = A
+    for i in range(d):
+        for k in range(d):
+            for j in range(d):
+                for l in range(d):
+                    B[d * i + k, d * j + l] = B[d * i + k, d * j + l] + c * M[i, k] * M[j, l]
+    return B
+
+
+@wp.func
+def _svd_mode(A: Any, U: Any, M: Any, Vs: Any, lam_k: wp.float64):
+    """A + lam_k vec(U M V^T) vec(U M V^T)^T."""
+    return _outer_vec(A, U * M * wp.transpose(Vs), lam_k)
+
+
+@wp.func
+def _stress_hessian_svd(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
+    """d2Psi/dF2 rebuilt from its analytic eigensystem with clamped eigenvalues (PSD)."""
+    zero = wp.float64(0.0)
+    U = wp.mat33d()
+    s = wp.vec3d()
+    Vs = wp.mat33d()
+    wp.svd3(F, U, s, Vs)
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    h = wp.float64(_HALF_SQRT2)
+    A = _mat99d()
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, _clamp(mu + dPsi_dJ * s[0], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, _clamp(mu - dPsi_dJ * s[0], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[1], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[1], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[2], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[2], 1))
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    S = wp.mat33d(
+        mu + cs / (s[0] * s[0]), lam / (s[0] * s[1]), lam / (s[0] * s[2]),
+        lam / (s[0] * s[1]), mu + cs / (s[1] * s[1]), lam / (s[1] * s[2]),
+        lam / (s[0] * s[2]), lam / (s[1] * s[2]), mu + cs / (s[2] * s[2]),
+    )
+    Q = wp.mat33d()
+    d = wp.vec3d()
+    wp.eig3(S, Q, d)
+    for k in range(3):
+        A = _svd_mode(A, U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, _clamp(d[k], 1))
+    return A
+
+
+@wp.func
+def _stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
+    zero = wp.float64(0.0)
+    U = wp.mat22d()
+    s = wp.vec2d()
+    Vs = wp.mat22d()
+    wp.svd2(F, U, s, Vs)
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    h = wp.float64(_HALF_SQRT2)
+    A = _mat44d()
+    A = _svd_mode(A, U, wp.mat22d(zero, -h, h, zero), Vs, _clamp(mu + dPsi_dJ, 1))  # twist
+    A = _svd_mode(A, U, wp.mat22d(zero, h, h, zero), Vs, _clamp(mu - dPsi_dJ, 1))  # flip
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    a = mu + cs / (s[0] * s[0])
+    c2 = mu + cs / (s[1] * s[1])
+    o = lam / (s[0] * s[1])
+    theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
+    ct = wp.cos(theta)
+    st = wp.sin(theta)
+    A = _svd_mode(A, U, wp.mat22d(ct, zero, zero, st), Vs,
+                  _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, 1))
+    A = _svd_mode(A, U, wp.mat22d(-st, zero, zero, ct), Vs,
+                  _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, 1))
+    return A
+
+
+@wp.func
+def _add_svd_route(K: Any, A: Any, gN: wp.array3d(dtype=Any), e: int, q: int, d: int, w: wp.float64):
+    """K + w G_q^T A G_q for a full stress Hessian A (d^2 x d^2): the rare dPsi/dJ > 0 route."""
+    Kn = K
+    k = gN.shape[2]
+    for a in range(k):
+        ga = gN[e, q, a]
+        for b in range(a, k):
+            gb = gN[e, q, b]
+            for i in range(d):
+                for j in range(d):
+                    acc = wp.float64(0.0)
+                    for kk in range(d):
+                        for l in range(d):
+                            acc += A[d * i + kk, d * j + l] * ga[kk] * gb[l]
+                    Kn[d * a + i, d * b + j] = Kn[d * a + i, d * b + j] + w * acc
+    return Kn
+
+
+@wp.func
+def _add_qp_hessian(K: _mat30d, F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64, w: wp.float64,
+                    mode: int, gN: wp.array3d(dtype=wp.vec3d), e: int, q: int):
+    """K + w * (quadrature point q's Hessian) in the blocks b >= a (10-node tet, 3D).
+
+    Exact block (a, b): mu (g_a . g_b) I + d2Psi/dJ2 gamma_a gamma_b^T - dPsi/dJ [F (g_a x g_b)]x,
+    gamma_a = cof(F) g_a (from d2J/dF_ik dF_jl = eps_ijm eps_klp F_mp contracted with g_a, g_b).
+    Projection with dPsi/dJ <= 0: minus 1/2 P_a N P_b^T, P_a = R [g_a]x = [R g_a]x R (the twist
+    modes R [e_i]x / sqrt 2 seen at node a; N the negative part of T = mu I + dPsi/dJ S), as
+    in the linear kernel's direct route. With dPsi/dJ > 0 (or _PROJECT_SVD): the SVD eigensystem.
+    """
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    if mode == _PROJECT_SVD or (mode == _PROJECT and dPsi_dJ > wp.float64(0.0)):
+        return _add_svd_route(K, _stress_hessian_svd(F, J, mu, lam), gN, e, q, 3, w)
+    d2 = (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)
+    I = wp.identity(n=3, dtype=wp.float64)
+    cof = J * wp.transpose(wp.inverse(F))
+    project = 0
+    R = I
+    Nt = wp.mat33d()
+    if mode == _PROJECT:
+        R = _polar_rotation3(F)
+        S = wp.transpose(R) * F
+        S = wp.float64(0.5) * (S + wp.transpose(S))
+        N = _negative_part_sym3(mu * I + dPsi_dJ * S)
+        if wp.ddot(N, N) > wp.float64(0.0):
+            project = 1
+            Nt = wp.float64(0.5) * w * (R * N * wp.transpose(R))
+    Kn = K
+    k = gN.shape[2]
+    wmu = w * mu
+    wdJ = w * dPsi_dJ
+    for a in range(k):
+        ga = gN[e, q, a]
+        ca = (w * d2) * (cof * ga)
+        RaN = wp.skew(R * ga) * Nt
+        for b in range(a, k):
+            gb = gN[e, q, b]
+            B = (wmu * wp.dot(ga, gb)) * I + wp.outer(ca, cof * gb) - wdJ * wp.skew(F * wp.cross(ga, gb))
+            if project != 0:
+                B = B + RaN * wp.skew(R * gb)  # - [R g_a]x Nt [R g_b]x^T, [v]x^T = -[v]x
+            for i in range(3):
+                for j in range(3):
+                    Kn[3 * a + i, 3 * b + j] = Kn[3 * a + i, 3 * b + j] + B[i, j]
+    return Kn
+
+
+@wp.func
+def _add_qp_hessian(K: _mat12d, F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64,  # noqa: F811
+                    w: wp.float64, mode: int, gN: wp.array3d(dtype=wp.vec2d), e: int, q: int):
+    """2D (6-node triangle): exact block mu (g_a . g_b) I + d2Psi/dJ2 gamma_a gamma_b^T +
+    dPsi/dJ (g_a x g_b) [[0, 1], [-1, 0]] (d2J/dF_ik dF_jl = eps_ij eps_kl); projection with
+    dPsi/dJ <= 0 removes the twist mode R [[0, -1], [1, 0]] / sqrt 2 when t = mu + dPsi/dJ < 0:
+    minus t/2 (RJ g_a)(RJ g_b)^T."""
+    zero = wp.float64(0.0)
+    one = wp.float64(1.0)
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    if mode == _PROJECT_SVD or (mode == _PROJECT and dPsi_dJ > zero):
+        return _add_svd_route(K, _stress_hessian_svd(F, J, mu, lam), gN, e, q, 2, w)
+    d2 = (mu + lam * (one - logJ)) / (J * J)
+    I = wp.identity(n=2, dtype=wp.float64)
+    E2 = wp.mat22d(zero, one, -one, zero)
+    cof = J * wp.transpose(wp.inverse(F))
+    t = mu + dPsi_dJ
+    project = 0
+    RJ = wp.mat22d()
+    if mode == _PROJECT and t < zero:
+        project = 1
+        cr = F[0, 0] + F[1, 1]
+        sr = F[1, 0] - F[0, 1]
+        RJ = wp.mat22d(-sr, -cr, cr, -sr) / wp.sqrt(cr * cr + sr * sr)
+    Kn = K
+    k = gN.shape[2]
+    for a in range(k):
+        ga = gN[e, q, a]
+        ca = w * (cof * ga)
+        ra = RJ * ga
+        for b in range(a, k):
+            gb = gN[e, q, b]
+            B = (w * mu * wp.dot(ga, gb)) * I + d2 * wp.outer(ca, cof * gb) + (
+                w * dPsi_dJ * (ga[0] * gb[1] - ga[1] * gb[0])) * E2
+            if project != 0:
+                B = B - (wp.float64(0.5) * w * t) * wp.outer(ra, RJ * gb)
+            for i in range(2):
+                for j in range(2):
+                    Kn[2 * a + i, 2 * b + j] = Kn[2 * a + i, 2 * b + j] + B[i, j]
+    return Kn
+
+
+# ----------------------------------------------------------------------------------------------
+# kernels (generic over the dimension; explicit overloads below)
+# ----------------------------------------------------------------------------------------------
+@wp.kernel
+def _energy_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+                   wq: wp.array2d(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
+                   energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
+    e = wp.tid()
+    E = wp.float64(0.0)
+    Jmin = wp.float64(wp.inf)
+    for q in range(wq.shape[1]):
+        F = _F_at(x, elements, gN, e, q)
+        J = wp.determinant(F)
+        Jmin = wp.min(Jmin, J)
+        if J > wp.float64(0.0):
+            E += wq[e, q] * _psi(F, J, mu[e], lam[e], _dim(F))
+    det_F[e] = Jmin
+    energy[e] = wp.where(Jmin > wp.float64(0.0), E, wp.float64(0.0))
+
+
+@wp.kernel
+def _gradient_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+                     wq: wp.array2d(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
+                     lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
+                     det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any)):
+    e = wp.tid()
+    E = wp.float64(0.0)
+    Jmin = wp.float64(wp.inf)
+    g = grad.dtype()
+    k = elements.shape[1]
+    for q in range(wq.shape[1]):
+        F = _F_at(x, elements, gN, e, q)
+        J = wp.determinant(F)
+        Jmin = wp.min(Jmin, J)
+        if J > wp.float64(0.0):
+            w = wq[e, q]
+            E += w * _psi(F, J, mu[e], lam[e], _dim(F))
+            P = _pk1(F, J, mu[e], lam[e])
+            d = _dimi(F)
+            for a in range(k):
+                f = w * (P * gN[e, q, a])
+                for i in range(d):
+                    g[d * a + i] = g[d * a + i] + f[i]
+    det_F[e] = Jmin
+    energy[e] = wp.float64(0.0)
+    grad[e] = grad.dtype()
+    if Jmin > wp.float64(0.0):
+        energy[e] = E
+        grad[e] = g
+
+
+@wp.kernel
+def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+                    wq: wp.array2d(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
+                    lam_e: wp.array(dtype=wp.float64), project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                    energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
+                    hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
+                    data2: wp.array(dtype=wp.float64)):
+    e = wp.tid()
+    zero = wp.float64(0.0)
+    k = elements.shape[1]
+    nq = wq.shape[1]
+    mu = mu_e[e]
+    lam = lam_e[e]
+    # first pass: det F at every quadrature point (an inverted point voids the whole element)
+    Jmin = wp.float64(wp.inf)
+    for q in range(nq):
+        Jmin = wp.min(Jmin, wp.determinant(_F_at(x, elements, gN, e, q)))
+    det_F[e] = Jmin
+    energy[e] = zero
+    grad[e] = grad.dtype()
+    if Jmin <= zero:
+        if scatter == 0:
+            for r in range(hess.shape[1]):
+                for c in range(hess.shape[2]):
+                    hess[e, r, c] = zero
+        return
+    mode = project
+    both = 0
+    if mode == _BOTH:
+        mode = _PROJECT
+        both = 1
+    E = zero
+    g = grad.dtype()
+    F0 = _F_at(x, elements, gN, e, 0)
+    K = _zero_hess(F0)
+    K2 = _zero_hess(F0)
+    for q in range(nq):
+        F = _F_at(x, elements, gN, e, q)
+        J = wp.determinant(F)
+        w = wq[e, q]
+        E += w * _psi(F, J, mu, lam, _dim(F))
+        P = _pk1(F, J, mu, lam)
+        d = _dimi(F)
+        for a in range(k):
+            f = w * (P * gN[e, q, a])
+            for i in range(d):
+                g[d * a + i] = g[d * a + i] + f[i]
+        if both != 0:  # exact Hessian into K2
+            K2 = _add_qp_hessian(K2, F, J, mu, lam, w, _EXACT, gN, e, q)
+        K = _add_qp_hessian(K, F, J, mu, lam, w, mode, gN, e, q)
+    energy[e] = E
+    grad[e] = g
+    kd = k * _dimi(F0)
+    for r in range(kd):
+        for c in range(r, kd):
+            if both != 0:  # exact into data, projected into data2
+                _store(scatter, slots, hess, data, e, r, c, K2[r, c])
+                _store(scatter, slots, hess, data2, e, r, c, K[r, c])
+            else:
+                _store(scatter, slots, hess, data, e, r, c, K[r, c])
+
+
+@wp.kernel
+def _stress_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+                   wq: wp.array2d(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
+                   det_F: wp.array(dtype=wp.float64), von_mises: wp.array(dtype=wp.float64)):
+    """min det F and max von Mises sqrt(3/2) mu |dev(F F^T - I)| / J over the quadrature points
+    (see simfab.fem.stress.det_and_von_mises); +inf stress where any det F <= 0."""
+    e = wp.tid()
+    Jmin = wp.float64(wp.inf)
+    vm = wp.float64(0.0)
+    for q in range(wq.shape[1]):
+        F = _F_at(x, elements, gN, e, q)
+        J = wp.determinant(F)
+        Jmin = wp.min(Jmin, J)
+        if J > wp.float64(0.0):
+            C = F * wp.transpose(F)
+            for i in range(_dimi(F)):
+                C[i, i] = C[i, i] - wp.float64(1.0)
+            tr = wp.trace(C)
+            dev2 = wp.max(wp.ddot(C, C) - tr * tr / wp.float64(3.0), wp.float64(0.0))
+            vm = wp.max(vm, wp.sqrt(wp.float64(1.5) * dev2) * mu_e[e] / J)
+    det_F[e] = Jmin
+    von_mises[e] = wp.where(Jmin > wp.float64(0.0), vm, wp.float64(wp.inf))
+
+
+@wp.kernel
+def _stress_hessian_kernel(F: wp.array(dtype=Any), J: wp.array(dtype=wp.float64), mu: wp.float64, lam: wp.float64,
+                           out: wp.array(dtype=Any)):
+    """PSD-projected d2Psi/dF2 from the SVD eigensystem, for a batch of F (tests)."""
+    t = wp.tid()
+    out[t] = _stress_hessian_svd(F[t], J[t], mu, lam)
+
+
+def _declare_overloads():
+    for vec, mat, gvec, amat in ((wp.vec2d, wp.mat22d, _vec12d, _mat44d), (wp.vec3d, wp.mat33d, _vec30d, _mat99d)):
+        types = {"x": wp.array(dtype=vec), "gN": wp.array3d(dtype=vec)}
+        wp.overload(_energy_kernel, types)
+        wp.overload(_stress_kernel, types)
+        wp.overload(_gradient_kernel, {**types, "grad": wp.array(dtype=gvec)})
+        wp.overload(_hessian_kernel, {**types, "grad": wp.array(dtype=gvec)})
+        wp.overload(_stress_hessian_kernel, {"F": wp.array(dtype=mat), "out": wp.array(dtype=amat)})
+
+
+_declare_overloads()
+
+# ----------------------------------------------------------------------------------------------
+# host side
+# ----------------------------------------------------------------------------------------------
+class _Workspace:
+    """Device copies of the model arrays, persistent output buffers and pre-recorded launches
+    (per model). Small meshes are dominated by per-call overhead, so (as in
+    :mod:`simfab.fem.neohookean`) the position buffer is persistent (on the CPU a numpy array the
+    kernels read through an alias) and each kind of launch is recorded once (``record_cmd``) and
+    replayed: 200 us -> 40 us per energy call on a 60-tet model."""
+
+    def __init__(self, model: P2Model):
+        d, m, k = model.dim, model.n_elements, model.elements.shape[1]
+        dev = model.device
+        self.model_device = dev
+        self.m = m
+        self.cpu = wp.get_device(dev).is_cpu
+        vec = wp.vec3d if d == 3 else wp.vec2d
+        self.x_np = np.zeros((model.n_vertices, d))
+        self.x = self._wrap(self.x_np, vec)
+        self.elements = wp.array(model.elements, dtype=wp.int32, device=dev)
+        self.gN = wp.array(model.grad_N, dtype=vec, device=dev)  # (m, nq, k) of vec
+        self.wq = wp.array(model.qp_weight, dtype=wp.float64, device=dev)
+        self.mu = wp.array(model.mu, dtype=wp.float64, device=dev)
+        self.lam = wp.array(model.lam, dtype=wp.float64, device=dev)
+        self.energy = wp.zeros(m, dtype=wp.float64, device=dev)
+        self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
+        self.von_mises = wp.zeros(m, dtype=wp.float64, device=dev)
+        self.grad = wp.zeros(m, dtype=_vec30d if d == 3 else _vec12d, device=dev)
+        self.slots = None  # CSR slots (int32), CSR values ``data`` / ``data2`` and element blocks ``hess``:
+        self.data_np = self.data = self.data2_np = self.data2 = None  # allocated on first use
+        self.hess = None
+        self.nnz = model.pattern.nnz
+        self.pattern = model.pattern
+        self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
+        self.dummy_slots = wp.zeros((1, 1, 1), dtype=wp.int32, device=dev)
+        self.dummy_data = wp.zeros(1, dtype=wp.float64, device=dev)
+        dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
+        self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))),
+                                     shape=(model.n_dofs, dofs.size))
+        self.kk = k * d
+        self.commands: dict = {}
+
+    def _wrap(self, arr, dtype):
+        if self.cpu:
+            return wp.array(arr, dtype=dtype, device=self.model_device, copy=False)
+        return wp.array(arr, dtype=dtype, device=self.model_device)
+
+    def set_positions(self, x: np.ndarray) -> None:
+        self.x_np[...] = x
+        if not self.cpu:
+            self.x.assign(self.x_np)
+
+    def _csr_buffers(self, two: bool):
+        if self.slots is None:
+            if self.nnz >= 2**31:
+                raise ValueError("Hessian too large for int32 slots")
+            self.slots = wp.array(self.pattern.element_slots.astype(np.int32), dtype=wp.int32,
+                                  device=self.model_device)
+            self.data_np = np.zeros(self.nnz)
+            self.data = self._wrap(self.data_np, wp.float64)
+        if two and self.data2 is None:
+            self.data2_np = np.zeros(self.nnz)
+            self.data2 = self._wrap(self.data2_np, wp.float64)
+        return self.data, (self.data2 if two else self.dummy_data)
+
+    def zero_csr(self, two: bool) -> None:
+        """Zero the CSR values the Hessian launch adds into."""
+        for arr, arr_np in ((self.data, self.data_np), (self.data2, self.data2_np))[: 2 if two else 1]:
+            if self.cpu:
+                arr_np.fill(0.0)
+            else:
+                arr.zero_()
+
+    def csr_values(self, second: bool = False) -> np.ndarray:
+        """A fresh copy (nnz,) of the CSR values of the last Hessian launch (``data2`` with ``second``)."""
+        if self.cpu:
+            return (self.data2_np if second else self.data_np).copy()
+        return (self.data2 if second else self.data).numpy()
+
+    def command(self, kind: str, mode: int = 0):
+        """The recorded launch of ``kind`` (energy, gradient, hessian, blocks, stress) and Hessian
+        mode, created on first use."""
+        cmd = self.commands.get((kind, mode))
+        if cmd is not None:
+            return cmd
+        common = [self.x, self.elements, self.gN, self.wq, self.mu, self.lam]
+        if kind == "energy":
+            kernel, inputs, outputs = _energy_kernel, common, [self.energy, self.det_F]
+        elif kind == "gradient":
+            kernel, inputs, outputs = _gradient_kernel, common, [self.energy, self.det_F, self.grad]
+        elif kind == "hessian":  # added straight into the CSR values
+            data, data2 = self._csr_buffers(mode == _BOTH)
+            kernel, inputs = _hessian_kernel, common + [mode, 1, self.slots]
+            outputs = [self.energy, self.det_F, self.grad, self.dummy3, data, data2]
+        elif kind == "blocks":
+            if self.hess is None:
+                self.hess = wp.zeros((self.m, self.kk, self.kk), dtype=wp.float64, device=self.model_device)
+            kernel, inputs = _hessian_kernel, common + [mode, 0, self.dummy_slots]
+            outputs = [self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data]
+        else:
+            kernel, inputs = _stress_kernel, [self.x, self.elements, self.gN, self.wq, self.mu]
+            outputs = [self.det_F, self.von_mises]
+        with RECORD_LOCK:  # the first launch loads the module: one thread at a time
+            cmd = wp.launch(kernel, dim=self.m, device=self.model_device, inputs=inputs, outputs=outputs,
+                            record_cmd=True)
+        self.commands[(kind, mode)] = cmd
+        return cmd
+
+
+def _workspace(model: P2Model) -> _Workspace:
+    ws = model._cache.get("neohookean_p2")
+    if ws is None:
+        ws = model._cache["neohookean_p2"] = _Workspace(model)
+    return ws
+
+
+def _launch(model: P2Model, x, kind: str, mode: int = 0) -> _Workspace:
+    """One kernel launch over all elements computing what ``kind`` asks for, at positions x."""
+    if not isinstance(model, P2Model):
+        raise TypeError(f"expected a P2Model, got {type(model).__name__} (linear models: simfab.fem.neohookean)")
+    ws = _workspace(model)
+    ws.set_positions(model.check_positions(x))
+    cmd = ws.command(kind, mode)
+    if kind == "hessian":
+        ws.zero_csr(mode == _BOTH)
+    cmd.launch()
+    return ws
+
+
+def _host(arr) -> np.ndarray:
+    return arr.numpy()  # a view on the CPU, a copy elsewhere
+
+
+def _total(ws: _Workspace) -> float:
+    if _host(ws.det_F).min() <= 0.0:
+        return float("inf")
+    return float(_host(ws.energy).sum())
+
+
+def _gradient(model: P2Model, ws: _Workspace) -> np.ndarray:
+    return (ws.scatter @ _host(ws.grad).reshape(-1)).reshape(model.n_vertices, model.dim)
+
+
+def energy(model: P2Model, x) -> float:
+    """Elastic energy [J] at node positions x (n, dim) [m]; +inf if det F <= 0 at any quadrature point."""
+    return _total(_launch(model, x, "energy"))
+
+
+def energy_gradient(model: P2Model, x) -> tuple[float, np.ndarray]:
+    """(energy [J], gradient dE/dx (n, dim) [N]). The elastic nodal force is ``-gradient``."""
+    ws = _launch(model, x, "gradient")
+    return _total(ws), _gradient(model, ws)
+
+
+def energy_gradient_hessian(model: P2Model, x, *, project_psd: bool = True) -> tuple[float, np.ndarray, sp.csr_matrix]:
+    """(energy [J], gradient (n, dim) [N], Hessian (n*dim, n*dim) CSR [N/m]) with the model's
+    fixed pattern; ``project_psd`` clamps each quadrature point's d2Psi/dF2 to PSD (so the
+    assembled Hessian is PSD), otherwise the Hessian is exact. ``data`` is a fresh array."""
+    ws = _launch(model, x, "hessian", _PROJECT if project_psd else _EXACT)
+    return _total(ws), _gradient(model, ws), model.pattern.matrix(ws.csr_values())
+
+
+def energy_gradient_hessians(model: P2Model, x) -> tuple[float, np.ndarray, sp.csr_matrix, sp.csr_matrix]:
+    """(energy, gradient, exact Hessian, PSD-projected Hessian) from one launch; for
+    :func:`simfab.solve.newton.minimize` pass ``(H_exact, H_psd)`` (exact steps where possible)."""
+    ws = _launch(model, x, "hessian", _BOTH)
+    return (_total(ws), _gradient(model, ws), model.pattern.matrix(ws.csr_values()),
+            model.pattern.matrix(ws.csr_values(second=True)))
+
+
+def element_hessians(model: P2Model, x, *, project_psd: bool = True, _svd: bool = False) -> np.ndarray:
+    """Per-element Hessian blocks (m, k*dim, k*dim) [N/m], dofs ordered (local node, axis);
+    ``_svd``: projected through the full SVD eigensystem at every point (reference route, tests)."""
+    ws = _launch(model, x, "blocks", _PROJECT_SVD if _svd else (_PROJECT if project_psd else _EXACT))
+    return ws.hess.numpy().copy()
+
+
+def _projected_stress_hessian(F, mu: float, lam: float) -> np.ndarray:
+    """d2Psi/dF2 with clamped eigenvalues (b, d^2, d^2) [Pa] of a batch F (b, d, d), vec(F)
+    row-major, from the kernels' analytic eigensystem (the SVD route; for the tests)."""
+    F = np.ascontiguousarray(F, dtype=np.float64)
+    d = F.shape[-1]
+    mat, amat = (wp.mat33d, _mat99d) if d == 3 else (wp.mat22d, _mat44d)
+    out = wp.zeros(F.shape[0], dtype=amat, device="cpu")
+    wp.launch(_stress_hessian_kernel, dim=F.shape[0], device="cpu",
+              inputs=[wp.array(F, dtype=mat, device="cpu"), wp.array(np.linalg.det(F), dtype=wp.float64, device="cpu"),
+                      wp.float64(mu), wp.float64(lam)], outputs=[out])
+    return out.numpy()
+
+
+def det_and_von_mises(model: P2Model, x) -> tuple[np.ndarray, np.ndarray]:
+    """(min det F (m,) [-], max von Mises stress (m,) [Pa]) over each element's quadrature points;
+    +inf stress where any det F <= 0 (formula: :func:`simfab.fem.stress.det_and_von_mises`)."""
+    ws = _launch(model, x, "stress")
+    return ws.det_F.numpy().copy(), ws.von_mises.numpy().copy()
+
+
+def det_F(model: P2Model, x) -> np.ndarray:
+    """Smallest det F over each element's quadrature points (m,); <= 0 means inverted there."""
+    return _launch(model, x, "energy").det_F.numpy().copy()
