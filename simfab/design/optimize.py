@@ -11,7 +11,10 @@ Each evaluation of a design h:
    negative when inverted). A candidate that fails is rejected ("inverted element",
    "degenerate element") without simulating.
 2. The insertion of the initial scene is re-run on X' (same object, path, steps, fixed region,
-   material, simulation options): :func:`simfab.coupling.simulate.simulate`. A simulation that
+   material, simulation options): :func:`simfab.coupling.simulate.simulate`, starting with the
+   boundary facets the initial shape's insertion refined (``DesignProblem.refined``: no second
+   solve of the steps where they would be found crossing; the best design's final run is plain,
+   as ``couple simulate`` runs it). A simulation that
    raises (no convergence, the object starting inside the part, a numerical failure) makes a
    rejected candidate with its reason - never a crash of the optimization.
 3. The profile gives E_ss, E_max, F_grip, F_in, F_rm and max von Mises
