@@ -12,7 +12,9 @@ constraint: value, lo, hi, unit, satisfied, initial; values mesh-corrected), cor
 profile_initial (category, coupling_ratio_pct, E_max_J, E_ss_J, F_in_N, F_rm_N, F_grip_N,
 max_von_mises_Pa (largest element stress), von_mises_avg_Pa (averaged over [design]
 stress_radius: what the yield constraint reads)), handles, iterations, stopped_early,
-simulations, simulations_stopped_early, speculative_simulations, workers, accepted, rejected
+simulations, simulations_stopped_early, speculative_simulations, acceptance_branches (the
+annealer's proposals evaluated as if the running one were accepted: drawn, adopted), workers,
+accepted, rejected
 (count per reason), seconds,
 simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_stl, outline_csv
 (2D), scene_xml, scene_toml, scene_mesh, profile_png, shape_png, history_csv, usd, summary_json,

@@ -71,6 +71,7 @@ def summary(res, *, scene: str | None = None) -> dict:
         "simulations": res.simulations,
         "simulations_stopped_early": res.stopped_simulations,
         "speculative_simulations": res.speculative,
+        "acceptance_branches": {"drawn": int(res.branches[0]), "adopted": int(res.branches[1])},
         "workers": res.workers,
         "accepted": len(res.accepted),
         "rejected": dict(res.rejected),
