@@ -231,6 +231,7 @@ class Evaluation:
     sim_seconds: float = 0.0
     seconds: float = 0.0
     bounds: list = field(default_factory=list)  # the objective's lower bound after each insertion step
+    newton_iterations: int = 0  # of a complete insertion (status "ok")
 
     @property
     def feasible(self) -> bool:
@@ -392,6 +393,7 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     else:
         ev.sim_seconds = time.perf_counter() - t1
         ev.status = "ok"
+        ev.newton_iterations = int(sum(st.iterations for st in res.steps))
         ev.figures = profile_figures(res, problem.brief.stress_radius)
         ev.constraints = problem.constraints(ev.figures)
         pen = B.penalty(ev.constraints)

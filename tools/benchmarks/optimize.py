@@ -24,6 +24,8 @@ import argparse
 import os
 import time
 
+import numpy as np
+
 TARGET_SECONDS = 30.0
 
 
@@ -67,6 +69,7 @@ def run(argv) -> dict:
                  "correction_rounds": len(rounds), "elements": [lv["elements"] for lv in mc["levels"]],
                  "constraints_mesh_converged": {c["name"]: c["value"] for c in mc["constraints"]}}
     first = next((r["k"] for r in res.history if r["evaluation"].feasible), None)
+    done = [r["evaluation"] for r in res.history[1:] if r["evaluation"].status == "ok"]
     sims = res.simulations + 1  # + the initial insertion of the placement
     sim_seconds = res.sim_seconds + initial.seconds
     ref = figures().get("insertion_simulation_seconds_original")
@@ -95,6 +98,8 @@ def run(argv) -> dict:
         "candidates_rejected_before_simulating": sum(1 for r in res.history if r["evaluation"].sim_seconds == 0),
         "simulations_per_second": (sims + res.stopped_simulations) / total,  # full + stopped early
         "seconds_per_simulation": sim_seconds / (sims + res.stopped_simulations),
+        # machine-independent: Newton iterations per complete insertion of a candidate
+        "newton_iterations_per_simulation": float(np.mean([ev.newton_iterations for ev in done])) if done else None,
         # the share of the processes' wall time not spent simulating (workers x wall)
         "fraction_outside_simulator": max(0.0, 1.0 - sim_seconds / (total * res.workers)),
         "rejected": res.rejected,
