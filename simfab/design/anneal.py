@@ -231,7 +231,7 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
         evaluation (submitted). Their thresholds depend on head's unknown value E_h; with E >= 0
         (the design objective), E_h < head.thr and the threshold grows with E_h, so each is
         screened and submitted with the threshold head.thr would give, an upper bound
-        (:func:`_adopt` checks it and tightens each to its exact threshold)."""
+        (``adopt`` checks it and tightens each to its exact threshold)."""
         gen = np.random.default_rng()
         gen.bit_generator.state = head.st
         b = _Branch(head=head, props=[], sig=shrunk(sigma, True), k_next=head.k + 1)
@@ -258,7 +258,7 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
         for q in b.props:  # as the serial loop: screened with the exact threshold, else evaluated with it
             out = evaluator.screen(q.x, q.thr_exact)
             if out is not None:
-                if q.running:
+                if q.running:  # its evaluation with the bound is not needed
                     drop([dataclasses.replace(q)])
                 q.out = out
             elif q.running:
@@ -274,7 +274,7 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
             draining = [d for d in draining if not d.done()]
             used = sum(map(_live, pending)) + len(draining) + (0 if branch is None else sum(map(_live, branch.props)))
             head = pending[0] if pending else None
-            if (can_branch and branch is None and head is not None and head.running and used < slots
+            if (can_branch and branch is None and head is not None and head.running and head.k < K and used < slots
                     and head.thr >= 0 and math.isfinite(head.thr) and (sims[1] + 1) / (sims[0] + 2) > 0.5):
                 # acceptance is the likelier outcome: the free slot evaluates the next proposal as if
                 # the head were accepted rather than the one after it as if rejected
@@ -319,7 +319,7 @@ def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=Non
         if accepted or done:  # the later proposals assumed a rejection: drop them
             drop(pending)
             pending = adopt(b, e_i) if b is not None and accepted and not done else None
-            if pending is not None:  # continue from the branch drawn for this acceptance
+            if pending:  # continue from the branch drawn for this acceptance
                 best.branches[1] += 1
                 rng.bit_generator.state = b.props[-1].st
                 sig_next, k_next = b.sig, b.k_next

@@ -132,8 +132,8 @@ class _Branching(_Speculative):
         return self.f(out[1]["x"], threshold)
 
 
-@pytest.mark.parametrize("slots", [2, 3])
-def test_acceptance_branch_makes_exactly_the_serial_decisions(slots):
+@pytest.mark.parametrize("slots,iterations", [(2, 200), (3, 200), (2, 3)])
+def test_acceptance_branch_makes_exactly_the_serial_decisions(slots, iterations):
     # with a hot schedule most proposals are accepted, so free slots evaluate the proposal after
     # the running one as if it were accepted, with an upper bound of its unknown threshold; the
     # record, value by value (including early-stop lower bounds), must be the serial one
@@ -143,11 +143,15 @@ def test_acceptance_branch_makes_exactly_the_serial_decisions(slots):
             v = threshold + 0.5 * (v - threshold)
         return v, {"x": x.copy()}
 
-    opts = AnnealOptions(iterations=200, sigma0=np.array([0.2, 0.2, 0.1]), lower=np.full(3, -3.0),
+    opts = AnnealOptions(iterations=iterations, sigma0=np.array([0.2, 0.2, 0.1]), lower=np.full(3, -3.0),
                          upper=np.full(3, 3.0), seed=5, tau0=2.0, tau_end=0.5)
     serial = anneal(f, np.array([-1.5, 2.0, 0.5]), opts)
     ev = _Branching(f, slots)
     spec = anneal(f, np.array([-1.5, 2.0, 0.5]), opts, evaluator=ev)
+    assert spec.iterations == serial.iterations == iterations  # (also when the last iteration is reached)
+    if iterations < 10:
+        assert [r["value"] for r in spec.history] == [r["value"] for r in serial.history]
+        return
     assert sum(r["accepted"] for r in serial.history[1:]) > 100  # the branch is the likelier outcome
     assert [r["value"] for r in spec.history] == [r["value"] for r in serial.history]
     assert [r["accepted"] for r in spec.history] == [r["accepted"] for r in serial.history]
