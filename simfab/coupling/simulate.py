@@ -137,7 +137,7 @@ class InsertionResult:
     facet_check, record, rigid_check; "other" is the rest of ``seconds``);
     warnings : one line each (e.g. steps too coarse, an unfinished insertion, stress above yield);
     notes : one line each about how the run was solved (e.g. a rigid motion of A that nothing
-    resists, pinned by the solver); refined_facets : ids (rows of ``fem.boundary_facets``) of the
+    resists, pinned by the solver); refined_facets : ids (rows of ``model.contact_facets``) of the
     facets that carried refinement points at the end (``simulate``'s ``refined`` for a similar run)."""
 
     model: CouplingModel
@@ -157,7 +157,7 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()
     """Run the insertion along all steps of ``cm``; see the module docstring for the method.
 
     callback : optional ``callback(k, StepResult)`` after every step (it may raise to stop the run)
-    refined : boundary facet ids (rows of ``cm.fem.boundary_facets``) to carry refinement points
+    refined : boundary facet ids (rows of ``cm.contact_facets``) to carry refinement points
         from the start, e.g. a similar run's ``refined_facets``. Facets are otherwise refined when
         a converged step finds them crossing into O, and that step is solved again: seeding a
         design candidate's run with the facets its initial shape's run refined saves those second
@@ -183,8 +183,8 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()
     ctx = dict(timer=timer, phases=phases, solver=SPDSolver())
     if len(refined) and cm.options.refine:
         ids = np.unique(np.asarray(refined, dtype=np.int64))
-        if ids.min() < 0 or ids.max() >= len(fem.boundary_facets):
-            raise ValueError(f"refined: facet ids must lie in [0, {len(fem.boundary_facets)})")
+        if ids.min() < 0 or ids.max() >= len(cm.contact_facets):
+            raise ValueError(f"refined: facet ids must lie in [0, {len(cm.contact_facets)})")
         _add_refinement(cm, state, [int(f) for f in ids])
     check_start(cm)
     steps = []
@@ -361,8 +361,7 @@ def _path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
 
 
 def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
-    from simfab.fem.neohookean import energy_gradient
-    from simfab.fem.stress import det_and_von_mises
+    from simfab.fem.elastic import det_and_von_mises, energy_gradient
 
     x = state.x
     n, dim = cm.fem.n_vertices, cm.dim
