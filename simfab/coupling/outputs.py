@@ -102,7 +102,8 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     lines = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
     labels = ax.get_legend_handles_labels()[1] + ax2.get_legend_handles_labels()[1]
     ax.legend(lines, labels, loc="upper left", fontsize=8)
-    ax.set_title(f"{res.model.name}: {prof.category} (coupling ratio {prof.coupling_ratio:.1f}%)")
+    p2 = ", P2 elements" if res.model.options.element_order == 2 else ""
+    ax.set_title(f"{res.model.name}: {prof.category} (coupling ratio {prof.coupling_ratio:.1f}%{p2})")
     fig.tight_layout()
     try:
         return save_figure(fig, path)

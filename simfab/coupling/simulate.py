@@ -79,6 +79,14 @@ bound L of psi (PSI_LIPSCHITZ = 2; |grad psi| ~ 1 away from sharp features). IML
 steeper near sharp rims of O; the run tracks the largest |grad psi| at its converged constraint
 and check points and warns when it exceeds L (the certificates are then not rigorous there).
 
+Element order: with ``options.element_order = 2`` A is the scene's mesh lifted to quadratic
+elements (:class:`simfab.fem.p2.P2Model`); every stage reads the energy, det F and stress through
+:mod:`simfab.fem.elastic` and the boundary it works on from ``cm.contact_facets`` (the linear
+sub-facets of the quadratic boundary), so the loop is the same for both orders: constraint points
+are all boundary nodes (corners and edge midpoints) plus refinement points on sub-facets, whose
+parents share an element (the contact Hessian stays inside the FEM pattern). Inversion is checked
+at the quadrature points (det F there), as the energy sees it.
+
 Forces: the reaction at the fixed dofs is r = dE_total/dx there (the force the support applies to
 A). By equilibrium of A it equals the force A exerts on O, so the insertion force is
 F = sum r . u (u: unit direction of O's translation), negative when A resists the insertion.
