@@ -118,3 +118,15 @@ def test_cli_p2_writes_valid_outputs(tmp_path, capsys):
     assert len(V) == d["nodes"] and len(F) == 4 * d["elements"]
     assert mujoco.MjModel.from_xml_path(d["mjcf"]).nkey == len(np.genfromtxt(d["profile_csv"], delimiter=",",
                                                                             names=True))
+
+
+def test_rest_shape_optimizer_refuses_p2_parts():
+    # its handles and modification energy act on a linear mesh: a clear input error, not a crash
+    from simfab.design.brief import DesignBrief
+    from simfab.design.optimize import make_problem
+
+    cm = load_coupling_scene("cclamp2d", overrides={"compliant": {"target_elements": 450},
+                                                     "simulation": {"element_order": 2}})
+    with pytest.raises(InputError, match="linear elements") as e:
+        make_problem(cm, DesignBrief(placement="spatial"))
+    assert "element_order" in e.value.where
