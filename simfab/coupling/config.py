@@ -113,8 +113,9 @@ class InsertionOptions:
     element_order : 1 (linear triangles / tets, the scene's mesh as it is) or 2 (quadratic: the
         mesh lifted to 6-node triangles / 10-node tets by :func:`simfab.fem.p2.to_p2`, which do
         not lock in bending; contact then acts at every boundary node, corners and edge
-        midpoints, and on the linear sub-facets of the quadratic boundary). h_A stays the corner
-        mesh's mean edge length.
+        midpoints, and on the linear sub-facets of the quadratic boundary, whose edges, half the
+        element's, set the local d_hat). h_A stays the corner mesh's mean edge length. The
+        rest-shape optimizer needs 1.
     """
 
     h_in: float | None = None
