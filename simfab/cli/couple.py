@@ -3,9 +3,10 @@
 Usage:
 
     simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes | --fixed-axes AXES] [--no-refine]
+                                 [--element-order 1|2]
     simfab couple optimize SCENE [--grip tight|loose] [--insertion-force LO HI] ... [--iterations N]
     simfab couple study handles SCENE [--counts K ...] [--random N]
-    simfab couple converge SCENE [--factors 0.25,0.5,1,1.5]
+    simfab couple converge SCENE [--factors 0.25,0.5,1,1.5] [--element-order 1|2]
     simfab couple scenes
 
 SCENE is a coupling scene: NAME.xml (MJCF: the object O as the mocap body 'object' with
@@ -33,7 +34,7 @@ SIMULATE_DESCRIPTION = """Run an insertion simulation of a coupling scene and wr
 --json keys: scene, category (tight/loose/...), E_max, E_ss [J], coupling_ratio [%], F_in, F_rm,
   F_grip [N], s_max, s_ss [m] (path length at E_max / steady state), max_von_mises, yield_stress
   [Pa], max_penetration, penetration_tolerance [m], min_det_F, steps, newton_iterations,
-  elements, kappa_initial, kappa_final [N/m], dhat [m], object_samples, seconds [s],
+  elements, element_order, nodes, kappa_initial, kappa_final [N/m], dhat [m], object_samples, seconds [s],
   time_split [s] per resource (assembly, factorization, contact, total), phase_split [s] per
   phase of the insertion loop (warm_start, newton, facet_check, record, rigid_check, other),
   warnings, units {key: unit}, and the output paths profile_csv, plot_png, usd, mjcf,
@@ -55,6 +56,9 @@ def add_args(p):
     s.add_argument("--fixed-axes", metavar="AXES",
                    help='axes the fixed region is held along, e.g. "xz" (must include the insertion axis)')
     s.add_argument("--no-refine", action="store_true", help="no refinement points on boundary edges/faces")
+    s.add_argument("--element-order", type=int, choices=(1, 2), metavar="{1,2}",
+                   help="1: linear elements, 2: quadratic (6-node triangles / 10-node tets, no bending "
+                        "locking) on the scene's mesh (overrides the scene's [simulation] element_order)")
     conv = sub.add_parser("converge", help="mesh-convergence study of a coupling scene",
                           description="Run a scene at refined meshes (element count x each factor) and report "
                                       "the profile figures, their extrapolated values and the error of the scene's "
@@ -64,6 +68,8 @@ def add_args(p):
     conv.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
     conv.add_argument("--factors", default="0.25,0.5,1,1.5",
                       help="refinement factors of the scene's element count (default 0.25,0.5,1,1.5)")
+    conv.add_argument("--element-order", type=int, choices=(1, 2), metavar="{1,2}",
+                      help="element order at every level (default: the scene's)")
     listing = sub.add_parser("scenes", help="list the bundled coupling scenes",
                              description="List the bundled coupling scenes (scenes/coupling); each runs with "
                                          "'simfab couple simulate NAME'. Writes nothing.\n\n--json keys: scenes "
@@ -102,7 +108,8 @@ def run(args) -> dict:
             raise InputError(f"must be comma-separated numbers, got {args.factors!r}", where="--factors") from None
         if len(factors) < 2 or min(factors) <= 0:
             raise InputError("give at least two positive factors", where="--factors")
-        rep = study(args.scene, factors, quiet=args.quiet)
+        ov = {} if args.element_order is None else {"simulation": {"element_order": args.element_order}}
+        rep = study(args.scene, factors, overrides=ov, quiet=args.quiet)
         return {**rep, "table": "\n" + format_table(rep)}
     if cmd != "simulate":
         raise InputError("choose an action: 'simfab couple simulate SCENE', 'optimize SCENE', 'study handles SCENE' "
@@ -129,6 +136,8 @@ def run(args) -> dict:
         sim["fix_all_axes"] = False
     if args.no_refine:
         sim["refine"] = False
+    if args.element_order is not None:
+        sim["element_order"] = args.element_order
     return simulate_scene(args.scene, out=args.out, device=args.device, quiet=args.quiet, simulation=sim)
 
 
@@ -144,7 +153,8 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     dev = check_device(device)
     cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}}, device=dev)
     check_start(cm)  # before the log line: bad input gives exactly one line on stderr
-    log(f"couple: {cm.name}: {cm.fem.n_elements} elements, {len(cm.field.vertices)} object samples, "
+    kind = "quadratic elements" if cm.options.element_order == 2 else "elements"
+    log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {len(cm.field.vertices)} object samples, "
         f"{len(cm.s_steps) - 1} steps", quiet=quiet)
     res = simulate(cm, quiet=quiet)
     for m in res.warnings:  # warnings show even with --quiet

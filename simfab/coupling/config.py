@@ -110,6 +110,12 @@ class InsertionOptions:
     kappa_rel : initial barrier stiffness kappa = kappa_rel * E * h_A (3D) or E * thickness (2D)
         [N/m] (the stiffness per node of A's elements); adapted during the run (see simulate).
     penetration_tol_rel : max penetration / h_A accepted at the end of a step.
+    element_order : 1 (linear triangles / tets, the scene's mesh as it is) or 2 (quadratic: the
+        mesh lifted to 6-node triangles / 10-node tets by :func:`simfab.fem.p2.to_p2`, which do
+        not lock in bending; contact then acts at every boundary node, corners and edge
+        midpoints, and on the linear sub-facets of the quadratic boundary, whose edges, half the
+        element's, set the local d_hat). h_A stays the corner mesh's mean edge length. The
+        rest-shape optimizer needs 1.
     """
 
     h_in: float | None = None
@@ -123,6 +129,7 @@ class InsertionOptions:
     dhat_rel: float = DHAT_REL
     kappa_rel: float = 1.0
     penetration_tol_rel: float = PENETRATION_TOL_REL
+    element_order: int = 1
 
     def __post_init__(self):
         def bad(name, why):
@@ -144,6 +151,9 @@ class InsertionOptions:
             bad("samples_per_edge", "must be an integer in [1, 100]")
         if not (isinstance(self.face_lattice, int) and 2 <= self.face_lattice <= 16):
             bad("face_lattice", "must be an integer in [2, 16]")
+        if not (isinstance(self.element_order, int) and not isinstance(self.element_order, bool)
+                and self.element_order in (1, 2)):
+            bad("element_order", "must be 1 (linear elements) or 2 (quadratic)")
         for name in ("dhat_rel", "kappa_rel", "penetration_tol_rel"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and v > 0):

@@ -15,7 +15,9 @@ from simfab.errors import InputError
 class CouplingModel:
     """Immutable description of one insertion simulation.
 
-    fem : :class:`simfab.fem.model.FemModel` of A (SI units)
+    fem : A's FEM model (SI units): a linear :class:`simfab.fem.model.FemModel` or, with
+        ``options.element_order = 2``, a quadratic :class:`simfab.fem.p2.P2Model` (energies through
+        :mod:`simfab.fem.elastic`; the facets contact works on: :attr:`contact_facets`)
     field : :class:`ImlsField` of O in O's body frame
     path : :class:`simfab.io.mjcf.Trajectory` of O's pose, parameterized by path length [m]
     s_steps : (K+1,) path length at each step [m]; step 0 is the start pose
@@ -49,6 +51,37 @@ class CouplingModel:
     @property
     def dim(self) -> int:
         return self.fem.dim
+
+    @property
+    def contact_facets(self) -> np.ndarray:
+        """(f, dim) int64 linear boundary facets (2D segments, 3D triangles; body on the left /
+        counter-clockwise from outside) that contact is checked and refined on; refinement facet
+        ids index its rows. Linear elements: ``fem.boundary_facets``. P2: ``fem.boundary_subfacets``
+        (2 segments / 4 triangles per quadratic facet, over its corner and midpoint nodes), whose
+        nodes share an element, so points interpolated on them stay inside the Hessian's sparsity
+        pattern. (Memoized, read-only.)"""
+        out = self._cache.get("contact_facets")
+        if out is None:
+            from simfab.fem.p2 import P2Model
+
+            f = self.fem.boundary_subfacets if isinstance(self.fem, P2Model) else self.fem.boundary_facets
+            out = self._cache["contact_facets"] = np.asarray(f, dtype=np.int64)
+            out.flags.writeable = False
+        return out
+
+    @property
+    def display_elements(self) -> np.ndarray:
+        """(m', dim+1) int64 linear simplices over A's nodes for output (USD, MJCF, plots): the
+        elements, or for P2 the red refinement on its nodes (``P2Model.sub_elements()``, 4 / 8
+        per element). (Memoized, read-only.)"""
+        out = self._cache.get("display_elements")
+        if out is None:
+            from simfab.fem.p2 import P2Model
+
+            el = self.fem.sub_elements() if isinstance(self.fem, P2Model) else self.fem.elements
+            out = self._cache["display_elements"] = np.asarray(el, dtype=np.int64)
+            out.flags.writeable = False
+        return out
 
     def pose(self, s: float):
         """O's pose at path length s: (R (3, 3), p (3,)) with world x = R x_body + p (memoized)."""

@@ -76,7 +76,7 @@ class _StepObjective:
 
     def __call__(self, xf: np.ndarray, need_hessian: bool):
         """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O."""
-        from simfab.fem.neohookean import energy_gradient, energy_gradient_hessian
+        from simfab.fem.elastic import energy_gradient, energy_gradient_hessian
 
         cm = self.cm
         memo = self.memo
@@ -146,7 +146,7 @@ class _StepObjective:
 
     def value(self, x: np.ndarray) -> float:
         """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible."""
-        from simfab.fem.neohookean import energy
+        from simfab.fem.elastic import energy
 
         with self.timer.timed("assembly"):
             E = energy(self.cm.fem, x) + (self.pin.energy(np.ravel(x)) if self.pin is not None else 0.0)
@@ -207,7 +207,7 @@ class _LazyHessian:
 
     def __call__(self):
         if self.H is None:
-            from simfab.fem.neohookean import energy_gradient_hessian
+            from simfab.fem.elastic import energy_gradient_hessian
 
             obj = self.obj
             with obj.timer.timed("assembly"):
@@ -300,7 +300,7 @@ def _point_dhat(cm: CouplingModel, pts: ContactPoints) -> np.ndarray:
     if dh is None:
         hv = cm._cache.get("vertex_h")
         if hv is None:
-            facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
+            facets = cm.contact_facets
             a, c = _EDGE_PAIRS[cm.dim]
             e = np.vstack([facets[:, [i, j]] for i, j in zip(a, c)])
             L = np.linalg.norm(cm.fem.rest[e[:, 0]] - cm.fem.rest[e[:, 1]], axis=1)

@@ -49,6 +49,8 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
         "steps": len(res.steps) - 1,
         "newton_iterations": int(res.column("iterations").sum()),
         "elements": int(res.model.fem.n_elements),
+        "element_order": int(res.model.options.element_order),
+        "nodes": int(res.model.fem.n_vertices),
         "kappa_initial": float(res.model.kappa),
         "kappa_final": float(res.steps[-1].kappa),
         "dhat": float(res.model.dhat),
@@ -100,7 +102,8 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     lines = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
     labels = ax.get_legend_handles_labels()[1] + ax2.get_legend_handles_labels()[1]
     ax.legend(lines, labels, loc="upper left", fontsize=8)
-    ax.set_title(f"{res.model.name}: {prof.category} (coupling ratio {prof.coupling_ratio:.1f}%)")
+    p2 = ", P2 elements" if res.model.options.element_order == 2 else ""
+    ax.set_title(f"{res.model.name}: {prof.category} (coupling ratio {prof.coupling_ratio:.1f}%{p2})")
     fig.tight_layout()
     try:
         return save_figure(fig, path)
@@ -109,7 +112,8 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
 
 
 def vertex_von_mises(fem, vm: np.ndarray) -> np.ndarray:
-    """Per-vertex von Mises stress: mean over incident elements (n,) [Pa]."""
+    """Per-node von Mises stress: mean over incident elements (n,) [Pa] (P2: the elements' largest
+    value over their quadrature points, at all their nodes)."""
     n = fem.n_vertices
     el = np.asarray(fem.elements)
     k = el.shape[1]
@@ -118,8 +122,9 @@ def vertex_von_mises(fem, vm: np.ndarray) -> np.ndarray:
     return s / np.maximum(c, 1)
 
 
-def _display_faces(fem) -> np.ndarray:
-    return np.asarray(fem.elements if fem.dim == 2 else fem.boundary_facets, dtype=np.int64)
+def _display_faces(cm) -> np.ndarray:
+    """Triangles over A's nodes to display it: 2D its (sub-)elements, 3D its boundary (sub-)facets."""
+    return cm.display_elements if cm.dim == 2 else cm.contact_facets
 
 
 def _object_display(cm):
@@ -142,7 +147,7 @@ def write_usd(res: InsertionResult, path) -> Path:
     cm = res.model
     fem = cm.fem
     w = StageWriter(path, time_codes_per_second=12.0)
-    faces = _display_faces(fem)
+    faces = _display_faces(cm)
     w.add_mesh("part", faces, res.steps[0].x)
     ov, of = _object_display(cm)
     w.add_rigid("object", points=ov, faces=of, color=[0.55, 0.6, 0.7])
@@ -201,9 +206,9 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     fem = cm.fem
     r_ss = res.steps[prof.index_ss]
     if fem.dim == 2:
-        V, F = extrude_triangles(r_ss.x, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
+        V, F = extrude_triangles(r_ss.x, cm.display_elements, cm.contact_facets, fem.thickness)
     else:
-        V, F = r_ss.x, np.asarray(fem.boundary_facets)
+        V, F = r_ss.x, cm.contact_facets
         used = np.unique(F)
         remap = np.full(len(V), -1)
         remap[used] = np.arange(len(used))

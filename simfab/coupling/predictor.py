@@ -201,7 +201,7 @@ def _restore_feasibility(cm: CouplingModel, state: _State, ctx) -> None:
 
 def _feasible_distances(cm, x0, s, pts, ctx):
     """Distances to O at s if x0 has no inverted element, else None."""
-    from simfab.fem.neohookean import det_F
+    from simfab.fem.elastic import det_F
 
     with ctx["timer"].timed("assembly"):
         ok = np.all(det_F(cm.fem, x0) > 0)
@@ -216,7 +216,7 @@ def _feasible_distances(cm, x0, s, pts, ctx):
 def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarray:
     """x + u, u minimizing 1/2 u^T H u + P/2 sum_j c_j(u)^2 over the free dofs, with
     c_j = n_j . (y_j(u) - delta_j) for ``normal`` points and |y_j(u) - delta_j| for ``full`` ones."""
-    from simfab.fem.neohookean import energy_gradient_hessian
+    from simfab.fem.elastic import energy_gradient_hessian
 
     n, dim = cm.fem.n_vertices, cm.dim
     H = state.H

@@ -54,7 +54,7 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
     memo = state.check
     if memo is not None and memo[0] is x and memo[1] == s and memo[2] == state.order:
         return memo[3]
-    facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
+    facets = cm.contact_facets
     R, p = cm.pose(s)
     bv = np.asarray(cm.fem.boundary_vertices)
     dv = np.full(cm.fem.n_vertices, np.inf)
@@ -158,14 +158,14 @@ def _check_cache(cm: CouplingModel, state: _State, refined: bool, p: int):
     key = (refined, state.order, p)
     cache = state.check_cache.get(key)
     if cache is None:
-        F = len(cm.fem.boundary_facets)
+        F = len(cm.contact_facets)
         cache = state.check_cache[key] = (np.full((F, p, 3), np.nan), np.full((F, p), np.inf))
     return cache
 
 
 def _rebuild_points(cm: CouplingModel, state: _State) -> None:
     """Constraint points = boundary vertices + refinement points of every refined facet."""
-    facets = np.asarray(cm.fem.boundary_facets, dtype=np.int64)
+    facets = cm.contact_facets
     pts = vertex_points(np.asarray(cm.fem.boundary_vertices, dtype=np.int64), cm.dim)
     if state.refined:
         ids = np.array(sorted(state.refined))

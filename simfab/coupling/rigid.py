@@ -33,7 +33,7 @@ def mean_stiffness(cm) -> float:
     """Mean |diagonal| of A's stiffness at rest [N/m] (memoized)."""
     k = cm._cache.get("mean_stiffness")
     if k is None:
-        from simfab.fem.neohookean import energy_gradient_hessian
+        from simfab.fem.elastic import energy_gradient_hessian
 
         _, _, H = energy_gradient_hessian(cm.fem, cm.fem.rest, project_psd=False)
         k = cm._cache["mean_stiffness"] = float(np.abs(H.diagonal()).mean())

@@ -26,7 +26,8 @@ The **TOML** (``NAME.toml``) defines A and the run (all lengths in metres, SI un
               signed distance, simfab.contact.sdf, unless sigma is given: samples then only sets
               its display samples)
     [fixed]   site = "fixed"
-    [simulation]  steps = 35 (or h_in [m]), L_max [m], fix_all_axes, refine, ...  (InsertionOptions)
+    [simulation]  steps = 35 (or h_in [m]), L_max [m], fix_all_axes, refine, element_order = 1 | 2, ...
+                  (InsertionOptions)
 """
 
 from __future__ import annotations
@@ -133,6 +134,10 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
 
     points, elements, thickness = build_compliant(comp, dim, base=toml.parent, where=f"{where} [compliant]")
     fem = make_model(points, elements, material, thickness=thickness, device=device)
+    if options.element_order == 2:
+        from simfab.fem.p2 import to_p2
+
+        fem = to_p2(fem)  # the fixed region below then holds the midpoints inside it as well
 
     sc = load_scene(xml)
     body = str(obj.get("body", "object"))

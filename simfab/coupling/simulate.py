@@ -79,6 +79,14 @@ bound L of psi (PSI_LIPSCHITZ = 2; |grad psi| ~ 1 away from sharp features). IML
 steeper near sharp rims of O; the run tracks the largest |grad psi| at its converged constraint
 and check points and warns when it exceeds L (the certificates are then not rigorous there).
 
+Element order: with ``options.element_order = 2`` A is the scene's mesh lifted to quadratic
+elements (:class:`simfab.fem.p2.P2Model`); every stage reads the energy, det F and stress through
+:mod:`simfab.fem.elastic` and the boundary it works on from ``cm.contact_facets`` (the linear
+sub-facets of the quadratic boundary), so the loop is the same for both orders: constraint points
+are all boundary nodes (corners and edge midpoints) plus refinement points on sub-facets, whose
+parents share an element (the contact Hessian stays inside the FEM pattern). Inversion is checked
+at the quadrature points (det F there), as the energy sees it.
+
 Forces: the reaction at the fixed dofs is r = dE_total/dx there (the force the support applies to
 A). By equilibrium of A it equals the force A exerts on O, so the insertion force is
 F = sum r . u (u: unit direction of O's translation), negative when A resists the insertion.
@@ -137,7 +145,7 @@ class InsertionResult:
     facet_check, record, rigid_check; "other" is the rest of ``seconds``);
     warnings : one line each (e.g. steps too coarse, an unfinished insertion, stress above yield);
     notes : one line each about how the run was solved (e.g. a rigid motion of A that nothing
-    resists, pinned by the solver); refined_facets : ids (rows of ``fem.boundary_facets``) of the
+    resists, pinned by the solver); refined_facets : ids (rows of ``model.contact_facets``) of the
     facets that carried refinement points at the end (``simulate``'s ``refined`` for a similar run)."""
 
     model: CouplingModel
@@ -157,7 +165,7 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()
     """Run the insertion along all steps of ``cm``; see the module docstring for the method.
 
     callback : optional ``callback(k, StepResult)`` after every step (it may raise to stop the run)
-    refined : boundary facet ids (rows of ``cm.fem.boundary_facets``) to carry refinement points
+    refined : boundary facet ids (rows of ``cm.contact_facets``) to carry refinement points
         from the start, e.g. a similar run's ``refined_facets``. Facets are otherwise refined when
         a converged step finds them crossing into O, and that step is solved again: seeding a
         design candidate's run with the facets its initial shape's run refined saves those second
@@ -185,8 +193,8 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()
     ctx = dict(timer=timer, phases=phases, solver=SPDSolver())
     if len(refined) and cm.options.refine:
         ids = np.unique(np.asarray(refined, dtype=np.int64))
-        if ids.min() < 0 or ids.max() >= len(fem.boundary_facets):
-            raise ValueError(f"refined: facet ids must lie in [0, {len(fem.boundary_facets)})")
+        if ids.min() < 0 or ids.max() >= len(cm.contact_facets):
+            raise ValueError(f"refined: facet ids must lie in [0, {len(cm.contact_facets)})")
         _add_refinement(cm, state, [int(f) for f in ids])
     check_start(cm)
     steps = []
@@ -363,8 +371,7 @@ def _path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
 
 
 def _record(cm: CouplingModel, state: _State, iters: int, ctx) -> StepResult:
-    from simfab.fem.neohookean import energy_gradient
-    from simfab.fem.stress import det_and_von_mises
+    from simfab.fem.elastic import det_and_von_mises, energy_gradient
 
     x = state.x
     n, dim = cm.fem.n_vertices, cm.dim

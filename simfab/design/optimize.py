@@ -174,6 +174,9 @@ def make_problem(cm, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetP
     source : a :class:`simfab.design.parallel.ProblemSource` naming the scene this problem was
         loaded from (its handle vertices are filled in here); needed by parallel evaluation
     """
+    if cm.options.element_order != 1:  # handles and the modification energy act on a linear mesh
+        raise InputError("the rest-shape optimizer runs on linear elements only; set element_order = 1",
+                         where="[simulation] element_order")
     fem = cm.fem
     X = np.asarray(fem.rest, float)
     regions = [np.asarray(cm.fixed_vertices)] + [np.asarray(r) for r in kept_regions if len(r)]

@@ -316,7 +316,7 @@ def write_usd(res, path) -> Path:
     cm = res.problem.base
     fem = cm.fem
     w = StageWriter(path, time_codes_per_second=12.0)
-    w.add_mesh("part", _display_faces(fem), fem.rest, color=[0.85, 0.55, 0.25])
+    w.add_mesh("part", _display_faces(cm), fem.rest, color=[0.85, 0.55, 0.25])
     ov, of = _object_display(cm)
     w.add_rigid("object", points=ov, faces=of, color=[0.55, 0.6, 0.7])
     final = res.best.result
