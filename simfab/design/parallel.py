@@ -1,5 +1,5 @@
-"""Parallel evaluation of the annealer's speculative proposals (:mod:`simfab.design.anneal`,
-``lookahead``) on worker processes.
+"""Parallel evaluation of the annealer's speculative proposals (:mod:`simfab.design.anneal`)
+on worker processes.
 
 One optimization is a chain of decisions, but most proposals are rejected, so the annealer can
 draw the next proposals before the current one is decided. This module screens each in this

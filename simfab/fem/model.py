@@ -16,8 +16,37 @@ from simfab.fem.materials import Material
 from simfab.fem.tolerances import DEGENERATE_REL
 
 
+class MeshModel:
+    """What every immutable FEM model (linear :class:`FemModel`, quadratic
+    :class:`simfab.fem.p2.P2Model`) shares: sizes from ``rest`` (n, dim) and ``elements`` (m, nodes),
+    and pickling without ``_cache`` (device buffers and recorded launches, rebuilt on demand)."""
+
+    def __getstate__(self):
+        return {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "_cache"}
+
+    def __setstate__(self, state):
+        for k, v in state.items():
+            if isinstance(v, np.ndarray):
+                v.flags.writeable = False  # unpickled arrays are fresh copies: keep them read-only
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "_cache", {})
+
+    @property
+    def n_vertices(self) -> int:
+        """Number of nodes (P2: corners and midpoints): the row count of positions ``x``."""
+        return self.rest.shape[0]
+
+    @property
+    def n_elements(self) -> int:
+        return self.elements.shape[0]
+
+    @property
+    def n_dofs(self) -> int:
+        return self.rest.size
+
+
 @dataclass(frozen=True, kw_only=True)
-class FemModel:
+class FemModel(MeshModel):
     """Linear simplicial FEM discretization of an elastic body (immutable).
 
     dim : 2 (triangles, plane strain) or 3 (tetrahedra)
@@ -50,30 +79,6 @@ class FemModel:
     material: Material | None = None
     device: str = "cpu"
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
-
-    def __getstate__(self):
-        # the cache holds device buffers and recorded launches: rebuilt on demand, not pickled
-        state = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "_cache"}
-        return state
-
-    def __setstate__(self, state):
-        for k, v in state.items():
-            if isinstance(v, np.ndarray):
-                v.flags.writeable = False  # unpickled arrays are fresh copies: keep them read-only
-            object.__setattr__(self, k, v)
-        object.__setattr__(self, "_cache", {})
-
-    @property
-    def n_vertices(self) -> int:
-        return self.rest.shape[0]
-
-    @property
-    def n_elements(self) -> int:
-        return self.elements.shape[0]
-
-    @property
-    def n_dofs(self) -> int:
-        return self.rest.size
 
     def mean_edge_length(self) -> float:
         """Mean length [m] of the element edges at rest (each element edge counted once per element)."""

@@ -50,7 +50,7 @@ import numpy as np
 from simfab.errors import InputError
 from simfab.fem.assembly import HessianPattern
 from simfab.fem.materials import Material
-from simfab.fem.model import FemModel, make_model
+from simfab.fem.model import FemModel, MeshModel, make_model
 
 #: local corner pairs of the edge nodes, in the node order above
 EDGE_PAIRS = {2: np.array([[0, 1], [1, 2], [2, 0]]),
@@ -121,7 +121,7 @@ def shape_functions(L: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @dataclass(frozen=True, kw_only=True)
-class P2Model:
+class P2Model(MeshModel):
     """Quadratic simplicial FEM discretization of an elastic body (immutable), affine elements.
 
     dim : 2 (6-node triangles, plane strain) or 3 (10-node tetrahedra)
@@ -178,29 +178,6 @@ class P2Model:
     material: Material | None = None
     device: str = "cpu"
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
-
-    def __getstate__(self):
-        return {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "_cache"}
-
-    def __setstate__(self, state):
-        for k, v in state.items():
-            if isinstance(v, np.ndarray):
-                v.flags.writeable = False
-            object.__setattr__(self, k, v)
-        object.__setattr__(self, "_cache", {})
-
-    @property
-    def n_vertices(self) -> int:
-        """Number of nodes (corners and midpoints): the row count of positions ``x``."""
-        return self.rest.shape[0]
-
-    @property
-    def n_elements(self) -> int:
-        return self.elements.shape[0]
-
-    @property
-    def n_dofs(self) -> int:
-        return self.rest.size
 
     @property
     def n_quadrature(self) -> int:

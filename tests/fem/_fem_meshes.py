@@ -76,3 +76,21 @@ def box_tet24(lx, ly, lz, nx, ny, nz):
     neg = np.linalg.det(d) < 0
     T[neg] = T[neg][:, [0, 1, 3, 2]]
     return P, T.astype(np.int32)
+
+
+def fd_grad_hess(model, x, eps):
+    """Central differences of simfab.fem.elastic (linear or P2 model): gradient from energies,
+    Hessian from gradients. (n*dim,), (n*dim, n*dim)."""
+    from simfab.fem import elastic
+
+    n = x.size
+    g = np.zeros(n)
+    H = np.zeros((n, n))
+    for i in range(n):
+        xp, xm = x.ravel().copy(), x.ravel().copy()
+        xp[i] += eps
+        xm[i] -= eps
+        g[i] = (elastic.energy(model, xp) - elastic.energy(model, xm)) / (2 * eps)
+        H[:, i] = (elastic.energy_gradient(model, xp)[1].ravel()
+                   - elastic.energy_gradient(model, xm)[1].ravel()) / (2 * eps)
+    return g, H

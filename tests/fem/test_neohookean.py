@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 from simfab.fem import neohookean as nh
 from simfab.fem.materials import Material
 from simfab.fem.model import make_model
+from _fem_meshes import fd_grad_hess
 
 MAT = Material(name="test", youngs_modulus=1.0e3, poisson_ratio=0.3, yield_stress=1e9, density=1.0)
 # nu = 0.3 -> mu/lam = (1 - 2 nu) / (2 nu) = 2/3: dPsi/dJ > 0 (eigensolver branch of the
@@ -49,20 +50,6 @@ def _rotation(dim, rng):
     return Rotation.random(random_state=rng).as_matrix() if dim == 3 else _rot2(rng.uniform(0, 2 * np.pi))
 
 
-def _fd_grad_hess(model, x, eps):
-    """Central differences: gradient from energies, Hessian from gradients."""
-    n = x.size
-    g = np.zeros(n)
-    H = np.zeros((n, n))
-    for i in range(n):
-        xp, xm = x.ravel().copy(), x.ravel().copy()
-        xp[i] += eps
-        xm[i] -= eps
-        g[i] = (nh.energy(model, xp) - nh.energy(model, xm)) / (2 * eps)
-        H[:, i] = (nh.energy_gradient(model, xp)[1].ravel() - nh.energy_gradient(model, xm)[1].ravel()) / (2 * eps)
-    return g, H
-
-
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("kind", ["general", "compressed", "expanded"])
 def test_gradient_and_hessian_match_finite_differences(dim, kind):
@@ -72,7 +59,7 @@ def test_gradient_and_hessian_match_finite_differences(dim, kind):
         x = _deform(model, rng, kind)
         E, g, H = nh.energy_gradient_hessian(model, x, project_psd=False)
         assert E == pytest.approx(nh.energy(model, x), rel=1e-14)
-        g_fd, H_fd = _fd_grad_hess(model, x, eps=1e-6 * model.mean_edge_length())
+        g_fd, H_fd = fd_grad_hess(model, x, eps=1e-6 * model.mean_edge_length())
         # central differences: truncation O(eps^2) ~ 1e-12 and round-off ~ 1e-16 |E| / eps ~ 1e-10 relative
         np.testing.assert_allclose(g.ravel(), g_fd, atol=1e-7 * np.abs(g).max())
         np.testing.assert_allclose(H.toarray(), H_fd, atol=1e-7 * np.abs(H_fd).max())
@@ -177,7 +164,7 @@ def test_mesh_gradient_and_hessian_assembly_match_finite_differences():
     model = make_model(P, T, MAT)
     x = model.rest + 0.05 * rng.standard_normal(model.rest.shape)
     E, g, H = nh.energy_gradient_hessian(model, x, project_psd=False)
-    g_fd, H_fd = _fd_grad_hess(model, x, eps=1e-6)
+    g_fd, H_fd = fd_grad_hess(model, x, eps=1e-6)
     np.testing.assert_allclose(g.ravel(), g_fd, atol=1e-7 * np.abs(g).max())
     np.testing.assert_allclose(H.toarray(), H_fd, atol=1e-7 * np.abs(H_fd).max())
     # the assembled projected Hessian equals the sum of the per-element projected blocks

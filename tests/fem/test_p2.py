@@ -7,7 +7,7 @@ from math import factorial
 
 import numpy as np
 import pytest
-from _fem_meshes import box_tet
+from _fem_meshes import box_tet, fd_grad_hess
 from scipy.spatial.transform import Rotation
 
 from simfab.fem import neohookean as nh1
@@ -169,19 +169,6 @@ def _deform(model, rng, kind):
             return x
 
 
-def _fd(model, x, eps):
-    n = x.size
-    g = np.zeros(n)
-    H = np.zeros((n, n))
-    for i in range(n):
-        xp, xm = x.ravel().copy(), x.ravel().copy()
-        xp[i] += eps
-        xm[i] -= eps
-        g[i] = (nh.energy(model, xp) - nh.energy(model, xm)) / (2 * eps)
-        H[:, i] = (nh.energy_gradient(model, xp)[1].ravel() - nh.energy_gradient(model, xm)[1].ravel()) / (2 * eps)
-    return g, H
-
-
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("kind", ["general", "compressed", "expanded"])
 def test_gradient_and_hessian_match_finite_differences(dim, kind):
@@ -191,7 +178,7 @@ def test_gradient_and_hessian_match_finite_differences(dim, kind):
     x = _deform(model, rng, kind)
     E, g, H = nh.energy_gradient_hessian(model, x, project_psd=False)
     assert E == pytest.approx(nh.energy(model, x), rel=1e-14)
-    g_fd, H_fd = _fd(model, x, eps=1e-6 * model.mean_edge_length())
+    g_fd, H_fd = fd_grad_hess(model, x, eps=1e-6 * model.mean_edge_length())
     # central differences: truncation O(eps^2) ~ 1e-12, round-off ~ 1e-16 |E| / eps ~ 1e-10 relative
     np.testing.assert_allclose(g.ravel(), g_fd, atol=1e-7 * np.abs(g).max())
     Hd = H.toarray()
