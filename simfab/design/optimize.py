@@ -27,9 +27,10 @@ or once the best design satisfies every constraint and has not improved by PATIE
 **Early rejection.** The annealer's acceptance test is a threshold known before the candidate is
 simulated (E_i < E_cur - T ln u). E_L is known before simulating, and the running maximum of the
 von Mises stress only grows along the insertion (the constraint reads its maximum over the whole
-run), so E_L + W (violation of the yield bound so far)^2 is a lower bound of E_i at every step.
-(The insertion and removal forces are not used: the profile reads them only up to the steady
-state, which is known at the end, so their running maxima are no bounds.)
+run), so E_L + W (violation of the yield bound so far)^2 is a lower bound of E_i at every step. So are
+the upper bounds of the insertion and removal forces, read over the records up to the energy's
+running maximum (the profile reads the forces up to its steady state, which comes after the
+energy's overall maximum: those records are always among them; see ``_bound_watch``).
 Once it exceeds the threshold the candidate would be rejected whatever the rest of its profile:
 its simulation stops there (status "stopped", objective = the bound). The decisions, hence the
 optimization's result, are exactly those of running every simulation to the end.
@@ -299,19 +300,37 @@ class _Exceeded(Exception):
 
 
 def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float, trace: list):
-    """Step callback raising :class:`_Exceeded` when base + W * (violation of the yield bound by
-    the running max of the averaged von Mises stress on ``cm``'s mesh)^2 exceeds ``threshold``
-    (None if nothing can be bounded); appends each step's bound to ``trace``."""
-    lo_hi = problem.limits.get("von_mises")
-    if lo_hi is None or not math.isfinite(lo_hi[1]) or not math.isfinite(threshold):
+    """Step callback raising :class:`_Exceeded` once ``base`` + W * (sum of the squared violations
+    that the steps so far already prove) exceeds ``threshold`` (None if nothing can be bounded);
+    appends each step's bound to ``trace``. Bounded, on ``cm``'s mesh, mesh-corrected like the
+    figures (``problem.corrections``):
+
+    - the yield bound, by the running max of the averaged von Mises stress (the figure is its
+      maximum over the whole run);
+    - the upper bounds of the insertion and removal forces, by max(0, -min F) and max(0, max F)
+      over the records up to the first maximum of the energy so far: the profile reads the forces
+      up to its steady state, which lies after the energy's maximum over the whole run
+      (:func:`simfab.coupling.profile.analyze`), itself at or after the running one, so those
+      records are always part of it.
+    """
+    terms = {k: problem.limits[k][1] for k in ("von_mises", "insertion_force", "removal_force")
+             if k in problem.limits and math.isfinite(problem.limits[k][1])}
+    if not terms or not math.isfinite(threshold):
         return None
-    hi, sc = lo_hi[1], B.SCALES["von_mises"]
-    peak = [0.0]
-    radius, factor = problem.brief.stress_radius, problem.corrections.get("von_mises", 1.0)
+    corr = {k: problem.corrections.get(k, 1.0) for k in terms}
+    radius = problem.brief.stress_radius
+    run = dict(sigma=0.0, E=-math.inf, F_lo=math.inf, F_hi=-math.inf, F_min=math.inf, F_max=-math.inf)
 
     def watch(k, rec):
-        peak[0] = max(peak[0], factor * averaged_von_mises(cm.fem, rec.von_mises, radius))
-        bound = base + B.PENALTY_WEIGHT * max(0.0, peak[0] - hi) ** 2 / sc**2
+        run["F_min"], run["F_max"] = min(run["F_min"], rec.force), max(run["F_max"], rec.force)
+        if rec.energy > run["E"]:  # a new maximum of the energy: every force so far is read
+            run["E"], run["F_lo"], run["F_hi"] = rec.energy, run["F_min"], run["F_max"]
+        value = {"insertion_force": max(0.0, -run["F_lo"]), "removal_force": max(0.0, run["F_hi"])}
+        if "von_mises" in terms:
+            run["sigma"] = max(run["sigma"], averaged_von_mises(cm.fem, rec.von_mises, radius))
+            value["von_mises"] = run["sigma"]
+        bound = base + B.PENALTY_WEIGHT * sum(max(0.0, corr[c] * value[c] - hi) ** 2 / B.SCALES[c] ** 2
+                                              for c, hi in terms.items())
         trace.append(bound)
         if bound > threshold:
             raise _Exceeded(bound, k)

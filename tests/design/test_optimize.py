@@ -145,3 +145,26 @@ def test_parallel_workers_make_the_same_decisions_as_one_process():
     assert np.array_equal(two.best.h, one.best.h)
     assert two.best.result is not None  # evaluated on a worker or here, the best keeps its insertion
     assert sum(r["accepted"] for r in one.history[1:]) >= 1  # the run did move
+
+
+def test_objective_bounds_along_the_insertion_are_lower_bounds_that_bite(scene):
+    """The per-step lower bounds of the objective (yield, insertion and removal force upper bounds:
+    what stops a candidate's insertion early) never exceed the finished objective, and the force
+    bounds (the yield bound set out of reach here) prove a large part of the penalty by the energy's
+    peak (the block needs ~14 N on the way in, ~18 N at its seat: asked for <= 4 N)."""
+    P = make_problem(scene, DesignBrief(grip="tight", insertion_force=(0.0, 4.0), removal_force=(0.0, 4.0),
+                                        yield_stress=1e12, handles=3, placement="spatial"))  # force terms only
+    h = P.handles.identity()
+    rng = np.random.default_rng(3)
+    for hh in (h, np.clip(h + 0.3 * P.sigma0 * rng.standard_normal(h.shape), P.lower, P.upper)):
+        ev = evaluate(P, hh, threshold=1e300, keep_result=True)  # finite: the bounds are traced, nothing stops
+        assert ev.status == "ok" and len(ev.bounds) == len(ev.result.steps)
+        assert max(ev.bounds) <= ev.objective * (1 + 1e-12)
+        assert all(b1 >= b0 for b0, b1 in zip(ev.bounds, ev.bounds[1:]))  # running maxima
+        peak = int(np.argmax(ev.result.column("energy")))
+        assert ev.bounds[peak] - ev.E_L > 0.25 * (ev.objective - ev.E_L) > 1e4
+        # stopped by a threshold just below a step's bound: rejected there, as the full run would be
+        k = peak
+        stopped = evaluate(P, hh, threshold=ev.bounds[k] * (1 - 1e-9))
+        assert stopped.status == "stopped" and stopped.objective == ev.bounds[k]
+        assert ev.objective > ev.bounds[k] * (1 - 1e-9)
