@@ -33,3 +33,21 @@ def test_scenes_with_only_a_ready_mesh_cannot_be_refined(tmp_path):
     assert load_coupling_scene(tmp_path / "clip3d.toml").fem.n_elements == len(T)  # the file is used
     with pytest.raises(InputError, match="target_elements"):
         run_levels(tmp_path / "clip3d.toml", (1, 2))
+
+
+def test_figures_that_are_zero_report_errors_relative_to_their_peak():
+    """An ejecting clip's F_rm (~1e-8 N: zero up to the solver's tolerances) and a loose coupling's
+    E_ss are judged against F_in and E_max, not against themselves (which would read 99 % noise)."""
+    from simfab.coupling.converge import Level, report
+
+    N = [500, 1000, 2000, 4000]
+    h2 = [1.0 / n for n in N]
+    figs = [dict(E_max=4.5 + 10 * h, E_ss=1e-10 * (1 + (-1) ** i), F_in=1.7e4 + 1e5 * h,
+                 F_rm=[8e-11, 2.4e-8, 2.2e-9, 1.9e-8][i], F_grip=9e3 + 1e4 * h) for i, h in enumerate(h2)]
+    rep = report("x", [Level(factor=f, elements=n, seconds=1.0, figures=g, category="ejects")
+                       for f, n, g in zip((0.5, 1, 2, 4), N, figs)], 2)
+    F = rep["figures"]
+    assert F["F_rm"]["relative_of"] == "F_in" and F["E_ss"]["relative_of"] == "E_max"
+    assert max(abs(e) for e in F["F_rm"]["relative_error"]) < 1e-11
+    assert F["F_in"]["relative_of"] == "F_in"
+    assert F["F_in"]["relative_error"][0] == pytest.approx(1e5 / 500 / 1.7e4, rel=1e-6)  # exact power law: exact limit
