@@ -18,7 +18,9 @@ accepted, rejected
 (count per reason), seconds,
 simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_stl, outline_csv
 (2D), scene_xml, scene_toml, scene_mesh, profile_png, shape_png, history_csv, usd, summary_json,
-revolved_stl with --revolve-axis), restarts (with --restarts: per run seed, status, message,
+revolved_stl with --revolve-axis; with --revolve-arms also revolved_scene_xml, revolved_scene_toml,
+revolved_mesh), revolved (with --revolve-arms: the 3D part's simulation: elements, category,
+figures, constraints of the brief with their values and satisfied flags), restarts (with --restarts: per run seed, status, message,
 feasible, objective, E_L, iterations, seconds), mesh_check (unless --no-mesh-check: levels
 (subdivisions, elements, seconds, category), figures (per figure: values per level,
 extrapolated, order, converging, difference_of_optimization_mesh), constraints at the
@@ -76,6 +78,10 @@ def add_optimize_args(s) -> None:
     s.add_argument("--revolve-axis", choices=["x", "y"], help="2D: also revolve the optimized section about this axis")
     s.add_argument("--revolve-offset", type=float, default=0.0, metavar="M",
                    help="position of the revolution axis [m] (x = M for axis y, y = M for axis x)")
+    s.add_argument("--revolve-arms", type=int, default=0, metavar="K",
+                   help="with --revolve-axis: revolve only the base (the keep sites) and replicate the arms K times "
+                        "around the axis (K >= 2, the thesis' building blocks), then simulate that 3D part "
+                        "(10-node tets); 0 (default): the whole section a full turn, STL only")
 
 
 def add_study_args(s) -> None:
@@ -129,7 +135,11 @@ def run_optimize(args) -> dict:
     if args.workers is not None and args.workers < 1:
         raise InputError(f"must be >= 1, got {args.workers}", where="--workers")
     workers = args.workers if args.workers is not None else (1 if args.restarts > 1 else min(os.cpu_count() or 1, 4))
-    revolve = (args.revolve_axis, args.revolve_offset) if args.revolve_axis else None
+    if args.revolve_arms and not args.revolve_axis:
+        raise InputError("needs --revolve-axis", where="--revolve-arms")
+    if args.revolve_arms < 0 or args.revolve_arms == 1:
+        raise InputError(f"must be 0 (a full turn) or >= 2, got {args.revolve_arms}", where="--revolve-arms")
+    revolve = (args.revolve_axis, args.revolve_offset, args.revolve_arms) if args.revolve_axis else None
     return optimize_scene(args.scene, out=args.out, design=design_overrides(args), simulation=simulation_overrides(args),
                           device=dev, quiet=args.quiet, seed=args.seed, revolve=revolve, restarts=args.restarts,
                           scheduler=args.scheduler, workers=workers, mesh_check=not args.no_mesh_check)

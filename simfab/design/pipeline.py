@@ -22,8 +22,10 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     restarts : independent annealing runs (seeds seed, seed+1, ...) on the same handles, run as
         Dask tasks (:func:`simfab.sweep.run_tasks`, on ``scheduler`` or a local cluster); the
         best final design is kept and every run is reported
-    revolve : (axis "x"|"y", offset [m]) to also write the optimized 2D section revolved into a
-        3D part (``NAME_optimized_revolved.stl``, mm)
+    revolve : (axis "x"|"y", offset [m], arms) to also write the optimized 2D section revolved into a
+        3D part (``NAME_optimized_revolved.stl``, mm): a full turn (arms 0), or the base revolved
+        and the arms replicated ``arms`` times (:func:`simfab.design.synthesis.revolve_arms`), then
+        written as a 3D scene and simulated (summary ``revolved``: its figures against the brief)
     workers : processes evaluating the annealer's proposals (:mod:`simfab.design.parallel`; the
         result does not depend on it); without restarts only
     mesh_check : re-run the optimized shape on uniformly refined meshes
@@ -35,6 +37,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     from simfab.design.optimize import make_problem, optimize
     from simfab.design.parallel import ProblemSource
     from simfab.design.scene import load_design_scene
+    from simfab.io.atomic import write_json
     from simfab.io.outpaths import make_out_dir
     from simfab.progress import log
 
@@ -63,7 +66,12 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         extra["objective_fine"] = checked_objective(res.problem, res.best, extra["mesh_check"])
     summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
     if revolve is not None:
-        summary["outputs"]["revolved_stl"] = str(write_revolved(res, out, cm.name, *revolve))
+        rev = write_revolved(res, out, cm.name, *revolve, scene=ds, optimized=summary["outputs"], quiet=quiet)
+        summary["outputs"].update({k: str(v) for k, v in rev.pop("outputs").items()})
+        if rev:
+            summary["revolved"] = rev
+            summary["warnings"] += rev["warnings"]
+        write_json(summary["outputs"]["summary_json"], summary)  # with the revolved part's entries
     for w in summary["warnings"]:
         log(f"simfab: warning: {w}")
     return summary
@@ -119,16 +127,54 @@ def mesh_corrected(res, seed: int, workers: int, quiet: bool):
     return best[0], best[1], rounds
 
 
-def write_revolved(res, out: Path, stem: str, axis: str, offset: float) -> Path:
-    """The optimized 2D section's outer outline revolved about ``axis`` (mm STL)."""
-    from simfab.design.synthesis import boundary_loops, revolve_outline
+def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: int = 0, *, scene=None,
+                   optimized: dict | None = None, quiet: bool = True) -> dict:
+    """The optimized 2D section revolved about ``axis`` (mm STL): a full turn of its outer outline
+    (``arms`` 0), else the base revolved with ``arms`` replicated arms as a 3D scene next to the
+    optimized 2D one (``optimized``: its output paths; ``scene``: the DesignScene, for its keep
+    sites), simulated: {"outputs": paths, and with arms: "elements", "seconds", "category",
+    "figures", "constraints", "warnings"}."""
+    from simfab.design.synthesis import boundary_loops, revolve_outline, revolved_scene
     from simfab.io.mesh import save_mesh
 
     fem = res.problem.base.fem
-    loop = boundary_loops(fem.boundary_facets)[0]
-    mesh = revolve_outline(res.best.rest[loop], axis=axis, offset=offset)
-    mesh.apply_scale(1e3)
-    return save_mesh(mesh, Path(out) / f"{stem}_optimized_revolved.stl")
+    if not arms:
+        loop = boundary_loops(fem.boundary_facets)[0]
+        mesh = revolve_outline(res.best.rest[loop], axis=axis, offset=offset)
+        mesh.apply_scale(1e3)
+        return {"outputs": {"revolved_stl": save_mesh(mesh, Path(out) / f"{stem}_optimized_revolved.stl")}}
+    import time
+
+    import numpy as np
+
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import simulate
+    from simfab.design import brief as B
+    from simfab.design.optimize import profile_figures
+    from simfab.progress import log
+
+    cm = res.problem.base
+    kept = np.concatenate(scene.kept_regions) if scene is not None and scene.kept_regions else np.zeros(0, int)
+    paths = revolved_scene(res.best.rest, fem, kept=kept, object_start=cm.pose(0.0)[1], scene_xml=optimized["scene_xml"],
+                           scene_toml=optimized["scene_toml"], out=out, stem=stem, axis=axis, offset=offset, arms=arms)
+    cm3 = load_coupling_scene(paths["scene_xml"], device=fem.device)
+    log(f"couple optimize: simulating the revolved part ({arms} arms, {cm3.fem.n_elements} 10-node tets)", quiet=quiet)
+    t0 = time.perf_counter()
+    r3 = simulate(cm3)
+    fig = profile_figures(r3, res.problem.brief.stress_radius)
+    cons = B.constraints(fig, res.problem.limits)
+    missed = [c.name for c in cons if not c.satisfied]
+    warnings = list(r3.warnings)
+    if missed:
+        warnings.append(f"{stem}: the revolved 3D part ({arms} arms) misses the 2D brief on {', '.join(missed)} "
+                        "(a plane-strain section and a 3D part with discrete arms on a ball are different mechanics: "
+                        "see summary 'revolved')")
+    return {"outputs": {"revolved_" + k: v for k, v in paths.items()} | {"revolved_stl": paths["stl"]},
+            "elements": int(cm3.fem.n_elements), "seconds": time.perf_counter() - t0, "category": fig["category"],
+            "figures": {k: v for k, v in fig.items() if k != "category"},
+            "constraints": [dict(name=c.name, value=c.value, lo=c.lo, hi=c.hi, unit=c.unit, satisfied=c.satisfied)
+                            for c in cons],
+            "warnings": warnings}
 
 
 def anneal_task(*, source, seed: int):
