@@ -139,6 +139,9 @@ class DesignProblem:
         empty: none
     refined : boundary facet ids every candidate's insertion starts refined with (``simulate``'s
         ``refined``): those the initial shape's insertion refined, set by :func:`optimize`
+    initial : the unmodified shape's insertion (``simulate(base)``, e.g. run for the displacement
+        placement), which :func:`optimize` scores as its initial evaluation instead of running it
+        again; None: optimize runs it
     """
 
     base: object
@@ -155,6 +158,7 @@ class DesignProblem:
     source: object = None
     corrections: dict = field(default_factory=dict)
     refined: tuple = ()
+    initial: object = None
 
     def constraints(self, figures: dict) -> list:
         """The brief's constraints on simulated ``figures``, mesh-corrected (see ``corrections``)."""
@@ -168,8 +172,8 @@ def make_problem(cm, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetP
     """Set up the optimization of scene ``cm``'s part.
 
     kept_regions : vertex index arrays kept unchanged besides the fixed support (keep sites)
-    initial : the initial shape's InsertionResult (displacement placement needs it; simulated
-        here when missing)
+    initial : the initial shape's InsertionResult, ``simulate(cm)`` (displacement placement needs it;
+        simulated here when missing); kept as the problem's ``initial``
     handle_vertices : explicit active handle vertices (overrides the brief's placement)
     seed : placement seed (random placement; affinity propagation's tie-breaking)
     source : a :class:`simfab.design.parallel.ProblemSource` naming the scene this problem was
@@ -205,7 +209,8 @@ def make_problem(cm, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetP
                          energy=ModificationEnergy(X, fem.boundary_facets), target=target, kept=kept,
                          q0=element_quality(X, fem.elements), lower=lower, upper=upper, sigma0=sigma0,
                          source=None if source is None else dataclasses.replace(
-                             source, handle_vertices=tuple(int(v) for v in H.vertex[H.active]), seed=seed))
+                             source, handle_vertices=tuple(int(v) for v in H.vertex[H.active]), seed=seed),
+                         initial=initial if initial is not None and initial.model is cm else None)
 
 
 def max_displacement(res) -> np.ndarray:
@@ -414,24 +419,45 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
         ev.reason = f"simulation failed ({type(e).__name__}): {str(e).splitlines()[0][:160] if str(e) else ''}"
     else:
         ev.sim_seconds = time.perf_counter() - t1
-        ev.status = "ok"
-        ev.newton_iterations = int(sum(st.iterations for st in res.steps))
-        ev.figures = profile_figures(res, problem.brief.stress_radius)
-        ev.constraints = problem.constraints(ev.figures)
-        pen = B.penalty(ev.constraints)
-        if problem.target is not None:
-            scale = problem.corrections.get("force_profile", 1.0)  # mesh correction of the whole profile
-            ev.rms_error = problem.target.rms_error(res.column("s"), scale * res.column("force"))
-            ev.objective = ev.rms_error ** 2 + pen
-        else:
-            ev.objective = ev.E_L + pen
-        if not math.isfinite(ev.objective):
-            ev.status, ev.reason, ev.objective = "rejected", "non-finite profile figures", math.inf
-        if keep_result:
-            ev.result = res
+        _score(problem, ev, res, keep_result)
     if ev.sim_seconds == 0.0:
         ev.sim_seconds = time.perf_counter() - t1
     ev.seconds = time.perf_counter() - t0
+    return ev
+
+
+def _score(problem: DesignProblem, ev: Evaluation, res, keep_result: bool) -> None:
+    """Fill ``ev`` (status "ok") from the complete insertion ``res`` of its rest shape: figures,
+    constraints, objective (or "rejected" for non-finite figures)."""
+    ev.status = "ok"
+    ev.newton_iterations = int(sum(st.iterations for st in res.steps))
+    ev.figures = profile_figures(res, problem.brief.stress_radius)
+    ev.constraints = problem.constraints(ev.figures)
+    pen = B.penalty(ev.constraints)
+    if problem.target is not None:
+        scale = problem.corrections.get("force_profile", 1.0)  # mesh correction of the whole profile
+        ev.rms_error = problem.target.rms_error(res.column("s"), scale * res.column("force"))
+        ev.objective = ev.rms_error ** 2 + pen
+    else:
+        ev.objective = ev.E_L + pen
+    if not math.isfinite(ev.objective):
+        ev.status, ev.reason, ev.objective = "rejected", "non-finite profile figures", math.inf
+    if keep_result:
+        ev.result = res
+
+
+def initial_evaluation(problem: DesignProblem) -> Evaluation:
+    """The evaluation of the unmodified shape (identity handles: the mesh exactly), scored from
+    ``problem.initial`` when the caller already ran it, else simulated."""
+    h = problem.handles.identity()
+    if problem.initial is None:
+        return evaluate(problem, h, keep_result=True)
+    t0 = time.perf_counter()
+    ev = screen(problem, h)
+    if not ev.reason:
+        ev.sim_seconds = problem.initial.seconds
+        _score(problem, ev, problem.initial, True)
+    ev.seconds = time.perf_counter() - t0 + ev.sim_seconds
     return ev
 
 
@@ -539,7 +565,7 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
         pool = stack.enter_context(EvaluationPool(problem, workers)) if workers > 1 else None
         # the unmodified shape's insertion gives the facets every candidate's run starts refined
         # with (problem.refined; the pool sends them with each candidate)
-        initial = evaluate(problem, problem.handles.identity(), keep_result=True)
+        initial = initial_evaluation(problem)
         if initial.status != "ok":
             raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to "
                                    "optimize from")

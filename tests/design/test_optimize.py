@@ -7,6 +7,7 @@ import pytest
 
 from simfab.design.brief import DesignBrief
 from simfab.design.optimize import element_quality, evaluate, make_problem, optimize
+from simfab.coupling.scene import load_coupling_scene
 from simfab.errors import ConvergenceError
 
 STEPS = 12  # a coarse insertion keeps the loop fast; the physics is the bundled scene's
@@ -168,3 +169,24 @@ def test_objective_bounds_along_the_insertion_are_lower_bounds_that_bite(scene):
         stopped = evaluate(P, hh, threshold=ev.bounds[k] * (1 - 1e-9))
         assert stopped.status == "stopped" and stopped.objective == ev.bounds[k]
         assert ev.objective > ev.bounds[k] * (1 - 1e-9)
+
+
+def test_initial_insertion_run_for_the_placement_is_scored_not_run_again(scene):
+    """The unmodified shape's insertion, run before the optimization (displacement placement), is the
+    optimizer's initial evaluation: scored as evaluate() would score that shape (identity handles
+    reproduce the mesh), not simulated again; a run of another model is not taken for it."""
+    from simfab.coupling.simulate import simulate
+    from simfab.design.optimize import initial_evaluation
+
+    brief = DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=3, placement="displacement")
+    run = simulate(scene)
+    P = make_problem(scene, brief, initial=run)
+    assert P.initial is run
+    ev = initial_evaluation(P)
+    fresh = evaluate(P, P.handles.identity())
+    assert ev.status == fresh.status == "ok" and ev.result is run
+    assert ev.objective == pytest.approx(fresh.objective, rel=1e-9)
+    assert all(ev.figures[k] == pytest.approx(fresh.figures[k], rel=1e-9, abs=1e-12)
+               for k in fresh.figures if k != "category")
+    other = simulate(load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": STEPS}}))
+    assert make_problem(scene, brief, initial=other).initial is None  # not this problem's model
