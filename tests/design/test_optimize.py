@@ -1,6 +1,7 @@
 """The rest-shape optimization loop on the bundled 2D C-clamp (simfab.design.optimize)."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -89,9 +90,9 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
 
     out = tmp_path / "o"
     r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "block2d_tight", "--iterations", "4",
-                        "--steps", "8", "--handles", "3", "--placement", "spatial", "--revolve-axis", "y",
-                        "--workers", "1", "--correction-rounds", "1",
-                        "--revolve-offset", "-0.02", "--out", str(out), "--json"], capture_output=True, text=True)
+                        "--steps", "8", "--handles", "3", "--placement", "spatial", "--revolve-axis", "x",
+                        "--workers", "1", "--correction-rounds", "1", "--revolve-arms", "2",
+                        "--out", str(out), "--json"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
     for k, p in s["outputs"].items():
@@ -116,6 +117,13 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
     for k in ("part_stl", "revolved_stl"):
         m = trimesh.load(s["outputs"][k])
         assert m.is_watertight and m.volume > 0, k
+    # the 3D synthesis (base revolved, 2 arms) was simulated and checked against the brief, and the
+    # summary file on disk has it too
+    rev = s["revolved"]
+    assert rev["elements"] > 100 and rev["category"] in ("tight", "loose", "ejects")
+    assert {c["name"] for c in rev["constraints"]} == set(s["constraints"])
+    assert json.loads(Path(s["outputs"]["summary_json"]).read_text())["revolved"]["elements"] == rev["elements"]
+    assert all(Path(s["outputs"][k]).is_file() for k in ("revolved_scene_xml", "revolved_scene_toml", "revolved_mesh"))
     # the optimized scene runs unchanged and reproduces the optimizer's figures
     r2 = subprocess.run([sys.executable, "-m", "simfab", "couple", "simulate", s["outputs"]["scene_xml"], "--out",
                          str(tmp_path / "sim"), "--json"], capture_output=True, text=True)

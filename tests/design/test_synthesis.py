@@ -33,6 +33,16 @@ def test_two_arms_are_the_sections_own_arms_in_its_plane():
         revolve_arms([SECTION], axis="x", cut=1.0, base_side=-1, arms=2, width=0.1).volume, rel=1e-9)
 
 
+def test_full_turn_of_a_section_is_a_closed_solid_of_revolution():
+    # Pappus: a rectangle r in [1, 2], z in [0, 1] revolved a full turn: V = 2 pi r_c A, faceted
+    from simfab.design.synthesis import revolve_outline
+
+    n = 96
+    m = revolve_outline(np.array([[0.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]]), axis="x", sections=n)
+    ring = 0.5 * n * np.sin(2 * np.pi / n) * (2.0**2 - 1.0**2) * 1.0  # faceted annulus times height
+    assert m.is_watertight and m.volume == pytest.approx(ring, rel=1e-9)
+
+
 def test_bad_synthesis_inputs_are_named():
     from simfab.errors import InputError
 
