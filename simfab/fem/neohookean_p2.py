@@ -37,7 +37,9 @@ reports the smallest J over each element's quadrature points and :func:`det_and_
 largest von Mises stress over them (conservative for inversion and yield checks).
 
 Kernels run in float64, one launch per call for all elements (one thread per element, quadrature
-loop inside); the Hessian launch adds straight into the CSR ``data`` of ``model.pattern`` through
+loop inside; on the CPU a mesh of SPLIT_ELEMENTS or more runs as two launches of half the elements
+on two threads: the clip3d part at the original's size, 1,083 10-node tets, 23 -> 16 ms per exact
+Hessian at load 4.5, where a second core is only partly free); the Hessian launch adds straight into the CSR ``data`` of ``model.pattern`` through
 precomputed slots, like the linear kernel. Each quadrature point's blocks come from the closed form
 above (mu, cofactor and cross-product terms plus the twist correction) rather than by contracting
 the 9 x 9 d2Psi/dF2 (that was 4x slower); the SVD route contracts it (rare: strong expansion).
@@ -79,6 +81,11 @@ _EXACT = wp.constant(0)
 _PROJECT = wp.constant(1)
 _PROJECT_SVD = wp.constant(2)
 _BOTH = wp.constant(3)
+
+#: Meshes with at least this many elements are launched in two halves on two threads on the CPU
+#: (the cost per 10-node tet is ~15 us for the Hessian: a handoff to the second thread, ~50 us,
+#: pays from a few dozen elements on; below this the launches stay whole).
+SPLIT_ELEMENTS = 256
 
 
 # ----------------------------------------------------------------------------------------------
@@ -315,10 +322,10 @@ def _add_qp_hessian(K: _mat12d, F: wp.mat22d, J: wp.float64, mu: wp.float64, lam
 # kernels (generic over the dimension; explicit overloads below)
 # ----------------------------------------------------------------------------------------------
 @wp.kernel
-def _energy_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+def _energy_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
                    wq: wp.array2d(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
                    energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
-    e = wp.tid()
+    e = first + wp.tid()  # this launch's part of the elements
     E = wp.float64(0.0)
     Jmin = wp.float64(wp.inf)
     for q in range(wq.shape[1]):
@@ -332,11 +339,11 @@ def _energy_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
 
 
 @wp.kernel
-def _gradient_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
                      wq: wp.array2d(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
                      lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
                      det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any)):
-    e = wp.tid()
+    e = first + wp.tid()  # this launch's part of the elements
     E = wp.float64(0.0)
     Jmin = wp.float64(wp.inf)
     g = grad.dtype()
@@ -363,13 +370,13 @@ def _gradient_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32
 
 
 @wp.kernel
-def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
                     wq: wp.array2d(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
                     lam_e: wp.array(dtype=wp.float64), project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
                     energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
                     data2: wp.array(dtype=wp.float64)):
-    e = wp.tid()
+    e = first + wp.tid()  # this launch's part of the elements
     zero = wp.float64(0.0)
     k = elements.shape[1]
     nq = wq.shape[1]
@@ -425,12 +432,12 @@ def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32)
 
 
 @wp.kernel
-def _stress_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
+def _stress_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
                    wq: wp.array2d(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
                    det_F: wp.array(dtype=wp.float64), von_mises: wp.array(dtype=wp.float64)):
     """min det F and max von Mises sqrt(3/2) mu |dev(F F^T - I)| / J over the quadrature points
     (see simfab.fem.stress.det_and_von_mises); +inf stress where any det F <= 0."""
-    e = wp.tid()
+    e = first + wp.tid()  # this launch's part of the elements
     Jmin = wp.float64(wp.inf)
     vm = wp.float64(0.0)
     for q in range(wq.shape[1]):
@@ -476,7 +483,11 @@ class _Workspace:
     (per model). Small meshes are dominated by per-call overhead, so (as in
     :mod:`simfab.fem.neohookean`) the position buffer is persistent (on the CPU a numpy array the
     kernels read through an alias) and each kind of launch is recorded once (``record_cmd``) and
-    replayed: 200 us -> 40 us per energy call on a 60-tet model."""
+    replayed: 200 us -> 40 us per energy call on a 60-tet model.
+
+    On the CPU a mesh of at least SPLIT_ELEMENTS elements is launched in two halves on two threads
+    (Warp's CPU kernels run on one thread and release the GIL): per-element outputs are disjoint,
+    and each half adds its Hessian into its own CSR buffer, summed afterwards."""
 
     def __init__(self, model: P2Model):
         d, m, k = model.dim, model.n_elements, model.elements.shape[1]
@@ -484,6 +495,8 @@ class _Workspace:
         self.model_device = dev
         self.m = m
         self.cpu = wp.get_device(dev).is_cpu
+        half = m // 2
+        self.parts = ((0, half), (half, m - half)) if self.cpu and m >= SPLIT_ELEMENTS else ((0, m),)
         vec = wp.vec3d if d == 3 else wp.vec2d
         self.x_np = np.zeros((model.n_vertices, d))
         self.x = self._wrap(self.x_np, vec)
@@ -496,8 +509,8 @@ class _Workspace:
         self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
         self.von_mises = wp.zeros(m, dtype=wp.float64, device=dev)
         self.grad = wp.zeros(m, dtype=_vec30d if d == 3 else _vec12d, device=dev)
-        self.slots = None  # CSR slots (int32), CSR values ``data`` / ``data2`` and element blocks ``hess``:
-        self.data_np = self.data = self.data2_np = self.data2 = None  # allocated on first use
+        self.slots = None  # CSR slots (int32) and element blocks ``hess``, allocated on first use;
+        self.csr = {}  # (which: 0 = data / 1 = data2, part) -> (warp array, numpy alias or None)
         self.hess = None
         self.nnz = model.pattern.nnz
         self.pattern = model.pattern
@@ -520,61 +533,70 @@ class _Workspace:
         if not self.cpu:
             self.x.assign(self.x_np)
 
-    def _csr_buffers(self, two: bool):
-        if self.slots is None:
-            if self.nnz >= 2**31:
-                raise ValueError("Hessian too large for int32 slots")
-            self.slots = wp.array(self.pattern.element_slots.astype(np.int32), dtype=wp.int32,
-                                  device=self.model_device)
-            self.data_np = np.zeros(self.nnz)
-            self.data = self._wrap(self.data_np, wp.float64)
-        if two and self.data2 is None:
-            self.data2_np = np.zeros(self.nnz)
-            self.data2 = self._wrap(self.data2_np, wp.float64)
-        return self.data, (self.data2 if two else self.dummy_data)
+    def _buffer(self, which: int, part: int):
+        """CSR value buffer ``which`` (0: data, 1: data2) of launch part ``part``."""
+        buf = self.csr.get((which, part))
+        if buf is None:
+            if self.slots is None:
+                if self.nnz >= 2**31:
+                    raise ValueError("Hessian too large for int32 slots")
+                self.slots = wp.array(self.pattern.element_slots.astype(np.int32), dtype=wp.int32,
+                                      device=self.model_device)
+            arr_np = np.zeros(self.nnz)
+            buf = self.csr[(which, part)] = (self._wrap(arr_np, wp.float64), arr_np if self.cpu else None)
+        return buf[0]
 
     def zero_csr(self, two: bool) -> None:
-        """Zero the CSR values the Hessian launch adds into."""
-        for arr, arr_np in ((self.data, self.data_np), (self.data2, self.data2_np))[: 2 if two else 1]:
-            if self.cpu:
-                arr_np.fill(0.0)
-            else:
-                arr.zero_()
+        """Zero the CSR values the Hessian launches add into."""
+        for (which, _), (arr, arr_np) in self.csr.items():
+            if which == 0 or two:
+                if arr_np is not None:
+                    arr_np.fill(0.0)
+                else:
+                    arr.zero_()
 
     def csr_values(self, second: bool = False) -> np.ndarray:
-        """A fresh copy (nnz,) of the CSR values of the last Hessian launch (``data2`` with ``second``)."""
-        if self.cpu:
-            return (self.data2_np if second else self.data_np).copy()
-        return (self.data2 if second else self.data).numpy()
+        """A fresh array (nnz,) of the CSR values of the last Hessian launch (``data2`` with
+        ``second``): the parts' buffers summed."""
+        which = int(second)
+        out = None
+        for part in range(len(self.parts)):
+            arr, arr_np = self.csr[(which, part)]
+            v = arr_np if arr_np is not None else arr.numpy()
+            out = v.copy() if out is None else out + v
+        return out
 
-    def command(self, kind: str, mode: int = 0):
-        """The recorded launch of ``kind`` (energy, gradient, hessian, blocks, stress) and Hessian
-        mode, created on first use."""
-        cmd = self.commands.get((kind, mode))
-        if cmd is not None:
-            return cmd
-        common = [self.x, self.elements, self.gN, self.wq, self.mu, self.lam]
-        if kind == "energy":
-            kernel, inputs, outputs = _energy_kernel, common, [self.energy, self.det_F]
-        elif kind == "gradient":
-            kernel, inputs, outputs = _gradient_kernel, common, [self.energy, self.det_F, self.grad]
-        elif kind == "hessian":  # added straight into the CSR values
-            data, data2 = self._csr_buffers(mode == _BOTH)
-            kernel, inputs = _hessian_kernel, common + [mode, 1, self.slots]
-            outputs = [self.energy, self.det_F, self.grad, self.dummy3, data, data2]
-        elif kind == "blocks":
-            if self.hess is None:
-                self.hess = wp.zeros((self.m, self.kk, self.kk), dtype=wp.float64, device=self.model_device)
-            kernel, inputs = _hessian_kernel, common + [mode, 0, self.dummy_slots]
-            outputs = [self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data]
-        else:
-            kernel, inputs = _stress_kernel, [self.x, self.elements, self.gN, self.wq, self.mu]
-            outputs = [self.det_F, self.von_mises]
-        with RECORD_LOCK:  # the first launch loads the module: one thread at a time
-            cmd = wp.launch(kernel, dim=self.m, device=self.model_device, inputs=inputs, outputs=outputs,
-                            record_cmd=True)
-        self.commands[(kind, mode)] = cmd
-        return cmd
+    def command(self, kind: str, mode: int = 0) -> tuple:
+        """The recorded launches (one per part) of ``kind`` (energy, gradient, hessian, blocks,
+        stress) and Hessian mode, created on first use."""
+        cmds = self.commands.get((kind, mode))
+        if cmds is not None:
+            return cmds
+        cmds = []
+        for part, (first, count) in enumerate(self.parts):
+            common = [first, self.x, self.elements, self.gN, self.wq, self.mu, self.lam]
+            if kind == "energy":
+                kernel, inputs, outputs = _energy_kernel, common, [self.energy, self.det_F]
+            elif kind == "gradient":
+                kernel, inputs, outputs = _gradient_kernel, common, [self.energy, self.det_F, self.grad]
+            elif kind == "hessian":  # added straight into this part's CSR values
+                data = self._buffer(0, part)
+                data2 = self._buffer(1, part) if mode == _BOTH else self.dummy_data
+                kernel, inputs = _hessian_kernel, common + [mode, 1, self.slots]
+                outputs = [self.energy, self.det_F, self.grad, self.dummy3, data, data2]
+            elif kind == "blocks":
+                if self.hess is None:
+                    self.hess = wp.zeros((self.m, self.kk, self.kk), dtype=wp.float64, device=self.model_device)
+                kernel, inputs = _hessian_kernel, common + [mode, 0, self.dummy_slots]
+                outputs = [self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data]
+            else:
+                kernel, inputs = _stress_kernel, [first, self.x, self.elements, self.gN, self.wq, self.mu]
+                outputs = [self.det_F, self.von_mises]
+            with RECORD_LOCK:  # the first launch loads the module: one thread at a time
+                cmds.append(wp.launch(kernel, dim=count, device=self.model_device, inputs=inputs, outputs=outputs,
+                                      record_cmd=True))
+        self.commands[(kind, mode)] = cmds = tuple(cmds)
+        return cmds
 
 
 def _workspace(model: P2Model) -> _Workspace:
@@ -585,15 +607,21 @@ def _workspace(model: P2Model) -> _Workspace:
 
 
 def _launch(model: P2Model, x, kind: str, mode: int = 0) -> _Workspace:
-    """One kernel launch over all elements computing what ``kind`` asks for, at positions x."""
+    """The kernel launches over all elements (one, or two halves on two threads) computing what
+    ``kind`` asks for, at positions x."""
+    from simfab._parallel import submit
+
     if not isinstance(model, P2Model):
         raise TypeError(f"expected a P2Model, got {type(model).__name__} (linear models: simfab.fem.neohookean)")
     ws = _workspace(model)
     ws.set_positions(model.check_positions(x))
-    cmd = ws.command(kind, mode)
+    cmds = ws.command(kind, mode)
     if kind == "hessian":
         ws.zero_csr(mode == _BOTH)
-    cmd.launch()
+    other = [submit(c.launch) for c in cmds[1:]]
+    cmds[0].launch()
+    for o in other:
+        o.result()
     return ws
 
 

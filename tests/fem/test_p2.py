@@ -547,3 +547,24 @@ def test_large_deflection_p2_cantilever_matches_the_elastica():
     r = solve_cantilever(cantilever_model(2, 2, order=2), rel_deflection=1.0 / 3.0)
     assert r.delta == pytest.approx(0.3017207738, rel=0.01)
     assert r.iterations <= 20
+
+
+def test_two_thread_launch_of_a_large_mesh_equals_the_whole_launch(monkeypatch):
+    """A mesh of >= SPLIT_ELEMENTS elements runs in two halves on two threads, each half adding its
+    Hessian into its own buffer: energy, gradient, both Hessians and stresses equal the one-launch
+    values (the Hessian to summation round-off)."""
+    P, T = box_tet(0.03, 0.01, 0.01, 6, 2, 2)  # 144 tets
+    rng = np.random.default_rng(5)
+    out = {}
+    for split in (10**9, 64):
+        monkeypatch.setattr(nh, "SPLIT_ELEMENTS", split)
+        m = make_p2_model(P, T, MAT)  # a fresh model: its launches are set up with this threshold
+        x = m.rest + 1e-4 * rng.standard_normal(m.rest.shape) if not out else out["x"]
+        out.setdefault("x", x)
+        assert len(nh._workspace(m).parts) == (1 if split > m.n_elements else 2)
+        E, g, He, Hp = nh.energy_gradient_hessians(m, x)
+        out[split] = (E, g, He.toarray(), Hp.toarray(), nh.det_and_von_mises(m, x)[1], nh.element_hessians(m, x))
+    a, b = out[10**9], out[64]
+    assert a[0] == b[0] and np.array_equal(a[1], b[1]) and np.array_equal(a[4], b[4]) and np.array_equal(a[5], b[5])
+    for A, B in ((a[2], b[2]), (a[3], b[3])):
+        assert np.abs(A - B).max() <= 1e-13 * np.abs(A).max()
