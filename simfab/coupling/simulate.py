@@ -177,6 +177,13 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()
     Raises ConvergenceError when a step cannot be solved to tolerance, InputError when O starts
     inside A.
     """
+    from simfab._threads import single_threaded_blas
+
+    with single_threaded_blas():  # small dense products in the loop (see simfab._threads)
+        return _simulate(cm, quiet=quiet, callback=callback, refined=refined)
+
+
+def _simulate(cm: CouplingModel, *, quiet: bool, callback, refined) -> InsertionResult:
     from simfab.solve.linear import SPDSolver
     from simfab.progress import progress
 
