@@ -10,6 +10,7 @@ def _numpy_blas_threads():
 def test_single_threaded_blas_inside_the_simulation_only(coarse_block_model, monkeypatch):
     import simfab.coupling.simulate as S
 
+    S.simulate(coarse_block_model(True))  # loads every library the run uses
     before = _numpy_blas_threads()
     seen = []
     real = S._simulate
