@@ -16,8 +16,9 @@ its 4 handles: 150 / 300 / 600 for 2 / 4 / 8, correction rounds half of that:
 error the optimizer reached on its coarse mesh (mesh-corrected) and the mesh check's
 mesh-converged RMS (extrapolated where the levels converge, else the finest level's), its
 value per refinement level, iterations (first run and with the correction rounds),
-simulations and seconds; ``rms_falling`` says whether the mesh-converged RMS falls with the
-count. The scene's own handle count reuses the scene's run.
+simulations (of the run kept) and seconds; ``rms_falling`` says whether the RMS on the finest
+level (16x the elements) falls with the count. The scene's own handle count reuses the scene's
+run.
 """
 
 from __future__ import annotations
@@ -107,7 +108,10 @@ def run(argv) -> dict:
                         "initial": s["profile_initial"], "final": s["profile"], "resimulated": re}
         if name == "profile2d":
             report[name]["rms_by_handles"] = _profile_handles(s, time.perf_counter() - t0, out, a)
-            fine = [r["rms_error_mesh_converged_N"] for r in report[name]["rms_by_handles"].values()]
+            # judged on the finest level: an RMS error is a norm, and its extrapolation from the levels
+            # (the check fits f_inf + b h^p to the RMS values) can fall below zero (8 handles: -0.058 N)
+            fine = [r["rms_error_levels_N"][-1] if r["rms_error_levels_N"] else None
+                    for r in report[name]["rms_by_handles"].values()]
             report[name]["rms_falling"] = all(x is not None for x in fine) and all(
                 b < a_ for a_, b in zip(fine, fine[1:]))
     return {"benchmark": "design_scenes", "out": str(out), "scenes": report,
