@@ -228,6 +228,11 @@ def plot_profiles(res, path) -> Path:
     tgt = res.problem.target
     if tgt is not None:
         ax2.plot(tgt.s * 1e3, tgt.force, ":", color="k", lw=2, label="target profile")
+        c = res.problem.corrections.get("force_profile", 1.0)
+        if c != 1.0:  # what the optimizer matched to the target: the coarse profile times its mesh correction
+            r = res.best.result
+            ax2.plot(r.column("s") * 1e3, c * r.column("force"), "-", color="tab:red", lw=1,
+                     label=f"optimized x {c:.3g} (mesh-corrected, RMS {res.best.rms_error:.3g} N)")
     ax2.axhline(0.0, color="0.6", lw=0.8)
     yl = ax2.get_ylim()
     init_f = res.initial.result.column("force")
