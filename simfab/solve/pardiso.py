@@ -49,6 +49,10 @@ def _load():
     by the loader. Returns the ctypes library or None."""
     global _LIB
     if _LIB is None:
+        # MKL's OpenMP threads otherwise spin for 200 ms after each factorization, taking a core
+        # from whatever runs next (assembly, other processes); waking them costs microseconds.
+        # Read when the OpenMP runtime starts (the first factorization); a user's setting wins.
+        os.environ.setdefault("KMP_BLOCKTIME", "0")
         names = [ctypes.util.find_library("mkl_rt")]
         for prefix in dict.fromkeys((sys.prefix, sys.base_prefix)):
             names += sorted(glob.glob(os.path.join(prefix, "lib", "libmkl_rt.so*")), key=len)
