@@ -5,7 +5,8 @@ Two sparse Cholesky libraries, each where it is fastest (``tools/bench.py linear
 - MKL PARDISO (:mod:`simfab.solve.pardiso`, the ``mkl`` wheel) for systems of at least
   :data:`PARDISO_MIN_DOFS` unknowns: its METIS ordering and multithreaded supernodal
   factorization take 1/2 to 1/5 of CHOLMOD's time on 3D elasticity systems (knocker3d with
-  quadratic tets: 23,676 dofs, 0.23 s instead of 0.53 s of CPU per factorization, on two cores);
+  quadratic tets: 23,676 dofs, 0.22-0.26 s of CPU per factorization on one core instead of
+  0.53 s, and it runs on both cores);
 - CHOLMOD (``cvxopt.cholmod``, which bundles SuiteSparse, so it installs with pip) below that,
   where PARDISO's fixed cost per call (about 1 ms) outweighs its faster kernels (2D coupling
   meshes of ~1,000 dofs, solved thousands of times by the rest-shape optimizer), and everywhere
@@ -114,9 +115,10 @@ class SPDSolver:
 
     def solve_free(self, A: sp.spmatrix, free: np.ndarray, b: np.ndarray) -> np.ndarray:
         """Solve ``A[free][:, free] x = b`` without forming the submatrix: ``free`` (m,) int indices
-        of the unknowns, ``b`` (m,) or (m, k). With CHOLMOD, the map from ``A``'s values straight to
-        the factor's input order is computed once per (pattern, free set), so each later call is
-        one gather and a numeric factorization (Newton on the free dofs of a fixed FEM pattern).
+        of the unknowns, ``b`` (m,) or (m, k). The map from ``A``'s values straight to the factor's
+        input order is computed once per (pattern, free set), so each later call is one gather and
+        a numeric factorization (Newton on the free dofs of a fixed FEM pattern; SuperLU extracts
+        the block).
         Raises :class:`NotPositiveDefinite` when the factorization fails."""
         free = np.asarray(free)
         A = canonical_csr(A)
