@@ -107,8 +107,10 @@ def _library(name: str, A: sp.csr_matrix):
         s = SPDSolver()
         return (lambda: None, lambda M: st.__setitem__("M", M), lambda b: s.solve(st["M"], b), lambda: None)
     if name.startswith("cholmod"):
+        from simfab.solve.linear import import_cholmod
+
+        cholmod = import_cholmod()  # with the machine's BLAS kernels, as SPDSolver uses it
         import cvxopt
-        import cvxopt.cholmod as cholmod
 
         def analyse():
             perm, r, c = st["map"] = _lower_order(A)
