@@ -1,21 +1,12 @@
 """Sparse symmetric positive-definite solves.
 
-Two sparse Cholesky libraries, each where it is fastest (``tools/bench.py linear_solvers``):
-
-- MKL PARDISO (:mod:`simfab.solve.pardiso`, the ``mkl`` wheel) for systems of at least
-  :data:`PARDISO_MIN_DOFS` unknowns: its METIS ordering and multithreaded supernodal
-  factorization take 1/2 to 1/5 of CHOLMOD's time on 3D elasticity systems (knocker3d with
-  quadratic tets: 23,676 dofs, 0.22-0.26 s of CPU per factorization on one core instead of
-  0.53 s, and it runs on both cores);
-- CHOLMOD (``cvxopt.cholmod``, which bundles SuiteSparse, so it installs with pip) below that,
-  where PARDISO's fixed cost per call (about 1 ms) outweighs its faster kernels (2D coupling
-  meshes of ~1,000 dofs, solved thousands of times by the rest-shape optimizer), and everywhere
-  when MKL is missing (it has wheels for x86-64 only).
-
-Both are several times faster than SuperLU on 3D elasticity systems. The symbolic analysis
-(fill-reducing ordering) and the value map are kept and reused while the sparsity pattern is
-unchanged, which is the case across Newton iterations of one simulation; a matrix whose values
-equal those of the last factorization is not factorized again.
+CHOLMOD (through ``cvxopt.cholmod``, which bundles SuiteSparse, so it installs with pip)
+is the default: it is several times faster than SuperLU on 3D elasticity systems, and as fast
+per core as MKL PARDISO on them once its BLAS uses the machine's vector instructions (see
+:func:`import_cholmod`; ``tools/bench.py linear_solvers`` compares the libraries). The symbolic
+analysis (fill-reducing ordering) and the value map are kept and reused while the sparsity
+pattern is unchanged, which is the case across Newton iterations of one simulation; a matrix
+whose values equal those of the last factorization is not factorized again.
 
     solver = SPDSolver()
     x = solver.solve(A, b)      # A: scipy.sparse (n, n) SPD, b: (n,) or (n, k)
@@ -29,11 +20,6 @@ import numpy as np
 import scipy.sparse as sp
 
 from simfab.errors import ConvergenceError
-
-#: Systems with at least this many unknowns are factorized with MKL PARDISO when it is installed,
-#: smaller ones with CHOLMOD (measured crossover: PARDISO is 0.55x CHOLMOD's speed at 1,000 dofs,
-#: 1.1x at 3,000-7,000, 1.6-8x from 17,000 on; tools/benchmarks/linear_solvers.py)
-PARDISO_MIN_DOFS = 4000
 
 
 def import_cholmod():
@@ -97,45 +83,35 @@ def same_pattern(key, A: sp.csr_matrix) -> bool:
 class SPDSolver:
     """Cholesky solver for sparse SPD matrices, specialised for repeated solves with one pattern.
 
-    The map from the CSR values to the factor's input order (the lower triangle column after
-    column, which for a symmetric matrix is also the upper triangle row after row: CHOLMOD's
-    and PARDISO's inputs hold the same values in the same order) and the symbolic analysis are
-    computed once per sparsity pattern; each later solve only gathers the values, refactorizes
-    numerically (skipped when the values are those of the last factorization) and solves, so
-    the per-call overhead of small systems stays below the factorization itself. A new
-    pattern triggers a new analysis.
+    With CHOLMOD, the map from the CSR values to CHOLMOD's lower-triangle CSC order and the
+    symbolic analysis are computed once per sparsity pattern; each later solve only gathers
+    the values, refactorizes numerically (skipped when the values are those of the last
+    factorization: Newton's predictor can hand the same Hessian twice) and solves, so the
+    per-call overhead of small systems stays below the factorization itself. A new pattern
+    triggers a new analysis.
 
     Parameters
     ----------
-    backend : "auto" | "cholmod" | "pardiso" | "splu"
-        "auto": MKL PARDISO for patterns of at least PARDISO_MIN_DOFS unknowns when MKL is
-        installed, CHOLMOD otherwise. The others force one library (tests, benchmarks).
+    backend : "cholmod" | "splu" | "auto"
+        "auto" uses CHOLMOD when cvxopt is importable, else SciPy's SuperLU.
     """
 
     def __init__(self, backend: str = "auto"):
-        if backend not in ("auto", "cholmod", "pardiso", "splu"):
+        if backend == "auto":
+            try:
+                import_cholmod()
+                backend = "cholmod"
+            except ImportError:  # pragma: no cover - cvxopt is a dependency
+                backend = "splu"
+        if backend not in ("cholmod", "splu"):
             raise ValueError(f"unknown linear-solver backend {backend!r}")
-        if backend == "pardiso":
-            from simfab.solve import pardiso
-
-            if not pardiso.available():
-                raise ValueError("linear-solver backend 'pardiso' needs MKL (pip install mkl)")
         self.backend = backend
         self._key = None  # (indptr, indices) of the analysed CSR pattern
-        self._perm = None  # CSR value index of each factor-input entry (lower triangle, column-major)
-        self._A = None  # CHOLMOD: cvxopt spmatrix holding the lower triangle
-        self._F = None  # CHOLMOD symbolic (then numeric) factor, or a simfab.solve.pardiso.PardisoCholesky
+        self._perm = None  # CSR value index of each CHOLMOD (lower, column-major) entry
+        self._A = None  # cvxopt spmatrix holding the lower triangle
+        self._F = None  # CHOLMOD symbolic (then numeric) factor
         self._factored = None  # copy of the values of the current numeric factorization (None: none)
         self._full = None  # solve_free: (full pattern key, free indices, value map full -> factor input)
-
-    @property
-    def library(self) -> str | None:
-        """The library of the current analysis: "cholmod", "pardiso", "splu", or None before the first solve."""
-        if self.backend == "splu":
-            return "splu"
-        if self._F is None:
-            return None
-        return "cholmod" if self._A is not None else "pardiso"
 
     def solve(self, A: sp.spmatrix, b: np.ndarray) -> np.ndarray:
         """Solve ``A x = b`` for SPD ``A`` (n, n) and ``b`` (n,) or (n, k); returns x shaped like b.
@@ -148,14 +124,13 @@ class SPDSolver:
 
             lu = splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
             return lu.solve(b)
-        return self._solve_factored(A, b)
+        return self._solve_cholmod(A, b)
 
     def solve_free(self, A: sp.spmatrix, free: np.ndarray, b: np.ndarray) -> np.ndarray:
         """Solve ``A[free][:, free] x = b`` without forming the submatrix: ``free`` (m,) int indices
-        of the unknowns, ``b`` (m,) or (m, k). The map from ``A``'s values straight to the factor's
-        input order is computed once per (pattern, free set), so each later call is one gather and
-        a numeric factorization (Newton on the free dofs of a fixed FEM pattern; SuperLU extracts
-        the block).
+        of the unknowns, ``b`` (m,) or (m, k). With CHOLMOD, the map from ``A``'s values straight to
+        the factor's input order is computed once per (pattern, free set), so each later call is
+        one gather and a numeric factorization (Newton on the free dofs of a fixed FEM pattern).
         Raises :class:`NotPositiveDefinite` when the factorization fails."""
         free = np.asarray(free)
         A = canonical_csr(A)
@@ -172,21 +147,19 @@ class SPDSolver:
             full = self._full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed)
         return self._factor_solve(A.data[full[2]], np.asarray(b, dtype=np.float64))
 
-    def _solve_factored(self, A, b):
+    def _solve_cholmod(self, A, b):
         A = canonical_csr(A)  # the value map gathers one value per entry
         if not same_pattern(self._key, A):
             self._analyse(A)
         return self._factor_solve(A.data[self._perm], b)
 
     def _factor_solve(self, values: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Numeric factorization of the analysed pattern with ``values`` (the factor's input order),
+        """Numeric factorization of the analysed pattern with ``values`` (CHOLMOD's input order),
         unless they are those of the current factorization, then the solve for ``b`` (n,) or (n, k)."""
         if self._factored is None or not np.array_equal(values, self._factored):
             self._factored = None
             self._factor(values)
             self._factored = values.copy()
-        if self._A is None:
-            return self._F.solve(b)
         import cvxopt
 
         cholmod = import_cholmod()
@@ -196,17 +169,6 @@ class SPDSolver:
 
     def _factor(self, values: np.ndarray) -> None:
         """Numeric Cholesky factorization; NotPositiveDefinite when a pivot is not positive."""
-        msg = "Cholesky factorization failed: matrix is not positive definite"
-        if self._A is None:
-            from simfab.solve.pardiso import NOT_POSITIVE_DEFINITE, PardisoError
-
-            try:
-                self._F.factor(values)
-            except PardisoError as e:
-                if e.code == NOT_POSITIVE_DEFINITE:
-                    raise NotPositiveDefinite(msg) from e
-                raise
-            return
         import cvxopt
 
         cholmod = import_cholmod()
@@ -214,7 +176,7 @@ class SPDSolver:
         try:
             cholmod.numeric(self._A, self._F)
         except ArithmeticError as e:
-            raise NotPositiveDefinite(msg) from e
+            raise NotPositiveDefinite("Cholesky factorization failed: matrix is not positive definite") from e
 
     def _analyse(self, A: sp.csr_matrix) -> None:
         self._full = None  # a value map built on the previous analysis no longer applies
@@ -224,17 +186,8 @@ class SPDSolver:
         cols = A.indices
         low = np.flatnonzero(cols <= rows)
         r, c = rows[low], cols[low]
-        order = np.lexsort((r, c))  # column-major, rows sorted within a column
+        order = np.lexsort((r, c))  # CHOLMOD: column-major, rows sorted within a column
         self._perm = low[order]
-        self._key = (A.indptr.copy(), A.indices.copy())
-        self._A = self._F = None
-        if self._use_pardiso(n):
-            from simfab.solve.pardiso import PardisoCholesky
-
-            # the lower triangle column after column is the upper triangle row after row
-            indptr = np.concatenate([[0], np.cumsum(np.bincount(c, minlength=n))])
-            self._F = PardisoCholesky(indptr, r[order])
-            return
         cholmod = import_cholmod()
         import cvxopt
 
@@ -242,12 +195,4 @@ class SPDSolver:
                                   cvxopt.matrix(c[order].astype(np.int64)), (n, n))
         cholmod.options["supernodal"] = 2
         self._F = cholmod.symbolic(self._A)
-
-    def _use_pardiso(self, n: int) -> bool:
-        if self.backend == "pardiso":
-            return True
-        if self.backend != "auto" or n < PARDISO_MIN_DOFS:
-            return False
-        from simfab.solve import pardiso
-
-        return pardiso.available()
+        self._key = (A.indptr.copy(), A.indices.copy())

@@ -79,9 +79,9 @@ def _system(name: str):
 
 
 def _mkl_threads(n: int) -> None:
-    from simfab.solve import pardiso
+    from benchmarks import _pardiso
 
-    pardiso._load().MKL_Set_Num_Threads(int(n))
+    _pardiso._load().MKL_Set_Num_Threads(int(n))
 
 
 def _lower_order(A: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -131,9 +131,9 @@ def _library(name: str, A: sp.csr_matrix):
 
         return analyse, factor, solve, lambda: None
     if name.startswith("pardiso"):
-        from simfab.solve import pardiso
+        from benchmarks import _pardiso as pardiso
 
-        if not pardiso.available():
+        if not pardiso.available():  # pip install mkl
             return None
 
         def analyse():

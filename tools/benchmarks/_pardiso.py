@@ -1,16 +1,15 @@
-"""Sparse Cholesky through Intel MKL PARDISO (the ``mkl`` wheel's ``libmkl_rt``), called via ctypes.
+"""Sparse Cholesky through Intel MKL PARDISO (the ``mkl`` wheel's ``libmkl_rt``), called via ctypes:
+the PARDISO rows of ``tools/bench.py linear_solvers`` (when ``pip install mkl`` was run).
 
-Only what :class:`simfab.solve.linear.SPDSolver` needs: a handle for one sparsity pattern
+simfab does not use it: with cvxopt's OpenBLAS on its AVX2 kernels (simfab.solve.linear.import_cholmod)
+CHOLMOD takes the same CPU time per factorization as PARDISO on the 3D P2 insertion Hessians, and
+the knocker3d P2 insertion ran no faster end to end with PARDISO on the 2 shared cores, so the
+~700 MB MKL dependency did not pay (see the benchmark's docstring). A handle for one sparsity pattern
 (upper triangle, CSR, zero-based) with a symbolic analysis (phase 11: METIS nested-dissection
 ordering and the supernode tree) done once, then numeric factorizations (phase 22) and solves
 (phase 33) reusing it. The matrix type is real SPD (mtype 2): a non-positive pivot is reported
-as error -4 and raised as :class:`simfab.solve.linear.NotPositiveDefinite`, which the Newton
-solver relies on to tell an indefinite exact Hessian from a positive-definite one.
-
-On the 3D P2 insertion Hessians (knocker3d, 23,676 free dofs, 6.2 M entries in the factor,
-2.8 GFlop per factorization) MKL's factorization takes about half the CPU time of the CHOLMOD
-bundled with cvxopt (whose BLAS is a serial reference-grade ATLAS) and runs on both cores; see
-``tools/benchmarks/linear_solvers.py``.
+as error -4 and a PardisoError with code NOT_POSITIVE_DEFINITE (what simfab's Newton solver would need to tell an
+indefinite exact Hessian from a positive-definite one).
 
 ``mkl`` has wheels for x86-64 only; :func:`available` says whether the library loaded.
 """
