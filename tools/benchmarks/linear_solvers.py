@@ -14,22 +14,31 @@ Per library (those installed): the symbolic analysis once [s], then ``repeat`` n
 factorizations + one solve each with changed values (the Newton pattern): median wall time [s],
 median process CPU time per call [s] (all threads), the relative residual |Ax-b|/|b|, the entries
 of the factor where the library reports them. Libraries: ``cholmod`` (cvxopt's CHOLMOD,
-supernodal, as SPDSolver used before), ``cholmod_simplicial``, ``pardiso`` (MKL PARDISO as
-simfab.solve.pardiso uses it, both cores) and ``pardiso_1thread``, ``splu`` (SciPy SuperLU),
-and when installed ``cholespy`` and ``qdldl``; ``spdsolver`` is simfab's SPDSolver as it is
-(automatic choice). No published reference figure exists for this comparison.
+supernodal, as SPDSolver uses it: with its OpenBLAS on AVX2 kernels, simfab.solve.linear.
+import_cholmod), ``cholmod_simplicial``, ``splu`` (SciPy SuperLU), and when installed ``pardiso``
+(MKL PARDISO on both cores, ``pip install mkl``; benchmarks/_pardiso.py) and ``pardiso_1thread``,
+``cholespy``, ``qdldl``; ``spdsolver`` is simfab's SPDSolver as it is. No published reference
+figure exists for this comparison.
 
-Measured 2026-12-02 on the 2 shared cores (load average 6-8 from other jobs, so wall times are
-inflated; CPU times are the steadier figure), on Hessians captured from the knocker3d P2 insertion
-run itself (23,676 free dofs, 1.71 M entries, one pattern for all 167 solves of a 4-step run):
-CHOLMOD 0.53 s CPU per factorization (0.71-0.84 s wall), MKL PARDISO 0.22-0.26 s CPU on one
-thread and 0.34 s CPU / 0.64 s wall on two under that load (6.2 M entries in its factor,
-2.8 GFlop), CHOLMOD simplicial 2.9 s CPU, cholespy (CHOLMOD, simplicial) 2.6 s CPU. Preloading
-OpenBLAS in place of the serial ATLAS that cvxopt's CHOLMOD links changed nothing (bit-identical
-results: the factorization is not BLAS-bound there). Reusing one factorization as the
-preconditioner of CG on the next Hessians needed 5-15 CG iterations per Newton step (a
-refactorization whenever CG needed more than 10-15); with a solve costing 1/10-1/20 of a
-factorization this is at best break-even, so simfab factorizes every Newton step.
+Measured 2026-12-02 on the 2 shared cores at load 6-10 (wall times inflated by other jobs; CPU
+times are the steadier figure). On Hessians captured from the knocker3d P2 insertion itself
+(23,676 free dofs, 1.71 M entries, one pattern for all 167 solves of a 4-step run, 12 of them
+exact repeats of the previous system): CHOLMOD 0.56 s CPU per factorization with the SSE3 kernels
+that cvxopt's OpenBLAS 0.3.15 picks on this CPU, 0.27 s with its Haswell kernels (0.28 s
+SkylakeX); MKL PARDISO 0.19-0.26 s CPU on one or two threads (6.6 M entries in its factor,
+2.8 GFlop); CHOLMOD simplicial 2.9-4.2 s, cholespy (CHOLMOD simplicial) 2.6-3.5 s, qdldl 2.9 s,
+SuperLU 1.8 s. This benchmark's run at load 9-10: CHOLMOD 0.368 s wall / 0.221 s CPU, PARDISO
+0.338 s / 0.228 s (two threads), 0.390 s / 0.191 s (one). Peak memory of a factorization: CHOLMOD
++132 MB, PARDISO +160 MB, cholespy +210 MB. Installed size: cvxopt 65 MB (already a dependency),
+mkl + intel-openmp + tbb 721 MB. Not usable: scikit-sparse and pydiso (no wheel for CPython 3.11
+on Linux), python-mumps (its only cp311 wheel, 0.0.2, is built against NumPy 1). On the 2D system
+CHOLMOD is fastest (~0.9 ms per call; PARDISO ~1.35 ms: a fixed cost per call). End to end,
+``simfab couple simulate knocker3d --element-order 2 --steps 4`` ran no faster with PARDISO than
+with the AVX2 CHOLMOD (106-142 s against 82-130 s, alternating runs; 67 s against 61 s of CPU), so
+simfab keeps CHOLMOD. Reusing one factorization as the preconditioner of CG on the next Hessians
+needed 5-15 CG iterations per Newton step (a refactorization whenever CG needed more than 10-15);
+with a solve costing 1/10-1/20 of a factorization this is at best break-even, so simfab factorizes
+every Newton step.
 """
 
 from __future__ import annotations
