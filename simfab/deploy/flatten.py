@@ -192,8 +192,10 @@ class CholeskyFactor:
     for any number of right-hand sides (the fill-reducing ordering is CHOLMOD's default)."""
 
     def __init__(self, A: sp.spmatrix):
+        from simfab.solve.linear import import_cholmod
+
+        cholmod = import_cholmod()  # (with the machine's BLAS kernels)
         import cvxopt
-        import cvxopt.cholmod as cholmod
 
         L = sp.tril(A, format="coo")
         self.n = A.shape[0]

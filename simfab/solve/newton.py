@@ -9,7 +9,7 @@ condition holds at an admissible point.
 
 Exact-first steps: ``fun`` may return the Hessian as a pair ``(H_exact, H_psd)`` (``H_psd`` may
 be a zero-argument callable building it on demand, so that it is only assembled when needed). The exact
-Hessian is then factorized first; when CHOLMOD succeeds it is positive definite and the step is
+Hessian is then factorized first; when its Cholesky factorization succeeds it is positive definite and the step is
 an exact Newton step (quadratic convergence also where element-wise PSD projection would only
 converge linearly, e.g. large rotations); otherwise the projected Hessian is used.
 

@@ -39,9 +39,18 @@ def test_non_canonical_input_is_not_mutated():
 
 
 def test_indefinite_matrix_raises():
-    A = _laplacian_2d(4, shift=-10.0)
-    with pytest.raises(NotPositiveDefinite):
-        SPDSolver().solve(A, np.ones(A.shape[0]))
+    # the Newton solver tells an indefinite exact Hessian from a positive-definite one by this:
+    # one slightly negative eigenvalue (-0.07 against a spectrum up to 8) must fail as well as a
+    # clearly indefinite matrix, and the solver must recover with the next, positive-definite
+    # matrix of the same pattern
+    A = _laplacian_2d(12)
+    lam = np.linalg.eigvalsh(A.toarray())[0]
+    solver = SPDSolver()
+    b = np.ones(A.shape[0])
+    for shift in (-lam - 0.07, -10.0):
+        with pytest.raises(NotPositiveDefinite):
+            solver.solve((A + shift * sp.eye(A.shape[0])).tocsr(), b)
+    np.testing.assert_allclose(solver.solve(A, b), np.linalg.solve(A.toarray(), b), rtol=1e-10)
 
 
 @pytest.mark.parametrize("backend", ["cholmod", "splu"])
@@ -78,3 +87,93 @@ def test_banded_solver_solves_the_free_block_through_its_own_solve():
     b = np.random.default_rng(2).standard_normal(len(free))
     x = BandedOrSparseCholesky().solve_free(A, free, b)
     np.testing.assert_allclose(A[free][:, free] @ x, b, atol=1e-10 * np.abs(b).max())
+
+
+def _p2_elasticity_system():
+    """Free block of the stiffness of a clamped, slightly stretched 3D quadratic-tet box (the
+    systems whose factorizations dominate 3D P2 insertions): 4 x 4 x 12 cubes of 6 tets lifted to
+    10-node tets, one end clamped, 5,832 free dofs."""
+    from simfab.fem import elastic
+    from simfab.fem.meshing import structured_box
+    from simfab.fem.p2 import make_p2_model
+
+    P, T = structured_box((0.01, 0.01, 0.03), (4, 4, 12))
+    m = make_p2_model(P, T, "pla")
+    H = elastic.energy_gradient_hessian(m, m.rest * 1.01)[2]
+    free = np.flatnonzero(np.repeat(m.rest[:, 2] > 1e-9, 3))
+    return sp.csr_matrix(H), free
+
+
+def test_solve_free_on_a_3d_quadratic_element_system():
+    # against SuperLU's direct solve of the extracted block; double-precision Cholesky is backward
+    # stable (|A x - b| <= c n eps |A| |x|), so with cond(A) ~ 1e5 here the residual must be
+    # ~1e-13 relative and the solutions agree to ~1e-11: 1e-10 / 1e-8 would fail on a wrong
+    # value map (an entry of the wrong place changes x at O(1))
+    from scipy.sparse.linalg import splu
+
+    H, free = _p2_elasticity_system()
+    Hf = H[free][:, free].tocsc()
+    b = np.random.default_rng(5).standard_normal((len(free), 2))
+    x = SPDSolver().solve_free(H, free, b)
+    ref = splu(Hf, permc_spec="MMD_AT_PLUS_A").solve(b)
+    for k in range(2):
+        assert np.linalg.norm(Hf @ x[:, k] - b[:, k]) <= 1e-10 * np.linalg.norm(b[:, k])
+        assert np.linalg.norm(x[:, k] - ref[:, k]) <= 1e-8 * np.linalg.norm(ref[:, k])
+
+
+def test_unchanged_values_are_not_factorized_again(monkeypatch):
+    # Newton's predictor can hand the same Hessian twice: the factorization is reused then, and
+    # only then (a changed value refactorizes, and so does anything after a failed factorization)
+    A = _laplacian_2d(9)
+    n = A.shape[0]
+    solver = SPDSolver()
+    calls = []
+    factor = solver._factor
+    monkeypatch.setattr(solver, "_factor", lambda v: (calls.append(1), factor(v))[1])
+    rng = np.random.default_rng(6)
+    free = np.arange(2, n)
+    for M, expect_calls in ((A, 1), (A.copy(), 1), (2.0 * A, 2), (2.0 * A, 2)):
+        b = rng.standard_normal(len(free))
+        x = solver.solve_free(M.tocsr(), free, b)
+        np.testing.assert_allclose(M[free][:, free] @ x, b, atol=1e-10 * np.abs(b).max())
+        assert len(calls) == expect_calls
+    with pytest.raises(NotPositiveDefinite):
+        solver.solve_free(-A, free, np.ones(len(free)))
+    x = solver.solve_free(2.0 * A, free, np.ones(len(free)))  # the values before the failure
+    assert len(calls) == 4
+    np.testing.assert_allclose((2.0 * A)[free][:, free] @ x, np.ones(len(free)), atol=1e-10)
+
+
+def test_cholmod_blas_uses_the_machines_vector_kernels():
+    # cvxopt's bundled OpenBLAS 0.3.15 falls back to SSE3 ("Prescott") kernels on CPUs newer than
+    # itself, which doubles CHOLMOD's factorization time; import_cholmod selects the AVX2 kernels
+    # on CPUs that have them and leaves the process environment as it was. A fresh interpreter:
+    # OpenBLAS chooses its kernels once, when cvxopt first loads it.
+    import os
+    import subprocess
+    import sys
+
+    from simfab.solve.linear import _has_avx2_fma
+
+    if not _has_avx2_fma():
+        pytest.skip("a CPU without AVX2/FMA: OpenBLAS's own kernel choice stands")
+    code = """
+import ctypes, os, pathlib
+from simfab.solve.linear import import_cholmod
+import_cholmod()
+import cvxopt
+libs = sorted((pathlib.Path(cvxopt.__file__).parent.parent / "cvxopt.libs").glob("libopenblas*.so*"))
+if libs:
+    lib = ctypes.CDLL(str(libs[0]))
+    lib.openblas_get_corename.restype = ctypes.c_char_p
+    print(lib.openblas_get_corename().decode(), os.environ.get("OPENBLAS_CORETYPE"))
+else:
+    print("none", os.environ.get("OPENBLAS_CORETYPE"))
+"""
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout.split()
+    core, after = out[-2], out[-1]
+    assert after == "None"  # the variable was set only around the import
+    if core == "none":
+        pytest.skip("cvxopt without a bundled OpenBLAS")
+    assert core.lower() == "haswell", core
