@@ -39,9 +39,13 @@ PROFILE_TOL = 0.05
 FIGURES = ("coupling_ratio", "grip_force", "insertion_force", "removal_force", "von_mises", "von_mises_peak")
 
 
-def refined_model(cm, rest: np.ndarray, times: int):
-    """The coupling model of rest shape ``rest`` (n, d) [m] on cm's mesh subdivided ``times`` times:
-    the fixed support is every vertex whose parents were all fixed."""
+def refined_model(cm, rest: np.ndarray, times: int, order: int = 1):
+    """The coupling model of rest shape ``rest`` (n, d) [m] on cm's mesh subdivided ``times`` times,
+    with elements of ``order`` (1: linear; 2: the refined mesh lifted to P2 by
+    :func:`simfab.fem.p2.to_p2`): the fixed support is every vertex (and P2 edge node) whose
+    parents were all fixed; the insertion options are cm's with ``element_order = order``."""
+    import dataclasses
+
     from simfab.coupling.model import make_coupling_model
     from simfab.fem.model import make_model
     from simfab.fem.subdivide import midpoint_mask, subdivide
@@ -54,66 +58,119 @@ def refined_model(cm, rest: np.ndarray, times: int):
         X, el, edges = subdivide(X, el)
         fixed = midpoint_mask(fixed, edges)
     new = make_model(X, el, fem.material, thickness=fem.thickness, device=fem.device)
+    if order == 2:
+        from simfab.fem.p2 import to_p2
+
+        new = to_p2(new)
+        fixed = midpoint_mask(fixed, new.edges)  # P2 edge node n_corners + i sits on edges[i]
+    elif order != 1:
+        raise ValueError(f"element order {order} is not 1 or 2")
+    options = dataclasses.replace(cm.options, element_order=int(order))
     return make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=np.flatnonzero(fixed),
-                               options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
+                               options=options, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
+
+
+def level_figures(res, stress_radius: float) -> dict:
+    """:func:`simfab.design.optimize.profile_figures` of an insertion; on P2 elements the averaged
+    stress at quadrature-point resolution (:func:`simfab.design.stress.p2_averaged_von_mises`: the
+    insertion records only each element's largest quadrature-point stress, biased high)."""
+    from simfab.design.optimize import profile_figures
+    from simfab.design.stress import p2_averaged_von_mises
+
+    f = profile_figures(res, stress_radius)
+    if res.model.options.element_order == 2:
+        f["von_mises"] = max(p2_averaged_von_mises(res.model.fem, r.x, stress_radius) for r in res.steps)
+    return f
+
+
+def as_levels(levels) -> tuple:
+    """Normalize check levels: (element order, subdivisions) pairs; a bare int t means linear
+    elements subdivided t times. The first level must be the optimization mesh, (1, 0)."""
+    out = tuple((1, int(lv)) if np.isscalar(lv) else (int(lv[0]), int(lv[1])) for lv in levels)
+    if not out or out[0] != (1, 0):
+        raise ValueError(f"the first check level must be the optimization mesh (1, 0), got {out[:1]}")
+    if any(o not in (1, 2) or t < 0 for o, t in out):
+        raise ValueError(f"check levels must be (order 1|2, subdivisions >= 0), got {out}")
+    return out
+
+
+def reference_value(fig: dict) -> float:
+    """The reference (mesh-converged) value of a :func:`mesh_check` figure: extrapolated where
+    that was possible, else the finest level's."""
+    return fig["values"][-1] if fig["extrapolated"] is None else fig["extrapolated"]
 
 
 def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, levels=None, quiet: bool = True) -> dict:
-    """Run the design ``rest`` at each refinement level and compare (see the module docstring).
+    """Run the design ``rest`` at each level and compare (see the module docstring).
 
     figures0 : the optimizer's figures of ``rest`` (level 0), reused instead of simulating again
         (not for target matching: its RMS force error per level needs the profiles)
-    Returns {"levels": [{elements, seconds}], "figures": {name: {values, extrapolated, order,
-    converging, difference_of_optimization_mesh}}, "constraints": [{name, value, lo, hi,
-    satisfied}] at the reference values, "feasible_fine": bool, "reference", "units"}.
+    levels : (element order, subdivisions) pairs (or ints: linear), first (1, 0); default
+        :data:`LEVELS` of the part's dimension
+    Returns {"levels": [{element_order, subdivisions, elements, nodes, seconds, category}],
+    "figures": {name: {values, extrapolated, order, converging, difference_of_optimization_mesh,
+    reference_change}}, "constraints": [{name, value, lo, hi, satisfied}] at the reference values,
+    "feasible_fine": bool, "reference", "units"}.
     """
     from simfab.coupling.converge import extrapolate
     from simfab.coupling.simulate import simulate
-    from simfab.design.optimize import profile_figures
 
     cm = problem.base
-    levels = LEVELS[cm.dim] if levels is None else tuple(levels)
+    levels = as_levels(LEVELS[cm.dim] if levels is None else levels)
     rows, figs, profiles = [], [], []
-    for t in levels:
+    for o, t in levels:
         t0 = time.perf_counter()
-        if t == 0 and figures0 is not None and problem.target is None:
-            f, n = figures0, cm.fem.n_elements
+        if (o, t) == (1, 0) and figures0 is not None and problem.target is None:
+            f, n, nodes = figures0, cm.fem.n_elements, cm.fem.n_vertices
         else:
-            m = refined_model(cm, rest, t)
+            m = refined_model(cm, rest, t, o)
             res = simulate(m, quiet=quiet)
-            f, n = profile_figures(res, problem.brief.stress_radius), m.fem.n_elements
+            f, n, nodes = level_figures(res, problem.brief.stress_radius), m.fem.n_elements, m.fem.n_vertices
             if problem.target is not None:  # the profile-matching error, a figure like the others
                 f = dict(f, rms_error=problem.target.rms_error(res.column("s"), res.column("force")))
                 profiles.append((res.column("s"), res.column("force")))
-        rows.append({"subdivisions": int(t), "elements": int(n), "seconds": time.perf_counter() - t0,
-                     "category": f["category"]})
+        rows.append({"element_order": int(o), "subdivisions": int(t), "elements": int(n), "nodes": int(nodes),
+                     "seconds": time.perf_counter() - t0, "category": f["category"]})
         figs.append(f)
-    N = np.array([r["elements"] for r in rows], float)
+    # the reference run: the trailing levels of the finest level's element order (P2 converges at a
+    # higher order than linear elements, so the two orders' values are not one h-sequence)
+    top = levels[-1][0]
+    k0 = len(levels)
+    while k0 > 0 and levels[k0 - 1][0] == top:
+        k0 -= 1
+    seq = list(range(k0, len(levels)))
+    N = np.array([rows[i]["elements"] for i in seq], float)
     out = {}
     for k in FIGURES + (("rms_error",) if problem.target is not None else ()):
         v = np.array([f[k] for f in figs], float)
         d = np.abs(np.diff(v))
-        # converging: the changes shrink with refinement (a stress at a sharp re-entrant corner is
-        # singular - its maximum grows without bound - and has no mesh-converged value)
+        # converging: the changes shrink from level to level (a stress at a sharp re-entrant corner
+        # is singular - its maximum grows without bound - and has no mesh-converged value)
         converging = bool(len(v) < 3 or d[-1] < d[-2] or d[-1] <= 1e-9 * max(np.abs(v).max(), 1e-300))
-        f_inf, p = extrapolate(N, v, cm.dim) if len(v) >= 3 and converging else (None, float("nan"))
+        # f = f_inf + b h^p through three levels of one order (the linear-only check of before)
+        f_inf, p = extrapolate(N, v[seq], cm.dim) if len(seq) >= 3 and converging else (None, float("nan"))
         ref = float(v[-1]) if f_inf is None else f_inf
+        # the reference's own discretization error, as far as the levels show it: the relative change
+        # between the last two levels of the reference order (None with one level of it)
+        change = float((v[-1] - v[-2]) / ref) if len(seq) >= 2 and ref else None
         out[k] = {"values": v.tolist(), "extrapolated": f_inf, "order": p, "converging": converging,
-                  "difference_of_optimization_mesh": float((v[0] - ref) / ref) if ref else 0.0}
+                  "difference_of_optimization_mesh": float((v[0] - ref) / ref) if ref else 0.0,
+                  "reference_change": change}
     # the mesh-converged answer: extrapolated values where they exist, else the finest level's
-    fine = dict(figs[-1], **{k: (v["values"][-1] if v["extrapolated"] is None else v["extrapolated"])
-                             for k, v in out.items()})
+    fine = dict(figs[-1], **{k: reference_value(v) for k, v in out.items()})
     cons = B.constraints(fine, problem.limits)
     extra = {}
     if profiles:  # least-squares factor c of c F_coarse(s) ~ F_finest(s): the profile's mesh correction
         (s0, f0), (s1, f1) = profiles[0], profiles[-1]
         ref = np.interp(s0, s1, f1)
         extra["profile_force_factor"] = float(f0 @ ref / (f0 @ f0)) if f0 @ f0 > 0 else 1.0
+    what = "P2 (quadratic) elements" if top == 2 else "linear elements"
     return {**extra, "levels": rows, "figures": out,
             "constraints": [{"name": c.name, "value": c.value, "lo": c.lo, "hi": c.hi, "satisfied": c.satisfied}
                             for c in cons],
             "feasible_fine": all(c.satisfied for c in cons),
-            "reference": "extrapolated where converging, else the finest level",
+            "reference": f"{what} on the finest level ({rows[-1]['elements']} elements); extrapolated where "
+                         f"three levels of that order converge",
             "units": {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N",
                       "von_mises": "Pa", "von_mises_peak": "Pa", "rms_error": "N"}}
 
@@ -125,7 +182,8 @@ def check_warnings(check: dict) -> list[str]:
     if not bad:
         return []
     what = ", ".join(f"{c['name']} {c['value']:.4g} (bounds {c['lo']:.4g}..{c['hi']:.4g})" for c in bad)
-    return [f"mesh-converged (refined up to {lv[-1]['elements']} elements from {lv[0]['elements']}) the design misses: {what}"]
+    ref = f"P{lv[-1].get('element_order', 1)} on {lv[-1]['elements']} elements"
+    return [f"mesh-converged ({ref}; the optimization mesh: {lv[0]['elements']} linear) the design misses: {what}"]
 
 
 def figure_unit(name: str) -> float:
@@ -141,7 +199,7 @@ def correction_factors(check: dict) -> dict:
     out = {}
     for k, v in check["figures"].items():
         coarse = v["values"][0]
-        ref = v["values"][-1] if v["extrapolated"] is None else v["extrapolated"]
+        ref = reference_value(v)
         # a figure below its constraint unit (1 N, 1 %, 1 MPa: B.SCALES) is noise, not a biased
         # value: its ratio (e.g. 1e-8 N / 1e-11 N) says nothing about the mesh
         if abs(coarse) < figure_unit(k):
@@ -171,8 +229,7 @@ def checked_objective(problem, ev, check: dict) -> float:
     cons = [B.Constraint(name=c["name"], value=c["value"], lo=c["lo"], hi=c["hi"], unit=B.UNITS[c["name"]],
                          scale=B.SCALES[c["name"]]) for c in check["constraints"]]
     if problem.target is not None:
-        v = check["figures"]["rms_error"]
-        base = (v["values"][-1] if v["extrapolated"] is None else v["extrapolated"]) ** 2
+        base = reference_value(check["figures"]["rms_error"]) ** 2
     else:
         base = ev.E_L
     return float(base + B.penalty(cons))
