@@ -28,7 +28,7 @@ import numpy as np
 from simfab.design import brief as B
 
 #: Refinement levels (number of uniform subdivisions) of the check, per dimension.
-LEVELS = {2: (0, 1, 2), 3: (0, 1)}
+LEVELS = {2: ((1, 0), (2, 0), (2, 1)), 3: ((1, 0), (2, 0))}
 #: Correction factors are clipped to this range (a coarse linear mesh is too stiff by tens of percent,
 #: not by orders of magnitude; a larger ratio means the figure changed character, e.g. a contact
 #: that exists on one mesh only).
