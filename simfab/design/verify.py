@@ -1,22 +1,47 @@
 """Mesh-convergence check of an optimized design: is the brief met by the shape, or only by its
 mesh?
 
-The optimizer simulates every candidate on the scene's own (coarse) mesh: linear simplices are
-too stiff in bending, and at the design scenes' ~450 triangles the coupling figures are tens of
-percent off their mesh-converged values (``simfab couple converge``). The optimized shape exists
-only as a mesh, so it is refined uniformly (:func:`simfab.fem.subdivide.subdivide`: every edge
-split, the same piecewise-linear domain, h -> h/2) and the same insertion (object, path, steps,
-support, options) is run on each level: 2D at 1x, 4x and 16x the elements, 3D at 1x and 8x.
+The optimizer simulates every candidate on the scene's own (coarse) mesh of linear simplices,
+which lock in bending: at the design scenes' ~450 triangles / ~1.5k tets the coupling forces are
+tens of percent too high (``simfab couple converge``; the knocker design's F_in 91 %). The
+optimized shape exists only as a mesh, so the same insertion (object, path, steps, support,
+options) is run again at finer *levels*, each an element order and a number of uniform
+subdivisions (:func:`simfab.fem.subdivide.subdivide`: every edge split, the same
+piecewise-linear domain, h -> h/2):
 
-Reported per figure: the value at every level, the extrapolated value (three levels whose
-changes shrink: f = f_inf + b h^p fitted, :func:`simfab.coupling.converge.extrapolate`; else
-none, and a figure whose changes grow - the max von Mises stress at a sharp re-entrant corner is
-singular - is flagged as not converging), and the relative difference of the optimization mesh
-from the extrapolated value (else the finest level); per constraint: its value there (the
-mesh-converged answer as far as the levels tell) and whether it is satisfied. A design that meets
-its brief only on the coarse mesh gets a warning in the summary, and
-:func:`correction_factors` turn the check into the next round's correction of the coarse figures
-(:func:`simfab.design.pipeline.optimize_scene`).
+    2D: linear 1x (the optimization mesh), P2 1x, P2 4x the elements
+    3D: linear 1x, P2 1x
+
+Quadratic (P2) elements (:func:`simfab.fem.p2.to_p2`) do not lock, so they are the reference
+(measured on the initial shapes against P2 at 16x; 2D ``standside2d`` / ``block2d_tight``,
+seconds on a shared 2-core machine):
+
+    level (2D)             F_in            F_rm            F_grip          sigma_avg     seconds
+    linear 1x              +12 / +30 %     +19 / +31 %     +16 / +39 %     +16 / +30 %   0.8 / 2.7
+    linear 16x             +2.7 / +2.7 %   +2.6 / +2.8 %   +1.3 / +3.8 %   +1.0 / +0.8 % 4.0 / 9.1
+    linear 1, 4, 16x fit   -0.8 / -0.3 %   +0.3 / -0.2 %   -0.2 / -27 %    -0.1 / -1.9 % 5.8 / 15
+    P2 1x                  -1.3 / +1.0 %   +1.8 / +1.0 %   +0.5 / +20 %    +1.7 / +5.2 % 7.3 / 4.1
+    P2 4x                  +0.6 / +0.3 %   +0.6 / +0.3 %   +0.1 / +1.3 %   +1.4 / +1.6 % 24 / 18
+
+The linear three-level extrapolation is as accurate where the figures converge smoothly and
+faster, but it fails on a figure that jumps between levels (the grip, read where the object
+comes to rest: -27 %); P2 at 4x is within 1.6 % on every figure without a fitted order, for
+1.5-2x the seconds. In 3D the linear mesh refined once (8x, the same unknowns as P2 1x) is still
+12-19 % stiff; P2 1x is within ~4 % (knocker3d, tools/bench.py p2_insertion) and P2 refined
+once costs ~8x more unknowns (not run by default; pass ``levels``).
+
+Reported per figure: the value at every level; the reference: the finest level's, or, with
+three levels of the finest order whose changes shrink, f = f_inf + b h^p fitted over them
+(:func:`simfab.coupling.converge.extrapolate`: the linear-only check, ``levels=(0, 1, 2)``);
+whether the changes shrink from level to level (a figure whose changes grow - the max von Mises
+stress at a sharp re-entrant corner is singular - is flagged as not converging); the relative
+difference of the optimization mesh from the reference; and the reference's own change between
+the last two levels of its order (its discretization error, as far as the levels show it). Per
+constraint: its value at the reference and whether it is satisfied. A design that meets its
+brief only on the coarse mesh gets a warning in the summary, and :func:`correction_factors`
+turn the check into the next round's correction of the coarse figures
+(:func:`simfab.design.pipeline.optimize_scene`). The averaged stress of a P2 level is computed
+at its quadrature points (:func:`simfab.design.stress.p2_averaged_von_mises`).
 """
 
 from __future__ import annotations
@@ -27,7 +52,8 @@ import numpy as np
 
 from simfab.design import brief as B
 
-#: Refinement levels (number of uniform subdivisions) of the check, per dimension.
+#: Check levels per dimension: (element order, uniform subdivisions); the first is the
+#: optimization mesh (measurements: module docstring).
 LEVELS = {2: ((1, 0), (2, 0), (2, 1)), 3: ((1, 0), (2, 0))}
 #: Correction factors are clipped to this range (a coarse linear mesh is too stiff by tens of percent,
 #: not by orders of magnitude; a larger ratio means the figure changed character, e.g. a contact
