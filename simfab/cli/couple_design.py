@@ -20,9 +20,9 @@ simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_s
 (2D), scene_xml, scene_toml, scene_mesh, profile_png, shape_png, history_csv, usd, summary_json,
 revolved_stl with --revolve-axis), restarts (with --restarts: per run seed, status, message,
 feasible, objective, E_L, iterations, seconds), mesh_check (unless --no-mesh-check: levels
-(subdivisions, elements, seconds, category), figures (per figure: values per level,
-extrapolated, order, converging, difference_of_optimization_mesh), constraints at the
-mesh-converged values, feasible_fine, reference, units), correction_rounds (per round:
+(element_order, subdivisions, elements, nodes, seconds, category), figures (per figure: values per
+level, extrapolated, order, converging, difference_of_optimization_mesh, reference_change),
+constraints at the mesh-converged values, feasible_fine, reference, units), correction_rounds (per round:
 factors, feasible_fine, objective_fine, iterations, seconds, kept: whether its design was
 better on the refined meshes; the outputs are the kept design's run), iterations_total (every
 round's), objective_fine (the kept design's objective with mesh-converged figures).
@@ -71,8 +71,9 @@ def add_optimize_args(s) -> None:
     s.add_argument("--scheduler", metavar="ADDRESS",
                    help="Dask scheduler for --restarts (default: a local cluster sized to this machine)")
     s.add_argument("--no-mesh-check", action="store_true",
-                   help="skip re-running the optimized shape on uniformly refined meshes (2D: 4x and 16x the "
-                        "elements, 3D: 8x), which reports the optimization mesh's discretization error")
+                   help="skip re-running the optimized shape with quadratic (P2) elements (2D: on the "
+                        "optimization mesh and refined 4x, 3D: on it), which reports the optimization mesh's "
+                        "discretization error and corrects the figures while the brief is missed there")
     s.add_argument("--revolve-axis", choices=["x", "y"], help="2D: also revolve the optimized section about this axis")
     s.add_argument("--revolve-offset", type=float, default=0.0, metavar="M",
                    help="position of the revolution axis [m] (x = M for axis y, y = M for axis x)")

@@ -26,7 +26,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         3D part (``NAME_optimized_revolved.stl``, mm)
     workers : processes evaluating the annealer's proposals (:mod:`simfab.design.parallel`; the
         result does not depend on it); without restarts only
-    mesh_check : re-run the optimized shape on uniformly refined meshes
+    mesh_check : re-run the optimized shape with quadratic elements, refined in 2D
         (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
         the mesh-converged ones, warning when a constraint holds only on the coarse mesh
     """
@@ -90,7 +90,7 @@ def mesh_corrected(res, seed: int, workers: int, quiet: bool):
     from simfab.progress import log
 
     name = res.problem.base.name
-    log(f"couple optimize: {name}: mesh check of the optimized shape on refined meshes", quiet=quiet)
+    log(f"couple optimize: {name}: mesh check of the optimized shape (quadratic elements)", quiet=quiet)
     check = mesh_check(res.problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
 
     def key(r, c):
