@@ -60,6 +60,9 @@ def add_optimize_args(s) -> None:
     g.add_argument("--iterations", type=int, metavar="N", help="simulated-annealing iterations (at most)")
     g.add_argument("--correction-rounds", type=int, metavar="N",
                    help="re-optimizations with mesh-corrected figures while the mesh check finds the brief missed")
+    g.add_argument("--check-refinements", type=int, metavar="N",
+                   help="the mesh check's P2 levels: on the optimization mesh and refined N times (default 1; "
+                        "0: quick, without an estimate of the reference's own error)")
     g.add_argument("--patience", type=int, metavar="N",
                    help="stop once the best design is feasible and has not improved for N iterations")
     s.add_argument("--steps", type=int, metavar="N", help="insertion steps per simulation (overrides the scene)")
@@ -71,9 +74,9 @@ def add_optimize_args(s) -> None:
     s.add_argument("--scheduler", metavar="ADDRESS",
                    help="Dask scheduler for --restarts (default: a local cluster sized to this machine)")
     s.add_argument("--no-mesh-check", action="store_true",
-                   help="skip re-running the optimized shape with quadratic (P2) elements (2D: on the "
-                        "optimization mesh and refined 4x, 3D: on it), which reports the optimization mesh's "
-                        "discretization error and corrects the figures while the brief is missed there")
+                   help="skip re-running the optimized shape with quadratic (P2) elements (on the "
+                        "optimization mesh and refined, see --check-refinements), which reports the optimization "
+                        "mesh's discretization error and corrects the figures while the brief is missed there")
     s.add_argument("--revolve-axis", choices=["x", "y"], help="2D: also revolve the optimized section about this axis")
     s.add_argument("--revolve-offset", type=float, default=0.0, metavar="M",
                    help="position of the revolution axis [m] (x = M for axis y, y = M for axis x)")
@@ -94,7 +97,7 @@ def design_overrides(args) -> dict:
 
     d = {}
     for k in ("grip", "yield_stress", "target_profile", "handles", "placement", "iterations", "patience",
-              "correction_rounds"):
+              "correction_rounds", "check_refinements"):
         v = getattr(args, k, None)
         if v is not None:
             d[k] = v
@@ -102,8 +105,8 @@ def design_overrides(args) -> dict:
         v = getattr(args, k, None)
         if v is not None:
             d[k] = list(v)
-    for k in ("handles", "iterations", "patience", "correction_rounds"):
-        lo = 0 if k in ("iterations", "correction_rounds") else 1
+    for k in ("handles", "iterations", "patience", "correction_rounds", "check_refinements"):
+        lo = 0 if k in ("iterations", "correction_rounds", "check_refinements") else 1
         if k in d and d[k] < lo:
             raise InputError(f"must be >= {lo}, got {d[k]}", where=f"--{k.replace('_', '-')}")
     return d

@@ -52,9 +52,13 @@ import numpy as np
 
 from simfab.design import brief as B
 
-#: Check levels per dimension: (element order, uniform subdivisions); the first is the
-#: optimization mesh (measurements: module docstring).
-LEVELS = {2: ((1, 0), (2, 0), (2, 1)), 3: ((1, 0), (2, 0))}
+def check_levels(refinements: int = 1) -> tuple:
+    """The check's levels, (element order, uniform subdivisions): the optimization mesh (linear,
+    as annealed), then P2 on it and on its ``refinements`` successive refinements
+    (``[design] check_refinements``; measurements: module docstring)."""
+    return ((1, 0),) + tuple((2, t) for t in range(int(refinements) + 1))
+
+
 #: Correction factors are clipped to this range (a coarse linear mesh is too stiff by tens of percent,
 #: not by orders of magnitude; a larger ratio means the figure changed character, e.g. a contact
 #: that exists on one mesh only).
@@ -132,7 +136,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
     figures0 : the optimizer's figures of ``rest`` (level 0), reused instead of simulating again
         (not for target matching: its RMS force error per level needs the profiles)
     levels : (element order, subdivisions) pairs (or ints: linear), first (1, 0); default
-        :data:`LEVELS` of the part's dimension
+        :func:`check_levels` of the brief's ``check_refinements``
     Returns {"levels": [{element_order, subdivisions, elements, nodes, seconds, category}],
     "figures": {name: {values, extrapolated, order, converging, difference_of_optimization_mesh,
     reference_change}}, "constraints": [{name, value, lo, hi, satisfied}] at the reference values,
@@ -142,7 +146,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
     from simfab.coupling.simulate import simulate
 
     cm = problem.base
-    levels = as_levels(LEVELS[cm.dim] if levels is None else levels)
+    levels = as_levels(check_levels(problem.brief.check_refinements) if levels is None else levels)
     rows, figs, profiles = [], [], []
     for o, t in levels:
         t0 = time.perf_counter()

@@ -84,12 +84,12 @@ def test_linear_mesh_check_extrapolates_three_levels(problem):
 
 
 def test_default_check_reads_p2_levels(problem):
-    """2D default: linear on the optimization mesh, then P2 on it and on its refinement (4x). The
+    """Default: linear on the optimization mesh, then P2 on it and on its refinement (2D: 4x). The
     reference is P2 refined; P2 does not lock, so its own refinement changes the forces by far
     less than the linear mesh is off (measured here: linear +30 % in F_in, P2 1x -> 4x -0.8 %)."""
-    from simfab.design.verify import LEVELS, correction_factors, reference_value
+    from simfab.design.verify import check_levels, correction_factors, reference_value
 
-    assert LEVELS[2] == ((1, 0), (2, 0), (2, 1))
+    assert problem.brief.check_refinements == 1 and check_levels(1) == ((1, 0), (2, 0), (2, 1))
     cm = problem.base
     r = mesh_check(problem, cm.fem.rest)
     n = cm.fem.n_elements
