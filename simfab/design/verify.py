@@ -3,14 +3,17 @@ mesh?
 
 The optimizer simulates every candidate on the scene's own (coarse) mesh of linear simplices,
 which lock in bending: at the design scenes' ~450 triangles / ~1.5k tets the coupling forces are
-tens of percent too high (``simfab couple converge``; the knocker design's F_in 91 %). The
+tens of percent too high (``simfab couple converge``; the knocker design's F_in by 91 % against P2
+on the same mesh, 207 % against P2 refined once). The
 optimized shape exists only as a mesh, so the same insertion (object, path, steps, support,
 options) is run again at finer *levels*, each an element order and a number of uniform
 subdivisions (:func:`simfab.fem.subdivide.subdivide`: every edge split, the same
 piecewise-linear domain, h -> h/2):
 
-    2D: linear 1x (the optimization mesh), P2 1x, P2 4x the elements
-    3D: linear 1x, P2 1x
+    linear 1x (the optimization mesh), P2 1x, P2 refined once (2D 4x, 3D 8x the elements)
+
+(:func:`check_levels`; ``[design] check_refinements`` sets the number of P2 refinements, 1 by
+default, 0 for a quick check that cannot see its own error).
 
 Quadratic (P2) elements (:func:`simfab.fem.p2.to_p2`) do not lock, so they are the reference
 (measured on the initial shapes against P2 at 16x; 2D ``standside2d`` / ``block2d_tight``,
@@ -27,8 +30,19 @@ The linear three-level extrapolation is as accurate where the figures converge s
 faster, but it fails on a figure that jumps between levels (the grip, read where the object
 comes to rest: -27 %); P2 at 4x is within 1.6 % on every figure without a fitted order, for
 1.5-2x the seconds. In 3D the linear mesh refined once (8x, the same unknowns as P2 1x) is still
-12-19 % stiff; P2 1x is within ~4 % (knocker3d, tools/bench.py p2_insertion) and P2 refined
-once costs ~8x more unknowns (not run by default; pass ``levels``).
+12-19 % stiff. P2 1x is within ~4 % on knocker3d's large-interference insertion (tools/bench.py
+p2_insertion) but not on the optimized knocker design (1,576 tets; a 5 N snap):
+
+    level (3D)      F_in      F_rm      sigma_avg   E_max      seconds (load ~8)
+    linear 1x       8.58 N    6.17 N    50.7 MPa    2.31 mJ    7.7
+    linear 8x       5.03 N    5.63 N    56.0 MPa    1.27 mJ    19
+    P2 1x           4.49 N    5.01 N    59.8 MPa    1.14 mJ    26
+    P2 8x           2.79 N    3.03 N    59.1 MPa    0.75 mJ    1,693
+
+P2's own refinement moves the forces by -38 % (halving d_hat on P2 1x moves F_in by -2 % only:
+the elements, not the contact layer), so the default check refines P2 once in 3D as well, at
+tens of times the seconds of P2 1x; its ``reference_change`` shows how far the reference itself
+is from converged.
 
 Reported per figure: the value at every level; the reference: the finest level's, or, with
 three levels of the finest order whose changes shrink, f = f_inf + b h^p fitted over them
@@ -51,6 +65,7 @@ import time
 import numpy as np
 
 from simfab.design import brief as B
+
 
 def check_levels(refinements: int = 1) -> tuple:
     """The check's levels, (element order, uniform subdivisions): the optimization mesh (linear,
