@@ -142,3 +142,18 @@ def test_target_matching_gets_a_profile_correction():
     assert len(r["figures"]["rms_error"]["values"]) == 2
     assert correction_factors(r)["force_profile"] == c
     assert needs_correction(r, {}) and not needs_correction(r, {"force_profile": c})
+
+
+def test_the_optimizer_refuses_p2_and_the_check_leaves_its_model_linear(problem):
+    """Only the check runs P2: the annealing's problem stays on the linear coarse mesh, and a
+    scene asking for P2 elements is refused by the optimizer with the field named."""
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.errors import InputError
+
+    p2 = load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 8, "element_order": 2}})
+    with pytest.raises(InputError) as e:
+        make_problem(p2, problem.brief)
+    assert "element_order" in str(e.value.where)
+    m = refined_model(problem.base, problem.base.fem.rest, 0, 2)
+    assert m.options.element_order == 2 and problem.base.options.element_order == 1
+    assert type(problem.base.fem).__name__ == "FemModel"
