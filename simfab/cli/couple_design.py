@@ -22,9 +22,9 @@ revolved_stl with --revolve-axis; with --revolve-arms also revolved_scene_xml, r
 revolved_mesh), revolved (with --revolve-arms: the 3D part's simulation: elements, category,
 figures, constraints of the brief with their values and satisfied flags), restarts (with --restarts: per run seed, status, message,
 feasible, objective, E_L, iterations, seconds), mesh_check (unless --no-mesh-check: levels
-(subdivisions, elements, seconds, category), figures (per figure: values per level,
-extrapolated, order, converging, difference_of_optimization_mesh), constraints at the
-mesh-converged values, feasible_fine, reference, units), correction_rounds (per round:
+(element_order, subdivisions, elements, nodes, seconds, category), figures (per figure: values per
+level, extrapolated, order, converging, difference_of_optimization_mesh, reference_change),
+constraints at the mesh-converged values, feasible_fine, reference, units), correction_rounds (per round:
 factors, feasible_fine, objective_fine, iterations, seconds, kept: whether its design was
 better on the refined meshes; the outputs are the kept design's run), iterations_total (every
 round's), objective_fine (the kept design's objective with mesh-converged figures).
@@ -62,6 +62,9 @@ def add_optimize_args(s) -> None:
     g.add_argument("--iterations", type=int, metavar="N", help="simulated-annealing iterations (at most)")
     g.add_argument("--correction-rounds", type=int, metavar="N",
                    help="re-optimizations with mesh-corrected figures while the mesh check finds the brief missed")
+    g.add_argument("--check-refinements", type=int, metavar="N",
+                   help="the mesh check's P2 levels: on the optimization mesh and refined N times (default 1; "
+                        "0: quick, without an estimate of the reference's own error)")
     g.add_argument("--patience", type=int, metavar="N",
                    help="stop once the best design is feasible and has not improved for N iterations")
     s.add_argument("--steps", type=int, metavar="N", help="insertion steps per simulation (overrides the scene)")
@@ -73,8 +76,9 @@ def add_optimize_args(s) -> None:
     s.add_argument("--scheduler", metavar="ADDRESS",
                    help="Dask scheduler for --restarts (default: a local cluster sized to this machine)")
     s.add_argument("--no-mesh-check", action="store_true",
-                   help="skip re-running the optimized shape on uniformly refined meshes (2D: 4x and 16x the "
-                        "elements, 3D: 8x), which reports the optimization mesh's discretization error")
+                   help="skip re-running the optimized shape with quadratic (P2) elements (on the "
+                        "optimization mesh and refined, see --check-refinements), which reports the optimization "
+                        "mesh's discretization error and corrects the figures while the brief is missed there")
     s.add_argument("--revolve-axis", choices=["x", "y"], help="2D: also revolve the optimized section about this axis")
     s.add_argument("--revolve-offset", type=float, default=0.0, metavar="M",
                    help="position of the revolution axis [m] (x = M for axis y, y = M for axis x)")
@@ -99,7 +103,7 @@ def design_overrides(args) -> dict:
 
     d = {}
     for k in ("grip", "yield_stress", "target_profile", "handles", "placement", "iterations", "patience",
-              "correction_rounds"):
+              "correction_rounds", "check_refinements"):
         v = getattr(args, k, None)
         if v is not None:
             d[k] = v
@@ -107,8 +111,8 @@ def design_overrides(args) -> dict:
         v = getattr(args, k, None)
         if v is not None:
             d[k] = list(v)
-    for k in ("handles", "iterations", "patience", "correction_rounds"):
-        lo = 0 if k in ("iterations", "correction_rounds") else 1
+    for k in ("handles", "iterations", "patience", "correction_rounds", "check_refinements"):
+        lo = 0 if k in ("iterations", "correction_rounds", "check_refinements") else 1
         if k in d and d[k] < lo:
             raise InputError(f"must be >= {lo}, got {d[k]}", where=f"--{k.replace('_', '-')}")
     return d

@@ -21,6 +21,9 @@ The ``[design]`` table of a coupling scene's TOML (all optional; SI units)::
                                    #   (critical distance, see simfab.design.stress)
     correction_rounds = 2          # re-optimizations with mesh-corrected figures while the
                                    #   mesh check (simfab.design.verify) finds the brief missed
+    check_refinements = 1          # the mesh check's P2 levels: on the optimization mesh and
+                                   #   refined this many times (0: P2 on it only, quick but
+                                   #   blind to its own error; each refinement costs 4x / 8x+)
 
 The random seed (handle placement, annealing) is the command's ``--seed``.
 
@@ -96,6 +99,7 @@ class DesignBrief:
     scale_range: tuple[float, float] = (0.5, 1.6)
     stress_radius: float = STRESS_RADIUS
     correction_rounds: int = 2
+    check_refinements: int = 1
 
     @classmethod
     def from_dict(cls, d: dict, *, where: str = "[design]") -> "DesignBrief":
@@ -126,11 +130,15 @@ class DesignBrief:
         if not (isinstance(self.stress_radius, (int, float)) and not isinstance(self.stress_radius, bool)
                 and 0 < self.stress_radius < 1):
             raise InputError(f"must be a length in (0, 1) m, got {self.stress_radius!r}", where=f"{where} stress_radius")
-        for k in ("handles", "iterations", "patience", "correction_rounds"):
+        for k in ("handles", "iterations", "patience", "correction_rounds", "check_refinements"):
             v = getattr(self, k)
-            if not isinstance(v, int) or isinstance(v, bool) or v < (0 if k in ("iterations", "correction_rounds") else 1):
+            if not isinstance(v, int) or isinstance(v, bool) or v < (0 if k in ("iterations", "correction_rounds",
+                                                                               "check_refinements") else 1):
                 raise InputError(f"must be a {'non-negative' if k == 'iterations' else 'positive'} integer, "
                                  f"got {v!r}", where=f"{where} {k}")
+        if self.check_refinements > 3:
+            raise InputError(f"must be at most 3 (each refinement multiplies the check's elements by 4 in 2D, "
+                             f"8 in 3D), got {self.check_refinements}", where=f"{where} check_refinements")
         if self.yield_stress is not None and not (isinstance(self.yield_stress, (int, float)) and self.yield_stress > 0):
             raise InputError(f"must be a positive stress [Pa], got {self.yield_stress!r}", where=f"{where} yield_stress")
         if not (isinstance(self.max_translation, (int, float)) and 0 < self.max_translation <= 1):

@@ -28,7 +28,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         written as a 3D scene and simulated (summary ``revolved``: its figures against the brief)
     workers : processes evaluating the annealer's proposals (:mod:`simfab.design.parallel`; the
         result does not depend on it); without restarts only
-    mesh_check : re-run the optimized shape on uniformly refined meshes
+    mesh_check : re-run the optimized shape with quadratic elements, refined in 2D
         (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
         the mesh-converged ones, warning when a constraint holds only on the coarse mesh
     """
@@ -110,7 +110,7 @@ def mesh_corrected(res, seed: int, workers: int, quiet: bool):
     from simfab.progress import log
 
     name = res.problem.base.name
-    log(f"couple optimize: {name}: mesh check of the optimized shape on refined meshes", quiet=quiet)
+    log(f"couple optimize: {name}: mesh check of the optimized shape (quadratic elements)", quiet=quiet)
     check = mesh_check(res.problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
 
     def key(r, c):
@@ -162,7 +162,7 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import simulate
     from simfab.design import brief as B
-    from simfab.design.optimize import profile_figures
+    from simfab.design.verify import level_figures
     from simfab.progress import log
 
     cm = res.problem.base
@@ -173,7 +173,7 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
     log(f"couple optimize: simulating the revolved part ({arms} arms, {cm3.fem.n_elements} 10-node tets)", quiet=quiet)
     t0 = time.perf_counter()
     r3 = simulate(cm3)
-    fig = profile_figures(r3, res.problem.brief.stress_radius)
+    fig = level_figures(r3, res.problem.brief.stress_radius)  # P2: stress averaged at quadrature points
     cons = B.constraints(fig, res.problem.limits)
     missed = [c.name for c in cons if not c.satisfied]
     warnings = list(r3.warnings)

@@ -1,22 +1,61 @@
 """Mesh-convergence check of an optimized design: is the brief met by the shape, or only by its
 mesh?
 
-The optimizer simulates every candidate on the scene's own (coarse) mesh: linear simplices are
-too stiff in bending, and at the design scenes' ~450 triangles the coupling figures are tens of
-percent off their mesh-converged values (``simfab couple converge``). The optimized shape exists
-only as a mesh, so it is refined uniformly (:func:`simfab.fem.subdivide.subdivide`: every edge
-split, the same piecewise-linear domain, h -> h/2) and the same insertion (object, path, steps,
-support, options) is run on each level: 2D at 1x, 4x and 16x the elements, 3D at 1x and 8x.
+The optimizer simulates every candidate on the scene's own (coarse) mesh of linear simplices,
+which lock in bending: at the design scenes' ~450 triangles / ~1.5k tets the coupling forces are
+tens of percent too high (``simfab couple converge``; the knocker design's F_in by 91 % against P2
+on the same mesh, 207 % against P2 refined once). The
+optimized shape exists only as a mesh, so the same insertion (object, path, steps, support,
+options) is run again at finer *levels*, each an element order and a number of uniform
+subdivisions (:func:`simfab.fem.subdivide.subdivide`: every edge split, the same
+piecewise-linear domain, h -> h/2):
 
-Reported per figure: the value at every level, the extrapolated value (three levels whose
-changes shrink: f = f_inf + b h^p fitted, :func:`simfab.coupling.converge.extrapolate`; else
-none, and a figure whose changes grow - the max von Mises stress at a sharp re-entrant corner is
-singular - is flagged as not converging), and the relative difference of the optimization mesh
-from the extrapolated value (else the finest level); per constraint: its value there (the
-mesh-converged answer as far as the levels tell) and whether it is satisfied. A design that meets
-its brief only on the coarse mesh gets a warning in the summary, and
-:func:`correction_factors` turn the check into the next round's correction of the coarse figures
-(:func:`simfab.design.pipeline.optimize_scene`).
+    linear 1x (the optimization mesh), P2 1x, P2 refined once (2D 4x, 3D 8x the elements)
+
+(:func:`check_levels`; ``[design] check_refinements`` sets the number of P2 refinements, 1 by
+default, 0 for a quick check that cannot see its own error).
+
+Quadratic (P2) elements (:func:`simfab.fem.p2.to_p2`) do not lock, so they are the reference
+(measured on the initial shapes against P2 at 16x; 2D ``standside2d`` / ``block2d_tight``,
+seconds on a shared 2-core machine):
+
+    level (2D)             F_in            F_rm            F_grip          sigma_avg     seconds
+    linear 1x              +12 / +30 %     +19 / +31 %     +16 / +39 %     +16 / +30 %   0.8 / 2.7
+    linear 16x             +2.7 / +2.7 %   +2.6 / +2.8 %   +1.3 / +3.8 %   +1.0 / +0.8 % 4.0 / 9.1
+    linear 1, 4, 16x fit   -0.8 / -0.3 %   +0.3 / -0.2 %   -0.2 / -27 %    -0.1 / -1.9 % 5.8 / 15
+    P2 1x                  -1.3 / +1.0 %   +1.8 / +1.0 %   +0.5 / +20 %    +1.7 / +5.2 % 7.3 / 4.1
+    P2 4x                  +0.6 / +0.3 %   +0.6 / +0.3 %   +0.1 / +1.3 %   +1.4 / +1.6 % 24 / 18
+
+The linear three-level extrapolation is as accurate where the figures converge smoothly and
+faster, but it fails on a figure that jumps between levels (the grip, read where the object
+comes to rest: -27 %); P2 at 4x is within 1.6 % on every figure without a fitted order, for
+1.5-2x the seconds. In 3D the linear mesh refined once (8x, the same unknowns as P2 1x) is still
+12-19 % stiff. P2 1x is within ~4 % on knocker3d's large-interference insertion (tools/bench.py
+p2_insertion) but not on the optimized knocker design (1,576 tets; a 5 N snap):
+
+    level (3D)      F_in      F_rm      sigma_avg   E_max      seconds (load ~8)
+    linear 1x       8.58 N    6.17 N    50.7 MPa    2.31 mJ    7.7
+    linear 8x       5.03 N    5.63 N    56.0 MPa    1.27 mJ    19
+    P2 1x           4.49 N    5.01 N    59.8 MPa    1.14 mJ    26
+    P2 8x           2.79 N    3.03 N    59.1 MPa    0.75 mJ    1,693
+
+P2's own refinement moves the forces by -38 % (halving d_hat on P2 1x moves F_in by -2 % only:
+the elements, not the contact layer), so the default check refines P2 once in 3D as well, at
+10-65x the seconds of P2 1x (607-1,693 s against 26-68 s on two knocker designs); its ``reference_change`` shows how far the reference itself
+is from converged.
+
+Reported per figure: the value at every level; the reference: the finest level's, or, with
+three levels of the finest order whose changes shrink, f = f_inf + b h^p fitted over them
+(:func:`simfab.coupling.converge.extrapolate`: the linear-only check, ``levels=(0, 1, 2)``);
+whether the changes shrink from level to level (a figure whose changes grow - the max von Mises
+stress at a sharp re-entrant corner is singular - is flagged as not converging); the relative
+difference of the optimization mesh from the reference; and the reference's own change between
+the last two levels of its order (its discretization error, as far as the levels show it). Per
+constraint: its value at the reference and whether it is satisfied. A design that meets its
+brief only on the coarse mesh gets a warning in the summary, and :func:`correction_factors`
+turn the check into the next round's correction of the coarse figures
+(:func:`simfab.design.pipeline.optimize_scene`). The averaged stress of a P2 level is computed
+at its quadrature points (:func:`simfab.design.stress.p2_averaged_von_mises`).
 """
 
 from __future__ import annotations
@@ -27,8 +66,14 @@ import numpy as np
 
 from simfab.design import brief as B
 
-#: Refinement levels (number of uniform subdivisions) of the check, per dimension.
-LEVELS = {2: (0, 1, 2), 3: (0, 1)}
+
+def check_levels(refinements: int = 1) -> tuple:
+    """The check's levels, (element order, uniform subdivisions): the optimization mesh (linear,
+    as annealed), then P2 on it and on its ``refinements`` successive refinements
+    (``[design] check_refinements``; measurements: module docstring)."""
+    return ((1, 0),) + tuple((2, t) for t in range(int(refinements) + 1))
+
+
 #: Correction factors are clipped to this range (a coarse linear mesh is too stiff by tens of percent,
 #: not by orders of magnitude; a larger ratio means the figure changed character, e.g. a contact
 #: that exists on one mesh only).
@@ -39,9 +84,13 @@ PROFILE_TOL = 0.05
 FIGURES = ("coupling_ratio", "grip_force", "insertion_force", "removal_force", "von_mises", "von_mises_peak")
 
 
-def refined_model(cm, rest: np.ndarray, times: int):
-    """The coupling model of rest shape ``rest`` (n, d) [m] on cm's mesh subdivided ``times`` times:
-    the fixed support is every vertex whose parents were all fixed."""
+def refined_model(cm, rest: np.ndarray, times: int, order: int = 1):
+    """The coupling model of rest shape ``rest`` (n, d) [m] on cm's mesh subdivided ``times`` times,
+    with elements of ``order`` (1: linear; 2: the refined mesh lifted to P2 by
+    :func:`simfab.fem.p2.to_p2`): the fixed support is every vertex (and P2 edge node) whose
+    parents were all fixed; the insertion options are cm's with ``element_order = order``."""
+    import dataclasses
+
     from simfab.coupling.model import make_coupling_model
     from simfab.fem.model import make_model
     from simfab.fem.subdivide import midpoint_mask, subdivide
@@ -54,66 +103,119 @@ def refined_model(cm, rest: np.ndarray, times: int):
         X, el, edges = subdivide(X, el)
         fixed = midpoint_mask(fixed, edges)
     new = make_model(X, el, fem.material, thickness=fem.thickness, device=fem.device)
+    if order == 2:
+        from simfab.fem.p2 import to_p2
+
+        new = to_p2(new)
+        fixed = midpoint_mask(fixed, new.edges)  # P2 edge node n_corners + i sits on edges[i]
+    elif order != 1:
+        raise ValueError(f"element order {order} is not 1 or 2")
+    options = dataclasses.replace(cm.options, element_order=int(order))
     return make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=np.flatnonzero(fixed),
-                               options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
+                               options=options, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
+
+
+def level_figures(res, stress_radius: float) -> dict:
+    """:func:`simfab.design.optimize.profile_figures` of an insertion; on P2 elements the averaged
+    stress at quadrature-point resolution (:func:`simfab.design.stress.p2_averaged_von_mises`: the
+    insertion records only each element's largest quadrature-point stress, biased high)."""
+    from simfab.design.optimize import profile_figures
+    from simfab.design.stress import p2_averaged_von_mises
+
+    f = profile_figures(res, stress_radius)
+    if res.model.options.element_order == 2:
+        f["von_mises"] = max(p2_averaged_von_mises(res.model.fem, r.x, stress_radius) for r in res.steps)
+    return f
+
+
+def as_levels(levels) -> tuple:
+    """Normalize check levels: (element order, subdivisions) pairs; a bare int t means linear
+    elements subdivided t times. The first level must be the optimization mesh, (1, 0)."""
+    out = tuple((1, int(lv)) if np.isscalar(lv) else (int(lv[0]), int(lv[1])) for lv in levels)
+    if not out or out[0] != (1, 0):
+        raise ValueError(f"the first check level must be the optimization mesh (1, 0), got {out[:1]}")
+    if any(o not in (1, 2) or t < 0 for o, t in out):
+        raise ValueError(f"check levels must be (order 1|2, subdivisions >= 0), got {out}")
+    return out
+
+
+def reference_value(fig: dict) -> float:
+    """The reference (mesh-converged) value of a :func:`mesh_check` figure: extrapolated where
+    that was possible, else the finest level's."""
+    return fig["values"][-1] if fig["extrapolated"] is None else fig["extrapolated"]
 
 
 def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, levels=None, quiet: bool = True) -> dict:
-    """Run the design ``rest`` at each refinement level and compare (see the module docstring).
+    """Run the design ``rest`` at each level and compare (see the module docstring).
 
     figures0 : the optimizer's figures of ``rest`` (level 0), reused instead of simulating again
         (not for target matching: its RMS force error per level needs the profiles)
-    Returns {"levels": [{elements, seconds}], "figures": {name: {values, extrapolated, order,
-    converging, difference_of_optimization_mesh}}, "constraints": [{name, value, lo, hi,
-    satisfied}] at the reference values, "feasible_fine": bool, "reference", "units"}.
+    levels : (element order, subdivisions) pairs (or ints: linear), first (1, 0); default
+        :func:`check_levels` of the brief's ``check_refinements``
+    Returns {"levels": [{element_order, subdivisions, elements, nodes, seconds, category}],
+    "figures": {name: {values, extrapolated, order, converging, difference_of_optimization_mesh,
+    reference_change}}, "constraints": [{name, value, lo, hi, satisfied}] at the reference values,
+    "feasible_fine": bool, "reference", "units"}.
     """
     from simfab.coupling.converge import extrapolate
     from simfab.coupling.simulate import simulate
-    from simfab.design.optimize import profile_figures
 
     cm = problem.base
-    levels = LEVELS[cm.dim] if levels is None else tuple(levels)
+    levels = as_levels(check_levels(problem.brief.check_refinements) if levels is None else levels)
     rows, figs, profiles = [], [], []
-    for t in levels:
+    for o, t in levels:
         t0 = time.perf_counter()
-        if t == 0 and figures0 is not None and problem.target is None:
-            f, n = figures0, cm.fem.n_elements
+        if (o, t) == (1, 0) and figures0 is not None and problem.target is None:
+            f, n, nodes = figures0, cm.fem.n_elements, cm.fem.n_vertices
         else:
-            m = refined_model(cm, rest, t)
+            m = refined_model(cm, rest, t, o)
             res = simulate(m, quiet=quiet)
-            f, n = profile_figures(res, problem.brief.stress_radius), m.fem.n_elements
+            f, n, nodes = level_figures(res, problem.brief.stress_radius), m.fem.n_elements, m.fem.n_vertices
             if problem.target is not None:  # the profile-matching error, a figure like the others
                 f = dict(f, rms_error=problem.target.rms_error(res.column("s"), res.column("force")))
                 profiles.append((res.column("s"), res.column("force")))
-        rows.append({"subdivisions": int(t), "elements": int(n), "seconds": time.perf_counter() - t0,
-                     "category": f["category"]})
+        rows.append({"element_order": int(o), "subdivisions": int(t), "elements": int(n), "nodes": int(nodes),
+                     "seconds": time.perf_counter() - t0, "category": f["category"]})
         figs.append(f)
-    N = np.array([r["elements"] for r in rows], float)
+    # the reference run: the trailing levels of the finest level's element order (P2 converges at a
+    # higher order than linear elements, so the two orders' values are not one h-sequence)
+    top = levels[-1][0]
+    k0 = len(levels)
+    while k0 > 0 and levels[k0 - 1][0] == top:
+        k0 -= 1
+    seq = list(range(k0, len(levels)))
+    N = np.array([rows[i]["elements"] for i in seq], float)
     out = {}
     for k in FIGURES + (("rms_error",) if problem.target is not None else ()):
         v = np.array([f[k] for f in figs], float)
         d = np.abs(np.diff(v))
-        # converging: the changes shrink with refinement (a stress at a sharp re-entrant corner is
-        # singular - its maximum grows without bound - and has no mesh-converged value)
+        # converging: the changes shrink from level to level (a stress at a sharp re-entrant corner
+        # is singular - its maximum grows without bound - and has no mesh-converged value)
         converging = bool(len(v) < 3 or d[-1] < d[-2] or d[-1] <= 1e-9 * max(np.abs(v).max(), 1e-300))
-        f_inf, p = extrapolate(N, v, cm.dim) if len(v) >= 3 and converging else (None, float("nan"))
+        # f = f_inf + b h^p through three levels of one order (the linear-only check of before)
+        f_inf, p = extrapolate(N, v[seq], cm.dim) if len(seq) >= 3 and converging else (None, float("nan"))
         ref = float(v[-1]) if f_inf is None else f_inf
+        # the reference's own discretization error, as far as the levels show it: the relative change
+        # between the last two levels of the reference order (None with one level of it)
+        change = float((v[-1] - v[-2]) / ref) if len(seq) >= 2 and ref else None
         out[k] = {"values": v.tolist(), "extrapolated": f_inf, "order": p, "converging": converging,
-                  "difference_of_optimization_mesh": float((v[0] - ref) / ref) if ref else 0.0}
+                  "difference_of_optimization_mesh": float((v[0] - ref) / ref) if ref else 0.0,
+                  "reference_change": change}
     # the mesh-converged answer: extrapolated values where they exist, else the finest level's
-    fine = dict(figs[-1], **{k: (v["values"][-1] if v["extrapolated"] is None else v["extrapolated"])
-                             for k, v in out.items()})
+    fine = dict(figs[-1], **{k: reference_value(v) for k, v in out.items()})
     cons = B.constraints(fine, problem.limits)
     extra = {}
     if profiles:  # least-squares factor c of c F_coarse(s) ~ F_finest(s): the profile's mesh correction
         (s0, f0), (s1, f1) = profiles[0], profiles[-1]
         ref = np.interp(s0, s1, f1)
         extra["profile_force_factor"] = float(f0 @ ref / (f0 @ f0)) if f0 @ f0 > 0 else 1.0
+    what = "P2 (quadratic) elements" if top == 2 else "linear elements"
     return {**extra, "levels": rows, "figures": out,
             "constraints": [{"name": c.name, "value": c.value, "lo": c.lo, "hi": c.hi, "satisfied": c.satisfied}
                             for c in cons],
             "feasible_fine": all(c.satisfied for c in cons),
-            "reference": "extrapolated where converging, else the finest level",
+            "reference": f"{what} on the finest level ({rows[-1]['elements']} elements); extrapolated where "
+                         f"three levels of that order converge",
             "units": {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N",
                       "von_mises": "Pa", "von_mises_peak": "Pa", "rms_error": "N"}}
 
@@ -125,7 +227,8 @@ def check_warnings(check: dict) -> list[str]:
     if not bad:
         return []
     what = ", ".join(f"{c['name']} {c['value']:.4g} (bounds {c['lo']:.4g}..{c['hi']:.4g})" for c in bad)
-    return [f"mesh-converged (refined up to {lv[-1]['elements']} elements from {lv[0]['elements']}) the design misses: {what}"]
+    ref = f"P{lv[-1].get('element_order', 1)} on {lv[-1]['elements']} elements"
+    return [f"mesh-converged ({ref}; the optimization mesh: {lv[0]['elements']} linear) the design misses: {what}"]
 
 
 def figure_unit(name: str) -> float:
@@ -141,7 +244,7 @@ def correction_factors(check: dict) -> dict:
     out = {}
     for k, v in check["figures"].items():
         coarse = v["values"][0]
-        ref = v["values"][-1] if v["extrapolated"] is None else v["extrapolated"]
+        ref = reference_value(v)
         # a figure below its constraint unit (1 N, 1 %, 1 MPa: B.SCALES) is noise, not a biased
         # value: its ratio (e.g. 1e-8 N / 1e-11 N) says nothing about the mesh
         if abs(coarse) < figure_unit(k):
@@ -171,8 +274,7 @@ def checked_objective(problem, ev, check: dict) -> float:
     cons = [B.Constraint(name=c["name"], value=c["value"], lo=c["lo"], hi=c["hi"], unit=B.UNITS[c["name"]],
                          scale=B.SCALES[c["name"]]) for c in check["constraints"]]
     if problem.target is not None:
-        v = check["figures"]["rms_error"]
-        base = (v["values"][-1] if v["extrapolated"] is None else v["extrapolated"]) ** 2
+        base = reference_value(check["figures"]["rms_error"]) ** 2
     else:
         base = ev.E_L
     return float(base + B.penalty(cons))

@@ -41,7 +41,9 @@ def test_bounds_from_grip():
                                           ({"insertion_force": [5, 1]}, "insertion_force"),
                                           ({"grip_force": 3}, "grip_force"), ({"colour": 1}, "unknown"),
                                           ({"placement": "k-means"}, "placement"),
-                                          ({"scale_range": [1.2, 2.0]}, "scale_range")])
+                                          ({"scale_range": [1.2, 2.0]}, "scale_range"),
+                                          ({"check_refinements": -1}, "check_refinements"),
+                                          ({"check_refinements": 4}, "check_refinements")])
 def test_bad_brief_names_the_field(table, field):
     with pytest.raises(InputError) as e:
         B.DesignBrief.from_dict(table, where="x.toml [design]")

@@ -91,18 +91,19 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
     out = tmp_path / "o"
     r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "block2d_tight", "--iterations", "4",
                         "--steps", "8", "--handles", "3", "--placement", "spatial", "--revolve-axis", "x",
-                        "--workers", "1", "--correction-rounds", "1", "--revolve-arms", "2",
+                        "--workers", "1", "--correction-rounds", "1", "--check-refinements", "0", "--revolve-arms", "2",
                         "--out", str(out), "--json"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
     for k, p in s["outputs"].items():
         assert (out / p.split("/")[-1]).is_file(), k
     assert s["simulations"] >= 1
-    # the mesh check ran (2D: 1x, 4x, 16x the elements) and, if the brief was missed there, one
-    # correction round optimized again (half the iterations) with the check's factors
+    # the (quick: --check-refinements 0) mesh check ran (linear, then P2 on the same mesh) and,
+    # if the brief was missed there, one correction round optimized again (half the iterations)
+    # with the check's factors
     mc = s["mesh_check"]
-    n = [lv["elements"] for lv in mc["levels"]]
-    assert n[1] == 4 * n[0] and n[2] == 16 * n[0]
+    n = [(lv["element_order"], lv["elements"]) for lv in mc["levels"]]
+    assert n == [(1, n[0][1]), (2, n[0][1])]
     rounds = s["correction_rounds"]
     assert len(rounds) <= 1 and s["iterations_total"] == 4 + sum(r["iterations"] for r in rounds)
     if rounds and rounds[0]["kept"]:  # the round's design was better on the refined meshes

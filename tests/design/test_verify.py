@@ -31,11 +31,40 @@ def test_refined_model_keeps_the_shape_support_and_options(problem):
     assert set(cm.fixed_vertices.tolist()) <= set(fine.fixed_vertices.tolist())
     assert len(fine.fixed_vertices) > len(cm.fixed_vertices)  # the support's midpoints are held too
     assert np.array_equal(fine.s_steps, cm.s_steps)  # the same insertion
+    # P2: the same mesh lifted to quadratic elements, whose edge nodes are the red refinement's
+    # vertices: the same support, and the same nodes as the linear mesh refined once
+    p2 = refined_model(cm, cm.fem.rest, 0, 2)
+    assert p2.options.element_order == 2 and p2.fem.n_elements == cm.fem.n_elements
+    assert np.array_equal(p2.fixed_vertices, fine.fixed_vertices)
+    assert np.allclose(p2.fem.rest, fine.fem.rest, rtol=0, atol=1e-15)
+    assert p2.h == cm.h and p2.dhat == cm.dhat  # h_A: the corner mesh's
 
 
-def test_mesh_check_reports_the_coarse_mesh_error(problem):
+def test_p2_level_matches_the_scene_loaded_with_quadratic_elements(problem):
+    """refined_model(order 2) is what ``[simulation] element_order = 2`` runs, but for the support:
+    the check holds a P2 edge node when both its corners are held (the linear mesh's support,
+    refined), the scene every node inside the fixed box, which adds the midpoints of edges
+    leaving the box. Measured: 0.1 % in F_in; the support's discretization, not the element's."""
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import simulate
+
     cm = problem.base
-    r = mesh_check(problem, cm.fem.rest)
+    mine = refined_model(cm, cm.fem.rest, 0, 2)
+    scene = load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 8, "element_order": 2}})
+    assert np.array_equal(mine.fem.rest, scene.fem.rest) and np.array_equal(mine.fem.elements, scene.fem.elements)
+    extra = np.setdiff1d(scene.fixed_vertices, mine.fixed_vertices)
+    assert np.all(np.isin(mine.fixed_vertices, scene.fixed_vertices)) and np.all(extra >= cm.fem.n_vertices)
+    held = np.isin(mine.fem.edges[extra - cm.fem.n_vertices], cm.fixed_vertices)
+    assert np.all(held.sum(axis=1) == 1)  # each extra node sits on an edge with one held corner
+    a = profile_figures(simulate(mine))
+    b = profile_figures(simulate(scene))
+    for k in ("insertion_force", "removal_force", "grip_force", "von_mises"):
+        assert np.isclose(a[k], b[k], rtol=5e-3), k
+
+
+def test_linear_mesh_check_extrapolates_three_levels(problem):
+    cm = problem.base
+    r = mesh_check(problem, cm.fem.rest, levels=(0, 1, 2))
     n = cm.fem.n_elements
     assert [lv["elements"] for lv in r["levels"]] == [n, 4 * n, 16 * n]
     f = r["figures"]["insertion_force"]
@@ -52,6 +81,29 @@ def test_mesh_check_reports_the_coarse_mesh_error(problem):
     assert r["feasible_fine"] == all(c["satisfied"] for c in r["constraints"])
     w = check_warnings(r)
     assert bool(w) == (not r["feasible_fine"])
+
+
+def test_default_check_reads_p2_levels(problem):
+    """Default: linear on the optimization mesh, then P2 on it and on its refinement (2D: 4x). The
+    reference is P2 refined; P2 does not lock, so its own refinement changes the forces by far
+    less than the linear mesh is off (measured here: linear +30 % in F_in, P2 1x -> 4x -0.8 %)."""
+    from simfab.design.verify import check_levels, correction_factors, reference_value
+
+    assert problem.brief.check_refinements == 1 and check_levels(1) == ((1, 0), (2, 0), (2, 1))
+    cm = problem.base
+    r = mesh_check(problem, cm.fem.rest)
+    n = cm.fem.n_elements
+    assert [(lv["element_order"], lv["elements"]) for lv in r["levels"]] == [(1, n), (2, n), (2, 4 * n)]
+    assert "P2" in r["reference"]
+    for k in ("insertion_force", "removal_force"):
+        f = r["figures"][k]
+        assert f["extrapolated"] is None and reference_value(f) == f["values"][-1]  # two P2 levels: no fit
+        assert 0.05 < f["difference_of_optimization_mesh"] < 1.0  # linear locks: too stiff
+        assert abs(f["reference_change"]) < 0.25 * f["difference_of_optimization_mesh"]
+        assert f["converging"]
+    c = correction_factors(r)
+    assert np.isclose(c["insertion_force"] * r["figures"]["insertion_force"]["values"][0],
+                      r["figures"]["insertion_force"]["values"][-1])
 
 
 def test_correction_factors_map_the_coarse_figures_to_the_reference(problem):
@@ -90,3 +142,18 @@ def test_target_matching_gets_a_profile_correction():
     assert len(r["figures"]["rms_error"]["values"]) == 2
     assert correction_factors(r)["force_profile"] == c
     assert needs_correction(r, {}) and not needs_correction(r, {"force_profile": c})
+
+
+def test_the_optimizer_refuses_p2_and_the_check_leaves_its_model_linear(problem):
+    """Only the check runs P2: the annealing's problem stays on the linear coarse mesh, and a
+    scene asking for P2 elements is refused by the optimizer with the field named."""
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.errors import InputError
+
+    p2 = load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 8, "element_order": 2}})
+    with pytest.raises(InputError) as e:
+        make_problem(p2, problem.brief)
+    assert "element_order" in str(e.value.where)
+    m = refined_model(problem.base, problem.base.fem.rest, 0, 2)
+    assert m.options.element_order == 2 and problem.base.options.element_order == 1
+    assert type(problem.base.fem).__name__ == "FemModel"
