@@ -82,11 +82,6 @@ _EXACT = wp.constant(0)
 _PROJECT = wp.constant(1)
 _PROJECT_SVD = wp.constant(2)
 _BOTH = wp.constant(3)  # exact into ``data`` and PSD-projected (default route) into ``data2``
-
-#: On the CPU, meshes with at least this many elements are launched in two halves on two threads
-#: (Warp CPU kernels run on one thread and release the GIL; a handoff costs ~50 us, a tet's Hessian
-#: ~0.8 us): clip3d's 28,836 tets, 33 ms per Hessian launch at load ~7 (see the module docstring).
-SPLIT_ELEMENTS = 2048
 _POLAR_STEP_SQ_TOL = wp.constant(wp.float64(tolerances.POLAR_STEP_SQ_TOL))
 _POLAR_MAX_ITER = wp.constant(tolerances.POLAR_MAX_ITER)
 
@@ -506,11 +501,10 @@ def _dim(F: wp.mat22d):  # noqa: F811
 
 
 @wp.kernel
-def _energy_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
-                   Dm_inv: wp.array(dtype=Any),
+def _energy_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
                    volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
                    energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
-    e = first + wp.tid()  # this launch's part of the elements
+    e = wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -520,12 +514,11 @@ def _energy_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtyp
 
 
 @wp.kernel
-def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
-                     Dm_inv: wp.array(dtype=Any),
+def _gradient_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
                      volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
                      lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
                      det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any)):
-    e = first + wp.tid()  # this launch's part of the elements
+    e = wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -537,14 +530,13 @@ def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dt
 
 
 @wp.kernel
-def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
-                    Dm_inv: wp.array(dtype=Any),
+def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
                     volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
                     lam_e: wp.array(dtype=wp.float64), project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
                     energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
                     data2: wp.array(dtype=wp.float64)):
-    e = first + wp.tid()  # this launch's part of the elements
+    e = wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -591,13 +583,12 @@ def _minus_eye(B: wp.mat22d):  # noqa: F811
 
 
 @wp.kernel
-def _stress_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
-                   Dm_inv: wp.array(dtype=Any),
+def _stress_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
                    mu_e: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64),
                    von_mises: wp.array(dtype=wp.float64)):
     """det F and the von Mises stress sqrt(3/2) mu |dev(F F^T - I)| / J per element (see
     simfab.fem.stress.det_and_von_mises); +inf where det F <= 0 (stress undefined)."""
-    e = first + wp.tid()  # this launch's part of the elements
+    e = wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -667,11 +658,6 @@ class _Workspace:
         # recorded launch keeps its arguments (re-binding fresh arrays per call costs more than the copy)
         self.data_np = self.data = None
         self.data2_np = self.data2 = None
-        # on the CPU a large mesh runs in two halves on two threads; the second half adds its
-        # Hessian into its own buffers (``parts_data``: (warp array, numpy alias) per buffer name)
-        half = m // 2
-        self.parts = ((0, half), (half, m - half)) if self.cpu and m >= SPLIT_ELEMENTS else ((0, m),)
-        self.parts_data = {}
         self.bound = {}  # (launch, parameter name) -> value currently bound in a recorded launch
         self.commands: dict = {}
         # gradient scatter: (n*d, m*k*d) sparse sum over the element copies of each dof
@@ -686,14 +672,9 @@ class _Workspace:
     def hessian_values(self, second: bool = False) -> np.ndarray:
         """A fresh copy (nnz,) of the CSR values filled by the last Hessian launch: ``data``, or
         ``data2`` with ``second`` (callers keep and modify the matrices built on it)."""
-        name = "data2" if second else "data"
         if self.cpu:
-            out = getattr(self, name + "_np").copy()
-            for key, (_, arr_np) in self.parts_data.items():
-                if key[0] == name:
-                    out += arr_np
-            return out
-        return getattr(self, name).numpy()
+            return (self.data2_np if second else self.data_np).copy()
+        return (self.data2 if second else self.data).numpy()
 
     def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(energy (m,), det F (m,), nodal gradient blocks) of the last launch, as host arrays."""
@@ -716,34 +697,15 @@ class _Workspace:
         if not self.cpu:
             self.x.assign(self.x_np)
 
-    def part_buffer(self, name: str, part: int):
-        """CSR values buffer ``name`` ("data" / "data2") of launch part ``part`` (part 0: the
-        workspace's own)."""
-        if part == 0:
-            return getattr(self, name)
-        buf = self.parts_data.get((name, part))
-        if buf is None:
-            arr_np = np.zeros(len(self.data_np))
-            buf = self.parts_data[(name, part)] = (self._wrap(arr_np, wp.float64, "cpu"), arr_np)  # parts: CPU only
-        return buf[0]
-
-    def commands_for(self, model: FemModel, want: int) -> tuple:
-        """The recorded launches of ``want``, one per part (see ``parts``)."""
-        cmds = self.commands.get(("parts", want))
-        if cmds is None:
-            cmds = self.commands[("parts", want)] = tuple(self.command(model, want, p) for p in range(len(self.parts)))
-        return cmds
-
-    def command(self, model: FemModel, want: int, part: int = 0):
-        """The recorded launch for ``want`` over elements part ``part`` (created on first use)."""
-        cmd = self.commands.get((want, part))
+    def command(self, model: FemModel, want: int):
+        """The recorded launch for ``want`` (created on first use)."""
+        cmd = self.commands.get(want)
         if cmd is not None:
             return cmd
-        first, count = self.parts[part]
-        common = [first, self.x, self.elements, self.Dm_inv, self.volume, self.mu, self.lam]
+        common = [self.x, self.elements, self.Dm_inv, self.volume, self.mu, self.lam]
         dev = model.device
         if want == _STRESS:
-            args = dict(inputs=[first, self.x, self.elements, self.Dm_inv, self.mu], outputs=[self.det_F, self.von_mises])
+            args = dict(inputs=[self.x, self.elements, self.Dm_inv, self.mu], outputs=[self.det_F, self.von_mises])
         elif want == _ENERGY:
             args = dict(inputs=common, outputs=[self.energy, self.det_F])
         elif want == _GRADIENT:
@@ -751,23 +713,20 @@ class _Workspace:
         elif want == _HESSIAN:  # scatter straight into CSR values
             if model.pattern.nnz >= 2**31:
                 raise ValueError("Hessian too large for int32 slots")
-            if self.slots is None:
-                self.slots = wp.array(model.pattern.element_slots.astype(np.int32), dtype=wp.int32, device=dev)
-                self.data_np = np.zeros(model.pattern.nnz)
-                self.data = self._wrap(self.data_np, wp.float64, dev)
+            self.slots = wp.array(model.pattern.element_slots.astype(np.int32), dtype=wp.int32, device=dev)
+            self.data_np = np.zeros(model.pattern.nnz)
+            self.data = self._wrap(self.data_np, wp.float64, dev)
             args = dict(inputs=common + [1, 1, self.slots],
-                        outputs=[self.energy, self.det_F, self.grad, self.dummy3, self.part_buffer("data", part),
-                                 self.dummy_data])
+                        outputs=[self.energy, self.det_F, self.grad, self.dummy3, self.data, self.dummy_data])
         else:  # _BLOCKS: keep the per-element blocks
             kk = (model.dim + 1) * model.dim
-            if self.hess is None:
-                self.hess = wp.zeros((model.n_elements, kk, kk), dtype=wp.float64, device=dev)
+            self.hess = wp.zeros((model.n_elements, kk, kk), dtype=wp.float64, device=dev)
             args = dict(inputs=common + [1, 0, self.dummy_slots],
                         outputs=[self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data])
         kernel = _KERNELS[want]
         with RECORD_LOCK:  # the first launch loads the module: one thread at a time
-            cmd = wp.launch(kernel, dim=count, device=dev, record_cmd=True, **args)
-        self.commands[(want, part)] = cmd
+            cmd = wp.launch(kernel, dim=model.n_elements, device=dev, record_cmd=True, **args)
+        self.commands[want] = cmd
         return cmd
 
 
@@ -779,41 +738,30 @@ def _workspace(model: FemModel) -> _Workspace:
 
 
 def _launch(model: FemModel, x, want: int, project: int = 1) -> _Workspace:
-    """The kernel launch over all elements (or two halves on two threads, see ``_Workspace.parts``)
-    computing what ``want`` asks for."""
-    from simfab._parallel import submit
-
+    """One kernel launch over all elements computing what ``want`` asks for."""
     x = model.check_positions(x)
     ws = _workspace(model)
     ws.set_positions(x)
-    cmds = ws.commands_for(model, want)
-    for part, cmd in enumerate(cmds):
-        if want in (_HESSIAN, _BLOCKS):
-            ws.bind(cmd, "project", int(project))
-        if want == _HESSIAN:
-            _zero(ws, "data", part)
-            if project == _BOTH:
-                if ws.data2 is None:
-                    ws.data2_np = np.zeros(model.pattern.nnz)
-                    ws.data2 = ws._wrap(ws.data2_np, wp.float64, model.device)
-                _zero(ws, "data2", part)
-                ws.bind(cmd, "data2", ws.part_buffer("data2", part))
-            else:
-                ws.bind(cmd, "data2", ws.dummy_data)
-    other = [submit(c.launch) for c in cmds[1:]]
-    cmds[0].launch()
-    for o in other:
-        o.result()
+    cmd = ws.command(model, want)
+    if want in (_HESSIAN, _BLOCKS):
+        ws.bind(cmd, "project", int(project))
+    if want == _HESSIAN:
+        _zero(ws, "data")
+        if project == _BOTH:
+            if ws.data2 is None:
+                ws.data2_np = np.zeros(model.pattern.nnz)
+                ws.data2 = ws._wrap(ws.data2_np, wp.float64, model.device)
+            _zero(ws, "data2")
+            ws.bind(cmd, "data2", ws.data2)
+        else:
+            ws.bind(cmd, "data2", ws.dummy_data)
+    cmd.launch()
     return ws
 
 
-def _zero(ws: _Workspace, name: str, part: int = 0) -> None:
-    """Zero the persistent CSR values buffer ``name`` ("data" or "data2") of launch part ``part``
-    before a launch adds into it."""
-    if part:
-        ws.part_buffer(name, part)
-        ws.parts_data[(name, part)][1].fill(0.0)
-    elif ws.cpu:
+def _zero(ws: _Workspace, name: str) -> None:
+    """Zero the persistent CSR values buffer ``name`` ("data" or "data2") before a launch adds into it."""
+    if ws.cpu:
         getattr(ws, name + "_np").fill(0.0)
     else:
         getattr(ws, name).zero_()

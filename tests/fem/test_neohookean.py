@@ -275,31 +275,3 @@ def test_returned_hessians_are_independent_of_later_launches():
     # and a fresh launch at x1 reproduces it bit for bit (the buffers are zeroed before each launch)
     E1b, g1b, H1b = nh.energy_gradient_hessian(model, x1, project_psd=False)
     assert E1b == E1 and np.array_equal(g1b, g1) and np.array_equal(H1b.toarray(), keep[2])
-
-
-def test_two_thread_launch_of_a_large_mesh_equals_the_whole_launch(monkeypatch):
-    """A mesh of >= SPLIT_ELEMENTS tets runs in two halves on two threads (the second adding its
-    Hessian into its own buffers): energy, gradient, both Hessians, element blocks and stresses
-    equal the one-launch values (the Hessians to summation round-off)."""
-    from _fem_meshes import box_tet
-
-    from simfab.fem.materials import material_by_name
-    from simfab.fem.model import make_model
-
-    P, T = box_tet(0.03, 0.01, 0.01, 6, 2, 2)  # 144 tets
-    rng = np.random.default_rng(6)
-    x = P + 1e-4 * rng.standard_normal(P.shape)
-    out = {}
-    for split in (10**9, 64):
-        monkeypatch.setattr(nh, "SPLIT_ELEMENTS", split)
-        m = make_model(P, T, material_by_name("PLA"))  # a fresh model: its launches use this threshold
-        assert len(nh._workspace(m).parts) == (1 if split > m.n_elements else 2)
-        E, g, He, Hp = nh.energy_gradient_hessians(m, x)
-        H1 = nh.energy_gradient_hessian(m, x)[2]  # the single-buffer route after the double one
-        out[split] = (E, g, He.toarray(), Hp.toarray(), H1.toarray(), nh.det_and_von_mises(m, x)[1],
-                      nh.element_hessians(m, x), nh.energy(m, x))
-    a, b = out[10**9], out[64]
-    assert a[0] == b[0] and a[7] == b[7] and np.array_equal(a[1], b[1])
-    assert np.array_equal(a[5], b[5]) and np.array_equal(a[6], b[6])
-    for A, B in zip(a[2:5], b[2:5]):
-        assert np.abs(A - B).max() <= 1e-13 * np.abs(A).max()
