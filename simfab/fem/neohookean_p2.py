@@ -38,8 +38,9 @@ largest von Mises stress over them (conservative for inversion and yield checks)
 
 Kernels run in float64, one launch per call for all elements (one thread per element, quadrature
 loop inside; on the CPU a mesh of SPLIT_ELEMENTS or more runs as two launches of half the elements
-on two threads: the clip3d part at the original's size, 1,083 10-node tets, 23 -> 16 ms per exact
-Hessian at load 4.5, where a second core is only partly free); the Hessian launch adds straight into the CSR ``data`` of ``model.pattern`` through
+on two threads: the clip3d part at the original's size, 1,083 10-node tets, 17.8 -> 12.5 ms per
+exact Hessian with assembly at load 1.5 (23 -> 16 ms at load 4.5); the same split of the linear
+kernels gained nothing on clip3d's 28,836 tets and was removed); the Hessian launch adds straight into the CSR ``data`` of ``model.pattern`` through
 precomputed slots, like the linear kernel. Each quadrature point's blocks come from the closed form
 above (mu, cofactor and cross-product terms plus the twist correction) rather than by contracting
 the 9 x 9 d2Psi/dF2 (that was 4x slower); the SVD route contracts it (rare: strong expansion).
