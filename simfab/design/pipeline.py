@@ -46,6 +46,8 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     cm = ds.cm
     if revolve is not None and cm.dim != 2:
         raise InputError("only a 2D section can be revolved", where="--revolve-axis")
+    if revolve is not None and len(revolve) > 2 and revolve[2] and not ds.kept_regions:
+        raise InputError("replicating arms needs the base marked by a keep site ([design] keep)", where="--revolve-arms")
     log(f"couple optimize: {cm.name}: {cm.fem.n_elements} elements, {len(cm.s_steps) - 1} steps, "
         f"{ds.brief.handles} handles ({ds.brief.placement}), up to {ds.brief.iterations} iterations", quiet=quiet)
     initial = simulate(cm) if ds.brief.placement == "displacement" else None

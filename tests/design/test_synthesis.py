@@ -83,3 +83,13 @@ def test_block_section_becomes_a_3d_scene_with_its_object_path_and_support(tmp_p
     assert r.max() > 0.009 and np.histogram(ang, bins=8, range=(-np.pi, np.pi))[0].min() > 0  # all around the axis
     # the object, its path and the material are the 2D scene's
     assert np.allclose(cm3.pose(0.0)[1], cm.pose(0.0)[1]) and cm3.fem.material.name == cm.fem.material.name
+
+
+def test_arms_without_a_keep_site_are_refused_before_optimizing(tmp_path):
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "standside2d", "--revolve-axis", "x",
+                        "--revolve-arms", "4", "--out", str(tmp_path / "o")], capture_output=True, text=True)
+    assert r.returncode == 2 and "--revolve-arms" in r.stderr and "keep" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
