@@ -199,3 +199,20 @@ def test_initial_insertion_run_for_the_placement_is_scored_not_run_again(scene):
                for k in fresh.figures if k != "category")
     other = simulate(load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": STEPS}}))
     assert make_problem(scene, brief, initial=other).initial is None  # not this problem's model
+
+
+def test_target_matching_starts_from_the_initial_shapes_mesh_correction(tmp_path):
+    """Matching a force profile, the coarse mesh's bias on the whole profile is measured on the
+    initial shape before the first iteration and the run starts corrected by it (a coarse linear
+    mesh is too stiff: factor < 1); without the mesh check nothing is corrected."""
+    import subprocess, sys
+
+    base = [sys.executable, "-m", "simfab", "couple", "optimize", "profile2d", "--iterations", "3", "--steps", "8",
+            "--handles", "2", "--placement", "spatial", "--workers", "1", "--correction-rounds", "0", "--json"]
+    r = subprocess.run(base + ["--check-refinements", "0", "--out", str(tmp_path / "a")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert 0.3 < s["corrections"]["force_profile"] < 0.95 and s["correction_rounds"] == []
+    r = subprocess.run(base + ["--no-mesh-check", "--out", str(tmp_path / "b")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["corrections"] == {}
