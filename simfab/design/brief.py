@@ -132,10 +132,10 @@ class DesignBrief:
             raise InputError(f"must be a length in (0, 1) m, got {self.stress_radius!r}", where=f"{where} stress_radius")
         for k in ("handles", "iterations", "patience", "correction_rounds", "check_refinements"):
             v = getattr(self, k)
-            if not isinstance(v, int) or isinstance(v, bool) or v < (0 if k in ("iterations", "correction_rounds",
-                                                                               "check_refinements") else 1):
-                raise InputError(f"must be a {'non-negative' if k == 'iterations' else 'positive'} integer, "
-                                 f"got {v!r}", where=f"{where} {k}")
+            zero_ok = k in ("iterations", "correction_rounds", "check_refinements")
+            if not isinstance(v, int) or isinstance(v, bool) or v < (0 if zero_ok else 1):
+                raise InputError(f"must be a {'non-negative' if zero_ok else 'positive'} integer, got {v!r}",
+                                 where=f"{where} {k}")
         if self.check_refinements > 3:
             raise InputError(f"must be at most 3 (each refinement multiplies the check's elements by 4 in 2D, "
                              f"8 in 3D), got {self.check_refinements}", where=f"{where} check_refinements")

@@ -194,6 +194,8 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
         converging = bool(len(v) < 3 or d[-1] < d[-2] or d[-1] <= 1e-9 * max(np.abs(v).max(), 1e-300))
         # f = f_inf + b h^p through three levels of one order (the linear-only check of before)
         f_inf, p = extrapolate(N, v[seq], cm.dim) if len(seq) >= 3 and converging else (None, float("nan"))
+        if k == "rms_error" and f_inf is not None and f_inf < 0:  # an error cannot extrapolate below 0
+            f_inf, p = None, float("nan")
         ref = float(v[-1]) if f_inf is None else f_inf
         # the reference's own discretization error, as far as the levels show it: the relative change
         # between the last two levels of the reference order (None with one level of it)
