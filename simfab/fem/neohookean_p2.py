@@ -63,6 +63,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from simfab._parallel import submit
 from simfab._warp import RECORD_LOCK, wp
 from simfab.fem.neohookean import (_HALF_SQRT2, _clamp, _dim, _negative_part_sym3, _pk1, _polar_rotation3, _psi,
                                    _store)
@@ -610,8 +611,6 @@ def _workspace(model: P2Model) -> _Workspace:
 def _launch(model: P2Model, x, kind: str, mode: int = 0) -> _Workspace:
     """The kernel launches over all elements (one, or two halves on two threads) computing what
     ``kind`` asks for, at positions x."""
-    from simfab._parallel import submit
-
     if not isinstance(model, P2Model):
         raise TypeError(f"expected a P2Model, got {type(model).__name__} (linear models: simfab.fem.neohookean)")
     ws = _workspace(model)
