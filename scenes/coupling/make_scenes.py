@@ -14,7 +14,7 @@ Scenes
 - cclamp2d      2D C-clamp snapped onto a cylinder, inner radius < R: tight grip (~4,800 tri, 35 steps)
 - clip2d_loose  same clamp with inner radius > R: holds it loosely (zero steady-state energy)
 - clip2d_eject  an arc that does not wrap past the cylinder's equator: pushes it out (no dip)
-- clip3d        the C-clamp extruded to a 3D clip on a cylinder (~28,800 tets: 4,800 triangles in 2 layers, 35 steps)
+- clip3d        the C-clamp extruded to a 3D clip on a cylinder (4,692 10-node tets: 782 triangles in 2 layers, 35 steps)
 - claw3d        four-finger claw (two crossed clamps) on a sphere (~12,000 tets, O with 10,000
                 samples, 25 steps)
 - knocker3d     door-knocker ring: pushed horizontally into a clip, then rotated 90 degrees about
@@ -169,16 +169,20 @@ def main() -> None:
     ro = CLAMP_TIGHT["inner_radius"] + CLAMP_TIGHT["width"]
     xb = -ro - CLAMP_TIGHT["base_depth"]
     x0 = x_start(CLAMP_TIGHT)
-    scene("clip3d", doc="3D clip (extruded C-clamp, PLA) snapped onto a cylinder along -x.", dim=3,
-          # 4,800 triangles (as cclamp2d) in 2 layers: within 5% of the mesh-converged figures
-          comp=dict(generator="extruded_clamp", target_elements=28800, layers=2, height=h3, **CLAMP_TIGHT),
+    scene("clip3d", doc="3D clip (extruded C-clamp, PLA) snapped onto a cylinder along -x.\n"
+          "Quadratic (10-node) tets on a 782-triangle section in 2 layers (4,692 tets): within 0.6% of the\n"
+          "same part refined to 4 layers and 1,000-1,800 triangles, where linear tets at 28,800 were 11%\n"
+          "too stiff (see README.md, \"Mesh resolution\").", dim=3,
+          # P2 on the section its outline allows (782 triangles) in 2 layers: within 1% of the
+          # mesh-converged figures (F_grip 2%); linear tets needed 28,800 for 11%
+          comp=dict(generator="extruded_clamp", target_elements=2700, layers=2, height=h3, **CLAMP_TIGHT),
           part_mesh=G.extruded_clamp(height=h3, **CLAMP_TIGHT),
           object_geoms=[dict(type="cylinder", size=[R_CYL, 0.008])],
           keys=[([x0, 0, 0], [1, 0, 0, 0]), ([X_SEATED, 0, 0], [1, 0, 0, 0])],
           fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.01],
-          # held along the cylinder's axis z too: a frictionless cylinder does not resist sliding
-          # along it, so the clip's position along z would be undetermined (it drifted by mm)
-          obj=dict(body="object", samples=1154), sim=dict(steps=35))
+          # held along x only (the original's support): the clip's free slide along the
+          # frictionless cylinder's axis z is pinned by the solver (simfab.coupling.rigid)
+          obj=dict(body="object", samples=1154), sim=dict(steps=35, element_order=2))
 
     # larger 3D model: four-finger claw on a sphere
     hc = 0.006
@@ -190,8 +194,8 @@ def main() -> None:
           object_geoms=[dict(type="mesh", mesh="sphere")],
           keys=[([x0, 0, 0], [1, 0, 0, 0]), ([X_SEATED, 0, 0], [1, 0, 0, 0])],
           fixed_center=[xb, 0, 0], fixed_half=[0.0006, 0.011, 0.011],
-          # held in all axes: a frictionless sphere does not resist the claw turning about the
-          # insertion axis through its centre, which the x-support alone leaves free
+          # held along x only: the claw's free turn on the frictionless sphere about the
+          # insertion axis is pinned by the solver (simfab.coupling.rigid)
           obj=dict(body="object", samples=10000), sim=dict(steps=25))
 
     # door knocker: ring bar along z pushed into a clip along -x, then rotated 90 deg about z

@@ -3,7 +3,10 @@ of the compliant part, their extrapolated (mesh-converged) values and the error 
 own resolution.
 
 The scene is run at ``target_elements`` times each refinement factor (the generator meshes the
-part again). A 3D scene that ships its part's mesh (``mesh_file``, fTetWild output stored because
+part again). An extruded part (``extruded_clamp``) is refined in its section and through its height
+alike: ``layers`` times factor^(1/3) (rounded, at least 1), the rest of the factor in the section
+(refining the section alone left the error through the height, 2.6% of E_max on clip3d's linear
+tets, out of the study). A 3D scene that ships its part's mesh (``mesh_file``, fTetWild output stored because
 fTetWild is not reproducible) keeps that mesh at factor 1 (the error of what users run) and is
 meshed again from its generator at the other factors; a part with no generator (a ready mesh
 only) cannot be refined and raises InputError. With
@@ -53,6 +56,8 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     for f in factors:
         ov = {k: dict(v) for k, v in (overrides or {}).items()}
         ov.setdefault("compliant", {})["target_elements"] = int(round(base * f))
+        if comp.get("generator") == "extruded_clamp":
+            ov["compliant"]["layers"] = max(1, int(round(int(comp.get("layers", 1)) * f ** (1.0 / 3.0))))
         if "mesh_file" in comp and f != 1.0:
             ov["compliant"]["mesh_file"] = None  # mesh again from the generator
         cm = load_coupling_scene(scene, overrides=ov)
@@ -121,12 +126,10 @@ def report(scene: str, levels: list, dim: int) -> dict:
 
 
 def _is_2d(scene) -> bool:
-    """The refinement is two-dimensional: a 2D scene, or an extruded 3D part (its layers stay, the
-    element count grows with the refinement of its 2D section: h ~ N^(-1/2))."""
+    """The refinement is two-dimensional (h ~ N^(-1/2)): a 2D scene."""
     from simfab.coupling.scene import read_toml, scene_paths
 
-    cfg = read_toml(scene_paths(scene)[1])
-    return cfg.get("dim", 2) == 2 or cfg.get("compliant", {}).get("generator") == "extruded_clamp"
+    return read_toml(scene_paths(scene)[1]).get("dim", 2) == 2
 
 
 def format_table(rep: dict) -> str:

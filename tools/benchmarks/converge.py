@@ -1,8 +1,8 @@
 """Mesh-convergence study of the bundled coupling scenes (the figures at 4-5 refinements, their
 extrapolated values and the error of each scene's default mesh; see simfab.coupling.converge).
 Default: the three 2D scenes; 3D ones by name, e.g. ``--scenes clip3d --factors 0.25,0.5,1,2``
-(an extruded part is refined in its section at fixed layers; a shipped fTetWild mesh is used at
-factor 1 and meshed again from the generator at the others).
+(an extruded part is refined in its section and its layers alike; a shipped fTetWild mesh is used
+at factor 1 and meshed again from the generator at the others).
 
 ``python tools/bench.py converge [--scenes cclamp2d,...] [--factors 0.125,0.25,0.5,1,2]``
 
