@@ -51,15 +51,10 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     if comp.get("target_elements") is None or ("mesh_file" in comp and comp.get("generator") in (None, "mesh")):
         raise InputError("a convergence study needs a scene whose part is meshed from target_elements "
                          "by a generator (not only a ready mesh_file)", where=str(toml))
-    base = int(comp["target_elements"])
     out = []
     for f in factors:
         ov = {k: dict(v) for k, v in (overrides or {}).items()}
-        ov.setdefault("compliant", {})["target_elements"] = int(round(base * f))
-        if comp.get("generator") == "extruded_clamp":
-            ov["compliant"]["layers"] = max(1, int(round(int(comp.get("layers", 1)) * f ** (1.0 / 3.0))))
-        if "mesh_file" in comp and f != 1.0:
-            ov["compliant"]["mesh_file"] = None  # mesh again from the generator
+        ov.setdefault("compliant", {}).update(level_mesh(comp, f))
         cm = load_coupling_scene(scene, overrides=ov)
         t0 = time.perf_counter()
         res = simulate(cm, quiet=quiet)
@@ -67,6 +62,19 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
         prof, d = summarize(res)
         out.append(Level(factor=float(f), elements=int(cm.fem.n_elements), seconds=dt,
                          figures={k: float(d[k]) for k in FIGURES}, category=prof.category))
+    return out
+
+
+def level_mesh(comp: dict, factor: float) -> dict:
+    """The ``[compliant]`` overrides of the level at ``factor`` for a part table ``comp``: the
+    target element count times the factor; an extrusion's layers times factor^(1/3) (rounded, at
+    least 1: uniform refinement, the section takes the rest); a shipped mesh file is meshed again
+    from the generator except at factor 1."""
+    out = {"target_elements": int(round(int(comp["target_elements"]) * factor))}
+    if comp.get("generator") == "extruded_clamp":
+        out["layers"] = max(1, int(round(int(comp.get("layers", 1)) * factor ** (1.0 / 3.0))))
+    if "mesh_file" in comp and factor != 1.0:
+        out["mesh_file"] = None
     return out
 
 

@@ -51,3 +51,18 @@ def test_figures_that_are_zero_report_errors_relative_to_their_peak():
     assert max(abs(e) for e in F["F_rm"]["relative_error"]) < 1e-11
     assert F["F_in"]["relative_of"] == "F_in"
     assert F["F_in"]["relative_error"][0] == pytest.approx(1e5 / 500 / 1.7e4, rel=1e-6)  # exact power law: exact limit
+
+
+def test_an_extrusion_is_refined_through_its_height_with_its_section():
+    # uniform refinement: 8x the elements is 2x the layers and 4x the section's triangles
+    from simfab.coupling.converge import level_mesh
+
+    comp = {"generator": "extruded_clamp", "target_elements": 2700, "layers": 2}
+    assert level_mesh(comp, 8.0) == {"target_elements": 21600, "layers": 4}
+    assert level_mesh(comp, 1.0) == {"target_elements": 2700, "layers": 2}
+    assert level_mesh(comp, 0.125)["layers"] == 1
+    # a shipped mesh is kept at factor 1 only; a generator that is not an extrusion has no layers
+    shipped = {"generator": "cross_claw", "target_elements": 1000, "mesh_file": "part.npz"}
+    assert level_mesh(shipped, 1.0) == {"target_elements": 1000}
+    assert level_mesh(shipped, 2.0) == {"target_elements": 2000, "mesh_file": None}
+
