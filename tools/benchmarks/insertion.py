@@ -7,7 +7,7 @@ Cases (bundled scenes, closest to the sizes of the thesis' timing table):
             (run at the original's size; the bundled scene is meshed finer for accuracy)
   clip3d    (~1080 10-node tets, 35 steps) vs "alligator 3D"  1040 elements, 35 steps
             (run at the original's size: one layer of ~360 triangles; the bundled scene is finer)
-  knocker3d (~5080 tets, 40 steps)       vs "door knocker"    5080 elements, 40 steps
+  knocker3d (4,880 10-node tets, 40 steps) vs "door knocker"  5080 elements, 40 steps
   claw3d    (~12,063 tets, 25 steps)     vs "claw 3D"        12063 elements, 25 steps
 Each row reports the simulation seconds (fastest run; scene loading and meshing excluded, as in
 the original's per-iteration cost; the median and every run's time too), the original's seconds
