@@ -8,7 +8,11 @@ Cases (bundled scenes, closest to the sizes of the thesis' timing table):
   clip3d    (~1080 10-node tets, 35 steps) vs "alligator 3D"  1040 elements, 35 steps
             (run at the original's size: one layer of ~360 triangles; the bundled scene is finer)
   knocker3d (4,880 10-node tets, 40 steps) vs "door knocker"  5080 elements, 40 steps
-  claw3d    (~12,063 tets, 25 steps)     vs "claw 3D"        12063 elements, 25 steps
+  claw3d    (5,130 10-node tets, 25 steps) vs "claw 3D"     12063 elements, 25 steps
+            (the 3D scenes run quadratic tets, as bundled: knocker3d and claw3d on their bundled
+            meshes, within 1-8% of their mesh-converged figures where linear tets were 40-74% too
+            stiff; clip3d at the original's size, one layer, ~3% on E_max and forces, ~11% on
+            the grip: see scenes/coupling/README.md)
 Each row reports the simulation seconds (fastest run; scene loading and meshing excluded, as in
 the original's per-iteration cost; the median and every run's time too), the original's seconds
 (``figures.json``), the speed-up ratio original/ours, Newton iterations and the time split (FEM
