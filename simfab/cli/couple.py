@@ -60,9 +60,9 @@ def add_args(p):
                    help="1: linear elements, 2: quadratic (6-node triangles / 10-node tets, no bending "
                         "locking) on the scene's mesh (overrides the scene's [simulation] element_order)")
     conv = sub.add_parser("converge", help="mesh-convergence study of a coupling scene",
-                          description="Run a scene at refined meshes (element count x each factor) and report "
-                                      "the profile figures, their extrapolated values and the error of the scene's "
-                                      "own mesh.\n\n--json keys: scene, levels (factor, elements, seconds, category), figures (per "
+                          description="Run a scene at refined meshes (element count x each factor; an extruded "
+                                      "part's layers x factor^(1/3)) and report the profile figures, their "
+                                      "extrapolated values and the error of the scene's own mesh.\n\n--json keys: scene, levels (factor, elements, seconds, category), figures (per "
                                       "figure: values, extrapolated, order, relative_error), error_of_default, table.",
                           formatter_class=argparse.RawDescriptionHelpFormatter)
     conv.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
