@@ -205,7 +205,8 @@ def knocker_design() -> None:
     xs = max(KNOCK_r - clamp["inner_radius"], 0.0) + 0.0001
     name = "knocker3d_design"
     scene(name, doc="Door knocker (design): the knocker ring snapped into a stiff clip and rotated about its bar; the\n"
-                    "initial clip needs large forces and yields. Optimize: insertion force <= 20 N, below yield.",
+                    "initial clip needs large forces and yields. Optimize: insertion force <= 20 N, below yield, and\n"
+                    "a snap that holds the ring: >= 2 N to push it in, >= 1 N to pull it out.",
           dim=3, comp=dict(generator="extruded_clamp", target_elements=1500, height=hk, **clamp),
           part_mesh=G.extruded_clamp(height=hk, **clamp), extra_assets=[("ring", ring.vertices, ring.faces)],
           object_geoms=[dict(type="mesh", mesh="ring")],
@@ -213,9 +214,13 @@ def knocker_design() -> None:
           fixed_center=[-ro - clamp["base_depth"], 0, 0], fixed_half=[0.0004, 0.011, 0.0065],
           obj=dict(body="object", samples=2000, rot_length_scale=0.005), sim=dict(steps=40, fix_all_axes=True),
           mesh_options=dict(coarsen=True, tol=0.1, tries=6),
-          # a snap (at least 5 N to push the ring in, so that it does not fall out) of at most 20 N
-          # (150 iterations found no snap within the bounds; 300, the default, and a correction round do)
-          design=dict(grip="loose", insertion_force=[5.0, 20.0], handles=5))
+          # the thesis' brief (at most 20 N to push the ring in, below yield) and a snap that holds
+          # the ring: at least 1 N to pull it out (3x the weight of a 30 g brass ring of this size)
+          # and 2 N to push it in. A 5 N insertion floor conflicts with the yield bound (two runs of
+          # 300 and 600 iterations reached 2.5-2.8 N at 59-60 MPa, P2 8x); without an insertion
+          # floor the annealer settles on a clip that no longer touches the ring (F_in = F_rm = 0:
+          # one flat penalty, lower than a snap's stress penalties on the way)
+          design=dict(grip="loose", insertion_force=[2.0, 20.0], removal_force=[1.0, math.inf], handles=5))
 
 
 def alligator3d() -> None:
