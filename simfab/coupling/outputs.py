@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simfab.coupling.profile import ProfileSummary, analyze
+from simfab.coupling.profile import ProfileSummary, analyze_run
 from simfab.coupling.simulate import InsertionResult
 
 #: Units of the summary keys (also written into the JSON summary).
@@ -27,7 +27,7 @@ CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "path_force_N", "grip_N", "m
 
 def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
     """(profile summary, JSON-ready dict of the key figures)."""
-    prof = analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"))
+    prof = analyze_run(res)
     d = {
         "scene": res.model.name,
         "category": prof.category,

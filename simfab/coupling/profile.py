@@ -20,6 +20,10 @@ Definitions (thesis, "Fundamentals and Overview"):
   sizes; interpolated 23.4 N vs 23.2 N).
 - Forces are read up to the steady state (the insertion ends there; past it O is pushed into its
   seat), over the whole run for **ejects**.
+- A path that ends in a prescribed pose (its last segment turns O, so the run cannot continue it
+  until O comes to rest, e.g. the door knocker's rotation) has its steady state at that end pose:
+  O stays there, so energy stored in the last steps (O pressed into A while turning) is the
+  coupling's steady state, not a push past a seat (``end_pose``).
 - stationary: E_ss is a local minimum of the energy along the path (the energy rises after it, or
   the force there does not draw O in by more than REST_FORCE_REL of the peak force), not just
   the run's last step.
@@ -63,8 +67,10 @@ def steady_state_index(energy: np.ndarray, tol: float) -> int:
     return k
 
 
-def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarray) -> ProfileSummary:
-    """Summarize a profile given per-step insertion distance s [m], energy [J], force [N], grip [N]."""
+def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarray, *,
+            end_pose: bool = False) -> ProfileSummary:
+    """Summarize a profile given per-step insertion distance s [m], energy [J], force [N], grip [N].
+    ``end_pose``: the path ends in a prescribed pose, where the steady state is (module docstring)."""
     E = np.asarray(energy, float)
     F = np.asarray(force, float)
     G = np.asarray(grip, float)
@@ -73,7 +79,7 @@ def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarr
     E_max = float(E.max())
     i_max = int(np.argmax(E))
     tol = C.ENERGY_REL_TOL * max(E_max, 0.0)
-    i_ss = steady_state_index(E, tol)
+    i_ss = E.size - 1 if end_pose else steady_state_index(E, tol)
     if E_max <= 0 or i_ss <= i_max or E[i_ss] >= E_max - tol:
         category, E_ss, i_ss = "ejects", E_max, i_max
     else:
@@ -98,3 +104,11 @@ def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarr
         F_in=float(max(0.0, -Fi.min())), F_rm=float(max(0.0, Fi.max())), F_grip=grip_ss,
         index_max=i_max, index_ss=i_ss, stationary=bool(stationary),
     )
+
+
+def analyze_run(res) -> ProfileSummary:
+    """:func:`analyze` of an :class:`simfab.coupling.simulate.InsertionResult`, its steady state at
+    the end pose when its path ends in a rotation (``model.end_direction`` None)."""
+    return analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"),
+                   end_pose=res.model.end_direction is None)
+

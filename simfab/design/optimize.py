@@ -107,9 +107,9 @@ def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
     stress averaged over ``stress_radius`` [m], :mod:`simfab.design.stress`), seat_clearance [m]
     (gap between part and object at the steady state, <= 0 in contact), and category, E_max, E_ss
     [J], von_mises_peak [Pa] (the largest element stress, mesh-dependent at sharp corners)."""
-    from simfab.coupling.profile import analyze
+    from simfab.coupling.profile import analyze_run
 
-    prof = analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"))
+    prof = analyze_run(res)
     fem = res.model.fem
     E = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
     floor = 0.5 * E * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2

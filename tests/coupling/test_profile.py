@@ -47,3 +47,17 @@ def test_plateau_and_noise_below_tolerance_do_not_create_minima():
     assert steady_state_index(E, 1e-9) == E.size - 1  # flat end: the end itself is the minimum seen
     p = analyze(np.arange(E.size) * 1.0, E, np.zeros_like(E), np.zeros_like(E))
     assert p.category == "ejects"
+
+
+def test_a_path_ending_in_a_prescribed_pose_has_its_steady_state_there():
+    # the door knocker's design: a snap (peak), energy ~0 while the ring turns, then the ring
+    # pressed into the clip in the rotation's last step. Pushed on past a seat (a translation) that
+    # last rise is not part of the coupling; at a prescribed end pose it is where the ring rests.
+    E = np.where(S < 0.007, _bump(S, 0.004, 0.0015), 0.0)
+    E[-1] = 0.7 * E.max()
+    F = -np.gradient(E, S)
+    seat = analyze(S, E, F, np.zeros_like(S))
+    assert seat.category == "loose" and seat.index_ss < S.size - 1
+    end = analyze(S, E, F, np.arange(S.size, dtype=float), end_pose=True)
+    assert end.category == "tight" and end.index_ss == S.size - 1
+    assert end.coupling_ratio == pytest.approx(70.0) and end.F_grip == S.size - 1
