@@ -100,10 +100,8 @@ def unresisted(Q: np.ndarray, c: np.ndarray, y: np.ndarray, normals: np.ndarray,
     """(k, r') the sub-basis of span(Q) that contact at points y (p, dim) with normals (p, dim) and
     stiffness weights (p,) resists by less than UNRESISTED_REL (see :func:`weakest_motion`); all
     of Q without contact."""
-    if Q.shape[1] == 0 or not np.any(weights > 0):
-        return Q
-    lam, V = _generalized(Q, c, y, normals, weights)
-    return Q @ V[:, lam < UNRESISTED_REL]
+    modes = contact_modes(Q, c, y, normals, weights)
+    return Q if modes is None else modes[1][:, modes[0] < UNRESISTED_REL]
 
 
 def motion_basis(cm) -> tuple[np.ndarray, np.ndarray]:
@@ -156,10 +154,18 @@ def weakest_motion(Q: np.ndarray, c: np.ndarray, y: np.ndarray, normals: np.ndar
     contact stiffness (e.g. kappa b''(d)). ratio = sum w (n . u)^2 / sum w |u|^2 over the points
     for the minimizing motion (0: unresisted); None when there is no contact or no free motion.
     """
+    modes = contact_modes(Q, c, y, normals, weights)
+    return None if modes is None else (float(max(modes[0][0], 0.0)), modes[1][:, 0])
+
+
+def contact_modes(Q: np.ndarray, c: np.ndarray, y: np.ndarray, normals: np.ndarray, weights: np.ndarray):
+    """(ratios (r,) ascending, motions (k, r)): the rigid motions in span(Q) ordered by how much
+    the contact resists them (ratio as in :func:`weakest_motion`), or None when there is no contact
+    or no free motion (:func:`unresisted` and :func:`weakest_motion` read one computation)."""
     if Q.shape[1] == 0 or not np.any(weights > 0):
         return None
     lam, V = _generalized(Q, c, y, normals, weights)
-    return float(max(lam[0], 0.0)), Q @ V[:, 0]
+    return lam, Q @ V
 
 
 def _generalized(Q, c, y, normals, weights):

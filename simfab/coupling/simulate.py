@@ -108,7 +108,7 @@ from simfab.coupling.model import CouplingModel, default_insertion_length, make_
 from simfab.coupling.objective import _StepObjective, _adapt_kappa, _final_eval, _newton, _objective, _point_dhat  # noqa: F401
 from simfab.coupling.points import vertex_points
 from simfab.coupling.refine import _add_refinement, _crossing_facets, _facet_check
-from simfab.coupling.rigid_check import _unresisted_basis, _weakest_rigid_motion
+from simfab.coupling.rigid_check import _rigid_contact
 from simfab.coupling.state import _State, _accept, _state_final
 from simfab.coupling.timing import _Timer
 from simfab.errors import ConvergenceError, InputError
@@ -208,6 +208,7 @@ def _simulate(cm: CouplingModel, *, quiet: bool, callback, refined) -> Insertion
     free_motions = rigid.motion_basis(cm)
     state.pin_basis = free_motions[0]  # nothing touches A yet: every free rigid motion is pinned
     weakest = [None]  # (ratio, motion, s, contact radius) of the least resisted rigid motion of A
+    weak_of = {}  # id(record) -> the least resisted rigid motion at its state (see _rigid_contact)
 
     def step_to(s, tolerate=False):
         """Solve the step from the current state to path length s; (record, undo token). With
@@ -216,7 +217,7 @@ def _simulate(cm: CouplingModel, *, quiet: bool, callback, refined) -> Insertion
         try:
             iters = _advance(cm, state, s, ctx, depth=0) if steps else _solve_at(cm, state, s, ctx)
             with phases.timed("rigid_check"):
-                basis = _unresisted_basis(cm, state, free_motions)
+                basis, weak = _rigid_contact(cm, state, free_motions)
             if basis.shape[1] < state.pin_basis.shape[1] and _pin_force(cm, state, saved.x) > C.PIN_FORCE_TOL:
                 # contact now resists a motion this step held pinned, and the pin held it with a
                 # force (not merely in balance): solve the step again without it
@@ -224,10 +225,12 @@ def _simulate(cm: CouplingModel, *, quiet: bool, callback, refined) -> Insertion
                 iters += _advance(cm, state, s, ctx, depth=0) if steps else _solve_at(cm, state, s, ctx)
                 state.prev, state.prev2 = prev
                 with phases.timed("rigid_check"):
-                    basis = _unresisted_basis(cm, state, free_motions)
+                    basis, weak = _rigid_contact(cm, state, free_motions)
             state.pin_basis = basis
             with phases.timed("record"):
-                return _record(cm, state, iters, ctx), saved
+                rec = _record(cm, state, iters, ctx)
+            weak_of[id(rec)] = weak
+            return rec, saved
         except ConvergenceError:
             if not tolerate:
                 raise
@@ -239,8 +242,7 @@ def _simulate(cm: CouplingModel, *, quiet: bool, callback, refined) -> Insertion
 
     def keep(rec):
         steps.append(rec)
-        with phases.timed("rigid_check"):
-            w = _weakest_rigid_motion(cm, state, free_motions)
+        w = weak_of.get(id(rec))
         if w is not None and (weakest[0] is None or w[0] < weakest[0][0]):
             weakest[0] = w
         if callback is not None:

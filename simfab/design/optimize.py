@@ -495,15 +495,16 @@ class DesignResult:
 
 
 def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
-             callback=None, workers: int = 1, start=None) -> DesignResult:
+             callback=None, workers=1, start=None) -> DesignResult:
     """Run simulated annealing on ``problem`` (see the module docstring) with random ``seed``;
     ``iterations`` defaults to the brief's. ``workers`` > 1 evaluates that many proposals at once
-    (:mod:`simfab.design.parallel`; needs ``problem.source``): the same result, sooner. ``start``:
+    (:mod:`simfab.design.parallel`; needs ``problem.source``): the same result, sooner; running
+    :class:`simfab.design.parallel.Workers` (started early by the caller) may be passed instead. ``start``:
     the design vector to start from (default: the unmodified shape; the initial evaluation is
     always of that shape, a start's is the annealer's first). Raises
     ConvergenceError if the initial shape itself cannot be simulated (there is nothing to start
     from)."""
-    from simfab.design.parallel import EvaluationPool
+    from simfab.design.parallel import EvaluationPool, Workers
     from simfab.progress import progress
 
     t0 = time.perf_counter()
@@ -558,11 +559,12 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     blocks = np.repeat(np.arange(problem.handles.n_active), 2 * problem.handles.dim)  # one block per handle
     opts = AnnealOptions(iterations=K, sigma0=problem.sigma0, lower=problem.lower, upper=problem.upper, blocks=blocks,
                          seed=seed)
-    workers = max(1, min(int(workers), K))
+    procs = workers if isinstance(workers, Workers) else None
+    workers = max(1, min(procs.n if procs is not None else int(workers), K))
     x0 = problem.handles.identity() if start is None else np.asarray(start, float)
     with contextlib.ExitStack() as stack:
         # workers start first: they rebuild the problem while this process evaluates the initial shape
-        pool = stack.enter_context(EvaluationPool(problem, workers)) if workers > 1 else None
+        pool = stack.enter_context(EvaluationPool(problem, procs or workers)) if workers > 1 else None
         # the unmodified shape's insertion gives the facets every candidate's run starts refined
         # with (problem.refined; the pool sends them with each candidate)
         initial = initial_evaluation(problem)

@@ -60,50 +60,96 @@ def rebuild(source: ProblemSource):
     return dataclasses.replace(p, corrections=dict(source.corrections), refined=tuple(source.refined))
 
 
-_WORKER_PROBLEM = None
+_WORKER = None  # (source without its refined facets, the DesignProblem it rebuilds to) in a worker
 _CANCEL = None  # shared flags: _CANCEL[ticket % CANCEL_SLOTS] set when submission `ticket` is not needed
 CANCEL_SLOTS = 1024  # more than the submissions ever in flight (the annealer bounds them)
 
 
-def _init_worker(source: ProblemSource, cancel) -> None:
-    global _WORKER_PROBLEM, _CANCEL
-    _WORKER_PROBLEM = rebuild(source)
+def _init_worker(cancel) -> None:
+    """A worker's start: the modules an evaluation needs (Python, NumPy/SciPy, Warp, simfab's
+    coupling and design: most of a worker's ~2 s start-up), before any problem is known."""
+    global _CANCEL
     _CANCEL = cancel
+    import simfab.coupling.simulate  # noqa: F401
+    import simfab.design.optimize  # noqa: F401
+    from simfab._warp import device
+
+    device("cpu")
 
 
-def _ready() -> bool:
-    return _WORKER_PROBLEM is not None
+def _problem(source: ProblemSource):
+    """This worker's problem for ``source``, rebuilt when the source (facets aside) changed; the
+    facets a candidate's run starts refined with are set without a rebuild (optimize() sets them
+    after the initial insertion)."""
+    global _WORKER
+    key = dataclasses.replace(source, refined=())
+    if _WORKER is None or _WORKER[0] != key:
+        _WORKER = (key, rebuild(key))
+    if tuple(source.refined) != _WORKER[1].refined:
+        _WORKER = (key, dataclasses.replace(_WORKER[1], refined=tuple(source.refined)))
+    return _WORKER[1]
 
 
-def _evaluate_remote(h: np.ndarray, threshold: float, refined: tuple, ticket: int):
-    global _WORKER_PROBLEM
+def _ready(source: ProblemSource | None = None) -> bool:
+    if source is not None:
+        _problem(source)
+    return True
+
+
+def _evaluate_remote(source: ProblemSource, h: np.ndarray, threshold: float, ticket: int):
     from simfab.design.optimize import evaluate
 
-    if refined != _WORKER_PROBLEM.refined:  # set by optimize() after the initial insertion
-        _WORKER_PROBLEM = dataclasses.replace(_WORKER_PROBLEM, refined=refined)
     # without its InsertionResult (not sent back); aborted once the annealer cancels it
     slot = ticket % CANCEL_SLOTS
-    return evaluate(_WORKER_PROBLEM, h, threshold=threshold, abort=lambda: _CANCEL[slot] != 0)
+    return evaluate(_problem(source), h, threshold=threshold, abort=lambda: _CANCEL[slot] != 0)
+
+
+class Workers:
+    """``n`` worker processes for :class:`EvaluationPool`, started before the problem they will
+    evaluate is known: their start-up (spawned Python, NumPy/SciPy, Warp, simfab; ~2 s) then
+    overlaps the caller's own work (the initial insertion, the handle placement) instead of
+    delaying the annealing's first simulations. Each builds a problem on its first task for it and
+    keeps it while the tasks' :class:`ProblemSource` stays the same, so one set of workers serves
+    several optimizations (e.g. ``couple optimize``'s correction rounds). A context manager (shuts
+    the processes down)."""
+
+    def __init__(self, n: int):
+        self.n = int(n)
+        ctx = multiprocessing.get_context("spawn")  # Warp's runtime is not fork-safe
+        self.cancel = ctx.Array("b", CANCEL_SLOTS, lock=False)  # written here only; workers read it
+        self.tickets = 0
+        self.executor = ProcessPoolExecutor(max_workers=self.n, mp_context=ctx, initializer=_init_worker,
+                                            initargs=(self.cancel,))
+        for _ in range(self.n):  # start the processes now
+            self.executor.submit(_ready)
+
+    def close(self) -> None:
+        self.executor.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
 
 
 class EvaluationPool:
     """The annealer's speculative evaluator (:func:`simfab.design.anneal.anneal`, ``evaluator``):
     ``screen`` runs the cheap checks here (shape validity, E_L against the threshold), ``submit``
-    sends a candidate's insertion simulation to one of ``workers`` worker processes (``slots``).
-    A context manager (shuts the workers down)."""
+    sends a candidate's insertion simulation to one of the worker processes (``slots``).
+    ``workers``: a number of processes to start (and shut down on exit), or running
+    :class:`Workers` (left running). A context manager."""
 
-    def __init__(self, problem, workers: int):
+    def __init__(self, problem, workers):
         if problem.source is None:
             raise ValueError("parallel evaluation needs a problem built from a scene file (problem.source)")
-        self.problem, self.slots = problem, int(workers)
-        ctx = multiprocessing.get_context("spawn")
-        self._cancel = ctx.Array("b", CANCEL_SLOTS, lock=False)  # written here only; workers read it
-        self._tickets = 0
-        self._ex = ProcessPoolExecutor(max_workers=self.slots, mp_context=ctx, initializer=_init_worker,
-                                       initargs=(problem.source, self._cancel))
-        # start the workers now (they rebuild the problem while this process evaluates the start)
+        self.problem = problem
+        self._own = not isinstance(workers, Workers)
+        self.workers = Workers(workers) if self._own else workers
+        self.slots = self.workers.n
+        # the workers build the problem while this process evaluates the start
         for _ in range(self.slots):
-            self._ex.submit(_ready)
+            self.workers.executor.submit(_ready, problem.source)
 
     def screen(self, h, threshold):
         from simfab.design.optimize import screen
@@ -112,10 +158,11 @@ class EvaluationPool:
         return (ev.objective, ev) if ev.reason else None
 
     def submit(self, h, threshold):
-        t, self._tickets = self._tickets, self._tickets + 1
-        self._cancel[t % CANCEL_SLOTS] = 0
-        return _Pending(self._ex.submit(_evaluate_remote, h, threshold, self.problem.refined, t), self._cancel,
-                        t % CANCEL_SLOTS)
+        w = self.workers
+        t, w.tickets = w.tickets, w.tickets + 1
+        w.cancel[t % CANCEL_SLOTS] = 0
+        src = dataclasses.replace(self.problem.source, refined=tuple(self.problem.refined))
+        return _Pending(w.executor.submit(_evaluate_remote, src, h, threshold, t), w.cancel, t % CANCEL_SLOTS)
 
     def restrict(self, out, threshold):
         """An evaluation run with a looser threshold, as if run with ``threshold``."""
@@ -125,7 +172,8 @@ class EvaluationPool:
         return ev.objective, ev
 
     def close(self) -> None:
-        self._ex.shutdown(wait=True, cancel_futures=True)
+        if self._own:
+            self.workers.close()
 
     def __enter__(self):
         return self

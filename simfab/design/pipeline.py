@@ -32,10 +32,10 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
         the mesh-converged ones, warning when a constraint holds only on the coarse mesh
     """
-    from simfab.coupling.simulate import simulate
+    import contextlib
+
     from simfab.design import outputs
-    from simfab.design.optimize import make_problem, optimize
-    from simfab.design.parallel import ProblemSource
+    from simfab.design.parallel import Workers
     from simfab.design.scene import load_design_scene
     from simfab.io.atomic import write_json
     from simfab.io.outpaths import make_out_dir
@@ -50,6 +50,34 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         raise InputError("replicating arms needs the base marked by a keep site ([design] keep)", where="--revolve-arms")
     log(f"couple optimize: {cm.name}: {cm.fem.n_elements} elements, {len(cm.s_steps) - 1} steps, "
         f"{ds.brief.handles} handles ({ds.brief.placement}), up to {ds.brief.iterations} iterations", quiet=quiet)
+    with contextlib.ExitStack() as stack:
+        # the worker processes start now: their start-up overlaps the initial insertion and the
+        # handle placement, and they serve the correction rounds too
+        procs = stack.enter_context(Workers(workers)) if workers > 1 and restarts <= 1 else 1
+        res, extra = _anneal_checked(ds, design, simulation, device, seed, restarts, scheduler, procs, mesh_check,
+                                     quiet)
+    summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
+    if revolve is not None:
+        rev = write_revolved(res, out, cm.name, *revolve, scene=ds, optimized=summary["outputs"], quiet=quiet)
+        summary["outputs"].update({k: str(v) for k, v in rev.pop("outputs").items()})
+        if rev:
+            summary["revolved"] = rev
+            summary["warnings"] += rev["warnings"]
+        write_json(summary["outputs"]["summary_json"], summary)  # with the revolved part's entries
+    for w in summary["warnings"]:
+        log(f"simfab: warning: {w}")
+    return summary
+
+
+def _anneal_checked(ds, design, simulation, device, seed, restarts, scheduler, workers, mesh_check, quiet):
+    """Place the handles, anneal (``restarts`` runs, or one on ``workers``: a count or running
+    :class:`simfab.design.parallel.Workers`), check the design on refined meshes and correct;
+    returns (DesignResult, summary extras)."""
+    from simfab.coupling.simulate import simulate
+    from simfab.design.optimize import make_problem, optimize
+    from simfab.design.parallel import ProblemSource
+
+    cm = ds.cm
     initial = simulate(cm) if ds.brief.placement == "displacement" else None
     source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}), device=device)
     problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed,
@@ -78,20 +106,10 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         res, extra["mesh_check"], extra["correction_rounds"] = mesh_corrected(res, seed, workers, quiet)
         extra["iterations_total"] = first + sum(r["iterations"] for r in extra["correction_rounds"])
         extra["objective_fine"] = checked_objective(res.problem, res.best, extra["mesh_check"])
-    summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
-    if revolve is not None:
-        rev = write_revolved(res, out, cm.name, *revolve, scene=ds, optimized=summary["outputs"], quiet=quiet)
-        summary["outputs"].update({k: str(v) for k, v in rev.pop("outputs").items()})
-        if rev:
-            summary["revolved"] = rev
-            summary["warnings"] += rev["warnings"]
-        write_json(summary["outputs"]["summary_json"], summary)  # with the revolved part's entries
-    for w in summary["warnings"]:
-        log(f"simfab: warning: {w}")
-    return summary
+    return res, extra
 
 
-def mesh_corrected(res, seed: int, workers: int, quiet: bool):
+def mesh_corrected(res, seed: int, workers, quiet: bool):
     """Mesh check of the optimized shape (:mod:`simfab.design.verify`); while the mesh-converged
     figures miss the brief, or a target profile is matched only on the coarse mesh
     (:func:`simfab.design.verify.needs_correction`; at most ``[design] correction_rounds``

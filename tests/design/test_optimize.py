@@ -157,6 +157,32 @@ def test_parallel_workers_make_the_same_decisions_as_one_process():
     assert sum(r["accepted"] for r in one.history[1:]) >= 1  # the run did move
 
 
+def test_workers_started_early_serve_several_problems():
+    """Worker processes started before the problem is known (simfab.design.parallel.Workers, as
+    `couple optimize` starts them) build each problem on its first task and rebuild when the
+    source changes (a correction round's factors): every decision is still the serial one."""
+    import dataclasses
+
+    from simfab.design.parallel import ProblemSource, Workers
+    from simfab.design.scene import load_design_scene
+
+    design, simulation = {"handles": 3, "placement": "spatial"}, {"steps": 8}
+    with Workers(2) as w:
+        ds = load_design_scene("block2d_tight", design=design, simulation=simulation)
+        src = ProblemSource(scene=str(ds.xml), design=design, simulation=simulation)
+        P = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, source=src)
+        corr = {"von_mises": 0.5, "insertion_force": 0.5}
+        Pc = dataclasses.replace(P, corrections=corr, source=dataclasses.replace(P.source, corrections=corr))
+        runs = [optimize(p, iterations=8, seed=5, workers=w) for p in (P, Pc)]
+    for p, two in zip((P, Pc), runs):
+        one = optimize(p, iterations=8, seed=5)
+        assert two.workers == 2
+        assert [r["value"] for r in two.history] == [r["value"] for r in one.history]
+        assert [r["accepted"] for r in two.history] == [r["accepted"] for r in one.history]
+    # the corrections changed the figures the constraints read: the runs differ
+    assert [r["value"] for r in runs[0].history] != [r["value"] for r in runs[1].history]
+
+
 def test_objective_bounds_along_the_insertion_are_lower_bounds_that_bite(scene):
     """The per-step lower bounds of the objective (yield, insertion and removal force upper bounds:
     what stops a candidate's insertion early) never exceed the finished objective, and the force
