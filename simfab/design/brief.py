@@ -246,14 +246,16 @@ class TargetProfile:
     source: str = ""
 
     def rms_error(self, s: np.ndarray, force: np.ndarray) -> float:
-        """RMS [N] of the simulated force (interpolated at the target's distances within the
-        simulated range) minus the target."""
+        """RMS [N] over every target sample of the simulated force (interpolated at the target's
+        distances) minus the target. Beyond the simulated range the profile holds its end value: a
+        run ends where O comes to rest (force ~0; the part draws it in no further) or at the path's
+        end, so a design that seats before the target does is charged for the target's forces
+        past its seat instead of having them left out (which would reward seating early)."""
         s = np.asarray(s, float)
-        inside = (self.s >= s[0]) & (self.s <= s[-1])
-        if not inside.any():
+        if not len(s):
             return float("inf")
-        f = np.interp(self.s[inside], s, np.asarray(force, float))
-        return float(np.sqrt(np.mean((f - self.force[inside]) ** 2)))
+        f = np.interp(self.s, s, np.asarray(force, float))  # (constant beyond both ends)
+        return float(np.sqrt(np.mean((f - self.force) ** 2)))
 
 
 __all__ = ["DesignBrief", "Constraint", "TargetProfile", "bounds", "constraints", "penalty", "read_target_profile",

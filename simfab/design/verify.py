@@ -208,9 +208,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
     cons = B.constraints(fine, problem.limits)
     extra = {}
     if profiles:  # least-squares factor c of c F_coarse(s) ~ F_finest(s): the profile's mesh correction
-        (s0, f0), (s1, f1) = profiles[0], profiles[-1]
-        ref = np.interp(s0, s1, f1)
-        extra["profile_force_factor"] = float(f0 @ ref / (f0 @ f0)) if f0 @ f0 > 0 else 1.0
+        extra["profile_force_factor"] = profile_factor(profiles[0], profiles[-1], float(cm.s_steps[-1]))
     what = "P2 (quadratic) elements" if top == 2 else "linear elements"
     return {**extra, "levels": rows, "figures": out,
             "constraints": [{"name": c.name, "value": c.value, "lo": c.lo, "hi": c.hi, "satisfied": c.satisfied}
@@ -220,6 +218,18 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
                          f"three levels of that order converge",
             "units": {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N",
                       "von_mises": "Pa", "von_mises_peak": "Pa", "rms_error": "N"}}
+
+
+def profile_factor(coarse, fine, s_path: float) -> float:
+    """Least-squares factor c of c F_coarse(s) ~ F_fine(s) over the coarse run's records on the
+    scene's path (s <= ``s_path`` [m]) within the fine run's range; ``coarse``, ``fine``: (s, F)
+    arrays. Records past the path's end are left out: they are the search for the rest point
+    (:func:`simfab.coupling.settle.to_rest`), micrometres apart around the seat, where the force
+    jumps by the full grip within the seat's shift between meshes; one of them would set c."""
+    (s0, f0), (s1, f1) = coarse, fine
+    on = (s0 <= s_path * (1 + 1e-12)) & (s0 <= s1[-1])
+    f0, ref = f0[on], np.interp(s0[on], s1, f1)
+    return float(f0 @ ref / (f0 @ f0)) if f0 @ f0 > 0 else 1.0
 
 
 def check_warnings(check: dict) -> list[str]:

@@ -57,6 +57,10 @@ def test_target_profile_rms(tmp_path):
     t = B.TargetProfile(s=s, force=f)
     assert t.rms_error(np.array([0, 0.01, 0.02]), np.array([0, -5, 0])) == 0.0
     assert np.isclose(t.rms_error(np.array([0, 0.02]), np.array([1.0, 1.0])), np.sqrt((1 + 6**2 + 1) / 3))
+    # a run that ends (at rest, force 0) before the target's last sample: the profile holds its end
+    # value there, so the target's force past the end counts (it is not left out)
+    t2 = B.TargetProfile(s=np.array([0.0, 0.01, 0.02]), force=np.array([0.0, 5.0, 4.0]))
+    assert np.isclose(t2.rms_error(np.array([0.0, 0.01, 0.012]), np.array([0.0, 5.0, 0.0])), np.sqrt(16 / 3))
     (tmp_path / "bad.csv").write_text("0,0\n0,1\n")
     with pytest.raises(InputError):
         B.read_target_profile(tmp_path / "bad.csv")

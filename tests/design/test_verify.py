@@ -144,6 +144,22 @@ def test_target_matching_gets_a_profile_correction():
     assert needs_correction(r, {}) and not needs_correction(r, {"force_profile": c})
 
 
+def test_profile_factor_leaves_out_the_search_for_the_rest_point():
+    """The coarse profile is the fine one times 1.25 along the path; past the path's end the runs
+    search for their rest points, and the seat (force jumping from +9 to -4 N) lies 1 um apart
+    between the meshes: those records would pull the least-squares factor away from 0.8."""
+    from simfab.design.verify import profile_factor
+
+    s = np.linspace(0.0, 0.01, 21)
+    f = 9.0 * np.sin(np.pi * s / 0.02)
+    coarse = (np.append(s, [0.010500, 0.010501]), np.append(1.25 * f, [-4.0, -4.0]))
+    fine = (np.append(s, [0.010500, 0.010502]), np.append(f, [9.0, -4.0]))
+    assert np.isclose(profile_factor(coarse, fine, 0.01), 0.8)
+    s0, f0 = coarse
+    ref = np.interp(s0, *fine)
+    assert abs(float(f0 @ ref / (f0 @ f0)) - 0.8) > 0.02  # with the seat's records: off
+
+
 def test_the_optimizer_refuses_p2_and_the_check_leaves_its_model_linear(problem):
     """Only the check runs P2: the annealing's problem stays on the linear coarse mesh, and a
     scene asking for P2 elements is refused by the optimizer with the field named."""
