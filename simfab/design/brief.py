@@ -246,16 +246,29 @@ class TargetProfile:
     source: str = ""
 
     def rms_error(self, s: np.ndarray, force: np.ndarray) -> float:
-        """RMS [N] over every target sample of the simulated force (interpolated at the target's
-        distances) minus the target. Beyond the simulated range the profile holds its end value: a
-        run ends where O comes to rest (force ~0; the part draws it in no further) or at the path's
-        end, so a design that seats before the target does is charged for the target's forces
-        past its seat instead of having them left out (which would reward seating early)."""
+        """RMS force error [N] over the target's distance range: sqrt(1/L int (F_sim - F_target)^2 ds)
+        with both profiles linear between their samples (exact for that: per piece of the merged
+        samples, h (e0^2 + e0 e1 + e1^2) / 3).
+
+        A distance integral, not a mean over samples: each sample weighs by the distance it covers,
+        so a densely sampled stretch (a run's search for its rest point, records micrometres apart
+        across the seat's force jump) does not decide the error, and a seat a few micrometres off
+        costs micrometres' worth of it. Beyond the simulated range the profile holds its end value:
+        a run ends where O comes to rest (force ~0: the part draws it in no further) or at the path's
+        end, so a design that seats before the target's seat is charged for the target's forces
+        past its own."""
         s = np.asarray(s, float)
         if not len(s):
             return float("inf")
-        f = np.interp(self.s, s, np.asarray(force, float))  # (constant beyond both ends)
-        return float(np.sqrt(np.mean((f - self.force) ** 2)))
+        force = np.asarray(force, float)
+        t0, t1 = float(self.s[0]), float(self.s[-1])
+        if not t1 > t0:
+            return float(np.sqrt(np.mean((np.interp(self.s, s, force) - self.force) ** 2)))
+        grid = np.union1d(self.s, s[(s > t0) & (s < t1)])
+        e = np.interp(grid, s, force) - np.interp(grid, self.s, self.force)  # (constant beyond the ends)
+        h = np.diff(grid)
+        integral = float(np.sum(h * (e[:-1] ** 2 + e[:-1] * e[1:] + e[1:] ** 2)) / 3.0)
+        return float(np.sqrt(integral / (t1 - t0)))
 
 
 __all__ = ["DesignBrief", "Constraint", "TargetProfile", "bounds", "constraints", "penalty", "read_target_profile",

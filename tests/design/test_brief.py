@@ -56,11 +56,18 @@ def test_target_profile_rms(tmp_path):
     s, f = B.read_target_profile(p)
     t = B.TargetProfile(s=s, force=f)
     assert t.rms_error(np.array([0, 0.01, 0.02]), np.array([0, -5, 0])) == 0.0
-    assert np.isclose(t.rms_error(np.array([0, 0.02]), np.array([1.0, 1.0])), np.sqrt((1 + 6**2 + 1) / 3))
-    # a run that ends (at rest, force 0) before the target's last sample: the profile holds its end
-    # value there, so the target's force past the end counts (it is not left out)
-    t2 = B.TargetProfile(s=np.array([0.0, 0.01, 0.02]), force=np.array([0.0, 5.0, 4.0]))
-    assert np.isclose(t2.rms_error(np.array([0.0, 0.01, 0.012]), np.array([0.0, 5.0, 0.0])), np.sqrt(16 / 3))
+    # a constant offset of 1 N: RMS 1 N, however the two profiles are sampled
+    assert np.isclose(t.rms_error(np.array([0, 0.005, 0.01, 0.0101, 0.02]), np.array([1, -1.5, -4, -3.95, 1.0])), 1.0)
+    # the distance integral (both profiles linear between samples): F_sim = 1 against the target's
+    # 0 -> -5 -> 0 N tent: 1/L int (1 + 5 (1 - |2s/L - 1|))^2 ds = 1 + 5 + 25/3
+    assert np.isclose(t.rms_error(np.array([0, 0.02]), np.array([1.0, 1.0])), np.sqrt(1 + 5 + 25 / 3))
+    # a run that ends (at rest, force 0) before the target's end: its profile holds its end value
+    # there, so the target's forces past the run's end count (they are not left out)
+    t2 = B.TargetProfile(s=np.array([0.0, 0.01, 0.02]), force=np.array([0.0, 5.0, 5.0]))
+    assert np.isclose(t2.rms_error(np.array([0.0, 0.01, 0.01000001]), np.array([0.0, 5.0, 0.0])), np.sqrt(12.5), rtol=1e-3)
+    # a seat (force jump) a micrometre off costs a micrometre's worth, not a whole sample's
+    seat = B.TargetProfile(s=np.array([0.0, 0.010, 0.010004]), force=np.array([0.0, 9.0, -4.0]))
+    assert seat.rms_error(np.array([0.0, 0.010001, 0.010004]), np.array([0.0, 9.0009, -4.0])) < 0.3
     (tmp_path / "bad.csv").write_text("0,0\n0,1\n")
     with pytest.raises(InputError):
         B.read_target_profile(tmp_path / "bad.csv")
