@@ -253,10 +253,10 @@ class TargetProfile:
         A distance integral, not a mean over samples: each sample weighs by the distance it covers,
         so a densely sampled stretch (a run's search for its rest point, records micrometres apart
         across the seat's force jump) does not decide the error, and a seat a few micrometres off
-        costs micrometres' worth of it. Beyond the simulated range the profile holds its end value:
-        a run ends where O comes to rest (force ~0: the part draws it in no further) or at the path's
-        end, so a design that seats before the target's seat is charged for the target's forces
-        past its own."""
+        costs micrometres' worth of it. Past the run's last record the force is 0: a finished run
+        ends where O comes to rest (its last record may be the rest search's overshoot into the seat,
+        whose force is not what holds O there), so a design that seats before the target does is
+        charged for the target's forces past its seat (left out, they would reward seating early)."""
         s = np.asarray(s, float)
         if not len(s):
             return float("inf")
@@ -265,7 +265,7 @@ class TargetProfile:
         if not t1 > t0:
             return float(np.sqrt(np.mean((np.interp(self.s, s, force) - self.force) ** 2)))
         grid = np.union1d(self.s, s[(s > t0) & (s < t1)])
-        e = np.interp(grid, s, force) - np.interp(grid, self.s, self.force)  # (constant beyond the ends)
+        e = np.interp(grid, s, force, right=0.0) - np.interp(grid, self.s, self.force)
         h = np.diff(grid)
         integral = float(np.sum(h * (e[:-1] ** 2 + e[:-1] * e[1:] + e[1:] ** 2)) / 3.0)
         return float(np.sqrt(integral / (t1 - t0)))

@@ -10,7 +10,10 @@ workers. Each worker holds its own :class:`~simfab.design.optimize.DesignProblem
 Warp arrays and caches do not cross process boundaries, and workers are spawned, not forked
 (Warp's runtime is not fork-safe). Rebuilding is deterministic, so a worker evaluates a design
 to exactly the figures this process would (tested); the optimization's result does not depend
-on the number of workers.
+on the number of workers. Starting a worker (spawned Python, NumPy/SciPy, Warp, simfab) takes
+about 2 s, so :class:`Workers` can be started before the problem exists (``couple optimize``
+starts them before the initial insertion and the handle placement, ~1.5-2.5 s on the stand side)
+and serve several optimizations (the correction rounds).
 
 Measured on the stand side (300 iterations, 2-core machine at load 1.2-1.5, whose speed drifts by
 up to 30 % within minutes, so compare runs made back to back): ``python tools/bench.py optimize

@@ -61,10 +61,11 @@ def test_target_profile_rms(tmp_path):
     # the distance integral (both profiles linear between samples): F_sim = 1 against the target's
     # 0 -> -5 -> 0 N tent: 1/L int (1 + 5 (1 - |2s/L - 1|))^2 ds = 1 + 5 + 25/3
     assert np.isclose(t.rms_error(np.array([0, 0.02]), np.array([1.0, 1.0])), np.sqrt(1 + 5 + 25 / 3))
-    # a run that ends (at rest, force 0) before the target's end: its profile holds its end value
-    # there, so the target's forces past the run's end count (they are not left out)
+    # a run that ends (at rest) before the target's end, its last record the rest search's overshoot
+    # (-40 N): past it the force is 0, so the target's forces there count (they are not left out)
     t2 = B.TargetProfile(s=np.array([0.0, 0.01, 0.02]), force=np.array([0.0, 5.0, 5.0]))
-    assert np.isclose(t2.rms_error(np.array([0.0, 0.01, 0.01000001]), np.array([0.0, 5.0, 0.0])), np.sqrt(12.5), rtol=1e-3)
+    assert np.isclose(t2.rms_error(np.array([0.0, 0.01, 0.01000001]), np.array([0.0, 5.0, -40.0])), np.sqrt(12.5),
+                      rtol=1e-3)
     # a seat (force jump) a micrometre off costs a micrometre's worth, not a whole sample's
     seat = B.TargetProfile(s=np.array([0.0, 0.010, 0.010004]), force=np.array([0.0, 9.0, -4.0]))
     assert seat.rms_error(np.array([0.0, 0.010001, 0.010004]), np.array([0.0, 9.0009, -4.0])) < 0.3
