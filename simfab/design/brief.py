@@ -264,11 +264,20 @@ class TargetProfile:
         t0, t1 = float(self.s[0]), float(self.s[-1])
         if not t1 > t0:
             return float(np.sqrt(np.mean((np.interp(self.s, s, force) - self.force) ** 2)))
-        grid = np.union1d(self.s, s[(s > t0) & (s < t1)])
-        e = np.interp(grid, s, force, right=0.0) - np.interp(grid, self.s, self.force)
-        h = np.diff(grid)
-        integral = float(np.sum(h * (e[:-1] ** 2 + e[:-1] * e[1:] + e[1:] ** 2)) / 3.0)
-        return float(np.sqrt(integral / (t1 - t0)))
+        end = min(float(s[-1]), t1)
+
+        def sq(grid, sim):  # int (sim - target)^2 ds over grid, both linear between grid points
+            e = sim - np.interp(grid, self.s, self.force)
+            return float(np.sum(np.diff(grid) * (e[:-1] ** 2 + e[:-1] * e[1:] + e[1:] ** 2)) / 3.0)
+
+        total = 0.0
+        if end > t0:
+            g = np.union1d(np.union1d(self.s[self.s < end], s[(s > t0) & (s < end)]), [end])
+            total += sq(g, np.interp(g, s, force))
+        if end < t1:  # past the run's end: force 0
+            g = np.union1d([max(end, t0)], self.s[self.s > end])
+            total += sq(g, np.zeros(len(g)))
+        return float(np.sqrt(total / (t1 - t0)))
 
 
 __all__ = ["DesignBrief", "Constraint", "TargetProfile", "bounds", "constraints", "penalty", "read_target_profile",
