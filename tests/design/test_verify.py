@@ -144,6 +144,34 @@ def test_target_matching_gets_a_profile_correction():
     assert needs_correction(r, {}) and not needs_correction(r, {"force_profile": c})
 
 
+def test_step_check_runs_where_the_steps_do_not_resolve_the_profile():
+    """With 3 steps the block's snap falls between steps (its P2 run warns "steps too coarse"):
+    the check runs that level again with 4x the steps, and each reference value is the finest
+    level's times its step factor (finer steps / the scene's steps); the figures' own values per
+    level stay those of the scene's steps."""
+    from simfab.design import verify
+    from simfab.design.scene import load_design_scene
+
+    ds = load_design_scene("block2d_tight", design={"handles": 3, "placement": "spatial"}, simulation={"steps": 3})
+    P = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions)
+    r = mesh_check(P, ds.cm.fem.rest, levels=(0, (2, 0)))
+    st = r["step_check"]
+    assert st["steps"] == 12 and st["factor"] == verify.STEP_CHECK_FACTOR
+    moved = 0
+    for k, fig in r["figures"].items():
+        c = st["factors"].get(k, 1.0)
+        assert fig.get("step_factor", 1.0) == c
+        assert np.isclose(verify.reference_value(fig), fig["values"][-1] * c)
+        moved += abs(c - 1.0) > 0.02
+    assert moved >= 1  # the coarse steps did miss something
+    vals = {c["name"]: c["value"] for c in r["constraints"]}
+    assert np.isclose(vals["grip_force"], r["figures"]["grip_force"]["values"][-1] * st["factors"]["grip_force"])
+    # 35 steps resolve the block's profile: no step check
+    ds35 = load_design_scene("block2d_tight", design={"handles": 3, "placement": "spatial"})
+    P35 = make_problem(ds35.cm, ds35.brief, kept_regions=ds35.kept_regions)
+    assert "step_check" not in mesh_check(P35, ds35.cm.fem.rest, levels=(0, (2, 0)))
+
+
 def test_profile_factor_leaves_out_the_search_for_the_rest_point():
     """The coarse profile is the fine one times 1.25 along the path; past the path's end the runs
     search for their rest points, and the seat (force jumping from +9 to -4 N) lies 1 um apart
