@@ -3,7 +3,7 @@ shape (or an optimized scene's) run at linear and P2 levels, each level's figure
 error against the finest P2 level, and the references the check variants would read.
 
 ``python tools/bench.py design_check [--scene standside2d] [--levels 1:0,1:1,1:2,1:3,2:0,2:1,2:2]
-[--steps N]``
+[--steps N] [--mesh-check]``
 
 SCENE is a design scene name or an optimized scene's XML (``couple optimize``'s
 ``NAME_optimized.xml``). A level is ORDER:SUBDIVISIONS (1 linear, 2 quadratic; 2D 4^t, 3D 8^t
@@ -13,7 +13,9 @@ relative error against the finest P2 level; ``linear_fit``: the old check's refe
 f_inf + b h^p through the last three linear levels); ``p2_fit``: the same through three P2
 levels. The measurements quoted in simfab/design/verify.py (standside2d, block2d_tight: the
 default levels; the knocker design: ``--scene .../knocker3d_design_optimized.xml --levels
-1:0,1:1,2:0,2:1``) came from this.
+1:0,1:1,2:0,2:1``) came from this. ``--mesh-check`` instead runs the check ``couple optimize``
+runs on its design (:func:`simfab.design.verify.mesh_check`: the brief's levels, the step check
+where the steps do not resolve the profile) on the scene's shape and prints its result.
 """
 
 from __future__ import annotations
@@ -36,10 +38,21 @@ def run(argv) -> dict:
     ap.add_argument("--scene", default="standside2d")
     ap.add_argument("--levels", default="1:0,1:1,1:2,1:3,2:0,2:1,2:2")
     ap.add_argument("--steps", type=int, default=None, help="insertion steps (default: the scene's)")
+    ap.add_argument("--mesh-check", action="store_true",
+                    help="run couple optimize's mesh check (levels of the brief, step check) instead")
     a = ap.parse_args(argv)
     levels = [tuple(int(x) for x in lv.split(":")) for lv in a.levels.split(",")]
     ds = load_design_scene(a.scene, simulation={} if a.steps is None else {"steps": a.steps, "h_in": None})
     cm = ds.cm
+    if a.mesh_check:
+        from simfab.design.optimize import make_problem
+        from simfab.design.verify import check_warnings, mesh_check
+
+        P = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target)
+        t0 = time.perf_counter()
+        r = mesh_check(P, cm.fem.rest)
+        return {"benchmark": "design_check", "scene": a.scene, "steps": len(cm.s_steps) - 1, "mesh_check": r,
+                "warnings": check_warnings(r), "seconds": time.perf_counter() - t0}
     rows = []
     for o, t in levels:
         m = refined_model(cm, cm.fem.rest, t, o)
