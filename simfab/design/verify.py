@@ -182,9 +182,8 @@ def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = T
     if problem.target is not None:
         fine["rms_error"] = problem.target.rms_error(fine_res.column("s"), fine_res.column("force"))
     factors = {}
-    for k, v in fine.items():
-        if k == "category" or k not in figures:
-            continue
+    for k in FIGURES + (("rms_error",) if problem.target is not None else ()):
+        v = fine[k]
         base = figures[k]
         # a figure below its constraint unit is noise (as in correction_factors)
         factors[k] = float(np.clip(v / base, *FACTOR_RANGE)) if abs(base) >= figure_unit(k) and base else 1.0
