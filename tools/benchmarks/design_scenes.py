@@ -60,8 +60,10 @@ def _resimulate(summary: dict, out: Path) -> dict:
 
 def _rms_row(s: dict, seconds: float) -> dict:
     """Per handle count: the optimizer's (coarse, mesh-corrected) and the mesh check's RMS [N]."""
+    from simfab.design.verify import reference_value
+
     mc = (s.get("mesh_check") or {}).get("figures", {}).get("rms_error")
-    fine = None if mc is None else (mc["values"][-1] if mc["extrapolated"] is None else mc["extrapolated"])
+    fine = None if mc is None else reference_value(mc)
     return {"rms_error_coarse_N": s.get("rms_error"), "rms_error_mesh_converged_N": fine,
             "rms_error_levels_N": None if mc is None else mc["values"], "rms_error_initial_N": s.get("rms_error_initial"),
             "force_profile_correction": s.get("corrections", {}).get("force_profile"),
