@@ -41,8 +41,9 @@ p2_insertion) but not on the optimized knocker design (1,576 tets; a 5 N snap):
 
 P2's own refinement moves the forces by -38 % (halving d_hat on P2 1x moves F_in by -2 % only:
 the elements, not the contact layer), so the default check refines P2 once in 3D as well, at
-10-65x the seconds of P2 1x (607-1,693 s against 26-68 s on two knocker designs); its ``reference_change`` shows how far the reference itself
-is from converged.
+10-65x the seconds of P2 1x under load (607-1,693 s against 26-68 s on two knocker designs at load
+~8; 82-93 s against 24-26 s on a quiet machine); its ``reference_change`` shows how far the
+reference itself is from converged.
 
 **Steps.** The levels refine the mesh, not the steps along the path. When the P2 level on the
 optimization mesh warns that its steps are too coarse for the profile (a snap or a force peak
