@@ -174,23 +174,30 @@ def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = T
     x1.05, 6.5 s -> 16 s."""
     from simfab.coupling.simulate import simulate
 
-    if not any("steps too coarse" in w for w in res.warnings):
+    if not _steps_too_coarse(res):
         return None
     t0 = time.perf_counter()
     m = refined_model(problem.base, rest, 0, 2, steps_factor=STEP_CHECK_FACTOR)
     fine_res = simulate(m, quiet=quiet)
-    fine = level_figures(fine_res, problem.brief.stress_radius)
-    if problem.target is not None:
-        fine["rms_error"] = problem.target.rms_error(fine_res.column("s"), fine_res.column("force"))
-    factors = {}
-    for k in FIGURES + (("rms_error",) if problem.target is not None else ()):
-        v = fine[k]
-        base = figures[k]
-        # a figure below its constraint unit is noise (as in correction_factors)
-        factors[k] = float(np.clip(v / base, *FACTOR_RANGE)) if abs(base) >= figure_unit(k) and base else 1.0
+    fine = _run_figures(problem, fine_res)
+    factors = {k: figure_ratio(k, fine[k], figures[k])
+               for k in FIGURES + (("rms_error",) if problem.target is not None else ())}
     return {"steps": int(len(m.s_steps) - 1), "factor": STEP_CHECK_FACTOR, "seconds": time.perf_counter() - t0,
             "factors": factors, "category": fine["category"],
-            "still_too_coarse": any("steps too coarse" in w for w in fine_res.warnings)}
+            "still_too_coarse": _steps_too_coarse(fine_res)}
+
+
+def _steps_too_coarse(res) -> bool:
+    """Whether an insertion's own step checks (simfab.coupling.settle.warnings) found its steps too coarse."""
+    return any("steps too coarse" in w for w in res.warnings)
+
+
+def _run_figures(problem, res) -> dict:
+    """:func:`level_figures` of an insertion, with the profile-matching RMS error when ``problem`` has a target."""
+    f = level_figures(res, problem.brief.stress_radius)
+    if problem.target is not None:
+        f["rms_error"] = problem.target.rms_error(res.column("s"), res.column("force"))
+    return f
 
 
 def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, levels=None, quiet: bool = True) -> dict:
@@ -219,9 +226,9 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
         else:
             m = refined_model(cm, rest, t, o)
             res = simulate(m, quiet=quiet)
-            f, n, nodes = level_figures(res, problem.brief.stress_radius), m.fem.n_elements, m.fem.n_vertices
-            if problem.target is not None:  # the profile-matching error, a figure like the others
-                f = dict(f, rms_error=problem.target.rms_error(res.column("s"), res.column("force")))
+            # (with a target: the profile-matching error, a figure like the others)
+            f, n, nodes = _run_figures(problem, res), m.fem.n_elements, m.fem.n_vertices
+            if problem.target is not None:
                 profiles.append((res.column("s"), res.column("force")))
             if (o, t) == (2, 0):
                 steps = step_check(problem, rest, res, f, quiet=quiet)
@@ -314,21 +321,21 @@ def figure_unit(name: str) -> float:
     return B.SCALES.get("von_mises" if name.startswith("von_mises") else name, 0.0)
 
 
+def figure_ratio(name: str, value: float, base: float) -> float:
+    """value / base of figure ``name``, clipped to FACTOR_RANGE; 1 when base is below the figure's
+    constraint unit (1 N, 1 %, 1 MPa: B.SCALES), which is noise rather than a biased value (its
+    ratio, e.g. 1e-8 N / 1e-11 N, says nothing), or when the ratio is not a positive number."""
+    if abs(base) < figure_unit(name) or not base:
+        return 1.0
+    r = value / base
+    return float(np.clip(r, *FACTOR_RANGE)) if np.isfinite(r) and r > 0 else 1.0
+
+
 def correction_factors(check: dict) -> dict:
     """{figure: reference value / optimization-mesh value} of a :func:`mesh_check` (space mapping
     of the coarse model's outputs: the optimizer multiplies its coarse figures by these, so that
     the next round aims at the mesh-converged values; figures with a zero coarse value keep 1)."""
-    out = {}
-    for k, v in check["figures"].items():
-        coarse = v["values"][0]
-        ref = reference_value(v)
-        # a figure below its constraint unit (1 N, 1 %, 1 MPa: B.SCALES) is noise, not a biased
-        # value: its ratio (e.g. 1e-8 N / 1e-11 N) says nothing about the mesh
-        if abs(coarse) < figure_unit(k):
-            out[k] = 1.0
-            continue
-        r = ref / coarse if coarse else 1.0
-        out[k] = float(np.clip(r, *FACTOR_RANGE)) if np.isfinite(r) and r > 0 else 1.0
+    out = {k: figure_ratio(k, reference_value(v), v["values"][0]) for k, v in check["figures"].items()}
     if "profile_force_factor" in check:  # target matching: the whole force profile, scaled
         out["force_profile"] = check["profile_force_factor"]
     return out
