@@ -23,8 +23,10 @@ revolved_mesh), revolved (with --revolve-arms: the 3D part's simulation: element
 figures, constraints of the brief with their values and satisfied flags), restarts (with --restarts: per run seed, status, message,
 feasible, objective, E_L, iterations, seconds), mesh_check (unless --no-mesh-check: levels
 (element_order, subdivisions, elements, nodes, seconds, category), figures (per figure: values per
-level, extrapolated, order, converging, difference_of_optimization_mesh, reference_change),
-constraints at the mesh-converged values, feasible_fine, reference, units), correction_rounds (per round:
+level, extrapolated, order, converging, difference_of_optimization_mesh, reference_change, step_factor),
+step_check (when the scene's steps do not resolve the profile: steps, factor, seconds, factors per figure,
+category, still_too_coarse), constraints at the mesh-converged values, feasible_fine, reference, units),
+correction_rounds (per round:
 factors, feasible_fine, objective_fine, iterations, seconds, kept: whether its design was
 better on the refined meshes; the outputs are the kept design's run), iterations_total (every
 round's), objective_fine (the kept design's objective with mesh-converged figures).
@@ -77,8 +79,9 @@ def add_optimize_args(s) -> None:
                    help="Dask scheduler for --restarts (default: a local cluster sized to this machine)")
     s.add_argument("--no-mesh-check", action="store_true",
                    help="skip re-running the optimized shape with quadratic (P2) elements (on the "
-                        "optimization mesh and refined, see --check-refinements), which reports the optimization "
-                        "mesh's discretization error and corrects the figures while the brief is missed there")
+                        "optimization mesh and refined, see --check-refinements; with 4x the steps where the scene's "
+                        "steps do not resolve the profile), which reports the optimization mesh's discretization "
+                        "error and corrects the figures while the brief is missed there")
     s.add_argument("--revolve-axis", choices=["x", "y"], help="2D: also revolve the optimized section about this axis")
     s.add_argument("--revolve-offset", type=float, default=0.0, metavar="M",
                    help="position of the revolution axis [m] (x = M for axis y, y = M for axis x)")
