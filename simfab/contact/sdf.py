@@ -1,4 +1,4 @@
-"""Exact signed distance of objects made of primitive geoms (sphere, capsule, cylinder, box).
+"""Exact signed distance of objects made of primitive geoms (sphere, capsule, cylinder, box, torus).
 
 An MJCF sphere meshed into a 320-face polyhedron and then sampled has flat faces up to 1.5% of R
 inside the true sphere, half the indentation of a contact at d = 0.03 R; the IMLS of its samples
@@ -14,6 +14,14 @@ Per primitive (body-frame centre c, rotation Q with columns the geom's axes; loc
 - cylinder radius r, half-length h along z: with a = |q_xy| - r, b = |q_z| - h,
   psi = -(|max((a, b), 0)| + min(max(a, b), 0))
 - box half-extents e: with u = |q| - e, psi = -(|max(u, 0)| + min(max(u), 0))
+- torus major radius R, tube radius r, axis along local z (MuJoCo's ``mujoco.sdf.torus`` plugin
+  geom, ``radius1`` = R, ``radius2`` = r): with w = (|q_xy| - R, q_z), psi = r - |w|
+
+MJCF has no torus geom; a ring described by the SDF plugin (``<geom type="sdf">`` with a
+``mujoco.sdf.torus`` instance) is read here as an exact torus. Meshed and sampled instead (the door
+knocker's ring as a 96 x 24 facet mesh), its facets sit up to 26 um inside the tube and the IMLS
+of the samples resolves them as it converges: the knocker's insertion force still moved 12 % from
+16,000 to 32,000 samples.
 
 A union of geoms takes the largest psi (the union's distance outside, a lower bound of the depth
 inside, exact except near intersections). 2D objects are cross-sections at z = 0: spheres,
@@ -30,13 +38,16 @@ import numpy as np
 
 from simfab.contact.imls import ImlsEval, body_frame, pose_matrix
 
-KINDS = ("sphere", "capsule", "cylinder", "box")
+KINDS = ("sphere", "capsule", "cylinder", "box", "torus")
+#: MuJoCo SDF plugin read as an exact torus (config radius1: major radius, radius2: tube radius [m]).
+TORUS_PLUGIN = "mujoco.sdf.torus"
 
 
 @dataclass(frozen=True, kw_only=True)
 class Primitive:
     """kind in KINDS; size: (r,) sphere, (r, h) capsule/cylinder (h half-length along local z),
-    (ex, ey, ez) box half-extents [m]; centre (3,) [m] and rotation (3, 3) in O's body frame."""
+    (ex, ey, ez) box half-extents, (R, r) torus (major and tube radius, axis local z) [m]; centre
+    (3,) [m] and rotation (3, 3) in O's body frame."""
 
     kind: str
     size: tuple
@@ -52,6 +63,8 @@ class Primitive:
         if self.kind == "cylinder":
             r, h = self.size
             return 2 * np.pi * r * r + 4 * np.pi * r * h
+        if self.kind == "torus":
+            return 4 * np.pi**2 * self.size[0] * self.size[1]
         ex, ey, ez = self.size
         return 8 * (ex * ey + ey * ez + ez * ex)
 
@@ -116,6 +129,8 @@ def _local_sdf(kind: str, size, q: np.ndarray, hessian: bool):
                     (t[:, :, None] * t[:, None, :]) * (a[out] / (dist[out] * np.maximum(rho[out], 1e-300)))[:, None, None]
             H = -Hd
         return -dist, -gd, H
+    if kind == "torus":
+        return _torus_sdf(size, q, hessian)
     e = np.asarray(size, float)
     u = np.abs(q) - e
     s = np.where(q >= 0, 1.0, -1.0)
@@ -138,6 +153,30 @@ def _local_sdf(kind: str, size, q: np.ndarray, hessian: bool):
         Hd = (Pm - nn[:, :, None] * nn[:, None, :]) / n[outside, None, None]
         H[outside] = -Hd
     return psi, g, H
+
+
+def _torus_sdf(size, q: np.ndarray, hessian: bool):
+    """Torus of major radius R and tube radius r about local z: psi = r - |w|, w = (rho - R, q_z),
+    rho = |q_xy|. grad |w| = n = ((rho - R) e_r + q_z e_z) / |w|; hess |w| = (P - n n^T) / |w| in the
+    (e_r, e_z) plane P plus (rho - R) / (|w| rho) t t^T along the azimuthal tangent t."""
+    R, r = size
+    k = len(q)
+    rho = np.linalg.norm(q[:, :2], axis=1)
+    er = np.zeros((k, 3))
+    er[:, :2] = q[:, :2] / np.maximum(rho, 1e-300)[:, None]
+    a = rho - R
+    w = np.hypot(a, q[:, 2])
+    ws = np.maximum(w, 1e-300)
+    n = (a[:, None] * er + q[:, 2:3] * np.array([0.0, 0.0, 1.0])) / ws[:, None]
+    H = None
+    if hessian:
+        ez = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (k, 3))
+        t = np.cross(er, ez)
+        P = er[:, :, None] * er[:, None, :] + ez[:, :, None] * ez[:, None, :]
+        Hd = (P - n[:, :, None] * n[:, None, :]) / ws[:, None, None] + \
+            (t[:, :, None] * t[:, None, :]) * (a / (ws * np.maximum(rho, 1e-300)))[:, None, None]
+        H = -Hd
+    return r - w, -n, H
 
 
 @dataclass(kw_only=True, eq=False)
@@ -221,9 +260,10 @@ class PrimitiveField:
         return np.abs(self.evaluate(points, pose, hessian=False).psi)
 
 
-def primitives_of_body(model, body_id: int) -> tuple | None:
+def primitives_of_body(model, body_id: int, plugins: dict | None = None) -> tuple | None:
     """The body's geoms as :class:`Primitive` in the body frame, or None when any of its geoms is not
-    a sphere, capsule, cylinder or box (or it has none)."""
+    a sphere, capsule, cylinder, box or torus (an SDF geom of the ``mujoco.sdf.torus`` plugin; its
+    radii from ``plugins``, :attr:`simfab.io.mjcf.Scene.sdf_plugins`), or it has none."""
     import mujoco
 
     from simfab.io.mjcf import quat_to_matrix
@@ -236,13 +276,29 @@ def primitives_of_body(model, body_id: int) -> tuple | None:
         if int(model.geom_bodyid[g]) != body_id:
             continue
         kind = kinds.get(int(model.geom_type[g]))
-        if kind is None:
+        torus = torus_radii(model, g, plugins)
+        if kind is None and torus is None:
             return None
         s = np.asarray(model.geom_size[g], float)
-        size = {"sphere": (s[0],), "capsule": (s[0], s[1]), "cylinder": (s[0], s[1]), "box": tuple(s[:3])}[kind]
+        size = torus or {"sphere": (s[0],), "capsule": (s[0], s[1]), "cylinder": (s[0], s[1]), "box": tuple(s[:3])}[kind]
+        kind = kind or "torus"
         out.append(Primitive(kind=kind, size=tuple(float(v) for v in size), centre=np.asarray(model.geom_pos[g], float),
                              rotation=quat_to_matrix(np.asarray(model.geom_quat[g], float))))
     return tuple(out) or None
+
+
+def torus_radii(model, g: int, plugins: dict | None) -> tuple | None:
+    """(major, tube) radii [m] of geom ``g`` when it is an SDF geom of the ``mujoco.sdf.torus``
+    plugin (``plugins``: instance id -> (plugin name, config), :attr:`simfab.io.mjcf.Scene.sdf_plugins`),
+    else None."""
+    import mujoco
+
+    if int(model.geom_type[g]) != int(mujoco.mjtGeom.mjGEOM_SDF) or not plugins:
+        return None
+    name, config = plugins.get(int(model.geom_plugin[g]), (None, {}))
+    if name != TORUS_PLUGIN:
+        return None
+    return float(config["radius1"]), float(config["radius2"])
 
 
 def section_primitives(prims: tuple) -> tuple | None:
@@ -254,6 +310,8 @@ def section_primitives(prims: tuple) -> tuple | None:
         Q = p.rotation
         along_z = abs(abs(Q[2, 2]) - 1.0) < 1e-9
         c = p.centre
+        if p.kind == "torus":  # its section is an annulus or two discs: sampled instead
+            return None
         if p.kind == "sphere":
             r = float(np.sqrt(max(p.size[0] ** 2 - c[2] ** 2, 0.0)))
             if r > 0:
@@ -345,6 +403,14 @@ def _sample(p: Primitive, m: int, dim: int) -> tuple[np.ndarray, np.ndarray]:
             qe = np.vstack([np.c_[disk, np.full(k, h)], np.c_[disk, np.full(k, -h)]])
             ne = np.vstack([np.tile([0, 0, 1.0], (k, 1)), np.tile([0, 0, -1.0], (k, 1))])
         q, nq = np.vstack([qs, qe]), np.vstack([ns, ne])
+    elif p.kind == "torus":
+        R, r = p.size
+        n_major = max(8, int(round(np.sqrt(m * R / r))))
+        n_tube = max(6, m // n_major)
+        t, f = np.meshgrid(2 * np.pi * (np.arange(n_major) + 0.5) / n_major, 2 * np.pi * np.arange(n_tube) / n_tube)
+        t, f = t.ravel(), f.ravel()
+        nq = np.c_[np.cos(f) * np.cos(t), np.cos(f) * np.sin(t), np.sin(f)]
+        q = np.c_[R * np.cos(t), R * np.sin(t), np.zeros_like(t)] + r * nq
     else:
         e = np.asarray(p.size, float)
         qs, ns = [], []

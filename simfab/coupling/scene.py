@@ -180,7 +180,7 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
 
 def primitive_field(sc, body: str, dim: int, samples: int):
     """Exact signed-distance field (:class:`simfab.contact.sdf.PrimitiveField`) of O when all its
-    geoms are spheres, capsules, cylinders or boxes (in 2D: whose z = 0 section is a circle or an
+    geoms are spheres, capsules, cylinders, boxes or tori (in 2D: whose z = 0 section is a circle or an
     aligned rectangle), else None (O is then sampled and its IMLS field used). The geoms' poses are
     taken relative to the mocap body (MuJoCo's geom_pos / geom_quat are in the body frame)."""
     import mujoco
@@ -188,7 +188,7 @@ def primitive_field(sc, body: str, dim: int, samples: int):
     from simfab.contact.sdf import build_primitive_field, primitives_of_body, section_primitives
 
     bid = mujoco.mj_name2id(sc.model, mujoco.mjtObj.mjOBJ_BODY, body)
-    prims = primitives_of_body(sc.model, bid) if bid >= 0 else None
+    prims = primitives_of_body(sc.model, bid, sc.sdf_plugins) if bid >= 0 else None
     if prims is not None and dim == 2:
         prims = section_primitives(prims)
     return None if prims is None else build_primitive_field(prims, dim, samples)

@@ -94,6 +94,8 @@ class Scene:
     site_size : site name -> (3,) MuJoCo site size [m] (sphere radius is ``size[0]``).
     custom_numeric : ``<numeric name data>`` name -> (k,) float array.
     custom_text : ``<text name data>`` name -> str.
+    sdf_plugins : plugin instance id -> (plugin name, config dict of strings), e.g. the
+        ``mujoco.sdf.torus`` instance of an SDF geom (empty without plugins).
     """
 
     path: Path
@@ -102,6 +104,7 @@ class Scene:
     site_size: dict
     custom_numeric: dict
     custom_text: dict
+    sdf_plugins: dict = dataclasses.field(default_factory=dict)
 
     def body_names(self) -> list[str]:
         mj = _mujoco()
@@ -126,7 +129,7 @@ class Scene:
             b = int(m.geom_bodyid[g])
             if b == 0 and not include_world:
                 continue
-            mesh = geom_mesh(m, g)
+            mesh = geom_mesh(m, g, self.sdf_plugins)
             if mesh is None:
                 continue
             T = np.eye(4)
@@ -137,9 +140,13 @@ class Scene:
         return {k: trimesh.util.concatenate(v) if len(v) > 1 else v[0] for k, v in parts.items()}
 
 
-def geom_mesh(model, g: int):
-    """Mesh of geom ``g`` in its own frame (``trimesh.Trimesh``), or None for planes/heightfields."""
+def geom_mesh(model, g: int, plugins: dict | None = None):
+    """Mesh of geom ``g`` in its own frame (``trimesh.Trimesh``), or None for planes/heightfields.
+    SDF geoms: a torus (``mujoco.sdf.torus`` in ``plugins``, :attr:`Scene.sdf_plugins`) is meshed
+    with 128 x 32 sections, others use the mesh MuJoCo extracts from their distance field."""
     import trimesh
+
+    from simfab.contact.sdf import torus_radii
 
     mj = _mujoco()
     t = int(model.geom_type[g])
@@ -157,7 +164,11 @@ def geom_mesh(model, g: int):
         return trimesh.creation.cylinder(radius=s[0], height=2 * s[1], sections=48)
     if t == int(G.mjGEOM_CAPSULE):
         return trimesh.creation.capsule(height=2 * s[1], radius=s[0], count=[24, 24])
-    if t == int(G.mjGEOM_MESH):
+    torus = torus_radii(model, g, plugins)
+    if torus is not None:
+        return trimesh.creation.torus(major_radius=torus[0], minor_radius=torus[1], major_sections=128,
+                                      minor_sections=32)
+    if t in (int(G.mjGEOM_MESH), int(G.mjGEOM_SDF)) and int(model.geom_dataid[g]) >= 0:
         mid = int(model.geom_dataid[g])
         va, vn = int(model.mesh_vertadr[mid]), int(model.mesh_vertnum[mid])
         fa, fn = int(model.mesh_faceadr[mid]), int(model.mesh_facenum[mid])
@@ -207,7 +218,19 @@ def load_scene(path: str | os.PathLike) -> Scene:
         name = mj.mj_id2name(model, mj.mjtObj.mjOBJ_TEXT, i)
         a, n = int(model.text_adr[i]), int(model.text_size[i])
         text[name] = bytes(model.text_data[a:a + n]).split(b"\0", 1)[0].decode()
-    return Scene(path=path, model=model, sites=sites, site_size=sizes, custom_numeric=numeric, custom_text=text)
+    return Scene(path=path, model=model, sites=sites, site_size=sizes, custom_numeric=numeric, custom_text=text,
+                 sdf_plugins=_plugin_configs(path, model))
+
+
+def _plugin_configs(path: Path, model) -> dict:
+    """Plugin instance id -> (plugin name, config) of the model's plugin instances (the compiled
+    model keeps neither; read from the MJCF's spec)."""
+    if model.nplugin == 0:
+        return {}
+    mj = _mujoco()
+    ids = {mj.mj_id2name(model, mj.mjtObj.mjOBJ_PLUGIN, i): i for i in range(model.nplugin)}
+    spec = mj.MjSpec.from_file(str(path))
+    return {ids[p.name]: (p.plugin_name, dict(p.config)) for p in spec.plugins if p.name in ids}
 
 
 def numeric_config(scene: Scene, prefix: str, config_type):
@@ -472,9 +495,25 @@ class MJCFBuilder:
             ET.SubElement(el, "freejoint", name=f"{name}_free")
         return el
 
-    def geom(self, body: ET.Element, **attrs) -> ET.Element:
-        """A geom in ``body`` (type, size, mesh, rgba, pos, quat, contype, ...)."""
-        return self.add(body, "geom", **attrs)
+    def geom(self, body: ET.Element, *, sdf: str | None = None, **attrs) -> ET.Element:
+        """A geom in ``body`` (type, size, mesh, rgba, pos, quat, contype, ...); ``sdf``: the name of
+        an :meth:`sdf_asset` (an SDF geom of that plugin instance)."""
+        if sdf is None:
+            return self.add(body, "geom", **attrs)
+        el = self.add(body, "geom", type="sdf", mesh=sdf, **attrs)
+        ET.SubElement(el, "plugin", instance=sdf)
+        return el
+
+    def sdf_asset(self, name: str, plugin: str, **config) -> ET.Element:
+        """An SDF plugin instance ``name`` (e.g. ``mujoco.sdf.torus`` with radius1, radius2 [m]) and
+        the mesh asset MuJoCo renders it with; geoms use it through ``geom(body, sdf=name)``."""
+        ext = self.add(self._section("extension"), "plugin", plugin=plugin)
+        inst = ET.SubElement(ext, "instance", name=name)
+        for k, v in config.items():
+            ET.SubElement(inst, "config", key=k, value=_fmt(v))
+        mesh = self.add(self.asset, "mesh", name=name)
+        ET.SubElement(mesh, "plugin", instance=name)
+        return mesh
 
     def site(self, body: ET.Element, name: str, pos, size=0.005, **attrs) -> ET.Element:
         """A named site (roots, targets, regions)."""

@@ -9,7 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from simfab.contact.sdf import Primitive, PrimitiveField, _sample, build_primitive_field, section_primitives
 
-SIZES = {"sphere": (0.01,), "capsule": (0.004, 0.01), "cylinder": (0.01, 0.006), "box": (0.01, 0.004, 0.007)}
+SIZES = {"sphere": (0.01,), "capsule": (0.004, 0.01), "cylinder": (0.01, 0.006), "box": (0.01, 0.004, 0.007),
+         "torus": (0.01, 0.003)}
 
 
 def _inside_local(kind, size, q):
@@ -21,6 +22,8 @@ def _inside_local(kind, size, q):
         return np.linalg.norm(p, axis=1) < size[0]
     if kind == "cylinder":
         return (np.hypot(q[:, 0], q[:, 1]) < size[0]) & (np.abs(q[:, 2]) < size[1])
+    if kind == "torus":
+        return np.hypot(np.hypot(q[:, 0], q[:, 1]) - size[0], q[:, 2]) < size[1]
     return np.all(np.abs(q) < np.asarray(size), axis=1)
 
 
@@ -83,3 +86,30 @@ def test_bundled_cylinder_scenes_use_the_exact_distance():
     R, p = cm.pose(0.0)
     y = np.array([[p[0] + 0.01, 0.0]])  # on the 10 mm cylinder's surface
     assert abs(cm.field.evaluate(y, (R, p)).psi[0]) < 1e-15
+
+
+
+def test_torus_plugin_geom_is_an_exact_torus(tmp_path):
+    """An SDF geom of MuJoCo's torus plugin (MJCF has no torus geom) is read as an exact torus,
+    posed by its geom pos/quat, and meshed for display on its surface."""
+    import mujoco
+
+    from simfab.contact.sdf import primitives_of_body
+    from simfab.io.mjcf import MJCFBuilder, load_scene
+
+    R, r = 0.02, 0.003
+    b = MJCFBuilder("ring")
+    b.sdf_asset("ring", "mujoco.sdf.torus", radius1=R, radius2=r)
+    o = b.body("object", pos=[0.001, 0, 0], mocap=True)
+    b.geom(o, sdf="ring", pos=[R, 0, 0], quat=[np.sqrt(0.5), np.sqrt(0.5), 0, 0], contype=0, conaffinity=0)
+    sc = load_scene(b.save(tmp_path / "ring.xml"))
+    bid = mujoco.mj_name2id(sc.model, mujoco.mjtObj.mjOBJ_BODY, "object")
+    (prim,) = primitives_of_body(sc.model, bid, sc.sdf_plugins)
+    assert prim.kind == "torus" and prim.size == (R, r)
+    f = build_primitive_field((prim,), 3, 500)
+    # body frame: the ring lies in the x-z plane (axis y) around (R, 0, 0); its bar crosses the origin
+    q = np.array([[0.0, 0.0, 0.0], [-r, 0.0, 0.0], [R, 0.0, 0.0], [2 * R + r + 0.001, 0.0, 0.0], [R, 0.0, R]])
+    assert np.allclose(f.evaluate(q).psi, [r, 0.0, r - R, -0.001, r], atol=1e-15)
+    mesh = sc.body_meshes()["object"]  # world frame: the body sits at x = 1 mm
+    v = mesh.vertices - [0.001 + R, 0, 0]
+    assert np.allclose(np.hypot(np.hypot(v[:, 0], v[:, 2]) - R, v[:, 1]), r, atol=1e-9)

@@ -16,8 +16,7 @@ def test_knocker_every_step_feasible_through_the_rotation():
     res = simulate(cm)
     # the path ends in the prescribed rotation, which a run cannot continue: when the ring is still
     # drawn in at its last step the run says so (the sign of that small last force, ~5% of the
-    # peak, is not robust: the torus' sampled field and refinement events make the rotation
-    # phase's force ripple by +-0.35 N), and it never says so otherwise
+    # peak, is not robust), and it never says so otherwise
     from simfab.coupling.settle import still_drawn_in
 
     check_every_step(res, allow=("the path ends in a rotation",))
