@@ -28,9 +28,15 @@ def main(argv=None) -> int:
         print(f"usage: python tools/bench.py NAME [options]; NAME in {available()}", file=sys.stderr)
         return 0 if argv and argv[0] in ("-h", "--help") else 2
     mod = importlib.import_module(f"benchmarks.{argv[0]}")
+    from simfab.errors import InputError
     from simfab.io.atomic import to_jsonable
 
-    print(json.dumps(to_jsonable(mod.run(argv[1:]))))
+    try:
+        out = mod.run(argv[1:])
+    except InputError as e:  # bad input: one line, exit code 2, no traceback
+        print(f"bench {argv[0]}: error: {e}", file=sys.stderr)
+        return 2
+    print(json.dumps(to_jsonable(out)))
     return 0
 
 
