@@ -90,6 +90,7 @@ def machine_reference_ms() -> float:
 def run(argv) -> dict:
     from benchmarks._reference import figures
 
+    from simfab.contact.sdf import PrimitiveField
     from simfab.coupling.outputs import summarize
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import simulate
@@ -128,7 +129,8 @@ def run(argv) -> dict:
         rows.append({
             "scene": scene,
             "elements": int(cm.fem.n_elements),
-            "object_samples": int(len(cm.field.vertices)),
+            # IMLS samples of a mesh object (None: primitives, exact signed distance)
+            "object_samples": None if isinstance(cm.field, PrimitiveField) else int(len(cm.field.vertices)),
             "steps": len(cm.s_steps) - 1,
             "seconds": round(dt, 3),
             "seconds_median": round(statistics.median(runs), 3),
