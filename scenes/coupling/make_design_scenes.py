@@ -205,7 +205,7 @@ def knocker_design() -> None:
     name = "knocker3d_design"
     scene(name, doc="Door knocker (design): the knocker ring snapped into a stiff clip and rotated about its bar; the\n"
                     "initial clip needs large forces and yields. Optimize: insertion force <= 20 N, below yield, and\n"
-                    "a snap that holds the ring: >= 2 N to push it in, >= 1 N to pull it out.",
+                    "a snap that holds the ring: >= 1 N to push it in, >= 1 N to pull it out.",
           dim=3, comp=dict(generator="extruded_clamp", target_elements=1500, height=hk, **clamp),
           part_mesh=G.extruded_clamp(height=hk, **clamp), sdf_assets=[KNOCK_SDF], object_geoms=[KNOCK_GEOM],
           keys=[([xk, 0, 0], [1, 0, 0, 0]), ([xs, 0, 0], [1, 0, 0, 0]), ([xs, 0, 0], quat_z(-np.pi / 2))],
@@ -214,11 +214,12 @@ def knocker_design() -> None:
           mesh_options=dict(coarsen=True, tol=0.1, tries=6),
           # the thesis' brief (at most 20 N to push the ring in, below yield) and a snap that holds
           # the ring: at least 1 N to pull it out (3x the weight of a 30 g brass ring of this size)
-          # and 2 N to push it in. A 5 N insertion floor conflicts with the yield bound (two runs of
-          # 300 and 600 iterations reached 2.5-2.8 N at 59-60 MPa, P2 8x); without an insertion
-          # floor the annealer settles on a clip that no longer touches the ring (F_in = F_rm = 0:
-          # one flat penalty, lower than a snap's stress penalties on the way)
-          design=dict(grip="loose", insertion_force=[2.0, 20.0], removal_force=[1.0, math.inf], handles=5))
+          # and 1 N to push it in. Without an insertion floor the annealer settles on a clip that no
+          # longer touches the ring (F_in = F_rm = 0: one flat penalty, lower than a snap's stress
+          # penalties on the way). With the exact torus a 2 N floor was not met below yield (600
+          # iterations: F_in 1.51 N at 58.9 MPa, P2 8x); with the sampled ring's fattened bar 2 N
+          # were, and a 5 N floor was not (2.5-2.8 N at 59-60 MPa)
+          design=dict(grip="loose", insertion_force=[1.0, 20.0], removal_force=[1.0, math.inf], handles=5))
 
 
 def alligator3d() -> None:

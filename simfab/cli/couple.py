@@ -154,8 +154,9 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}}, device=dev)
     check_start(cm)  # before the log line: bad input gives exactly one line on stderr
     kind = "quadratic elements" if cm.options.element_order == 2 else "elements"
-    log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {len(cm.field.vertices)} object samples, "
-        f"{len(cm.s_steps) - 1} steps", quiet=quiet)
+    prims = getattr(cm.field, "primitives", None)  # exact signed distance (simfab.contact.sdf)
+    obj = (f"object: exact {', '.join(p.kind for p in prims)}" if prims else f"{len(cm.field.vertices)} object samples")
+    log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {obj}, {len(cm.s_steps) - 1} steps", quiet=quiet)
     res = simulate(cm, quiet=quiet)
     for m in res.warnings:  # warnings show even with --quiet
         log(f"simfab: warning: {m}")

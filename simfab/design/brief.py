@@ -73,6 +73,13 @@ SCALES = {"coupling_ratio": 1.0, "grip_force": 1.0, "insertion_force": 1.0, "rem
           "von_mises": 1.0e6, "seat_clearance": 1.0e-4}
 UNITS = {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N", "von_mises": "Pa",
          "seat_clearance": "m"}
+#: Correction rounds (simfab.design.pipeline.mesh_corrected) aim this far (relative) inside the
+#: force and stress bounds: the coarse figures times the correction factors carry the factors' own
+#: change from the checked design to the next (the annealer settles on a bound; on the knocker
+#: design, stop 17, F_rm read 1.018 N corrected and 0.98 N on its check, and the factors of two
+#: successive designs differed by 17-24 %).
+CORRECTION_MARGIN = 0.10
+MARGIN_FIGURES = ("grip_force", "insertion_force", "removal_force", "von_mises")
 #: kappa_cr of the thesis [%]: the steady state must stay this far below the peak energy.
 KAPPA_TIGHT = 95.0
 KAPPA_LOOSE = 1.0e-3
@@ -213,9 +220,19 @@ def constraints(figures: dict, limits: dict[str, tuple[float, float]]) -> list[C
             for k, (lo, hi) in limits.items()]
 
 
-def penalty(cons: list[Constraint]) -> float:
-    """W * sum of squared scaled violations [-] (0 when every constraint holds)."""
-    return PENALTY_WEIGHT * float(sum(c.violation ** 2 for c in cons))
+def penalty(cons: list[Constraint], margin: float = 0.0) -> float:
+    """W * sum of squared scaled violations [-] (0 when every constraint holds); with ``margin`` the
+    bounds of the force and stress constraints (MARGIN_FIGURES) move that far (relative) inside:
+    lo (1 + margin), hi (1 - margin)."""
+    return PENALTY_WEIGHT * float(sum(aimed(c, margin).violation ** 2 for c in cons))
+
+
+def aimed(c: Constraint, margin: float) -> Constraint:
+    """``c`` with its bounds moved ``margin`` (relative) inside when it is a force or stress
+    constraint (see :func:`penalty`)."""
+    if not margin or c.name not in MARGIN_FIGURES:
+        return c
+    return replace(c, lo=c.lo * (1.0 + margin), hi=c.hi * (1.0 - margin))
 
 
 def read_target_profile(path: Path) -> tuple[np.ndarray, np.ndarray]:

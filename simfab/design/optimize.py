@@ -137,6 +137,9 @@ class DesignProblem:
     corrections : {figure: factor} applied to the simulated figures before the constraints read
         them (mesh correction of a coarse model, :func:`simfab.design.verify.correction_factors`);
         empty: none
+    margin : relative margin inside the force and stress bounds that the penalties aim at
+        (:data:`simfab.design.brief.CORRECTION_MARGIN` in correction rounds, else 0); the
+        constraints report the brief's own bounds
     refined : boundary facet ids every candidate's insertion starts refined with (``simulate``'s
         ``refined``): those the initial shape's insertion refined, set by :func:`optimize`
     initial : the unmodified shape's insertion (``simulate(base)``, e.g. run for the displacement
@@ -157,6 +160,7 @@ class DesignProblem:
     sigma0: np.ndarray
     source: object = None
     corrections: dict = field(default_factory=dict)
+    margin: float = 0.0
     refined: tuple = ()
     initial: object = None
 
@@ -318,7 +322,7 @@ def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float, trac
       (:func:`simfab.coupling.profile.analyze`), itself at or after the running one, so those
       records are always part of it.
     """
-    terms = {k: problem.limits[k][1] for k in ("von_mises", "insertion_force", "removal_force")
+    terms = {k: problem.limits[k][1] * (1.0 - problem.margin) for k in ("von_mises", "insertion_force", "removal_force")
              if k in problem.limits and math.isfinite(problem.limits[k][1])}
     if not terms or not math.isfinite(threshold):
         return None
@@ -433,7 +437,7 @@ def _score(problem: DesignProblem, ev: Evaluation, res, keep_result: bool) -> No
     ev.newton_iterations = int(sum(st.iterations for st in res.steps))
     ev.figures = profile_figures(res, problem.brief.stress_radius)
     ev.constraints = problem.constraints(ev.figures)
-    pen = B.penalty(ev.constraints)
+    pen = B.penalty(ev.constraints, problem.margin)
     if problem.target is not None:
         scale = problem.corrections.get("force_profile", 1.0)  # mesh correction of the whole profile
         ev.rms_error = problem.target.rms_error(res.column("s"), scale * res.column("force"))

@@ -37,8 +37,9 @@ import numpy as np
 class ProblemSource:
     """What rebuilds a design problem in another process: the scene (MJCF path), the overrides of
     its ``[design]`` and ``[simulation]`` tables, the Warp device, the active handle vertices
-    (placed once, by the caller), the seed, the mesh corrections of the figures and the facets
-    every candidate's insertion starts refined with (``DesignProblem.refined``)."""
+    (placed once, by the caller), the seed, the mesh corrections of the figures with the margin
+    the penalties aim inside the bounds, and the facets every candidate's insertion starts refined
+    with (``DesignProblem.refined``)."""
 
     scene: str
     design: dict = field(default_factory=dict)
@@ -47,6 +48,7 @@ class ProblemSource:
     handle_vertices: tuple = ()
     seed: int = 0
     corrections: dict = field(default_factory=dict)
+    margin: float = 0.0
     refined: tuple = ()
 
 
@@ -60,7 +62,8 @@ def rebuild(source: ProblemSource):
                            device=check_device(source.device))
     p = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target,
                      handle_vertices=list(source.handle_vertices), seed=source.seed, source=source)
-    return dataclasses.replace(p, corrections=dict(source.corrections), refined=tuple(source.refined))
+    return dataclasses.replace(p, corrections=dict(source.corrections), margin=source.margin,
+                               refined=tuple(source.refined))
 
 
 _WORKER = None  # (source without its refined facets, the DesignProblem it rebuilds to) in a worker

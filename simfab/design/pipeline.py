@@ -115,7 +115,8 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
     (:func:`simfab.design.verify.needs_correction`; at most ``[design] correction_rounds``
     times), optimize again from the best checked design with the coarse figures multiplied by
     its check's correction factors (output space mapping: the coarse model stays the fast one,
-    its bias is measured on the design it produced) and check again. A round can make things
+    its bias is measured on the design it produced; its penalties aim CORRECTION_MARGIN inside the
+    force and stress bounds, since the next design's factors differ) and check again. A round can make things
     worse (the factors change along the way, e.g. when a contact event moves with the mesh), so
     the best checked design is kept: feasible on the refined meshes first, then the lowest
     objective there (:func:`simfab.design.verify.checked_objective`).
@@ -125,6 +126,7 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
     """
     import dataclasses
 
+    from simfab.design.brief import CORRECTION_MARGIN
     from simfab.design.optimize import optimize
     from simfab.design.verify import checked_objective, correction_factors, mesh_check, needs_correction
     from simfab.progress import log
@@ -143,8 +145,9 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
             break
         factors = correction_factors(check_b)
         p = res_b.problem
-        src = None if p.source is None else dataclasses.replace(p.source, corrections=factors)
-        problem = dataclasses.replace(p, corrections=factors, source=src)
+        margin = CORRECTION_MARGIN  # the next design's factors differ from these: aim inside the bounds
+        src = None if p.source is None else dataclasses.replace(p.source, corrections=factors, margin=margin)
+        problem = dataclasses.replace(p, corrections=factors, margin=margin, source=src)
         log(f"couple optimize: {name}: correction round {k + 1}: the coarse figures times "
             + ", ".join(f"{n} {v:.3g}" for n, v in factors.items()), quiet=quiet)
         nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet, workers=workers if src is not None else 1,

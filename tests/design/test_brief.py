@@ -30,6 +30,23 @@ def test_penalty_zero_inside_bounds_and_growing_outside():
     assert np.isclose(a, b) and np.isclose(a, B.PENALTY_WEIGHT)
 
 
+def test_correction_margin_aims_inside_force_and_stress_bounds():
+    """Correction rounds penalize force and stress figures within the margin of their bounds (the
+    reported constraints keep the brief's bounds); the coupling ratio keeps its own."""
+    lim = {"insertion_force": (2.0, 20.0), "removal_force": (1.0, math.inf), "von_mises": (0.0, 60e6),
+           "coupling_ratio": (0.0, 1e-3)}
+    fig = {"insertion_force": 10.0, "removal_force": 1.05, "von_mises": 50e6, "coupling_ratio": 0.0}
+    cons = B.constraints(fig, lim)
+    assert all(c.satisfied for c in cons) and B.penalty(cons) == 0.0
+    m = B.CORRECTION_MARGIN
+    # 1.05 N is within 10 % of the 1 N floor: (1.1 - 1.05)^2 W
+    assert np.isclose(B.penalty(cons, m), B.PENALTY_WEIGHT * (1.0 * (1 + m) - 1.05) ** 2)
+    near_yield = B.constraints(dict(fig, removal_force=2.0, von_mises=57e6), lim)
+    assert np.isclose(B.penalty(near_yield, m), B.PENALTY_WEIGHT * ((57e6 - 60e6 * (1 - m)) / 1e6) ** 2)
+    # bounds of 0 and inf stay, and so does the coupling ratio's
+    assert B.penalty(B.constraints(dict(fig, removal_force=5.0, coupling_ratio=0.99e-3), lim), m) == 0.0
+
+
 def test_bounds_from_grip():
     assert B.bounds(B.DesignBrief(grip="tight"), 60e6)["coupling_ratio"] == (0.1, 95.0)
     assert B.bounds(B.DesignBrief(grip="loose"), 60e6)["coupling_ratio"] == (0.0, 1e-3)
