@@ -116,8 +116,8 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
     times), optimize again from the best checked design with the coarse figures multiplied by
     its check's correction factors (output space mapping: the coarse model stays the fast one,
     its bias is measured on the design it produced; its penalties aim CORRECTION_MARGIN inside the
-    force and stress bounds, since the next design's factors differ) and check again. A round can make things
-    worse (the factors change along the way, e.g. when a contact event moves with the mesh), so
+    force and stress bounds, since the next design's factors differ) and check again. A round can
+    make things worse (the factors change along the way, e.g. when a contact event moves with the mesh), so
     the best checked design is kept: feasible on the refined meshes first, then the lowest
     objective there (:func:`simfab.design.verify.checked_objective`).
 
