@@ -216,9 +216,9 @@ def main() -> None:
     rok = CLAMP_KNOCK["inner_radius"] + CLAMP_KNOCK["width"]
     xk = x_start(CLAMP_KNOCK, margin=0.0005, radius=KNOCK_r)
     xs = max(KNOCK_r - CLAMP_KNOCK["inner_radius"], 0.0) + 0.0001  # seated: the bar clears the back of the clip
-    # 3 layers of the extruded section (8,181 10-node tets, meshed on load): within 3.5% of 6 layers
+    # 3 layers of the extruded section (8,181 10-node tets, meshed on load): within 1.4% of 8 layers
     # where the stored 4,880-tet fTetWild mesh it ran before (knocker3d_part.npz, still the fixed
-    # real-geometry mesh of tools/bench.py p2 and linear_solvers) was 4-6% off
+    # real-geometry mesh of tools/bench.py p2 and linear_solvers) was up to 4.1% off
     scene("knocker3d", doc="Door-knocker ring (an exact torus): inserted horizontally into a clip, then rotated about its\n"
           "bar. Quadratic (10-node) tets on the clip's section extruded in 3 layers: linear tets were 57-74%\n"
           "too stiff (see README.md, \"Mesh resolution\").", dim=3,
