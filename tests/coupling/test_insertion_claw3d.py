@@ -1,6 +1,5 @@
-"""Insertion of the largest bundled model: the four-finger claw on a sphere (5,130 tets, an
-object with 10,000 samples; its own module so that the test runner can place it on another
-worker)."""
+"""Insertion of the largest bundled model: the four-finger claw on a sphere (5,130 tets, the ball
+an exact sphere; its own module so that the test runner can place it on another worker)."""
 
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene

@@ -11,8 +11,9 @@ Cases (bundled scenes, closest to the sizes of the thesis' timing table):
   knocker3d (5,220 10-node tets in 2 layers, 40 steps; bundled: 8,181 in 3, 80 steps) vs "door knocker"
             5080 elements, 40 steps
   claw3d    (5,130 10-node tets, 25 steps) vs "claw 3D"     12063 elements, 25 steps
-            (the 3D scenes run quadratic tets, as bundled: claw3d on its bundled mesh, within
-            3.5% of its mesh-converged figures where linear tets were 40-44% too stiff; knocker3d
+            (the 3D scenes run quadratic tets, as bundled: claw3d on its bundled mesh with an
+            exact ball, within 3.5% of its mesh-converged figures where linear tets were 40-44% too
+            stiff; knocker3d
             at 2 layers, 2-5% above 8 layers; clip3d at the original's size, one layer, ~3% on
             E_max and forces, ~11% on the grip: see scenes/coupling/README.md)
 Each row reports the simulation seconds (fastest run; scene loading and meshing excluded, as in
