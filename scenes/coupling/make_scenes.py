@@ -32,6 +32,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
 
+from simfab.io.mjcf import TORUS_PLUGIN  # noqa: E402
+
 R_CYL = 0.010  # cylinder / sphere radius [m]
 
 CLAMP_TIGHT = dict(inner_radius=0.0095, width=0.0025, opening_deg=60.0, base_depth=0.004, base_height=0.020)
@@ -51,7 +53,7 @@ KNOCK_R, KNOCK_r = 0.020, 0.003  # ring major / tube radius [m]
 #: The knocker ring: an exact torus (MuJoCo's SDF torus plugin; MJCF has no torus geom) with its axis
 #: along y and its bar (nearest tube section) through the body origin. As a 96 x 24 facet mesh its
 #: sampled contact field did not converge (the facets sit up to 26 um inside the tube).
-KNOCK_SDF = ("ring", "mujoco.sdf.torus", dict(radius1=KNOCK_R, radius2=KNOCK_r))
+KNOCK_SDF = ("ring", TORUS_PLUGIN, dict(radius1=KNOCK_R, radius2=KNOCK_r))
 KNOCK_GEOM = dict(sdf="ring", pos=[KNOCK_R, 0, 0], quat=[math.sqrt(0.5), math.sqrt(0.5), 0, 0])
 #: The knocker's clip holds the ring's bar loosely (0.3 mm clearance) behind a mouth narrower than the
 #: bar (snap on insertion); the bar's curvature (offset y^2 / 2R = 0.225 mm at the clip's ends) still

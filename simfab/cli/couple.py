@@ -145,6 +145,7 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
                    stem: str | None = None) -> dict:
     """Load a coupling scene, run the insertion and write every output; returns the summary."""
     from simfab._warp import device as check_device  # quiet Warp initialization
+    from simfab.contact.sdf import PrimitiveField
     from simfab.coupling.outputs import write_all
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import check_start, simulate
@@ -154,8 +155,9 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}}, device=dev)
     check_start(cm)  # before the log line: bad input gives exactly one line on stderr
     kind = "quadratic elements" if cm.options.element_order == 2 else "elements"
-    prims = getattr(cm.field, "primitives", None)  # exact signed distance (simfab.contact.sdf)
-    obj = (f"object: exact {', '.join(p.kind for p in prims)}" if prims else f"{len(cm.field.vertices)} object samples")
+    exact = isinstance(cm.field, PrimitiveField)  # exact signed distance, not sampled
+    obj = (f"object: exact {', '.join(p.kind for p in cm.field.primitives)}" if exact
+           else f"{len(cm.field.vertices)} object samples")
     log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {obj}, {len(cm.s_steps) - 1} steps", quiet=quiet)
     res = simulate(cm, quiet=quiet)
     for m in res.warnings:  # warnings show even with --quiet

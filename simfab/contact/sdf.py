@@ -39,8 +39,6 @@ import numpy as np
 from simfab.contact.imls import ImlsEval, body_frame, pose_matrix
 
 KINDS = ("sphere", "capsule", "cylinder", "box", "torus")
-#: MuJoCo SDF plugin read as an exact torus (config radius1: major radius, radius2: tube radius [m]).
-TORUS_PLUGIN = "mujoco.sdf.torus"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -105,30 +103,22 @@ def _local_sdf(kind: str, size, q: np.ndarray, hessian: bool):
         ez[:, 2] = np.sign(q[:, 2])
         a, b = rho - r, np.abs(q[:, 2]) - h
         out = (a > 0) & (b > 0)  # nearest point on the rim
-        dist = np.where(out, np.hypot(np.maximum(a, 0), np.maximum(b, 0)), np.maximum(a, b))
+        dist = np.maximum(a, b)
         # gradient of the (unsigned outside / negative inside) distance
         gd = np.where((a >= b)[:, None], er, ez)
-        if out.any():
-            gd[out] = (a[out, None] * er[out] + b[out, None] * ez[out]) / dist[out, None]
         if hessian:
-            # side (a >= b): d = rho - r, hess = (I_xy - e_r e_r^T) / rho; caps: 0; rim: that of
-            # the distance to the circle, (I - n n^T) projected, with n = gd
+            # side (a >= b): d = rho - r, hess = (I_xy - e_r e_r^T) / rho; caps: 0
             side = (a >= b) & ~out
             Pxy = np.zeros((k, 3, 3))
             Pxy[:, 0, 0] = Pxy[:, 1, 1] = 1.0
             Pxy -= er[:, :, None] * er[:, None, :]
             Hd = np.where(side[:, None, None], Pxy / np.maximum(rho, 1e-300)[:, None, None], 0.0)
-            if out.any():
-                # distance to the rim circle: (P - n n^T) / d in the (e_r, e_z) plane P, plus
-                # a / (d rho) along the azimuthal tangent t
-                n, e_r, e_z = gd[out], er[out], ez[out]
-                t = np.cross(e_r, np.array([0.0, 0.0, 1.0]))
-                P = e_r[:, :, None] * e_r[:, None, :] + e_z[:, :, None] * e_z[:, None, :]
-                d_o = dist[out][:, None, None]
-                Hd[out] = (P - n[:, :, None] * n[:, None, :]) / d_o + \
-                    (t[:, :, None] * t[:, None, :]) * (a[out] / (dist[out] * np.maximum(rho[out], 1e-300)))[:, None, None]
-            H = -Hd
-        return -dist, -gd, H
+        if out.any():  # the rim: the distance to the circle of radius r at z = +-h
+            rim = q[out] - np.c_[np.zeros((out.sum(), 2)), np.sign(q[out, 2]) * h]
+            dist[out], gd[out], H_rim = _circle_distance(rim, r, hessian)
+            if hessian:
+                Hd[out] = H_rim
+        return -dist, -gd, (-Hd if hessian else None)
     if kind == "torus":
         return _torus_sdf(size, q, hessian)
     e = np.asarray(size, float)
@@ -156,27 +146,36 @@ def _local_sdf(kind: str, size, q: np.ndarray, hessian: bool):
 
 
 def _torus_sdf(size, q: np.ndarray, hessian: bool):
-    """Torus of major radius R and tube radius r about local z: psi = r - |w|, w = (rho - R, q_z),
-    rho = |q_xy|. grad |w| = n = ((rho - R) e_r + q_z e_z) / |w|; hess |w| = (P - n n^T) / |w| in the
-    (e_r, e_z) plane P plus (rho - R) / (|w| rho) t t^T along the azimuthal tangent t."""
+    """Torus of major radius R and tube radius r about local z: psi = r - d, d the distance to its
+    centre circle (:func:`_circle_distance`)."""
     R, r = size
+    d, g, H = _circle_distance(q, R, hessian)
+    return r - d, -g, (-H if hessian else None)
+
+
+def _circle_distance(q: np.ndarray, R: float, hessian: bool):
+    """(d (k,), grad d (k, 3), hess d (k, 3, 3) or None): distance from local points q (k, 3) to the
+    circle of radius R about the z axis in the plane z = 0. With rho = |q_xy|, e_r the radial unit
+    vector, t = e_r x e_z the azimuthal one: d = |(rho - R, q_z)|, grad d = n = ((rho - R) e_r +
+    q_z e_z) / d, hess d = (e_r e_r^T + e_z e_z^T - n n^T) / d + (rho - R) / (d rho) t t^T.
+    (The cylinder's rim and the torus' centre circle.)"""
     k = len(q)
     rho = np.linalg.norm(q[:, :2], axis=1)
     er = np.zeros((k, 3))
     er[:, :2] = q[:, :2] / np.maximum(rho, 1e-300)[:, None]
+    ez = np.zeros((k, 3))
+    ez[:, 2] = 1.0
     a = rho - R
-    w = np.hypot(a, q[:, 2])
-    ws = np.maximum(w, 1e-300)
-    n = (a[:, None] * er + q[:, 2:3] * np.array([0.0, 0.0, 1.0])) / ws[:, None]
-    H = None
-    if hessian:
-        ez = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (k, 3))
-        t = np.cross(er, ez)
-        P = er[:, :, None] * er[:, None, :] + ez[:, :, None] * ez[:, None, :]
-        Hd = (P - n[:, :, None] * n[:, None, :]) / ws[:, None, None] + \
-            (t[:, :, None] * t[:, None, :]) * (a / (ws * np.maximum(rho, 1e-300)))[:, None, None]
-        H = -Hd
-    return r - w, -n, H
+    d = np.hypot(a, q[:, 2])
+    ds = np.maximum(d, 1e-300)
+    n = (a[:, None] * er + q[:, 2:3] * ez) / ds[:, None]
+    if not hessian:
+        return d, n, None
+    t = np.cross(er, ez)
+    P = er[:, :, None] * er[:, None, :] + ez[:, :, None] * ez[:, None, :]
+    H = (P - n[:, :, None] * n[:, None, :]) / ds[:, None, None] + \
+        (t[:, :, None] * t[:, None, :]) * (a / (ds * np.maximum(rho, 1e-300)))[:, None, None]
+    return d, n, H
 
 
 @dataclass(kw_only=True, eq=False)
@@ -266,7 +265,7 @@ def primitives_of_body(model, body_id: int, plugins: dict | None = None) -> tupl
     radii from ``plugins``, :attr:`simfab.io.mjcf.Scene.sdf_plugins`), or it has none."""
     import mujoco
 
-    from simfab.io.mjcf import quat_to_matrix
+    from simfab.io.mjcf import quat_to_matrix, torus_radii
 
     G = mujoco.mjtGeom
     kinds = {int(G.mjGEOM_SPHERE): "sphere", int(G.mjGEOM_CAPSULE): "capsule", int(G.mjGEOM_CYLINDER): "cylinder",
@@ -285,20 +284,6 @@ def primitives_of_body(model, body_id: int, plugins: dict | None = None) -> tupl
         out.append(Primitive(kind=kind, size=tuple(float(v) for v in size), centre=np.asarray(model.geom_pos[g], float),
                              rotation=quat_to_matrix(np.asarray(model.geom_quat[g], float))))
     return tuple(out) or None
-
-
-def torus_radii(model, g: int, plugins: dict | None) -> tuple | None:
-    """(major, tube) radii [m] of geom ``g`` when it is an SDF geom of the ``mujoco.sdf.torus``
-    plugin (``plugins``: instance id -> (plugin name, config), :attr:`simfab.io.mjcf.Scene.sdf_plugins`),
-    else None."""
-    import mujoco
-
-    if int(model.geom_type[g]) != int(mujoco.mjtGeom.mjGEOM_SDF) or not plugins:
-        return None
-    name, config = plugins.get(int(model.geom_plugin[g]), (None, {}))
-    if name != TORUS_PLUGIN:
-        return None
-    return float(config["radius1"]), float(config["radius2"])
 
 
 def section_primitives(prims: tuple) -> tuple | None:

@@ -228,11 +228,17 @@ def penalty(cons: list[Constraint], margin: float = 0.0) -> float:
 
 
 def aimed(c: Constraint, margin: float) -> Constraint:
-    """``c`` with its bounds moved ``margin`` (relative) inside when it is a force or stress
-    constraint (see :func:`penalty`)."""
-    if not margin or c.name not in MARGIN_FIGURES:
-        return c
-    return replace(c, lo=c.lo * (1.0 + margin), hi=c.hi * (1.0 - margin))
+    """``c`` with :func:`aimed_bounds` (see :func:`penalty`)."""
+    lo, hi = aimed_bounds(c.name, c.lo, c.hi, margin)
+    return c if (lo, hi) == (c.lo, c.hi) else replace(c, lo=lo, hi=hi)
+
+
+def aimed_bounds(name: str, lo: float, hi: float, margin: float) -> tuple[float, float]:
+    """Constraint ``name``'s bounds moved ``margin`` (relative) inside when it is a force or stress
+    constraint (MARGIN_FIGURES): (lo (1 + margin), hi (1 - margin)); else (lo, hi)."""
+    if not margin or name not in MARGIN_FIGURES:
+        return lo, hi
+    return lo * (1.0 + margin), hi * (1.0 - margin)
 
 
 def read_target_profile(path: Path) -> tuple[np.ndarray, np.ndarray]:

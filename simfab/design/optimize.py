@@ -322,7 +322,8 @@ def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float, trac
       (:func:`simfab.coupling.profile.analyze`), itself at or after the running one, so those
       records are always part of it.
     """
-    terms = {k: problem.limits[k][1] * (1.0 - problem.margin) for k in ("von_mises", "insertion_force", "removal_force")
+    terms = {k: B.aimed_bounds(k, *problem.limits[k], problem.margin)[1]  # the bounds the penalties aim at
+             for k in ("von_mises", "insertion_force", "removal_force")
              if k in problem.limits and math.isfinite(problem.limits[k][1])}
     if not terms or not math.isfinite(threshold):
         return None

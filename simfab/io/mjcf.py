@@ -146,8 +146,6 @@ def geom_mesh(model, g: int, plugins: dict | None = None):
     with 128 x 32 sections, others use the mesh MuJoCo extracts from their distance field."""
     import trimesh
 
-    from simfab.contact.sdf import torus_radii
-
     mj = _mujoco()
     t = int(model.geom_type[g])
     s = np.asarray(model.geom_size[g], dtype=np.float64)
@@ -176,6 +174,23 @@ def geom_mesh(model, g: int, plugins: dict | None = None):
         F = np.asarray(model.mesh_face[fa:fa + fn], dtype=np.int64)
         return trimesh.Trimesh(V, F, process=False)
     return None
+
+
+#: MuJoCo SDF plugin read as an exact torus (config radius1: major radius, radius2: tube radius [m];
+#: simfab.contact.sdf).
+TORUS_PLUGIN = "mujoco.sdf.torus"
+
+
+def torus_radii(model, g: int, plugins: dict | None) -> tuple | None:
+    """(major, tube) radii [m] of geom ``g`` when it is an SDF geom of the ``mujoco.sdf.torus``
+    plugin (``plugins``: instance id -> (plugin name, config), :attr:`Scene.sdf_plugins`),
+    else None."""
+    if int(model.geom_type[g]) != int(_mujoco().mjtGeom.mjGEOM_SDF) or not plugins:
+        return None
+    name, config = plugins.get(int(model.geom_plugin[g]), (None, {}))
+    if name != TORUS_PLUGIN:
+        return None
+    return float(config["radius1"]), float(config["radius2"])
 
 
 def load_model(path: str | os.PathLike):
