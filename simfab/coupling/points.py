@@ -27,46 +27,38 @@ class ContactPoints:
         return len(self.verts)
 
     @property
-    def n_plain(self) -> int:
-        """Number of leading plain-vertex points (facet -1): sets list vertices first, and these
-        are read and scattered directly instead of through their (1, 0[, 0]) weights."""
-        n = self.cache.get("n_plain")
-        if n is None:
-            interp = np.flatnonzero(self.facet >= 0)
-            n = self.cache["n_plain"] = int(interp[0]) if len(interp) else len(self.facet)
-        return n
+    def matrix(self):
+        """(k, n_max) CSR interpolation matrix P, y = P x (n_max: the largest parent index + 1),
+        built once per set: one sparse product instead of gathers and a weighted sum per call
+        (the insertion loop reads positions several times per Newton iteration)."""
+        P = self.cache.get("matrix")
+        if P is None:
+            import scipy.sparse as sp
+
+            k, nv = self.verts.shape  # (a plain vertex repeats its index with weights 1, 0[, 0])
+            P = sp.csr_matrix((self.weights.ravel().copy(), self.verts.ravel().copy(), np.arange(0, k * nv + 1, nv)),
+                              shape=(k, int(self.verts.max()) + 1 if k else 0))
+            P.sum_duplicates()
+            P.eliminate_zeros()
+            P = self.cache["matrix"] = (P, P.T.tocsr())
+        return P
 
     def positions(self, x: np.ndarray) -> np.ndarray:
         """(k, dim) point positions (or displacements when ``x`` is a displacement field)."""
-        nb = self.n_plain
-        if nb == len(self):
-            return x[self.verts[:, 0]]
-        out = np.empty((len(self), x.shape[1]))
-        out[:nb] = x[self.verts[:nb, 0]]
-        out[nb:] = np.einsum("km,kmd->kd", self.weights[nb:], x[self.verts[nb:]])
-        return out
+        P = self.matrix[0]
+        return P @ x[: P.shape[1]]
 
     def scatter(self, g_points: np.ndarray, n_vertices: int, rows: np.ndarray | None = None) -> np.ndarray:
         """Vertex vectors (n, dim) = sum_j w_ja g_j (transpose of :meth:`positions`). With ``rows``
         (a,) int, ``g_points`` (a, dim) is given at those points only (the others are zero)."""
         dim = g_points.shape[1]
-        nb = self.n_plain
+        out = np.zeros((n_vertices, dim))
         if rows is not None:  # a few points (e.g. those in contact): accumulate them in place
-            out = np.zeros((n_vertices, dim))
-            plain = rows < nb
-            np.add.at(out, self.verts[rows[plain], 0], g_points[plain])
-            if not plain.all():
-                inner = rows[~plain]
-                contrib = self.weights[inner, :, None] * g_points[~plain, None, :]  # (i, nv, dim)
-                np.add.at(out, self.verts[inner].ravel(), contrib.reshape(-1, dim))
+            contrib = self.weights[rows, :, None] * g_points[:, None, :]  # (a, nv, dim)
+            np.add.at(out, self.verts[rows].ravel(), contrib.reshape(-1, dim))
             return out
-        idx = self.cache.get("scatter_idx")
-        if idx is None:
-            idx = self.cache["scatter_idx"] = np.concatenate([self.verts[:nb, 0], self.verts[nb:].ravel()])
-        c = np.concatenate([g_points[:nb], (self.weights[nb:, :, None] * g_points[nb:, None, :]).reshape(-1, dim)])
-        out = np.empty((n_vertices, dim))
-        for a in range(dim):  # every point: one pass per axis
-            out[:, a] = np.bincount(idx, weights=c[:, a], minlength=n_vertices)
+        PT = self.matrix[1]
+        out[: PT.shape[0]] = PT @ g_points
         return out
 
     def concat(self, other: "ContactPoints") -> "ContactPoints":
