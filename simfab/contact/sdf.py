@@ -237,15 +237,18 @@ class PrimitiveField:
         c = (R @ prim.centre + p)[:dim]
         rel = pts - c
         n = np.sqrt(np.einsum("kd,kd->k", rel, rel))
-        u = rel / np.maximum(n, 1e-300)[:, None]
+        inv = 1.0 / np.maximum(n, 1e-300)
+        u = rel * inv[:, None]
         psi = prim.size[0] - n
         k = len(pts)
         hess = np.zeros((k, dim, dim))
         if hessian:
-            sel = np.ones(k, bool) if hessian_band is None else psi > -hessian_band
-            if sel.any():
-                us = u[sel]
-                hess[sel] = -(np.eye(dim)[None] - us[:, :, None] * us[:, None, :]) / np.maximum(n[sel], 1e-300)[:, None, None]
+            sel = slice(None) if hessian_band is None else np.flatnonzero(psi > -hessian_band)
+            us, inv_s = u[sel], inv[sel]
+            if len(us):
+                h = us[:, :, None] * us[:, None, :]
+                h[:, range(dim), range(dim)] -= 1.0
+                hess[sel] = h * inv_s[:, None, None]
         return ImlsEval(psi=psi, grad=-u, hess=hess, near=np.ones(k, dtype=bool))
 
     def far_lower_bound(self, points, pose=None) -> np.ndarray:
