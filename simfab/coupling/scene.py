@@ -143,11 +143,12 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
     body = str(obj.get("body", "object"))
     rho = obj.get("rot_length_scale")
     path = Trajectory.from_scene(sc, body=body, **({} if rho is None else {"rot_length_scale": float(rho)}))
-    mesh = object_mesh_body_frame(sc, body)
     n_samples = int(obj.get("samples", 50 if dim == 2 else 2000))
     if n_samples < 8:
         raise InputError(f"samples={n_samples} is too few for the object's IMLS field", where=f"{where} [object]")
     fld = primitive_field(sc, body, dim, n_samples) if obj.get("sigma") is None else None
+    # O's mesh: sampled for its IMLS field, or displayed in 3D (a 2D primitive shows its exact samples)
+    mesh = object_mesh_body_frame(sc, body) if fld is None or dim == 3 else None
     if fld is not None:  # exact signed distance of primitive geoms (simfab.contact.sdf)
         disp_v, disp_f = (fld.vertices, None) if dim == 2 else (np.asarray(mesh.vertices), np.asarray(mesh.faces))
     elif dim == 2:

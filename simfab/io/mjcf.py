@@ -360,8 +360,13 @@ class Trajectory:
         """(samples, 3) positions [m] at ``samples`` evenly spaced path lengths from 0 to the end
         (computed once per count: the path is immutable)."""
         cache = self.__dict__.setdefault("_sampled", {})
-        if samples not in cache:
-            cache[samples] = np.array([self.pose_at(s)[0] for s in np.linspace(0.0, self.length, samples)])
+        if samples not in cache:  # pose_at's positions, vectorized (linear within each segment)
+            s = np.linspace(0.0, self.length, samples)
+            seg, cum = self.segment_lengths, self._cumulative
+            i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
+            f = np.where(seg[i] > 0, (s - cum[i]) / np.where(seg[i] > 0, seg[i], 1.0), 0.0)
+            P = np.asarray(self.positions, dtype=float)
+            cache[samples] = (1.0 - f)[:, None] * P[i] + f[:, None] * P[i + 1]
         return cache[samples]
 
     def pose_at_key(self, u: float):
@@ -424,16 +429,25 @@ class Trajectory:
 
 
 def _body_radius(model, bid: int) -> float:
-    """Largest distance of a body's geometry from the body frame origin [m] (exact for meshes)."""
+    """Largest distance of a body's geometry from the body frame origin [m]: exact for meshes and
+    (SDF geoms: their MuJoCo mesh) and for primitives centred on the body's origin (MuJoCo's
+    bounding radius ``geom_rbound``), |geom pos| + that radius (an upper bound) for an offset
+    primitive. No meshing (the scene loads without trimesh)."""
+    mj = _mujoco()
+    G = mj.mjtGeom
     r = 0.0
     for g in range(model.ngeom):
         if int(model.geom_bodyid[g]) != bid:
             continue
-        mesh = geom_mesh(model, g)
-        if mesh is None:
-            continue
-        V = mesh.vertices @ quat_to_matrix(model.geom_quat[g]).T + model.geom_pos[g]
-        r = max(r, float(np.linalg.norm(V, axis=1).max()))
+        t = int(model.geom_type[g])
+        pos = np.asarray(model.geom_pos[g], dtype=np.float64)
+        if t in (int(G.mjGEOM_MESH), int(G.mjGEOM_SDF)) and int(model.geom_dataid[g]) >= 0:
+            mid = int(model.geom_dataid[g])
+            va, vn = int(model.mesh_vertadr[mid]), int(model.mesh_vertnum[mid])
+            V = np.asarray(model.mesh_vert[va:va + vn], dtype=np.float64) @ quat_to_matrix(model.geom_quat[g]).T + pos
+            r = max(r, float(np.linalg.norm(V, axis=1).max()))
+        elif t not in (int(G.mjGEOM_PLANE), int(G.mjGEOM_HFIELD), int(G.mjGEOM_MESH), int(G.mjGEOM_SDF)):
+            r = max(r, float(np.linalg.norm(pos)) + float(model.geom_rbound[g]))
     return r
 
 
