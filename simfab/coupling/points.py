@@ -28,9 +28,10 @@ class ContactPoints:
 
     @property
     def matrix(self):
-        """(k, n_max) CSR interpolation matrix P, y = P x (n_max: the largest parent index + 1),
-        built once per set: one sparse product instead of gathers and a weighted sum per call
-        (the insertion loop reads positions several times per Newton iteration)."""
+        """(P, P^T): the (k, n_max) CSR interpolation matrix, y = P x (n_max: the largest parent
+        index + 1), and its transpose, built once per set: one sparse product instead of gathers
+        and a weighted sum per call (the insertion loop reads positions several times per Newton
+        iteration)."""
         P = self.cache.get("matrix")
         if P is None:
             import scipy.sparse as sp
