@@ -429,10 +429,10 @@ class Trajectory:
 
 
 def _body_radius(model, bid: int) -> float:
-    """Largest distance of a body's geometry from the body frame origin [m]: exact for meshes and
-    (SDF geoms: their MuJoCo mesh) and for primitives centred on the body's origin (MuJoCo's
-    bounding radius ``geom_rbound``), |geom pos| + that radius (an upper bound) for an offset
-    primitive. No meshing (the scene loads without trimesh)."""
+    """Largest distance of a body's geometry from the body frame origin [m]: exact for meshes (an
+    SDF geom: its MuJoCo mesh) and for primitives centred on the body's origin (MuJoCo's bounding
+    radius ``geom_rbound``); |geom pos| + that radius (an upper bound) for an offset primitive.
+    No meshing (the scene loads without trimesh)."""
     mj = _mujoco()
     G = mj.mjtGeom
     r = 0.0
