@@ -64,6 +64,9 @@ def test_trajectory_matches_analytic_interpolation(scene_path):
     assert samples[0][0] == 0 and samples[-1][0] == pytest.approx(traj.length)
     assert len(samples) == int(np.floor(traj.length / 0.01)) + 2
     np.testing.assert_allclose(samples[10][1], [0, 0, 0.2], atol=1e-12)
+    # evenly sampled positions (vectorized) are pose_at's
+    ss = np.linspace(0.0, traj.length, 101)
+    np.testing.assert_allclose(traj.sampled_positions(101), [traj.pose_at(v)[0] for v in ss], rtol=0, atol=1e-15)
 
 
 def test_slerp_constant_angular_speed():
