@@ -203,8 +203,11 @@ def _display_mesh(fem, X):
     return X[used], remap[F]
 
 
-def plot_profiles(res, path) -> Path:
-    """Energy and force profiles of the initial and the optimized design, with the brief's bands."""
+def plot_profiles(res, path, mesh_check: dict | None = None) -> Path:
+    """Energy and force profiles of the initial and the optimized design, with the brief's bands.
+    The titles list the constraints: the mesh check's mesh-converged figures when ``mesh_check``
+    (the summary's) is given, which decide whether the design meets the brief, else the
+    optimizer's own (coarse-mesh, mesh-corrected) figures."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -253,14 +256,19 @@ def plot_profiles(res, path) -> Path:
     ax2.set_xlabel("insertion distance [mm]")
     ax1.legend(fontsize=8, loc="upper left")
     ax2.legend(fontsize=7, loc="lower left")
+    if mesh_check:
+        cons = [(c["name"], c["value"], c["lo"], c["hi"], c["satisfied"]) for c in mesh_check["constraints"]]
+        what = " (constraints: mesh-converged figures)"
+    else:
+        cons = [(c.name, c.value, c.lo, c.hi, c.satisfied) for c in res.best.constraints]
+        what = " (constraints on mesh-corrected figures)" if res.problem.corrections else ""
     lines = []
-    for c in res.best.constraints:
-        u = B.UNITS[c.name]
+    for name, value, lo, hi, ok in cons:
+        u = B.UNITS[name]
         k, uu = {"Pa": (1e-6, "MPa"), "m": (1e3, "mm")}.get(u, (1.0, u))
-        lo = "-inf" if not np.isfinite(c.lo) else f"{c.lo * k:.3g}"
-        hi = "inf" if not np.isfinite(c.hi) else f"{c.hi * k:.3g}"
-        lines.append(f"{c.name} {c.value * k:.3g} {uu} in [{lo}, {hi}] {'ok' if c.satisfied else 'VIOLATED'}")
-    what = " (constraints on mesh-corrected figures)" if res.problem.corrections else ""
+        lo = "-inf" if lo is None or not np.isfinite(lo) else f"{lo * k:.3g}"
+        hi = "inf" if hi is None or not np.isfinite(hi) else f"{hi * k:.3g}"
+        lines.append(f"{name} {value * k:.3g} {uu} in [{lo}, {hi}] {'ok' if ok else 'VIOLATED'}")
     ax1.set_title(f"{res.problem.base.name}: before / after rest-shape optimization{what}\n"
                   + "; ".join(lines[:3]), fontsize=8)
     if len(lines) > 3:
@@ -373,7 +381,7 @@ def write_all(res, out: Path, *, scene_xml: Path, scene_toml: Path, stem: str | 
         if fem.dim == 2:
             write_outline_csv(fem, res.best.rest, tmp["outline_csv"])
         write_scene(res, scene_xml, scene_toml, paths, tmp, stem)
-        plot_profiles(res, tmp["profile_png"])
+        plot_profiles(res, tmp["profile_png"], s.get("mesh_check"))
         plot_shape(res, tmp["shape_png"])
         write_csv(tmp["history_csv"], HISTORY_HEADER, history_rows(res))
         write_usd(res, tmp["usd"])
