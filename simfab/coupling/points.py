@@ -27,12 +27,12 @@ class ContactPoints:
         return len(self.verts)
 
     @property
-    def matrix(self):
+    def interpolation(self):
         """(P, P^T): the (k, n_max) CSR interpolation matrix, y = P x (n_max: the largest parent
         index + 1), and its transpose, built once per set: one sparse product instead of gathers
         and a weighted sum per call (the insertion loop reads positions several times per Newton
         iteration)."""
-        P = self.cache.get("matrix")
+        P = self.cache.get("interpolation")
         if P is None:
             import scipy.sparse as sp
 
@@ -41,12 +41,12 @@ class ContactPoints:
                               shape=(k, int(self.verts.max()) + 1 if k else 0))
             P.sum_duplicates()
             P.eliminate_zeros()
-            P = self.cache["matrix"] = (P, P.T.tocsr())
+            P = self.cache["interpolation"] = (P, P.T.tocsr())
         return P
 
     def positions(self, x: np.ndarray) -> np.ndarray:
         """(k, dim) point positions (or displacements when ``x`` is a displacement field)."""
-        P = self.matrix[0]
+        P = self.interpolation[0]
         return P @ x[: P.shape[1]]
 
     def scatter(self, g_points: np.ndarray, n_vertices: int, rows: np.ndarray | None = None) -> np.ndarray:
@@ -58,7 +58,7 @@ class ContactPoints:
             contrib = self.weights[rows, :, None] * g_points[:, None, :]  # (a, nv, dim)
             np.add.at(out, self.verts[rows].ravel(), contrib.reshape(-1, dim))
             return out
-        PT = self.matrix[1]
+        PT = self.interpolation[1]
         out[: PT.shape[0]] = PT @ g_points
         return out
 

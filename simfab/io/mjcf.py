@@ -446,7 +446,7 @@ def _body_radius(model, bid: int) -> float:
             va, vn = int(model.mesh_vertadr[mid]), int(model.mesh_vertnum[mid])
             V = np.asarray(model.mesh_vert[va:va + vn], dtype=np.float64) @ quat_to_matrix(model.geom_quat[g]).T + pos
             r = max(r, float(np.linalg.norm(V, axis=1).max()))
-        elif t not in (int(G.mjGEOM_PLANE), int(G.mjGEOM_HFIELD), int(G.mjGEOM_MESH), int(G.mjGEOM_SDF)):
+        elif t not in (int(G.mjGEOM_PLANE), int(G.mjGEOM_HFIELD)):  # a primitive (or a mesh-less SDF: its bound)
             r = max(r, float(np.linalg.norm(pos)) + float(model.geom_rbound[g]))
     return r
 
