@@ -16,10 +16,11 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    feasible, non-inverted warm start: every point outside O. The linear and quadratic
    extrapolations of the last two / three converged steps come first; the feasible one with the
    lowest objective E_d + B is the warm start (fewer Newton iterations when the deformation
-   evolves smoothly along the path), with the vertices that were in contact moved back to their
-   last gap to O (extrapolation slides them off O's curved surface, out of the barrier's range);
-   the contact predictor above is computed only when no extrapolation is feasible (its PSD
-   tangent stiffness is then assembled on demand).
+   evolves smoothly along the path); the contact predictor above is computed only when no
+   extrapolation is feasible (its PSD tangent stiffness is then assembled on demand). Either way
+   the vertices that were in contact are moved back to their last gap to O (extrapolations and
+   the predictor's pushes slide them along chords off O's curved surface, out of the barrier's
+   range).
 2. **Corrector.** Newton (:func:`simfab.solve.newton.minimize`, exact Hessian first, the
    PSD-projected one when the exact one is indefinite) on
    E_d(x) + kappa * sum_j b(-psi(y_j)) with the log barrier b of :mod:`simfab.contact.barrier`.
