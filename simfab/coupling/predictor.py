@@ -69,16 +69,13 @@ def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.
     xs = _snap_contacts(cm, state, best_x, s_new, ctx)
     if xs is not None and np.isfinite(obj.value(xs)):  # (+inf: infeasible, inside O or inverted)
         best_x = xs
-    if C.WARM_START_FLOOR > 0:
-        # a point that ends up almost touching O costs one Newton iteration per doubling of its
-        # distance (the log barrier): start such points at LIFT_TO * d_hat instead
-        fin = _state_final(state)
-        prev = fin[4] if fin is not None else None
-        xl = _lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * obj.dhat,
-                          to=C.LIFT_TO * obj.dhat, prev=prev)
-        if xl is not None:
-            best_x = xl
-    return best_x
+    # a point that ends up almost touching O costs one Newton iteration per doubling of its
+    # distance (the log barrier): start such points at LIFT_TO * d_hat instead
+    fin = _state_final(state)
+    prev = fin[4] if fin is not None else None
+    xl = _lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * obj.dhat,
+                      to=C.LIFT_TO * obj.dhat, prev=prev)
+    return best_x if xl is None else xl
 
 
 def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float, ctx) -> np.ndarray | None:
