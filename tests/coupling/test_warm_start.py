@@ -35,10 +35,61 @@ def test_snapped_warm_start_puts_contact_vertices_back_at_their_last_gap(monkeyp
         d_new = -cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False).psi
         assert np.all(d_new > 0)
         # what matters: they stay in the barrier's range (0, d_hat), near their last gap (a vertex
-        # shared with refined facets whose points were in contact too takes the mean of their
+        # shared with refined facets whose points were in contact too takes the largest of their
         # moves, which lands it within half of d_hat of its own gap)
         assert np.all(d_new < dh[act])
         assert np.all(np.abs(d_new - d_prev[act]) <= 0.5 * dh[act])
+
+
+def test_a_moved_vertex_takes_the_largest_move_its_points_ask_for():
+    # Vertex 0 carries its own point (wants 12 um toward O, i.e. -12 um) and, with weights 0.9 and
+    # 0.5, two points of its edge to vertex 1 (want -20 um and -18 um). The mean of the wanted
+    # moves would carry vertex 0 by ~-17 um, 5 um past where its own point stops (inside O when its
+    # gap was under 5 um); the largest signed move, -12 um, carries no point closer than it asks.
+    # Vertex 1 carries the edge points only, with weights 0.1 and 0.5: it takes -18 um. Directions
+    # are the weighted means of the points' normals (here all +y).
+    from types import SimpleNamespace
+
+    from simfab.coupling.points import ContactPoints
+
+    pts = ContactPoints(verts=np.array([[0, 0], [0, 1], [0, 1]]), weights=np.array([[1.0, 0.0], [0.9, 0.1], [0.5, 0.5]]),
+                        facet=np.array([-1, 0, 0]))
+    cm = SimpleNamespace(fem=SimpleNamespace(n_vertices=3))
+    x = np.zeros((3, 2))
+    sel = np.array([True, True, True])
+    dist = np.array([-12e-6, -20e-6, -18e-6])
+    direction = np.tile([0.0, 2.0], (3, 1))  # normalized inside
+    x1 = P._move_points(cm, pts, x, sel, dist, direction)
+    np.testing.assert_allclose(x1[0], [0.0, -12e-6], atol=1e-18)
+    np.testing.assert_allclose(x1[1], [0.0, -18e-6], atol=1e-18)
+    np.testing.assert_array_equal(x1[2], [0.0, 0.0])  # no point on it: unmoved
+    # a move away from O (positive) wins over one toward it on the same vertex
+    x2 = P._move_points(cm, pts, x, sel, np.array([3e-6, -20e-6, -18e-6]), direction)
+    np.testing.assert_allclose(x2[0], [0.0, 3e-6], atol=1e-18)
+
+
+def test_warm_starts_keep_the_contact_the_last_step_ended_with(monkeypatch):
+    # A warm start with every contact point pushed out of the barrier's range (d >= d_hat) lets
+    # Newton's first step, which then does not see O there, release the part's deformation into O
+    # (the step cap cuts it to a few percent, and the step takes 7-11 iterations). On the stand
+    # side the contact predictor's pushes (steps where no extrapolation is feasible) and snapped
+    # vertices that overshot into O (their warm start then dropped) did that at 6 of 35 steps.
+    lost, seen = [], []
+    real = P._warm_start
+
+    def spy(cm, state, s_new, obj, ctx):
+        x0 = real(cm, state, s_new, obj, ctx)
+        fin = state.final
+        if fin is not None and len(fin[4]) == len(state.points) and np.any(fin[4] < obj.dhat):
+            d, _, _ = obj.distances(x0, False)
+            seen.append(s_new)
+            if not np.any(d < obj.dhat):
+                lost.append(s_new)
+        return x0
+
+    monkeypatch.setattr(P, "_warm_start", spy)
+    S.simulate(load_coupling_scene("standside2d"))
+    assert len(seen) > 25 and lost == []
 
 
 @pytest.mark.parametrize("axes, message", [("xq", "axis letters"), ("xx", "axis letters"), ("", "axis letters")])

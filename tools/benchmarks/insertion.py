@@ -34,6 +34,8 @@ import os
 import statistics
 import time
 
+from benchmarks._machine import machine_reference_ms
+
 CASES = [
     ("cclamp2d", "stand side (2D)"),
     ("clip3d", "alligator 3D"),
@@ -68,24 +70,6 @@ def _runs_wanted(a, runs: list) -> int:
         return MIN_REPEAT
     return len(runs) + 1 if sum(runs) < a.budget and len(runs) < a.max_repeat else len(runs)
 
-
-def machine_reference_ms() -> float:
-    """Milliseconds of a fixed CPU workload (a pure-Python loop and small dense products), timed
-    right after each case: the same simulation's wall time on a shared machine moves with the
-    machine's momentary speed, and this figure moves with it (best of 3)."""
-    import numpy as np
-
-    a = np.random.default_rng(0).standard_normal((200, 200))
-    best = float("inf")
-    for _ in range(3):
-        t0 = time.perf_counter()
-        s = 0.0
-        for i in range(200_000):
-            s += i * 0.5
-        for _ in range(20):
-            a = np.tanh(a @ a * 1e-3)
-        best = min(best, time.perf_counter() - t0)
-    return round(best * 1e3, 2)
 
 
 def run(argv) -> dict:

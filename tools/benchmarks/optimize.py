@@ -42,6 +42,7 @@ def run(argv) -> dict:
                     help="skip the mesh check (and correction rounds) that couple optimize runs after the annealing")
     a = ap.parse_args(argv)
 
+    from benchmarks._machine import machine_reference_ms
     from benchmarks._reference import figures
     from simfab.coupling.simulate import simulate
     from simfab.design.optimize import make_problem, optimize
@@ -50,6 +51,7 @@ def run(argv) -> dict:
 
     ds = load_design_scene(a.scene)
     simulate(ds.cm)  # warm-up: Warp kernels loaded, caches built (not timed)
+    ref_before = machine_reference_ms()
     t0, c0 = time.perf_counter(), time.process_time()
     ds = load_design_scene(a.scene)
     t_load = time.perf_counter() - t0
@@ -72,6 +74,7 @@ def run(argv) -> dict:
             check = {"seconds": time.perf_counter() - t2, "feasible_mesh_converged": mc["feasible_fine"],
                      "correction_rounds": len(rounds), "elements": [lv["elements"] for lv in mc["levels"]],
                      "constraints_mesh_converged": {c["name"]: c["value"] for c in mc["constraints"]}}
+    ref_after = machine_reference_ms()
     first = next((r["k"] for r in res.history if r["evaluation"].feasible), None)
     done = [r["evaluation"] for r in res.history[1:] if r["evaluation"].status == "ok"]
     # the initial insertion (run for the placement) is the optimizer's initial evaluation (reused)
@@ -100,6 +103,8 @@ def run(argv) -> dict:
         "speculative_simulations": res.speculative,  # run ahead on a worker, not needed
         "acceptance_branches": {"drawn": res.branches[0], "adopted": res.branches[1]},
         "load_average_1min": os.getloadavg()[0],
+        # the machine's momentary speed before and after the run (benchmarks._machine; ~25 ms usual)
+        "machine_reference_ms": [ref_before, ref_after],
         "candidates_rejected_before_simulating": sum(1 for r in res.history if r["evaluation"].sim_seconds == 0),
         "simulations_per_second": (sims + res.stopped_simulations) / total,  # full + stopped early
         "seconds_per_simulation": sim_seconds / (sims + res.stopped_simulations),
