@@ -1,6 +1,6 @@
 """Rest-shape optimization benchmark: the stand-side design end to end.
 
-``python tools/bench.py optimize [--scene standside2d] [--iterations N] [--seed S]``
+``python tools/bench.py optimize [--scene standside2d] [--iterations N] [--seed S] [--repeat N]``
 
 Runs what ``simfab couple optimize standside2d`` runs - the initial insertion (for displacement
 handle placement), the handle placement (bounded biharmonic weights, affinity propagation), the
@@ -12,7 +12,10 @@ the final design meets them all. Outputs are not written (timed is the computati
 once (simfab.design.parallel: speculative evaluation, the same design as 1 worker); the time
 includes starting the workers (started first, as ``couple optimize`` does: their start-up overlaps
 the initial insertion and the handle placement). Then, as ``couple optimize`` does, the design's mesh check on
-refined meshes (and correction rounds if needed), timed separately (``mesh_check``).
+refined meshes (and correction rounds if needed), timed separately (``mesh_check``). ``--repeat N``
+(default REPEAT) runs the optimization N times, after the first each in a fresh process, and
+reports the fastest run (``seconds_all_runs``, ``seconds_median`` and each run's machine
+reference too); the runs must reach the same design.
 
 Reference: the original method's 4.8 s per stand-side insertion simulation (shared reference
 figures, "insertion_simulation_seconds_original", row "stand side (2D)") times its up to 300
@@ -23,12 +26,24 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import os
+import statistics
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
+from simfab.errors import InputError
+
 TARGET_SECONDS = 30.0
+#: Runs by default: this virtual machine's speed drifts by up to 2x within minutes (the reference
+#: workload of benchmarks._machine took 16-56 ms on 2 December) and interference only ever adds
+#: time, so the fastest of the runs is the best estimate of the cost (as timeit and pyperf advise;
+#: the insertion benchmark does the same).
+REPEAT = 2
 
 
 def run(argv) -> dict:
@@ -40,8 +55,44 @@ def run(argv) -> dict:
                     help="processes evaluating proposals (speculative lookahead; same result as 1)")
     ap.add_argument("--no-mesh-check", action="store_true",
                     help="skip the mesh check (and correction rounds) that couple optimize runs after the annealing")
+    ap.add_argument("--repeat", type=int, default=REPEAT,
+                    help=f"runs of the optimization, each after the first in a fresh process (default {REPEAT}): "
+                         "the fastest one's figures are reported, every run's seconds too")
     a = ap.parse_args(argv)
+    if a.repeat < 1:
+        raise InputError(f"must be >= 1, got {a.repeat}", where="--repeat")
+    out = _run_once(a)
+    return out if a.repeat == 1 else _fastest(a, out)
 
+
+def _fastest(a, first: dict) -> dict:
+    """``first`` (this process's run, with the mesh check) and a.repeat - 1 runs in fresh processes
+    (each pays its own imports and worker start-up, as a user's run does): the fastest run's
+    figures with the mesh check of the first, every run's seconds and machine reference. Every
+    run must reach the same design (the optimization is seeded; a difference is an error)."""
+    cmd = [sys.executable, str(Path(__file__).resolve().parents[1] / "bench.py"), "optimize", "--repeat", "1",
+           "--no-mesh-check", "--scene", a.scene, "--seed", str(a.seed), "--workers", str(a.workers)]
+    if a.iterations is not None:
+        cmd += ["--iterations", str(a.iterations)]
+    runs = [first]
+    for _ in range(a.repeat - 1):
+        child = json.loads(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout)
+        if (child["E_L"], child["simulations"], child["feasible"]) != (first["E_L"], first["simulations"],
+                                                                         first["feasible"]):
+            raise RuntimeError(f"a repeated run reached another design: E_L {child['E_L']} vs {first['E_L']}, "
+                               f"{child['simulations']} vs {first['simulations']} simulations")
+        runs.append(child)
+    best = dict(min(runs, key=lambda r: r["seconds"]))
+    check = first["mesh_check"]
+    best.update(mesh_check=check, seconds_with_mesh_check=best["seconds"] + check["seconds"] if check else None,
+                seconds_all_runs=[r["seconds"] for r in runs],
+                seconds_median=statistics.median(r["seconds"] for r in runs),
+                machine_reference_ms_all_runs=[r["machine_reference_ms"] for r in runs])
+    return best
+
+
+def _run_once(a) -> dict:
+    """One timed optimization in this process (and the mesh check unless a.no_mesh_check)."""
     from benchmarks._machine import machine_reference_ms
     from benchmarks._reference import figures
     from simfab.coupling.simulate import simulate
