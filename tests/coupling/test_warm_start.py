@@ -73,7 +73,8 @@ def test_warm_starts_keep_the_contact_the_last_step_ended_with(monkeypatch):
     # Newton's first step, which then does not see O there, release the part's deformation into O
     # (the step cap cuts it to a few percent, and the step takes 7-11 iterations). On the stand
     # side the contact predictor's pushes (steps where no extrapolation is feasible) and snapped
-    # vertices that overshot into O (their warm start then dropped) did that at 6 of 35 steps.
+    # vertices that overshot into O (their warm start then dropped) did that at 7 of its 33 steps
+    # that began in contact.
     lost, seen = [], []
     real = P._warm_start
 
