@@ -70,9 +70,10 @@ LIFT_TO = 0.8
 #: Newton iterations with (floor, lift) = (0.1, 0.5) -> (0.5, 0.8): clip3d 184 -> 170, knocker3d
 #: 272 -> 243, claw3d 116 -> 111, cclamp2d 57 -> 57; (0.5, 0.8) -> (0.7, 0.8) once snapped
 #: vertices stopped overshooting (predictor._move_points): six stand-side design candidates
-#: 892 -> 818, standside2d, cclamp2d, alligator2d, clip2d_eject, clip3d, claw3d unchanged within
-#: 1, knocker3d 146 -> 149 (the profile figures agree within the Newton force tolerance; an
-#: adaptive lift to the last step's median contact gap did no better).
+#: 892 -> 818, standside2d 179 -> 172; cclamp2d, alligator2d, clip2d_eject, block2d_tight,
+#: profile2d, alligator3d, clip3d and claw3d within 1; knocker3d 146 -> 149 (the profile figures
+#: agree within the Newton force tolerance; an adaptive lift to the last step's median contact gap
+#: did no better).
 WARM_START_FLOOR = 0.7
 #: Refinement rounds per step (each adds the facets found crossing O) before ConvergenceError.
 MAX_REFINEMENT_ROUNDS = 64
