@@ -18,8 +18,8 @@ from simfab.errors import ConvergenceError
 def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj, *, below: float,
                  to: float, prev: np.ndarray | None = None):
     """x with the constraint points at distance <= ``below`` [m] from O (inside it: d <= 0) moved
-    out along O's normal to ``to`` [m], their facets' vertices taking the weighted mean of the
-    wanted moves (a local move: the rest of A keeps its shape). With ``prev`` (k,), the points'
+    out along O's normal to ``to`` [m], their facets' vertices taking the largest of the wanted
+    moves (:func:`_move_points`; a local move: the rest of A keeps its shape). With ``prev`` (k,), the points'
     gaps at the last step, points that were already that close keep their place. Returns x itself
     when nothing is that close, None when the result is infeasible."""
     # the objective's (lazy) distances: exact with gradients within its band (> below), lower

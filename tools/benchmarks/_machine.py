@@ -9,7 +9,8 @@ def machine_reference_ms() -> float:
     """Milliseconds of a fixed CPU workload (a pure-Python loop and small dense products), timed
     beside a benchmark's runs: the same simulation's wall time on a shared machine moves with the
     machine's momentary speed, and this figure moves with it (best of 3).
-    24.7-26.4 ms on this 2-core virtual machine in most runs of 2 December (one of 276 ms)."""
+    ~25 ms on this 2-core virtual machine in its usual phases; 15-56 ms over one hour of 2 December
+    (and once 276 ms)."""
     import numpy as np
 
     a = np.random.default_rng(0).standard_normal((200, 200))

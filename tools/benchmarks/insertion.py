@@ -71,7 +71,6 @@ def _runs_wanted(a, runs: list) -> int:
     return len(runs) + 1 if sum(runs) < a.budget and len(runs) < a.max_repeat else len(runs)
 
 
-
 def run(argv) -> dict:
     from benchmarks._reference import figures
 

@@ -40,7 +40,7 @@ from simfab.errors import InputError
 
 TARGET_SECONDS = 30.0
 #: Runs by default: this virtual machine's speed drifts by up to 2x within minutes (the reference
-#: workload of benchmarks._machine took 16-56 ms on 2 December) and interference only ever adds
+#: workload of benchmarks._machine took 15-56 ms within an hour of 2 December) and interference only ever adds
 #: time, so the fastest of the runs is the best estimate of the cost (as timeit and pyperf advise;
 #: the insertion benchmark does the same).
 REPEAT = 2
@@ -76,7 +76,7 @@ def _fastest(a, first: dict) -> dict:
         cmd += ["--iterations", str(a.iterations)]
     runs = [first]
     for _ in range(a.repeat - 1):
-        child = json.loads(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout)
+        child = json.loads(subprocess.run(cmd, stdout=subprocess.PIPE, text=True, check=True).stdout)  # its stderr shows
         if (child["E_L"], child["simulations"], child["feasible"]) != (first["E_L"], first["simulations"],
                                                                          first["feasible"]):
             raise RuntimeError(f"a repeated run reached another design: E_L {child['E_L']} vs {first['E_L']}, "
@@ -116,6 +116,7 @@ def _run_once(a) -> dict:
         res = optimize(problem, iterations=a.iterations, seed=a.seed, workers=procs)
         total = time.perf_counter() - t0
         cpu = time.process_time() - c0
+        ref_after = machine_reference_ms()
         check = None
         if not a.no_mesh_check:  # what `couple optimize` runs next (simfab.design.pipeline)
             from simfab.design.pipeline import mesh_corrected
@@ -125,7 +126,6 @@ def _run_once(a) -> dict:
             check = {"seconds": time.perf_counter() - t2, "feasible_mesh_converged": mc["feasible_fine"],
                      "correction_rounds": len(rounds), "elements": [lv["elements"] for lv in mc["levels"]],
                      "constraints_mesh_converged": {c["name"]: c["value"] for c in mc["constraints"]}}
-    ref_after = machine_reference_ms()
     first = next((r["k"] for r in res.history if r["evaluation"].feasible), None)
     done = [r["evaluation"] for r in res.history[1:] if r["evaluation"].status == "ok"]
     # the initial insertion (run for the placement) is the optimizer's initial evaluation (reused)
@@ -154,7 +154,7 @@ def _run_once(a) -> dict:
         "speculative_simulations": res.speculative,  # run ahead on a worker, not needed
         "acceptance_branches": {"drawn": res.branches[0], "adopted": res.branches[1]},
         "load_average_1min": os.getloadavg()[0],
-        # the machine's momentary speed before and after the run (benchmarks._machine; ~25 ms usual)
+        # the machine's momentary speed before and after the timed run (benchmarks._machine; ~25 ms usual)
         "machine_reference_ms": [ref_before, ref_after],
         "candidates_rejected_before_simulating": sum(1 for r in res.history if r["evaluation"].sim_seconds == 0),
         "simulations_per_second": (sims + res.stopped_simulations) / total,  # full + stopped early
