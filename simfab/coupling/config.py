@@ -13,7 +13,7 @@ from simfab.errors import InputError
 # ---------------------------------------------------------------------------- tolerances (one place)
 #: Max penetration allowed at the end of every step, relative to h_A (checked, else ConvergenceError).
 PENETRATION_TOL_REL = 1e-3
-#: Barrier activation distance d_hat relative to the local boundary edge length (objective._point_dhat).
+#: Barrier activation distance d_hat relative to the local boundary edge length (layout.point_dhat).
 DHAT_REL = 1e-2
 #: Lipschitz bound of the IMLS field used by the conservative step cap (|grad psi| ~ 1 near O).
 PSI_LIPSCHITZ = 2.0
@@ -27,24 +27,20 @@ KAPPA_MAX_GROWTH = 1e3
 CURVATURE_SAFETY = 2.0
 CURVATURE_FLOOR = 0.1
 #: Lazy contact evaluation: points certified (by the Lipschitz bound) farther than
-#: LAZY_BAND_DHATS * d_hat from O are not re-evaluated (the barrier acts within d_hat only; a band
-#: of half a sigma as well evaluated 8% more points and 70% more Hessians of psi on clip3d for the
-#: same result).
+#: LAZY_BAND_DHATS * d_hat from O are not re-evaluated (the barrier acts within d_hat only).
 LAZY_BAND_DHATS = 4.0
 #: Newton: stop when the step is below this fraction of h_A ...
 NEWTON_STEP_TOL_REL = 1e-7
 #: ... or the free-dof force residual is below this fraction of E * h_A^2 (3D) / E * h_A * t (2D)
-#: (about 0.02 N on the bundled scenes: the support reaction and the work-conjugate contact force
-#: agree to 0.01 N, and against 2e-7 the profile figures E_max, E_ss, F_in, F_rm and F_grip of
-#: cclamp2d and clip3d agree to 1e-9 relative, Newton converging quadratically there).
+#: (Newton converges quadratically near this tolerance, so the profile figures are settled to far
+#: more digits than the force residual suggests).
 NEWTON_GRAD_TOL_REL = 1e-6
 #: ... or below this fraction of the residual at the step's warm start.
 NEWTON_GRAD_TOL_START = 1e-5
 NEWTON_MAX_ITER = 100
 #: Newton evaluates the Hessian at its first line-search trial (most are accepted at once) unless
-#: the residual is already within this factor of the target (the trial is then most likely
-#: converged: on clip3d 34 trials went without their Hessian, backtracking ones included, and 7 of
-#: them then needed it).
+#: the residual is already within this factor of the target (the trial is then most likely the
+#: converged point, which needs no Hessian).
 NEWTON_EAGER_ABOVE_TOL = 10.0
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4
@@ -58,22 +54,14 @@ MAX_FACE_LATTICE = 16
 MAX_BISECTIONS = 6
 #: After a refinement the step is solved again from its converged positions with the new points
 #: that lie inside O lifted out to LIFT_TO * d_hat (their facets' vertices move); from the previous
-#: step's state when that is infeasible or fails (clip3d 209 -> 194, knocker3d 295 -> 276 Newton
-#: iterations, same profile figures).
-#: (0.8: near where contact points settle, see WARM_START_FLOOR; 0.5 took clip3d 179 iterations)
+#: step's state when that is infeasible or fails. 0.8 is near where contact points settle (see
+#: WARM_START_FLOOR), so a lifted point starts close to its equilibrium gap.
 LIFT_TO = 0.8
 #: Warm-start points closer to O than WARM_START_FLOOR * d_hat (and not that close at the last
 #: step) are lifted to LIFT_TO * d_hat: from a small gap the log barrier's Newton steps only about
-#: double it (from 4e-4 d_hat this cost clip3d's last step 12 extra iterations), and with the
-#: barrier stiffness kappa of the bundled scenes contact points settle at 0.8-0.95 d_hat (their
-#: residual dominates each step's first iterations while they climb there from ~0.25 d_hat).
-#: Newton iterations with (floor, lift) = (0.1, 0.5) -> (0.5, 0.8): clip3d 184 -> 170, knocker3d
-#: 272 -> 243, claw3d 116 -> 111, cclamp2d 57 -> 57; (0.5, 0.8) -> (0.7, 0.8) once snapped
-#: vertices stopped overshooting (predictor._move_points): six stand-side design candidates
-#: 892 -> 818, standside2d 179 -> 172; cclamp2d, alligator2d, clip2d_eject, block2d_tight,
-#: profile2d, alligator3d, clip3d and claw3d within 1; knocker3d 146 -> 149 (the profile figures
-#: agree within the Newton force tolerance; an adaptive lift to the last step's median contact gap
-#: did no better).
+#: double it (one iteration per doubling), while with the barrier stiffness kappa of the bundled
+#: scenes contact points settle at 0.8-0.95 d_hat. The measured choice of (floor, lift) is in
+#: docs/decisions.md.
 WARM_START_FLOOR = 0.7
 #: Refinement rounds per step (each adds the facets found crossing O) before ConvergenceError.
 MAX_REFINEMENT_ROUNDS = 64

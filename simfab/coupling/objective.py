@@ -1,8 +1,10 @@
 """The per-step objective E_d(x) + kappa sum_j b(d_j(x)) (+ the rigid-mode pin) and its Newton solve.
 
-See :mod:`simfab.coupling.simulate` for the method; this module holds the objective with its lazy
-contact evaluation and step cap (:class:`_StepObjective`), the deferred PSD Hessian, the
-per-point barrier activation distances, the barrier stiffness adaptation and :func:`_newton`."""
+See :mod:`simfab.coupling.simulate` for the method. :class:`StepObjective` evaluates the objective
+with lazy contact distances and caps Newton's steps so that no constraint point reaches O;
+:func:`make_objective` builds it for a step, :func:`solve` runs the barrier Newton,
+:func:`evaluation` reads Newton's converged evaluation as an :class:`~simfab.coupling.state.Evaluation`
+and :func:`adapt_kappa` stiffens the barrier for the following steps."""
 
 from __future__ import annotations
 
@@ -11,25 +13,24 @@ import numpy as np
 from simfab.contact.barrier import barrier, point_barrier, project_psd
 from simfab.coupling import config as C
 from simfab.coupling import rigid
+from simfab.coupling.layout import add_point_blocks, point_dhat, regularize
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.points import ContactPoints
-from simfab.coupling.timing import _TimedSolver, _Timer
+from simfab.coupling.state import Evaluation, StepContext, StepState
+from simfab.coupling.timing import TimedSolver, Timer
+from simfab.fem.elastic import energy, energy_gradient, energy_gradient_hessian
+from simfab.solve.newton import NewtonOptions, minimize
 
-_EDGE_PAIRS = {2: (np.array([0]), np.array([1])), 3: (np.array([0, 0, 1]), np.array([1, 2, 2]))}  # facet edges (a, c)
 
-# ----------------------------------------------------------------------------- objective
-class _StepObjective:
+class StepObjective:
     """E_d(x) + kappa sum_j b(d_j(x)) for a fixed pose of O and a fixed set of constraint points."""
 
-    def __init__(self, cm: CouplingModel, points: ContactPoints, R: np.ndarray, p: np.ndarray, timer: _Timer,
+    def __init__(self, cm: CouplingModel, points: ContactPoints, R: np.ndarray, p: np.ndarray, timer: Timer,
                  kappa: float | None = None, pin: rigid.Pin | None = None):
         self.cm, self.points, self.R, self.p, self.timer = cm, points, R, p, timer
         self.pin = pin  # pin of the rigid motions nothing resists (simfab.coupling.rigid.Pin), or None
         self.kappa = cm.kappa if kappa is None else float(kappa)
         self.n, self.dim = cm.fem.n_vertices, cm.dim
-        self.slots = _point_slots(cm, points)
-        self.wpair = points.weights[:, :, None] * points.weights[:, None, :]  # (k, nv, nv)
-        self.diag = _diag_slots(cm)
         self.last_x = None
         self.last_d = None
         self.last_gd = None
@@ -39,7 +40,7 @@ class _StepObjective:
         # Lazy evaluation: psi is L-Lipschitz, so a point that was at distance d_ref when last
         # evaluated exactly (at y_ref) is still at least d_ref - L |y - y_ref| away. Points whose
         # bound stays above the band need no evaluation (their barrier term is exactly zero).
-        self.dhat = _point_dhat(cm, points)  # (k,) activation distance per point [m]
+        self.dhat = point_dhat(cm, points)  # (k,) activation distance per point [m]
         self.dhat_max = float(self.dhat.max()) if len(self.dhat) else cm.dhat
         self.band = C.LAZY_BAND_DHATS * self.dhat
         self.y_ref = None
@@ -76,8 +77,6 @@ class _StepObjective:
 
     def __call__(self, xf: np.ndarray, need_hessian: bool):
         """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O."""
-        from simfab.fem.elastic import energy_gradient, energy_gradient_hessian
-
         cm = self.cm
         memo = self.memo
         if need_hessian and memo is not None and memo[0].shape == xf.shape and np.array_equal(memo[0], xf):
@@ -88,7 +87,7 @@ class _StepObjective:
         with self.timer.timed("assembly"):
             if need_hessian:
                 # exact Hessian only (half the cost of the eigen-projected one); the projected one is
-                # assembled on demand, when the exact one turns out indefinite (see _LazyHessian)
+                # assembled on demand, when the exact one turns out indefinite (see LazyHessian)
                 E, g, H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)
                 H = None
             else:
@@ -107,7 +106,7 @@ class _StepObjective:
                 contact = (act, Hy)
                 if H_exact is not None:
                     self._add_contact(H_exact, contact, psd=False)
-                    H = _LazyHessian(self, x.copy(), contact)
+                    H = LazyHessian(self, x.copy(), contact)
                 else:
                     self._add_contact(H, contact, psd=True)
                 self._remember(xf, d, gd, H, E, g)
@@ -118,7 +117,7 @@ class _StepObjective:
             else:
                 # Newton may stop at a trial evaluated without its Hessian (see NewtonOptions.
                 # eager_above_tol): this evaluation may be the final one, with the PSD Hessian deferred
-                self._remember(xf, d, gd, _LazyHessian(self, x.copy(), None), E, g)
+                self._remember(xf, d, gd, LazyHessian(self, x.copy(), None), E, g)
         # exact-first Newton (simfab.solve.newton): the exact Hessian is used whenever it is
         # positive definite (quadratic convergence), the PSD-projected one (built lazily) otherwise
         out = (E + B, (g + gc).ravel(), H if H_exact is None else (H_exact, H))
@@ -137,17 +136,15 @@ class _StepObjective:
 
     def _remember(self, xf, d, gd, H, E, g) -> None:
         """Keep the last evaluation's data (x, distances, their gradients, Hessian, elastic energy
-        and gradient): Newton's final evaluation is read from it (see :func:`_final_eval`)."""
+        and gradient): Newton's final evaluation is read from it (see :func:`evaluation`)."""
         self.last_x = xf.copy()
         self.last_d = d
         self.last_gd = gd
         self.last_H = H
-        self.last_fem = (E, g)  # elastic energy and gradient at last_x (reused by _record)
+        self.last_fem = (E, g)  # elastic energy and gradient at last_x (reused by the step record)
 
     def value(self, x: np.ndarray) -> float:
         """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible."""
-        from simfab.fem.elastic import energy
-
         with self.timer.timed("assembly"):
             E = energy(self.cm.fem, x) + (self.pin.energy(np.ravel(x)) if self.pin is not None else 0.0)
         if not np.isfinite(E):
@@ -162,12 +159,8 @@ class _StepObjective:
         """Add the barrier Hessian blocks (PSD-projected per point if ``psd``) and the rigid-mode
         regularization to the FEM Hessian ``H`` (in place)."""
         act, Hy = contact  # active point indices (a,), exact barrier Hessian blocks (a, dim, dim)
-        if len(act):
-            if psd:
-                Hy = project_psd(Hy)
-            wp_act = self.wpair[act][:, :, :, None, None]
-            np.add.at(H.data, self.slots[act].ravel(), (wp_act * Hy[:, None, None, :, :]).ravel())
-        _regularize(self.cm, H, self.diag)
+        add_point_blocks(self.cm, self.points, H, act, project_psd(Hy) if psd and len(act) else Hy)
+        regularize(self.cm, H)
 
     def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
         """Step cap keeping every constraint point outside O along the whole step (see below).
@@ -197,8 +190,8 @@ class _StepObjective:
         return float(min(1.0, np.min(np.maximum(alpha_curv, cons))))
 
 
-class _LazyHessian:
-    """PSD-projected Hessian of a :class:`_StepObjective` at x, assembled on first call (once);
+class LazyHessian:
+    """PSD-projected Hessian of a :class:`StepObjective` at x, assembled on first call (once);
     ``contact`` (active points, exact barrier blocks) as found with the exact Hessian, or None to
     evaluate the distances at x again (deterministic: the same active points and blocks)."""
 
@@ -207,8 +200,6 @@ class _LazyHessian:
 
     def __call__(self):
         if self.H is None:
-            from simfab.fem.elastic import energy_gradient_hessian
-
             obj = self.obj
             with obj.timer.timed("assembly"):
                 _, _, H = energy_gradient_hessian(obj.cm.fem, self.x)
@@ -226,33 +217,15 @@ def dim_factor(dim: int) -> float:
     return float(dim)
 
 
-def _regularize(cm: CouplingModel, H, diag: np.ndarray) -> None:
-    """Add FACTOR_REG * mean stiffness to the diagonal of H in place (``diag``: the CSR slots of
-    the diagonal, :func:`_diag_slots`) when the supports leave rigid motions free: the sparse
-    factorization then succeeds, and the Woodbury pin (rigid.PinnedSolver) removes the near-null
-    directions from the solve; the term is in the Hessian only (not the energy)."""
-    if rigid.motion_basis(cm)[0].shape[1]:
-        H.data[diag] += C.FACTOR_REG * rigid.mean_stiffness(cm)
-
-
-def _diag_slots(cm: CouplingModel) -> np.ndarray:
-    s = cm._cache.get("diag")
-    if s is None:
-        n, dim = cm.fem.n_vertices, cm.dim
-        b = cm.fem.pattern.block_slots(np.arange(n), np.arange(n))
-        s = cm._cache["diag"] = b[:, np.arange(dim), np.arange(dim)].ravel()
-    return s
-
-
-def _objective(cm, state, s, ctx) -> _StepObjective:
+def make_objective(cm: CouplingModel, state: StepState, s: float, ctx: StepContext) -> StepObjective:
     """The step objective at path length s over the state's points, with its barrier stiffness and
     the pin of its unresisted rigid motions anchored at the state's positions."""
     R, p = cm.pose(s)
     pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], state.x)
-    return _StepObjective(cm, state.points, R, p, ctx["timer"], state.kappa, pin)
+    return StepObjective(cm, state.points, R, p, ctx.timer, state.kappa, pin)
 
 
-def _adapt_kappa(cm: CouplingModel, state: _State, obj: _StepObjective) -> None:
+def adapt_kappa(cm: CouplingModel, state: StepState, obj: StepObjective) -> None:
     """IPC-style stiffness adaptation: when a converged step leaves a point closer to O than
     KAPPA_GROW_BELOW * d_hat (the barrier then works in its ill-conditioned 1/d^2 range), double
     kappa for the following steps (at most KAPPA_MAX_GROWTH times the initial value); a stiffer
@@ -264,70 +237,33 @@ def _adapt_kappa(cm: CouplingModel, state: _State, obj: _StepObjective) -> None:
         state.kappa = min(2.0 * state.kappa, C.KAPPA_MAX_GROWTH * cm.kappa)
 
 
-def _newton(cm: CouplingModel, obj: _StepObjective, x0: np.ndarray, ctx) -> tuple[np.ndarray, int]:
+def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContext) -> tuple[np.ndarray, int]:
     """Barrier Newton from x0. Stops when the free-dof force residual is below
     max(NEWTON_GRAD_TOL_REL * force_scale, NEWTON_GRAD_TOL_START * |residual at x0|) or the Newton
     step is below NEWTON_STEP_TOL_REL * h_A (projected Newton converges linearly once the PSD
     projections are active, so a purely absolute force target would spend many iterations on the
-    last digits)."""
-    from simfab.solve.newton import NewtonOptions, minimize
-
+    last digits). Returns (x (n, dim), Newton iterations)."""
     _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n)
     opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
                          step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=True,
                          eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL)
-    solver = _TimedSolver(_pinned(ctx["solver"], obj.pin), ctx["timer"])
+    solver = TimedSolver(pinned(ctx.solver, obj.pin), ctx.timer)
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
     return res.x.reshape(x0.shape), res.iterations
 
 
-def _pinned(solver, pin):
+def pinned(solver, pin):
     """``solver`` with the rigid-mode pin's Woodbury update (rigid.PinnedSolver) when there is one."""
     return solver if pin is None else rigid.PinnedSolver(solver, pin)
 
 
-def _point_dhat(cm: CouplingModel, pts: ContactPoints) -> np.ndarray:
-    """(k,) barrier activation distance of each constraint point [m]: dhat_rel times the local
-    edge length there (the shortest boundary edge at a vertex, interpolated with the point's
-    weights), so that the standoff stays a fixed small fraction of the local element size on
-    graded meshes, and of the smallest size on stretched ones: on clip3d's extrusion (0.3 mm
-    triangles, layers 4 mm apart) the mean edge length made d_hat 25 um, the standoff ~4% of the
-    cylinder's 0.5 mm interference and E_max 3% higher per halving of the layer height (memoized
-    per point set)."""
-    dh = pts.cache.get("dhat")
-    if dh is None:
-        hv = cm._cache.get("vertex_h")
-        if hv is None:
-            facets = cm.contact_facets
-            a, c = _EDGE_PAIRS[cm.dim]
-            e = np.vstack([facets[:, [i, j]] for i, j in zip(a, c)])
-            L = np.linalg.norm(cm.fem.rest[e[:, 0]] - cm.fem.rest[e[:, 1]], axis=1)
-            n = cm.fem.n_vertices
-            hv = np.full(n, np.inf)
-            np.minimum.at(hv, e.ravel(), np.repeat(L, 2))
-            hv = cm._cache["vertex_h"] = np.where(np.isfinite(hv), hv, cm.h)
-        dh = pts.cache["dhat"] = cm.options.dhat_rel * np.einsum("km,km->k", pts.weights, hv[pts.verts])
-    return dh
-
-
-def _point_slots(cm: CouplingModel, pts: ContactPoints) -> np.ndarray:
-    """(k, nv, nv, dim, dim) positions in the Hessian's data of the blocks coupling each point's parents."""
-    slots = pts.cache.get("slots")
-    if slots is None:
-        nv = pts.verts.shape[1]
-        ia, ib = np.meshgrid(np.arange(nv), np.arange(nv), indexing="ij")
-        rows = pts.verts[:, ia.ravel()].ravel()
-        cols = pts.verts[:, ib.ravel()].ravel()
-        slots = pts.cache["slots"] = cm.fem.pattern.block_slots(rows, cols).reshape(len(pts), nv, nv, cm.dim, cm.dim)
-    return slots
-
-
-def _final_eval(obj: _StepObjective, x: np.ndarray):
-    """(x, kappa, E, grad E (n, dim), d (k,), grad d (k, dim)) of the objective's last Hessian
-    evaluation when it was at x (Newton's converged point), else None."""
+def evaluation(obj: StepObjective, x: np.ndarray) -> Evaluation | None:
+    """The objective's last evaluation as an :class:`Evaluation` when it was at x (Newton's
+    converged point), else None."""
     if obj.last_x is None or not np.array_equal(obj.last_x, x.ravel()):
         return None
     E, gE = obj.last_fem
-    return (x, obj.kappa, E, gE, obj.last_d, obj.last_gd)
+    return Evaluation(x=x, kappa=obj.kappa, points=obj.points, elastic_energy=float(E), elastic_gradient=gE,
+                      distances=obj.last_d, distance_gradients=obj.last_gd, hessian=obj.last_H)

@@ -4,22 +4,27 @@ used when no extrapolation is feasible; see :mod:`simfab.coupling.simulate`, ste
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from simfab.coupling import config as C
 from simfab.coupling import rigid
+from simfab.coupling.layout import add_point_blocks, diag_slots, point_dhat, regularize
 from simfab.coupling.model import CouplingModel
-from simfab.coupling.objective import _LazyHessian, _diag_slots, _pinned, _point_dhat, _point_slots, _regularize
+from simfab.coupling.objective import StepObjective, pinned
 from simfab.coupling.points import ContactPoints
-from simfab.coupling.state import _State, _state_final
-from simfab.coupling.timing import _TimedSolver
+from simfab.coupling.state import StepContext, StepState
+from simfab.coupling.timing import TimedSolver
 from simfab.errors import ConvergenceError
+from simfab.fem.elastic import det_F, energy_gradient_hessian
 
-def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj, *, below: float,
+
+def lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj: StepObjective, *, below: float,
                  to: float, prev: np.ndarray | None = None):
     """x with the constraint points at distance <= ``below`` [m] from O (inside it: d <= 0) moved
     out along O's normal to ``to`` [m], their facets' vertices taking the largest of the wanted
-    moves (:func:`_move_points`; a local move: the rest of A keeps its shape). With ``prev`` (k,), the points'
+    moves (:func:`move_points`; a local move: the rest of A keeps its shape). With ``prev`` (k,), the points'
     gaps at the last step, points that were already that close keep their place. Returns x itself
     when nothing is that close, None when the result is infeasible."""
     # the objective's (lazy) distances: exact with gradients within its band (> below), lower
@@ -31,19 +36,19 @@ def _lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj, *, b
         lift &= prev > below
     if not lift.any():
         return x
-    x1 = _move_points(cm, pts, x, lift, to[lift] - d[lift], gd[lift])
+    x1 = move_points(cm, pts, x, lift, to[lift] - d[lift], gd[lift])
     return x1 if np.isfinite(obj.value(x1)) else None
 
 
-def _extrapolations(state: _State, s_new: float) -> list:
+def extrapolations(state: StepState, s_new: float) -> list:
     """Linear (last two steps) and quadratic (last three, Lagrange) extrapolations of A's
     positions to s_new: warm-start candidates when the deformation evolves smoothly."""
-    if state.prev is None or not state.prev[1] < state.s:
+    if state.prev is None or not state.prev.s < state.s:
         return []
-    xp, sp_ = state.prev
+    xp, sp_ = state.prev.x, state.prev.s
     out = [state.x + (state.x - xp) * ((s_new - state.s) / (state.s - sp_))]
-    if state.prev2 is not None and state.prev2[1] < sp_:
-        (x2, s2), (x1, s1), (xc, sc) = state.prev2, state.prev, (state.x, state.s)
+    if state.prev2 is not None and state.prev2.s < sp_:
+        (x2, s2), (x1, s1), (xc, sc) = (state.prev2.x, state.prev2.s), (xp, sp_), (state.x, state.s)
         t = s_new
         l2 = (t - s1) * (t - sc) / ((s2 - s1) * (s2 - sc))
         l1 = (t - s2) * (t - sc) / ((s1 - s2) * (s1 - sc))
@@ -52,33 +57,48 @@ def _extrapolations(state: _State, s_new: float) -> list:
     return out
 
 
-def _warm_start(cm: CouplingModel, state: _State, s_new: float, obj, ctx) -> np.ndarray:
-    """The feasible warm-start candidate with the lowest objective among the linear and quadratic
-    extrapolations of the last steps, or the contact predictor (:func:`_predict`) when no
-    extrapolation is feasible, with its contact gaps restored (:func:`_snap_contacts`) and near
-    points lifted. (The predictor's pushes carry contact points along chords of O's curved surface
-    as well: without the snap its warm starts had lost every contact, 2-5 d_hat away.)
+@dataclass(frozen=True, eq=False)
+class WarmStart:
+    """A step's warm start: x (n, dim) [m] the positions Newton starts from; source: "linear" or
+    "quadratic" (an extrapolation of the last steps) or "predictor" (the contact predictor);
+    snapped: the candidate with its contact gaps restored (None when there was no contact to
+    restore, or when restoring them was infeasible)."""
+
+    x: np.ndarray
+    source: str
+    snapped: np.ndarray | None
+
+
+def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjective, ctx: StepContext) -> WarmStart:
+    """The warm start: the feasible candidate with the lowest objective among the linear and quadratic
+    extrapolations of the last steps, or the contact predictor (:func:`predict`) when no
+    extrapolation is feasible, with its contact gaps restored (:func:`snap_contacts`: the
+    predictor's pushes also carry contact points along chords of O's curved surface) and near
+    points lifted.
     Raises ConvergenceError when no candidate is feasible."""
-    best_x, best_f = None, np.inf
-    for xc in _extrapolations(state, s_new):
+    best_x, best_f, source = None, np.inf, "predictor"
+    for xc, kind in zip(extrapolations(state, s_new), ("linear", "quadratic")):
         fc = obj.value(xc)
         if np.isfinite(fc) and fc < best_f:
-            best_x, best_f = xc, fc
+            best_x, best_f, source = xc, fc, kind
     if best_x is None:
-        best_x = _predict(cm, state, s_new, ctx)
-    xs = _snap_contacts(cm, state, best_x, s_new, ctx)
+        best_x = predict(cm, state, s_new, ctx)
+    xs = snap_contacts(cm, state, best_x, s_new, ctx)
     if xs is not None and np.isfinite(obj.value(xs)):  # (+inf: infeasible, inside O or inverted)
         best_x = xs
+    else:
+        xs = None
     # a point that ends up almost touching O costs one Newton iteration per doubling of its
     # distance (the log barrier): start such points at LIFT_TO * d_hat instead
-    fin = _state_final(state)
-    prev = fin[4] if fin is not None else None
-    xl = _lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * obj.dhat,
+    ev = state.current_evaluation()
+    prev = ev.distances if ev is not None else None
+    xl = lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * obj.dhat,
                       to=C.LIFT_TO * obj.dhat, prev=prev)
-    return best_x if xl is None else xl
+    return WarmStart(x=best_x if xl is None else xl, source=source, snapped=xs)
 
 
-def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float, ctx) -> np.ndarray | None:
+def snap_contacts(cm: CouplingModel, state: StepState, x: np.ndarray, s_new: float,
+                  ctx: StepContext) -> np.ndarray | None:
     """x with the boundary vertices that were in contact at the end of the last step (d < d_hat)
     moved along O's normal back to their last distance to O, or None when there are none (the
     caller checks feasibility: the move may push a neighbour into O or invert an element).
@@ -90,29 +110,27 @@ def _snap_contacts(cm: CouplingModel, state: _State, x: np.ndarray, s_new: float
     deformation into O (the step cap then cuts it to a few percent). Restoring the last gaps keeps
     those points in the barrier's range; the rest of A is left to Newton.
     """
-    fin = _state_final(state)
+    ev = state.current_evaluation()
     pts = state.points
-    if fin is None:
+    if ev is None:
         return None
-    d_prev = fin[4]
-    act = d_prev < _point_dhat(cm, pts)
+    d_prev = ev.distances
+    act = d_prev < point_dhat(cm, pts)
     if not act.any():
         return None
     R, p = cm.pose(s_new)
-    with ctx["timer"].timed("contact"):
-        ev = cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False)
-    g = -ev.grad
-    return _move_points(cm, pts, x, act, (d_prev[act] + ev.psi) * ev.near, g)
+    with ctx.timer.timed("contact"):
+        ev_o = cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False)
+    return move_points(cm, pts, x, act, (d_prev[act] + ev_o.psi) * ev_o.near, -ev_o.grad)
 
 
-def _move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.ndarray, dist: np.ndarray,
+def move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.ndarray, dist: np.ndarray,
                  direction: np.ndarray) -> np.ndarray:
     """x with the points ``sel`` moved by ``dist`` (s,) [m] along ``direction`` (s, dim) (normalized
     here; positive: away from O). Each vertex carrying selected points moves along the weighted mean
     of their directions by the largest of their moves, so no point on it is carried closer to O
-    than it asks: a vertex point that wants 12 um toward O between refinement points that want
-    20 um would otherwise take their mean and end inside O (stand side, the snap at its seat; the
-    snapped warm start was then dropped and every contact lost)."""
+    than it asks (the mean of the moves would carry a vertex point that wants a small move toward O
+    between refinement points that want larger ones into O)."""
     nrm = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
     rows = np.flatnonzero(sel)
     n = cm.fem.n_vertices
@@ -126,7 +144,7 @@ def _move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.n
     return x1
 
 
-def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
+def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext) -> np.ndarray:
     """Feasible warm start at s_new (see the module docstring, step 1).
 
     Points O can reach during the step (distance below L |O's displacement there| + d_hat) are
@@ -135,7 +153,7 @@ def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
     tangent stiffness. Points still inside O afterwards are carried fully (rigidly with O) and the
     solve is repeated; as a last resort every reachable point is carried rigidly.
     """
-    timer = ctx["timer"]
+    timer = ctx.timer
     x = state.x
     dim = cm.dim
     Ra, pa = cm.pose(state.s)
@@ -152,7 +170,7 @@ def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
     with timer.timed("contact"):
         ev_a = cm.field.evaluate(y, (Ra, pa), hessian=False)
     delta = carry(y) - y
-    reach = (-ev_a.psi < C.PSI_LIPSCHITZ * np.linalg.norm(delta, axis=1) + _point_dhat(cm, pts)) & ev_a.near
+    reach = (-ev_a.psi < C.PSI_LIPSCHITZ * np.linalg.norm(delta, axis=1) + point_dhat(cm, pts)) & ev_a.near
     if not reach.any():
         return x.copy()
     # O's outward normal at each point, carried with O to the new pose
@@ -163,8 +181,8 @@ def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
     normal = reach & (push > 0)
     full = np.zeros(len(pts), dtype=bool)
     for _ in range(C.PREDICTOR_RETRIES + 1):
-        x0 = _penalty_solve(cm, state, x, pts, normal & ~full, full, nrm, delta, ctx)
-        d_new = _feasible_distances(cm, x0, s_new, pts, ctx)
+        x0 = penalty_solve(cm, state, x, pts, normal & ~full, full, nrm, delta, ctx)
+        d_new = feasible_distances(cm, x0, s_new, pts, ctx)
         if d_new is not None and np.all(d_new > 0):
             return x0
         if d_new is None:
@@ -175,14 +193,14 @@ def _predict(cm: CouplingModel, state: _State, s_new: float, ctx) -> np.ndarray:
             break
         full |= bad
     full = reach
-    x0 = _penalty_solve(cm, state, x, pts, np.zeros_like(full), full, nrm, delta, ctx)
-    d_new = _feasible_distances(cm, x0, s_new, pts, ctx)
+    x0 = penalty_solve(cm, state, x, pts, np.zeros_like(full), full, nrm, delta, ctx)
+    d_new = feasible_distances(cm, x0, s_new, pts, ctx)
     if d_new is not None and np.all(d_new > 0):
         return x0
     raise ConvergenceError(f"no feasible warm start for the step to s={s_new:.6g} m")
 
 
-def _restore_feasibility(cm: CouplingModel, state: _State, ctx) -> None:
+def restore_feasibility(cm: CouplingModel, state: StepState, ctx: StepContext) -> None:
     """Push constraint points that are inside O at (state.x, state.s) (by at most the tolerance)
     out along O's normal to d_hat / 2, A following through the penalty solve."""
     R, p = cm.pose(state.s)
@@ -195,58 +213,51 @@ def _restore_feasibility(cm: CouplingModel, state: _State, ctx) -> None:
             return
         g = -ev.grad
         nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-        delta = (0.5 * _point_dhat(cm, pts) - np.minimum(d, 0.0))[:, None] * nrm
-        x1 = _penalty_solve(cm, state, state.x, pts, bad, np.zeros_like(bad), nrm, delta, ctx)
-        if _feasible_distances(cm, x1, state.s, pts, ctx) is None:
+        delta = (0.5 * point_dhat(cm, pts) - np.minimum(d, 0.0))[:, None] * nrm
+        x1 = penalty_solve(cm, state, state.x, pts, bad, np.zeros_like(bad), nrm, delta, ctx)
+        if feasible_distances(cm, x1, state.s, pts, ctx) is None:
             break
         state.x = x1
     raise ConvergenceError(f"could not push the new refinement points out of the object at s={state.s:.6g} m")
 
 
-def _feasible_distances(cm, x0, s, pts, ctx):
+def feasible_distances(cm, x0, s, pts, ctx):
     """Distances to O at s if x0 has no inverted element, else None."""
-    from simfab.fem.elastic import det_F
-
-    with ctx["timer"].timed("assembly"):
+    with ctx.timer.timed("assembly"):
         ok = np.all(det_F(cm.fem, x0) > 0)
     if not ok:
         return None
     R, p = cm.pose(s)
-    with ctx["timer"].timed("contact"):
+    with ctx.timer.timed("contact"):
         ev = cm.field.evaluate(pts.positions(x0), (R, p), hessian=False)
     return -ev.psi
 
 
-def _penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarray:
+def penalty_solve(cm, state, x, pts, normal, full, nrm, delta, ctx) -> np.ndarray:
     """x + u, u minimizing 1/2 u^T H u + P/2 sum_j c_j(u)^2 over the free dofs, with
     c_j = n_j . (y_j(u) - delta_j) for ``normal`` points and |y_j(u) - delta_j| for ``full`` ones."""
-    from simfab.fem.elastic import energy_gradient_hessian
-
     n, dim = cm.fem.n_vertices, cm.dim
-    H = state.H
-    if isinstance(H, _LazyHessian):  # the PSD tangent is assembled only when the predictor runs
-        H = state.H = H()
+    H = state.tangent
+    if callable(H):  # the PSD tangent is assembled only when the predictor runs
+        H = state.tangent = H()
     if H is None:
-        with ctx["timer"].timed("assembly"):
+        with ctx.timer.timed("assembly"):
             _, _, H = energy_gradient_hessian(cm.fem, x)
-            _regularize(cm, H, _diag_slots(cm))
-        state.H = H
-    pen = C.PREDICTOR_PENALTY * float(np.abs(H.data[_diag_slots(cm)]).max())
+            regularize(cm, H)
+        state.tangent = H
+    pen = C.PREDICTOR_PENALTY * float(np.abs(H.data[diag_slots(cm)]).max())
     sel = normal | full
     N = np.zeros((len(pts), dim, dim))
     N[normal] = np.einsum("ki,kj->kij", nrm[normal], nrm[normal])
     N[full] = np.eye(dim)
     N = N[sel]
-    w = pts.weights[sel]
-    blocks = pen * w[:, :, None, None, None] * w[:, None, :, None, None] * N[:, None, None, :, :]
-    data = H.data.copy()
-    np.add.at(data, _point_slots(cm, pts)[sel].ravel(), blocks.ravel())
-    A = cm.fem.pattern.matrix(data)
+    A = cm.fem.pattern.matrix(H.data.copy())
+    add_point_blocks(cm, pts, A, np.flatnonzero(sel), pen * N)
     f_pt = pen * np.einsum("kij,kj->ki", N, delta[sel])  # penalty force per point
     rhs = pts.scatter(f_pt, n, rows=np.flatnonzero(sel)).ravel()
     fidx = np.flatnonzero(cm.free)
     pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], x)
-    uf = _TimedSolver(_pinned(ctx["solver"], pin), ctx["timer"]).solve_free(A, fidx, rhs[fidx])
+    uf = TimedSolver(pinned(ctx.solver, pin), ctx.timer).solve_free(A, fidx, rhs[fidx])
     u = np.zeros(n * dim)
     u[fidx] = uf
     return x + u.reshape(n, dim)

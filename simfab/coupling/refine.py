@@ -5,24 +5,41 @@ constraint points (their density doubled when refined facets still penetrate); s
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 
 from simfab.contact.imls import body_frame
 from simfab.coupling import config as C
+from simfab.coupling.layout import EDGE_PAIRS, point_dhat
 from simfab.coupling.model import CouplingModel
-from simfab.coupling.objective import _EDGE_PAIRS, _point_dhat
 from simfab.coupling.points import check_weights, facet_points, facet_weights, vertex_points
-from simfab.coupling.state import _State
+from simfab.coupling.state import Evaluation, StepState
 from simfab.errors import ConvergenceError
 
-def _crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: _State, final=None) -> list:
+
+@dataclass(frozen=True, eq=False)
+class FacetCheck:
+    """The facet check at positions x (n, dim) [m], path length s [m] and refinement density
+    ``order``: ids (f,) of the boundary facets that could reach into O, psi_max (f,) [m] the largest
+    psi (or a certified upper bound of it) over each one's check points, refined (f,) bool."""
+
+    x: np.ndarray
+    s: float
+    order: int
+    ids: np.ndarray
+    psi_max: np.ndarray
+    refined: np.ndarray
+
+def crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
+                    final: Evaluation | None = None) -> list:
     """Facets to (re)refine at (x, s): unrefined boundary facets near O whose interior crosses into
     O, and, when a refined facet still penetrates O by more than the tolerance between its points,
     every refined facet again at twice the density (returned as the full list)."""
     if not cm.options.refine:
         return []
-    ids, psi_max, refined = _facet_check(cm, x, s, state, final)
+    fc = facet_check(cm, x, s, state, final)
+    ids, psi_max, refined = fc.ids, fc.psi_max, fc.refined
     if len(ids) == 0:
         return []
     if np.any(psi_max[refined] > cm.tol):
@@ -31,40 +48,43 @@ def _crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: _State, 
             raise ConvergenceError(f"refinement at density {state.order} still leaves a penetration of "
                                    f"{psi_max[refined].max():.3e} m > {cm.tol:.3e} m at s={s:.6g} m")
         state.order = 2 * state.order + (1 if cm.dim == 2 else 0)  # new points = the old check points
-        _rebuild_points(cm, state)
+        rebuild_points(cm, state)
         return sorted(state.refined | {int(f) for f in ids[psi_max > 0]})
     return [int(f) for f in ids[(psi_max > 0) & ~refined]]
 
 
-_COVER = {2: 0.5, 3: 1.0 / np.sqrt(3.0)}  # max distance from a facet point to its nearest vertex / longest edge
+#: The largest distance from a point of a facet to its nearest vertex, over its longest edge.
+COVER = {2: 0.5, 3: 1.0 / np.sqrt(3.0)}  # max distance from a facet point to its nearest vertex / longest edge
 
 
-def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, final=None):
+def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
+                final: Evaluation | None = None) -> FacetCheck:
     """Max psi over check points of each boundary facet that could reach into O at (x, s).
 
-    Returns (facet ids (f,), max psi (f,) [m], refined (f,) bool). Unrefined facets are checked
+    Returns a :class:`FacetCheck`. Unrefined facets are checked
     at the points refinement would add; refined facets at the denser check points (their own
     points plus the midpoints between them). A facet can only reach into O if one of its vertices
     is within L * cover of O, cover the largest distance from a point of the facet to its nearest
     vertex (at most the longest edge / sqrt(3) on a triangle, half the edge in 2D). Check points
     whose Lipschitz bound, from the facet's vertices or from their own values at earlier checks (in
     O's body frame), is negative are not evaluated; their bound stands in for psi. The result is
-    remembered for the same (x, s).
+    remembered for the same (x, s) (``final``: Newton's converged evaluation at x, whose distances
+    stand in for the boundary vertices').
     """
     memo = state.check
-    if memo is not None and memo[0] is x and memo[1] == s and memo[2] == state.order:
-        return memo[3]
+    if memo is not None and memo.x is x and memo.s == s and memo.order == state.order:
+        return memo
     facets = cm.contact_facets
     R, p = cm.pose(s)
     bv = np.asarray(cm.fem.boundary_vertices)
     dv = np.full(cm.fem.n_vertices, np.inf)
-    if final is not None and final[0] is x and len(final[4]) >= len(bv):
+    if final is not None and final.x is x and len(final.distances) >= len(bv):
         # Newton's converged evaluation at x (the first len(bv) constraint points are the boundary
         # vertices, in vertex_points order): exact within the lazy band, lower bounds beyond it;
         # those beyond the kernel radius get the sharper nearest-sample bound
-        dv[bv] = final[4][: len(bv)]
-        state.grad_peak = max(state.grad_peak, _max_norm(final[5]))
-        out = np.flatnonzero(dv[bv] > _point_dhat(cm, state.points)[: len(bv)] * C.LAZY_BAND_DHATS)
+        dv[bv] = final.distances[: len(bv)]
+        state.grad_peak = max(state.grad_peak, _max_norm(final.distance_gradients))
+        out = np.flatnonzero(dv[bv] > point_dhat(cm, state.points)[: len(bv)] * C.LAZY_BAND_DHATS)
         nn = cm.field.nearest_sample(x[bv[out]], (R, p))
         far = nn >= cm.field.radius
         dv[bv[out[far]]] = np.maximum(dv[bv[out[far]]], cm.field.far_bound(nn[far]))
@@ -76,13 +96,13 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
         if far.any():  # far vertices: a sharper lower bound of their distance than far_distance
             dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
     xf = x[facets]  # (F, nv, dim)
-    a, c = _EDGE_PAIRS[cm.dim]
+    a, c = EDGE_PAIRS[cm.dim]
     edges2 = np.einsum("fed,fed->fe", xf[:, a] - xf[:, c], xf[:, a] - xf[:, c])  # (F, e) squared edge lengths
     # every point of a facet lies within `cover` of one of its vertices: half the edge (2D), and
     # longest edge / sqrt(3) on a triangle (the farthest point is the circumcentre when acute,
     # R = c / (2 sin gamma) with gamma >= 60 deg; else within half the longest edge). A facet whose
     # vertices are all farther than L * cover from O is certified outside by the vertex bounds.
-    cover = np.sqrt(edges2.max(axis=1)) * _COVER[cm.dim]
+    cover = np.sqrt(edges2.max(axis=1)) * COVER[cm.dim]
     ids = np.flatnonzero(np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * cover)
     refined = np.zeros(len(facets), dtype=bool)
     refined[list(state.refined)] = True
@@ -91,7 +111,7 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
     for is_refined in (False, True):
         sel = refined if is_refined else ~refined
         if sel.any():
-            w, gap_map = _check_lattice(cm.dim, state.order, is_refined)
+            w, gap_map = check_lattice(cm.dim, state.order, is_refined)
             f_sel = ids[sel]
             xv = xf[f_sel]  # (f, nv, dim) the facets' vertices
             y = w @ xv  # (f, p, dim) check points
@@ -118,8 +138,8 @@ def _facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: _State, fina
                 state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
             known_body[f_sel], known_psi[f_sel] = body, psi
             psi_max[sel] = psi.max(axis=1)
-    out = (ids, psi_max, refined)
-    state.check = (x, s, state.order, out)
+    out = FacetCheck(x, s, state.order, ids, psi_max, refined)
+    state.check = out
     return out
 
 
@@ -128,10 +148,8 @@ def _max_norm(v: np.ndarray) -> float:
     return float(np.sqrt(np.einsum("kd,kd->k", v, v).max())) if len(v) else 0.0
 
 
-
-
 @functools.lru_cache(maxsize=32)
-def _check_lattice(dim: int, order: int, refined: bool) -> tuple[np.ndarray, np.ndarray]:
+def check_lattice(dim: int, order: int, refined: bool) -> tuple[np.ndarray, np.ndarray]:
     """(w (p, nv), G (edges, p * nv)) for the check points of a facet at refinement ``order``:
     their barycentric weights (refinement points for an unrefined facet, the denser check points
     for a refined one) and the map from the facet's squared edge lengths (f, edges) to the squared
@@ -142,7 +160,7 @@ def _check_lattice(dim: int, order: int, refined: bool) -> tuple[np.ndarray, np.
     f * p * nv difference vectors. (Cached and read-only.)
     """
     w = check_weights(dim, order) if refined else facet_weights(dim, order)
-    a, c = _EDGE_PAIRS[dim]
+    a, c = EDGE_PAIRS[dim]
     b = np.arange(dim)
     wa, wc = w[:, a].T[:, :, None], w[:, c].T[:, :, None]  # (e, p, 1)
     G = (wa * (c[:, None, None] == b) + wc * (a[:, None, None] == b) - wa * wc).reshape(len(a), -1)
@@ -151,7 +169,7 @@ def _check_lattice(dim: int, order: int, refined: bool) -> tuple[np.ndarray, np.
     return w, G
 
 
-def _check_cache(cm: CouplingModel, state: _State, refined: bool, p: int):
+def _check_cache(cm: CouplingModel, state: StepState, refined: bool, p: int):
     """(body positions (F, p, 3) [m], psi or an upper bound (F, p) [m]) of every boundary facet's
     check points at its last check (NaN / +inf: never checked) for unrefined or refined facets at
     the current density; reset when the density changes."""
@@ -163,7 +181,7 @@ def _check_cache(cm: CouplingModel, state: _State, refined: bool, p: int):
     return cache
 
 
-def _rebuild_points(cm: CouplingModel, state: _State) -> None:
+def rebuild_points(cm: CouplingModel, state: StepState) -> None:
     """Constraint points = boundary vertices + refinement points of every refined facet."""
     facets = cm.contact_facets
     pts = vertex_points(np.asarray(cm.fem.boundary_vertices, dtype=np.int64), cm.dim)
@@ -173,6 +191,7 @@ def _rebuild_points(cm: CouplingModel, state: _State) -> None:
     state.points = pts
 
 
-def _add_refinement(cm: CouplingModel, state: _State, facet_ids: list) -> None:
+def add_refinement(cm: CouplingModel, state: StepState, facet_ids) -> None:
+    """Give the boundary facets ``facet_ids`` (rows of ``cm.contact_facets``) refinement points."""
     state.refined.update(int(f) for f in facet_ids)
-    _rebuild_points(cm, state)
+    rebuild_points(cm, state)

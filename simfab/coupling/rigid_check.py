@@ -3,36 +3,61 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from simfab.contact.barrier import barrier_hessian
 from simfab.coupling import rigid
+from simfab.coupling.layout import point_dhat
 from simfab.coupling.model import CouplingModel
-from simfab.coupling.objective import _point_dhat
-from simfab.coupling.state import _State, _state_final
+from simfab.coupling.state import StepState
 
-def _rigid_contact(cm: CouplingModel, state: _State, free_motions):
-    """(basis, weakest) at the current state, from one generalized eigenproblem
-    (:func:`simfab.coupling.rigid.contact_modes`): basis (k, r') the free rigid motions that the
-    contact leaves unresisted (what the next step pins; all of them without contact), weakest
-    (ratio, motion, s, radius) the motion it resists least (for the notes; None without contact or
+
+@dataclass(frozen=True, eq=False)
+class WeakMotion:
+    """The rigid motion of A the contact resists least at path length s [m]: ratio [-] its contact
+    stiffness over the stiffness it would have if every contact normal were aligned with it, motion
+    (r,) its coordinates in :func:`simfab.coupling.rigid.motion_basis`, radius [m] the RMS distance
+    of the contact points from A's rest centroid (for describing a rotation)."""
+
+    ratio: float
+    motion: np.ndarray
+    s: float
+    radius: float
+
+
+@dataclass(frozen=True, eq=False)
+class RigidContact:
+    """basis (k, r'): the free rigid motions the contact leaves unresisted (what the next step pins;
+    all of them without contact); weakest: the motion it resists least (None without contact or
     free motion)."""
-    fin = _state_final(state)
+
+    basis: np.ndarray
+    weakest: WeakMotion | None
+
+
+def rigid_contact(cm: CouplingModel, state: StepState, free_motions) -> RigidContact:
+    """The unresisted motions at the current state, from one generalized eigenproblem
+    (:func:`simfab.coupling.rigid.contact_modes`) over the points in the barrier's range;
+    ``free_motions``: :func:`simfab.coupling.rigid.motion_basis` of ``cm``."""
+    ev = state.current_evaluation()
     Q, c = free_motions
     if Q.shape[1] == 0:
-        return Q, None
-    if fin is None:
-        return (state.pin_basis if state.pin_basis is not None else Q), None
-    d, gd = fin[4], fin[5]
-    dh = _point_dhat(cm, state.points)
+        return RigidContact(Q, None)
+    if ev is None:
+        return RigidContact(state.pin_basis if state.pin_basis is not None else Q, None)
+    d, gd = ev.distances, ev.distance_gradients
+    dh = point_dhat(cm, state.points)
     act = (d < dh) & (np.einsum("kd,kd->k", gd, gd) > 0)
     if not act.any():
-        return Q, None
+        return RigidContact(Q, None)
     y = state.points.positions(state.x)[act]
     nrm = gd[act] / np.linalg.norm(gd[act], axis=1, keepdims=True)
     modes = rigid.contact_modes(Q, c, y, nrm, barrier_hessian(d[act], dh[act]))
     if modes is None:
-        return Q, None
+        return RigidContact(Q, None)
     lam, motions = modes
     radius = float(np.sqrt(np.mean(np.sum((y - c) ** 2, axis=1))))
-    return motions[:, lam < rigid.UNRESISTED_REL], (float(max(lam[0], 0.0)), motions[:, 0], state.s, radius)
+    return RigidContact(motions[:, lam < rigid.UNRESISTED_REL],
+                        WeakMotion(float(max(lam[0], 0.0)), motions[:, 0], state.s, radius))

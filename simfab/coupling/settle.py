@@ -77,13 +77,12 @@ def still_drawn_in(steps) -> bool:
     return peak > 0 and P[-1] > REST_FORCE_REL * peak and E_last < E_prev
 
 
-def to_rest(cm, steps, step_to, undo, keep) -> str:
+def to_rest(cm, stepper) -> str:
     """Continue the run past the path's end until O comes to rest (see the module docstring).
 
-    steps : the records so far (StepResult list); step_to(s, tolerate=True) -> (record or None
-    when the step cannot be solved, token) solves the step from the current state to path length
-    s [m]; undo(token) returns to the state before that step; keep(record) appends a record.
-    Steps of SETTLE_STEP_REL times the last planned one (at most 1/MIN_SETTLE_STEPS of the path) go on while
+    stepper : the run's :class:`simfab.coupling.stepper.Stepper` (its ``steps`` so far; ``step``
+    solves a step from the current state, ``undo`` returns to the state before it, ``keep``
+    appends its record). Steps of SETTLE_STEP_REL times the last planned one (at most 1/MIN_SETTLE_STEPS of the path) go on while
     :func:`still_drawn_in`; a step that overshoots the rest point (path force below
     -REST_FORCE_REL * peak: O pushed into a stiffer contact, or no solution: undone) starts the search; the rest
     point is bracketed (:func:`_bracket`), every trial solved from the last one's state (a step
@@ -94,6 +93,7 @@ def to_rest(cm, steps, step_to, undo, keep) -> str:
     Returns "rest" (O came to rest), "not continued" (the path cannot be continued or was already
     at rest) or why it stopped short ("cap": the extension limit, "bracket": no rest point found).
     """
+    steps = stepper.steps
     if len(steps) < 2 or not can_continue(cm) or not still_drawn_in(steps):
         return "not continued" if len(steps) < 2 or not still_drawn_in(steps) else "cannot continue"
     h = min(SETTLE_STEP_REL * (steps[-1].s - steps[-2].s), float(cm.path.length) / MIN_SETTLE_STEPS)
@@ -103,17 +103,18 @@ def to_rest(cm, steps, step_to, undo, keep) -> str:
     for _ in range(int(np.ceil(SETTLE_MAX_STEPS_REL * (len(cm.s_steps) - 1)))):
         if not still_drawn_in(steps):
             return "rest"
-        rec, token = step_to(steps[-1].s + h, tolerate=True)
+        attempt = stepper.step(steps[-1].s + h, tolerate=True)
+        rec = attempt.record
         if rec is not None and rec.path_force >= -tol:
-            keep(rec)
+            stepper.keep(rec)
             continue
         if rec is None:
-            undo(token)
-        return _bracket(steps[-1], rec, steps[-1].s + h, step_to, undo, keep, tol, REST_ENERGY_REL * E_max)
+            stepper.undo(attempt)
+        return _bracket(steps[-1], rec, steps[-1].s + h, stepper, tol, REST_ENERGY_REL * E_max)
     return "rest" if not still_drawn_in(steps) else "cap"
 
 
-def _bracket(lo, hi, hi_s, step_to, undo, keep, tol, e_tol) -> str:
+def _bracket(lo, hi, hi_s, stepper, tol, e_tol) -> str:
     """Find the rest point between the kept record ``lo`` (path force > 0) and an overshoot at
     ``hi_s`` (record ``hi``, None when unsolvable); see :func:`to_rest`.
 
@@ -130,12 +131,13 @@ def _bracket(lo, hi, hi_s, step_to, undo, keep, tol, e_tol) -> str:
         if lo.path_force * (hi_s - lo.s) <= e_tol:
             break
         s_try = 0.5 * (lo.s + hi_s)
-        rec, token = step_to(s_try, tolerate=True)
+        attempt = stepper.step(s_try, tolerate=True)
+        rec = attempt.record
         if rec is not None and abs(rec.path_force) <= tol:
-            keep(rec)
+            stepper.keep(rec)
             return "rest"
         if rec is None:
-            undo(token)
+            stepper.undo(attempt)
             hi, hi_s = None, s_try
         elif rec.path_force > 0:  # still drawn in: the new lower end
             lo = rec
@@ -143,11 +145,11 @@ def _bracket(lo, hi, hi_s, step_to, undo, keep, tol, e_tol) -> str:
             hi, hi_s = rec, s_try
     else:
         if lo is not steps_last:
-            keep(lo)
+            stepper.keep(lo)
         return "bracket"
     for end in (lo, hi):  # the ends' records, in order (the trials' own: no solve again)
         if end is not None and end is not steps_last:
-            keep(end)
+            stepper.keep(end)
     return "rest"
 
 

@@ -1,4 +1,11 @@
-"""The state of an insertion run between steps (:class:`_State`) and the acceptance of a converged step."""
+"""Typed data of the insertion loop: what one converged step's evaluation holds
+(:class:`Evaluation`), the contact it ends with (:class:`ContactState`, the lagged data a
+frictional step reads), the run's state between steps (:class:`StepState`) and the per-run context
+(:class:`StepContext`); and :func:`accept`, which makes a converged solution the current state.
+
+Model/State split: the :class:`simfab.coupling.model.CouplingModel` is immutable for a run; a
+:class:`StepState` is what a step reads and writes.
+"""
 
 from __future__ import annotations
 
@@ -6,45 +13,142 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from simfab.contact.barrier import barrier_gradient
 from simfab.coupling.points import ContactPoints
+from simfab.coupling.timing import Timer
+from simfab.solve.linear import SPDSolver
 
-# ----------------------------------------------------------------------------- simulation
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Evaluation:
+    """Newton's last evaluation of a step objective at its converged positions.
+
+    x : (n, dim) positions [m] it was evaluated at (the very array the state holds);
+    kappa : barrier stiffness [N/m]; points : the constraint points it was evaluated over;
+    elastic_energy [J] and elastic_gradient (n, dim) [N]: E_d and dE_d/dx (without barrier or pin);
+    distances (k,) [m]: d_j = -psi(y_j), exact within the objective's lazy band (which contains the
+    barrier's support), certified lower bounds beyond it; distance_gradients (k, dim): grad d_j
+    (zero where only a bound is known); hessian: the objective's PSD Hessian at x (CSR, or a
+    callable that assembles it on first use), None when it was not evaluated at x."""
+
+    x: np.ndarray
+    kappa: float
+    points: ContactPoints
+    elastic_energy: float
+    elastic_gradient: np.ndarray
+    distances: np.ndarray
+    distance_gradients: np.ndarray
+    hessian: object = None
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ContactState:
+    """The contact a converged step ends with, over the constraint points within their barrier
+    range (d_j < d_hat_j): what the next step reads lagged (e.g. a frictional potential's normal
+    force magnitudes and tangent bases, as IPC lags them).
+
+    index (a,): the points' rows in ``points``; positions (a, dim) [m]; normals (a, dim): O's
+    outward unit normal at each (grad d / |grad d|); normal_force (a,) [N]: the barrier's push
+    lambda_j = -kappa b'(d_j) >= 0; tangents (a, dim, dim - 1): an orthonormal basis of the plane
+    normal to each normal (2D: the normal turned by +90 deg; 3D: completed from the axis least
+    aligned with it)."""
+
+    points: ContactPoints
+    index: np.ndarray
+    positions: np.ndarray
+    normals: np.ndarray
+    normal_force: np.ndarray
+    tangents: np.ndarray
+
+    @classmethod
+    def from_evaluation(cls, ev: Evaluation, dhat: np.ndarray) -> "ContactState":
+        """The contact of a converged evaluation ``ev`` with per-point activation distances ``dhat`` (k,)."""
+        gn = np.linalg.norm(ev.distance_gradients, axis=1)
+        idx = np.flatnonzero((ev.distances < dhat) & (gn > 0))
+        n = ev.distance_gradients[idx] / gn[idx, None]
+        lam = -ev.kappa * barrier_gradient(ev.distances[idx], dhat[idx])
+        return cls(points=ev.points, index=idx, positions=ev.points.positions(ev.x)[idx], normals=n,
+                   normal_force=lam, tangents=tangent_bases(n))
+
+
+def tangent_bases(normals: np.ndarray) -> np.ndarray:
+    """(a, dim, dim - 1) orthonormal bases of the planes normal to unit ``normals`` (a, dim)."""
+    a, dim = normals.shape
+    if dim == 2:
+        return np.stack([-normals[:, 1], normals[:, 0]], axis=1)[:, :, None]
+    axis = np.eye(3)[np.argmin(np.abs(normals), axis=1)]
+    t1 = np.cross(normals, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return np.stack([t1, np.cross(normals, t1)], axis=2)
+
+
+@dataclass(frozen=True)
+class PastStep:
+    """A converged earlier step: positions x (n, dim) [m] at path length s [m]."""
+
+    x: np.ndarray
+    s: float
+
+
 @dataclass(kw_only=True)
-class _State:
-    x: np.ndarray  # (n, dim)
+class StepState:
+    """The insertion run's state between steps.
+
+    x (n, dim) [m] at path length s [m]; points: the constraint points (boundary vertices plus the
+    refinement points of the ``refined`` facets at density ``order``: 2D points per edge, 3D face
+    lattice order, doubled on demand); kappa: the barrier stiffness for the following steps [N/m]
+    (adapted); kappa_step: the stiffness x was solved with (forces at x use it); evaluation:
+    Newton's last evaluation at x (None when it is not at x); contact: the contact x ends with;
+    tangent: the PSD Hessian at x for the predictor (CSR, or a callable assembling it on demand);
+    prev, prev2: the one and two steps before (extrapolating warm starts); pin_basis (k, r): the
+    rigid motions the next step pins; grad_peak: largest |grad psi| seen at converged constraint
+    and check points; check / check_cache: memo of the last facet check and of earlier check
+    points' values (see :mod:`simfab.coupling.refine`)."""
+
+    x: np.ndarray
     s: float
     points: ContactPoints
     refined: set
-    order: int  # refinement density (2D: points per edge, 3D: face lattice order), doubled on demand
-    check: tuple | None = None  # memo of the last facet check (x, s, order, result)
-    check_cache: dict = field(default_factory=dict)  # earlier check points' values (_check_cache)
-    kappa: float = 0.0  # current barrier stiffness [N/m] (adapted, see _adapt_kappa)
-    H: object = None  # last PSD Hessian (for the predictor; a _LazyHessian until first needed)
-    final: tuple | None = None  # Newton's last evaluation at x (see _final_eval), for _record
-    kappa_step: float = 0.0  # barrier stiffness the current x was solved with [N/m] (kappa may
-    # grow for the following steps; forces at x must use the stiffness of its own equilibrium)
-    prev: tuple | None = None  # (x, s) of the step before (for the extrapolating predictor)
-    prev2: tuple | None = None  # (x, s) two steps before
-    grad_peak: float = 0.0  # largest |grad psi| seen at converged constraint and check points [-]
-    pin_basis: np.ndarray | None = None  # (k, r) rigid motions (rigid.motion_basis coordinates) the
+    order: int
+    kappa: float = 0.0
+    kappa_step: float = 0.0
+    evaluation: Evaluation | None = None
+    contact: ContactState | None = None
+    tangent: object = None
+    prev: PastStep | None = None
+    prev2: PastStep | None = None
+    pin_basis: np.ndarray | None = None
+    grad_peak: float = 0.0
+    check: object = None
+    check_cache: dict = field(default_factory=dict)
+
+    def current_evaluation(self) -> Evaluation | None:
+        """Newton's last evaluation when it belongs to the current state (at ``x``, over the current
+        points: a refinement since changes the points), else None."""
+        ev = self.evaluation
+        if ev is None or ev.x is not self.x or len(ev.distances) != len(self.points):
+            return None
+        return ev
 
 
-def _accept(state: _State, x: np.ndarray, s: float, obj: _StepObjective, final) -> None:
-    """Make the converged x at path length s the current state, with the Hessian, final
-    evaluation (``_final_eval(obj, x)``) and barrier stiffness of the objective it was solved with."""
-    state.x, state.s = x, s
-    state.final = final
+@dataclass(kw_only=True)
+class StepContext:
+    """Per-run services of the insertion loop: ``timer`` (seconds per resource: assembly,
+    factorization, contact), ``phases`` (seconds per loop phase: warm_start, newton, facet_check,
+    record, rigid_check) and the sparse ``solver`` whose symbolic factorization every solve reuses."""
+
+    timer: Timer = field(default_factory=Timer)
+    phases: Timer = field(default_factory=Timer)
+    solver: SPDSolver = field(default_factory=SPDSolver)
+
+
+def accept(state: StepState, x: np.ndarray, s: float, kappa: float, evaluation: Evaluation | None,
+           dhat: np.ndarray) -> None:
+    """Make the converged x at path length s (solved with barrier stiffness ``kappa``) the current
+    state, with Newton's last evaluation there (``dhat``: the points' activation distances)."""
+    state.x, state.s, state.kappa_step = x, s, kappa
+    state.evaluation = evaluation
     # the objective's last evaluation may be a rejected line-search trial (Newton stopping at the
     # round-off floor): its Hessian belongs to x only when the evaluation does
-    state.H = obj.last_H if state.final is not None else None
-    state.kappa_step = obj.kappa
-
-
-def _state_final(state: _State):
-    """Newton's last evaluation (see :func:`_final_eval`) when it belongs to the current state:
-    at state.x and over the current constraint points (a refinement since changes the points);
-    else None."""
-    fin = state.final
-    if fin is None or fin[0] is not state.x or len(fin[4]) != len(state.points):
-        return None
-    return fin
+    state.tangent = evaluation.hessian if evaluation is not None else None
+    state.contact = ContactState.from_evaluation(evaluation, dhat) if evaluation is not None else None

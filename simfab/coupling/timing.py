@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 
-class _Timer:
+class Timer:
     """Accumulates wall time per category (assembly, factorization, contact, ...)."""
 
     def __init__(self):
@@ -14,18 +14,18 @@ class _Timer:
     def add(self, key: str, dt: float) -> None:
         self.t[key] = self.t.get(key, 0.0) + dt
 
-    def timed(self, key: str) -> "_Span":
+    def timed(self, key: str) -> "Span":
         """Book the wall time of a ``with`` block under ``key``."""
-        return _Span(self, key)
+        return Span(self, key)
 
 
-class _Span:
-    """``with`` block timed into a :class:`_Timer` (a plain class: it runs on every objective
+class Span:
+    """``with`` block timed into a :class:`Timer` (a plain class: it runs on every objective
     evaluation, where a generator-based context manager costs a few times more)."""
 
     __slots__ = ("timer", "key", "t0")
 
-    def __init__(self, timer: _Timer, key: str):
+    def __init__(self, timer: Timer, key: str):
         self.timer, self.key = timer, key
 
     def __enter__(self):
@@ -35,7 +35,7 @@ class _Span:
         self.timer.add(self.key, time.perf_counter() - self.t0)
 
 
-class _TimedSolver:
+class TimedSolver:
     """SPDSolver wrapper that books factorization + solve time."""
 
     def __init__(self, solver, timer):

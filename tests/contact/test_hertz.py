@@ -1,5 +1,5 @@
 """Hertz check at modest size: a rigid sphere pressed into a block graded toward the contact (the
-quarter x, y >= 0 with symmetry planes, simfab.coupling.hertz).
+quarter x, y >= 0 with symmetry planes, simfab.verification.hertz).
 
 Hertz: F = 4/3 E* sqrt(R) d^(3/2) on a half-space. At this size (4.2k tets, edge ~ a / 6 at the
 contact) linear tets are measurably stiff: the same mesh's linear solution under Hertz's pressure
@@ -13,8 +13,8 @@ no correction) is ``python tools/bench.py hertz``.
 import numpy as np
 import pytest
 
-from simfab.coupling.hertz import linear_centre_displacement, sphere_on_block
-from simfab.coupling.objective import _point_dhat
+from simfab.verification.hertz import linear_centre_displacement, sphere_on_block
+from simfab.coupling.layout import point_dhat
 
 R, E, NU = 0.01, 1e6, 0.3
 
@@ -44,7 +44,7 @@ def test_standoff_is_a_fraction_of_the_local_element_size(pressed):
     from simfab.coupling.points import face_weights, vertex_points
 
     # the contact elements are much smaller than the mesh's mean edge length, and d_hat follows them
-    dhat_local = float(_point_dhat(cm, vertex_points(np.array([centre]), 3))[0])
+    dhat_local = float(point_dhat(cm, vertex_points(np.array([centre]), 3))[0])
     assert dhat_local < 0.2 * cm.dhat
     # the block's top surface (dense points on its boundary faces) touches the sphere within the
     # local activation distance (standoff <= 1-2% of the local edge length), far below the travel

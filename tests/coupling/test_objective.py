@@ -8,8 +8,10 @@ from simfab.contact.barrier import point_barrier
 from simfab.coupling import config as C
 from simfab.coupling.rigid import mean_stiffness
 from simfab.coupling.points import edge_weights, facet_points, vertex_points
-from simfab.coupling.objective import _StepObjective
-from simfab.coupling.timing import _Timer
+from simfab.coupling.layout import EDGE_PAIRS
+from simfab.coupling.objective import StepObjective
+from simfab.coupling.refine import COVER, check_lattice
+from simfab.coupling.timing import Timer
 from simfab.fem.neohookean import energy_gradient_hessian
 
 
@@ -22,7 +24,7 @@ def _objective_near_contact(coarse_block_model):
     # place the circle so that the top edge's middle points are inside the barrier band
     R, p = cm.pose(0.0)
     p = np.array([0.0, 3e-3 + 0.4 * cm.dhat, 0.0])
-    obj = _StepObjective(cm, pts, R, p, _Timer())
+    obj = StepObjective(cm, pts, R, p, Timer())
     return cm, pts, obj
 
 
@@ -87,13 +89,10 @@ def test_evaluation_without_hessian_defers_the_same_psd_hessian(coarse_block_mod
 def test_check_lattice_gaps_equal_the_distances_to_the_facet_vertices(dim, order, refined):
     # the facet check bounds psi at a check point from the facet's vertices by L |y - v|; the
     # distances come from squared edge lengths through a precomputed map: compare with |y - v|
-    from simfab.coupling.objective import _EDGE_PAIRS
-    from simfab.coupling.refine import _check_lattice
-
     rng = np.random.default_rng(3)
     xv = rng.standard_normal((50, dim, dim)) * rng.uniform(0.01, 3.0, (50, 1, 1))  # 50 facets of dim vertices
-    w, G = _check_lattice(dim, order, refined)
-    a, c = _EDGE_PAIRS[dim]
+    w, G = check_lattice(dim, order, refined)
+    a, c = EDGE_PAIRS[dim]
     edges2 = np.sum((xv[:, a] - xv[:, c]) ** 2, axis=2)
     gap = np.sqrt(np.maximum(edges2 @ G, 0.0)).reshape(50, len(w), dim)
     y = w @ xv
@@ -133,8 +132,6 @@ def test_scatter_is_the_transpose_of_positions(repeat_vertices):
 def test_every_facet_point_is_within_cover_of_a_vertex(dim):
     # the facet check leaves out facets whose vertices are all farther than L * cover from O:
     # sound only if no point of a facet is farther than cover (x longest edge) from every vertex
-    from simfab.coupling.refine import _COVER
-
     rng = np.random.default_rng(9)
     w = rng.dirichlet(np.ones(dim), size=4000)  # points on the facet (barycentric)
     worst = 0.0
@@ -144,5 +141,5 @@ def test_every_facet_point_is_within_cover_of_a_vertex(dim):
         near = np.min(np.linalg.norm(y[:, None, :] - v[None], axis=2), axis=1).max()
         c = max(np.linalg.norm(v[a] - v[b]) for a in range(dim) for b in range(a))
         worst = max(worst, near / c)
-    assert worst <= _COVER[dim] * (1 + 1e-12)
-    assert worst > 0.9 * _COVER[dim]  # and the bound is nearly reached (not loose)
+    assert worst <= COVER[dim] * (1 + 1e-12)
+    assert worst > 0.9 * COVER[dim]  # and the bound is nearly reached (not loose)

@@ -4,41 +4,54 @@ extrapolated warm start, and the ``fixed_axes`` option."""
 import numpy as np
 import pytest
 
-import simfab.coupling.predictor as P
-import simfab.coupling.simulate as S
+import simfab.coupling.config as C
+from simfab.coupling import predictor
 from simfab.coupling.config import InsertionOptions
+from simfab.coupling.layout import point_dhat
+from simfab.coupling.objective import make_objective
+from simfab.coupling.points import ContactPoints
 from simfab.coupling.scene import load_coupling_scene
+from simfab.coupling.simulate import simulate
+from simfab.coupling.stepper import Stepper
 from simfab.errors import InputError
 
 
-def test_snapped_warm_start_puts_contact_vertices_back_at_their_last_gap(monkeypatch):
-    # Wrap the real _snap_contacts: on every step with contact, the vertices that ended the last
-    # step within d_hat of O must start the next one near their last distance. The move is one
-    # projection along the IMLS normal, exact to first order: the remaining error is the field's
-    # curvature times the squared move, far below 5% of d_hat here (moves are a few d_hat at most).
-    calls = []
-    real = P._snap_contacts
+def _warm_starts(cm):
+    """Drive the insertion of ``cm`` over its planned steps with a :class:`Stepper`; before every
+    step after the first, the warm start it is about to use (as ``predictor.warm_start`` computes
+    it from the state the step starts from). Yields (state, objective, WarmStart, s)."""
+    stepper = Stepper(cm)
+    for s in cm.s_steps:
+        s = float(s)
+        if stepper.steps:
+            obj = make_objective(cm, stepper.state, s, stepper.ctx)
+            yield stepper.state, obj, predictor.warm_start(cm, stepper.state, s, obj, stepper.ctx), s
+        stepper.keep(stepper.step(s).record)
 
-    def spy(cm, state, x, s_new, ctx):
-        out = real(cm, state, x, s_new, ctx)
-        if out is not None:
-            calls.append((cm, state.points, state.final[4].copy(), out, s_new))
-        return out
 
-    monkeypatch.setattr(P, "_snap_contacts", spy)
-    S.simulate(load_coupling_scene("cclamp2d"))
-    assert len(calls) > 10  # the clamp is in contact for most of the insertion
-    for cm, pts, d_prev, x, s in calls:
-        dh = P._point_dhat(cm, pts)
+def test_snapped_warm_start_puts_contact_vertices_back_at_their_last_gap():
+    # On every step with contact, the vertices that ended the last step within d_hat of O must
+    # start the next one near their last distance. The move is one projection along the IMLS
+    # normal, exact to first order: the remaining error is the field's curvature times the squared
+    # move, far below 5% of d_hat here (moves are a few d_hat at most).
+    cm = load_coupling_scene("cclamp2d")
+    calls = 0
+    for state, _, ws, s in _warm_starts(cm):
+        if ws.snapped is None:
+            continue
+        calls += 1
+        pts, d_prev = state.points, state.current_evaluation().distances
+        dh = point_dhat(cm, pts)
         act = (pts.weights[:, 0] == 1.0) & (d_prev < dh)
         R, p = cm.pose(s)
-        d_new = -cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False).psi
+        d_new = -cm.field.evaluate(pts.positions(ws.snapped)[act], (R, p), hessian=False).psi
         assert np.all(d_new > 0)
         # what matters: they stay in the barrier's range (0, d_hat), near their last gap (a vertex
         # shared with refined facets whose points were in contact too takes the largest of their
         # moves, which lands it within half of d_hat of its own gap)
         assert np.all(d_new < dh[act])
         assert np.all(np.abs(d_new - d_prev[act]) <= 0.5 * dh[act])
+    assert calls > 10  # the clamp is in contact for most of the insertion
 
 
 def test_a_moved_vertex_takes_the_largest_move_its_points_ask_for():
@@ -50,8 +63,6 @@ def test_a_moved_vertex_takes_the_largest_move_its_points_ask_for():
     # are the weighted means of the points' normals (here all +y).
     from types import SimpleNamespace
 
-    from simfab.coupling.points import ContactPoints
-
     pts = ContactPoints(verts=np.array([[0, 0], [0, 1], [0, 1]]), weights=np.array([[1.0, 0.0], [0.9, 0.1], [0.5, 0.5]]),
                         facet=np.array([-1, 0, 0]))
     cm = SimpleNamespace(fem=SimpleNamespace(n_vertices=3))
@@ -59,37 +70,29 @@ def test_a_moved_vertex_takes_the_largest_move_its_points_ask_for():
     sel = np.array([True, True, True])
     dist = np.array([-12e-6, -20e-6, -18e-6])
     direction = np.tile([0.0, 2.0], (3, 1))  # normalized inside
-    x1 = P._move_points(cm, pts, x, sel, dist, direction)
+    x1 = predictor.move_points(cm, pts, x, sel, dist, direction)
     np.testing.assert_allclose(x1[0], [0.0, -12e-6], atol=1e-18)
     np.testing.assert_allclose(x1[1], [0.0, -18e-6], atol=1e-18)
     np.testing.assert_array_equal(x1[2], [0.0, 0.0])  # no point on it: unmoved
     # a move away from O (positive) wins over one toward it on the same vertex
-    x2 = P._move_points(cm, pts, x, sel, np.array([3e-6, -20e-6, -18e-6]), direction)
+    x2 = predictor.move_points(cm, pts, x, sel, np.array([3e-6, -20e-6, -18e-6]), direction)
     np.testing.assert_allclose(x2[0], [0.0, 3e-6], atol=1e-18)
 
 
-def test_warm_starts_keep_the_contact_the_last_step_ended_with(monkeypatch):
+def test_warm_starts_keep_the_contact_the_last_step_ended_with():
     # A warm start with every contact point pushed out of the barrier's range (d >= d_hat) lets
     # Newton's first step, which then does not see O there, release the part's deformation into O
-    # (the step cap cuts it to a few percent, and the step takes 7-11 iterations). On the stand
+    # (the step cap cuts it to a few percent, and the step takes many iterations). On the stand
     # side the contact predictor's pushes (steps where no extrapolation is feasible) and snapped
-    # vertices that overshot into O (their warm start then dropped) did that at 7 of its 33 steps
-    # that began in contact.
+    # vertices that overshoot into O could do that.
     lost, seen = [], []
-    real = P._warm_start
-
-    def spy(cm, state, s_new, obj, ctx):
-        x0 = real(cm, state, s_new, obj, ctx)
-        fin = state.final
-        if fin is not None and len(fin[4]) == len(state.points) and np.any(fin[4] < obj.dhat):
-            d, _, _ = obj.distances(x0, False)
-            seen.append(s_new)
+    for state, obj, ws, s in _warm_starts(load_coupling_scene("standside2d")):
+        ev = state.current_evaluation()
+        if ev is not None and np.any(ev.distances < obj.dhat):
+            d, _, _ = obj.distances(ws.x, False)
+            seen.append(s)
             if not np.any(d < obj.dhat):
-                lost.append(s_new)
-        return x0
-
-    monkeypatch.setattr(P, "_warm_start", spy)
-    S.simulate(load_coupling_scene("standside2d"))
+                lost.append(s)
     assert len(seen) > 25 and lost == []
 
 
@@ -119,30 +122,22 @@ def test_fixed_axes_hold_exactly_the_named_axes_of_the_fixed_region():
     assert free[others].all()
 
 
-def test_warm_starts_keep_new_points_off_the_object(monkeypatch):
+def test_warm_starts_keep_new_points_off_the_object():
     # A point starting almost on O costs a Newton iteration per doubling of its gap; every warm
     # start must have the points that were not that close at the last step at least
     # WARM_START_FLOOR * d_hat away (half of it allowed for the one-projection lift's curvature error)
-    import simfab.coupling.config as C
-
-    seen = []
-    real = P._warm_start
-
-    def spy(cm, state, s_new, obj, ctx):
-        x0 = real(cm, state, s_new, obj, ctx)
-        fin = state.final
-        if fin is not None and len(fin[4]) == len(state.points):
-            R, p = cm.pose(s_new)
-            d = -cm.field.evaluate(state.points.positions(x0), (R, p), hessian=False).psi
-            new = fin[4] > C.WARM_START_FLOOR * cm.dhat
-            seen.append(float(d[new].min() / cm.dhat))
-        return x0
-
     assert C.WARM_START_FLOOR >= 0.05  # the floor is on by default
-    monkeypatch.setattr(P, "_warm_start", spy)
     # 3,600 linear tets: the warm start acts on the contact points, whatever the elements
-    S.simulate(load_coupling_scene("clip3d", overrides={"compliant": {"target_elements": 3600},
-                                                        "simulation": {"element_order": 1}}))
+    cm = load_coupling_scene("clip3d", overrides={"compliant": {"target_elements": 3600},
+                                                  "simulation": {"element_order": 1}})
+    seen = []
+    for state, _, ws, s in _warm_starts(cm):
+        ev = state.current_evaluation()
+        if ev is not None:
+            R, p = cm.pose(s)
+            d = -cm.field.evaluate(state.points.positions(ws.x), (R, p), hessian=False).psi
+            new = ev.distances > C.WARM_START_FLOOR * cm.dhat
+            seen.append(float(d[new].min() / cm.dhat))
     assert len(seen) > 30 and min(seen) >= 0.5 * C.WARM_START_FLOOR
 
 
@@ -150,10 +145,8 @@ def test_a_field_steeper_than_the_lipschitz_bound_is_reported(monkeypatch):
     # The facet check and the lazy distance bounds certify points outside O with |grad psi| <= L.
     # The bundled clamp's field has |grad psi| ~ 1.0 at its evaluated points: with L just below
     # that the run must say that its certificates are not rigorous; with the default L = 2, not.
-    import simfab.coupling.config as C
-
-    res = S.simulate(load_coupling_scene("cclamp2d"))
+    res = simulate(load_coupling_scene("cclamp2d"))
     assert not any("gradient reached" in w for w in res.warnings)
     monkeypatch.setattr(C, "PSI_LIPSCHITZ", 0.99)
-    res = S.simulate(load_coupling_scene("cclamp2d"))
+    res = simulate(load_coupling_scene("cclamp2d"))
     assert any("gradient reached" in w and "above the Lipschitz bound 0.99" in w for w in res.warnings)

@@ -1,5 +1,5 @@
 """Hertz benchmark: a rigid sphere pressed into an elastic block meshed with tetrahedra graded
-toward the contact (simfab.coupling.hertz: the quarter x, y >= 0 with symmetry planes, a Gmsh
+toward the contact (simfab.verification.hertz: the quarter x, y >= 0 with symmetry planes, a Gmsh
 Delaunay mesh whose edge grows linearly from h0 R at the contact point), force against the
 sphere's nominal travel compared with Hertz's F = 4/3 E* sqrt(R) d^(3/2) at d/R = 0.02-0.05.
 
@@ -10,7 +10,7 @@ top faces within it a/h, and the block's indentation over the travel (1 + stando
 own stiffness s (the centre displacement over d of the same mesh's linear solution under Hertz's
 pressure at d = 0.03 R: F / F_Hertz ~ s^-1.5); and the largest |F / F_Hertz - 1| over d/R in
 [0.02, 0.05] (the target is 5%). The remaining error is the stiffness of linear tets (see
-simfab.coupling.hertz for the figures per mesh); the block (20 R wide and deep, held on its bottom)
+docs/decisions.md for the figures per mesh); the block (20 R wide and deep, held on its bottom)
 is 0.4% stiffer than one twice its size.
 """
 
@@ -21,7 +21,7 @@ import time
 
 
 def run(argv) -> dict:
-    from simfab.coupling.hertz import linear_centre_displacement, sphere_on_block
+    from simfab.verification.hertz import linear_centre_displacement, sphere_on_block
 
     ap = argparse.ArgumentParser(prog="bench hertz")
     ap.add_argument("--h0", type=float, default=0.0025, help="edge length at the contact point [R]")

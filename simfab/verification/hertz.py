@@ -1,5 +1,6 @@
 """Hertz check of the contact: a rigid sphere pressed into an elastic block meshed with tetrahedra
-graded toward the contact point (used by a test at modest size and by ``tools/bench.py hertz``).
+graded toward the contact point: a verification of the contact against a closed form that users
+can run (``python tools/bench.py hertz`` runs it at full size, a test at modest size).
 
 Hertz (frictionless rigid sphere of radius R on an elastic half-space, E* = E / (1 - nu^2)):
 
@@ -9,21 +10,15 @@ The half-space is a block 2W wide and D deep (in units of R), held in all axes o
 (sides free). By symmetry only its quarter x, y >= 0 is modelled, with the symmetry planes x = 0 and
 y = 0 held normal to themselves (the force on the whole block is 4 times the quarter's support
 reaction); it is meshed by :func:`simfab.fem.meshing.graded_box` with edge length h0 R at the contact
-point growing by ``growth`` per unit distance. Where the error comes from, measured by the linear
-(small-strain) solution of the same meshes under the Hertz pressure p0 sqrt(1 - r^2/a^2) at
-d = 0.03 R, whose centre displacement is d exactly on a half-space:
+point growing by ``growth`` per unit distance.
 
-- the stiffness of linear tets in the zone r < ~5a that carries most of Hertz's compliance: the
-  whole-block tensor grid graded by x = W t^2.5 this check used before (16 x 16 x 10 hexes, 15,360
-  tets, needle elements away from the axis) gave 0.81 d, i.e. F / F_Hertz 1.45 against the travel
-  (F / F_Hertz ~ (u_centre / d)^-1.5: the contact adds no stiffness of its own). Graded Delaunay
-  meshes of the quarter: 0.938 d (h0 = 0.01 R, growth 0.2, 4.2k tets), 0.959 d (0.005 R, 0.15,
-  10k), 0.969 d (0.01 R, 0.1, 26k), 0.974 d (0.005 R, 0.1, 31k), 0.981 d (0.0025 R, 0.1, 41k, W =
-  D = 20 R: the default) : the growth rate matters most (at r = a the edge is ~ growth * a);
-- the finite block: W = D = 10 R -> 20 R raises the centre displacement by 0.4% (0.974 -> 0.978 d);
-- the contact: F / F_Hertz is 1.5-2% above s^-1.5 (the nodal pressure of the barrier; the block's
-  surface ends the barrier's standoff, 0.05-0.4% of d, past the sphere's travel).
-With the defaults F / F_Hertz = 1.045-1.048 at d/R = 0.01-0.05 (41k tets, ~2 min).
+The check's error has three sources (figures in docs/decisions.md): the stiffness of linear tets in
+the zone r < ~5a that carries most of Hertz's compliance (the growth rate of the grading matters
+most: at r = a the edge is ~ growth * a), the finite block, and the barrier's nodal pressure
+(F / F_Hertz scales as (u_centre / d)^-1.5: the contact adds no stiffness of its own).
+:func:`linear_centre_displacement` separates the first two from the third: the small-strain centre
+displacement of the same mesh under Hertz's pressure p0 sqrt(1 - r^2/a^2), which is d exactly on a
+half-space.
 """
 
 from __future__ import annotations

@@ -1,0 +1,104 @@
+"""The record of a converged insertion step (:class:`StepResult`): energy, forces on O, grip,
+stresses and the checks that the state is admissible (:func:`record_step`).
+
+Forces: the reaction at the fixed dofs is r = dE_total/dx there (the force the support applies to
+A); by equilibrium of A it equals the force A exerts on O, so the insertion force is F = sum r . u
+(u: unit direction of O's translation), negative when A resists the insertion. The path force is
+the generalized force on O along the path, P = sum_j f_j(on O) . dy_j/ds = -d(E + B)/ds. Contact
+forces on A are f_a = -dB/dx_a; the grip force is || (1/2 sum |f_x|, 1/2 sum |f_y|, 1/2 sum |f_z|) ||.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from simfab.contact.barrier import point_barrier
+from simfab.coupling.layout import point_dhat
+from simfab.coupling.model import CouplingModel
+from simfab.coupling.refine import facet_check
+from simfab.coupling.state import StepState
+from simfab.errors import ConvergenceError
+from simfab.fem.elastic import det_and_von_mises, energy_gradient
+
+
+@dataclass(kw_only=True)
+class StepResult:
+    """One insertion step. Units: s, penetration [m]; energy [J]; forces [N]; stress [Pa]."""
+
+    s: float
+    pos: np.ndarray
+    quat: np.ndarray
+    x: np.ndarray  # (n, dim) deformed positions [m]
+    energy: float
+    force: float  # insertion force: support reactions along O's translation (resisting < 0)
+    path_force: float  # generalized force along the path, sum_j f_j(on O) . dy_j/ds = -d(E + B)/ds [N]
+    barrier_energy: float  # kappa sum_j b(d_j) at this state [J] (not part of the elastic energy)
+    grip: float
+    max_von_mises: float
+    von_mises: np.ndarray  # (m,) per element [Pa]
+    penetration: float
+    min_det_F: float
+    iterations: int
+    contact_points: int
+    kappa: float  # barrier stiffness used for this step [N/m]
+
+
+def path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
+    """(k, dim) velocity per unit path length of O's material points currently at y (central
+    differences of O's pose, one-sided at the ends of the path)."""
+    L = float(cm.path.length)
+    h = 1e-6 * max(L, 1e-12)
+    s0 = max(0.0, s - h)
+    s1 = s + h if cm.end_direction is not None else min(L, s + h)  # straight on past the end
+    R, p = cm.pose(s)
+    dim = cm.dim
+    y3 = np.zeros((len(y), 3))
+    y3[:, :dim] = y
+    out = []
+    for si in (s0, s1):
+        Ri, pi = cm.pose(si)
+        out.append((y3 - p) @ (Ri @ R.T).T + pi)
+    return ((out[1] - out[0]) / (s1 - s0))[:, :dim]
+
+
+def record_step(cm: CouplingModel, state: StepState, iterations: int) -> StepResult:
+    """The record of the converged current state (see the module docstring for the forces).
+    Raises ConvergenceError when an element is inverted or the penetration exceeds the tolerance."""
+    x = state.x
+    n, dim = cm.fem.n_vertices, cm.dim
+    R, p = cm.pose(state.s)
+    pts = state.points
+    ev = state.current_evaluation()
+    if ev is not None and ev.kappa == state.kappa_step:
+        # Newton's last evaluation at x: exact distances within the lazy band (which contains the
+        # barrier's support), certified lower bounds beyond it (zero barrier, outside O)
+        E, gE, d, gd = ev.elastic_energy, ev.elastic_gradient, ev.distances, ev.distance_gradients
+        psi_pts = -d
+    else:
+        E, gE = energy_gradient(cm.fem, x)
+        field = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
+        d, gd, psi_pts = -field.psi, -field.grad, field.psi
+    B, gy, _ = point_barrier(d, gd, None, point_dhat(cm, pts), state.kappa_step)
+    gc = pts.scatter(gy, n)
+    g = gE + gc
+    fixed = ~cm.free.reshape(n, dim)
+    reaction = np.where(fixed, g, 0.0).sum(axis=0)  # force of the support on A = force of A on O
+    force = float(reaction @ cm.direction(state.s))
+    path_force = float(np.einsum("kd,kd->", gy, path_velocity(cm, state.s, pts.positions(x))))
+    grip = float(np.linalg.norm(0.5 * np.abs(-gc).sum(axis=0)))  # -gc: contact force on A's vertices
+    dets, vm = det_and_von_mises(cm.fem, x)
+    min_det = float(dets.min())
+    if not min_det > 0:
+        raise ConvergenceError(f"an element is inverted at s={state.s:.6g} m (min det F = {min_det:.3e})")
+    check = facet_check(cm, x, state.s, state)
+    pen = float(max(0.0, psi_pts.max(initial=-np.inf), check.psi_max.max(initial=-np.inf)))
+    if pen > cm.tol:
+        raise ConvergenceError(f"penetration {pen:.3e} m exceeds the tolerance {cm.tol:.3e} m at s={state.s:.6g} m")
+    pos, quat = (np.asarray(a).copy() for a in cm.pos_quat(state.s))
+    return StepResult(
+        s=state.s, pos=pos, quat=quat, x=x.copy(), energy=float(E), force=force, path_force=path_force,
+        barrier_energy=float(B), grip=grip, max_von_mises=float(vm.max()), von_mises=vm, penetration=pen,
+        min_det_F=min_det, iterations=int(iterations), contact_points=len(pts), kappa=float(state.kappa_step),
+    )

@@ -1,0 +1,191 @@
+"""One insertion step after another: :class:`Stepper` moves O to a path length, lets A settle
+(warm start, barrier Newton, refinement; see :mod:`simfab.coupling.simulate` for the method),
+checks the rigid motions the contact leaves free and records the step. ``step`` solves a step from
+the current state, ``undo`` returns to the state before it, ``keep`` appends its record to the run:
+the loop over the planned steps and the search for O's rest point past them
+(:func:`simfab.coupling.settle.to_rest`) are both written with these three.
+
+The stages a step runs are public functions of the model, the :class:`~simfab.coupling.state.StepState`
+and the :class:`~simfab.coupling.state.StepContext`: :func:`solve_at` (step 0, O not moving) and
+:func:`advance` (O moving), which compose :mod:`.objective`, :mod:`.predictor` and :mod:`.refine`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from simfab.coupling import config as C
+from simfab.coupling import predictor, rigid
+from simfab.coupling.layout import point_dhat
+from simfab.coupling.model import CouplingModel
+from simfab.coupling.objective import adapt_kappa, evaluation, make_objective, solve
+from simfab.coupling.points import vertex_points
+from simfab.coupling.record import StepResult, record_step
+from simfab.coupling.refine import add_refinement, crossing_facets
+from simfab.coupling.rigid_check import WeakMotion, rigid_contact
+from simfab.coupling.state import PastStep, StepContext, StepState, accept
+from simfab.errors import ConvergenceError
+
+
+@dataclass(frozen=True, eq=False)
+class StepAttempt:
+    """A solved (or failed) step: its record (None when ``step(..., tolerate=True)`` could not solve
+    it) and the state before it (what :meth:`Stepper.undo` returns to)."""
+
+    record: StepResult | None
+    before: StepState
+
+
+class Stepper:
+    """The insertion run of ``cm`` step by step (see the module docstring).
+
+    refined : boundary facet ids (rows of ``cm.contact_facets``) carrying refinement points from the
+    start; callback : optional ``callback(k, StepResult)`` after every kept step (it may raise to
+    stop the run). Attributes: ``state`` (:class:`StepState`), ``ctx`` (:class:`StepContext`),
+    ``steps`` (the kept records), ``weakest`` (the least resisted rigid motion over the kept steps)."""
+
+    def __init__(self, cm: CouplingModel, *, refined=(), callback=None):
+        self.cm, self.callback = cm, callback
+        self.ctx = StepContext()
+        order = cm.options.samples_per_edge if cm.dim == 2 else cm.options.face_lattice
+        self.state = StepState(x=np.array(cm.fem.rest, dtype=np.float64), s=0.0, refined=set(), order=order,
+                               points=vertex_points(np.asarray(cm.fem.boundary_vertices, dtype=np.int64), cm.dim),
+                               kappa=cm.kappa)
+        if len(refined) and cm.options.refine:
+            ids = np.unique(np.asarray(refined, dtype=np.int64))
+            if ids.min() < 0 or ids.max() >= len(cm.contact_facets):
+                raise ValueError(f"refined: facet ids must lie in [0, {len(cm.contact_facets)})")
+            add_refinement(cm, self.state, ids)
+        self.free_motions = rigid.motion_basis(cm)
+        self.state.pin_basis = self.free_motions[0]  # nothing touches A yet: every free rigid motion is pinned
+        self.steps: list[StepResult] = []
+        self.weakest: WeakMotion | None = None
+        self._weak: dict[int, WeakMotion | None] = {}  # id(record) -> its state's least resisted motion
+
+    def step(self, s: float, *, tolerate: bool = False) -> StepAttempt:
+        """Solve the step from the current state to path length s [m] (the first step solves at s
+        without moving O). With ``tolerate``, a step that cannot be solved gives a record of None
+        instead of raising ConvergenceError (the state is then undefined until :meth:`undo`)."""
+        cm, state, phases = self.cm, self.state, self.ctx.phases
+        before = replace(state, refined=set(state.refined))
+        try:
+            iters = self._solve(s)
+            with phases.timed("rigid_check"):
+                contact = rigid_contact(cm, state, self.free_motions)
+            if (contact.basis.shape[1] < state.pin_basis.shape[1]
+                    and self._pin_force(before.x) > C.PIN_FORCE_TOL):
+                # contact now resists a motion this step held pinned, and the pin held it with a
+                # force (not merely in balance): solve the step again without it
+                prev, state.pin_basis = (state.prev, state.prev2), contact.basis
+                iters += self._solve(s)
+                state.prev, state.prev2 = prev
+                with phases.timed("rigid_check"):
+                    contact = rigid_contact(cm, state, self.free_motions)
+            state.pin_basis = contact.basis
+            with phases.timed("record"):
+                rec = record_step(cm, state, iters)
+            self._weak[id(rec)] = contact.weakest
+            return StepAttempt(rec, before)
+        except ConvergenceError:
+            if not tolerate:
+                raise
+            return StepAttempt(None, before)
+
+    def undo(self, attempt: StepAttempt) -> None:
+        """Return to the state before ``attempt``."""
+        for f in fields(attempt.before):
+            setattr(self.state, f.name, getattr(attempt.before, f.name))
+
+    def keep(self, record: StepResult) -> None:
+        """Append ``record`` (a solved step's) to the run."""
+        self.steps.append(record)
+        w = self._weak.get(id(record))
+        if w is not None and (self.weakest is None or w.ratio < self.weakest.ratio):
+            self.weakest = w
+        if self.callback is not None:
+            self.callback(len(self.steps) - 1, record)
+
+    def _solve(self, s: float) -> int:
+        if self.steps:
+            return advance(self.cm, self.state, s, self.ctx)
+        return solve_at(self.cm, self.state, s, self.ctx)
+
+    def _pin_force(self, anchor: np.ndarray) -> float:
+        """Largest force the step's pin (anchored at ``anchor``, the step's start) exerts along its
+        motions at the converged state, relative to Newton's force tolerance (NEWTON_GRAD_TOL_REL *
+        force_scale): ~1 when the pinned motions were in balance anyway."""
+        cm, state = self.cm, self.state
+        pin = rigid.pin_for(cm, state.pin_basis, self.free_motions[1], anchor)
+        if pin is None:
+            return 0.0
+        return float(np.abs(pin.force(state.x.ravel())).max()) / (C.NEWTON_GRAD_TOL_REL * cm.force_scale)
+
+
+def solve_at(cm: CouplingModel, state: StepState, s: float, ctx: StepContext) -> int:
+    """Solve at the current pose without moving O (step 0), with refinement; Newton iterations."""
+    total = 0
+    for _ in range(C.MAX_REFINEMENT_ROUNDS):
+        obj = make_objective(cm, state, s, ctx)
+        with ctx.phases.timed("newton"):
+            x, it = solve(cm, obj, state.x, ctx)
+        total += it
+        final = evaluation(obj, x)
+        with ctx.phases.timed("facet_check"):
+            new = crossing_facets(cm, x, s, state, final)
+        if not new:
+            accept(state, x, s, obj.kappa, final, point_dhat(cm, state.points))
+            return total
+        add_refinement(cm, state, new)
+    raise ConvergenceError("refinement did not settle at the start pose")
+
+
+def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext, depth: int = 0) -> int:
+    """Move O from state.s to s_new and re-equilibrate A (warm start, Newton, refinement); a step
+    that cannot be solved is bisected up to MAX_BISECTIONS deep. Returns the Newton iterations."""
+    total = 0
+    resume = None  # converged positions to resume from after a refinement (see below)
+    refined = False  # points were added since the previous state was accepted
+    for _ in range(C.MAX_REFINEMENT_ROUNDS):  # refinement restarts
+        resumed = False
+        try:
+            with ctx.phases.timed("warm_start"):
+                obj = make_objective(cm, state, s_new, ctx)
+                x0 = None if resume is None else predictor.lift_points(cm, state.points, resume, obj, below=0.0,
+                                                                       to=C.LIFT_TO * obj.dhat)
+                resumed = x0 is not None
+                if x0 is None:
+                    if refined:  # starting over from the previous state: make it feasible for the new points
+                        predictor.restore_feasibility(cm, state, ctx)
+                        refined = False
+                    x0 = predictor.warm_start(cm, state, s_new, obj, ctx).x
+            with ctx.phases.timed("newton"):
+                x, it = solve(cm, obj, x0, ctx)
+        except ConvergenceError:
+            if resumed:  # the resumed solve failed: solve from the previous state instead
+                resume = None
+                continue
+            if depth >= C.MAX_BISECTIONS:
+                raise
+            mid = 0.5 * (state.s + s_new)
+            total += advance(cm, state, mid, ctx, depth + 1)
+            total += advance(cm, state, s_new, ctx, depth + 1)
+            return total
+        total += it
+        final = evaluation(obj, x)
+        with ctx.phases.timed("facet_check"):
+            new = crossing_facets(cm, x, s_new, state, final) if cm.options.refine else []
+        if not new:
+            state.prev2, state.prev = state.prev, PastStep(state.x, state.s)
+            accept(state, x, s_new, obj.kappa, final, point_dhat(cm, state.points))
+            adapt_kappa(cm, state, obj)
+            return total
+        # solve again from x with the new points lifted out of O (see predictor.lift_points); should
+        # that be infeasible or fail, from the previous state, which is feasible for the new points
+        # (new facets were outside O there; denser points of refined facets were within the
+        # tolerance and are pushed out first, when it comes to that)
+        add_refinement(cm, state, new)
+        refined = True
+        resume = x
+    raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")

@@ -1,0 +1,2 @@
+"""Verification problems with closed-form answers that a user can run to check simfab's mechanics:
+:mod:`simfab.verification.hertz` (a rigid sphere pressed into an elastic block, against Hertz)."""
