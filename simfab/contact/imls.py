@@ -37,7 +37,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from simfab._parallel import submit
 from simfab._warp import RECORD_LOCK, wp
+from simfab.errors import InputError
+from simfab.rotations import pose_matrix
 
 #: On the CPU, evaluations at this many points or more run as two launches on two threads.
 PARALLEL_MIN_POINTS = 1024
@@ -264,8 +267,6 @@ def build_imls(
                (:meth:`ImlsField.inside`); 2D: the sample polygon's perimeter by default. Without
                it (3D) far points are reported outside.
     """
-    from simfab.errors import InputError
-
     v = np.asarray(vertices, dtype=np.float64)
     n = np.asarray(normals, dtype=np.float64)
     if v.ndim != 2 or v.shape[1] not in (2, 3) or v.shape != n.shape or len(v) < 3:
@@ -409,23 +410,6 @@ def _cell_lists(v3: np.ndarray, radius: float, sigma: float, dim: int, device: s
                       samples=wp.array(sample_ids[order].astype(np.int32), dtype=wp.int32, device=device))
 
 
-def pose_matrix(pose):
-    """(R (3,3), p (3,)) from ``pose``: None (identity), (R, p) or (pos (3,), quat_wxyz (4,))."""
-    if pose is None:
-        return np.eye(3), np.zeros(3)
-    a, b = pose
-    a = np.asarray(a, float)
-    b = np.asarray(b, float)
-    if a.shape == (3, 3):
-        R, p = a, b
-    else:
-        from simfab.io.mjcf import quat_to_matrix
-
-        R, p = quat_to_matrix(b), a
-    p = np.resize(p, 3) if p.size < 3 else p
-    return R, p
-
-
 _EYE3_BYTES = np.eye(3).tobytes()
 
 
@@ -437,7 +421,7 @@ def _unrotated(R: np.ndarray) -> bool:
 
 def body_frame(points, pose=None) -> np.ndarray:
     """World points (..., dim) in O's body frame (..., 3): R^T (x - p) for O's ``pose`` (as in
-    :func:`pose_matrix`); 2D points get z = 0."""
+    :func:`simfab.rotations.pose_matrix`); 2D points get z = 0."""
     R, p = pose_matrix(pose)
     pts = np.asarray(points, dtype=np.float64)
     body = _pad3(pts.reshape(-1, pts.shape[-1])) - p
@@ -461,8 +445,6 @@ def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian
         return _finish(q, (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, np.int32)))
     if m >= PARALLEL_MIN_POINTS and wp.get_device(fld.device).is_cpu:
         # two single-threaded launches on two threads, each with its own buffers
-        from simfab._parallel import submit
-
         half = m // 2
         second = submit(_launch, fld, q.body[half:], q.band)
         parts = [_launch(fld, q.body[:half], q.band), second.result()]

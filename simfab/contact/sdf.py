@@ -36,7 +36,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab.contact.imls import ImlsEval, body_frame, pose_matrix
+from simfab.contact.imls import ImlsEval, body_frame
+from simfab.io.mjcf import torus_radii
+from simfab.rotations import pose_matrix, quat_to_matrix
 
 KINDS = ("sphere", "capsule", "cylinder", "box", "torus")
 
@@ -268,7 +270,6 @@ def primitives_of_body(model, body_id: int, plugins: dict | None = None) -> tupl
     radii from ``plugins``, :attr:`simfab.io.mjcf.Scene.sdf_plugins`), or it has none."""
     import mujoco
 
-    from simfab.io.mjcf import quat_to_matrix, torus_radii
 
     G = mujoco.mjtGeom
     kinds = {int(G.mjGEOM_SPHERE): "sphere", int(G.mjGEOM_CAPSULE): "capsule", int(G.mjGEOM_CYLINDER): "cylinder",

@@ -23,6 +23,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simfab.coupling.outputs import summarize
+from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
+from simfab.coupling.simulate import simulate
+from simfab.errors import InputError
+
 FIGURES = ("E_max", "E_ss", "F_in", "F_rm", "F_grip")
 #: A figure below this fraction of its kind's peak (E_max; the larger of F_in, F_rm) is zero up to
 #: the solver's tolerances: its error is reported relative to that peak.
@@ -40,10 +45,6 @@ class Level:
 
 def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True) -> list:
     """One :class:`Level` per refinement factor (element count times the factor)."""
-    from simfab.coupling.outputs import summarize
-    from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
-    from simfab.coupling.simulate import simulate
-    from simfab.errors import InputError
 
     _, toml = scene_paths(scene)
     cfg = read_toml(toml)
@@ -135,7 +136,6 @@ def report(scene: str, levels: list, dim: int) -> dict:
 
 def _is_2d(scene) -> bool:
     """The refinement is two-dimensional (h ~ N^(-1/2)): a 2D scene."""
-    from simfab.coupling.scene import read_toml, scene_paths
 
     return read_toml(scene_paths(scene)[1]).get("dim", 2) == 2
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from simfab.contact.imls import curve_normals
 from simfab.errors import InputError
 
 
@@ -108,7 +109,6 @@ def resample_closed(points: np.ndarray, n: int) -> np.ndarray:
 def section_samples(mesh, n: int) -> tuple[np.ndarray, np.ndarray]:
     """2D object from a 3D mesh: the cross-section with the plane z = 0 (largest loop), resampled to
     n CCW points, with outward curve normals."""
-    from simfab.contact.imls import curve_normals
 
     sec = mesh.section(plane_origin=[0, 0, 0], plane_normal=[0, 0, 1])
     if sec is None:

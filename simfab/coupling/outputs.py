@@ -13,6 +13,10 @@ import numpy as np
 
 from simfab.coupling.profile import ProfileSummary, analyze_run
 from simfab.coupling.simulate import InsertionResult
+from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json
+from simfab.io.mjcf import MJCFBuilder, quat_to_matrix
+from simfab.io.outpaths import safe_name
+from simfab.io.usd import StageWriter
 
 #: Units of the summary keys (also written into the JSON summary).
 SUMMARY_UNITS = {
@@ -66,7 +70,6 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
 
 
 def write_profile_csv(res: InsertionResult, path) -> Path:
-    from simfab.io.atomic import write_csv
 
     rows = [[k, r.s, r.energy, r.force, r.path_force, r.grip, r.max_von_mises, r.penetration, r.min_det_F, r.iterations,
              r.contact_points] for k, r in enumerate(res.steps)]
@@ -81,7 +84,6 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from simfab.io.atomic import save_figure
 
     s = res.column("s") * 1e3
     E = res.column("energy")
@@ -142,7 +144,6 @@ def _object_display(cm):
 def write_usd(res: InsertionResult, path) -> Path:
     """USD stage: A's deforming mesh (``part``) with a per-vertex ``von_mises`` primvar [Pa], O's
     animated transform (``object``); time code k = insertion step k."""
-    from simfab.io.usd import StageWriter
 
     cm = res.model
     fem = cm.fem
@@ -200,7 +201,6 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     it driven by a position actuator ``insertion`` [m along the path]: press play and drag the
     control slider to move O along the path (gravity off, O has no contacts; keyframes set qpos and
     ctrl). Otherwise O is a mocap body and the keyframes hold its poses."""
-    from simfab.io.mjcf import MJCFBuilder, quat_to_matrix
 
     cm = res.model
     fem = cm.fem
@@ -255,10 +255,8 @@ def _loop_edges(k: int) -> np.ndarray:
 def write_all(res: InsertionResult, out: Path, stem: str | None = None) -> dict:
     """Write every output into ``out``; return the summary dict with the output paths. The files
     appear together: a failure while writing any of them leaves none."""
-    from simfab.io.atomic import atomic_paths, write_json
 
     out = Path(out)
-    from simfab.io.outpaths import safe_name
 
     stem = safe_name(stem or res.model.name)  # the scene's name comes from a file: no separators, no '..'
     prof, summary = summarize(res)

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from simfab.fem.elastic import energy_gradient_hessian
+
 #: A rigid motion whose contact stiffness is below this fraction of the stiffness it would have if
 #: every contact normal were aligned with the motion counts as unresisted.
 UNRESISTED_REL = 1e-2
@@ -33,7 +35,6 @@ def mean_stiffness(cm) -> float:
     """Mean |diagonal| of A's stiffness at rest [N/m] (memoized)."""
     k = cm._cache.get("mean_stiffness")
     if k is None:
-        from simfab.fem.elastic import energy_gradient_hessian
 
         _, _, H = energy_gradient_hessian(cm.fem, cm.fem.rest, project_psd=False)
         k = cm._cache["mean_stiffness"] = float(np.abs(H.diagonal()).mean())

@@ -31,6 +31,7 @@ from simfab.coupling import config as C
 
 #: O is at rest when the path force (A drawing O in, > 0) is at most this fraction of the peak |force|.
 from simfab.coupling.profile import REST_FORCE_REL  # noqa: E402 (one definition)
+
 #: Continue past the path's end by at most this many times the planned number of steps (of
 #: SETTLE_STEP_REL times the planned size: 4 x 0.25, as far again as the planned path).
 SETTLE_MAX_STEPS_REL = 4.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 
+
 class Timer:
     """Accumulates wall time per category (assembly, factorization, contact, ...)."""
 

@@ -13,8 +13,8 @@ no correction) is ``python tools/bench.py hertz``.
 import numpy as np
 import pytest
 
-from simfab.verification.hertz import linear_centre_displacement, sphere_on_block
 from simfab.coupling.layout import point_dhat
+from simfab.verification.hertz import linear_centre_displacement, sphere_on_block
 
 R, E, NU = 0.01, 1e6, 0.3
 

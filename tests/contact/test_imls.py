@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from simfab.contact.imls import build_imls, curve_normals, evaluate, imls_reference, pose_matrix
+from simfab.contact.imls import build_imls, curve_normals, evaluate, imls_reference
+from simfab.rotations import pose_matrix
 
 
 def _sphere_field(R=0.01):

@@ -4,13 +4,12 @@ penetrations the vertices alone miss."""
 
 import numpy as np
 import pytest
+from _coupling_checks import check_every_step
 
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
 from simfab.errors import ConvergenceError
-
-from _coupling_checks import check_every_step
 
 CATEGORY = {"cclamp2d": "tight", "clip2d_loose": "loose", "clip2d_eject": "ejects"}
 

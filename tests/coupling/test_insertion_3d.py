@@ -1,11 +1,11 @@
 """Insertion simulation in 3D: the bundled clip on a cylinder (its own module so that the test
 runner can place it on another worker than the 2D scenes)."""
 
+from _coupling_checks import check_every_step
+
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
-
-from _coupling_checks import check_every_step
 
 
 def test_3d_clip_every_step_feasible_and_tight():

@@ -1,11 +1,11 @@
 """Insertion of the largest bundled model: the four-finger claw on a sphere (5,130 tets, the ball
 an exact sphere; its own module so that the test runner can place it on another worker)."""
 
+from _coupling_checks import check_every_step
+
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
-
-from _coupling_checks import check_every_step
 
 
 def test_claw_every_step_feasible_and_tight():

@@ -2,11 +2,10 @@
 runner can place it on another worker)."""
 
 import numpy as np
+from _coupling_checks import check_every_step
 
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
-
-from _coupling_checks import check_every_step
 
 
 def test_knocker_every_step_feasible_through_the_rotation():

@@ -6,14 +6,13 @@ import pytest
 
 from simfab.contact.barrier import point_barrier
 from simfab.coupling import config as C
-from simfab.coupling.rigid import mean_stiffness
-from simfab.coupling.points import edge_weights, facet_points, vertex_points
 from simfab.coupling.layout import EDGE_PAIRS
 from simfab.coupling.objective import StepObjective
+from simfab.coupling.points import edge_weights, facet_points, vertex_points
 from simfab.coupling.refine import COVER, check_lattice
+from simfab.coupling.rigid import mean_stiffness
 from simfab.coupling.timing import Timer
 from simfab.fem.neohookean import energy_gradient_hessian
-
 
 
 def _objective_near_contact(coarse_block_model):

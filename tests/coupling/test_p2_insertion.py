@@ -13,6 +13,7 @@ import shutil
 
 import numpy as np
 import pytest
+from _coupling_checks import check_every_step
 
 from simfab.coupling.config import InsertionOptions
 from simfab.coupling.outputs import summarize
@@ -22,8 +23,6 @@ from simfab.coupling.simulate import simulate
 from simfab.errors import InputError
 from simfab.fem.model import FemModel
 from simfab.fem.p2 import P2Model
-
-from _coupling_checks import check_every_step
 
 STEPS = 12
 

@@ -1,8 +1,9 @@
 """Rigid motions of the compliant part that neither supports nor contact resist: found, named and
 reported (a frictionless clip on a cylinder slides along its axis; a claw on a sphere turns)."""
 
-import numpy as np
 from types import SimpleNamespace
+
+import numpy as np
 
 from simfab.coupling import rigid
 

@@ -87,6 +87,7 @@ def test_step_checks_ignore_a_negligible_profile(scale, coarse):
     # E_max is within what Newton's force tolerance f_tol leaves unresolved over the travel
     # (f_tol * travel, NEGLIGIBLE_NOISE of it): a run that barely touched the object (E_max 1e-14 J)
     from types import SimpleNamespace
+
     from simfab.coupling import config as C
     from simfab.coupling import settle
 
