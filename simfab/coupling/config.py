@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
+import numpy as np
+
 from simfab.errors import InputError
 
 # ---------------------------------------------------------------------------- tolerances (one place)
@@ -76,6 +78,55 @@ PIN_FORCE_TOL = 10.0
 ENERGY_REL_TOL = 1e-6
 #: A steady state with E_ss <= LOOSE_REL * E_max is "loose" (zero grip).
 LOOSE_REL = 1e-3
+
+
+@dataclass(frozen=True, kw_only=True)
+class ContactOptions:
+    """Contact between the object O and the part A (scene TOML table ``[contact]``).
+
+    friction : Coulomb coefficient mu >= 0 between O and A [-]; 0 (the default) is frictionless.
+        Printed PLA on PLA or on metal: roughly 0.2-0.5.
+    friction_eps_rel : the stick-slip transition eps of the friction mollifier
+        (:mod:`simfab.contact.friction`) relative to the local boundary edge length at each contact
+        point [-]: below eps of tangential slip over a step a point sticks (a spring of stiffness
+        2 mu lambda / eps), beyond it it slides with the force mu lambda.
+    lag_tol : the normal forces and tangent bases are lagged (from the step's start, then from its
+        solution); a step is solved again with the refreshed ones until its normal forces change by
+        less than this fraction of the largest normal force [-].
+    max_lag_iterations : solves per step at most (the first included); a step whose normal forces
+        still change by more than ``lag_tol`` after them is reported in the run's warnings.
+    """
+
+    friction: float = 0.0
+    friction_eps_rel: float = 1e-3
+    lag_tol: float = 1e-2
+    max_lag_iterations: int = 6
+
+    def __post_init__(self):
+        def bad(name, why):
+            raise InputError(f"{name}={getattr(self, name)!r} {why}", where="[contact]")
+
+        for name in ("friction", "friction_eps_rel", "lag_tol"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                bad(name, "must be a number")
+        if not 0 <= self.friction <= 2:
+            bad("friction", "must be a Coulomb coefficient in [0, 2]")
+        if not 0 < self.friction_eps_rel <= 0.1:
+            bad("friction_eps_rel", "must lie in (0, 0.1]")
+        if not 0 < self.lag_tol < 1:
+            bad("lag_tol", "must lie in (0, 1)")
+        if isinstance(self.max_lag_iterations, bool) or not isinstance(self.max_lag_iterations, int) \
+                or not 1 <= self.max_lag_iterations <= 50:
+            bad("max_lag_iterations", "must be an integer in [1, 50]")
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "[contact]") -> "ContactOptions":
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
+        return cls(**d)
 
 
 @dataclass(frozen=True, kw_only=True)

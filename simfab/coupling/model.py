@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from simfab.contact.imls import ImlsField, pose_matrix
-from simfab.coupling.config import InsertionOptions
+from simfab.coupling.config import ContactOptions, InsertionOptions
 from simfab.errors import InputError
 
 
@@ -29,6 +29,7 @@ class CouplingModel:
     h : A's mean edge length h_A [m]; dhat [m]; kappa [N/m]; tol : penetration tolerance [m]
     object_vertices, object_faces : O's display geometry in its body frame (3D mesh, or a closed
         curve (k, 2) with faces None in 2D)
+    contact : :class:`ContactOptions` (friction between O and A)
     """
 
     name: str
@@ -47,6 +48,7 @@ class CouplingModel:
     force_scale: float
     object_vertices: np.ndarray
     object_faces: np.ndarray | None = None
+    contact: ContactOptions = field(default_factory=ContactOptions)
     _cache: dict = field(default_factory=dict, repr=False, init=False)  # fresh on dataclasses.replace
 
     @property
@@ -135,7 +137,7 @@ class CouplingModel:
 
 
 def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertices, options: InsertionOptions,
-                        object_vertices, object_faces=None) -> CouplingModel:
+                        object_vertices, object_faces=None, contact: ContactOptions | None = None) -> CouplingModel:
     """Assemble a :class:`CouplingModel`: steps along the path, boundary conditions, barrier scales."""
     dim = fem.dim
     n = fem.n_vertices
@@ -182,6 +184,7 @@ def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertice
         tol=options.penetration_tol_rel * h, force_scale=E * h * width,
         object_vertices=np.asarray(object_vertices, float),
         object_faces=None if object_faces is None else np.asarray(object_faces, int),
+        contact=ContactOptions() if contact is None else contact,
     )
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from simfab.contact.barrier import barrier, point_barrier, project_psd
 from simfab.coupling import config as C
 from simfab.coupling import rigid
+from simfab.coupling.friction import FrictionLag
 from simfab.coupling.layout import add_point_blocks, point_dhat, regularize
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.points import ContactPoints
@@ -23,12 +24,16 @@ from simfab.solve.newton import NewtonOptions, minimize
 
 
 class StepObjective:
-    """E_d(x) + kappa sum_j b(d_j(x)) for a fixed pose of O and a fixed set of constraint points."""
+    """E_d(x) + kappa sum_j b(d_j(x)) (+ the lagged friction potential D(x)) for a fixed pose of O
+    and a fixed set of constraint points."""
 
     def __init__(self, cm: CouplingModel, points: ContactPoints, R: np.ndarray, p: np.ndarray, timer: Timer,
-                 kappa: float | None = None, pin: rigid.Pin | None = None):
+                 kappa: float | None = None, pin: rigid.Pin | None = None, friction: FrictionLag | None = None):
         self.cm, self.points, self.R, self.p, self.timer = cm, points, R, p, timer
         self.pin = pin  # pin of the rigid motions nothing resists (simfab.coupling.rigid.Pin), or None
+        if friction is not None and friction.points is not points:
+            raise ValueError("the friction lag belongs to another set of constraint points")
+        self.friction = friction  # lagged friction over the step (simfab.coupling.friction), or None
         self.kappa = cm.kappa if kappa is None else float(kappa)
         self.n, self.dim = cm.fem.n_vertices, cm.dim
         self.last_x = None
@@ -102,8 +107,14 @@ class StepObjective:
         with self.timer.timed("contact"):
             act, B, gy, Hy = self._barrier(d, gd, hd)
             gc = self.points.scatter(gy, self.n, rows=act)
+            Hf = None
+            if self.friction is not None:
+                fr = self.friction.evaluate(x, hessian=need_hessian)
+                B += float(fr.energy.sum())
+                gc += self.points.scatter(fr.gradient, self.n, rows=self.friction.rows)
+                Hf = fr.hessian
             if need_hessian:
-                contact = (act, Hy)
+                contact = (act, Hy, Hf)
                 if H_exact is not None:
                     self._add_contact(H_exact, contact, psd=False)
                     H = LazyHessian(self, x.copy(), contact)
@@ -149,17 +160,21 @@ class StepObjective:
             E = energy(self.cm.fem, x) + (self.pin.energy(np.ravel(x)) if self.pin is not None else 0.0)
         if not np.isfinite(E):
             return np.inf
-        d, _, _ = self.distances(np.asarray(x).reshape(self.n, self.dim), False)
+        x = np.asarray(x).reshape(self.n, self.dim)
+        d, _, _ = self.distances(x, False)
         if np.any(d <= 0):
             return np.inf
         act = d < self.dhat
-        return E + self.kappa * float(barrier(d[act], self.dhat[act]).sum())
+        D = float(self.friction.evaluate(x, hessian=False).energy.sum()) if self.friction is not None else 0.0
+        return E + self.kappa * float(barrier(d[act], self.dhat[act]).sum()) + D
 
     def _add_contact(self, H, contact, *, psd: bool) -> None:
         """Add the barrier Hessian blocks (PSD-projected per point if ``psd``) and the rigid-mode
         regularization to the FEM Hessian ``H`` (in place)."""
-        act, Hy = contact  # active point indices (a,), exact barrier Hessian blocks (a, dim, dim)
+        act, Hy, Hf = contact  # active points (a,), exact barrier blocks (a, dim, dim), friction blocks or None
         add_point_blocks(self.cm, self.points, H, act, project_psd(Hy) if psd and len(act) else Hy)
+        if Hf is not None:  # PSD by construction (simfab.contact.friction)
+            add_point_blocks(self.cm, self.points, H, self.friction.rows, Hf)
         regularize(self.cm, H)
 
     def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
@@ -205,7 +220,8 @@ class LazyHessian:
                 _, _, H = energy_gradient_hessian(obj.cm.fem, self.x)
             if self.contact is None:
                 act, _, _, Hy = obj._barrier(*obj.distances(self.x, True))
-                self.contact = (act, Hy)
+                Hf = obj.friction.evaluate(self.x, hessian=True).hessian if obj.friction is not None else None
+                self.contact = (act, Hy, Hf)
             with obj.timer.timed("contact"):
                 obj._add_contact(H, self.contact, psd=True)
             self.H = H
@@ -217,12 +233,13 @@ def dim_factor(dim: int) -> float:
     return float(dim)
 
 
-def make_objective(cm: CouplingModel, state: StepState, s: float, ctx: StepContext) -> StepObjective:
-    """The step objective at path length s over the state's points, with its barrier stiffness and
-    the pin of its unresisted rigid motions anchored at the state's positions."""
+def make_objective(cm: CouplingModel, state: StepState, s: float, ctx: StepContext,
+                   friction: FrictionLag | None = None) -> StepObjective:
+    """The step objective at path length s over the state's points, with its barrier stiffness, the
+    pin of its unresisted rigid motions anchored at the state's positions and the lagged friction."""
     R, p = cm.pose(s)
     pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], state.x)
-    return StepObjective(cm, state.points, R, p, ctx.timer, state.kappa, pin)
+    return StepObjective(cm, state.points, R, p, ctx.timer, state.kappa, pin, friction)
 
 
 def adapt_kappa(cm: CouplingModel, state: StepState, obj: StepObjective) -> None:

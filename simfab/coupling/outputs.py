@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from simfab.coupling.profile import ProfileSummary, analyze_run
+from simfab.coupling.settle import energy_balance
 from simfab.coupling.simulate import InsertionResult
 from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json
 from simfab.io.mjcf import MJCFBuilder, quat_to_matrix
@@ -22,16 +23,22 @@ from simfab.io.usd import StageWriter
 SUMMARY_UNITS = {
     "E_max": "J", "E_ss": "J", "coupling_ratio": "%", "F_in": "N", "F_rm": "N", "F_grip": "N",
     "max_von_mises": "Pa", "max_penetration": "m", "min_det_F": "-", "seconds": "s", "kappa_initial": "N/m",
-    "kappa_final": "N/m", "dhat": "m", "s_max": "m", "s_ss": "m", "s_path_end": "m",
+    "kappa_final": "N/m", "dhat": "m", "s_max": "m", "s_path_end": "m", "s_ss": "m", "friction": "-",
+    "F_hold": "N", "dissipated": "J", "energy_balance": "-", "jammed_at": "m",
 }
 
-CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "path_force_N", "grip_N", "max_von_mises_Pa", "max_penetration_m", "min_det_F",
-              "newton_iterations", "contact_points"]
+#: One row per record, the insertion's then (with friction) the removal's: ``phase`` says which; in
+#: both, s_m is the position along the path and path_force_N the force on O along the path's forward
+#: tangent (the removal runs back over the same positions, so the phases compare row by row).
+CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "path_force_N", "grip_N", "max_von_mises_Pa", "max_penetration_m",
+              "min_det_F", "newton_iterations", "contact_points", "phase", "normal_force_N", "path_force_friction_N",
+              "dissipated_J", "lag_solves"]
 
 
 def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
     """(profile summary, JSON-ready dict of the key figures)."""
     prof = analyze_run(res)
+    records = [*res.steps, *res.removal]
     d = {
         "scene": res.model.name,
         "category": prof.category,
@@ -62,6 +69,14 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
         "seconds": float(res.seconds),
         "time_split": {k: float(v) for k, v in res.timings.items()},
         "phase_split": {k: float(v) for k, v in res.phases.items()},
+        "friction": prof.friction,
+        "F_hold": prof.F_hold,
+        "removal_steps": len(res.removal),
+        "dissipated": float(sum(r.dissipated for r in records)),
+        "energy_balance": energy_balance(res.steps, res.removal)["total"] if len(res.steps) > 1 else 0.0,
+        "jammed_at": res.jammed_at,
+        "lag_solves_per_step": float(np.mean([r.lag_solves for r in records[1:]])) if len(records) > 1 else 0.0,
+        "newton_iterations_removal": int(sum(r.iterations for r in res.removal)),
         "warnings": list(res.warnings),
         "notes": list(getattr(res, "notes", [])),
         "units": SUMMARY_UNITS,
@@ -70,9 +85,10 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
 
 
 def write_profile_csv(res: InsertionResult, path) -> Path:
-
+    """The profile CSV (:data:`CSV_HEADER`), SI units."""
     rows = [[k, r.s, r.energy, r.force, r.path_force, r.grip, r.max_von_mises, r.penetration, r.min_det_F, r.iterations,
-             r.contact_points] for k, r in enumerate(res.steps)]
+             r.contact_points, r.phase, r.normal_force, r.path_force_friction, r.dissipated, r.lag_solves]
+            for k, r in enumerate([*res.steps, *res.removal])]
     return write_csv(path, CSV_HEADER, rows)
 
 
@@ -96,6 +112,11 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     ax.set_ylabel("elastic energy [J]", color="tab:blue")
     ax2 = ax.twinx()
     ax2.plot(s, F, "--", color="tab:orange", lw=1.5, label="insertion force")
+    if res.removal:  # friction: the removal is its own traversal
+        ax.plot(res.column("s", "remove") * 1e3, res.column("energy", "remove"), "-", color="tab:cyan", lw=1.5,
+                label="elastic energy (removal)")
+        ax2.plot(res.column("s", "remove") * 1e3, res.column("force", "remove"), "-.", color="tab:brown", lw=1.5,
+                 label="force on removal")
     q = np.array([r.quat for r in res.steps])
     if np.abs(np.abs(q @ q[0]) - 1.0).max() > 1e-9:  # rotating path: also the work-conjugate force
         ax2.plot(s, res.column("path_force"), ":", color="tab:purple", lw=1.5, label="path force (-dE/ds)")
@@ -105,7 +126,8 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     labels = ax.get_legend_handles_labels()[1] + ax2.get_legend_handles_labels()[1]
     ax.legend(lines, labels, loc="upper left", fontsize=8)
     p2 = ", P2 elements" if res.model.options.element_order == 2 else ""
-    ax.set_title(f"{res.model.name}: {prof.category} (coupling ratio {prof.coupling_ratio:.1f}%{p2})")
+    mu = f", friction {prof.friction:g}" if prof.friction > 0 else ""
+    ax.set_title(f"{res.model.name}: {prof.category} (coupling ratio {prof.coupling_ratio:.1f}%{p2}{mu})")
     fig.tight_layout()
     try:
         return save_figure(fig, path)
@@ -143,7 +165,7 @@ def _object_display(cm):
 
 def write_usd(res: InsertionResult, path) -> Path:
     """USD stage: A's deforming mesh (``part``) with a per-vertex ``von_mises`` primvar [Pa], O's
-    animated transform (``object``); time code k = insertion step k."""
+    animated transform (``object``); time code k = record k (the insertion's, then the removal's)."""
 
     cm = res.model
     fem = cm.fem
@@ -152,8 +174,9 @@ def write_usd(res: InsertionResult, path) -> Path:
     w.add_mesh("part", faces, res.steps[0].x)
     ov, of = _object_display(cm)
     w.add_rigid("object", points=ov, faces=of, color=[0.55, 0.6, 0.7])
-    vmax = float(max(r.max_von_mises for r in res.steps)) or 1.0
-    for k, r in enumerate(res.steps):
+    records = [*res.steps, *res.removal]
+    vmax = float(max(r.max_von_mises for r in records)) or 1.0
+    for k, r in enumerate(records):
         w.set_points("part", r.x, k)
         w.set_scalar("part", "von_mises", vertex_von_mises(fem, r.von_mises), k, interpolation="vertex",
                      vmin=0.0, vmax=vmax, units="Pa")

@@ -43,11 +43,12 @@ def lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj: StepO
 def extrapolations(state: StepState, s_new: float) -> list:
     """Linear (last two steps) and quadratic (last three, Lagrange) extrapolations of A's
     positions to s_new: warm-start candidates when the deformation evolves smoothly."""
-    if state.prev is None or not state.prev.s < state.s:
+    sign = state.direction  # extrapolate along the traversal's direction only
+    if state.prev is None or not (state.s - state.prev.s) * sign > 0:
         return []
     xp, sp_ = state.prev.x, state.prev.s
     out = [state.x + (state.x - xp) * ((s_new - state.s) / (state.s - sp_))]
-    if state.prev2 is not None and state.prev2.s < sp_:
+    if state.prev2 is not None and (sp_ - state.prev2.s) * sign > 0:
         (x2, s2), (x1, s1), (xc, sc) = (state.prev2.x, state.prev2.s), (xp, sp_), (state.x, state.s)
         t = s_new
         l2 = (t - s1) * (t - sc) / ((s2 - s1) * (s2 - sc))

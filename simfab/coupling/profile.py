@@ -18,6 +18,12 @@ Definitions (thesis, "Fundamentals and Overview"):
   within micrometres (cclamp2d: 17 N just before the seat engages, 39 N 0.02 mm on), so the value
   at the bracket's lower end depends on how close the search came (22.5 N vs 21.5 N at two mesh
   sizes; interpolated 23.4 N vs 23.2 N).
+- With friction (a run's ``removal`` records: the removal simulated as its own traversal) F_in is
+  read from the insertion and F_rm = max(0, max F) from the removal; F_hold = max(0, F) at the first
+  removal step is the force needed to start sliding O out of its seat (elastic draw plus static
+  friction). A design whose elastic profile ejects O (no dip) but which friction holds in place
+  (F_hold > 0) is **held by friction**; an insertion that self-locks (O pushed inside the friction
+  cone of the contact, which sticks: a snap-fit with mu tan alpha >= 1) **jams**.
 - Forces are read up to the steady state (the insertion ends there; past it O is pushed into its
   seat), over the whole run for **ejects**.
 - A path that ends in a prescribed pose (its last segment turns O, so the run cannot continue it
@@ -31,7 +37,7 @@ Definitions (thesis, "Fundamentals and Overview"):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -55,6 +61,8 @@ class ProfileSummary:
     index_max: int
     index_ss: int
     stationary: bool = True  # E_ss is a minimum of the energy along the path (not the run's end)
+    F_hold: float = 0.0  # with friction: the force to start sliding O out of its seat [N] (else F_rm's elastic part)
+    friction: float = 0.0  # the Coulomb coefficient the profile was simulated with [-]
 
 
 def steady_state_index(energy: np.ndarray, tol: float) -> int:
@@ -108,7 +116,21 @@ def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarr
 
 def analyze_run(res) -> ProfileSummary:
     """:func:`analyze` of an :class:`simfab.coupling.simulate.InsertionResult`, its steady state at
-    the end pose when its path ends in a rotation (``model.end_direction`` None)."""
-    return analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"),
+    the end pose when its path ends in a rotation (``model.end_direction`` None); with friction F_rm
+    and F_hold from its removal records and the frictional categories (module docstring)."""
+    prof = analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"),
                    end_pose=res.model.end_direction is None)
+    mu = float(res.model.contact.friction)
+    if res.jammed_at is not None:
+        return replace(prof, category="jams", F_rm=0.0, F_hold=0.0, friction=mu)
+    if not res.removal:
+        return replace(prof, F_hold=prof.F_rm, friction=mu)
+    F_rm_path = res.column("force", "remove")
+    F_rm = float(max(0.0, F_rm_path.max()))
+    F_hold = float(max(0.0, F_rm_path[0]))
+    peak = float(np.abs(np.r_[res.column("force"), F_rm_path]).max())
+    category = prof.category
+    if category == "ejects" and F_hold > REST_FORCE_REL * peak:
+        category = "held by friction"
+    return replace(prof, category=category, F_rm=F_rm, F_hold=F_hold, friction=mu)
 

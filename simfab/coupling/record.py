@@ -4,8 +4,14 @@ stresses and the checks that the state is admissible (:func:`record_step`).
 Forces: the reaction at the fixed dofs is r = dE_total/dx there (the force the support applies to
 A); by equilibrium of A it equals the force A exerts on O, so the insertion force is F = sum r . u
 (u: unit direction of O's translation), negative when A resists the insertion. The path force is
-the generalized force on O along the path, P = sum_j f_j(on O) . dy_j/ds = -d(E + B)/ds. Contact
-forces on A are f_a = -dB/dx_a; the grip force is || (1/2 sum |f_x|, 1/2 sum |f_y|, 1/2 sum |f_z|) ||.
+the generalized force on O along the path, P = sum_j f_j(on O) . dy_j/ds (= -d(E + B)/ds without
+friction). Contact forces on A are f_a = -dB/dx_a; the grip force is
+|| (1/2 sum |f_x|, 1/2 sum |f_y|, 1/2 sum |f_z|) || over the normal (barrier) forces.
+
+With friction (:mod:`simfab.coupling.friction`) the friction forces f_j = dD/dy_j on O join the
+reaction and the path force (``path_force_friction`` is their part), and the step's dissipated work
+sum_j f_j . dy_j is recorded: over a step the work done on O equals the change of stored energy plus
+what friction dissipated.
 """
 
 from __future__ import annotations
@@ -15,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simfab.contact.barrier import point_barrier
+from simfab.coupling import friction
 from simfab.coupling.layout import point_dhat
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.refine import facet_check
@@ -43,6 +50,14 @@ class StepResult:
     iterations: int
     contact_points: int
     kappa: float  # barrier stiffness used for this step [N/m]
+    phase: str = "insert"  # "insert" (O moving forward along the path) or "remove" (moving back)
+    normal_force: float = 0.0  # total normal contact force sum_j lambda_j [N]
+    path_force_friction: float = 0.0  # friction's part of path_force [N]
+    dissipated: float = 0.0  # work dissipated by friction over the step leading to this record [J]
+    slipping: float = 0.0  # fraction of the normal force at points that slipped more than eps [-]
+    lag_solves: int = 0  # solves of the step with refreshed friction lags (lagging iterations)
+    lag_change: float = 0.0  # relative change of the normal forces at the step's last lagging iteration [-]
+    locked: float = 0.0  # fraction of the normal force at self-locked contact points [-] (friction.FrictionRecord)
 
 
 def path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
@@ -82,12 +97,18 @@ def record_step(cm: CouplingModel, state: StepState, iterations: int) -> StepRes
         d, gd, psi_pts = -field.psi, -field.grad, field.psi
     B, gy, _ = point_barrier(d, gd, None, point_dhat(cm, pts), state.kappa_step)
     gc = pts.scatter(gy, n)
+    grip = float(np.linalg.norm(0.5 * np.abs(-gc).sum(axis=0)))  # -gc: normal contact force on A's vertices
+    velocity = path_velocity(cm, state.s, pts.positions(x))
+    path_force = float(np.einsum("kd,kd->", gy, velocity))
     g = gE + gc
+    fr = None
+    if state.friction is not None:
+        fr = friction.record(state.friction, x, velocity)
+        g = g + pts.scatter(fr.point_forces, n, rows=state.friction.rows)
+        path_force += fr.path_force
     fixed = ~cm.free.reshape(n, dim)
     reaction = np.where(fixed, g, 0.0).sum(axis=0)  # force of the support on A = force of A on O
     force = float(reaction @ cm.direction(state.s))
-    path_force = float(np.einsum("kd,kd->", gy, path_velocity(cm, state.s, pts.positions(x))))
-    grip = float(np.linalg.norm(0.5 * np.abs(-gc).sum(axis=0)))  # -gc: contact force on A's vertices
     dets, vm = det_and_von_mises(cm.fem, x)
     min_det = float(dets.min())
     if not min_det > 0:
@@ -101,4 +122,7 @@ def record_step(cm: CouplingModel, state: StepState, iterations: int) -> StepRes
         s=state.s, pos=pos, quat=quat, x=x.copy(), energy=float(E), force=force, path_force=path_force,
         barrier_energy=float(B), grip=grip, max_von_mises=float(vm.max()), von_mises=vm, penetration=pen,
         min_det_F=min_det, iterations=int(iterations), contact_points=len(pts), kappa=float(state.kappa_step),
+        phase="remove" if state.direction < 0 else "insert", normal_force=float(np.linalg.norm(gy, axis=1).sum()),
+        path_force_friction=fr.path_force if fr else 0.0, dissipated=fr.dissipated if fr else 0.0,
+        slipping=fr.slipping if fr else 0.0, lag_solves=state.lag_solves, lag_change=state.lag_change, locked=fr.locked if fr else 0.0,
     )

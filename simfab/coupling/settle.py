@@ -109,7 +109,7 @@ def to_rest(cm, stepper) -> str:
         if rec is not None and rec.path_force >= -tol:
             stepper.keep(rec)
             continue
-        if rec is None:
+        if rec is None or stepper.history_dependent:  # (with friction every trial goes forward from the last kept)
             stepper.undo(attempt)
         return _bracket(steps[-1], rec, steps[-1].s + h, stepper, tol, REST_ENERGY_REL * E_max)
     return "rest" if not still_drawn_in(steps) else "cap"
@@ -125,7 +125,9 @@ def _bracket(lo, hi, hi_s, stepper, tol, e_tol) -> str:
     kink (O seating against a stiff part of A: P jumps from drawing in to pushing back within a
     micrometre), so the two ends are kept as the last records (the trials' own records; the run's
     state is then the last trial's): force through zero between them, the energy's minimum along
-    the path at the lower end.
+    the path at the lower end. With friction (``stepper.history_dependent``) every trial is solved
+    forward from the lower end's state (an overshoot is undone: stepping back would reverse the
+    friction), and only the lower end is kept.
     """
     steps_last = lo
     for _ in range(REST_TRIALS):
@@ -137,9 +139,9 @@ def _bracket(lo, hi, hi_s, stepper, tol, e_tol) -> str:
         if rec is not None and abs(rec.path_force) <= tol:
             stepper.keep(rec)
             return "rest"
-        if rec is None:
+        if rec is None or (stepper.history_dependent and rec.path_force <= 0):
             stepper.undo(attempt)
-            hi, hi_s = None, s_try
+            hi, hi_s = (None if rec is None else rec), s_try
         elif rec.path_force > 0:  # still drawn in: the new lower end
             lo = rec
         else:
@@ -148,21 +150,61 @@ def _bracket(lo, hi, hi_s, stepper, tol, e_tol) -> str:
         if lo is not steps_last:
             stepper.keep(lo)
         return "bracket"
-    for end in (lo, hi):  # the ends' records, in order (the trials' own: no solve again)
+    ends = (lo,) if stepper.history_dependent else (lo, hi)
+    for end in ends:  # the ends' records, in order (the trials' own: no solve again)
         if end is not None and end is not steps_last:
             stepper.keep(end)
     return "rest"
 
 
-def warnings(cm, steps, rest: str = "not continued") -> list:
+def step_work(records: list, *, turn: bool = False) -> dict:
+    """The energy balance of consecutive records (a traversal, either direction): per step k the work
+    O does on A, W_k = -h_k (N_k + N_{k+1}) / 2 - h_k F_{k+1} (h_k = s_{k+1} - s_k; N the normal
+    part of the path force by the trapezoidal rule, F its friction part, constant over the step as
+    the incremental potential takes it), against the change of stored energy plus what friction
+    dissipated over it, Delta(E + B)_k + D_{k+1}. With ``turn`` the first step reverses O's motion:
+    friction, and with it the normal force, flips at its start, so its normal part is taken at the
+    step's end. Returns arrays ``work``, ``stored`` (Delta(E + B)), ``dissipated`` and ``mismatch``
+    (k,) [J]."""
+    s = np.array([r.s for r in records])
+    Et = np.array([r.energy + r.barrier_energy for r in records])
+    F = np.array([r.path_force_friction for r in records])
+    N = np.array([r.path_force for r in records]) - F
+    D = np.array([r.dissipated for r in records])
+    h = np.diff(s)
+    N_start = N[:-1].copy()
+    if turn and len(N_start):
+        N_start[0] = N[1]
+    work = -0.5 * h * (N[1:] + N_start) - h * F[1:]
+    stored = np.diff(Et)
+    return {"work": work, "stored": stored, "dissipated": D[1:], "mismatch": stored + D[1:] - work}
+
+
+def energy_balance(steps: list, removal: list = ()) -> dict:
+    """The energy balance of a run over both traversals (the removal starts from the insertion's
+    last record), relative to the peak energy E_max: ``step`` the largest per-step mismatch
+    (:func:`step_work`), ``total`` |sum of the work done on A - the net change of stored energy - the
+    dissipated energy|; with ``work_J``, ``dissipated_J`` (over both traversals) and ``E_max_J``."""
+    E_max = float(max(r.energy for r in steps))
+    parts = [step_work(steps)] + ([step_work([steps[-1], *removal], turn=True)] if len(removal) else [])
+    mis = np.concatenate([p["mismatch"] for p in parts])
+    work = float(sum(p["work"].sum() for p in parts))
+    diss = float(sum(p["dissipated"].sum() for p in parts))
+    stored = float(sum(p["stored"].sum() for p in parts))
+    scale = E_max if E_max > 0 else 1.0
+    return {"step": float(np.abs(mis).max(initial=0.0)) / scale, "total": abs(work - stored - diss) / scale,
+            "work_J": work, "dissipated_J": diss, "E_max_J": E_max}
+
+
+def warnings(cm, steps, rest: str = "not continued", removal: list = ()) -> list:
     """One line per problem found in the profile of ``steps`` (StepResult list), see the module
-    docstring; ``rest`` is :func:`to_rest`'s outcome."""
+    docstring; ``rest`` is :func:`to_rest`'s outcome; ``removal`` the frictional removal's records
+    (their steps are checked for the same energy balance, and their lagging iterations)."""
     out = []
     if len(steps) < 2:
         return out
     s = np.array([r.s for r in steps])
     E = np.array([r.energy for r in steps])
-    Et = E + np.array([r.barrier_energy for r in steps])
     P = np.array([r.path_force for r in steps])
     name = cm.name
     if rest != "rest" and still_drawn_in(steps):
@@ -178,15 +220,19 @@ def warnings(cm, steps, rest: str = "not continued") -> list:
     E_max = float(E.max())
     f_tol = C.NEWTON_GRAD_TOL_REL * cm.force_scale  # force noise of a converged step [N]
     if E_max > NEGLIGIBLE_NOISE * f_tol * (s[-1] - s[0]):
-        h = np.diff(s)
-        work = -0.5 * h * (P[1:] + P[:-1])
-        mis = np.abs(np.diff(Et) - work)
-        mis = np.where(mis > NEGLIGIBLE_NOISE * f_tol * h, mis, 0.0)
-        k = int(np.argmax(mis))
-        if mis[k] > STEP_WORK_REL * E_max:
-            out.append(f"{name}: steps too coarse to resolve the profile: over the step to s={s[k + 1] * 1e3:.4g} mm "
-                       f"the work of the insertion force differs from the change of stored energy by "
-                       f"{100 * mis[k] / E_max:.3g}% of E_max (> {100 * STEP_WORK_REL:g}%); use more steps")
+        for phase, records in (("insertion", steps), ("removal", [steps[-1], *removal] if len(removal) else [])):
+            if len(records) < 2:
+                continue
+            sr = np.array([r.s for r in records])
+            h = np.abs(np.diff(sr))
+            mis = np.abs(step_work(records, turn=phase == "removal")["mismatch"])
+            mis = np.where(mis > NEGLIGIBLE_NOISE * f_tol * h, mis, 0.0)
+            k = int(np.argmax(mis))
+            if mis[k] > STEP_WORK_REL * E_max:
+                out.append(f"{name}: steps too coarse to resolve the profile: over the {phase} step to "
+                           f"s={sr[k + 1] * 1e3:.4g} mm the work of the path force differs from the change of stored "
+                           f"energy (plus friction's dissipation) by {100 * mis[k] / E_max:.3g}% of E_max "
+                           f"(> {100 * STEP_WORK_REL:g}%); use more steps")
         n = len(cm.s_steps)  # the planned steps (the rest search past them may push O into its seat)
         i = int(np.argmin(P[:n]))
         if 0 < i < n - 1 and P[i] < -NEGLIGIBLE_NOISE * f_tol:
@@ -194,6 +240,13 @@ def warnings(cm, steps, rest: str = "not continued") -> list:
             if abs(F_peak - P[i]) > STEP_PEAK_REL * abs(P[i]):
                 out.append(f"{name}: steps too coarse to resolve the peak insertion force: {-P[i]:.4g} N at a "
                            f"step, {-F_peak:.4g} N at the peak between steps; use more steps")
+    unlagged = [r for r in [*steps, *removal] if r.lag_change > cm.contact.lag_tol]
+    if unlagged:
+        r = max(unlagged, key=lambda r: r.lag_change)
+        out.append(f"{name}: at {len(unlagged)} step(s) the friction's normal forces still changed by up to "
+                   f"{100 * r.lag_change:.3g}% (> lag_tol {100 * cm.contact.lag_tol:g}%) after "
+                   f"{cm.contact.max_lag_iterations} lagging iterations (worst at s={r.s * 1e3:.4g} mm, {r.phase}): the "
+                   "friction forces there are not consistent with the normal forces to that tolerance")
     mat = cm.fem.material
     if mat is not None:
         vm = np.array([r.max_von_mises for r in steps])

@@ -117,7 +117,11 @@ class InsertionResult:
     warnings : one line each (e.g. steps too coarse, an unfinished insertion, stress above yield);
     notes : one line each about how the run was solved (e.g. a rigid motion of A that nothing
     resists, pinned by the solver); refined_facets : ids (rows of ``model.contact_facets``) of the
-    facets that carried refinement points at the end (``simulate``'s ``refined`` for a similar run)."""
+    facets that carried refinement points at the end (``simulate``'s ``refined`` for a similar run);
+    removal : with friction, one :class:`StepResult` per step of the removal (O moved back from where
+    the insertion left it over the insertion's step positions, phase "remove"); empty without
+    friction (removal is then the insertion played backwards); jammed_at : the path length [m] where
+    a frictional insertion self-locked (see :func:`jammed`), None when it did not."""
 
     model: CouplingModel
     steps: list
@@ -127,9 +131,13 @@ class InsertionResult:
     warnings: list = field(default_factory=list)
     notes: list = field(default_factory=list)
     refined_facets: tuple = ()
+    removal: list = field(default_factory=list)
+    jammed_at: float | None = None
 
-    def column(self, name: str) -> np.ndarray:
-        return np.array([getattr(r, name) for r in self.steps], dtype=float)
+    def column(self, name: str, phase: str = "insert") -> np.ndarray:
+        """One field of every record of a phase ("insert" or "remove") as an array."""
+        records = self.removal if phase == "remove" else self.steps
+        return np.array([getattr(r, name) for r in records], dtype=float)
 
 
 def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()) -> InsertionResult:
@@ -151,17 +159,51 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()
         t_start = time.perf_counter()
         stepper = Stepper(cm, refined=refined, callback=callback)
         check_start(cm)
+        jam = None
         for s in progress(cm.s_steps, total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
             stepper.keep(stepper.step(float(s)).record)
-        rest = settle.to_rest(cm, stepper)
-        return _result(stepper, rest, time.perf_counter() - t_start)
+            if jammed(stepper.steps):
+                jam = stepper.steps[-1].s
+                break
+        rest = settle.to_rest(cm, stepper) if jam is None else "jammed"
+        if stepper.history_dependent and jam is None:
+            remove(stepper, quiet=quiet)
+        return _result(stepper, rest, jam, time.perf_counter() - t_start)
 
 
-def _result(stepper: Stepper, rest: str, seconds: float) -> InsertionResult:
+#: A frictional insertion jams when, on this many consecutive steps, more than JAM_LOCKED_REL of the
+#: normal contact force sits at self-locked points (:class:`simfab.coupling.friction.FrictionRecord`).
+JAM_STEPS = 2
+JAM_LOCKED_REL = 0.5
+
+
+def jammed(steps: list) -> bool:
+    """The last JAM_STEPS insertion records are self-locked: O is pushed inside the friction cone of
+    the contact carrying most of the normal force, which sticks, so A cannot slide out of its way
+    and is dragged along (a snap-fit whose face angle alpha has mu tan alpha >= 1)."""
+    last = steps[-JAM_STEPS:]
+    return len(last) == JAM_STEPS and all(r.normal_force > 0 and r.locked > JAM_LOCKED_REL for r in last)
+
+
+def remove(stepper: Stepper, *, quiet: bool = True) -> None:
+    """The removal as its own quasi-static traversal: O moved back from where the insertion left it
+    over the insertion's step positions to the start (records of phase "remove")."""
+    s_end = stepper.steps[-1].s
+    s_back = [float(s) for s in stepper.cm.s_steps[::-1] if s < s_end * (1 - 1e-12)]
+    stepper.reverse()
+    for s in progress(s_back, total=len(s_back), desc=f"removal {stepper.cm.name}", quiet=quiet):
+        stepper.keep(stepper.step(s).record)
+
+
+def _result(stepper: Stepper, rest: str, jam: float | None, seconds: float) -> InsertionResult:
     """The run's result, its warnings (:func:`simfab.coupling.settle.warnings`) and notes."""
     cm, state, ctx = stepper.cm, stepper.state, stepper.ctx
     ctx.timer.add("total", seconds)
-    warnings = settle.warnings(cm, stepper.steps, rest)
+    warnings = settle.warnings(cm, stepper.steps, rest, removal=stepper.removal)
+    if jam is not None:
+        warnings.append(f"{cm.name}: the insertion jams at s={jam * 1e3:.4g} mm (friction mu={cm.contact.friction:g}): "
+                        "the object pushes inside the friction cone of the contact, which sticks, and drags the part "
+                        "along; the run stops there (no removal)")
     notes = []
     w = stepper.weakest
     if w is not None and w.ratio < rigid.UNRESISTED_REL:
@@ -178,7 +220,8 @@ def _result(stepper: Stepper, rest: str, seconds: float) -> InsertionResult:
     phases = dict(ctx.phases.t)
     phases["other"] = seconds - sum(phases.values())
     return InsertionResult(model=cm, steps=stepper.steps, seconds=seconds, timings=dict(ctx.timer.t), phases=phases,
-                           warnings=warnings, notes=notes, refined_facets=tuple(sorted(state.refined)))
+                           warnings=warnings, notes=notes, refined_facets=tuple(sorted(state.refined)),
+                           removal=stepper.removal, jammed_at=jam)
 
 
 def check_start(cm: CouplingModel) -> None:

@@ -103,7 +103,11 @@ class StepState:
     prev, prev2: the one and two steps before (extrapolating warm starts); pin_basis (k, r): the
     rigid motions the next step pins; grad_peak: largest |grad psi| seen at converged constraint
     and check points; check / check_cache: memo of the last facet check and of earlier check
-    points' values (see :mod:`simfab.coupling.refine`)."""
+    points' values (see :mod:`simfab.coupling.refine`); direction: +1 while O moves forward along
+    the path (insertion), -1 backward (removal); friction: the friction lag x was solved with
+    (:class:`simfab.coupling.friction.FrictionLag`, None without friction), lag_solves: the solves
+    its step took (lagging iterations), lag_change: the relative change of the normal forces at its
+    last lagging iteration."""
 
     x: np.ndarray
     s: float
@@ -121,6 +125,10 @@ class StepState:
     grad_peak: float = 0.0
     check: object = None
     check_cache: dict = field(default_factory=dict)
+    direction: int = 1
+    friction: object = None
+    lag_solves: int = 0
+    lag_change: float = 0.0
 
     def current_evaluation(self) -> Evaluation | None:
         """Newton's last evaluation when it belongs to the current state (at ``x``, over the current

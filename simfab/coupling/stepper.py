@@ -17,7 +17,8 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from simfab.coupling import config as C
-from simfab.coupling import predictor, rigid
+from simfab.coupling import friction, predictor, rigid
+from simfab.coupling.friction import FrictionLag
 from simfab.coupling.layout import point_dhat
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.objective import adapt_kappa, evaluation, make_objective, solve
@@ -44,7 +45,8 @@ class Stepper:
     refined : boundary facet ids (rows of ``cm.contact_facets``) carrying refinement points from the
     start; callback : optional ``callback(k, StepResult)`` after every kept step (it may raise to
     stop the run). Attributes: ``state`` (:class:`StepState`), ``ctx`` (:class:`StepContext`),
-    ``steps`` (the kept records), ``weakest`` (the least resisted rigid motion over the kept steps)."""
+    ``steps`` (the kept insertion records), ``removal`` (the kept removal records, see
+    :meth:`reverse`), ``weakest`` (the least resisted rigid motion over the kept steps)."""
 
     def __init__(self, cm: CouplingModel, *, refined=(), callback=None):
         self.cm, self.callback = cm, callback
@@ -61,6 +63,7 @@ class Stepper:
         self.free_motions = rigid.motion_basis(cm)
         self.state.pin_basis = self.free_motions[0]  # nothing touches A yet: every free rigid motion is pinned
         self.steps: list[StepResult] = []
+        self.removal: list[StepResult] = []
         self.weakest: WeakMotion | None = None
         self._weak: dict[int, WeakMotion | None] = {}  # id(record) -> its state's least resisted motion
 
@@ -77,10 +80,16 @@ class Stepper:
             if (contact.basis.shape[1] < state.pin_basis.shape[1]
                     and self._pin_force(before.x) > C.PIN_FORCE_TOL):
                 # contact now resists a motion this step held pinned, and the pin held it with a
-                # force (not merely in balance): solve the step again without it
-                prev, state.pin_basis = (state.prev, state.prev2), contact.basis
-                iters += self._solve(s)
-                state.prev, state.prev2 = prev
+                # force (not merely in balance): solve the step again without it (with friction from
+                # the step's start: the friction of a step depends on where it started)
+                if self.history_dependent:
+                    self.undo(StepAttempt(None, before))
+                    state.pin_basis = contact.basis
+                    iters += self._solve(s)
+                else:
+                    prev, state.pin_basis = (state.prev, state.prev2), contact.basis
+                    iters += self._solve(s)
+                    state.prev, state.prev2 = prev
                 with phases.timed("rigid_check"):
                     contact = rigid_contact(cm, state, self.free_motions)
             state.pin_basis = contact.basis
@@ -99,13 +108,24 @@ class Stepper:
             setattr(self.state, f.name, getattr(attempt.before, f.name))
 
     def keep(self, record: StepResult) -> None:
-        """Append ``record`` (a solved step's) to the run."""
-        self.steps.append(record)
+        """Append ``record`` (a solved step's) to the run (its insertion or removal records by its phase)."""
+        kept = self.removal if record.phase == "remove" else self.steps
+        kept.append(record)
         w = self._weak.get(id(record))
         if w is not None and (self.weakest is None or w.ratio < self.weakest.ratio):
             self.weakest = w
         if self.callback is not None:
-            self.callback(len(self.steps) - 1, record)
+            self.callback(len(self.steps) + len(self.removal) - 1, record)
+
+    @property
+    def history_dependent(self) -> bool:
+        """A step's solution depends on the state it starts from (friction), not only on O's pose:
+        the run must not step back and forth over the same path."""
+        return self.cm.contact.friction > 0
+
+    def reverse(self) -> None:
+        """Turn O around: the following steps move it back along the path (removal records)."""
+        self.state.direction = -1
 
     def _solve(self, s: float) -> int:
         if self.steps:
@@ -141,20 +161,48 @@ def solve_at(cm: CouplingModel, state: StepState, s: float, ctx: StepContext) ->
     raise ConvergenceError("refinement did not settle at the start pose")
 
 
+def start_lag(cm: CouplingModel, state: StepState, s_new: float) -> FrictionLag:
+    """The friction lag of the step from the current state to s_new over the state's points: anchors
+    carried rigidly with O over the step, normal forces and normals from the step's start (Newton's
+    evaluation there when it covers the current points, else the field at the start pose)."""
+    pts = state.points
+    motion = friction.step_map(cm, state.s, s_new)
+    y = pts.positions(state.x)
+    ev = state.current_evaluation()
+    if ev is not None:
+        d, gd, kappa = ev.distances, ev.distance_gradients, ev.kappa
+    else:
+        R, p = cm.pose(state.s)
+        field = cm.field.evaluate(y, (R, p), hessian=False)
+        d, gd, kappa = -field.psi, -field.grad, state.kappa_step or state.kappa
+    anchors = friction.carry(y, motion)
+    return friction.lag(cm, pts, anchors, anchors - y, d, gd, kappa, rotation=motion[0])
+
+
 def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext, depth: int = 0) -> int:
-    """Move O from state.s to s_new and re-equilibrate A (warm start, Newton, refinement); a step
-    that cannot be solved is bisected up to MAX_BISECTIONS deep. Returns the Newton iterations."""
+    """Move O from state.s to s_new and re-equilibrate A (warm start, Newton, refinement, and with
+    friction the lagging iterations: the step solved again with the normal forces and tangents of
+    its own solution until they change by less than ``lag_tol``); a step that cannot be solved is
+    bisected up to MAX_BISECTIONS deep. Returns the Newton iterations."""
     total = 0
     resume = None  # converged positions to resume from after a refinement (see below)
     refined = False  # points were added since the previous state was accepted
-    for _ in range(C.MAX_REFINEMENT_ROUNDS):  # refinement restarts
+    frictional = cm.contact.friction > 0
+    lagged, lag_solves, lag_change = None, 0, 0.0
+    rounds = 0
+    while True:
         resumed = False
         try:
             with ctx.phases.timed("warm_start"):
-                obj = make_objective(cm, state, s_new, ctx)
-                x0 = None if resume is None else predictor.lift_points(cm, state.points, resume, obj, below=0.0,
-                                                                       to=C.LIFT_TO * obj.dhat)
-                resumed = x0 is not None
+                if frictional and (lagged is None or lagged.points is not state.points):
+                    lagged = start_lag(cm, state, s_new)
+                obj = make_objective(cm, state, s_new, ctx, lagged)
+                if isinstance(resume, _Lagged):  # a lagging iteration: from the converged positions
+                    x0, resumed = resume.x, True
+                else:
+                    x0 = None if resume is None else predictor.lift_points(cm, state.points, resume, obj, below=0.0,
+                                                                           to=C.LIFT_TO * obj.dhat)
+                    resumed = x0 is not None
                 if x0 is None:
                     if refined:  # starting over from the previous state: make it feasible for the new points
                         predictor.restore_feasibility(cm, state, ctx)
@@ -177,15 +225,36 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
         with ctx.phases.timed("facet_check"):
             new = crossing_facets(cm, x, s_new, state, final) if cm.options.refine else []
         if not new:
+            if frictional:
+                lag_solves += 1
+                if final is None:
+                    d, gd, _ = obj.distances(x, False)
+                else:
+                    d, gd = final.distances, final.distance_gradients
+                fresh = friction.lag(cm, state.points, lagged.anchors, lagged.travel, d, gd, obj.kappa)
+                lag_change = fresh.change(lagged)
+                if lag_change > cm.contact.lag_tol and lag_solves < cm.contact.max_lag_iterations:
+                    lagged, resume = fresh, _Lagged(x)
+                    continue
             state.prev2, state.prev = state.prev, PastStep(state.x, state.s)
             accept(state, x, s_new, obj.kappa, final, point_dhat(cm, state.points))
+            state.friction, state.lag_solves, state.lag_change = lagged, lag_solves, lag_change
             adapt_kappa(cm, state, obj)
             return total
         # solve again from x with the new points lifted out of O (see predictor.lift_points); should
         # that be infeasible or fail, from the previous state, which is feasible for the new points
         # (new facets were outside O there; denser points of refined facets were within the
         # tolerance and are pushed out first, when it comes to that)
+        rounds += 1
+        if rounds >= C.MAX_REFINEMENT_ROUNDS:
+            raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")
         add_refinement(cm, state, new)
         refined = True
         resume = x
-    raise ConvergenceError(f"refinement did not settle at s={s_new:.6g} m")
+
+
+@dataclass(frozen=True, eq=False)
+class _Lagged:
+    """Converged positions x (n, dim) to solve a lagging iteration from (they need no lift)."""
+
+    x: np.ndarray

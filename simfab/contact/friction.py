@@ -1,0 +1,131 @@
+"""Lagged Coulomb friction as an incremental potential (IPC: Li et al. 2020, "Incremental Potential
+Contact", sec. 5), with energy, gradient and Hessian per contact point in one Warp launch.
+
+Per contact point j, with the normal force magnitude lambda_j >= 0 [N] and an orthonormal tangent
+basis T_j (dim, dim - 1) both lagged (held fixed during a Newton solve), the tangential relative
+displacement over the step is u_j = T_j^T dy_j [m], dy_j the displacement of the point relative to
+the object's material point it started the step on. The dissipative potential is
+
+    D = sum_j mu lambda_j f0(|u_j|)   [J]
+
+with the C1 mollifier of |u| at the stick-slip transition eps [m]:
+
+    f0(y) = -y^3 / (3 eps^2) + y^2 / eps + eps / 3    (y < eps),   f0(y) = y   (y >= eps)
+    f1(y) = f0'(y) = 2 y / eps - y^2 / eps^2           (y < eps),   f1(y) = 1   (y >= eps)
+
+so the friction force -dD/du_j = -mu lambda_j f1(|u_j|) u_j / |u_j| has magnitude mu lambda_j once
+the point slips by more than eps, and is a spring of stiffness 2 mu lambda_j / eps at sticking.
+
+    dD/du_j   = mu lambda_j (f1(y) / y) u_j                                  (y = |u_j|)
+    d2D/du_j2 = mu lambda_j [ (f1'(y) y - f1(y)) / y^3  u_j u_j^T + f1(y) / y  I ]
+    with (f1' y - f1) / y^3 = -1 / (eps^2 y) (y < eps), -1 / y^3 (y >= eps);  f1 / y = 2 / eps - y / eps^2
+    (y < eps), 1 / y (y >= eps).
+
+The Hessian is positive semi-definite without projection: its eigenvalues are f1 / y across u and
+f1' = 2 / eps - 2 y / eps^2 >= 0 (y < eps) or 0 (y >= eps) along u. The derivatives with respect to
+dy are T (d/du) and T (d2/du2) T^T (T fixed: lagged).
+
+Dimensions: one kernel serves 2D and 3D; points are vec3 (z = 0 in 2D) with two tangents t1, t2
+(t2 = 0 in 2D, so u = (t1 . dy, 0)).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from simfab._warp import wp
+
+
+@wp.func
+def _f0(y: wp.float64, eps: wp.float64) -> wp.float64:
+    if y < eps:
+        return -y * y * y / (wp.float64(3.0) * eps * eps) + y * y / eps + eps / wp.float64(3.0)
+    return y
+
+
+@wp.func
+def _f1_over_y(y: wp.float64, eps: wp.float64) -> wp.float64:
+    if y < eps:
+        return wp.float64(2.0) / eps - y / (eps * eps)
+    return wp.float64(1.0) / y
+
+
+@wp.func
+def _curvature(y: wp.float64, eps: wp.float64) -> wp.float64:
+    """(f1'(y) y - f1(y)) / y^3, times u u^T (|u| = y) it vanishes as y -> 0."""
+    if y <= wp.float64(0.0):
+        return wp.float64(0.0)
+    if y < eps:
+        return -wp.float64(1.0) / (eps * eps * y)
+    return -wp.float64(1.0) / (y * y * y)
+
+
+@wp.kernel
+def _friction_kernel(
+    dy: wp.array(dtype=wp.vec3d),  # (a,) relative displacement over the step [m]
+    t1: wp.array(dtype=wp.vec3d),  # (a,) first tangent
+    t2: wp.array(dtype=wp.vec3d),  # (a,) second tangent (zero in 2D)
+    mu_lambda: wp.array(dtype=wp.float64),  # (a,) mu * lambda [N]
+    eps: wp.array(dtype=wp.float64),  # (a,) mollifier width [m]
+    want_hessian: wp.int32,
+    energy: wp.array(dtype=wp.float64),  # (a,) [J]
+    grad: wp.array(dtype=wp.vec3d),  # (a,) dD/ddy [N]
+    hess: wp.array(dtype=wp.mat33d),  # (a,) d2D/ddy2 [N/m]
+):
+    j = wp.tid()
+    a = t1[j]
+    b = t2[j]
+    d = dy[j]
+    u1 = wp.dot(a, d)
+    u2 = wp.dot(b, d)
+    y = wp.sqrt(u1 * u1 + u2 * u2)
+    e = eps[j]
+    ml = mu_lambda[j]
+    energy[j] = ml * _f0(y, e)
+    fy = _f1_over_y(y, e)
+    w = u1 * a + u2 * b  # T u: the tangential slip in world coordinates
+    grad[j] = (ml * fy) * w
+    if want_hessian != 0:
+        hess[j] = ml * (_curvature(y, e) * wp.outer(w, w) + fy * (wp.outer(a, a) + wp.outer(b, b)))
+
+
+@dataclass(frozen=True, eq=False)
+class FrictionEval:
+    """energy (a,) [J]; gradient (a, dim) [N] dD/ddy_j; hessian (a, dim, dim) [N/m] or None;
+    slip (a,) [m] the tangential slip |u_j|."""
+
+    energy: np.ndarray
+    gradient: np.ndarray
+    hessian: np.ndarray | None
+    slip: np.ndarray
+
+
+def friction_potential(dy: np.ndarray, tangents: np.ndarray, mu_lambda: np.ndarray, eps: np.ndarray, *,
+                       hessian: bool = True, device: str = "cpu") -> FrictionEval:
+    """The friction potential of points with relative displacements ``dy`` (a, dim) [m], tangent
+    bases ``tangents`` (a, dim, dim - 1), ``mu_lambda`` (a,) = mu lambda_j [N] and mollifier widths
+    ``eps`` (a,) [m] (see the module docstring), in one Warp launch."""
+    dy = np.asarray(dy, dtype=np.float64)
+    a, dim = dy.shape
+    if a == 0:
+        return FrictionEval(np.zeros(0), np.zeros((0, dim)), np.zeros((0, dim, dim)) if hessian else None,
+                            np.zeros(0))
+    d3 = np.zeros((a, 3))
+    d3[:, :dim] = dy
+    t = np.zeros((a, 3, 2))
+    t[:, :dim, : dim - 1] = tangents
+    args = [wp.array(d3, dtype=wp.vec3d, device=device),
+            wp.array(np.ascontiguousarray(t[:, :, 0]), dtype=wp.vec3d, device=device),
+            wp.array(np.ascontiguousarray(t[:, :, 1]), dtype=wp.vec3d, device=device),
+            wp.array(np.asarray(mu_lambda, dtype=np.float64), dtype=wp.float64, device=device),
+            wp.array(np.asarray(eps, dtype=np.float64), dtype=wp.float64, device=device),
+            int(hessian)]
+    out_e = wp.zeros(a, dtype=wp.float64, device=device)
+    out_g = wp.zeros(a, dtype=wp.vec3d, device=device)
+    out_h = wp.zeros(a if hessian else 1, dtype=wp.mat33d, device=device)
+    wp.launch(_friction_kernel, dim=a, inputs=args, outputs=[out_e, out_g, out_h], device=device)
+    slip = np.linalg.norm(np.einsum("kdt,kd->kt", t, d3), axis=1)
+    H = out_h.numpy()[:, :dim, :dim] if hessian else None
+    return FrictionEval(out_e.numpy(), out_g.numpy()[:, :dim], H, slip)

@@ -1,0 +1,61 @@
+"""A cantilever snap-fit for the friction tests: a PLA beam (length L along y, width t along x)
+clamped at its root y = 0, whose tip corner (0, L) is pushed by the face of a rigid box inclined at
+alpha to the insertion direction (-y). Moving down by delta past first touch the face deflects the
+tip by delta tan alpha along +x. Without friction the force on the box along the path is
+F = F_lat tan alpha; with Coulomb friction mu, F_in = F_lat (tan alpha + mu) / (1 - mu tan alpha)
+on insertion and the force pushing the box back out on removal F_lat (tan alpha - mu) / (1 + mu tan
+alpha), F_lat the beam's lateral force at the same deflection."""
+
+import numpy as np
+
+from simfab.contact.sdf import Primitive, build_primitive_field
+from simfab.coupling.config import ContactOptions, InsertionOptions
+from simfab.coupling.simulate import make_coupling_model
+from simfab.fem.materials import PLA
+from simfab.fem.meshing import structured_box
+from simfab.fem.model import make_model
+from simfab.io.mjcf import Trajectory
+
+L, T, GAP, DEFLECTION = 20e-3, 1.5e-3, 0.3e-3, 0.8e-3
+
+
+def _beam(dim: int, cells_t: int):
+    n_y = int(round(cells_t * L / T))
+    if dim == 2:
+        nx, ny = cells_t, n_y
+        xs, ys = np.meshgrid(np.linspace(0, T, nx + 1), np.linspace(0, L, ny + 1), indexing="ij")
+        P = np.c_[xs.ravel(), ys.ravel()]
+        idx = np.arange((nx + 1) * (ny + 1)).reshape(nx + 1, ny + 1)
+        a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+        E = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+        return make_model(P, E, PLA, thickness=2e-3)
+    V, E = structured_box((T, L, 2e-3), (cells_t, n_y, 2))
+    return make_model(V, E, PLA)
+
+
+def snapfit_model(alpha_deg: float, mu: float, *, dim: int = 2, steps: int = 24, cells_t: int = 3):
+    """The snap-fit at face angle alpha [deg] and friction mu (see the module docstring): the box
+    travels GAP to first touch, then until the tip is deflected by DEFLECTION."""
+    fem = _beam(dim, cells_t)
+    a = np.radians(alpha_deg)
+    n = np.array([np.cos(a), -np.sin(a), 0.0])  # the face's outward normal (O on its left)
+    touch = np.array([0.0, L + GAP, 0.0])  # a point of the face at the start
+    ex, ey = 10e-3, 30e-3
+    Q = np.array([[np.cos(a), np.sin(a), 0.0], [-np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])  # columns: box axes
+    centre = touch - ex * n
+    size = (ex, ey, np.inf if dim == 2 else 50e-3)
+    field = build_primitive_field((Primitive(kind="box", size=size, centre=centre, rotation=Q),), dim)
+    travel = GAP + DEFLECTION / np.tan(a)
+    path = Trajectory(np.array([[0.0, 0.0, 0.0], [0.0, -travel, 0.0]]), np.array([[1.0, 0, 0, 0]] * 2))
+    root = np.flatnonzero(fem.rest[:, 1] < 1e-9)
+    opts = InsertionOptions(steps=steps, L_max=travel, fix_all_axes=True)
+    return make_coupling_model(name=f"snapfit{dim}d", fem=fem, field=field, path=path, fixed_vertices=root,
+                               options=opts, object_vertices=field.vertices, contact=ContactOptions(friction=mu))
+
+
+def ratio_formula(alpha_deg: float, mu: float, phase: str) -> float:
+    """F(mu) / F(0) of the path force on insertion or removal (module docstring)."""
+    t = np.tan(np.radians(alpha_deg))
+    if phase == "insert":
+        return (t + mu) / (t * (1 - mu * t))
+    return (t - mu) / (t * (1 + mu * t))
