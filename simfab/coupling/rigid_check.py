@@ -39,7 +39,10 @@ class RigidContact:
 
 def rigid_contact(cm: CouplingModel, state: StepState, free_motions) -> RigidContact:
     """The unresisted motions at the current state, from one generalized eigenproblem
-    (:func:`simfab.coupling.rigid.contact_modes`) over the points in the barrier's range;
+    (:func:`simfab.coupling.rigid.contact_modes`) over the points in the barrier's range, each
+    resisting along O's normal with the barrier's stiffness kappa b''(d); with friction also along
+    its tangents with the sticking stiffness 2 mu lambda / eps (friction resists a clip sliding along
+    a cylinder, or a claw turning on a sphere: those motions are then not pinned).
     ``free_motions``: :func:`simfab.coupling.rigid.motion_basis` of ``cm``."""
     ev = state.current_evaluation()
     Q, c = free_motions
@@ -54,7 +57,17 @@ def rigid_contact(cm: CouplingModel, state: StepState, free_motions) -> RigidCon
         return RigidContact(Q, None)
     y = state.points.positions(state.x)[act]
     nrm = gd[act] / np.linalg.norm(gd[act], axis=1, keepdims=True)
-    modes = rigid.contact_modes(Q, c, y, nrm, barrier_hessian(d[act], dh[act]))
+    w = ev.kappa * barrier_hessian(d[act], dh[act])
+    con = state.contact
+    if cm.contact.friction > 0 and con is not None and len(con.index):
+        # sticking friction along each tangent of the points in contact
+        stick = 2.0 * cm.contact.friction * con.normal_force / (cm.contact.friction_eps_rel * dh[con.index]
+                                                                 / cm.options.dhat_rel)
+        T = con.tangents
+        y = np.vstack([y, *[con.positions] * T.shape[2]])
+        nrm = np.vstack([nrm, *[T[:, :, i] for i in range(T.shape[2])]])
+        w = np.concatenate([w, *[stick] * T.shape[2]])
+    modes = rigid.contact_modes(Q, c, y, nrm, w)
     if modes is None:
         return RigidContact(Q, None)
     lam, motions = modes

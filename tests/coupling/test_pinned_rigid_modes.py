@@ -60,3 +60,19 @@ def test_clip_free_to_slide_along_the_cylinder_is_pinned_not_drifting(clip_runs)
     assert a.category == b.category == "tight"
     for k in ("E_max", "E_ss", "F_in", "F_rm"):
         assert getattr(a, k) == pytest.approx(getattr(b, k), rel=0.05), k
+
+
+def test_friction_resists_the_slide_along_the_cylinder():
+    # with friction the clip's slide along the cylinder is resisted (the sticking contact holds it):
+    # it is no longer reported as unresisted, and the part still does not drift along z
+    import dataclasses
+
+    from simfab.coupling.config import ContactOptions
+
+    sim, comp = {"steps": 18, "element_order": 1}, {"target_elements": 3600}
+    cm = load_coupling_scene("clip3d", overrides={"simulation": sim, "compliant": comp})
+    res = simulate(dataclasses.replace(cm, contact=ContactOptions(friction=0.3)))
+    assert not any("translation along z" in n for n in res.notes)
+    assert res.removal and res.jammed_at is None
+    for r in [*res.steps, *res.removal]:
+        assert abs(float((r.x - cm.fem.rest)[:, 2].mean())) < 0.01 * cm.path.length
