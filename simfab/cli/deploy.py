@@ -167,8 +167,9 @@ def run_cell(args) -> dict:
     scene = args.scene or unitcell.default_scene_path()
     cfg, inserts = unitcell.load_cell_scene(scene)
     if args.increments is not None:
-        if args.increments < 1:
-            raise InputError(f"must be >= 1 (got {args.increments})", where="--increments")
+        lo, hi = unitcell.COUNT_RANGES["increments"]
+        if not lo <= args.increments <= hi:
+            raise InputError(f"must be in [{lo}, {hi}] (got {args.increments})", where="--increments")
         cfg = dataclasses.replace(cfg, increments=args.increments)
     names = args.insert or sorted(inserts)
     for n in names:
