@@ -19,6 +19,7 @@ SUMMARY_UNITS = {
     "E_max": "J", "E_ss": "J", "coupling_ratio": "%", "F_in": "N", "F_rm": "N", "F_grip": "N",
     "max_von_mises": "Pa", "max_penetration": "m", "min_det_F": "-", "seconds": "s", "kappa_initial": "N/m",
     "kappa_final": "N/m", "dhat": "m", "s_max": "m", "s_ss": "m", "s_path_end": "m",
+    "averaged_von_mises": "Pa", "stress_radius": "m",
 }
 
 CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "path_force_N", "grip_N", "max_von_mises_Pa", "max_penetration_m", "min_det_F",
@@ -252,9 +253,11 @@ def _loop_edges(k: int) -> np.ndarray:
     return np.c_[i, (i + 1) % k]
 
 
-def write_all(res: InsertionResult, out: Path, stem: str | None = None) -> dict:
+def write_all(res: InsertionResult, out: Path, stem: str | None = None, *, figures: dict | None = None) -> dict:
     """Write every output into ``out``; return the summary dict with the output paths. The files
-    appear together: a failure while writing any of them leaves none."""
+    appear together: a failure while writing any of them leaves none. ``figures``: further summary
+    entries computed by the caller (e.g. the averaged stress the design reads), placed after
+    ``max_von_mises`` in the summary and its JSON."""
     from simfab.io.atomic import atomic_paths, write_json
 
     out = Path(out)
@@ -262,6 +265,10 @@ def write_all(res: InsertionResult, out: Path, stem: str | None = None) -> dict:
 
     stem = safe_name(stem or res.model.name)  # the scene's name comes from a file: no separators, no '..'
     prof, summary = summarize(res)
+    if figures:
+        items = list(summary.items())
+        at = next(i for i, (k, _) in enumerate(items) if k == "max_von_mises") + 1
+        summary = dict(items[:at] + list(figures.items()) + items[at:])
     paths = {"profile_csv": out / f"{stem}_profile.csv", "plot_png": out / f"{stem}_profile.png",
              "usd": out / f"{stem}.usda", "mjcf": out / f"{stem}.xml", "profile_json": out / f"{stem}_summary.json"}
     summary.update({k: str(v) for k, v in paths.items()})
