@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from simfab.errors import InputError
-from simfab.io.companion import reading
 from simfab.io.atomic import atomic_path
+from simfab.io.companion import reading
 
 SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
 UNIT_SCALE = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
