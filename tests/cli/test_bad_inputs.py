@@ -232,6 +232,8 @@ CASES = [
      ["uc_frac_segments.xml", "cell_segments", "whole number"]),
     ("deploy-cell-huge-segments", ["deploy", "--scene", "{uc_huge_segments}"], 2, ["uc_huge_segments.xml", "cell_segments"]),
     ("deploy-increments-huge", ["deploy", "--increments", "100000"], 2, ["--increments"]),
+    ("deploy-spacing-beyond-surface", ["deploy", "surface", "dome", "--spacing", "10"], 2,
+     ["--spacing", "target surface", "0.3294 m"]),
     ("validate-beam-two-values", ["validate", "buckling", "--scene", "{el_two_values}", "--n", "8"], 2,
      ["el_two_values.xml", "beam_length", "one number"]),
     ("validate-beam-poisson", ["validate", "buckling", "--scene", "{el_poisson}", "--n", "8"], 2,
