@@ -14,7 +14,9 @@ folder: exit 2 before any computation), and while it runs every file written thr
 
 Exit codes: 0 ok; 2 bad input (one line on stderr naming the file/field, no traceback);
 1 internal failure or a solver that did not converge (one line, traceback only with
-``SIMFAB_DEBUG=1``).
+``SIMFAB_DEBUG=1``). Numeric warnings raised while a subcommand runs (NumPy's invalid value,
+divide by zero) are shown after a successful run and dropped on the error path, so an error
+stays the one line on stderr.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import os
 import sys
 
 from simfab.errors import ConvergenceError, InputError, ValidationFailed
-from simfab.io.outpaths import check_out_dir, confine
+from simfab.io.outpaths import check_out_dir, confine, require_nonempty
 
 #: Subcommands in the order ``simfab --help`` lists them.
 SUBCOMMANDS = ("grow", "couple", "deploy", "crowd", "sweep", "validate", "demo", "render", "inspect")
@@ -117,6 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     import warnings
 
     warnings.showwarning = _show_warning
+    _HELD.clear()
     try:
         parser = build_parser()
         try:
@@ -129,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.command is None:
             parser.print_help(sys.stderr)
             return 2
+        if args.out is not None:  # --out "$UNSET": refused by every subcommand, also those that write elsewhere
+            require_nonempty(args.out, "--out")
         if args.out is None:  # a module may name its own default folder (demo: ./simfab-out)
             args.out = getattr(args._module, "DEFAULT_OUT", os.path.join("simfab-out", args.command))
         if args.json:
@@ -138,22 +143,28 @@ def main(argv: list[str] | None = None) -> int:
             check_out_dir(r, where=_OUT_FLAG.get(args.command, "--out"))
         with confine(roots):
             result = args._module.run(args)
+        _flush_held_warnings()
         _report(result, args)
         return 0
     except InputError as e:
+        _drop_held_warnings()
         print(f"simfab: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except ValidationFailed as e:
+        _drop_held_warnings()
         print(f"simfab: validation failed: {_one_line(e)}", file=sys.stderr)
         return 1
     except ConvergenceError as e:
+        _drop_held_warnings()
         print(f"simfab: did not converge: {_one_line(e)}", file=sys.stderr)
         _debug_trace()
         return 1
     except KeyboardInterrupt:
+        _drop_held_warnings()
         print("simfab: interrupted", file=sys.stderr)
         return 130
     except Exception as e:  # internal failure: one line unless debugging
+        _drop_held_warnings()
         print(f"simfab: internal error: {type(e).__name__}: {_one_line(e)}", file=sys.stderr)
         _debug_trace()
         return 1
@@ -168,10 +179,32 @@ def _output_roots(args) -> list:
     return list(fn(args)) if fn is not None else [args.out]
 
 
+#: Numeric warnings (NumPy's ``RuntimeWarning``: invalid value, divide by zero, overflow) held back
+#: while a subcommand runs: after a successful run they are shown; on the error path they are
+#: dropped (shown only with SIMFAB_DEBUG=1), so an error is the one line on stderr.
+_HELD: list[str] = []
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """Python warnings (e.g. mesh repairs) as one line on stderr, like simfab's own warnings."""
-    print(f"simfab: warning: {_one_line(message) if isinstance(message, BaseException) else ' '.join(str(message).split())}",
-          file=sys.stderr)
+    """Python warnings (e.g. mesh repairs) as one line on stderr, like simfab's own warnings;
+    numeric ones (RuntimeWarning) are held back until the run's outcome is known (``_HELD``)."""
+    text = f"simfab: warning: {_one_line(message) if isinstance(message, BaseException) else ' '.join(str(message).split())}"
+    if isinstance(category, type) and issubclass(category, RuntimeWarning):
+        _HELD.append(text)
+    else:
+        print(text, file=sys.stderr)
+
+
+def _flush_held_warnings() -> None:
+    for text in _HELD:
+        print(text, file=sys.stderr)
+    _HELD.clear()
+
+
+def _drop_held_warnings() -> None:
+    if os.environ.get("SIMFAB_DEBUG"):
+        _flush_held_warnings()
+    _HELD.clear()
 
 
 def _one_line(e: BaseException) -> str:

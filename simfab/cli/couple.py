@@ -32,8 +32,10 @@ SIMULATE_DESCRIPTION = """Run an insertion simulation of a coupling scene and wr
 (CSV, JSON, PNG), a USD replay and an MJCF scene for the viewer under --out.
 
 --json keys: scene, category (tight/loose/...), E_max, E_ss [J], coupling_ratio [%], F_in, F_rm,
-  F_grip [N], s_max, s_ss [m] (path length at E_max / steady state), max_von_mises, yield_stress
-  [Pa], max_penetration, penetration_tolerance [m], min_det_F, steps, newton_iterations,
+  F_grip [N], s_max, s_ss [m] (path length at E_max / steady state), max_von_mises [Pa] (the raw
+  element maximum over the insertion), averaged_von_mises [Pa] (the von Mises stress averaged over
+  stress_radius [m] around each element, the figure the design's yield constraint reads: the
+  scene's [design] stress_radius, default 0.5 mm), yield_stress [Pa], max_penetration, penetration_tolerance [m], min_det_F, steps, newton_iterations,
   elements, element_order, nodes, kappa_initial, kappa_final [N/m], dhat [m], object_samples, seconds [s],
   time_split [s] per resource (assembly, factorization, contact, total), phase_split [s] per
   phase of the insertion loop (warm_start, newton, facet_check, record, rigid_check, other),
@@ -109,6 +111,9 @@ def run(args) -> dict:
         if len(factors) < 2 or min(factors) <= 0:
             raise InputError("give at least two positive factors", where="--factors")
         ov = {} if args.element_order is None else {"simulation": {"element_order": args.element_order}}
+        from simfab.design.scene import check_brief_table
+
+        check_brief_table(args.scene)
         rep = study(args.scene, factors, overrides=ov, quiet=args.quiet)
         return {**rep, "table": "\n" + format_table(rep)}
     if cmd != "simulate":
@@ -151,8 +156,11 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     from simfab.coupling.simulate import check_start, simulate
     from simfab.progress import log
 
+    from simfab.design.scene import check_brief_table
+
     dev = check_device(device)
     cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}}, device=dev)
+    check_brief_table(scene)  # the scene's [design] table, though simulating does not read it
     check_start(cm)  # before the log line: bad input gives exactly one line on stderr
     kind = "quadratic elements" if cm.options.element_order == 2 else "elements"
     exact = isinstance(cm.field, PrimitiveField)  # exact signed distance, not sampled
@@ -162,7 +170,30 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     res = simulate(cm, quiet=quiet)
     for m in res.warnings:  # warnings show even with --quiet
         log(f"simfab: warning: {m}")
-    return write_all(res, Path(out), stem=stem)
+    return write_all(res, Path(out), stem=stem, figures=averaged_stress(res, stress_radius(scene)))
+
+
+def stress_radius(scene) -> float:
+    """The scene's [design] stress_radius [m], else the default the design brief uses."""
+    from simfab.coupling.scene import read_toml, scene_paths
+    from simfab.design.brief import DesignBrief
+
+    table = read_toml(scene_paths(scene)[1]).get("design")
+    return DesignBrief.from_dict(dict(table or {})).stress_radius
+
+
+def averaged_stress(res, radius: float) -> dict:
+    """The von Mises stress the design's yield constraint reads (simfab.design.stress): the maximum
+    over the insertion of the stress averaged over ``radius`` [m] around each element (P1) or
+    quadrature point (P2); {"averaged_von_mises" [Pa], "stress_radius" [m]}."""
+    from simfab.design.stress import averaged_von_mises, p2_averaged_von_mises
+
+    fem = res.model.fem
+    if res.model.options.element_order == 2:
+        vm = max(p2_averaged_von_mises(fem, r.x, radius) for r in res.steps)
+    else:
+        vm = max(averaged_von_mises(fem, r.von_mises, radius) for r in res.steps)
+    return {"averaged_von_mises": float(vm), "stress_radius": float(radius)}
 
 
 #: Annealing iterations of the demo's design run (the scene's brief allows 300).

@@ -83,6 +83,11 @@ def run_surface(args) -> dict:
         if v is not None:
             ov[table][field] = v
     scene = sc.load_scene(target, units=args.units, overrides=ov)
+    size = scene.target.diameter
+    if scene.pattern.spacing > size:  # not one grid cell fits: an input error, not an empty pattern
+        raise InputError(f"{scene.pattern.spacing:.4g} m is larger than the target surface (its bounding-box "
+                         f"diagonal {size:.4g} m)", where="--spacing" if args.spacing is not None
+                         else f"{scene.path}: pattern.spacing")
     out = os.path.abspath(args.out)
     if os.path.exists(out) and not os.path.isdir(out):
         raise InputError("output location exists and is not a folder", where=out)
@@ -167,8 +172,9 @@ def run_cell(args) -> dict:
     scene = args.scene or unitcell.default_scene_path()
     cfg, inserts = unitcell.load_cell_scene(scene)
     if args.increments is not None:
-        if args.increments < 1:
-            raise InputError(f"must be >= 1 (got {args.increments})", where="--increments")
+        lo, hi = unitcell.COUNT_RANGES["increments"]
+        if not lo <= args.increments <= hi:
+            raise InputError(f"must be in [{lo}, {hi}] (got {args.increments})", where="--increments")
         cfg = dataclasses.replace(cfg, increments=args.increments)
     names = args.insert or sorted(inserts)
     for n in names:

@@ -105,6 +105,11 @@ def _nonneg(v):
     return v
 
 
+#: GrowthParams field -> the command-line option that sets it (errors name the option the value came from)
+_FLAGS = {"branch_length": "--branch-length", "kill": "--kill", "influence": "--influence",
+          "attractors": "--attractors", "max_steps": "--max-steps"}
+
+
 def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool = False, **overrides) -> dict:
     """Grow, skin, check and write every output for one scene; returns the summary.
 
@@ -124,6 +129,9 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool =
         toml = Path(scene).with_suffix(".toml")
         if (e.where or "").startswith("--"):
             raise
+        key = (e.where or "").removeprefix("growth.")
+        if key in _FLAGS and overrides.get(key) is not None:  # the value came from the command line
+            raise InputError(e.message, where=_FLAGS[key]) from None
         raise e.in_file(toml if toml.is_file() else scene) from None
     s = result.summary()
     if s["segments"] == 0:

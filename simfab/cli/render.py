@@ -39,8 +39,10 @@ def _target(args):
 
 def output_roots(args) -> list:
     """The PNG's folder (checked before rendering)."""
-    from simfab.io.outpaths import check_out_file
+    from simfab.io.outpaths import check_out_file, require_nonempty
 
+    if args.output is not None:  # -o "$UNSET" would otherwise fall back to --out unnoticed
+        require_nonempty(args.output, "-o/--output")
     t = check_out_file(_target(args), where="-o/--output" if args.output else "--out", suffixes=(".png",))
     return [str(t.parent) if str(t.parent) else "."]
 

@@ -208,3 +208,51 @@ class InsertionOptions:
         if unknown:
             raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
         return cls(**d)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ObjectOptions:
+    """The rigid object O (scene TOML table ``[object]``).
+
+    body : name of O's mocap body in the MJCF.
+    samples : surface samples of O for its IMLS field (>= 8); None: 50 in 2D, 2000 in 3D. An
+        object made only of primitive geoms uses their exact signed distance unless ``sigma`` is
+        given (samples then only sets its display samples).
+    sigma : IMLS support radius [m]; None: from the sample spacing (and the exact field for primitives).
+    seed : seed of O's 3D surface sampling (an integer >= 0).
+    rot_length_scale : rho [m/rad], the length a rotation of O along its path counts per radian;
+        None: O's bounding radius (simfab.io.mjcf.Trajectory).
+    """
+
+    body: str = "object"
+    samples: int | None = None
+    sigma: float | None = None
+    seed: int = 0
+    rot_length_scale: float | None = None
+
+    def __post_init__(self):
+        def bad(name, why):
+            raise InputError(f"{name}={getattr(self, name)!r} {why}", where="[object]")
+
+        if not (isinstance(self.body, str) and self.body):
+            bad("body", "must be the name of O's mocap body")
+        if self.samples is not None and (isinstance(self.samples, bool) or not isinstance(self.samples, int)
+                                         or self.samples < 8):
+            bad("samples", "must be an integer >= 8 (too few for the object's IMLS field)")
+        for name in ("sigma", "rot_length_scale"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < float("inf")):
+                bad(name, "must be a positive length [m]")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**32:
+            bad("seed", "must be an integer in [0, 2**32)")
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "[object]") -> "ObjectOptions":
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
+        try:
+            return cls(**d)
+        except InputError as e:
+            raise InputError(e.message, where=where) from None

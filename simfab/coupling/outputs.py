@@ -25,6 +25,7 @@ SUMMARY_UNITS = {
     "max_von_mises": "Pa", "max_penetration": "m", "min_det_F": "-", "seconds": "s", "kappa_initial": "N/m",
     "kappa_final": "N/m", "dhat": "m", "s_max": "m", "s_path_end": "m", "s_ss": "m", "friction": "-",
     "F_hold": "N", "dissipated": "J", "energy_balance": "-", "jammed_at": "m",
+    "averaged_von_mises": "Pa", "stress_radius": "m",
 }
 
 #: One row per record, the insertion's then (with friction) the removal's: ``phase`` says which; in
@@ -275,14 +276,20 @@ def _loop_edges(k: int) -> np.ndarray:
     return np.c_[i, (i + 1) % k]
 
 
-def write_all(res: InsertionResult, out: Path, stem: str | None = None) -> dict:
+def write_all(res: InsertionResult, out: Path, stem: str | None = None, *, figures: dict | None = None) -> dict:
     """Write every output into ``out``; return the summary dict with the output paths. The files
-    appear together: a failure while writing any of them leaves none."""
+    appear together: a failure while writing any of them leaves none. ``figures``: further summary
+    entries computed by the caller (e.g. the averaged stress the design reads), placed after
+    ``max_von_mises`` in the summary and its JSON."""
 
     out = Path(out)
 
     stem = safe_name(stem or res.model.name)  # the scene's name comes from a file: no separators, no '..'
     prof, summary = summarize(res)
+    if figures:
+        items = list(summary.items())
+        at = next(i for i, (k, _) in enumerate(items) if k == "max_von_mises") + 1
+        summary = dict(items[:at] + list(figures.items()) + items[at:])
     paths = {"profile_csv": out / f"{stem}_profile.csv", "plot_png": out / f"{stem}_profile.png",
              "usd": out / f"{stem}.usda", "mjcf": out / f"{stem}.xml", "profile_json": out / f"{stem}_summary.json"}
     summary.update({k: str(v) for k, v in paths.items()})

@@ -21,29 +21,99 @@ The **TOML** (``NAME.toml``) defines A and the run (all lengths in metres, SI un
     # outline = "part.csv" (2D, x,y per line) or mesh = "part.stl" (3D surface), units = "m" | "mm"
     # mesh_file = "part.npz": a ready simplicial mesh (arrays points, elements) used instead of
     #   meshing (the bundled 3D scenes ship theirs: fTetWild is not bit-reproducible)
-    [object]  body = "object", samples = 50, sigma = (optional) [m], seed = 0
-              (an object made only of sphere / capsule / cylinder / box geoms uses their exact
-              signed distance, simfab.contact.sdf, unless sigma is given: samples then only sets
-              its display samples)
+    [object]  body = "object", samples = 50, sigma = (optional) [m], seed = 0, rot_length_scale [m/rad]
+              (ObjectOptions; an object made only of sphere / capsule / cylinder / box geoms uses
+              their exact signed distance, simfab.contact.sdf, unless sigma is given: samples
+              then only sets its display samples)
     [fixed]   site = "fixed"
     [simulation]  steps = 35 (or h_in [m]), L_max [m], fix_all_axes, refine, element_order = 1 | 2, ...
                   (InsertionOptions)
+    [design]  the design brief (simfab.design.brief.DesignBrief; read by ``couple optimize``)
+
+Every table and key is checked against :data:`SCENE_TABLES` before anything is built: an
+unknown table or key is an InputError naming the file, the table and the key (a misspelt
+option must not silently fall back to its default). An outline CSV may start with a header row.
 """
 
 from __future__ import annotations
 
+import inspect
 import tomllib
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
 from simfab._bundled import scenes_dir
 from simfab.coupling import geometry
-from simfab.coupling.config import InsertionOptions
+from simfab.coupling.config import InsertionOptions, ObjectOptions
 from simfab.errors import InputError
+from simfab.io.companion import read_csv_numbers, read_npz
 
 GENERATORS_2D = ("c_clamp", "outline")
 GENERATORS_3D = ("extruded_clamp", "cross_claw", "mesh")
+
+
+def _names(cls) -> frozenset:
+    return frozenset(f.name for f in fields(cls))
+
+
+def _compliant_keys(table: dict, dim: int) -> frozenset | None:
+    """The keys [compliant] may hold: the common ones and those of its generator (its function's
+    keyword parameters); None for an unknown generator (build_compliant names it)."""
+    gen = table.get("generator")
+    if gen is None:  # the generator inferred from the part's source (outline / mesh file)
+        gen = "outline" if "outline" in table else "mesh" if "mesh" in table else None
+    common = {"generator", "target_elements", "units", "mesh_file"} | ({"thickness"} if dim == 2 else set())
+    own = {None: set(), "outline": {"outline"}, "mesh": {"mesh"},
+           "c_clamp": _kwargs(geometry.c_clamp_outline),
+           "extruded_clamp": {"layers", "height"} | _kwargs(geometry.c_clamp_outline),
+           "cross_claw": {"height"} | _kwargs(geometry.c_clamp_outline)}.get(gen)
+    return None if own is None else frozenset(common | own)
+
+
+def _kwargs(fn) -> set:
+    return {n for n, p in inspect.signature(fn).parameters.items() if p.kind == p.KEYWORD_ONLY}
+
+
+#: Top-level keys of a coupling scene's TOML that are not tables.
+TOP_LEVEL_KEYS = frozenset({"name", "dim"})
+#: Every table a coupling scene's TOML may hold and the keys allowed in it: a set of names, or a
+#: function (table, dim) -> names when they depend on the table's values ([compliant]: its
+#: generator's parameters; None there leaves the error to the generator check). The table's own
+#: configuration (e.g. InsertionOptions) validates the values. A new table is one line here.
+SCENE_TABLES: dict = {
+    "material": frozenset({"name", "youngs_modulus", "poisson_ratio", "yield_stress", "density"}),
+    "compliant": _compliant_keys,
+    "object": _names(ObjectOptions),
+    "fixed": frozenset({"site"}),
+    "simulation": _names(InsertionOptions),
+    "design": None,  # keys and values checked by simfab.design.brief.DesignBrief where the brief is read
+}
+
+
+def check_tables(cfg: dict, where: str) -> None:
+    """InputError naming ``where`` (the TOML file), the table and the key of the first unknown
+    table, unknown key, or table given as a plain value (see :data:`SCENE_TABLES`)."""
+    dim = cfg.get("dim", 2)
+    for key, value in cfg.items():
+        if key in TOP_LEVEL_KEYS:
+            continue
+        if key not in SCENE_TABLES:
+            what = "table" if isinstance(value, dict) else "key"
+            known = ", ".join([f"[{t}]" for t in SCENE_TABLES] + sorted(TOP_LEVEL_KEYS))
+            raise InputError(f"unknown {what} {f'[{key}]' if what == 'table' else repr(key)} (a coupling scene "
+                             f"has {known})", where=where)
+        if not isinstance(value, dict):
+            raise InputError(f"[{key}] must be a table, got {value!r}", where=where)
+        allowed = SCENE_TABLES[key]
+        if callable(allowed):
+            allowed = allowed(value, dim)
+        if allowed is None:
+            continue
+        extra = sorted(k for k in value if k not in allowed)
+        if extra:
+            raise InputError(f"[{key}]: unknown key {extra[0]!r} (known: {', '.join(sorted(allowed))})", where=where)
 
 
 def read_toml(path: Path) -> dict:
@@ -100,8 +170,10 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
             cfg[k] = v
     where = str(toml)
     dim = cfg.get("dim", 2)
-    if dim not in (2, 3):
+    if isinstance(dim, bool) or dim not in (2, 3):
         raise InputError(f"dim must be 2 or 3, got {dim!r}", where=where)
+    check_tables({k: ({kk: vv for kk, vv in v.items() if vv is not None} if isinstance(v, dict) else v)
+                  for k, v in cfg.items()}, where)  # None: an override that removes a key
     name = str(cfg.get("name", xml.stem))
 
     mat = _section(cfg, "material", where)
@@ -129,8 +201,11 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
     sim = _section(cfg, "simulation", where)
     try:
         options = InsertionOptions.from_dict(sim, where=f"{where} [simulation]")
+        obj_opts = ObjectOptions.from_dict({k: v for k, v in obj.items() if v is not None}, where=f"{where} [object]")
     except TypeError as e:
         raise InputError(f"[simulation]: {e}", where=where) from None
+    except InputError as e:
+        raise e.in_file(where) from None
 
     points, elements, thickness = build_compliant(comp, dim, base=toml.parent, where=f"{where} [compliant]")
     fem = make_model(points, elements, material, thickness=thickness, device=device)
@@ -140,13 +215,11 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
         fem = to_p2(fem)  # the fixed region below then holds the midpoints inside it as well
 
     sc = load_scene(xml)
-    body = str(obj.get("body", "object"))
-    rho = obj.get("rot_length_scale")
+    body = obj_opts.body
+    rho = obj_opts.rot_length_scale
     path = Trajectory.from_scene(sc, body=body, **({} if rho is None else {"rot_length_scale": float(rho)}))
-    n_samples = int(obj.get("samples", 50 if dim == 2 else 2000))
-    if n_samples < 8:
-        raise InputError(f"samples={n_samples} is too few for the object's IMLS field", where=f"{where} [object]")
-    fld = primitive_field(sc, body, dim, n_samples) if obj.get("sigma") is None else None
+    n_samples = obj_opts.samples if obj_opts.samples is not None else (50 if dim == 2 else 2000)
+    fld = primitive_field(sc, body, dim, n_samples) if obj_opts.sigma is None else None
     # O's mesh: sampled for its IMLS field, or displayed in 3D (a 2D primitive shows its exact samples)
     mesh = object_mesh_body_frame(sc, body) if fld is None or dim == 3 else None
     if fld is not None:  # exact signed distance of primitive geoms (simfab.contact.sdf)
@@ -156,13 +229,13 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
         spacing = float(np.linalg.norm(np.diff(np.vstack([ov, ov[:1]]), axis=0), axis=1).mean())
         disp_v, disp_f = ov, None
     else:
-        ov, on = geometry.surface_samples(mesh, n_samples, seed=int(obj.get("seed", 0)))
+        ov, on = geometry.surface_samples(mesh, n_samples, seed=obj_opts.seed)
         spacing = None
         disp_v, disp_f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     if fld is None:
         from simfab.contact.imls import build_imls
 
-        sigma = obj.get("sigma")
+        sigma = obj_opts.sigma
         fld = build_imls(ov, on, sigma=None if sigma is None else float(sigma), spacing=spacing, device=device,
                          area=None if dim == 2 else float(mesh.area))
 
@@ -235,13 +308,8 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
         if gen == "c_clamp":
             outline = _call(geometry.c_clamp_outline, comp, where)
         elif gen == "outline" or "outline" in comp:
-            f = base / str(comp.pop("outline"))
-            if not f.is_file():
-                raise InputError("outline file not found", where=str(f))
-            try:
-                outline = np.loadtxt(f, delimiter=",", ndmin=2) * scale
-            except ValueError as e:
-                raise InputError(f"cannot read the outline CSV: {e}", where=str(f)) from None
+            outline = read_csv_numbers(base / str(comp.pop("outline")), 2, what="outline CSV (x,y per row)",
+                                       min_rows=3) * scale
         else:
             raise InputError(f"2D generator must be one of {GENERATORS_2D}, got {gen!r}", where=where)
         if not (np.isfinite(thickness) and thickness > 0):
@@ -291,17 +359,19 @@ def load_mesh_file(path: Path, dim: int):
     Bundled 3D scenes ship their tetrahedral mesh this way: fTetWild is not bit-reproducible across
     runs, so the mesh generated once by ``scenes/coupling/make_scenes.py`` is stored with the scene.
     """
-    if not path.is_file():
-        raise InputError("mesh file not found", where=str(path))
-    try:
-        with np.load(path) as z:
-            P, T = np.asarray(z["points"], dtype=np.float64), np.asarray(z["elements"], dtype=np.int64)
-    except (OSError, KeyError, ValueError) as e:
-        raise InputError(f"cannot read the mesh (.npz with 'points' and 'elements'): {e}", where=str(path)) from None
+    z = read_npz(path, ("points", "elements"), what="mesh file (.npz with points and elements)")
+    P, T = z["points"], z["elements"]
+    if P.dtype.kind not in "iuf" or T.dtype.kind not in "iuf":
+        raise InputError(f"points and elements must be numeric arrays, got {P.dtype} and {T.dtype}", where=str(path))
     if P.ndim != 2 or P.shape[1] != dim or T.ndim != 2 or T.shape[1] != dim + 1:
         raise InputError(f"mesh arrays have shapes {P.shape}, {T.shape}; expected (n, {dim}), (m, {dim + 1})",
                          where=str(path))
-    return P, T
+    if not np.all(np.isfinite(P)):
+        raise InputError("points contain NaN or infinity", where=str(path))
+    if len(T) == 0 or not np.all(np.isfinite(T)) or np.any(T != np.round(T)) or T.min() < 0 or T.max() >= len(P):
+        raise InputError(f"elements must be {dim + 1} whole-number indices into the {len(P)} points per row",
+                         where=str(path))
+    return P.astype(np.float64), T.astype(np.int64)
 
 
 def _call(fn, kw: dict, where: str):

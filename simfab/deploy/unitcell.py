@@ -45,6 +45,11 @@ from simfab.errors import InputError
 U = np.array([[1.0, 0, 0], [0, 1.0, 0], [-1.0, 0, 0], [0, -1.0, 0]])
 
 
+#: Allowed range of the unit cell's counts: rod segments per beam piece (16 pieces per cell) and
+#: quasi-static increments; beyond the upper bounds a run takes minutes without changing the result.
+COUNT_RANGES = {"segments": (2, 200), "increments": (1, 1000)}
+
+
 @dataclass(frozen=True, kw_only=True)
 class CellConfig:
     """Unit-cell parameters (``<numeric name="cell_<field>">`` in the scene). Lengths [m], moduli [Pa].
@@ -68,13 +73,17 @@ class CellConfig:
     perturbation: float = 0.05
 
     def __post_init__(self):
+        for name, (lo, hi) in COUNT_RANGES.items():  # counts first: whole numbers in their range
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+                raise InputError(f"must be a whole number in [{lo}, {hi}], got {v!r}", where=f"cell_{name}")
         require_positive(self, "cell_")
         if not self.gap < self.size / 2 - 2 * self.beam_width:
-            raise InputError(f"cell_gap {self.gap} leaves no room for the spokes in a cell of size {self.size}")
+            raise InputError(f"{self.gap} leaves no room for the spokes in a cell of size {self.size} (need gap < "
+                             f"size/2 - 2 beam_width = {self.size / 2 - 2 * self.beam_width:.4g} m)", where="cell_gap")
         if not self.corner_gap < self.size / 2:
-            raise InputError("cell_corner_gap must be smaller than half the cell size")
-        if int(self.segments) < 2 or int(self.increments) < 1:
-            raise InputError("cell_segments must be >= 2 and cell_increments >= 1")
+            raise InputError(f"{self.corner_gap} must be smaller than half the cell size ({self.size / 2:.4g} m)",
+                             where="cell_corner_gap")
 
 
 @dataclass(frozen=True)

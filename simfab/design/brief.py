@@ -65,6 +65,7 @@ import numpy as np
 from simfab.coupling import config as C
 from simfab.design.stress import STRESS_RADIUS
 from simfab.errors import InputError
+from simfab.io.companion import read_csv_numbers
 
 #: Weight of the squared, scaled constraint violations against E_L.
 PENALTY_WEIGHT = 1.0e3
@@ -244,17 +245,7 @@ def aimed_bounds(name: str, lo: float, hi: float, margin: float) -> tuple[float,
 def read_target_profile(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """(s (k,) [m], F (k,) [N]) of a target force profile CSV (distance, force per row; an optional
     header line; distances strictly increasing)."""
-    if not path.is_file():
-        raise InputError("target profile file not found", where=str(path))
-    try:
-        a = np.genfromtxt(path, delimiter=",", dtype=float)
-    except ValueError as e:
-        raise InputError(f"cannot read the target profile (distance_m, force_N per row): {e}", where=str(path)) from None
-    a = np.atleast_2d(a)
-    a = a[~np.all(np.isnan(a), axis=1)]
-    if a.ndim != 2 or a.shape[1] != 2 or len(a) < 2 or not np.all(np.isfinite(a)):
-        raise InputError("target profile must have two finite columns (distance_m, force_N) and >= 2 rows",
-                         where=str(path))
+    a = read_csv_numbers(path, 2, what="target profile (distance_m, force_N per row)", min_rows=2)
     if np.any(np.diff(a[:, 0]) <= 0):
         raise InputError("target profile distances must be strictly increasing", where=str(path))
     return a[:, 0], a[:, 1]

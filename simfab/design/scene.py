@@ -26,6 +26,21 @@ class DesignScene:
     toml: Path
 
 
+def check_brief_table(scene) -> None:
+    """Validate the ``[design]`` table of a coupling scene's TOML, when it has one (InputError naming
+    the file, the table and the key): commands that only simulate the scene check it too, so a
+    misspelt brief key is reported by every command, not first by ``couple optimize``."""
+    from simfab.coupling.scene import read_toml, scene_paths
+
+    _, toml = scene_paths(scene)
+    table = read_toml(toml).get("design")
+    if table is None:
+        return
+    if not isinstance(table, dict):
+        raise InputError("[design] must be a table", where=str(toml))
+    DesignBrief.from_dict(dict(table), where=f"{toml} [design]")
+
+
 def load_design_scene(scene, *, design: dict | None = None, simulation: dict | None = None,
                       device: str = "cpu") -> DesignScene:
     """Load a coupling scene with its design brief; ``design`` overrides keys of ``[design]``

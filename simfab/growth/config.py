@@ -173,6 +173,7 @@ def resolve(p: GrowthParams, box: np.ndarray, *, area: float | None = None) -> R
     if not (L > 0 and kill > 0 and infl > 0):
         raise InputError(f"branch length, kill and influence distances must be positive (got {L}, {kill}, {infl})",
                          where="growth")
+    check_scale(p, box)
     if not infl > kill:
         raise InputError(f"influence distance ({infl:.4g} m) must exceed kill distance ({kill:.4g} m)", where="growth")
     r_max = p.r_max if p.r_max is not None else R_MAX_PER_DIAG * diag
@@ -186,6 +187,26 @@ def resolve(p: GrowthParams, box: np.ndarray, *, area: float | None = None) -> R
     return Resolved(box=box, diag=diag, spacing=spacing, influence=float(infl), kill=float(kill),
                     branch_length=float(L), max_steps=int(max_steps), r_min=float(r_min), r_max=float(r_max),
                     radius_decay=float(decay))
+
+
+def check_scale(p: GrowthParams, box: np.ndarray) -> None:
+    """InputError for a given length that cannot make sense in the design box (2, 3) [m]: a
+    growth step longer than the box's longest side, a kill or influence distance or a maximum
+    branch radius larger than its diagonal D (every attractor would be killed or seen at once,
+    one step would leave the box). The error names the parameter (``growth.<key>`` or
+    ``radius.r_max``) and the box size it was compared with. Derived (None) values scale with
+    the box and are not checked."""
+    ext = np.asarray(box[1], np.float64) - np.asarray(box[0], np.float64)
+    side, diag = float(ext.max()), float(np.linalg.norm(ext))
+    size = f"the design box is {' x '.join(f'{e:.4g}' for e in ext)} m, diagonal {diag:.4g} m"
+    if p.branch_length is not None and p.branch_length > side:
+        raise InputError(f"{p.branch_length:.4g} m is longer than the design box's longest side ({size})",
+                         where="growth.branch_length")
+    for key, v in (("kill", p.kill), ("influence", p.influence)):
+        if v is not None and v > diag:
+            raise InputError(f"{v:.4g} m is larger than the design box's diagonal ({size})", where=f"growth.{key}")
+    if p.r_max is not None and p.r_max > diag:
+        raise InputError(f"{p.r_max:.4g} m is larger than the design box's diagonal ({size})", where="radius.r_max")
 
 
 # --------------------------------------------------------------------------- TOML

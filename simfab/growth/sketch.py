@@ -20,6 +20,7 @@ import numpy as np
 
 from simfab.errors import InputError
 from simfab.growth.skeleton import Skeleton, chains, revert_collisions
+from simfab.io.companion import read_csv_numbers, reading
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -189,27 +190,17 @@ def load_stroke(path: str) -> np.ndarray:
     p = Path(path)
     if not p.is_file():
         raise InputError("file not found", where=f"--stroke {path}")
-    text = p.read_text(encoding="utf-8")
-    try:
-        if p.suffix.lower() == ".json":
+    if p.suffix.lower() != ".json":
+        S = read_csv_numbers(p, 2, what="stroke CSV (x,y pixels per row)")
+    else:
+        with reading(p, "stroke JSON") as f:
+            text = f.read_text(encoding="utf-8")
+        try:
             d = json.loads(text)
-            pts = d["points"] if isinstance(d, dict) else d
-        else:
-            rows = [r.split(",") for r in text.strip().splitlines() if r.strip()]
-            if rows and not _is_number(rows[0][0]):
-                rows = rows[1:]
-            pts = [[float(a), float(b)] for a, b in rows]
-        S = np.asarray(pts, np.float64)
-    except (json.JSONDecodeError, KeyError, ValueError, TypeError) as e:
-        raise InputError(f"cannot read stroke points ({e})", where=str(p)) from None
+            S = np.asarray(d["points"] if isinstance(d, dict) else d, np.float64)
+        except (json.JSONDecodeError, KeyError, ValueError, TypeError) as e:
+            raise InputError(f"cannot read stroke points ({e})", where=str(p)) from None
     if S.ndim != 2 or S.shape[1] != 2 or len(S) < 2 or not np.all(np.isfinite(S)):
         raise InputError("a stroke needs at least 2 finite (x, y) points", where=str(p))
     return S
 
-
-def _is_number(s: str) -> bool:
-    try:
-        float(s)
-        return True
-    except ValueError:
-        return False

@@ -64,7 +64,7 @@ def _inspect_mjcf(path: Path) -> dict:
     for b in range(1, m.nbody):
         if m.body_mocapid[b] >= 0 and m.nkey >= 2:
             name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b)
-            out["trajectories"][name] = {"length_m": Trajectory.from_model(m, name).length}
+            out["trajectories"][name] = {"length_m": Trajectory.from_scene(s, name).length}
     return out
 
 

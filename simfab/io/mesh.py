@@ -20,6 +20,7 @@ import numpy as np
 
 from simfab.errors import InputError
 from simfab.io.atomic import atomic_path
+from simfab.io.companion import reading
 
 SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
 UNIT_SCALE = {"m": 1.0, "mm": 1e-3, "cm": 1e-2}
@@ -114,10 +115,8 @@ def read_mesh(path: str | os.PathLike, *, units: str = "m", require_watertight: 
         raise InputError("file not found", where=where)
     if path.suffix.lower() not in SUFFIXES:
         raise InputError(f"unsupported mesh format {path.suffix!r} (use {', '.join(SUFFIXES)})", where=where)
-    try:
+    with reading(path, "mesh"):  # trimesh raises many types for corrupt files: all are bad input
         loaded = trimesh.load(str(path), force="mesh", process=False)
-    except Exception as e:  # trimesh raises many types for corrupt files
-        raise InputError(f"cannot read mesh: {' '.join(str(e).split()) or type(e).__name__}", where=where) from None
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise InputError("no triangles in the file", where=where)
     mesh = loaded

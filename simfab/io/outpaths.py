@@ -3,6 +3,8 @@ before any computation, and every file written is confined to the folders the us
 
 - :func:`safe_name` turns a name read from a file (scene, body, model, label) into one path
   component: no separators, no ``..``, no leading dot, nothing outside ``[A-Za-z0-9._-]``.
+- :func:`require_nonempty` refuses an empty path (``--out "$UNSET"``), which would otherwise
+  mean the working folder or fail late.
 - :func:`check_out_dir` raises :class:`~simfab.errors.InputError` when a folder cannot receive
   outputs (an existing file, an unwritable or non-folder ancestor); it creates nothing.
 - :func:`confine` makes every :func:`simfab.io.atomic.atomic_path` inside its block refuse a
@@ -40,9 +42,11 @@ def _resolved(p: str | os.PathLike) -> Path:
 def check_out_dir(out: str | os.PathLike, *, where: str = "--out") -> Path:
     """Check that ``out`` is (or can be created as) a writable folder; create nothing.
 
-    Raises InputError naming ``where`` and the path when ``out`` is an existing file, when an
-    ancestor is a file, or when the nearest existing ancestor is not writable.
+    Raises InputError naming ``where`` and the path when ``out`` is empty (an unset shell
+    variable: ``--out "$DIR"``; it would silently mean the working folder), an existing file,
+    when an ancestor is a file, or when the nearest existing ancestor is not writable.
     """
+    require_nonempty(out, where)
     p = Path(os.path.abspath(out))
     if p.exists() and not p.is_dir():
         raise InputError(f"{out} exists and is not a folder", where=where)
@@ -58,6 +62,13 @@ def check_out_dir(out: str | os.PathLike, *, where: str = "--out") -> Path:
     return p
 
 
+def require_nonempty(path, where: str) -> None:
+    """InputError naming ``where`` when ``path`` is empty or blank."""
+    if not str(path).strip():
+        raise InputError(f"is an empty path ({str(path)!r}: an unset shell variable?); name a folder or leave "
+                         "the option out", where=where)
+
+
 def make_out_dir(out: str | os.PathLike, *, where: str = "--out") -> Path:
     """:func:`check_out_dir`, then create the folder (InputError if that fails)."""
     p = check_out_dir(out, where=where)
@@ -69,7 +80,8 @@ def make_out_dir(out: str | os.PathLike, *, where: str = "--out") -> Path:
 
 
 def check_out_file(path: str | os.PathLike, *, where: str, suffixes: tuple[str, ...] = ()) -> Path:
-    """Check an explicit output file: not an existing folder, allowed suffix, writable folder."""
+    """Check an explicit output file: not empty, not an existing folder, allowed suffix, writable folder."""
+    require_nonempty(path, where)
     p = Path(path)
     if p.is_dir():
         raise InputError(f"{path} is a folder; give a file name", where=where)

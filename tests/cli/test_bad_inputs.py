@@ -122,6 +122,40 @@ def _inputs(d: Path) -> dict:
                              '"root": [0, 0]}')
     f["garbage_json"] = d / "garbage.json"
     f["garbage_json"].write_text("{not json")
+    # --- issue 32's classes (and issue 28's scene-table checks)
+    f["grow_bigstep"] = _copy_scene(g, d, "grow_bigstep", toml_sub=[('mode = "volume"', 'mode = "volume"\nbranch_length = 1.0')])
+    claw = SCENES / "coupling" / "claw3d.xml"
+    (d / "trunc.npz").write_bytes((claw.parent / "claw3d_part.npz").read_bytes()[:300])
+    f["cc_trunc_npz"] = _copy_scene(claw, d, "cc_trunc_npz", toml_sub=[('mesh_file = "claw3d_part.npz"',
+                                                                        'mesh_file = "trunc.npz"')])
+    (d / "garbage.csv").write_bytes(b"\xff\xfe\x00\x01" + bytes(range(256)))
+    blk = SCENES / "coupling" / "block2d_tight.xml"
+    f["cc_garbage_csv"] = _copy_scene(blk, d, "cc_garbage_csv", toml_sub=[('outline = "block2d_tight_outline.csv"',
+                                                                            'outline = "garbage.csv"')])
+    (d / "garbage.stl").write_bytes(b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0\n")
+    alli = SCENES / "coupling" / "alligator3d.xml"
+    f["cc_garbage_stl"] = _copy_scene(alli, d, "cc_garbage_stl", toml_sub=[('mesh_file = "alligator3d_part.npz"',
+                                                                            'mesh = "garbage.stl"')])
+    prof = SCENES / "coupling" / "profile2d.xml"
+    shutil.copy(prof.parent / "profile2d_outline.csv", d / "profile2d_outline.csv")
+    f["cc_garbage_target"] = _copy_scene(prof, d, "cc_garbage_target", toml_sub=[
+        ('target_profile = "profile2d_target.csv"', 'target_profile = "garbage.csv"')])
+    f["uc_two_values"] = _copy_scene(u, d, "uc_two_values", xml_sub=[('name="cell_size" data="0.08"',
+                                                                      'name="cell_size" data="0.08 0.09"')])
+    f["uc_frac_segments"] = _copy_scene(u, d, "uc_frac_segments", xml_sub=[('name="cell_segments" data="10"',
+                                                                            'name="cell_segments" data="10.5"')])
+    f["uc_huge_segments"] = _copy_scene(u, d, "uc_huge_segments", xml_sub=[('name="cell_segments" data="10"',
+                                                                            'name="cell_segments" data="100000"')])
+    f["el_two_values"] = _copy_scene(e, d, "el_two_values", xml_sub=[('name="beam_length" data="0.1"',
+                                                                      'name="beam_length" data="0.1 0.2"')])
+    f["cc_zero_quat"] = _copy_scene(c, d, "cc_zero_quat", xml_sub=[('mpos="0.0007 0 0" mquat="1 0 0 0"',
+                                                                    'mpos="0.0007 0 0" mquat="0 0 0 0"')])
+    for stem, sub in (("cc_bogus_table", ("[fixed]", "[bogus]\nx = 1\n\n[fixed]")),
+                      ("cc_object_key", ('body = "object"', 'body = "object"\nsampels = 60')),
+                      ("cc_compliant_key", ("segments = 48", "segments = 48\nwidht = 0.003")),
+                      ("cc_top_key", ("dim = 2", "dim = 2\nunits = \"mm\"")),
+                      ("cc_design_key", ('grip = "tight"', 'grip = "tight"\ngrip_forse = [1.0, 2.0]'))):
+        f[stem] = _copy_scene(c, d, stem, toml_sub=[sub])
     f["camera"] = d / "camera.json"
     f["camera"].write_text('{"eye": [0.2, 0.2, 0.2], "target": [0, 0, 0], "up": [0, 0, 1], "fovy_deg": 45, '
                            '"width": 64, "height": 48}')
@@ -141,7 +175,14 @@ CASES = [
     ("grow-huge-attractor-count", ["grow", "{grow}", "--attractors", "1000000000"], 2, ["--attractors"]),
     ("grow-nan-in-mjcf", ["grow", "{grow_nan}"], 2, ["grow_nan.xml", "size"]),
     ("grow-bad-toml-field", ["grow", "{grow_badtoml}"], 2, ["grow_badtoml.toml", "mode"]),
-    ("grow-unreached-targets", ["grow", "{grow}", "--branch-length", "6"], 1, ["phone_stand.xml", "unreached", "--best-effort"]),
+    ("grow-unreached-targets", ["grow", "{grow}", "--max-steps", "25"], 1, ["phone_stand.xml", "unreached", "--best-effort"]),
+    # issue 32 class 1: a value far outside the scene's scale is bad input, naming the option and the box
+    ("grow-branch-length-beyond-box", ["grow", "{grow}", "--branch-length", "6"], 2,
+     ["--branch-length", "design box", "0.12 x 0.13 x 0.15 m"]),
+    ("grow-kill-beyond-box", ["grow", "{grow}", "--kill", "5"], 2, ["--kill", "diagonal 0.2319 m"]),
+    ("grow-influence-beyond-box", ["grow", "{grow}", "--influence", "3"], 2, ["--influence", "diagonal 0.2319 m"]),
+    ("grow-toml-branch-length-beyond-box", ["grow", "{grow_bigstep}"], 2,
+     ["grow_bigstep.toml", "growth.branch_length", "design box"]),
     ("grow-edit-needs-stroke", ["grow", "edit", "{skeleton}", "--camera", "{camera}"], 2, ["--stroke"]),
     ("grow-edit-garbage-stroke", ["grow", "edit", "{skeleton}", "--camera", "{camera}", "--stroke", "{garbage_json}"], 2,
      ["garbage.json"]),
@@ -159,6 +200,25 @@ CASES = [
     ("couple-h-in-nan", ["couple", "simulate", "cclamp2d", "--h-in", "nan"], 2, ["--h-in"]),
     ("couple-seed-negative", ["couple", "simulate", "cclamp2d", "--seed", "-1"], 2, ["--seed"]),
     ("couple-out-is-a-file", ["couple", "simulate", "cclamp2d", "--out", "{file}"], 2, ["--out", "afile.txt"]),
+    # issue 32 class 2: a companion file that cannot be read is bad input naming the file
+    ("couple-truncated-npz", ["couple", "simulate", "{cc_trunc_npz}"], 2, ["trunc.npz", "cannot read"]),
+    ("couple-garbage-outline-csv", ["couple", "simulate", "{cc_garbage_csv}"], 2, ["garbage.csv", "cannot read"]),
+    ("couple-garbage-stl", ["couple", "simulate", "{cc_garbage_stl}"], 2, ["garbage.stl"]),
+    ("couple-garbage-target-profile", ["couple", "optimize", "{cc_garbage_target}"], 2, ["garbage.csv"]),
+    # issue 32 class 5: a zero quaternion is the one error line (no NumPy warning before it)
+    ("couple-zero-quaternion", ["couple", "simulate", "{cc_zero_quat}"], 2, ["cc_zero_quat.xml", "mquat", "keyframe 1"]),
+    ("inspect-zero-quaternion", ["inspect", "{cc_zero_quat}"], 2, ["cc_zero_quat.xml", "mquat"]),
+    # issue 32 class 6: a path of 10^6 keyframes is refused at load, in seconds
+    ("couple-million-keyframes", ["couple", "simulate", "{many_keys}"], 2, ["many_keys.xml", "<keyframe>", "10000"]),
+    # issue 28: every table and key of a coupling scene is checked
+    ("couple-unknown-table", ["couple", "simulate", "{cc_bogus_table}"], 2, ["cc_bogus_table.toml", "[bogus]"]),
+    ("couple-unknown-object-key", ["couple", "simulate", "{cc_object_key}"], 2,
+     ["cc_object_key.toml", "[object]", "sampels"]),
+    ("couple-unknown-compliant-key", ["couple", "simulate", "{cc_compliant_key}"], 2,
+     ["cc_compliant_key.toml", "[compliant]", "widht"]),
+    ("couple-unknown-top-level-key", ["couple", "simulate", "{cc_top_key}"], 2, ["cc_top_key.toml", "'units'"]),
+    ("couple-unknown-design-key", ["couple", "simulate", "{cc_design_key}"], 2,
+     ["cc_design_key.toml", "[design]", "grip_forse"]),
     # --- deploy and validate
     ("deploy-cell-poisson", ["deploy", "--scene", "{uc_poisson}"], 2, ["uc_poisson.xml", "cell_poisson"]),
     ("deploy-cell-young", ["deploy", "--scene", "{uc_young}"], 2, ["uc_young.xml", "cell_young"]),
@@ -166,11 +226,27 @@ CASES = [
     ("deploy-unknown-insert", ["deploy", "--insert", "nope"], 2, ["--insert", "nope"]),
     ("deploy-missing-scene", ["deploy", "--scene", "nope.xml"], 2, ["nope.xml"]),
     ("deploy-out-is-a-file", ["deploy", "--out", "{file}"], 2, ["--out", "afile.txt"]),
+    # issue 32 class 4: every <numeric> field checked for count, type and range before anything runs
+    ("deploy-cell-two-values", ["deploy", "--scene", "{uc_two_values}"], 2, ["uc_two_values.xml", "cell_size", "one number"]),
+    ("deploy-cell-fractional-segments", ["deploy", "--scene", "{uc_frac_segments}"], 2,
+     ["uc_frac_segments.xml", "cell_segments", "whole number"]),
+    ("deploy-cell-huge-segments", ["deploy", "--scene", "{uc_huge_segments}"], 2, ["uc_huge_segments.xml", "cell_segments"]),
+    ("deploy-increments-huge", ["deploy", "--increments", "100000"], 2, ["--increments"]),
+    ("deploy-spacing-beyond-surface", ["deploy", "surface", "dome", "--spacing", "10"], 2,
+     ["--spacing", "target surface", "0.3294 m"]),
+    ("validate-beam-two-values", ["validate", "buckling", "--scene", "{el_two_values}", "--n", "8"], 2,
+     ["el_two_values.xml", "beam_length", "one number"]),
     ("validate-beam-poisson", ["validate", "buckling", "--scene", "{el_poisson}", "--n", "8"], 2,
      ["el_poisson.xml", "beam_poisson"]),
     ("validate-g-over-L", ["validate", "buckling", "--g-over-L", "1.5"], 2, ["--g-over-L"]),
     ("validate-odd-n", ["validate", "buckling", "--n", "5"], 2, ["--n"]),
     ("validate-out-is-a-file", ["validate", "buckling", "--out", "{file}"], 2, ["--out", "afile.txt"]),
+    # issue 32 class 3: an empty --out (an unset shell variable) is refused by every subcommand
+    ("crowd-simulate-empty-out", ["crowd", "simulate", "--tasks", "3", "--scale", "1", "10", "--out", ""], 2, ["--out"]),
+    ("grow-empty-out", ["grow", "{grow}", "--out", ""], 2, ["--out", "empty"]),
+    ("couple-empty-out", ["couple", "simulate", "cclamp2d", "--out", ""], 2, ["--out", "empty"]),
+    ("inspect-empty-out", ["inspect", "{open_stl}", "--out", " "], 2, ["--out", "empty"]),
+    ("render-empty-output", ["render", "{usda}", "-o", ""], 2, ["-o/--output", "empty"]),
     # --- crowd
     ("crowd-missing-ratings", ["crowd", "aggregate", "nope.csv", "--scale", "1", "10"], 2, ["nope.csv"]),
     ("crowd-fractional-label", ["crowd", "aggregate", "{ratings_float}", "--scale", "1", "10"], 2,
@@ -211,6 +287,22 @@ CASES = [
 ]
 
 
+def _many_keys(d: Path) -> Path:
+    """cclamp2d with its straight path given as 10^6 keyframes (issue 32, class 6)."""
+    src = (SCENES / "coupling" / "cclamp2d.xml").read_text()
+    a, b = src.index("<keyframe>"), src.index("</keyframe>")
+    x = np.linspace(0.0114344085, 0.0007, 10**6)
+    keys = "".join(f'<key mpos="{v:.9g} 0 0" mquat="1 0 0 0"/>\n' for v in x)
+    out = d / "many_keys.xml"
+    out.write_text(src[:a] + "<keyframe>\n" + keys + src[b:])
+    shutil.copy(SCENES / "coupling" / "cclamp2d.toml", d / "many_keys.toml")
+    return out
+
+
+#: inputs too large to make for every case: made only for the cases that name them
+LAZY_INPUTS = {"many_keys": _many_keys}
+
+
 def _run(argv, cwd: Path):
     env = dict(os.environ, PYTHONPATH=str(ROOT), MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
     env.pop("SIMFAB_DEBUG", None)
@@ -228,6 +320,7 @@ def test_bad_input(case, tmp_path):
     work = tmp_path / "work"
     work.mkdir()
     files = _inputs(work)
+    files.update({k: make(work) for k, make in LAZY_INPUTS.items() if "{" + k + "}" in " ".join(argv)})
     out = tmp_path / "out"
     args = [a.format(**files, out=out) for a in argv]
     if "--out" not in args:

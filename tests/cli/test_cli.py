@@ -83,6 +83,35 @@ def test_internal_error_exit_1(monkeypatch, capsys):
     assert "internal error" in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize("outcome, code", [(None, 0), ("input", 2), ("internal", 1)])
+def test_numeric_warnings_show_after_success_and_never_before_an_error(monkeypatch, capsys, outcome, code):
+    # a NumPy RuntimeWarning raised on the way to an error must not precede the one error line
+    import warnings
+
+    import numpy as np
+
+    import simfab.cli.inspect_ as mod
+    from simfab.errors import InputError
+
+    def run(args):
+        np.divide(np.zeros(1), np.zeros(1))  # RuntimeWarning: invalid value encountered in divide
+        if outcome == "input":
+            raise InputError("bad field", where="f.toml")
+        if outcome == "internal":
+            raise RuntimeError("kaboom")
+        return {"ok": 1}
+
+    monkeypatch.setattr(mod, "run", run)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        assert main(["inspect", "x"]) == code
+    err = capsys.readouterr().err.strip().splitlines()
+    if outcome is None:
+        assert err == ["simfab: warning: invalid value encountered in divide"]
+    else:
+        assert len(err) == 1 and err[0].startswith("simfab: error: f.toml" if code == 2 else "simfab: internal error")
+
+
 def test_python_dash_m_entry_point():
     import subprocess
     import sys

@@ -53,6 +53,9 @@ def test_check_out_dir(tmp_path):
     for bad in (f, f / "sub"):
         with pytest.raises(InputError, match="--out"):
             check_out_dir(bad)
+    for empty in ("", "  "):  # --out "$UNSET"
+        with pytest.raises(InputError, match="--out: is an empty path"):
+            check_out_dir(empty)
     check_out_dir(tmp_path / "new" / "deeper")
     assert not (tmp_path / "new").exists()  # the check creates nothing
 

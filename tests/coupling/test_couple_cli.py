@@ -10,6 +10,7 @@ from simfab.cli import main
 from simfab.coupling.scene import bundled_dir
 
 SUMMARY_KEYS = {"category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises",
+                "averaged_von_mises", "stress_radius",
                 "max_penetration", "min_det_F", "steps", "newton_iterations", "seconds", "profile_csv", "profile_json",
                 "plot_png", "usd", "mjcf"}
 
@@ -20,6 +21,9 @@ def test_simulate_writes_profile_plot_usd_and_mjcf(tmp_path, capsys):
     stdout = capsys.readouterr().out
     summary = json.loads(stdout)  # exactly one JSON object
     assert SUMMARY_KEYS <= set(summary) and summary["steps"] == 10
+    keys = list(summary)  # the averaged stress stands beside the raw element maximum
+    assert keys[keys.index("max_von_mises") + 1] == "averaged_von_mises"
+    assert 0 < summary["averaged_von_mises"] <= summary["max_von_mises"] and summary["stress_radius"] == 5e-4
     # the phase split covers the run's wall time once (each phase counted once, "other" the rest)
     phases = summary["phase_split"]
     assert {"warm_start", "newton", "facet_check", "record", "rigid_check", "other"} <= set(phases)
@@ -45,6 +49,30 @@ def test_simulate_writes_profile_plot_usd_and_mjcf(tmp_path, capsys):
     for _ in range(int(1.0 / m.opt.timestep)):
         mujoco.mj_step(m, d)
     assert d.qpos[0] == pytest.approx(m.key_qpos[10, 0], abs=1e-6 * abs(m.key_qpos[10, 0]) + 1e-9)
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_summary_reports_the_averaged_stress_the_yield_constraint_reads(order):
+    # averaged_von_mises is the figure the design's yield constraint and its mesh check read
+    # (simfab.design.verify.level_figures: element means for P1, quadrature-point means for P2);
+    # averaging over a radius smaller than any element gives back the raw element maximum (P1)
+    from simfab.cli.couple import averaged_stress, stress_radius
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import simulate
+    from simfab.design.brief import DesignBrief
+    from simfab.design.verify import level_figures
+
+    res = simulate(load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 4, "element_order": order}}))
+    r = stress_radius("block2d_tight")
+    assert r == DesignBrief().stress_radius  # the scene's brief leaves the default
+    got = averaged_stress(res, r)
+    assert got == {"averaged_von_mises": pytest.approx(level_figures(res, r)["von_mises"], rel=1e-12),
+                   "stress_radius": r}
+    assert 0 < got["averaged_von_mises"] <= res.column("max_von_mises").max() * (1 + 1e-12)
+    if order == 1:
+        raw = averaged_stress(res, 1e-9)["averaged_von_mises"]
+        assert raw == pytest.approx(res.column("max_von_mises").max(), rel=1e-12)
+        assert got["averaged_von_mises"] < 0.99 * raw  # the radius does average at the block's corners
 
 
 def test_a_failing_writer_leaves_no_output_file(tmp_path, monkeypatch):

@@ -52,3 +52,16 @@ def test_bending_strain_of_a_circular_arc(plane, half):
     c = 0.5 * (sec.width if half == "width" else sec.thickness)
     assert eps[[0, n]] == pytest.approx([0.0, 0.0], abs=0)
     np.testing.assert_allclose(eps[1:n], c / R, rtol=1.01 * (L / R / n) ** 2 / 12)
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("segments", 10.5, "whole number in \\[2, 200\\]"), ("segments", 1, "\\[2, 200\\]"), ("segments", 10**5, "200"),
+    ("increments", 0, "\\[1, 1000\\]"), ("increments", 2.0, "whole number"), ("segments", True, "whole number"),
+    ("gap", 0.05, "no room for the spokes"), ("corner_gap", 0.05, "half the cell size"), ("size", -1.0, "positive"),
+])
+def test_every_cell_field_is_checked_naming_it(field, value, match):
+    from simfab.errors import InputError
+
+    with pytest.raises(InputError, match=match) as e:
+        unitcell.CellConfig(**{field: value})
+    assert e.value.where == f"cell_{field}"

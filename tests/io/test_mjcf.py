@@ -121,3 +121,81 @@ def test_numeric_config_reads_prefixed_fields_and_rejects_typos(tmp_path):
     b.custom_numeric("cell_widht", 0.3)
     with pytest.raises(InputError, match="unknown parameter <numeric name='cell_widht'>"):
         numeric_config(load_scene(b.save(tmp_path / "typo.xml")), "cell_", Cfg)
+
+
+def test_segment_lengths_are_each_segments_translation_and_rotation():
+    # sqrt(|dp|^2 + (rho theta)^2) per segment, theta = quat_angle of its two keys, over a path that
+    # translates, turns and does both (the vectorized lengths against the per-segment definition)
+    from simfab.io.mjcf import quat_angle
+
+    rng = np.random.default_rng(3)
+    P = np.cumsum(rng.normal(size=(40, 3)) * 0.01, axis=0)
+    Q = np.array([_axis_angle_quat(rng.normal(size=3), a) for a in rng.uniform(0, np.pi, 40)])
+    Q[5] = Q[4]  # a pure translation
+    P[9] = P[8]  # a pure rotation
+    tr = Trajectory(P, Q, rot_length_scale=0.02)
+    want = [np.hypot(np.linalg.norm(P[i + 1] - P[i]), 0.02 * quat_angle(Q[i], Q[i + 1])) for i in range(39)]
+    np.testing.assert_allclose(tr.segment_lengths, want, rtol=1e-12, atol=1e-15)
+    assert tr.segment_lengths[4] == pytest.approx(np.linalg.norm(P[5] - P[4]), rel=1e-12)
+    assert tr.segment_lengths[8] == pytest.approx(0.02 * quat_angle(Q[8], Q[9]), rel=1e-9)
+
+
+def test_a_densely_keyed_straight_path_samples_like_its_two_ends(tmp_path):
+    # the same straight push given as 2 and as 10,000 keyframes (the most a scene may hold) gives
+    # the same length and the same poses at every insertion step
+    from simfab.io.mjcf import MAX_KEYFRAMES
+
+    a, b = np.array([0.02, 0.0, 0.0]), np.array([0.001, 0.0, 0.0])
+    ends = Trajectory(np.array([a, b]), np.array([[1.0, 0, 0, 0]] * 2))
+    x = np.linspace(0.0, 1.0, MAX_KEYFRAMES)[:, None]
+    dense = Trajectory(a + x * (b - a), np.tile([1.0, 0, 0, 0], (MAX_KEYFRAMES, 1)))
+    assert dense.length == pytest.approx(ends.length, rel=1e-12)
+    for (s0, p0, q0), (s1, p1, q1) in zip(ends.sample(ends.length / 35), dense.sample(ends.length / 35)):
+        assert s0 == s1
+        np.testing.assert_allclose(p1, p0, atol=1e-15)
+        np.testing.assert_allclose(q1, q0, atol=0)
+
+
+@pytest.mark.parametrize("quat", [[0.0, 0, 0, 0], [np.nan, 0, 0, 1], [np.inf, 0, 0, 0]])
+def test_a_zero_or_non_finite_keyframe_quaternion_is_an_input_error_without_warnings(quat):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a NumPy warning on the way would fail here
+        with pytest.raises(InputError, match=r"mquat: keyframe 1: quaternion .* is zero or not finite"):
+            Trajectory(np.zeros((3, 3)), np.array([[1.0, 0, 0, 0], quat, [1.0, 0, 0, 0]]))
+
+
+def test_more_keyframes_than_the_limit_are_refused_before_mujoco_compiles(tmp_path):
+    from simfab.io.mjcf import MAX_KEYFRAMES
+
+    b = MJCFBuilder("many")
+    b.body("object", pos=[0, 0, 0], mocap=True)
+    for i in range(MAX_KEYFRAMES + 1):
+        b.key(mpos=[i * 1e-6, 0, 0])
+    path = tmp_path / "many.xml"
+    path.write_text(b.to_xml())
+    with pytest.raises(InputError, match=rf"many.xml: <keyframe> holds more than the {MAX_KEYFRAMES} keys"):
+        load_scene(path)
+
+
+@pytest.mark.parametrize("data, match", [([0.25, 0.5], "data must be one number, got 2"),
+                                         (7.5, "data must be a whole number")])
+def test_numeric_config_checks_count_and_type(tmp_path, data, match):
+    import dataclasses
+
+    from simfab.io.mjcf import numeric_config
+
+    @dataclasses.dataclass(frozen=True, kw_only=True)
+    class Cfg:
+        width: float = 1.0
+        segments: int = 4
+
+    b = MJCFBuilder("cfg")
+    b.geom(b.body("a"), type="sphere", size=0.1)
+    name = "cell_segments" if match != "data must be one number, got 2" else "cell_width"
+    b.custom_numeric(name, data)
+    path = tmp_path / "cfg.xml"
+    path.write_text(b.to_xml())
+    with pytest.raises(InputError, match=rf"cfg.xml: <numeric name='{name}'>: {match}"):
+        numeric_config(load_scene(path), "cell_", Cfg)

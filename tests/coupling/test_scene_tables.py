@@ -1,0 +1,81 @@
+"""Coupling scenes' TOML: every table and key checked (simfab.coupling.scene.SCENE_TABLES); an
+outline CSV may start with a header row."""
+
+import shutil
+from dataclasses import fields
+
+import numpy as np
+import pytest
+
+from simfab.coupling.config import InsertionOptions, ObjectOptions
+from simfab.coupling.scene import SCENE_TABLES, bundled_dir, check_tables, load_coupling_scene, read_toml
+from simfab.errors import InputError
+
+
+@pytest.mark.parametrize("toml", sorted(bundled_dir().glob("*.toml")), ids=lambda p: p.stem)
+def test_every_bundled_scene_passes_the_table_check(toml):
+    check_tables(read_toml(toml), str(toml))
+
+
+def test_each_table_knows_its_configuration_fields():
+    assert SCENE_TABLES["simulation"] == {f.name for f in fields(InsertionOptions)}
+    assert SCENE_TABLES["object"] == {f.name for f in fields(ObjectOptions)}
+
+
+CLAMP = dict(inner_radius=0.0095, width=0.0025, opening_deg=60.0, base_depth=0.004, base_height=0.02)
+
+
+@pytest.mark.parametrize("cfg, where", [
+    ({"dim": 2, "bogus": {"x": 1}}, "unknown table [bogus]"),
+    ({"dim": 2, "contact": {"friction": 0.3}}, "unknown table [contact]"),
+    ({"dim": 2, "units": "mm"}, "unknown key 'units'"),
+    ({"dim": 2, "object": {"body": "object", "sampels": 60}}, "[object]: unknown key 'sampels'"),
+    ({"dim": 2, "fixed": {"site": "fixed", "size": 1}}, "[fixed]: unknown key 'size'"),
+    ({"dim": 2, "material": {"name": "PLA", "colour": "red"}}, "[material]: unknown key 'colour'"),
+    ({"dim": 2, "simulation": {"stepz": 3}}, "[simulation]: unknown key 'stepz'"),
+    ({"dim": 2, "compliant": {"generator": "c_clamp", "widht": 0.003, **CLAMP}}, "[compliant]: unknown key 'widht'"),
+    ({"dim": 2, "compliant": {"generator": "outline", "outline": "o.csv", "segments": 48}},
+     "[compliant]: unknown key 'segments'"),  # an outline has no generator parameters
+    ({"dim": 3, "compliant": {"generator": "extruded_clamp", "height": 0.01, "thickness": 0.005, **CLAMP}},
+     "[compliant]: unknown key 'thickness'"),  # thickness is a 2D key
+    ({"dim": 3, "compliant": {"generator": "mesh", "mesh": "p.stl", "layers": 2}}, "[compliant]: unknown key 'layers'"),
+    ({"dim": 2, "object": 3}, "[object] must be a table"),
+])
+def test_unknown_tables_and_keys_name_the_file_table_and_key(cfg, where):
+    with pytest.raises(InputError) as e:
+        check_tables(cfg, "s.toml")
+    assert str(e.value).startswith("s.toml: ") and where in str(e.value)
+
+
+def test_generators_accept_their_own_parameters():
+    check_tables({"dim": 3, "compliant": {"generator": "extruded_clamp", "layers": 2, "height": 0.01, "segments": 48,
+                                          "target_elements": 100, **CLAMP}}, "s.toml")
+    check_tables({"dim": 3, "compliant": {"generator": "cross_claw", "height": 0.01, "mesh_file": "p.npz", **CLAMP}},
+                 "s.toml")
+    check_tables({"dim": 2, "compliant": {"outline": "o.csv", "thickness": 0.005, "units": "mm"}}, "s.toml")
+
+
+def test_an_outline_csv_may_start_with_a_header_row(tmp_path):
+    src = bundled_dir()
+    for suffix in (".xml", ".toml"):
+        shutil.copy(src / f"block2d_tight{suffix}", tmp_path / f"block2d_tight{suffix}")
+    csv = src / "block2d_tight_outline.csv"
+    (tmp_path / csv.name).write_text("x,y\n" + csv.read_text())
+    ov = {"simulation": {"steps": 2}}
+    plain = load_coupling_scene(src / "block2d_tight.xml", overrides=ov)
+    headed = load_coupling_scene(tmp_path / "block2d_tight.xml", overrides=ov)
+    assert plain.fem.n_elements == headed.fem.n_elements
+    np.testing.assert_array_equal(headed.fem.rest, plain.fem.rest)
+
+
+def test_object_options_are_validated_naming_the_key(tmp_path):
+    src = bundled_dir()
+    shutil.copy(src / "cclamp2d.xml", tmp_path / "s.xml")
+    text = (src / "cclamp2d.toml").read_text()
+    for old, new, key in (("samples = 50", "samples = 50.5", "samples"), ('body = "object"', "body = 3", "body"),
+                          ("samples = 50", "samples = 50\nsigma = -1.0", "sigma"),
+                          ("samples = 50", "samples = 50\nseed = -2", "seed")):
+        (tmp_path / "s.toml").write_text(text.replace(old, new))
+        with pytest.raises(InputError) as e:
+            load_coupling_scene(tmp_path / "s.xml")
+        assert str(tmp_path / "s.toml") in str(e.value) and "[object]" in str(e.value) and key in str(e.value)
