@@ -3,10 +3,10 @@
 Usage:
 
     simfab couple simulate SCENE [--steps N | --h-in H] [--L-max L] [--fix-all-axes | --fixed-axes AXES] [--no-refine]
-                                 [--element-order 1|2]
+                                 [--element-order 1|2] [--friction MU]
     simfab couple optimize SCENE [--grip tight|loose] [--insertion-force LO HI] ... [--iterations N]
     simfab couple study handles SCENE [--counts K ...] [--random N]
-    simfab couple converge SCENE [--factors 0.25,0.5,1,1.5] [--element-order 1|2]
+    simfab couple converge SCENE [--factors 0.25,0.5,1,1.5] [--element-order 1|2] [--friction MU]
     simfab couple scenes
 
 SCENE is a coupling scene: NAME.xml (MJCF: the object O as the mocap body 'object' with
@@ -14,10 +14,13 @@ keyframes for its path, the box site 'fixed') plus NAME.toml (the compliant part
 material and the simulation options); a bare NAME refers to a bundled scene in
 scenes/coupling ('simfab couple scenes' lists them). Scene format: scenes/coupling/README.md.
 
-Outputs under --out: NAME_profile.csv (per step: distance [m], energy [J], insertion force
-[N] (support reactions along O's translation), path force [N] (work-conjugate force along the
-path, = -dE/ds, also defined during rotations), grip [N], max von Mises [Pa], max penetration [m],
-min det F, Newton iterations), NAME_summary.json (the --json summary), NAME_profile.png
+Outputs under --out: NAME_profile.csv (per record: distance along the path [m], energy [J],
+insertion force [N] (support reactions along O's translation), path force [N] (the force on O along
+the path's forward tangent, = -dE/ds without friction, also defined during rotations), grip [N], max
+von Mises [Pa], max penetration [m], min det F, Newton iterations, contact points, phase (insert, or
+remove: with friction the removal is simulated as its own traversal back over the same positions),
+normal contact force [N], friction's part of the path force [N], dissipated work [J], lagging
+iterations), NAME_summary.json (the --json summary), NAME_profile.png
 (energy solid, force dashed, markers at E_max and E_ss), NAME.usda (A's deforming mesh with a
 von_mises primvar, O's animated transform, one time code per step) and NAME.xml (MJCF for the
 viewer: A at the steady state, O with one keyframe per step).
@@ -39,8 +42,14 @@ SIMULATE_DESCRIPTION = """Run an insertion simulation of a coupling scene and wr
   elements, element_order, nodes, kappa_initial, kappa_final [N/m], dhat [m], object_samples, seconds [s],
   time_split [s] per resource (assembly, factorization, contact, total), phase_split [s] per
   phase of the insertion loop (warm_start, newton, facet_check, record, rigid_check, other),
+  friction [-] (the Coulomb coefficient used: [contact] friction or --friction, 0 = frictionless),
+  F_hold [N] (with friction: the force to start sliding O out of its seat), removal_steps,
+  newton_iterations_removal, dissipated [J] (work friction dissipated over both traversals),
+  energy_balance [-] (|work on the part - stored - dissipated| / E_max over both traversals),
+  lag_solves_per_step, jammed_at [m] (where a frictional insertion self-locked, else null),
   warnings, units {key: unit}, and the output paths profile_csv, plot_png, usd, mjcf,
-  profile_json."""
+  profile_json. With friction F_rm is read from the removal and the category may be "jams" or
+  "held by friction"."""
 
 HELP = "simulate inserting a rigid object into a compliant part (deformation profile, grip, forces)"
 DESCRIPTION = __doc__
@@ -61,6 +70,9 @@ def add_args(p):
     s.add_argument("--element-order", type=int, choices=(1, 2), metavar="{1,2}",
                    help="1: linear elements, 2: quadratic (6-node triangles / 10-node tets, no bending "
                         "locking) on the scene's mesh (overrides the scene's [simulation] element_order)")
+    s.add_argument("--friction", type=float, metavar="MU",
+                   help="Coulomb friction coefficient between object and part (overrides the scene's [contact] "
+                        "friction; 0: frictionless; printed PLA: ~0.2-0.5)")
     conv = sub.add_parser("converge", help="mesh-convergence study of a coupling scene",
                           description="Run a scene at refined meshes (element count x each factor; an extruded "
                                       "part's layers x factor^(1/3)) and report the profile figures, their "
@@ -72,6 +84,8 @@ def add_args(p):
                       help="refinement factors of the scene's element count (default 0.25,0.5,1,1.5)")
     conv.add_argument("--element-order", type=int, choices=(1, 2), metavar="{1,2}",
                       help="element order at every level (default: the scene's)")
+    conv.add_argument("--friction", type=float, metavar="MU",
+                      help="Coulomb friction coefficient at every level (default: the scene's [contact] friction)")
     listing = sub.add_parser("scenes", help="list the bundled coupling scenes",
                              description="List the bundled coupling scenes (scenes/coupling); each runs with "
                                          "'simfab couple simulate NAME'. Writes nothing.\n\n--json keys: scenes "
@@ -111,6 +125,8 @@ def run(args) -> dict:
         if len(factors) < 2 or min(factors) <= 0:
             raise InputError("give at least two positive factors", where="--factors")
         ov = {} if args.element_order is None else {"simulation": {"element_order": args.element_order}}
+        if args.friction is not None:
+            ov["contact"] = {"friction": args.friction}
         from simfab.design.scene import check_brief_table
 
         check_brief_table(args.scene)
@@ -143,11 +159,13 @@ def run(args) -> dict:
         sim["refine"] = False
     if args.element_order is not None:
         sim["element_order"] = args.element_order
-    return simulate_scene(args.scene, out=args.out, device=args.device, quiet=args.quiet, simulation=sim)
+    contact = {} if args.friction is None else {"friction": args.friction}
+    return simulate_scene(args.scene, out=args.out, device=args.device, quiet=args.quiet, simulation=sim,
+                          contact=contact)
 
 
 def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simulation: dict | None = None,
-                   stem: str | None = None) -> dict:
+                   contact: dict | None = None, stem: str | None = None) -> dict:
     """Load a coupling scene, run the insertion and write every output; returns the summary."""
     from simfab._warp import device as check_device  # quiet Warp initialization
     from simfab.contact.sdf import PrimitiveField
@@ -159,14 +177,15 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     from simfab.design.scene import check_brief_table
 
     dev = check_device(device)
-    cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}}, device=dev)
+    cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}, "contact": contact or {}}, device=dev)
     check_brief_table(scene)  # the scene's [design] table, though simulating does not read it
     check_start(cm)  # before the log line: bad input gives exactly one line on stderr
     kind = "quadratic elements" if cm.options.element_order == 2 else "elements"
     exact = isinstance(cm.field, PrimitiveField)  # exact signed distance, not sampled
     obj = (f"object: exact {', '.join(p.kind for p in cm.field.primitives)}" if exact
            else f"{len(cm.field.vertices)} object samples")
-    log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {obj}, {len(cm.s_steps) - 1} steps", quiet=quiet)
+    mu = f", friction {cm.contact.friction:g}" if cm.contact.friction > 0 else ", frictionless"
+    log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {obj}, {len(cm.s_steps) - 1} steps{mu}", quiet=quiet)
     res = simulate(cm, quiet=quiet)
     for m in res.warnings:  # warnings show even with --quiet
         log(f"simfab: warning: {m}")
@@ -189,10 +208,11 @@ def averaged_stress(res, radius: float) -> dict:
     from simfab.design.stress import averaged_von_mises, p2_averaged_von_mises
 
     fem = res.model.fem
+    records = [*res.steps, *res.removal]
     if res.model.options.element_order == 2:
-        vm = max(p2_averaged_von_mises(fem, r.x, radius) for r in res.steps)
+        vm = max(p2_averaged_von_mises(fem, r.x, radius) for r in records)
     else:
-        vm = max(averaged_von_mises(fem, r.von_mises, radius) for r in res.steps)
+        vm = max(averaged_von_mises(fem, r.von_mises, radius) for r in records)
     return {"averaged_von_mises": float(vm), "stress_radius": float(radius)}
 
 

@@ -41,6 +41,7 @@ class Level:
     seconds: float
     figures: dict
     category: str
+    friction: float = 0.0
 
 
 def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True) -> list:
@@ -62,7 +63,7 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
         dt = time.perf_counter() - t0
         prof, d = summarize(res)
         out.append(Level(factor=float(f), elements=int(cm.fem.n_elements), seconds=dt,
-                         figures={k: float(d[k]) for k in FIGURES}, category=prof.category))
+                         figures={k: float(d[k]) for k in FIGURES}, category=prof.category, friction=prof.friction))
     return out
 
 
@@ -127,6 +128,7 @@ def report(scene: str, levels: list, dim: int) -> dict:
         v["relative_error"] = [(x - v["extrapolated"]) / ref if ref else 0.0 for x in v["values"]]
     return {
         "scene": scene,
+        "friction": levels[0].friction if levels else 0.0,
         "levels": [{"factor": lv.factor, "elements": lv.elements, "seconds": lv.seconds, "category": lv.category}
                    for lv in levels],
         "figures": figures,

@@ -46,7 +46,7 @@ import numpy as np
 
 from simfab._bundled import scenes_dir
 from simfab.coupling import geometry
-from simfab.coupling.config import InsertionOptions, ObjectOptions
+from simfab.coupling.config import ContactOptions, InsertionOptions, ObjectOptions
 from simfab.errors import InputError
 from simfab.io.companion import read_csv_numbers, read_npz
 
@@ -88,6 +88,7 @@ SCENE_TABLES: dict = {
     "object": _names(ObjectOptions),
     "fixed": frozenset({"site"}),
     "simulation": _names(InsertionOptions),
+    "contact": _names(ContactOptions),
     "design": None,  # keys and values checked by simfab.design.brief.DesignBrief where the brief is read
 }
 
@@ -201,6 +202,8 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
     sim = _section(cfg, "simulation", where)
     try:
         options = InsertionOptions.from_dict(sim, where=f"{where} [simulation]")
+        contact = ContactOptions.from_dict({k: v for k, v in _section(cfg, "contact", where).items() if v is not None},
+                                           where=f"{where} [contact]")
         obj_opts = ObjectOptions.from_dict({k: v for k, v in obj.items() if v is not None}, where=f"{where} [object]")
     except TypeError as e:
         raise InputError(f"[simulation]: {e}", where=where) from None
@@ -249,7 +252,7 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
     inside = np.all(np.abs(fem.rest - c) <= half + 1e-12, axis=1)
     fixed = np.flatnonzero(inside)
     return make_coupling_model(name=name, fem=fem, field=fld, path=path, fixed_vertices=fixed, options=options,
-                               object_vertices=disp_v, object_faces=disp_f)
+                               object_vertices=disp_v, object_faces=disp_f, contact=contact)
 
 
 def primitive_field(sc, body: str, dim: int, samples: int):

@@ -157,25 +157,20 @@ def _bracket(lo, hi, hi_s, stepper, tol, e_tol) -> str:
     return "rest"
 
 
-def step_work(records: list, *, turn: bool = False) -> dict:
+def step_work(records: list) -> dict:
     """The energy balance of consecutive records (a traversal, either direction): per step k the work
     O does on A, W_k = -h_k (N_k + N_{k+1}) / 2 - h_k F_{k+1} (h_k = s_{k+1} - s_k; N the normal
-    part of the path force by the trapezoidal rule, F its friction part, constant over the step as
-    the incremental potential takes it), against the change of stored energy plus what friction
-    dissipated over it, Delta(E + B)_k + D_{k+1}. With ``turn`` the first step reverses O's motion:
-    friction, and with it the normal force, flips at its start, so its normal part is taken at the
-    step's end. Returns arrays ``work``, ``stored`` (Delta(E + B)), ``dissipated`` and ``mismatch``
-    (k,) [J]."""
+    part of the path force by the trapezoidal rule, F its friction part taken at the step's end, as
+    the incremental potential takes the friction of a step), against the change of stored energy plus
+    what friction dissipated over it, Delta(E + B)_k + D_{k+1}. Returns arrays ``work``, ``stored``
+    (Delta(E + B)), ``dissipated`` and ``mismatch`` (k,) [J]."""
     s = np.array([r.s for r in records])
     Et = np.array([r.energy + r.barrier_energy for r in records])
     F = np.array([r.path_force_friction for r in records])
     N = np.array([r.path_force for r in records]) - F
     D = np.array([r.dissipated for r in records])
     h = np.diff(s)
-    N_start = N[:-1].copy()
-    if turn and len(N_start):
-        N_start[0] = N[1]
-    work = -0.5 * h * (N[1:] + N_start) - h * F[1:]
+    work = -0.5 * h * (N[1:] + N[:-1]) - h * F[1:]
     stored = np.diff(Et)
     return {"work": work, "stored": stored, "dissipated": D[1:], "mismatch": stored + D[1:] - work}
 
@@ -186,7 +181,7 @@ def energy_balance(steps: list, removal: list = ()) -> dict:
     (:func:`step_work`), ``total`` |sum of the work done on A - the net change of stored energy - the
     dissipated energy|; with ``work_J``, ``dissipated_J`` (over both traversals) and ``E_max_J``."""
     E_max = float(max(r.energy for r in steps))
-    parts = [step_work(steps)] + ([step_work([steps[-1], *removal], turn=True)] if len(removal) else [])
+    parts = [step_work(steps)] + ([step_work([steps[-1], *removal])] if len(removal) else [])
     mis = np.concatenate([p["mismatch"] for p in parts])
     work = float(sum(p["work"].sum() for p in parts))
     diss = float(sum(p["dissipated"].sum() for p in parts))
@@ -225,7 +220,7 @@ def warnings(cm, steps, rest: str = "not continued", removal: list = ()) -> list
                 continue
             sr = np.array([r.s for r in records])
             h = np.abs(np.diff(sr))
-            mis = np.abs(step_work(records, turn=phase == "removal")["mismatch"])
+            mis = np.abs(step_work(records)["mismatch"])
             mis = np.where(mis > NEGLIGIBLE_NOISE * f_tol * h, mis, 0.0)
             k = int(np.argmax(mis))
             if mis[k] > STEP_WORK_REL * E_max:
@@ -298,5 +293,11 @@ def work_energy_mismatch(steps, planned: int | None = None) -> dict:
 
 def _parabola_peak(x: np.ndarray, y: np.ndarray) -> float:
     """Extreme value of the parabola through three points (x (3,), y (3,)); y[1] if it is a line."""
-    a, b, c = np.polyfit(x - x[1], y, 2)
-    return float(c - b * b / (4 * a)) if a != 0 else float(y[1])
+    d0, d2 = float(x[0] - x[1]), float(x[2] - x[1])
+    det = d0 * d2 * (d0 - d2)
+    if det == 0:
+        return float(y[1])
+    r0, r2 = float(y[0] - y[1]), float(y[2] - y[1])
+    a = (r0 * d2 - r2 * d0) / det
+    b = (r2 * d0 * d0 - r0 * d2 * d2) / det
+    return float(y[1] - b * b / (4 * a)) if a != 0 else float(y[1])

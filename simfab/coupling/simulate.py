@@ -185,11 +185,23 @@ def jammed(steps: list) -> bool:
     return len(last) == JAM_STEPS and all(r.normal_force > 0 and r.locked > JAM_LOCKED_REL for r in last)
 
 
+#: The removal turns O around in steps of h / 2^k (k = TURN_STEPS ... 1, h the planned step) before it
+#: follows the insertion's positions: where O turns, the contact first sticks while the part's
+#: tangential strain (left by friction dragging it) relaxes, and the friction force swings from one
+#: side of the cone to the other over that travel; steps much longer than it would not resolve the
+#: swing (the energy balance), and F_hold is read at the first, shortest step.
+TURN_STEPS = 6
+
+
 def remove(stepper: Stepper, *, quiet: bool = True) -> None:
-    """The removal as its own quasi-static traversal: O moved back from where the insertion left it
-    over the insertion's step positions to the start (records of phase "remove")."""
+    """The removal as its own quasi-static traversal: O moved back from where the insertion left it,
+    first by TURN_STEPS graded steps, then over the insertion's step positions to the start (records
+    of phase "remove")."""
     s_end = stepper.steps[-1].s
-    s_back = [float(s) for s in stepper.cm.s_steps[::-1] if s < s_end * (1 - 1e-12)]
+    h = float(np.diff(stepper.cm.s_steps).mean())
+    turn = [s_end - h / 2**k for k in range(TURN_STEPS, 0, -1) if s_end - h / 2**k > 0]
+    last = turn[-1] if turn else s_end
+    s_back = turn + [float(s) for s in stepper.cm.s_steps[::-1] if s < last * (1 - 1e-12)]
     stepper.reverse()
     for s in progress(s_back, total=len(s_back), desc=f"removal {stepper.cm.name}", quiet=quiet):
         stepper.keep(stepper.step(s).record)
