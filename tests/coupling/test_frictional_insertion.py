@@ -7,7 +7,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from _snapfit import GAP, ratio_formula, snapfit_model
 
 from simfab.contact.sdf import Primitive, build_primitive_field
 from simfab.coupling import friction
@@ -22,6 +21,7 @@ from simfab.fem.materials import PLA
 from simfab.fem.meshing import triangulate_polygon
 from simfab.fem.model import make_model
 from simfab.io.mjcf import Trajectory
+from simfab.verification.snapfit import GAP, ratio_formula, snapfit_model
 
 
 def _deflected(res):

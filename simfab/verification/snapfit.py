@@ -1,10 +1,15 @@
-"""A cantilever snap-fit for the friction tests: a PLA beam (length L along y, width t along x)
+"""A cantilever snap-fit: the verification of frictional contact against the wedge formula. A PLA beam (length L along y, width t along x)
 clamped at its root y = 0, whose tip corner (0, L) is pushed by the face of a rigid box inclined at
 alpha to the insertion direction (-y). Moving down by delta past first touch the face deflects the
 tip by delta tan alpha along +x. Without friction the force on the box along the path is
 F = F_lat tan alpha; with Coulomb friction mu, F_in = F_lat (tan alpha + mu) / (1 - mu tan alpha)
 on insertion and the force pushing the box back out on removal F_lat (tan alpha - mu) / (1 + mu tan
-alpha), F_lat the beam's lateral force at the same deflection."""
+alpha), F_lat the beam's lateral force at the same deflection (force balance of the box on the
+inclined face: normal force N and friction mu N, F_lat = N (cos alpha -+ mu sin alpha), F = N (sin
+alpha +- mu cos alpha)). At mu tan alpha >= 1 the insertion self-locks (jams). The formula neglects
+the moment of the axial tip load about the beam's axis (t / L = 7.5 % here) and the beam's shortening.
+
+``python tools/bench.py friction`` runs the table of angles and coefficients; a test runs a few."""
 
 import numpy as np
 

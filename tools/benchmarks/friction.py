@@ -1,0 +1,104 @@
+"""Frictional contact: the snap-fit against the wedge formula, the energy balance, and the bundled
+coupling scenes with and without friction.
+
+``python tools/bench.py friction [--alphas 20,30,40] [--mus 0.1,0.3,0.5] [--scenes cclamp2d,...] [--mu 0.3]``
+
+- ``snapfit``: per face angle alpha and coefficient mu (simfab.verification.snapfit, 2D, 24 steps,
+  and 3D at alpha 30, mu 0.3): the simulated insertion and removal force ratios F(mu) / F(0) over
+  the deflected travel (min and max over its records) against (tan a + mu) / (tan a (1 - mu tan a))
+  and (tan a - mu) / (tan a (1 + mu tan a)); worst relative error. A combination with mu tan a >= 1
+  is expected to jam.
+- ``scenes``: each bundled scene at mu = 0 and at ``--mu`` (default 0.3, mid-range of printed PLA on
+  PLA or on metal): category, E_max, F_in, F_rm, F_hold, seconds, Newton iterations (insertion and
+  removal), lagging solves per step, energy balance over both traversals (fraction of E_max), and the
+  cost ratio (frictional seconds and Newton iterations over the frictionless insertion's).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+
+import numpy as np
+
+
+def _snapfit_row(alpha: float, mu: float, dim: int, steps: int) -> dict:
+    from simfab.coupling.settle import energy_balance
+    from simfab.coupling.simulate import simulate
+    from simfab.verification.snapfit import GAP, ratio_formula, snapfit_model
+
+    r0 = simulate(snapfit_model(alpha, 0.0, dim=dim, steps=steps))
+    t0 = time.perf_counter()
+    r1 = simulate(snapfit_model(alpha, mu, dim=dim, steps=steps))
+    secs = time.perf_counter() - t0
+    row = {"alpha_deg": alpha, "mu": mu, "dim": dim, "mu_tan_alpha": round(mu * np.tan(np.radians(alpha)), 3),
+           "seconds": round(secs, 2)}
+    if r1.jammed_at is not None:
+        return {**row, "jammed_at_mm": round(r1.jammed_at * 1e3, 4)}
+    s = r0.column("s")
+    sel = s >= GAP + 0.2 * (s[-1] - GAP)
+    P0 = dict(zip(np.round(s[sel], 12), r0.column("path_force")[sel]))
+    ins = r1.column("path_force")[sel] / r0.column("path_force")[sel]
+    rm = np.array([p / P0[k] for k, p in zip(np.round(r1.column("s", "remove"), 12), r1.column("path_force", "remove"))
+                   if k in P0])
+    f_in, f_rm = ratio_formula(alpha, mu, "insert"), ratio_formula(alpha, mu, "remove")
+    err = max(np.abs(ins / f_in - 1).max(), np.abs(rm / f_rm - 1).max())
+    bal = energy_balance(r1.steps, r1.removal)
+    return {**row, "insert_ratio": [round(float(ins.min()), 4), round(float(ins.max()), 4)],
+            "insert_formula": round(f_in, 4), "remove_ratio": [round(float(rm.min()), 4), round(float(rm.max()), 4)],
+            "remove_formula": round(f_rm, 4), "worst_rel_error": round(float(err), 4),
+            "energy_balance": round(bal["total"], 5)}
+
+
+def _scene_row(scene: str, mu: float) -> dict:
+    from simfab.coupling.config import ContactOptions
+    from simfab.coupling.profile import analyze_run
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.settle import energy_balance
+    from simfab.coupling.simulate import simulate
+
+    out = {}
+    for m in (0.0, mu):
+        cm = load_coupling_scene(scene)
+        cm = dataclasses.replace(cm, contact=ContactOptions(friction=m))
+        t0 = time.perf_counter()
+        res = simulate(cm)
+        secs = time.perf_counter() - t0
+        p = analyze_run(res)
+        records = [*res.steps, *res.removal]
+        out[f"mu={m:g}"] = {
+            "category": p.category, "E_max_J": float(f"{p.E_max:.4g}"), "F_in_N": float(f"{p.F_in:.4g}"),
+            "F_rm_N": float(f"{p.F_rm:.4g}"), "F_hold_N": float(f"{p.F_hold:.4g}"), "seconds": round(secs, 2),
+            "newton_insert": int(sum(r.iterations for r in res.steps)),
+            "newton_remove": int(sum(r.iterations for r in res.removal)),
+            "steps_insert": len(res.steps), "steps_remove": len(res.removal),
+            "lag_solves_per_step": round(float(np.mean([r.lag_solves for r in records[1:]])), 2) if m > 0 else 0,
+            "energy_balance": round(energy_balance(res.steps, res.removal)["total"], 5),
+            "jammed_at_m": res.jammed_at,
+        }
+    a, b = out["mu=0"], out[f"mu={mu:g}"]
+    out["cost_ratio_seconds"] = round(b["seconds"] / a["seconds"], 2)
+    out["cost_ratio_newton"] = round((b["newton_insert"] + b["newton_remove"]) / a["newton_insert"], 2)
+    return {"scene": scene, **out}
+
+
+def run(argv) -> dict:
+    ap = argparse.ArgumentParser(prog="bench friction")
+    ap.add_argument("--alphas", default="20,30,40")
+    ap.add_argument("--mus", default="0.1,0.3,0.5")
+    ap.add_argument("--scenes", default="cclamp2d,clip2d_loose,clip2d_eject,block2d_tight,standside2d,alligator2d")
+    ap.add_argument("--mu", type=float, default=0.3)
+    ap.add_argument("--no-snapfit", action="store_true")
+    a = ap.parse_args(argv)
+    snap = []
+    if not a.no_snapfit:
+        for alpha in (float(x) for x in a.alphas.split(",")):
+            for mu in (float(x) for x in a.mus.split(",")):
+                snap.append(_snapfit_row(alpha, mu, 2, 24))
+        snap.append(_snapfit_row(30.0, 0.3, 3, 12))
+        snap.append(_snapfit_row(70.0, 0.5, 2, 24))  # mu tan a = 1.37: jams
+    scenes = [_scene_row(s, a.mu) for s in a.scenes.split(",") if s]
+    worst = max((r["worst_rel_error"] for r in snap if "worst_rel_error" in r), default=None)
+    return {"benchmark": "friction", "snapfit": snap, "snapfit_worst_rel_error": worst, "snapfit_target": 0.05,
+            "scenes": scenes, "cost_target": "frictional insertion + removal <= 2x (frictionless insertion + removal)"}
