@@ -228,7 +228,7 @@ def warnings(cm, steps, rest: str = "not continued", removal: list = ()) -> list
                            f"s={sr[k + 1] * 1e3:.4g} mm the work of the path force differs from the change of stored "
                            f"energy (plus friction's dissipation) by {100 * mis[k] / E_max:.3g}% of E_max "
                            f"(> {100 * STEP_WORK_REL:g}%); use more steps")
-        n = len(cm.s_steps)  # the planned steps (the rest search past them may push O into its seat)
+        n = min(len(cm.s_steps), len(s))  # the planned steps (the rest search past them may push O into its seat)
         i = int(np.argmin(P[:n]))
         if 0 < i < n - 1 and P[i] < -NEGLIGIBLE_NOISE * f_tol:
             F_peak = _parabola_peak(s[i - 1:i + 2], P[i - 1:i + 2])
