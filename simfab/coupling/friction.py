@@ -78,17 +78,26 @@ def carry(y: np.ndarray, motion) -> np.ndarray:
     return ((y3 - pa) @ M.T + pb)[:, :dim]
 
 
-def lag(cm: CouplingModel, points: ContactPoints, anchors: np.ndarray, travel: np.ndarray, distances: np.ndarray,
-        distance_gradients: np.ndarray, kappa: float, rotation: np.ndarray | None = None) -> FrictionLag:
-    """The friction lag from distances (k,) [m] and their gradients (k, dim) at some state, with
-    barrier stiffness ``kappa`` [N/m]; ``rotation`` (3, 3) carries the normals to the step's end
-    pose (from the step's start), None when they are at it already."""
+def normal_forces(cm: CouplingModel, points: ContactPoints, distances: np.ndarray, kappa: float) -> np.ndarray:
+    """(k,) the barrier's normal force lambda_j = -kappa b'(d_j) [N] at distances (k,) [m] (0 beyond d_hat)."""
     dh = point_dhat(cm, points)
-    gn = np.linalg.norm(distance_gradients, axis=1)
-    rows = np.flatnonzero((distances < dh) & (distances > 0) & (gn > 0))
+    rows = np.flatnonzero((distances < dh) & (distances > 0))
     lam = np.zeros(len(points))
     lam[rows] = -kappa * barrier_gradient(distances[rows], dh[rows])
-    rows = rows[lam[rows] > 0]
+    return lam
+
+
+def lag(cm: CouplingModel, points: ContactPoints, anchors: np.ndarray, travel: np.ndarray, distances: np.ndarray,
+        distance_gradients: np.ndarray, kappa: float, rotation: np.ndarray | None = None,
+        normal_force: np.ndarray | None = None) -> FrictionLag:
+    """The friction lag from distances (k,) [m] and their gradients (k, dim) at some state, with
+    barrier stiffness ``kappa`` [N/m]; ``rotation`` (3, 3) carries the normals to the step's end
+    pose (from the step's start), None when they are at it already; ``normal_force`` (k,) [N]
+    replaces the normal forces of the distances (a prediction), on the points whose normal is known."""
+    dh = point_dhat(cm, points)
+    gn = np.linalg.norm(distance_gradients, axis=1)
+    lam = normal_forces(cm, points, distances, kappa) if normal_force is None else np.where(gn > 0, normal_force, 0.0)
+    rows = np.flatnonzero((lam > 0) & (gn > 0))
     n = distance_gradients[rows] / gn[rows, None]
     if rotation is not None:
         dim = n.shape[1]

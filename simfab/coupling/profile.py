@@ -19,9 +19,10 @@ Definitions (thesis, "Fundamentals and Overview"):
   at the bracket's lower end depends on how close the search came (22.5 N vs 21.5 N at two mesh
   sizes; interpolated 23.4 N vs 23.2 N).
 - With friction (a run's ``removal`` records: the removal simulated as its own traversal) F_in is
-  read from the insertion and F_rm = max(0, max F) from the removal; F_hold = max(0, F) at the first
-  removal step is the force needed to start sliding O out of its seat (elastic draw plus static
-  friction). A design whose elastic profile ejects O (no dip) but which friction holds in place
+  read from the insertion and F_rm = max(0, max F) from the removal; F_hold, the force needed to
+  start sliding O out of its seat (elastic draw plus static friction), is max(0, max F) over the
+  removal's turn (its graded first steps, half a planned step back from the seat, over which the
+  contact goes from sticking to slipping). A design whose elastic profile ejects O (no dip) but which friction holds in place
   (F_hold > 0) is **held by friction**; an insertion that self-locks (O pushed inside the friction
   cone of the contact, which sticks: a snap-fit with mu tan alpha >= 1) **jams**.
 - Forces are read up to the steady state (the insertion ends there; past it O is pushed into its
@@ -127,7 +128,9 @@ def analyze_run(res) -> ProfileSummary:
         return replace(prof, F_hold=prof.F_rm, friction=mu)
     F_rm_path = res.column("force", "remove")
     F_rm = float(max(0.0, F_rm_path.max()))
-    F_hold = float(max(0.0, F_rm_path[0]))
+    h = float(np.diff(res.model.s_steps).mean())
+    turn = res.column("s", "remove") >= res.steps[-1].s - 0.5 * h * (1 + 1e-9)
+    F_hold = float(max(0.0, F_rm_path[turn].max(initial=0.0)))
     peak = float(np.abs(np.r_[res.column("force"), F_rm_path]).max())
     category = prof.category
     if category == "ejects" and F_hold > REST_FORCE_REL * peak:

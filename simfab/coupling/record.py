@@ -57,6 +57,7 @@ class StepResult:
     slipping: float = 0.0  # fraction of the normal force at points that slipped more than eps [-]
     lag_solves: int = 0  # solves of the step with refreshed friction lags (lagging iterations)
     lag_change: float = 0.0  # relative change of the normal forces at the step's last lagging iteration [-]
+    reaction: np.ndarray | None = None  # (dim,) force of the support on A = force of A on O [N]
     locked: float = 0.0  # fraction of the normal force at self-locked contact points [-] (friction.FrictionRecord)
 
 
@@ -124,5 +125,5 @@ def record_step(cm: CouplingModel, state: StepState, iterations: int) -> StepRes
         min_det_F=min_det, iterations=int(iterations), contact_points=len(pts), kappa=float(state.kappa_step),
         phase="remove" if state.direction < 0 else "insert", normal_force=float(np.linalg.norm(gy, axis=1).sum()),
         path_force_friction=fr.path_force if fr else 0.0, dissipated=fr.dissipated if fr else 0.0,
-        slipping=fr.slipping if fr else 0.0, lag_solves=state.lag_solves, lag_change=state.lag_change, locked=fr.locked if fr else 0.0,
+        slipping=fr.slipping if fr else 0.0, lag_solves=state.lag_solves, lag_change=state.lag_change, reaction=reaction, locked=fr.locked if fr else 0.0,
     )

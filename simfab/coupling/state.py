@@ -84,10 +84,13 @@ def tangent_bases(normals: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PastStep:
-    """A converged earlier step: positions x (n, dim) [m] at path length s [m]."""
+    """A converged earlier step: positions x (n, dim) [m] at path length s [m]; with friction the
+    normal forces (k,) [N] at its constraint points ``points``."""
 
     x: np.ndarray
     s: float
+    points: ContactPoints | None = None
+    normal_force: np.ndarray | None = None
 
 
 @dataclass(kw_only=True)
@@ -107,7 +110,7 @@ class StepState:
     the path (insertion), -1 backward (removal); friction: the friction lag x was solved with
     (:class:`simfab.coupling.friction.FrictionLag`, None without friction), lag_solves: the solves
     its step took (lagging iterations), lag_change: the relative change of the normal forces at its
-    last lagging iteration."""
+    last lagging iteration, normal_force (k,) [N]: the normal forces at x (with friction)."""
 
     x: np.ndarray
     s: float
@@ -129,6 +132,7 @@ class StepState:
     friction: object = None
     lag_solves: int = 0
     lag_change: float = 0.0
+    normal_force: np.ndarray | None = None
 
     def current_evaluation(self) -> Evaluation | None:
         """Newton's last evaluation when it belongs to the current state (at ``x``, over the current

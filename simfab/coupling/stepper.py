@@ -163,8 +163,10 @@ def solve_at(cm: CouplingModel, state: StepState, s: float, ctx: StepContext) ->
 
 def start_lag(cm: CouplingModel, state: StepState, s_new: float) -> FrictionLag:
     """The friction lag of the step from the current state to s_new over the state's points: anchors
-    carried rigidly with O over the step, normal forces and normals from the step's start (Newton's
-    evaluation there when it covers the current points, else the field at the start pose)."""
+    carried rigidly with O over the step, normals from the step's start (Newton's evaluation there
+    when it covers the current points, else the field at the start pose) and normal forces
+    extrapolated linearly in s from the last two steps when both have them over the same points (else
+    the start's): the lagging iterations then start closer to the step's own normal forces."""
     pts = state.points
     motion = friction.step_map(cm, state.s, s_new)
     y = pts.positions(state.x)
@@ -176,7 +178,12 @@ def start_lag(cm: CouplingModel, state: StepState, s_new: float) -> FrictionLag:
         field = cm.field.evaluate(y, (R, p), hessian=False)
         d, gd, kappa = -field.psi, -field.grad, state.kappa_step or state.kappa
     anchors = friction.carry(y, motion)
-    return friction.lag(cm, pts, anchors, anchors - y, d, gd, kappa, rotation=motion[0])
+    lam = friction.normal_forces(cm, pts, d, kappa)
+    prev = state.prev
+    if (prev is not None and prev.points is pts and prev.normal_force is not None
+            and (state.s - prev.s) * (s_new - state.s) > 0):
+        lam = np.maximum(lam + (lam - prev.normal_force) * ((s_new - state.s) / (state.s - prev.s)), 0.0)
+    return friction.lag(cm, pts, anchors, anchors - y, d, gd, kappa, rotation=motion[0], normal_force=lam)
 
 
 def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext, depth: int = 0) -> int:
@@ -236,9 +243,10 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                 if lag_change > cm.contact.lag_tol and lag_solves < cm.contact.max_lag_iterations:
                     lagged, resume = fresh, _Lagged(x)
                     continue
-            state.prev2, state.prev = state.prev, PastStep(state.x, state.s)
+            state.prev2, state.prev = state.prev, PastStep(state.x, state.s, state.points, state.normal_force)
             accept(state, x, s_new, obj.kappa, final, point_dhat(cm, state.points))
             state.friction, state.lag_solves, state.lag_change = lagged, lag_solves, lag_change
+            state.normal_force = fresh.normal_force if frictional else None
             adapt_kappa(cm, state, obj)
             return total
         # solve again from x with the new points lifted out of O (see predictor.lift_points); should

@@ -30,12 +30,13 @@ def _deflected(res):
     return s >= GAP + 0.2 * (s[-1] - GAP)
 
 
-@pytest.mark.parametrize("alpha, mu, dim", [(20, 0.5, 2), (30, 0.3, 2), (40, 0.1, 2), (30, 0.3, 3)])
+@pytest.mark.parametrize("alpha, mu, dim", [(20, 0.5, 2), (30, 0.3, 2), (40, 0.5, 2), (30, 0.3, 3)])
 def test_snapfit_force_ratios_follow_the_wedge_formula(alpha, mu, dim):
     # Insertion: F_in(mu) / F_in(0) = (tan a + mu) / (tan a (1 - mu tan a)); removal: the force
     # pushing the box back out drops to (tan a - mu) / (tan a (1 + mu tan a)) of the frictionless one
-    # (the lateral beam force at a given deflection is the same). The beam's axial friction load acts
-    # at the tip corner, t/2 off the beam's axis (t/L = 7.5 %): within 5 % on the deflected travel.
+    # (the lateral beam force at a given deflection is the same). The formula neglects the axial tip
+    # load's beam-column softening and its moment (about 2 % each on this slender beam, see
+    # simfab.verification.snapfit): within 5 % on the deflected travel.
     steps = 24 if dim == 2 else 12
     r0 = simulate(snapfit_model(alpha, 0.0, dim=dim, steps=steps))
     r1 = simulate(snapfit_model(alpha, mu, dim=dim, steps=steps))
