@@ -35,7 +35,8 @@ SIMULATE_DESCRIPTION = """Run an insertion simulation of a coupling scene and wr
   F_grip [N], s_max, s_ss [m] (path length at E_max / steady state), max_von_mises [Pa] (the raw
   element maximum over the insertion), averaged_von_mises [Pa] (the von Mises stress averaged over
   stress_radius [m] around each element, the figure the design's yield constraint reads: the
-  scene's [design] stress_radius, default 0.5 mm), yield_stress [Pa], max_penetration, penetration_tolerance [m], min_det_F, steps, newton_iterations,
+  scene's [design] stress_radius, default 0.5 mm), yield_stress [Pa], max_penetration,
+  penetration_tolerance [m], min_det_F, steps, newton_iterations,
   elements, element_order, nodes, kappa_initial, kappa_final [N/m], dhat [m], object_samples, seconds [s],
   time_split [s] per resource (assembly, factorization, contact, total), phase_split [s] per
   phase of the insertion loop (warm_start, newton, facet_check, record, rigid_check, other),
@@ -103,6 +104,7 @@ def run(args) -> dict:
         return couple_design.run_optimize(args) if cmd == "optimize" else couple_design.run_study(args)
     if cmd == "converge":
         from simfab.coupling.converge import format_table, study
+        from simfab.design.scene import check_brief_table
 
         try:
             factors = tuple(float(f) for f in args.factors.split(","))
@@ -111,8 +113,6 @@ def run(args) -> dict:
         if len(factors) < 2 or min(factors) <= 0:
             raise InputError("give at least two positive factors", where="--factors")
         ov = {} if args.element_order is None else {"simulation": {"element_order": args.element_order}}
-        from simfab.design.scene import check_brief_table
-
         check_brief_table(args.scene)
         rep = study(args.scene, factors, overrides=ov, quiet=args.quiet)
         return {**rep, "table": "\n" + format_table(rep)}
@@ -154,9 +154,8 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     from simfab.coupling.outputs import write_all
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import check_start, simulate
-    from simfab.progress import log
-
     from simfab.design.scene import check_brief_table
+    from simfab.progress import log
 
     dev = check_device(device)
     cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}}, device=dev)
