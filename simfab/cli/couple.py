@@ -104,7 +104,6 @@ def run(args) -> dict:
         return couple_design.run_optimize(args) if cmd == "optimize" else couple_design.run_study(args)
     if cmd == "converge":
         from simfab.coupling.converge import format_table, study
-        from simfab.design.scene import check_brief_table
 
         try:
             factors = tuple(float(f) for f in args.factors.split(","))
@@ -113,6 +112,8 @@ def run(args) -> dict:
         if len(factors) < 2 or min(factors) <= 0:
             raise InputError("give at least two positive factors", where="--factors")
         ov = {} if args.element_order is None else {"simulation": {"element_order": args.element_order}}
+        from simfab.design.scene import check_brief_table
+
         check_brief_table(args.scene)
         rep = study(args.scene, factors, overrides=ov, quiet=args.quiet)
         return {**rep, "table": "\n" + format_table(rep)}
@@ -154,8 +155,9 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     from simfab.coupling.outputs import write_all
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import check_start, simulate
-    from simfab.design.scene import check_brief_table
     from simfab.progress import log
+
+    from simfab.design.scene import check_brief_table
 
     dev = check_device(device)
     cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}}, device=dev)

@@ -16,10 +16,10 @@ from simfab.coupling.simulate import InsertionResult
 
 #: Units of the summary keys (also written into the JSON summary).
 SUMMARY_UNITS = {
-    "averaged_von_mises": "Pa", "stress_radius": "m",  # write_all's figures from the design's stress averaging
     "E_max": "J", "E_ss": "J", "coupling_ratio": "%", "F_in": "N", "F_rm": "N", "F_grip": "N",
     "max_von_mises": "Pa", "max_penetration": "m", "min_det_F": "-", "seconds": "s", "kappa_initial": "N/m",
     "kappa_final": "N/m", "dhat": "m", "s_max": "m", "s_ss": "m", "s_path_end": "m",
+    "averaged_von_mises": "Pa", "stress_radius": "m",
 }
 
 CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "path_force_N", "grip_N", "max_von_mises_Pa", "max_penetration_m", "min_det_F",
@@ -254,9 +254,10 @@ def _loop_edges(k: int) -> np.ndarray:
 
 
 def write_all(res: InsertionResult, out: Path, stem: str | None = None, *, figures: dict | None = None) -> dict:
-    """Write every output into ``out`` (``figures``: summary entries the caller computed, e.g. the averaged stress
-    the design reads, placed after ``max_von_mises``); return the summary dict with the output paths. The files
-    appear together: a failure while writing any of them leaves none."""
+    """Write every output into ``out``; return the summary dict with the output paths. The files
+    appear together: a failure while writing any of them leaves none. ``figures``: further summary
+    entries computed by the caller (e.g. the averaged stress the design reads), placed after
+    ``max_von_mises`` in the summary and its JSON."""
     from simfab.io.atomic import atomic_paths, write_json
 
     out = Path(out)
