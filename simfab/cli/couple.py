@@ -38,7 +38,8 @@ SIMULATE_DESCRIPTION = """Run an insertion simulation of a coupling scene and wr
   F_grip [N], s_max, s_ss [m] (path length at E_max / steady state), max_von_mises [Pa] (the raw
   element maximum over the insertion), averaged_von_mises [Pa] (the von Mises stress averaged over
   stress_radius [m] around each element, the figure the design's yield constraint reads: the
-  scene's [design] stress_radius, default 0.5 mm), yield_stress [Pa], max_penetration, penetration_tolerance [m], min_det_F, steps, newton_iterations,
+  scene's [design] stress_radius, default 0.5 mm), yield_stress [Pa], max_penetration,
+  penetration_tolerance [m], min_det_F, steps, newton_iterations,
   elements, element_order, nodes, kappa_initial, kappa_final [N/m], dhat [m], object_samples, seconds [s],
   time_split [s] per resource (assembly, factorization, contact, total), phase_split [s] per
   phase of the insertion loop (warm_start, newton, facet_check, record, rigid_check, other),

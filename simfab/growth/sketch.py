@@ -159,7 +159,8 @@ def load_camera(arg: str) -> Camera:
         path = Path(arg)
         if not path.is_file():
             raise InputError("file not found", where=f"--camera {arg}")
-        text, where = path.read_text(encoding="utf-8"), str(path)
+        with reading(path, "camera JSON"):
+            text, where = path.read_text(encoding="utf-8"), str(path)
     try:
         d = json.loads(text)
     except json.JSONDecodeError as e:

@@ -3,6 +3,8 @@
 - :mod:`simfab.io.usd`    time-sampled USD stages (meshes, curves, points, rigid bodies)
 - :mod:`simfab.io.mjcf`   MuJoCo scenes, keyframe trajectories, MJCF generation
 - :mod:`simfab.io.mesh`   mesh loading with validation and repair
+- :mod:`simfab.io.companion` files a scene refers to (npz, CSV, meshes): any read failure is
+  an InputError naming the file
 - :mod:`simfab.io.render` offscreen PNGs (MuJoCo EGL, matplotlib fallback)
 - :mod:`simfab.io.atomic` temp-file-and-rename writes
 """

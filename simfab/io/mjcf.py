@@ -66,8 +66,8 @@ _NONFINITE = re.compile(r"(?<![A-Za-z0-9_])[-+]?(nan|inf|infinity)(?![A-Za-z0-9_
 
 
 #: Most ``<key>`` keyframes an MJCF file may hold: MuJoCo's compiler takes time quadratic in
-#: their number (a straight path of 10,000 keys compiles in about 0.1 s, 30,000 in 1.3 s,
-#: 100,000 in 17 s), so a longer path is refused before it compiles; resample it.
+#: their number (10,000 compile in a fraction of a second, 10^6 would take about half an hour;
+#: docs/decisions.md), so a longer path is refused before it compiles; resample it.
 MAX_KEYFRAMES = 10_000
 
 

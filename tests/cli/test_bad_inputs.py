@@ -156,6 +156,10 @@ def _inputs(d: Path) -> dict:
                       ("cc_top_key", ("dim = 2", "dim = 2\nunits = \"mm\"")),
                       ("cc_design_key", ('grip = "tight"', 'grip = "tight"\ngrip_forse = [1.0, 2.0]'))):
         f[stem] = _copy_scene(c, d, stem, toml_sub=[sub])
+    f["stroke"] = SCENES / "growth" / "phone_stand_stroke.json"
+    f["binary_json"] = d / "binary.json"
+    f["binary_json"].write_bytes(b"\xff\xfe{\x00")
+    f["garbage_csv"] = d / "garbage.csv"
     f["camera"] = d / "camera.json"
     f["camera"].write_text('{"eye": [0.2, 0.2, 0.2], "target": [0, 0, 0], "up": [0, 0, 1], "fovy_deg": 45, '
                            '"width": 64, "height": 48}')
@@ -186,6 +190,10 @@ CASES = [
     ("grow-edit-needs-stroke", ["grow", "edit", "{skeleton}", "--camera", "{camera}"], 2, ["--stroke"]),
     ("grow-edit-garbage-stroke", ["grow", "edit", "{skeleton}", "--camera", "{camera}", "--stroke", "{garbage_json}"], 2,
      ["garbage.json"]),
+    ("grow-edit-binary-stroke-csv", ["grow", "edit", "{skeleton}", "--camera", "{camera}", "--stroke", "{garbage_csv}"], 2,
+     ["garbage.csv", "stroke"]),
+    ("grow-edit-binary-camera", ["grow", "edit", "{skeleton}", "--stroke", "{stroke}", "--camera", "{binary_json}"], 2,
+     ["binary.json", "camera"]),
     # --- couple
     ("couple-target-elements-0", ["couple", "simulate", "{cc_target0}"], 2, ["cc_target0.toml", "target_elements"]),
     ("couple-collinear-outline", ["couple", "simulate", "{cc_collinear}"], 2, ["cc_collinear.toml", "outline"]),

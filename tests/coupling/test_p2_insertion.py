@@ -91,7 +91,7 @@ def test_default_order_is_linear_and_unchanged(runs):
 def test_element_order_is_validated(bad):
     with pytest.raises(InputError, match="element_order") as e:
         load_coupling_scene("cclamp2d", overrides={"simulation": {"element_order": bad}})
-    assert "[simulation]" in e.value.where
+    assert e.value.where.endswith("cclamp2d.toml") and "[simulation]: element_order" in str(e.value)
 
 
 def test_cli_p2_writes_valid_outputs(tmp_path, capsys):

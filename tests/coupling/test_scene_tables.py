@@ -27,7 +27,7 @@ CLAMP = dict(inner_radius=0.0095, width=0.0025, opening_deg=60.0, base_depth=0.0
 
 @pytest.mark.parametrize("cfg, where", [
     ({"dim": 2, "bogus": {"x": 1}}, "unknown table [bogus]"),
-    ({"dim": 2, "contact": {"friction": 0.3}}, "unknown table [contact]"),
+    ({"dim": 2, "contakt": {"friction": 0.3}}, "unknown table [contakt]"),  # a misspelt table is not ignored
     ({"dim": 2, "units": "mm"}, "unknown key 'units'"),
     ({"dim": 2, "object": {"body": "object", "sampels": 60}}, "[object]: unknown key 'sampels'"),
     ({"dim": 2, "fixed": {"site": "fixed", "size": 1}}, "[fixed]: unknown key 'size'"),
@@ -45,6 +45,13 @@ def test_unknown_tables_and_keys_name_the_file_table_and_key(cfg, where):
     with pytest.raises(InputError) as e:
         check_tables(cfg, "s.toml")
     assert str(e.value).startswith("s.toml: ") and where in str(e.value)
+
+
+@pytest.mark.parametrize("table", sorted(t for t, keys in SCENE_TABLES.items() if isinstance(keys, frozenset)))
+def test_every_table_rejects_an_unknown_key(table):
+    with pytest.raises(InputError) as e:
+        check_tables({"dim": 2, table: {"bogus_key": 1}}, "s.toml")
+    assert str(e.value).startswith("s.toml: ") and f"[{table}]: unknown key 'bogus_key'" in str(e.value)
 
 
 def test_generators_accept_their_own_parameters():
