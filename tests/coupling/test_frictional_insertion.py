@@ -21,7 +21,7 @@ from simfab.fem.materials import PLA
 from simfab.fem.meshing import triangulate_polygon
 from simfab.fem.model import make_model
 from simfab.io.mjcf import Trajectory
-from simfab.verification.snapfit import GAP, ratio_formula, snapfit_model
+from simfab.verification.snapfit import GAP, contact_law, ratio_formula, snapfit_model
 
 
 def _deflected(res):
@@ -30,29 +30,39 @@ def _deflected(res):
     return s >= GAP + 0.2 * (s[-1] - GAP)
 
 
+def _lateral(records) -> np.ndarray:
+    """The lateral force on the beam [N]: the face's push across it (+x), which the support's reaction
+    (the force of the beam on the box) balances."""
+    return -np.array([r.reaction[0] for r in records])
+
+
 @pytest.mark.parametrize("alpha, mu, dim", [(20, 0.5, 2), (30, 0.3, 2), (40, 0.5, 2), (30, 0.3, 3)])
-def test_snapfit_force_ratios_follow_the_wedge_formula(alpha, mu, dim):
-    # Insertion: F_in(mu) / F_in(0) = (tan a + mu) / (tan a (1 - mu tan a)); removal: the force
-    # pushing the box back out drops to (tan a - mu) / (tan a (1 + mu tan a)) of the frictionless one
-    # (the lateral beam force at a given deflection is the same). The formula neglects the axial tip
-    # load's beam-column softening and its moment (about 2 % each on this slender beam, see
-    # simfab.verification.snapfit): within 5 % on the deflected travel.
+def test_snapfit_forces_follow_the_wedge_formula(alpha, mu, dim):
+    # The contact law: the force along the path over the lateral force on the beam is
+    # (tan a + mu) / (1 - mu tan a) on insertion and (tan a - mu) / (1 + mu tan a) on removal, both
+    # measured in the same run (lagged normal forces within lag_tol = 1 %): within 3 % and 5 %
+    # (removal's ratio is small). The force ratios F(mu) / F(0) at the same lateral force follow
+    # within 5 %; at the same position they differ by how much the larger axial tip load softens and
+    # bends the beam (simfab.verification.snapfit), within 5 % where mu tan a <= 0.2.
     steps = 24 if dim == 2 else 12
     r0 = simulate(snapfit_model(alpha, 0.0, dim=dim, steps=steps))
     r1 = simulate(snapfit_model(alpha, mu, dim=dim, steps=steps))
     # the removal turns O around in TURN_STEPS graded steps, then runs back over the insertion's positions
     assert r0.removal == [] and r1.jammed_at is None and len(r1.removal) == len(r1.steps) - 1 + TURN_STEPS
     sel = _deflected(r0)
-    P0 = r0.column("path_force")[sel]
-    assert np.all(P0 < 0)  # the beam resists the box
-    ratio_in = r1.column("path_force")[sel] / P0
-    np.testing.assert_allclose(ratio_in, ratio_formula(alpha, mu, "insert"), rtol=0.05)
-    s_rm = r1.column("s", "remove")
-    P_rm = dict(zip(np.round(s_rm, 12), r1.column("path_force", "remove")))
+    P0, L0 = r0.column("path_force")[sel], _lateral(r0.steps)[sel]
+    P1, L1 = r1.column("path_force")[sel], _lateral(r1.steps)[sel]
+    assert np.all(P0 < 0) and np.all(L0 > 0)  # the beam resists the box; the face pushes the tip along +x
+    np.testing.assert_allclose(-P0 / L0, contact_law(alpha, 0.0, "insert"), rtol=0.025)
+    np.testing.assert_allclose(-P1 / L1, contact_law(alpha, mu, "insert"), rtol=0.03)
+    np.testing.assert_allclose((P1 / L1) / (P0 / L0), ratio_formula(alpha, mu, "insert"), rtol=0.05)
     s0 = np.round(r0.column("s")[sel], 12)
-    ratio_rm = np.array([P_rm[s] for s in s0 if s in P_rm]) / P0[: sum(s in P_rm for s in s0)]
-    assert len(ratio_rm) >= 0.7 * sel.sum()
-    np.testing.assert_allclose(ratio_rm, ratio_formula(alpha, mu, "remove"), rtol=0.05)
+    rm = [r for r in r1.removal if round(r.s, 12) in set(s0)]
+    assert len(rm) >= 0.7 * sel.sum()
+    Pr, Lr = np.array([r.path_force for r in rm]), _lateral(rm)
+    np.testing.assert_allclose(-Pr / Lr, contact_law(alpha, mu, "remove"), rtol=0.05)  # pushes the box back out
+    if mu * np.tan(np.radians(alpha)) <= 0.2:
+        np.testing.assert_allclose(P1 / P0, ratio_formula(alpha, mu, "insert"), rtol=0.05)
     prof = analyze_run(r1)
     assert prof.friction == mu and prof.F_in == pytest.approx(-r1.column("force").min())
 
