@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import igl
 import numpy as np
 
 from simfab.errors import InputError
@@ -128,8 +129,6 @@ def make_handles(rest: np.ndarray, elements: np.ndarray, handle_vertices, inacti
     Raises InputError if a handle vertex lies in an inactive region or the weights cannot be
     computed.
     """
-    import igl
-
     X = np.ascontiguousarray(rest, dtype=np.float64)
     T = np.ascontiguousarray(elements, dtype=np.int64)
     hv = np.asarray(handle_vertices, dtype=np.int64).ravel()

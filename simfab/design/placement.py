@@ -33,6 +33,8 @@ was.)
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
@@ -116,8 +118,8 @@ def place_handles(rest: np.ndarray, elements: np.ndarray, count: int, kept: np.n
 def _cluster_to_count(S: np.ndarray, count: int, is_kept: np.ndarray, seed: int) -> np.ndarray:
     """Affinity-propagation labels with the preference bisected so that ``count`` clusters contain
     no kept point (closest achievable count otherwise)."""
-    import warnings
-
+    # deferred: scikit-learn costs seconds of start-up (every worker process's) and only the
+    # displacement placement needs it
     from sklearn.cluster import AffinityPropagation
     from sklearn.exceptions import ConvergenceWarning
 

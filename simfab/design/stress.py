@@ -35,6 +35,9 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from simfab.fem.p2 import corner_gradients
 
 #: Default averaging radius [m] ([design] stress_radius).
 STRESS_RADIUS = 0.5e-3
@@ -57,8 +60,6 @@ def averaged_von_mises(fem, von_mises: np.ndarray, radius: float) -> float:
 
 def _ball_mean_matrix(c: np.ndarray, V: np.ndarray, radius: float) -> sp.csr_matrix:
     """(k, k) row-stochastic A, (A s)_i = sum_{|c_j - c_i| <= r} V_j s_j / sum V_j, of cells at c (k, dim)."""
-    from scipy.spatial import cKDTree
-
     pairs = cKDTree(c).query_pairs(radius, output_type="ndarray")
     k = len(c)
     rows = np.r_[np.arange(k), pairs[:, 0], pairs[:, 1]]
@@ -72,8 +73,6 @@ def quadrature_von_mises(fem, x) -> np.ndarray:
     [m]: F(L) = sum_i L_i F_i from the corner gradients (F is affine over an element), sigma_vm =
     sqrt(3/2) mu |dev(F F^T - I)| / J (:func:`simfab.fem.stress.det_and_von_mises`; plane strain in
     2D: the out-of-plane entry of F F^T - I is 0); +inf where det F <= 0."""
-    from simfab.fem.p2 import corner_gradients
-
     F = np.einsum("qc,mcij->mqij", fem.qp_bary, corner_gradients(fem, x))
     J = np.linalg.det(F)
     C = F @ np.swapaxes(F, -1, -2) - np.eye(fem.dim)

@@ -68,11 +68,20 @@ at its quadrature points (:func:`simfab.design.stress.p2_averaged_von_mises`).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
+from simfab.coupling.converge import extrapolate
+from simfab.coupling.model import make_coupling_model
+from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
+from simfab.design.problem import profile_figures
+from simfab.design.stress import p2_averaged_von_mises
+from simfab.fem.model import make_model
+from simfab.fem.p2 import to_p2
+from simfab.fem.subdivide import midpoint_mask, subdivide
 
 
 def check_levels(refinements: int = 1) -> tuple:
@@ -101,12 +110,6 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
     :func:`simfab.fem.p2.to_p2`): the fixed support is every vertex (and P2 edge node) whose
     parents were all fixed; the insertion options are cm's with ``element_order = order`` and
     ``steps_factor`` times its steps along the same path."""
-    import dataclasses
-
-    from simfab.coupling.model import make_coupling_model
-    from simfab.fem.model import make_model
-    from simfab.fem.subdivide import midpoint_mask, subdivide
-
     fem = cm.fem
     X, el = np.asarray(rest, float), np.asarray(fem.elements)
     fixed = np.zeros(len(X), bool)
@@ -116,8 +119,6 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
         fixed = midpoint_mask(fixed, edges)
     new = make_model(X, el, fem.material, thickness=fem.thickness, device=fem.device)
     if order == 2:
-        from simfab.fem.p2 import to_p2
-
         new = to_p2(new)
         fixed = midpoint_mask(fixed, new.edges)  # P2 edge node n_corners + i sits on edges[i]
     elif order != 1:
@@ -132,12 +133,9 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
 
 
 def level_figures(res, stress_radius: float) -> dict:
-    """:func:`simfab.design.optimize.profile_figures` of an insertion; on P2 elements the averaged
+    """:func:`simfab.design.problem.profile_figures` of an insertion; on P2 elements the averaged
     stress at quadrature-point resolution (:func:`simfab.design.stress.p2_averaged_von_mises`: the
     insertion records only each element's largest quadrature-point stress, biased high)."""
-    from simfab.design.optimize import profile_figures
-    from simfab.design.stress import p2_averaged_von_mises
-
     f = profile_figures(res, stress_radius)
     if res.model.options.element_order == 2:
         f["von_mises"] = max(p2_averaged_von_mises(res.model.fem, r.x, stress_radius) for r in res.steps)
@@ -172,8 +170,6 @@ def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = T
     cheapest level that is not locked). None when the steps resolve the profile. Measured on the
     optimized door knocker (P2 1x, 40 -> 160 steps): F_in x1.07, F_rm x1.36, averaged stress
     x1.05, 6.5 s -> 16 s."""
-    from simfab.coupling.simulate import simulate
-
     if not _steps_too_coarse(res):
         return None
     t0 = time.perf_counter()
@@ -212,9 +208,6 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
     reference_change}}, "constraints": [{name, value, lo, hi, satisfied}] at the reference values,
     "feasible_fine": bool, "reference", "units"}.
     """
-    from simfab.coupling.converge import extrapolate
-    from simfab.coupling.simulate import simulate
-
     cm = problem.base
     levels = as_levels(check_levels(problem.brief.check_refinements) if levels is None else levels)
     rows, figs, profiles = [], [], []

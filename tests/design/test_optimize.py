@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from simfab.design.brief import DesignBrief
-from simfab.design.optimize import element_quality, evaluate, make_problem, optimize
+from simfab.design.optimize import optimize
+from simfab.design.problem import element_quality, evaluate, make_problem
 from simfab.coupling.scene import load_coupling_scene
 from simfab.errors import ConvergenceError
 
@@ -64,7 +65,7 @@ def test_small_design_problem_meets_every_constraint(scene):
     """The building block's socket exceeds PLA's 60 MPa yield stress; ask for a tight grip with
     an insertion force <= 12 N and no yielding, and check by re-simulating the optimized shape."""
     from simfab.coupling.simulate import simulate
-    from simfab.design.optimize import candidate_model, profile_figures
+    from simfab.design.problem import candidate_model, profile_figures
 
     brief = DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=4, iterations=60, patience=15)
     P = make_problem(scene, brief)
@@ -140,7 +141,7 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
 def test_parallel_workers_make_the_same_decisions_as_one_process():
     """Two processes evaluating speculative proposals (simfab.design.parallel): the worker rebuilds
     the problem from its scene file, and every decision - hence the design - is the serial one."""
-    from simfab.design.parallel import ProblemSource
+    from simfab.design.problem import ProblemSource
     from simfab.design.scene import load_design_scene
 
     ds = load_design_scene("block2d_tight", design={"handles": 3, "placement": "spatial"}, simulation={"steps": 8})
@@ -159,11 +160,11 @@ def test_parallel_workers_make_the_same_decisions_as_one_process():
 
 def test_workers_started_early_serve_several_problems():
     """Worker processes started before the problem is known (simfab.design.parallel.Workers, as
-    `couple optimize` starts them) build each problem on its first task and rebuild when the
-    source changes (a correction round's factors): every decision is still the serial one."""
-    import dataclasses
-
-    from simfab.design.parallel import ProblemSource, Workers
+    `couple optimize` starts them) build each problem on its first task and score it with the
+    settings that travel with every task (a correction round's factors): every decision is still
+    the serial one."""
+    from simfab.design.parallel import Workers
+    from simfab.design.problem import ProblemSource
     from simfab.design.scene import load_design_scene
 
     design, simulation = {"handles": 3, "placement": "spatial"}, {"steps": 8}
@@ -172,7 +173,7 @@ def test_workers_started_early_serve_several_problems():
         src = ProblemSource(scene=str(ds.xml), design=design, simulation=simulation)
         P = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, source=src)
         corr = {"von_mises": 0.5, "insertion_force": 0.5}
-        Pc = dataclasses.replace(P, corrections=corr, source=dataclasses.replace(P.source, corrections=corr))
+        Pc = P.with_settings(corrections=corr)
         runs = [optimize(p, iterations=8, seed=5, workers=w) for p in (P, Pc)]
     for p, two in zip((P, Pc), runs):
         one = optimize(p, iterations=8, seed=5)
@@ -211,7 +212,7 @@ def test_initial_insertion_run_for_the_placement_is_scored_not_run_again(scene):
     optimizer's initial evaluation: scored as evaluate() would score that shape (identity handles
     reproduce the mesh), not simulated again; a run of another model is not taken for it."""
     from simfab.coupling.simulate import simulate
-    from simfab.design.optimize import initial_evaluation
+    from simfab.design.problem import initial_evaluation
 
     brief = DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=3, placement="displacement")
     run = simulate(scene)

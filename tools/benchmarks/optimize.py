@@ -77,8 +77,8 @@ def _fastest(a, first: dict) -> dict:
     runs = [first]
     for _ in range(a.repeat - 1):
         child = json.loads(subprocess.run(cmd, stdout=subprocess.PIPE, text=True, check=True).stdout)  # its stderr shows
-        if (child["E_L"], child["simulations"], child["feasible"]) != (first["E_L"], first["simulations"],
-                                                                         first["feasible"]):
+        if (child["E_L"], child["design"], child["simulations"], child["feasible"]) != (
+                first["E_L"], first["design"], first["simulations"], first["feasible"]):
             raise RuntimeError(f"a repeated run reached another design: E_L {child['E_L']} vs {first['E_L']}, "
                                f"{child['simulations']} vs {first['simulations']} simulations")
         runs.append(child)
@@ -96,8 +96,9 @@ def _run_once(a) -> dict:
     from benchmarks._machine import machine_reference_ms
     from benchmarks._reference import figures
     from simfab.coupling.simulate import simulate
-    from simfab.design.optimize import make_problem, optimize
-    from simfab.design.parallel import ProblemSource, Workers
+    from simfab.design.optimize import optimize
+    from simfab.design.parallel import Workers
+    from simfab.design.problem import ProblemSource, make_problem
     from simfab.design.scene import load_design_scene
 
     ds = load_design_scene(a.scene)
@@ -148,6 +149,7 @@ def _run_once(a) -> dict:
         "first_feasible_iteration": first,
         "feasible": res.best.feasible,
         "E_L": res.best.E_L,
+        "design": res.best.h.tolist(),  # the best design's handle parameters (translations [m], scales)
         "simulations": sims,
         "simulations_stopped_early": res.stopped_simulations,
         "workers": res.workers,
