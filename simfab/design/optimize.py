@@ -151,7 +151,7 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
     if best.status == "ok" and (best.result is None or problem.settings.refined):
         # the best design's insertion again, here (it may have run on a worker) and as `couple
         # simulate` runs it: without the seeded refinement, whose figures differ by the contact
-        # discretization (stand side: 0.1 %, a near-jam insertion force 1.2 %)
+        # discretization
         plain = evaluate(problem.with_settings(refined=()), best.h, keep_result=True)
         if plain.status == "ok":
             best = plain

@@ -36,7 +36,8 @@ from simfab.io.usd import StageWriter
 
 HISTORY_HEADER = ["iteration", "status", "reason", "objective", "E_L", "rms_error_N", "accepted", "current_objective",
                   "best_objective", "temperature", "sigma_rel", "coupling_ratio_pct", "grip_force_N",
-                  "insertion_force_N", "removal_force_N", "von_mises_avg_Pa", "max_von_mises_Pa", "seat_clearance_m", "category",
+                  "insertion_force_N", "removal_force_N", "von_mises_avg_Pa", "max_von_mises_Pa", "seat_clearance_m",
+                  "category",
                   "seconds"]
 
 
@@ -87,7 +88,8 @@ def summary(res, *, scene: str | None = None) -> dict:
         "seconds": res.seconds,
         "simulation_seconds": res.sim_seconds,
         # with several workers the simulations overlap: the share of the workers' time they took
-        "fraction_outside_simulator": max(0.0, 1.0 - res.sim_seconds / (res.seconds * res.workers)) if res.seconds > 0 else 0.0,
+        "fraction_outside_simulator": (max(0.0, 1.0 - res.sim_seconds / (res.seconds * res.workers))
+                                       if res.seconds > 0 else 0.0),
         "units": {"objective": "-", "E_L": "-", "seconds": "s", "constraints": dict(B.UNITS)},
     }
     if best.rms_error is not None:
@@ -117,7 +119,8 @@ def _figures(f: dict) -> dict:
     """The profile's figures with unit-bearing names (E in J, forces in N, stress in Pa)."""
     names = {"category": "category", "coupling_ratio": "coupling_ratio_pct", "E_max": "E_max_J", "E_ss": "E_ss_J",
              "insertion_force": "F_in_N", "removal_force": "F_rm_N", "grip_force": "F_grip_N",
-             "von_mises": "von_mises_avg_Pa", "von_mises_peak": "max_von_mises_Pa", "seat_clearance": "seat_clearance_m"}
+             "von_mises": "von_mises_avg_Pa", "von_mises_peak": "max_von_mises_Pa",
+             "seat_clearance": "seat_clearance_m"}
     return {v: f.get(k) for k, v in names.items()}
 
 
@@ -239,7 +242,7 @@ def plot_profiles(res, path, mesh_check: dict | None = None) -> Path:
     ax2.set_ylim(max(yl[0], -1.3 * span), min(yl[1], 1.3 * span))
     e_init = float(res.initial.result.column("energy").max()) * 1e3
     e_best = float(res.best.result.column("energy").max()) * 1e3
-    if e_best > 0 and e_init > 20 * e_best:  # (the knocker: 2,400 mJ before, 0.6 mJ after) both stay readable
+    if e_best > 0 and e_init > 20 * e_best:  # energies orders of magnitude apart: both stay readable
         ax1.set_yscale("symlog", linthresh=0.1 * e_best)
         ax1.set_ylim(bottom=0.0)  # (elastic energy >= 0)
         ax1.set_ylabel(f"elastic energy [mJ]\n(log above {0.1 * e_best:.2g} mJ)")

@@ -58,7 +58,8 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     if revolve is not None and cm.dim != 2:
         raise InputError("only a 2D section can be revolved", where="--revolve-axis")
     if revolve is not None and len(revolve) > 2 and revolve[2] and not ds.kept_regions:
-        raise InputError("replicating arms needs the base marked by a keep site ([design] keep)", where="--revolve-arms")
+        raise InputError("replicating arms needs the base marked by a keep site ([design] keep)",
+                         where="--revolve-arms")
     log(f"couple optimize: {cm.name}: {cm.fem.n_elements} elements, {len(cm.s_steps) - 1} steps, "
         f"{ds.brief.handles} handles ({ds.brief.placement}), up to {ds.brief.iterations} iterations", quiet=quiet)
     with contextlib.ExitStack() as stack:
@@ -86,7 +87,8 @@ def _anneal_checked(ds, design, simulation, device, seed, restarts, scheduler, w
     returns (DesignResult, summary extras)."""
     cm = ds.cm
     initial = simulate(cm) if ds.brief.placement == "displacement" else None
-    source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}), device=device)
+    source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}),
+                           device=device)
     problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed,
                            source=source)
     if mesh_check and problem.target is not None:
@@ -167,8 +169,9 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
         return {"outputs": {"revolved_stl": save_mesh(mesh, Path(out) / f"{stem}_optimized_revolved.stl")}}
     cm = res.problem.base
     kept = np.concatenate(scene.kept_regions) if scene is not None and scene.kept_regions else np.zeros(0, int)
-    paths = revolved_scene(res.best.rest, fem, kept=kept, object_start=cm.pose(0.0)[1], scene_xml=optimized["scene_xml"],
-                           scene_toml=optimized["scene_toml"], out=out, stem=stem, axis=axis, offset=offset, arms=arms)
+    paths = revolved_scene(res.best.rest, fem, kept=kept, object_start=cm.pose(0.0)[1],
+                           scene_xml=optimized["scene_xml"], scene_toml=optimized["scene_toml"], out=out, stem=stem,
+                           axis=axis, offset=offset, arms=arms)
     cm3 = load_coupling_scene(paths["scene_xml"], device=fem.device)
     log(f"couple optimize: simulating the revolved part ({arms} arms, {cm3.fem.n_elements} 10-node tets)", quiet=quiet)
     t0 = time.perf_counter()
@@ -202,7 +205,8 @@ def anneal_task(*, source: ProblemSource, settings: EvaluationSettings, seed: in
 
 def _restarts(problem, seed, restarts, quiet, scheduler):
     tasks = [dict(source=problem.source, settings=problem.settings, seed=seed + i) for i in range(restarts)]
-    results = run_tasks(anneal_task, tasks, scheduler=scheduler, quiet=quiet, desc=f"optimize {problem.base.name} restarts")
+    results = run_tasks(anneal_task, tasks, scheduler=scheduler, quiet=quiet,
+                        desc=f"optimize {problem.base.name} restarts")
     runs = []
     for t, r in zip(tasks, results):
         row = {"seed": t["seed"], "status": r.status, "message": r.message, "seconds": r.seconds}

@@ -270,11 +270,19 @@ def max_displacement(res) -> np.ndarray:
 
 @dataclass(kw_only=True)
 class Evaluation:
-    """One design's evaluation. status: "ok" | "rejected" (invalid) | "stopped" (provably above the
-    acceptance threshold) | "aborted" (a speculative run no longer needed, never decided on); reason: why not ok; objective [-] (+inf when rejected, a lower bound
-    when stopped); E_L [-]; rms_error [N] (target matching); constraints: list of
-    :class:`simfab.design.brief.Constraint`; figures: :func:`profile_figures`; result: the
-    InsertionResult (kept only while needed); rest: (n, d) [m]; seconds (simulation, total)."""
+    """One design's evaluation.
+
+    h : (n_vars,) the design; rest : (n, d) [m] its rest shape
+    status : "ok" | "rejected" (invalid) | "stopped" (provably above the acceptance threshold) |
+        "aborted" (a speculative run no longer needed, never decided on); reason : why not ok
+    objective [-] : +inf when rejected, a lower bound when stopped; E_L [-]; rms_error [N]
+        (target matching)
+    constraints : list of :class:`simfab.design.brief.Constraint`; figures : :func:`profile_figures`
+    result : the InsertionResult (kept only while needed); sim_seconds, seconds : in the
+        simulation, in total
+    bounds : the objective's lower bound after each insertion step; newton_iterations : of a
+        complete insertion (status "ok")
+    """
 
     h: np.ndarray
     rest: np.ndarray
@@ -285,11 +293,11 @@ class Evaluation:
     rms_error: float | None = None
     constraints: list = field(default_factory=list)
     figures: dict = field(default_factory=dict)
-    result: object = None
+    result: InsertionResult | None = None
     sim_seconds: float = 0.0
     seconds: float = 0.0
-    bounds: list = field(default_factory=list)  # the objective's lower bound after each insertion step
-    newton_iterations: int = 0  # of a complete insertion (status "ok")
+    bounds: list = field(default_factory=list)
+    newton_iterations: int = 0
 
     @property
     def feasible(self) -> bool:
@@ -309,7 +317,8 @@ def restricted(problem: DesignProblem, ev: Evaluation, threshold: float) -> Eval
                                    sim_seconds=0.0, bounds=[])
     for i, b in enumerate(ev.bounds):
         if b > threshold:
-            return dataclasses.replace(ev, status="stopped", reason=f"objective above the acceptance threshold at step {i}",
+            return dataclasses.replace(ev, status="stopped",
+                                       reason=f"objective above the acceptance threshold at step {i}",
                                        objective=b, figures={}, constraints=[], rms_error=None, result=None,
                                        bounds=ev.bounds[: i + 1])
     return ev

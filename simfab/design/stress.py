@@ -2,9 +2,8 @@
 
 Linear elasticity puts a stress singularity at every sharp re-entrant corner (sigma ~ r^(-lambda),
 lambda ~ 0.3-0.5 in 2D), and the design parts have such corners (slots cut into blocks, jaw
-roots). The largest element stress there grows without bound as the mesh is refined - measured on
-the optimized tighter building block: 53 -> 69 -> 93 MPa at 457 -> 1,828 -> 7,312 triangles - so
-it has no mesh-converged value, and a yield constraint on it would say less about the part than
+roots). The largest element stress there grows without bound as the mesh is refined, so it has
+no mesh-converged value, and a yield constraint on it would say less about the part than
 about its mesh. The Theory of Critical Distances (Taylor 2007) judges notched parts by the
 stress averaged over a material length instead; here every element's von Mises stress is
 replaced by the volume-weighted mean over the elements whose centroids lie within ``radius``
@@ -21,7 +20,7 @@ than the radius averages each element with itself (the raw element maximum).
 
 Quadratic (P2) elements carry a stress that varies over the element (linear in F): the insertion
 records only each element's largest quadrature-point stress, which biases the mean upwards by
-O(h |grad sigma|) (+5 % measured on the stand side at 450 triangles). :func:`p2_averaged_von_mises`
+O(h |grad sigma|). :func:`p2_averaged_von_mises`
 applies the same definition at the quadrature points instead - each point a cell of volume
 V_e w_q at its rest position, its stress replaced by the volume-weighted mean over the points
 within ``radius``:

@@ -38,8 +38,7 @@ def iterations_per_handle_budget(brief, handles: int) -> int:
     progress per iteration of a random-walk search falls as 1 / variables (an adaptive-step
     (1+1) search on a quadratic needs O(n log(1 / eps)) iterations for n variables): with one
     budget for every count the largest count stops furthest from its optimum
-    (tests/design/test_handle_budget.py, on a least-squares stand-in with a known optimum: 17x
-    further for 8 handles than for 2 at 300 iterations each, about as far at 600 vs 150). The
+    (tests/design/test_handle_budget.py shows it on a least-squares stand-in with a known optimum). The
     mesh check's correction rounds (half the budget each,
     :func:`simfab.design.pipeline.mesh_corrected`) scale with it."""
     return max(1, round(brief.iterations * int(handles) / brief.handles))
@@ -58,7 +57,8 @@ def run_one(*, scene: str, design: dict, simulation: dict, method: str, count: i
 
 
 def handle_study(scene, *, out, counts=(2, 4, 6), randoms: int = 10, design: dict | None = None,
-                 simulation: dict | None = None, seed: int = 0, quiet: bool = True, scheduler: str | None = None) -> dict:
+                 simulation: dict | None = None, seed: int = 0, quiet: bool = True,
+                 scheduler: str | None = None) -> dict:
     """Run the study and write ``NAME_handle_study.csv`` (one row per run), ``..._summary.csv``,
     ``.png`` and ``.json`` into ``out``; returns the summary."""
     out = make_out_dir(out)
@@ -69,17 +69,19 @@ def handle_study(scene, *, out, counts=(2, 4, 6), randoms: int = 10, design: dic
     for k in counts:
         for method in METHODS:
             seeds = range(seed, seed + randoms) if method == "random" else [seed]
-            tasks += [dict(scene=scene_path, design=dict(design or {}), simulation=dict(simulation or {}), method=method,
-                           count=int(k), seed=int(s)) for s in seeds]
+            tasks += [dict(scene=scene_path, design=dict(design or {}), simulation=dict(simulation or {}),
+                           method=method, count=int(k), seed=int(s)) for s in seeds]
     results = run_tasks(run_one, tasks, scheduler=scheduler, quiet=quiet, desc=f"handle study {name}")
     runs = []
     for t, r in zip(tasks, results):
         row = {"method": t["method"], "handles": t["count"], "seed": t["seed"], "status": r.status,
                "message": r.message or ""}
         if r.status == "ok":
-            row.update({k: r.value[k] for k in ("converged", "E_L", "objective", "iterations", "simulations", "seconds")})
+            row.update({k: r.value[k]
+                        for k in ("converged", "E_L", "objective", "iterations", "simulations", "seconds")})
         else:
-            row.update(converged=False, E_L=math.nan, objective=math.nan, iterations=0, simulations=0, seconds=r.seconds)
+            row.update(converged=False, E_L=math.nan, objective=math.nan, iterations=0, simulations=0,
+                       seconds=r.seconds)
         runs.append(row)
     rows = summarize(runs, counts)
     paths = {"runs_csv": out / f"{name}_handle_study.csv", "summary_csv": out / f"{name}_handle_study_summary.csv",

@@ -167,7 +167,8 @@ def revolved_scene(X: np.ndarray, fem, *, kept: np.ndarray, object_start: np.nda
     """
     kept = np.asarray(kept, dtype=np.int64)
     if kept.size == 0:
-        raise InputError("replicating arms needs the base marked by a keep site ([design] keep)", where="--revolve-arms")
+        raise InputError("replicating arms needs the base marked by a keep site ([design] keep)",
+                         where="--revolve-arms")
     X = np.asarray(X, float)
     ax = 0 if axis == "x" else 1
     rad = 1 - ax

@@ -41,9 +41,9 @@ def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypat
     assert ev.status == "rejected" and ev.reason in ("inverted element", "degenerate element")
     assert ev.objective == np.inf
 
-    import simfab.coupling.simulate as sim
+    import simfab.design.problem as design_problem  # the simulator as the design problem calls it
 
-    real = sim.simulate
+    real = design_problem.simulate
     calls = {"n": 0}
 
     def flaky(cm, **kw):  # every second simulation does not converge
@@ -52,7 +52,7 @@ def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypat
             raise ConvergenceError("step 7: Newton did not converge (test)")
         return real(cm, **kw)
 
-    monkeypatch.setattr(sim, "simulate", flaky)
+    monkeypatch.setattr(design_problem, "simulate", flaky)
     res = optimize(P, iterations=6, seed=1)
     reasons = [r["evaluation"].reason for r in res.history]
     assert any(r.startswith("simulation did not converge") for r in reasons)
@@ -236,7 +236,8 @@ def test_target_matching_starts_from_the_initial_shapes_mesh_correction(tmp_path
 
     base = [sys.executable, "-m", "simfab", "couple", "optimize", "profile2d", "--iterations", "3", "--steps", "8",
             "--handles", "2", "--placement", "spatial", "--workers", "1", "--correction-rounds", "0", "--json"]
-    r = subprocess.run(base + ["--check-refinements", "0", "--out", str(tmp_path / "a")], capture_output=True, text=True)
+    r = subprocess.run(base + ["--check-refinements", "0", "--out", str(tmp_path / "a")], capture_output=True,
+                       text=True)
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
     assert 0.3 < s["corrections"]["force_profile"] < 0.95 and s["correction_rounds"] == []

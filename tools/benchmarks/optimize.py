@@ -76,7 +76,8 @@ def _fastest(a, first: dict) -> dict:
         cmd += ["--iterations", str(a.iterations)]
     runs = [first]
     for _ in range(a.repeat - 1):
-        child = json.loads(subprocess.run(cmd, stdout=subprocess.PIPE, text=True, check=True).stdout)  # its stderr shows
+        # (the child's stderr shows)
+        child = json.loads(subprocess.run(cmd, stdout=subprocess.PIPE, text=True, check=True).stdout)
         if (child["E_L"], child["design"], child["simulations"], child["feasible"]) != (
                 first["E_L"], first["design"], first["simulations"], first["feasible"]):
             raise RuntimeError(f"a repeated run reached another design: E_L {child['E_L']} vs {first['E_L']}, "
