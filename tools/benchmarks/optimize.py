@@ -7,7 +7,8 @@ handle placement), the handle placement (bounded biharmonic weights, affinity pr
 annealing with one full insertion simulation per iteration - and reports the wall time, the
 simulations run and simulations per second, the fraction of the time spent outside the
 simulator, the number of iterations to the first design meeting every constraint and whether
-the final design meets them all. Outputs are not written (timed is the computation).
+the final design meets them all, with its E_L and handle parameters (``design``: per active handle
+its translation [m] and per-axis scales). Outputs are not written (timed is the computation).
 ``--workers`` (default 2, the machine the target was set for) evaluates that many proposals at
 once (simfab.design.parallel: speculative evaluation, the same design as 1 worker); the time
 includes starting the workers (started first, as ``couple optimize`` does: their start-up overlaps
@@ -39,10 +40,9 @@ import numpy as np
 from simfab.errors import InputError
 
 TARGET_SECONDS = 30.0
-#: Runs by default: this virtual machine's speed drifts by up to 2x within minutes (the reference
-#: workload of benchmarks._machine took 15-56 ms within an hour of 2 December) and interference only ever adds
-#: time, so the fastest of the runs is the best estimate of the cost (as timeit and pyperf advise;
-#: the insertion benchmark does the same).
+#: Runs by default: the machine's speed drifts by up to 2x within minutes (``machine_reference_ms``
+#: shows it) and interference only ever adds time, so the fastest of the runs is the best estimate
+#: of the cost (as timeit and pyperf advise; the insertion benchmark does the same).
 REPEAT = 2
 
 
