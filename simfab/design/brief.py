@@ -252,8 +252,7 @@ def read_target_profile(path: Path) -> tuple[np.ndarray, np.ndarray]:
     try:
         a = np.genfromtxt(path, delimiter=",", dtype=float)
     except ValueError as e:
-        raise InputError(f"cannot read the target profile (distance_m, force_N per row): {e}",
-                         where=str(path)) from None
+        raise InputError(f"cannot read the target profile (distance_m, force_N per row): {e}", where=str(path)) from None
     a = np.atleast_2d(a)
     a = a[~np.all(np.isnan(a), axis=1)]
     if a.ndim != 2 or a.shape[1] != 2 or len(a) < 2 or not np.all(np.isfinite(a)):

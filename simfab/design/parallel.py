@@ -32,8 +32,16 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from simfab._warp import device
-from simfab.design.problem import (DesignProblem, Evaluation, EvaluationSettings, ProblemSource, evaluate, rebuild,
-                                   restricted, screen)
+from simfab.design.problem import (
+    DesignProblem,
+    Evaluation,
+    EvaluationSettings,
+    ProblemSource,
+    evaluate,
+    rebuild,
+    restricted,
+    screen,
+)
 
 #: In a worker: the source of the problem it holds (None before its first task) and that problem.
 _WORKER: tuple[ProblemSource, DesignProblem] | None = None

@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from simfab.coupling.scene import load_coupling_scene
 from simfab.design.brief import DesignBrief
 from simfab.design.optimize import optimize
 from simfab.design.problem import element_quality, evaluate, make_problem
-from simfab.coupling.scene import load_coupling_scene
 from simfab.errors import ConvergenceError
 
 STEPS = 12  # a coarse insertion keeps the loop fast; the physics is the bundled scene's
@@ -85,9 +85,10 @@ def test_small_design_problem_meets_every_constraint(scene):
 
 
 def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path):
-    from simfab.cli import main
+    import subprocess
+    import sys
+
     from simfab.io.usd import check_compliance
-    import subprocess, sys
 
     out = tmp_path / "o"
     r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "block2d_tight", "--iterations", "4",
@@ -232,7 +233,8 @@ def test_target_matching_starts_from_the_initial_shapes_mesh_correction(tmp_path
     """Matching a force profile, the coarse mesh's bias on the whole profile is measured on the
     initial shape before the first iteration and the run starts corrected by it (a coarse linear
     mesh is too stiff: factor < 1); without the mesh check nothing is corrected."""
-    import subprocess, sys
+    import subprocess
+    import sys
 
     base = [sys.executable, "-m", "simfab", "couple", "optimize", "profile2d", "--iterations", "3", "--steps", "8",
             "--handles", "2", "--placement", "spatial", "--workers", "1", "--correction-rounds", "0", "--json"]
