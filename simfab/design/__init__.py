@@ -12,7 +12,9 @@ Optimization").
 - :mod:`simfab.design.modification` - the Laplacian editing energy E_L of the boundary
 - :mod:`simfab.design.brief` - the design brief ([design] table) and its constraint penalties
 - :mod:`simfab.design.anneal` - simulated annealing (seeded, exponential cooling)
-- :mod:`simfab.design.optimize` - the optimization loop: candidate -> validity -> insertion -> objective
+- :mod:`simfab.design.problem` - the design problem and the evaluation of one design: candidate ->
+  validity -> insertion (stopped once provably rejected) -> objective; rebuilt from its scene in a worker
+- :mod:`simfab.design.optimize` - the optimization loop: annealing over the problem's designs
 - :mod:`simfab.design.parallel` - speculative evaluation of proposals on worker processes
 - :mod:`simfab.design.stress` - the von Mises stress averaged over a critical distance (yield)
 - :mod:`simfab.design.verify` - the design on refined meshes: mesh-converged figures, corrections

@@ -33,7 +33,7 @@ Decisions are still taken in order; at the first acceptance the later proposals 
 (running ones are cancelled) and the random stream is rewound to where the accepted proposal's
 draws ended.
 
-When most evaluated proposals are accepted (the rate so far above 1/2; 61 % on the stand side),
+When most evaluated proposals are accepted (the rate so far above 1/2),
 a free slot serves the **acceptance branch** instead: the proposals after the running head drawn
 as if it were accepted (from its design, with the grown sigma and the stream where its draws
 ended), up to the first that needs its full evaluation. Their thresholds E_h - tau_k |E_h| ln u

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import igl
 import numpy as np
 
 from simfab.errors import InputError
@@ -87,7 +88,8 @@ class Handles:
         T, S = self.transforms(h)
         W = self.weights
         # sum_j w_ij (c_j + s_j (x_i - c_j) + t_j), with sum_j w_ij = 1
-        return W @ (self.centers + T) + np.einsum("ij,ijd->id", W, (self.rest[:, None, :] - self.centers[None]) * S[None])
+        local = (self.rest[:, None, :] - self.centers[None]) * S[None]  # s_j * (x_i - c_j)
+        return W @ (self.centers + T) + np.einsum("ij,ijd->id", W, local)
 
     def lbs_matrix(self) -> np.ndarray:
         """(n, (d+1) m) M_LBS of the thesis (documentation and tests; :meth:`apply` avoids it)."""
@@ -128,8 +130,6 @@ def make_handles(rest: np.ndarray, elements: np.ndarray, handle_vertices, inacti
     Raises InputError if a handle vertex lies in an inactive region or the weights cannot be
     computed.
     """
-    import igl
-
     X = np.ascontiguousarray(rest, dtype=np.float64)
     T = np.ascontiguousarray(elements, dtype=np.int64)
     hv = np.asarray(handle_vertices, dtype=np.int64).ravel()
@@ -146,7 +146,8 @@ def make_handles(rest: np.ndarray, elements: np.ndarray, handle_vertices, inacti
         raise InputError("two handles on the same vertex", where="[design] handles")
     held = np.concatenate(regions) if regions else np.zeros(0, np.int64)
     if np.isin(hv, held).any():
-        raise InputError("a handle lies in a region kept unchanged (fixed support or keep site)", where="[design] handles")
+        raise InputError("a handle lies in a region kept unchanged (fixed support or keep site)",
+                         where="[design] handles")
     m = len(hv) + len(regions)
     if len(hv) == 0:
         raise InputError("no active handle to modify the shape with", where="[design] handles")

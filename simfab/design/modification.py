@@ -34,7 +34,8 @@ class ModificationEnergy:
         e = np.vstack([local[:, [a, b]] for a, b in zip(i, j)])
         e = np.unique(np.sort(e, axis=1), axis=0)
         b = len(self.vertices)
-        A = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(b, b)).tocsr()
+        A = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                          shape=(b, b)).tocsr()
         deg = np.asarray(A.sum(axis=1)).ravel()
         L = sp.identity(b, format="csr") - sp.diags(1.0 / deg) @ A
         edge_len = np.linalg.norm(self.rest[self.vertices[e[:, 0]]] - self.rest[self.vertices[e[:, 1]]], axis=1)

@@ -19,15 +19,25 @@ Written together into ``--out`` (temporaries renamed only when all succeeded):
 from __future__ import annotations
 
 import shutil
+import tomllib
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 
+from simfab.coupling.outputs import _display_faces, _object_display, extrude_triangles, vertex_von_mises
 from simfab.design import brief as B
+from simfab.design.synthesis import boundary_loops
+from simfab.design.verify import check_warnings
+from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json, write_text
+from simfab.io.mesh import save_mesh
+from simfab.io.usd import StageWriter
 
 HISTORY_HEADER = ["iteration", "status", "reason", "objective", "E_L", "rms_error_N", "accepted", "current_objective",
                   "best_objective", "temperature", "sigma_rel", "coupling_ratio_pct", "grip_force_N",
-                  "insertion_force_N", "removal_force_N", "von_mises_avg_Pa", "max_von_mises_Pa", "seat_clearance_m", "category",
+                  "insertion_force_N", "removal_force_N", "von_mises_avg_Pa", "max_von_mises_Pa", "seat_clearance_m",
+                  "category",
                   "seconds"]
 
 
@@ -59,7 +69,7 @@ def summary(res, *, scene: str | None = None) -> dict:
         "E_L": best.E_L,
         "constraints": cons,
         # the constraints read the coarse figures times these (mesh correction rounds; {} without)
-        "corrections": dict(res.problem.corrections),
+        "corrections": dict(res.problem.settings.corrections),
         "category": best.figures.get("category"),
         "category_initial": init.figures.get("category"),
         "profile": _figures(best.figures),
@@ -78,7 +88,8 @@ def summary(res, *, scene: str | None = None) -> dict:
         "seconds": res.seconds,
         "simulation_seconds": res.sim_seconds,
         # with several workers the simulations overlap: the share of the workers' time they took
-        "fraction_outside_simulator": max(0.0, 1.0 - res.sim_seconds / (res.seconds * res.workers)) if res.seconds > 0 else 0.0,
+        "fraction_outside_simulator": (max(0.0, 1.0 - res.sim_seconds / (res.seconds * res.workers))
+                                       if res.seconds > 0 else 0.0),
         "units": {"objective": "-", "E_L": "-", "seconds": "s", "constraints": dict(B.UNITS)},
     }
     if best.rms_error is not None:
@@ -108,7 +119,8 @@ def _figures(f: dict) -> dict:
     """The profile's figures with unit-bearing names (E in J, forces in N, stress in Pa)."""
     names = {"category": "category", "coupling_ratio": "coupling_ratio_pct", "E_max": "E_max_J", "E_ss": "E_ss_J",
              "insertion_force": "F_in_N", "removal_force": "F_rm_N", "grip_force": "F_grip_N",
-             "von_mises": "von_mises_avg_Pa", "von_mises_peak": "max_von_mises_Pa", "seat_clearance": "seat_clearance_m"}
+             "von_mises": "von_mises_avg_Pa", "von_mises_peak": "max_von_mises_Pa",
+             "seat_clearance": "seat_clearance_m"}
     return {v: f.get(k) for k, v in names.items()}
 
 
@@ -124,9 +136,7 @@ def history_rows(res):
 
 def part_mesh_mm(fem, X: np.ndarray):
     """trimesh of the part with rest shape X in millimetres (2D: extruded by the thickness)."""
-    import trimesh
-
-    from simfab.coupling.outputs import extrude_triangles
+    import trimesh  # deferred: about a second of start-up, for writing the part only
 
     if fem.dim == 2:
         V, F = extrude_triangles(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
@@ -138,9 +148,6 @@ def part_mesh_mm(fem, X: np.ndarray):
 
 
 def write_outline_csv(fem, X: np.ndarray, path) -> Path:
-    from simfab.design.synthesis import boundary_loops
-    from simfab.io.atomic import write_csv
-
     rows = []
     for k, loop in enumerate(boundary_loops(fem.boundary_facets)):
         rows += [[k, float(X[v, 0] * 1e3), float(X[v, 1] * 1e3)] for v in loop]
@@ -150,13 +157,6 @@ def write_outline_csv(fem, X: np.ndarray, path) -> Path:
 def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, stem: str) -> None:
     """The optimized scene: the original MJCF with the part's display mesh replaced, the TOML with
     the optimized mesh as ``mesh_file`` (same material, object, path, fixed region, options)."""
-    import tomllib
-    import xml.etree.ElementTree as ET
-
-    import tomli_w
-
-    from simfab.io.atomic import write_text
-
     fem = res.problem.base.fem
     X = res.best.rest
     np.savez(tmp["scene_mesh"], points=X, elements=np.asarray(fem.elements))
@@ -192,8 +192,6 @@ def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, 
 
 
 def _display_mesh(fem, X):
-    from simfab.coupling.outputs import extrude_triangles
-
     if fem.dim == 2:
         return extrude_triangles(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
     F = np.asarray(fem.boundary_facets)
@@ -208,12 +206,10 @@ def plot_profiles(res, path, mesh_check: dict | None = None) -> Path:
     The titles list the constraints: the mesh check's mesh-converged figures when ``mesh_check``
     (the summary's) is given, which decide whether the design meets the brief, else the
     optimizer's own (coarse-mesh, mesh-corrected) figures."""
-    import matplotlib
+    import matplotlib  # deferred: pyplot costs about a second of start-up, and only plotting needs it
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from simfab.io.atomic import save_figure
 
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7.0, 6.4), dpi=120, sharex=True)
     lim = res.problem.limits
@@ -231,7 +227,7 @@ def plot_profiles(res, path, mesh_check: dict | None = None) -> Path:
     tgt = res.problem.target
     if tgt is not None:
         ax2.plot(tgt.s * 1e3, tgt.force, ":", color="k", lw=2, label="target profile")
-        c = res.problem.corrections.get("force_profile", 1.0)
+        c = res.problem.settings.corrections.get("force_profile", 1.0)
         if c != 1.0:  # what the optimizer matched to the target: the coarse profile times its mesh correction
             r = res.best.result
             ax2.plot(r.column("s") * 1e3, c * r.column("force"), "-", color="tab:red", lw=1,
@@ -246,7 +242,7 @@ def plot_profiles(res, path, mesh_check: dict | None = None) -> Path:
     ax2.set_ylim(max(yl[0], -1.3 * span), min(yl[1], 1.3 * span))
     e_init = float(res.initial.result.column("energy").max()) * 1e3
     e_best = float(res.best.result.column("energy").max()) * 1e3
-    if e_best > 0 and e_init > 20 * e_best:  # (the knocker: 2,400 mJ before, 0.6 mJ after) both stay readable
+    if e_best > 0 and e_init > 20 * e_best:  # energies orders of magnitude apart: both stay readable
         ax1.set_yscale("symlog", linthresh=0.1 * e_best)
         ax1.set_ylim(bottom=0.0)  # (elastic energy >= 0)
         ax1.set_ylabel(f"elastic energy [mJ]\n(log above {0.1 * e_best:.2g} mJ)")
@@ -261,7 +257,7 @@ def plot_profiles(res, path, mesh_check: dict | None = None) -> Path:
         what = " (constraints: mesh-converged figures)"
     else:
         cons = [(c.name, c.value, c.lo, c.hi, c.satisfied) for c in res.best.constraints]
-        what = " (constraints on mesh-corrected figures)" if res.problem.corrections else ""
+        what = " (constraints on mesh-corrected figures)" if res.problem.settings.corrections else ""
     lines = []
     for name, value, lo, hi, ok in cons:
         u = B.UNITS[name]
@@ -279,13 +275,11 @@ def plot_profiles(res, path, mesh_check: dict | None = None) -> Path:
 
 def plot_shape(res, path) -> Path:
     """Initial silhouette (grey) under the optimized shape (colour), handles marked."""
-    import matplotlib
+    import matplotlib  # deferred: pyplot costs about a second of start-up, and only plotting needs it
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
-
-    from simfab.io.atomic import save_figure
 
     fem = res.problem.base.fem
     H = res.problem.handles
@@ -330,9 +324,6 @@ def plot_shape(res, path) -> Path:
 def write_usd(res, path) -> Path:
     """Accepted rest shapes (one time code each, ``simfab:objective`` attribute), then the final
     design's insertion (the object animated)."""
-    from simfab.coupling.outputs import _display_faces, _object_display, vertex_von_mises
-    from simfab.io.usd import StageWriter
-
     cm = res.problem.base
     fem = cm.fem
     w = StageWriter(path, time_codes_per_second=12.0)
@@ -363,17 +354,12 @@ def write_all(res, out: Path, *, scene_xml: Path, scene_toml: Path, stem: str | 
               extra: dict | None = None) -> dict:
     """Write every output (see the module docstring) together; return the summary with paths
     (``extra`` keys added to it, e.g. the restarts)."""
-    from simfab.io.atomic import atomic_paths, write_csv, write_json
-    from simfab.io.mesh import save_mesh
-
     fem = res.problem.base.fem
     stem = stem or res.problem.base.name
     paths = output_paths(out, stem, fem.dim, target=res.problem.target is not None)
     s = summary(res)
     s.update(extra or {})
     if s.get("mesh_check"):
-        from simfab.design.verify import check_warnings
-
         s["warnings"] = s["warnings"] + check_warnings(s["mesh_check"])
     s["outputs"] = {k: str(v) for k, v in paths.items()}
     with atomic_paths(paths) as tmp:

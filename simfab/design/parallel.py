@@ -2,25 +2,25 @@
 on worker processes.
 
 One optimization is a chain of decisions, but most proposals are rejected, so the annealer can
-draw the next proposals before the current one is decided. This module screens each in this
-process (shape validity and E_L against the threshold decide most of them at once) and runs the
-insertion simulations of the others on worker processes, as many at a time as there are
-workers. Each worker holds its own :class:`~simfab.design.optimize.DesignProblem`, rebuilt from a
-:class:`ProblemSource` (the scene file, the overrides and the placed handles): the problem's
-Warp arrays and caches do not cross process boundaries, and workers are spawned, not forked
-(Warp's runtime is not fork-safe). Rebuilding is deterministic, so a worker evaluates a design
-to exactly the figures this process would (tested); the optimization's result does not depend
-on the number of workers. Starting a worker (spawned Python, NumPy/SciPy, Warp, simfab) takes
-about 2 s, so :class:`Workers` can be started before the problem exists (``couple optimize``
-starts them before the initial insertion and the handle placement, ~1.5-2.5 s on the stand side)
-and serve several optimizations (the correction rounds).
+draw the next proposals before the current one is decided. :class:`EvaluationPool` screens each
+in this process (shape validity and E_L against the threshold decide most of them at once,
+:func:`simfab.design.problem.screen`) and runs the insertion simulations of the others on worker
+processes, as many at a time as there are workers; a run that is no longer needed (a proposal
+before it was accepted) is cancelled at its next step instead of holding its worker.
 
-Measured on the stand side (300 iterations, 2-core machine at load 1.2-1.5, whose speed drifts by
-up to 30 % within minutes, so compare runs made back to back): ``python tools/bench.py optimize
---no-mesh-check`` (2 workers) 32.7 s against 42.4 s with ``--workers 1``. 61 % of the simulated
-candidates are accepted, so the free slot mostly serves the annealer's acceptance branch (49 drawn,
-32 adopted); discarded runs are cancelled at their next step instead of holding their worker. The
-same run before the acceptance branch and the cancellation: 37.1 s.
+Each worker holds its own :class:`~simfab.design.problem.DesignProblem`, rebuilt from the
+problem's :class:`~simfab.design.problem.ProblemSource` (:func:`simfab.design.problem.rebuild`),
+and receives the problem's :class:`~simfab.design.problem.EvaluationSettings` with every task:
+the problem's Warp arrays and caches do not cross process boundaries, and workers are spawned,
+not forked, because Warp's runtime is not fork-safe. Rebuilding is deterministic, so a worker
+evaluates a design to exactly the figures this process would (tested), and the optimization's
+result does not depend on the number of workers.
+
+Starting a worker (spawned Python, NumPy/SciPy, Warp, simfab) costs seconds, so :class:`Workers`
+can be started before the problem exists (``couple optimize`` starts them before the initial
+insertion and the handle placement, which their start-up then overlaps) and serve several
+optimizations (the correction rounds). Measured speed-ups: ``python tools/bench.py optimize``
+with ``--workers 1`` and ``2``.
 """
 
 from __future__ import annotations
@@ -28,71 +28,44 @@ from __future__ import annotations
 import dataclasses
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
 
 import numpy as np
 
+from simfab._warp import device
+from simfab.design.problem import (
+    DesignProblem,
+    Evaluation,
+    EvaluationSettings,
+    ProblemSource,
+    evaluate,
+    rebuild,
+    restricted,
+    screen,
+)
 
-@dataclass(frozen=True, kw_only=True)
-class ProblemSource:
-    """What rebuilds a design problem in another process: the scene (MJCF path), the overrides of
-    its ``[design]`` and ``[simulation]`` tables, the Warp device, the active handle vertices
-    (placed once, by the caller), the seed, the mesh corrections of the figures with the margin
-    the penalties aim inside the bounds, and the facets every candidate's insertion starts refined
-    with (``DesignProblem.refined``)."""
-
-    scene: str
-    design: dict = field(default_factory=dict)
-    simulation: dict = field(default_factory=dict)
-    device: str = "cpu"
-    handle_vertices: tuple = ()
-    seed: int = 0
-    corrections: dict = field(default_factory=dict)
-    margin: float = 0.0
-    refined: tuple = ()
-
-
-def rebuild(source: ProblemSource):
-    """The :class:`~simfab.design.optimize.DesignProblem` that ``source`` describes."""
-    from simfab._warp import device as check_device
-    from simfab.design.optimize import make_problem
-    from simfab.design.scene import load_design_scene
-
-    ds = load_design_scene(source.scene, design=source.design, simulation=source.simulation,
-                           device=check_device(source.device))
-    p = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target,
-                     handle_vertices=list(source.handle_vertices), seed=source.seed, source=source)
-    return dataclasses.replace(p, corrections=dict(source.corrections), margin=source.margin,
-                               refined=tuple(source.refined))
-
-
-_WORKER = None  # (source without its refined facets, the DesignProblem it rebuilds to) in a worker
+#: In a worker: the source of the problem it holds (None before its first task) and that problem.
+_WORKER: tuple[ProblemSource, DesignProblem] | None = None
 _CANCEL = None  # shared flags: _CANCEL[ticket % CANCEL_SLOTS] set when submission `ticket` is not needed
 CANCEL_SLOTS = 1024  # more than the submissions ever in flight (the annealer bounds them)
 
 
 def _init_worker(cancel) -> None:
-    """A worker's start: the modules an evaluation needs (Python, NumPy/SciPy, Warp, simfab's
-    coupling and design: most of a worker's ~2 s start-up), before any problem is known."""
+    """A worker's start, before any problem is known: the shared cancel flags and the Warp device
+    (importing this module has already loaded what an evaluation needs: NumPy/SciPy, Warp, simfab's
+    coupling and design, most of a worker's start-up)."""
     global _CANCEL
     _CANCEL = cancel
-    import simfab.coupling.simulate  # noqa: F401
-    import simfab.design.optimize  # noqa: F401
-    from simfab._warp import device
-
     device("cpu")
 
 
-def _problem(source: ProblemSource):
-    """This worker's problem for ``source``, rebuilt when the source (facets aside) changed; the
-    facets a candidate's run starts refined with are set without a rebuild (optimize() sets them
-    after the initial insertion)."""
+def _problem(source: ProblemSource, settings: EvaluationSettings | None = None) -> DesignProblem:
+    """This worker's problem for ``source``, rebuilt when the source changed, with ``settings``
+    (set without a rebuild: they change between the rounds of one optimization)."""
     global _WORKER
-    key = dataclasses.replace(source, refined=())
-    if _WORKER is None or _WORKER[0] != key:
-        _WORKER = (key, rebuild(key))
-    if tuple(source.refined) != _WORKER[1].refined:
-        _WORKER = (key, dataclasses.replace(_WORKER[1], refined=tuple(source.refined)))
+    if _WORKER is None or _WORKER[0] != source:
+        _WORKER = (source, rebuild(source))
+    if settings is not None and settings != _WORKER[1].settings:
+        _WORKER = (source, dataclasses.replace(_WORKER[1], settings=settings))
     return _WORKER[1]
 
 
@@ -102,17 +75,16 @@ def _ready(source: ProblemSource | None = None) -> bool:
     return True
 
 
-def _evaluate_remote(source: ProblemSource, h: np.ndarray, threshold: float, ticket: int):
-    from simfab.design.optimize import evaluate
-
+def _evaluate_remote(source: ProblemSource, settings: EvaluationSettings, h: np.ndarray, threshold: float,
+                     ticket: int) -> Evaluation:
     # without its InsertionResult (not sent back); aborted once the annealer cancels it
     slot = ticket % CANCEL_SLOTS
-    return evaluate(_problem(source), h, threshold=threshold, abort=lambda: _CANCEL[slot] != 0)
+    return evaluate(_problem(source, settings), h, threshold=threshold, abort=lambda: _CANCEL[slot] != 0)
 
 
 class Workers:
     """``n`` worker processes for :class:`EvaluationPool`, started before the problem they will
-    evaluate is known: their start-up (spawned Python, NumPy/SciPy, Warp, simfab; ~2 s) then
+    evaluate is known: their start-up (spawned Python, NumPy/SciPy, Warp, simfab: seconds) then
     overlaps the caller's own work (the initial insertion, the handle placement) instead of
     delaying the annealing's first simulations. Each builds a problem on its first task for it and
     keeps it while the tasks' :class:`ProblemSource` stays the same, so one set of workers serves
@@ -146,7 +118,7 @@ class EvaluationPool:
     ``workers``: a number of processes to start (and shut down on exit), or running
     :class:`Workers` (left running). A context manager."""
 
-    def __init__(self, problem, workers):
+    def __init__(self, problem: DesignProblem, workers: int | Workers):
         if problem.source is None:
             raise ValueError("parallel evaluation needs a problem built from a scene file (problem.source)")
         self.problem = problem
@@ -158,8 +130,6 @@ class EvaluationPool:
             self.workers.executor.submit(_ready, problem.source)
 
     def screen(self, h, threshold):
-        from simfab.design.optimize import screen
-
         ev = screen(self.problem, h, threshold)
         return (ev.objective, ev) if ev.reason else None
 
@@ -167,13 +137,12 @@ class EvaluationPool:
         w = self.workers
         t, w.tickets = w.tickets, w.tickets + 1
         w.cancel[t % CANCEL_SLOTS] = 0
-        src = dataclasses.replace(self.problem.source, refined=tuple(self.problem.refined))
-        return _Pending(w.executor.submit(_evaluate_remote, src, h, threshold, t), w.cancel, t % CANCEL_SLOTS)
+        p = self.problem
+        return _Pending(w.executor.submit(_evaluate_remote, p.source, p.settings, h, threshold, t), w.cancel,
+                        t % CANCEL_SLOTS)
 
     def restrict(self, out, threshold):
         """An evaluation run with a looser threshold, as if run with ``threshold``."""
-        from simfab.design.optimize import restricted
-
         ev = restricted(self.problem, out[1], threshold)
         return ev.objective, ev
 

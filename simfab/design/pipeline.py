@@ -6,9 +6,29 @@ outputs (:mod:`simfab.design.outputs`)."""
 
 from __future__ import annotations
 
+import contextlib
+import time
 from pathlib import Path
 
-from simfab.errors import InputError
+import numpy as np
+
+from simfab.coupling.scene import load_coupling_scene
+from simfab.coupling.simulate import simulate
+from simfab.design import brief as B
+from simfab.design import outputs
+from simfab.design.optimize import optimize
+from simfab.design.parallel import Workers
+from simfab.design.problem import EvaluationSettings, ProblemSource, evaluate, make_problem, rebuild
+from simfab.design.scene import load_design_scene
+from simfab.design.synthesis import boundary_loops, revolve_outline, revolved_scene
+from simfab.design.verify import checked_objective, correction_factors, level_figures, needs_correction
+from simfab.design.verify import mesh_check as check_mesh  # (optimize_scene's mesh_check is its switch)
+from simfab.errors import ConvergenceError, InputError
+from simfab.io.atomic import write_json
+from simfab.io.mesh import save_mesh
+from simfab.io.outpaths import make_out_dir
+from simfab.progress import log
+from simfab.sweep import run_tasks
 
 
 def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict | None = None, device: str = "cpu",
@@ -32,22 +52,14 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
         the mesh-converged ones, warning when a constraint holds only on the coarse mesh
     """
-    import contextlib
-
-    from simfab.design import outputs
-    from simfab.design.parallel import Workers
-    from simfab.design.scene import load_design_scene
-    from simfab.io.atomic import write_json
-    from simfab.io.outpaths import make_out_dir
-    from simfab.progress import log
-
     out = make_out_dir(out)
     ds = load_design_scene(scene, design=design, simulation=simulation, device=device)
     cm = ds.cm
     if revolve is not None and cm.dim != 2:
         raise InputError("only a 2D section can be revolved", where="--revolve-axis")
     if revolve is not None and len(revolve) > 2 and revolve[2] and not ds.kept_regions:
-        raise InputError("replicating arms needs the base marked by a keep site ([design] keep)", where="--revolve-arms")
+        raise InputError("replicating arms needs the base marked by a keep site ([design] keep)",
+                         where="--revolve-arms")
     log(f"couple optimize: {cm.name}: {cm.fem.n_elements} elements, {len(cm.s_steps) - 1} steps, "
         f"{ds.brief.handles} handles ({ds.brief.placement}), up to {ds.brief.iterations} iterations", quiet=quiet)
     with contextlib.ExitStack() as stack:
@@ -73,35 +85,24 @@ def _anneal_checked(ds, design, simulation, device, seed, restarts, scheduler, w
     """Place the handles, anneal (``restarts`` runs, or one on ``workers``: a count or running
     :class:`simfab.design.parallel.Workers`), check the design on refined meshes and correct;
     returns (DesignResult, summary extras)."""
-    from simfab.coupling.simulate import simulate
-    from simfab.design.optimize import make_problem, optimize
-    from simfab.design.parallel import ProblemSource
-
     cm = ds.cm
     initial = simulate(cm) if ds.brief.placement == "displacement" else None
-    source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}), device=device)
+    source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}),
+                           device=device)
     problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed,
                            source=source)
     if mesh_check and problem.target is not None:
-        # target matching: the coarse mesh's bias on the whole profile (~0.75 on profile2d) is known
-        # before any iteration from the initial shape's check; without it the first run matches the
-        # target with a too-stiff model and a correction round of half the budget must undo it
-        # (8 handles on profile2d: 0.31 N -> 0.14 N RMS on the finest check level)
-        import dataclasses
-
-        from simfab.design.verify import correction_factors, mesh_check as check_shape
-
-        factors = correction_factors(check_shape(problem, problem.handles.rest, quiet=quiet))
-        problem = dataclasses.replace(problem, corrections=factors,
-                                      source=dataclasses.replace(problem.source, corrections=factors))
+        # target matching: the coarse mesh's bias on the whole profile is known before any iteration
+        # from the initial shape's check; without it the first run matches the target with a
+        # too-stiff model and a correction round of half the budget must undo it
+        problem = problem.with_settings(corrections=correction_factors(check_mesh(problem, problem.handles.rest,
+                                                                                  quiet=quiet)))
     if restarts <= 1:
         res, runs = optimize(problem, quiet=quiet, seed=seed, workers=workers), None
     else:
         res, runs = _restarts(problem, seed, restarts, quiet, scheduler)
     extra = {} if runs is None else {"restarts": runs}
     if mesh_check and res.best.status == "ok":
-        from simfab.design.verify import checked_objective
-
         first = res.iterations
         res, extra["mesh_check"], extra["correction_rounds"] = mesh_corrected(res, seed, workers, quiet)
         extra["iterations_total"] = first + sum(r["iterations"] for r in extra["correction_rounds"])
@@ -124,16 +125,9 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
     Returns (result, its check, [per round: factors, feasible_fine, checked objective, iterations,
     seconds, kept]).
     """
-    import dataclasses
-
-    from simfab.design.brief import CORRECTION_MARGIN
-    from simfab.design.optimize import optimize
-    from simfab.design.verify import checked_objective, correction_factors, mesh_check, needs_correction
-    from simfab.progress import log
-
     name = res.problem.base.name
     log(f"couple optimize: {name}: mesh check of the optimized shape (quadratic elements)", quiet=quiet)
-    check = mesh_check(res.problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
+    check = check_mesh(res.problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
 
     def key(r, c):
         return (not c["feasible_fine"], checked_objective(r.problem, r.best, c))
@@ -141,18 +135,16 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
     best, rounds = (res, check), []
     for k in range(res.problem.brief.correction_rounds):
         res_b, check_b = best
-        if not needs_correction(check_b, res_b.problem.corrections):
+        if not needs_correction(check_b, res_b.problem.settings.corrections):
             break
         factors = correction_factors(check_b)
-        p = res_b.problem
-        margin = CORRECTION_MARGIN  # the next design's factors differ from these: aim inside the bounds
-        src = None if p.source is None else dataclasses.replace(p.source, corrections=factors, margin=margin)
-        problem = dataclasses.replace(p, corrections=factors, margin=margin, source=src)
+        # the next design's factors differ from these: aim inside the bounds
+        problem = res_b.problem.with_settings(corrections=factors, margin=B.CORRECTION_MARGIN)
         log(f"couple optimize: {name}: correction round {k + 1}: the coarse figures times "
             + ", ".join(f"{n} {v:.3g}" for n, v in factors.items()), quiet=quiet)
-        nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet, workers=workers if src is not None else 1,
+        nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet, workers=workers if problem.source is not None else 1,
                        start=res_b.best.h, iterations=max(problem.brief.iterations // 2, 1))
-        c = mesh_check(problem, nxt.best.rest, figures0=nxt.best.figures, quiet=quiet)
+        c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, quiet=quiet)
         better = key(nxt, c) < key(*best)
         rounds.append({"round": k + 1, "factors": factors, "feasible_fine": c["feasible_fine"],
                        "objective_fine": key(nxt, c)[1], "iterations": nxt.iterations, "seconds": nxt.seconds,
@@ -169,29 +161,17 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
     optimized 2D one (``optimized``: its output paths; ``scene``: the DesignScene, for its keep
     sites), simulated: {"outputs": paths, and with arms: "elements", "seconds", "category",
     "figures", "constraints", "warnings"}."""
-    from simfab.design.synthesis import boundary_loops, revolve_outline, revolved_scene
-    from simfab.io.mesh import save_mesh
-
     fem = res.problem.base.fem
     if not arms:
         loop = boundary_loops(fem.boundary_facets)[0]
         mesh = revolve_outline(res.best.rest[loop], axis=axis, offset=offset)
         mesh.apply_scale(1e3)
         return {"outputs": {"revolved_stl": save_mesh(mesh, Path(out) / f"{stem}_optimized_revolved.stl")}}
-    import time
-
-    import numpy as np
-
-    from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import simulate
-    from simfab.design import brief as B
-    from simfab.design.verify import level_figures
-    from simfab.progress import log
-
     cm = res.problem.base
     kept = np.concatenate(scene.kept_regions) if scene is not None and scene.kept_regions else np.zeros(0, int)
-    paths = revolved_scene(res.best.rest, fem, kept=kept, object_start=cm.pose(0.0)[1], scene_xml=optimized["scene_xml"],
-                           scene_toml=optimized["scene_toml"], out=out, stem=stem, axis=axis, offset=offset, arms=arms)
+    paths = revolved_scene(res.best.rest, fem, kept=kept, object_start=cm.pose(0.0)[1],
+                           scene_xml=optimized["scene_xml"], scene_toml=optimized["scene_toml"], out=out, stem=stem,
+                           axis=axis, offset=offset, arms=arms)
     cm3 = load_coupling_scene(paths["scene_xml"], device=fem.device)
     log(f"couple optimize: simulating the revolved part ({arms} arms, {cm3.fem.n_elements} 10-node tets)", quiet=quiet)
     t0 = time.perf_counter()
@@ -212,27 +192,21 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
             "warnings": warnings}
 
 
-def anneal_task(*, source, seed: int):
+def anneal_task(*, source: ProblemSource, settings: EvaluationSettings, seed: int):
     """One restart (a Dask task): the annealing of the problem ``source`` rebuilds
-    (:class:`simfab.design.parallel.ProblemSource`, handles already placed) with ``seed``;
-    returns the :class:`simfab.design.optimize.DesignResult` without its unpicklable parts (the
-    problem and the insertion results, which the client rebuilds)."""
-    from simfab.design.optimize import optimize
-    from simfab.design.parallel import rebuild
-
-    res = optimize(rebuild(source), seed=seed)
+    (:class:`simfab.design.problem.ProblemSource`, handles already placed), scored with
+    ``settings``, with ``seed``; returns the :class:`simfab.design.optimize.DesignResult` without
+    its unpicklable parts (the problem and the insertion results, which the client rebuilds)."""
+    res = optimize(rebuild(source, settings), seed=seed)
     res.problem = None
     res.initial.result = res.best.result = None
     return res
 
 
 def _restarts(problem, seed, restarts, quiet, scheduler):
-    from simfab.design.optimize import evaluate
-    from simfab.errors import ConvergenceError
-    from simfab.sweep import run_tasks
-
-    tasks = [dict(source=problem.source, seed=seed + i) for i in range(restarts)]
-    results = run_tasks(anneal_task, tasks, scheduler=scheduler, quiet=quiet, desc=f"optimize {problem.base.name} restarts")
+    tasks = [dict(source=problem.source, settings=problem.settings, seed=seed + i) for i in range(restarts)]
+    results = run_tasks(anneal_task, tasks, scheduler=scheduler, quiet=quiet,
+                        desc=f"optimize {problem.base.name} restarts")
     runs = []
     for t, r in zip(tasks, results):
         row = {"seed": t["seed"], "status": r.status, "message": r.message, "seconds": r.seconds}

@@ -22,16 +22,15 @@ not change: they get no active handle (the kept vertices are inactive handles,
 vertex (or the closest count reachable).
 
 Cost: the similarity matrix is dense, (n, n) float64: 8 n^2 bytes (12k vertices: 1.2 GB), and
-each affinity-propagation fit costs O(n^2) per iteration (scikit-learn, one core: 0.3 s at 500
-points, 2.4 s at 1,000, 22 s at 2,500; the preference bisection fits up to BISECTIONS times). Larger
-meshes are first reduced to MAX_POINTS samples (farthest-point, on the graph's geodesic distance),
-which are clustered and among which the handles are chosen: cclamp2d's 2,589 vertices took
-over 8 minutes to place with 2,500 samples, 11.5-11.7 s with 1,000 or 1,200 (handle placement
-and weights). (1,200: paddleside2d's 1,128 vertices are clustered whole, as its documented design
-was.)
+each affinity-propagation fit costs O(n^2) per iteration, up to BISECTIONS fits. Larger meshes
+are therefore first reduced to MAX_POINTS samples (farthest-point, on the graph's geodesic
+distance), which are clustered and among which the handles are chosen (the choice of
+MAX_POINTS: docs/decisions.md).
 """
 
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 import scipy.sparse as sp
@@ -116,8 +115,8 @@ def place_handles(rest: np.ndarray, elements: np.ndarray, count: int, kept: np.n
 def _cluster_to_count(S: np.ndarray, count: int, is_kept: np.ndarray, seed: int) -> np.ndarray:
     """Affinity-propagation labels with the preference bisected so that ``count`` clusters contain
     no kept point (closest achievable count otherwise)."""
-    import warnings
-
+    # deferred: scikit-learn costs seconds of start-up (every worker process's) and only the
+    # displacement placement needs it
     from sklearn.cluster import AffinityPropagation
     from sklearn.exceptions import ConvergenceWarning
 

@@ -9,8 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
+from simfab.coupling.model import CouplingModel
+from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
 from simfab.design.brief import DesignBrief, TargetProfile, read_target_profile
 from simfab.errors import InputError
+from simfab.io.mjcf import load_scene
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -18,7 +21,7 @@ class DesignScene:
     """cm: the initial CouplingModel; brief; kept_regions: vertex arrays of the keep sites;
     target: TargetProfile or None; xml, toml: the scene's files."""
 
-    cm: object
+    cm: CouplingModel
     brief: DesignBrief
     kept_regions: tuple
     target: TargetProfile | None
@@ -30,8 +33,6 @@ def check_brief_table(scene) -> None:
     """Validate the ``[design]`` table of a coupling scene's TOML, when it has one (InputError naming
     the file, the table and the key): commands that only simulate the scene check it too, so a
     misspelt brief key is reported by every command, not first by ``couple optimize``."""
-    from simfab.coupling.scene import read_toml, scene_paths
-
     _, toml = scene_paths(scene)
     table = read_toml(toml).get("design")
     if table is None:
@@ -45,9 +46,6 @@ def load_design_scene(scene, *, design: dict | None = None, simulation: dict | N
                       device: str = "cpu") -> DesignScene:
     """Load a coupling scene with its design brief; ``design`` overrides keys of ``[design]``
     (command-line options), ``simulation`` those of ``[simulation]``."""
-    from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
-    from simfab.io.mjcf import load_scene
-
     xml, toml = scene_paths(scene)
     if not xml.is_file():
         raise InputError("scene file not found", where=str(xml))

@@ -2,9 +2,8 @@
 
 Linear elasticity puts a stress singularity at every sharp re-entrant corner (sigma ~ r^(-lambda),
 lambda ~ 0.3-0.5 in 2D), and the design parts have such corners (slots cut into blocks, jaw
-roots). The largest element stress there grows without bound as the mesh is refined - measured on
-the optimized tighter building block: 53 -> 69 -> 93 MPa at 457 -> 1,828 -> 7,312 triangles - so
-it has no mesh-converged value, and a yield constraint on it would say less about the part than
+roots). The largest element stress there grows without bound as the mesh is refined, so it has
+no mesh-converged value, and a yield constraint on it would say less about the part than
 about its mesh. The Theory of Critical Distances (Taylor 2007) judges notched parts by the
 stress averaged over a material length instead; here every element's von Mises stress is
 replaced by the volume-weighted mean over the elements whose centroids lie within ``radius``
@@ -21,7 +20,7 @@ than the radius averages each element with itself (the raw element maximum).
 
 Quadratic (P2) elements carry a stress that varies over the element (linear in F): the insertion
 records only each element's largest quadrature-point stress, which biases the mean upwards by
-O(h |grad sigma|) (+5 % measured on the stand side at 450 triangles). :func:`p2_averaged_von_mises`
+O(h |grad sigma|). :func:`p2_averaged_von_mises`
 applies the same definition at the quadrature points instead - each point a cell of volume
 V_e w_q at its rest position, its stress replaced by the volume-weighted mean over the points
 within ``radius``:
@@ -35,6 +34,9 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from simfab.fem.p2 import corner_gradients
 
 #: Default averaging radius [m] ([design] stress_radius).
 STRESS_RADIUS = 0.5e-3
@@ -57,8 +59,6 @@ def averaged_von_mises(fem, von_mises: np.ndarray, radius: float) -> float:
 
 def _ball_mean_matrix(c: np.ndarray, V: np.ndarray, radius: float) -> sp.csr_matrix:
     """(k, k) row-stochastic A, (A s)_i = sum_{|c_j - c_i| <= r} V_j s_j / sum V_j, of cells at c (k, dim)."""
-    from scipy.spatial import cKDTree
-
     pairs = cKDTree(c).query_pairs(radius, output_type="ndarray")
     k = len(c)
     rows = np.r_[np.arange(k), pairs[:, 0], pairs[:, 1]]
@@ -72,8 +72,6 @@ def quadrature_von_mises(fem, x) -> np.ndarray:
     [m]: F(L) = sum_i L_i F_i from the corner gradients (F is affine over an element), sigma_vm =
     sqrt(3/2) mu |dev(F F^T - I)| / J (:func:`simfab.fem.stress.det_and_von_mises`; plane strain in
     2D: the out-of-plane entry of F F^T - I is 0); +inf where det F <= 0."""
-    from simfab.fem.p2 import corner_gradients
-
     F = np.einsum("qc,mcij->mqij", fem.qp_bary, corner_gradients(fem, x))
     J = np.linalg.det(F)
     C = F @ np.swapaxes(F, -1, -2) - np.eye(fem.dim)

@@ -16,6 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
+from simfab._warp import device as check_device
+from simfab.design.optimize import optimize
+from simfab.design.problem import make_problem
+from simfab.design.scene import load_design_scene
+from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json
+from simfab.io.outpaths import make_out_dir
+from simfab.sweep import run_tasks
+
 METHODS = ("displacement", "spatial", "random")
 
 
@@ -30,8 +38,7 @@ def iterations_per_handle_budget(brief, handles: int) -> int:
     progress per iteration of a random-walk search falls as 1 / variables (an adaptive-step
     (1+1) search on a quadratic needs O(n log(1 / eps)) iterations for n variables): with one
     budget for every count the largest count stops furthest from its optimum
-    (tests/design/test_handle_budget.py, on a least-squares stand-in with a known optimum: 17x
-    further for 8 handles than for 2 at 300 iterations each, about as far at 600 vs 150). The
+    (tests/design/test_handle_budget.py shows it on a least-squares stand-in with a known optimum). The
     mesh check's correction rounds (half the budget each,
     :func:`simfab.design.pipeline.mesh_corrected`) scale with it."""
     return max(1, round(brief.iterations * int(handles) / brief.handles))
@@ -39,10 +46,6 @@ def iterations_per_handle_budget(brief, handles: int) -> int:
 
 def run_one(*, scene: str, design: dict, simulation: dict, method: str, count: int, seed: int) -> dict:
     """One optimization of the study (a Dask task): returns its figures."""
-    from simfab._warp import device as check_device
-    from simfab.design.optimize import make_problem, optimize
-    from simfab.design.scene import load_design_scene
-
     check_device("cpu")
     ds = load_design_scene(scene, design=dict(design, handles=count, placement=method), simulation=simulation)
     problem = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, seed=seed)
@@ -54,13 +57,10 @@ def run_one(*, scene: str, design: dict, simulation: dict, method: str, count: i
 
 
 def handle_study(scene, *, out, counts=(2, 4, 6), randoms: int = 10, design: dict | None = None,
-                 simulation: dict | None = None, seed: int = 0, quiet: bool = True, scheduler: str | None = None) -> dict:
+                 simulation: dict | None = None, seed: int = 0, quiet: bool = True,
+                 scheduler: str | None = None) -> dict:
     """Run the study and write ``NAME_handle_study.csv`` (one row per run), ``..._summary.csv``,
     ``.png`` and ``.json`` into ``out``; returns the summary."""
-    from simfab.io.outpaths import make_out_dir
-    from simfab.design.scene import load_design_scene
-    from simfab.sweep import run_tasks
-
     out = make_out_dir(out)
     ds = load_design_scene(scene, design=design, simulation=simulation)  # validates before any task runs
     name = ds.cm.name
@@ -69,25 +69,25 @@ def handle_study(scene, *, out, counts=(2, 4, 6), randoms: int = 10, design: dic
     for k in counts:
         for method in METHODS:
             seeds = range(seed, seed + randoms) if method == "random" else [seed]
-            tasks += [dict(scene=scene_path, design=dict(design or {}), simulation=dict(simulation or {}), method=method,
-                           count=int(k), seed=int(s)) for s in seeds]
+            tasks += [dict(scene=scene_path, design=dict(design or {}), simulation=dict(simulation or {}),
+                           method=method, count=int(k), seed=int(s)) for s in seeds]
     results = run_tasks(run_one, tasks, scheduler=scheduler, quiet=quiet, desc=f"handle study {name}")
     runs = []
     for t, r in zip(tasks, results):
         row = {"method": t["method"], "handles": t["count"], "seed": t["seed"], "status": r.status,
                "message": r.message or ""}
         if r.status == "ok":
-            row.update({k: r.value[k] for k in ("converged", "E_L", "objective", "iterations", "simulations", "seconds")})
+            row.update({k: r.value[k]
+                        for k in ("converged", "E_L", "objective", "iterations", "simulations", "seconds")})
         else:
-            row.update(converged=False, E_L=math.nan, objective=math.nan, iterations=0, simulations=0, seconds=r.seconds)
+            row.update(converged=False, E_L=math.nan, objective=math.nan, iterations=0, simulations=0,
+                       seconds=r.seconds)
         runs.append(row)
     rows = summarize(runs, counts)
     paths = {"runs_csv": out / f"{name}_handle_study.csv", "summary_csv": out / f"{name}_handle_study_summary.csv",
              "plot_png": out / f"{name}_handle_study.png", "summary_json": out / f"{name}_handle_study.json"}
     result = {"scene": name, "rows": rows, "runs": len(runs), "failed_runs": sum(r["status"] != "ok" for r in runs),
               "outputs": {k: str(v) for k, v in paths.items()}, "units": {"E_L": "-"}}
-    from simfab.io.atomic import atomic_paths, write_csv, write_json
-
     with atomic_paths(paths) as tmp:
         keys = list(runs[0].keys())
         write_csv(tmp["runs_csv"], keys, ([r[k] for k in keys] for r in runs))
@@ -113,12 +113,10 @@ def summarize(runs: list[dict], counts) -> list[dict]:
 
 
 def plot(rows: list[dict], name: str, path) -> Path:
-    import matplotlib
+    import matplotlib  # deferred: pyplot costs about a second of start-up, and only plotting needs it
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from simfab.io.atomic import save_figure
 
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9.6, 3.8), dpi=120)
     counts = sorted({r["handles"] for r in rows})

@@ -20,9 +20,17 @@
 
 from __future__ import annotations
 
+import tomllib
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import manifold3d as m3
 import numpy as np
+import tomli_w
 
 from simfab.errors import InputError
+from simfab.fem.meshing import tetrahedralize
+from simfab.io.atomic import atomic_paths
 
 
 def boundary_loops(facets: np.ndarray) -> list[np.ndarray]:
@@ -46,7 +54,7 @@ def boundary_loops(facets: np.ndarray) -> list[np.ndarray]:
 def revolve_outline(loop_xy: np.ndarray, *, axis: str = "y", offset: float = 0.0, sections: int = 96):
     """Watertight trimesh of a closed outline (k, 2) [m] revolved a full turn about the in-plane
     axis (see module docstring); the revolution axis becomes the 3D z axis."""
-    import trimesh
+    import trimesh  # deferred: about a second of start-up, for the 3D outputs only
 
     P = np.asarray(loop_xy, float)
     if axis == "y":
@@ -88,8 +96,7 @@ def revolve_arms(loops, *, axis: str = "x", offset: float = 0.0, cut: float, bas
     The 3D part is in the section's frame: axis "x": points (a, offset + r cos t, r sin t) with a
     the axial and r the radial coordinate; the section's plane is z = 0.
     """
-    import manifold3d as m3
-    import trimesh
+    import trimesh  # deferred: about a second of start-up, for the 3D outputs only
 
     if axis not in ("x", "y"):
         raise InputError(f"revolution axis must be 'x' or 'y', got {axis!r}", where="--revolve-axis")
@@ -158,18 +165,10 @@ def revolved_scene(X: np.ndarray, fem, *, kept: np.ndarray, object_start: np.nda
     STEM_optimized_revolved_part.npz (the tet mesh, so re-simulating is reproducible); returns
     their paths {"stl", "scene_xml", "scene_toml", "mesh"} (all or nothing written).
     """
-    import tomllib
-    import xml.etree.ElementTree as ET
-    from pathlib import Path
-
-    import tomli_w
-
-    from simfab.fem.meshing import tetrahedralize
-    from simfab.io.atomic import atomic_paths
-
     kept = np.asarray(kept, dtype=np.int64)
     if kept.size == 0:
-        raise InputError("replicating arms needs the base marked by a keep site ([design] keep)", where="--revolve-arms")
+        raise InputError("replicating arms needs the base marked by a keep site ([design] keep)",
+                         where="--revolve-arms")
     X = np.asarray(X, float)
     ax = 0 if axis == "x" else 1
     rad = 1 - ax

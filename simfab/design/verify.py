@@ -2,55 +2,33 @@
 mesh?
 
 The optimizer simulates every candidate on the scene's own (coarse) mesh of linear simplices,
-which lock in bending: at the design scenes' ~450 triangles / ~1.5k tets the coupling forces are
-tens of percent too high (``simfab couple converge``; the knocker design's F_in by 91 % against P2
-on the same mesh, 207 % against P2 refined once). The
-optimized shape exists only as a mesh, so the same insertion (object, path, steps, support,
-options) is run again at finer *levels*, each an element order and a number of uniform
-subdivisions (:func:`simfab.fem.subdivide.subdivide`: every edge split, the same
-piecewise-linear domain, h -> h/2):
+which lock in bending: at the design scenes' resolution the coupling forces are tens of percent
+too high (``simfab couple converge`` measures it). The optimized shape exists only as a mesh, so
+the same insertion (object, path, steps, support, options) is run again at finer *levels*, each
+an element order and a number of uniform subdivisions
+(:func:`simfab.fem.subdivide.subdivide`: every edge split, the same piecewise-linear domain,
+h -> h/2):
 
     linear 1x (the optimization mesh), P2 1x, P2 refined once (2D 4x, 3D 8x the elements)
 
 (:func:`check_levels`; ``[design] check_refinements`` sets the number of P2 refinements, 1 by
 default, 0 for a quick check that cannot see its own error).
 
-Quadratic (P2) elements (:func:`simfab.fem.p2.to_p2`) do not lock, so they are the reference
-(measured on the initial shapes against P2 at 16x; 2D ``standside2d`` / ``block2d_tight``,
-seconds on a shared 2-core machine):
-
-    level (2D)             F_in            F_rm            F_grip          sigma_avg     seconds
-    linear 1x              +12 / +30 %     +19 / +31 %     +16 / +39 %     +16 / +30 %   0.8 / 2.7
-    linear 16x             +2.7 / +2.7 %   +2.6 / +2.8 %   +1.3 / +3.8 %   +1.0 / +0.8 % 4.0 / 9.1
-    linear 1, 4, 16x fit   -0.8 / -0.3 %   +0.3 / -0.2 %   -0.2 / -27 %    -0.1 / -1.9 % 5.8 / 15
-    P2 1x                  -1.3 / +1.0 %   +1.8 / +1.0 %   +0.5 / +20 %    +1.7 / +5.2 % 7.3 / 4.1
-    P2 4x                  +0.6 / +0.3 %   +0.6 / +0.3 %   +0.1 / +1.3 %   +1.4 / +1.6 % 24 / 18
-
-The linear three-level extrapolation is as accurate where the figures converge smoothly and
-faster, but it fails on a figure that jumps between levels (the grip, read where the object
-comes to rest: -27 %); P2 at 4x is within 1.6 % on every figure without a fitted order, for
-1.5-2x the seconds. In 3D the linear mesh refined once (8x, the same unknowns as P2 1x) is still
-12-19 % stiff. P2 1x is within ~4 % on knocker3d's large-interference insertion (tools/bench.py
-p2_insertion) but not on the optimized knocker design (1,576 tets; a 5 N snap):
-
-    level (3D)      F_in      F_rm      sigma_avg   E_max      seconds (load ~8)
-    linear 1x       8.58 N    6.17 N    50.7 MPa    2.31 mJ    7.7
-    linear 8x       5.03 N    5.63 N    56.0 MPa    1.27 mJ    19
-    P2 1x           4.49 N    5.01 N    59.8 MPa    1.14 mJ    26
-    P2 8x           2.79 N    3.03 N    59.1 MPa    0.75 mJ    1,693
-
-P2's own refinement moves the forces by -38 % (halving d_hat on P2 1x moves F_in by -2 % only:
-the elements, not the contact layer), so the default check refines P2 once in 3D as well, at
-10-65x the seconds of P2 1x under load (607-1,693 s against 26-68 s on two knocker designs at load
-~8; 82-93 s against 24-26 s on a quiet machine); its ``reference_change`` shows how far the
-reference itself is from converged.
+Quadratic (P2) elements (:func:`simfab.fem.p2.to_p2`) do not lock, so they are the reference:
+P2 refined once is within 2 % of P2 at 16x on every figure of the 2D scenes it was compared on,
+without a fitted convergence order. Linear elements refined and extrapolated (f = f_inf + b h^p
+over three levels) are as accurate where a figure converges smoothly but fail on one that jumps
+between levels (the grip force, read where the object comes to rest). In 3D P2 refined once is
+still needed: P2's own refinement moves the forces by tens of percent on a thin snap-fit
+(measurements and the alternatives: docs/decisions.md). The check reports the reference's own
+change between its last two levels (``reference_change``), so a reference that is itself not
+converged shows.
 
 **Steps.** The levels refine the mesh, not the steps along the path. When the P2 level on the
 optimization mesh warns that its steps are too coarse for the profile (a snap or a force peak
 between steps), :func:`step_check` runs that level again with STEP_CHECK_FACTOR (4) times the
 steps and multiplies each reference value by its step factor (the step and mesh errors taken as
-independent). On the optimized door knocker (40 -> 160 steps) F_in x1.07, F_rm x1.36, averaged
-stress x1.05, for 16 s; a design whose profile its steps resolve is not run again.
+independent); a design whose profile its steps resolve is not run again.
 
 Reported per figure: the value at every level; the reference: the finest level's, or, with
 three levels of the finest order whose changes shrink, f = f_inf + b h^p fitted over them
@@ -68,17 +46,26 @@ at its quadrature points (:func:`simfab.design.stress.p2_averaged_von_mises`).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
+from simfab.coupling.converge import extrapolate
+from simfab.coupling.model import make_coupling_model
+from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
+from simfab.design.problem import profile_figures
+from simfab.design.stress import p2_averaged_von_mises
+from simfab.fem.model import make_model
+from simfab.fem.p2 import to_p2
+from simfab.fem.subdivide import midpoint_mask, subdivide
 
 
 def check_levels(refinements: int = 1) -> tuple:
     """The check's levels, (element order, uniform subdivisions): the optimization mesh (linear,
     as annealed), then P2 on it and on its ``refinements`` successive refinements
-    (``[design] check_refinements``; measurements: module docstring)."""
+    (``[design] check_refinements``; the choice: module docstring)."""
     return ((1, 0),) + tuple((2, t) for t in range(int(refinements) + 1))
 
 
@@ -101,12 +88,6 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
     :func:`simfab.fem.p2.to_p2`): the fixed support is every vertex (and P2 edge node) whose
     parents were all fixed; the insertion options are cm's with ``element_order = order`` and
     ``steps_factor`` times its steps along the same path."""
-    import dataclasses
-
-    from simfab.coupling.model import make_coupling_model
-    from simfab.fem.model import make_model
-    from simfab.fem.subdivide import midpoint_mask, subdivide
-
     fem = cm.fem
     X, el = np.asarray(rest, float), np.asarray(fem.elements)
     fixed = np.zeros(len(X), bool)
@@ -116,8 +97,6 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
         fixed = midpoint_mask(fixed, edges)
     new = make_model(X, el, fem.material, thickness=fem.thickness, device=fem.device)
     if order == 2:
-        from simfab.fem.p2 import to_p2
-
         new = to_p2(new)
         fixed = midpoint_mask(fixed, new.edges)  # P2 edge node n_corners + i sits on edges[i]
     elif order != 1:
@@ -127,17 +106,15 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
         o = cm.options
         options = dataclasses.replace(options, **({"h_in": o.h_in / steps_factor} if o.h_in is not None else
                                                   {"steps": (len(cm.s_steps) - 1) * int(steps_factor)}))
-    return make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=np.flatnonzero(fixed),
-                               options=options, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
+    return make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path,
+                               fixed_vertices=np.flatnonzero(fixed), options=options,
+                               object_vertices=cm.object_vertices, object_faces=cm.object_faces)
 
 
 def level_figures(res, stress_radius: float) -> dict:
-    """:func:`simfab.design.optimize.profile_figures` of an insertion; on P2 elements the averaged
+    """:func:`simfab.design.problem.profile_figures` of an insertion; on P2 elements the averaged
     stress at quadrature-point resolution (:func:`simfab.design.stress.p2_averaged_von_mises`: the
     insertion records only each element's largest quadrature-point stress, biased high)."""
-    from simfab.design.optimize import profile_figures
-    from simfab.design.stress import p2_averaged_von_mises
-
     f = profile_figures(res, stress_radius)
     if res.model.options.element_order == 2:
         f["von_mises"] = max(p2_averaged_von_mises(res.model.fem, r.x, stress_radius) for r in res.steps)
@@ -169,11 +146,7 @@ def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = T
     them), the same level is run with STEP_CHECK_FACTOR times the steps; each figure's ratio
     (finer steps / the scene's steps) is its step factor, which multiplies the reference value
     (the step error and the mesh error taken as independent: the step factor is measured on the
-    cheapest level that is not locked). None when the steps resolve the profile. Measured on the
-    optimized door knocker (P2 1x, 40 -> 160 steps): F_in x1.07, F_rm x1.36, averaged stress
-    x1.05, 6.5 s -> 16 s."""
-    from simfab.coupling.simulate import simulate
-
+    cheapest level that is not locked). None when the steps resolve the profile."""
     if not _steps_too_coarse(res):
         return None
     t0 = time.perf_counter()
@@ -212,9 +185,6 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, level
     reference_change}}, "constraints": [{name, value, lo, hi, satisfied}] at the reference values,
     "feasible_fine": bool, "reference", "units"}.
     """
-    from simfab.coupling.converge import extrapolate
-    from simfab.coupling.simulate import simulate
-
     cm = problem.base
     levels = as_levels(check_levels(problem.brief.check_refinements) if levels is None else levels)
     rows, figs, profiles = [], [], []
@@ -312,7 +282,8 @@ def check_warnings(check: dict) -> list[str]:
     ref = f"P{lv[-1].get('element_order', 1)} on {lv[-1]['elements']} elements"
     if st is not None:
         ref += f", with the step factors of {st['steps']} steps"
-    return out + [f"mesh-converged ({ref}; the optimization mesh: {lv[0]['elements']} linear) the design misses: {what}"]
+    return out + [f"mesh-converged ({ref}; the optimization mesh: {lv[0]['elements']} linear) "
+                  f"the design misses: {what}"]
 
 
 def figure_unit(name: str) -> float:

@@ -122,7 +122,7 @@ def test_cli_p2_writes_valid_outputs(tmp_path, capsys):
 def test_rest_shape_optimizer_refuses_p2_parts():
     # its handles and modification energy act on a linear mesh: a clear input error, not a crash
     from simfab.design.brief import DesignBrief
-    from simfab.design.optimize import make_problem
+    from simfab.design.problem import make_problem
 
     cm = load_coupling_scene("cclamp2d", overrides={"compliant": {"target_elements": 450},
                                                      "simulation": {"element_order": 2}})

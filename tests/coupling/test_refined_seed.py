@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from simfab.coupling.simulate import simulate
-from simfab.design.optimize import profile_figures
+from simfab.design.problem import profile_figures
 from simfab.design.scene import load_design_scene
 
 

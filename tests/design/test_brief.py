@@ -16,7 +16,8 @@ def test_penalty_zero_inside_bounds_and_growing_outside():
     assert B.penalty(B.constraints(inside, lim)) == 0.0
     assert all(c.satisfied for c in B.constraints(inside, lim))
     for key, values in {"insertion_force": [21, 25, 40], "von_mises": [61e6, 70e6, 100e6],
-                        "coupling_ratio": [96, 99, 100], "grip_force": [4, 2, 0], "removal_force": [11, 15, 30]}.items():
+                        "coupling_ratio": [96, 99, 100], "grip_force": [4, 2, 0],
+                        "removal_force": [11, 15, 30]}.items():
         pens = []
         for v in values:
             fig = dict(inside, **{key: v})

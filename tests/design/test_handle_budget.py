@@ -34,11 +34,11 @@ def fit(handles: int, iterations: int, seed: int) -> tuple[float, float]:
     rms_star = float(np.sqrt(np.mean((B @ h_star - TARGET) ** 2)))
 
     def f(h, threshold=None):
-        return float(np.mean((B @ h - TARGET) ** 2)), None  # mean squared error [N^2], as optimize.evaluate
+        return float(np.mean((B @ h - TARGET) ** 2)), None  # mean squared error [N^2], as problem.evaluate
 
+    blocks = np.repeat(np.arange(handles), VARS_PER_HANDLE)
     r = anneal(f, np.zeros(n), AnnealOptions(iterations=iterations, sigma0=np.ones(n), lower=np.full(n, -20.0),
-                                             upper=np.full(n, 20.0), blocks=np.repeat(np.arange(handles), VARS_PER_HANDLE),
-                                             seed=seed))
+                                             upper=np.full(n, 20.0), blocks=blocks, seed=seed))
     return float(np.sqrt(r.value)), rms_star
 
 

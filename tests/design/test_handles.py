@@ -53,8 +53,9 @@ def test_handle_in_kept_region_is_refused(plate):
 
 
 def test_tetrahedral_weights():
-    from simfab.fem.meshing import tetrahedralize
     import trimesh
+
+    from simfab.fem.meshing import tetrahedralize
 
     box = trimesh.creation.box(extents=[0.03, 0.01, 0.01])
     V, T = tetrahedralize(np.asarray(box.vertices), np.asarray(box.faces), target_tets=800)

@@ -6,9 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simfab.design.brief import DesignBrief
-from simfab.design.optimize import element_quality, evaluate, make_problem, optimize
 from simfab.coupling.scene import load_coupling_scene
+from simfab.design.brief import DesignBrief
+from simfab.design.optimize import optimize
+from simfab.design.problem import element_quality, evaluate, make_problem
 from simfab.errors import ConvergenceError
 
 STEPS = 12  # a coarse insertion keeps the loop fast; the physics is the bundled scene's
@@ -40,9 +41,9 @@ def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypat
     assert ev.status == "rejected" and ev.reason in ("inverted element", "degenerate element")
     assert ev.objective == np.inf
 
-    import simfab.coupling.simulate as sim
+    import simfab.design.problem as design_problem  # the simulator as the design problem calls it
 
-    real = sim.simulate
+    real = design_problem.simulate
     calls = {"n": 0}
 
     def flaky(cm, **kw):  # every second simulation does not converge
@@ -51,7 +52,7 @@ def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypat
             raise ConvergenceError("step 7: Newton did not converge (test)")
         return real(cm, **kw)
 
-    monkeypatch.setattr(sim, "simulate", flaky)
+    monkeypatch.setattr(design_problem, "simulate", flaky)
     res = optimize(P, iterations=6, seed=1)
     reasons = [r["evaluation"].reason for r in res.history]
     assert any(r.startswith("simulation did not converge") for r in reasons)
@@ -64,7 +65,7 @@ def test_small_design_problem_meets_every_constraint(scene):
     """The building block's socket exceeds PLA's 60 MPa yield stress; ask for a tight grip with
     an insertion force <= 12 N and no yielding, and check by re-simulating the optimized shape."""
     from simfab.coupling.simulate import simulate
-    from simfab.design.optimize import candidate_model, profile_figures
+    from simfab.design.problem import candidate_model, profile_figures
 
     brief = DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=4, iterations=60, patience=15)
     P = make_problem(scene, brief)
@@ -84,9 +85,10 @@ def test_small_design_problem_meets_every_constraint(scene):
 
 
 def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path):
-    from simfab.cli import main
+    import subprocess
+    import sys
+
     from simfab.io.usd import check_compliance
-    import subprocess, sys
 
     out = tmp_path / "o"
     r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "block2d_tight", "--iterations", "4",
@@ -140,7 +142,7 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
 def test_parallel_workers_make_the_same_decisions_as_one_process():
     """Two processes evaluating speculative proposals (simfab.design.parallel): the worker rebuilds
     the problem from its scene file, and every decision - hence the design - is the serial one."""
-    from simfab.design.parallel import ProblemSource
+    from simfab.design.problem import ProblemSource
     from simfab.design.scene import load_design_scene
 
     ds = load_design_scene("block2d_tight", design={"handles": 3, "placement": "spatial"}, simulation={"steps": 8})
@@ -159,11 +161,11 @@ def test_parallel_workers_make_the_same_decisions_as_one_process():
 
 def test_workers_started_early_serve_several_problems():
     """Worker processes started before the problem is known (simfab.design.parallel.Workers, as
-    `couple optimize` starts them) build each problem on its first task and rebuild when the
-    source changes (a correction round's factors): every decision is still the serial one."""
-    import dataclasses
-
-    from simfab.design.parallel import ProblemSource, Workers
+    `couple optimize` starts them) build each problem on its first task and score it with the
+    settings that travel with every task (a correction round's factors): every decision is still
+    the serial one."""
+    from simfab.design.parallel import Workers
+    from simfab.design.problem import ProblemSource
     from simfab.design.scene import load_design_scene
 
     design, simulation = {"handles": 3, "placement": "spatial"}, {"steps": 8}
@@ -172,7 +174,7 @@ def test_workers_started_early_serve_several_problems():
         src = ProblemSource(scene=str(ds.xml), design=design, simulation=simulation)
         P = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, source=src)
         corr = {"von_mises": 0.5, "insertion_force": 0.5}
-        Pc = dataclasses.replace(P, corrections=corr, source=dataclasses.replace(P.source, corrections=corr))
+        Pc = P.with_settings(corrections=corr)
         runs = [optimize(p, iterations=8, seed=5, workers=w) for p in (P, Pc)]
     for p, two in zip((P, Pc), runs):
         one = optimize(p, iterations=8, seed=5)
@@ -211,7 +213,7 @@ def test_initial_insertion_run_for_the_placement_is_scored_not_run_again(scene):
     optimizer's initial evaluation: scored as evaluate() would score that shape (identity handles
     reproduce the mesh), not simulated again; a run of another model is not taken for it."""
     from simfab.coupling.simulate import simulate
-    from simfab.design.optimize import initial_evaluation
+    from simfab.design.problem import initial_evaluation
 
     brief = DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=3, placement="displacement")
     run = simulate(scene)
@@ -231,11 +233,13 @@ def test_target_matching_starts_from_the_initial_shapes_mesh_correction(tmp_path
     """Matching a force profile, the coarse mesh's bias on the whole profile is measured on the
     initial shape before the first iteration and the run starts corrected by it (a coarse linear
     mesh is too stiff: factor < 1); without the mesh check nothing is corrected."""
-    import subprocess, sys
+    import subprocess
+    import sys
 
     base = [sys.executable, "-m", "simfab", "couple", "optimize", "profile2d", "--iterations", "3", "--steps", "8",
             "--handles", "2", "--placement", "spatial", "--workers", "1", "--correction-rounds", "0", "--json"]
-    r = subprocess.run(base + ["--check-refinements", "0", "--out", str(tmp_path / "a")], capture_output=True, text=True)
+    r = subprocess.run(base + ["--check-refinements", "0", "--out", str(tmp_path / "a")], capture_output=True,
+                       text=True)
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
     assert 0.3 < s["corrections"]["force_profile"] < 0.95 and s["correction_rounds"] == []

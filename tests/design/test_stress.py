@@ -25,7 +25,8 @@ def _plate(n):
             tris += [[a, b, c], [a, c, d]]
     E = MU * (3 * LAM + 2 * MU) / (LAM + MU)
     nu = LAM / (2 * (LAM + MU))
-    return make_p2_model(X, np.array(tris), Material(name="t", youngs_modulus=E, poisson_ratio=nu, yield_stress=50e6, density=1000.0))
+    mat = Material(name="t", youngs_modulus=E, poisson_ratio=nu, yield_stress=50e6, density=1000.0)
+    return make_p2_model(X, np.array(tris), mat)
 
 
 def _bending(X):

@@ -1,12 +1,11 @@
 """Mesh check of an optimized shape on uniformly refined meshes (simfab.design.verify)."""
 
-import dataclasses
 
 import numpy as np
 import pytest
 
 from simfab.design.brief import DesignBrief
-from simfab.design.optimize import make_problem, profile_figures
+from simfab.design.problem import make_problem, profile_figures
 from simfab.design.verify import check_warnings, mesh_check, refined_model
 
 
@@ -122,7 +121,7 @@ def test_correction_factors_map_the_coarse_figures_to_the_reference(problem):
         else:
             assert c[k] in FACTOR_RANGE
     assert c["insertion_force"] < 1.0  # linear triangles: the coarse mesh is too stiff
-    corrected = dataclasses.replace(problem, corrections=c)
+    corrected = problem.with_settings(corrections=c)
     coarse = {k: v["values"][0] for k, v in r["figures"].items()}
     vals = {x.name: x.value for x in corrected.constraints(dict(coarse, seat_clearance=0.0))}
     assert np.isclose(vals["grip_force"], r["figures"]["grip_force"]["values"][-1])

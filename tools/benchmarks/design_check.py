@@ -45,7 +45,7 @@ def run(argv) -> dict:
     ds = load_design_scene(a.scene, simulation={} if a.steps is None else {"steps": a.steps, "h_in": None})
     cm = ds.cm
     if a.mesh_check:
-        from simfab.design.optimize import make_problem
+        from simfab.design.problem import make_problem
         from simfab.design.verify import check_warnings, mesh_check
 
         P = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target)

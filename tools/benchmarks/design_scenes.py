@@ -35,7 +35,7 @@ def _resimulate(summary: dict, out: Path) -> dict:
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import simulate
     from simfab.design import brief as B
-    from simfab.design.optimize import profile_figures
+    from simfab.design.problem import profile_figures
     from simfab.design.scene import load_design_scene
 
     xml = summary["outputs"]["scene_xml"]

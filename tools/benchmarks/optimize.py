@@ -7,7 +7,8 @@ handle placement), the handle placement (bounded biharmonic weights, affinity pr
 annealing with one full insertion simulation per iteration - and reports the wall time, the
 simulations run and simulations per second, the fraction of the time spent outside the
 simulator, the number of iterations to the first design meeting every constraint and whether
-the final design meets them all. Outputs are not written (timed is the computation).
+the final design meets them all, with its E_L and handle parameters (``design``: per active handle
+its translation [m] and per-axis scales). Outputs are not written (timed is the computation).
 ``--workers`` (default 2, the machine the target was set for) evaluates that many proposals at
 once (simfab.design.parallel: speculative evaluation, the same design as 1 worker); the time
 includes starting the workers (started first, as ``couple optimize`` does: their start-up overlaps
@@ -39,10 +40,9 @@ import numpy as np
 from simfab.errors import InputError
 
 TARGET_SECONDS = 30.0
-#: Runs by default: this virtual machine's speed drifts by up to 2x within minutes (the reference
-#: workload of benchmarks._machine took 15-56 ms within an hour of 2 December) and interference only ever adds
-#: time, so the fastest of the runs is the best estimate of the cost (as timeit and pyperf advise;
-#: the insertion benchmark does the same).
+#: Runs by default: the machine's speed drifts by up to 2x within minutes (``machine_reference_ms``
+#: shows it) and interference only ever adds time, so the fastest of the runs is the best estimate
+#: of the cost (as timeit and pyperf advise; the insertion benchmark does the same).
 REPEAT = 2
 
 
@@ -76,9 +76,10 @@ def _fastest(a, first: dict) -> dict:
         cmd += ["--iterations", str(a.iterations)]
     runs = [first]
     for _ in range(a.repeat - 1):
-        child = json.loads(subprocess.run(cmd, stdout=subprocess.PIPE, text=True, check=True).stdout)  # its stderr shows
-        if (child["E_L"], child["simulations"], child["feasible"]) != (first["E_L"], first["simulations"],
-                                                                         first["feasible"]):
+        # (the child's stderr shows)
+        child = json.loads(subprocess.run(cmd, stdout=subprocess.PIPE, text=True, check=True).stdout)
+        if (child["E_L"], child["design"], child["simulations"], child["feasible"]) != (
+                first["E_L"], first["design"], first["simulations"], first["feasible"]):
             raise RuntimeError(f"a repeated run reached another design: E_L {child['E_L']} vs {first['E_L']}, "
                                f"{child['simulations']} vs {first['simulations']} simulations")
         runs.append(child)
@@ -96,8 +97,9 @@ def _run_once(a) -> dict:
     from benchmarks._machine import machine_reference_ms
     from benchmarks._reference import figures
     from simfab.coupling.simulate import simulate
-    from simfab.design.optimize import make_problem, optimize
-    from simfab.design.parallel import ProblemSource, Workers
+    from simfab.design.optimize import optimize
+    from simfab.design.parallel import Workers
+    from simfab.design.problem import ProblemSource, make_problem
     from simfab.design.scene import load_design_scene
 
     ds = load_design_scene(a.scene)
@@ -148,6 +150,7 @@ def _run_once(a) -> dict:
         "first_feasible_iteration": first,
         "feasible": res.best.feasible,
         "E_L": res.best.E_L,
+        "design": res.best.h.tolist(),  # the best design's handle parameters (translations [m], scales)
         "simulations": sims,
         "simulations_stopped_early": res.stopped_simulations,
         "workers": res.workers,

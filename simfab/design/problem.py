@@ -1,0 +1,517 @@
+"""The design problem: what one optimization holds fixed, how it is rebuilt in another process, and
+the evaluation of one design (thesis, "Rest Shape Optimization").
+
+    E(h) = E_L(X'(h)) + W sum_c max(0, c(h) / scale_c)^2          (or a target-profile error)
+    X'(h) = M_LBS T(h)                                              (:mod:`simfab.design.handles`)
+
+Each evaluation of a design h (:func:`evaluate`):
+
+1. X' = M_LBS T(h); **validity**: every element keeps its orientation and at least
+   QUALITY_REL of its initial shape quality q (mean ratio: 4 sqrt(3) A / sum l^2 for a triangle,
+   12 (3 V)^(2/3) / sum l^2 for a tetrahedron; 1 for the regular simplex, 0 when degenerate,
+   negative when inverted). A candidate that fails is rejected ("inverted element",
+   "degenerate element") without simulating.
+2. The insertion of the initial scene is re-run on X' (same object, path, steps, fixed region,
+   material, simulation options): :func:`simfab.coupling.simulate.simulate`, starting with the
+   boundary facets the initial shape's insertion refined (``EvaluationSettings.refined``: no
+   second solve of the steps where they would be found crossing). A simulation that raises (no
+   convergence, the object starting inside the part, a numerical failure) makes a rejected
+   candidate with its reason - never a crash of the optimization.
+3. The profile gives E_ss, E_max, F_grip, F_in, F_rm and max von Mises
+   (:func:`profile_figures`); the objective adds their penalties (:mod:`simfab.design.brief`).
+
+**Early rejection.** The annealer's acceptance test is a threshold known before the candidate is
+simulated (E_i < E_cur - T ln u). E_L is known before simulating, and the running maximum of the
+von Mises stress only grows along the insertion (the constraint reads its maximum over the whole
+run), so E_L + W (violation of the yield bound so far)^2 is a lower bound of E_i at every step. So are
+the upper bounds of the insertion and removal forces, read over the records up to the energy's
+running maximum (the profile reads the forces up to its steady state, which comes after the
+energy's overall maximum: those records are always among them; see ``_bound_watch``).
+Once it exceeds the threshold the candidate would be rejected whatever the rest of its profile:
+its simulation stops there (status "stopped", objective = the bound). The decisions, hence the
+optimization's result, are exactly those of running every simulation to the end.
+
+**One problem, two processes.** The annealer (:mod:`simfab.design.optimize`) and the worker pool
+(:mod:`simfab.design.parallel`) both evaluate designs with this module. A worker cannot receive a
+:class:`DesignProblem` (its Warp arrays and caches do not cross process boundaries), so it
+rebuilds one from its :class:`ProblemSource` (:func:`rebuild`; deterministic) and receives the
+:class:`EvaluationSettings` that change during an optimization with each task.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from simfab._warp import device as check_device
+from simfab.coupling.model import CouplingModel, make_coupling_model
+from simfab.coupling.profile import analyze_run
+from simfab.coupling.simulate import InsertionResult, check_start, simulate
+from simfab.design import brief as B
+from simfab.design.handles import Handles, make_handles
+from simfab.design.modification import ModificationEnergy
+from simfab.design.placement import place_handles
+from simfab.design.scene import load_design_scene
+from simfab.design.stress import STRESS_RADIUS, averaged_von_mises
+from simfab.errors import ConvergenceError, InputError
+from simfab.fem.model import make_model
+
+#: A candidate element must keep this fraction of its initial mean-ratio quality.
+QUALITY_REL = 0.25
+
+#: Initial proposal standard deviation: translations as a fraction of the bounding-box diagonal,
+#: scales (dimensionless).
+SIGMA_TRANSLATION_REL = 0.01
+SIGMA_SCALE = 0.03
+
+
+def element_quality(X: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    """(m,) signed mean-ratio quality of simplices (see module docstring); < 0 means inverted."""
+    p = np.asarray(X, float)[np.asarray(elements)]
+    d = p.shape[-1]
+    D = np.swapaxes(p[:, 1:, :] - p[:, :1, :], 1, 2)
+    det = np.linalg.det(D)
+    k = d + 1
+    i, j = np.triu_indices(k, 1)
+    l2 = np.sum((p[:, i, :] - p[:, j, :]) ** 2, axis=(1, 2))
+    if d == 2:
+        return 4.0 * math.sqrt(3.0) * (det / 2.0) / l2
+    vol = det / 6.0
+    return np.sign(vol) * 12.0 * np.cbrt(3.0 * np.abs(vol)) ** 2 / l2
+
+
+#: A profile whose peak energy is below that of a uniform strain of this size over the whole part
+#: never really touched the object (round-off): it has no coupling ("none", coupling ratio 100 %),
+#: so that a design cannot meet a grip constraint with a ratio of two round-off energies.
+CONTACT_STRAIN_FLOOR = 1e-5
+
+
+def seat_clearance(res, index: int) -> float:
+    """Gap [m] between the part and the object at step ``index`` beyond the contact range: the
+    smallest distance from A's boundary vertices to O (-psi near O, the field's far lower bound
+    beyond its kernel) minus the barrier's activation distance d_hat (<= 0: in contact)."""
+    cm = res.model
+    r = res.steps[index]
+    y = np.asarray(r.x)[np.asarray(cm.fem.boundary_vertices)]
+    pose = cm.pose(r.s)
+    ev = cm.field.evaluate(y, pose, hessian=False)
+    d = -np.asarray(ev.psi, float)
+    far = ~np.asarray(ev.near, bool)
+    if far.any():
+        d[far] = cm.field.far_lower_bound(y[far], pose)
+    return float(d.min() - np.max(cm.dhat))
+
+
+def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
+    """Figures of an insertion the constraints read: coupling_ratio [%], grip_force,
+    insertion_force, removal_force [N], von_mises [Pa] (max over the insertion of the von Mises
+    stress averaged over ``stress_radius`` [m], :mod:`simfab.design.stress`), seat_clearance [m]
+    (gap between part and object at the steady state, <= 0 in contact), and category, E_max, E_ss
+    [J], von_mises_peak [Pa] (the largest element stress, mesh-dependent at sharp corners)."""
+    prof = analyze_run(res)
+    fem = res.model.fem
+    E = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
+    floor = 0.5 * E * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
+    touched = prof.E_max > floor
+    return {"coupling_ratio": prof.coupling_ratio if touched else 100.0, "grip_force": prof.F_grip,
+            "insertion_force": prof.F_in, "removal_force": prof.F_rm,
+            "von_mises": max(averaged_von_mises(fem, r.von_mises, stress_radius) for r in res.steps),
+            "von_mises_peak": float(res.column("max_von_mises").max()),
+            "seat_clearance": seat_clearance(res, prof.index_ss),
+            "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss}
+
+
+
+@dataclass(frozen=True, kw_only=True)
+class ProblemSource:
+    """What rebuilds a design problem in another process (:func:`rebuild`): the scene (MJCF path),
+    the overrides of its ``[design]`` and ``[simulation]`` tables, the Warp device, the active
+    handle vertices (placed once, by the caller: :func:`make_problem` fills them in) and the
+    placement seed."""
+
+    scene: str
+    design: dict = field(default_factory=dict)
+    simulation: dict = field(default_factory=dict)
+    device: str = "cpu"
+    handle_vertices: tuple = ()
+    seed: int = 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class EvaluationSettings:
+    """How a problem's designs are scored, beyond the scene: what changes between the rounds of one
+    optimization, and travels with every task to a worker (one value; the problem itself does not).
+
+    corrections : {figure: factor} applied to the simulated figures before the constraints read
+        them (mesh correction of a coarse model, :func:`simfab.design.verify.correction_factors`);
+        empty: none
+    margin : relative margin inside the force and stress bounds that the penalties aim at
+        (:data:`simfab.design.brief.CORRECTION_MARGIN` in correction rounds, else 0); the
+        constraints report the brief's own bounds
+    refined : boundary facet ids every candidate's insertion starts refined with (``simulate``'s
+        ``refined``): those the initial shape's insertion refined, set by
+        :func:`simfab.design.optimize.optimize`
+    """
+
+    corrections: dict = field(default_factory=dict)
+    margin: float = 0.0
+    refined: tuple = ()
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class DesignProblem:
+    """Everything fixed during one optimization (the model of the loop).
+
+    base : the initial :class:`simfab.coupling.model.CouplingModel`
+    brief : :class:`simfab.design.brief.DesignBrief`; limits : {constraint: (lo, hi)} in UNITS
+    handles : :class:`Handles`; energy : :class:`ModificationEnergy`
+    target : :class:`simfab.design.brief.TargetProfile` or None
+    kept : (k,) vertices held unchanged; q0 : (m,) initial element qualities
+    lower, upper, sigma0 : (n_vars,) design bounds and initial proposal deviations
+    source : the :class:`ProblemSource` that rebuilds this problem in another process (parallel
+        evaluation, restarts), or None (a problem not loaded from a scene file)
+    settings : :class:`EvaluationSettings` (mesh corrections, margin, seeded refinement)
+    initial : the unmodified shape's insertion (``simulate(base)``, e.g. run for the displacement
+        placement), which :func:`initial_evaluation` scores instead of running it again; None:
+        it is simulated there
+    """
+
+    base: CouplingModel
+    brief: B.DesignBrief
+    limits: dict
+    handles: Handles
+    energy: ModificationEnergy
+    target: B.TargetProfile | None
+    kept: np.ndarray
+    q0: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    sigma0: np.ndarray
+    source: ProblemSource | None = None
+    settings: EvaluationSettings = field(default_factory=EvaluationSettings)
+    initial: InsertionResult | None = None
+
+    def with_settings(self, **changes) -> "DesignProblem":
+        """This problem with :class:`EvaluationSettings` fields ``changes`` replaced."""
+        return dataclasses.replace(self, settings=dataclasses.replace(self.settings, **changes))
+
+    def constraints(self, figures: dict) -> list:
+        """The brief's constraints on simulated ``figures``, mesh-corrected (``settings.corrections``)."""
+        c = self.settings.corrections
+        return B.constraints({k: v * c.get(k, 1.0) if isinstance(v, float) else v for k, v in figures.items()},
+                             self.limits)
+
+
+def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetProfile | None = None,
+                 initial: InsertionResult | None = None, handle_vertices=None, seed: int = 0,
+                 source: ProblemSource | None = None, settings: EvaluationSettings | None = None) -> DesignProblem:
+    """Set up the optimization of scene ``cm``'s part.
+
+    kept_regions : vertex index arrays kept unchanged besides the fixed support (keep sites)
+    initial : the initial shape's InsertionResult, ``simulate(cm)`` (displacement placement needs it;
+        simulated here when missing); kept as the problem's ``initial``
+    handle_vertices : explicit active handle vertices (overrides the brief's placement)
+    seed : placement seed (random placement; affinity propagation's tie-breaking)
+    source : a :class:`ProblemSource` naming the scene this problem was loaded from (its handle
+        vertices and seed are filled in here); needed by parallel evaluation
+    settings : :class:`EvaluationSettings` (default: none)
+    """
+    if cm.options.element_order != 1:  # handles and the modification energy act on a linear mesh
+        raise InputError("the rest-shape optimizer runs on linear elements only; set element_order = 1",
+                         where="[simulation] element_order")
+    fem = cm.fem
+    X = np.asarray(fem.rest, float)
+    regions = [np.asarray(cm.fixed_vertices)] + [np.asarray(r) for r in kept_regions if len(r)]
+    kept = np.unique(np.concatenate(regions))
+    if handle_vertices is None:
+        disp = None
+        if brief.placement == "displacement":
+            if initial is None:
+                initial = simulate(cm)
+            disp = max_displacement(initial)
+        handle_vertices = place_handles(X, fem.elements, brief.handles, kept, method=brief.placement,
+                                        displacement=disp, seed=seed)
+    H = make_handles(X, fem.elements, handle_vertices, regions)
+    diag = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0)))
+    d, m = H.dim, H.n_active
+    t_max = brief.max_translation * diag
+    lo_s, hi_s = brief.scale_range
+    lower = np.tile(np.r_[np.full(d, -t_max), np.full(d, lo_s)], m)
+    upper = np.tile(np.r_[np.full(d, t_max), np.full(d, hi_s)], m)
+    sigma0 = np.tile(np.r_[np.full(d, SIGMA_TRANSLATION_REL * diag), np.full(d, SIGMA_SCALE)], m)
+    ys = fem.material.yield_stress if fem.material is not None else None
+    return DesignProblem(base=cm, brief=brief, limits=B.bounds(brief, ys), handles=H,
+                         energy=ModificationEnergy(X, fem.boundary_facets), target=target, kept=kept,
+                         q0=element_quality(X, fem.elements), lower=lower, upper=upper, sigma0=sigma0,
+                         source=None if source is None else dataclasses.replace(
+                             source, handle_vertices=tuple(int(v) for v in H.vertex[H.active]), seed=seed),
+                         settings=EvaluationSettings() if settings is None else settings,
+                         initial=initial if initial is not None and initial.model is cm else None)
+
+
+def rebuild(source: ProblemSource, settings: EvaluationSettings | None = None) -> DesignProblem:
+    """The :class:`DesignProblem` that ``source`` describes, scored with ``settings``."""
+    ds = load_design_scene(source.scene, design=source.design, simulation=source.simulation,
+                           device=check_device(source.device))
+    return make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target,
+                        handle_vertices=list(source.handle_vertices), seed=source.seed, source=source,
+                        settings=settings)
+
+
+def max_displacement(res) -> np.ndarray:
+    """(n,) largest displacement of every vertex over an insertion [m]."""
+    X = np.asarray(res.model.fem.rest)
+    return np.max([np.linalg.norm(np.asarray(r.x) - X, axis=1) for r in res.steps], axis=0)
+
+
+@dataclass(kw_only=True)
+class Evaluation:
+    """One design's evaluation.
+
+    h : (n_vars,) the design; rest : (n, d) [m] its rest shape
+    status : "ok" | "rejected" (invalid) | "stopped" (provably above the acceptance threshold) |
+        "aborted" (a speculative run no longer needed, never decided on); reason : why not ok
+    objective [-] : +inf when rejected, a lower bound when stopped; E_L [-]; rms_error [N]
+        (target matching)
+    constraints : list of :class:`simfab.design.brief.Constraint`; figures : :func:`profile_figures`
+    result : the InsertionResult (kept only while needed); sim_seconds, seconds : in the
+        simulation, in total
+    bounds : the objective's lower bound after each insertion step; newton_iterations : of a
+        complete insertion (status "ok")
+    """
+
+    h: np.ndarray
+    rest: np.ndarray
+    status: str
+    objective: float = math.inf
+    reason: str = ""
+    E_L: float = math.nan
+    rms_error: float | None = None
+    constraints: list = field(default_factory=list)
+    figures: dict = field(default_factory=dict)
+    result: InsertionResult | None = None
+    sim_seconds: float = 0.0
+    seconds: float = 0.0
+    bounds: list = field(default_factory=list)
+    newton_iterations: int = 0
+
+    @property
+    def feasible(self) -> bool:
+        return self.status == "ok" and all(c.satisfied for c in self.constraints)
+
+
+def restricted(problem: DesignProblem, ev: Evaluation, threshold: float) -> Evaluation:
+    """``ev``, evaluated with a threshold at least ``threshold``, as :func:`evaluate` with
+    ``threshold`` returns it: screened out when E_L alone exceeds it, stopped at the first step
+    whose objective bound exceeds it, else ``ev`` itself."""
+    if ev.status not in ("ok", "stopped"):
+        return ev
+    lead = 0.0 if problem.target is not None else ev.E_L
+    if lead > threshold:
+        return dataclasses.replace(ev, status="stopped", reason="modification energy above the acceptance threshold",
+                                   objective=lead, figures={}, constraints=[], rms_error=None, result=None,
+                                   sim_seconds=0.0, bounds=[])
+    for i, b in enumerate(ev.bounds):
+        if b > threshold:
+            return dataclasses.replace(ev, status="stopped",
+                                       reason=f"objective above the acceptance threshold at step {i}",
+                                       objective=b, figures={}, constraints=[], rms_error=None, result=None,
+                                       bounds=ev.bounds[: i + 1])
+    return ev
+
+
+def shape_defect(problem: DesignProblem, X: np.ndarray) -> str:
+    """Why X is not a valid rest shape ("inverted element", "degenerate element"), or ""."""
+    q = element_quality(X, problem.base.fem.elements)
+    if np.any(q <= 0):
+        return "inverted element"
+    if np.any(q < QUALITY_REL * problem.q0):
+        return "degenerate element"
+    return ""
+
+
+def candidate_model(problem: DesignProblem, X: np.ndarray):
+    """(CouplingModel on rest shape X, "") or (None, reason) when X is not a valid rest shape."""
+    cm = problem.base
+    fem = cm.fem
+    why = shape_defect(problem, X)
+    if why:
+        return None, why
+    try:
+        new = make_model(X, fem.elements, fem.material, thickness=fem.thickness, device=fem.device)
+    except InputError as e:
+        return None, f"invalid mesh: {e}"
+    # the scene's own options: the insertion runs as 'couple simulate' would run the candidate
+    out = make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
+                              options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
+    return out, ""
+
+
+class _Exceeded(Exception):
+    """Raised from the insertion's step callback once the objective's lower bound exceeds the
+    acceptance threshold."""
+
+    def __init__(self, bound: float, step: int):
+        self.bound, self.step = bound, step
+
+
+def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float, trace: list):
+    """Step callback raising :class:`_Exceeded` once ``base`` + W * (sum of the squared violations
+    that the steps so far already prove) exceeds ``threshold`` (None if nothing can be bounded);
+    appends each step's bound to ``trace``. Bounded, on ``cm``'s mesh, mesh-corrected like the
+    figures (``problem.settings.corrections``):
+
+    - the yield bound, by the running max of the averaged von Mises stress (the figure is its
+      maximum over the whole run);
+    - the upper bounds of the insertion and removal forces, by max(0, -min F) and max(0, max F)
+      over the records up to the first maximum of the energy so far: the profile reads the forces
+      up to its steady state, which lies after the energy's maximum over the whole run
+      (:func:`simfab.coupling.profile.analyze`), itself at or after the running one, so those
+      records are always part of it.
+    """
+    terms = {k: B.aimed_bounds(k, *problem.limits[k], problem.settings.margin)[1]  # the bounds the penalties aim at
+             for k in ("von_mises", "insertion_force", "removal_force")
+             if k in problem.limits and math.isfinite(problem.limits[k][1])}
+    if not terms or not math.isfinite(threshold):
+        return None
+    corr = {k: problem.settings.corrections.get(k, 1.0) for k in terms}
+    radius = problem.brief.stress_radius
+    run = dict(sigma=0.0, E=-math.inf, F_lo=math.inf, F_hi=-math.inf, F_min=math.inf, F_max=-math.inf)
+
+    def watch(k, rec):
+        run["F_min"], run["F_max"] = min(run["F_min"], rec.force), max(run["F_max"], rec.force)
+        if rec.energy > run["E"]:  # a new maximum of the energy: every force so far is read
+            run["E"], run["F_lo"], run["F_hi"] = rec.energy, run["F_min"], run["F_max"]
+        value = {"insertion_force": max(0.0, -run["F_lo"]), "removal_force": max(0.0, run["F_hi"])}
+        if "von_mises" in terms:
+            run["sigma"] = max(run["sigma"], averaged_von_mises(cm.fem, rec.von_mises, radius))
+            value["von_mises"] = run["sigma"]
+        bound = base + B.PENALTY_WEIGHT * sum(max(0.0, corr[c] * value[c] - hi) ** 2 / B.SCALES[c] ** 2
+                                              for c, hi in terms.items())
+        trace.append(bound)
+        if bound > threshold:
+            raise _Exceeded(bound, k)
+
+    return watch
+
+
+class _Aborted(Exception):
+    """Raised from the insertion's step callback when the evaluation is no longer needed."""
+
+    def __init__(self, step: int):
+        self.step = step
+
+
+def _step_watch(bound, abort):
+    """The insertion's step callback: the objective bound's watch (or None), then ``abort``."""
+    if abort is None:
+        return bound
+
+    def watch(k, rec):
+        if bound is not None:
+            bound(k, rec)
+        if abort():
+            raise _Aborted(k)
+
+    return watch
+
+
+def screen(problem: DesignProblem, h: np.ndarray, threshold: float = math.inf) -> Evaluation:
+    """The cheap part of :func:`evaluate`: the rest shape, its validity and E_L against the
+    acceptance threshold. A returned evaluation with a ``reason`` is decided (rejected, or
+    stopped with objective E_L > threshold); without one, the candidate needs its simulation."""
+    t0 = time.perf_counter()
+    X = problem.handles.apply(h)
+    ev = Evaluation(h=np.array(h, float), rest=X, status="rejected")
+    ev.reason = shape_defect(problem, X)
+    if not ev.reason:
+        ev.E_L = problem.energy(X)
+        base = 0.0 if problem.target is not None else ev.E_L
+        if base > threshold:
+            ev.status, ev.reason, ev.objective = "stopped", "modification energy above the acceptance threshold", base
+    ev.seconds = time.perf_counter() - t0
+    return ev
+
+
+def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False,
+             threshold: float = math.inf, abort=None) -> Evaluation:
+    """Evaluate design vector h (see the module docstring); never raises for a bad candidate.
+
+    threshold : acceptance threshold of the annealer; the simulation stops (status "stopped",
+        objective = a lower bound > threshold) as soon as the objective provably exceeds it.
+    abort : optional callable () -> bool polled after every insertion step; when it returns True
+        the simulation stops (status "aborted": a speculative evaluation no longer needed).
+    """
+    t0 = time.perf_counter()
+    ev = screen(problem, h, threshold)
+    if ev.reason:
+        return ev
+    cm, ev.reason = candidate_model(problem, ev.rest)
+    if ev.reason:
+        ev.seconds = time.perf_counter() - t0
+        return ev
+    base = 0.0 if problem.target is not None else ev.E_L
+    t1 = time.perf_counter()
+    try:
+        check_start(cm)
+        res = simulate(cm, callback=_step_watch(_bound_watch(problem, cm, base, threshold, ev.bounds), abort),
+                       refined=problem.settings.refined)
+    except _Aborted as e:
+        ev.status, ev.reason = "aborted", f"no longer needed at step {e.step}"
+    except _Exceeded as e:
+        ev.status, ev.objective = "stopped", e.bound
+        ev.reason = f"objective above the acceptance threshold at step {e.step}"
+    except ConvergenceError as e:
+        ev.reason = f"simulation did not converge: {str(e).splitlines()[0][:160]}"
+    except InputError as e:
+        ev.reason = f"simulation refused the shape: {str(e).splitlines()[0][:160]}"
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError, RuntimeError) as e:
+        ev.reason = f"simulation failed ({type(e).__name__}): {str(e).splitlines()[0][:160] if str(e) else ''}"
+    else:
+        ev.sim_seconds = time.perf_counter() - t1
+        _score(problem, ev, res, keep_result)
+    if ev.sim_seconds == 0.0:
+        ev.sim_seconds = time.perf_counter() - t1
+    ev.seconds = time.perf_counter() - t0
+    return ev
+
+
+def _score(problem: DesignProblem, ev: Evaluation, res, keep_result: bool) -> None:
+    """Fill ``ev`` (status "ok") from the complete insertion ``res`` of its rest shape: figures,
+    constraints, objective (or "rejected" for non-finite figures)."""
+    ev.status = "ok"
+    ev.newton_iterations = int(sum(st.iterations for st in res.steps))
+    ev.figures = profile_figures(res, problem.brief.stress_radius)
+    ev.constraints = problem.constraints(ev.figures)
+    pen = B.penalty(ev.constraints, problem.settings.margin)
+    if problem.target is not None:
+        scale = problem.settings.corrections.get("force_profile", 1.0)  # mesh correction of the whole profile
+        ev.rms_error = problem.target.rms_error(res.column("s"), scale * res.column("force"))
+        ev.objective = ev.rms_error ** 2 + pen
+    else:
+        ev.objective = ev.E_L + pen
+    if not math.isfinite(ev.objective):
+        ev.status, ev.reason, ev.objective = "rejected", "non-finite profile figures", math.inf
+    if keep_result:
+        ev.result = res
+
+
+def initial_evaluation(problem: DesignProblem) -> Evaluation:
+    """The evaluation of the unmodified shape (identity handles: the mesh exactly), scored from
+    ``problem.initial`` when the caller already ran it, else simulated."""
+    h = problem.handles.identity()
+    if problem.initial is None:
+        return evaluate(problem, h, keep_result=True)
+    t0 = time.perf_counter()
+    ev = screen(problem, h)
+    if not ev.reason:
+        ev.sim_seconds = problem.initial.seconds
+        _score(problem, ev, problem.initial, True)
+    ev.seconds = time.perf_counter() - t0 + ev.sim_seconds
+    return ev
+
+
