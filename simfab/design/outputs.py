@@ -174,6 +174,9 @@ def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, 
         if getattr(opts, k) is not None:
             simc[k] = getattr(opts, k)
     cfg["simulation"] = simc
+    mu = res.problem.base.contact.friction  # the friction it was designed with (--friction included)
+    if mu > 0 or "contact" in cfg:
+        cfg["contact"] = {**cfg.get("contact", {}), "friction": float(mu)}
     tgt = res.problem.target
     if tgt is not None:  # the optimized scene carries its own copy of the target profile
         shutil.copyfile(tgt.source, tmp["scene_target"])
