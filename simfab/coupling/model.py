@@ -7,9 +7,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab.contact.imls import ImlsField, pose_matrix
+from simfab.contact.imls import ImlsField
 from simfab.coupling.config import ContactOptions, InsertionOptions
 from simfab.errors import InputError
+from simfab.rotations import pose_matrix
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
