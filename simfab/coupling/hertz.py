@@ -98,7 +98,7 @@ def linear_centre_displacement(cm, *, R: float, d: float, E: float, nu: float, q
     The pressure is integrated per top triangle by the midpoint rule on quad^2 sub-triangles."""
     import scipy.sparse.linalg as spl
 
-    from simfab.fem.neohookean import energy_gradient_hessian
+    from simfab.fem.elastic import energy_gradient_hessian
 
     fem = cm.fem
     P = fem.rest

@@ -102,7 +102,7 @@ class BracketResult:
 
 def tip_deflection(outline, holes=(), *, setup: BracketSetup = BracketSetup(), name: str = "design") -> BracketResult:
     """Mesh, clamp at x = 0, load at (L, load_y), solve statics; return the tip deflection."""
-    from simfab.fem import neohookean as nh
+    from simfab.fem import elastic as nh
     from simfab.fem.materials import material_by_name
     from simfab.fem.meshing import triangulate_polygon
     from simfab.fem.model import make_model

@@ -12,14 +12,22 @@ import numpy as np
 
 from simfab.errors import InputError
 from simfab.fem.assembly import HessianPattern
-from simfab.fem.materials import Material
+from simfab.fem.materials import Material, material_by_name
 from simfab.fem.tolerances import DEGENERATE_REL
 
 
 class MeshModel:
     """What every immutable FEM model (linear :class:`FemModel`, quadratic
-    :class:`simfab.fem.p2.P2Model`) shares: sizes from ``rest`` (n, dim) and ``elements`` (m, nodes),
-    and pickling without ``_cache`` (device buffers and recorded launches, rebuilt on demand)."""
+    :class:`simfab.fem.p2.P2Model`) shares: sizes from ``rest`` (n, dim) and ``elements`` (m, k),
+    position validation, and pickling without ``_cache`` (device buffers and recorded launches,
+    rebuilt on demand). What depends on the element order is a method of the subclass:
+
+    - ``element_order`` : 1 or 2 (selects the kernels in :mod:`simfab.fem.elastic`)
+    - ``element_geometry()`` : the per-element rest geometry and quadrature weights the kernels read
+    - ``shape_functions(L)`` : nodal shape functions at barycentric points (consistent loads)
+    - ``linear_facets()`` / ``linear_elements()`` : the boundary and the body as linear simplices
+      over the model's nodes (contact, output)
+    """
 
     def __getstate__(self):
         return {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "_cache"}
@@ -43,6 +51,18 @@ class MeshModel:
     @property
     def n_dofs(self) -> int:
         return self.rest.size
+
+    def check_positions(self, x, where: str = "x") -> np.ndarray:
+        """``x`` (n, dim) or (n*dim,) as a (n, dim) float64 array; InputError naming ``where`` if the
+        shape is wrong or it holds NaN/inf."""
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape == (self.n_dofs,):
+            x = x.reshape(self.n_vertices, self.dim)
+        if x.shape != self.rest.shape:
+            raise InputError(f"positions have shape {x.shape}, expected {self.rest.shape}", where=where)
+        if not np.all(np.isfinite(x)):
+            raise InputError("positions contain NaN or inf", where=where)
+        return x
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -80,20 +100,35 @@ class FemModel(MeshModel):
     device: str = "cpu"
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
+    @property
+    def element_order(self) -> int:
+        return 1
+
+    @property
+    def corner_elements(self) -> np.ndarray:
+        """(m, dim+1) the simplices' corners: the elements themselves."""
+        return self.elements
+
     def mean_edge_length(self) -> float:
         """Mean length [m] of the element edges at rest (each element edge counted once per element)."""
         return _mean_edge_length(self.rest, self.elements)
 
-    def check_positions(self, x, where: str = "x") -> np.ndarray:
-        """``x`` as a (n, dim) float64 array; InputError if the shape is wrong or it holds NaN/inf."""
-        x = np.asarray(x, dtype=np.float64)
-        if x.shape == (self.n_dofs,):
-            x = x.reshape(self.n_vertices, self.dim)
-        if x.shape != self.rest.shape:
-            raise InputError(f"positions have shape {x.shape}, expected {self.rest.shape}", where=where)
-        if not np.all(np.isfinite(x)):
-            raise InputError("positions contain NaN or inf", where=where)
-        return x
+    def element_geometry(self) -> tuple[np.ndarray, np.ndarray]:
+        """(Dm^-1 (m, dim, dim) [1/m], volume (m,) [m^3]): F = Ds Dm^-1 is constant over a linear
+        simplex, so it is the one-quadrature-point case with weight = volume."""
+        return self.Dm_inv, self.volume
+
+    def shape_functions(self, L) -> np.ndarray:
+        """Linear shape functions (q, dim+1) at barycentric points L (q, dim+1): the barycentrics."""
+        return np.asarray(L, dtype=np.float64)
+
+    def linear_facets(self) -> np.ndarray:
+        """(f, dim) the boundary facets (``boundary_facets``)."""
+        return self.boundary_facets
+
+    def linear_elements(self) -> np.ndarray:
+        """(m, dim+1) the elements."""
+        return self.elements
 
 
 def _edge_matrices(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
@@ -134,8 +169,8 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     element, degenerate elements (|det Dm| <= DEGENERATE_REL * h^dim, h = mean edge length),
     thickness <= 0.
     """
+    # deferred: importing simfab._warp loads Warp, which building a model needs only for the device name
     from simfab._warp import device as _validate_device
-    from simfab.fem.materials import material_by_name
 
     if isinstance(material, str):
         material = material_by_name(material)

@@ -1,4 +1,6 @@
-"""Compressible Neo-Hookean elasticity on linear simplices: energy, gradient, Hessian side by side.
+"""Compressible Neo-Hookean elasticity on linear simplices: the Warp kernels (energy, gradient,
+Hessian side by side) and their :data:`LINEAR` record. The public functions that launch them, for
+every element order, are in :mod:`simfab.fem.elastic`.
 
 Per element (volume V, Lame parameters mu, lam, dimension d):
 
@@ -31,7 +33,7 @@ twist/flip values come from the mu ||F||^2 term (2 * mu/2 * I) plus dPsi/dJ time
 det F, whose eigenvalues on those modes are +-s_k.) The PSD projection clamps negative
 eigenvalues to zero in this d^2-dimensional stress space, which makes the element block PSD.
 
-3D evaluation (measured ~2x faster than the SVD route, no eigensolver in the common case): when
+3D evaluation (no eigensolver in the common case, about half the cost of the SVD route): when
 dPsi/dJ <= 0 (lam log J <= mu - all but strong volumetric expansion) the flip and scaling
 eigenvalues are provably positive, so only the 3-dimensional twist block can be indefinite. That
 block is T = mu I + dPsi/dJ S in the basis R [e_i]x / sqrt 2, with F = R S the polar decomposition
@@ -40,16 +42,15 @@ block is T = mu I + dPsi/dJ S in the basis R [e_i]x / sqrt 2, with F = R S the p
 spectral projectors come from closed-form eigenvalues (accurate also for clustered eigenvalues).
 With dPsi/dJ > 0 the full SVD eigensystem is used. 2D works the same way with its single twist
 mode (polar rotation in closed form).
-With ``project_psd=False`` the exact Hessian is returned (validated against finite differences;
-the two projected routes agree to round-off, also checked against numpy ``eigh`` in the tests).
-Batched numpy ``eigh`` of the 12x12 element blocks instead was ~10x slower than the whole kernel
-(``python -m simfab.fem.benchmark``).
+The exact Hessian (mode EXACT) is validated against finite differences; the two projected routes
+(PROJECT, PROJECT_SVD) agree to round-off and with numpy ``eigh`` of the exact blocks (tests).
 
-All kernels run in float64, one launch per call for all elements (energy, gradient and Hessian
-blocks in the same kernel when the Hessian is wanted); the Hessian kernel adds its values straight
-into the CSR ``data`` of the model's fixed pattern through precomputed slots. Warp CPU kernels
-run single-threaded, so results are bit-reproducible there; on CUDA the additions are atomic and
-their order (hence the last bits) can vary between runs.
+All kernels run in float64 with one thread per element (argument lists and launch codes:
+:mod:`simfab.fem.workspace`); energy, gradient and Hessian blocks come from the same kernel when the
+Hessian is wanted, and the Hessian kernel adds its values straight into the CSR ``data`` of the
+model's fixed pattern through precomputed slots. Warp CPU kernels run single-threaded, so results
+are bit-reproducible there; on CUDA the additions are atomic and their order (hence the last bits)
+can vary between runs.
 
 An element with det F <= 0 makes the energy +inf (the log barrier of Neo-Hookean); such an
 element contributes nothing to the gradient and Hessian, which are then not meaningful.
@@ -59,12 +60,9 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-import scipy.sparse as sp
-
-from simfab._warp import RECORD_LOCK, wp
+from simfab._warp import wp
 from simfab.fem import tolerances
-from simfab.fem.model import FemModel
+from simfab.fem.workspace import ElementKernels, Hessian
 
 wp.set_module_options({"enable_backward": False})  # hand-written derivatives; halves compile time
 
@@ -76,12 +74,11 @@ _mat4x6d = wp.types.matrix(shape=(4, 6), dtype=wp.float64)
 _mat9x12d = wp.types.matrix(shape=(9, 12), dtype=wp.float64)
 
 _HALF_SQRT2 = 0.7071067811865476  # 1/sqrt(2): unit Frobenius norm of the twist/flip modes
-# Hessian kernel modes: exact; PSD-projected (direct route where valid, else SVD); PSD-projected
-# always through the SVD eigensystem (reference route for tests and the benchmark)
-_EXACT = wp.constant(0)
-_PROJECT = wp.constant(1)
-_PROJECT_SVD = wp.constant(2)
-_BOTH = wp.constant(3)  # exact into ``data`` and PSD-projected (default route) into ``data2``
+# Hessian kernel modes (simfab.fem.workspace.Hessian)
+_EXACT = wp.constant(int(Hessian.EXACT))
+_PROJECT = wp.constant(int(Hessian.PROJECT))
+_PROJECT_SVD = wp.constant(int(Hessian.PROJECT_SVD))
+_BOTH = wp.constant(int(Hessian.BOTH))
 _POLAR_STEP_SQ_TOL = wp.constant(wp.float64(tolerances.POLAR_STEP_SQ_TOL))
 _POLAR_MAX_ITER = wp.constant(tolerances.POLAR_MAX_ITER)
 
@@ -501,10 +498,11 @@ def _dim(F: wp.mat22d):  # noqa: F811
 
 
 @wp.kernel
-def _energy_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
-                   volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
-                   energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
-    e = wp.tid()
+def _energy_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                   Dm_inv: wp.array(dtype=Any), volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
+                   lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
+                   det_F: wp.array(dtype=wp.float64)):
+    e = first + wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -514,11 +512,11 @@ def _energy_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
 
 
 @wp.kernel
-def _gradient_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
-                     volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
+def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                     Dm_inv: wp.array(dtype=Any), volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
                      lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
                      det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any)):
-    e = wp.tid()
+    e = first + wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -530,13 +528,13 @@ def _gradient_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32
 
 
 @wp.kernel
-def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
-                    volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
+def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                    Dm_inv: wp.array(dtype=Any), volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
                     lam_e: wp.array(dtype=wp.float64), project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
                     energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
                     data2: wp.array(dtype=wp.float64)):
-    e = wp.tid()
+    e = first + wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -583,12 +581,13 @@ def _minus_eye(B: wp.mat22d):  # noqa: F811
 
 
 @wp.kernel
-def _stress_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
-                   mu_e: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64),
+def _stress_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                   Dm_inv: wp.array(dtype=Any), volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
+                   lam_e: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64),
                    von_mises: wp.array(dtype=wp.float64)):
     """det F and the von Mises stress sqrt(3/2) mu |dev(F F^T - I)| / J per element (see
     simfab.fem.stress.det_and_von_mises); +inf where det F <= 0 (stress undefined)."""
-    e = wp.tid()
+    e = first + wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -614,230 +613,11 @@ def _declare_overloads():
 _declare_overloads()
 
 # ----------------------------------------------------------------------------------------------
-# host side
+# the element order's record for simfab.fem.workspace
 # ----------------------------------------------------------------------------------------------
-_ENERGY, _GRADIENT, _HESSIAN, _BLOCKS, _STRESS = 0, 1, 2, 3, 4  # what a launch computes
-_KERNELS = (_energy_kernel, _gradient_kernel, _hessian_kernel, _hessian_kernel, _stress_kernel)  # by ``want``
-
-
-class _Workspace:
-    """Device copies of the model arrays, reusable buffers and pre-recorded launches (per model).
-
-    Small meshes are dominated by per-call overhead, so the position buffer is persistent (on the
-    CPU a numpy array the kernels read through an alias) and the launches are recorded once
-    (``record_cmd``) and replayed with only the changing parameters updated.
-    """
-
-    def __init__(self, model: FemModel):
-        d, m = model.dim, model.n_elements
-        dev = model.device
-        self.cpu = wp.get_device(dev).is_cpu
-        self.vec = wp.vec3d if d == 3 else wp.vec2d
-        mat = wp.mat33d if d == 3 else wp.mat22d
-        self.x_np = np.zeros((model.n_vertices, d))
-        self.x = self._wrap(self.x_np, self.vec, dev)
-        self.elements = wp.array(model.elements, dtype=wp.int32, device=dev)
-        self.Dm_inv = wp.array(model.Dm_inv, dtype=mat, device=dev)
-        self.volume = wp.array(model.volume, dtype=wp.float64, device=dev)
-        self.mu = wp.array(model.mu, dtype=wp.float64, device=dev)
-        self.lam = wp.array(model.lam, dtype=wp.float64, device=dev)
-        self.energy = wp.zeros(m, dtype=wp.float64, device=dev)
-        self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
-        self.grad = wp.zeros(m, dtype=_vec12d if d == 3 else _vec6d, device=dev)
-        self.von_mises = wp.zeros(m, dtype=wp.float64, device=dev)
-        self.hess = None  # element blocks (m, k*d, k*d) float64, allocated on first element_hessians()
-        self.slots = None  # model.pattern.element_slots as int32, on first Hessian request
-        self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
-        self.dummy_slots = wp.zeros((1, 1, 1), dtype=wp.int32, device=dev)
-        self.dummy_data = wp.zeros(1, dtype=wp.float64, device=dev)
-        # host views of the per-element outputs on the CPU (the Warp arrays' own memory: no copy)
-        self.energy_np, self.det_F_np, self.grad_np = (
-            (self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()) if self.cpu else (None, None, None))
-        # CSR values written by the Hessian kernel: persistent buffers (``data``, and ``data2`` for the
-        # projected Hessian with _BOTH), zeroed before and copied out after each launch, so the
-        # recorded launch keeps its arguments (re-binding fresh arrays per call costs more than the copy)
-        self.data_np = self.data = None
-        self.data2_np = self.data2 = None
-        self.bound = {}  # (launch, parameter name) -> value currently bound in a recorded launch
-        self.commands: dict = {}
-        # gradient scatter: (n*d, m*k*d) sparse sum over the element copies of each dof
-        dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
-        self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))),
-                                     shape=(model.n_dofs, dofs.size))
-
-    def _wrap(self, arr: np.ndarray, dtype, dev):
-        """Warp view of a numpy array (alias on the CPU, a device copy elsewhere)."""
-        return wp.array(arr, dtype=dtype, device=dev, copy=False) if self.cpu else wp.array(arr, dtype=dtype, device=dev)
-
-    def hessian_values(self, second: bool = False) -> np.ndarray:
-        """A fresh copy (nnz,) of the CSR values filled by the last Hessian launch: ``data``, or
-        ``data2`` with ``second`` (callers keep and modify the matrices built on it)."""
-        if self.cpu:
-            return (self.data2_np if second else self.data_np).copy()
-        return (self.data2 if second else self.data).numpy()
-
-    def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(energy (m,), det F (m,), nodal gradient blocks) of the last launch, as host arrays."""
-        if self.cpu:
-            return self.energy_np, self.det_F_np, self.grad_np
-        return self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()
-
-    def bind(self, cmd, name: str, value) -> None:
-        """Set a parameter of a recorded launch only when it changes (setting costs ~20 us): ints
-        by value, arrays by identity."""
-        key = (id(cmd), name)
-        prev = self.bound.get(key)
-        if (prev == value) if isinstance(value, int) else (prev is value):
-            return
-        cmd.set_param_by_name(name, value)
-        self.bound[key] = value
-
-    def set_positions(self, x: np.ndarray) -> None:
-        self.x_np[...] = x
-        if not self.cpu:
-            self.x.assign(self.x_np)
-
-    def command(self, model: FemModel, want: int):
-        """The recorded launch for ``want`` (created on first use)."""
-        cmd = self.commands.get(want)
-        if cmd is not None:
-            return cmd
-        common = [self.x, self.elements, self.Dm_inv, self.volume, self.mu, self.lam]
-        dev = model.device
-        if want == _STRESS:
-            args = dict(inputs=[self.x, self.elements, self.Dm_inv, self.mu], outputs=[self.det_F, self.von_mises])
-        elif want == _ENERGY:
-            args = dict(inputs=common, outputs=[self.energy, self.det_F])
-        elif want == _GRADIENT:
-            args = dict(inputs=common, outputs=[self.energy, self.det_F, self.grad])
-        elif want == _HESSIAN:  # scatter straight into CSR values
-            if model.pattern.nnz >= 2**31:
-                raise ValueError("Hessian too large for int32 slots")
-            self.slots = wp.array(model.pattern.element_slots.astype(np.int32), dtype=wp.int32, device=dev)
-            self.data_np = np.zeros(model.pattern.nnz)
-            self.data = self._wrap(self.data_np, wp.float64, dev)
-            args = dict(inputs=common + [1, 1, self.slots],
-                        outputs=[self.energy, self.det_F, self.grad, self.dummy3, self.data, self.dummy_data])
-        else:  # _BLOCKS: keep the per-element blocks
-            kk = (model.dim + 1) * model.dim
-            self.hess = wp.zeros((model.n_elements, kk, kk), dtype=wp.float64, device=dev)
-            args = dict(inputs=common + [1, 0, self.dummy_slots],
-                        outputs=[self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data])
-        kernel = _KERNELS[want]
-        with RECORD_LOCK:  # the first launch loads the module: one thread at a time
-            cmd = wp.launch(kernel, dim=model.n_elements, device=dev, record_cmd=True, **args)
-        self.commands[want] = cmd
-        return cmd
-
-
-def _workspace(model: FemModel) -> _Workspace:
-    ws = model._cache.get("neohookean")
-    if ws is None:
-        ws = model._cache["neohookean"] = _Workspace(model)
-    return ws
-
-
-def _launch(model: FemModel, x, want: int, project: int = 1) -> _Workspace:
-    """One kernel launch over all elements computing what ``want`` asks for."""
-    x = model.check_positions(x)
-    ws = _workspace(model)
-    ws.set_positions(x)
-    cmd = ws.command(model, want)
-    if want in (_HESSIAN, _BLOCKS):
-        ws.bind(cmd, "project", int(project))
-    if want == _HESSIAN:
-        _zero(ws, "data")
-        if project == _BOTH:
-            if ws.data2 is None:
-                ws.data2_np = np.zeros(model.pattern.nnz)
-                ws.data2 = ws._wrap(ws.data2_np, wp.float64, model.device)
-            _zero(ws, "data2")
-            ws.bind(cmd, "data2", ws.data2)
-        else:
-            ws.bind(cmd, "data2", ws.dummy_data)
-    cmd.launch()
-    return ws
-
-
-def _zero(ws: _Workspace, name: str) -> None:
-    """Zero the persistent CSR values buffer ``name`` ("data" or "data2") before a launch adds into it."""
-    if ws.cpu:
-        getattr(ws, name + "_np").fill(0.0)
-    else:
-        getattr(ws, name).zero_()
-
-
-def _total(ws: _Workspace) -> float:
-    energy, det, _ = ws.outputs()
-    if det.min() <= 0.0:
-        return float("inf")
-    return float(energy.sum())
-
-
-def _gradient(model: FemModel, ws: _Workspace) -> np.ndarray:
-    return (ws.scatter @ ws.outputs()[2].reshape(-1)).reshape(model.n_vertices, model.dim)
-
-
-def energy(model: FemModel, x) -> float:
-    """Elastic energy [J] at positions x (n, dim) [m]; +inf if any element has det F <= 0."""
-    return _total(_launch(model, x, _ENERGY, False))
-
-
-def energy_gradient(model: FemModel, x) -> tuple[float, np.ndarray]:
-    """(energy [J], gradient dE/dx (n, dim) [N]). The elastic nodal force is ``-gradient``."""
-    ws = _launch(model, x, _GRADIENT, False)
-    return _total(ws), _gradient(model, ws)
-
-
-def element_hessians(model: FemModel, x, *, project_psd: bool = True) -> np.ndarray:
-    """Per-element Hessian blocks (m, (dim+1)*dim, (dim+1)*dim) [N/m], dofs ordered (vertex, axis)."""
-    ws = _launch(model, x, _BLOCKS, _PROJECT if project_psd else _EXACT)
-    return ws.hess.numpy().copy()
-
-
-def energy_gradient_hessian(model: FemModel, x, *, project_psd: bool = True) -> tuple[float, np.ndarray, sp.csr_matrix]:
-    """(energy [J], gradient (n, dim) [N], Hessian (n*dim, n*dim) CSR [N/m]).
-
-    With ``project_psd`` (default) every element block is projected to positive semi-definite
-    (clamped eigenvalues of d2Psi/dF2), so the assembled Hessian is PSD; otherwise it is the
-    exact Hessian. The CSR has the model's fixed pattern (``model.pattern``); its ``data`` is a
-    fresh array the caller may modify (e.g. add contact blocks via ``pattern.block_slots``).
-    """
-    ws = _launch(model, x, _HESSIAN, _PROJECT if project_psd else _EXACT)
-    H = model.pattern.matrix(ws.hessian_values())
-    return _total(ws), _gradient(model, ws), H
-
-
-def energy_gradient_hessians(model: FemModel, x) -> tuple[float, np.ndarray, sp.csr_matrix, sp.csr_matrix]:
-    """(energy [J], gradient (n, dim) [N], exact Hessian, PSD-projected Hessian), both CSR
-    (n*dim, n*dim) [N/m] with the model's pattern, from a single kernel launch.
-
-    For :func:`simfab.solve.newton.minimize` return ``(H_exact, H_psd)`` as the Hessian: it takes
-    exact Newton steps whenever the exact Hessian is positive definite (quadratic convergence near
-    stable equilibria with large rotations, where per-element projection converges only linearly)
-    and falls back to the projected one otherwise.
-    """
-    ws = _launch(model, x, _HESSIAN, _BOTH)
-    H_exact = model.pattern.matrix(ws.hessian_values())
-    H_psd = model.pattern.matrix(ws.hessian_values(second=True))
-    return _total(ws), _gradient(model, ws), H_exact, H_psd
-
-
-def _energy_gradient_hessian_svd(model: FemModel, x) -> tuple[float, np.ndarray, sp.csr_matrix]:
-    """Like :func:`energy_gradient_hessian` (projected) but always through the SVD eigensystem:
-    the reference route the faster direct route is checked and benchmarked against."""
-    ws = _launch(model, x, _HESSIAN, _PROJECT_SVD)
-    H = model.pattern.matrix(ws.hessian_values())
-    return _total(ws), _gradient(model, ws), H
-
-
-def det_and_von_mises(model: FemModel, x) -> tuple[np.ndarray, np.ndarray]:
-    """(det F (m,) [-], von Mises stress (m,) [Pa]) per element in one launch; see
-    :func:`simfab.fem.stress.det_and_von_mises` (the public entry point) for the formula."""
-    ws = _launch(model, x, _STRESS)
-    return ws.det_F.numpy().copy(), ws.von_mises.numpy().copy()
-
-
-def det_F(model: FemModel, x) -> np.ndarray:
-    """det F per element (m,) at positions x (n, dim); <= 0 means inverted or degenerate."""
-    return _launch(model, x, _ENERGY, False).outputs()[1].copy()
+#: Linear simplices: F = Ds Dm^-1 is constant over the element (the one-quadrature-point case:
+#: ``model.element_geometry()`` is (Dm^-1 (m, d, d), volume (m,))). One launch at every size: two
+#: halves on two threads gained nothing on the insertion models (see docs/decisions.md).
+LINEAR = ElementKernels(energy=_energy_kernel, gradient=_gradient_kernel, hessian=_hessian_kernel,
+                        stress=_stress_kernel, grad_dtype={2: _vec6d, 3: _vec12d},
+                        geometry_dtype={2: wp.mat22d, 3: wp.mat33d})

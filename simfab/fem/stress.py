@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from simfab.fem import elastic
 from simfab.fem.model import FemModel, _edge_matrices
 
 
@@ -66,12 +67,10 @@ def det_and_von_mises(model: FemModel, x) -> tuple[np.ndarray, np.ndarray]:
     B = diag(F F^T, 1)) drop out of the deviator, so sigma_vm = sqrt(3/2) mu |dev B| / J with
     |dev B|^2 = C:C - tr(C)^2 / 3 (C = B - I): no inverse, logarithm or 3x3 stress tensor per element (this
     runs once per insertion step). Elements with det F <= 0 (stress undefined) get +inf.
-    Computed by a Warp kernel (:func:`simfab.fem.neohookean.det_and_von_mises`);
-    :func:`_det_and_von_mises_numpy` is the same formula in NumPy.
+    Computed by a Warp kernel (:func:`simfab.fem.elastic.det_and_von_mises`, which also takes P2
+    models); :func:`_det_and_von_mises_numpy` is the same formula in NumPy.
     """
-    from simfab.fem.neohookean import det_and_von_mises as kernel
-
-    return kernel(model, x)
+    return elastic.det_and_von_mises(model, x)
 
 
 def _det_and_von_mises_numpy(model: FemModel, x) -> tuple[np.ndarray, np.ndarray]:
