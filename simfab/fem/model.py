@@ -16,6 +16,7 @@ from simfab.fem.materials import Material, material_by_name
 from simfab.fem.tolerances import DEGENERATE_REL
 
 
+@dataclass(frozen=True, kw_only=True)
 class MeshModel:
     """What every immutable FEM model (linear :class:`FemModel`, quadratic
     :class:`simfab.fem.p2.P2Model`) shares: sizes from ``rest`` (n, dim) and ``elements`` (m, k),
@@ -27,7 +28,24 @@ class MeshModel:
     - ``shape_functions(L)`` : nodal shape functions at barycentric points (consistent loads)
     - ``linear_facets()`` / ``linear_elements()`` : the boundary and the body as linear simplices
       over the model's nodes (contact, output)
+
+    The fields every order has are described in :class:`FemModel` and :class:`simfab.fem.p2.P2Model`.
     """
+
+    dim: int
+    rest: np.ndarray
+    elements: np.ndarray
+    Dm_inv: np.ndarray
+    volume: np.ndarray
+    mu: np.ndarray
+    lam: np.ndarray
+    thickness: float
+    boundary_facets: np.ndarray
+    boundary_vertices: np.ndarray
+    pattern: HessianPattern
+    material: Material | None = None
+    device: str = "cpu"
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __getstate__(self):
         return {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "_cache"}
@@ -84,21 +102,6 @@ class FemModel(MeshModel):
     material : the material the Lame parameters came from (None if given per element)
     device : Warp device the kernels run on ("cpu", "cuda:0")
     """
-
-    dim: int
-    rest: np.ndarray
-    elements: np.ndarray
-    Dm_inv: np.ndarray
-    volume: np.ndarray
-    mu: np.ndarray
-    lam: np.ndarray
-    thickness: float
-    boundary_facets: np.ndarray
-    boundary_vertices: np.ndarray
-    pattern: HessianPattern
-    material: Material | None = None
-    device: str = "cpu"
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def element_order(self) -> int:

@@ -72,6 +72,8 @@ _vec4d = wp.types.vector(length=4, dtype=wp.float64)
 _vec9d = wp.types.vector(length=9, dtype=wp.float64)
 _mat4x6d = wp.types.matrix(shape=(4, 6), dtype=wp.float64)
 _mat9x12d = wp.types.matrix(shape=(9, 12), dtype=wp.float64)
+_mat44d = wp.types.matrix(shape=(4, 4), dtype=wp.float64)
+_mat99d = wp.types.matrix(shape=(9, 9), dtype=wp.float64)
 
 _HALF_SQRT2 = 0.7071067811865476  # 1/sqrt(2): unit Frobenius norm of the twist/flip modes
 # Hessian kernel modes (simfab.fem.workspace.Hessian)
@@ -116,12 +118,6 @@ def _pk1(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64):
     """First Piola-Kirchhoff stress P = mu (F - F^-T) + lam log J F^-T [Pa]."""
     FinvT = wp.transpose(wp.inverse(F))
     return mu * (F - FinvT) + lam * wp.log(J) * FinvT
-
-
-@wp.func
-def _mode(U: Any, M: Any, V: Any, Dmi: Any):
-    """Nodal vector of the stress-space mode U M V^T (2D or 3D through the ``_nodal`` overloads)."""
-    return _nodal(U * M * wp.transpose(V), Dmi)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -301,35 +297,34 @@ def _hessian_direct(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.i
 
 
 @wp.func
-def _hessian_svd(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu: wp.float64, lam: wp.float64,
-                 dPsi_dJ: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                 hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
-    """PSD-projected element Hessian from the full analytic eigensystem (SVD of F). Used when
-    dPsi/dJ > 0 (strong volumetric expansion), where flip and scaling eigenvalues can be negative."""
+def _eigensystem(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
+    """The 9 eigenmodes of d2Psi/dF2 from the SVD F = U diag(s) V^T, as rows vec(U M_k V^T)
+    (row-major) of a 9x9 matrix, and their eigenvalues clamped at 0 (module docstring): twist
+    (skew) and flip (symmetric) modes in the (1,2), (0,2), (0,1) planes, then the scaling modes
+    U diag(q) V^T, q the eigenvectors of the Hessian of Psi in the singular values."""
     zero = wp.float64(0.0)
-    project = 1
     U = wp.mat33d()
     s = wp.vec3d()
     Vs = wp.mat33d()
     wp.svd3(F, U, s, Vs)
     logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
     h = wp.float64(_HALF_SQRT2)
-    B = _mat9x12d()  # rows: nodal vectors of the 9 eigenmodes of d2Psi/dF2
-    w = _vec9d()  # their clamped eigenvalues
-    # twist (skew) and flip (symmetric) modes in the (1,2), (0,2), (0,1) planes
-    B[0] = _mode(U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, Dmi)
-    w[0] = _clamp(mu + dPsi_dJ * s[0], project)
-    B[1] = _mode(U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, Dmi)
-    w[1] = _clamp(mu - dPsi_dJ * s[0], project)
-    B[2] = _mode(U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, Dmi)
-    w[2] = _clamp(mu + dPsi_dJ * s[1], project)
-    B[3] = _mode(U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, Dmi)
-    w[3] = _clamp(mu - dPsi_dJ * s[1], project)
-    B[4] = _mode(U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
-    w[4] = _clamp(mu + dPsi_dJ * s[2], project)
-    B[5] = _mode(U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
-    w[5] = _clamp(mu - dPsi_dJ * s[2], project)
-    # scaling modes U diag(q) V^T: q eigenvectors of the Hessian of Psi in the singular values
+    Vt = wp.transpose(Vs)
+    modes = _mat99d()
+    w = _vec9d()
+    modes[0] = _vec(U * wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero) * Vt)
+    w[0] = _clamp(mu + dPsi_dJ * s[0], 1)
+    modes[1] = _vec(U * wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero) * Vt)
+    w[1] = _clamp(mu - dPsi_dJ * s[0], 1)
+    modes[2] = _vec(U * wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero) * Vt)
+    w[2] = _clamp(mu + dPsi_dJ * s[1], 1)
+    modes[3] = _vec(U * wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero) * Vt)
+    w[3] = _clamp(mu - dPsi_dJ * s[1], 1)
+    modes[4] = _vec(U * wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero) * Vt)
+    w[4] = _clamp(mu + dPsi_dJ * s[2], 1)
+    modes[5] = _vec(U * wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero) * Vt)
+    w[5] = _clamp(mu - dPsi_dJ * s[2], 1)
     cs = mu + lam * (wp.float64(1.0) - logJ)
     A = wp.mat33d(
         mu + cs / (s[0] * s[0]), lam / (s[0] * s[1]), lam / (s[0] * s[2]),
@@ -340,10 +335,35 @@ def _hessian_svd(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu:
     d = wp.vec3d()
     wp.eig3(A, Q, d)
     for k in range(3):
-        B[6 + k] = _mode(U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, Dmi)
-        w[6 + k] = _clamp(d[k], project)
-    # H_e = V sum_k w_k b_k b_k^T  (symmetric: compute the upper triangle, mirror)
-    for r in range(12):
+        modes[6 + k] = _vec(U * wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])) * Vt)
+        w[6 + k] = _clamp(d[k], 1)
+    return modes, w
+
+
+@wp.func
+def _vec(M: wp.mat33d):
+    """vec(M), row-major."""
+    return _vec9d(M[0, 0], M[0, 1], M[0, 2], M[1, 0], M[1, 1], M[1, 2], M[2, 0], M[2, 1], M[2, 2])
+
+
+@wp.func
+def _unvec(v: _vec9d):
+    return wp.mat33d(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8])
+
+
+@wp.func
+def _hessian_svd(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu: wp.float64, lam: wp.float64,
+                 scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dtype=wp.float64),
+                 data: wp.array(dtype=wp.float64), e: int):
+    """PSD-projected element Hessian V sum_k w_k b_k b_k^T from the clamped eigensystem (b_k: the
+    nodal vector of mode k). Used when dPsi/dJ > 0 (strong volumetric expansion), where flip and
+    scaling eigenvalues can be negative."""
+    zero = wp.float64(0.0)
+    modes, w = _eigensystem(F, J, mu, lam)
+    B = _mat9x12d()  # rows: nodal vectors of the 9 eigenmodes
+    for k in range(9):
+        B[k] = _nodal(_unvec(modes[k]), Dmi)
+    for r in range(12):  # symmetric: the upper triangle, mirrored by _store
         for c in range(r, 12):
             acc = zero
             for k in range(9):
@@ -444,26 +464,24 @@ def _hessian_direct(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.i
 
 
 @wp.func
-def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d,  # noqa: F811
-                 V: wp.float64, mu: wp.float64, lam: wp.float64,
-                 dPsi_dJ: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                 hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
-    """PSD-projected element Hessian from the full eigensystem (SVD of F), for dPsi/dJ > 0."""
+def _eigensystem(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
+    """2D: twist, flip and the two scaling modes (closed-form eigensystem of the symmetric 2x2
+    [[a, o], [o, c2]]) as rows vec(U M_k V^T) of a 4x4 matrix, eigenvalues clamped at 0."""
     zero = wp.float64(0.0)
-    project = 1
     U = wp.mat22d()
     s = wp.vec2d()
     Vs = wp.mat22d()
     wp.svd2(F, U, s, Vs)
     logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
     h = wp.float64(_HALF_SQRT2)
-    B = _mat4x6d()
+    Vt = wp.transpose(Vs)
+    modes = _mat44d()
     w = _vec4d()
-    B[0] = _mode(U, wp.mat22d(zero, -h, h, zero), Vs, Dmi)  # twist
-    w[0] = _clamp(mu + dPsi_dJ, project)
-    B[1] = _mode(U, wp.mat22d(zero, h, h, zero), Vs, Dmi)  # flip
-    w[1] = _clamp(mu - dPsi_dJ, project)
-    # scaling modes: closed-form eigensystem of the symmetric 2x2 [[a, o], [o, c2]]
+    modes[0] = _vec(U * wp.mat22d(zero, -h, h, zero) * Vt)  # twist
+    w[0] = _clamp(mu + dPsi_dJ, 1)
+    modes[1] = _vec(U * wp.mat22d(zero, h, h, zero) * Vt)  # flip
+    w[1] = _clamp(mu - dPsi_dJ, 1)
     cs = mu + lam * (wp.float64(1.0) - logJ)
     a = mu + cs / (s[0] * s[0])
     c2 = mu + cs / (s[1] * s[1])
@@ -471,10 +489,32 @@ def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d,  # noqa: F811
     theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
     ct = wp.cos(theta)
     st = wp.sin(theta)
-    B[2] = _mode(U, wp.mat22d(ct, zero, zero, st), Vs, Dmi)
-    w[2] = _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, project)
-    B[3] = _mode(U, wp.mat22d(-st, zero, zero, ct), Vs, Dmi)
-    w[3] = _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, project)
+    modes[2] = _vec(U * wp.mat22d(ct, zero, zero, st) * Vt)
+    w[2] = _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, 1)
+    modes[3] = _vec(U * wp.mat22d(-st, zero, zero, ct) * Vt)
+    w[3] = _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, 1)
+    return modes, w
+
+
+@wp.func
+def _vec(M: wp.mat22d):  # noqa: F811
+    return _vec4d(M[0, 0], M[0, 1], M[1, 0], M[1, 1])
+
+
+@wp.func
+def _unvec(v: _vec4d):  # noqa: F811
+    return wp.mat22d(v[0], v[1], v[2], v[3])
+
+
+@wp.func
+def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu: wp.float64,  # noqa: F811
+                 lam: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                 hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
+    zero = wp.float64(0.0)
+    modes, w = _eigensystem(F, J, mu, lam)
+    B = _mat4x6d()
+    for k in range(4):
+        B[k] = _nodal(_unvec(modes[k]), Dmi)
     for r in range(6):
         for c in range(r, 6):
             acc = zero
@@ -565,9 +605,9 @@ def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dty
         _hessian_direct(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, mode, both, scatter, slots, hess, data, data2)
     elif both != 0:
         _hessian_direct(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, _EXACT, 0, scatter, slots, hess, data, data)
-        _hessian_svd(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data2, e)
+        _hessian_svd(F, J, Dmi, V, mu, lam, scatter, slots, hess, data2, e)
     else:
-        _hessian_svd(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
+        _hessian_svd(F, J, Dmi, V, mu, lam, scatter, slots, hess, data, e)
 
 
 @wp.func

@@ -54,16 +54,14 @@ from typing import Any
 import numpy as np
 
 from simfab._warp import wp
-from simfab.fem.neohookean import (_BOTH, _EXACT, _HALF_SQRT2, _PROJECT, _PROJECT_SVD, _clamp, _dim,
-                                   _negative_part_sym3, _pk1, _polar_rotation3, _psi, _store)
+from simfab.fem.neohookean import (_BOTH, _EXACT, _PROJECT, _PROJECT_SVD, _dim, _eigensystem, _mat44d, _mat99d,
+                                   _negative_part_sym3, _pk1, _polar_rotation3, _psi, _store, _unvec)
 from simfab.fem.workspace import ElementKernels
 
 wp.set_module_options({"enable_backward": False})
 
 _vec12d = wp.types.vector(length=12, dtype=wp.float64)
 _vec30d = wp.types.vector(length=30, dtype=wp.float64)
-_mat44d = wp.types.matrix(shape=(4, 4), dtype=wp.float64)
-_mat99d = wp.types.matrix(shape=(9, 9), dtype=wp.float64)
 _mat12d = wp.types.matrix(shape=(12, 12), dtype=wp.float64)
 _mat30d = wp.types.matrix(shape=(30, 30), dtype=wp.float64)
 
@@ -101,6 +99,16 @@ def _zero_hess(F: wp.mat22d):  # noqa: F811
 
 
 @wp.func
+def _zero_stress_hessian(F: wp.mat33d):
+    return _mat99d()
+
+
+@wp.func
+def _zero_stress_hessian(F: wp.mat22d):  # noqa: F811
+    return _mat44d()
+
+
+@wp.func
 def _dimi(M: wp.mat33d):
     return 3
 
@@ -124,67 +132,13 @@ def _outer_vec(A: Any, M: Any, c: wp.float64):
 
 
 @wp.func
-def _svd_mode(A: Any, U: Any, M: Any, Vs: Any, lam_k: wp.float64):
-    """A + lam_k vec(U M V^T) vec(U M V^T)^T."""
-    return _outer_vec(A, U * M * wp.transpose(Vs), lam_k)
-
-
-@wp.func
-def _stress_hessian_svd(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
-    """d2Psi/dF2 rebuilt from its analytic eigensystem with clamped eigenvalues (PSD)."""
-    zero = wp.float64(0.0)
-    U = wp.mat33d()
-    s = wp.vec3d()
-    Vs = wp.mat33d()
-    wp.svd3(F, U, s, Vs)
-    logJ = wp.log(J)
-    dPsi_dJ = (lam * logJ - mu) / J
-    h = wp.float64(_HALF_SQRT2)
-    A = _mat99d()
-    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, _clamp(mu + dPsi_dJ * s[0], 1))
-    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, _clamp(mu - dPsi_dJ * s[0], 1))
-    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[1], 1))
-    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[1], 1))
-    A = _svd_mode(A, U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[2], 1))
-    A = _svd_mode(A, U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[2], 1))
-    cs = mu + lam * (wp.float64(1.0) - logJ)
-    S = wp.mat33d(
-        mu + cs / (s[0] * s[0]), lam / (s[0] * s[1]), lam / (s[0] * s[2]),
-        lam / (s[0] * s[1]), mu + cs / (s[1] * s[1]), lam / (s[1] * s[2]),
-        lam / (s[0] * s[2]), lam / (s[1] * s[2]), mu + cs / (s[2] * s[2]),
-    )
-    Q = wp.mat33d()
-    d = wp.vec3d()
-    wp.eig3(S, Q, d)
-    for k in range(3):
-        A = _svd_mode(A, U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, _clamp(d[k], 1))
-    return A
-
-
-@wp.func
-def _stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
-    zero = wp.float64(0.0)
-    U = wp.mat22d()
-    s = wp.vec2d()
-    Vs = wp.mat22d()
-    wp.svd2(F, U, s, Vs)
-    logJ = wp.log(J)
-    dPsi_dJ = (lam * logJ - mu) / J
-    h = wp.float64(_HALF_SQRT2)
-    A = _mat44d()
-    A = _svd_mode(A, U, wp.mat22d(zero, -h, h, zero), Vs, _clamp(mu + dPsi_dJ, 1))  # twist
-    A = _svd_mode(A, U, wp.mat22d(zero, h, h, zero), Vs, _clamp(mu - dPsi_dJ, 1))  # flip
-    cs = mu + lam * (wp.float64(1.0) - logJ)
-    a = mu + cs / (s[0] * s[0])
-    c2 = mu + cs / (s[1] * s[1])
-    o = lam / (s[0] * s[1])
-    theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
-    ct = wp.cos(theta)
-    st = wp.sin(theta)
-    A = _svd_mode(A, U, wp.mat22d(ct, zero, zero, st), Vs,
-                  _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, 1))
-    A = _svd_mode(A, U, wp.mat22d(-st, zero, zero, ct), Vs,
-                  _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, 1))
+def _stress_hessian_svd(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64):
+    """d2Psi/dF2 rebuilt from its analytic eigensystem with clamped eigenvalues (PSD):
+    sum_k w_k vec(M_k) vec(M_k)^T over the modes M_k of ``_eigensystem``."""
+    modes, w = _eigensystem(F, J, mu, lam)
+    A = _zero_stress_hessian(F)
+    for k in range(_dimi(F) * _dimi(F)):
+        A = _outer_vec(A, _unvec(modes[k]), w[k])
     return A
 
 

@@ -43,7 +43,7 @@ Hessians is PSD):
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -156,29 +156,15 @@ class P2Model(MeshModel):
     linear : the linear :class:`FemModel` on the corner mesh this model was lifted from
     """
 
-    dim: int
-    rest: np.ndarray
-    elements: np.ndarray
     n_corners: int
     edges: np.ndarray
     corner_elements: np.ndarray
-    Dm_inv: np.ndarray
-    volume: np.ndarray
     degree: int
     qp_bary: np.ndarray
     qp_weight: np.ndarray
     grad_N: np.ndarray
-    mu: np.ndarray
-    lam: np.ndarray
-    thickness: float
-    boundary_facets: np.ndarray
     boundary_subfacets: np.ndarray
-    boundary_vertices: np.ndarray
-    pattern: HessianPattern
     linear: FemModel
-    material: Material | None = None
-    device: str = "cpu"
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n_quadrature(self) -> int:

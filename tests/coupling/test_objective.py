@@ -10,7 +10,7 @@ from simfab.coupling.rigid import mean_stiffness
 from simfab.coupling.points import edge_weights, facet_points, vertex_points
 from simfab.coupling.objective import _StepObjective
 from simfab.coupling.timing import _Timer
-from simfab.fem.neohookean import energy_gradient_hessian
+from simfab.fem.elastic import energy_gradient_hessian
 
 
 

@@ -126,7 +126,7 @@ def test_make_model_accepts_material_names():
 def test_model_pickles_without_device_cache():
     import pickle
 
-    from simfab.fem import neohookean as nh
+    from simfab.fem import elastic as nh
 
     P, T = box_tet(1.0, 0.5, 0.5, 2, 1, 1)
     m = make_model(P, T, PLA)
