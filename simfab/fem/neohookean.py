@@ -107,6 +107,19 @@ def _store(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dty
 
 
 @wp.func
+def _void(e: int, scatter: int, energy: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
+          hess: wp.array3d(dtype=wp.float64)):
+    """Zero element e's energy, gradient and (with block storage, scatter == 0) Hessian block: an
+    inverted element contributes nothing."""
+    energy[e] = wp.float64(0.0)
+    grad[e] = grad.dtype()
+    if scatter == 0:
+        for r in range(hess.shape[1]):
+            for c in range(hess.shape[2]):
+                hess[e, r, c] = wp.float64(0.0)
+
+
+@wp.func
 def _psi(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64, d: wp.float64):
     """Neo-Hookean energy density [Pa] (J > 0)."""
     logJ = wp.log(J)
@@ -579,13 +592,8 @@ def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dty
     J = wp.determinant(F)
     det_F[e] = J
     zero = wp.float64(0.0)
-    energy[e] = zero
-    grad[e] = grad.dtype()
     if J <= zero:
-        if scatter == 0:
-            for r in range(hess.shape[1]):
-                for c in range(hess.shape[2]):
-                    hess[e, r, c] = zero
+        _void(e, scatter, energy, grad, hess)
         return
     V = volume[e]
     mu = mu_e[e]

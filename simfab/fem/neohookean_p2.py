@@ -55,7 +55,7 @@ import numpy as np
 
 from simfab._warp import wp
 from simfab.fem.neohookean import (_BOTH, _EXACT, _PROJECT, _PROJECT_SVD, _dim, _eigensystem, _mat44d, _mat99d,
-                                   _negative_part_sym3, _pk1, _polar_rotation3, _psi, _store, _unvec)
+                                   _negative_part_sym3, _pk1, _polar_rotation3, _psi, _store, _unvec, _void)
 from simfab.fem.workspace import ElementKernels
 
 wp.set_module_options({"enable_backward": False})
@@ -321,13 +321,8 @@ def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dty
     for q in range(nq):
         Jmin = wp.min(Jmin, wp.determinant(_F_at(x, elements, gN, e, q)))
     det_F[e] = Jmin
-    energy[e] = zero
-    grad[e] = grad.dtype()
     if Jmin <= zero:
-        if scatter == 0:
-            for r in range(hess.shape[1]):
-                for c in range(hess.shape[2]):
-                    hess[e, r, c] = zero
+        _void(e, scatter, energy, grad, hess)
         return
     mode = project
     both = 0
