@@ -11,6 +11,7 @@ from simfab.contact.imls import ImlsField, pose_matrix
 from simfab.coupling.config import InsertionOptions
 from simfab.errors import InputError
 
+
 @dataclass(frozen=True, kw_only=True, eq=False)
 class CouplingModel:
     """Immutable description of one insertion simulation.

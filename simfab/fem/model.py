@@ -184,13 +184,15 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     where = "mesh"
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] not in (2, 3) or pts.shape[0] < pts.shape[1] + 1:
-        raise InputError(f"points must be an (n, 2) or (n, 3) array with n >= dim+1, got shape {pts.shape}", where=where)
+        raise InputError(f"points must be an (n, 2) or (n, 3) array with n >= dim+1, got shape {pts.shape}",
+                         where=where)
     if not np.all(np.isfinite(pts)):
         raise InputError("points contain NaN or inf", where=where)
     dim = pts.shape[1]
     el = np.asarray(elements)
     if el.ndim != 2 or el.shape[1] != dim + 1 or el.shape[0] == 0:
-        raise InputError(f"elements must be an (m, {dim + 1}) array for {dim}D points, got shape {el.shape}", where=where)
+        raise InputError(f"elements must be an (m, {dim + 1}) array for {dim}D points, got shape {el.shape}",
+                         where=where)
     if not np.issubdtype(el.dtype, np.integer):
         if not np.all(np.equal(np.mod(el, 1), 0)):
             raise InputError("element indices must be integers", where=where)
@@ -205,7 +207,8 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     used = np.zeros(n, bool)
     used[el.ravel()] = True
     if not used.all():
-        raise InputError(f"{int((~used).sum())} vertices are not used by any element (first: {int(np.flatnonzero(~used)[0])})",
+        first = int(np.flatnonzero(~used)[0])
+        raise InputError(f"{int((~used).sum())} vertices are not used by any element (first: {first})",
                          where=where)
     if not (np.isfinite(thickness) and thickness > 0):
         raise InputError(f"thickness must be > 0, got {thickness}", where=where)

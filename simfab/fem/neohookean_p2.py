@@ -54,8 +54,23 @@ from typing import Any
 import numpy as np
 
 from simfab._warp import wp
-from simfab.fem.neohookean import (_BOTH, _EXACT, _PROJECT, _PROJECT_SVD, _dim, _eigensystem, _mat44d, _mat99d,
-                                   _negative_part_sym3, _pk1, _polar_rotation3, _psi, _store, _unvec, _void)
+from simfab.fem.neohookean import (
+    _BOTH,
+    _EXACT,
+    _PROJECT,
+    _PROJECT_SVD,
+    _dim,
+    _eigensystem,
+    _mat44d,
+    _mat99d,
+    _negative_part_sym3,
+    _pk1,
+    _polar_rotation3,
+    _psi,
+    _store,
+    _unvec,
+    _void,
+)
 from simfab.fem.workspace import ElementKernels
 
 wp.set_module_options({"enable_backward": False})
@@ -273,8 +288,8 @@ def _energy_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtyp
 
 
 @wp.kernel
-def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
-                     wq: wp.array2d(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
+def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                     gN: wp.array3d(dtype=Any), wq: wp.array2d(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
                      lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
                      det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any)):
     e = first + wp.tid()  # this launch's part of the elements
@@ -409,8 +424,8 @@ _declare_overloads()
 # the element order's record for simfab.fem.workspace, and the batched stress Hessian
 # ----------------------------------------------------------------------------------------------
 #: Meshes with at least this many elements are launched in two halves on two threads on the CPU:
-#: a handoff to the second thread (~50 us) pays from a few dozen 10-node tets on (~15 us each
-#: per Hessian), so below this size the launches stay whole.
+#: handing a launch to the second thread costs about as much as a few 10-node tet Hessians, so
+#: smaller meshes stay one launch.
 SPLIT_ELEMENTS = 256
 
 #: Quadratic simplices: ``model.element_geometry()`` is (grad_N (m, nq, k, d), qp_weight (m, nq)).

@@ -32,9 +32,9 @@ Hessians is PSD):
         12 - 3 and 4 x 6 >= 30 - 6 strain samples vs deformation modes: no spurious zero-energy
         modes), and by Strang's lemma degree 2p - 2 = 2 keeps the optimal convergence order. Not
         exact beyond small strain (the geometric stiffness, stress x grad N grad N, is cubic and
-        Psi(F) is not polynomial), but measured on a cantilever bent to 30% tip deflection
-        (``python tools/bench.py p2``, "large_deflection") it differs from the degree 4/5 rules by
-        < 0.05% of the deflection, at 0.5-0.6x their Hessian cost.
+        Psi(F) is not polynomial), but on a strongly bent cantilever its deflection stays within a
+        small fraction of a percent of the degree 4/5 rules' at about half their Hessian cost
+        (``python tools/bench.py p2``, "large_deflection"; docs/decisions.md).
     degree 4 (triangle, 6 points, Dunavant) / degree 5 (tet, 14 points, Walkington): exact for the
         geometric stiffness of a linear stress field; samples det F at more points (inversion is
         checked at the quadrature points only), for strongly nonlinear states where that matters.

@@ -11,11 +11,11 @@ from _fem_meshes import box_tet, fd_grad_hess
 from scipy.spatial.transform import Rotation
 
 from simfab.fem import elastic as nh
-from simfab.fem.neohookean import LINEAR
-from simfab.fem.neohookean_p2 import QUADRATIC, projected_stress_hessian
 from simfab.fem.cantilever import cantilever_model, rectangle_mesh, solve_cantilever, static_solve
 from simfab.fem.materials import Material
 from simfab.fem.model import make_model
+from simfab.fem.neohookean import LINEAR
+from simfab.fem.neohookean_p2 import QUADRATIC, projected_stress_hessian
 from simfab.fem.p2 import RULES, make_p2_model, shape_functions, to_p2
 
 MAT = Material(name="test", youngs_modulus=1.0e3, poisson_ratio=0.3, yield_stress=1e9, density=1.0)

@@ -63,9 +63,10 @@ def _cost(dim: int) -> dict:
 
     lin = cantilever_model(dim, 4 if dim == 3 else 8)
     x1 = lin.rest * 1.01
-    out = {"elements": lin.n_elements,
-           "linear": {"grad_us": _median_us_per_element(lambda: elastic.energy_gradient(lin, x1), lin.n_elements),
-                      "hess_us": _median_us_per_element(lambda: elastic.energy_gradient_hessian(lin, x1), lin.n_elements)}}
+    m1 = lin.n_elements
+    out = {"elements": m1,
+           "linear": {"grad_us": _median_us_per_element(lambda: elastic.energy_gradient(lin, x1), m1),
+                      "hess_us": _median_us_per_element(lambda: elastic.energy_gradient_hessian(lin, x1), m1)}}
     for (d, degree) in sorted(RULES):
         if d != dim:
             continue
