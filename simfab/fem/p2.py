@@ -263,7 +263,7 @@ def to_p2(model: FemModel, *, degree: int | None = None) -> P2Model:
     degree : quadrature degree, one of :data:`RULES` for the dimension (default
         :data:`DEFAULT_DEGREE`)
     """
-    if not isinstance(model, FemModel):
+    if getattr(model, "element_order", None) != 1:
         raise InputError(f"to_p2 needs a linear FemModel, got {type(model).__name__}", where="model")
     dim = model.dim
     if degree is None:
