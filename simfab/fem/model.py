@@ -23,13 +23,9 @@ class MeshModel:
     position validation, and pickling without ``_cache`` (device buffers and recorded launches,
     rebuilt on demand). What depends on the element order is a method of the subclass:
 
-    - ``element_order`` : 1 or 2 (selects the kernels in :mod:`simfab.fem.elastic`)
-    - ``element_geometry()`` : the per-element rest geometry and quadrature weights the kernels read
-    - ``shape_functions(L)`` : nodal shape functions at barycentric points (consistent loads)
-    - ``linear_facets()`` / ``linear_elements()`` : the boundary and the body as linear simplices
-      over the model's nodes (contact, output)
-
-    The fields every order has are described in :class:`FemModel` and :class:`simfab.fem.p2.P2Model`.
+    ``element_order``, ``element_geometry()``, ``shape_functions(L)``, ``linear_facets()``,
+    ``linear_elements()``, ``mean_edge_length()`` and the ``corner_elements`` (m, dim+1). The fields
+    every order has are described in :class:`FemModel` and :class:`simfab.fem.p2.P2Model`.
     """
 
     dim: int
@@ -69,6 +65,34 @@ class MeshModel:
     @property
     def n_dofs(self) -> int:
         return self.rest.size
+
+    @property
+    def element_order(self) -> int:
+        """Polynomial order of the shape functions: 1 (linear) or 2 (P2); selects the kernels in
+        :mod:`simfab.fem.elastic`."""
+        raise NotImplementedError
+
+    def element_geometry(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rest geometry F is computed from at each quadrature point, weights (m, ...) [m^3]): what
+        the element order's kernels read (:mod:`simfab.fem.workspace`)."""
+        raise NotImplementedError
+
+    def shape_functions(self, L) -> np.ndarray:
+        """Nodal shape functions (q, k) at barycentric points L (q, dim+1) of an element."""
+        raise NotImplementedError
+
+    def linear_facets(self) -> np.ndarray:
+        """(f, dim) the boundary as linear facets over the model's nodes, oriented like
+        ``boundary_facets`` (contact is checked and refined on them)."""
+        raise NotImplementedError
+
+    def linear_elements(self) -> np.ndarray:
+        """(m', dim+1) the body as linear simplices over the model's nodes (output: USD, MJCF, plots)."""
+        raise NotImplementedError
+
+    def mean_edge_length(self) -> float:
+        """Mean length [m] of the (corner-mesh) element edges at rest."""
+        raise NotImplementedError
 
     def check_positions(self, x, where: str = "x") -> np.ndarray:
         """``x`` (n, dim) or (n*dim,) as a (n, dim) float64 array; InputError naming ``where`` if the
