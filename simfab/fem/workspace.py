@@ -196,8 +196,7 @@ class Workspace:
 
     def gradient(self) -> np.ndarray:
         """The assembled nodal gradient (n, dim) [N] of the last GRADIENT / HESSIAN / BLOCKS launch."""
-        n_dofs = self.scatter.shape[0]
-        return (self.scatter @ self.grad.numpy().reshape(-1)).reshape(n_dofs // self.x_np.shape[1], -1)
+        return (self.scatter @ self.grad.numpy().reshape(-1)).reshape(self.x_np.shape)
 
 
 def launch(model, kernels: ElementKernels, x, what: Launch, mode: Hessian = Hessian.EXACT) -> Workspace:
