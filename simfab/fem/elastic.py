@@ -90,7 +90,7 @@ def element_hessians(model, x, *, project_psd: bool = True, projection: str = "a
 
 def det_F(model, x) -> np.ndarray:
     """det F per element (m,) [-] (P2: the smallest over the quadrature points); <= 0 means inverted."""
-    return launch(model, kernels(model), x, Launch.ENERGY).det_F.numpy().copy()
+    return launch(model, kernels(model), x, Launch.ENERGY).outputs()[1].copy()
 
 
 def det_and_von_mises(model, x) -> tuple[np.ndarray, np.ndarray]:

@@ -537,6 +537,98 @@ def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu:
 
 
 # ----------------------------------------------------------------------------------------------
+# the clamped stress Hessian d2Psi/dF2 from the analytic eigensystem, for the P2 kernels' SVD route
+# (built mode by mode rather than from ``_eigensystem``: see docs/decisions.md)
+# ----------------------------------------------------------------------------------------------
+@wp.func
+def _dimi(M: wp.mat33d):
+    return 3
+
+
+@wp.func
+def _dimi(M: wp.mat22d):  # noqa: F811
+    return 2
+
+
+@wp.func
+def _outer_vec(A: Any, M: Any, c: wp.float64):
+    """A + c vec(M) vec(M)^T (vec row-major, M d x d)."""
+    d = _dimi(M)
+    B = A
+    for i in range(d):
+        for k in range(d):
+            for j in range(d):
+                for l in range(d):
+                    B[d * i + k, d * j + l] = B[d * i + k, d * j + l] + c * M[i, k] * M[j, l]
+    return B
+
+
+@wp.func
+def _svd_mode(A: Any, U: Any, M: Any, Vs: Any, lam_k: wp.float64):
+    """A + lam_k vec(U M V^T) vec(U M V^T)^T."""
+    return _outer_vec(A, U * M * wp.transpose(Vs), lam_k)
+
+
+@wp.func
+def _stress_hessian_svd(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
+    """d2Psi/dF2 rebuilt from its analytic eigensystem with clamped eigenvalues (PSD)."""
+    zero = wp.float64(0.0)
+    U = wp.mat33d()
+    s = wp.vec3d()
+    Vs = wp.mat33d()
+    wp.svd3(F, U, s, Vs)
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    h = wp.float64(_HALF_SQRT2)
+    A = _mat99d()
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, _clamp(mu + dPsi_dJ * s[0], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, _clamp(mu - dPsi_dJ * s[0], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[1], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[1], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[2], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[2], 1))
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    S = wp.mat33d(
+        mu + cs / (s[0] * s[0]), lam / (s[0] * s[1]), lam / (s[0] * s[2]),
+        lam / (s[0] * s[1]), mu + cs / (s[1] * s[1]), lam / (s[1] * s[2]),
+        lam / (s[0] * s[2]), lam / (s[1] * s[2]), mu + cs / (s[2] * s[2]),
+    )
+    Q = wp.mat33d()
+    d = wp.vec3d()
+    wp.eig3(S, Q, d)
+    for k in range(3):
+        A = _svd_mode(A, U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, _clamp(d[k], 1))
+    return A
+
+
+@wp.func
+def _stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
+    zero = wp.float64(0.0)
+    U = wp.mat22d()
+    s = wp.vec2d()
+    Vs = wp.mat22d()
+    wp.svd2(F, U, s, Vs)
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    h = wp.float64(_HALF_SQRT2)
+    A = _mat44d()
+    A = _svd_mode(A, U, wp.mat22d(zero, -h, h, zero), Vs, _clamp(mu + dPsi_dJ, 1))  # twist
+    A = _svd_mode(A, U, wp.mat22d(zero, h, h, zero), Vs, _clamp(mu - dPsi_dJ, 1))  # flip
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    a = mu + cs / (s[0] * s[0])
+    c2 = mu + cs / (s[1] * s[1])
+    o = lam / (s[0] * s[1])
+    theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
+    ct = wp.cos(theta)
+    st = wp.sin(theta)
+    A = _svd_mode(A, U, wp.mat22d(ct, zero, zero, st), Vs,
+                  _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, 1))
+    A = _svd_mode(A, U, wp.mat22d(-st, zero, zero, ct), Vs,
+                  _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, 1))
+    return A
+
+
+# ----------------------------------------------------------------------------------------------
 # kernels: generic over the dimension (element functions above are overloaded for 2D and 3D;
 # explicit overloads below, so the module is built once for both)
 # ----------------------------------------------------------------------------------------------

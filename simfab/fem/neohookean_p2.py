@@ -60,7 +60,7 @@ from simfab.fem.neohookean import (
     _PROJECT,
     _PROJECT_SVD,
     _dim,
-    _eigensystem,
+    _dimi,
     _mat44d,
     _mat99d,
     _negative_part_sym3,
@@ -68,7 +68,7 @@ from simfab.fem.neohookean import (
     _polar_rotation3,
     _psi,
     _store,
-    _unvec,
+    _stress_hessian_svd,
     _void,
 )
 from simfab.fem.workspace import ElementKernels
@@ -111,50 +111,6 @@ def _zero_hess(F: wp.mat33d):
 @wp.func
 def _zero_hess(F: wp.mat22d):  # noqa: F811
     return _mat12d()
-
-
-@wp.func
-def _zero_stress_hessian(F: wp.mat33d):
-    return _mat99d()
-
-
-@wp.func
-def _zero_stress_hessian(F: wp.mat22d):  # noqa: F811
-    return _mat44d()
-
-
-@wp.func
-def _dimi(M: wp.mat33d):
-    return 3
-
-
-@wp.func
-def _dimi(M: wp.mat22d):  # noqa: F811
-    return 2
-
-
-@wp.func
-def _outer_vec(A: Any, M: Any, c: wp.float64):
-    """A + c vec(M) vec(M)^T (vec row-major, M d x d)."""
-    d = _dimi(M)
-    B = A
-    for i in range(d):
-        for k in range(d):
-            for j in range(d):
-                for l in range(d):
-                    B[d * i + k, d * j + l] = B[d * i + k, d * j + l] + c * M[i, k] * M[j, l]
-    return B
-
-
-@wp.func
-def _stress_hessian_svd(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64):
-    """d2Psi/dF2 rebuilt from its analytic eigensystem with clamped eigenvalues (PSD):
-    sum_k w_k vec(M_k) vec(M_k)^T over the modes M_k of ``_eigensystem``."""
-    modes, w = _eigensystem(F, J, mu, lam)
-    A = _zero_stress_hessian(F)
-    for k in range(_dimi(F) * _dimi(F)):
-        A = _outer_vec(A, _unvec(modes[k]), w[k])
-    return A
 
 
 @wp.func

@@ -102,6 +102,8 @@ class Workspace:
         self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
         self.von_mises = wp.zeros(m, dtype=wp.float64, device=dev)
         self.grad = wp.zeros(m, dtype=kernels.grad_dtype[d], device=dev)
+        # host arrays of the per-element outputs: on the CPU views of the Warp arrays' memory (no copy)
+        self._host = (self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()) if self.cpu else None
         self.hess = None  # element blocks (m, kd, kd), allocated on the first BLOCKS launch
         self.slots = None  # model.pattern.element_slots as int32, on the first HESSIAN launch
         self.csr: dict = {}  # (0: data / 1: data2, part) -> (warp array, numpy alias on the CPU or None)
@@ -188,15 +190,23 @@ class Workspace:
         cmds = self.commands[(what, mode)] = tuple(cmds)
         return cmds
 
+    def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(energy (m,), det F (m,), nodal gradient blocks (m, kd)) of the last launch as host arrays
+        (views on the CPU: read before the next launch)."""
+        if self._host is not None:
+            return self._host
+        return self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()
+
     def total_energy(self) -> float:
         """Sum of the element energies [J] of the last launch; +inf if any det F <= 0."""
-        if self.det_F.numpy().min() <= 0.0:  # .numpy(): a view on the CPU, a copy elsewhere
+        energy, det_F, _ = self.outputs()
+        if det_F.min() <= 0.0:
             return float("inf")
-        return float(self.energy.numpy().sum())
+        return float(energy.sum())
 
     def gradient(self) -> np.ndarray:
         """The assembled nodal gradient (n, dim) [N] of the last GRADIENT / HESSIAN / BLOCKS launch."""
-        return (self.scatter @ self.grad.numpy().reshape(-1)).reshape(self.x_np.shape)
+        return (self.scatter @ self.outputs()[2].reshape(-1)).reshape(self.x_np.shape)
 
 
 def launch(model, kernels: ElementKernels, x, what: Launch, mode: Hessian = Hessian.EXACT) -> Workspace:
