@@ -20,16 +20,24 @@ import scipy.sparse as sp
 
 from simfab.errors import InputError
 from simfab.fem.neohookean import LINEAR
-from simfab.fem.neohookean_p2 import QUADRATIC
 from simfab.fem.workspace import ElementKernels, Hessian, Launch, launch
 
-_KERNELS = {1: LINEAR, 2: QUADRATIC}  # by model.element_order
 _PROJECTIONS = {"auto": Hessian.PROJECT, "svd": Hessian.PROJECT_SVD}
 
 
 def kernels(model) -> ElementKernels:
-    """The kernels of the model's element order."""
-    return _KERNELS[model.element_order]
+    """The kernels of the model's element order: :data:`~simfab.fem.neohookean.LINEAR` (1) or
+    :data:`~simfab.fem.neohookean_p2.QUADRATIC` (2)."""
+    order = model.element_order
+    if order == 1:
+        return LINEAR
+    if order == 2:
+        # deferred for start-up time: defining the P2 kernels takes about half a second at import,
+        # which runs on linear elements do not need
+        from simfab.fem.neohookean_p2 import QUADRATIC
+
+        return QUADRATIC
+    raise InputError(f"no kernels for element order {order}", where="element_order")
 
 
 def _mode(project_psd: bool, projection: str) -> Hessian:
