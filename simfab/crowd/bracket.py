@@ -22,7 +22,7 @@ from simfab.crowd.config import TOL
 from simfab.crowd.plots import _plt
 from simfab.crowd.truth import scale_to_survey
 from simfab.errors import InputError
-from simfab.fem import neohookean as nh
+from simfab.fem import elastic as nh
 from simfab.fem.materials import material_by_name
 from simfab.fem.meshing import triangulate_polygon
 from simfab.fem.model import make_model

@@ -33,7 +33,7 @@ from simfab.coupling.simulate import make_coupling_model, simulate
 from simfab.fem.materials import Material
 from simfab.fem.meshing import graded_box
 from simfab.fem.model import make_model
-from simfab.fem.neohookean import energy_gradient_hessian
+from simfab.fem.elastic import energy_gradient_hessian
 from simfab.io.mjcf import Trajectory
 
 
