@@ -109,7 +109,7 @@ def run_surface(args) -> dict:
             res.sim = mjcf_sim.build(res.network.model, res.network.state, res.deployment.final,
                                      density=scene.deploy.density, cfg=scene.mujoco, name="deployed_surface",
                                      body_geoms=pipeline.insert_geoms(res.pattern, res.network))
-        res.sim.builder.save(tmp["mjcf"])
+        res.sim.save(tmp["mjcf"])
         write_json(tmp["json"], summary)
     return summary
 

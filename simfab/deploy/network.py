@@ -19,10 +19,15 @@ points on the inserts move from the gap (g_i) to the insert's edge (r) in ``incr
 steps, each solved to equilibrium from the last.
 
 Branch selection (the flat pattern can buckle into many shapes; the target says which one is
-meant): (1) predictor: each increment starts from the last equilibrium moved by 1/increments of
-the displacement field D that takes every node and body from its flat position to the target
-point its flat position maps to (the target rigidly aligned to the flat pattern, D = 0 at the
-fully supported node); it is only the Newton start, the equilibrium is the rods'; (2) while drawing in,
+meant): (1) predictor: each increment starts from the tangent continuation of the last
+equilibrium, dq = -H^{-1} (dg/dlambda) / increments (implicit function theorem,
+:meth:`simfab.rods.statics.StaticSolver.offset_sensitivity`; the nearly inextensible beams make a
+plain restart from the last state cost 2x the Newton iterations), and the first increment
+also moves by 1/increments of the out-of-plane part of the displacement field D that takes
+every node and body from its flat position to the target point its flat position maps to (the
+target rigidly aligned to the flat pattern, D = 0 at the fully supported node; its in-plane
+part is the metric change that the tangent already carries). It is only the Newton start, the
+equilibrium is the rods'; (2) while drawing in,
 every insert carries a small out-of-plane load ``f_i = perturbation * B1 / h^2 * s_i`` with
 ``s_i`` in [-1, 1] the target's height at the insert above its best-fit plane, minus its
 least-squares plane over the inserts' flat positions (no resultant force or moment), normalised. The
@@ -241,13 +246,16 @@ def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device:
     res = None
     for i in progress(range(1, n + 1), total=n, desc="deploy pattern", quiet=quiet):
         lam = i / n
+        # tangent continuation from the last equilibrium (implicit function theorem; the flat state
+        # is the unloaded equilibrium of increment 0)
+        dq = solver.offset_sensitivity(state, direction / n, body_forces=body_forces if i > 1 else None)
         solver.set_attachment_offsets(offset0 + lam * direction)
-        x, pos = state.x, state.body_pos
-        if predictor is not None:
+        st = solver.red.apply(state, dq)
+        if i == 1 and predictor is not None:  # the out-of-plane branch towards the target
             free = ~model.node_fixed.any(axis=1)
-            x = x + (free[:, None] * predictor[0]) / n
-            pos = pos + (~model.body_driven[:, None] * predictor[1]) / n
-        st = synchronize(solver.model, state, x, state.theta, pos, state.body_rot)
+            x = st.x + (free[:, None] * predictor[0] * [0, 0, 1]) / n
+            pos = st.body_pos + (~model.body_driven[:, None] * predictor[1] * [0, 0, 1]) / n
+            st = synchronize(solver.model, st, x, st.theta, pos, st.body_rot)
         try:
             res = solver.solve(st, body_forces=body_forces)
             its = res.iterations

@@ -95,7 +95,7 @@ def write_pattern_png(path, res) -> None:
 
 
 def write_deviation_png(path, res) -> None:
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     from simfab.io.atomic import save_figure
 
@@ -111,8 +111,7 @@ def write_deviation_png(path, res) -> None:
     ax.add_collection3d(Poly3DCollection(A[p.quads], facecolors=fc, edgecolors="k", linewidths=0.3))
     V = tgt.V * 1e3
     E = np.concatenate([tgt.F[:, [0, 1]], tgt.F[:, [1, 2]]])[:: max(1, len(tgt.F) // 800)]
-    for e in E:
-        ax.plot(*V[e].T, color="0.6", lw=0.3)
+    ax.add_collection3d(Line3DCollection(V[E], colors="0.6", linewidths=0.3))  # one artist for the wireframe
     allp = np.vstack([A, V])
     lo, hi = allp.min(axis=0), allp.max(axis=0)
     ax.set_xlim(lo[0], hi[0])
