@@ -11,7 +11,7 @@ with gaps from the area distortion, writes the laser-cut SVG + DXF (mm), deploys
 MuJoCo scene that simulates (it opens on the deployed state; the flat pattern is the springs'
 rest state and keyframe 'flat'), checked for stability and against simfab's equilibrium.
 Outputs in --out: pattern.svg, pattern.dxf, flattening.png, pattern.png, deviation.png,
-deploy.usda, deployed.xml, surface.json.
+deploy.usda, deployed.xml, inserts.csv (bill of materials: inserts per size), surface.json.
 
 Unit cell: for every insert body of the scene (default scenes/deploy/unit_cell.xml) the cell's spokes
 are drawn onto the insert in quasi-static increments; writes per insert a USD timeline (rods as
@@ -92,7 +92,8 @@ def run_surface(args) -> dict:
     res = pipeline.run(scene, device=_device(args.device), quiet=args.quiet,
                        mujoco_check=not getattr(args, "no_mujoco_check", False))
     names = dict(svg="pattern.svg", dxf="pattern.dxf", flat_png="flattening.png", pattern_png="pattern.png",
-                 deviation_png="deviation.png", usd="deploy.usda", mjcf="deployed.xml", json="surface.json")
+                 deviation_png="deviation.png", usd="deploy.usda", mjcf="deployed.xml", bom="inserts.csv",
+                 json="surface.json")
     paths = {k: os.path.join(out, v) for k, v in names.items()}
     summary = pipeline.summary(res)
     summary["outputs"] = paths
@@ -103,6 +104,7 @@ def run_surface(args) -> dict:
         so.write_pattern_png(tmp["pattern_png"], res)
         so.write_deviation_png(tmp["deviation_png"], res)
         so.write_usd(tmp["usd"], res)
+        so.write_bom_csv(tmp["bom"], res)
         if res.sim is None:
             from simfab.deploy import mjcf_sim
 
@@ -125,8 +127,10 @@ def format_text(summary: dict) -> str:
             f"flattening        u in [{s['u_min']:.4g}, {s['u_max']:.4g}], area ratio in "
             f"[{s['area_ratio_min']:.4g}, {s['area_ratio_max']:.4g}]",
             f"pattern           {s['quads']} quads, {s['beams']} beams, {s['springs']} springs, {s['inserts']} inserts "
-            f"(r = {s['insert_half_size_mm']:.3g} mm, gaps {s['gap_min_mm']:.3g}..{s['gap_max_mm']:.3g} mm, "
-            f"{len(s['unreachable_gaps'])} unreachable)",
+            f"(gaps {s['gap_min_mm']:.3g}..{s['gap_max_mm']:.3g} mm, {len(s['unreachable_gaps'])} unreachable)",
+            "inserts (r)       " + ", ".join(f"{b['count']} x {b['half_size_mm']:.3g} mm"
+                                             + (f" ({b['size_class']})" if len(s['bill_of_materials']) > 1 else "")
+                                             for b in s["bill_of_materials"]),
             f"laser cut         {lc['parts']} parts, cut length {lc['cut_length_mm'] / 1e3:.4g} m, sheet "
             f"{lc['sheet_mm'][0]:.0f} x {lc['sheet_mm'][1]:.0f} mm",
             f"deployed          {dp['kind']} (inserts' local K: {dp['curvature_sign_at_inserts']['positive']} > 0, "
@@ -147,6 +151,11 @@ def format_text(summary: dict) -> str:
                     f"{'finite' if st['finite'] else 'BLEW UP'}, max drift {st['max_drift_m'] * 1e3:.3g} mm; "
                     f"relaxed vs simfab: RMS {rl['rms_m'] * 1e3:.3g} mm = {100 * (rl['rms_rel'] or 0):.3g} % of the "
                     f"{rl['out_of_plane_extent_m'] * 1e3:.3g} mm height")
+    if s["unreachable_gaps"]:
+        rows.append("unreachable gaps  " + ", ".join(
+            f"{g['insert']}{g['size_class']}: {g['required_mm']:.3g} mm needed, {g['cut_mm']:.3g} cut "
+            f"(deviation there {g['deviation_mm']:.3g} mm)" for g in s["unreachable_gaps"][:8])
+            + (f", ... ({len(s['unreachable_gaps'])} in all, surface.json)" if len(s["unreachable_gaps"]) > 8 else ""))
     rows.append("seconds           " + ", ".join(f"{k} {v:.3g}" for k, v in s["seconds"].items()))
     rows.append(f"outputs           {os.path.dirname(s['outputs']['json'])}/")
     return "\n".join(rows)

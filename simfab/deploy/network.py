@@ -129,7 +129,7 @@ def build_network(pat, cfg: DeployConfig) -> Network:
         nb.clamp(name, "end", vname[v])
         if pat.interior[v]:
             d = s3 - P3[v]
-            pulls.append((name, d / np.linalg.norm(d), pc.insert_half_size - pat.gap[v]))
+            pulls.append((name, d / np.linalg.norm(d), pat.insert_size[v] - pat.gap[v]))
     springs = []
     for i, (q, e0, e1, pts) in enumerate(pat.spring_curves(ss)):
         name = f"spring{q}_{i % 4}"

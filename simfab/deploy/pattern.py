@@ -13,9 +13,9 @@ Layout (all in the flat domain, metres):
   (:mod:`simfab.deploy.springs`); a quad whose neighbouring edges are nearly collinear (an
   interior angle > ``degenerate_angle_deg``, boundary quads only) gets no spring;
 - at every **interior** quad vertex (four quads around it) the four beams stop short of a
-  gap of half-size ``g_i`` that receives a rigid insert of the common half-size ``r``; the
-  insert clamps the beam ends at distance ``r`` from the vertex. Boundary vertices join their
-  beams rigidly (no insert).
+  gap of half-size ``g_i`` that receives a rigid insert of half-size ``r_i`` from the insert
+  catalogue (``insert_half_sizes``; one size: ``insert_half_size``); the insert clamps the beam
+  ends at distance ``r_i`` from the vertex. Boundary vertices join their beams rigidly (no insert).
 
 Gap rule (derivation). The flattening scales lengths by ``e^u``: a curve of length ``L`` on the
 target has length ``e^u L`` in the flat domain (u varies slowly over a cell). Deployment must
@@ -37,6 +37,14 @@ the target among its isometric embeddings (hence the out-of-plane branch selecti
 Achievable gaps: ``min_gap <= g <= h_i/2 - min_beam`` (a gap must exist to be cut, and each
 half beam needs ``min_beam`` of length to carry its spring junction). Vertices outside are
 clamped to the range and reported as unreachable (with the gap they would need).
+
+Insert catalogue. The growth a vertex needs, ``d_i = r_i - g_i = (h_i/2)(e^{-u_i} - 1)``, does
+not depend on the insert; the insert size only shifts the gap. So with a short list of sizes
+(what a maker can produce) each insert takes a size whose gap ``g = r - d_i`` is achievable -
+of those, the one whose gap is nearest the middle of the achievable range (most margin for cut
+tolerances either way); where no size reaches, the one with the smallest shortfall, and the
+vertex is reported unreachable. The sizes are classes A, B, ... in increasing size (engraved
+next to the insert numbers; bill of materials: :meth:`Pattern.bill_of_materials`).
 """
 
 from __future__ import annotations
@@ -55,7 +63,8 @@ class PatternConfig:
 
     spacing: grid spacing h; beam_width (in plane) and beam_thickness (sheet); insert_half_size
     r: distance from an insert's centre to where it clamps the beams (one size for all
-    inserts); spring_bulge [-]: smallest Bezier handle pull towards the quad centre; spring_slack
+    inserts); insert_half_sizes: the insert catalogue, a list of such sizes (when given it
+    replaces insert_half_size; each insert gets one, see module doc); spring_bulge [-]: smallest Bezier handle pull towards the quad centre; spring_slack
     [-]: arc length margin over the deployed chord (see :mod:`simfab.deploy.springs`);
     spring_width: in-plane width of the spring arcs (narrower than the beams: the springs let the
     cells grow in plane); min_gap, min_beam:
@@ -67,6 +76,7 @@ class PatternConfig:
     beam_width: float = 0.003
     beam_thickness: float = 0.001
     insert_half_size: float = 0.005
+    insert_half_sizes: tuple = ()
     spring_bulge: float = 0.5
     spring_slack: float = 0.1
     spring_width: float = 0.0015
@@ -75,10 +85,23 @@ class PatternConfig:
     degenerate_angle_deg: float = 160.0
 
     def __post_init__(self):
+        if not isinstance(self.insert_half_sizes, (tuple, list)):
+            raise InputError(f"must be a list of sizes [m] (got {self.insert_half_sizes!r})",
+                             where="pattern.insert_half_sizes")
+        object.__setattr__(self, "insert_half_sizes", tuple(self.insert_half_sizes))
         require_positive(self, "pattern.")
-        if not self.insert_half_size < self.spacing / 2 - self.min_beam:
-            raise InputError(f"insert_half_size {self.insert_half_size} m leaves no beam in a cell of spacing "
-                             f"{self.spacing} m (needs < spacing/2 - min_beam)", where="pattern.insert_half_size")
+        field = "insert_half_sizes" if self.insert_half_sizes else "insert_half_size"
+        if len(set(self.sizes)) != len(self.sizes):
+            raise InputError(f"sizes must differ (got {list(self.insert_half_sizes)})", where=f"pattern.{field}")
+        if not max(self.sizes) + self.beam_width < self.spacing / 2:
+            raise InputError(f"insert size {max(self.sizes)} m: two neighbouring insert plates (half-side r + "
+                             f"beam_width) would overlap at spacing {self.spacing} m (needs r < spacing/2 - "
+                             f"beam_width)", where=f"pattern.{field}")
+
+    @property
+    def sizes(self) -> tuple:
+        """The insert catalogue [m], increasing (``insert_half_sizes``, or the one ``insert_half_size``)."""
+        return tuple(sorted(self.insert_half_sizes)) if self.insert_half_sizes else (self.insert_half_size,)
 
 
 @dataclass(frozen=True)
@@ -89,9 +112,11 @@ class Pattern:
     interior (n,) bool (insert vertices); u (n,) [-]: flattening log scale factor at the
     vertices; gap (n,) [m]: gap half-size (0 on boundary vertices); gap_required (n,) [m]
     (before clamping); unreachable (k,) vertex indices; spring (q,) bool; insert_ids (n,) int
-    (label number, -1 on the boundary); bulge (q,) [-]: spring handle pull per quad; growth (q,)
-    [-]: the quad's deployment scale e^{-u}; spring_ratio (q,) [-]: its arcs' smallest
-    length/chord; tight_springs (k,) quads whose arcs cannot get the slack (see
+    (label number, -1 on the boundary); insert_size (n,) [m]: each insert's half-size r_i (0 on
+    the boundary); insert_class (n,) int: its index in ``config.sizes`` (-1 on the boundary);
+    bulge (q,) [-]: spring handle pull per quad; growth (q,4) [-]: the growth of its four spring
+    arcs' chords in deployment (:func:`quad_growth`; about e^{-u} in a regular cell);
+    spring_ratio (q,4) [-]: the arcs' length/chord ratios; tight_springs (k,) quads whose arcs cannot get the slack (see
     :mod:`simfab.deploy.springs`); config.
     """
 
@@ -106,6 +131,8 @@ class Pattern:
     unreachable: np.ndarray
     spring: np.ndarray
     insert_ids: np.ndarray
+    insert_size: np.ndarray
+    insert_class: np.ndarray
     bulge: np.ndarray
     growth: np.ndarray
     spring_ratio: np.ndarray
@@ -115,6 +142,21 @@ class Pattern:
     @property
     def n_inserts(self) -> int:
         return int(np.sum(self.interior))
+
+    def class_label(self, v: int) -> str:
+        """Size-class letter (A = smallest) of the insert at vertex v ('' with a one-size catalogue)."""
+        return CLASS_LETTERS[int(self.insert_class[v])] if len(self.config.sizes) > 1 else ""
+
+    def bill_of_materials(self) -> list[dict]:
+        """Per catalogue size: class letter, half-size r [mm], plate side 2 (r + beam_width) [mm]
+        (the insert part as cut), count and the insert numbers."""
+        out = []
+        for k, r in enumerate(self.config.sizes):
+            vs = np.flatnonzero(self.interior & (self.insert_class == k))
+            out.append(dict(size_class=CLASS_LETTERS[k], half_size_mm=r * 1e3,
+                            plate_side_mm=2e3 * (r + self.config.beam_width), count=int(len(vs)),
+                            inserts=sorted(int(self.insert_ids[v]) for v in vs)))
+        return out
 
     def midpoints(self) -> np.ndarray:
         """(e,2) edge midpoints [m] (junction positions)."""
@@ -148,6 +190,22 @@ class Pattern:
                 e0, e1 = es[k], es[(k + 1) % 4]
                 out.append((q, e0, e1, bezier(mids[e0], mids[e1], c, float(self.bulge[q]), n)))
         return out
+
+
+CLASS_LETTERS = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
+
+
+def assign_sizes(d: np.ndarray, gmax: np.ndarray, sizes, min_gap: float) -> np.ndarray:
+    """Catalogue index (k,) per insert (see module doc): d (k,) [m] the growth r - g each needs,
+    gmax (k,) [m] its largest achievable gap, sizes (s,) [m] the catalogue; the achievable gap
+    nearest the middle of [min_gap, gmax], else the smallest shortfall."""
+    r = np.asarray(sizes, dtype=np.float64)[None, :]
+    g = r - np.asarray(d)[:, None]  # (k, s) gap each size would need
+    hi = np.asarray(gmax)[:, None]
+    short = np.maximum(min_gap - g, 0.0) + np.maximum(g - hi, 0.0)
+    off_middle = np.abs(g - 0.5 * (min_gap + hi))
+    least = short <= short.min(axis=1, keepdims=True) + 1e-12  # all achievable ones (shortfall 0), if any
+    return np.argmin(np.where(least, off_middle, np.inf), axis=1)
 
 
 def gap_rule(u: np.ndarray, h: np.ndarray, r: float) -> np.ndarray:
@@ -215,13 +273,17 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     uP = _interpolate(uv, faces, u, P)
     elen = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1)
     hv = np.bincount(edges.ravel(), weights=np.repeat(elen, 2), minlength=len(P)) / np.maximum(valence, 1)
-    req = np.where(interior, gap_rule(uP, hv, cfg.insert_half_size), 0.0)
     gmax = 0.5 * hv - cfg.min_beam
+    need = gap_rule(uP, hv, 0.0)  # -d: the gap with r = 0
+    cls = np.full(len(P), -1)
+    cls[interior] = assign_sizes(-need[interior], gmax[interior], cfg.sizes, cfg.min_gap)
+    r_v = np.where(interior, np.asarray(cfg.sizes)[np.maximum(cls, 0)], 0.0)
+    req = np.where(interior, r_v + need, 0.0)
     unreachable = np.flatnonzero(interior & ((req < cfg.min_gap) | (req > gmax)))
     gap = np.where(interior, np.clip(req, cfg.min_gap, gmax), 0.0)
     # springs: none in quads with nearly collinear neighbouring edges
     spring = np.array([_max_angle(P[q]) < np.radians(cfg.degenerate_angle_deg) for q in quads])
-    growth = np.exp(-uP[quads].mean(axis=1))
+    growth = quad_growth(P, quads, r_v - gap)
     qmids = 0.5 * (P[quads] + P[np.roll(quads, -1, axis=1)])  # (q,4,2) midpoint of edge (v_k, v_k+1)
     bulge, ratio, tight = size_bulges(P, quads, qmids, growth, bulge_min=cfg.spring_bulge, slack=cfg.spring_slack,
                                       width=cfg.spring_width)
@@ -230,8 +292,25 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     order = order[np.lexsort((P[order, 0], -P[order, 1]))]  # row by row from the top, left to right
     ids[order] = np.arange(1, len(order) + 1)
     return Pattern(P=P, quads=quads, edges=edges, edge_quads=edge_quads, interior=interior, u=uP, gap=gap,
-                   gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, bulge=bulge, growth=growth,
-                   spring_ratio=ratio, tight_springs=np.flatnonzero(tight & spring), config=cfg)
+                   gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, insert_size=r_v,
+                   insert_class=cls, bulge=bulge, growth=growth, spring_ratio=ratio,
+                   tight_springs=np.flatnonzero(tight & spring), config=cfg)
+
+
+def quad_growth(P: np.ndarray, quads: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(q,4) [-] growth of the chords of each quad's four spring arcs, arc k around corner k+1 (the
+    order of :meth:`Pattern.spring_curves`). The arc around corner
+    v joins the midpoints of v's two edges, at distances a, b from v; deployment lengthens both
+    half-edges by d_v (d (n,) [m] = r - g, 0 on the boundary), so with the corner angle alpha kept
+    the chord grows from sqrt(a^2 + b^2 - 2ab cos alpha) to the same with a + d_v, b + d_v."""
+    v = quads
+    prev, nxt = np.roll(quads, 1, axis=1), np.roll(quads, -1, axis=1)
+    A = 0.5 * (P[prev] - P[v])  # (q,4,2) corner -> midpoint of the edge to the previous corner
+    B = 0.5 * (P[nxt] - P[v])
+    a, b = np.linalg.norm(A, axis=2), np.linalg.norm(B, axis=2)
+    cos = np.einsum("qki,qki->qk", A, B) / (a * b)
+    chord = lambda x, y: np.sqrt(np.maximum(x * x + y * y - 2 * x * y * cos, 0.0))  # noqa: E731
+    return np.roll(chord(a + d[v], b + d[v]) / chord(a, b), -1, axis=1)
 
 
 def _good_quad(Q: np.ndarray, h: float) -> bool:

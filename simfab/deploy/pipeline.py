@@ -135,11 +135,11 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
 
 
 def insert_geoms(pat, net) -> dict:
-    """MuJoCo/USD geometry of the inserts: square plates of half-side r + beam_width, 2 t thick."""
+    """MuJoCo/USD geometry of the inserts: square plates of half-side r_i + beam_width, 2 t thick."""
     pc = pat.config
-    s = pc.insert_half_size + pc.beam_width
     out = {}
     for v in np.flatnonzero(pat.interior):
+        s = float(pat.insert_size[v]) + pc.beam_width
         out[net.model.body_names[net.vertex_body[v]]] = dict(box=[s, s, pc.beam_thickness], rgba=[0.85, 0.45, 0.2, 1])
     return out
 
@@ -193,16 +193,22 @@ def summary(res: SurfaceResult) -> dict:
         area_ratio_min=float(np.exp(2 * f.sigma.min())), area_ratio_max=float(np.exp(2 * f.sigma.max())),
         closure_angle_correction_rad=f.closure_angle_correction,
         quads=int(len(p.quads)), beams=int(len(p.edges)), springs=int(p.spring.sum()), inserts=p.n_inserts,
-        insert_half_size_mm=p.config.insert_half_size * 1e3,
+        insert_half_sizes_mm=[r * 1e3 for r in p.config.sizes],
+        bill_of_materials=p.bill_of_materials(),
         gap_min_mm=float(p.gap[ins].min() * 1e3) if ins.any() else None,
         gap_max_mm=float(p.gap[ins].max() * 1e3) if ins.any() else None,
-        unreachable_gaps=[dict(insert=int(p.insert_ids[v]), required_mm=float(p.gap_required[v] * 1e3))
+        unreachable_gaps=[dict(insert=int(p.insert_ids[v]), size_class=p.class_label(v),
+                               required_mm=float(p.gap_required[v] * 1e3), cut_mm=float(p.gap[v] * 1e3),
+                               growth_shortfall_mm=float(abs(p.gap_required[v] - p.gap[v]) * 1e3),
+                               deviation_mm=float(dv.per_vertex[v] * 1e3))
                           for v in p.unreachable],
         spring_bulge_min=float(p.bulge[p.spring].min()) if p.spring.any() else None,
         spring_bulge_max=float(p.bulge[p.spring].max()) if p.spring.any() else None,
         quad_growth_max=float(p.growth.max()),
-        springs_short_of_slack=[dict(quad=int(q), growth=float(p.growth[q]), arc_over_chord=float(p.spring_ratio[q]))
-                                for q in p.tight_springs],
+        springs_short_of_slack=[dict(quad=int(q), growth=float(p.growth[q][k]),
+                                     arc_over_chord=float(p.spring_ratio[q][k]))
+                                for q in p.tight_springs
+                                for k in [int(np.argmin(p.spring_ratio[q] / np.maximum(p.growth[q], 1.0)))]],
         lasercut=lasercut.summary(res.cut),
         deployment=dict(stable=res.deployment.stable, increments=len(res.deployment.iterations),
                         newton_iterations=res.deployment.iterations, energy_J=res.deployment.energy, **res.shape),

@@ -162,11 +162,15 @@ def test_cli_surface_writes_everything(tmp_path, capsys):
     res = json.loads(capsys.readouterr().out)
     for p in res["outputs"].values():
         assert (out / p.split("/")[-1]).is_file()
-    assert res["u_min"] >= 0 < res["u_max"] and res["gap_min_mm"] > res["insert_half_size_mm"]
+    assert res["u_min"] >= 0 < res["u_max"] and res["gap_min_mm"] > res["insert_half_sizes_mm"][0]
     assert res["deployment"]["kind"] == "saddle" and res["deviation"]["rms"] < 0.03
     assert res["mujoco"]["stability"]["finite"]
     assert set(res["seconds"]) >= {"flatten", "layout", "lasercut", "deploy", "compare", "mujoco", "total"}
     assert check_compliance(res["outputs"]["usd"]) == []
+    # the bill of materials: one row per catalogue size, counting every insert
+    rows = (out / "inserts.csv").read_text().splitlines()
+    assert rows[0] == "size_class,half_size_mm,plate_side_mm,count,inserts" and len(rows) == 2
+    assert int(rows[1].split(",")[3]) == res["inserts"] == res["bill_of_materials"][0]["count"]
 
 
 @pytest.mark.parametrize("argv, field", [
