@@ -43,6 +43,8 @@ def add_args(p) -> None:
     g.add_argument("--beam-thickness", type=float, help="sheet thickness [m]")
     g.add_argument("--insert-size", type=float, help="insert half-size r (clamp distance from its centre) [m]")
     g.add_argument("--young", type=float, help="Young's modulus of the sheet [Pa]")
+    g.add_argument("--tune", type=int, metavar="STEPS", help="Gauss-Newton steps tuning the gaps on the deployed "
+                   "shape (0: none; scene [tune] iterations)")
     g.add_argument("--no-mujoco-check", action="store_true", help="skip stepping the MuJoCo scene (stability / relaxation)")
     p.add_argument("--scene", default=None, help="unit-cell MJCF scene (default scenes/deploy/unit_cell.xml)")
     p.add_argument("--insert", nargs="+", metavar="BODY", help="insert bodies to deploy (default: all 'insert*' bodies)")
@@ -75,10 +77,11 @@ def run_surface(args) -> dict:
         raise InputError("needs a TARGET: scene TOML, bundled name (dome, saddle, mixed) or mesh file",
                          where="simfab deploy surface")
     target = sc.bundled_path(args.target) if args.target in sc.BUNDLED and not os.path.exists(args.target) else args.target
-    ov = {"pattern": {}, "material": {}}
+    ov = {"pattern": {}, "material": {}, "tune": {}}
     for flag, table, field in (("spacing", "pattern", "spacing"), ("beam_width", "pattern", "beam_width"),
                                ("beam_thickness", "pattern", "beam_thickness"),
-                               ("insert_size", "pattern", "insert_half_size"), ("young", "material", "young")):
+                               ("insert_size", "pattern", "insert_half_size"), ("young", "material", "young"),
+                               ("tune", "tune", "iterations")):
         v = getattr(args, flag, None)
         if v is not None:
             ov[table][field] = v
@@ -142,6 +145,12 @@ def format_text(summary: dict) -> str:
             f"deviation         RMS {dv['rms'] * 100:.3g} % ({dv['rms_mm']:.3g} mm), Hausdorff {dv['hausdorff'] * 100:.3g} % "
             f"({dv['hausdorff_mm']:.3g} mm) of D = {dv['diameter_mm']:.0f} mm; height {dv['deployed_height_mm']:.3g} mm "
             f"(target {dv['target_height_mm']:.3g} mm)"]
+    tn = s.get("tuning")
+    if tn:
+        rows.append(f"tuned gaps        {tn['steps']} Gauss-Newton steps ({tn['solves']} solves), RMS "
+                    f"{100 * tn['rms_before']:.3g} % -> {100 * dv['rms']:.3g} %, Hausdorff "
+                    f"{100 * tn['hausdorff_before']:.3g} % -> {100 * dv['hausdorff']:.3g} %, gaps changed by up to "
+                    f"{tn['gap_change_max_mm']:.3g} mm")
     mj = s.get("mujoco") or {}
     if mj:
         st, rl = mj["stability"], mj["relaxation"]
@@ -225,7 +234,8 @@ def demo(ctx) -> dict:
                                        usd=v["outputs"]["usd"]) for k, v in res["inserts"].items()})
     sargs = argparse.Namespace(out=os.path.join(ctx.out, "surface_dome"), seed=ctx.seed, device=ctx.device,
                                quiet=ctx.quiet, json=False, action="surface", target="dome", units=None, spacing=None,
-                               beam_width=None, beam_thickness=None, insert_size=None, young=None, no_mujoco_check=True)
+                               beam_width=None, beam_thickness=None, insert_size=None, young=None, tune=None,
+                               no_mujoco_check=True)
     sres = run(sargs)
     out["surface_dome"] = dict(kind=sres["deployment"]["kind"], rms=sres["deviation"]["rms"],
                                hausdorff=sres["deviation"]["hausdorff"], inserts=sres["inserts"],

@@ -80,8 +80,8 @@ class DeployConfig:
 class Network:
     """The rod network of a pattern: model/state (flat), body indices of the pattern vertices
     (n,) (insert or boundary junction), edge junction bodies (e,), the insert-clamped nodes and
-    their unit direction (k,), (k,3) and grow distance (k,) [m] = r - g of their vertex, the node
-    supported in x, y, z."""
+    their unit direction (k,), (k,3), grow distance (k,) [m] = r - g of their vertex and that
+    vertex (k,), the node supported in x, y, z."""
 
     model: object
     state: object
@@ -90,6 +90,7 @@ class Network:
     pull_nodes: np.ndarray
     pull_dir: np.ndarray
     pull_grow: np.ndarray
+    pull_vertex: np.ndarray  # (k,) the pattern vertex (insert) of each insert-clamped node
     held_node: int  # the fully supported node (predictor origin)
 
 
@@ -129,7 +130,7 @@ def build_network(pat, cfg: DeployConfig) -> Network:
         nb.clamp(name, "end", vname[v])
         if pat.interior[v]:
             d = s3 - P3[v]
-            pulls.append((name, d / np.linalg.norm(d), pat.insert_size[v] - pat.gap[v]))
+            pulls.append((name, d / np.linalg.norm(d), pat.insert_size[v] - pat.gap[v], v))
     springs = []
     for i, (q, e0, e1, pts) in enumerate(pat.spring_curves(ss)):
         name = f"spring{q}_{i % 4}"
@@ -150,18 +151,20 @@ def build_network(pat, cfg: DeployConfig) -> Network:
         picks.append(k)
         nb.fix(springs[k][0], nodes=[nspring // 2], comps=comps)
     model, state = nb.build()
-    nodes, dirs, grow = [], [], []
-    for name, d, g in pulls:
+    nodes, dirs, grow, pv = [], [], [], []
+    for name, d, g, v in pulls:
         r = model.rod(name)
         for n in r.nodes[-2:]:  # the clamped end edge's two nodes
             nodes.append(int(n))
             dirs.append(d)
             grow.append(g)
+            pv.append(v)
     vb = np.array([model.body_index(n) for n in vname])
     eb = np.array([model.body_index(f"J{e}") for e in range(len(pat.edges))])
     held = int(model.rod(springs[picks[0]][0]).nodes[nspring // 2])
     return Network(model=model, state=state, vertex_body=vb, edge_body=eb, pull_nodes=np.array(nodes),
-                   pull_dir=np.array(dirs), pull_grow=np.array(grow), held_node=held)
+                   pull_dir=np.array(dirs), pull_grow=np.array(grow), pull_vertex=np.array(pv, dtype=np.int64),
+                   held_node=held)
 
 
 @dataclass

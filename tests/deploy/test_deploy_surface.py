@@ -248,3 +248,34 @@ def test_offset_sensitivity_matches_re_solved_equilibria(tiny_saddle):
     fd = (pos[0] - pos[1]) / (2 * h)
     assert np.max(np.abs(dpos)) > 0.1  # the insert's own move is O(1) per unit offset
     assert np.max(np.abs(dpos - fd)) < 2e-4 * np.max(np.abs(fd))
+
+
+def test_tuning_lowers_the_deviation_of_the_recut_pattern(small_dome):
+    """Gauss-Newton on the gaps (IFT sensitivities) lowers the RMS deviation, and the re-cut pattern's
+    own equilibrium keeps the gain (its beams' flat lengths changed with the gaps), with every gap
+    still achievable."""
+    from simfab.deploy import tuning
+
+    pat, net, dep, cfg, Y = small_dome
+    tgt = surface.spherical_cap(0.1, np.radians(50), 10)
+    before = compare.deviation(dep.vertex_positions(), Y, pat.quads, tgt)
+    tuned = tuning.tune(pat, net, dep, Y, tgt, tuning.TuneConfig(iterations=2))
+    assert tuned.steps >= 1 and np.all(np.diff(tuned.rms_history) < 0)
+    pat2 = tuning.retuned_pattern(pat, tuned.gap)
+    lo, hi = tuning.achievable_growth(pat)
+    d = (pat2.insert_size - pat2.gap)[pat.interior]
+    assert np.all(d >= lo[pat.interior] - 1e-12) and np.all(d <= hi[pat.interior] + 1e-12)
+    net2 = network.build_network(pat2, cfg)
+    dep2 = tuning.redeploy(pat2, net2, dep, tuned)
+    after = compare.deviation(dep2.vertex_positions(), Y, pat2.quads, tgt)
+    assert dep2.stable and after.rms < 0.8 * before.rms
+
+
+def test_tune_config_errors():
+    from simfab.deploy import tuning
+    from simfab.errors import InputError
+
+    with pytest.raises(InputError, match="tune.iterations"):
+        tuning.TuneConfig(iterations=-1)
+    with pytest.raises(InputError, match="tune.damping"):
+        tuning.TuneConfig(damping=0.0)
