@@ -83,8 +83,11 @@ class PatternConfig:
     min_gap: float = 0.0015
     min_beam: float = 0.004
     degenerate_angle_deg: float = 160.0
+    layout: str = "grid"
 
     def __post_init__(self):
+        if self.layout not in ("conforming", "grid"):
+            raise InputError(f"must be 'conforming' or 'grid' (got {self.layout!r})", where="pattern.layout")
         if not isinstance(self.insert_half_sizes, (tuple, list)):
             raise InputError(f"must be a list of sizes [m] (got {self.insert_half_sizes!r})",
                              where="pattern.insert_half_sizes")
@@ -224,38 +227,10 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     if not poly.is_valid:
         raise InputError("the flattened boundary self-intersects; the target needs cuts or cones")
     h = cfg.spacing
-    lo, hi = uv.min(axis=0), uv.max(axis=0)
-    ni = np.arange(np.floor(lo[0] / h) - 1, np.ceil(hi[0] / h) + 2)
-    nj = np.arange(np.floor(lo[1] / h) - 1, np.ceil(hi[1] / h) + 2)
-    I, J = np.meshgrid(ni, nj, indexing="ij")
-    G = np.stack([I * h, J * h], axis=-1)  # (a, b, 2)
-    inside = shapely.contains_xy(poly, G[..., 0], G[..., 1])
-    ring = poly.exterior
-    proj = G.copy()
-    out_idx = np.argwhere(~inside)
-    if len(out_idx):
-        pts = shapely.points(G[~inside])
-        near = shapely.line_interpolate_point(ring, shapely.line_locate_point(ring, pts))
-        proj[~inside] = shapely.get_coordinates(near)
-    quads, corners = [], []
-    A, B = inside.shape
-    for i in range(A - 1):
-        for j in range(B - 1):
-            c = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)]
-            ins = [inside[k] for k in c]
-            nin = sum(ins)
-            if nin == 4 or nin == 3 or (nin == 2 and (ins[0] == ins[1] or ins[1] == ins[2])):
-                Q = np.array([proj[k] for k in c])
-                if _good_quad(Q, h):
-                    quads.append([k[0] * B + k[1] for k in c])
-    if not quads:
-        raise InputError(f"no quad fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
-                         where="pattern.spacing")
-    quads = np.array(quads)
-    quads = _largest_component(quads)
-    used, inv = np.unique(quads, return_inverse=True)
-    quads = inv.reshape(-1, 4)
-    P = proj.reshape(-1, 2)[used]
+    if cfg.layout == "grid":
+        P, quads = _clipped_grid(poly, uv, h)
+    else:
+        P, quads = conforming_quads(poly, h, uv)
     # edges and their quads
     e_all = np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)])
     q_all = np.tile(np.arange(len(quads)), 4)
@@ -268,7 +243,7 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     bnd_v = np.zeros(len(P), dtype=bool)
     bnd_v[edges[edge_quads[:, 1] < 0].ravel()] = True
     valence = np.bincount(edges.ravel(), minlength=len(P))
-    interior = ~bnd_v & (valence == 4)
+    interior = ~bnd_v  # every vertex inside the outline holds an insert (4 beams; 3 or 5 at staircase corners)
     # u at the pattern vertices: linear interpolation on the flat triangulation
     uP = _interpolate(uv, faces, u, P)
     elen = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1)
@@ -361,3 +336,185 @@ def _interpolate(uv, faces, values, P) -> np.ndarray:
 def map_to_surface(uv, faces, V, P) -> np.ndarray:
     """3D target points (k,3) [m] of flat points P (k,2): barycentric on the flat triangulation."""
     return np.stack([_interpolate(uv, faces, V[:, c], P) for c in range(3)], axis=1)
+
+
+def _clipped_grid(poly, uv, h):
+    """The clipped square grid (``layout = "grid"``): (P (n,2), quads (q,4) CCW)."""
+    import shapely
+
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    ni = np.arange(np.floor(lo[0] / h) - 1, np.ceil(hi[0] / h) + 2)
+    nj = np.arange(np.floor(lo[1] / h) - 1, np.ceil(hi[1] / h) + 2)
+    I, J = np.meshgrid(ni, nj, indexing="ij")
+    G = np.stack([I * h, J * h], axis=-1)  # (a, b, 2)
+    inside = shapely.contains_xy(poly, G[..., 0], G[..., 1])
+    ring = poly.exterior
+    proj = G.copy()
+    out_idx = np.argwhere(~inside)
+    if len(out_idx):
+        pts = shapely.points(G[~inside])
+        near = shapely.line_interpolate_point(ring, shapely.line_locate_point(ring, pts))
+        proj[~inside] = shapely.get_coordinates(near)
+    quads, corners = [], []
+    A, B = inside.shape
+    for i in range(A - 1):
+        for j in range(B - 1):
+            c = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)]
+            ins = [inside[k] for k in c]
+            nin = sum(ins)
+            if nin == 4 or nin == 3 or (nin == 2 and (ins[0] == ins[1] or ins[1] == ins[2])):
+                Q = np.array([proj[k] for k in c])
+                if _good_quad(Q, h):
+                    quads.append([k[0] * B + k[1] for k in c])
+    if not quads:
+        raise InputError(f"no quad fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
+                         where="pattern.spacing")
+    quads = np.array(quads)
+    quads = _largest_component(quads)
+    used, inv = np.unique(quads, return_inverse=True)
+    quads = inv.reshape(-1, 4)
+    P = proj.reshape(-1, 2)[used]
+    return P, quads
+
+
+CORE_MARGIN = 0.5  # core grid nodes keep >= CORE_MARGIN x spacing from the boundary
+SMOOTHING_ITERATIONS = 20
+
+
+def conforming_quads(poly, h: float, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary-conforming quad mesh of the flat domain ``poly`` (``layout = "conforming"``):
+    (P (n,2) [m], quads (q,4) CCW).
+
+    Method (a square grid with one *pillow* layer, as in hexahedral meshing): the core is the
+    grid cells (spacing h, on the grid through the origin) whose four corners lie inside the
+    domain at least ``CORE_MARGIN`` h from its boundary (the largest edge-connected set, cells that
+    touch the rest at one corner only removed, so its outline is one simple loop v_0 .. v_m).
+    Every loop vertex gets a boundary vertex p_k (its nearest boundary point, then spread along
+    the boundary by arc length so that their order follows the loop's), and every loop edge
+    (v_k, v_k+1) one quad (v_k, p_k, p_k+1, v_k+1): each pillow quad has exactly two vertices on
+    the boundary, so no quad degenerates into a triangle with three boundary vertices on a line
+    (what clipping a grid cell does where the boundary runs across it). Then Laplacian smoothing of
+    the non-boundary vertices (``SMOOTHING_ITERATIONS`` Jacobi sweeps, boundary vertices fixed;
+    the uniform grid is its fixed point, so only the cells near the boundary move). The outline
+    is the chord polygon of the p_k on the boundary: the quads cover the domain up to the chords'
+    segments (sagitta ~ h^2 / (8 R) for a boundary of curvature radius R). Staircase corners of
+    the core give loop vertices of valence 3 (convex) or 5 (concave) - inserts with 3 or 5 beams.
+    """
+    import shapely
+
+    ring = poly.exterior
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    ni = np.arange(np.floor(lo[0] / h) - 1, np.ceil(hi[0] / h) + 2)
+    nj = np.arange(np.floor(lo[1] / h) - 1, np.ceil(hi[1] / h) + 2)
+    I, J = np.meshgrid(ni, nj, indexing="ij")
+    G = np.stack([I * h, J * h], axis=-1)
+    A, B = I.shape
+    flatG = G.reshape(-1, 2)
+    pts = shapely.points(flatG)
+    core = (shapely.contains_xy(poly, flatG[:, 0], flatG[:, 1])
+            & (shapely.distance(ring, pts) >= CORE_MARGIN * h)).reshape(A, B)
+    cells = [[i * B + j, (i + 1) * B + j, (i + 1) * B + j + 1, i * B + j + 1]
+             for i in range(A - 1) for j in range(B - 1)
+             if core[i, j] and core[i + 1, j] and core[i + 1, j + 1] and core[i, j + 1]]
+    if not cells:
+        raise InputError(f"no quad fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
+                         where="pattern.spacing")
+    quads = _largest_component(np.array(cells))
+    quads = _remove_pinches(quads)
+    loop = _outline(quads)  # CCW loop of core vertex ids
+    # boundary vertices: nearest points, then arc-length positions made to follow the loop's order
+    L = ring.length
+    s = np.asarray(shapely.line_locate_point(ring, shapely.points(flatG[loop])), dtype=np.float64)
+    ccw = shapely.Polygon(flatG[loop]).exterior.is_ccw == ring.is_ccw  # both loops the same way round
+    if not ccw:
+        s = -s
+    s = np.unwrap(s / L * 2 * np.pi) * L / (2 * np.pi)  # continuous around the loop
+    s = _monotone(s, L)
+    if not ccw:
+        s = -s
+    p = shapely.get_coordinates(shapely.line_interpolate_point(ring, np.mod(s, L)))
+    n0 = len(flatG)
+    P = np.vstack([flatG, p])
+    m = len(loop)
+    k = np.arange(m)
+    pillow = np.stack([loop, n0 + k, n0 + (k + 1) % m, loop[(k + 1) % m]], axis=1)
+    quads = np.vstack([quads, pillow])
+    quads = _ccw(P, quads)
+    used, inv = np.unique(quads, return_inverse=True)
+    quads = inv.reshape(-1, 4)
+    P = P[used]
+    movable = np.isin(used, loop)  # only the core's outline moves (the grid inside it stays regular)
+    P = _smooth(P, quads, ~movable, SMOOTHING_ITERATIONS)
+    return P, quads
+
+
+def _remove_pinches(quads: np.ndarray) -> np.ndarray:
+    """Drop cells until every vertex on the outline has exactly two outline edges (no two parts
+    touching at one corner): the cell at such a vertex with the fewest edge neighbours goes."""
+    while True:
+        e = np.sort(np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)]), axis=1)
+        uniq, inv, cnt = np.unique(e, axis=0, return_inverse=True, return_counts=True)
+        bnd = uniq[cnt == 1]
+        deg = np.bincount(bnd.ravel(), minlength=int(quads.max()) + 1)
+        bad = np.flatnonzero(deg > 2)
+        if not len(bad):
+            return _largest_component(quads)
+        qi = np.flatnonzero(np.any(quads == bad[0], axis=1))
+        nb = [int(np.sum(cnt[inv.ravel()[np.arange(4) * len(quads) + q]] == 2)) for q in qi]
+        quads = np.delete(quads, qi[int(np.argmin(nb))], axis=0)
+
+
+def _outline(quads: np.ndarray) -> np.ndarray:
+    """Vertex ids of the outline of a quad mesh with one simple boundary loop, in the quads' order
+    (CCW for CCW quads)."""
+    nxt = {}
+    directed = np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)])
+    key = np.sort(directed, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    for a, b in directed[cnt[inv.ravel()] == 1]:
+        nxt[int(a)] = int(b)
+    start = next(iter(nxt))
+    loop = [start]
+    while nxt[loop[-1]] != start:
+        loop.append(nxt[loop[-1]])
+    return np.array(loop)
+
+
+def _monotone(s: np.ndarray, L: float) -> np.ndarray:
+    """Arc-length positions (m,) made strictly increasing within one turn (each at least L / (4 m)
+    after the previous: nearest points of neighbouring loop vertices can come in the wrong order at
+    a convex staircase corner), then relaxed twice towards their neighbours' mean (even spacing)."""
+    m = len(s)
+    out = s.copy()
+    gap = L / (4.0 * m)
+    for k in range(1, m):
+        out[k] = max(out[k], out[k - 1] + gap)
+    if out[-1] - out[0] > L - gap:  # compress into one turn
+        out = out[0] + (out - out[0]) * (L - gap) / (out[-1] - out[0])
+    for _ in range(2):
+        prev = np.r_[out[-1] - L, out[:-1]]
+        nxt = np.r_[out[1:], out[0] + L]
+        out = 0.5 * out + 0.25 * (prev + nxt)
+    return out
+
+
+def _ccw(P: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    Q = P[quads]
+    area = np.sum(Q[:, :, 0] * np.roll(Q[:, :, 1], -1, axis=1) - np.roll(Q[:, :, 0], -1, axis=1) * Q[:, :, 1], axis=1)
+    out = quads.copy()
+    out[area < 0] = out[area < 0][:, ::-1]
+    return out
+
+
+def _smooth(P: np.ndarray, quads: np.ndarray, fixed: np.ndarray, iterations: int) -> np.ndarray:
+    """Jacobi Laplacian smoothing over the quad edges (fixed vertices stay)."""
+    import scipy.sparse as sp
+
+    e = np.unique(np.sort(np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)]), axis=1), axis=0)
+    n = len(P)
+    W = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
+    deg = np.asarray(W.sum(axis=1)).ravel()
+    X = P.copy()
+    for _ in range(iterations):
+        X = np.where(fixed[:, None], P, (W @ X) / deg[:, None])
+    return X

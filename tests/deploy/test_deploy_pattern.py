@@ -219,3 +219,34 @@ def test_catalogue_config_errors():
         pattern.PatternConfig(spacing=0.03, insert_half_sizes=[0.004, 0.013])
     with pytest.raises(InputError, match="insert_half_sizes"):
         pattern.PatternConfig(insert_half_sizes="0.004")
+
+
+@pytest.mark.parametrize("name", scene.BUNDLED)
+def test_conforming_layout_covers_the_domain_without_degenerate_quads(name):
+    """layout = "conforming" (grid core + pillow layer): more of the flat domain covered than the
+    clipped grid (measured 98.8-98.9 % vs 95.2-97.9 % on the bundled targets), its boundary
+    vertices on the flattened boundary, every quad convex with all angles below the spring limit
+    (so every quad has a spring) and no edge below half the spacing."""
+    import shapely
+
+    sc = scene.load_scene(scene.bundled_path(name))
+    f = flatten.flatten(sc.target.V, sc.target.F)
+    h = sc.pattern.spacing
+    poly = shapely.Polygon(f.uv[f.boundary])
+    cover = {}
+    for lay in ("grid", "conforming"):
+        cfg = pattern.PatternConfig(**{**sc.pattern.__dict__, "layout": lay})
+        pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, cfg)
+        cover[lay] = shapely.union_all([shapely.Polygon(pat.P[q]) for q in pat.quads]).area / poly.area
+    assert cover["conforming"] > 0.985 and cover["conforming"] > cover["grid"]
+    assert np.all(pat.spring)
+    angles = np.array([pattern._max_angle(pat.P[q]) for q in pat.quads])
+    assert np.degrees(angles.max()) < 135.0
+    Q = pat.P[pat.quads]
+    edge = np.linalg.norm(np.roll(Q, -1, axis=1) - Q, axis=2)
+    assert edge.min() > 0.5 * h
+    bnd = ~pat.interior
+    d = shapely.distance(poly.exterior, shapely.points(pat.P[bnd]))
+    assert np.max(d) < 1e-9
+    val = np.bincount(pat.edges.ravel(), minlength=len(pat.P))[pat.interior]
+    assert set(val.tolist()) <= {3, 4, 5}  # 3 / 5 at the core's staircase corners (54 % of the dome's 37)

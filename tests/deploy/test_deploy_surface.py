@@ -9,9 +9,9 @@ import pytest
 from simfab.deploy import compare, flatten, mjcf_sim, network, pattern, pipeline, surface
 
 
-def _deploy(target, spacing, increments=6):
+def _deploy(target, spacing, increments=6, layout="grid"):
     f = flatten.flatten(target.V, target.F)
-    pat = pattern.layout(f.uv, f.boundary, target.F, f.u, pattern.PatternConfig(spacing=spacing))
+    pat = pattern.layout(f.uv, f.boundary, target.F, f.u, pattern.PatternConfig(spacing=spacing, layout=layout))
     cfg = network.DeployConfig(perturbation=0.5, increments=increments)
     net = network.build_network(pat, cfg)
     Y = pattern.map_to_surface(f.uv, target.F, target.V, pat.P)
@@ -220,8 +220,8 @@ def test_offset_sensitivity_matches_re_solved_equilibria(tiny_saddle):
     """The implicit-function-theorem derivative of the deployed equilibrium with respect to one
     insert's clamp offset (``StaticSolver.offset_sensitivity``) agrees with the central
     difference of two re-solved equilibria (offset +-h). The difference's error is O(h^2) (measured
-    relative 5e-3, 4.5e-4, 5e-5, 4.5e-6, 5e-7 at h = 100, 30, 10, 3, 1 um): at h = 10 um a wrong
-    derivative term would show far above 2e-4."""
+    relative 7e-2, 1.1e-2, 1.3e-3, 1.2e-4, 1.3e-5 at h = 100, 30, 10, 3, 1 um: this insert moves its
+    neighbours by ~30x its own growth): at h = 1 um a wrong derivative term would show far above 2e-4."""
     from simfab.rods.model import synchronize
     from simfab.rods.statics import StaticSolver
 
@@ -239,7 +239,7 @@ def test_offset_sensitivity_matches_re_solved_equilibria(tiny_saddle):
     dq = solver.offset_sensitivity(st, D)
     cols = solver.red.body_trans_cols.reshape(-1, 3)
     dpos = dq[cols]  # (free bodies, 3) d(body position)/dp
-    h = 1e-5
+    h = 1e-6
     pos = []
     for sgn in (1.0, -1.0):
         solver.set_attachment_offsets(offset + sgn * h * D)
