@@ -223,6 +223,7 @@ class StaticSolver:
         self.linear = ShiftedCholesky()
         self._definiteness = SPDSolver()  # unshifted factorizations for is_stable (pattern analysis reused)
         self.length = max(float(np.sum(model.rest_len[r.edges])) for r in model.rods)
+        self._last = None  # (state, node_forces, body_forces, reduced Hessian) of the last converged solve
 
     # -- objective in reduced unknowns -----------------------------------------------------
     def _objective(self, st: RodState, need_grad: bool, need_hess: bool, node_forces, body_forces):
@@ -286,6 +287,7 @@ class StaticSolver:
         hist = [(E, gnorm, 0.0)]
         for it in range(opts.max_iter + 1):
             if gnorm <= gtol:
+                self._last = (st, nf, bf, Hq)
                 return StaticResult(st, E, it, gnorm, dict(self.evaluator.parts), hist)
             if it == opts.max_iter:
                 break
@@ -330,6 +332,7 @@ class StaticSolver:
 
         self.model = dataclasses.replace(self.model, node_offset=np.asarray(node_offset, dtype=np.float64))
         self.red.model = self.model
+        self._last = None  # a cached Hessian belongs to the old offsets
 
     def offset_sensitivity(self, state: RodState, d_offset, *, node_forces=None, body_forces=None) -> np.ndarray:
         """Derivative dq/dp (nq,) or (nq,k) of the equilibrium ``state`` with respect to parameters p
@@ -356,7 +359,13 @@ class StaticSolver:
         nf = None if node_forces is None else np.asarray(node_forces, dtype=np.float64)
         bf = None if body_forces is None else np.asarray(body_forces, dtype=np.float64)
         base = self.model
-        supports = self._offset_supports(state, D)
+        last = self._last
+        same = lambda a, b: (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))  # noqa: E731
+        cached = last if last is not None and last[0] is state and same(last[1], nf) and same(last[2], bf) else None
+        if len(D) == 1:  # one direction: nothing to group
+            supports = [np.arange(self.red.nq)]
+        else:
+            supports = self._offset_supports(state, D)
         colours: list[list[int]] = []
         used: list[np.ndarray] = []
         for j, S in enumerate(supports):
@@ -385,7 +394,10 @@ class StaticSolver:
                     B[supports[j], j] = diff[supports[j]]
         finally:
             self.set_attachment_offsets(base.node_offset)
-        _, _, Hq = self._objective(state, True, True, nf, bf)
+        if cached is not None:
+            Hq = cached[3]  # the converged Newton iterate's own Hessian (same state, loads and offsets)
+        else:
+            _, _, Hq = self._objective(state, True, True, nf, bf)
         try:
             dq = -np.asarray(self._definiteness.solve(Hq, B)).reshape(self.red.nq, len(D))
         except NotPositiveDefinite:  # unstable equilibrium: the shifted solve, column by column

@@ -200,6 +200,14 @@ def test_scene_rejects_unknown_fields(tmp_path):
     p.write_text('[target]\nkind = "torus"\n')
     with pytest.raises(InputError, match="torus"):
         scene.load_scene(p)
+    base = '[target]\nkind = "saddle"\ndisk_radius = 0.06\ncurvature_radius = 0.1\n'
+    for table, bad, field in (("pattern", 'insert_half_sizes = [0.004, "x"]', "pattern.insert_half_sizes"),
+                              ("pattern", 'layout = "hex"', "pattern.layout"),
+                              ("tune", "iterations = 1.5", "tune.iterations"), ("tune", "step = 1", "step")):
+        p.write_text(base + f"[{table}]\n{bad}\n")
+        with pytest.raises(InputError, match=field) as e:
+            scene.load_scene(p)
+        assert str(p) in str(e.value) or str(p) in str(getattr(e.value, "where", ""))
 
 
 def test_mesh_target_in_millimetres(tmp_path):
