@@ -64,10 +64,11 @@ class PatternConfig:
     spacing: grid spacing h; beam_width (in plane) and beam_thickness (sheet); insert_half_size
     r: distance from an insert's centre to where it clamps the beams (one size for all
     inserts); insert_half_sizes: the insert catalogue, a list of such sizes (when given it
-    replaces insert_half_size; each insert gets one, see module doc); spring_bulge [-]: smallest Bezier handle pull towards the quad centre; spring_slack
-    [-]: arc length margin over the deployed chord (see :mod:`simfab.deploy.springs`);
-    spring_width: in-plane width of the spring arcs (narrower than the beams: the springs let the
-    cells grow in plane); min_gap, min_beam:
+    replaces insert_half_size; each insert gets one, see module doc); layout: "grid" (the
+    clipped square grid) or "conforming" (:func:`conforming_quads`); spring_bulge [-]: smallest
+    Bezier handle pull towards the quad centre; spring_slack [-]: arc length margin over the
+    deployed chord (see :mod:`simfab.deploy.springs`); spring_width: in-plane width of the spring
+    arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:
     achievable-gap limits (see module doc); degenerate_angle_deg [deg]: interior angle above
     which a boundary quad gets no spring.
     """
@@ -355,7 +356,7 @@ def _clipped_grid(poly, uv, h):
         pts = shapely.points(G[~inside])
         near = shapely.line_interpolate_point(ring, shapely.line_locate_point(ring, pts))
         proj[~inside] = shapely.get_coordinates(near)
-    quads, corners = [], []
+    quads = []
     A, B = inside.shape
     for i in range(A - 1):
         for j in range(B - 1):

@@ -98,7 +98,7 @@ def shape_descriptors(pat, X: np.ndarray, Y: np.ndarray | None = None) -> dict:
 
 def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = True) -> SurfaceResult:
     """Run every stage on a loaded :class:`simfab.deploy.scene.SurfaceScene`."""
-    from simfab.deploy import compare, flatten, lasercut, mjcf_sim, network, pattern, tuning
+    from simfab.deploy import compare, flatten, lasercut, network, pattern, tuning
     from simfab.progress import log
 
     sec = {}

@@ -103,7 +103,8 @@ def load_scene(path, *, units: str | None = None, overrides: dict | None = None)
     else:
         doc = {}
         target = surface.load(p, units=units or "m")
-    tables = {k: {**doc.get(k, {}), **overrides.get(k, {})} for k in ("pattern", "material", "deploy", "mujoco", "tune")}
+    tables = {k: {**doc.get(k, {}), **overrides.get(k, {})}
+              for k in ("pattern", "material", "deploy", "mujoco", "tune")}
     pat = _make(PatternConfig, tables["pattern"], where, "pattern")
     dep = _make(DeployConfig, {**tables["material"], **tables["deploy"]}, where, "material/deploy")
     sim = _make(SimConfig, tables["mujoco"], where, "mujoco")

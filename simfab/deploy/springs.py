@@ -12,11 +12,12 @@ at the centre; b > 1: the arc passes closer to the centre than its handles' foot
 Sizing rule (why). Deployment scales the quad by s_q = e^{-u_q} (u_q: flattening log scale
 factor at the quad): the two midpoints an arc joins move apart, its chord c grows to s_q c
 (the pattern passes each arc's own chord growth, from the growth r - g of the insert at the
-corner the arc turns around: :func:`simfab.deploy.pattern.quad_growth`). An arc of length S can follow only by bending while S > s_q c; as S -> s_q c
-it straightens and its resistance to further growth diverges (it ends up carrying the growth in
-tension, which compresses the beams: they buckle out of plane locally at every insert instead of
-the network growing into the target - measured on the bundled dome: a 16 mm high deployment
-for a 54 mm target with the earlier fixed b = 0.7, S/c = 1.16 < s_q = 1.22 at the centre).
+corner the arc turns around: :func:`simfab.deploy.pattern.quad_growth`). An arc of length S can
+follow only by bending while S > s_q c; as S -> s_q c it straightens and its resistance to
+further growth diverges (it ends up carrying the growth in tension, which compresses the beams:
+they buckle out of plane locally at every insert instead of the network growing into the target
+- measured on the bundled dome: a 16 mm high deployment for a 54 mm target with the earlier
+fixed b = 0.7, S/c = 1.16 < s_q = 1.22 at the centre).
 Hence each quad's b is the smallest b >= ``spring_bulge`` with
 
     S_k(b) / c_k >= (1 + spring_slack) max(s_k, 1)           for all four arcs k of the quad,

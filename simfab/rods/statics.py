@@ -360,7 +360,10 @@ class StaticSolver:
         bf = None if body_forces is None else np.asarray(body_forces, dtype=np.float64)
         base = self.model
         last = self._last
-        same = lambda a, b: (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))  # noqa: E731
+
+        def same(a, b):
+            return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+
         cached = last if last is not None and last[0] is state and same(last[1], nf) and same(last[2], bf) else None
         if len(D) == 1:  # one direction: nothing to group
             supports = [np.arange(self.red.nq)]
