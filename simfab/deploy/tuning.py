@@ -14,8 +14,9 @@ Sensitivities (implicit function theorem): the equilibrium q*(d) satisfies g_q(q
 for all inserts (:meth:`simfab.rods.statics.StaticSolver.offset_sensitivity`, checked against
 re-solved equilibria in tests/deploy). Growing insert i moves its beam ends' clamp points
 outwards along the beams by d_i, i.e. the parameter is the clamp offset; a changed gap g_i also
-changes the flat beam's length by the same amount (the re-cut pattern is deployed again at the end,
-so the reported shape is the re-cut pattern's).
+changes the flat beam's length by the same amount, so at the end the re-cut pattern's own
+equilibrium is solved from the tuned state (:func:`redeploy`) and the reported shape is the
+re-cut pattern's.
 
 Step (Levenberg-Marquardt): ``(J^T J + mu I) delta = -J^T e`` with J = n^T R dX/dd (n, k) and mu
 = ``damping`` x the largest diagonal of J^T J (the inserts far from the boundary barely move the
