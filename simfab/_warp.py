@@ -10,6 +10,8 @@ import threading
 
 import warp as wp
 
+from simfab.errors import InputError
+
 #: Held while a launch is recorded (``record_cmd=True``): the first launch of a kernel loads (and
 #: may build) its module, which must not happen from two threads at once. Replaying recorded
 #: launches from two threads is safe as long as they use different buffers.
@@ -56,7 +58,6 @@ _init_quietly()
 
 def device(name: str | None = None) -> str:
     """Validate a device name ("cpu", "cuda", "cuda:0"); InputError when it does not exist."""
-    from simfab.errors import InputError
 
     name = name or "cpu"
     if name.startswith("cuda") and not wp.is_cuda_available():

@@ -33,6 +33,9 @@ from simfab.deploy import elastica
 from simfab.deploy import tolerances as tol
 from simfab.deploy._config import require_positive
 from simfab.errors import ConvergenceError, InputError
+from simfab.io.mjcf import load_scene, numeric_config
+from simfab.rods.model import Material, NetworkBuilder, Section, synchronize
+from simfab.rods.statics import StaticSolver, StaticsOptions
 
 DEFAULT_RATIOS = (0.99, 0.95, 0.90, 0.80, 0.60)
 DEFAULT_N = (20, 40, 80, 160)
@@ -80,7 +83,6 @@ class InsertScene:
 def load_insert_scene(path) -> InsertScene:
     """Read the elastica scene: body ``insert`` (start pose = beam's moving end), site ``anchor``
     (fixed end, origin), beam parameters as ``<numeric name="beam_<field>">``."""
-    from simfab.io.mjcf import load_scene, numeric_config
 
     sc = load_scene(path)
     kw = numeric_config(sc, "beam_", BeamSetup)
@@ -144,7 +146,6 @@ def build_beam(setup: BeamSetup, n: int, support: str, path: str = "direct", *, 
     """The beam with ``n`` segments, start state carrying the first-mode imperfection.
 
     ``free_end=True`` (critical load): the moving end's x is an unknown (loaded by a force)."""
-    from simfab.rods.model import Material, NetworkBuilder, Section
 
     if support not in elastica.SUPPORTS:
         raise InputError(f"support must be one of {elastica.SUPPORTS} (got {support!r})", where="--support")
@@ -239,7 +240,6 @@ def _prescribe_gap(beam: Beam, state, g_old: float, g: float):
 
 
 def _sync(beam: Beam, prev, x, body_pos):
-    from simfab.rods.model import synchronize
 
     return synchronize(beam.model, prev, x, prev.theta, body_pos, prev.body_rot)
 
@@ -252,7 +252,6 @@ def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: st
     increments since the flat start [s], Newton iterations and quasi-static increments since the
     flat start, and the shape (x, z) when ``keep_states``.
     """
-    from simfab.rods.statics import StaticSolver, StaticsOptions
 
     beam = build_beam(setup, n, support, path)
     # nearly inextensible beam: relax each increment with EA / 100 first (see StaticsOptions)
@@ -299,8 +298,6 @@ def critical_load(setup: BeamSetup, n: int, support: str = "pinned", *, device: 
     P brackets the loss of definiteness to ``CRITICAL_LOAD_BISECTION_RTOL``.
     Compare with pi^2 B / L^2 (pinned) / 4 pi^2 B / L^2 (clamped).
     """
-    from simfab.rods.model import synchronize
-    from simfab.rods.statics import StaticSolver
 
     beam = build_beam(setup, n, support, "direct", free_end=True)
     model = beam.model

@@ -30,7 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from simfab.rods import frames as fr
+from simfab.deploy import mjcf_sim
+from simfab.io.mjcf import MJCFBuilder
+from simfab.io.render import render_mjcf
+from simfab.io.usd import StageWriter
+from simfab.rods.model import material_curvatures
+from simfab.rotations import matrix_to_quat
 
 FLEX_TIMESTEP = 2e-3  # [s] time step of the flexcomp export
 
@@ -43,7 +48,6 @@ def rod_polylines(model, state) -> list[np.ndarray]:
 def bending_strain(model, state) -> np.ndarray:
     """Largest bending fibre strain per node (N,) [-]: ``|dk1| t/2 + |dk2| w/2`` over the Voronoi
     length, with ``dk`` the change of material curvature from the rest shape; 0 at rod ends."""
-    from simfab.rods.model import material_curvatures
 
     out = np.zeros(model.n_nodes)
     if model.n_hinges == 0:
@@ -60,7 +64,6 @@ def bending_strain(model, state) -> np.ndarray:
 def write_usd(path, deployment) -> Path:
     """Timeline of the deployment; rods carry a per-vertex ``bending_strain`` primvar (colour scale
     0 .. the largest strain of the whole timeline)."""
-    from simfab.io.usd import StageWriter
 
     d = deployment
     model = d.cell.model
@@ -77,18 +80,16 @@ def write_usd(path, deployment) -> Path:
         w.set_curves("deploy/rods", rod_polylines(model, st), widths, t)
         w.set_scalar("deploy/rods", "bending_strain", strains[t], t, vmin=0.0, vmax=smax)
         b = d.cell.insert_body
-        w.set_pose("deploy/insert", st.body_pos[b], fr.matrix_to_quat(st.body_rot[b]), t)
+        w.set_pose("deploy/insert", st.body_pos[b], matrix_to_quat(st.body_rot[b]), t)
     return w.save()
 
 
 def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsules") -> Path:
-    from simfab.io.mjcf import MJCFBuilder
 
     if rods not in ("flexcomp", "capsules", "chain"):
         raise ValueError(f"rods must be 'flexcomp', 'capsules' or 'chain' (got {rods!r})")
     d = deployment
     if rods == "chain":
-        from simfab.deploy import mjcf_sim
 
         ins = d.insert
         geoms = {ins.name: dict(mesh=(np.asarray(ins.mesh.vertices), np.asarray(ins.mesh.faces)),
@@ -105,7 +106,7 @@ def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsule
     b.floor(z=float(np.min(st.x[:, 2])) - 0.01, size=0.3)
     ins = d.insert
     ib = d.cell.insert_body
-    body = b.body(ins.name, pos=st.body_pos[ib], quat=fr.matrix_to_quat(st.body_rot[ib]))
+    body = b.body(ins.name, pos=st.body_pos[ib], quat=matrix_to_quat(st.body_rot[ib]))
     b.mesh_asset(f"{ins.name}_mesh", ins.mesh.vertices, ins.mesh.faces)
     b.geom(body, type="mesh", mesh=f"{ins.name}_mesh", mass=max(ins.mass, 1e-6), rgba=[0.85, 0.45, 0.2, 1])
     holder = b.body("rods") if rods == "capsules" else None
@@ -130,6 +131,5 @@ def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsule
 
 
 def write_png(png, mjcf_path) -> Path:
-    from simfab.io.render import render_mjcf
 
     return render_mjcf(mjcf_path, png, width=640, height=480)

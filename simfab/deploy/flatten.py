@@ -41,6 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from simfab.errors import ConvergenceError, InputError
+from simfab.solve.linear import import_cholmod
 
 
 @dataclass(frozen=True)
@@ -192,7 +193,6 @@ class CholeskyFactor:
     for any number of right-hand sides (the fill-reducing ordering is CHOLMOD's default)."""
 
     def __init__(self, A: sp.spmatrix):
-        from simfab.solve.linear import import_cholmod
 
         cholmod = import_cholmod()  # (with the machine's BLAS kernels)
         import cvxopt

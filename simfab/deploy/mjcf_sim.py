@@ -46,6 +46,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simfab.deploy.compare import kabsch
+from simfab.errors import InputError
+from simfab.io.atomic import atomic_path
+from simfab.io.mjcf import MJCFBuilder, _mujoco
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -87,7 +91,6 @@ class SimConfig:
     body_damping: float = 200.0
 
     def __post_init__(self):
-        from simfab.errors import InputError
 
         if self.solver not in ("PGS", "CG", "Newton"):
             raise InputError(f"must be PGS, CG or Newton (got {self.solver!r})", where="mujoco.solver")
@@ -127,7 +130,6 @@ class SimScene:
         """Write the MJCF (compiled by MuJoCo in :func:`build` already) atomically; returns the path."""
         from pathlib import Path
 
-        from simfab.io.atomic import atomic_path
 
         path = Path(path)
         with atomic_path(path) as tmp:
@@ -160,7 +162,6 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
     box=half sizes (3,), mass, rgba) for inserts; other bodies get a small sphere."""
     from scipy.spatial.transform import Rotation
 
-    from simfab.io.mjcf import MJCFBuilder, _mujoco
 
     dt = cfg.timestep
     b = MJCFBuilder(name, timestep=dt, gravity=[0, 0, 0])
@@ -284,7 +285,6 @@ class Stability:
 
 def aligned_drift(X0: np.ndarray, X1: np.ndarray) -> float:
     """Largest distance [m] between points X1 (n,3) rigidly aligned onto X0 (n,3) and X0."""
-    from simfab.deploy.compare import kabsch
 
     R, t = kabsch(X1, X0)
     return float(np.max(np.linalg.norm(X1 @ R.T + t - X0, axis=1)))

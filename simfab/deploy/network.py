@@ -42,7 +42,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from simfab.deploy._config import require_positive
+from simfab.deploy.compare import kabsch
 from simfab.errors import ConvergenceError, InputError
+from simfab.progress import progress
+from simfab.rods.model import Material, NetworkBuilder, Section, synchronize
+from simfab.rods.statics import StaticSolver
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -104,7 +108,6 @@ def rod_parameters(n: int, clamp_edge: float) -> np.ndarray:
 
 
 def build_network(pat, cfg: DeployConfig) -> Network:
-    from simfab.rods.model import Material, NetworkBuilder, Section
 
     pc = pat.config
     sec = Section(width=pc.beam_width, thickness=pc.beam_thickness)
@@ -205,7 +208,6 @@ def target_heights(pat, target_points: np.ndarray) -> np.ndarray:
 def target_displacement(net: Network, flat_to_target) -> tuple[np.ndarray, np.ndarray]:
     """Predictor field D (see module doc): (N,3) for the nodes and (B,3) for the bodies [m].
     ``flat_to_target``: function (k,2) flat points -> (k,3) target points."""
-    from simfab.deploy.compare import kabsch
 
     X0 = np.vstack([net.state.x, net.state.body_pos])
     T = flat_to_target(X0[:, :2])
@@ -223,9 +225,6 @@ def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device:
     (:func:`target_displacement`) or None."""
     import time
 
-    from simfab.progress import progress
-    from simfab.rods.model import synchronize
-    from simfab.rods.statics import StaticSolver
 
     t0 = time.perf_counter()
     model = net.model

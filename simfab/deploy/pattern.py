@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simfab.deploy._config import require_positive
+from simfab.deploy.springs import bezier, size_bulges
 from simfab.errors import InputError
 
 
@@ -180,7 +181,6 @@ class Pattern:
     def spring_curves(self, n=12) -> list[tuple[int, int, int, np.ndarray]]:
         """Per spring arc: (quad, edge from, edge to, points (n+1,2)) cubic Bezier [m] at n+1 uniform
         parameters (n int) or at the Bezier parameters n (array in [0, 1])."""
-        from simfab.deploy.springs import bezier
 
         out = []
         mids = self.midpoints()
@@ -222,7 +222,6 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,))."""
     import shapely
 
-    from simfab.deploy.springs import size_bulges
 
     poly = shapely.Polygon(uv[boundary])
     if not poly.is_valid:
@@ -246,7 +245,7 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     valence = np.bincount(edges.ravel(), minlength=len(P))
     interior = ~bnd_v  # every vertex inside the outline holds an insert (4 beams; 3 or 5 at staircase corners)
     # u at the pattern vertices: linear interpolation on the flat triangulation
-    uP = _interpolate(uv, faces, u, P)
+    uP = interpolate(uv, faces, u, P)
     elen = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1)
     hv = np.bincount(edges.ravel(), weights=np.repeat(elen, 2), minlength=len(P)) / np.maximum(valence, 1)
     gmax = 0.5 * hv - cfg.min_beam
@@ -320,7 +319,7 @@ def _largest_component(quads: np.ndarray) -> np.ndarray:
     return quads[lab == np.argmax(np.bincount(lab))]
 
 
-def _interpolate(uv, faces, values, P) -> np.ndarray:
+def interpolate(uv, faces, values, P) -> np.ndarray:
     """Piecewise-linear interpolation of per-vertex ``values`` on the flat triangulation at P (k,2);
     points outside (projected boundary nodes, by round-off) take the nearest vertex's value."""
     import matplotlib.tri as mtri
@@ -336,7 +335,7 @@ def _interpolate(uv, faces, values, P) -> np.ndarray:
 
 def map_to_surface(uv, faces, V, P) -> np.ndarray:
     """3D target points (k,3) [m] of flat points P (k,2): barycentric on the flat triangulation."""
-    return np.stack([_interpolate(uv, faces, V[:, c], P) for c in range(3)], axis=1)
+    return np.stack([interpolate(uv, faces, V[:, c], P) for c in range(3)], axis=1)
 
 
 def _clipped_grid(poly, uv, h):

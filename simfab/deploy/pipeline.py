@@ -30,6 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simfab.deploy import compare, flatten, lasercut, mjcf_sim, network, pattern, tuning
+from simfab.deploy.network import discrete_gaussian_curvature
+from simfab.progress import log
+
 
 @dataclass
 class SurfaceResult:
@@ -84,7 +88,6 @@ def local_curvature(pat, X: np.ndarray) -> np.ndarray:
 def shape_descriptors(pat, X: np.ndarray, Y: np.ndarray | None = None) -> dict:
     """Shape of the deployed vertices X (n,3) [m] (see module doc); Y (n,3) [m]: the target points
     (for the sign agreement)."""
-    from simfab.deploy.network import discrete_gaussian_curvature
 
     K = discrete_gaussian_curvature(X, pat.quads, pat.interior)
     Kl = local_curvature(pat, X)[pat.interior]
@@ -98,8 +101,6 @@ def shape_descriptors(pat, X: np.ndarray, Y: np.ndarray | None = None) -> dict:
 
 def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = True) -> SurfaceResult:
     """Run every stage on a loaded :class:`simfab.deploy.scene.SurfaceScene`."""
-    from simfab.deploy import compare, flatten, lasercut, network, pattern, tuning
-    from simfab.progress import log
 
     sec = {}
     t = time.perf_counter()
@@ -167,7 +168,6 @@ def mujoco_check_run(net, dep, pat, scene):
     """Build the MuJoCo scene, step it from the key (stability) and relax it (agreement with simfab)."""
     import mujoco
 
-    from simfab.deploy import compare, mjcf_sim
 
     cfg = scene.mujoco
     sim = mjcf_sim.build(net.model, net.state, dep.final, density=scene.deploy.density, cfg=cfg,
@@ -200,7 +200,6 @@ def out_of_plane_extent(X: np.ndarray) -> float:
 
 def summary(res: SurfaceResult) -> dict:
     """The JSON summary (units in the keys)."""
-    from simfab.deploy import lasercut
 
     f, p, dv = res.flat, res.pattern, res.deviation
     ins = p.interior

@@ -26,6 +26,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from simfab._bundled import scenes_dir
+from simfab.deploy import surface
+from simfab.deploy.mjcf_sim import SimConfig
+from simfab.deploy.network import DeployConfig
+from simfab.deploy.pattern import PatternConfig
+from simfab.deploy.tuning import TuneConfig
 from simfab.errors import InputError
 
 BUNDLED = ("dome", "saddle", "mixed")
@@ -68,11 +73,6 @@ def load_scene(path, *, units: str | None = None, overrides: dict | None = None)
 
     ``overrides``: {"pattern": {...}, "material": {...}, "deploy": {...}, "mujoco": {...}, "tune": {...}}
     (command-line values, applied over the file's)."""
-    from simfab.deploy import surface
-    from simfab.deploy.mjcf_sim import SimConfig
-    from simfab.deploy.network import DeployConfig
-    from simfab.deploy.pattern import PatternConfig
-    from simfab.deploy.tuning import TuneConfig
 
     p = Path(path)
     where = str(p)

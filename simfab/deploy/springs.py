@@ -61,7 +61,7 @@ def _arc_ratios(M0, M1, c, b) -> np.ndarray:
     return S / np.linalg.norm(M1 - M0, axis=2)
 
 
-def _length_ratio(M0, M1, c, b) -> np.ndarray:
+def length_ratio(M0, M1, c, b) -> np.ndarray:
     """(q,) smallest arc length / chord over each quad's four arcs."""
     return np.min(_arc_ratios(M0, M1, c, b), axis=1)
 

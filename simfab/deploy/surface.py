@@ -22,7 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simfab.deploy.flatten import boundary_loop, face_areas
 from simfab.errors import InputError
+from simfab.io.mesh import read_mesh
 
 KINDS = ("spherical_cap", "saddle", "mixed", "cylinder")
 
@@ -128,7 +130,6 @@ def validate(V, F, name: str = "target", *, where: str | None = None) -> Target:
     """Check disk topology; InputError (naming ``where``) on: non-finite coordinates, degenerate
     faces, non-manifold edges, no/several boundary loops, several components, Euler
     characteristic != 1."""
-    from simfab.deploy.flatten import boundary_loop, face_areas
 
     where = where or name
     V = np.asarray(V, dtype=np.float64)
@@ -175,7 +176,6 @@ def validate(V, F, name: str = "target", *, where: str | None = None) -> Target:
 
 def load(path, *, units: str = "m") -> Target:
     """Read an OBJ/STL/PLY target (``units`` m, mm or cm) and validate it (see :func:`validate`)."""
-    from simfab.io.mesh import read_mesh
 
     mesh, _ = read_mesh(path, units=units)
     return validate(np.asarray(mesh.vertices), np.asarray(mesh.faces), name=str(path), where=str(path))

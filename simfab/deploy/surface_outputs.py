@@ -15,6 +15,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from simfab.deploy.export import bending_strain, rod_polylines
+from simfab.deploy.lasercut import SCALE_BAR_MM
+from simfab.io.atomic import save_figure
+from simfab.io.usd import StageWriter
+from simfab.rotations import matrix_to_quat
+
 
 def _plt():
     import matplotlib
@@ -26,7 +32,6 @@ def _plt():
 
 
 def write_flattening_png(path, res) -> None:
-    from simfab.io.atomic import save_figure
 
     plt = _plt()
     tgt, f = res.scene.target, res.flat
@@ -61,8 +66,6 @@ def write_flattening_png(path, res) -> None:
 def write_pattern_png(path, res) -> None:
     from matplotlib.collections import LineCollection
 
-    from simfab.deploy.lasercut import SCALE_BAR_MM
-    from simfab.io.atomic import save_figure
 
     plt = _plt()
     p, cut = res.pattern, res.cut
@@ -98,7 +101,6 @@ def write_pattern_png(path, res) -> None:
 def write_deviation_png(path, res) -> None:
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
-    from simfab.io.atomic import save_figure
 
     plt = _plt()
     dv, p, tgt = res.deviation, res.pattern, res.scene.target
@@ -135,9 +137,6 @@ def write_usd(path, res) -> None:
     import trimesh
     from pxr import UsdGeom, Vt
 
-    from simfab.deploy.export import bending_strain, rod_polylines
-    from simfab.io.usd import StageWriter
-    from simfab.rods import frames as fr
 
     net, dep, p = res.network, res.deployment, res.pattern
     model = net.model
@@ -158,7 +157,7 @@ def write_usd(path, res) -> None:
         w.set_curves("deploy/rods", rod_polylines(model, st), widths, t)
         w.set_scalar("deploy/rods", "bending_strain", strains[t], t, vmin=0.0, vmax=smax)
         for nm, b in names:
-            w.set_pose(nm, st.body_pos[b], fr.matrix_to_quat(st.body_rot[b]), t)
+            w.set_pose(nm, st.body_pos[b], matrix_to_quat(st.body_rot[b]), t)
     # the target, moved onto the deployed state: x_target_frame = R x_dep + t  =>  x_dep = R^T (y - t)
     dv = res.deviation
     Vt_ = (res.scene.target.V - dv.t) @ dv.R

@@ -35,7 +35,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from simfab.deploy.compare import kabsch
+from simfab.deploy.network import Deployment
 from simfab.errors import ConvergenceError, InputError
+from simfab.rods.model import synchronize
+from simfab.rods.statics import StaticSolver
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -101,7 +104,6 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
     """Tune the gaps of ``pat`` from its deployment ``dep`` (network ``net``) towards ``target`` with
     correspondences Y (n,3) (see module doc). Returns the tuned gaps; the caller re-cuts and
     re-deploys."""
-    from simfab.rods.statics import StaticSolver
 
     t0 = time.perf_counter()
     model = net.model
@@ -174,9 +176,6 @@ def redeploy(pat, net, dep, tuned: Tuning, *, device: str = "cpu"):
     its deployed clamp offsets, in equilibrium from the tuned state (same topology, so the tuned
     node and body positions are its Newton start; only the beams' flat lengths differ, by the gap
     changes). The earlier increments of ``dep`` are kept for the USD timeline."""
-    from simfab.deploy.network import Deployment
-    from simfab.rods.model import synchronize
-    from simfab.rods.statics import StaticSolver
 
     t0 = time.perf_counter()
     solver = StaticSolver(net.model, device=device)

@@ -40,7 +40,11 @@ import numpy as np
 
 from simfab._bundled import scenes_dir
 from simfab.deploy._config import require_positive
-from simfab.errors import InputError
+from simfab.errors import ConvergenceError, InputError
+from simfab.io.mjcf import geom_mesh, load_scene, numeric_config
+from simfab.progress import progress
+from simfab.rods.model import Material, NetworkBuilder, Section, synchronize
+from simfab.rods.statics import StaticSolver
 
 U = np.array([[1.0, 0, 0], [0, 1.0, 0], [-1.0, 0, 0], [0, -1.0, 0]])
 
@@ -101,9 +105,7 @@ class Insert:
 
 def load_cell_scene(path) -> tuple[CellConfig, dict]:
     """Cell parameters and all inserts (bodies whose name starts with ``insert``) of the scene."""
-    from simfab.io.mjcf import geom_mesh, load_scene, numeric_config  # first: sets up headless GL before mujoco loads
-
-    import mujoco
+    import mujoco  # (simfab.io, imported above, set up headless GL before MuJoCo loads)
 
     sc = load_scene(path)
     kw = numeric_config(sc, "cell_", CellConfig)
@@ -159,7 +161,6 @@ class Cell:
 
 
 def build_cell(cfg: CellConfig, insert_name: str = "insert") -> Cell:
-    from simfab.rods.model import Material, NetworkBuilder, Section
 
     a2 = cfg.size / 2
     c = cfg.corner_gap
@@ -259,10 +260,6 @@ class Deployment:
 
 def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> Deployment:
     """Draw the spokes onto ``insert`` in ``cfg.increments`` steps and return the deployment."""
-    from simfab.errors import ConvergenceError
-    from simfab.progress import progress
-    from simfab.rods.model import synchronize
-    from simfab.rods.statics import StaticSolver
 
     cell = build_cell(cfg, insert.name)
     model = cell.model

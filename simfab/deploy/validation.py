@@ -4,8 +4,14 @@ from __future__ import annotations
 
 import os
 
+from simfab._warp import device as _device
+from simfab.deploy import buckling as bk
+from simfab.deploy import elastica
 from simfab.deploy import tolerances as _tol
-from simfab.errors import ValidationFailed
+from simfab.deploy import tolerances as tol
+from simfab.errors import InputError, ValidationFailed
+from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json
+from simfab.progress import log
 
 HELP = "discrete elastic rods vs the exact elastica (rise, force, convergence order, critical load)"
 DESCRIPTION = (
@@ -27,7 +33,6 @@ DESCRIPTION = (
 
 
 def _float_list(text: str) -> float:
-    from simfab.errors import InputError
 
     try:
         return float(text)
@@ -36,7 +41,6 @@ def _float_list(text: str) -> float:
 
 
 def _int_list(text: str) -> int:
-    from simfab.errors import InputError
 
     try:
         return int(text)
@@ -58,11 +62,6 @@ def add_args(p) -> None:
 def run(args) -> dict:
     import numpy as np
 
-    from simfab.deploy import buckling as bk
-    from simfab.deploy import elastica
-    from simfab.deploy import tolerances as tol
-    from simfab.io.atomic import atomic_paths, write_csv, write_json
-    from simfab.progress import log
 
     ratios = list(args.g_over_L or bk.DEFAULT_RATIOS)
     ns = sorted(set(args.n or bk.DEFAULT_N))
@@ -75,7 +74,6 @@ def run(args) -> dict:
     scene = bk.load_insert_scene(args.scene or bk.default_scene_path())
     setup = scene.setup
     import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
-    from simfab._warp import device as _device
 
     dev = _device(args.device)
 
@@ -177,9 +175,6 @@ def _plot(path, shapes, rows, ratios, supports, paths, ns, L):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from simfab.deploy import elastica
-    from simfab.deploy import tolerances as tol
-    from simfab.io.atomic import save_figure
 
     n_show = tol.VALIDATION_N if tol.VALIDATION_N in ns else max(ns)
     fig, axes = plt.subplots(len(supports), 1, figsize=(8, 3.2 * len(supports)), squeeze=False)

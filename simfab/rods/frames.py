@@ -115,35 +115,3 @@ def transport_directors(d1: np.ndarray, t_old: np.ndarray, t_new: np.ndarray) ->
     d = parallel_transport(d1, t_old, t_new)
     d -= dot(d, t_new)[:, None] * t_new
     return normalize(d)
-
-
-# ----------------------------------------------------------------------------- rotations
-def skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrices (k,3,3) of rows ``v`` (k,3): ``skew(v) @ w == v x w``."""
-    v = np.atleast_2d(v)
-    S = np.zeros(v.shape[:-1] + (3, 3))
-    S[..., 0, 1], S[..., 0, 2] = -v[..., 2], v[..., 1]
-    S[..., 1, 0], S[..., 1, 2] = v[..., 2], -v[..., 0]
-    S[..., 2, 0], S[..., 2, 1] = -v[..., 1], v[..., 0]
-    return S
-
-
-def expmap(w: np.ndarray) -> np.ndarray:
-    """Rotation matrices (k,3,3) of rotation vectors ``w`` (k,3) [rad] (Rodrigues)."""
-    w = np.atleast_2d(w)
-    a = np.linalg.norm(w, axis=-1)
-    K = skew(w)
-    small = a < 1e-8
-    a_safe = np.where(small, 1.0, a)
-    s = np.where(small, 1.0 - a**2 / 6.0, np.sin(a_safe) / a_safe)
-    c = np.where(small, 0.5 - a**2 / 24.0, (1.0 - np.cos(a_safe)) / a_safe**2)
-    return np.eye(3) + s[:, None, None] * K + c[:, None, None] * (K @ K)
-
-
-def matrix_to_quat(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a rotation matrix (3,3)."""
-    from scipy.spatial.transform import Rotation
-
-    x, y, z, w = Rotation.from_matrix(R).as_quat()
-    q = np.array([w, x, y, z])
-    return q if q[0] >= 0 else -q

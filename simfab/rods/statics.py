@@ -226,7 +226,7 @@ class StaticSolver:
         self._last = None  # (state, node_forces, body_forces, reduced Hessian) of the last converged solve
 
     # -- objective in reduced unknowns -----------------------------------------------------
-    def _objective(self, st: RodState, need_grad: bool, need_hess: bool, node_forces, body_forces):
+    def objective(self, st: RodState, need_grad: bool, need_hess: bool, node_forces, body_forces):
         """Total potential, reduced gradient and Hessian at ``st`` (q = 0 around ``st``)."""
         E, g, H = self.evaluator(st, need_grad or need_hess, need_hess)
         if node_forces is not None:
@@ -280,7 +280,7 @@ class StaticSolver:
         gtol = grad_tol * self.model.force_scale
         cap = opts.max_step * self.length
         st = state
-        E, gq, Hq = self._objective(st, True, True, nf, bf)
+        E, gq, Hq = self.objective(st, True, True, nf, bf)
         gnorm = float(np.max(np.abs(gq)))
         if not (np.isfinite(E) and np.isfinite(gnorm)):
             raise ConvergenceError("rod equilibrium: energy or forces are not finite at the start state")
@@ -300,13 +300,13 @@ class StaticSolver:
             accepted = False
             for _ in range(opts.max_backtracks):
                 trial = self.red.apply(st, alpha * d)
-                Et, _, _ = self._objective(trial, False, False, nf, bf)
+                Et, _, _ = self.objective(trial, False, False, nf, bf)
                 if np.isfinite(Et) and Et <= E + opts.armijo * alpha * slope:
                     accepted = True
                     break
                 if np.isfinite(Et) and abs(Et - E) <= opts.roundoff * max(abs(E), 1e-300):
                     # f cannot resolve the decrease: accept when the residual drops
-                    _, gt, _ = self._objective(trial, True, False, nf, bf)
+                    _, gt, _ = self.objective(trial, True, False, nf, bf)
                     if float(np.max(np.abs(gt))) < gnorm:
                         accepted = True
                         break
@@ -315,7 +315,7 @@ class StaticSolver:
                 raise ConvergenceError(f"rod equilibrium: line search failed at Newton iteration {it + 1} "
                                        f"(||g||_inf = {gnorm:.3e} N, target {gtol:.3e} N)")
             st = trial
-            E, gq, Hq = self._objective(st, True, True, nf, bf)
+            E, gq, Hq = self.objective(st, True, True, nf, bf)
             gnorm = float(np.max(np.abs(gq)))
             if not np.isfinite(gnorm):
                 raise ConvergenceError(f"rod equilibrium: forces became non-finite at Newton iteration {it + 1}")
@@ -391,7 +391,7 @@ class StaticSolver:
                 for sgn in (1.0, -1.0):
                     self.set_attachment_offsets(base.node_offset + sgn * h * Dc)
                     st = synchronize(self.model, state, state.x, state.theta, state.body_pos, state.body_rot)
-                    gs.append(self._objective(st, True, False, nf, bf)[1])
+                    gs.append(self.objective(st, True, False, nf, bf)[1])
                 diff = (gs[0] - gs[1]) / (2.0 * h)
                 for j in members:
                     B[supports[j], j] = diff[supports[j]]
@@ -400,7 +400,7 @@ class StaticSolver:
         if cached is not None:
             Hq = cached[3]  # the converged Newton iterate's own Hessian (same state, loads and offsets)
         else:
-            _, _, Hq = self._objective(state, True, True, nf, bf)
+            _, _, Hq = self.objective(state, True, True, nf, bf)
         try:
             dq = -np.asarray(self._definiteness.solve(Hq, B)).reshape(self.red.nq, len(D))
         except NotPositiveDefinite:  # unstable equilibrium: the shifted solve, column by column
@@ -435,7 +435,7 @@ class StaticSolver:
 
     def reduced_system(self, state: RodState):
         """(gradient (nq,), Hessian CSR (nq,nq)) of the elastic energy in reduced unknowns at ``state``."""
-        _, gq, Hq = self._objective(state, True, True, None, None)
+        _, gq, Hq = self.objective(state, True, True, None, None)
         return gq, Hq
 
     def is_stable(self, state: RodState) -> bool:

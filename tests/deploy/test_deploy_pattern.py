@@ -24,7 +24,7 @@ def _gaussian_curvature_at(sc, f, points):
     area = np.bincount(F.ravel(), weights=np.repeat(flatten.face_areas(V, F) / 3, 3), minlength=n)
     K = defect / area
     K[f.boundary] = K[f.boundary] * 0  # boundary vertices carry geodesic, not Gaussian, curvature
-    return pattern._interpolate(f.uv, F, K, points)
+    return pattern.interpolate(f.uv, F, K, points)
 
 
 def test_gap_rule_formula():
@@ -116,9 +116,9 @@ def test_spring_arc_length_closed_form():
     from simfab.deploy import springs
 
     M0, M1, c = np.array([[[0.5, 0.0]]]), np.array([[[1.0, 0.5]]]), np.array([[0.5, 0.5]])
-    assert abs(springs._length_ratio(M0, M1, c, [0.0])[0] - 1.0) < 1e-12
+    assert abs(springs.length_ratio(M0, M1, c, [0.0])[0] - 1.0) < 1e-12
     # the arc length grows with the bulge (the sizing's bisection relies on it)
-    r = [springs._length_ratio(M0, M1, c, [b])[0] for b in (0.3, 0.6, 0.9, 1.2)]
+    r = [springs.length_ratio(M0, M1, c, [b])[0] for b in (0.3, 0.6, 0.9, 1.2)]
     assert np.all(np.diff(r) > 0)
 
 

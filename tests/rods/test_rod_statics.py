@@ -31,11 +31,11 @@ def test_reduced_gradient_through_rigid_body_matches_finite_differences():
     # a generic deformed state (body moved and rotated, nodes displaced)
     q = rng.normal(scale=2e-3, size=solver.red.nq)
     st = solver.red.apply(st, q)
-    E, g, _ = solver._objective(st, True, False, None, None)
+    E, g, _ = solver.objective(st, True, False, None, None)
     h = 1e-7
     I = np.eye(solver.red.nq)
-    gfd = np.array([(solver._objective(solver.red.apply(st, h * I[i]), False, False, None, None)[0]
-                     - solver._objective(solver.red.apply(st, -h * I[i]), False, False, None, None)[0]) / (2 * h)
+    gfd = np.array([(solver.objective(solver.red.apply(st, h * I[i]), False, False, None, None)[0]
+                     - solver.objective(solver.red.apply(st, -h * I[i]), False, False, None, None)[0]) / (2 * h)
                     for i in range(solver.red.nq)])
     assert np.max(np.abs(g - gfd)) <= 1e-5 * np.max(np.abs(g))
 
@@ -138,12 +138,12 @@ def test_reduced_hessian_through_rigid_body_matches_second_differences(network, 
     solver = StaticSolver(model)
     rng = np.random.default_rng(4)
     st = solver.red.apply(st, rng.normal(scale=deform, size=solver.red.nq))
-    E, _, H = solver._objective(st, True, True, None, None)
+    E, _, H = solver.objective(st, True, True, None, None)
     Hd = H.toarray()
     for _ in range(4):
         v = rng.normal(size=solver.red.nq)
-        e2 = (solver._objective(solver.red.apply(st, hs * v), False, False, None, None)[0] - 2 * E
-              + solver._objective(solver.red.apply(st, -hs * v), False, False, None, None)[0]) / hs**2
+        e2 = (solver.objective(solver.red.apply(st, hs * v), False, False, None, None)[0] - 2 * E
+              + solver.objective(solver.red.apply(st, -hs * v), False, False, None, None)[0]) / hs**2
         assert v @ Hd @ v == pytest.approx(e2, rel=1e-4)
 
 

@@ -48,7 +48,7 @@ def _snapfit_row(alpha: float, mu: float, dim: int, steps: int) -> dict:
     law_in = law(r1.steps)[sel]
     rm = {round(r.s, 12): r for r in r1.removal}
     rm = [rm[k] for k in keys if k in rm]
-    law_rm = -law(rm)
+    law_rm = law(rm)  # the force pushing the box back out over the lateral force (both signs flip)
     raw = r1.column("path_force")[sel] / r0.column("path_force")[sel]
     c_in, c_rm = contact_law(alpha, mu, "insert"), contact_law(alpha, mu, "remove")
     f_in = ratio_formula(alpha, mu, "insert")
