@@ -36,9 +36,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from simfab.errors import ConvergenceError
-from simfab.rods import frames as fr
 from simfab.rods.energy import Evaluator
 from simfab.rods.model import RodModel, RodState, synchronize
+from simfab.rotations import expmap, skew
 from simfab.solve.banded import BandedOrSparseCholesky, ShiftedCholesky  # noqa: F401 (used and re-exported)
 from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
@@ -146,7 +146,7 @@ class Reduction:
         pos, rot = base.body_pos.copy(), base.body_rot.copy()
         if len(self.bodies):
             pos[self.bodies] += dc
-            rot[self.bodies] = fr.expmap(dw) @ rot[self.bodies]
+            rot[self.bodies] = expmap(dw) @ rot[self.bodies]
         return synchronize(self.model, base, x.reshape(-1, 3), theta, pos, rot)
 
     def jacobian(self, state: RodState) -> sp.csr_matrix:
@@ -165,7 +165,7 @@ class Reduction:
                 cols.append((c0[:, None] + three).ravel())
                 vals.append(np.ones(len(rr)))
                 # rotation: dx = w x r = -[r]x w, w = (scaled unknown) / ell
-                blk = -fr.skew(r) / self.ell  # (m,3,3)
+                blk = -skew(r) / self.ell  # (m,3,3)
                 rows.append(np.repeat(rr, 3))
                 cols.append(np.broadcast_to(c0[:, None, None] + 3 + three, blk.shape).ravel())
                 vals.append(blk.reshape(-1))
