@@ -272,7 +272,7 @@ class _Nearest:
             at_min = d_g == best[a_g]
             first = np.full(len(self.A), np.iinfo(np.int64).max)
             np.minimum.at(first, a_g[at_min], node[at_min])
-            u = np.unique(a_g)
+            u = np.nonzero(best < np.inf)[0]
             self._update(u, best[u], idx[first[u]])
         dead = att[pr["v"] <= self.kill]
         alive[dead] = False
