@@ -1,0 +1,334 @@
+"""Structural check of a grown support: does the skin carry its load, and how far does it bend?
+
+Model (linear elastostatics on quadratic tetrahedra):
+
+1. the skin (:func:`simfab.growth.skinning.skin`, objects carved out) is tetrahedralized by
+   fTetWild (:func:`simfab.fem.meshing.tetrahedralize`) with a target edge length of
+   ``EDGE_PER_RMIN`` r_min (r_min the thinnest branch radius) and lifted to 10-node tets
+   (:func:`simfab.fem.p2.to_p2`): a branch is a beam, and P2 elements carry the linear strain
+   of bending exactly where linear tets lock;
+2. boundary nodes within ``FIX_TOL`` D (D the skin's bounding-box diagonal, the order of
+   fTetWild's surface envelope) of a *ground* object (one a root stands on) are clamped, u = 0;
+3. loads: each supported object's weight m g (MJCF body mass, the model's gravity vector) is
+   shared equally among the reached targets that touch it (within ``GROUND_CONTACT`` of its
+   diagonal), plus the ``[loads]`` / ``--load`` force of each target; a target's force F acts as
+   a uniform traction F / A on the skin facets within the branch radius of the target point
+   (area A; consistent nodal loads, :func:`simfab.fem.loads.traction_loads`), and the support's
+   own weight as the body force rho g (:func:`simfab.fem.loads.body_force_loads`);
+4. K u = f on the free dofs, K the Hessian of the Neo-Hookean energy at the rest shape (the
+   small-strain stiffness with the material's Lame parameters mu, lambda:
+   :func:`simfab.fem.elastic.energy_gradient_hessian`), by sparse Cholesky
+   (:class:`simfab.solve.linear.SPDSolver`);
+5. stress at every quadrature point: eps = sym(grad u), sigma = lambda tr(eps) I + 2 mu eps,
+   sigma_vm = sqrt(3/2 s:s) (s the deviator), averaged over a ball of radius
+   ``critical_distance`` (the coupling's yield rule, :mod:`simfab.design.stress`):
+   sigma_bar_q = sum_{|X_p - X_q| <= r} V_p sigma_p / sum V_p, each point a cell of volume V_e w_q;
+
+and reports the safety factor SF = sigma_yield / max_q sigma_bar_q, where the peak is, the
+deflection of each target (the traction-weighted mean displacement of its loaded facets), and
+the support's mass rho V.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+import simfab.growth.tolerances as tol
+from simfab.errors import ConvergenceError, InputError
+from simfab.fem import elastic
+from simfab.fem.loads import body_force_loads, traction_loads
+from simfab.fem.meshing import tetrahedralize
+from simfab.fem.model import make_model
+from simfab.fem.p2 import P2Model, corner_gradients, to_p2
+from simfab.growth.config import StructureSpec
+from simfab.growth.scene import GrowthScene
+from simfab.growth.skeleton import Skeleton
+from simfab.growth.skinning import skin
+from simfab.solve.linear import NotPositiveDefinite, SPDSolver
+
+#: fTetWild's target edge length as a multiple of the thinnest branch radius. fTetWild refines
+#: below it wherever its surface envelope (1e-3 of the diagonal) asks, which on the bundled
+#: supports gives edges of about one thinnest radius; a target at that size itself costs several
+#: times the meshing time for a mesh of about the same count (docs/decisions.md)
+EDGE_PER_RMIN = 4.0
+#: clamp band: boundary nodes this fraction of the skin's diagonal from a ground object
+FIX_TOL = 2e-3
+#: standard gravity [m/s^2] when the scene has no MJCF model to read it from
+G0 = 9.81
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class TargetLoad:
+    """Force on one target: ``force`` (3,) [N] = ``weight`` (its share of the objects it touches)
+    + ``extra`` ([loads] / --load); ``objects`` the touched objects' names."""
+
+    name: str
+    force: np.ndarray
+    weight: np.ndarray
+    extra: np.ndarray
+    objects: tuple
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class CheckOptions:
+    """Mesh and output options of :func:`check_structure`.
+
+    edge_length : target tet edge length [m] (None: ``EDGE_PER_RMIN`` x the smallest radius).
+    segments : joint-sphere resolution of the skin (None: the scene's ``skin.segments``).
+    self_weight : include the support's own weight.
+    """
+
+    edge_length: float | None = None
+    segments: int | None = None
+    self_weight: bool = True
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class StructureCheck:
+    """Result of :func:`check_structure` (SI units).
+
+    safety_factor : yield stress / max_von_mises_Pa. max_von_mises_Pa : the peak of the
+    critical-distance mean of the von Mises stress [Pa]; peak_point (3,) [m] where it is.
+    max_point_von_mises_Pa : the largest quadrature-point value (unaveraged) [Pa].
+    deflection_m : target name -> |mean displacement of its loaded facets| [m].
+    mass_kg, volume_m3 : of the support. loads : the :class:`TargetLoad` per loaded target.
+    model : the P2 model; u (n, 3) [m] displacement of its nodes; fixed (n,) bool clamped nodes.
+    element_von_mises : (m,) per element the largest averaged quadrature-point stress [Pa].
+    mesh : the skin (``trimesh.Trimesh``) that was meshed. tets, nodes : mesh sizes.
+    seconds : wall time of skin, mesh, solve and stress.
+    """
+
+    safety_factor: float
+    max_von_mises_Pa: float
+    peak_point: np.ndarray
+    max_point_von_mises_Pa: float
+    deflection_m: dict
+    mass_kg: float
+    volume_m3: float
+    loads: tuple
+    material_name: str
+    yield_stress_Pa: float
+    critical_distance_m: float
+    model: P2Model
+    u: np.ndarray
+    fixed: np.ndarray
+    element_von_mises: np.ndarray
+    mesh: object
+    tets: int
+    nodes: int
+    seconds: float
+    qp_points: np.ndarray
+    qp_von_mises: np.ndarray
+
+    def summary(self) -> dict:
+        """JSON-ready figures (the ``simfab grow check`` keys)."""
+        return {
+            "safety_factor": self.safety_factor,
+            "max_von_mises_Pa": self.max_von_mises_Pa,
+            "peak_point_m": [float(v) for v in self.peak_point],
+            "max_point_von_mises_Pa": self.max_point_von_mises_Pa,
+            "deflection_m": dict(self.deflection_m),
+            "max_deflection_m": max(self.deflection_m.values(), default=0.0),
+            "mass_kg": self.mass_kg,
+            "volume_m3": self.volume_m3,
+            "material": self.material_name,
+            "yield_stress_Pa": self.yield_stress_Pa,
+            "critical_distance_m": self.critical_distance_m,
+            "target_forces_N": {ld.name: [float(v) for v in ld.force] for ld in self.loads},
+            "tets": self.tets,
+            "fem_nodes": self.nodes,
+            "seconds_check": self.seconds,
+        }
+
+
+def gravity(scene: GrowthScene) -> np.ndarray:
+    """The scene's gravity vector (3,) [m/s^2] (MJCF ``<option gravity>``; (0, 0, -G0) without a file)."""
+    if scene.path is None:
+        return np.array([0.0, 0.0, -G0])
+    from simfab.io.mjcf import load_scene
+
+    return np.asarray(load_scene(scene.path).model.opt.gravity, np.float64).copy()
+
+
+def body_masses(scene: GrowthScene) -> dict:
+    """Object name -> mass [kg] (MJCF body masses, MuJoCo's inertia from the geoms' density)."""
+    if scene.path is None:
+        return {}
+    from simfab.io.mjcf import load_scene
+
+    sc = load_scene(scene.path)
+    return {n: float(m) for n, m in zip(sc.body_names(), sc.model.body_mass) if n in scene.objects}
+
+
+def ground_objects(scene: GrowthScene) -> list:
+    """Names of the objects a root stands on (within ``GROUND_CONTACT`` of their diagonal)."""
+    out = []
+    for name, m in scene.objects.items():
+        _, d, _ = m.nearest.on_surface(scene.roots)
+        if np.any(d <= tol.GROUND_CONTACT * float(np.linalg.norm(m.extents))):
+            out.append(name)
+    return out
+
+
+def target_loads(scene: GrowthScene, reached: list, extra: dict | None = None) -> tuple:
+    """The force on every reached target (see :class:`TargetLoad`): object weights shared among
+    the reached targets touching each non-ground object, plus ``extra`` (name -> (3,) [N]; the
+    scene's ``[loads]`` when None). InputError when an extra load names an unreached target."""
+    extra = dict(scene.structure.loads) if extra is None else dict(extra)
+    missing = [n for n in extra if n not in reached]
+    if missing:
+        raise InputError(f"load on target(s) {', '.join(missing)} that the support does not reach "
+                         f"(reached: {', '.join(reached)})", where="loads")
+    g = gravity(scene)
+    mass = body_masses(scene)
+    ground = set(ground_objects(scene))
+    idx = {n: i for i, n in enumerate(scene.target_names)}
+    touch = {}
+    for name, m in scene.objects.items():
+        if name in ground:
+            continue
+        _, d, _ = m.nearest.on_surface(scene.targets[[idx[t] for t in reached]]) if reached else (0, [], 0)
+        on = [t for t, dt in zip(reached, d) if dt <= tol.GROUND_CONTACT * float(np.linalg.norm(m.extents))]
+        if on:
+            touch[name] = on
+    out = []
+    for t in reached:
+        objs = tuple(o for o, ts in touch.items() if t in ts)
+        w = sum((mass.get(o, 0.0) * g / len(touch[o]) for o in objs), np.zeros(3))
+        e = np.asarray(extra.get(t, (0.0, 0.0, 0.0)), np.float64)
+        if objs or t in extra:
+            out.append(TargetLoad(name=t, force=w + e, weight=w, extra=e, objects=objs))
+    return tuple(out)
+
+
+def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | None = None,
+                    options: CheckOptions = CheckOptions(), spec: StructureSpec | None = None) -> StructureCheck:
+    """Skin, mesh, load and solve the support ``skeleton`` grown in ``scene`` (module docstring).
+
+    loads : extra target forces name -> (3,) [N] replacing the scene's ``[loads]`` (None: keep).
+    spec : material and critical distance (None: the scene's ``[material]``).
+    """
+    t0 = time.perf_counter()
+    spec = scene.structure if spec is None else spec
+    mat = spec.material
+    reached = list(skeleton.target_nodes())
+    tl = target_loads(scene, reached, loads)
+    p = scene.params
+    mesh, _ = skin(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects, fixed=skeleton.fixed_mask(),
+                   segments=options.segments or p.skin_segments, subtract=p.subtract_objects)
+    h = options.edge_length if options.edge_length is not None else EDGE_PER_RMIN * float(skeleton.radius.min())
+    diag = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    V, T = tetrahedralize(mesh.vertices, mesh.faces, edge_length_fac=min(1.0, h / diag))
+    model = to_p2(make_model(V, T, mat))
+    X = model.rest
+    fixed = _clamped(model, scene, FIX_TOL * diag)
+    g = gravity(scene)
+    f = np.zeros_like(X)
+    if options.self_weight:
+        f += body_force_loads(model, lambda Xq: np.broadcast_to(mat.density * g, Xq.shape))
+    share = {}
+    tnode = skeleton.target_nodes()
+    for ld in tl:
+        i = tnode[ld.name]
+        w = _patch_weights(model, skeleton.nodes[i], float(skeleton.radius[i]))
+        share[ld.name] = w
+        f += w[:, None] * ld.force[None, :]
+    u = _solve(model, fixed, f)
+    x = X + u
+    _, vm = quadrature_von_mises_linear(model, x)
+    cells = np.einsum("qc,mcd->mqd", model.qp_bary, X[model.corner_elements]).reshape(-1, 3)
+    avg = ball_mean(cells, np.abs(model.qp_weight).ravel(), vm.ravel(), spec.critical_distance)
+    k = int(np.argmax(avg))
+    peak = float(avg[k])
+    defl = {name: float(np.linalg.norm(w @ u)) for name, w in share.items()}
+    vol = float(model.volume.sum())
+    return StructureCheck(
+        safety_factor=float(mat.yield_stress / peak) if peak > 0 else float("inf"),
+        max_von_mises_Pa=peak, peak_point=cells[k].copy(), max_point_von_mises_Pa=float(vm.max()),
+        deflection_m=defl, mass_kg=mat.density * vol, volume_m3=vol, loads=tl, material_name=mat.name,
+        yield_stress_Pa=mat.yield_stress, critical_distance_m=spec.critical_distance, model=model, u=u,
+        fixed=fixed, element_von_mises=avg.reshape(vm.shape).max(axis=1), mesh=mesh, tets=int(model.n_elements),
+        nodes=int(model.n_vertices), seconds=time.perf_counter() - t0, qp_points=cells, qp_von_mises=avg)
+
+
+def _clamped(model: P2Model, scene: GrowthScene, band: float) -> np.ndarray:
+    """(n,) bool: boundary nodes within ``band`` [m] of a ground object's surface."""
+    ground = ground_objects(scene)
+    if not ground:
+        raise InputError("no object under the roots to clamp the support to (a root must stand on an object)",
+                         where="scene")
+    fixed = np.zeros(model.n_vertices, bool)
+    b = np.asarray(model.boundary_vertices)
+    for name in ground:
+        m = scene.objects[name]
+        lo, hi = m.bounds
+        near = b[np.all((model.rest[b] >= lo - band) & (model.rest[b] <= hi + band), axis=1)]
+        if near.size:
+            _, d, _ = m.nearest.on_surface(model.rest[near])
+            fixed[near[d <= band]] = True
+    if fixed.sum() < 3:
+        raise ConvergenceError("the support's skin does not meet the object under its roots: nothing to clamp")
+    return fixed
+
+
+def _patch_weights(model: P2Model, point: np.ndarray, radius: float) -> np.ndarray:
+    """(n,) nodal weights summing to 1 of a uniform traction on the boundary facets whose
+    centroid lies within ``radius`` [m] of ``point`` (at least the 3 nearest facets)."""
+    c = model.rest[model.boundary_facets[:, :3]].mean(axis=1)
+    d = np.linalg.norm(c - point, axis=1)
+    on = d <= radius
+    if on.sum() < 3:
+        on = np.zeros(len(c), bool)
+        on[np.argsort(d)[:3]] = True
+    w = traction_loads(model, on, np.array([1.0, 0.0, 0.0]))[:, 0]
+    return w / w.sum()
+
+
+def _solve(model: P2Model, fixed: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """u (n, 3) [m] of K u = f on the free nodes (u = 0 on the fixed ones), K the rest stiffness."""
+    _, _, K = elastic.energy_gradient_hessian(model, model.rest, project_psd=False)
+    free = np.repeat(~fixed, 3)
+    idx = np.nonzero(free)[0]
+    u = np.zeros(model.n_dofs)
+    try:
+        u[idx] = SPDSolver().solve_free(K, idx, f.ravel()[idx])
+    except NotPositiveDefinite:
+        raise ConvergenceError("the stiffness is singular: part of the support is not connected to the clamped "
+                               "ground (a floating body)") from None
+    if not np.all(np.isfinite(u)):
+        raise ConvergenceError("the static solve returned non-finite displacements")
+    return u.reshape(-1, 3)
+
+
+def quadrature_von_mises_linear(model: P2Model, x) -> tuple[np.ndarray, np.ndarray]:
+    """Small-strain stress at every quadrature point of positions ``x`` (n, 3) [m]: F(L) =
+    sum_c L_c F_c (F affine over a P2 element), eps = sym(F) - I, sigma = lambda tr(eps) I +
+    2 mu eps. Returns (Cauchy stress (m, nq, 3, 3) [Pa], von Mises (m, nq) [Pa])."""
+    F = np.einsum("qc,mcij->mqij", model.qp_bary, corner_gradients(model, x))
+    eps = 0.5 * (F + np.swapaxes(F, -1, -2)) - np.eye(3)
+    tr = np.einsum("mqii->mq", eps)
+    mu = np.asarray(model.mu)[:, None, None, None]
+    lam = np.asarray(model.lam)[:, None, None, None]
+    sigma = lam * tr[..., None, None] * np.eye(3) + 2.0 * mu * eps
+    s = sigma - np.einsum("mqii->mq", sigma)[..., None, None] / 3.0 * np.eye(3)
+    return sigma, np.sqrt(1.5 * np.einsum("mqij,mqij->mq", s, s))
+
+
+def ball_mean(points: np.ndarray, weights: np.ndarray, values: np.ndarray, radius: float) -> np.ndarray:
+    """(k,) sum_{|p_j - p_i| <= radius} w_j v_j / sum w_j over cells at ``points`` (k, 3) [m]
+    (radius 0: the values themselves)."""
+    v = np.asarray(values, np.float64).ravel()
+    if not radius > 0:
+        return v.copy()
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    num = weights * v
+    den = np.asarray(weights, np.float64).copy()
+    np.add.at(num, pairs[:, 0], weights[pairs[:, 1]] * v[pairs[:, 1]])
+    np.add.at(num, pairs[:, 1], weights[pairs[:, 0]] * v[pairs[:, 0]])
+    np.add.at(den, pairs[:, 0], weights[pairs[:, 1]])
+    np.add.at(den, pairs[:, 1], weights[pairs[:, 0]])
+    return num / den
