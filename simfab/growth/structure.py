@@ -19,14 +19,14 @@ Model (linear elastostatics on quadratic tetrahedra):
    small-strain stiffness with the material's Lame parameters mu, lambda:
    :func:`simfab.fem.elastic.energy_gradient_hessian`), by sparse Cholesky
    (:class:`simfab.solve.linear.SPDSolver`);
-5. stress at every quadrature point: eps = sym(grad u), sigma = lambda tr(eps) I + 2 mu eps,
-   sigma_vm = sqrt(3/2 s:s) (s the deviator), averaged over a ball of radius
-   ``critical_distance`` (the coupling's yield rule, :mod:`simfab.design.stress`):
-   sigma_bar_q = sum_{|X_p - X_q| <= r} V_p sigma_p / sum V_p, each point a cell of volume V_e w_q;
+5. stress at every element corner (:func:`corner_stress`): eps = sym(grad u), sigma =
+   lambda tr(eps) I + 2 mu eps, sigma_vm = sqrt(3/2 s:s) (s the deviator), averaged over a ball of
+   radius ``critical_distance`` (the coupling's yield rule, :mod:`simfab.design.stress`):
+   sigma_bar_q = sum_{|X_p - X_q| <= r} V_p sigma_p / sum V_p, each corner a cell of volume V_e / 4;
 
 and reports the safety factor SF = sigma_yield / max_q sigma_bar_q, where the peak is, the
 deflection of each target (the traction-weighted mean displacement of its loaded facets), and
-the support's mass rho V.
+the support's mass rho V (V the skin's volume; the tet mesh's differs by fTetWild's envelope).
 """
 
 from __future__ import annotations
@@ -93,11 +93,12 @@ class StructureCheck:
 
     safety_factor : yield stress / max_von_mises_Pa. max_von_mises_Pa : the peak of the
     critical-distance mean of the von Mises stress [Pa]; peak_point (3,) [m] where it is.
-    max_point_von_mises_Pa : the largest quadrature-point value (unaveraged) [Pa].
+    max_point_von_mises_Pa : the largest corner value (unaveraged) [Pa].
     deflection_m : target name -> |mean displacement of its loaded facets| [m].
     mass_kg, volume_m3 : of the support. loads : the :class:`TargetLoad` per loaded target.
     model : the P2 model; u (n, 3) [m] displacement of its nodes; fixed (n,) bool clamped nodes.
-    element_von_mises : (m,) per element the largest averaged quadrature-point stress [Pa].
+    element_von_mises : (m,) per element the largest averaged corner stress [Pa].
+    points, point_von_mises : (4m, 3) rest positions [m] of the element corners and their averaged stress [Pa].
     mesh : the skin (``trimesh.Trimesh``) that was meshed. tets, nodes : mesh sizes.
     seconds : wall time of skin, mesh, solve and stress.
     """
@@ -121,8 +122,8 @@ class StructureCheck:
     tets: int
     nodes: int
     seconds: float
-    qp_points: np.ndarray
-    qp_von_mises: np.ndarray
+    points: np.ndarray
+    point_von_mises: np.ndarray
 
     def summary(self) -> dict:
         """JSON-ready figures (the ``simfab grow check`` keys)."""
@@ -239,20 +240,20 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
         f += w[:, None] * ld.force[None, :]
     u = _solve(model, fixed, f)
     x = X + u
-    _, vm = quadrature_von_mises_linear(model, x)
-    cells = np.einsum("qc,mcd->mqd", model.qp_bary, X[model.corner_elements]).reshape(-1, 3)
-    avg = ball_mean(cells, np.abs(model.qp_weight).ravel(), vm.ravel(), spec.critical_distance)
+    _, vm = corner_stress(model, x)
+    cells = X[model.corner_elements].reshape(-1, 3)
+    avg = ball_mean(cells, np.repeat(np.abs(model.volume) / 4.0, 4), vm.ravel(), spec.critical_distance)
     k = int(np.argmax(avg))
     peak = float(avg[k])
     defl = {name: float(np.linalg.norm(w @ u)) for name, w in share.items()}
-    vol = float(model.volume.sum())
+    vol = float(mesh.volume)
     return StructureCheck(
         safety_factor=float(mat.yield_stress / peak) if peak > 0 else float("inf"),
         max_von_mises_Pa=peak, peak_point=cells[k].copy(), max_point_von_mises_Pa=float(vm.max()),
         deflection_m=defl, mass_kg=mat.density * vol, volume_m3=vol, loads=tl, material_name=mat.name,
         yield_stress_Pa=mat.yield_stress, critical_distance_m=spec.critical_distance, model=model, u=u,
         fixed=fixed, element_von_mises=avg.reshape(vm.shape).max(axis=1), mesh=mesh, tets=int(model.n_elements),
-        nodes=int(model.n_vertices), seconds=time.perf_counter() - t0, qp_points=cells, qp_von_mises=avg)
+        nodes=int(model.n_vertices), seconds=time.perf_counter() - t0, points=cells, point_von_mises=avg)
 
 
 def _clamped(model: P2Model, scene: GrowthScene, band: float) -> np.ndarray:
@@ -304,11 +305,14 @@ def _solve(model: P2Model, fixed: np.ndarray, f: np.ndarray) -> np.ndarray:
     return u.reshape(-1, 3)
 
 
-def quadrature_von_mises_linear(model: P2Model, x) -> tuple[np.ndarray, np.ndarray]:
-    """Small-strain stress at every quadrature point of positions ``x`` (n, 3) [m]: F(L) =
-    sum_c L_c F_c (F affine over a P2 element), eps = sym(F) - I, sigma = lambda tr(eps) I +
-    2 mu eps. Returns (Cauchy stress (m, nq, 3, 3) [Pa], von Mises (m, nq) [Pa])."""
-    F = np.einsum("qc,mcij->mqij", model.qp_bary, corner_gradients(model, x))
+def corner_stress(model: P2Model, x) -> tuple[np.ndarray, np.ndarray]:
+    """Small-strain stress at the corners of every element, positions ``x`` (n, 3) [m]: F_c =
+    :func:`simfab.fem.p2.corner_gradients`, eps = sym(F_c) - I, sigma = lambda tr(eps) I + 2 mu eps.
+    Returns (Cauchy stress (m, 4, 3, 3) [Pa], von Mises (m, 4) [Pa]). The stress is affine over a
+    P2 element and the von Mises stress a norm of it, so its largest value over the element is at
+    a corner: corners sample the extremes of the discrete field (on the surface, where bending
+    stress peaks), which quadrature points, inside the element, would miss."""
+    F = corner_gradients(model, x)
     eps = 0.5 * (F + np.swapaxes(F, -1, -2)) - np.eye(3)
     tr = np.einsum("mqii->mq", eps)
     mu = np.asarray(model.mu)[:, None, None, None]
