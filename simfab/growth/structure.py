@@ -336,3 +336,122 @@ def ball_mean(points: np.ndarray, weights: np.ndarray, values: np.ndarray, radiu
     np.add.at(den, pairs[:, 0], weights[pairs[:, 1]])
     np.add.at(den, pairs[:, 1], weights[pairs[:, 0]])
     return num / den
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class StrengthenResult:
+    """Outcome of :func:`strengthen`: the final ``skeleton`` and its ``check``; ``history`` one
+    (safety factor, volume [m^3]) per check run, the first the input's (a thinning round that
+    fell below the target is listed but not kept); ``reached`` whether the final safety factor
+    is at least ``target``."""
+
+    skeleton: Skeleton
+    check: StructureCheck
+    target: float
+    history: tuple
+    reached: bool
+
+    def summary(self) -> dict:
+        sf0, v0 = self.history[0]
+        sf1, v1 = self.check.safety_factor, self.check.volume_m3
+        return {"target_safety_factor": self.target, "reached": self.reached, "checks": len(self.history),
+                "safety_factor_before": sf0, "safety_factor_after": sf1, "volume_before_m3": v0,
+                "volume_after_m3": v1, "volume_change": v1 / v0 - 1.0 if v0 > 0 else 0.0}
+
+
+#: strengthening: the radius factor is the cube root of the stress ratio (bending stress of a
+#: round bar ~ M / r^3) times this margin, so that one re-check usually suffices
+STRENGTHEN_MARGIN = 1.05
+#: thinning lowers a radius by at most this factor per round (stress redistributes as it thins)
+THIN_STEP = 0.7
+
+
+def node_stress(skeleton: Skeleton, check: StructureCheck) -> np.ndarray:
+    """(n,) per skeleton node the largest critical-distance mean stress [Pa] of the element corners
+    nearest to it (nodes no corner is nearest to take their neighbours' largest)."""
+    n = len(skeleton.nodes)
+    _, j = cKDTree(skeleton.nodes).query(check.points, k=1)
+    s = np.zeros(n)
+    np.maximum.at(s, j, check.point_von_mises)
+    e = skeleton.edges
+    for _ in range(4):  # fill gaps along the chains
+        empty = s <= 0
+        if not empty.any() or len(e) == 0:
+            break
+        t = np.zeros(n)
+        np.maximum.at(t, e[:, 0], s[e[:, 1]])
+        np.maximum.at(t, e[:, 1], s[e[:, 0]])
+        s[empty] = t[empty]
+    return s
+
+
+def radius_caps(skeleton: Skeleton, scene: GrowthScene) -> np.ndarray:
+    """(n,) largest radius [m] each node may take: the distance to the nearest obstacle sphere's
+    surface, and for nodes off the object surfaces the distance to the objects (never below the
+    current radius), so that thickening stays clear of obstacles and does not fill the space
+    between the support and an object."""
+    from simfab.growth.obstacles import Obstacles
+
+    X = skeleton.nodes
+    cap = np.full(len(X), np.inf)
+    if len(scene.sphere_radii):
+        d = np.linalg.norm(X[:, None, :] - scene.sphere_centers[None], axis=2) - scene.sphere_radii[None]
+        cap = np.minimum(cap, d.min(axis=1))
+    off = ~skeleton.on_surface_mask()
+    if scene.objects and off.any():
+        obs = Obstacles(list(scene.objects.values()), np.zeros((0, 3)), np.zeros(0), end_trim=0.0)
+        _, d = obs.surface_distance(X[off])
+        cap[off] = np.minimum(cap[off], d)
+    return np.maximum(cap, skeleton.radius)
+
+
+def strengthen(skeleton: Skeleton, scene: GrowthScene, target: float, *, loads: dict | None = None,
+               options: CheckOptions = CheckOptions(), spec: StructureSpec | None = None, thin: bool = False,
+               rounds: int = 5, check: StructureCheck | None = None) -> StrengthenResult:
+    """Scale branch radii until the safety factor is at least ``target`` (topology unchanged).
+
+    Each round: the allowed stress sigma_a = yield / target; each node's stress s_i
+    (:func:`node_stress`); nodes with s_i > sigma_a get r_i *= STRENGTHEN_MARGIN (s_i /
+    sigma_a)^(1/3) (a round bar's bending stress ~ 1/r^3), spread to their neighbours (a
+    branch thickens around its overloaded spot, not in a bead); with ``thin``, nodes with s_i <
+    sigma_a / STRENGTHEN_MARGIN get r_i *= max(THIN_STEP, (s_i STRENGTHEN_MARGIN / sigma_a)^(1/3)),
+    never below the input's thinnest radius (the growth's printable minimum); radii are capped
+    by :func:`radius_caps`; then re-skin and re-check. Stops when the target is met (and, with
+    ``thin``, when no node is over-strong or nothing changes), or after ``rounds`` rounds.
+    """
+    if not (target > 0 and np.isfinite(target)):
+        raise InputError(f"the safety factor to reach must be a positive number, got {target}", where="--strengthen")
+    spec = scene.structure if spec is None else spec
+    sigma_a = spec.material.yield_stress / target
+    c = check if check is not None else check_structure(skeleton, scene, loads=loads, options=options, spec=spec)
+    history = [(c.safety_factor, c.volume_m3)]
+    r_floor = float(skeleton.radius.min())
+    caps = radius_caps(skeleton, scene)
+    sk = skeleton
+    for _ in range(rounds):
+        s = node_stress(sk, c)
+        k = np.ones(len(s))
+        over = s > sigma_a
+        k[over] = STRENGTHEN_MARGIN * (s[over] / sigma_a) ** (1.0 / 3.0)
+        e = sk.edges
+        if len(e):  # spread to the neighbours
+            up = k.copy()
+            np.maximum.at(up, e[:, 0], k[e[:, 1]])
+            np.maximum.at(up, e[:, 1], k[e[:, 0]])
+            k = np.where(up > 1.0, up, k)
+        if thin:
+            low = (k <= 1.0) & (s < sigma_a / STRENGTHEN_MARGIN)
+            k[low] = np.maximum(THIN_STEP, (np.maximum(s[low], 0.0) * STRENGTHEN_MARGIN / sigma_a) ** (1.0 / 3.0))
+        r = np.minimum(np.maximum(sk.radius * k, np.minimum(r_floor, sk.radius)), caps)
+        if c.safety_factor >= target and not (thin and np.any(r < sk.radius * (1 - 1e-3))):
+            break
+        if np.allclose(r, sk.radius, rtol=1e-3):
+            break
+        cand = sk.replace(radius=r)
+        cc = check_structure(cand, scene, loads=loads, options=options, spec=spec)
+        history.append((cc.safety_factor, cc.volume_m3))
+        if thin and cc.safety_factor < target <= c.safety_factor:
+            break  # thinning went too far: keep the last design that met the target
+        sk, c = cand, cc
+    return StrengthenResult(skeleton=sk, check=c, target=float(target), history=tuple(history),
+                            reached=bool(c.safety_factor >= target))
