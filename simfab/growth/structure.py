@@ -387,9 +387,11 @@ def node_stress(skeleton: Skeleton, check: StructureCheck) -> np.ndarray:
 
 def radius_caps(skeleton: Skeleton, scene: GrowthScene) -> np.ndarray:
     """(n,) largest radius [m] each node may take: the distance to the nearest obstacle sphere's
-    surface, and for nodes off the object surfaces the distance to the objects (never below the
-    current radius), so that thickening stays clear of obstacles and does not fill the space
-    between the support and an object."""
+    surface, and for nodes off the object surfaces the distance to the supported objects (never
+    below the current radius), so that thickening stays clear of obstacles and does not fill the
+    space between the support and an object it does not touch there. Ground objects (under the
+    roots) do not cap: a root thickened into the ground is carved flat and clamped over a larger
+    face, which is what a root needs."""
     from simfab.growth.obstacles import Obstacles
 
     X = skeleton.nodes
@@ -398,8 +400,10 @@ def radius_caps(skeleton: Skeleton, scene: GrowthScene) -> np.ndarray:
         d = np.linalg.norm(X[:, None, :] - scene.sphere_centers[None], axis=2) - scene.sphere_radii[None]
         cap = np.minimum(cap, d.min(axis=1))
     off = ~skeleton.on_surface_mask()
-    if scene.objects and off.any():
-        obs = Obstacles(list(scene.objects.values()), np.zeros((0, 3)), np.zeros(0), end_trim=0.0)
+    ground = set(ground_objects(scene))
+    held = [m for n, m in scene.objects.items() if n not in ground]
+    if held and off.any():
+        obs = Obstacles(held, np.zeros((0, 3)), np.zeros(0), end_trim=0.0)
         _, d = obs.surface_distance(X[off])
         cap[off] = np.minimum(cap[off], d)
     return np.maximum(cap, skeleton.radius)
