@@ -24,13 +24,12 @@ One growth step (Runions et al. 2005, with the target attractors of the thesis):
 Growth stops when every attractor is dead, or reports why it stopped early (step cap,
 node cap, stalled). Nearest-node distances are kept per attractor and updated with the
 new nodes only. Ordinary attractors only need their nearest growing node when it is within
-the influence distance (farther, they do not attract), so a step looks up, in a k-d tree of
-all attractors built once, the pairs (new node, attractor) closer than the influence
-distance: a step costs O(new nodes × attractors per influence ball), independent of the
-total attractor count. Target attractors (few, unbounded influence) are compared with every
-new node. Nearest-node distances beyond the influence distance are not tracked; growth is
-the same as with exact tracking, because a node stops growing only when a farther node is
-no nearer than the one it replaced (see :func:`_absorb`).
+the influence distance R (farther, they do not attract), so each step enumerates the pairs
+(new node, live attractor) closer than R from a k-d tree of the live attractors: a step costs
+O(new nodes x attractors per influence ball), not O(live attractors x new nodes). Target
+attractors (few, unbounded influence) are compared with every new node. Nearest-node
+distances beyond R are not tracked, and growth is the same as with exact tracking
+(:class:`_Nearest` says why).
 """
 
 from __future__ import annotations

@@ -256,6 +256,28 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
         nodes=int(model.n_vertices), seconds=time.perf_counter() - t0, points=cells, point_von_mises=avg)
 
 
+def buckling_factor(check: StructureCheck) -> float:
+    """Linearized buckling: the smallest load factor lambda > 0 with (K + lambda K_G) phi = 0 on
+    the free dofs, K the stiffness at rest and K_G the load-stiffness of the checked state,
+    K_G = [H(X + u) - H(X - u)] / 2 (H the exact Neo-Hookean Hessian, u the linear solution:
+    the central difference keeps the part linear in the load, the geometric stiffness of the
+    stress sigma(u)). Solved as the largest theta of -K_G phi = theta K phi (K SPD), lambda =
+    1 / theta; inf when no load compresses anything (theta <= 0). The loads times lambda are
+    the critical loads (slender supports fail by buckling before they yield)."""
+    from scipy.sparse.linalg import eigsh
+
+    m = check.model
+    X = m.rest
+    _, _, K = elastic.energy_gradient_hessian(m, X, project_psd=False)
+    _, _, Hp = elastic.energy_gradient_hessian(m, X + check.u, project_psd=False)
+    _, _, Hm = elastic.energy_gradient_hessian(m, X - check.u, project_psd=False)
+    free = np.nonzero(np.repeat(~check.fixed, 3))[0]
+    Kf = K[free][:, free].tocsc()
+    G = (-0.5 * (Hp - Hm))[free][:, free].tocsc()
+    theta = eigsh(G, k=1, M=Kf, which="LA", return_eigenvectors=False, tol=1e-8)[0]
+    return float(1.0 / theta) if theta > 0 else float("inf")
+
+
 def _clamped(model: P2Model, scene: GrowthScene, band: float) -> np.ndarray:
     """(n,) bool: boundary nodes within ``band`` [m] of a ground object's surface."""
     ground = ground_objects(scene)
