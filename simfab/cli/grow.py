@@ -123,12 +123,12 @@ def run(args) -> dict:
         loads, target = _check_options(args)
         _known_targets(loads, args.scene)
     s = grow_scene(args.scene, out=args.out, seed=args.seed, quiet=args.quiet,
-                      attractors=_positive("--attractors", args.attractors),
-                      influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
-                      branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
-                      symmetric=args.symmetric, smoothing_iterations=_nonneg(args.smooth_iterations),
-                      max_steps=_positive("--max-steps", args.max_steps), best_effort=args.best_effort,
-                      keep_result=structural)
+                   attractors=_positive("--attractors", args.attractors),
+                   influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
+                   branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
+                   symmetric=args.symmetric, smoothing_iterations=_nonneg(args.smooth_iterations),
+                   max_steps=_positive("--max-steps", args.max_steps), best_effort=args.best_effort,
+                   keep_result=structural)
     if not structural:
         return s
     result = s.pop("_result")
