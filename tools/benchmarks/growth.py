@@ -160,7 +160,8 @@ def _scaling(counts: list[int], repeats: int) -> dict:
                      "growth_cpu_seconds_median": statistics.median(c),
                      "nodes_grown": s["nodes_grown"], "steps": s["steps"], "stop_reasons": s["stop_reasons"],
                      "targets": f"{s['targets_reached']}/{s['targets_total']}"})
+    pairs = [(a, b) for a, b in zip(rows, rows[1:]) if b["attractors"] != a["attractors"]]
     exps = [math.log(b["growth_seconds_median"] / a["growth_seconds_median"])
-            / math.log(b["attractors"] / a["attractors"]) for a, b in zip(rows, rows[1:]) if b["attractors"] != a["attractors"]]
+            / math.log(b["attractors"] / a["attractors"]) for a, b in pairs]
     return {"scene": SCALING_SCENE, "target_seconds_at_20000": TARGET_20K_SECONDS, "rows": rows,
             "exponent_between_counts": exps}
