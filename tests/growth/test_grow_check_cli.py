@@ -49,6 +49,18 @@ def test_check_and_strengthen_a_strut(strut_json, tmp_path, capsys):
     for key in ("check_usd", "check_png"):
         assert pathlib.Path(s[key]).is_file() and pathlib.Path(st[key]).is_file()
         assert pathlib.Path(s[key]).parent == out
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.Open(s["check_usd"])
+    support = stage.GetPrimAtPath("/World/support")
+    api = UsdGeom.PrimvarsAPI(support)
+    vm = api.GetPrimvar("von_mises").Get(1)
+    disp = api.GetPrimvar("displacement").Get(1)
+    assert max(vm) == pytest.approx(s["max_von_mises_Pa"], rel=1e-6)  # float32 primvar
+    assert max(disp) > s["deflection_m"]["target_0"] * 0.9  # the tip moves the most
+    rest = UsdGeom.Mesh(support).GetPointsAttr().Get(0)
+    loaded = UsdGeom.Mesh(support).GetPointsAttr().Get(1)
+    assert max(abs(b[0] - a[0]) for a, b in zip(rest, loaded)) > 0  # the loaded state is displaced
     sk, doc = load_skeleton_json(st["skeleton_json"])
     r0 = _strut_skeleton().radius
     assert len(sk.nodes) == len(r0)  # same topology
