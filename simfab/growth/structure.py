@@ -11,7 +11,8 @@ Model (linear elastostatics on quadratic tetrahedra):
    fTetWild's surface envelope) of a *ground* object (one a root stands on) are clamped, u = 0;
 3. loads: each supported object's weight m g (MJCF body mass, the model's gravity vector) is
    shared equally among the reached targets that touch it (within ``GROUND_CONTACT`` of its
-   diagonal), plus the ``[loads]`` / ``--load`` force of each target; a target's force F acts as
+   diagonal, or the branch radius there), plus the ``[loads]`` / ``--load`` force of each target;
+   surface-mode contacts count as targets; a target's force F acts as
    a uniform traction F / A on the skin facets within the branch radius of the target point
    (area A; consistent nodal loads, :func:`simfab.fem.loads.traction_loads`), and the support's
    own weight as the body force rho g (:func:`simfab.fem.loads.body_force_loads`);
@@ -63,8 +64,9 @@ G0 = 9.81
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class TargetLoad:
-    """Force on one target: ``force`` (3,) [N] = ``weight`` (its share of the objects it touches)
-    + ``extra`` ([loads] / --load); ``objects`` the touched objects' names."""
+    """Force on one load point (a reached target or a surface contact, :func:`load_points`):
+    ``force`` (3,) [N] = ``weight`` (its share of the objects it touches) + ``extra`` ([loads] /
+    --load); ``objects`` the touched objects' names (none: the point only reports its deflection)."""
 
     name: str
     force: np.ndarray
@@ -94,7 +96,7 @@ class StructureCheck:
     safety_factor : yield stress / max_von_mises_Pa. max_von_mises_Pa : the peak of the
     critical-distance mean of the von Mises stress [Pa]; peak_point (3,) [m] where it is.
     max_point_von_mises_Pa : the largest corner value (unaveraged) [Pa].
-    deflection_m : target name -> |mean displacement of its loaded facets| [m].
+    deflection_m : load point name -> |mean displacement of its facets| [m] (every reached target and contact).
     mass_kg, volume_m3 : of the support. loads : the :class:`TargetLoad` per loaded target.
     model : the P2 model; u (n, 3) [m] displacement of its nodes; fixed (n,) bool clamped nodes.
     element_von_mises : (m,) per element the largest averaged corner stress [Pa].
@@ -175,34 +177,46 @@ def ground_objects(scene: GrowthScene) -> list:
     return out
 
 
-def target_loads(scene: GrowthScene, reached: list, extra: dict | None = None) -> tuple:
-    """The force on every reached target (see :class:`TargetLoad`): object weights shared among
-    the reached targets touching each non-ground object, plus ``extra`` (name -> (3,) [N]; the
-    scene's ``[loads]`` when None). InputError when an extra load names an unreached target."""
+def load_points(skeleton: Skeleton) -> dict:
+    """Where the support meets what it holds: name -> skeleton node, the reached targets (by
+    their site names) and, in surface mode, the contacts (``contact_<node>``)."""
+    out = dict(skeleton.target_nodes())
+    for i in np.nonzero(skeleton.contact_mask())[0]:
+        out.setdefault(f"contact_{int(i)}", int(i))
+    return out
+
+
+def target_loads(scene: GrowthScene, skeleton: Skeleton, extra: dict | None = None) -> tuple:
+    """The force on every load point of :func:`load_points` (see :class:`TargetLoad`): each
+    non-ground object's weight shared equally among the points touching it (within the branch
+    radius there, or ``GROUND_CONTACT`` of its diagonal), plus ``extra`` (target name -> (3,) [N];
+    the scene's ``[loads]`` when None). InputError when an extra load names an unreached target."""
     extra = dict(scene.structure.loads) if extra is None else dict(extra)
-    missing = [n for n in extra if n not in reached]
+    points = load_points(skeleton)
+    missing = [n for n in extra if n not in points]
     if missing:
         raise InputError(f"load on target(s) {', '.join(missing)} that the support does not reach "
-                         f"(reached: {', '.join(reached)})", where="loads")
+                         f"(reached: {', '.join(points)})", where="loads")
     g = gravity(scene)
     mass = body_masses(scene)
     ground = set(ground_objects(scene))
-    idx = {n: i for i, n in enumerate(scene.target_names)}
+    names = list(points)
+    idx = np.array([points[n] for n in names], np.int64)
     touch = {}
     for name, m in scene.objects.items():
-        if name in ground:
+        if name in ground or not names:
             continue
-        _, d, _ = m.nearest.on_surface(scene.targets[[idx[t] for t in reached]]) if reached else (0, [], 0)
-        on = [t for t, dt in zip(reached, d) if dt <= tol.GROUND_CONTACT * float(np.linalg.norm(m.extents))]
+        _, d, _ = m.nearest.on_surface(skeleton.nodes[idx])
+        tol_d = np.maximum(tol.GROUND_CONTACT * float(np.linalg.norm(m.extents)), skeleton.radius[idx])
+        on = [n for n, hit in zip(names, d <= tol_d) if hit]
         if on:
             touch[name] = on
     out = []
-    for t in reached:
+    for t in names:
         objs = tuple(o for o, ts in touch.items() if t in ts)
         w = sum((mass.get(o, 0.0) * g / len(touch[o]) for o in objs), np.zeros(3))
         e = np.asarray(extra.get(t, (0.0, 0.0, 0.0)), np.float64)
-        if objs or t in extra:
-            out.append(TargetLoad(name=t, force=w + e, weight=w, extra=e, objects=objs))
+        out.append(TargetLoad(name=t, force=w + e, weight=w, extra=e, objects=objs))
     return tuple(out)
 
 
@@ -216,8 +230,7 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
     t0 = time.perf_counter()
     spec = scene.structure if spec is None else spec
     mat = spec.material
-    reached = list(skeleton.target_nodes())
-    tl = target_loads(scene, reached, loads)
+    tl = target_loads(scene, skeleton, loads)
     p = scene.params
     mesh, _ = skin(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects, fixed=skeleton.fixed_mask(),
                    segments=options.segments or p.skin_segments, subtract=p.subtract_objects)
@@ -232,7 +245,7 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
     if options.self_weight:
         f += body_force_loads(model, lambda Xq: np.broadcast_to(mat.density * g, Xq.shape))
     share = {}
-    tnode = skeleton.target_nodes()
+    tnode = load_points(skeleton)
     for ld in tl:
         i = tnode[ld.name]
         w = _patch_weights(model, skeleton.nodes[i], float(skeleton.radius[i]))

@@ -90,9 +90,11 @@ def test_strut_root_stress_matches_beam_theory(strut):
 
     The check's peak is the mean over a ball of radius r_c = 0.5 mm (the default critical
     distance) at the root's surface: beam theory's mean over that half ball is the root stress
-    times 1 - 3 r_c / (8 c) (the mean depth of a half ball is 3 r_c / 8); the check's within 5 %
-    of it (the clamp's restraint of the Poisson contraction adds a little at the root's edge),
-    at the clamped root, and below the largest unaveraged corner value."""
+    times 1 - 3 r_c / (8 c) (the mean depth of a half ball is 3 r_c / 8). The check's is within
+    10 % of it, at the clamped root, and below the largest unaveraged corner value: the ball is
+    smaller than the elements here, so the peak is nearly the corner value at the clamp's edge,
+    where the clamp's restraint of the Poisson contraction adds stress that depends on the mesh
+    (fTetWild's meshes differ run to run: 1.00-1.07 of beam theory over six runs)."""
     m = strut.model
     _, I, c = _section(strut.mesh, LENGTH / 2)
     zc = _load_centroid(strut)
@@ -106,7 +108,7 @@ def test_strut_root_stress_matches_beam_theory(strut):
     assert abs(b) == pytest.approx(P / I, rel=0.05)
     rc = strut.critical_distance_m
     assert rc == 5e-4
-    assert strut.max_von_mises_Pa == pytest.approx(root * (1 - 3 * rc / (8 * c)), rel=0.05)
+    assert strut.max_von_mises_Pa == pytest.approx(root * (1 - 3 * rc / (8 * c)), rel=0.10)
     assert strut.peak_point[2] < 2 * R  # at the clamped root
     assert strut.max_von_mises_Pa < strut.max_point_von_mises_Pa
 
@@ -116,17 +118,20 @@ def test_column_buckling_load_matches_euler(tmp_path):
     buckling factor times P is Euler's critical load of a clamped-free column,
     P_cr = pi^2 E I / (4 z_c^2), within 10 % (the issue's tolerance; L / d = 10 is slender enough
     that shear adds < 1 %). Pulled instead, only local compression near the clamp and the load
-    patch is left to buckle: the factor is many times larger."""
+    patch is left to buckle: the factor is many times larger.
+
+    Mesh: target edge 2R (the check's default, 4 r_min, leaves fTetWild free to put one element
+    across this plain cylinder, and its factor ranged 0.88-1.00 of Euler's over repeated runs;
+    at 2R, 1.009-1.011)."""
     scene = load_growth_scene(_strut_scene(tmp_path))
-    res = check_structure(_strut_skeleton(), scene, loads={"target_0": (0.0, 0.0, -P)},
-                          options=CheckOptions(self_weight=False))
+    opts = CheckOptions(self_weight=False, edge_length=2 * R)
+    res = check_structure(_strut_skeleton(), scene, loads={"target_0": (0.0, 0.0, -P)}, options=opts)
     E = res.model.material.youngs_modulus
     _, I, _ = _section(res.mesh, LENGTH / 2)  # the 12-gon's I is the same about every axis
     zc = _load_centroid(res)
     lam = buckling_factor(res)
     assert lam * P == pytest.approx(np.pi**2 * E * I / (4 * zc**2), rel=0.10)
-    pulled = check_structure(_strut_skeleton(), scene, loads={"target_0": (0.0, 0.0, P)},
-                             options=CheckOptions(self_weight=False))
+    pulled = check_structure(_strut_skeleton(), scene, loads={"target_0": (0.0, 0.0, P)}, options=opts)
     assert buckling_factor(pulled) > 5 * lam
 
 
@@ -139,7 +144,7 @@ def test_strut_self_weight_and_mass(tmp_path):
     assert res.mass_kg == pytest.approx(rho * res.mesh.volume, rel=1e-12)
     assert res.model.volume.sum() == pytest.approx(res.mesh.volume, rel=0.01)  # fTetWild's envelope
     assert res.max_point_von_mises_Pa < 5 * rho * 9.81 * LENGTH
-    assert res.deflection_m == {}  # no target load: nothing reported per target
+    assert set(res.deflection_m) == {"target_0"}  # reported at every reached target
     top = res.model.rest[:, 2] > LENGTH
     assert np.all(res.u[top, 2] < 0)
 
@@ -148,15 +153,35 @@ def test_phone_weight_is_shared_among_its_targets(scenes_dir):
     """phone_stand: the phone (MJCF mass from its box and MuJoCo's default density 1000 kg/m^3)
     rests on all five targets; each carries a fifth of m g, straight down. The desk under the
     root is ground, not load."""
+    from simfab.growth import grow
+
     scene = load_growth_scene(scenes_dir / "phone_stand.xml")
-    loads = target_loads(scene, list(scene.target_names))
+    sk = grow(scene, seed=0).skeleton
+    loads = target_loads(scene, sk)
     m = 1000.0 * 0.075 * 0.008 * 0.15
     assert len(loads) == 5
     for ld in loads:
         assert ld.objects == ("phone",)
         np.testing.assert_allclose(ld.force, [0, 0, -m * 9.81 / 5], rtol=1e-9, atol=1e-12)
-    extra = target_loads(scene, list(scene.target_names), {"target_0": (1.0, 0.0, 0.0)})
-    np.testing.assert_allclose(extra[0].force, [1.0, 0, -m * 9.81 / 5])
+    extra = {ld.name: ld for ld in target_loads(scene, sk, {"target_0": (1.0, 0.0, 0.0)})}
+    np.testing.assert_allclose(extra["target_0"].force, [1.0, 0, -m * 9.81 / 5])
+    with pytest.raises(InputError):
+        target_loads(scene, sk.replace(target=np.where(sk.target == 0, -1, sk.target)), {"target_0": (1, 0, 0)})
+
+
+def test_surface_contacts_carry_the_egg(scenes_dir):
+    """egg_holder_surface has no targets: the egg rests on the surface-mode contacts, which share
+    its weight."""
+    from simfab.growth import grow
+    from simfab.growth.structure import body_masses
+
+    scene = load_growth_scene(scenes_dir / "egg_holder_surface.xml")
+    sk = grow(scene, seed=0).skeleton
+    loads = target_loads(scene, sk)
+    carrying = [ld for ld in loads if ld.objects]
+    assert carrying and all(ld.name.startswith("contact_") and ld.objects == ("egg",) for ld in carrying)
+    total = sum(ld.force for ld in carrying)
+    np.testing.assert_allclose(total, [0, 0, -9.81 * body_masses(scene)["egg"]], rtol=1e-9)
 
 
 def test_material_and_loads_tables(tmp_path):
