@@ -26,7 +26,7 @@ from pathlib import Path
 from simfab._bundled import scenes_dir
 
 #: units of summary keys for the plain-text table (the skin files themselves are in mm: skin_units)
-UNITS = {"influence": "m", "kill": "m", "branch_length": "m", "volume": "m³", "overlap_volume": "m³",
+UNITS = {"buckling_factor": "-", "influence": "m", "kill": "m", "branch_length": "m", "volume": "m³", "overlap_volume": "m³",
          "penetration": "m", "seconds_growth": "s", "seconds_skin": "s", "safety_factor": "-",
          "max_von_mises_Pa": "Pa", "max_point_von_mises_Pa": "Pa", "yield_stress_Pa": "Pa", "mass_kg": "kg",
          "critical_distance_m": "m", "max_deflection_m": "m", "seconds_check": "s"}
@@ -54,7 +54,7 @@ DESCRIPTION = (
     "--json keys (check, and grow --check under 'check'): safety_factor, max_von_mises_Pa (critical-distance "
     "mean), peak_point_m, max_point_von_mises_Pa, deflection_m (per target), max_deflection_m, mass_kg, volume_m3, "
     "material, yield_stress_Pa, critical_distance_m, target_forces_N, tets, fem_nodes, seconds_check, check_usd, "
-    "check_png; with --strengthen also 'strengthened' (the same figures of the final design plus "
+    "check_png, with --buckling buckling_factor; with --strengthen also 'strengthened' (the same figures of the final design plus "
     "target_safety_factor, reached, checks, safety_factor_before/after, volume_before/after_m3, volume_change, "
     "skeleton_json, skin_stl, check_usd, check_png)."
 )
@@ -87,6 +87,8 @@ def add_args(p):
     c.add_argument("--strengthen", type=float, metavar="SF",
                    help="thicken overloaded branches until the safety factor against yield is at least SF")
     c.add_argument("--thin", action="store_true", help="(with --strengthen) also thin over-strong branches down to SF")
+    c.add_argument("--buckling", action="store_true",
+                   help="also the linearized buckling factor of the loads (critical loads = factor x loads)")
     e = p.add_argument_group("edit")
     e.add_argument("--stroke", metavar="FILE", help="(edit) stroke: JSON {\"points\": [[x, y], ...]} or CSV, pixels")
     e.add_argument("--camera", metavar="FILE|JSON", help="(edit) camera: eye, target, up, fovy_deg, width, height")
@@ -111,14 +113,14 @@ def run(args) -> dict:
     from simfab.errors import InputError
 
     if args.scene == "edit":
-        if args.check or args.load or args.strengthen is not None or args.thin:
-            raise InputError("--check, --load, --strengthen and --thin do not apply to 'edit'")
+        if args.check or args.load or args.strengthen is not None or args.thin or args.buckling:
+            raise InputError("--check, --load, --strengthen, --thin and --buckling do not apply to 'edit'")
         return _run_edit(args)
     if args.scene == "check":
         return _run_check(args)
     if args.skeleton is not None or args.stroke or args.camera or args.chain is not None:
         raise InputError("SKELETON_JSON, --stroke, --camera and --chain belong to 'simfab grow edit'")
-    structural = args.check or args.load or args.strengthen is not None or args.thin
+    structural = args.check or args.load or args.strengthen is not None or args.thin or args.buckling
     if structural:
         loads, target = _check_options(args)
         _known_targets(loads, args.scene)
@@ -133,7 +135,7 @@ def run(args) -> dict:
         return s
     result = s.pop("_result")
     s["check"] = check_outputs(result.skeleton, result.scene, out=args.out, stem=result.scene.name, loads=loads,
-                               strengthen=target, thin=args.thin, quiet=args.quiet)
+                               strengthen=target, thin=args.thin, buckling=args.buckling, quiet=args.quiet)
     return s
 
 
@@ -172,13 +174,14 @@ def _known_targets(loads: dict, scene_path) -> None:
         raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(names)})", where="--load")
 
 
-def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, thin=False, quiet=True) -> dict:
+def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, thin=False, buckling=False,
+                  quiet=True) -> dict:
     """Check (and optionally strengthen) a support, write the USD/PNG (and the strengthened
     skeleton and skin), return the summary."""
     from simfab.errors import InputError
     from simfab.growth.outputs import save_skin, write_check
     from simfab.growth.skeleton import to_json_dict
-    from simfab.growth.structure import check_structure, strengthen as strengthen_support
+    from simfab.growth.structure import buckling_factor, check_structure, strengthen as strengthen_support
     from simfab.io.atomic import atomic_paths, write_json
     from simfab.io.outpaths import safe_name
     from simfab.progress import log
@@ -191,6 +194,8 @@ def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, t
     log(f"simfab grow check: {stem}: meshing and solving", quiet=quiet)
     c = check_structure(skeleton, scene, loads=merged)
     summary = c.summary()
+    if buckling:
+        summary["buckling_factor"] = buckling_factor(c)
     if strengthen is not None:
         log(f"simfab grow check: {stem}: strengthening to safety factor {strengthen:g}", quiet=quiet)
         res = strengthen_support(skeleton, scene, strengthen, loads=merged, thin=thin, check=c)
@@ -233,7 +238,7 @@ def _run_check(args) -> dict:
     stem = Path(args.skeleton).stem.removesuffix("_skeleton")
     return {"skeleton": str(args.skeleton), "scene": str(scene_path),
             **check_outputs(sk, scene, out=args.out, stem=stem, loads=loads, strengthen=target, thin=args.thin,
-                            quiet=args.quiet)}
+                            buckling=args.buckling, quiet=args.quiet)}
 
 
 def _nonneg(v):

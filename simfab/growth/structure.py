@@ -269,24 +269,43 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
         nodes=int(model.n_vertices), seconds=time.perf_counter() - t0, points=cells, point_von_mises=avg)
 
 
+def geometric_stiffness(model: P2Model, sigma_corners: np.ndarray):
+    """Geometric (stress) stiffness K_G (3n, 3n) [N/m] of the stress field with corner values
+    ``sigma_corners`` (m, 4, 3, 3) [Pa] (affine over each element):
+
+        K_G[3a+i, 3b+j] = delta_ij sum_e sum_q w_eq grad N_a(X_q) . sigma(X_q) grad N_b(X_q),
+
+    the second variation of sum_e int sigma : (1/2) grad u^T grad u, with the model's quadrature
+    (exact for these products: P2 gradients are linear, sigma is linear)."""
+    import scipy.sparse as sp
+
+    sq = np.einsum("qc,mcij->mqij", model.qp_bary, sigma_corners)
+    gN = np.asarray(model.grad_N)
+    Ge = np.einsum("mq,mqai,mqij,mqbj->mab", np.asarray(model.qp_weight), gN, sq, gN)
+    el = np.asarray(model.elements, np.int64)
+    k = el.shape[1]
+    rows = np.repeat(el[:, :, None], k, axis=2)
+    cols = np.repeat(el[:, None, :], k, axis=1)
+    n = model.n_vertices
+    parts = [sp.coo_matrix((Ge.ravel(), (3 * rows.ravel() + d, 3 * cols.ravel() + d)), shape=(3 * n, 3 * n))
+             for d in range(3)]
+    return (parts[0] + parts[1] + parts[2]).tocsr()
+
+
 def buckling_factor(check: StructureCheck) -> float:
     """Linearized buckling: the smallest load factor lambda > 0 with (K + lambda K_G) phi = 0 on
-    the free dofs, K the stiffness at rest and K_G the load-stiffness of the checked state,
-    K_G = [H(X + u) - H(X - u)] / 2 (H the exact Neo-Hookean Hessian, u the linear solution:
-    the central difference keeps the part linear in the load, the geometric stiffness of the
-    stress sigma(u)). Solved as the largest theta of -K_G phi = theta K phi (K SPD), lambda =
-    1 / theta; inf when no load compresses anything (theta <= 0). The loads times lambda are
-    the critical loads (slender supports fail by buckling before they yield)."""
+    the free dofs, K the small-strain stiffness and K_G the geometric stiffness of the checked
+    stress state (:func:`geometric_stiffness`). Solved as the largest theta of -K_G phi = theta K
+    phi (K SPD), lambda = 1 / theta; inf when nothing is compressed (theta <= 0). The loads times
+    lambda are the critical loads (slender supports fail by buckling before they yield)."""
     from scipy.sparse.linalg import eigsh
 
     m = check.model
-    X = m.rest
-    _, _, K = elastic.energy_gradient_hessian(m, X, project_psd=False)
-    _, _, Hp = elastic.energy_gradient_hessian(m, X + check.u, project_psd=False)
-    _, _, Hm = elastic.energy_gradient_hessian(m, X - check.u, project_psd=False)
+    _, _, K = elastic.energy_gradient_hessian(m, m.rest, project_psd=False)
+    sigma, _ = corner_stress(m, m.rest + check.u)
     free = np.nonzero(np.repeat(~check.fixed, 3))[0]
     Kf = K[free][:, free].tocsc()
-    G = (-0.5 * (Hp - Hm))[free][:, free].tocsc()
+    G = (-geometric_stiffness(m, sigma))[free][:, free].tocsc()
     theta = eigsh(G, k=1, M=Kf, which="LA", return_eigenvectors=False, tol=1e-8)[0]
     return float(1.0 / theta) if theta > 0 else float("inf")
 

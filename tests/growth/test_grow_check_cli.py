@@ -37,11 +37,12 @@ def test_check_and_strengthen_a_strut(strut_json, tmp_path, capsys):
     root, where the moment is largest."""
     out = tmp_path / "out"
     code, so, err = _run(["grow", "check", str(strut_json), "--load", "target_0=40,0,0", "--strengthen", "1.5",
-                          "--out", str(out), "--json"], capsys)
+                          "--buckling", "--out", str(out), "--json"], capsys)
     assert code == 0, err
     s = json.loads(so)
     assert CHECK_KEYS <= set(s)
     assert s["safety_factor"] < 1.0 and set(s["deflection_m"]) == {"target_0"}
+    assert s["buckling_factor"] > 5  # a side load on a stubby strut: it yields long before it buckles
     st = s["strengthened"]
     assert st["reached"] and st["safety_factor"] >= 1.5 and st["safety_factor_before"] == s["safety_factor"]
     assert st["volume_after_m3"] > st["volume_before_m3"] and st["deflection_m"]["target_0"] < s["deflection_m"][

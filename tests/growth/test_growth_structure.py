@@ -207,3 +207,19 @@ def test_bad_structure_tables_name_file_and_key(tmp_path, toml, where):
     with pytest.raises(InputError) as e:
         load_growth_scene(xml)
     assert "strut.toml" in str(e.value) and where in str(e.value)
+
+
+def test_geometric_stiffness_is_the_second_variation(strut):
+    """u . K_G u = sum_q w_q sigma_q : (grad u_q^T grad u_q) for any u (the quadratic form of the
+    stress stiffness), checked with a random u against the quadrature written out."""
+    from simfab.growth.structure import geometric_stiffness
+
+    m = strut.model
+    sigma, _ = corner_stress(m, m.rest + strut.u)
+    KG = geometric_stiffness(m, sigma)
+    u = np.random.default_rng(0).normal(size=m.rest.shape) * 1e-4
+    gu = np.einsum("mai,mqaj->mqij", u[m.elements], m.grad_N)  # (grad u)_ij = du_i / dX_j
+    sq = np.einsum("qc,mcij->mqij", m.qp_bary, sigma)
+    direct = np.einsum("mq,mqjk,mqij,mqik->", m.qp_weight, sq, gu, gu)
+    assert u.ravel() @ (KG @ u.ravel()) == pytest.approx(direct, rel=1e-10)
+    assert abs(KG - KG.T).max() <= 1e-12 * abs(KG).max()
