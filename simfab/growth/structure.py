@@ -28,6 +28,8 @@ Model (linear elastostatics on quadratic tetrahedra):
 and reports the safety factor SF = sigma_yield / max_q sigma_bar_q, where the peak is, the
 deflection of each target (the traction-weighted mean displacement of its loaded facets), and
 the support's mass rho V (V the skin's volume; the tet mesh's differs by fTetWild's envelope).
+:func:`buckling_factor` adds the linearized buckling load factor of that state, and
+:func:`strengthen` rescales branch radii until the safety factor reaches a target.
 """
 
 from __future__ import annotations
