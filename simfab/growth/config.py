@@ -69,7 +69,7 @@ import math
 
 import numpy as np
 
-from simfab.design.stress import STRESS_RADIUS
+import simfab.growth.tolerances as tol
 from simfab.errors import InputError
 from simfab.fem.materials import PLA, Material, material_by_name
 
@@ -243,7 +243,7 @@ class StructureSpec:
     """
 
     material: Material = PLA
-    critical_distance: float = STRESS_RADIUS
+    critical_distance: float = tol.CRITICAL_DISTANCE
     loads: tuple = ()
 
 
@@ -276,7 +276,7 @@ def structure_from_toml(doc: dict, where: str) -> StructureSpec:
             raise InputError(f"must lie in (-1, 0.5), got {nu}", where=f"{where}: material.poisson_ratio")
         over["poisson_ratio"] = nu
     material = dataclasses.replace(base, name=str(m.get("name", base.name)), **over) if over else base
-    radius = STRESS_RADIUS
+    radius = tol.CRITICAL_DISTANCE
     if "critical_distance" in m:
         radius = _num(m["critical_distance"], f"{where}: material.critical_distance", positive=False)
         if radius < 0:
