@@ -181,7 +181,8 @@ def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, t
     from simfab.errors import InputError
     from simfab.growth.outputs import save_skin, write_check
     from simfab.growth.skeleton import to_json_dict
-    from simfab.growth.structure import buckling_factor, check_structure, strengthen as strengthen_support
+    from simfab.growth.structure import buckling_factor, check_structure
+    from simfab.growth.structure import strengthen as strengthen_support
     from simfab.io.atomic import atomic_paths, write_json
     from simfab.io.outpaths import safe_name
     from simfab.progress import log

@@ -237,7 +237,7 @@ class StructureSpec:
     material : the printed material (:class:`simfab.fem.materials.Material`; PLA by default).
     critical_distance : radius [m] of the ball the von Mises stress is averaged over before it
         is compared with the yield stress (Theory of Critical Distances, as the coupling's
-        yield check: :mod:`simfab.design.stress`); 0 compares the largest quadrature-point value.
+        yield check: :mod:`simfab.design.stress`); 0 compares the largest element-corner value.
     loads : ((target name, (fx, fy, fz)), ...) extra forces [N] on target sites, world frame,
         added to the supported objects' weights.
     """

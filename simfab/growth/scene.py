@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from simfab.errors import InputError
 import simfab.growth.tolerances as tol
+from simfab.errors import InputError
 from simfab.growth.config import GrowthParams, StructureSpec, params_from_toml, structure_from_toml
 
 

@@ -5,12 +5,11 @@ import pathlib
 import shutil
 
 import pytest
+from test_growth_structure import _strut_scene, _strut_skeleton
 
 from simfab.cli import main
 from simfab.growth.skeleton import load_skeleton_json, to_json_dict
 from simfab.io.atomic import write_json
-
-from test_growth_structure import _strut_scene, _strut_skeleton
 
 SCENES = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "growth"
 CHECK_KEYS = {"safety_factor", "max_von_mises_Pa", "deflection_m", "mass_kg", "peak_point_m", "check_usd",
