@@ -125,3 +125,16 @@ def test_check_of_a_skeleton_without_scene(strut_json, tmp_path, capsys):
     bad.write_text(json.dumps(d))
     code, out, err = _run(["grow", "check", str(bad), "--out", str(tmp_path / "o")], capsys)
     assert code == 2 and "scene" in err and len(err.strip().splitlines()) == 1
+
+
+def test_grow_then_check(tmp_path, capsys):
+    """``simfab grow SCENE --check``: the growth's outputs plus the check's, its figures under 'check'."""
+    xml = _strut_scene(tmp_path, "[growth]\nattractors = 300\n[loads]\ntarget_0 = [0.5, 0.0, 0.0]\n")
+    out = tmp_path / "out"
+    code, so, err = _run(["grow", str(xml), "--check", "--out", str(out), "--json"], capsys)
+    assert code == 0, err
+    s = json.loads(so)
+    assert s["targets_reached"] == 1 and CHECK_KEYS <= set(s["check"])
+    assert s["check"]["target_forces_N"]["target_0"] == [0.5, 0.0, 0.0]
+    assert 0 < s["check"]["safety_factor"] < float("inf") and s["check"]["deflection_m"]["target_0"] > 0
+    assert {p.name for p in out.iterdir()} >= {"strut_skin.stl", "strut_check.usdc", "strut_check.png"}
