@@ -3,11 +3,18 @@
     simfab grow SCENE.xml [--attractors N --influence D --kill D --branch-length L
                            --mode volume|surface|profile --symmetric --smooth-iterations K]
     simfab grow edit SKELETON.json --stroke STROKE.json --camera CAMERA.json [--chain K]
+    simfab grow check SKELETON.json [--load TARGET=FX,FY,FZ ...] [--strengthen SF [--thin]]
+    simfab grow SCENE.xml --check [--load ...] [--strengthen SF [--thin]]
 
 SCENE is an MJCF file with a companion TOML (see scenes/growth/README.md). Outputs under
 --out: skin STL + PLY (mm), skeleton JSON, USD growth replay, MJCF of objects + grown part,
 PNG preview and the preview's camera (JSON, the --camera of 'grow edit'). 'edit' moves one
 skeleton chain onto the surface of rays through a 2D stroke and re-skins the result.
+'check' (or --check after growing) tetrahedralizes the skin, clamps it where it meets the object
+under its roots, loads it with the supported objects' weights, its own weight and [loads] /
+--load, and reports the safety factor against yield, the peak von Mises stress, each target's
+deflection and the mass (USD stage and stress PNG under --out); --strengthen SF thickens the
+overloaded branches (and with --thin thins the over-strong ones) until the safety factor is SF.
 """
 
 from __future__ import annotations
@@ -19,8 +26,10 @@ from pathlib import Path
 from simfab._bundled import scenes_dir
 
 #: units of summary keys for the plain-text table (the skin files themselves are in mm: skin_units)
-UNITS = {"influence": "m", "kill": "m", "branch_length": "m", "volume": "m³", "overlap_volume": "m³",
-         "penetration": "m", "seconds_growth": "s", "seconds_skin": "s"}
+UNITS = {"buckling_factor": "-", "influence": "m", "kill": "m", "branch_length": "m", "volume": "m³", "overlap_volume": "m³",
+         "penetration": "m", "seconds_growth": "s", "seconds_skin": "s", "safety_factor": "-",
+         "max_von_mises_Pa": "Pa", "max_point_von_mises_Pa": "Pa", "yield_stress_Pa": "Pa", "mass_kg": "kg",
+         "critical_distance_m": "m", "max_deflection_m": "m", "seconds_check": "s"}
 
 HELP = "grow a support structure between objects (space colonization) and skin it for 3D printing"
 DESCRIPTION = (
@@ -41,15 +50,23 @@ DESCRIPTION = (
     "skeleton_json, usd, mjcf, png, camera_json.\n\n"
     "--json keys (edit): chain, segments_colliding and the other edit figures, nodes, segments, watertight, bodies, "
     "volume [m^3], skin_units, skeleton_json, skin_stl, skin_ply, png (the edit seen through --camera, the "
-    "stroke in red)."
+    "stroke in red).\n\n"
+    "--json keys (check, and grow --check under 'check'): safety_factor, max_von_mises_Pa (critical-distance "
+    "mean), peak_point_m, max_point_von_mises_Pa, deflection_m (per target), max_deflection_m, mass_kg, volume_m3, "
+    "material, yield_stress_Pa, critical_distance_m, target_forces_N, tets, fem_nodes, seconds_check, check_usd, "
+    "check_png, with --buckling buckling_factor; with --strengthen also 'strengthened' (the same figures of the final design plus "
+    "target_safety_factor, reached, checks, safety_factor_before/after, volume_before/after_m3, volume_change, "
+    "skeleton_json, skin_stl, check_usd, check_png)."
 )
 
 SCENES_DIR = scenes_dir("growth")
 
 
 def add_args(p):
-    p.add_argument("scene", metavar="SCENE", help="growth scene (MJCF .xml), or the word 'edit' for a sketch edit")
-    p.add_argument("skeleton", nargs="?", metavar="SKELETON_JSON", help="(edit) skeleton JSON written by simfab grow")
+    p.add_argument("scene", metavar="SCENE", help="growth scene (MJCF .xml), or the word 'edit' (sketch edit) or "
+                                                  "'check' (structural check of a skeleton)")
+    p.add_argument("skeleton", nargs="?", metavar="SKELETON_JSON",
+                   help="(edit, check) skeleton JSON written by simfab grow")
     g = p.add_argument_group("growth")
     g.add_argument("--attractors", type=int, metavar="N", help="number of random attractors (default 2000)")
     g.add_argument("--influence", type=float, metavar="D", help="attractor influence distance [m]")
@@ -62,6 +79,16 @@ def add_args(p):
     g.add_argument("--best-effort", action="store_true",
                    help="keep and write a structure that leaves targets unreached (default: that is a failed "
                         "growth, exit 1, nothing written)")
+    c = p.add_argument_group("structural check")
+    c.add_argument("--check", action="store_true", help="check the grown support under its loads (see 'check')")
+    c.add_argument("--load", action="append", metavar="TARGET=FX,FY,FZ",
+                   help="extra force [N] on a target site, world frame (repeatable; replaces the scene's [loads] "
+                        "entry for that target)")
+    c.add_argument("--strengthen", type=float, metavar="SF",
+                   help="thicken overloaded branches until the safety factor against yield is at least SF")
+    c.add_argument("--thin", action="store_true", help="(with --strengthen) also thin over-strong branches down to SF")
+    c.add_argument("--buckling", action="store_true",
+                   help="also the linearized buckling factor of the loads (critical loads = factor x loads)")
     e = p.add_argument_group("edit")
     e.add_argument("--stroke", metavar="FILE", help="(edit) stroke: JSON {\"points\": [[x, y], ...]} or CSV, pixels")
     e.add_argument("--camera", metavar="FILE|JSON", help="(edit) camera: eye, target, up, fovy_deg, width, height")
@@ -86,15 +113,133 @@ def run(args) -> dict:
     from simfab.errors import InputError
 
     if args.scene == "edit":
+        if args.check or args.load or args.strengthen is not None or args.thin or args.buckling:
+            raise InputError("--check, --load, --strengthen, --thin and --buckling do not apply to 'edit'")
         return _run_edit(args)
+    if args.scene == "check":
+        return _run_check(args)
     if args.skeleton is not None or args.stroke or args.camera or args.chain is not None:
         raise InputError("SKELETON_JSON, --stroke, --camera and --chain belong to 'simfab grow edit'")
-    return grow_scene(args.scene, out=args.out, seed=args.seed, quiet=args.quiet,
-                      attractors=_positive("--attractors", args.attractors),
-                      influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
-                      branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
-                      symmetric=args.symmetric, smoothing_iterations=_nonneg(args.smooth_iterations),
-                      max_steps=_positive("--max-steps", args.max_steps), best_effort=args.best_effort)
+    structural = args.check or args.load or args.strengthen is not None or args.thin or args.buckling
+    if structural:
+        loads, target = _check_options(args)
+        _known_targets(loads, args.scene)
+    s = grow_scene(args.scene, out=args.out, seed=args.seed, quiet=args.quiet,
+                   attractors=_positive("--attractors", args.attractors),
+                   influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
+                   branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
+                   symmetric=args.symmetric, smoothing_iterations=_nonneg(args.smooth_iterations),
+                   max_steps=_positive("--max-steps", args.max_steps), best_effort=args.best_effort,
+                   keep_result=structural)
+    if not structural:
+        return s
+    result = s.pop("_result")
+    s["check"] = check_outputs(result.skeleton, result.scene, out=args.out, stem=result.scene.name, loads=loads,
+                               strengthen=target, thin=args.thin, buckling=args.buckling, quiet=args.quiet)
+    return s
+
+
+def _check_options(args):
+    """(--load forces name -> (3,) [N], --strengthen SF or None), validated."""
+    from simfab.errors import InputError
+
+    if args.thin and args.strengthen is None:
+        raise InputError("--thin goes with --strengthen SF", where="--thin")
+    target = args.strengthen
+    if target is not None and not (0 < target < float("inf")):
+        raise InputError(f"must be a positive finite number, got {target}", where="--strengthen")
+    loads = {}
+    for item in args.load or []:
+        name, sep, vec = item.partition("=")
+        try:
+            f = [float(v) for v in vec.split(",")]
+        except ValueError:
+            f = []
+        if not sep or not name or len(f) != 3 or not all(abs(v) < float("inf") for v in f):
+            raise InputError(f"expected TARGET=FX,FY,FZ (newtons), got {item!r}", where="--load")
+        loads[name.strip()] = tuple(f)
+    return loads, target
+
+
+def _known_targets(loads: dict, scene_path) -> None:
+    """InputError (before anything is grown or written) when --load names no target of the scene."""
+    from simfab.errors import InputError
+    from simfab.growth.scene import load_growth_scene
+
+    if not loads:
+        return
+    names = load_growth_scene(scene_path).target_names
+    unknown = [n for n in loads if n not in names]
+    if unknown:
+        raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(names)})", where="--load")
+
+
+def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, thin=False, buckling=False,
+                  quiet=True) -> dict:
+    """Check (and optionally strengthen) a support, write the USD/PNG (and the strengthened
+    skeleton and skin), return the summary."""
+    from simfab.errors import InputError
+    from simfab.growth.outputs import save_skin, write_check
+    from simfab.growth.skeleton import to_json_dict
+    from simfab.growth.structure import buckling_factor, check_structure
+    from simfab.growth.structure import strengthen as strengthen_support
+    from simfab.io.atomic import atomic_paths, write_json
+    from simfab.io.outpaths import safe_name
+    from simfab.progress import log
+
+    unknown = [n for n in loads if n not in scene.target_names]
+    if unknown:
+        raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(scene.target_names)})",
+                         where="--load")
+    merged = {**dict(scene.structure.loads), **loads}
+    log(f"simfab grow check: {stem}: meshing and solving", quiet=quiet)
+    c = check_structure(skeleton, scene, loads=merged)
+    summary = c.summary()
+    if buckling:
+        summary["buckling_factor"] = buckling_factor(c)
+    if strengthen is not None:
+        log(f"simfab grow check: {stem}: strengthening to safety factor {strengthen:g}", quiet=quiet)
+        res = strengthen_support(skeleton, scene, strengthen, loads=merged, thin=thin, check=c)
+    stem = safe_name(stem)
+    summary.update(write_check(c, scene, Path(out), stem=stem))
+    if strengthen is not None:
+        st = {**res.check.summary(), **res.summary()}
+        paths = {"skeleton_json": Path(out) / f"{stem}_strengthened_skeleton.json",
+                 "skin_stl": Path(out) / f"{stem}_strengthened_skin.stl"}
+        with atomic_paths(paths) as tmp:
+            write_json(tmp["skeleton_json"], to_json_dict(res.skeleton, scene=str(scene.path.resolve()) if scene.path
+                                                          else None, strengthen=res.summary()))
+            save_skin(res.check.mesh, tmp["skin_stl"])
+        st.update({k: str(v) for k, v in paths.items()})
+        st.update(write_check(res.check, scene, Path(out), stem=f"{stem}_strengthened"))
+        summary["strengthened"] = st
+    return summary
+
+
+def _run_check(args) -> dict:
+    from simfab.errors import InputError
+    from simfab.growth.scene import load_growth_scene
+    from simfab.growth.skeleton import load_skeleton_json
+
+    if args.skeleton is None:
+        raise InputError("simfab grow check needs SKELETON_JSON")
+    for name in ("attractors", "influence", "kill", "branch_length", "mode", "symmetric", "smooth_iterations",
+                 "max_steps", "stroke", "camera", "chain"):
+        if getattr(args, name, None) not in (None, False):
+            raise InputError(f"--{name.replace('_', '-')} does not apply to 'check'")
+    loads, target = _check_options(args)
+    sk, doc = load_skeleton_json(args.skeleton)
+    scene_path = doc.get("scene")
+    if not scene_path or not Path(scene_path).is_file():
+        raise InputError(f"the skeleton names no readable scene ({scene_path!r})", where=f"{args.skeleton}: scene")
+    scene = load_growth_scene(scene_path)
+    names = set(scene.target_names)
+    if any(n not in names for n in sk.target_names):
+        raise InputError("the skeleton's targets are not its scene's", where=f"{args.skeleton}: target_names")
+    stem = Path(args.skeleton).stem.removesuffix("_skeleton")
+    return {"skeleton": str(args.skeleton), "scene": str(scene_path),
+            **check_outputs(sk, scene, out=args.out, stem=stem, loads=loads, strengthen=target, thin=args.thin,
+                            buckling=args.buckling, quiet=args.quiet)}
 
 
 def _nonneg(v):
@@ -110,8 +255,10 @@ _FLAGS = {"branch_length": "--branch-length", "kill": "--kill", "influence": "--
           "attractors": "--attractors", "max_steps": "--max-steps"}
 
 
-def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool = False, **overrides) -> dict:
-    """Grow, skin, check and write every output for one scene; returns the summary.
+def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool = False, keep_result: bool = False,
+               **overrides) -> dict:
+    """Grow, skin, check and write every output for one scene; returns the summary (with the
+    :class:`GrowthResult` under ``_result`` when ``keep_result``).
 
     A target left unreached is a failed growth (ConvergenceError, exit 1) unless ``best_effort``."""
     from simfab.errors import ConvergenceError
@@ -159,6 +306,8 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool =
     })
     s.update(paths)
     s["skin_units"] = SKIN_FILE_UNITS
+    if keep_result:
+        s["_result"] = result
     return s
 
 

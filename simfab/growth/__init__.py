@@ -12,7 +12,8 @@ Modules: :mod:`~simfab.growth.config` (parameters, TOML), :mod:`~simfab.growth.s
 (MJCF scenes), :mod:`~simfab.growth.attractors`, :mod:`~simfab.growth.obstacles`,
 :mod:`~simfab.growth.colonize` (the growth algorithm), :mod:`~simfab.growth.skeleton`
 (pruning, smoothing, radii), :mod:`~simfab.growth.skinning`, :mod:`~simfab.growth.sketch`
-(sketch edits), :mod:`~simfab.growth.outputs` (files).
+(sketch edits), :mod:`~simfab.growth.structure` (structural check, strengthening, buckling;
+imported on its own: it loads the FEM), :mod:`~simfab.growth.outputs` (files).
 """
 
 from simfab.growth.config import GrowthParams, ProfileSpec, SymmetrySpec

@@ -23,7 +23,13 @@ One growth step (Runions et al. 2005, with the target attractors of the thesis):
 
 Growth stops when every attractor is dead, or reports why it stopped early (step cap,
 node cap, stalled). Nearest-node distances are kept per attractor and updated with the
-new nodes only, so a step costs O(live attractors × new nodes).
+new nodes only. Ordinary attractors only need their nearest growing node when it is within
+the influence distance R (farther, they do not attract), so each step enumerates the pairs
+(new node, live attractor) closer than R from a k-d tree of the live attractors: a step costs
+O(new nodes x attractors per influence ball), not O(live attractors x new nodes). Target
+attractors (few, unbounded influence) are compared with every new node. Nearest-node
+distances beyond R are not tracked, and growth is the same as with exact tracking
+(:class:`_Nearest` says why).
 """
 
 from __future__ import annotations
@@ -34,7 +40,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
-from simfab.growth import tolerances as tol
+import simfab.growth.tolerances as tol
 
 
 @dataclasses.dataclass
@@ -147,10 +153,11 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
     alive[on_tree] = False
     rep.targets_reached.extend(int(t) for t in tid[on_tree])
 
-    # nearest growing node and nearest node of every attractor
-    near_d = np.full(len(A), np.inf)
-    near_i = np.full(len(A), -1, np.int64)
-    _absorb(A, alive, is_t, near_d, near_i, tree.nodes, np.arange(len(tree)), ~tree.frozen, s.kill)
+    # nearest growing node of every attractor (ordinary ones: only when within influence)
+    near = _Nearest(A, is_t, s.influence, s.kill)
+    near.absorb(alive, tree.nodes, np.arange(len(tree)), ~tree.frozen)
+    near_d, near_i = near.d, near.i
+    nodes = _NodeIndex(tree.nodes)
 
     died = np.full(len(A), -1, np.int64)
     died[~alive] = step0
@@ -168,7 +175,8 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
             rep.stop_reason = "stalled: no live attractor within influence of a growing node"
             step -= 1
             break
-        pos, parent, target_attr, dropped_attr, stuck = _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep)
+        pos, parent, target_attr, dropped_attr, stuck = _grow_step(tree, nodes, A, att, near_i, is_t, tid, obstacles, s,
+                                                                   rng, rep)
         if dropped_attr.size:
             alive[dropped_attr[~is_t[dropped_attr]]] = False
             died[~alive & (died < 0)] = step
@@ -179,7 +187,7 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
         if dead_end.size:
             tree.frozen[dead_end] = True
             rep.dead_ends += int(dead_end.size)
-            _reassociate(A, alive, near_d, near_i, tree, dead_end)
+            near.reassociate(alive, tree, dead_end)
         if len(pos) == 0:
             idle += 1
             if idle >= tol.STALL_PATIENCE:
@@ -193,7 +201,8 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
         alive[target_attr[landed]] = False
         rep.targets_reached.extend(int(tid[a]) for a in target_attr[landed])
         idx = np.arange(first, len(tree))
-        _absorb(A, alive, is_t, near_d, near_i, pos, idx, ~landed, s.kill)
+        nodes.add(pos)
+        near.absorb(alive, pos, idx, ~landed)
         died[~alive & (died < 0)] = step
         if len(tree) >= s.max_nodes:
             rep.stop_reason = f"node cap reached ({s.max_nodes} nodes)"
@@ -206,27 +215,86 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
     return rep
 
 
-def _absorb(A, alive, is_t, near_d, near_i, pos, idx, growing, kill) -> None:
-    """Fold new nodes ``pos`` (k, 3) (global indices ``idx``) into the attractor state: the
-    nearest growing node of every live attractor, and death of ordinary attractors within
-    ``kill`` of any new node. One distance matrix (live attractors × new nodes) serves both."""
-    live = np.nonzero(alive)[0]
-    if live.size == 0 or len(pos) == 0:
-        return
-    D = cdist(A[live], pos)
-    g = np.nonzero(growing)[0]
-    if g.size:
-        Dg = D[:, g]
-        j = np.argmin(Dg, axis=1)
-        d = Dg[np.arange(len(live)), j]
-        better = d < near_d[live]
-        near_d[live[better]] = d[better]
-        near_i[live[better]] = idx[g[j[better]]]
-    dead = (D.min(axis=1) <= kill) & ~is_t[live]
-    alive[live[dead]] = False
+class _Nearest:
+    """Nearest growing node per attractor, and the kill step, as new nodes appear.
+
+    ``d`` (m,) distance [m] and ``i`` (m,) index of the nearest growing node (inf / -1: none
+    known). Target attractors (unbounded influence, few) are compared with every new node.
+    Ordinary attractors are looked up in a k-d tree of all of them (built once) within the
+    influence distance R of each new node: their ``d`` is exact whenever the nearest growing
+    node is within R and is some value > R (or inf) otherwise. That is all a growth step reads
+    (an attractor pulls only when ``d <= R``), and it stays so when a node stops growing: its
+    attractors are re-queried (:meth:`reassociate`), and a node no nearer than the one lost
+    cannot come within R of an attractor whose lost nearest node was beyond R.
+    """
+
+    def __init__(self, A: np.ndarray, is_t: np.ndarray, influence: float, kill: float):
+        self.A = A
+        self.t_idx = np.nonzero(is_t)[0]
+        self.R = float(influence)
+        self.kill = float(kill)
+        self.d = np.full(len(A), np.inf)
+        self.i = np.full(len(A), -1, np.int64)
+        self._index(np.nonzero(~is_t)[0])
+
+    def _index(self, ordinary: np.ndarray) -> None:
+        """k-d tree of the ordinary attractors ``ordinary`` (rebuilt over the live ones once half
+        of the indexed ones died, so that the look-ups stay proportional to the live count)."""
+        self.o_idx = ordinary
+        self.tree = cKDTree(self.A[ordinary]) if ordinary.size else None
+
+    def absorb(self, alive: np.ndarray, pos: np.ndarray, idx: np.ndarray, growing: np.ndarray) -> None:
+        """Fold new nodes ``pos`` (k, 3) (tree indices ``idx``; ``growing`` (k,) bool) in: nearer
+        growing nodes replace the recorded ones, and ordinary attractors within the kill
+        distance of any new node die (``alive`` updated in place)."""
+        if len(pos) == 0:
+            return
+        g = np.nonzero(growing)[0]
+        t = self.t_idx[alive[self.t_idx]]
+        if t.size and g.size:
+            D = cdist(self.A[t], pos[g])
+            j = np.argmin(D, axis=1)
+            self._update(t, D[np.arange(len(t)), j], idx[g[j]])
+        live = alive[self.o_idx]
+        if 2 * np.count_nonzero(live) < live.size:
+            self._index(self.o_idx[live])
+        if self.tree is None:
+            return
+        pr = cKDTree(pos).sparse_distance_matrix(self.tree, self.R, output_type="ndarray")
+        att = self.o_idx[pr["j"]]
+        ok = alive[att] & growing[pr["i"]]
+        node, a_g, d_g = pr["i"][ok], att[ok], pr["v"][ok]
+        if a_g.size:
+            # per attractor the nearest new node; the lowest node index among equally near ones
+            best = np.full(len(self.A), np.inf)
+            np.minimum.at(best, a_g, d_g)
+            at_min = d_g == best[a_g]
+            first = np.full(len(self.A), np.iinfo(np.int64).max)
+            np.minimum.at(first, a_g[at_min], node[at_min])
+            u = np.nonzero(best < np.inf)[0]
+            self._update(u, best[u], idx[first[u]])
+        dead = att[pr["v"] <= self.kill]
+        alive[dead] = False
+
+    def _update(self, att, d, node) -> None:
+        better = d < self.d[att]
+        self.d[att[better]] = d[better]
+        self.i[att[better]] = node[better]
+
+    def reassociate(self, alive: np.ndarray, tree: Tree, dead: np.ndarray) -> None:
+        """Attractors whose nearest growing node stopped growing look for the next one."""
+        affected = np.nonzero(alive & np.isin(self.i, dead))[0]
+        self.d[affected] = np.inf
+        self.i[affected] = -1
+        g = np.nonzero(~tree.frozen)[0]
+        if affected.size == 0 or g.size == 0:
+            return
+        d, j = cKDTree(tree.nodes[g]).query(self.A[affected], k=1)
+        self.d[affected] = d
+        self.i[affected] = g[j]
 
 
-def _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep):
+def _grow_step(tree, nodes, A, att, near_i, is_t, tid, obstacles, s, rng, rep):
     """Children of the attracted nodes: (pos (k,3), parent (k,), target attractor or -1 (k,),
     attractors of dropped children, attracted nodes that got no child this step)."""
     L = s.branch_length
@@ -277,8 +345,7 @@ def _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep):
     free_cand = keep & (target_attr < 0)
     if free_cand.any():
         fc = np.nonzero(free_cand)[0]
-        d, _ = cKDTree(X).query(cand[fc], k=1, distance_upper_bound=spacing)
-        crowded = fc[d < spacing]
+        crowded = fc[nodes.within(cand[fc], spacing)]
         if fc.size > 1:
             pairs = cKDTree(cand[fc]).query_pairs(spacing, output_type="ndarray")
             if len(pairs):
@@ -293,17 +360,30 @@ def _grow_step(tree, A, att, near_i, is_t, tid, obstacles, s, rng, rep):
     return cand[keep], uniq[keep], target_attr[keep], dropped_attr, uniq[~keep]
 
 
-def _reassociate(A, alive, near_d, near_i, tree, dead) -> None:
-    """Attractors whose nearest growing node stopped growing look for the next one."""
-    affected = np.nonzero(alive & np.isin(near_i, dead))[0]
-    near_d[affected] = np.inf
-    near_i[affected] = -1
-    g = np.nonzero(~tree.frozen)[0]
-    if affected.size == 0 or g.size == 0:
-        return
-    d, j = cKDTree(tree.nodes[g]).query(A[affected], k=1)
-    near_d[affected] = d
-    near_i[affected] = g[j]
+class _NodeIndex:
+    """k-d trees over the tree's nodes as they are appended (a logarithmic method: blocks of
+    decreasing size, a new block merged with the last while it is at least as large), so that
+    a step's look-up costs O(log² n) per query and building them O(n log² n) in all, instead
+    of a new tree over every node each step."""
+
+    def __init__(self, X: np.ndarray):
+        self.blocks = []
+        self.add(X)
+
+    def add(self, P: np.ndarray) -> None:
+        pts = np.asarray(P, np.float64).reshape(-1, 3)
+        while self.blocks and len(self.blocks[-1][0]) <= len(pts):
+            pts = np.concatenate([self.blocks.pop()[0], pts])
+        if len(pts):
+            self.blocks.append((pts, cKDTree(pts)))
+
+    def within(self, Q: np.ndarray, r: float) -> np.ndarray:
+        """(q,) bool: a node lies closer than ``r`` [m] to ``Q[i]``."""
+        out = np.zeros(len(Q), bool)
+        for _, t in self.blocks:
+            d, _ = t.query(Q, k=1, distance_upper_bound=r)
+            out |= d < r
+        return out
 
 
 def _avoid(start, direction, on_surface, L, obstacles, trials, rng):

@@ -49,6 +49,17 @@ TOML layout (all tables and keys optional; see ``scenes/growth/README.md``)::
     segments = 12              # circular resolution of joint spheres (rounded up to a multiple of 4)
     subtract_objects = true    # carve the objects out of the skin
     tolerance = 0.0            # [m] largest allowed penetration of the skin into an object
+
+    [material]                 # structural check (simfab grow check): the printed material
+    name = "PLA"               # built-in base material (PLA, VeroWhite); the keys below override it
+    youngs_modulus = 3.5e9     # [Pa]
+    poisson_ratio = 0.36       # [-]
+    yield_stress = 60e6        # [Pa] von Mises yield stress
+    density = 1240.0           # [kg/m^3]
+    critical_distance = 5e-4   # [m] radius the von Mises stress is averaged over (0: the largest point value)
+
+    [loads]                    # structural check: extra force per target site [N], world frame
+    target_0 = [0.0, 0.0, -2.0]
 """
 
 from __future__ import annotations
@@ -58,7 +69,9 @@ import math
 
 import numpy as np
 
+import simfab.growth.tolerances as tol
 from simfab.errors import InputError
+from simfab.fem.materials import PLA, Material, material_by_name
 
 MODES = ("volume", "surface", "profile")
 
@@ -212,7 +225,7 @@ def check_scale(p: GrowthParams, box: np.ndarray) -> None:
 # --------------------------------------------------------------------------- TOML
 _GROWTH_KEYS = {"mode", "attractors", "influence", "kill", "branch_length", "box", "surface_objects",
                 "target_influence", "max_steps", "max_nodes", "max_trials", "seed"}
-_TABLES = {"growth", "radius", "smoothing", "symmetry", "profile", "stages", "skin"}
+_TABLES = {"growth", "radius", "smoothing", "symmetry", "profile", "stages", "skin", "material", "loads"}
 
 
 def _vec(x, n, where):
@@ -236,6 +249,64 @@ def _num(x, where, *, integer=False, positive=True, allow_inf=False):
     if positive and not x > 0:
         raise InputError(f"must be positive, got {x!r}", where=where)
     return int(x) if integer else float(x)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class StructureSpec:
+    """The structural check's inputs from the ``[material]`` and ``[loads]`` tables.
+
+    material : the printed material (:class:`simfab.fem.materials.Material`; PLA by default).
+    critical_distance : radius [m] of the ball the von Mises stress is averaged over before it
+        is compared with the yield stress (Theory of Critical Distances, as the coupling's
+        yield check: :mod:`simfab.design.stress`); 0 compares the largest element-corner value.
+    loads : ((target name, (fx, fy, fz)), ...) extra forces [N] on target sites, world frame,
+        added to the supported objects' weights.
+    """
+
+    material: Material = PLA
+    critical_distance: float = tol.CRITICAL_DISTANCE
+    loads: tuple = ()
+
+
+_MATERIAL_KEYS = {"name", "youngs_modulus", "poisson_ratio", "yield_stress", "density", "critical_distance"}
+
+
+def structure_from_toml(doc: dict, where: str) -> StructureSpec:
+    """:class:`StructureSpec` from a parsed scene TOML (``[material]``, ``[loads]``); InputError
+    names the file, table and key. Target names in ``[loads]`` are checked against the scene's
+    sites by :func:`simfab.growth.scene.load_growth_scene`."""
+    m = doc.get("material", {})
+    if not isinstance(m, dict):
+        raise InputError("expected a table", where=f"{where}: [material]")
+    _check_unknown(m, _MATERIAL_KEYS, f"{where}: [material]")
+    base = PLA
+    if "name" in m:
+        if not isinstance(m["name"], str):
+            raise InputError(f"expected a material name, got {m['name']!r}", where=f"{where}: material.name")
+        try:
+            base = material_by_name(m["name"])
+        except InputError as e:
+            raise InputError(e.message, where=f"{where}: material.name") from None
+    over = {}
+    for key in ("youngs_modulus", "yield_stress", "density"):
+        if key in m:
+            over[key] = _num(m[key], f"{where}: material.{key}")
+    if "poisson_ratio" in m:
+        nu = _num(m["poisson_ratio"], f"{where}: material.poisson_ratio", positive=False)
+        if not -1.0 < nu < 0.5:
+            raise InputError(f"must lie in (-1, 0.5), got {nu}", where=f"{where}: material.poisson_ratio")
+        over["poisson_ratio"] = nu
+    material = dataclasses.replace(base, name=str(m.get("name", base.name)), **over) if over else base
+    radius = tol.CRITICAL_DISTANCE
+    if "critical_distance" in m:
+        radius = _num(m["critical_distance"], f"{where}: material.critical_distance", positive=False)
+        if radius < 0:
+            raise InputError(f"must be >= 0, got {radius}", where=f"{where}: material.critical_distance")
+    ld = doc.get("loads", {})
+    if not isinstance(ld, dict):
+        raise InputError("expected a table", where=f"{where}: [loads]")
+    loads = tuple((str(k), _vec(v, 3, f"{where}: loads.{k}")) for k, v in ld.items())
+    return StructureSpec(material=material, critical_distance=radius, loads=loads)
 
 
 def _check_unknown(d: dict, allowed: set, where: str):

@@ -182,3 +182,94 @@ def render_preview(mjcf: Path, png: Path, azimuth: float, camera_json: Path | No
     if camera_json is not None:
         write_json(camera_json, cam or {"note": "no OpenGL: the matplotlib fallback has no pinhole camera"})
     return png
+
+
+# --------------------------------------------------------------------------- structural check
+def check_surface(check):
+    """The loaded support's surface for display: (faces (f, 3) into the returned points, rest
+    points (k, 3) [m], displacement (k, 3) [m], von Mises (k,) [Pa]: at each surface corner the
+    largest critical-distance mean over the corners of the elements sharing it)."""
+    m = check.model
+    F = np.asarray(m.boundary_facets[:, :3])
+    used, inv = np.unique(F, return_inverse=True)
+    node_vm = np.zeros(m.n_vertices)
+    np.maximum.at(node_vm, np.asarray(m.corner_elements).ravel(), check.point_von_mises)
+    return inv.reshape(F.shape), m.rest[used], check.u[used], node_vm[used]
+
+
+def write_check_usd(check, scene, path: Path) -> Path:
+    """USD stage of the structural check: the objects (static), the support's surface at rest
+    (time code 0) and loaded (time code 1, true displacement), with per-vertex primvars
+    ``von_mises`` [Pa] (the critical-distance mean) and ``displacement`` [m] (magnitude)."""
+    from simfab.io.usd import StageWriter
+
+    faces, X, u, vm = check_surface(check)
+    w = StageWriter(path)
+    for name, m in scene.objects.items():
+        w.add_mesh(f"objects/{_ident(name)}", np.asarray(m.faces), np.asarray(m.vertices), color=OBJECT_RGBA[:3])
+    w.add_mesh("support", faces, X)
+    disp = np.linalg.norm(u, axis=1)
+    for t, x in ((0, X), (1, X + u)):
+        w.set_points("support", x, t)
+        w.set_scalar("support", "displacement", disp, t, vmin=0.0, vmax=float(disp.max()) or 1.0, units="m")
+        w.set_scalar("support", "von_mises", vm, t, vmin=0.0, vmax=float(vm.max()) or 1.0, units="Pa",
+                     cmap="inferno")
+    return w.save()
+
+
+def write_check_png(check, path: Path, *, title: str) -> Path:
+    """PNG of the support's surface coloured by the von Mises stress [MPa] (critical-distance mean),
+    the peak marked, with a colour bar and the safety factor in the title."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from simfab.io.atomic import save_figure
+
+    faces, X, _, vm = check_surface(check)
+    fig = plt.figure(figsize=(7.5, 6.5), dpi=120)
+    ax = fig.add_subplot(projection="3d")
+    mpa = vm / 1e6
+    norm = matplotlib.colors.Normalize(vmin=0.0, vmax=float(mpa.max()) or 1.0)
+    cmap = matplotlib.colormaps["inferno"]
+    Xmm = X * 1e3
+    poly = Poly3DCollection(Xmm[faces], facecolors=cmap(norm(mpa[faces].mean(axis=1))), edgecolors="none")
+    ax.add_collection3d(poly)
+    p = check.peak_point * 1e3
+    ax.scatter(*p, s=80, marker="o", facecolors="none", edgecolors="cyan", linewidths=2,
+               label=f"peak {check.max_von_mises_Pa / 1e6:.3g} MPa", depthshade=False)
+    lo, hi = Xmm.min(axis=0), Xmm.max(axis=0)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_zlim(lo[2], hi[2])
+    ax.set_box_aspect(np.maximum(hi - lo, 1e-9))
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_zlabel("z [mm]")
+    ax.view_init(elev=20, azim=-60)
+    ax.legend(loc="upper left")
+    sm = matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap)
+    fig.colorbar(sm, ax=ax, shrink=0.7, label=f"von Mises stress, {check.critical_distance_m * 1e3:.3g} mm "
+                                                "critical-distance mean [MPa]")
+    ax.set_title(title, fontsize=10)
+    return save_figure(fig, path, close=True)
+
+
+def write_check(check, scene, out: Path, *, stem: str) -> dict:
+    """USD stage and PNG of a structural check under ``out`` (together or not at all)."""
+    from simfab.io.atomic import atomic_paths
+    from simfab.io.outpaths import safe_name
+
+    out = Path(out)
+    stem = safe_name(stem)
+    paths = {"check_usd": out / f"{stem}_check.usdc", "check_png": out / f"{stem}_check.png"}
+    title = (f"{stem}: loaded support, safety factor {check.safety_factor:.3g} "
+             f"(yield {check.yield_stress_Pa / 1e6:.3g} MPa, {check.material_name})\n"
+             f"max deflection {max(check.deflection_m.values(), default=0.0) * 1e3:.3g} mm, "
+             f"mass {check.mass_kg * 1e3:.3g} g")
+    with atomic_paths(paths) as tmp:
+        write_check_usd(check, scene, tmp["check_usd"])
+        write_check_png(check, tmp["check_png"], title=title)
+    return {k: str(v) for k, v in paths.items()}

@@ -23,9 +23,9 @@ import time
 
 import numpy as np
 
+import simfab.growth.attractors as attr
+import simfab.growth.tolerances as tol
 from simfab.errors import InputError
-from simfab.growth import attractors as attr
-from simfab.growth import tolerances as tol
 from simfab.growth.colonize import ColonizeSettings, Tree, colonize
 from simfab.growth.config import Resolved, resolve
 from simfab.growth.obstacles import Obstacles

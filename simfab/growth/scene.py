@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
+import simfab.growth.tolerances as tol
 from simfab.errors import InputError
-from simfab.growth import tolerances as tol
-from simfab.growth.config import GrowthParams, params_from_toml
+from simfab.growth.config import GrowthParams, StructureSpec, params_from_toml, structure_from_toml
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -40,6 +40,7 @@ class GrowthScene:
     targets : (t, 3) target points. target_names : t names.
     sphere_centers : (s, 3), sphere_radii : (s,) obstacle spheres. sphere_names : s names.
     params : growth parameters. path : the MJCF file (None when built in Python).
+    structure : material and extra loads of the structural check ([material], [loads]).
     """
 
     objects: dict
@@ -52,6 +53,7 @@ class GrowthScene:
     sphere_names: tuple = ()
     params: GrowthParams = dataclasses.field(default_factory=GrowthParams)
     path: Path | None = None
+    structure: StructureSpec = dataclasses.field(default_factory=StructureSpec)
 
     def __post_init__(self):
         object.__setattr__(self, "roots", np.asarray(self.roots, dtype=np.float64).reshape(-1, 3))
@@ -91,12 +93,14 @@ def load_growth_scene(path: str | os.PathLike) -> GrowthScene:
     sc = load_scene(path)
     toml_path = path.with_suffix(".toml")
     params = GrowthParams()
+    structure = StructureSpec()
     if toml_path.is_file():
         try:
             doc = tomllib.loads(toml_path.read_text(encoding="utf-8"))
         except tomllib.TOMLDecodeError as e:
             raise InputError(f"invalid TOML: {e}", where=str(toml_path)) from None
         params = params_from_toml(doc, str(toml_path))
+        structure = structure_from_toml(doc, str(toml_path))
 
     def sites(prefix):
         names = sorted((n for n in sc.sites if n.startswith(prefix)), key=_natural_key)
@@ -109,7 +113,11 @@ def load_growth_scene(path: str | os.PathLike) -> GrowthScene:
     objects = {k: v for k, v in sc.body_meshes().items() if len(v.faces)}
     scene = GrowthScene(objects=objects, roots=roots, root_names=root_names, targets=targets,
                         target_names=target_names, sphere_centers=centers, sphere_radii=radii,
-                        sphere_names=sphere_names, params=params, path=path)
+                        sphere_names=sphere_names, params=params, path=path, structure=structure)
+    unknown = [n for n, _ in structure.loads if n not in target_names]
+    if unknown:
+        raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(target_names)})",
+                         where=f"{toml_path}: [loads]")
     validate_scene(scene)
     return scene
 

@@ -15,7 +15,7 @@ import io
 
 import numpy as np
 
-from simfab.growth import tolerances as tol
+import simfab.growth.tolerances as tol
 from simfab.growth.skeleton import chains, subset
 
 

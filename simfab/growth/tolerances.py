@@ -48,3 +48,8 @@ GROUND_CONTACT = 1e-3
 #: Skin penetration below this fraction of D is round-off of the float32 STL cleanup, not a
 #: real overlap (the skin is carved exactly by the objects).
 PENETRATION_ROUNDOFF = 1e-6
+
+#: Structural check: default radius [m] the von Mises stress is averaged over before the yield
+#: comparison ([material] critical_distance): half of PLA's critical distance, the coupling's
+#: choice (simfab.design.stress.STRESS_RADIUS explains it).
+CRITICAL_DISTANCE = 0.5e-3

@@ -1,6 +1,7 @@
-"""Growth benchmark: seconds per growth (2000 attractors) and per skin, every bundled scene.
+"""Growth benchmark: seconds per growth (2000 attractors) and per skin, every bundled scene,
+and the growth time's scaling with the attractor count on phone_stand.
 
-``python tools/bench.py growth [--repeats R] [--attractors N] [--scenes a,b,...]``
+``python tools/bench.py growth [--repeats R] [--attractors N] [--scenes a,b,...] [--scaling N1,N2,...]``
 
 For each scene in ``scenes/growth`` the full growth (attractor placement, colonization,
 pruning, smoothing; all stages for guided scenes) and the skin (union, carving, STL
@@ -11,19 +12,29 @@ other load on the machine), nodes, segments, targets reached, and whether the ta
 method's total run time per growth with 2000 attractors ("growth_seconds_original" in the
 shared reference figures; "<1" entries are taken as 1 s, an upper bound), compared with
 our growth + skin time.
+
+Scaling (``--scaling``, default 2000,20000,200000; ``--scaling ""`` skips it): phone_stand grown
+with each attractor count (seeds 0..R-1, after the warm-up), one row per count with its
+median wall and process CPU seconds, nodes grown, steps and stop reason (the node cap raised to
+2 n so that the largest count grows to the end); the exponent p of seconds ~ n^p is fitted
+between consecutive counts. Target: 20,000 attractors <= 0.5 s of growth.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import statistics
 import time
 
 from simfab._bundled import scenes_dir
+from simfab.errors import InputError
 
 TARGET_GROWTH_SECONDS = 0.3
 TARGET_SKIN_SECONDS = 1.0
+TARGET_20K_SECONDS = 0.5
+SCALING_SCENE = "phone_stand"
 
 SCENES = scenes_dir("growth")
 
@@ -50,7 +61,15 @@ def run(argv) -> dict:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--attractors", type=int, default=2000)
     ap.add_argument("--scenes", default=None, help="comma-separated scene names (default: all)")
+    ap.add_argument("--scaling", default="2000,20000,200000",
+                    help=f"comma-separated attractor counts grown on {SCALING_SCENE} (empty: skip)")
     a = ap.parse_args(argv)
+    try:
+        counts = [int(c) for c in a.scaling.split(",") if c.strip()]
+    except ValueError:
+        raise InputError(f"--scaling: expected comma-separated integers, got {a.scaling!r}") from None
+    if any(c < 1 for c in counts):
+        raise InputError(f"--scaling: attractor counts must be positive, got {a.scaling!r}")
 
     from simfab.growth import grow, load_growth_scene, skin_result
 
@@ -91,6 +110,7 @@ def run(argv) -> dict:
             "growth_target_met": statistics.median(tg) / stages <= TARGET_GROWTH_SECONDS,
             "skin_target_met": statistics.median(ts) <= TARGET_SKIN_SECONDS,
         }
+    scaling = _scaling(counts, a.repeats)
     ref, per_example = _reference()
     ours_total = [v["growth_seconds_median"] + v["skin_seconds_median"] for v in out.values()]
     result = {
@@ -104,7 +124,12 @@ def run(argv) -> dict:
         "all_growth_targets_met": all(v["growth_target_met"] for v in out.values()),
         "all_skin_targets_met": all(v["skin_target_met"] for v in out.values()),
         "ours_total_seconds_range": [min(ours_total), max(ours_total)],
+        "scaling": scaling,
     }
+    row20k = next((r for r in scaling["rows"] if r["attractors"] == 20000), None)
+    if row20k is not None:
+        result["growth_20k_seconds_median"] = row20k["growth_seconds_median"]
+        result["growth_20k_target_met"] = row20k["growth_seconds_median"] <= TARGET_20K_SECONDS
     if ref is not None:
         orig = list(per_example.values())
         result["reference"] = {
@@ -116,3 +141,28 @@ def run(argv) -> dict:
         result["ratio_original_median_over_ours_median"] = statistics.median(orig) / statistics.median(ours_total)
         result["ratio_original_slowest_over_ours_slowest"] = max(orig) / max(ours_total)
     return result
+
+
+def _scaling(counts: list[int], repeats: int) -> dict:
+    """Growth seconds of :data:`SCALING_SCENE` per attractor count, and the exponents between counts."""
+    from simfab.growth import grow, load_growth_scene
+
+    scene = load_growth_scene(SCENES / f"{SCALING_SCENE}.xml")
+    rows = []
+    for n in counts:
+        t, c = [], []
+        for seed in range(repeats):
+            t0, c0 = time.perf_counter(), time.process_time()
+            r = grow(scene, seed=seed, attractors=n, max_nodes=max(scene.params.max_nodes, 2 * n))
+            t.append(time.perf_counter() - t0)
+            c.append(time.process_time() - c0)
+        s = r.summary()
+        rows.append({"attractors": n, "growth_seconds_median": statistics.median(t), "growth_seconds_max": max(t),
+                     "growth_cpu_seconds_median": statistics.median(c),
+                     "nodes_grown": s["nodes_grown"], "steps": s["steps"], "stop_reasons": s["stop_reasons"],
+                     "targets": f"{s['targets_reached']}/{s['targets_total']}"})
+    pairs = [(a, b) for a, b in zip(rows, rows[1:]) if b["attractors"] != a["attractors"]]
+    exps = [math.log(b["growth_seconds_median"] / a["growth_seconds_median"])
+            / math.log(b["attractors"] / a["attractors"]) for a, b in pairs]
+    return {"scene": SCALING_SCENE, "target_seconds_at_20000": TARGET_20K_SECONDS, "rows": rows,
+            "exponent_between_counts": exps}

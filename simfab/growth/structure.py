@@ -1,0 +1,517 @@
+"""Structural check of a grown support: does the skin carry its load, and how far does it bend?
+
+Model (linear elastostatics on quadratic tetrahedra):
+
+1. the skin (:func:`simfab.growth.skinning.skin`, objects carved out) is tetrahedralized by
+   fTetWild (:func:`simfab.fem.meshing.tetrahedralize`) with a target edge length of
+   ``EDGE_PER_RMIN`` r_min (r_min the thinnest branch radius) and lifted to 10-node tets
+   (:func:`simfab.fem.p2.to_p2`): a branch is a beam, and P2 elements carry the linear strain
+   of bending exactly where linear tets lock;
+2. boundary nodes within ``FIX_TOL`` D (D the skin's bounding-box diagonal, the order of
+   fTetWild's surface envelope) of a *ground* object (one a root stands on) are clamped, u = 0;
+3. loads: each supported object's weight m g (MJCF body mass, the model's gravity vector) is
+   shared equally among the reached targets that touch it (within ``GROUND_CONTACT`` of its
+   diagonal, or the branch radius there), plus the ``[loads]`` / ``--load`` force of each target;
+   surface-mode contacts count as targets; a target's force F acts as
+   a uniform traction F / A on the skin facets within the branch radius of the target point
+   (area A; consistent nodal loads, :func:`simfab.fem.loads.traction_loads`), and the support's
+   own weight as the body force rho g (:func:`simfab.fem.loads.body_force_loads`);
+4. K u = f on the free dofs, K the Hessian of the Neo-Hookean energy at the rest shape (the
+   small-strain stiffness with the material's Lame parameters mu, lambda:
+   :func:`simfab.fem.elastic.energy_gradient_hessian`), by sparse Cholesky
+   (:class:`simfab.solve.linear.SPDSolver`);
+5. stress at every element corner (:func:`corner_stress`): eps = sym(grad u), sigma =
+   lambda tr(eps) I + 2 mu eps, sigma_vm = sqrt(3/2 s:s) (s the deviator), averaged over a ball of
+   radius ``critical_distance`` (the coupling's yield rule, :mod:`simfab.design.stress`):
+   sigma_bar_q = sum_{|X_p - X_q| <= r} V_p sigma_p / sum V_p, each corner a cell of volume V_e / 4;
+
+and reports the safety factor SF = sigma_yield / max_q sigma_bar_q, where the peak is, the
+deflection of each target (the traction-weighted mean displacement of its loaded facets), and
+the support's mass rho V (V the skin's volume; the tet mesh's differs by fTetWild's envelope).
+:func:`buckling_factor` adds the linearized buckling load factor of that state, and
+:func:`strengthen` rescales branch radii until the safety factor reaches a target.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+import simfab.growth.tolerances as tol
+from simfab.errors import ConvergenceError, InputError
+from simfab.fem import elastic
+from simfab.fem.loads import body_force_loads, traction_loads
+from simfab.fem.meshing import tetrahedralize
+from simfab.fem.model import make_model
+from simfab.fem.p2 import P2Model, corner_gradients, to_p2
+from simfab.growth.config import StructureSpec
+from simfab.growth.scene import GrowthScene
+from simfab.growth.skeleton import Skeleton
+from simfab.growth.skinning import skin
+from simfab.solve.linear import NotPositiveDefinite, SPDSolver
+
+#: fTetWild's target edge length as a multiple of the thinnest branch radius. fTetWild refines
+#: below it wherever its surface envelope (1e-3 of the diagonal) asks, which on the bundled
+#: supports gives edges of about one thinnest radius; a target at that size itself costs several
+#: times the meshing time for a mesh of about the same count (docs/decisions.md)
+EDGE_PER_RMIN = 4.0
+#: clamp band: boundary nodes this fraction of the skin's diagonal from a ground object
+FIX_TOL = 2e-3
+#: standard gravity [m/s^2] when the scene has no MJCF model to read it from
+G0 = 9.81
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class TargetLoad:
+    """Force on one load point (a reached target or a surface contact, :func:`load_points`):
+    ``force`` (3,) [N] = ``weight`` (its share of the objects it touches) + ``extra`` ([loads] /
+    --load); ``objects`` the touched objects' names (none: the point only reports its deflection)."""
+
+    name: str
+    force: np.ndarray
+    weight: np.ndarray
+    extra: np.ndarray
+    objects: tuple
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class CheckOptions:
+    """Mesh and output options of :func:`check_structure`.
+
+    edge_length : target tet edge length [m] (None: ``EDGE_PER_RMIN`` x the smallest radius).
+    segments : joint-sphere resolution of the skin (None: the scene's ``skin.segments``).
+    self_weight : include the support's own weight.
+    """
+
+    edge_length: float | None = None
+    segments: int | None = None
+    self_weight: bool = True
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class StructureCheck:
+    """Result of :func:`check_structure` (SI units).
+
+    safety_factor : yield stress / max_von_mises_Pa. max_von_mises_Pa : the peak of the
+    critical-distance mean of the von Mises stress [Pa]; peak_point (3,) [m] where it is.
+    max_point_von_mises_Pa : the largest corner value (unaveraged) [Pa].
+    deflection_m : load point name -> |mean displacement of its facets| [m] (every reached target and contact).
+    mass_kg, volume_m3 : of the support. loads : the :class:`TargetLoad` per loaded target.
+    model : the P2 model; u (n, 3) [m] displacement of its nodes; fixed (n,) bool clamped nodes.
+    element_von_mises : (m,) per element the largest averaged corner stress [Pa].
+    points, point_von_mises : (4m, 3) rest positions [m] of the element corners and their averaged stress [Pa].
+    mesh : the skin (``trimesh.Trimesh``) that was meshed. tets, nodes : mesh sizes.
+    seconds : wall time of skin, mesh, solve and stress.
+    """
+
+    safety_factor: float
+    max_von_mises_Pa: float
+    peak_point: np.ndarray
+    max_point_von_mises_Pa: float
+    deflection_m: dict
+    mass_kg: float
+    volume_m3: float
+    loads: tuple
+    material_name: str
+    yield_stress_Pa: float
+    critical_distance_m: float
+    model: P2Model
+    u: np.ndarray
+    fixed: np.ndarray
+    element_von_mises: np.ndarray
+    mesh: object
+    tets: int
+    nodes: int
+    seconds: float
+    points: np.ndarray
+    point_von_mises: np.ndarray
+
+    def summary(self) -> dict:
+        """JSON-ready figures (the ``simfab grow check`` keys)."""
+        return {
+            "safety_factor": self.safety_factor,
+            "max_von_mises_Pa": self.max_von_mises_Pa,
+            "peak_point_m": [float(v) for v in self.peak_point],
+            "max_point_von_mises_Pa": self.max_point_von_mises_Pa,
+            "deflection_m": dict(self.deflection_m),
+            "max_deflection_m": max(self.deflection_m.values(), default=0.0),
+            "mass_kg": self.mass_kg,
+            "volume_m3": self.volume_m3,
+            "material": self.material_name,
+            "yield_stress_Pa": self.yield_stress_Pa,
+            "critical_distance_m": self.critical_distance_m,
+            "target_forces_N": {ld.name: [float(v) for v in ld.force] for ld in self.loads},
+            "tets": self.tets,
+            "fem_nodes": self.nodes,
+            "seconds_check": self.seconds,
+        }
+
+
+def gravity(scene: GrowthScene) -> np.ndarray:
+    """The scene's gravity vector (3,) [m/s^2] (MJCF ``<option gravity>``; (0, 0, -G0) without a file)."""
+    if scene.path is None:
+        return np.array([0.0, 0.0, -G0])
+    from simfab.io.mjcf import load_scene
+
+    return np.asarray(load_scene(scene.path).model.opt.gravity, np.float64).copy()
+
+
+def body_masses(scene: GrowthScene) -> dict:
+    """Object name -> mass [kg] (MJCF body masses, MuJoCo's inertia from the geoms' density)."""
+    if scene.path is None:
+        return {}
+    from simfab.io.mjcf import load_scene
+
+    sc = load_scene(scene.path)
+    return {n: float(m) for n, m in zip(sc.body_names(), sc.model.body_mass) if n in scene.objects}
+
+
+def ground_objects(scene: GrowthScene) -> list:
+    """Names of the objects a root stands on (within ``GROUND_CONTACT`` of their diagonal)."""
+    out = []
+    for name, m in scene.objects.items():
+        _, d, _ = m.nearest.on_surface(scene.roots)
+        if np.any(d <= tol.GROUND_CONTACT * float(np.linalg.norm(m.extents))):
+            out.append(name)
+    return out
+
+
+def load_points(skeleton: Skeleton) -> dict:
+    """Where the support meets what it holds: name -> skeleton node, the reached targets (by
+    their site names) and, in surface mode, the contacts (``contact_<node>``)."""
+    out = dict(skeleton.target_nodes())
+    for i in np.nonzero(skeleton.contact_mask())[0]:
+        out.setdefault(f"contact_{int(i)}", int(i))
+    return out
+
+
+def target_loads(scene: GrowthScene, skeleton: Skeleton, extra: dict | None = None) -> tuple:
+    """The force on every load point of :func:`load_points` (see :class:`TargetLoad`): each
+    non-ground object's weight shared equally among the points touching it (within the branch
+    radius there, or ``GROUND_CONTACT`` of its diagonal), plus ``extra`` (target name -> (3,) [N];
+    the scene's ``[loads]`` when None). InputError when an extra load names an unreached target."""
+    extra = dict(scene.structure.loads) if extra is None else dict(extra)
+    points = load_points(skeleton)
+    missing = [n for n in extra if n not in points]
+    if missing:
+        raise InputError(f"load on target(s) {', '.join(missing)} that the support does not reach "
+                         f"(reached: {', '.join(points)})", where="loads")
+    g = gravity(scene)
+    mass = body_masses(scene)
+    ground = set(ground_objects(scene))
+    names = list(points)
+    idx = np.array([points[n] for n in names], np.int64)
+    touch = {}
+    for name, m in scene.objects.items():
+        if name in ground or not names:
+            continue
+        _, d, _ = m.nearest.on_surface(skeleton.nodes[idx])
+        tol_d = np.maximum(tol.GROUND_CONTACT * float(np.linalg.norm(m.extents)), skeleton.radius[idx])
+        on = [n for n, hit in zip(names, d <= tol_d) if hit]
+        if on:
+            touch[name] = on
+    out = []
+    for t in names:
+        objs = tuple(o for o, ts in touch.items() if t in ts)
+        w = sum((mass.get(o, 0.0) * g / len(touch[o]) for o in objs), np.zeros(3))
+        e = np.asarray(extra.get(t, (0.0, 0.0, 0.0)), np.float64)
+        out.append(TargetLoad(name=t, force=w + e, weight=w, extra=e, objects=objs))
+    return tuple(out)
+
+
+def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | None = None,
+                    options: CheckOptions = CheckOptions(), spec: StructureSpec | None = None) -> StructureCheck:
+    """Skin, mesh, load and solve the support ``skeleton`` grown in ``scene`` (module docstring).
+
+    loads : extra target forces name -> (3,) [N] replacing the scene's ``[loads]`` (None: keep).
+    spec : material and critical distance (None: the scene's ``[material]``).
+    """
+    t0 = time.perf_counter()
+    spec = scene.structure if spec is None else spec
+    mat = spec.material
+    tl = target_loads(scene, skeleton, loads)
+    p = scene.params
+    mesh, _ = skin(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects, fixed=skeleton.fixed_mask(),
+                   segments=options.segments or p.skin_segments, subtract=p.subtract_objects)
+    h = options.edge_length if options.edge_length is not None else EDGE_PER_RMIN * float(skeleton.radius.min())
+    diag = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    V, T = tetrahedralize(mesh.vertices, mesh.faces, edge_length_fac=min(1.0, h / diag))
+    model = to_p2(make_model(V, T, mat))
+    X = model.rest
+    fixed = _clamped(model, scene, FIX_TOL * diag)
+    g = gravity(scene)
+    f = np.zeros_like(X)
+    if options.self_weight:
+        f += body_force_loads(model, lambda Xq: np.broadcast_to(mat.density * g, Xq.shape))
+    share = {}
+    tnode = load_points(skeleton)
+    for ld in tl:
+        i = tnode[ld.name]
+        w = _patch_weights(model, skeleton.nodes[i], float(skeleton.radius[i]))
+        share[ld.name] = w
+        f += w[:, None] * ld.force[None, :]
+    u = _solve(model, fixed, f)
+    x = X + u
+    _, vm = corner_stress(model, x)
+    cells = X[model.corner_elements].reshape(-1, 3)
+    avg = ball_mean(cells, np.repeat(np.abs(model.volume) / 4.0, 4), vm.ravel(), spec.critical_distance)
+    k = int(np.argmax(avg))
+    peak = float(avg[k])
+    defl = {name: float(np.linalg.norm(w @ u)) for name, w in share.items()}
+    vol = float(mesh.volume)
+    return StructureCheck(
+        safety_factor=float(mat.yield_stress / peak) if peak > 0 else float("inf"),
+        max_von_mises_Pa=peak, peak_point=cells[k].copy(), max_point_von_mises_Pa=float(vm.max()),
+        deflection_m=defl, mass_kg=mat.density * vol, volume_m3=vol, loads=tl, material_name=mat.name,
+        yield_stress_Pa=mat.yield_stress, critical_distance_m=spec.critical_distance, model=model, u=u,
+        fixed=fixed, element_von_mises=avg.reshape(vm.shape).max(axis=1), mesh=mesh, tets=int(model.n_elements),
+        nodes=int(model.n_vertices), seconds=time.perf_counter() - t0, points=cells, point_von_mises=avg)
+
+
+def geometric_stiffness(model: P2Model, sigma_corners: np.ndarray):
+    """Geometric (stress) stiffness K_G (3n, 3n) [N/m] of the stress field with corner values
+    ``sigma_corners`` (m, 4, 3, 3) [Pa] (affine over each element):
+
+        K_G[3a+i, 3b+j] = delta_ij sum_e sum_q w_eq grad N_a(X_q) . sigma(X_q) grad N_b(X_q),
+
+    the second variation of sum_e int sigma : (1/2) grad u^T grad u, with the model's quadrature
+    (exact for these products: P2 gradients are linear, sigma is linear)."""
+    import scipy.sparse as sp
+
+    sq = np.einsum("qc,mcij->mqij", model.qp_bary, sigma_corners)
+    gN = np.asarray(model.grad_N)
+    Ge = np.einsum("mq,mqai,mqij,mqbj->mab", np.asarray(model.qp_weight), gN, sq, gN)
+    el = np.asarray(model.elements, np.int64)
+    k = el.shape[1]
+    rows = np.repeat(el[:, :, None], k, axis=2)
+    cols = np.repeat(el[:, None, :], k, axis=1)
+    n = model.n_vertices
+    parts = [sp.coo_matrix((Ge.ravel(), (3 * rows.ravel() + d, 3 * cols.ravel() + d)), shape=(3 * n, 3 * n))
+             for d in range(3)]
+    return (parts[0] + parts[1] + parts[2]).tocsr()
+
+
+def buckling_factor(check: StructureCheck) -> float:
+    """Linearized buckling: the smallest load factor lambda > 0 with (K + lambda K_G) phi = 0 on
+    the free dofs, K the small-strain stiffness and K_G the geometric stiffness of the checked
+    stress state (:func:`geometric_stiffness`). Solved as the largest theta of -K_G phi = theta K
+    phi (K SPD), lambda = 1 / theta; inf when nothing is compressed (theta <= 0). The loads times
+    lambda are the critical loads (slender supports fail by buckling before they yield)."""
+    from scipy.sparse.linalg import eigsh
+
+    m = check.model
+    _, _, K = elastic.energy_gradient_hessian(m, m.rest, project_psd=False)
+    sigma, _ = corner_stress(m, m.rest + check.u)
+    free = np.nonzero(np.repeat(~check.fixed, 3))[0]
+    Kf = K[free][:, free].tocsc()
+    G = (-geometric_stiffness(m, sigma))[free][:, free].tocsc()
+    theta = eigsh(G, k=1, M=Kf, which="LA", return_eigenvectors=False, tol=1e-8)[0]
+    return float(1.0 / theta) if theta > 0 else float("inf")
+
+
+def _clamped(model: P2Model, scene: GrowthScene, band: float) -> np.ndarray:
+    """(n,) bool: boundary nodes within ``band`` [m] of a ground object's surface."""
+    ground = ground_objects(scene)
+    if not ground:
+        raise InputError("no object under the roots to clamp the support to (a root must stand on an object)",
+                         where="scene")
+    fixed = np.zeros(model.n_vertices, bool)
+    b = np.asarray(model.boundary_vertices)
+    for name in ground:
+        m = scene.objects[name]
+        lo, hi = m.bounds
+        near = b[np.all((model.rest[b] >= lo - band) & (model.rest[b] <= hi + band), axis=1)]
+        if near.size:
+            _, d, _ = m.nearest.on_surface(model.rest[near])
+            fixed[near[d <= band]] = True
+    if fixed.sum() < 3:
+        raise ConvergenceError("the support's skin does not meet the object under its roots: nothing to clamp")
+    return fixed
+
+
+def _patch_weights(model: P2Model, point: np.ndarray, radius: float) -> np.ndarray:
+    """(n,) nodal weights summing to 1 of a uniform traction on the boundary facets whose
+    centroid lies within ``radius`` [m] of ``point`` (at least the 3 nearest facets)."""
+    c = model.rest[model.boundary_facets[:, :3]].mean(axis=1)
+    d = np.linalg.norm(c - point, axis=1)
+    on = d <= radius
+    if on.sum() < 3:
+        on = np.zeros(len(c), bool)
+        on[np.argsort(d)[:3]] = True
+    w = traction_loads(model, on, np.array([1.0, 0.0, 0.0]))[:, 0]
+    return w / w.sum()
+
+
+def _solve(model: P2Model, fixed: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """u (n, 3) [m] of K u = f on the free nodes (u = 0 on the fixed ones), K the rest stiffness."""
+    _, _, K = elastic.energy_gradient_hessian(model, model.rest, project_psd=False)
+    free = np.repeat(~fixed, 3)
+    idx = np.nonzero(free)[0]
+    u = np.zeros(model.n_dofs)
+    try:
+        u[idx] = SPDSolver().solve_free(K, idx, f.ravel()[idx])
+    except NotPositiveDefinite:
+        raise ConvergenceError("the stiffness is singular: part of the support is not connected to the clamped "
+                               "ground (a floating body)") from None
+    if not np.all(np.isfinite(u)):
+        raise ConvergenceError("the static solve returned non-finite displacements")
+    return u.reshape(-1, 3)
+
+
+def corner_stress(model: P2Model, x) -> tuple[np.ndarray, np.ndarray]:
+    """Small-strain stress at the corners of every element, positions ``x`` (n, 3) [m]: F_c =
+    :func:`simfab.fem.p2.corner_gradients`, eps = sym(F_c) - I, sigma = lambda tr(eps) I + 2 mu eps.
+    Returns (Cauchy stress (m, 4, 3, 3) [Pa], von Mises (m, 4) [Pa]). The stress is affine over a
+    P2 element and the von Mises stress a norm of it, so its largest value over the element is at
+    a corner: corners sample the extremes of the discrete field (on the surface, where bending
+    stress peaks), which quadrature points, inside the element, would miss."""
+    F = corner_gradients(model, x)
+    eps = 0.5 * (F + np.swapaxes(F, -1, -2)) - np.eye(3)
+    tr = np.einsum("mqii->mq", eps)
+    mu = np.asarray(model.mu)[:, None, None, None]
+    lam = np.asarray(model.lam)[:, None, None, None]
+    sigma = lam * tr[..., None, None] * np.eye(3) + 2.0 * mu * eps
+    s = sigma - np.einsum("mqii->mq", sigma)[..., None, None] / 3.0 * np.eye(3)
+    return sigma, np.sqrt(1.5 * np.einsum("mqij,mqij->mq", s, s))
+
+
+def ball_mean(points: np.ndarray, weights: np.ndarray, values: np.ndarray, radius: float) -> np.ndarray:
+    """(k,) sum_{|p_j - p_i| <= radius} w_j v_j / sum w_j over cells at ``points`` (k, 3) [m]
+    (radius 0: the values themselves)."""
+    v = np.asarray(values, np.float64).ravel()
+    if not radius > 0:
+        return v.copy()
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    num = weights * v
+    den = np.asarray(weights, np.float64).copy()
+    np.add.at(num, pairs[:, 0], weights[pairs[:, 1]] * v[pairs[:, 1]])
+    np.add.at(num, pairs[:, 1], weights[pairs[:, 0]] * v[pairs[:, 0]])
+    np.add.at(den, pairs[:, 0], weights[pairs[:, 1]])
+    np.add.at(den, pairs[:, 1], weights[pairs[:, 0]])
+    return num / den
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class StrengthenResult:
+    """Outcome of :func:`strengthen`: the final ``skeleton`` and its ``check``; ``history`` one
+    (safety factor, volume [m^3]) per check run, the first the input's (a thinning round that
+    fell below the target is listed but not kept); ``reached`` whether the final safety factor
+    is at least ``target``."""
+
+    skeleton: Skeleton
+    check: StructureCheck
+    target: float
+    history: tuple
+    reached: bool
+
+    def summary(self) -> dict:
+        sf0, v0 = self.history[0]
+        sf1, v1 = self.check.safety_factor, self.check.volume_m3
+        return {"target_safety_factor": self.target, "reached": self.reached, "checks": len(self.history),
+                "safety_factor_before": sf0, "safety_factor_after": sf1, "volume_before_m3": v0,
+                "volume_after_m3": v1, "volume_change": v1 / v0 - 1.0 if v0 > 0 else 0.0}
+
+
+#: strengthening: the radius factor is the cube root of the stress ratio (bending stress of a
+#: round bar ~ M / r^3) times this margin, so that one re-check usually suffices
+STRENGTHEN_MARGIN = 1.05
+#: thinning lowers a radius by at most this factor per round (stress redistributes as it thins)
+THIN_STEP = 0.7
+
+
+def node_stress(skeleton: Skeleton, check: StructureCheck) -> np.ndarray:
+    """(n,) per skeleton node the largest critical-distance mean stress [Pa] of the element corners
+    nearest to it (nodes no corner is nearest to take their neighbours' largest)."""
+    n = len(skeleton.nodes)
+    _, j = cKDTree(skeleton.nodes).query(check.points, k=1)
+    s = np.zeros(n)
+    np.maximum.at(s, j, check.point_von_mises)
+    e = skeleton.edges
+    for _ in range(4):  # fill gaps along the chains
+        empty = s <= 0
+        if not empty.any() or len(e) == 0:
+            break
+        t = np.zeros(n)
+        np.maximum.at(t, e[:, 0], s[e[:, 1]])
+        np.maximum.at(t, e[:, 1], s[e[:, 0]])
+        s[empty] = t[empty]
+    return s
+
+
+def radius_caps(skeleton: Skeleton, scene: GrowthScene) -> np.ndarray:
+    """(n,) largest radius [m] each node may take: the distance to the nearest obstacle sphere's
+    surface, and for nodes off the object surfaces the distance to the supported objects (never
+    below the current radius), so that thickening stays clear of obstacles and does not fill the
+    space between the support and an object it does not touch there. Ground objects (under the
+    roots) do not cap: a root thickened into the ground is carved flat and clamped over a larger
+    face, which is what a root needs."""
+    from simfab.growth.obstacles import Obstacles
+
+    X = skeleton.nodes
+    cap = np.full(len(X), np.inf)
+    if len(scene.sphere_radii):
+        d = np.linalg.norm(X[:, None, :] - scene.sphere_centers[None], axis=2) - scene.sphere_radii[None]
+        cap = np.minimum(cap, d.min(axis=1))
+    off = ~skeleton.on_surface_mask()
+    ground = set(ground_objects(scene))
+    held = [m for n, m in scene.objects.items() if n not in ground]
+    if held and off.any():
+        obs = Obstacles(held, np.zeros((0, 3)), np.zeros(0), end_trim=0.0)
+        _, d = obs.surface_distance(X[off])
+        cap[off] = np.minimum(cap[off], d)
+    return np.maximum(cap, skeleton.radius)
+
+
+def strengthen(skeleton: Skeleton, scene: GrowthScene, target: float, *, loads: dict | None = None,
+               options: CheckOptions = CheckOptions(), spec: StructureSpec | None = None, thin: bool = False,
+               rounds: int = 5, check: StructureCheck | None = None) -> StrengthenResult:
+    """Scale branch radii until the safety factor is at least ``target`` (topology unchanged).
+
+    Each round: the allowed stress sigma_a = yield / target; each node's stress s_i
+    (:func:`node_stress`); nodes with s_i > sigma_a get r_i *= STRENGTHEN_MARGIN (s_i /
+    sigma_a)^(1/3) (a round bar's bending stress ~ 1/r^3), spread to their neighbours (a
+    branch thickens around its overloaded spot, not in a bead); with ``thin``, nodes with s_i <
+    sigma_a / STRENGTHEN_MARGIN get r_i *= max(THIN_STEP, (s_i STRENGTHEN_MARGIN / sigma_a)^(1/3)),
+    never below the input's thinnest radius (the growth's printable minimum); radii are capped
+    by :func:`radius_caps`; then re-skin and re-check. Stops when the target is met (and, with
+    ``thin``, when no node is over-strong or nothing changes), or after ``rounds`` rounds.
+    """
+    if not (target > 0 and np.isfinite(target)):
+        raise InputError(f"the safety factor to reach must be a positive number, got {target}", where="--strengthen")
+    spec = scene.structure if spec is None else spec
+    sigma_a = spec.material.yield_stress / target
+    c = check if check is not None else check_structure(skeleton, scene, loads=loads, options=options, spec=spec)
+    history = [(c.safety_factor, c.volume_m3)]
+    r_floor = float(skeleton.radius.min())
+    caps = radius_caps(skeleton, scene)
+    sk = skeleton
+    for _ in range(rounds):
+        s = node_stress(sk, c)
+        k = np.ones(len(s))
+        over = s > sigma_a
+        k[over] = STRENGTHEN_MARGIN * (s[over] / sigma_a) ** (1.0 / 3.0)
+        e = sk.edges
+        if len(e):  # spread to the neighbours
+            up = k.copy()
+            np.maximum.at(up, e[:, 0], k[e[:, 1]])
+            np.maximum.at(up, e[:, 1], k[e[:, 0]])
+            k = np.where(up > 1.0, up, k)
+        if thin:
+            low = (k <= 1.0) & (s < sigma_a / STRENGTHEN_MARGIN)
+            k[low] = np.maximum(THIN_STEP, (np.maximum(s[low], 0.0) * STRENGTHEN_MARGIN / sigma_a) ** (1.0 / 3.0))
+        r = np.minimum(np.maximum(sk.radius * k, np.minimum(r_floor, sk.radius)), caps)
+        if c.safety_factor >= target and not (thin and np.any(r < sk.radius * (1 - 1e-3))):
+            break
+        if np.allclose(r, sk.radius, rtol=1e-3):
+            break
+        cand = sk.replace(radius=r)
+        cc = check_structure(cand, scene, loads=loads, options=options, spec=spec)
+        history.append((cc.safety_factor, cc.volume_m3))
+        if thin and cc.safety_factor < target <= c.safety_factor:
+            break  # thinning went too far: keep the last design that met the target
+        sk, c = cand, cc
+    return StrengthenResult(skeleton=sk, check=c, target=float(target), history=tuple(history),
+                            reached=bool(c.safety_factor >= target))
