@@ -157,12 +157,14 @@ class StepContext:
 
 
 def accept(state: StepState, x: np.ndarray, s: float, kappa: float, evaluation: Evaluation | None,
-           dhat: np.ndarray) -> None:
+           dhat: np.ndarray | None) -> None:
     """Make the converged x at path length s (solved with barrier stiffness ``kappa``) the current
-    state, with Newton's last evaluation there (``dhat``: the points' activation distances)."""
+    state, with Newton's last evaluation there; with ``dhat`` (the points' activation distances)
+    also the contact it ends with (:class:`ContactState`, what friction reads)."""
     state.x, state.s, state.kappa_step = x, s, kappa
     state.evaluation = evaluation
     # the objective's last evaluation may be a rejected line-search trial (Newton stopping at the
     # round-off floor): its Hessian belongs to x only when the evaluation does
     state.tangent = evaluation.hessian if evaluation is not None else None
-    state.contact = ContactState.from_evaluation(evaluation, dhat) if evaluation is not None else None
+    state.contact = ContactState.from_evaluation(evaluation, dhat) if evaluation is not None and dhat is not None \
+        else None

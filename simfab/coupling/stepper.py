@@ -155,10 +155,16 @@ def solve_at(cm: CouplingModel, state: StepState, s: float, ctx: StepContext) ->
         with ctx.phases.timed("facet_check"):
             new = crossing_facets(cm, x, s, state, final)
         if not new:
-            accept(state, x, s, obj.kappa, final, point_dhat(cm, state.points))
+            accept(state, x, s, obj.kappa, final, _contact_dhat(cm, state))
             return total
         add_refinement(cm, state, new)
     raise ConvergenceError("refinement did not settle at the start pose")
+
+
+def _contact_dhat(cm: CouplingModel, state: StepState) -> np.ndarray | None:
+    """The points' activation distances when the accepted state must record its contact (friction
+    reads it), else None."""
+    return point_dhat(cm, state.points) if cm.contact.friction > 0 else None
 
 
 def start_lag(cm: CouplingModel, state: StepState, s_new: float) -> FrictionLag:
@@ -244,7 +250,7 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                     lagged, resume = fresh, _Lagged(x)
                     continue
             state.prev2, state.prev = state.prev, PastStep(state.x, state.s, state.normal_force_points, state.normal_force)
-            accept(state, x, s_new, obj.kappa, final, point_dhat(cm, state.points))
+            accept(state, x, s_new, obj.kappa, final, _contact_dhat(cm, state))
             state.friction, state.lag_solves, state.lag_change = lagged, lag_solves, lag_change
             state.normal_force = fresh.normal_force if frictional else None
             state.normal_force_points = state.points if frictional else None
