@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from simfab.cli import main
-from simfab.errors import InputError
 from simfab.cli.sweep_runner import execute_run, lookup, run_task, write_scene
 from simfab.cli.sweep_spec import load_spec
+from simfab.errors import InputError
 
 
 def _spec(tmp_path, text, name="s.toml"):

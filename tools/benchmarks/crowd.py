@@ -76,7 +76,6 @@ def _crowdkit_rms(crowds):
 
 def run(argv):
     from benchmarks._reference import required
-
     from simfab.crowd import analysis, metrics, synth
     from simfab.crowd.config import PRACTITIONERS, SamplerConfig
     from simfab.crowd.data import Scale
