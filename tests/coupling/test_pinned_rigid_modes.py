@@ -22,7 +22,8 @@ def test_pinned_solve_is_the_woodbury_update():
     U = np.linalg.qr(rng.normal(size=(n, 2)))[0]
     B = rng.normal(size=(n, n))
     A = B @ B.T
-    A -= np.outer(A @ U[:, 0], U[:, 0]) + np.outer(U[:, 0], U[:, 0] @ A) - (U[:, 0] @ A @ U[:, 0]) * np.outer(U[:, 0], U[:, 0])
+    A -= (np.outer(A @ U[:, 0], U[:, 0]) + np.outer(U[:, 0], U[:, 0] @ A)
+          - (U[:, 0] @ A @ U[:, 0]) * np.outer(U[:, 0], U[:, 0]))
     A += 1e-10 * np.eye(n)  # the factorization's diagonal term
     free = np.arange(2, n)
     pin = rigid.Pin(U, 3.0, np.zeros(n))
@@ -39,7 +40,8 @@ def clip_runs():
     # (the pin acts on the rigid modes, whatever the elements) keep the test short
     sim, comp = {"steps": 18, "element_order": 1}, {"target_elements": 3600}
     free = simulate(load_coupling_scene("clip3d", overrides={"simulation": sim, "compliant": comp}))
-    held = simulate(load_coupling_scene("clip3d", overrides={"simulation": {**sim, "fixed_axes": "xz"}, "compliant": comp}))
+    held = simulate(load_coupling_scene("clip3d", overrides={"simulation": {**sim, "fixed_axes": "xz"},
+                                                             "compliant": comp}))
     return free, held
 
 

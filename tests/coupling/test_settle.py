@@ -29,7 +29,8 @@ def test_cclamp_continues_past_the_keyframes_until_the_cylinder_seats(cclamp):
     prof, summary = summarize(res)
     # E_ss is the energy's minimum along the path, below the value at the last keyframe, and a
     # stationary point; the steady state lies past the keyframes
-    assert prof.stationary and prof.E_ss == pytest.approx(E[prof.index_max:].min(), rel=1e-12) and prof.E_ss < 0.95 * E[n - 1]
+    assert prof.stationary and prof.E_ss == pytest.approx(E[prof.index_max:].min(), rel=1e-12)
+    assert prof.E_ss < 0.95 * E[n - 1]
     assert summary["s_ss"] > res.model.path.length
     # no run warning (only the design's yield warning)
     assert all("yield stress" in w for w in res.warnings)
@@ -57,7 +58,8 @@ def test_yield_warning_follows_the_material(cclamp):
     vm = cclamp.column("max_von_mises").max()
     for yield_stress, warned in ((0.5 * vm, True), (2.0 * vm, False)):
         res = simulate(load_coupling_scene("cclamp2d", overrides={
-            "material": {"name": "stiff", "youngs_modulus": 3.5e9, "poisson_ratio": 0.36, "yield_stress": yield_stress}}))
+            "material": {"name": "stiff", "youngs_modulus": 3.5e9, "poisson_ratio": 0.36,
+                         "yield_stress": yield_stress}}))
         assert any("exceeds the yield stress" in w for w in res.warnings) == warned
 
 

@@ -32,8 +32,8 @@ def test_simulate_writes_long_form_ratings(crowd_files):
 def test_aggregate_json_keys(crowd_files, tmp_path, capsys):
     ratings, truth = crowd_files
     out = tmp_path / "agg"
-    args = ["crowd", "aggregate", str(ratings), "--scale", "1", "10", "--truth", str(truth), "--out", str(out), "--json",
-            "--burn-in", "400", "--draws", "800", "--max-draws", "800"]
+    args = ["crowd", "aggregate", str(ratings), "--scale", "1", "10", "--truth", str(truth), "--out", str(out),
+            "--json", "--burn-in", "400", "--draws", "800", "--max-draws", "800"]
     assert main(args) == 0
     d = json.loads(capsys.readouterr().out)
     assert set(d["methods"]) == {"arithmetic_mean", "geometric_mean", "median", "majority", "bayesian"}

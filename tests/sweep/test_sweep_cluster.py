@@ -51,8 +51,8 @@ def remote():
                 time.sleep(0.2)
         for i in range(2):
             procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", addr, "--nthreads", "1",
-                                           "--nworkers", "1", "--no-dashboard", "--host", "127.0.0.1", "--name", f"w{i}"],
-                                          **quiet))
+                                           "--nworkers", "1", "--no-dashboard", "--host", "127.0.0.1",
+                                           "--name", f"w{i}"], **quiet))
         with Client(addr, timeout=60) as c:
             c.wait_for_workers(2, timeout=60)
         yield addr
