@@ -107,7 +107,8 @@ def _inputs(d: Path) -> dict:
     f["usda"] = d / "ok.usda"
     f["usda"].write_text('#usda 1.0\n(\n    defaultPrim = "World"\n    startTimeCode = 0\n    endTimeCode = 2\n    '
                          'upAxis = "Z"\n)\n\ndef Xform "World"\n{\n    def Mesh "m"\n    {\n        '
-                         'int[] faceVertexCounts = [3, 3]\n        int[] faceVertexIndices = [0, 1, 2, 0, 2, 3]\n        '
+                         'int[] faceVertexCounts = [3, 3]\n        '
+                         'int[] faceVertexIndices = [0, 1, 2, 0, 2, 3]\n        '
                          'point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]\n    }\n}\n')
     f["trunc_usda"] = d / "trunc.usda"
     f["trunc_usda"].write_text(f["usda"].read_text()[:150])
