@@ -122,7 +122,7 @@ def test_grow_outputs_stay_in_out(tmp_path):
     r = _run(["grow", str(SCENES / "growth" / "phone_stand.xml"), "--out", str(out)], tmp_path)
     assert r.returncode == 0, r.stderr
     assert _files(tmp_path) and all(out in p.parents for p in _files(tmp_path))
-    # the skin written is clean: closed and without zero-area faces (3 before the fix)
+    # the skin written is clean: closed and without zero-area faces
     from simfab.io.mesh import read_mesh
 
     s = json.loads(r.stdout)

@@ -66,7 +66,7 @@ def test_clip_free_to_slide_along_the_cylinder_is_pinned_not_drifting(clip_runs)
 
 def test_friction_resists_the_slide_along_the_cylinder():
     # with friction the clip's slide along the cylinder is resisted (the sticking contact holds it):
-    # it is no longer reported as unresisted, and the part still does not drift along z
+    # it is not reported as unresisted, and the part still does not drift along z
     import dataclasses
 
     from simfab.coupling.config import ContactOptions

@@ -13,7 +13,7 @@ from simfab.crowd.study import micro_crowd_study, subcrowds
 
 
 def _serial_reference(ratings, truth, *, n_sub, min_size, config, seed):
-    """The study as it ran before Dask: sizes in order, one generator for sub-crowds and seeds."""
+    """The study run serially in this process: sizes in order, one generator for sub-crowds and seeds."""
     rng = np.random.default_rng(seed)
     sc, N = ratings.scale, len(ratings.workers)
     indiv = metrics.individual_errors(ratings.labels, truth, sc)
