@@ -77,8 +77,10 @@ def test_profile_forces_stop_at_the_steady_state():
 
 
 def _records(s, E, P):
+    """Frictionless step records: no friction force, no dissipation, nothing left to lag."""
     from types import SimpleNamespace
-    return [SimpleNamespace(s=si, energy=e, barrier_energy=0.0, path_force=p, max_von_mises=0.0)
+    return [SimpleNamespace(s=si, energy=e, barrier_energy=0.0, path_force=p, path_force_friction=0.0,
+                            dissipated=0.0, lag_change=0.0, phase="insert", max_von_mises=0.0)
             for si, e, p in zip(s, E, P)]
 
 
@@ -95,7 +97,8 @@ def test_step_checks_ignore_a_negligible_profile(scale, coarse):
 
     s = np.linspace(0.0, 0.01, 5)
     cm = SimpleNamespace(name="t", s_steps=s, force_scale=1e4, fem=SimpleNamespace(material=None),
-                         options=SimpleNamespace(L_max=0.01), end_direction=None)
+                         options=SimpleNamespace(L_max=0.01), end_direction=None,
+                         contact=SimpleNamespace(lag_tol=0.01, max_lag_iterations=5))
     floor = C.NEWTON_GRAD_TOL_REL * cm.force_scale * s[-1]  # 1e-4 J
     E = scale * floor * np.array([0.0, 0.2, 1.0, 0.3, 0.1])
     P = scale * floor / s[-1] * np.array([0.0, -40.0, -10.0, 80.0, 5.0])
