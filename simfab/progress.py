@@ -13,12 +13,13 @@ def progress(iterable: Iterable[T], *, total: int | None = None, desc: str = "",
     if quiet or not sys.stderr.isatty():
         yield from iterable
         return
+    from rich.console import Console
     from rich.progress import Progress
 
-    from rich.console import Console
-
     with Progress(console=Console(stderr=True), transient=True) as bar:
-        task = bar.add_task(desc, total=total if total is not None else (len(iterable) if hasattr(iterable, "__len__") else None))
+        if total is None and hasattr(iterable, "__len__"):
+            total = len(iterable)
+        task = bar.add_task(desc, total=total)
         for item in iterable:
             yield item
             bar.advance(task)

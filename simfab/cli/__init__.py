@@ -48,7 +48,8 @@ def subcommand_module(name: str):
 def add_common_args(p: argparse.ArgumentParser) -> None:
     """Flags every subcommand takes (also after the subcommand name)."""
     g = p.add_argument_group("common options")
-    g.add_argument("--out", default=argparse.SUPPRESS, metavar="DIR", help="output folder (default ./simfab-out/<subcommand>)")
+    g.add_argument("--out", default=argparse.SUPPRESS, metavar="DIR",
+                   help="output folder (default ./simfab-out/<subcommand>)")
     g.add_argument("--seed", type=_seed, default=argparse.SUPPRESS, metavar="N",
                    help="random seed, an integer 0 <= N < 2**32 (default 0)")
     g.add_argument("--device", choices=["cpu", "cuda"], default=argparse.SUPPRESS, help="Warp device (default cpu)")
@@ -192,7 +193,8 @@ _HELD: list[str] = []
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """Python warnings (e.g. mesh repairs) as one line on stderr, like simfab's own warnings;
     numeric ones (RuntimeWarning) are held back until the run's outcome is known (``_HELD``)."""
-    text = f"simfab: warning: {_one_line(message) if isinstance(message, BaseException) else ' '.join(str(message).split())}"
+    text = _one_line(message) if isinstance(message, BaseException) else " ".join(str(message).split())
+    text = f"simfab: warning: {text}"
     if isinstance(category, type) and issubclass(category, RuntimeWarning):
         _HELD.append(text)
     else:

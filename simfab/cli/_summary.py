@@ -17,13 +17,14 @@ OUTPUT_SUFFIXES = (".png", ".usda", ".usdc", ".usd", ".xml", ".csv", ".json", ".
 SUFFIX_UNITS = (("_m3", "m³"), ("_m2", "m²"), ("_mm", "mm"), ("_m", "m"), ("_pa", "Pa"), ("_n", "N"), ("_j", "J"),
                 ("_deg", "deg"), ("_s", "s"), ("seconds", "s"))
 CONTAINER_KEYS = {"outputs", "pipelines", "scenes", "inserts"}  # left out of output-file labels
-MAX_ROWS = 20
+MAX_ROWS = 20  # rows of a list-of-rows sub-table before it is elided
 MAX_SIDE_BY_SIDE = 4  # up to this many like results are shown as columns (quantities as rows)
 #: units of keys common to several subcommands whose modules do not list them
 KNOWN_UNITS = {"insert_half_size": "m", "gap_half_size": "m", "gaussian_curvature": "1/m²", "insert_rise": "m",
-               "saddle_amplitude": "m", "angle_deficit": "rad", "gaussian_curvature_per_increment": "1/m²", "energy": "J", "max_bending_strain": "-",
+               "saddle_amplitude": "m", "angle_deficit": "rad", "gaussian_curvature_per_increment": "1/m²",
+               "energy": "J", "max_bending_strain": "-",
                "critical_load": "N", "euler_load": "N", "volume": "m³", "yield_stress": "Pa",
-               "penetration_tolerance": "m", "time_split": "s", "phase_split": "s"}  # rows of a list-of-rows sub-table before it is elided
+               "penetration_tolerance": "m", "time_split": "s", "phase_split": "s"}
 MAX_COLS = 9
 MAX_DEPTH = 3
 

@@ -40,11 +40,16 @@ def _sampler_args(p, *, study: bool):
     d = STUDY_SAMPLER if study else SamplerConfig()
     g = p.add_argument_group("Bayesian sampler")
     g.add_argument("--chains", type=int, default=d.chains, help=f"chains per crowd (default {d.chains})")
-    g.add_argument("--burn-in", type=int, default=d.burn_in, help=f"adaptive burn-in sweeps per chain (default {d.burn_in})")
-    g.add_argument("--draws", type=int, default=d.draws, help=f"recorded sweeps per chain{'' if study else ' per round; rounds repeat until converged'} (default {d.draws})")
-    g.add_argument("--likelihood", choices=["rounded", "density"], default=d.likelihood, help="rounded: probability of the integer answer's cell (default); density: the thesis' density at the answer")
+    g.add_argument("--burn-in", type=int, default=d.burn_in,
+                   help=f"adaptive burn-in sweeps per chain (default {d.burn_in})")
+    rounds = "" if study else " per round; rounds repeat until converged"
+    g.add_argument("--draws", type=int, default=d.draws, help=f"recorded sweeps per chain{rounds} (default {d.draws})")
+    g.add_argument("--likelihood", choices=["rounded", "density"], default=d.likelihood,
+                   help="rounded: probability of the integer answer's cell (default); "
+                        "density: the thesis' density at the answer")
     if not study:
-        g.add_argument("--max-draws", type=int, default=d.max_draws, help=f"cap on recorded sweeps per chain (default {d.max_draws})")
+        g.add_argument("--max-draws", type=int, default=d.max_draws,
+                       help=f"cap on recorded sweeps per chain (default {d.max_draws})")
 
 
 def _sampler_config(args, *, study: bool):
@@ -64,7 +69,8 @@ def _sampler_config(args, *, study: bool):
 
 
 def _scale_arg(p):
-    p.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), required=True, help="integer rating scale, e.g. 1 10")
+    p.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), required=True,
+                   help="integer rating scale, e.g. 1 10")
 
 
 _RAW = {"formatter_class": __import__("argparse").RawDescriptionHelpFormatter}
@@ -135,16 +141,22 @@ def add_args(p):
     s.add_argument("--truth", required=True, help="CSV task,truth")
     s.add_argument("--subcrowds", type=int, default=500, help="sub-crowds per size (default 500)")
     s.add_argument("--min-size", type=int, default=5, help="smallest sub-crowd (default 5); sizes run to N-1")
-    s.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler to run the sizes on (default: a local cluster, one worker per core; 'serial': in this process)")
+    s.add_argument("--scheduler", metavar="ADDRESS",
+                   help="Dask scheduler to run the sizes on (default: a local cluster, one worker per core; "
+                        "'serial': in this process)")
     _sampler_args(s, study=True)
     add_common_args(s)
 
     t = sub.add_parser("truth", help="support volume / overhang area of a mesh in given orientations",
                        description=TRUTH_DESCRIPTION, **_RAW)
     t.add_argument("mesh", help="STL/OBJ/PLY/OFF/GLB; printed with +z up, plate under the lowest point")
-    t.add_argument("--orientations", nargs="+", default=["six"], metavar="O", help="'six' (the six axis directions down) or [NAME=]RX:RY:RZ in degrees (extrinsic x, y, z); default six")
-    t.add_argument("--units", default="m", choices=["m", "mm", "cm"], help="units of the mesh file: m, mm or cm (default m)")
-    t.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), default=[1.0, 10.0], help="survey scale for the scores (default 1 10)")
+    t.add_argument("--orientations", nargs="+", default=["six"], metavar="O",
+                   help="'six' (the six axis directions down) or [NAME=]RX:RY:RZ in degrees (extrinsic x, y, z); "
+                        "default six")
+    t.add_argument("--units", default="m", choices=["m", "mm", "cm"],
+                   help="units of the mesh file: m, mm or cm (default m)")
+    t.add_argument("--scale", nargs=2, type=float, metavar=("LO", "HI"), default=[1.0, 10.0],
+                   help="survey scale for the scores (default 1 10)")
     t.add_argument("--no-raycast", action="store_true", help="skip the ray-cast cross-check")
     add_common_args(t)
 
@@ -156,8 +168,10 @@ def add_args(p):
     g.add_argument("--truth", help="CSV task,truth to rate")
     m.add_argument("--practitioners", type=int, default=15, help="practitioner raters (default 15)")
     m.add_argument("--public", type=int, default=0, help="general-public raters (default 0)")
-    m.add_argument("--malicious", type=float, default=None, help="fraction of the general public that is malicious (default 0.1)")
-    m.add_argument("--difficulty", type=float, nargs="+", default=[1.0], help="question difficulty beta (one value or one per question; default 1)")
+    m.add_argument("--malicious", type=float, default=None,
+                   help="fraction of the general public that is malicious (default 0.1)")
+    m.add_argument("--difficulty", type=float, nargs="+", default=[1.0],
+                   help="question difficulty beta (one value or one per question; default 1)")
     add_common_args(m)
 
     b = sub.add_parser("bracket", help="strength truth of the 2D bracket designs (FEM tip deflection, scores 1..5)",
@@ -172,7 +186,8 @@ def run(args):
     cmd = getattr(args, "crowd_command", None)
     if cmd is None:
         raise InputError("choose an action: aggregate, study, truth, simulate or bracket (see 'simfab crowd --help')")
-    return {"aggregate": run_aggregate, "study": run_study, "truth": run_truth, "simulate": run_simulate, "bracket": run_bracket}[cmd](args)
+    return {"aggregate": run_aggregate, "study": run_study, "truth": run_truth, "simulate": run_simulate,
+            "bracket": run_bracket}[cmd](args)
 
 
 def _device(args) -> str:
@@ -200,7 +215,9 @@ def run_aggregate(args):
     for m in result["warnings"]:  # warnings show even with --quiet
         log(f"simfab: warning: {m}")
     summary = aggregate_outputs(ratings, truth, result, args.out, title=os.path.basename(args.ratings))
-    summary["bayes"] = {k: summary["bayes"][k] for k in ("rhat_max", "ess_min", "seconds", "converged", "iterations_per_chain", "chains", "credible_mass", "x_interval")}
+    summary["bayes"] = {k: summary["bayes"][k] for k in ("rhat_max", "ess_min", "seconds", "converged",
+                                                         "iterations_per_chain", "chains", "credible_mass",
+                                                         "x_interval")}
     return summary
 
 
@@ -212,7 +229,8 @@ def run_study(args):
     cfg = _sampler_config(args, study=True)
     ratings = load_ratings(args.ratings, scale)
     truth = load_truth(args.truth, ratings)
-    res = micro_crowd_study(ratings, truth, n_sub=args.subcrowds, min_size=args.min_size, config=cfg, seed=args.seed, quiet=args.quiet, device=_device(args), scheduler=args.scheduler)
+    res = micro_crowd_study(ratings, truth, n_sub=args.subcrowds, min_size=args.min_size, config=cfg, seed=args.seed,
+                            quiet=args.quiet, device=_device(args), scheduler=args.scheduler)
     return study_outputs(res, args.out, title=f"Micro-crowd study of {os.path.basename(args.ratings)}")
 
 
@@ -259,19 +277,25 @@ def run_simulate(args):
         tasks, truth = None, None
     Q = len(tasks) if tasks else args.tasks
     if len(args.difficulty) not in (1, Q):
-        raise InputError(f"give one difficulty or {Q} (one per question), got {len(args.difficulty)}", where="--difficulty")
-    crowd = synth.simulate(mixes, scale=scale, truth=truth, n_tasks=Q, beta=args.difficulty if len(args.difficulty) > 1 else args.difficulty[0], seed=args.seed)
+        raise InputError(f"give one difficulty or {Q} (one per question), got {len(args.difficulty)}",
+                         where="--difficulty")
+    beta = args.difficulty if len(args.difficulty) > 1 else args.difficulty[0]
+    crowd = synth.simulate(mixes, scale=scale, truth=truth, n_tasks=Q, beta=beta, seed=args.seed)
     r = crowd.ratings
     if tasks:
         r = dataclasses.replace(r, tasks=tuple(tasks))
     os.makedirs(args.out, exist_ok=True)
     outputs = {
         "ratings_csv": str(write_csv(os.path.join(args.out, "ratings.csv"), ["worker", "task", "label"], r.to_long())),
-        "truth_csv": str(write_csv(os.path.join(args.out, "truth.csv"), ["task", "truth"], list(zip(r.tasks, crowd.truth.tolist())))),
+        "truth_csv": str(write_csv(os.path.join(args.out, "truth.csv"), ["task", "truth"],
+                                   list(zip(r.tasks, crowd.truth.tolist())))),
     }
-    planted = {"alpha": dict(zip(r.workers, crowd.alpha.tolist())), "malicious": [w for w, b in zip(r.workers, crowd.malicious) if b], "beta": dict(zip(r.tasks, crowd.beta.tolist())), "truth": dict(zip(r.tasks, crowd.truth.tolist()))}
+    planted = {"alpha": dict(zip(r.workers, crowd.alpha.tolist())),
+               "malicious": [w for w, b in zip(r.workers, crowd.malicious) if b],
+               "beta": dict(zip(r.tasks, crowd.beta.tolist())), "truth": dict(zip(r.tasks, crowd.truth.tolist()))}
     outputs["planted_json"] = str(write_json(os.path.join(args.out, "planted.json"), planted))
-    return {"raters": len(r.workers), "tasks": list(r.tasks), "malicious": len(planted["malicious"]), "outputs": outputs}
+    return {"raters": len(r.workers), "tasks": list(r.tasks), "malicious": len(planted["malicious"]),
+            "outputs": outputs}
 
 
 def run_bracket(args):

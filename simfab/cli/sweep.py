@@ -35,16 +35,17 @@ DESCRIPTION = __doc__.split("\n\n", 1)[1]
 
 def add_args(p) -> None:
     p.add_argument("spec", nargs="?", metavar="SPEC", help="sweep spec TOML, or a bundled spec name (see --list)")
-    p.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler to run on, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="Dask scheduler to run on, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")
     p.add_argument("--retry-failed", action="store_true", help="on resume, run again the runs that failed")
     p.add_argument("--list", action="store_true", help="list the bundled sweep specs")
 
 
 def run(args) -> dict:
     from simfab._bundled import scenes_dir
-    from simfab.errors import InputError
     from simfab.cli.sweep_spec import load_spec
     from simfab.cli.sweep_study import run_sweep
+    from simfab.errors import InputError
 
     if args.list:
         return {"specs": sorted(p.stem for p in scenes_dir("sweeps").glob("*.toml"))}
@@ -66,11 +67,13 @@ def format_text(summary: dict) -> str:
     show = df.drop(columns=["key", "worker", "outputs"], errors="ignore")
     if "message" in show and not show["message"].fillna("").astype(str).str.len().any():
         show = show.drop(columns=["message"])
-    with pd.option_context("display.max_rows", 40, "display.width", 160, "display.max_colwidth", 60, "display.float_format", "{:.4g}".format):
+    with pd.option_context("display.max_rows", 40, "display.width", 160, "display.max_colwidth", 60,
+                           "display.float_format", "{:.4g}".format):
         body = show.to_string(index=False)
     failed = ", ".join(f"{n} {k}" for k, n in summary["failed"].items()) or "none"
-    lines = [f"sweep {summary['name']}: {summary['runs']} runs ({summary['ran']} ran, {summary['skipped']} from the table), "
-             f"{summary['ok']} ok, failed: {failed}; {summary['seconds']:.1f} s wall, {summary['run_seconds']:.1f} s in runs",
+    lines = [f"sweep {summary['name']}: {summary['runs']} runs ({summary['ran']} ran, "
+             f"{summary['skipped']} from the table), {summary['ok']} ok, failed: {failed}; "
+             f"{summary['seconds']:.1f} s wall, {summary['run_seconds']:.1f} s in runs",
              body, f"table: {summary['outputs']['table_parquet']} (+ .csv)"]
     lines += [f"plot: {p}" for p in summary["outputs"]["plots"].values()]
     return "\n".join(lines)

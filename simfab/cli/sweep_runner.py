@@ -16,8 +16,8 @@ import os
 import tempfile
 from pathlib import Path
 
-from simfab.errors import InputError
 from simfab.cli.sweep_spec import SweepSpec, scene_files
+from simfab.errors import InputError
 
 _PARSER = None  # one argparse tree per worker process (building it imports every subcommand)
 
@@ -65,7 +65,8 @@ def run_task(spec: SweepSpec, point: dict, *, run_dir: str) -> dict:
             "keep": spec.keep_outputs, "scene": scene}
 
 
-def execute_run(*, argv: list[str], figures: list[tuple[str, str]], run_dir: str, keep: bool, scene: dict | None) -> dict:
+def execute_run(*, argv: list[str], figures: list[tuple[str, str]], run_dir: str, keep: bool,
+                scene: dict | None) -> dict:
     """Run ``simfab ARGV --out RUN_DIR --quiet`` in this process; return {figure: value}.
 
     With ``scene``, first writes the edited base scene into RUN_DIR/scene and puts its path
@@ -180,5 +181,7 @@ def _edit_mjcf(text: str, edits, base: Path, *, where: str) -> str:
                     comps[i] = repr(float(v)) if isinstance(v, float) else str(v)
                 el.set(attr, " ".join(comps))
             else:
-                el.set(attr, " ".join(map(str, v)) if isinstance(v, (list, tuple)) else (repr(v) if isinstance(v, float) else str(v)))
+                text = " ".join(map(str, v)) if isinstance(v, (list, tuple)) else (
+                    repr(v) if isinstance(v, float) else str(v))
+                el.set(attr, text)
     return ET.tostring(root, encoding="unicode")

@@ -222,7 +222,8 @@ def _values(name: str, d: dict, seed: int, where: str) -> tuple[tuple, bool]:
         raise InputError(f"random = {kind!r}; use 'uniform', 'loguniform', 'integers' or 'choice'", where=where)
     if "range" in d:
         r, n = d["range"], d.get("num")
-        if not (isinstance(r, list) and len(r) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)):
+        numbers = isinstance(r, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
+        if not (numbers and len(r) == 2):
             raise InputError(f"range must be [lo, hi] (numbers), got {r!r}", where=where)
         if not isinstance(n, int) or n < 2:
             raise InputError(f"range needs num = N >= 2 points, got {n!r}", where=where)
@@ -239,7 +240,8 @@ def _values(name: str, d: dict, seed: int, where: str) -> tuple[tuple, bool]:
 
 def _ident(name: str, where: str) -> str:
     if not _IDENT.match(name) or name in META_COLUMNS:
-        raise InputError(f"column name {name!r} must be an identifier (letters, digits, _) and not one of {', '.join(META_COLUMNS)}", where=where)
+        raise InputError(f"column name {name!r} must be an identifier (letters, digits, _) and not one of "
+                         f"{', '.join(META_COLUMNS)}", where=where)
     return name
 
 
@@ -250,7 +252,8 @@ def resolve_scene(text: str, base: Path) -> Path:
     for p in (base / text, scenes_dir(text)):
         if p.is_file():
             return p.resolve()
-    raise InputError(f"scene {text!r} found neither beside the spec nor among the bundled scenes", where="[sweep] scene")
+    raise InputError(f"scene {text!r} found neither beside the spec nor among the bundled scenes",
+                     where="[sweep] scene")
 
 
 def find_spec(text: str) -> Path:
@@ -296,19 +299,23 @@ def load_spec(path) -> SweepSpec:
 
         cmd = shlex.split(cmd)
     if not (isinstance(cmd, list) and cmd and all(isinstance(c, (str, int, float)) for c in cmd)):
-        raise InputError("command must be a simfab command line, e.g. ['couple', 'simulate', '{scene}']", where=f"{f} [sweep] command")
+        raise InputError("command must be a simfab command line, e.g. ['couple', 'simulate', '{scene}']",
+                         where=f"{f} [sweep] command")
     cmd = tuple(str(c) for c in cmd)
     from simfab.cli import SUBCOMMANDS
 
     if cmd[0] not in SUBCOMMANDS or cmd[0] == "sweep":
-        raise InputError(f"{cmd[0]!r} is not a subcommand to sweep (have: {', '.join(s for s in SUBCOMMANDS if s != 'sweep')})", where=f"{f} [sweep] command")
+        have = ", ".join(s for s in SUBCOMMANDS if s != "sweep")
+        raise InputError(f"{cmd[0]!r} is not a subcommand to sweep (have: {have})", where=f"{f} [sweep] command")
     if any(c in ("--out", "--json") for c in cmd):
-        raise InputError("the sweep sets --out (one folder per run) and reads the summary itself; drop --out/--json", where=f"{f} [sweep] command")
+        raise InputError("the sweep sets --out (one folder per run) and reads the summary itself; drop --out/--json",
+                         where=f"{f} [sweep] command")
     scene = resolve_scene(str(sw["scene"]), path.parent) if "scene" in sw else None
     if scene is not None and scene.suffix not in (".toml", ".xml"):
         raise InputError(f"the base scene must be a .toml or .xml file, got {scene.name}", where=f"{f} [sweep] scene")
     if scene is not None and "{scene}" not in cmd:
-        raise InputError("the command must place the scene: put '{scene}' where the scene path goes", where=f"{f} [sweep] command")
+        raise InputError("the command must place the scene: put '{scene}' where the scene path goes",
+                         where=f"{f} [sweep] command")
     combine = sw.get("combine", "product")
     if combine not in ("product", "zip"):
         raise InputError(f"combine must be 'product' or 'zip', got {combine!r}", where=f"{f} [sweep]")
@@ -319,7 +326,8 @@ def load_spec(path) -> SweepSpec:
     def address(text, where):
         a = Address.parse(text, where)
         if a.kind == "toml" and (scene is None or not any(s.suffix == ".toml" for s in scene_files(scene))):
-            raise InputError(f"{text!r} is a scene TOML key but the spec has no TOML scene (a command-line option starts with --)", where=where)
+            raise InputError(f"{text!r} is a scene TOML key but the spec has no TOML scene "
+                             "(a command-line option starts with --)", where=where)
         if a.kind == "mjcf" and (scene is None or not any(s.suffix == ".xml" for s in scene_files(scene))):
             raise InputError(f"{text!r} is an MJCF address but the spec has no MJCF scene", where=where)
         if a.kind == "flag" and a.text in ("--out", "--json", "--quiet"):
@@ -337,9 +345,11 @@ def load_spec(path) -> SweepSpec:
             if k not in _PARAM:
                 raise InputError(f"unknown key {k!r} (have: {', '.join(sorted(_PARAM))})", where=where)
         vals, log = _values(name, pd, seed, where)
-        params.append(Parameter(name=name, address=address(pd.get("set", name), where), values=vals, unit=str(pd.get("unit", "")), log=log))
+        params.append(Parameter(name=name, address=address(pd.get("set", name), where), values=vals,
+                                unit=str(pd.get("unit", "")), log=log))
     if combine == "zip" and len({len(p.values) for p in params}) > 1:
-        raise InputError(f"combine = 'zip' needs equally many values per parameter, got {[len(p.values) for p in params]}", where=f"{f} [parameters]")
+        raise InputError(f"combine = 'zip' needs equally many values per parameter, "
+                         f"got {[len(p.values) for p in params]}", where=f"{f} [parameters]")
     texts = [p.address.text for p in params] + [a.text for a, _ in fixed]
     dup = {t for t in texts if texts.count(t) > 1}
     if dup:

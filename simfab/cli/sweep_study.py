@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import time
 from pathlib import Path
 
-from simfab.errors import InputError
 from simfab.cli.sweep_spec import META_COLUMNS, SweepSpec
-from simfab.sweep.table import FINAL, frame, read_table, table_paths, write_table
+from simfab.errors import InputError
 from simfab.io.outpaths import make_out_dir
+from simfab.sweep.table import FINAL, frame, read_table, table_paths, write_table
 
 #: Seconds between rewrites of the table while results arrive.
 SAVE_INTERVAL = 2.0
@@ -38,7 +37,8 @@ def _check_derived(spec: SweepSpec) -> None:
         try:
             df[name] = df.eval(expr)
         except Exception as e:
-            raise InputError(f"cannot evaluate {expr!r}: {' '.join(str(e).split())}", where=f"{spec.source} [derived] {name}") from None
+            raise InputError(f"cannot evaluate {expr!r}: {' '.join(str(e).split())}",
+                             where=f"{spec.source} [derived] {name}") from None
 
 
 def with_derived(spec: SweepSpec, df):
@@ -64,10 +64,10 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, quiet: bool = False, retr
     """Run ``spec`` into the folder ``out`` (see the module docstring); returns the summary:
     counts per status, the paths of the table (Parquet, CSV), plots (PNG) and summary JSON."""
     from simfab import __version__
+    from simfab.cli.sweep_runner import cell, execute_run, run_task
     from simfab.io.atomic import write_json
     from simfab.progress import log
     from simfab.sweep.plots import plot_sweep
-    from simfab.cli.sweep_runner import cell, execute_run, run_task
     from simfab.sweep.tasks import SERIAL, connect, run_tasks
 
     t0 = time.perf_counter()
@@ -78,7 +78,8 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, quiet: bool = False, retr
     first = {}
     for i, k in enumerate(keys):
         if k in first:
-            raise InputError(f"runs {first[k]} and {i} have the same parameters ({points[i]}); remove the repeated value", where=f"{spec.source} [parameters]")
+            raise InputError(f"runs {first[k]} and {i} have the same parameters ({points[i]}); "
+                             "remove the repeated value", where=f"{spec.source} [parameters]")
         first[k] = i
     cols = columns(spec)
     rows: dict[str, dict] = {}
@@ -101,9 +102,11 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, quiet: bool = False, retr
         i = todo[r.index]
         k = keys[i]
         figs = r.value if r.ok else {}
-        rows[k] = {"run": i, "key": k, **{p: cell(v) for p, v in points[i].items()}, **{g.name: figs.get(g.name) for g in spec.figures},
+        kept = spec.keep_outputs and r.status not in ("worker_died", "version_mismatch")
+        rows[k] = {"run": i, "key": k, **{p: cell(v) for p, v in points[i].items()},
+                   **{g.name: figs.get(g.name) for g in spec.figures},
                    "status": r.status, "message": r.message, "seconds": r.seconds, "worker": r.worker,
-                   "outputs": f"runs/{k}" if spec.keep_outputs and r.status not in ("worker_died", "version_mismatch") else ""}
+                   "outputs": f"runs/{k}" if kept else ""}
         if time.perf_counter() - last[0] > SAVE_INTERVAL:
             write_table(table(), out, spec.name)
             last[0] = time.perf_counter()
@@ -122,10 +125,12 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, quiet: bool = False, retr
     plots = plot_sweep(spec, df, out)
     counts = df["status"].value_counts().to_dict() if len(df) else {}
     summary = {
-        "spec": str(spec.source), "name": spec.name, "runs": len(points), "ran": len(todo), "skipped": len(points) - len(todo),
+        "spec": str(spec.source), "name": spec.name, "runs": len(points), "ran": len(todo),
+        "skipped": len(points) - len(todo),
         "ok": int(counts.get("ok", 0)), "failed": {k: int(v) for k, v in counts.items() if k != "ok"},
         "seconds": time.perf_counter() - t0, "run_seconds": float(df["seconds"].sum()) if len(df) else 0.0,
-        "simfab_version": __version__, "outputs": {"table_parquet": paths["parquet"], "table_csv": paths["csv"], "plots": plots},
+        "simfab_version": __version__,
+        "outputs": {"table_parquet": paths["parquet"], "table_csv": paths["csv"], "plots": plots},
     }
     summary["outputs"]["summary_json"] = str(write_json(out / f"{spec.name}.json", summary))
     return summary

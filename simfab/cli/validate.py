@@ -42,7 +42,7 @@ def run(args) -> dict:
 
 def demo(ctx) -> dict:
     """The buckling validation on a small table (n = 20, 40, 80; g/L = 0.9, 0.6; both supports,
-    direct and through the insert): about 15 s."""
+    direct and through the insert): a table small enough for a demo."""
     import argparse
 
     mod = importlib.import_module(VALIDATIONS["buckling"])

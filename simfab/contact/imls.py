@@ -336,7 +336,8 @@ def density_weights(v: np.ndarray, sigma: float, radius: float) -> np.ndarray:
     if len(pairs):
         d2 = np.sum((v[pairs[:, 0]] - v[pairs[:, 1]]) ** 2, axis=1)
         k = np.exp(-d2 / sigma**2)
-        rho += np.bincount(pairs[:, 0], weights=k, minlength=len(v)) + np.bincount(pairs[:, 1], weights=k, minlength=len(v))
+        rho += (np.bincount(pairs[:, 0], weights=k, minlength=len(v))
+                + np.bincount(pairs[:, 1], weights=k, minlength=len(v)))
     a = 1.0 / rho
     return a / a.mean()
 

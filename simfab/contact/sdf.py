@@ -283,7 +283,8 @@ def primitives_of_body(model, body_id: int, plugins: dict | None = None) -> tupl
         if kind is None and torus is None:
             return None
         s = np.asarray(model.geom_size[g], float)
-        size = torus or {"sphere": (s[0],), "capsule": (s[0], s[1]), "cylinder": (s[0], s[1]), "box": tuple(s[:3])}[kind]
+        size = torus or {"sphere": (s[0],), "capsule": (s[0], s[1]), "cylinder": (s[0], s[1]),
+                         "box": tuple(s[:3])}[kind]
         kind = kind or "torus"
         out.append(Primitive(kind=kind, size=tuple(float(v) for v in size), centre=np.asarray(model.geom_pos[g], float),
                              rotation=quat_to_matrix(np.asarray(model.geom_quat[g], float))))
@@ -408,7 +409,8 @@ def _sample(p: Primitive, m: int, dim: int) -> tuple[np.ndarray, np.ndarray]:
             mf = max(1, int(round(m * e[b] * e[c] / (2 * (e[0] * e[1] + e[1] * e[2] + e[2] * e[0])) / 2)))
             nb = max(1, int(round(np.sqrt(mf * e[b] / e[c]))))
             nc = max(1, mf // nb)
-            gb, gc = np.meshgrid(e[b] * (2 * (np.arange(nb) + 0.5) / nb - 1), e[c] * (2 * (np.arange(nc) + 0.5) / nc - 1))
+            gb, gc = np.meshgrid(e[b] * (2 * (np.arange(nb) + 0.5) / nb - 1),
+                                 e[c] * (2 * (np.arange(nc) + 0.5) / nc - 1))
             for sgn in (-1.0, 1.0):
                 f = np.zeros((gb.size, 3))
                 f[:, ax], f[:, b], f[:, c] = sgn * e[ax], gb.ravel(), gc.ravel()

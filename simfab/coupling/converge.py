@@ -106,9 +106,9 @@ def study(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: 
 
 
 def report(scene: str, levels: list, dim: int) -> dict:
-    """Per figure the values, the extrapolated value, the observed order and each level's relative
-    error (a figure below ZERO_REL of its kind's peak, e.g. a loose coupling's E_ss, relative to that peak); per level the element count and
-    seconds; ``error_of_default``: the errors of the scene's own mesh (factor 1, else the first level)."""
+    """Per figure the values, the extrapolated value, the observed order and each level's relative error (a figure
+    below ZERO_REL of its kind's peak, e.g. a loose coupling's E_ss, relative to that peak); per level the element
+    count and seconds; ``error_of_default``: the errors of the scene's own mesh (factor 1, else the first level)."""
     N = np.array([lv.elements for lv in levels])
     i_default = next((i for i, lv in enumerate(levels) if lv.factor == 1.0), 0)  # the scene's own mesh
     figures = {}

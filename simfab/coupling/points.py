@@ -63,7 +63,8 @@ class ContactPoints:
         return out
 
     def concat(self, other: "ContactPoints") -> "ContactPoints":
-        return ContactPoints(verts=np.vstack([self.verts, other.verts]), weights=np.vstack([self.weights, other.weights]),
+        return ContactPoints(verts=np.vstack([self.verts, other.verts]),
+                             weights=np.vstack([self.weights, other.weights]),
                              facet=np.concatenate([self.facet, other.facet]))
 
 

@@ -125,5 +125,6 @@ def record_step(cm: CouplingModel, state: StepState, iterations: int) -> StepRes
         min_det_F=min_det, iterations=int(iterations), contact_points=len(pts), kappa=float(state.kappa_step),
         phase="remove" if state.direction < 0 else "insert", normal_force=float(np.linalg.norm(gy, axis=1).sum()),
         path_force_friction=fr.path_force if fr else 0.0, dissipated=fr.dissipated if fr else 0.0,
-        slipping=fr.slipping if fr else 0.0, lag_solves=state.lag_solves, lag_change=state.lag_change, reaction=reaction, locked=fr.locked if fr else 0.0,
+        slipping=fr.slipping if fr else 0.0, lag_solves=state.lag_solves, lag_change=state.lag_change,
+        reaction=reaction, locked=fr.locked if fr else 0.0,
     )

@@ -81,15 +81,14 @@ def still_drawn_in(steps) -> bool:
 def to_rest(cm, stepper) -> str:
     """Continue the run past the path's end until O comes to rest (see the module docstring).
 
-    stepper : the run's :class:`simfab.coupling.stepper.Stepper` (its ``steps`` so far; ``step``
-    solves a step from the current state, ``undo`` returns to the state before it, ``keep``
-    appends its record). Steps of SETTLE_STEP_REL times the last planned one (at most 1/MIN_SETTLE_STEPS of the path) go on while
-    :func:`still_drawn_in`; a step that overshoots the rest point (path force below
-    -REST_FORCE_REL * peak: O pushed into a stiffer contact, or no solution: undone) starts the search; the rest
-    point is bracketed (:func:`_bracket`), every trial solved from the last one's state (a step
-    back from past the rest point is short and feasible: O moves away from A). It ends when the path
-    force is within REST_FORCE_REL * peak of zero, or when the energy between the bracket's ends is
-    known to within REST_ENERGY_REL * E_max (see :func:`_bracket`).
+    stepper : the run's :class:`simfab.coupling.stepper.Stepper` (its ``steps`` so far; ``step`` solves a step from
+    the current state, ``undo`` returns to the state before it, ``keep`` appends its record). Steps of SETTLE_STEP_REL
+    times the last planned one (at most 1/MIN_SETTLE_STEPS of the path) go on while :func:`still_drawn_in`; a step
+    that overshoots the rest point (path force below -REST_FORCE_REL * peak: O pushed into a stiffer contact, or no
+    solution: undone) starts the search; the rest point is bracketed (:func:`_bracket`), every trial solved from the
+    last one's state (a step back from past the rest point is short and feasible: O moves away from A). It ends when
+    the path force is within REST_FORCE_REL * peak of zero, or when the energy between the bracket's ends is known to
+    within REST_ENERGY_REL * E_max (see :func:`_bracket`).
 
     Returns "rest" (O came to rest), "not continued" (the path cannot be continued or was already
     at rest) or why it stopped short ("cap": the extension limit, "bracket": no rest point found).
@@ -240,8 +239,8 @@ def warnings(cm, steps, rest: str = "not continued", removal: list = ()) -> list
         r = max(unlagged, key=lambda r: r.lag_change)
         out.append(f"{name}: at {len(unlagged)} step(s) the friction's normal forces still changed by up to "
                    f"{100 * r.lag_change:.3g}% (> lag_tol {100 * cm.contact.lag_tol:g}%) after "
-                   f"{cm.contact.max_lag_iterations} lagging iterations (worst at s={r.s * 1e3:.4g} mm, {r.phase}): the "
-                   "friction forces there are not consistent with the normal forces to that tolerance")
+                   f"{cm.contact.max_lag_iterations} lagging iterations (worst at s={r.s * 1e3:.4g} mm, {r.phase}): "
+                   "the friction forces there are not consistent with the normal forces to that tolerance")
     mat = cm.fem.material
     if mat is not None:
         vm = np.array([r.max_von_mises for r in steps])

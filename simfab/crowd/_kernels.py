@@ -302,8 +302,8 @@ def _init_cache(
 class WarpKernel:
     """Chains of a batch of crowds on a Warp device; same interface as the numpy kernel.
 
-    y, mask: (B, R, Q) unit-scale ratings (any value, e.g. NaN, where missing) and presence; init: (alpha, beta, x) arrays of
-    shape (B, C, R), (B, C, Q), (B, C, Q). Launch seeds come from ``rng`` (reproducible).
+    y, mask: (B, R, Q) unit-scale ratings (any value, e.g. NaN, where missing) and presence; init: (alpha, beta, x)
+    arrays of shape (B, C, R), (B, C, Q), (B, C, Q). Launch seeds come from ``rng`` (reproducible).
     """
 
     def __init__(self, y, mask, half_width, priors, cfg, rng, init, device="cpu"):
@@ -321,7 +321,8 @@ class WarpKernel:
         lo, hi = (obs.y, obs.y) if obs.lo is None else (obs.lo, obs.hi)
         self.lo, self.hi, self.w = arr(lo), arr(hi), arr(obs.weight)
         self.cap = float(_ratio_cap())
-        self.prior = arr([priors.alpha_mean, priors.alpha_precision, priors.beta_mean, priors.beta_precision, priors.beta_min, priors.x_mean, priors.x_precision, self.cap])
+        self.prior = arr([priors.alpha_mean, priors.alpha_precision, priors.beta_mean, priors.beta_precision,
+                          priors.beta_min, priors.x_mean, priors.x_precision, self.cap])
         T = self.T
         alpha, beta, x = (np.asarray(v, float).reshape(T, -1) for v in init)
         self.alpha, self.beta, self.x = arr(alpha), arr(beta), arr(x)
@@ -334,11 +335,13 @@ class WarpKernel:
         self.n_adapt = arr(np.zeros(T))
         self.ll, self.inv_s, self.ll_tmp, self.is_tmp = (arr(np.zeros((T, R, Q))) for _ in range(4))
         self.reset_counts()
-        wp.launch(_init_cache, dim=(T, R, Q), inputs=[self.lo, self.hi, self.w, self.rounded, C, self.cap, self.alpha, self.beta, self.x, self.ll, self.inv_s], device=device)
+        wp.launch(_init_cache, dim=(T, R, Q), inputs=[self.lo, self.hi, self.w, self.rounded, C, self.cap, self.alpha,
+                                                      self.beta, self.x, self.ll, self.inv_s], device=device)
 
     def reset_counts(self):
         np = self.np
-        self.count = {k: wp.array(np.zeros(v.shape), dtype=wp.float64, device=self.device) for k, v in self.step.items()}
+        self.count = {k: wp.array(np.zeros(v.shape), dtype=wp.float64, device=self.device)
+                      for k, v in self.step.items()}
         self.sweeps = 0
 
     def accept_rates(self) -> dict:

@@ -47,17 +47,20 @@ def half_width(ratings: Ratings, config: SamplerConfig = SamplerConfig()) -> flo
     return 0.5 / ratings.scale.span if config.likelihood == "rounded" else 0.0
 
 
-def bayesian(ratings: Ratings, *, config: SamplerConfig = SamplerConfig(), priors: Priors = Priors(), seed: int = 0, quiet: bool = True, device: str = "cpu") -> BayesResult:
+def bayesian(ratings: Ratings, *, config: SamplerConfig = SamplerConfig(), priors: Priors = Priors(), seed: int = 0,
+             quiet: bool = True, device: str = "cpu") -> BayesResult:
     """Fit the expertise/difficulty model to one crowd (several chains, R-hat/ESS checked)."""
 
-    post = sample(ratings.unit, priors=priors, config=config, seed=seed, half_width=half_width(ratings, config), quiet=quiet, device=device)
+    post = sample(ratings.unit, priors=priors, config=config, seed=seed, half_width=half_width(ratings, config),
+                  quiet=quiet, device=device)
     sc = ratings.scale
     rh, es = float(post.rhat_max[0]), float(post.ess_min[0])
     warnings = []
     if not post.converged[0]:
         warnings.append(
             f"Bayesian model: chains disagree after {post.iterations} iterations per chain "
-            f"(R-hat max {rh:.3f}, target < {config.rhat_target}; bulk ESS min {es:.0f}, target >= {config.ess_target:.0f}); "
+            f"(R-hat max {rh:.3f}, target < {config.rhat_target}; "
+            f"bulk ESS min {es:.0f}, target >= {config.ess_target:.0f}); "
             "treat its estimates as unreliable or rerun with more --draws"
         )
     return BayesResult(
@@ -86,7 +89,8 @@ def classical(ratings: Ratings) -> dict[str, np.ndarray]:
     return out
 
 
-def aggregate_all(ratings: Ratings, truth=None, *, config: SamplerConfig = SamplerConfig(), priors: Priors = Priors(), seed: int = 0, quiet: bool = True, device: str = "cpu") -> dict:
+def aggregate_all(ratings: Ratings, truth=None, *, config: SamplerConfig = SamplerConfig(), priors: Priors = Priors(),
+                  seed: int = 0, quiet: bool = True, device: str = "cpu") -> dict:
     """Every aggregate of one crowd, scored against ``truth`` ((Q,) scale units) when given.
 
     Returns ``{"methods": {name: {"estimates": {task: value}, "rms", "rms_discrete",
@@ -102,9 +106,11 @@ def aggregate_all(ratings: Ratings, truth=None, *, config: SamplerConfig = Sampl
             continue
         row = {"estimates": dict(zip(ratings.tasks, est[name].tolist()))}
         if truth is not None:
-            row.update(metrics.score(est[name], ratings.labels, truth, ratings.scale, discrete_method=name in A.DISCRETE))
+            row.update(metrics.score(est[name], ratings.labels, truth, ratings.scale,
+                                     discrete_method=name in A.DISCRETE))
         else:
-            row.update({k: None for k in ("rms", "rms_continuous", "rms_discrete", "percentile", "percentile_continuous", "percentile_discrete")})
+            row.update({k: None for k in ("rms", "rms_continuous", "rms_discrete", "percentile",
+                                          "percentile_continuous", "percentile_discrete")})
         methods[name] = row
     bayes = {
         "rhat_max": bres.rhat_max,
@@ -115,10 +121,13 @@ def aggregate_all(ratings: Ratings, truth=None, *, config: SamplerConfig = Sampl
         "chains": config.chains,
         "credible_mass": config.credible_mass,
         "x_interval": {t: bres.x_interval[j].tolist() for j, t in enumerate(ratings.tasks)},
-        "beta": {t: {"mean": float(bres.beta_mean[j]), "interval": bres.beta_interval[j].tolist()} for j, t in enumerate(ratings.tasks)},
-        "alpha": {w: {"mean": float(bres.alpha_mean[i]), "interval": bres.alpha_interval[i].tolist()} for i, w in enumerate(ratings.workers)},
+        "beta": {t: {"mean": float(bres.beta_mean[j]), "interval": bres.beta_interval[j].tolist()}
+                 for j, t in enumerate(ratings.tasks)},
+        "alpha": {w: {"mean": float(bres.alpha_mean[i]), "interval": bres.alpha_interval[i].tolist()}
+                  for i, w in enumerate(ratings.workers)},
     }
     out = {"methods": methods, "bayes": bayes, "warnings": list(bres.warnings)}
     if truth is not None:
-        out["individual_errors"] = dict(zip(ratings.workers, metrics.individual_errors(ratings.labels, truth, ratings.scale).tolist()))
+        errors = metrics.individual_errors(ratings.labels, truth, ratings.scale)
+        out["individual_errors"] = dict(zip(ratings.workers, errors.tolist()))
     return out

@@ -61,7 +61,8 @@ def designs(s: BracketSetup = BracketSetup()) -> dict[str, tuple[np.ndarray, lis
     d = {}
     d["solid"] = (np.array([[0, 0], [L, 0], [L, H], [0, H]], float), [])
     d["tapered"] = (np.array([[0, 0], [L, y - t], [L, top], [0, top]], float), [])
-    d["holes"] = (np.array([[0, 0], [L, 0], [L, H], [0, H]], float), [_circle(0.04 + 0.05 * k, 0.05, 0.022) for k in range(3)])
+    d["holes"] = (np.array([[0, 0], [L, 0], [L, H], [0, H]], float),
+                  [_circle(0.04 + 0.05 * k, 0.05, 0.022) for k in range(3)])
     # shelf bracket: top flange plus a diagonal strut from the wall's foot
     strut = np.array([[0, 0], [t * 1.4, 0], [L - t, top - t], [L - t * 2.2, top - t]], float)
     import shapely
@@ -86,7 +87,8 @@ def designs(s: BracketSetup = BracketSetup()) -> dict[str, tuple[np.ndarray, lis
     R_out, R_in = L, L - 1.5 * t
     outer = np.column_stack([R_out * np.sin(ang), top - R_out * np.cos(ang) * (top / L)])
     inner = np.column_stack([R_in * np.sin(ang[::-1]), top - R_in * np.cos(ang[::-1]) * (top / L)])
-    arch = shapely.unary_union([shapely.Polygon(np.vstack([outer, inner])).buffer(0), shapely.box(0, top - t, L, top), shapely.box(0, 0, t, top)])
+    arch = shapely.unary_union([shapely.Polygon(np.vstack([outer, inner])).buffer(0), shapely.box(0, top - t, L, top),
+                                shapely.box(0, 0, t, top)])
     d["arch"] = (np.array(arch.exterior.coords)[:-1], [np.array(i.coords)[:-1] for i in arch.interiors])
     # inverted taper: deep at the tip, shallow at the wall (the worst use of material)
     d["inverted"] = (np.array([[0, top - 2 * t], [L, 0], [L, top], [0, top]], float), [])
@@ -122,7 +124,8 @@ def tip_deflection(outline, holes=(), *, setup: BracketSetup = BracketSetup(), n
     on_tip = X[:, 0] >= setup.length * (1 - TOL.span_rel)
     loaded = on_tip & (np.abs(X[:, 1] - setup.load_y) <= setup.load_radius)
     if not loaded.any():
-        raise InputError(f"design {name!r} has no end face at x = L within {setup.load_radius} m of the load point", where=name)
+        raise InputError(f"design {name!r} has no end face at x = L within {setup.load_radius} m of the load point",
+                         where=name)
     f = np.zeros_like(X)
     f[loaded, 1] = -setup.load / loaded.sum()
     fv = f.ravel()
@@ -134,11 +137,13 @@ def tip_deflection(outline, holes=(), *, setup: BracketSetup = BracketSetup(), n
         E, g = nh.energy_gradient(model, x)
         return E - fv @ x, g.ravel() - fv, None
 
-    res = minimize(fun, X.ravel().copy(), free=np.repeat(~clamped, 2), admissible=lambda x: bool(np.all(nh.det_F(model, x) > 0)))
+    res = minimize(fun, X.ravel().copy(), free=np.repeat(~clamped, 2),
+                   admissible=lambda x: bool(np.all(nh.det_F(model, x) > 0)))
     x = res.x.reshape(-1, 2)
     u = x - X
     area = float(model.volume.sum()) / setup.thickness  # plane strain: element volume = area * thickness
-    return BracketResult(name=name, deflection=float(-u[loaded, 1].mean()), area=area, n_triangles=len(T), newton_iterations=res.iterations, points=P, triangles=T, displacement=u)
+    return BracketResult(name=name, deflection=float(-u[loaded, 1].mean()), area=area, n_triangles=len(T),
+                         newton_iterations=res.iterations, points=P, triangles=T, displacement=u)
 
 
 def bracket_survey(setup: BracketSetup = BracketSetup(), *, names=None) -> list[BracketResult]:

@@ -85,7 +85,8 @@ def from_matrix(labels, scale: Scale, *, workers=None, tasks=None, source="<memo
     """Build :class:`Ratings` from an (R, Q) array (NaN = missing), validating it."""
     labels = np.array(labels, dtype=float)
     if labels.ndim != 2 or labels.size == 0:
-        raise InputError(f"ratings must be a non-empty (raters, questions) matrix, got shape {labels.shape}", where=source)
+        raise InputError(f"ratings must be a non-empty (raters, questions) matrix, got shape {labels.shape}",
+                         where=source)
     R, Q = labels.shape
     workers = tuple(str(w) for w in (workers if workers is not None else (f"w{i}" for i in range(R))))
     tasks = tuple(str(t) for t in (tasks if tasks is not None else (f"q{j}" for j in range(Q))))
@@ -93,7 +94,8 @@ def from_matrix(labels, scale: Scale, *, workers=None, tasks=None, source="<memo
     bad = fin & ((labels < scale.lo) | (labels > scale.hi) | (labels != np.round(labels)))
     if bad.any():
         i, j = np.argwhere(bad)[0]
-        raise InputError(f"label {labels[i, j]:g} of worker {workers[i]!r} on task {tasks[j]!r} is not an integer on the scale [{scale.lo:g}, {scale.hi:g}]", where=source)
+        raise InputError(f"label {labels[i, j]:g} of worker {workers[i]!r} on task {tasks[j]!r} is not an integer "
+                         f"on the scale [{scale.lo:g}, {scale.hi:g}]", where=source)
     _check_coverage(fin, workers, tasks, source)
     return Ratings(labels=labels, workers=workers, tasks=tasks, scale=scale, source=source)
 
@@ -124,7 +126,8 @@ def _read_csv(path, required: tuple[str, ...]):
     df.columns = [str(c).strip() for c in df.columns]
     missing = [c for c in required if c not in df.columns]
     if missing:
-        raise InputError(f"missing column {missing[0]!r} (columns are {list(df.columns)}; need {list(required)})", where=path)
+        raise InputError(f"missing column {missing[0]!r} (columns are {list(df.columns)}; need {list(required)})",
+                         where=path)
     for c in required:
         df[c] = df[c].str.strip()
     return df
@@ -166,7 +169,8 @@ def load_ratings(path, scale: Scale) -> Ratings:
     off = (labels < scale.lo) | (labels > scale.hi) | (labels != np.round(labels))
     if off.any():
         k = int(np.flatnonzero(off)[0])
-        raise InputError(f"line {k + 2}, column 'label': {labels[k]:g} is not an integer on the scale [{scale.lo:g}, {scale.hi:g}]", where=path)
+        raise InputError(f"line {k + 2}, column 'label': {labels[k]:g} is not an integer on the scale "
+                         f"[{scale.lo:g}, {scale.hi:g}]", where=path)
     w_ids = list(dict.fromkeys(workers))
     t_ids = list(dict.fromkeys(tasks))
     wi = {w: i for i, w in enumerate(w_ids)}
@@ -176,7 +180,8 @@ def load_ratings(path, scale: Scale) -> Ratings:
     for k, (w, t, v) in enumerate(zip(workers, tasks, labels)):
         key = (wi[w], ti[t])
         if key in first:
-            raise InputError(f"line {k + 2}: duplicate rating of task {t!r} by worker {w!r} (first at line {first[key] + 2})", where=path)
+            raise InputError(f"line {k + 2}: duplicate rating of task {t!r} by worker {w!r} "
+                             f"(first at line {first[key] + 2})", where=path)
         first[key] = k
         mat[key] = v
     return Ratings(labels=mat, workers=tuple(w_ids), tasks=tuple(t_ids), scale=scale, source=path)
@@ -196,7 +201,8 @@ def read_truth(path, scale: Scale) -> tuple[list[str], np.ndarray]:
             raise InputError(f"line {k + 2}: duplicate truth for task {t!r} (first at line {seen[t] + 2})", where=path)
         seen[t] = k
         if not scale.lo <= v <= scale.hi:
-            raise InputError(f"line {k + 2}, column 'truth': {v:g} is outside the scale [{scale.lo:g}, {scale.hi:g}]", where=path)
+            raise InputError(f"line {k + 2}, column 'truth': {v:g} is outside the scale "
+                             f"[{scale.lo:g}, {scale.hi:g}]", where=path)
     return tasks, vals
 
 

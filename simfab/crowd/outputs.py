@@ -23,23 +23,30 @@ def aggregate_outputs(ratings, truth, result: dict, out: str, *, title: str = "c
     rows = []
     for j, t in enumerate(ratings.tasks):
         lo, hi = bayes["x_interval"][t]
-        rows.append([t] + [methods[n]["estimates"][t] for n in names] + [lo, hi] + ([float(truth[j])] if truth is not None else []))
+        rows.append([t] + [methods[n]["estimates"][t] for n in names] + [lo, hi]
+                    + ([float(truth[j])] if truth is not None else []))
     outputs = {"aggregates_csv": str(write_csv(os.path.join(out, "aggregates.csv"), header, rows))}
     rrows = []
     indiv = result.get("individual_errors", {})
     for w in ratings.workers:
         a = bayes["alpha"][w]
         rrows.append([w, a["mean"], a["interval"][0], a["interval"][1], indiv.get(w, "")])
-    outputs["raters_csv"] = str(write_csv(os.path.join(out, "raters.csv"), ["worker", "alpha_mean", "alpha_lo", "alpha_hi", "rms_error"], rrows))
+    outputs["raters_csv"] = str(write_csv(os.path.join(out, "raters.csv"),
+                                          ["worker", "alpha_mean", "alpha_lo", "alpha_hi", "rms_error"], rrows))
     if truth is not None:
         sc = ratings.scale
         crowd_err = methods["bayesian"]["rms_continuous"]
         ind = [indiv[w] for w in ratings.workers]
-        outputs["expert_network_png"] = plot_expert_network(crowd_err, ind, ratings.workers, os.path.join(out, "expert_network.png"), title=f"{title}: Bayesian crowd estimate vs individuals")
-        per_q = {n: abs(sc.to_unit([methods[n]["estimates"][t] for t in ratings.tasks]) - sc.to_unit(truth)) for n in names}
-        outputs["errors_png"] = plot_method_errors(per_q, ratings.tasks, os.path.join(out, "errors_per_question.png"), title=f"{title}: crowd error per question")
+        outputs["expert_network_png"] = plot_expert_network(
+            crowd_err, ind, ratings.workers, os.path.join(out, "expert_network.png"),
+            title=f"{title}: Bayesian crowd estimate vs individuals")
+        per_q = {n: abs(sc.to_unit([methods[n]["estimates"][t] for t in ratings.tasks]) - sc.to_unit(truth))
+                 for n in names}
+        outputs["errors_png"] = plot_method_errors(per_q, ratings.tasks, os.path.join(out, "errors_per_question.png"),
+                                                   title=f"{title}: crowd error per question")
     outputs["summary_json"] = os.path.join(out, "summary.json")
-    summary = dict(result, outputs=outputs, tasks=list(ratings.tasks), workers=len(ratings.workers), scale=[ratings.scale.lo, ratings.scale.hi])
+    summary = dict(result, outputs=outputs, tasks=list(ratings.tasks), workers=len(ratings.workers),
+                   scale=[ratings.scale.lo, ratings.scale.hi])
     write_json(outputs["summary_json"], summary)
     return summary
 
@@ -58,12 +65,16 @@ def study_outputs(result, out: str, *, title: str) -> dict:
 
 def truth_outputs(rows, out: str, *, scale, notes=()) -> dict:
 
-    cols = ["orientation", "rx_deg", "ry_deg", "rz_deg", "support_volume_m3", "overhang_area_m2", "raycast_volume_m3", "raycast_rel_diff", "support_score", "finish_score"]
-    table = [[r["orientation"], *r["euler_deg"], r["support_volume"], r["overhang_area"], r.get("raycast_volume", ""), r.get("raycast_rel_diff", ""), r["support_score"], r["finish_score"]] for r in rows]
+    cols = ["orientation", "rx_deg", "ry_deg", "rz_deg", "support_volume_m3", "overhang_area_m2", "raycast_volume_m3",
+            "raycast_rel_diff", "support_score", "finish_score"]
+    table = [[r["orientation"], *r["euler_deg"], r["support_volume"], r["overhang_area"], r.get("raycast_volume", ""),
+              r.get("raycast_rel_diff", ""), r["support_score"], r["finish_score"]] for r in rows]
     outputs = {
         "table_csv": str(write_csv(os.path.join(out, "truth_table.csv"), cols, table)),
-        "support_truth_csv": str(write_csv(os.path.join(out, "truth_support.csv"), ["task", "truth"], [[r["orientation"], r["support_score"]] for r in rows])),
-        "finish_truth_csv": str(write_csv(os.path.join(out, "truth_finish.csv"), ["task", "truth"], [[r["orientation"], r["finish_score"]] for r in rows])),
+        "support_truth_csv": str(write_csv(os.path.join(out, "truth_support.csv"), ["task", "truth"],
+                                           [[r["orientation"], r["support_score"]] for r in rows])),
+        "finish_truth_csv": str(write_csv(os.path.join(out, "truth_finish.csv"), ["task", "truth"],
+                                          [[r["orientation"], r["finish_score"]] for r in rows])),
     }
     summary = {"orientations": rows, "scale": list(scale), "mesh_notes": list(notes), "outputs": outputs}
     outputs["truth_json"] = str(write_json(os.path.join(out, "truth.json"), summary))
@@ -74,17 +85,21 @@ def bracket_outputs(results, setup, out: str) -> dict:
     """Tables, truth CSV, picture and JSON of a bracket survey."""
     import dataclasses
 
-
     scores = strength_scores(results)
-    rows = [[r.name, r.deflection, r.area, r.n_triangles, r.newton_iterations, float(s)] for r, s in zip(results, scores)]
+    rows = [[r.name, r.deflection, r.area, r.n_triangles, r.newton_iterations, float(s)]
+            for r, s in zip(results, scores)]
     outputs = {
-        "table_csv": str(write_csv(os.path.join(out, "brackets.csv"), ["design", "tip_deflection_m", "area_m2", "triangles", "newton_iterations", "strength_score"], rows)),
-        "truth_csv": str(write_csv(os.path.join(out, "truth_strength.csv"), ["task", "truth"], [[r.name, float(s)] for r, s in zip(results, scores)])),
+        "table_csv": str(write_csv(os.path.join(out, "brackets.csv"), ["design", "tip_deflection_m", "area_m2",
+                                                                       "triangles", "newton_iterations",
+                                                                       "strength_score"], rows)),
+        "truth_csv": str(write_csv(os.path.join(out, "truth_strength.csv"), ["task", "truth"],
+                                   [[r.name, float(s)] for r, s in zip(results, scores)])),
         "designs_png": plot_brackets(results, scores, os.path.join(out, "brackets.png")),
     }
     summary = {
         "setup": dataclasses.asdict(setup),
-        "designs": {r.name: {"tip_deflection": r.deflection, "score": float(s), "area": r.area} for r, s in zip(results, scores)},
+        "designs": {r.name: {"tip_deflection": r.deflection, "score": float(s), "area": r.area}
+                    for r, s in zip(results, scores)},
         "outputs": outputs,
     }
     outputs["summary_json"] = str(write_json(os.path.join(out, "brackets.json"), summary))

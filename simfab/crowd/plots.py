@@ -22,10 +22,12 @@ def plot_study(result, path, *, title: str = "Micro-crowd study") -> str:
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
     k = result.sizes
     for ax, m, s, label, color, top in (
-        (axes[0], result.percentile_mean, result.percentile_sd, "percentile rank of crowd estimate (%)", "tab:blue", 100.0),
+        (axes[0], result.percentile_mean, result.percentile_sd, "percentile rank of crowd estimate (%)", "tab:blue",
+         100.0),
         (axes[1], result.bias_mean, result.bias_sd, "population bias (RMS error, unit scale)", "tab:red", np.inf),
     ):
-        ax.fill_between(k, np.maximum(m - s, 0.0), np.minimum(m + s, top), color="gold", alpha=0.5, label="+- 1 sd (clipped to the range)")
+        ax.fill_between(k, np.maximum(m - s, 0.0), np.minimum(m + s, top), color="gold", alpha=0.5,
+                        label="+- 1 sd (clipped to the range)")
         ax.plot(k, m, "o-", color=color, label="mean")
         ax.set_xlabel("crowd size")
         ax.set_ylabel(label)
@@ -65,12 +67,15 @@ def plot_expert_network(crowd_error: float, individual, names, path, *, title: s
         if err < crowd_error:
             ax.add_patch(Circle(p, r_node * 1.35, fill=False, edgecolor="crimson", lw=1.4, ls="--", zorder=3))
         fs = 7 if n > 20 else 8
-        ax.text(p[0], p[1], f"{err:.2f}", ha="center", va="center", fontsize=fs, zorder=4, color="w" if norm(err) > 0.5 else "k")
+        ax.text(p[0], p[1], f"{err:.2f}", ha="center", va="center", fontsize=fs, zorder=4,
+                color="w" if norm(err) > 0.5 else "k")
         ax.text(1.3 * p[0], 1.3 * p[1], str(names[i]), ha="center", va="center", fontsize=fs - 1, color="0.3")
     ax.add_patch(Circle((0, 0), 0.22, facecolor=cmap(norm(crowd_error)), edgecolor="k", lw=1.2, zorder=2))
-    ax.text(0, 0, f"crowd\n{crowd_error:.3f}", ha="center", va="center", fontsize=10, zorder=4, color="w" if norm(crowd_error) > 0.5 else "k")
+    ax.text(0, 0, f"crowd\n{crowd_error:.3f}", ha="center", va="center", fontsize=10, zorder=4,
+            color="w" if norm(crowd_error) > 0.5 else "k")
     beaten = int(np.sum(e > crowd_error))
-    ax.set_title(f"{title}\ncrowd beats {beaten} of {n} individuals\n(dashed ring: individual better than the crowd)", fontsize=9, wrap=True)
+    ax.set_title(f"{title}\ncrowd beats {beaten} of {n} individuals\n"
+                 "(dashed ring: individual better than the crowd)", fontsize=9, wrap=True)
     fig.colorbar(cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.7, label="RMS error (unit scale)")
     ax.set_xlim(-1.45, 1.45)
     ax.set_ylim(-1.45, 1.45)

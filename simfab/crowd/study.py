@@ -61,7 +61,9 @@ class StudyResult:
                 "unconverged_fraction": float(u),
                 "rhat_median": float(rm),
             }
-            for k, n, pm, ps, bm, bs, u, rm in zip(self.sizes, self.n_subcrowds, self.percentile_mean, self.percentile_sd, self.bias_mean, self.bias_sd, self.unconverged, self.rhat_median)
+            for k, n, pm, ps, bm, bs, u, rm in zip(self.sizes, self.n_subcrowds, self.percentile_mean,
+                                                   self.percentile_sd, self.bias_mean, self.bias_sd,
+                                                   self.unconverged, self.rhat_median)
         ]
 
 
@@ -102,13 +104,15 @@ def micro_crowd_study(
     if min_size < 2:
         raise InputError(f"minimum sub-crowd size must be >= 2, got {min_size}", where="--min-size")
     if N - 1 < min_size:
-        raise InputError(f"a crowd of {N} raters has no sub-crowds of sizes {min_size}..{N - 1}; need at least {min_size + 1} raters", where=ratings.source)
+        raise InputError(f"a crowd of {N} raters has no sub-crowds of sizes {min_size}..{N - 1}; "
+                         f"need at least {min_size + 1} raters", where=ratings.source)
     if n_sub < 2:
         raise InputError(f"need at least 2 sub-crowds per size, got {n_sub}", where="--subcrowds")
     rng = np.random.default_rng(seed)
     sc = ratings.scale
     truth = np.asarray(truth, float)
-    common = {"unit": ratings.unit, "truth_unit": sc.to_unit(truth), "individual": metrics.individual_errors(ratings.labels, truth, sc),
+    common = {"unit": ratings.unit, "truth_unit": sc.to_unit(truth),
+              "individual": metrics.individual_errors(ratings.labels, truth, sc),
               "config": config, "priors": priors, "half_width": half_width(ratings, config), "device": device}
     tasks = []
     for k in range(min_size, N):
@@ -125,11 +129,13 @@ def micro_crowd_study(
     cols = {key: np.array([r.value[key] for r in results]) for key in ("n", "pm", "ps", "bm", "bs", "u", "rm")}
     return StudyResult(
         sizes=np.arange(min_size, N), n_subcrowds=cols["n"], percentile_mean=cols["pm"], percentile_sd=cols["ps"],
-        bias_mean=cols["bm"], bias_sd=cols["bs"], unconverged=cols["u"], rhat_median=cols["rm"], seconds=time.perf_counter() - t0,
+        bias_mean=cols["bm"], bias_sd=cols["bs"], unconverged=cols["u"], rhat_median=cols["rm"],
+        seconds=time.perf_counter() - t0,
     )
 
 
-def study_size(*, unit, truth_unit, individual, members, config: SamplerConfig, priors: Priors, seed: int, half_width, device: str = "cpu") -> dict:
+def study_size(*, unit, truth_unit, individual, members, config: SamplerConfig, priors: Priors, seed: int, half_width,
+               device: str = "cpu") -> dict:
     """One crowd size of the study (a Dask task): all S sub-crowds in one batched sampler run.
 
     unit (R, Q) ratings on the unit scale (NaN: missing); truth_unit (Q,); individual (R,)
@@ -139,9 +145,11 @@ def study_size(*, unit, truth_unit, individual, members, config: SamplerConfig, 
     worst R-hat.
     """
 
-    post = sample(unit[members], config=config, priors=priors, seed=seed, half_width=half_width, keep_latent=False, device=device)
+    post = sample(unit[members], config=config, priors=priors, seed=seed, half_width=half_width, keep_latent=False,
+                  device=device)
     est = post.mean("x")  # (S, Q) unit scale
     bias = np.sqrt(np.mean((est - truth_unit[None]) ** 2, axis=1))
     pct = np.array([metrics.percentile_rank(b, individual[m]) for b, m in zip(bias, members)])
-    return {"n": len(members), "pm": float(pct.mean()), "ps": float(pct.std(ddof=1)), "bm": float(bias.mean()), "bs": float(bias.std(ddof=1)),
+    return {"n": len(members), "pm": float(pct.mean()), "ps": float(pct.std(ddof=1)), "bm": float(bias.mean()),
+            "bs": float(bias.std(ddof=1)),
             "u": float(np.mean(post.rhat_max > config.rhat_target)), "rm": float(np.median(post.rhat_max))}

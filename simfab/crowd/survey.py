@@ -98,7 +98,8 @@ def load_survey(path=SURVEY_TOML) -> SurveySpec:
     for name, c in d.get("crowds", {}).items():
         w = f"crowds.{name}"
         mix = CrowdMix(
-            size=get(c, "size", int, w), alpha_mean=get(c, "alpha_mean", float, w), alpha_sd=get(c, "alpha_sd", float, w),
+            size=get(c, "size", int, w), alpha_mean=get(c, "alpha_mean", float, w),
+            alpha_sd=get(c, "alpha_sd", float, w),
             malicious_fraction=float(c.get("malicious_fraction", 0.0)),
         )
         crowds.append(CrowdSpec(name=name, mix=mix, file=get(c, "file", str, w)))
@@ -107,10 +108,12 @@ def load_survey(path=SURVEY_TOML) -> SurveySpec:
     scale = get(s, "scale", list, "survey")
     diff = get(s, "difficulty", list, "survey")
     return SurveySpec(
-        root=path.parent, title=get(s, "title", str, "survey"), mesh=get(s, "mesh", str, "survey"), units=get(s, "units", str, "survey"),
-        question=question, orientations=tuple(get(s, "orientations", list, "survey")), scale=(float(scale[0]), float(scale[1])),
-        difficulty=tuple(float(v) for v in diff), seed=get(s, "seed", int, "survey"), truth_file=get(s, "truth", str, "survey"),
-        picture=get(s, "picture", str, "survey"), crowds=tuple(crowds), demo_subcrowds=int(d.get("demo", {}).get("subcrowds", 30)),
+        root=path.parent, title=get(s, "title", str, "survey"), mesh=get(s, "mesh", str, "survey"),
+        units=get(s, "units", str, "survey"), question=question,
+        orientations=tuple(get(s, "orientations", list, "survey")), scale=(float(scale[0]), float(scale[1])),
+        difficulty=tuple(float(v) for v in diff), seed=get(s, "seed", int, "survey"),
+        truth_file=get(s, "truth", str, "survey"), picture=get(s, "picture", str, "survey"), crowds=tuple(crowds),
+        demo_subcrowds=int(d.get("demo", {}).get("subcrowds", 30)),
     )
 
 
@@ -137,7 +140,8 @@ def survey_truth(spec: SurveySpec, *, raycast: bool = True) -> list[dict]:
     """Orientation table of the survey's mesh (see :func:`simfab.crowd.truth.orientation_table`)."""
 
     mesh = load_mesh(spec.root / spec.mesh, units=spec.units, require_watertight=True)
-    return orientation_table(mesh.vertices, mesh.faces, parse_orientations(spec.orientations), raycast=raycast, scale=spec.scale)
+    return orientation_table(mesh.vertices, mesh.faces, parse_orientations(spec.orientations), raycast=raycast,
+                             scale=spec.scale)
 
 
 def _picture(spec: SurveySpec, vertices_m, faces, path):
@@ -161,7 +165,8 @@ def _picture(spec: SurveySpec, vertices_m, faces, path):
     b.geom(b.worldbody, type="plane", size=(x0 + gap, depth / 2 + gap, 0.01), rgba=(0.85, 0.85, 0.88, 1))
     for o, R, lo, hi, xo in placed:
         q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
-        body = b.body(f"o_{o.name}", pos=(xo - x0 - lo[0], -0.5 * (lo[1] + hi[1]), -lo[2]), quat=(q[3], q[0], q[1], q[2]))
+        body = b.body(f"o_{o.name}", pos=(xo - x0 - lo[0], -0.5 * (lo[1] + hi[1]), -lo[2]),
+                      quat=(q[3], q[0], q[1], q[2]))
         b.geom(body, type="mesh", mesh="part", rgba=(0.2, 0.45, 0.8, 1), contype=0, conaffinity=0)
     b.save(path)
 
@@ -183,13 +188,15 @@ def make_bundle(spec: SurveySpec | None = None) -> dict:
     if len(spec.difficulty) not in (1, len(tasks)):
         raise InputError(f"survey.difficulty needs 1 or {len(tasks)} values", where=str(spec.root))
     for k, c in enumerate(spec.crowds):
-        crowd = synth.simulate(c.mix, scale=scale, truth=truth, beta=np.resize(spec.difficulty, len(tasks)), seed=spec.seed + k, worker_prefix=f"{c.name[:2]}")
+        crowd = synth.simulate(c.mix, scale=scale, truth=truth, beta=np.resize(spec.difficulty, len(tasks)),
+                               seed=spec.seed + k, worker_prefix=f"{c.name[:2]}")
         r = dataclasses.replace(crowd.ratings, tasks=tuple(tasks))
         write_csv(spec.root / c.file, ["worker", "task", "label"], r.to_long())
     return {"tasks": tasks, "truth": truth.tolist()}
 
 
-def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: SurveySpec | None = None, subcrowds: int | None = None) -> dict:
+def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: SurveySpec | None = None,
+                       subcrowds: int | None = None) -> dict:
     """The demo: recompute the truth from the mesh, aggregate each crowd, expert network,
     a micro-crowd study of the practitioners, a picture of the six orientations."""
 
@@ -205,10 +212,12 @@ def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: Sur
         truth = load_truth(spec.root / spec.truth_file, ratings)
         drift = max(abs(bundled[t] - v) for t, v in zip(ratings.tasks, truth))
         if drift > 1e-6:
-            raise InputError(f"bundled truth differs from the mesh's by {drift:.3g}; rerun scenes/crowd/make_survey.py", where=str(spec.root / spec.truth_file))
+            raise InputError(f"bundled truth differs from the mesh's by {drift:.3g}; rerun scenes/crowd/make_survey.py",
+                             where=str(spec.root / spec.truth_file))
         log(f"crowd demo: aggregating {c.name} ({len(ratings.workers)} raters)", quiet=quiet)
         res = aggregate_all(ratings, truth, seed=seed, quiet=quiet)
-        s = aggregate_outputs(ratings, truth, res, os.path.join(out, safe_name(c.name)), title=f"{spec.title}, {c.name.replace('_', ' ')}")
+        s = aggregate_outputs(ratings, truth, res, os.path.join(out, safe_name(c.name)),
+                              title=f"{spec.title}, {c.name.replace('_', ' ')}")
         crowds[c.name] = {
             "rms": {m: v["rms"] for m, v in s["methods"].items()},
             "percentile": {m: v["percentile"] for m, v in s["methods"].items()},
@@ -220,11 +229,13 @@ def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: Sur
             n_sub = subcrowds or spec.demo_subcrowds
             log(f"crowd demo: micro-crowd study of {c.name} ({n_sub} sub-crowds per size)", quiet=quiet)
             st = micro_crowd_study(ratings, truth, n_sub=n_sub, seed=seed, quiet=quiet)
-            crowds[c.name]["study"] = study_outputs(st, os.path.join(out, safe_name(c.name)), title=f"{spec.title}, {c.name}")
+            crowds[c.name]["study"] = study_outputs(st, os.path.join(out, safe_name(c.name)),
+                                                    title=f"{spec.title}, {c.name}")
     summary["crowds"] = crowds
     try:
 
-        summary["picture_png"] = str(render_mjcf(spec.root / spec.picture, os.path.join(out, "orientations.png"), width=960, height=360))
+        summary["picture_png"] = str(render_mjcf(spec.root / spec.picture, os.path.join(out, "orientations.png"),
+                                                 width=960, height=360))
     except Exception as e:  # a picture is a nicety; never fail the demo over OpenGL
         log(f"crowd demo: could not render the orientations ({type(e).__name__}: {e})", quiet=quiet)
     return summary

@@ -43,7 +43,8 @@ def draw_alpha(mix: CrowdMix, rng: np.random.Generator) -> tuple[np.ndarray, np.
     n_bad = int(round(mix.malicious_fraction * mix.size))
     bad = np.zeros(mix.size, bool)
     bad[rng.permutation(mix.size)[:n_bad]] = True
-    alpha = np.where(bad, rng.normal(mix.malicious_mean, mix.malicious_sd, mix.size), rng.normal(mix.alpha_mean, mix.alpha_sd, mix.size))
+    alpha = np.where(bad, rng.normal(mix.malicious_mean, mix.malicious_sd, mix.size),
+                     rng.normal(mix.alpha_mean, mix.alpha_sd, mix.size))
     return alpha, bad
 
 
@@ -81,5 +82,6 @@ def simulate(
     x = scale.to_unit(truth)
     y = M.sample_ratings(x, alpha, beta, rng)
     labels = scale.round(scale.from_unit(y))
-    ratings = from_matrix(labels, scale, workers=[f"{worker_prefix}{i:03d}" for i in range(alpha.size)], tasks=[f"q{j + 1}" for j in range(Q)])
+    ratings = from_matrix(labels, scale, workers=[f"{worker_prefix}{i:03d}" for i in range(alpha.size)],
+                          tasks=[f"q{j + 1}" for j in range(Q)])
     return SyntheticCrowd(ratings=ratings, truth=truth, x=x, alpha=alpha, beta=beta, malicious=bad)

@@ -66,7 +66,8 @@ def parse_orientations(specs) -> list[Orientation]:
             continue
         m = _ORIENT.match(tok)
         if not m:
-            raise InputError(f"{tok!r} is not an orientation (use 'six' or [name=]RX:RY:RZ in degrees, e.g. side=90:0:0)", where="--orientations")
+            raise InputError(f"{tok!r} is not an orientation (use 'six' or [name=]RX:RY:RZ in degrees, "
+                             "e.g. side=90:0:0)", where="--orientations")
         try:
             ang = tuple(float(m[k]) for k in ("rx", "ry", "rz"))
         except ValueError:
@@ -111,7 +112,8 @@ def support_metrics(vertices, faces, *, tol: Tolerances = TOL) -> dict:
     tri, area, nz, down, z_min = _downward(v, f, tol)
     height = tri[down, :, 2].mean(axis=1) - z_min
     volume = float(np.sum(area[down] * -nz[down] * height))
-    return {"support_volume": volume, "overhang_area": float(area[down].sum()), "z_min": z_min, "downward_triangles": int(down.sum())}
+    return {"support_volume": volume, "overhang_area": float(area[down].sum()), "z_min": z_min,
+            "downward_triangles": int(down.sum())}
 
 
 def raycast_support_volume(vertices, faces, *, grid: int | None = None, tol: Tolerances = TOL) -> float:
@@ -156,7 +158,8 @@ def scale_to_survey(values, *, lo: float = 1.0, hi: float = 10.0, higher_is_more
     return lo + (hi - lo) * (u if higher_is_more else 1.0 - u)
 
 
-def orientation_table(vertices, faces, orientations, *, raycast: bool = True, scale=(1.0, 10.0), tol: Tolerances = TOL) -> list[dict]:
+def orientation_table(vertices, faces, orientations, *, raycast: bool = True, scale=(1.0, 10.0),
+                      tol: Tolerances = TOL) -> list[dict]:
     """Per orientation: support volume, overhang area, ray-cast volume, and survey scores.
 
     Returns rows {orientation, euler_deg, support_volume, overhang_area, raycast_volume,
@@ -166,11 +169,13 @@ def orientation_table(vertices, faces, orientations, *, raycast: bool = True, sc
     for o in orientations:
         vo = oriented(vertices, o)
         m = support_metrics(vo, faces, tol=tol)
-        row = {"orientation": o.name, "euler_deg": list(o.euler_deg), "support_volume": m["support_volume"], "overhang_area": m["overhang_area"]}
+        row = {"orientation": o.name, "euler_deg": list(o.euler_deg), "support_volume": m["support_volume"],
+               "overhang_area": m["overhang_area"]}
         if raycast:
             rc = raycast_support_volume(vo, faces, tol=tol)
             row["raycast_volume"] = rc
-            row["raycast_rel_diff"] = (rc - m["support_volume"]) / m["support_volume"] if m["support_volume"] > 0 else (0.0 if rc == 0 else None)
+            sv = m["support_volume"]
+            row["raycast_rel_diff"] = (rc - sv) / sv if sv > 0 else (0.0 if rc == 0 else None)
         rows.append(row)
     sv = scale_to_survey([r["support_volume"] for r in rows], lo=scale[0], hi=scale[1], higher_is_more=True)
     fs = scale_to_survey([r["overhang_area"] for r in rows], lo=scale[0], hi=scale[1], higher_is_more=False)

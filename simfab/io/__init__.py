@@ -51,7 +51,8 @@ def inspect_file(path, *, units: str = "m") -> dict:
         problems = report.problems() + ([f"{inside} faces lie inside the solid (overlapping bodies or a "
                                          "self-intersecting surface)"] if inside else [])
         return {"kind": "mesh", "file": str(path), **dataclasses.asdict(report), "problems": problems,
-                "usable_after_repair": bool(mesh.is_watertight) and not inside, "extents_m": [float(x) for x in mesh.extents],
+                "usable_after_repair": bool(mesh.is_watertight) and not inside,
+                "extents_m": [float(x) for x in mesh.extents],
                 "units": units, "interior_faces": inside, "warnings": [warn] if warn else []}
     raise InputError(f"unknown file type {suf!r} (mesh, .xml or .usd/.usda/.usdc)", where=str(path))
 
@@ -80,7 +81,8 @@ def _inspect_usd(path: Path) -> dict:
 
     st = open_stage(path)
     prims = {str(p.GetPath()): p.GetTypeName() for p in st.Traverse()}
-    return {"kind": "usd", "file": str(path), "default_prim": str(st.GetDefaultPrim().GetPath()) if st.GetDefaultPrim() else None,
+    default = st.GetDefaultPrim()
+    return {"kind": "usd", "file": str(path), "default_prim": str(default.GetPath()) if default else None,
             "up_axis": str(UsdGeom.GetStageUpAxis(st)), "meters_per_unit": UsdGeom.GetStageMetersPerUnit(st),
             "time_codes_per_second": st.GetTimeCodesPerSecond(), "start_time_code": st.GetStartTimeCode(),
             "end_time_code": st.GetEndTimeCode(), "prims": prims, "compliance_errors": check_compliance(path)}

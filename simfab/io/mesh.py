@@ -72,7 +72,8 @@ def inspect_mesh(mesh) -> MeshReport:
     dup = len(srt) - len(np.unique(srt, axis=0)) if len(srt) else 0
     unref = len(mesh.vertices) - len(np.unique(mesh.faces)) if len(mesh.faces) else len(mesh.vertices)
     watertight = bool(mesh.is_watertight)
-    bodies = len(trimesh.graph.connected_components(mesh.face_adjacency, nodes=np.arange(len(mesh.faces)))) if len(mesh.faces) else 0
+    bodies = (len(trimesh.graph.connected_components(mesh.face_adjacency, nodes=np.arange(len(mesh.faces))))
+              if len(mesh.faces) else 0)
     return MeshReport(
         vertices=len(mesh.vertices), faces=len(mesh.faces), degenerate_faces=degenerate, duplicate_faces=int(dup),
         unreferenced_vertices=int(unref), watertight=watertight, winding_consistent=bool(mesh.is_winding_consistent),
@@ -148,7 +149,8 @@ def read_mesh(path: str | os.PathLike, *, units: str = "m", require_watertight: 
         mesh.invert()
         repaired.append("inward-facing normals")
     if require_watertight and not mesh.is_watertight:
-        raise InputError("mesh is not watertight (open boundary or non-manifold edges); a closed surface is required", where=where)
+        raise InputError("mesh is not watertight (open boundary or non-manifold edges); a closed surface is required",
+                         where=where)
     if require_watertight and not mesh.is_winding_consistent:
         raise InputError("face winding could not be made consistent", where=where)
     report.repaired = repaired
@@ -244,7 +246,8 @@ def unite_overlaps(mesh, *, where: str):
     if len(bodies) < 2:
         raise InputError(f"the surface intersects itself ({int(inside.sum())} faces lie inside the solid); "
                          "fix the mesh (a self-intersecting surface has no well-defined volume)", where=where)
-    parts = [Manifold(Mesh(vert_properties=np.asarray(b.vertices, np.float32), tri_verts=np.asarray(b.faces, np.uint32)))
+    parts = [Manifold(Mesh(vert_properties=np.asarray(b.vertices, np.float32),
+                           tri_verts=np.asarray(b.faces, np.uint32)))
              for b in bodies]
     u = Manifold.batch_boolean(parts, _manifold_add())
     out = u.to_mesh()

@@ -98,8 +98,9 @@ def render_model(model, png, *, data=None, width: int = 640, height: int = 480,
         # MuJoCo's free camera: forward = (cos el cos az, cos el sin az, sin el), eye = lookat - distance forward
         a, e = np.radians(azimuth), np.radians(elevation)
         fwd = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
-        camera.update(eye=(np.asarray(cam.lookat) - cam.distance * fwd).tolist(), target=np.asarray(cam.lookat).tolist(),
-                      up=[0.0, 0.0, 1.0], fovy_deg=float(model.vis.global_.fovy), width=int(width), height=int(height))
+        camera.update(eye=(np.asarray(cam.lookat) - cam.distance * fwd).tolist(),
+                      target=np.asarray(cam.lookat).tolist(), up=[0.0, 0.0, 1.0],
+                      fovy_deg=float(model.vis.global_.fovy), width=int(width), height=int(height))
     renderer = mujoco.Renderer(model, height=height, width=width)
     try:
         renderer.update_scene(data, camera=cam)
@@ -120,7 +121,8 @@ def render_mjcf(xml, png, *, width: int = 640, height: int = 480, camera: dict |
         if not _is_gl_error(e):
             raise
 
-        meshes = Scene(path=Path("."), model=model, sites={}, site_size={}, custom_numeric={}, custom_text={}).body_meshes()
+        meshes = Scene(path=Path("."), model=model, sites={}, site_size={}, custom_numeric={},
+                       custom_text={}).body_meshes()
         return _render_matplotlib([(m.vertices, m.faces, None) for m in meshes.values()], png, width, height)
 
 
@@ -292,7 +294,9 @@ def _render_matplotlib(items, png, width, height, *, curves=(), points=()) -> Pa
         allv.append(P)
     V = np.concatenate(allv)
     c, r = (V.max(0) + V.min(0)) / 2, max(float(np.ptp(V, axis=0).max()) / 2, 1e-6)
-    ax.set_xlim(c[0] - r, c[0] + r); ax.set_ylim(c[1] - r, c[1] + r); ax.set_zlim(c[2] - r, c[2] + r)
+    ax.set_xlim(c[0] - r, c[0] + r)
+    ax.set_ylim(c[1] - r, c[1] + r)
+    ax.set_zlim(c[2] - r, c[2] + r)
     ax.view_init(elev=-ELEVATION, azim=AZIMUTH - 90)
     ax.set_axis_off()
     path = save_figure(fig, png)

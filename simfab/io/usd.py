@@ -74,7 +74,8 @@ def _constant_color(gprim, color) -> None:
     """Constant ``displayColor`` (RGB in [0, 1]) on a gprim; None leaves it unset."""
     if color is None:
         return
-    gprim.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray.FromNumpy(np.asarray([color], np.float32)))
+    colors = Vt.Vec3fArray.FromNumpy(np.asarray([color], np.float32))
+    gprim.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(colors)
 
 
 class StageWriter:
@@ -246,7 +247,8 @@ class StageWriter:
         c.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(pts.astype(np.float32)), tc)
         pad = 0.0
         if widths is not None:
-            w = np.concatenate([np.broadcast_to(np.asarray(wi, np.float64), (k,)) for wi, k in zip(widths, counts)]) if counts else np.zeros(0)
+            w = (np.concatenate([np.broadcast_to(np.asarray(wi, np.float64), (k,)) for wi, k in zip(widths, counts)])
+                 if counts else np.zeros(0))
             c.CreateWidthsAttr().Set(Vt.FloatArray.FromNumpy(w.astype(np.float32)), tc)
             c.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
             pad = float(w.max(initial=0.0)) / 2

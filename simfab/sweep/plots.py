@@ -97,7 +97,13 @@ def _lines(ax, df, x, f, series, ok, units):
     cats = sorted(df.loc[ok, f].dropna().unique()) if text else None
     for key, g in groups:
         g = g[g["status"] == "ok"].sort_values(x)
-        label = None if series is None else f"{series} = {key:.4g}{' ' + units.get(series, '') if units.get(series) else ''}" if isinstance(key, float) else f"{series} = {key}"
+        if series is None:
+            label = None
+        elif isinstance(key, float):
+            unit = " " + units[series] if units.get(series) else ""
+            label = f"{series} = {key:.4g}{unit}"
+        else:
+            label = f"{series} = {key}"
         if text:
             ax.plot(g[x], [cats.index(v) for v in g[f]], "o", ms=8, label=label)
         else:
@@ -112,7 +118,8 @@ def _lines(ax, df, x, f, series, ok, units):
             ax.axhline(0.0, color="0.5", lw=0.8)
     bad = df.loc[~ok, x].dropna()
     if len(bad):
-        ax.plot(bad, np.zeros(len(bad)), "x", color="red", ms=10, mew=2, transform=ax.get_xaxis_transform(), clip_on=False, label="failed run")
+        ax.plot(bad, np.zeros(len(bad)), "x", color="red", ms=10, mew=2, transform=ax.get_xaxis_transform(),
+                clip_on=False, label="failed run")
     ax.grid(alpha=0.3)
     if series is not None or len(bad):
         ax.legend(loc="best", fontsize=9)
@@ -139,7 +146,8 @@ def _map(fig, ax, df, x, y, f, ok, units, logs):
         for xv, yv, v in zip(df[x], df[y], val):
             Z[np.searchsorted(ys, yv), np.searchsorted(xs, xv)] = v
         ax.set_facecolor("0.85")  # failed / missing cells
-        m = ax.pcolormesh(_edges(xs, x in logs), _edges(ys, y in logs), np.ma.masked_invalid(Z), cmap=cmap, norm=norm, shading="flat")
+        m = ax.pcolormesh(_edges(xs, x in logs), _edges(ys, y in logs), np.ma.masked_invalid(Z), cmap=cmap, norm=norm,
+                          shading="flat")
         for (i, j) in zip(*np.nonzero(np.isnan(Z))):
             ax.text(xs[j], ys[i], "x", color="red", ha="center", va="center", fontsize=12, fontweight="bold")
         if len(xs) <= 12:
@@ -151,14 +159,16 @@ def _map(fig, ax, df, x, y, f, ok, units, logs):
         if not text and Z.size <= 64:  # small charts: print the values in the cells
             for (i, j), v in np.ndenumerate(Z):
                 if np.isfinite(v):
-                    ax.text(xs[j], ys[i], f"{v:.3g}", ha="center", va="center", fontsize=8, color="w" if v < np.nanmean(Z) else "k")
+                    ax.text(xs[j], ys[i], f"{v:.3g}", ha="center", va="center", fontsize=8,
+                            color="w" if v < np.nanmean(Z) else "k")
     else:
         m = ax.scatter(df[x], df[y], c=val, cmap=cmap, norm=norm, s=60, edgecolors="k")
         bad = ~ok
         ax.scatter(df.loc[bad, x], df.loc[bad, y], marker="x", color="red", s=60)
     ax.set_ylabel(_label(y, units.get(y, "")))
     if text:
-        ax.legend(handles=[Patch(color=c, label=k) for c, k in zip(_palette(len(cats)), cats)] + [Patch(facecolor="0.85", label="failed run")],
+        ax.legend(handles=[Patch(color=c, label=k) for c, k in zip(_palette(len(cats)), cats)]
+                  + [Patch(facecolor="0.85", label="failed run")],
                   loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
     else:
         fig.colorbar(m, ax=ax, label=_label(f, units.get(f, "")))

@@ -36,12 +36,15 @@ def read_table(out: Path, name: str):
             return pd.read_parquet(paths["parquet"], engine="pyarrow")
         except Exception as e:  # a damaged file: fall back to the CSV twin
             if not paths["csv"].is_file():
-                raise InputError(f"cannot read the table to resume ({type(e).__name__}); delete it to start over", where=str(paths["parquet"])) from None
+                raise InputError(f"cannot read the table to resume ({type(e).__name__}); delete it to start over",
+                                 where=str(paths["parquet"])) from None
     if paths["csv"].is_file():
         try:
-            return pd.read_csv(paths["csv"], dtype={"key": str, "message": str, "worker": str, "outputs": str}, keep_default_na=False, na_values=[""])
+            return pd.read_csv(paths["csv"], dtype={"key": str, "message": str, "worker": str, "outputs": str},
+                               keep_default_na=False, na_values=[""])
         except Exception as e:
-            raise InputError(f"cannot read the table to resume ({type(e).__name__}); delete it to start over", where=str(paths["csv"])) from None
+            raise InputError(f"cannot read the table to resume ({type(e).__name__}); delete it to start over",
+                             where=str(paths["csv"])) from None
     return None
 
 

@@ -104,7 +104,8 @@ def call(fn: Callable, kwargs: dict, version: str | None = None) -> dict:
     t0 = time.perf_counter()
     out = {"value": None, "status": "ok", "message": "", "worker": _worker_name()}
     if version is not None and version != __version__:
-        out.update(status="version_mismatch", message=f"worker {out['worker']} runs simfab {__version__}, the client {version}")
+        out.update(status="version_mismatch",
+                   message=f"worker {out['worker']} runs simfab {__version__}, the client {version}")
     else:
         try:
             out["value"] = fn(**kwargs)
@@ -165,7 +166,8 @@ def check_worker_versions(client, version: str | None = None, *, where: str = "-
     if bad:
         addr, v = sorted(bad.items())[0]
         more = f" (and {len(bad) - 1} more workers)" if len(bad) > 1 else ""
-        raise InputError(f"Dask worker {addr} has simfab {v}, this client {version}{more}: install the same simfab on every worker", where=where)
+        raise InputError(f"Dask worker {addr} has simfab {v}, this client {version}{more}: "
+                         "install the same simfab on every worker", where=where)
     return found
 
 
@@ -199,11 +201,13 @@ def connect(scheduler=None, *, quiet: bool = False, min_workers: int = 1, timeou
                     socket.create_connection(parse_host_port(addr[6:]), timeout=timeout).close()
                 client = stack.enter_context(Client(addr, timeout=timeout))
             except (OSError, TimeoutError) as e:
-                raise InputError(f"cannot connect to a Dask scheduler at {addr}: {one_line(e)}", where="--scheduler") from None
+                raise InputError(f"cannot connect to a Dask scheduler at {addr}: {one_line(e)}",
+                                 where="--scheduler") from None
             try:
                 client.wait_for_workers(min_workers, timeout=timeout)
             except TimeoutError:
-                raise InputError(f"the Dask scheduler at {addr} has no workers (start some with 'dask worker {addr}')", where="--scheduler") from None
+                raise InputError(f"the Dask scheduler at {addr} has no workers (start some with 'dask worker {addr}')",
+                                 where="--scheduler") from None
             check_worker_versions(client)
             log(f"dask: scheduler {addr}, {len(client.scheduler_info()['workers'])} workers", quiet=quiet)
         link = _dashboard(client)
@@ -253,7 +257,8 @@ class _Bar:
 
 
 def _result(index: int, d: dict) -> TaskResult:
-    return TaskResult(index=index, value=d["value"], status=d["status"], message=d["message"], seconds=d["seconds"], worker=d["worker"])
+    return TaskResult(index=index, value=d["value"], status=d["status"], message=d["message"], seconds=d["seconds"],
+                      worker=d["worker"])
 
 
 def run_tasks(fn: Callable, kwargs_list: Sequence[dict], *, scheduler=None, quiet: bool = False, desc: str = "",
@@ -297,7 +302,8 @@ def _run_dask(client, fn, kwargs_list, version, finish, bar) -> None:
     from distributed.scheduler import KilledWorker
 
     token = f"{getattr(fn, '__name__', 'task')}-{socket.gethostname()}-{os.getpid()}-{time.time_ns()}"
-    futures = client.map(_call_kw, kwargs_list, fn=fn, version=version, key=[f"simfab-{token}-{i}" for i in range(len(kwargs_list))], pure=False)
+    keys = [f"simfab-{token}-{i}" for i in range(len(kwargs_list))]
+    futures = client.map(_call_kw, kwargs_list, fn=fn, version=version, key=keys, pure=False)
     index = {f.key: i for i, f in enumerate(futures)}
     bar.update(running=min(len(futures), sum(client.nthreads().values())))
     last = 0.0

@@ -30,10 +30,10 @@ import numpy as np
 from simfab.contact.sdf import Primitive, build_primitive_field
 from simfab.coupling.config import InsertionOptions
 from simfab.coupling.simulate import make_coupling_model, simulate
+from simfab.fem.elastic import energy_gradient_hessian
 from simfab.fem.materials import Material
 from simfab.fem.meshing import graded_box
 from simfab.fem.model import make_model
-from simfab.fem.elastic import energy_gradient_hessian
 from simfab.io.mjcf import Trajectory
 
 
@@ -103,7 +103,8 @@ def linear_centre_displacement(cm, *, R: float, d: float, E: float, nu: float, q
     facets = np.asarray(fem.boundary_facets)
     top = facets[np.all(np.abs(P[facets][:, :, 2]) <= 1e-12 * R, axis=1)]
     # centroids of the quad^2 equal sub-triangles of each face (barycentric (q, 3)): the midpoint rule
-    ij = [(i + o, j + o) for i in range(quad) for j in range(quad - i) for o in (1 / 3, 2 / 3) if o < 0.5 or i + j < quad - 1]
+    ij = [(i + o, j + o) for i in range(quad) for j in range(quad - i) for o in (1 / 3, 2 / 3)
+          if o < 0.5 or i + j < quad - 1]
     w = np.array([(i / quad, j / quad, 1.0 - (i + j) / quad) for i, j in ij])
     q = np.einsum("pm,fmd->fpd", w, P[top])  # (f, q, 3)
     p = p0 * np.sqrt(np.clip(1.0 - (q[:, :, :2] ** 2).sum(-1) / a**2, 0.0, None))  # (f, q)

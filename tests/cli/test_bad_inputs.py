@@ -72,7 +72,8 @@ def _inputs(d: Path) -> dict:
     (d / "line.csv").write_text("0,0\n0.01,0\n0.02,0\n")
     (d / "sliver.csv").write_text("0,0\n0.01,1e-13\n0.02,0\n")
     for stem, csv in (("cc_collinear", "line.csv"), ("cc_sliver", "sliver.csv")):
-        f[stem] = _copy_scene(c, d, stem, toml_sub=[('generator = "c_clamp"', f'generator = "outline"\noutline = "{csv}"')])
+        f[stem] = _copy_scene(c, d, stem,
+                              toml_sub=[('generator = "c_clamp"', f'generator = "outline"\noutline = "{csv}"')])
         t = (d / f"{stem}.toml").read_text()
         for k in ("inner_radius", "width", "opening_deg", "base_depth", "base_height", "segments"):
             t = "\n".join(line for line in t.splitlines() if not line.startswith(k + " "))
@@ -81,10 +82,13 @@ def _inputs(d: Path) -> dict:
     shutil.copy(c, f["cc_notoml"])
     f["cc_nan"] = _copy_scene(c, d, "cc_nan", xml_sub=[('size="0.01 0.01"', 'size="nan 0.01"')])
     u = SCENES / "deploy" / "unit_cell.xml"
-    f["uc_poisson"] = _copy_scene(u, d, "uc_poisson", xml_sub=[('name="cell_poisson" data="0.35"', 'name="cell_poisson" data="0.7"')])
-    f["uc_young"] = _copy_scene(u, d, "uc_young", xml_sub=[('name="cell_young" data="2.5e9"', 'name="cell_young" data="-1"')])
+    f["uc_poisson"] = _copy_scene(u, d, "uc_poisson",
+                                  xml_sub=[('name="cell_poisson" data="0.35"', 'name="cell_poisson" data="0.7"')])
+    f["uc_young"] = _copy_scene(u, d, "uc_young",
+                                xml_sub=[('name="cell_young" data="2.5e9"', 'name="cell_young" data="-1"')])
     e = SCENES / "deploy" / "elastica.xml"
-    f["el_poisson"] = _copy_scene(e, d, "el_poisson", xml_sub=[('name="beam_poisson" data="0.35"', 'name="beam_poisson" data="0.6"')])
+    f["el_poisson"] = _copy_scene(e, d, "el_poisson",
+                                  xml_sub=[('name="beam_poisson" data="0.35"', 'name="beam_poisson" data="0.6"')])
     f["ratings"] = SCENES / "crowd" / "ratings_practitioners.csv"
     f["truth"] = SCENES / "crowd" / "truth_support.csv"
     f["ratings_float"] = d / "ratings_float.csv"
@@ -102,9 +106,10 @@ def _inputs(d: Path) -> dict:
     f["folded_stl"] = d / "folded.stl"
     f["usda"] = d / "ok.usda"
     f["usda"].write_text('#usda 1.0\n(\n    defaultPrim = "World"\n    startTimeCode = 0\n    endTimeCode = 2\n    '
-                         'upAxis = "Z"\n)\n\ndef Xform "World"\n{\n    def Mesh "m"\n    {\n        int[] faceVertexCounts = '
-                         '[3, 3]\n        int[] faceVertexIndices = [0, 1, 2, 0, 2, 3]\n        point3f[] points = '
-                         '[(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]\n    }\n}\n')
+                         'upAxis = "Z"\n)\n\ndef Xform "World"\n{\n    def Mesh "m"\n    {\n        '
+                         'int[] faceVertexCounts = [3, 3]\n        '
+                         'int[] faceVertexIndices = [0, 1, 2, 0, 2, 3]\n        '
+                         'point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]\n    }\n}\n')
     f["trunc_usda"] = d / "trunc.usda"
     f["trunc_usda"].write_text(f["usda"].read_text()[:150])
     f["garbage_usdc"] = d / "garbage.usdc"
@@ -123,7 +128,8 @@ def _inputs(d: Path) -> dict:
     f["garbage_json"] = d / "garbage.json"
     f["garbage_json"].write_text("{not json")
     # --- issue 32's classes (and issue 28's scene-table checks)
-    f["grow_bigstep"] = _copy_scene(g, d, "grow_bigstep", toml_sub=[('mode = "volume"', 'mode = "volume"\nbranch_length = 1.0')])
+    f["grow_bigstep"] = _copy_scene(g, d, "grow_bigstep",
+                                    toml_sub=[('mode = "volume"', 'mode = "volume"\nbranch_length = 1.0')])
     claw = SCENES / "coupling" / "claw3d.xml"
     (d / "trunc.npz").write_bytes((claw.parent / "claw3d_part.npz").read_bytes()[:300])
     f["cc_trunc_npz"] = _copy_scene(claw, d, "cc_trunc_npz", toml_sub=[('mesh_file = "claw3d_part.npz"',
@@ -179,7 +185,8 @@ CASES = [
     ("grow-huge-attractor-count", ["grow", "{grow}", "--attractors", "1000000000"], 2, ["--attractors"]),
     ("grow-nan-in-mjcf", ["grow", "{grow_nan}"], 2, ["grow_nan.xml", "size"]),
     ("grow-bad-toml-field", ["grow", "{grow_badtoml}"], 2, ["grow_badtoml.toml", "mode"]),
-    ("grow-unreached-targets", ["grow", "{grow}", "--max-steps", "25"], 1, ["phone_stand.xml", "unreached", "--best-effort"]),
+    ("grow-unreached-targets", ["grow", "{grow}", "--max-steps", "25"], 1,
+     ["phone_stand.xml", "unreached", "--best-effort"]),
     # issue 32 class 1: a value far outside the scene's scale is bad input, naming the option and the box
     ("grow-branch-length-beyond-box", ["grow", "{grow}", "--branch-length", "6"], 2,
      ["--branch-length", "design box", "0.12 x 0.13 x 0.15 m"]),
@@ -188,10 +195,10 @@ CASES = [
     ("grow-toml-branch-length-beyond-box", ["grow", "{grow_bigstep}"], 2,
      ["grow_bigstep.toml", "growth.branch_length", "design box"]),
     ("grow-edit-needs-stroke", ["grow", "edit", "{skeleton}", "--camera", "{camera}"], 2, ["--stroke"]),
-    ("grow-edit-garbage-stroke", ["grow", "edit", "{skeleton}", "--camera", "{camera}", "--stroke", "{garbage_json}"], 2,
-     ["garbage.json"]),
-    ("grow-edit-binary-stroke-csv", ["grow", "edit", "{skeleton}", "--camera", "{camera}", "--stroke", "{garbage_csv}"], 2,
-     ["garbage.csv", "stroke"]),
+    ("grow-edit-garbage-stroke", ["grow", "edit", "{skeleton}", "--camera", "{camera}", "--stroke", "{garbage_json}"],
+     2, ["garbage.json"]),
+    ("grow-edit-binary-stroke-csv", ["grow", "edit", "{skeleton}", "--camera", "{camera}", "--stroke", "{garbage_csv}"],
+     2, ["garbage.csv", "stroke"]),
     ("grow-edit-binary-camera", ["grow", "edit", "{skeleton}", "--stroke", "{stroke}", "--camera", "{binary_json}"], 2,
      ["binary.json", "camera"]),
     # --- couple
@@ -214,7 +221,8 @@ CASES = [
     ("couple-garbage-stl", ["couple", "simulate", "{cc_garbage_stl}"], 2, ["garbage.stl"]),
     ("couple-garbage-target-profile", ["couple", "optimize", "{cc_garbage_target}"], 2, ["garbage.csv"]),
     # issue 32 class 5: a zero quaternion is the one error line (no NumPy warning before it)
-    ("couple-zero-quaternion", ["couple", "simulate", "{cc_zero_quat}"], 2, ["cc_zero_quat.xml", "mquat", "keyframe 1"]),
+    ("couple-zero-quaternion", ["couple", "simulate", "{cc_zero_quat}"], 2,
+     ["cc_zero_quat.xml", "mquat", "keyframe 1"]),
     ("inspect-zero-quaternion", ["inspect", "{cc_zero_quat}"], 2, ["cc_zero_quat.xml", "mquat"]),
     # issue 32 class 6: a path of 10^6 keyframes is refused at load, in seconds
     ("couple-million-keyframes", ["couple", "simulate", "{many_keys}"], 2, ["many_keys.xml", "<keyframe>", "10000"]),
@@ -235,10 +243,12 @@ CASES = [
     ("deploy-missing-scene", ["deploy", "--scene", "nope.xml"], 2, ["nope.xml"]),
     ("deploy-out-is-a-file", ["deploy", "--out", "{file}"], 2, ["--out", "afile.txt"]),
     # issue 32 class 4: every <numeric> field checked for count, type and range before anything runs
-    ("deploy-cell-two-values", ["deploy", "--scene", "{uc_two_values}"], 2, ["uc_two_values.xml", "cell_size", "one number"]),
+    ("deploy-cell-two-values", ["deploy", "--scene", "{uc_two_values}"], 2,
+     ["uc_two_values.xml", "cell_size", "one number"]),
     ("deploy-cell-fractional-segments", ["deploy", "--scene", "{uc_frac_segments}"], 2,
      ["uc_frac_segments.xml", "cell_segments", "whole number"]),
-    ("deploy-cell-huge-segments", ["deploy", "--scene", "{uc_huge_segments}"], 2, ["uc_huge_segments.xml", "cell_segments"]),
+    ("deploy-cell-huge-segments", ["deploy", "--scene", "{uc_huge_segments}"], 2,
+     ["uc_huge_segments.xml", "cell_segments"]),
     ("deploy-increments-huge", ["deploy", "--increments", "100000"], 2, ["--increments"]),
     ("deploy-spacing-beyond-surface", ["deploy", "surface", "dome", "--spacing", "10"], 2,
      ["--spacing", "target surface", "0.3294 m"]),
@@ -250,7 +260,8 @@ CASES = [
     ("validate-odd-n", ["validate", "buckling", "--n", "5"], 2, ["--n"]),
     ("validate-out-is-a-file", ["validate", "buckling", "--out", "{file}"], 2, ["--out", "afile.txt"]),
     # issue 32 class 3: an empty --out (an unset shell variable) is refused by every subcommand
-    ("crowd-simulate-empty-out", ["crowd", "simulate", "--tasks", "3", "--scale", "1", "10", "--out", ""], 2, ["--out"]),
+    ("crowd-simulate-empty-out", ["crowd", "simulate", "--tasks", "3", "--scale", "1", "10", "--out", ""], 2,
+     ["--out"]),
     ("grow-empty-out", ["grow", "{grow}", "--out", ""], 2, ["--out", "empty"]),
     ("couple-empty-out", ["couple", "simulate", "cclamp2d", "--out", ""], 2, ["--out", "empty"]),
     ("inspect-empty-out", ["inspect", "{open_stl}", "--out", " "], 2, ["--out", "empty"]),
@@ -373,8 +384,8 @@ def test_crowd_truth_unites_overlapping_bodies_and_says_so(tmp_path):
     b = trimesh.creation.box(extents=[0.01, 0.02, 0.01])
     b.apply_translation([0.003, 0.004, 0.001])
     u = a.union(b, engine="manifold")
-    assert s["orientations"][0]["support_volume"] == pytest.approx(support_metrics(u.vertices, u.faces)["support_volume"],
-                                                                   rel=1e-6)
+    expected = support_metrics(u.vertices, u.faces)["support_volume"]
+    assert s["orientations"][0]["support_volume"] == pytest.approx(expected, rel=1e-6)
 
 
 def test_implausible_units_are_warned(tmp_path):

@@ -30,7 +30,8 @@ def _files(d: Path) -> set:
 
 
 @pytest.mark.parametrize("name, expected", [("../../x", "x"), ("/etc/passwd", "etc_passwd"), ("..", "unnamed"),
-                                            (".hidden", "hidden"), ("a b/c", "a_b_c"), ("ok-name_1.v2", "ok-name_1.v2")])
+                                            (".hidden", "hidden"), ("a b/c", "a_b_c"),
+                                            ("ok-name_1.v2", "ok-name_1.v2")])
 def test_safe_name(name, expected):
     assert safe_name(name) == expected
 
@@ -70,11 +71,12 @@ def test_unwritable_out_folder_is_refused_before_computing(tmp_path, monkeypatch
     locked = tmp_path / "locked"
     locked.mkdir()
     real = os.access
-    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if os.path.abspath(p) == str(locked) else real(p, mode, **kw))
+    monkeypatch.setattr(os, "access",
+                        lambda p, mode, **kw: False if os.path.abspath(p) == str(locked) else real(p, mode, **kw))
     with pytest.raises(InputError, match="no permission"):
         check_out_dir(locked / "sub")
-    for argv in (["couple", "simulate", "cclamp2d", "--steps", "1"], ["couple", "optimize", "block2d_tight", "--iterations", "1"],
-                 ["grow", "phone_stand"]):
+    for argv in (["couple", "simulate", "cclamp2d", "--steps", "1"],
+                 ["couple", "optimize", "block2d_tight", "--iterations", "1"], ["grow", "phone_stand"]):
         code = main(argv + ["--out", str(locked / "o")])
         err = capsys.readouterr().err.strip().splitlines()
         assert code == 2 and len(err) == 1 and "no permission" in err[0] and "--out" in err[0], (argv, err)
@@ -96,7 +98,8 @@ def test_couple_scene_name_cannot_escape(tmp_path):
 
 
 def test_deploy_body_name_cannot_escape(tmp_path):
-    xml = (SCENES / "deploy" / "unit_cell.xml").read_text().replace('name="insert_small"', 'name="insert_/../../../../x"')
+    xml = (SCENES / "deploy" / "unit_cell.xml").read_text().replace('name="insert_small"',
+                                                                    'name="insert_/../../../../x"')
     (tmp_path / "cell.xml").write_text(xml)
     out = tmp_path / "a" / "b"
     r = _run(["deploy", "--scene", str(tmp_path / "cell.xml"), "--insert", "insert_/../../../../x", "--increments", "1",
@@ -119,7 +122,7 @@ def test_grow_outputs_stay_in_out(tmp_path):
     r = _run(["grow", str(SCENES / "growth" / "phone_stand.xml"), "--out", str(out)], tmp_path)
     assert r.returncode == 0, r.stderr
     assert _files(tmp_path) and all(out in p.parents for p in _files(tmp_path))
-    # the skin written is clean: closed and without zero-area faces (3 before the fix)
+    # the skin written is clean: closed and without zero-area faces
     from simfab.io.mesh import read_mesh
 
     s = json.loads(r.stdout)

@@ -25,7 +25,8 @@ def test_barrier_is_c2_at_dhat_positive_convex_and_infinite_at_contact():
         assert abs(fn(np.array([DHAT - eps]), DHAT)[0]) < 1e-6 * max(1.0, DHAT)
         assert fn(np.array([DHAT + eps]), DHAT)[0] == 0.0
     d = np.linspace(0.001, 0.999, 100) * DHAT
-    assert np.all(barrier(d, DHAT) > 0) and np.all(barrier_gradient(d, DHAT) < 0) and np.all(barrier_hessian(d, DHAT) > 0)
+    assert np.all(barrier(d, DHAT) > 0) and np.all(barrier_gradient(d, DHAT) < 0)
+    assert np.all(barrier_hessian(d, DHAT) > 0)
     assert barrier(np.array([0.0, -1.0]), DHAT).tolist() == [np.inf, np.inf]
 
 
@@ -44,7 +45,8 @@ def test_point_barrier_chain_rule_through_imls():
 
     def energy(yy):
         e = evaluate(f, yy)
-        return np.array([point_barrier(-e.psi[i:i + 1], -e.grad[i:i + 1], None, dhat, kappa)[0] for i in range(len(yy))])
+        return np.array([point_barrier(-e.psi[i:i + 1], -e.grad[i:i + 1], None, dhat, kappa)[0]
+                         for i in range(len(yy))])
 
     e = evaluate(f, y)
     assert np.all(-e.psi > 0) and np.all(-e.psi < dhat)

@@ -224,7 +224,7 @@ def test_uneven_samples_keep_the_curvature_bound(sampling):
     # Random samples and the vertices of a UV sphere (dense at the poles) are unevenly spread: with
     # the default width (2 mean spacings for uneven samples) and density weights the field keeps
     # the sigma^2 / R bound of even samples within 2 sigma of the surface (at the mean
-    # nearest-neighbour distance the random case was 5.9x over it)
+    # nearest-neighbour distance the random case is 5.9x over it)
     R = 0.01
     rng = np.random.default_rng(11)
     if sampling == "random":

@@ -84,7 +84,8 @@ def test_evaluation_without_hessian_defers_the_same_psd_hessian(coarse_block_mod
     assert diff.nnz == 0 or np.abs(diff.data).max() == 0.0
 
 
-@pytest.mark.parametrize("dim,order,refined", [(2, 10, False), (2, 10, True), (3, 4, False), (3, 4, True), (3, 9, True)])
+@pytest.mark.parametrize("dim,order,refined", [(2, 10, False), (2, 10, True), (3, 4, False), (3, 4, True),
+                                               (3, 9, True)])
 def test_check_lattice_gaps_equal_the_distances_to_the_facet_vertices(dim, order, refined):
     # the facet check bounds psi at a check point from the facet's vertices by L |y - v|; the
     # distances come from squared edge lengths through a precomputed map: compare with |y - v|

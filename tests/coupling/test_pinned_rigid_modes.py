@@ -22,7 +22,8 @@ def test_pinned_solve_is_the_woodbury_update():
     U = np.linalg.qr(rng.normal(size=(n, 2)))[0]
     B = rng.normal(size=(n, n))
     A = B @ B.T
-    A -= np.outer(A @ U[:, 0], U[:, 0]) + np.outer(U[:, 0], U[:, 0] @ A) - (U[:, 0] @ A @ U[:, 0]) * np.outer(U[:, 0], U[:, 0])
+    A -= (np.outer(A @ U[:, 0], U[:, 0]) + np.outer(U[:, 0], U[:, 0] @ A)
+          - (U[:, 0] @ A @ U[:, 0]) * np.outer(U[:, 0], U[:, 0]))
     A += 1e-10 * np.eye(n)  # the factorization's diagonal term
     free = np.arange(2, n)
     pin = rigid.Pin(U, 3.0, np.zeros(n))
@@ -39,7 +40,8 @@ def clip_runs():
     # (the pin acts on the rigid modes, whatever the elements) keep the test short
     sim, comp = {"steps": 18, "element_order": 1}, {"target_elements": 3600}
     free = simulate(load_coupling_scene("clip3d", overrides={"simulation": sim, "compliant": comp}))
-    held = simulate(load_coupling_scene("clip3d", overrides={"simulation": {**sim, "fixed_axes": "xz"}, "compliant": comp}))
+    held = simulate(load_coupling_scene("clip3d", overrides={"simulation": {**sim, "fixed_axes": "xz"},
+                                                             "compliant": comp}))
     return free, held
 
 
@@ -64,7 +66,7 @@ def test_clip_free_to_slide_along_the_cylinder_is_pinned_not_drifting(clip_runs)
 
 def test_friction_resists_the_slide_along_the_cylinder():
     # with friction the clip's slide along the cylinder is resisted (the sticking contact holds it):
-    # it is no longer reported as unresisted, and the part still does not drift along z
+    # it is not reported as unresisted, and the part still does not drift along z
     import dataclasses
 
     from simfab.coupling.config import ContactOptions

@@ -29,7 +29,8 @@ def test_cclamp_continues_past_the_keyframes_until_the_cylinder_seats(cclamp):
     prof, summary = summarize(res)
     # E_ss is the energy's minimum along the path, below the value at the last keyframe, and a
     # stationary point; the steady state lies past the keyframes
-    assert prof.stationary and prof.E_ss == pytest.approx(E[prof.index_max:].min(), rel=1e-12) and prof.E_ss < 0.95 * E[n - 1]
+    assert prof.stationary and prof.E_ss == pytest.approx(E[prof.index_max:].min(), rel=1e-12)
+    assert prof.E_ss < 0.95 * E[n - 1]
     assert summary["s_ss"] > res.model.path.length
     # no run warning (only the design's yield warning)
     assert all("yield stress" in w for w in res.warnings)
@@ -57,7 +58,8 @@ def test_yield_warning_follows_the_material(cclamp):
     vm = cclamp.column("max_von_mises").max()
     for yield_stress, warned in ((0.5 * vm, True), (2.0 * vm, False)):
         res = simulate(load_coupling_scene("cclamp2d", overrides={
-            "material": {"name": "stiff", "youngs_modulus": 3.5e9, "poisson_ratio": 0.36, "yield_stress": yield_stress}}))
+            "material": {"name": "stiff", "youngs_modulus": 3.5e9, "poisson_ratio": 0.36,
+                         "yield_stress": yield_stress}}))
         assert any("exceeds the yield stress" in w for w in res.warnings) == warned
 
 
@@ -75,8 +77,10 @@ def test_profile_forces_stop_at_the_steady_state():
 
 
 def _records(s, E, P):
+    """Frictionless step records: no friction force, no dissipation, nothing left to lag."""
     from types import SimpleNamespace
-    return [SimpleNamespace(s=si, energy=e, barrier_energy=0.0, path_force=p, max_von_mises=0.0)
+    return [SimpleNamespace(s=si, energy=e, barrier_energy=0.0, path_force=p, path_force_friction=0.0,
+                            dissipated=0.0, lag_change=0.0, phase="insert", max_von_mises=0.0)
             for si, e, p in zip(s, E, P)]
 
 
@@ -93,7 +97,8 @@ def test_step_checks_ignore_a_negligible_profile(scale, coarse):
 
     s = np.linspace(0.0, 0.01, 5)
     cm = SimpleNamespace(name="t", s_steps=s, force_scale=1e4, fem=SimpleNamespace(material=None),
-                         options=SimpleNamespace(L_max=0.01), end_direction=None)
+                         options=SimpleNamespace(L_max=0.01), end_direction=None,
+                         contact=SimpleNamespace(lag_tol=0.01, max_lag_iterations=5))
     floor = C.NEWTON_GRAD_TOL_REL * cm.force_scale * s[-1]  # 1e-4 J
     E = scale * floor * np.array([0.0, 0.2, 1.0, 0.3, 0.1])
     P = scale * floor / s[-1] * np.array([0.0, -40.0, -10.0, 80.0, 5.0])

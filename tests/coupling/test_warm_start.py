@@ -63,8 +63,8 @@ def test_a_moved_vertex_takes_the_largest_move_its_points_ask_for():
     # are the weighted means of the points' normals (here all +y).
     from types import SimpleNamespace
 
-    pts = ContactPoints(verts=np.array([[0, 0], [0, 1], [0, 1]]), weights=np.array([[1.0, 0.0], [0.9, 0.1], [0.5, 0.5]]),
-                        facet=np.array([-1, 0, 0]))
+    pts = ContactPoints(verts=np.array([[0, 0], [0, 1], [0, 1]]),
+                        weights=np.array([[1.0, 0.0], [0.9, 0.1], [0.5, 0.5]]), facet=np.array([-1, 0, 0]))
     cm = SimpleNamespace(fem=SimpleNamespace(n_vertices=3))
     x = np.zeros((3, 2))
     sel = np.array([True, True, True])

@@ -18,7 +18,8 @@ def test_slender_bracket_matches_timoshenko_beam():
     from simfab.fem.materials import material_by_name
 
     L, h, t, P = 0.2, 0.02, 0.01, 5.0
-    setup = Bk.BracketSetup(length=L, height=h, thickness=t, load=P, load_y=h / 2, load_radius=h / 2 + 1e-9, max_area=(h / 16) ** 2)
+    setup = Bk.BracketSetup(length=L, height=h, thickness=t, load=P, load_y=h / 2, load_radius=h / 2 + 1e-9,
+                            max_area=(h / 16) ** 2)
     r = Bk.tip_deflection(np.array([[0, 0], [L, 0], [L, h], [0, h]]), setup=setup, name="beam")
     m = material_by_name(setup.material)
     E, nu = m.youngs_modulus, m.poisson_ratio

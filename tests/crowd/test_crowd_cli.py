@@ -17,7 +17,8 @@ def _write(path, text):
 @pytest.fixture(scope="module")
 def crowd_files(tmp_path_factory):
     d = tmp_path_factory.mktemp("crowd")
-    assert main(["crowd", "simulate", "--tasks", "4", "--scale", "1", "10", "--practitioners", "8", "--out", str(d), "--seed", "3", "--quiet"]) == 0
+    assert main(["crowd", "simulate", "--tasks", "4", "--scale", "1", "10", "--practitioners", "8", "--out", str(d),
+                 "--seed", "3", "--quiet"]) == 0
     return d / "ratings.csv", d / "truth.csv"
 
 
@@ -31,7 +32,8 @@ def test_simulate_writes_long_form_ratings(crowd_files):
 def test_aggregate_json_keys(crowd_files, tmp_path, capsys):
     ratings, truth = crowd_files
     out = tmp_path / "agg"
-    args = ["crowd", "aggregate", str(ratings), "--scale", "1", "10", "--truth", str(truth), "--out", str(out), "--json", "--burn-in", "400", "--draws", "800", "--max-draws", "800"]
+    args = ["crowd", "aggregate", str(ratings), "--scale", "1", "10", "--truth", str(truth), "--out", str(out),
+            "--json", "--burn-in", "400", "--draws", "800", "--max-draws", "800"]
     assert main(args) == 0
     d = json.loads(capsys.readouterr().out)
     assert set(d["methods"]) == {"arithmetic_mean", "geometric_mean", "median", "majority", "bayesian"}
@@ -52,7 +54,8 @@ def test_aggregate_json_keys(crowd_files, tmp_path, capsys):
 
 def test_aggregate_without_truth_gives_null_errors(crowd_files, tmp_path, capsys):
     ratings, _ = crowd_files
-    assert main(["crowd", "aggregate", str(ratings), "--scale", "1", "10", "--out", str(tmp_path / "a"), "--json", "--draws", "300", "--max-draws", "300"]) == 0
+    assert main(["crowd", "aggregate", str(ratings), "--scale", "1", "10", "--out", str(tmp_path / "a"), "--json",
+                 "--draws", "300", "--max-draws", "300"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["methods"]["median"]["rms"] is None and d["methods"]["bayesian"]["percentile"] is None
 
@@ -60,7 +63,8 @@ def test_aggregate_without_truth_gives_null_errors(crowd_files, tmp_path, capsys
 def test_study_small(crowd_files, tmp_path, capsys):
     ratings, truth = crowd_files
     out = tmp_path / "study"
-    assert main(["crowd", "study", str(ratings), "--scale", "1", "10", "--truth", str(truth), "--subcrowds", "4", "--min-size", "6", "--burn-in", "100", "--draws", "100", "--out", str(out), "--json"]) == 0
+    assert main(["crowd", "study", str(ratings), "--scale", "1", "10", "--truth", str(truth), "--subcrowds", "4",
+                 "--min-size", "6", "--burn-in", "100", "--draws", "100", "--out", str(out), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert [r["size"] for r in d["sizes"]] == [6, 7]
     assert [r["subcrowds"] for r in d["sizes"]] == [4, 4]  # C(8,6)=28 > 4 random; C(8,7)=8 > 4
@@ -73,7 +77,8 @@ def test_truth_on_a_mesh_file(tmp_path, capsys):
     path = tmp_path / "cube.stl"
     box.export(path)
     out = tmp_path / "truth"
-    assert main(["crowd", "truth", str(path), "--units", "mm", "--orientations", "flat=0:0:0", "edge=45:0:0", "--out", str(out), "--json"]) == 0
+    assert main(["crowd", "truth", str(path), "--units", "mm", "--orientations", "flat=0:0:0", "edge=45:0:0",
+                 "--out", str(out), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     rows = {r["orientation"]: r for r in d["orientations"]}
     # 20 mm cube on an edge: V = L a^2 / 2 = 0.02^3 / 2 m^3
@@ -86,9 +91,11 @@ def test_truth_on_a_mesh_file(tmp_path, capsys):
 BAD_RATINGS = {
     "missing_column": ("worker,task\na,q1\n", "missing column 'label'"),
     "non_numeric": ("worker,task,label\na,q1,5\nb,q1,high\n", "line 3, column 'label': 'high' is not a finite number"),
-    "off_scale": ("worker,task,label\na,q1,5\nb,q1,11\n", "line 3, column 'label': 11 is not an integer on the scale [1, 10]"),
+    "off_scale": ("worker,task,label\na,q1,5\nb,q1,11\n",
+                  "line 3, column 'label': 11 is not an integer on the scale [1, 10]"),
     "non_integer": ("worker,task,label\na,q1,5.5\n", "line 2, column 'label': 5.5 is not an integer"),
-    "duplicate": ("worker,task,label\na,q1,5\nb,q1,4\na,q1,6\n", "line 4: duplicate rating of task 'q1' by worker 'a' (first at line 2)"),
+    "duplicate": ("worker,task,label\na,q1,5\nb,q1,4\na,q1,6\n",
+                  "line 4: duplicate rating of task 'q1' by worker 'a' (first at line 2)"),
     "empty_crowd": ("worker,task,label\n", "no ratings (empty crowd)"),
     "empty_file": ("", "empty file"),
     "empty_worker": ("worker,task,label\n,q1,5\n", "line 2, column 'worker': empty"),
@@ -133,7 +140,8 @@ def test_bad_truth_exit_2(truth, msg, tmp_path, capsys):
         (["crowd", "aggregate", "nope.csv", "--scale", "1", "10", "--chains", "1"], "--chains: must be >= 2"),
         (["crowd", "truth", "nope.stl"], "nope.stl"),
         (["crowd", "truth", "nope.stl", "--orientations", "tilted"], "--orientations"),
-        (["crowd", "simulate", "--tasks", "3", "--scale", "1", "5", "--malicious", "2"], "--malicious: must be within [0, 1]"),
+        (["crowd", "simulate", "--tasks", "3", "--scale", "1", "5", "--malicious", "2"],
+         "--malicious: must be within [0, 1]"),
         (["crowd"], "choose an action"),
     ],
 )
@@ -153,9 +161,11 @@ def test_density_likelihood_on_tied_integer_answers_warns_chains_disagree(tmp_pa
     """The thesis' density at integer answers is unbounded where raters agree exactly
     (delta -> 0): the posterior splits into spikes and the chains disagree. The sampler must
     say so (the default rounded likelihood exists for this reason)."""
-    rows = "".join(f"w{i},q{j},{v}\n" for i, r in enumerate([[2, 7, 5], [2, 7, 5], [2, 8, 4], [3, 7, 5], [2, 6, 5], [4, 7, 6]]) for j, v in enumerate(r))
+    labels = [[2, 7, 5], [2, 7, 5], [2, 8, 4], [3, 7, 5], [2, 6, 5], [4, 7, 6]]
+    rows = "".join(f"w{i},q{j},{v}\n" for i, r in enumerate(labels) for j, v in enumerate(r))
     path = _write(tmp_path / "r.csv", "worker,task,label\n" + rows)
-    args = ["crowd", "aggregate", path, "--scale", "1", "10", "--out", str(tmp_path / "o"), "--json", "--burn-in", "300", "--draws", "600", "--max-draws", "600"]
+    args = ["crowd", "aggregate", path, "--scale", "1", "10", "--out", str(tmp_path / "o"), "--json",
+            "--burn-in", "300", "--draws", "600", "--max-draws", "600"]
     assert main(args + ["--likelihood", "density"]) == 0
     cap = capsys.readouterr()
     d = json.loads(cap.out)

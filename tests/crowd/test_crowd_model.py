@@ -15,7 +15,8 @@ def _log_mass_quad(a, b):
     return np.log(val) - 0.5 * m * m - 0.5 * np.log(2 * np.pi)
 
 
-@pytest.mark.parametrize("a,b", [(-1.0, 2.0), (-40.0, -39.5), (-8.0, -7.9), (39.5, 40.0), (3.0, 3.001), (-0.2, 0.1), (-300.0, -299.0)])
+@pytest.mark.parametrize("a,b", [(-1.0, 2.0), (-40.0, -39.5), (-8.0, -7.9), (39.5, 40.0), (3.0, 3.001), (-0.2, 0.1),
+                                 (-300.0, -299.0)])
 def test_log_normal_mass_matches_quadrature_in_both_tails(a, b):
     assert M.log_normal_mass(a, b) == pytest.approx(_log_mass_quad(a, b), rel=1e-9, abs=1e-12)
 
@@ -24,7 +25,8 @@ def test_log_unit_mass_equals_general_mass():
     rng = np.random.default_rng(0)
     x = rng.uniform(0, 1, 200)
     inv_s = np.exp(rng.uniform(-0.5, 6, 200))
-    np.testing.assert_allclose(M.log_unit_mass(x, inv_s), M.log_normal_mass(-x * inv_s, (1 - x) * inv_s), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(M.log_unit_mass(x, inv_s), M.log_normal_mass(-x * inv_s, (1 - x) * inv_s),
+                               rtol=1e-12, atol=1e-15)
 
 
 @pytest.mark.parametrize("x,s", [(0.3, 0.05), (0.0, 0.7), (1.0, 0.2), (0.55, 1.0), (0.9, 1e-3)])

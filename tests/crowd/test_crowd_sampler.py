@@ -58,7 +58,8 @@ def test_sampler_reproduces_the_prior_without_data(backend):
     beta_mean = 1 + norm.pdf(1) / norm.cdf(1)
     sd10 = np.sqrt(10)
     x_var = truncnorm(-0.5 / sd10, 0.5 / sd10, loc=0.5, scale=sd10).var()
-    for name, mean, var in (("alpha", 1.0, 1.0), ("beta", beta_mean, truncnorm(-1 + 1e-3, np.inf, loc=1).var()), ("x", 0.5, x_var)):
+    beta_var = truncnorm(-1 + 1e-3, np.inf, loc=1).var()
+    for name, mean, var in (("alpha", 1.0, 1.0), ("beta", beta_mean, beta_var), ("x", 0.5, x_var)):
         d = getattr(post, name)[0]  # (C, D, K)
         m = d.mean(axis=(0, 1))
         ess = diagnostics.ess(np.moveaxis(d, -1, 0))

@@ -13,7 +13,8 @@ def _diamond_prism(a=0.02, length=0.05):
     (width a, length L, |n_z| = 1/sqrt(2)) overhang. V = L * (area under the V between the
     faces and the plate) = L * (a/sqrt2)^2 = L a^2 / 2; overhang area = 2 a L."""
     box = trimesh.creation.box((length, a, a))
-    return T.oriented(box.vertices, T.Orientation(name="d", euler_deg=(45.0, 0.0, 0.0))), box.faces, length * a * a / 2, 2 * a * length
+    verts = T.oriented(box.vertices, T.Orientation(name="d", euler_deg=(45.0, 0.0, 0.0)))
+    return verts, box.faces, length * a * a / 2, 2 * a * length
 
 
 def _t_shape(w=0.06, t=0.01, h=0.04, s=0.012, depth=0.03):
@@ -99,6 +100,7 @@ def test_bundled_survey_truth_matches_its_mesh():
     rows = survey_truth(spec, raycast=False)
     r = load_ratings(spec.root / spec.crowds[0].file, Scale(lo=1, hi=10))
     truth = load_truth(spec.root / spec.truth_file, r)
-    np.testing.assert_allclose(truth, [{x["orientation"]: x["support_score"] for x in rows}[t] for t in r.tasks], rtol=1e-9)
+    scores = {x["orientation"]: x["support_score"] for x in rows}
+    np.testing.assert_allclose(truth, [scores[t] for t in r.tasks], rtol=1e-9)
     assert len(spec.crowds[0].mix.__dict__) and len(r.workers) == 15
     assert len(load_ratings(spec.root / spec.crowds[1].file, Scale(lo=1, hi=10)).workers) == 100

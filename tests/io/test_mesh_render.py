@@ -43,7 +43,8 @@ def test_repairable_problems_warn(tmp_path):
     assert m.is_watertight and m.is_winding_consistent and m.volume == pytest.approx(1.0)
 
 
-@pytest.mark.parametrize("content,match", [(None, "file not found"), (b"solid x\nendsolid x\n", "no triangles|cannot read"),
+@pytest.mark.parametrize("content,match", [(None, "file not found"),
+                                           (b"solid x\nendsolid x\n", "no triangles|cannot read"),
                                            (b"\x00\x01garbage", "cannot read|no triangles")])
 def test_unusable_files(tmp_path, content, match):
     p = tmp_path / "m.stl"

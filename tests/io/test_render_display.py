@@ -44,7 +44,7 @@ def test_usd_curves_and_points_are_drawn(tmp_path):
     w.set_points("pts", np.array([[0.1, 0.1, 0.0]]), 0, widths=np.array([0.03]))
     w.save()
     png = render.render_file(tmp_path / "c.usda", tmp_path / "c.png", width=160, height=120)
-    assert _red_pixels(png) > 200  # a stage of curves and points alone was "no visible mesh" before
+    assert _red_pixels(png) > 200  # a stage of curves and points alone is drawn, not "no visible mesh"
 
 
 def test_time_out_of_range_is_clamped_with_a_warning(tmp_path, capsys):

@@ -13,17 +13,19 @@ from simfab.crowd.study import micro_crowd_study, subcrowds
 
 
 def _serial_reference(ratings, truth, *, n_sub, min_size, config, seed):
-    """The study as it ran before Dask: sizes in order, one generator for sub-crowds and seeds."""
+    """The study run serially in this process: sizes in order, one generator for sub-crowds and seeds."""
     rng = np.random.default_rng(seed)
     sc, N = ratings.scale, len(ratings.workers)
     indiv = metrics.individual_errors(ratings.labels, truth, sc)
     rows = []
     for k in range(min_size, N):
         idx = subcrowds(N, k, n_sub, rng)
-        post = sample(ratings.unit[idx], config=config, seed=int(rng.integers(2**31 - 1)), half_width=half_width(ratings, config), keep_latent=False)
+        post = sample(ratings.unit[idx], config=config, seed=int(rng.integers(2**31 - 1)),
+                      half_width=half_width(ratings, config), keep_latent=False)
         bias = np.sqrt(np.mean((post.mean("x") - sc.to_unit(truth)[None]) ** 2, axis=1))
         pct = np.array([metrics.percentile_rank(b, indiv[m]) for b, m in zip(bias, idx)])
-        rows.append([k, len(idx), pct.mean(), pct.std(ddof=1), bias.mean(), bias.std(ddof=1), np.mean(post.rhat_max > config.rhat_target), np.median(post.rhat_max)])
+        rows.append([k, len(idx), pct.mean(), pct.std(ddof=1), bias.mean(), bias.std(ddof=1),
+                     np.mean(post.rhat_max > config.rhat_target), np.median(post.rhat_max)])
     return np.array(rows)
 
 

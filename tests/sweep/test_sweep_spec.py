@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from simfab.cli import main
-from simfab.errors import InputError
 from simfab.cli.sweep_runner import execute_run, lookup, run_task, write_scene
 from simfab.cli.sweep_spec import load_spec
+from simfab.errors import InputError
 
 
 def _spec(tmp_path, text, name="s.toml"):
@@ -75,7 +75,8 @@ def test_run_keys(tiny_spec):
     ("[sweep]\ncommand = ['nope']\n", "[sweep] command"),
     ("[sweep]\ncommand = ['crowd', 'simulate', '--out', 'x']\n", "[sweep] command"),
     ("[sweep]\ncommand = ['crowd', 'simulate']\n[parameters.x]\nset = '--tasks'\nrange = [1, 2]\n", "[parameters.x]"),
-    ("[sweep]\ncommand = ['crowd', 'simulate']\n[parameters.x]\nset = 'material.youngs_modulus'\nvalues = [1]\n", "[parameters.x]"),
+    ("[sweep]\ncommand = ['crowd', 'simulate']\n[parameters.x]\nset = 'material.youngs_modulus'\nvalues = [1]\n",
+     "[parameters.x]"),
     ("[sweep]\ncommand = ['crowd', 'simulate']\n[collect]\n'bad name' = 'raters'\n", "[collect] bad name"),
     ("[sweep]\ncommand = ['crowd', 'simulate']\n[plot]\nx = 'nothing'\n", "[plot]"),
 ])
@@ -91,7 +92,8 @@ def test_bad_spec_names_file_and_field(tmp_path, capsys, text, field):
 
 
 def test_derived_expression_checked_before_running(tmp_path, capsys):
-    p = _spec(tmp_path, "[sweep]\ncommand = ['crowd', 'simulate', '--scale', '1', '10', '--tasks', '2']\n[collect]\nraters = 'raters'\n[derived]\nz = 'raters / nonexistent'\n")
+    p = _spec(tmp_path, "[sweep]\ncommand = ['crowd', 'simulate', '--scale', '1', '10', '--tasks', '2']\n"
+                        "[collect]\nraters = 'raters'\n[derived]\nz = 'raters / nonexistent'\n")
     assert main(["sweep", str(p), "--out", str(tmp_path / "o"), "--scheduler", "serial"]) == 2
     assert "[derived] z" in capsys.readouterr().err
 

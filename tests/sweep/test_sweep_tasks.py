@@ -36,7 +36,8 @@ def client():
         yield c
 
 
-EXPECTED = [(0, "ok", 0), (1, "ok", 1), (2, "ok", 4), (3, "bad_input", None), (4, "not_converged", None), (5, "error", None), (6, "ok", 36)]
+EXPECTED = [(0, "ok", 0), (1, "ok", 1), (2, "ok", 4), (3, "bad_input", None), (4, "not_converged", None),
+            (5, "error", None), (6, "ok", 36)]
 
 
 def _check(results):

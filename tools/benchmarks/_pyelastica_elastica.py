@@ -84,4 +84,5 @@ def run(n: int, g_over_L: float, delta_exact: float, *, rtol: float = 1e-3, cap_
             break
     return dict(n=n, seconds=_time.perf_counter() - t0, converged=converged, delta_over_L=delta, rel_err=err,
                 simulated_time=t_sim, time_step=dt, steps=int(round(t_sim / dt)), cap_seconds=cap_seconds,
-                radius_over_L=r / L, history=[dict(t=a, delta_over_L=b, rel_err=c, wall=d) for a, b, c, d in history[-3:]])
+                radius_over_L=r / L,
+                history=[dict(t=a, delta_over_L=b, rel_err=c, wall=d) for a, b, c, d in history[-3:]])

@@ -51,7 +51,8 @@ def _reference_metropolis(y01, half_width, *, iterations, burn_in, thin, seed, t
         if it < burn_in and (it + 1) % tune_interval == 0:
             for k in state:  # PyMC2 Metropolis.tune
                 r = accepted[k] / tune_interval
-                scale[k] *= 0.1 if r < 0.001 else 0.5 if r < 0.05 else 0.9 if r < 0.2 else 10.0 if r > 0.95 else 2.0 if r > 0.75 else 1.1 if r > 0.5 else 1.0
+                scale[k] *= (0.1 if r < 0.001 else 0.5 if r < 0.05 else 0.9 if r < 0.2
+                             else 10.0 if r > 0.95 else 2.0 if r > 0.75 else 1.1 if r > 0.5 else 1.0)
                 accepted[k] = 0
         if it >= burn_in and (it - burn_in) % thin == 0 and (it - burn_in) // thin < out.shape[0]:
             out[(it - burn_in) // thin] = state["x"]
@@ -76,7 +77,6 @@ def _crowdkit_rms(crowds):
 
 def run(argv):
     from benchmarks._reference import required
-
     from simfab.crowd import analysis, metrics, synth
     from simfab.crowd.config import PRACTITIONERS, SamplerConfig
     from simfab.crowd.data import Scale
@@ -100,7 +100,8 @@ def run(argv):
     ours = sample(y01, config=cfg, seed=a.seed, half_width=hw)
     ours_x = ours.mean("x")[0]
 
-    ref_draws, ref_seconds = _reference_metropolis(y01, hw, iterations=a.ref_iterations, burn_in=burn, thin=mc["thin"], seed=a.seed)
+    ref_draws, ref_seconds = _reference_metropolis(y01, hw, iterations=a.ref_iterations, burn_in=burn, thin=mc["thin"],
+                                                   seed=a.seed)
     ref_x = ref_draws.mean(axis=0)
 
     speed = {

@@ -65,7 +65,8 @@ def _rms_row(s: dict, seconds: float) -> dict:
     mc = (s.get("mesh_check") or {}).get("figures", {}).get("rms_error")
     fine = None if mc is None else reference_value(mc)
     return {"rms_error_coarse_N": s.get("rms_error"), "rms_error_mesh_converged_N": fine,
-            "rms_error_levels_N": None if mc is None else mc["values"], "rms_error_initial_N": s.get("rms_error_initial"),
+            "rms_error_levels_N": None if mc is None else mc["values"],
+            "rms_error_initial_N": s.get("rms_error_initial"),
             "force_profile_correction": s.get("corrections", {}).get("force_profile"),
             "iterations": s["iterations"], "iterations_total": s.get("iterations_total", s["iterations"]),
             "simulations": s["simulations"], "seconds": seconds}
@@ -105,8 +106,9 @@ def run(argv) -> dict:
         t0 = time.perf_counter()
         s = optimize_scene(name, out=out / name, seed=0, restarts=a.restarts)
         re = _resimulate(s, out / name)
-        report[name] = {"restarts": s.get("restarts"), "feasible": s["feasible"], "E_L": s["E_L"], "iterations": s["iterations"],
-                        "simulations": s["simulations"], "seconds": time.perf_counter() - t0,
+        report[name] = {"restarts": s.get("restarts"), "feasible": s["feasible"], "E_L": s["E_L"],
+                        "iterations": s["iterations"], "simulations": s["simulations"],
+                        "seconds": time.perf_counter() - t0,
                         "initial": s["profile_initial"], "final": s["profile"], "resimulated": re}
         if name == "profile2d":
             report[name]["rms_by_handles"] = _profile_handles(s, time.perf_counter() - t0, out, a)

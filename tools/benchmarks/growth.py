@@ -8,8 +8,8 @@ pruning, smoothing; all stages for guided scenes) and the skin (union, carving, 
 cleanup and the round-trip checks) are timed for seeds 0..R-1 after one warm-up run.
 Reported per scene: median and max wall seconds (and process CPU seconds, less sensitive to
 other load on the machine), nodes, segments, targets reached, and whether the targets
-(growth <= 0.3 s per growth -- a guided scene grows once per stage --, skin <= 1 s) are met. The reference is the original
-method's total run time per growth with 2000 attractors ("growth_seconds_original" in the
+(growth <= 0.3 s per growth -- a guided scene grows once per stage --, skin <= 1 s) are met. The
+reference is the original method's total run time per growth with 2000 attractors ("growth_seconds_original" in the
 shared reference figures; "<1" entries are taken as 1 s, an upper bound), compared with
 our growth + skin time.
 

@@ -1,6 +1,7 @@
 """Sparse SPD factorizations on the systems simfab's Newton solves: which library, at which size.
 
-``python tools/bench.py linear_solvers [--repeat 5] [--repeat-2d 200] [--libraries cholmod,pardiso,...] [--no-3d] [--table]``
+``python tools/bench.py linear_solvers [--repeat 5] [--repeat-2d 200] [--libraries cholmod,pardiso,...]
+[--no-3d] [--table]``
 
 Systems (stiffness of a Neo-Hookean part slightly stretched, PSD-projected, free block):
 
@@ -20,25 +21,11 @@ import_cholmod), ``cholmod_simplicial``, ``splu`` (SciPy SuperLU), and when inst
 ``cholespy``, ``qdldl``; ``spdsolver`` is simfab's SPDSolver as it is. No published reference
 figure exists for this comparison.
 
-Measured 2026-12-02 on the 2 shared cores at load 6-10 (wall times inflated by other jobs; CPU
-times are the steadier figure). On Hessians captured from the knocker3d P2 insertion itself
-(23,676 free dofs, 1.71 M entries, one pattern for all 167 solves of a 4-step run, 12 of them
-exact repeats of the previous system): CHOLMOD 0.56 s CPU per factorization with the SSE3 kernels
-that cvxopt's OpenBLAS 0.3.15 picks on this CPU, 0.27 s with its Haswell kernels (0.28 s
-SkylakeX); MKL PARDISO 0.19-0.26 s CPU on one or two threads (6.6 M entries in its factor,
-2.8 GFlop); CHOLMOD simplicial 2.9-4.2 s, cholespy (CHOLMOD simplicial) 2.6-3.5 s, qdldl 2.9 s,
-SuperLU 1.8 s. This benchmark's run at load 9-10: CHOLMOD 0.368 s wall / 0.221 s CPU, PARDISO
-0.338 s / 0.228 s (two threads), 0.390 s / 0.191 s (one). Peak memory of a factorization: CHOLMOD
-+132 MB, PARDISO +160 MB, cholespy +210 MB. Installed size: cvxopt 65 MB (already a dependency),
-mkl + intel-openmp + tbb 721 MB. Not usable: scikit-sparse and pydiso (no wheel for CPython 3.11
-on Linux), python-mumps (its only cp311 wheel, 0.0.2, is built against NumPy 1). On the 2D system
-CHOLMOD is fastest (~0.9 ms per call; PARDISO ~1.35 ms: a fixed cost per call). End to end,
-``simfab couple simulate knocker3d --element-order 2 --steps 4`` ran no faster with PARDISO than
-with the AVX2 CHOLMOD (106-142 s against 82-130 s, alternating runs; 67 s against 61 s of CPU), so
-simfab keeps CHOLMOD. Reusing one factorization as the preconditioner of CG on the next Hessians
-needed 5-15 CG iterations per Newton step (a refactorization whenever CG needed more than 10-15);
-with a solve costing 1/10-1/20 of a factorization this is at best break-even, so simfab factorizes
-every Newton step.
+simfab keeps CHOLMOD (supernodal, AVX2 kernels) and factorizes at every Newton step: on the
+knocker3d P2 Hessians MKL PARDISO is no faster end to end, and reusing a factorization as the
+preconditioner of CG on the next Hessians is at best break-even (a solve costs 1/10-1/20 of a
+factorization, CG needs 5-15 iterations). The measurements are in docs/decisions.md ("Sparse
+factorization").
 """
 
 from __future__ import annotations
@@ -246,7 +233,7 @@ def run(argv) -> dict:
             print(f"{'library':20s} {'analyse s':>10s} {'factor+solve s':>15s} {'CPU s/call':>11s} "
                   f"{'residual':>9s} {'factor nnz':>11s} {'vs CHOLMOD':>10s}", file=sys.stderr)
             for r in rows:
-                print(f"{r['library']:20s} {r['analyse_s']:10.3g} {r['factor_solve_s']:15.4g} {r['cpu_per_call_s']:11.4g} "
-                      f"{r['max_rel_residual']:9.1e} {str(r['factor_nnz'] or '-'):>11s} "
+                print(f"{r['library']:20s} {r['analyse_s']:10.3g} {r['factor_solve_s']:15.4g} "
+                      f"{r['cpu_per_call_s']:11.4g} {r['max_rel_residual']:9.1e} {str(r['factor_nnz'] or '-'):>11s} "
                       f"{str(r['speedup_vs_cholmod'] or '-'):>10s}", file=sys.stderr)
     return out

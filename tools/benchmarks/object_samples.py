@@ -10,9 +10,9 @@ r (simfab.contact.imls). The mesh-convergence study (``bench converge``) refines
 only; this one runs the scene as bundled (its mesh, elements and steps) at each sample count and
 reports per count sigma [m], the profile figures (E_max, E_ss [J], F_in, F_rm, F_grip [N],
 category), Newton iterations and seconds. Primitive objects (sphere, cylinder, capsule, box, torus)
-use their exact signed distance and have nothing to converge (InputError); since stop 17 every
-bundled scene's object is one (the knocker's ring, a 96 x 24 facet mesh before, moved 10-20 % per
-doubling up to 32,000 samples; claw3d's ball, an icosphere at 10,000 samples, read F_in 2.7 % high).
+use their exact signed distance and have nothing to converge (InputError); every bundled scene's
+object is one, because sampled meshes of round objects converge slowly in the sample count (see
+docs/decisions.md, "Objects as primitives").
 """
 
 from __future__ import annotations
@@ -39,7 +39,8 @@ def run(argv) -> dict:
     for n in (int(x) for x in a.samples.split(",")):
         cm = load_coupling_scene(a.scene, overrides={"object": {"samples": n}, "simulation": sim})
         if isinstance(cm.field, PrimitiveField):  # exact, not sampled
-            raise InputError(f"{a.scene}'s object is made of primitives (exact signed distance): no sampling to converge")
+            raise InputError(f"{a.scene}'s object is made of primitives (exact signed distance): "
+                             "no sampling to converge")
         t0 = time.perf_counter()
         res = simulate(cm)
         p = analyze_run(res)

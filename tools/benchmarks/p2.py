@@ -25,9 +25,7 @@ energy; proportional to the compliance) for linear tets on the scene's mesh and 
 refinement (8x tets) and for P2 on the scene's mesh (``--knocker-reference`` adds P2 on the
 refinement: 180k dofs, minutes). Conforming displacement FEM is too stiff, so every figure is a
 lower bound of the true work: the largest is the best estimate, and ratio = work / that one.
-Measured with ``--knocker-reference`` (2026-12-01, 2 shared cores): P2 on the refined mesh
-(39040 tets, 180k dofs) 7.116e-8 J in 174 s and 3.8 GB; the scene mesh gives 63% of it with
-linear tets, 85% with linear tets refined once (same dofs as P2) and 98% with P2.
+The figures of a ``--knocker-reference`` run are in docs/decisions.md ("P2 reference work").
 
 Cost: median wall time per element [us] of ``energy_gradient`` and ``energy_gradient_hessian``
 (PSD-projected, assembled into CSR) for linear and P2 (both quadrature rules) on the same corner

@@ -26,7 +26,6 @@ def run(argv) -> dict:
     a = p.parse_args(argv)
 
     from benchmarks._reference import figures
-
     from simfab.deploy import buckling as bk
     from simfab.deploy import elastica
     from simfab.deploy import tolerances as tol

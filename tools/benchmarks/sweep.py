@@ -150,7 +150,9 @@ def _crowd(client, workers: int, n_sub: int) -> dict:
     c0, t0 = _cpu_seconds(), time.perf_counter()
     b = micro_crowd_study(ratings, truth, n_sub=n_sub, seed=0, scheduler=client)
     dask, dask_cpu = time.perf_counter() - t0, _cpu_seconds() - c0
-    same = all(np.array_equal(getattr(a, f), getattr(b, f)) for f in ("sizes", "percentile_mean", "percentile_sd", "bias_mean", "bias_sd", "unconverged", "rhat_median"))
+    same = all(np.array_equal(getattr(a, f), getattr(b, f)) for f in ("sizes", "percentile_mean", "percentile_sd",
+                                                                        "bias_mean", "bias_sd", "unconverged",
+                                                                        "rhat_median"))
     return {
         "crowd": f"bundled practitioners, {len(ratings.workers)} raters x {len(ratings.tasks)} questions",
         "sizes": len(a.sizes), "subcrowds_per_size": n_sub, "tasks": len(a.sizes),
@@ -164,7 +166,8 @@ def run(argv):
     from simfab.sweep.tasks import connect, machine_workers
 
     ap = argparse.ArgumentParser(prog="bench sweep")
-    ap.add_argument("--subcrowds", type=int, default=500, help="sub-crowds per size in the crowd study (default 500, the study's)")
+    ap.add_argument("--subcrowds", type=int, default=500,
+                    help="sub-crowds per size in the crowd study (default 500, the study's)")
     ap.add_argument("--empty-tasks", type=int, default=400)
     ap.add_argument("--skip-crowd", action="store_true")
     a = ap.parse_args(argv)
