@@ -173,9 +173,8 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     from simfab.coupling.outputs import write_all
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import check_start, simulate
-    from simfab.progress import log
-
     from simfab.design.scene import check_brief_table
+    from simfab.progress import log
 
     dev = check_device(device)
     cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}, "contact": contact or {}}, device=dev)

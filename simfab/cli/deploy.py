@@ -67,7 +67,8 @@ def run(args) -> dict:
 
 
 def run_surface(args) -> dict:
-    from simfab.deploy import pipeline, scene as sc
+    from simfab.deploy import pipeline
+    from simfab.deploy import scene as sc
     from simfab.deploy import surface_outputs as so
     from simfab.deploy.lasercut import write_dxf, write_svg
     from simfab.errors import InputError
@@ -178,13 +179,12 @@ def format_text(summary: dict) -> str:
 def run_cell(args) -> dict:
     import dataclasses
 
+    import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
+    from simfab._warp import device as _device
     from simfab.deploy import export, unitcell
     from simfab.errors import InputError
     from simfab.io.atomic import atomic_paths, write_json
     from simfab.progress import log
-
-    import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
-    from simfab._warp import device as _device
 
     dev = _device(args.device)
     scene = args.scene or unitcell.default_scene_path()

@@ -261,13 +261,11 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool =
     :class:`GrowthResult` under ``_result`` when ``keep_result``).
 
     A target left unreached is a failed growth (ConvergenceError, exit 1) unless ``best_effort``."""
-    from simfab.errors import ConvergenceError
+    from simfab.errors import ConvergenceError, InputError
     from simfab.growth import grow, skin_result
     from simfab.growth.outputs import SKIN_FILE_UNITS, write_all
     from simfab.growth.tolerances import PENETRATION_ROUNDOFF
     from simfab.progress import log
-
-    from simfab.errors import InputError
 
     symmetric = overrides.pop("symmetric", None)
     try:
@@ -316,12 +314,12 @@ def _run_edit(args) -> dict:
 
     from simfab.errors import InputError
     from simfab.growth.obstacles import Obstacles
+    from simfab.growth.outputs import SKIN_FILE_UNITS, save_skin
     from simfab.growth.scene import load_growth_scene
     from simfab.growth.skeleton import load_skeleton_json, to_json_dict
-    from simfab.growth.skinning import skin
     from simfab.growth.sketch import edit_chain, load_camera, load_stroke
+    from simfab.growth.skinning import skin
     from simfab.io.atomic import atomic_paths, write_json
-    from simfab.growth.outputs import SKIN_FILE_UNITS, save_skin
 
     if args.skeleton is None:
         raise InputError("simfab grow edit needs SKELETON_JSON")

@@ -140,7 +140,6 @@ def write_all(result, mesh, out: Path, *, stem: str = "growth") -> dict:
     """Write every output of a run under ``out``; returns name -> path. The files appear
     together: a failure in any writer leaves none of them (``atomic_paths``)."""
     from simfab.io.atomic import atomic_paths
-
     from simfab.io.outpaths import safe_name
 
     out = Path(out)

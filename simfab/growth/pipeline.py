@@ -30,7 +30,7 @@ from simfab.growth.colonize import ColonizeSettings, Tree, colonize
 from simfab.growth.config import Resolved, resolve
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene, load_growth_scene, validate_scene
-from simfab.growth.skeleton import (Skeleton, keep_ancestors, radius_by_age, smooth_positions, subset)
+from simfab.growth.skeleton import Skeleton, keep_ancestors, radius_by_age, smooth_positions, subset
 
 #: root nudge off the symmetry plane, as a fraction of r_max (must stay < 1 to fuse halves)
 ROOT_SPLIT = 0.25

@@ -2,9 +2,8 @@
 
 import json
 
-import numpy as np
-
 import mujoco
+import numpy as np
 import pytest
 
 from simfab.cli import main
@@ -72,9 +71,7 @@ def test_deploy_cli_small_insert(tmp_path, capsys, rods):
 
         # the scene floats freely: shape change after the best rigid alignment [m]; the cell is 80 mm wide
         assert aligned_drift(x0[1:], d.xpos[1:]) < 0.01
-    from pxr import Usd
-
-    from pxr import UsdGeom
+    from pxr import Usd, UsdGeom
 
     stage = Usd.Stage.Open(res["outputs"]["usd"])
     assert stage.GetEndTimeCode() == 4

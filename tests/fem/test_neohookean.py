@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
+from _fem_meshes import fd_grad_hess
 from scipy.spatial.transform import Rotation
 
 from simfab.fem import elastic as nh
 from simfab.fem.materials import Material
 from simfab.fem.model import make_model
-from _fem_meshes import fd_grad_hess
 
 MAT = Material(name="test", youngs_modulus=1.0e3, poisson_ratio=0.3, yield_stress=1e9, density=1.0)
 # nu = 0.3 -> mu/lam = (1 - 2 nu) / (2 nu) = 2/3: dPsi/dJ > 0 (eigensolver branch of the

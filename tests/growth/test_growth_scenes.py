@@ -1,11 +1,11 @@
 """Every bundled scene, five seeds: all targets reached, no segment inside an object or sphere."""
 
+import pathlib
+
 import numpy as np
 import pytest
 
 from simfab.growth import grow, load_growth_scene
-
-import pathlib
 
 SCENES = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "growth"
 SCENE_NAMES = sorted(p.stem for p in SCENES.glob("*.xml"))

@@ -8,8 +8,7 @@ from simfab.errors import InputError
 from simfab.growth.config import StructureSpec
 from simfab.growth.scene import load_growth_scene
 from simfab.growth.skeleton import Skeleton
-from simfab.growth.structure import (CheckOptions, buckling_factor, check_structure, corner_stress,
-                                     target_loads)
+from simfab.growth.structure import CheckOptions, buckling_factor, check_structure, corner_stress, target_loads
 
 R, LENGTH, P = 0.004, 0.08, 1.0  # strut radius and length [m], tip load [N]
 
