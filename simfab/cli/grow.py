@@ -55,9 +55,8 @@ DESCRIPTION = (
     "mean), peak_point_m, max_point_von_mises_Pa, deflection_m (per target), max_deflection_m, mass_kg, volume_m3, "
     "material, yield_stress_Pa, critical_distance_m, target_forces_N, tets, fem_nodes, seconds_check, check_usd, "
     "check_png, with --buckling buckling_factor; with --strengthen also 'strengthened' (the same figures of the "
-    "final design plus "
-    "target_safety_factor, reached, checks, safety_factor_before/after, volume_before/after_m3, volume_change, "
-    "skeleton_json, skin_stl, check_usd, check_png)."
+    "final design plus target_safety_factor, reached, checks, safety_factor_before/after, volume_before/after_m3, "
+    "volume_change, skeleton_json, skin_stl, check_usd, check_png)."
 )
 
 SCENES_DIR = scenes_dir("growth")

@@ -27,8 +27,8 @@ DESCRIPTION = (
     f"pinned critical load {_tol.CRITICAL_LOAD_RTOL:.1%}).\n\n"
     "--json keys: passed, failures (list), convergence_order {support: median order}, "
     "insert_vs_direct_max_rel_diff, critical_load (list per support: support, n, load figures [N], rel_err, "
-    "tolerance), tolerances {n, pinned_rise, "
-    "clamped_rise, force, critical_load}, beam (setup: lengths [m], young [Pa], poisson, ...), scene, "
+    "tolerance), tolerances {n, pinned_rise, clamped_rise, force, critical_load}, beam (setup: lengths [m], "
+    "young [Pa], poisson, ...), scene, "
     "outputs {csv, json, png}, rows (one per case, the CSV columns)."
 )
 
