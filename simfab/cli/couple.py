@@ -77,7 +77,8 @@ def add_args(p):
     conv = sub.add_parser("converge", help="mesh-convergence study of a coupling scene",
                           description="Run a scene at refined meshes (element count x each factor; an extruded "
                                       "part's layers x factor^(1/3)) and report the profile figures, their "
-                                      "extrapolated values and the error of the scene's own mesh.\n\n--json keys: scene, levels (factor, elements, seconds, category), figures (per "
+                                      "extrapolated values and the error of the scene's own mesh.\n\n--json keys: "
+                                      "scene, levels (factor, elements, seconds, category), figures (per "
                                       "figure: values, extrapolated, order, relative_error), error_of_default, table.",
                           formatter_class=argparse.RawDescriptionHelpFormatter)
     conv.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
@@ -98,7 +99,8 @@ def add_args(p):
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     couple_design.add_optimize_args(o)
     st = sub.add_parser("study", help="handle-placement study (displacement vs spatial vs random)",
-                        description=couple_design.STUDY_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+                        description=couple_design.STUDY_DESCRIPTION,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
     couple_design.add_study_args(st)
     for q in (s, conv, listing, o, st):
         add_common_args(q)  # e.g. 'simfab couple scenes --json'

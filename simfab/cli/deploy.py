@@ -45,10 +45,13 @@ def add_args(p) -> None:
     g.add_argument("--young", type=float, help="Young's modulus of the sheet [Pa]")
     g.add_argument("--tune", type=int, metavar="STEPS", help="Gauss-Newton steps tuning the gaps on the deployed "
                    "shape (0: none; scene [tune] iterations)")
-    g.add_argument("--no-mujoco-check", action="store_true", help="skip stepping the MuJoCo scene (stability / relaxation)")
+    g.add_argument("--no-mujoco-check", action="store_true",
+                   help="skip stepping the MuJoCo scene (stability / relaxation)")
     p.add_argument("--scene", default=None, help="unit-cell MJCF scene (default scenes/deploy/unit_cell.xml)")
-    p.add_argument("--insert", nargs="+", metavar="BODY", help="insert bodies to deploy (default: all 'insert*' bodies)")
-    p.add_argument("--increments", type=int, default=None, help="quasi-static increments (default: scene's cell_increments)")
+    p.add_argument("--insert", nargs="+", metavar="BODY",
+                   help="insert bodies to deploy (default: all 'insert*' bodies)")
+    p.add_argument("--increments", type=int, default=None,
+                   help="quasi-static increments (default: scene's cell_increments)")
     p.add_argument("--mjcf-rods", choices=["capsules", "chain", "flexcomp"], default="capsules",
                    help="rods in the deployed MJCF: static capsule chains (default), 'chain': a scene MuJoCo "
                         "simulates (opens on the deployed state; flat rest state of the hinge springs; free insert "
@@ -77,7 +80,8 @@ def run_surface(args) -> dict:
     if not args.target:
         raise InputError("needs a TARGET: scene TOML, bundled name (dome, saddle, mixed) or mesh file",
                          where="simfab deploy surface")
-    target = sc.bundled_path(args.target) if args.target in sc.BUNDLED and not os.path.exists(args.target) else args.target
+    target = (sc.bundled_path(args.target) if args.target in sc.BUNDLED and not os.path.exists(args.target)
+              else args.target)
     ov = {"pattern": {}, "material": {}, "tune": {}}
     for flag, table, field in (("spacing", "pattern", "spacing"), ("beam_width", "pattern", "beam_width"),
                                ("beam_thickness", "pattern", "beam_thickness"),
@@ -148,9 +152,9 @@ def format_text(summary: dict) -> str:
             f"{dp['quadric_gaussian_curvature']:.4g} 1/m^2), stable: {dp['stable']}",
             f"springs           bulge {s['spring_bulge_min']:.3g}..{s['spring_bulge_max']:.3g} for quad growth up to "
             f"{s['quad_growth_max']:.3g}; {len(s['springs_short_of_slack'])} quads short of the slack",
-            f"deviation         RMS {dv['rms'] * 100:.3g} % ({dv['rms_mm']:.3g} mm), Hausdorff {dv['hausdorff'] * 100:.3g} % "
-            f"({dv['hausdorff_mm']:.3g} mm) of D = {dv['diameter_mm']:.0f} mm; height {dv['deployed_height_mm']:.3g} mm "
-            f"(target {dv['target_height_mm']:.3g} mm)"]
+            f"deviation         RMS {dv['rms'] * 100:.3g} % ({dv['rms_mm']:.3g} mm), "
+            f"Hausdorff {dv['hausdorff'] * 100:.3g} % ({dv['hausdorff_mm']:.3g} mm) of D = {dv['diameter_mm']:.0f} mm; "
+            f"height {dv['deployed_height_mm']:.3g} mm (target {dv['target_height_mm']:.3g} mm)"]
     tn = s.get("tuning")
     if tn:
         rows.append(f"tuned gaps        {tn['steps']} Gauss-Newton steps ({tn['solves']} solves), RMS "
@@ -197,7 +201,8 @@ def run_cell(args) -> dict:
     names = args.insert or sorted(inserts)
     for n in names:
         if n not in inserts:
-            raise InputError(f"no insert body {n!r} in the scene (have: {', '.join(sorted(inserts))})", where="--insert")
+            raise InputError(f"no insert body {n!r} in the scene (have: {', '.join(sorted(inserts))})",
+                             where="--insert")
     out = os.path.abspath(args.out)
     deployments = {}
     for n in names:

@@ -26,8 +26,8 @@ from pathlib import Path
 from simfab._bundled import scenes_dir
 
 #: units of summary keys for the plain-text table (the skin files themselves are in mm: skin_units)
-UNITS = {"buckling_factor": "-", "influence": "m", "kill": "m", "branch_length": "m", "volume": "m³", "overlap_volume": "m³",
-         "penetration": "m", "seconds_growth": "s", "seconds_skin": "s", "safety_factor": "-",
+UNITS = {"buckling_factor": "-", "influence": "m", "kill": "m", "branch_length": "m", "volume": "m³",
+         "overlap_volume": "m³", "penetration": "m", "seconds_growth": "s", "seconds_skin": "s", "safety_factor": "-",
          "max_von_mises_Pa": "Pa", "max_point_von_mises_Pa": "Pa", "yield_stress_Pa": "Pa", "mass_kg": "kg",
          "critical_distance_m": "m", "max_deflection_m": "m", "seconds_check": "s"}
 
@@ -54,9 +54,9 @@ DESCRIPTION = (
     "--json keys (check, and grow --check under 'check'): safety_factor, max_von_mises_Pa (critical-distance "
     "mean), peak_point_m, max_point_von_mises_Pa, deflection_m (per target), max_deflection_m, mass_kg, volume_m3, "
     "material, yield_stress_Pa, critical_distance_m, target_forces_N, tets, fem_nodes, seconds_check, check_usd, "
-    "check_png, with --buckling buckling_factor; with --strengthen also 'strengthened' (the same figures of the final design plus "
-    "target_safety_factor, reached, checks, safety_factor_before/after, volume_before/after_m3, volume_change, "
-    "skeleton_json, skin_stl, check_usd, check_png)."
+    "check_png, with --buckling buckling_factor; with --strengthen also 'strengthened' (the same figures of the "
+    "final design plus target_safety_factor, reached, checks, safety_factor_before/after, volume_before/after_m3, "
+    "volume_change, skeleton_json, skin_stl, check_usd, check_png)."
 )
 
 SCENES_DIR = scenes_dir("growth")

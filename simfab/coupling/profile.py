@@ -22,9 +22,10 @@ Definitions (thesis, "Fundamentals and Overview"):
   read from the insertion and F_rm = max(0, max F) from the removal; F_hold, the force needed to
   start sliding O out of its seat (elastic draw plus static friction), is max(0, max F) over the
   removal's turn (its graded first steps, half a planned step back from the seat, over which the
-  contact goes from sticking to slipping). A design whose elastic profile ejects O (no dip) but which friction holds in place
-  (F_hold > 0) is **held by friction**; an insertion that self-locks (O pushed inside the friction
-  cone of the contact, which sticks: a snap-fit with mu tan alpha >= 1) **jams**.
+  contact goes from sticking to slipping). A design whose elastic profile ejects O (no dip) but
+  which friction holds in place (F_hold > 0) is **held by friction**; an insertion that self-locks
+  (O pushed inside the friction cone of the contact, which sticks: a snap-fit with
+  mu tan alpha >= 1) **jams**.
 - Forces are read up to the steady state (the insertion ends there; past it O is pushed into its
   seat), over the whole run for **ejects**.
 - A path that ends in a prescribed pose (its last segment turns O, so the run cannot continue it

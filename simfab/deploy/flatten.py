@@ -133,7 +133,8 @@ def _close_polygon(lengths: np.ndarray, phi: np.ndarray, *, tol: float = 1e-14, 
             return phi
         J = np.stack([-lengths * s, lengths * c])  # (2, b)
         phi -= J.T @ np.linalg.solve(J @ J.T, r)
-    raise ConvergenceError(f"BFF: boundary polygon did not close (residual {np.linalg.norm(r) / total:.2e} of its length)")
+    raise ConvergenceError("BFF: boundary polygon did not close "
+                           f"(residual {np.linalg.norm(r) / total:.2e} of its length)")
 
 
 def flatten(V, F) -> Flattening:

@@ -55,7 +55,8 @@ def disk_mesh(a: float, rings: int) -> tuple[np.ndarray, np.ndarray]:
     P = np.concatenate(pts)
     F = Delaunay(P).simplices.astype(np.int64)
     d = P[F]
-    cross = (d[:, 1, 0] - d[:, 0, 0]) * (d[:, 2, 1] - d[:, 0, 1]) - (d[:, 1, 1] - d[:, 0, 1]) * (d[:, 2, 0] - d[:, 0, 0])
+    cross = ((d[:, 1, 0] - d[:, 0, 0]) * (d[:, 2, 1] - d[:, 0, 1])
+             - (d[:, 1, 1] - d[:, 0, 1]) * (d[:, 2, 0] - d[:, 0, 0]))
     F[cross < 0] = F[cross < 0][:, ::-1]
     return P, F
 
@@ -116,7 +117,8 @@ def procedural(kind: str, params: dict, *, where: str = "target") -> Target:
         elif kind == "cylinder":
             t = cylinder(float(p.pop("radius")), np.radians(float(p.pop("angle_deg"))), float(p.pop("length")), rings)
         else:
-            raise InputError(f"unknown procedural target {kind!r} (use one of {', '.join(KINDS)})", where=f"{where}.kind")
+            raise InputError(f"unknown procedural target {kind!r} (use one of {', '.join(KINDS)})",
+                             where=f"{where}.kind")
     except KeyError as e:
         raise InputError(f"missing parameter {e.args[0]!r} for target kind {kind!r}", where=where) from None
     except (TypeError, ValueError) as e:

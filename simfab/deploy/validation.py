@@ -26,8 +26,9 @@ DESCRIPTION = (
     f"{_tol.PINNED_RISE_RTOL:.1%}, clamped rise {_tol.CLAMPED_RISE_RTOL:.0%}, force {_tol.FORCE_RTOL:.0%}, "
     f"pinned critical load {_tol.CRITICAL_LOAD_RTOL:.1%}).\n\n"
     "--json keys: passed, failures (list), convergence_order {support: median order}, "
-    "insert_vs_direct_max_rel_diff, critical_load (list per support: support, n, load figures [N], rel_err, tolerance), tolerances {n, pinned_rise, "
-    "clamped_rise, force, critical_load}, beam (setup: lengths [m], young [Pa], poisson, ...), scene, "
+    "insert_vs_direct_max_rel_diff, critical_load (list per support: support, n, load figures [N], rel_err, "
+    "tolerance), tolerances {n, pinned_rise, clamped_rise, force, critical_load}, beam (setup: lengths [m], "
+    "young [Pa], poisson, ...), scene, "
     "outputs {csv, json, png}, rows (one per case, the CSV columns)."
 )
 
@@ -51,7 +52,8 @@ def _int_list(text: str) -> int:
 def add_args(p) -> None:
     p.add_argument("--g-over-L", dest="g_over_L", nargs="+", type=_float_list, metavar="R",
                    help="gap ratios g/L in (0, 1) (default 0.99 0.95 0.90 0.80 0.60)")
-    p.add_argument("--n", nargs="+", type=_int_list, metavar="N", help="segment counts (even, >= 4; default 20 40 80 160)")
+    p.add_argument("--n", nargs="+", type=_int_list, metavar="N",
+                   help="segment counts (even, >= 4; default 20 40 80 160)")
     p.add_argument("--support", choices=["pinned", "clamped", "both"], default="both",
                    help="end conditions of the beam (default both)")
     p.add_argument("--path", choices=["direct", "insert", "both"], default="both",
@@ -166,7 +168,8 @@ def _print_table(rows) -> None:
     for r in rows:
         o = f"{r['order']:.2f}" if r["order"] is not None else "-"
         print(f"{r['support']:8} {r['path']:6} {r['g_over_L']:5.2f} {r['n']:4d} {r['delta_over_L']:9.6f} "
-              f"{r['delta_over_L_exact']:9.6f} {r['rel_err']:9.2e} {o:>6} {r['force_rel_err']:9.2e} {r['seconds']:6.2f}")
+              f"{r['delta_over_L_exact']:9.6f} {r['rel_err']:9.2e} {o:>6} {r['force_rel_err']:9.2e} "
+              f"{r['seconds']:6.2f}")
 
 
 def _plot(path, shapes, rows, ratios, supports, paths, ns, L):

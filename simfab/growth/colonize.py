@@ -139,7 +139,8 @@ def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids
     ``step0`` is the step count of earlier stages (node birth steps continue from it).
     Returns a :class:`ColonizeReport`; unreached targets are listed there, never silently lost.
     """
-    A = np.concatenate([np.asarray(attractors, np.float64).reshape(-1, 3), np.asarray(targets, np.float64).reshape(-1, 3)])
+    A = np.concatenate([np.asarray(attractors, np.float64).reshape(-1, 3),
+                        np.asarray(targets, np.float64).reshape(-1, 3)])
     m = len(A) - len(targets)
     is_t = np.zeros(len(A), bool)
     is_t[m:] = True

@@ -364,7 +364,8 @@ def params_from_toml(doc: dict, where: str) -> GrowthParams:
     s = doc.get("smoothing", {})
     _check_unknown(s, {"iterations", "lambda1", "lambda2"}, f"{where}: [smoothing]")
     if "iterations" in s:
-        kw["smoothing_iterations"] = _num(s["iterations"], f"{where}: smoothing.iterations", integer=True, positive=False)
+        kw["smoothing_iterations"] = _num(s["iterations"], f"{where}: smoothing.iterations", integer=True,
+                                          positive=False)
     for key in ("lambda1", "lambda2"):
         if key in s:
             kw[key] = _num(s[key], f"{where}: smoothing.{key}", positive=False)
@@ -387,8 +388,10 @@ def params_from_toml(doc: dict, where: str) -> GrowthParams:
     if st is not None:
         _check_unknown(st, {"targets"}, f"{where}: [stages]")
         t = st.get("targets")
-        if not (isinstance(t, list) and t and all(isinstance(x, list) and x and all(isinstance(n, str) for n in x) for x in t)):
-            raise InputError("expected a list of non-empty lists of target site names", where=f"{where}: stages.targets")
+        if not (isinstance(t, list) and t
+                and all(isinstance(x, list) and x and all(isinstance(n, str) for n in x) for x in t)):
+            raise InputError("expected a list of non-empty lists of target site names",
+                             where=f"{where}: stages.targets")
         kw["stages"] = tuple(tuple(x) for x in t)
 
     sk = doc.get("skin", {})

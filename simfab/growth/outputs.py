@@ -5,8 +5,8 @@ Units: the skin STL/PLY are in **millimetres** (what slicers expect); everything
 
 Every file is written atomically (temporary name + rename). The USD stage replays the
 growth: time code t (0..S) shows the branches grown up to step t (as polylines) with
-widths 2 r (radius by age) and the attractors still alive, S+1 the pruned skeleton, S+2 the smoothed one, S+3 the skin (and the objects
-throughout as static meshes).
+widths 2 r (radius by age) and the attractors still alive, S+1 the pruned skeleton, S+2
+the smoothed one, S+3 the skin (and the objects throughout as static meshes).
 """
 
 from __future__ import annotations

@@ -103,7 +103,8 @@ def skeleton_chains(sk: Skeleton) -> list[np.ndarray]:
     return chains(sk.parent, sk.fixed_mask())
 
 
-def edit_chain(sk: Skeleton, camera: Camera, stroke, *, chain: int | None = None, obstacles=None) -> tuple[Skeleton, dict]:
+def edit_chain(sk: Skeleton, camera: Camera, stroke, *, chain: int | None = None,
+               obstacles=None) -> tuple[Skeleton, dict]:
     """Move one chain onto the ray surface of ``stroke`` (m, 2) [px].
 
     ``chain`` indexes :func:`skeleton_chains` (default: the chain closest to the stroke on

@@ -30,7 +30,8 @@ def _hinge_dofs(model: RodModel) -> np.ndarray:
 
 def _edge_dofs(model: RodModel) -> np.ndarray:
     e = model.edges.astype(np.int64)
-    return np.stack([3 * e[:, 0], 3 * e[:, 0] + 1, 3 * e[:, 0] + 2, 3 * e[:, 1], 3 * e[:, 1] + 1, 3 * e[:, 1] + 2], axis=1)
+    return np.stack([3 * e[:, 0], 3 * e[:, 0] + 1, 3 * e[:, 0] + 2,
+                     3 * e[:, 1], 3 * e[:, 1] + 1, 3 * e[:, 1] + 2], axis=1)
 
 
 class DeviceBuffers:

@@ -58,7 +58,8 @@ class Section:
     def __post_init__(self):
         if self.shape == "rect":
             if not (self.width > 0 and self.thickness > 0):
-                raise InputError(f"rectangular section needs width > 0 and thickness > 0 (got {self.width}, {self.thickness})")
+                raise InputError("rectangular section needs width > 0 and thickness > 0 "
+                                 f"(got {self.width}, {self.thickness})")
         elif self.shape == "circle":
             if not self.radius > 0:
                 raise InputError(f"circular section needs radius > 0 (got {self.radius})")
@@ -81,7 +82,8 @@ class Section:
             J = a * b**3 * (1.0 / 3.0 - 0.21 * (b / a) * (1.0 - b**4 / (12.0 * a**4)))
             return dict(EA=E * w * t, B1=E * w * t**3 / 12.0, B2=E * t * w**3 / 12.0, GJ=G * J)
         r = self.radius
-        return dict(EA=E * np.pi * r**2, B1=E * np.pi * r**4 / 4.0, B2=E * np.pi * r**4 / 4.0, GJ=G * np.pi * r**4 / 2.0)
+        return dict(EA=E * np.pi * r**2, B1=E * np.pi * r**4 / 4.0, B2=E * np.pi * r**4 / 4.0,
+                    GJ=G * np.pi * r**4 / 2.0)
 
     def half_extents(self) -> tuple[float, float]:
         """Distances [m] from the centreline to the outer fibre along m1 (half the thickness) and
@@ -347,7 +349,8 @@ class NetworkBuilder:
             try:
                 d1.append(fr.space_parallel_frames(fr.normalize(np.diff(r.points, axis=0)), r.director))
             except ValueError:
-                raise InputError(f"rod {r.name!r}: director {r.director.tolist()} is parallel to the first edge") from None
+                raise InputError(f"rod {r.name!r}: director {r.director.tolist()} "
+                                 "is parallel to the first edge") from None
             if k >= 2:
                 hn.append(np.stack([nodes[:-2], nodes[1:-1], nodes[2:]], axis=1))
                 he.append(np.stack([eds[:-1], eds[1:]], axis=1))

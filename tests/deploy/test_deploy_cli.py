@@ -17,7 +17,8 @@ def test_validate_buckling_small_case_writes_outputs(tmp_path, capsys):
     res = json.loads(capsys.readouterr().out)
     rows = res["rows"]
     assert len(rows) == 2
-    for key in ("support", "g_over_L", "n", "delta_over_L", "delta_over_L_exact", "rel_err", "force_rel_err", "seconds"):
+    for key in ("support", "g_over_L", "n", "delta_over_L", "delta_over_L_exact", "rel_err", "force_rel_err",
+                "seconds"):
         assert key in rows[0]
     assert [r["increments"] for r in rows] == [1, 1]  # g/L 1 -> 0.9 is one step of the scene's beam_max_increment 0.1
     assert res["convergence_order"]["pinned"] == pytest.approx(2.0, abs=0.2)
@@ -86,7 +87,8 @@ def test_validation_failure_exits_1_after_writing_outputs(tmp_path, capsys):
     """A soft axial stiffness (extensible beam) misses the inextensible elastica at n = 80: exit 1."""
     from simfab.deploy.buckling import default_scene_path
 
-    text = open(default_scene_path()).read().replace('name="beam_axial_ratio" data="1e8"', 'name="beam_axial_ratio" data="300"')
+    text = open(default_scene_path()).read().replace('name="beam_axial_ratio" data="1e8"',
+                                                     'name="beam_axial_ratio" data="300"')
     scene = tmp_path / "soft.xml"
     scene.write_text(text)
     out = tmp_path / "vb"

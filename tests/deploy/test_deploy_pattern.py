@@ -61,7 +61,8 @@ def test_layout_structure(laid_out):
     val = np.bincount(pat.edges.ravel(), minlength=len(pat.P))
     assert np.all(val[pat.interior] == 4)
     Q = pat.P[pat.quads]
-    area = 0.5 * np.sum(Q[:, :, 0] * np.roll(Q[:, :, 1], -1, axis=1) - np.roll(Q[:, :, 0], -1, axis=1) * Q[:, :, 1], axis=1)
+    area = 0.5 * np.sum(Q[:, :, 0] * np.roll(Q[:, :, 1], -1, axis=1) - np.roll(Q[:, :, 0], -1, axis=1) * Q[:, :, 1],
+                        axis=1)
     assert np.all(area > 0.2 * sc.pattern.spacing**2)
     # springs are missing only in boundary quads
     qb = np.unique(pat.edge_quads[pat.edge_quads[:, 1] < 0, 0])

@@ -31,7 +31,8 @@ def test_triangulate_polygon_with_hole_area_and_quality():
     for i in range(3):
         a, b, c = V[F[:, i]], V[F[:, (i + 1) % 3]], V[F[:, (i + 2) % 3]]
         u, v = b - a, c - a
-        ang.append(np.degrees(np.arccos(np.einsum("ij,ij->i", u, v) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1))))
+        ang.append(np.degrees(np.arccos(np.einsum("ij,ij->i", u, v)
+                                        / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1))))
     assert np.min(ang) >= 30 - 1e-6
     # no vertex inside the hole, and the mesh is a valid FEM model with the hole on its boundary
     assert not np.any(shapely.contains_xy(shapely.Polygon(hole).buffer(-1e-9), V[:, 0], V[:, 1]))

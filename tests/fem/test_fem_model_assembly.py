@@ -33,7 +33,8 @@ def test_model_2d_reorients_and_computes_volumes():
     m = make_model(P, T, PLA, thickness=0.01)
     assert m.dim == 2 and m.elements.dtype == np.int32
     e = m.rest[m.elements]
-    cross = (e[:, 1, 0] - e[:, 0, 0]) * (e[:, 2, 1] - e[:, 0, 1]) - (e[:, 1, 1] - e[:, 0, 1]) * (e[:, 2, 0] - e[:, 0, 0])
+    cross = ((e[:, 1, 0] - e[:, 0, 0]) * (e[:, 2, 1] - e[:, 0, 1])
+             - (e[:, 1, 1] - e[:, 0, 1]) * (e[:, 2, 0] - e[:, 0, 0]))
     assert np.all(cross > 0)
     assert m.volume.sum() == pytest.approx(2.0 * 1.0 * 0.01, rel=1e-12)
     np.testing.assert_allclose(np.linalg.inv(m.Dm_inv) @ m.Dm_inv, np.broadcast_to(np.eye(2), m.Dm_inv.shape),

@@ -130,7 +130,8 @@ def unit_cell_network():
 # (network, size of the random deformation [m], second-difference step hs): the unit cell's
 # 2.5 mm edges and 15 mm clamp levers make its energy vary on shorter scales, hence the smaller
 # step; the truncation error ~ hs^2 is below 1e-5 relative in both cases (checked by varying hs)
-@pytest.mark.parametrize("network, deform, hs", [(two_rods_on_a_free_body, 2e-3, 1e-5), (unit_cell_network, 1e-4, 1e-6)])
+@pytest.mark.parametrize("network, deform, hs",
+                         [(two_rods_on_a_free_body, 2e-3, 1e-5), (unit_cell_network, 1e-4, 1e-6)])
 def test_reduced_hessian_through_rigid_body_matches_second_differences(network, deform, hs):
     """H_q (J^T H J + geometric term of the body rotations) vs d^2/ds^2 E(apply(state, s v)) at s = 0,
     for one free body and for many (the geometric term is assembled for all bodies at once)."""

@@ -5,10 +5,11 @@
 For each scene in ``scenes/growth``: grow (the scene's attractors, seed S), check the support
 under its objects' weights, its own weight and its ``[loads]`` (:func:`simfab.growth.structure.
 check_structure`), then :func:`~simfab.growth.structure.strengthen` to safety factor SF (default
-2; ``--thin``: thinning over-strong branches too, at most K rounds). One row per scene: safety factor, peak von Mises stress (critical-distance mean) [Pa],
-largest target deflection [m], mass [kg], check seconds, before and after, and the number of
-checks strengthening took. Target: the phone stand's check <= 30 s. No published reference
-exists for this figure (the thesis leaves structural soundness to the user).
+2; ``--thin``: thinning over-strong branches too, at most K rounds). One row per scene: safety
+factor, peak von Mises stress (critical-distance mean) [Pa], largest target deflection [m],
+mass [kg], check seconds, before and after, and the number of checks strengthening took.
+Target: the phone stand's check <= 30 s. No published reference exists for this figure (the
+thesis leaves structural soundness to the user).
 """
 
 from __future__ import annotations
