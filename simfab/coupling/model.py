@@ -13,7 +13,6 @@ from simfab.errors import InputError
 from simfab.rotations import pose_matrix
 
 
-
 @dataclass(frozen=True, kw_only=True, eq=False)
 class CouplingModel:
     """Immutable description of one insertion simulation.

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from simfab.growth.tolerances import SEGMENT_END_TRIM
+
 
 class Obstacles:
     """Everything a branch may not cross.
@@ -37,7 +39,6 @@ class Obstacles:
         """The objects and obstacle spheres of a :class:`~simfab.growth.scene.GrowthScene`;
         segment ends on a surface are trimmed by ``SEGMENT_END_TRIM`` × ``diag`` (a design-space
         diagonal [m])."""
-        from simfab.growth.tolerances import SEGMENT_END_TRIM
 
         return cls(list(scene.objects.values()), scene.sphere_centers, scene.sphere_radii,
                    end_trim=SEGMENT_END_TRIM * diag)

@@ -18,6 +18,12 @@ import numpy as np
 
 from simfab.growth.pipeline import node_radius
 from simfab.growth.skeleton import chains, to_json_dict
+from simfab.io.atomic import atomic_paths, save_figure, write_json
+from simfab.io.mesh import save_mesh
+from simfab.io.mjcf import MJCFBuilder, load_model
+from simfab.io.outpaths import safe_name
+from simfab.io.render import AZIMUTH, annotate_png, render_mjcf, render_model
+from simfab.io.usd import StageWriter
 
 OBJECT_RGBA = (0.62, 0.64, 0.68, 1.0)
 SKIN_RGBA = (0.86, 0.52, 0.25, 1.0)
@@ -29,7 +35,6 @@ def _ident(name: str) -> str:
 
 
 def write_skeleton(result, path: Path, skeleton=None, **extra) -> Path:
-    from simfab.io.atomic import write_json
 
     sk = skeleton if skeleton is not None else result.skeleton
     scene = result.scene
@@ -39,7 +44,6 @@ def write_skeleton(result, path: Path, skeleton=None, **extra) -> Path:
 
 def write_usd(result, mesh, path: Path) -> Path:
     """Growth replay stage (see module docstring)."""
-    from simfab.io.usd import StageWriter
 
     w = StageWriter(path)
     for name, m in result.scene.objects.items():
@@ -85,7 +89,6 @@ def _set_polylines(w, nodes, radius, polylines, parent, t):
 
 def write_mjcf(result, mesh, path: Path) -> Path:
     """MJCF with the objects and the grown part as static mesh bodies (open it in the viewer)."""
-    from simfab.io.mjcf import MJCFBuilder
 
     b = MJCFBuilder(f"{result.scene.name}_grown")
     for name, m in result.scene.objects.items():
@@ -109,7 +112,6 @@ def write_mjcf(result, mesh, path: Path) -> Path:
 def preview_azimuth(result, mesh) -> float:
     """MuJoCo camera azimuth [deg] that looks at the grown part from its side of the objects
     (the part is often behind the object it supports, e.g. a phone stand)."""
-    from simfab.io.render import AZIMUTH
 
     objs = [m.bounds.mean(axis=0) for m in result.scene.objects.values()]
     if not objs or len(mesh.vertices) == 0:
@@ -129,7 +131,6 @@ SKIN_FILE_UNITS = "mm"
 def save_skin(mesh, path: Path) -> Path:
     """Write the skin for printing: STL/PLY in millimetres (simfab works in metres inside;
     read it back with ``simfab.io.mesh.load_mesh(path, units="mm")``)."""
-    from simfab.io.mesh import save_mesh
 
     m = mesh.copy()
     m.apply_scale(1000.0)
@@ -139,8 +140,6 @@ def save_skin(mesh, path: Path) -> Path:
 def write_all(result, mesh, out: Path, *, stem: str = "growth") -> dict:
     """Write every output of a run under ``out``; returns name -> path. The files appear
     together: a failure in any writer leaves none of them (``atomic_paths``)."""
-    from simfab.io.atomic import atomic_paths
-    from simfab.io.outpaths import safe_name
 
     out = Path(out)
     stem = safe_name(stem)  # scene names come from files: no separators, no '..'
@@ -165,9 +164,6 @@ def render_preview(mjcf: Path, png: Path, azimuth: float, camera_json: Path | No
     camera of the picture (the --camera of ``simfab grow edit``, so a stroke can be drawn over
     it). Falls back to the default view (and matplotlib without OpenGL) through
     :func:`simfab.io.render.render_mjcf`."""
-    from simfab.io.atomic import write_json
-    from simfab.io.mjcf import load_model
-    from simfab.io.render import annotate_png, render_mjcf, render_model
 
     cam: dict = {}
     model = load_model(mjcf)
@@ -200,7 +196,6 @@ def write_check_usd(check, scene, path: Path) -> Path:
     """USD stage of the structural check: the objects (static), the support's surface at rest
     (time code 0) and loaded (time code 1, true displacement), with per-vertex primvars
     ``von_mises`` [Pa] (the critical-distance mean) and ``displacement`` [m] (magnitude)."""
-    from simfab.io.usd import StageWriter
 
     faces, X, u, vm = check_surface(check)
     w = StageWriter(path)
@@ -225,7 +220,6 @@ def write_check_png(check, path: Path, *, title: str) -> Path:
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    from simfab.io.atomic import save_figure
 
     faces, X, _, vm = check_surface(check)
     fig = plt.figure(figsize=(7.5, 6.5), dpi=120)
@@ -258,8 +252,6 @@ def write_check_png(check, path: Path, *, title: str) -> Path:
 
 def write_check(check, scene, out: Path, *, stem: str) -> dict:
     """USD stage and PNG of a structural check under ``out`` (together or not at all)."""
-    from simfab.io.atomic import atomic_paths
-    from simfab.io.outpaths import safe_name
 
     out = Path(out)
     stem = safe_name(stem)

@@ -27,10 +27,11 @@ import simfab.growth.attractors as attr
 import simfab.growth.tolerances as tol
 from simfab.errors import InputError
 from simfab.growth.colonize import ColonizeSettings, Tree, colonize
-from simfab.growth.config import Resolved, resolve
+from simfab.growth.config import Resolved, SymmetrySpec, resolve
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene, load_growth_scene, validate_scene
 from simfab.growth.skeleton import Skeleton, keep_ancestors, radius_by_age, smooth_positions, subset
+from simfab.growth.skinning import skin
 
 #: root nudge off the symmetry plane, as a fraction of r_max (must stay < 1 to fuse halves)
 ROOT_SPLIT = 0.25
@@ -122,7 +123,6 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
         validate_scene(scene)
     p = scene.params
     if symmetric and p.symmetry is None:
-        from simfab.growth.config import SymmetrySpec
 
         scene = scene.with_params(symmetry=SymmetrySpec(point=tuple(scene.roots.mean(axis=0)), normal=(1.0, 0.0, 0.0)))
         p = scene.params
@@ -397,7 +397,6 @@ class _Symmetry:
 
 def skin_result(result: GrowthResult, *, segments: int | None = None, subtract: bool | None = None):
     """Skin the final skeleton of ``result``: returns (trimesh, SkinReport, seconds)."""
-    from simfab.growth.skinning import skin
 
     p = result.scene.params
     t0 = time.perf_counter()

@@ -29,6 +29,7 @@ import numpy as np
 import simfab.growth.tolerances as tol
 from simfab.errors import InputError
 from simfab.growth.config import GrowthParams, StructureSpec, params_from_toml, structure_from_toml
+from simfab.io.mjcf import load_scene
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -85,7 +86,6 @@ class GrowthScene:
 
 def load_growth_scene(path: str | os.PathLike) -> GrowthScene:
     """Read ``path`` (MJCF) and its companion ``.toml``; InputError on anything unusable."""
-    from simfab.io.mjcf import load_scene
 
     path = Path(path)
     if path.suffix.lower() != ".xml":

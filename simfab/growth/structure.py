@@ -48,9 +48,11 @@ from simfab.fem.meshing import tetrahedralize
 from simfab.fem.model import make_model
 from simfab.fem.p2 import P2Model, corner_gradients, to_p2
 from simfab.growth.config import StructureSpec
+from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene
 from simfab.growth.skeleton import Skeleton
 from simfab.growth.skinning import skin
+from simfab.io.mjcf import load_scene
 from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
 #: fTetWild's target edge length as a multiple of the thinnest branch radius. fTetWild refines
@@ -154,7 +156,6 @@ def gravity(scene: GrowthScene) -> np.ndarray:
     """The scene's gravity vector (3,) [m/s^2] (MJCF ``<option gravity>``; (0, 0, -G0) without a file)."""
     if scene.path is None:
         return np.array([0.0, 0.0, -G0])
-    from simfab.io.mjcf import load_scene
 
     return np.asarray(load_scene(scene.path).model.opt.gravity, np.float64).copy()
 
@@ -163,7 +164,6 @@ def body_masses(scene: GrowthScene) -> dict:
     """Object name -> mass [kg] (MJCF body masses, MuJoCo's inertia from the geoms' density)."""
     if scene.path is None:
         return {}
-    from simfab.io.mjcf import load_scene
 
     sc = load_scene(scene.path)
     return {n: float(m) for n, m in zip(sc.body_names(), sc.model.body_mass) if n in scene.objects}
@@ -448,7 +448,6 @@ def radius_caps(skeleton: Skeleton, scene: GrowthScene) -> np.ndarray:
     space between the support and an object it does not touch there. Ground objects (under the
     roots) do not cap: a root thickened into the ground is carved flat and clamped over a larger
     face, which is what a root needs."""
-    from simfab.growth.obstacles import Obstacles
 
     X = skeleton.nodes
     cap = np.full(len(X), np.inf)
