@@ -15,9 +15,8 @@ Definitions (thesis, "Fundamentals and Overview"):
 - F_grip: grip force at the steady state [N]. When the force passes through zero between the
   steady-state step and the next one (O at rest between them: the run's rest search brackets it),
   the grip is interpolated linearly in the force to where it is zero: at a seat the grip jumps
-  within micrometres (cclamp2d: 17 N just before the seat engages, 39 N 0.02 mm on), so the value
-  at the bracket's lower end depends on how close the search came (22.5 N vs 21.5 N at two mesh
-  sizes; interpolated 23.4 N vs 23.2 N).
+  within micrometres, so the value at the bracket's lower end would depend on how close the search
+  came (figures in docs/decisions.md).
 - With friction (a run's ``removal`` records: the removal simulated as its own traversal) F_in is
   read from the insertion and F_rm = max(0, max F) from the removal; F_hold, the force needed to
   start sliding O out of its seat (elastic draw plus static friction), is max(0, max F) over the
