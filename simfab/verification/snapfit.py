@@ -48,9 +48,12 @@ def _beam(dim: int, cells_t: int):
     return make_model(V, E, PLA)
 
 
-def snapfit_model(alpha_deg: float, mu: float, *, dim: int = 2, steps: int = 24, cells_t: int = 3):
+def snapfit_model(alpha_deg: float, mu: float, *, dim: int = 2, steps: int = 24, cells_t: int = 3,
+                  lag_tol: float = 0.01):
     """The snap-fit at face angle alpha [deg] and friction mu (see the module docstring): the box
-    travels GAP to first touch, then until the tip is deflected by DEFLECTION."""
+    travels GAP to first touch, then until the tip is deflected by DEFLECTION. ``lag_tol``: the
+    friction's lag tolerance (:class:`simfab.coupling.config.ContactOptions`), tighter than the
+    default so that the check measures the contact law, not the lag."""
     fem = _beam(dim, cells_t)
     a = np.radians(alpha_deg)
     n = np.array([np.cos(a), -np.sin(a), 0.0])  # the face's outward normal (O on its left)
@@ -65,7 +68,8 @@ def snapfit_model(alpha_deg: float, mu: float, *, dim: int = 2, steps: int = 24,
     root = np.flatnonzero(fem.rest[:, 1] < 1e-9)
     opts = InsertionOptions(steps=steps, L_max=travel, fix_all_axes=True)
     return make_coupling_model(name=f"snapfit{dim}d", fem=fem, field=field, path=path, fixed_vertices=root,
-                               options=opts, object_vertices=field.vertices, contact=ContactOptions(friction=mu))
+                               options=opts, object_vertices=field.vertices,
+                               contact=ContactOptions(friction=mu, lag_tol=lag_tol))
 
 
 def ratio_formula(alpha_deg: float, mu: float, phase: str) -> float:

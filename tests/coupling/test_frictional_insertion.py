@@ -108,8 +108,9 @@ def test_a_sliding_block_feels_mu_times_the_normal_force():
     res = simulate(_block_and_plate(mu, 1e-3, h_in=40e-6))
     sliding = [r for r in res.steps if r.pos[0] > 0.2e-3]  # past the shear ramp: the contact slips
     assert len(sliding) > 5 and all(r.slipping > 0.99 for r in sliding)
+    lag_tol = res.model.contact.lag_tol  # the friction reads normal forces lagged to this tolerance
     for r in sliding:  # the path runs along x there: the path force is the tangential force on the plate
-        assert abs(r.path_force) == pytest.approx(mu * r.normal_force, rel=0.02)
+        assert abs(r.path_force) == pytest.approx(mu * r.normal_force, rel=lag_tol + 0.01)
 
 
 def test_below_the_slip_threshold_the_contact_sticks():
