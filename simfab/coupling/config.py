@@ -124,11 +124,7 @@ class ContactOptions:
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "[contact]") -> "ContactOptions":
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
-        return cls(**d)
+        return from_table(cls, d, where)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -205,11 +201,7 @@ class InsertionOptions:
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "[simulation]") -> "InsertionOptions":
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
-        return cls(**d)
+        return from_table(cls, d, where)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -250,11 +242,17 @@ class ObjectOptions:
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "[object]") -> "ObjectOptions":
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
-        try:
-            return cls(**d)
-        except InputError as e:
-            raise InputError(e.message, where=where) from None
+        return from_table(cls, d, where)
+
+
+def from_table(cls, d: dict, where: str):
+    """``cls(**d)`` for a keyword-only options dataclass read from a scene table: an unknown key, or a
+    value its validation rejects, is an InputError naming ``where`` (the file and table)."""
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(d) - known)
+    if unknown:
+        raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
+    try:
+        return cls(**d)
+    except InputError as e:
+        raise InputError(e.message, where=where) from None
