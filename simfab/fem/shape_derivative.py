@@ -1,0 +1,108 @@
+"""Shape derivatives of the linear-simplex Neo-Hookean energy: how E(x; X) changes with the rest
+shape X at fixed deformed positions x, side by side with the energy they differentiate.
+
+Per element (see :mod:`simfab.fem.neohookean` for Psi and P): F = Ds Dm^-1 with Dm the rest edge
+matrix, V = |det Dm| / d! (times the thickness in 2D), E_e = V Psi(F). Varying the rest edges,
+dF = -F dDm Dm^-1 and dV = V tr(Dm^-1 dDm), so
+
+    dE_e/dDm = V (Psi I - F^T P) Dm^-T                       (the Eshelby stress, pulled to the edges)
+
+and for a fixed direction w (n, dim) of the deformed positions, with L = Dw Dm^-1 (Dw: w's edge
+matrix) and Q = w . dE/dx = V P : L, the mixed second derivative applied to w is
+
+    dQ/dDm = V ((P : L) I - F^T dP[L] - L^T P) Dm^-T,
+    dP[L]  = mu L + (mu - lam log J) F^-T L^T F^-T + lam (F^-T : L) F^-T       (Neo-Hookean)
+
+(dP[L]: P's derivative along L). Edge-matrix derivatives G (dim, dim) go to the nodes as
+dX_i = G[:, i-1] (i = 1..d), dX_0 = -sum_i G[:, i-1]. The mixed product ``w^T d2E/dx dX`` is what the
+adjoint method needs (``lambda^T d2E/dx dX``, :mod:`simfab.coupling.adjoint`); it is never formed as
+a matrix. The Lame parameters are per element and do not depend on X.
+
+Written in batched numpy over the elements (one einsum per term): the derivatives are evaluated
+once per converged insertion step, beside one sparse factorization, so they are not on the hot path.
+Linear elements only (the rest-shape optimizer's models); checked against finite differences of
+:func:`simfab.fem.neohookean.energy` / ``energy_gradient`` on perturbed rest shapes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simfab.fem.model import FemModel
+
+
+def _kinematics(model: FemModel, x: np.ndarray):
+    """(F (m, d, d), J (m,), F^-T, Dm^-1, V (m,), mu, lam) at positions x (n, d)."""
+    x = np.asarray(x, float)
+    el = np.asarray(model.elements)
+    Ds = np.swapaxes(x[el[:, 1:]] - x[el[:, :1]], 1, 2)  # (m, d, d): columns x_i - x_0
+    Dmi = np.asarray(model.Dm_inv, float)
+    F = Ds @ Dmi
+    J = np.linalg.det(F)
+    if np.any(J <= 0):
+        raise ValueError("shape derivative at an inverted element (det F <= 0)")
+    FiT = np.swapaxes(np.linalg.inv(F), 1, 2)
+    return F, J, FiT, Dmi, np.asarray(model.volume, float), np.asarray(model.mu, float), np.asarray(model.lam, float)
+
+
+def _pk1(F, J, FiT, mu, lam):
+    """First Piola-Kirchhoff stress P = mu (F - F^-T) + lam log J F^-T (m, d, d) [Pa]."""
+    return mu[:, None, None] * (F - FiT) + (lam * np.log(J))[:, None, None] * FiT
+
+
+def _to_nodes(model: FemModel, G: np.ndarray) -> np.ndarray:
+    """Scatter per-element edge-matrix derivatives G (m, d, d) to nodal derivatives (n, d)."""
+    el = np.asarray(model.elements)
+    n, d = model.n_vertices, G.shape[1]
+    cols = np.swapaxes(G, 1, 2)  # (m, d nodes 1..d, d components)
+    nodal = np.concatenate([-cols.sum(axis=1, keepdims=True), cols], axis=1)  # (m, d+1, d)
+    out = np.zeros((n, d))
+    np.add.at(out, el.ravel(), nodal.reshape(-1, d))
+    return out
+
+
+def energy(model: FemModel, x: np.ndarray) -> float:
+    """E(x; X) [J] of the model's rest shape X (the same value as :func:`simfab.fem.neohookean.energy`,
+    for the derivative tests)."""
+    F, J, _, _, V, mu, lam = _kinematics(model, x)
+    d = F.shape[1]
+    logJ = np.log(J)
+    psi = 0.5 * mu * (np.einsum("mij,mij->m", F, F) - d) - mu * logJ + 0.5 * lam * logJ**2
+    return float(np.sum(V * psi))
+
+
+def rest_gradient(model: FemModel, x: np.ndarray) -> np.ndarray:
+    """dE/dX (n, d) [N]: the energy's derivative with respect to the rest positions at fixed x."""
+    F, J, FiT, Dmi, V, mu, lam = _kinematics(model, x)
+    d = F.shape[1]
+    logJ = np.log(J)
+    psi = 0.5 * mu * (np.einsum("mij,mij->m", F, F) - d) - mu * logJ + 0.5 * lam * logJ**2
+    P = _pk1(F, J, FiT, mu, lam)
+    eshelby = psi[:, None, None] * np.eye(d) - np.swapaxes(F, 1, 2) @ P
+    return _to_nodes(model, V[:, None, None] * eshelby @ np.swapaxes(Dmi, 1, 2))
+
+
+def mixed_product(model: FemModel, x: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """d/dX (w . dE/dx) (n, d) [N/m * m]: the mixed second derivative d2E/dx dX applied to the
+    deformed-position direction w (n, d) (see the module docstring)."""
+    F, J, FiT, Dmi, V, mu, lam = _kinematics(model, x)
+    d = F.shape[1]
+    el = np.asarray(model.elements)
+    w = np.asarray(w, float).reshape(model.n_vertices, d)
+    Dw = np.swapaxes(w[el[:, 1:]] - w[el[:, :1]], 1, 2)
+    L = Dw @ Dmi
+    P = _pk1(F, J, FiT, mu, lam)
+    PL = np.einsum("mij,mij->m", P, L)
+    FiT_L = np.einsum("mij,mij->m", FiT, L)
+    dP = (mu[:, None, None] * L + (mu - lam * np.log(J))[:, None, None] * (FiT @ np.swapaxes(L, 1, 2) @ FiT)
+          + (lam * FiT_L)[:, None, None] * FiT)
+    G = PL[:, None, None] * np.eye(d) - np.swapaxes(F, 1, 2) @ dP - np.swapaxes(L, 1, 2) @ P
+    return _to_nodes(model, V[:, None, None] * G @ np.swapaxes(Dmi, 1, 2))
+
+
+def volume_gradient(model: FemModel) -> np.ndarray:
+    """d(sum of element volumes)/dX (n, d) [m^2] (2D: area times thickness): dV_e/dDm = V_e Dm^-T."""
+    V = np.asarray(model.volume, float)
+    Dmi = np.asarray(model.Dm_inv, float)
+    return _to_nodes(model, V[:, None, None] * np.swapaxes(Dmi, 1, 2))
+
