@@ -60,7 +60,9 @@ class StepSensitivity:
     """Derivatives of one step's figures with respect to the rest positions X (n, dim).
 
     s [m], phase: the record's; energy [J/m]: dE/dX; force [N/m]: dF/dX (insertion force,
-    :class:`simfab.coupling.record.StepResult` ``force``); grip [N/m]: dG/dX; stable: H_ff was
+    :class:`simfab.coupling.record.StepResult` ``force``); grip [N/m]: dG/dX; stress [Pa/m] and
+    stress_value [Pa]: the averaged von Mises stress's maximum and its (smoothed) derivative, None
+    / NaN without a :class:`StressMeasure`; stable: H_ff was
     positive definite; supported: no friction and no pinned rigid motion at this step."""
 
     s: float
@@ -68,6 +70,8 @@ class StepSensitivity:
     energy: np.ndarray
     force: np.ndarray
     grip: np.ndarray
+    stress: np.ndarray | None = None
+    stress_value: float = float("nan")
     stable: bool = True
     supported: bool = True
 
@@ -159,8 +163,33 @@ def _rows(pts: ContactPoints, rows: np.ndarray) -> ContactPoints:
     return ContactPoints(verts=pts.verts[rows], weights=pts.weights[rows], facet=pts.facet[rows])
 
 
-def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert") -> StepSensitivity:
-    """:class:`StepSensitivity` of the converged ``state`` (see the module docstring)."""
+@dataclass(frozen=True, kw_only=True, eq=False)
+class StressMeasure:
+    """The stress figure of a step: max_e (A sigma_vm)_e with A (m, m) the row-stochastic averaging
+    over a critical distance (:func:`simfab.design.stress.averaging_matrix`, held fixed: its
+    dependence on X, through element volumes and which centroids lie within the radius, is not
+    differentiated). Its gradient is that of the log-sum-exp T log sum_e exp((A sigma)_e / T) at
+    T = ``temperature_rel`` * max (the softmax-weighted element gradients; -> the max's gradient
+    where one element dominates); the value reported is the exact maximum."""
+
+    averaging: object
+    temperature_rel: float = 0.02
+
+
+def smooth_max_weights(values: np.ndarray, temperature: float) -> np.ndarray:
+    """Softmax weights exp((v_i - max) / T) / sum (k,): the gradient of T log sum_i exp(v_i / T)."""
+    v = np.asarray(values, float)
+    if not temperature > 0:
+        w = (v == v.max()).astype(float)
+        return w / w.sum()
+    e = np.exp((v - v.max()) / temperature)
+    return e / e.sum()
+
+
+def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
+                     stress: StressMeasure | None = None) -> StepSensitivity:
+    """:class:`StepSensitivity` of the converged ``state`` (see the module docstring); with
+    ``stress`` also that of the averaged von Mises stress's maximum (:class:`StressMeasure`)."""
     fem, x = cm.fem, np.asarray(state.x, float)
     n, dim = fem.n_vertices, cm.dim
     bar = _Barrier(cm, state)
@@ -182,9 +211,20 @@ def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert")
     a = 0.5 * np.abs(gc).sum(axis=0)
     G = float(np.linalg.norm(a))
     wg = 0.5 * np.sign(gc) * (a / G)[None, :] if G > 0 else np.zeros_like(gc)
-    gx = np.stack([gE.reshape(n, dim), (H @ v.ravel()).reshape(n, dim), (HB @ wg.ravel()).reshape(n, dim)])
+    # per figure: (dq/dx (n, dim), dq/dX at fixed x (n, dim))
+    figures = [(gE.reshape(n, dim), shape_derivative.rest_gradient(fem, x)),
+               ((H @ v.ravel()).reshape(n, dim), mixed(v)),
+               ((HB @ wg.ravel()).reshape(n, dim), bar.mixed_product(wg, kappa_grad))]
+    stress_value = float("nan")
+    if stress is not None:
+        avg = stress.averaging @ shape_derivative.von_mises(fem, x)
+        stress_value = float(avg.max())
+        c = stress.averaging.T @ smooth_max_weights(avg, stress.temperature_rel * abs(stress_value))
+        figures.append(shape_derivative.von_mises_derivatives(fem, x, c))
+    k = len(figures)
+    gx = np.stack([f[0] for f in figures])
     idx = np.flatnonzero(cm.free)
-    rhs = gx.reshape(3, -1)[:, idx].T
+    rhs = gx.reshape(k, -1)[:, idx].T
     pinned = state.pin_basis is not None and state.pin_basis.shape[1] > 0
     stable = True
     try:
@@ -193,25 +233,25 @@ def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert")
             regularize(cm, Hr)
             solver = rigid.PinnedSolver(SPDSolver(), rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1],
                                                                    state.x))
-            lam_f = np.column_stack([solver.solve_free(Hr, idx, rhs[:, q]) for q in range(3)])
+            lam_f = np.column_stack([solver.solve_free(Hr, idx, rhs[:, q]) for q in range(k)])
         else:
             lam_f = SPDSolver().solve_free(H, idx, rhs)
     except NotPositiveDefinite:
         stable = False
         lam_f = splu(sp.csc_matrix(H[idx][:, idx])).solve(rhs)
-    lam = np.zeros((3, n * dim))
+    lam = np.zeros((k, n * dim))
     lam[:, idx] = lam_f.T
-    lam = lam.reshape(3, n, dim)
+    lam = lam.reshape(k, n, dim)
     fixed = ~free
     out = []
-    for q, (direct, lq) in enumerate([(shape_derivative.rest_gradient(fem, x), lam[0]), (mixed(v), lam[1]),
-                                     (bar.mixed_product(wg, kappa_grad), lam[2])]):
-        dq = direct - mixed(lq)
-        resid = gx[q] - (H @ lq.ravel()).reshape(n, dim)
-        dq[fixed] += resid[fixed]
+    for q in range(k):
+        dq = figures[q][1] - mixed(lam[q])
+        resid = gx[q] - (H @ lam[q].ravel()).reshape(n, dim)
+        dq[fixed] += resid[fixed]  # the fixed dofs sit at the rest positions: dx_fixed/dX_fixed = I
         out.append(dq)
     supported = state.friction is None and not pinned
-    return StepSensitivity(s=float(state.s), phase=phase, energy=out[0], force=out[1], grip=out[2], stable=stable,
+    return StepSensitivity(s=float(state.s), phase=phase, energy=out[0], force=out[1], grip=out[2],
+                           stress=out[3] if stress is not None else None, stress_value=stress_value, stable=stable,
                            supported=supported)
 
 
@@ -220,11 +260,11 @@ class SensitivityRecorder:
     recorder=...)`` (it receives each kept record with the converged state it was recorded at).
     ``insert`` and ``remove``: the sensitivities of the run's insertion and removal records, in order."""
 
-    def __init__(self, cm: CouplingModel):
-        self.cm = cm
+    def __init__(self, cm: CouplingModel, stress: StressMeasure | None = None):
+        self.cm, self.stress = cm, stress
         self.insert: list[StepSensitivity] = []
         self.remove: list[StepSensitivity] = []
 
     def __call__(self, record, state: StepState) -> None:
-        sens = step_sensitivity(self.cm, state, record.phase)
+        sens = step_sensitivity(self.cm, state, record.phase, self.stress)
         (self.remove if record.phase == "remove" else self.insert).append(sens)

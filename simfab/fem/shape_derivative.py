@@ -106,3 +106,33 @@ def volume_gradient(model: FemModel) -> np.ndarray:
     Dmi = np.asarray(model.Dm_inv, float)
     return _to_nodes(model, V[:, None, None] * np.swapaxes(Dmi, 1, 2))
 
+
+
+def von_mises(model: FemModel, x: np.ndarray) -> np.ndarray:
+    """(m,) von Mises stress [Pa], sigma_vm = sqrt(3/2 dev2) mu / J with C = F F^T - I and
+    dev2 = C : C - tr(C)^2 / 3 (:func:`simfab.fem.stress.det_and_von_mises`'s formula)."""
+    F, J, _, _, _, mu, _ = _kinematics(model, x)
+    C = F @ np.swapaxes(F, 1, 2) - np.eye(F.shape[1])
+    tr = np.einsum("mii->m", C)
+    dev2 = np.maximum(np.einsum("mij,mij->m", C, C) - tr * tr / 3.0, 0.0)
+    return np.sqrt(1.5 * dev2) * mu / J
+
+
+def von_mises_derivatives(model: FemModel, x: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(dq/dx, dq/dX) (n, d) each of q = sum_e c_e sigma_vm,e (c (m,) fixed weights [-]).
+
+    d sigma_vm/dF = sigma_vm (d dev2/dF / (2 dev2) - F^-T), d dev2/dF = 4 C F - 4/3 tr(C) F; with
+    S_e = c_e d sigma_vm,e/dF: dq/dDs = S Dm^-T (to the nodes as the energy gradient) and, at
+    fixed x, dq/dDm = -F^T S Dm^-T. An element with dev2 = 0 (no distortion) contributes nothing
+    (sigma_vm is not differentiable there)."""
+    F, J, FiT, Dmi, _, mu, _ = _kinematics(model, x)
+    C = F @ np.swapaxes(F, 1, 2) - np.eye(F.shape[1])
+    tr = np.einsum("mii->m", C)
+    dev2 = np.maximum(np.einsum("mij,mij->m", C, C) - tr * tr / 3.0, 0.0)
+    vm = np.sqrt(1.5 * dev2) * mu / J
+    safe = np.where(dev2 > 0, dev2, 1.0)
+    ddev = 4.0 * C @ F - (4.0 / 3.0) * tr[:, None, None] * F
+    S = (np.asarray(c, float) * vm)[:, None, None] * (ddev / (2.0 * safe[:, None, None]) - FiT)
+    S[dev2 <= 0] = 0.0
+    DmiT = np.swapaxes(Dmi, 1, 2)
+    return _to_nodes(model, S @ DmiT), _to_nodes(model, -np.swapaxes(F, 1, 2) @ S @ DmiT)

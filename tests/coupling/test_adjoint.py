@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 from simfab.coupling import config as C
-from simfab.coupling.adjoint import SensitivityRecorder
+from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import make_coupling_model, simulate
+from simfab.design.stress import averaging_matrix
 from simfab.fem.model import make_model
 
 EPS = 1e-3  # central-difference step along dX, whose size is ~1 % of A's mean edge length
@@ -50,11 +51,12 @@ def smooth_field(cm, seed):
     return 0.01 * cm.h * np.sin((X - c) @ k + rng.uniform(0, np.pi, cm.dim))
 
 
-def check(cm, seed=0, min_supported=3, figures=("energy", "force", "grip")):
+def check(cm, seed=0, min_supported=3, figures=("energy", "force", "grip", "stress")):
     cm = dataclasses.replace(cm, options=dataclasses.replace(cm.options, L_max=float(cm.s_steps[-1])))
     X = np.asarray(cm.fem.rest, float)
     dX = smooth_field(cm, seed)
-    rec = SensitivityRecorder(cm)
+    A = averaging_matrix(cm.fem, 0.5e-3)  # held fixed (its X-dependence is not differentiated)
+    rec = SensitivityRecorder(cm, StressMeasure(averaging=A, temperature_rel=0.0))  # T = 0: the max's gradient
     base = simulate(cm, recorder=rec)
     plus = simulate(with_rest(cm, X + EPS * dX))
     minus = simulate(with_rest(cm, X - EPS * dX))
@@ -63,7 +65,10 @@ def check(cm, seed=0, min_supported=3, figures=("energy", "force", "grip")):
     ok = [k for k, sn in enumerate(rec.insert) if sn.supported]
     assert len(ok) >= min_supported and all(sn.stable for sn in rec.insert)
     for key in figures:
-        fd = np.array([(getattr(p, key) - getattr(m, key)) / (2 * EPS) for p, m in zip(plus.steps, minus.steps)])[ok]
+        def value(r):
+            return float((A @ r.von_mises).max()) if key == "stress" else getattr(r, key)
+
+        fd = np.array([(value(p) - value(m)) / (2 * EPS) for p, m in zip(plus.steps, minus.steps)])[ok]
         an = np.array([float(np.sum(getattr(sn, key) * dX)) for sn in rec.insert])[ok]
         scale = np.abs(fd).max()
         assert scale > 0
@@ -78,7 +83,7 @@ def test_snap_fit_2d(tight_newton):
 
 def test_rotating_path_2d(tight_newton, ellipse_in_clamp_model):
     # the insertion force (along O's translation) is zero during the pure rotation
-    check(ellipse_in_clamp_model(steps=10), figures=("energy", "grip"))
+    check(ellipse_in_clamp_model(steps=10), figures=("energy", "grip", "stress"))
 
 
 def test_clip_3d(tight_newton):

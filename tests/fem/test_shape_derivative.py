@@ -42,3 +42,27 @@ def test_rest_gradient_and_mixed_product_match_finite_differences(dim):
     fd2 = float(np.sum(w * (gp - gm))) / (2 * eps)
     an2 = float(np.sum(shape_derivative.mixed_product(model, x, w) * dX))
     assert an2 == pytest.approx(fd2, rel=1e-6)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_von_mises_derivatives_match_finite_differences(dim):
+    from simfab.fem.stress import det_and_von_mises
+
+    X, el = _mesh(dim)
+    rng = np.random.default_rng(10 + dim)
+    model = make_model(X, el, "PLA", thickness=0.005)
+    h = model.mean_edge_length()
+    x = X + 0.05 * h * rng.standard_normal(X.shape)
+    c = rng.uniform(0, 1, model.n_elements)
+    dx, dX = h * rng.standard_normal(X.shape), h * rng.standard_normal(X.shape)
+    eps = 1e-6
+    assert np.allclose(shape_derivative.von_mises(model, x), det_and_von_mises(model, x)[1], rtol=1e-10)
+    gx, gX = shape_derivative.von_mises_derivatives(model, x, c)
+
+    def q(Xe, xe):
+        return float(c @ det_and_von_mises(make_model(Xe, el, "PLA", thickness=0.005), xe)[1])
+
+    fd_x = (q(X, x + eps * dx) - q(X, x - eps * dx)) / (2 * eps)
+    fd_X = (q(X + eps * dX, x) - q(X - eps * dX, x)) / (2 * eps)
+    assert float(np.sum(gx * dx)) == pytest.approx(fd_x, rel=1e-6)
+    assert float(np.sum(gX * dX)) == pytest.approx(fd_X, rel=1e-6)
