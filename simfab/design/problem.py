@@ -283,7 +283,8 @@ class Evaluation:
     result : the InsertionResult (kept only while needed); sim_seconds, seconds : in the
         simulation, in total
     bounds : the objective's lower bound after each insertion step; newton_iterations : of a
-        complete insertion (status "ok")
+        complete insertion (status "ok"); recorder : the insertion's per-step recorder (``evaluate``'s
+        ``recorder``), None without one
     """
 
     h: np.ndarray
@@ -300,6 +301,7 @@ class Evaluation:
     seconds: float = 0.0
     bounds: list = field(default_factory=list)
     newton_iterations: int = 0
+    recorder: object = None
 
     @property
     def feasible(self) -> bool:
@@ -450,13 +452,16 @@ def screen(problem: DesignProblem, h: np.ndarray, threshold: float = math.inf) -
 
 
 def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False,
-             threshold: float = math.inf, abort=None) -> Evaluation:
+             threshold: float = math.inf, abort=None, recorder=None) -> Evaluation:
     """Evaluate design vector h (see the module docstring); never raises for a bad candidate.
 
     threshold : acceptance threshold of the annealer; the simulation stops (status "stopped",
         objective = a lower bound > threshold) as soon as the objective provably exceeds it.
     abort : optional callable () -> bool polled after every insertion step; when it returns True
         the simulation stops (status "aborted": a speculative evaluation no longer needed).
+    recorder : optional factory ``recorder(cm)`` of the insertion's per-step recorder (``simulate``'s
+        ``recorder``, e.g. :class:`simfab.coupling.adjoint.SensitivityRecorder`), made for the
+        candidate's model; the recorder is returned as ``Evaluation.recorder``.
     """
     t0 = time.perf_counter()
     ev = screen(problem, h, threshold)
@@ -470,8 +475,9 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     t1 = time.perf_counter()
     try:
         check_start(cm)
+        rec = ev.recorder = recorder(cm) if recorder is not None else None
         res = simulate(cm, callback=_step_watch(_bound_watch(problem, cm, base, threshold, ev.bounds), abort),
-                       refined=problem.settings.refined)
+                       refined=problem.settings.refined, recorder=rec)
     except _Aborted as e:
         ev.status, ev.reason = "aborted", f"no longer needed at step {e.step}"
     except _Exceeded as e:
