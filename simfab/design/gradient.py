@@ -317,7 +317,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
 
     res = minimize(objective, z0, jac=objective_grad, method="SLSQP", bounds=[(0.0, 1.0)] * len(z0),
                    constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
-                   options={"maxiter": MAX_ITERATIONS if iterations is None else int(iterations), "ftol": FTOL})
+                   options={"maxiter": MAX_ITERATIONS if iterations is None else int(iterations), "ftol": FTOL},
+                   callback=on_iteration)
     ok = [ev for ev in run.evaluations if ev.status == "ok"]
     best = min(ok, key=lambda e: (not e.feasible, e.objective))
     if best.status == "ok" and problem.settings.refined and best is not initial:
