@@ -87,11 +87,12 @@ def edge_rest_derivative(X: np.ndarray, a: np.ndarray, c: np.ndarray, coef: np.n
     return out
 
 
-def dhat_pullback(cm: CouplingModel, pts: ContactPoints, coef: np.ndarray) -> np.ndarray:
-    """sum_j coef_j d dhat_j/dX (n, dim) for the per-point activation distances of
+def dhat_jacobian(cm: CouplingModel, pts: ContactPoints) -> sp.csr_matrix:
+    """(k, n * dim) d dhat_j/dX of the per-point activation distances of
     :func:`simfab.coupling.layout.point_dhat` (dhat_j = dhat_rel sum_a w_ja h_a, h_a the shortest
     boundary edge at vertex a: its derivative is that edge's, the minimum being a selection)."""
     X = np.asarray(cm.fem.rest, float)
+    n, dim = X.shape
     facets = cm.contact_facets
     ia, ic = EDGE_PAIRS[cm.dim]
     e = np.vstack([facets[:, [i, j]] for i, j in zip(ia, ic)])
@@ -100,13 +101,21 @@ def dhat_pullback(cm: CouplingModel, pts: ContactPoints, coef: np.ndarray) -> np
     edge_of = np.repeat(np.arange(len(e)), 2)
     order = np.lexsort((L[edge_of], ends))  # per vertex, its edges by length: the first is the shortest
     first = np.r_[True, ends[order][1:] != ends[order][:-1]]
-    shortest = np.full(cm.fem.n_vertices, -1)
+    shortest = np.full(n, -1)
     shortest[ends[order][first]] = edge_of[order][first]
-    cv = np.zeros(cm.fem.n_vertices)
-    np.add.at(cv, pts.verts.ravel(), (cm.options.dhat_rel * coef[:, None] * pts.weights).ravel())
-    v = np.flatnonzero((cv != 0) & (shortest >= 0))
+    k, nv = pts.verts.shape
+    rows = np.repeat(np.arange(k), nv)
+    v = pts.verts.ravel()
+    coef = cm.options.dhat_rel * pts.weights.ravel()
+    keep = (coef != 0) & (shortest[v] >= 0)
+    rows, v, coef = rows[keep], v[keep], coef[keep]
     ed = e[shortest[v]]
-    return edge_rest_derivative(X, ed[:, 0], ed[:, 1], cv[v])
+    other = np.where(ed[:, 0] == v, ed[:, 1], ed[:, 0])
+    g = (coef / L[shortest[v]])[:, None] * (X[v] - X[other])  # d|X_v - X_u|/dX_v, scaled
+    r = np.repeat(rows, 2 * dim)
+    c = np.concatenate([v[:, None] * dim + np.arange(dim), other[:, None] * dim + np.arange(dim)], axis=1).ravel()
+    val = np.concatenate([g, -g], axis=1).ravel()
+    return sp.csr_matrix((val, (r, c)), shape=(k, n * dim))
 
 
 def mean_edge_gradient(cm: CouplingModel) -> np.ndarray:
@@ -134,6 +143,7 @@ class _Barrier:
         _, self.gy, self.Hy = point_barrier(d[a], gd[a], hd[a], self.dhat[a], self.kappa, psd=False)
         self.energy = self.kappa * float(barrier_terms(self.d, self.dhat[a])[0].sum()) if len(a) else 0.0
         self.gradient = pts.scatter(self.gy, cm.fem.n_vertices, rows=a)  # (n, dim) dB/dx
+        self.dhat_jac = dhat_jacobian(cm, _rows(pts, a))  # (a, n dim)
 
     def db_ddhat(self) -> tuple[np.ndarray, np.ndarray]:
         """(db/d dhat, db'/d dhat) (a,) at the active points: b = -r^2 log(d/dhat), r = d - dhat."""
@@ -144,19 +154,22 @@ class _Barrier:
     def rest_gradient(self, kappa_grad: np.ndarray | None) -> np.ndarray:
         """dB/dX at fixed x (n, dim)."""
         db, _ = self.db_ddhat()
-        out = dhat_pullback(self.cm, _rows(self.pts, self.act), self.kappa * db)
+        out = ((self.kappa * db) @ self.dhat_jac).reshape(-1, self.cm.dim)
         if kappa_grad is not None:
             out += self.energy / self.kappa * kappa_grad
         return out
 
     def mixed_product(self, w: np.ndarray, kappa_grad: np.ndarray | None) -> np.ndarray:
-        """d/dX (w . dB/dx) at fixed x (n, dim), w (n, dim)."""
+        """d/dX (w . dB/dx) at fixed x (n, dim) for w (n, dim); a stack (b, n, dim) gives (b, n, dim)."""
         _, dbp = self.db_ddhat()
-        wy = self.pts.positions(w)[self.act]
-        out = dhat_pullback(self.cm, _rows(self.pts, self.act), self.kappa * dbp * np.einsum("kd,kd->k", self.gd, wy))
+        w = np.asarray(w, float)
+        W = w.reshape(-1, *w.shape[-2:])
+        wy = np.stack([self.pts.positions(wb)[self.act] for wb in W])  # (b, a, dim)
+        coef = self.kappa * dbp * np.einsum("kd,bkd->bk", self.gd, wy)
+        out = np.asarray(coef @ self.dhat_jac).reshape(W.shape)
         if kappa_grad is not None:
-            out += float(np.sum(w * self.gradient)) / self.kappa * kappa_grad
-        return out
+            out += (np.einsum("bnd,nd->b", W, self.gradient) / self.kappa)[:, None, None] * kappa_grad
+        return out.reshape(w.shape)
 
 
 def _rows(pts: ContactPoints, rows: np.ndarray) -> ContactPoints:
@@ -187,9 +200,11 @@ def smooth_max_weights(values: np.ndarray, temperature: float) -> np.ndarray:
 
 
 def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
-                     stress: StressMeasure | None = None) -> StepSensitivity:
+                     stress: StressMeasure | None = None, solver: SPDSolver | None = None) -> StepSensitivity:
     """:class:`StepSensitivity` of the converged ``state`` (see the module docstring); with
-    ``stress`` also that of the averaged von Mises stress's maximum (:class:`StressMeasure`)."""
+    ``stress`` also that of the averaged von Mises stress's maximum (:class:`StressMeasure`);
+    ``solver``: the sparse solver to factorize with (one per run reuses its symbolic analysis)."""
+    solver = SPDSolver() if solver is None else solver
     fem, x = cm.fem, np.asarray(state.x, float)
     n, dim = fem.n_vertices, cm.dim
     bar = _Barrier(cm, state)
@@ -201,9 +216,6 @@ def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
     add_point_blocks(cm, state.points, H, bar.act, bar.Hy)
     kappa_grad = cm.kappa / cm.h * mean_edge_gradient(cm) if dim == 3 else None
 
-    def mixed(w):
-        return shape_derivative.mixed_product(fem, x, w) + bar.mixed_product(w, kappa_grad)
-
     free = cm.free.reshape(n, dim)
     u = cm.direction(state.s)
     v = np.where(free, 0.0, u[None, :])  # F = v . grad W
@@ -213,8 +225,8 @@ def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
     wg = 0.5 * np.sign(gc) * (a / G)[None, :] if G > 0 else np.zeros_like(gc)
     # per figure: (dq/dx (n, dim), dq/dX at fixed x (n, dim))
     figures = [(gE.reshape(n, dim), shape_derivative.rest_gradient(fem, x)),
-               ((H @ v.ravel()).reshape(n, dim), mixed(v)),
-               ((HB @ wg.ravel()).reshape(n, dim), bar.mixed_product(wg, kappa_grad))]
+               ((H @ v.ravel()).reshape(n, dim), None),  # direct term: mixed(v), folded into the stack below
+               ((HB @ wg.ravel()).reshape(n, dim), None)]  # direct term: the barrier's mixed(wg), likewise
     stress_value = float("nan")
     if stress is not None:
         avg = stress.averaging @ shape_derivative.von_mises(fem, x)
@@ -231,11 +243,11 @@ def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
         if pinned:  # as Newton solved it: Woodbury pin on the regularized Hessian (anchor held fixed)
             Hr = H.copy()
             regularize(cm, Hr)
-            solver = rigid.PinnedSolver(SPDSolver(), rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1],
-                                                                   state.x))
-            lam_f = np.column_stack([solver.solve_free(Hr, idx, rhs[:, q]) for q in range(k)])
+            pinned_solver = rigid.PinnedSolver(solver, rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1],
+                                                                     state.x))
+            lam_f = np.column_stack([pinned_solver.solve_free(Hr, idx, rhs[:, q]) for q in range(k)])
         else:
-            lam_f = SPDSolver().solve_free(H, idx, rhs)
+            lam_f = solver.solve_free(H, idx, rhs)
     except NotPositiveDefinite:
         stable = False
         lam_f = splu(sp.csc_matrix(H[idx][:, idx])).solve(rhs)
@@ -243,9 +255,17 @@ def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
     lam[:, idx] = lam_f.T
     lam = lam.reshape(k, n, dim)
     fixed = ~free
+    # dq/dX = direct - mixed(lambda): force's direct term is mixed(v) and grip's the barrier part of
+    # mixed(wg), so one stacked mixed product over (lambda_0, lambda_1 - v, lambda_2 (- wg for B), ...)
+    We = lam.copy()
+    We[1] -= v
+    Wb = We.copy()
+    Wb[2] -= wg
+    mixed_all = shape_derivative.mixed_product(fem, x, We) + bar.mixed_product(Wb, kappa_grad)
+    direct = [figures[0][1], np.zeros((n, dim)), np.zeros((n, dim))] + [f[1] for f in figures[3:]]
     out = []
     for q in range(k):
-        dq = figures[q][1] - mixed(lam[q])
+        dq = direct[q] - mixed_all[q]
         resid = gx[q] - (H @ lam[q].ravel()).reshape(n, dim)
         dq[fixed] += resid[fixed]  # the fixed dofs sit at the rest positions: dx_fixed/dX_fixed = I
         out.append(dq)
@@ -262,9 +282,10 @@ class SensitivityRecorder:
 
     def __init__(self, cm: CouplingModel, stress: StressMeasure | None = None):
         self.cm, self.stress = cm, stress
+        self.solver = SPDSolver()  # one symbolic analysis for the run's (fixed-pattern) Hessians
         self.insert: list[StepSensitivity] = []
         self.remove: list[StepSensitivity] = []
 
     def __call__(self, record, state: StepState) -> None:
-        sens = step_sensitivity(self.cm, state, record.phase, self.stress)
+        sens = step_sensitivity(self.cm, state, record.phase, self.stress, self.solver)
         (self.remove if record.phase == "remove" else self.insert).append(sens)

@@ -84,28 +84,27 @@ def rest_gradient(model: FemModel, x: np.ndarray) -> np.ndarray:
 
 def mixed_product(model: FemModel, x: np.ndarray, w: np.ndarray) -> np.ndarray:
     """d/dX (w . dE/dx) (n, d) [N/m * m]: the mixed second derivative d2E/dx dX applied to the
-    deformed-position direction w (n, d) (see the module docstring)."""
+    deformed-position direction w (n, d) (see the module docstring); a stack of directions
+    (b, n, d) gives a stack of results (b, n, d) from one evaluation of the kinematics."""
     F, J, FiT, Dmi, V, mu, lam = _kinematics(model, x)
     d = F.shape[1]
     el = np.asarray(model.elements)
-    w = np.asarray(w, float).reshape(model.n_vertices, d)
-    Dw = np.swapaxes(w[el[:, 1:]] - w[el[:, :1]], 1, 2)
-    L = Dw @ Dmi
+    w = np.asarray(w, float)
+    single = w.ndim == 2
+    W = w.reshape(-1, model.n_vertices, d)
     P = _pk1(F, J, FiT, mu, lam)
-    PL = np.einsum("mij,mij->m", P, L)
-    FiT_L = np.einsum("mij,mij->m", FiT, L)
-    dP = (mu[:, None, None] * L + (mu - lam * np.log(J))[:, None, None] * (FiT @ np.swapaxes(L, 1, 2) @ FiT)
-          + (lam * FiT_L)[:, None, None] * FiT)
-    G = PL[:, None, None] * np.eye(d) - np.swapaxes(F, 1, 2) @ dP - np.swapaxes(L, 1, 2) @ P
-    return _to_nodes(model, V[:, None, None] * G @ np.swapaxes(Dmi, 1, 2))
-
-
-def volume_gradient(model: FemModel) -> np.ndarray:
-    """d(sum of element volumes)/dX (n, d) [m^2] (2D: area times thickness): dV_e/dDm = V_e Dm^-T."""
-    V = np.asarray(model.volume, float)
-    Dmi = np.asarray(model.Dm_inv, float)
-    return _to_nodes(model, V[:, None, None] * np.swapaxes(Dmi, 1, 2))
-
+    FT, DmiT = np.swapaxes(F, 1, 2), np.swapaxes(Dmi, 1, 2)
+    out = np.empty_like(W)
+    for b, wb in enumerate(W):
+        Dw = np.swapaxes(wb[el[:, 1:]] - wb[el[:, :1]], 1, 2)
+        L = Dw @ Dmi
+        PL = np.einsum("mij,mij->m", P, L)
+        FiT_L = np.einsum("mij,mij->m", FiT, L)
+        dP = (mu[:, None, None] * L + (mu - lam * np.log(J))[:, None, None] * (FiT @ np.swapaxes(L, 1, 2) @ FiT)
+              + (lam * FiT_L)[:, None, None] * FiT)
+        G = PL[:, None, None] * np.eye(d) - FT @ dP - np.swapaxes(L, 1, 2) @ P
+        out[b] = _to_nodes(model, V[:, None, None] * G @ DmiT)
+    return out[0] if single else out
 
 
 def von_mises(model: FemModel, x: np.ndarray) -> np.ndarray:
