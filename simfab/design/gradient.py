@@ -20,13 +20,15 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
   force passes through zero after it as :func:`simfab.coupling.profile.analyze` does;
 - E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
 - the element quality q_e (signed mean ratio) analytically.
-Not differentiated (gradient None; the optimizer reads them as constraints without a gradient:
-it checks them on every design and reports them): the seat clearance, the target-profile error,
-and anything with friction (the sensitivities hold for mu = 0).
+- the target-profile error rms^2 (the objective of profile matching) through the force samples
+  (:func:`target_gradient`), at fixed step positions.
+Not differentiated (gradient None; the optimizer reads it as a constraint without a gradient: it
+checks it on every design and reports it): the seat clearance; and nothing with friction (the
+sensitivities hold for mu = 0).
 
 Optimizer (:func:`optimize_gradient`): SLSQP on z = (h - lower) / (upper - lower) in [0, 1] from
-the initial shape, minimizing E_L subject to the brief's constraints, scaled to their SCALES units,
-(value - lo) / scale >= 0 and (hi - value) / scale >= 0, and the element-quality bound
+the initial shape, minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's
+constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0, and the element-quality bound
 q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP asks for (iterate or line-search
 trial) costs one insertion, which records its sensitivities: the Jacobians come with the values.
 The best design is the feasible one with the lowest objective among all simulated (the lowest
@@ -144,8 +146,25 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
     else:
         g["von_mises"] = None
     g["seat_clearance"] = None
+    if problem.target is not None:
+        scale = problem.settings.corrections.get("force_profile", 1.0)
+        g["rms_error_sq"] = scale * target_gradient(problem.target, res.column("s"), scale * F) @ dF
     supported = all(s.supported for s in rec.insert + rec.remove) and not res.removal
     return FigureGradients(values=dict(ev.figures), gradients=g, supported=supported, steady_index=i_ss)
+
+
+def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """d(rms^2)/dF_k (k,) [N] of the target-profile error (:meth:`simfab.design.brief.TargetProfile.
+    rms_error`) at fixed distances s: rms^2 is a quadratic function of the force samples (an
+    integral of squared piecewise-linear differences), so central differences with any step are
+    exact up to round-off; a step of 1 N is used."""
+    f = np.asarray(force, float)
+    out = np.empty(len(f))
+    for k in range(len(f)):
+        e = np.zeros(len(f))
+        e[k] = 1.0
+        out[k] = 0.5 * (target.rms_error(s, f + e) ** 2 - target.rms_error(s, f - e) ** 2)
+    return out
 
 
 def modification_gradient(problem: DesignProblem, X: np.ndarray, Jh: np.ndarray) -> np.ndarray:
@@ -269,13 +288,19 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         h = h_of(z)
         X = H.apply(h)
         if target:
+            if np.any(element_quality(X, el) <= 0):
+                return 1e6
             ev, fg = _evaluate(run, h)
             return float(ev.rms_error ** 2) if ev.status == "ok" and ev.rms_error is not None else 1e6
         return problem.energy(X)
 
     def objective_grad(z):
-        if target:  # the target-profile error is not differentiated: SLSQP's own differences would cost insertions
-            return np.zeros_like(z)
+        if target:
+            h = h_of(z)
+            if np.any(element_quality(H.apply(h), el) <= 0):
+                return np.zeros_like(z)
+            _, fg = _evaluate(run, h)
+            return np.zeros_like(z) if fg is None else fg.gradients["rms_error_sq"] * span
         return modification_gradient(problem, H.apply(h_of(z)), Jh) * span
 
     def cons(z):
