@@ -14,6 +14,8 @@ max_von_mises_Pa (largest element stress), von_mises_avg_Pa (averaged over [desi
 stress_radius: what the yield constraint reads)), handles, method (anneal | gradient), iterations,
 stopped_early, insertions (every insertion simulation of the optimization: complete, stopped early or
 speculative; the mesh check's excluded), gradient_evaluations (insertions that also gave gradients),
+nonsmooth_events (gradient method: how many consecutive simulated designs differ in steady_state_index,
+category, refinement, kappa, steps, of pairs; null for anneal),
 simulations, simulations_stopped_early, speculative_simulations, acceptance_branches (the
 annealer's proposals evaluated as if the running one were accepted: drawn, adopted), workers,
 accepted, rejected

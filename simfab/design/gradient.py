@@ -216,6 +216,7 @@ class _Run:
     memo: dict = field(default_factory=dict)
     insertions: int = 0
     gradient_evaluations: int = 0
+    signatures: list = field(default_factory=list)  # per complete insertion: its discrete features (events)
 
 
 def _evaluate(run: _Run, h: np.ndarray):
@@ -235,8 +236,25 @@ def _evaluate(run: _Run, h: np.ndarray):
         fg = figure_gradients(problem, ev, run.Jh)
         run.gradient_evaluations += 1
     ev.recorder = None  # (memory: the per-step sensitivities are read into fg)
+    if ev.status == "ok":
+        r = ev.result
+        run.signatures.append({"steady_state_index": fg.steady_index, "category": ev.figures.get("category"),
+                               "refinement": tuple(r.refined_facets), "kappa": max(st.kappa for st in r.steps),
+                               "steps": len(r.steps)})
     run.evaluations.append(ev)
     out = run.memo[key] = (ev, fg)
+    return out
+
+
+def nonsmooth_events(signatures: list) -> dict:
+    """How often consecutive simulated designs differ in a discrete feature the gradient does not see:
+    {feature: count} over ``pairs`` consecutive pairs (steady-state index, category, the set of refined
+    facets, the final barrier stiffness kappa, the number of records: the rest search's steps)."""
+    out = {k: 0 for k in ("steady_state_index", "category", "refinement", "kappa", "steps")}
+    for a, b in zip(signatures, signatures[1:]):
+        for k in out:
+            out[k] += int(a[k] != b[k])
+    out["pairs"] = max(len(signatures) - 1, 0)
     return out
 
 
@@ -365,5 +383,6 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
                        simulations=run.insertions, stopped_simulations=0, rejected=rejected,
                        seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
                        iterations=int(res.nit), stopped_early=bool(res.success), method="gradient",
-                       gradient_evaluations=run.gradient_evaluations, message=str(res.message))
+                       gradient_evaluations=run.gradient_evaluations, message=str(res.message),
+                       events=nonsmooth_events(run.signatures))
     return out

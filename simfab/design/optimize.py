@@ -51,7 +51,9 @@ class DesignResult:
     several workers it may exceed the wall time); stopped_early : bool
     method : "anneal" (:func:`optimize`) or "gradient" (:func:`simfab.design.gradient.optimize_gradient`);
     gradient_evaluations : insertions that also gave the figures' gradients; message : the
-    optimizer's own closing message ("" for annealing)
+    optimizer's own closing message ("" for annealing); events : the gradient method's count of
+    non-smooth events between consecutive simulated designs
+    (:func:`simfab.design.gradient.nonsmooth_events`), None for annealing
     """
 
     problem: DesignProblem
@@ -72,6 +74,7 @@ class DesignResult:
     method: str = "anneal"
     gradient_evaluations: int = 0
     message: str = ""
+    events: dict | None = None
 
 
 def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,

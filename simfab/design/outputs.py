@@ -81,6 +81,7 @@ def summary(res, *, scene: str | None = None) -> dict:
         "stopped_early": res.stopped_early,
         "insertions": insertions(res),
         "gradient_evaluations": res.gradient_evaluations,
+        "nonsmooth_events": res.events,
         "simulations": res.simulations,
         "simulations_stopped_early": res.stopped_simulations,
         "speculative_simulations": res.speculative,

@@ -60,3 +60,25 @@ def test_modification_and_quality_gradients(problem):
         2 * eps)
     Jq = G.quality_jacobian(P.handles.apply(h), el) @ Jh
     assert np.abs(Jq @ dh - fdq).max() <= 1e-6 * np.abs(fdq).max()
+
+
+def test_couple_optimize_gradient_method(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    out = tmp_path / "o"
+    r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "block2d_tight", "--method", "gradient",
+                        "--steps", "8", "--handles", "3", "--placement", "spatial", "--iterations", "3",
+                        "--check-refinements", "0", "--correction-rounds", "0", "--out", str(out), "--json"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert s["method"] == "gradient" and s["iterations"] <= 3
+    # every design SLSQP visited was simulated once, and each complete insertion gave its gradients
+    assert 1 <= s["gradient_evaluations"] <= s["insertions"]
+    assert s["E_L"] >= 0
+    if s["feasible"]:
+        assert all(c["satisfied"] for c in s["constraints"].values())
+    for k, p in s["outputs"].items():
+        assert (out / p.split("/")[-1]).is_file(), k

@@ -46,6 +46,7 @@ def run(argv) -> dict:
                              "gradient_evaluations": s["gradient_evaluations"],
                              "seconds": time.perf_counter() - t0, "E_L": s["E_L"], "rms_error_N": s.get("rms_error"),
                              "feasible": s["feasible"], "met_mesh_check": mc.get("feasible_fine"),
-                             "correction_rounds": len(s.get("correction_rounds", []))})
+                             "correction_rounds": len(s.get("correction_rounds", [])),
+                             "nonsmooth_events": s.get("nonsmooth_events")})
     return {"benchmark": "design_methods", "rows": rows,
             "units": {"seconds": "s", "E_L": "-", "rms_error_N": "N"}}
