@@ -170,6 +170,7 @@ def _run_once(a) -> dict:
         "design": res.best.h.tolist(),  # the best design's handle parameters (translations [m], scales)
         "insertions": ins,
         "gradient_evaluations": res.gradient_evaluations,
+        "nonsmooth_events": res.events,
         "simulations": sims,
         "simulations_stopped_early": res.stopped_simulations,
         "workers": res.workers,
