@@ -123,7 +123,8 @@ def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
             "von_mises": max(averaged_von_mises(fem, r.von_mises, stress_radius) for r in [*res.steps, *res.removal]),
             "von_mises_peak": float(max(r.max_von_mises for r in [*res.steps, *res.removal])),
             "seat_clearance": seat_clearance(res, prof.index_ss),
-            "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss}
+            "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss,
+            "friction": prof.friction}
 
 
 
