@@ -17,7 +17,8 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
   maximum);
 - E_ss = E at the steady-state index i_ss (held: a change of the index is a non-smooth event);
   coupling ratio 100 E_ss / E_max by the quotient rule; the grip at i_ss, interpolated where the
-  force passes through zero after it as :func:`simfab.coupling.profile.analyze` does;
+  force passes through zero after it as :func:`simfab.coupling.profile.analyze` does (the
+  interpolation weight held, see :func:`figure_gradients`);
 - E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
 - the element quality q_e (signed mean ratio) analytically.
 - the target-profile error rms^2 (the objective of profile matching) through the force samples
@@ -58,7 +59,7 @@ from simfab.progress import log
 #: Smooth maxima's temperature, relative to the largest magnitude of the series they take the maximum of.
 TEMPERATURE_REL = 0.02
 #: SLSQP iterations at most (each needs one insertion plus its line-search trials).
-MAX_ITERATIONS = 30
+MAX_ITERATIONS = 20
 #: SLSQP's stopping tolerance on the objective (E_L, dimensionless ~1 per edge length of change).
 FTOL = 1e-4
 
@@ -134,10 +135,12 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
     g["hold_force"] = g["removal_force"] if not res.removal else None
     grip = dG[i_ss]
     if prof.category != "ejects" and i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
-        f0, f1 = F[i_ss], F[i_ss + 1]
-        w = f0 / (f0 - f1)
-        dw = (-f1 * dF[i_ss] + f0 * dF[i_ss + 1]) / (f0 - f1) ** 2
-        grip = (1 - w) * dG[i_ss] + w * dG[i_ss + 1] + (G[i_ss + 1] - G[i_ss]) * dw
+        # the rest point's weight w = F_i / (F_i - F_i+1) is held: the two records are the rest
+        # search's bracket around a seat, where the force passes through zero within micrometres,
+        # so dw/dF is huge and meaningful only over that bracket (whose records the search places
+        # anew for every design); the grip's own change at the two records is the usable direction
+        w = F[i_ss] / (F[i_ss] - F[i_ss + 1])
+        grip = (1 - w) * dG[i_ss] + w * dG[i_ss + 1]
     g["grip_force"] = grip
     stresses = [s.stress_value for s in rec.insert + rec.remove]
     if all(s.stress is not None for s in rec.insert + rec.remove):
@@ -238,9 +241,10 @@ def _evaluate(run: _Run, h: np.ndarray):
     ev.recorder = None  # (memory: the per-step sensitivities are read into fg)
     if ev.status == "ok":
         r = ev.result
+        planned = len(r.model.s_steps)
         run.signatures.append({"steady_state_index": fg.steady_index, "category": ev.figures.get("category"),
                                "refinement": tuple(r.refined_facets), "kappa": max(st.kappa for st in r.steps),
-                               "steps": len(r.steps)})
+                               "steps": len(r.steps), "rest_positions": tuple(st.s for st in r.steps[planned:])})
     run.evaluations.append(ev)
     out = run.memo[key] = (ev, fg)
     return out
@@ -249,8 +253,9 @@ def _evaluate(run: _Run, h: np.ndarray):
 def nonsmooth_events(signatures: list) -> dict:
     """How often consecutive simulated designs differ in a discrete feature the gradient does not see:
     {feature: count} over ``pairs`` consecutive pairs (steady-state index, category, the set of refined
-    facets, the final barrier stiffness kappa, the number of records: the rest search's steps)."""
-    out = {k: 0 for k in ("steady_state_index", "category", "refinement", "kappa", "steps")}
+    facets, the final barrier stiffness kappa, the number of records and the positions of those past
+    the planned steps: the rest search's)."""
+    out = {k: 0 for k in ("steady_state_index", "category", "refinement", "kappa", "steps", "rest_positions")}
     for a, b in zip(signatures, signatures[1:]):
         for k in out:
             out[k] += int(a[k] != b[k])
@@ -279,8 +284,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     """SLSQP on the brief (see the module docstring); returns a :class:`DesignResult` whose
     ``simulations`` counts every insertion and ``gradient_evaluations`` those that gave gradients
     (all complete ones). ``seed`` is unused (the method is deterministic: the same signature as
-    :func:`simfab.design.optimize.optimize`); ``iterations`` caps
-    SLSQP's iterations (default MAX_ITERATIONS). Raises ConvergenceError when the initial shape
+    :func:`simfab.design.optimize.optimize`); ``iterations`` caps SLSQP's iterations (default: the
+    brief's, at most MAX_ITERATIONS). Raises ConvergenceError when the initial shape
     cannot be simulated."""
     t0 = time.perf_counter()
     H = problem.handles
@@ -360,7 +365,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
 
     res = minimize(objective, z0, jac=objective_grad, method="SLSQP", bounds=[(0.0, 1.0)] * len(z0),
                    constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
-                   options={"maxiter": MAX_ITERATIONS if iterations is None else int(iterations), "ftol": FTOL},
+                   options={"maxiter": min(MAX_ITERATIONS, problem.brief.iterations) if iterations is None
+                            else int(iterations), "ftol": FTOL},
                    callback=on_iteration)
     ok = [ev for ev in run.evaluations if ev.status == "ok"]
     best = min(ok, key=lambda e: (not e.feasible, e.objective))
