@@ -29,9 +29,9 @@ sensitivities hold for mu = 0).
 
 Optimizer (:func:`optimize_gradient`): SLSQP on z = (h - lower) / (upper - lower) in [0, 1] from
 the initial shape, minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's
-constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0, and the element-quality bound
-q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP asks for (iterate or line-search
-trial) costs one insertion, which records its sensitivities: the Jacobians come with the values.
+constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0,
+and the element-quality bound q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
+asks for (iterate or line-search trial) costs one insertion, which records its sensitivities: the Jacobians come with the values.
 The best design is the feasible one with the lowest objective among all simulated (the lowest
 penalized objective when none is feasible).
 """
@@ -51,7 +51,14 @@ from simfab.coupling.profile import analyze_run
 from simfab.design import brief as B
 from simfab.design.handles import Handles
 from simfab.design.optimize import DesignResult
-from simfab.design.problem import CONTACT_STRAIN_FLOOR, QUALITY_REL, DesignProblem, Evaluation, element_quality, evaluate
+from simfab.design.problem import (
+    CONTACT_STRAIN_FLOOR,
+    QUALITY_REL,
+    DesignProblem,
+    Evaluation,
+    element_quality,
+    evaluate,
+)
 from simfab.design.stress import averaging_matrix
 from simfab.errors import ConvergenceError
 from simfab.progress import log
@@ -117,7 +124,7 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
     dE = np.array([pull(s.energy) for s in rec.insert])
     dF = np.array([pull(s.force) for s in rec.insert])
     dG = np.array([pull(s.grip) for s in rec.insert])
-    E, F, G = res.column("energy"), res.column("force"), res.column("grip")
+    E, F = res.column("energy"), res.column("force")
     prof = analyze_run(res)
     fem = res.model.fem
     Ey = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))

@@ -1,6 +1,7 @@
 """``simfab couple optimize``'s pipeline: load the design scene, place handles (from one
 insertion of the initial shape), anneal (:mod:`simfab.design.optimize`, on worker processes:
-:mod:`simfab.design.parallel`) or descend by gradients (:mod:`simfab.design.gradient`), check the design on refined meshes and re-optimize with
+:mod:`simfab.design.parallel`) or descend by gradients (:mod:`simfab.design.gradient`), check the
+design on refined meshes and re-optimize with
 mesh-corrected figures while it misses the brief there (:mod:`simfab.design.verify`), write the
 outputs (:mod:`simfab.design.outputs`)."""
 
