@@ -32,8 +32,8 @@ the initial shape, minimizing E_L (profile matching: rms^2 [N^2]) subject to the
 constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0,
 and the element-quality bound q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
 asks for (iterate or line-search trial) costs one insertion, which records its sensitivities: the
-Jacobians come with the values. The best design is the feasible one with the lowest objective among all simulated (the lowest
-penalized objective when none is feasible).
+Jacobians come with the values. The best design is the feasible one with the lowest objective
+among all simulated (the lowest penalized objective when none is feasible).
 """
 
 from __future__ import annotations
