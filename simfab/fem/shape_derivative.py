@@ -21,7 +21,7 @@ a matrix. The Lame parameters are per element and do not depend on X.
 Written in batched numpy over the elements (one einsum per term): the derivatives are evaluated
 once per converged insertion step, beside one sparse factorization, so they are not on the hot path.
 Linear elements only (the rest-shape optimizer's models); checked against finite differences of
-:func:`simfab.fem.neohookean.energy` / ``energy_gradient`` on perturbed rest shapes.
+:func:`simfab.fem.elastic.energy` / ``energy_gradient`` on perturbed rest shapes.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def _to_nodes(model: FemModel, G: np.ndarray) -> np.ndarray:
 
 
 def energy(model: FemModel, x: np.ndarray) -> float:
-    """E(x; X) [J] of the model's rest shape X (the same value as :func:`simfab.fem.neohookean.energy`,
+    """E(x; X) [J] of the model's rest shape X (the same value as :func:`simfab.fem.elastic.energy`,
     for the derivative tests)."""
     F, J, _, _, V, mu, lam = _kinematics(model, x)
     d = F.shape[1]
