@@ -18,19 +18,23 @@ kappa sum_j (db'/d dhat)_j (grad d_j . lambda_j) d dhat_j/dX (+ its kappa part i
 Figures per step (:class:`StepSensitivity`): the elastic energy E (q = E), the insertion force
 F = u . sum over the fixed dofs of grad W (the support's reaction along O's translation u: dq/dx =
 H v, dq/dX|_x = (d2W/dx dX)^T v with v = u on the fixed dofs) and the grip force
-G = |a|, a_d = 1/2 sum_v |grad_v B|_d (dq/dx = H_B w, w_vd = 1/2 sign(grad_v B)_d a_d / G).
+G = |a|, a_d = 1/2 sum_v |grad_v B|_d (dq/dx = H_B w, w_vd = 1/2 sign(grad_v B)_d a_d / G); with a
+:class:`StressMeasure` also the averaged von Mises stress's maximum.
 
 One sparse factorization of H_ff per step (CHOLMOD through :class:`simfab.solve.linear.SPDSolver`,
-the insertion's solver class) and one back-substitution with three right-hand sides. The exact
+the insertion's solver class, its symbolic analysis reused over a run) and one back-substitution
+with a right-hand side per figure (3, or 4 with the stress). The exact
 Hessian is used (not Newton's PSD-projected one): at a stable equilibrium H_ff is positive
 definite; where it is not, the step is marked ``stable = False`` and solved with SuperLU.
 
 Scope: frictionless contact (mu = 0) and no pinned rigid motions (both make a step depend on the
 one before: lagged friction anchors, the pin's anchor at the step's start); a step with either is
 marked ``supported = False`` and its derivatives are those at a fixed previous state (the pin
-enters as Newton solves with it: Woodbury on the regularized Hessian). The path
-positions s_k are held fixed (the rest search's s past the planned steps moves with X; that is
-not differentiated). Non-smooth events: a constraint point entering or leaving the barrier's range
+enters as Newton solves with it: Woodbury on the regularized Hessian). Derivatives are at fixed
+path positions s_k: the planned steps' positions follow A's farthest point along the path when
+``L_max`` is unset (in jumps of 1/2000 of the path, :func:`simfab.coupling.model.
+default_insertion_length`), and the rest search places its records anew for every design; neither
+is differentiated. Non-smooth events: a constraint point entering or leaving the barrier's range
 (b is C2 at d = dhat, so derivatives stay continuous), refinement points added (a new, discrete
 constraint set: the profile jumps by the discretization error), kappa doubling (a jump in B's
 scale); none is differentiated, the figures' derivatives are those of the branch the run took.
