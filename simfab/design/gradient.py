@@ -33,7 +33,9 @@ constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - v
 and the element-quality bound q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
 asks for (iterate or line-search trial) costs one insertion, which records its sensitivities: the
 Jacobians come with the values. The best design is the feasible one with the lowest objective
-among all simulated (the lowest penalized objective when none is feasible).
+among all simulated (the lowest penalized objective when none is feasible). Every candidate runs at
+the initial shape's planned step positions (``EvaluationSettings.hold_steps``): the derivatives are
+taken at fixed positions, and the default insertion length would move them in jumps.
 """
 
 from __future__ import annotations
@@ -270,10 +272,18 @@ def nonsmooth_events(signatures: list) -> dict:
     return out
 
 
+#: Constraints without a gradient: SLSQP would see them as flat and its line search would stall on
+#: them (the seat clearance turns positive as a grip is relaxed); every simulated design is still
+#: checked against them (the best design is a feasible one).
+NOT_DIFFERENTIATED = ("seat_clearance",)
+
+
 def _constraint_rows(problem: DesignProblem) -> list:
     """[(figure, sign, bound, scale)]: one row per finite bound, c = sign (value * correction - bound) / scale >= 0."""
     rows = []
     for name, (lo, hi) in problem.limits.items():
+        if name in NOT_DIFFERENTIATED:  # checked on every design (the best is a feasible one), not linearized
+            continue
         lo, hi = B.aimed_bounds(name, lo, hi, problem.settings.margin)
         if math.isfinite(lo) and not (name != "coupling_ratio" and lo <= 0):  # a force >= 0 always holds
             rows.append((name, 1.0, lo, B.SCALES[name]))
@@ -295,6 +305,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     brief's, at most MAX_ITERATIONS). Raises ConvergenceError when the initial shape
     cannot be simulated."""
     t0 = time.perf_counter()
+    problem = problem.with_settings(hold_steps=True)  # derivatives are at fixed step positions
     H = problem.handles
     Jh = handle_jacobian(H)
     run = _Run(problem=problem, Jh=Jh)
@@ -377,8 +388,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
                    callback=on_iteration)
     ok = [ev for ev in run.evaluations if ev.status == "ok"]
     best = min(ok, key=lambda e: (not e.feasible, e.objective))
-    if best.status == "ok" and problem.settings.refined and best is not initial:
-        plain = evaluate(problem.with_settings(refined=()), best.h, keep_result=True)
+    if best.status == "ok" and best is not initial:  # as `couple simulate` runs it (own steps, no seeded refinement)
+        plain = evaluate(problem.with_settings(refined=(), hold_steps=False), best.h, keep_result=True)
         if plain.status == "ok":
             best = plain
     for ev in run.evaluations:

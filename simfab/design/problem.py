@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from simfab._warp import device as check_device
+from simfab.coupling import settle
 from simfab.coupling.model import CouplingModel, make_coupling_model
 from simfab.coupling.profile import analyze_run
 from simfab.coupling.simulate import InsertionResult, check_start, simulate
@@ -158,11 +159,16 @@ class EvaluationSettings:
     refined : boundary facet ids every candidate's insertion starts refined with (``simulate``'s
         ``refined``): those the initial shape's insertion refined, set by
         :func:`simfab.design.optimize.optimize`
+    hold_steps : every candidate's insertion runs at the initial shape's planned path positions
+        (``base.s_steps``) instead of its own (whose insertion length follows A's farthest point
+        along the path in jumps of 1/2000 of the path): the gradient method
+        (:mod:`simfab.design.gradient`) differentiates at fixed step positions
     """
 
     corrections: dict = field(default_factory=dict)
     margin: float = 0.0
     refined: tuple = ()
+    hold_steps: bool = False
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -354,6 +360,11 @@ def candidate_model(problem: DesignProblem, X: np.ndarray):
     out = make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
                               options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces,
                               contact=cm.contact)
+    if problem.settings.hold_steps and not settle.can_continue(cm):
+        # the initial shape's step positions (the default insertion length follows A's farthest
+        # point along the path, in jumps); a run continued to rest past the path's end already
+        # plans the whole path, whatever the shape
+        out = dataclasses.replace(out, s_steps=np.array(cm.s_steps, dtype=float))
     return out, ""
 
 
