@@ -11,7 +11,11 @@ constraint: value, lo, hi, unit, satisfied, initial; values mesh-corrected), cor
 (per figure: factor applied to the coarse figure, from the mesh check), category, category_initial, profile and
 profile_initial (category, coupling_ratio_pct, E_max_J, E_ss_J, F_in_N, F_rm_N, F_grip_N,
 max_von_mises_Pa (largest element stress), von_mises_avg_Pa (averaged over [design]
-stress_radius: what the yield constraint reads)), handles, iterations, stopped_early,
+stress_radius: what the yield constraint reads)), handles, method (anneal | gradient), iterations,
+stopped_early, insertions (every insertion simulation of the optimization: complete, stopped early or
+speculative; the mesh check's excluded), gradient_evaluations (insertions that also gave gradients),
+nonsmooth_events (gradient method: how many consecutive simulated designs differ in steady_state_index,
+category, refinement, kappa, steps, of pairs; null for anneal),
 simulations, simulations_stopped_early, speculative_simulations, acceptance_branches (the
 annealer's proposals evaluated as if the running one were accepted: drawn, adopted), workers,
 accepted, rejected
@@ -29,7 +33,7 @@ category, still_too_coarse), constraints at the mesh-converged values, feasible_
 correction_rounds (per round:
 factors, feasible_fine, objective_fine, iterations, seconds, kept: whether its design was
 better on the refined meshes; the outputs are the kept design's run), iterations_total (every
-round's), objective_fine (the kept design's objective with mesh-converged figures).
+round's), insertions_total (every round's), objective_fine (the kept design's objective with mesh-converged figures).
 
 simfab couple study handles SCENE runs the handle-placement study: displacement-based and
 spatial placement and --random random picks, for each handle count of --counts, each an
@@ -79,6 +83,9 @@ def add_optimize_args(s) -> None:
     s.add_argument("--workers", type=int, default=None, metavar="N",
                    help="processes evaluating the annealer's proposals at once (speculatively; the design "
                         "does not depend on it; default: this machine's cores, at most 4; 1 with --restarts)")
+    s.add_argument("--method", choices=["anneal", "gradient"], default="anneal",
+                   help="optimizer: simulated annealing (default), or SLSQP on the profile's exact sensitivities "
+                        "(adjoint method, one insertion per design it visits; frictionless briefs)")
     s.add_argument("--restarts", type=int, default=1, metavar="N",
                    help="independent annealing runs (seeds SEED..SEED+N-1) as Dask tasks; the best design is kept")
     s.add_argument("--scheduler", metavar="ADDRESS",
@@ -156,7 +163,8 @@ def run_optimize(args) -> dict:
     contact = {} if args.friction is None else {"friction": args.friction}
     return optimize_scene(args.scene, out=args.out, design=design_overrides(args), simulation=simulation_overrides(args),
                           contact=contact, device=dev, quiet=args.quiet, seed=args.seed, revolve=revolve, restarts=args.restarts,
-                          scheduler=args.scheduler, workers=workers, mesh_check=not args.no_mesh_check)
+                          scheduler=args.scheduler, workers=workers, mesh_check=not args.no_mesh_check,
+                          method=args.method)
 
 
 def run_study(args) -> dict:

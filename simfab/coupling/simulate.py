@@ -140,7 +140,7 @@ class InsertionResult:
         return np.array([getattr(r, name) for r in records], dtype=float)
 
 
-def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()) -> InsertionResult:
+def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=(), recorder=None) -> InsertionResult:
     """Run the insertion along all steps of ``cm``; see the module docstring for the method.
 
     callback : optional ``callback(k, StepResult)`` after every step (it may raise to stop the run)
@@ -150,6 +150,9 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()
         run with the facets its initial shape's run refined saves those second solves. The figures
         differ by the contact discretization only (facets dipping into O by less than the penetration
         tolerance are held out of it too).
+    recorder : optional ``recorder(StepResult, StepState)`` with every kept record and its converged
+        state (:class:`simfab.coupling.stepper.Stepper`), e.g. the adjoint sensitivities
+        (:class:`simfab.coupling.adjoint.SensitivityRecorder`); it does not change the run.
 
     Returns :class:`InsertionResult` (one :class:`StepResult` per step including the start pose).
     Raises ConvergenceError when a step cannot be solved to tolerance, InputError when O starts
@@ -157,7 +160,7 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()
     """
     with single_threaded_blas():  # small dense products in the loop (see simfab._threads)
         t_start = time.perf_counter()
-        stepper = Stepper(cm, refined=refined, callback=callback)
+        stepper = Stepper(cm, refined=refined, callback=callback, recorder=recorder)
         check_start(cm)
         jam = None
         for s in progress(cm.s_steps, total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):

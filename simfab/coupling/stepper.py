@@ -44,12 +44,16 @@ class Stepper:
 
     refined : boundary facet ids (rows of ``cm.contact_facets``) carrying refinement points from the
     start; callback : optional ``callback(k, StepResult)`` after every kept step (it may raise to
-    stop the run). Attributes: ``state`` (:class:`StepState`), ``ctx`` (:class:`StepContext`),
+    stop the run); recorder : optional ``recorder(StepResult, StepState)`` called with every kept
+    record and the converged state it was recorded at, its ``pin_basis`` the pin it was solved with
+    (e.g. :class:`simfab.coupling.adjoint.SensitivityRecorder`). Attributes: ``state``
+    (:class:`StepState`), ``ctx`` (:class:`StepContext`),
     ``steps`` (the kept insertion records), ``removal`` (the kept removal records, see
     :meth:`reverse`), ``weakest`` (the least resisted rigid motion over the kept steps)."""
 
-    def __init__(self, cm: CouplingModel, *, refined=(), callback=None):
-        self.cm, self.callback = cm, callback
+    def __init__(self, cm: CouplingModel, *, refined=(), callback=None, recorder=None):
+        self.cm, self.callback, self.recorder = cm, callback, recorder
+        self._states: dict[int, StepState] = {}  # id(record) -> the state it was recorded at (with a recorder)
         self.ctx = StepContext()
         order = cm.options.samples_per_edge if cm.dim == 2 else cm.options.face_lattice
         self.state = StepState(x=np.array(cm.fem.rest, dtype=np.float64), s=0.0, refined=set(), order=order,
@@ -74,6 +78,7 @@ class Stepper:
         cm, state, phases = self.cm, self.state, self.ctx.phases
         before = replace(state, refined=set(state.refined))
         try:
+            solved_pin = state.pin_basis  # the pin the step's solution was solved with (see _states)
             iters = self._solve(s)
             with phases.timed("rigid_check"):
                 contact = rigid_contact(cm, state, self.free_motions)
@@ -84,10 +89,11 @@ class Stepper:
                 # the step's start: the friction of a step depends on where it started)
                 if self.history_dependent:
                     self.undo(StepAttempt(None, before))
-                    state.pin_basis = contact.basis
+                    state.pin_basis = solved_pin = contact.basis
                     iters += self._solve(s)
                 else:
                     prev, state.pin_basis = (state.prev, state.prev2), contact.basis
+                    solved_pin = contact.basis
                     iters += self._solve(s)
                     state.prev, state.prev2 = prev
                 with phases.timed("rigid_check"):
@@ -96,6 +102,8 @@ class Stepper:
             with phases.timed("record"):
                 rec = record_step(cm, state, iters)
             self._weak[id(rec)] = contact.weakest
+            if self.recorder is not None:  # the state as recorded (the bracket keeps records after later trials)
+                self._states[id(rec)] = replace(state, refined=set(state.refined), pin_basis=solved_pin)
             return StepAttempt(rec, before)
         except ConvergenceError:
             if not tolerate:
@@ -114,6 +122,8 @@ class Stepper:
         w = self._weak.get(id(record))
         if w is not None and (self.weakest is None or w.ratio < self.weakest.ratio):
             self.weakest = w
+        if self.recorder is not None:
+            self.recorder(record, self._states.pop(id(record)))
         if self.callback is not None:
             self.callback(len(self.steps) + len(self.removal) - 1, record)
 

@@ -49,6 +49,11 @@ class DesignResult:
     evaluated candidates; branches : the annealer's acceptance branches (drawn, adopted)
     seconds : wall time; sim_seconds : inside the simulator, summed over the evaluations used (with
     several workers it may exceed the wall time); stopped_early : bool
+    method : "anneal" (:func:`optimize`) or "gradient" (:func:`simfab.design.gradient.optimize_gradient`);
+    gradient_evaluations : insertions that also gave the figures' gradients; message : the
+    optimizer's own closing message ("" for annealing); events : the gradient method's count of
+    non-smooth events between consecutive simulated designs
+    (:func:`simfab.design.gradient.nonsmooth_events`), None for annealing
     """
 
     problem: DesignProblem
@@ -66,6 +71,10 @@ class DesignResult:
     speculative: int = 0
     workers: int = 1
     branches: tuple = (0, 0)
+    method: str = "anneal"
+    gradient_evaluations: int = 0
+    message: str = ""
+    events: dict | None = None
 
 
 def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,

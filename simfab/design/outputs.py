@@ -76,8 +76,12 @@ def summary(res, *, scene: str | None = None) -> dict:
         "profile_initial": _figures(init.figures),
         "handles": {"active": int(res.problem.handles.n_active), "inactive": int((~res.problem.handles.active).sum()),
                     "placement": res.problem.brief.placement},
+        "method": res.method,
         "iterations": res.iterations,
         "stopped_early": res.stopped_early,
+        "insertions": insertions(res),
+        "gradient_evaluations": res.gradient_evaluations,
+        "nonsmooth_events": res.events,
         "simulations": res.simulations,
         "simulations_stopped_early": res.stopped_simulations,
         "speculative_simulations": res.speculative,
@@ -113,6 +117,12 @@ def summary(res, *, scene: str | None = None) -> dict:
         warnings.append(w)
     out["warnings"] = warnings
     return out
+
+
+def insertions(res) -> int:
+    """Every insertion simulation an optimization ran: complete, stopped early, and (annealing on
+    workers) run ahead and not needed; the mesh check's are not counted."""
+    return int(res.simulations + res.stopped_simulations + res.speculative)
 
 
 def _figures(f: dict) -> dict:

@@ -1,6 +1,7 @@
 """``simfab couple optimize``'s pipeline: load the design scene, place handles (from one
 insertion of the initial shape), anneal (:mod:`simfab.design.optimize`, on worker processes:
-:mod:`simfab.design.parallel`), check the design on refined meshes and re-optimize with
+:mod:`simfab.design.parallel`) or descend by gradients (:mod:`simfab.design.gradient`), check the
+design on refined meshes and re-optimize with
 mesh-corrected figures while it misses the brief there (:mod:`simfab.design.verify`), write the
 outputs (:mod:`simfab.design.outputs`)."""
 
@@ -16,6 +17,7 @@ from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
 from simfab.design import outputs
+from simfab.design.gradient import optimize_gradient
 from simfab.design.optimize import optimize
 from simfab.design.parallel import Workers
 from simfab.design.problem import EvaluationSettings, ProblemSource, evaluate, make_problem, rebuild
@@ -34,7 +36,8 @@ from simfab.sweep import run_tasks
 def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict | None = None,
                    contact: dict | None = None, device: str = "cpu",
                    quiet: bool = True, seed: int = 0, revolve: tuple[str, float] | None = None, restarts: int = 1,
-                   scheduler: str | None = None, workers: int = 1, mesh_check: bool = True) -> dict:
+                   scheduler: str | None = None, workers: int = 1, mesh_check: bool = True,
+                   method: str = "anneal") -> dict:
     """Optimize a design scene's part and write every output into ``out``; returns the summary.
 
     design : overrides of the ``[design]`` table (e.g. ``{"iterations": 60, "handles": 4}``)
@@ -52,10 +55,19 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     mesh_check : re-run the optimized shape with quadratic elements, refined in 2D
         (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
         the mesh-converged ones, warning when a constraint holds only on the coarse mesh
+    method : "anneal" (simulated annealing, :mod:`simfab.design.optimize`) or "gradient" (SLSQP on
+        the adjoint sensitivities, :mod:`simfab.design.gradient`: frictionless briefs, one run)
     """
+    if method not in METHODS:
+        raise InputError(f"must be one of {', '.join(METHODS)}, got {method!r}", where="--method")
+    if method == "gradient" and restarts > 1:
+        raise InputError("the gradient method is deterministic: restarts would repeat it", where="--restarts")
     out = make_out_dir(out)
     ds = load_design_scene(scene, design=design, simulation=simulation, contact=contact, device=device)
     cm = ds.cm
+    if method == "gradient" and cm.contact.friction > 0:
+        raise InputError("the gradient method's sensitivities hold for frictionless contact (friction 0)",
+                         where="--method")
     if revolve is not None and cm.dim != 2:
         raise InputError("only a 2D section can be revolved", where="--revolve-axis")
     if revolve is not None and len(revolve) > 2 and revolve[2] and not ds.kept_regions:
@@ -69,7 +81,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         procs = stack.enter_context(Workers(workers)) if workers > 1 and restarts <= 1 else 1
         source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}),
                                contact=dict(contact or {}), device=device)
-        res, extra = _anneal_checked(ds, source, seed, restarts, scheduler, procs, mesh_check, quiet)
+        res, extra = _anneal_checked(ds, source, seed, restarts, scheduler, procs, mesh_check, quiet, method)
     summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
     if revolve is not None:
         rev = write_revolved(res, out, cm.name, *revolve, scene=ds, optimized=summary["outputs"], quiet=quiet)
@@ -83,7 +95,12 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     return summary
 
 
-def _anneal_checked(ds, source: ProblemSource, seed, restarts, scheduler, workers, mesh_check, quiet):
+#: The optimizers ``couple optimize --method`` offers.
+METHODS = ("anneal", "gradient")
+
+
+def _anneal_checked(ds, source: ProblemSource, seed, restarts, scheduler, workers, mesh_check, quiet,
+                    method: str = "anneal"):
     """Place the handles, anneal (``restarts`` runs, or one on ``workers``: a count or running
     :class:`simfab.design.parallel.Workers`), check the design on refined meshes and correct;
     returns (DesignResult, summary extras)."""
@@ -97,15 +114,18 @@ def _anneal_checked(ds, source: ProblemSource, seed, restarts, scheduler, worker
         # too-stiff model and a correction round of half the budget must undo it
         problem = problem.with_settings(corrections=correction_factors(check_mesh(problem, problem.handles.rest,
                                                                                   quiet=quiet)))
-    if restarts <= 1:
+    if method == "gradient":
+        res, runs = optimize_gradient(problem, quiet=quiet, seed=seed), None
+    elif restarts <= 1:
         res, runs = optimize(problem, quiet=quiet, seed=seed, workers=workers), None
     else:
         res, runs = _restarts(problem, seed, restarts, quiet, scheduler)
     extra = {} if runs is None else {"restarts": runs}
     if mesh_check and res.best.status == "ok":
-        first = res.iterations
+        first, insertions = res.iterations, outputs.insertions(res)
         res, extra["mesh_check"], extra["correction_rounds"] = mesh_corrected(res, seed, workers, quiet)
         extra["iterations_total"] = first + sum(r["iterations"] for r in extra["correction_rounds"])
+        extra["insertions_total"] = insertions + sum(r["insertions"] for r in extra["correction_rounds"])
         extra["objective_fine"] = checked_objective(res.problem, res.best, extra["mesh_check"])
     return res, extra
 
@@ -142,13 +162,17 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
         problem = res_b.problem.with_settings(corrections=factors, margin=B.CORRECTION_MARGIN)
         log(f"couple optimize: {name}: correction round {k + 1}: the coarse figures times "
             + ", ".join(f"{n} {v:.3g}" for n, v in factors.items()), quiet=quiet)
-        nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet, workers=workers if problem.source is not None else 1,
-                       start=res_b.best.h, iterations=max(problem.brief.iterations // 2, 1))
+        if res_b.method == "gradient":
+            nxt = optimize_gradient(problem, quiet=quiet, start=res_b.best.h)
+        else:
+            nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet,
+                           workers=workers if problem.source is not None else 1, start=res_b.best.h,
+                           iterations=max(problem.brief.iterations // 2, 1))
         c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, quiet=quiet)
         better = key(nxt, c) < key(*best)
         rounds.append({"round": k + 1, "factors": factors, "feasible_fine": c["feasible_fine"],
                        "objective_fine": key(nxt, c)[1], "iterations": nxt.iterations, "seconds": nxt.seconds,
-                       "kept": better})
+                       "insertions": outputs.insertions(nxt), "kept": better})
         if better:
             best = (nxt, c)
     return best[0], best[1], rounds

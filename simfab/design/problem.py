@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from simfab._warp import device as check_device
+from simfab.coupling import settle
 from simfab.coupling.model import CouplingModel, make_coupling_model
 from simfab.coupling.profile import analyze_run
 from simfab.coupling.simulate import InsertionResult, check_start, simulate
@@ -158,11 +159,16 @@ class EvaluationSettings:
     refined : boundary facet ids every candidate's insertion starts refined with (``simulate``'s
         ``refined``): those the initial shape's insertion refined, set by
         :func:`simfab.design.optimize.optimize`
+    hold_steps : every candidate's insertion runs at the initial shape's planned path positions
+        (``base.s_steps``) instead of its own (whose insertion length follows A's farthest point
+        along the path in jumps of 1/2000 of the path): the gradient method
+        (:mod:`simfab.design.gradient`) differentiates at fixed step positions
     """
 
     corrections: dict = field(default_factory=dict)
     margin: float = 0.0
     refined: tuple = ()
+    hold_steps: bool = False
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -284,7 +290,8 @@ class Evaluation:
     result : the InsertionResult (kept only while needed); sim_seconds, seconds : in the
         simulation, in total
     bounds : the objective's lower bound after each insertion step; newton_iterations : of a
-        complete insertion (status "ok")
+        complete insertion (status "ok"); recorder : the insertion's per-step recorder (``evaluate``'s
+        ``recorder``), None without one
     """
 
     h: np.ndarray
@@ -301,6 +308,7 @@ class Evaluation:
     seconds: float = 0.0
     bounds: list = field(default_factory=list)
     newton_iterations: int = 0
+    recorder: object = None
 
     @property
     def feasible(self) -> bool:
@@ -352,6 +360,11 @@ def candidate_model(problem: DesignProblem, X: np.ndarray):
     out = make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
                               options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces,
                               contact=cm.contact)
+    if problem.settings.hold_steps and not settle.can_continue(cm):
+        # the initial shape's step positions (the default insertion length follows A's farthest
+        # point along the path, in jumps); a run continued to rest past the path's end already
+        # plans the whole path, whatever the shape
+        out = dataclasses.replace(out, s_steps=np.array(cm.s_steps, dtype=float))
     return out, ""
 
 
@@ -451,13 +464,16 @@ def screen(problem: DesignProblem, h: np.ndarray, threshold: float = math.inf) -
 
 
 def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False,
-             threshold: float = math.inf, abort=None) -> Evaluation:
+             threshold: float = math.inf, abort=None, recorder=None) -> Evaluation:
     """Evaluate design vector h (see the module docstring); never raises for a bad candidate.
 
     threshold : acceptance threshold of the annealer; the simulation stops (status "stopped",
         objective = a lower bound > threshold) as soon as the objective provably exceeds it.
     abort : optional callable () -> bool polled after every insertion step; when it returns True
         the simulation stops (status "aborted": a speculative evaluation no longer needed).
+    recorder : optional factory ``recorder(cm)`` of the insertion's per-step recorder (``simulate``'s
+        ``recorder``, e.g. :class:`simfab.coupling.adjoint.SensitivityRecorder`), made for the
+        candidate's model; the recorder is returned as ``Evaluation.recorder``.
     """
     t0 = time.perf_counter()
     ev = screen(problem, h, threshold)
@@ -471,8 +487,9 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     t1 = time.perf_counter()
     try:
         check_start(cm)
+        rec = ev.recorder = recorder(cm) if recorder is not None else None
         res = simulate(cm, callback=_step_watch(_bound_watch(problem, cm, base, threshold, ev.bounds), abort),
-                       refined=problem.settings.refined)
+                       refined=problem.settings.refined, recorder=rec)
     except _Aborted as e:
         ev.status, ev.reason = "aborted", f"no longer needed at step {e.step}"
     except _Exceeded as e:

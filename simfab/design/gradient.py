@@ -1,0 +1,412 @@
+"""Rest-shape design by gradients: the brief's figures and their derivatives with respect to the
+handle parameters h, and a gradient-based optimizer over them (SciPy SLSQP).
+
+Derivatives. One insertion of the design X(h) records, per step, the adjoint sensitivities of the
+elastic energy E_k, the insertion force F_k, the grip G_k and the averaged von Mises maximum
+sigma_k to the rest positions (:mod:`simfab.coupling.adjoint`). X = M_LBS T(h) is linear in h
+(:mod:`simfab.design.handles`), so dq/dh = (dX/dh)^T dq/dX with
+
+    dX_i/dt_j = w_ij I,    dX_i/ds_j = w_ij diag(X_i - c_j)          (per axis; inactive handles fixed)
+
+The figures (:func:`simfab.design.problem.profile_figures`) are maxima or values at the steady-state
+index of those per-step series; their derivatives (:func:`figure_gradients`):
+
+- E_max, F_in = max(0, -min F), F_rm = max(0, max F) (up to the steady state), the stress maximum over
+  the steps: the gradient of the log-sum-exp T log sum_k exp(q_k / T) with T = TEMPERATURE_REL times
+  the series' largest magnitude (softmax weights over the steps; the reported value is the exact
+  maximum);
+- E_ss = E at the steady-state index i_ss (held: a change of the index is a non-smooth event);
+  coupling ratio 100 E_ss / E_max by the quotient rule; the grip at i_ss, interpolated where the
+  force passes through zero after it as :func:`simfab.coupling.profile.analyze` does (the
+  interpolation weight held, see :func:`figure_gradients`);
+- E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
+- the element quality q_e (signed mean ratio) analytically.
+- the target-profile error rms^2 (the objective of profile matching) through the force samples
+  (:func:`target_gradient`), at fixed step positions.
+Not differentiated (gradient None; the optimizer reads it as a constraint without a gradient: it
+checks it on every design and reports it): the seat clearance; and nothing with friction (the
+sensitivities hold for mu = 0).
+
+Optimizer (:func:`optimize_gradient`): SLSQP on z = (h - lower) / (upper - lower) in [0, 1] from
+the initial shape, minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's
+constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0,
+and the element-quality bound q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
+asks for (iterate or line-search trial) costs one insertion, which records its sensitivities: the
+Jacobians come with the values. The best design is the feasible one with the lowest objective
+among all simulated (the lowest penalized objective when none is feasible). Every candidate runs at
+the initial shape's planned step positions (``EvaluationSettings.hold_steps``): the derivatives are
+taken at fixed positions, and the default insertion length would move them in jumps.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import minimize
+
+from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_max_weights
+from simfab.coupling.profile import analyze_run
+from simfab.design import brief as B
+from simfab.design.handles import Handles
+from simfab.design.optimize import DesignResult
+from simfab.design.problem import (
+    CONTACT_STRAIN_FLOOR,
+    QUALITY_REL,
+    DesignProblem,
+    Evaluation,
+    element_quality,
+    evaluate,
+)
+from simfab.design.stress import averaging_matrix
+from simfab.errors import ConvergenceError
+from simfab.progress import log
+
+#: Smooth maxima's temperature, relative to the largest magnitude of the series they take the maximum of.
+TEMPERATURE_REL = 0.02
+#: SLSQP iterations at most (each needs one insertion plus its line-search trials).
+MAX_ITERATIONS = 20
+#: SLSQP's stopping tolerance on the objective (E_L, dimensionless ~1 per edge length of change).
+FTOL = 1e-4
+
+
+def handle_jacobian(handles: Handles) -> np.ndarray:
+    """dX/dh (n * d, n_vars): the rest shape's derivative with respect to the design vector (packed
+    per active handle as [t_j (d), s_j (d)], :func:`simfab.design.handles.pack`)."""
+    X, C, W = handles.rest, handles.centers, handles.weights
+    n, d = X.shape
+    act = np.flatnonzero(handles.active)
+    J = np.zeros((n, d, len(act), 2, d))
+    for k, j in enumerate(act):
+        for a in range(d):
+            J[:, a, k, 0, a] = W[:, j]
+            J[:, a, k, 1, a] = W[:, j] * (X[:, a] - C[j, a])
+    return J.reshape(n * d, -1)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class FigureGradients:
+    """The brief's figures of one insertion with their gradients with respect to h (n_vars,) each:
+    ``values`` {figure: value} (those of :func:`simfab.design.problem.profile_figures`),
+    ``gradients`` {figure: (n_vars,) or None (not differentiated)}; ``supported``: every step's
+    sensitivity is exact (no friction, no pinned rigid motion; see :mod:`simfab.coupling.adjoint`);
+    ``steady_index``: the steady-state index the figures were read at."""
+
+    values: dict
+    gradients: dict
+    supported: bool
+    steady_index: int
+
+
+def stress_measure(problem: DesignProblem, cm) -> StressMeasure:
+    """The yield constraint's stress (averaged over the brief's radius) on ``cm``'s mesh."""
+    return StressMeasure(averaging=averaging_matrix(cm.fem, problem.brief.stress_radius),
+                         temperature_rel=TEMPERATURE_REL)
+
+
+def _smax(values: np.ndarray, grads: np.ndarray) -> np.ndarray:
+    """Gradient of the smooth maximum of ``values`` (k,) with per-value gradients (k, p)."""
+    scale = float(np.abs(values).max()) if len(values) else 0.0
+    return smooth_max_weights(values, TEMPERATURE_REL * scale) @ grads
+
+
+def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> FigureGradients:
+    """:class:`FigureGradients` of an evaluation run with a :class:`SensitivityRecorder`
+    (``evaluate(..., recorder=...)``, status "ok", result kept); Jh: :func:`handle_jacobian`."""
+    res, rec = ev.result, ev.recorder
+    if len(rec.insert) != len(res.steps):
+        raise ValueError("the recorder does not hold one sensitivity per insertion record")
+
+    def pull(a):
+        return np.asarray(a, float).ravel() @ Jh
+
+    dE = np.array([pull(s.energy) for s in rec.insert])
+    dF = np.array([pull(s.force) for s in rec.insert])
+    dG = np.array([pull(s.grip) for s in rec.insert])
+    E, F = res.column("energy"), res.column("force")
+    prof = analyze_run(res)
+    fem = res.model.fem
+    Ey = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
+    touched = prof.E_max > 0.5 * Ey * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
+    i_ss = prof.index_ss
+    g: dict = {}
+    g_Emax = _smax(E, dE)
+    g["E_max"] = g_Emax
+    g["E_ss"] = g_Emax if prof.category == "ejects" else dE[i_ss]
+    g["coupling_ratio"] = (100.0 * (g["E_ss"] / prof.E_max - prof.E_ss * g_Emax / prof.E_max**2)
+                           if touched else np.zeros(Jh.shape[1]))
+    end = len(F) if prof.category == "ejects" else i_ss + 1
+    g["insertion_force"] = -_smax(-F[:end], dF[:end]) if prof.F_in > 0 else np.zeros(Jh.shape[1])
+    g["removal_force"] = _smax(F[:end], dF[:end]) if prof.F_rm > 0 else np.zeros(Jh.shape[1])
+    g["hold_force"] = g["removal_force"] if not res.removal else None
+    grip = dG[i_ss]
+    if prof.category != "ejects" and i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
+        # the rest point's weight w = F_i / (F_i - F_i+1) is held: the two records are the rest
+        # search's bracket around a seat, where the force passes through zero within micrometres,
+        # so dw/dF is huge and meaningful only over that bracket (whose records the search places
+        # anew for every design); the grip's own change at the two records is the usable direction
+        w = F[i_ss] / (F[i_ss] - F[i_ss + 1])
+        grip = (1 - w) * dG[i_ss] + w * dG[i_ss + 1]
+    g["grip_force"] = grip
+    stresses = [s.stress_value for s in rec.insert + rec.remove]
+    if all(s.stress is not None for s in rec.insert + rec.remove):
+        dS = np.array([pull(s.stress) for s in rec.insert + rec.remove])
+        g["von_mises"] = _smax(np.asarray(stresses), dS)
+    else:
+        g["von_mises"] = None
+    g["seat_clearance"] = None
+    if problem.target is not None:
+        scale = problem.settings.corrections.get("force_profile", 1.0)
+        g["rms_error_sq"] = scale * target_gradient(problem.target, res.column("s"), scale * F) @ dF
+    supported = all(s.supported for s in rec.insert + rec.remove) and not res.removal
+    return FigureGradients(values=dict(ev.figures), gradients=g, supported=supported, steady_index=i_ss)
+
+
+def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """d(rms^2)/dF_k (k,) [N] of the target-profile error (:meth:`simfab.design.brief.TargetProfile.
+    rms_error`) at fixed distances s: rms^2 is a quadratic function of the force samples (an
+    integral of squared piecewise-linear differences), so central differences with any step are
+    exact up to round-off; a step of 1 N is used."""
+    f = np.asarray(force, float)
+    out = np.empty(len(f))
+    for k in range(len(f)):
+        e = np.zeros(len(f))
+        e[k] = 1.0
+        out[k] = 0.5 * (target.rms_error(s, f + e) ** 2 - target.rms_error(s, f - e) ** 2)
+    return out
+
+
+def modification_gradient(problem: DesignProblem, X: np.ndarray, Jh: np.ndarray) -> np.ndarray:
+    """dE_L/dh (n_vars,): E_L = sum_axes v^T M_L v over the boundary displacements v, so dE_L/dX = 2 M_L v."""
+    en = problem.energy
+    v = np.asarray(X, float)[en.vertices] - en.rest[en.vertices]
+    gX = np.zeros_like(np.asarray(X, float))
+    gX[en.vertices] = 2.0 * (en.M @ v)
+    return gX.ravel() @ Jh
+
+
+def quality_jacobian(X: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    """(m, n * d) d q_e/dX of the signed mean-ratio quality (:func:`simfab.design.problem.element_quality`):
+    2D q = 2 sqrt(3) det / l2, 3D q = 12 (det / 2)^(2/3) / l2 (det > 0) with det the edge matrix's
+    determinant (d det/dDm = det Dm^-T) and l2 the sum of squared edge lengths."""
+    el = np.asarray(elements)
+    p = np.asarray(X, float)[el]  # (m, d+1, d)
+    m, k, d = p.shape
+    D = np.swapaxes(p[:, 1:, :] - p[:, :1, :], 1, 2)
+    det = np.linalg.det(D)
+    i, j = np.triu_indices(k, 1)
+    diff = p[:, i, :] - p[:, j, :]
+    l2 = np.sum(diff**2, axis=(1, 2))
+    if d == 2:
+        q = 2.0 * math.sqrt(3.0) * det / l2
+        dq_ddet = 2.0 * math.sqrt(3.0) / l2
+    else:
+        q = 12.0 * np.cbrt(np.abs(det) / 2.0) ** 2 / l2 * np.sign(det)
+        dq_ddet = 4.0 * np.cbrt(np.abs(det) / 2.0) ** -1 / l2
+    ddet_dD = det[:, None, None] * np.swapaxes(np.linalg.inv(D), 1, 2)  # (m, d, d): columns = nodes 1..d
+    cols = np.swapaxes(ddet_dD, 1, 2)  # (m, d nodes, d comps)
+    g = np.concatenate([-cols.sum(axis=1, keepdims=True), cols], axis=1) * dq_ddet[:, None, None]
+    dl2 = np.zeros((m, k, d))
+    np.add.at(dl2, (slice(None), i), 2.0 * diff)
+    np.add.at(dl2, (slice(None), j), -2.0 * diff)
+    g -= (q / l2)[:, None, None] * dl2
+    rows = np.repeat(np.arange(m), k * d)
+    colidx = (el[:, :, None] * d + np.arange(d)).ravel()
+    return sp.csr_matrix((g.ravel(), (rows, colidx)), shape=(m, X.size))
+
+
+@dataclass(kw_only=True)
+class _Run:
+    """The optimizer's bookkeeping: every design simulated, in order."""
+
+    problem: DesignProblem
+    Jh: np.ndarray
+    evaluations: list = field(default_factory=list)
+    memo: dict = field(default_factory=dict)
+    insertions: int = 0
+    gradient_evaluations: int = 0
+    signatures: list = field(default_factory=list)  # per complete insertion: its discrete features (events)
+
+
+def _evaluate(run: _Run, h: np.ndarray):
+    """(Evaluation, FigureGradients or None) of design h, memoized (SLSQP asks for each design's
+    values and Jacobians in separate calls)."""
+    key = np.asarray(h, float).tobytes()
+    out = run.memo.get(key)
+    if out is not None:
+        return out
+    problem = run.problem
+    ev = evaluate(problem, h, keep_result=True,
+                  recorder=lambda cm: SensitivityRecorder(cm, stress_measure(problem, cm)))
+    if ev.sim_seconds > 0:
+        run.insertions += 1
+    fg = None
+    if ev.status == "ok":
+        fg = figure_gradients(problem, ev, run.Jh)
+        run.gradient_evaluations += 1
+    ev.recorder = None  # (memory: the per-step sensitivities are read into fg)
+    if ev.status == "ok":
+        r = ev.result
+        planned = len(r.model.s_steps)
+        run.signatures.append({"steady_state_index": fg.steady_index, "category": ev.figures.get("category"),
+                               "refinement": tuple(r.refined_facets), "kappa": max(st.kappa for st in r.steps),
+                               "steps": len(r.steps), "rest_positions": tuple(st.s for st in r.steps[planned:])})
+    run.evaluations.append(ev)
+    out = run.memo[key] = (ev, fg)
+    return out
+
+
+def nonsmooth_events(signatures: list) -> dict:
+    """How often consecutive simulated designs differ in a discrete feature the gradient does not see:
+    {feature: count} over ``pairs`` consecutive pairs (steady-state index, category, the set of refined
+    facets, the final barrier stiffness kappa, the number of records and the positions of those past
+    the planned steps: the rest search's)."""
+    out = {k: 0 for k in ("steady_state_index", "category", "refinement", "kappa", "steps", "rest_positions")}
+    for a, b in zip(signatures, signatures[1:]):
+        for k in out:
+            out[k] += int(a[k] != b[k])
+    out["pairs"] = max(len(signatures) - 1, 0)
+    return out
+
+
+#: Constraints without a gradient: SLSQP would see them as flat and its line search would stall on
+#: them (the seat clearance turns positive as a grip is relaxed); every simulated design is still
+#: checked against them (the best design is a feasible one).
+NOT_DIFFERENTIATED = ("seat_clearance",)
+
+
+def _constraint_rows(problem: DesignProblem) -> list:
+    """[(figure, sign, bound, scale)]: one row per finite bound, c = sign (value * correction - bound) / scale >= 0."""
+    rows = []
+    for name, (lo, hi) in problem.limits.items():
+        if name in NOT_DIFFERENTIATED:  # checked on every design (the best is a feasible one), not linearized
+            continue
+        lo, hi = B.aimed_bounds(name, lo, hi, problem.settings.margin)
+        if math.isfinite(lo) and not (name != "coupling_ratio" and lo <= 0):  # a force >= 0 always holds
+            rows.append((name, 1.0, lo, B.SCALES[name]))
+        if math.isfinite(hi):
+            rows.append((name, -1.0, hi, B.SCALES[name]))
+    return rows
+
+
+#: Constraint value SLSQP sees for a design that cannot be simulated (a violation of this many units).
+FAILED_VIOLATION = 10.0
+
+
+def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
+                      callback=None, start=None) -> DesignResult:
+    """SLSQP on the brief (see the module docstring); returns a :class:`DesignResult` whose
+    ``simulations`` counts every insertion and ``gradient_evaluations`` those that gave gradients
+    (all complete ones). ``seed`` is unused (the method is deterministic: the same signature as
+    :func:`simfab.design.optimize.optimize`); ``iterations`` caps SLSQP's iterations (default: the
+    brief's, at most MAX_ITERATIONS). Raises ConvergenceError when the initial shape
+    cannot be simulated."""
+    t0 = time.perf_counter()
+    problem = problem.with_settings(hold_steps=True)  # derivatives are at fixed step positions
+    H = problem.handles
+    Jh = handle_jacobian(H)
+    run = _Run(problem=problem, Jh=Jh)
+    initial = _evaluate(run, H.identity())[0]  # (with its sensitivities: SLSQP starts there)
+    if initial.status != "ok":
+        raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to optimize from")
+    if not problem.settings.refined and initial.result.refined_facets:
+        run.problem = problem = problem.with_settings(refined=tuple(int(i) for i in initial.result.refined_facets))
+    lo, hi = problem.lower, problem.upper
+    span = hi - lo
+    rows = _constraint_rows(problem)
+    corr = problem.settings.corrections
+    target = problem.target is not None
+    el = problem.base.fem.elements
+    q0 = problem.q0
+
+    def h_of(z):
+        return lo + np.clip(z, 0.0, 1.0) * span
+
+    def objective(z):
+        h = h_of(z)
+        X = H.apply(h)
+        if target:
+            if np.any(element_quality(X, el) <= 0):
+                return 1e6
+            ev, fg = _evaluate(run, h)
+            return float(ev.rms_error ** 2) if ev.status == "ok" and ev.rms_error is not None else 1e6
+        return problem.energy(X)
+
+    def objective_grad(z):
+        if target:
+            h = h_of(z)
+            if np.any(element_quality(H.apply(h), el) <= 0):
+                return np.zeros_like(z)
+            _, fg = _evaluate(run, h)
+            return np.zeros_like(z) if fg is None else fg.gradients["rms_error_sq"] * span
+        return modification_gradient(problem, H.apply(h_of(z)), Jh) * span
+
+    def cons(z):
+        h = h_of(z)
+        X = H.apply(h)
+        qual = np.asarray(element_quality(X, el)) / q0 - QUALITY_REL
+        if np.any(qual <= 0):
+            return np.r_[np.full(len(rows), -FAILED_VIOLATION), qual]
+        ev, fg = _evaluate(run, h)
+        if fg is None:
+            return np.r_[np.full(len(rows), -FAILED_VIOLATION), qual]
+        vals = [sign * (fg.values[name] * corr.get(name, 1.0) - bound) / scale for name, sign, bound, scale in rows]
+        return np.r_[vals, qual]
+
+    def cons_jac(z):
+        h = h_of(z)
+        X = H.apply(h)
+        Jq = (quality_jacobian(X, el) @ Jh) / q0[:, None]
+        ev, fg = (None, None)
+        if np.all(np.asarray(element_quality(X, el)) > 0):
+            ev, fg = _evaluate(run, h)
+        Jc = np.zeros((len(rows), len(z)))
+        for r, (name, sign, _, scale) in enumerate(rows):
+            gr = None if fg is None else fg.gradients.get(name)
+            if gr is not None:
+                Jc[r] = sign * gr * corr.get(name, 1.0) / scale
+        return np.vstack([Jc, Jq]) * span[None, :]
+
+    z0 = np.clip((H.identity() if start is None else np.asarray(start, float)) - lo, 0, None) / span
+    history: list = []
+
+    def on_iteration(z):
+        ev, _ = _evaluate(run, h_of(z))
+        history.append(ev)
+        if callback is not None:
+            callback({"k": len(history), "info": ev})
+        log(f"couple optimize: {problem.base.name}: gradient iteration {len(history)}: objective "
+            f"{ev.objective:.4g}, insertions {run.insertions}", quiet=quiet)
+
+    res = minimize(objective, z0, jac=objective_grad, method="SLSQP", bounds=[(0.0, 1.0)] * len(z0),
+                   constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
+                   options={"maxiter": min(MAX_ITERATIONS, problem.brief.iterations) if iterations is None
+                            else int(iterations), "ftol": FTOL},
+                   callback=on_iteration)
+    ok = [ev for ev in run.evaluations if ev.status == "ok"]
+    best = min(ok, key=lambda e: (not e.feasible, e.objective))
+    if best.status == "ok" and best is not initial:  # as `couple simulate` runs it (own steps, no seeded refinement)
+        plain = evaluate(problem.with_settings(refined=(), hold_steps=False), best.h, keep_result=True)
+        if plain.status == "ok":
+            best = plain
+    for ev in run.evaluations:
+        if ev is not best and ev is not initial:
+            ev.result = None
+    rejected: dict = {}
+    for ev in run.evaluations:
+        if ev.status == "rejected":
+            key = ev.reason.split(":")[0]
+            rejected[key] = rejected.get(key, 0) + 1
+    hist = [{"k": k, "accepted": True, "current": ev.objective, "best": ev.objective, "temperature": math.nan,
+             "sigma": math.nan, "value": ev.objective, "evaluation": ev} for k, ev in enumerate(history)]
+    out = DesignResult(problem=problem, initial=initial, best=best, history=hist,
+                       accepted=[(k, ev.rest, ev.objective) for k, ev in enumerate(history)],
+                       simulations=run.insertions, stopped_simulations=0, rejected=rejected,
+                       seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
+                       iterations=int(res.nit), stopped_early=bool(res.success), method="gradient",
+                       gradient_evaluations=run.gradient_evaluations, message=str(res.message),
+                       events=nonsmooth_events(run.signatures))
+    return out
