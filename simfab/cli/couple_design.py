@@ -24,8 +24,8 @@ simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_s
 (2D), scene_xml, scene_toml, scene_mesh, profile_png, shape_png, history_csv, usd, summary_json,
 revolved_stl with --revolve-axis; with --revolve-arms also revolved_scene_xml, revolved_scene_toml,
 revolved_mesh), revolved (with --revolve-arms: the 3D part's simulation: elements, category,
-figures, constraints of the brief with their values and satisfied flags), restarts (with --restarts: per run seed, status, message,
-feasible, objective, E_L, iterations, seconds), mesh_check (unless --no-mesh-check: levels
+figures, constraints of the brief with their values and satisfied flags), restarts (with --restarts: per
+run seed, status, message, feasible, objective, E_L, iterations, seconds), mesh_check (unless --no-mesh-check: levels
 (element_order, subdivisions, elements, nodes, seconds, category), figures (per figure: values per
 level, extrapolated, order, converging, difference_of_optimization_mesh, reference_change, step_factor),
 step_check (when the scene's steps do not resolve the profile: steps, factor, seconds, factors per figure,
@@ -40,8 +40,8 @@ spatial placement and --random random picks, for each handle count of --counts, 
 optimization run as a Dask task (--scheduler); reports the fraction of runs that met every
 constraint and the final E_L per method (table, CSV, PNG).
 
---json keys: scene, runs, failed_runs, rows (method, handles, runs, converged_fraction, E_L_median, E_L_best), outputs (runs_csv,
-summary_csv, plot_png, summary_json), units.
+--json keys: scene, runs, failed_runs, rows (method, handles, runs, converged_fraction, E_L_median, E_L_best),
+outputs (runs_csv, summary_csv, plot_png, summary_json), units.
 """
 
 from __future__ import annotations
@@ -63,7 +63,8 @@ def add_optimize_args(s) -> None:
     g.add_argument("--removal-force", nargs=2, type=float, metavar=("LO", "HI"), help="removal force bounds [N]")
     g.add_argument("--hold-force", nargs=2, type=float, metavar=("LO", "HI"),
                    help="hold force bounds [N] (the force to start sliding the seated object out)")
-    g.add_argument("--yield-stress", type=float, metavar="PA", help="max von Mises bound [Pa] (default: the material's)")
+    g.add_argument("--yield-stress", type=float, metavar="PA",
+                   help="max von Mises bound [Pa] (default: the material's)")
     g.add_argument("--target-profile", metavar="CSV", help="force profile to match (distance_m, force_N rows)")
     g.add_argument("--handles", type=int, metavar="K", help="number of active handles")
     g.add_argument("--placement", choices=["displacement", "spatial", "random"], help="handle placement")
@@ -107,7 +108,8 @@ def add_optimize_args(s) -> None:
 def add_study_args(s) -> None:
     s.add_argument("study", choices=["handles"], help="which study (handles: handle placement)")
     s.add_argument("scene", metavar="SCENE", help="design scene")
-    s.add_argument("--counts", type=int, nargs="+", default=[2, 4, 6], metavar="K", help="handle counts (default 2 4 6)")
+    s.add_argument("--counts", type=int, nargs="+", default=[2, 4, 6], metavar="K",
+                   help="handle counts (default 2 4 6)")
     s.add_argument("--random", type=int, default=10, metavar="N", help="random placements per count (default 10)")
     s.add_argument("--iterations", type=int, metavar="N", help="annealing iterations per run (default: the brief's)")
     s.add_argument("--steps", type=int, metavar="N", help="insertion steps per simulation")
@@ -161,10 +163,10 @@ def run_optimize(args) -> dict:
         raise InputError(f"must be 0 (a full turn) or >= 2, got {args.revolve_arms}", where="--revolve-arms")
     revolve = (args.revolve_axis, args.revolve_offset, args.revolve_arms) if args.revolve_axis else None
     contact = {} if args.friction is None else {"friction": args.friction}
-    return optimize_scene(args.scene, out=args.out, design=design_overrides(args), simulation=simulation_overrides(args),
-                          contact=contact, device=dev, quiet=args.quiet, seed=args.seed, revolve=revolve, restarts=args.restarts,
-                          scheduler=args.scheduler, workers=workers, mesh_check=not args.no_mesh_check,
-                          method=args.method)
+    return optimize_scene(args.scene, out=args.out, design=design_overrides(args),
+                          simulation=simulation_overrides(args), contact=contact, device=dev, quiet=args.quiet,
+                          seed=args.seed, revolve=revolve, restarts=args.restarts, scheduler=args.scheduler,
+                          workers=workers, mesh_check=not args.no_mesh_check, method=args.method)
 
 
 def run_study(args) -> dict:
