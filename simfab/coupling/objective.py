@@ -55,7 +55,7 @@ class StepObjective:
     def distances(self, x: np.ndarray, hessian: bool):
         """(d (k,) [m], grad d (k, dim), hess d (k, dim, dim) or None): exact near O, lower bounds
         (zero derivatives) for points certified farther than the band."""
-        with self.timer.timed("contact"):
+        with self.timer.timed("contact_field"):
             y = self.points.positions(x)
             k, dim = len(y), self.dim
             if self.y_ref is None:
@@ -81,7 +81,16 @@ class StepObjective:
         return d, gd, hd
 
     def __call__(self, xf: np.ndarray, need_hessian: bool):
-        """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O."""
+        """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O.
+        An evaluation without the Hessian (a line-search trial) books its whole time under
+        "line_search"; one with it books the FEM terms under "assembly", the contact field under
+        "contact_field" and the barrier (and friction) terms under "barrier"."""
+        if not need_hessian:
+            with self.timer.into("line_search"):
+                return self._evaluate(xf, False)
+        return self._evaluate(xf, True)
+
+    def _evaluate(self, xf: np.ndarray, need_hessian: bool):
         cm = self.cm
         memo = self.memo
         if need_hessian and memo is not None and memo[0].shape == xf.shape and np.array_equal(memo[0], xf):
@@ -104,7 +113,7 @@ class StepObjective:
         d, gd, hd = self.distances(x, need_hessian)
         if np.any(d <= 0):
             return np.inf, g.ravel(), H
-        with self.timer.timed("contact"):
+        with self.timer.timed("barrier"):
             act, B, gy, Hy = self._barrier(d, gd, hd)
             gc = self.points.scatter(gy, self.n, rows=act)
             Hf = None
@@ -155,7 +164,12 @@ class StepObjective:
         self.last_fem = (E, g)  # elastic energy and gradient at last_x (reused by the step record)
 
     def value(self, x: np.ndarray) -> float:
-        """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible."""
+        """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible
+        (its time books under "line_search")."""
+        with self.timer.into("line_search"):
+            return self._value(x)
+
+    def _value(self, x: np.ndarray) -> float:
         with self.timer.timed("assembly"):
             E = energy(self.cm.fem, x) + (self.pin.energy(np.ravel(x)) if self.pin is not None else 0.0)
         if not np.isfinite(E):
@@ -185,8 +199,13 @@ class StepObjective:
         keeping this above 0.1 d. It lets points in contact slide along O (a ~ 0) and move away
         freely, while approaching points stop short of O. Conservative advancement,
         alpha <= 0.9 d / (L |dy|) with L a Lipschitz bound of psi, is always allowed as well.
-        The line search still rejects any trial point inside O (energy +inf).
+        The line search still rejects any trial point inside O (energy +inf). Its time books under
+        "line_search".
         """
+        with self.timer.into("line_search"):
+            return self._max_step(xf, dx)
+
+    def _max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
         if self.last_x is not None and np.array_equal(self.last_x, xf):
             d, gd = self.last_d, self.last_gd
         else:
@@ -222,7 +241,7 @@ class LazyHessian:
                 act, _, _, Hy = obj._barrier(*obj.distances(self.x, True))
                 Hf = obj.friction.evaluate(self.x, hessian=True).hessian if obj.friction is not None else None
                 self.contact = (act, Hy, Hf)
-            with obj.timer.timed("contact"):
+            with obj.timer.timed("barrier"):
                 obj._add_contact(H, self.contact, psd=True)
             self.H = H
         return self.H
