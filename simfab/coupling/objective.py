@@ -195,9 +195,9 @@ class StepObjective:
         """Step cap keeping every constraint point outside O along the whole step (see below).
 
         Per point, with d its distance to O, a = grad d . dy and K a curvature bound of the field
-        (from the Hessians near O, see ``__call__``), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2; the cap is the largest alpha
-        keeping this above 0.1 d. It lets points in contact slide along O (a ~ 0) and move away
-        freely, while approaching points stop short of O. Conservative advancement,
+        (from the Hessians near O, see ``__call__``), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2;
+        the cap is the largest alpha keeping this above 0.1 d. It lets points in contact slide along O
+        (a ~ 0) and move away freely, while approaching points stop short of O. Conservative advancement,
         alpha <= 0.9 d / (L |dy|) with L a Lipschitz bound of psi, is always allowed as well.
         The line search still rejects any trial point inside O (energy +inf). Its time books under
         "line_search".

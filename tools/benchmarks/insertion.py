@@ -101,7 +101,6 @@ def _runs_wanted(a, runs: list) -> int:
 
 def run(argv) -> dict:
     from benchmarks._reference import figures
-
     from simfab.contact.sdf import PrimitiveField
     from simfab.coupling.outputs import summarize
     from simfab.coupling.scene import load_coupling_scene
@@ -152,7 +151,8 @@ def run(argv) -> dict:
         stages = {k: float(t.get(k, 0.0)) for k in STAGES}
         stages.update({k: float(res.phases.get(k, 0.0)) for k in PHASE_STAGES})
         stages["python"] = dt - sum(stages.values())
-        split = {"assembly": t.get("assembly", 0.0), "factorization": t.get("factorization", 0.0) + t.get("solves", 0.0),
+        split = {"assembly": t.get("assembly", 0.0),
+                 "factorization": t.get("factorization", 0.0) + t.get("solves", 0.0),
                  "contact": t.get("contact_field", 0.0) + t.get("barrier", 0.0)}
         split = {k: round(float(v), 3) for k, v in split.items()}
         split["other"] = round(float(dt - sum(split.values())), 3)
