@@ -57,6 +57,8 @@ def add_optimize_args(s) -> None:
     g.add_argument("--grip-force", nargs=2, type=float, metavar=("LO", "HI"), help="grip force bounds [N]")
     g.add_argument("--insertion-force", nargs=2, type=float, metavar=("LO", "HI"), help="insertion force bounds [N]")
     g.add_argument("--removal-force", nargs=2, type=float, metavar=("LO", "HI"), help="removal force bounds [N]")
+    g.add_argument("--hold-force", nargs=2, type=float, metavar=("LO", "HI"),
+                   help="hold force bounds [N] (the force to start sliding the seated object out)")
     g.add_argument("--yield-stress", type=float, metavar="PA", help="max von Mises bound [Pa] (default: the material's)")
     g.add_argument("--target-profile", metavar="CSV", help="force profile to match (distance_m, force_N rows)")
     g.add_argument("--handles", type=int, metavar="K", help="number of active handles")
@@ -70,6 +72,10 @@ def add_optimize_args(s) -> None:
     g.add_argument("--patience", type=int, metavar="N",
                    help="stop once the best design is feasible and has not improved for N iterations")
     s.add_argument("--steps", type=int, metavar="N", help="insertion steps per simulation (overrides the scene)")
+    s.add_argument("--friction", type=float, metavar="MU",
+                   help="Coulomb friction coefficient between object and part (overrides the scene's [contact] "
+                        "friction): every candidate's insertion and removal are simulated with it, and the brief "
+                        "reads the frictional forces")
     s.add_argument("--workers", type=int, default=None, metavar="N",
                    help="processes evaluating the annealer's proposals at once (speculatively; the design "
                         "does not depend on it; default: this machine's cores, at most 4; 1 with --restarts)")
@@ -110,7 +116,7 @@ def design_overrides(args) -> dict:
         v = getattr(args, k, None)
         if v is not None:
             d[k] = v
-    for k in ("grip_force", "insertion_force", "removal_force"):
+    for k in ("grip_force", "insertion_force", "removal_force", "hold_force"):
         v = getattr(args, k, None)
         if v is not None:
             d[k] = list(v)
@@ -147,8 +153,9 @@ def run_optimize(args) -> dict:
     if args.revolve_arms < 0 or args.revolve_arms == 1:
         raise InputError(f"must be 0 (a full turn) or >= 2, got {args.revolve_arms}", where="--revolve-arms")
     revolve = (args.revolve_axis, args.revolve_offset, args.revolve_arms) if args.revolve_axis else None
+    contact = {} if args.friction is None else {"friction": args.friction}
     return optimize_scene(args.scene, out=args.out, design=design_overrides(args), simulation=simulation_overrides(args),
-                          device=dev, quiet=args.quiet, seed=args.seed, revolve=revolve, restarts=args.restarts,
+                          contact=contact, device=dev, quiet=args.quiet, seed=args.seed, revolve=revolve, restarts=args.restarts,
                           scheduler=args.scheduler, workers=workers, mesh_check=not args.no_mesh_check)
 
 

@@ -11,7 +11,7 @@ with gaps from the area distortion, writes the laser-cut SVG + DXF (mm), deploys
 MuJoCo scene that simulates (it opens on the deployed state; the flat pattern is the springs'
 rest state and keyframe 'flat'), checked for stability and against simfab's equilibrium.
 Outputs in --out: pattern.svg, pattern.dxf, flattening.png, pattern.png, deviation.png,
-deploy.usda, deployed.xml, surface.json.
+deploy.usda, deployed.xml, inserts.csv (bill of materials: inserts per size), surface.json.
 
 Unit cell: for every insert body of the scene (default scenes/deploy/unit_cell.xml) the cell's spokes
 are drawn onto the insert in quasi-static increments; writes per insert a USD timeline (rods as
@@ -43,6 +43,8 @@ def add_args(p) -> None:
     g.add_argument("--beam-thickness", type=float, help="sheet thickness [m]")
     g.add_argument("--insert-size", type=float, help="insert half-size r (clamp distance from its centre) [m]")
     g.add_argument("--young", type=float, help="Young's modulus of the sheet [Pa]")
+    g.add_argument("--tune", type=int, metavar="STEPS", help="Gauss-Newton steps tuning the gaps on the deployed "
+                   "shape (0: none; scene [tune] iterations)")
     g.add_argument("--no-mujoco-check", action="store_true", help="skip stepping the MuJoCo scene (stability / relaxation)")
     p.add_argument("--scene", default=None, help="unit-cell MJCF scene (default scenes/deploy/unit_cell.xml)")
     p.add_argument("--insert", nargs="+", metavar="BODY", help="insert bodies to deploy (default: all 'insert*' bodies)")
@@ -75,10 +77,11 @@ def run_surface(args) -> dict:
         raise InputError("needs a TARGET: scene TOML, bundled name (dome, saddle, mixed) or mesh file",
                          where="simfab deploy surface")
     target = sc.bundled_path(args.target) if args.target in sc.BUNDLED and not os.path.exists(args.target) else args.target
-    ov = {"pattern": {}, "material": {}}
+    ov = {"pattern": {}, "material": {}, "tune": {}}
     for flag, table, field in (("spacing", "pattern", "spacing"), ("beam_width", "pattern", "beam_width"),
                                ("beam_thickness", "pattern", "beam_thickness"),
-                               ("insert_size", "pattern", "insert_half_size"), ("young", "material", "young")):
+                               ("insert_size", "pattern", "insert_half_size"), ("young", "material", "young"),
+                               ("tune", "tune", "iterations")):
         v = getattr(args, flag, None)
         if v is not None:
             ov[table][field] = v
@@ -97,7 +100,8 @@ def run_surface(args) -> dict:
     res = pipeline.run(scene, device=_device(args.device), quiet=args.quiet,
                        mujoco_check=not getattr(args, "no_mujoco_check", False))
     names = dict(svg="pattern.svg", dxf="pattern.dxf", flat_png="flattening.png", pattern_png="pattern.png",
-                 deviation_png="deviation.png", usd="deploy.usda", mjcf="deployed.xml", json="surface.json")
+                 deviation_png="deviation.png", usd="deploy.usda", mjcf="deployed.xml", bom="inserts.csv",
+                 json="surface.json")
     paths = {k: os.path.join(out, v) for k, v in names.items()}
     summary = pipeline.summary(res)
     summary["outputs"] = paths
@@ -108,13 +112,14 @@ def run_surface(args) -> dict:
         so.write_pattern_png(tmp["pattern_png"], res)
         so.write_deviation_png(tmp["deviation_png"], res)
         so.write_usd(tmp["usd"], res)
+        so.write_bom_csv(tmp["bom"], res)
         if res.sim is None:
             from simfab.deploy import mjcf_sim
 
             res.sim = mjcf_sim.build(res.network.model, res.network.state, res.deployment.final,
                                      density=scene.deploy.density, cfg=scene.mujoco, name="deployed_surface",
                                      body_geoms=pipeline.insert_geoms(res.pattern, res.network))
-        res.sim.builder.save(tmp["mjcf"])
+        res.sim.save(tmp["mjcf"])
         write_json(tmp["json"], summary)
     return summary
 
@@ -130,8 +135,10 @@ def format_text(summary: dict) -> str:
             f"flattening        u in [{s['u_min']:.4g}, {s['u_max']:.4g}], area ratio in "
             f"[{s['area_ratio_min']:.4g}, {s['area_ratio_max']:.4g}]",
             f"pattern           {s['quads']} quads, {s['beams']} beams, {s['springs']} springs, {s['inserts']} inserts "
-            f"(r = {s['insert_half_size_mm']:.3g} mm, gaps {s['gap_min_mm']:.3g}..{s['gap_max_mm']:.3g} mm, "
-            f"{len(s['unreachable_gaps'])} unreachable)",
+            f"(gaps {s['gap_min_mm']:.3g}..{s['gap_max_mm']:.3g} mm, {len(s['unreachable_gaps'])} unreachable)",
+            "inserts (r)       " + ", ".join(f"{b['count']} x {b['half_size_mm']:.3g} mm"
+                                             + (f" ({b['size_class']})" if len(s['bill_of_materials']) > 1 else "")
+                                             for b in s["bill_of_materials"]),
             f"laser cut         {lc['parts']} parts, cut length {lc['cut_length_mm'] / 1e3:.4g} m, sheet "
             f"{lc['sheet_mm'][0]:.0f} x {lc['sheet_mm'][1]:.0f} mm",
             f"deployed          {dp['kind']} (inserts' local K: {dp['curvature_sign_at_inserts']['positive']} > 0, "
@@ -143,6 +150,12 @@ def format_text(summary: dict) -> str:
             f"deviation         RMS {dv['rms'] * 100:.3g} % ({dv['rms_mm']:.3g} mm), Hausdorff {dv['hausdorff'] * 100:.3g} % "
             f"({dv['hausdorff_mm']:.3g} mm) of D = {dv['diameter_mm']:.0f} mm; height {dv['deployed_height_mm']:.3g} mm "
             f"(target {dv['target_height_mm']:.3g} mm)"]
+    tn = s.get("tuning")
+    if tn:
+        rows.append(f"tuned gaps        {tn['steps']} Gauss-Newton steps ({tn['solves']} solves), RMS "
+                    f"{100 * tn['rms_before']:.3g} % -> {100 * dv['rms']:.3g} %, Hausdorff "
+                    f"{100 * tn['hausdorff_before']:.3g} % -> {100 * dv['hausdorff']:.3g} %, gaps changed by up to "
+                    f"{tn['gap_change_max_mm']:.3g} mm")
     mj = s.get("mujoco") or {}
     if mj:
         st, rl = mj["stability"], mj["relaxation"]
@@ -152,6 +165,11 @@ def format_text(summary: dict) -> str:
                     f"{'finite' if st['finite'] else 'BLEW UP'}, max drift {st['max_drift_m'] * 1e3:.3g} mm; "
                     f"relaxed vs simfab: RMS {rl['rms_m'] * 1e3:.3g} mm = {100 * (rl['rms_rel'] or 0):.3g} % of the "
                     f"{rl['out_of_plane_extent_m'] * 1e3:.3g} mm height")
+    if s["unreachable_gaps"]:
+        rows.append("unreachable gaps  " + ", ".join(
+            f"{g['insert']}{g['size_class']}: {g['required_mm']:.3g} mm needed, {g['cut_mm']:.3g} cut "
+            f"(deviation there {g['deviation_mm']:.3g} mm)" for g in s["unreachable_gaps"][:8])
+            + (f", ... ({len(s['unreachable_gaps'])} in all, surface.json)" if len(s["unreachable_gaps"]) > 8 else ""))
     rows.append("seconds           " + ", ".join(f"{k} {v:.3g}" for k, v in s["seconds"].items()))
     rows.append(f"outputs           {os.path.dirname(s['outputs']['json'])}/")
     return "\n".join(rows)
@@ -222,7 +240,8 @@ def demo(ctx) -> dict:
                                        usd=v["outputs"]["usd"]) for k, v in res["inserts"].items()})
     sargs = argparse.Namespace(out=os.path.join(ctx.out, "surface_dome"), seed=ctx.seed, device=ctx.device,
                                quiet=ctx.quiet, json=False, action="surface", target="dome", units=None, spacing=None,
-                               beam_width=None, beam_thickness=None, insert_size=None, young=None, no_mujoco_check=True)
+                               beam_width=None, beam_thickness=None, insert_size=None, young=None, tune=None,
+                               no_mujoco_check=True)
     sres = run(sargs)
     out["surface_dome"] = dict(kind=sres["deployment"]["kind"], rms=sres["deviation"]["rms"],
                                hausdorff=sres["deviation"]["hausdorff"], inserts=sres["inserts"],

@@ -7,9 +7,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab.contact.imls import ImlsField, pose_matrix
+from simfab.contact.imls import ImlsField
 from simfab.coupling.config import ContactOptions, InsertionOptions
 from simfab.errors import InputError
+from simfab.rotations import pose_matrix
+
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -59,30 +61,24 @@ class CouplingModel:
     def contact_facets(self) -> np.ndarray:
         """(f, dim) int64 linear boundary facets (2D segments, 3D triangles; body on the left /
         counter-clockwise from outside) that contact is checked and refined on; refinement facet
-        ids index its rows. Linear elements: ``fem.boundary_facets``. P2: ``fem.boundary_subfacets``
-        (2 segments / 4 triangles per quadratic facet, over its corner and midpoint nodes), whose
+        ids index its rows. ``fem.linear_facets()``: the boundary facets of linear elements; for P2
+        the 2 segments / 4 triangles per quadratic facet over its corner and midpoint nodes, whose
         nodes share an element, so points interpolated on them stay inside the Hessian's sparsity
         pattern. (Memoized, read-only.)"""
         out = self._cache.get("contact_facets")
         if out is None:
-            from simfab.fem.p2 import P2Model
-
-            f = self.fem.boundary_subfacets if isinstance(self.fem, P2Model) else self.fem.boundary_facets
-            out = self._cache["contact_facets"] = np.asarray(f, dtype=np.int64)
+            out = self._cache["contact_facets"] = np.asarray(self.fem.linear_facets(), dtype=np.int64)
             out.flags.writeable = False
         return out
 
     @property
     def display_elements(self) -> np.ndarray:
         """(m', dim+1) int64 linear simplices over A's nodes for output (USD, MJCF, plots): the
-        elements, or for P2 the red refinement on its nodes (``P2Model.sub_elements()``, 4 / 8
+        elements, or for P2 the red refinement on its nodes (``fem.linear_elements()``, 4 / 8
         per element). (Memoized, read-only.)"""
         out = self._cache.get("display_elements")
         if out is None:
-            from simfab.fem.p2 import P2Model
-
-            el = self.fem.sub_elements() if isinstance(self.fem, P2Model) else self.fem.elements
-            out = self._cache["display_elements"] = np.asarray(el, dtype=np.int64)
+            out = self._cache["display_elements"] = np.asarray(self.fem.linear_elements(), dtype=np.int64)
             out.flags.writeable = False
         return out
 

@@ -15,9 +15,10 @@ from simfab.coupling.profile import ProfileSummary, analyze_run
 from simfab.coupling.settle import energy_balance
 from simfab.coupling.simulate import InsertionResult
 from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json
-from simfab.io.mjcf import MJCFBuilder, quat_to_matrix
+from simfab.io.mjcf import MJCFBuilder
 from simfab.io.outpaths import safe_name
 from simfab.io.usd import StageWriter
+from simfab.rotations import quat_to_matrix
 
 #: Units of the summary keys (also written into the JSON summary).
 SUMMARY_UNITS = {

@@ -69,7 +69,7 @@ def pin_for(cm, Q: np.ndarray, c: np.ndarray, x: np.ndarray) -> Pin | None:
     if memo is not None and memo[0] is Q and memo[1] is x:
         return memo[2]
     dim = cm.dim
-    U = (_rows(x - c, dim) @ Q).reshape(-1, Q.shape[1])  # (n*dim, r)
+    U = (point_motions(x - c, dim) @ Q).reshape(-1, Q.shape[1])  # (n*dim, r)
     U[~cm.free] = 0.0
     U, sv, _ = np.linalg.svd(U, full_matrices=False)
     U = U[:, sv > 1e-9 * sv.max()]
@@ -124,13 +124,13 @@ def _motion_basis(cm) -> tuple[np.ndarray, np.ndarray]:
     r = 3 if dim == 2 else 6
     if not len(verts):
         return np.eye(r), c
-    rows = _rows(fem.rest[verts] - c, dim)[np.arange(len(verts)), axes]  # (held dofs, r)
+    rows = point_motions(fem.rest[verts] - c, dim)[np.arange(len(verts)), axes]  # (held dofs, r)
     _, s, Vt = np.linalg.svd(rows, full_matrices=True)
     rank = int(np.sum(s > 1e-9 * s.max()))
     return Vt[rank:].T, c
 
 
-def _rows(rel: np.ndarray, dim: int) -> np.ndarray:
+def point_motions(rel: np.ndarray, dim: int) -> np.ndarray:
     """(p, dim, r): d u / d q at points with positions ``rel`` (p, dim) relative to the centre."""
     p = len(rel)
     if dim == 2:
@@ -172,7 +172,7 @@ def contact_modes(Q: np.ndarray, c: np.ndarray, y: np.ndarray, normals: np.ndarr
 def _generalized(Q, c, y, normals, weights):
     """Eigenpairs (ascending) of K v = lam M v: contact stiffness K and motion metric M of the
     motions span(Q) at the contact points (see :func:`weakest_motion`)."""
-    J = _rows(y - c, y.shape[1]) @ Q  # (p, dim, k): point motion per basis motion
+    J = point_motions(y - c, y.shape[1]) @ Q  # (p, dim, k): point motion per basis motion
     nJ = np.einsum("pd,pdk->pk", normals, J)
     K = np.einsum("p,pk,pl->kl", weights, nJ, nJ)
     M = np.einsum("p,pdk,pdl->kl", weights, J, J)

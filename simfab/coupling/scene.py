@@ -45,10 +45,20 @@ from pathlib import Path
 import numpy as np
 
 from simfab._bundled import scenes_dir
+from simfab.contact.imls import build_imls
+from simfab.contact.sdf import build_primitive_field, primitives_of_body, section_primitives
 from simfab.coupling import geometry
 from simfab.coupling.config import ContactOptions, InsertionOptions, ObjectOptions
+from simfab.coupling.simulate import make_coupling_model
 from simfab.errors import InputError
+from simfab.fem.materials import Material, material_by_name
+from simfab.fem.meshing import extrude_triangles, tetrahedralize, triangulate_polygon
+from simfab.fem.model import make_model
+from simfab.fem.p2 import to_p2
 from simfab.io.companion import read_csv_numbers, read_npz
+from simfab.io.mesh import load_mesh
+from simfab.io.mjcf import Trajectory, load_scene
+from simfab.rotations import quat_to_matrix
 
 GENERATORS_2D = ("c_clamp", "outline")
 GENERATORS_3D = ("extruded_clamp", "cross_claw", "mesh")
@@ -155,10 +165,6 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
 
     overrides : optional dict of dicts merged into the TOML tables (e.g. ``{"simulation": {"steps": 5}}``).
     """
-    from simfab.coupling.simulate import make_coupling_model
-    from simfab.fem.materials import Material, material_by_name
-    from simfab.fem.model import make_model
-    from simfab.io.mjcf import Trajectory, load_scene
 
     xml, toml = scene_paths(scene)
     if not xml.is_file():
@@ -213,7 +219,6 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
     points, elements, thickness = build_compliant(comp, dim, base=toml.parent, where=f"{where} [compliant]")
     fem = make_model(points, elements, material, thickness=thickness, device=device)
     if options.element_order == 2:
-        from simfab.fem.p2 import to_p2
 
         fem = to_p2(fem)  # the fixed region below then holds the midpoints inside it as well
 
@@ -236,7 +241,6 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
         spacing = None
         disp_v, disp_f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     if fld is None:
-        from simfab.contact.imls import build_imls
 
         sigma = obj_opts.sigma
         fld = build_imls(ov, on, sigma=None if sigma is None else float(sigma), spacing=spacing, device=device,
@@ -262,7 +266,6 @@ def primitive_field(sc, body: str, dim: int, samples: int):
     taken relative to the mocap body (MuJoCo's geom_pos / geom_quat are in the body frame)."""
     import mujoco
 
-    from simfab.contact.sdf import build_primitive_field, primitives_of_body, section_primitives
 
     bid = mujoco.mj_name2id(sc.model, mujoco.mjtObj.mjOBJ_BODY, body)
     prims = primitives_of_body(sc.model, bid, sc.sdf_plugins) if bid >= 0 else None
@@ -280,7 +283,6 @@ def object_mesh_body_frame(sc, body: str):
         raise InputError(f"body {body!r} has no geometry to build the object from", where=str(sc.path))
     m = meshes[body].copy()
     bid = mujoco.mj_name2id(sc.model, mujoco.mjtObj.mjOBJ_BODY, body)
-    from simfab.io.mjcf import quat_to_matrix
 
     R = quat_to_matrix(sc.model.body_quat[bid])
     p = np.asarray(sc.model.body_pos[bid])
@@ -293,7 +295,6 @@ def object_mesh_body_frame(sc, body: str):
 
 def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
     """A's mesh from the [compliant] table: (points (n, dim) [m], elements, thickness [m])."""
-    from simfab.fem.meshing import tetrahedralize
 
     gen = comp.pop("generator", None)
     cached = comp.pop("mesh_file", None)
@@ -325,7 +326,6 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
         # an extrusion meshed as one: the clamp's outline triangulated to target / (3 layers)
         # triangles, extruded in prisms of 3 tets (in-plane bending resolved like the 2D mesh; an
         # isotropic fTetWild mesh of the same part was 150% too stiff at 1,070 tets, 18% at 11k)
-        from simfab.fem.meshing import extrude_triangles
 
         layers = comp.pop("layers", 1)
         if isinstance(layers, bool) or not isinstance(layers, int) or not 1 <= layers <= 64:
@@ -344,7 +344,6 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
     elif gen == "cross_claw":
         surf = _call(geometry.cross_claw, comp, where)
     elif gen == "mesh" or "mesh" in comp:
-        from simfab.io.mesh import load_mesh
 
         surf = load_mesh(base / str(comp.pop("mesh")), units=units, require_watertight=True)
     else:
@@ -388,7 +387,6 @@ def _call(fn, kw: dict, where: str):
 
 def _triangulate_to_target(outline: np.ndarray, target: int | None):
     """Triangle mesh of the outline with about ``target`` triangles (area bound tuned in 3 passes)."""
-    from simfab.fem.meshing import triangulate_polygon
 
     if target is None:
         return triangulate_polygon(outline)

@@ -110,7 +110,8 @@ class StepState:
     the path (insertion), -1 backward (removal); friction: the friction lag x was solved with
     (:class:`simfab.coupling.friction.FrictionLag`, None without friction), lag_solves: the solves
     its step took (lagging iterations), lag_change: the relative change of the normal forces at its
-    last lagging iteration, normal_force (k,) [N]: the normal forces at x (with friction)."""
+    last lagging iteration, normal_force (k,) [N]: the normal forces at x (with friction) over the
+    constraint points ``normal_force_points`` (the current ones until a refinement replaces them)."""
 
     x: np.ndarray
     s: float
@@ -133,6 +134,7 @@ class StepState:
     lag_solves: int = 0
     lag_change: float = 0.0
     normal_force: np.ndarray | None = None
+    normal_force_points: ContactPoints | None = None
 
     def current_evaluation(self) -> Evaluation | None:
         """Newton's last evaluation when it belongs to the current state (at ``x``, over the current

@@ -243,10 +243,11 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                 if lag_change > cm.contact.lag_tol and lag_solves < cm.contact.max_lag_iterations:
                     lagged, resume = fresh, _Lagged(x)
                     continue
-            state.prev2, state.prev = state.prev, PastStep(state.x, state.s, state.points, state.normal_force)
+            state.prev2, state.prev = state.prev, PastStep(state.x, state.s, state.normal_force_points, state.normal_force)
             accept(state, x, s_new, obj.kappa, final, point_dhat(cm, state.points))
             state.friction, state.lag_solves, state.lag_change = lagged, lag_solves, lag_change
             state.normal_force = fresh.normal_force if frictional else None
+            state.normal_force_points = state.points if frictional else None
             adapt_kappa(cm, state, obj)
             return total
         # solve again from x with the new points lifted out of O (see predictor.lift_points); should

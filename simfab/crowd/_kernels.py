@@ -18,6 +18,8 @@ Arrays (T = crowds x chains threads, R raters, Q questions):
 from __future__ import annotations
 
 from simfab._warp import wp  # quiet Warp initialization
+from simfab.crowd.config import TOL
+from simfab.crowd.model import Observations
 
 _F = wp.float64
 
@@ -307,7 +309,6 @@ class WarpKernel:
     def __init__(self, y, mask, half_width, priors, cfg, rng, init, device="cpu"):
         import numpy as np
 
-        from simfab.crowd.model import Observations
 
         self.np, self.cfg, self.rng, self.device = np, cfg, rng, device
         B, R, Q = y.shape
@@ -379,6 +380,5 @@ class WarpKernel:
 
 
 def _ratio_cap():
-    from simfab.crowd.config import TOL
 
     return TOL.ratio_cap

@@ -10,6 +10,7 @@ from simfab.crowd import aggregate as A
 from simfab.crowd import metrics
 from simfab.crowd.config import Priors, SamplerConfig
 from simfab.crowd.data import Ratings
+from simfab.crowd.sampler import sample
 from simfab.errors import InputError
 
 #: Method names in table order (the thesis' columns).
@@ -48,7 +49,6 @@ def half_width(ratings: Ratings, config: SamplerConfig = SamplerConfig()) -> flo
 
 def bayesian(ratings: Ratings, *, config: SamplerConfig = SamplerConfig(), priors: Priors = Priors(), seed: int = 0, quiet: bool = True, device: str = "cpu") -> BayesResult:
     """Fit the expertise/difficulty model to one crowd (several chains, R-hat/ESS checked)."""
-    from simfab.crowd.sampler import sample
 
     post = sample(ratings.unit, priors=priors, config=config, seed=seed, half_width=half_width(ratings, config), quiet=quiet, device=device)
     sc = ratings.scale

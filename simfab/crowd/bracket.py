@@ -19,7 +19,15 @@ import dataclasses
 import numpy as np
 
 from simfab.crowd.config import TOL
+from simfab.crowd.plots import _plt
+from simfab.crowd.truth import scale_to_survey
 from simfab.errors import InputError
+from simfab.fem import elastic as nh
+from simfab.fem.materials import material_by_name
+from simfab.fem.meshing import triangulate_polygon
+from simfab.fem.model import make_model
+from simfab.io.atomic import save_figure
+from simfab.solve.newton import minimize
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -102,11 +110,6 @@ class BracketResult:
 
 def tip_deflection(outline, holes=(), *, setup: BracketSetup = BracketSetup(), name: str = "design") -> BracketResult:
     """Mesh, clamp at x = 0, load at (L, load_y), solve statics; return the tip deflection."""
-    from simfab.fem import neohookean as nh
-    from simfab.fem.materials import material_by_name
-    from simfab.fem.meshing import triangulate_polygon
-    from simfab.fem.model import make_model
-    from simfab.solve.newton import minimize
 
     P, T = triangulate_polygon(outline, holes=holes, max_area=setup.max_area)
     mat = material_by_name(setup.material)
@@ -152,7 +155,6 @@ def strength_scores(results, *, lo: float = 1.0, hi: float = 5.0) -> np.ndarray:
     """Survey scores: linear in log tip deflection (compliances of candidate designs span
     orders of magnitude; linear scaling would crowd all but the weakest at the top),
     ``hi`` = smallest deflection (strongest), ``lo`` = largest."""
-    from simfab.crowd.truth import scale_to_survey
 
     return scale_to_survey(np.log([r.deflection for r in results]), lo=lo, hi=hi, higher_is_more=False)
 
@@ -162,8 +164,6 @@ def plot_brackets(results, scores, path) -> str:
     colour scale (so the designs compare), deformation exaggerated by one common factor."""
     from matplotlib import cm, colors
 
-    from simfab.crowd.plots import _plt
-    from simfab.io.atomic import save_figure
 
     plt = _plt()
     n = len(results)

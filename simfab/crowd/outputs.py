@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import os
 
+from simfab.crowd.bracket import plot_brackets, strength_scores
+from simfab.crowd.plots import plot_expert_network, plot_method_errors, plot_study
+from simfab.io.atomic import write_csv, write_json
+
 
 def aggregate_outputs(ratings, truth, result: dict, out: str, *, title: str = "crowd") -> dict:
     """Write the aggregate table, rater table, summary JSON and (with truth) figures."""
-    from simfab.crowd.plots import plot_expert_network, plot_method_errors
-    from simfab.io.atomic import write_csv, write_json
 
     os.makedirs(out, exist_ok=True)
     methods = result["methods"]
@@ -43,8 +45,6 @@ def aggregate_outputs(ratings, truth, result: dict, out: str, *, title: str = "c
 
 
 def study_outputs(result, out: str, *, title: str) -> dict:
-    from simfab.crowd.plots import plot_study
-    from simfab.io.atomic import write_csv, write_json
 
     rows = result.rows()
     outputs = {
@@ -57,7 +57,6 @@ def study_outputs(result, out: str, *, title: str) -> dict:
 
 
 def truth_outputs(rows, out: str, *, scale, notes=()) -> dict:
-    from simfab.io.atomic import write_csv, write_json
 
     cols = ["orientation", "rx_deg", "ry_deg", "rz_deg", "support_volume_m3", "overhang_area_m2", "raycast_volume_m3", "raycast_rel_diff", "support_score", "finish_score"]
     table = [[r["orientation"], *r["euler_deg"], r["support_volume"], r["overhang_area"], r.get("raycast_volume", ""), r.get("raycast_rel_diff", ""), r["support_score"], r["finish_score"]] for r in rows]
@@ -75,8 +74,6 @@ def bracket_outputs(results, setup, out: str) -> dict:
     """Tables, truth CSV, picture and JSON of a bracket survey."""
     import dataclasses
 
-    from simfab.crowd.bracket import plot_brackets, strength_scores
-    from simfab.io.atomic import write_csv, write_json
 
     scores = strength_scores(results)
     rows = [[r.name, r.deflection, r.area, r.n_triangles, r.newton_iterations, float(s)] for r, s in zip(results, scores)]

@@ -38,8 +38,10 @@ import time
 import numpy as np
 
 from simfab.crowd import model as M
+from simfab.crowd._kernels import WarpKernel
 from simfab.crowd.config import Priors, SamplerConfig
 from simfab.crowd.diagnostics import diagnose
+from simfab.progress import progress
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -159,7 +161,6 @@ class _NumpyKernel:
         """n sweeps; adapt steps every cfg.adapt_every sweeps if ``adapt``; return the
         recorded draws {name: (n, B, C, K)}. ``active`` is accepted for interface parity:
         the numpy reference advances every crowd (the caller ignores finished ones)."""
-        from simfab.progress import progress
 
         s = self.state
         buf = {k: np.empty((n,) + getattr(s, k).shape) for k in record}
@@ -274,7 +275,6 @@ def sample(
     rng = np.random.default_rng(seed)
     init = _initial_state(B, config.chains, R, Q, priors, rng)
     if backend == "warp":
-        from simfab.crowd._kernels import WarpKernel
 
         kern = WarpKernel(y, m, half_width, priors, config, rng, init, device=device)
     elif backend == "numpy":

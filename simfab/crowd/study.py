@@ -21,9 +21,12 @@ import time
 import numpy as np
 
 from simfab.crowd import metrics
+from simfab.crowd.analysis import half_width
 from simfab.crowd.config import STUDY_SAMPLER, Priors, SamplerConfig
 from simfab.crowd.data import Ratings
+from simfab.crowd.sampler import sample
 from simfab.errors import ConvergenceError, InputError
+from simfab.sweep.tasks import run_tasks
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -93,8 +96,6 @@ def micro_crowd_study(
     from one generator seeded with ``seed``, so the result does not depend on where or in
     which order the sizes run.
     """
-    from simfab.crowd.analysis import half_width
-    from simfab.sweep.tasks import run_tasks
 
     t0 = time.perf_counter()
     N = len(ratings.workers)
@@ -137,7 +138,6 @@ def study_size(*, unit, truth_unit, individual, members, config: SamplerConfig, 
     (unit-scale RMS), u the fraction of fits with R-hat above the target and rm their median
     worst R-hat.
     """
-    from simfab.crowd.sampler import sample
 
     post = sample(unit[members], config=config, priors=priors, seed=seed, half_width=half_width, keep_latent=False, device=device)
     est = post.mean("x")  # (S, Q) unit scale

@@ -20,9 +20,20 @@ from pathlib import Path
 import numpy as np
 
 from simfab._bundled import scenes_dir
+from simfab.crowd import synth
+from simfab.crowd.analysis import aggregate_all
 from simfab.crowd.config import CrowdMix
+from simfab.crowd.data import Scale, load_ratings, load_truth
+from simfab.crowd.outputs import aggregate_outputs, study_outputs, truth_outputs
+from simfab.crowd.study import micro_crowd_study
+from simfab.crowd.truth import orientation_table, parse_orientations
 from simfab.errors import InputError
+from simfab.io.atomic import write_csv
+from simfab.io.mesh import load_mesh, save_mesh
+from simfab.io.mjcf import MJCFBuilder
 from simfab.io.outpaths import safe_name
+from simfab.io.render import render_mjcf
+from simfab.progress import log
 
 SURVEY_DIR = scenes_dir("crowd")
 SURVEY_TOML = SURVEY_DIR / "printing_survey.toml"
@@ -124,8 +135,6 @@ def build_part_mm():
 
 def survey_truth(spec: SurveySpec, *, raycast: bool = True) -> list[dict]:
     """Orientation table of the survey's mesh (see :func:`simfab.crowd.truth.orientation_table`)."""
-    from simfab.crowd.truth import orientation_table, parse_orientations
-    from simfab.io.mesh import load_mesh
 
     mesh = load_mesh(spec.root / spec.mesh, units=spec.units, require_watertight=True)
     return orientation_table(mesh.vertices, mesh.faces, parse_orientations(spec.orientations), raycast=raycast, scale=spec.scale)
@@ -135,8 +144,6 @@ def _picture(spec: SurveySpec, vertices_m, faces, path):
     """MJCF with the part once per orientation, side by side on the build plate."""
     from scipy.spatial.transform import Rotation
 
-    from simfab.crowd.truth import parse_orientations
-    from simfab.io.mjcf import MJCFBuilder
 
     b = MJCFBuilder("printing_survey")
     b.mesh_asset("part", vertices_m, faces)
@@ -161,10 +168,6 @@ def _picture(spec: SurveySpec, vertices_m, faces, path):
 
 def make_bundle(spec: SurveySpec | None = None) -> dict:
     """(Re)generate mesh, picture, truth and synthetic responses of a survey from its TOML."""
-    from simfab.crowd import synth
-    from simfab.crowd.data import Scale
-    from simfab.io.atomic import write_csv
-    from simfab.io.mesh import save_mesh
 
     spec = spec or load_survey()
     import trimesh
@@ -189,11 +192,6 @@ def make_bundle(spec: SurveySpec | None = None) -> dict:
 def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: SurveySpec | None = None, subcrowds: int | None = None) -> dict:
     """The demo: recompute the truth from the mesh, aggregate each crowd, expert network,
     a micro-crowd study of the practitioners, a picture of the six orientations."""
-    from simfab.crowd.outputs import aggregate_outputs, study_outputs, truth_outputs
-    from simfab.crowd.analysis import aggregate_all
-    from simfab.crowd.data import Scale, load_ratings, load_truth
-    from simfab.crowd.study import micro_crowd_study
-    from simfab.progress import log
 
     spec = spec or load_survey()
     scale = Scale(lo=spec.scale[0], hi=spec.scale[1])
@@ -225,7 +223,6 @@ def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: Sur
             crowds[c.name]["study"] = study_outputs(st, os.path.join(out, safe_name(c.name)), title=f"{spec.title}, {c.name}")
     summary["crowds"] = crowds
     try:
-        from simfab.io.render import render_mjcf
 
         summary["picture_png"] = str(render_mjcf(spec.root / spec.picture, os.path.join(out, "orientations.png"), width=960, height=360))
     except Exception as e:  # a picture is a nicety; never fail the demo over OpenGL

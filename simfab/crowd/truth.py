@@ -26,6 +26,7 @@ import numpy as np
 
 from simfab.crowd.config import TOL, Tolerances
 from simfab.errors import InputError
+from simfab.io.mesh import read_mesh, unite_overlaps, units_warning
 
 #: Six canonical orientations: each of the part's six axis directions facing down.
 SIX = {
@@ -189,7 +190,6 @@ def load_part(path, *, units: str = "m"):
     """
     import warnings
 
-    from simfab.io.mesh import read_mesh, unite_overlaps, units_warning
 
     with warnings.catch_warnings():  # the repairs are reported as notes
         warnings.simplefilter("ignore")

@@ -14,6 +14,13 @@ def require_positive(cfg, prefix: str) -> None:
     first field of dataclass ``cfg`` that is not a finite positive number."""
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
+        if isinstance(v, str):  # a choice: checked by its owner
+            continue
+        if isinstance(v, (tuple, list)):  # a list field: every entry (an empty list is checked by its owner)
+            for k, x in enumerate(v):
+                if isinstance(x, bool) or not isinstance(x, (int, float)) or not (np.isfinite(x) and x > 0):
+                    raise InputError(f"entry {k} must be a positive number (got {x!r})", where=f"{prefix}{f.name}")
+            continue
         if not (np.isfinite(v) and v > 0):
             raise InputError(f"must be a positive number (got {v})", where=f"{prefix}{f.name}")
         if f.name == "poisson" and not v < 0.5:

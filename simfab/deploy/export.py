@@ -95,7 +95,7 @@ def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsule
                                 mass=max(ins.mass, 1e-6))}
         sim = mjcf_sim.build(d.cell.model, d.states[0], d.states[-1], density=1200.0, cfg=mjcf_sim.SimConfig(),
                              name=name, body_geoms=geoms)
-        return sim.builder.save(path)
+        return sim.save(path)
     model = d.cell.model
     st = d.states[-1]
     b = MJCFBuilder(name, timestep=FLEX_TIMESTEP if rods == "flexcomp" else None,

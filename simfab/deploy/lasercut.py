@@ -2,10 +2,11 @@
 
 Geometry: every beam half and spring arc is a centre-line offset by half its width
 (flat caps at the gaps, round joins), united into closed outlines (shapely); each outline
-ring (outer boundary and holes) is one closed polyline on the **cut** layer. The inserts (one
-common size: a square plate of half-side r + beam_width, so the clamped beam ends rest on
-it) are laid out in rows below the pattern as separate parts. The **engrave** layer carries the
-insert numbers (at each gap of the pattern and on each insert part) and a 50 mm scale bar.
+ring (outer boundary and holes) is one closed polyline on the **cut** layer. The inserts (each a
+square plate of half-side r_i + beam_width, so the clamped beam ends rest on it) are laid out
+in rows below the pattern as separate parts, by size class. The **engrave** layer carries the
+insert numbers with their size class (``12 B``; the number alone with a one-size catalogue) at
+each gap of the pattern and on each insert part, and a 50 mm scale bar.
 
 Files: SVG with ``width``/``height`` in mm and the viewBox ``0 0 W H`` in mm (y down: x_svg =
 x - x0, y_svg = y1 - y with (x0, y1) the sheet's top-left corner, :func:`svg_origin`), layers as
@@ -60,19 +61,22 @@ def layout(pat, *, arc_points: int = 12) -> CutLayout:
             rings.append(np.asarray(ring.coords)[:-1])
     labels = []
     ids = np.flatnonzero(pat.interior)
+    name = lambda v: f"{pat.insert_ids[v]} {pat.class_label(v)}".strip()  # noqa: E731  number + size class
     for v in ids:
-        labels.append((str(pat.insert_ids[v]), tuple(pat.P[v] * MM), 1.2))
+        labels.append((name(v), tuple(pat.P[v] * MM), 1.2))
     minx, miny, maxx, maxy = shape.bounds
-    # insert parts: rows below the pattern
-    s = (pat.config.insert_half_size + pat.config.beam_width) * MM
+    # insert parts: rows below the pattern, by size class then number, on the largest size's pitch
+    half = (pat.insert_size + pat.config.beam_width) * MM  # plate half-side per vertex
+    s = float(half[ids].max()) if len(ids) else 0.0
     pitch = 2 * s + 3.0
     per_row = max(1, int((maxx - minx) // pitch))
     y0 = miny - 10.0 - s
-    for k, v in enumerate(ids[np.argsort(pat.insert_ids[ids])]):
+    for k, v in enumerate(ids[np.lexsort((pat.insert_ids[ids], pat.insert_class[ids]))]):
         cx = minx + s + (k % per_row) * pitch
         cy = y0 - (k // per_row) * pitch
-        rings.append(np.array([[cx - s, cy - s], [cx + s, cy - s], [cx + s, cy + s], [cx - s, cy + s]]))
-        labels.append((str(pat.insert_ids[v]), (cx, cy), 1.2))
+        a = half[v]
+        rings.append(np.array([[cx - a, cy - a], [cx + a, cy - a], [cx + a, cy + a], [cx - a, cy + a]]))
+        labels.append((name(v), (cx, cy), 1.2))
     nrows = (len(ids) + per_row - 1) // per_row if len(ids) else 0
     ybar = y0 - max(nrows - 1, 0) * pitch - s - 8.0
     bar = [((minx, ybar), (minx + SCALE_BAR_MM, ybar))]

@@ -2,8 +2,9 @@
 
 Model (built from a :class:`simfab.rods.model.RodModel`, its flat state and a deployed state):
 
-- every simfab body (insert, junction) is a free MuJoCo body (``freejoint``) at its flat pose;
-  a *driven* (held) body is attached to the world instead;
+- every simfab body (insert, junction) is a free MuJoCo body (pose: see below) - three slide
+  joints along the world axes and a ball joint, so that translations and rotations get their own
+  damping (``SimConfig.body_damping``); a *driven* (held) body is attached to the world instead;
 - every rod is a chain of rigid links, one per rod edge (box geom: edge length x thickness x
   width, no contacts). Link frame: origin at the edge's first node, axes (t, m1, m2) = (tangent,
   sheet normal, in-plane width direction). The first link is rigidly part of the body the rod
@@ -32,6 +33,10 @@ Measured (tests/deploy small saddle, 2 s from the key, default settings, mass_sc
 dt = 2 ms keeps the elastic energy to -3 % and the shape to 2 % of the out-of-plane height
 (kinetic energy 5e-6 J at the end); 5 ms stays finite but releases 36 % of the energy, 10-20 ms
 stay finite and release ~90 % (the motion is then not a relaxation). Hence ``timestep = 2e-3``.
+The bodies' damping (``body_damping``) lets the relaxation check come to rest in 0.1-0.25 s of
+simulated time on the bundled surfaces instead of oscillating for seconds; with it, dt = 4 ms
+still lets the welds slip (PGS at its iteration cap: the saddle's relaxed state ends 0.33 mm from
+simfab's instead of 0.01 mm), so dt stays 2 ms.
 """
 
 from __future__ import annotations
@@ -60,7 +65,11 @@ class SimConfig:
     then released 95 % of the elastic energy into motion - while equilibria do not depend on it);
     solver, iterations: MuJoCo constraint solver and its iterations per step (PGS is 2x faster per
     step than Newton on these weld-heavy scenes; 20 iterations would be 4x faster again but let
-    the welds slip: the unit cell then drifts by 26 mm in 2 s instead of 2 mm).
+    the welds slip: the unit cell then drifts by 26 mm in 2 s instead of 2 mm);
+    body_damping [1/s]: mass-proportional damping of the free bodies, c = body_damping x mass on
+    their translations and x rotational inertia on their rotations (absolute velocities: the
+    scene floats freely, so this damps the network's slow, nearly rigid modes, which the hinges'
+    stiffness-proportional damping leaves oscillating; equilibria do not depend on it).
     """
 
     timestep: float = 2e-3
@@ -75,6 +84,7 @@ class SimConfig:
     solver: str = "PGS"
     mass_scale: float = 100.0
     iterations: int = 100
+    body_damping: float = 200.0
 
     def __post_init__(self):
         from simfab.errors import InputError
@@ -94,22 +104,54 @@ def _frames(state) -> np.ndarray:
 
 
 def _quat(R) -> np.ndarray:
-    from simfab.rods import frames as fr
+    """(w, x, y, z) unit quaternions (w >= 0) of rotation matrices (3,3) or (k,3,3)."""
+    from scipy.spatial.transform import Rotation
 
-    return fr.matrix_to_quat(R)
+    q = np.roll(Rotation.from_matrix(R).as_quat(), 1, axis=-1)
+    return q * np.where(q[..., :1] < 0, -1.0, 1.0)
 
 
 @dataclass
 class SimScene:
-    """What :func:`build` returns: the MJCF builder (``save`` it; keys ``deployed`` and ``flat``
-    are in), the deployed key's values per joint name and its full qpos, the body names, and the
-    compiled ``mujoco.MjModel`` (without the keys; its ``qpos0`` is the deployed key)."""
+    """What :func:`build` returns: the MJCF text (keys ``deployed`` and ``flat`` in it; ``save``
+    writes it), the flat key's values per joint name, the body names, the deployed key's full
+    qpos and the compiled ``mujoco.MjModel`` (its ``qpos0`` is the deployed key)."""
 
-    builder: object
+    xml: str
     key_values: dict
     body_names: list
     key_qpos: np.ndarray | None = None
     model: object = None
+
+    def save(self, path):
+        """Write the MJCF (compiled by MuJoCo in :func:`build` already) atomically; returns the path."""
+        from pathlib import Path
+
+        from simfab.io.atomic import atomic_path
+
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            tmp.write_text(self.xml, encoding="utf-8")
+        return path
+
+
+_QPOS_SIZE = {"free": 7, "ball": 4, "slide": 1, "hinge": 1}
+
+
+def _key_qpos(root, values: dict) -> np.ndarray:
+    """qpos of a key from per-joint values (joint name -> (size,) array; missing joints: their
+    qpos0, 0 or the identity quaternion), in MuJoCo's order: joints in depth-first body order."""
+    out = []
+    for el in root.iter():
+        if el.tag in ("joint", "freejoint"):
+            kind = "free" if el.tag == "freejoint" else el.get("type", "hinge")
+            v = values.get(el.get("name"))
+            if v is None:
+                v = np.zeros(_QPOS_SIZE[kind])
+                if kind in ("free", "ball"):
+                    v[-4] = 1.0
+            out.append(np.asarray(v, dtype=np.float64))
+    return np.concatenate(out) if out else np.zeros(0)
 
 
 def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = "deployed",
@@ -118,7 +160,7 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
     box=half sizes (3,), mass, rgba) for inserts; other bodies get a small sphere."""
     from scipy.spatial.transform import Rotation
 
-    from simfab.io.mjcf import MJCFBuilder
+    from simfab.io.mjcf import MJCFBuilder, _mujoco
 
     dt = cfg.timestep
     b = MJCFBuilder(name, timestep=dt, gravity=[0, 0, 0])
@@ -133,13 +175,21 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
     kmax = float(np.max(model.bend_stiff / model.vor_len[:, None])) if model.n_hinges else 0.0
     I_body = cfg.body_inertia_factor * kmax * (dt / cfg.omega_dt) ** 2
     mb = {}
-    key = {}  # joint name -> qpos values of the deployed key
+    key = {}  # joint name -> qpos values of the flat key
+    qb_d, qb_rel = _quat(deployed.body_rot), _quat(np.transpose(deployed.body_rot, (0, 2, 1)) @ flat.body_rot)
     for i, bn in enumerate(model.body_names):
-        el = b.body(bn, pos=deployed.body_pos[i], quat=_quat(deployed.body_rot[i]))
-        if not model.body_driven[i]:
-            b.add(el, "freejoint", name=f"{bn}_free")
+        el = b.body(bn, pos=deployed.body_pos[i], quat=qb_d[i])
         g = body_geoms.get(bn)
         mass = (g.get("mass", cfg.insert_mass) if g else cfg.body_mass) * cfg.mass_scale
+        if not model.body_driven[i]:
+            # free body as three slides along the world axes (axis in the body frame: R_d^T e_k) and a
+            # ball, so that translation and rotation get their own damping (see SimConfig.body_damping)
+            for k, ax in enumerate("xyz"):
+                b.add(el, "joint", name=f"{bn}_{ax}", type="slide", axis=deployed.body_rot[i][k],
+                      damping=cfg.body_damping * mass)
+                key[f"{bn}_{ax}"] = np.array([flat.body_pos[i][k] - deployed.body_pos[i][k]])
+            b.add(el, "joint", name=f"{bn}_rot", type="ball", damping=cfg.body_damping * I_body)
+            key[f"{bn}_rot"] = qb_rel[i]
         b.add(el, "inertial", pos=[0, 0, 0], mass=mass, diaginertia=[I_body] * 3)
         if g and "mesh" in g:
             V, F = g["mesh"]
@@ -153,9 +203,15 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
             rad = 0.5 * float(np.max([r.section.draw_width() for r in model.rods]))
             b.geom(el, type="sphere", size=[rad], mass=0, contype=0, conaffinity=0, rgba=[0.3, 0.3, 0.35, 1])
         mb[i] = el
-    for i, bn in enumerate(model.body_names):
-        if not model.body_driven[i]:
-            key[f"{bn}_free"] = np.concatenate([flat.body_pos[i], _quat(flat.body_rot[i])])
+    # per hinge (all rods at once): the deployed relation Q of link k to link k-1 (qpos0) and the
+    # flat one, J = Q^T (Rf_a^T Rf_b), whose intrinsic x-y-z angles are the springs' rest angles
+    ha, hb = model.hinge_edges[:, 0], model.hinge_edges[:, 1]
+    RdT = np.transpose(Rd, (0, 2, 1))
+    Qh = RdT[ha] @ Rd[hb]
+    Jh = np.transpose(Qh, (0, 2, 1)) @ (np.transpose(Rf, (0, 2, 1))[ha] @ Rf[hb])
+    ang_h = Rotation.from_matrix(Jh).as_euler("XYZ") if len(Jh) else np.zeros((0, 3))
+    quat_h = _quat(Qh) if len(Qh) else np.zeros((0, 4))
+    hinge_of = {(int(a), int(c)): h for h, (a, c) in enumerate(model.hinge_edges)}
     for r in model.rods:
         e0, e1 = int(r.edges[0]), int(r.edges[-1])
         sb, eb = int(model.edge_body[e0]), int(model.edge_body[e1])
@@ -170,18 +226,13 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
         rel_R = Rb.T @ Rd[e0]
         parent = b.add(mb[sb], "body", name=f"{r.name}_0", pos=rel_p, quat=_quat(rel_R))
         _link_geom(b, parent, L[0], w, t, density * cfg.mass_scale)
-        # hinge stiffnesses per interior node (hinges of this rod, in order)
-        hinges = np.flatnonzero(np.isin(model.hinge_edges[:, 0], r.edges))
         for k in range(1, len(r.edges)):
-            ea, eb_ = int(r.edges[k - 1]), int(r.edges[k])
-            h = hinges[k - 1]
+            h = hinge_of[int(r.edges[k - 1]), int(r.edges[k])]
             B1, B2 = model.bend_stiff[h]
             GJ = model.twist_stiff[h]
             lv = model.vor_len[h]
-            Q = Rd[ea].T @ Rd[eb_]  # deployed relation of link k to link k-1 (qpos0)
-            child = b.add(parent, "body", name=f"{r.name}_{k}", pos=[L[k - 1], 0.0, 0.0], quat=_quat(Q))
-            J = Q.T @ (Rf[ea].T @ Rf[eb_])  # joint rotation of the flat state = the springs' rest
-            ang = Rotation.from_matrix(J).as_euler("XYZ")
+            child = b.add(parent, "body", name=f"{r.name}_{k}", pos=[L[k - 1], 0.0, 0.0], quat=quat_h[h])
+            ang = ang_h[h]
             for ax, axis, kk, a in (("x", "1 0 0", GJ / lv, ang[0]), ("y", "0 1 0", B2 / lv, ang[1]),
                                     ("z", "0 0 1", B1 / lv, ang[2])):
                 arm = kk * (dt / cfg.omega_dt) ** 2
@@ -200,20 +251,12 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
         b.equality("weld", body1=model.body_names[eb], body2=f"{r.name}_{len(r.edges) - 1}",
                    relpose=np.concatenate([relpos, relq]), solref=[2 * dt, 1.0],
                    solimp=[cfg.impedance, cfg.impedance, 0.001, 0.5, 2])
-    scene = SimScene(builder=b, key_values=key, body_names=list(model.body_names))
-    m = b.compile()
-    qpos = np.array(m.qpos0)
-    import mujoco
-
-    for jn, v in key.items():
-        j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, jn)
-        a = m.jnt_qposadr[j]
-        qpos[a:a + len(v)] = v
-    b.key("deployed", qpos=np.array(m.qpos0))
-    b.key("flat", qpos=qpos)
-    scene.key_qpos = np.array(m.qpos0)
-    scene.model = m
-    return scene
+    qpos_deployed = _key_qpos(b.worldbody, {})
+    b.key("deployed", qpos=qpos_deployed)
+    b.key("flat", qpos=_key_qpos(b.worldbody, key))
+    xml = b.to_xml()
+    m = _mujoco().MjModel.from_xml_string(xml)
+    return SimScene(xml=xml, key_values=key, body_names=list(model.body_names), key_qpos=qpos_deployed, model=m)
 
 
 def _link_geom(b, body, length, w, t, density):

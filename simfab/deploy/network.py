@@ -19,10 +19,15 @@ points on the inserts move from the gap (g_i) to the insert's edge (r) in ``incr
 steps, each solved to equilibrium from the last.
 
 Branch selection (the flat pattern can buckle into many shapes; the target says which one is
-meant): (1) predictor: each increment starts from the last equilibrium moved by 1/increments of
-the displacement field D that takes every node and body from its flat position to the target
-point its flat position maps to (the target rigidly aligned to the flat pattern, D = 0 at the
-fully supported node); it is only the Newton start, the equilibrium is the rods'; (2) while drawing in,
+meant): (1) predictor: each increment starts from the tangent continuation of the last
+equilibrium, dq = -H^{-1} (dg/dlambda) / increments (implicit function theorem,
+:meth:`simfab.rods.statics.StaticSolver.offset_sensitivity`; the nearly inextensible beams make a
+plain restart from the last state cost 2x the Newton iterations), and the first increment
+also moves by 1/increments of the out-of-plane part of the displacement field D that takes
+every node and body from its flat position to the target point its flat position maps to (the
+target rigidly aligned to the flat pattern, D = 0 at the fully supported node; its in-plane
+part is the metric change that the tangent already carries). It is only the Newton start, the
+equilibrium is the rods'; (2) while drawing in,
 every insert carries a small out-of-plane load ``f_i = perturbation * B1 / h^2 * s_i`` with
 ``s_i`` in [-1, 1] the target's height at the insert above its best-fit plane, minus its
 least-squares plane over the inserts' flat positions (no resultant force or moment), normalised. The
@@ -75,8 +80,8 @@ class DeployConfig:
 class Network:
     """The rod network of a pattern: model/state (flat), body indices of the pattern vertices
     (n,) (insert or boundary junction), edge junction bodies (e,), the insert-clamped nodes and
-    their unit direction (k,), (k,3) and grow distance (k,) [m] = r - g of their vertex, the node
-    supported in x, y, z."""
+    their unit direction (k,), (k,3), grow distance (k,) [m] = r - g of their vertex and that
+    vertex (k,), the node supported in x, y, z."""
 
     model: object
     state: object
@@ -85,6 +90,7 @@ class Network:
     pull_nodes: np.ndarray
     pull_dir: np.ndarray
     pull_grow: np.ndarray
+    pull_vertex: np.ndarray  # (k,) the pattern vertex (insert) of each insert-clamped node
     held_node: int  # the fully supported node (predictor origin)
 
 
@@ -124,7 +130,7 @@ def build_network(pat, cfg: DeployConfig) -> Network:
         nb.clamp(name, "end", vname[v])
         if pat.interior[v]:
             d = s3 - P3[v]
-            pulls.append((name, d / np.linalg.norm(d), pc.insert_half_size - pat.gap[v]))
+            pulls.append((name, d / np.linalg.norm(d), pat.insert_size[v] - pat.gap[v], v))
     springs = []
     for i, (q, e0, e1, pts) in enumerate(pat.spring_curves(ss)):
         name = f"spring{q}_{i % 4}"
@@ -145,18 +151,20 @@ def build_network(pat, cfg: DeployConfig) -> Network:
         picks.append(k)
         nb.fix(springs[k][0], nodes=[nspring // 2], comps=comps)
     model, state = nb.build()
-    nodes, dirs, grow = [], [], []
-    for name, d, g in pulls:
+    nodes, dirs, grow, pv = [], [], [], []
+    for name, d, g, v in pulls:
         r = model.rod(name)
         for n in r.nodes[-2:]:  # the clamped end edge's two nodes
             nodes.append(int(n))
             dirs.append(d)
             grow.append(g)
+            pv.append(v)
     vb = np.array([model.body_index(n) for n in vname])
     eb = np.array([model.body_index(f"J{e}") for e in range(len(pat.edges))])
     held = int(model.rod(springs[picks[0]][0]).nodes[nspring // 2])
     return Network(model=model, state=state, vertex_body=vb, edge_body=eb, pull_nodes=np.array(nodes),
-                   pull_dir=np.array(dirs), pull_grow=np.array(grow), held_node=held)
+                   pull_dir=np.array(dirs), pull_grow=np.array(grow), pull_vertex=np.array(pv, dtype=np.int64),
+                   held_node=held)
 
 
 @dataclass
@@ -241,13 +249,16 @@ def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device:
     res = None
     for i in progress(range(1, n + 1), total=n, desc="deploy pattern", quiet=quiet):
         lam = i / n
+        # tangent continuation from the last equilibrium (implicit function theorem; the flat state
+        # is the unloaded equilibrium of increment 0)
+        dq = solver.offset_sensitivity(state, direction / n, body_forces=body_forces if i > 1 else None)
         solver.set_attachment_offsets(offset0 + lam * direction)
-        x, pos = state.x, state.body_pos
-        if predictor is not None:
+        st = solver.red.apply(state, dq)
+        if i == 1 and predictor is not None:  # the out-of-plane branch towards the target
             free = ~model.node_fixed.any(axis=1)
-            x = x + (free[:, None] * predictor[0]) / n
-            pos = pos + (~model.body_driven[:, None] * predictor[1]) / n
-        st = synchronize(solver.model, state, x, state.theta, pos, state.body_rot)
+            x = st.x + (free[:, None] * predictor[0] * [0, 0, 1]) / n
+            pos = st.body_pos + (~model.body_driven[:, None] * predictor[1] * [0, 0, 1]) / n
+            st = synchronize(solver.model, st, x, st.theta, pos, st.body_rot)
         try:
             res = solver.solve(st, body_forces=body_forces)
             its = res.iterations

@@ -13,9 +13,9 @@ Layout (all in the flat domain, metres):
   (:mod:`simfab.deploy.springs`); a quad whose neighbouring edges are nearly collinear (an
   interior angle > ``degenerate_angle_deg``, boundary quads only) gets no spring;
 - at every **interior** quad vertex (four quads around it) the four beams stop short of a
-  gap of half-size ``g_i`` that receives a rigid insert of the common half-size ``r``; the
-  insert clamps the beam ends at distance ``r`` from the vertex. Boundary vertices join their
-  beams rigidly (no insert).
+  gap of half-size ``g_i`` that receives a rigid insert of half-size ``r_i`` from the insert
+  catalogue (``insert_half_sizes``; one size: ``insert_half_size``); the insert clamps the beam
+  ends at distance ``r_i`` from the vertex. Boundary vertices join their beams rigidly (no insert).
 
 Gap rule (derivation). The flattening scales lengths by ``e^u``: a curve of length ``L`` on the
 target has length ``e^u L`` in the flat domain (u varies slowly over a cell). Deployment must
@@ -37,6 +37,14 @@ the target among its isometric embeddings (hence the out-of-plane branch selecti
 Achievable gaps: ``min_gap <= g <= h_i/2 - min_beam`` (a gap must exist to be cut, and each
 half beam needs ``min_beam`` of length to carry its spring junction). Vertices outside are
 clamped to the range and reported as unreachable (with the gap they would need).
+
+Insert catalogue. The growth a vertex needs, ``d_i = r_i - g_i = (h_i/2)(e^{-u_i} - 1)``, does
+not depend on the insert; the insert size only shifts the gap. So with a short list of sizes
+(what a maker can produce) each insert takes a size whose gap ``g = r - d_i`` is achievable -
+of those, the one whose gap is nearest the middle of the achievable range (most margin for cut
+tolerances either way); where no size reaches, the one with the smallest shortfall, and the
+vertex is reported unreachable. The sizes are classes A, B, ... in increasing size (engraved
+next to the insert numbers; bill of materials: :meth:`Pattern.bill_of_materials`).
 """
 
 from __future__ import annotations
@@ -55,10 +63,12 @@ class PatternConfig:
 
     spacing: grid spacing h; beam_width (in plane) and beam_thickness (sheet); insert_half_size
     r: distance from an insert's centre to where it clamps the beams (one size for all
-    inserts); spring_bulge [-]: smallest Bezier handle pull towards the quad centre; spring_slack
-    [-]: arc length margin over the deployed chord (see :mod:`simfab.deploy.springs`);
-    spring_width: in-plane width of the spring arcs (narrower than the beams: the springs let the
-    cells grow in plane); min_gap, min_beam:
+    inserts); insert_half_sizes: the insert catalogue, a list of such sizes (when given it
+    replaces insert_half_size; each insert gets one, see module doc); layout: "grid" (the
+    clipped square grid) or "conforming" (:func:`conforming_quads`); spring_bulge [-]: smallest
+    Bezier handle pull towards the quad centre; spring_slack [-]: arc length margin over the
+    deployed chord (see :mod:`simfab.deploy.springs`); spring_width: in-plane width of the spring
+    arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:
     achievable-gap limits (see module doc); degenerate_angle_deg [deg]: interior angle above
     which a boundary quad gets no spring.
     """
@@ -67,18 +77,35 @@ class PatternConfig:
     beam_width: float = 0.003
     beam_thickness: float = 0.001
     insert_half_size: float = 0.005
+    insert_half_sizes: tuple = ()
     spring_bulge: float = 0.5
     spring_slack: float = 0.1
     spring_width: float = 0.0015
     min_gap: float = 0.0015
     min_beam: float = 0.004
     degenerate_angle_deg: float = 160.0
+    layout: str = "grid"
 
     def __post_init__(self):
+        if self.layout not in ("conforming", "grid"):
+            raise InputError(f"must be 'conforming' or 'grid' (got {self.layout!r})", where="pattern.layout")
+        if not isinstance(self.insert_half_sizes, (tuple, list)):
+            raise InputError(f"must be a list of sizes [m] (got {self.insert_half_sizes!r})",
+                             where="pattern.insert_half_sizes")
+        object.__setattr__(self, "insert_half_sizes", tuple(self.insert_half_sizes))
         require_positive(self, "pattern.")
-        if not self.insert_half_size < self.spacing / 2 - self.min_beam:
-            raise InputError(f"insert_half_size {self.insert_half_size} m leaves no beam in a cell of spacing "
-                             f"{self.spacing} m (needs < spacing/2 - min_beam)", where="pattern.insert_half_size")
+        field = "insert_half_sizes" if self.insert_half_sizes else "insert_half_size"
+        if len(set(self.sizes)) != len(self.sizes):
+            raise InputError(f"sizes must differ (got {list(self.insert_half_sizes)})", where=f"pattern.{field}")
+        if not max(self.sizes) + self.beam_width < self.spacing / 2:
+            raise InputError(f"insert size {max(self.sizes)} m: two neighbouring insert plates (half-side r + "
+                             f"beam_width) would overlap at spacing {self.spacing} m (needs r < spacing/2 - "
+                             f"beam_width)", where=f"pattern.{field}")
+
+    @property
+    def sizes(self) -> tuple:
+        """The insert catalogue [m], increasing (``insert_half_sizes``, or the one ``insert_half_size``)."""
+        return tuple(sorted(self.insert_half_sizes)) if self.insert_half_sizes else (self.insert_half_size,)
 
 
 @dataclass(frozen=True)
@@ -89,9 +116,11 @@ class Pattern:
     interior (n,) bool (insert vertices); u (n,) [-]: flattening log scale factor at the
     vertices; gap (n,) [m]: gap half-size (0 on boundary vertices); gap_required (n,) [m]
     (before clamping); unreachable (k,) vertex indices; spring (q,) bool; insert_ids (n,) int
-    (label number, -1 on the boundary); bulge (q,) [-]: spring handle pull per quad; growth (q,)
-    [-]: the quad's deployment scale e^{-u}; spring_ratio (q,) [-]: its arcs' smallest
-    length/chord; tight_springs (k,) quads whose arcs cannot get the slack (see
+    (label number, -1 on the boundary); insert_size (n,) [m]: each insert's half-size r_i (0 on
+    the boundary); insert_class (n,) int: its index in ``config.sizes`` (-1 on the boundary);
+    bulge (q,) [-]: spring handle pull per quad; growth (q,4) [-]: the growth of its four spring
+    arcs' chords in deployment (:func:`quad_growth`; about e^{-u} in a regular cell);
+    spring_ratio (q,4) [-]: the arcs' length/chord ratios; tight_springs (k,) quads whose arcs cannot get the slack (see
     :mod:`simfab.deploy.springs`); config.
     """
 
@@ -106,6 +135,8 @@ class Pattern:
     unreachable: np.ndarray
     spring: np.ndarray
     insert_ids: np.ndarray
+    insert_size: np.ndarray
+    insert_class: np.ndarray
     bulge: np.ndarray
     growth: np.ndarray
     spring_ratio: np.ndarray
@@ -115,6 +146,21 @@ class Pattern:
     @property
     def n_inserts(self) -> int:
         return int(np.sum(self.interior))
+
+    def class_label(self, v: int) -> str:
+        """Size-class letter (A = smallest) of the insert at vertex v ('' with a one-size catalogue)."""
+        return CLASS_LETTERS[int(self.insert_class[v])] if len(self.config.sizes) > 1 else ""
+
+    def bill_of_materials(self) -> list[dict]:
+        """Per catalogue size: class letter, half-size r [mm], plate side 2 (r + beam_width) [mm]
+        (the insert part as cut), count and the insert numbers."""
+        out = []
+        for k, r in enumerate(self.config.sizes):
+            vs = np.flatnonzero(self.interior & (self.insert_class == k))
+            out.append(dict(size_class=CLASS_LETTERS[k], half_size_mm=r * 1e3,
+                            plate_side_mm=2e3 * (r + self.config.beam_width), count=int(len(vs)),
+                            inserts=sorted(int(self.insert_ids[v]) for v in vs)))
+        return out
 
     def midpoints(self) -> np.ndarray:
         """(e,2) edge midpoints [m] (junction positions)."""
@@ -150,6 +196,22 @@ class Pattern:
         return out
 
 
+CLASS_LETTERS = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
+
+
+def assign_sizes(d: np.ndarray, gmax: np.ndarray, sizes, min_gap: float) -> np.ndarray:
+    """Catalogue index (k,) per insert (see module doc): d (k,) [m] the growth r - g each needs,
+    gmax (k,) [m] its largest achievable gap, sizes (s,) [m] the catalogue; the achievable gap
+    nearest the middle of [min_gap, gmax], else the smallest shortfall."""
+    r = np.asarray(sizes, dtype=np.float64)[None, :]
+    g = r - np.asarray(d)[:, None]  # (k, s) gap each size would need
+    hi = np.asarray(gmax)[:, None]
+    short = np.maximum(min_gap - g, 0.0) + np.maximum(g - hi, 0.0)
+    off_middle = np.abs(g - 0.5 * (min_gap + hi))
+    least = short <= short.min(axis=1, keepdims=True) + 1e-12  # all achievable ones (shortfall 0), if any
+    return np.argmin(np.where(least, off_middle, np.inf), axis=1)
+
+
 def gap_rule(u: np.ndarray, h: np.ndarray, r: float) -> np.ndarray:
     """Gap half-size g = r - (h/2)(e^{-u} - 1) [m] for log scale factors u (n,) [-] and mean flat
     edge lengths h (n,) [m] (see module doc)."""
@@ -166,38 +228,10 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     if not poly.is_valid:
         raise InputError("the flattened boundary self-intersects; the target needs cuts or cones")
     h = cfg.spacing
-    lo, hi = uv.min(axis=0), uv.max(axis=0)
-    ni = np.arange(np.floor(lo[0] / h) - 1, np.ceil(hi[0] / h) + 2)
-    nj = np.arange(np.floor(lo[1] / h) - 1, np.ceil(hi[1] / h) + 2)
-    I, J = np.meshgrid(ni, nj, indexing="ij")
-    G = np.stack([I * h, J * h], axis=-1)  # (a, b, 2)
-    inside = shapely.contains_xy(poly, G[..., 0], G[..., 1])
-    ring = poly.exterior
-    proj = G.copy()
-    out_idx = np.argwhere(~inside)
-    if len(out_idx):
-        pts = shapely.points(G[~inside])
-        near = shapely.line_interpolate_point(ring, shapely.line_locate_point(ring, pts))
-        proj[~inside] = shapely.get_coordinates(near)
-    quads, corners = [], []
-    A, B = inside.shape
-    for i in range(A - 1):
-        for j in range(B - 1):
-            c = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)]
-            ins = [inside[k] for k in c]
-            nin = sum(ins)
-            if nin == 4 or nin == 3 or (nin == 2 and (ins[0] == ins[1] or ins[1] == ins[2])):
-                Q = np.array([proj[k] for k in c])
-                if _good_quad(Q, h):
-                    quads.append([k[0] * B + k[1] for k in c])
-    if not quads:
-        raise InputError(f"no quad fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
-                         where="pattern.spacing")
-    quads = np.array(quads)
-    quads = _largest_component(quads)
-    used, inv = np.unique(quads, return_inverse=True)
-    quads = inv.reshape(-1, 4)
-    P = proj.reshape(-1, 2)[used]
+    if cfg.layout == "grid":
+        P, quads = _clipped_grid(poly, uv, h)
+    else:
+        P, quads = conforming_quads(poly, h, uv)
     # edges and their quads
     e_all = np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)])
     q_all = np.tile(np.arange(len(quads)), 4)
@@ -210,18 +244,22 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     bnd_v = np.zeros(len(P), dtype=bool)
     bnd_v[edges[edge_quads[:, 1] < 0].ravel()] = True
     valence = np.bincount(edges.ravel(), minlength=len(P))
-    interior = ~bnd_v & (valence == 4)
+    interior = ~bnd_v  # every vertex inside the outline holds an insert (4 beams; 3 or 5 at staircase corners)
     # u at the pattern vertices: linear interpolation on the flat triangulation
     uP = _interpolate(uv, faces, u, P)
     elen = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1)
     hv = np.bincount(edges.ravel(), weights=np.repeat(elen, 2), minlength=len(P)) / np.maximum(valence, 1)
-    req = np.where(interior, gap_rule(uP, hv, cfg.insert_half_size), 0.0)
     gmax = 0.5 * hv - cfg.min_beam
+    need = gap_rule(uP, hv, 0.0)  # -d: the gap with r = 0
+    cls = np.full(len(P), -1)
+    cls[interior] = assign_sizes(-need[interior], gmax[interior], cfg.sizes, cfg.min_gap)
+    r_v = np.where(interior, np.asarray(cfg.sizes)[np.maximum(cls, 0)], 0.0)
+    req = np.where(interior, r_v + need, 0.0)
     unreachable = np.flatnonzero(interior & ((req < cfg.min_gap) | (req > gmax)))
     gap = np.where(interior, np.clip(req, cfg.min_gap, gmax), 0.0)
     # springs: none in quads with nearly collinear neighbouring edges
     spring = np.array([_max_angle(P[q]) < np.radians(cfg.degenerate_angle_deg) for q in quads])
-    growth = np.exp(-uP[quads].mean(axis=1))
+    growth = quad_growth(P, quads, r_v - gap)
     qmids = 0.5 * (P[quads] + P[np.roll(quads, -1, axis=1)])  # (q,4,2) midpoint of edge (v_k, v_k+1)
     bulge, ratio, tight = size_bulges(P, quads, qmids, growth, bulge_min=cfg.spring_bulge, slack=cfg.spring_slack,
                                       width=cfg.spring_width)
@@ -230,8 +268,25 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     order = order[np.lexsort((P[order, 0], -P[order, 1]))]  # row by row from the top, left to right
     ids[order] = np.arange(1, len(order) + 1)
     return Pattern(P=P, quads=quads, edges=edges, edge_quads=edge_quads, interior=interior, u=uP, gap=gap,
-                   gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, bulge=bulge, growth=growth,
-                   spring_ratio=ratio, tight_springs=np.flatnonzero(tight & spring), config=cfg)
+                   gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, insert_size=r_v,
+                   insert_class=cls, bulge=bulge, growth=growth, spring_ratio=ratio,
+                   tight_springs=np.flatnonzero(tight & spring), config=cfg)
+
+
+def quad_growth(P: np.ndarray, quads: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(q,4) [-] growth of the chords of each quad's four spring arcs, arc k around corner k+1 (the
+    order of :meth:`Pattern.spring_curves`). The arc around corner
+    v joins the midpoints of v's two edges, at distances a, b from v; deployment lengthens both
+    half-edges by d_v (d (n,) [m] = r - g, 0 on the boundary), so with the corner angle alpha kept
+    the chord grows from sqrt(a^2 + b^2 - 2ab cos alpha) to the same with a + d_v, b + d_v."""
+    v = quads
+    prev, nxt = np.roll(quads, 1, axis=1), np.roll(quads, -1, axis=1)
+    A = 0.5 * (P[prev] - P[v])  # (q,4,2) corner -> midpoint of the edge to the previous corner
+    B = 0.5 * (P[nxt] - P[v])
+    a, b = np.linalg.norm(A, axis=2), np.linalg.norm(B, axis=2)
+    cos = np.einsum("qki,qki->qk", A, B) / (a * b)
+    chord = lambda x, y: np.sqrt(np.maximum(x * x + y * y - 2 * x * y * cos, 0.0))  # noqa: E731
+    return np.roll(chord(a + d[v], b + d[v]) / chord(a, b), -1, axis=1)
 
 
 def _good_quad(Q: np.ndarray, h: float) -> bool:
@@ -282,3 +337,185 @@ def _interpolate(uv, faces, values, P) -> np.ndarray:
 def map_to_surface(uv, faces, V, P) -> np.ndarray:
     """3D target points (k,3) [m] of flat points P (k,2): barycentric on the flat triangulation."""
     return np.stack([_interpolate(uv, faces, V[:, c], P) for c in range(3)], axis=1)
+
+
+def _clipped_grid(poly, uv, h):
+    """The clipped square grid (``layout = "grid"``): (P (n,2), quads (q,4) CCW)."""
+    import shapely
+
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    ni = np.arange(np.floor(lo[0] / h) - 1, np.ceil(hi[0] / h) + 2)
+    nj = np.arange(np.floor(lo[1] / h) - 1, np.ceil(hi[1] / h) + 2)
+    I, J = np.meshgrid(ni, nj, indexing="ij")
+    G = np.stack([I * h, J * h], axis=-1)  # (a, b, 2)
+    inside = shapely.contains_xy(poly, G[..., 0], G[..., 1])
+    ring = poly.exterior
+    proj = G.copy()
+    out_idx = np.argwhere(~inside)
+    if len(out_idx):
+        pts = shapely.points(G[~inside])
+        near = shapely.line_interpolate_point(ring, shapely.line_locate_point(ring, pts))
+        proj[~inside] = shapely.get_coordinates(near)
+    quads = []
+    A, B = inside.shape
+    for i in range(A - 1):
+        for j in range(B - 1):
+            c = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)]
+            ins = [inside[k] for k in c]
+            nin = sum(ins)
+            if nin == 4 or nin == 3 or (nin == 2 and (ins[0] == ins[1] or ins[1] == ins[2])):
+                Q = np.array([proj[k] for k in c])
+                if _good_quad(Q, h):
+                    quads.append([k[0] * B + k[1] for k in c])
+    if not quads:
+        raise InputError(f"no quad fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
+                         where="pattern.spacing")
+    quads = np.array(quads)
+    quads = _largest_component(quads)
+    used, inv = np.unique(quads, return_inverse=True)
+    quads = inv.reshape(-1, 4)
+    P = proj.reshape(-1, 2)[used]
+    return P, quads
+
+
+CORE_MARGIN = 0.5  # core grid nodes keep >= CORE_MARGIN x spacing from the boundary
+SMOOTHING_ITERATIONS = 20
+
+
+def conforming_quads(poly, h: float, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary-conforming quad mesh of the flat domain ``poly`` (``layout = "conforming"``):
+    (P (n,2) [m], quads (q,4) CCW).
+
+    Method (a square grid with one *pillow* layer, as in hexahedral meshing): the core is the
+    grid cells (spacing h, on the grid through the origin) whose four corners lie inside the
+    domain at least ``CORE_MARGIN`` h from its boundary (the largest edge-connected set, cells that
+    touch the rest at one corner only removed, so its outline is one simple loop v_0 .. v_m).
+    Every loop vertex gets a boundary vertex p_k (its nearest boundary point, then spread along
+    the boundary by arc length so that their order follows the loop's), and every loop edge
+    (v_k, v_k+1) one quad (v_k, p_k, p_k+1, v_k+1): each pillow quad has exactly two vertices on
+    the boundary, so no quad degenerates into a triangle with three boundary vertices on a line
+    (what clipping a grid cell does where the boundary runs across it). Then Laplacian smoothing of
+    the non-boundary vertices (``SMOOTHING_ITERATIONS`` Jacobi sweeps, boundary vertices fixed;
+    the uniform grid is its fixed point, so only the cells near the boundary move). The outline
+    is the chord polygon of the p_k on the boundary: the quads cover the domain up to the chords'
+    segments (sagitta ~ h^2 / (8 R) for a boundary of curvature radius R). Staircase corners of
+    the core give loop vertices of valence 3 (convex) or 5 (concave) - inserts with 3 or 5 beams.
+    """
+    import shapely
+
+    ring = poly.exterior
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    ni = np.arange(np.floor(lo[0] / h) - 1, np.ceil(hi[0] / h) + 2)
+    nj = np.arange(np.floor(lo[1] / h) - 1, np.ceil(hi[1] / h) + 2)
+    I, J = np.meshgrid(ni, nj, indexing="ij")
+    G = np.stack([I * h, J * h], axis=-1)
+    A, B = I.shape
+    flatG = G.reshape(-1, 2)
+    pts = shapely.points(flatG)
+    core = (shapely.contains_xy(poly, flatG[:, 0], flatG[:, 1])
+            & (shapely.distance(ring, pts) >= CORE_MARGIN * h)).reshape(A, B)
+    cells = [[i * B + j, (i + 1) * B + j, (i + 1) * B + j + 1, i * B + j + 1]
+             for i in range(A - 1) for j in range(B - 1)
+             if core[i, j] and core[i + 1, j] and core[i + 1, j + 1] and core[i, j + 1]]
+    if not cells:
+        raise InputError(f"no quad fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
+                         where="pattern.spacing")
+    quads = _largest_component(np.array(cells))
+    quads = _remove_pinches(quads)
+    loop = _outline(quads)  # CCW loop of core vertex ids
+    # boundary vertices: nearest points, then arc-length positions made to follow the loop's order
+    L = ring.length
+    s = np.asarray(shapely.line_locate_point(ring, shapely.points(flatG[loop])), dtype=np.float64)
+    ccw = shapely.Polygon(flatG[loop]).exterior.is_ccw == ring.is_ccw  # both loops the same way round
+    if not ccw:
+        s = -s
+    s = np.unwrap(s / L * 2 * np.pi) * L / (2 * np.pi)  # continuous around the loop
+    s = _monotone(s, L)
+    if not ccw:
+        s = -s
+    p = shapely.get_coordinates(shapely.line_interpolate_point(ring, np.mod(s, L)))
+    n0 = len(flatG)
+    P = np.vstack([flatG, p])
+    m = len(loop)
+    k = np.arange(m)
+    pillow = np.stack([loop, n0 + k, n0 + (k + 1) % m, loop[(k + 1) % m]], axis=1)
+    quads = np.vstack([quads, pillow])
+    quads = _ccw(P, quads)
+    used, inv = np.unique(quads, return_inverse=True)
+    quads = inv.reshape(-1, 4)
+    P = P[used]
+    movable = np.isin(used, loop)  # only the core's outline moves (the grid inside it stays regular)
+    P = _smooth(P, quads, ~movable, SMOOTHING_ITERATIONS)
+    return P, quads
+
+
+def _remove_pinches(quads: np.ndarray) -> np.ndarray:
+    """Drop cells until every vertex on the outline has exactly two outline edges (no two parts
+    touching at one corner): the cell at such a vertex with the fewest edge neighbours goes."""
+    while True:
+        e = np.sort(np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)]), axis=1)
+        uniq, inv, cnt = np.unique(e, axis=0, return_inverse=True, return_counts=True)
+        bnd = uniq[cnt == 1]
+        deg = np.bincount(bnd.ravel(), minlength=int(quads.max()) + 1)
+        bad = np.flatnonzero(deg > 2)
+        if not len(bad):
+            return _largest_component(quads)
+        qi = np.flatnonzero(np.any(quads == bad[0], axis=1))
+        nb = [int(np.sum(cnt[inv.ravel()[np.arange(4) * len(quads) + q]] == 2)) for q in qi]
+        quads = np.delete(quads, qi[int(np.argmin(nb))], axis=0)
+
+
+def _outline(quads: np.ndarray) -> np.ndarray:
+    """Vertex ids of the outline of a quad mesh with one simple boundary loop, in the quads' order
+    (CCW for CCW quads)."""
+    nxt = {}
+    directed = np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)])
+    key = np.sort(directed, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    for a, b in directed[cnt[inv.ravel()] == 1]:
+        nxt[int(a)] = int(b)
+    start = next(iter(nxt))
+    loop = [start]
+    while nxt[loop[-1]] != start:
+        loop.append(nxt[loop[-1]])
+    return np.array(loop)
+
+
+def _monotone(s: np.ndarray, L: float) -> np.ndarray:
+    """Arc-length positions (m,) made strictly increasing within one turn (each at least L / (4 m)
+    after the previous: nearest points of neighbouring loop vertices can come in the wrong order at
+    a convex staircase corner), then relaxed twice towards their neighbours' mean (even spacing)."""
+    m = len(s)
+    out = s.copy()
+    gap = L / (4.0 * m)
+    for k in range(1, m):
+        out[k] = max(out[k], out[k - 1] + gap)
+    if out[-1] - out[0] > L - gap:  # compress into one turn
+        out = out[0] + (out - out[0]) * (L - gap) / (out[-1] - out[0])
+    for _ in range(2):
+        prev = np.r_[out[-1] - L, out[:-1]]
+        nxt = np.r_[out[1:], out[0] + L]
+        out = 0.5 * out + 0.25 * (prev + nxt)
+    return out
+
+
+def _ccw(P: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    Q = P[quads]
+    area = np.sum(Q[:, :, 0] * np.roll(Q[:, :, 1], -1, axis=1) - np.roll(Q[:, :, 0], -1, axis=1) * Q[:, :, 1], axis=1)
+    out = quads.copy()
+    out[area < 0] = out[area < 0][:, ::-1]
+    return out
+
+
+def _smooth(P: np.ndarray, quads: np.ndarray, fixed: np.ndarray, iterations: int) -> np.ndarray:
+    """Jacobi Laplacian smoothing over the quad edges (fixed vertices stay)."""
+    import scipy.sparse as sp
+
+    e = np.unique(np.sort(np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)]), axis=1), axis=0)
+    n = len(P)
+    W = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
+    deg = np.asarray(W.sum(axis=1)).ravel()
+    X = P.copy()
+    for _ in range(iterations):
+        X = np.where(fixed[:, None], P, (W @ X) / deg[:, None])
+    return X

@@ -2,7 +2,9 @@
 
 Stages (each timed): flatten (:mod:`~simfab.deploy.flatten`), layout
 (:mod:`~simfab.deploy.pattern`), lasercut (:mod:`~simfab.deploy.lasercut`), deploy
-(:mod:`~simfab.deploy.network`), compare (:mod:`~simfab.deploy.compare`) and mujoco
+(:mod:`~simfab.deploy.network`), tune (optional, scene ``[tune]``: the gaps adjusted by
+Gauss-Newton on the deployed shape, the pattern re-cut and its equilibrium solved:
+:mod:`~simfab.deploy.tuning`), compare (:mod:`~simfab.deploy.compare`) and mujoco
 (:mod:`~simfab.deploy.mjcf_sim`: build the simulatable scene, step it (damped) from the deployed
 key until it is at rest - its convergence test, ``settle_tol`` - or for at most
 ``stability_seconds``, and compare the relaxed state with simfab's equilibrium after a rigid
@@ -45,6 +47,7 @@ class SurfaceResult:
     sim_check: dict
     shape: dict
     seconds: dict
+    tuning: dict | None = None
 
 
 def quadric_curvature(X: np.ndarray) -> float:
@@ -95,7 +98,7 @@ def shape_descriptors(pat, X: np.ndarray, Y: np.ndarray | None = None) -> dict:
 
 def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = True) -> SurfaceResult:
     """Run every stage on a loaded :class:`simfab.deploy.scene.SurfaceScene`."""
-    from simfab.deploy import compare, flatten, lasercut, mjcf_sim, network, pattern
+    from simfab.deploy import compare, flatten, lasercut, network, pattern, tuning
     from simfab.progress import log
 
     sec = {}
@@ -119,6 +122,22 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     dep = network.deploy(pat, net, scene.deploy, network.target_heights(pat, Y), device=device, quiet=quiet,
                          predictor=network.target_displacement(net, to_target))
     sec["deploy"] = time.perf_counter() - t
+    tune_info = None
+    if scene.tune is not None and scene.tune.iterations > 0:
+        t = time.perf_counter()
+        before = compare.deviation(dep.vertex_positions(), Y, pat.quads, tgt)
+        log(f"deploy surface: tuning the gaps (RMS {100 * before.rms:.3g} % before)", quiet=quiet)
+        tuned = tuning.tune(pat, net, dep, Y, tgt, scene.tune, device=device)
+        gap0 = pat.gap
+        pat = tuning.retuned_pattern(pat, tuned.gap)
+        cut = lasercut.layout(pat)
+        net = network.build_network(pat, scene.deploy)
+        dep = tuning.redeploy(pat, net, dep, tuned, device=device)
+        tune_info = dict(steps=tuned.steps, solves=tuned.solves, rms_before=before.rms,
+                         hausdorff_before=before.hausdorff,
+                         point_to_plane_rms_mm=[1e3 * r for r in tuned.rms_history],
+                         gap_change_max_mm=float(np.max(np.abs(tuned.gap - gap0)) * 1e3))
+        sec["tune"] = time.perf_counter() - t
     t = time.perf_counter()
     X = dep.vertex_positions()
     dev = compare.deviation(X, Y, pat.quads, tgt)
@@ -131,15 +150,15 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         sim, check = mujoco_check_run(net, dep, pat, scene)
         sec["mujoco"] = time.perf_counter() - t
     return SurfaceResult(scene=scene, flat=flat, pattern=pat, cut=cut, network=net, deployment=dep, target_points=Y,
-                         deviation=dev, sim=sim, sim_check=check, shape=shape, seconds=sec)
+                         deviation=dev, sim=sim, sim_check=check, shape=shape, seconds=sec, tuning=tune_info)
 
 
 def insert_geoms(pat, net) -> dict:
-    """MuJoCo/USD geometry of the inserts: square plates of half-side r + beam_width, 2 t thick."""
+    """MuJoCo/USD geometry of the inserts: square plates of half-side r_i + beam_width, 2 t thick."""
     pc = pat.config
-    s = pc.insert_half_size + pc.beam_width
     out = {}
     for v in np.flatnonzero(pat.interior):
+        s = float(pat.insert_size[v]) + pc.beam_width
         out[net.model.body_names[net.vertex_body[v]]] = dict(box=[s, s, pc.beam_thickness], rgba=[0.85, 0.45, 0.2, 1])
     return out
 
@@ -193,16 +212,22 @@ def summary(res: SurfaceResult) -> dict:
         area_ratio_min=float(np.exp(2 * f.sigma.min())), area_ratio_max=float(np.exp(2 * f.sigma.max())),
         closure_angle_correction_rad=f.closure_angle_correction,
         quads=int(len(p.quads)), beams=int(len(p.edges)), springs=int(p.spring.sum()), inserts=p.n_inserts,
-        insert_half_size_mm=p.config.insert_half_size * 1e3,
+        insert_half_sizes_mm=[r * 1e3 for r in p.config.sizes],
+        bill_of_materials=p.bill_of_materials(),
         gap_min_mm=float(p.gap[ins].min() * 1e3) if ins.any() else None,
         gap_max_mm=float(p.gap[ins].max() * 1e3) if ins.any() else None,
-        unreachable_gaps=[dict(insert=int(p.insert_ids[v]), required_mm=float(p.gap_required[v] * 1e3))
+        unreachable_gaps=[dict(insert=int(p.insert_ids[v]), size_class=p.class_label(v),
+                               required_mm=float(p.gap_required[v] * 1e3), cut_mm=float(p.gap[v] * 1e3),
+                               growth_shortfall_mm=float(abs(p.gap_required[v] - p.gap[v]) * 1e3),
+                               deviation_mm=float(dv.per_vertex[v] * 1e3))
                           for v in p.unreachable],
         spring_bulge_min=float(p.bulge[p.spring].min()) if p.spring.any() else None,
         spring_bulge_max=float(p.bulge[p.spring].max()) if p.spring.any() else None,
         quad_growth_max=float(p.growth.max()),
-        springs_short_of_slack=[dict(quad=int(q), growth=float(p.growth[q]), arc_over_chord=float(p.spring_ratio[q]))
-                                for q in p.tight_springs],
+        springs_short_of_slack=[dict(quad=int(q), growth=float(p.growth[q][k]),
+                                     arc_over_chord=float(p.spring_ratio[q][k]))
+                                for q in p.tight_springs
+                                for k in [int(np.argmin(p.spring_ratio[q] / np.maximum(p.growth[q], 1.0)))]],
         lasercut=lasercut.summary(res.cut),
         deployment=dict(stable=res.deployment.stable, increments=len(res.deployment.iterations),
                         newton_iterations=res.deployment.iterations, energy_J=res.deployment.energy, **res.shape),
@@ -210,6 +235,7 @@ def summary(res: SurfaceResult) -> dict:
                        diameter_mm=dv.diameter * 1e3,
                        deployed_height_mm=out_of_plane_extent(dv.aligned) * 1e3,
                        target_height_mm=out_of_plane_extent(res.target_points) * 1e3),
+        tuning=res.tuning,
         mujoco=res.sim_check,
         seconds=dict(res.seconds, total=float(sum(res.seconds.values()))),
     )

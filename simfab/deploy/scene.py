@@ -13,6 +13,7 @@
     [material]   # young [Pa], poisson [-], density [kg/m^3]
     [deploy]     # increments, perturbation, beam_segments, spring_segments
     [mujoco]     # simfab.deploy.mjcf_sim.SimConfig
+    [tune]       # simfab.deploy.tuning.TuneConfig (iterations = 0: no tuning)
 
 Unknown tables or fields are errors naming the file and the field.
 """
@@ -40,6 +41,7 @@ class SurfaceScene:
     deploy: object
     mujoco: object
     path: str
+    tune: object = None
 
 
 def bundled_path(name: str) -> str:
@@ -64,12 +66,13 @@ def _make(cls, table: dict, where: str, section: str):
 def load_scene(path, *, units: str | None = None, overrides: dict | None = None) -> SurfaceScene:
     """Read a scene TOML, or a bare mesh file (then all parameters are defaults + ``overrides``).
 
-    ``overrides``: {"pattern": {...}, "material": {...}, "deploy": {...}, "mujoco": {...}}
+    ``overrides``: {"pattern": {...}, "material": {...}, "deploy": {...}, "mujoco": {...}, "tune": {...}}
     (command-line values, applied over the file's)."""
     from simfab.deploy import surface
     from simfab.deploy.mjcf_sim import SimConfig
     from simfab.deploy.network import DeployConfig
     from simfab.deploy.pattern import PatternConfig
+    from simfab.deploy.tuning import TuneConfig
 
     p = Path(path)
     where = str(p)
@@ -81,7 +84,7 @@ def load_scene(path, *, units: str | None = None, overrides: dict | None = None)
             doc = tomllib.loads(p.read_text(encoding="utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
             raise InputError(f"not valid TOML: {e}", where=where) from None
-        unknown = sorted(set(doc) - {"target", "pattern", "material", "deploy", "mujoco"})
+        unknown = sorted(set(doc) - {"target", "pattern", "material", "deploy", "mujoco", "tune"})
         if unknown:
             raise InputError(f"unknown table(s) {', '.join(unknown)}", where=where)
         tt = dict(doc.get("target", {}))
@@ -100,8 +103,10 @@ def load_scene(path, *, units: str | None = None, overrides: dict | None = None)
     else:
         doc = {}
         target = surface.load(p, units=units or "m")
-    tables = {k: {**doc.get(k, {}), **overrides.get(k, {})} for k in ("pattern", "material", "deploy", "mujoco")}
+    tables = {k: {**doc.get(k, {}), **overrides.get(k, {})}
+              for k in ("pattern", "material", "deploy", "mujoco", "tune")}
     pat = _make(PatternConfig, tables["pattern"], where, "pattern")
     dep = _make(DeployConfig, {**tables["material"], **tables["deploy"]}, where, "material/deploy")
     sim = _make(SimConfig, tables["mujoco"], where, "mujoco")
-    return SurfaceScene(target=target, pattern=pat, deploy=dep, mujoco=sim, path=where)
+    tune = _make(TuneConfig, tables["tune"], where, "tune")
+    return SurfaceScene(target=target, pattern=pat, deploy=dep, mujoco=sim, path=where, tune=tune)

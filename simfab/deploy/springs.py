@@ -10,15 +10,17 @@ so the arc leaves each midpoint towards the quad centre and bulges inwards (b = 
 at the centre; b > 1: the arc passes closer to the centre than its handles' foot points).
 
 Sizing rule (why). Deployment scales the quad by s_q = e^{-u_q} (u_q: flattening log scale
-factor at the quad, mean of its corners): the two midpoints an arc joins move apart, its chord
-c grows to s_q c. An arc of length S can follow only by bending while S > s_q c; as S -> s_q c
-it straightens and its resistance to further growth diverges (it ends up carrying the growth in
-tension, which compresses the beams: they buckle out of plane locally at every insert instead of
-the network growing into the target - measured on the bundled dome: a 16 mm high deployment
-for a 54 mm target with the earlier fixed b = 0.7, S/c = 1.16 < s_q = 1.22 at the centre).
+factor at the quad): the two midpoints an arc joins move apart, its chord c grows to s_q c
+(the pattern passes each arc's own chord growth, from the growth r - g of the insert at the
+corner the arc turns around: :func:`simfab.deploy.pattern.quad_growth`). An arc of length S can
+follow only by bending while S > s_q c; as S -> s_q c it straightens and its resistance to
+further growth diverges (it ends up carrying the growth in tension, which compresses the beams:
+they buckle out of plane locally at every insert instead of the network growing into the target
+- measured on the bundled dome: a 16 mm high deployment for a 54 mm target with the earlier
+fixed b = 0.7, S/c = 1.16 < s_q = 1.22 at the centre).
 Hence each quad's b is the smallest b >= ``spring_bulge`` with
 
-    S(b) / c >= (1 + spring_slack) max(s_q, 1)               for all four arcs of the quad,
+    S_k(b) / c_k >= (1 + spring_slack) max(s_k, 1)           for all four arcs k of the quad,
 
 found by bisection (S/c grows monotonically with b). b is capped where an arc would come within
 ``spring_width`` of the quad centre (the four arcs of a quad must stay apart for the cut); a
@@ -52,11 +54,16 @@ def _arcs(M0, M1, c, b) -> np.ndarray:
     return (1 - t) ** 3 * P0 + 3 * (1 - t) ** 2 * t * P1 + 3 * (1 - t) * t**2 * P2 + t**3 * P3
 
 
-def _length_ratio(M0, M1, c, b) -> np.ndarray:
-    """(q,) smallest arc length / chord over each quad's four arcs."""
+def _arc_ratios(M0, M1, c, b) -> np.ndarray:
+    """(q,4) arc length / chord of each quad's four arcs."""
     p = _arcs(M0, M1, c, b)
     S = np.sum(np.linalg.norm(np.diff(p, axis=2), axis=3), axis=2)
-    return np.min(S / np.linalg.norm(M1 - M0, axis=2), axis=1)
+    return S / np.linalg.norm(M1 - M0, axis=2)
+
+
+def _length_ratio(M0, M1, c, b) -> np.ndarray:
+    """(q,) smallest arc length / chord over each quad's four arcs."""
+    return np.min(_arc_ratios(M0, M1, c, b), axis=1)
 
 
 def _clearance(M0, M1, c, b) -> np.ndarray:
@@ -79,12 +86,13 @@ def _bisect(ok, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 def size_bulges(P: np.ndarray, quads: np.ndarray, mids_of_quad: np.ndarray, growth: np.ndarray, *, bulge_min: float,
                 slack: float, width: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per quad (q,): handle pull b [-], the arcs' smallest length/chord ratio S/c at b [-], and
-    whether the quad is ``tight`` (needs more than the centre clearance allows).
+    """Per quad: handle pull b (q,) [-], its four arcs' length/chord ratios S/c at b (q,4) [-], and
+    whether the quad is ``tight`` (q,) (an arc needs more than the centre clearance allows).
 
     P (n,2) [m] quad vertices; quads (q,4); mids_of_quad (q,4,2) [m] midpoints of the quad's
-    edges k = (v_k, v_{k+1}); growth (q,) [-] s_q; bulge_min, slack [-]; width [m] spring width
-    (the clearance kept from the quad centre)."""
+    edges k = (v_k, v_{k+1}); growth (q,) or (q,4) [-] the quad's s_q or each arc's own chord
+    growth (arc k joins the midpoints of edges k and k+1); bulge_min, slack [-]; width [m] spring
+    width (the clearance kept from the quad centre)."""
     nq = len(quads)
     if nq == 0:
         return np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
@@ -94,7 +102,8 @@ def size_bulges(P: np.ndarray, quads: np.ndarray, mids_of_quad: np.ndarray, grow
     bmin = np.full(nq, float(bulge_min))
     # cap: the largest b whose arcs keep ``width`` from the centre (the first b that does not, by bisection)
     cap = np.maximum(_bisect(lambda b: _clearance(M0, M1, c, b) < width, bmin, np.full(nq, _B_UPPER)), bmin)
-    need = (1.0 + slack) * np.maximum(np.asarray(growth, dtype=np.float64), 1.0)
-    b = _bisect(lambda x: _length_ratio(M0, M1, c, x) >= need, bmin, cap)
-    ratio = _length_ratio(M0, M1, c, b)
-    return b, ratio, ratio < need - 1e-9
+    g = np.asarray(growth, dtype=np.float64)
+    need = (1.0 + slack) * np.maximum(g if g.ndim == 2 else g[:, None], 1.0)  # (q,4)
+    b = _bisect(lambda x: np.all(_arc_ratios(M0, M1, c, x) >= need, axis=1), bmin, cap)
+    ratio = _arc_ratios(M0, M1, c, b)
+    return b, ratio, np.any(ratio < need - 1e-9, axis=1)

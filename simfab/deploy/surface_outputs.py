@@ -70,7 +70,7 @@ def write_pattern_png(path, res) -> None:
     segs = [np.vstack([r, r[:1]]) for r in cut.rings]
     ax.add_collection(LineCollection(segs, colors="k", linewidths=0.5, label="cut"))
     ins = np.flatnonzero(p.interior)
-    d = (p.config.insert_half_size - p.gap[ins]) * 1e3
+    d = (p.insert_size[ins] - p.gap[ins]) * 1e3
     lim = float(np.max(np.abs(d))) if len(d) else 1.0
     sc = ax.scatter(p.P[ins, 0] * 1e3, p.P[ins, 1] * 1e3, c=d, cmap="coolwarm", vmin=-lim, vmax=lim, s=40,
                     zorder=3, label="insert gap")
@@ -86,7 +86,8 @@ def write_pattern_png(path, res) -> None:
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
-    ax.set_title(f"flat pattern: {p.n_inserts} inserts (r = {p.config.insert_half_size * 1e3:.1f} mm), "
+    sizes = ", ".join(f"{b['count']} x {b['half_size_mm']:.3g}" for b in p.bill_of_materials())
+    ax.set_title(f"flat pattern: {p.n_inserts} inserts (r [mm]: {sizes}), "
                  f"{cut.parts} parts, cut length {cut.cut_length / 1e3:.2f} m")
     ax.legend(loc="upper right", fontsize=8)
     fig.colorbar(sc, ax=ax, shrink=0.7, label="r - g [mm] (> 0 insert pushes: dome; < 0 pulls: saddle)")
@@ -95,7 +96,7 @@ def write_pattern_png(path, res) -> None:
 
 
 def write_deviation_png(path, res) -> None:
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     from simfab.io.atomic import save_figure
 
@@ -111,8 +112,7 @@ def write_deviation_png(path, res) -> None:
     ax.add_collection3d(Poly3DCollection(A[p.quads], facecolors=fc, edgecolors="k", linewidths=0.3))
     V = tgt.V * 1e3
     E = np.concatenate([tgt.F[:, [0, 1]], tgt.F[:, [1, 2]]])[:: max(1, len(tgt.F) // 800)]
-    for e in E:
-        ax.plot(*V[e].T, color="0.6", lw=0.3)
+    ax.add_collection3d(Line3DCollection(V[E], colors="0.6", linewidths=0.3))  # one artist for the wireframe
     allp = np.vstack([A, V])
     lo, hi = allp.min(axis=0), allp.max(axis=0)
     ax.set_xlim(lo[0], hi[0])
@@ -144,11 +144,11 @@ def write_usd(path, res) -> None:
     w = StageWriter(path, up_axis="Z", meters_per_unit=1.0)
     w.add_curves("deploy/rods", color=(0.9, 0.85, 0.7))
     widths = [np.full(len(r.nodes), r.section.draw_width()) for r in model.rods]
-    s = p.config.insert_half_size + p.config.beam_width
-    box = trimesh.creation.box(extents=[2 * s, 2 * s, 2 * p.config.beam_thickness])
     ins = np.flatnonzero(p.interior)
     names = []
     for v in ins:
+        s = float(p.insert_size[v]) + p.config.beam_width
+        box = trimesh.creation.box(extents=[2 * s, 2 * s, 2 * p.config.beam_thickness])
         nm = f"deploy/inserts/insert_{p.insert_ids[v]}"
         w.add_rigid(nm, box.vertices, box.faces, color=(0.85, 0.45, 0.2))
         names.append((nm, net.vertex_body[v]))
@@ -166,3 +166,16 @@ def write_usd(path, res) -> None:
     mesh = UsdGeom.Mesh(w.stage.GetPrimAtPath("/World/deploy/target"))
     mesh.CreateDisplayOpacityAttr(Vt.FloatArray([0.35]))
     w.save()
+
+
+def write_bom_csv(path, res) -> None:
+    """Bill of materials of the inserts: one row per catalogue size (class, half-size r [mm], plate
+    side [mm], count, insert numbers separated by spaces)."""
+    import csv
+
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["size_class", "half_size_mm", "plate_side_mm", "count", "inserts"])
+        for b in res.pattern.bill_of_materials():
+            w.writerow([b["size_class"], f"{b['half_size_mm']:.4g}", f"{b['plate_side_mm']:.4g}", b["count"],
+                        " ".join(str(i) for i in b["inserts"])])

@@ -7,6 +7,8 @@ The ``[design]`` table of a coupling scene's TOML (all optional; SI units)::
     grip_force = [5.0, 40.0]       # [lo, hi] N at the steady state (inf allowed: [5.0, inf])
     insertion_force = [0.0, 20.0]  # [lo, hi] N, largest force to push the object in
     removal_force = [0.0, 30.0]    # [lo, hi] N, largest force to pull it out
+    hold_force = [5.0, inf]        # [lo, hi] N, force to start sliding the seated object out
+                                   #   (with friction: elastic draw plus static friction)
     yield_stress = 60e6            # Pa; default: the material's; max von Mises must stay below
     target_profile = "target.csv"  # optional: match a force profile (distance [m], force [N])
     handles = 5                    # active handles
@@ -36,7 +38,10 @@ Constraints (thesis, "Optimization"), each a value with bounds [lo, hi]:
   state) <= 0 [m]. A loose design's grip force and coupling ratio are 0 whatever its clearance,
   so their penalties are flat over all loose designs and give the annealer no direction back to
   a grip; the clearance does (it is <= 0, hence free, for every design in contact);
-- grip force F_g, insertion force F_in, removal force F_rm [N] within their bounds;
+- grip force F_g, insertion force F_in, removal force F_rm, hold force F_hold [N] within their
+  bounds. With friction ([contact] friction or ``--friction``) F_in is read from the frictional
+  insertion, F_rm and F_hold from the removal simulated as its own traversal
+  (:func:`simfab.coupling.profile.analyze_run`); without it F_hold = F_rm;
 - max over the insertion of the von Mises stress averaged over ``stress_radius`` <= yield
   stress [Pa] (the raw element maximum is singular at sharp corners: simfab.design.stress).
 
@@ -71,15 +76,17 @@ from simfab.io.companion import read_csv_numbers
 PENALTY_WEIGHT = 1.0e3
 #: Units in which a violation counts one: percent, newtons, megapascals, 0.1 mm.
 SCALES = {"coupling_ratio": 1.0, "grip_force": 1.0, "insertion_force": 1.0, "removal_force": 1.0,
-          "von_mises": 1.0e6, "seat_clearance": 1.0e-4}
-UNITS = {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N", "von_mises": "Pa",
-         "seat_clearance": "m"}
+          "hold_force": 1.0, "von_mises": 1.0e6, "seat_clearance": 1.0e-4}
+UNITS = {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N", "hold_force": "N",
+         "von_mises": "Pa", "seat_clearance": "m"}
 #: Correction rounds (simfab.design.pipeline.mesh_corrected) aim this far (relative) inside the
 #: force and stress bounds: the annealer settles on a bound, and the factors measured on the checked
 #: design are not those of the next design, so a design aimed at the bound itself misses it on its
 #: own check about as often as not.
 CORRECTION_MARGIN = 0.10
-MARGIN_FIGURES = ("grip_force", "insertion_force", "removal_force", "von_mises")
+MARGIN_FIGURES = ("grip_force", "insertion_force", "removal_force", "hold_force", "von_mises")
+#: The force constraints of a brief ([lo, hi] N).
+FORCES = ("grip_force", "insertion_force", "removal_force", "hold_force")
 #: kappa_cr of the thesis [%]: the steady state must stay this far below the peak energy.
 KAPPA_TIGHT = 95.0
 KAPPA_LOOSE = 1.0e-3
@@ -95,6 +102,7 @@ class DesignBrief:
     grip_force: tuple[float, float] | None = None
     insertion_force: tuple[float, float] | None = None
     removal_force: tuple[float, float] | None = None
+    hold_force: tuple[float, float] | None = None
     yield_stress: float | None = None
     target_profile: str | None = None
     handles: int = 5
@@ -116,7 +124,7 @@ class DesignBrief:
             raise InputError(f"unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})", where=where)
         kw = {}
         for k, v in d.items():
-            if k in ("grip_force", "insertion_force", "removal_force", "scale_range"):
+            if k in (*FORCES, "scale_range"):
                 kw[k] = _bounds(v, f"{where} {k}")
             elif k == "keep":
                 kw[k] = (v,) if isinstance(v, str) else tuple(str(s) for s in v)
@@ -208,7 +216,7 @@ def bounds(brief: DesignBrief, yield_stress: float | None) -> dict[str, tuple[fl
         out["seat_clearance"] = (-math.inf, 0.0)
     elif brief.grip == "loose":
         out["coupling_ratio"] = (0.0, KAPPA_LOOSE)
-    for k in ("grip_force", "insertion_force", "removal_force"):
+    for k in FORCES:
         if getattr(brief, k) is not None:
             out[k] = getattr(brief, k)
     ys = brief.yield_stress if brief.yield_stress is not None else yield_stress

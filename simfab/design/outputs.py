@@ -118,9 +118,9 @@ def summary(res, *, scene: str | None = None) -> dict:
 def _figures(f: dict) -> dict:
     """The profile's figures with unit-bearing names (E in J, forces in N, stress in Pa)."""
     names = {"category": "category", "coupling_ratio": "coupling_ratio_pct", "E_max": "E_max_J", "E_ss": "E_ss_J",
-             "insertion_force": "F_in_N", "removal_force": "F_rm_N", "grip_force": "F_grip_N",
+             "insertion_force": "F_in_N", "removal_force": "F_rm_N", "hold_force": "F_hold_N", "grip_force": "F_grip_N",
              "von_mises": "von_mises_avg_Pa", "von_mises_peak": "max_von_mises_Pa",
-             "seat_clearance": "seat_clearance_m"}
+             "seat_clearance": "seat_clearance_m", "friction": "friction"}
     return {v: f.get(k) for k, v in names.items()}
 
 
@@ -174,6 +174,9 @@ def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, 
         if getattr(opts, k) is not None:
             simc[k] = getattr(opts, k)
     cfg["simulation"] = simc
+    mu = res.problem.base.contact.friction  # the friction it was designed with (--friction included)
+    if mu > 0 or "contact" in cfg:
+        cfg["contact"] = {**cfg.get("contact", {}), "friction": float(mu)}
     tgt = res.problem.target
     if tgt is not None:  # the optimized scene carries its own copy of the target profile
         shutil.copyfile(tgt.source, tmp["scene_target"])

@@ -31,13 +31,14 @@ from simfab.progress import log
 from simfab.sweep import run_tasks
 
 
-def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict | None = None, device: str = "cpu",
+def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict | None = None,
+                   contact: dict | None = None, device: str = "cpu",
                    quiet: bool = True, seed: int = 0, revolve: tuple[str, float] | None = None, restarts: int = 1,
                    scheduler: str | None = None, workers: int = 1, mesh_check: bool = True) -> dict:
     """Optimize a design scene's part and write every output into ``out``; returns the summary.
 
     design : overrides of the ``[design]`` table (e.g. ``{"iterations": 60, "handles": 4}``)
-    simulation : overrides of ``[simulation]``
+    simulation : overrides of ``[simulation]``; contact : of ``[contact]`` (e.g. ``{"friction": 0.3}``)
     seed : random seed of the handle placement and the annealing
     restarts : independent annealing runs (seeds seed, seed+1, ...) on the same handles, run as
         Dask tasks (:func:`simfab.sweep.run_tasks`, on ``scheduler`` or a local cluster); the
@@ -53,7 +54,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         the mesh-converged ones, warning when a constraint holds only on the coarse mesh
     """
     out = make_out_dir(out)
-    ds = load_design_scene(scene, design=design, simulation=simulation, device=device)
+    ds = load_design_scene(scene, design=design, simulation=simulation, contact=contact, device=device)
     cm = ds.cm
     if revolve is not None and cm.dim != 2:
         raise InputError("only a 2D section can be revolved", where="--revolve-axis")
@@ -66,8 +67,9 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         # the worker processes start now: their start-up overlaps the initial insertion and the
         # handle placement, and they serve the correction rounds too
         procs = stack.enter_context(Workers(workers)) if workers > 1 and restarts <= 1 else 1
-        res, extra = _anneal_checked(ds, design, simulation, device, seed, restarts, scheduler, procs, mesh_check,
-                                     quiet)
+        source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}),
+                               contact=dict(contact or {}), device=device)
+        res, extra = _anneal_checked(ds, source, seed, restarts, scheduler, procs, mesh_check, quiet)
     summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
     if revolve is not None:
         rev = write_revolved(res, out, cm.name, *revolve, scene=ds, optimized=summary["outputs"], quiet=quiet)
@@ -81,14 +83,12 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     return summary
 
 
-def _anneal_checked(ds, design, simulation, device, seed, restarts, scheduler, workers, mesh_check, quiet):
+def _anneal_checked(ds, source: ProblemSource, seed, restarts, scheduler, workers, mesh_check, quiet):
     """Place the handles, anneal (``restarts`` runs, or one on ``workers``: a count or running
     :class:`simfab.design.parallel.Workers`), check the design on refined meshes and correct;
     returns (DesignResult, summary extras)."""
     cm = ds.cm
     initial = simulate(cm) if ds.brief.placement == "displacement" else None
-    source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}),
-                           device=device)
     problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed,
                            source=source)
     if mesh_check and problem.target is not None:

@@ -108,7 +108,8 @@ def seat_clearance(res, index: int) -> float:
 
 def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
     """Figures of an insertion the constraints read: coupling_ratio [%], grip_force,
-    insertion_force, removal_force [N], von_mises [Pa] (max over the insertion of the von Mises
+    insertion_force, removal_force, hold_force [N] (frictional with friction: removal and hold from
+    the removal traversal), von_mises [Pa] (max over the insertion and removal of the von Mises
     stress averaged over ``stress_radius`` [m], :mod:`simfab.design.stress`), seat_clearance [m]
     (gap between part and object at the steady state, <= 0 in contact), and category, E_max, E_ss
     [J], von_mises_peak [Pa] (the largest element stress, mesh-dependent at sharp corners)."""
@@ -118,24 +119,26 @@ def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
     floor = 0.5 * E * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
     touched = prof.E_max > floor
     return {"coupling_ratio": prof.coupling_ratio if touched else 100.0, "grip_force": prof.F_grip,
-            "insertion_force": prof.F_in, "removal_force": prof.F_rm,
-            "von_mises": max(averaged_von_mises(fem, r.von_mises, stress_radius) for r in res.steps),
-            "von_mises_peak": float(res.column("max_von_mises").max()),
+            "insertion_force": prof.F_in, "removal_force": prof.F_rm, "hold_force": prof.F_hold,
+            "von_mises": max(averaged_von_mises(fem, r.von_mises, stress_radius) for r in [*res.steps, *res.removal]),
+            "von_mises_peak": float(max(r.max_von_mises for r in [*res.steps, *res.removal])),
             "seat_clearance": seat_clearance(res, prof.index_ss),
-            "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss}
+            "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss,
+            "friction": prof.friction}
 
 
 
 @dataclass(frozen=True, kw_only=True)
 class ProblemSource:
     """What rebuilds a design problem in another process (:func:`rebuild`): the scene (MJCF path),
-    the overrides of its ``[design]`` and ``[simulation]`` tables, the Warp device, the active
+    the overrides of its ``[design]``, ``[simulation]`` and ``[contact]`` tables, the Warp device, the active
     handle vertices (placed once, by the caller: :func:`make_problem` fills them in) and the
     placement seed."""
 
     scene: str
     design: dict = field(default_factory=dict)
     simulation: dict = field(default_factory=dict)
+    contact: dict = field(default_factory=dict)
     device: str = "cpu"
     handle_vertices: tuple = ()
     seed: int = 0
@@ -255,7 +258,7 @@ def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), ta
 
 def rebuild(source: ProblemSource, settings: EvaluationSettings | None = None) -> DesignProblem:
     """The :class:`DesignProblem` that ``source`` describes, scored with ``settings``."""
-    ds = load_design_scene(source.scene, design=source.design, simulation=source.simulation,
+    ds = load_design_scene(source.scene, design=source.design, simulation=source.simulation, contact=source.contact,
                            device=check_device(source.device))
     return make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target,
                         handle_vertices=list(source.handle_vertices), seed=source.seed, source=source,
@@ -347,7 +350,8 @@ def candidate_model(problem: DesignProblem, X: np.ndarray):
         return None, f"invalid mesh: {e}"
     # the scene's own options: the insertion runs as 'couple simulate' would run the candidate
     out = make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
-                              options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces)
+                              options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces,
+                              contact=cm.contact)
     return out, ""
 
 
@@ -371,7 +375,9 @@ def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float, trac
       over the records up to the first maximum of the energy so far: the profile reads the forces
       up to its steady state, which lies after the energy's maximum over the whole run
       (:func:`simfab.coupling.profile.analyze`), itself at or after the running one, so those
-      records are always part of it.
+      records are always part of it. With friction the removal force is read from the removal's
+      own records (phase "remove"), by the running max(0, max F) over them; the hold force is not
+      bounded early (it is read at the removal's turn, after the whole insertion).
     """
     terms = {k: B.aimed_bounds(k, *problem.limits[k], problem.settings.margin)[1]  # the bounds the penalties aim at
              for k in ("von_mises", "insertion_force", "removal_force")
@@ -382,11 +388,18 @@ def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float, trac
     radius = problem.brief.stress_radius
     run = dict(sigma=0.0, E=-math.inf, F_lo=math.inf, F_hi=-math.inf, F_min=math.inf, F_max=-math.inf)
 
+    frictional = cm.contact.friction > 0
+    run["F_rm"] = -math.inf
+
     def watch(k, rec):
-        run["F_min"], run["F_max"] = min(run["F_min"], rec.force), max(run["F_max"], rec.force)
-        if rec.energy > run["E"]:  # a new maximum of the energy: every force so far is read
-            run["E"], run["F_lo"], run["F_hi"] = rec.energy, run["F_min"], run["F_max"]
-        value = {"insertion_force": max(0.0, -run["F_lo"]), "removal_force": max(0.0, run["F_hi"])}
+        if rec.phase == "remove":
+            run["F_rm"] = max(run["F_rm"], rec.force)
+        else:
+            run["F_min"], run["F_max"] = min(run["F_min"], rec.force), max(run["F_max"], rec.force)
+            if rec.energy > run["E"]:  # a new maximum of the energy: every force so far is read
+                run["E"], run["F_lo"], run["F_hi"] = rec.energy, run["F_min"], run["F_max"]
+        value = {"insertion_force": max(0.0, -run["F_lo"]),
+                 "removal_force": max(0.0, run["F_rm"] if frictional else run["F_hi"])}
         if "von_mises" in terms:
             run["sigma"] = max(run["sigma"], averaged_von_mises(cm.fem, rec.von_mises, radius))
             value["von_mises"] = run["sigma"]

@@ -43,9 +43,9 @@ def check_brief_table(scene) -> None:
 
 
 def load_design_scene(scene, *, design: dict | None = None, simulation: dict | None = None,
-                      device: str = "cpu") -> DesignScene:
+                      contact: dict | None = None, device: str = "cpu") -> DesignScene:
     """Load a coupling scene with its design brief; ``design`` overrides keys of ``[design]``
-    (command-line options), ``simulation`` those of ``[simulation]``."""
+    (command-line options), ``simulation`` those of ``[simulation]``, ``contact`` those of ``[contact]``."""
     xml, toml = scene_paths(scene)
     if not xml.is_file():
         raise InputError("scene file not found", where=str(xml))
@@ -56,7 +56,7 @@ def load_design_scene(scene, *, design: dict | None = None, simulation: dict | N
     table = dict(table)
     table.update({k: v for k, v in (design or {}).items() if v is not None})
     brief = DesignBrief.from_dict(table, where=f"{toml} [design]")
-    cm = load_coupling_scene(xml, overrides={"simulation": simulation or {}}, device=device)
+    cm = load_coupling_scene(xml, overrides={"simulation": simulation or {}, "contact": contact or {}}, device=device)
     target = None
     if brief.target_profile:
         p = Path(brief.target_profile)

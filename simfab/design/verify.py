@@ -79,7 +79,8 @@ STEP_CHECK_FACTOR = 4
 #: Target matching: the corrected coarse force profile may differ from the finest level's by this
 #: fraction (least-squares scale) before another correction round runs.
 PROFILE_TOL = 0.05
-FIGURES = ("coupling_ratio", "grip_force", "insertion_force", "removal_force", "von_mises", "von_mises_peak")
+FIGURES = ("coupling_ratio", "grip_force", "insertion_force", "removal_force", "hold_force", "von_mises",
+           "von_mises_peak")
 
 
 def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor: int = 1):
@@ -108,7 +109,7 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
                                                   {"steps": (len(cm.s_steps) - 1) * int(steps_factor)}))
     return make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path,
                                fixed_vertices=np.flatnonzero(fixed), options=options,
-                               object_vertices=cm.object_vertices, object_faces=cm.object_faces)
+                               object_vertices=cm.object_vertices, object_faces=cm.object_faces, contact=cm.contact)
 
 
 def level_figures(res, stress_radius: float) -> dict:
@@ -117,7 +118,8 @@ def level_figures(res, stress_radius: float) -> dict:
     insertion records only each element's largest quadrature-point stress, biased high)."""
     f = profile_figures(res, stress_radius)
     if res.model.options.element_order == 2:
-        f["von_mises"] = max(p2_averaged_von_mises(res.model.fem, r.x, stress_radius) for r in res.steps)
+        f["von_mises"] = max(p2_averaged_von_mises(res.model.fem, r.x, stress_radius)
+                             for r in [*res.steps, *res.removal])
     return f
 
 

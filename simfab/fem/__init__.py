@@ -2,20 +2,23 @@
 
 - :mod:`simfab.fem.materials` - isotropic materials (Young's modulus, Poisson ratio, yield stress)
 - :mod:`simfab.fem.model` - the immutable :class:`FemModel` (rest shape, Dm^-1, volumes, Lame parameters)
+  and :class:`MeshModel`, the methods every element order provides
+- :mod:`simfab.fem.p2` - quadratic elements: :class:`P2Model` (6-node triangles, 10-node tets) from a
+  linear mesh (``to_p2``)
 - :mod:`simfab.fem.assembly` - fixed-pattern sparse Hessian assembly
-- :mod:`simfab.fem.neohookean` - compressible Neo-Hookean energy, gradient and PSD-projected Hessian (Warp)
-- :mod:`simfab.fem.p2` - quadratic elements: :class:`P2Model` (6-node triangles, 10-node tets) from a linear mesh (``to_p2``)
-- :mod:`simfab.fem.neohookean_p2` - the Neo-Hookean energy, gradient and Hessian on P2 elements (Warp, quadrature)
-- :mod:`simfab.fem.elastic` - the same energy functions for either element order (dispatch on the model type)
+- :mod:`simfab.fem.elastic` - compressible Neo-Hookean energy, gradient and (PSD-projected) Hessian of a
+  model of either element order: the public functions
+- :mod:`simfab.fem.neohookean`, :mod:`simfab.fem.neohookean_p2` - their Warp kernels (linear; P2 with
+  quadrature)
+- :mod:`simfab.fem.workspace` - the recorded kernel launches both element orders share
 - :mod:`simfab.fem.loads` - consistent nodal loads (body force, traction) for linear and P2 models
 - :mod:`simfab.fem.cantilever` - the cantilever bending verification problem (linear and P2 vs Timoshenko)
 - :mod:`simfab.fem.stress` - Cauchy and von Mises stress
 - :mod:`simfab.fem.meshing` - Triangle (2D) and fTetWild (3D) meshing, structured tet boxes
 - :mod:`simfab.fem.tolerances` - the area's numerical tolerances
-- :mod:`simfab.fem.benchmark` - timings (``python -m simfab.fem.benchmark``)
 
 The shared Newton solver lives in :mod:`simfab.solve.newton`.
 
 Submodules are imported on demand so that ``import simfab.fem`` stays cheap (Warp is imported
-by :mod:`simfab.fem.neohookean` only).
+by :mod:`simfab.fem.workspace` and the kernel modules only).
 """

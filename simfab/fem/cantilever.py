@@ -25,9 +25,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simfab.fem import elastic as nh
+from simfab.fem.loads import traction_loads
 from simfab.fem.materials import Material
+from simfab.fem.meshing import structured_box
 from simfab.fem.model import FemModel, make_model
 from simfab.fem.p2 import P2Model, to_p2
+from simfab.solve.newton import minimize
 
 #: the beam of the verification problem: steel-like modulus is irrelevant in the small-load limit
 BEAM = Material(name="beam", youngs_modulus=1.0e6, poisson_ratio=0.3, yield_stress=1e12, density=1.0)
@@ -61,8 +65,6 @@ def cantilever_model(dim: int, n: int, *, order: int = 1, length: float = 1.0, h
                      ) -> FemModel | P2Model:
     """The beam with ``n`` cells through the height (10 n along it at L/h = 10), linear (order 1)
     or P2 (order 2, quadrature ``degree``)."""
-    from simfab.fem.meshing import structured_box
-
     nx = int(round(n * length / height))
     if dim == 3:
         V, T = structured_box((length, height, height), (nx, n, n))
@@ -89,8 +91,6 @@ def timoshenko_deflection(load: float, *, dim: int, length: float = 1.0, height:
 def tip_loads(model: FemModel | P2Model, load: float, length: float) -> np.ndarray:
     """Consistent nodal forces (n, dim) [N] of a uniform -y traction with resultant ``load`` on the
     face X = length (:func:`simfab.fem.loads.traction_loads`)."""
-    from simfab.fem.loads import traction_loads
-
     X = model.rest
     on_tip = np.all(np.abs(X[model.boundary_facets, 0] - length) < 1e-9 * length, axis=1)
     f = traction_loads(model, on_tip, np.eye(model.dim)[1])
@@ -100,9 +100,6 @@ def tip_loads(model: FemModel | P2Model, load: float, length: float) -> np.ndarr
 def static_solve(model: FemModel | P2Model, x0, free_vertices, forces):
     """Minimize E(x) - f.x over the free vertices (others stay at x0), exact-first Newton steps
     (:func:`simfab.solve.newton.minimize`). Returns (x (n, dim), NewtonResult)."""
-    from simfab.fem import elastic as nh
-    from simfab.solve.newton import minimize
-
     f = np.asarray(forces, float).ravel()
 
     def fun(x, need_h):

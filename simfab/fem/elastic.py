@@ -1,58 +1,109 @@
-"""The elastic energy of any FEM model, linear or quadratic: one import for callers that should
-not care about the element order (e.g. the insertion simulation once it runs on P2 parts).
+"""The elastic energy of an FEM model of any element order: energy, gradient and Hessian.
 
-Each function has the signature of its :mod:`simfab.fem.neohookean` namesake and forwards to it
-for a :class:`~simfab.fem.model.FemModel` and to :mod:`simfab.fem.neohookean_p2` for a
-:class:`~simfab.fem.p2.P2Model` (there det F is the smallest and the von Mises stress the largest
-value over each element's quadrature points).
+Compressible Neo-Hookean material, ``Psi(F) = mu/2 (||F||_F^2 - d) - mu log J + lam/2 (log J)^2``
+(2D: plane strain with ``model.thickness``), integrated over each element with the model's
+quadrature rule (linear simplices: F constant, one point). The kernels and their equations are in
+:mod:`simfab.fem.neohookean` (linear) and :mod:`simfab.fem.neohookean_p2` (quadratic); every function
+here runs the one kernel launch over all elements that computes what it returns
+(:func:`simfab.fem.workspace.launch`), with the kernels of ``model.element_order``.
+
+Units: positions x (n, dim) [m] (or flat (n*dim,)); energy [J]; gradient dE/dx (n, dim) [N] with
+the sign of the energy increase (the elastic nodal force is ``-gradient``); Hessians [N/m] over
+dofs ordered (node, axis). The energy is +inf if det F <= 0 anywhere it is evaluated (P2: at any
+quadrature point); such elements contribute nothing to the gradient and Hessian.
 """
 
 from __future__ import annotations
 
-from types import ModuleType
+import numpy as np
+import scipy.sparse as sp
+
+from simfab.errors import InputError
+from simfab.fem.neohookean import LINEAR
+from simfab.fem.workspace import ElementKernels, Hessian, Launch, launch
+
+_PROJECTIONS = {"auto": Hessian.PROJECT, "svd": Hessian.PROJECT_SVD}
 
 
-def kernels(model) -> ModuleType:
-    """The Neo-Hookean module for the model's element order."""
-    from simfab.fem.p2 import P2Model
+def kernels(model) -> ElementKernels:
+    """The kernels of the model's element order: :data:`~simfab.fem.neohookean.LINEAR` (1) or
+    :data:`~simfab.fem.neohookean_p2.QUADRATIC` (2)."""
+    order = model.element_order
+    if order == 1:
+        return LINEAR
+    if order == 2:
+        # deferred for start-up time: defining the P2 kernels takes about half a second at import,
+        # which runs on linear elements do not need
+        from simfab.fem.neohookean_p2 import QUADRATIC
 
-    if isinstance(model, P2Model):
-        from simfab.fem import neohookean_p2 as mod
-    else:
-        from simfab.fem import neohookean as mod
-    return mod
+        return QUADRATIC
+    raise InputError(f"no kernels for element order {order}", where="element_order")
+
+
+def _mode(project_psd: bool, projection: str) -> Hessian:
+    if not project_psd:
+        return Hessian.EXACT
+    if projection not in _PROJECTIONS:
+        raise InputError(f"projection must be one of {sorted(_PROJECTIONS)}, got {projection!r}", where="projection")
+    return _PROJECTIONS[projection]
 
 
 def energy(model, x) -> float:
-    """Elastic energy [J]; +inf if any element is inverted."""
-    return kernels(model).energy(model, x)
+    """Elastic energy [J] at positions x; +inf if any element is inverted."""
+    return launch(model, kernels(model), x, Launch.ENERGY).total_energy()
 
 
-def energy_gradient(model, x):
-    """(energy [J], gradient (n, dim) [N])."""
-    return kernels(model).energy_gradient(model, x)
+def energy_gradient(model, x) -> tuple[float, np.ndarray]:
+    """(energy [J], gradient dE/dx (n, dim) [N])."""
+    ws = launch(model, kernels(model), x, Launch.GRADIENT)
+    return ws.total_energy(), ws.gradient()
 
 
-def energy_gradient_hessian(model, x, *, project_psd: bool = True):
-    """(energy [J], gradient (n, dim) [N], Hessian CSR (n*dim, n*dim) [N/m], PSD-projected or exact)."""
-    return kernels(model).energy_gradient_hessian(model, x, project_psd=project_psd)
+def energy_gradient_hessian(model, x, *, project_psd: bool = True,
+                            projection: str = "auto") -> tuple[float, np.ndarray, sp.csr_matrix]:
+    """(energy [J], gradient (n, dim) [N], Hessian (n*dim, n*dim) CSR [N/m]).
+
+    With ``project_psd`` (default) the negative eigenvalues of d2Psi/dF2 are clamped to zero at
+    every element (P2: every quadrature point), so the assembled Hessian is PSD; otherwise it is the
+    exact Hessian. ``projection``: "auto" removes the negative twist modes in closed form where
+    dPsi/dJ <= 0 and uses the SVD eigensystem elsewhere; "svd" uses the SVD eigensystem everywhere
+    (the reference route; the two agree to round-off). The CSR has the model's fixed pattern
+    (``model.pattern``); its ``data`` is a fresh array the caller may modify (e.g. add contact
+    blocks via ``pattern.block_slots``).
+    """
+    ws = launch(model, kernels(model), x, Launch.HESSIAN, _mode(project_psd, projection))
+    return ws.total_energy(), ws.gradient(), model.pattern.matrix(ws.csr_values())
 
 
-def energy_gradient_hessians(model, x):
-    """(energy, gradient, exact Hessian, PSD-projected Hessian) from one launch."""
-    return kernels(model).energy_gradient_hessians(model, x)
+def energy_gradient_hessians(model, x) -> tuple[float, np.ndarray, sp.csr_matrix, sp.csr_matrix]:
+    """(energy [J], gradient (n, dim) [N], exact Hessian, PSD-projected Hessian), both CSR
+    (n*dim, n*dim) [N/m] with the model's pattern, from a single kernel launch.
+
+    For :func:`simfab.solve.newton.minimize` return ``(H_exact, H_psd)`` as the Hessian: it takes
+    exact Newton steps whenever the exact Hessian is positive definite (quadratic convergence near
+    stable equilibria with large rotations, where per-element projection converges only linearly)
+    and falls back to the projected one otherwise.
+    """
+    ws = launch(model, kernels(model), x, Launch.HESSIAN, Hessian.BOTH)
+    return (ws.total_energy(), ws.gradient(), model.pattern.matrix(ws.csr_values()),
+            model.pattern.matrix(ws.csr_values(second=True)))
 
 
-def element_hessians(model, x, *, project_psd: bool = True):
-    """Per-element Hessian blocks (m, k*dim, k*dim) [N/m]."""
-    return kernels(model).element_hessians(model, x, project_psd=project_psd)
+def element_hessians(model, x, *, project_psd: bool = True, projection: str = "auto") -> np.ndarray:
+    """Per-element Hessian blocks (m, k*dim, k*dim) [N/m], dofs ordered (local node, axis);
+    ``project_psd`` and ``projection`` as in :func:`energy_gradient_hessian`."""
+    ws = launch(model, kernels(model), x, Launch.BLOCKS, _mode(project_psd, projection))
+    return ws.hess.numpy().copy()
 
 
-def det_F(model, x):
-    """det F per element (m,) (P2: the smallest over the quadrature points)."""
-    return kernels(model).det_F(model, x)
+def det_F(model, x) -> np.ndarray:
+    """det F per element (m,) [-] (P2: the smallest over the quadrature points); <= 0 means inverted."""
+    return launch(model, kernels(model), x, Launch.ENERGY).outputs()[1].copy()
 
 
-def det_and_von_mises(model, x):
-    """(det F (m,) [-], von Mises stress (m,) [Pa]) per element (P2: min / max over the points)."""
-    return kernels(model).det_and_von_mises(model, x)
+def det_and_von_mises(model, x) -> tuple[np.ndarray, np.ndarray]:
+    """(det F (m,) [-], von Mises stress (m,) [Pa]) per element in one launch (P2: the smallest det F
+    and the largest stress over the quadrature points); +inf stress where det F <= 0. Formula:
+    :func:`simfab.fem.stress.det_and_von_mises`."""
+    ws = launch(model, kernels(model), x, Launch.STRESS)
+    return ws.det_F.numpy().copy(), ws.von_mises.numpy().copy()

@@ -14,7 +14,7 @@ from typing import Callable
 import numpy as np
 
 from simfab.fem.model import FemModel
-from simfab.fem.p2 import RULES, P2Model, shape_functions
+from simfab.fem.p2 import RULES, P2Model
 
 
 def body_force_loads(model: FemModel | P2Model, density: Callable[[np.ndarray], np.ndarray], *,
@@ -29,12 +29,8 @@ def body_force_loads(model: FemModel | P2Model, density: Callable[[np.ndarray], 
     if degree is None:
         degree = max(d for (dd, d) in RULES if dd == dim)
     L, w = RULES[(dim, degree)]
-    if isinstance(model, P2Model):
-        N, _ = shape_functions(L, dim)
-        corners = model.rest[model.corner_elements]
-    else:
-        N = L  # linear shape functions are the barycentrics
-        corners = model.rest[model.elements]
+    N = model.shape_functions(L)  # (q, k)
+    corners = model.rest[model.corner_elements]
     Xq = np.einsum("ql,mld->mqd", L, corners)
     b = np.asarray(density(Xq.reshape(-1, dim)), dtype=np.float64).reshape(Xq.shape)
     fe = np.einsum("m,q,qa,mqd->mad", model.volume, w, N, b)

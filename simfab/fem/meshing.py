@@ -10,6 +10,8 @@ import contextlib
 import tempfile
 
 import numpy as np
+import shapely
+import triangle
 
 from simfab.errors import InputError
 
@@ -40,9 +42,6 @@ def triangulate_polygon(outline, *, holes=(), max_area: float | None = None, min
     Returns V (n, 2) float64 and F (m, 3) int32, counter-clockwise (positive) triangles. The
     polygon's boundary segments are kept (Steiner points may split them).
     """
-    import shapely
-    import triangle
-
     outer = _as_loop(outline, "outline")
     loops = [outer] + [_as_loop(h, f"holes[{i}]") for i, h in enumerate(holes)]
     poly = shapely.Polygon(outer, [h for h in loops[1:]])
@@ -91,8 +90,6 @@ def check_polygon_size(poly, max_area: float | None = None) -> None:
     A quality (minimum-angle) triangulation of a strip of width w and length L needs about
     L / w triangles; with w ~ 2 A / P and L ~ P / 2 that is ~ P^2 / (4 A).
     """
-    import shapely
-
     A, P = float(poly.area), float(poly.length)
     lo, hi = np.asarray(poly.bounds[:2]), np.asarray(poly.bounds[2:])
     diag = float(np.linalg.norm(hi - lo))
@@ -151,7 +148,7 @@ def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, tar
             raise InputError(f"edge length asks for about {n_est:.3g} tetrahedra (limit {MAX_ELEMENTS})",
                              where="edge_length_fac")
         kwargs["edge_length_fac"] = float(edge_length_fac)
-    import pytetwild  # lazy: imports pyvista
+    import pytetwild  # deferred for start-up time: importing it loads pyvista (~0.4 s)
 
     # fTetWild drops a scratch file (__tracked_surface.stl) into the working directory: run it
     # from a private temporary directory so callers' folders stay clean.
@@ -215,7 +212,7 @@ def load_gmsh():
     """The ``gmsh`` module, or RuntimeError(GMSH_MISSING) when it is not installed or cannot load
     its library (a bare system lacks the X11/GLU libraries the PyPI wheel links against)."""
     try:
-        import gmsh
+        import gmsh  # deferred: optional, and its library may fail to load (handled here)
     except (ImportError, OSError) as e:
         raise RuntimeError(f"{GMSH_MISSING} ({type(e).__name__}: {e})") from None
     return gmsh

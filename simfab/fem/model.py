@@ -12,14 +12,36 @@ import numpy as np
 
 from simfab.errors import InputError
 from simfab.fem.assembly import HessianPattern
-from simfab.fem.materials import Material
+from simfab.fem.materials import Material, material_by_name
 from simfab.fem.tolerances import DEGENERATE_REL
 
 
+@dataclass(frozen=True, kw_only=True)
 class MeshModel:
     """What every immutable FEM model (linear :class:`FemModel`, quadratic
-    :class:`simfab.fem.p2.P2Model`) shares: sizes from ``rest`` (n, dim) and ``elements`` (m, nodes),
-    and pickling without ``_cache`` (device buffers and recorded launches, rebuilt on demand)."""
+    :class:`simfab.fem.p2.P2Model`) shares: sizes from ``rest`` (n, dim) and ``elements`` (m, k),
+    position validation, and pickling without ``_cache`` (device buffers and recorded launches,
+    rebuilt on demand). What depends on the element order is a method of the subclass:
+
+    ``element_order``, ``element_geometry()``, ``shape_functions(L)``, ``linear_facets()``,
+    ``linear_elements()``, ``mean_edge_length()`` and the ``corner_elements`` (m, dim+1). The fields
+    every order has are described in :class:`FemModel` and :class:`simfab.fem.p2.P2Model`.
+    """
+
+    dim: int
+    rest: np.ndarray
+    elements: np.ndarray
+    Dm_inv: np.ndarray
+    volume: np.ndarray
+    mu: np.ndarray
+    lam: np.ndarray
+    thickness: float
+    boundary_facets: np.ndarray
+    boundary_vertices: np.ndarray
+    pattern: HessianPattern
+    material: Material | None = None
+    device: str = "cpu"
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __getstate__(self):
         return {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "_cache"}
@@ -44,6 +66,46 @@ class MeshModel:
     def n_dofs(self) -> int:
         return self.rest.size
 
+    @property
+    def element_order(self) -> int:
+        """Polynomial order of the shape functions: 1 (linear) or 2 (P2); selects the kernels in
+        :mod:`simfab.fem.elastic`."""
+        raise NotImplementedError
+
+    def element_geometry(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rest geometry F is computed from at each quadrature point, weights (m, ...) [m^3]): what
+        the element order's kernels read (:mod:`simfab.fem.workspace`)."""
+        raise NotImplementedError
+
+    def shape_functions(self, L) -> np.ndarray:
+        """Nodal shape functions (q, k) at barycentric points L (q, dim+1) of an element."""
+        raise NotImplementedError
+
+    def linear_facets(self) -> np.ndarray:
+        """(f, dim) the boundary as linear facets over the model's nodes, oriented like
+        ``boundary_facets`` (contact is checked and refined on them)."""
+        raise NotImplementedError
+
+    def linear_elements(self) -> np.ndarray:
+        """(m', dim+1) the body as linear simplices over the model's nodes (output: USD, MJCF, plots)."""
+        raise NotImplementedError
+
+    def mean_edge_length(self) -> float:
+        """Mean length [m] of the (corner-mesh) element edges at rest."""
+        raise NotImplementedError
+
+    def check_positions(self, x, where: str = "x") -> np.ndarray:
+        """``x`` (n, dim) or (n*dim,) as a (n, dim) float64 array; InputError naming ``where`` if the
+        shape is wrong or it holds NaN/inf."""
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape == (self.n_dofs,):
+            x = x.reshape(self.n_vertices, self.dim)
+        if x.shape != self.rest.shape:
+            raise InputError(f"positions have shape {x.shape}, expected {self.rest.shape}", where=where)
+        if not np.all(np.isfinite(x)):
+            raise InputError("positions contain NaN or inf", where=where)
+        return x
+
 
 @dataclass(frozen=True, kw_only=True)
 class FemModel(MeshModel):
@@ -65,35 +127,35 @@ class FemModel(MeshModel):
     device : Warp device the kernels run on ("cpu", "cuda:0")
     """
 
-    dim: int
-    rest: np.ndarray
-    elements: np.ndarray
-    Dm_inv: np.ndarray
-    volume: np.ndarray
-    mu: np.ndarray
-    lam: np.ndarray
-    thickness: float
-    boundary_facets: np.ndarray
-    boundary_vertices: np.ndarray
-    pattern: HessianPattern
-    material: Material | None = None
-    device: str = "cpu"
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+    @property
+    def element_order(self) -> int:
+        return 1
+
+    @property
+    def corner_elements(self) -> np.ndarray:
+        """(m, dim+1) the simplices' corners: the elements themselves."""
+        return self.elements
 
     def mean_edge_length(self) -> float:
         """Mean length [m] of the element edges at rest (each element edge counted once per element)."""
         return _mean_edge_length(self.rest, self.elements)
 
-    def check_positions(self, x, where: str = "x") -> np.ndarray:
-        """``x`` as a (n, dim) float64 array; InputError if the shape is wrong or it holds NaN/inf."""
-        x = np.asarray(x, dtype=np.float64)
-        if x.shape == (self.n_dofs,):
-            x = x.reshape(self.n_vertices, self.dim)
-        if x.shape != self.rest.shape:
-            raise InputError(f"positions have shape {x.shape}, expected {self.rest.shape}", where=where)
-        if not np.all(np.isfinite(x)):
-            raise InputError("positions contain NaN or inf", where=where)
-        return x
+    def element_geometry(self) -> tuple[np.ndarray, np.ndarray]:
+        """(Dm^-1 (m, dim, dim) [1/m], volume (m,) [m^3]): F = Ds Dm^-1 is constant over a linear
+        simplex, so it is the one-quadrature-point case with weight = volume."""
+        return self.Dm_inv, self.volume
+
+    def shape_functions(self, L) -> np.ndarray:
+        """Linear shape functions (q, dim+1) at barycentric points L (q, dim+1): the barycentrics."""
+        return np.asarray(L, dtype=np.float64)
+
+    def linear_facets(self) -> np.ndarray:
+        """(f, dim) the boundary facets (``boundary_facets``)."""
+        return self.boundary_facets
+
+    def linear_elements(self) -> np.ndarray:
+        """(m, dim+1) the elements."""
+        return self.elements
 
 
 def _edge_matrices(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
@@ -134,8 +196,8 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     element, degenerate elements (|det Dm| <= DEGENERATE_REL * h^dim, h = mean edge length),
     thickness <= 0.
     """
+    # deferred: importing simfab._warp loads Warp, which building a model needs only for the device name
     from simfab._warp import device as _validate_device
-    from simfab.fem.materials import material_by_name
 
     if isinstance(material, str):
         material = material_by_name(material)
@@ -146,13 +208,15 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     where = "mesh"
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] not in (2, 3) or pts.shape[0] < pts.shape[1] + 1:
-        raise InputError(f"points must be an (n, 2) or (n, 3) array with n >= dim+1, got shape {pts.shape}", where=where)
+        raise InputError(f"points must be an (n, 2) or (n, 3) array with n >= dim+1, got shape {pts.shape}",
+                         where=where)
     if not np.all(np.isfinite(pts)):
         raise InputError("points contain NaN or inf", where=where)
     dim = pts.shape[1]
     el = np.asarray(elements)
     if el.ndim != 2 or el.shape[1] != dim + 1 or el.shape[0] == 0:
-        raise InputError(f"elements must be an (m, {dim + 1}) array for {dim}D points, got shape {el.shape}", where=where)
+        raise InputError(f"elements must be an (m, {dim + 1}) array for {dim}D points, got shape {el.shape}",
+                         where=where)
     if not np.issubdtype(el.dtype, np.integer):
         if not np.all(np.equal(np.mod(el, 1), 0)):
             raise InputError("element indices must be integers", where=where)
@@ -167,7 +231,8 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     used = np.zeros(n, bool)
     used[el.ravel()] = True
     if not used.all():
-        raise InputError(f"{int((~used).sum())} vertices are not used by any element (first: {int(np.flatnonzero(~used)[0])})",
+        first = int(np.flatnonzero(~used)[0])
+        raise InputError(f"{int((~used).sum())} vertices are not used by any element (first: {first})",
                          where=where)
     if not (np.isfinite(thickness) and thickness > 0):
         raise InputError(f"thickness must be > 0, got {thickness}", where=where)

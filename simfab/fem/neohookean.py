@@ -1,4 +1,6 @@
-"""Compressible Neo-Hookean elasticity on linear simplices: energy, gradient, Hessian side by side.
+"""Compressible Neo-Hookean elasticity on linear simplices: the Warp kernels (energy, gradient,
+Hessian side by side) and their :data:`LINEAR` record. The public functions that launch them, for
+every element order, are in :mod:`simfab.fem.elastic`.
 
 Per element (volume V, Lame parameters mu, lam, dimension d):
 
@@ -31,7 +33,7 @@ twist/flip values come from the mu ||F||^2 term (2 * mu/2 * I) plus dPsi/dJ time
 det F, whose eigenvalues on those modes are +-s_k.) The PSD projection clamps negative
 eigenvalues to zero in this d^2-dimensional stress space, which makes the element block PSD.
 
-3D evaluation (measured ~2x faster than the SVD route, no eigensolver in the common case): when
+3D evaluation (no eigensolver in the common case, about half the cost of the SVD route): when
 dPsi/dJ <= 0 (lam log J <= mu - all but strong volumetric expansion) the flip and scaling
 eigenvalues are provably positive, so only the 3-dimensional twist block can be indefinite. That
 block is T = mu I + dPsi/dJ S in the basis R [e_i]x / sqrt 2, with F = R S the polar decomposition
@@ -40,16 +42,15 @@ block is T = mu I + dPsi/dJ S in the basis R [e_i]x / sqrt 2, with F = R S the p
 spectral projectors come from closed-form eigenvalues (accurate also for clustered eigenvalues).
 With dPsi/dJ > 0 the full SVD eigensystem is used. 2D works the same way with its single twist
 mode (polar rotation in closed form).
-With ``project_psd=False`` the exact Hessian is returned (validated against finite differences;
-the two projected routes agree to round-off, also checked against numpy ``eigh`` in the tests).
-Batched numpy ``eigh`` of the 12x12 element blocks instead was ~10x slower than the whole kernel
-(``python -m simfab.fem.benchmark``).
+The exact Hessian (mode EXACT) is validated against finite differences; the two projected routes
+(PROJECT, PROJECT_SVD) agree to round-off and with numpy ``eigh`` of the exact blocks (tests).
 
-All kernels run in float64, one launch per call for all elements (energy, gradient and Hessian
-blocks in the same kernel when the Hessian is wanted); the Hessian kernel adds its values straight
-into the CSR ``data`` of the model's fixed pattern through precomputed slots. Warp CPU kernels
-run single-threaded, so results are bit-reproducible there; on CUDA the additions are atomic and
-their order (hence the last bits) can vary between runs.
+All kernels run in float64 with one thread per element (argument lists and launch codes:
+:mod:`simfab.fem.workspace`); energy, gradient and Hessian blocks come from the same kernel when the
+Hessian is wanted, and the Hessian kernel adds its values straight into the CSR ``data`` of the
+model's fixed pattern through precomputed slots. Warp CPU kernels run single-threaded, so results
+are bit-reproducible there; on CUDA the additions are atomic and their order (hence the last bits)
+can vary between runs.
 
 An element with det F <= 0 makes the energy +inf (the log barrier of Neo-Hookean); such an
 element contributes nothing to the gradient and Hessian, which are then not meaningful.
@@ -59,12 +60,9 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-import scipy.sparse as sp
-
-from simfab._warp import RECORD_LOCK, wp
+from simfab._warp import wp
 from simfab.fem import tolerances
-from simfab.fem.model import FemModel
+from simfab.fem.workspace import ElementKernels, Hessian
 
 wp.set_module_options({"enable_backward": False})  # hand-written derivatives; halves compile time
 
@@ -74,14 +72,15 @@ _vec4d = wp.types.vector(length=4, dtype=wp.float64)
 _vec9d = wp.types.vector(length=9, dtype=wp.float64)
 _mat4x6d = wp.types.matrix(shape=(4, 6), dtype=wp.float64)
 _mat9x12d = wp.types.matrix(shape=(9, 12), dtype=wp.float64)
+_mat44d = wp.types.matrix(shape=(4, 4), dtype=wp.float64)
+_mat99d = wp.types.matrix(shape=(9, 9), dtype=wp.float64)
 
 _HALF_SQRT2 = 0.7071067811865476  # 1/sqrt(2): unit Frobenius norm of the twist/flip modes
-# Hessian kernel modes: exact; PSD-projected (direct route where valid, else SVD); PSD-projected
-# always through the SVD eigensystem (reference route for tests and the benchmark)
-_EXACT = wp.constant(0)
-_PROJECT = wp.constant(1)
-_PROJECT_SVD = wp.constant(2)
-_BOTH = wp.constant(3)  # exact into ``data`` and PSD-projected (default route) into ``data2``
+# Hessian kernel modes (simfab.fem.workspace.Hessian)
+_EXACT = wp.constant(int(Hessian.EXACT))
+_PROJECT = wp.constant(int(Hessian.PROJECT))
+_PROJECT_SVD = wp.constant(int(Hessian.PROJECT_SVD))
+_BOTH = wp.constant(int(Hessian.BOTH))
 _POLAR_STEP_SQ_TOL = wp.constant(wp.float64(tolerances.POLAR_STEP_SQ_TOL))
 _POLAR_MAX_ITER = wp.constant(tolerances.POLAR_MAX_ITER)
 
@@ -108,6 +107,19 @@ def _store(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dty
 
 
 @wp.func
+def _void(e: int, scatter: int, energy: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
+          hess: wp.array3d(dtype=wp.float64)):
+    """Zero element e's energy, gradient and (with block storage, scatter == 0) Hessian block: an
+    inverted element contributes nothing."""
+    energy[e] = wp.float64(0.0)
+    grad[e] = grad.dtype()
+    if scatter == 0:
+        for r in range(hess.shape[1]):
+            for c in range(hess.shape[2]):
+                hess[e, r, c] = wp.float64(0.0)
+
+
+@wp.func
 def _psi(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64, d: wp.float64):
     """Neo-Hookean energy density [Pa] (J > 0)."""
     logJ = wp.log(J)
@@ -119,12 +131,6 @@ def _pk1(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64):
     """First Piola-Kirchhoff stress P = mu (F - F^-T) + lam log J F^-T [Pa]."""
     FinvT = wp.transpose(wp.inverse(F))
     return mu * (F - FinvT) + lam * wp.log(J) * FinvT
-
-
-@wp.func
-def _mode(U: Any, M: Any, V: Any, Dmi: Any):
-    """Nodal vector of the stress-space mode U M V^T (2D or 3D through the ``_nodal`` overloads)."""
-    return _nodal(U * M * wp.transpose(V), Dmi)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -304,35 +310,34 @@ def _hessian_direct(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.i
 
 
 @wp.func
-def _hessian_svd(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu: wp.float64, lam: wp.float64,
-                 dPsi_dJ: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                 hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
-    """PSD-projected element Hessian from the full analytic eigensystem (SVD of F). Used when
-    dPsi/dJ > 0 (strong volumetric expansion), where flip and scaling eigenvalues can be negative."""
+def _eigensystem(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
+    """The 9 eigenmodes of d2Psi/dF2 from the SVD F = U diag(s) V^T, as rows vec(U M_k V^T)
+    (row-major) of a 9x9 matrix, and their eigenvalues clamped at 0 (module docstring): twist
+    (skew) and flip (symmetric) modes in the (1,2), (0,2), (0,1) planes, then the scaling modes
+    U diag(q) V^T, q the eigenvectors of the Hessian of Psi in the singular values."""
     zero = wp.float64(0.0)
-    project = 1
     U = wp.mat33d()
     s = wp.vec3d()
     Vs = wp.mat33d()
     wp.svd3(F, U, s, Vs)
     logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
     h = wp.float64(_HALF_SQRT2)
-    B = _mat9x12d()  # rows: nodal vectors of the 9 eigenmodes of d2Psi/dF2
-    w = _vec9d()  # their clamped eigenvalues
-    # twist (skew) and flip (symmetric) modes in the (1,2), (0,2), (0,1) planes
-    B[0] = _mode(U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, Dmi)
-    w[0] = _clamp(mu + dPsi_dJ * s[0], project)
-    B[1] = _mode(U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, Dmi)
-    w[1] = _clamp(mu - dPsi_dJ * s[0], project)
-    B[2] = _mode(U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, Dmi)
-    w[2] = _clamp(mu + dPsi_dJ * s[1], project)
-    B[3] = _mode(U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, Dmi)
-    w[3] = _clamp(mu - dPsi_dJ * s[1], project)
-    B[4] = _mode(U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
-    w[4] = _clamp(mu + dPsi_dJ * s[2], project)
-    B[5] = _mode(U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, Dmi)
-    w[5] = _clamp(mu - dPsi_dJ * s[2], project)
-    # scaling modes U diag(q) V^T: q eigenvectors of the Hessian of Psi in the singular values
+    Vt = wp.transpose(Vs)
+    modes = _mat99d()
+    w = _vec9d()
+    modes[0] = _vec(U * wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero) * Vt)
+    w[0] = _clamp(mu + dPsi_dJ * s[0], 1)
+    modes[1] = _vec(U * wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero) * Vt)
+    w[1] = _clamp(mu - dPsi_dJ * s[0], 1)
+    modes[2] = _vec(U * wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero) * Vt)
+    w[2] = _clamp(mu + dPsi_dJ * s[1], 1)
+    modes[3] = _vec(U * wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero) * Vt)
+    w[3] = _clamp(mu - dPsi_dJ * s[1], 1)
+    modes[4] = _vec(U * wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero) * Vt)
+    w[4] = _clamp(mu + dPsi_dJ * s[2], 1)
+    modes[5] = _vec(U * wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero) * Vt)
+    w[5] = _clamp(mu - dPsi_dJ * s[2], 1)
     cs = mu + lam * (wp.float64(1.0) - logJ)
     A = wp.mat33d(
         mu + cs / (s[0] * s[0]), lam / (s[0] * s[1]), lam / (s[0] * s[2]),
@@ -343,10 +348,35 @@ def _hessian_svd(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu:
     d = wp.vec3d()
     wp.eig3(A, Q, d)
     for k in range(3):
-        B[6 + k] = _mode(U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, Dmi)
-        w[6 + k] = _clamp(d[k], project)
-    # H_e = V sum_k w_k b_k b_k^T  (symmetric: compute the upper triangle, mirror)
-    for r in range(12):
+        modes[6 + k] = _vec(U * wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])) * Vt)
+        w[6 + k] = _clamp(d[k], 1)
+    return modes, w
+
+
+@wp.func
+def _vec(M: wp.mat33d):
+    """vec(M), row-major."""
+    return _vec9d(M[0, 0], M[0, 1], M[0, 2], M[1, 0], M[1, 1], M[1, 2], M[2, 0], M[2, 1], M[2, 2])
+
+
+@wp.func
+def _unvec(v: _vec9d):
+    return wp.mat33d(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8])
+
+
+@wp.func
+def _hessian_svd(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu: wp.float64, lam: wp.float64,
+                 scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dtype=wp.float64),
+                 data: wp.array(dtype=wp.float64), e: int):
+    """PSD-projected element Hessian V sum_k w_k b_k b_k^T from the clamped eigensystem (b_k: the
+    nodal vector of mode k). Used when dPsi/dJ > 0 (strong volumetric expansion), where flip and
+    scaling eigenvalues can be negative."""
+    zero = wp.float64(0.0)
+    modes, w = _eigensystem(F, J, mu, lam)
+    B = _mat9x12d()  # rows: nodal vectors of the 9 eigenmodes
+    for k in range(9):
+        B[k] = _nodal(_unvec(modes[k]), Dmi)
+    for r in range(12):  # symmetric: the upper triangle, mirrored by _store
         for c in range(r, 12):
             acc = zero
             for k in range(9):
@@ -447,26 +477,24 @@ def _hessian_direct(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.i
 
 
 @wp.func
-def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d,  # noqa: F811
-                 V: wp.float64, mu: wp.float64, lam: wp.float64,
-                 dPsi_dJ: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                 hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
-    """PSD-projected element Hessian from the full eigensystem (SVD of F), for dPsi/dJ > 0."""
+def _eigensystem(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
+    """2D: twist, flip and the two scaling modes (closed-form eigensystem of the symmetric 2x2
+    [[a, o], [o, c2]]) as rows vec(U M_k V^T) of a 4x4 matrix, eigenvalues clamped at 0."""
     zero = wp.float64(0.0)
-    project = 1
     U = wp.mat22d()
     s = wp.vec2d()
     Vs = wp.mat22d()
     wp.svd2(F, U, s, Vs)
     logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
     h = wp.float64(_HALF_SQRT2)
-    B = _mat4x6d()
+    Vt = wp.transpose(Vs)
+    modes = _mat44d()
     w = _vec4d()
-    B[0] = _mode(U, wp.mat22d(zero, -h, h, zero), Vs, Dmi)  # twist
-    w[0] = _clamp(mu + dPsi_dJ, project)
-    B[1] = _mode(U, wp.mat22d(zero, h, h, zero), Vs, Dmi)  # flip
-    w[1] = _clamp(mu - dPsi_dJ, project)
-    # scaling modes: closed-form eigensystem of the symmetric 2x2 [[a, o], [o, c2]]
+    modes[0] = _vec(U * wp.mat22d(zero, -h, h, zero) * Vt)  # twist
+    w[0] = _clamp(mu + dPsi_dJ, 1)
+    modes[1] = _vec(U * wp.mat22d(zero, h, h, zero) * Vt)  # flip
+    w[1] = _clamp(mu - dPsi_dJ, 1)
     cs = mu + lam * (wp.float64(1.0) - logJ)
     a = mu + cs / (s[0] * s[0])
     c2 = mu + cs / (s[1] * s[1])
@@ -474,16 +502,130 @@ def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d,  # noqa: F811
     theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
     ct = wp.cos(theta)
     st = wp.sin(theta)
-    B[2] = _mode(U, wp.mat22d(ct, zero, zero, st), Vs, Dmi)
-    w[2] = _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, project)
-    B[3] = _mode(U, wp.mat22d(-st, zero, zero, ct), Vs, Dmi)
-    w[3] = _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, project)
+    modes[2] = _vec(U * wp.mat22d(ct, zero, zero, st) * Vt)
+    w[2] = _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, 1)
+    modes[3] = _vec(U * wp.mat22d(-st, zero, zero, ct) * Vt)
+    w[3] = _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, 1)
+    return modes, w
+
+
+@wp.func
+def _vec(M: wp.mat22d):  # noqa: F811
+    return _vec4d(M[0, 0], M[0, 1], M[1, 0], M[1, 1])
+
+
+@wp.func
+def _unvec(v: _vec4d):  # noqa: F811
+    return wp.mat22d(v[0], v[1], v[2], v[3])
+
+
+@wp.func
+def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu: wp.float64,  # noqa: F811
+                 lam: wp.float64, scatter: int, slots: wp.array3d(dtype=wp.int32),
+                 hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64), e: int):
+    zero = wp.float64(0.0)
+    modes, w = _eigensystem(F, J, mu, lam)
+    B = _mat4x6d()
+    for k in range(4):
+        B[k] = _nodal(_unvec(modes[k]), Dmi)
     for r in range(6):
         for c in range(r, 6):
             acc = zero
             for k in range(4):
                 acc += w[k] * B[k, r] * B[k, c]
             _store(scatter, slots, hess, data, e, r, c, V * acc)
+
+
+# ----------------------------------------------------------------------------------------------
+# the clamped stress Hessian d2Psi/dF2 from the analytic eigensystem, for the P2 kernels' SVD route
+# (built mode by mode rather than from ``_eigensystem``: see docs/decisions.md)
+# ----------------------------------------------------------------------------------------------
+@wp.func
+def _dimi(M: wp.mat33d):
+    return 3
+
+
+@wp.func
+def _dimi(M: wp.mat22d):  # noqa: F811
+    return 2
+
+
+@wp.func
+def _outer_vec(A: Any, M: Any, c: wp.float64):
+    """A + c vec(M) vec(M)^T (vec row-major, M d x d)."""
+    d = _dimi(M)
+    B = A
+    for i in range(d):
+        for k in range(d):
+            for j in range(d):
+                for l in range(d):
+                    B[d * i + k, d * j + l] = B[d * i + k, d * j + l] + c * M[i, k] * M[j, l]
+    return B
+
+
+@wp.func
+def _svd_mode(A: Any, U: Any, M: Any, Vs: Any, lam_k: wp.float64):
+    """A + lam_k vec(U M V^T) vec(U M V^T)^T."""
+    return _outer_vec(A, U * M * wp.transpose(Vs), lam_k)
+
+
+@wp.func
+def _stress_hessian_svd(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
+    """d2Psi/dF2 rebuilt from its analytic eigensystem with clamped eigenvalues (PSD)."""
+    zero = wp.float64(0.0)
+    U = wp.mat33d()
+    s = wp.vec3d()
+    Vs = wp.mat33d()
+    wp.svd3(F, U, s, Vs)
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    h = wp.float64(_HALF_SQRT2)
+    A = _mat99d()
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, _clamp(mu + dPsi_dJ * s[0], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, _clamp(mu - dPsi_dJ * s[0], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[1], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[1], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[2], 1))
+    A = _svd_mode(A, U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[2], 1))
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    S = wp.mat33d(
+        mu + cs / (s[0] * s[0]), lam / (s[0] * s[1]), lam / (s[0] * s[2]),
+        lam / (s[0] * s[1]), mu + cs / (s[1] * s[1]), lam / (s[1] * s[2]),
+        lam / (s[0] * s[2]), lam / (s[1] * s[2]), mu + cs / (s[2] * s[2]),
+    )
+    Q = wp.mat33d()
+    d = wp.vec3d()
+    wp.eig3(S, Q, d)
+    for k in range(3):
+        A = _svd_mode(A, U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, _clamp(d[k], 1))
+    return A
+
+
+@wp.func
+def _stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
+    zero = wp.float64(0.0)
+    U = wp.mat22d()
+    s = wp.vec2d()
+    Vs = wp.mat22d()
+    wp.svd2(F, U, s, Vs)
+    logJ = wp.log(J)
+    dPsi_dJ = (lam * logJ - mu) / J
+    h = wp.float64(_HALF_SQRT2)
+    A = _mat44d()
+    A = _svd_mode(A, U, wp.mat22d(zero, -h, h, zero), Vs, _clamp(mu + dPsi_dJ, 1))  # twist
+    A = _svd_mode(A, U, wp.mat22d(zero, h, h, zero), Vs, _clamp(mu - dPsi_dJ, 1))  # flip
+    cs = mu + lam * (wp.float64(1.0) - logJ)
+    a = mu + cs / (s[0] * s[0])
+    c2 = mu + cs / (s[1] * s[1])
+    o = lam / (s[0] * s[1])
+    theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
+    ct = wp.cos(theta)
+    st = wp.sin(theta)
+    A = _svd_mode(A, U, wp.mat22d(ct, zero, zero, st), Vs,
+                  _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, 1))
+    A = _svd_mode(A, U, wp.mat22d(-st, zero, zero, ct), Vs,
+                  _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, 1))
+    return A
 
 
 # ----------------------------------------------------------------------------------------------
@@ -501,10 +643,11 @@ def _dim(F: wp.mat22d):  # noqa: F811
 
 
 @wp.kernel
-def _energy_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
-                   volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64), lam: wp.array(dtype=wp.float64),
-                   energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64)):
-    e = wp.tid()
+def _energy_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                   Dm_inv: wp.array(dtype=Any), volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
+                   lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
+                   det_F: wp.array(dtype=wp.float64)):
+    e = first + wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -514,11 +657,11 @@ def _energy_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
 
 
 @wp.kernel
-def _gradient_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
-                     volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
+def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                     Dm_inv: wp.array(dtype=Any), volume: wp.array(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
                      lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
                      det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any)):
-    e = wp.tid()
+    e = first + wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -530,24 +673,19 @@ def _gradient_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32
 
 
 @wp.kernel
-def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
-                    volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
+def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                    Dm_inv: wp.array(dtype=Any), volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
                     lam_e: wp.array(dtype=wp.float64), project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
                     energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
                     data2: wp.array(dtype=wp.float64)):
-    e = wp.tid()
+    e = first + wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
     zero = wp.float64(0.0)
-    energy[e] = zero
-    grad[e] = grad.dtype()
     if J <= zero:
-        if scatter == 0:
-            for r in range(hess.shape[1]):
-                for c in range(hess.shape[2]):
-                    hess[e, r, c] = zero
+        _void(e, scatter, energy, grad, hess)
         return
     V = volume[e]
     mu = mu_e[e]
@@ -567,9 +705,9 @@ def _hessian_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32)
         _hessian_direct(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, mode, both, scatter, slots, hess, data, data2)
     elif both != 0:
         _hessian_direct(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, _EXACT, 0, scatter, slots, hess, data, data)
-        _hessian_svd(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data2, e)
+        _hessian_svd(F, J, Dmi, V, mu, lam, scatter, slots, hess, data2, e)
     else:
-        _hessian_svd(F, J, Dmi, V, mu, lam, dPsi_dJ, scatter, slots, hess, data, e)
+        _hessian_svd(F, J, Dmi, V, mu, lam, scatter, slots, hess, data, e)
 
 
 @wp.func
@@ -583,12 +721,13 @@ def _minus_eye(B: wp.mat22d):  # noqa: F811
 
 
 @wp.kernel
-def _stress_kernel(x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), Dm_inv: wp.array(dtype=Any),
-                   mu_e: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64),
+def _stress_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                   Dm_inv: wp.array(dtype=Any), volume: wp.array(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
+                   lam_e: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64),
                    von_mises: wp.array(dtype=wp.float64)):
     """det F and the von Mises stress sqrt(3/2) mu |dev(F F^T - I)| / J per element (see
     simfab.fem.stress.det_and_von_mises); +inf where det F <= 0 (stress undefined)."""
-    e = wp.tid()
+    e = first + wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)
     det_F[e] = J
@@ -614,230 +753,11 @@ def _declare_overloads():
 _declare_overloads()
 
 # ----------------------------------------------------------------------------------------------
-# host side
+# the element order's record for simfab.fem.workspace
 # ----------------------------------------------------------------------------------------------
-_ENERGY, _GRADIENT, _HESSIAN, _BLOCKS, _STRESS = 0, 1, 2, 3, 4  # what a launch computes
-_KERNELS = (_energy_kernel, _gradient_kernel, _hessian_kernel, _hessian_kernel, _stress_kernel)  # by ``want``
-
-
-class _Workspace:
-    """Device copies of the model arrays, reusable buffers and pre-recorded launches (per model).
-
-    Small meshes are dominated by per-call overhead, so the position buffer is persistent (on the
-    CPU a numpy array the kernels read through an alias) and the launches are recorded once
-    (``record_cmd``) and replayed with only the changing parameters updated.
-    """
-
-    def __init__(self, model: FemModel):
-        d, m = model.dim, model.n_elements
-        dev = model.device
-        self.cpu = wp.get_device(dev).is_cpu
-        self.vec = wp.vec3d if d == 3 else wp.vec2d
-        mat = wp.mat33d if d == 3 else wp.mat22d
-        self.x_np = np.zeros((model.n_vertices, d))
-        self.x = self._wrap(self.x_np, self.vec, dev)
-        self.elements = wp.array(model.elements, dtype=wp.int32, device=dev)
-        self.Dm_inv = wp.array(model.Dm_inv, dtype=mat, device=dev)
-        self.volume = wp.array(model.volume, dtype=wp.float64, device=dev)
-        self.mu = wp.array(model.mu, dtype=wp.float64, device=dev)
-        self.lam = wp.array(model.lam, dtype=wp.float64, device=dev)
-        self.energy = wp.zeros(m, dtype=wp.float64, device=dev)
-        self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
-        self.grad = wp.zeros(m, dtype=_vec12d if d == 3 else _vec6d, device=dev)
-        self.von_mises = wp.zeros(m, dtype=wp.float64, device=dev)
-        self.hess = None  # element blocks (m, k*d, k*d) float64, allocated on first element_hessians()
-        self.slots = None  # model.pattern.element_slots as int32, on first Hessian request
-        self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
-        self.dummy_slots = wp.zeros((1, 1, 1), dtype=wp.int32, device=dev)
-        self.dummy_data = wp.zeros(1, dtype=wp.float64, device=dev)
-        # host views of the per-element outputs on the CPU (the Warp arrays' own memory: no copy)
-        self.energy_np, self.det_F_np, self.grad_np = (
-            (self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()) if self.cpu else (None, None, None))
-        # CSR values written by the Hessian kernel: persistent buffers (``data``, and ``data2`` for the
-        # projected Hessian with _BOTH), zeroed before and copied out after each launch, so the
-        # recorded launch keeps its arguments (re-binding fresh arrays per call costs more than the copy)
-        self.data_np = self.data = None
-        self.data2_np = self.data2 = None
-        self.bound = {}  # (launch, parameter name) -> value currently bound in a recorded launch
-        self.commands: dict = {}
-        # gradient scatter: (n*d, m*k*d) sparse sum over the element copies of each dof
-        dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
-        self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))),
-                                     shape=(model.n_dofs, dofs.size))
-
-    def _wrap(self, arr: np.ndarray, dtype, dev):
-        """Warp view of a numpy array (alias on the CPU, a device copy elsewhere)."""
-        return wp.array(arr, dtype=dtype, device=dev, copy=False) if self.cpu else wp.array(arr, dtype=dtype, device=dev)
-
-    def hessian_values(self, second: bool = False) -> np.ndarray:
-        """A fresh copy (nnz,) of the CSR values filled by the last Hessian launch: ``data``, or
-        ``data2`` with ``second`` (callers keep and modify the matrices built on it)."""
-        if self.cpu:
-            return (self.data2_np if second else self.data_np).copy()
-        return (self.data2 if second else self.data).numpy()
-
-    def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(energy (m,), det F (m,), nodal gradient blocks) of the last launch, as host arrays."""
-        if self.cpu:
-            return self.energy_np, self.det_F_np, self.grad_np
-        return self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()
-
-    def bind(self, cmd, name: str, value) -> None:
-        """Set a parameter of a recorded launch only when it changes (setting costs ~20 us): ints
-        by value, arrays by identity."""
-        key = (id(cmd), name)
-        prev = self.bound.get(key)
-        if (prev == value) if isinstance(value, int) else (prev is value):
-            return
-        cmd.set_param_by_name(name, value)
-        self.bound[key] = value
-
-    def set_positions(self, x: np.ndarray) -> None:
-        self.x_np[...] = x
-        if not self.cpu:
-            self.x.assign(self.x_np)
-
-    def command(self, model: FemModel, want: int):
-        """The recorded launch for ``want`` (created on first use)."""
-        cmd = self.commands.get(want)
-        if cmd is not None:
-            return cmd
-        common = [self.x, self.elements, self.Dm_inv, self.volume, self.mu, self.lam]
-        dev = model.device
-        if want == _STRESS:
-            args = dict(inputs=[self.x, self.elements, self.Dm_inv, self.mu], outputs=[self.det_F, self.von_mises])
-        elif want == _ENERGY:
-            args = dict(inputs=common, outputs=[self.energy, self.det_F])
-        elif want == _GRADIENT:
-            args = dict(inputs=common, outputs=[self.energy, self.det_F, self.grad])
-        elif want == _HESSIAN:  # scatter straight into CSR values
-            if model.pattern.nnz >= 2**31:
-                raise ValueError("Hessian too large for int32 slots")
-            self.slots = wp.array(model.pattern.element_slots.astype(np.int32), dtype=wp.int32, device=dev)
-            self.data_np = np.zeros(model.pattern.nnz)
-            self.data = self._wrap(self.data_np, wp.float64, dev)
-            args = dict(inputs=common + [1, 1, self.slots],
-                        outputs=[self.energy, self.det_F, self.grad, self.dummy3, self.data, self.dummy_data])
-        else:  # _BLOCKS: keep the per-element blocks
-            kk = (model.dim + 1) * model.dim
-            self.hess = wp.zeros((model.n_elements, kk, kk), dtype=wp.float64, device=dev)
-            args = dict(inputs=common + [1, 0, self.dummy_slots],
-                        outputs=[self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data])
-        kernel = _KERNELS[want]
-        with RECORD_LOCK:  # the first launch loads the module: one thread at a time
-            cmd = wp.launch(kernel, dim=model.n_elements, device=dev, record_cmd=True, **args)
-        self.commands[want] = cmd
-        return cmd
-
-
-def _workspace(model: FemModel) -> _Workspace:
-    ws = model._cache.get("neohookean")
-    if ws is None:
-        ws = model._cache["neohookean"] = _Workspace(model)
-    return ws
-
-
-def _launch(model: FemModel, x, want: int, project: int = 1) -> _Workspace:
-    """One kernel launch over all elements computing what ``want`` asks for."""
-    x = model.check_positions(x)
-    ws = _workspace(model)
-    ws.set_positions(x)
-    cmd = ws.command(model, want)
-    if want in (_HESSIAN, _BLOCKS):
-        ws.bind(cmd, "project", int(project))
-    if want == _HESSIAN:
-        _zero(ws, "data")
-        if project == _BOTH:
-            if ws.data2 is None:
-                ws.data2_np = np.zeros(model.pattern.nnz)
-                ws.data2 = ws._wrap(ws.data2_np, wp.float64, model.device)
-            _zero(ws, "data2")
-            ws.bind(cmd, "data2", ws.data2)
-        else:
-            ws.bind(cmd, "data2", ws.dummy_data)
-    cmd.launch()
-    return ws
-
-
-def _zero(ws: _Workspace, name: str) -> None:
-    """Zero the persistent CSR values buffer ``name`` ("data" or "data2") before a launch adds into it."""
-    if ws.cpu:
-        getattr(ws, name + "_np").fill(0.0)
-    else:
-        getattr(ws, name).zero_()
-
-
-def _total(ws: _Workspace) -> float:
-    energy, det, _ = ws.outputs()
-    if det.min() <= 0.0:
-        return float("inf")
-    return float(energy.sum())
-
-
-def _gradient(model: FemModel, ws: _Workspace) -> np.ndarray:
-    return (ws.scatter @ ws.outputs()[2].reshape(-1)).reshape(model.n_vertices, model.dim)
-
-
-def energy(model: FemModel, x) -> float:
-    """Elastic energy [J] at positions x (n, dim) [m]; +inf if any element has det F <= 0."""
-    return _total(_launch(model, x, _ENERGY, False))
-
-
-def energy_gradient(model: FemModel, x) -> tuple[float, np.ndarray]:
-    """(energy [J], gradient dE/dx (n, dim) [N]). The elastic nodal force is ``-gradient``."""
-    ws = _launch(model, x, _GRADIENT, False)
-    return _total(ws), _gradient(model, ws)
-
-
-def element_hessians(model: FemModel, x, *, project_psd: bool = True) -> np.ndarray:
-    """Per-element Hessian blocks (m, (dim+1)*dim, (dim+1)*dim) [N/m], dofs ordered (vertex, axis)."""
-    ws = _launch(model, x, _BLOCKS, _PROJECT if project_psd else _EXACT)
-    return ws.hess.numpy().copy()
-
-
-def energy_gradient_hessian(model: FemModel, x, *, project_psd: bool = True) -> tuple[float, np.ndarray, sp.csr_matrix]:
-    """(energy [J], gradient (n, dim) [N], Hessian (n*dim, n*dim) CSR [N/m]).
-
-    With ``project_psd`` (default) every element block is projected to positive semi-definite
-    (clamped eigenvalues of d2Psi/dF2), so the assembled Hessian is PSD; otherwise it is the
-    exact Hessian. The CSR has the model's fixed pattern (``model.pattern``); its ``data`` is a
-    fresh array the caller may modify (e.g. add contact blocks via ``pattern.block_slots``).
-    """
-    ws = _launch(model, x, _HESSIAN, _PROJECT if project_psd else _EXACT)
-    H = model.pattern.matrix(ws.hessian_values())
-    return _total(ws), _gradient(model, ws), H
-
-
-def energy_gradient_hessians(model: FemModel, x) -> tuple[float, np.ndarray, sp.csr_matrix, sp.csr_matrix]:
-    """(energy [J], gradient (n, dim) [N], exact Hessian, PSD-projected Hessian), both CSR
-    (n*dim, n*dim) [N/m] with the model's pattern, from a single kernel launch.
-
-    For :func:`simfab.solve.newton.minimize` return ``(H_exact, H_psd)`` as the Hessian: it takes
-    exact Newton steps whenever the exact Hessian is positive definite (quadratic convergence near
-    stable equilibria with large rotations, where per-element projection converges only linearly)
-    and falls back to the projected one otherwise.
-    """
-    ws = _launch(model, x, _HESSIAN, _BOTH)
-    H_exact = model.pattern.matrix(ws.hessian_values())
-    H_psd = model.pattern.matrix(ws.hessian_values(second=True))
-    return _total(ws), _gradient(model, ws), H_exact, H_psd
-
-
-def _energy_gradient_hessian_svd(model: FemModel, x) -> tuple[float, np.ndarray, sp.csr_matrix]:
-    """Like :func:`energy_gradient_hessian` (projected) but always through the SVD eigensystem:
-    the reference route the faster direct route is checked and benchmarked against."""
-    ws = _launch(model, x, _HESSIAN, _PROJECT_SVD)
-    H = model.pattern.matrix(ws.hessian_values())
-    return _total(ws), _gradient(model, ws), H
-
-
-def det_and_von_mises(model: FemModel, x) -> tuple[np.ndarray, np.ndarray]:
-    """(det F (m,) [-], von Mises stress (m,) [Pa]) per element in one launch; see
-    :func:`simfab.fem.stress.det_and_von_mises` (the public entry point) for the formula."""
-    ws = _launch(model, x, _STRESS)
-    return ws.det_F.numpy().copy(), ws.von_mises.numpy().copy()
-
-
-def det_F(model: FemModel, x) -> np.ndarray:
-    """det F per element (m,) at positions x (n, dim); <= 0 means inverted or degenerate."""
-    return _launch(model, x, _ENERGY, False).outputs()[1].copy()
+#: Linear simplices: F = Ds Dm^-1 is constant over the element (the one-quadrature-point case:
+#: ``model.element_geometry()`` is (Dm^-1 (m, d, d), volume (m,))). One launch at every size: two
+#: halves on two threads gained nothing on the insertion models (see docs/decisions.md).
+LINEAR = ElementKernels(energy=_energy_kernel, gradient=_gradient_kernel, hessian=_hessian_kernel,
+                        stress=_stress_kernel, grad_dtype={2: _vec6d, 3: _vec12d},
+                        geometry_dtype={2: wp.mat22d, 3: wp.mat33d})

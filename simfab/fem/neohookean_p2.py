@@ -1,4 +1,6 @@
-"""Compressible Neo-Hookean elasticity on quadratic (P2) simplices: energy, gradient, Hessian.
+"""Compressible Neo-Hookean elasticity on quadratic (P2) simplices: the Warp kernels (energy,
+gradient, Hessian side by side) and their :data:`QUADRATIC` record; the public functions that
+launch them, for every element order, are in :mod:`simfab.fem.elastic`.
 
 Same energy density as :mod:`simfab.fem.neohookean` (2D = plane strain with thickness):
 
@@ -32,28 +34,17 @@ SVD eigensystem with clamped eigenvalues.
 Inversion: the energy is +inf when J <= 0 at any quadrature point of any element; such an element
 contributes nothing to the gradient and Hessian (not meaningful then). Inversion between the
 quadrature points is not seen by the energy; :func:`simfab.fem.p2.det_F_lower_bound` bounds det F
-over whole elements (Bernstein coefficients) for a stricter admissibility test. :func:`det_F`
-reports the smallest J over each element's quadrature points and :func:`det_and_von_mises` the
-largest von Mises stress over them (conservative for inversion and yield checks).
+over whole elements (Bernstein coefficients) for a stricter admissibility test. The stress launch
+reports the smallest J over each element's quadrature points and the largest von Mises stress over
+them (conservative for inversion and yield checks).
 
-Kernels run in float64, one launch per call for all elements (one thread per element, quadrature
-loop inside; on the CPU a mesh of SPLIT_ELEMENTS or more runs as two launches of half the elements
-on two threads: the clip3d part at the original's size, 1,083 10-node tets, 17.8 -> 12.5 ms per
-exact Hessian with assembly at load 1.5 (23 -> 16 ms at load 4.5); the same split of the linear
-kernels gained nothing on clip3d's 28,836 tets and was removed); the Hessian launch adds straight into the CSR ``data`` of ``model.pattern`` through
-precomputed slots, like the linear kernel. Each quadrature point's blocks come from the closed form
-above (mu, cofactor and cross-product terms plus the twist correction) rather than by contracting
-the 9 x 9 d2Psi/dF2 (that was 4x slower); the SVD route contracts it (rare: strong expansion).
-
-Measured cost per element and call (CPU, one thread, ``python tools/bench.py p2``, "cost_per_element";
-box meshes of 3840 tets / 1280 triangles at F = 1.01 I; ranges over runs on a shared 2-core machine),
-PSD-projected Hessian assembled into CSR: linear tet 0.7-0.9 us, 10-node tet 12-18 us with the
-default 4-point rule (~20x) and ~33 us with the 14-point rule (~40x); linear triangle 0.16-0.22 us,
-6-node triangle 2.0-3.0 us (3 points, ~13x) and 3.5-4.5 us (6 points, ~20x). Gradient: 0.1 us vs
-1.3 us (tet, 4 points), 0.07-0.1 vs 0.5 us (triangle, 3 points). Per degree of freedom (a P2 tet
-mesh has ~8x fewer elements than a linear one with the same dofs) the 3D Hessian costs ~3x the
-linear one; in a static solve the sparse factorization of the denser P2 pattern dominates (~80%
-of the time on the knocker3d part).
+Kernels run in float64 with one thread per element and the quadrature loop inside (argument
+lists and launch codes: :mod:`simfab.fem.workspace`; on the CPU a mesh of :data:`SPLIT_ELEMENTS`
+or more runs as two launches of half the elements on two threads). Each quadrature point's
+Hessian blocks come from the closed form above (mu, cofactor and cross-product terms plus the
+twist correction) rather than by contracting the d^2 x d^2 matrix A, which costs several times
+more; only the rare SVD route contracts A. Cost per element relative to a linear simplex:
+``python tools/bench.py p2`` ("cost_per_element").
 """
 
 from __future__ import annotations
@@ -61,33 +52,33 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 
-from simfab._parallel import submit
-from simfab._warp import RECORD_LOCK, wp
-from simfab.fem.neohookean import (_HALF_SQRT2, _clamp, _dim, _negative_part_sym3, _pk1, _polar_rotation3, _psi,
-                                   _store)
-from simfab.fem.p2 import P2Model
+from simfab._warp import wp
+from simfab.fem.neohookean import (
+    _BOTH,
+    _EXACT,
+    _PROJECT,
+    _PROJECT_SVD,
+    _dim,
+    _dimi,
+    _mat44d,
+    _mat99d,
+    _negative_part_sym3,
+    _pk1,
+    _polar_rotation3,
+    _psi,
+    _store,
+    _stress_hessian_svd,
+    _void,
+)
+from simfab.fem.workspace import ElementKernels
 
 wp.set_module_options({"enable_backward": False})
 
 _vec12d = wp.types.vector(length=12, dtype=wp.float64)
 _vec30d = wp.types.vector(length=30, dtype=wp.float64)
-_mat44d = wp.types.matrix(shape=(4, 4), dtype=wp.float64)
-_mat99d = wp.types.matrix(shape=(9, 9), dtype=wp.float64)
 _mat12d = wp.types.matrix(shape=(12, 12), dtype=wp.float64)
 _mat30d = wp.types.matrix(shape=(30, 30), dtype=wp.float64)
-
-# stress-Hessian modes (same meaning as in neohookean.py)
-_EXACT = wp.constant(0)
-_PROJECT = wp.constant(1)
-_PROJECT_SVD = wp.constant(2)
-_BOTH = wp.constant(3)
-
-#: Meshes with at least this many elements are launched in two halves on two threads on the CPU
-#: (the cost per 10-node tet is ~15 us for the Hessian: a handoff to the second thread, ~50 us,
-#: pays from a few dozen elements on; below this the launches stay whole).
-SPLIT_ELEMENTS = 256
 
 
 # ----------------------------------------------------------------------------------------------
@@ -120,94 +111,6 @@ def _zero_hess(F: wp.mat33d):
 @wp.func
 def _zero_hess(F: wp.mat22d):  # noqa: F811
     return _mat12d()
-
-
-@wp.func
-def _dimi(M: wp.mat33d):
-    return 3
-
-
-@wp.func
-def _dimi(M: wp.mat22d):  # noqa: F811
-    return 2
-
-
-@wp.func
-def _outer_vec(A: Any, M: Any, c: wp.float64):
-    """A + c vec(M) vec(M)^T (vec row-major, M d x d)."""
-    d = _dimi(M)
-    B = A
-    for i in range(d):
-        for k in range(d):
-            for j in range(d):
-                for l in range(d):
-                    B[d * i + k, d * j + l] = B[d * i + k, d * j + l] + c * M[i, k] * M[j, l]
-    return B
-
-
-@wp.func
-def _svd_mode(A: Any, U: Any, M: Any, Vs: Any, lam_k: wp.float64):
-    """A + lam_k vec(U M V^T) vec(U M V^T)^T."""
-    return _outer_vec(A, U * M * wp.transpose(Vs), lam_k)
-
-
-@wp.func
-def _stress_hessian_svd(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
-    """d2Psi/dF2 rebuilt from its analytic eigensystem with clamped eigenvalues (PSD)."""
-    zero = wp.float64(0.0)
-    U = wp.mat33d()
-    s = wp.vec3d()
-    Vs = wp.mat33d()
-    wp.svd3(F, U, s, Vs)
-    logJ = wp.log(J)
-    dPsi_dJ = (lam * logJ - mu) / J
-    h = wp.float64(_HALF_SQRT2)
-    A = _mat99d()
-    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, _clamp(mu + dPsi_dJ * s[0], 1))
-    A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, _clamp(mu - dPsi_dJ * s[0], 1))
-    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[1], 1))
-    A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, h, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[1], 1))
-    A = _svd_mode(A, U, wp.mat33d(zero, -h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[2], 1))
-    A = _svd_mode(A, U, wp.mat33d(zero, h, zero, h, zero, zero, zero, zero, zero), Vs, _clamp(mu - dPsi_dJ * s[2], 1))
-    cs = mu + lam * (wp.float64(1.0) - logJ)
-    S = wp.mat33d(
-        mu + cs / (s[0] * s[0]), lam / (s[0] * s[1]), lam / (s[0] * s[2]),
-        lam / (s[0] * s[1]), mu + cs / (s[1] * s[1]), lam / (s[1] * s[2]),
-        lam / (s[0] * s[2]), lam / (s[1] * s[2]), mu + cs / (s[2] * s[2]),
-    )
-    Q = wp.mat33d()
-    d = wp.vec3d()
-    wp.eig3(S, Q, d)
-    for k in range(3):
-        A = _svd_mode(A, U, wp.diag(wp.vec3d(Q[0, k], Q[1, k], Q[2, k])), Vs, _clamp(d[k], 1))
-    return A
-
-
-@wp.func
-def _stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
-    zero = wp.float64(0.0)
-    U = wp.mat22d()
-    s = wp.vec2d()
-    Vs = wp.mat22d()
-    wp.svd2(F, U, s, Vs)
-    logJ = wp.log(J)
-    dPsi_dJ = (lam * logJ - mu) / J
-    h = wp.float64(_HALF_SQRT2)
-    A = _mat44d()
-    A = _svd_mode(A, U, wp.mat22d(zero, -h, h, zero), Vs, _clamp(mu + dPsi_dJ, 1))  # twist
-    A = _svd_mode(A, U, wp.mat22d(zero, h, h, zero), Vs, _clamp(mu - dPsi_dJ, 1))  # flip
-    cs = mu + lam * (wp.float64(1.0) - logJ)
-    a = mu + cs / (s[0] * s[0])
-    c2 = mu + cs / (s[1] * s[1])
-    o = lam / (s[0] * s[1])
-    theta = wp.float64(0.5) * wp.atan2(wp.float64(2.0) * o, a - c2)
-    ct = wp.cos(theta)
-    st = wp.sin(theta)
-    A = _svd_mode(A, U, wp.mat22d(ct, zero, zero, st), Vs,
-                  _clamp(a * ct * ct + wp.float64(2.0) * o * st * ct + c2 * st * st, 1))
-    A = _svd_mode(A, U, wp.mat22d(-st, zero, zero, ct), Vs,
-                  _clamp(a * st * st - wp.float64(2.0) * o * st * ct + c2 * ct * ct, 1))
-    return A
 
 
 @wp.func
@@ -341,8 +244,8 @@ def _energy_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtyp
 
 
 @wp.kernel
-def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
-                     wq: wp.array2d(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
+def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                     gN: wp.array3d(dtype=Any), wq: wp.array2d(dtype=wp.float64), mu: wp.array(dtype=wp.float64),
                      lam: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64),
                      det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any)):
     e = first + wp.tid()  # this launch's part of the elements
@@ -389,13 +292,8 @@ def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dty
     for q in range(nq):
         Jmin = wp.min(Jmin, wp.determinant(_F_at(x, elements, gN, e, q)))
     det_F[e] = Jmin
-    energy[e] = zero
-    grad[e] = grad.dtype()
     if Jmin <= zero:
-        if scatter == 0:
-            for r in range(hess.shape[1]):
-                for c in range(hess.shape[2]):
-                    hess[e, r, c] = zero
+        _void(e, scatter, energy, grad, hess)
         return
     mode = project
     both = 0
@@ -434,9 +332,10 @@ def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dty
 
 
 @wp.kernel
-def _stress_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
-                   wq: wp.array2d(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
-                   det_F: wp.array(dtype=wp.float64), von_mises: wp.array(dtype=wp.float64)):
+def _stress_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                   gN: wp.array3d(dtype=Any), wq: wp.array2d(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
+                   lam_e: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64),
+                   von_mises: wp.array(dtype=wp.float64)):
     """min det F and max von Mises sqrt(3/2) mu |dev(F F^T - I)| / J over the quadrature points
     (see simfab.fem.stress.det_and_von_mises); +inf stress where any det F <= 0."""
     e = first + wp.tid()  # this launch's part of the elements
@@ -478,204 +377,23 @@ def _declare_overloads():
 _declare_overloads()
 
 # ----------------------------------------------------------------------------------------------
-# host side
+# the element order's record for simfab.fem.workspace, and the batched stress Hessian
 # ----------------------------------------------------------------------------------------------
-class _Workspace:
-    """Device copies of the model arrays, persistent output buffers and pre-recorded launches
-    (per model). Small meshes are dominated by per-call overhead, so (as in
-    :mod:`simfab.fem.neohookean`) the position buffer is persistent (on the CPU a numpy array the
-    kernels read through an alias) and each kind of launch is recorded once (``record_cmd``) and
-    replayed: 200 us -> 40 us per energy call on a 60-tet model.
+#: Meshes with at least this many elements are launched in two halves on two threads on the CPU:
+#: handing a launch to the second thread costs about as much as a few 10-node tet Hessians, so
+#: smaller meshes stay one launch.
+SPLIT_ELEMENTS = 256
 
-    On the CPU a mesh of at least SPLIT_ELEMENTS elements is launched in two halves on two threads
-    (Warp's CPU kernels run on one thread and release the GIL): per-element outputs are disjoint,
-    and each half adds its Hessian into its own CSR buffer, summed afterwards."""
-
-    def __init__(self, model: P2Model):
-        d, m, k = model.dim, model.n_elements, model.elements.shape[1]
-        dev = model.device
-        self.model_device = dev
-        self.m = m
-        self.cpu = wp.get_device(dev).is_cpu
-        half = m // 2
-        self.parts = ((0, half), (half, m - half)) if self.cpu and m >= SPLIT_ELEMENTS else ((0, m),)
-        vec = wp.vec3d if d == 3 else wp.vec2d
-        self.x_np = np.zeros((model.n_vertices, d))
-        self.x = self._wrap(self.x_np, vec)
-        self.elements = wp.array(model.elements, dtype=wp.int32, device=dev)
-        self.gN = wp.array(model.grad_N, dtype=vec, device=dev)  # (m, nq, k) of vec
-        self.wq = wp.array(model.qp_weight, dtype=wp.float64, device=dev)
-        self.mu = wp.array(model.mu, dtype=wp.float64, device=dev)
-        self.lam = wp.array(model.lam, dtype=wp.float64, device=dev)
-        self.energy = wp.zeros(m, dtype=wp.float64, device=dev)
-        self.det_F = wp.zeros(m, dtype=wp.float64, device=dev)
-        self.von_mises = wp.zeros(m, dtype=wp.float64, device=dev)
-        self.grad = wp.zeros(m, dtype=_vec30d if d == 3 else _vec12d, device=dev)
-        self.slots = None  # CSR slots (int32) and element blocks ``hess``, allocated on first use;
-        self.csr = {}  # (which: 0 = data / 1 = data2, part) -> (warp array, numpy alias or None)
-        self.hess = None
-        self.nnz = model.pattern.nnz
-        self.pattern = model.pattern
-        self.dummy3 = wp.zeros((1, 1, 1), dtype=wp.float64, device=dev)
-        self.dummy_slots = wp.zeros((1, 1, 1), dtype=wp.int32, device=dev)
-        self.dummy_data = wp.zeros(1, dtype=wp.float64, device=dev)
-        dofs = (model.elements.astype(np.int64)[:, :, None] * d + np.arange(d)).ravel()
-        self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))),
-                                     shape=(model.n_dofs, dofs.size))
-        self.kk = k * d
-        self.commands: dict = {}
-
-    def _wrap(self, arr, dtype):
-        if self.cpu:
-            return wp.array(arr, dtype=dtype, device=self.model_device, copy=False)
-        return wp.array(arr, dtype=dtype, device=self.model_device)
-
-    def set_positions(self, x: np.ndarray) -> None:
-        self.x_np[...] = x
-        if not self.cpu:
-            self.x.assign(self.x_np)
-
-    def _buffer(self, which: int, part: int):
-        """CSR value buffer ``which`` (0: data, 1: data2) of launch part ``part``."""
-        buf = self.csr.get((which, part))
-        if buf is None:
-            if self.slots is None:
-                if self.nnz >= 2**31:
-                    raise ValueError("Hessian too large for int32 slots")
-                self.slots = wp.array(self.pattern.element_slots.astype(np.int32), dtype=wp.int32,
-                                      device=self.model_device)
-            arr_np = np.zeros(self.nnz)
-            buf = self.csr[(which, part)] = (self._wrap(arr_np, wp.float64), arr_np if self.cpu else None)
-        return buf[0]
-
-    def zero_csr(self, two: bool) -> None:
-        """Zero the CSR values the Hessian launches add into."""
-        for (which, _), (arr, arr_np) in self.csr.items():
-            if which == 0 or two:
-                if arr_np is not None:
-                    arr_np.fill(0.0)
-                else:
-                    arr.zero_()
-
-    def csr_values(self, second: bool = False) -> np.ndarray:
-        """A fresh array (nnz,) of the CSR values of the last Hessian launch (``data2`` with
-        ``second``): the parts' buffers summed."""
-        which = int(second)
-        out = None
-        for part in range(len(self.parts)):
-            arr, arr_np = self.csr[(which, part)]
-            v = arr_np if arr_np is not None else arr.numpy()
-            out = v.copy() if out is None else out + v
-        return out
-
-    def command(self, kind: str, mode: int = 0) -> tuple:
-        """The recorded launches (one per part) of ``kind`` (energy, gradient, hessian, blocks,
-        stress) and Hessian mode, created on first use."""
-        cmds = self.commands.get((kind, mode))
-        if cmds is not None:
-            return cmds
-        cmds = []
-        for part, (first, count) in enumerate(self.parts):
-            common = [first, self.x, self.elements, self.gN, self.wq, self.mu, self.lam]
-            if kind == "energy":
-                kernel, inputs, outputs = _energy_kernel, common, [self.energy, self.det_F]
-            elif kind == "gradient":
-                kernel, inputs, outputs = _gradient_kernel, common, [self.energy, self.det_F, self.grad]
-            elif kind == "hessian":  # added straight into this part's CSR values
-                data = self._buffer(0, part)
-                data2 = self._buffer(1, part) if mode == _BOTH else self.dummy_data
-                kernel, inputs = _hessian_kernel, common + [mode, 1, self.slots]
-                outputs = [self.energy, self.det_F, self.grad, self.dummy3, data, data2]
-            elif kind == "blocks":
-                if self.hess is None:
-                    self.hess = wp.zeros((self.m, self.kk, self.kk), dtype=wp.float64, device=self.model_device)
-                kernel, inputs = _hessian_kernel, common + [mode, 0, self.dummy_slots]
-                outputs = [self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data]
-            else:
-                kernel, inputs = _stress_kernel, [first, self.x, self.elements, self.gN, self.wq, self.mu]
-                outputs = [self.det_F, self.von_mises]
-            with RECORD_LOCK:  # the first launch loads the module: one thread at a time
-                cmds.append(wp.launch(kernel, dim=count, device=self.model_device, inputs=inputs, outputs=outputs,
-                                      record_cmd=True))
-        self.commands[(kind, mode)] = cmds = tuple(cmds)
-        return cmds
+#: Quadratic simplices: ``model.element_geometry()`` is (grad_N (m, nq, k, d), qp_weight (m, nq)).
+QUADRATIC = ElementKernels(energy=_energy_kernel, gradient=_gradient_kernel, hessian=_hessian_kernel,
+                           stress=_stress_kernel, grad_dtype={2: _vec12d, 3: _vec30d},
+                           geometry_dtype={2: wp.vec2d, 3: wp.vec3d}, split_elements=SPLIT_ELEMENTS)
 
 
-def _workspace(model: P2Model) -> _Workspace:
-    ws = model._cache.get("neohookean_p2")
-    if ws is None:
-        ws = model._cache["neohookean_p2"] = _Workspace(model)
-    return ws
-
-
-def _launch(model: P2Model, x, kind: str, mode: int = 0) -> _Workspace:
-    """The kernel launches over all elements (one, or two halves on two threads) computing what
-    ``kind`` asks for, at positions x."""
-    if not isinstance(model, P2Model):
-        raise TypeError(f"expected a P2Model, got {type(model).__name__} (linear models: simfab.fem.neohookean)")
-    ws = _workspace(model)
-    ws.set_positions(model.check_positions(x))
-    cmds = ws.command(kind, mode)
-    if kind == "hessian":
-        ws.zero_csr(mode == _BOTH)
-    other = [submit(c.launch) for c in cmds[1:]]
-    cmds[0].launch()
-    for o in other:
-        o.result()
-    return ws
-
-
-def _host(arr) -> np.ndarray:
-    return arr.numpy()  # a view on the CPU, a copy elsewhere
-
-
-def _total(ws: _Workspace) -> float:
-    if _host(ws.det_F).min() <= 0.0:
-        return float("inf")
-    return float(_host(ws.energy).sum())
-
-
-def _gradient(model: P2Model, ws: _Workspace) -> np.ndarray:
-    return (ws.scatter @ _host(ws.grad).reshape(-1)).reshape(model.n_vertices, model.dim)
-
-
-def energy(model: P2Model, x) -> float:
-    """Elastic energy [J] at node positions x (n, dim) [m]; +inf if det F <= 0 at any quadrature point."""
-    return _total(_launch(model, x, "energy"))
-
-
-def energy_gradient(model: P2Model, x) -> tuple[float, np.ndarray]:
-    """(energy [J], gradient dE/dx (n, dim) [N]). The elastic nodal force is ``-gradient``."""
-    ws = _launch(model, x, "gradient")
-    return _total(ws), _gradient(model, ws)
-
-
-def energy_gradient_hessian(model: P2Model, x, *, project_psd: bool = True) -> tuple[float, np.ndarray, sp.csr_matrix]:
-    """(energy [J], gradient (n, dim) [N], Hessian (n*dim, n*dim) CSR [N/m]) with the model's
-    fixed pattern; ``project_psd`` clamps each quadrature point's d2Psi/dF2 to PSD (so the
-    assembled Hessian is PSD), otherwise the Hessian is exact. ``data`` is a fresh array."""
-    ws = _launch(model, x, "hessian", _PROJECT if project_psd else _EXACT)
-    return _total(ws), _gradient(model, ws), model.pattern.matrix(ws.csr_values())
-
-
-def energy_gradient_hessians(model: P2Model, x) -> tuple[float, np.ndarray, sp.csr_matrix, sp.csr_matrix]:
-    """(energy, gradient, exact Hessian, PSD-projected Hessian) from one launch; for
-    :func:`simfab.solve.newton.minimize` pass ``(H_exact, H_psd)`` (exact steps where possible)."""
-    ws = _launch(model, x, "hessian", _BOTH)
-    return (_total(ws), _gradient(model, ws), model.pattern.matrix(ws.csr_values()),
-            model.pattern.matrix(ws.csr_values(second=True)))
-
-
-def element_hessians(model: P2Model, x, *, project_psd: bool = True, _svd: bool = False) -> np.ndarray:
-    """Per-element Hessian blocks (m, k*dim, k*dim) [N/m], dofs ordered (local node, axis);
-    ``_svd``: projected through the full SVD eigensystem at every point (reference route, tests)."""
-    ws = _launch(model, x, "blocks", _PROJECT_SVD if _svd else (_PROJECT if project_psd else _EXACT))
-    return ws.hess.numpy().copy()
-
-
-def _projected_stress_hessian(F, mu: float, lam: float) -> np.ndarray:
-    """d2Psi/dF2 with clamped eigenvalues (b, d^2, d^2) [Pa] of a batch F (b, d, d), vec(F)
-    row-major, from the kernels' analytic eigensystem (the SVD route; for the tests)."""
+def projected_stress_hessian(F, mu: float, lam: float) -> np.ndarray:
+    """d2Psi/dF2 with clamped eigenvalues (b, d^2, d^2) [Pa] for a batch of deformation gradients
+    F (b, d, d) with det F > 0 (vec(F) row-major), from the analytic eigensystem the kernels use
+    on their SVD route (one launch, CPU)."""
     F = np.ascontiguousarray(F, dtype=np.float64)
     d = F.shape[-1]
     mat, amat = (wp.mat33d, _mat99d) if d == 3 else (wp.mat22d, _mat44d)
@@ -684,15 +402,3 @@ def _projected_stress_hessian(F, mu: float, lam: float) -> np.ndarray:
               inputs=[wp.array(F, dtype=mat, device="cpu"), wp.array(np.linalg.det(F), dtype=wp.float64, device="cpu"),
                       wp.float64(mu), wp.float64(lam)], outputs=[out])
     return out.numpy()
-
-
-def det_and_von_mises(model: P2Model, x) -> tuple[np.ndarray, np.ndarray]:
-    """(min det F (m,) [-], max von Mises stress (m,) [Pa]) over each element's quadrature points;
-    +inf stress where any det F <= 0 (formula: :func:`simfab.fem.stress.det_and_von_mises`)."""
-    ws = _launch(model, x, "stress")
-    return ws.det_F.numpy().copy(), ws.von_mises.numpy().copy()
-
-
-def det_F(model: P2Model, x) -> np.ndarray:
-    """Smallest det F over each element's quadrature points (m,); <= 0 means inverted there."""
-    return _launch(model, x, "energy").det_F.numpy().copy()

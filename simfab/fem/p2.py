@@ -32,9 +32,9 @@ Hessians is PSD):
         12 - 3 and 4 x 6 >= 30 - 6 strain samples vs deformation modes: no spurious zero-energy
         modes), and by Strang's lemma degree 2p - 2 = 2 keeps the optimal convergence order. Not
         exact beyond small strain (the geometric stiffness, stress x grad N grad N, is cubic and
-        Psi(F) is not polynomial), but measured on a cantilever bent to 30% tip deflection
-        (``python tools/bench.py p2``, "large_deflection") it differs from the degree 4/5 rules by
-        < 0.05% of the deflection, at 0.5-0.6x their Hessian cost.
+        Psi(F) is not polynomial), but on a strongly bent cantilever its deflection stays within a
+        small fraction of a percent of the degree 4/5 rules' at about half their Hessian cost
+        (``python tools/bench.py p2``, "large_deflection"; docs/decisions.md).
     degree 4 (triangle, 6 points, Dunavant) / degree 5 (tet, 14 points, Walkington): exact for the
         geometric stiffness of a linear stress field; samples det F at more points (inversion is
         checked at the quadrature points only), for strongly nonlinear states where that matters.
@@ -43,7 +43,7 @@ Hessians is PSD):
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -51,6 +51,7 @@ from simfab.errors import InputError
 from simfab.fem.assembly import HessianPattern
 from simfab.fem.materials import Material
 from simfab.fem.model import FemModel, MeshModel, make_model
+from simfab.fem.subdivide import subdivide
 
 #: local corner pairs of the edge nodes, in the node order above
 EDGE_PAIRS = {2: np.array([[0, 1], [1, 2], [2, 0]]),
@@ -155,29 +156,15 @@ class P2Model(MeshModel):
     linear : the linear :class:`FemModel` on the corner mesh this model was lifted from
     """
 
-    dim: int
-    rest: np.ndarray
-    elements: np.ndarray
     n_corners: int
     edges: np.ndarray
     corner_elements: np.ndarray
-    Dm_inv: np.ndarray
-    volume: np.ndarray
     degree: int
     qp_bary: np.ndarray
     qp_weight: np.ndarray
     grad_N: np.ndarray
-    mu: np.ndarray
-    lam: np.ndarray
-    thickness: float
-    boundary_facets: np.ndarray
     boundary_subfacets: np.ndarray
-    boundary_vertices: np.ndarray
-    pattern: HessianPattern
     linear: FemModel
-    material: Material | None = None
-    device: str = "cpu"
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n_quadrature(self) -> int:
@@ -187,16 +174,24 @@ class P2Model(MeshModel):
         """Mean length [m] of the corner-mesh edges at rest (as FemModel.mean_edge_length)."""
         return self.linear.mean_edge_length()
 
-    def check_positions(self, x, where: str = "x") -> np.ndarray:
-        """``x`` as a (n, dim) float64 array; InputError if the shape is wrong or it holds NaN/inf."""
-        x = np.asarray(x, dtype=np.float64)
-        if x.shape == (self.n_dofs,):
-            x = x.reshape(self.n_vertices, self.dim)
-        if x.shape != self.rest.shape:
-            raise InputError(f"positions have shape {x.shape}, expected {self.rest.shape}", where=where)
-        if not np.all(np.isfinite(x)):
-            raise InputError("positions contain NaN or inf", where=where)
-        return x
+    @property
+    def element_order(self) -> int:
+        return 2
+
+    def element_geometry(self) -> tuple[np.ndarray, np.ndarray]:
+        """(grad_N (m, nq, k, dim) [1/m], qp_weight (m, nq) [m^3]): F_q = sum_a x_a (x) grad_N[e, q, a]
+        at each quadrature point, weighted by w_q."""
+        return self.grad_N, self.qp_weight
+
+    def shape_functions(self, L) -> np.ndarray:
+        """P2 shape functions (q, k) at barycentric points L (q, dim+1) (:func:`shape_functions`)."""
+        return shape_functions(L, self.dim)[0]
+
+    def linear_facets(self) -> np.ndarray:
+        """(f', dim) the boundary as linear pieces over corner and midpoint nodes
+        (``boundary_subfacets``: 2 segments / 4 triangles per quadratic facet). Their nodes share an
+        element, so points interpolated on them stay inside the Hessian's sparsity pattern."""
+        return self.boundary_subfacets
 
     def lift(self, x_corners) -> np.ndarray:
         """P2 node positions (n, dim) from corner positions (n_corners, dim): midpoints at the
@@ -207,13 +202,11 @@ class P2Model(MeshModel):
                              where="x")
         return np.vstack([xc, 0.5 * (xc[self.edges[:, 0]] + xc[self.edges[:, 1]])])
 
-    def sub_elements(self) -> np.ndarray:
+    def linear_elements(self) -> np.ndarray:
         """Linear simplices on the same nodes (4m triangles / 8m tets, positively oriented): the red
         refinement of the corner mesh (:func:`simfab.fem.subdivide.subdivide`, whose midpoint
         numbering this model shares), e.g. to write a P2 state as a linear mesh (USD) or to run
         linear-mesh geometry (contact, stress plots) on it."""
-        from simfab.fem.subdivide import subdivide
-
         return subdivide(self.linear.rest, self.corner_elements)[1].astype(np.int32)
 
     def interpolate(self, x, L) -> np.ndarray:
@@ -270,7 +263,7 @@ def to_p2(model: FemModel, *, degree: int | None = None) -> P2Model:
     degree : quadrature degree, one of :data:`RULES` for the dimension (default
         :data:`DEFAULT_DEGREE`)
     """
-    if not isinstance(model, FemModel):
+    if getattr(model, "element_order", None) != 1:
         raise InputError(f"to_p2 needs a linear FemModel, got {type(model).__name__}", where="model")
     dim = model.dim
     if degree is None:

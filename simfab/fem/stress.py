@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from simfab.fem import elastic
 from simfab.fem.model import FemModel, _edge_matrices
 
 
@@ -66,34 +67,7 @@ def det_and_von_mises(model: FemModel, x) -> tuple[np.ndarray, np.ndarray]:
     B = diag(F F^T, 1)) drop out of the deviator, so sigma_vm = sqrt(3/2) mu |dev B| / J with
     |dev B|^2 = C:C - tr(C)^2 / 3 (C = B - I): no inverse, logarithm or 3x3 stress tensor per element (this
     runs once per insertion step). Elements with det F <= 0 (stress undefined) get +inf.
-    Computed by a Warp kernel (:func:`simfab.fem.neohookean.det_and_von_mises`);
-    :func:`_det_and_von_mises_numpy` is the same formula in NumPy.
+    Computed by a Warp kernel (:func:`simfab.fem.elastic.det_and_von_mises`, which also takes P2
+    models); the tests check it against the same formula in NumPy.
     """
-    from simfab.fem.neohookean import det_and_von_mises as kernel
-
-    return kernel(model, x)
-
-
-def _det_and_von_mises_numpy(model: FemModel, x) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`det_and_von_mises` in NumPy (the reference the kernel is tested against)."""
-    F = deformation_gradient(model, x)
-    J = _det(F)
-    # dev B = dev (B - I); with C = B - I (small near rest) the sum C:C - tr(C)^2 / 3 cancels only
-    # relative to |C|^2, so the stress at rest is zero to round-off (in plane strain C_zz = 0)
-    C = F @ np.swapaxes(F, 1, 2) - np.eye(model.dim)
-    tr = np.einsum("mii->m", C)
-    CC = np.einsum("mij,mij->m", C, C)
-    dev = np.sqrt(1.5 * np.maximum(CC - tr * tr / 3.0, 0.0))
-    ok = J > 0
-    vm = np.full(J.shape, np.inf)
-    vm[ok] = dev[ok] * model.mu[ok] / J[ok]
-    return J, vm
-
-
-def _det(F: np.ndarray) -> np.ndarray:
-    """det of (m, d, d) matrices, d = 2 or 3, by cofactors (vectorized; no per-matrix LAPACK call)."""
-    if F.shape[-1] == 2:
-        return F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
-    return (F[:, 0, 0] * (F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1])
-            - F[:, 0, 1] * (F[:, 1, 0] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 0])
-            + F[:, 0, 2] * (F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0]))
+    return elastic.det_and_von_mises(model, x)

@@ -21,7 +21,10 @@ if not os.environ.get("DISPLAY"):
 
 
 def inspect_file(path, *, units: str = "m") -> dict:
-    """Summary and validation of a mesh, MJCF scene or USD stage (what ``simfab inspect`` prints)."""
+    """Summary and validation of a mesh, MJCF scene or USD stage (what ``simfab inspect`` prints).
+
+    The format modules are imported here, not at the package's top: every module that writes a file
+    imports this package (``simfab.io.atomic``), and MuJoCo, OpenUSD and trimesh take seconds."""
     from simfab.errors import InputError
 
     path = Path(path)

@@ -13,6 +13,8 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
+from simfab.io.outpaths import check_inside
+
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterator[Path]:
@@ -22,7 +24,6 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
     dispatch on the extension (trimesh, USD, matplotlib) pick the right format.
     On an exception the temporary is removed and ``path`` is untouched.
     """
-    from simfab.io.outpaths import check_inside
 
     path = Path(path)
     check_inside(path)  # inside simfab's CLI, outputs stay in the folders the user named

@@ -25,6 +25,7 @@ import numpy as np
 
 from simfab.errors import InputError
 from simfab.io.atomic import atomic_path
+from simfab.rotations import quat_slerp, quat_to_matrix
 
 
 def _mujoco():
@@ -302,37 +303,6 @@ def numeric_config(scene: Scene, prefix: str, config_type):
 
 
 # --------------------------------------------------------------------------- trajectories
-def quat_slerp(q0, q1, u: float) -> np.ndarray:
-    """Spherical linear interpolation of unit quaternions (w, x, y, z), shortest arc."""
-    q0 = np.asarray(q0, dtype=np.float64) / np.linalg.norm(q0)
-    q1 = np.asarray(q1, dtype=np.float64) / np.linalg.norm(q1)
-    dot = float(np.dot(q0, q1))
-    if dot < 0.0:  # q and -q are the same rotation; take the short way round
-        q1, dot = -q1, -dot
-    if dot > 1.0 - 1e-12:
-        q = q0 + u * (q1 - q0)
-        return q / np.linalg.norm(q)
-    theta = np.arccos(min(dot, 1.0))
-    s = np.sin(theta)
-    return (np.sin((1 - u) * theta) * q0 + np.sin(u * theta) * q1) / s
-
-
-def quat_angle(q0, q1) -> float:
-    """Rotation angle [rad] between two unit quaternions."""
-    d = abs(float(np.dot(np.asarray(q0) / np.linalg.norm(q0), np.asarray(q1) / np.linalg.norm(q1))))
-    return 2.0 * np.arccos(min(d, 1.0))
-
-
-def quat_to_matrix(q) -> np.ndarray:
-    """(w, x, y, z) -> 3x3 rotation matrix."""
-    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 @dataclasses.dataclass(frozen=True)
 class Trajectory:
     """Piecewise path through keyframe poses, parameterized by path length.

@@ -18,7 +18,11 @@ import numpy as np
 
 from simfab.errors import InputError
 from simfab.io.annotate import annotate_png  # noqa: F401  (re-exported: titles, scale and colour bars)
-from simfab.io.atomic import atomic_path
+from simfab.io.atomic import atomic_path, save_figure
+from simfab.io.mesh import SUFFIXES, load_mesh, units_warning
+from simfab.io.mjcf import MJCFBuilder, Scene, load_model
+from simfab.io.usd import as_points3, open_stage, read_curves_at, read_mesh_at, read_scalar_at, stage_time
+from simfab.progress import log
 
 AZIMUTH, ELEVATION, DISTANCE_FACTOR = 135.0, -25.0, 1.3
 COLOR_BINS = 24  # per-face colours are quantized into this many geoms for MuJoCo
@@ -108,7 +112,6 @@ def render_model(model, png, *, data=None, width: int = 640, height: int = 480,
 def render_mjcf(xml, png, *, width: int = 640, height: int = 480, camera: dict | None = None) -> Path:
     """Render an MJCF file (path) or a compiled ``MjModel`` to a PNG; matplotlib fallback without GL.
     ``camera`` receives the camera (see :func:`render_model`; left empty by the fallback)."""
-    from simfab.io.mjcf import load_model
 
     model = load_model(xml) if isinstance(xml, (str, os.PathLike)) else xml
     try:
@@ -116,7 +119,6 @@ def render_mjcf(xml, png, *, width: int = 640, height: int = 480, camera: dict |
     except Exception as e:  # no usable OpenGL: draw the geometry with matplotlib instead
         if not _is_gl_error(e):
             raise
-        from simfab.io.mjcf import Scene
 
         meshes = Scene(path=Path("."), model=model, sites={}, site_size={}, custom_numeric={}, custom_text={}).body_meshes()
         return _render_matplotlib([(m.vertices, m.faces, None) for m in meshes.values()], png, width, height)
@@ -135,8 +137,6 @@ def render_meshes(items, png, *, width: int = 640, height: int = 480, floor: boo
     Display geometry only: everything is a static geom of the world body (no masses, so MuJoCo's
     inertia checks cannot reject a flat or thin mesh), and the floor casts no shadow specks.
     """
-    from simfab.io.mjcf import MJCFBuilder
-    from simfab.io.usd import as_points3
 
     items = [(as_points3(V), np.asarray(F, np.int64), c) for V, F, c in items]  # 2D meshes go to z = 0
     curves = [([as_points3(p) for p in pl], ws, c) for pl, ws, c in curves]
@@ -190,15 +190,12 @@ def render_usd(path, png, *, time: float | None = None, width: int = 640, height
     """Render the visible meshes (with their colours), basis curves (tubes of their widths) and
     points of a USD stage at a time code (default: the last; outside the stage's range it is
     clamped with a warning on stderr). ``info`` receives the time code drawn."""
-    from simfab.io.usd import open_stage, read_curves_at, read_mesh_at, stage_time
-    from simfab.progress import log
 
     stage = open_stage(path)
     t, warning = stage_time(stage, time)
     if warning:
         log(f"simfab: warning: {path}: {warning}")
     if info is not None:
-        from simfab.io.usd import read_scalar_at
 
         info["time"] = t
         sc = read_scalar_at(stage, t)
@@ -232,12 +229,9 @@ def render_file(src, png, *, time: float | None = None, width: int = 640, height
     elif suf in (".usd", ".usda", ".usdc"):
         out = render_usd(src, png, time=time, width=width, height=height, info=info, camera=cam)
     else:
-        from simfab.io.mesh import SUFFIXES, load_mesh
 
         if suf not in SUFFIXES:
             raise InputError(f"cannot render {suf!r} files (use .xml, .usd/.usda/.usdc or a mesh)", where=str(src))
-        from simfab.io.mesh import units_warning
-        from simfab.progress import log
 
         m = load_mesh(src)
         w = units_warning(m.extents, "m")
@@ -281,7 +275,6 @@ def _render_matplotlib(items, png, width, height, *, curves=(), points=()) -> Pa
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    from simfab.io.atomic import save_figure
 
     fig = plt.figure(figsize=(width / 100, height / 100), dpi=100)
     ax = fig.add_subplot(projection="3d")

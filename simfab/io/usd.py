@@ -33,7 +33,6 @@ import re
 from pathlib import Path
 
 import numpy as np
-
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
 from simfab.errors import InputError

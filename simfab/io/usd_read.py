@@ -8,7 +8,6 @@ import re
 from pathlib import Path
 
 import numpy as np
-
 from pxr import Usd, UsdGeom
 
 from simfab.errors import InputError

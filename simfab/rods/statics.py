@@ -223,6 +223,7 @@ class StaticSolver:
         self.linear = ShiftedCholesky()
         self._definiteness = SPDSolver()  # unshifted factorizations for is_stable (pattern analysis reused)
         self.length = max(float(np.sum(model.rest_len[r.edges])) for r in model.rods)
+        self._last = None  # (state, node_forces, body_forces, reduced Hessian) of the last converged solve
 
     # -- objective in reduced unknowns -----------------------------------------------------
     def _objective(self, st: RodState, need_grad: bool, need_hess: bool, node_forces, body_forces):
@@ -286,6 +287,7 @@ class StaticSolver:
         hist = [(E, gnorm, 0.0)]
         for it in range(opts.max_iter + 1):
             if gnorm <= gtol:
+                self._last = (st, nf, bf, Hq)
                 return StaticResult(st, E, it, gnorm, dict(self.evaluator.parts), hist)
             if it == opts.max_iter:
                 break
@@ -330,6 +332,106 @@ class StaticSolver:
 
         self.model = dataclasses.replace(self.model, node_offset=np.asarray(node_offset, dtype=np.float64))
         self.red.model = self.model
+        self._last = None  # a cached Hessian belongs to the old offsets
+
+    def offset_sensitivity(self, state: RodState, d_offset, *, node_forces=None, body_forces=None) -> np.ndarray:
+        """Derivative dq/dp (nq,) or (nq,k) of the equilibrium ``state`` with respect to parameters p
+        that move attachment points within their bodies, ``node_offset = offset + sum_j p_j D_j``;
+        ``d_offset``: D (N,3) [m per unit p] or a sequence of k of them.
+
+        Implicit function theorem: the equilibrium satisfies g_q(q*(p), p) = 0, so
+        H_q dq*/dp = -dg_q/dp with the reduced Hessian H_q at the equilibrium (shifted if indefinite,
+        see :class:`ShiftedCholesky`; one factorization for all k right-hand sides when it is
+        positive definite). dg_q/dp is the
+        central difference of the exact reduced gradient in p, step h = 1e-6 x length_scale / max|D|
+        (the gradient is smooth in the offsets; the O(h^2) error is far below the Newton tolerance).
+        Directions whose effects on g_q cannot overlap share one pair of gradient evaluations
+        (Curtis-Powell-Reid grouping): D_j moves full DOFs m_j, which change the full gradient on the
+        rows coupled to them by the Hessian's pattern and the reduced gradient on the columns of J
+        those rows reach (support S_j); directions are coloured greedily so that supports in one
+        colour are disjoint, and each colour's difference is split by the supports (a grid of inserts
+        needs 2-4 colours instead of k).
+        The returned increments are applied with the offsets moved accordingly (``set_attachment_offsets``
+        then ``Reduction.apply``)."""
+        D = np.asarray(d_offset, dtype=np.float64)
+        single = D.ndim == 2
+        D = D[None] if single else D
+        nf = None if node_forces is None else np.asarray(node_forces, dtype=np.float64)
+        bf = None if body_forces is None else np.asarray(body_forces, dtype=np.float64)
+        base = self.model
+        last = self._last
+
+        def same(a, b):
+            return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+
+        cached = last if last is not None and last[0] is state and same(last[1], nf) and same(last[2], bf) else None
+        if len(D) == 1:  # one direction: nothing to group
+            supports = [np.arange(self.red.nq)]
+        else:
+            supports = self._offset_supports(state, D)
+        colours: list[list[int]] = []
+        used: list[np.ndarray] = []
+        for j, S in enumerate(supports):
+            for c, u in enumerate(used):
+                if not np.any(u[S]):
+                    colours[c].append(j)
+                    u[S] = True
+                    break
+            else:
+                colours.append([j])
+                u = np.zeros(self.red.nq, dtype=bool)
+                u[S] = True
+                used.append(u)
+        B = np.zeros((self.red.nq, len(D)))
+        try:
+            for members in colours:
+                Dc = D[members].sum(axis=0)
+                h = 1e-6 * base.length_scale / (float(np.max(np.abs(Dc))) or 1.0)
+                gs = []
+                for sgn in (1.0, -1.0):
+                    self.set_attachment_offsets(base.node_offset + sgn * h * Dc)
+                    st = synchronize(self.model, state, state.x, state.theta, state.body_pos, state.body_rot)
+                    gs.append(self._objective(st, True, False, nf, bf)[1])
+                diff = (gs[0] - gs[1]) / (2.0 * h)
+                for j in members:
+                    B[supports[j], j] = diff[supports[j]]
+        finally:
+            self.set_attachment_offsets(base.node_offset)
+        if cached is not None:
+            Hq = cached[3]  # the converged Newton iterate's own Hessian (same state, loads and offsets)
+        else:
+            _, _, Hq = self._objective(state, True, True, nf, bf)
+        try:
+            dq = -np.asarray(self._definiteness.solve(Hq, B)).reshape(self.red.nq, len(D))
+        except NotPositiveDefinite:  # unstable equilibrium: the shifted solve, column by column
+            dq = -np.stack([self.linear.solve(Hq, B[:, j]) for j in range(len(D))], axis=1)
+        return dq[:, 0] if single else dq
+
+    def _offset_supports(self, state: RodState, D: np.ndarray) -> list[np.ndarray]:
+        """Per direction D_j (N,3): the reduced-gradient entries (indices into q) that moving the
+        attachment offsets along D_j can change (see :meth:`offset_sensitivity`)."""
+        _, _, H = self.evaluator(state, False, True)
+        Hp = sp.csr_matrix((np.ones(H.nnz, dtype=np.int8), H.indices, H.indptr), shape=H.shape)
+        n_full = self.red.n_full
+        if self.red.simple:
+            col = np.full(n_full, -1)
+            col[self.red.full_index] = np.arange(len(self.red.full_index))
+        else:
+            J = self.red.jacobian(state).tocsr()
+            Jp = sp.csr_matrix((np.ones(J.nnz, dtype=np.int8), J.indices, J.indptr), shape=J.shape)
+        out = []
+        for Dj in D:
+            moved = np.flatnonzero(np.abs(Dj).ravel() > 0)  # full DOFs 3 n + c of the moved nodes
+            rows = np.zeros(n_full, dtype=bool)
+            rows[moved] = True
+            rows[np.unique(Hp[:, moved].tocoo().row)] = True if len(moved) else False
+            f = np.flatnonzero(rows)
+            if self.red.simple:
+                S = col[f][col[f] >= 0]
+            else:
+                S = np.unique(Jp[f].tocoo().col)
+            out.append(S.astype(np.int64))
+        return out
 
     def reduced_system(self, state: RodState):
         """(gradient (nq,), Hessian CSR (nq,nq)) of the elastic energy in reduced unknowns at ``state``."""

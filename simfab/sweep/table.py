@@ -15,6 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from simfab.errors import InputError
+from simfab.io.atomic import atomic_path
 
 #: Statuses that are a property of the run's parameters: kept on resume. Other failures
 #: (an internal error, a dead worker, a worker of another version) are run again.
@@ -69,7 +70,6 @@ def write_table(df, out: Path, name: str) -> dict[str, str]:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from simfab.io.atomic import atomic_path
 
     paths = table_paths(out, name)
     with atomic_path(paths["parquet"]) as tmp:

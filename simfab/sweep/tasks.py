@@ -39,7 +39,10 @@ import socket
 import time
 from typing import Any, Callable, Iterator, Sequence
 
+import simfab
+from simfab import __version__
 from simfab.errors import ConvergenceError, InputError
+from simfab.progress import log
 
 #: ``TaskResult.status`` values.
 STATUSES = ("ok", "bad_input", "not_converged", "error", "worker_died", "version_mismatch")
@@ -97,7 +100,6 @@ def call(fn: Callable, kwargs: dict, version: str | None = None) -> dict:
 
     ``version``: the client's simfab version; a worker with another one refuses the task.
     """
-    from simfab import __version__
 
     t0 = time.perf_counter()
     out = {"value": None, "status": "ok", "message": "", "worker": _worker_name()}
@@ -148,13 +150,11 @@ def _dashboard(client) -> str | None:
 def check_worker_versions(client, version: str | None = None, *, where: str = "--scheduler") -> dict:
     """Ask every worker of ``client`` for its simfab version; InputError if any differs from
     ``version`` (default: this process's) or cannot import simfab. Returns {address: version}."""
-    from simfab import __version__
 
     version = version or __version__
 
     def probe():  # pickled by value: runs even where simfab is missing
         try:
-            import simfab
 
             return simfab.__version__
         except ImportError as e:
@@ -176,7 +176,6 @@ def connect(scheduler=None, *, quiet: bool = False, min_workers: int = 1, timeou
     A remote cluster must have ``min_workers`` workers within ``timeout`` seconds."""
     from distributed import Client, LocalCluster
 
-    from simfab.progress import log
 
     if isinstance(scheduler, Client):
         yield scheduler
@@ -224,7 +223,14 @@ class _Bar:
         if quiet or not sys.stderr.isatty() or total == 0:
             return
         from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
 
         self._bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                              TextColumn("[red]{task.fields[failed]} failed[/] {task.fields[running]} running"),
@@ -262,7 +268,6 @@ def run_tasks(fn: Callable, kwargs_list: Sequence[dict], *, scheduler=None, quie
     save partial results. Returns (T,) :class:`TaskResult` in the order of ``kwargs_list``.
     Raises InputError when the scheduler cannot be reached or a worker has another simfab.
     """
-    from simfab import __version__
 
     kwargs_list = list(kwargs_list)
     results: list[TaskResult | None] = [None] * len(kwargs_list)

@@ -27,6 +27,15 @@ from dataclasses import replace
 
 import numpy as np
 
+from simfab.contact.sdf import Primitive, build_primitive_field
+from simfab.coupling.config import InsertionOptions
+from simfab.coupling.simulate import make_coupling_model, simulate
+from simfab.fem.materials import Material
+from simfab.fem.meshing import graded_box
+from simfab.fem.model import make_model
+from simfab.fem.elastic import energy_gradient_hessian
+from simfab.io.mjcf import Trajectory
+
 
 def hertz_force(d, R: float, E: float, nu: float):
     """Hertz's force [N] of a rigid sphere (radius R [m]) pressed d [m] into a half-space (E [Pa], nu)."""
@@ -41,13 +50,6 @@ def sphere_on_block(*, h0: float = 0.0025, growth: float = 0.1, W: float = 20.0,
     touch), a / h (contact radius over the mean edge length of the top faces within the contact
     radius), block indentation / d (the top centre's downward displacement over the sphere's
     travel: 1 + standoff / d, the surface is pushed the barrier's standoff past the sphere)."""
-    from simfab.contact.sdf import Primitive, build_primitive_field
-    from simfab.coupling.config import InsertionOptions
-    from simfab.coupling.simulate import make_coupling_model, simulate
-    from simfab.fem.materials import Material
-    from simfab.fem.meshing import graded_box
-    from simfab.fem.model import make_model
-    from simfab.io.mjcf import Trajectory
 
     mat = Material(name="soft", youngs_modulus=E, poisson_ratio=nu, yield_stress=1e12, density=1000.0)
     P, T = graded_box((0.0, 0.0, -D * R), (W * R, W * R, 0.0), centre=(0.0, 0.0, 0.0), h0=h0 * R,
@@ -93,7 +95,6 @@ def linear_centre_displacement(cm, *, R: float, d: float, E: float, nu: float, q
     The pressure is integrated per top triangle by the midpoint rule on quad^2 sub-triangles."""
     import scipy.sparse.linalg as spl
 
-    from simfab.fem.neohookean import energy_gradient_hessian
 
     fem = cm.fem
     P = fem.rest

@@ -14,6 +14,7 @@ from simfab.coupling.config import ContactOptions, InsertionOptions
 from simfab.coupling.objective import StepObjective
 from simfab.coupling.points import edge_weights, facet_points, vertex_points
 from simfab.coupling.profile import analyze_run
+from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.settle import energy_balance
 from simfab.coupling.simulate import TURN_STEPS, make_coupling_model, simulate
 from simfab.coupling.timing import Timer
@@ -156,3 +157,13 @@ def test_frictional_objective_gradient_and_hessian_match_finite_differences(coar
         fm, gm, _ = obj(x.ravel() - h * d, False)
         assert (fp - fm) / (2 * h) == pytest.approx(g @ d, rel=1e-5)
         np.testing.assert_allclose(H @ d, (gp - gm) / (2 * h), rtol=1e-4, atol=1e-4 * np.abs(H @ d).max())
+
+
+def test_friction_through_refinement_events():
+    # the stand side refines facets during steps: the friction lag is rebuilt for the new points and
+    # the normal-force extrapolation only reads normal forces over the same points
+    res = simulate(load_coupling_scene("standside2d", overrides={"contact": {"friction": 0.3}}))
+    assert res.refined_facets and res.jammed_at is None and res.removal
+    assert res.removal[-1].s == 0.0 and res.removal[-1].normal_force == 0.0  # O back out of the part
+    prof = analyze_run(res)
+    assert prof.friction == 0.3 and prof.F_rm > 0

@@ -12,7 +12,7 @@ from simfab.coupling.points import edge_weights, facet_points, vertex_points
 from simfab.coupling.refine import COVER, check_lattice
 from simfab.coupling.rigid import mean_stiffness
 from simfab.coupling.timing import Timer
-from simfab.fem.neohookean import energy_gradient_hessian
+from simfab.fem.elastic import energy_gradient_hessian
 
 
 def _objective_near_contact(coarse_block_model):

@@ -25,7 +25,7 @@ def test_motions_left_free_by_the_supports():
         Q, c = rigid.motion_basis(cm)
         assert Q.shape[1] == k
         if k:
-            u = rigid._rows(cm.fem.rest - c, dim) @ Q  # (p, dim, k)
+            u = rigid.point_motions(cm.fem.rest - c, dim) @ Q  # (p, dim, k)
             held_mask = ~cm.free.reshape(-1, dim)
             assert np.abs(u[held_mask]).max() < 1e-12
 

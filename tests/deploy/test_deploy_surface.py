@@ -9,9 +9,9 @@ import pytest
 from simfab.deploy import compare, flatten, mjcf_sim, network, pattern, pipeline, surface
 
 
-def _deploy(target, spacing, increments=6):
+def _deploy(target, spacing, increments=6, layout="grid"):
     f = flatten.flatten(target.V, target.F)
-    pat = pattern.layout(f.uv, f.boundary, target.F, f.u, pattern.PatternConfig(spacing=spacing))
+    pat = pattern.layout(f.uv, f.boundary, target.F, f.u, pattern.PatternConfig(spacing=spacing, layout=layout))
     cfg = network.DeployConfig(perturbation=0.5, increments=increments)
     net = network.build_network(pat, cfg)
     Y = pattern.map_to_surface(f.uv, target.F, target.V, pat.P)
@@ -97,7 +97,7 @@ def test_mujoco_scene_opens_on_key_and_is_stable(tiny_saddle, tmp_path):
     pat, net, dep, cfg, _ = tiny_saddle
     sc = mjcf_sim.SimConfig()
     sim = mjcf_sim.build(net.model, net.state, dep.final, density=cfg.density, cfg=sc)
-    path = sim.builder.save(tmp_path / "deployed.xml")
+    path = sim.save(tmp_path / "deployed.xml")
     m = mujoco.MjModel.from_xml_path(str(path))
     assert m.nkey == 2 and m.nv > 6 * net.model.n_bodies and m.neq == len(net.model.rods)
     d = mujoco.MjData(m)
@@ -162,11 +162,15 @@ def test_cli_surface_writes_everything(tmp_path, capsys):
     res = json.loads(capsys.readouterr().out)
     for p in res["outputs"].values():
         assert (out / p.split("/")[-1]).is_file()
-    assert res["u_min"] >= 0 < res["u_max"] and res["gap_min_mm"] > res["insert_half_size_mm"]
+    assert res["u_min"] >= 0 < res["u_max"] and res["gap_min_mm"] > res["insert_half_sizes_mm"][0]
     assert res["deployment"]["kind"] == "saddle" and res["deviation"]["rms"] < 0.03
     assert res["mujoco"]["stability"]["finite"]
     assert set(res["seconds"]) >= {"flatten", "layout", "lasercut", "deploy", "compare", "mujoco", "total"}
     assert check_compliance(res["outputs"]["usd"]) == []
+    # the bill of materials: one row per catalogue size, counting every insert
+    rows = (out / "inserts.csv").read_text().splitlines()
+    assert rows[0] == "size_class,half_size_mm,plate_side_mm,count,inserts" and len(rows) == 2
+    assert int(rows[1].split(",")[3]) == res["inserts"] == res["bill_of_materials"][0]["count"]
 
 
 @pytest.mark.parametrize("argv, field", [
@@ -196,6 +200,14 @@ def test_scene_rejects_unknown_fields(tmp_path):
     p.write_text('[target]\nkind = "torus"\n')
     with pytest.raises(InputError, match="torus"):
         scene.load_scene(p)
+    base = '[target]\nkind = "saddle"\ndisk_radius = 0.06\ncurvature_radius = 0.1\n'
+    for table, bad, field in (("pattern", 'insert_half_sizes = [0.004, "x"]', "pattern.insert_half_sizes"),
+                              ("pattern", 'layout = "hex"', "pattern.layout"),
+                              ("tune", "iterations = 1.5", "tune.iterations"), ("tune", "step = 1", "step")):
+        p.write_text(base + f"[{table}]\n{bad}\n")
+        with pytest.raises(InputError, match=field) as e:
+            scene.load_scene(p)
+        assert str(p) in str(e.value) or str(p) in str(getattr(e.value, "where", ""))
 
 
 def test_mesh_target_in_millimetres(tmp_path):
@@ -210,3 +222,90 @@ def test_mesh_target_in_millimetres(tmp_path):
     (tmp_path / "s.toml").write_text('[target]\nmesh = "cap.obj"\nunits = "mm"\n[pattern]\nspacing = 0.02\n')
     sc = scene.load_scene(tmp_path / "s.toml")
     assert sc.pattern.spacing == 0.02 and np.allclose(sc.target.V, t.V, atol=1e-9)
+
+
+def test_offset_sensitivity_matches_re_solved_equilibria(tiny_saddle):
+    """The implicit-function-theorem derivative of the deployed equilibrium with respect to one
+    insert's clamp offset (``StaticSolver.offset_sensitivity``) agrees with the central
+    difference of two re-solved equilibria (offset +-h). The difference's error is O(h^2) (measured
+    relative 7e-2, 1.1e-2, 1.3e-3, 1.2e-4, 1.3e-5 at h = 100, 30, 10, 3, 1 um: this insert moves its
+    neighbours by ~30x its own growth): at h = 1 um a wrong derivative term would show far above 2e-4."""
+    from simfab.rods.model import synchronize
+    from simfab.rods.statics import StaticSolver
+
+    pat, net, dep, cfg, _ = tiny_saddle
+    model = net.model
+    solver = StaticSolver(model)
+    offset = model.node_offset.copy()
+    offset[net.pull_nodes] += net.pull_dir * net.pull_grow[:, None]  # the deployed offsets
+    solver.set_attachment_offsets(offset)
+    st = solver.solve(dep.final).state  # dep.final's own equilibrium, re-converged by this solver
+    D = np.zeros_like(offset)
+    k = net.pull_nodes[net.pull_grow == net.pull_grow[0]]  # the first insert's clamped nodes
+    sel = np.isin(net.pull_nodes, k)
+    D[net.pull_nodes[sel]] = net.pull_dir[sel]  # its gap shrinks by p [m]
+    dq = solver.offset_sensitivity(st, D)
+    cols = solver.red.body_trans_cols.reshape(-1, 3)
+    dpos = dq[cols]  # (free bodies, 3) d(body position)/dp
+    h = 1e-6
+    pos = []
+    for sgn in (1.0, -1.0):
+        solver.set_attachment_offsets(offset + sgn * h * D)
+        moved = synchronize(solver.model, st, st.x, st.theta, st.body_pos, st.body_rot)  # clamped nodes follow
+        pos.append(solver.solve(moved).state.body_pos[solver.red.bodies])
+    fd = (pos[0] - pos[1]) / (2 * h)
+    assert np.max(np.abs(dpos)) > 0.1  # the insert's own move is O(1) per unit offset
+    assert np.max(np.abs(dpos - fd)) < 2e-4 * np.max(np.abs(fd))
+
+
+def test_tuning_lowers_the_deviation_of_the_recut_pattern(small_dome):
+    """Gauss-Newton on the gaps (IFT sensitivities) lowers the RMS deviation, and the re-cut pattern's
+    own equilibrium keeps the gain (its beams' flat lengths changed with the gaps), with every gap
+    still achievable."""
+    from simfab.deploy import tuning
+
+    pat, net, dep, cfg, Y = small_dome
+    tgt = surface.spherical_cap(0.1, np.radians(50), 10)
+    before = compare.deviation(dep.vertex_positions(), Y, pat.quads, tgt)
+    tuned = tuning.tune(pat, net, dep, Y, tgt, tuning.TuneConfig(iterations=2))
+    assert tuned.steps >= 1 and np.all(np.diff(tuned.rms_history) < 0)
+    pat2 = tuning.retuned_pattern(pat, tuned.gap)
+    lo, hi = tuning.achievable_growth(pat)
+    d = (pat2.insert_size - pat2.gap)[pat.interior]
+    assert np.all(d >= lo[pat.interior] - 1e-12) and np.all(d <= hi[pat.interior] + 1e-12)
+    net2 = network.build_network(pat2, cfg)
+    dep2 = tuning.redeploy(pat2, net2, dep, tuned)
+    after = compare.deviation(dep2.vertex_positions(), Y, pat2.quads, tgt)
+    assert dep2.stable and after.rms < 0.8 * before.rms
+
+
+def test_tune_config_errors():
+    from simfab.deploy import tuning
+    from simfab.errors import InputError
+
+    with pytest.raises(InputError, match="tune.iterations"):
+        tuning.TuneConfig(iterations=-1)
+    with pytest.raises(InputError, match="tune.damping"):
+        tuning.TuneConfig(damping=0.0)
+
+
+def test_grouped_offset_sensitivities_equal_one_at_a_time(tiny_saddle):
+    """The Curtis-Powell-Reid grouping (directions with disjoint gradient supports share one
+    difference) gives the same derivatives as one difference per direction, to round-off."""
+    from simfab.rods.statics import StaticSolver
+
+    pat, net, dep, cfg, _ = tiny_saddle
+    solver = StaticSolver(net.model)
+    offset = net.model.node_offset.copy()
+    offset[net.pull_nodes] += net.pull_dir * net.pull_grow[:, None]
+    solver.set_attachment_offsets(offset)
+    st = solver.solve(dep.final).state
+    D = []
+    for v in np.flatnonzero(pat.interior):
+        Dv = np.zeros_like(offset)
+        sel = net.pull_vertex == v
+        Dv[net.pull_nodes[sel]] = net.pull_dir[sel]
+        D.append(Dv)
+    together = solver.offset_sensitivity(st, np.array(D))
+    alone = np.stack([solver.offset_sensitivity(st, Dv) for Dv in D], axis=1)
+    assert len(D) >= 4 and np.max(np.abs(together - alone)) < 1e-6 * np.max(np.abs(alone))

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from _fem_meshes import box_tet, box_tet24, rect_tri
 
-from simfab.fem import neohookean as nh
+from simfab.fem import elastic as nh
 from simfab.fem.materials import Material
 from simfab.fem.model import make_model
 from simfab.solve.newton import minimize

@@ -10,11 +10,12 @@ import pytest
 from _fem_meshes import box_tet, fd_grad_hess
 from scipy.spatial.transform import Rotation
 
-from simfab.fem import neohookean as nh1
-from simfab.fem import neohookean_p2 as nh
+from simfab.fem import elastic as nh
 from simfab.fem.cantilever import cantilever_model, rectangle_mesh, solve_cantilever, static_solve
 from simfab.fem.materials import Material
 from simfab.fem.model import make_model
+from simfab.fem.neohookean import LINEAR
+from simfab.fem.neohookean_p2 import QUADRATIC, projected_stress_hessian
 from simfab.fem.p2 import RULES, make_p2_model, shape_functions, to_p2
 
 MAT = Material(name="test", youngs_modulus=1.0e3, poisson_ratio=0.3, yield_stress=1e9, density=1.0)
@@ -118,8 +119,8 @@ def test_p2_model_structure_midpoints_and_boundary(dim):
     X2, sub, edges = subdivide(lin.rest, lin.elements)
     np.testing.assert_array_equal(m.edges, edges)
     np.testing.assert_array_equal(m.rest, X2)
-    np.testing.assert_array_equal(m.sub_elements(), sub)
-    assert make_model(m.rest, m.sub_elements(), MAT, thickness=0.1).volume.sum() == pytest.approx(lin.volume.sum())
+    np.testing.assert_array_equal(m.linear_elements(), sub)
+    assert make_model(m.rest, m.linear_elements(), MAT, thickness=0.1).volume.sum() == pytest.approx(lin.volume.sum())
     # lifting corner positions puts midpoints between them
     xc = lin.rest * 1.1 + 0.3
     np.testing.assert_allclose(m.lift(xc), m.rest * 1.1 + 0.3, atol=1e-14)
@@ -209,7 +210,7 @@ def test_projected_hessian_is_psd_and_matches_the_eigensystem_route(dim, kind):
         assert np.linalg.eigvalsh(H_exact).min() < -1e-3 * scale
     # the direct route (twist-block projection) equals the full SVD eigensystem route
     blocks = nh.element_hessians(model, x)
-    blocks_svd = nh.element_hessians(model, x, _svd=True)
+    blocks_svd = nh.element_hessians(model, x, projection="svd")
     np.testing.assert_allclose(blocks, blocks_svd, atol=1e-10 * scale)
     # the projection clamps only negative curvature: H_exact - H is PSD
     assert np.linalg.eigvalsh(H_exact - H).max() < 1e-10 * scale
@@ -233,7 +234,7 @@ def test_projected_stress_hessian_is_the_eigenvalue_clamp_of_the_exact_one(dim):
             if np.linalg.det(F) > 0.1:
                 Fs.append(F)
     Fs = np.array(Fs)
-    got = nh._projected_stress_hessian(Fs, mu, lam)
+    got = projected_stress_hessian(Fs, mu, lam)
     eps = 1e-6
     for F, A_proj in zip(Fs, got):
         A = np.zeros((dim * dim, dim * dim))
@@ -292,7 +293,7 @@ def test_rigid_motion_costs_nothing_and_inversion_at_a_quadrature_point_is_infin
     a, b = model.edges[mid - model.n_corners]
     centroid = model.rest[e0[: dim + 1]].mean(0)
     x[mid] += 3.0 * (centroid - x[mid])
-    assert nh1.det_F(model.linear, x[: model.n_corners]).min() > 0
+    assert nh.det_F(model.linear, x[: model.n_corners]).min() > 0
     assert nh.det_F(model, x).min() <= 0
     assert nh.energy(model, x) == np.inf
     assert nh.energy_gradient(model, x)[0] == np.inf
@@ -421,7 +422,7 @@ def test_det_and_von_mises_are_min_and_max_over_quadrature_points(dim):
     A = np.eye(dim) + 0.1 * rng.standard_normal((dim, dim))
     x = model.rest @ A.T
     J2, vm2 = nh.det_and_von_mises(model, x)
-    J1, vm1 = nh1.det_and_von_mises(model.linear, x[: model.n_corners])
+    J1, vm1 = nh.det_and_von_mises(model.linear, x[: model.n_corners])
     np.testing.assert_allclose(J2, J1, rtol=1e-12)
     np.testing.assert_allclose(vm2, vm1, rtol=1e-10)
     # general smooth field: min det F and max von Mises over the points, against NumPy
@@ -524,18 +525,26 @@ def test_consistent_loads_carry_the_resultant_and_moment(dim):
         assert f[:, 1].sum() == pytest.approx(3.0 * area, rel=1e-12)
 
 
-def test_elastic_dispatches_on_the_element_order():
-    from simfab.fem import elastic
-
-    rng = np.random.default_rng(7)
-    model = _small_mesh(3, rng)
-    x = _deform(model, rng, "general")
-    for m, mod, xm in ((model, nh, x), (model.linear, nh1, x[: model.n_corners])):
-        assert elastic.kernels(m) is mod
-        assert elastic.energy(m, xm) == mod.energy(m, xm)
-        np.testing.assert_array_equal(elastic.energy_gradient_hessian(m, xm)[2].data,
-                                      mod.energy_gradient_hessian(m, xm)[2].data)
-        np.testing.assert_array_equal(elastic.det_and_von_mises(m, xm)[1], mod.det_and_von_mises(m, xm)[1])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_elastic_runs_the_kernels_of_the_element_order(dim):
+    # an affine deformation has the same constant F in the P2 and the linear model: equal energies,
+    # det F and stresses through the two kernel sets, and the linear gradient at the corners equals
+    # the P2 gradient lumped from the midpoints to their edges' ends (dx_mid = (dx_a + dx_b) / 2)
+    rng = np.random.default_rng(7 + dim)
+    model = _small_mesh(dim, rng)
+    assert nh.kernels(model) is QUADRATIC and nh.kernels(model.linear) is LINEAR
+    A = np.eye(dim) + 0.1 * rng.standard_normal((dim, dim))
+    x, xl = model.rest @ A.T, model.linear.rest @ A.T
+    assert nh.energy(model, x) == pytest.approx(nh.energy(model.linear, xl), rel=1e-12)
+    for a, b in zip(nh.det_and_von_mises(model, x), nh.det_and_von_mises(model.linear, xl)):
+        np.testing.assert_allclose(a, b, rtol=1e-12)
+    g = nh.energy_gradient(model, x)[1]
+    lumped = g[: model.n_corners].copy()
+    for i, (a, b) in enumerate(model.edges):
+        lumped[a] += 0.5 * g[model.n_corners + i]
+        lumped[b] += 0.5 * g[model.n_corners + i]
+    gl = nh.energy_gradient(model.linear, xl)[1]
+    np.testing.assert_allclose(lumped, gl, atol=1e-12 * np.abs(gl).max())
 
 
 def test_large_deflection_p2_cantilever_matches_the_elastica():
@@ -549,22 +558,19 @@ def test_large_deflection_p2_cantilever_matches_the_elastica():
     assert r.iterations <= 20
 
 
-def test_two_thread_launch_of_a_large_mesh_equals_the_whole_launch(monkeypatch):
-    """A mesh of >= SPLIT_ELEMENTS elements runs in two halves on two threads, each half adding its
-    Hessian into its own buffer: energy, gradient, both Hessians and stresses equal the one-launch
-    values (the Hessian to summation round-off)."""
-    P, T = box_tet(0.03, 0.01, 0.01, 6, 2, 2)  # 144 tets
+def test_two_thread_launch_of_a_large_mesh_equals_the_assembled_element_blocks():
+    """A mesh of >= QUADRATIC.split_elements elements runs in two halves on two threads, each half
+    adding its Hessian into its own CSR buffer: the summed buffers equal the assembly of the
+    per-element blocks (to summation round-off), and the Hessian launch's energy and gradient equal
+    those of the energy and gradient launches."""
+    P, T = box_tet(0.04, 0.01, 0.015, 8, 2, 3)  # 48 cubes of 6 tets: 288 tets
+    m = make_p2_model(P, T, MAT)
+    assert m.n_elements >= QUADRATIC.split_elements
     rng = np.random.default_rng(5)
-    out = {}
-    for split in (10**9, 64):
-        monkeypatch.setattr(nh, "SPLIT_ELEMENTS", split)
-        m = make_p2_model(P, T, MAT)  # a fresh model: its launches are set up with this threshold
-        x = m.rest + 1e-4 * rng.standard_normal(m.rest.shape) if not out else out["x"]
-        out.setdefault("x", x)
-        assert len(nh._workspace(m).parts) == (1 if split > m.n_elements else 2)
-        E, g, He, Hp = nh.energy_gradient_hessians(m, x)
-        out[split] = (E, g, He.toarray(), Hp.toarray(), nh.det_and_von_mises(m, x)[1], nh.element_hessians(m, x))
-    a, b = out[10**9], out[64]
-    assert a[0] == b[0] and np.array_equal(a[1], b[1]) and np.array_equal(a[4], b[4]) and np.array_equal(a[5], b[5])
-    for A, B in ((a[2], b[2]), (a[3], b[3])):
-        assert np.abs(A - B).max() <= 1e-13 * np.abs(A).max()
+    x = m.rest + 1e-4 * rng.standard_normal(m.rest.shape)
+    E, g, He, Hp = nh.energy_gradient_hessians(m, x)
+    for H, project in ((He, False), (Hp, True)):
+        ref = m.pattern.assemble(nh.element_hessians(m, x, project_psd=project)).toarray()
+        assert np.abs(H.toarray() - ref).max() <= 1e-13 * np.abs(ref).max()
+    assert E == pytest.approx(nh.energy(m, x), rel=1e-15)
+    np.testing.assert_array_equal(g, nh.energy_gradient(m, x)[1])

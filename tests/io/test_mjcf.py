@@ -5,7 +5,8 @@ import pytest
 import trimesh
 
 from simfab.errors import InputError
-from simfab.io.mjcf import MJCFBuilder, Trajectory, load_scene, quat_slerp, quat_to_matrix
+from simfab.io.mjcf import MJCFBuilder, Trajectory, load_scene
+from simfab.rotations import quat_angle, quat_slerp, quat_to_matrix
 
 
 def _axis_angle_quat(axis, angle):
@@ -126,7 +127,6 @@ def test_numeric_config_reads_prefixed_fields_and_rejects_typos(tmp_path):
 def test_segment_lengths_are_each_segments_translation_and_rotation():
     # sqrt(|dp|^2 + (rho theta)^2) per segment, theta = quat_angle of its two keys, over a path that
     # translates, turns and does both (the vectorized lengths against the per-segment definition)
-    from simfab.io.mjcf import quat_angle
 
     rng = np.random.default_rng(3)
     P = np.cumsum(rng.normal(size=(40, 3)) * 0.01, axis=0)

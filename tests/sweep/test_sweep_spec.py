@@ -175,12 +175,13 @@ def test_bundled_specs_load(tmp_path):
     from simfab._bundled import scenes_dir
 
     specs = {p.stem: load_spec(p) for p in scenes_dir("sweeps").glob("*.toml")}
-    assert set(specs) == {"cclamp2d_chart", "unit_cell_inserts"}
+    assert set(specs) == {"cclamp2d_chart", "cclamp2d_friction", "unit_cell_inserts"}
     chart = specs["cclamp2d_chart"]
     assert len(chart.points()) == 20 and [p.name for p in chart.swept] == ["youngs_modulus", "arm_width"]
     cell = specs["unit_cell_inserts"]
     sizes = [p["insert_half_size"] for p in cell.points()]
     assert min(sizes) < 0.015 < max(sizes) and 0.015 in [round(s, 12) for s in sizes]  # saddle, flat and dome
+    assert [p["friction"] for p in specs["cclamp2d_friction"].points()] == [0.0, 0.1, 0.2, 0.3, 0.4, 0.5]
     for name, s in specs.items():  # the edited scenes are written and parse
         kw = run_task(s, s.points()[-1], run_dir=str(tmp_path / name))
         f = write_scene(kw["scene"], tmp_path / name)

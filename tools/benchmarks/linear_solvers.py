@@ -51,6 +51,8 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from benchmarks._meshes import rect_model
+
 ALL = ("spdsolver", "cholmod", "cholmod_simplicial", "pardiso", "pardiso_1thread", "splu", "cholespy", "qdldl")
 
 
@@ -73,9 +75,7 @@ def _system(name: str):
         X = model.rest
         free = np.repeat(X[:, 0] >= X[:, 0].min() + 1e-6, 3)  # base's back face clamped
     else:
-        from simfab.fem.benchmark import _rect_model
-
-        model = _rect_model(900)
+        model = rect_model(900)
         X = model.rest
         free = np.repeat(X[:, 0] > X[:, 0].min() + 1e-9, 2)
     x = X * 1.01  # slightly stretched: a Hessian with stress terms, not the rest stiffness

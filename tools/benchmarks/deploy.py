@@ -1,0 +1,111 @@
+"""Benchmark: ``simfab deploy surface`` end to end, and how the deployment's cost grows with the inserts.
+
+``python tools/bench.py deploy [--scene dome] [--scales 1 1.4 2] [--no-scaling] [--no-cli]``
+
+End to end: ``python -m simfab deploy surface SCENE --out TMP`` as a user runs it (a fresh
+process: imports, flattening, layout, laser-cut files, deployment, comparison, the MuJoCo scene
+built, stepped until at rest and checked against simfab's equilibrium, every output file written);
+its wall time and the CPU time the process used (the machine is shared: wall time moves with the
+load, CPU time less), and the per-stage seconds from its surface.json. Target (issue 33): the
+bundled dome <= 10 s end to end; ``ratio`` = wall / target.
+
+Scaling: the dome scene's cap scaled by s (sphere radius x s, same angle and spacing, so ~s^2 x
+the inserts), in this process (imports excluded): inserts, rod DOFs, Newton iterations, the
+deploy stage's seconds, and the MuJoCo check (nv, welds, steps to rest, seconds). Target (issue
+33): a 150-insert pattern (s = 2) deployed in <= 20 s. Beside the runs: the machine's momentary
+speed (``_machine.machine_reference_ms``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from benchmarks._machine import machine_reference_ms
+
+TARGET_END_TO_END_S = 10.0
+TARGET_150_INSERTS_DEPLOY_S = 20.0
+
+
+def _cli(scene: str) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        p = subprocess.run([sys.executable, "-m", "simfab", "deploy", "surface", scene, "--out", tmp, "--quiet"],
+                           cwd=root, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if p.returncode != 0:
+            raise RuntimeError(f"simfab deploy surface {scene} failed: {p.stderr.strip()[-400:]}")
+        s = json.loads(open(os.path.join(tmp, "surface.json")).read())
+    st = (s.get("mujoco") or {}).get("stability", {})
+    return dict(wall_s=wall, cpu_s=(after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
+                stages_s=s["seconds"], inserts=s["inserts"], rms=s["deviation"]["rms"],
+                hausdorff=s["deviation"]["hausdorff"], newton_iterations=sum(s["deployment"]["newton_iterations"]),
+                mujoco_at_rest=st.get("settled"), mujoco_steps=st.get("steps"))
+
+
+def _scaled(scene_name: str, s: float) -> dict:
+    from simfab.deploy import pipeline, scene, surface
+
+    sc = scene.load_scene(scene.bundled_path(scene_name))
+    tgt = sc.target
+    if s != 1.0:  # the bundled dome's cap with the sphere radius scaled (spherical_cap: apex at the origin)
+        R = _sphere_radius(tgt)
+        theta = float(np.arccos(1 + tgt.V[:, 2].min() / R))
+        tgt = surface.spherical_cap(R * s, theta, int(round(24 * s)))
+        sc = dataclasses.replace(sc, target=tgt)
+    t0 = time.perf_counter()
+    res = pipeline.run(sc, quiet=True, mujoco_check=True)
+    total = time.perf_counter() - t0
+    sm = pipeline.summary(res)
+    mj = sm["mujoco"]
+    return dict(scale=s, inserts=sm["inserts"], rod_dofs=int(res.network.model.n_nodes * 3 + res.network.model.n_edges),
+                newton_iterations=sum(sm["deployment"]["newton_iterations"]), deploy_s=sm["seconds"]["deploy"],
+                mujoco_s=sm["seconds"]["mujoco"], mujoco_nv=mj["nv"], mujoco_welds=mj["welds"],
+                mujoco_steps=mj["stability"]["steps"], mujoco_at_rest=mj["stability"]["settled"], total_s=total,
+                rms=sm["deviation"]["rms"])
+
+
+def _sphere_radius(tgt) -> float:
+    """Sphere radius of a ``spherical_cap`` target (apex at the origin, centre at (0, 0, -R))."""
+    # |p - c|^2 = R^2 with c = (0, 0, -R): x^2 + y^2 + z^2 + 2 R z = 0 -> R = -(x^2 + y^2 + z^2) / (2 z)
+    V = tgt.V[tgt.V[:, 2] < -1e-9]
+    return float(np.median(-(np.sum(V**2, axis=1)) / (2 * V[:, 2])))
+
+
+def run(argv) -> dict:
+    p = argparse.ArgumentParser(prog="bench deploy")
+    p.add_argument("--scene", default="dome")
+    p.add_argument("--scales", type=float, nargs="+", default=[1.0, 1.4, 2.0])
+    p.add_argument("--no-scaling", action="store_true")
+    p.add_argument("--no-cli", action="store_true")
+    a = p.parse_args(argv)
+    out = dict(benchmark="deploy", machine_reference_ms_before=machine_reference_ms())
+    if not a.no_cli:
+        e2e = _cli(a.scene)
+        out.update(end_to_end=e2e, target_end_to_end_s=TARGET_END_TO_END_S, ratio=e2e["wall_s"] / TARGET_END_TO_END_S)
+    if not a.no_scaling and a.scene == "dome":
+        rows = [_scaled(a.scene, s) for s in a.scales]
+        out["scaling"] = rows
+        big = [r for r in rows if r["inserts"] >= 140]
+        out["target_150_inserts_deploy_s"] = TARGET_150_INSERTS_DEPLOY_S
+        out["ratio_150_inserts"] = big[0]["deploy_s"] / TARGET_150_INSERTS_DEPLOY_S if big else None
+    out["machine_reference_ms_after"] = machine_reference_ms()
+    out["reference"] = None
+    out["reference_note"] = "no published figure for this pipeline in figures.json; targets from issue 33"
+    try:
+        out["load_average_1min"] = os.getloadavg()[0]
+    except OSError:
+        out["load_average_1min"] = None
+    return out
