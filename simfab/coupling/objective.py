@@ -135,7 +135,7 @@ class StepObjective:
                 kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if len(act) else 0.0
                 self.curv = max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / cm.field.sigma)
             else:
-                # Newton stops at a trial evaluated without its Hessian (line-search trials are): this
+                # Newton may stop at a trial evaluated without its Hessian (see solve): this
                 # evaluation may be the final one, with the PSD Hessian deferred
                 self._remember(xf, d, gd, LazyHessian(self, x.copy(), None), E, g)
         # exact-first Newton (simfab.solve.newton): the exact Hessian is used whenever it is
@@ -278,15 +278,17 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     max(NEWTON_GRAD_TOL_REL * force_scale, NEWTON_GRAD_TOL_START * |residual at x0|) or the Newton
     step is below NEWTON_STEP_TOL_REL * h_A (projected Newton converges linearly once the PSD
     projections are active, so a purely absolute force target would spend many iterations on the
-    last digits). Line-search trials are evaluated without the Hessian (energy and gradient), and the
-    Hessian only at an accepted trial that is not converged: on P2 parts the Hessian costs ~20 energy
-    and gradient evaluations, and the last trial of most steps is converged. Returns (x (n, dim),
-    Newton iterations)."""
+    last digits). On quadratic elements line-search trials are evaluated without the Hessian (energy
+    and gradient), and the Hessian only at an accepted trial that is not converged: it costs ~15-20
+    energy and gradient evaluations there, and the first trial of most steps is converged. On linear
+    ones, where it costs about one objective evaluation, the first trial carries it (unless the
+    residual is within NEWTON_EAGER_ABOVE_TOL of the target). Returns (x (n, dim), Newton iterations)."""
     _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n)
     opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
-                         step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h)
+                         step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=cm.fem.element_order == 1,
+                         eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL)
     solver = TimedSolver(pinned(ctx.solver, obj.pin), ctx.timer)
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
     return res.x.reshape(x0.shape), res.iterations

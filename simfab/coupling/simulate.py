@@ -62,10 +62,11 @@ its vertices' distances from Newton's last evaluation, and check points already 
 O by the Lipschitz bound from their facet's vertices, or from their own values at earlier checks,
 are not evaluated; lifting near points reads the objective's lazy distances. Per Newton iterate
 only the exact FEM Hessian is assembled (the PSD-projected one, twice as expensive, only when the
-exact one fails to factorize), and not at line-search trials (energy and gradient only; a P2
-Hessian costs ~20 of those, and the first trial of most steps is their last iterate); the step
-record reuses Newton's last evaluation. The forces of a step use the barrier stiffness its
-equilibrium was solved with.
+exact one fails to factorize), on quadratic elements not at line-search trials (energy and
+gradient only; their Hessian costs ~15-20 of those, and the first trial of most steps is their last
+iterate), on linear ones already at the first trial unless the force residual is within
+NEWTON_EAGER_ABOVE_TOL of the target; the step record reuses Newton's last evaluation. The forces
+of a step use the barrier stiffness its equilibrium was solved with.
 
 Well-posedness: a rigid motion of A that the supports leave free and no contact normal opposes
 (a clip sliding along a frictionless cylinder, a claw turning on a sphere) costs no energy, so the
