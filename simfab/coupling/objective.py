@@ -51,6 +51,12 @@ class StepObjective:
         self.y_ref = None
         self.d_ref = None
         self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
+        # P2: the exact Hessian too is assembled on demand (LazyHessian), so that Newton, once it
+        # has stopped offering it (NewtonOptions.retry_exact), assembles the projected one only; the
+        # elastic energy and gradient then come from a gradient launch (~1/15 of a Hessian's),
+        # reused from the line-search trial at the same positions (_fem: (x, E, gradient))
+        self.lazy_exact = cm.fem.element_order == 2
+        self._fem = None
 
     def distances(self, x: np.ndarray, hessian: bool):
         """(d (k,) [m], grad d (k, dim), hess d (k, dim, dim) or None): exact near O, lower bounds
@@ -99,13 +105,18 @@ class StepObjective:
         x = xf.reshape(self.n, self.dim)
         H_exact = None
         with self.timer.timed("assembly"):
-            if need_hessian:
+            H = None
+            if need_hessian and not self.lazy_exact:
                 # exact Hessian only (half the cost of the eigen-projected one); the projected one is
                 # assembled on demand, when the exact one turns out indefinite (see LazyHessian)
                 E, g, H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)
-                H = None
             else:
-                (E, g), H = energy_gradient(cm.fem, x), None
+                fem = self._fem
+                if fem is not None and np.array_equal(fem[0], xf):  # Newton's Hessian at its accepted trial
+                    E, g = fem[1], fem[2]
+                else:
+                    E, g = energy_gradient(cm.fem, x)
+                    self._fem = (xf.copy(), E, g)
         if self.pin is not None:
             E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
         if not np.isfinite(E):
@@ -124,7 +135,10 @@ class StepObjective:
                 Hf = fr.hessian
             if need_hessian:
                 contact = (act, Hy, Hf)
-                if H_exact is not None:
+                if self.lazy_exact:
+                    xc = x.copy()
+                    H_exact, H = LazyHessian(self, xc, contact, psd=False), LazyHessian(self, xc, contact)
+                elif H_exact is not None:
                     self._add_contact(H_exact, contact, psd=False)
                     H = LazyHessian(self, x.copy(), contact)
                 else:
@@ -225,24 +239,24 @@ class StepObjective:
 
 
 class LazyHessian:
-    """PSD-projected Hessian of a :class:`StepObjective` at x, assembled on first call (once);
-    ``contact`` (active points, exact barrier blocks) as found with the exact Hessian, or None to
-    evaluate the distances at x again (deterministic: the same active points and blocks)."""
+    """PSD-projected (``psd``) or exact Hessian of a :class:`StepObjective` at x, assembled on first
+    call (once); ``contact`` (active points, exact barrier blocks) as found with the exact Hessian,
+    or None to evaluate the distances at x again (deterministic: the same active points and blocks)."""
 
-    def __init__(self, obj, x, contact):
-        self.obj, self.x, self.contact, self.H = obj, x, contact, None
+    def __init__(self, obj, x, contact, psd: bool = True):
+        self.obj, self.x, self.contact, self.H, self.psd = obj, x, contact, None, psd
 
     def __call__(self):
         if self.H is None:
             obj = self.obj
             with obj.timer.timed("assembly"):
-                _, _, H = energy_gradient_hessian(obj.cm.fem, self.x)
+                _, _, H = energy_gradient_hessian(obj.cm.fem, self.x, project_psd=self.psd)
             if self.contact is None:
                 act, _, _, Hy = obj._barrier(*obj.distances(self.x, True))
                 Hf = obj.friction.evaluate(self.x, hessian=True).hessian if obj.friction is not None else None
                 self.contact = (act, Hy, Hf)
             with obj.timer.timed("barrier"):
-                obj._add_contact(H, self.contact, psd=True)
+                obj._add_contact(H, self.contact, psd=self.psd)
             self.H = H
         return self.H
 

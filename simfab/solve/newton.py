@@ -7,8 +7,8 @@ Cholesky factorization (:class:`simfab.solve.linear.SPDSolver`, symbolic analysi
 the pattern is unchanged), then backtracks along ``dx`` until the Armijo sufficient-decrease
 condition holds at an admissible point.
 
-Exact-first steps: ``fun`` may return the Hessian as a pair ``(H_exact, H_psd)`` (``H_psd`` may
-be a zero-argument callable building it on demand, so that it is only assembled when needed). The exact
+Exact-first steps: ``fun`` may return the Hessian as a pair ``(H_exact, H_psd)`` (either may be
+a zero-argument callable building it on demand, so that it is only assembled when needed). The exact
 Hessian is then factorized first; when its Cholesky factorization succeeds it is positive definite and the step is
 an exact Newton step (quadratic convergence also where element-wise PSD projection would only
 converge linearly, e.g. large rotations); otherwise the projected Hessian is used (with
@@ -188,6 +188,7 @@ def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonOp
         H_exact, H_psd = H
         if try_exact:
             try:
+                H_exact = H_exact() if callable(H_exact) else H_exact
                 return _solve_block(solver, sub, H_exact, rhs), 0.0, "exact", False
             except NotPositiveDefinite:
                 failed = True
