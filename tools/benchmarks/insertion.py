@@ -24,8 +24,8 @@ pose, the rest search's included) needs at least S sparse factorizations of its 
 floor = S x (one CHOLMOD numeric factorization + solve of the case's P2 Hessian on its free dofs,
 at the run's last state, fastest of FLOOR_REPEAT, measured in the same process right after the
 runs); ``floor_ratio`` = seconds / floor_seconds, the target FLOOR_TARGET (``floor_ratio_cpu``: the
-same in process CPU time, the run's on both of its threads, steadier when the machine is shared). Each row also reports
-the simulation seconds (fastest run; scene loading and meshing excluded, as in the original's
+same in process CPU time, the run's on both of its threads, steadier when the machine is shared).
+Each row also reports the simulation seconds (fastest run; scene loading and meshing excluded, as in the original's
 per-iteration cost; the median and every run's time too), the original's seconds
 (``figures.json``) and the speed-up original/ours with the accuracy of both beside it, Newton
 iterations and their histogram per step, and the run's wall time split by stage, each second
@@ -203,7 +203,7 @@ def run(argv) -> dict:
             "machine": "2 cores, CPU only", "rows": rows}
 
 
-def factorization_seconds(cm, x) -> float:
+def factorization_seconds(cm, x) -> tuple[float, float]:
     """(wall, CPU) seconds of one CHOLMOD numeric factorization + solve of the case's Hessian on its
     free dofs (the PSD FEM Hessian at positions x with the rigid-mode regularization: the run's
     pattern, so the run's factorization cost), fastest of FLOOR_REPEAT after the symbolic analysis."""
