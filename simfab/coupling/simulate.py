@@ -112,7 +112,8 @@ from simfab.progress import progress
 @dataclass(kw_only=True)
 class InsertionResult:
     """steps : one :class:`StepResult` per step (the start pose first); seconds : wall time;
-    timings : seconds per resource (assembly, factorization, contact; they cut across phases);
+    timings : seconds per stage, each counted once (assembly, factorization, solves, contact_field,
+    barrier, line_search, predictor; :mod:`simfab.coupling.timing`; they cut across phases);
     phases : wall seconds per phase of the insertion loop, each counted once (warm_start, newton,
     facet_check, record, rigid_check; "other" is the rest of ``seconds``);
     warnings : one line each (e.g. steps too coarse, an unfinished insertion, stress above yield);
