@@ -51,11 +51,17 @@ class StepObjective:
         self.y_ref = None
         self.d_ref = None
         self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
+        # P2: the exact Hessian too is assembled on demand (LazyHessian), so that Newton, once it
+        # has stopped offering it (NewtonOptions.retry_exact), assembles the projected one only; the
+        # elastic energy and gradient then come from a gradient launch (~1/15 of a Hessian's),
+        # reused from the line-search trial at the same positions (_fem: (x, E, gradient))
+        self.lazy_exact = cm.fem.element_order == 2
+        self._fem = None
 
     def distances(self, x: np.ndarray, hessian: bool):
         """(d (k,) [m], grad d (k, dim), hess d (k, dim, dim) or None): exact near O, lower bounds
         (zero derivatives) for points certified farther than the band."""
-        with self.timer.timed("contact"):
+        with self.timer.timed("contact_field"):
             y = self.points.positions(x)
             k, dim = len(y), self.dim
             if self.y_ref is None:
@@ -81,7 +87,16 @@ class StepObjective:
         return d, gd, hd
 
     def __call__(self, xf: np.ndarray, need_hessian: bool):
-        """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O."""
+        """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O.
+        An evaluation without the Hessian (a line-search trial) books its whole time under
+        "line_search"; one with it books the FEM terms under "assembly", the contact field under
+        "contact_field" and the barrier (and friction) terms under "barrier"."""
+        if not need_hessian:
+            with self.timer.into("line_search"):
+                return self._evaluate(xf, False)
+        return self._evaluate(xf, True)
+
+    def _evaluate(self, xf: np.ndarray, need_hessian: bool):
         cm = self.cm
         memo = self.memo
         if need_hessian and memo is not None and memo[0].shape == xf.shape and np.array_equal(memo[0], xf):
@@ -90,13 +105,18 @@ class StepObjective:
         x = xf.reshape(self.n, self.dim)
         H_exact = None
         with self.timer.timed("assembly"):
-            if need_hessian:
+            H = None
+            if need_hessian and not self.lazy_exact:
                 # exact Hessian only (half the cost of the eigen-projected one); the projected one is
                 # assembled on demand, when the exact one turns out indefinite (see LazyHessian)
                 E, g, H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)
-                H = None
             else:
-                (E, g), H = energy_gradient(cm.fem, x), None
+                fem = self._fem
+                if fem is not None and np.array_equal(fem[0], xf):  # Newton's Hessian at its accepted trial
+                    E, g = fem[1], fem[2]
+                else:
+                    E, g = energy_gradient(cm.fem, x)
+                    self._fem = (xf.copy(), E, g)
         if self.pin is not None:
             E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
         if not np.isfinite(E):
@@ -104,7 +124,7 @@ class StepObjective:
         d, gd, hd = self.distances(x, need_hessian)
         if np.any(d <= 0):
             return np.inf, g.ravel(), H
-        with self.timer.timed("contact"):
+        with self.timer.timed("barrier"):
             act, B, gy, Hy = self._barrier(d, gd, hd)
             gc = self.points.scatter(gy, self.n, rows=act)
             Hf = None
@@ -115,7 +135,10 @@ class StepObjective:
                 Hf = fr.hessian
             if need_hessian:
                 contact = (act, Hy, Hf)
-                if H_exact is not None:
+                if self.lazy_exact:
+                    xc = x.copy()
+                    H_exact, H = LazyHessian(self, xc, contact, psd=False), LazyHessian(self, xc, contact)
+                elif H_exact is not None:
                     self._add_contact(H_exact, contact, psd=False)
                     H = LazyHessian(self, x.copy(), contact)
                 else:
@@ -126,8 +149,8 @@ class StepObjective:
                 kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if len(act) else 0.0
                 self.curv = max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / cm.field.sigma)
             else:
-                # Newton may stop at a trial evaluated without its Hessian (see NewtonOptions.
-                # eager_above_tol): this evaluation may be the final one, with the PSD Hessian deferred
+                # Newton may stop at a trial evaluated without its Hessian (see solve): this
+                # evaluation may be the final one, with the PSD Hessian deferred
                 self._remember(xf, d, gd, LazyHessian(self, x.copy(), None), E, g)
         # exact-first Newton (simfab.solve.newton): the exact Hessian is used whenever it is
         # positive definite (quadratic convergence), the PSD-projected one (built lazily) otherwise
@@ -155,7 +178,12 @@ class StepObjective:
         self.last_fem = (E, g)  # elastic energy and gradient at last_x (reused by the step record)
 
     def value(self, x: np.ndarray) -> float:
-        """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible."""
+        """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible
+        (its time books under "line_search")."""
+        with self.timer.into("line_search"):
+            return self._value(x)
+
+    def _value(self, x: np.ndarray) -> float:
         with self.timer.timed("assembly"):
             E = energy(self.cm.fem, x) + (self.pin.energy(np.ravel(x)) if self.pin is not None else 0.0)
         if not np.isfinite(E):
@@ -181,12 +209,17 @@ class StepObjective:
         """Step cap keeping every constraint point outside O along the whole step (see below).
 
         Per point, with d its distance to O, a = grad d . dy and K a curvature bound of the field
-        (from the Hessians near O, see ``__call__``), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2; the cap is the largest alpha
-        keeping this above 0.1 d. It lets points in contact slide along O (a ~ 0) and move away
-        freely, while approaching points stop short of O. Conservative advancement,
+        (from the Hessians near O, see ``__call__``), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2;
+        the cap is the largest alpha keeping this above 0.1 d. It lets points in contact slide along O
+        (a ~ 0) and move away freely, while approaching points stop short of O. Conservative advancement,
         alpha <= 0.9 d / (L |dy|) with L a Lipschitz bound of psi, is always allowed as well.
-        The line search still rejects any trial point inside O (energy +inf).
+        The line search still rejects any trial point inside O (energy +inf). Its time books under
+        "line_search".
         """
+        with self.timer.into("line_search"):
+            return self._max_step(xf, dx)
+
+    def _max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
         if self.last_x is not None and np.array_equal(self.last_x, xf):
             d, gd = self.last_d, self.last_gd
         else:
@@ -206,24 +239,24 @@ class StepObjective:
 
 
 class LazyHessian:
-    """PSD-projected Hessian of a :class:`StepObjective` at x, assembled on first call (once);
-    ``contact`` (active points, exact barrier blocks) as found with the exact Hessian, or None to
-    evaluate the distances at x again (deterministic: the same active points and blocks)."""
+    """PSD-projected (``psd``) or exact Hessian of a :class:`StepObjective` at x, assembled on first
+    call (once); ``contact`` (active points, exact barrier blocks) as found with the exact Hessian,
+    or None to evaluate the distances at x again (deterministic: the same active points and blocks)."""
 
-    def __init__(self, obj, x, contact):
-        self.obj, self.x, self.contact, self.H = obj, x, contact, None
+    def __init__(self, obj, x, contact, psd: bool = True):
+        self.obj, self.x, self.contact, self.H, self.psd = obj, x, contact, None, psd
 
     def __call__(self):
         if self.H is None:
             obj = self.obj
             with obj.timer.timed("assembly"):
-                _, _, H = energy_gradient_hessian(obj.cm.fem, self.x)
+                _, _, H = energy_gradient_hessian(obj.cm.fem, self.x, project_psd=self.psd)
             if self.contact is None:
                 act, _, _, Hy = obj._barrier(*obj.distances(self.x, True))
                 Hf = obj.friction.evaluate(self.x, hessian=True).hessian if obj.friction is not None else None
                 self.contact = (act, Hy, Hf)
-            with obj.timer.timed("contact"):
-                obj._add_contact(H, self.contact, psd=True)
+            with obj.timer.timed("barrier"):
+                obj._add_contact(H, self.contact, psd=self.psd)
             self.H = H
         return self.H
 
@@ -259,13 +292,20 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     max(NEWTON_GRAD_TOL_REL * force_scale, NEWTON_GRAD_TOL_START * |residual at x0|) or the Newton
     step is below NEWTON_STEP_TOL_REL * h_A (projected Newton converges linearly once the PSD
     projections are active, so a purely absolute force target would spend many iterations on the
-    last digits). Returns (x (n, dim), Newton iterations)."""
+    last digits). On quadratic elements line-search trials are evaluated without the Hessian (energy
+    and gradient), and the Hessian only at an accepted trial that is not converged: it costs ~15-20
+    energy and gradient evaluations there, and the first trial of most steps is converged. On linear
+    ones, where it costs about one objective evaluation, the first trial carries it (unless the
+    residual is within NEWTON_EAGER_ABOVE_TOL of the target). Once the exact Hessian has failed to
+    factorize, the rest of the solve uses the PSD-projected one (``retry_exact=False``): where it
+    is indefinite it mostly stays so, and each failed attempt costs up to a factorization. Returns
+    (x (n, dim), Newton iterations)."""
     _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n)
     opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
-                         step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=True,
-                         eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL)
+                         step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=cm.fem.element_order == 1,
+                         eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False)
     solver = TimedSolver(pinned(ctx.solver, obj.pin), ctx.timer)
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
     return res.x.reshape(x0.shape), res.iterations

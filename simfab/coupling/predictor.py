@@ -120,7 +120,7 @@ def snap_contacts(cm: CouplingModel, state: StepState, x: np.ndarray, s_new: flo
     if not act.any():
         return None
     R, p = cm.pose(s_new)
-    with ctx.timer.timed("contact"):
+    with ctx.timer.timed("contact_field"):
         ev_o = cm.field.evaluate(pts.positions(x)[act], (R, p), hessian=False)
     return move_points(cm, pts, x, act, (d_prev[act] + ev_o.psi) * ev_o.near, -ev_o.grad)
 
@@ -168,7 +168,7 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext)
 
     pts = state.points
     y = pts.positions(x)
-    with timer.timed("contact"):
+    with timer.timed("contact_field"):
         ev_a = cm.field.evaluate(y, (Ra, pa), hessian=False)
     delta = carry(y) - y
     reach = (-ev_a.psi < C.PSI_LIPSCHITZ * np.linalg.norm(delta, axis=1) + point_dhat(cm, pts)) & ev_a.near
@@ -229,7 +229,7 @@ def feasible_distances(cm, x0, s, pts, ctx):
     if not ok:
         return None
     R, p = cm.pose(s)
-    with ctx.timer.timed("contact"):
+    with ctx.timer.timed("contact_field"):
         ev = cm.field.evaluate(pts.positions(x0), (R, p), hessian=False)
     return -ev.psi
 

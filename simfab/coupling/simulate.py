@@ -62,10 +62,11 @@ its vertices' distances from Newton's last evaluation, and check points already 
 O by the Lipschitz bound from their facet's vertices, or from their own values at earlier checks,
 are not evaluated; lifting near points reads the objective's lazy distances. Per Newton iterate
 only the exact FEM Hessian is assembled (the PSD-projected one, twice as expensive, only when the
-exact one fails to factorize); the line search evaluates the Hessian already at its first trial
-(most are accepted) unless the force residual is within NEWTON_EAGER_ABOVE_TOL of the target (the
-trial is then most likely the last iterate), and the step record reuses Newton's last
-evaluation. The forces of a step use the barrier stiffness its equilibrium was solved with.
+exact one fails to factorize), on quadratic elements not at line-search trials (energy and
+gradient only; their Hessian costs ~15-20 of those, and the first trial of most steps is their last
+iterate), on linear ones already at the first trial unless the force residual is within
+NEWTON_EAGER_ABOVE_TOL of the target; the step record reuses Newton's last evaluation. The forces
+of a step use the barrier stiffness its equilibrium was solved with.
 
 Well-posedness: a rigid motion of A that the supports leave free and no contact normal opposes
 (a clip sliding along a frictionless cylinder, a claw turning on a sphere) costs no energy, so the
@@ -111,7 +112,8 @@ from simfab.progress import progress
 @dataclass(kw_only=True)
 class InsertionResult:
     """steps : one :class:`StepResult` per step (the start pose first); seconds : wall time;
-    timings : seconds per resource (assembly, factorization, contact; they cut across phases);
+    timings : seconds per stage, each counted once (assembly, factorization, solves, contact_field,
+    barrier, line_search, predictor; :mod:`simfab.coupling.timing`; they cut across phases);
     phases : wall seconds per phase of the insertion loop, each counted once (warm_start, newton,
     facet_check, record, rigid_check; "other" is the rest of ``seconds``);
     warnings : one line each (e.g. steps too coarse, an unfinished insertion, stress above yield);

@@ -147,9 +147,10 @@ class StepState:
 
 @dataclass(kw_only=True)
 class StepContext:
-    """Per-run services of the insertion loop: ``timer`` (seconds per resource: assembly,
-    factorization, contact), ``phases`` (seconds per loop phase: warm_start, newton, facet_check,
-    record, rigid_check) and the sparse ``solver`` whose symbolic factorization every solve reuses."""
+    """Per-run services of the insertion loop: ``timer`` (seconds per stage: assembly, factorization,
+    solves, contact_field, barrier, line_search, predictor; see :mod:`simfab.coupling.timing`),
+    ``phases`` (seconds per loop phase: warm_start, newton, facet_check, record, rigid_check) and
+    the sparse ``solver`` whose symbolic factorization every solve reuses."""
 
     timer: Timer = field(default_factory=Timer)
     phases: Timer = field(default_factory=Timer)

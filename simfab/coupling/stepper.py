@@ -216,7 +216,7 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
     while True:
         resumed = False
         try:
-            with ctx.phases.timed("warm_start"):
+            with ctx.phases.timed("warm_start"), ctx.timer.into("predictor"):
                 if frictional and (lagged is None or lagged.points is not state.points):
                     lagged = start_lag(cm, state, s_new)
                 obj = make_objective(cm, state, s_new, ctx, lagged)

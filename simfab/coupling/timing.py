@@ -1,5 +1,13 @@
-"""Wall-time accounting of an insertion run: per resource (assembly, factorization, contact) and per
-phase of the loop."""
+"""Wall-time accounting of an insertion run: per stage (assembly, factorization, solves, contact
+field, barrier, line search, predictor) and per phase of the loop (warm_start, newton, facet_check,
+record, rigid_check).
+
+Each :class:`Timer` books a ``with`` block's time *exclusively*: a block opened inside another block
+of the same timer pauses the outer one, so a timer's figures add up to at most the wall time and
+never count a second twice (e.g. the triangular solves inside a solve that also factorizes book
+under "solves", the factorization under "factorization"). Within :meth:`Timer.into` every block of
+the timer books under one key (e.g. the predictor's assembly and solves under "predictor").
+"""
 
 from __future__ import annotations
 
@@ -7,17 +15,25 @@ import time
 
 
 class Timer:
-    """Accumulates wall time per category (assembly, factorization, contact, ...)."""
+    """Accumulates exclusive wall time per category in ``t`` (seconds) and the number of blocks
+    timed per category in ``n``."""
 
     def __init__(self):
         self.t: dict[str, float] = {}
+        self.n: dict[str, int] = {}
+        self._open: list = []  # the open spans, innermost last
+        self._into: str | None = None
 
     def add(self, key: str, dt: float) -> None:
         self.t[key] = self.t.get(key, 0.0) + dt
 
     def timed(self, key: str) -> "Span":
-        """Book the wall time of a ``with`` block under ``key``."""
-        return Span(self, key)
+        """Book the wall time of a ``with`` block under ``key`` (exclusive of blocks nested in it)."""
+        return _NULL if self._into is not None else Span(self, key)
+
+    def into(self, key: str) -> "Into":
+        """A ``with`` block whose whole time, blocks nested in it included, books under ``key``."""
+        return Into(self, key)
 
 
 class Span:
@@ -30,17 +46,70 @@ class Span:
         self.timer, self.key = timer, key
 
     def __enter__(self):
-        self.t0 = time.perf_counter()
+        timer = self.timer
+        now = time.perf_counter()
+        if timer._open:  # pause the enclosing span
+            outer = timer._open[-1]
+            timer.add(outer.key, now - outer.t0)
+        self.t0 = now
+        timer._open.append(self)
 
     def __exit__(self, *exc):
-        self.timer.add(self.key, time.perf_counter() - self.t0)
+        timer = self.timer
+        now = time.perf_counter()
+        timer.add(self.key, now - self.t0)
+        timer.n[self.key] = timer.n.get(self.key, 0) + 1
+        timer._open.pop()
+        if timer._open:  # resume the enclosing span
+            timer._open[-1].t0 = now
+
+
+class _Null:
+    __slots__ = ()
+
+    def __enter__(self):
+        pass
+
+    def __exit__(self, *exc):
+        pass
+
+
+_NULL = _Null()
+
+
+class Into:
+    """See :meth:`Timer.into`."""
+
+    __slots__ = ("timer", "span", "saved")
+
+    def __init__(self, timer: Timer, key: str):
+        self.timer, self.span = timer, Span(timer, key)
+
+    def __enter__(self):
+        self.saved = self.timer._into
+        if self.saved is None:
+            self.span.__enter__()
+            self.timer._into = self.span.key
+
+    def __exit__(self, *exc):
+        if self.saved is None:
+            self.timer._into = None
+            self.span.__exit__(*exc)
 
 
 class TimedSolver:
-    """SPDSolver wrapper that books factorization + solve time."""
+    """Solver wrapper (``solve``, ``solve_free``) that books its calls under "solves" and hands the
+    timer to the wrapped :class:`simfab.solve.linear.SPDSolver` (found through ``.solver`` of
+    wrappers such as :class:`simfab.coupling.rigid.PinnedSolver`), which books its numeric
+    factorizations under "factorization"."""
 
     def __init__(self, solver, timer):
         self.solver, self.timer = solver, timer
+        inner = solver
+        while hasattr(inner, "solver"):
+            inner = inner.solver
+        if hasattr(inner, "timer"):
+            inner.timer = timer
 
     def solve(self, A, b):
         return self._timed(self.solver.solve, A, b)
@@ -49,5 +118,5 @@ class TimedSolver:
         return self._timed(self.solver.solve_free, A, free, b)
 
     def _timed(self, fn, *args):
-        with self.timer.timed("factorization"):
+        with self.timer.timed("solves"):
             return fn(*args)

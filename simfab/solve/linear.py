@@ -94,6 +94,10 @@ class SPDSolver:
     ----------
     backend : "cholmod" | "splu" | "auto"
         "auto" uses CHOLMOD when cvxopt is importable, else SciPy's SuperLU.
+
+    Attribute ``timer``: None, or an object with ``timed(key)`` returning a context manager (e.g.
+    :class:`simfab.coupling.timing.Timer`); each numeric factorization is then timed under
+    "factorization".
     """
 
     def __init__(self, backend: str = "auto"):
@@ -112,6 +116,7 @@ class SPDSolver:
         self._F = None  # CHOLMOD symbolic (then numeric) factor
         self._factored = None  # copy of the values of the current numeric factorization (None: none)
         self._full = None  # solve_free: (full pattern key, free indices, value map full -> factor input)
+        self.timer = None
 
     def solve(self, A: sp.spmatrix, b: np.ndarray) -> np.ndarray:
         """Solve ``A x = b`` for SPD ``A`` (n, n) and ``b`` (n,) or (n, k); returns x shaped like b.
@@ -158,7 +163,11 @@ class SPDSolver:
         unless they are those of the current factorization, then the solve for ``b`` (n,) or (n, k)."""
         if self._factored is None or not np.array_equal(values, self._factored):
             self._factored = None
-            self._factor(values)
+            if self.timer is None:
+                self._factor(values)
+            else:
+                with self.timer.timed("factorization"):
+                    self._factor(values)
             self._factored = values.copy()
         import cvxopt
 

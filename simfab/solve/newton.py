@@ -7,11 +7,12 @@ Cholesky factorization (:class:`simfab.solve.linear.SPDSolver`, symbolic analysi
 the pattern is unchanged), then backtracks along ``dx`` until the Armijo sufficient-decrease
 condition holds at an admissible point.
 
-Exact-first steps: ``fun`` may return the Hessian as a pair ``(H_exact, H_psd)`` (``H_psd`` may
-be a zero-argument callable building it on demand, so that it is only assembled when needed). The exact
+Exact-first steps: ``fun`` may return the Hessian as a pair ``(H_exact, H_psd)`` (either may be
+a zero-argument callable building it on demand, so that it is only assembled when needed). The exact
 Hessian is then factorized first; when its Cholesky factorization succeeds it is positive definite and the step is
 an exact Newton step (quadratic convergence also where element-wise PSD projection would only
-converge linearly, e.g. large rotations); otherwise the projected Hessian is used.
+converge linearly, e.g. large rotations); otherwise the projected Hessian is used (with
+``retry_exact=False`` for the rest of the solve).
 
 Feasibility hooks (used by barrier-based contact):
 
@@ -72,6 +73,10 @@ class NewtonOptions:
     # quadratically, the trial is then most likely the last iterate and its Hessian never used
     # (0: always eager)
     eager_above_tol: float = 0.0
+    # Exact-first Hessians (see the module docstring): False stops trying the exact Hessian for the
+    # rest of the solve once its factorization has failed (a failed attempt costs up to a whole
+    # factorization, and where the exact Hessian is indefinite it mostly stays so until convergence)
+    retry_exact: bool = True
     # Regularization when the Cholesky factorization fails: H + shift * mean|diag H| * I with
     # shift starting at reg_initial, multiplied by reg_growth per failure, at most reg_max.
     reg_initial: float = 1e-10
@@ -172,22 +177,27 @@ def _free_block(free_idx: np.ndarray, n: int) -> _FreeBlock:
     return fb
 
 
-def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonOptions):
+def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonOptions, try_exact: bool = True):
     """Newton direction on the free dofs. ``H`` is a PSD sparse matrix, or a pair
     ``(H_exact, H_psd)``: the exact Hessian is tried first (a successful Cholesky factorization
     proves it positive definite, so the step is an exact Newton step: quadratic convergence);
-    when it is indefinite the PSD-projected one is used. Returns (dx, shift, "exact"|"psd")."""
+    when it is indefinite (or ``try_exact`` is False) the PSD-projected one is used. Returns
+    (dx, shift, "exact"|"psd", whether an exact factorization failed)."""
+    failed = False
     if isinstance(H, tuple):
         H_exact, H_psd = H
-        try:
-            return _solve_block(solver, sub, H_exact, rhs), 0.0, "exact"
-        except NotPositiveDefinite:
-            H = H_psd() if callable(H_psd) else H_psd
+        if try_exact:
+            try:
+                H_exact = H_exact() if callable(H_exact) else H_exact
+                return _solve_block(solver, sub, H_exact, rhs), 0.0, "exact", False
+            except NotPositiveDefinite:
+                failed = True
+        H = H_psd() if callable(H_psd) else H_psd
     try:
-        return _solve_block(solver, sub, H, rhs), 0.0, "psd"
+        return _solve_block(solver, sub, H, rhs), 0.0, "psd", failed
     except NotPositiveDefinite:
         dx, shift = _solve_shifted(solver, sub(H), rhs, opts)
-    return dx, shift, "psd"
+    return dx, shift, "psd", failed
 
 
 def _solve_block(solver: SPDSolver, sub: "_FreeBlock", H, rhs: np.ndarray) -> np.ndarray:
@@ -263,6 +273,7 @@ def minimize(
 
     if admissible is not None and not admissible(x):
         raise ConvergenceError("Newton: the start point is not admissible")
+    try_exact = True
     f, g, H = fun(x, True)
     if not np.isfinite(f):
         raise ConvergenceError(f"Newton: the objective is not finite at the start point (f={f})")
@@ -279,7 +290,9 @@ def minimize(
         return done("gradient", 0)
 
     for it in range(1, opts.max_iter + 1):
-        dx_f, shift, used = _newton_direction(solver, sub, H, -g[free_idx], opts)
+        dx_f, shift, used, failed = _newton_direction(solver, sub, H, -g[free_idx], opts, try_exact)
+        if failed and not opts.retry_exact:
+            try_exact = False
         dx = np.zeros(n)
         dx[free_idx] = dx_f
         slope = float(g[free_idx] @ dx_f)

@@ -5,6 +5,7 @@ import pytest
 import scipy.sparse as sp
 
 from simfab.errors import ConvergenceError
+from simfab.solve.linear import SPDSolver
 from simfab.solve.newton import NewtonOptions, minimize
 
 
@@ -199,6 +200,38 @@ def test_exact_hessian_used_when_positive_definite_else_psd_fallback():
     res2 = minimize(fun2, np.zeros(6))
     assert all(h["hessian"] == "psd" for h in res2.history)
     np.testing.assert_allclose(res2.x, np.linalg.solve(A + np.eye(6), b), rtol=1e-9)
+
+
+def test_retry_exact_false_stops_offering_an_indefinite_exact_hessian():
+    # f = sum cosh(x_i) - b.x (convex, Hessian diag cosh x): Newton needs several iterations. The
+    # "exact" Hessian offered first is indefinite at every iterate, so each of its factorizations
+    # fails; with retry_exact=False it is tried once per solve, and the iterates are the same
+    b = np.array([3.0, -2.0, 1.0, 0.5])
+
+    def fun(x, need_h):
+        h = np.cosh(x)
+        pair = (sp.diags(h - np.r_[h[0] + 1.0, 0, 0, 0]).tocsr(), sp.diags(h).tocsr()) if need_h else None
+        return float(np.cosh(x).sum() - b @ x), np.sinh(x) - b, pair
+
+    class Counting:
+        def __init__(self):
+            self.inner, self.calls = SPDSolver(), 0
+
+        def solve(self, A, rhs):
+            self.calls += 1
+            return self.inner.solve(A, rhs)
+
+    runs = {}
+    for retry in (True, False):
+        solver = Counting()
+        res = minimize(fun, np.zeros(4), options=NewtonOptions(grad_tol=1e-12, retry_exact=retry), solver=solver)
+        runs[retry] = (res, solver.calls)
+    (res_t, calls_t), (res_f, calls_f) = runs[True], runs[False]
+    assert res_t.iterations == res_f.iterations >= 3
+    np.testing.assert_allclose(res_t.x, res_f.x, rtol=1e-12)  # (the failed attempts leave round-off only)
+    np.testing.assert_allclose(res_f.x, np.arcsinh(b), rtol=1e-10)
+    assert calls_t == 2 * res_t.iterations  # a failed exact attempt and the PSD solve, every iteration
+    assert calls_f == res_f.iterations + 1  # the exact one only at the first
 
 
 def test_zero_max_step_and_inadmissible_trials_raise():
