@@ -41,7 +41,8 @@ SIMULATE_DESCRIPTION = """Run an insertion simulation of a coupling scene and wr
   scene's [design] stress_radius, default 0.5 mm), yield_stress [Pa], max_penetration,
   penetration_tolerance [m], min_det_F, steps, newton_iterations,
   elements, element_order, nodes, kappa_initial, kappa_final [N/m], dhat [m], object_samples, seconds [s],
-  time_split [s] per resource (assembly, factorization, contact, total), phase_split [s] per
+  time_split [s] per resource (assembly, factorization, solves, contact_field, barrier, line_search,
+  predictor, total), phase_split [s] per
   phase of the insertion loop (warm_start, newton, facet_check, record, rigid_check, other),
   friction [-] (the Coulomb coefficient used: [contact] friction or --friction, 0 = frictionless),
   F_hold [N] (with friction: the force to start sliding O out of its seat), removal_steps,

@@ -67,7 +67,8 @@ class BandedOrSparseCholesky(SPDSolver):
         except LinAlgError:
             raise NotPositiveDefinite("banded Cholesky failed: matrix is not positive definite") from None
         x = np.empty(n)
-        x[info["perm"]] = cho_solve_banded((c, False), np.asarray(b, dtype=np.float64)[info["perm"]], check_finite=False)
+        rhs = np.asarray(b, dtype=np.float64)[info["perm"]]
+        x[info["perm"]] = cho_solve_banded((c, False), rhs, check_finite=False)
         return x
 
 

@@ -29,7 +29,9 @@ def test_matches_dense_and_reuses_pattern(backend):
 def test_non_canonical_input_is_not_mutated():
     A = _laplacian_2d(5).tocoo()
     # the same matrix as a sum of duplicate entries, unsorted
-    rows = np.concatenate([A.row, A.row]); cols = np.concatenate([A.col, A.col]); vals = np.concatenate([A.data, A.data]) / 2
+    rows = np.concatenate([A.row, A.row])
+    cols = np.concatenate([A.col, A.col])
+    vals = np.concatenate([A.data, A.data]) / 2
     D = sp.csr_matrix((vals, (rows, cols)), shape=A.shape)
     D.has_canonical_format = False
     D_data = D.data.copy()
@@ -171,7 +173,8 @@ else:
     print("none", os.environ.get("OPENBLAS_CORETYPE"))
 """
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout.split()
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         check=True).stdout.split()
     core, after = out[-2], out[-1]
     assert after == "None"  # the variable was set only around the import
     if core == "none":
