@@ -87,7 +87,7 @@ class ShiftedCholesky(BandedOrSparseCholesky):
         self._diag_key = None
         self._diag = None  # positions of the diagonal in the CSR data (None: not all stored)
 
-    def _shifter(self, A: sp.csr_matrix):
+    def shifter(self, A: sp.csr_matrix):
         """Function mu -> A + mu I. When every diagonal entry is stored (Newton Hessians), the shift
         is added to those values in a copy (same pattern, no sparse addition per trial shift)."""
         if not same_pattern(self._diag_key, A):
@@ -113,7 +113,7 @@ class ShiftedCholesky(BandedOrSparseCholesky):
         except NotPositiveDefinite:
             pass
         A = canonical_csr(A)
-        shifted = self._shifter(A)
+        shifted = self.shifter(A)
         base = float(np.mean(np.abs(A.diagonal()))) or 1.0
         lo, mu = 0.0, 1e-10 * base
         x = None

@@ -97,7 +97,7 @@ class SPDSolver:
 
     Attribute ``timer``: None, or an object with ``timed(key)`` returning a context manager (e.g.
     :class:`simfab.coupling.timing.Timer`); each numeric factorization is then timed under
-    "factorization".
+    "factorization". Attribute ``factorizations``: the numeric factorizations attempted so far.
     """
 
     def __init__(self, backend: str = "auto"):
@@ -117,6 +117,7 @@ class SPDSolver:
         self._factored = None  # copy of the values of the current numeric factorization (None: none)
         self._full = None  # solve_free: (full pattern key, free indices, value map full -> factor input)
         self.timer = None
+        self.factorizations = 0
 
     def solve(self, A: sp.spmatrix, b: np.ndarray) -> np.ndarray:
         """Solve ``A x = b`` for SPD ``A`` (n, n) and ``b`` (n,) or (n, k); returns x shaped like b.
@@ -180,6 +181,7 @@ class SPDSolver:
         """Numeric Cholesky factorization; NotPositiveDefinite when a pivot is not positive."""
         import cvxopt
 
+        self.factorizations += 1
         cholmod = import_cholmod()
         self._A.V = cvxopt.matrix(values)
         try:

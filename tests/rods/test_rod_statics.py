@@ -166,7 +166,7 @@ def test_shifted_cholesky_shift_is_a_plus_mu_identity():
     solver = ShiftedCholesky()
     for A in (full, holed, full):  # pattern changes, then back: the diagonal map follows
         A0 = A.toarray()
-        shifted = solver._shifter(A)
+        shifted = solver.shifter(A)
         for mu in (1e-3, 7.5):
             np.testing.assert_array_equal(shifted(mu).toarray(), A0 + mu * np.eye(n))
         np.testing.assert_array_equal(A.toarray(), A0)  # the caller's matrix is not modified
