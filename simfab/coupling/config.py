@@ -247,13 +247,11 @@ class ObjectOptions:
 
 
 def from_table(cls, d: dict, where: str):
-    """``cls(**d)`` for a keyword-only options dataclass read from a scene table: an unknown key, or a
-    value its validation rejects, is an InputError naming ``where`` (the file and table)."""
+    """``cls(**d)`` for a keyword-only options dataclass read from a scene table: an unknown key is an
+    InputError naming ``where`` (the file and table); a value its validation rejects raises the
+    class's own InputError, which names the table (the scene loader adds the file)."""
     known = {f.name for f in fields(cls)}
     unknown = sorted(set(d) - known)
     if unknown:
         raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
-    try:
-        return cls(**d)
-    except InputError as e:
-        raise InputError(e.message, where=where) from None
+    return cls(**d)
