@@ -12,7 +12,6 @@
   quadrature)
 - :mod:`simfab.fem.workspace` - the recorded kernel launches both element orders share
 - :mod:`simfab.fem.loads` - consistent nodal loads (body force, traction) for linear and P2 models
-- :mod:`simfab.fem.cantilever` - the cantilever bending verification problem (linear and P2 vs Timoshenko)
 - :mod:`simfab.fem.stress` - Cauchy and von Mises stress
 - :mod:`simfab.fem.meshing` - Triangle (2D) and fTetWild (3D) meshing, structured tet boxes
 - :mod:`simfab.fem.tolerances` - the area's numerical tolerances

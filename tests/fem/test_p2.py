@@ -11,12 +11,12 @@ from _fem_meshes import box_tet, fd_grad_hess
 from scipy.spatial.transform import Rotation
 
 from simfab.fem import elastic as nh
-from simfab.fem.cantilever import cantilever_model, rectangle_mesh, solve_cantilever, static_solve
 from simfab.fem.materials import Material
 from simfab.fem.model import make_model
 from simfab.fem.neohookean import LINEAR
 from simfab.fem.neohookean_p2 import QUADRATIC, projected_stress_hessian
 from simfab.fem.p2 import RULES, make_p2_model, shape_functions, to_p2
+from simfab.verification.cantilever import cantilever_model, rectangle_mesh, solve_cantilever, static_solve
 
 MAT = Material(name="test", youngs_modulus=1.0e3, poisson_ratio=0.3, yield_stress=1e9, density=1.0)
 
@@ -396,7 +396,7 @@ def test_quadratic_field_pure_bending_is_reproduced_by_p2_not_by_p1(dim):
 # ----------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("dim", [2, 3])
 def test_cantilever_p2_matches_timoshenko_where_linear_locks(dim):
-    # delta = P L^3 / (3 E' I) + P L / (kappa G A) (simfab.fem.cantilever), L/h = 10, load for a
+    # delta = P L^3 / (3 E' I) + P L / (kappa G A) (simfab.verification.cantilever), L/h = 10, load for a
     # 1e-3 L deflection (nonlinearity ~1e-6). P2 error is O(h^2) in energy; measured (6-tet cubes /
     # 2 triangles per square): 3D -2.4% (1 cell through the height), -1.1% (2); 2D -1.7%, -0.7%;
     # mesh-converged -0.3..-0.5% (the clamp restrains the root's Poisson contraction, which beam

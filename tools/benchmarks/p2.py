@@ -2,7 +2,7 @@
 
 ``python tools/bench.py p2 [--dims 2,3] [--levels2-3d 1,2,4 ...] [--no-cost] [--no-knocker] [--table] [--plot P.png]``
 
-Cantilever (simfab.fem.cantilever): L/h = 10, clamped, tip shear load for a 1e-3 L deflection,
+Cantilever (simfab.verification.cantilever): L/h = 10, clamped, tip shear load for a 1e-3 L deflection,
 n cells through the height (structured: 6-tet cubes / two triangles per square). Per dimension,
 element order and level: elements, free dofs, delta / Timoshenko, the error against the
 mesh-converged value (Richardson extrapolation of the three finest P2 levels; its difference from
@@ -56,8 +56,8 @@ def _median_us_per_element(fn, m: int, repeat: int = 5) -> float:
 
 def _cost(dim: int) -> dict:
     from simfab.fem import elastic
-    from simfab.fem.cantilever import cantilever_model
     from simfab.fem.p2 import RULES, to_p2
+    from simfab.verification.cantilever import cantilever_model
 
     lin = cantilever_model(dim, 4 if dim == 3 else 8)
     x1 = lin.rest * 1.01
@@ -92,7 +92,7 @@ def _richardson(levels: list[int], values: list[float]) -> float:
 
 
 def _study(dim: int, levels1: list[int], levels2: list[int], degree: int | None) -> dict:
-    from simfab.fem.cantilever import cantilever_model, solve_cantilever
+    from simfab.verification.cantilever import cantilever_model, solve_cantilever
 
     rows = {1: [], 2: []}
     solve_cantilever(cantilever_model(dim, 1, order=2, degree=degree))  # warm-up: kernel loads
@@ -125,8 +125,8 @@ def _study(dim: int, levels1: list[int], levels2: list[int], degree: int | None)
 
 
 def _large_deflection(dim: int) -> list[dict]:
-    from simfab.fem.cantilever import cantilever_model, solve_cantilever
     from simfab.fem.p2 import RULES
+    from simfab.verification.cantilever import cantilever_model, solve_cantilever
 
     elastica = 0.3017207738  # tip deflection / L at alpha = 1 (tests/fem/test_fem_statics.py shoots it)
     rows = []
@@ -141,11 +141,11 @@ def _large_deflection(dim: int) -> list[dict]:
 
 def _knocker3d(reference: bool) -> dict:
     from simfab.coupling.scene import bundled_dir
-    from simfab.fem.cantilever import static_solve
     from simfab.fem.loads import body_force_loads
     from simfab.fem.model import make_model
     from simfab.fem.p2 import to_p2
     from simfab.fem.subdivide import subdivide
+    from simfab.verification.cantilever import static_solve
 
     data = np.load(bundled_dir() / "knocker3d_part.npz")
     P, T = data["points"], data["elements"]
