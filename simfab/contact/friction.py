@@ -129,3 +129,14 @@ def friction_potential(dy: np.ndarray, tangents: np.ndarray, mu_lambda: np.ndarr
     slip = np.linalg.norm(np.einsum("kdt,kd->kt", t, d3), axis=1)
     H = out_h.numpy()[:, :dim, :dim] if hessian else None
     return FrictionEval(out_e.numpy(), out_g.numpy()[:, :dim], H, slip)
+
+
+def tangent_bases(normals: np.ndarray) -> np.ndarray:
+    """(a, dim, dim - 1) orthonormal bases of the planes normal to unit ``normals`` (a, dim)."""
+    a, dim = normals.shape
+    if dim == 2:
+        return np.stack([-normals[:, 1], normals[:, 0]], axis=1)[:, :, None]
+    axis = np.eye(3)[np.argmin(np.abs(normals), axis=1)]
+    t1 = np.cross(normals, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return np.stack([t1, np.cross(normals, t1)], axis=2)

@@ -18,11 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from simfab.contact.barrier import barrier_gradient
-from simfab.contact.friction import FrictionEval, friction_potential
+from simfab.contact.friction import FrictionEval, friction_potential, tangent_bases
 from simfab.coupling.layout import point_dhat
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.points import ContactPoints
-from simfab.coupling.state import tangent_bases
 
 #: A stuck contact counts as self-locked only where O's motion has a tangential part of at least this
 #: fraction of it (O pressing straight into a face sticks without locking anything).
@@ -60,22 +59,6 @@ class FrictionLag:
         if scale <= 0:
             return 0.0
         return float(np.abs(self.normal_force - other.normal_force).max()) / scale
-
-
-def step_map(cm: CouplingModel, s_a: float, s_b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(M (3, 3), p_a (3,), p_b (3,)): O's rigid motion from path length s_a to s_b, y -> M (y - p_a) + p_b."""
-    Ra, pa = cm.pose(s_a)
-    Rb, pb = cm.pose(s_b)
-    return Rb @ Ra.T, pa, pb
-
-
-def carry(y: np.ndarray, motion) -> np.ndarray:
-    """Points y (k, dim) moved rigidly by ``motion`` (:func:`step_map`)."""
-    M, pa, pb = motion
-    dim = y.shape[1]
-    y3 = np.zeros((len(y), 3))
-    y3[:, :dim] = y
-    return ((y3 - pa) @ M.T + pb)[:, :dim]
 
 
 def normal_forces(cm: CouplingModel, points: ContactPoints, distances: np.ndarray, kappa: float) -> np.ndarray:

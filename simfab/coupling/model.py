@@ -89,6 +89,21 @@ class CouplingModel:
             out = self._cache[key] = pose_matrix(self.pos_quat(s))
         return out
 
+    def motion(self, s_a: float, s_b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """O's rigid motion from path length s_a to s_b: (M (3, 3), p_a (3,), p_b (3,)) with
+        y -> M (y - p_a) + p_b for O's material points."""
+        Ra, pa = self.pose(s_a)
+        Rb, pb = self.pose(s_b)
+        return Rb @ Ra.T, pa, pb
+
+    def carry(self, y: np.ndarray, s_a: float, s_b: float) -> np.ndarray:
+        """Points y (k, dim) [m] moved with O from path length s_a to s_b (:meth:`motion`)."""
+        M, pa, pb = self.motion(s_a, s_b)
+        dim = y.shape[1]
+        y3 = np.zeros((len(y), 3))
+        y3[:, :dim] = y
+        return ((y3 - pa) @ M.T + pb)[:, :dim]
+
     def pos_quat(self, s: float):
         """O's pose at path length s as the path gives it: (pos (3,) [m], quat_wxyz (4,)) (memoized;
         do not modify the arrays)."""

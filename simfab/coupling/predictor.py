@@ -158,19 +158,13 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext)
     x = state.x
     dim = cm.dim
     Ra, pa = cm.pose(state.s)
-    Rb, pb = cm.pose(s_new)
-    M = Rb @ Ra.T  # world rigid map of the step: y -> M (y - pa) + pb
-
-    def carry(z):
-        z3 = np.zeros((len(z), 3))
-        z3[:, :dim] = z
-        return ((z3 - pa) @ M.T + pb)[:, :dim]
+    M = cm.motion(state.s, s_new)[0]  # O's rotation over the step
 
     pts = state.points
     y = pts.positions(x)
     with timer.timed("contact_field"):
         ev_a = cm.field.evaluate(y, (Ra, pa), hessian=False)
-    delta = carry(y) - y
+    delta = cm.carry(y, state.s, s_new) - y
     reach = (-ev_a.psi < C.PSI_LIPSCHITZ * np.linalg.norm(delta, axis=1) + point_dhat(cm, pts)) & ev_a.near
     if not reach.any():
         return x.copy()

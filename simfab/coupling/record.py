@@ -68,15 +68,7 @@ def path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
     h = 1e-6 * max(L, 1e-12)
     s0 = max(0.0, s - h)
     s1 = s + h if cm.end_direction is not None else min(L, s + h)  # straight on past the end
-    R, p = cm.pose(s)
-    dim = cm.dim
-    y3 = np.zeros((len(y), 3))
-    y3[:, :dim] = y
-    out = []
-    for si in (s0, s1):
-        Ri, pi = cm.pose(si)
-        out.append((y3 - p) @ (Ri @ R.T).T + pi)
-    return ((out[1] - out[0]) / (s1 - s0))[:, :dim]
+    return (cm.carry(y, s, s1) - cm.carry(y, s, s0)) / (s1 - s0)
 
 
 def record_step(cm: CouplingModel, state: StepState, iterations: int) -> StepResult:

@@ -58,13 +58,12 @@ def rigid_contact(cm: CouplingModel, state: StepState, free_motions) -> RigidCon
     y = state.points.positions(state.x)[act]
     nrm = gd[act] / np.linalg.norm(gd[act], axis=1, keepdims=True)
     w = ev.kappa * barrier_hessian(d[act], dh[act])
-    con = state.contact
-    if cm.contact.friction > 0 and con is not None and len(con.index):
-        # sticking friction along each tangent of the points in contact
-        stick = 2.0 * cm.contact.friction * con.normal_force / (cm.contact.friction_eps_rel * dh[con.index]
-                                                                 / cm.options.dhat_rel)
-        T = con.tangents
-        y = np.vstack([y, *[con.positions] * T.shape[2]])
+    lag = state.friction  # the lagged contact the state was solved with (with friction)
+    if lag is not None and lag.points is state.points and len(lag.rows):
+        # sticking friction along each tangent of the points in contact: stiffness 2 mu lambda / eps
+        stick = 2.0 * lag.mu_lambda / lag.eps
+        T = lag.tangents
+        y = np.vstack([y, *[state.points.positions(state.x)[lag.rows]] * T.shape[2]])
         nrm = np.vstack([nrm, *[T[:, :, i] for i in range(T.shape[2])]])
         w = np.concatenate([w, *[stick] * T.shape[2]])
     modes = rigid.contact_modes(Q, c, y, nrm, w)

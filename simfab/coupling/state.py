@@ -1,7 +1,8 @@
 """Typed data of the insertion loop: what one converged step's evaluation holds
-(:class:`Evaluation`), the contact it ends with (:class:`ContactState`, the lagged data a
-frictional step reads), the run's state between steps (:class:`StepState`) and the per-run context
-(:class:`StepContext`); and :func:`accept`, which makes a converged solution the current state.
+(:class:`Evaluation`), the run's state between steps (:class:`StepState`: with friction also the
+lagged contact a step was solved with, :class:`simfab.coupling.friction.FrictionLag`: its normal
+forces, normals and tangent bases) and the per-run context (:class:`StepContext`); and
+:func:`accept`, which makes a converged solution the current state.
 
 Model/State split: the :class:`simfab.coupling.model.CouplingModel` is immutable for a run; a
 :class:`StepState` is what a step reads and writes.
@@ -13,7 +14,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab.contact.barrier import barrier_gradient
 from simfab.coupling.points import ContactPoints
 from simfab.coupling.timing import Timer
 from simfab.solve.linear import SPDSolver
@@ -41,47 +41,6 @@ class Evaluation:
     hessian: object = None
 
 
-@dataclass(frozen=True, kw_only=True, eq=False)
-class ContactState:
-    """The contact a converged step ends with, over the constraint points within their barrier
-    range (d_j < d_hat_j): what the next step reads lagged (e.g. a frictional potential's normal
-    force magnitudes and tangent bases, as IPC lags them).
-
-    index (a,): the points' rows in ``points``; positions (a, dim) [m]; normals (a, dim): O's
-    outward unit normal at each (grad d / |grad d|); normal_force (a,) [N]: the barrier's push
-    lambda_j = -kappa b'(d_j) >= 0; tangents (a, dim, dim - 1): an orthonormal basis of the plane
-    normal to each normal (2D: the normal turned by +90 deg; 3D: completed from the axis least
-    aligned with it)."""
-
-    points: ContactPoints
-    index: np.ndarray
-    positions: np.ndarray
-    normals: np.ndarray
-    normal_force: np.ndarray
-    tangents: np.ndarray
-
-    @classmethod
-    def from_evaluation(cls, ev: Evaluation, dhat: np.ndarray) -> "ContactState":
-        """The contact of a converged evaluation ``ev`` with per-point activation distances ``dhat`` (k,)."""
-        gn = np.linalg.norm(ev.distance_gradients, axis=1)
-        idx = np.flatnonzero((ev.distances < dhat) & (gn > 0))
-        n = ev.distance_gradients[idx] / gn[idx, None]
-        lam = -ev.kappa * barrier_gradient(ev.distances[idx], dhat[idx])
-        return cls(points=ev.points, index=idx, positions=ev.points.positions(ev.x)[idx], normals=n,
-                   normal_force=lam, tangents=tangent_bases(n))
-
-
-def tangent_bases(normals: np.ndarray) -> np.ndarray:
-    """(a, dim, dim - 1) orthonormal bases of the planes normal to unit ``normals`` (a, dim)."""
-    a, dim = normals.shape
-    if dim == 2:
-        return np.stack([-normals[:, 1], normals[:, 0]], axis=1)[:, :, None]
-    axis = np.eye(3)[np.argmin(np.abs(normals), axis=1)]
-    t1 = np.cross(normals, axis)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    return np.stack([t1, np.cross(normals, t1)], axis=2)
-
-
 @dataclass(frozen=True)
 class PastStep:
     """A converged earlier step: positions x (n, dim) [m] at path length s [m]; with friction the
@@ -97,21 +56,19 @@ class PastStep:
 class StepState:
     """The insertion run's state between steps.
 
-    x (n, dim) [m] at path length s [m]; points: the constraint points (boundary vertices plus the
-    refinement points of the ``refined`` facets at density ``order``: 2D points per edge, 3D face
-    lattice order, doubled on demand); kappa: the barrier stiffness for the following steps [N/m]
-    (adapted); kappa_step: the stiffness x was solved with (forces at x use it); evaluation:
-    Newton's last evaluation at x (None when it is not at x); contact: the contact x ends with;
-    tangent: the PSD Hessian at x for the predictor (CSR, or a callable assembling it on demand);
-    prev, prev2: the one and two steps before (extrapolating warm starts); pin_basis (k, r): the
-    rigid motions the next step pins; grad_peak: largest |grad psi| seen at converged constraint
-    and check points; check / check_cache: memo of the last facet check and of earlier check
-    points' values (see :mod:`simfab.coupling.refine`); direction: +1 while O moves forward along
-    the path (insertion), -1 backward (removal); friction: the friction lag x was solved with
-    (:class:`simfab.coupling.friction.FrictionLag`, None without friction), lag_solves: the solves
-    its step took (lagging iterations), lag_change: the relative change of the normal forces at its
-    last lagging iteration, normal_force (k,) [N]: the normal forces at x (with friction) over the
-    constraint points ``normal_force_points`` (the current ones until a refinement replaces them)."""
+    x (n, dim) [m] at path length s [m]; points: the constraint points (boundary vertices plus the refinement
+    points of the ``refined`` facets at density ``order``: 2D points per edge, 3D face lattice order, doubled on
+    demand); kappa: the barrier stiffness for the following steps [N/m] (adapted); kappa_step: the stiffness x
+    was solved with (forces at x use it); evaluation: Newton's last evaluation at x (None when it is not at x);
+    tangent: the PSD Hessian at x for the predictor (CSR, or a callable assembling it on demand); prev, prev2:
+    the one and two steps before (extrapolating warm starts); pin_basis (k, r): the rigid motions the next step
+    pins; grad_peak: largest |grad psi| seen at converged constraint and check points; check / check_cache: memo
+    of the last facet check and of earlier check points' values (see :mod:`simfab.coupling.refine`); direction:
+    +1 while O moves forward along the path (insertion), -1 backward (removal); friction: the friction lag x was
+    solved with (:class:`simfab.coupling.friction.FrictionLag`, None without friction), lag_solves: the solves
+    its step took (lagging iterations), lag_change: the relative change of the normal forces at its last lagging
+    iteration, normal_force (k,) [N]: the normal forces at x (with friction) over the constraint points
+    ``normal_force_points`` (the current ones until a refinement replaces them)."""
 
     x: np.ndarray
     s: float
@@ -121,7 +78,6 @@ class StepState:
     kappa: float = 0.0
     kappa_step: float = 0.0
     evaluation: Evaluation | None = None
-    contact: ContactState | None = None
     tangent: object = None
     prev: PastStep | None = None
     prev2: PastStep | None = None
@@ -157,15 +113,11 @@ class StepContext:
     solver: SPDSolver = field(default_factory=SPDSolver)
 
 
-def accept(state: StepState, x: np.ndarray, s: float, kappa: float, evaluation: Evaluation | None,
-           dhat: np.ndarray | None) -> None:
+def accept(state: StepState, x: np.ndarray, s: float, kappa: float, evaluation: Evaluation | None) -> None:
     """Make the converged x at path length s (solved with barrier stiffness ``kappa``) the current
-    state, with Newton's last evaluation there; with ``dhat`` (the points' activation distances)
-    also the contact it ends with (:class:`ContactState`, what friction reads)."""
+    state, with Newton's last evaluation there."""
     state.x, state.s, state.kappa_step = x, s, kappa
     state.evaluation = evaluation
     # the objective's last evaluation may be a rejected line-search trial (Newton stopping at the
     # round-off floor): its Hessian belongs to x only when the evaluation does
     state.tangent = evaluation.hessian if evaluation is not None else None
-    state.contact = ContactState.from_evaluation(evaluation, dhat) if evaluation is not None and dhat is not None \
-        else None

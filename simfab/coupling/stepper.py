@@ -19,7 +19,6 @@ import numpy as np
 from simfab.coupling import config as C
 from simfab.coupling import friction, predictor, rigid
 from simfab.coupling.friction import FrictionLag
-from simfab.coupling.layout import point_dhat
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.objective import adapt_kappa, evaluation, make_objective, solve
 from simfab.coupling.points import vertex_points
@@ -165,16 +164,10 @@ def solve_at(cm: CouplingModel, state: StepState, s: float, ctx: StepContext) ->
         with ctx.phases.timed("facet_check"):
             new = crossing_facets(cm, x, s, state, final)
         if not new:
-            accept(state, x, s, obj.kappa, final, _contact_dhat(cm, state))
+            accept(state, x, s, obj.kappa, final)
             return total
         add_refinement(cm, state, new)
     raise ConvergenceError("refinement did not settle at the start pose")
-
-
-def _contact_dhat(cm: CouplingModel, state: StepState) -> np.ndarray | None:
-    """The points' activation distances when the accepted state must record its contact (friction
-    reads it), else None."""
-    return point_dhat(cm, state.points) if cm.contact.friction > 0 else None
 
 
 def start_lag(cm: CouplingModel, state: StepState, s_new: float) -> FrictionLag:
@@ -184,7 +177,7 @@ def start_lag(cm: CouplingModel, state: StepState, s_new: float) -> FrictionLag:
     extrapolated linearly in s from the last two steps when both have them over the same points (else
     the start's): the lagging iterations then start closer to the step's own normal forces."""
     pts = state.points
-    motion = friction.step_map(cm, state.s, s_new)
+    rotation = cm.motion(state.s, s_new)[0]
     y = pts.positions(state.x)
     ev = state.current_evaluation()
     if ev is not None:
@@ -193,13 +186,13 @@ def start_lag(cm: CouplingModel, state: StepState, s_new: float) -> FrictionLag:
         R, p = cm.pose(state.s)
         field = cm.field.evaluate(y, (R, p), hessian=False)
         d, gd, kappa = -field.psi, -field.grad, state.kappa_step or state.kappa
-    anchors = friction.carry(y, motion)
+    anchors = cm.carry(y, state.s, s_new)
     lam = friction.normal_forces(cm, pts, d, kappa)
     prev = state.prev
     if (prev is not None and prev.points is pts and prev.normal_force is not None
             and (state.s - prev.s) * (s_new - state.s) > 0):
         lam = np.maximum(lam + (lam - prev.normal_force) * ((s_new - state.s) / (state.s - prev.s)), 0.0)
-    return friction.lag(cm, pts, anchors, anchors - y, d, gd, kappa, rotation=motion[0], normal_force=lam)
+    return friction.lag(cm, pts, anchors, anchors - y, d, gd, kappa, rotation=rotation, normal_force=lam)
 
 
 def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext, depth: int = 0) -> int:
@@ -261,7 +254,7 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                     continue
             past = PastStep(state.x, state.s, state.normal_force_points, state.normal_force)
             state.prev2, state.prev = state.prev, past
-            accept(state, x, s_new, obj.kappa, final, _contact_dhat(cm, state))
+            accept(state, x, s_new, obj.kappa, final)
             state.friction, state.lag_solves, state.lag_change = lagged, lag_solves, lag_change
             state.normal_force = fresh.normal_force if frictional else None
             state.normal_force_points = state.points if frictional else None

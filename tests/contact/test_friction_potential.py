@@ -4,8 +4,7 @@ differences in stick and slip, 2D and 3D; the force magnitude mu lambda once sli
 import numpy as np
 import pytest
 
-from simfab.contact.friction import friction_potential
-from simfab.coupling.state import tangent_bases
+from simfab.contact.friction import friction_potential, tangent_bases
 
 
 def _points(dim, a, rng, eps, scale):

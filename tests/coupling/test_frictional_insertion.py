@@ -54,6 +54,8 @@ def test_snapfit_forces_follow_the_wedge_formula(alpha, mu, dim):
     P0, L0 = r0.column("path_force")[sel], _lateral(r0.steps)[sel]
     P1, L1 = r1.column("path_force")[sel], _lateral(r1.steps)[sel]
     assert np.all(P0 < 0) and np.all(L0 > 0)  # the beam resists the box; the face pushes the tip along +x
+    # frictionless: tan(alpha) exactly in theory; the first records after first touch sit up to 2.1 %
+    # above it (the barrier's standoff is a finite fraction of the tip's small deflection there)
     np.testing.assert_allclose(-P0 / L0, contact_law(alpha, 0.0, "insert"), rtol=0.025)
     np.testing.assert_allclose(-P1 / L1, contact_law(alpha, mu, "insert"), rtol=0.03)
     np.testing.assert_allclose((P1 / L1) / (P0 / L0), ratio_formula(alpha, mu, "insert"), rtol=0.05)
