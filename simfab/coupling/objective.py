@@ -287,7 +287,8 @@ def adapt_kappa(cm: CouplingModel, state: StepState, obj: StepObjective) -> None
         state.kappa = min(2.0 * state.kappa, C.KAPPA_MAX_GROWTH * cm.kappa)
 
 
-def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContext) -> tuple[np.ndarray, int]:
+def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContext, *,
+          floor: float = 0.0) -> tuple[np.ndarray, int]:
     """Barrier Newton from x0. Stops when the free-dof force residual is below
     max(NEWTON_GRAD_TOL_REL * force_scale, NEWTON_GRAD_TOL_START * |residual at x0|) or the Newton
     step is below NEWTON_STEP_TOL_REL * h_A (projected Newton converges linearly once the PSD
@@ -298,11 +299,12 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     ones, where it costs about one objective evaluation, the first trial carries it (unless the
     residual is within NEWTON_EAGER_ABOVE_TOL of the target). Once the exact Hessian has failed to
     factorize, the rest of the solve uses the PSD-projected one (``retry_exact=False``): where it
-    is indefinite it mostly stays so, and each failed attempt costs up to a factorization. Returns
+    is indefinite it mostly stays so, and each failed attempt costs up to a factorization. ``floor``
+    [N] raises the force tolerance for a solve that is not final (a lagging iteration). Returns
     (x (n, dim), Newton iterations)."""
     _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
-    scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n)
+    scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n, floor)
     opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
                          step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=cm.fem.element_order == 1,
                          eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False)

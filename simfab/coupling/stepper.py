@@ -170,6 +170,12 @@ def solve_at(cm: CouplingModel, state: StepState, s: float, ctx: StepContext) ->
     raise ConvergenceError("refinement did not settle at the start pose")
 
 
+def lag_floor(cm: CouplingModel, lagged: FrictionLag) -> float:
+    """Force residual [N] a lagging iteration's solve stops at: LAG_RESIDUAL_REL * lag_tol times the
+    largest lagged normal force (see :data:`simfab.coupling.config.LAG_RESIDUAL_REL`)."""
+    return C.LAG_RESIDUAL_REL * cm.contact.lag_tol * float(lagged.normal_force.max(initial=0.0))
+
+
 def start_lag(cm: CouplingModel, state: StepState, s_new: float) -> FrictionLag:
     """The friction lag of the step from the current state to s_new over the state's points: anchors
     carried rigidly with O over the step, normals from the step's start (Newton's evaluation there
@@ -198,13 +204,15 @@ def start_lag(cm: CouplingModel, state: StepState, s_new: float) -> FrictionLag:
 def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext, depth: int = 0) -> int:
     """Move O from state.s to s_new and re-equilibrate A (warm start, Newton, refinement, and with
     friction the lagging iterations: the step solved again with the normal forces and tangents of
-    its own solution until they change by less than ``lag_tol``); a step that cannot be solved is
-    bisected up to MAX_BISECTIONS deep. Returns the Newton iterations."""
+    its own solution until they change by less than ``lag_tol``, each solved to the residual
+    :func:`lag_floor` only, then once more to Newton's tolerance with the settled lag); a step that
+    cannot be solved is bisected up to MAX_BISECTIONS deep. Returns the Newton iterations."""
     total = 0
     resume = None  # converged positions to resume from after a refinement (see below)
     refined = False  # points were added since the previous state was accepted
     frictional = cm.contact.friction > 0
     lagged, lag_solves, lag_change = None, 0, 0.0
+    settled = not frictional  # the lag has settled: solve to Newton's tolerance (else to lag_floor)
     rounds = 0
     while True:
         resumed = False
@@ -225,7 +233,7 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                         refined = False
                     x0 = predictor.warm_start(cm, state, s_new, obj, ctx).x
             with ctx.phases.timed("newton"):
-                x, it = solve(cm, obj, x0, ctx)
+                x, it = solve(cm, obj, x0, ctx, floor=0.0 if settled else lag_floor(cm, lagged))
         except ConvergenceError:
             if resumed:  # the resumed solve failed: solve from the previous state instead
                 resume = None
@@ -242,15 +250,18 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
             new = crossing_facets(cm, x, s_new, state, final) if cm.options.refine else []
         if not new:
             if frictional:
-                lag_solves += 1
                 if final is None:
                     d, gd, _ = obj.distances(x, False)
                 else:
                     d, gd = final.distances, final.distance_gradients
                 fresh = friction.lag(cm, state.points, lagged.anchors, lagged.travel, d, gd, obj.kappa)
-                lag_change = fresh.change(lagged)
-                if lag_change > cm.contact.lag_tol and lag_solves < cm.contact.max_lag_iterations:
-                    lagged, resume = fresh, _Lagged(x)
+                if not settled:
+                    lag_solves += 1
+                    lag_change = fresh.change(lagged)
+                    if lag_change > cm.contact.lag_tol and lag_solves < cm.contact.max_lag_iterations:
+                        lagged, resume = fresh, _Lagged(x)
+                        continue
+                    settled, resume = True, _Lagged(x)  # once more, to Newton's tolerance with the same lag
                     continue
             past = PastStep(state.x, state.s, state.normal_force_points, state.normal_force)
             state.prev2, state.prev = state.prev, past
@@ -270,6 +281,7 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
         add_refinement(cm, state, new)
         refined = True
         resume = x
+        settled = not frictional
 
 
 @dataclass(frozen=True, eq=False)
