@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simfab._warp import wp
+from simfab._warp import RECORD_LOCK, wp
 
 
 @wp.func
@@ -102,33 +102,71 @@ class FrictionEval:
     slip: np.ndarray
 
 
+class FrictionPoints:
+    """The lagged friction data of ``a`` contact points on the device, for repeated evaluations at
+    changing relative displacements (a Newton solve evaluates one lag tens of times): tangent bases
+    ``tangents`` (a, dim, dim - 1), ``mu_lambda`` (a,) = mu lambda_j [N] and mollifier widths ``eps``
+    (a,) [m] are uploaded once, the output buffers persist, and the launch (with and without the
+    Hessian) is recorded once and replayed (on the CPU the displacement and output buffers alias
+    numpy arrays)."""
+
+    def __init__(self, tangents: np.ndarray, mu_lambda: np.ndarray, eps: np.ndarray, *, device: str = "cpu"):
+        tangents = np.asarray(tangents, dtype=np.float64)
+        a, dim = tangents.shape[0], tangents.shape[1]
+        self.a, self.dim, self.device = a, dim, device
+        self.cpu = wp.get_device(device).is_cpu
+        t = np.zeros((a, 3, 2))
+        t[:, :dim, : dim - 1] = tangents
+        self._t = t
+        self._dy = np.zeros((a, 3))
+        self._dy_wp = wp.array(self._dy, dtype=wp.vec3d, device=device, copy=not self.cpu)
+        self._inputs = [self._dy_wp,
+                        wp.array(np.ascontiguousarray(t[:, :, 0]), dtype=wp.vec3d, device=device),
+                        wp.array(np.ascontiguousarray(t[:, :, 1]), dtype=wp.vec3d, device=device),
+                        wp.array(np.asarray(mu_lambda, dtype=np.float64).reshape(a), dtype=wp.float64, device=device),
+                        wp.array(np.asarray(eps, dtype=np.float64).reshape(a), dtype=wp.float64, device=device)]
+        self._energy = wp.zeros(max(a, 1), dtype=wp.float64, device=device)
+        self._grad = wp.zeros(max(a, 1), dtype=wp.vec3d, device=device)
+        self._hess = wp.zeros(max(a, 1), dtype=wp.mat33d, device=device)
+        self._commands: dict = {}
+
+    def _command(self, hessian: bool):
+        cmd = self._commands.get(hessian)
+        if cmd is None:
+            with RECORD_LOCK:  # the first launch loads the module: one thread at a time
+                cmd = self._commands[hessian] = wp.launch(
+                    _friction_kernel, dim=self.a, inputs=[*self._inputs, int(hessian)],
+                    outputs=[self._energy, self._grad, self._hess], device=self.device, record_cmd=True)
+        return cmd
+
+    def evaluate(self, dy: np.ndarray, *, hessian: bool = True) -> FrictionEval:
+        """The potential at relative displacements ``dy`` (a, dim) [m] (the module docstring)."""
+        dy = np.asarray(dy, dtype=np.float64)
+        a, dim = self.a, self.dim
+        if dy.shape != (a, dim):
+            raise ValueError(f"dy has shape {dy.shape}, expected ({a}, {dim})")
+        if a == 0:
+            return FrictionEval(np.zeros(0), np.zeros((0, dim)), np.zeros((0, dim, dim)) if hessian else None,
+                                np.zeros(0))
+        self._dy[:, :dim] = dy
+        if not self.cpu:
+            self._dy_wp.assign(self._dy)
+        self._command(hessian).launch()
+        slip = np.linalg.norm(np.einsum("kdt,kd->kt", self._t, self._dy), axis=1)
+        H = self._hess.numpy()[:a, :dim, :dim].copy() if hessian else None
+        return FrictionEval(self._energy.numpy()[:a].copy(), self._grad.numpy()[:a, :dim].copy(), H, slip)
+
+
 def friction_potential(dy: np.ndarray, tangents: np.ndarray, mu_lambda: np.ndarray, eps: np.ndarray, *,
                        hessian: bool = True, device: str = "cpu") -> FrictionEval:
     """The friction potential of points with relative displacements ``dy`` (a, dim) [m], tangent
     bases ``tangents`` (a, dim, dim - 1), ``mu_lambda`` (a,) = mu lambda_j [N] and mollifier widths
-    ``eps`` (a,) [m] (see the module docstring), in one Warp launch."""
+    ``eps`` (a,) [m] (see the module docstring), in one Warp launch (:class:`FrictionPoints` for
+    repeated evaluations of the same points)."""
     dy = np.asarray(dy, dtype=np.float64)
     a, dim = dy.shape
-    if a == 0:
-        return FrictionEval(np.zeros(0), np.zeros((0, dim)), np.zeros((0, dim, dim)) if hessian else None,
-                            np.zeros(0))
-    d3 = np.zeros((a, 3))
-    d3[:, :dim] = dy
-    t = np.zeros((a, 3, 2))
-    t[:, :dim, : dim - 1] = tangents
-    args = [wp.array(d3, dtype=wp.vec3d, device=device),
-            wp.array(np.ascontiguousarray(t[:, :, 0]), dtype=wp.vec3d, device=device),
-            wp.array(np.ascontiguousarray(t[:, :, 1]), dtype=wp.vec3d, device=device),
-            wp.array(np.asarray(mu_lambda, dtype=np.float64), dtype=wp.float64, device=device),
-            wp.array(np.asarray(eps, dtype=np.float64), dtype=wp.float64, device=device),
-            int(hessian)]
-    out_e = wp.zeros(a, dtype=wp.float64, device=device)
-    out_g = wp.zeros(a, dtype=wp.vec3d, device=device)
-    out_h = wp.zeros(a if hessian else 1, dtype=wp.mat33d, device=device)
-    wp.launch(_friction_kernel, dim=a, inputs=args, outputs=[out_e, out_g, out_h], device=device)
-    slip = np.linalg.norm(np.einsum("kdt,kd->kt", t, d3), axis=1)
-    H = out_h.numpy()[:, :dim, :dim] if hessian else None
-    return FrictionEval(out_e.numpy(), out_g.numpy()[:, :dim], H, slip)
+    tangents = np.asarray(tangents, dtype=np.float64).reshape(a, dim, dim - 1)
+    return FrictionPoints(tangents, mu_lambda, eps, device=device).evaluate(dy, hessian=hessian)
 
 
 def tangent_bases(normals: np.ndarray) -> np.ndarray:

@@ -14,11 +14,12 @@ friction. The mollifier width is eps_j = ``friction_eps_rel`` times the local bo
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from simfab.contact.barrier import barrier_gradient
-from simfab.contact.friction import FrictionEval, friction_potential, tangent_bases
+from simfab.contact.friction import FrictionEval, FrictionPoints, tangent_bases
 from simfab.coupling.layout import point_dhat
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.points import ContactPoints
@@ -36,7 +37,7 @@ class FrictionLag:
     travel (k, dim) [m]: O's displacement over the step at each point's start position (c_j - y_j^a);
     normal_force (k,) [N]: lagged lambda_j (0 beyond the barrier's range); rows (a,): the points with
     lambda_j > 0; normals (a, dim), tangents (a, dim, dim - 1), mu_lambda (a,) [N], eps (a,) [m] over
-    those rows."""
+    those rows; device: where :meth:`evaluate` runs."""
 
     points: ContactPoints
     anchors: np.ndarray
@@ -47,11 +48,18 @@ class FrictionLag:
     tangents: np.ndarray
     mu_lambda: np.ndarray
     eps: np.ndarray
+    device: str = "cpu"
+
+    @cached_property
+    def potential(self) -> FrictionPoints:
+        """The rows' friction data on the device (built on the first evaluation: many lags are only
+        compared, never evaluated)."""
+        return FrictionPoints(self.tangents, self.mu_lambda, self.eps, device=self.device)
 
     def evaluate(self, x: np.ndarray, *, hessian: bool) -> FrictionEval:
         """The friction potential at positions x (n, dim) over ``rows``."""
         dy = self.points.positions(x)[self.rows] - self.anchors[self.rows]
-        return friction_potential(dy, self.tangents, self.mu_lambda, self.eps, hessian=hessian)
+        return self.potential.evaluate(dy, hessian=hessian)
 
     def change(self, other: "FrictionLag") -> float:
         """max_j |lambda_j - lambda'_j| over the largest normal force of either lag [-]."""
@@ -87,8 +95,9 @@ def lag(cm: CouplingModel, points: ContactPoints, anchors: np.ndarray, travel: n
         n = n @ rotation[:dim, :dim].T
     mu = cm.contact.friction
     eps = cm.contact.friction_eps_rel * dh[rows] / cm.options.dhat_rel
+    tangents = tangent_bases(n)
     return FrictionLag(points=points, anchors=anchors, travel=travel, normal_force=lam, rows=rows, normals=n,
-                       tangents=tangent_bases(n), mu_lambda=mu * lam[rows], eps=eps)
+                       tangents=tangents, mu_lambda=mu * lam[rows], eps=eps, device=cm.fem.device)
 
 
 @dataclass(frozen=True)
