@@ -20,8 +20,11 @@ Definitions (thesis, "Fundamentals and Overview"):
 - With friction (a run's ``removal`` records: the removal simulated as its own traversal) F_in is
   read from the insertion and F_rm = max(0, max F) from the removal; F_hold, the force needed to
   start sliding O out of its seat (elastic draw plus static friction), is max(0, max F) over the
-  removal's turn (its graded first steps, half a planned step back from the seat, over which the
-  contact goes from sticking to slipping). A design whose elastic profile ejects O (no dip) but
+  removal records up to the onset of sliding (points carrying SLIDING_REL of the normal force slip;
+  :func:`hold_force`): the removal's graded first steps resolve that travel, and reading F_hold at the
+  onset of sliding, not over a fixed travel, keeps the removal profile beyond it (a detent's draw)
+  out of it whatever the step size. A contact that never slides drags the part out: F_hold = F_rm.
+  A design whose elastic profile ejects O (no dip) but
   which friction holds in place (F_hold > 0) is **held by friction**; an insertion that self-locks
   (O pushed inside the friction cone of the contact, which sticks: a snap-fit with
   mu tan alpha >= 1) **jams**.
@@ -115,6 +118,27 @@ def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarr
     )
 
 
+#: The removal has started sliding where points carrying this fraction of the normal force slip.
+SLIDING_REL = 0.99
+
+
+def hold_force(force: np.ndarray, slipping: np.ndarray, F_rm: float) -> float:
+    """F_hold [N] from the removal records' path forces ``force`` (r,) [N] and slipping fractions
+    ``slipping`` (r,) [-] (1 where no normal force acts): max(0, max F) up to the onset of sliding,
+    where the slipping fraction reaches SLIDING_REL, the force there interpolated linearly in the
+    slipping fraction between the records around it (the graded turn steps double in length, so the
+    record past the onset may lie well beyond it); F_rm when the contact never slides."""
+    k = np.flatnonzero(slipping >= SLIDING_REL)
+    if not len(k):
+        return F_rm
+    k = int(k[0])
+    at = float(force[k])
+    if k > 0 and slipping[k] > slipping[k - 1]:
+        w = (SLIDING_REL - slipping[k - 1]) / (slipping[k] - slipping[k - 1])
+        at = float(force[k - 1] + min(max(w, 0.0), 1.0) * (force[k] - force[k - 1]))
+    return max(0.0, float(np.max(force[:k], initial=at)), at)
+
+
 def analyze_run(res) -> ProfileSummary:
     """:func:`analyze` of an :class:`simfab.coupling.simulate.InsertionResult`, its steady state at
     the end pose when its path ends in a rotation (``model.end_direction`` None); with friction F_rm
@@ -128,9 +152,9 @@ def analyze_run(res) -> ProfileSummary:
         return replace(prof, F_hold=prof.F_rm, friction=mu)
     F_rm_path = res.column("force", "remove")
     F_rm = float(max(0.0, F_rm_path.max()))
-    h = float(np.diff(res.model.s_steps).mean())
-    turn = res.column("s", "remove") >= res.steps[-1].s - 0.5 * h * (1 + 1e-9)
-    F_hold = float(max(0.0, F_rm_path[turn].max(initial=0.0)))
+    # no normal force: nothing sticks (the part is free there)
+    slipping = np.array([r.slipping if r.normal_force > 0 else 1.0 for r in res.removal])
+    F_hold = hold_force(F_rm_path, slipping, F_rm)
     peak = float(np.abs(np.r_[res.column("force"), F_rm_path]).max())
     category = prof.category
     if category == "ejects" and F_hold > REST_FORCE_REL * peak:

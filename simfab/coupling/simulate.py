@@ -194,7 +194,7 @@ def jammed(steps: list) -> bool:
 #: follows the insertion's positions: where O turns, the contact first sticks while the part's
 #: tangential strain (left by friction dragging it) relaxes, and the friction force swings from one
 #: side of the cone to the other over that travel; steps much longer than it would not resolve the
-#: swing (the energy balance), and F_hold is read at the first, shortest step.
+#: swing (the energy balance), nor the onset of sliding F_hold is read at.
 TURN_STEPS = 6
 
 

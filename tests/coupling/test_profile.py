@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from simfab.coupling.profile import analyze, steady_state_index
+from simfab.coupling.profile import SLIDING_REL, analyze, hold_force, steady_state_index
 
 S = np.linspace(0.0, 0.01, 41)
 
@@ -61,3 +61,18 @@ def test_a_path_ending_in_a_prescribed_pose_has_its_steady_state_there():
     end = analyze(S, E, F, np.arange(S.size, dtype=float), end_pose=True)
     assert end.category == "tight" and end.index_ss == S.size - 1
     assert end.coupling_ratio == pytest.approx(70.0) and end.F_grip == S.size - 1
+
+
+def test_hold_force_is_read_at_the_onset_of_sliding():
+    """F_hold: the largest pull before the contact slides, the onset interpolated in the slipping
+    fraction; the draw past the onset (a detent's) is F_rm's, not F_hold's."""
+    force = np.array([-40.0, 10.0, 30.0, 120.0, 175.0])
+    slipping = np.array([0.0, 0.5, 1.0, 1.0, 1.0])
+    w = (SLIDING_REL - 0.5) / 0.5
+    assert hold_force(force, slipping, 175.0) == pytest.approx(10.0 + w * 20.0, rel=1e-12)
+    # a contact that never slides drags the part out: the whole removal force holds it
+    assert hold_force(force, np.zeros(5), 175.0) == 175.0
+    # free from the start (no normal force: slipping 1): nothing holds it
+    assert hold_force(np.array([0.0, 0.0, 1.2]), np.ones(3), 1.2) == 0.0
+    # a pull that peaked while sticking counts
+    assert hold_force(np.array([50.0, 20.0, 25.0]), np.array([0.0, 0.0, 1.0]), 50.0) == 50.0
