@@ -1,7 +1,8 @@
 """Frictional contact: the snap-fit against the wedge formula, the energy balance, and the bundled
 coupling scenes with and without friction.
 
-``python tools/bench.py friction [--alphas 20,30,40] [--mus 0.1,0.3,0.5] [--scenes cclamp2d,...] [--mu 0.3]``
+``python tools/bench.py friction [--alphas 20,30,40] [--mus 0.1,0.3,0.5] [--scenes cclamp2d,...] [--mu 0.3]
+[--double-steps]``
 
 - ``snapfit``: per face angle alpha and coefficient mu (simfab.verification.snapfit, 2D, 24 steps,
   and 3D at alpha 30, mu 0.3), over the deflected travel (min and max over its records): the contact
@@ -111,6 +112,23 @@ def _scene_row(scene: str, mu: float) -> dict:
     return {"scene": scene, **out}
 
 
+def _refined_row(scene: str, mu: float) -> dict:
+    """The scene at ``mu`` with twice its planned steps: F_in, F_rm, F_hold and the energy balance
+    (their change from the bundled steps is the step discretization's share of the figures)."""
+    from simfab.coupling.profile import analyze_run
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.settle import energy_balance
+    from simfab.coupling.simulate import simulate
+
+    steps = 2 * load_coupling_scene(scene).options.steps
+    cm = load_coupling_scene(scene, overrides={"simulation": {"steps": steps}, "contact": {"friction": mu}})
+    res = simulate(cm)
+    p = analyze_run(res)
+    return {"steps": steps, "F_in_N": float(f"{p.F_in:.4g}"), "F_rm_N": float(f"{p.F_rm:.4g}"),
+            "F_hold_N": float(f"{p.F_hold:.4g}"),
+            "energy_balance": round(energy_balance(res.steps, res.removal)["total"], 5)}
+
+
 def run(argv) -> dict:
     ap = argparse.ArgumentParser(prog="bench friction")
     ap.add_argument("--alphas", default="20,30,40")
@@ -118,6 +136,7 @@ def run(argv) -> dict:
     ap.add_argument("--scenes", default="cclamp2d,clip2d_loose,clip2d_eject,block2d_tight,standside2d,alligator2d")
     ap.add_argument("--mu", type=float, default=0.3)
     ap.add_argument("--no-snapfit", action="store_true")
+    ap.add_argument("--double-steps", action="store_true", help="each scene at --mu also at twice its steps")
     a = ap.parse_args(argv)
     snap = []
     if not a.no_snapfit:
@@ -127,6 +146,9 @@ def run(argv) -> dict:
         snap.append(_snapfit_row(30.0, 0.3, 3, 12))
         snap.append(_snapfit_row(70.0, 0.5, 2, 24))  # mu tan a = 1.37: jams
     scenes = [_scene_row(s, a.mu) for s in a.scenes.split(",") if s]
+    if a.double_steps:
+        for row in scenes:
+            row["double_steps"] = _refined_row(row["scene"], a.mu)
     worst = {k: max((r[k] for r in snap if k in r), default=None)
              for k in ("contact_law_worst_rel_error", "ratio_at_equal_lateral_force_rel_error",
                        "ratio_at_equal_position_rel_error", "energy_balance")}
