@@ -123,9 +123,10 @@ def dhat_jacobian(cm: CouplingModel, pts: ContactPoints) -> sp.csr_matrix:
 
 
 def mean_edge_gradient(cm: CouplingModel) -> np.ndarray:
-    """d h_A/dX (n, dim) of A's mean element edge length (:meth:`FemModel.mean_edge_length`)."""
+    """d h_A/dX (n, dim) of A's mean element edge length (:meth:`MeshModel.mean_edge_length`: over the
+    corner mesh, so a P2 model's edge nodes get zero)."""
     X = np.asarray(cm.fem.rest, float)
-    el = np.asarray(cm.fem.elements)
+    el = np.asarray(cm.fem.corner_elements)
     i, j = np.triu_indices(el.shape[1], 1)
     a, c = el[:, i].ravel(), el[:, j].ravel()
     return edge_rest_derivative(X, a, c, np.full(len(a), 1.0 / len(a)))
