@@ -42,6 +42,7 @@ scale); none is differentiated, the figures' derivatives are those of the branch
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,6 +79,7 @@ class StepSensitivity:
     stress_value: float = float("nan")
     stable: bool = True
     supported: bool = True
+    friction_lag_held: bool = False
 
 
 def edge_rest_derivative(X: np.ndarray, a: np.ndarray, c: np.ndarray, coef: np.ndarray) -> np.ndarray:
@@ -204,93 +206,295 @@ def smooth_max_weights(values: np.ndarray, temperature: float) -> np.ndarray:
     return e / e.sum()
 
 
-def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
-                     stress: StressMeasure | None = None, solver: SPDSolver | None = None) -> StepSensitivity:
-    """:class:`StepSensitivity` of the converged ``state`` (see the module docstring); with
-    ``stress`` also that of the averaged von Mises stress's maximum (:class:`StressMeasure`);
-    ``solver``: the sparse solver to factorize with (one per run reuses its symbolic analysis)."""
-    solver = SPDSolver() if solver is None else solver
-    fem, x = cm.fem, np.asarray(state.x, float)
-    n, dim = fem.n_vertices, cm.dim
-    bar = _Barrier(cm, state)
-    _, gE, HE = energy_gradient_hessian(fem, x, project_psd=False)
-    HB = HE.copy()
-    HB.data[:] = 0.0
-    add_point_blocks(cm, state.points, HB, bar.act, bar.Hy)
-    H = HE.copy()  # in HE's fixed pattern (the Hessian slots, regularization and solver maps expect it)
-    add_point_blocks(cm, state.points, H, bar.act, bar.Hy)
-    kappa_grad = cm.kappa / cm.h * mean_edge_gradient(cm) if dim == 3 else None
+class _Friction:
+    """The lagged friction potential D = sum_j mu lambda_j f0(|T_j^T (y_j(x) - c_j)|, eps_j) of a
+    converged state with its lag (:class:`simfab.coupling.friction.FrictionLag`): lambda_j, T_j held;
+    the anchors c_j = M (y_j(x_prev) - p_a) + p_b carried from the step's start (the backward pass,
+    :meth:`back`); eps_j = (friction_eps_rel / dhat_rel) dhat_j(X) through the rest shape."""
 
-    free = cm.free.reshape(n, dim)
+    def __init__(self, cm: CouplingModel, state: StepState):
+        lag = state.friction
+        x = np.asarray(state.x, float)
+        self.cm, self.lag, self.rows = cm, lag, lag.rows
+        fe = lag.evaluate(x, hessian=True)
+        self.Hy = fe.hessian  # (a, dim, dim) d2D/dy2, exact for the held lag (simfab.contact.friction)
+        self.gradient = lag.points.scatter(fe.gradient, cm.fem.n_vertices, rows=self.rows)
+        dy = lag.points.positions(x)[self.rows] - lag.anchors[self.rows]
+        self.Tu = np.einsum("kdt,kd,ket->ke", lag.tangents, dy, lag.tangents)  # T T^T dy: the tangential slip
+        y, eps = fe.slip, lag.eps
+        stick = y < eps
+        # f0 and f1 / y of the mollifier (simfab.contact.friction) differentiated in eps (zero once slipping)
+        self.df0 = lag.mu_lambda * np.where(stick, 2 * y**3 / (3 * eps**3) - y**2 / eps**2 + 1.0 / 3.0, 0.0)
+        self.dfy = lag.mu_lambda * np.where(stick, -2.0 / eps**2 + 2.0 * y / eps**3, 0.0)
+        scale = cm.contact.friction_eps_rel / cm.options.dhat_rel
+        self.eps_jac = scale * dhat_jacobian(cm, _rows(lag.points, self.rows))  # (a, n dim) d eps_j / dX
+
+    def rest_gradient(self) -> np.ndarray:
+        """dD/dX at fixed x and anchors (n, dim)."""
+        return np.asarray(self.df0 @ self.eps_jac).reshape(-1, self.cm.dim)
+
+    def mixed_product(self, W: np.ndarray) -> np.ndarray:
+        """d/dX (w . dD/dx) at fixed x and anchors for a stack W (b, n, dim): through eps only."""
+        wy = np.stack([self.lag.points.positions(wb)[self.rows] for wb in W])  # (b, a, dim)
+        coef = self.dfy * np.einsum("kd,bkd->bk", self.Tu, wy)
+        return np.asarray(coef @ self.eps_jac).reshape(W.shape)
+
+    def back(self, W: np.ndarray, M: np.ndarray) -> np.ndarray:
+        """-(d grad_x D / d x_prev)^T w for a stack W (b, n, dim): the anchors c_j = M P_j x_prev + const,
+        so d grad D / d x_prev = -sum_j P_j^T Hy_j M P_j and the result is sum_j P_j^T M^T Hy_j P_j w."""
+        dim = self.cm.dim
+        Md = np.asarray(M)[:dim, :dim]
+        out = np.empty_like(W)
+        for b, wb in enumerate(W):
+            wy = self.lag.points.positions(wb)[self.rows]
+            out[b] = self.lag.points.scatter(np.einsum("kij,kj->ki", self.Hy, wy) @ Md, self.cm.fem.n_vertices,
+                                             rows=self.rows)
+        return out
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class StepLink:
+    """How a step's equilibrium depends on the state it started from, x_prev (the previous record's
+    positions, or the rest shape X for the first): through the friction anchors (``friction_motion``:
+    O's rotation M (3, 3) over the step, None without friction) and the rigid-motion pin's anchor
+    (``pin``: :class:`simfab.coupling.rigid.Pin` anchored at x_prev, None without); ``followed``: the
+    dependence is followed to the previous record (False when the step started from a state that was
+    not recorded: a bisected step or a step solved again after its pin changed; x_prev then held)."""
+
+    friction_motion: np.ndarray | None
+    pin: object
+    followed: bool
+    from_rest: bool
+
+
+class StepLinearization:
+    """A converged step linearized for the adjoint method: the exact Hessian H of its objective
+    W = E + B (+ D with friction, + the pin), the barrier, friction and pin terms, and the solver.
+
+    :meth:`solve` gives lambda = H_ff^-1 r for a stack of right-hand sides; :meth:`pull` turns
+    (lambda, dq/dx, direct terms) into dq/dX (the module docstring's formula); :meth:`back` gives
+    the right-hand sides the previous step receives."""
+
+    def __init__(self, cm: CouplingModel, state: StepState, link: StepLink, solver: SPDSolver):
+        self.cm, self.state, self.link, self.solver = cm, state, link, solver
+        fem, x = cm.fem, np.asarray(state.x, float)
+        self.x = x
+        n, dim = fem.n_vertices, cm.dim
+        self.bar = _Barrier(cm, state)
+        self.fric = _Friction(cm, state) if state.friction is not None and len(state.friction.rows) else None
+        _, self.gE, HE = energy_gradient_hessian(fem, x, project_psd=False)
+        self.HB = HE.copy()
+        self.HB.data[:] = 0.0
+        add_point_blocks(cm, state.points, self.HB, self.bar.act, self.bar.Hy)
+        H = HE.copy()  # in HE's fixed pattern (the Hessian slots, regularization and solver maps expect it)
+        add_point_blocks(cm, state.points, H, self.bar.act, self.bar.Hy)
+        if self.fric is not None:
+            add_point_blocks(cm, self.fric.lag.points, H, self.fric.rows, self.fric.Hy)
+        self.H = H
+        self.kappa_grad = cm.kappa / cm.h * mean_edge_gradient(cm) if dim == 3 else None
+        self.idx = np.flatnonzero(cm.free)
+        self.fixed = ~cm.free.reshape(n, dim)
+        self.stable = True
+
+    def apply(self, lam: np.ndarray) -> np.ndarray:
+        """H lambda (+ the pin's mu U U^T lambda) for a stack (k, n, dim)."""
+        out = np.stack([(self.H @ lb.ravel()).reshape(lb.shape) for lb in lam])
+        pin = self.link.pin
+        if pin is not None:
+            out += (self.link.pin.mu * ((lam.reshape(len(lam), -1) @ pin.U) @ pin.U.T)).reshape(lam.shape)
+        return out
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """lambda (k, n, dim) with (H lambda)_free = rhs_free, lambda_fixed = 0, for rhs (k, n, dim)."""
+        k = len(rhs)
+        idx = self.idx
+        b = rhs.reshape(k, -1)[:, idx].T
+        lam = np.zeros((k, rhs[0].size))
+        try:
+            if self.link.pin is not None:
+                # as Newton solved it (Woodbury pin on the regularized Hessian), then two refinement
+                # sweeps against the exact H + mu U U^T remove the regularization's tiny diagonal term
+                Hr = self.H.copy()
+                regularize(self.cm, Hr)
+                ps = rigid.PinnedSolver(self.solver, self.link.pin)
+                for sweep in range(3):
+                    r = b if sweep == 0 else b - self.apply(lam.reshape(rhs.shape)).reshape(k, -1)[:, idx].T
+                    lam[:, idx] += np.column_stack([ps.solve_free(Hr, idx, r[:, q]) for q in range(k)]).T
+                return lam.reshape(rhs.shape)
+            lam_f = self.solver.solve_free(self.H, idx, b)
+        except NotPositiveDefinite:
+            self.stable = False
+            lam_f = splu(sp.csc_matrix(self.H[idx][:, idx])).solve(b)
+        lam[:, idx] = np.asarray(lam_f).reshape(len(idx), k).T
+        return lam.reshape(rhs.shape)
+
+    def pull(self, lam: np.ndarray, gx: np.ndarray, direct: np.ndarray, elastic_shift: np.ndarray,
+             barrier_shift: np.ndarray) -> np.ndarray:
+        """dq/dX (k, n, dim) = direct - (lambda - shift)^T d2W/dx dX + (dq/dx - H lambda)_fixed for stacks
+        (k, n, dim): ``elastic_shift`` is subtracted from lambda in the elastic, friction and pin terms and
+        ``barrier_shift`` in the barrier's (the force's and grip's direct terms folded into the stack)."""
+        We = lam - elastic_shift
+        Wb = lam - barrier_shift
+        out = direct - shape_derivative.mixed_product(self.cm.fem, self.x, We) \
+            - self.bar.mixed_product(Wb, self.kappa_grad)
+        if self.fric is not None:
+            out -= self.fric.mixed_product(We)
+        resid = gx - self.apply(lam)
+        out[:, self.fixed] += resid[:, self.fixed]  # the fixed dofs sit at the rest positions: dx_fixed/dX_fixed = I
+        return out
+
+    def back(self, lam: np.ndarray) -> np.ndarray:
+        """The right-hand sides (k, n, dim) -(dR/dx_prev)^T lambda that the previous step receives
+        (R = grad_x W of this step): the friction anchors' and the pin anchor's."""
+        out = np.zeros_like(lam)
+        if self.fric is not None and self.link.friction_motion is not None:
+            out += self.fric.back(lam, self.link.friction_motion)
+        pin = self.link.pin
+        if pin is not None:  # pin energy mu/2 |U^T (x - x_prev)|^2 (U held): d grad / d x_prev = -mu U U^T
+            out += (pin.mu * ((lam.reshape(len(lam), -1) @ pin.U) @ pin.U.T)).reshape(lam.shape)
+        return out
+
+
+def step_link(cm: CouplingModel, state: StepState, previous: StepState | None) -> StepLink:
+    """:class:`StepLink` of ``state`` given the previous record's state (None: the first record)."""
+    prev = state.prev
+    if previous is None:
+        followed = prev is None
+        anchor = np.asarray(cm.fem.rest, float) if prev is None else prev.x
+    else:
+        followed = prev is not None and prev.x is previous.x
+        anchor = prev.x if prev is not None else previous.x
+    pinned = state.pin_basis is not None and state.pin_basis.shape[1] > 0
+    pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], anchor) if pinned else None
+    M = None
+    if state.friction is not None and prev is not None:
+        M = cm.motion(prev.s, state.s)[0]
+    return StepLink(friction_motion=M, pin=pin, followed=followed, from_rest=prev is None)
+
+
+def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
+                     stress: StressMeasure | None = None, solver: SPDSolver | None = None,
+                     link: StepLink | None = None) -> StepSensitivity:
+    """:class:`StepSensitivity` of the converged ``state`` (see the module docstring) at a fixed
+    starting state x_prev (no backward pass: :class:`SensitivityRecorder` adds it); with ``stress``
+    also that of the averaged von Mises stress's maximum (:class:`StressMeasure`); ``solver``: the
+    sparse solver to factorize with (one per run reuses its symbolic analysis); ``link``: the step's
+    dependence on its start (:func:`step_link`; default: as if its start were not recorded)."""
+    _, sens, _ = _step(cm, state, phase, stress, SPDSolver() if solver is None else solver,
+                         step_link(cm, state, None) if link is None else link)
+    return sens
+
+
+def _step(cm, state, phase, stress, solver, link):
+    """(linearization, sensitivity at a fixed start, lambda stack (k, n, dim))."""
+    lin = StepLinearization(cm, state, link, solver)
+    fem, x = cm.fem, lin.x
+    n, dim = fem.n_vertices, cm.dim
+    free = ~lin.fixed
     u = cm.direction(state.s)
     v = np.where(free, 0.0, u[None, :])  # F = v . grad W
-    gc = bar.gradient
+    gc = lin.bar.gradient
     a = 0.5 * np.abs(gc).sum(axis=0)
     G = float(np.linalg.norm(a))
     wg = 0.5 * np.sign(gc) * (a / G)[None, :] if G > 0 else np.zeros_like(gc)
-    # per figure: (dq/dx (n, dim), dq/dX at fixed x (n, dim))
-    figures = [(gE.reshape(n, dim), shape_derivative.rest_gradient(fem, x)),
-               ((H @ v.ravel()).reshape(n, dim), None),  # direct term: mixed(v), folded into the stack below
-               ((HB @ wg.ravel()).reshape(n, dim), None)]  # direct term: the barrier's mixed(wg), likewise
+    zero = np.zeros((n, dim))
+    gE_rest = shape_derivative.rest_gradient(fem, x)
+    # per figure: dq/dx (n, dim), dq/dX at fixed x; the force's direct term is mixed(v) and the grip's the
+    # barrier part of mixed(wg): folded into the stacked mixed product as shifts of lambda
+    gx = [lin.gE.reshape(n, dim), (lin.H @ v.ravel()).reshape(n, dim), (lin.HB @ wg.ravel()).reshape(n, dim)]
+    direct = [gE_rest, zero, zero]
     stress_value = float("nan")
     if stress is not None:
         avg = stress.averaging @ shape_derivative.von_mises(fem, x)
         stress_value = float(avg.max())
         c = stress.averaging.T @ smooth_max_weights(avg, stress.temperature_rel * abs(stress_value))
-        figures.append(shape_derivative.von_mises_derivatives(fem, x, c))
-    k = len(figures)
-    gx = np.stack([f[0] for f in figures])
-    idx = np.flatnonzero(cm.free)
-    rhs = gx.reshape(k, -1)[:, idx].T
-    pinned = state.pin_basis is not None and state.pin_basis.shape[1] > 0
-    stable = True
-    try:
-        if pinned:  # as Newton solved it: Woodbury pin on the regularized Hessian (anchor held fixed)
-            Hr = H.copy()
-            regularize(cm, Hr)
-            pinned_solver = rigid.PinnedSolver(solver, rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1],
-                                                                     state.x))
-            lam_f = np.column_stack([pinned_solver.solve_free(Hr, idx, rhs[:, q]) for q in range(k)])
-        else:
-            lam_f = solver.solve_free(H, idx, rhs)
-    except NotPositiveDefinite:
-        stable = False
-        lam_f = splu(sp.csc_matrix(H[idx][:, idx])).solve(rhs)
-    lam = np.zeros((k, n * dim))
-    lam[:, idx] = lam_f.T
-    lam = lam.reshape(k, n, dim)
-    fixed = ~free
-    # dq/dX = direct - mixed(lambda): force's direct term is mixed(v) and grip's the barrier part of
-    # mixed(wg), so one stacked mixed product over (lambda_0, lambda_1 - v, lambda_2 (- wg for B), ...)
-    We = lam.copy()
-    We[1] -= v
-    Wb = We.copy()
-    Wb[2] -= wg
-    mixed_all = shape_derivative.mixed_product(fem, x, We) + bar.mixed_product(Wb, kappa_grad)
-    direct = [figures[0][1], np.zeros((n, dim)), np.zeros((n, dim))] + [f[1] for f in figures[3:]]
-    out = []
-    for q in range(k):
-        dq = direct[q] - mixed_all[q]
-        resid = gx[q] - (H @ lam[q].ravel()).reshape(n, dim)
-        dq[fixed] += resid[fixed]  # the fixed dofs sit at the rest positions: dx_fixed/dX_fixed = I
-        out.append(dq)
-    supported = state.friction is None and not pinned
-    return StepSensitivity(s=float(state.s), phase=phase, energy=out[0], force=out[1], grip=out[2],
-                           stress=out[3] if stress is not None else None, stress_value=stress_value, stable=stable,
-                           supported=supported)
+        sx, sX = shape_derivative.von_mises_derivatives(fem, x, c)
+        gx.append(sx)
+        direct.append(sX)
+    gx, direct = np.stack(gx), np.stack(direct)
+    e_shift, b_shift = np.zeros_like(gx), np.zeros_like(gx)
+    e_shift[1] = b_shift[1] = v
+    b_shift[2] = wg
+    lam = lin.solve(gx)
+    out = lin.pull(lam, gx, direct, e_shift, b_shift)
+    if link.from_rest and link.pin is not None:  # the first step's pin is anchored at the rest shape itself
+        out += lin.back(lam)
+    sens = StepSensitivity(s=float(state.s), phase=phase, energy=out[0], force=out[1], grip=out[2],
+                           stress=out[3] if stress is not None else None, stress_value=stress_value,
+                           stable=lin.stable, supported=link.followed, friction_lag_held=lin.fric is not None)
+    return lin, sens, lam
+
+
+def _depends(link: StepLink, lin: StepLinearization) -> bool:
+    """The step's equilibrium depends on the previous record's positions, and that is followed."""
+    return link.followed and not link.from_rest and (link.pin is not None or lin.fric is not None)
 
 
 class SensitivityRecorder:
     """Collects a :class:`StepSensitivity` per kept step of a run: pass as ``simulate(...,
     recorder=...)`` (it receives each kept record with the converged state it was recorded at).
-    ``insert`` and ``remove``: the sensitivities of the run's insertion and removal records, in order."""
+    ``insert`` and ``remove``: the sensitivities of the run's insertion and removal records, in order.
+
+    Each record's sensitivity is computed when it is kept, at its start held fixed; where steps depend
+    on their start (friction anchors, a pin), reading ``insert`` / ``remove`` first runs the backward
+    pass (:meth:`finish`): the right-hand sides lambda_k^T dR_k/dx_(k-1) of every later record are
+    solved at each earlier one in turn, and their contributions added (one more assembly and
+    factorization per step passed through)."""
 
     def __init__(self, cm: CouplingModel, stress: StressMeasure | None = None):
         self.cm, self.stress = cm, stress
         self.solver = SPDSolver()  # one symbolic analysis for the run's (fixed-pattern) Hessians
-        self.insert: list[StepSensitivity] = []
-        self.remove: list[StepSensitivity] = []
+        self._sens: list[StepSensitivity] = []
+        self._states: list[StepState] = []
+        self._links: list[StepLink] = []
+        self._pending: list = []  # per record: its lambda stack when the step depends on its start, else None
+        self._finished = True
 
     def __call__(self, record, state: StepState) -> None:
-        sens = step_sensitivity(self.cm, state, record.phase, self.stress, self.solver)
-        (self.remove if record.phase == "remove" else self.insert).append(sens)
+        previous = self._states[-1] if self._states else None
+        link = step_link(self.cm, state, previous)
+        lin, sens, lam = _step(self.cm, state, record.phase, self.stress, self.solver, link)
+        depends = _depends(link, lin)
+        self._sens.append(sens)
+        self._states.append(state)
+        self._links.append(link)
+        self._pending.append(lin.back(lam) if depends else None)
+        self._finished = self._finished and not depends
+
+    def finish(self) -> None:
+        """The backward pass through the steps that depend on their start (see the class docstring)."""
+        if self._finished:
+            return
+        self._finished = True
+        figs = [f for f in ("energy", "force", "grip", "stress") if getattr(self._sens[0], f) is not None]
+        add: dict = {}
+        incoming = None  # (targets [(record, figure)], right-hand sides (b, n, dim)) to solve at record j
+        for j in range(len(self._sens) - 1, -1, -1):
+            targets, send = [], []
+            if incoming is not None:
+                lin = StepLinearization(self.cm, self._states[j], self._links[j], self.solver)
+                lam = lin.solve(incoming[1])
+                zero = np.zeros_like(lam)
+                dq = lin.pull(lam, incoming[1], zero, zero, zero)
+                if self._links[j].from_rest and self._links[j].pin is not None:
+                    dq += lin.back(lam)
+                for t, d in zip(incoming[0], dq):
+                    add[t] = add.get(t, 0.0) + d
+                if _depends(self._links[j], lin):
+                    targets, send = list(incoming[0]), [lin.back(lam)]
+            if self._pending[j] is not None:
+                targets += [(j, f) for f in figs]
+                send.append(self._pending[j])
+            incoming = (targets, np.concatenate(send)) if targets else None
+        for (k, f), d in add.items():
+            self._sens[k] = dataclasses.replace(self._sens[k], **{f: getattr(self._sens[k], f) + d})
+
+    @property
+    def insert(self) -> list[StepSensitivity]:
+        self.finish()
+        return [s for s in self._sens if s.phase != "remove"]
+
+    @property
+    def remove(self) -> list[StepSensitivity]:
+        self.finish()
+        return [s for s in self._sens if s.phase == "remove"]
