@@ -207,41 +207,94 @@ def smooth_max_weights(values: np.ndarray, temperature: float) -> np.ndarray:
 
 
 class _Friction:
-    """The lagged friction potential D = sum_j mu lambda_j f0(|T_j^T (y_j(x) - c_j)|, eps_j) of a
-    converged state with its lag (:class:`simfab.coupling.friction.FrictionLag`): lambda_j, T_j held;
-    the anchors c_j = M (y_j(x_prev) - p_a) + p_b carried from the step's start (the backward pass,
-    :meth:`back`); eps_j = (friction_eps_rel / dhat_rel) dhat_j(X) through the rest shape."""
+    """The friction forces of a converged state solved with the lag ``state.friction``
+    (:mod:`simfab.coupling.friction`), as functions of the state itself: at a converged lag the
+    normal forces and normals are those of the solution,
 
-    def __init__(self, cm: CouplingModel, state: StepState):
+        f_j = mu lambda_j phi(|w_j|) w_j,   w_j = (I - n_j n_j^T)(y_j(x) - c_j),   phi = f1(y) / y,
+        lambda_j = -kappa b'(d_j(x); dhat_j(X)),   n_j = grad d_j / |grad d_j|,
+        c_j = M (y_j(x_prev) - p_a) + p_b (the anchors, carried from the step's start),
+
+    and eps_j = (friction_eps_rel / dhat_rel) dhat_j(X). Their Jacobian in y_j is
+
+        df_j/dy = Hf_j + mu phi w_j (x) dlambda_j/dy + B_j Dw_j,   B_j = mu lambda_j (phi'/y w w^T + phi I),
+        dlambda_j/dy = -kappa b''(d_j) grad d_j,   Dw_j = -((n . dy) N_j + n_j (x) N_j^T dy),
+        N_j = dn_j/dy = (I - n n^T) hess d_j / |grad d_j|,
+
+    Hf_j = B_j (I - n n^T) the friction Hessian at the held lag: the first term is the part
+    a lag held fixed keeps; the other two are not symmetric (the lagged step has no potential in its
+    normal forces and normals). ``held``: use Hf only (lambda_j and n_j held at their values)."""
+
+    def __init__(self, cm: CouplingModel, state: StepState, held: bool = False):
         lag = state.friction
         x = np.asarray(state.x, float)
-        self.cm, self.lag, self.rows = cm, lag, lag.rows
+        self.cm, self.lag, self.rows, self.held = cm, lag, lag.rows, held
+        pts, rows = lag.points, lag.rows
         fe = lag.evaluate(x, hessian=True)
         self.Hy = fe.hessian  # (a, dim, dim) d2D/dy2, exact for the held lag (simfab.contact.friction)
-        self.gradient = lag.points.scatter(fe.gradient, cm.fem.n_vertices, rows=self.rows)
-        dy = lag.points.positions(x)[self.rows] - lag.anchors[self.rows]
-        self.Tu = np.einsum("kdt,kd,ket->ke", lag.tangents, dy, lag.tangents)  # T T^T dy: the tangential slip
+        self.gradient = pts.scatter(fe.gradient, cm.fem.n_vertices, rows=rows)
+        dim = cm.dim
+        dy = pts.positions(x)[rows] - lag.anchors[rows]
+        n = lag.normals
+        w = dy - np.einsum("kd,kd->k", n, dy)[:, None] * n  # the tangential slip (I - n n^T) dy
         y, eps = fe.slip, lag.eps
         stick = y < eps
-        # f0 and f1 / y of the mollifier (simfab.contact.friction) differentiated in eps (zero once slipping)
-        self.df0 = lag.mu_lambda * np.where(stick, 2 * y**3 / (3 * eps**3) - y**2 / eps**2 + 1.0 / 3.0, 0.0)
-        self.dfy = lag.mu_lambda * np.where(stick, -2.0 / eps**2 + 2.0 * y / eps**3, 0.0)
+        ys = np.where(y > 0, y, 1.0)
+        phi = np.where(stick, 2.0 / eps - y / eps**2, 1.0 / ys)
+        curv = np.where(y <= 0, 0.0, np.where(stick, -1.0 / (eps**2 * ys), -1.0 / ys**3))
+        ml = lag.mu_lambda
+        self.force_dir = ml[:, None] * phi[:, None] * w  # f_j
+        # f_j and D_j differentiated in eps (zero once slipping)
+        self.df0 = ml * np.where(stick, 2 * y**3 / (3 * eps**3) - y**2 / eps**2 + 1.0 / 3.0, 0.0)
+        self.dfy = ml * np.where(stick, -2.0 / eps**2 + 2.0 * y / eps**3, 0.0)
+        self.w = w
         scale = cm.contact.friction_eps_rel / cm.options.dhat_rel
-        self.eps_jac = scale * dhat_jacobian(cm, _rows(lag.points, self.rows))  # (a, n dim) d eps_j / dX
+        sub = _rows(pts, rows)
+        self.dhat_jac = dhat_jacobian(cm, sub)  # (a, n dim)
+        self.eps_jac = scale * self.dhat_jac
+        self.extra = None
+        self.kappa = float(state.kappa_step)
+        if held or not len(rows):
+            return
+        ev = cm.field.evaluate(pts.positions(x)[rows], cm.pose(state.s), hessian=True,
+                               hessian_band=float(point_dhat(cm, pts).max()))
+        d, gd, hd = -ev.psi, -ev.grad[:, :dim], -ev.hess[:, :dim, :dim]
+        dh = point_dhat(cm, pts)[rows]
+        r, log = d - dh, np.log(d / dh)
+        b2 = -2.0 * log - 4.0 * r / d + r * r / d**2  # b''(d)
+        self.dbp_ddhat = 2.0 * log + 2.0 * r / dh + 2.0 * r / d  # d b'(d; dhat) / d dhat
+        self.lam = lag.normal_force[rows]
+        self.mu = lag.mu_lambda / np.where(self.lam > 0, self.lam, 1.0)
+        gl = -self.kappa * b2[:, None] * gd  # d lambda / dy
+        gn = np.linalg.norm(gd, axis=1)
+        Pt = np.eye(dim) - n[:, :, None] * n[:, None, :]
+        N = Pt @ hd / gn[:, None, None]
+        ndy = np.einsum("kd,kd->k", n, dy)
+        Dw = -(ndy[:, None, None] * N + n[:, :, None] * np.einsum("kji,kj->ki", N, dy)[:, None, :])
+        B = ml[:, None, None] * (curv[:, None, None] * w[:, :, None] * w[:, None, :] + phi[:, None, None] * np.eye(dim))
+        self.extra = (self.mu * phi)[:, None, None] * w[:, :, None] * gl[:, None, :] + B @ Dw  # (a, dim, dim)
 
     def rest_gradient(self) -> np.ndarray:
-        """dD/dX at fixed x and anchors (n, dim)."""
+        """dD/dX at fixed x, anchors and lag (n, dim)."""
         return np.asarray(self.df0 @ self.eps_jac).reshape(-1, self.cm.dim)
 
-    def mixed_product(self, W: np.ndarray) -> np.ndarray:
-        """d/dX (w . dD/dx) at fixed x and anchors for a stack W (b, n, dim): through eps only."""
+    def mixed_product(self, W: np.ndarray, kappa_grad: np.ndarray | None) -> np.ndarray:
+        """d/dX (w . sum_j P_j^T f_j) at fixed x and anchors for a stack W (b, n, dim): through eps_j and,
+        unless held, lambda_j (dhat_j, and kappa in 3D)."""
         wy = np.stack([self.lag.points.positions(wb)[self.rows] for wb in W])  # (b, a, dim)
-        coef = self.dfy * np.einsum("kd,bkd->bk", self.Tu, wy)
-        return np.asarray(coef @ self.eps_jac).reshape(W.shape)
+        coef = self.dfy * np.einsum("kd,bkd->bk", self.w, wy)
+        out = np.asarray(coef @ self.eps_jac).reshape(W.shape)
+        if self.extra is not None:
+            fw = np.einsum("kd,bkd->bk", self.force_dir, wy)  # w . f_j: f_j is proportional to lambda_j
+            dlam = -self.kappa * self.dbp_ddhat  # d lambda_j / d dhat_j
+            out += np.asarray((fw * (dlam / np.where(self.lam > 0, self.lam, 1.0))) @ self.dhat_jac).reshape(W.shape)
+            if kappa_grad is not None:  # lambda_j proportional to kappa, kappa to the mean edge length in 3D
+                out += (fw.sum(axis=1) / self.cm.kappa)[:, None, None] * kappa_grad
+        return out
 
     def back(self, W: np.ndarray, M: np.ndarray) -> np.ndarray:
-        """-(d grad_x D / d x_prev)^T w for a stack W (b, n, dim): the anchors c_j = M P_j x_prev + const,
-        so d grad D / d x_prev = -sum_j P_j^T Hy_j M P_j and the result is sum_j P_j^T M^T Hy_j P_j w."""
+        """-(d R / d x_prev)^T w for a stack W (b, n, dim): the anchors c_j = M P_j x_prev + const, so
+        dR/dx_prev = -sum_j P_j^T Hf_j M P_j and the result is sum_j P_j^T M^T Hf_j P_j w."""
         dim = self.cm.dim
         Md = np.asarray(M)[:dim, :dim]
         out = np.empty_like(W)
@@ -268,84 +321,120 @@ class StepLink:
 
 
 class StepLinearization:
-    """A converged step linearized for the adjoint method: the exact Hessian H of its objective
-    W = E + B (+ D with friction, + the pin), the barrier, friction and pin terms, and the solver.
+    """A converged step linearized for the adjoint method: the Jacobian J = dR/dx of its equilibrium
+    R = grad_x (E + B) (+ the friction forces, + the pin's gradient) = 0 (without friction the exact
+    Hessian H, symmetric), the barrier, friction and pin terms, and the solver.
 
-    :meth:`solve` gives lambda = H_ff^-1 r for a stack of right-hand sides; :meth:`pull` turns
-    (lambda, dq/dx, direct terms) into dq/dX (the module docstring's formula); :meth:`back` gives
-    the right-hand sides the previous step receives."""
+    :meth:`solve` gives lambda with (J^T lambda)_free = r_free for a stack of right-hand sides;
+    :meth:`pull` turns (lambda, dq/dx, direct terms) into dq/dX (the module docstring's formula);
+    :meth:`back` gives the right-hand sides the previous step receives. ``held_lag``: the friction's
+    normal forces and normals held at their values (the Jacobian then is the symmetric H + Hf)."""
 
-    def __init__(self, cm: CouplingModel, state: StepState, link: StepLink, solver: SPDSolver):
+    def __init__(self, cm: CouplingModel, state: StepState, link: StepLink, solver: SPDSolver,
+                 held_lag: bool = False):
         self.cm, self.state, self.link, self.solver = cm, state, link, solver
         fem, x = cm.fem, np.asarray(state.x, float)
         self.x = x
         n, dim = fem.n_vertices, cm.dim
         self.bar = _Barrier(cm, state)
-        self.fric = _Friction(cm, state) if state.friction is not None and len(state.friction.rows) else None
+        frictional = state.friction is not None and len(state.friction.rows)
+        self.fric = _Friction(cm, state, held=held_lag) if frictional else None
         _, self.gE, HE = energy_gradient_hessian(fem, x, project_psd=False)
         self.HB = HE.copy()
         self.HB.data[:] = 0.0
         add_point_blocks(cm, state.points, self.HB, self.bar.act, self.bar.Hy)
         H = HE.copy()  # in HE's fixed pattern (the Hessian slots, regularization and solver maps expect it)
         add_point_blocks(cm, state.points, H, self.bar.act, self.bar.Hy)
+        self.JT = None  # J^T where J is not symmetric
         if self.fric is not None:
             add_point_blocks(cm, self.fric.lag.points, H, self.fric.rows, self.fric.Hy)
+            if self.fric.extra is not None:
+                J = H.copy()
+                add_point_blocks(cm, self.fric.lag.points, J, self.fric.rows, self.fric.extra)
+                self.JT = sp.csr_matrix(J.T)
         self.H = H
         self.kappa_grad = cm.kappa / cm.h * mean_edge_gradient(cm) if dim == 3 else None
         self.idx = np.flatnonzero(cm.free)
         self.fixed = ~cm.free.reshape(n, dim)
         self.stable = True
 
+    def transpose_product(self, v: np.ndarray) -> np.ndarray:
+        """J^T v (n, dim) for v (n, dim) (without the pin): d(v . R)/dx."""
+        A = self.H if self.JT is None else self.JT
+        return (A @ np.ravel(v)).reshape(np.shape(v))
+
     def apply(self, lam: np.ndarray) -> np.ndarray:
-        """H lambda (+ the pin's mu U U^T lambda) for a stack (k, n, dim)."""
-        out = np.stack([(self.H @ lb.ravel()).reshape(lb.shape) for lb in lam])
+        """J^T lambda (+ the pin's mu U U^T lambda) for a stack (k, n, dim)."""
+        out = np.stack([self.transpose_product(lb) for lb in lam])
         pin = self.link.pin
         if pin is not None:
-            out += (self.link.pin.mu * ((lam.reshape(len(lam), -1) @ pin.U) @ pin.U.T)).reshape(lam.shape)
+            out += (pin.mu * ((lam.reshape(len(lam), -1) @ pin.U) @ pin.U.T)).reshape(lam.shape)
         return out
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """lambda (k, n, dim) with (H lambda)_free = rhs_free, lambda_fixed = 0, for rhs (k, n, dim)."""
+        """lambda (k, n, dim) with (J^T lambda)_free = rhs_free, lambda_fixed = 0, for rhs (k, n, dim)."""
         k = len(rhs)
         idx = self.idx
         b = rhs.reshape(k, -1)[:, idx].T
         lam = np.zeros((k, rhs[0].size))
+        pin = self.link.pin
+        if pin is None and self.JT is None:
+            try:
+                lam_f = self.solver.solve_free(self.H, idx, b)
+            except NotPositiveDefinite:
+                self.stable = False
+                lam_f = splu(sp.csc_matrix(self.H[idx][:, idx])).solve(b)
+            lam[:, idx] = np.asarray(lam_f).reshape(len(idx), k).T
+            return lam.reshape(rhs.shape)
+        # as Newton solved it, a pin by Woodbury on the regularized matrix, then refinement sweeps
+        # against the exact J^T + mu U U^T remove the regularization's tiny diagonal term
+        Ar = self.H.copy()
+        if pin is not None:
+            regularize(self.cm, Ar)
+        if self.JT is not None:
+            lu = splu(sp.csc_matrix((self.JT + (Ar - self.H))[idx][:, idx]))
+            base = lu.solve
+        else:
+            def base(r):
+                return self.solver.solve_free(Ar, idx, r)
+        if pin is None:
+            inner = base
+        else:
+            Uf = pin.U[idx]
+            Z = np.asarray(base(Uf)).reshape(len(idx), -1)
+            S = np.eye(Uf.shape[1]) / pin.mu + Uf.T @ Z
+
+            def inner(r):
+                y = np.asarray(base(r)).reshape(r.shape)
+                return y - Z @ np.linalg.solve(S, Uf.T @ y)
         try:
-            if self.link.pin is not None:
-                # as Newton solved it (Woodbury pin on the regularized Hessian), then two refinement
-                # sweeps against the exact H + mu U U^T remove the regularization's tiny diagonal term
-                Hr = self.H.copy()
-                regularize(self.cm, Hr)
-                ps = rigid.PinnedSolver(self.solver, self.link.pin)
-                for sweep in range(3):
-                    r = b if sweep == 0 else b - self.apply(lam.reshape(rhs.shape)).reshape(k, -1)[:, idx].T
-                    lam[:, idx] += np.column_stack([ps.solve_free(Hr, idx, r[:, q]) for q in range(k)]).T
-                return lam.reshape(rhs.shape)
-            lam_f = self.solver.solve_free(self.H, idx, b)
+            for sweep in range(3 if pin is not None else 1):
+                r = b if sweep == 0 else b - self.apply(lam.reshape(rhs.shape)).reshape(k, -1)[:, idx].T
+                lam[:, idx] += np.asarray(inner(r)).reshape(len(idx), k).T
         except NotPositiveDefinite:
             self.stable = False
-            lam_f = splu(sp.csc_matrix(self.H[idx][:, idx])).solve(b)
-        lam[:, idx] = np.asarray(lam_f).reshape(len(idx), k).T
+            lam[:] = 0.0
+            lam[:, idx] = splu(sp.csc_matrix(self.H[idx][:, idx])).solve(b).reshape(len(idx), k).T
         return lam.reshape(rhs.shape)
 
     def pull(self, lam: np.ndarray, gx: np.ndarray, direct: np.ndarray, elastic_shift: np.ndarray,
              barrier_shift: np.ndarray) -> np.ndarray:
-        """dq/dX (k, n, dim) = direct - (lambda - shift)^T d2W/dx dX + (dq/dx - H lambda)_fixed for stacks
-        (k, n, dim): ``elastic_shift`` is subtracted from lambda in the elastic, friction and pin terms and
+        """dq/dX (k, n, dim) = direct - (lambda - shift)^T dR/dX + (dq/dx - J^T lambda)_fixed for stacks
+        (k, n, dim): ``elastic_shift`` is subtracted from lambda in the elastic and friction terms and
         ``barrier_shift`` in the barrier's (the force's and grip's direct terms folded into the stack)."""
         We = lam - elastic_shift
         Wb = lam - barrier_shift
         out = direct - shape_derivative.mixed_product(self.cm.fem, self.x, We) \
             - self.bar.mixed_product(Wb, self.kappa_grad)
         if self.fric is not None:
-            out -= self.fric.mixed_product(We)
+            out -= self.fric.mixed_product(We, self.kappa_grad)
         resid = gx - self.apply(lam)
         out[:, self.fixed] += resid[:, self.fixed]  # the fixed dofs sit at the rest positions: dx_fixed/dX_fixed = I
         return out
 
     def back(self, lam: np.ndarray) -> np.ndarray:
-        """The right-hand sides (k, n, dim) -(dR/dx_prev)^T lambda that the previous step receives
-        (R = grad_x W of this step): the friction anchors' and the pin anchor's."""
+        """The right-hand sides (k, n, dim) -(dR/dx_prev)^T lambda that the previous step receives:
+        the friction anchors' and the pin anchor's."""
         out = np.zeros_like(lam)
         if self.fric is not None and self.link.friction_motion is not None:
             out += self.fric.back(lam, self.link.friction_motion)
@@ -385,9 +474,9 @@ def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
     return sens
 
 
-def _step(cm, state, phase, stress, solver, link):
+def _step(cm, state, phase, stress, solver, link, held_lag=False):
     """(linearization, sensitivity at a fixed start, lambda stack (k, n, dim))."""
-    lin = StepLinearization(cm, state, link, solver)
+    lin = StepLinearization(cm, state, link, solver, held_lag)
     fem, x = cm.fem, lin.x
     n, dim = fem.n_vertices, cm.dim
     free = ~lin.fixed
@@ -401,7 +490,7 @@ def _step(cm, state, phase, stress, solver, link):
     gE_rest = shape_derivative.rest_gradient(fem, x)
     # per figure: dq/dx (n, dim), dq/dX at fixed x; the force's direct term is mixed(v) and the grip's the
     # barrier part of mixed(wg): folded into the stacked mixed product as shifts of lambda
-    gx = [lin.gE.reshape(n, dim), (lin.H @ v.ravel()).reshape(n, dim), (lin.HB @ wg.ravel()).reshape(n, dim)]
+    gx = [lin.gE.reshape(n, dim), lin.transpose_product(v), (lin.HB @ wg.ravel()).reshape(n, dim)]
     direct = [gE_rest, zero, zero]
     stress_value = float("nan")
     if stress is not None:
@@ -421,7 +510,7 @@ def _step(cm, state, phase, stress, solver, link):
         out += lin.back(lam)
     sens = StepSensitivity(s=float(state.s), phase=phase, energy=out[0], force=out[1], grip=out[2],
                            stress=out[3] if stress is not None else None, stress_value=stress_value,
-                           stable=lin.stable, supported=link.followed, friction_lag_held=lin.fric is not None)
+                           stable=lin.stable, supported=link.followed, friction_lag_held=lin.fric is not None and held_lag)
     return lin, sens, lam
 
 
@@ -441,8 +530,8 @@ class SensitivityRecorder:
     solved at each earlier one in turn, and their contributions added (one more assembly and
     factorization per step passed through)."""
 
-    def __init__(self, cm: CouplingModel, stress: StressMeasure | None = None):
-        self.cm, self.stress = cm, stress
+    def __init__(self, cm: CouplingModel, stress: StressMeasure | None = None, *, held_lag: bool = False):
+        self.cm, self.stress, self.held_lag = cm, stress, held_lag
         self.solver = SPDSolver()  # one symbolic analysis for the run's (fixed-pattern) Hessians
         self._sens: list[StepSensitivity] = []
         self._states: list[StepState] = []
@@ -453,7 +542,7 @@ class SensitivityRecorder:
     def __call__(self, record, state: StepState) -> None:
         previous = self._states[-1] if self._states else None
         link = step_link(self.cm, state, previous)
-        lin, sens, lam = _step(self.cm, state, record.phase, self.stress, self.solver, link)
+        lin, sens, lam = _step(self.cm, state, record.phase, self.stress, self.solver, link, self.held_lag)
         depends = _depends(link, lin)
         self._sens.append(sens)
         self._states.append(state)
@@ -472,7 +561,7 @@ class SensitivityRecorder:
         for j in range(len(self._sens) - 1, -1, -1):
             targets, send = [], []
             if incoming is not None:
-                lin = StepLinearization(self.cm, self._states[j], self._links[j], self.solver)
+                lin = StepLinearization(self.cm, self._states[j], self._links[j], self.solver, self.held_lag)
                 lam = lin.solve(incoming[1])
                 zero = np.zeros_like(lam)
                 dq = lin.pull(lam, incoming[1], zero, zero, zero)
