@@ -1,43 +1,67 @@
 """Sensitivities of an insertion step's record to A's rest shape X, by the adjoint method.
 
-A converged step's state x(X) is an equilibrium of W(x; X) = E(x; X) + B(x; X) over the free dofs
-(E: Neo-Hookean energy, B = kappa sum_j b(d_j(x), dhat_j): the barrier; both depend on X, E through
-the rest edges, B through the per-point activation distances dhat_j, which are fractions of the
-rest edge lengths at the point, and in 3D through kappa, proportional to the mean edge length).
-The fixed dofs sit at their rest positions, x_fixed = X_fixed. For a figure q(x, X) of the step,
-implicit differentiation of grad_free W = 0 gives
+A converged step's state x(X) solves R(x; X, x_prev) = 0 over the free dofs, R = grad_x (E + B)
+(+ the friction forces, + the rigid-mode pin's gradient), E: the Neo-Hookean energy (linear or P2
+elements), B = kappa sum_j b(d_j(x), dhat_j): the barrier; both depend on X, E through the rest
+geometry, B through the per-point activation distances dhat_j, which are fractions of the rest
+edge lengths at the point, and in 3D through kappa, proportional to the mean edge length. The
+fixed dofs sit at their rest positions, x_fixed = X_fixed. For a figure q(x, X) of the step,
+implicit differentiation of R = 0 gives
 
-    dq/dX = dq/dX|_x - lambda^T d2W/dx dX + [fixed dofs] (dq/dx - H lambda)_fixed,
-    H_ff lambda = (dq/dx)_free                                            (one back-substitution)
+    dq/dX = dq/dX|_x - lambda^T dR/dX + [fixed dofs] (dq/dx - J^T lambda)_fixed
+            + (-lambda^T dR/dx_prev) dx_prev/dX,
+    (J^T)_ff lambda = (dq/dx)_free,   J = dR/dx                          (one back-substitution)
 
-with H the exact Hessian d2W/dx2 at the converged x (lambda extended by zeros to the fixed dofs).
-The mixed term is never formed: ``lambda^T d2W/dx dX`` is the derivative of lambda . grad_x W
-with respect to X at fixed x, :func:`simfab.fem.shape_derivative.mixed_product` for E and, for B,
-kappa sum_j (db'/d dhat)_j (grad d_j . lambda_j) d dhat_j/dX (+ its kappa part in 3D).
+(lambda extended by zeros to the fixed dofs). Without friction J is the exact Hessian H of
+E + B (+ pin) at the converged x, symmetric. The mixed term is never formed: ``lambda^T dR/dX``
+is the derivative of lambda . R with respect to X at fixed x, :func:`simfab.fem.shape_derivative.
+mixed_product` for E and, for B, kappa sum_j (db'/d dhat)_j (grad d_j . lambda_j) d dhat_j/dX (+ its
+kappa part in 3D). P2: derivatives are with respect to every node; ``shape_derivative.
+linear_rest_derivative`` chains them to the linear mesh's vertices (edge nodes at midpoints).
+
+Dependence on the step's start x_prev (the previous record's positions; the rest shape X for
+the first), followed by a backward pass (:class:`SensitivityRecorder`): the rigid-mode pin
+mu/2 |U^T (x - x_prev)|^2 (motions nothing resists yet; U held) and, with friction, the anchors
+c_j = M (y_j(x_prev) - p_a) + p_b the points slip from. The right-hand side
+-lambda_k^T dR_k/dx_(k-1) of every later record is solved at each earlier one in turn. A step solved
+from a state that was not recorded (a bisected step, a step solved again after its pin changed)
+holds that state fixed and is marked ``supported = False``.
+
+Friction (:mod:`simfab.coupling.friction`): the lagging iterations converge (to ``lag_tol``) to a
+step whose normal forces lambda_j and normals n_j are those of its own solution, so they are
+differentiated as functions of x and X (lambda_j = -kappa b'(d_j(x); dhat_j(X)), n_j = grad d_j /
+|grad d_j|): J = H + Hf + the non-symmetric terms of :class:`_Friction`, solved with SuperLU. The
+residual difference between the lag the step was solved with and its own solution (up to
+``lag_tol`` of the largest normal force) is not differentiated. Holding lambda_j and n_j fixed
+instead (``held_lag``) drops the force's dependence on the normal force: tens of percent error in
+the force's derivative at mu = 0.3 (``python tools/bench.py sensitivities``).
 
 Figures per step (:class:`StepSensitivity`): the elastic energy E (q = E), the insertion force
-F = u . sum over the fixed dofs of grad W (the support's reaction along O's translation u: dq/dx =
-H v, dq/dX|_x = (d2W/dx dX)^T v with v = u on the fixed dofs) and the grip force
+F = u . sum over the fixed dofs of R (the support's reaction along O's translation u: dq/dx =
+J^T v, dq/dX|_x = (dR/dX)^T v with v = u on the fixed dofs) and the grip force
 G = |a|, a_d = 1/2 sum_v |grad_v B|_d (dq/dx = H_B w, w_vd = 1/2 sign(grad_v B)_d a_d / G); with a
-:class:`StressMeasure` also the averaged von Mises stress's maximum.
+:class:`StressMeasure` also the averaged von Mises stress's maximum (per quadrature point on P2).
 
-One sparse factorization of H_ff per step (CHOLMOD through :class:`simfab.solve.linear.SPDSolver`,
-the insertion's solver class, its symbolic analysis reused over a run) and one back-substitution
-with a right-hand side per figure (3, or 4 with the stress). The exact
-Hessian is used (not Newton's PSD-projected one): at a stable equilibrium H_ff is positive
-definite; where it is not, the step is marked ``stable = False`` and solved with SuperLU.
+One sparse factorization per step (CHOLMOD through :class:`simfab.solve.linear.SPDSolver`, the
+insertion's solver class, its symbolic analysis reused over a run; SuperLU for the non-symmetric
+frictional J) and one back-substitution per figure (3, or 4 with the stress); the backward pass
+assembles and factorizes each step it passes through once more. The exact Hessian is used (not
+Newton's PSD-projected one): at a stable equilibrium H_ff is positive definite; where it is not,
+the step is marked ``stable = False`` and solved with SuperLU. A pinned step is solved as Newton
+solved it (Woodbury on the Hessian with a tiny diagonal regularization), then refined by two
+residual sweeps against the unregularized system.
 
-Scope: frictionless contact (mu = 0) and no pinned rigid motions (both make a step depend on the
-one before: lagged friction anchors, the pin's anchor at the step's start); a step with either is
-marked ``supported = False`` and its derivatives are those at a fixed previous state (the pin
-enters as Newton solves with it: Woodbury on the regularized Hessian). Derivatives are at fixed
-path positions s_k: the planned steps' positions follow A's farthest point along the path when
-``L_max`` is unset (in jumps of 1/2000 of the path, :func:`simfab.coupling.model.
-default_insertion_length`), and the rest search places its records anew for every design; neither
-is differentiated. Non-smooth events: a constraint point entering or leaving the barrier's range
-(b is C2 at d = dhat, so derivatives stay continuous), refinement points added (a new, discrete
-constraint set: the profile jumps by the discretization error), kappa doubling (a jump in B's
-scale); none is differentiated, the figures' derivatives are those of the branch the run took.
+Not differentiated: the path positions s_k (the planned steps' positions follow A's farthest point
+along the path when ``L_max`` is unset, in jumps of 1/2000 of the path, :func:`simfab.coupling.
+model.default_insertion_length`; the rest search places its records anew for every design).
+Non-smooth events: a constraint point entering or leaving the barrier's range (b is C2 at d = dhat,
+so derivatives stay continuous; with friction a point entering contact starts carrying friction
+with lambda_j from 0, continuous too), contact onset of the part as a whole (the pin's set of
+unresisted motions changes: a different equation, a kink in the profile), refinement points added
+(a new, discrete constraint set: the profile jumps by the discretization error), kappa doubling (a
+jump in B's scale), a friction point's stick-slip transition (C1 mollifier: continuous force,
+jumping stiffness); none is differentiated, the figures' derivatives are those of the branch the
+run took.
 """
 
 from __future__ import annotations
@@ -62,13 +86,17 @@ from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class StepSensitivity:
-    """Derivatives of one step's figures with respect to the rest positions X (n, dim).
+    """Derivatives of one step's figures with respect to the rest positions X (n, dim) of every node
+    of ``cm.fem`` (P2: corners and edge nodes; :func:`simfab.fem.shape_derivative.linear_rest_derivative`
+    chains them to the linear mesh's vertices).
 
     s [m], phase: the record's; energy [J/m]: dE/dX; force [N/m]: dF/dX (insertion force,
     :class:`simfab.coupling.record.StepResult` ``force``); grip [N/m]: dG/dX; stress [Pa/m] and
     stress_value [Pa]: the averaged von Mises stress's maximum and its (smoothed) derivative, None
     / NaN without a :class:`StressMeasure`; stable: H_ff was
-    positive definite; supported: no friction and no pinned rigid motion at this step."""
+    positive definite; supported: every dependence of the step is followed (False: it was solved from
+    an unrecorded state, held fixed); friction_lag_held: the friction's normal forces and normals
+    were held at their values (``SensitivityRecorder(held_lag=True)``, an approximation)."""
 
     s: float
     phase: str
@@ -185,10 +213,12 @@ def _rows(pts: ContactPoints, rows: np.ndarray) -> ContactPoints:
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class StressMeasure:
-    """The stress figure of a step: max_e (A sigma_vm)_e with A (m, m) the row-stochastic averaging
-    over a critical distance (:func:`simfab.design.stress.averaging_matrix`, held fixed: its
-    dependence on X, through element volumes and which centroids lie within the radius, is not
-    differentiated). Its gradient is that of the log-sum-exp T log sum_e exp((A sigma)_e / T) at
+    """The stress figure of a step: max_e (A sigma_vm)_e with A (p, p) the row-stochastic averaging
+    over a critical distance of the per-point stresses of :func:`simfab.fem.shape_derivative.von_mises`
+    (linear: per element, :func:`simfab.design.stress.averaging_matrix`; P2: per quadrature point,
+    element-major, as :func:`simfab.design.stress.p2_averaged_von_mises` averages them), held fixed:
+    its dependence on X, through volumes and which points lie within the radius, is not
+    differentiated. Its gradient is that of the log-sum-exp T log sum_e exp((A sigma)_e / T) at
     T = ``temperature_rel`` * max (the softmax-weighted element gradients; -> the max's gradient
     where one element dominates); the value reported is the exact maximum."""
 
@@ -228,7 +258,7 @@ class _Friction:
     def __init__(self, cm: CouplingModel, state: StepState, held: bool = False):
         lag = state.friction
         x = np.asarray(state.x, float)
-        self.cm, self.lag, self.rows, self.held = cm, lag, lag.rows, held
+        self.cm, self.lag, self.rows = cm, lag, lag.rows
         pts, rows = lag.points, lag.rows
         fe = lag.evaluate(x, hessian=True)
         self.Hy = fe.hessian  # (a, dim, dim) d2D/dy2, exact for the held lag (simfab.contact.friction)
@@ -244,8 +274,7 @@ class _Friction:
         curv = np.where(y <= 0, 0.0, np.where(stick, -1.0 / (eps**2 * ys), -1.0 / ys**3))
         ml = lag.mu_lambda
         self.force_dir = ml[:, None] * phi[:, None] * w  # f_j
-        # f_j and D_j differentiated in eps (zero once slipping)
-        self.df0 = ml * np.where(stick, 2 * y**3 / (3 * eps**3) - y**2 / eps**2 + 1.0 / 3.0, 0.0)
+        # mu lambda_j f1 / y differentiated in eps (zero once slipping)
         self.dfy = ml * np.where(stick, -2.0 / eps**2 + 2.0 * y / eps**3, 0.0)
         self.w = w
         scale = cm.contact.friction_eps_rel / cm.options.dhat_rel
@@ -273,10 +302,6 @@ class _Friction:
         Dw = -(ndy[:, None, None] * N + n[:, :, None] * np.einsum("kji,kj->ki", N, dy)[:, None, :])
         B = ml[:, None, None] * (curv[:, None, None] * w[:, :, None] * w[:, None, :] + phi[:, None, None] * np.eye(dim))
         self.extra = (self.mu * phi)[:, None, None] * w[:, :, None] * gl[:, None, :] + B @ Dw  # (a, dim, dim)
-
-    def rest_gradient(self) -> np.ndarray:
-        """dD/dX at fixed x, anchors and lag (n, dim)."""
-        return np.asarray(self.df0 @ self.eps_jac).reshape(-1, self.cm.dim)
 
     def mixed_product(self, W: np.ndarray, kappa_grad: np.ndarray | None) -> np.ndarray:
         """d/dX (w . sum_j P_j^T f_j) at fixed x and anchors for a stack W (b, n, dim): through eps_j and,
@@ -510,7 +535,8 @@ def _step(cm, state, phase, stress, solver, link, held_lag=False):
         out += lin.back(lam)
     sens = StepSensitivity(s=float(state.s), phase=phase, energy=out[0], force=out[1], grip=out[2],
                            stress=out[3] if stress is not None else None, stress_value=stress_value,
-                           stable=lin.stable, supported=link.followed, friction_lag_held=lin.fric is not None and held_lag)
+                           stable=lin.stable, supported=link.followed,
+                           friction_lag_held=lin.fric is not None and held_lag)
     return lin, sens, lam
 
 

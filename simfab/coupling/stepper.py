@@ -45,8 +45,9 @@ class Stepper:
     start; callback : optional ``callback(k, StepResult)`` after every kept step (it may raise to
     stop the run); recorder : optional ``recorder(StepResult, StepState)`` called with every kept
     record and the converged state it was recorded at, its ``pin_basis`` the pin it was solved with
-    and ``prev`` the state it was solved from (the pin's and the friction anchors' origin) (e.g. :class:`simfab.coupling.adjoint.SensitivityRecorder`). Attributes: ``state``
-    (:class:`StepState`), ``ctx`` (:class:`StepContext`),
+    and ``prev`` the state it was solved from (the pin's and the friction anchors' origin; e.g.
+    :class:`simfab.coupling.adjoint.SensitivityRecorder`). Attributes: ``state`` (:class:`StepState`),
+    ``ctx`` (:class:`StepContext`),
     ``steps`` (the kept insertion records), ``removal`` (the kept removal records, see
     :meth:`reverse`), ``weakest`` (the least resisted rigid motion over the kept steps)."""
 
