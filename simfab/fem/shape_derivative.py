@@ -52,6 +52,7 @@ class Quadrature:
 
     grad_N: np.ndarray
     weights: np.ndarray
+    scatter: sp.csr_matrix  # (n, m k): sums per-element nodal rows into the nodes
 
 
 def quadrature(model: MeshModel) -> Quadrature:
@@ -63,11 +64,13 @@ def quadrature(model: MeshModel) -> Quadrature:
         return cache
     geometry, weights = model.element_geometry()
     geometry, weights = np.asarray(geometry, float), np.asarray(weights, float)
+    el = np.asarray(model.elements).ravel()
+    scatter = sp.csr_matrix((np.ones(el.size), (el, np.arange(el.size))), shape=(model.n_vertices, el.size))
     if weights.ndim == 1:  # linear simplex: geometry is Dm^-1 (m, d, d)
         grad_L = np.concatenate([-geometry.sum(axis=1, keepdims=True), geometry], axis=1)
-        q = Quadrature(grad_N=grad_L[:, None], weights=weights[:, None])
+        q = Quadrature(grad_N=grad_L[:, None], weights=weights[:, None], scatter=scatter)
     else:
-        q = Quadrature(grad_N=geometry, weights=weights)
+        q = Quadrature(grad_N=geometry, weights=weights, scatter=scatter)
     model._cache["shape_derivative_quadrature"] = q
     return q
 
@@ -83,6 +86,7 @@ class _Kinematics:
     G: np.ndarray
     mu: np.ndarray
     lam: np.ndarray
+    scatter: sp.csr_matrix
 
 
 def _kinematics(model: MeshModel, x: np.ndarray) -> _Kinematics:
@@ -94,7 +98,7 @@ def _kinematics(model: MeshModel, x: np.ndarray) -> _Kinematics:
         raise ValueError("shape derivative at an inverted element (det F <= 0)")
     FiT = np.swapaxes(np.linalg.inv(F), -1, -2)
     return _Kinematics(F=F, J=J, FiT=FiT, w=q.weights, G=q.grad_N, mu=np.asarray(model.mu, float)[:, None],
-                       lam=np.asarray(model.lam, float)[:, None])
+                       lam=np.asarray(model.lam, float)[:, None], scatter=q.scatter)
 
 
 def _psi(k: _Kinematics) -> np.ndarray:
@@ -111,10 +115,13 @@ def _pk1(k: _Kinematics) -> np.ndarray:
 def _to_nodes(model: MeshModel, k: _Kinematics, M: np.ndarray) -> np.ndarray:
     """Nodal derivatives (n, d) of per-point rest-map derivatives M_q = dq/dK_q (m, nq, d, d):
     sum_q M_q G_qa scattered to the nodes a (also F-derivatives to dq/dx: F_q = sum_a x_a (x) G_qa)."""
-    nodal = np.einsum("mqij,mqaj->mai", M, k.G)
-    out = np.zeros((model.n_vertices, M.shape[-1]))
-    np.add.at(out, np.asarray(model.elements).ravel(), nodal.reshape(-1, M.shape[-1]))
-    return out
+    d, n = M.shape[-1], model.n_vertices
+    nodal = np.einsum("...mqij,mqaj->...mai", M, k.G)  # a stack (..., m, nq, d, d) gives (..., n, d)
+    lead = nodal.shape[:-3]
+    B = int(np.prod(lead, dtype=int))
+    flat = np.moveaxis(nodal.reshape(B, -1, d), 0, 1).reshape(-1, B * d)  # (m k, B d)
+    out = k.scatter @ flat
+    return np.moveaxis(out.reshape(n, B, d), 1, 0).reshape(*lead, n, d)
 
 
 def energy(model: MeshModel, x: np.ndarray) -> float:
@@ -146,13 +153,14 @@ def mixed_product(model: MeshModel, x: np.ndarray, w: np.ndarray) -> np.ndarray:
     FT = np.swapaxes(k.F, -1, -2)
     mu, c2 = k.mu[..., None, None], (k.mu - k.lam * np.log(k.J))[..., None, None]
     out = np.empty_like(W)
-    for b, wb in enumerate(W):
-        L = np.einsum("mai,mqaj->mqij", wb[el], k.G)
-        PL = np.einsum("mqij,mqij->mq", P, L)
-        FiT_L = np.einsum("mqij,mqij->mq", k.FiT, L)
+    chunk = max(1, int(2e6 // max(1, P.size)))  # directions per batch: ~2e6 doubles per array
+    for b0 in range(0, len(W), chunk):
+        L = np.einsum("bmai,mqaj->bmqij", W[b0:b0 + chunk][:, el], k.G)
+        PL = np.einsum("mqij,bmqij->bmq", P, L)
+        FiT_L = np.einsum("mqij,bmqij->bmq", k.FiT, L)
         dP = mu * L + c2 * (k.FiT @ np.swapaxes(L, -1, -2) @ k.FiT) + (k.lam * FiT_L)[..., None, None] * k.FiT
         M = PL[..., None, None] * np.eye(d) - FT @ dP - np.swapaxes(L, -1, -2) @ P
-        out[b] = _to_nodes(model, k, k.w[..., None, None] * M)
+        out[b0:b0 + chunk] = _to_nodes(model, k, k.w[..., None, None] * M)
     return out[0] if single else out
 
 
