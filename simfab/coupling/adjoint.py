@@ -540,6 +540,12 @@ def _step(cm, state, phase, stress, solver, link, held_lag=False):
     return lin, sens, lam
 
 
+#: The backward pass drops a record's right-hand side once its l1 norm [q/m] falls below this fraction of
+#: the largest entry of the record's own derivative dq/dX (dx/dX is O(1), so it would change dq/dX by
+#: about as little): chains through sliding friction or pinned motions in balance die out within a few steps.
+PRUNE_REL = 1e-9
+
+
 def _depends(link: StepLink, lin: StepLinearization) -> bool:
     """The step's equilibrium depends on the previous record's positions, and that is followed."""
     return link.followed and not link.from_rest and (link.pin is not None or lin.fric is not None)
@@ -600,7 +606,12 @@ class SensitivityRecorder:
             if self._pending[j] is not None:
                 targets += [(j, f) for f in figs]
                 send.append(self._pending[j])
-            incoming = (targets, np.concatenate(send)) if targets else None
+            if targets:  # drop the right-hand sides too small to matter (a chain that has died out)
+                send = np.concatenate(send)
+                keep = [i for i, (k, f) in enumerate(targets)
+                        if np.abs(send[i]).sum() > PRUNE_REL * np.abs(getattr(self._sens[k], f)).max()]
+                targets, send = [targets[i] for i in keep], send[keep]
+            incoming = (targets, send) if targets else None
         for (k, f), d in add.items():
             self._sens[k] = dataclasses.replace(self._sens[k], **{f: getattr(self._sens[k], f) + d})
 
