@@ -262,7 +262,6 @@ class _Friction:
         pts, rows = lag.points, lag.rows
         fe = lag.evaluate(x, hessian=True)
         self.Hy = fe.hessian  # (a, dim, dim) d2D/dy2, exact for the held lag (simfab.contact.friction)
-        self.gradient = pts.scatter(fe.gradient, cm.fem.n_vertices, rows=rows)
         dim = cm.dim
         dy = pts.positions(x)[rows] - lag.anchors[rows]
         n = lag.normals

@@ -5,7 +5,7 @@
 Scenes: a 2D snap fit (``block2d_tight``, 12 steps) with linear and P2 elements and at mu = 0.3;
 a rotating 2D path (an ellipse turned 90 degrees in the loose clamp), frictionless and at mu = 0.3;
 a 3D clip (``clip3d``, 8 steps, 300 elements) with linear tets and all support dofs held, with its
-slide along the cylinder pinned (support along the insertion axis only), and with P2 tets. Per
+slide along the cylinder pinned (support along the insertion axis only), with P2 tets and at mu = 0.3. Per
 scene and figure (elastic energy, insertion force, grip, the averaged von Mises maximum; the
 frictional scenes also over their removal records): the largest difference between the adjoint
 derivative (:mod:`simfab.coupling.adjoint`) along a smooth rest-shape perturbation and the central
@@ -53,9 +53,9 @@ def _models() -> dict:
                                    options=InsertionOptions(steps=10, fix_all_axes=True), object_vertices=v,
                                    contact=base.contact)
 
-    def clip(order=1, held=True):
+    def clip(order=1, held=True, mu=0.0):
         sim = {"steps": 8, "element_order": order, "fix_all_axes": held}
-        return load_coupling_scene("clip3d", overrides={"simulation": sim,
+        return load_coupling_scene("clip3d", overrides={"simulation": sim, "contact": {"friction": mu},
                                                         "compliant": {"target_elements": 300, "layers": 1}})
 
     no_force = ("energy", "grip", "stress")  # the force along O's translation is zero during the rotation
@@ -66,7 +66,8 @@ def _models() -> dict:
             "rotating_path_2d_friction": (lambda: rot(mu=FRICTION), no_force),
             "clip_3d": (lambda: clip(), FIGURES),
             "clip_3d_pinned_slide": (lambda: clip(held=False), FIGURES),
-            "clip_3d_p2": (lambda: clip(order=2), FIGURES)}
+            "clip_3d_p2": (lambda: clip(order=2), FIGURES),
+            "clip_3d_friction": (lambda: clip(mu=FRICTION), FIGURES)}
 
 
 def _linear(cm):
