@@ -576,7 +576,8 @@ class SensitivityRecorder:
         lin, sens, lam = _step(self.cm, state, record.phase, self.stress, self.solver, link, self.held_lag)
         depends = _depends(link, lin)
         self._sens.append(sens)
-        self._states.append(state)
+        # kept for the backward pass without Newton's evaluation, tangent and check memo (Hessians)
+        self._states.append(dataclasses.replace(state, evaluation=None, tangent=None, check=None, check_cache={}))
         self._links.append(link)
         self._pending.append(lin.back(lam) if depends else None)
         self._finished = self._finished and not depends
