@@ -1,47 +1,72 @@
 """Sensitivities of an insertion step's record to A's rest shape X, by the adjoint method.
 
-A converged step's state x(X) is an equilibrium of W(x; X) = E(x; X) + B(x; X) over the free dofs
-(E: Neo-Hookean energy, B = kappa sum_j b(d_j(x), dhat_j): the barrier; both depend on X, E through
-the rest edges, B through the per-point activation distances dhat_j, which are fractions of the
-rest edge lengths at the point, and in 3D through kappa, proportional to the mean edge length).
-The fixed dofs sit at their rest positions, x_fixed = X_fixed. For a figure q(x, X) of the step,
-implicit differentiation of grad_free W = 0 gives
+A converged step's state x(X) solves R(x; X, x_prev) = 0 over the free dofs, R = grad_x (E + B)
+(+ the friction forces, + the rigid-mode pin's gradient), E: the Neo-Hookean energy (linear or P2
+elements), B = kappa sum_j b(d_j(x), dhat_j): the barrier; both depend on X, E through the rest
+geometry, B through the per-point activation distances dhat_j, which are fractions of the rest
+edge lengths at the point, and in 3D through kappa, proportional to the mean edge length. The
+fixed dofs sit at their rest positions, x_fixed = X_fixed. For a figure q(x, X) of the step,
+implicit differentiation of R = 0 gives
 
-    dq/dX = dq/dX|_x - lambda^T d2W/dx dX + [fixed dofs] (dq/dx - H lambda)_fixed,
-    H_ff lambda = (dq/dx)_free                                            (one back-substitution)
+    dq/dX = dq/dX|_x - lambda^T dR/dX + [fixed dofs] (dq/dx - J^T lambda)_fixed
+            + (-lambda^T dR/dx_prev) dx_prev/dX,
+    (J^T)_ff lambda = (dq/dx)_free,   J = dR/dx                          (one back-substitution)
 
-with H the exact Hessian d2W/dx2 at the converged x (lambda extended by zeros to the fixed dofs).
-The mixed term is never formed: ``lambda^T d2W/dx dX`` is the derivative of lambda . grad_x W
-with respect to X at fixed x, :func:`simfab.fem.shape_derivative.mixed_product` for E and, for B,
-kappa sum_j (db'/d dhat)_j (grad d_j . lambda_j) d dhat_j/dX (+ its kappa part in 3D).
+(lambda extended by zeros to the fixed dofs). Without friction J is the exact Hessian H of
+E + B (+ pin) at the converged x, symmetric. The mixed term is never formed: ``lambda^T dR/dX``
+is the derivative of lambda . R with respect to X at fixed x, :func:`simfab.fem.shape_derivative.
+mixed_product` for E and, for B, kappa sum_j (db'/d dhat)_j (grad d_j . lambda_j) d dhat_j/dX (+ its
+kappa part in 3D). P2: derivatives are with respect to every node; ``shape_derivative.
+linear_rest_derivative`` chains them to the linear mesh's vertices (edge nodes at midpoints).
+
+Dependence on the step's start x_prev (the previous record's positions; the rest shape X for
+the first), followed by a backward pass (:class:`SensitivityRecorder`): the rigid-mode pin
+mu/2 |U^T (x - x_prev)|^2 (motions nothing resists yet; U held) and, with friction, the anchors
+c_j = M (y_j(x_prev) - p_a) + p_b the points slip from. The right-hand side
+-lambda_k^T dR_k/dx_(k-1) of every later record is solved at each earlier one in turn. A step solved
+from a state that was not recorded (a bisected step, a step solved again after its pin changed)
+holds that state fixed and is marked ``supported = False``.
+
+Friction (:mod:`simfab.coupling.friction`): the lagging iterations converge (to ``lag_tol``) to a
+step whose normal forces lambda_j and normals n_j are those of its own solution, so they are
+differentiated as functions of x and X (lambda_j = -kappa b'(d_j(x); dhat_j(X)), n_j = grad d_j /
+|grad d_j|): J = H + Hf + the non-symmetric terms of :class:`_Friction`, solved with SuperLU. The
+residual difference between the lag the step was solved with and its own solution (up to
+``lag_tol`` of the largest normal force) is not differentiated. Holding lambda_j and n_j fixed
+instead (``held_lag``) drops the force's dependence on the normal force: tens of percent error in
+the force's derivative at mu = 0.3 (``python tools/bench.py sensitivities``).
 
 Figures per step (:class:`StepSensitivity`): the elastic energy E (q = E), the insertion force
-F = u . sum over the fixed dofs of grad W (the support's reaction along O's translation u: dq/dx =
-H v, dq/dX|_x = (d2W/dx dX)^T v with v = u on the fixed dofs) and the grip force
+F = u . sum over the fixed dofs of R (the support's reaction along O's translation u: dq/dx =
+J^T v, dq/dX|_x = (dR/dX)^T v with v = u on the fixed dofs) and the grip force
 G = |a|, a_d = 1/2 sum_v |grad_v B|_d (dq/dx = H_B w, w_vd = 1/2 sign(grad_v B)_d a_d / G); with a
-:class:`StressMeasure` also the averaged von Mises stress's maximum.
+:class:`StressMeasure` also the averaged von Mises stress's maximum (per quadrature point on P2).
 
-One sparse factorization of H_ff per step (CHOLMOD through :class:`simfab.solve.linear.SPDSolver`,
-the insertion's solver class, its symbolic analysis reused over a run) and one back-substitution
-with a right-hand side per figure (3, or 4 with the stress). The exact
-Hessian is used (not Newton's PSD-projected one): at a stable equilibrium H_ff is positive
-definite; where it is not, the step is marked ``stable = False`` and solved with SuperLU.
+One sparse factorization per step (CHOLMOD through :class:`simfab.solve.linear.SPDSolver`, the
+insertion's solver class, its symbolic analysis reused over a run; SuperLU for the non-symmetric
+frictional J) and one back-substitution per figure (3, or 4 with the stress); the backward pass
+assembles and factorizes each step it passes through once more. The exact Hessian is used (not
+Newton's PSD-projected one): at a stable equilibrium H_ff is positive definite; where it is not,
+the step is marked ``stable = False`` and solved with SuperLU. A pinned step is solved as Newton
+solved it (Woodbury on the Hessian with a tiny diagonal regularization), then refined by two
+residual sweeps against the unregularized system.
 
-Scope: frictionless contact (mu = 0) and no pinned rigid motions (both make a step depend on the
-one before: lagged friction anchors, the pin's anchor at the step's start); a step with either is
-marked ``supported = False`` and its derivatives are those at a fixed previous state (the pin
-enters as Newton solves with it: Woodbury on the regularized Hessian). Derivatives are at fixed
-path positions s_k: the planned steps' positions follow A's farthest point along the path when
-``L_max`` is unset (in jumps of 1/2000 of the path, :func:`simfab.coupling.model.
-default_insertion_length`), and the rest search places its records anew for every design; neither
-is differentiated. Non-smooth events: a constraint point entering or leaving the barrier's range
-(b is C2 at d = dhat, so derivatives stay continuous), refinement points added (a new, discrete
-constraint set: the profile jumps by the discretization error), kappa doubling (a jump in B's
-scale); none is differentiated, the figures' derivatives are those of the branch the run took.
+Not differentiated: the path positions s_k (the planned steps' positions follow A's farthest point
+along the path when ``L_max`` is unset, in jumps of 1/2000 of the path, :func:`simfab.coupling.
+model.default_insertion_length`; the rest search places its records anew for every design).
+Non-smooth events: a constraint point entering or leaving the barrier's range (b is C2 at d = dhat,
+so derivatives stay continuous; with friction a point entering contact starts carrying friction
+with lambda_j from 0, continuous too), contact onset of the part as a whole (the pin's set of
+unresisted motions changes: a different equation, a kink in the profile), refinement points added
+(a new, discrete constraint set: the profile jumps by the discretization error), kappa doubling (a
+jump in B's scale), a friction point's stick-slip transition (C1 mollifier: continuous force,
+jumping stiffness); none is differentiated, the figures' derivatives are those of the branch the
+run took.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,13 +86,17 @@ from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class StepSensitivity:
-    """Derivatives of one step's figures with respect to the rest positions X (n, dim).
+    """Derivatives of one step's figures with respect to the rest positions X (n, dim) of every node
+    of ``cm.fem`` (P2: corners and edge nodes; :func:`simfab.fem.shape_derivative.linear_rest_derivative`
+    chains them to the linear mesh's vertices).
 
     s [m], phase: the record's; energy [J/m]: dE/dX; force [N/m]: dF/dX (insertion force,
     :class:`simfab.coupling.record.StepResult` ``force``); grip [N/m]: dG/dX; stress [Pa/m] and
     stress_value [Pa]: the averaged von Mises stress's maximum and its (smoothed) derivative, None
     / NaN without a :class:`StressMeasure`; stable: H_ff was
-    positive definite; supported: no friction and no pinned rigid motion at this step."""
+    positive definite; supported: every dependence of the step is followed (False: it was solved from
+    an unrecorded state, held fixed); friction_lag_held: the friction's normal forces and normals
+    were held at their values (``SensitivityRecorder(held_lag=True)``, an approximation)."""
 
     s: float
     phase: str
@@ -78,6 +107,7 @@ class StepSensitivity:
     stress_value: float = float("nan")
     stable: bool = True
     supported: bool = True
+    friction_lag_held: bool = False
 
 
 def edge_rest_derivative(X: np.ndarray, a: np.ndarray, c: np.ndarray, coef: np.ndarray) -> np.ndarray:
@@ -123,9 +153,10 @@ def dhat_jacobian(cm: CouplingModel, pts: ContactPoints) -> sp.csr_matrix:
 
 
 def mean_edge_gradient(cm: CouplingModel) -> np.ndarray:
-    """d h_A/dX (n, dim) of A's mean element edge length (:meth:`FemModel.mean_edge_length`)."""
+    """d h_A/dX (n, dim) of A's mean element edge length (:meth:`MeshModel.mean_edge_length`: over the
+    corner mesh, so a P2 model's edge nodes get zero)."""
     X = np.asarray(cm.fem.rest, float)
-    el = np.asarray(cm.fem.elements)
+    el = np.asarray(cm.fem.corner_elements)
     i, j = np.triu_indices(el.shape[1], 1)
     a, c = el[:, i].ravel(), el[:, j].ravel()
     return edge_rest_derivative(X, a, c, np.full(len(a), 1.0 / len(a)))
@@ -182,10 +213,12 @@ def _rows(pts: ContactPoints, rows: np.ndarray) -> ContactPoints:
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class StressMeasure:
-    """The stress figure of a step: max_e (A sigma_vm)_e with A (m, m) the row-stochastic averaging
-    over a critical distance (:func:`simfab.design.stress.averaging_matrix`, held fixed: its
-    dependence on X, through element volumes and which centroids lie within the radius, is not
-    differentiated). Its gradient is that of the log-sum-exp T log sum_e exp((A sigma)_e / T) at
+    """The stress figure of a step: max_e (A sigma_vm)_e with A (p, p) the row-stochastic averaging
+    over a critical distance of the per-point stresses of :func:`simfab.fem.shape_derivative.von_mises`
+    (linear: per element, :func:`simfab.design.stress.averaging_matrix`; P2: per quadrature point,
+    element-major, as :func:`simfab.design.stress.p2_averaged_von_mises` averages them), held fixed:
+    its dependence on X, through volumes and which points lie within the radius, is not
+    differentiated. Its gradient is that of the log-sum-exp T log sum_e exp((A sigma)_e / T) at
     T = ``temperature_rel`` * max (the softmax-weighted element gradients; -> the max's gradient
     where one element dominates); the value reported is the exact maximum."""
 
@@ -203,93 +236,391 @@ def smooth_max_weights(values: np.ndarray, temperature: float) -> np.ndarray:
     return e / e.sum()
 
 
-def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
-                     stress: StressMeasure | None = None, solver: SPDSolver | None = None) -> StepSensitivity:
-    """:class:`StepSensitivity` of the converged ``state`` (see the module docstring); with
-    ``stress`` also that of the averaged von Mises stress's maximum (:class:`StressMeasure`);
-    ``solver``: the sparse solver to factorize with (one per run reuses its symbolic analysis)."""
-    solver = SPDSolver() if solver is None else solver
-    fem, x = cm.fem, np.asarray(state.x, float)
-    n, dim = fem.n_vertices, cm.dim
-    bar = _Barrier(cm, state)
-    _, gE, HE = energy_gradient_hessian(fem, x, project_psd=False)
-    HB = HE.copy()
-    HB.data[:] = 0.0
-    add_point_blocks(cm, state.points, HB, bar.act, bar.Hy)
-    H = HE.copy()  # in HE's fixed pattern (the Hessian slots, regularization and solver maps expect it)
-    add_point_blocks(cm, state.points, H, bar.act, bar.Hy)
-    kappa_grad = cm.kappa / cm.h * mean_edge_gradient(cm) if dim == 3 else None
+class _Friction:
+    """The friction forces of a converged state solved with the lag ``state.friction``
+    (:mod:`simfab.coupling.friction`), as functions of the state itself: at a converged lag the
+    normal forces and normals are those of the solution,
 
-    free = cm.free.reshape(n, dim)
+        f_j = mu lambda_j phi(|w_j|) w_j,   w_j = (I - n_j n_j^T)(y_j(x) - c_j),   phi = f1(y) / y,
+        lambda_j = -kappa b'(d_j(x); dhat_j(X)),   n_j = grad d_j / |grad d_j|,
+        c_j = M (y_j(x_prev) - p_a) + p_b (the anchors, carried from the step's start),
+
+    and eps_j = (friction_eps_rel / dhat_rel) dhat_j(X). Their Jacobian in y_j is
+
+        df_j/dy = Hf_j + mu phi w_j (x) dlambda_j/dy + B_j Dw_j,   B_j = mu lambda_j (phi'/y w w^T + phi I),
+        dlambda_j/dy = -kappa b''(d_j) grad d_j,   Dw_j = -((n . dy) N_j + n_j (x) N_j^T dy),
+        N_j = dn_j/dy = (I - n n^T) hess d_j / |grad d_j|,
+
+    Hf_j = B_j (I - n n^T) the friction Hessian at the held lag: the first term is the part
+    a lag held fixed keeps; the other two are not symmetric (the lagged step has no potential in its
+    normal forces and normals). ``held``: use Hf only (lambda_j and n_j held at their values)."""
+
+    def __init__(self, cm: CouplingModel, state: StepState, held: bool = False):
+        lag = state.friction
+        x = np.asarray(state.x, float)
+        self.cm, self.lag, self.rows = cm, lag, lag.rows
+        pts, rows = lag.points, lag.rows
+        fe = lag.evaluate(x, hessian=True)
+        self.Hy = fe.hessian  # (a, dim, dim) d2D/dy2, exact for the held lag (simfab.contact.friction)
+        dim = cm.dim
+        dy = pts.positions(x)[rows] - lag.anchors[rows]
+        n = lag.normals
+        w = dy - np.einsum("kd,kd->k", n, dy)[:, None] * n  # the tangential slip (I - n n^T) dy
+        y, eps = fe.slip, lag.eps
+        stick = y < eps
+        ys = np.where(y > 0, y, 1.0)
+        phi = np.where(stick, 2.0 / eps - y / eps**2, 1.0 / ys)
+        curv = np.where(y <= 0, 0.0, np.where(stick, -1.0 / (eps**2 * ys), -1.0 / ys**3))
+        ml = lag.mu_lambda
+        self.force_dir = ml[:, None] * phi[:, None] * w  # f_j
+        # mu lambda_j f1 / y differentiated in eps (zero once slipping)
+        self.dfy = ml * np.where(stick, -2.0 / eps**2 + 2.0 * y / eps**3, 0.0)
+        self.w = w
+        scale = cm.contact.friction_eps_rel / cm.options.dhat_rel
+        sub = _rows(pts, rows)
+        self.dhat_jac = dhat_jacobian(cm, sub)  # (a, n dim)
+        self.eps_jac = scale * self.dhat_jac
+        self.extra = None
+        self.kappa = float(state.kappa_step)
+        if held or not len(rows):
+            return
+        ev = cm.field.evaluate(pts.positions(x)[rows], cm.pose(state.s), hessian=True,
+                               hessian_band=float(point_dhat(cm, pts).max()))
+        d, gd, hd = -ev.psi, -ev.grad[:, :dim], -ev.hess[:, :dim, :dim]
+        dh = point_dhat(cm, pts)[rows]
+        r, log = d - dh, np.log(d / dh)
+        b2 = -2.0 * log - 4.0 * r / d + r * r / d**2  # b''(d)
+        self.dbp_ddhat = 2.0 * log + 2.0 * r / dh + 2.0 * r / d  # d b'(d; dhat) / d dhat
+        self.lam = lag.normal_force[rows]
+        self.mu = lag.mu_lambda / np.where(self.lam > 0, self.lam, 1.0)
+        gl = -self.kappa * b2[:, None] * gd  # d lambda / dy
+        gn = np.linalg.norm(gd, axis=1)
+        Pt = np.eye(dim) - n[:, :, None] * n[:, None, :]
+        N = Pt @ hd / gn[:, None, None]
+        ndy = np.einsum("kd,kd->k", n, dy)
+        Dw = -(ndy[:, None, None] * N + n[:, :, None] * np.einsum("kji,kj->ki", N, dy)[:, None, :])
+        B = ml[:, None, None] * (curv[:, None, None] * w[:, :, None] * w[:, None, :] + phi[:, None, None] * np.eye(dim))
+        self.extra = (self.mu * phi)[:, None, None] * w[:, :, None] * gl[:, None, :] + B @ Dw  # (a, dim, dim)
+
+    def mixed_product(self, W: np.ndarray, kappa_grad: np.ndarray | None) -> np.ndarray:
+        """d/dX (w . sum_j P_j^T f_j) at fixed x and anchors for a stack W (b, n, dim): through eps_j and,
+        unless held, lambda_j (dhat_j, and kappa in 3D)."""
+        wy = np.stack([self.lag.points.positions(wb)[self.rows] for wb in W])  # (b, a, dim)
+        coef = self.dfy * np.einsum("kd,bkd->bk", self.w, wy)
+        out = np.asarray(coef @ self.eps_jac).reshape(W.shape)
+        if self.extra is not None:
+            fw = np.einsum("kd,bkd->bk", self.force_dir, wy)  # w . f_j: f_j is proportional to lambda_j
+            dlam = -self.kappa * self.dbp_ddhat  # d lambda_j / d dhat_j
+            out += np.asarray((fw * (dlam / np.where(self.lam > 0, self.lam, 1.0))) @ self.dhat_jac).reshape(W.shape)
+            if kappa_grad is not None:  # lambda_j proportional to kappa, kappa to the mean edge length in 3D
+                out += (fw.sum(axis=1) / self.cm.kappa)[:, None, None] * kappa_grad
+        return out
+
+    def back(self, W: np.ndarray, M: np.ndarray) -> np.ndarray:
+        """-(d R / d x_prev)^T w for a stack W (b, n, dim): the anchors c_j = M P_j x_prev + const, so
+        dR/dx_prev = -sum_j P_j^T Hf_j M P_j and the result is sum_j P_j^T M^T Hf_j P_j w."""
+        dim = self.cm.dim
+        Md = np.asarray(M)[:dim, :dim]
+        out = np.empty_like(W)
+        for b, wb in enumerate(W):
+            wy = self.lag.points.positions(wb)[self.rows]
+            out[b] = self.lag.points.scatter(np.einsum("kij,kj->ki", self.Hy, wy) @ Md, self.cm.fem.n_vertices,
+                                             rows=self.rows)
+        return out
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class StepLink:
+    """How a step's equilibrium depends on the state it started from, x_prev (the previous record's
+    positions, or the rest shape X for the first): through the friction anchors (``friction_motion``:
+    O's rotation M (3, 3) over the step, None without friction) and the rigid-motion pin's anchor
+    (``pin``: :class:`simfab.coupling.rigid.Pin` anchored at x_prev, None without); ``followed``: the
+    dependence is followed to the previous record (False when the step started from a state that was
+    not recorded: a bisected step or a step solved again after its pin changed; x_prev then held)."""
+
+    friction_motion: np.ndarray | None
+    pin: object
+    followed: bool
+    from_rest: bool
+
+
+class StepLinearization:
+    """A converged step linearized for the adjoint method: the Jacobian J = dR/dx of its equilibrium
+    R = grad_x (E + B) (+ the friction forces, + the pin's gradient) = 0 (without friction the exact
+    Hessian H, symmetric), the barrier, friction and pin terms, and the solver.
+
+    :meth:`solve` gives lambda with (J^T lambda)_free = r_free for a stack of right-hand sides;
+    :meth:`pull` turns (lambda, dq/dx, direct terms) into dq/dX (the module docstring's formula);
+    :meth:`back` gives the right-hand sides the previous step receives. ``held_lag``: the friction's
+    normal forces and normals held at their values (the Jacobian then is the symmetric H + Hf)."""
+
+    def __init__(self, cm: CouplingModel, state: StepState, link: StepLink, solver: SPDSolver,
+                 held_lag: bool = False):
+        self.cm, self.state, self.link, self.solver = cm, state, link, solver
+        fem, x = cm.fem, np.asarray(state.x, float)
+        self.x = x
+        n, dim = fem.n_vertices, cm.dim
+        self.bar = _Barrier(cm, state)
+        frictional = state.friction is not None and len(state.friction.rows)
+        self.fric = _Friction(cm, state, held=held_lag) if frictional else None
+        _, self.gE, HE = energy_gradient_hessian(fem, x, project_psd=False)
+        self.HB = HE.copy()
+        self.HB.data[:] = 0.0
+        add_point_blocks(cm, state.points, self.HB, self.bar.act, self.bar.Hy)
+        H = HE.copy()  # in HE's fixed pattern (the Hessian slots, regularization and solver maps expect it)
+        add_point_blocks(cm, state.points, H, self.bar.act, self.bar.Hy)
+        self.JT = None  # J^T where J is not symmetric
+        if self.fric is not None:
+            add_point_blocks(cm, self.fric.lag.points, H, self.fric.rows, self.fric.Hy)
+            if self.fric.extra is not None:
+                J = H.copy()
+                add_point_blocks(cm, self.fric.lag.points, J, self.fric.rows, self.fric.extra)
+                self.JT = sp.csr_matrix(J.T)
+        self.H = H
+        self.kappa_grad = cm.kappa / cm.h * mean_edge_gradient(cm) if dim == 3 else None
+        self.idx = np.flatnonzero(cm.free)
+        self.fixed = ~cm.free.reshape(n, dim)
+        self.stable = True
+
+    def transpose_product(self, v: np.ndarray) -> np.ndarray:
+        """J^T v (n, dim) for v (n, dim) (without the pin): d(v . R)/dx."""
+        A = self.H if self.JT is None else self.JT
+        return (A @ np.ravel(v)).reshape(np.shape(v))
+
+    def apply(self, lam: np.ndarray) -> np.ndarray:
+        """J^T lambda (+ the pin's mu U U^T lambda) for a stack (k, n, dim)."""
+        out = np.stack([self.transpose_product(lb) for lb in lam])
+        pin = self.link.pin
+        if pin is not None:
+            out += (pin.mu * ((lam.reshape(len(lam), -1) @ pin.U) @ pin.U.T)).reshape(lam.shape)
+        return out
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """lambda (k, n, dim) with (J^T lambda)_free = rhs_free, lambda_fixed = 0, for rhs (k, n, dim)."""
+        k = len(rhs)
+        idx = self.idx
+        b = rhs.reshape(k, -1)[:, idx].T
+        lam = np.zeros((k, rhs[0].size))
+        pin = self.link.pin
+        if pin is None and self.JT is None:
+            try:
+                lam_f = self.solver.solve_free(self.H, idx, b)
+            except NotPositiveDefinite:
+                self.stable = False
+                lam_f = splu(sp.csc_matrix(self.H[idx][:, idx])).solve(b)
+            lam[:, idx] = np.asarray(lam_f).reshape(len(idx), k).T
+            return lam.reshape(rhs.shape)
+        # as Newton solved it, a pin by Woodbury on the regularized matrix, then refinement sweeps
+        # against the exact J^T + mu U U^T remove the regularization's tiny diagonal term
+        Ar = self.H.copy()
+        if pin is not None:
+            regularize(self.cm, Ar)
+        if self.JT is not None:
+            lu = splu(sp.csc_matrix((self.JT + (Ar - self.H))[idx][:, idx]))
+            base = lu.solve
+        else:
+            def base(r):
+                return self.solver.solve_free(Ar, idx, r)
+        if pin is None:
+            inner = base
+        else:
+            Uf = pin.U[idx]
+            Z = np.asarray(base(Uf)).reshape(len(idx), -1)
+            S = np.eye(Uf.shape[1]) / pin.mu + Uf.T @ Z
+
+            def inner(r):
+                y = np.asarray(base(r)).reshape(r.shape)
+                return y - Z @ np.linalg.solve(S, Uf.T @ y)
+        try:
+            for sweep in range(3 if pin is not None else 1):
+                r = b if sweep == 0 else b - self.apply(lam.reshape(rhs.shape)).reshape(k, -1)[:, idx].T
+                lam[:, idx] += np.asarray(inner(r)).reshape(len(idx), k).T
+        except NotPositiveDefinite:
+            self.stable = False
+            lam[:] = 0.0
+            lam[:, idx] = splu(sp.csc_matrix(self.H[idx][:, idx])).solve(b).reshape(len(idx), k).T
+        return lam.reshape(rhs.shape)
+
+    def pull(self, lam: np.ndarray, gx: np.ndarray, direct: np.ndarray, elastic_shift: np.ndarray,
+             barrier_shift: np.ndarray) -> np.ndarray:
+        """dq/dX (k, n, dim) = direct - (lambda - shift)^T dR/dX + (dq/dx - J^T lambda)_fixed for stacks
+        (k, n, dim): ``elastic_shift`` is subtracted from lambda in the elastic and friction terms and
+        ``barrier_shift`` in the barrier's (the force's and grip's direct terms folded into the stack)."""
+        We = lam - elastic_shift
+        Wb = lam - barrier_shift
+        out = direct - shape_derivative.mixed_product(self.cm.fem, self.x, We) \
+            - self.bar.mixed_product(Wb, self.kappa_grad)
+        if self.fric is not None:
+            out -= self.fric.mixed_product(We, self.kappa_grad)
+        resid = gx - self.apply(lam)
+        out[:, self.fixed] += resid[:, self.fixed]  # the fixed dofs sit at the rest positions: dx_fixed/dX_fixed = I
+        return out
+
+    def back(self, lam: np.ndarray) -> np.ndarray:
+        """The right-hand sides (k, n, dim) -(dR/dx_prev)^T lambda that the previous step receives:
+        the friction anchors' and the pin anchor's."""
+        out = np.zeros_like(lam)
+        if self.fric is not None and self.link.friction_motion is not None:
+            out += self.fric.back(lam, self.link.friction_motion)
+        pin = self.link.pin
+        if pin is not None:  # pin energy mu/2 |U^T (x - x_prev)|^2 (U held): d grad / d x_prev = -mu U U^T
+            out += (pin.mu * ((lam.reshape(len(lam), -1) @ pin.U) @ pin.U.T)).reshape(lam.shape)
+        return out
+
+
+def step_link(cm: CouplingModel, state: StepState, previous: StepState | None) -> StepLink:
+    """:class:`StepLink` of ``state`` given the previous record's state (None: the first record)."""
+    prev = state.prev
+    if previous is None:
+        followed = prev is None
+        anchor = np.asarray(cm.fem.rest, float) if prev is None else prev.x
+    else:
+        followed = prev is not None and prev.x is previous.x
+        anchor = prev.x if prev is not None else previous.x
+    pinned = state.pin_basis is not None and state.pin_basis.shape[1] > 0
+    pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], anchor) if pinned else None
+    M = None
+    if state.friction is not None and prev is not None:
+        M = cm.motion(prev.s, state.s)[0]
+    return StepLink(friction_motion=M, pin=pin, followed=followed, from_rest=prev is None)
+
+
+def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
+                     stress: StressMeasure | None = None, solver: SPDSolver | None = None,
+                     link: StepLink | None = None) -> StepSensitivity:
+    """:class:`StepSensitivity` of the converged ``state`` (see the module docstring) at a fixed
+    starting state x_prev (no backward pass: :class:`SensitivityRecorder` adds it); with ``stress``
+    also that of the averaged von Mises stress's maximum (:class:`StressMeasure`); ``solver``: the
+    sparse solver to factorize with (one per run reuses its symbolic analysis); ``link``: the step's
+    dependence on its start (:func:`step_link`; default: as if its start were not recorded)."""
+    _, sens, _ = _step(cm, state, phase, stress, SPDSolver() if solver is None else solver,
+                         step_link(cm, state, None) if link is None else link)
+    return sens
+
+
+def _step(cm, state, phase, stress, solver, link, held_lag=False):
+    """(linearization, sensitivity at a fixed start, lambda stack (k, n, dim))."""
+    lin = StepLinearization(cm, state, link, solver, held_lag)
+    fem, x = cm.fem, lin.x
+    n, dim = fem.n_vertices, cm.dim
+    free = ~lin.fixed
     u = cm.direction(state.s)
     v = np.where(free, 0.0, u[None, :])  # F = v . grad W
-    gc = bar.gradient
+    gc = lin.bar.gradient
     a = 0.5 * np.abs(gc).sum(axis=0)
     G = float(np.linalg.norm(a))
     wg = 0.5 * np.sign(gc) * (a / G)[None, :] if G > 0 else np.zeros_like(gc)
-    # per figure: (dq/dx (n, dim), dq/dX at fixed x (n, dim))
-    figures = [(gE.reshape(n, dim), shape_derivative.rest_gradient(fem, x)),
-               ((H @ v.ravel()).reshape(n, dim), None),  # direct term: mixed(v), folded into the stack below
-               ((HB @ wg.ravel()).reshape(n, dim), None)]  # direct term: the barrier's mixed(wg), likewise
+    zero = np.zeros((n, dim))
+    gE_rest = shape_derivative.rest_gradient(fem, x)
+    # per figure: dq/dx (n, dim), dq/dX at fixed x; the force's direct term is mixed(v) and the grip's the
+    # barrier part of mixed(wg): folded into the stacked mixed product as shifts of lambda
+    gx = [lin.gE.reshape(n, dim), lin.transpose_product(v), (lin.HB @ wg.ravel()).reshape(n, dim)]
+    direct = [gE_rest, zero, zero]
     stress_value = float("nan")
     if stress is not None:
         avg = stress.averaging @ shape_derivative.von_mises(fem, x)
         stress_value = float(avg.max())
         c = stress.averaging.T @ smooth_max_weights(avg, stress.temperature_rel * abs(stress_value))
-        figures.append(shape_derivative.von_mises_derivatives(fem, x, c))
-    k = len(figures)
-    gx = np.stack([f[0] for f in figures])
-    idx = np.flatnonzero(cm.free)
-    rhs = gx.reshape(k, -1)[:, idx].T
-    pinned = state.pin_basis is not None and state.pin_basis.shape[1] > 0
-    stable = True
-    try:
-        if pinned:  # as Newton solved it: Woodbury pin on the regularized Hessian (anchor held fixed)
-            Hr = H.copy()
-            regularize(cm, Hr)
-            pinned_solver = rigid.PinnedSolver(solver, rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1],
-                                                                     state.x))
-            lam_f = np.column_stack([pinned_solver.solve_free(Hr, idx, rhs[:, q]) for q in range(k)])
-        else:
-            lam_f = solver.solve_free(H, idx, rhs)
-    except NotPositiveDefinite:
-        stable = False
-        lam_f = splu(sp.csc_matrix(H[idx][:, idx])).solve(rhs)
-    lam = np.zeros((k, n * dim))
-    lam[:, idx] = lam_f.T
-    lam = lam.reshape(k, n, dim)
-    fixed = ~free
-    # dq/dX = direct - mixed(lambda): force's direct term is mixed(v) and grip's the barrier part of
-    # mixed(wg), so one stacked mixed product over (lambda_0, lambda_1 - v, lambda_2 (- wg for B), ...)
-    We = lam.copy()
-    We[1] -= v
-    Wb = We.copy()
-    Wb[2] -= wg
-    mixed_all = shape_derivative.mixed_product(fem, x, We) + bar.mixed_product(Wb, kappa_grad)
-    direct = [figures[0][1], np.zeros((n, dim)), np.zeros((n, dim))] + [f[1] for f in figures[3:]]
-    out = []
-    for q in range(k):
-        dq = direct[q] - mixed_all[q]
-        resid = gx[q] - (H @ lam[q].ravel()).reshape(n, dim)
-        dq[fixed] += resid[fixed]  # the fixed dofs sit at the rest positions: dx_fixed/dX_fixed = I
-        out.append(dq)
-    supported = state.friction is None and not pinned
-    return StepSensitivity(s=float(state.s), phase=phase, energy=out[0], force=out[1], grip=out[2],
-                           stress=out[3] if stress is not None else None, stress_value=stress_value, stable=stable,
-                           supported=supported)
+        sx, sX = shape_derivative.von_mises_derivatives(fem, x, c)
+        gx.append(sx)
+        direct.append(sX)
+    gx, direct = np.stack(gx), np.stack(direct)
+    e_shift, b_shift = np.zeros_like(gx), np.zeros_like(gx)
+    e_shift[1] = b_shift[1] = v
+    b_shift[2] = wg
+    lam = lin.solve(gx)
+    out = lin.pull(lam, gx, direct, e_shift, b_shift)
+    if link.from_rest and link.pin is not None:  # the first step's pin is anchored at the rest shape itself
+        out += lin.back(lam)
+    sens = StepSensitivity(s=float(state.s), phase=phase, energy=out[0], force=out[1], grip=out[2],
+                           stress=out[3] if stress is not None else None, stress_value=stress_value,
+                           stable=lin.stable, supported=link.followed,
+                           friction_lag_held=lin.fric is not None and held_lag)
+    return lin, sens, lam
+
+
+#: The backward pass drops a record's right-hand side once its l1 norm [q/m] falls below this fraction of
+#: the largest entry of the record's own derivative dq/dX (dx/dX is O(1), so it would change dq/dX by
+#: about as little): chains through sliding friction or pinned motions in balance die out within a few steps.
+PRUNE_REL = 1e-9
+
+
+def _depends(link: StepLink, lin: StepLinearization) -> bool:
+    """The step's equilibrium depends on the previous record's positions, and that is followed."""
+    return link.followed and not link.from_rest and (link.pin is not None or lin.fric is not None)
 
 
 class SensitivityRecorder:
     """Collects a :class:`StepSensitivity` per kept step of a run: pass as ``simulate(...,
     recorder=...)`` (it receives each kept record with the converged state it was recorded at).
-    ``insert`` and ``remove``: the sensitivities of the run's insertion and removal records, in order."""
+    ``insert`` and ``remove``: the sensitivities of the run's insertion and removal records, in order.
 
-    def __init__(self, cm: CouplingModel, stress: StressMeasure | None = None):
-        self.cm, self.stress = cm, stress
+    Each record's sensitivity is computed when it is kept, at its start held fixed; where steps depend
+    on their start (friction anchors, a pin), reading ``insert`` / ``remove`` first runs the backward
+    pass (:meth:`finish`): the right-hand sides lambda_k^T dR_k/dx_(k-1) of every later record are
+    solved at each earlier one in turn, and their contributions added (one more assembly and
+    factorization per step passed through)."""
+
+    def __init__(self, cm: CouplingModel, stress: StressMeasure | None = None, *, held_lag: bool = False):
+        self.cm, self.stress, self.held_lag = cm, stress, held_lag
         self.solver = SPDSolver()  # one symbolic analysis for the run's (fixed-pattern) Hessians
-        self.insert: list[StepSensitivity] = []
-        self.remove: list[StepSensitivity] = []
+        self._sens: list[StepSensitivity] = []
+        self._states: list[StepState] = []
+        self._links: list[StepLink] = []
+        self._pending: list = []  # per record: its lambda stack when the step depends on its start, else None
+        self._finished = True
 
     def __call__(self, record, state: StepState) -> None:
-        sens = step_sensitivity(self.cm, state, record.phase, self.stress, self.solver)
-        (self.remove if record.phase == "remove" else self.insert).append(sens)
+        previous = self._states[-1] if self._states else None
+        link = step_link(self.cm, state, previous)
+        lin, sens, lam = _step(self.cm, state, record.phase, self.stress, self.solver, link, self.held_lag)
+        depends = _depends(link, lin)
+        self._sens.append(sens)
+        # kept for the backward pass without Newton's evaluation, tangent and check memo (Hessians)
+        self._states.append(dataclasses.replace(state, evaluation=None, tangent=None, check=None, check_cache={}))
+        self._links.append(link)
+        self._pending.append(lin.back(lam) if depends else None)
+        self._finished = self._finished and not depends
+
+    def finish(self) -> None:
+        """The backward pass through the steps that depend on their start (see the class docstring)."""
+        if self._finished:
+            return
+        self._finished = True
+        figs = [f for f in ("energy", "force", "grip", "stress") if getattr(self._sens[0], f) is not None]
+        add: dict = {}
+        incoming = None  # (targets [(record, figure)], right-hand sides (b, n, dim)) to solve at record j
+        for j in range(len(self._sens) - 1, -1, -1):
+            targets, send = [], []
+            if incoming is not None:
+                lin = StepLinearization(self.cm, self._states[j], self._links[j], self.solver, self.held_lag)
+                lam = lin.solve(incoming[1])
+                zero = np.zeros_like(lam)
+                dq = lin.pull(lam, incoming[1], zero, zero, zero)
+                if self._links[j].from_rest and self._links[j].pin is not None:
+                    dq += lin.back(lam)
+                for t, d in zip(incoming[0], dq):
+                    add[t] = add.get(t, 0.0) + d
+                if _depends(self._links[j], lin):
+                    targets, send = list(incoming[0]), [lin.back(lam)]
+            if self._pending[j] is not None:
+                targets += [(j, f) for f in figs]
+                send.append(self._pending[j])
+            if targets:  # drop the right-hand sides too small to matter (a chain that has died out)
+                send = np.concatenate(send)
+                keep = [i for i, (k, f) in enumerate(targets)
+                        if np.abs(send[i]).sum() > PRUNE_REL * np.abs(getattr(self._sens[k], f)).max()]
+                targets, send = [targets[i] for i in keep], send[keep]
+            incoming = (targets, send) if targets else None
+        for (k, f), d in add.items():
+            self._sens[k] = dataclasses.replace(self._sens[k], **{f: getattr(self._sens[k], f) + d})
+
+    @property
+    def insert(self) -> list[StepSensitivity]:
+        self.finish()
+        return [s for s in self._sens if s.phase != "remove"]
+
+    @property
+    def remove(self) -> list[StepSensitivity]:
+        self.finish()
+        return [s for s in self._sens if s.phase == "remove"]

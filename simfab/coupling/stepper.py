@@ -45,8 +45,9 @@ class Stepper:
     start; callback : optional ``callback(k, StepResult)`` after every kept step (it may raise to
     stop the run); recorder : optional ``recorder(StepResult, StepState)`` called with every kept
     record and the converged state it was recorded at, its ``pin_basis`` the pin it was solved with
-    (e.g. :class:`simfab.coupling.adjoint.SensitivityRecorder`). Attributes: ``state``
-    (:class:`StepState`), ``ctx`` (:class:`StepContext`),
+    and ``prev`` the state it was solved from (the pin's and the friction anchors' origin; e.g.
+    :class:`simfab.coupling.adjoint.SensitivityRecorder`). Attributes: ``state`` (:class:`StepState`),
+    ``ctx`` (:class:`StepContext`),
     ``steps`` (the kept insertion records), ``removal`` (the kept removal records, see
     :meth:`reverse`), ``weakest`` (the least resisted rigid motion over the kept steps)."""
 
@@ -78,6 +79,7 @@ class Stepper:
         before = replace(state, refined=set(state.refined))
         try:
             solved_pin = state.pin_basis  # the pin the step's solution was solved with (see _states)
+            solved_from = None  # the state it was solved from when that is not state.prev
             iters = self._solve(s)
             with phases.timed("rigid_check"):
                 contact = rigid_contact(cm, state, self.free_motions)
@@ -93,6 +95,7 @@ class Stepper:
                 else:
                     prev, state.pin_basis = (state.prev, state.prev2), contact.basis
                     solved_pin = contact.basis
+                    solved_from = PastStep(state.x, state.s)  # the second solve starts from the first's solution
                     iters += self._solve(s)
                     state.prev, state.prev2 = prev
                 with phases.timed("rigid_check"):
@@ -102,7 +105,8 @@ class Stepper:
                 rec = record_step(cm, state, iters)
             self._weak[id(rec)] = contact.weakest
             if self.recorder is not None:  # the state as recorded (the bracket keeps records after later trials)
-                self._states[id(rec)] = replace(state, refined=set(state.refined), pin_basis=solved_pin)
+                self._states[id(rec)] = replace(state, refined=set(state.refined), pin_basis=solved_pin,
+                                                prev=state.prev if solved_from is None else solved_from)
             return StepAttempt(rec, before)
         except ConvergenceError:
             if not tolerate:

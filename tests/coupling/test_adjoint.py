@@ -1,28 +1,37 @@
 """Adjoint sensitivities of insertion records to the rest shape (simfab.coupling.adjoint) against
-central finite differences of whole insertions on perturbed rest shapes: a 2D snap fit, a 3D clip
-and a rotating 2D path.
+central finite differences of whole insertions on perturbed rest shapes: a 2D snap fit (linear and
+P2 elements, frictionless and at mu = 0.3 with its removal), a rotating 2D path (frictionless and
+at mu = 0.3) and a 3D clip whose slide along the cylinder is pinned (the pin's anchor followed
+through the steps).
 
 The adjoint differentiates the exact equilibrium of each step; the simulation stops Newton at a
 force residual of NEWTON_GRAD_TOL_REL * force_scale, and the finite differences of figures that
 read single contact forces (the grip) then see the solver's residual (~3e-3 relative on a snap
 fit). The reference runs are therefore solved to a residual 1e-4 times smaller (the config's
 public tolerances, raised for these runs), which is what "the derivative of the step's record"
-means. Steps solved with a rigid-motion pin (nothing touching A yet) are excluded (``supported``).
+means. With friction the lag is converged likewise (``lag_tol`` 1e-6): the adjoint differentiates
+the step at its converged lag. Steps solved from an unrecorded state (``supported`` False) are
+excluded. P2 models are rebuilt from the perturbed linear mesh (``to_p2``), their derivatives
+chained to its vertices (``linear_rest_derivative``).
 """
 
 import dataclasses
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from simfab.coupling import config as C
 from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import make_coupling_model, simulate
-from simfab.design.stress import averaging_matrix
+from simfab.design.stress import averaging_matrix, quadrature_von_mises
 from simfab.fem.model import make_model
+from simfab.fem.p2 import to_p2
+from simfab.fem.shape_derivative import linear_rest_derivative
 
 EPS = 1e-3  # central-difference step along dX, whose size is ~1 % of A's mean edge length
+FRICTION = {"friction": 0.3, "lag_tol": 1e-6, "max_lag_iterations": 50}
 
 
 @pytest.fixture
@@ -32,18 +41,26 @@ def tight_newton(monkeypatch):
     monkeypatch.setattr(C, "NEWTON_STEP_TOL_REL", 1e-12)
 
 
+def linear_mesh(cm):
+    return cm.fem.linear if cm.fem.element_order == 2 else cm.fem
+
+
 def with_rest(cm, X):
-    """``cm`` with A's rest shape X (same mesh, material, object, path, supports and options)."""
-    fem = make_model(X, cm.fem.elements, cm.fem.material, thickness=cm.fem.thickness)
+    """``cm`` with A's rest shape X on its linear mesh (same elements and order, material, object,
+    path, supports and options)."""
+    lin = linear_mesh(cm)
+    fem = make_model(X, lin.elements, lin.material, thickness=lin.thickness)
+    if cm.fem.element_order == 2:
+        fem = to_p2(fem, degree=cm.fem.degree)
     return make_coupling_model(name=cm.name, fem=fem, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
                                options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces,
                                contact=cm.contact)
 
 
 def smooth_field(cm, seed):
-    """A smooth rest-shape perturbation (n, dim) of amplitude ~ 1 % of the edge length: the profile's
-    derivative along it is what is checked."""
-    X = np.asarray(cm.fem.rest, float)
+    """A smooth perturbation (n, dim) of the linear mesh's rest shape, of amplitude ~ 1 % of the edge
+    length: the profile's derivative along it is what is checked."""
+    X = np.asarray(linear_mesh(cm).rest, float)
     rng = np.random.default_rng(seed)
     c = X.mean(axis=0)
     size = np.ptp(X, axis=0).max()
@@ -51,11 +68,34 @@ def smooth_field(cm, seed):
     return 0.01 * cm.h * np.sin((X - c) @ k + rng.uniform(0, np.pi, cm.dim))
 
 
+def stresses(fem, x):
+    """Per-point von Mises stresses: per element (linear), at the quadrature points (P2)."""
+    from simfab.fem.shape_derivative import von_mises
+
+    return quadrature_von_mises(fem, x).ravel() if fem.element_order == 2 else von_mises(fem, x)
+
+
+def compare(cm, sens, plus, minus, dX, A, figures, ok):
+    for key in figures:
+        def value(r, run):
+            return float((A @ stresses(run.model.fem, r.x)).max()) if key == "stress" else getattr(r, key)
+
+        fd = np.array([(value(p, plus) - value(m, minus)) / (2 * EPS) for p, m in zip(*ok[0])])[ok[1]]
+        an = np.array([float(np.sum(linear_rest_derivative(cm.fem, getattr(sn, key)) * dX)) for sn in sens])[ok[1]]
+        scale = np.abs(fd).max()
+        assert scale > 0
+        # relative to the figure's largest derivative over the run: steps out of contact have ~0 of both
+        assert np.abs(an - fd).max() <= 1e-4 * scale, (key, an, fd)
+
+
 def check(cm, seed=0, min_supported=3, figures=("energy", "force", "grip", "stress")):
     cm = dataclasses.replace(cm, options=dataclasses.replace(cm.options, L_max=float(cm.s_steps[-1])))
-    X = np.asarray(cm.fem.rest, float)
+    X = np.asarray(linear_mesh(cm).rest, float)
     dX = smooth_field(cm, seed)
-    A = averaging_matrix(cm.fem, 0.5e-3)  # held fixed (its X-dependence is not differentiated)
+    if cm.fem.element_order == 2:  # held fixed (its X-dependence is not differentiated); P2: the points' maximum
+        A = sp.identity(stresses(cm.fem, cm.fem.rest).size, format="csr")
+    else:
+        A = averaging_matrix(cm.fem, 0.5e-3)
     rec = SensitivityRecorder(cm, StressMeasure(averaging=A, temperature_rel=0.0))  # T = 0: the max's gradient
     base = simulate(cm, recorder=rec)
     plus = simulate(with_rest(cm, X + EPS * dX))
@@ -64,16 +104,12 @@ def check(cm, seed=0, min_supported=3, figures=("energy", "force", "grip", "stre
     assert plus.refined_facets == minus.refined_facets == base.refined_facets  # no refinement event between
     ok = [k for k, sn in enumerate(rec.insert) if sn.supported]
     assert len(ok) >= min_supported and all(sn.stable for sn in rec.insert)
-    for key in figures:
-        def value(r):
-            return float((A @ r.von_mises).max()) if key == "stress" else getattr(r, key)
-
-        fd = np.array([(value(p) - value(m)) / (2 * EPS) for p, m in zip(plus.steps, minus.steps)])[ok]
-        an = np.array([float(np.sum(getattr(sn, key) * dX)) for sn in rec.insert])[ok]
-        scale = np.abs(fd).max()
-        assert scale > 0
-        # relative to the figure's largest derivative over the run: steps out of contact have ~0 of both
-        assert np.abs(an - fd).max() <= 1e-4 * scale, (key, an, fd)
+    compare(cm, rec.insert, plus, minus, dX, A, figures, ((plus.steps, minus.steps), ok))
+    if cm.contact.friction > 0:  # the removal: a traversal of its own, each step from the one before
+        assert len(rec.remove) == len(plus.removal) == len(minus.removal) > 0
+        assert all(sn.supported for sn in rec.remove)
+        compare(cm, rec.remove, plus, minus, dX, A, tuple(f for f in figures if f != "stress"),
+                ((plus.removal, minus.removal), list(range(len(rec.remove)))))
     return base, rec
 
 
@@ -81,13 +117,31 @@ def test_snap_fit_2d(tight_newton):
     check(load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 12}}))
 
 
+def test_snap_fit_2d_p2(tight_newton):
+    check(load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 12, "element_order": 2}}))
+
+
+def test_snap_fit_2d_friction(tight_newton):
+    # every step starts from the one before (the friction anchors): the backward pass follows them
+    check(load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 12}, "contact": FRICTION}))
+
+
 def test_rotating_path_2d(tight_newton, ellipse_in_clamp_model):
     # the insertion force (along O's translation) is zero during the pure rotation
     check(ellipse_in_clamp_model(steps=10), figures=("energy", "grip", "stress"))
 
 
-def test_clip_3d(tight_newton):
-    # all support dofs held: the clip's slide along the cylinder is then resisted (no pinned steps)
-    cm = load_coupling_scene("clip3d", overrides={"simulation": {"steps": 8, "element_order": 1, "fix_all_axes": True},
+def test_rotating_path_2d_friction(tight_newton, ellipse_in_clamp_model):
+    # the anchors turn with O over each step (M != I in the backward pass)
+    cm = ellipse_in_clamp_model(steps=10)
+    cm = dataclasses.replace(cm, contact=dataclasses.replace(cm.contact, **FRICTION))
+    check(cm, figures=("energy", "grip", "stress"))
+
+
+def test_clip_3d_pinned_slide(tight_newton):
+    # the support holds the clip along the insertion axis only: its slide along the cylinder is
+    # pinned at every step (anchored at the step's start, followed back through the steps)
+    cm = load_coupling_scene("clip3d", overrides={"simulation": {"steps": 8, "element_order": 1},
                                                   "compliant": {"target_elements": 300, "layers": 1}})
-    check(cm)
+    _, rec = check(cm)
+    assert sum(sn.supported for sn in rec.insert) >= len(rec.insert) - 1
