@@ -15,7 +15,9 @@ Layout (all in the flat domain, metres):
 - at every **interior** quad vertex (four quads around it) the four beams stop short of a
   gap of half-size ``g_i`` that receives a rigid insert of half-size ``r_i`` from the insert
   catalogue (``insert_half_sizes``; one size: ``insert_half_size``); the insert clamps the beam
-  ends at distance ``r_i`` from the vertex. Boundary vertices join their beams rigidly (no insert).
+  ends at distance ``r_i`` from the vertex. Boundary vertices join their beams rigidly (no insert),
+  except on the seams of a cut flattening (:mod:`simfab.deploy.cuts`), where u != 0: there the
+  cells grow as inside, so those vertices get inserts too (2 or 3 beams).
 
 Gap rule (derivation). The flattening scales lengths by ``e^u``: a curve of length ``L`` on the
 target has length ``e^u L`` in the flat domain (u varies slowly over a cell). Deployment must
@@ -231,6 +233,7 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
         P, quads = _clipped_grid(poly, uv, h)
     else:
         P, quads = conforming_quads(poly, h, uv)
+    P, quads = drop_outside_quads(poly, P, quads)
     # edges and their quads
     e_all = np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)])
     q_all = np.tile(np.arange(len(quads)), 4)
@@ -243,9 +246,11 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     bnd_v = np.zeros(len(P), dtype=bool)
     bnd_v[edges[edge_quads[:, 1] < 0].ravel()] = True
     valence = np.bincount(edges.ravel(), minlength=len(P))
-    interior = ~bnd_v  # every vertex inside the outline holds an insert (4 beams; 3 or 5 at staircase corners)
     # u at the pattern vertices: linear interpolation on the flat triangulation
     uP = interpolate(uv, faces, u, P)
+    # every vertex inside the outline holds an insert (4 beams; 3 or 5 at staircase corners), and so
+    # does a boundary vertex on a seam (u != 0 there: its cell must grow too, simfab.deploy.cuts)
+    interior = ~bnd_v | (np.abs(uP) > SEAM_U)
     elen = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1)
     hv = np.bincount(edges.ravel(), weights=np.repeat(elen, 2), minlength=len(P)) / np.maximum(valence, 1)
     gmax = 0.5 * hv - cfg.min_beam
@@ -270,6 +275,26 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
                    gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, insert_size=r_v,
                    insert_class=cls, bulge=bulge, growth=growth, spring_ratio=ratio,
                    tight_springs=np.flatnonzero(tight & spring), config=cfg)
+
+
+SEAM_U = 1e-3  # |u| above which a boundary vertex (on a seam: the rim has u = 0) gets an insert
+OUTSIDE_AREA = 0.1  # a quad with more than this fraction of its area outside the flat domain is dropped
+
+
+def drop_outside_quads(poly, P: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Drop quads with more than ``OUTSIDE_AREA`` of their area outside the flat domain ``poly``
+    (a grid cell whose corners lie on both sides of a cut's wedge, :mod:`simfab.deploy.cuts`, would
+    bridge the seam), keep the largest edge-connected set: (P, quads) re-indexed. A no-op on a
+    domain without notches (the cells' corners lie in it or on its boundary)."""
+    import shapely
+
+    cells = shapely.polygons(P[quads])
+    out = shapely.area(shapely.difference(cells, poly)) > OUTSIDE_AREA * shapely.area(cells)
+    if not out.any():
+        return P, quads
+    quads = _largest_component(quads[~out])
+    used, inv = np.unique(quads, return_inverse=True)
+    return P[used], inv.reshape(-1, 4)
 
 
 def quad_growth(P: np.ndarray, quads: np.ndarray, d: np.ndarray) -> np.ndarray:

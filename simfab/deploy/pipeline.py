@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simfab.deploy import compare, flatten, lasercut, mjcf_sim, network, pattern, tuning
+from simfab.deploy import compare, cuts, flatten, lasercut, mjcf_sim, network, pattern, tuning
 from simfab.deploy.network import discrete_gaussian_curvature
 from simfab.progress import log
 
@@ -52,6 +52,7 @@ class SurfaceResult:
     shape: dict
     seconds: dict
     tuning: dict | None = None
+    cuts: object = None  # simfab.deploy.cuts.CutFlattening when the scene has [cuts] max_cones > 0
 
 
 def quadric_curvature(X: np.ndarray) -> float:
@@ -106,20 +107,26 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     t = time.perf_counter()
     tgt = scene.target
     log(f"deploy surface: flatten {len(tgt.V)} vertices (BFF)", quiet=quiet)
-    flat = flatten.flatten(tgt.V, tgt.F)
+    cut_flat = None
+    if getattr(scene, "cuts", None) is not None and scene.cuts.max_cones > 0:  # cones + cuts (the cut mesh)
+        cut_flat = cuts.flatten_with_cuts(tgt.V, tgt.F, scene.cuts, scene.pattern)
+        flat, mV, mF = cut_flat.flat, cut_flat.V, cut_flat.F
+        log(f"deploy surface: {len(cut_flat.cones)} cone(s), cut paths to the boundary", quiet=quiet)
+    else:
+        flat, mV, mF = flatten.flatten(tgt.V, tgt.F), tgt.V, tgt.F
     sec["flatten"] = time.perf_counter() - t
     t = time.perf_counter()
-    pat = pattern.layout(flat.uv, flat.boundary, tgt.F, flat.u, scene.pattern)
-    Y = pattern.map_to_surface(flat.uv, tgt.F, tgt.V, pat.P)
+    pat = pattern.layout(flat.uv, flat.boundary, mF, flat.u, scene.pattern)
+    Y = pattern.map_to_surface(flat.uv, mF, mV, pat.P)
     sec["layout"] = time.perf_counter() - t
     t = time.perf_counter()
-    cut = lasercut.layout(pat)
+    cut = lasercut.layout(pat, seams=seam_lines(cut_flat))
     sec["lasercut"] = time.perf_counter() - t
     t = time.perf_counter()
     log(f"deploy surface: {pat.n_inserts} inserts, {len(pat.edges)} beams, {int(pat.spring.sum())} springs",
         quiet=quiet)
     net = network.build_network(pat, scene.deploy)
-    to_target = lambda p: pattern.map_to_surface(flat.uv, tgt.F, tgt.V, p)  # noqa: E731
+    to_target = lambda p: pattern.map_to_surface(flat.uv, mF, mV, p)  # noqa: E731
     dep = network.deploy(pat, net, scene.deploy, network.target_heights(pat, Y), device=device, quiet=quiet,
                          predictor=network.target_displacement(net, to_target))
     sec["deploy"] = time.perf_counter() - t
@@ -131,7 +138,7 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         tuned = tuning.tune(pat, net, dep, Y, tgt, scene.tune, device=device)
         gap0 = pat.gap
         pat = tuning.retuned_pattern(pat, tuned.gap)
-        cut = lasercut.layout(pat)
+        cut = lasercut.layout(pat, seams=seam_lines(cut_flat))
         net = network.build_network(pat, scene.deploy)
         dep = tuning.redeploy(pat, net, dep, tuned, device=device)
         tune_info = dict(steps=tuned.steps, solves=tuned.solves, rms_before=before.rms,
@@ -151,7 +158,8 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         sim, check = mujoco_check_run(net, dep, pat, scene)
         sec["mujoco"] = time.perf_counter() - t
     return SurfaceResult(scene=scene, flat=flat, pattern=pat, cut=cut, network=net, deployment=dep, target_points=Y,
-                         deviation=dev, sim=sim, sim_check=check, shape=shape, seconds=sec, tuning=tune_info)
+                         deviation=dev, sim=sim, sim_check=check, shape=shape, seconds=sec, tuning=tune_info,
+                         cuts=cut_flat)
 
 
 def insert_geoms(pat, net) -> dict:
@@ -235,6 +243,29 @@ def summary(res: SurfaceResult) -> dict:
                        deployed_height_mm=out_of_plane_extent(dv.aligned) * 1e3,
                        target_height_mm=out_of_plane_extent(res.target_points) * 1e3),
         tuning=res.tuning,
+        cuts=cuts_summary(res),
         mujoco=res.sim_check,
         seconds=dict(res.seconds, total=float(sum(res.seconds.values()))),
     )
+
+
+def seam_lines(cf) -> list:
+    """[(label S<k>, (j,2) flat polyline [m])]: both sides of every cut path of a cut flattening
+    (empty without cuts) for the laser-cut seam layer."""
+    if cf is None:
+        return []
+    return [(f"S{k + 1}", cf.flat.uv[side]) for k, s in enumerate(cf.seams) for side in s.sides]
+
+
+def cuts_summary(res: SurfaceResult) -> dict | None:
+    """Cones and seams of a run with cuts (None without): per cone its angle defect [deg] and
+    seam length [mm] (the cut path in 3D), the interior mesh vertices whose growth no insert size
+    reaches without and with the cones."""
+    cf = res.cuts
+    if cf is None:
+        return None
+    V = res.scene.target.V
+    return dict(cones=len(cf.cones), unreachable_mesh_vertices=cf.unreachable_vertices,
+                seams=[dict(cone_defect_deg=float(np.degrees(d)),
+                            length_mm=float(np.sum(np.linalg.norm(np.diff(V[s.path], axis=0), axis=1)) * 1e3))
+                       for d, s in zip(cf.cone_defect, cf.seams)])
