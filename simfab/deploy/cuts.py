@@ -17,7 +17,8 @@ a cone is the choice of Ben-Chen, Gotsman and Bunin (2008): each cone absorbs th
 it so that the scale there is 1. One Cholesky factor per cone set (the meshes are small).
 
 Greedy placement. Repeat: solve for u; if every interior vertex's growth is reachable by some
-catalogue size (``reachable``) and within the springs' reach (``e^{-u} <= max_growth``), stop; else put a cone at the vertex with the most negative u among
+catalogue size (``reachable``) and within the springs' reach (``e^{-u} <= max_growth``), stop;
+else put a cone at the vertex with the most negative u among
 those at least ``boundary_distance`` spacings (graph distance along mesh edges) from the boundary
 and ``cone_distance`` spacings from every cone, up to ``max_cones``. Only u < 0 vertices (the
 flattening shrank them) are candidates: their cones have Omega~ > 0 and open into a wedge in the
@@ -26,15 +27,16 @@ plane; a cone at u > 0 would have Omega~ < 0, and its two cut sides would overla
 
 Cut paths. Each cone in turn is joined by the shortest mesh-edge path (Dijkstra on 3D edge
 lengths) to the boundary, around the earlier cuts (or onto one, where they wall the cone off):
-the cuts form a forest rooted on the boundary, so the cut mesh is again a disk. Cutting duplicates each cut vertex once per
-wedge of faces between its cut edges (:func:`cut_mesh`).
+the cuts form a forest rooted on the boundary, so the cut mesh is again a disk. Cutting
+duplicates each cut vertex once per wedge of faces between its cut edges (:func:`cut_mesh`).
 
 Flattening with cones. The cut mesh is flattened by BFF with the cone metric's u prescribed on
 its whole boundary (0 on the original boundary and the cones, u along both sides of every cut):
 :func:`simfab.deploy.flatten.flatten` (``u_boundary``). Both sides of a cut get the same lengths
 ``e^{(u_i+u_j)/2} l_ij`` and, the metric being flat, are congruent up to a rigid motion (rotation by
 the cone angle): the seams. In deployment the seams stay free (two boundary edges of the
-network); the deviation is measured against the target surface.
+network), or, with ``join_seams``, facing seam vertices are tied (:func:`seam_ties`); the
+deviation is measured against the target surface.
 """
 
 from __future__ import annotations
@@ -54,14 +56,21 @@ class CutsConfig:
     """Scene ``[cuts]`` table. max_cones: cone singularities the greedy placement may add (0: no
     cuts); boundary_distance, cone_distance [-]: smallest graph distance of a cone from the
     boundary and from another cone, in pattern spacings (a cone nearer the boundary would only
-    cut off a sliver; two cones closer than a cell would share one)."""
+    cut off a sliver; two cones closer than a cell would share one); max_growth [-]: largest cell
+    growth e^{-u} the torsional springs follow (their Bezier arcs reach 1.2-1.4 x their chord,
+    :mod:`simfab.deploy.springs`): cones are added until every interior vertex has a reachable gap
+    and e^{-u} <= max_growth; join_seams: close the seams in deployment by ties between facing seam
+    vertices (:func:`seam_ties`; false: the seams stay free)."""
 
     max_cones: int = 0
     boundary_distance: float = 1.5
     cone_distance: float = 2.0
     max_growth: float = 1.25
+    join_seams: bool = False
 
     def __post_init__(self):
+        if not isinstance(self.join_seams, bool):
+            raise InputError(f"must be true or false (got {self.join_seams!r})", where="cuts.join_seams")
         if isinstance(self.max_cones, bool) or not isinstance(self.max_cones, int) or self.max_cones < 0:
             raise InputError(f"must be a non-negative integer (got {self.max_cones!r})", where="cuts.max_cones")
         for f in ("boundary_distance", "cone_distance", "max_growth"):
@@ -281,3 +290,39 @@ def flatten_with_cuts(V, F, cfg: CutsConfig, pattern_cfg, *, cones=None) -> CutF
     return CutFlattening(V=V_cut, F=F_cut, orig=orig, flat=flat, cones=np.asarray(cones, dtype=np.int64),
                          cone_defect=np.asarray(defect), u_uncut=u, seams=seams,
                          unreachable_vertices=dict(without_cones=before, with_cones=after))
+
+
+@dataclass(frozen=True)
+class SeamTies:
+    """Seam vertex pairs (k,2) (pattern vertex ids) and their distance on the target (k,) [m]."""
+
+    pairs: np.ndarray
+    length: np.ndarray
+
+
+TIE_ACROSS = 1.5  # a pair is across a wedge when its flat distance exceeds this x its target distance
+TIE_REACH = 1.5  # [spacings] largest target distance of a tied pair
+
+
+def seam_ties(pat, Y: np.ndarray) -> SeamTies:
+    """Pairs of seam vertices (pattern boundary vertices with u != 0, see
+    :mod:`simfab.deploy.pattern`) that face each other across a cut: mutual nearest neighbours by
+    their target points Y (n,3) [m], within ``TIE_REACH`` spacings on the target and at least
+    ``TIE_ACROSS`` times that apart in the flat pattern (two vertices along the same side of a seam
+    are about as far apart flat as on the target, e^u ~ 1)."""
+    from simfab.deploy.pattern import SEAM_U
+
+    h = pat.config.spacing
+    bnd = np.zeros(len(pat.P), dtype=bool)
+    bnd[pat.edges[pat.edge_quads[:, 1] < 0].ravel()] = True
+    S = np.flatnonzero(bnd & (np.abs(pat.u) > SEAM_U))
+    if len(S) < 2:
+        return SeamTies(pairs=np.zeros((0, 2), dtype=np.int64), length=np.zeros(0))
+    d3 = np.linalg.norm(Y[S][:, None] - Y[S][None], axis=2)
+    d2 = np.linalg.norm(pat.P[S][:, None] - pat.P[S][None], axis=2)
+    ok = (d2 > TIE_ACROSS * d3) & (d3 < TIE_REACH * h)
+    D = np.where(ok, d3, np.inf)
+    nn = np.argmin(D, axis=1)
+    pairs = [(S[i], S[j]) for i, j in enumerate(nn) if np.isfinite(D[i, j]) and nn[j] == i and i < j]
+    P = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    return SeamTies(pairs=P, length=np.linalg.norm(Y[P[:, 0]] - Y[P[:, 1]], axis=1))

@@ -53,6 +53,7 @@ class SurfaceResult:
     seconds: dict
     tuning: dict | None = None
     cuts: object = None  # simfab.deploy.cuts.CutFlattening when the scene has [cuts] max_cones > 0
+    ties: object = None  # simfab.deploy.cuts.SeamTies when the seams are joined
 
 
 def quadric_curvature(X: np.ndarray) -> float:
@@ -125,7 +126,8 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     t = time.perf_counter()
     log(f"deploy surface: {pat.n_inserts} inserts, {len(pat.edges)} beams, {int(pat.spring.sum())} springs",
         quiet=quiet)
-    net = network.build_network(pat, scene.deploy)
+    ties = cuts.seam_ties(pat, Y) if cut_flat is not None and scene.cuts.join_seams else None
+    net = network.build_network(pat, scene.deploy, ties=ties)
     to_target = lambda p: pattern.map_to_surface(flat.uv, mF, mV, p)  # noqa: E731
     dep = network.deploy(pat, net, scene.deploy, network.target_heights(pat, Y), device=device, quiet=quiet,
                          predictor=network.target_displacement(net, to_target))
@@ -139,7 +141,7 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         gap0 = pat.gap
         pat = tuning.retuned_pattern(pat, tuned.gap)
         cut = lasercut.layout(pat, seams=seam_lines(cut_flat))
-        net = network.build_network(pat, scene.deploy)
+        net = network.build_network(pat, scene.deploy, ties=ties)
         dep = tuning.redeploy(pat, net, dep, tuned, device=device)
         tune_info = dict(steps=tuned.steps, solves=tuned.solves, rms_before=before.rms,
                          hausdorff_before=before.hausdorff,
@@ -159,7 +161,7 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         sec["mujoco"] = time.perf_counter() - t
     return SurfaceResult(scene=scene, flat=flat, pattern=pat, cut=cut, network=net, deployment=dep, target_points=Y,
                          deviation=dev, sim=sim, sim_check=check, shape=shape, seconds=sec, tuning=tune_info,
-                         cuts=cut_flat)
+                         cuts=cut_flat, ties=ties)
 
 
 def insert_geoms(pat, net) -> dict:
@@ -266,6 +268,7 @@ def cuts_summary(res: SurfaceResult) -> dict | None:
         return None
     V = res.scene.target.V
     return dict(cones=len(cf.cones), unreachable_mesh_vertices=cf.unreachable_vertices,
+                seams_joined=res.ties is not None, seam_ties=0 if res.ties is None else int(len(res.ties.pairs)),
                 seams=[dict(cone_defect_deg=float(np.degrees(d)),
                             length_mm=float(np.sum(np.linalg.norm(np.diff(V[s.path], axis=0), axis=1)) * 1e3))
                        for d, s in zip(cf.cone_defect, cf.seams)])

@@ -110,7 +110,7 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
     ins = np.flatnonzero(pat.interior)
     d = pat.insert_size - pat.gap  # growth per vertex (0 on the boundary)
     lo, hi = achievable_growth(pat)
-    offset0 = model.node_offset.copy()
+    offset0 = model.node_offset.copy() + (0.0 if net.tie_offset is None else net.tie_offset)  # seams closed
 
     def offsets(dv):
         o = offset0.copy()
@@ -179,7 +179,7 @@ def redeploy(pat, net, dep, tuned: Tuning, *, device: str = "cpu"):
 
     t0 = time.perf_counter()
     solver = StaticSolver(net.model, device=device)
-    o = net.model.node_offset.copy()
+    o = net.model.node_offset.copy() + (0.0 if net.tie_offset is None else net.tie_offset)
     o[net.pull_nodes] += net.pull_dir * net.pull_grow[:, None]
     solver.set_attachment_offsets(o)
     s = tuned.state
