@@ -14,7 +14,8 @@ is already cut there, the pattern's outline follows them).
 Files: SVG with ``width``/``height`` in mm and the viewBox ``0 0 W H`` in mm (y down: x_svg =
 x - x0, y_svg = y1 - y with (x0, y1) the sheet's top-left corner, :func:`svg_origin`), layers as
 Inkscape layer groups ``cut`` (red hairline) and ``engrave`` (blue); DXF (R2010, $INSUNITS = mm)
-with layers ``CUT`` (closed LWPOLYLINEs), ``ENGRAVE`` (TEXT, LINE) and ``SEAM`` (open LWPOLYLINEs, TEXT). Summary: part count,
+with layers ``CUT`` (closed LWPOLYLINEs), ``ENGRAVE`` (TEXT, LINE) and ``SEAM`` (open LWPOLYLINEs,
+TEXT). Summary: part count,
 total cut length [mm], sheet extent [mm].
 """
 

@@ -145,6 +145,7 @@ class Pattern:
     spring_ratio: np.ndarray
     tight_springs: np.ndarray
     config: PatternConfig
+    gap_max: np.ndarray | None = None  # (n,) [m] largest achievable gap (h_i/2 - min_beam; seams: shortest edge)
 
     @property
     def n_inserts(self) -> int:
@@ -248,12 +249,17 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     valence = np.bincount(edges.ravel(), minlength=len(P))
     # u at the pattern vertices: linear interpolation on the flat triangulation
     uP = interpolate(uv, faces, u, P)
-    # every vertex inside the outline holds an insert (4 beams; 3 or 5 at staircase corners), and so
-    # does a boundary vertex on a seam (u != 0 there: its cell must grow too, simfab.deploy.cuts)
-    interior = ~bnd_v | (np.abs(uP) > SEAM_U)
     elen = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1)
     hv = np.bincount(edges.ravel(), weights=np.repeat(elen, 2), minlength=len(P)) / np.maximum(valence, 1)
     gmax = 0.5 * hv - cfg.min_beam
+    # every vertex inside the outline holds an insert (4 beams; 3 or 5 at staircase corners), and so
+    # does a boundary vertex on a seam (u != 0 there: its cell must grow too, simfab.deploy.cuts) whose
+    # shortest edge leaves room for a gap (its gap limit is set by that edge: clipped cells are short)
+    emin = np.full(len(P), np.inf)
+    np.minimum.at(emin, edges.ravel(), np.repeat(elen, 2))
+    seam = bnd_v & (np.abs(uP) > SEAM_U) & (0.5 * emin - cfg.min_beam >= cfg.min_gap)
+    gmax = np.where(seam, 0.5 * emin - cfg.min_beam, gmax)
+    interior = ~bnd_v | seam
     need = gap_rule(uP, hv, 0.0)  # -d: the gap with r = 0
     cls = np.full(len(P), -1)
     cls[interior] = assign_sizes(-need[interior], gmax[interior], cfg.sizes, cfg.min_gap)
@@ -274,7 +280,7 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     return Pattern(P=P, quads=quads, edges=edges, edge_quads=edge_quads, interior=interior, u=uP, gap=gap,
                    gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, insert_size=r_v,
                    insert_class=cls, bulge=bulge, growth=growth, spring_ratio=ratio,
-                   tight_springs=np.flatnonzero(tight & spring), config=cfg)
+                   tight_springs=np.flatnonzero(tight & spring), config=cfg, gap_max=np.where(interior, gmax, 0.0))
 
 
 SEAM_U = 1e-3  # |u| above which a boundary vertex (on a seam: the rim has u = 0) gets an insert

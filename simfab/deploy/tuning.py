@@ -97,7 +97,8 @@ def achievable_growth(pat) -> tuple[np.ndarray, np.ndarray]:
     elen = np.linalg.norm(pat.P[pat.edges[:, 0]] - pat.P[pat.edges[:, 1]], axis=1)
     val = np.bincount(pat.edges.ravel(), minlength=len(pat.P))
     hv = np.bincount(pat.edges.ravel(), weights=np.repeat(elen, 2), minlength=len(pat.P)) / np.maximum(val, 1)
-    return pat.insert_size - (0.5 * hv - pc.min_beam), pat.insert_size - pc.min_gap
+    gmax = 0.5 * hv - pc.min_beam if pat.gap_max is None else pat.gap_max  # (the layout's, seams included)
+    return pat.insert_size - gmax, pat.insert_size - pc.min_gap
 
 
 def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str = "cpu") -> Tuning:
