@@ -48,6 +48,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
 from simfab.deploy import flatten as bff
+from simfab.deploy.pattern import on_seams
 from simfab.errors import InputError
 
 
@@ -304,18 +305,21 @@ TIE_ACROSS = 1.5  # a pair is across a wedge when its flat distance exceeds this
 TIE_REACH = 1.5  # [spacings] largest target distance of a tied pair
 
 
-def seam_ties(pat, Y: np.ndarray) -> SeamTies:
-    """Pairs of seam vertices (pattern boundary vertices with u != 0, see
-    :mod:`simfab.deploy.pattern`) that face each other across a cut: mutual nearest neighbours by
+def seam_lines(cf: CutFlattening) -> list:
+    """[(label S<k>, (j,2) flat polyline [m])]: both sides of every cut path (the seams)."""
+    return [(f"S{k + 1}", cf.flat.uv[side]) for k, s in enumerate(cf.seams) for side in s.sides]
+
+
+def seam_ties(pat, Y: np.ndarray, cf: CutFlattening) -> SeamTies:
+    """Pairs of seam vertices (pattern boundary vertices on a seam of ``cf``,
+    :func:`simfab.deploy.pattern.on_seams`) that face each other across a cut: mutual nearest neighbours by
     their target points Y (n,3) [m], within ``TIE_REACH`` spacings on the target and at least
     ``TIE_ACROSS`` times that apart in the flat pattern (two vertices along the same side of a seam
     are about as far apart flat as on the target, e^u ~ 1)."""
-    from simfab.deploy.pattern import SEAM_U
-
     h = pat.config.spacing
     bnd = np.zeros(len(pat.P), dtype=bool)
     bnd[pat.edges[pat.edge_quads[:, 1] < 0].ravel()] = True
-    S = np.flatnonzero(bnd & (np.abs(pat.u) > SEAM_U))
+    S = np.flatnonzero(bnd & on_seams(pat.P, [p for _, p in seam_lines(cf)], h))
     if len(S) < 2:
         return SeamTies(pairs=np.zeros((0, 2), dtype=np.int64), length=np.zeros(0))
     d3 = np.linalg.norm(Y[S][:, None] - Y[S][None], axis=2)

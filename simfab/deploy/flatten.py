@@ -1,9 +1,10 @@
-"""Boundary First Flattening (Sawhney & Crane 2017) with zero boundary scale factor, cone-free.
+"""Boundary First Flattening (Sawhney & Crane 2017) with zero (or prescribed) boundary scale factors.
 
 Input: a disk-topology triangle mesh V (n,3) [m], F (m,3). Output: flat positions (n,2) [m]
 whose metric is conformal to the input's, ``g_flat = e^{2u} g``, with ``u = 0`` on the
 boundary (boundary edge lengths kept; the flattening of least area distortion, Springborn et
-al. 2008) and no cone singularities.
+al. 2008) and no cone singularities. Cones enter as prescribed boundary scale factors of a cut
+mesh (``flatten(..., u_boundary=...)``, :mod:`simfab.deploy.cuts`).
 
 Discrete quantities (A: the cotan Laplacian, positive semi-definite, ``(A u)_i = sum_j w_ij
 (u_i - u_j)``, ``w_ij = (cot a_ij + cot b_ij) / 2`` over the two angles opposite edge ij):

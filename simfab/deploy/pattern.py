@@ -16,8 +16,8 @@ Layout (all in the flat domain, metres):
   gap of half-size ``g_i`` that receives a rigid insert of half-size ``r_i`` from the insert
   catalogue (``insert_half_sizes``; one size: ``insert_half_size``); the insert clamps the beam
   ends at distance ``r_i`` from the vertex. Boundary vertices join their beams rigidly (no insert),
-  except on the seams of a cut flattening (:mod:`simfab.deploy.cuts`), where u != 0: there the
-  cells grow as inside, so those vertices get inserts too (2 or 3 beams).
+  except on the seams of a cut flattening (``seams``, :mod:`simfab.deploy.cuts`), where u != 0:
+  there the cells grow as inside, so those vertices get inserts too (2 or 3 beams).
 
 Gap rule (derivation). The flattening scales lengths by ``e^u``: a curve of length ``L`` on the
 target has length ``e^u L`` in the flat domain (u varies slowly over a cell). Deployment must
@@ -145,7 +145,7 @@ class Pattern:
     spring_ratio: np.ndarray
     tight_springs: np.ndarray
     config: PatternConfig
-    gap_max: np.ndarray | None = None  # (n,) [m] largest achievable gap (h_i/2 - min_beam; seams: shortest edge)
+    gap_max: np.ndarray | None = None  # (n,) [m] largest gap the tuning may cut (see layout)
 
     @property
     def n_inserts(self) -> int:
@@ -221,8 +221,12 @@ def gap_rule(u: np.ndarray, h: np.ndarray, r: float) -> np.ndarray:
     return r - 0.5 * h * np.expm1(-np.asarray(u, dtype=np.float64))
 
 
-def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig) -> Pattern:
-    """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,))."""
+def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig, *,
+           seams=()) -> Pattern:
+    """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,)).
+    ``seams``: flat polylines [(k,2) m] of the cut sides of a cut flattening (their boundary
+    vertices get inserts). ``Pattern.gap_max``: the largest gap the tuning may cut, the achievable
+    limit capped so that every beam half keeps ``min_beam`` (or the length the layout cut)."""
     import shapely
 
 
@@ -257,7 +261,7 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     # shortest edge leaves room for a gap (its gap limit is set by that edge: clipped cells are short)
     emin = np.full(len(P), np.inf)
     np.minimum.at(emin, edges.ravel(), np.repeat(elen, 2))
-    seam = bnd_v & (np.abs(uP) > SEAM_U) & (0.5 * emin - cfg.min_beam >= cfg.min_gap)
+    seam = bnd_v & on_seams(P, seams, h) & (0.5 * emin - cfg.min_beam >= cfg.min_gap)
     gmax = np.where(seam, 0.5 * emin - cfg.min_beam, gmax)
     interior = ~bnd_v | seam
     need = gap_rule(uP, hv, 0.0)  # -d: the gap with r = 0
@@ -280,10 +284,22 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     return Pattern(P=P, quads=quads, edges=edges, edge_quads=edge_quads, interior=interior, u=uP, gap=gap,
                    gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, insert_size=r_v,
                    insert_class=cls, bulge=bulge, growth=growth, spring_ratio=ratio,
-                   tight_springs=np.flatnonzero(tight & spring), config=cfg, gap_max=np.where(interior, gmax, 0.0))
+                   tight_springs=np.flatnonzero(tight & spring), config=cfg,
+                   gap_max=np.where(interior, np.minimum(gmax, np.maximum(0.5 * emin - cfg.min_beam, gap)), 0.0))
 
 
-SEAM_U = 1e-3  # |u| above which a boundary vertex (on a seam: the rim has u = 0) gets an insert
+SEAM_TOL = 1e-6  # [spacings] distance within which a boundary vertex lies on a seam polyline
+
+
+def on_seams(P: np.ndarray, seams, h: float) -> np.ndarray:
+    """(n,) bool: points P (n,2) [m] within ``SEAM_TOL`` h of one of the seam polylines [(k,2)]."""
+    import shapely
+
+    if not len(seams):
+        return np.zeros(len(P), dtype=bool)
+    lines = shapely.MultiLineString([np.asarray(s, dtype=np.float64) for s in seams])
+    return shapely.distance(lines, shapely.points(P)) <= SEAM_TOL * h
+
 OUTSIDE_AREA = 0.1  # a quad with more than this fraction of its area outside the flat domain is dropped
 
 

@@ -117,16 +117,17 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         flat, mV, mF = flatten.flatten(tgt.V, tgt.F), tgt.V, tgt.F
     sec["flatten"] = time.perf_counter() - t
     t = time.perf_counter()
-    pat = pattern.layout(flat.uv, flat.boundary, mF, flat.u, scene.pattern)
+    seams = [] if cut_flat is None else cuts.seam_lines(cut_flat)
+    pat = pattern.layout(flat.uv, flat.boundary, mF, flat.u, scene.pattern, seams=[p for _, p in seams])
     Y = pattern.map_to_surface(flat.uv, mF, mV, pat.P)
     sec["layout"] = time.perf_counter() - t
     t = time.perf_counter()
-    cut = lasercut.layout(pat, seams=seam_lines(cut_flat))
+    cut = lasercut.layout(pat, seams=seams)
     sec["lasercut"] = time.perf_counter() - t
     t = time.perf_counter()
     log(f"deploy surface: {pat.n_inserts} inserts, {len(pat.edges)} beams, {int(pat.spring.sum())} springs",
         quiet=quiet)
-    ties = cuts.seam_ties(pat, Y) if cut_flat is not None and scene.cuts.join_seams else None
+    ties = cuts.seam_ties(pat, Y, cut_flat) if cut_flat is not None and scene.cuts.join_seams else None
     net = network.build_network(pat, scene.deploy, ties=ties)
     to_target = lambda p: pattern.map_to_surface(flat.uv, mF, mV, p)  # noqa: E731
     dep = network.deploy(pat, net, scene.deploy, network.target_heights(pat, Y), device=device, quiet=quiet,
@@ -140,7 +141,7 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         tuned = tuning.tune(pat, net, dep, Y, tgt, scene.tune, device=device)
         gap0 = pat.gap
         pat = tuning.retuned_pattern(pat, tuned.gap)
-        cut = lasercut.layout(pat, seams=seam_lines(cut_flat))
+        cut = lasercut.layout(pat, seams=seams)
         net = network.build_network(pat, scene.deploy, ties=ties)
         dep = tuning.redeploy(pat, net, dep, tuned, device=device)
         tune_info = dict(steps=tuned.steps, solves=tuned.solves, rms_before=before.rms,
@@ -251,23 +252,23 @@ def summary(res: SurfaceResult) -> dict:
     )
 
 
-def seam_lines(cf) -> list:
-    """[(label S<k>, (j,2) flat polyline [m])]: both sides of every cut path of a cut flattening
-    (empty without cuts) for the laser-cut seam layer."""
-    if cf is None:
-        return []
-    return [(f"S{k + 1}", cf.flat.uv[side]) for k, s in enumerate(cf.seams) for side in s.sides]
-
-
 def cuts_summary(res: SurfaceResult) -> dict | None:
     """Cones and seams of a run with cuts (None without): per cone its angle defect [deg] and
     seam length [mm] (the cut path in 3D), the interior mesh vertices whose growth no insert size
-    reaches without and with the cones."""
+    reaches without and with the cones, the seam ties, and the flat area the pattern's quads cover
+    (of the cut domain: the grid cells clipped at the wedges leave notches the deviation does not
+    see)."""
+    import shapely
+
     cf = res.cuts
     if cf is None:
         return None
     V = res.scene.target.V
+    p = res.pattern
+    covered = float(np.sum(shapely.area(shapely.polygons(p.P[p.quads]))))
+    domain = float(shapely.area(shapely.Polygon(cf.flat.uv[cf.flat.boundary])))
     return dict(cones=len(cf.cones), unreachable_mesh_vertices=cf.unreachable_vertices,
+                flat_area_covered=covered / domain,
                 seams_joined=res.ties is not None, seam_ties=0 if res.ties is None else int(len(res.ties.pairs)),
                 seams=[dict(cone_defect_deg=float(np.degrees(d)),
                             length_mm=float(np.sum(np.linalg.norm(np.diff(V[s.path], axis=0), axis=1)) * 1e3))

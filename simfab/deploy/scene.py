@@ -36,6 +36,9 @@ from simfab.deploy.tuning import TuneConfig
 from simfab.errors import InputError
 
 BUNDLED = ("dome", "saddle", "mixed")
+# the steep targets (insert catalogues; cuts with cones on the cap and the petal): bundled names too
+BUNDLED_STEEP = ("cap80", "saddle_steep", "petal")
+NAMES = BUNDLED + BUNDLED_STEEP
 
 
 @dataclass(frozen=True)

@@ -121,16 +121,17 @@ def test_cut_mesh_is_a_disk_with_isometric_seams():
 def test_pattern_around_the_cuts():
     t = _cap80()
     cf = cuts.flatten_with_cuts(t.V, t.F, cuts.CutsConfig(max_cones=8), CAP80)
-    pat = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, CAP80)
+    lines = cuts.seam_lines(cf)
+    pat = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, CAP80, seams=[p for _, p in lines])
     poly = shapely.Polygon(cf.flat.uv[cf.flat.boundary])
     cells = shapely.polygons(pat.P[pat.quads])
     # no quad bridges a wedge
     assert np.all(shapely.area(shapely.difference(cells, poly)) <= pattern.OUTSIDE_AREA * shapely.area(cells))
-    # seam vertices (on the outline, u != 0) with room for a gap hold inserts; rim vertices (u = 0) do not;
+    # seam vertices (on the outline, on a cut side) with room for a gap hold inserts; rim vertices do not;
     # every beam half keeps at least min_beam between its gap and its midpoint
     bnd = np.zeros(len(pat.P), dtype=bool)
     bnd[pat.edges[pat.edge_quads[:, 1] < 0].ravel()] = True
-    seam = bnd & (np.abs(pat.u) > pattern.SEAM_U)
+    seam = bnd & pattern.on_seams(pat.P, [p for _, p in lines], CAP80.spacing)
     assert np.sum(pat.interior[seam]) > 10 and not np.any(pat.interior[bnd & ~seam])
     # every insert inside the outline reaches its gap (the cones' purpose); a seam insert next to a
     # short clipped edge may not (it is listed, with its gap clamped)
@@ -138,7 +139,6 @@ def test_pattern_around_the_cuts():
     for _, v, start, end in pat.beam_halves():
         assert np.linalg.norm(end - start) >= CAP80.min_beam - 1e-12
     # the seam layer: both sides of every cut, in the SVG and the DXF
-    lines = [(f"S{k + 1}", cf.flat.uv[side]) for k, s in enumerate(cf.seams) for side in s.sides]
     cut = lasercut.layout(pat, seams=lines)
     assert len(cut.seams) == 2 * len(cf.seams) and lasercut.summary(cut)["seams"] == len(cf.seams)
     assert np.allclose(cut.seams[0][1], lines[0][1] * 1e3)
@@ -149,8 +149,8 @@ def test_seam_layer_files(tmp_path):
 
     t = _cap80(12)
     cf = cuts.flatten_with_cuts(t.V, t.F, cuts.CutsConfig(max_cones=8), CAP80)
-    pat = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, CAP80)
-    lines = [(f"S{k + 1}", cf.flat.uv[side]) for k, s in enumerate(cf.seams) for side in s.sides]
+    lines = cuts.seam_lines(cf)
+    pat = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, CAP80, seams=[p for _, p in lines])
     cut = lasercut.layout(pat, seams=lines)
     lasercut.write_svg(tmp_path / "p.svg", cut)
     lasercut.write_dxf(tmp_path / "p.dxf", cut)
