@@ -45,10 +45,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+import shapely
 from scipy.sparse.csgraph import dijkstra
 
 from simfab.deploy import flatten as bff
-from simfab.deploy.pattern import on_seams
+from simfab.deploy.pattern import near_seams
 from simfab.errors import InputError
 
 
@@ -311,15 +312,16 @@ def seam_lines(cf: CutFlattening) -> list:
 
 
 def seam_ties(pat, Y: np.ndarray, cf: CutFlattening) -> SeamTies:
-    """Pairs of seam vertices (pattern boundary vertices on a seam of ``cf``,
-    :func:`simfab.deploy.pattern.on_seams`) that face each other across a cut: mutual nearest neighbours by
+    """Pairs of seam vertices (pattern boundary vertices along a seam of ``cf``,
+    :func:`simfab.deploy.pattern.near_seams`) that face each other across a cut: mutual nearest neighbours by
     their target points Y (n,3) [m], within ``TIE_REACH`` spacings on the target and at least
     ``TIE_ACROSS`` times that apart in the flat pattern (two vertices along the same side of a seam
     are about as far apart flat as on the target, e^u ~ 1)."""
     h = pat.config.spacing
     bnd = np.zeros(len(pat.P), dtype=bool)
     bnd[pat.edges[pat.edge_quads[:, 1] < 0].ravel()] = True
-    S = np.flatnonzero(bnd & on_seams(pat.P, [p for _, p in seam_lines(cf)], h))
+    poly = shapely.Polygon(cf.flat.uv[cf.flat.boundary])
+    S = np.flatnonzero(bnd & near_seams(pat.P, poly, [p for _, p in seam_lines(cf)], h))
     if len(S) < 2:
         return SeamTies(pairs=np.zeros((0, 2), dtype=np.int64), length=np.zeros(0))
     d3 = np.linalg.norm(Y[S][:, None] - Y[S][None], axis=2)

@@ -257,11 +257,11 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     hv = np.bincount(edges.ravel(), weights=np.repeat(elen, 2), minlength=len(P)) / np.maximum(valence, 1)
     gmax = 0.5 * hv - cfg.min_beam
     # every vertex inside the outline holds an insert (4 beams; 3 or 5 at staircase corners), and so
-    # does a boundary vertex on a seam (u != 0 there: its cell must grow too, simfab.deploy.cuts) whose
+    # does a boundary vertex along a seam (u != 0 there: its cell must grow too, simfab.deploy.cuts) whose
     # shortest edge leaves room for a gap (its gap limit is set by that edge: clipped cells are short)
     emin = np.full(len(P), np.inf)
     np.minimum.at(emin, edges.ravel(), np.repeat(elen, 2))
-    seam = bnd_v & on_seams(P, seams, h) & (0.5 * emin - cfg.min_beam >= cfg.min_gap)
+    seam = bnd_v & near_seams(P, poly, seams, h) & (0.5 * emin - cfg.min_beam >= cfg.min_gap)
     gmax = np.where(seam, 0.5 * emin - cfg.min_beam, gmax)
     interior = ~bnd_v | seam
     need = gap_rule(uP, hv, 0.0)  # -d: the gap with r = 0
@@ -288,17 +288,21 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
                    gap_max=np.where(interior, np.minimum(gmax, np.maximum(0.5 * emin - cfg.min_beam, gap)), 0.0))
 
 
-SEAM_TOL = 1e-6  # [spacings] distance within which a boundary vertex lies on a seam polyline
+SEAM_TOL = 1e-6  # [spacings] where the seams are cut out of the domain's outline to leave the rim
 
 
-def on_seams(P: np.ndarray, seams, h: float) -> np.ndarray:
-    """(n,) bool: points P (n,2) [m] within ``SEAM_TOL`` h of one of the seam polylines [(k,2)]."""
+def near_seams(P: np.ndarray, poly, seams, h: float) -> np.ndarray:
+    """(n,) bool: points P (n,2) [m] nearer to one of the seam polylines [(k,2)] than to the rim (the
+    flat domain ``poly``'s outline without the seams; u = 0 there): the pattern's outline along a
+    cut, on the seam or inside the domain where the grid dropped the cells a wedge crosses."""
     import shapely
 
     if not len(seams):
         return np.zeros(len(P), dtype=bool)
     lines = shapely.MultiLineString([np.asarray(s, dtype=np.float64) for s in seams])
-    return shapely.distance(lines, shapely.points(P)) <= SEAM_TOL * h
+    rim = shapely.difference(poly.exterior, shapely.buffer(lines, SEAM_TOL * h))
+    pts = shapely.points(P)
+    return shapely.distance(lines, pts) < shapely.distance(rim, pts)
 
 OUTSIDE_AREA = 0.1  # a quad with more than this fraction of its area outside the flat domain is dropped
 
