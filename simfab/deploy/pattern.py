@@ -16,8 +16,9 @@ Layout (all in the flat domain, metres):
   gap of half-size ``g_i`` that receives a rigid insert of half-size ``r_i`` from the insert
   catalogue (``insert_half_sizes``; one size: ``insert_half_size``); the insert clamps the beam
   ends at distance ``r_i`` from the vertex. Boundary vertices join their beams rigidly (no insert),
-  except on the seams of a cut flattening (``seams``, :mod:`simfab.deploy.cuts`), where u != 0:
-  there the cells grow as inside, so those vertices get inserts too (2 or 3 beams).
+  except along the seams of a cut flattening (``seams``, :mod:`simfab.deploy.cuts`; the outline
+  nearer a seam than the rim), where u != 0: there the cells grow as inside, so those vertices
+  get inserts too (2 or 3 beams) where their shortest edge leaves room for a gap.
 
 Gap rule (derivation). The flattening scales lengths by ``e^u``: a curve of length ``L`` on the
 target has length ``e^u L`` in the flat domain (u varies slowly over a cell). Deployment must
@@ -303,6 +304,7 @@ def near_seams(P: np.ndarray, poly, seams, h: float) -> np.ndarray:
     rim = shapely.difference(poly.exterior, shapely.buffer(lines, SEAM_TOL * h))
     pts = shapely.points(P)
     return shapely.distance(lines, pts) < shapely.distance(rim, pts)
+
 
 OUTSIDE_AREA = 0.1  # a quad with more than this fraction of its area outside the flat domain is dropped
 
