@@ -3,7 +3,8 @@
 - flattening PNG: the target (3D, coloured by the log scale factor u) and its flattening
   (u as colour, boundary in black), colour bar in u [-];
 - pattern PNG: the laser-cut outlines (black) with each insert gap coloured by r - g [mm]
-  (> 0: the insert pushes, dome; < 0: pulls, saddle), unreachable gaps crossed, a 50 mm bar;
+  (> 0: the insert pushes, dome; < 0: pulls, saddle), unreachable gaps crossed, the seams of a
+  cut flattening (green), a 50 mm bar;
 - deviation PNG: the deployed quad mesh after the best rigid alignment, coloured by the
   distance of each vertex to the target [mm], the target as grey wireframe;
 - USD: rods as curves with widths (one time code per quasi-static increment, 0 = flat), the
@@ -84,6 +85,9 @@ def write_pattern_png(path, res) -> None:
     fig, ax = plt.subplots(figsize=(8, 8))
     segs = [np.vstack([r, r[:1]]) for r in cut.rings]
     ax.add_collection(LineCollection(segs, colors="k", linewidths=0.5, label="cut"))
+    if cut.seams:
+        ax.add_collection(LineCollection([pts for _, pts in cut.seams], colors="tab:green", linewidths=1.2,
+                                         label="seams (cut paths: edges that meet on the target)"))
     ins = np.flatnonzero(p.interior)
     d = (p.insert_size[ins] - p.gap[ins]) * 1e3
     lim = float(np.max(np.abs(d))) if len(d) else 1.0
