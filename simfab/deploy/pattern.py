@@ -226,8 +226,8 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
            seams=()) -> Pattern:
     """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,)).
     ``seams``: flat polylines [(k,2) m] of the cut sides of a cut flattening (their boundary
-    vertices get inserts). ``Pattern.gap_max``: the largest gap the tuning may cut, the achievable
-    limit capped so that every beam half keeps ``min_beam`` (or the length the layout cut)."""
+    vertices get inserts). ``Pattern.gap_max``: the largest gap the tuning may cut
+    (:func:`tuning_gap_limit`)."""
     import shapely
 
 
@@ -286,7 +286,17 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
                    gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, insert_size=r_v,
                    insert_class=cls, bulge=bulge, growth=growth, spring_ratio=ratio,
                    tight_springs=np.flatnonzero(tight & spring), config=cfg,
-                   gap_max=np.where(interior, np.minimum(gmax, np.maximum(0.5 * emin - cfg.min_beam, gap)), 0.0))
+                   gap_max=np.where(interior, tuning_gap_limit(gmax, emin, gap, cfg.min_beam, bool(len(seams))), 0.0))
+
+
+def tuning_gap_limit(gmax, emin, gap, min_beam: float, cut: bool) -> np.ndarray:
+    """(n,) [m] the largest gap the tuning may cut (``Pattern.gap_max``): the achievable limit
+    ``gmax``; on a cut pattern (``cut``: the wedges leave short clipped edges next to inserts) also
+    at most half the vertex's shortest edge ``emin`` less ``min_beam``, or the gap the layout cut
+    (a beam half would otherwise shrink to zero length, measured on the petal)."""
+    if not cut:
+        return gmax
+    return np.minimum(gmax, np.maximum(0.5 * emin - min_beam, gap))
 
 
 SEAM_TOL = 1e-6  # [spacings] where the seams are cut out of the domain's outline to leave the rim

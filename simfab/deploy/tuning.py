@@ -97,7 +97,7 @@ def achievable_growth(pat) -> tuple[np.ndarray, np.ndarray]:
     elen = np.linalg.norm(pat.P[pat.edges[:, 0]] - pat.P[pat.edges[:, 1]], axis=1)
     val = np.bincount(pat.edges.ravel(), minlength=len(pat.P))
     hv = np.bincount(pat.edges.ravel(), weights=np.repeat(elen, 2), minlength=len(pat.P)) / np.maximum(val, 1)
-    gmax = 0.5 * hv - pc.min_beam if pat.gap_max is None else pat.gap_max  # (the layout's, seams included)
+    gmax = 0.5 * hv - pc.min_beam if pat.gap_max is None else pat.gap_max  # (the layout's: seams, short edges)
     return pat.insert_size - gmax, pat.insert_size - pc.min_gap
 
 
