@@ -87,9 +87,17 @@ def test_greedy_cones_make_every_gap_reachable():
     assert np.all(cf.cone_defect > 0)  # positive cones only: their wedges open in the plane
     # Gauss-Bonnet of the cone metric: the cones carry part of the cap's total curvature 2 pi (1 - cos 80)
     assert np.sum(cf.cone_defect) < 2 * np.pi * (1 - np.cos(np.radians(80)))
-    # cones keep their distance from the boundary (graph distance >= boundary_distance spacings)
-    rim = np.linalg.norm(t.V[cf.cones][:, None] - t.V[flatten.boundary_loop(t.F, len(t.V))][None], axis=2).min(1)
-    assert np.all(rim >= cfg.boundary_distance * CAP80.spacing - 1e-12)
+    # cones keep their graph distance (along mesh edges) from the boundary and from each other
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+
+    e = np.unique(np.sort(np.concatenate([t.F[:, [0, 1]], t.F[:, [1, 2]], t.F[:, [2, 0]]]), axis=1), axis=0)
+    w = np.linalg.norm(t.V[e[:, 0]] - t.V[e[:, 1]], axis=1)
+    G = sp.coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(t.V),) * 2)
+    D = dijkstra(G, directed=False, indices=cf.cones)  # (c, n)
+    assert np.all(D[:, flatten.boundary_loop(t.F, len(t.V))].min(axis=1) >= cfg.boundary_distance * CAP80.spacing)
+    Dc = D[:, cf.cones] + np.diag(np.full(len(cf.cones), np.inf))
+    assert np.all(Dc >= cfg.cone_distance * CAP80.spacing)
 
 
 def test_cut_mesh_is_a_disk_with_isometric_seams():
