@@ -15,8 +15,7 @@ Files: SVG with ``width``/``height`` in mm and the viewBox ``0 0 W H`` in mm (y 
 x - x0, y_svg = y1 - y with (x0, y1) the sheet's top-left corner, :func:`svg_origin`), layers as
 Inkscape layer groups ``cut`` (red hairline) and ``engrave`` (blue); DXF (R2010, $INSUNITS = mm)
 with layers ``CUT`` (closed LWPOLYLINEs), ``ENGRAVE`` (TEXT, LINE) and ``SEAM`` (open LWPOLYLINEs,
-TEXT). Summary: part count,
-total cut length [mm], sheet extent [mm].
+TEXT). Summary: part count, total cut length [mm], sheet extent [mm] (the seams included), seams.
 """
 
 from __future__ import annotations
@@ -71,6 +70,11 @@ def layout(pat, *, arc_points: int = 12, seams=()) -> CutLayout:
     for v in ids:
         labels.append((name(v), tuple(pat.P[v] * MM), 1.2))
     minx, miny, maxx, maxy = shape.bounds
+    seam_lines = tuple((lab, np.asarray(pts, dtype=np.float64) * MM) for lab, pts in seams)
+    if seam_lines:  # the seams run on to the rim where the grid left notches
+        allp = np.vstack([pts for _, pts in seam_lines])
+        minx, miny = min(minx, allp[:, 0].min()), min(miny, allp[:, 1].min())
+        maxx, maxy = max(maxx, allp[:, 0].max()), max(maxy, allp[:, 1].max())
     # insert parts: rows below the pattern, by size class then number, on the largest size's pitch
     half = (pat.insert_size + pat.config.beam_width) * MM  # plate half-side per vertex
     s = float(half[ids].max()) if len(ids) else 0.0
@@ -90,7 +94,6 @@ def layout(pat, *, arc_points: int = 12, seams=()) -> CutLayout:
     labels.append((f"{SCALE_BAR_MM:.0f} mm", (minx + SCALE_BAR_MM / 2, ybar - 3.0), 2.5))
     cut_length = float(sum(np.sum(np.linalg.norm(np.roll(r, -1, axis=0) - r, axis=1)) for r in rings))
     extent = (minx, ybar - 6.0, maxx, maxy)
-    seam_lines = tuple((lab, np.asarray(pts, dtype=np.float64) * MM) for lab, pts in seams)
     return CutLayout(rings=rings, labels=labels, scale_bar=bar, parts=len(polys) + len(ids), inserts=len(ids),
                      cut_length=cut_length, extent=extent, seams=seam_lines)
 
