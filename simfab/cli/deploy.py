@@ -4,9 +4,10 @@
     simfab deploy surface TARGET       # target surface -> laser-cut pattern -> deployment
 
 surface TARGET: TARGET is a scene TOML (scenes/deploy/dome.toml, saddle.toml, mixed.toml,
-or a bundled name: dome, saddle, mixed) or a disk-topology mesh (OBJ/STL/PLY, --units). It
-flattens the target (BFF, u = 0 on the boundary), lays out the beam / spring / insert pattern
-with gaps from the area distortion, writes the laser-cut SVG + DXF (mm), deploys the pattern
+or a bundled name: dome, saddle, mixed, cap80, saddle_steep, petal) or a disk-topology mesh
+(OBJ/STL/PLY, --units). It flattens the target (BFF, u = 0 on the boundary; with cone
+singularities and cuts when the scene's [cuts] max_cones > 0), lays out the beam / spring /
+insert pattern with gaps from the area distortion, writes the laser-cut SVG + DXF (mm), deploys the pattern
 (rods + free inserts), compares it with the target after the best rigid alignment, and writes a
 MuJoCo scene that simulates (it opens on the deployed state; the flat pattern is the springs'
 rest state and keyframe 'flat'), checked for stability and against simfab's equilibrium.
@@ -35,7 +36,8 @@ DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 
 def add_args(p) -> None:
     p.add_argument("action", nargs="?", choices=["surface"], help="'surface': deploy a pattern onto a target surface")
-    p.add_argument("target", nargs="?", help="surface: scene TOML, bundled name (dome, saddle, mixed) or mesh file")
+    p.add_argument("target", nargs="?", help="surface: scene TOML, bundled name (dome, saddle, mixed, "
+                   "cap80, saddle_steep, petal) or mesh file")
     g = p.add_argument_group("surface options (override the scene's)")
     g.add_argument("--units", choices=["m", "mm", "cm"], default=None, help="units of a target mesh file (default m)")
     g.add_argument("--spacing", type=float, help="pattern grid spacing [m]")
@@ -78,9 +80,10 @@ def run_surface(args) -> dict:
     from simfab.io.atomic import atomic_paths, write_json
 
     if not args.target:
-        raise InputError("needs a TARGET: scene TOML, bundled name (dome, saddle, mixed) or mesh file",
+        raise InputError("needs a TARGET: scene TOML, bundled name (dome, saddle, mixed, cap80, saddle_steep, "
+                         "petal) or mesh file",
                          where="simfab deploy surface")
-    target = (sc.bundled_path(args.target) if args.target in sc.BUNDLED and not os.path.exists(args.target)
+    target = (sc.bundled_path(args.target) if args.target in sc.NAMES and not os.path.exists(args.target)
               else args.target)
     ov = {"pattern": {}, "material": {}, "tune": {}}
     for flag, table, field in (("spacing", "pattern", "spacing"), ("beam_width", "pattern", "beam_width"),
@@ -155,6 +158,12 @@ def format_text(summary: dict) -> str:
             f"deviation         RMS {dv['rms'] * 100:.3g} % ({dv['rms_mm']:.3g} mm), "
             f"Hausdorff {dv['hausdorff'] * 100:.3g} % ({dv['hausdorff_mm']:.3g} mm) of D = {dv['diameter_mm']:.0f} mm; "
             f"height {dv['deployed_height_mm']:.3g} mm (target {dv['target_height_mm']:.3g} mm)"]
+    cu = s.get("cuts")
+    if cu:
+        rows.append(f"cuts              {cu['cones']} cones (angle defects "
+                    + ", ".join(f"{c['cone_defect_deg']:.3g}" for c in cu["seams"])
+                    + f" deg), seams {'joined by ' + str(cu['seam_ties']) + ' ties' if cu['seams_joined'] else 'free'}"
+                    f"; pattern covers {100 * cu['flat_area_covered']:.3g} % of the cut flat domain")
     tn = s.get("tuning")
     if tn:
         rows.append(f"tuned gaps        {tn['steps']} Gauss-Newton steps ({tn['solves']} solves), RMS "

@@ -11,6 +11,8 @@ Inverse design from a target surface (``simfab deploy surface``), one stage per 
 - :mod:`simfab.deploy.surface`: disk-topology targets (validation, procedural cap / saddle /
   mixed / cylinder); :mod:`simfab.deploy.scene`: the scene TOML;
 - :mod:`simfab.deploy.flatten`: Boundary First Flattening (u = 0 on the boundary);
+- :mod:`simfab.deploy.cuts`: cone singularities placed automatically, cut paths, BFF of the cut
+  mesh, seam ties;
 - :mod:`simfab.deploy.pattern`: quad layout, beams, Bezier torsional springs, the gap rule;
 - :mod:`simfab.deploy.lasercut`: SVG / DXF export (mm);
 - :mod:`simfab.deploy.network`: the pattern as a rod network with free inserts, deployment;

@@ -1,9 +1,10 @@
-"""Boundary First Flattening (Sawhney & Crane 2017) with zero boundary scale factor, cone-free.
+"""Boundary First Flattening (Sawhney & Crane 2017) with zero (or prescribed) boundary scale factors.
 
 Input: a disk-topology triangle mesh V (n,3) [m], F (m,3). Output: flat positions (n,2) [m]
 whose metric is conformal to the input's, ``g_flat = e^{2u} g``, with ``u = 0`` on the
 boundary (boundary edge lengths kept; the flattening of least area distortion, Springborn et
-al. 2008) and no cone singularities.
+al. 2008) and no cone singularities. Cones enter as prescribed boundary scale factors of a cut
+mesh (``flatten(..., u_boundary=...)``, :mod:`simfab.deploy.cuts`).
 
 Discrete quantities (A: the cotan Laplacian, positive semi-definite, ``(A u)_i = sum_j w_ij
 (u_i - u_j)``, ``w_ij = (cot a_ij + cot b_ij) / 2`` over the two angles opposite edge ij):
@@ -137,8 +138,14 @@ def _close_polygon(lengths: np.ndarray, phi: np.ndarray, *, tol: float = 1e-14, 
                            f"(residual {np.linalg.norm(r) / total:.2e} of its length)")
 
 
-def flatten(V, F) -> Flattening:
-    """Boundary First Flattening with u = 0 on the boundary (see module doc). V (n,3) [m], F (m,3)."""
+def flatten(V, F, *, u_boundary=None) -> Flattening:
+    """Boundary First Flattening with u = 0 on the boundary (see module doc). V (n,3) [m], F (m,3).
+
+    ``u_boundary`` (n,) [-] (read at the boundary vertices; default 0): prescribed boundary scale
+    factors (BFF's Dirichlet case; :mod:`simfab.deploy.cuts` passes the cone metric's u along
+    the cut sides). Then step 1 solves ``A_II u_I = -Omega_I - A_IB u_B``, step 2 adds
+    ``A_BB u_B`` to the boundary curvature, and step 3 uses the lengths ``l~ = e^{(u_i+u_j)/2} l``.
+    """
     import time
 
     t0 = time.perf_counter()
@@ -159,16 +166,21 @@ def flatten(V, F) -> Flattening:
     A_IB = A_I[:, loop].tocsr()
     t1 = time.perf_counter()
     solver = CholeskyFactor(A_II) if len(interior) else None
-    # 1. flat metric, u_B = 0:  A_II u_I = -Omega_I
+    # 1. flat metric, u_B given (0 by default):  A_II u_I = -Omega_I - A_IB u_B
     u = np.zeros(n)
+    if u_boundary is not None:
+        u[loop] = np.asarray(u_boundary, dtype=np.float64)[loop]
+    uB = u[loop]
     if len(interior):
-        u[interior] = solver.solve(-omega)
+        u[interior] = solver.solve(-omega - A_IB @ uB)
     t2 = time.perf_counter()
-    # 2. Dirichlet-to-Neumann: boundary curvature of the flat metric
-    k_new = kgeo + (A_IB.T @ u[interior] if len(interior) else 0.0)
-    # 3. boundary polygon with the original lengths (u_B = 0), closed by the smallest angle change
+    # 2. Dirichlet-to-Neumann: boundary curvature of the flat metric, k~ = k + A_BI u_I + A_BB u_B
+    k_new = kgeo + (A_IB.T @ u[interior] if len(interior) else 0.0) + A[loop][:, loop] @ uB
+    # 3. boundary polygon with the scaled lengths (u_B = 0: the original ones), closed by the smallest
+    # angle change
     Vb = V[loop]
     lengths = np.linalg.norm(np.roll(Vb, -1, axis=0) - Vb, axis=1)  # edge loop[i] -> loop[i+1]
+    lengths = lengths * np.exp(0.5 * (uB + np.roll(uB, -1)))
     phi0 = np.cumsum(k_new)  # tangent of edge i turns by k~ at its start vertex
     phi = _close_polygon(lengths, phi0)
     corr = float(np.max(np.abs(phi - phi0)))

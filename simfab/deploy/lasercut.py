@@ -6,13 +6,16 @@ ring (outer boundary and holes) is one closed polyline on the **cut** layer. The
 square plate of half-side r_i + beam_width, so the clamped beam ends rest on it) are laid out
 in rows below the pattern as separate parts, by size class. The **engrave** layer carries the
 insert numbers with their size class (``12 B``; the number alone with a one-size catalogue) at
-each gap of the pattern and on each insert part, and a 50 mm scale bar.
+each gap of the pattern and on each insert part, and a 50 mm scale bar. A pattern flattened with
+cuts (:mod:`simfab.deploy.cuts`) also has a **seam** layer: both sides of every cut path as open
+polylines, labelled ``S<k>`` at their middles (the two edges that meet on the target; the sheet
+is already cut there, the pattern's outline follows them).
 
 Files: SVG with ``width``/``height`` in mm and the viewBox ``0 0 W H`` in mm (y down: x_svg =
 x - x0, y_svg = y1 - y with (x0, y1) the sheet's top-left corner, :func:`svg_origin`), layers as
 Inkscape layer groups ``cut`` (red hairline) and ``engrave`` (blue); DXF (R2010, $INSUNITS = mm)
-with layers ``CUT`` (closed LWPOLYLINEs) and ``ENGRAVE`` (TEXT, LINE). Summary: part count,
-total cut length [mm], sheet extent [mm].
+with layers ``CUT`` (closed LWPOLYLINEs), ``ENGRAVE`` (TEXT, LINE) and ``SEAM`` (open LWPOLYLINEs,
+TEXT). Summary: part count, total cut length [mm], sheet extent [mm] (the seams included), seams.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ SCALE_BAR_MM = 50.0
 class CutLayout:
     """Everything drawn, in mm (y up): cut rings [(k,2) closed, first != last], labels
     [(text, (x, y), height)], scale-bar segments [((x0,y0),(x1,y1))], parts, cut_length [mm],
-    extent (xmin, ymin, xmax, ymax) [mm]."""
+    extent (xmin, ymin, xmax, ymax) [mm]; seams [(label, (k,2) open polyline)] (empty without cuts)."""
 
     rings: list
     labels: list
@@ -38,10 +41,12 @@ class CutLayout:
     inserts: int
     cut_length: float
     extent: tuple
+    seams: tuple = ()
 
 
-def layout(pat, *, arc_points: int = 12) -> CutLayout:
-    """Outlines of the pattern ``pat`` (:class:`simfab.deploy.pattern.Pattern`) and its inserts."""
+def layout(pat, *, arc_points: int = 12, seams=()) -> CutLayout:
+    """Outlines of the pattern ``pat`` (:class:`simfab.deploy.pattern.Pattern`) and its inserts;
+    ``seams``: [(label, (k,2) polyline [m])] for the seam layer."""
     import shapely
 
     w = pat.config.beam_width * MM
@@ -65,6 +70,11 @@ def layout(pat, *, arc_points: int = 12) -> CutLayout:
     for v in ids:
         labels.append((name(v), tuple(pat.P[v] * MM), 1.2))
     minx, miny, maxx, maxy = shape.bounds
+    seam_lines = tuple((lab, np.asarray(pts, dtype=np.float64) * MM) for lab, pts in seams)
+    if seam_lines:  # the seams run on to the rim where the grid left notches
+        allp = np.vstack([pts for _, pts in seam_lines])
+        minx, miny = min(minx, allp[:, 0].min()), min(miny, allp[:, 1].min())
+        maxx, maxy = max(maxx, allp[:, 0].max()), max(maxy, allp[:, 1].max())
     # insert parts: rows below the pattern, by size class then number, on the largest size's pitch
     half = (pat.insert_size + pat.config.beam_width) * MM  # plate half-side per vertex
     s = float(half[ids].max()) if len(ids) else 0.0
@@ -85,7 +95,7 @@ def layout(pat, *, arc_points: int = 12) -> CutLayout:
     cut_length = float(sum(np.sum(np.linalg.norm(np.roll(r, -1, axis=0) - r, axis=1)) for r in rings))
     extent = (minx, ybar - 6.0, maxx, maxy)
     return CutLayout(rings=rings, labels=labels, scale_bar=bar, parts=len(polys) + len(ids), inserts=len(ids),
-                     cut_length=cut_length, extent=extent)
+                     cut_length=cut_length, extent=extent, seams=seam_lines)
 
 
 SVG_MARGIN = 5.0  # mm around the drawing
@@ -119,7 +129,18 @@ def write_svg(path, cut: CutLayout) -> None:
     for text, (x, y), h in cut.labels:
         out.append(f'<text x="{fx(x)}" y="{fy(y)}" font-size="{f(h)}" font-family="sans-serif" text-anchor="middle" '
                    f'dominant-baseline="central" fill="#0000ff" stroke="none">{text}</text>')
-    out.append("</g></svg>")
+    out.append("</g>")
+    if cut.seams:
+        out.append('<g id="seam" inkscape:label="seam" inkscape:groupmode="layer" fill="none" stroke="#00a000" '
+                   'stroke-width="0.1">')
+        for k, (lab, pts) in enumerate(cut.seams):
+            d = "M " + " L ".join(f"{fx(x)},{fy(y)}" for x, y in pts)
+            out.append(f'<path id="seam{k}" d="{d}"/>')
+            x, y = pts[len(pts) // 2]
+            out.append(f'<text x="{fx(x)}" y="{fy(y)}" font-size="3" font-family="sans-serif" text-anchor="middle" '
+                       f'dominant-baseline="central" fill="#00a000" stroke="none">{lab}</text>')
+        out.append("</g>")
+    out.append("</svg>")
     with open(path, "w", encoding="utf-8") as fh:
         fh.write("\n".join(out) + "\n")
 
@@ -134,6 +155,8 @@ def write_dxf(path, cut: CutLayout) -> None:
     doc.header["$MEASUREMENT"] = 1
     doc.layers.add("CUT", color=1)
     doc.layers.add("ENGRAVE", color=5)
+    if cut.seams:
+        doc.layers.add("SEAM", color=3)
     msp = doc.modelspace()
     for r in cut.rings:
         msp.add_lwpolyline([tuple(p) for p in r], close=True, dxfattribs={"layer": "CUT"})
@@ -142,10 +165,14 @@ def write_dxf(path, cut: CutLayout) -> None:
     for text, (x, y), h in cut.labels:
         msp.add_text(text, height=h, dxfattribs={"layer": "ENGRAVE"}).set_placement(
             (x, y), align=TextEntityAlignment.MIDDLE_CENTER)
+    for lab, pts in cut.seams:
+        msp.add_lwpolyline([tuple(p) for p in pts], close=False, dxfattribs={"layer": "SEAM"})
+        msp.add_text(lab, height=3.0, dxfattribs={"layer": "SEAM"}).set_placement(
+            tuple(pts[len(pts) // 2]), align=TextEntityAlignment.MIDDLE_CENTER)
     doc.saveas(path)
 
 
 def summary(cut: CutLayout) -> dict:
     x0, y0, x1, y1 = cut.extent
     return dict(parts=cut.parts, inserts=cut.inserts, cut_outlines=len(cut.rings), cut_length_mm=cut.cut_length,
-                sheet_mm=[x1 - x0, y1 - y0])
+                sheet_mm=[x1 - x0, y1 - y0], seams=len({lab for lab, _ in cut.seams}))

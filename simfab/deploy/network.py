@@ -10,6 +10,12 @@ Network (built from a :class:`simfab.deploy.pattern.Pattern`, flat in z = 0):
   vertex's insert at the beam end, i.e. at distance g from the insert centre in the flat state,
   or to the boundary junction); each spring arc is a rod clamped to the junctions of the two
   edge midpoints it joins. Rest shape = the flat, cut shape (springs carry their Bezier curvature).
+- seam ties (optional, a cut pattern whose seams are closed, :func:`simfab.deploy.cuts.seam_ties`):
+  a straight 3-segment beam across the wedge between two seam vertices facing each other on the
+  target, clamped to both (its end edges rigid in the vertex bodies); in deployment its clamp
+  offsets move outwards along it by (L_flat - L_target)/2 at each end, like an insert's beam
+  ends, so the two vertices are drawn from their flat distance to their target distance (the
+  seam is closed; the tie is not part of the laser-cut sheet but a joint made at assembly);
 - support: a statically determinate 3-2-1 support on the middle nodes of three spring arcs
   (near the centre: x, y, z; towards +x: y, z; towards +y: z) removes the six rigid motions
   without constraining the deformation (as in the unit cell).
@@ -96,6 +102,7 @@ class Network:
     pull_grow: np.ndarray
     pull_vertex: np.ndarray  # (k,) the pattern vertex (insert) of each insert-clamped node
     held_node: int  # the fully supported node (predictor origin)
+    tie_offset: np.ndarray | None = None  # (N,3) [m] seam ties' clamp-offset change at full deployment
 
 
 def rod_parameters(n: int, clamp_edge: float) -> np.ndarray:
@@ -107,7 +114,9 @@ def rod_parameters(n: int, clamp_edge: float) -> np.ndarray:
     return np.concatenate([[0.0], np.linspace(d, 1.0 - d, n - 1), [1.0]])
 
 
-def build_network(pat, cfg: DeployConfig) -> Network:
+def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
+    """The rod network of ``pat`` (see module doc); ``ties``: :class:`simfab.deploy.cuts.SeamTies`
+    (seam vertex pairs (k,2) and their target distances (k,) [m]) or None (seams free)."""
 
     pc = pat.config
     sec = Section(width=pc.beam_width, thickness=pc.beam_thickness)
@@ -144,6 +153,15 @@ def build_network(pat, cfg: DeployConfig) -> Network:
     if len(springs) < 3:
         raise InputError("the pattern needs at least one quad with a spring (make pattern.spacing smaller)",
                          where="pattern.spacing")
+    tie_rods = []
+    for k, ((a, b), L) in enumerate(zip(np.zeros((0, 2), int) if ties is None else ties.pairs,
+                                        () if ties is None else ties.length)):
+        name = f"tie{k}"
+        nb.add_rod(name, P3[a] + np.linspace(0.0, 1.0, 4)[:, None] * (P3[b] - P3[a]), section=sec, material=mat)
+        nb.clamp(name, "start", vname[a])
+        nb.clamp(name, "end", vname[b])
+        Lf = float(np.linalg.norm(P3[b] - P3[a]))
+        tie_rods.append((name, (P3[a] - P3[b]) / Lf, 0.5 * max(Lf - float(L), 0.0)))
     mid = np.array([p for _, p in springs])
     c = pat.P.mean(axis=0)
     span = np.ptp(pat.P, axis=0)
@@ -165,9 +183,16 @@ def build_network(pat, cfg: DeployConfig) -> Network:
     vb = np.array([model.body_index(n) for n in vname])
     eb = np.array([model.body_index(f"J{e}") for e in range(len(pat.edges))])
     held = int(model.rod(springs[picks[0]][0]).nodes[nspring // 2])
+    tie_offset = None
+    if tie_rods:
+        tie_offset = np.zeros((model.n_nodes, 3))
+        for name, d, s in tie_rods:  # start end (at a) moves away from b, the end end away from a
+            nd = model.rod(name).nodes
+            tie_offset[nd[:2]] = d * s
+            tie_offset[nd[-2:]] = -d * s
     return Network(model=model, state=state, vertex_body=vb, edge_body=eb, pull_nodes=np.array(nodes),
                    pull_dir=np.array(dirs), pull_grow=np.array(grow), pull_vertex=np.array(pv, dtype=np.int64),
-                   held_node=held)
+                   held_node=held, tie_offset=tie_offset)
 
 
 @dataclass
@@ -232,6 +257,8 @@ def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device:
     offset0 = model.node_offset.copy()
     direction = np.zeros_like(offset0)
     direction[net.pull_nodes] = net.pull_dir * net.pull_grow[:, None]
+    if net.tie_offset is not None:
+        direction += net.tie_offset
     B1 = float(np.min(model.bend_stiff[:, 0]))
     f = cfg.perturbation * B1 / pat.config.spacing**2
     body_forces = np.zeros((model.n_bodies, 3))

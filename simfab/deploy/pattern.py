@@ -15,7 +15,10 @@ Layout (all in the flat domain, metres):
 - at every **interior** quad vertex (four quads around it) the four beams stop short of a
   gap of half-size ``g_i`` that receives a rigid insert of half-size ``r_i`` from the insert
   catalogue (``insert_half_sizes``; one size: ``insert_half_size``); the insert clamps the beam
-  ends at distance ``r_i`` from the vertex. Boundary vertices join their beams rigidly (no insert).
+  ends at distance ``r_i`` from the vertex. Boundary vertices join their beams rigidly (no insert),
+  except along the seams of a cut flattening (``seams``, :mod:`simfab.deploy.cuts`; the outline
+  nearer a seam than the rim), where u != 0: there the cells grow as inside, so those vertices
+  get inserts too (2 or 3 beams) where their shortest edge leaves room for a gap.
 
 Gap rule (derivation). The flattening scales lengths by ``e^u``: a curve of length ``L`` on the
 target has length ``e^u L`` in the flat domain (u varies slowly over a cell). Deployment must
@@ -143,6 +146,7 @@ class Pattern:
     spring_ratio: np.ndarray
     tight_springs: np.ndarray
     config: PatternConfig
+    gap_max: np.ndarray | None = None  # (n,) [m] largest gap the tuning may cut (see layout)
 
     @property
     def n_inserts(self) -> int:
@@ -218,8 +222,12 @@ def gap_rule(u: np.ndarray, h: np.ndarray, r: float) -> np.ndarray:
     return r - 0.5 * h * np.expm1(-np.asarray(u, dtype=np.float64))
 
 
-def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig) -> Pattern:
-    """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,))."""
+def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig, *,
+           seams=()) -> Pattern:
+    """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,)).
+    ``seams``: flat polylines [(k,2) m] of the cut sides of a cut flattening (their boundary
+    vertices get inserts). ``Pattern.gap_max``: the largest gap the tuning may cut
+    (:func:`tuning_gap_limit`)."""
     import shapely
 
 
@@ -231,6 +239,7 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
         P, quads = _clipped_grid(poly, uv, h)
     else:
         P, quads = conforming_quads(poly, h, uv)
+    P, quads = drop_outside_quads(poly, P, quads)
     # edges and their quads
     e_all = np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)])
     q_all = np.tile(np.arange(len(quads)), 4)
@@ -243,12 +252,19 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     bnd_v = np.zeros(len(P), dtype=bool)
     bnd_v[edges[edge_quads[:, 1] < 0].ravel()] = True
     valence = np.bincount(edges.ravel(), minlength=len(P))
-    interior = ~bnd_v  # every vertex inside the outline holds an insert (4 beams; 3 or 5 at staircase corners)
     # u at the pattern vertices: linear interpolation on the flat triangulation
     uP = interpolate(uv, faces, u, P)
     elen = np.linalg.norm(P[edges[:, 0]] - P[edges[:, 1]], axis=1)
     hv = np.bincount(edges.ravel(), weights=np.repeat(elen, 2), minlength=len(P)) / np.maximum(valence, 1)
     gmax = 0.5 * hv - cfg.min_beam
+    # every vertex inside the outline holds an insert (4 beams; 3 or 5 at staircase corners), and so
+    # does a boundary vertex along a seam (u != 0 there: its cell must grow too, simfab.deploy.cuts) whose
+    # shortest edge leaves room for a gap (its gap limit is set by that edge: clipped cells are short)
+    emin = np.full(len(P), np.inf)
+    np.minimum.at(emin, edges.ravel(), np.repeat(elen, 2))
+    seam = bnd_v & near_seams(P, poly, seams, h) & (0.5 * emin - cfg.min_beam >= cfg.min_gap)
+    gmax = np.where(seam, 0.5 * emin - cfg.min_beam, gmax)
+    interior = ~bnd_v | seam
     need = gap_rule(uP, hv, 0.0)  # -d: the gap with r = 0
     cls = np.full(len(P), -1)
     cls[interior] = assign_sizes(-need[interior], gmax[interior], cfg.sizes, cfg.min_gap)
@@ -269,7 +285,54 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     return Pattern(P=P, quads=quads, edges=edges, edge_quads=edge_quads, interior=interior, u=uP, gap=gap,
                    gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, insert_size=r_v,
                    insert_class=cls, bulge=bulge, growth=growth, spring_ratio=ratio,
-                   tight_springs=np.flatnonzero(tight & spring), config=cfg)
+                   tight_springs=np.flatnonzero(tight & spring), config=cfg,
+                   gap_max=np.where(interior, tuning_gap_limit(gmax, emin, gap, cfg.min_beam, bool(len(seams))), 0.0))
+
+
+def tuning_gap_limit(gmax, emin, gap, min_beam: float, cut: bool) -> np.ndarray:
+    """(n,) [m] the largest gap the tuning may cut (``Pattern.gap_max``): the achievable limit
+    ``gmax``; on a cut pattern (``cut``: the wedges leave short clipped edges next to inserts) also
+    at most half the vertex's shortest edge ``emin`` less ``min_beam``, or the gap the layout cut
+    (a beam half would otherwise shrink to zero length, measured on the petal)."""
+    if not cut:
+        return gmax
+    return np.minimum(gmax, np.maximum(0.5 * emin - min_beam, gap))
+
+
+SEAM_TOL = 1e-6  # [spacings] where the seams are cut out of the domain's outline to leave the rim
+
+
+def near_seams(P: np.ndarray, poly, seams, h: float) -> np.ndarray:
+    """(n,) bool: points P (n,2) [m] nearer to one of the seam polylines [(k,2)] than to the rim (the
+    flat domain ``poly``'s outline without the seams; u = 0 there): the pattern's outline along a
+    cut, on the seam or inside the domain where the grid dropped the cells a wedge crosses."""
+    import shapely
+
+    if not len(seams):
+        return np.zeros(len(P), dtype=bool)
+    lines = shapely.MultiLineString([np.asarray(s, dtype=np.float64) for s in seams])
+    rim = shapely.difference(poly.exterior, shapely.buffer(lines, SEAM_TOL * h))
+    pts = shapely.points(P)
+    return shapely.distance(lines, pts) < shapely.distance(rim, pts)
+
+
+OUTSIDE_AREA = 0.1  # a quad with more than this fraction of its area outside the flat domain is dropped
+
+
+def drop_outside_quads(poly, P: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Drop quads with more than ``OUTSIDE_AREA`` of their area outside the flat domain ``poly``
+    (a grid cell whose corners lie on both sides of a cut's wedge, :mod:`simfab.deploy.cuts`, would
+    bridge the seam), keep the largest edge-connected set: (P, quads) re-indexed. A no-op on a
+    domain without notches (the cells' corners lie in it or on its boundary)."""
+    import shapely
+
+    cells = shapely.polygons(P[quads])
+    out = shapely.area(shapely.difference(cells, poly)) > OUTSIDE_AREA * shapely.area(cells)
+    if not out.any():
+        return P, quads
+    quads = _largest_component(quads[~out])
+    used, inv = np.unique(quads, return_inverse=True)
+    return P[used], inv.reshape(-1, 4)
 
 
 def quad_growth(P: np.ndarray, quads: np.ndarray, d: np.ndarray) -> np.ndarray:

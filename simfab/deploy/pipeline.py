@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simfab.deploy import compare, flatten, lasercut, mjcf_sim, network, pattern, tuning
+from simfab.deploy import compare, cuts, flatten, lasercut, mjcf_sim, network, pattern, tuning
 from simfab.deploy.network import discrete_gaussian_curvature
 from simfab.progress import log
 
@@ -52,6 +52,8 @@ class SurfaceResult:
     shape: dict
     seconds: dict
     tuning: dict | None = None
+    cuts: object = None  # simfab.deploy.cuts.CutFlattening when the scene has [cuts] max_cones > 0
+    ties: object = None  # simfab.deploy.cuts.SeamTies when the seams are joined
 
 
 def quadric_curvature(X: np.ndarray) -> float:
@@ -106,20 +108,28 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     t = time.perf_counter()
     tgt = scene.target
     log(f"deploy surface: flatten {len(tgt.V)} vertices (BFF)", quiet=quiet)
-    flat = flatten.flatten(tgt.V, tgt.F)
+    cut_flat = None
+    if getattr(scene, "cuts", None) is not None and scene.cuts.max_cones > 0:  # cones + cuts (the cut mesh)
+        cut_flat = cuts.flatten_with_cuts(tgt.V, tgt.F, scene.cuts, scene.pattern)
+        flat, mV, mF = cut_flat.flat, cut_flat.V, cut_flat.F
+        log(f"deploy surface: {len(cut_flat.cones)} cone(s), cut paths to the boundary", quiet=quiet)
+    else:
+        flat, mV, mF = flatten.flatten(tgt.V, tgt.F), tgt.V, tgt.F
     sec["flatten"] = time.perf_counter() - t
     t = time.perf_counter()
-    pat = pattern.layout(flat.uv, flat.boundary, tgt.F, flat.u, scene.pattern)
-    Y = pattern.map_to_surface(flat.uv, tgt.F, tgt.V, pat.P)
+    seams = [] if cut_flat is None else cuts.seam_lines(cut_flat)
+    pat = pattern.layout(flat.uv, flat.boundary, mF, flat.u, scene.pattern, seams=[p for _, p in seams])
+    Y = pattern.map_to_surface(flat.uv, mF, mV, pat.P)
     sec["layout"] = time.perf_counter() - t
     t = time.perf_counter()
-    cut = lasercut.layout(pat)
+    cut = lasercut.layout(pat, seams=seams)
     sec["lasercut"] = time.perf_counter() - t
     t = time.perf_counter()
     log(f"deploy surface: {pat.n_inserts} inserts, {len(pat.edges)} beams, {int(pat.spring.sum())} springs",
         quiet=quiet)
-    net = network.build_network(pat, scene.deploy)
-    to_target = lambda p: pattern.map_to_surface(flat.uv, tgt.F, tgt.V, p)  # noqa: E731
+    ties = cuts.seam_ties(pat, Y, cut_flat) if cut_flat is not None and scene.cuts.join_seams else None
+    net = network.build_network(pat, scene.deploy, ties=ties)
+    to_target = lambda p: pattern.map_to_surface(flat.uv, mF, mV, p)  # noqa: E731
     dep = network.deploy(pat, net, scene.deploy, network.target_heights(pat, Y), device=device, quiet=quiet,
                          predictor=network.target_displacement(net, to_target))
     sec["deploy"] = time.perf_counter() - t
@@ -131,8 +141,8 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         tuned = tuning.tune(pat, net, dep, Y, tgt, scene.tune, device=device)
         gap0 = pat.gap
         pat = tuning.retuned_pattern(pat, tuned.gap)
-        cut = lasercut.layout(pat)
-        net = network.build_network(pat, scene.deploy)
+        cut = lasercut.layout(pat, seams=seams)
+        net = network.build_network(pat, scene.deploy, ties=ties)
         dep = tuning.redeploy(pat, net, dep, tuned, device=device)
         tune_info = dict(steps=tuned.steps, solves=tuned.solves, rms_before=before.rms,
                          hausdorff_before=before.hausdorff,
@@ -151,7 +161,8 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         sim, check = mujoco_check_run(net, dep, pat, scene)
         sec["mujoco"] = time.perf_counter() - t
     return SurfaceResult(scene=scene, flat=flat, pattern=pat, cut=cut, network=net, deployment=dep, target_points=Y,
-                         deviation=dev, sim=sim, sim_check=check, shape=shape, seconds=sec, tuning=tune_info)
+                         deviation=dev, sim=sim, sim_check=check, shape=shape, seconds=sec, tuning=tune_info,
+                         cuts=cut_flat, ties=ties)
 
 
 def insert_geoms(pat, net) -> dict:
@@ -235,6 +246,30 @@ def summary(res: SurfaceResult) -> dict:
                        deployed_height_mm=out_of_plane_extent(dv.aligned) * 1e3,
                        target_height_mm=out_of_plane_extent(res.target_points) * 1e3),
         tuning=res.tuning,
+        cuts=cuts_summary(res),
         mujoco=res.sim_check,
         seconds=dict(res.seconds, total=float(sum(res.seconds.values()))),
     )
+
+
+def cuts_summary(res: SurfaceResult) -> dict | None:
+    """Cones and seams of a run with cuts (None without): per cone its angle defect [deg] and
+    seam length [mm] (the cut path in 3D), the interior mesh vertices whose growth no insert size
+    reaches without and with the cones, the seam ties, and the flat area the pattern's quads cover
+    (of the cut domain: the grid cells clipped at the wedges leave notches the deviation does not
+    see)."""
+    import shapely
+
+    cf = res.cuts
+    if cf is None:
+        return None
+    V = res.scene.target.V
+    p = res.pattern
+    covered = float(np.sum(shapely.area(shapely.polygons(p.P[p.quads]))))
+    domain = float(shapely.area(shapely.Polygon(cf.flat.uv[cf.flat.boundary])))
+    return dict(cones=len(cf.cones), unreachable_mesh_vertices=cf.unreachable_vertices,
+                flat_area_covered=covered / domain,
+                seams_joined=res.ties is not None, seam_ties=0 if res.ties is None else int(len(res.ties.pairs)),
+                seams=[dict(cone_defect_deg=float(np.degrees(d)),
+                            length_mm=float(np.sum(np.linalg.norm(np.diff(V[s.path], axis=0), axis=1)) * 1e3))
+                       for d, s in zip(cf.cone_defect, cf.seams)])

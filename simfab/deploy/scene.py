@@ -14,6 +14,7 @@
     [deploy]     # increments, perturbation, beam_segments, spring_segments
     [mujoco]     # simfab.deploy.mjcf_sim.SimConfig
     [tune]       # simfab.deploy.tuning.TuneConfig (iterations = 0: no tuning)
+    [cuts]       # simfab.deploy.cuts.CutsConfig (max_cones = 0: no cuts)
 
 Unknown tables or fields are errors naming the file and the field.
 """
@@ -27,6 +28,7 @@ from pathlib import Path
 
 from simfab._bundled import scenes_dir
 from simfab.deploy import surface
+from simfab.deploy.cuts import CutsConfig
 from simfab.deploy.mjcf_sim import SimConfig
 from simfab.deploy.network import DeployConfig
 from simfab.deploy.pattern import PatternConfig
@@ -34,6 +36,9 @@ from simfab.deploy.tuning import TuneConfig
 from simfab.errors import InputError
 
 BUNDLED = ("dome", "saddle", "mixed")
+# the steep targets (insert catalogues; cuts with cones on the cap and the petal): bundled names too
+BUNDLED_STEEP = ("cap80", "saddle_steep", "petal")
+NAMES = BUNDLED + BUNDLED_STEEP
 
 
 @dataclass(frozen=True)
@@ -47,6 +52,7 @@ class SurfaceScene:
     mujoco: object
     path: str
     tune: object = None
+    cuts: object = None
 
 
 def bundled_path(name: str) -> str:
@@ -72,7 +78,8 @@ def _make(cls, table: dict, where: str, section: str):
 def load_scene(path, *, units: str | None = None, overrides: dict | None = None) -> SurfaceScene:
     """Read a scene TOML, or a bare mesh file (then all parameters are defaults + ``overrides``).
 
-    ``overrides``: {"pattern": {...}, "material": {...}, "deploy": {...}, "mujoco": {...}, "tune": {...}}
+    ``overrides``: {"pattern": {...}, "material": {...}, "deploy": {...}, "mujoco": {...}, "tune": {...},
+    "cuts": {...}}
     (command-line values, applied over the file's)."""
 
     p = Path(path)
@@ -85,7 +92,7 @@ def load_scene(path, *, units: str | None = None, overrides: dict | None = None)
             doc = tomllib.loads(p.read_text(encoding="utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
             raise InputError(f"not valid TOML: {e}", where=where) from None
-        unknown = sorted(set(doc) - {"target", "pattern", "material", "deploy", "mujoco", "tune"})
+        unknown = sorted(set(doc) - {"target", "pattern", "material", "deploy", "mujoco", "tune", "cuts"})
         if unknown:
             raise InputError(f"unknown table(s) {', '.join(unknown)}", where=where)
         tt = dict(doc.get("target", {}))
@@ -105,9 +112,10 @@ def load_scene(path, *, units: str | None = None, overrides: dict | None = None)
         doc = {}
         target = surface.load(p, units=units or "m")
     tables = {k: {**doc.get(k, {}), **overrides.get(k, {})}
-              for k in ("pattern", "material", "deploy", "mujoco", "tune")}
+              for k in ("pattern", "material", "deploy", "mujoco", "tune", "cuts")}
     pat = _make(PatternConfig, tables["pattern"], where, "pattern")
     dep = _make(DeployConfig, {**tables["material"], **tables["deploy"]}, where, "material/deploy")
     sim = _make(SimConfig, tables["mujoco"], where, "mujoco")
     tune = _make(TuneConfig, tables["tune"], where, "tune")
-    return SurfaceScene(target=target, pattern=pat, deploy=dep, mujoco=sim, path=where, tune=tune)
+    cut = _make(CutsConfig, tables["cuts"], where, "cuts")
+    return SurfaceScene(target=target, pattern=pat, deploy=dep, mujoco=sim, path=where, tune=tune, cuts=cut)

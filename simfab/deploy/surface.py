@@ -13,7 +13,12 @@ Procedural targets (all over a disk of radius ``a`` [m] in the xy plane, triangu
 - ``mixed``: a saddle with an off-centre Gaussian bump, z = (x^2 - y^2) / (2 c) + h exp(-|p -
   (x0, 0)|^2 / s^2): K > 0 on the bump, K < 0 on the far side (both signs of Gaussian curvature,
   like the thesis' lily/snail examples);
-- ``cylinder``: a patch of a cylinder of radius R (developable, K = 0; for validation).
+- ``cylinder``: a patch of a cylinder of radius R (developable, K = 0; for validation);
+- ``petal``: a petal with a fold along its midrib, over an ellipse of half-axes a (length, y) and
+  b (width, x): z = s (sqrt(x^2 + w^2) - w) + y^2 / (2 c) - a rounded V (slope s either side of a
+  fold of width w: curvature s w^2 / (x^2 + w^2)^{3/2}, s / w on the midrib) curled along its
+  length (radius c). K = z_xx z_yy / (1 + |grad z|^2)^2 > 0 concentrated on the fold (like the
+  thesis' lily petals; the fold is where the flattening shrinks most).
 """
 
 from __future__ import annotations
@@ -26,7 +31,7 @@ from simfab.deploy.flatten import boundary_loop, face_areas
 from simfab.errors import InputError
 from simfab.io.mesh import read_mesh
 
-KINDS = ("spherical_cap", "saddle", "mixed", "cylinder")
+KINDS = ("spherical_cap", "saddle", "mixed", "cylinder", "petal")
 
 
 @dataclass(frozen=True)
@@ -85,6 +90,15 @@ def mixed(a: float, c: float, h: float, s: float, x0: float, rings: int) -> Targ
     return validate(np.column_stack([P, z]), F, "mixed")
 
 
+def petal(a: float, b: float, s: float, w: float, c: float, rings: int) -> Target:
+    """Folded petal z = s (sqrt(x^2 + w^2) - w) + y^2 / (2 c) over the ellipse x^2/b^2 + y^2/a^2 <= 1
+    (a, b, w, c [m], s [-]; see module doc)."""
+    P, F = disk_mesh(1.0, rings)
+    x, y = b * P[:, 0], a * P[:, 1]
+    z = s * (np.sqrt(x * x + w * w) - w) + y * y / (2.0 * c)
+    return validate(np.column_stack([x, y, z]), F, "petal")
+
+
 def cylinder(R: float, angle: float, length: float, n: int, *, jitter: float = 0.25, seed: int = 0) -> Target:
     """Patch of a cylinder (radius R [m], opening ``angle`` [rad], axial ``length`` [m]) meshed by
     Delaunay triangulation of a jittered (n+1)^2 grid of its developed rectangle."""
@@ -114,6 +128,9 @@ def procedural(kind: str, params: dict, *, where: str = "target") -> Target:
         elif kind == "mixed":
             t = mixed(float(p.pop("disk_radius")), float(p.pop("curvature_radius")), float(p.pop("height")),
                       float(p.pop("width")), float(p.pop("offset")), rings)
+        elif kind == "petal":
+            t = petal(float(p.pop("half_length")), float(p.pop("half_width")), float(p.pop("fold_slope")),
+                      float(p.pop("fold_width")), float(p.pop("curl_radius")), rings)
         elif kind == "cylinder":
             t = cylinder(float(p.pop("radius")), np.radians(float(p.pop("angle_deg"))), float(p.pop("length")), rings)
         else:

@@ -3,7 +3,8 @@
 - flattening PNG: the target (3D, coloured by the log scale factor u) and its flattening
   (u as colour, boundary in black), colour bar in u [-];
 - pattern PNG: the laser-cut outlines (black) with each insert gap coloured by r - g [mm]
-  (> 0: the insert pushes, dome; < 0: pulls, saddle), unreachable gaps crossed, a 50 mm bar;
+  (> 0: the insert pushes, dome; < 0: pulls, saddle), unreachable gaps crossed, the seams of a
+  cut flattening (green), a 50 mm bar;
 - deviation PNG: the deployed quad mesh after the best rigid alignment, coloured by the
   distance of each vertex to the target [mm], the target as grey wireframe;
 - USD: rods as curves with widths (one time code per quasi-static increment, 0 = flat), the
@@ -34,24 +35,36 @@ def _plt():
 def write_flattening_png(path, res) -> None:
 
     plt = _plt()
-    tgt, f = res.scene.target, res.flat
+    tgt, f, cf = res.scene.target, res.flat, getattr(res, "cuts", None)
+    V, F = (tgt.V, tgt.F) if cf is None else (cf.V, cf.F)  # with cuts: the cut mesh (its flattening)
     fig = plt.figure(figsize=(11, 5))
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     vmin, vmax = float(min(f.u.min(), -1e-6)), float(max(f.u.max(), 1e-6))
     lim = max(-vmin, vmax)
-    tri = ax.plot_trisurf(tgt.V[:, 0], tgt.V[:, 1], tgt.V[:, 2], triangles=tgt.F, cmap="coolwarm",
+    tri = ax.plot_trisurf(V[:, 0], V[:, 1], V[:, 2], triangles=F, cmap="coolwarm",
                           linewidth=0.0, antialiased=False)
-    tri.set_array(f.u[tgt.F].mean(axis=1))
+    tri.set_array(f.u[F].mean(axis=1))
     tri.set_clim(-lim, lim)
     ax.set_box_aspect(np.ptp(tgt.V, axis=0) + 1e-9)
     ax.set_title(f"target ({len(tgt.V)} vertices), colour: u")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax2 = fig.add_subplot(1, 2, 2)
-    tp = ax2.tripcolor(f.uv[:, 0] * 1e3, f.uv[:, 1] * 1e3, tgt.F, f.u, cmap="coolwarm", vmin=-lim, vmax=lim,
+    tp = ax2.tripcolor(f.uv[:, 0] * 1e3, f.uv[:, 1] * 1e3, F, f.u, cmap="coolwarm", vmin=-lim, vmax=lim,
                        shading="gouraud")
     b = np.r_[f.boundary, f.boundary[0]]
-    ax2.plot(f.uv[b, 0] * 1e3, f.uv[b, 1] * 1e3, "k-", lw=1.2, label="boundary (lengths kept, u = 0)")
+    ax2.plot(f.uv[b, 0] * 1e3, f.uv[b, 1] * 1e3, "k-", lw=1.2,
+             label="boundary (lengths kept, u = 0)" if cf is None else "boundary and seams (u = 0 on the rim)")
+    if cf is not None and len(cf.cones):
+        for k, s in enumerate(cf.seams):
+            for j, side in enumerate(s.sides):
+                ax2.plot(f.uv[side, 0] * 1e3, f.uv[side, 1] * 1e3, "-", color="tab:green", lw=1.5,
+                         label="seams (both sides of each cut)" if k == 0 and j == 0 else None)
+        tip = [int(np.flatnonzero(cf.orig == c)[0]) for c in cf.cones]
+        ax2.scatter(f.uv[tip, 0] * 1e3, f.uv[tip, 1] * 1e3, marker="*", s=80, c="k", zorder=4,
+                    label=f"{len(tip)} cones ({np.degrees(cf.cone_defect.min()):.0f}-"
+                          f"{np.degrees(cf.cone_defect.max()):.0f} deg)")
+        ax.scatter(*tgt.V[cf.cones].T, marker="*", s=60, c="k")
     ax2.set_aspect("equal")
     ax2.set_xlabel("x [mm]")
     ax2.set_ylabel("y [mm]")
@@ -72,6 +85,9 @@ def write_pattern_png(path, res) -> None:
     fig, ax = plt.subplots(figsize=(8, 8))
     segs = [np.vstack([r, r[:1]]) for r in cut.rings]
     ax.add_collection(LineCollection(segs, colors="k", linewidths=0.5, label="cut"))
+    if cut.seams:
+        ax.add_collection(LineCollection([pts for _, pts in cut.seams], colors="tab:green", linewidths=1.2,
+                                         label="seams (cut paths: edges that meet on the target)"))
     ins = np.flatnonzero(p.interior)
     d = (p.insert_size[ins] - p.gap[ins]) * 1e3
     lim = float(np.max(np.abs(d))) if len(d) else 1.0

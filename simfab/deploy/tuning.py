@@ -97,7 +97,8 @@ def achievable_growth(pat) -> tuple[np.ndarray, np.ndarray]:
     elen = np.linalg.norm(pat.P[pat.edges[:, 0]] - pat.P[pat.edges[:, 1]], axis=1)
     val = np.bincount(pat.edges.ravel(), minlength=len(pat.P))
     hv = np.bincount(pat.edges.ravel(), weights=np.repeat(elen, 2), minlength=len(pat.P)) / np.maximum(val, 1)
-    return pat.insert_size - (0.5 * hv - pc.min_beam), pat.insert_size - pc.min_gap
+    gmax = 0.5 * hv - pc.min_beam if pat.gap_max is None else pat.gap_max  # (the layout's: seams, short edges)
+    return pat.insert_size - gmax, pat.insert_size - pc.min_gap
 
 
 def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str = "cpu") -> Tuning:
@@ -110,7 +111,7 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
     ins = np.flatnonzero(pat.interior)
     d = pat.insert_size - pat.gap  # growth per vertex (0 on the boundary)
     lo, hi = achievable_growth(pat)
-    offset0 = model.node_offset.copy()
+    offset0 = model.node_offset.copy() + (0.0 if net.tie_offset is None else net.tie_offset)  # seams closed
 
     def offsets(dv):
         o = offset0.copy()
@@ -179,7 +180,7 @@ def redeploy(pat, net, dep, tuned: Tuning, *, device: str = "cpu"):
 
     t0 = time.perf_counter()
     solver = StaticSolver(net.model, device=device)
-    o = net.model.node_offset.copy()
+    o = net.model.node_offset.copy() + (0.0 if net.tie_offset is None else net.tie_offset)
     o[net.pull_nodes] += net.pull_dir * net.pull_grow[:, None]
     solver.set_attachment_offsets(o)
     s = tuned.state
