@@ -69,8 +69,7 @@ def _make(cls, table: dict, where: str, section: str):
     try:
         return cls(**table)
     except InputError as e:
-        raise InputError(e.args[0] if e.args else str(e),
-                         where=f"{where}: {getattr(e, 'where', None) or section}") from None
+        raise InputError(e.message, where=f"{where}: {e.where or section}") from None
     except TypeError as e:
         raise InputError(str(e), where=f"{where}: [{section}]") from None
 

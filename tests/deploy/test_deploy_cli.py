@@ -137,3 +137,15 @@ def test_deploy_failure_while_writing_leaves_no_output_files(tmp_path, monkeypat
     with pytest.raises(RuntimeError, match="renderer unavailable"):
         cli_deploy.run(args)
     assert not [p for p in out.rglob("*") if p.is_file()]
+
+
+def test_a_bad_pattern_value_names_its_file_and_field_once(tmp_path, capsys):
+    scene = tmp_path / "cap.toml"
+    scene.write_text('[target]\nkind = "spherical_cap"\nradius = 0.15\nangle_deg = 50\n'
+                     '[pattern]\ninsert_half_sizes = [-1.0]\n')
+    out = tmp_path / "o"
+    assert main(["deploy", "surface", str(scene), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"simfab: error: {scene}: pattern.insert_half_sizes: entry 0 must be a positive number "
+                   "(got -1.0)")
+    assert not out.exists()
