@@ -298,16 +298,21 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     ones, where it costs about one objective evaluation, the first trial carries it (unless the
     residual is within NEWTON_EAGER_ABOVE_TOL of the target). Once the exact Hessian has failed to
     factorize, the rest of the solve uses the PSD-projected one (``retry_exact=False``): where it
-    is indefinite it mostly stays so, and each failed attempt costs up to a factorization. Returns
-    (x (n, dim), Newton iterations)."""
+    is indefinite it mostly stays so, and each failed attempt costs up to a factorization. On
+    quadratic elements a solve that follows one where the exact Hessian failed uses the projected
+    one throughout (``exact_first=False``; the next solve offers the exact one again): consecutive
+    steps see similar Hessians, and a failed attempt costs an exact assembly and up to a
+    factorization. Returns (x (n, dim), Newton iterations)."""
     _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n)
     opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
                          step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=cm.fem.element_order == 1,
-                         eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False)
+                         eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False,
+                         exact_first=not (obj.lazy_exact and ctx.exact_failed))
     solver = TimedSolver(pinned(ctx.solver, obj.pin), ctx.timer)
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
+    ctx.exact_failed = res.exact_failures > 0
     return res.x.reshape(x0.shape), res.iterations
 
 
