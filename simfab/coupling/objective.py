@@ -210,9 +210,11 @@ class StepObjective:
 
         Per point, with d its distance to O, a = grad d . dy and K a curvature bound of the field
         (from the Hessians near O, see ``__call__``), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2;
-        the cap is the largest alpha keeping this above 0.1 d. It lets points in contact slide along O
-        (a ~ 0) and move away freely, while approaching points stop short of O. Conservative advancement,
-        alpha <= 0.9 d / (L |dy|) with L a Lipschitz bound of psi, is always allowed as well.
+        the cap is the largest alpha keeping this above t = min(0.1 d, CAP_LAND_DHATS d_hat) (a point far
+        from O may land inside the barrier's range, where the next Newton step sees it). It lets points in
+        contact slide along O (a ~ 0) and move away freely, while approaching points stop short of O.
+        Conservative advancement, alpha <= (d - t) / (L |dy|) with L a Lipschitz bound of psi, is always
+        allowed as well.
         The line search still rejects any trial point inside O (energy +inf). Its time books under
         "line_search".
         """
@@ -232,7 +234,7 @@ class StepObjective:
         d, gd, dy, sp = d[m], gd[m], dy[m], sp[m]
         a = np.einsum("kd,kd->k", gd, dy)
         q = 0.5 * sp**2 * self.curv
-        keep = C.STEP_FRACTION * d
+        keep = d - np.minimum((1.0 - C.STEP_FRACTION) * d, C.CAP_LAND_DHATS * self.dhat[m])
         alpha_curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
         cons = keep / (C.PSI_LIPSCHITZ * sp)
         return float(min(1.0, np.min(np.maximum(alpha_curv, cons))))
