@@ -199,9 +199,9 @@ class SPDSolver:
             pos = canonical_csr(pos)
             self._analyse(pos)
             composed = pos.data.astype(np.int64)[self._perm] - 1
-            full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed, None)
-        if not same:
-            self._full = full = full[:3] + ((A.indptr, A.indices),)
+            full = self._full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed, (A.indptr, A.indices))
+        elif not same:
+            full = self._full = full[:3] + ((A.indptr, A.indices),)
         self._ensure_factor(A.data[full[2]])
 
     def _solve_cholmod(self, A, b):
@@ -269,8 +269,9 @@ class SPDSolver:
         n = A.shape[0]
         rows = np.repeat(np.arange(n), np.diff(A.indptr))
         cols = A.indices
-        # CHOLMOD reads the lower triangle column by column: entry (c, r), r >= c, of column c is
-        # entry (r, c) of the upper triangle's row r, so CSR order of the upper triangle is its order
+        # CHOLMOD reads the lower triangle column by column (rows ascending within a column); its
+        # entry (i, j), i >= j, is A[j, i] of the symmetric A, the upper triangle's entry in CSR row j:
+        # the upper triangle in CSR storage order (rows j, columns i ascending) is CHOLMOD's order
         self._perm = np.flatnonzero(cols >= rows)
         c, r = rows[self._perm], cols[self._perm]
         cholmod = import_cholmod()
