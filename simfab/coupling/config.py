@@ -21,6 +21,10 @@ DHAT_REL = 1e-2
 PSI_LIPSCHITZ = 2.0
 #: Fraction of the distance to O a point may travel in one Newton step (conservative advancement).
 STEP_FRACTION = 0.9
+#: ... but a point farther than (1 - STEP_FRACTION)^-1 CAP_LAND_DHATS * d_hat from O may travel until
+#: it is CAP_LAND_DHATS * d_hat away: it lands inside the barrier's range, so the next Newton step
+#: sees it (at 10 % of its gap it would still be outside, and cap the next step again).
+CAP_LAND_DHATS = 0.5
 #: Barrier stiffness adaptation: double kappa after a step that ends with a point closer than
 #: KAPPA_GROW_BELOW * d_hat to O, up to KAPPA_MAX_GROWTH times its initial value.
 KAPPA_GROW_BELOW = 1e-3

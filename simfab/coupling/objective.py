@@ -210,9 +210,11 @@ class StepObjective:
 
         Per point, with d its distance to O, a = grad d . dy and K a curvature bound of the field
         (from the Hessians near O, see ``__call__``), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2;
-        the cap is the largest alpha keeping this above 0.1 d. It lets points in contact slide along O
-        (a ~ 0) and move away freely, while approaching points stop short of O. Conservative advancement,
-        alpha <= 0.9 d / (L |dy|) with L a Lipschitz bound of psi, is always allowed as well.
+        the cap is the largest alpha keeping this above t = min(0.1 d, CAP_LAND_DHATS d_hat) (a point far
+        from O may land inside the barrier's range, where the next Newton step sees it). It lets points in
+        contact slide along O (a ~ 0) and move away freely, while approaching points stop short of O.
+        Conservative advancement, alpha <= (d - t) / (L |dy|) with L a Lipschitz bound of psi, is always
+        allowed as well.
         The line search still rejects any trial point inside O (energy +inf). Its time books under
         "line_search".
         """
@@ -232,7 +234,7 @@ class StepObjective:
         d, gd, dy, sp = d[m], gd[m], dy[m], sp[m]
         a = np.einsum("kd,kd->k", gd, dy)
         q = 0.5 * sp**2 * self.curv
-        keep = C.STEP_FRACTION * d
+        keep = d - np.minimum((1.0 - C.STEP_FRACTION) * d, C.CAP_LAND_DHATS * self.dhat[m])
         alpha_curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
         cons = keep / (C.PSI_LIPSCHITZ * sp)
         return float(min(1.0, np.min(np.maximum(alpha_curv, cons))))
@@ -299,17 +301,22 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     ones, where it costs about one objective evaluation, the first trial carries it (unless the
     residual is within NEWTON_EAGER_ABOVE_TOL of the target). Once the exact Hessian has failed to
     factorize, the rest of the solve uses the PSD-projected one (``retry_exact=False``): where it
-    is indefinite it mostly stays so, and each failed attempt costs up to a factorization. ``floor``
-    [N] raises the force tolerance for a solve that is not final (a lagging iteration). Returns
-    (x (n, dim), Newton iterations)."""
+    is indefinite it mostly stays so, and each failed attempt costs up to a factorization. On
+    quadratic elements a solve that follows one where the exact Hessian failed uses the projected
+    one throughout (``exact_first=False``; the next solve offers the exact one again): consecutive
+    steps see similar Hessians, and a failed attempt costs an exact assembly and up to a
+    factorization. ``floor`` [N] raises the force tolerance for a solve that is not final (a lagging
+    iteration). Returns (x (n, dim), Newton iterations)."""
     _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n, floor)
     opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
                          step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=cm.fem.element_order == 1,
-                         eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False)
+                         eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False,
+                         exact_first=not (obj.lazy_exact and ctx.exact_failed))
     solver = TimedSolver(pinned(ctx.solver, obj.pin), ctx.timer)
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
+    ctx.exact_failed = res.exact_failures > 0
     return res.x.reshape(x0.shape), res.iterations
 
 

@@ -81,13 +81,17 @@ def pin_for(cm, Q: np.ndarray, c: np.ndarray, x: np.ndarray) -> Pin | None:
 class PinnedSolver:
     """Solves (A + mu U U^T)[free] x = b with one factorization of A[free] (Woodbury):
     y = A^-1 b, Z = A^-1 U, x = y - Z (I/mu + U^T Z)^-1 U^T y. Wraps a solver with
-    ``solve_free(A, free, b)``; A must be factorizable (see simulate: a tiny diagonal term)."""
+    ``solve_free(A, free, b)``, or with ``solve_free_update`` (:class:`simfab.solve.linear.SPDSolver`:
+    the same update with U through half the triangular solves); A must be factorizable (see
+    simulate: a tiny diagonal term)."""
 
     def __init__(self, solver, pin: Pin):
         self.solver, self.pin = solver, pin
 
     def solve_free(self, A, free, b):
         Uf = self.pin.U[free]
+        if hasattr(self.solver, "solve_free_update"):
+            return self.solver.solve_free_update(A, free, b, Uf, self.pin.mu)
         X = self.solver.solve_free(A, free, np.column_stack([b, Uf]))
         y, Z = X[:, 0], X[:, 1:]
         S = np.eye(Uf.shape[1]) / self.pin.mu + Uf.T @ Z

@@ -106,11 +106,13 @@ class StepContext:
     """Per-run services of the insertion loop: ``timer`` (seconds per stage: assembly, factorization,
     solves, contact_field, barrier, line_search, predictor; see :mod:`simfab.coupling.timing`),
     ``phases`` (seconds per loop phase: warm_start, newton, facet_check, record, rigid_check) and
-    the sparse ``solver`` whose symbolic factorization every solve reuses."""
+    the sparse ``solver`` whose symbolic factorization every solve reuses; ``exact_failed``: the
+    last Newton solve found the exact Hessian indefinite (see :func:`simfab.coupling.objective.solve`)."""
 
     timer: Timer = field(default_factory=Timer)
     phases: Timer = field(default_factory=Timer)
     solver: SPDSolver = field(default_factory=SPDSolver)
+    exact_failed: bool = False
 
 
 def accept(state: StepState, x: np.ndarray, s: float, kappa: float, evaluation: Evaluation | None) -> None:

@@ -152,12 +152,13 @@ class Workspace:
     def csr_values(self, second: bool = False) -> np.ndarray:
         """A fresh array (nnz,) of the CSR values of the last Hessian launch (``data2`` with
         ``second``), the parts' buffers summed (callers keep and modify the matrices built on it)."""
-        out = None
+        vals = []
         for part in range(len(self.parts)):
             arr, arr_np = self.csr[(int(second), part)]
-            v = arr_np if arr_np is not None else arr.numpy()
-            out = v.copy() if out is None else out + v
-        return out
+            vals.append(arr_np if arr_np is not None else arr.numpy())
+        if len(vals) == 1:
+            return vals[0].copy()
+        return np.add(vals[0], vals[1]) if len(vals) == 2 else np.sum(vals, axis=0)  # one pass, one new array
 
     def command(self, what: Launch, mode: Hessian) -> tuple:
         """The recorded launches (one per part) for ``what`` and ``mode``, created on first use."""

@@ -50,6 +50,16 @@ class BandedOrSparseCholesky(SPDSolver):
         free = np.asarray(free)
         return self.solve(canonical_csr(A)[free][:, free], b)
 
+    def solve_free_update(self, A, free, b, U, mu):
+        """``(A[free][:, free] + mu U U^T) x = b`` by Woodbury through :meth:`solve_free` (U's r
+        columns solved beside b): y = A^-1 b, Z = A^-1 U, x = y - Z (I/mu + U^T Z)^-1 U^T y."""
+        b, U = np.asarray(b, dtype=np.float64), np.asarray(U, dtype=np.float64)
+        k = 1 if b.ndim == 1 else b.shape[1]
+        X = np.column_stack([self.solve_free(A, free, b.reshape(len(b), k)[:, j]) for j in range(k)]
+                            + [self.solve_free(A, free, U[:, j]) for j in range(U.shape[1])])
+        y, Z = X[:, :k], X[:, k:]
+        return (y - Z @ np.linalg.solve(np.eye(U.shape[1]) / mu + U.T @ Z, U.T @ y)).reshape(b.shape)
+
     def solve(self, A, b):
         from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 

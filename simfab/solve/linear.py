@@ -98,6 +98,11 @@ class SPDSolver:
     Attribute ``timer``: None, or an object with ``timed(key)`` returning a context manager (e.g.
     :class:`simfab.coupling.timing.Timer`); each numeric factorization is then timed under
     "factorization". Attribute ``factorizations``: the numeric factorizations attempted so far.
+
+    CHOLMOD's input is the lower triangle in column-major order, which for a symmetric matrix is
+    the upper triangle of its CSR in row-major order: the value map takes the CSR entries on and
+    above the diagonal, in their storage order, so each gather reads ``A.data`` front to back (a
+    random-order gather of a 3D P2 Hessian's ~2 M values costs ~7 ms, an ordered one ~1-2 ms).
     """
 
     def __init__(self, backend: str = "auto"):
@@ -112,10 +117,14 @@ class SPDSolver:
         self.backend = backend
         self._key = None  # (indptr, indices) of the analysed CSR pattern
         self._perm = None  # CSR value index of each CHOLMOD (lower, column-major) entry
+        self._inv_d = None  # D^-1 of the current factorization (n, 1)
+        self._lu = None  # splu backend: the last factorization
         self._A = None  # cvxopt spmatrix holding the lower triangle
         self._F = None  # CHOLMOD symbolic (then numeric) factor
-        self._factored = None  # copy of the values of the current numeric factorization (None: none)
-        self._full = None  # solve_free: (full pattern key, free indices, value map full -> factor input)
+        self._factored = None  # the values of the current numeric factorization (None: none)
+        # solve_free: (full pattern key, free indices, value map full -> factor input, the index
+        # arrays (indptr, indices) last seen with that key)
+        self._full = None
         self.timer = None
         self.factorizations = 0
 
@@ -138,30 +147,73 @@ class SPDSolver:
         the factor's input order is computed once per (pattern, free set), so each later call is
         one gather and a numeric factorization (Newton on the free dofs of a fixed FEM pattern).
         Raises :class:`NotPositiveDefinite` when the factorization fails."""
-        free = np.asarray(free)
-        A = canonical_csr(A)
+        self._factor_free(A, free)
         if self.backend == "splu":
-            return self.solve(A[free][:, free], b)
+            return self._lu.solve(np.asarray(b, dtype=np.float64))
+        return self._solve_factored(np.asarray(b, dtype=np.float64))
+
+    def solve_free_update(self, A: sp.spmatrix, free: np.ndarray, b: np.ndarray, U: np.ndarray,
+                          mu: float) -> np.ndarray:
+        """Solve ``(A[free][:, free] + mu U U^T) x = b`` (U (m, r) dense, mu > 0 [units of A], b (m,)
+        or (m, k)) with one sparse factorization of ``A``'s block (Woodbury).
+
+        With CHOLMOD's factor P A P^T = L D L^T (D = I for a supernodal L L^T) and the half solves
+        f(v) = L^-1 P v, g(v) = P^T L^-T v (so A^-1 = g D^-1 f): V = f(U), v = f(b),
+        c = (I/mu + V^T D^-1 V)^-1 V^T D^-1 v and x = g(D^-1 (v - V c)). The r columns of U pass
+        through the forward half only, so the update costs r/2 solves instead of r.
+        Raises :class:`NotPositiveDefinite` when the factorization fails."""
+        b = np.asarray(b, dtype=np.float64)
+        U = np.asarray(U, dtype=np.float64)
+        self._factor_free(A, free)
+        k = 1 if b.ndim == 1 else b.shape[1]
+        if self.backend == "splu":
+            X = self._lu.solve(np.column_stack([b.reshape(len(b), k), U]))
+            y, Z = X[:, :k], X[:, k:]
+            return (y - Z @ np.linalg.solve(np.eye(U.shape[1]) / mu + U.T @ Z, U.T @ y)).reshape(b.shape)
+        F = self._half(np.column_stack([b.reshape(len(b), k), U]), forward=True)
+        v, V = F[:, :k], F[:, k:]
+        Dv, DV = self._inv_d * v, self._inv_d * V
+        c = np.linalg.solve(np.eye(U.shape[1]) / mu + V.T @ DV, V.T @ Dv)
+        return self._half(Dv - DV @ c, forward=False).reshape(b.shape)
+
+    def _factor_free(self, A: sp.spmatrix, free: np.ndarray) -> None:
+        """Factorize ``A[free][:, free]`` numerically (see :meth:`solve_free`)."""
+        free = np.asarray(free)
+        if self.backend == "splu":
+            from scipy.sparse.linalg import splu
+
+            A = canonical_csr(A)
+            self._lu = splu(sp.csc_matrix(A[free][:, free]), permc_spec="MMD_AT_PLUS_A",
+                            options={"SymmetricMode": True})
+            return
         full = self._full
+        # a model's Hessians share its pattern's index arrays (never modified in place): the same
+        # arrays as last time need no comparison
+        same = full is not None and getattr(A, "indices", None) is full[3][1] and A.indptr is full[3][0]
+        if not same:
+            A = canonical_csr(A)
         if full is None or not (full[1].shape == free.shape and np.array_equal(full[1], free)
-                                and same_pattern(full[0], A)):
+                                and (same or same_pattern(full[0], A))):
             # positions (+1, so that no entry is an explicit zero) of A's values in the submatrix
             pos = sp.csr_matrix((np.arange(1.0, A.nnz + 1.0), A.indices, A.indptr), shape=A.shape)[free][:, free]
             pos = canonical_csr(pos)
             self._analyse(pos)
             composed = pos.data.astype(np.int64)[self._perm] - 1
-            full = self._full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed)
-        return self._factor_solve(A.data[full[2]], np.asarray(b, dtype=np.float64))
+            full = self._full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed, (A.indptr, A.indices))
+        elif not same:
+            full = self._full = full[:3] + ((A.indptr, A.indices),)
+        self._ensure_factor(A.data[full[2]])
 
     def _solve_cholmod(self, A, b):
         A = canonical_csr(A)  # the value map gathers one value per entry
         if not same_pattern(self._key, A):
             self._analyse(A)
-        return self._factor_solve(A.data[self._perm], b)
+        self._ensure_factor(A.data[self._perm])
+        return self._solve_factored(b)
 
-    def _factor_solve(self, values: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Numeric factorization of the analysed pattern with ``values`` (CHOLMOD's input order),
-        unless they are those of the current factorization, then the solve for ``b`` (n,) or (n, k)."""
+    def _ensure_factor(self, values: np.ndarray) -> None:
+        """Numeric factorization of the analysed pattern with ``values`` (CHOLMOD's input order, a
+        fresh array the solver keeps), unless they are those of the current factorization."""
         if self._factored is None or not np.array_equal(values, self._factored):
             self._factored = None
             if self.timer is None:
@@ -169,13 +221,26 @@ class SPDSolver:
             else:
                 with self.timer.timed("factorization"):
                     self._factor(values)
-            self._factored = values.copy()
+            self._factored = values
+
+    def _solve_factored(self, b: np.ndarray) -> np.ndarray:
+        """x = A^-1 b with the current factorization, b (n,) or (n, k)."""
         import cvxopt
 
         cholmod = import_cholmod()
         x = cvxopt.matrix(np.ascontiguousarray(b.reshape(self._A.size[0], -1)))
         cholmod.solve(self._F, x)
         return np.array(x).reshape(b.shape)
+
+    def _half(self, B: np.ndarray, *, forward: bool) -> np.ndarray:
+        """f(B) = L^-1 P B (``forward``) or g(B) = P^T L^-T B with the current factor, B (n, k)."""
+        import cvxopt
+
+        cholmod = import_cholmod()
+        x = cvxopt.matrix(np.ascontiguousarray(B))
+        for sys in ((7, 4) if forward else (5, 8)):  # CHOLMOD_P, CHOLMOD_L / CHOLMOD_Lt, CHOLMOD_Pt
+            cholmod.solve(self._F, x, sys=sys)
+        return np.array(x)
 
     def _factor(self, values: np.ndarray) -> None:
         """Numeric Cholesky factorization; NotPositiveDefinite when a pivot is not positive."""
@@ -196,6 +261,7 @@ class SPDSolver:
         inv_d = np.array(inv_d)
         if not (np.all(np.isfinite(inv_d)) and inv_d.min(initial=np.inf) > 0.0):
             raise NotPositiveDefinite("Cholesky factorization failed: matrix is not positive definite")
+        self._inv_d = inv_d  # (n, 1) D^-1 of the factor (ones for L L^T), for solve_free_update
 
     def _analyse(self, A: sp.csr_matrix) -> None:
         self._full = None  # a value map built on the previous analysis no longer applies
@@ -203,15 +269,16 @@ class SPDSolver:
         n = A.shape[0]
         rows = np.repeat(np.arange(n), np.diff(A.indptr))
         cols = A.indices
-        low = np.flatnonzero(cols <= rows)
-        r, c = rows[low], cols[low]
-        order = np.lexsort((r, c))  # CHOLMOD: column-major, rows sorted within a column
-        self._perm = low[order]
+        # CHOLMOD reads the lower triangle column by column (rows ascending within a column); its
+        # entry (i, j), i >= j, is A[j, i] of the symmetric A, the upper triangle's entry in CSR row j:
+        # the upper triangle in CSR storage order (rows j, columns i ascending) is CHOLMOD's order
+        self._perm = np.flatnonzero(cols >= rows)
+        c, r = rows[self._perm], cols[self._perm]
         cholmod = import_cholmod()
         import cvxopt
 
-        self._A = cvxopt.spmatrix(cvxopt.matrix(A.data[self._perm]), cvxopt.matrix(r[order].astype(np.int64)),
-                                  cvxopt.matrix(c[order].astype(np.int64)), (n, n))
+        self._A = cvxopt.spmatrix(cvxopt.matrix(A.data[self._perm]), cvxopt.matrix(r.astype(np.int64)),
+                                  cvxopt.matrix(c.astype(np.int64)), (n, n))
         # CHOLMOD's own choice (supernodal when the flops per factor entry are high): simplicial on
         # small 2D systems (stand side, 551 unknowns: 0.15 ms per factorization, 0.22 supernodal),
         # supernodal on 3D ones (clip3d, 7,425: 17-20 ms, 53 simplicial)

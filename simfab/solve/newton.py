@@ -77,6 +77,9 @@ class NewtonOptions:
     # rest of the solve once its factorization has failed (a failed attempt costs up to a whole
     # factorization, and where the exact Hessian is indefinite it mostly stays so until convergence)
     retry_exact: bool = True
+    # Offer the exact Hessian from the first iteration (False: the projected one throughout, e.g.
+    # when the caller's previous, similar solve found the exact one indefinite)
+    exact_first: bool = True
     # Regularization when the Cholesky factorization fails: H + shift * mean|diag H| * I with
     # shift starting at reg_initial, multiplied by reg_growth per failure, at most reg_max.
     reg_initial: float = 1e-10
@@ -114,6 +117,7 @@ class NewtonResult:
     converged : always True for a returned result (non-convergence raises)
     reason : which criterion stopped the iteration ("gradient", "step", "roundoff")
     history : one dict per iteration: energy, grad_norm, alpha, backtracks, shift
+    exact_failures : exact Hessians offered whose factorization failed (not positive definite)
     """
 
     x: np.ndarray
@@ -123,6 +127,7 @@ class NewtonResult:
     converged: bool
     reason: str = ""
     history: list = field(default_factory=list)
+    exact_failures: int = 0
 
 
 class _FreeBlock:
@@ -273,7 +278,8 @@ def minimize(
 
     if admissible is not None and not admissible(x):
         raise ConvergenceError("Newton: the start point is not admissible")
-    try_exact = True
+    try_exact = opts.exact_first
+    exact_failures = 0
     f, g, H = fun(x, True)
     if not np.isfinite(f):
         raise ConvergenceError(f"Newton: the objective is not finite at the start point (f={f})")
@@ -284,13 +290,14 @@ def minimize(
 
     def done(reason: str, it: int) -> NewtonResult:
         return NewtonResult(x=x, energy=float(f), grad_norm=gnorm, iterations=it, converged=True,
-                            reason=reason, history=history)
+                            reason=reason, history=history, exact_failures=exact_failures)
 
     if free_idx.size == 0 or gnorm <= opts.grad_tol * gscale:
         return done("gradient", 0)
 
     for it in range(1, opts.max_iter + 1):
         dx_f, shift, used, failed = _newton_direction(solver, sub, H, -g[free_idx], opts, try_exact)
+        exact_failures += int(failed)
         if failed and not opts.retry_exact:
             try_exact = False
         dx = np.zeros(n)

@@ -84,6 +84,31 @@ def test_evaluation_without_hessian_defers_the_same_psd_hessian(coarse_block_mod
     assert diff.nnz == 0 or np.abs(diff.data).max() == 0.0
 
 
+@pytest.mark.parametrize("gap_dhats", [0.5, 3.0, 7.0])
+def test_step_cap_stops_approaching_points_outside_o(coarse_block_model, gap_dhats):
+    # the top edge pushed straight into the circle by more than its gap: the full step penetrates,
+    # the capped one leaves every point at least t = min(0.1 d, CAP_LAND_DHATS d_hat) from O (d its
+    # gap before the step; the curvature bound K >= 0.1 / sigma exceeds the circle's 1 / (3 mm))
+    cm = coarse_block_model(refine=True)
+    facets = np.asarray(cm.fem.boundary_facets)
+    top = [i for i, f in enumerate(facets) if set(f.tolist()) == {2, 3}]
+    pts = vertex_points(np.asarray(cm.fem.boundary_vertices), 2).concat(facet_points(facets, top, edge_weights(20)))
+    R, _ = cm.pose(0.0)
+    obj = StepObjective(cm, pts, R, np.array([0.0, 3e-3 + gap_dhats * cm.dhat, 0.0]), Timer())
+    x = cm.fem.rest.copy()
+    obj(x.ravel(), True)  # sets the curvature bound from the contact Hessians
+    d0 = obj.last_d.copy()
+    dx = np.zeros_like(x)
+    dx[[2, 3], 1] = (gap_dhats + 1.0) * cm.dhat
+    alpha = obj.max_step(x.ravel(), dx.ravel())
+    R_, p_ = obj.R, obj.p
+    full = -cm.field.evaluate(pts.positions(x + dx), (R_, p_), hessian=False).psi
+    capped = -cm.field.evaluate(pts.positions(x + alpha * dx), (R_, p_), hessian=False).psi
+    assert full.min() < 0 and 0 < alpha < 1
+    t = np.minimum((1 - C.STEP_FRACTION) * d0, C.CAP_LAND_DHATS * obj.dhat)
+    assert np.all(capped >= t * (1 - 1e-6))
+
+
 @pytest.mark.parametrize("dim,order,refined", [(2, 10, False), (2, 10, True), (3, 4, False), (3, 4, True),
                                                (3, 9, True)])
 def test_check_lattice_gaps_equal_the_distances_to_the_facet_vertices(dim, order, refined):

@@ -232,6 +232,14 @@ def test_retry_exact_false_stops_offering_an_indefinite_exact_hessian():
     np.testing.assert_allclose(res_f.x, np.arcsinh(b), rtol=1e-10)
     assert calls_t == 2 * res_t.iterations  # a failed exact attempt and the PSD solve, every iteration
     assert calls_f == res_f.iterations + 1  # the exact one only at the first
+    assert (res_t.exact_failures, res_f.exact_failures) == (res_t.iterations, 1)
+    # exact_first=False: the projected Hessian throughout (no failed attempt, the same iterates)
+    solver = Counting()
+    res_p = minimize(fun, np.zeros(4), options=NewtonOptions(grad_tol=1e-12, retry_exact=False, exact_first=False),
+                     solver=solver)
+    assert solver.calls == res_p.iterations == res_f.iterations and res_p.exact_failures == 0
+    assert all(h["hessian"] == "psd" for h in res_p.history)
+    np.testing.assert_allclose(res_p.x, res_f.x, rtol=1e-12)
 
 
 def test_zero_max_step_and_inadmissible_trials_raise():
