@@ -135,16 +135,16 @@ def build_network(pat, cfg: DeployConfig) -> Network:
             d = s3 - P3[v]
             pulls.append((name, d / np.linalg.norm(d), pat.insert_size[v] - pat.gap[v], v))
     springs = []
-    for i, (q, e0, e1, pts) in enumerate(pat.spring_curves(ss)):
+    for i, (q, e0, e1, pts) in enumerate(pat.spring_rods(ss)):
         name = f"spring{q}_{i % 4}"
         nb.add_rod(name, np.column_stack([pts, np.zeros(len(pts))]), section=sec_spring, material=mat)
         nb.clamp(name, "start", f"J{e0}")
         nb.clamp(name, "end", f"J{e1}")
-        springs.append((name, pts[nspring // 2]))
+        springs.append((name, pts[(len(pts) - 1) // 2], (len(pts) - 1) // 2))  # (rod, middle node, its index)
     if len(springs) < 3:
         raise InputError("the pattern needs at least one quad with a spring (make pattern.spacing smaller)",
                          where="pattern.spacing")
-    mid = np.array([p for _, p in springs])
+    mid = np.array([p for _, p, _ in springs])
     c = pat.P.mean(axis=0)
     span = np.ptp(pat.P, axis=0)
     picks = []
@@ -152,7 +152,7 @@ def build_network(pat, cfg: DeployConfig) -> Network:
         order = np.argsort(np.linalg.norm(mid - aim, axis=1))
         k = next(int(j) for j in order if int(j) not in picks)
         picks.append(k)
-        nb.fix(springs[k][0], nodes=[nspring // 2], comps=comps)
+        nb.fix(springs[k][0], nodes=[springs[k][2]], comps=comps)
     model, state = nb.build()
     nodes, dirs, grow, pv = [], [], [], []
     for name, d, g, v in pulls:
@@ -164,7 +164,7 @@ def build_network(pat, cfg: DeployConfig) -> Network:
             pv.append(v)
     vb = np.array([model.body_index(n) for n in vname])
     eb = np.array([model.body_index(f"J{e}") for e in range(len(pat.edges))])
-    held = int(model.rod(springs[picks[0]][0]).nodes[nspring // 2])
+    held = int(model.rod(springs[picks[0]][0]).nodes[springs[picks[0]][2]])
     return Network(model=model, state=state, vertex_body=vb, edge_body=eb, pull_nodes=np.array(nodes),
                    pull_dir=np.array(dirs), pull_grow=np.array(grow), pull_vertex=np.array(pv, dtype=np.int64),
                    held_node=held)
