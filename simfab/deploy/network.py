@@ -9,7 +9,7 @@ Network (built from a :class:`simfab.deploy.pattern.Pattern`, flat in z = 0):
   edge is two half beams from its midpoint junction (clamped) to the vertex (clamped to the
   vertex's insert at the beam end, i.e. at distance g from the insert centre in the flat state,
   or to the boundary junction); each spring arc is a rod clamped to the junctions of the two
-  edge midpoints it joins. Rest shape = the flat, cut shape (springs carry their Bezier curvature).
+  edge midpoints it joins. Rest shape = the flat, cut shape (springs carry their Bezier or zigzag curvature).
 - support: a statically determinate 3-2-1 support on the middle nodes of three spring arcs
   (near the centre: x, y, z; towards +x: y, z; towards +y: z) removes the six rigid motions
   without constraining the deformation (as in the unit cell).
@@ -46,7 +46,13 @@ from simfab.deploy.compare import kabsch
 from simfab.errors import ConvergenceError, InputError
 from simfab.progress import progress
 from simfab.rods.model import Material, NetworkBuilder, Section, synchronize
-from simfab.rods.statics import StaticSolver
+from simfab.rods.statics import StaticSolver, StaticsOptions
+
+#: Newton step cap of the deployment's solves [longest rod] (StaticsOptions.max_step): the tangent
+#: predictor starts each increment near its equilibrium, so the cap only binds in the first
+#: increment's buckling, where 0.05 held 40-60 Newton steps in a row at alpha ~ 0.27 (0.2: 227 -> 176
+#: iterations on a 165-insert dome, same equilibria on the bundled targets; docs/decisions.md).
+MAX_STEP = 0.2
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -54,7 +60,8 @@ class DeployConfig:
     """Material and simulation parameters (scene ``[material]`` and ``[deploy]`` tables).
 
     young [Pa], poisson [-], density [kg/m^3] (sheet material); beam_segments,
-    spring_segments: rod segments per half beam / spring arc; clamp_edge [-]: length of a rod's
+    spring_segments: rod segments per half beam / Bezier spring arc (a zigzag arc has its own, per
+    piece: :data:`simfab.deploy.springs.ZIGZAG_SEGMENTS`); clamp_edge [-]: length of a rod's
     two clamped end edges relative to its other edges (a clamped edge is rigid within its body,
     so uniform edges would stiffen a 3-segment beam by leaving only its middle third free);
     increments: quasi-static steps; perturbation [-]: branch-selection load factor (see module doc).
@@ -228,7 +235,7 @@ def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device:
 
     t0 = time.perf_counter()
     model = net.model
-    solver = StaticSolver(model, device=device)
+    solver = StaticSolver(model, device=device, options=StaticsOptions(max_step=MAX_STEP))
     offset0 = model.node_offset.copy()
     direction = np.zeros_like(offset0)
     direction[net.pull_nodes] = net.pull_dir * net.pull_grow[:, None]

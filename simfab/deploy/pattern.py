@@ -10,7 +10,8 @@ Layout (all in the flat domain, metres):
   by a rigid junction; each quad gets a **torsional spring**: four cubic Bezier arcs joining
   consecutive edge midpoints, bulging towards the quad centre, each quad's bulge sized so that
   the arcs are long enough for the growth the quad undergoes in deployment
-  (:mod:`simfab.deploy.springs`); a quad whose neighbouring edges are nearly collinear (an
+  (:mod:`simfab.deploy.springs`); an arc the Bezier family cannot make long enough is a zigzag
+  instead (:func:`zigzag_springs`); a quad whose neighbouring edges are nearly collinear (an
   interior angle > ``degenerate_angle_deg``, boundary quads only) gets no spring;
 - at every **interior** quad vertex (four quads around it) the four beams stop short of a
   gap of half-size ``g_i`` that receives a rigid insert of half-size ``r_i`` from the insert

@@ -28,6 +28,25 @@ def _gaussian_curvature_at(sc, f, points):
     return pattern.interpolate(f.uv, F, K, points)
 
 
+def test_interpolate_inside_and_outside_the_flat_mesh():
+    """Inside: the piecewise-linear interpolant (matplotlib's as the reference); outside (a
+    conforming layout's boundary vertices): the value at the nearest boundary point, here of a
+    linear field on the unit square, evaluated 1 mm beyond an edge."""
+    import matplotlib.tri as mtri
+
+    rng = np.random.default_rng(3)
+    uv = np.vstack([[[0, 0], [1, 0], [1, 1], [0, 1]], rng.uniform(0.1, 0.9, (30, 2))])
+    faces = mtri.Triangulation(uv[:, 0], uv[:, 1]).triangles
+    vals = np.column_stack([2 * uv[:, 0] - uv[:, 1], np.sin(3 * uv[:, 0])])
+    P = rng.uniform(0.0, 1.0, (50, 2))
+    ref = mtri.LinearTriInterpolator(mtri.Triangulation(uv[:, 0], uv[:, 1], faces), vals[:, 1])(P[:, 0], P[:, 1])
+    assert np.allclose(pattern.interpolate(uv, faces, vals, P)[:, 1], ref, atol=1e-12)
+    out = np.array([[0.3, -0.001], [1.001, 0.6], [0.5, 1.001]])
+    near = np.array([[0.3, 0.0], [1.0, 0.6], [0.5, 1.0]])
+    got = pattern.interpolate(uv, faces, vals[:, 0], out)
+    assert np.allclose(got, 2 * near[:, 0] - near[:, 1], atol=1e-12)
+
+
 def test_gap_rule_formula():
     u = np.array([-0.2, 0.0, 0.1])
     g = pattern.gap_rule(u, np.full(3, 0.03), 0.005)
