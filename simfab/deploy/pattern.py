@@ -299,7 +299,8 @@ def zigzag_springs(P, quads, qmids, growth, ratio, tight, cfg: PatternConfig):
     bool short of S/c >= (1 + spring_slack) max(growth, 1) becomes the shortest zigzag that reaches
     it (:func:`simfab.deploy.springs.size_zigzag`), or the longest one that fits where that is
     longer than the Bezier arc. The zigzag stays ``spring_width`` inside its triangle (edge
-    midpoints and quad centre), the Bezier arcs of the same quad inside theirs. Returns legs (q,4)
+    midpoints and quad centre); the quad's Bezier arcs keep ``spring_width`` from the centre (their
+    sizing), which they approach only near the triangles' shared apex. Returns legs (q,4)
     int (0: Bezier), amplitude (q,4), S/c (q,4) and the quads still short of the slack (q,) bool."""
     legs, amp = np.zeros((len(quads), 4), dtype=np.int64), np.zeros((len(quads), 4))
     ratio, tight = ratio.copy(), tight.copy()

@@ -242,8 +242,10 @@ def zigzag_points(pieces, *, rod: bool = False) -> np.ndarray:
     out = []
     for k, p in enumerate(pieces):
         kind = _piece_kind(p, k, len(pieces))
-        m = ZIGZAG_SEGMENTS[kind] if rod else (1 if p[0] == "line" else _TURN_SAMPLES // (2 if kind == "quarter"
-                                                                                       else 1))
+        if rod:
+            m = ZIGZAG_SEGMENTS[kind]
+        else:
+            m = 1 if p[0] == "line" else _TURN_SAMPLES // 2 if kind == "quarter" else _TURN_SAMPLES
         pts = _piece_points(p, m)
         out.append(pts if k == 0 else pts[1:])
     return np.vstack(out)
