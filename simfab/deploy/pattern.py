@@ -72,7 +72,9 @@ class PatternConfig:
     deployed chord (see :mod:`simfab.deploy.springs`); spring_width: in-plane width of the spring
     arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:
     achievable-gap limits (see module doc); degenerate_angle_deg [deg]: interior angle above
-    which a boundary quad gets no spring.
+    which a boundary quad gets no spring; springs: "zigzag" (an arc the Bezier family cannot make
+    long enough becomes a zigzag, :func:`zigzag_springs`) or "bezier" (Bezier arcs only, those
+    short of the slack reported).
     """
 
     spacing: float = 0.025
@@ -87,10 +89,13 @@ class PatternConfig:
     min_beam: float = 0.004
     degenerate_angle_deg: float = 160.0
     layout: str = "grid"
+    springs: str = "zigzag"
 
     def __post_init__(self):
         if self.layout not in ("conforming", "grid"):
             raise InputError(f"must be 'conforming' or 'grid' (got {self.layout!r})", where="pattern.layout")
+        if self.springs not in ("bezier", "zigzag"):
+            raise InputError(f"must be 'bezier' or 'zigzag' (got {self.springs!r})", where="pattern.springs")
         if not isinstance(self.insert_half_sizes, (tuple, list)):
             raise InputError(f"must be a list of sizes [m] (got {self.insert_half_sizes!r})",
                              where="pattern.insert_half_sizes")
@@ -283,7 +288,9 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     qmids = 0.5 * (P[quads] + P[np.roll(quads, -1, axis=1)])  # (q,4,2) midpoint of edge (v_k, v_k+1)
     bulge, ratio, tight = size_bulges(P, quads, qmids, growth, bulge_min=cfg.spring_bulge, slack=cfg.spring_slack,
                                       width=cfg.spring_width)
-    legs, amp, ratio, tight = zigzag_springs(P, quads, qmids, growth, ratio, tight & spring, cfg)
+    legs, amp = np.zeros((len(quads), 4), dtype=np.int64), np.zeros((len(quads), 4))
+    if cfg.springs == "zigzag":
+        legs, amp, ratio, tight = zigzag_springs(P, quads, qmids, growth, ratio, tight & spring, cfg)
     ids = np.full(len(P), -1)
     order = np.flatnonzero(interior)
     order = order[np.lexsort((P[order, 0], -P[order, 1]))]  # row by row from the top, left to right
