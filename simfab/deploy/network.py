@@ -9,7 +9,7 @@ Network (built from a :class:`simfab.deploy.pattern.Pattern`, flat in z = 0):
   edge is two half beams from its midpoint junction (clamped) to the vertex (clamped to the
   vertex's insert at the beam end, i.e. at distance g from the insert centre in the flat state,
   or to the boundary junction); each spring arc is a rod clamped to the junctions of the two
-  edge midpoints it joins. Rest shape = the flat, cut shape (springs carry their Bezier curvature).
+  edge midpoints it joins. Rest shape = the flat, cut shape (springs carry their Bezier or zigzag curvature).
 - seam ties (optional, a cut pattern whose seams are closed, :func:`simfab.deploy.cuts.seam_ties`):
   a straight 3-segment beam across the wedge between two seam vertices facing each other on the
   target, clamped to both (its end edges rigid in the vertex bodies); in deployment its clamp
@@ -52,7 +52,13 @@ from simfab.deploy.compare import kabsch
 from simfab.errors import ConvergenceError, InputError
 from simfab.progress import progress
 from simfab.rods.model import Material, NetworkBuilder, Section, synchronize
-from simfab.rods.statics import StaticSolver
+from simfab.rods.statics import StaticSolver, StaticsOptions
+
+#: Newton step cap of the deployment's solves [longest rod] (StaticsOptions.max_step): the tangent
+#: predictor starts each increment near its equilibrium, so the cap only binds in the first
+#: increment's buckling, where 0.05 held 40-60 Newton steps in a row at alpha ~ 0.27 (0.2: 227 -> 176
+#: iterations on a 165-insert dome, same equilibria on the bundled targets; docs/decisions.md).
+MAX_STEP = 0.2
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -60,7 +66,8 @@ class DeployConfig:
     """Material and simulation parameters (scene ``[material]`` and ``[deploy]`` tables).
 
     young [Pa], poisson [-], density [kg/m^3] (sheet material); beam_segments,
-    spring_segments: rod segments per half beam / spring arc; clamp_edge [-]: length of a rod's
+    spring_segments: rod segments per half beam / Bezier spring arc (a zigzag arc has its own, per
+    piece: :data:`simfab.deploy.springs.ZIGZAG_SEGMENTS`); clamp_edge [-]: length of a rod's
     two clamped end edges relative to its other edges (a clamped edge is rigid within its body,
     so uniform edges would stiffen a 3-segment beam by leaving only its middle third free);
     increments: quasi-static steps; perturbation [-]: branch-selection load factor (see module doc).
@@ -144,12 +151,12 @@ def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
             d = s3 - P3[v]
             pulls.append((name, d / np.linalg.norm(d), pat.insert_size[v] - pat.gap[v], v))
     springs = []
-    for i, (q, e0, e1, pts) in enumerate(pat.spring_curves(ss)):
+    for i, (q, e0, e1, pts) in enumerate(pat.spring_rods(ss)):
         name = f"spring{q}_{i % 4}"
         nb.add_rod(name, np.column_stack([pts, np.zeros(len(pts))]), section=sec_spring, material=mat)
         nb.clamp(name, "start", f"J{e0}")
         nb.clamp(name, "end", f"J{e1}")
-        springs.append((name, pts[nspring // 2]))
+        springs.append((name, pts[(len(pts) - 1) // 2], (len(pts) - 1) // 2))  # (rod, middle node, its index)
     if len(springs) < 3:
         raise InputError("the pattern needs at least one quad with a spring (make pattern.spacing smaller)",
                          where="pattern.spacing")
@@ -162,7 +169,7 @@ def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
         nb.clamp(name, "end", vname[b])
         Lf = float(np.linalg.norm(P3[b] - P3[a]))
         tie_rods.append((name, (P3[a] - P3[b]) / Lf, 0.5 * max(Lf - float(L), 0.0)))
-    mid = np.array([p for _, p in springs])
+    mid = np.array([p for _, p, _ in springs])
     c = pat.P.mean(axis=0)
     span = np.ptp(pat.P, axis=0)
     picks = []
@@ -170,7 +177,7 @@ def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
         order = np.argsort(np.linalg.norm(mid - aim, axis=1))
         k = next(int(j) for j in order if int(j) not in picks)
         picks.append(k)
-        nb.fix(springs[k][0], nodes=[nspring // 2], comps=comps)
+        nb.fix(springs[k][0], nodes=[springs[k][2]], comps=comps)
     model, state = nb.build()
     nodes, dirs, grow, pv = [], [], [], []
     for name, d, g, v in pulls:
@@ -182,7 +189,7 @@ def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
             pv.append(v)
     vb = np.array([model.body_index(n) for n in vname])
     eb = np.array([model.body_index(f"J{e}") for e in range(len(pat.edges))])
-    held = int(model.rod(springs[picks[0]][0]).nodes[nspring // 2])
+    held = int(model.rod(springs[picks[0]][0]).nodes[springs[picks[0]][2]])
     tie_offset = None
     if tie_rods:
         tie_offset = np.zeros((model.n_nodes, 3))
@@ -253,7 +260,7 @@ def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device:
 
     t0 = time.perf_counter()
     model = net.model
-    solver = StaticSolver(model, device=device)
+    solver = StaticSolver(model, device=device, options=StaticsOptions(max_step=MAX_STEP))
     offset0 = model.node_offset.copy()
     direction = np.zeros_like(offset0)
     direction[net.pull_nodes] = net.pull_dir * net.pull_grow[:, None]

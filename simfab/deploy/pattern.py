@@ -10,7 +10,8 @@ Layout (all in the flat domain, metres):
   by a rigid junction; each quad gets a **torsional spring**: four cubic Bezier arcs joining
   consecutive edge midpoints, bulging towards the quad centre, each quad's bulge sized so that
   the arcs are long enough for the growth the quad undergoes in deployment
-  (:mod:`simfab.deploy.springs`); a quad whose neighbouring edges are nearly collinear (an
+  (:mod:`simfab.deploy.springs`); an arc the Bezier family cannot make long enough is a zigzag
+  instead (:func:`zigzag_springs`); a quad whose neighbouring edges are nearly collinear (an
   interior angle > ``degenerate_angle_deg``, boundary quads only) gets no spring;
 - at every **interior** quad vertex (four quads around it) the four beams stop short of a
   gap of half-size ``g_i`` that receives a rigid insert of half-size ``r_i`` from the insert
@@ -57,7 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simfab.deploy._config import require_positive
-from simfab.deploy.springs import bezier, size_bulges
+from simfab.deploy.springs import bezier, size_bulges, size_zigzag, zigzag_layout, zigzag_points
 from simfab.errors import InputError
 
 
@@ -74,7 +75,9 @@ class PatternConfig:
     deployed chord (see :mod:`simfab.deploy.springs`); spring_width: in-plane width of the spring
     arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:
     achievable-gap limits (see module doc); degenerate_angle_deg [deg]: interior angle above
-    which a boundary quad gets no spring.
+    which a boundary quad gets no spring; springs: "zigzag" (an arc the Bezier family cannot make
+    long enough becomes a zigzag, :func:`zigzag_springs`) or "bezier" (Bezier arcs only, those
+    short of the slack reported).
     """
 
     spacing: float = 0.025
@@ -89,10 +92,13 @@ class PatternConfig:
     min_beam: float = 0.004
     degenerate_angle_deg: float = 160.0
     layout: str = "grid"
+    springs: str = "zigzag"
 
     def __post_init__(self):
         if self.layout not in ("conforming", "grid"):
             raise InputError(f"must be 'conforming' or 'grid' (got {self.layout!r})", where="pattern.layout")
+        if self.springs not in ("bezier", "zigzag"):
+            raise InputError(f"must be 'bezier' or 'zigzag' (got {self.springs!r})", where="pattern.springs")
         if not isinstance(self.insert_half_sizes, (tuple, list)):
             raise InputError(f"must be a list of sizes [m] (got {self.insert_half_sizes!r})",
                              where="pattern.insert_half_sizes")
@@ -124,8 +130,9 @@ class Pattern:
     the boundary); insert_class (n,) int: its index in ``config.sizes`` (-1 on the boundary);
     bulge (q,) [-]: spring handle pull per quad; growth (q,4) [-]: the growth of its four spring
     arcs' chords in deployment (:func:`quad_growth`; about e^{-u} in a regular cell);
-    spring_ratio (q,4) [-]: the arcs' length/chord ratios; tight_springs (k,) quads whose arcs cannot get the slack (see
-    :mod:`simfab.deploy.springs`); config.
+    spring_ratio (q,4) [-]: the arcs' length/chord ratios; spring_legs (q,4) int: legs of each arc's zigzag (0: a
+    Bezier arc), spring_amplitude (q,4) [-]: the zigzag's leg height fraction; tight_springs (k,) quads whose arcs
+    cannot get the slack (see :mod:`simfab.deploy.springs`); config.
     """
 
     P: np.ndarray
@@ -144,6 +151,8 @@ class Pattern:
     bulge: np.ndarray
     growth: np.ndarray
     spring_ratio: np.ndarray
+    spring_legs: np.ndarray
+    spring_amplitude: np.ndarray
     tight_springs: np.ndarray
     config: PatternConfig
     gap_max: np.ndarray | None = None  # (n,) [m] largest gap the tuning may cut (see layout)
@@ -183,21 +192,38 @@ class Pattern:
         return out
 
     def spring_curves(self, n=12) -> list[tuple[int, int, int, np.ndarray]]:
-        """Per spring arc: (quad, edge from, edge to, points (n+1,2)) cubic Bezier [m] at n+1 uniform
-        parameters (n int) or at the Bezier parameters n (array in [0, 1])."""
+        """Per spring arc: (quad, edge from, edge to, points (k,2) [m]) as cut: a Bezier arc at n+1
+        uniform parameters, a zigzag as its drawn polyline (:func:`simfab.deploy.springs.zigzag_points`)."""
+        return [(q, e0, e1, self._zigzag(q, k, e0, e1, rod=False) if self.spring_legs[q, k] else
+                 bezier(*self._arc_ends(q, e0, e1), float(self.bulge[q]), n))
+                for q, k, e0, e1 in self._arcs()]
 
-        out = []
-        mids = self.midpoints()
+    def spring_rods(self, params: np.ndarray) -> list[tuple[int, int, int, np.ndarray]]:
+        """Per spring arc: (quad, edge from, edge to, rod nodes (k,2) [m]): a Bezier arc at the
+        parameters ``params`` (in [0, 1]), a zigzag at its own nodes (``ZIGZAG_SEGMENTS`` per piece)."""
+        return [(q, e0, e1, self._zigzag(q, k, e0, e1, rod=True) if self.spring_legs[q, k] else
+                 bezier(*self._arc_ends(q, e0, e1), float(self.bulge[q]), params))
+                for q, k, e0, e1 in self._arcs()]
+
+    def _arcs(self):
+        """(quad, arc k, edge from, edge to) of every spring arc, arc k joining edges k and k+1."""
         ekey = {tuple(sorted(e)): i for i, e in enumerate(self.edges.tolist())}
+        out = []
         for q, quad in enumerate(self.quads):
             if not self.spring[q]:
                 continue
-            c = self.P[quad].mean(axis=0)
             es = [ekey[tuple(sorted((int(quad[k]), int(quad[(k + 1) % 4]))))] for k in range(4)]
-            for k in range(4):
-                e0, e1 = es[k], es[(k + 1) % 4]
-                out.append((q, e0, e1, bezier(mids[e0], mids[e1], c, float(self.bulge[q]), n)))
+            out += [(q, k, es[k], es[(k + 1) % 4]) for k in range(4)]
         return out
+
+    def _arc_ends(self, q, e0, e1):
+        mids = 0.5 * (self.P[self.edges[[e0, e1], 0]] + self.P[self.edges[[e0, e1], 1]])
+        return mids[0], mids[1], self.P[self.quads[q]].mean(axis=0)
+
+    def _zigzag(self, q, k, e0, e1, *, rod: bool) -> np.ndarray:
+        lay = zigzag_layout(*self._arc_ends(q, e0, e1), int(self.spring_legs[q, k]),
+                            float(self.spring_amplitude[q, k]), self.config.spring_width)
+        return zigzag_points(lay[0], rod=rod)
 
 
 CLASS_LETTERS = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
@@ -278,15 +304,39 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     qmids = 0.5 * (P[quads] + P[np.roll(quads, -1, axis=1)])  # (q,4,2) midpoint of edge (v_k, v_k+1)
     bulge, ratio, tight = size_bulges(P, quads, qmids, growth, bulge_min=cfg.spring_bulge, slack=cfg.spring_slack,
                                       width=cfg.spring_width)
+    legs, amp = np.zeros((len(quads), 4), dtype=np.int64), np.zeros((len(quads), 4))
+    if cfg.springs == "zigzag":
+        legs, amp, ratio, tight = zigzag_springs(P, quads, qmids, growth, ratio, tight & spring, cfg)
     ids = np.full(len(P), -1)
     order = np.flatnonzero(interior)
     order = order[np.lexsort((P[order, 0], -P[order, 1]))]  # row by row from the top, left to right
     ids[order] = np.arange(1, len(order) + 1)
     return Pattern(P=P, quads=quads, edges=edges, edge_quads=edge_quads, interior=interior, u=uP, gap=gap,
                    gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, insert_size=r_v,
-                   insert_class=cls, bulge=bulge, growth=growth, spring_ratio=ratio,
-                   tight_springs=np.flatnonzero(tight & spring), config=cfg,
+                   insert_class=cls, bulge=bulge, growth=growth, spring_ratio=ratio, spring_legs=legs,
+                   spring_amplitude=amp, tight_springs=np.flatnonzero(tight & spring), config=cfg,
                    gap_max=np.where(interior, tuning_gap_limit(gmax, emin, gap, cfg.min_beam, bool(len(seams))), 0.0))
+
+
+def zigzag_springs(P, quads, qmids, growth, ratio, tight, cfg: PatternConfig):
+    """Zigzag springs where a Bezier arc cannot get the slack: each arc of a ``tight`` quad (q,)
+    bool short of S/c >= (1 + spring_slack) max(growth, 1) becomes the shortest zigzag that reaches
+    it (:func:`simfab.deploy.springs.size_zigzag`), or the longest one that fits where that is
+    longer than the Bezier arc. The zigzag stays ``spring_width`` inside its triangle (edge
+    midpoints and quad centre); the quad's Bezier arcs keep ``spring_width`` from the centre (their
+    sizing), which they approach only near the triangles' shared apex. Returns legs (q,4)
+    int (0: Bezier), amplitude (q,4), S/c (q,4) and the quads still short of the slack (q,) bool."""
+    legs, amp = np.zeros((len(quads), 4), dtype=np.int64), np.zeros((len(quads), 4))
+    ratio, tight = ratio.copy(), tight.copy()
+    need = (1.0 + cfg.spring_slack) * np.maximum(growth, 1.0)
+    c = P[quads].mean(axis=1)
+    for q in np.flatnonzero(tight):
+        for k in np.flatnonzero(ratio[q] < need[q] - 1e-9):
+            n, a, r = size_zigzag(qmids[q, k], qmids[q, (k + 1) % 4], c[q], need[q, k], cfg.spring_width)
+            if n and r > ratio[q, k]:
+                legs[q, k], amp[q, k], ratio[q, k] = n, a, r
+        tight[q] = bool(np.any(ratio[q] < need[q] - 1e-9))
+    return legs, amp, ratio, tight
 
 
 def tuning_gap_limit(gmax, emin, gap, min_beam: float, cut: bool) -> np.ndarray:
@@ -383,22 +433,41 @@ def _largest_component(quads: np.ndarray) -> np.ndarray:
 
 
 def interpolate(uv, faces, values, P) -> np.ndarray:
-    """Piecewise-linear interpolation of per-vertex ``values`` on the flat triangulation at P (k,2);
-    points outside (projected boundary nodes, by round-off) take the nearest vertex's value."""
+    """Piecewise-linear interpolation of per-vertex ``values`` (n,) or (n,k) on the flat triangulation
+    at P (m,2); points outside (a conforming layout's boundary vertices, up to ~ a sagitta off the
+    boundary) take the value at their nearest point of the triangulation's boundary edges (linear
+    along the edge): the field extended constant along the boundary's normal."""
     import matplotlib.tri as mtri
-    from scipy.spatial import cKDTree
 
+    vals = np.asarray(values, dtype=np.float64)
+    V = vals.reshape(len(uv), -1)
     tri = mtri.Triangulation(uv[:, 0], uv[:, 1], faces)
-    out = np.asarray(mtri.LinearTriInterpolator(tri, values)(P[:, 0], P[:, 1]).filled(np.nan), dtype=np.float64)
-    bad = ~np.isfinite(out)
-    if bad.any():
-        out[bad] = values[cKDTree(uv).query(P[bad])[1]]
-    return out
+    f = tri.get_trifinder()(P[:, 0], P[:, 1])
+    out = np.empty((len(P), V.shape[1]))
+    ins = f >= 0
+    if ins.any():  # barycentric coordinates in the containing triangle
+        T = uv[faces[f[ins]]]  # (k,3,2)
+        A = np.stack([T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]], axis=2)  # (k,2,2)
+        lam = np.linalg.solve(A, (P[ins] - T[:, 0])[:, :, None])[:, :, 0]
+        w = np.column_stack([1.0 - lam.sum(axis=1), lam])
+        out[ins] = np.einsum("kj,kjc->kc", w, V[faces[f[ins]]])
+    if (~ins).any():
+        e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+        ue, cnt = np.unique(e, axis=0, return_counts=True)
+        be = ue[cnt == 1]  # boundary edges
+        a, d = uv[be[:, 0]], uv[be[:, 1]] - uv[be[:, 0]]
+        X = P[~ins][:, None, :]
+        t = np.clip(np.einsum("mbi,bi->mb", X - a, d) / np.einsum("bi,bi->b", d, d), 0.0, 1.0)
+        dist = np.linalg.norm(a + t[:, :, None] * d - X, axis=2)
+        j = np.argmin(dist, axis=1)
+        tj = t[np.arange(len(j)), j][:, None]
+        out[~ins] = (1.0 - tj) * V[be[j, 0]] + tj * V[be[j, 1]]
+    return out.reshape((len(P),) + vals.shape[1:])
 
 
 def map_to_surface(uv, faces, V, P) -> np.ndarray:
     """3D target points (k,3) [m] of flat points P (k,2): barycentric on the flat triangulation."""
-    return np.stack([interpolate(uv, faces, V[:, c], P) for c in range(3)], axis=1)
+    return interpolate(uv, faces, V, P)
 
 
 def _clipped_grid(poly, uv, h):
@@ -458,9 +527,13 @@ def conforming_quads(poly, h: float, uv: np.ndarray) -> tuple[np.ndarray, np.nda
     the boundary, so no quad degenerates into a triangle with three boundary vertices on a line
     (what clipping a grid cell does where the boundary runs across it). Then Laplacian smoothing of
     the non-boundary vertices (``SMOOTHING_ITERATIONS`` Jacobi sweeps, boundary vertices fixed;
-    the uniform grid is its fixed point, so only the cells near the boundary move). The outline
-    is the chord polygon of the p_k on the boundary: the quads cover the domain up to the chords'
-    segments (sagitta ~ h^2 / (8 R) for a boundary of curvature radius R). Staircase corners of
+    the uniform grid is its fixed point, so only the cells near the boundary move). The chord
+    polygon of the p_k on the boundary would leave out the segments between the chords and the
+    boundary (sagitta s ~ h^2 / (8 R) for a boundary of curvature radius R, ~1.2 % of the bundled
+    targets' area); the p_k are moved off the boundary so that every chord's segment is balanced
+    (:func:`_area_preserving`): the outline crosses the boundary, and what it leaves out is
+    (4/9) s a per chord (a: the half length over which the boundary lies outside it; 0.128 s L for a
+    circular arc instead of 2/3 s L), matched by as much outside. Staircase corners of
     the core give loop vertices of valence 3 (convex) or 5 (concave) - inserts with 3 or 5 beams.
     """
     import shapely
@@ -496,6 +569,7 @@ def conforming_quads(poly, h: float, uv: np.ndarray) -> tuple[np.ndarray, np.nda
     if not ccw:
         s = -s
     p = shapely.get_coordinates(shapely.line_interpolate_point(ring, np.mod(s, L)))
+    p = _area_preserving(ring, s, p)
     n0 = len(flatG)
     P = np.vstack([flatG, p])
     m = len(loop)
@@ -509,6 +583,38 @@ def conforming_quads(poly, h: float, uv: np.ndarray) -> tuple[np.ndarray, np.nda
     movable = np.isin(used, loop)  # only the core's outline moves (the grid inside it stays regular)
     P = _smooth(P, quads, ~movable, SMOOTHING_ITERATIONS)
     return P, quads
+
+
+AREA_SAMPLES = 24  # boundary points per chord for its segment area
+
+
+def _area_preserving(ring, s: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Boundary vertices p (m,2) [m] (at arc-length positions s (m,) on ``ring``, in the loop's
+    order) moved along the outline's vertex normals so that each chord's segment area is balanced:
+    chord j (p_j, p_j+1, length L_j) bounds the segment of signed area A_j between it and the
+    boundary (positive where the boundary bulges out of the outline), whose mean height is
+    delta_j = A_j / L_j; moving the chord outward by delta_j leaves as much of the segment outside
+    as it adds beyond the boundary (a parabolic arc: the chord at 2/3 of the sagitta). A vertex
+    moves by the mean of its two chords' delta along the mean of their outward normals."""
+    import shapely
+
+    m = len(p)
+    t = np.linspace(0.0, 1.0, AREA_SAMPLES + 1)
+    s1 = np.r_[s[1:], s[0] + (ring.length if s[-1] > s[0] else -ring.length)]
+    arc = shapely.get_coordinates(shapely.line_interpolate_point(
+        ring, np.mod(s[:, None] + t[None, :] * (s1 - s)[:, None], ring.length).ravel())).reshape(m, -1, 2)
+    arc[:, 0], arc[:, -1] = p, np.roll(p, -1, axis=0)
+    x, y = arc[..., 0], arc[..., 1]
+    shoelace = 0.5 * np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1)  # arc + chord back
+    q = np.roll(p, -1, axis=0)
+    orient = np.sign(np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))  # +1: the outline runs CCW
+    d = q - p
+    Lc = np.linalg.norm(d, axis=1)
+    nrm = orient * np.column_stack([d[:, 1], -d[:, 0]]) / Lc[:, None]  # outward normal of each chord
+    delta = orient * shoelace / Lc  # a boundary bulging outward closes the way the outline runs
+    vn = nrm + np.roll(nrm, 1, axis=0)
+    vn /= np.linalg.norm(vn, axis=1)[:, None]
+    return p + (0.5 * (delta + np.roll(delta, 1)))[:, None] * vn
 
 
 def _remove_pinches(quads: np.ndarray) -> np.ndarray:

@@ -235,7 +235,8 @@ def summary(res: SurfaceResult) -> dict:
         spring_bulge_max=float(p.bulge[p.spring].max()) if p.spring.any() else None,
         quad_growth_max=float(p.growth.max()),
         springs_short_of_slack=[dict(quad=int(q), growth=float(p.growth[q][k]),
-                                     arc_over_chord=float(p.spring_ratio[q][k]))
+                                     arc_over_chord=float(p.spring_ratio[q][k]),
+                                     deviation_mm=float(np.max(dv.per_vertex[p.quads[q]]) * 1e3))
                                 for q in p.tight_springs
                                 for k in [int(np.argmin(p.spring_ratio[q] / np.maximum(p.growth[q], 1.0)))]],
         lasercut=lasercut.summary(res.cut),

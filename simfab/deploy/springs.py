@@ -26,6 +26,14 @@ found by bisection (S/c grows monotonically with b). b is capped where an arc wo
 ``spring_width`` of the quad centre (the four arcs of a quad must stay apart for the cut); a
 quad that needs more is reported (``tight``) and keeps the capped b. Shrinking quads (u > 0,
 saddles) need no growth slack (their arcs bend further); they keep the plain margin.
+
+Zigzags (:func:`zigzag_layout`). A Bezier arc reaches S/c ~ 1.2-1.5 before it comes within a
+spring width of the centre; steeper growth (1.5-1.7 on an 80 deg cap) takes an arc that packs
+its length into its triangle (M0, M1, centre): vertical legs (in the chord's frame) joined by half
+circles, one clearance inside the triangle, about (triangle area) / (leg pitch) long - up to
+~2.4 c in a 30 mm cell with 1 mm springs. :func:`size_zigzag` takes the fewest legs that reach the
+length, then the lowest legs (bisection on their height fraction), as the Bezier sizing takes
+the smallest b.
 """
 
 from __future__ import annotations
@@ -107,3 +115,166 @@ def size_bulges(P: np.ndarray, quads: np.ndarray, mids_of_quad: np.ndarray, grow
     b = _bisect(lambda x: np.all(_arc_ratios(M0, M1, c, x) >= need, axis=1), bmin, cap)
     ratio = _arc_ratios(M0, M1, c, b)
     return b, ratio, np.any(ratio < need - 1e-9, axis=1)
+
+
+# --- zigzag springs -------------------------------------------------------------------------------------------------
+
+ZIGZAG_MAX_LEGS = 12  # legs of the longest zigzag tried (even counts 2, 4, ..., this)
+_TURN_SAMPLES = 16  # polyline points per half turn of a drawn zigzag
+# rod segments per piece of a zigzag (lead-in/out line, quarter turn, leg, half turn): a leg bends like a cantilever
+# (two segments resolve its curvature's linear profile), a half turn of 180 deg turns by 60 deg per node
+ZIGZAG_SEGMENTS = {"lead": 1, "quarter": 1, "leg": 2, "half": 3}
+
+
+def zigzag_segments(legs: int) -> int:
+    """Rod segments of a zigzag with ``legs`` legs (see :data:`ZIGZAG_SEGMENTS`)."""
+    s = ZIGZAG_SEGMENTS
+    return 2 * (s["lead"] + s["quarter"]) + legs * s["leg"] + (legs - 1) * s["half"]
+
+
+def _zigzag_frame(M0, M1, c):
+    """Local frame of the arc's triangle (M0, M1, c): origin M0, x along the chord, y towards c;
+    returns (chord length, unit x (2,), unit y (2,), inward unit normals of the sides M0-c and M1-c
+    in local coordinates (2,), (2,))."""
+    M0, M1, c = (np.asarray(a, dtype=np.float64) for a in (M0, M1, c))
+    L = float(np.linalg.norm(M1 - M0))
+    ex = (M1 - M0) / L
+    ey = np.array([-ex[1], ex[0]])
+    if (c - M0) @ ey < 0:
+        ey = -ey
+    C = np.array([(c - M0) @ ex, (c - M0) @ ey])
+    d0 = C / np.linalg.norm(C)  # side M0 -> c
+    d1 = (C - [L, 0.0]) / np.linalg.norm(C - [L, 0.0])  # side M1 -> c
+    n0 = np.array([d0[1], -d0[0]])  # inward: towards +x of the side through the origin
+    n1 = np.array([-d1[1], d1[0]])
+    if n0 @ [L, 0.0] < 0:
+        n0 = -n0
+    if n1 @ ([0.0, 0.0] - np.array([L, 0.0])) < 0:
+        n1 = -n1
+    return L, ex, ey, n0, n1
+
+
+def zigzag_layout(M0, M1, c, legs: int, amplitude: float, clearance: float):
+    """Pieces of a zigzag spring from M0 to M1 (2,) [m] inside the triangle (M0, M1, c) (c: the
+    quad centre), or None where ``legs`` legs do not fit.
+
+    Local frame: x along the chord M0 -> M1 (length L), y towards c. The path runs along the chord
+    from M0, turns up by a quarter circle into leg 0, and alternates ``legs`` (even) vertical legs at
+    pitch p = 2 rho joined by half circles of radius rho (at the top between legs 2i and 2i+1, at
+    the bottom - touching the chord - between legs 2i+1 and 2i+2), then turns down by a quarter
+    circle into the chord to M1. Every turn's circle keeps ``clearance`` + rho from both sides
+    M0-c, M1-c (inward normals n0, n1): the spring's centre line stays ``clearance`` inside the
+    triangle (apart from its ends on the chord), so the four springs of a quad stay 2 clearance
+    apart. With X_min + rho = x_0 the first leg (n0 . (X_min, rho) = rho + clearance, linear in
+    rho) and likewise the last, the legs fill [X_min + rho, X_max - rho]:
+
+        rho = (gamma - alpha) / (2 legs + beta + epsilon),
+        X_min = alpha + beta rho,  X_max = gamma - epsilon rho.
+
+    The top of the pair (2i, 2i+1) is t_i = t_lo + amplitude (t_max,i - t_lo), with t_max,i the
+    height at which the top half circle (centre X_i) touches the clearance line of a side and
+    t_lo = rho + clearance (every leg at least one clearance long). ``legs`` legs fit when
+    rho >= clearance (legs at least one clearance apart) and every t_max,i >= t_lo. Returns
+    (pieces, rho): pieces in world coordinates, ("line", P, Q) and ("arc", centre, radius, angle
+    from, angle to, R) - the angles in the chord's frame, R (2,2) its axes as columns."""
+    L, ex, ey, n0, n1 = _zigzag_frame(M0, M1, c)
+    M0 = np.asarray(M0, dtype=np.float64)
+    # n0 . (X, rho) >= rho + clearance  ->  X >= (rho (1 - n0y) + clearance) / n0x
+    alpha, beta = clearance / n0[0], (1.0 - n0[1]) / n0[0]
+    # n1 . (X - L, rho) >= rho + clearance  ->  X <= L - (rho (1 - n1y) + clearance) / (-n1x)
+    gamma, eps = L - clearance / -n1[0], (1.0 - n1[1]) / -n1[0]
+    rho = (gamma - alpha) / (2 * legs + beta + eps)
+    if not (rho >= clearance and legs >= 2 and legs % 2 == 0) or n0[1] >= 0 or n1[1] >= 0:
+        return None  # (a side leaning outward over the chord: the centre projects beyond it - no zigzag)
+    x = (alpha + beta * rho) + rho + 2 * rho * np.arange(legs)
+    tops = []
+    for i in range(legs // 2):
+        X = 0.5 * (x[2 * i] + x[2 * i + 1])
+        # n . (X - o, t) >= rho + clearance for both sides (n_y < 0 for the sides above the chord)
+        tmax = min((rho + clearance - n0[0] * X) / n0[1], (rho + clearance - n1[0] * (X - L)) / n1[1])
+        if tmax < rho + clearance:
+            return None
+        tops.append(rho + clearance + amplitude * (tmax - rho - clearance))
+    loc = []  # pieces in local coordinates
+    loc.append(("line", np.array([0.0, 0.0]), np.array([x[0] - rho, 0.0])))
+    loc.append(("arc", np.array([x[0] - rho, rho]), rho, -0.5 * np.pi, 0.0))
+    for j in range(legs):
+        t = tops[j // 2]
+        up = j % 2 == 0
+        loc.append(("line", np.array([x[j], rho if up else t]), np.array([x[j], t if up else rho])))
+        if j == legs - 1:
+            break
+        if up:  # top half turn, clockwise over the top
+            loc.append(("arc", np.array([x[j] + rho, t]), rho, np.pi, 0.0))
+        else:  # bottom half turn, counter-clockwise under the bottom
+            loc.append(("arc", np.array([x[j] + rho, rho]), rho, -np.pi, 0.0))
+    loc.append(("arc", np.array([x[-1] + rho, rho]), rho, np.pi, 1.5 * np.pi))
+    loc.append(("line", np.array([x[-1] + rho, 0.0]), np.array([L, 0.0])))
+    R = np.column_stack([ex, ey])
+    out = []
+    for p in loc:
+        if p[0] == "line":
+            out.append(("line", M0 + R @ p[1], M0 + R @ p[2]))
+        else:
+            out.append(("arc", M0 + R @ p[1], p[2], p[3], p[4], R))
+    return out, rho
+
+
+def _piece_points(p, m: int) -> np.ndarray:
+    """(m+1,2) points of a piece at m uniform steps of its arc length."""
+    s = np.linspace(0.0, 1.0, m + 1)[:, None]
+    if p[0] == "line":
+        return p[1] + s * (p[2] - p[1])
+    _, C, r, a0, a1, R = p
+    a = a0 + s[:, 0] * (a1 - a0)
+    return C + (r * np.column_stack([np.cos(a), np.sin(a)])) @ R.T
+
+
+def _piece_kind(p, k: int, n: int) -> str:
+    if p[0] == "line":
+        return "lead" if k in (0, n - 1) else "leg"
+    return "quarter" if abs(p[4] - p[3]) < 0.75 * np.pi else "half"
+
+
+def zigzag_points(pieces, *, rod: bool = False) -> np.ndarray:
+    """Polyline of a zigzag's pieces: drawn (``_TURN_SAMPLES`` points per half turn, straight pieces
+    as they are) or, with ``rod``, the rod's nodes (:data:`ZIGZAG_SEGMENTS` per piece)."""
+    out = []
+    for k, p in enumerate(pieces):
+        kind = _piece_kind(p, k, len(pieces))
+        if rod:
+            m = ZIGZAG_SEGMENTS[kind]
+        else:
+            m = 1 if p[0] == "line" else _TURN_SAMPLES // 2 if kind == "quarter" else _TURN_SAMPLES
+        pts = _piece_points(p, m)
+        out.append(pts if k == 0 else pts[1:])
+    return np.vstack(out)
+
+
+def _polyline_ratio(pts: np.ndarray) -> float:
+    return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)) / np.linalg.norm(pts[-1] - pts[0]))
+
+
+def size_zigzag(M0, M1, c, need: float, clearance: float) -> tuple[int, float, float]:
+    """(legs, amplitude, S/c) of the shortest zigzag (fewest legs, then the smallest leg height by
+    bisection - its length grows monotonically with the amplitude) whose drawn length is at least
+    ``need`` x its chord; the longest that fits where none reaches (legs 0: none fits)."""
+    best = (0, 0.0, 0.0)
+    for legs in range(2, ZIGZAG_MAX_LEGS + 1, 2):
+        lay = zigzag_layout(M0, M1, c, legs, 1.0, clearance)
+        if lay is None:  # (more legs: a smaller rho and lower legs may fit where fewer do not)
+            continue
+        r1 = _polyline_ratio(zigzag_points(lay[0]))
+        if r1 > best[2]:
+            best = (legs, 1.0, r1)
+        if r1 < need:
+            continue
+        ratio = lambda a: _polyline_ratio(zigzag_points(zigzag_layout(M0, M1, c, legs, a, clearance)[0]))  # noqa
+        lo, hi = 0.0, 1.0
+        if ratio(lo) >= need:
+            return legs, lo, ratio(lo)
+        for _ in range(_BISECTION_STEPS):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if ratio(mid) >= need else (mid, hi)
+        return legs, hi, ratio(hi)
+    return best

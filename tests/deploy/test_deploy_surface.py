@@ -167,6 +167,8 @@ def test_cli_surface_writes_everything(tmp_path, capsys):
     assert res["mujoco"]["stability"]["finite"]
     assert set(res["seconds"]) >= {"flatten", "layout", "lasercut", "deploy", "compare", "mujoco", "total"}
     assert check_compliance(res["outputs"]["usd"]) == []
+    for row in res["springs_short_of_slack"]:  # each with the deviation at its quad
+        assert row["arc_over_chord"] < 1.1 * max(row["growth"], 1.0) and row["deviation_mm"] >= 0
     # the bill of materials: one row per catalogue size, counting every insert
     rows = (out / "inserts.csv").read_text().splitlines()
     assert rows[0] == "size_class,half_size_mm,plate_side_mm,count,inserts" and len(rows) == 2

@@ -11,7 +11,9 @@ bundled dome <= 10 s end to end; ``ratio`` = wall / target.
 
 Scaling: the dome scene's cap scaled by s (sphere radius x s, same angle and spacing, so ~s^2 x
 the inserts), in this process (imports excluded): inserts, rod DOFs, Newton iterations, the
-deploy stage's seconds, and the MuJoCo check (nv, welds, steps to rest, seconds). Target (issue
+deploy stage's wall seconds, the CPU seconds of the pipeline without and of the MuJoCo check,
+and the MuJoCo check's counts (bodies, nv, welds, steps to rest, the compile's mj_setConst work
+:func:`setconst_work`); ``growth_exponents``: slope of log(cost) over log(inserts). Target (issue
 33): a 150-insert pattern (s = 2) deployed in <= 20 s. Beside the runs: the machine's momentary
 speed (``_machine.machine_reference_ms``).
 """
@@ -65,16 +67,43 @@ def _scaled(scene_name: str, s: float) -> dict:
         theta = float(np.arccos(1 + tgt.V[:, 2].min() / R))
         tgt = surface.spherical_cap(R * s, theta, int(round(24 * s)))
         sc = dataclasses.replace(sc, target=tgt)
-    t0 = time.perf_counter()
-    res = pipeline.run(sc, quiet=True, mujoco_check=True)
+    t0, c0 = time.perf_counter(), time.process_time()
+    res = pipeline.run(sc, quiet=True, mujoco_check=False)
+    c1 = time.process_time()
+    sim, check = pipeline.mujoco_check_run(res.network, res.deployment, res.pattern, sc)
+    c2 = time.process_time()
     total = time.perf_counter() - t0
+    res.sim, res.sim_check = sim, check
     sm = pipeline.summary(res)
     mj = sm["mujoco"]
+    m = sim.model
     return dict(scale=s, inserts=sm["inserts"], rod_dofs=int(res.network.model.n_nodes * 3 + res.network.model.n_edges),
                 newton_iterations=sum(sm["deployment"]["newton_iterations"]), deploy_s=sm["seconds"]["deploy"],
-                mujoco_s=sm["seconds"]["mujoco"], mujoco_nv=mj["nv"], mujoco_welds=mj["welds"],
-                mujoco_steps=mj["stability"]["steps"], mujoco_at_rest=mj["stability"]["settled"], total_s=total,
-                rms=sm["deviation"]["rms"])
+                pipeline_cpu_s=c1 - c0, mujoco_cpu_s=c2 - c1, mujoco_step_wall_s=mj["stability"]["wall_s"],
+                mujoco_bodies=int(m.nbody), mujoco_nv=mj["nv"], mujoco_welds=mj["welds"],
+                mujoco_setconst_work=setconst_work(m), mujoco_steps=mj["stability"]["steps"],
+                mujoco_at_rest=mj["stability"]["settled"], total_s=total, rms=sm["deviation"]["rms"])
+
+
+def setconst_work(m) -> int:
+    """Machine-independent count of MuJoCo's compile-time constants (mj_setConst): body_invweight0
+    solves M^-1 for the 6 Jacobian rows of every body that is not a simple point mass and
+    dof_invweight0 for every dof's unit vector, each a sparse LDL solve over all nv dofs touching
+    nnz(L) = sum over dofs of their ancestor dofs (+1): work = (6 n_body + nv) nnz(L). Both factors
+    grow with the network, hence the compile's quadratic growth."""
+    par = np.asarray(m.dof_parentid)
+    depth = np.zeros(m.nv, dtype=np.int64)
+    for i in range(m.nv):  # parents come before their children
+        depth[i] = 1 + (depth[par[i]] if par[i] >= 0 else 0)
+    general = int(np.sum(np.asarray(m.body_simple[1:]) != 2))
+    return int((6 * general + m.nv) * depth.sum())
+
+
+def _growth_exponent(rows, key) -> float | None:
+    """Least-squares slope of log(rows[key]) against log(inserts) (cost ~ inserts^slope)."""
+    x = np.log([r["inserts"] for r in rows])
+    y = np.log([max(float(r[key]), 1e-12) for r in rows])
+    return float(np.polyfit(x, y, 1)[0]) if len(rows) >= 2 and np.ptp(x) > 0 else None
 
 
 def _sphere_radius(tgt) -> float:
@@ -98,9 +127,13 @@ def run(argv) -> dict:
     if not a.no_scaling and a.scene == "dome":
         rows = [_scaled(a.scene, s) for s in a.scales]
         out["scaling"] = rows
+        out["growth_exponents"] = {k: _growth_exponent(rows, k) for k in (
+            "newton_iterations", "pipeline_cpu_s", "mujoco_cpu_s", "mujoco_setconst_work", "mujoco_bodies")}
         big = [r for r in rows if r["inserts"] >= 140]
         out["target_150_inserts_deploy_s"] = TARGET_150_INSERTS_DEPLOY_S
         out["ratio_150_inserts"] = big[0]["deploy_s"] / TARGET_150_INSERTS_DEPLOY_S if big else None
+        # the same by CPU seconds of the whole pipeline without the MuJoCo check (the wall time moves with the load)
+        out["ratio_150_inserts_cpu"] = big[0]["pipeline_cpu_s"] / TARGET_150_INSERTS_DEPLOY_S if big else None
     out["machine_reference_ms_after"] = machine_reference_ms()
     out["reference"] = None
     out["reference_note"] = "no published figure for this pipeline in figures.json; targets from issue 33"
