@@ -16,9 +16,8 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
   the series' largest magnitude (softmax weights over the steps; the reported value is the exact
   maximum);
 - E_ss = E at the steady-state index i_ss (held: a change of the index is a non-smooth event);
-  coupling ratio 100 E_ss / E_max by the quotient rule; the grip at i_ss, interpolated where the
-  force passes through zero after it as :func:`simfab.coupling.profile.analyze` does (the
-  interpolation weight held, see :func:`figure_gradients`);
+  coupling ratio 100 E_ss / E_max by the quotient rule; the grip at the rest point, which moves
+  with the design (:func:`rest_grip_gradient`: implicit differentiation of F(s*; X) = 0);
 - E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
 - the element quality q_e (signed mean ratio) analytically.
 - the target-profile error rms^2 (the objective of profile matching) through the force samples
@@ -29,7 +28,8 @@ sensitivities hold for mu = 0).
 
 Optimizer (:func:`optimize_gradient`): SLSQP on z = (h - lower) / (upper - lower) in [0, 1] from
 the initial shape, minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's
-constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0,
+constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0
+(a loose grip's coupling-ratio bound in sqrt(CR), :class:`ConstraintRow`),
 and the element-quality bound q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
 asks for (iterate or line-search trial) costs one insertion, which records its sensitivities: the
 Jacobians come with the values. The best design is the feasible one with the lowest objective
@@ -142,15 +142,7 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
     g["insertion_force"] = -_smax(-F[:end], dF[:end]) if prof.F_in > 0 else np.zeros(Jh.shape[1])
     g["removal_force"] = _smax(F[:end], dF[:end]) if prof.F_rm > 0 else np.zeros(Jh.shape[1])
     g["hold_force"] = g["removal_force"] if not res.removal else None
-    grip = dG[i_ss]
-    if prof.category != "ejects" and i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
-        # the rest point's weight w = F_i / (F_i - F_i+1) is held: the two records are the rest
-        # search's bracket around a seat, where the force passes through zero within micrometres,
-        # so dw/dF is huge and meaningful only over that bracket (whose records the search places
-        # anew for every design); the grip's own change at the two records is the usable direction
-        w = F[i_ss] / (F[i_ss] - F[i_ss + 1])
-        grip = (1 - w) * dG[i_ss] + w * dG[i_ss + 1]
-    g["grip_force"] = grip
+    g["grip_force"] = rest_grip_gradient(res, i_ss, dF, dG) if prof.category != "ejects" else dG[i_ss]
     stresses = [s.stress_value for s in rec.insert + rec.remove]
     if all(s.stress is not None for s in rec.insert + rec.remove):
         dS = np.array([pull(s.stress) for s in rec.insert + rec.remove])
@@ -163,6 +155,37 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
         g["rms_error_sq"] = scale * target_gradient(problem.target, res.column("s"), scale * F) @ dF
     supported = all(s.supported for s in rec.insert + rec.remove) and not res.removal
     return FigureGradients(values=dict(ev.figures), gradients=g, supported=supported, steady_index=i_ss)
+
+
+def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.ndarray:
+    """dF_grip/dh (n_vars,) of the grip read at the rest point, O's position s* where the force F passes
+    through zero; dF, dG: (k, n_vars) the records' force and grip derivatives at fixed positions.
+
+    The profile reads the grip at s* interpolated between the two records a, b = a + 1 that bracket it
+    (F_a > 0 >= F_b; :func:`simfab.coupling.profile.analyze`), or at the rest search's last record b
+    when the steady state is that record (a position the search places at s* plus its stopping
+    offset). Either way the reading follows s*(X), defined by F(s*; X) = 0, so by the implicit
+    function theorem with the bracket's secant slopes (w = F_a / (F_a - F_b), s* = s_a + w (s_b - s_a))
+
+        dG* = (1 - w) dG_a + w dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2
+
+    (the record case: dG_b + (G_b - G_a) dw). At a seat the force and the grip both change by
+    ~10^6 N/m over the bracket's micrometres and the two terms nearly cancel: the grip at fixed
+    positions alone is off by orders of magnitude and in sign. Without a bracket (a planned record,
+    whose position is held): dG at i_ss."""
+    F, G = res.column("force"), res.column("grip")
+    planned = len(res.model.s_steps)
+    if i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
+        a, interpolated = i_ss, True
+    elif planned <= i_ss and 0 < i_ss and F[i_ss - 1] > 0 >= F[i_ss]:
+        a, interpolated = i_ss - 1, False
+    else:
+        return dG[i_ss]
+    b = a + 1
+    w = F[a] / (F[a] - F[b])
+    dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
+    base = (1 - w) * dG[a] + w * dG[b] if interpolated else dG[b]
+    return base + (G[b] - G[a]) * dw
 
 
 def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
@@ -278,17 +301,52 @@ def nonsmooth_events(signatures: list) -> dict:
 NOT_DIFFERENTIATED = ("seat_clearance",)
 
 
+#: A coupling-ratio upper bound below this [%] (the loose brief's KAPPA_LOOSE) is linearized in
+#: sqrt(CR) (:class:`ConstraintRow`).
+ROOT_BELOW = 1.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class ConstraintRow:
+    """One finite bound SLSQP linearizes: c = sign (v - bound) / scale >= 0 with v = value * correction,
+    or with ``root`` c = sign (sqrt(v) - sqrt(bound)) / sqrt(scale).
+
+    The root is the smooth surrogate of a category bound: a loose grip asks CR = 100 E_ss / E_max <=
+    1e-3 %, and E_ss vanishes quadratically as the seat's overlap closes (the barrier and the elastic
+    energy are quadratic in it), so dCR/dh -> 0 on the way and each linearization asks for a step that
+    is too long by a growing factor; sqrt(CR) is about linear in the overlap."""
+
+    name: str
+    sign: float
+    bound: float
+    scale: float
+    root: bool = False
+
+    def value(self, v: float) -> float:
+        if self.root:
+            return self.sign * (math.sqrt(max(v, 0.0)) - math.sqrt(self.bound)) / math.sqrt(self.scale)
+        return self.sign * (v - self.bound) / self.scale
+
+    def gradient(self, v: float, g: np.ndarray) -> np.ndarray:
+        """dc/dh from dv/dh ``g``."""
+        if self.root:
+            return self.sign * g / (2.0 * math.sqrt(v * self.scale)) if v > 0 else np.zeros_like(g)
+        return self.sign * g / self.scale
+
+
 def _constraint_rows(problem: DesignProblem) -> list:
-    """[(figure, sign, bound, scale)]: one row per finite bound, c = sign (value * correction - bound) / scale >= 0."""
+    """[:class:`ConstraintRow`]: one row per finite bound (a force's lower bound 0 always holds)."""
     rows = []
     for name, (lo, hi) in problem.limits.items():
         if name in NOT_DIFFERENTIATED:  # checked on every design (the best is a feasible one), not linearized
             continue
         lo, hi = B.aimed_bounds(name, lo, hi, problem.settings.margin)
+        scale = B.SCALES[name]
         if math.isfinite(lo) and not (name != "coupling_ratio" and lo <= 0):  # a force >= 0 always holds
-            rows.append((name, 1.0, lo, B.SCALES[name]))
+            rows.append(ConstraintRow(name=name, sign=1.0, bound=lo, scale=scale))
         if math.isfinite(hi):
-            rows.append((name, -1.0, hi, B.SCALES[name]))
+            rows.append(ConstraintRow(name=name, sign=-1.0, bound=hi, scale=scale,
+                                      root=name == "coupling_ratio" and hi < ROOT_BELOW))
     return rows
 
 
@@ -353,7 +411,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         ev, fg = _evaluate(run, h)
         if fg is None:
             return np.r_[np.full(len(rows), -FAILED_VIOLATION), qual]
-        vals = [sign * (fg.values[name] * corr.get(name, 1.0) - bound) / scale for name, sign, bound, scale in rows]
+        vals = [r.value(fg.values[r.name] * corr.get(r.name, 1.0)) for r in rows]
         return np.r_[vals, qual]
 
     def cons_jac(z):
@@ -364,10 +422,11 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         if np.all(np.asarray(element_quality(X, el)) > 0):
             ev, fg = _evaluate(run, h)
         Jc = np.zeros((len(rows), len(z)))
-        for r, (name, sign, _, scale) in enumerate(rows):
-            gr = None if fg is None else fg.gradients.get(name)
+        for i, r in enumerate(rows):
+            gr = None if fg is None else fg.gradients.get(r.name)
             if gr is not None:
-                Jc[r] = sign * gr * corr.get(name, 1.0) / scale
+                c = corr.get(r.name, 1.0)
+                Jc[i] = r.gradient(fg.values[r.name] * c, gr * c)
         return np.vstack([Jc, Jq]) * span[None, :]
 
     z0 = np.clip((H.identity() if start is None else np.asarray(start, float)) - lo, 0, None) / span
