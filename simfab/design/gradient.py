@@ -26,7 +26,9 @@ Not differentiated (gradient None; the optimizer reads it as a constraint withou
 checks it on every design and reports it): the seat clearance; and nothing with friction (the
 sensitivities hold for mu = 0).
 
-Optimizer (:func:`optimize_gradient`): SLSQP on z = (h - lower) / (upper - lower) in [0, 1] from
+Optimizer (:func:`optimize_gradient`): when the start gives no direction (a part that does not
+touch the object: every violated constraint's gradient is zero) a seeded annealing pre-phase runs
+until a design touches; then SLSQP on z = (h - lower) / (upper - lower) in [0, 1] from
 the initial shape, minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's
 constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0
 (a loose grip's coupling-ratio bound in sqrt(CR), :class:`ConstraintRow`),
@@ -52,7 +54,7 @@ from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_m
 from simfab.coupling.profile import analyze_run
 from simfab.design import brief as B
 from simfab.design.handles import Handles
-from simfab.design.optimize import DesignResult
+from simfab.design.optimize import DesignResult, optimize
 from simfab.design.problem import (
     CONTACT_STRAIN_FLOOR,
     QUALITY_REL,
@@ -164,28 +166,29 @@ def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.nda
     The profile reads the grip at s* interpolated between the two records a, b = a + 1 that bracket it
     (F_a > 0 >= F_b; :func:`simfab.coupling.profile.analyze`), or at the rest search's last record b
     when the steady state is that record (a position the search places at s* plus its stopping
-    offset). Either way the reading follows s*(X), defined by F(s*; X) = 0, so by the implicit
-    function theorem with the bracket's secant slopes (w = F_a / (F_a - F_b), s* = s_a + w (s_b - s_a))
+    offset, which is not a function of the design). Either way the reading follows s*(X), defined by
+    F(s*; X) = 0, so both are differentiated as the grip at s*, by the implicit function theorem with
+    the bracket's secant slopes (w = F_a / (F_a - F_b), s* = s_a + w (s_b - s_a)):
 
         dG* = (1 - w) dG_a + w dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2
 
-    (the record case: dG_b + (G_b - G_a) dw). At a seat the force and the grip both change by
-    ~10^6 N/m over the bracket's micrometres and the two terms nearly cancel: the grip at fixed
-    positions alone is off by orders of magnitude and in sign. Without a bracket (a planned record,
-    whose position is held): dG at i_ss."""
+    At a seat the force and the grip both change by ~10^6 N/m over the bracket's micrometres and the
+    terms nearly cancel: the grip's derivative at fixed positions alone is off by orders of
+    magnitude and in sign, this one is within tens of percent of finite differences over whole
+    re-simulations (block2d_tight: the seat is a kink, so no secant is exact; tests/design/
+    test_gradient.py). Without a bracket (a planned record, whose position is held): dG at i_ss."""
     F, G = res.column("force"), res.column("grip")
     planned = len(res.model.s_steps)
     if i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
-        a, interpolated = i_ss, True
+        a = i_ss
     elif planned <= i_ss and 0 < i_ss and F[i_ss - 1] > 0 >= F[i_ss]:
-        a, interpolated = i_ss - 1, False
+        a = i_ss - 1
     else:
         return dG[i_ss]
     b = a + 1
     w = F[a] / (F[a] - F[b])
     dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
-    base = (1 - w) * dG[a] + w * dG[b] if interpolated else dG[b]
-    return base + (G[b] - G[a]) * dw
+    return (1 - w) * dG[a] + w * dG[b] + (G[b] - G[a]) * dw
 
 
 def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
@@ -257,7 +260,7 @@ class _Run:
 def _evaluate(run: _Run, h: np.ndarray):
     """(Evaluation, FigureGradients or None) of design h, memoized (SLSQP asks for each design's
     values and Jacobians in separate calls)."""
-    key = np.asarray(h, float).tobytes()
+    key = np.round(np.asarray(h, float), 12).tobytes()  # (z -> h round trips differ in the last bits)
     out = run.memo.get(key)
     if out is not None:
         return out
@@ -334,7 +337,7 @@ class ConstraintRow:
         return self.sign * g / self.scale
 
 
-def _constraint_rows(problem: DesignProblem) -> list:
+def constraint_rows(problem: DesignProblem) -> list:
     """[:class:`ConstraintRow`]: one row per finite bound (a force's lower bound 0 always holds)."""
     rows = []
     for name, (lo, hi) in problem.limits.items():
@@ -352,14 +355,31 @@ def _constraint_rows(problem: DesignProblem) -> list:
 
 #: Constraint value SLSQP sees for a design that cannot be simulated (a violation of this many units).
 FAILED_VIOLATION = 10.0
+#: Annealing iterations at most of the pre-phase that runs when the start gives SLSQP no direction.
+PRE_PHASE_ITERATIONS = 60
+
+
+def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
+    """The start gives SLSQP no direction: some constraint row is violated and every violated row's
+    gradient is zero or missing (a part that does not touch the object: no figure depends on its shape)."""
+    violated = [r for r in rows if r.value(fg.values[r.name] * corrections.get(r.name, 1.0)) < 0]
+    flat = all(fg.gradients.get(r.name) is None or not np.any(fg.gradients[r.name]) for r in violated)
+    return bool(violated) and flat
+
+
+def in_contact(ev: Evaluation) -> bool:
+    """A complete evaluation whose part touched the object (category other than "none")."""
+    return ev.status == "ok" and ev.figures.get("category") not in (None, "none")
 
 
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
                       callback=None, start=None) -> DesignResult:
     """SLSQP on the brief (see the module docstring); returns a :class:`DesignResult` whose
     ``simulations`` counts every insertion and ``gradient_evaluations`` those that gave gradients
-    (all complete ones). ``seed`` is unused (the method is deterministic: the same signature as
-    :func:`simfab.design.optimize.optimize`); ``iterations`` caps SLSQP's iterations (default: the
+    (all complete ones, and the pre-phase's). ``seed`` seeds the annealing pre-phase, which runs
+    only when the start gives no direction (:func:`flat_start`: at most PRE_PHASE_ITERATIONS
+    iterations, until a design touches the object; SLSQP starts from that design); otherwise the
+    method is deterministic. ``iterations`` caps SLSQP's iterations (default: the
     brief's, at most MAX_ITERATIONS). Raises ConvergenceError when the initial shape
     cannot be simulated."""
     t0 = time.perf_counter()
@@ -374,8 +394,19 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         run.problem = problem = problem.with_settings(refined=tuple(int(i) for i in initial.result.refined_facets))
     lo, hi = problem.lower, problem.upper
     span = hi - lo
-    rows = _constraint_rows(problem)
+    rows = constraint_rows(problem)
     corr = problem.settings.corrections
+    pre = None
+    fg0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))[1]
+    if fg0 is not None and flat_start(rows, fg0, corr):
+        # no direction at the start: anneal (seeded) until a design touches the object, then descend from it
+        log(f"couple optimize: {problem.base.name}: the start gives no gradient (no contact); annealing pre-phase "
+            f"until a design touches, at most {PRE_PHASE_ITERATIONS} iterations", quiet=quiet)
+        pre = optimize(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
+                       start=None if start is None else np.asarray(start, float), until=in_contact)
+        run.insertions += pre.simulations + pre.stopped_simulations + pre.speculative
+        if in_contact(pre.best):
+            start = pre.best.h
     target = problem.target is not None
     el = problem.base.fem.elements
     q0 = problem.q0
@@ -461,11 +492,16 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             rejected[key] = rejected.get(key, 0) + 1
     hist = [{"k": k, "accepted": True, "current": ev.objective, "best": ev.objective, "temperature": math.nan,
              "sigma": math.nan, "value": ev.objective, "evaluation": ev} for k, ev in enumerate(history)]
+    message = str(res.message)
+    if pre is not None:
+        message = (f"annealing pre-phase ({pre.iterations} iterations, "
+                   f"{pre.simulations + pre.stopped_simulations + pre.speculative} insertions, "
+                   f"{'a design in contact' if in_contact(pre.best) else 'no design in contact'}); SLSQP: {message}")
     out = DesignResult(problem=problem, initial=initial, best=best, history=hist,
                        accepted=[(k, ev.rest, ev.objective) for k, ev in enumerate(history)],
                        simulations=run.insertions, stopped_simulations=0, rejected=rejected,
                        seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
                        iterations=int(res.nit), stopped_early=bool(res.success), method="gradient",
-                       gradient_evaluations=run.gradient_evaluations, message=str(res.message),
+                       gradient_evaluations=run.gradient_evaluations, message=message,
                        events=nonsmooth_events(run.signatures))
     return out
