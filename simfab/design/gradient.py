@@ -16,8 +16,9 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
   the series' largest magnitude (softmax weights over the steps; the reported value is the exact
   maximum);
 - E_ss = E at the steady-state index i_ss (held: a change of the index is a non-smooth event);
-  coupling ratio 100 E_ss / E_max by the quotient rule; the grip at the rest point, which moves
-  with the design (:func:`rest_grip_gradient`: implicit differentiation of F(s*; X) = 0);
+  coupling ratio 100 E_ss / E_max by the quotient rule; the grip at the steady state
+  (:func:`rest_grip_gradient`: a reading at the rest search's last record follows the rest point,
+  implicit differentiation of F(s*; X) = 0);
 - E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
 - the element quality q_e (signed mean ratio) analytically.
 - the target-profile error rms^2 (the objective of profile matching) through the force samples
@@ -28,11 +29,12 @@ sensitivities hold for mu = 0).
 
 Optimizer (:func:`optimize_gradient`): when the start gives no direction (a part that does not
 touch the object: every violated constraint's gradient is zero) a seeded annealing pre-phase runs
-until a design touches; then SLSQP on z = (h - lower) / (upper - lower) in [0, 1] from
-the initial shape, minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's
-constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0
-(a loose grip's coupling-ratio bound in sqrt(CR), :class:`ConstraintRow`),
-and the element-quality bound q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
+until a design is in the brief's category (:func:`in_category`); then SLSQP on
+z = (h - lower) / (upper - lower) in [0, 1] from the initial shape (or the pre-phase's best),
+minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's constraints, scaled to
+their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0 (a loose grip's
+coupling-ratio bound in sqrt(CR), :class:`ConstraintRow`), and the element-quality bound
+q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
 asks for (iterate or line-search trial) costs one insertion, which records its sensitivities: the
 Jacobians come with the values. The best design is the feasible one with the lowest objective
 among all simulated (the lowest penalized objective when none is feasible). Every candidate runs at
@@ -160,35 +162,35 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
 
 
 def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.ndarray:
-    """dF_grip/dh (n_vars,) of the grip read at the rest point, O's position s* where the force F passes
-    through zero; dF, dG: (k, n_vars) the records' force and grip derivatives at fixed positions.
+    """dF_grip/dh (n_vars,) of the grip read at the steady state; dF, dG: (k, n_vars) the records'
+    force and grip derivatives at fixed positions. Two readings (:func:`simfab.coupling.profile.analyze`):
 
-    The profile reads the grip at s* interpolated between the two records a, b = a + 1 that bracket it
-    (F_a > 0 >= F_b; :func:`simfab.coupling.profile.analyze`), or at the rest search's last record b
-    when the steady state is that record (a position the search places at s* plus its stopping
-    offset, which is not a function of the design). Either way the reading follows s*(X), defined by
-    F(s*; X) = 0, so both are differentiated as the grip at s*, by the implicit function theorem with
-    the bracket's secant slopes (w = F_a / (F_a - F_b), s* = s_a + w (s_b - s_a)):
+    - interpolated at the rest point s* between the records a = i_ss and b = a + 1 that bracket it
+      (F_a > 0 >= F_b), w = F_a / (F_a - F_b): (1 - w) dG_a + w dG_b, the weight held (the rest
+      search places the bracket's records anew for every design; differentiating w through the
+      bracket's secant slopes made SLSQP's first step on alligator2d lose the grip);
+    - at the rest search's last record b = i_ss, past the zero crossing (F_a > 0 >= F_b, a = b - 1):
+      that record sits at s* plus the search's stopping offset, so it follows s*(X), F(s*; X) = 0,
+      and by the implicit function theorem with the bracket's secant slopes
 
-        dG* = (1 - w) dG_a + w dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2
+          dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2.
 
-    At a seat the force and the grip both change by ~10^6 N/m over the bracket's micrometres and the
-    terms nearly cancel: the grip's derivative at fixed positions alone is off by orders of
-    magnitude and in sign, this one is within tens of percent of finite differences over whole
-    re-simulations (block2d_tight: the seat is a kink, so no secant is exact; tests/design/
-    test_gradient.py). Without a bracket (a planned record, whose position is held): dG at i_ss."""
+      At a seat (block2d_tight: the ball on the socket's bottom) the force and the grip change by
+      ~10^6 N/m over the bracket's micrometres and the two terms nearly cancel: dG_b alone is off by
+      an order of magnitude or more, the sum is within a factor 1.6 of finite differences over whole
+      re-simulations (the seat is a kink: no derivative is exact there; tests/design/test_gradient_method.py).
+
+    Otherwise (a planned record, whose position is held): dG at i_ss."""
     F, G = res.column("force"), res.column("grip")
     planned = len(res.model.s_steps)
     if i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
-        a = i_ss
-    elif planned <= i_ss and 0 < i_ss and F[i_ss - 1] > 0 >= F[i_ss]:
-        a = i_ss - 1
-    else:
-        return dG[i_ss]
-    b = a + 1
-    w = F[a] / (F[a] - F[b])
-    dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
-    return (1 - w) * dG[a] + w * dG[b] + (G[b] - G[a]) * dw
+        w = F[i_ss] / (F[i_ss] - F[i_ss + 1])
+        return (1 - w) * dG[i_ss] + w * dG[i_ss + 1]
+    if planned <= i_ss and 0 < i_ss and F[i_ss - 1] > 0 >= F[i_ss]:
+        a, b = i_ss - 1, i_ss
+        dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
+        return dG[b] + (G[b] - G[a]) * dw
+    return dG[i_ss]
 
 
 def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
@@ -372,13 +374,21 @@ def in_contact(ev: Evaluation) -> bool:
     return ev.status == "ok" and ev.figures.get("category") not in (None, "none")
 
 
+def in_category(ev: Evaluation) -> bool:
+    """In contact and within the brief's coupling-ratio bounds (its category: tight, loose), the
+    pre-phase's goal: a design that merely grazes the object (a grip of millinewtons, in the
+    barrier's range only) has gradients too small for SLSQP's linearization of a newton-sized bound,
+    whose steps then invert elements."""
+    return in_contact(ev) and all(c.satisfied for c in ev.constraints if c.name == "coupling_ratio")
+
+
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
                       callback=None, start=None) -> DesignResult:
     """SLSQP on the brief (see the module docstring); returns a :class:`DesignResult` whose
     ``simulations`` counts every insertion and ``gradient_evaluations`` those that gave gradients
     (all complete ones, and the pre-phase's). ``seed`` seeds the annealing pre-phase, which runs
     only when the start gives no direction (:func:`flat_start`: at most PRE_PHASE_ITERATIONS
-    iterations, until a design touches the object; SLSQP starts from that design); otherwise the
+    iterations, until a design is in the brief's category; SLSQP starts from the best one); otherwise the
     method is deterministic. ``iterations`` caps SLSQP's iterations (default: the
     brief's, at most MAX_ITERATIONS). Raises ConvergenceError when the initial shape
     cannot be simulated."""
@@ -399,11 +409,11 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     pre = None
     fg0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))[1]
     if fg0 is not None and flat_start(rows, fg0, corr):
-        # no direction at the start: anneal (seeded) until a design touches the object, then descend from it
+        # no direction at the start: anneal (seeded) until a design is in the brief's category, then descend
         log(f"couple optimize: {problem.base.name}: the start gives no gradient (no contact); annealing pre-phase "
-            f"until a design touches, at most {PRE_PHASE_ITERATIONS} iterations", quiet=quiet)
+            f"until a design is in the brief's category, at most {PRE_PHASE_ITERATIONS} iterations", quiet=quiet)
         pre = optimize(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
-                       start=None if start is None else np.asarray(start, float), until=in_contact)
+                       start=None if start is None else np.asarray(start, float), until=in_category)
         run.insertions += pre.simulations + pre.stopped_simulations + pre.speculative
         if in_contact(pre.best):
             start = pre.best.h
@@ -496,7 +506,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     if pre is not None:
         message = (f"annealing pre-phase ({pre.iterations} iterations, "
                    f"{pre.simulations + pre.stopped_simulations + pre.speculative} insertions, "
-                   f"{'a design in contact' if in_contact(pre.best) else 'no design in contact'}); SLSQP: {message}")
+                   f"{'a design in the category' if in_category(pre.best) else 'none in the category'}); "
+                   f"SLSQP: {message}")
     out = DesignResult(problem=problem, initial=initial, best=best, history=hist,
                        accepted=[(k, ev.rest, ev.objective) for k, ev in enumerate(history)],
                        simulations=run.insertions, stopped_simulations=0, rejected=rejected,
