@@ -16,9 +16,8 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
   the series' largest magnitude (softmax weights over the steps; the reported value is the exact
   maximum);
 - E_ss = E at the steady-state index i_ss (held: a change of the index is a non-smooth event);
-  coupling ratio 100 E_ss / E_max by the quotient rule; the grip at the steady state
-  (:func:`rest_grip_gradient`: a reading at the rest search's last record follows the rest point,
-  implicit differentiation of F(s*; X) = 0);
+  coupling ratio 100 E_ss / E_max by the quotient rule; the grip at the rest point, which moves
+  with the design (:func:`rest_grip_gradient`: implicit differentiation of F(s*; X) = 0);
 - E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
 - the element quality q_e (signed mean ratio) analytically.
 - the target-profile error rms^2 (the objective of profile matching) through the force samples
@@ -163,34 +162,36 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
 
 def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.ndarray:
     """dF_grip/dh (n_vars,) of the grip read at the steady state; dF, dG: (k, n_vars) the records'
-    force and grip derivatives at fixed positions. Two readings (:func:`simfab.coupling.profile.analyze`):
+    force and grip derivatives at fixed positions.
 
-    - interpolated at the rest point s* between the records a = i_ss and b = a + 1 that bracket it
-      (F_a > 0 >= F_b), w = F_a / (F_a - F_b): (1 - w) dG_a + w dG_b, the weight held (the rest
-      search places the bracket's records anew for every design; differentiating w through the
-      bracket's secant slopes made SLSQP's first step on alligator2d lose the grip);
-    - at the rest search's last record b = i_ss, past the zero crossing (F_a > 0 >= F_b, a = b - 1):
-      that record sits at s* plus the search's stopping offset, so it follows s*(X), F(s*; X) = 0,
-      and by the implicit function theorem with the bracket's secant slopes
+    The profile reads the grip at the rest point s*, where the force F passes through zero,
+    interpolated between the two records a, b = a + 1 that bracket it (F_a > 0 >= F_b, a = i_ss;
+    :func:`simfab.coupling.profile.analyze`), or at the rest search's last record b = i_ss when the
+    steady state is that record, past the zero crossing (a = b - 1: a position the search places at
+    s* plus its stopping offset). Either reading follows s*(X), F(s*; X) = 0, so by the implicit
+    function theorem with the bracket's secant slopes (w = F_a / (F_a - F_b), s* = s_a + w (s_b - s_a)):
 
-          dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2.
+        dG* = (1 - w) dG_a + w dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2
 
-      At a seat (block2d_tight: the ball on the socket's bottom) the force and the grip change by
-      ~10^6 N/m over the bracket's micrometres and the two terms nearly cancel: dG_b alone is off by
-      an order of magnitude or more, the sum is within a factor 1.6 of finite differences over whole
-      re-simulations (the seat is a kink: no derivative is exact there; tests/design/test_gradient_method.py).
-
-    Otherwise (a planned record, whose position is held): dG at i_ss."""
+    (the record's reading: dG_b + (G_b - G_a) dw). At a seat (block2d_tight: the ball on the socket's
+    bottom) the force and the grip change by ~10^6 N/m over the bracket's micrometres and the terms
+    nearly cancel: the derivative at fixed positions alone is off by an order of magnitude or more,
+    this one is within a factor 1.6 of finite differences over whole re-simulations (the seat is a
+    kink: no derivative is exact there; tests/design/test_gradient_method.py). Otherwise (a planned
+    record, whose position is held): dG at i_ss."""
     F, G = res.column("force"), res.column("grip")
     planned = len(res.model.s_steps)
     if i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
-        w = F[i_ss] / (F[i_ss] - F[i_ss + 1])
-        return (1 - w) * dG[i_ss] + w * dG[i_ss + 1]
-    if planned <= i_ss and 0 < i_ss and F[i_ss - 1] > 0 >= F[i_ss]:
-        a, b = i_ss - 1, i_ss
-        dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
-        return dG[b] + (G[b] - G[a]) * dw
-    return dG[i_ss]
+        a, interpolated = i_ss, True
+    elif planned <= i_ss and 0 < i_ss and F[i_ss - 1] > 0 >= F[i_ss]:
+        a, interpolated = i_ss - 1, False
+    else:
+        return dG[i_ss]
+    b = a + 1
+    w = F[a] / (F[a] - F[b])
+    dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
+    base = (1 - w) * dG[a] + w * dG[b] if interpolated else dG[b]
+    return base + (G[b] - G[a]) * dw
 
 
 def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
