@@ -173,17 +173,20 @@ def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.nda
 
         dG* = (1 - w) dG_a + w dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2
 
-    (the record's reading: dG_b + (G_b - G_a) dw). At a seat (block2d_tight: the ball on the socket's
-    bottom) the force and the grip change by ~10^6 N/m over the bracket's micrometres and the terms
-    nearly cancel: the derivative at fixed positions alone is off by an order of magnitude or more,
-    this one is within a factor 1.6 of finite differences over whole re-simulations (the seat is a
-    kink: no derivative is exact there; tests/design/test_gradient_method.py). Otherwise (a planned
+    (the record's reading: dG_b + (G_b - G_a) dw when a too is a record of the rest search, whose
+    bracket spans micrometres; when a is a planned record the secant spans a whole step, and dG_b
+    is used: with the term there alligator2d missed its brief, without it met it, docs/decisions.md).
+    At a seat (block2d_tight: the ball on the socket's bottom) the force and the grip change by
+    ~10^6 N/m over the bracket's micrometres and the terms nearly cancel: the derivative at fixed
+    positions alone is off by an order of magnitude or more, this one is within a factor 1.6 of
+    finite differences over whole re-simulations (the seat is a kink: no derivative is exact there;
+    tests/design/test_gradient_method.py). Otherwise (a planned
     record, whose position is held): dG at i_ss."""
     F, G = res.column("force"), res.column("grip")
     planned = len(res.model.s_steps)
     if i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
         a, interpolated = i_ss, True
-    elif planned <= i_ss and 0 < i_ss and F[i_ss - 1] > 0 >= F[i_ss]:
+    elif planned <= i_ss - 1 and F[i_ss - 1] > 0 >= F[i_ss]:
         a, interpolated = i_ss - 1, False
     else:
         return dG[i_ss]
