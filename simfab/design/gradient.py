@@ -16,9 +16,8 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
   the series' largest magnitude (softmax weights over the steps; the reported value is the exact
   maximum);
 - E_ss = E at the steady-state index i_ss (held: a change of the index is a non-smooth event);
-  coupling ratio 100 E_ss / E_max by the quotient rule; the grip at i_ss, interpolated where the
-  force passes through zero after it as :func:`simfab.coupling.profile.analyze` does (the
-  interpolation weight held, see :func:`figure_gradients`);
+  coupling ratio 100 E_ss / E_max by the quotient rule; the grip at the rest point, which moves
+  with the design (:func:`rest_grip_gradient`: implicit differentiation of F(s*; X) = 0);
 - E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
 - the element quality q_e (signed mean ratio) analytically.
 - the target-profile error rms^2 (the objective of profile matching) through the force samples
@@ -27,10 +26,14 @@ Not differentiated (gradient None; the optimizer reads it as a constraint withou
 checks it on every design and reports it): the seat clearance; and nothing with friction (the
 sensitivities hold for mu = 0).
 
-Optimizer (:func:`optimize_gradient`): SLSQP on z = (h - lower) / (upper - lower) in [0, 1] from
-the initial shape, minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's
-constraints, scaled to their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0,
-and the element-quality bound q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
+Optimizer (:func:`optimize_gradient`): when the start gives no direction (a part that does not
+touch the object: every violated constraint's gradient is zero) a seeded annealing pre-phase runs
+until a design is in the brief's category (:func:`in_category`); then SLSQP on
+z = (h - lower) / (upper - lower) in [0, 1] from the initial shape (or the pre-phase's best),
+minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's constraints, scaled to
+their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0 (a loose grip's
+coupling-ratio bound in sqrt(CR), :class:`ConstraintRow`), and the element-quality bound
+q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
 asks for (iterate or line-search trial) costs one insertion, which records its sensitivities: the
 Jacobians come with the values. The best design is the feasible one with the lowest objective
 among all simulated (the lowest penalized objective when none is feasible). Every candidate runs at
@@ -52,7 +55,7 @@ from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_m
 from simfab.coupling.profile import analyze_run
 from simfab.design import brief as B
 from simfab.design.handles import Handles
-from simfab.design.optimize import DesignResult
+from simfab.design.optimize import DesignResult, optimize
 from simfab.design.problem import (
     CONTACT_STRAIN_FLOOR,
     QUALITY_REL,
@@ -142,15 +145,7 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
     g["insertion_force"] = -_smax(-F[:end], dF[:end]) if prof.F_in > 0 else np.zeros(Jh.shape[1])
     g["removal_force"] = _smax(F[:end], dF[:end]) if prof.F_rm > 0 else np.zeros(Jh.shape[1])
     g["hold_force"] = g["removal_force"] if not res.removal else None
-    grip = dG[i_ss]
-    if prof.category != "ejects" and i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
-        # the rest point's weight w = F_i / (F_i - F_i+1) is held: the two records are the rest
-        # search's bracket around a seat, where the force passes through zero within micrometres,
-        # so dw/dF is huge and meaningful only over that bracket (whose records the search places
-        # anew for every design); the grip's own change at the two records is the usable direction
-        w = F[i_ss] / (F[i_ss] - F[i_ss + 1])
-        grip = (1 - w) * dG[i_ss] + w * dG[i_ss + 1]
-    g["grip_force"] = grip
+    g["grip_force"] = rest_grip_gradient(res, i_ss, dF, dG) if prof.category != "ejects" else dG[i_ss]
     stresses = [s.stress_value for s in rec.insert + rec.remove]
     if all(s.stress is not None for s in rec.insert + rec.remove):
         dS = np.array([pull(s.stress) for s in rec.insert + rec.remove])
@@ -163,6 +158,43 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
         g["rms_error_sq"] = scale * target_gradient(problem.target, res.column("s"), scale * F) @ dF
     supported = all(s.supported for s in rec.insert + rec.remove) and not res.removal
     return FigureGradients(values=dict(ev.figures), gradients=g, supported=supported, steady_index=i_ss)
+
+
+def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.ndarray:
+    """dF_grip/dh (n_vars,) of the grip read at the steady state; dF, dG: (k, n_vars) the records'
+    force and grip derivatives at fixed positions.
+
+    The profile reads the grip at the rest point s*, where the force F passes through zero,
+    interpolated between the two records a, b = a + 1 that bracket it (F_a > 0 >= F_b, a = i_ss;
+    :func:`simfab.coupling.profile.analyze`), or at the rest search's last record b = i_ss when the
+    steady state is that record, past the zero crossing (a = b - 1: a position the search places at
+    s* plus its stopping offset). Either reading follows s*(X), F(s*; X) = 0, so by the implicit
+    function theorem with the bracket's secant slopes (w = F_a / (F_a - F_b), s* = s_a + w (s_b - s_a)):
+
+        dG* = (1 - w) dG_a + w dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2
+
+    (the record's reading: dG_b + (G_b - G_a) dw when a too is a record of the rest search, whose
+    bracket spans micrometres; when a is a planned record the secant spans a whole step, and dG_b
+    is used: with the term there alligator2d missed its brief, without it met it, docs/decisions.md).
+    At a seat (block2d_tight: the ball on the socket's bottom) the force and the grip change by
+    ~10^6 N/m over the bracket's micrometres and the terms nearly cancel: the derivative at fixed
+    positions alone is off by an order of magnitude or more, this one is within a factor 1.6 of
+    finite differences over whole re-simulations (the seat is a kink: no derivative is exact there;
+    tests/design/test_gradient_method.py). Otherwise (a planned
+    record, whose position is held): dG at i_ss."""
+    F, G = res.column("force"), res.column("grip")
+    planned = len(res.model.s_steps)
+    if i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
+        a, interpolated = i_ss, True
+    elif planned <= i_ss - 1 and F[i_ss - 1] > 0 >= F[i_ss]:
+        a, interpolated = i_ss - 1, False
+    else:
+        return dG[i_ss]
+    b = a + 1
+    w = F[a] / (F[a] - F[b])
+    dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
+    base = (1 - w) * dG[a] + w * dG[b] if interpolated else dG[b]
+    return base + (G[b] - G[a]) * dw
 
 
 def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
@@ -234,7 +266,7 @@ class _Run:
 def _evaluate(run: _Run, h: np.ndarray):
     """(Evaluation, FigureGradients or None) of design h, memoized (SLSQP asks for each design's
     values and Jacobians in separate calls)."""
-    key = np.asarray(h, float).tobytes()
+    key = np.round(np.asarray(h, float), 12).tobytes()  # (z -> h round trips differ in the last bits)
     out = run.memo.get(key)
     if out is not None:
         return out
@@ -278,30 +310,90 @@ def nonsmooth_events(signatures: list) -> dict:
 NOT_DIFFERENTIATED = ("seat_clearance",)
 
 
-def _constraint_rows(problem: DesignProblem) -> list:
-    """[(figure, sign, bound, scale)]: one row per finite bound, c = sign (value * correction - bound) / scale >= 0."""
+#: A coupling-ratio upper bound below this [%] (the loose brief's KAPPA_LOOSE) is linearized in
+#: sqrt(CR) (:class:`ConstraintRow`).
+ROOT_BELOW = 1.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class ConstraintRow:
+    """One finite bound SLSQP linearizes: c = sign (v - bound) / scale >= 0 with v = value * correction,
+    or with ``root`` c = sign (sqrt(v) - sqrt(bound)) / sqrt(scale).
+
+    The root is the smooth surrogate of a category bound: a loose grip asks CR = 100 E_ss / E_max <=
+    1e-3 %, and E_ss vanishes quadratically as the seat's overlap closes (the barrier and the elastic
+    energy are quadratic in it), so dCR/dh -> 0 on the way and each linearization asks for a step that
+    is too long by a growing factor; sqrt(CR) is about linear in the overlap."""
+
+    name: str
+    sign: float
+    bound: float
+    scale: float
+    root: bool = False
+
+    def value(self, v: float) -> float:
+        if self.root:
+            return self.sign * (math.sqrt(max(v, 0.0)) - math.sqrt(self.bound)) / math.sqrt(self.scale)
+        return self.sign * (v - self.bound) / self.scale
+
+    def gradient(self, v: float, g: np.ndarray) -> np.ndarray:
+        """dc/dh from dv/dh ``g``."""
+        if self.root:
+            return self.sign * g / (2.0 * math.sqrt(v * self.scale)) if v > 0 else np.zeros_like(g)
+        return self.sign * g / self.scale
+
+
+def constraint_rows(problem: DesignProblem) -> list:
+    """[:class:`ConstraintRow`]: one row per finite bound (a force's lower bound 0 always holds)."""
     rows = []
     for name, (lo, hi) in problem.limits.items():
         if name in NOT_DIFFERENTIATED:  # checked on every design (the best is a feasible one), not linearized
             continue
         lo, hi = B.aimed_bounds(name, lo, hi, problem.settings.margin)
+        scale = B.SCALES[name]
         if math.isfinite(lo) and not (name != "coupling_ratio" and lo <= 0):  # a force >= 0 always holds
-            rows.append((name, 1.0, lo, B.SCALES[name]))
+            rows.append(ConstraintRow(name=name, sign=1.0, bound=lo, scale=scale))
         if math.isfinite(hi):
-            rows.append((name, -1.0, hi, B.SCALES[name]))
+            rows.append(ConstraintRow(name=name, sign=-1.0, bound=hi, scale=scale,
+                                      root=name == "coupling_ratio" and hi < ROOT_BELOW))
     return rows
 
 
 #: Constraint value SLSQP sees for a design that cannot be simulated (a violation of this many units).
 FAILED_VIOLATION = 10.0
+#: Annealing iterations at most of the pre-phase that runs when the start gives SLSQP no direction.
+PRE_PHASE_ITERATIONS = 60
+
+
+def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
+    """The start gives SLSQP no direction: some constraint row is violated and every violated row's
+    gradient is zero or missing (a part that does not touch the object: no figure depends on its shape)."""
+    violated = [r for r in rows if r.value(fg.values[r.name] * corrections.get(r.name, 1.0)) < 0]
+    flat = all(fg.gradients.get(r.name) is None or not np.any(fg.gradients[r.name]) for r in violated)
+    return bool(violated) and flat
+
+
+def in_contact(ev: Evaluation) -> bool:
+    """A complete evaluation whose part touched the object (category other than "none")."""
+    return ev.status == "ok" and ev.figures.get("category") not in (None, "none")
+
+
+def in_category(ev: Evaluation) -> bool:
+    """In contact and within the brief's coupling-ratio bounds (its category: tight, loose), the
+    pre-phase's goal: a design that merely grazes the object (a grip of millinewtons, in the
+    barrier's range only) has gradients too small for SLSQP's linearization of a newton-sized bound,
+    whose steps then invert elements."""
+    return in_contact(ev) and all(c.satisfied for c in ev.constraints if c.name == "coupling_ratio")
 
 
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
                       callback=None, start=None) -> DesignResult:
     """SLSQP on the brief (see the module docstring); returns a :class:`DesignResult` whose
     ``simulations`` counts every insertion and ``gradient_evaluations`` those that gave gradients
-    (all complete ones). ``seed`` is unused (the method is deterministic: the same signature as
-    :func:`simfab.design.optimize.optimize`); ``iterations`` caps SLSQP's iterations (default: the
+    (all complete ones, and the pre-phase's). ``seed`` seeds the annealing pre-phase, which runs
+    only when the start gives no direction (:func:`flat_start`: at most PRE_PHASE_ITERATIONS
+    iterations, until a design is in the brief's category; SLSQP starts from the best one); otherwise the
+    method is deterministic. ``iterations`` caps SLSQP's iterations (default: the
     brief's, at most MAX_ITERATIONS). Raises ConvergenceError when the initial shape
     cannot be simulated."""
     t0 = time.perf_counter()
@@ -316,8 +408,19 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         run.problem = problem = problem.with_settings(refined=tuple(int(i) for i in initial.result.refined_facets))
     lo, hi = problem.lower, problem.upper
     span = hi - lo
-    rows = _constraint_rows(problem)
+    rows = constraint_rows(problem)
     corr = problem.settings.corrections
+    pre = None
+    fg0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))[1]
+    if fg0 is not None and flat_start(rows, fg0, corr):
+        # no direction at the start: anneal (seeded) until a design is in the brief's category, then descend
+        log(f"couple optimize: {problem.base.name}: the start gives no gradient (no contact); annealing pre-phase "
+            f"until a design is in the brief's category, at most {PRE_PHASE_ITERATIONS} iterations", quiet=quiet)
+        pre = optimize(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
+                       start=None if start is None else np.asarray(start, float), until=in_category)
+        run.insertions += pre.simulations + pre.stopped_simulations + pre.speculative
+        if in_contact(pre.best):
+            start = pre.best.h
     target = problem.target is not None
     el = problem.base.fem.elements
     q0 = problem.q0
@@ -353,7 +456,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         ev, fg = _evaluate(run, h)
         if fg is None:
             return np.r_[np.full(len(rows), -FAILED_VIOLATION), qual]
-        vals = [sign * (fg.values[name] * corr.get(name, 1.0) - bound) / scale for name, sign, bound, scale in rows]
+        vals = [r.value(fg.values[r.name] * corr.get(r.name, 1.0)) for r in rows]
         return np.r_[vals, qual]
 
     def cons_jac(z):
@@ -364,10 +467,11 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         if np.all(np.asarray(element_quality(X, el)) > 0):
             ev, fg = _evaluate(run, h)
         Jc = np.zeros((len(rows), len(z)))
-        for r, (name, sign, _, scale) in enumerate(rows):
-            gr = None if fg is None else fg.gradients.get(name)
+        for i, r in enumerate(rows):
+            gr = None if fg is None else fg.gradients.get(r.name)
             if gr is not None:
-                Jc[r] = sign * gr * corr.get(name, 1.0) / scale
+                c = corr.get(r.name, 1.0)
+                Jc[i] = r.gradient(fg.values[r.name] * c, gr * c)
         return np.vstack([Jc, Jq]) * span[None, :]
 
     z0 = np.clip((H.identity() if start is None else np.asarray(start, float)) - lo, 0, None) / span
@@ -402,11 +506,17 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             rejected[key] = rejected.get(key, 0) + 1
     hist = [{"k": k, "accepted": True, "current": ev.objective, "best": ev.objective, "temperature": math.nan,
              "sigma": math.nan, "value": ev.objective, "evaluation": ev} for k, ev in enumerate(history)]
+    message = str(res.message)
+    if pre is not None:
+        message = (f"annealing pre-phase ({pre.iterations} iterations, "
+                   f"{pre.simulations + pre.stopped_simulations + pre.speculative} insertions, "
+                   f"{'a design in the category' if in_category(pre.best) else 'none in the category'}); "
+                   f"SLSQP: {message}")
     out = DesignResult(problem=problem, initial=initial, best=best, history=hist,
                        accepted=[(k, ev.rest, ev.objective) for k, ev in enumerate(history)],
                        simulations=run.insertions, stopped_simulations=0, rejected=rejected,
                        seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
                        iterations=int(res.nit), stopped_early=bool(res.success), method="gradient",
-                       gradient_evaluations=run.gradient_evaluations, message=str(res.message),
+                       gradient_evaluations=run.gradient_evaluations, message=message,
                        events=nonsmooth_events(run.signatures))
     return out

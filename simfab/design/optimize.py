@@ -78,7 +78,7 @@ class DesignResult:
 
 
 def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
-             callback=None, workers=1, start=None) -> DesignResult:
+             callback=None, workers=1, start=None, until=None) -> DesignResult:
     """Run simulated annealing on ``problem`` (see the module docstring) with random ``seed``;
     ``iterations`` defaults to the brief's. ``workers`` > 1 evaluates that many proposals at once
     (:mod:`simfab.design.parallel`; needs ``problem.source``): the same result, sooner; running
@@ -133,6 +133,8 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
         # the best value counts as improved when it fell by more than PATIENCE_REL
         if best_value < progress_ref["value"] * (1.0 - PATIENCE_REL) or not math.isfinite(progress_ref["value"]):
             progress_ref.update(value=best_value, k=k)
+        if until is not None and until(best_info):
+            return True
         return best_info.feasible and k - progress_ref["k"] >= brief.patience
 
     progress_ref = {"value": math.inf, "k": 0}

@@ -1,0 +1,66 @@
+"""The gradient design method's treatment of the brief's non-smooth figures (simfab.design.gradient):
+the grip read at a seat the rest search brackets, the loose grip's square-root surrogate, and the
+annealing pre-phase for a start that touches nothing."""
+
+import math
+
+import numpy as np
+import pytest
+
+from simfab.coupling.scene import load_coupling_scene
+from simfab.design import gradient as G
+from simfab.design.brief import DesignBrief
+from simfab.design.problem import evaluate, make_problem
+
+
+def test_grip_gradient_follows_the_rest_point():
+    # block2d_tight's ball seats against the socket's bottom: the force jumps from +5 N to -2 N within
+    # 3 um there, and the grip is read at the rest point the rest search brackets anew for every design.
+    # The seat is a kink, so no derivative is exact there: the test asks for the secant's sign and size,
+    # which the grip's derivative at the record's fixed position misses by an order of magnitude.
+    cm = load_coupling_scene("block2d_tight")
+    P = make_problem(cm, DesignBrief(grip="tight", handles=3, placement="spatial")).with_settings(hold_steps=True)
+    Jh = G.handle_jacobian(P.handles)
+    h0 = P.handles.identity()
+    dh = np.random.default_rng(0).standard_normal(len(h0)) * P.sigma0
+    ev = evaluate(P, h0, keep_result=True, recorder=lambda cm: G.SensitivityRecorder(cm, G.stress_measure(P, cm)))
+    fg = G.figure_gradients(P, ev, Jh)
+    assert fg.steady_index >= len(ev.result.model.s_steps)  # read at a record of the rest search
+    eps = 0.1  # the seat is a kink: a secant over whole re-simulations, not an infinitesimal difference
+    ep, em = evaluate(P, h0 + eps * dh), evaluate(P, h0 - eps * dh)
+    assert ep.figures["category"] == em.figures["category"] == "tight"
+    fd = (ep.figures["grip_force"] - em.figures["grip_force"]) / (2 * eps)
+    assert float(fg.gradients["grip_force"] @ dh) == pytest.approx(fd, rel=0.6)
+    fixed = float(np.asarray(ev.recorder.insert[fg.steady_index].grip).ravel() @ Jh @ dh)
+    assert abs(fixed - fd) > 3 * abs(fd)  # (-196 against -14)
+
+
+def test_loose_bound_square_root_surrogate():
+    row = G.ConstraintRow(name="coupling_ratio", sign=-1.0, bound=1e-3, scale=1.0, root=True)
+    assert row.value(1e-3) == pytest.approx(0.0, abs=1e-15)
+    assert row.value(0.0) == pytest.approx(math.sqrt(1e-3))  # satisfied: c >= 0
+    assert row.value(4e-3) < 0
+    g = np.array([2.0, -1.0])  # dCR/dh
+    v, eps = 4e-3, 1e-9
+    fd = (row.value(v + eps) - row.value(v - eps)) / (2 * eps)
+    assert np.allclose(row.gradient(v, g), fd * g, rtol=1e-6)
+    assert not np.any(row.gradient(0.0, g))  # CR = 0 (no contact at the seat): the bound is inactive
+    plain = G.ConstraintRow(name="grip_force", sign=1.0, bound=3.0, scale=1.0)
+    assert plain.value(5.0) == 2.0 and np.allclose(plain.gradient(5.0, g), g)
+
+
+def test_flat_start_runs_the_annealing_pre_phase():
+    # paddleside2d's U-channel matches the blade exactly: no contact, every figure's gradient is zero
+    cm = load_coupling_scene("paddleside2d", overrides={"compliant": {"target_elements": 500},
+                                                        "simulation": {"steps": 15}})
+    P = make_problem(cm, DesignBrief(grip="tight", grip_force=(5.0, math.inf), handles=3, placement="spatial"))
+    Jh = G.handle_jacobian(P.handles)
+    ev = evaluate(P.with_settings(hold_steps=True), P.handles.identity(), keep_result=True,
+                  recorder=lambda cm: G.SensitivityRecorder(cm, G.stress_measure(P, cm)))
+    assert ev.figures["category"] == "none"
+    assert G.flat_start(G.constraint_rows(P), G.figure_gradients(P, ev, Jh), {})
+    res = G.optimize_gradient(P, iterations=1, seed=0)
+    assert res.message.startswith("annealing pre-phase")
+    # every insertion is counted: the pre-phase's (stopped early or complete) and SLSQP's, which all give gradients
+    assert res.simulations > res.gradient_evaluations >= 1
+    assert res.best.status == "ok" and res.best.objective <= res.initial.objective
