@@ -11,8 +11,9 @@ Network (built from a :class:`simfab.deploy.pattern.Pattern`, flat in z = 0):
   or to the boundary junction); each spring arc is a rod clamped to the junctions of the two
   edge midpoints it joins. Rest shape = the flat, cut shape (springs carry their Bezier or zigzag curvature).
 - seam ties (optional, a cut pattern whose seams are closed, :func:`simfab.deploy.cuts.seam_ties`):
-  a straight 3-segment beam across the wedge between two seam vertices facing each other on the
-  target, clamped to both (its end edges rigid in the vertex bodies); in deployment its clamp
+  a straight beam across the wedge between two seam vertices facing each other on the
+  target, clamped to both (its short end edges rigid in the vertex bodies, like a beam's:
+  :data:`TIE_SEGMENTS_PER_BEAM_SEGMENT`); in deployment its clamp
   offsets move outwards along it by (L_flat - L_target)/2 at each end, like an insert's beam
   ends, so the two vertices are drawn from their flat distance to their target distance (the
   seam is closed; the tie is not part of the laser-cut sheet but a joint made at assembly);
@@ -59,6 +60,10 @@ from simfab.rods.statics import StaticSolver, StaticsOptions
 #: increment's buckling, where 0.05 held 40-60 Newton steps in a row at alpha ~ 0.27 (0.2: 227 -> 176
 #: iterations on a 165-insert dome, same equilibria on the bundled targets; docs/decisions.md).
 MAX_STEP = 0.2
+#: rod segments of a seam tie per ``beam_segments``: a tie spans up to 1.5 spacings (three half
+#: beams), so it gets three half beams' segments and, like them, short clamped end edges
+#: (``clamp_edge``): it bends and twists over its whole length
+TIE_SEGMENTS_PER_BEAM_SEGMENT = 3
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -161,10 +166,11 @@ def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
         raise InputError("the pattern needs at least one quad with a spring (make pattern.spacing smaller)",
                          where="pattern.spacing")
     tie_rods = []
+    st = rod_parameters(TIE_SEGMENTS_PER_BEAM_SEGMENT * nbeam, cfg.clamp_edge)
     for k, ((a, b), L) in enumerate(zip(np.zeros((0, 2), int) if ties is None else ties.pairs,
                                         () if ties is None else ties.length)):
         name = f"tie{k}"
-        nb.add_rod(name, P3[a] + np.linspace(0.0, 1.0, 4)[:, None] * (P3[b] - P3[a]), section=sec, material=mat)
+        nb.add_rod(name, P3[a] + st[:, None] * (P3[b] - P3[a]), section=sec, material=mat)
         nb.clamp(name, "start", vname[a])
         nb.clamp(name, "end", vname[b])
         Lf = float(np.linalg.norm(P3[b] - P3[a]))
