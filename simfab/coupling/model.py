@@ -10,6 +10,8 @@ import numpy as np
 from simfab.contact.imls import ImlsField
 from simfab.coupling.config import ContactOptions, InsertionOptions
 from simfab.errors import InputError
+from simfab.fem.model import make_model
+from simfab.fem.p2 import to_p2
 from simfab.rotations import pose_matrix
 
 
@@ -144,6 +146,20 @@ class CouplingModel:
             n = np.linalg.norm(u)
             out = self._cache[key] = u / n if n > 0 else u
         return out.copy()
+
+
+def with_rest_shape(cm: CouplingModel, X: np.ndarray) -> CouplingModel:
+    """``cm`` with A's rest shape X (n, dim) [m] on its linear mesh (``cm.fem.linear`` for quadratic
+    elements, whose edge nodes then sit at the new midpoints): the same elements, element order,
+    material, object, path, supports, options and contact. The steps are planned again for X (see
+    :func:`make_coupling_model`). Raises InputError for an invalid mesh."""
+    lin = cm.fem.linear if cm.fem.element_order == 2 else cm.fem
+    fem = make_model(X, lin.elements, lin.material, thickness=lin.thickness, device=lin.device)
+    if cm.fem.element_order == 2:
+        fem = to_p2(fem, degree=cm.fem.degree)
+    return make_coupling_model(name=cm.name, fem=fem, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
+                               options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces,
+                               contact=cm.contact)
 
 
 def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertices, options: InsertionOptions,

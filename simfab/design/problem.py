@@ -49,7 +49,7 @@ import numpy as np
 
 from simfab._warp import device as check_device
 from simfab.coupling import settle
-from simfab.coupling.model import CouplingModel, make_coupling_model
+from simfab.coupling.model import CouplingModel, with_rest_shape
 from simfab.coupling.profile import analyze_run
 from simfab.coupling.simulate import InsertionResult, check_start, simulate
 from simfab.design import brief as B
@@ -59,7 +59,6 @@ from simfab.design.placement import place_handles
 from simfab.design.scene import load_design_scene
 from simfab.design.stress import STRESS_RADIUS, averaged_von_mises
 from simfab.errors import ConvergenceError, InputError
-from simfab.fem.model import make_model
 
 #: A candidate element must keep this fraction of its initial mean-ratio quality.
 QUALITY_REL = 0.25
@@ -348,18 +347,13 @@ def shape_defect(problem: DesignProblem, X: np.ndarray) -> str:
 def candidate_model(problem: DesignProblem, X: np.ndarray):
     """(CouplingModel on rest shape X, "") or (None, reason) when X is not a valid rest shape."""
     cm = problem.base
-    fem = cm.fem
     why = shape_defect(problem, X)
     if why:
         return None, why
-    try:
-        new = make_model(X, fem.elements, fem.material, thickness=fem.thickness, device=fem.device)
+    try:  # the scene's own options: the insertion runs as 'couple simulate' would run the candidate
+        out = with_rest_shape(cm, X)
     except InputError as e:
         return None, f"invalid mesh: {e}"
-    # the scene's own options: the insertion runs as 'couple simulate' would run the candidate
-    out = make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
-                              options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces,
-                              contact=cm.contact)
     if problem.settings.hold_steps and not settle.can_continue(cm):
         # the initial shape's step positions (the default insertion length follows A's farthest
         # point along the path, in jumps); a run continued to rest past the path's end already

@@ -23,11 +23,10 @@ import scipy.sparse as sp
 
 from simfab.coupling import config as C
 from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure
+from simfab.coupling.model import with_rest_shape
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import make_coupling_model, simulate
+from simfab.coupling.simulate import simulate
 from simfab.design.stress import averaging_matrix, quadrature_von_mises
-from simfab.fem.model import make_model
-from simfab.fem.p2 import to_p2
 from simfab.fem.shape_derivative import linear_rest_derivative
 
 EPS = 1e-3  # central-difference step along dX, whose size is ~1 % of A's mean edge length
@@ -43,18 +42,6 @@ def tight_newton(monkeypatch):
 
 def linear_mesh(cm):
     return cm.fem.linear if cm.fem.element_order == 2 else cm.fem
-
-
-def with_rest(cm, X):
-    """``cm`` with A's rest shape X on its linear mesh (same elements and order, material, object,
-    path, supports and options)."""
-    lin = linear_mesh(cm)
-    fem = make_model(X, lin.elements, lin.material, thickness=lin.thickness)
-    if cm.fem.element_order == 2:
-        fem = to_p2(fem, degree=cm.fem.degree)
-    return make_coupling_model(name=cm.name, fem=fem, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
-                               options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces,
-                               contact=cm.contact)
 
 
 def smooth_field(cm, seed):
@@ -98,8 +85,8 @@ def check(cm, seed=0, min_supported=3, figures=("energy", "force", "grip", "stre
         A = averaging_matrix(cm.fem, 0.5e-3)
     rec = SensitivityRecorder(cm, StressMeasure(averaging=A, temperature_rel=0.0))  # T = 0: the max's gradient
     base = simulate(cm, recorder=rec)
-    plus = simulate(with_rest(cm, X + EPS * dX))
-    minus = simulate(with_rest(cm, X - EPS * dX))
+    plus = simulate(with_rest_shape(cm, X + EPS * dX))
+    minus = simulate(with_rest_shape(cm, X - EPS * dX))
     assert [r.s for r in plus.steps] == [r.s for r in base.steps] == [r.s for r in minus.steps]
     assert plus.refined_facets == minus.refined_facets == base.refined_facets  # no refinement event between
     ok = [k for k, sn in enumerate(rec.insert) if sn.supported]

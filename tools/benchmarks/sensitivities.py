@@ -74,20 +74,6 @@ def _linear(cm):
     return cm.fem.linear if cm.fem.element_order == 2 else cm.fem
 
 
-def _with_rest(cm, X):
-    from simfab.coupling.simulate import make_coupling_model
-    from simfab.fem.model import make_model
-    from simfab.fem.p2 import to_p2
-
-    lin = _linear(cm)
-    fem = make_model(X, lin.elements, lin.material, thickness=lin.thickness)
-    if cm.fem.element_order == 2:
-        fem = to_p2(fem, degree=cm.fem.degree)
-    return make_coupling_model(name=cm.name, fem=fem, field=cm.field, path=cm.path, fixed_vertices=cm.fixed_vertices,
-                               options=cm.options, object_vertices=cm.object_vertices, object_faces=cm.object_faces,
-                               contact=cm.contact)
-
-
 def _stresses(fem, x):
     from simfab.design.stress import quadrature_von_mises
     from simfab.fem.shape_derivative import von_mises
@@ -99,6 +85,7 @@ def _errors(cm, figures, eps) -> list[dict]:
     import scipy.sparse as sp
 
     from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure
+    from simfab.coupling.model import with_rest_shape
     from simfab.coupling.simulate import simulate
     from simfab.design.stress import averaging_matrix
     from simfab.fem.shape_derivative import linear_rest_derivative
@@ -120,9 +107,9 @@ def _errors(cm, figures, eps) -> list[dict]:
         if not held:
             t_adj = time.perf_counter() - t0
     t0 = time.perf_counter()
-    plus = simulate(_with_rest(cm, X + eps * dX))
+    plus = simulate(with_rest_shape(cm, X + eps * dX))
     t_plain = time.perf_counter() - t0
-    minus = simulate(_with_rest(cm, X - eps * dX))
+    minus = simulate(with_rest_shape(cm, X - eps * dX))
 
     def table(sens, pr, mr, keys):
         ok = [i for i, sn in enumerate(sens) if sn.supported]
