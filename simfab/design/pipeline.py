@@ -62,17 +62,17 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         raise InputError(f"must be one of {', '.join(METHODS)}, got {method!r}", where="--method")
     if method == "gradient" and restarts > 1:
         raise InputError("the gradient method is deterministic: restarts would repeat it", where="--restarts")
-    out = make_out_dir(out)
     ds = load_design_scene(scene, design=design, simulation=simulation, contact=contact, device=device)
     cm = ds.cm
     if method == "gradient" and cm.contact.friction > 0:
-        raise InputError("the gradient method's sensitivities hold for frictionless contact (friction 0)",
-                         where="--method")
+        raise InputError("the gradient design does not read frictional profiles yet (friction 0 only; "
+                         "--method anneal designs with friction)", where="--method")
     if revolve is not None and cm.dim != 2:
         raise InputError("only a 2D section can be revolved", where="--revolve-axis")
     if revolve is not None and len(revolve) > 2 and revolve[2] and not ds.kept_regions:
         raise InputError("replicating arms needs the base marked by a keep site ([design] keep)",
                          where="--revolve-arms")
+    out = make_out_dir(out)  # after every input check: bad input leaves no output directory
     log(f"couple optimize: {cm.name}: {cm.fem.n_elements} elements, {len(cm.s_steps) - 1} steps, "
         f"{ds.brief.handles} handles ({ds.brief.placement}), up to {ds.brief.iterations} iterations", quiet=quiet)
     with contextlib.ExitStack() as stack:
