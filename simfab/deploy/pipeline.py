@@ -146,7 +146,9 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         dep = tuning.redeploy(pat, net, dep, tuned, device=device)
         tune_info = dict(steps=tuned.steps, solves=tuned.solves, rms_before=before.rms,
                          hausdorff_before=before.hausdorff,
+                         point_weight=scene.tune.point_weight,
                          point_to_plane_rms_mm=[1e3 * r for r in tuned.rms_history],
+                         point_to_target_rms_mm=[1e3 * r for r in tuned.point_rms_history],
                          gap_change_max_mm=float(np.max(np.abs(tuned.gap - gap0)) * 1e3))
         sec["tune"] = time.perf_counter() - t
     t = time.perf_counter()

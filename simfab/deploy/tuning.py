@@ -5,9 +5,20 @@ network's bending: the deployed shape misses the target where the rods cannot fo
 (steep caps, boundary cells). Here the growth of each insert, ``d_i = r_i - g_i`` [m], is the
 unknown of a least-squares problem on the deployed shape itself.
 
-Residual (point to plane, the quantity the deviation's RMS measures): after the best rigid
-alignment (R, t) of the deployed vertices X (n,3) onto the target, ``e_j = n_j . (R x_j + t - c_j)``
-with c_j the closest target point and n_j its face normal (both held fixed in one step).
+Residual: the point-to-plane distance to the surface (the quantity the deviation's RMS measures)
+stacked with a weighted point-to-point term towards each vertex's own target point,
+
+    e = [ n_j . (R x_j + t - c_j) ,  sqrt(w) (R x_j + t - y_j) ]   (n + 3n rows),
+    E = |e|^2 / 2,
+
+with c_j the closest target point, n_j its face normal and y_j the vertex's target point (the
+flattening's map of its flat position); w = ``point_weight``. The surface term alone accepts a
+shape that lies on the surface but covers a different part of it (a steep cap's vertices sliding
+up the sphere: on the surface within 1 mm and 6 % too low); the point term ties each vertex to its
+own place. Alignment (R, t): ICP on the same objective - each iteration a Kabsch fit onto the
+blended points (c_j + w y_j) / (1 + w), the minimiser of sum |A - c|^2 + w |A - y|^2 for fixed c
+- so at convergence dE/d(R, t) = 0 and the Gauss-Newton gradient J^T e below needs no alignment
+term (checked against finite differences of E with re-solved equilibria in tests/deploy).
 
 Sensitivities (implicit function theorem): the equilibrium q*(d) satisfies g_q(q*, d) = 0, so
 ``dq*/dd_i = -H_q^{-1} dg_q/dd_i`` with the reduced Hessian at the equilibrium, one factorization
@@ -18,11 +29,12 @@ changes the flat beam's length by the same amount, so at the end the re-cut patt
 equilibrium is solved from the tuned state (:func:`redeploy`) and the reported shape is the
 re-cut pattern's.
 
-Step (Levenberg-Marquardt): ``(J^T J + mu I) delta = -J^T e`` with J = n^T R dX/dd (n, k) and mu
+Step (Levenberg-Marquardt): ``(J^T J + mu I) delta = -J^T e`` with J = [n^T R dX/dd; sqrt(w) R dX/dd]
+((n + 3n), k; c_j, n_j, R held fixed in the step) and mu
 = ``damping`` x the largest diagonal of J^T J (the inserts far from the boundary barely move the
 aligned shape's normal distance; mu keeps their steps bounded); d + delta is clipped into the
 achievable range ``min_gap <= r_i - d_i <= h_i/2 - min_beam``; the new equilibrium is solved from
-the tangent prediction q + dq*/dd delta; a step that does not lower the RMS is halved (up to 3 times),
+the tangent prediction q + dq*/dd delta; a step that does not lower E is halved (up to 3 times),
 else the tuning stops.
 """
 
@@ -33,6 +45,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 
 from simfab.deploy.compare import kabsch
 from simfab.deploy.network import Deployment
@@ -41,13 +54,20 @@ from simfab.rods.model import synchronize
 from simfab.rods.statics import StaticSolver
 
 
+
 @dataclass(frozen=True, kw_only=True)
 class TuneConfig:
     """Scene ``[tune]`` table. iterations: Gauss-Newton steps (0: no tuning); damping [-]:
-    Levenberg-Marquardt mu relative to the largest diagonal of J^T J."""
+    Levenberg-Marquardt mu relative to the largest diagonal of J^T J; point_weight [-]: w, the
+    weight of the point-to-point residual towards each vertex's own target point against the
+    distance to the surface (0: fit the surface only; at w = 1 a vertex 1 mm from its own target
+    point weighs as much as one 1 mm off the surface). The point term also pulls on tangential
+    offsets the gaps cannot remove (a network whose deployed metric is off along the surface), so
+    it is a per-scene choice (scenes/deploy/README.md)."""
 
     iterations: int = 0
     damping: float = 1e-3
+    point_weight: float = 0.0
 
     def __post_init__(self):
         if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or self.iterations < 0:
@@ -55,39 +75,82 @@ class TuneConfig:
         if isinstance(self.damping, bool) or not isinstance(self.damping, (int, float)) or not (
                 np.isfinite(self.damping) and self.damping > 0):
             raise InputError(f"must be a positive number (got {self.damping!r})", where="tune.damping")
+        if isinstance(self.point_weight, bool) or not isinstance(self.point_weight, (int, float)) or not (
+                np.isfinite(self.point_weight) and self.point_weight >= 0):
+            raise InputError(f"must be a non-negative number (got {self.point_weight!r})", where="tune.point_weight")
 
 
 @dataclass
 class Tuning:
     """Result: tuned gaps (n,) [m] (0 on the boundary), the tuned equilibrium (a RodState of the
-    network it was computed on), point-to-plane RMS per accepted iterate [m] (first: before
-    tuning), Gauss-Newton steps taken, equilibrium solves, seconds."""
+    network it was computed on), per accepted iterate (first: before tuning) the point-to-plane RMS
+    [m] (``rms_history``) and the RMS distance to the vertices' own target points [m]
+    (``point_rms_history``), Gauss-Newton steps taken, equilibrium solves, seconds."""
 
     gap: np.ndarray
     state: object
     rms_history: list
+    point_rms_history: list
     steps: int
     solves: int
     seconds: float
 
 
-def _closest(target, A):
-    import trimesh
+@dataclass(frozen=True)
+class Fit:
+    """The tuning's residual at deployed vertices X (see module doc): e (4n,) [m] (n point-to-plane
+    rows, then the 3n weighted point-to-point rows, vertex-major), the alignment R (3,3), t (3,),
+    the closest points' face normals N (n,3), the point weight w, the objective E = |e|^2 / 2 [m^2],
+    the point-to-plane RMS [m] and the RMS distance of the aligned vertices to their target points [m]."""
 
-    tm = trimesh.Trimesh(target.V, target.F, process=False)
-    C, dist, tri = trimesh.proximity.closest_point(tm, A)
+    e: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    N: np.ndarray
+    point_weight: float
+    cost: float
+    plane_rms: float
+    point_rms: float
+
+
+def _closest(tm, A):
+    C, _, tri = trimesh.proximity.closest_point(tm, A)
     return C, tm.face_normals[tri]
 
 
-def _residual(X, Y, target):
-    """(e (n,), R, N (n,3)): point-to-plane residuals after the Kabsch + ICP alignment."""
+def fit_residual(X: np.ndarray, Y: np.ndarray, target, point_weight: float, *, icp_iters: int = 30) -> Fit:
+    """Residual of deployed vertices X (n,3) [m] against the target surface (``target.V``, ``target.F``)
+    and the vertices' target points Y (n,3) [m], after the alignment that minimises the same
+    objective (ICP from the Kabsch fit onto Y, until E changes by less than 1e-12 relative)."""
+    tm = trimesh.Trimesh(target.V, target.F, process=False)
+    w = float(point_weight)
     R, t = kabsch(X, Y)
-    for _ in range(10):  # ICP to the surface (as the deviation measure)
-        C, N = _closest(target, X @ R.T + t)
-        R, t = kabsch(X, C)
+    prev = np.inf
+    for _ in range(icp_iters):
+        A = X @ R.T + t
+        C, _ = _closest(tm, A)
+        E = float(np.sum((A - C) ** 2) + w * np.sum((A - Y) ** 2))
+        if abs(prev - E) <= 1e-12 * max(E, 1e-300):
+            break
+        prev = E
+        R, t = kabsch(X, (C + w * Y) / (1.0 + w))
     A = X @ R.T + t
-    C, N = _closest(target, A)
-    return np.einsum("ij,ij->i", N, A - C), R, N
+    C, N = _closest(tm, A)
+    dist = np.linalg.norm(A - C, axis=1)
+    far = dist > 1e-12 * target.diameter
+    N[far] = (A - C)[far] / dist[far, None]  # grad of the distance (the face normal inside a face)
+    ep = dist
+    e = np.concatenate([ep, np.sqrt(w) * (A - Y).ravel()])
+    return Fit(e=e, R=R, t=t, N=N, point_weight=w, cost=0.5 * float(e @ e), plane_rms=float(np.sqrt(np.mean(ep**2))),
+               point_rms=float(np.sqrt(np.mean(np.sum((A - Y) ** 2, axis=1)))))
+
+
+def fit_jacobian(fit: Fit, dX: np.ndarray) -> np.ndarray:
+    """J (4n, k) = de/dp of :func:`fit_residual` for vertex derivatives dX (n,3,k) [m per unit p],
+    with the closest points, normals and alignment held fixed (rows as ``fit.e``)."""
+    RdX = np.einsum("jl,nlk->njk", fit.R, dX)  # (n,3,k)
+    Jp = np.einsum("nj,njk->nk", fit.N, RdX)
+    return np.concatenate([Jp, np.sqrt(fit.point_weight) * RdX.reshape(-1, dX.shape[2])])
 
 
 def achievable_growth(pat) -> tuple[np.ndarray, np.ndarray]:
@@ -127,16 +190,16 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
     state = dep.final
     pos_of = {int(b): i for i, b in enumerate(solver.red.bodies)}
     rows = solver.red.body_trans_cols.reshape(-1, 3)[[pos_of[int(b)] for b in net.vertex_body]]  # (n,3)
-    e, R, N = _residual(state.body_pos[net.vertex_body], Y, target)
-    hist = [float(np.sqrt(np.mean(e**2)))]
+    fit = fit_residual(state.body_pos[net.vertex_body], Y, target, cfg.point_weight)
+    hist, phist = [fit.plane_rms], [fit.point_rms]
     steps = solves = 0
     for _ in range(cfg.iterations):
         dq = solver.offset_sensitivity(state, D)  # (nq, k)
         dX = dq[rows]  # (n, 3, k)
-        J = np.einsum("nj,jl,nlk->nk", N, R, dX)
+        J = fit_jacobian(fit, dX)
         A = J.T @ J
         mu = cfg.damping * float(np.max(np.diag(A)))
-        step = -np.linalg.solve(A + mu * np.eye(len(ins)), J.T @ e)
+        step = -np.linalg.solve(A + mu * np.eye(len(ins)), J.T @ fit.e)
         d_try = d.copy()
         accepted = False
         alpha = 1.0
@@ -150,20 +213,20 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
             except ConvergenceError:
                 alpha *= 0.5
                 continue
-            e_try, R_try, N_try = _residual(res.state.body_pos[net.vertex_body], Y, target)
-            rms = float(np.sqrt(np.mean(e_try**2)))
-            if rms < hist[-1]:
+            fit_try = fit_residual(res.state.body_pos[net.vertex_body], Y, target, cfg.point_weight)
+            if fit_try.cost < fit.cost:
                 accepted = True
                 break
             alpha *= 0.5
         if not accepted:
             solver.set_attachment_offsets(offsets(d))
             break
-        d, state, e, R, N = d_try.copy(), res.state, e_try, R_try, N_try
-        hist.append(rms)
+        d, state, fit = d_try.copy(), res.state, fit_try
+        hist.append(fit.plane_rms)
+        phist.append(fit.point_rms)
         steps += 1
     gap = np.where(pat.interior, pat.insert_size - d, 0.0)
-    return Tuning(gap=gap, state=state, rms_history=hist, steps=steps, solves=solves,
+    return Tuning(gap=gap, state=state, rms_history=hist, point_rms_history=phist, steps=steps, solves=solves,
                   seconds=time.perf_counter() - t0)
 
 

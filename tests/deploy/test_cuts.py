@@ -237,3 +237,19 @@ def test_cut_cap_mujoco_scene_comes_to_rest():
     # at rest within settle_tol x height of where it would be after the full check; simfab's equilibrium
     # is MuJoCo's to within the links' rigidity (simfab's rods stretch by up to ~0.1 mm)
     assert rel["rms_rel"] < sc.settle_tol and rel["max_rel"] < 2 * sc.settle_tol
+
+
+def test_bundled_cap80_meets_the_deployment_bound():
+    """The bundled 80 deg cap (scenes/deploy/cap80.toml), cut at its cones with the seams tied and
+    its gaps tuned by 8 Gauss-Newton steps (the scene's command `--tune 8`), deploys within the
+    issue's bound: RMS <= 1 % of the diameter and out-of-plane height within 3 % of the target's,
+    every gap reachable. The tuning's point term makes the height: fitted to the surface alone it
+    ends on the sphere but 5.7 % too low."""
+    from simfab.deploy import pipeline
+    from simfab.deploy.scene import bundled_path, load_scene
+
+    s = load_scene(bundled_path("cap80"), overrides={"tune": {"iterations": 8}})
+    r = pipeline.run(s, mujoco_check=False)
+    height = pipeline.out_of_plane_extent(r.deviation.aligned) / pipeline.out_of_plane_extent(r.target_points)
+    assert r.deployment.stable and len(r.pattern.unreachable) == 0 and r.tuning["steps"] >= 1
+    assert r.deviation.rms <= 0.01 and abs(height - 1.0) <= 0.03
