@@ -95,8 +95,8 @@ class PatternConfig:
     springs: str = "zigzag"
 
     def __post_init__(self):
-        if self.layout not in ("conforming", "grid"):
-            raise InputError(f"must be 'conforming' or 'grid' (got {self.layout!r})", where="pattern.layout")
+        if self.layout not in ("conforming", "grid", "mesh"):
+            raise InputError(f"must be 'conforming', 'grid' or 'mesh' (got {self.layout!r})", where="pattern.layout")
         if self.springs not in ("bezier", "zigzag"):
             raise InputError(f"must be 'bezier' or 'zigzag' (got {self.springs!r})", where="pattern.springs")
         if not isinstance(self.insert_half_sizes, (tuple, list)):
@@ -263,6 +263,8 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     h = cfg.spacing
     if cfg.layout == "grid":
         P, quads = _clipped_grid(poly, uv, h)
+    elif cfg.layout == "mesh":
+        P, quads = mesh_quads(poly, h)
     else:
         P, quads = conforming_quads(poly, h, uv)
     P, quads = drop_outside_quads(poly, P, quads)
@@ -507,6 +509,67 @@ def _clipped_grid(poly, uv, h):
     quads = inv.reshape(-1, 4)
     P = proj.reshape(-1, 2)[used]
     return P, quads
+
+
+MESH_CORNER_DEG = 25.0  # outline vertices turning by more than this are corners of the mesh's boundary curves
+MESH_SIZE = 1.2  # Gmsh element size / spacing: its recombined quads' median edge is then about the spacing
+
+
+def mesh_quads(poly, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary-following unstructured quad mesh of the flat domain ``poly`` (``layout = "mesh"``):
+    (P (n,2) [m], quads (q,4) CCW), for outlines a grid cannot follow (the notches a cut
+    flattening's wedges leave, :mod:`simfab.deploy.cuts`).
+
+    Gmsh: the outline split at its corners (turning angle > ``MESH_CORNER_DEG``: cone tips, where a
+    seam meets the rim) into splines through the outline's points, a Frontal-Delaunay triangulation
+    of size ``MESH_SIZE`` h recombined into quads (simple full-quad recombination: every triangle
+    left over is split, so no triangle remains), Laplacian smoothing. The mesh vertices on the
+    outline lie on it; what a boundary edge leaves out is its chord's segment (2/3 s L, sagitta
+    s ~ h^2 / (8 R) on a rim of radius R). Valence 3 or 5 at the irregular vertices: inserts with
+    3 or 5 beams. Deterministic (one thread, Gmsh's fixed seed)."""
+    from simfab.fem.meshing import load_gmsh
+
+    ring = np.asarray(poly.exterior.coords)[:-1]
+    if not poly.exterior.is_ccw:
+        ring = ring[::-1]
+    d1, d2 = ring - np.roll(ring, 1, axis=0), np.roll(ring, -1, axis=0) - ring
+    turn = np.abs(np.arctan2(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0], np.sum(d1 * d2, axis=1)))
+    corners = np.flatnonzero(turn > np.radians(MESH_CORNER_DEG))
+    corners = corners if len(corners) else np.array([0])
+    n = len(ring)
+    gmsh = load_gmsh()
+    gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        geo = gmsh.model.geo
+        size = MESH_SIZE * h
+        tag = {int(c): geo.addPoint(*ring[c], 0.0, size) for c in corners}
+        curves = []
+        for a, b in zip(corners, np.r_[corners[1:], corners[0]]):
+            idx = np.arange(a, b + (n if b <= a else 0) + 1) % n
+            mids = [geo.addPoint(*ring[i], 0.0, size) for i in idx[1:-1]]
+            curves.append(geo.addSpline([tag[int(a)], *mids, tag[int(b)]]))
+        geo.addPlaneSurface([geo.addCurveLoop(curves)])
+        geo.synchronize()
+        for key, val in (("Mesh.Algorithm", 6), ("Mesh.RecombineAll", 1), ("Mesh.RecombinationAlgorithm", 2),
+                         ("Mesh.MeshSizeMin", size), ("Mesh.MeshSizeMax", size), ("Mesh.MeshSizeFromPoints", 0),
+                         ("Mesh.MeshSizeExtendFromBoundary", 0), ("Mesh.Smoothing", 10)):
+            gmsh.option.setNumber(key, val)
+        gmsh.model.mesh.generate(2)
+        tags, X, _ = gmsh.model.mesh.getNodes()
+        _, conn = gmsh.model.mesh.getElementsByType(3)  # 4-node quadrangles
+    finally:
+        gmsh.finalize()
+    index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
+    index[tags.astype(np.int64)] = np.arange(len(tags))
+    quads = index[conn.astype(np.int64)].reshape(-1, 4)
+    if not len(quads):
+        raise InputError(f"no quad fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
+                         where="pattern.spacing")
+    used, inv = np.unique(quads, return_inverse=True)
+    P = X.reshape(-1, 3)[used, :2]
+    return P, _ccw(P, inv.reshape(-1, 4))
 
 
 CORE_MARGIN = 0.5  # core grid nodes keep >= CORE_MARGIN x spacing from the boundary

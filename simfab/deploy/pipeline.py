@@ -3,7 +3,7 @@
 Stages (each timed): flatten (:mod:`~simfab.deploy.flatten`), layout
 (:mod:`~simfab.deploy.pattern`), lasercut (:mod:`~simfab.deploy.lasercut`), deploy
 (:mod:`~simfab.deploy.network`), tune (optional, scene ``[tune]``: the gaps adjusted by
-Gauss-Newton on the deployed shape, the pattern re-cut and its equilibrium solved:
+Gauss-Newton on the deployed shape, the pattern re-cut and its equilibrium solved after every step:
 :mod:`~simfab.deploy.tuning`), compare (:mod:`~simfab.deploy.compare`) and mujoco
 (:mod:`~simfab.deploy.mjcf_sim`: build the simulatable scene, step it (damped) from the deployed
 key until it is at rest - its convergence test, ``settle_tol`` - or for at most
@@ -138,18 +138,15 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         t = time.perf_counter()
         before = compare.deviation(dep.vertex_positions(), Y, pat.quads, tgt)
         log(f"deploy surface: tuning the gaps (RMS {100 * before.rms:.3g} % before)", quiet=quiet)
-        tuned = tuning.tune(pat, net, dep, Y, tgt, scene.tune, device=device)
         gap0 = pat.gap
-        pat = tuning.retuned_pattern(pat, tuned.gap)
+        tuned = tuning.tune_pattern(pat, net, dep, Y, tgt, scene.tune, scene.deploy, ties=ties, device=device)
+        pat, net, dep = tuned.pattern, tuned.network, tuned.deployment
         cut = lasercut.layout(pat, seams=seams)
-        net = network.build_network(pat, scene.deploy, ties=ties)
-        dep = tuning.redeploy(pat, net, dep, tuned, device=device)
         tune_info = dict(steps=tuned.steps, solves=tuned.solves, rms_before=before.rms,
-                         hausdorff_before=before.hausdorff,
-                         point_weight=scene.tune.point_weight,
+                         hausdorff_before=before.hausdorff, point_weight=scene.tune.point_weight,
                          point_to_plane_rms_mm=[1e3 * r for r in tuned.rms_history],
                          point_to_target_rms_mm=[1e3 * r for r in tuned.point_rms_history],
-                         gap_change_max_mm=float(np.max(np.abs(tuned.gap - gap0)) * 1e3))
+                         gap_change_max_mm=float(np.max(np.abs(pat.gap - gap0)) * 1e3))
         sec["tune"] = time.perf_counter() - t
     t = time.perf_counter()
     X = dep.vertex_positions()

@@ -152,6 +152,36 @@ def test_pattern_around_the_cuts():
     assert np.allclose(cut.seams[0][1], lines[0][1] * 1e3)
 
 
+def test_mesh_layout_follows_the_cuts(require_gmsh):
+    """``layout = "mesh"`` (Gmsh quads of the cut flat domain) follows the seams: it covers >= 99 % of
+    the cut flat domain (the clipped grid drops the cells a wedge crosses: measured 84 % on the
+    bundled cap, here checked below 95 %), its quads do not overlap or leave the domain by more than
+    a chord's segment, and none is degenerate (every interior angle below degenerate_angle_deg:
+    every quad gets its spring). Measured: 99.6 % covered, largest angle 134 deg."""
+    import dataclasses
+
+    t = _cap80()
+    cf = cuts.flatten_with_cuts(t.V, t.F, cuts.CutsConfig(max_cones=8), CAP80)
+    lines = [p for _, p in cuts.seam_lines(cf)]
+    poly = shapely.Polygon(cf.flat.uv[cf.flat.boundary])
+    covered = {}
+    for lay in ("grid", "mesh"):
+        cfg = dataclasses.replace(CAP80, layout=lay)
+        pat = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, cfg, seams=lines)
+        cells = shapely.polygons(pat.P[pat.quads])
+        union = shapely.union_all(cells)
+        covered[lay] = shapely.area(shapely.intersection(union, poly)) / poly.area
+    assert covered["grid"] < 0.95 and covered["mesh"] >= 0.99
+    assert np.sum(shapely.area(cells)) == pytest.approx(shapely.area(union), rel=1e-9)  # no overlaps
+    assert shapely.area(shapely.difference(union, poly)) < 0.005 * poly.area
+    Q = pat.P[pat.quads]  # (q,4,2) CCW
+    a, b = np.roll(Q, 1, axis=1) - Q, np.roll(Q, -1, axis=1) - Q
+    cos = np.einsum("qki,qki->qk", a, b) / (np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2))
+    cross = b[..., 0] * a[..., 1] - b[..., 1] * a[..., 0]  # > 0: a convex corner of a CCW quad
+    assert np.all(cross > 0) and np.degrees(np.arccos(cos)).max() < CAP80.degenerate_angle_deg
+    assert np.all(pat.spring) and pat.n_inserts > 50
+
+
 def test_seam_layer_files(tmp_path):
     import ezdxf
 
