@@ -5,7 +5,9 @@ Layout (all in the flat domain, metres):
 - a square grid of spacing ``h`` centred on the flat domain; nodes inside the boundary are kept,
   a cell with three or two (adjacent) corners inside gets its outside corners projected to
   the nearest boundary point; cells that become too small (an edge < h/4) or non-convex are
-  dropped, and the largest edge-connected set of cells is the quad mesh;
+  dropped, and the largest edge-connected set of cells is the quad mesh (``layout = "grid"``;
+  ``"conforming"``: a grid core with a pillow layer on the outline, :func:`conforming_quads`;
+  ``"mesh"``: an unstructured Gmsh quad mesh of the domain, :func:`mesh_quads`);
 - every quad edge is a **beam** (width ``w``, sheet thickness ``t``), split at its midpoint
   by a rigid junction; each quad gets a **torsional spring**: four cubic Bezier arcs joining
   consecutive edge midpoints, bulging towards the quad centre, each quad's bulge sized so that
@@ -70,7 +72,8 @@ class PatternConfig:
     r: distance from an insert's centre to where it clamps the beams (one size for all
     inserts); insert_half_sizes: the insert catalogue, a list of such sizes (when given it
     replaces insert_half_size; each insert gets one, see module doc); layout: "grid" (the
-    clipped square grid) or "conforming" (:func:`conforming_quads`); spring_bulge [-]: smallest
+    clipped square grid), "conforming" (:func:`conforming_quads`) or "mesh" (:func:`mesh_quads`:
+    Gmsh quads that follow any outline, the seams of a cut flattening included); spring_bulge [-]: smallest
     Bezier handle pull towards the quad centre; spring_slack [-]: arc length margin over the
     deployed chord (see :mod:`simfab.deploy.springs`); spring_width: in-plane width of the spring
     arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:

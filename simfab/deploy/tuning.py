@@ -5,20 +5,22 @@ network's bending: the deployed shape misses the target where the rods cannot fo
 (steep caps, boundary cells). Here the growth of each insert, ``d_i = r_i - g_i`` [m], is the
 unknown of a least-squares problem on the deployed shape itself.
 
-Residual: the point-to-plane distance to the surface (the quantity the deviation's RMS measures)
-stacked with a weighted point-to-point term towards each vertex's own target point,
+Residual: the distance to the surface (the quantity the deviation's RMS measures) stacked with a
+weighted point-to-point term towards each vertex's own target point,
 
-    e = [ n_j . (R x_j + t - c_j) ,  sqrt(w) (R x_j + t - y_j) ]   (n + 3n rows),
+    e = [ |R x_j + t - c_j| ,  sqrt(w) (R x_j + t - y_j) ]   (n + 3n rows),
     E = |e|^2 / 2,
 
-with c_j the closest target point, n_j its face normal and y_j the vertex's target point (the
-flattening's map of its flat position); w = ``point_weight``. The surface term alone accepts a
-shape that lies on the surface but covers a different part of it (a steep cap's vertices sliding
-up the sphere: on the surface within 1 mm and 6 % too low); the point term ties each vertex to its
-own place. Alignment (R, t): ICP on the same objective - each iteration a Kabsch fit onto the
-blended points (c_j + w y_j) / (1 + w), the minimiser of sum |A - c|^2 + w |A - y|^2 for fixed c
-- so at convergence dE/d(R, t) = 0 and the Gauss-Newton gradient J^T e below needs no alignment
-term (checked against finite differences of E with re-solved equilibria in tests/deploy).
+with c_j the closest target point and y_j the vertex's target point (the flattening's map of its
+flat position); w = ``point_weight``. The distance is linearized along n_j = (R x_j + t - c_j) /
+|R x_j + t - c_j|: the face normal where c_j lies inside a face (point to plane), and still the
+distance's gradient where c_j lies on the target's rim, where the face normal is not. The surface
+term alone accepts a shape that lies on the surface but covers a different part of it (a steep
+cap's vertices sliding up the sphere: on the surface, yet too low); the point term ties each
+vertex to its own place. Alignment (R, t): ICP on the same objective - each iteration a Kabsch fit
+onto the blended points (c_j + w y_j) / (1 + w), the minimiser of sum |A - c|^2 + w |A - y|^2 for
+fixed c - so at convergence dE/d(R, t) = 0 and the Gauss-Newton gradient J^T e below needs no
+alignment term (checked against finite differences of E with re-solved equilibria in tests/deploy).
 
 Sensitivities (implicit function theorem): the equilibrium q*(d) satisfies g_q(q*, d) = 0, so
 ``dq*/dd_i = -H_q^{-1} dg_q/dd_i`` with the reduced Hessian at the equilibrium, one factorization
@@ -29,8 +31,8 @@ changes the flat beam's length by the same amount, so at the end the re-cut patt
 equilibrium is solved from the tuned state (:func:`redeploy`) and the reported shape is the
 re-cut pattern's.
 
-Step (Levenberg-Marquardt): ``(J^T J + mu I) delta = -J^T e`` with J = [n^T R dX/dd; sqrt(w) R dX/dd]
-((n + 3n), k; c_j, n_j, R held fixed in the step) and mu
+Step (Levenberg-Marquardt): ``(J^T J + mu I) delta = -J^T e`` with J = [n_j^T R dX_j/dd;
+sqrt(w) R dX/dd] ((n + 3n), k; c_j, n_j, R held fixed in the step) and mu
 = ``damping`` x the largest diagonal of J^T J (the inserts far from the boundary barely move the
 aligned shape's normal distance; mu keeps their steps bounded); d + delta is clipped into the
 achievable range ``min_gap <= r_i - d_i <= h_i/2 - min_beam``; the new equilibrium is solved from
@@ -38,12 +40,10 @@ the tangent prediction q + dq*/dd delta; a step that does not lower E is halved 
 else the tuning stops.
 
 Re-cut after every step (:func:`tune_pattern`): the step's parameter is the clamp offset, the
-pattern's is the gap, whose change also lengthens the flexible half beam (7-10 mm long in a 25-30 mm
-cell) by d_i - and its bending stiffness with it. Left to accumulate over 12 steps, that difference
-moved the petal's re-cut equilibrium from the tuned state's 1.8 mm point-to-plane RMS to a 4.5 mm
-deviation. So each step is followed by the re-cut pattern's own equilibrium, the next step's
-sensitivities are taken there, and a step whose re-cut pattern does not lower E ends the tuning
-(the pattern before it is kept).
+pattern's is the gap, whose change also lengthens the flexible half beam (a few mm long) by d_i -
+and its bending stiffness with it, a difference that grows with every step. So each step is
+followed by the re-cut pattern's own equilibrium, the next step's sensitivities are taken there,
+and a step whose re-cut pattern does not lower E ends the tuning (the pattern before it is kept).
 """
 
 from __future__ import annotations
@@ -60,7 +60,6 @@ from simfab.deploy.network import Deployment, build_network
 from simfab.errors import ConvergenceError, InputError
 from simfab.rods.model import synchronize
 from simfab.rods.statics import StaticSolver
-
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -91,8 +90,8 @@ class TuneConfig:
 @dataclass
 class Tuning:
     """Result: tuned gaps (n,) [m] (0 on the boundary), the tuned equilibrium (a RodState of the
-    network it was computed on), per accepted iterate (first: before tuning) the point-to-plane RMS
-    [m] (``rms_history``) and the RMS distance to the vertices' own target points [m]
+    network it was computed on), per accepted iterate (first: before tuning) the RMS distance to the
+    surface [m] (``rms_history``) and the RMS distance to the vertices' own target points [m]
     (``point_rms_history``), Gauss-Newton steps taken, equilibrium solves, seconds."""
 
     gap: np.ndarray
@@ -106,10 +105,11 @@ class Tuning:
 
 @dataclass(frozen=True)
 class Fit:
-    """The tuning's residual at deployed vertices X (see module doc): e (4n,) [m] (n point-to-plane
-    rows, then the 3n weighted point-to-point rows, vertex-major), the alignment R (3,3), t (3,),
-    the closest points' face normals N (n,3), the point weight w, the objective E = |e|^2 / 2 [m^2],
-    the point-to-plane RMS [m] and the RMS distance of the aligned vertices to their target points [m]."""
+    """The tuning's residual at deployed vertices X (see module doc): e (4n,) [m] (n distances to the
+    surface, then the 3n weighted point-to-point rows, vertex-major), the alignment R (3,3), t (3,),
+    the unit directions N (n,3) from the closest points (the distances' gradients), the point weight
+    w, the objective E = |e|^2 / 2 [m^2], the RMS distance to the surface [m] (``plane_rms``) and the
+    RMS distance of the aligned vertices to their target points [m]."""
 
     e: np.ndarray
     R: np.ndarray
@@ -147,9 +147,8 @@ def fit_residual(X: np.ndarray, Y: np.ndarray, target, point_weight: float, *, i
     dist = np.linalg.norm(A - C, axis=1)
     far = dist > 1e-12 * target.diameter
     N[far] = (A - C)[far] / dist[far, None]  # grad of the distance (the face normal inside a face)
-    ep = dist
-    e = np.concatenate([ep, np.sqrt(w) * (A - Y).ravel()])
-    return Fit(e=e, R=R, t=t, N=N, point_weight=w, cost=0.5 * float(e @ e), plane_rms=float(np.sqrt(np.mean(ep**2))),
+    e = np.concatenate([dist, np.sqrt(w) * (A - Y).ravel()])
+    return Fit(e=e, R=R, t=t, N=N, point_weight=w, cost=0.5 * float(e @ e), plane_rms=float(np.sqrt(np.mean(dist**2))),
                point_rms=float(np.sqrt(np.mean(np.sum((A - Y) ** 2, axis=1)))))
 
 
@@ -267,7 +266,7 @@ def redeploy(pat, net, dep, tuned: Tuning, *, device: str = "cpu"):
 @dataclass
 class TunedPattern:
     """Result of :func:`tune_pattern`: the last accepted re-cut pattern, its network and deployment;
-    per accepted step (first: before tuning) the point-to-plane RMS and the RMS distance to the
+    per accepted step (first: before tuning) the RMS distances to the surface and to the vertices'
     target points of the re-cut pattern's equilibrium [m]; steps, equilibrium solves (trial and
     re-cut), seconds."""
 

@@ -270,9 +270,9 @@ def test_tuning_gradient_matches_re_solved_equilibria(tiny_saddle, weight, icp_i
     target's rim it was off by 56 %). Measured max error relative to the largest component: 2.8e-6
     with the point term (w = 1); 9.6e-6 for the surface term alone, whose ICP slides slowly along
     the saddle (30 iterations: 13 %, hence 3000 here)."""
+    from simfab.deploy import tuning
     from simfab.rods.model import synchronize
     from simfab.rods.statics import StaticSolver
-    from simfab.deploy import tuning
 
     pat, net, dep, cfg, Y = tiny_saddle
     tgt = surface.saddle(0.06, 0.1, 8)
