@@ -328,6 +328,32 @@ def test_tuning_lowers_the_deviation_of_the_recut_pattern(small_dome):
     assert dep2.stable and after.rms < 0.8 * before.rms
 
 
+def test_tune_pattern_recuts_after_every_step(small_dome):
+    """``tune_pattern`` re-cuts the pattern after every Gauss-Newton step and keeps a step only if
+    the re-cut pattern's own equilibrium lowers the objective: its history (the re-cut
+    equilibria's distance to the surface, w = 0) falls strictly, the returned deployment is the
+    returned pattern's equilibrium (a fresh solve from it does not move it; measured 0) and its
+    deviation is below the untuned one (measured RMS 0.394 % vs 0.493 %, 2 steps)."""
+    from simfab.deploy import tuning
+    from simfab.rods.statics import StaticSolver
+
+    pat, net, dep, cfg, Y = small_dome
+    tgt = surface.spherical_cap(0.1, np.radians(50), 10)
+    before = compare.deviation(dep.vertex_positions(), Y, pat.quads, tgt)
+    res = tuning.tune_pattern(pat, net, dep, Y, tgt, tuning.TuneConfig(iterations=2), cfg)
+    assert res.steps >= 1 and len(res.rms_history) == res.steps + 1 and np.all(np.diff(res.rms_history) < 0)
+    p2, n2 = res.pattern, res.network
+    assert np.max(np.abs(p2.gap - pat.gap)) > 1e-5 and res.deployment.stable
+    solver = StaticSolver(n2.model)
+    o = n2.model.node_offset.copy()
+    o[n2.pull_nodes] += n2.pull_dir * n2.pull_grow[:, None]
+    solver.set_attachment_offsets(o)
+    again = solver.solve(res.deployment.final).state.body_pos[n2.vertex_body]
+    assert np.max(np.abs(again - res.deployment.vertex_positions())) < 1e-5  # [m]: at its own equilibrium
+    after = compare.deviation(res.deployment.vertex_positions(), Y, p2.quads, tgt)
+    assert after.rms < 0.9 * before.rms
+
+
 def test_tune_config_errors():
     from simfab.deploy import tuning
     from simfab.errors import InputError
