@@ -64,8 +64,8 @@ class ElementKernels:
 
     grad_dtype : dim -> Warp vector type of one element's nodal gradient (length k d)
     geometry_dtype : dim -> Warp type of the entries of ``model.element_geometry()[0]``
-    split_elements : CPU meshes with at least this many elements run as two half launches on two
-        threads (None: always one launch)
+    split_elements : dim -> CPU meshes of that dimension with at least this many elements run as two
+        half launches on two threads (None, or a dimension missing: always one launch)
     """
 
     energy: Any
@@ -74,7 +74,7 @@ class ElementKernels:
     stress: Any
     grad_dtype: dict
     geometry_dtype: dict
-    split_elements: int | None = None
+    split_elements: dict | None = None
 
 
 class Workspace:
@@ -86,7 +86,7 @@ class Workspace:
         self.kernels = kernels
         self.cpu = wp.get_device(dev).is_cpu
         half = m // 2
-        split = kernels.split_elements
+        split = None if kernels.split_elements is None else kernels.split_elements.get(d)
         self.parts = ((0, half), (half, m - half)) if self.cpu and split is not None and m >= split else ((0, m),)
         self.m, self.kd = m, k * d
         self.pattern = model.pattern
