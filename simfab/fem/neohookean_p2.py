@@ -40,10 +40,10 @@ them (conservative for inversion and yield checks).
 
 Kernels run in float64 with one thread per element and the quadrature loop inside (argument
 lists and launch codes: :mod:`simfab.fem.workspace`; on the CPU a mesh of :data:`SPLIT_ELEMENTS`
-(per dimension) or more runs as two launches of half the elements on two threads). Each quadrature point's
-Hessian blocks come from the closed form above (mu, cofactor and cross-product terms plus the
-twist correction) rather than by contracting the d^2 x d^2 matrix A, which costs several times
-more; only the rare SVD route contracts A. Cost per element relative to a linear simplex:
+(per dimension) or more runs as two launches of half the elements on two threads). Each
+quadrature point's Hessian blocks come from the closed form above (mu, cofactor and
+cross-product terms plus the twist correction) rather than by contracting the d^2 x d^2 matrix
+A, which costs several times more; only the rare SVD route contracts A. Cost per element relative to a linear simplex:
 ``python tools/bench.py p2`` ("cost_per_element").
 """
 
