@@ -42,20 +42,49 @@ def lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj: StepO
 
 def extrapolations(state: StepState, s_new: float) -> list:
     """Linear (last two steps) and quadratic (last three, Lagrange) extrapolations of A's
-    positions to s_new: warm-start candidates when the deformation evolves smoothly."""
+    positions to s_new: warm-start candidates when the deformation evolves smoothly. Where the
+    last steps went back and forth (the rest search's bisection, :mod:`simfab.coupling.settle`)
+    and s_new lies between two of the last three steps, their interpolations instead: the linear
+    one between the nearest step on either side of s_new, and the quadratic one through all three
+    (the trial's own previous state is usually on the far side of the bracket, a poor start alone)."""
     sign = state.direction  # extrapolate along the traversal's direction only
-    if state.prev is None or not (state.s - state.prev.s) * sign > 0:
+    if state.prev is None:
         return []
+    if not (state.s - state.prev.s) * sign > 0:
+        return interpolations(state, s_new)
     xp, sp_ = state.prev.x, state.prev.s
     out = [state.x + (state.x - xp) * ((s_new - state.s) / (state.s - sp_))]
     if state.prev2 is not None and (sp_ - state.prev2.s) * sign > 0:
         (x2, s2), (x1, s1), (xc, sc) = (state.prev2.x, state.prev2.s), (xp, sp_), (state.x, state.s)
-        t = s_new
-        l2 = (t - s1) * (t - sc) / ((s2 - s1) * (s2 - sc))
-        l1 = (t - s2) * (t - sc) / ((s1 - s2) * (s1 - sc))
-        lc = (t - s2) * (t - s1) / ((sc - s2) * (sc - s1))
-        out.append(l2 * x2 + l1 * x1 + lc * xc)
+        out.append(_lagrange(((x2, s2), (x1, s1), (xc, sc)), s_new))
     return out
+
+
+def interpolations(state: StepState, s_new: float) -> list:
+    """Linear interpolation between the nearest of the last three steps below and above s_new, and
+    the quadratic one through all three when they are distinct (see :func:`extrapolations`); empty
+    when s_new is not between two of them."""
+    past = [(state.x, state.s), (state.prev.x, state.prev.s)]
+    if state.prev2 is not None:
+        past.append((state.prev2.x, state.prev2.s))
+    below = [p for p in past if p[1] < s_new]
+    above = [p for p in past if p[1] > s_new]
+    if not below or not above:
+        return []
+    (xa, sa), (xb, sb) = max(below, key=lambda p: p[1]), min(above, key=lambda p: p[1])
+    out = [xa + (xb - xa) * ((s_new - sa) / (sb - sa))]
+    if len(past) == 3 and len({p[1] for p in past}) == 3:
+        out.append(_lagrange(past, s_new))
+    return out
+
+
+def _lagrange(past, t: float) -> np.ndarray:
+    """The quadratic Lagrange polynomial through three (x, s) pairs (distinct s), at s = t."""
+    (x2, s2), (x1, s1), (xc, sc) = past
+    l2 = (t - s1) * (t - sc) / ((s2 - s1) * (s2 - sc))
+    l1 = (t - s2) * (t - sc) / ((s1 - s2) * (s1 - sc))
+    lc = (t - s2) * (t - s1) / ((sc - s2) * (sc - s1))
+    return l2 * x2 + l1 * x1 + lc * xc
 
 
 @dataclass(frozen=True, eq=False)

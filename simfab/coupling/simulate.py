@@ -14,7 +14,8 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    pattern, so the symbolic factorization is reused). Points still inside O are then carried
    rigidly with O (rigid motion keeps their distance to O) and the solve repeated. The result is a
    feasible, non-inverted warm start: every point outside O. The linear and quadratic
-   extrapolations of the last two / three converged steps come first; the feasible one with the
+   extrapolations of the last two / three converged steps come first (for a trial of the rest
+   search between steps it has bracketed, their interpolations); the feasible one with the
    lowest objective E_d + B is the warm start (fewer Newton iterations when the deformation
    evolves smoothly along the path); the contact predictor above is computed only when no
    extrapolation is feasible (its PSD tangent stiffness is then assembled on demand). Either way

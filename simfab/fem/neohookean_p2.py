@@ -40,10 +40,10 @@ them (conservative for inversion and yield checks).
 
 Kernels run in float64 with one thread per element and the quadrature loop inside (argument
 lists and launch codes: :mod:`simfab.fem.workspace`; on the CPU a mesh of :data:`SPLIT_ELEMENTS`
-or more runs as two launches of half the elements on two threads). Each quadrature point's
-Hessian blocks come from the closed form above (mu, cofactor and cross-product terms plus the
-twist correction) rather than by contracting the d^2 x d^2 matrix A, which costs several times
-more; only the rare SVD route contracts A. Cost per element relative to a linear simplex:
+(per dimension) or more runs its Hessian as two launches of half the elements on two threads).
+Each quadrature point's Hessian blocks come from the closed form above (mu, cofactor and
+cross-product terms plus the twist correction) rather than by contracting the d^2 x d^2 matrix
+A, which costs several times more; only the rare SVD route contracts A. Cost per element relative to a linear simplex:
 ``python tools/bench.py p2`` ("cost_per_element").
 """
 
@@ -379,10 +379,11 @@ _declare_overloads()
 # ----------------------------------------------------------------------------------------------
 # the element order's record for simfab.fem.workspace, and the batched stress Hessian
 # ----------------------------------------------------------------------------------------------
-#: Meshes with at least this many elements are launched in two halves on two threads on the CPU:
-#: handing a launch to the second thread costs about as much as a few 10-node tet Hessians, so
-#: smaller meshes stay one launch.
-SPLIT_ELEMENTS = 256
+#: Meshes with at least this many elements (by dimension) launch their Hessians in two halves on two
+#: threads on the CPU: handing a launch to the second thread costs about as much as a few 10-node tet
+#: Hessians, so smaller meshes stay one launch. A 6-node triangle's Hessian is 12 x 12 against a
+#: tet's 30 x 30 (~1/6 of the work): a 455-triangle mesh runs each launch faster on one thread.
+SPLIT_ELEMENTS = {2: 2048, 3: 256}
 
 #: Quadratic simplices: ``model.element_geometry()`` is (grad_N (m, nq, k, d), qp_weight (m, nq)).
 QUADRATIC = ElementKernels(energy=_energy_kernel, gradient=_gradient_kernel, hessian=_hessian_kernel,

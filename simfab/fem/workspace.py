@@ -19,11 +19,12 @@ computes is a :class:`Launch` code, and the Hessian kernel's treatment of d2Psi/
 Small meshes are dominated by per-call overhead, so the :class:`Workspace` (one per model, kept
 in ``model._cache``) holds persistent device buffers (on the CPU the position buffer is a numpy
 array the kernels read through an alias) and records each launch once (``record_cmd``), then
-replays it. On the CPU a mesh with at least ``kernels.split_elements`` elements runs as two
-launches of half the elements on two threads (Warp CPU kernels run on one thread and release the
-GIL): per-element outputs are disjoint and each half adds its Hessian into its own CSR buffer,
-summed afterwards. The Hessian launch adds the element blocks straight into the CSR ``data`` of
-the model's fixed pattern through precomputed slots.
+replays it. On the CPU the Hessian launches of a mesh with at least ``kernels.split_elements``
+elements run as two launches of half the elements on two threads (Warp CPU kernels run on one
+thread and release the GIL): per-element outputs are disjoint and each half adds its Hessian into
+its own CSR buffer, summed afterwards. The energy, gradient and stress launches stay whole: they
+cost less than handing half of them to the second thread. The Hessian launch adds the element
+blocks straight into the CSR ``data`` of the model's fixed pattern through precomputed slots.
 """
 
 from __future__ import annotations
@@ -64,8 +65,8 @@ class ElementKernels:
 
     grad_dtype : dim -> Warp vector type of one element's nodal gradient (length k d)
     geometry_dtype : dim -> Warp type of the entries of ``model.element_geometry()[0]``
-    split_elements : CPU meshes with at least this many elements run as two half launches on two
-        threads (None: always one launch)
+    split_elements : dim -> CPU meshes of that dimension with at least this many elements run their
+        Hessian launches as two halves on two threads (None, or a dimension missing: always one launch)
     """
 
     energy: Any
@@ -74,7 +75,7 @@ class ElementKernels:
     stress: Any
     grad_dtype: dict
     geometry_dtype: dict
-    split_elements: int | None = None
+    split_elements: dict | None = None
 
 
 class Workspace:
@@ -86,7 +87,7 @@ class Workspace:
         self.kernels = kernels
         self.cpu = wp.get_device(dev).is_cpu
         half = m // 2
-        split = kernels.split_elements
+        split = None if kernels.split_elements is None else kernels.split_elements.get(d)
         self.parts = ((0, half), (half, m - half)) if self.cpu and split is not None and m >= split else ((0, m),)
         self.m, self.kd = m, k * d
         self.pattern = model.pattern
@@ -167,7 +168,10 @@ class Workspace:
             return cmds
         kern = self.kernels
         cmds = []
-        for part, (first, count) in enumerate(self.parts):
+        # only the Hessian launches are split: the others take a fraction of a millisecond, less
+        # than waking the second thread costs (and far less when the cores are busy)
+        parts = self.parts if what in (Launch.HESSIAN, Launch.BLOCKS) else ((0, self.m),)
+        for part, (first, count) in enumerate(parts):
             inputs = [first, self.x, *self.inputs]
             if what == Launch.ENERGY:
                 kernel, outputs = kern.energy, [self.energy, self.det_F]

@@ -9,9 +9,10 @@ from simfab.coupling import predictor
 from simfab.coupling.config import InsertionOptions
 from simfab.coupling.layout import point_dhat
 from simfab.coupling.objective import make_objective
-from simfab.coupling.points import ContactPoints
+from simfab.coupling.points import ContactPoints, vertex_points
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
+from simfab.coupling.state import PastStep, StepState
 from simfab.coupling.stepper import Stepper
 from simfab.errors import InputError
 
@@ -150,3 +151,37 @@ def test_a_field_steeper_than_the_lipschitz_bound_is_reported(monkeypatch):
     monkeypatch.setattr(C, "PSI_LIPSCHITZ", 0.99)
     res = simulate(load_coupling_scene("cclamp2d"))
     assert any("gradient reached" in w and "above the Lipschitz bound 0.99" in w for w in res.warnings)
+
+
+def test_a_bisection_trial_starts_from_the_interpolation_of_the_steps_around_it():
+    """The rest search goes back and forth along the path: a trial between two of the last three
+    steps is offered their interpolations (linear between the nearest on either side, quadratic
+    through all three), exact for positions linear / quadratic in s; extrapolations keep to the
+    traversal's direction, and a trial outside the three steps gets no candidate."""
+    pts = vertex_points(np.arange(5), 2)
+    rng = np.random.default_rng(3)
+    a, b, c = (rng.standard_normal((5, 2)) for _ in range(3))
+
+    def state(x_of, s_now, s_prev, s_prev2):
+        return StepState(x=x_of(s_now), s=s_now, points=pts, refined=set(), order=1,
+                         prev=PastStep(x_of(s_prev), s_prev), prev2=PastStep(x_of(s_prev2), s_prev2))
+
+    def lin(s):
+        return a + b * s
+
+    def quad(s):
+        return a + b * s + c * s * s
+
+    # bisection: from the overshoot at 1.0 back to 0.5, now forward again to 0.75 (lower end 0.0)
+    st = state(lin, 0.5, 1.0, 0.0)
+    cands = predictor.extrapolations(st, 0.75)
+    assert len(cands) == 2
+    np.testing.assert_allclose(cands[0], lin(0.75), rtol=0, atol=1e-14)
+    st = state(quad, 0.5, 1.0, 0.0)
+    np.testing.assert_allclose(predictor.extrapolations(st, 0.75)[1], quad(0.75), rtol=0, atol=1e-13)
+    # the linear one takes the nearest steps on either side (0.5 and 1.0), not the older 0.0
+    lin_guess = predictor.extrapolations(st, 0.75)[0]
+    np.testing.assert_allclose(lin_guess, quad(0.5) + (quad(1.0) - quad(0.5)) * 0.5, rtol=0, atol=1e-14)
+    assert predictor.extrapolations(state(lin, 0.5, 1.0, 0.0), 1.5) == []
+    # going forward: the extrapolations of the last steps, as before
+    np.testing.assert_allclose(predictor.extrapolations(state(quad, 1.0, 0.5, 0.0), 1.5)[1], quad(1.5), atol=1e-13)

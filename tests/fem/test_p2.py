@@ -559,13 +559,13 @@ def test_large_deflection_p2_cantilever_matches_the_elastica():
 
 
 def test_two_thread_launch_of_a_large_mesh_equals_the_assembled_element_blocks():
-    """A mesh of >= QUADRATIC.split_elements elements runs in two halves on two threads, each half
-    adding its Hessian into its own CSR buffer: the summed buffers equal the assembly of the
+    """A tet mesh of >= QUADRATIC.split_elements[3] elements runs its Hessian in two halves on two
+    threads, each half adding into its own CSR buffer: the summed buffers equal the assembly of the
     per-element blocks (to summation round-off), and the Hessian launch's energy and gradient equal
-    those of the energy and gradient launches."""
+    those of the (whole) energy and gradient launches."""
     P, T = box_tet(0.04, 0.01, 0.015, 8, 2, 3)  # 48 cubes of 6 tets: 288 tets
     m = make_p2_model(P, T, MAT)
-    assert m.n_elements >= QUADRATIC.split_elements
+    assert m.n_elements >= QUADRATIC.split_elements[3]
     rng = np.random.default_rng(5)
     x = m.rest + 1e-4 * rng.standard_normal(m.rest.shape)
     E, g, He, Hp = nh.energy_gradient_hessians(m, x)
