@@ -49,7 +49,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import minimize
 
 from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_max_weights
 from simfab.coupling.profile import analyze_run
@@ -64,6 +63,7 @@ from simfab.design.problem import (
     element_quality,
     evaluate,
 )
+from simfab.design.sqp import CheapConstraints, Sample, SQPOptions, trust_region_sqp
 from simfab.design.stress import averaging_matrix
 from simfab.errors import ConvergenceError
 from simfab.progress import log
@@ -263,9 +263,18 @@ class _Run:
     signatures: list = field(default_factory=list)  # per complete insertion: its discrete features (events)
 
 
-def _evaluate(run: _Run, h: np.ndarray):
-    """(Evaluation, FigureGradients or None) of design h, memoized (SLSQP asks for each design's
-    values and Jacobians in separate calls)."""
+@dataclass(frozen=True, kw_only=True, eq=False)
+class _Evaluated:
+    """One simulated design: the evaluation, its :class:`FigureGradients` (None unless complete) and
+    (target matching) the records' force derivatives dF_k/dh (k, n_vars) at fixed positions."""
+
+    ev: Evaluation
+    fg: FigureGradients | None
+    force_jacobian: np.ndarray | None = None
+
+
+def _evaluate(run: _Run, h: np.ndarray) -> _Evaluated:
+    """Design h simulated with its sensitivities, memoized (a design is never simulated twice)."""
     key = np.round(np.asarray(h, float), 12).tobytes()  # (z -> h round trips differ in the last bits)
     out = run.memo.get(key)
     if out is not None:
@@ -275,10 +284,12 @@ def _evaluate(run: _Run, h: np.ndarray):
                   recorder=lambda cm: SensitivityRecorder(cm, stress_measure(problem, cm)))
     if ev.sim_seconds > 0:
         run.insertions += 1
-    fg = None
+    fg, dF = None, None
     if ev.status == "ok":
         fg = figure_gradients(problem, ev, run.Jh)
         run.gradient_evaluations += 1
+        if problem.target is not None:
+            dF = np.array([np.asarray(st.force, float).ravel() @ run.Jh for st in ev.recorder.insert])
     ev.recorder = None  # (memory: the per-step sensitivities are read into fg)
     if ev.status == "ok":
         r = ev.result
@@ -287,7 +298,7 @@ def _evaluate(run: _Run, h: np.ndarray):
                                "refinement": tuple(r.refined_facets), "kappa": max(st.kappa for st in r.steps),
                                "steps": len(r.steps), "rest_positions": tuple(st.s for st in r.steps[planned:])})
     run.evaluations.append(ev)
-    out = run.memo[key] = (ev, fg)
+    out = run.memo[key] = _Evaluated(ev=ev, fg=fg, force_jacobian=dF)
     return out
 
 
@@ -386,22 +397,86 @@ def in_category(ev: Evaluation) -> bool:
     return in_contact(ev) and all(c.satisfied for c in ev.constraints if c.name == "coupling_ratio")
 
 
+#: Trust-region SQP iterations at most (one insertion each), when the brief's iterations are more.
+MAX_ITERATIONS = 30
+#: The SQP's initial trust-region radius, in z (a fraction of each design variable's range).
+RADIUS = 0.05
+#: The constraints are aimed this far inside their bounds, relative to the bound (at least AIM_ABS in
+#: their SCALES units: 1 mN, 1 kPa, 0.001 %), a design the SQP counts as feasible (each aimed row violated by
+#: at most its aim) meets the brief, and a step whose linearization lands on
+#: the bound does not end a hair outside it (the figures are piecewise smooth: a correction step of a few
+#: micrometres then meets their kinks).
+AIM_REL = 1e-2
+AIM_ABS = 1e-3
+#: The element-quality bound the subproblems impose: this factor above QUALITY_REL (round-off off the
+#: rejection threshold).
+QUALITY_AIM = 1.001
+#: The SQP stops when its trust-region radius falls below this (in z: 1e-4 of a translation's range
+#: is ~ 1e-5 of the part's size).
+MIN_RADIUS = 1e-4
+#: Stop when no step predicts a reduction of the objective above this fraction of it.
+RTOL = 1e-2
+
+
+def modification_hessian(problem: DesignProblem, Jh: np.ndarray) -> np.ndarray:
+    """d2E_L/dh2 (n_vars, n_vars), constant: E_L = sum_axes v_a^T M_L v_a over the boundary vertices'
+    displacements v_a (linear in h), so the Hessian is 2 sum_a J_a^T M_L J_a with J_a the rows of dX/dh
+    of the boundary vertices' axis a."""
+    en = problem.energy
+    d = problem.handles.dim
+    out = np.zeros((Jh.shape[1], Jh.shape[1]))
+    for a in range(d):
+        Ja = Jh[en.vertices * d + a]
+        out += 2.0 * Ja.T @ (en.M @ Ja)
+    return out
+
+
+def target_hessian(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """d2(rms^2)/dF_k dF_l (k, k) [-] of the target-profile error at fixed distances s: rms^2 is a
+    quadratic function of the force samples (:func:`target_gradient`), so with unit steps
+    r(F + e_k + e_l) - r(F + e_k) - r(F + e_l) + r(F) is its Hessian's entry exactly (up to
+    round-off). Samples outside the target's range have zero rows (skipped)."""
+    f = np.asarray(force, float)
+    s = np.asarray(s, float)
+    k = len(f)
+
+    def r(x):
+        return target.rms_error(s, x) ** 2
+
+    inside = np.flatnonzero(s >= float(target.s[0]) - (s[1] - s[0] if k > 1 else 0.0))
+    r0 = r(f)
+    r1 = {}
+    for i in inside:
+        e = f.copy()
+        e[i] += 1.0
+        r1[i] = r(e)
+    H = np.zeros((k, k))
+    for a, i in enumerate(inside):
+        for j in inside[a:]:
+            e = f.copy()
+            e[i] += 1.0
+            e[j] += 1.0
+            H[i, j] = H[j, i] = r(e) - r1[i] - r1[j] + r0
+    return H
+
+
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
                       callback=None, start=None) -> DesignResult:
-    """SLSQP on the brief (see the module docstring); returns a :class:`DesignResult` whose
-    ``simulations`` counts every insertion and ``gradient_evaluations`` those that gave gradients
-    (all complete ones, and the pre-phase's). ``seed`` seeds the annealing pre-phase, which runs
-    only when the start gives no direction (:func:`flat_start`: at most PRE_PHASE_ITERATIONS
-    iterations, until a design is in the brief's category; SLSQP starts from the best one); otherwise the
-    method is deterministic. ``iterations`` caps SLSQP's iterations (default: the
-    brief's, at most MAX_ITERATIONS). Raises ConvergenceError when the initial shape
+    """A trust-region SQP on the brief (:func:`simfab.design.sqp.trust_region_sqp`; see the module
+    docstring): one insertion per iteration; returns a :class:`DesignResult` whose ``simulations``
+    counts every insertion (the pre-phase's and the final run as ``couple simulate`` runs the design
+    included) and ``gradient_evaluations`` those that gave gradients. ``seed`` seeds the annealing
+    pre-phase, which runs only when the start gives no direction (:func:`flat_start`: at most
+    PRE_PHASE_ITERATIONS iterations, until a design is in the brief's category; the SQP starts from
+    the best one); otherwise the method is deterministic. ``iterations`` caps the SQP's iterations
+    (default: the brief's, at most MAX_ITERATIONS). Raises ConvergenceError when the initial shape
     cannot be simulated."""
     t0 = time.perf_counter()
     problem = problem.with_settings(hold_steps=True)  # derivatives are at fixed step positions
     H = problem.handles
     Jh = handle_jacobian(H)
     run = _Run(problem=problem, Jh=Jh)
-    initial = _evaluate(run, H.identity())[0]  # (with its sensitivities: SLSQP starts there)
+    initial = _evaluate(run, H.identity()).ev  # (with its sensitivities: the SQP starts there)
     if initial.status != "ok":
         raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to optimize from")
     if not problem.settings.refined and initial.result.refined_facets:
@@ -411,7 +486,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     rows = constraint_rows(problem)
     corr = problem.settings.corrections
     pre = None
-    fg0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))[1]
+    fg0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float)).fg
     if fg0 is not None and flat_start(rows, fg0, corr):
         # no direction at the start: anneal (seeded) until a design is in the brief's category, then descend
         log(f"couple optimize: {problem.base.name}: the start gives no gradient (no contact); annealing pre-phase "
@@ -424,76 +499,63 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     target = problem.target is not None
     el = problem.base.fem.elements
     q0 = problem.q0
+    B_EL = None if target else span[:, None] * modification_hessian(problem, Jh) * span[None, :]
+    force_scale = corr.get("force_profile", 1.0)
 
     def h_of(z):
         return lo + np.clip(z, 0.0, 1.0) * span
 
-    def objective(z):
+    def sample(z) -> Sample:
         h = h_of(z)
-        X = H.apply(h)
+        e = _evaluate(run, h)
+        if e.fg is None or (target and e.ev.rms_error is None):
+            return Sample(ok=False)
+        fg = e.fg
         if target:
-            if np.any(element_quality(X, el) <= 0):
-                return 1e6
-            ev, fg = _evaluate(run, h)
-            return float(ev.rms_error ** 2) if ev.status == "ok" and ev.rms_error is not None else 1e6
-        return problem.energy(X)
-
-    def objective_grad(z):
-        if target:
-            h = h_of(z)
-            if np.any(element_quality(H.apply(h), el) <= 0):
-                return np.zeros_like(z)
-            _, fg = _evaluate(run, h)
-            return np.zeros_like(z) if fg is None else fg.gradients["rms_error_sq"] * span
-        return modification_gradient(problem, H.apply(h_of(z)), Jh) * span
-
-    def cons(z):
-        h = h_of(z)
-        X = H.apply(h)
-        qual = np.asarray(element_quality(X, el)) / q0 - QUALITY_REL
-        if np.any(qual <= 0):
-            return np.r_[np.full(len(rows), -FAILED_VIOLATION), qual]
-        ev, fg = _evaluate(run, h)
-        if fg is None:
-            return np.r_[np.full(len(rows), -FAILED_VIOLATION), qual]
-        vals = [r.value(fg.values[r.name] * corr.get(r.name, 1.0)) for r in rows]
-        return np.r_[vals, qual]
-
-    def cons_jac(z):
-        h = h_of(z)
-        X = H.apply(h)
-        Jq = (quality_jacobian(X, el) @ Jh) / q0[:, None]
-        ev, fg = (None, None)
-        if np.all(np.asarray(element_quality(X, el)) > 0):
-            ev, fg = _evaluate(run, h)
-        Jc = np.zeros((len(rows), len(z)))
+            f = float(e.ev.rms_error ** 2)
+            g = fg.gradients["rms_error_sq"] * span
+            J = force_scale * e.force_jacobian * span[None, :]
+            Q = target_hessian(problem.target, e.ev.result.column("s"), force_scale * e.ev.result.column("force"))
+            Bz = J.T @ Q @ J  # Gauss-Newton: the force samples' curvature left out
+        else:
+            X = H.apply(h)
+            f, g, Bz = problem.energy(X), modification_gradient(problem, X, Jh) * span, B_EL
+        c = np.array([r.value(fg.values[r.name] * corr.get(r.name, 1.0)) for r in rows]) - aim
+        A = np.zeros((len(rows), len(z)))
         for i, r in enumerate(rows):
-            gr = None if fg is None else fg.gradients.get(r.name)
+            gr = fg.gradients.get(r.name)
             if gr is not None:
-                c = corr.get(r.name, 1.0)
-                Jc[i] = r.gradient(fg.values[r.name] * c, gr * c)
-        return np.vstack([Jc, Jq]) * span[None, :]
+                k = corr.get(r.name, 1.0)
+                A[i] = r.gradient(fg.values[r.name] * k, gr * k) * span
+        return Sample(ok=True, f=f, g=g, B=Bz, c=c, A=A)
 
+    aim = np.array([max(AIM_ABS, AIM_REL * abs(r.value(0.0))) for r in rows])
+    quality = CheapConstraints(
+        fun=lambda z: np.asarray(element_quality(H.apply(h_of(z)), el)) / q0 - QUALITY_AIM * QUALITY_REL,
+        jac=lambda z: np.asarray(quality_jacobian(H.apply(h_of(z)), el) @ Jh) / q0[:, None] * span[None, :])
     z0 = np.clip((H.identity() if start is None else np.asarray(start, float)) - lo, 0, None) / span
+    cap = min(MAX_ITERATIONS, problem.brief.iterations) if iterations is None else int(iterations)
     history: list = []
 
-    def on_iteration(z):
-        ev, _ = _evaluate(run, h_of(z))
-        history.append(ev)
+    def on_step(st):
+        ev = run.evaluations[-1]
+        history.append((ev, st.accepted))
         if callback is not None:
             callback({"k": len(history), "info": ev})
-        log(f"couple optimize: {problem.base.name}: gradient iteration {len(history)}: objective "
-            f"{ev.objective:.4g}, insertions {run.insertions}", quiet=quiet)
+        log(f"couple optimize: {problem.base.name}: SQP iteration {len(history)}: objective {ev.objective:.4g}, "
+            f"ratio {st.rho:.3g}, radius {st.radius:.3g}, {'accepted' if st.accepted else 'rejected'}, "
+            f"insertions {run.insertions}", quiet=quiet)
 
-    res = minimize(objective, z0, jac=objective_grad, method="SLSQP", bounds=[(0.0, 1.0)] * len(z0),
-                   constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
-                   options={"maxiter": min(MAX_ITERATIONS, problem.brief.iterations) if iterations is None
-                            else int(iterations), "ftol": FTOL},
-                   callback=on_iteration)
+    opts = SQPOptions(radius=RADIUS, max_evaluations=cap + 1, rtol=RTOL, ctol=aim,
+                      min_radius=MIN_RADIUS)
+    res = trust_region_sqp(sample, z0, options=opts, cheap=quality, callback=on_step)
+    log(f"couple optimize: {problem.base.name}: SQP: {res.message} ({len(res.steps)} iterations, "
+        f"{run.insertions} insertions)", quiet=quiet)
     ok = [ev for ev in run.evaluations if ev.status == "ok"]
     best = min(ok, key=lambda e: (not e.feasible, e.objective))
     if best.status == "ok" and best is not initial:  # as `couple simulate` runs it (own steps, no seeded refinement)
         plain = evaluate(problem.with_settings(refined=(), hold_steps=False), best.h, keep_result=True)
+        run.insertions += int(plain.sim_seconds > 0)
         if plain.status == "ok":
             best = plain
     for ev in run.evaluations:
@@ -504,19 +566,22 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         if ev.status == "rejected":
             key = ev.reason.split(":")[0]
             rejected[key] = rejected.get(key, 0) + 1
-    hist = [{"k": k, "accepted": True, "current": ev.objective, "best": ev.objective, "temperature": math.nan,
-             "sigma": math.nan, "value": ev.objective, "evaluation": ev} for k, ev in enumerate(history)]
-    message = str(res.message)
+    hist, current, best_so_far = [], initial.objective, initial.objective
+    for k, (ev, acc) in enumerate(history):
+        current = ev.objective if acc else current
+        best_so_far = min(best_so_far, ev.objective)
+        hist.append({"k": k, "accepted": acc, "current": current, "best": best_so_far, "temperature": math.nan,
+                     "sigma": math.nan, "value": ev.objective, "evaluation": ev})
+    message = f"SQP: {res.message} ({len(res.steps)} iterations)"
     if pre is not None:
         message = (f"annealing pre-phase ({pre.iterations} iterations, "
                    f"{pre.simulations + pre.stopped_simulations + pre.speculative} insertions, "
                    f"{'a design in the category' if in_category(pre.best) else 'none in the category'}); "
-                   f"SLSQP: {message}")
-    out = DesignResult(problem=problem, initial=initial, best=best, history=hist,
-                       accepted=[(k, ev.rest, ev.objective) for k, ev in enumerate(history)],
-                       simulations=run.insertions, stopped_simulations=0, rejected=rejected,
-                       seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
-                       iterations=int(res.nit), stopped_early=bool(res.success), method="gradient",
-                       gradient_evaluations=run.gradient_evaluations, message=message,
-                       events=nonsmooth_events(run.signatures))
-    return out
+                   f"{message}")
+    return DesignResult(problem=problem, initial=initial, best=best, history=hist,
+                        accepted=[(k, ev.rest, ev.objective) for k, (ev, acc) in enumerate(history) if acc],
+                        simulations=run.insertions, stopped_simulations=0, rejected=rejected,
+                        seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
+                        iterations=len(res.steps), stopped_early=bool(res.converged), method="gradient",
+                        gradient_evaluations=run.gradient_evaluations, message=message,
+                        events=nonsmooth_events(run.signatures))
