@@ -43,6 +43,7 @@ taken at fixed positions, and the default insertion length would move them in ju
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -62,6 +63,7 @@ from simfab.design.problem import (
     Evaluation,
     element_quality,
     evaluate,
+    initial_evaluation,
 )
 from simfab.design.sqp import CheapConstraints, Sample, SQPOptions, trust_region_sqp
 from simfab.design.stress import averaging_matrix
@@ -384,6 +386,31 @@ def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
     return bool(violated) and flat
 
 
+def gap_gradient(res, index: int, Jh: np.ndarray, temperature_rel: float = 0.1) -> np.ndarray | None:
+    """d(seat clearance)/dh (n_vars,) of an insertion whose part touches nothing (category "none"),
+    at record ``index``; None when no boundary vertex is within the field's kernel of O.
+
+    The clearance is min_i d(y_i) - d_hat over A's boundary vertices y_i, d = -psi
+    (:func:`simfab.design.problem.seat_clearance`). A part that touches nothing is undeformed: every
+    free vertex sits at its rest position, y_i = X_i, so dd_i/dX_i = -grad psi(y_i). The minimum's
+    gradient is that of a soft minimum over the near vertices at temperature ``temperature_rel`` d_hat:
+    a part shaped after O has many vertices within a fraction of d_hat of the nearest (paddleside2d: 39
+    within d_hat / 10), and the soft minimum closes the gap over all of them rather than at one
+    (-> the exact minimum's one-sided derivative as the temperature -> 0)."""
+    cm = res.model
+    r = res.steps[index]
+    bv = np.asarray(cm.fem.boundary_vertices)
+    ev = cm.field.evaluate(np.asarray(r.x)[bv], cm.pose(r.s), hessian=False)
+    near = np.asarray(ev.near, bool)
+    if not near.any():
+        return None
+    d = -np.asarray(ev.psi, float)[near]
+    w = np.exp(-(d - d.min()) / (temperature_rel * float(np.max(cm.dhat))))
+    gX = np.zeros(np.asarray(r.x).shape)
+    gX[bv[near]] = -(w / w.sum())[:, None] * np.asarray(ev.grad, float)[near]
+    return gX.ravel() @ Jh
+
+
 def in_contact(ev: Evaluation) -> bool:
     """A complete evaluation whose part touched the object (category other than "none")."""
     return ev.status == "ok" and ev.figures.get("category") not in (None, "none")
@@ -476,7 +503,10 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     H = problem.handles
     Jh = handle_jacobian(H)
     run = _Run(problem=problem, Jh=Jh)
-    initial = _evaluate(run, H.identity()).ev  # (with its sensitivities: the SQP starts there)
+    if problem.initial is not None:  # the placement's run of the initial shape: scored, not simulated again
+        initial = initial_evaluation(problem)
+    else:
+        initial = _evaluate(run, H.identity()).ev  # (with its sensitivities: the SQP starts there)
     if initial.status != "ok":
         raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to optimize from")
     if not problem.settings.refined and initial.result.refined_facets:
@@ -486,16 +516,24 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     rows = constraint_rows(problem)
     corr = problem.settings.corrections
     pre = None
-    fg0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float)).fg
-    if fg0 is not None and flat_start(rows, fg0, corr):
-        # no direction at the start: anneal (seeded) until a design is in the brief's category, then descend
-        log(f"couple optimize: {problem.base.name}: the start gives no gradient (no contact); annealing pre-phase "
-            f"until a design is in the brief's category, at most {PRE_PHASE_ITERATIONS} iterations", quiet=quiet)
-        pre = optimize(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
-                       start=None if start is None else np.asarray(start, float), until=in_category)
-        run.insertions += pre.simulations + pre.stopped_simulations + pre.speculative
-        if in_contact(pre.best):
-            start = pre.best.h
+    e0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))
+    if e0.fg is not None and flat_start(rows, e0.fg, corr):
+        g_gap = gap_gradient(e0.ev.result, e0.fg.steady_index, Jh) if "seat_clearance" in problem.limits else None
+        if g_gap is not None and np.any(g_gap):
+            # no figure depends on the shape, but the gap to O does: close it first (the clearance bound, linearized)
+            log(f"couple optimize: {problem.base.name}: the start touches nothing (gap "
+                f"{e0.ev.figures['seat_clearance'] * 1e6:.3g} um); the SQP closes the gap first", quiet=quiet)
+            rows.append(ConstraintRow(name="seat_clearance", sign=-1.0, bound=0.0, scale=B.SCALES["seat_clearance"]))
+        else:
+            # no direction at all: anneal (seeded) until a design is in the brief's category, then descend
+            log(f"couple optimize: {problem.base.name}: the start gives no gradient (no contact); annealing "
+                f"pre-phase until a design is in the brief's category, at most {PRE_PHASE_ITERATIONS} iterations",
+                quiet=quiet)
+            pre = optimize(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
+                           start=None if start is None else np.asarray(start, float), until=in_category)
+            run.insertions += pre.simulations + pre.stopped_simulations + pre.speculative
+            if in_contact(pre.best):
+                start = pre.best.h
     target = problem.target is not None
     el = problem.base.fem.elements
     q0 = problem.q0
@@ -524,6 +562,9 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         A = np.zeros((len(rows), len(z)))
         for i, r in enumerate(rows):
             gr = fg.gradients.get(r.name)
+            if r.name == "seat_clearance":  # (a flat start's gap; 0 once in contact, where it holds)
+                gr = (gap_gradient(e.ev.result, fg.steady_index, Jh) if e.ev.figures.get("category") == "none"
+                      else None)
             if gr is not None:
                 k = corr.get(r.name, 1.0)
                 A[i] = r.gradient(fg.values[r.name] * k, gr * k) * span
@@ -543,7 +584,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         if callback is not None:
             callback({"k": len(history), "info": ev})
         log(f"couple optimize: {problem.base.name}: SQP iteration {len(history)}: objective {ev.objective:.4g}, "
-            f"ratio {st.rho:.3g}, radius {st.radius:.3g}, {'accepted' if st.accepted else 'rejected'}, "
+            f"ratio {st.rho:.3g} (predicted {st.predicted:.3g}), radius {st.radius:.3g}, {'accepted' if st.accepted else 'rejected'}, "
             f"insertions {run.insertions}", quiet=quiet)
 
     opts = SQPOptions(radius=RADIUS, max_evaluations=cap + 1, rtol=RTOL, ctol=aim,
@@ -578,6 +619,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
                    f"{pre.simulations + pre.stopped_simulations + pre.speculative} insertions, "
                    f"{'a design in the category' if in_category(pre.best) else 'none in the category'}); "
                    f"{message}")
+    if problem.initial is None:  # the initial shape's run, for correction rounds started from this result
+        problem = dataclasses.replace(problem, initial=initial.result)
     return DesignResult(problem=problem, initial=initial, best=best, history=hist,
                         accepted=[(k, ev.rest, ev.objective) for k, (ev, acc) in enumerate(history) if acc],
                         simulations=run.insertions, stopped_simulations=0, rejected=rejected,

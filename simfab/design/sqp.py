@@ -28,7 +28,7 @@ the region's edge. The objective's own model is exact for the modification energ
 measures how well the constraints' linearization predicted the simulation.
 
 Stops when the current design is feasible (every violation within ``ctol``) and the model predicts
-no reduction of f above ``rtol`` |f| + ``atol``; when infeasible and no step reduces the linearized violation; when the radius falls
+no reduction of f above ``rtol`` |f| + ``atol``, or ``patience`` trials in a row from it were rejected; when infeasible and no step reduces the linearized violation; when the radius falls
 below ``min_radius``; or after ``max_evaluations``.
 """
 
@@ -66,9 +66,9 @@ class Sample:
     c: np.ndarray | None = None
     A: np.ndarray | None = None
 
-    def violation(self) -> float:
-        """sum_i max(0, -c_i) (l1, in the constraints' units)."""
-        return float(np.sum(np.maximum(0.0, -self.c))) if self.ok else math.inf
+    def violation(self, tol: float | np.ndarray = 0.0) -> float:
+        """sum_i max(0, -c_i - tol_i) (l1, in the constraints' units)."""
+        return float(np.sum(np.maximum(0.0, -self.c - tol))) if self.ok else math.inf
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -88,7 +88,9 @@ class SQPOptions:
     rtol, atol : stop when feasible and the predicted reduction is below rtol |f| + atol (f's units);
     ctol : a design whose every violation max(0, -c_i) is at most ctol (scalar or (m,), c's units) counts as
     feasible for that test;
-    penalty : the l1 merit's initial mu (f's units per unit of violation), raised as needed."""
+    penalty : the l1 merit's initial mu (f's units per unit of violation), raised as needed;
+    patience : stop when the current design is feasible and this many trials in a row were rejected (the
+    model mispredicts the simulation at every radius tried: a kink of a constraint at the design)."""
 
     radius: float = 0.05
     max_radius: float = 0.5
@@ -98,6 +100,7 @@ class SQPOptions:
     atol: float = 1e-10
     ctol: float | np.ndarray = 0.0
     penalty: float = 1.0
+    patience: int = 3
 
     def __post_init__(self):
         if not (0 < self.min_radius <= self.radius <= self.max_radius):
@@ -153,8 +156,8 @@ def sr1_update(S: np.ndarray, step: np.ndarray, y: np.ndarray) -> np.ndarray:
     return S + np.outer(u, u) / den
 
 
-def _linear_violation(s: Sample, dz: np.ndarray) -> float:
-    return float(np.sum(np.maximum(0.0, -(s.c + s.A @ dz))))
+def _linear_violation(s: Sample, dz: np.ndarray, tol: float | np.ndarray = 0.0) -> float:
+    return float(np.sum(np.maximum(0.0, -(s.c + s.A @ dz) - tol)))
 
 
 def _cheap(cheap: CheapConstraints | None, z: np.ndarray, radius: float, n_extra: int = 0) -> list:
@@ -247,13 +250,13 @@ def trust_region_sqp(evaluate: Callable[[np.ndarray], Sample], z0: np.ndarray, *
     S = np.zeros((len(z), len(z)))  # the constraints' curvature in the Lagrangian's Hessian (SR1)
     lam = np.zeros(len(s.c))
     while True:
-        v0 = s.violation()
-        within = bool(np.all(np.maximum(0.0, -s.c) <= options.ctol))
-        dzf = feasibility_step(s, z, radius, cheap) if v0 > 0 else np.zeros(len(z))
+        v0 = s.violation(options.ctol)  # the merit's: violations within ctol are free
+        within = v0 == 0.0
+        dzf = feasibility_step(s, z, radius, cheap) if s.violation() > 0 else np.zeros(len(z))
         dz, lam_qp = optimality_step(s, z, radius, dzf, cheap, S)
         if lam_qp is not None:
             lam = lam_qp
-        dv = v0 - _linear_violation(s, dz)
+        dv = v0 - _linear_violation(s, dz, options.ctol)
         q = _model(s, dz, S)
         if dv > 1e-12 * max(v0, 1.0) and q > 0:
             mu = max(mu, q / ((1.0 - RHO_M) * dv))
@@ -273,7 +276,7 @@ def trust_region_sqp(evaluate: Callable[[np.ndarray], Sample], z0: np.ndarray, *
         st = evaluate(zt)
         out.evaluations += 1
         if st.ok:
-            actual = (s.f + mu * v0) - (st.f + mu * st.violation())
+            actual = (s.f + mu * v0) - (st.f + mu * st.violation(options.ctol))
             rho = actual / pred
             # secant of the constraint part of grad L = g - A^T lambda (the objective's own Hessian is in B)
             S = sr1_update(S, zt - z, -(st.A - s.A).T @ lam)
@@ -294,5 +297,9 @@ def trust_region_sqp(evaluate: Callable[[np.ndarray], Sample], z0: np.ndarray, *
             callback(rec)
         if radius < options.min_radius:
             out.message = f"trust region below {options.min_radius:g}"
+            break
+        tail = out.steps[-options.patience:]
+        if within and len(tail) == options.patience and not any(t.accepted for t in tail):
+            out.message = f"{options.patience} trials in a row rejected at a feasible design"
             break
     return out
