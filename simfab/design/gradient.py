@@ -487,6 +487,29 @@ def target_hessian(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
     return H
 
 
+def seat_shift_gradient(target, s: np.ndarray, force: np.ndarray, dF: np.ndarray) -> np.ndarray:
+    """d(rms^2)/dh (n_vars,) [N^2] from the run's end moving with the design, the part of the
+    target-profile error's gradient that the force samples at fixed distances (:func:`target_gradient`)
+    do not carry: past the run's end s_e (where O rests) the force counts as 0, so a design that seats
+    early is charged int_{s_e}^{t1} F_t^2 ds / L, and at fixed distances nothing moves that end.
+
+    The end follows the rest point s*, F(s*) = 0, bracketed by the last two records (F_a > 0 >= F_b):
+    ds*/dh = (s_b - s_a) dw, w = F_a / (F_a - F_b), dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2 (as for the
+    grip, :func:`rest_grip_gradient`). Moving the end by ds the run's profile is assumed to continue
+    as the target's (it matches it before its end), so rms^2 changes by -F_t(s_e)^2 ds / L: the
+    target's force at the run's end drives the seat towards the target's. Zero when the run ends past
+    the target's range or its last two records do not bracket a rest point."""
+    s = np.asarray(s, float)
+    F = np.asarray(force, float)
+    t0, t1 = float(target.s[0]), float(target.s[-1])
+    if len(F) < 2 or not (t0 < s[-1] < t1) or not (F[-2] > 0 >= F[-1]):
+        return np.zeros(dF.shape[1])
+    a, b = len(F) - 2, len(F) - 1
+    dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
+    ft = float(np.interp(s[-1], target.s, target.force))
+    return -(ft**2) / (t1 - t0) * (s[b] - s[a]) * dw
+
+
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
                       callback=None, start=None) -> DesignResult:
     """A trust-region SQP on the brief (:func:`simfab.design.sqp.trust_region_sqp`; see the module
@@ -551,9 +574,10 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         fg = e.fg
         if target:
             f = float(e.ev.rms_error ** 2)
-            g = fg.gradients["rms_error_sq"] * span
+            sr, Fr = e.ev.result.column("s"), force_scale * e.ev.result.column("force")
             J = force_scale * e.force_jacobian * span[None, :]
-            Q = target_hessian(problem.target, e.ev.result.column("s"), force_scale * e.ev.result.column("force"))
+            g = fg.gradients["rms_error_sq"] * span + seat_shift_gradient(problem.target, sr, Fr, J)
+            Q = target_hessian(problem.target, sr, Fr)
             Bz = J.T @ Q @ J  # Gauss-Newton: the force samples' curvature left out
         else:
             X = H.apply(h)

@@ -257,7 +257,7 @@ def trust_region_sqp(evaluate: Callable[[np.ndarray], Sample], z0: np.ndarray, *
         if lam_qp is not None:
             lam = lam_qp
         dv = v0 - _linear_violation(s, dz, options.ctol)
-        q = _model(s, dz, S)
+        q = _model(s, dz)  # the objective's own model (exact for a quadratic f), without the constraints' curvature
         if dv > 1e-12 * max(v0, 1.0) and q > 0:
             mu = max(mu, q / ((1.0 - RHO_M) * dv))
         pred = -q + mu * dv
