@@ -1,5 +1,5 @@
 """Rest-shape design by gradients: the brief's figures and their derivatives with respect to the
-handle parameters h, and a gradient-based optimizer over them (SciPy SLSQP).
+handle parameters h, and a gradient-based optimizer over them (a trust-region SQP, :mod:`simfab.design.sqp`).
 
 Derivatives. One insertion of the design X(h) records, per step, the adjoint sensitivities of the
 elastic energy E_k, the insertion force F_k, the grip G_k and the averaged von Mises maximum
@@ -23,22 +23,27 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
 - the target-profile error rms^2 (the objective of profile matching) through the force samples
   (:func:`target_gradient`), at fixed step positions.
 Not differentiated (gradient None; the optimizer reads it as a constraint without a gradient: it
-checks it on every design and reports it): the seat clearance; and nothing with friction (the
-sensitivities hold for mu = 0).
+checks it on every design and reports it): the seat clearance (but for a part that touches nothing,
+:func:`gap_gradient`); and nothing with friction (the sensitivities hold for mu = 0).
 
-Optimizer (:func:`optimize_gradient`): when the start gives no direction (a part that does not
-touch the object: every violated constraint's gradient is zero) a seeded annealing pre-phase runs
-until a design is in the brief's category (:func:`in_category`); then SLSQP on
-z = (h - lower) / (upper - lower) in [0, 1] from the initial shape (or the pre-phase's best),
-minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's constraints, scaled to
-their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0 (a loose grip's
-coupling-ratio bound in sqrt(CR), :class:`ConstraintRow`), and the element-quality bound
-q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
-asks for (iterate or line-search trial) costs one insertion, which records its sensitivities: the
-Jacobians come with the values. The best design is the feasible one with the lowest objective
-among all simulated (the lowest penalized objective when none is feasible). Every candidate runs at
-the initial shape's planned step positions (``EvaluationSettings.hold_steps``): the derivatives are
-taken at fixed positions, and the default insertion length would move them in jumps.
+Optimizer (:func:`optimize_gradient`): a trust-region SQP (:func:`simfab.design.sqp.trust_region_sqp`)
+on z = (h - lower) / (upper - lower) in [0, 1] from the initial shape, one insertion per iteration:
+the objective's model needs no simulation - E_L is a quadratic in h with a constant Hessian
+(:func:`modification_hessian`), profile matching's rms^2 a quadratic in the force samples, whose
+Gauss-Newton Hessian J^T Q J (:func:`target_hessian`) comes with the samples' Jacobian J - and only
+the brief's constraints are linearized from the insertion: scaled to their SCALES units,
+(value - lo) / scale >= 0 and (hi - value) / scale >= 0 (a loose grip's coupling-ratio bound in
+sqrt(CR), :class:`ConstraintRow`), aimed AIM_REL inside the bound; the element-quality bound
+q_e / q0_e >= QUALITY_REL is imposed exactly in every subproblem (analytic, no simulation), so no
+trial is an inverted or degenerate mesh. Profile matching's gradient also carries the run's end
+moving with the design (:func:`seat_shift_gradient`). A start that touches nothing (every figure's
+gradient zero) gets the seat clearance's bound, linearized through the gap of the undeformed part
+(:func:`gap_gradient`); only when that has no gradient either (no vertex near O) a seeded annealing
+pre-phase runs until a design is in the brief's category (:func:`in_category`). The best design is
+the feasible one with the lowest objective among all simulated (the lowest penalized objective when
+none is feasible). Every candidate runs at the initial shape's planned step positions
+(``EvaluationSettings.hold_steps``): the derivatives are taken at fixed positions, and the default
+insertion length would move them in jumps.
 """
 
 from __future__ import annotations
@@ -72,10 +77,6 @@ from simfab.progress import log
 
 #: Smooth maxima's temperature, relative to the largest magnitude of the series they take the maximum of.
 TEMPERATURE_REL = 0.02
-#: SLSQP iterations at most (each needs one insertion plus its line-search trials).
-MAX_ITERATIONS = 20
-#: SLSQP's stopping tolerance on the objective (E_L, dimensionless ~1 per edge length of change).
-FTOL = 1e-4
 
 
 def handle_jacobian(handles: Handles) -> np.ndarray:
@@ -317,9 +318,10 @@ def nonsmooth_events(signatures: list) -> dict:
     return out
 
 
-#: Constraints without a gradient: SLSQP would see them as flat and its line search would stall on
-#: them (the seat clearance turns positive as a grip is relaxed); every simulated design is still
-#: checked against them (the best design is a feasible one).
+#: Constraints without a gradient: the SQP would see them as flat (the seat clearance turns positive as
+#: a grip is relaxed: a flat constraint stalls a line search); every simulated design is still checked
+#: against them (the best design is a feasible one). A start that touches nothing linearizes the
+#: clearance through :func:`gap_gradient` instead.
 NOT_DIFFERENTIATED = ("seat_clearance",)
 
 
@@ -330,7 +332,7 @@ ROOT_BELOW = 1.0
 
 @dataclass(frozen=True, kw_only=True)
 class ConstraintRow:
-    """One finite bound SLSQP linearizes: c = sign (v - bound) / scale >= 0 with v = value * correction,
+    """One finite bound the SQP linearizes: c = sign (v - bound) / scale >= 0 with v = value * correction,
     or with ``root`` c = sign (sqrt(v) - sqrt(bound)) / sqrt(scale).
 
     The root is the smooth surrogate of a category bound: a loose grip asks CR = 100 E_ss / E_max <=
@@ -372,14 +374,12 @@ def constraint_rows(problem: DesignProblem) -> list:
     return rows
 
 
-#: Constraint value SLSQP sees for a design that cannot be simulated (a violation of this many units).
-FAILED_VIOLATION = 10.0
-#: Annealing iterations at most of the pre-phase that runs when the start gives SLSQP no direction.
+#: Annealing iterations at most of the pre-phase that runs when the start gives the SQP no direction.
 PRE_PHASE_ITERATIONS = 60
 
 
 def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
-    """The start gives SLSQP no direction: some constraint row is violated and every violated row's
+    """The start gives the SQP no direction: some constraint row is violated and every violated row's
     gradient is zero or missing (a part that does not touch the object: no figure depends on its shape)."""
     violated = [r for r in rows if r.value(fg.values[r.name] * corrections.get(r.name, 1.0)) < 0]
     flat = all(fg.gradients.get(r.name) is None or not np.any(fg.gradients[r.name]) for r in violated)
@@ -419,8 +419,7 @@ def in_contact(ev: Evaluation) -> bool:
 def in_category(ev: Evaluation) -> bool:
     """In contact and within the brief's coupling-ratio bounds (its category: tight, loose), the
     pre-phase's goal: a design that merely grazes the object (a grip of millinewtons, in the
-    barrier's range only) has gradients too small for SLSQP's linearization of a newton-sized bound,
-    whose steps then invert elements."""
+    barrier's range only) has gradients too small for a linearization of a newton-sized bound."""
     return in_contact(ev) and all(c.satisfied for c in ev.constraints if c.name == "coupling_ratio")
 
 
@@ -608,8 +607,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         if callback is not None:
             callback({"k": len(history), "info": ev})
         log(f"couple optimize: {problem.base.name}: SQP iteration {len(history)}: objective {ev.objective:.4g}, "
-            f"ratio {st.rho:.3g} (predicted {st.predicted:.3g}), radius {st.radius:.3g}, {'accepted' if st.accepted else 'rejected'}, "
-            f"insertions {run.insertions}", quiet=quiet)
+            f"ratio {st.rho:.3g} (predicted {st.predicted:.3g}), radius {st.radius:.3g}, "
+            f"{'accepted' if st.accepted else 'rejected'}, insertions {run.insertions}", quiet=quiet)
 
     opts = SQPOptions(radius=RADIUS, max_evaluations=cap + 1, rtol=RTOL, ctol=aim,
                       min_radius=MIN_RADIUS)

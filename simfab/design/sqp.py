@@ -18,18 +18,27 @@ least-squares sum; c, A), a step dz is found without any evaluation, inside the 
 2. **Optimality**: min m(dz) = g^T dz + dz^T B dz / 2 s.t. c + A dz >= -r (the violations no larger
    than step 1 reached), the box, the region and q (SLSQP from step 1's point, which is feasible).
 
-The step is simulated once and judged by the l1 merit phi(z) = f(z) + mu sum_i max(0, -c_i(z)) (Fletcher's
-exact penalty): rho = (phi(z_k) - phi(z_k + dz)) / pred, pred = -m(dz) + mu (v(0) - v(dz)) > 0, with mu
-raised so that pred >= RHO_M mu (v(0) - v(dz)) (mu >= m(dz) / ((1 - RHO_M) (v(0) - v(dz)))). The step is
-taken when rho >= ETA; the radius shrinks to SHRINK |dz|_inf when rho < 1/4 or the evaluation fails
-(non-smooth events of the simulation - a category change, the steady state moving to another step,
-a seat - show up as such ratios: the radius handles them), and doubles when rho > 3/4 on a step at
-the region's edge. The objective's own model is exact for the modification energy, so the ratio
-measures how well the constraints' linearization predicted the simulation.
+The step minimizes the Lagrangian's model: B + S, with S ~ -sum_i lambda_i d2c_i/dz2 the constraints'
+curvature, a symmetric rank-one (SR1) secant of the constraint part of grad L = g - A^T lambda between
+the designs evaluated (lambda the subproblem's multipliers); without it a step along a curved
+constraint overshoots and the iterates zig-zag along it (tests/design/test_sqp.py's disc).
+
+The step is simulated once and judged by the l1 merit phi(z) = f(z) + mu v(z),
+v = sum_i max(0, -c_i - ctol_i) (Fletcher's exact penalty; violations within ``ctol`` are free: the
+caller aims its constraints that far inside their true bounds, so designs between the aim and the
+bound meet the brief and are not penalized, while the subproblems aim at c >= 0):
+rho = (phi(z_k) - phi(z_k + dz)) / pred, pred = -(g^T dz + dz^T B dz / 2) + mu (v(0) - v_lin(dz)) - the
+objective's own model (exact for a quadratic f) and the linearized violation - with mu raised so
+that pred >= RHO_M mu (v(0) - v_lin(dz)). The step is taken when rho >= ETA; the radius shrinks to
+SHRINK |dz|_inf when rho < 1/4 or the evaluation fails (non-smooth events of the simulation - a
+category change, the steady state moving to another step, a seat - show up as such ratios: the radius
+handles them), and doubles when rho > 3/4 on a step at the region's edge. With an exact objective
+model the ratio measures how well the constraints' linearization predicted the simulation.
 
 Stops when the current design is feasible (every violation within ``ctol``) and the model predicts
-no reduction of f above ``rtol`` |f| + ``atol``, or ``patience`` trials in a row from it were rejected; when infeasible and no step reduces the linearized violation; when the radius falls
-below ``min_radius``; or after ``max_evaluations``.
+no reduction of f above ``rtol`` |f| + ``atol``, or ``patience`` trials in a row from it were rejected
+(a kink the radius does not get below); when infeasible and no step reduces the linearized
+violation; when the radius falls below ``min_radius``; or after ``max_evaluations``.
 """
 
 from __future__ import annotations
@@ -193,8 +202,9 @@ def feasibility_step(s: Sample, z: np.ndarray, radius: float, cheap: CheapConstr
     Au = s.A * radius / ts
     cons = [{"type": "ineq", "fun": lambda x: s.c / ts + Au @ x[:n] + x[n:],
              "jac": lambda x: np.hstack([Au, np.eye(m)])}] + _cheap(cheap, z, radius, m)
-    res = minimize(lambda x: float(x[n:].sum()), np.r_[np.zeros(n), t0 / ts], jac=lambda x: np.r_[np.zeros(n), np.ones(m)],
-                   method="SLSQP", bounds=list(zip(lo, hi)) + [(0.0, None)] * m, constraints=cons,
+    res = minimize(lambda x: float(x[n:].sum()), np.r_[np.zeros(n), t0 / ts],
+                   jac=lambda x: np.r_[np.zeros(n), np.ones(m)], method="SLSQP",
+                   bounds=list(zip(lo, hi)) + [(0.0, None)] * m, constraints=cons,
                    options={"maxiter": 200, "ftol": 1e-12})
     dz = radius * np.clip(res.x[:n], lo, hi)
     if cheap is not None and np.any(cheap.fun(z + dz) < -CHEAP_TOL):
@@ -209,7 +219,7 @@ def optimality_step(s: Sample, z: np.ndarray, radius: float, dz0: np.ndarray, ch
     held; from dz0 (which is feasible for it), and dz0 itself (lambda None) when the solver ends elsewhere
     infeasible or higher. lambda (m,) >= 0: the subproblem's multipliers of the linearized constraints.
     Solved in u = dz / radius with m scaled to ~1 over the region."""
-    n, m = len(z), len(s.c)
+    m = len(s.c)
     B = s.B if S is None else s.B + S
     r = np.maximum(0.0, -(s.c + s.A @ dz0))
     tol = 1e-9 * (1.0 + np.abs(s.c))

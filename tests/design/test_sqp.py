@@ -48,8 +48,10 @@ def test_reaches_the_kkt_point_of_a_disc_constraint(z0):
 def test_cheap_constraint_is_held_exactly():
     # with z1^2 <= 0.25 (cheap, exact in every subproblem) the optimum is z1 = 0.5, z2 = sqrt(R^2 - 0.25)
     ev = Counted()
-    cheap = CheapConstraints(fun=lambda z: np.array([0.25 - z[0] ** 2]), jac=lambda z: np.array([[-2.0 * z[0], 0.0]]))
-    res = trust_region_sqp(ev, np.array([0.1, 0.1]), options=SQPOptions(radius=0.1, max_evaluations=30, ctol=1e-6), cheap=cheap)
+    cheap = CheapConstraints(fun=lambda z: np.array([0.25 - z[0] ** 2]),
+                             jac=lambda z: np.array([[-2.0 * z[0], 0.0]]))
+    res = trust_region_sqp(ev, np.array([0.1, 0.1]), options=SQPOptions(radius=0.1, max_evaluations=30, ctol=1e-6),
+                           cheap=cheap)
     assert res.converged, res.message
     assert np.allclose(res.z, [0.5, math.sqrt(R**2 - 0.25)], atol=2e-3)
     assert all(z[0] <= 0.5 + 1e-9 for z in ev.seen)  # no trial outside it: it costs no evaluation
