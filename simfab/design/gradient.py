@@ -386,6 +386,17 @@ def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
     return bool(violated) and flat
 
 
+def lost_grip(category: str, tight: bool, reached: dict) -> bool:
+    """A design the SQP counts as failed: one that touches nothing once a design touched (``reached``
+    ["contact"]), or, for a tight brief, one whose category is not tight once a tight one was reached.
+    Such a design's figures have no gradient towards the brief (a grip of 0 at a rest point that
+    touches nothing), so a step there ends the descent; its violation alone (the l1 merit) may still
+    look like progress when the step relieved another constraint (a stress bound traded for the grip)."""
+    if category == "none" and reached["contact"]:
+        return True
+    return tight and category != "tight" and reached["tight"]
+
+
 def gap_gradient(res, index: int, Jh: np.ndarray, temperature_rel: float = 0.1) -> np.ndarray | None:
     """d(seat clearance)/dh (n_vars,) of an insertion whose part touches nothing (category "none"),
     at record ``index``; None when no boundary vertex is within the field's kernel of O.
@@ -565,11 +576,19 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     def h_of(z):
         return lo + np.clip(z, 0.0, 1.0) * span
 
+    tight = problem.brief.grip == "tight"
+    reached = {"contact": False, "tight": False}
+
     def sample(z) -> Sample:
         h = h_of(z)
         e = _evaluate(run, h)
         if e.fg is None or (target and e.ev.rms_error is None):
             return Sample(ok=False)
+        category = e.ev.figures.get("category")
+        if lost_grip(category, tight, reached):
+            return Sample(ok=False)
+        reached["contact"] |= category != "none"
+        reached["tight"] |= category == "tight"
         fg = e.fg
         if target:
             f = float(e.ev.rms_error ** 2)
