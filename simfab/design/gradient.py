@@ -621,7 +621,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     history: list = []
 
     def on_step(st):
-        ev = run.evaluations[-1]
+        ev = _evaluate(run, h_of(st.z)).ev  # (memoized: the trial's evaluation)
         history.append((ev, st.accepted))
         if callback is not None:
             callback({"k": len(history), "info": ev})
