@@ -438,6 +438,9 @@ def in_category(ev: Evaluation) -> bool:
 MAX_ITERATIONS = 30
 #: The SQP's initial trust-region radius, in z (a fraction of each design variable's range).
 RADIUS = 0.05
+#: ... when it starts from a given design (a correction round's: an optimized design, near the kinks of
+#: its active constraints, where a step of RADIUS loses the grip).
+RADIUS_FROM_DESIGN = 0.01
 #: The constraints are aimed this far inside their bounds, relative to the bound (at least AIM_ABS in
 #: their SCALES units: 1 mN, 1 kPa, 0.001 %), a design the SQP counts as feasible (each aimed row violated by
 #: at most its aim) meets the brief, and a step whose linearization lands on
@@ -629,8 +632,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             f"ratio {st.rho:.3g} (predicted {st.predicted:.3g}), radius {st.radius:.3g}, "
             f"{'accepted' if st.accepted else 'rejected'}, insertions {run.insertions}", quiet=quiet)
 
-    opts = SQPOptions(radius=RADIUS, max_evaluations=cap + 1, rtol=RTOL, ctol=aim,
-                      min_radius=MIN_RADIUS)
+    opts = SQPOptions(radius=RADIUS if start is None or pre is not None else RADIUS_FROM_DESIGN,
+                      max_evaluations=cap + 1, rtol=RTOL, ctol=aim, min_radius=MIN_RADIUS)
     res = trust_region_sqp(sample, z0, options=opts, cheap=quality, callback=on_step)
     log(f"couple optimize: {problem.base.name}: SQP: {res.message} ({len(res.steps)} iterations, "
         f"{run.insertions} insertions)", quiet=quiet)
