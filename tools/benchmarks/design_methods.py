@@ -5,11 +5,13 @@
 
 For every scene, method and seed: ``simfab couple optimize NAME --method M --seed S`` (its [design]
 brief; annealing on 2 workers, the gradient method in one process; the mesh check with its
-correction rounds), outputs under ``--out`` (default ``./simfab-out/design_methods``). Reported per
+correction rounds), outputs under ``--out`` (default: a new temporary directory). Reported per
 run: ``insertions`` (every insertion simulation of the optimization and its correction rounds,
 the placement's initial insertion and the mesh check's excluded), ``gradient_evaluations``,
-``seconds`` (end to end, mesh check included), ``E_L`` (profile2d: the RMS force error [N]),
-``feasible`` (coarse, mesh-corrected) and ``met_mesh_check`` (mesh-converged figures). The
+``seconds`` (end to end, mesh check included), ``E_L``, ``rms_error_N`` (profile2d: the RMS force
+error, coarse and mesh-corrected),
+``feasible`` (coarse, mesh-corrected), ``met_mesh_check`` (mesh-converged figures),
+``rms_error_fine_N`` (profile2d: on the mesh check's finest level) and the optimizer's closing message. The
 gradient method does not depend on the seed except through the handle placement and its annealing
 pre-phase. ``profile2d`` runs once per count of ``--profile-handles`` (default: the scene's 4), its
 [design] handles overridden (``handles`` in the row; annealing gets the scene's iterations per handle,
