@@ -532,8 +532,9 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     pre-phase, which runs only when the start gives no direction (:func:`flat_start`: at most
     PRE_PHASE_ITERATIONS iterations, until a design is in the brief's category; the SQP starts from
     the best one); otherwise the method is deterministic. ``iterations`` caps the SQP's iterations
-    (default: the brief's, at most MAX_ITERATIONS). Raises ConvergenceError when the initial shape
-    cannot be simulated."""
+    (default: the brief's, at most MAX_ITERATIONS). ``start``: the design to start from (a correction
+    round's: the trust region then starts at RADIUS_FROM_DESIGN), default the initial shape. Raises
+    ConvergenceError when the initial shape cannot be simulated."""
     t0 = time.perf_counter()
     problem = problem.with_settings(hold_steps=True)  # derivatives are at fixed step positions
     H = problem.handles
