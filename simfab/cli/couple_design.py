@@ -85,8 +85,8 @@ def add_optimize_args(s) -> None:
                    help="processes evaluating the annealer's proposals at once (speculatively; the design "
                         "does not depend on it; default: this machine's cores, at most 4; 1 with --restarts)")
     s.add_argument("--method", choices=["anneal", "gradient"], default="anneal",
-                   help="optimizer: simulated annealing (default), or SLSQP on the profile's exact sensitivities "
-                        "(adjoint method, one insertion per design it visits; frictionless briefs)")
+                   help="optimizer: simulated annealing (default), or a trust-region SQP on the profile's exact "
+                        "sensitivities (adjoint method, one insertion per iteration; frictionless briefs)")
     s.add_argument("--restarts", type=int, default=1, metavar="N",
                    help="independent annealing runs (seeds SEED..SEED+N-1) as Dask tasks; the best design is kept")
     s.add_argument("--scheduler", metavar="ADDRESS",

@@ -1,5 +1,5 @@
 """Rest-shape design by gradients: the brief's figures and their derivatives with respect to the
-handle parameters h, and a gradient-based optimizer over them (SciPy SLSQP).
+handle parameters h, and a gradient-based optimizer over them (a trust-region SQP, :mod:`simfab.design.sqp`).
 
 Derivatives. One insertion of the design X(h) records, per step, the adjoint sensitivities of the
 elastic energy E_k, the insertion force F_k, the grip G_k and the averaged von Mises maximum
@@ -23,33 +23,38 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
 - the target-profile error rms^2 (the objective of profile matching) through the force samples
   (:func:`target_gradient`), at fixed step positions.
 Not differentiated (gradient None; the optimizer reads it as a constraint without a gradient: it
-checks it on every design and reports it): the seat clearance; and nothing with friction (the
-sensitivities hold for mu = 0).
+checks it on every design and reports it): the seat clearance (but for a part that touches nothing,
+:func:`gap_gradient`); and nothing with friction (the sensitivities hold for mu = 0).
 
-Optimizer (:func:`optimize_gradient`): when the start gives no direction (a part that does not
-touch the object: every violated constraint's gradient is zero) a seeded annealing pre-phase runs
-until a design is in the brief's category (:func:`in_category`); then SLSQP on
-z = (h - lower) / (upper - lower) in [0, 1] from the initial shape (or the pre-phase's best),
-minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's constraints, scaled to
-their SCALES units, (value - lo) / scale >= 0 and (hi - value) / scale >= 0 (a loose grip's
-coupling-ratio bound in sqrt(CR), :class:`ConstraintRow`), and the element-quality bound
-q_e / q0_e - QUALITY_REL >= 0 on every element. Every design SLSQP
-asks for (iterate or line-search trial) costs one insertion, which records its sensitivities: the
-Jacobians come with the values. The best design is the feasible one with the lowest objective
-among all simulated (the lowest penalized objective when none is feasible). Every candidate runs at
-the initial shape's planned step positions (``EvaluationSettings.hold_steps``): the derivatives are
-taken at fixed positions, and the default insertion length would move them in jumps.
+Optimizer (:func:`optimize_gradient`): a trust-region SQP (:func:`simfab.design.sqp.trust_region_sqp`)
+on z = (h - lower) / (upper - lower) in [0, 1] from the initial shape, one insertion per iteration:
+the objective's model needs no simulation - E_L is a quadratic in h with a constant Hessian
+(:func:`modification_hessian`), profile matching's rms^2 a quadratic in the force samples, whose
+Gauss-Newton Hessian J^T Q J (:func:`target_hessian`) comes with the samples' Jacobian J - and only
+the brief's constraints are linearized from the insertion: scaled to their SCALES units,
+(value - lo) / scale >= 0 and (hi - value) / scale >= 0 (a loose grip's coupling-ratio bound in
+sqrt(CR), :class:`ConstraintRow`), aimed AIM_REL inside the bound; the element-quality bound
+q_e / q0_e >= QUALITY_REL is imposed exactly in every subproblem (analytic, no simulation), so no
+trial is an inverted or degenerate mesh. Profile matching's gradient also carries the run's end
+moving with the design (:func:`seat_shift_gradient`). A start that touches nothing (every figure's
+gradient zero) gets the seat clearance's bound, linearized through the gap of the undeformed part
+(:func:`gap_gradient`); only when that has no gradient either (no vertex near O) a seeded annealing
+pre-phase runs until a design is in the brief's category (:func:`in_category`). The best design is
+the feasible one with the lowest objective among all simulated (the lowest penalized objective when
+none is feasible). Every candidate runs at the initial shape's planned step positions
+(``EvaluationSettings.hold_steps``): the derivatives are taken at fixed positions, and the default
+insertion length would move them in jumps.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import minimize
 
 from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_max_weights
 from simfab.coupling.profile import analyze_run
@@ -63,17 +68,15 @@ from simfab.design.problem import (
     Evaluation,
     element_quality,
     evaluate,
+    initial_evaluation,
 )
+from simfab.design.sqp import CheapConstraints, Sample, SQPOptions, trust_region_sqp
 from simfab.design.stress import averaging_matrix
 from simfab.errors import ConvergenceError
 from simfab.progress import log
 
 #: Smooth maxima's temperature, relative to the largest magnitude of the series they take the maximum of.
 TEMPERATURE_REL = 0.02
-#: SLSQP iterations at most (each needs one insertion plus its line-search trials).
-MAX_ITERATIONS = 20
-#: SLSQP's stopping tolerance on the objective (E_L, dimensionless ~1 per edge length of change).
-FTOL = 1e-4
 
 
 def handle_jacobian(handles: Handles) -> np.ndarray:
@@ -263,9 +266,18 @@ class _Run:
     signatures: list = field(default_factory=list)  # per complete insertion: its discrete features (events)
 
 
-def _evaluate(run: _Run, h: np.ndarray):
-    """(Evaluation, FigureGradients or None) of design h, memoized (SLSQP asks for each design's
-    values and Jacobians in separate calls)."""
+@dataclass(frozen=True, kw_only=True, eq=False)
+class _Evaluated:
+    """One simulated design: the evaluation, its :class:`FigureGradients` (None unless complete) and
+    (target matching) the records' force derivatives dF_k/dh (k, n_vars) at fixed positions."""
+
+    ev: Evaluation
+    fg: FigureGradients | None
+    force_jacobian: np.ndarray | None = None
+
+
+def _evaluate(run: _Run, h: np.ndarray) -> _Evaluated:
+    """Design h simulated with its sensitivities, memoized (a design is never simulated twice)."""
     key = np.round(np.asarray(h, float), 12).tobytes()  # (z -> h round trips differ in the last bits)
     out = run.memo.get(key)
     if out is not None:
@@ -275,10 +287,12 @@ def _evaluate(run: _Run, h: np.ndarray):
                   recorder=lambda cm: SensitivityRecorder(cm, stress_measure(problem, cm)))
     if ev.sim_seconds > 0:
         run.insertions += 1
-    fg = None
+    fg, dF = None, None
     if ev.status == "ok":
         fg = figure_gradients(problem, ev, run.Jh)
         run.gradient_evaluations += 1
+        if problem.target is not None:
+            dF = np.array([np.asarray(st.force, float).ravel() @ run.Jh for st in ev.recorder.insert])
     ev.recorder = None  # (memory: the per-step sensitivities are read into fg)
     if ev.status == "ok":
         r = ev.result
@@ -287,7 +301,7 @@ def _evaluate(run: _Run, h: np.ndarray):
                                "refinement": tuple(r.refined_facets), "kappa": max(st.kappa for st in r.steps),
                                "steps": len(r.steps), "rest_positions": tuple(st.s for st in r.steps[planned:])})
     run.evaluations.append(ev)
-    out = run.memo[key] = (ev, fg)
+    out = run.memo[key] = _Evaluated(ev=ev, fg=fg, force_jacobian=dF)
     return out
 
 
@@ -304,9 +318,10 @@ def nonsmooth_events(signatures: list) -> dict:
     return out
 
 
-#: Constraints without a gradient: SLSQP would see them as flat and its line search would stall on
-#: them (the seat clearance turns positive as a grip is relaxed); every simulated design is still
-#: checked against them (the best design is a feasible one).
+#: Constraints without a gradient: the SQP would see them as flat (the seat clearance turns positive as
+#: a grip is relaxed: a flat constraint stalls a line search); every simulated design is still checked
+#: against them (the best design is a feasible one). A start that touches nothing linearizes the
+#: clearance through :func:`gap_gradient` instead.
 NOT_DIFFERENTIATED = ("seat_clearance",)
 
 
@@ -317,7 +332,7 @@ ROOT_BELOW = 1.0
 
 @dataclass(frozen=True, kw_only=True)
 class ConstraintRow:
-    """One finite bound SLSQP linearizes: c = sign (v - bound) / scale >= 0 with v = value * correction,
+    """One finite bound the SQP linearizes: c = sign (v - bound) / scale >= 0 with v = value * correction,
     or with ``root`` c = sign (sqrt(v) - sqrt(bound)) / sqrt(scale).
 
     The root is the smooth surrogate of a category bound: a loose grip asks CR = 100 E_ss / E_max <=
@@ -359,18 +374,52 @@ def constraint_rows(problem: DesignProblem) -> list:
     return rows
 
 
-#: Constraint value SLSQP sees for a design that cannot be simulated (a violation of this many units).
-FAILED_VIOLATION = 10.0
-#: Annealing iterations at most of the pre-phase that runs when the start gives SLSQP no direction.
+#: Annealing iterations at most of the pre-phase that runs when the start gives the SQP no direction.
 PRE_PHASE_ITERATIONS = 60
 
 
 def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
-    """The start gives SLSQP no direction: some constraint row is violated and every violated row's
+    """The start gives the SQP no direction: some constraint row is violated and every violated row's
     gradient is zero or missing (a part that does not touch the object: no figure depends on its shape)."""
     violated = [r for r in rows if r.value(fg.values[r.name] * corrections.get(r.name, 1.0)) < 0]
     flat = all(fg.gradients.get(r.name) is None or not np.any(fg.gradients[r.name]) for r in violated)
     return bool(violated) and flat
+
+
+def lost_grip(category: str, tight: bool, reached: dict) -> bool:
+    """A design the SQP counts as failed: one that touches nothing once a design touched (``reached``
+    ["contact"]), or, for a tight brief, one whose category is not tight once a tight one was reached.
+    Such a design's figures have no gradient towards the brief (a grip of 0 at a rest point that
+    touches nothing), so a step there ends the descent; its violation alone (the l1 merit) may still
+    look like progress when the step relieved another constraint (a stress bound traded for the grip)."""
+    if category == "none" and reached["contact"]:
+        return True
+    return tight and category != "tight" and reached["tight"]
+
+
+def gap_gradient(res, index: int, Jh: np.ndarray, temperature_rel: float = 0.1) -> np.ndarray | None:
+    """d(seat clearance)/dh (n_vars,) of an insertion whose part touches nothing (category "none"),
+    at record ``index``; None when no boundary vertex is within the field's kernel of O.
+
+    The clearance is min_i d(y_i) - d_hat over A's boundary vertices y_i, d = -psi
+    (:func:`simfab.design.problem.seat_clearance`). A part that touches nothing is undeformed: every
+    free vertex sits at its rest position, y_i = X_i, so dd_i/dX_i = -grad psi(y_i). The minimum's
+    gradient is that of a soft minimum over the near vertices at temperature ``temperature_rel`` d_hat:
+    a part shaped after O has many vertices within a fraction of d_hat of the nearest (paddleside2d: 39
+    within d_hat / 10), and the soft minimum closes the gap over all of them rather than at one
+    (-> the exact minimum's one-sided derivative as the temperature -> 0)."""
+    cm = res.model
+    r = res.steps[index]
+    bv = np.asarray(cm.fem.boundary_vertices)
+    ev = cm.field.evaluate(np.asarray(r.x)[bv], cm.pose(r.s), hessian=False)
+    near = np.asarray(ev.near, bool)
+    if not near.any():
+        return None
+    d = -np.asarray(ev.psi, float)[near]
+    w = np.exp(-(d - d.min()) / (temperature_rel * float(np.max(cm.dhat))))
+    gX = np.zeros(np.asarray(r.x).shape)
+    gX[bv[near]] = -(w / w.sum())[:, None] * np.asarray(ev.grad, float)[near]
+    return gX.ravel() @ Jh
 
 
 def in_contact(ev: Evaluation) -> bool:
@@ -381,27 +430,120 @@ def in_contact(ev: Evaluation) -> bool:
 def in_category(ev: Evaluation) -> bool:
     """In contact and within the brief's coupling-ratio bounds (its category: tight, loose), the
     pre-phase's goal: a design that merely grazes the object (a grip of millinewtons, in the
-    barrier's range only) has gradients too small for SLSQP's linearization of a newton-sized bound,
-    whose steps then invert elements."""
+    barrier's range only) has gradients too small for a linearization of a newton-sized bound."""
     return in_contact(ev) and all(c.satisfied for c in ev.constraints if c.name == "coupling_ratio")
+
+
+#: Trust-region SQP iterations at most (one insertion each), when the brief's iterations are more.
+MAX_ITERATIONS = 30
+#: The SQP's initial trust-region radius, in z (a fraction of each design variable's range).
+RADIUS = 0.05
+#: ... when it starts from a given design (a correction round's: an optimized design, near the kinks of
+#: its active constraints, where a step of RADIUS loses the grip).
+RADIUS_FROM_DESIGN = 0.01
+#: The constraints are aimed this far inside their bounds, relative to the bound (at least AIM_ABS in
+#: their SCALES units: 1 mN, 1 kPa, 0.001 %), a design the SQP counts as feasible (each aimed row violated by
+#: at most its aim) meets the brief, and a step whose linearization lands on
+#: the bound does not end a hair outside it (the figures are piecewise smooth: a correction step of a few
+#: micrometres then meets their kinks).
+AIM_REL = 1e-2
+AIM_ABS = 1e-3
+#: The element-quality bound the subproblems impose: this factor above QUALITY_REL (round-off off the
+#: rejection threshold).
+QUALITY_AIM = 1.001
+#: The SQP stops when its trust-region radius falls below this (in z: 1e-4 of a translation's range
+#: is ~ 1e-5 of the part's size).
+MIN_RADIUS = 1e-4
+#: Stop when no step predicts a reduction of the objective above this fraction of it.
+RTOL = 1e-2
+
+
+def modification_hessian(problem: DesignProblem, Jh: np.ndarray) -> np.ndarray:
+    """d2E_L/dh2 (n_vars, n_vars), constant: E_L = sum_axes v_a^T M_L v_a over the boundary vertices'
+    displacements v_a (linear in h), so the Hessian is 2 sum_a J_a^T M_L J_a with J_a the rows of dX/dh
+    of the boundary vertices' axis a."""
+    en = problem.energy
+    d = problem.handles.dim
+    out = np.zeros((Jh.shape[1], Jh.shape[1]))
+    for a in range(d):
+        Ja = Jh[en.vertices * d + a]
+        out += 2.0 * Ja.T @ (en.M @ Ja)
+    return out
+
+
+def target_hessian(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """d2(rms^2)/dF_k dF_l (k, k) [-] of the target-profile error at fixed distances s: rms^2 is a
+    quadratic function of the force samples (:func:`target_gradient`), so with unit steps
+    r(F + e_k + e_l) - r(F + e_k) - r(F + e_l) + r(F) is its Hessian's entry exactly (up to
+    round-off). Samples outside the target's range have zero rows (skipped)."""
+    f = np.asarray(force, float)
+    s = np.asarray(s, float)
+    k = len(f)
+
+    def r(x):
+        return target.rms_error(s, x) ** 2
+
+    inside = np.flatnonzero(s >= float(target.s[0]) - (s[1] - s[0] if k > 1 else 0.0))
+    r0 = r(f)
+    r1 = {}
+    for i in inside:
+        e = f.copy()
+        e[i] += 1.0
+        r1[i] = r(e)
+    H = np.zeros((k, k))
+    for a, i in enumerate(inside):
+        for j in inside[a:]:
+            e = f.copy()
+            e[i] += 1.0
+            e[j] += 1.0
+            H[i, j] = H[j, i] = r(e) - r1[i] - r1[j] + r0
+    return H
+
+
+def seat_shift_gradient(target, s: np.ndarray, force: np.ndarray, dF: np.ndarray) -> np.ndarray:
+    """d(rms^2)/dh (n_vars,) [N^2] from the run's end moving with the design, the part of the
+    target-profile error's gradient that the force samples at fixed distances (:func:`target_gradient`)
+    do not carry: past the run's end s_e (where O rests) the force counts as 0, so a design that seats
+    early is charged int_{s_e}^{t1} F_t^2 ds / L, and at fixed distances nothing moves that end.
+
+    The end follows the rest point s*, F(s*) = 0, bracketed by the last two records (F_a > 0 >= F_b):
+    ds*/dh = (s_b - s_a) dw, w = F_a / (F_a - F_b), dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2 (as for the
+    grip, :func:`rest_grip_gradient`). Moving the end by ds the run's profile is assumed to continue
+    as the target's (it matches it before its end), so rms^2 changes by -F_t(s_e)^2 ds / L: the
+    target's force at the run's end drives the seat towards the target's. Zero when the run ends past
+    the target's range or its last two records do not bracket a rest point."""
+    s = np.asarray(s, float)
+    F = np.asarray(force, float)
+    t0, t1 = float(target.s[0]), float(target.s[-1])
+    if len(F) < 2 or not (t0 < s[-1] < t1) or not (F[-2] > 0 >= F[-1]):
+        return np.zeros(dF.shape[1])
+    a, b = len(F) - 2, len(F) - 1
+    dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
+    ft = float(np.interp(s[-1], target.s, target.force))
+    return -(ft**2) / (t1 - t0) * (s[b] - s[a]) * dw
 
 
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
                       callback=None, start=None) -> DesignResult:
-    """SLSQP on the brief (see the module docstring); returns a :class:`DesignResult` whose
-    ``simulations`` counts every insertion and ``gradient_evaluations`` those that gave gradients
-    (all complete ones, and the pre-phase's). ``seed`` seeds the annealing pre-phase, which runs
-    only when the start gives no direction (:func:`flat_start`: at most PRE_PHASE_ITERATIONS
-    iterations, until a design is in the brief's category; SLSQP starts from the best one); otherwise the
-    method is deterministic. ``iterations`` caps SLSQP's iterations (default: the
-    brief's, at most MAX_ITERATIONS). Raises ConvergenceError when the initial shape
-    cannot be simulated."""
+    """A trust-region SQP on the brief (:func:`simfab.design.sqp.trust_region_sqp`; see the module
+    docstring): one insertion per iteration; returns a :class:`DesignResult` whose ``simulations``
+    counts every insertion (the pre-phase's and the final run as ``couple simulate`` runs the design
+    included) and ``gradient_evaluations`` those that gave gradients. ``seed`` seeds the annealing
+    pre-phase, which runs only when the start gives no direction (:func:`flat_start`: at most
+    PRE_PHASE_ITERATIONS iterations, until a design is in the brief's category; the SQP starts from
+    the best one); otherwise the method is deterministic. ``iterations`` caps the SQP's iterations
+    (default: the brief's, at most MAX_ITERATIONS). ``start``: the design to start from (a correction
+    round's: the trust region then starts at RADIUS_FROM_DESIGN), default the initial shape. Raises
+    ConvergenceError when the initial shape cannot be simulated."""
     t0 = time.perf_counter()
     problem = problem.with_settings(hold_steps=True)  # derivatives are at fixed step positions
     H = problem.handles
     Jh = handle_jacobian(H)
     run = _Run(problem=problem, Jh=Jh)
-    initial = _evaluate(run, H.identity())[0]  # (with its sensitivities: SLSQP starts there)
+    if problem.initial is not None:  # the placement's run of the initial shape: scored, not simulated again
+        initial = initial_evaluation(problem)
+    else:
+        initial = _evaluate(run, H.identity()).ev  # (with its sensitivities: the SQP starts there)
     if initial.status != "ok":
         raise ConvergenceError(f"the initial shape cannot be simulated ({initial.reason}); nothing to optimize from")
     if not problem.settings.refined and initial.result.refined_facets:
@@ -411,89 +553,96 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     rows = constraint_rows(problem)
     corr = problem.settings.corrections
     pre = None
-    fg0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))[1]
-    if fg0 is not None and flat_start(rows, fg0, corr):
-        # no direction at the start: anneal (seeded) until a design is in the brief's category, then descend
-        log(f"couple optimize: {problem.base.name}: the start gives no gradient (no contact); annealing pre-phase "
-            f"until a design is in the brief's category, at most {PRE_PHASE_ITERATIONS} iterations", quiet=quiet)
-        pre = optimize(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
-                       start=None if start is None else np.asarray(start, float), until=in_category)
-        run.insertions += pre.simulations + pre.stopped_simulations + pre.speculative
-        if in_contact(pre.best):
-            start = pre.best.h
+    e0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))
+    if e0.fg is not None and flat_start(rows, e0.fg, corr):
+        g_gap = gap_gradient(e0.ev.result, e0.fg.steady_index, Jh) if "seat_clearance" in problem.limits else None
+        if g_gap is not None and np.any(g_gap):
+            # no figure depends on the shape, but the gap to O does: close it first (the clearance bound, linearized)
+            log(f"couple optimize: {problem.base.name}: the start touches nothing (gap "
+                f"{e0.ev.figures['seat_clearance'] * 1e6:.3g} um); the SQP closes the gap first", quiet=quiet)
+            rows.append(ConstraintRow(name="seat_clearance", sign=-1.0, bound=0.0, scale=B.SCALES["seat_clearance"]))
+        else:
+            # no direction at all: anneal (seeded) until a design is in the brief's category, then descend
+            log(f"couple optimize: {problem.base.name}: the start gives no gradient (no contact); annealing "
+                f"pre-phase until a design is in the brief's category, at most {PRE_PHASE_ITERATIONS} iterations",
+                quiet=quiet)
+            pre = optimize(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
+                           start=None if start is None else np.asarray(start, float), until=in_category)
+            run.insertions += pre.simulations + pre.stopped_simulations + pre.speculative
+            if in_contact(pre.best):
+                start = pre.best.h
     target = problem.target is not None
     el = problem.base.fem.elements
     q0 = problem.q0
+    B_EL = None if target else span[:, None] * modification_hessian(problem, Jh) * span[None, :]
+    force_scale = corr.get("force_profile", 1.0)
 
     def h_of(z):
         return lo + np.clip(z, 0.0, 1.0) * span
 
-    def objective(z):
+    tight = problem.brief.grip == "tight"
+    reached = {"contact": False, "tight": False}
+
+    def sample(z) -> Sample:
         h = h_of(z)
-        X = H.apply(h)
+        e = _evaluate(run, h)
+        if e.fg is None or (target and e.ev.rms_error is None):
+            return Sample(ok=False)
+        category = e.ev.figures.get("category")
+        if lost_grip(category, tight, reached):
+            return Sample(ok=False)
+        reached["contact"] |= category != "none"
+        reached["tight"] |= category == "tight"
+        fg = e.fg
         if target:
-            if np.any(element_quality(X, el) <= 0):
-                return 1e6
-            ev, fg = _evaluate(run, h)
-            return float(ev.rms_error ** 2) if ev.status == "ok" and ev.rms_error is not None else 1e6
-        return problem.energy(X)
-
-    def objective_grad(z):
-        if target:
-            h = h_of(z)
-            if np.any(element_quality(H.apply(h), el) <= 0):
-                return np.zeros_like(z)
-            _, fg = _evaluate(run, h)
-            return np.zeros_like(z) if fg is None else fg.gradients["rms_error_sq"] * span
-        return modification_gradient(problem, H.apply(h_of(z)), Jh) * span
-
-    def cons(z):
-        h = h_of(z)
-        X = H.apply(h)
-        qual = np.asarray(element_quality(X, el)) / q0 - QUALITY_REL
-        if np.any(qual <= 0):
-            return np.r_[np.full(len(rows), -FAILED_VIOLATION), qual]
-        ev, fg = _evaluate(run, h)
-        if fg is None:
-            return np.r_[np.full(len(rows), -FAILED_VIOLATION), qual]
-        vals = [r.value(fg.values[r.name] * corr.get(r.name, 1.0)) for r in rows]
-        return np.r_[vals, qual]
-
-    def cons_jac(z):
-        h = h_of(z)
-        X = H.apply(h)
-        Jq = (quality_jacobian(X, el) @ Jh) / q0[:, None]
-        ev, fg = (None, None)
-        if np.all(np.asarray(element_quality(X, el)) > 0):
-            ev, fg = _evaluate(run, h)
-        Jc = np.zeros((len(rows), len(z)))
+            f = float(e.ev.rms_error ** 2)
+            sr, Fr = e.ev.result.column("s"), force_scale * e.ev.result.column("force")
+            J = force_scale * e.force_jacobian * span[None, :]
+            g = fg.gradients["rms_error_sq"] * span + seat_shift_gradient(problem.target, sr, Fr, J)
+            Q = target_hessian(problem.target, sr, Fr)
+            Bz = J.T @ Q @ J  # Gauss-Newton: the force samples' curvature left out
+        else:
+            X = H.apply(h)
+            f, g, Bz = problem.energy(X), modification_gradient(problem, X, Jh) * span, B_EL
+        c = np.array([r.value(fg.values[r.name] * corr.get(r.name, 1.0)) for r in rows]) - aim
+        A = np.zeros((len(rows), len(z)))
         for i, r in enumerate(rows):
-            gr = None if fg is None else fg.gradients.get(r.name)
+            gr = fg.gradients.get(r.name)
+            if r.name == "seat_clearance":  # (a flat start's gap; 0 once in contact, where it holds)
+                gr = (gap_gradient(e.ev.result, fg.steady_index, Jh) if e.ev.figures.get("category") == "none"
+                      else None)
             if gr is not None:
-                c = corr.get(r.name, 1.0)
-                Jc[i] = r.gradient(fg.values[r.name] * c, gr * c)
-        return np.vstack([Jc, Jq]) * span[None, :]
+                k = corr.get(r.name, 1.0)
+                A[i] = r.gradient(fg.values[r.name] * k, gr * k) * span
+        return Sample(ok=True, f=f, g=g, B=Bz, c=c, A=A)
 
+    aim = np.array([max(AIM_ABS, AIM_REL * abs(r.value(0.0))) for r in rows])
+    quality = CheapConstraints(
+        fun=lambda z: np.asarray(element_quality(H.apply(h_of(z)), el)) / q0 - QUALITY_AIM * QUALITY_REL,
+        jac=lambda z: np.asarray(quality_jacobian(H.apply(h_of(z)), el) @ Jh) / q0[:, None] * span[None, :])
     z0 = np.clip((H.identity() if start is None else np.asarray(start, float)) - lo, 0, None) / span
+    cap = min(MAX_ITERATIONS, problem.brief.iterations) if iterations is None else int(iterations)
     history: list = []
 
-    def on_iteration(z):
-        ev, _ = _evaluate(run, h_of(z))
-        history.append(ev)
+    def on_step(st):
+        ev = _evaluate(run, h_of(st.z)).ev  # (memoized: the trial's evaluation)
+        history.append((ev, st.accepted))
         if callback is not None:
             callback({"k": len(history), "info": ev})
-        log(f"couple optimize: {problem.base.name}: gradient iteration {len(history)}: objective "
-            f"{ev.objective:.4g}, insertions {run.insertions}", quiet=quiet)
+        log(f"couple optimize: {problem.base.name}: SQP iteration {len(history)}: objective {ev.objective:.4g}, "
+            f"ratio {st.rho:.3g} (predicted {st.predicted:.3g}), radius {st.radius:.3g}, "
+            f"{'accepted' if st.accepted else 'rejected'}, insertions {run.insertions}", quiet=quiet)
 
-    res = minimize(objective, z0, jac=objective_grad, method="SLSQP", bounds=[(0.0, 1.0)] * len(z0),
-                   constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
-                   options={"maxiter": min(MAX_ITERATIONS, problem.brief.iterations) if iterations is None
-                            else int(iterations), "ftol": FTOL},
-                   callback=on_iteration)
+    opts = SQPOptions(radius=RADIUS if start is None or pre is not None else RADIUS_FROM_DESIGN,
+                      max_evaluations=cap + 1, rtol=RTOL, ctol=aim, min_radius=MIN_RADIUS)
+    res = trust_region_sqp(sample, z0, options=opts, cheap=quality, callback=on_step)
+    log(f"couple optimize: {problem.base.name}: SQP: {res.message} ({len(res.steps)} iterations, "
+        f"{run.insertions} insertions)", quiet=quiet)
     ok = [ev for ev in run.evaluations if ev.status == "ok"]
     best = min(ok, key=lambda e: (not e.feasible, e.objective))
     if best.status == "ok" and best is not initial:  # as `couple simulate` runs it (own steps, no seeded refinement)
         plain = evaluate(problem.with_settings(refined=(), hold_steps=False), best.h, keep_result=True)
+        run.insertions += int(plain.sim_seconds > 0)
         if plain.status == "ok":
             best = plain
     for ev in run.evaluations:
@@ -504,19 +653,24 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         if ev.status == "rejected":
             key = ev.reason.split(":")[0]
             rejected[key] = rejected.get(key, 0) + 1
-    hist = [{"k": k, "accepted": True, "current": ev.objective, "best": ev.objective, "temperature": math.nan,
-             "sigma": math.nan, "value": ev.objective, "evaluation": ev} for k, ev in enumerate(history)]
-    message = str(res.message)
+    hist, current, best_so_far = [], initial.objective, initial.objective
+    for k, (ev, acc) in enumerate(history):
+        current = ev.objective if acc else current
+        best_so_far = min(best_so_far, ev.objective)
+        hist.append({"k": k, "accepted": acc, "current": current, "best": best_so_far, "temperature": math.nan,
+                     "sigma": math.nan, "value": ev.objective, "evaluation": ev})
+    message = f"SQP: {res.message} ({len(res.steps)} iterations)"
     if pre is not None:
         message = (f"annealing pre-phase ({pre.iterations} iterations, "
                    f"{pre.simulations + pre.stopped_simulations + pre.speculative} insertions, "
                    f"{'a design in the category' if in_category(pre.best) else 'none in the category'}); "
-                   f"SLSQP: {message}")
-    out = DesignResult(problem=problem, initial=initial, best=best, history=hist,
-                       accepted=[(k, ev.rest, ev.objective) for k, ev in enumerate(history)],
-                       simulations=run.insertions, stopped_simulations=0, rejected=rejected,
-                       seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
-                       iterations=int(res.nit), stopped_early=bool(res.success), method="gradient",
-                       gradient_evaluations=run.gradient_evaluations, message=message,
-                       events=nonsmooth_events(run.signatures))
-    return out
+                   f"{message}")
+    if problem.initial is None:  # the initial shape's run, for correction rounds started from this result
+        problem = dataclasses.replace(problem, initial=initial.result)
+    return DesignResult(problem=problem, initial=initial, best=best, history=hist,
+                        accepted=[(k, ev.rest, ev.objective) for k, (ev, acc) in enumerate(history) if acc],
+                        simulations=run.insertions, stopped_simulations=0, rejected=rejected,
+                        seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
+                        iterations=len(res.steps), stopped_early=bool(res.converged), method="gradient",
+                        gradient_evaluations=run.gradient_evaluations, message=message,
+                        events=nonsmooth_events(run.signatures))

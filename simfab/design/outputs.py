@@ -79,6 +79,7 @@ def summary(res, *, scene: str | None = None) -> dict:
         "method": res.method,
         "iterations": res.iterations,
         "stopped_early": res.stopped_early,
+        "optimizer_message": res.message,
         "insertions": insertions(res),
         "gradient_evaluations": res.gradient_evaluations,
         "nonsmooth_events": res.events,

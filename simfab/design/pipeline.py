@@ -55,7 +55,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     mesh_check : re-run the optimized shape with quadratic elements, refined in 2D
         (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
         the mesh-converged ones, warning when a constraint holds only on the coarse mesh
-    method : "anneal" (simulated annealing, :mod:`simfab.design.optimize`) or "gradient" (SLSQP on
+    method : "anneal" (simulated annealing, :mod:`simfab.design.optimize`) or "gradient" (a trust-region SQP on
         the adjoint sensitivities, :mod:`simfab.design.gradient`: frictionless briefs, one run)
     """
     if method not in METHODS:

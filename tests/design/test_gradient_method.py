@@ -1,6 +1,6 @@
 """The gradient design method's treatment of the brief's non-smooth figures (simfab.design.gradient):
 the grip read at a seat the rest search brackets, the loose grip's square-root surrogate, and the
-annealing pre-phase for a start that touches nothing."""
+gap of a start that touches nothing."""
 
 import math
 
@@ -49,18 +49,30 @@ def test_loose_bound_square_root_surrogate():
     assert plain.value(5.0) == 2.0 and np.allclose(plain.gradient(5.0, g), g)
 
 
-def test_flat_start_runs_the_annealing_pre_phase():
-    # paddleside2d's U-channel matches the blade exactly: no contact, every figure's gradient is zero
+def test_flat_start_closes_the_gap():
+    # paddleside2d's U-channel matches the blade exactly: no contact, every figure's gradient is zero; the
+    # gap to the blade is not, and the SQP closes it (the clearance bound linearized) before the grip's
     cm = load_coupling_scene("paddleside2d", overrides={"compliant": {"target_elements": 500},
                                                         "simulation": {"steps": 15}})
     P = make_problem(cm, DesignBrief(grip="tight", grip_force=(5.0, math.inf), handles=3, placement="spatial"))
     Jh = G.handle_jacobian(P.handles)
-    ev = evaluate(P.with_settings(hold_steps=True), P.handles.identity(), keep_result=True,
+    Ph = P.with_settings(hold_steps=True)
+    ev = evaluate(Ph, P.handles.identity(), keep_result=True,
                   recorder=lambda cm: G.SensitivityRecorder(cm, G.stress_measure(P, cm)))
-    assert ev.figures["category"] == "none"
-    assert G.flat_start(G.constraint_rows(P), G.figure_gradients(P, ev, Jh), {})
-    res = G.optimize_gradient(P, iterations=1, seed=0)
-    assert res.message.startswith("annealing pre-phase")
-    # every insertion is counted: the pre-phase's (stopped early or complete) and SLSQP's, which all give gradients
-    assert res.simulations > res.gradient_evaluations >= 1
-    assert res.best.status == "ok" and res.best.objective <= res.initial.objective
+    assert ev.figures["category"] == "none" and ev.figures["seat_clearance"] > 0
+    fg = G.figure_gradients(P, ev, Jh)
+    assert G.flat_start(G.constraint_rows(P), fg, {})
+    # the gap's gradient (at a vanishing temperature: the nearest vertex's) against a central difference of
+    # whole evaluations (the part is undeformed: exact while the nearest vertex stays the nearest)
+    g = G.gap_gradient(ev.result, fg.steady_index, Jh, temperature_rel=1e-9)
+    dh = np.random.default_rng(0).standard_normal(len(g)) * P.sigma0
+    eps = 1e-3
+    ep, em = evaluate(Ph, P.handles.identity() + eps * dh), evaluate(Ph, P.handles.identity() - eps * dh)
+    fd = (ep.figures["seat_clearance"] - em.figures["seat_clearance"]) / (2 * eps)
+    assert float(g @ dh) == pytest.approx(fd, rel=1e-3)
+    res = G.optimize_gradient(P, iterations=4, seed=0)
+    assert not res.message.startswith("annealing pre-phase")
+    # no annealing: every insertion but the final plain re-run gave gradients
+    assert res.simulations == res.gradient_evaluations + 1
+    assert res.best.status == "ok" and res.best.figures["category"] != "none"
+    assert res.best.objective < res.initial.objective

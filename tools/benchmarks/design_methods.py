@@ -1,15 +1,21 @@
 """Annealing against gradient design on the bundled design scenes.
 
-``python tools/bench.py design_methods [--scenes a,b,...] [--methods anneal,gradient] [--seeds 0,1,2] [--out DIR]``
+``python tools/bench.py design_methods [--scenes a,b,...] [--methods anneal,gradient] [--seeds 0,1,2] [--out DIR]
+[--profile-handles 2,4,8]``
 
 For every scene, method and seed: ``simfab couple optimize NAME --method M --seed S`` (its [design]
 brief; annealing on 2 workers, the gradient method in one process; the mesh check with its
-correction rounds), outputs under ``--out`` (default ``./simfab-out/design_methods``). Reported per
+correction rounds), outputs under ``--out`` (default: a new temporary directory). Reported per
 run: ``insertions`` (every insertion simulation of the optimization and its correction rounds,
 the placement's initial insertion and the mesh check's excluded), ``gradient_evaluations``,
-``seconds`` (end to end, mesh check included), ``E_L`` (profile2d: the RMS force error [N]),
-``feasible`` (coarse, mesh-corrected) and ``met_mesh_check`` (mesh-converged figures). The
-gradient method does not depend on the seed except through the handle placement.
+``seconds`` (end to end, mesh check included), ``E_L``, ``rms_error_N`` (profile2d: the RMS force
+error, coarse and mesh-corrected),
+``feasible`` (coarse, mesh-corrected), ``met_mesh_check`` (mesh-converged figures),
+``rms_error_fine_N`` (profile2d: on the mesh check's finest level) and the optimizer's closing message. The
+gradient method does not depend on the seed except through the handle placement and its annealing
+pre-phase. ``profile2d`` runs once per count of ``--profile-handles`` (default: the scene's 4), its
+[design] handles overridden (``handles`` in the row; annealing gets the scene's iterations per handle,
+:func:`simfab.design.study.iterations_per_handle_budget`).
 """
 
 from __future__ import annotations
@@ -23,30 +29,52 @@ SCENES = ["standside2d", "paddleside2d", "block2d_loose", "block2d_tight", "bloc
           "profile2d", "alligator3d", "knocker3d_design"]
 
 
+def _finest_rms(check: dict):
+    """The RMS force error [N] on the mesh check's finest level (None without a target or a check)."""
+    rms = (check.get("figures") or {}).get("rms_error")
+    return None if rms is None else rms["values"][-1]
+
+
 def run(argv) -> dict:
     from simfab.design.pipeline import optimize_scene
+    from simfab.design.scene import load_design_scene
+    from simfab.design.study import iterations_per_handle_budget
 
     ap = argparse.ArgumentParser(prog="bench.py design_methods")
     ap.add_argument("--scenes", default=",".join(SCENES[:6]))
     ap.add_argument("--methods", default="anneal,gradient")
     ap.add_argument("--seeds", default="0")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--profile-handles", default=None, help="profile2d's handle counts, e.g. 2,4,8")
     a = ap.parse_args(argv)
     out = Path(a.out) if a.out else Path(tempfile.mkdtemp(prefix="design_methods_"))
     rows = []
+    runs = []
     for scene in a.scenes.split(","):
+        counts = [None]
+        if scene == "profile2d" and a.profile_handles:
+            counts = [int(k) for k in a.profile_handles.split(",")]
+        runs += [(scene, k) for k in counts]
+    for scene, k in runs:
         for method in a.methods.split(","):
             for seed in (int(s) for s in a.seeds.split(",")):
+                design = None
+                if k is not None:
+                    brief = load_design_scene(scene).brief
+                    design = {"handles": k, "iterations": iterations_per_handle_budget(brief, k)}
                 t0 = time.perf_counter()
-                s = optimize_scene(scene, out=out / f"{scene}_{method}_{seed}", quiet=True, seed=seed,
+                s = optimize_scene(scene, out=out / f"{scene}{'' if k is None else f'_h{k}'}_{method}_{seed}",
+                                   quiet=True, seed=seed, design=design,
                                    workers=2 if method == "anneal" else 1, method=method)
                 mc = s.get("mesh_check") or {}
-                rows.append({"scene": scene, "method": method, "seed": seed,
+                rows.append({"scene": scene, "handles": s["handles"]["active"], "method": method, "seed": seed,
                              "insertions": s.get("insertions_total", s["insertions"]),
                              "gradient_evaluations": s["gradient_evaluations"],
                              "seconds": time.perf_counter() - t0, "E_L": s["E_L"], "rms_error_N": s.get("rms_error"),
                              "feasible": s["feasible"], "met_mesh_check": mc.get("feasible_fine"),
+                             "rms_error_fine_N": _finest_rms(mc),
                              "correction_rounds": len(s.get("correction_rounds", [])),
+                             "optimizer_message": s.get("optimizer_message"),
                              "nonsmooth_events": s.get("nonsmooth_events")})
     return {"benchmark": "design_methods", "rows": rows,
-            "units": {"seconds": "s", "E_L": "-", "rms_error_N": "N"}}
+            "units": {"seconds": "s", "E_L": "-", "rms_error_N": "N", "rms_error_fine_N": "N"}}

@@ -19,10 +19,10 @@ refined meshes (and correction rounds if needed), timed separately (``mesh_check
 reports the fastest run (``seconds_all_runs``, ``seconds_median`` and each run's machine
 reference too); the runs must reach the same design.
 
-``--method gradient`` runs SLSQP on the adjoint sensitivities (:mod:`simfab.design.gradient`) instead
-of the annealing (one process; ``--iterations`` caps SLSQP's iterations); ``insertions`` counts every
-insertion simulation of the optimization (complete, stopped early, speculative; the placement's
-initial insertion and the mesh check excluded), ``gradient_evaluations`` those that gave gradients.
+``--method gradient`` runs the trust-region SQP on the adjoint sensitivities (:mod:`simfab.design.gradient`)
+instead of the annealing (one process; ``--iterations`` caps the SQP's iterations, one insertion each);
+``insertions`` counts every insertion simulation of the optimization (complete, stopped early, speculative;
+the placement's initial insertion and the mesh check excluded), ``gradient_evaluations`` those that gave gradients.
 
 Reference: the original method's 4.8 s per stand-side insertion simulation (shared reference
 figures, "insertion_simulation_seconds_original", row "stand side (2D)") times its up to 300
@@ -56,7 +56,7 @@ def run(argv) -> dict:
     ap = argparse.ArgumentParser(prog="bench.py optimize")
     ap.add_argument("--scene", default="standside2d")
     ap.add_argument("--method", choices=["anneal", "gradient"], default="anneal",
-                    help="optimizer: simulated annealing or SLSQP on the adjoint sensitivities")
+                    help="optimizer: simulated annealing or a trust-region SQP on the adjoint sensitivities")
     ap.add_argument("--iterations", type=int, default=None, help="annealing iterations (default: the brief's)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2,
