@@ -44,6 +44,8 @@ simfab's instead of 0.01 mm), so dt stays 2 ms.
 from __future__ import annotations
 
 import dataclasses
+import warnings
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 import numpy as np
@@ -270,8 +272,50 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
     b.key("deployed", qpos=qpos_deployed)
     b.key("flat", qpos=_key_qpos(b.worldbody, key))
     xml = b.to_xml()
-    m = _mujoco().MjModel.from_xml_string(xml)
+    m = compile_in_parts(b.root, xml)
     return SimScene(xml=xml, key_values=key, body_names=list(model.body_names), key_qpos=qpos_deployed, model=m)
+
+
+#: top-level bodies (with their subtrees) per part in :func:`compile_in_parts`
+PART_BODIES = 50
+_EMPTY_PREFIX = "empty prefix"  # MuJoCo's warning on attach(prefix=""): about saving the spec, which simfab never does
+
+
+def compile_in_parts(root, xml: str, *, part_bodies: int = PART_BODIES):
+    """``mujoco.MjModel`` of the MJCF document ``root`` (ElementTree; ``xml`` is its text), the same
+    model as ``MjModel.from_xml_string(xml)``, compiled from parts: the document without its
+    top-level bodies (options, assets, equalities, keys) and groups of ``part_bodies`` top-level
+    bodies, each parsed on its own and attached (``MjSpec.attach``, no name prefix). MuJoCo's
+    parser rebuilds its tree lists after every added element, so one parse of the whole network
+    grows with the square of its links (more than half of the MJCF compile of a 165-insert
+    network); the parts keep that quadratic cost per part. Documents with mesh assets or few
+    bodies are compiled whole."""
+    mj = _mujoco()
+    wb = root.find("worldbody")
+    tops = [el for el in wb if el.tag == "body"]
+    if root.find("asset/mesh") is not None or len(tops) <= part_bodies:
+        return mj.MjModel.from_xml_string(xml)
+    for el in tops:
+        wb.remove(el)
+    try:
+        spec = mj.MjSpec.from_string(ET.tostring(root, encoding="unicode"))
+    finally:
+        wb.extend(tops)
+    compiler = root.find("compiler")
+    prev = mj.get_mju_user_warning()
+    mj.set_mju_user_warning(lambda msg: None if _EMPTY_PREFIX in str(msg) else prev(msg))
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=f".*{_EMPTY_PREFIX}")
+            for i in range(0, len(tops), part_bodies):
+                part = ET.Element("mujoco")
+                part.append(compiler)
+                ET.SubElement(part, "worldbody").extend(tops[i:i + part_bodies])
+                spec.attach(mj.MjSpec.from_string(ET.tostring(part, encoding="unicode")),
+                            frame=spec.worldbody.add_frame(), prefix="")
+            return spec.compile()
+    finally:
+        mj.set_mju_user_warning(prev)
 
 
 def _link_geom(b, body, length, w, t, density, *, pos=None, R=None):

@@ -99,6 +99,17 @@ def test_mujoco_scene_opens_on_key_and_is_stable(tiny_saddle, tmp_path):
     sim = mjcf_sim.build(net.model, net.state, dep.final, density=cfg.density, cfg=sc)
     path = sim.save(tmp_path / "deployed.xml")
     m = mujoco.MjModel.from_xml_path(str(path))
+    # the model compiled in parts (the check's) is the saved file's, field by field
+    import xml.etree.ElementTree as ET
+
+    for mp in (sim.model, mjcf_sim.compile_in_parts(ET.fromstring(sim.xml), sim.xml, part_bodies=3)):
+        assert (mp.nbody, mp.nq, mp.nv, mp.neq, mp.nkey) == (m.nbody, m.nq, m.nv, m.neq, m.nkey)
+        for f in ("body_parentid", "body_pos", "body_quat", "body_mass", "jnt_type", "jnt_axis", "jnt_stiffness",
+                  "qpos_spring", "dof_damping", "dof_armature", "geom_size", "geom_pos", "eq_obj1id", "eq_obj2id",
+                  "eq_data", "key_qpos", "dof_invweight0"):
+            assert np.array_equal(getattr(mp, f), getattr(m, f)), f
+        assert [mujoco.mj_id2name(mp, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(mp.nbody)] == \
+            [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(m.nbody)]
     assert m.nkey == 2 and m.nv > 6 * net.model.n_bodies and m.neq == len(net.model.rods)
     d = mujoco.MjData(m)
     # key 'flat' is the cut pattern (the springs' rest): every body and rod node where the flat
