@@ -178,8 +178,8 @@ def run(argv) -> dict:
     p.add_argument("--no-scaling", action="store_true")
     p.add_argument("--no-cli", action="store_true")
     p.add_argument("--baseline", metavar="DIR", help="another simfab checkout to compare with (interleaved A/B)")
-    p.add_argument("--pairs", type=int, default=3)
-    p.add_argument("--ab-scale", type=float, default=2.0)
+    p.add_argument("--pairs", type=int, default=3, help="A/B pairs (baseline, this) per case")
+    p.add_argument("--ab-scale", type=float, default=2.0, help="scale of the dome's cap in the A/B (2: 165 inserts)")
     a = p.parse_args(argv)
     out = dict(benchmark="deploy", machine_reference_ms_before=machine_reference_ms())
     if a.baseline:
