@@ -18,7 +18,7 @@ and the MuJoCo check's counts (bodies, nv, welds, steps to rest, the compile's m
 33): a 150-insert pattern (s = 2) deployed in <= 20 s. Beside the runs: the machine's momentary
 speed (``_machine.machine_reference_ms``).
 
-A/B (``--baseline DIR``: another checkout of simfab, e.g. ``git worktree add DIR main``): the end
+A/B (``--baseline DIR``: another copy of simfab, e.g. ``git archive main | tar -x -C DIR``): the end
 to end run and the scaled case ``--ab-scale`` (pipeline + MuJoCo check, in a fresh process each),
 alternating baseline and this checkout ``--pairs`` times, so that both sides see the same drift of
 the shared machine; ``ab`` holds every run's wall and CPU seconds, the medians and the median of
