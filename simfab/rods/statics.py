@@ -242,15 +242,12 @@ class StaticSolver:
             Hq = self.red.block(H) if need_hess else None
             return E, gq, Hq
         J = self.red.jacobian(st)
-        JT = J.T.tocsr()
-        gq = JT @ g
+        gq = J.T @ g
         if body_forces is not None:
             gq[self.red.body_trans_cols] -= body_forces[self.red.bodies].ravel()
         Hq = None
         if need_hess:
-            # J^T (H J) with J^T in CSR: both products row-major (scipy's J.T @ H converts J.T to CSC
-            # and back, 1.6x the time of the whole product on a 165-insert network)
-            Hq = JT @ (H @ J)
+            Hq = (J.T @ H @ J).tocsr()
             G = self.red.geometric(st, g)
             if G is not None:
                 Hq = Hq + G
