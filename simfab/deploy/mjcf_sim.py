@@ -8,7 +8,9 @@ Model (built from a :class:`simfab.rods.model.RodModel`, its flat state and a de
 - every rod is a chain of rigid links, one per rod edge (box geom: edge length x thickness x
   width, no contacts). Link frame: origin at the edge's first node, axes (t, m1, m2) = (tangent,
   sheet normal, in-plane width direction). The first link is rigidly part of the body the rod
-  starts clamped to; each further link hangs from the previous one by three hinges at the node:
+  starts clamped to (a geom of that body, not a body of its own: MuJoCo's compile time grows
+  with the square of the body count); each further link hangs from the previous one by three
+  hinges at the node:
   twist about t (stiffness GJ / l), in-plane bending about m1 (B2 / l) and out-of-plane bending
   about m2 (B1 / l), l = the Voronoi length (l_{k-1} + l_k) / 2: the discrete elastic rod's
   bending/twist energy 1/2 (B / l) phi^2 for a hinge angle phi, stretch-free (links are rigid);
@@ -42,6 +44,8 @@ simfab's instead of 0.01 mm), so dt stays 2 ms.
 from __future__ import annotations
 
 import dataclasses
+import warnings
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 import numpy as np
@@ -220,19 +224,24 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
             raise ValueError(f"rod {r.name!r}: both end edges must be clamped to bodies for the MuJoCo scene")
         w, t = r.section.width, r.section.thickness
         L = model.rest_len[r.edges]
-        # link 0: rigid part of the start body; its pose relative to the body from the deployed state
+        # link 0 is rigidly part of the start body: its geom sits in that body (pose relative to the
+        # body from the deployed state; the body keeps its own inertial) and link 1 hangs from the body
         n0 = int(r.nodes[0])
         Rb = deployed.body_rot[sb]
         rel_p = Rb.T @ (deployed.x[n0] - deployed.body_pos[sb])
         rel_R = Rb.T @ Rd[e0]
-        parent = b.add(mb[sb], "body", name=f"{r.name}_0", pos=rel_p, quat=_quat(rel_R))
-        _link_geom(b, parent, L[0], w, t, density * cfg.mass_scale)
+        _link_geom(b, mb[sb], L[0], w, t, None, pos=rel_p, R=rel_R)
+        parent = mb[sb]
         for k in range(1, len(r.edges)):
             h = hinge_of[int(r.edges[k - 1]), int(r.edges[k])]
             B1, B2 = model.bend_stiff[h]
             GJ = model.twist_stiff[h]
             lv = model.vor_len[h]
-            child = b.add(parent, "body", name=f"{r.name}_{k}", pos=[L[k - 1], 0.0, 0.0], quat=quat_h[h])
+            if k == 1:
+                pos, quat = rel_p + L[0] * rel_R[:, 0], _quat(rel_R @ Qh[h])
+            else:
+                pos, quat = [L[k - 1], 0.0, 0.0], quat_h[h]
+            child = b.add(parent, "body", name=f"{r.name}_{k}", pos=pos, quat=quat)
             ang = ang_h[h]
             for ax, axis, kk, a in (("x", "1 0 0", GJ / lv, ang[0]), ("y", "0 1 0", B2 / lv, ang[1]),
                                     ("z", "0 0 1", B1 / lv, ang[2])):
@@ -243,26 +252,81 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
                 key[jn] = np.array([a])
             _link_geom(b, child, L[k], w, t, density * cfg.mass_scale)
             parent = child
-        # weld the last link to the end body (deployed relative pose)
-        n_last = int(model.edges[e1][0])
+        # weld the last link (the start body itself for a one-edge rod) to the end body (deployed
+        # relative pose)
         Re = deployed.body_rot[eb]
-        relpos = Re.T @ (deployed.x[n_last] - deployed.body_pos[eb])
-        relq = _quat(Re.T @ Rd[e1])
+        if len(r.edges) > 1:
+            n_last = int(model.edges[e1][0])
+            relpos = Re.T @ (deployed.x[n_last] - deployed.body_pos[eb])
+            relq = _quat(Re.T @ Rd[e1])
+            last = f"{r.name}_{len(r.edges) - 1}"
+        else:
+            relpos = Re.T @ (deployed.body_pos[sb] - deployed.body_pos[eb])
+            relq = _quat(Re.T @ Rb)
+            last = model.body_names[sb]
         # relpose: pose of body2 (the link) in body1's (the end body's) frame
-        b.equality("weld", body1=model.body_names[eb], body2=f"{r.name}_{len(r.edges) - 1}",
+        b.equality("weld", body1=model.body_names[eb], body2=last,
                    relpose=np.concatenate([relpos, relq]), solref=[2 * dt, 1.0],
                    solimp=[cfg.impedance, cfg.impedance, 0.001, 0.5, 2])
     qpos_deployed = _key_qpos(b.worldbody, {})
     b.key("deployed", qpos=qpos_deployed)
     b.key("flat", qpos=_key_qpos(b.worldbody, key))
     xml = b.to_xml()
-    m = _mujoco().MjModel.from_xml_string(xml)
+    m = compile_in_parts(b.root, xml)
     return SimScene(xml=xml, key_values=key, body_names=list(model.body_names), key_qpos=qpos_deployed, model=m)
 
 
-def _link_geom(b, body, length, w, t, density):
-    b.geom(body, type="box", size=[0.5 * length, 0.5 * t, 0.5 * w], pos=[0.5 * length, 0, 0], density=density,
-           contype=0, conaffinity=0, rgba=[0.95, 0.9, 0.75, 1])
+#: top-level bodies (with their subtrees) per part in :func:`compile_in_parts`
+PART_BODIES = 50
+_EMPTY_PREFIX = "empty prefix"  # MuJoCo's warning on attach(prefix=""): about saving the spec, which simfab never does
+
+
+def compile_in_parts(root, xml: str, *, part_bodies: int = PART_BODIES):
+    """``mujoco.MjModel`` of the MJCF document ``root`` (ElementTree; ``xml`` is its text), the same
+    model as ``MjModel.from_xml_string(xml)``, compiled from parts: the document without its
+    top-level bodies (options, assets, equalities, keys) and groups of ``part_bodies`` top-level
+    bodies, each parsed on its own and attached (``MjSpec.attach``, no name prefix). MuJoCo's
+    parser rebuilds its tree lists after every added element, so one parse of the whole network
+    grows with the square of its links (more than half of the MJCF compile of a 165-insert
+    network); the parts keep that quadratic cost per part. Documents with mesh assets or few
+    bodies are compiled whole."""
+    mj = _mujoco()
+    wb = root.find("worldbody")
+    tops = [el for el in wb if el.tag == "body"]
+    if root.find("asset/mesh") is not None or len(tops) <= part_bodies:
+        return mj.MjModel.from_xml_string(xml)
+    for el in tops:
+        wb.remove(el)
+    try:
+        spec = mj.MjSpec.from_string(ET.tostring(root, encoding="unicode"))
+    finally:
+        wb.extend(tops)
+    compiler = root.find("compiler")
+    prev = mj.get_mju_user_warning()
+    mj.set_mju_user_warning(lambda msg: None if _EMPTY_PREFIX in str(msg) else prev(msg))
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=f".*{_EMPTY_PREFIX}")
+            for i in range(0, len(tops), part_bodies):
+                part = ET.Element("mujoco")
+                part.append(compiler)
+                ET.SubElement(part, "worldbody").extend(tops[i:i + part_bodies])
+                spec.attach(mj.MjSpec.from_string(ET.tostring(part, encoding="unicode")),
+                            frame=spec.worldbody.add_frame(), prefix="")
+            return spec.compile()
+    finally:
+        mj.set_mju_user_warning(prev)
+
+
+def _link_geom(b, body, length, w, t, density, *, pos=None, R=None):
+    """Box geom of a link of the given length along the frame's x axis from ``pos`` (default: the
+    body's origin), frame ``R`` (default: the body's); ``density`` None: massless (the geom sits in
+    a simfab body, whose inertial is its own)."""
+    p0 = np.zeros(3) if pos is None else np.asarray(pos, dtype=np.float64)
+    ax = np.eye(3) if R is None else np.asarray(R, dtype=np.float64)
+    extra = dict(mass=0) if density is None else dict(density=density)
+    b.geom(body, type="box", size=[0.5 * length, 0.5 * t, 0.5 * w], pos=p0 + 0.5 * length * ax[:, 0],
+           quat=None if R is None else _quat(ax), contype=0, conaffinity=0, rgba=[0.95, 0.9, 0.75, 1], **extra)
 
 
 @dataclass(frozen=True)

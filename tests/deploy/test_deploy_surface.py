@@ -99,6 +99,17 @@ def test_mujoco_scene_opens_on_key_and_is_stable(tiny_saddle, tmp_path):
     sim = mjcf_sim.build(net.model, net.state, dep.final, density=cfg.density, cfg=sc)
     path = sim.save(tmp_path / "deployed.xml")
     m = mujoco.MjModel.from_xml_path(str(path))
+    # the model compiled in parts (the check's) is the saved file's, field by field
+    import xml.etree.ElementTree as ET
+
+    for mp in (sim.model, mjcf_sim.compile_in_parts(ET.fromstring(sim.xml), sim.xml, part_bodies=3)):
+        assert (mp.nbody, mp.nq, mp.nv, mp.neq, mp.nkey) == (m.nbody, m.nq, m.nv, m.neq, m.nkey)
+        for f in ("body_parentid", "body_pos", "body_quat", "body_mass", "jnt_type", "jnt_axis", "jnt_stiffness",
+                  "qpos_spring", "dof_damping", "dof_armature", "geom_size", "geom_pos", "eq_obj1id", "eq_obj2id",
+                  "eq_data", "key_qpos", "dof_invweight0"):
+            assert np.array_equal(getattr(mp, f), getattr(m, f)), f
+        assert [mujoco.mj_id2name(mp, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(mp.nbody)] == \
+            [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(m.nbody)]
     assert m.nkey == 2 and m.nv > 6 * net.model.n_bodies and m.neq == len(net.model.rods)
     d = mujoco.MjData(m)
     # key 'flat' is the cut pattern (the springs' rest): every body and rod node where the flat
@@ -108,7 +119,7 @@ def test_mujoco_scene_opens_on_key_and_is_stable(tiny_saddle, tmp_path):
     for i, name in enumerate(net.model.body_names):
         assert np.allclose(d.body(name).xpos, net.state.body_pos[i], atol=1e-9)
     r = net.model.rods[-1]  # a spring: clamped at junctions, whose offsets do not change
-    for k in range(len(r.edges)):
+    for k in range(1, len(r.edges)):  # link 0 is part of the start body (checked above)
         assert np.allclose(d.body(f"{r.name}_{k}").xpos, net.state.x[r.nodes[k]], atol=1e-9)
     # qpos0 (what the viewer opens on) and key 'deployed' are simfab's deployed state: bodies
     # exactly, rod nodes to the rods' stretch (EA finite)
@@ -121,7 +132,7 @@ def test_mujoco_scene_opens_on_key_and_is_stable(tiny_saddle, tmp_path):
     # MuJoCo's links have the rest lengths: node k is off by at most the rod's accumulated stretch
     stretch = np.abs(np.linalg.norm(np.diff(st.x[net.model.edges], axis=1)[:, 0], axis=1) - net.model.rest_len)
     for r in net.model.rods:
-        for k in range(len(r.edges)):
+        for k in range(1, len(r.edges)):
             err = np.linalg.norm(d.body(f"{r.name}_{k}").xpos - st.x[r.nodes[k]])
             assert err <= np.sum(stretch[r.edges[:k]]) + 1e-9
     # the hinge springs' energy at the key matches simfab's bending + twisting energy: the two

@@ -1,6 +1,7 @@
 """Benchmark: ``simfab deploy surface`` end to end, and how the deployment's cost grows with the inserts.
 
-``python tools/bench.py deploy [--scene dome] [--scales 1 1.4 2] [--no-scaling] [--no-cli]``
+``python tools/bench.py deploy [--scene dome] [--scales 1 1.4 2] [--no-scaling] [--no-cli]
+[--baseline DIR [--pairs 3] [--ab-scale 2]]``
 
 End to end: ``python -m simfab deploy surface SCENE --out TMP`` as a user runs it (a fresh
 process: imports, flattening, layout, laser-cut files, deployment, comparison, the MuJoCo scene
@@ -16,6 +17,12 @@ and the MuJoCo check's counts (bodies, nv, welds, steps to rest, the compile's m
 :func:`setconst_work`); ``growth_exponents``: slope of log(cost) over log(inserts). Target (issue
 33): a 150-insert pattern (s = 2) deployed in <= 20 s. Beside the runs: the machine's momentary
 speed (``_machine.machine_reference_ms``).
+
+A/B (``--baseline DIR``: another copy of simfab, e.g. ``git archive main | tar -x -C DIR``): the end
+to end run and the scaled case ``--ab-scale`` (pipeline + MuJoCo check, in a fresh process each),
+alternating baseline and this checkout ``--pairs`` times, so that both sides see the same drift of
+the shared machine; ``ab`` holds every run's wall and CPU seconds, the medians and the median of
+the per-pair ratios (this / baseline), and whether both sides ended at the same deployed shape.
 """
 
 from __future__ import annotations
@@ -38,13 +45,17 @@ TARGET_END_TO_END_S = 10.0
 TARGET_150_INSERTS_DEPLOY_S = 20.0
 
 
-def _cli(scene: str) -> dict:
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+TOOLS = os.path.join(ROOT, "tools")
+
+
+def _cli(scene: str, root: str = ROOT) -> dict:
+    """``python -m simfab deploy surface SCENE`` in a fresh process run from checkout ``root``."""
     with tempfile.TemporaryDirectory() as tmp:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
-        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         p = subprocess.run([sys.executable, "-m", "simfab", "deploy", "surface", scene, "--out", tmp, "--quiet"],
-                           cwd=root, capture_output=True, text=True)
+                           cwd=root, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=root))
         wall = time.perf_counter() - t0
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if p.returncode != 0:
@@ -55,6 +66,52 @@ def _cli(scene: str) -> dict:
                 stages_s=s["seconds"], inserts=s["inserts"], rms=s["deviation"]["rms"],
                 hausdorff=s["deviation"]["hausdorff"], newton_iterations=sum(s["deployment"]["newton_iterations"]),
                 mujoco_at_rest=st.get("settled"), mujoco_steps=st.get("steps"))
+
+
+def _scaled_process(root: str, scene_name: str, s: float) -> dict:
+    """:func:`_scaled` in a fresh process with simfab from checkout ``root`` (this file's
+    benchmark code); adds the process's wall and CPU seconds (imports included)."""
+    code = ("import json; from benchmarks.deploy import _scaled; "
+            f"print(json.dumps(_scaled({scene_name!r}, {float(s)!r})))")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    p = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True,
+                       env=dict(os.environ, PYTHONPATH=os.pathsep.join([root, TOOLS])))
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if p.returncode != 0:
+        raise RuntimeError(f"scaled deployment (s = {s}) from {root} failed: {p.stderr.strip()[-400:]}")
+    row = json.loads(p.stdout.strip().splitlines()[-1])
+    row.update(process_wall_s=wall,
+               process_cpu_s=(after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime))
+    return row
+
+
+def _ab(baseline: str, scene: str, scale: float, pairs: int) -> dict:
+    """Interleaved A/B: baseline, this, baseline, this, ... for the end to end run and the scaled case."""
+    out = {"baseline": os.path.abspath(baseline), "pairs": pairs}
+    for name, run, keys in (
+            ("end_to_end", lambda root: _cli(scene, root), ("wall_s", "cpu_s")),
+            (f"scaled_{scale:g}", lambda root: _scaled_process(root, "dome", scale),
+             ("process_wall_s", "process_cpu_s", "pipeline_cpu_s", "mujoco_cpu_s", "deploy_s"))):
+        runs = {"baseline": [], "this": []}
+        for _ in range(pairs):
+            runs["baseline"].append(run(baseline))
+            runs["this"].append(run(ROOT))
+        summary = {}
+        for k in keys:
+            a = np.array([r[k] for r in runs["baseline"]])
+            b = np.array([r[k] for r in runs["this"]])
+            summary[k] = dict(baseline_median=float(np.median(a)), this_median=float(np.median(b)),
+                              ratio_median=float(np.median(b / a)), baseline=a.tolist(), this=b.tolist())
+        summary["rms_baseline"] = [r["rms"] for r in runs["baseline"]]
+        summary["rms_this"] = [r["rms"] for r in runs["this"]]
+        summary["inserts"] = runs["this"][0]["inserts"]
+        summary["mujoco_at_rest_this"] = [r.get("mujoco_at_rest") for r in runs["this"]]
+        summary["mujoco_steps"] = dict(baseline=[r.get("mujoco_steps") for r in runs["baseline"]],
+                                       this=[r.get("mujoco_steps") for r in runs["this"]])
+        out[name] = summary
+    return out
 
 
 def _scaled(scene_name: str, s: float) -> dict:
@@ -82,6 +139,7 @@ def _scaled(scene_name: str, s: float) -> dict:
                 pipeline_cpu_s=c1 - c0, mujoco_cpu_s=c2 - c1, mujoco_step_wall_s=mj["stability"]["wall_s"],
                 mujoco_bodies=int(m.nbody), mujoco_nv=mj["nv"], mujoco_welds=mj["welds"],
                 mujoco_setconst_work=setconst_work(m), mujoco_steps=mj["stability"]["steps"],
+                mujoco_relaxed_rms_rel=mj["relaxation"]["rms_rel"],
                 mujoco_at_rest=mj["stability"]["settled"], total_s=total, rms=sm["deviation"]["rms"])
 
 
@@ -119,8 +177,13 @@ def run(argv) -> dict:
     p.add_argument("--scales", type=float, nargs="+", default=[1.0, 1.4, 2.0])
     p.add_argument("--no-scaling", action="store_true")
     p.add_argument("--no-cli", action="store_true")
+    p.add_argument("--baseline", metavar="DIR", help="another simfab checkout to compare with (interleaved A/B)")
+    p.add_argument("--pairs", type=int, default=3, help="A/B pairs (baseline, this) per case")
+    p.add_argument("--ab-scale", type=float, default=2.0, help="scale of the dome's cap in the A/B (2: 165 inserts)")
     a = p.parse_args(argv)
     out = dict(benchmark="deploy", machine_reference_ms_before=machine_reference_ms())
+    if a.baseline:
+        out["ab"] = _ab(a.baseline, a.scene, a.ab_scale, a.pairs)
     if not a.no_cli:
         e2e = _cli(a.scene)
         out.update(end_to_end=e2e, target_end_to_end_s=TARGET_END_TO_END_S, ratio=e2e["wall_s"] / TARGET_END_TO_END_S)
