@@ -64,8 +64,9 @@ from simfab.design.problem import (
     element_quality,
     evaluate,
 )
-from simfab.design.stress import averaging_matrix
+from simfab.design.stress import averaging_matrix, quadrature_averaging_matrix
 from simfab.errors import ConvergenceError
+from simfab.fem.shape_derivative import linear_rest_derivative
 from simfab.progress import log
 
 #: Smooth maxima's temperature, relative to the largest magnitude of the series they take the maximum of.
@@ -105,9 +106,12 @@ class FigureGradients:
 
 
 def stress_measure(problem: DesignProblem, cm) -> StressMeasure:
-    """The yield constraint's stress (averaged over the brief's radius) on ``cm``'s mesh."""
-    return StressMeasure(averaging=averaging_matrix(cm.fem, problem.brief.stress_radius),
-                         temperature_rel=TEMPERATURE_REL)
+    """The yield constraint's stress (averaged over the brief's radius) on ``cm``'s mesh: per element
+    on linear elements, over the quadrature points on P2 (as :func:`simfab.design.problem.profile_figures`
+    reads it)."""
+    r = problem.brief.stress_radius
+    A = quadrature_averaging_matrix(cm.fem, r) if cm.fem.element_order == 2 else averaging_matrix(cm.fem, r)
+    return StressMeasure(averaging=A, temperature_rel=TEMPERATURE_REL)
 
 
 def _smax(values: np.ndarray, grads: np.ndarray) -> np.ndarray:
@@ -122,16 +126,16 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
     res, rec = ev.result, ev.recorder
     if len(rec.insert) != len(res.steps):
         raise ValueError("the recorder does not hold one sensitivity per insertion record")
+    fem = res.model.fem
 
-    def pull(a):
-        return np.asarray(a, float).ravel() @ Jh
+    def pull(a):  # dq/dX on every node -> on the linear mesh's vertices (P2: edge nodes at midpoints) -> dq/dh
+        return linear_rest_derivative(fem, np.asarray(a, float)).ravel() @ Jh
 
     dE = np.array([pull(s.energy) for s in rec.insert])
     dF = np.array([pull(s.force) for s in rec.insert])
     dG = np.array([pull(s.grip) for s in rec.insert])
     E, F = res.column("energy"), res.column("force")
     prof = analyze_run(res)
-    fem = res.model.fem
     Ey = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
     touched = prof.E_max > 0.5 * Ey * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
     i_ss = prof.index_ss
@@ -422,7 +426,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         if in_contact(pre.best):
             start = pre.best.h
     target = problem.target is not None
-    el = problem.base.fem.elements
+    el = problem.mesh.elements
     q0 = problem.q0
 
     def h_of(z):

@@ -147,7 +147,7 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
     """
     name = res.problem.base.name
     log(f"couple optimize: {name}: mesh check of the optimized shape (quadratic elements)", quiet=quiet)
-    check = check_mesh(res.problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
+    check = check_mesh(res.problem, res.best.rest, figures0=res.best.figures, result0=res.best.result, quiet=quiet)
 
     def key(r, c):
         return (not c["feasible_fine"], checked_objective(r.problem, r.best, c))
@@ -168,7 +168,7 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
             nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet,
                            workers=workers if problem.source is not None else 1, start=res_b.best.h,
                            iterations=max(problem.brief.iterations // 2, 1))
-        c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, quiet=quiet)
+        c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, result0=nxt.best.result, quiet=quiet)
         better = key(nxt, c) < key(*best)
         rounds.append({"round": k + 1, "factors": factors, "feasible_fine": c["feasible_fine"],
                        "objective_fine": key(nxt, c)[1], "iterations": nxt.iterations, "seconds": nxt.seconds,
