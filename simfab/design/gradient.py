@@ -52,7 +52,7 @@ import scipy.sparse as sp
 from scipy.optimize import minimize
 
 from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_max_weights
-from simfab.coupling.profile import analyze_run
+from simfab.coupling.profile import analyze_run, rest_bracket
 from simfab.design import brief as B
 from simfab.design.handles import Handles
 from simfab.design.optimize import DesignResult, optimize
@@ -169,36 +169,29 @@ def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.nda
     force and grip derivatives at fixed positions.
 
     The profile reads the grip at the rest point s*, where the force F passes through zero,
-    interpolated between the two records a, b = a + 1 that bracket it (F_a > 0 >= F_b, a = i_ss;
-    :func:`simfab.coupling.profile.analyze`), or at the rest search's last record b = i_ss when the
-    steady state is that record, past the zero crossing (a = b - 1: a position the search places at
-    s* plus its stopping offset). Either reading follows s*(X), F(s*; X) = 0, so by the implicit
-    function theorem with the bracket's secant slopes (w = F_a / (F_a - F_b), s* = s_a + w (s_b - s_a)):
+    interpolated between the two records a, b = a + 1 that bracket it (F_a > 0 >= F_b;
+    :func:`simfab.coupling.profile.rest_bracket`: a = i_ss, or a = i_ss - 1 when both are records of
+    the rest search, the steady state the search's last record past the zero crossing). The reading
+    G* = G_a + w (G_b - G_a), w = F_a / (F_a - F_b), follows s*(X), F(s*; X) = 0; differentiated with
+    the bracket's secant slopes (the implicit function theorem on the linear interpolant):
 
         dG* = (1 - w) dG_a + w dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2
 
-    (the record's reading: dG_b + (G_b - G_a) dw when a too is a record of the rest search, whose
-    bracket spans micrometres; when a is a planned record the secant spans a whole step, and dG_b
-    is used: with the term there alligator2d missed its brief, without it met it, docs/decisions.md).
     At a seat (block2d_tight: the ball on the socket's bottom) the force and the grip change by
     ~10^6 N/m over the bracket's micrometres and the terms nearly cancel: the derivative at fixed
-    positions alone is off by an order of magnitude or more, this one is within a factor 1.6 of
-    finite differences over whole re-simulations (the seat is a kink: no derivative is exact there;
-    tests/design/test_gradient_method.py). Otherwise (a planned
-    record, whose position is held): dG at i_ss."""
+    positions alone is off by an order of magnitude or more (the seat is a kink: no derivative is
+    exact there; tests/design/test_gradient_method.py). Without such a bracket (a planned record,
+    whose position is held; or the rest search's last record with a planned record before it, a
+    secant over a whole step: docs/decisions.md): dG at i_ss."""
     F, G = res.column("force"), res.column("grip")
     planned = len(res.model.s_steps)
-    if i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
-        a, interpolated = i_ss, True
-    elif planned <= i_ss - 1 and F[i_ss - 1] > 0 >= F[i_ss]:
-        a, interpolated = i_ss - 1, False
-    else:
+    a = rest_bracket(F, i_ss, planned if len(F) > planned else None)
+    if a is None:
         return dG[i_ss]
     b = a + 1
     w = F[a] / (F[a] - F[b])
     dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
-    base = (1 - w) * dG[a] + w * dG[b] if interpolated else dG[b]
-    return base + (G[b] - G[a]) * dw
+    return (1 - w) * dG[a] + w * dG[b] + (G[b] - G[a]) * dw
 
 
 def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
