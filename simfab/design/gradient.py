@@ -21,10 +21,14 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
 - E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
 - the element quality q_e (signed mean ratio) analytically.
 - the target-profile error rms^2 (the objective of profile matching) through the force samples
-  (:func:`target_gradient`), at fixed step positions.
+  (:func:`target_gradient`), at fixed step positions;
+- with friction, F_rm and F_hold from the removal traversal's records (:func:`removal_gradients`),
+  whose sensitivities the adjoint's backward pass carries through the friction anchors; the
+  insertion runs with lag_tol <= GRADIENT_LAG_TOL (the pipeline tightens the scene's).
+On P2 elements every node's derivative is chained to the linear mesh's vertices (the edge nodes
+sit at the midpoints; :func:`simfab.fem.shape_derivative.linear_rest_derivative`) before dX/dh.
 Not differentiated (gradient None; the optimizer reads it as a constraint without a gradient: it
-checks it on every design and reports it): the seat clearance; and nothing with friction (the
-sensitivities hold for mu = 0).
+checks it on every design and reports it): the seat clearance.
 
 Optimizer (:func:`optimize_gradient`): when the start gives no direction (a part that does not
 touch the object: every violated constraint's gradient is zero) a seeded annealing pre-phase runs
@@ -52,7 +56,7 @@ import scipy.sparse as sp
 from scipy.optimize import minimize
 
 from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_max_weights
-from simfab.coupling.profile import analyze_run, rest_bracket
+from simfab.coupling.profile import SLIDING_REL, analyze_run, rest_bracket
 from simfab.design import brief as B
 from simfab.design.handles import Handles
 from simfab.design.optimize import DesignResult, optimize
@@ -69,6 +73,10 @@ from simfab.errors import ConvergenceError
 from simfab.fem.shape_derivative import linear_rest_derivative
 from simfab.progress import log
 
+#: [contact] lag_tol the gradient method runs frictional insertions with (at most): the adjoint
+#: differentiates each step at its converged lag, and at a looser lag the figures jump with the
+#: number of lagging iterations (docs/decisions.md, "Design by gradients").
+GRADIENT_LAG_TOL = 1e-2
 #: Smooth maxima's temperature, relative to the largest magnitude of the series they take the maximum of.
 TEMPERATURE_REL = 0.02
 #: SLSQP iterations at most (each needs one insertion plus its line-search trials).
@@ -96,7 +104,7 @@ class FigureGradients:
     """The brief's figures of one insertion with their gradients with respect to h (n_vars,) each:
     ``values`` {figure: value} (those of :func:`simfab.design.problem.profile_figures`),
     ``gradients`` {figure: (n_vars,) or None (not differentiated)}; ``supported``: every step's
-    sensitivity is exact (no friction, no pinned rigid motion; see :mod:`simfab.coupling.adjoint`);
+    dependence on the ones before is followed (see :mod:`simfab.coupling.adjoint`);
     ``steady_index``: the steady-state index the figures were read at."""
 
     values: dict
@@ -147,8 +155,11 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
                            if touched else np.zeros(Jh.shape[1]))
     end = len(F) if prof.category == "ejects" else i_ss + 1
     g["insertion_force"] = -_smax(-F[:end], dF[:end]) if prof.F_in > 0 else np.zeros(Jh.shape[1])
-    g["removal_force"] = _smax(F[:end], dF[:end]) if prof.F_rm > 0 else np.zeros(Jh.shape[1])
-    g["hold_force"] = g["removal_force"] if not res.removal else None
+    if res.removal:  # friction: F_rm and F_hold from the removal traversal (simfab.coupling.profile.analyze_run)
+        g["removal_force"], g["hold_force"] = removal_gradients(res, prof, np.array([pull(s.force) for s in rec.remove]))
+    else:
+        g["removal_force"] = _smax(F[:end], dF[:end]) if prof.F_rm > 0 else np.zeros(Jh.shape[1])
+        g["hold_force"] = g["removal_force"]
     g["grip_force"] = rest_grip_gradient(res, i_ss, dF, dG) if prof.category != "ejects" else dG[i_ss]
     stresses = [s.stress_value for s in rec.insert + rec.remove]
     if all(s.stress is not None for s in rec.insert + rec.remove):
@@ -160,7 +171,7 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
     if problem.target is not None:
         scale = problem.settings.corrections.get("force_profile", 1.0)
         g["rms_error_sq"] = scale * target_gradient(problem.target, res.column("s"), scale * F) @ dF
-    supported = all(s.supported for s in rec.insert + rec.remove) and not res.removal
+    supported = all(s.supported for s in rec.insert + rec.remove)
     return FigureGradients(values=dict(ev.figures), gradients=g, supported=supported, steady_index=i_ss)
 
 
@@ -192,6 +203,36 @@ def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.nda
     w = F[a] / (F[a] - F[b])
     dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
     return (1 - w) * dG[a] + w * dG[b] + (G[b] - G[a]) * dw
+
+
+def removal_gradients(res, prof, dF: np.ndarray) -> tuple:
+    """(dF_rm/dh, dF_hold/dh) (n_vars,) each of a frictional run's removal figures
+    (:func:`simfab.coupling.profile.analyze_run`); dF: (r, n_vars) the removal records' force
+    derivatives (the adjoint's backward pass carries each record's dependence on the earlier ones:
+    the friction anchors). F_rm = max(0, max F) over the removal records: the smooth maximum's
+    gradient. F_hold = max(0, max F over the records before the onset of sliding k, F_at) with
+    F_at = F_(k-1) + w (F_k - F_(k-1)) interpolated at the slipping fraction SLIDING_REL
+    (:func:`simfab.coupling.profile.hold_force`): the smooth maximum over those values, w held (the
+    onset's position between two records is a stick-slip event, not differentiated). A run that
+    jams has F_rm = F_hold = 0 (zero gradients); a contact that never slides has F_hold = F_rm."""
+    n = dF.shape[1] if dF.ndim == 2 else 0
+    zero = np.zeros(n)
+    if prof.category == "jams" or not len(dF):
+        return zero, zero
+    Fr = res.column("force", "remove")
+    g_rm = _smax(Fr, dF) if prof.F_rm > 0 else zero
+    slipping = np.array([r.slipping if r.normal_force > 0 else 1.0 for r in res.removal])
+    k = np.flatnonzero(slipping >= SLIDING_REL)
+    if not len(k):
+        return g_rm, g_rm
+    k = int(k[0])
+    at, d_at = float(Fr[k]), dF[k]
+    if k > 0 and slipping[k] > slipping[k - 1]:
+        w = min(max((SLIDING_REL - slipping[k - 1]) / (slipping[k] - slipping[k - 1]), 0.0), 1.0)
+        at, d_at = float(Fr[k - 1] + w * (Fr[k] - Fr[k - 1])), (1 - w) * dF[k - 1] + w * dF[k]
+    if prof.F_hold <= 0:
+        return g_rm, zero
+    return g_rm, _smax(np.r_[Fr[:k], at], np.vstack([dF[:k], d_at[None, :]]))
 
 
 def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
 from simfab.design import outputs
-from simfab.design.gradient import optimize_gradient
+from simfab.design.gradient import GRADIENT_LAG_TOL, optimize_gradient
 from simfab.design.optimize import optimize
 from simfab.design.parallel import Workers
 from simfab.design.problem import EvaluationSettings, ProblemSource, evaluate, make_problem, rebuild
@@ -56,7 +56,8 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
         the mesh-converged ones, warning when a constraint holds only on the coarse mesh
     method : "anneal" (simulated annealing, :mod:`simfab.design.optimize`) or "gradient" (SLSQP on
-        the adjoint sensitivities, :mod:`simfab.design.gradient`: frictionless briefs, one run)
+        the adjoint sensitivities, :mod:`simfab.design.gradient`: one run; with friction its lag solved
+        to at most GRADIENT_LAG_TOL)
     """
     if method not in METHODS:
         raise InputError(f"must be one of {', '.join(METHODS)}, got {method!r}", where="--method")
@@ -64,9 +65,14 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         raise InputError("the gradient method is deterministic: restarts would repeat it", where="--restarts")
     ds = load_design_scene(scene, design=design, simulation=simulation, contact=contact, device=device)
     cm = ds.cm
-    if method == "gradient" and cm.contact.friction > 0:
-        raise InputError("the gradient design does not read frictional profiles yet (friction 0 only; "
-                         "--method anneal designs with friction)", where="--method")
+    if method == "gradient" and cm.contact.friction > 0 and cm.contact.lag_tol > GRADIENT_LAG_TOL:
+        # finite differences of whole frictional insertions jump with the number of lagging
+        # iterations at a loose lag; the adjoint differentiates the step at its converged lag
+        contact = dict(contact or {}, lag_tol=GRADIENT_LAG_TOL)
+        log(f"couple optimize: {cm.name}: the gradient method with friction solves the lag to "
+            f"lag_tol = {GRADIENT_LAG_TOL:g} (the scene's {cm.contact.lag_tol:g})", quiet=quiet)
+        ds = load_design_scene(scene, design=design, simulation=simulation, contact=contact, device=device)
+        cm = ds.cm
     if revolve is not None and cm.dim != 2:
         raise InputError("only a 2D section can be revolved", where="--revolve-axis")
     if revolve is not None and len(revolve) > 2 and revolve[2] and not ds.kept_regions:

@@ -115,3 +115,17 @@ def test_couple_optimize_gradient_method(tmp_path, order):
         assert all(c["satisfied"] for c in s["constraints"].values())
     for k, p in s["outputs"].items():
         assert (out / p.split("/")[-1]).is_file(), k
+
+
+def test_frictional_figure_gradients_match_finite_differences(monkeypatch):
+    """mu = 0.3 with its removal traversal: F_rm and F_hold read from the removal records, whose
+    sensitivities the adjoint's backward pass carries through the friction anchors; the lag solved
+    to 1e-6 (the adjoint differentiates each step at its converged lag)."""
+    cm = load_coupling_scene("block2d_tight", overrides={
+        "simulation": {"steps": 12}, "contact": {"friction": 0.3, "lag_tol": 1e-6, "max_lag_iterations": 50}})
+    cm = dataclasses.replace(cm, options=dataclasses.replace(cm.options, L_max=float(cm.s_steps[-1])))
+    P = make_problem(cm, DesignBrief(grip="tight", handles=3, placement="spatial"))
+    ev, fg = _check_against_finite_differences(
+        P, monkeypatch, ("E_max", "insertion_force", "grip_force", "removal_force", "hold_force"))
+    assert ev.result.removal and fg.supported
+    assert fg.values["removal_force"] > 0 and fg.values["hold_force"] > 0
