@@ -47,6 +47,7 @@ taken at fixed positions, and the default insertion length would move them in ju
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -70,7 +71,7 @@ from simfab.design.problem import (
 )
 from simfab.design.stress import averaging_matrix, quadrature_averaging_matrix
 from simfab.errors import ConvergenceError
-from simfab.fem.shape_derivative import linear_rest_derivative
+from simfab.fem.shape_derivative import linear_rest_derivative, von_mises
 from simfab.progress import log
 
 #: [contact] lag_tol the gradient method runs frictional insertions with (at most): the adjoint
@@ -128,22 +129,123 @@ def _smax(values: np.ndarray, grads: np.ndarray) -> np.ndarray:
     return smooth_max_weights(values, TEMPERATURE_REL * scale) @ grads
 
 
+#: A record whose weight in every figure's smooth maximum is below this gets no sensitivity
+#: (:func:`needed_records`): its contribution to the gradient is below 1e-12 of the figure's.
+WEIGHT_FLOOR = 1e-12
+
+
+class DeferredRecorder:
+    """A run's recorder (``simulate(..., recorder=...)``) that keeps each record's converged state
+    and computes the adjoint sensitivities (:class:`simfab.coupling.adjoint.SensitivityRecorder`)
+    afterwards, of the records asked for only (:meth:`sensitivities`): the brief's figures read
+    a few records each (maxima through softmax weights that vanish away from the peak, the steady
+    state, the rest point's bracket), and a record's sensitivity costs an assembly, a factorization
+    and its mixed products (about one insertion step). A record whose step depends on its start
+    (a pinned rigid motion, friction anchors) brings the record before it (the backward pass
+    follows the chain), so the sensitivities are those of recording every record."""
+
+    def __init__(self, cm, stress: StressMeasure | None = None):
+        self.cm, self.stress = cm, stress
+        self.records: list = []  # (record, converged state without Newton's memo)
+
+    def __call__(self, record, state) -> None:
+        self.records.append((record, dataclasses.replace(state, evaluation=None, tangent=None, check=None,
+                                                         check_cache={})))
+
+    def stress_values(self) -> np.ndarray:
+        """(records,) the stress measure's value max_e (A sigma_vm)_e of every record [Pa]."""
+        A = self.stress.averaging
+        return np.array([float((A @ von_mises(self.cm.fem, st.x)).max()) for _, st in self.records])
+
+    def sensitivities(self, needed) -> dict:
+        """{record index: StepSensitivity} of the records ``needed`` (indices in the run's order,
+        insertion then removal) and those their steps depend on."""
+        want = set(int(j) for j in needed)
+        depends = set()
+        for j in range(len(self.records) - 1, 0, -1):  # (descending: a chain pulls in its whole start)
+            st = self.records[j][1]
+            if st.prev is not None and ((st.pin_basis is not None and st.pin_basis.shape[1] > 0)
+                                        or st.friction is not None):
+                depends.add(j)
+                if j in want:
+                    want.add(j - 1)
+        order = sorted(want)
+        rec = SensitivityRecorder(self.cm, self.stress)
+        for j in order:
+            rec(*self.records[j])
+        # a step that does not depend on its start is exact whether or not the record before it was replayed
+        return {j: sn if j in depends else dataclasses.replace(sn, supported=True)
+                for j, sn in zip(order, rec.insert + rec.remove)}
+
+
+def _weights_needed(values: np.ndarray) -> np.ndarray:
+    """(k,) bool: the records whose smooth-maximum weight (:func:`_smax`) is at least WEIGHT_FLOOR."""
+    v = np.asarray(values, float)
+    if not len(v):
+        return np.zeros(0, bool)
+    scale = float(np.abs(v).max())
+    return smooth_max_weights(v, TEMPERATURE_REL * scale) >= WEIGHT_FLOOR
+
+
+def needed_records(problem: DesignProblem, res, prof, stresses: np.ndarray) -> np.ndarray:
+    """(K + R,) bool over the run's insertion and removal records: those :func:`figure_gradients`
+    reads a sensitivity of (a weight of at least WEIGHT_FLOOR in a smooth maximum, the steady state,
+    the rest point's bracket, every insertion record for a target profile); ``stresses`` (K + R,)
+    the stress measure's values [Pa]."""
+    K, R = len(res.steps), len(res.removal)
+    out = np.zeros(K + R, bool)
+    E, F = res.column("energy"), res.column("force")
+    out[:K] |= _weights_needed(E)
+    i_ss = prof.index_ss
+    out[i_ss] = True
+    end = K if prof.category == "ejects" else i_ss + 1
+    out[:end] |= _weights_needed(-F[:end]) | _weights_needed(F[:end])
+    a = rest_bracket(F, i_ss, len(res.model.s_steps) if K > len(res.model.s_steps) else None)
+    if a is not None and prof.category != "ejects":
+        out[a: a + 2] = True
+    if R:
+        Fr = res.column("force", "remove")
+        out[K:] |= _weights_needed(Fr)
+        slipping = np.array([r.slipping if r.normal_force > 0 else 1.0 for r in res.removal])
+        k = np.flatnonzero(slipping >= SLIDING_REL)
+        if len(k):  # F_hold: the records up to the onset of sliding
+            out[K: K + int(k[0]) + 1] = True
+    out |= _weights_needed(stresses)
+    if problem.target is not None:
+        out[:K] = True
+    return out
+
+
 def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> FigureGradients:
-    """:class:`FigureGradients` of an evaluation run with a :class:`SensitivityRecorder`
+    """:class:`FigureGradients` of an evaluation run with a :class:`DeferredRecorder` (the
+    sensitivities of :func:`needed_records` only) or a :class:`SensitivityRecorder` (every record's)
     (``evaluate(..., recorder=...)``, status "ok", result kept); Jh: :func:`handle_jacobian`."""
     res, rec = ev.result, ev.recorder
-    if len(rec.insert) != len(res.steps):
-        raise ValueError("the recorder does not hold one sensitivity per insertion record")
+    K, R = len(res.steps), len(res.removal)
     fem = res.model.fem
-
-    def pull(a):  # dq/dX on every node -> on the linear mesh's vertices (P2: edge nodes at midpoints) -> dq/dh
-        return linear_rest_derivative(fem, np.asarray(a, float)).ravel() @ Jh
-
-    dE = np.array([pull(s.energy) for s in rec.insert])
-    dF = np.array([pull(s.force) for s in rec.insert])
-    dG = np.array([pull(s.grip) for s in rec.insert])
-    E, F = res.column("energy"), res.column("force")
     prof = analyze_run(res)
+    if isinstance(rec, DeferredRecorder):
+        if len(rec.records) != K + R:
+            raise ValueError("the recorder does not hold one state per record")
+        stresses = rec.stress_values() if rec.stress is not None else np.zeros(K + R)
+        sens = rec.sensitivities(np.flatnonzero(needed_records(problem, res, prof, stresses)))
+    else:
+        if len(rec.insert) != K:
+            raise ValueError("the recorder does not hold one sensitivity per insertion record")
+        sens = dict(enumerate(rec.insert + rec.remove))
+        stresses = np.array([s.stress_value for s in sens.values()])
+    zero = np.zeros(Jh.shape[1])
+
+    def pull(j, figure):  # dq/dX on every node -> the linear mesh's vertices (P2: edge nodes at midpoints) -> dq/dh
+        sn = sens.get(j)
+        if sn is None:  # (a record no figure reads: weight below WEIGHT_FLOOR)
+            return zero
+        return linear_rest_derivative(fem, np.asarray(getattr(sn, figure), float)).ravel() @ Jh
+
+    dE = np.array([pull(j, "energy") for j in range(K)])
+    dF = np.array([pull(j, "force") for j in range(K)])
+    dG = np.array([pull(j, "grip") for j in range(K)])
+    E, F = res.column("energy"), res.column("force")
     Ey = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
     touched = prof.E_max > 0.5 * Ey * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
     i_ss = prof.index_ss
@@ -152,26 +254,26 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
     g["E_max"] = g_Emax
     g["E_ss"] = g_Emax if prof.category == "ejects" else dE[i_ss]
     g["coupling_ratio"] = (100.0 * (g["E_ss"] / prof.E_max - prof.E_ss * g_Emax / prof.E_max**2)
-                           if touched else np.zeros(Jh.shape[1]))
+                           if touched else zero)
     end = len(F) if prof.category == "ejects" else i_ss + 1
-    g["insertion_force"] = -_smax(-F[:end], dF[:end]) if prof.F_in > 0 else np.zeros(Jh.shape[1])
-    if res.removal:  # friction: F_rm and F_hold from the removal traversal (simfab.coupling.profile.analyze_run)
-        g["removal_force"], g["hold_force"] = removal_gradients(res, prof, np.array([pull(s.force) for s in rec.remove]))
+    g["insertion_force"] = -_smax(-F[:end], dF[:end]) if prof.F_in > 0 else zero
+    if R:  # friction: F_rm and F_hold from the removal traversal (simfab.coupling.profile.analyze_run)
+        g["removal_force"], g["hold_force"] = removal_gradients(res, prof, np.array([pull(K + j, "force")
+                                                                                       for j in range(R)]))
     else:
-        g["removal_force"] = _smax(F[:end], dF[:end]) if prof.F_rm > 0 else np.zeros(Jh.shape[1])
+        g["removal_force"] = _smax(F[:end], dF[:end]) if prof.F_rm > 0 else zero
         g["hold_force"] = g["removal_force"]
     g["grip_force"] = rest_grip_gradient(res, i_ss, dF, dG) if prof.category != "ejects" else dG[i_ss]
-    stresses = [s.stress_value for s in rec.insert + rec.remove]
-    if all(s.stress is not None for s in rec.insert + rec.remove):
-        dS = np.array([pull(s.stress) for s in rec.insert + rec.remove])
-        g["von_mises"] = _smax(np.asarray(stresses), dS)
+    if all(s.stress is not None for s in sens.values()):
+        dS = np.array([pull(j, "stress") for j in range(K + R)])
+        g["von_mises"] = _smax(stresses, dS)
     else:
         g["von_mises"] = None
     g["seat_clearance"] = None
     if problem.target is not None:
         scale = problem.settings.corrections.get("force_profile", 1.0)
         g["rms_error_sq"] = scale * target_gradient(problem.target, res.column("s"), scale * F) @ dF
-    supported = all(s.supported for s in rec.insert + rec.remove)
+    supported = all(s.supported for s in sens.values())
     return FigureGradients(values=dict(ev.figures), gradients=g, supported=supported, steady_index=i_ss)
 
 
@@ -310,7 +412,7 @@ def _evaluate(run: _Run, h: np.ndarray):
         return out
     problem = run.problem
     ev = evaluate(problem, h, keep_result=True,
-                  recorder=lambda cm: SensitivityRecorder(cm, stress_measure(problem, cm)))
+                  recorder=lambda cm: DeferredRecorder(cm, stress_measure(problem, cm)))
     if ev.sim_seconds > 0:
         run.insertions += 1
     fg = None

@@ -40,11 +40,19 @@ def _check_against_finite_differences(P, monkeypatch, names, rel=1e-4, rel_of=No
     Jh = G.handle_jacobian(P.handles)
     h0 = P.handles.identity()
     dh = np.random.default_rng(0).standard_normal(len(h0)) * P.sigma0
-    ev = evaluate(P, h0, keep_result=True,
-                  recorder=lambda cm: G.SensitivityRecorder(cm, G.stress_measure(P, cm)))
+    ev = evaluate(P, h0, keep_result=True, recorder=lambda cm: G.DeferredRecorder(cm, G.stress_measure(P, cm)))
     fg = G.figure_gradients(P, ev, Jh)
-    # (the first steps, before contact, are solved with a rigid-motion pin, fg.supported False: no figure
-    # is read from them)
+    # the deferred recorder's sensitivities of the records the figures read give the gradients of
+    # every record's (the same states replayed through the adjoint's recorder)
+    rec = ev.recorder
+    full = G.SensitivityRecorder(rec.cm, rec.stress)
+    for r, st in rec.records:
+        full(r, st)
+    fg_full = G.figure_gradients(P, dataclasses.replace(ev, recorder=full), Jh)
+    for name, g in fg_full.gradients.items():
+        if g is not None:
+            assert np.abs(fg.gradients[name] - g).max() <= 1e-10 * max(np.abs(g).max(), 1e-300), name
+    assert fg.supported  # every record the figures read: its dependence on the records before it followed
     eps = 1e-2
     ep, em = evaluate(P, h0 + eps * dh), evaluate(P, h0 - eps * dh)
     assert ep.figures["category"] == em.figures["category"] == ev.figures["category"]
@@ -52,15 +60,17 @@ def _check_against_finite_differences(P, monkeypatch, names, rel=1e-4, rel_of=No
         fd = (ep.figures[name] - em.figures[name]) / (2 * eps)
         assert abs(fd) > 0, name
         assert float(fg.gradients[name] @ dh) == pytest.approx(fd, rel=(rel_of or {}).get(name, rel)), name
-    return ev, fg
+    return ev, fg, len(rec.sensitivities(np.flatnonzero(
+        G.needed_records(P, ev.result, G.analyze_run(ev.result), rec.stress_values()))))
 
 
 FIGURES = ("E_max", "E_ss", "coupling_ratio", "insertion_force", "removal_force", "grip_force", "von_mises")
 
 
 def test_figure_gradients_match_finite_differences(problem, monkeypatch):
-    ev, _ = _check_against_finite_differences(problem, monkeypatch, FIGURES)
+    ev, _, computed = _check_against_finite_differences(problem, monkeypatch, FIGURES)
     assert ev.figures["category"] == "tight"
+    assert computed < len(ev.result.steps)  # the records far from every figure's peak: none computed
 
 
 def test_p2_figure_gradients_match_finite_differences(problem_p2, monkeypatch):
@@ -71,7 +81,7 @@ def test_p2_figure_gradients_match_finite_differences(problem_p2, monkeypatch):
     assert P.mesh.n_vertices < P.base.fem.n_vertices
     # the averaging's own dependence on X (quadrature weights) is not differentiated
     # (simfab.coupling.adjoint.StressMeasure): 4e-4 of the stress's derivative here
-    ev, _ = _check_against_finite_differences(P, monkeypatch, FIGURES, rel_of={"von_mises": 1e-3})
+    ev, _, _ = _check_against_finite_differences(P, monkeypatch, FIGURES, rel_of={"von_mises": 1e-3})
     assert ev.result.model.fem.element_order == 2 and ev.figures["category"] == "tight"
 
 
@@ -125,7 +135,7 @@ def test_frictional_figure_gradients_match_finite_differences(monkeypatch):
         "simulation": {"steps": 12}, "contact": {"friction": 0.3, "lag_tol": 1e-6, "max_lag_iterations": 50}})
     cm = dataclasses.replace(cm, options=dataclasses.replace(cm.options, L_max=float(cm.s_steps[-1])))
     P = make_problem(cm, DesignBrief(grip="tight", handles=3, placement="spatial"))
-    ev, fg = _check_against_finite_differences(
+    ev, fg, _ = _check_against_finite_differences(
         P, monkeypatch, ("E_max", "insertion_force", "grip_force", "removal_force", "hold_force"))
     assert ev.result.removal and fg.supported
     assert fg.values["removal_force"] > 0 and fg.values["hold_force"] > 0
