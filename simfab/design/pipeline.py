@@ -17,7 +17,7 @@ from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
 from simfab.design import outputs
-from simfab.design.gradient import GRADIENT_LAG_TOL, optimize_gradient
+from simfab.design.gradient import GRADIENT_LAG_TOL, design_recorder, optimize_gradient
 from simfab.design.optimize import optimize
 from simfab.design.parallel import Workers
 from simfab.design.problem import EvaluationSettings, ProblemSource, evaluate, make_problem, rebuild
@@ -111,9 +111,11 @@ def _anneal_checked(ds, source: ProblemSource, seed, restarts, scheduler, worker
     :class:`simfab.design.parallel.Workers`), check the design on refined meshes and correct;
     returns (DesignResult, summary extras)."""
     cm = ds.cm
-    initial = simulate(cm) if ds.brief.placement == "displacement" else None
+    # (the gradient method reuses the placement's insertion of the initial shape, recorded)
+    rec = design_recorder(cm, ds.brief) if method == "gradient" else None
+    initial = simulate(cm, recorder=rec) if ds.brief.placement == "displacement" else None
     problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed,
-                           source=source)
+                           source=source, initial_recorder=rec)
     if mesh_check and problem.target is not None:
         # target matching: the coarse mesh's bias on the whole profile is known before any iteration
         # from the initial shape's check; without it the first run matches the target with a

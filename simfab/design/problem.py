@@ -206,6 +206,8 @@ class DesignProblem:
     initial : the unmodified shape's insertion (``simulate(base)``, e.g. run for the displacement
         placement), which :func:`initial_evaluation` scores instead of running it again; None:
         it is simulated there
+    initial_recorder : the recorder ``initial`` was run with (``simulate``'s ``recorder``, e.g. the
+        gradient method's :class:`simfab.design.gradient.DeferredRecorder`), or None
     """
 
     base: CouplingModel
@@ -222,6 +224,7 @@ class DesignProblem:
     source: ProblemSource | None = None
     settings: EvaluationSettings = field(default_factory=EvaluationSettings)
     initial: InsertionResult | None = None
+    initial_recorder: object = None
 
     @property
     def mesh(self):
@@ -242,7 +245,8 @@ class DesignProblem:
 
 def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetProfile | None = None,
                  initial: InsertionResult | None = None, handle_vertices=None, seed: int = 0,
-                 source: ProblemSource | None = None, settings: EvaluationSettings | None = None) -> DesignProblem:
+                 source: ProblemSource | None = None, settings: EvaluationSettings | None = None,
+                 initial_recorder=None) -> DesignProblem:
     """Set up the optimization of scene ``cm``'s part.
 
     kept_regions : vertex index arrays kept unchanged besides the fixed support (keep sites)
@@ -253,6 +257,7 @@ def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), ta
     source : a :class:`ProblemSource` naming the scene this problem was loaded from (its handle
         vertices and seed are filled in here); needed by parallel evaluation
     settings : :class:`EvaluationSettings` (default: none)
+    initial_recorder : the recorder ``initial`` was simulated with (kept with it), or None
     """
     # handles, E_L and the quality bound act on the linear mesh; a P2 model's candidates are lifted
     # from it (edge nodes at the midpoints), so only its corners (the first n_corners nodes) are design vertices
@@ -290,7 +295,8 @@ def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), ta
                          source=None if source is None else dataclasses.replace(
                              source, handle_vertices=tuple(int(v) for v in H.vertex[H.active]), seed=seed),
                          settings=EvaluationSettings() if settings is None else settings,
-                         initial=initial if initial is not None and initial.model is cm else None)
+                         initial=initial if initial is not None and initial.model is cm else None,
+                         initial_recorder=initial_recorder if initial is not None and initial.model is cm else None)
 
 
 def rebuild(source: ProblemSource, settings: EvaluationSettings | None = None) -> DesignProblem:
