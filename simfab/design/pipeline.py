@@ -193,7 +193,7 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
     optimized 2D one (``optimized``: its output paths; ``scene``: the DesignScene, for its keep
     sites), simulated: {"outputs": paths, and with arms: "elements", "seconds", "category",
     "figures", "constraints", "warnings"}."""
-    fem = res.problem.base.fem
+    fem = res.problem.mesh  # (the design's linear mesh)
     if not arms:
         loop = boundary_loops(fem.boundary_facets)[0]
         mesh = revolve_outline(res.best.rest[loop], axis=axis, offset=offset)

@@ -1,6 +1,7 @@
 """Annealing against gradient design on the bundled design scenes.
 
-``python tools/bench.py design_methods [--scenes a,b,...] [--methods anneal,gradient] [--seeds 0,1,2] [--out DIR]``
+``python tools/bench.py design_methods [--scenes a,b,...] [--methods anneal,gradient] [--seeds 0,1,2] [--out DIR]
+[--element-orders 1,2] [--friction MU]``
 
 For every scene, method and seed: ``simfab couple optimize NAME --method M --seed S`` (its [design]
 brief; annealing on 2 workers, the gradient method in one process; the mesh check with its
@@ -9,7 +10,9 @@ run: ``insertions`` (every insertion simulation of the optimization and its corr
 the placement's initial insertion and the mesh check's excluded), ``gradient_evaluations``,
 ``seconds`` (end to end, mesh check included), ``E_L`` (profile2d: the RMS force error [N]),
 ``feasible`` (coarse, mesh-corrected) and ``met_mesh_check`` (mesh-converged figures). The
-gradient method does not depend on the seed except through the handle placement.
+gradient method does not depend on the seed except through the handle placement. ``--element-orders``
+runs each with those element orders (``couple optimize --element-order``: 2 simulates every
+candidate on P2, the handles on the linear mesh); ``--friction`` sets ``[contact] friction``.
 """
 
 from __future__ import annotations
@@ -31,17 +34,24 @@ def run(argv) -> dict:
     ap.add_argument("--methods", default="anneal,gradient")
     ap.add_argument("--seeds", default="0")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--element-orders", default=None, help="e.g. 1,2 (default: the scene's)")
+    ap.add_argument("--friction", type=float, default=None)
     a = ap.parse_args(argv)
+    orders = [None] if a.element_orders is None else [int(o) for o in a.element_orders.split(",")]
+    contact = {} if a.friction is None else {"friction": a.friction}
     out = Path(a.out) if a.out else Path(tempfile.mkdtemp(prefix="design_methods_"))
     rows = []
     for scene in a.scenes.split(","):
         for method in a.methods.split(","):
-            for seed in (int(s) for s in a.seeds.split(",")):
+            for seed, order in ((int(s), o) for s in a.seeds.split(",") for o in orders):
                 t0 = time.perf_counter()
-                s = optimize_scene(scene, out=out / f"{scene}_{method}_{seed}", quiet=True, seed=seed,
-                                   workers=2 if method == "anneal" else 1, method=method)
+                sim = {} if order is None else {"element_order": order}
+                s = optimize_scene(scene, out=out / f"{scene}_{method}_{seed}_{order}", quiet=True, seed=seed,
+                                   workers=2 if method == "anneal" else 1, method=method, simulation=sim,
+                                   contact=contact)
                 mc = s.get("mesh_check") or {}
-                rows.append({"scene": scene, "method": method, "seed": seed,
+                rows.append({"scene": scene, "method": method, "seed": seed, "element_order": order,
+                             "friction": a.friction,
                              "insertions": s.get("insertions_total", s["insertions"]),
                              "gradient_evaluations": s["gradient_evaluations"],
                              "seconds": time.perf_counter() - t0, "E_L": s["E_L"], "rms_error_N": s.get("rms_error"),
