@@ -290,7 +290,16 @@ def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) ->
         if len(rec.records) != K + R:
             raise ValueError("the recorder does not hold one state per record")
         stresses = rec.stress_values() if rec.stress is not None else np.zeros(K + R)
-        sens = rec.sensitivities(np.flatnonzero(needed_records(problem, res, prof, stresses)))
+        try:
+            sens = rec.sensitivities(np.flatnonzero(needed_records(problem, res, prof, stresses)))
+        except (ConvergenceError, ArithmeticError, np.linalg.LinAlgError, RuntimeError):
+            # an equilibrium the adjoint cannot factorize (e.g. a pinned step whose Hessian is not
+            # positive definite): the design keeps its values; its gradients are unknown, taken as
+            # zero (what SLSQP's Jacobian rows read for a figure without a gradient), supported False
+            n = Jh.shape[1]
+            names = ("E_max", "E_ss", "coupling_ratio", "insertion_force", "removal_force", "hold_force",
+                     "grip_force", "von_mises") + (("rms_error_sq",) if problem.target is not None else ())
+            return {**{k: np.zeros(n) for k in names}, "seat_clearance": None}, False
     else:
         if len(rec.insert) != K:
             raise ValueError("the recorder does not hold one sensitivity per insertion record")
