@@ -97,6 +97,7 @@ def _fastest(a, first: dict) -> dict:
     best = dict(min(runs, key=lambda r: r["seconds"]))
     check = first["mesh_check"]
     best.update(mesh_check=check, seconds_with_mesh_check=best["seconds"] + check["seconds"] if check else None,
+                meets_target=best["meets_target"] and (check is None or bool(check["feasible_mesh_converged"])),
                 seconds_all_runs=[r["seconds"] for r in runs],
                 seconds_median=statistics.median(r["seconds"] for r in runs),
                 machine_reference_ms_all_runs=[r["machine_reference_ms"] for r in runs])
@@ -192,7 +193,9 @@ def _run_once(a) -> dict:
         "fraction_outside_simulator": max(0.0, 1.0 - sim_seconds / (total * res.workers)),
         "rejected": res.rejected,
         "target_seconds": TARGET_SECONDS[a.method],
-        "meets_target": total <= TARGET_SECONDS[a.method] and res.best.feasible,
+        # (and, when the mesh check runs, the design meets the brief on it)
+        "meets_target": total <= TARGET_SECONDS[a.method] and res.best.feasible and (
+            check is None or bool(check["feasible_mesh_converged"])),
         "reference": {"source": "insertion_simulation_seconds_original: stand side (2D) x 300 iterations",
                       "seconds_per_simulation": row["seconds"] if row else None, "seconds": ref_total},
         "speedup_vs_reference": ref_total / total if ref_total else None,
