@@ -90,7 +90,7 @@ def add_optimize_args(s) -> None:
                         "does not depend on it; default: this machine's cores, at most 4; 1 with --restarts)")
     s.add_argument("--method", choices=["anneal", "gradient"], default="anneal",
                    help="optimizer: simulated annealing (default), or SLSQP on the profile's exact sensitivities "
-                        "(adjoint method, one insertion per design it visits; frictionless briefs)")
+                        "(adjoint method, one insertion per design it visits; with friction its lag solved to 1 %%)")
     s.add_argument("--restarts", type=int, default=1, metavar="N",
                    help="independent annealing runs (seeds SEED..SEED+N-1) as Dask tasks; the best design is kept")
     s.add_argument("--scheduler", metavar="ADDRESS",
