@@ -31,7 +31,8 @@ Not differentiated (gradient None; the optimizer reads it as a constraint withou
 checks it on every design and reports it): the seat clearance.
 
 Optimizer (:func:`optimize_gradient`): when the start gives no direction (a part that does not
-touch the object: every violated constraint's gradient is zero) a seeded annealing pre-phase runs
+touch the object: every violated constraint's gradient is zero; or an ejecting profile whose coupling
+ratio the brief bounds, :func:`flat_start`) a seeded annealing pre-phase runs
 until a design is in the brief's category (:func:`in_category`); then SLSQP on
 z = (h - lower) / (upper - lower) in [0, 1] from the initial shape (or the pre-phase's best),
 minimizing E_L (profile matching: rms^2 [N^2]) subject to the brief's constraints, scaled to
@@ -584,10 +585,15 @@ PRE_PHASE_ITERATIONS = 60
 
 def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
     """The start gives SLSQP no direction: some constraint row is violated and every violated row's
-    gradient is zero or missing (a part that does not touch the object: no figure depends on its shape)."""
+    gradient is zero or missing (a part that does not touch the object: no figure depends on its shape),
+    or a coupling-ratio row is violated while the profile ejects (no dip after its peak: CR = 100 %
+    for every shape nearby, its gradient zero, and SLSQP's linearization of that row cannot be
+    satisfied: knocker3d_design's clip presses the ring until the path's end, and SLSQP's steps
+    shrank to 1e-13 of the bounds)."""
     violated = [r for r in rows if r.value(fg.values[r.name] * corrections.get(r.name, 1.0)) < 0]
     flat = all(fg.gradients.get(r.name) is None or not np.any(fg.gradients[r.name]) for r in violated)
-    return bool(violated) and flat
+    ejects = fg.values.get("category") == "ejects" and any(r.name == "coupling_ratio" for r in violated)
+    return bool(violated) and (flat or ejects)
 
 
 def in_contact(ev: Evaluation) -> bool:
