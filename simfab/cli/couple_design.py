@@ -81,12 +81,17 @@ def add_optimize_args(s) -> None:
                    help="Coulomb friction coefficient between object and part (overrides the scene's [contact] "
                         "friction): every candidate's insertion and removal are simulated with it, and the brief "
                         "reads the frictional forces")
+    s.add_argument("--element-order", type=int, choices=(1, 2), metavar="{1,2}",
+                   help="elements every candidate is simulated with (overrides the scene's [simulation] "
+                        "element_order): 1 linear (fast, too stiff on coarse meshes: the mesh check corrects), 2 "
+                        "quadratic on the scene's mesh (the handles still act on its linear mesh)")
     s.add_argument("--workers", type=int, default=None, metavar="N",
                    help="processes evaluating the annealer's proposals at once (speculatively; the design "
                         "does not depend on it; default: this machine's cores, at most 4; 1 with --restarts)")
     s.add_argument("--method", choices=["anneal", "gradient"], default="anneal",
                    help="optimizer: simulated annealing (default), or a trust-region SQP on the profile's exact "
-                        "sensitivities (adjoint method, one insertion per iteration; frictionless briefs)")
+                        "sensitivities (adjoint method, one insertion per iteration; with friction its lag solved "
+                        "to 1 %%)")
     s.add_argument("--restarts", type=int, default=1, metavar="N",
                    help="independent annealing runs (seeds SEED..SEED+N-1) as Dask tasks; the best design is kept")
     s.add_argument("--scheduler", metavar="ADDRESS",
@@ -163,8 +168,9 @@ def run_optimize(args) -> dict:
         raise InputError(f"must be 0 (a full turn) or >= 2, got {args.revolve_arms}", where="--revolve-arms")
     revolve = (args.revolve_axis, args.revolve_offset, args.revolve_arms) if args.revolve_axis else None
     contact = {} if args.friction is None else {"friction": args.friction}
+    sim = simulation_overrides(args) | ({} if args.element_order is None else {"element_order": args.element_order})
     return optimize_scene(args.scene, out=args.out, design=design_overrides(args),
-                          simulation=simulation_overrides(args), contact=contact, device=dev, quiet=args.quiet,
+                          simulation=sim, contact=contact, device=dev, quiet=args.quiet,
                           seed=args.seed, revolve=revolve, restarts=args.restarts, scheduler=args.scheduler,
                           workers=workers, mesh_check=not args.no_mesh_check, method=args.method)
 

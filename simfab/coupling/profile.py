@@ -16,7 +16,10 @@ Definitions (thesis, "Fundamentals and Overview"):
   steady-state step and the next one (O at rest between them: the run's rest search brackets it),
   the grip is interpolated linearly in the force to where it is zero: at a seat the grip jumps
   within micrometres, so the value at the bracket's lower end would depend on how close the search
-  came (figures in docs/decisions.md).
+  came (figures in docs/decisions.md). Likewise when the steady state is the rest search's last
+  record, already past the zero crossing, and the record before it is the search's too (``rest_from``):
+  the bracket is those two, and the grip is interpolated over it, not read at the record the search
+  stopped at.
 - With friction (a run's ``removal`` records: the removal simulated as its own traversal) F_in is
   read from the insertion and F_rm = max(0, max F) from the removal; F_hold, the force needed to
   start sliding O out of its seat (elastic draw plus static friction), is max(0, max F) over the
@@ -80,9 +83,11 @@ def steady_state_index(energy: np.ndarray, tol: float) -> int:
 
 
 def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarray, *,
-            end_pose: bool = False) -> ProfileSummary:
+            end_pose: bool = False, rest_from: int | None = None) -> ProfileSummary:
     """Summarize a profile given per-step insertion distance s [m], energy [J], force [N], grip [N].
-    ``end_pose``: the path ends in a prescribed pose, where the steady state is (module docstring)."""
+    ``end_pose``: the path ends in a prescribed pose, where the steady state is (module docstring);
+    ``rest_from``: the index of the first record of the run's search for the rest point (the records
+    past the planned steps), None if there is none."""
     E = np.asarray(energy, float)
     F = np.asarray(force, float)
     G = np.asarray(grip, float)
@@ -108,14 +113,28 @@ def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarr
     scale = float(np.abs(Fi).max()) if Fi.size else 0.0
     stationary = category == "ejects" or i_ss < len(E) - 1 or F[i_ss] <= REST_FORCE_REL * scale
     grip_ss = float(G[i_ss])
-    if category != "ejects" and i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
-        w = F[i_ss] / (F[i_ss] - F[i_ss + 1])  # the rest point, F = 0, between the two records
-        grip_ss = float(G[i_ss] + w * (G[i_ss + 1] - G[i_ss]))
+    a = rest_bracket(F, i_ss, rest_from) if category != "ejects" else None
+    if a is not None:
+        w = F[a] / (F[a] - F[a + 1])  # the rest point, F = 0, between the two records
+        grip_ss = float(G[a] + w * (G[a + 1] - G[a]))
     return ProfileSummary(
         category=category, E_max=E_max, E_ss=E_ss, coupling_ratio=ratio,
         F_in=float(max(0.0, -Fi.min())), F_rm=float(max(0.0, Fi.max())), F_grip=grip_ss,
         index_max=i_max, index_ss=i_ss, stationary=bool(stationary),
     )
+
+
+def rest_bracket(force: np.ndarray, i_ss: int, rest_from: int | None = None) -> int | None:
+    """The first record a of the pair (a, a + 1) whose forces bracket the rest point around the
+    steady state i_ss (F_a > 0 >= F_(a+1)): a = i_ss (the next record is past it), else a = i_ss - 1
+    when both are records of the rest search (index >= ``rest_from``: its bracket spans micrometres;
+    a planned record's position is not a bracket of the rest point); None otherwise."""
+    F = np.asarray(force, float)
+    if i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
+        return i_ss
+    if rest_from is not None and rest_from <= i_ss - 1 and F[i_ss - 1] > 0 >= F[i_ss]:
+        return i_ss - 1
+    return None
 
 
 #: The removal has started sliding where points carrying this fraction of the normal force slip.
@@ -143,8 +162,9 @@ def analyze_run(res) -> ProfileSummary:
     """:func:`analyze` of an :class:`simfab.coupling.simulate.InsertionResult`, its steady state at
     the end pose when its path ends in a rotation (``model.end_direction`` None); with friction F_rm
     and F_hold from its removal records and the frictional categories (module docstring)."""
+    planned = len(res.model.s_steps)
     prof = analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"),
-                   end_pose=res.model.end_direction is None)
+                   end_pose=res.model.end_direction is None, rest_from=planned if len(res.steps) > planned else None)
     mu = float(res.model.contact.friction)
     if res.jammed_at is not None:
         return replace(prof, category="jams", F_rm=0.0, F_hold=0.0, friction=mu)

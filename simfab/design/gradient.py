@@ -21,10 +21,15 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
 - E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
 - the element quality q_e (signed mean ratio) analytically.
 - the target-profile error rms^2 (the objective of profile matching) through the force samples
-  (:func:`target_gradient`), at fixed step positions.
+  (:func:`target_gradient`), at fixed step positions;
+- with friction, F_rm and F_hold from the removal traversal's records (:func:`removal_gradients`),
+  whose sensitivities the adjoint's backward pass carries through the friction anchors; the
+  insertion runs with lag_tol <= GRADIENT_LAG_TOL (the pipeline tightens the scene's).
+On P2 elements every node's derivative is chained to the linear mesh's vertices (the edge nodes
+sit at the midpoints; :func:`simfab.fem.shape_derivative.linear_rest_derivative`) before dX/dh.
 Not differentiated (gradient None; the optimizer reads it as a constraint without a gradient: it
 checks it on every design and reports it): the seat clearance (but for a part that touches nothing,
-:func:`gap_gradient`); and nothing with friction (the sensitivities hold for mu = 0).
+:func:`gap_gradient`).
 
 Optimizer (:func:`optimize_gradient`): a trust-region SQP (:func:`simfab.design.sqp.trust_region_sqp`)
 on z = (h - lower) / (upper - lower) in [0, 1] from the initial shape, one insertion per iteration:
@@ -38,8 +43,9 @@ q_e / q0_e >= QUALITY_REL is imposed exactly in every subproblem (analytic, no s
 trial is an inverted or degenerate mesh. Profile matching's gradient also carries the run's end
 moving with the design (:func:`seat_shift_gradient`). A start that touches nothing (every figure's
 gradient zero) gets the seat clearance's bound, linearized through the gap of the undeformed part
-(:func:`gap_gradient`); only when that has no gradient either (no vertex near O) a seeded annealing
-pre-phase runs until a design is in the brief's category (:func:`in_category`). The best design is
+(:func:`gap_gradient`); only when that has no gradient either (no vertex near O), or when the start
+ejects under a coupling-ratio bound (:func:`flat_start`), a seeded annealing pre-phase runs until a
+design is in the brief's category (:func:`in_category`). The best design is
 the feasible one with the lowest objective among all simulated (the lowest penalized objective when
 none is feasible). Every candidate runs at the initial shape's planned step positions
 (``EvaluationSettings.hold_steps``): the derivatives are taken at fixed positions, and the default
@@ -51,13 +57,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
 from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_max_weights
-from simfab.coupling.profile import analyze_run
+from simfab.coupling.profile import SLIDING_REL, analyze_run, rest_bracket
 from simfab.design import brief as B
 from simfab.design.handles import Handles
 from simfab.design.optimize import DesignResult, optimize
@@ -71,10 +78,15 @@ from simfab.design.problem import (
     initial_evaluation,
 )
 from simfab.design.sqp import CheapConstraints, Sample, SQPOptions, trust_region_sqp
-from simfab.design.stress import averaging_matrix
+from simfab.design.stress import averaging_matrix, quadrature_averaging_matrix
 from simfab.errors import ConvergenceError
+from simfab.fem.shape_derivative import linear_rest_derivative, von_mises
 from simfab.progress import log
 
+#: [contact] lag_tol the gradient method runs frictional insertions with (at most): the adjoint
+#: differentiates each step at its converged lag, and at a looser lag the figures jump with the
+#: number of lagging iterations (docs/decisions.md, "Design by gradients").
+GRADIENT_LAG_TOL = 1e-2
 #: Smooth maxima's temperature, relative to the largest magnitude of the series they take the maximum of.
 TEMPERATURE_REL = 0.02
 
@@ -93,24 +105,78 @@ def handle_jacobian(handles: Handles) -> np.ndarray:
     return J.reshape(n * d, -1)
 
 
+class GradientMap(Mapping):
+    """{figure: (n_vars,) or None} computed on first access by ``compute() -> (gradients, supported)``
+    (a caller that reads a design's values only never pays for its sensitivities: with a
+    :class:`DeferredRecorder` they are then never computed); ``on_compute`` is called once when they are."""
+
+    def __init__(self, compute, on_compute=None):
+        self._compute, self._on_compute = compute, on_compute
+        self._data: dict | None = None
+        self._supported = True
+
+    def _get(self) -> dict:
+        if self._data is None:
+            self._data, self._supported = self._compute()
+            self._compute = None  # (memory: the recorder's states)
+            if self._on_compute is not None:
+                self._on_compute()
+        return self._data
+
+    @property
+    def computed(self) -> bool:
+        return self._data is not None
+
+    @property
+    def supported(self) -> bool:
+        self._get()
+        return self._supported
+
+    def __getitem__(self, key):
+        return self._get()[key]
+
+    def __iter__(self):
+        return iter(self._get())
+
+    def __len__(self) -> int:
+        return len(self._get())
+
+
 @dataclass(frozen=True, kw_only=True, eq=False)
 class FigureGradients:
     """The brief's figures of one insertion with their gradients with respect to h (n_vars,) each:
     ``values`` {figure: value} (those of :func:`simfab.design.problem.profile_figures`),
-    ``gradients`` {figure: (n_vars,) or None (not differentiated)}; ``supported``: every step's
-    sensitivity is exact (no friction, no pinned rigid motion; see :mod:`simfab.coupling.adjoint`);
-    ``steady_index``: the steady-state index the figures were read at."""
+    ``gradients`` {figure: (n_vars,) or None (not differentiated)} (a :class:`GradientMap`: computed
+    when first read; with a target profile also "force_samples" (K, n_vars), the insertion records'
+    path forces' Jacobian); ``supported``: every step's dependence on the ones before is followed (see
+    :mod:`simfab.coupling.adjoint`); ``steady_index``: the steady-state index the figures were read at."""
 
     values: dict
-    gradients: dict
-    supported: bool
+    gradients: GradientMap
     steady_index: int
+
+    @property
+    def supported(self) -> bool:
+        return self.gradients.supported
 
 
 def stress_measure(problem: DesignProblem, cm) -> StressMeasure:
-    """The yield constraint's stress (averaged over the brief's radius) on ``cm``'s mesh."""
-    return StressMeasure(averaging=averaging_matrix(cm.fem, problem.brief.stress_radius),
-                         temperature_rel=TEMPERATURE_REL)
+    """The yield constraint's stress (averaged over the brief's radius) on ``cm``'s mesh: per element
+    on linear elements, over the quadrature points on P2 (as :func:`simfab.design.problem.profile_figures`
+    reads it)."""
+    return _stress_measure(cm, problem.brief.stress_radius)
+
+
+def _stress_measure(cm, radius: float) -> StressMeasure:
+    A = quadrature_averaging_matrix(cm.fem, radius) if cm.fem.element_order == 2 else averaging_matrix(cm.fem, radius)
+    return StressMeasure(averaging=A, temperature_rel=TEMPERATURE_REL)
+
+
+def design_recorder(cm, brief: B.DesignBrief) -> "DeferredRecorder":
+    """The recorder the gradient method runs ``cm``'s insertion with: pass the initial shape's
+    insertion one (``simulate(cm, recorder=...)``) as ``make_problem``'s ``initial_recorder`` and
+    the method reuses that insertion instead of simulating the initial shape again."""
+    return DeferredRecorder(cm, _stress_measure(cm, brief.stress_radius))
 
 
 def _smax(values: np.ndarray, grads: np.ndarray) -> np.ndarray:
@@ -119,22 +185,144 @@ def _smax(values: np.ndarray, grads: np.ndarray) -> np.ndarray:
     return smooth_max_weights(values, TEMPERATURE_REL * scale) @ grads
 
 
-def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> FigureGradients:
-    """:class:`FigureGradients` of an evaluation run with a :class:`SensitivityRecorder`
-    (``evaluate(..., recorder=...)``, status "ok", result kept); Jh: :func:`handle_jacobian`."""
-    res, rec = ev.result, ev.recorder
-    if len(rec.insert) != len(res.steps):
-        raise ValueError("the recorder does not hold one sensitivity per insertion record")
+#: A record whose weight in every figure's smooth maximum is below this gets no sensitivity
+#: (:func:`needed_records`): the dropped weights sum to at most (records) x WEIGHT_FLOOR, so the
+#: gradient changes by about that fraction (1e-5 on the design scenes' ~40 records; the finite-difference
+#: tests ask for 1e-4). At temperature 2 % of the peak that keeps the records within 28 % of it.
+WEIGHT_FLOOR = 1e-6
 
-    def pull(a):
-        return np.asarray(a, float).ravel() @ Jh
 
-    dE = np.array([pull(s.energy) for s in rec.insert])
-    dF = np.array([pull(s.force) for s in rec.insert])
-    dG = np.array([pull(s.grip) for s in rec.insert])
+class DeferredRecorder:
+    """A run's recorder (``simulate(..., recorder=...)``) that keeps each record's converged state
+    and computes the adjoint sensitivities (:class:`simfab.coupling.adjoint.SensitivityRecorder`)
+    afterwards, of the records asked for only (:meth:`sensitivities`): the brief's figures read
+    a few records each (maxima through softmax weights that vanish away from the peak, the steady
+    state, the rest point's bracket), and a record's sensitivity costs an assembly, a factorization
+    and its mixed products (about one insertion step). A record whose step depends on its start
+    (a pinned rigid motion, friction anchors) brings the record before it (the backward pass
+    follows the chain), so the sensitivities are those of recording every record."""
+
+    def __init__(self, cm, stress: StressMeasure | None = None):
+        self.cm, self.stress = cm, stress
+        self.records: list = []  # (record, converged state without Newton's memo)
+
+    def __call__(self, record, state) -> None:
+        self.records.append((record, dataclasses.replace(state, evaluation=None, tangent=None, check=None,
+                                                         check_cache={})))
+
+    def stress_values(self) -> np.ndarray:
+        """(records,) the stress measure's value max_e (A sigma_vm)_e of every record [Pa]."""
+        A = self.stress.averaging
+        return np.array([float((A @ von_mises(self.cm.fem, st.x)).max()) for _, st in self.records])
+
+    def sensitivities(self, needed) -> dict:
+        """{record index: StepSensitivity} of the records ``needed`` (indices in the run's order,
+        insertion then removal) and those their steps depend on."""
+        want = set(int(j) for j in needed)
+        depends = set()
+        for j in range(len(self.records) - 1, 0, -1):  # (descending: a chain pulls in its whole start)
+            st = self.records[j][1]
+            if st.prev is not None and ((st.pin_basis is not None and st.pin_basis.shape[1] > 0)
+                                        or st.friction is not None):
+                depends.add(j)
+                if j in want:
+                    want.add(j - 1)
+        order = sorted(want)
+        rec = SensitivityRecorder(self.cm, self.stress)
+        for j in order:
+            rec(*self.records[j])
+        # a step that does not depend on its start is exact whether or not the record before it was replayed
+        return {j: sn if j in depends else dataclasses.replace(sn, supported=True)
+                for j, sn in zip(order, rec.insert + rec.remove)}
+
+
+def _weights_needed(values: np.ndarray) -> np.ndarray:
+    """(k,) bool: the records whose smooth-maximum weight (:func:`_smax`) is at least WEIGHT_FLOOR."""
+    v = np.asarray(values, float)
+    if not len(v):
+        return np.zeros(0, bool)
+    scale = float(np.abs(v).max())
+    return smooth_max_weights(v, TEMPERATURE_REL * scale) >= WEIGHT_FLOOR
+
+
+def needed_records(problem: DesignProblem, res, prof, stresses: np.ndarray) -> np.ndarray:
+    """(K + R,) bool over the run's insertion and removal records: those :func:`figure_gradients`
+    reads a sensitivity of (a weight of at least WEIGHT_FLOOR in a smooth maximum, the steady state,
+    the rest point's bracket, every insertion record for a target profile); ``stresses`` (K + R,)
+    the stress measure's values [Pa]."""
+    K, R = len(res.steps), len(res.removal)
+    out = np.zeros(K + R, bool)
     E, F = res.column("energy"), res.column("force")
+    out[:K] |= _weights_needed(E)
+    i_ss = prof.index_ss
+    out[i_ss] = True
+    end = K if prof.category == "ejects" else i_ss + 1
+    out[:end] |= _weights_needed(-F[:end]) | _weights_needed(F[:end])
+    a = rest_bracket(F, i_ss, len(res.model.s_steps) if K > len(res.model.s_steps) else None)
+    if a is not None and prof.category != "ejects":
+        out[a: a + 2] = True
+    if R:
+        Fr = res.column("force", "remove")
+        out[K:] |= _weights_needed(Fr)
+        slipping = np.array([r.slipping if r.normal_force > 0 else 1.0 for r in res.removal])
+        k = np.flatnonzero(slipping >= SLIDING_REL)
+        if len(k):  # F_hold: the records up to the onset of sliding
+            out[K: K + int(k[0]) + 1] = True
+    out |= _weights_needed(stresses)
+    if problem.target is not None:
+        out[:K] = True
+    return out
+
+
+def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray, on_compute=None) -> FigureGradients:
+    """:class:`FigureGradients` of an evaluation run with a :class:`DeferredRecorder` (the
+    sensitivities of :func:`needed_records` only) or a :class:`SensitivityRecorder` (every record's)
+    (``evaluate(..., recorder=...)``, status "ok", result kept); Jh: :func:`handle_jacobian`. The
+    gradients are computed when first read (:class:`GradientMap`; ``on_compute`` called then)."""
+    res, rec = ev.result, ev.recorder
     prof = analyze_run(res)
+    return FigureGradients(values=dict(ev.figures), steady_index=prof.index_ss,
+                           gradients=GradientMap(lambda: _figure_gradients(problem, res, rec, prof, Jh), on_compute))
+
+
+def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) -> tuple:
+    """(gradients, supported) of :func:`figure_gradients`."""
+    K, R = len(res.steps), len(res.removal)
     fem = res.model.fem
+    if isinstance(rec, DeferredRecorder):
+        if len(rec.records) != K + R:
+            raise ValueError("the recorder does not hold one state per record")
+        stresses = rec.stress_values() if rec.stress is not None else np.zeros(K + R)
+        try:
+            sens = rec.sensitivities(np.flatnonzero(needed_records(problem, res, prof, stresses)))
+        except (ConvergenceError, ArithmeticError, np.linalg.LinAlgError, RuntimeError):
+            # an equilibrium the adjoint cannot factorize (e.g. a pinned step whose Hessian is not
+            # positive definite): the design keeps its values; its gradients are unknown, taken as
+            # zero, supported False (the SQP counts such a design as a failed evaluation)
+            n = Jh.shape[1]
+            names = ("E_max", "E_ss", "coupling_ratio", "insertion_force", "removal_force", "hold_force",
+                     "grip_force", "von_mises") + (("rms_error_sq",) if problem.target is not None else ())
+            out = {**{k: np.zeros(n) for k in names}, "seat_clearance": None}
+            if problem.target is not None:
+                out["force_samples"] = np.zeros((K, n))
+            return out, False
+    else:
+        if len(rec.insert) != K:
+            raise ValueError("the recorder does not hold one sensitivity per insertion record")
+        sens = dict(enumerate(rec.insert + rec.remove))
+        stresses = np.array([s.stress_value for s in sens.values()])
+    zero = np.zeros(Jh.shape[1])
+
+    def pull(j, figure):  # dq/dX on every node -> the linear mesh's vertices (P2: edge nodes at midpoints) -> dq/dh
+        sn = sens.get(j)
+        if sn is None:  # (a record no figure reads: weight below WEIGHT_FLOOR)
+            return zero
+        return linear_rest_derivative(fem, np.asarray(getattr(sn, figure), float)).ravel() @ Jh
+
+    dE = np.array([pull(j, "energy") for j in range(K)])
+    dF = np.array([pull(j, "force") for j in range(K)])
+    dG = np.array([pull(j, "grip") for j in range(K)])
+    E, F = res.column("energy"), res.column("force")
     Ey = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
     touched = prof.E_max > 0.5 * Ey * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
     i_ss = prof.index_ss
@@ -143,24 +331,27 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
     g["E_max"] = g_Emax
     g["E_ss"] = g_Emax if prof.category == "ejects" else dE[i_ss]
     g["coupling_ratio"] = (100.0 * (g["E_ss"] / prof.E_max - prof.E_ss * g_Emax / prof.E_max**2)
-                           if touched else np.zeros(Jh.shape[1]))
+                           if touched else zero)
     end = len(F) if prof.category == "ejects" else i_ss + 1
-    g["insertion_force"] = -_smax(-F[:end], dF[:end]) if prof.F_in > 0 else np.zeros(Jh.shape[1])
-    g["removal_force"] = _smax(F[:end], dF[:end]) if prof.F_rm > 0 else np.zeros(Jh.shape[1])
-    g["hold_force"] = g["removal_force"] if not res.removal else None
+    g["insertion_force"] = -_smax(-F[:end], dF[:end]) if prof.F_in > 0 else zero
+    if R:  # friction: F_rm and F_hold from the removal traversal (simfab.coupling.profile.analyze_run)
+        g["removal_force"], g["hold_force"] = removal_gradients(res, prof, np.array([pull(K + j, "force")
+                                                                                       for j in range(R)]))
+    else:
+        g["removal_force"] = _smax(F[:end], dF[:end]) if prof.F_rm > 0 else zero
+        g["hold_force"] = g["removal_force"]
     g["grip_force"] = rest_grip_gradient(res, i_ss, dF, dG) if prof.category != "ejects" else dG[i_ss]
-    stresses = [s.stress_value for s in rec.insert + rec.remove]
-    if all(s.stress is not None for s in rec.insert + rec.remove):
-        dS = np.array([pull(s.stress) for s in rec.insert + rec.remove])
-        g["von_mises"] = _smax(np.asarray(stresses), dS)
+    if all(s.stress is not None for s in sens.values()):
+        dS = np.array([pull(j, "stress") for j in range(K + R)])
+        g["von_mises"] = _smax(stresses, dS)
     else:
         g["von_mises"] = None
     g["seat_clearance"] = None
     if problem.target is not None:
         scale = problem.settings.corrections.get("force_profile", 1.0)
         g["rms_error_sq"] = scale * target_gradient(problem.target, res.column("s"), scale * F) @ dF
-    supported = all(s.supported for s in rec.insert + rec.remove) and not res.removal
-    return FigureGradients(values=dict(ev.figures), gradients=g, supported=supported, steady_index=i_ss)
+        g["force_samples"] = dF  # (K, n_vars): d F_k / dh, the Gauss-Newton model's Jacobian
+    return g, all(s.supported for s in sens.values())
 
 
 def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.ndarray:
@@ -168,36 +359,59 @@ def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.nda
     force and grip derivatives at fixed positions.
 
     The profile reads the grip at the rest point s*, where the force F passes through zero,
-    interpolated between the two records a, b = a + 1 that bracket it (F_a > 0 >= F_b, a = i_ss;
-    :func:`simfab.coupling.profile.analyze`), or at the rest search's last record b = i_ss when the
-    steady state is that record, past the zero crossing (a = b - 1: a position the search places at
-    s* plus its stopping offset). Either reading follows s*(X), F(s*; X) = 0, so by the implicit
-    function theorem with the bracket's secant slopes (w = F_a / (F_a - F_b), s* = s_a + w (s_b - s_a)):
+    interpolated between the two records a, b = a + 1 that bracket it (F_a > 0 >= F_b;
+    :func:`simfab.coupling.profile.rest_bracket`: a = i_ss, or a = i_ss - 1 when both are records of
+    the rest search, the steady state the search's last record past the zero crossing). The reading
+    G* = G_a + w (G_b - G_a), w = F_a / (F_a - F_b), follows s*(X), F(s*; X) = 0; differentiated with
+    the bracket's secant slopes (the implicit function theorem on the linear interpolant):
 
         dG* = (1 - w) dG_a + w dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2
 
-    (the record's reading: dG_b + (G_b - G_a) dw when a too is a record of the rest search, whose
-    bracket spans micrometres; when a is a planned record the secant spans a whole step, and dG_b
-    is used: with the term there alligator2d missed its brief, without it met it, docs/decisions.md).
     At a seat (block2d_tight: the ball on the socket's bottom) the force and the grip change by
     ~10^6 N/m over the bracket's micrometres and the terms nearly cancel: the derivative at fixed
-    positions alone is off by an order of magnitude or more, this one is within a factor 1.6 of
-    finite differences over whole re-simulations (the seat is a kink: no derivative is exact there;
-    tests/design/test_gradient_method.py). Otherwise (a planned
-    record, whose position is held): dG at i_ss."""
+    positions alone is off by an order of magnitude or more (the seat is a kink: no derivative is
+    exact there; tests/design/test_gradient_method.py). Without such a bracket (a planned record,
+    whose position is held; or the rest search's last record with a planned record before it, a
+    secant over a whole step: docs/decisions.md): dG at i_ss."""
     F, G = res.column("force"), res.column("grip")
     planned = len(res.model.s_steps)
-    if i_ss + 1 < len(F) and F[i_ss] > 0 >= F[i_ss + 1]:
-        a, interpolated = i_ss, True
-    elif planned <= i_ss - 1 and F[i_ss - 1] > 0 >= F[i_ss]:
-        a, interpolated = i_ss - 1, False
-    else:
+    a = rest_bracket(F, i_ss, planned if len(F) > planned else None)
+    if a is None:
         return dG[i_ss]
     b = a + 1
     w = F[a] / (F[a] - F[b])
     dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
-    base = (1 - w) * dG[a] + w * dG[b] if interpolated else dG[b]
-    return base + (G[b] - G[a]) * dw
+    return (1 - w) * dG[a] + w * dG[b] + (G[b] - G[a]) * dw
+
+
+def removal_gradients(res, prof, dF: np.ndarray) -> tuple:
+    """(dF_rm/dh, dF_hold/dh) (n_vars,) each of a frictional run's removal figures
+    (:func:`simfab.coupling.profile.analyze_run`); dF: (r, n_vars) the removal records' force
+    derivatives (the adjoint's backward pass carries each record's dependence on the earlier ones:
+    the friction anchors). F_rm = max(0, max F) over the removal records: the smooth maximum's
+    gradient. F_hold = max(0, max F over the records before the onset of sliding k, F_at) with
+    F_at = F_(k-1) + w (F_k - F_(k-1)) interpolated at the slipping fraction SLIDING_REL
+    (:func:`simfab.coupling.profile.hold_force`): the smooth maximum over those values, w held (the
+    onset's position between two records is a stick-slip event, not differentiated). A run that
+    jams has F_rm = F_hold = 0 (zero gradients); a contact that never slides has F_hold = F_rm."""
+    n = dF.shape[1] if dF.ndim == 2 else 0
+    zero = np.zeros(n)
+    if prof.category == "jams" or not len(dF):
+        return zero, zero
+    Fr = res.column("force", "remove")
+    g_rm = _smax(Fr, dF) if prof.F_rm > 0 else zero
+    slipping = np.array([r.slipping if r.normal_force > 0 else 1.0 for r in res.removal])
+    k = np.flatnonzero(slipping >= SLIDING_REL)
+    if not len(k):
+        return g_rm, g_rm
+    k = int(k[0])
+    at, d_at = float(Fr[k]), dF[k]
+    if k > 0 and slipping[k] > slipping[k - 1]:
+        w = min(max((SLIDING_REL - slipping[k - 1]) / (slipping[k] - slipping[k - 1]), 0.0), 1.0)
+        at, d_at = float(Fr[k - 1] + w * (Fr[k] - Fr[k - 1])), (1 - w) * dF[k - 1] + w * dF[k]
+    if prof.F_hold <= 0:
+        return g_rm, zero
+    return g_rm, _smax(np.r_[Fr[:k], at], np.vstack([dF[:k], d_at[None, :]]))
 
 
 def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
@@ -283,17 +497,24 @@ def _evaluate(run: _Run, h: np.ndarray) -> _Evaluated:
     if out is not None:
         return out
     problem = run.problem
-    ev = evaluate(problem, h, keep_result=True,
-                  recorder=lambda cm: SensitivityRecorder(cm, stress_measure(problem, cm)))
+    if (problem.initial_recorder is not None and problem.initial is not None and not problem.settings.refined
+            and np.array_equal(h, problem.handles.identity())):
+        # the initial shape's insertion, run before the optimization with its recorder (the same run:
+        # hold_steps is the initial shape's own steps); scored with this problem's settings
+        ev = initial_evaluation(problem)
+        ev.recorder = problem.initial_recorder
+    else:
+        ev = evaluate(problem, h, keep_result=True,
+                      recorder=lambda cm: DeferredRecorder(cm, stress_measure(problem, cm)))
     if ev.sim_seconds > 0:
         run.insertions += 1
     fg, dF = None, None
-    if ev.status == "ok":
-        fg = figure_gradients(problem, ev, run.Jh)
-        run.gradient_evaluations += 1
+    if ev.status == "ok":  # (gradient_evaluations: those whose gradients were computed)
+        fg = figure_gradients(problem, ev, run.Jh,
+                              on_compute=lambda: setattr(run, "gradient_evaluations", run.gradient_evaluations + 1))
         if problem.target is not None:
-            dF = np.array([np.asarray(st.force, float).ravel() @ run.Jh for st in ev.recorder.insert])
-    ev.recorder = None  # (memory: the per-step sensitivities are read into fg)
+            dF = fg.gradients["force_samples"]
+    ev.recorder = None  # (the recorder's states live in fg until its gradients are read)
     if ev.status == "ok":
         r = ev.result
         planned = len(r.model.s_steps)
@@ -380,10 +601,14 @@ PRE_PHASE_ITERATIONS = 60
 
 def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
     """The start gives the SQP no direction: some constraint row is violated and every violated row's
-    gradient is zero or missing (a part that does not touch the object: no figure depends on its shape)."""
+    gradient is zero or missing (a part that does not touch the object: no figure depends on its shape),
+    or a coupling-ratio row is violated while the profile ejects (no dip after its peak: CR = 100 %
+    for every shape nearby, its gradient zero, and no linearization of that row can be satisfied:
+    knocker3d_design's clip presses the ring until the path's end)."""
     violated = [r for r in rows if r.value(fg.values[r.name] * corrections.get(r.name, 1.0)) < 0]
     flat = all(fg.gradients.get(r.name) is None or not np.any(fg.gradients[r.name]) for r in violated)
-    return bool(violated) and flat
+    ejects = fg.values.get("category") == "ejects" and any(r.name == "coupling_ratio" for r in violated)
+    return bool(violated) and (flat or ejects)
 
 
 def lost_grip(category: str, tight: bool, reached: dict) -> bool:
@@ -555,7 +780,9 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     pre = None
     e0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))
     if e0.fg is not None and flat_start(rows, e0.fg, corr):
-        g_gap = gap_gradient(e0.ev.result, e0.fg.steady_index, Jh) if "seat_clearance" in problem.limits else None
+        touches_nothing = e0.ev.figures.get("category") == "none"
+        g_gap = (gap_gradient(e0.ev.result, e0.fg.steady_index, Jh)
+                 if touches_nothing and "seat_clearance" in problem.limits else None)
         if g_gap is not None and np.any(g_gap):
             # no figure depends on the shape, but the gap to O does: close it first (the clearance bound, linearized)
             log(f"couple optimize: {problem.base.name}: the start touches nothing (gap "
@@ -563,7 +790,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             rows.append(ConstraintRow(name="seat_clearance", sign=-1.0, bound=0.0, scale=B.SCALES["seat_clearance"]))
         else:
             # no direction at all: anneal (seeded) until a design is in the brief's category, then descend
-            log(f"couple optimize: {problem.base.name}: the start gives no gradient (no contact); annealing "
+            why = "no contact" if touches_nothing else "the profile ejects"
+            log(f"couple optimize: {problem.base.name}: the start gives no gradient ({why}); annealing "
                 f"pre-phase until a design is in the brief's category, at most {PRE_PHASE_ITERATIONS} iterations",
                 quiet=quiet)
             pre = optimize(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
@@ -572,7 +800,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             if in_contact(pre.best):
                 start = pre.best.h
     target = problem.target is not None
-    el = problem.base.fem.elements
+    el = problem.mesh.elements
     q0 = problem.q0
     B_EL = None if target else span[:, None] * modification_hessian(problem, Jh) * span[None, :]
     force_scale = corr.get("force_profile", 1.0)
@@ -586,7 +814,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     def sample(z) -> Sample:
         h = h_of(z)
         e = _evaluate(run, h)
-        if e.fg is None or (target and e.ev.rms_error is None):
+        if e.fg is None or (target and e.ev.rms_error is None) or not e.fg.supported:
             return Sample(ok=False)
         category = e.ev.figures.get("category")
         if lost_grip(category, tight, reached):
@@ -635,6 +863,10 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
 
     opts = SQPOptions(radius=RADIUS if start is None or pre is not None else RADIUS_FROM_DESIGN,
                       max_evaluations=cap + 1, rtol=RTOL, ctol=aim, min_radius=MIN_RADIUS)
+    if not sample(z0).ok:  # (memoized: the SQP's first evaluation)
+        raise ConvergenceError(f"couple optimize: {problem.base.name}: the gradient method's start cannot be "
+                               f"simulated with its sensitivities ({_evaluate(run, h_of(z0)).ev.reason or 'no gradient'});"
+                               " --method anneal does not need them")
     res = trust_region_sqp(sample, z0, options=opts, cheap=quality, callback=on_step)
     log(f"couple optimize: {problem.base.name}: SQP: {res.message} ({len(res.steps)} iterations, "
         f"{run.insertions} insertions)", quiet=quiet)

@@ -28,6 +28,7 @@ import tomli_w
 
 from simfab.coupling.outputs import _display_faces, _object_display, extrude_triangles, vertex_von_mises
 from simfab.design import brief as B
+from simfab.design.problem import lift_rest
 from simfab.design.synthesis import boundary_loops
 from simfab.design.verify import check_warnings
 from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json, write_text
@@ -168,7 +169,7 @@ def write_outline_csv(fem, X: np.ndarray, path) -> Path:
 def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, stem: str) -> None:
     """The optimized scene: the original MJCF with the part's display mesh replaced, the TOML with
     the optimized mesh as ``mesh_file`` (same material, object, path, fixed region, options)."""
-    fem = res.problem.base.fem
+    fem = res.problem.mesh  # (the design's linear mesh: a P2 scene's TOML lifts it again)
     X = res.best.rest
     np.savez(tmp["scene_mesh"], points=X, elements=np.asarray(fem.elements))
     cfg = tomllib.loads(Path(scene_toml).read_text(encoding="utf-8"))
@@ -295,7 +296,7 @@ def plot_shape(res, path) -> Path:
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
 
-    fem = res.problem.base.fem
+    fem = res.problem.mesh
     H = res.problem.handles
     X0, X1 = np.asarray(fem.rest) * 1e3, res.best.rest * 1e3
     fig, ax = plt.subplots(figsize=(6.4, 5.6), dpi=120)
@@ -348,7 +349,7 @@ def write_usd(res, path) -> Path:
     start_pos, start_quat = final.steps[0].pos, final.steps[0].quat
     t = 0
     for k, X, val in res.accepted:
-        w.set_points("part", X, t)
+        w.set_points("part", lift_rest(fem, X), t)
         w.set_attribute("part", "objective", val, t)
         w.set_attribute("part", "iteration", k, t)
         w.set_pose("object", start_pos, start_quat, t)
@@ -368,7 +369,7 @@ def write_all(res, out: Path, *, scene_xml: Path, scene_toml: Path, stem: str | 
               extra: dict | None = None) -> dict:
     """Write every output (see the module docstring) together; return the summary with paths
     (``extra`` keys added to it, e.g. the restarts)."""
-    fem = res.problem.base.fem
+    fem = res.problem.mesh
     stem = stem or res.problem.base.name
     paths = output_paths(out, stem, fem.dim, target=res.problem.target is not None)
     s = summary(res)

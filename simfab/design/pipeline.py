@@ -17,7 +17,7 @@ from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
 from simfab.design import outputs
-from simfab.design.gradient import optimize_gradient
+from simfab.design.gradient import GRADIENT_LAG_TOL, design_recorder, optimize_gradient
 from simfab.design.optimize import optimize
 from simfab.design.parallel import Workers
 from simfab.design.problem import EvaluationSettings, ProblemSource, evaluate, make_problem, rebuild
@@ -56,7 +56,8 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
         the mesh-converged ones, warning when a constraint holds only on the coarse mesh
     method : "anneal" (simulated annealing, :mod:`simfab.design.optimize`) or "gradient" (a trust-region SQP on
-        the adjoint sensitivities, :mod:`simfab.design.gradient`: frictionless briefs, one run)
+        the adjoint sensitivities, :mod:`simfab.design.gradient`: one run; with friction its lag solved to at
+        most GRADIENT_LAG_TOL)
     """
     if method not in METHODS:
         raise InputError(f"must be one of {', '.join(METHODS)}, got {method!r}", where="--method")
@@ -64,9 +65,14 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         raise InputError("the gradient method is deterministic: restarts would repeat it", where="--restarts")
     ds = load_design_scene(scene, design=design, simulation=simulation, contact=contact, device=device)
     cm = ds.cm
-    if method == "gradient" and cm.contact.friction > 0:
-        raise InputError("the gradient design does not read frictional profiles yet (friction 0 only; "
-                         "--method anneal designs with friction)", where="--method")
+    if method == "gradient" and cm.contact.friction > 0 and cm.contact.lag_tol > GRADIENT_LAG_TOL:
+        # finite differences of whole frictional insertions jump with the number of lagging
+        # iterations at a loose lag; the adjoint differentiates the step at its converged lag
+        contact = dict(contact or {}, lag_tol=GRADIENT_LAG_TOL)
+        log(f"couple optimize: {cm.name}: the gradient method with friction solves the lag to "
+            f"lag_tol = {GRADIENT_LAG_TOL:g} (the scene's {cm.contact.lag_tol:g})", quiet=quiet)
+        ds = load_design_scene(scene, design=design, simulation=simulation, contact=contact, device=device)
+        cm = ds.cm
     if revolve is not None and cm.dim != 2:
         raise InputError("only a 2D section can be revolved", where="--revolve-axis")
     if revolve is not None and len(revolve) > 2 and revolve[2] and not ds.kept_regions:
@@ -105,9 +111,11 @@ def _anneal_checked(ds, source: ProblemSource, seed, restarts, scheduler, worker
     :class:`simfab.design.parallel.Workers`), check the design on refined meshes and correct;
     returns (DesignResult, summary extras)."""
     cm = ds.cm
-    initial = simulate(cm) if ds.brief.placement == "displacement" else None
+    # (the gradient method reuses the placement's insertion of the initial shape, recorded)
+    rec = design_recorder(cm, ds.brief) if method == "gradient" else None
+    initial = simulate(cm, recorder=rec) if ds.brief.placement == "displacement" else None
     problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed,
-                           source=source)
+                           source=source, initial_recorder=rec)
     if mesh_check and problem.target is not None:
         # target matching: the coarse mesh's bias on the whole profile is known before any iteration
         # from the initial shape's check; without it the first run matches the target with a
@@ -147,7 +155,7 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
     """
     name = res.problem.base.name
     log(f"couple optimize: {name}: mesh check of the optimized shape (quadratic elements)", quiet=quiet)
-    check = check_mesh(res.problem, res.best.rest, figures0=res.best.figures, quiet=quiet)
+    check = check_mesh(res.problem, res.best.rest, figures0=res.best.figures, result0=res.best.result, quiet=quiet)
 
     def key(r, c):
         return (not c["feasible_fine"], checked_objective(r.problem, r.best, c))
@@ -168,7 +176,7 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
             nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet,
                            workers=workers if problem.source is not None else 1, start=res_b.best.h,
                            iterations=max(problem.brief.iterations // 2, 1))
-        c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, quiet=quiet)
+        c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, result0=nxt.best.result, quiet=quiet)
         better = key(nxt, c) < key(*best)
         rounds.append({"round": k + 1, "factors": factors, "feasible_fine": c["feasible_fine"],
                        "objective_fine": key(nxt, c)[1], "iterations": nxt.iterations, "seconds": nxt.seconds,
@@ -185,7 +193,7 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
     optimized 2D one (``optimized``: its output paths; ``scene``: the DesignScene, for its keep
     sites), simulated: {"outputs": paths, and with arms: "elements", "seconds", "category",
     "figures", "constraints", "warnings"}."""
-    fem = res.problem.base.fem
+    fem = res.problem.mesh  # (the design's linear mesh)
     if not arms:
         loop = boundary_loops(fem.boundary_facets)[0]
         mesh = revolve_outline(res.best.rest[loop], axis=axis, offset=offset)

@@ -57,7 +57,7 @@ from simfab.design.handles import Handles, make_handles
 from simfab.design.modification import ModificationEnergy
 from simfab.design.placement import place_handles
 from simfab.design.scene import load_design_scene
-from simfab.design.stress import STRESS_RADIUS, averaged_von_mises
+from simfab.design.stress import STRESS_RADIUS, record_averaged_von_mises
 from simfab.errors import ConvergenceError, InputError
 
 #: A candidate element must keep this fraction of its initial mean-ratio quality.
@@ -106,11 +106,31 @@ def seat_clearance(res, index: int) -> float:
     return float(d.min() - np.max(cm.dhat))
 
 
+def linear_mesh(fem):
+    """The linear mesh the design acts on: ``fem`` itself, or for a quadratic (P2) model the linear
+    :class:`simfab.fem.model.FemModel` it was lifted from (its corners; the edge nodes follow at the
+    edges' midpoints, :func:`simfab.coupling.model.with_rest_shape`). Handles, E_L, the element
+    quality bound and the outputs act on it."""
+    return fem.linear if getattr(fem, "element_order", 1) == 2 else fem
+
+
+def lift_rest(fem, X: np.ndarray) -> np.ndarray:
+    """Node rest positions (fem.n_vertices, dim) [m] of a design X on :func:`linear_mesh` (fem):
+    X itself, or for P2 the corners X followed by the edge nodes at the edges' midpoints
+    (as :func:`simfab.fem.p2.to_p2` places them)."""
+    X = np.asarray(X, float)
+    if getattr(fem, "element_order", 1) != 2:
+        return X
+    e = np.asarray(fem.edges, np.int64)
+    return np.r_[X, 0.5 * (X[e[:, 0]] + X[e[:, 1]])]
+
+
 def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
     """Figures of an insertion the constraints read: coupling_ratio [%], grip_force,
     insertion_force, removal_force, hold_force [N] (frictional with friction: removal and hold from
     the removal traversal), von_mises [Pa] (max over the insertion and removal of the von Mises
-    stress averaged over ``stress_radius`` [m], :mod:`simfab.design.stress`), seat_clearance [m]
+    stress averaged over ``stress_radius`` [m], :mod:`simfab.design.stress`; on P2 elements at the
+    quadrature points, :func:`simfab.design.stress.record_averaged_von_mises`), seat_clearance [m]
     (gap between part and object at the steady state, <= 0 in contact), and category, E_max, E_ss
     [J], von_mises_peak [Pa] (the largest element stress, mesh-dependent at sharp corners)."""
     prof = analyze_run(res)
@@ -120,7 +140,7 @@ def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
     touched = prof.E_max > floor
     return {"coupling_ratio": prof.coupling_ratio if touched else 100.0, "grip_force": prof.F_grip,
             "insertion_force": prof.F_in, "removal_force": prof.F_rm, "hold_force": prof.F_hold,
-            "von_mises": max(averaged_von_mises(fem, r.von_mises, stress_radius) for r in [*res.steps, *res.removal]),
+            "von_mises": max(record_averaged_von_mises(fem, r, stress_radius) for r in [*res.steps, *res.removal]),
             "von_mises_peak": float(max(r.max_von_mises for r in [*res.steps, *res.removal])),
             "seat_clearance": seat_clearance(res, prof.index_ss),
             "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss,
@@ -186,6 +206,8 @@ class DesignProblem:
     initial : the unmodified shape's insertion (``simulate(base)``, e.g. run for the displacement
         placement), which :func:`initial_evaluation` scores instead of running it again; None:
         it is simulated there
+    initial_recorder : the recorder ``initial`` was run with (``simulate``'s ``recorder``, e.g. the
+        gradient method's :class:`simfab.design.gradient.DeferredRecorder`), or None
     """
 
     base: CouplingModel
@@ -202,6 +224,13 @@ class DesignProblem:
     source: ProblemSource | None = None
     settings: EvaluationSettings = field(default_factory=EvaluationSettings)
     initial: InsertionResult | None = None
+    initial_recorder: object = None
+
+    @property
+    def mesh(self):
+        """The linear mesh the design acts on (:func:`linear_mesh` of ``base.fem``): ``handles``,
+        ``energy``, ``q0`` and every design's ``rest`` are on its vertices."""
+        return linear_mesh(self.base.fem)
 
     def with_settings(self, **changes) -> "DesignProblem":
         """This problem with :class:`EvaluationSettings` fields ``changes`` replaced."""
@@ -216,7 +245,8 @@ class DesignProblem:
 
 def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetProfile | None = None,
                  initial: InsertionResult | None = None, handle_vertices=None, seed: int = 0,
-                 source: ProblemSource | None = None, settings: EvaluationSettings | None = None) -> DesignProblem:
+                 source: ProblemSource | None = None, settings: EvaluationSettings | None = None,
+                 initial_recorder=None) -> DesignProblem:
     """Set up the optimization of scene ``cm``'s part.
 
     kept_regions : vertex index arrays kept unchanged besides the fixed support (keep sites)
@@ -227,20 +257,26 @@ def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), ta
     source : a :class:`ProblemSource` naming the scene this problem was loaded from (its handle
         vertices and seed are filled in here); needed by parallel evaluation
     settings : :class:`EvaluationSettings` (default: none)
+    initial_recorder : the recorder ``initial`` was simulated with (kept with it), or None
     """
-    if cm.options.element_order != 1:  # handles and the modification energy act on a linear mesh
-        raise InputError("the rest-shape optimizer runs on linear elements only; set element_order = 1",
-                         where="[simulation] element_order")
-    fem = cm.fem
+    # handles, E_L and the quality bound act on the linear mesh; a P2 model's candidates are lifted
+    # from it (edge nodes at the midpoints), so only its corners (the first n_corners nodes) are design vertices
+    fem = linear_mesh(cm.fem)
     X = np.asarray(fem.rest, float)
-    regions = [np.asarray(cm.fixed_vertices)] + [np.asarray(r) for r in kept_regions if len(r)]
+    n = len(X)
+
+    def corners(v):
+        v = np.asarray(v, np.int64)
+        return v[v < n]
+
+    regions = [corners(cm.fixed_vertices)] + [corners(r) for r in kept_regions if len(corners(r))]
     kept = np.unique(np.concatenate(regions))
     if handle_vertices is None:
         disp = None
         if brief.placement == "displacement":
             if initial is None:
                 initial = simulate(cm)
-            disp = max_displacement(initial)
+            disp = max_displacement(initial)[:n]
         handle_vertices = place_handles(X, fem.elements, brief.handles, kept, method=brief.placement,
                                         displacement=disp, seed=seed)
     H = make_handles(X, fem.elements, handle_vertices, regions)
@@ -251,14 +287,16 @@ def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), ta
     lower = np.tile(np.r_[np.full(d, -t_max), np.full(d, lo_s)], m)
     upper = np.tile(np.r_[np.full(d, t_max), np.full(d, hi_s)], m)
     sigma0 = np.tile(np.r_[np.full(d, SIGMA_TRANSLATION_REL * diag), np.full(d, SIGMA_SCALE)], m)
-    ys = fem.material.yield_stress if fem.material is not None else None
+    mat = cm.fem.material
+    ys = mat.yield_stress if mat is not None else None
     return DesignProblem(base=cm, brief=brief, limits=B.bounds(brief, ys), handles=H,
                          energy=ModificationEnergy(X, fem.boundary_facets), target=target, kept=kept,
                          q0=element_quality(X, fem.elements), lower=lower, upper=upper, sigma0=sigma0,
                          source=None if source is None else dataclasses.replace(
                              source, handle_vertices=tuple(int(v) for v in H.vertex[H.active]), seed=seed),
                          settings=EvaluationSettings() if settings is None else settings,
-                         initial=initial if initial is not None and initial.model is cm else None)
+                         initial=initial if initial is not None and initial.model is cm else None,
+                         initial_recorder=initial_recorder if initial is not None and initial.model is cm else None)
 
 
 def rebuild(source: ProblemSource, settings: EvaluationSettings | None = None) -> DesignProblem:
@@ -336,7 +374,7 @@ def restricted(problem: DesignProblem, ev: Evaluation, threshold: float) -> Eval
 
 def shape_defect(problem: DesignProblem, X: np.ndarray) -> str:
     """Why X is not a valid rest shape ("inverted element", "degenerate element"), or ""."""
-    q = element_quality(X, problem.base.fem.elements)
+    q = element_quality(X, problem.mesh.elements)
     if np.any(q <= 0):
         return "inverted element"
     if np.any(q < QUALITY_REL * problem.q0):
@@ -408,7 +446,7 @@ def _bound_watch(problem: DesignProblem, cm, base: float, threshold: float, trac
         value = {"insertion_force": max(0.0, -run["F_lo"]),
                  "removal_force": max(0.0, run["F_rm"] if frictional else run["F_hi"])}
         if "von_mises" in terms:
-            run["sigma"] = max(run["sigma"], averaged_von_mises(cm.fem, rec.von_mises, radius))
+            run["sigma"] = max(run["sigma"], record_averaged_von_mises(cm.fem, rec, radius))
             value["von_mises"] = run["sigma"]
         bound = base + B.PENALTY_WEIGHT * sum(max(0.0, corr[c] * value[c] - hi) ** 2 / B.SCALES[c] ** 2
                                               for c, hi in terms.items())

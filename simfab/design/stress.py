@@ -81,15 +81,32 @@ def quadrature_von_mises(fem, x) -> np.ndarray:
         return np.where(J > 0, dev * np.asarray(fem.mu)[:, None] / J, np.inf)
 
 
-def p2_averaged_von_mises(fem, x, radius: float) -> float:
-    """max_q sigma_bar_q [Pa] of a P2 model at positions x (n, dim) [m] (module docstring; the
-    averaging matrix is memoized on ``fem`` per radius)."""
+def quadrature_averaging_matrix(fem, radius: float) -> sp.csr_matrix:
+    """(m nq, m nq) row-stochastic matrix A averaging a P2 model's quadrature-point stresses
+    (element-major, as ``quadrature_von_mises(fem, x).ravel()``) over the points within ``radius``
+    [m], weighted by their quadrature weights (memoized on ``fem`` per radius)."""
     cache = fem.__dict__.setdefault("_stress_averaging_qp", {}) if hasattr(fem, "__dict__") else {}
     A = cache.get(radius)
     if A is None:
         c = _qp_rest(fem)
         A = cache[radius] = _ball_mean_matrix(c.reshape(-1, fem.dim), np.abs(np.asarray(fem.qp_weight)).ravel(), radius)
-    return float((A @ quadrature_von_mises(fem, x).ravel()).max())
+    return A
+
+
+def p2_averaged_von_mises(fem, x, radius: float) -> float:
+    """max_q sigma_bar_q [Pa] of a P2 model at positions x (n, dim) [m] (module docstring;
+    :func:`quadrature_averaging_matrix`)."""
+    return float((quadrature_averaging_matrix(fem, radius) @ quadrature_von_mises(fem, x).ravel()).max())
+
+
+def record_averaged_von_mises(fem, record, radius: float) -> float:
+    """The averaged von Mises maximum [Pa] of one insertion record (``x``, ``von_mises``) on ``fem``:
+    per element (:func:`averaged_von_mises` of the record's element stresses) on linear elements, at
+    the quadrature points on P2 (:func:`p2_averaged_von_mises`: the record keeps only each P2
+    element's largest point stress, which is biased high and not differentiable)."""
+    if getattr(fem, "element_order", 1) == 2:
+        return p2_averaged_von_mises(fem, record.x, radius)
+    return averaged_von_mises(fem, record.von_mises, radius)
 
 
 def _qp_rest(fem) -> np.ndarray:

@@ -55,18 +55,18 @@ from simfab.coupling.converge import extrapolate
 from simfab.coupling.model import make_coupling_model
 from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
-from simfab.design.problem import profile_figures
-from simfab.design.stress import p2_averaged_von_mises
+from simfab.design.problem import linear_mesh, profile_figures
 from simfab.fem.model import make_model
 from simfab.fem.p2 import to_p2
 from simfab.fem.subdivide import midpoint_mask, subdivide
 
 
-def check_levels(refinements: int = 1) -> tuple:
+def check_levels(refinements: int = 1, order: int = 1) -> tuple:
     """The check's levels, (element order, uniform subdivisions): the optimization mesh (linear,
     as annealed), then P2 on it and on its ``refinements`` successive refinements
-    (``[design] check_refinements``; the choice: module docstring)."""
-    return ((1, 0),) + tuple((2, t) for t in range(int(refinements) + 1))
+    (``[design] check_refinements``; the choice: module docstring). A design optimized on P2
+    (``order`` 2) starts at P2 on the optimization mesh."""
+    return ((1, 0),) * (order == 1) + tuple((2, t) for t in range(int(refinements) + 1))
 
 
 #: Correction factors are clipped to this range (a coarse linear mesh is too stiff by tens of percent,
@@ -89,10 +89,11 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
     :func:`simfab.fem.p2.to_p2`): the fixed support is every vertex (and P2 edge node) whose
     parents were all fixed; the insertion options are cm's with ``element_order = order`` and
     ``steps_factor`` times its steps along the same path."""
-    fem = cm.fem
+    fem = linear_mesh(cm.fem)  # rest: on the linear mesh (a P2 scene's corners)
     X, el = np.asarray(rest, float), np.asarray(fem.elements)
     fixed = np.zeros(len(X), bool)
-    fixed[np.asarray(cm.fixed_vertices)] = True
+    fv = np.asarray(cm.fixed_vertices, np.int64)
+    fixed[fv[fv < len(X)]] = True
     for _ in range(times):
         X, el, edges = subdivide(X, el)
         fixed = midpoint_mask(fixed, edges)
@@ -113,22 +114,17 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
 
 
 def level_figures(res, stress_radius: float) -> dict:
-    """:func:`simfab.design.problem.profile_figures` of an insertion; on P2 elements the averaged
-    stress at quadrature-point resolution (:func:`simfab.design.stress.p2_averaged_von_mises`: the
-    insertion records only each element's largest quadrature-point stress, biased high)."""
-    f = profile_figures(res, stress_radius)
-    if res.model.options.element_order == 2:
-        f["von_mises"] = max(p2_averaged_von_mises(res.model.fem, r.x, stress_radius)
-                             for r in [*res.steps, *res.removal])
-    return f
+    """:func:`simfab.design.problem.profile_figures` of an insertion (on P2 elements the averaged
+    stress at quadrature-point resolution, :func:`simfab.design.stress.record_averaged_von_mises`)."""
+    return profile_figures(res, stress_radius)
 
 
-def as_levels(levels) -> tuple:
+def as_levels(levels, order: int = 1) -> tuple:
     """Normalize check levels: (element order, subdivisions) pairs; a bare int t means linear
-    elements subdivided t times. The first level must be the optimization mesh, (1, 0)."""
+    elements subdivided t times. The first level must be the optimization mesh, (``order``, 0)."""
     out = tuple((1, int(lv)) if np.isscalar(lv) else (int(lv[0]), int(lv[1])) for lv in levels)
-    if not out or out[0] != (1, 0):
-        raise ValueError(f"the first check level must be the optimization mesh (1, 0), got {out[:1]}")
+    if not out or out[0] != (order, 0):
+        raise ValueError(f"the first check level must be the optimization mesh ({order}, 0), got {out[:1]}")
     if any(o not in (1, 2) or t < 0 for o, t in out):
         raise ValueError(f"check levels must be (order 1|2, subdivisions >= 0), got {out}")
     return out
@@ -175,26 +171,32 @@ def _run_figures(problem, res) -> dict:
     return f
 
 
-def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, levels=None, quiet: bool = True) -> dict:
+def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, result0=None, levels=None,
+               quiet: bool = True) -> dict:
     """Run the design ``rest`` at each level and compare (see the module docstring).
 
     figures0 : the optimizer's figures of ``rest`` (level 0), reused instead of simulating again
         (not for target matching: its RMS force error per level needs the profiles)
-    levels : (element order, subdivisions) pairs (or ints: linear), first (1, 0); default
-        :func:`check_levels` of the brief's ``check_refinements``
+    result0 : the optimizer's insertion of ``rest`` with ``figures0``: on a P2 optimization mesh the
+        step check (:func:`step_check`) reads its warnings (without it, level 0 reused, none runs)
+    levels : (element order, subdivisions) pairs (or ints: linear), first the optimization mesh
+        (its element order, 0); default :func:`check_levels` of the brief's ``check_refinements``
     Returns {"levels": [{element_order, subdivisions, elements, nodes, seconds, category}],
     "figures": {name: {values, extrapolated, order, converging, difference_of_optimization_mesh,
     reference_change}}, "constraints": [{name, value, lo, hi, satisfied}] at the reference values,
     "feasible_fine": bool, "reference", "units"}.
     """
     cm = problem.base
-    levels = as_levels(check_levels(problem.brief.check_refinements) if levels is None else levels)
+    order = int(cm.options.element_order)
+    levels = as_levels(check_levels(problem.brief.check_refinements, order) if levels is None else levels, order)
     rows, figs, profiles = [], [], []
     steps = None
     for o, t in levels:
         t0 = time.perf_counter()
-        if (o, t) == (1, 0) and figures0 is not None and problem.target is None:
+        if (o, t) == (order, 0) and figures0 is not None and problem.target is None:
             f, n, nodes = figures0, cm.fem.n_elements, cm.fem.n_vertices
+            if (o, t) == (2, 0) and result0 is not None:
+                steps = step_check(problem, rest, result0, f, quiet=quiet)
         else:
             m = refined_model(cm, rest, t, o)
             res = simulate(m, quiet=quiet)
@@ -284,7 +286,8 @@ def check_warnings(check: dict) -> list[str]:
     ref = f"P{lv[-1].get('element_order', 1)} on {lv[-1]['elements']} elements"
     if st is not None:
         ref += f", with the step factors of {st['steps']} steps"
-    return out + [f"mesh-converged ({ref}; the optimization mesh: {lv[0]['elements']} linear) "
+    kind = "P2" if lv[0].get("element_order", 1) == 2 else "linear"
+    return out + [f"mesh-converged ({ref}; the optimization mesh: {lv[0]['elements']} {kind}) "
                   f"the design misses: {what}"]
 
 

@@ -220,8 +220,8 @@ CASES = [
     ("couple-garbage-outline-csv", ["couple", "simulate", "{cc_garbage_csv}"], 2, ["garbage.csv", "cannot read"]),
     ("couple-garbage-stl", ["couple", "simulate", "{cc_garbage_stl}"], 2, ["garbage.stl"]),
     ("couple-garbage-target-profile", ["couple", "optimize", "{cc_garbage_target}"], 2, ["garbage.csv"]),
-    ("couple-gradient-with-friction", ["couple", "optimize", "block2d_tight", "--method", "gradient", "--friction",
-                                       "0.3"], 2, ["--method", "friction"]),
+    ("couple-optimize-element-order-3", ["couple", "optimize", "block2d_tight", "--element-order", "3"], 2,
+     ["--element-order"]),
     ("couple-gradient-restarts", ["couple", "optimize", "block2d_tight", "--method", "gradient", "--restarts", "2"], 2,
      ["--restarts"]),
     # issue 32 class 5: a zero quaternion is the one error line (no NumPy warning before it)

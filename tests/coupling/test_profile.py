@@ -76,3 +76,20 @@ def test_hold_force_is_read_at_the_onset_of_sliding():
     assert hold_force(np.array([0.0, 0.0, 1.2]), np.ones(3), 1.2) == 0.0
     # a pull that peaked while sticking counts
     assert hold_force(np.array([50.0, 20.0, 25.0]), np.array([0.0, 0.0, 1.0]), 50.0) == 50.0
+
+
+def test_grip_interpolated_over_the_rest_search_bracket_at_its_last_record():
+    """A tight profile continued to rest: planned records, then the rest search's (from index 6),
+    whose last record lies past the force's zero crossing (O pushed back from the seat). The grip is
+    read at F = 0 between the search's last two records, G linear in F there: G(F=0) = 4 exactly,
+    wherever the search stopped; with the record before the last a planned one, it is the last
+    record's value (no bracket of the rest point)."""
+    s = np.r_[np.linspace(0.0, 5e-3, 6), 5.002e-3, 5.003e-3]
+    E = np.array([0.0, 2.0, 5.0, 3.0, 2.0, 1.6, 1.5, 1.45])
+    for F_last in (-1.0, -3.0):  # two stops of the search, both past the rest point
+        F = np.array([0.0, -2.0, -3.0, 2.0, 1.0, 0.5, 2.0, F_last])
+        G = 4.0 + 0.5 * F  # grip linear in the force near the seat
+        p = analyze(s, E, F, G, rest_from=6)
+        assert p.index_ss == 7 and p.F_grip == pytest.approx(4.0)
+        assert analyze(s, E, F, G).F_grip == pytest.approx(G[7])  # no rest search: the record itself
+        assert analyze(s, E, F, G, rest_from=7).F_grip == pytest.approx(G[7])  # record before it planned

@@ -76,3 +76,20 @@ def test_flat_start_closes_the_gap():
     assert res.simulations == res.gradient_evaluations + 1
     assert res.best.status == "ok" and res.best.figures["category"] != "none"
     assert res.best.objective < res.initial.objective
+
+
+def test_an_ejecting_start_with_a_coupling_ratio_bound_is_a_flat_start():
+    # clip2d_eject's profile has no dip after its peak: CR = 100 % for every shape nearby (gradient
+    # zero), which no SQP step can linearize towards a loose or tight brief's bound
+    cm = load_coupling_scene("clip2d_eject", overrides={"simulation": {"steps": 10}})
+    P = make_problem(cm, DesignBrief(grip="loose", handles=3, placement="spatial"))
+    Jh = G.handle_jacobian(P.handles)
+    ev = evaluate(P.with_settings(hold_steps=True), P.handles.identity(), keep_result=True,
+                  recorder=lambda cm: G.DeferredRecorder(cm, G.stress_measure(P, cm)))
+    fg = G.figure_gradients(P, ev, Jh)
+    assert ev.figures["category"] == "ejects" and ev.figures["coupling_ratio"] == 100.0
+    assert np.abs(fg.gradients["coupling_ratio"]).max() <= 1e-9 * np.abs(fg.gradients["E_max"]).max()
+    assert G.flat_start(G.constraint_rows(P), fg, {})
+    # without a coupling-ratio bound ("any" grip) the forces' gradients give the SQP its direction
+    P_any = make_problem(cm, DesignBrief(grip="any", insertion_force=(0.0, 0.1), handles=3, placement="spatial"))
+    assert not G.flat_start(G.constraint_rows(P_any), fg, {})

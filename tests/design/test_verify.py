@@ -6,7 +6,7 @@ import pytest
 
 from simfab.design.brief import DesignBrief
 from simfab.design.problem import make_problem, profile_figures
-from simfab.design.verify import check_warnings, mesh_check, refined_model
+from simfab.design.verify import check_levels, check_warnings, mesh_check, refined_model
 
 
 @pytest.fixture(scope="module")
@@ -187,16 +187,25 @@ def test_profile_factor_leaves_out_the_search_for_the_rest_point():
     assert abs(float(f0 @ ref / (f0 @ f0)) - 0.8) > 0.02  # with the seat's records: off
 
 
-def test_the_optimizer_refuses_p2_and_the_check_leaves_its_model_linear(problem):
-    """Only the check runs P2: the annealing's problem stays on the linear coarse mesh, and a
-    scene asking for P2 elements is refused by the optimizer with the field named."""
+def test_a_p2_problem_designs_on_the_linear_mesh_and_its_check_starts_at_p2(problem):
+    """A scene with P2 elements: the handles, E_L and the quality bound act on its linear mesh, every
+    candidate is simulated on P2 (edge nodes at the midpoints of the moved linear mesh), and the mesh
+    check's first level is the optimization mesh itself (P2 1x), then P2 refined; the linear
+    problem's check leaves its model linear."""
     from simfab.coupling.scene import load_coupling_scene
-    from simfab.errors import InputError
+    from simfab.design.problem import candidate_model, lift_rest
 
     p2 = load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 8, "element_order": 2}})
-    with pytest.raises(InputError) as e:
-        make_problem(p2, problem.brief)
-    assert "element_order" in str(e.value.where)
-    m = refined_model(problem.base, problem.base.fem.rest, 0, 2)
-    assert m.options.element_order == 2 and problem.base.options.element_order == 1
+    P = make_problem(p2, problem.brief)
+    assert P.mesh is p2.fem.linear and P.handles.rest.shape == (p2.fem.n_corners, 2)
+    assert np.all(P.kept < p2.fem.n_corners)
+    X = P.handles.apply(P.handles.identity() + 0.5 * P.sigma0)
+    cm, why = candidate_model(P, X)
+    assert not why and cm.fem.element_order == 2
+    assert np.allclose(cm.fem.rest, lift_rest(p2.fem, X))
+    assert check_levels(1, 2) == ((2, 0), (2, 1)) and check_levels(1) == ((1, 0), (2, 0), (2, 1))
+    m = refined_model(p2, X, 1, 2)
+    assert m.fem.n_elements == 4 * p2.fem.n_elements and m.options.element_order == 2
+    lin = refined_model(problem.base, problem.base.fem.rest, 0, 2)
+    assert lin.options.element_order == 2 and problem.base.options.element_order == 1
     assert type(problem.base.fem).__name__ == "FemModel"

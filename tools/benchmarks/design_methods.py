@@ -1,7 +1,7 @@
 """Annealing against gradient design on the bundled design scenes.
 
 ``python tools/bench.py design_methods [--scenes a,b,...] [--methods anneal,gradient] [--seeds 0,1,2] [--out DIR]
-[--profile-handles 2,4,8]``
+[--profile-handles 2,4,8] [--element-orders 1,2] [--friction MU]``
 
 For every scene, method and seed: ``simfab couple optimize NAME --method M --seed S`` (its [design]
 brief; annealing on 2 workers, the gradient method in one process; the mesh check with its
@@ -15,7 +15,9 @@ error, coarse and mesh-corrected),
 gradient method does not depend on the seed except through the handle placement and its annealing
 pre-phase. ``profile2d`` runs once per count of ``--profile-handles`` (default: the scene's 4), its
 [design] handles overridden (``handles`` in the row; annealing gets the scene's iterations per handle,
-:func:`simfab.design.study.iterations_per_handle_budget`).
+:func:`simfab.design.study.iterations_per_handle_budget`). ``--element-orders`` runs each with those
+element orders (``couple optimize --element-order``: 2 simulates every candidate on P2, the handles on
+the linear mesh); ``--friction`` sets ``[contact] friction``.
 """
 
 from __future__ import annotations
@@ -46,7 +48,11 @@ def run(argv) -> dict:
     ap.add_argument("--seeds", default="0")
     ap.add_argument("--out", default=None)
     ap.add_argument("--profile-handles", default=None, help="profile2d's handle counts, e.g. 2,4,8")
+    ap.add_argument("--element-orders", default=None, help="e.g. 1,2 (default: the scene's)")
+    ap.add_argument("--friction", type=float, default=None)
     a = ap.parse_args(argv)
+    orders = [None] if a.element_orders is None else [int(o) for o in a.element_orders.split(",")]
+    contact = {} if a.friction is None else {"friction": a.friction}
     out = Path(a.out) if a.out else Path(tempfile.mkdtemp(prefix="design_methods_"))
     rows = []
     runs = []
@@ -57,17 +63,20 @@ def run(argv) -> dict:
         runs += [(scene, k) for k in counts]
     for scene, k in runs:
         for method in a.methods.split(","):
-            for seed in (int(s) for s in a.seeds.split(",")):
+            for seed, order in ((int(s), o) for s in a.seeds.split(",") for o in orders):
                 design = None
                 if k is not None:
                     brief = load_design_scene(scene).brief
                     design = {"handles": k, "iterations": iterations_per_handle_budget(brief, k)}
                 t0 = time.perf_counter()
-                s = optimize_scene(scene, out=out / f"{scene}{'' if k is None else f'_h{k}'}_{method}_{seed}",
-                                   quiet=True, seed=seed, design=design,
-                                   workers=2 if method == "anneal" else 1, method=method)
+                sim = {} if order is None else {"element_order": order}
+                name = f"{scene}{'' if k is None else f'_h{k}'}_{method}_{seed}_{order}"
+                s = optimize_scene(scene, out=out / name, quiet=True, seed=seed, design=design,
+                                   workers=2 if method == "anneal" else 1, method=method, simulation=sim,
+                                   contact=contact)
                 mc = s.get("mesh_check") or {}
                 rows.append({"scene": scene, "handles": s["handles"]["active"], "method": method, "seed": seed,
+                             "element_order": order, "friction": a.friction,
                              "insertions": s.get("insertions_total", s["insertions"]),
                              "gradient_evaluations": s["gradient_evaluations"],
                              "seconds": time.perf_counter() - t0, "E_L": s["E_L"], "rms_error_N": s.get("rms_error"),

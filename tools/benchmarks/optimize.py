@@ -22,7 +22,8 @@ reference too); the runs must reach the same design.
 ``--method gradient`` runs the trust-region SQP on the adjoint sensitivities (:mod:`simfab.design.gradient`)
 instead of the annealing (one process; ``--iterations`` caps the SQP's iterations, one insertion each);
 ``insertions`` counts every insertion simulation of the optimization (complete, stopped early, speculative;
-the placement's initial insertion and the mesh check excluded), ``gradient_evaluations`` those that gave gradients.
+the placement's initial insertion and the mesh check excluded; the gradient method reuses that insertion,
+recorded, as its first), ``gradient_evaluations`` those that gave gradients.
 
 Reference: the original method's 4.8 s per stand-side insertion simulation (shared reference
 figures, "insertion_simulation_seconds_original", row "stand side (2D)") times its up to 300
@@ -95,6 +96,7 @@ def _fastest(a, first: dict) -> dict:
     best = dict(min(runs, key=lambda r: r["seconds"]))
     check = first["mesh_check"]
     best.update(mesh_check=check, seconds_with_mesh_check=best["seconds"] + check["seconds"] if check else None,
+                meets_target=best["meets_target"] and (check is None or bool(check["feasible_mesh_converged"])),
                 seconds_all_runs=[r["seconds"] for r in runs],
                 seconds_median=statistics.median(r["seconds"] for r in runs),
                 machine_reference_ms_all_runs=[r["machine_reference_ms"] for r in runs])
@@ -106,7 +108,7 @@ def _run_once(a) -> dict:
     from benchmarks._machine import machine_reference_ms
     from benchmarks._reference import figures
     from simfab.coupling.simulate import simulate
-    from simfab.design.gradient import optimize_gradient
+    from simfab.design.gradient import design_recorder, optimize_gradient
     from simfab.design.optimize import optimize
     from simfab.design.outputs import insertions
     from simfab.design.parallel import Workers
@@ -123,9 +125,11 @@ def _run_once(a) -> dict:
     with Workers(workers) if workers > 1 else contextlib.nullcontext(1) as procs:
         # as `couple optimize`: the workers start while this process places the handles
         t1 = time.perf_counter()
-        initial = simulate(ds.cm)
+        # (the gradient method reuses this insertion of the initial shape, recorded, as couple optimize does)
+        rec = design_recorder(ds.cm, ds.brief) if a.method == "gradient" else None
+        initial = simulate(ds.cm, recorder=rec)
         problem = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial,
-                               seed=a.seed, source=ProblemSource(scene=str(ds.xml)))
+                               seed=a.seed, source=ProblemSource(scene=str(ds.xml)), initial_recorder=rec)
         t_setup = time.perf_counter() - t1
         if a.method == "gradient":
             res = optimize_gradient(problem, iterations=a.iterations, seed=a.seed)
@@ -188,7 +192,9 @@ def _run_once(a) -> dict:
         "fraction_outside_simulator": max(0.0, 1.0 - sim_seconds / (total * res.workers)),
         "rejected": res.rejected,
         "target_seconds": TARGET_SECONDS[a.method],
-        "meets_target": total <= TARGET_SECONDS[a.method] and res.best.feasible,
+        # (and, when the mesh check runs, the design meets the brief on it)
+        "meets_target": total <= TARGET_SECONDS[a.method] and res.best.feasible and (
+            check is None or bool(check["feasible_mesh_converged"])),
         "reference": {"source": "insertion_simulation_seconds_original: stand side (2D) x 300 iterations",
                       "seconds_per_simulation": row["seconds"] if row else None, "seconds": ref_total},
         "speedup_vs_reference": ref_total / total if ref_total else None,
