@@ -290,7 +290,7 @@ def adapt_kappa(cm: CouplingModel, state: StepState, obj: StepObjective) -> None
 
 
 def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContext, *,
-          floor: float = 0.0, stop=None) -> tuple[np.ndarray, int]:
+          floor: float = 0.0) -> tuple[np.ndarray, int]:
     """Barrier Newton from x0. Stops when the free-dof force residual is below
     max(NEWTON_GRAD_TOL_REL * force_scale, NEWTON_GRAD_TOL_START * |residual at x0|) or the Newton
     step is below NEWTON_STEP_TOL_REL * h_A (projected Newton converges linearly once the PSD
@@ -306,8 +306,7 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     one throughout (``exact_first=False``; the next solve offers the exact one again): consecutive
     steps see similar Hessians, and a failed attempt costs an exact assembly and up to a
     factorization. ``floor`` [N] raises the force tolerance for a solve that is not final (a lagging
-    iteration). ``stop``: optional ``stop(obj, x, g) -> bool`` at every unconverged iterate, True
-    ends the solve with :class:`simfab.solve.newton.Stopped`. Returns (x (n, dim), Newton iterations)."""
+    iteration). Returns (x (n, dim), Newton iterations)."""
     _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n, floor)
@@ -316,8 +315,7 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
                          eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False,
                          exact_first=not (obj.lazy_exact and ctx.exact_failed))
     solver = TimedSolver(pinned(ctx.solver, obj.pin), ctx.timer)
-    res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver,
-                   stop=None if stop is None else (lambda x, g: stop(obj, x, g)))
+    res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
     ctx.exact_failed = res.exact_failures > 0
     return res.x.reshape(x0.shape), res.iterations
 

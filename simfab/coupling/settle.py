@@ -5,9 +5,7 @@ seats: at its last pose A still draws O in (path force > 0) and the energy is st
 E_ss read there is not the steady state. When the path's last segment is a pure translation and
 the insertion length is the default one, the run continues past the last keyframe straight on,
 with quarter steps, until the path force has gone through zero (O at rest: the energy at its
-minimum along the path), at most as far again as the planned path (:func:`to_rest`). The step
-that overshoots is solved only until its path force is certainly negative (:func:`overshoot`): the
-search needs its sign, and the bisection then starts from where its Newton solve stopped.
+minimum along the path), at most as far again as the planned path (:func:`to_rest`).
 
 **Checks** (:func:`warnings`, one line each, copied into the run's warnings):
 
@@ -29,12 +27,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from simfab.contact.barrier import point_barrier
 from simfab.coupling import config as C
 
 #: O is at rest when the path force (A drawing O in, > 0) is at most this fraction of the peak |force|.
 from simfab.coupling.profile import REST_FORCE_REL  # noqa: E402 (one definition)
-from simfab.coupling.record import path_velocity
 
 #: Continue past the path's end by at most this many times the planned number of steps (of
 #: SETTLE_STEP_REL times the planned size: 4 x 0.25, as far again as the planned path).
@@ -49,11 +45,6 @@ MIN_SETTLE_STEPS = 20
 REST_ENERGY_REL = 1e-3
 #: Trials to find the rest point once a step has overshot it.
 REST_TRIALS = 16
-#: The step that overshoots the rest point is abandoned as soon as its path force is certainly
-#: below -REST_FORCE_REL * peak: P_k + SIGN_MARGIN * r_k < -tol at a Newton iterate (P_k its path
-#: force, r_k its largest free-dof force residual [N]). Traced over the rest searches of the
-#: benchmark cases, |P_k - P*| / r_k stayed below 5.8 (P* the converged path force).
-SIGN_MARGIN = 10.0
 #: Largest mismatch between a step's work and its change of stored energy, relative to E_max.
 STEP_WORK_REL = 0.05
 #: Largest difference between F_in at a step and the peak of the parabola through its neighbours.
@@ -93,11 +84,11 @@ def to_rest(cm, stepper) -> str:
     stepper : the run's :class:`simfab.coupling.stepper.Stepper` (its ``steps`` so far; ``step`` solves a step from
     the current state, ``undo`` returns to the state before it, ``keep`` appends its record). Steps of SETTLE_STEP_REL
     times the last planned one (at most 1/MIN_SETTLE_STEPS of the path) go on while :func:`still_drawn_in`; a step
-    that overshoots the rest point (path force below -REST_FORCE_REL * peak: O pushed into a stiffer contact, known
-    once :func:`overshoot` stops its solve; or no solution: undone) starts the search; the rest point is bracketed
-    (:func:`_bracket`), every trial solved from the last one's state (a step back from past the rest point is short
-    and feasible: O moves away from A). It ends when the path force is within REST_FORCE_REL * peak of zero, or when
-    the energy between the bracket's ends is known to within REST_ENERGY_REL * E_max (see :func:`_bracket`).
+    that overshoots the rest point (path force below -REST_FORCE_REL * peak: O pushed into a stiffer contact, or no
+    solution: undone) starts the search; the rest point is bracketed (:func:`_bracket`), every trial solved from the
+    last one's state (a step back from past the rest point is short and feasible: O moves away from A). It ends when
+    the path force is within REST_FORCE_REL * peak of zero, or when the energy between the bracket's ends is known to
+    within REST_ENERGY_REL * E_max (see :func:`_bracket`).
 
     Returns "rest" (O came to rest), "not continued" (the path cannot be continued or was already
     at rest) or why it stopped short ("cap": the extension limit, "bracket": no rest point found).
@@ -112,47 +103,18 @@ def to_rest(cm, stepper) -> str:
     for _ in range(int(np.ceil(SETTLE_MAX_STEPS_REL * (len(cm.s_steps) - 1)))):
         if not still_drawn_in(steps):
             return "rest"
-        s_new = steps[-1].s + h
-        # (with friction the path force also has friction's part, and every trial is solved to the end)
-        attempt = stepper.step(s_new, tolerate=True,
-                               stop=None if stepper.history_dependent else overshoot(cm, s_new, tol))
+        attempt = stepper.step(steps[-1].s + h, tolerate=True)
         rec = attempt.record
         if rec is not None and rec.path_force >= -tol:
             stepper.keep(rec)
             continue
-        if (rec is None and not attempt.stopped) or stepper.history_dependent:
-            stepper.undo(attempt)  # (with friction every trial goes forward from the last kept)
-        return _bracket(steps[-1], rec, s_new, stepper, tol, REST_ENERGY_REL * E_max, hi_stopped=attempt.stopped)
+        if rec is None or stepper.history_dependent:  # (with friction every trial goes forward from the last kept)
+            stepper.undo(attempt)
+        return _bracket(steps[-1], rec, steps[-1].s + h, stepper, tol, REST_ENERGY_REL * E_max)
     return "rest" if not still_drawn_in(steps) else "cap"
 
 
-def overshoot(cm, s: float, tol: float):
-    """The early stop of the step to s [m] past the path's end (:meth:`Stepper.step`'s ``stop``): True
-    at a Newton iterate x whose path force P = sum_j f_j . v_j (the barrier's force on O at the
-    points in range, :func:`simfab.coupling.record.path_velocity`; as the step's record reads it) is
-    certainly below -tol [N]: P + SIGN_MARGIN * r < -tol with r the largest free-dof residual of g
-    (N,) [N]. The step then only tells the rest search that O went past its rest point: the overshoot
-    costs the iterations to the sign, not to Newton's tolerance (it pushes O into the seat, many
-    times the peak force, and its Newton steps are capped on the way)."""
-    free = np.asarray(cm.free).ravel()
-
-    def stop(obj, x, g) -> bool:
-        if obj.last_x is None or not np.array_equal(obj.last_x, x):  # (the accepted iterate's evaluation)
-            return False
-        d, gd = obj.last_d, obj.last_gd
-        act = np.flatnonzero(d < obj.dhat)
-        if not len(act):
-            return False
-        _, gy, _ = point_barrier(d[act], gd[act], None, obj.dhat[act], obj.kappa)
-        y = obj.points.positions(np.reshape(x, (cm.fem.n_vertices, cm.dim)))[act]
-        P = float(np.einsum("kd,kd->", gy, path_velocity(cm, s, y)))
-        r = float(np.abs(np.asarray(g)[free]).max(initial=0.0))
-        return P + SIGN_MARGIN * r < -tol
-
-    return stop
-
-
-def _bracket(lo, hi, hi_s, stepper, tol, e_tol, hi_stopped: bool = False) -> str:
+def _bracket(lo, hi, hi_s, stepper, tol, e_tol) -> str:
     """Find the rest point between the kept record ``lo`` (path force > 0) and an overshoot at
     ``hi_s`` (record ``hi``, None when unsolvable); see :func:`to_rest`.
 
@@ -164,9 +126,7 @@ def _bracket(lo, hi, hi_s, stepper, tol, e_tol, hi_stopped: bool = False) -> str
     state is then the last trial's): force through zero between them, the energy's minimum along
     the path at the lower end. With friction (``stepper.history_dependent``) every trial is solved
     forward from the lower end's state (an overshoot is undone: stepping back would reverse the
-    friction), and only the lower end is kept. ``hi_stopped``: the overshoot's solve was stopped once
-    its sign was certain (:func:`overshoot`; no record, the next trial starts from its last
-    iterate): should it still be the upper end at the end, it is solved then.
+    friction), and only the lower end is kept.
     """
     steps_last = lo
     for _ in range(REST_TRIALS):
@@ -180,20 +140,15 @@ def _bracket(lo, hi, hi_s, stepper, tol, e_tol, hi_stopped: bool = False) -> str
             return "rest"
         if rec is None or (stepper.history_dependent and rec.path_force <= 0):
             stepper.undo(attempt)
-            hi, hi_s, hi_stopped = (None if rec is None else rec), s_try, False
+            hi, hi_s = (None if rec is None else rec), s_try
         elif rec.path_force > 0:  # still drawn in: the new lower end
             lo = rec
         else:
-            hi, hi_s, hi_stopped = rec, s_try, False
+            hi, hi_s = rec, s_try
     else:
         if lo is not steps_last:
             stepper.keep(lo)
         return "bracket"
-    if hi_stopped and not stepper.history_dependent:  # the overshoot is the upper end: its record now
-        attempt = stepper.step(hi_s, tolerate=True)
-        hi = attempt.record
-        if hi is None:
-            stepper.undo(attempt)
     ends = (lo,) if stepper.history_dependent else (lo, hi)
     for end in ends:  # the ends' records, in order (the trials' own: no solve again)
         if end is not None and end is not steps_last:

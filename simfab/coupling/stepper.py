@@ -27,18 +27,15 @@ from simfab.coupling.refine import add_refinement, crossing_facets
 from simfab.coupling.rigid_check import WeakMotion, rigid_contact
 from simfab.coupling.state import PastStep, StepContext, StepState, accept
 from simfab.errors import ConvergenceError
-from simfab.solve.newton import Stopped
 
 
 @dataclass(frozen=True, eq=False)
 class StepAttempt:
     """A solved (or failed) step: its record (None when ``step(..., tolerate=True)`` could not solve
-    it, or when ``stop`` ended its solve: then ``stopped``) and the state before it (what
-    :meth:`Stepper.undo` returns to)."""
+    it) and the state before it (what :meth:`Stepper.undo` returns to)."""
 
     record: StepResult | None
     before: StepState
-    stopped: bool = False
 
 
 class Stepper:
@@ -74,20 +71,16 @@ class Stepper:
         self.weakest: WeakMotion | None = None
         self._weak: dict[int, WeakMotion | None] = {}  # id(record) -> its state's least resisted motion
 
-    def step(self, s: float, *, tolerate: bool = False, stop=None) -> StepAttempt:
+    def step(self, s: float, *, tolerate: bool = False) -> StepAttempt:
         """Solve the step from the current state to path length s [m] (the first step solves at s
         without moving O). With ``tolerate``, a step that cannot be solved gives a record of None
-        instead of raising ConvergenceError (the state is then undefined until :meth:`undo`).
-        ``stop``: optional ``stop(objective, x, g) -> bool`` asked at every unconverged Newton
-        iterate of the step's (first) solve; when it says True the step ends without a record
-        (``stopped``) and the state is that iterate at s when its facets are outside O
-        (:func:`keep_stopped`), else the state before; :meth:`undo` returns to the state before."""
+        instead of raising ConvergenceError (the state is then undefined until :meth:`undo`)."""
         cm, state, phases = self.cm, self.state, self.ctx.phases
         before = replace(state, refined=set(state.refined))
         try:
             solved_pin = state.pin_basis  # the pin the step's solution was solved with (see _states)
             solved_from = None  # the state it was solved from when that is not state.prev
-            iters = self._solve(s, stop)
+            iters = self._solve(s)
             with phases.timed("rigid_check"):
                 contact = rigid_contact(cm, state, self.free_motions)
             if (contact.basis.shape[1] < state.pin_basis.shape[1]
@@ -119,10 +112,6 @@ class Stepper:
             if not tolerate:
                 raise
             return StepAttempt(None, before)
-        except Stopped:
-            if state.s != s:  # (see keep_stopped: the stopped iterate could not be kept)
-                self.undo(StepAttempt(None, before))
-            return StepAttempt(None, before, stopped=True)
 
     def undo(self, attempt: StepAttempt) -> None:
         """Return to the state before ``attempt``."""
@@ -151,9 +140,9 @@ class Stepper:
         """Turn O around: the following steps move it back along the path (removal records)."""
         self.state.direction = -1
 
-    def _solve(self, s: float, stop=None) -> int:
+    def _solve(self, s: float) -> int:
         if self.steps:
-            return advance(self.cm, self.state, s, self.ctx, stop=stop)
+            return advance(self.cm, self.state, s, self.ctx)
         return solve_at(self.cm, self.state, s, self.ctx)
 
     def _pin_force(self, anchor: np.ndarray) -> float:
@@ -216,15 +205,12 @@ def start_lag(cm: CouplingModel, state: StepState, s_new: float) -> FrictionLag:
     return friction.lag(cm, pts, anchors, anchors - y, d, gd, kappa, rotation=rotation, normal_force=lam)
 
 
-def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext, depth: int = 0, *,
-            stop=None) -> int:
+def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext, depth: int = 0) -> int:
     """Move O from state.s to s_new and re-equilibrate A (warm start, Newton, refinement, and with
     friction the lagging iterations: the step solved again with the normal forces and tangents of
     its own solution until they change by less than ``lag_tol``, each solved to the residual
     :func:`lag_floor` only, then once more to Newton's tolerance with the settled lag); a step that
-    cannot be solved is bisected up to MAX_BISECTIONS deep. ``stop`` (see :meth:`Stepper.step`) is
-    asked in the first solve only (:class:`simfab.solve.newton.Stopped` ends the step). Returns the
-    Newton iterations."""
+    cannot be solved is bisected up to MAX_BISECTIONS deep. Returns the Newton iterations."""
     total = 0
     resume = None  # converged positions to resume from after a refinement (see below)
     refined = False  # points were added since the previous state was accepted
@@ -251,12 +237,7 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                         refined = False
                     x0 = predictor.warm_start(cm, state, s_new, obj, ctx).x
             with ctx.phases.timed("newton"):
-                x, it = solve(cm, obj, x0, ctx, floor=0.0 if settled else lag_floor(cm, lagged),
-                              stop=stop if rounds == 0 and not resumed else None)
-        except Stopped as stopped:
-            with ctx.phases.timed("facet_check"):
-                keep_stopped(cm, state, s_new, obj, stopped.x.reshape(x0.shape))
-            raise
+                x, it = solve(cm, obj, x0, ctx, floor=0.0 if settled else lag_floor(cm, lagged))
         except ConvergenceError:
             if resumed:  # the resumed solve failed: solve from the previous state instead
                 resume = None
@@ -305,18 +286,6 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
         refined = True
         resume = x
         settled = not frictional
-
-
-def keep_stopped(cm: CouplingModel, state: StepState, s_new: float, obj, x: np.ndarray) -> None:
-    """Make the iterate x (n, dim) where a step's solve was stopped (not converged; every point
-    outside O, as at every Newton iterate) the current state at s_new, when no boundary facet crosses
-    O there (the facet check every kept state passes); else leave the state as it was. A later step
-    then starts from it as from a converged one."""
-    final = evaluation(obj, x)
-    if cm.options.refine and crossing_facets(cm, x, s_new, state, final):
-        return
-    state.prev2, state.prev = state.prev, PastStep(state.x, state.s)
-    accept(state, x, s_new, obj.kappa, final)
 
 
 @dataclass(frozen=True, eq=False)

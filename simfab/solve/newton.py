@@ -21,10 +21,6 @@ Feasibility hooks (used by barrier-based contact):
 - ``admissible(x) -> bool`` rejects trial points (e.g. an inverted element); an objective
   value of ``+inf`` or NaN is rejected as well.
 
-Early stop: ``stop(x, g) -> bool``, asked at every accepted iterate that is not converged, ends the
-solve by raising :class:`Stopped` (the caller has learnt what it needed from the iterate, e.g. the
-sign of a force; the iterate is not a minimizer and is not returned as one).
-
 Convergence (checked at every iterate, on the free dofs only):
 
 1. gradient: ``||g_f||_inf <= grad_tol * scale`` where ``scale = options.grad_scale`` when given
@@ -132,15 +128,6 @@ class NewtonResult:
     reason: str = ""
     history: list = field(default_factory=list)
     exact_failures: int = 0
-
-
-class Stopped(Exception):
-    """The caller's ``stop`` criterion ended :func:`minimize` at iterate ``x`` (N,) after
-    ``iterations`` Newton iterations (not a ConvergenceError: nothing failed)."""
-
-    def __init__(self, x: np.ndarray, iterations: int):
-        super().__init__(f"stopped by the caller after {iterations} Newton iterations")
-        self.x, self.iterations = x, iterations
 
 
 class _FreeBlock:
@@ -251,7 +238,6 @@ def minimize(
     max_step: Callable[[np.ndarray, np.ndarray], float] | None = None,
     admissible: Callable[[np.ndarray], bool] | None = None,
     solver: SPDSolver | None = None,
-    stop: Callable[[np.ndarray, np.ndarray], bool] | None = None,
 ) -> NewtonResult:
     """Minimize ``fun`` from ``x0`` by projected Newton with backtracking line search.
 
@@ -271,12 +257,10 @@ def minimize(
         along the full-length direction ``dx`` (zero on fixed dofs).
     admissible : ``admissible(x) -> bool``; trial points failing it are rejected.
     solver : an :class:`SPDSolver` to reuse (keeps the symbolic analysis across calls).
-    stop : ``stop(x, g) -> bool`` at every accepted, unconverged iterate; True raises :class:`Stopped`.
 
     Returns
     -------
-    NewtonResult with ``converged=True``. Raises ConvergenceError otherwise (:class:`Stopped` when
-    ``stop`` ends it).
+    NewtonResult with ``converged=True``. Raises ConvergenceError otherwise.
     """
     x = np.array(x0, dtype=np.float64).ravel()
     n = x.size
@@ -368,8 +352,6 @@ def minimize(
         history.append(dict(energy=float(f), grad_norm=gnorm, alpha=alpha, backtracks=bt, shift=shift, hessian=used))
         if gnorm <= opts.grad_tol * gscale:
             return done("gradient", it)
-        if stop is not None and stop(x, g):
-            raise Stopped(x, it)
         if H is None:
             f, g, H = fun(x, True)
 

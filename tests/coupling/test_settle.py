@@ -104,22 +104,3 @@ def test_step_checks_ignore_a_negligible_profile(scale, coarse):
     P = scale * floor / s[-1] * np.array([0.0, -40.0, -10.0, 80.0, 5.0])
     out = settle.warnings(cm, _records(s, E, P))
     assert any("steps too coarse" in w for w in out) == coarse, out
-
-
-def test_the_overshoot_stopped_at_its_sign_brackets_the_same_rest_point(cclamp, monkeypatch):
-    """The step past the rest point is stopped once its path force is certainly below -tol
-    (settle.SIGN_MARGIN); solved to the end instead (an infinite margin), the run ends on the same
-    bracket, with the figures equal to Newton's force tolerance f_tol (the grip is read at the seat
-    by interpolating in the bracket ends' path forces, which f_tol resolves to ~5 f_tol)."""
-    import simfab.coupling.config as C
-    from simfab.coupling import settle
-
-    monkeypatch.setattr(settle, "SIGN_MARGIN", np.inf)
-    full = simulate(load_coupling_scene("cclamp2d"))
-    f_tol = C.NEWTON_GRAD_TOL_REL * full.model.force_scale
-    a, b = summarize(cclamp)[1], summarize(full)[1]
-    assert [r.s for r in cclamp.steps] == pytest.approx([r.s for r in full.steps], rel=0, abs=1e-12)
-    for key in ("F_in", "F_rm", "F_grip"):
-        assert abs(a[key] - b[key]) <= 5 * f_tol, key
-    for key in ("E_max", "E_ss"):
-        assert a[key] == pytest.approx(b[key], rel=1e-5), key

@@ -255,30 +255,3 @@ def test_zero_max_step_and_inadmissible_trials_raise():
 
     with pytest.raises(ConvergenceError, match="line search failed"):
         minimize(fun, np.zeros(3), admissible=admissible)
-
-
-def test_stop_hook_ends_the_solve_at_the_iterate_it_accepts():
-    """``stop(x, g)`` is asked at every accepted, unconverged iterate: True raises Stopped with that
-    iterate and the iterations so far; a hook that never says True leaves the result unchanged."""
-    from simfab.solve.newton import Stopped
-
-    # f = sum(cosh(x_i - 1)): convex, Newton converges quadratically in several iterations
-    def fun(x, need_h):
-        g = np.sinh(x - 1.0)
-        return float(np.cosh(x - 1.0).sum()), g, (sp.diags(np.cosh(x - 1.0)).tocsr() if need_h else None)
-
-    x0 = np.full(4, 4.0)
-    ref = minimize(fun, x0, options=NewtonOptions(grad_tol=1e-12, grad_scale=1.0))
-    assert ref.iterations >= 4
-    seen = []
-    with pytest.raises(Stopped) as info:
-        minimize(fun, x0, options=NewtonOptions(grad_tol=1e-12, grad_scale=1.0),
-                 stop=lambda x, g: seen.append(x.copy()) or len(seen) == 2)
-    assert info.value.iterations == 2
-    np.testing.assert_array_equal(info.value.x, seen[-1])
-    # the second iterate of the full solve (no line-search change: the same trial points)
-    one = minimize(fun, x0, options=NewtonOptions(max_iter=50, grad_tol=1e-12, grad_scale=1.0),
-                   stop=lambda x, g: False)
-    np.testing.assert_array_equal(one.x, ref.x)
-    assert one.iterations == ref.iterations
-    np.testing.assert_allclose(np.abs(np.sinh(seen[-1] - 1.0)).max(), ref.history[1]["grad_norm"], rtol=1e-14)
