@@ -864,9 +864,9 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     opts = SQPOptions(radius=RADIUS if start is None or pre is not None else RADIUS_FROM_DESIGN,
                       max_evaluations=cap + 1, rtol=RTOL, ctol=aim, min_radius=MIN_RADIUS)
     if not sample(z0).ok:  # (memoized: the SQP's first evaluation)
+        why = _evaluate(run, h_of(z0)).ev.reason or "its sensitivities failed"
         raise ConvergenceError(f"couple optimize: {problem.base.name}: the gradient method's start cannot be "
-                               f"simulated with its sensitivities ({_evaluate(run, h_of(z0)).ev.reason or 'no gradient'});"
-                               " --method anneal does not need them")
+                               f"simulated with its sensitivities ({why}); --method anneal does not need them")
     res = trust_region_sqp(sample, z0, options=opts, cheap=quality, callback=on_step)
     log(f"couple optimize: {problem.base.name}: SQP: {res.message} ({len(res.steps)} iterations, "
         f"{run.insertions} insertions)", quiet=quiet)
