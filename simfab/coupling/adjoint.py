@@ -421,24 +421,28 @@ class StepLinearization:
         else:
             def base(r):
                 return self.solver.solve_free(Ar, idx, r)
-        if pin is None:
-            inner = base
-        else:
-            Uf = pin.U[idx]
-            Z = np.asarray(base(Uf)).reshape(len(idx), -1)
-            S = np.eye(Uf.shape[1]) / pin.mu + Uf.T @ Z
 
-            def inner(r):
-                y = np.asarray(base(r)).reshape(r.shape)
-                return y - Z @ np.linalg.solve(S, Uf.T @ y)
-        try:
+        def sweeps(base) -> None:
+            if pin is None:
+                inner = base
+            else:
+                Uf = pin.U[idx]
+                Z = np.asarray(base(Uf)).reshape(len(idx), -1)
+                S = np.eye(Uf.shape[1]) / pin.mu + Uf.T @ Z
+
+                def inner(r):
+                    y = np.asarray(base(r)).reshape(r.shape)
+                    return y - Z @ np.linalg.solve(S, Uf.T @ y)
+            lam[:] = 0.0
             for sweep in range(3 if pin is not None else 1):
                 r = b if sweep == 0 else b - self.apply(lam.reshape(rhs.shape)).reshape(k, -1)[:, idx].T
                 lam[:, idx] += np.asarray(inner(r)).reshape(len(idx), k).T
-        except NotPositiveDefinite:
+
+        try:
+            sweeps(base)
+        except NotPositiveDefinite:  # (an indefinite equilibrium Hessian: the same solve by LU)
             self.stable = False
-            lam[:] = 0.0
-            lam[:, idx] = splu(sp.csc_matrix(self.H[idx][:, idx])).solve(b).reshape(len(idx), k).T
+            sweeps(splu(sp.csc_matrix(Ar[idx][:, idx])).solve)
         return lam.reshape(rhs.shape)
 
     def pull(self, lam: np.ndarray, gx: np.ndarray, direct: np.ndarray, elastic_shift: np.ndarray,

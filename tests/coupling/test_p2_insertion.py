@@ -119,13 +119,14 @@ def test_cli_p2_writes_valid_outputs(tmp_path, capsys):
                                                                             names=True))
 
 
-def test_rest_shape_optimizer_refuses_p2_parts():
-    # its handles and modification energy act on a linear mesh: a clear input error, not a crash
+def test_rest_shape_optimizer_takes_p2_parts_with_handles_on_the_linear_mesh():
+    # the handles, E_L and the quality bound act on the P2 part's linear mesh (its vertices); candidates
+    # are the P2 part with its edge nodes at the moved edges' midpoints
     from simfab.design.brief import DesignBrief
     from simfab.design.problem import make_problem
 
     cm = load_coupling_scene("cclamp2d", overrides={"compliant": {"target_elements": 450},
                                                      "simulation": {"element_order": 2}})
-    with pytest.raises(InputError, match="linear elements") as e:
-        make_problem(cm, DesignBrief(placement="spatial"))
-    assert "element_order" in e.value.where
+    P = make_problem(cm, DesignBrief(placement="spatial"))
+    assert P.mesh.elements.shape[1] == 3 and cm.fem.elements.shape[1] == 6
+    assert P.handles.apply(P.handles.identity()).shape[0] == int(P.mesh.elements.max()) + 1
