@@ -298,7 +298,7 @@ def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) ->
         except (ConvergenceError, ArithmeticError, np.linalg.LinAlgError, RuntimeError):
             # an equilibrium the adjoint cannot factorize (e.g. a pinned step whose Hessian is not
             # positive definite): the design keeps its values; its gradients are unknown, taken as
-            # zero, supported False (the SQP counts such a design as a failed evaluation)
+            # zero (what the SQP's linearization reads for a figure without a gradient), supported False
             n = Jh.shape[1]
             names = ("E_max", "E_ss", "coupling_ratio", "insertion_force", "removal_force", "hold_force",
                      "grip_force", "von_mises") + (("rms_error_sq",) if problem.target is not None else ())
@@ -814,7 +814,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     def sample(z) -> Sample:
         h = h_of(z)
         e = _evaluate(run, h)
-        if e.fg is None or (target and e.ev.rms_error is None) or not e.fg.supported:
+        if e.fg is None or (target and e.ev.rms_error is None):
             return Sample(ok=False)
         category = e.ev.figures.get("category")
         if lost_grip(category, tight, reached):
@@ -864,7 +864,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     opts = SQPOptions(radius=RADIUS if start is None or pre is not None else RADIUS_FROM_DESIGN,
                       max_evaluations=cap + 1, rtol=RTOL, ctol=aim, min_radius=MIN_RADIUS)
     if not sample(z0).ok:  # (memoized: the SQP's first evaluation)
-        why = _evaluate(run, h_of(z0)).ev.reason or "its sensitivities failed"
+        why = _evaluate(run, h_of(z0)).ev.reason or "status " + _evaluate(run, h_of(z0)).ev.status
         raise ConvergenceError(f"couple optimize: {problem.base.name}: the gradient method's start cannot be "
                                f"simulated with its sensitivities ({why}); --method anneal does not need them")
     res = trust_region_sqp(sample, z0, options=opts, cheap=quality, callback=on_step)
