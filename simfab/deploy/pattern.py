@@ -62,6 +62,7 @@ import numpy as np
 from simfab.deploy._config import require_positive
 from simfab.deploy.springs import bezier, size_bulges, size_zigzag, zigzag_layout, zigzag_points
 from simfab.errors import InputError
+from simfab.fem.meshing import gmsh_elements, gmsh_session
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -530,8 +531,6 @@ def mesh_quads(poly, h: float) -> tuple[np.ndarray, np.ndarray]:
     outline lie on it; what a boundary edge leaves out is its chord's segment (2/3 s L, sagitta
     s ~ h^2 / (8 R) on a rim of radius R). Valence 3 or 5 at the irregular vertices: inserts with
     3 or 5 beams. Deterministic (one thread, Gmsh's fixed seed)."""
-    from simfab.fem.meshing import load_gmsh
-
     ring = np.asarray(poly.exterior.coords)[:-1]
     if not poly.exterior.is_ccw:
         ring = ring[::-1]
@@ -540,11 +539,7 @@ def mesh_quads(poly, h: float) -> tuple[np.ndarray, np.ndarray]:
     corners = np.flatnonzero(turn > np.radians(MESH_CORNER_DEG))
     corners = corners if len(corners) else np.array([0])
     n = len(ring)
-    gmsh = load_gmsh()
-    gmsh.initialize(interruptible=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
+    with gmsh_session("flat_domain") as gmsh:
         geo = gmsh.model.geo
         size = MESH_SIZE * h
         tag = {int(c): geo.addPoint(*ring[c], 0.0, size) for c in corners}
@@ -560,13 +555,7 @@ def mesh_quads(poly, h: float) -> tuple[np.ndarray, np.ndarray]:
                          ("Mesh.MeshSizeExtendFromBoundary", 0), ("Mesh.Smoothing", 10)):
             gmsh.option.setNumber(key, val)
         gmsh.model.mesh.generate(2)
-        tags, X, _ = gmsh.model.mesh.getNodes()
-        _, conn = gmsh.model.mesh.getElementsByType(3)  # 4-node quadrangles
-    finally:
-        gmsh.finalize()
-    index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
-    index[tags.astype(np.int64)] = np.arange(len(tags))
-    quads = index[conn.astype(np.int64)].reshape(-1, 4)
+        X, quads = gmsh_elements(gmsh, 3, 4)  # 4-node quadrangles
     if not len(quads):
         raise InputError(f"no quad fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
                          where="pattern.spacing")

@@ -218,6 +218,32 @@ def load_gmsh():
     return gmsh
 
 
+@contextlib.contextmanager
+def gmsh_session(name: str):
+    """A Gmsh session (``with gmsh_session("name") as gmsh:``) with one model ``name``, quiet and on one
+    thread (deterministic: Gmsh's fixed seed), finalized on exit; RuntimeError(GMSH_MISSING) without Gmsh."""
+    gmsh = load_gmsh()
+    gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.model.add(name)
+        yield gmsh
+    finally:
+        gmsh.finalize()
+
+
+def gmsh_elements(gmsh, element_type: int, nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """The generated mesh of a :func:`gmsh_session`: (X (N, 3) every node's coordinates, E (M, nodes)
+    int64 rows into X) of its elements of Gmsh type ``element_type`` (3: 4-node quadrangles, 4:
+    4-node tetrahedra)."""
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    _, conn = gmsh.model.mesh.getElementsByType(element_type)
+    index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
+    index[tags.astype(np.int64)] = np.arange(len(tags))
+    return coords.reshape(-1, 3), index[conn.astype(np.int64)].reshape(-1, nodes)
+
+
 def graded_box(lo, hi, *, centre, h0: float, growth: float, h_max: float | None = None):
     """Tetrahedral mesh of the box [lo, hi] graded toward a point (Gmsh, Delaunay + optimization).
 
@@ -253,12 +279,7 @@ def graded_box(lo, hi, *, centre, h0: float, growth: float, h_max: float | None 
     n_est = float(np.sum(6 * np.sqrt(2) / h**3 * dx[:, None, None] * dy[None, :, None] * dz[None, None, :]))
     if n_est > MAX_ELEMENTS:
         raise InputError(f"graded mesh asks for about {n_est:.3g} tetrahedra (limit {MAX_ELEMENTS})", where="h0")
-    gmsh = load_gmsh()
-    gmsh.initialize(interruptible=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        gmsh.model.add("graded_box")
+    with gmsh_session("graded_box") as gmsh:
         gmsh.model.occ.addBox(*lo, *size)
         gmsh.model.occ.synchronize()
         f = gmsh.model.mesh.field.add("MathEval")
@@ -271,14 +292,7 @@ def graded_box(lo, hi, *, centre, h0: float, growth: float, h_max: float | None 
         gmsh.option.setNumber("Mesh.Algorithm3D", 1)  # Delaunay
         gmsh.option.setNumber("Mesh.Optimize", 1)
         gmsh.model.mesh.generate(3)
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        _, conn = gmsh.model.mesh.getElementsByType(4)  # 4-node tetrahedra
-    finally:
-        gmsh.finalize()
-    idx = np.zeros(int(tags.max()) + 1, dtype=np.int64)
-    idx[tags.astype(np.int64)] = np.arange(len(tags))
-    V = coords.reshape(-1, 3)
-    T = idx[conn.astype(np.int64)].reshape(-1, 4)
+        V, T = gmsh_elements(gmsh, 4, 4)  # 4-node tetrahedra
     used = np.unique(T)  # drop nodes of lower-dimensional entities not used by any tet (none, normally)
     remap = np.full(len(V), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))

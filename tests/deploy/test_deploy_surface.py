@@ -283,21 +283,10 @@ def test_tuning_gradient_matches_re_solved_equilibria(tiny_saddle, weight, icp_i
     the saddle (30 iterations: 13 %, hence 3000 here)."""
     from simfab.deploy import tuning
     from simfab.rods.model import synchronize
-    from simfab.rods.statics import StaticSolver
 
     pat, net, dep, cfg, Y = tiny_saddle
     tgt = surface.saddle(0.06, 0.1, 8)
-    solver = StaticSolver(net.model)
-    offset = net.model.node_offset.copy()
-    offset[net.pull_nodes] += net.pull_dir * net.pull_grow[:, None]
-    solver.set_attachment_offsets(offset)
-    st = solver.solve(dep.final).state
-    D = []
-    for v in np.flatnonzero(pat.interior):
-        Dv = np.zeros_like(offset)
-        sel = net.pull_vertex == v
-        Dv[net.pull_nodes[sel]] = net.pull_dir[sel]  # its growth d_v [m per unit p]
-        D.append(Dv)
+    solver, offset, st, D = _deployed_with_growth_directions(pat, net, dep)
     pos_of = {int(b): i for i, b in enumerate(solver.red.bodies)}
     rows = solver.red.body_trans_cols.reshape(-1, 3)[[pos_of[int(b)] for b in net.vertex_body]]
     dX = solver.offset_sensitivity(st, np.array(D))[rows]  # (n, 3, k)
@@ -380,9 +369,20 @@ def test_tune_config_errors():
 def test_grouped_offset_sensitivities_equal_one_at_a_time(tiny_saddle):
     """The Curtis-Powell-Reid grouping (directions with disjoint gradient supports share one
     difference) gives the same derivatives as one difference per direction, to round-off."""
-    from simfab.rods.statics import StaticSolver
 
     pat, net, dep, cfg, _ = tiny_saddle
+    solver, offset, st, D = _deployed_with_growth_directions(pat, net, dep)
+    together = solver.offset_sensitivity(st, np.array(D))
+    alone = np.stack([solver.offset_sensitivity(st, Dv) for Dv in D], axis=1)
+    assert len(D) >= 4 and np.max(np.abs(together - alone)) < 1e-6 * np.max(np.abs(alone))
+
+
+def _deployed_with_growth_directions(pat, net, dep):
+    """The deployed network's static solver, its attachment offsets, its equilibrium, and per interior
+    insert v the offset direction of its growth d_v [m per unit p] (its pull nodes along their pull
+    directions)."""
+    from simfab.rods.statics import StaticSolver
+
     solver = StaticSolver(net.model)
     offset = net.model.node_offset.copy()
     offset[net.pull_nodes] += net.pull_dir * net.pull_grow[:, None]
@@ -394,6 +394,4 @@ def test_grouped_offset_sensitivities_equal_one_at_a_time(tiny_saddle):
         sel = net.pull_vertex == v
         Dv[net.pull_nodes[sel]] = net.pull_dir[sel]
         D.append(Dv)
-    together = solver.offset_sensitivity(st, np.array(D))
-    alone = np.stack([solver.offset_sensitivity(st, Dv) for Dv in D], axis=1)
-    assert len(D) >= 4 and np.max(np.abs(together - alone)) < 1e-6 * np.max(np.abs(alone))
+    return solver, offset, st, D
