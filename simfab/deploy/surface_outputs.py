@@ -106,9 +106,9 @@ def write_pattern_png(path, res) -> None:
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
     sizes = ", ".join(f"{b['count']} x {b['half_size_mm']:.3g}" for b in p.bill_of_materials())
-    ax.set_title(f"flat pattern: {p.n_inserts} inserts (r [mm]: {sizes}), "
+    ax.set_title(f"flat pattern: {p.n_inserts} inserts (r [mm]: {sizes}),\n"
                  f"{cut.parts} parts, cut length {cut.cut_length / 1e3:.2f} m")
-    ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=2, fontsize=8)  # (below: off the pattern)
     fig.colorbar(sc, ax=ax, shrink=0.7, label="r - g [mm] (> 0 insert pushes: dome; < 0 pulls: saddle)")
     fig.tight_layout()
     save_figure(fig, path)
