@@ -57,7 +57,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -105,59 +104,19 @@ def handle_jacobian(handles: Handles) -> np.ndarray:
     return J.reshape(n * d, -1)
 
 
-class GradientMap(Mapping):
-    """{figure: (n_vars,) or None} computed on first access by ``compute() -> (gradients, supported)``
-    (a caller that reads a design's values only never pays for its sensitivities: with a
-    :class:`DeferredRecorder` they are then never computed); ``on_compute`` is called once when they are."""
-
-    def __init__(self, compute, on_compute=None):
-        self._compute, self._on_compute = compute, on_compute
-        self._data: dict | None = None
-        self._supported = True
-
-    def _get(self) -> dict:
-        if self._data is None:
-            self._data, self._supported = self._compute()
-            self._compute = None  # (memory: the recorder's states)
-            if self._on_compute is not None:
-                self._on_compute()
-        return self._data
-
-    @property
-    def computed(self) -> bool:
-        return self._data is not None
-
-    @property
-    def supported(self) -> bool:
-        self._get()
-        return self._supported
-
-    def __getitem__(self, key):
-        return self._get()[key]
-
-    def __iter__(self):
-        return iter(self._get())
-
-    def __len__(self) -> int:
-        return len(self._get())
-
-
 @dataclass(frozen=True, kw_only=True, eq=False)
 class FigureGradients:
     """The brief's figures of one insertion with their gradients with respect to h (n_vars,) each:
     ``values`` {figure: value} (those of :func:`simfab.design.problem.profile_figures`),
-    ``gradients`` {figure: (n_vars,) or None (not differentiated)} (a :class:`GradientMap`: computed
-    when first read; with a target profile also "force_samples" (K, n_vars), the insertion records'
-    path forces' Jacobian); ``supported``: every step's dependence on the ones before is followed (see
-    :mod:`simfab.coupling.adjoint`); ``steady_index``: the steady-state index the figures were read at."""
+    ``gradients`` {figure: (n_vars,) or None (not differentiated)} (with a target profile also
+    "force_samples" (K, n_vars), the insertion records' path forces' Jacobian); ``supported``: every
+    step's dependence on the ones before is followed (see :mod:`simfab.coupling.adjoint`);
+    ``steady_index``: the steady-state index the figures were read at."""
 
     values: dict
-    gradients: GradientMap
+    gradients: dict
     steady_index: int
-
-    @property
-    def supported(self) -> bool:
-        return self.gradients.supported
+    supported: bool
 
 
 def stress_measure(problem: DesignProblem, cm) -> StressMeasure:
@@ -274,15 +233,14 @@ def needed_records(problem: DesignProblem, res, prof, stresses: np.ndarray) -> n
     return out
 
 
-def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray, on_compute=None) -> FigureGradients:
+def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> FigureGradients:
     """:class:`FigureGradients` of an evaluation run with a :class:`DeferredRecorder` (the
     sensitivities of :func:`needed_records` only) or a :class:`SensitivityRecorder` (every record's)
-    (``evaluate(..., recorder=...)``, status "ok", result kept); Jh: :func:`handle_jacobian`. The
-    gradients are computed when first read (:class:`GradientMap`; ``on_compute`` called then)."""
+    (``evaluate(..., recorder=...)``, status "ok", result kept); Jh: :func:`handle_jacobian`."""
     res, rec = ev.result, ev.recorder
     prof = analyze_run(res)
-    return FigureGradients(values=dict(ev.figures), steady_index=prof.index_ss,
-                           gradients=GradientMap(lambda: _figure_gradients(problem, res, rec, prof, Jh), on_compute))
+    g, supported = _figure_gradients(problem, res, rec, prof, Jh)
+    return FigureGradients(values=dict(ev.figures), gradients=g, steady_index=prof.index_ss, supported=supported)
 
 
 def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) -> tuple:
@@ -509,12 +467,12 @@ def _evaluate(run: _Run, h: np.ndarray) -> _Evaluated:
     if ev.sim_seconds > 0:
         run.insertions += 1
     fg, dF = None, None
-    if ev.status == "ok":  # (gradient_evaluations: those whose gradients were computed)
-        fg = figure_gradients(problem, ev, run.Jh,
-                              on_compute=lambda: setattr(run, "gradient_evaluations", run.gradient_evaluations + 1))
+    if ev.status == "ok":
+        fg = figure_gradients(problem, ev, run.Jh)
+        run.gradient_evaluations += 1
         if problem.target is not None:
             dF = fg.gradients["force_samples"]
-    ev.recorder = None  # (the recorder's states live in fg until its gradients are read)
+    ev.recorder = None  # (memory: the recorder's states; the sensitivities are read into fg)
     if ev.status == "ok":
         r = ev.result
         planned = len(r.model.s_steps)
