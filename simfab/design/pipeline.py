@@ -17,7 +17,7 @@ from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
 from simfab.design import outputs
-from simfab.design.gradient import GRADIENT_LAG_TOL, design_recorder, optimize_gradient
+from simfab.design.gradient import GRADIENT_LAG_TOL, MAX_ITERATIONS, design_recorder, optimize_gradient
 from simfab.design.optimize import optimize
 from simfab.design.parallel import Workers
 from simfab.design.problem import EvaluationSettings, ProblemSource, evaluate, make_problem, rebuild
@@ -79,8 +79,10 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         raise InputError("replicating arms needs the base marked by a keep site ([design] keep)",
                          where="--revolve-arms")
     out = make_out_dir(out)  # after every input check: bad input leaves no output directory
+    cap = min(MAX_ITERATIONS, ds.brief.iterations) if method == "gradient" else ds.brief.iterations
     log(f"couple optimize: {cm.name}: {cm.fem.n_elements} elements, {len(cm.s_steps) - 1} steps, "
-        f"{ds.brief.handles} handles ({ds.brief.placement}), up to {ds.brief.iterations} iterations", quiet=quiet)
+        f"{ds.brief.handles} handles ({ds.brief.placement}), up to {cap} {'SQP ' if method == 'gradient' else ''}"
+        "iterations", quiet=quiet)
     with contextlib.ExitStack() as stack:
         # the worker processes start now: their start-up overlaps the initial insertion and the
         # handle placement, and they serve the correction rounds too
