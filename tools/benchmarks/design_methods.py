@@ -1,23 +1,23 @@
 """Annealing against gradient design on the bundled design scenes.
 
 ``python tools/bench.py design_methods [--scenes a,b,...] [--methods anneal,gradient] [--seeds 0,1,2] [--out DIR]
-[--profile-handles 2,4,8] [--element-orders 1,2] [--friction MU]``
+[--profile-handles 2,4,8] [--element-orders 1,2] [--friction MU] [--anneal-workers N]``
 
-For every scene, method and seed: ``simfab couple optimize NAME --method M --seed S`` (its [design]
-brief; annealing on 2 workers, the gradient method in one process; the mesh check with its
-correction rounds), outputs under ``--out`` (default: a new temporary directory). Reported per
-run: ``insertions`` (every insertion simulation of the optimization and its correction rounds,
-the placement's initial insertion and the mesh check's excluded), ``gradient_evaluations``,
-``seconds`` (end to end, mesh check included), ``E_L``, ``rms_error_N`` (profile2d: the RMS force
-error, coarse and mesh-corrected),
-``feasible`` (coarse, mesh-corrected), ``met_mesh_check`` (mesh-converged figures),
-``rms_error_fine_N`` (profile2d: on the mesh check's finest level) and the optimizer's closing message. The
-gradient method does not depend on the seed except through the handle placement and its annealing
-pre-phase. ``profile2d`` runs once per count of ``--profile-handles`` (default: the scene's 4), its
-[design] handles overridden (``handles`` in the row; annealing gets the scene's iterations per handle,
-:func:`simfab.design.study.iterations_per_handle_budget`). ``--element-orders`` runs each with those
-element orders (``couple optimize --element-order``: 2 simulates every candidate on P2, the handles on
-the linear mesh); ``--friction`` sets ``[contact] friction``.
+For every scene, method and seed: ``simfab couple optimize NAME --method M --seed S`` (its [design] brief;
+annealing on ``--anneal-workers`` processes (default 2; with 1 it runs no speculative proposals, so its
+``insertions`` are the annealer's own need, the same design), the gradient method in one process; the mesh
+check with its correction rounds), outputs under ``--out`` (default: a new temporary directory). Reported per
+run: ``insertions`` (every insertion simulation of the optimization and its correction rounds, the placement's
+initial insertion and the mesh check's excluded), ``gradient_evaluations``, ``seconds`` (end to end, mesh
+check included), ``E_L``, ``rms_error_N`` (profile2d: the RMS force error, coarse and mesh-corrected),
+``feasible`` (coarse, mesh-corrected), ``met_mesh_check`` (mesh-converged figures), ``rms_error_fine_N``
+(profile2d: on the mesh check's finest level) and the optimizer's closing message. The gradient method does
+not depend on the seed except through the handle placement and its annealing pre-phase. ``profile2d`` runs
+once per count of ``--profile-handles`` (default: the scene's 4), its [design] handles overridden (``handles``
+in the row; annealing gets the scene's iterations per handle,
+:func:`simfab.design.study.iterations_per_handle_budget`). ``--element-orders`` runs each with those element
+orders (``couple optimize --element-order``: 2 simulates every candidate on P2, the handles on the linear
+mesh); ``--friction`` sets ``[contact] friction``.
 """
 
 from __future__ import annotations
@@ -50,6 +50,7 @@ def run(argv) -> dict:
     ap.add_argument("--profile-handles", default=None, help="profile2d's handle counts, e.g. 2,4,8")
     ap.add_argument("--element-orders", default=None, help="e.g. 1,2 (default: the scene's)")
     ap.add_argument("--friction", type=float, default=None)
+    ap.add_argument("--anneal-workers", type=int, default=2)
     a = ap.parse_args(argv)
     orders = [None] if a.element_orders is None else [int(o) for o in a.element_orders.split(",")]
     contact = {} if a.friction is None else {"friction": a.friction}
@@ -72,7 +73,7 @@ def run(argv) -> dict:
                 sim = {} if order is None else {"element_order": order}
                 name = f"{scene}{'' if k is None else f'_h{k}'}_{method}_{seed}_{order}"
                 s = optimize_scene(scene, out=out / name, quiet=True, seed=seed, design=design,
-                                   workers=2 if method == "anneal" else 1, method=method, simulation=sim,
+                                   workers=a.anneal_workers if method == "anneal" else 1, method=method, simulation=sim,
                                    contact=contact)
                 mc = s.get("mesh_check") or {}
                 rows.append({"scene": scene, "handles": s["handles"]["active"], "method": method, "seed": seed,
