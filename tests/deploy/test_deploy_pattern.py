@@ -10,7 +10,9 @@ from simfab.errors import InputError
 
 @pytest.fixture(scope="module", params=scene.BUNDLED)
 def laid_out(request):
-    sc = scene.load_scene(scene.bundled_path(request.param))
+    """Each bundled target flattened without cuts and laid out on the clipped grid (the layouts the
+    scenes choose have their own tests)."""
+    sc = scene.load_scene(scene.bundled_path(request.param), overrides={"pattern": {"layout": "grid"}})
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     return request.param, sc, f, pat
