@@ -560,11 +560,11 @@ class MeshRecipe:
     """One Gmsh meshing of the flat domain (:func:`mesh_quads`). algorithm: Gmsh ``Mesh.Algorithm``
     (5 Delaunay, 6 Frontal-Delaunay, 8 Frontal-Delaunay for quads); recombination: Gmsh
     ``Mesh.RecombinationAlgorithm`` (1 Blossom: a perfect matching of the triangles into quads,
-    which exists for an even number of boundary edges but may leave triangles; 2 simple full-quad:
-    every element split into quads, no triangle left, edges halved); size [spacings]: the element
-    size; uniform_outline: each outline curve (between corners) divided into round(L / h) equal edges
-    (at least one; one curve gets one more when the total is odd, so that a full matching can
-    exist) - the two sides of a seam, of equal flat length, then get facing vertices."""
+    which exists for an even number of boundary edges but may leave triangles; 2 simple
+    full-quad: every element split into quads, no triangle left); size [spacings]: the element
+    size; uniform_outline: each outline curve (between corners) divided into round(L / h) equal
+    edges (at least one; one curve gets one more when the total is odd, so that a full matching
+    can exist) - the two sides of a seam, of equal flat length, then get facing vertices."""
 
     algorithm: int
     recombination: int
