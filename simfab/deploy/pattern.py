@@ -7,7 +7,8 @@ Layout (all in the flat domain, metres):
   the nearest boundary point; cells that become too small (an edge < h/4) or non-convex are
   dropped, and the largest edge-connected set of cells is the quad mesh (``layout = "grid"``;
   ``"conforming"``: a grid core with a pillow layer on the outline, :func:`conforming_quads`;
-  ``"mesh"``: an unstructured Gmsh quad mesh of the domain, :func:`mesh_quads`);
+  ``"mesh"``: an unstructured Gmsh quad mesh of the domain, :func:`mesh_quads`, the best of a few
+  meshings, :data:`MESH_RECIPES`);
 - every quad edge is a **beam** (width ``w``, sheet thickness ``t``), split at its midpoint
   by a rigid junction; each quad gets a **torsional spring**: four cubic Bezier arcs joining
   consecutive edge midpoints, bulging towards the quad centre, each quad's bulge sized so that
@@ -21,7 +22,8 @@ Layout (all in the flat domain, metres):
   ends at distance ``r_i`` from the vertex. Boundary vertices join their beams rigidly (no insert),
   except along the seams of a cut flattening (``seams``, :mod:`simfab.deploy.cuts`; the outline
   nearer a seam than the rim), where u != 0: there the cells grow as inside, so those vertices
-  get inserts too (2 or 3 beams) where their shortest edge leaves room for a gap.
+  get inserts too (2 or 3 beams) where their shortest edge leaves room for a gap and an insert
+  comes nearer their growth than a rigid joint (not at a cone tip or a seam's rim end, u = 0).
 
 Gap rule (derivation). The flattening scales lengths by ``e^u``: a curve of length ``L`` on the
 target has length ``e^u L`` in the flat domain (u varies slowly over a cell). Deployment must
@@ -257,20 +259,48 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,)).
     ``seams``: flat polylines [(k,2) m] of the cut sides of a cut flattening (their boundary
     vertices get inserts). ``Pattern.gap_max``: the largest gap the tuning may cut
-    (:func:`tuning_gap_limit`)."""
+    (:func:`tuning_gap_limit`). ``layout = "mesh"``: the pattern of the best of the
+    :data:`MESH_RECIPES` meshings (fewest :func:`defects`, then the largest covered area)."""
     import shapely
-
 
     poly = shapely.Polygon(uv[boundary])
     if not poly.is_valid:
         raise InputError("the flattened boundary self-intersects; the target needs cuts or cones")
     h = cfg.spacing
     if cfg.layout == "grid":
-        P, quads = _clipped_grid(poly, uv, h)
+        meshes = [_clipped_grid(poly, uv, h)]
     elif cfg.layout == "mesh":
-        P, quads = mesh_quads(poly, h)
+        meshes = [m for m in (mesh_quads(poly, h, r) for r in MESH_RECIPES) if m is not None]
+        if not meshes:
+            raise InputError(f"no quad mesh fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
+                             where="pattern.spacing")
     else:
-        P, quads = conforming_quads(poly, h, uv)
+        meshes = [conforming_quads(poly, h, uv)]
+    best, best_key = None, None
+    for P, quads in meshes:
+        pat = _pattern_on(poly, P, quads, uv, faces, u, cfg, seams)
+        key = (defects(pat), -covered_fraction(pat, poly))
+        if best_key is None or key < best_key:
+            best, best_key = pat, key
+    return best
+
+
+def covered_fraction(pat: Pattern, poly) -> float:
+    """The fraction [-] of the flat domain ``poly`` (a shapely Polygon) that the pattern's quads cover
+    (their parts outside it not counted)."""
+    import shapely
+
+    return float(np.sum(shapely.area(shapely.intersection(shapely.polygons(pat.P[pat.quads]), poly))) / poly.area)
+
+
+def defects(pat: Pattern) -> int:
+    """Inserts whose gap is unreachable, quads short of spring slack and quads without a spring."""
+    return int(len(pat.unreachable) + len(pat.tight_springs) + np.sum(~pat.spring))
+
+
+def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams) -> Pattern:
+    """The pattern (inserts, gaps, springs) on the quad mesh (P, quads) of the flat domain ``poly``."""
+    h = cfg.spacing
     P, quads = drop_outside_quads(poly, P, quads)
     # edges and their quads
     e_all = np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)])
@@ -296,8 +326,15 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     np.minimum.at(emin, edges.ravel(), np.repeat(elen, 2))
     seam = bnd_v & near_seams(P, poly, seams, h) & (0.5 * emin - cfg.min_beam >= cfg.min_gap)
     gmax = np.where(seam, 0.5 * emin - cfg.min_beam, gmax)
-    interior = ~bnd_v | seam
     need = gap_rule(uP, hv, 0.0)  # -d: the gap with r = 0
+    # a seam vertex that needs less growth |d| than its best insert falls short by is joined rigidly
+    # (growth 0: the nearer one; a cone tip or a seam's rim end, where u = 0)
+    if seam.any():
+        k = assign_sizes(-need[seam], gmax[seam], cfg.sizes, cfg.min_gap)
+        g = np.asarray(cfg.sizes)[k] + need[seam]
+        short = np.maximum(cfg.min_gap - g, 0.0) + np.maximum(g - gmax[seam], 0.0)
+        seam[np.flatnonzero(seam)[np.abs(need[seam]) <= short]] = False
+    interior = ~bnd_v | seam
     cls = np.full(len(P), -1)
     cls[interior] = assign_sizes(-need[interior], gmax[interior], cfg.sizes, cfg.min_gap)
     r_v = np.where(interior, np.asarray(cfg.sizes)[np.maximum(cls, 0)], 0.0)
@@ -516,21 +553,49 @@ def _clipped_grid(poly, uv, h):
 
 
 MESH_CORNER_DEG = 25.0  # outline vertices turning by more than this are corners of the mesh's boundary curves
-MESH_SIZE = 1.2  # Gmsh element size / spacing: its recombined quads' median edge is then about the spacing
 
 
-def mesh_quads(poly, h: float) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True, kw_only=True)
+class MeshRecipe:
+    """One Gmsh meshing of the flat domain (:func:`mesh_quads`). algorithm: Gmsh ``Mesh.Algorithm``
+    (5 Delaunay, 6 Frontal-Delaunay, 8 Frontal-Delaunay for quads); recombination: Gmsh
+    ``Mesh.RecombinationAlgorithm`` (1 Blossom: a perfect matching of the triangles into quads,
+    which exists for an even number of boundary edges but may leave triangles; 2 simple
+    full-quad: every element split into quads, no triangle left); size [spacings]: the element
+    size; uniform_outline: each outline curve (between corners) divided into round(L / h) equal
+    edges (at least one; one curve gets one more when the total is odd, so that a full matching
+    can exist) - the two sides of a seam, of equal flat length, then get facing vertices."""
+
+    algorithm: int
+    recombination: int
+    size: float
+    uniform_outline: bool
+
+
+#: the meshings :func:`layout` tries with ``layout = "mesh"``, keeping the pattern with the fewest
+#: defects (unreachable gaps, quads short of spring slack or without a spring), then the largest
+#: covered area. The first (the outline's own discretization, full-quad) always yields quads only;
+#: the uniform outline keeps short outline curves (a rim piece between two seams) from seeding
+#: strips of thin quads whose short edges leave no room for a gap.
+MESH_RECIPES = (MeshRecipe(algorithm=6, recombination=2, size=1.2, uniform_outline=False),
+                MeshRecipe(algorithm=5, recombination=1, size=1.0, uniform_outline=True),
+                MeshRecipe(algorithm=6, recombination=1, size=1.0, uniform_outline=True),
+                MeshRecipe(algorithm=8, recombination=1, size=1.0, uniform_outline=True))
+
+
+def mesh_quads(poly, h: float, recipe: MeshRecipe = MESH_RECIPES[0]) -> tuple[np.ndarray, np.ndarray] | None:
     """Boundary-following unstructured quad mesh of the flat domain ``poly`` (``layout = "mesh"``):
     (P (n,2) [m], quads (q,4) CCW), for outlines a grid cannot follow (the notches a cut
-    flattening's wedges leave, :mod:`simfab.deploy.cuts`).
+    flattening's wedges leave, :mod:`simfab.deploy.cuts`); None when the recipe leaves triangles
+    (Blossom without a perfect matching: they would be holes in the pattern).
 
     Gmsh: the outline split at its corners (turning angle > ``MESH_CORNER_DEG``: cone tips, where a
-    seam meets the rim) into splines through the outline's points, a Frontal-Delaunay triangulation
-    of size ``MESH_SIZE`` h recombined into quads (simple full-quad recombination: every triangle
-    left over is split, so no triangle remains), Laplacian smoothing. The mesh vertices on the
-    outline lie on it; what a boundary edge leaves out is its chord's segment (2/3 s L, sagitta
-    s ~ h^2 / (8 R) on a rim of radius R). Valence 3 or 5 at the irregular vertices: inserts with
-    3 or 5 beams. Deterministic (one thread, Gmsh's fixed seed)."""
+    seam meets the rim) into splines through the outline's points, a triangulation of element size
+    ``recipe.size`` h recombined into quads (:class:`MeshRecipe`), Laplacian smoothing. The mesh
+    vertices on the outline lie on it; what a boundary edge leaves out is its chord's segment
+    (2/3 s L, sagitta s ~ h^2 / (8 R) on a rim of radius R: ~1.1 % of the bundled dome's area, so
+    ``conforming`` covers more of an uncut domain). Valence 3 or 5 at the irregular vertices:
+    inserts with 3 or 5 beams. Deterministic (one thread, Gmsh's fixed seed)."""
     ring = np.asarray(poly.exterior.coords)[:-1]
     if not poly.exterior.is_ccw:
         ring = ring[::-1]
@@ -541,24 +606,32 @@ def mesh_quads(poly, h: float) -> tuple[np.ndarray, np.ndarray]:
     n = len(ring)
     with gmsh_session("flat_domain") as gmsh:
         geo = gmsh.model.geo
-        size = MESH_SIZE * h
+        size = recipe.size * h
         tag = {int(c): geo.addPoint(*ring[c], 0.0, size) for c in corners}
-        curves = []
+        curves, lengths = [], []
         for a, b in zip(corners, np.r_[corners[1:], corners[0]]):
             idx = np.arange(a, b + (n if b <= a else 0) + 1) % n
             mids = [geo.addPoint(*ring[i], 0.0, size) for i in idx[1:-1]]
             curves.append(geo.addSpline([tag[int(a)], *mids, tag[int(b)]]))
+            lengths.append(float(np.sum(np.linalg.norm(np.diff(ring[idx], axis=0), axis=1))))
         geo.addPlaneSurface([geo.addCurveLoop(curves)])
+        if recipe.uniform_outline:
+            count = [max(1, int(round(L / h))) for L in lengths]
+            if sum(count) % 2:
+                count[int(np.argmax(np.asarray(lengths) / count))] += 1
+            for c, m in zip(curves, count):
+                geo.mesh.setTransfiniteCurve(c, m + 1)
         geo.synchronize()
-        for key, val in (("Mesh.Algorithm", 6), ("Mesh.RecombineAll", 1), ("Mesh.RecombinationAlgorithm", 2),
-                         ("Mesh.MeshSizeMin", size), ("Mesh.MeshSizeMax", size), ("Mesh.MeshSizeFromPoints", 0),
+        for key, val in (("Mesh.Algorithm", recipe.algorithm), ("Mesh.RecombineAll", 1),
+                         ("Mesh.RecombinationAlgorithm", recipe.recombination), ("Mesh.MeshSizeMin", size),
+                         ("Mesh.MeshSizeMax", size), ("Mesh.MeshSizeFromPoints", 0),
                          ("Mesh.MeshSizeExtendFromBoundary", 0), ("Mesh.Smoothing", 10)):
             gmsh.option.setNumber(key, val)
         gmsh.model.mesh.generate(2)
         X, quads = gmsh_elements(gmsh, 3, 4)  # 4-node quadrangles
-    if not len(quads):
-        raise InputError(f"no quad fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
-                         where="pattern.spacing")
+        _, triangles = gmsh_elements(gmsh, 2, 3)
+    if len(triangles) or not len(quads):
+        return None
     used, inv = np.unique(quads, return_inverse=True)
     P = X.reshape(-1, 3)[used, :2]
     return P, _ccw(P, inv.reshape(-1, 4))

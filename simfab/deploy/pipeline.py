@@ -221,6 +221,7 @@ def summary(res: SurfaceResult) -> dict:
         area_ratio_min=float(np.exp(2 * f.sigma.min())), area_ratio_max=float(np.exp(2 * f.sigma.max())),
         closure_angle_correction_rad=f.closure_angle_correction,
         quads=int(len(p.quads)), beams=int(len(p.edges)), springs=int(p.spring.sum()), inserts=p.n_inserts,
+        layout=p.config.layout, flat_area_covered=flat_area_covered(res),
         insert_half_sizes_mm=[r * 1e3 for r in p.config.sizes],
         bill_of_materials=p.bill_of_materials(),
         gap_min_mm=float(p.gap[ins].min() * 1e3) if ins.any() else None,
@@ -252,23 +253,26 @@ def summary(res: SurfaceResult) -> dict:
     )
 
 
+def flat_area_covered(res: SurfaceResult) -> float:
+    """The fraction [-] of the flat domain (cut, with cuts) that the pattern's quads cover."""
+    import shapely
+
+    f = res.flat
+    return pattern.covered_fraction(res.pattern, shapely.Polygon(f.uv[f.boundary]))
+
+
 def cuts_summary(res: SurfaceResult) -> dict | None:
     """Cones and seams of a run with cuts (None without): per cone its angle defect [deg] and
     seam length [mm] (the cut path in 3D), the interior mesh vertices whose growth no insert size
     reaches without and with the cones, the seam ties, and the flat area the pattern's quads cover
-    (of the cut domain: the grid cells clipped at the wedges leave notches the deviation does not
-    see)."""
-    import shapely
-
+    (of the cut domain, also the summary's ``flat_area_covered``: the grid cells clipped at the
+    wedges leave notches the deviation does not see)."""
     cf = res.cuts
     if cf is None:
         return None
     V = res.scene.target.V
-    p = res.pattern
-    covered = float(np.sum(shapely.area(shapely.polygons(p.P[p.quads]))))
-    domain = float(shapely.area(shapely.Polygon(cf.flat.uv[cf.flat.boundary])))
     return dict(cones=len(cf.cones), unreachable_mesh_vertices=cf.unreachable_vertices,
-                flat_area_covered=covered / domain,
+                flat_area_covered=flat_area_covered(res),
                 seams_joined=res.ties is not None, seam_ties=0 if res.ties is None else int(len(res.ties.pairs)),
                 seams=[dict(cone_defect_deg=float(np.degrees(d)),
                             length_mm=float(np.sum(np.linalg.norm(np.diff(V[s.path], axis=0), axis=1)) * 1e3))

@@ -10,7 +10,9 @@ from simfab.errors import InputError
 
 @pytest.fixture(scope="module", params=scene.BUNDLED)
 def laid_out(request):
-    sc = scene.load_scene(scene.bundled_path(request.param))
+    """Each bundled target flattened without cuts and laid out on the clipped grid (the layouts the
+    scenes choose have their own tests)."""
+    sc = scene.load_scene(scene.bundled_path(request.param), overrides={"pattern": {"layout": "grid"}})
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     return request.param, sc, f, pat
@@ -177,10 +179,10 @@ def test_springs_are_long_enough_for_the_growth(laid_out):
 def test_steep_cap_springs_reach_their_slack():
     """The 80 deg cap's quads grow up to 1.57 x (Bezier arcs reach 1.2-1.5 x their chord inside a
     cell): zigzag arcs make every arc at least (1 + slack) x its chord's growth long, with the rod
-    segments the zigzag's pieces need."""
+    segments the zigzag's pieces need (the cap uncut, on the clipped grid)."""
     from simfab.deploy import network, springs
 
-    sc = scene.load_scene(scenes_dir("deploy", "cap80.toml"))
+    sc = scene.load_scene(scenes_dir("deploy", "cap80.toml"), overrides={"pattern": {"layout": "grid"}})
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     need = (1 + sc.pattern.spring_slack) * np.maximum(pat.growth, 1.0)
