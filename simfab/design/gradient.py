@@ -20,8 +20,8 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
   with the design (:func:`rest_grip_gradient`: implicit differentiation of F(s*; X) = 0);
 - E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
 - the element quality q_e (signed mean ratio) analytically.
-- the target-profile error rms^2 (the objective of profile matching) through the force samples
-  (:func:`target_gradient`), at fixed step positions;
+- the target-profile error rms^2 (the objective of profile matching) through the force samples at
+  fixed step positions and the run's rest point, which moves with the design (:func:`target_model`);
 - with friction, F_rm and F_hold from the removal traversal's records (:func:`removal_gradients`),
   whose sensitivities the adjoint's backward pass carries through the friction anchors; the
   insertion runs with lag_tol <= GRADIENT_LAG_TOL (the pipeline tightens the scene's).
@@ -34,14 +34,13 @@ checks it on every design and reports it): the seat clearance (but for a part th
 Optimizer (:func:`optimize_gradient`): a trust-region SQP (:func:`simfab.design.sqp.trust_region_sqp`)
 on z = (h - lower) / (upper - lower) in [0, 1] from the initial shape, one insertion per iteration:
 the objective's model needs no simulation - E_L is a quadratic in h with a constant Hessian
-(:func:`modification_hessian`), profile matching's rms^2 a quadratic in the force samples, whose
-Gauss-Newton Hessian J^T Q J (:func:`target_hessian`) comes with the samples' Jacobian J - and only
+(:func:`modification_hessian`), profile matching's rms^2 a function of the force samples and the run's
+rest point, whose Gauss-Newton Hessian J^T Q J (:func:`target_model`) comes with their Jacobian J - and only
 the brief's constraints are linearized from the insertion: scaled to their SCALES units,
 (value - lo) / scale >= 0 and (hi - value) / scale >= 0 (a loose grip's coupling-ratio bound in
 sqrt(CR), :class:`ConstraintRow`), aimed AIM_REL inside the bound; the element-quality bound
 q_e / q0_e >= QUALITY_REL is imposed exactly in every subproblem (analytic, no simulation), so no
-trial is an inverted or degenerate mesh. Profile matching's gradient also carries the run's end
-moving with the design (:func:`seat_shift_gradient`). A start that touches nothing (every figure's
+trial is an inverted or degenerate mesh. A start that touches nothing (every figure's
 gradient zero) gets the seat clearance's bound, linearized through the gap of the undeformed part
 (:func:`gap_gradient`); only when that has no gradient either (no vertex near O), or when the start
 ejects under a coupling-ratio bound (:func:`flat_start`), a seeded annealing pre-phase runs until a
@@ -307,7 +306,7 @@ def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) ->
     g["seat_clearance"] = None
     if problem.target is not None:
         scale = problem.settings.corrections.get("force_profile", 1.0)
-        g["rms_error_sq"] = scale * target_gradient(problem.target, res.column("s"), scale * F) @ dF
+        g["rms_error_sq"] = target_model(problem.target, res.column("s"), scale * F, scale * dF).gradient
         g["force_samples"] = dF  # (K, n_vars): d F_k / dh, the Gauss-Newton model's Jacobian
     return g, all(s.supported for s in sens.values())
 
@@ -370,20 +369,6 @@ def removal_gradients(res, prof, dF: np.ndarray) -> tuple:
     if prof.F_hold <= 0:
         return g_rm, zero
     return g_rm, _smax(np.r_[Fr[:k], at], np.vstack([dF[:k], d_at[None, :]]))
-
-
-def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """d(rms^2)/dF_k (k,) [N] of the target-profile error (:meth:`simfab.design.brief.TargetProfile.
-    rms_error`) at fixed distances s: rms^2 is a quadratic function of the force samples (an
-    integral of squared piecewise-linear differences), so central differences with any step are
-    exact up to round-off; a step of 1 N is used."""
-    f = np.asarray(force, float)
-    out = np.empty(len(f))
-    for k in range(len(f)):
-        e = np.zeros(len(f))
-        e[k] = 1.0
-        out[k] = 0.5 * (target.rms_error(s, f + e) ** 2 - target.rms_error(s, f - e) ** 2)
-    return out
 
 
 def modification_gradient(problem: DesignProblem, X: np.ndarray, Jh: np.ndarray) -> np.ndarray:
@@ -654,56 +639,92 @@ def modification_hessian(problem: DesignProblem, Jh: np.ndarray) -> np.ndarray:
     return out
 
 
-def target_hessian(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """d2(rms^2)/dF_k dF_l (k, k) [-] of the target-profile error at fixed distances s: rms^2 is a
-    quadratic function of the force samples (:func:`target_gradient`), so with unit steps
-    r(F + e_k + e_l) - r(F + e_k) - r(F + e_l) + r(F) is its Hessian's entry exactly (up to
-    round-off). Samples outside the target's range have zero rows (skipped)."""
-    f = np.asarray(force, float)
-    s = np.asarray(s, float)
-    k = len(f)
+@dataclass(frozen=True, kw_only=True, eq=False)
+class TargetModel:
+    """The target-profile error of one insertion as the SQP models it: ``value`` rms^2 [N^2],
+    ``gradient`` (n,) its derivative with respect to the design variables and ``hessian`` (n, n) a
+    Gauss-Newton model Hessian (symmetric positive semi-definite), in the units of the force samples'
+    Jacobian the model was built with."""
 
-    def r(x):
-        return target.rms_error(s, x) ** 2
+    value: float
+    gradient: np.ndarray
+    hessian: np.ndarray
 
-    inside = np.flatnonzero(s >= float(target.s[0]) - (s[1] - s[0] if k > 1 else 0.0))
-    r0 = r(f)
+
+#: The rest point's step in the target model's second differences, relative to the target's length:
+#: the curvature of rms^2 in the run's end over the distances a design step moves it (tens of
+#: micrometres), not at the target's sample kinks.
+REST_STEP_REL = 2e-3
+
+
+def target_model(target, s: np.ndarray, force: np.ndarray, dF: np.ndarray) -> TargetModel:
+    """:class:`TargetModel` of the target-profile error rms^2 (:meth:`simfab.design.brief.TargetProfile.
+    rms_error`) of a run with records at s (k,) [m], forces (k,) [N] and the forces' Jacobian dF
+    (k, n) at fixed positions.
+
+    rms^2 is a function R(y) of y = (F_0 .. F_a, s*): the records' forces up to the run's end and the
+    end itself, the rest point s* = s_a + w (s_b - s_a), w = F_a / (F_a - F_b), when the last two records
+    bracket a zero crossing (:func:`simfab.design.brief.run_to_rest`; else y = F and R is a quadratic).
+    The rest point moves with the design: ds*/dh = (s_b - s_a) (F_a dF_b - F_b dF_a) / (F_a - F_b)^2 (the
+    implicit derivative of F(s*) = 0 over the bracket's secant, as for the grip,
+    :func:`rest_grip_gradient`), so dy/dh = J_y stacks dF_k/dh and ds*/dh. R is a quadratic in the forces
+    at a fixed end (an integral of squared piecewise-linear differences): its derivatives in them are
+    differences with a 1 N step, exact up to round-off; in s* it is piecewise smooth (the target's
+    samples), differentiated by central differences with a step of 1e-6 L and curved over REST_STEP_REL L.
+    Gauss-Newton: value R, gradient J_y^T dR/dy, Hessian J_y^T Q J_y with Q the second differences of R
+    in y projected on the positive semi-definite cone (negative eigenvalues, from the rest point's
+    terms, set to 0)."""
+    s, F = np.asarray(s, float), np.asarray(force, float)
+    dF = np.asarray(dF, float)
+    k = len(F)
+    L = float(target.s[-1] - target.s[0])
+    rested = k >= 2 and F[-2] > 0.0 >= F[-1]
+    if rested:
+        a, b = k - 2, k - 1
+        w = F[a] / (F[a] - F[b])
+        se = s[a] + w * (s[b] - s[a])
+        dse = (s[b] - s[a]) * (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
+        y0, Jy = np.r_[F[:b], se], np.vstack([dF[:b], dse[None, :]])
+
+        def R(y):
+            return target.rms_error(np.r_[s[:b], y[-1]], np.r_[y[:-1], 0.0]) ** 2
+
+        room = 0.5 * (se - s[a])  # (the end stays past its last record)
+        hg = np.r_[np.ones(b), min(1e-6 * L, room)]
+        hh = np.r_[np.ones(b), min(REST_STEP_REL * L, room)]
+    else:
+        y0, Jy = F, dF
+
+        def R(y):
+            return target.rms_error(s, y) ** 2
+
+        hg = hh = np.ones(k)
+    n = len(y0)
+    # only the samples inside the target's range (and the end) enter R
+    first = float(target.s[0]) - (s[1] - s[0] if k > 1 else 0.0)
+    live = np.flatnonzero(np.r_[s[: n - 1] if rested else s, [np.inf] if rested else []] >= first)
+    r0 = R(y0)
+    gy = np.zeros(n)
+    for i in live:
+        e = np.zeros(n)
+        e[i] = hg[i]
+        gy[i] = (R(y0 + e) - R(y0 - e)) / (2.0 * hg[i])
     r1 = {}
-    for i in inside:
-        e = f.copy()
-        e[i] += 1.0
-        r1[i] = r(e)
-    H = np.zeros((k, k))
-    for a, i in enumerate(inside):
-        for j in inside[a:]:
-            e = f.copy()
-            e[i] += 1.0
-            e[j] += 1.0
-            H[i, j] = H[j, i] = r(e) - r1[i] - r1[j] + r0
-    return H
-
-
-def seat_shift_gradient(target, s: np.ndarray, force: np.ndarray, dF: np.ndarray) -> np.ndarray:
-    """d(rms^2)/dh (n_vars,) [N^2] from the run's end moving with the design, the part of the
-    target-profile error's gradient that the force samples at fixed distances (:func:`target_gradient`)
-    do not carry: past the run's end s_e (where O rests) the force counts as 0, so a design that seats
-    early is charged int_{s_e}^{t1} F_t^2 ds / L, and at fixed distances nothing moves that end.
-
-    The end follows the rest point s*, F(s*) = 0, bracketed by the last two records (F_a > 0 >= F_b):
-    ds*/dh = (s_b - s_a) dw, w = F_a / (F_a - F_b), dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2 (as for the
-    grip, :func:`rest_grip_gradient`). Moving the end by ds the run's profile is assumed to continue
-    as the target's (it matches it before its end), so rms^2 changes by -F_t(s_e)^2 ds / L: the
-    target's force at the run's end drives the seat towards the target's. Zero when the run ends past
-    the target's range or its last two records do not bracket a rest point."""
-    s = np.asarray(s, float)
-    F = np.asarray(force, float)
-    t0, t1 = float(target.s[0]), float(target.s[-1])
-    if len(F) < 2 or not (t0 < s[-1] < t1) or not (F[-2] > 0 >= F[-1]):
-        return np.zeros(dF.shape[1])
-    a, b = len(F) - 2, len(F) - 1
-    dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
-    ft = float(np.interp(s[-1], target.s, target.force))
-    return -(ft**2) / (t1 - t0) * (s[b] - s[a]) * dw
+    for i in live:
+        e = np.zeros(n)
+        e[i] = hh[i]
+        r1[i] = R(y0 + e)
+    Qs = np.zeros((n, n))  # the Hessian in y / hh (unit steps): comparable entries for the projection
+    for p, i in enumerate(live):
+        for j in live[p:]:
+            e = np.zeros(n)
+            e[i] += hh[i]
+            e[j] += hh[j]
+            Qs[i, j] = Qs[j, i] = R(y0 + e) - r1[i] - r1[j] + r0
+    lam, V = np.linalg.eigh(Qs)
+    Qs = (V * np.maximum(lam, 0.0)) @ V.T
+    Js = Jy / hh[:, None]
+    return TargetModel(value=r0, gradient=gy @ Jy, hessian=Js.T @ Qs @ Js)
 
 
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
@@ -781,12 +802,9 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         reached["tight"] |= category == "tight"
         fg = e.fg
         if target:
-            f = float(e.ev.rms_error ** 2)
-            sr, Fr = e.ev.result.column("s"), force_scale * e.ev.result.column("force")
-            J = force_scale * e.force_jacobian * span[None, :]
-            g = fg.gradients["rms_error_sq"] * span + seat_shift_gradient(problem.target, sr, Fr, J)
-            Q = target_hessian(problem.target, sr, Fr)
-            Bz = J.T @ Q @ J  # Gauss-Newton: the force samples' curvature left out
+            tm = target_model(problem.target, e.ev.result.column("s"), force_scale * e.ev.result.column("force"),
+                              force_scale * e.force_jacobian * span[None, :])
+            f, g, Bz = tm.value, tm.gradient, tm.hessian  # (Gauss-Newton: the samples' own curvature left out)
         else:
             X = H.apply(h)
             f, g, Bz = problem.energy(X), modification_gradient(problem, X, Jh) * span, B_EL
