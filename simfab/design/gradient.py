@@ -40,9 +40,12 @@ the brief's constraints are linearized from the insertion: scaled to their SCALE
 (value - lo) / scale >= 0 and (hi - value) / scale >= 0 (a loose grip's coupling-ratio bound in
 sqrt(CR), :class:`ConstraintRow`), aimed AIM_REL inside the bound; the element-quality bound
 q_e / q0_e >= QUALITY_REL is imposed exactly in every subproblem (analytic, no simulation), so no
-trial is an inverted or degenerate mesh. A start that touches nothing (every figure's
-gradient zero) gets the seat clearance's bound, linearized through the gap of the undeformed part
-(:func:`gap_gradient`); only when that has no gradient either (no vertex near O), or when the start
+trial is an inverted or degenerate mesh. Target matching restarts the SQP from its best design at the
+initial radius when the trust region collapsed (at most RESTARTS times, while that gains): the rest
+point's approach (the force between the last planned record and the seat) is not sampled at fixed
+positions, and a radius shrunk there stays small after the design has moved on. A start that touches
+nothing (every figure's gradient zero) gets the seat clearance's bound, linearized through the gap of
+the undeformed part (:func:`gap_gradient`); only when that has no gradient either (no vertex near O), or when the start
 ejects under a coupling-ratio bound (:func:`flat_start`), a seeded annealing pre-phase runs until a
 design is in the brief's category (:func:`in_category`). The best design is
 the feasible one with the lowest objective among all simulated (the lowest penalized objective when
@@ -624,6 +627,9 @@ QUALITY_AIM = 1.001
 MIN_RADIUS = 1e-4
 #: Stop when no step predicts a reduction of the objective above this fraction of it.
 RTOL = 1e-2
+#: Target matching: restarts of the SQP from its best design at its initial radius after its trust region
+#: collapsed or its trials kept failing (the next one only while a restart lowers the objective by more than RTOL).
+RESTARTS = 2
 
 
 def modification_hessian(problem: DesignProblem, Jh: np.ndarray) -> np.ndarray:
@@ -844,7 +850,23 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         raise ConvergenceError(f"couple optimize: {problem.base.name}: the gradient method's start cannot be "
                                f"simulated with its sensitivities ({why}); --method anneal does not need them")
     res = trust_region_sqp(sample, z0, options=opts, cheap=quality, callback=on_step)
-    log(f"couple optimize: {problem.base.name}: SQP: {res.message} ({len(res.steps)} iterations, "
+    iterations = len(res.steps)
+    for _ in range(RESTARTS if target else 0):
+        # target matching: a trust region that collapsed at a kink of the rest point starts again from the
+        # best design at the initial radius (its start memoized: no insertion); again while that gains
+        if res.converged or iterations >= cap:
+            break
+        log(f"couple optimize: {problem.base.name}: SQP: {res.message}; restart from the best design at radius "
+            f"{opts.radius:g}", quiet=quiet)
+        before = res.sample.f
+        res = trust_region_sqp(sample, res.z, options=dataclasses.replace(opts, max_evaluations=cap + 1 - iterations),
+                               cheap=quality, callback=on_step)
+        iterations += len(res.steps)
+        if res.sample.f > (1.0 - RTOL) * before:
+            break
+    if not res.converged and iterations >= cap:
+        res.message = f"iteration cap ({cap}) reached"
+    log(f"couple optimize: {problem.base.name}: SQP: {res.message} ({iterations} iterations, "
         f"{run.insertions} insertions)", quiet=quiet)
     ok = [ev for ev in run.evaluations if ev.status == "ok"]
     best = min(ok, key=lambda e: (not e.feasible, e.objective))
@@ -867,7 +889,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         best_so_far = min(best_so_far, ev.objective)
         hist.append({"k": k, "accepted": acc, "current": current, "best": best_so_far, "temperature": math.nan,
                      "sigma": math.nan, "value": ev.objective, "evaluation": ev})
-    message = f"SQP: {res.message} ({len(res.steps)} iterations)"
+    message = f"SQP: {res.message} ({iterations} iterations)"
     if pre is not None:
         message = (f"annealing pre-phase ({pre.iterations} iterations, "
                    f"{pre.simulations + pre.stopped_simulations + pre.speculative} insertions, "
@@ -879,6 +901,6 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
                         accepted=[(k, ev.rest, ev.objective) for k, (ev, acc) in enumerate(history) if acc],
                         simulations=run.insertions, stopped_simulations=0, rejected=rejected,
                         seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
-                        iterations=len(res.steps), stopped_early=bool(res.converged), method="gradient",
+                        iterations=iterations, stopped_early=bool(res.converged), method="gradient",
                         gradient_evaluations=run.gradient_evaluations, message=message,
                         events=nonsmooth_events(run.signatures))

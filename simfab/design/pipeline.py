@@ -185,6 +185,8 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
                        "insertions": outputs.insertions(nxt), "kept": better})
         if better:
             best = (nxt, c)
+        elif res_b.method == "gradient":  # the same start and factors: the next round would repeat this one
+            break
     return best[0], best[1], rounds
 
 
