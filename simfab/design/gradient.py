@@ -743,7 +743,10 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     PRE_PHASE_ITERATIONS iterations, until a design is in the brief's category; the SQP starts from
     the best one); otherwise the method is deterministic. ``iterations`` caps the SQP's iterations
     (default: the brief's, at most MAX_ITERATIONS). ``start``: the design to start from (a correction
-    round's: the trust region then starts at RADIUS_FROM_DESIGN), default the initial shape. Raises
+    round's: the trust region then starts at RADIUS_FROM_DESIGN, and a brief's round stops at its first
+    design that meets the corrected brief, :class:`simfab.design.sqp.SQPOptions` ``stop_when_feasible``:
+    the factors were measured at the start and move with the design by more than the objective's
+    further steps would gain; the mesh check decides), default the initial shape. Raises
     ConvergenceError when the initial shape cannot be simulated."""
     t0 = time.perf_counter()
     problem = problem.with_settings(hold_steps=True)  # derivatives are at fixed step positions
@@ -844,7 +847,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             f"{'accepted' if st.accepted else 'rejected'}, insertions {run.insertions}", quiet=quiet)
 
     opts = SQPOptions(radius=RADIUS if start is None or pre is not None else RADIUS_FROM_DESIGN,
-                      max_evaluations=cap + 1, rtol=RTOL, ctol=aim, min_radius=MIN_RADIUS)
+                      max_evaluations=cap + 1, rtol=RTOL, ctol=aim, min_radius=MIN_RADIUS,
+                      stop_when_feasible=start is not None and not target)
     if not sample(z0).ok:  # (memoized: the SQP's first evaluation)
         why = _evaluate(run, h_of(z0)).ev.reason or "status " + _evaluate(run, h_of(z0)).ev.status
         raise ConvergenceError(f"couple optimize: {problem.base.name}: the gradient method's start cannot be "
