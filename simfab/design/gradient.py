@@ -45,9 +45,9 @@ initial radius when the trust region collapsed (at most RESTARTS times, while th
 point's approach (the force between the last planned record and the seat) is not sampled at fixed
 positions, and a radius shrunk there stays small after the design has moved on. A start that touches
 nothing (every figure's gradient zero) gets the seat clearance's bound, linearized through the gap of
-the undeformed part (:func:`gap_gradient`); only when that has no gradient either (no vertex near O), or when the start
-ejects under a coupling-ratio bound (:func:`flat_start`), a seeded annealing pre-phase runs until a
-design is in the brief's category (:func:`in_category`). The best design is
+the undeformed part (:func:`gap_gradient`); only when that has no gradient either (no vertex near O),
+or when the start ejects under a coupling-ratio bound (:func:`flat_start`), a seeded annealing
+pre-phase runs until a design is in the brief's category (:func:`in_category`). The best design is
 the feasible one with the lowest objective among all simulated (the lowest penalized objective when
 none is feasible). Every candidate runs at the initial shape's planned step positions
 (``EvaluationSettings.hold_steps``): the derivatives are taken at fixed positions, and the default
@@ -436,9 +436,14 @@ class _Evaluated:
     force_jacobian: np.ndarray | None = None
 
 
+def _key(h: np.ndarray) -> np.ndarray:
+    """A design's memo key (z -> h round trips differ in the last bits)."""
+    return np.round(np.asarray(h, float), 12)
+
+
 def _evaluate(run: _Run, h: np.ndarray) -> _Evaluated:
     """Design h simulated with its sensitivities, memoized (a design is never simulated twice)."""
-    key = np.round(np.asarray(h, float), 12).tobytes()  # (z -> h round trips differ in the last bits)
+    key = _key(h).tobytes()
     out = run.memo.get(key)
     if out is not None:
         return out
@@ -708,7 +713,8 @@ def target_model(target, s: np.ndarray, force: np.ndarray, dF: np.ndarray) -> Ta
     n = len(y0)
     # only the samples inside the target's range (and the end) enter R
     first = float(target.s[0]) - (s[1] - s[0] if k > 1 else 0.0)
-    live = np.flatnonzero(np.r_[s[: n - 1] if rested else s, [np.inf] if rested else []] >= first)
+    where = np.r_[s[:-1], np.inf] if rested else s  # (the entries of y: records, then the end)
+    live = np.flatnonzero(where >= first)
     r0 = R(y0)
     gy = np.zeros(n)
     for i in live:
@@ -734,7 +740,7 @@ def target_model(target, s: np.ndarray, force: np.ndarray, dF: np.ndarray) -> Ta
 
 
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
-                      callback=None, start=None) -> DesignResult:
+                      callback=None, start=None, resume=None) -> DesignResult:
     """A trust-region SQP on the brief (:func:`simfab.design.sqp.trust_region_sqp`; see the module
     docstring): one insertion per iteration; returns a :class:`DesignResult` whose ``simulations``
     counts every insertion (the pre-phase's and the final run as ``couple simulate`` runs the design
@@ -746,8 +752,11 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     round's: the trust region then starts at RADIUS_FROM_DESIGN, and a brief's round stops at its first
     design that meets the corrected brief, :class:`simfab.design.sqp.SQPOptions` ``stop_when_feasible``:
     the factors were measured at the start and move with the design by more than the objective's
-    further steps would gain; the mesh check decides), default the initial shape. Raises
-    ConvergenceError when the initial shape cannot be simulated."""
+    further steps would gain; the mesh check decides), default the initial shape. ``resume``: a
+    previous result's ``resume`` (its best design's simulation with gradients); when ``start`` is that
+    design and the problem a brief, the run starts from it re-scored (the round's corrections change
+    the scoring, not the simulation: same held steps and seeded refinement) instead of simulating it
+    again. Raises ConvergenceError when the initial shape cannot be simulated."""
     t0 = time.perf_counter()
     problem = problem.with_settings(hold_steps=True)  # derivatives are at fixed step positions
     H = problem.handles
@@ -765,6 +774,14 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     span = hi - lo
     rows = constraint_rows(problem)
     corr = problem.settings.corrections
+    if (resume is not None and start is not None and problem.target is None and resume.fg is not None
+            and np.array_equal(_key(resume.ev.h), _key(start)) and resume.ev.figures.get("category") != "none"):
+        # a round from the previous run's best: its simulation, scored as simfab.design.problem scores a brief
+        cons = problem.constraints(resume.ev.figures)
+        ev = dataclasses.replace(resume.ev, constraints=cons,
+                                 objective=resume.ev.E_L + B.penalty(cons, problem.settings.margin))
+        run.memo[_key(start).tobytes()] = dataclasses.replace(resume, ev=ev)
+        run.evaluations.append(ev)
     pre = None
     e0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))
     if e0.fg is not None and flat_start(rows, e0.fg, corr):
@@ -874,6 +891,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         f"{run.insertions} insertions)", quiet=quiet)
     ok = [ev for ev in run.evaluations if ev.status == "ok"]
     best = min(ok, key=lambda e: (not e.feasible, e.objective))
+    resume_next = run.memo.get(_key(best.h).tobytes())
     if best.status == "ok" and best is not initial:  # as `couple simulate` runs it (own steps, no seeded refinement)
         plain = evaluate(problem.with_settings(refined=(), hold_steps=False), best.h, keep_result=True)
         run.insertions += int(plain.sim_seconds > 0)
@@ -907,4 +925,4 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
                         seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
                         iterations=iterations, stopped_early=bool(res.converged), method="gradient",
                         gradient_evaluations=run.gradient_evaluations, message=message,
-                        events=nonsmooth_events(run.signatures))
+                        events=nonsmooth_events(run.signatures), resume=resume_next)

@@ -118,3 +118,21 @@ def test_an_ejecting_start_with_a_coupling_ratio_bound_is_a_flat_start():
     # without a coupling-ratio bound ("any" grip) the forces' gradients give the SQP its direction
     P_any = make_problem(cm, DesignBrief(grip="any", insertion_force=(0.0, 0.1), handles=3, placement="spatial"))
     assert not G.flat_start(G.constraint_rows(P_any), fg, {})
+
+
+def test_a_correction_round_resumes_from_the_previous_best():
+    # A correction round starts from the previous run's best design with other correction factors: the
+    # simulation is the same (held steps, seeded refinement), only its scoring changes, so the round reuses
+    # it (one insertion fewer) and takes the same steps as a round that simulates its start again
+    cm = load_coupling_scene("block2d_tight", overrides={"compliant": {"target_elements": 250},
+                                                         "simulation": {"steps": 10}})
+    P = make_problem(cm, DesignBrief(grip="tight", grip_force=(3.0, 5.0), handles=3, placement="spatial"))
+    res = G.optimize_gradient(P, iterations=3, seed=0)
+    assert res.resume is not None
+    P2 = res.problem.with_settings(corrections={"grip_force": 0.7, "insertion_force": 0.7, "removal_force": 0.7})
+    resumed = G.optimize_gradient(P2, start=res.best.h, resume=res.resume, iterations=3, seed=1)
+    again = G.optimize_gradient(P2, start=res.best.h, iterations=3, seed=1)
+    assert resumed.simulations == again.simulations - 1
+    assert [h["value"] for h in resumed.history] == [h["value"] for h in again.history]
+    assert resumed.best.objective == again.best.objective
+
