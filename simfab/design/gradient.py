@@ -778,7 +778,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             and np.array_equal(_key(resume.ev.h), _key(start)) and resume.ev.figures.get("category") != "none"):
         # a round from the previous run's best: its simulation, scored as simfab.design.problem scores a brief
         cons = problem.constraints(resume.ev.figures)
-        ev = dataclasses.replace(resume.ev, constraints=cons,
+        ev = dataclasses.replace(resume.ev, constraints=cons, sim_seconds=0.0,  # (simulated by that run)
                                  objective=resume.ev.E_L + B.penalty(cons, problem.settings.margin))
         run.memo[_key(start).tobytes()] = dataclasses.replace(resume, ev=ev)
         run.evaluations.append(ev)
