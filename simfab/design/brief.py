@@ -262,6 +262,19 @@ def read_target_profile(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return a[:, 0], a[:, 1]
 
 
+def run_to_rest(s: np.ndarray, force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(s, F) of a run cut at its rest point: when its last two records bracket a zero crossing of
+    the force from above (F_a > 0 >= F_b: the rest search's overshoot into the seat, or a planned step
+    past it), the last record becomes the rest point s* = s_a + w (s_b - s_a), w = F_a / (F_a - F_b),
+    with force 0 (where O rests; :func:`simfab.design.gradient.rest_grip_gradient` reads the grip
+    there too); otherwise the run unchanged."""
+    s, force = np.asarray(s, float), np.asarray(force, float)
+    if len(s) < 2 or not (force[-2] > 0.0 >= force[-1]):
+        return s, force
+    w = force[-2] / (force[-2] - force[-1])
+    return np.r_[s[:-1], s[-2] + w * (s[-1] - s[-2])], np.r_[force[:-1], 0.0]
+
+
 @dataclass(frozen=True, kw_only=True)
 class TargetProfile:
     """A force profile to match: distances s [m] and forces F [N] (resisting < 0)."""
@@ -278,14 +291,15 @@ class TargetProfile:
         A distance integral, not a mean over samples: each sample weighs by the distance it covers,
         so a densely sampled stretch (a run's search for its rest point, records micrometres apart
         across the seat's force jump) does not decide the error, and a seat a few micrometres off
-        costs micrometres' worth of it. Past the run's last record the force is 0: a finished run
-        ends where O comes to rest (its last record may be the rest search's overshoot into the seat,
-        whose force is not what holds O there), so a design that seats before the target does is
-        charged for the target's forces past its seat (left out, they would reward seating early)."""
-        s = np.asarray(s, float)
+        costs micrometres' worth of it. The run ends where O comes to rest (:func:`run_to_rest`: its
+        last record may be the rest search's overshoot into the seat, whose force is not what holds O
+        there; the piece towards it would charge that force's square, tens of newtons that depend on
+        how deep the search overshot). Past the run's end the force is 0, so a design that seats
+        before the target does is charged for the target's forces past its seat (left out, they
+        would reward seating early)."""
+        s, force = run_to_rest(s, force)
         if not len(s):
             return float("inf")
-        force = np.asarray(force, float)
         t0, t1 = float(self.s[0]), float(self.s[-1])
         if not t1 > t0:
             return float(np.sqrt(np.mean((np.interp(self.s, s, force) - self.force) ** 2)))
@@ -306,4 +320,4 @@ class TargetProfile:
 
 
 __all__ = ["DesignBrief", "Constraint", "TargetProfile", "bounds", "constraints", "penalty", "read_target_profile",
-           "PENALTY_WEIGHT", "SCALES", "UNITS"]
+           "run_to_rest", "PENALTY_WEIGHT", "SCALES", "UNITS"]

@@ -20,8 +20,8 @@ index of those per-step series; their derivatives (:func:`figure_gradients`):
   with the design (:func:`rest_grip_gradient`: implicit differentiation of F(s*; X) = 0);
 - E_L = |L v|^2 / l^2 (:mod:`simfab.design.modification`): 2 M_L v, exactly;
 - the element quality q_e (signed mean ratio) analytically.
-- the target-profile error rms^2 (the objective of profile matching) through the force samples
-  (:func:`target_gradient`), at fixed step positions;
+- the target-profile error rms^2 (the objective of profile matching) through the force samples at
+  fixed step positions and the run's rest point, which moves with the design (:func:`target_model`);
 - with friction, F_rm and F_hold from the removal traversal's records (:func:`removal_gradients`),
   whose sensitivities the adjoint's backward pass carries through the friction anchors; the
   insertion runs with lag_tol <= GRADIENT_LAG_TOL (the pipeline tightens the scene's).
@@ -34,18 +34,20 @@ checks it on every design and reports it): the seat clearance (but for a part th
 Optimizer (:func:`optimize_gradient`): a trust-region SQP (:func:`simfab.design.sqp.trust_region_sqp`)
 on z = (h - lower) / (upper - lower) in [0, 1] from the initial shape, one insertion per iteration:
 the objective's model needs no simulation - E_L is a quadratic in h with a constant Hessian
-(:func:`modification_hessian`), profile matching's rms^2 a quadratic in the force samples, whose
-Gauss-Newton Hessian J^T Q J (:func:`target_hessian`) comes with the samples' Jacobian J - and only
+(:func:`modification_hessian`), profile matching's rms^2 a function of the force samples and the run's
+rest point, whose Gauss-Newton Hessian J^T Q J (:func:`target_model`) comes with their Jacobian J - and only
 the brief's constraints are linearized from the insertion: scaled to their SCALES units,
 (value - lo) / scale >= 0 and (hi - value) / scale >= 0 (a loose grip's coupling-ratio bound in
 sqrt(CR), :class:`ConstraintRow`), aimed AIM_REL inside the bound; the element-quality bound
 q_e / q0_e >= QUALITY_REL is imposed exactly in every subproblem (analytic, no simulation), so no
-trial is an inverted or degenerate mesh. Profile matching's gradient also carries the run's end
-moving with the design (:func:`seat_shift_gradient`). A start that touches nothing (every figure's
-gradient zero) gets the seat clearance's bound, linearized through the gap of the undeformed part
-(:func:`gap_gradient`); only when that has no gradient either (no vertex near O), or when the start
-ejects under a coupling-ratio bound (:func:`flat_start`), a seeded annealing pre-phase runs until a
-design is in the brief's category (:func:`in_category`). The best design is
+trial is an inverted or degenerate mesh. Target matching restarts the SQP from its best design at the
+initial radius when the trust region collapsed (at most RESTARTS times, while that gains): the rest
+point's approach (the force between the last planned record and the seat) is not sampled at fixed
+positions, and a radius shrunk there stays small after the design has moved on. A start that touches
+nothing (every figure's gradient zero) gets the seat clearance's bound, linearized through the gap of
+the undeformed part (:func:`gap_gradient`); only when that has no gradient either (no vertex near O),
+or when the start ejects under a coupling-ratio bound (:func:`flat_start`), a seeded annealing
+pre-phase runs until a design is in the brief's category (:func:`in_category`). The best design is
 the feasible one with the lowest objective among all simulated (the lowest penalized objective when
 none is feasible). Every candidate runs at the initial shape's planned step positions
 (``EvaluationSettings.hold_steps``): the derivatives are taken at fixed positions, and the default
@@ -307,7 +309,7 @@ def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) ->
     g["seat_clearance"] = None
     if problem.target is not None:
         scale = problem.settings.corrections.get("force_profile", 1.0)
-        g["rms_error_sq"] = scale * target_gradient(problem.target, res.column("s"), scale * F) @ dF
+        g["rms_error_sq"] = target_model(problem.target, res.column("s"), scale * F, scale * dF).gradient
         g["force_samples"] = dF  # (K, n_vars): d F_k / dh, the Gauss-Newton model's Jacobian
     return g, all(s.supported for s in sens.values())
 
@@ -372,20 +374,6 @@ def removal_gradients(res, prof, dF: np.ndarray) -> tuple:
     return g_rm, _smax(np.r_[Fr[:k], at], np.vstack([dF[:k], d_at[None, :]]))
 
 
-def target_gradient(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """d(rms^2)/dF_k (k,) [N] of the target-profile error (:meth:`simfab.design.brief.TargetProfile.
-    rms_error`) at fixed distances s: rms^2 is a quadratic function of the force samples (an
-    integral of squared piecewise-linear differences), so central differences with any step are
-    exact up to round-off; a step of 1 N is used."""
-    f = np.asarray(force, float)
-    out = np.empty(len(f))
-    for k in range(len(f)):
-        e = np.zeros(len(f))
-        e[k] = 1.0
-        out[k] = 0.5 * (target.rms_error(s, f + e) ** 2 - target.rms_error(s, f - e) ** 2)
-    return out
-
-
 def modification_gradient(problem: DesignProblem, X: np.ndarray, Jh: np.ndarray) -> np.ndarray:
     """dE_L/dh (n_vars,): E_L = sum_axes v^T M_L v over the boundary displacements v, so dE_L/dX = 2 M_L v."""
     en = problem.energy
@@ -448,9 +436,14 @@ class _Evaluated:
     force_jacobian: np.ndarray | None = None
 
 
+def _key(h: np.ndarray) -> np.ndarray:
+    """A design's memo key (z -> h round trips differ in the last bits)."""
+    return np.round(np.asarray(h, float), 12)
+
+
 def _evaluate(run: _Run, h: np.ndarray) -> _Evaluated:
     """Design h simulated with its sensitivities, memoized (a design is never simulated twice)."""
-    key = np.round(np.asarray(h, float), 12).tobytes()  # (z -> h round trips differ in the last bits)
+    key = _key(h).tobytes()
     out = run.memo.get(key)
     if out is not None:
         return out
@@ -639,6 +632,9 @@ QUALITY_AIM = 1.001
 MIN_RADIUS = 1e-4
 #: Stop when no step predicts a reduction of the objective above this fraction of it.
 RTOL = 1e-2
+#: Target matching: restarts of the SQP from its best design at its initial radius after its trust region
+#: collapsed or its trials kept failing (the next one only while a restart lowers the objective by more than RTOL).
+RESTARTS = 2
 
 
 def modification_hessian(problem: DesignProblem, Jh: np.ndarray) -> np.ndarray:
@@ -654,60 +650,97 @@ def modification_hessian(problem: DesignProblem, Jh: np.ndarray) -> np.ndarray:
     return out
 
 
-def target_hessian(target, s: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """d2(rms^2)/dF_k dF_l (k, k) [-] of the target-profile error at fixed distances s: rms^2 is a
-    quadratic function of the force samples (:func:`target_gradient`), so with unit steps
-    r(F + e_k + e_l) - r(F + e_k) - r(F + e_l) + r(F) is its Hessian's entry exactly (up to
-    round-off). Samples outside the target's range have zero rows (skipped)."""
-    f = np.asarray(force, float)
-    s = np.asarray(s, float)
-    k = len(f)
+@dataclass(frozen=True, kw_only=True, eq=False)
+class TargetModel:
+    """The target-profile error of one insertion as the SQP models it: ``value`` rms^2 [N^2],
+    ``gradient`` (n,) its derivative with respect to the design variables and ``hessian`` (n, n) a
+    Gauss-Newton model Hessian (symmetric positive semi-definite), in the units of the force samples'
+    Jacobian the model was built with."""
 
-    def r(x):
-        return target.rms_error(s, x) ** 2
+    value: float
+    gradient: np.ndarray
+    hessian: np.ndarray
 
-    inside = np.flatnonzero(s >= float(target.s[0]) - (s[1] - s[0] if k > 1 else 0.0))
-    r0 = r(f)
+
+#: The rest point's step in the target model's second differences, relative to the target's length:
+#: the curvature of rms^2 in the run's end over the distances a design step moves it (tens of
+#: micrometres), not at the target's sample kinks.
+REST_STEP_REL = 2e-3
+
+
+def target_model(target, s: np.ndarray, force: np.ndarray, dF: np.ndarray) -> TargetModel:
+    """:class:`TargetModel` of the target-profile error rms^2 (:meth:`simfab.design.brief.TargetProfile.
+    rms_error`) of a run with records at s (k,) [m], forces (k,) [N] and the forces' Jacobian dF
+    (k, n) at fixed positions.
+
+    rms^2 is a function R(y) of y = (F_0 .. F_a, s*): the records' forces up to the run's end and the
+    end itself, the rest point s* = s_a + w (s_b - s_a), w = F_a / (F_a - F_b), when the last two records
+    bracket a zero crossing (:func:`simfab.design.brief.run_to_rest`; else y = F and R is a quadratic).
+    The rest point moves with the design: ds*/dh = (s_b - s_a) (F_a dF_b - F_b dF_a) / (F_a - F_b)^2 (the
+    implicit derivative of F(s*) = 0 over the bracket's secant, as for the grip,
+    :func:`rest_grip_gradient`), so dy/dh = J_y stacks dF_k/dh and ds*/dh. R is a quadratic in the forces
+    at a fixed end (an integral of squared piecewise-linear differences): its derivatives in them are
+    differences with a 1 N step, exact up to round-off; in s* it is piecewise smooth (the target's
+    samples), differentiated by central differences with a step of 1e-6 L and curved over REST_STEP_REL L.
+    Gauss-Newton: value R, gradient J_y^T dR/dy, Hessian J_y^T Q J_y with Q the second differences of R
+    in y projected on the positive semi-definite cone (negative eigenvalues, from the rest point's
+    terms, set to 0)."""
+    s, F = np.asarray(s, float), np.asarray(force, float)
+    dF = np.asarray(dF, float)
+    k = len(F)
+    L = float(target.s[-1] - target.s[0])
+    rested = k >= 2 and F[-2] > 0.0 >= F[-1]
+    if rested:
+        a, b = k - 2, k - 1
+        w = F[a] / (F[a] - F[b])
+        se = s[a] + w * (s[b] - s[a])
+        dse = (s[b] - s[a]) * (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
+        y0, Jy = np.r_[F[:b], se], np.vstack([dF[:b], dse[None, :]])
+
+        def R(y):
+            return target.rms_error(np.r_[s[:b], y[-1]], np.r_[y[:-1], 0.0]) ** 2
+
+        room = 0.5 * (se - s[a])  # (the end stays past its last record)
+        hg = np.r_[np.ones(b), min(1e-6 * L, room)]
+        hh = np.r_[np.ones(b), min(REST_STEP_REL * L, room)]
+    else:
+        y0, Jy = F, dF
+
+        def R(y):
+            return target.rms_error(s, y) ** 2
+
+        hg = hh = np.ones(k)
+    n = len(y0)
+    # only the samples inside the target's range (and the end) enter R
+    first = float(target.s[0]) - (s[1] - s[0] if k > 1 else 0.0)
+    where = np.r_[s[:-1], np.inf] if rested else s  # (the entries of y: records, then the end)
+    live = np.flatnonzero(where >= first)
+    r0 = R(y0)
+    gy = np.zeros(n)
+    for i in live:
+        e = np.zeros(n)
+        e[i] = hg[i]
+        gy[i] = (R(y0 + e) - R(y0 - e)) / (2.0 * hg[i])
     r1 = {}
-    for i in inside:
-        e = f.copy()
-        e[i] += 1.0
-        r1[i] = r(e)
-    H = np.zeros((k, k))
-    for a, i in enumerate(inside):
-        for j in inside[a:]:
-            e = f.copy()
-            e[i] += 1.0
-            e[j] += 1.0
-            H[i, j] = H[j, i] = r(e) - r1[i] - r1[j] + r0
-    return H
-
-
-def seat_shift_gradient(target, s: np.ndarray, force: np.ndarray, dF: np.ndarray) -> np.ndarray:
-    """d(rms^2)/dh (n_vars,) [N^2] from the run's end moving with the design, the part of the
-    target-profile error's gradient that the force samples at fixed distances (:func:`target_gradient`)
-    do not carry: past the run's end s_e (where O rests) the force counts as 0, so a design that seats
-    early is charged int_{s_e}^{t1} F_t^2 ds / L, and at fixed distances nothing moves that end.
-
-    The end follows the rest point s*, F(s*) = 0, bracketed by the last two records (F_a > 0 >= F_b):
-    ds*/dh = (s_b - s_a) dw, w = F_a / (F_a - F_b), dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2 (as for the
-    grip, :func:`rest_grip_gradient`). Moving the end by ds the run's profile is assumed to continue
-    as the target's (it matches it before its end), so rms^2 changes by -F_t(s_e)^2 ds / L: the
-    target's force at the run's end drives the seat towards the target's. Zero when the run ends past
-    the target's range or its last two records do not bracket a rest point."""
-    s = np.asarray(s, float)
-    F = np.asarray(force, float)
-    t0, t1 = float(target.s[0]), float(target.s[-1])
-    if len(F) < 2 or not (t0 < s[-1] < t1) or not (F[-2] > 0 >= F[-1]):
-        return np.zeros(dF.shape[1])
-    a, b = len(F) - 2, len(F) - 1
-    dw = (F[a] * dF[b] - F[b] * dF[a]) / (F[a] - F[b]) ** 2
-    ft = float(np.interp(s[-1], target.s, target.force))
-    return -(ft**2) / (t1 - t0) * (s[b] - s[a]) * dw
+    for i in live:
+        e = np.zeros(n)
+        e[i] = hh[i]
+        r1[i] = R(y0 + e)
+    Qs = np.zeros((n, n))  # the Hessian in y / hh (unit steps): comparable entries for the projection
+    for p, i in enumerate(live):
+        for j in live[p:]:
+            e = np.zeros(n)
+            e[i] += hh[i]
+            e[j] += hh[j]
+            Qs[i, j] = Qs[j, i] = R(y0 + e) - r1[i] - r1[j] + r0
+    lam, V = np.linalg.eigh(Qs)
+    Qs = (V * np.maximum(lam, 0.0)) @ V.T
+    Js = Jy / hh[:, None]
+    return TargetModel(value=r0, gradient=gy @ Jy, hessian=Js.T @ Qs @ Js)
 
 
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
-                      callback=None, start=None) -> DesignResult:
+                      callback=None, start=None, resume=None) -> DesignResult:
     """A trust-region SQP on the brief (:func:`simfab.design.sqp.trust_region_sqp`; see the module
     docstring): one insertion per iteration; returns a :class:`DesignResult` whose ``simulations``
     counts every insertion (the pre-phase's and the final run as ``couple simulate`` runs the design
@@ -716,8 +749,14 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     PRE_PHASE_ITERATIONS iterations, until a design is in the brief's category; the SQP starts from
     the best one); otherwise the method is deterministic. ``iterations`` caps the SQP's iterations
     (default: the brief's, at most MAX_ITERATIONS). ``start``: the design to start from (a correction
-    round's: the trust region then starts at RADIUS_FROM_DESIGN), default the initial shape. Raises
-    ConvergenceError when the initial shape cannot be simulated."""
+    round's: the trust region then starts at RADIUS_FROM_DESIGN, and a brief's round stops at its first
+    design that meets the corrected brief, :class:`simfab.design.sqp.SQPOptions` ``stop_when_feasible``:
+    the factors were measured at the start and move with the design by more than the objective's
+    further steps would gain; the mesh check decides), default the initial shape. ``resume``: a
+    previous result's ``resume`` (its best design's simulation with gradients); when ``start`` is that
+    design and the problem a brief, the run starts from it re-scored (the round's corrections change
+    the scoring, not the simulation: same held steps and seeded refinement) instead of simulating it
+    again. Raises ConvergenceError when the initial shape cannot be simulated."""
     t0 = time.perf_counter()
     problem = problem.with_settings(hold_steps=True)  # derivatives are at fixed step positions
     H = problem.handles
@@ -735,6 +774,14 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     span = hi - lo
     rows = constraint_rows(problem)
     corr = problem.settings.corrections
+    if (resume is not None and start is not None and problem.target is None and resume.fg is not None
+            and np.array_equal(_key(resume.ev.h), _key(start)) and resume.ev.figures.get("category") != "none"):
+        # a round from the previous run's best: its simulation, scored as simfab.design.problem scores a brief
+        cons = problem.constraints(resume.ev.figures)
+        ev = dataclasses.replace(resume.ev, constraints=cons, sim_seconds=0.0,  # (simulated by that run)
+                                 objective=resume.ev.E_L + B.penalty(cons, problem.settings.margin))
+        run.memo[_key(start).tobytes()] = dataclasses.replace(resume, ev=ev)
+        run.evaluations.append(ev)
     pre = None
     e0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))
     if e0.fg is not None and flat_start(rows, e0.fg, corr):
@@ -781,12 +828,9 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         reached["tight"] |= category == "tight"
         fg = e.fg
         if target:
-            f = float(e.ev.rms_error ** 2)
-            sr, Fr = e.ev.result.column("s"), force_scale * e.ev.result.column("force")
-            J = force_scale * e.force_jacobian * span[None, :]
-            g = fg.gradients["rms_error_sq"] * span + seat_shift_gradient(problem.target, sr, Fr, J)
-            Q = target_hessian(problem.target, sr, Fr)
-            Bz = J.T @ Q @ J  # Gauss-Newton: the force samples' curvature left out
+            tm = target_model(problem.target, e.ev.result.column("s"), force_scale * e.ev.result.column("force"),
+                              force_scale * e.force_jacobian * span[None, :])
+            f, g, Bz = tm.value, tm.gradient, tm.hessian  # (Gauss-Newton: the samples' own curvature left out)
         else:
             X = H.apply(h)
             f, g, Bz = problem.energy(X), modification_gradient(problem, X, Jh) * span, B_EL
@@ -820,16 +864,34 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             f"{'accepted' if st.accepted else 'rejected'}, insertions {run.insertions}", quiet=quiet)
 
     opts = SQPOptions(radius=RADIUS if start is None or pre is not None else RADIUS_FROM_DESIGN,
-                      max_evaluations=cap + 1, rtol=RTOL, ctol=aim, min_radius=MIN_RADIUS)
+                      max_evaluations=cap + 1, rtol=RTOL, ctol=aim, min_radius=MIN_RADIUS,
+                      stop_when_feasible=start is not None and not target)
     if not sample(z0).ok:  # (memoized: the SQP's first evaluation)
         why = _evaluate(run, h_of(z0)).ev.reason or "status " + _evaluate(run, h_of(z0)).ev.status
         raise ConvergenceError(f"couple optimize: {problem.base.name}: the gradient method's start cannot be "
                                f"simulated with its sensitivities ({why}); --method anneal does not need them")
     res = trust_region_sqp(sample, z0, options=opts, cheap=quality, callback=on_step)
-    log(f"couple optimize: {problem.base.name}: SQP: {res.message} ({len(res.steps)} iterations, "
+    iterations = len(res.steps)
+    for _ in range(RESTARTS if target else 0):
+        # target matching: a trust region that collapsed at a kink of the rest point starts again from the
+        # best design at the initial radius (its start memoized: no insertion); again while that gains
+        if res.converged or iterations >= cap:
+            break
+        log(f"couple optimize: {problem.base.name}: SQP: {res.message}; restart from the best design at radius "
+            f"{opts.radius:g}", quiet=quiet)
+        before = res.sample.f
+        res = trust_region_sqp(sample, res.z, options=dataclasses.replace(opts, max_evaluations=cap + 1 - iterations),
+                               cheap=quality, callback=on_step)
+        iterations += len(res.steps)
+        if res.sample.f > (1.0 - RTOL) * before:
+            break
+    if not res.converged and iterations >= cap:
+        res.message = f"iteration cap ({cap}) reached"
+    log(f"couple optimize: {problem.base.name}: SQP: {res.message} ({iterations} iterations, "
         f"{run.insertions} insertions)", quiet=quiet)
     ok = [ev for ev in run.evaluations if ev.status == "ok"]
     best = min(ok, key=lambda e: (not e.feasible, e.objective))
+    resume_next = run.memo.get(_key(best.h).tobytes())
     if best.status == "ok" and best is not initial:  # as `couple simulate` runs it (own steps, no seeded refinement)
         plain = evaluate(problem.with_settings(refined=(), hold_steps=False), best.h, keep_result=True)
         run.insertions += int(plain.sim_seconds > 0)
@@ -849,7 +911,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         best_so_far = min(best_so_far, ev.objective)
         hist.append({"k": k, "accepted": acc, "current": current, "best": best_so_far, "temperature": math.nan,
                      "sigma": math.nan, "value": ev.objective, "evaluation": ev})
-    message = f"SQP: {res.message} ({len(res.steps)} iterations)"
+    message = f"SQP: {res.message} ({iterations} iterations)"
     if pre is not None:
         message = (f"annealing pre-phase ({pre.iterations} iterations, "
                    f"{pre.simulations + pre.stopped_simulations + pre.speculative} insertions, "
@@ -861,6 +923,6 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
                         accepted=[(k, ev.rest, ev.objective) for k, (ev, acc) in enumerate(history) if acc],
                         simulations=run.insertions, stopped_simulations=0, rejected=rejected,
                         seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),
-                        iterations=len(res.steps), stopped_early=bool(res.converged), method="gradient",
+                        iterations=iterations, stopped_early=bool(res.converged), method="gradient",
                         gradient_evaluations=run.gradient_evaluations, message=message,
-                        events=nonsmooth_events(run.signatures))
+                        events=nonsmooth_events(run.signatures), resume=resume_next)

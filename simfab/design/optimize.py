@@ -53,7 +53,9 @@ class DesignResult:
     gradient_evaluations : insertions that also gave the figures' gradients; message : the
     optimizer's own closing message ("" for annealing); events : the gradient method's count of
     non-smooth events between consecutive simulated designs
-    (:func:`simfab.design.gradient.nonsmooth_events`), None for annealing
+    (:func:`simfab.design.gradient.nonsmooth_events`), None for annealing; resume : the gradient
+    method's simulation of its best design with its gradients (held steps), which a correction round
+    started from that design reuses instead of simulating it again; None for annealing
     """
 
     problem: DesignProblem
@@ -75,6 +77,7 @@ class DesignResult:
     gradient_evaluations: int = 0
     message: str = ""
     events: dict | None = None
+    resume: object = None
 
 
 def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,

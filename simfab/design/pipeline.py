@@ -173,7 +173,7 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
         log(f"couple optimize: {name}: correction round {k + 1}: the coarse figures times "
             + ", ".join(f"{n} {v:.3g}" for n, v in factors.items()), quiet=quiet)
         if res_b.method == "gradient":
-            nxt = optimize_gradient(problem, quiet=quiet, start=res_b.best.h, seed=seed + 1 + k)
+            nxt = optimize_gradient(problem, quiet=quiet, start=res_b.best.h, seed=seed + 1 + k, resume=res_b.resume)
         else:
             nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet,
                            workers=workers if problem.source is not None else 1, start=res_b.best.h,
@@ -185,6 +185,8 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
                        "insertions": outputs.insertions(nxt), "kept": better})
         if better:
             best = (nxt, c)
+        elif res_b.method == "gradient":  # the same start and factors: the next round would repeat this one
+            break
     return best[0], best[1], rounds
 
 

@@ -37,8 +37,9 @@ model the ratio measures how well the constraints' linearization predicted the s
 
 Stops when the current design is feasible (every violation within ``ctol``) and the model predicts
 no reduction of f above ``rtol`` |f| + ``atol``, or ``patience`` trials in a row from it were rejected
-(a kink the radius does not get below); when infeasible and no step reduces the linearized
-violation; when the radius falls below ``min_radius``; or after ``max_evaluations``.
+(a kink the radius does not get below), or at once with ``stop_when_feasible``; when infeasible and no
+step reduces the linearized violation; when the radius falls below ``min_radius``; or after
+``max_evaluations``.
 """
 
 from __future__ import annotations
@@ -99,7 +100,10 @@ class SQPOptions:
     feasible for that test;
     penalty : the l1 merit's initial mu (f's units per unit of violation), raised as needed;
     patience : stop when the current design is feasible and this many trials in a row were rejected (the
-    model mispredicts the simulation at every radius tried: a kink of a constraint at the design)."""
+    model mispredicts the simulation at every radius tried: a kink of a constraint at the design);
+    stop_when_feasible : stop at the first design that is feasible (within ``ctol``), the start included: for
+    constraints known only up to an error larger than what further steps would gain (a correction round's
+    factors, measured at its start, move with the design), which a check outside the method decides."""
 
     radius: float = 0.05
     max_radius: float = 0.5
@@ -110,6 +114,7 @@ class SQPOptions:
     ctol: float | np.ndarray = 0.0
     penalty: float = 1.0
     patience: int = 3
+    stop_when_feasible: bool = False
 
     def __post_init__(self):
         if not (0 < self.min_radius <= self.radius <= self.max_radius):
@@ -262,6 +267,9 @@ def trust_region_sqp(evaluate: Callable[[np.ndarray], Sample], z0: np.ndarray, *
     while True:
         v0 = s.violation(options.ctol)  # the merit's: violations within ctol are free
         within = v0 == 0.0
+        if within and options.stop_when_feasible:
+            out.converged, out.message = True, "a feasible design reached (stop_when_feasible)"
+            break
         dzf = feasibility_step(s, z, radius, cheap) if s.violation() > 0 else np.zeros(len(z))
         dz, lam_qp = optimality_step(s, z, radius, dzf, cheap, S)
         if lam_qp is not None:

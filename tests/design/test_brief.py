@@ -87,6 +87,16 @@ def test_target_profile_rms(tmp_path):
     # a seat (force jump) a micrometre off costs a micrometre's worth, not a whole sample's
     seat = B.TargetProfile(s=np.array([0.0, 0.010, 0.010004]), force=np.array([0.0, 9.0, -4.0]))
     assert seat.rms_error(np.array([0.0, 0.010001, 0.010004]), np.array([0.0, 9.0009, -4.0])) < 0.3
+    # the run ends at its rest point, not at the rest search's overshoot: records (0, 0.01, 0.012) m with
+    # forces (5, 5, -5) N rest at 0.011 m (F linear 5 -> 0 over the last millimetre); against a target of
+    # 5 N on [0, 0.012]: int_0.01^0.011 (5 (0.011 - s) / 1e-3 - 5)^2 ds = 25e-3 / 3, past 0.011 m 25e-3
+    flat = B.TargetProfile(s=np.array([0.0, 0.012]), force=np.array([5.0, 5.0]))
+    for overshoot in (-5.0, -50.0):  # how deep the search overshot does not matter beyond moving the rest point
+        s_end = 0.01 + 0.002 * 5.0 / (5.0 - overshoot)
+        want = (25.0 * (s_end - 0.01) / 3.0 + 25.0 * (0.012 - s_end)) / 0.012
+        assert flat.rms_error(np.array([0.0, 0.01, 0.012]), np.array([5.0, 5.0, overshoot])) ** 2 == pytest.approx(want)
+    s_r, f_r = B.run_to_rest(np.array([0.0, 0.01, 0.012]), np.array([5.0, 5.0, -5.0]))
+    assert np.allclose(s_r, [0.0, 0.01, 0.011]) and np.allclose(f_r, [5.0, 5.0, 0.0])
     (tmp_path / "bad.csv").write_text("0,0\n0,1\n")
     with pytest.raises(InputError):
         B.read_target_profile(tmp_path / "bad.csv")

@@ -1,6 +1,7 @@
 """The gradient design method's treatment of the brief's non-smooth figures (simfab.design.gradient):
-the grip read at a seat the rest search brackets, the loose grip's square-root surrogate, and the
-gap of a start that touches nothing."""
+the grip read at a seat the rest search brackets, the target-profile error whose run ends at a rest
+point that moves with the design, the loose grip's square-root surrogate, and the gap of a start that
+touches nothing."""
 
 import math
 
@@ -9,7 +10,7 @@ import pytest
 
 from simfab.coupling.scene import load_coupling_scene
 from simfab.design import gradient as G
-from simfab.design.brief import DesignBrief
+from simfab.design.brief import DesignBrief, TargetProfile
 from simfab.design.problem import evaluate, make_problem
 
 
@@ -33,6 +34,30 @@ def test_grip_gradient_follows_the_rest_point():
     assert float(fg.gradients["grip_force"] @ dh) == pytest.approx(fd, rel=0.6)
     fixed = float(np.asarray(ev.recorder.insert[fg.steady_index].grip).ravel() @ Jh @ dh)
     assert abs(fixed - fd) > 3 * abs(fd)  # (-196 against -14)
+
+
+def test_target_model_follows_the_rest_point():
+    # A run whose forces are linear in h, F(h) = F0 + P h, ending in the rest search's bracket (F_a > 0 >= F_b,
+    # the overshoot -30 N): rms^2 is then a smooth function of h through the forces and the rest point
+    # s*(h) between the last two records. The model's gradient must match central differences of
+    # rms_error itself.
+    rng = np.random.default_rng(0)
+    ts = np.linspace(0.0, 0.01, 21)
+    target = TargetProfile(s=ts, force=8.0 * np.sin(600.0 * ts))
+    s = np.r_[np.linspace(0.0, 0.0095, 20), 0.00952]
+    F0 = 8.0 * np.sin(600.0 * s) + 0.5
+    F0[-2:] = 4.0, -30.0
+    P = rng.standard_normal((len(s), 4)) * np.r_[np.ones(len(s) - 1), 50.0][:, None]
+    h0 = 0.01 * rng.standard_normal(4)
+
+    def rms2(h):
+        return target.rms_error(s, F0 + P @ h) ** 2
+
+    m = G.target_model(target, s, F0 + P @ h0, P)
+    assert m.value == pytest.approx(rms2(h0), rel=1e-12)
+    fd = np.array([(rms2(h0 + 1e-6 * e) - rms2(h0 - 1e-6 * e)) / 2e-6 for e in np.eye(4)])
+    assert np.allclose(m.gradient, fd, rtol=1e-6, atol=1e-8 * np.abs(fd).max())
+    assert np.linalg.eigvalsh(m.hessian).min() >= -1e-9 * np.abs(m.hessian).max()  # Gauss-Newton: PSD
 
 
 def test_loose_bound_square_root_surrogate():
@@ -93,3 +118,21 @@ def test_an_ejecting_start_with_a_coupling_ratio_bound_is_a_flat_start():
     # without a coupling-ratio bound ("any" grip) the forces' gradients give the SQP its direction
     P_any = make_problem(cm, DesignBrief(grip="any", insertion_force=(0.0, 0.1), handles=3, placement="spatial"))
     assert not G.flat_start(G.constraint_rows(P_any), fg, {})
+
+
+def test_a_correction_round_resumes_from_the_previous_best():
+    # A correction round starts from the previous run's best design with other correction factors: the
+    # simulation is the same (held steps, seeded refinement), only its scoring changes, so the round reuses
+    # it (one insertion fewer) and takes the same steps as a round that simulates its start again
+    cm = load_coupling_scene("block2d_tight", overrides={"compliant": {"target_elements": 250},
+                                                         "simulation": {"steps": 10}})
+    P = make_problem(cm, DesignBrief(grip="tight", grip_force=(3.0, 5.0), handles=3, placement="spatial"))
+    res = G.optimize_gradient(P, iterations=3, seed=0)
+    assert res.resume is not None
+    P2 = res.problem.with_settings(corrections={"grip_force": 0.7, "insertion_force": 0.7, "removal_force": 0.7})
+    resumed = G.optimize_gradient(P2, start=res.best.h, resume=res.resume, iterations=3, seed=1)
+    again = G.optimize_gradient(P2, start=res.best.h, iterations=3, seed=1)
+    assert resumed.simulations == again.simulations - 1
+    assert [h["value"] for h in resumed.history] == [h["value"] for h in again.history]
+    assert resumed.best.objective == again.best.objective
+

@@ -45,6 +45,29 @@ def test_reaches_the_kkt_point_of_a_disc_constraint(z0):
     assert ev.calls <= 10
 
 
+def test_stop_when_feasible_ends_at_the_first_feasible_design():
+    # from the infeasible start (0.95, 0.1) the iterates enter the disc far from z* and then slide along its
+    # edge; asked to stop when feasible, the method ends at the first accepted design inside the disc (within
+    # ctol), with fewer evaluations than the full descent
+    full = trust_region_sqp(Counted(), np.array([0.95, 0.1]), options=SQPOptions(radius=0.05, max_evaluations=30,
+                                                                               ctol=1e-6))
+    assert full.converged and np.allclose(full.z, Z_STAR, atol=2e-3)
+    ev = Counted()
+    res = trust_region_sqp(ev, np.array([0.95, 0.1]),
+                           options=SQPOptions(radius=0.05, max_evaluations=30, ctol=1e-6, stop_when_feasible=True))
+    assert res.converged and "feasible" in res.message
+    assert res.sample.violation(1e-6) == 0.0
+    accepted = [st for st in res.steps if st.accepted]
+    assert accepted and accepted[-1].sample is res.sample
+    assert all(st.sample.violation(1e-6) > 0.0 for st in accepted[:-1])  # none feasible before the last
+    assert ev.calls == res.evaluations < full.evaluations
+    assert res.sample.f > full.sample.f + 0.1  # (0.72, 0.15): not yet the optimum
+    # a feasible start: no step at all
+    ev0 = Counted()
+    res0 = trust_region_sqp(ev0, np.array([0.1, 0.2]), options=SQPOptions(stop_when_feasible=True, ctol=1e-6))
+    assert ev0.calls == 1 and not res0.steps and np.allclose(res0.z, [0.1, 0.2])
+
+
 def test_cheap_constraint_is_held_exactly():
     # with z1^2 <= 0.25 (cheap, exact in every subproblem) the optimum is z1 = 0.5, z2 = sqrt(R^2 - 0.25)
     ev = Counted()
