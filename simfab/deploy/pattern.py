@@ -757,11 +757,13 @@ def conforming_quads(poly, h: float, uv: np.ndarray, *,
     # boundary vertices: nearest points, then arc-length positions made to follow the loop's order
     L = ring.length
     s = np.asarray(shapely.line_locate_point(ring, shapely.points(flatG[loop])), dtype=np.float64)
+    if sweeps == 0:  # along the outward bisectors: no straight angle at a staircase corner
+        s = _bisector_positions(ring, flatG[loop], s)
     ccw = shapely.Polygon(flatG[loop]).exterior.is_ccw == ring.is_ccw  # both loops the same way round
     if not ccw:
         s = -s
     s = np.unwrap(s / L * 2 * np.pi) * L / (2 * np.pi)  # continuous around the loop
-    s = _monotone(s, L)
+    s = _monotone(s, L, relax=2 if sweeps else 0)
     if not ccw:
         s = -s
     p = shapely.get_coordinates(shapely.line_interpolate_point(ring, np.mod(s, L)))
@@ -779,6 +781,30 @@ def conforming_quads(poly, h: float, uv: np.ndarray, *,
     movable = np.isin(used, loop)  # only the core's outline moves (the grid inside it stays regular)
     P = _smooth(P, quads, ~movable, sweeps)
     return P, quads
+
+
+def _bisector_positions(ring, V: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Arc-length positions (m,) on ``ring`` where the outward bisector of each vertex of the
+    closed loop V (m,2) [m] (the normalised sum of its two edges' outward normals) first meets it
+    (``s`` (m,): the nearest points', kept where a ray misses). At a convex staircase corner of an
+    unsmoothed core the nearest point lies on the line of one of its loop edges, and the pillow
+    quad there would have a straight angle (no spring); on the bisector both pillow quads get
+    ~135 deg."""
+    import shapely
+
+    d = np.roll(V, -1, axis=0) - V
+    orient = np.sign(np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1]))
+    nrm = orient * np.column_stack([d[:, 1], -d[:, 0]]) / np.linalg.norm(d, axis=1)[:, None]
+    b = nrm + np.roll(nrm, 1, axis=0)
+    b /= np.linalg.norm(b, axis=1)[:, None]
+    reach = 2.0 * float(np.ptp(V, axis=0).max() + ring.length)
+    out = s.copy()
+    for k in range(len(V)):
+        hit = shapely.intersection(shapely.LineString([V[k], V[k] + reach * b[k]]), ring)
+        pts = shapely.get_coordinates(hit)
+        if len(pts):
+            out[k] = shapely.line_locate_point(ring, shapely.Point(pts[np.argmin(np.linalg.norm(pts - V[k], axis=1))]))
+    return out
 
 
 AREA_SAMPLES = 24  # boundary points per chord for its segment area
@@ -845,10 +871,11 @@ def _outline(quads: np.ndarray) -> np.ndarray:
     return np.array(loop)
 
 
-def _monotone(s: np.ndarray, L: float) -> np.ndarray:
+def _monotone(s: np.ndarray, L: float, relax: int = 2) -> np.ndarray:
     """Arc-length positions (m,) made strictly increasing within one turn (each at least L / (4 m)
     after the previous: nearest points of neighbouring loop vertices can come in the wrong order at
-    a convex staircase corner), then relaxed twice towards their neighbours' mean (even spacing)."""
+    a convex staircase corner), then relaxed ``relax`` times towards their neighbours' mean (even
+    spacing; 0 keeps the bisector positions of an unsmoothed core)."""
     m = len(s)
     out = s.copy()
     gap = L / (4.0 * m)
@@ -856,7 +883,7 @@ def _monotone(s: np.ndarray, L: float) -> np.ndarray:
         out[k] = max(out[k], out[k - 1] + gap)
     if out[-1] - out[0] > L - gap:  # compress into one turn
         out = out[0] + (out - out[0]) * (L - gap) / (out[-1] - out[0])
-    for _ in range(2):
+    for _ in range(relax):
         prev = np.r_[out[-1] - L, out[:-1]]
         nxt = np.r_[out[1:], out[0] + L]
         out = 0.5 * out + 0.25 * (prev + nxt)
