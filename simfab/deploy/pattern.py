@@ -87,8 +87,8 @@ class PatternConfig:
     mean edge length, the gap rule of the module doc) or "edges" (the growths fitted to every
     edge's own length and u, :func:`edge_fitted_growth`: for meshes whose edges differ in length);
     conforming_core: "smoothed" (the conforming layout's core outline Laplacian-smoothed) or
-    "regular" (left on the grid: every core edge h long, as the vertex gap rule assumes, but the
-    pillow quads at the staircase corners degenerate; :func:`conforming_quads`).
+    "regular" (left on the grid: every core edge h long, as the vertex gap rule assumes; the
+    pillow's boundary vertices on the core outline's bisectors; :func:`conforming_quads`).
     """
 
     spacing: float = 0.025
@@ -720,10 +720,13 @@ def conforming_quads(poly, h: float, uv: np.ndarray, *,
     (what clipping a grid cell does where the boundary runs across it). Then Laplacian smoothing of
     the core's outline vertices (``sweeps`` Jacobi sweeps, boundary vertices fixed; the uniform
     grid is its fixed point, so only the cells near the boundary move). Smoothing lifts the pillow
-    quads' angles at the staircase corners below ``degenerate_angle_deg`` (unsmoothed, ``sweeps =
-    0``, some exceed it and get no spring), but moves the outline vertices off the grid: the vertex
-    gap rule, which gives all of an insert's beams one growth from their mean edge length, then
-    over- and under-grows its unequal edges (docs/decisions.md: the dome). The chord
+    quads' angles at the staircase corners below ``degenerate_angle_deg``, but moves the outline
+    vertices off the grid: the vertex gap rule, which gives all of an insert's beams one growth
+    from their mean edge length, then over- and under-grows its unequal edges (docs/decisions.md:
+    the dome). ``sweeps = 0`` keeps the core on the grid and puts each p_k where the outward
+    bisector of its loop vertex meets the boundary instead (:func:`_bisector_positions`, not
+    relaxed along it): at a convex staircase corner the nearest point would continue one of the
+    core's edges, a straight angle in its pillow quad. The chord
     polygon of the p_k on the boundary would leave out the segments between the chords and the
     boundary (sagitta s ~ h^2 / (8 R) for a boundary of curvature radius R, ~1.2 % of the bundled
     targets' area); the p_k are moved off the boundary so that every chord's segment is balanced
@@ -803,7 +806,8 @@ def _bisector_positions(ring, V: np.ndarray, s: np.ndarray) -> np.ndarray:
         hit = shapely.intersection(shapely.LineString([V[k], V[k] + reach * b[k]]), ring)
         pts = shapely.get_coordinates(hit)
         if len(pts):
-            out[k] = shapely.line_locate_point(ring, shapely.Point(pts[np.argmin(np.linalg.norm(pts - V[k], axis=1))]))
+            first = pts[np.argmin(np.linalg.norm(pts - V[k], axis=1))]
+            out[k] = shapely.line_locate_point(ring, shapely.Point(first))
     return out
 
 

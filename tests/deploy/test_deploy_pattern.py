@@ -329,9 +329,10 @@ def test_conforming_layout_covers_the_domain_without_degenerate_quads(name):
     """layout = "conforming" (grid core + pillow layer): at least 99 % of the flat domain covered
     (measured 99.74-99.77 % vs 95.2-97.9 % for the clipped grid on the bundled targets; the dome's
     unsmoothed core, conforming_core = "regular": 99.51 %), about as much outside as the chords'
-    segments leave inside (<= 0.3 %; the dome 0.33 %, its pillow vertices on the bisectors), its boundary vertices within a sagitta
-    h^2 / (8 R_min) of the flattened boundary, every quad convex with all angles below the spring
-    limit (so every quad has a spring) and no edge below half the spacing."""
+    segments leave inside (<= 0.3 %; the dome 0.33 %, its pillow vertices on the bisectors), its
+    boundary vertices within a sagitta h^2 / (8 R_min) of the flattened boundary, every quad convex
+    with all angles well below the spring limit (so every quad has a spring) and no edge below half
+    the spacing."""
     import shapely
 
     sc = scene.load_scene(scene.bundled_path(name))
