@@ -83,7 +83,12 @@ class PatternConfig:
     achievable-gap limits (see module doc); degenerate_angle_deg [deg]: interior angle above
     which a boundary quad gets no spring; springs: "zigzag" (an arc the Bezier family cannot make
     long enough becomes a zigzag, :func:`zigzag_springs`) or "bezier" (Bezier arcs only, those
-    short of the slack reported).
+    short of the slack reported); growth_fit: "vertex" (each insert's growth from its own u and
+    mean edge length, the gap rule of the module doc) or "edges" (the growths fitted to every
+    edge's own length and u, :func:`edge_fitted_growth`: for meshes whose edges differ in length);
+    conforming_core: "smoothed" (the conforming layout's core outline Laplacian-smoothed) or
+    "regular" (left on the grid: every core edge h long, as the vertex gap rule assumes; the
+    pillow's boundary vertices on the core outline's bisectors; :func:`conforming_quads`).
     """
 
     spacing: float = 0.025
@@ -99,8 +104,15 @@ class PatternConfig:
     degenerate_angle_deg: float = 160.0
     layout: str = "grid"
     springs: str = "zigzag"
+    growth_fit: str = "vertex"
+    conforming_core: str = "smoothed"
 
     def __post_init__(self):
+        if self.conforming_core not in ("regular", "smoothed"):
+            raise InputError(f"must be 'regular' or 'smoothed' (got {self.conforming_core!r})",
+                             where="pattern.conforming_core")
+        if self.growth_fit not in ("edges", "vertex"):
+            raise InputError(f"must be 'edges' or 'vertex' (got {self.growth_fit!r})", where="pattern.growth_fit")
         if self.layout not in ("conforming", "grid", "mesh"):
             raise InputError(f"must be 'conforming', 'grid' or 'mesh' (got {self.layout!r})", where="pattern.layout")
         if self.springs not in ("bezier", "zigzag"):
@@ -254,6 +266,54 @@ def gap_rule(u: np.ndarray, h: np.ndarray, r: float) -> np.ndarray:
     return r - 0.5 * h * np.expm1(-np.asarray(u, dtype=np.float64))
 
 
+#: weight of the edges' growth differences against their sums in :func:`edge_fitted_growth`
+GROWTH_FIT_DIFFERENCE = 0.3
+
+
+def edge_fitted_growth(P: np.ndarray, edges: np.ndarray, u: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Insert growths d (n,) [m] fitted to the edges (``growth_fit = "edges"``): P (n,2) [m] the
+    vertices, edges (e,2), u (n,) [-] the log scale factor at the vertices, free (n,) bool the
+    vertices with an insert (the others join their beams rigidly: d = 0).
+
+    Deployment lengthens edge (a, b) of flat length L_e by d_a + d_b (its two beam ends move by
+    the inserts' growths); the target asks for G_e = (L_e/2)(e^{-u_a} + e^{-u_b} - 2) (the
+    trapezoid rule of e^{-u} along it), and each end's share differs by
+    D_e = (L_e/2)(e^{-u_a} - e^{-u_b}). Least squares in relative terms,
+
+        min_d  sum_e ((d_a + d_b - G_e) / L_e)^2 + mu^2 sum_{e: a, b free} ((d_a - d_b - D_e) / L_e)^2,
+
+    mu = :data:`GROWTH_FIT_DIFFERENCE`: the sums carry the metric; the differences, weaker, remove
+    the null direction of the sums on a bipartite quad mesh (alternating +t / -t on its two vertex
+    classes). On a uniform grid d = (h/2)(e^{-u} - 1), the vertex rule, zeroes every residual;
+    where edges differ in length (a smoothed pillow layer, an unstructured mesh) the edges' sums
+    are matched instead of each vertex's mean edge length's growth."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    n = len(P)
+    a, b = edges[:, 0], edges[:, 1]
+    L = np.linalg.norm(P[a] - P[b], axis=1)
+    ea, eb = np.exp(-u[a]), np.exp(-u[b])
+    G, D = 0.5 * L * (ea + eb - 2.0), 0.5 * L * (ea - eb)
+    idx = np.flatnonzero(free)
+    col = np.full(n, -1)
+    col[idx] = np.arange(len(idx))
+    both = np.flatnonzero(free[a] & free[b])
+    rows, cols, vals = [], [], []
+    for end, sign in ((a, 1.0), (b, 1.0)):
+        m = np.flatnonzero(free[end])
+        rows.append(m), cols.append(col[end[m]]), vals.append(sign / L[m])
+    for end, sign in ((a, 1.0), (b, -1.0)):
+        rows.append(len(edges) + np.arange(len(both))), cols.append(col[end[both]])
+        vals.append(sign * GROWTH_FIT_DIFFERENCE / L[both])
+    A = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(len(edges) + len(both), len(idx)))
+    rhs = np.concatenate([G / L, GROWTH_FIT_DIFFERENCE * D[both] / L[both]])
+    d = np.zeros(n)
+    d[idx] = spla.spsolve((A.T @ A).tocsc(), A.T @ rhs)
+    return d
+
+
 def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig, *,
            seams=()) -> Pattern:
     """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,)).
@@ -275,7 +335,8 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
             raise InputError(f"no quad mesh fits the flat domain at spacing {h} m (make pattern.spacing smaller)",
                              where="pattern.spacing")
     else:
-        meshes = [conforming_quads(poly, h, uv)]
+        sweeps = SMOOTHING_ITERATIONS if cfg.conforming_core == "smoothed" else 0
+        meshes = [conforming_quads(poly, h, uv, sweeps=sweeps)]
     best, best_key = None, None
     for P, quads in meshes:
         pat = _pattern_on(poly, P, quads, uv, faces, u, cfg, seams)
@@ -327,6 +388,8 @@ def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams) -> Patt
     seam = bnd_v & near_seams(P, poly, seams, h) & (0.5 * emin - cfg.min_beam >= cfg.min_gap)
     gmax = np.where(seam, 0.5 * emin - cfg.min_beam, gmax)
     need = gap_rule(uP, hv, 0.0)  # -d: the gap with r = 0
+    if cfg.growth_fit == "edges":
+        need = -edge_fitted_growth(P, edges, uP, ~bnd_v | seam)
     # a seam vertex that needs less growth |d| than its best insert falls short by is joined rigidly
     # (growth 0: the nearer one; a cone tip or a seam's rim end, where u = 0)
     if seam.any():
@@ -638,10 +701,11 @@ def mesh_quads(poly, h: float, recipe: MeshRecipe = MESH_RECIPES[0]) -> tuple[np
 
 
 CORE_MARGIN = 0.5  # core grid nodes keep >= CORE_MARGIN x spacing from the boundary
-SMOOTHING_ITERATIONS = 20
+SMOOTHING_ITERATIONS = 20  # sweeps of conforming_core = "smoothed"
 
 
-def conforming_quads(poly, h: float, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def conforming_quads(poly, h: float, uv: np.ndarray, *,
+                     sweeps: int = SMOOTHING_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
     """Boundary-conforming quad mesh of the flat domain ``poly`` (``layout = "conforming"``):
     (P (n,2) [m], quads (q,4) CCW).
 
@@ -654,8 +718,15 @@ def conforming_quads(poly, h: float, uv: np.ndarray) -> tuple[np.ndarray, np.nda
     (v_k, v_k+1) one quad (v_k, p_k, p_k+1, v_k+1): each pillow quad has exactly two vertices on
     the boundary, so no quad degenerates into a triangle with three boundary vertices on a line
     (what clipping a grid cell does where the boundary runs across it). Then Laplacian smoothing of
-    the non-boundary vertices (``SMOOTHING_ITERATIONS`` Jacobi sweeps, boundary vertices fixed;
-    the uniform grid is its fixed point, so only the cells near the boundary move). The chord
+    the core's outline vertices (``sweeps`` Jacobi sweeps, boundary vertices fixed; the uniform
+    grid is its fixed point, so only the cells near the boundary move). Smoothing lifts the pillow
+    quads' angles at the staircase corners below ``degenerate_angle_deg``, but moves the outline
+    vertices off the grid: the vertex gap rule, which gives all of an insert's beams one growth
+    from their mean edge length, then over- and under-grows its unequal edges (docs/decisions.md:
+    the dome). ``sweeps = 0`` keeps the core on the grid and puts each p_k where the outward
+    bisector of its loop vertex meets the boundary instead (:func:`_bisector_positions`, not
+    relaxed along it): at a convex staircase corner the nearest point would continue one of the
+    core's edges, a straight angle in its pillow quad. The chord
     polygon of the p_k on the boundary would leave out the segments between the chords and the
     boundary (sagitta s ~ h^2 / (8 R) for a boundary of curvature radius R, ~1.2 % of the bundled
     targets' area); the p_k are moved off the boundary so that every chord's segment is balanced
@@ -689,11 +760,13 @@ def conforming_quads(poly, h: float, uv: np.ndarray) -> tuple[np.ndarray, np.nda
     # boundary vertices: nearest points, then arc-length positions made to follow the loop's order
     L = ring.length
     s = np.asarray(shapely.line_locate_point(ring, shapely.points(flatG[loop])), dtype=np.float64)
+    if sweeps == 0:  # along the outward bisectors: no straight angle at a staircase corner
+        s = _bisector_positions(ring, flatG[loop], s)
     ccw = shapely.Polygon(flatG[loop]).exterior.is_ccw == ring.is_ccw  # both loops the same way round
     if not ccw:
         s = -s
     s = np.unwrap(s / L * 2 * np.pi) * L / (2 * np.pi)  # continuous around the loop
-    s = _monotone(s, L)
+    s = _monotone(s, L, relax=2 if sweeps else 0)
     if not ccw:
         s = -s
     p = shapely.get_coordinates(shapely.line_interpolate_point(ring, np.mod(s, L)))
@@ -709,8 +782,33 @@ def conforming_quads(poly, h: float, uv: np.ndarray) -> tuple[np.ndarray, np.nda
     quads = inv.reshape(-1, 4)
     P = P[used]
     movable = np.isin(used, loop)  # only the core's outline moves (the grid inside it stays regular)
-    P = _smooth(P, quads, ~movable, SMOOTHING_ITERATIONS)
+    P = _smooth(P, quads, ~movable, sweeps)
     return P, quads
+
+
+def _bisector_positions(ring, V: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Arc-length positions (m,) on ``ring`` where the outward bisector of each vertex of the
+    closed loop V (m,2) [m] (the normalised sum of its two edges' outward normals) first meets it
+    (``s`` (m,): the nearest points', kept where a ray misses). At a convex staircase corner of an
+    unsmoothed core the nearest point lies on the line of one of its loop edges, and the pillow
+    quad there would have a straight angle (no spring); on the bisector both pillow quads get
+    ~135 deg."""
+    import shapely
+
+    d = np.roll(V, -1, axis=0) - V
+    orient = np.sign(np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1]))
+    nrm = orient * np.column_stack([d[:, 1], -d[:, 0]]) / np.linalg.norm(d, axis=1)[:, None]
+    b = nrm + np.roll(nrm, 1, axis=0)
+    b /= np.linalg.norm(b, axis=1)[:, None]
+    reach = 2.0 * float(np.ptp(V, axis=0).max() + ring.length)
+    out = s.copy()
+    for k in range(len(V)):
+        hit = shapely.intersection(shapely.LineString([V[k], V[k] + reach * b[k]]), ring)
+        pts = shapely.get_coordinates(hit)
+        if len(pts):
+            first = pts[np.argmin(np.linalg.norm(pts - V[k], axis=1))]
+            out[k] = shapely.line_locate_point(ring, shapely.Point(first))
+    return out
 
 
 AREA_SAMPLES = 24  # boundary points per chord for its segment area
@@ -777,10 +875,11 @@ def _outline(quads: np.ndarray) -> np.ndarray:
     return np.array(loop)
 
 
-def _monotone(s: np.ndarray, L: float) -> np.ndarray:
+def _monotone(s: np.ndarray, L: float, relax: int = 2) -> np.ndarray:
     """Arc-length positions (m,) made strictly increasing within one turn (each at least L / (4 m)
     after the previous: nearest points of neighbouring loop vertices can come in the wrong order at
-    a convex staircase corner), then relaxed twice towards their neighbours' mean (even spacing)."""
+    a convex staircase corner), then relaxed ``relax`` times towards their neighbours' mean (even
+    spacing; 0 keeps the bisector positions of an unsmoothed core)."""
     m = len(s)
     out = s.copy()
     gap = L / (4.0 * m)
@@ -788,7 +887,7 @@ def _monotone(s: np.ndarray, L: float) -> np.ndarray:
         out[k] = max(out[k], out[k - 1] + gap)
     if out[-1] - out[0] > L - gap:  # compress into one turn
         out = out[0] + (out - out[0]) * (L - gap) / (out[-1] - out[0])
-    for _ in range(2):
+    for _ in range(relax):
         prev = np.r_[out[-1] - L, out[:-1]]
         nxt = np.r_[out[1:], out[0] + L]
         out = 0.5 * out + 0.25 * (prev + nxt)

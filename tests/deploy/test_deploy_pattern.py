@@ -327,10 +327,12 @@ def test_catalogue_config_errors():
 @pytest.mark.parametrize("name", scene.BUNDLED)
 def test_conforming_layout_covers_the_domain_without_degenerate_quads(name):
     """layout = "conforming" (grid core + pillow layer): at least 99 % of the flat domain covered
-    (measured 99.74-99.77 % vs 95.2-97.9 % for the clipped grid on the bundled targets), as much
-    outside as the chords' segments inside (<= 0.3 %), its boundary vertices within a sagitta
-    h^2 / (8 R_min) of the flattened boundary, every quad convex with all angles below the spring
-    limit (so every quad has a spring) and no edge below half the spacing."""
+    (measured 99.74-99.77 % vs 95.2-97.9 % for the clipped grid on the bundled targets; the dome's
+    unsmoothed core, conforming_core = "regular": 99.51 %), about as much outside as the chords'
+    segments leave inside (<= 0.3 %; the dome 0.33 %, its pillow vertices on the bisectors), its
+    boundary vertices within a sagitta h^2 / (8 R_min) of the flattened boundary, every quad convex
+    with all angles well below the spring limit (so every quad has a spring) and no edge below half
+    the spacing."""
     import shapely
 
     sc = scene.load_scene(scene.bundled_path(name))
@@ -345,10 +347,10 @@ def test_conforming_layout_covers_the_domain_without_degenerate_quads(name):
         cover[lay] = quads.intersection(poly).area / poly.area
     outside = quads.difference(poly).area / poly.area
     assert cover["conforming"] >= 0.99 and cover["conforming"] > cover["grid"]
-    assert outside < 0.003
+    assert outside < 0.004
     assert np.all(pat.spring)
     angles = np.array([pattern._max_angle(pat.P[q]) for q in pat.quads])
-    assert np.degrees(angles.max()) < 135.0
+    assert np.degrees(angles.max()) < 140.0  # smoothed <= 135; the dome's regular core 136 (bisectors)
     Q = pat.P[pat.quads]
     edge = np.linalg.norm(np.roll(Q, -1, axis=1) - Q, axis=2)
     assert edge.min() > 0.5 * h
@@ -358,3 +360,74 @@ def test_conforming_layout_covers_the_domain_without_degenerate_quads(name):
     assert 0 < np.max(d) < h**2 / (8 * R_min)
     val = np.bincount(pat.edges.ravel(), minlength=len(pat.P))[pat.interior]
     assert set(val.tolist()) <= {3, 4, 5}  # 3 / 5 at the core's staircase corners (54 % of the dome's 37)
+
+
+def test_edge_fitted_growth_is_the_gap_rule_on_a_uniform_grid_and_fits_unequal_edges():
+    """growth_fit = "edges": on a uniform grid (h = 30 mm, rigid outline, a smooth u) the fitted
+    growths are the vertex rule's (h/2)(e^{-u} - 1) up to the trapezoid rule's O(h^2 u'') along
+    the edges next to the rigid outline, i.e. every residual d_a + d_b - G_e is zero where both
+    rules agree; on the same grid with its rows unevenly spaced (25 / 35 mm, as a smoothed
+    outline leaves them) the edges' growths d_a + d_b match their targets
+    (L_e/2)(e^{-u_a} + e^{-u_b} - 2) better (RMS, relative) than the vertex rule's with the mean
+    edge length."""
+    h = 0.03
+    def grid(ys):
+        X, Y = np.meshgrid(np.arange(5) * h, np.asarray(ys), indexing="ij")
+        P = np.column_stack([X.ravel(), Y.ravel()])
+        idx = np.arange(len(P)).reshape(5, len(ys))
+        E = np.vstack([np.column_stack([idx[:-1].ravel(), idx[1:].ravel()]),
+                       np.column_stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()])])
+        free = np.zeros(idx.shape, dtype=bool)
+        free[1:-1, 1:-1] = True
+        return P, E, free.ravel()
+
+    def target(P, E, u):
+        L = np.linalg.norm(P[E[:, 0]] - P[E[:, 1]], axis=1)
+        return L, 0.5 * L * (np.exp(-u[E[:, 0]]) + np.exp(-u[E[:, 1]]) - 2)
+
+    P, E, free = grid(np.arange(5) * h)
+    u = -0.2 + 0.1 * np.sum((P - 2 * h) ** 2, axis=1) / (2 * h) ** 2  # u = 0 .. -0.2, largest growth inside
+    u[~free] = 0.0  # the outline keeps its length (BFF with u = 0 on the boundary)
+    d = pattern.edge_fitted_growth(P, E, u, free)
+    d0 = np.where(free, 0.5 * h * np.expm1(-u), 0.0)
+    assert np.all(d[~free] == 0)
+    both = free[E[:, 0]] & free[E[:, 1]]
+    L, G = target(P, E, u)
+    assert np.max(np.abs(d[E[both, 0]] + d[E[both, 1]] - G[both])) < 0.02 * np.max(np.abs(G))
+    assert np.max(np.abs(d - d0)) < 0.05 * np.max(np.abs(d0))
+    # unequal rows: the fit matches the edges' growth, the vertex rule misses it
+    P, E, free = grid(np.cumsum([0, 0.025, 0.035, 0.035, 0.025]))
+    u = np.where(free, -0.2, 0.0)
+    L, G = target(P, E, u)
+    d = pattern.edge_fitted_growth(P, E, u, free)
+    hv = np.bincount(E.ravel(), weights=np.repeat(L, 2), minlength=len(P)) / np.bincount(E.ravel(), minlength=len(P))
+    dv = np.where(free, 0.5 * hv * np.expm1(-u), 0.0)
+    err = lambda dd: np.sqrt(np.mean(((dd[E[:, 0]] + dd[E[:, 1]] - G) / L) ** 2))  # noqa: E731
+    assert err(d) < err(dv)  # the least-squares optimum of the sums (the differences' term aside)
+    assert np.all(np.isfinite(d)) and np.all(d[free] > 0)
+
+
+def test_conforming_core_regular_keeps_the_grid_and_options_are_checked():
+    """conforming_core = "regular": the core's vertices stay on the grid (every core edge h long;
+    the pillow quads alone follow the outline), the coverage is the smoothed layout's; bad choices
+    name their field."""
+    sc = scene.load_scene(scene.bundled_path("dome"), overrides={"pattern": {"layout": "conforming"}})
+    f = flatten.flatten(sc.target.V, sc.target.F)
+    h = sc.pattern.spacing
+    pats = {}
+    for core in ("regular", "smoothed"):
+        cfg = pattern.PatternConfig(**{**sc.pattern.__dict__, "conforming_core": core})
+        pats[core] = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, cfg)
+    reg = pats["regular"]
+    ins = np.flatnonzero(reg.interior)
+    assert np.allclose(reg.P[ins] / h, np.round(reg.P[ins] / h), atol=1e-9)
+    core = reg.interior[reg.edges].all(axis=1)
+    L = np.linalg.norm(reg.P[reg.edges[core, 0]] - reg.P[reg.edges[core, 1]], axis=1)
+    assert np.allclose(L, h)
+    L = np.linalg.norm(pats["smoothed"].P[pats["smoothed"].edges[core, 0]]
+                       - pats["smoothed"].P[pats["smoothed"].edges[core, 1]], axis=1)
+    assert np.ptp(L) > 0.2 * h  # smoothed: the outline's edges range ~25-35 mm
+    with pytest.raises(InputError, match="conforming_core"):
+        pattern.PatternConfig(conforming_core="round")
+    with pytest.raises(InputError, match="growth_fit"):
+        pattern.PatternConfig(growth_fit="faces")
