@@ -45,9 +45,11 @@ initial radius when the trust region collapsed (at most RESTARTS times, while th
 point's approach (the force between the last planned record and the seat) is not sampled at fixed
 positions, and a radius shrunk there stays small after the design has moved on. A start that touches
 nothing (every figure's gradient zero) gets the seat clearance's bound, linearized through the gap of
-the undeformed part (:func:`gap_gradient`); only when that has no gradient either (no vertex near O),
-or when the start ejects under a coupling-ratio bound (:func:`flat_start`), a seeded annealing
-pre-phase runs until a design is in the brief's category (:func:`in_category`). The best design is
+the undeformed part (:func:`gap_gradient`). A start that ejects at an end pose (the pose presses A harder
+than the snap before it) has its coupling ratio continued above 100 % (:func:`ejecting_ratio`), which the
+SQP linearizes like the ratio itself. Only when neither gives a gradient (no vertex near O; a start that
+ejects without an end pose or an earlier peak: :func:`flat_start`), a seeded annealing pre-phase runs
+until a design is in the brief's category (:func:`in_category`). The best design is
 the feasible one with the lowest objective among all simulated (the lowest penalized objective when
 none is feasible). Every candidate runs at the initial shape's planned step positions
 (``EvaluationSettings.hold_steps``): the derivatives are taken at fixed positions, and the default
@@ -113,12 +115,15 @@ class FigureGradients:
     ``gradients`` {figure: (n_vars,) or None (not differentiated)} (with a target profile also
     "force_samples" (K, n_vars), the insertion records' path forces' Jacobian); ``supported``: every
     step's dependence on the ones before is followed (see :mod:`simfab.coupling.adjoint`);
-    ``steady_index``: the steady-state index the figures were read at."""
+    ``steady_index``: the steady-state index the figures were read at; ``ratio_continued``: the profile
+    ejects at an end pose and ``values["coupling_ratio"]`` is :func:`ejecting_ratio` (above 100 %), not the
+    profile's 100 %."""
 
     values: dict
     gradients: dict
     steady_index: int
     supported: bool
+    ratio_continued: bool = False
 
 
 def stress_measure(problem: DesignProblem, cm) -> StressMeasure:
@@ -222,6 +227,10 @@ def needed_records(problem: DesignProblem, res, prof, stresses: np.ndarray) -> n
     a = rest_bracket(F, i_ss, len(res.model.s_steps) if K > len(res.model.s_steps) else None)
     if a is not None and prof.category != "ejects":
         out[a: a + 2] = True
+    v = _ejecting_valley(res, prof)
+    if v is not None:  # ejecting_ratio: the end and the peak before the valley
+        out[K - 1] = True
+        out[: v + 1] |= _weights_needed(E[: v + 1])
     if R:
         Fr = res.column("force", "remove")
         out[K:] |= _weights_needed(Fr)
@@ -242,7 +251,12 @@ def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> 
     res, rec = ev.result, ev.recorder
     prof = analyze_run(res)
     g, supported = _figure_gradients(problem, res, rec, prof, Jh)
-    return FigureGradients(values=dict(ev.figures), gradients=g, steady_index=prof.index_ss, supported=supported)
+    values = dict(ev.figures)
+    continued = _ejecting_valley(res, prof) is not None and g["coupling_ratio"] is not None
+    if continued:
+        values["coupling_ratio"] = ejecting_ratio(res)
+    return FigureGradients(values=values, gradients=g, steady_index=prof.index_ss, supported=supported,
+                           ratio_continued=continued)
 
 
 def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) -> tuple:
@@ -292,6 +306,10 @@ def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) ->
     g["E_ss"] = g_Emax if prof.category == "ejects" else dE[i_ss]
     g["coupling_ratio"] = (100.0 * (g["E_ss"] / prof.E_max - prof.E_ss * g_Emax / prof.E_max**2)
                            if touched else zero)
+    v = _ejecting_valley(res, prof)
+    if v is not None and touched:  # ejecting_ratio's gradient: 100 (dE_end / E_pk - E_end dE_pk / E_pk^2)
+        E_pk = float(E[: v + 1].max())
+        g["coupling_ratio"] = 100.0 * (dE[-1] / E_pk - E[-1] * _smax(E[: v + 1], dE[: v + 1]) / E_pk**2)
     end = len(F) if prof.category == "ejects" else i_ss + 1
     g["insertion_force"] = -_smax(-F[:end], dF[:end]) if prof.F_in > 0 else zero
     if R:  # friction: F_rm and F_hold from the removal traversal (simfab.coupling.profile.analyze_run)
@@ -312,6 +330,42 @@ def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) ->
         g["rms_error_sq"] = target_model(problem.target, res.column("s"), scale * F, scale * dF).gradient
         g["force_samples"] = dF  # (K, n_vars): d F_k / dh, the Gauss-Newton model's Jacobian
     return g, all(s.supported for s in sens.values())
+
+
+def _ejecting_valley(res, prof) -> int | None:
+    """The valley index of :func:`ejecting_ratio` when it applies (an ejecting profile at an end pose with
+    a peak before its last valley), else None."""
+    if prof.category != "ejects" or res.model.end_direction is not None:
+        return None
+    E = res.column("energy")
+    k = len(E) - 1
+    while k > 0 and E[k - 1] < E[k]:  # back from the end down the final rise
+        k -= 1
+    return k if k > 0 and float(E[: k + 1].max()) > E[k] else None
+
+
+def ejecting_ratio(res) -> float | None:
+    """The coupling ratio continued past an ejecting end pose [%]: 100 E_end / E_pk, with E_pk the largest
+    energy before the valley the run's final rise starts from; None when the run does not end in a pose
+    (a rotation), does not eject, or rises all the way from its start.
+
+    A path that ends in a pose has its steady state there (:func:`simfab.coupling.profile.analyze`); when
+    the end pose presses A harder than the snap before it (knocker3d_design's clip squeezing the ring as
+    it turns), the end is the energy's maximum and the profile ejects: CR = 100 % for every design
+    nearby, its gradient zero, so no linearization of a coupling-ratio bound gives a direction. This
+    ratio is the profile's CR = 100 E_end / E_max wherever the end is below the earlier peak (E_max =
+    E_pk there, the category tight or loose), and goes on above 100 % with the end's energy, so it is
+    continuous across the category change and its gradient (envelope theorem at both records; E_pk a
+    smooth maximum, :func:`figure_gradients`) asks for the end pose to press less."""
+    if res.model.end_direction is not None:
+        return None
+    prof = analyze_run(res)
+    v = _ejecting_valley(res, prof)
+    if v is None:
+        return None
+    E = res.column("energy")
+    E_pk = float(E[: v + 1].max())
+    return 100.0 * float(E[-1]) / E_pk if E_pk > 0 else None
 
 
 def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.ndarray:
@@ -554,11 +608,13 @@ def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
     """The start gives the SQP no direction: some constraint row is violated and every violated row's
     gradient is zero or missing (a part that does not touch the object: no figure depends on its shape),
     or a coupling-ratio row is violated while the profile ejects (no dip after its peak: CR = 100 %
-    for every shape nearby, its gradient zero, and no linearization of that row can be satisfied:
-    knocker3d_design's clip presses the ring until the path's end)."""
+    for every shape nearby, its gradient zero, and no linearization of that row can be satisfied)
+    and the ratio could not be continued past the category (:func:`ejecting_ratio`: a path that ends in
+    a pose, pressing harder than the snap before it, as knocker3d_design's clip squeezes the ring)."""
     violated = [r for r in rows if r.value(fg.values[r.name] * corrections.get(r.name, 1.0)) < 0]
     flat = all(fg.gradients.get(r.name) is None or not np.any(fg.gradients[r.name]) for r in violated)
-    ejects = fg.values.get("category") == "ejects" and any(r.name == "coupling_ratio" for r in violated)
+    ejects = (fg.values.get("category") == "ejects" and not fg.ratio_continued
+              and any(r.name == "coupling_ratio" for r in violated))
     return bool(violated) and (flat or ejects)
 
 

@@ -1,7 +1,7 @@
 """The gradient design method's treatment of the brief's non-smooth figures (simfab.design.gradient):
 the grip read at a seat the rest search brackets, the target-profile error whose run ends at a rest
-point that moves with the design, the loose grip's square-root surrogate, and the gap of a start that
-touches nothing."""
+point that moves with the design, the loose grip's square-root surrogate, the gap of a start that
+touches nothing, and the coupling ratio continued past an ejecting end pose."""
 
 import math
 
@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from simfab.coupling.scene import load_coupling_scene
+from simfab.coupling.simulate import simulate
 from simfab.design import gradient as G
 from simfab.design.brief import DesignBrief, TargetProfile
 from simfab.design.problem import evaluate, make_problem
@@ -136,3 +137,54 @@ def test_a_correction_round_resumes_from_the_previous_best():
     assert [h["value"] for h in resumed.history] == [h["value"] for h in again.history]
     assert resumed.best.objective == again.best.objective
 
+
+def _ellipse_turned_twice():
+    """clip2d_loose's clamp with an elliptical object (semi-axes 11.2 x 8 mm, long axis along the path, clear
+    of the clamp) turned 90 deg (its long axis presses the arc: the snap), 180 deg (clear again: the valley),
+    then 270 deg while its centre moves 0.3 mm away from the clamp's bottom: the end pose presses the arc
+    harder than the snap did, so the profile ejects at its end pose."""
+    from simfab.contact.imls import build_imls, curve_normals
+    from simfab.coupling.config import InsertionOptions
+    from simfab.coupling.simulate import make_coupling_model
+    from simfab.io.mjcf import Trajectory
+
+    base = load_coupling_scene("clip2d_loose")
+    t = np.linspace(0, 2 * np.pi, 120, endpoint=False)
+    v = np.c_[11.2e-3 * np.cos(t), 8.0e-3 * np.sin(t)]
+    q = [[math.cos(a), 0, 0, math.sin(a)] for a in np.radians([0, 0, 90, 180, 270]) / 2]
+    path = Trajectory(np.array([[1.0e-3, 0, 0], [0.9e-3, 0, 0], [0.9e-3, 0, 0], [0.9e-3, 0, 0], [1.2e-3, 0, 0]]),
+                      np.array(q), rot_length_scale=0.01)
+    return make_coupling_model(name="ellipse", fem=base.fem, field=build_imls(v, curve_normals(v)), path=path,
+                               fixed_vertices=base.fixed_vertices, object_vertices=v,
+                               options=InsertionOptions(steps=16, fix_all_axes=True))
+
+
+def test_ejecting_end_pose_continues_the_coupling_ratio(monkeypatch):
+    # an end pose pressing harder than the snap before it: CR = 100 % with a zero gradient; the ratio
+    # continued past the category, 100 E_end / E_pk, has a gradient (against central differences of whole
+    # evaluations; exact maxima, equilibria solved far below the simulation's tolerance), so the SQP
+    # starts without the annealing pre-phase
+    from simfab.coupling import config as C
+
+    monkeypatch.setattr(G, "TEMPERATURE_REL", 0.0)
+    monkeypatch.setattr(C, "NEWTON_GRAD_TOL_REL", 1e-10)
+    monkeypatch.setattr(C, "NEWTON_GRAD_TOL_START", 1e-10)
+    monkeypatch.setattr(C, "NEWTON_STEP_TOL_REL", 1e-12)
+    P = make_problem(_ellipse_turned_twice(), DesignBrief(grip="loose", handles=3, placement="spatial"))
+    Ph = P.with_settings(hold_steps=True)
+    Jh = G.handle_jacobian(P.handles)
+    h0 = P.handles.identity()
+    ev = evaluate(Ph, h0, keep_result=True, recorder=lambda cm: G.DeferredRecorder(cm, G.stress_measure(P, cm)))
+    fg = G.figure_gradients(P, ev, Jh)
+    assert ev.figures["category"] == "ejects" and ev.figures["coupling_ratio"] == 100.0
+    assert fg.ratio_continued and fg.values["coupling_ratio"] == G.ejecting_ratio(ev.result) > 100.0
+    assert not G.flat_start(G.constraint_rows(P), fg, {})
+    dh = np.random.default_rng(0).standard_normal(len(h0)) * P.sigma0
+    eps = 1e-3  # (at 1e-2 the snap's refinement points differ between the two runs: a non-smooth event)
+    ep, em = evaluate(Ph, h0 + eps * dh, keep_result=True), evaluate(Ph, h0 - eps * dh, keep_result=True)
+    fd = (G.ejecting_ratio(ep.result) - G.ejecting_ratio(em.result)) / (2 * eps)
+    assert abs(fd) > 0
+    assert float(fg.gradients["coupling_ratio"] @ dh) == pytest.approx(fd, rel=1e-4)
+    # a translation's end (clip2d_eject) is not an end pose: no continued ratio
+    res = simulate(load_coupling_scene("clip2d_eject", overrides={"simulation": {"steps": 10}}))
+    assert G.analyze_run(res).category == "ejects" and G.ejecting_ratio(res) is None
