@@ -219,14 +219,15 @@ def averaged_stress(res, radius: float) -> dict:
     return {"averaged_von_mises": float(vm), "stress_radius": float(radius)}
 
 
-#: Annealing iterations of the demo's design run (the scene's brief allows 300).
+#: Iteration cap of the demo's design run (the scene's brief allows 300; the gradient method, the default,
+#: stops at simfab.design.gradient.MAX_ITERATIONS).
 DEMO_DESIGN_ITERATIONS = 80
 
 
 def demo(ctx) -> dict:
     """The 2D C-clamp (tight grip) and the 3D clip on a cylinder; then the building block's rest
     shape (block2d_tight, 450 triangles) optimized for its design brief (tight, 3-5 N grip,
-    below the yield stress) in at most DEMO_DESIGN_ITERATIONS iterations, checked on refined
+    below the yield stress) by the default method (gradient), checked on refined
     meshes (and corrected, if it misses the brief there)."""
     from simfab.design.pipeline import optimize_scene
 

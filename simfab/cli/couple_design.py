@@ -68,7 +68,9 @@ def add_optimize_args(s) -> None:
     g.add_argument("--target-profile", metavar="CSV", help="force profile to match (distance_m, force_N rows)")
     g.add_argument("--handles", type=int, metavar="K", help="number of active handles")
     g.add_argument("--placement", choices=["displacement", "spatial", "random"], help="handle placement")
-    g.add_argument("--iterations", type=int, metavar="N", help="simulated-annealing iterations (at most)")
+    g.add_argument("--iterations", type=int, metavar="N",
+                   help="iterations at most (annealing: one proposal each; the gradient method: SQP iterations, "
+                        "at most 30)")
     g.add_argument("--correction-rounds", type=int, metavar="N",
                    help="re-optimizations with mesh-corrected figures while the mesh check finds the brief missed")
     g.add_argument("--check-refinements", type=int, metavar="N",
@@ -88,10 +90,10 @@ def add_optimize_args(s) -> None:
     s.add_argument("--workers", type=int, default=None, metavar="N",
                    help="processes evaluating the annealer's proposals at once (speculatively; the design "
                         "does not depend on it; default: this machine's cores, at most 4; 1 with --restarts)")
-    s.add_argument("--method", choices=["anneal", "gradient"], default="anneal",
-                   help="optimizer: simulated annealing (default), or a trust-region SQP on the profile's exact "
-                        "sensitivities (adjoint method, one insertion per iteration; with friction its lag solved "
-                        "to 1 %%)")
+    s.add_argument("--method", choices=["anneal", "gradient"], default=None,
+                   help="optimizer: a trust-region SQP on the profile's exact sensitivities (default; adjoint "
+                        "method, one insertion per iteration; with friction its lag solved to 1 %%), or simulated "
+                        "annealing (the default with --restarts N > 1)")
     s.add_argument("--restarts", type=int, default=1, metavar="N",
                    help="independent annealing runs (seeds SEED..SEED+N-1) as Dask tasks; the best design is kept")
     s.add_argument("--scheduler", metavar="ADDRESS",

@@ -16,8 +16,8 @@ DESCRIPTION = """Run every pipeline on small bundled cases, one folder per pipel
   grow      every bundled growth scene (scenes/growth/*.xml), then the sample sketch edit of
             the phone stand (scenes/growth/phone_stand_stroke.json)
   couple    2 of the bundled coupling scenes: cclamp2d (2D, tight grip) and clip3d (3D clip
-            on a cylinder); then the rest-shape optimization of block2d_tight (80 iterations
-            at most); 'simfab couple scenes' lists the others
+            on a cylinder); then the rest-shape optimization of block2d_tight (the gradient
+            method: a few insertions); 'simfab couple scenes' lists the others
   deploy    the bundled unit cell with its larger and smaller insert (dome vs saddle) and the
             dome surface scene (flattening, laser-cut pattern, deployment)
   crowd     the bundled 3D-printing survey (truth from the mesh, practitioners vs public,

@@ -37,7 +37,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
                    contact: dict | None = None, device: str = "cpu",
                    quiet: bool = True, seed: int = 0, revolve: tuple[str, float] | None = None, restarts: int = 1,
                    scheduler: str | None = None, workers: int = 1, mesh_check: bool = True,
-                   method: str = "anneal") -> dict:
+                   method: str | None = None) -> dict:
     """Optimize a design scene's part and write every output into ``out``; returns the summary.
 
     design : overrides of the ``[design]`` table (e.g. ``{"iterations": 60, "handles": 4}``)
@@ -55,10 +55,15 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     mesh_check : re-run the optimized shape with quadratic elements, refined in 2D
         (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
         the mesh-converged ones, warning when a constraint holds only on the coarse mesh
-    method : "anneal" (simulated annealing, :mod:`simfab.design.optimize`) or "gradient" (a trust-region SQP on
-        the adjoint sensitivities, :mod:`simfab.design.gradient`: one run; with friction its lag solved to at
-        most GRADIENT_LAG_TOL)
+    method : "gradient" (a trust-region SQP on the adjoint sensitivities, :mod:`simfab.design.gradient`: one
+        run; with friction its lag solved to at most GRADIENT_LAG_TOL) or "anneal" (simulated annealing,
+        :mod:`simfab.design.optimize`); None: "gradient", or "anneal" with ``restarts`` > 1 (restarts are
+        independent annealing runs). The gradient method is the default because on every bundled design
+        scene it meets the brief on the mesh check with 4-60x fewer insertions than annealing and a lower
+        E_L on most (the table in scenes/coupling/README.md).
     """
+    if method is None:
+        method = "anneal" if restarts > 1 else "gradient"
     if method not in METHODS:
         raise InputError(f"must be one of {', '.join(METHODS)}, got {method!r}", where="--method")
     if method == "gradient" and restarts > 1:

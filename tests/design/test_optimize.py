@@ -91,7 +91,8 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
     from simfab.io.usd import check_compliance
 
     out = tmp_path / "o"
-    r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "block2d_tight", "--iterations", "4",
+    r = subprocess.run([sys.executable, "-m", "simfab", "couple", "optimize", "block2d_tight", "--method", "anneal",
+                        "--iterations", "4",
                         "--steps", "8", "--handles", "3", "--placement", "spatial", "--revolve-axis", "x",
                         "--workers", "1", "--correction-rounds", "1", "--check-refinements", "0", "--revolve-arms", "2",
                         "--out", str(out), "--json"], capture_output=True, text=True)
@@ -236,7 +237,8 @@ def test_target_matching_starts_from_the_initial_shapes_mesh_correction(tmp_path
     import subprocess
     import sys
 
-    base = [sys.executable, "-m", "simfab", "couple", "optimize", "profile2d", "--iterations", "3", "--steps", "8",
+    base = [sys.executable, "-m", "simfab", "couple", "optimize", "profile2d", "--method", "anneal",
+            "--iterations", "3", "--steps", "8",
             "--handles", "2", "--placement", "spatial", "--workers", "1", "--correction-rounds", "0", "--json"]
     r = subprocess.run(base + ["--check-refinements", "0", "--out", str(tmp_path / "a")], capture_output=True,
                        text=True)
