@@ -35,7 +35,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
 sys.path.insert(0, str(HERE))
 
-from make_scenes import R_CYL, write_toml  # noqa: E402
+from make_scenes import R_CYL  # noqa: E402
 
 T2D = 0.005  # plane-strain thickness [m]
 
@@ -156,9 +156,9 @@ def profile2d() -> None:
     """Profile matching: the bundled C-clamp's start; the target is the force profile of another
     clamp (thinner arm, larger inner radius) simulated along the same path - a target that some
     shape reaches, so the RMS error measures how close the handles can come."""
-    import tomllib
 
     from make_scenes import CLAMP_TIGHT, X_SEATED, x_start
+
     from simfab.coupling.geometry import c_clamp_outline
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import simulate
@@ -194,6 +194,7 @@ def knocker_design() -> None:
     """Door knocker (3D, rotating path): the ring of knocker3d, a clip with thick arms (stiff: the
     initial design needs large forces and yields)."""
     from make_scenes import KNOCK_GEOM, KNOCK_SDF, KNOCK_r, quat_z, scene, x_start
+
     from simfab.coupling import geometry as G
 
     # thick, tall arms (thesis-like: the initial clip needs kilonewtons and yields several times over)
@@ -225,6 +226,7 @@ def knocker_design() -> None:
 def alligator3d() -> None:
     """The 2D alligator's section extruded 6 mm: the 3D version of the same design problem."""
     from make_scenes import scene
+
     from simfab.coupling.geometry import extrude
 
     rod, body = 0.004, (-0.022, 0.008, -0.005, 0.008)
