@@ -37,7 +37,9 @@ sqrt(w) R dX/dd] ((n + 3n), k; c_j, n_j, R held fixed in the step) and mu
 aligned shape's normal distance; mu keeps their steps bounded); d + delta is clipped into the
 achievable range ``min_gap <= r_i - d_i <= h_i/2 - min_beam``; the new equilibrium is solved from
 the tangent prediction q + dq*/dd delta; a step that does not lower E is halved (up to 3 times),
-else the tuning stops.
+then (``escalations``) recomputed with mu x 10 and halved again, else the tuning stops: the clipped
+Gauss-Newton step is not a descent direction where gaps sit at their bounds, the damped one tends
+to the (projected) gradient.
 
 Re-cut after every step (:func:`tune_pattern`): the step's parameter is the clamp offset, the
 pattern's is the gap, whose change also lengthens the flexible half beam (a few mm long) by d_i -
@@ -61,6 +63,8 @@ from simfab.errors import ConvergenceError, InputError
 from simfab.rods.model import synchronize
 from simfab.rods.statics import StaticSolver
 
+ESCALATION_FACTOR = 10.0  # mu's factor per escalation (TuneConfig.escalations)
+
 
 @dataclass(frozen=True, kw_only=True)
 class TuneConfig:
@@ -70,11 +74,14 @@ class TuneConfig:
     distance to the surface (0: fit the surface only; at w = 1 a vertex 1 mm from its own target
     point weighs as much as one 1 mm off the surface). The point term also pulls on tangential
     offsets the gaps cannot remove (a network whose deployed metric is off along the surface), so
-    it is a per-scene choice (scenes/deploy/README.md)."""
+    it is a per-scene choice (scenes/deploy/README.md). escalations: how many times a step whose
+    halvings all fail to lower E is retried with mu x ``ESCALATION_FACTOR`` (a shorter step turned
+    towards the gradient) before the tuning stops (0: stop at the first such step)."""
 
     iterations: int = 0
     damping: float = 1e-3
     point_weight: float = 0.0
+    escalations: int = 0
 
     def __post_init__(self):
         if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or self.iterations < 0:
@@ -85,6 +92,8 @@ class TuneConfig:
         if isinstance(self.point_weight, bool) or not isinstance(self.point_weight, (int, float)) or not (
                 np.isfinite(self.point_weight) and self.point_weight >= 0):
             raise InputError(f"must be a non-negative number (got {self.point_weight!r})", where="tune.point_weight")
+        if isinstance(self.escalations, bool) or not isinstance(self.escalations, int) or self.escalations < 0:
+            raise InputError(f"must be a non-negative integer (got {self.escalations!r})", where="tune.escalations")
 
 
 @dataclass
@@ -205,26 +214,29 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
         dX = dq[rows]  # (n, 3, k)
         J = fit_jacobian(fit, dX)
         A = J.T @ J
-        mu = cfg.damping * float(np.max(np.diag(A)))
-        step = -np.linalg.solve(A + mu * np.eye(len(ins)), J.T @ fit.e)
         d_try = d.copy()
         accepted = False
-        alpha = 1.0
-        for _ in range(4):
-            d_try[ins] = np.clip(d[ins] + alpha * step, lo[ins], hi[ins])
-            solver.set_attachment_offsets(offsets(d_try))
-            st = solver.red.apply(state, dq @ (d_try[ins] - d[ins]))
-            try:
-                res = solver.solve(st)
-                solves += 1
-            except ConvergenceError:
+        for k in range(cfg.escalations + 1):
+            mu = cfg.damping * ESCALATION_FACTOR**k * float(np.max(np.diag(A)))
+            step = -np.linalg.solve(A + mu * np.eye(len(ins)), J.T @ fit.e)
+            alpha = 1.0
+            for _ in range(4):
+                d_try[ins] = np.clip(d[ins] + alpha * step, lo[ins], hi[ins])
+                solver.set_attachment_offsets(offsets(d_try))
+                st = solver.red.apply(state, dq @ (d_try[ins] - d[ins]))
+                try:
+                    res = solver.solve(st)
+                    solves += 1
+                except ConvergenceError:
+                    alpha *= 0.5
+                    continue
+                fit_try = fit_residual(res.state.body_pos[net.vertex_body], Y, target, cfg.point_weight)
+                if fit_try.cost < fit.cost:
+                    accepted = True
+                    break
                 alpha *= 0.5
-                continue
-            fit_try = fit_residual(res.state.body_pos[net.vertex_body], Y, target, cfg.point_weight)
-            if fit_try.cost < fit.cost:
-                accepted = True
+            if accepted:
                 break
-            alpha *= 0.5
         if not accepted:
             solver.set_attachment_offsets(offsets(d))
             break
@@ -284,27 +296,34 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
                  device: str = "cpu") -> TunedPattern:
     """Up to ``cfg.iterations`` Gauss-Newton steps (:func:`tune`, one at a time), each followed by
     the re-cut pattern (:func:`retuned_pattern`), its network (``deploy_cfg``, ``ties`` as built
-    for ``net``) and its own equilibrium (:func:`redeploy`); stops at the first step whose re-cut
-    equilibrium does not lower the objective E (see module doc)."""
+    for ``net``) and its own equilibrium (:func:`redeploy`); a step whose re-cut equilibrium does not
+    lower the objective E is retried with mu x ``ESCALATION_FACTOR`` (up to ``cfg.escalations``
+    times), else the tuning stops (see module doc)."""
     t0 = time.perf_counter()
     fit = fit_residual(dep.vertex_positions(), Y, target, cfg.point_weight)
     hist, phist = [fit.plane_rms], [fit.point_rms]
     steps = solves = 0
-    one = dataclasses.replace(cfg, iterations=1)
     for _ in range(cfg.iterations):
-        tuned = tune(pat, net, dep, Y, target, one, device=device)
-        solves += tuned.solves
-        if tuned.steps == 0:
-            break
-        pat2 = retuned_pattern(pat, tuned.gap)
-        net2 = build_network(pat2, deploy_cfg, ties=ties)
-        try:
-            dep2 = redeploy(pat2, net2, dep, tuned, device=device)
-        except ConvergenceError:
-            break
-        solves += 1
-        fit2 = fit_residual(dep2.vertex_positions(), Y, target, cfg.point_weight)
-        if not fit2.cost < fit.cost:
+        accepted = False
+        for k in range(cfg.escalations + 1):  # a re-cut that does not lower E: the step again at mu x 10
+            one = dataclasses.replace(cfg, iterations=1, damping=cfg.damping * ESCALATION_FACTOR**k,
+                                      escalations=cfg.escalations - k)
+            tuned = tune(pat, net, dep, Y, target, one, device=device)
+            solves += tuned.solves
+            if tuned.steps == 0:
+                break
+            pat2 = retuned_pattern(pat, tuned.gap)
+            net2 = build_network(pat2, deploy_cfg, ties=ties)
+            try:
+                dep2 = redeploy(pat2, net2, dep, tuned, device=device)
+            except ConvergenceError:
+                continue
+            solves += 1
+            fit2 = fit_residual(dep2.vertex_positions(), Y, target, cfg.point_weight)
+            if fit2.cost < fit.cost:
+                accepted = True
+                break
+        if not accepted:
             break
         pat, net, dep, fit = pat2, net2, dep2, fit2
         hist.append(fit.plane_rms)

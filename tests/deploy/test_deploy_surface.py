@@ -354,6 +354,26 @@ def test_tune_pattern_recuts_after_every_step(small_dome):
     assert after.rms < 0.9 * before.rms
 
 
+def test_damping_escalation_only_acts_on_a_rejected_step(small_dome):
+    """``escalations`` retries a rejected step with a larger damping; a step accepted at the first
+    damping is the same with or without it (gaps to round-off), and with it the objective still
+    falls at every accepted step of ``tune_pattern`` (never an uphill step)."""
+    from simfab.deploy import tuning
+
+    pat, net, dep, cfg, Y = small_dome
+    tgt = surface.spherical_cap(0.1, np.radians(50), 10)
+    plain = tuning.tune(pat, net, dep, Y, tgt, tuning.TuneConfig(iterations=1, point_weight=1.0))
+    escal = tuning.tune(pat, net, dep, Y, tgt, tuning.TuneConfig(iterations=1, point_weight=1.0, escalations=3))
+    assert plain.steps == 1 and escal.steps == 1 and escal.solves == plain.solves
+    assert np.max(np.abs(escal.gap - plain.gap)) < 1e-12
+    res = tuning.tune_pattern(pat, net, dep, Y, tgt, tuning.TuneConfig(iterations=3, point_weight=1.0, escalations=2),
+                              cfg)
+    w = 1.0
+    assert res.steps >= 1
+    E = np.square(res.rms_history) + w * np.square(res.point_rms_history)  # E / n (both terms' mean squares)
+    assert np.all(np.diff(E) < 0)
+
+
 def test_tune_config_errors():
     from simfab.deploy import tuning
     from simfab.errors import InputError
@@ -364,6 +384,8 @@ def test_tune_config_errors():
         tuning.TuneConfig(damping=0.0)
     with pytest.raises(InputError, match="tune.point_weight"):
         tuning.TuneConfig(point_weight=-1.0)
+    with pytest.raises(InputError, match="tune.escalations"):
+        tuning.TuneConfig(escalations=1.5)
 
 
 def test_grouped_offset_sensitivities_equal_one_at_a_time(tiny_saddle):
