@@ -100,14 +100,37 @@ class _Parser(argparse.ArgumentParser):
         raise InputError(f"{self.prog}: {message}")
 
 
-def build_parser() -> argparse.ArgumentParser:
+#: Common options that take a value (skipped when looking for the subcommand's name in argv).
+_VALUED = ("--out", "--seed", "--device")
+
+
+def invoked_subcommand(argv: list[str]) -> str | None:
+    """The subcommand named in ``argv`` (the first word that is not a common option or its value), or
+    None when there is none, it is not a known subcommand, or a help/version flag comes first (the
+    top-level help lists every subcommand)."""
+    skip = False
+    for tok in argv:
+        if skip:
+            skip = False
+        elif tok in ("-h", "--help", "--version"):
+            return None
+        elif tok in _VALUED:
+            skip = True
+        elif not tok.startswith("-"):
+            return tok if tok in SUBCOMMANDS else None
+    return None
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The CLI's parser; ``only``: build (and import) that subcommand's module alone - the one argv
+    invokes - so a command does not pay the imports of the others (the crowd CLI's FEM kernels: ~1 s)."""
     from simfab import __version__
 
     parser = _Parser(prog="simfab", description="Computational fabrication design built around physics simulation.")
     parser.add_argument("--version", action="version", version=f"simfab {__version__}")
     add_common_args(parser)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name in SUBCOMMANDS:
+    for name in SUBCOMMANDS if only is None else (only,):
         mod = subcommand_module(name)
         sp = sub.add_parser(name, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
         add_common_args(sp)
@@ -126,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     _HELD.clear()
     try:
-        parser = build_parser()
+        argv = sys.argv[1:] if argv is None else list(argv)
+        parser = build_parser(invoked_subcommand(argv))
         try:
             args = parser.parse_args(argv)
         except SystemExit as e:  # --help / --version

@@ -70,3 +70,22 @@ def test_demo_runs_every_pipeline_and_says_which():
     for name in demo.PIPELINES:
         assert f"\n  {name} " in demo.DESCRIPTION
     assert "grow edit" in demo.DESCRIPTION or "sketch edit" in demo.DESCRIPTION
+
+
+def test_a_command_builds_only_its_own_subcommand():
+    # the invoked subcommand is found past the common options and their values; help/version flags
+    # before it (the top-level help lists every subcommand) and unknown words give None
+    from simfab.cli import invoked_subcommand
+
+    assert invoked_subcommand(["--out", "deploy", "--seed", "3", "--quiet", "deploy", "surface", "dome"]) == "deploy"
+    assert invoked_subcommand(["--help", "deploy"]) is None and invoked_subcommand(["--version"]) is None
+    assert invoked_subcommand(["bogus"]) is None and invoked_subcommand([]) is None
+    # so a deploy command does not import the crowd CLI's FEM stack
+    import subprocess
+    import sys
+
+    code = ("import sys; from simfab.cli import main; rc = main(['deploy', 'surface', '--help']); "
+            "print(rc, 'simfab.crowd.outputs' in sys.modules, 'simfab.fem.neohookean' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split()[-3:] == ["0", "False", "False"]
