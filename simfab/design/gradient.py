@@ -79,6 +79,7 @@ from simfab.design.problem import (
     element_quality,
     evaluate,
     initial_evaluation,
+    score_figures,
 )
 from simfab.design.sqp import CheapConstraints, Sample, SQPOptions, trust_region_sqp
 from simfab.design.stress import averaging_matrix, quadrature_averaging_matrix
@@ -832,10 +833,9 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     corr = problem.settings.corrections
     if (resume is not None and start is not None and problem.target is None and resume.fg is not None
             and np.array_equal(_key(resume.ev.h), _key(start)) and resume.ev.figures.get("category") != "none"):
-        # a round from the previous run's best: its simulation, scored as simfab.design.problem scores a brief
-        cons = problem.constraints(resume.ev.figures)
-        ev = dataclasses.replace(resume.ev, constraints=cons, sim_seconds=0.0,  # (simulated by that run)
-                                 objective=resume.ev.E_L + B.penalty(cons, problem.settings.margin))
+        # a round from the previous run's best: its simulation, scored with this round's factors
+        ev = dataclasses.replace(resume.ev, sim_seconds=0.0)  # (simulated by that run)
+        score_figures(problem, ev, ev.result)
         run.memo[_key(start).tobytes()] = dataclasses.replace(resume, ev=ev)
         run.evaluations.append(ev)
     pre = None

@@ -548,6 +548,16 @@ def _score(problem: DesignProblem, ev: Evaluation, res, keep_result: bool) -> No
     ev.status = "ok"
     ev.newton_iterations = int(sum(st.iterations for st in res.steps))
     ev.figures = profile_figures(res, problem.brief.stress_radius)
+    score_figures(problem, ev, res)
+    if keep_result:
+        ev.result = res
+
+
+def score_figures(problem: DesignProblem, ev: Evaluation, res) -> None:
+    """Set ``ev``'s constraints and objective from its figures (and, with a target profile, the
+    complete insertion ``res``) under ``problem``'s corrections and margin: E_L + penalty, or the squared
+    RMS force error + penalty; "rejected" for non-finite figures. A correction round re-scores the
+    previous run's simulation of its start with it (the same simulation, other factors)."""
     ev.constraints = problem.constraints(ev.figures)
     pen = B.penalty(ev.constraints, problem.settings.margin)
     if problem.target is not None:
@@ -558,8 +568,6 @@ def _score(problem: DesignProblem, ev: Evaluation, res, keep_result: bool) -> No
         ev.objective = ev.E_L + pen
     if not math.isfinite(ev.objective):
         ev.status, ev.reason, ev.objective = "rejected", "non-finite profile figures", math.inf
-    if keep_result:
-        ev.result = res
 
 
 def initial_evaluation(problem: DesignProblem) -> Evaluation:
