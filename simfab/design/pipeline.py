@@ -58,9 +58,8 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     method : "gradient" (a trust-region SQP on the adjoint sensitivities, :mod:`simfab.design.gradient`: one
         run; with friction its lag solved to at most GRADIENT_LAG_TOL) or "anneal" (simulated annealing,
         :mod:`simfab.design.optimize`); None: "gradient", or "anneal" with ``restarts`` > 1 (restarts are
-        independent annealing runs). The gradient method is the default because on every bundled design
-        scene it meets the brief on the mesh check with 4-60x fewer insertions than annealing and a lower
-        E_L on most (the table in scenes/coupling/README.md).
+        independent annealing runs). The gradient method is the default: it needs one insertion per
+        iteration where annealing needs one per proposal (measured: scenes/coupling/README.md).
     """
     if method is None:
         method = "anneal" if restarts > 1 else "gradient"
