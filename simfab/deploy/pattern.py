@@ -60,6 +60,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+import shapely
+from scipy.sparse.csgraph import connected_components
 
 from simfab.deploy._config import require_positive
 from simfab.deploy.springs import bezier, size_bulges, size_zigzag, zigzag_layout, zigzag_points
@@ -287,8 +291,6 @@ def edge_fitted_growth(P: np.ndarray, edges: np.ndarray, u: np.ndarray, free: np
     classes). On a uniform grid d = (h/2)(e^{-u} - 1), the vertex rule, zeroes every residual;
     where edges differ in length (a smoothed pillow layer, an unstructured mesh) the edges' sums
     are matched instead of each vertex's mean edge length's growth."""
-    import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
 
     n = len(P)
     a, b = edges[:, 0], edges[:, 1]
@@ -300,11 +302,14 @@ def edge_fitted_growth(P: np.ndarray, edges: np.ndarray, u: np.ndarray, free: np
     col[idx] = np.arange(len(idx))
     both = np.flatnonzero(free[a] & free[b])
     rows, cols, vals = [], [], []
-    for end, sign in ((a, 1.0), (b, 1.0)):
+    for end in (a, b):  # the sums: d_a + d_b
         m = np.flatnonzero(free[end])
-        rows.append(m), cols.append(col[end[m]]), vals.append(sign / L[m])
-    for end, sign in ((a, 1.0), (b, -1.0)):
-        rows.append(len(edges) + np.arange(len(both))), cols.append(col[end[both]])
+        rows.append(m)
+        cols.append(col[end[m]])
+        vals.append(1.0 / L[m])
+    for end, sign in ((a, 1.0), (b, -1.0)):  # the differences: d_a - d_b
+        rows.append(len(edges) + np.arange(len(both)))
+        cols.append(col[end[both]])
         vals.append(sign * GROWTH_FIT_DIFFERENCE / L[both])
     A = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                       shape=(len(edges) + len(both), len(idx)))
@@ -321,7 +326,6 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     vertices get inserts). ``Pattern.gap_max``: the largest gap the tuning may cut
     (:func:`tuning_gap_limit`). ``layout = "mesh"``: the pattern of the best of the
     :data:`MESH_RECIPES` meshings (fewest :func:`defects`, then the largest covered area)."""
-    import shapely
 
     poly = shapely.Polygon(uv[boundary])
     if not poly.is_valid:
@@ -349,7 +353,6 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
 def covered_fraction(pat: Pattern, poly) -> float:
     """The fraction [-] of the flat domain ``poly`` (a shapely Polygon) that the pattern's quads cover
     (their parts outside it not counted)."""
-    import shapely
 
     return float(np.sum(shapely.area(shapely.intersection(shapely.polygons(pat.P[pat.quads]), poly))) / poly.area)
 
@@ -462,7 +465,6 @@ def near_seams(P: np.ndarray, poly, seams, h: float) -> np.ndarray:
     """(n,) bool: points P (n,2) [m] nearer to one of the seam polylines [(k,2)] than to the rim (the
     flat domain ``poly``'s outline without the seams; u = 0 there): the pattern's outline along a
     cut, on the seam or inside the domain where the grid dropped the cells a wedge crosses."""
-    import shapely
 
     if not len(seams):
         return np.zeros(len(P), dtype=bool)
@@ -480,7 +482,6 @@ def drop_outside_quads(poly, P: np.ndarray, quads: np.ndarray) -> tuple[np.ndarr
     (a grid cell whose corners lie on both sides of a cut's wedge, :mod:`simfab.deploy.cuts`, would
     bridge the seam), keep the largest edge-connected set: (P, quads) re-indexed. A no-op on a
     domain without notches (the cells' corners lie in it or on its boundary)."""
-    import shapely
 
     cells = shapely.polygons(P[quads])
     out = shapely.area(shapely.difference(cells, poly)) > OUTSIDE_AREA * shapely.area(cells)
@@ -526,8 +527,6 @@ def _max_angle(Q: np.ndarray) -> float:
 
 
 def _largest_component(quads: np.ndarray) -> np.ndarray:
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
 
     e = np.sort(np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)]), axis=1)
     q = np.tile(np.arange(len(quads)), 4)
@@ -578,7 +577,6 @@ def map_to_surface(uv, faces, V, P) -> np.ndarray:
 
 def _clipped_grid(poly, uv, h):
     """The clipped square grid (``layout = "grid"``): (P (n,2), quads (q,4) CCW)."""
-    import shapely
 
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     ni = np.arange(np.floor(lo[0] / h) - 1, np.ceil(hi[0] / h) + 2)
@@ -735,7 +733,6 @@ def conforming_quads(poly, h: float, uv: np.ndarray, *,
     circular arc instead of 2/3 s L), matched by as much outside. Staircase corners of
     the core give loop vertices of valence 3 (convex) or 5 (concave) - inserts with 3 or 5 beams.
     """
-    import shapely
 
     ring = poly.exterior
     lo, hi = uv.min(axis=0), uv.max(axis=0)
@@ -793,7 +790,6 @@ def _bisector_positions(ring, V: np.ndarray, s: np.ndarray) -> np.ndarray:
     unsmoothed core the nearest point lies on the line of one of its loop edges, and the pillow
     quad there would have a straight angle (no spring); on the bisector both pillow quads get
     ~135 deg."""
-    import shapely
 
     d = np.roll(V, -1, axis=0) - V
     orient = np.sign(np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1]))
@@ -822,7 +818,6 @@ def _area_preserving(ring, s: np.ndarray, p: np.ndarray) -> np.ndarray:
     delta_j = A_j / L_j; moving the chord outward by delta_j leaves as much of the segment outside
     as it adds beyond the boundary (a parabolic arc: the chord at 2/3 of the sagitta). A vertex
     moves by the mean of its two chords' delta along the mean of their outward normals."""
-    import shapely
 
     m = len(p)
     t = np.linspace(0.0, 1.0, AREA_SAMPLES + 1)
@@ -904,7 +899,6 @@ def _ccw(P: np.ndarray, quads: np.ndarray) -> np.ndarray:
 
 def _smooth(P: np.ndarray, quads: np.ndarray, fixed: np.ndarray, iterations: int) -> np.ndarray:
     """Jacobi Laplacian smoothing over the quad edges (fixed vertices stay)."""
-    import scipy.sparse as sp
 
     e = np.unique(np.sort(np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)]), axis=1), axis=0)
     n = len(P)
