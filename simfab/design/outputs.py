@@ -358,7 +358,7 @@ def write_usd(res, path) -> Path:
     for r in final.steps:
         w.set_points("part", r.x, t)
         w.set_scalar("part", "von_mises", vertex_von_mises(fem, r.von_mises), t, interpolation="vertex", vmin=0.0,
-                     vmax=vmax)
+                     vmax=vmax, units="Pa")
         w.set_attribute("part", "objective", res.best.objective, t)
         w.set_pose("object", r.pos, r.quat, t)
         t += 1

@@ -116,6 +116,11 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
         assert s["iterations"] == 4 and s["corrections"] == {}
         assert all(s["objective_fine"] <= r["objective_fine"] for r in rounds)
     assert check_compliance(s["outputs"]["usd"]) == []
+    from simfab.io.usd_read import open_stage, read_scalar_at
+
+    # the stress field carries its unit, so a rendered colour bar reads "von_mises [Pa]"
+    name, _, (lo, hi), units = read_scalar_at(open_stage(s["outputs"]["usd"]))
+    assert (name, units) == ("von_mises", "Pa") and 0.0 == lo < hi
     import trimesh
 
     for k in ("part_stl", "revolved_stl"):
