@@ -15,8 +15,8 @@ Layout (all in the flat domain, metres):
   the arcs are long enough for the growth the quad undergoes in deployment
   (:mod:`simfab.deploy.springs`); an arc the Bezier family cannot make long enough is a zigzag
   instead (:func:`zigzag_springs`), and a quad where no zigzag fits takes one pull per arc
-  (:func:`simfab.deploy.springs.size_arcs`); a quad whose neighbouring edges are nearly collinear (an
-  interior angle > ``degenerate_angle_deg``, boundary quads only) gets no spring;
+  (:func:`simfab.deploy.springs.size_arcs`); a quad whose neighbouring edges are nearly collinear
+  (an interior angle > ``degenerate_angle_deg``, boundary quads only) gets no spring;
 - at every **interior** quad vertex (four quads around it) the four beams stop short of a
   gap of half-size ``g_i`` that receives a rigid insert of half-size ``r_i`` from the insert
   catalogue (``insert_half_sizes``; one size: ``insert_half_size``); the insert clamps the beam
@@ -91,8 +91,8 @@ class PatternConfig:
     which a boundary quad gets no spring; springs: "zigzag" (an arc the Bezier family cannot make
     long enough becomes a zigzag, :func:`zigzag_springs`; a quad where no zigzag fits either takes
     one pull per arc, :func:`simfab.deploy.springs.size_arcs`) or "bezier" (Bezier arcs at one pull
-    per quad only, those short of the slack reported); growth_fit: "vertex" (each insert's growth from its own u and
-    mean edge length, the gap rule of the module doc) or "edges" (the growths fitted to every
+    per quad only, those short of the slack reported); growth_fit: "vertex" (each insert's growth
+    from its own u and mean edge length, the gap rule of the module doc) or "edges" (the growths fitted to every
     edge's own length and u, :func:`edge_fitted_growth`: for meshes whose edges differ in length);
     conforming_core: "smoothed" (the conforming layout's core outline Laplacian-smoothed) or
     "regular" (left on the grid: every core edge h long, as the vertex gap rule assumes; the
@@ -329,9 +329,9 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
            seams=(), cone_tips=()) -> Pattern:
     """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,)).
     ``seams``: flat polylines [(k,2) m] of the cut sides of a cut flattening (their boundary
-    vertices get inserts); ``cone_tips`` (c,2) [m]: the cones' flat positions (a pattern vertex there
-    takes its growth from :func:`cone_tip_growth`). ``Pattern.gap_max``: the largest gap the tuning may cut
-    (:func:`tuning_gap_limit`). ``layout = "mesh"``: the pattern of the best of the
+    vertices get inserts); ``cone_tips`` (c,2) [m]: the cones' flat positions (a pattern vertex
+    there takes its growth from :func:`cone_tip_growth`). ``Pattern.gap_max``: the largest gap the
+    tuning may cut (:func:`tuning_gap_limit`). ``layout = "mesh"``: the pattern of the best of the
     :data:`MESH_RECIPES` meshings (fewest :func:`defects`, then the largest covered area)."""
 
     poly = shapely.Polygon(uv[boundary])
@@ -407,7 +407,7 @@ def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams, cone_ti
         for v in np.flatnonzero(tip & seam):
             need[v] = -cone_tip_growth(P, edges, v, uv, faces, u)
     # a seam vertex that needs less growth |d| than its best insert falls short by is joined rigidly
-    # (growth 0: the nearer one; a cone tip or a seam's rim end, where u = 0)
+    # (growth 0: the nearer one; a seam's rim end, where u = 0)
     if seam.any():
         k = assign_sizes(-need[seam], gmax[seam], cfg.sizes, cfg.min_gap)
         g = np.asarray(cfg.sizes)[k] + need[seam]
@@ -463,7 +463,8 @@ def cone_tip_growth(P: np.ndarray, edges: np.ndarray, v: int, uv, faces, u) -> f
     u interpolated on the flat triangulation (uv, faces, u), Gauss-Legendre with
     :data:`TIP_QUADRATURE` points. The gap rule's endpoint value (h/2)(e^{-u_v} - 1) is 0 there (u = 0
     at a cone, :mod:`simfab.deploy.cuts`) while the first ring around the cone shrank: the cone
-    metric's u is log-singular at the cone and the endpoint rule misses the whole half edge."""
+    metric's u is singular at a cone (its vertex value 0 is the discrete convention), so the
+    endpoint rule misses the whole half edge."""
     es = edges[np.any(edges == v, axis=1)]
     other = es.sum(axis=1) - v
     x, w = np.polynomial.legendre.leggauss(TIP_QUADRATURE)
