@@ -306,6 +306,11 @@ TIE_ACROSS = 1.5  # a pair is across a wedge when its flat distance exceeds this
 TIE_REACH = 1.5  # [spacings] largest target distance of a tied pair
 
 
+def cone_points(cf: CutFlattening) -> np.ndarray:
+    """(c,2) [m] the cones' flat positions (a cut path's cone end is one vertex of the cut mesh)."""
+    return np.array([cf.flat.uv[np.flatnonzero(cf.orig == c)[0]] for c in cf.cones]).reshape(-1, 2)
+
+
 def seam_lines(cf: CutFlattening) -> list:
     """[(label S<k>, (j,2) flat polyline [m])]: both sides of every cut path (the seams)."""
     return [(f"S{k + 1}", cf.flat.uv[side]) for k, s in enumerate(cf.seams) for side in s.sides]

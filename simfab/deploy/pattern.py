@@ -14,8 +14,9 @@ Layout (all in the flat domain, metres):
   consecutive edge midpoints, bulging towards the quad centre, each quad's bulge sized so that
   the arcs are long enough for the growth the quad undergoes in deployment
   (:mod:`simfab.deploy.springs`); an arc the Bezier family cannot make long enough is a zigzag
-  instead (:func:`zigzag_springs`); a quad whose neighbouring edges are nearly collinear (an
-  interior angle > ``degenerate_angle_deg``, boundary quads only) gets no spring;
+  instead (:func:`zigzag_springs`), and a quad where no zigzag fits takes one pull per arc
+  (:func:`simfab.deploy.springs.size_arcs`); a quad whose neighbouring edges are nearly collinear
+  (an interior angle > ``degenerate_angle_deg``, boundary quads only) gets no spring;
 - at every **interior** quad vertex (four quads around it) the four beams stop short of a
   gap of half-size ``g_i`` that receives a rigid insert of half-size ``r_i`` from the insert
   catalogue (``insert_half_sizes``; one size: ``insert_half_size``); the insert clamps the beam
@@ -23,7 +24,9 @@ Layout (all in the flat domain, metres):
   except along the seams of a cut flattening (``seams``, :mod:`simfab.deploy.cuts`; the outline
   nearer a seam than the rim), where u != 0: there the cells grow as inside, so those vertices
   get inserts too (2 or 3 beams) where their shortest edge leaves room for a gap and an insert
-  comes nearer their growth than a rigid joint (not at a cone tip or a seam's rim end, u = 0).
+  comes nearer their growth than a rigid joint (not at a seam's rim end, u = 0). A pattern vertex
+  on a cone tip (``cone_tips``) is a seam vertex whose growth is the half-edge integral
+  (:func:`cone_tip_growth`): u = 0 at the cone itself, but its first ring shrank.
 
 Gap rule (derivation). The flattening scales lengths by ``e^u``: a curve of length ``L`` on the
 target has length ``e^u L`` in the flat domain (u varies slowly over a cell). Deployment must
@@ -66,7 +69,7 @@ import shapely
 from scipy.sparse.csgraph import connected_components
 
 from simfab.deploy._config import require_positive
-from simfab.deploy.springs import bezier, size_bulges, size_zigzag, zigzag_layout, zigzag_points
+from simfab.deploy.springs import bezier, size_arcs, size_bulges, size_zigzag, zigzag_layout, zigzag_points
 from simfab.errors import InputError
 from simfab.fem.meshing import gmsh_elements, gmsh_session
 
@@ -86,9 +89,10 @@ class PatternConfig:
     arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:
     achievable-gap limits (see module doc); degenerate_angle_deg [deg]: interior angle above
     which a boundary quad gets no spring; springs: "zigzag" (an arc the Bezier family cannot make
-    long enough becomes a zigzag, :func:`zigzag_springs`) or "bezier" (Bezier arcs only, those
-    short of the slack reported); growth_fit: "vertex" (each insert's growth from its own u and
-    mean edge length, the gap rule of the module doc) or "edges" (the growths fitted to every
+    long enough becomes a zigzag, :func:`zigzag_springs`; a quad where no zigzag fits either takes
+    one pull per arc, :func:`simfab.deploy.springs.size_arcs`) or "bezier" (Bezier arcs at one pull
+    per quad only, those short of the slack reported); growth_fit: "vertex" (each insert's growth
+    from its own u and mean edge length, the gap rule of the module doc) or "edges" (the growths fitted to every
     edge's own length and u, :func:`edge_fitted_growth`: for meshes whose edges differ in length);
     conforming_core: "smoothed" (the conforming layout's core outline Laplacian-smoothed) or
     "regular" (left on the grid: every core edge h long, as the vertex gap rule assumes; the
@@ -150,7 +154,8 @@ class Pattern:
     (before clamping); unreachable (k,) vertex indices; spring (q,) bool; insert_ids (n,) int
     (label number, -1 on the boundary); insert_size (n,) [m]: each insert's half-size r_i (0 on
     the boundary); insert_class (n,) int: its index in ``config.sizes`` (-1 on the boundary);
-    bulge (q,) [-]: spring handle pull per quad; growth (q,4) [-]: the growth of its four spring
+    bulge (q,4) [-]: spring handle pull per arc (one per quad, or per arc where a quad needs it:
+    :func:`simfab.deploy.springs.size_arcs`); growth (q,4) [-]: the growth of its four spring
     arcs' chords in deployment (:func:`quad_growth`; about e^{-u} in a regular cell);
     spring_ratio (q,4) [-]: the arcs' length/chord ratios; spring_legs (q,4) int: legs of each arc's zigzag (0: a
     Bezier arc), spring_amplitude (q,4) [-]: the zigzag's leg height fraction; tight_springs (k,) quads whose arcs
@@ -178,6 +183,7 @@ class Pattern:
     tight_springs: np.ndarray
     config: PatternConfig
     gap_max: np.ndarray | None = None  # (n,) [m] largest gap the tuning may cut (see layout)
+    cone_tip: np.ndarray | None = None  # (n,) bool: the vertex sits on a cone tip of a cut flattening
 
     @property
     def n_inserts(self) -> int:
@@ -217,14 +223,14 @@ class Pattern:
         """Per spring arc: (quad, edge from, edge to, points (k,2) [m]) as cut: a Bezier arc at n+1
         uniform parameters, a zigzag as its drawn polyline (:func:`simfab.deploy.springs.zigzag_points`)."""
         return [(q, e0, e1, self._zigzag(q, k, e0, e1, rod=False) if self.spring_legs[q, k] else
-                 bezier(*self._arc_ends(q, e0, e1), float(self.bulge[q]), n))
+                 bezier(*self._arc_ends(q, e0, e1), float(self.bulge[q, k]), n))
                 for q, k, e0, e1 in self._arcs()]
 
     def spring_rods(self, params: np.ndarray) -> list[tuple[int, int, int, np.ndarray]]:
         """Per spring arc: (quad, edge from, edge to, rod nodes (k,2) [m]): a Bezier arc at the
         parameters ``params`` (in [0, 1]), a zigzag at its own nodes (``ZIGZAG_SEGMENTS`` per piece)."""
         return [(q, e0, e1, self._zigzag(q, k, e0, e1, rod=True) if self.spring_legs[q, k] else
-                 bezier(*self._arc_ends(q, e0, e1), float(self.bulge[q]), params))
+                 bezier(*self._arc_ends(q, e0, e1), float(self.bulge[q, k]), params))
                 for q, k, e0, e1 in self._arcs()]
 
     def _arcs(self):
@@ -320,11 +326,12 @@ def edge_fitted_growth(P: np.ndarray, edges: np.ndarray, u: np.ndarray, free: np
 
 
 def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig, *,
-           seams=()) -> Pattern:
+           seams=(), cone_tips=()) -> Pattern:
     """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,)).
     ``seams``: flat polylines [(k,2) m] of the cut sides of a cut flattening (their boundary
-    vertices get inserts). ``Pattern.gap_max``: the largest gap the tuning may cut
-    (:func:`tuning_gap_limit`). ``layout = "mesh"``: the pattern of the best of the
+    vertices get inserts); ``cone_tips`` (c,2) [m]: the cones' flat positions (a pattern vertex
+    there takes its growth from :func:`cone_tip_growth`). ``Pattern.gap_max``: the largest gap the
+    tuning may cut (:func:`tuning_gap_limit`). ``layout = "mesh"``: the pattern of the best of the
     :data:`MESH_RECIPES` meshings (fewest :func:`defects`, then the largest covered area)."""
 
     poly = shapely.Polygon(uv[boundary])
@@ -343,7 +350,7 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
         meshes = [conforming_quads(poly, h, uv, sweeps=sweeps)]
     best, best_key = None, None
     for P, quads in meshes:
-        pat = _pattern_on(poly, P, quads, uv, faces, u, cfg, seams)
+        pat = _pattern_on(poly, P, quads, uv, faces, u, cfg, seams, cone_tips)
         key = (defects(pat), -covered_fraction(pat, poly))
         if best_key is None or key < best_key:
             best, best_key = pat, key
@@ -362,7 +369,7 @@ def defects(pat: Pattern) -> int:
     return int(len(pat.unreachable) + len(pat.tight_springs) + np.sum(~pat.spring))
 
 
-def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams) -> Pattern:
+def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams, cone_tips=()) -> Pattern:
     """The pattern (inserts, gaps, springs) on the quad mesh (P, quads) of the flat domain ``poly``."""
     h = cfg.spacing
     P, quads = drop_outside_quads(poly, P, quads)
@@ -393,8 +400,14 @@ def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams) -> Patt
     need = gap_rule(uP, hv, 0.0)  # -d: the gap with r = 0
     if cfg.growth_fit == "edges":
         need = -edge_fitted_growth(P, edges, uP, ~bnd_v | seam)
+    tip = np.zeros(len(P), dtype=bool)
+    if len(cone_tips):
+        near = np.min(np.linalg.norm(P[:, None] - np.asarray(cone_tips)[None], axis=2), axis=1)
+        tip = bnd_v & (near < SEAM_TOL * h)
+        for v in np.flatnonzero(tip & seam):
+            need[v] = -cone_tip_growth(P, edges, v, uv, faces, u)
     # a seam vertex that needs less growth |d| than its best insert falls short by is joined rigidly
-    # (growth 0: the nearer one; a cone tip or a seam's rim end, where u = 0)
+    # (growth 0: the nearer one; a seam's rim end, where u = 0)
     if seam.any():
         k = assign_sizes(-need[seam], gmax[seam], cfg.sizes, cfg.min_gap)
         g = np.asarray(cfg.sizes)[k] + need[seam]
@@ -416,6 +429,15 @@ def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams) -> Patt
     legs, amp = np.zeros((len(quads), 4), dtype=np.int64), np.zeros((len(quads), 4))
     if cfg.springs == "zigzag":
         legs, amp, ratio, tight = zigzag_springs(P, quads, qmids, growth, ratio, tight & spring, cfg)
+    bulge = np.repeat(bulge[:, None], 4, axis=1)
+    # all Bezier and still short (no zigzag fits): per-arc pulls; ``springs = "bezier"`` keeps one pull per quad
+    short = np.flatnonzero(tight & spring & ~np.any(legs > 0, axis=1)) if cfg.springs == "zigzag" else []
+    if len(short):
+        need_s = (1.0 + cfg.spring_slack) * np.maximum(growth[short], 1.0)
+        bulge[short], ratio[short] = size_arcs(qmids[short], np.roll(qmids[short], -1, axis=1),
+                                               P[quads[short]].mean(axis=1)[:, None, :], need_s, bulge[short, 0],
+                                               bulge_min=cfg.spring_bulge, width=cfg.spring_width)
+        tight[short] = np.any(ratio[short] < need_s - 1e-9, axis=1)
     ids = np.full(len(P), -1)
     order = np.flatnonzero(interior)
     order = order[np.lexsort((P[order, 0], -P[order, 1]))]  # row by row from the top, left to right
@@ -424,7 +446,33 @@ def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams) -> Patt
                    gap_required=req, unreachable=unreachable, spring=spring, insert_ids=ids, insert_size=r_v,
                    insert_class=cls, bulge=bulge, growth=growth, spring_ratio=ratio, spring_legs=legs,
                    spring_amplitude=amp, tight_springs=np.flatnonzero(tight & spring), config=cfg,
-                   gap_max=np.where(interior, tuning_gap_limit(gmax, emin, gap, cfg.min_beam, bool(len(seams))), 0.0))
+                   gap_max=np.where(interior, tuning_gap_limit(gmax, emin, gap, cfg.min_beam, bool(len(seams))), 0.0),
+                   cone_tip=tip)
+
+
+#: Gauss-Legendre points per half edge of :func:`cone_tip_growth`
+TIP_QUADRATURE = 8
+
+
+def cone_tip_growth(P: np.ndarray, edges: np.ndarray, v: int, uv, faces, u) -> float:
+    """Growth d [m] of the insert at a cone tip v: the mean over its edges of the half edge's
+    growth in deployment,
+
+        d = mean_e  int_0^{L_e/2} (e^{-u(s)} - 1) ds      (s from the tip along edge e),
+
+    u interpolated on the flat triangulation (uv, faces, u), Gauss-Legendre with
+    :data:`TIP_QUADRATURE` points. The gap rule's endpoint value (h/2)(e^{-u_v} - 1) is 0 there (u = 0
+    at a cone, :mod:`simfab.deploy.cuts`) while the first ring around the cone shrank: the cone
+    metric's u is singular at a cone (its vertex value 0 is the discrete convention), so the
+    endpoint rule misses the whole half edge."""
+    es = edges[np.any(edges == v, axis=1)]
+    other = es.sum(axis=1) - v
+    x, w = np.polynomial.legendre.leggauss(TIP_QUADRATURE)
+    s = 0.25 * (x + 1.0)  # [0, 1/2] of each edge
+    pts = P[v] + s[None, :, None] * (P[other] - P[v])[:, None, :]  # (k, q, 2)
+    uq = interpolate(uv, faces, u, pts.reshape(-1, 2)).reshape(len(other), -1)
+    L = np.linalg.norm(P[other] - P[v], axis=1)
+    return float(np.mean(0.25 * L * (np.expm1(-uq) @ w)))
 
 
 def zigzag_springs(P, quads, qmids, growth, ratio, tight, cfg: PatternConfig):

@@ -118,7 +118,9 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     sec["flatten"] = time.perf_counter() - t
     t = time.perf_counter()
     seams = [] if cut_flat is None else cuts.seam_lines(cut_flat)
-    pat = pattern.layout(flat.uv, flat.boundary, mF, flat.u, scene.pattern, seams=[p for _, p in seams])
+    tips = np.zeros((0, 2)) if cut_flat is None else cuts.cone_points(cut_flat)
+    pat = pattern.layout(flat.uv, flat.boundary, mF, flat.u, scene.pattern, seams=[p for _, p in seams],
+                         cone_tips=tips)
     Y = pattern.map_to_surface(flat.uv, mF, mV, pat.P)
     sec["layout"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -264,14 +266,19 @@ def flat_area_covered(res: SurfaceResult) -> float:
 def cuts_summary(res: SurfaceResult) -> dict | None:
     """Cones and seams of a run with cuts (None without): per cone its angle defect [deg] and
     seam length [mm] (the cut path in 3D), the interior mesh vertices whose growth no insert size
-    reaches without and with the cones, the seam ties, and the flat area the pattern's quads cover
-    (of the cut domain, also the summary's ``flat_area_covered``: the grid cells clipped at the
-    wedges leave notches the deviation does not see)."""
+    reaches without and with the cones, the inserts on cone tips (insert number, size class,
+    growth [mm]: :func:`simfab.deploy.pattern.cone_tip_growth`), the seam ties, and the flat area
+    the pattern's quads cover (of the cut domain, also the summary's ``flat_area_covered``: the grid
+    cells clipped at the wedges leave notches the deviation does not see)."""
     cf = res.cuts
     if cf is None:
         return None
     V = res.scene.target.V
-    return dict(cones=len(cf.cones), unreachable_mesh_vertices=cf.unreachable_vertices,
+    p = res.pattern
+    tips = [] if p.cone_tip is None else [
+        dict(insert=int(p.insert_ids[v]), size_class=p.class_label(v),
+             growth_mm=float((p.insert_size[v] - p.gap[v]) * 1e3)) for v in np.flatnonzero(p.cone_tip & p.interior)]
+    return dict(cones=len(cf.cones), unreachable_mesh_vertices=cf.unreachable_vertices, cone_tip_inserts=tips,
                 flat_area_covered=flat_area_covered(res),
                 seams_joined=res.ties is not None, seam_ties=0 if res.ties is None else int(len(res.ties.pairs)),
                 seams=[dict(cone_defect_deg=float(np.degrees(d)),

@@ -34,6 +34,15 @@ circles, one clearance inside the triangle, about (triangle area) / (leg pitch) 
 ~2.4 c in a 30 mm cell with 1 mm springs. :func:`size_zigzag` takes the fewest legs that reach the
 length, then the lowest legs (bisection on their height fraction), as the Bezier sizing takes
 the smallest b.
+
+Per-arc pulls (:func:`size_arcs`). In a skewed quad one arc may need more length than its
+neighbours while the common b's cap is set by its own approach to the centre. Such a quad, all
+Bezier and still short, gives each arc its own b_k: the smallest that reaches its own need. The
+arcs approach the centre along the quad's half-diagonals (opposite arcs along one line, adjacent
+ones at about a right angle), so their centre clearances c_k bound their separations: opposite
+c_k + c_{k+2}, adjacent about sqrt(c_k^2 + c_{k+1}^2). The per-arc pulls are kept where these stay
+at least what four arcs at the cap give (c_k = w: 2 w and sqrt(2) w), so a deep arc opposite a
+shallow one is allowed.
 """
 
 from __future__ import annotations
@@ -115,6 +124,29 @@ def size_bulges(P: np.ndarray, quads: np.ndarray, mids_of_quad: np.ndarray, grow
     b = _bisect(lambda x: np.all(_arc_ratios(M0, M1, c, x) >= need, axis=1), bmin, cap)
     ratio = _arc_ratios(M0, M1, c, b)
     return b, ratio, np.any(ratio < need - 1e-9, axis=1)
+
+
+def size_arcs(M0: np.ndarray, M1: np.ndarray, c: np.ndarray, need: np.ndarray, b: np.ndarray, *,
+              bulge_min: float, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per-arc pulls (see module doc) for quads short of the slack at their common pull b (q,):
+    M0, M1 (q,4,2) [m] each arc's midpoints, c (q,1,2) [m] the centres, need (q,4) [-] the S/c each arc
+    needs. Returns the pulls (q,4) [-] (the common b repeated where the per-arc ones would bring
+    two arcs nearer than the cap allows, or an arc does not reach its need) and their S/c (q,4)."""
+    q = len(b)
+    lo, hi = np.full(q, float(bulge_min)), np.full(q, _B_UPPER)
+    bk = np.empty((q, 4))
+    for k in range(4):
+        sl = (slice(None), slice(k, k + 1))
+        bk[:, k] = _bisect(lambda x: _arc_ratios(M0[sl], M1[sl], c, x)[:, 0] >= need[:, k], lo, hi)
+    ratio = np.stack([_arc_ratios(M0[:, k:k + 1], M1[:, k:k + 1], c, bk[:, k])[:, 0] for k in range(4)], axis=1)
+    clear = np.stack([np.min(np.linalg.norm(_arcs(M0[:, k:k + 1], M1[:, k:k + 1], c, bk[:, k])[:, 0]
+                                            - c, axis=2), axis=1) for k in range(4)], axis=1)
+    nxt, opp = np.roll(clear, -1, axis=1), np.roll(clear, -2, axis=1)
+    ok = (np.all(clear + opp >= 2.0 * width - 1e-12, axis=1)
+          & np.all(clear**2 + nxt**2 >= 2.0 * width**2 - 1e-18, axis=1) & np.all(ratio >= need - 1e-9, axis=1))
+    common = np.repeat(np.asarray(b, dtype=np.float64)[:, None], 4, axis=1)
+    common_ratio = _arc_ratios(M0, M1, c, b)
+    return np.where(ok[:, None], bk, common), np.where(ok[:, None], ratio, common_ratio)
 
 
 # --- zigzag springs -------------------------------------------------------------------------------------------------

@@ -431,3 +431,59 @@ def test_conforming_core_regular_keeps_the_grid_and_options_are_checked():
         pattern.PatternConfig(conforming_core="round")
     with pytest.raises(InputError, match="growth_fit"):
         pattern.PatternConfig(growth_fit="faces")
+
+
+def test_cone_tip_growth_is_the_half_edge_integral():
+    """cone_tip_growth: for a linear u = a . x (interpolated exactly on any triangulation) each half
+    edge from the tip along unit e (length L/2) grows by int_0^{L/2} (e^{-beta s} - 1) ds
+    = (1 - e^{-beta L/2}) / beta - L/2, beta = a . e; the growth is their mean (8-point
+    Gauss-Legendre: exact to round-off for this smooth integrand)."""
+    uv = np.array([[-0.05, -0.05], [0.05, -0.05], [0.05, 0.05], [-0.05, 0.05], [0.0, 0.0]])
+    faces = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    a = np.array([-6.0, 3.0])  # [1/m]: u from -0.45 to +0.45 over the square
+    u = uv @ a
+    P = np.array([[0.0, 0.0], [0.04, 0.0], [0.0, 0.03], [-0.02, -0.02]])
+    edges = np.array([[0, 1], [2, 0], [0, 3]])
+    exact = []
+    for o in (1, 2, 3):
+        L = np.linalg.norm(P[o]); beta = a @ (P[o] / L)  # noqa: E702
+        exact.append((1 - np.exp(-beta * L / 2)) / beta - L / 2)
+    assert pattern.cone_tip_growth(P, edges, 0, uv, faces, u) == pytest.approx(np.mean(exact), rel=1e-10)
+
+
+def test_skewed_quad_springs_take_per_arc_pulls():
+    """A skewed interior quad of the bundled mixed surface's conforming layout (edges 20-29 mm): at a
+    common pull its two arcs round the short diagonal's corners reach 1.231 x their chord of the
+    1.239 x they need before they come within one spring width w of the centre (no zigzag fits its
+    7-9 mm triangles). Per-arc pulls (springs.size_arcs): the shallow arcs keep room for the deep one,
+    every arc reaches its need, and the arcs stay apart as far as the cap keeps them in a regular
+    quad: opposite arcs' polylines >= 2 w apart, adjacent arcs' nearest approaches to the centre
+    at least sqrt(2) w apart."""
+    from simfab.deploy import springs
+
+    Q = np.array([[-53.49, 53.39], [-25.0, 50.0], [-25.36, 75.32], [-45.13, 72.88]]) * 1e-3
+    need = np.array([[1.239, 1.157, 1.126, 1.142]])
+    w = 0.0015
+    M0 = 0.5 * (Q + np.roll(Q, -1, axis=0))[None]
+    M1, c = np.roll(M0, -1, axis=1), Q.mean(axis=0)[None, None]
+    b, ratio, tight = springs.size_bulges(Q, np.arange(4)[None], M0[0][None], need / 1.1, bulge_min=0.5,
+                                          slack=0.1, width=w)
+    assert tight[0] and ratio[0, 0] < need[0, 0]  # the common pull falls short
+    bk, rk = springs.size_arcs(M0, M1, c, need, b, bulge_min=0.5, width=w)
+    assert np.all(rk >= need - 1e-9) and bk[0, 0] > b[0] > bk[0, 2]
+    arcs = [springs.bezier(M0[0, k], M1[0, k], c[0, 0], bk[0, k], 400) for k in range(4)]
+    dist = lambda p, q: np.min(np.linalg.norm(p[:, None] - q[None], axis=2))  # noqa: E731
+    assert min(dist(arcs[0], arcs[2]), dist(arcs[1], arcs[3])) >= 2 * w * (1 - 1e-3)
+    apex = [a[np.argmin(np.linalg.norm(a - c[0, 0], axis=1))] for a in arcs]
+    assert min(np.linalg.norm(apex[k] - apex[(k + 1) % 4]) for k in range(4)) >= np.sqrt(2) * w * (1 - 1e-3)
+
+
+def test_bundled_mixed_layout_has_every_spring_at_its_slack():
+    """The bundled mixed surface as laid out (conforming): a spring in every quad, none short of its
+    slack (the skewed quad above among them)."""
+    sc = scene.load_scene(scene.bundled_path("mixed"))
+    f = flatten.flatten(sc.target.V, sc.target.F)
+    pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
+    need = (1 + sc.pattern.spring_slack) * np.maximum(pat.growth, 1.0)
+    assert np.all(pat.spring) and len(pat.tight_springs) == 0
+    assert np.all(pat.spring_ratio >= need - 1e-9)
