@@ -78,7 +78,7 @@ def write_usd(path, deployment) -> Path:
     smax = max(float(np.max(e)) for e in strains) or 1.0
     for t, st in enumerate(d.states):
         w.set_curves("deploy/rods", rod_polylines(model, st), widths, t)
-        w.set_scalar("deploy/rods", "bending_strain", strains[t], t, vmin=0.0, vmax=smax)
+        w.set_scalar("deploy/rods", "bending_strain", strains[t], t, vmin=0.0, vmax=smax, units="-")
         b = d.cell.insert_body
         w.set_pose("deploy/insert", st.body_pos[b], matrix_to_quat(st.body_rot[b]), t)
     return w.save()

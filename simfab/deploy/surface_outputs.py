@@ -99,9 +99,11 @@ def write_pattern_png(path, res) -> None:
     x0, y0, x1, y1 = cut.extent
     yb = min(r[:, 1].min() for r in cut.rings) - 6
     ax.plot([x0, x0 + SCALE_BAR_MM], [yb, yb], "k-", lw=3)
-    ax.text(x0 + SCALE_BAR_MM / 2, yb - 4, f"{SCALE_BAR_MM:.0f} mm", ha="center", va="top")
+    # the label's offset in points and the margin as a fraction of the span: clear of the frame at any extent
+    ax.annotate(f"{SCALE_BAR_MM:.0f} mm", (x0 + SCALE_BAR_MM / 2, yb), xytext=(0, -4), textcoords="offset points",
+                ha="center", va="top")
     ax.set_xlim(x0 - 5, x1 + 5)
-    ax.set_ylim(yb - 12, y1 + 5)
+    ax.set_ylim(yb - 6 - 0.06 * (y1 - yb), y1 + 5)
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
@@ -171,7 +173,7 @@ def write_usd(path, res) -> None:
     smax = max(float(np.max(e)) for e in strains) or 1.0
     for t, st in enumerate(dep.states):
         w.set_curves("deploy/rods", rod_polylines(model, st), widths, t)
-        w.set_scalar("deploy/rods", "bending_strain", strains[t], t, vmin=0.0, vmax=smax)
+        w.set_scalar("deploy/rods", "bending_strain", strains[t], t, vmin=0.0, vmax=smax, units="-")
         for nm, b in names:
             w.set_pose(nm, st.body_pos[b], matrix_to_quat(st.body_rot[b]), t)
     # the target, moved onto the deployed state: x_target_frame = R x_dep + t  =>  x_dep = R^T (y - t)
