@@ -281,8 +281,9 @@ def test_bundled_cap80_meets_the_deployment_bound():
     steps, deploys within the issue's bound: RMS <= 1 % of the diameter and out-of-plane height
     within 3 % of the target's, every gap reachable, a spring in every quad and none short of its
     slack. Measured (an insert on each cone tip, pattern.cone_tip_growth): 0.234 %, -2.0 % after 2
-    steps; the scene's command `--tune 8` takes 5 (0.200 %, -1.5 %) in twice the time. The tuning's point term makes the height: fitted to the surface alone
-    the (grid-laid) cap ended on the sphere but 5.7 % too low."""
+    steps; the scene's command `--tune 8` takes 5 (0.200 %, -1.5 %) in twice the time. The tuning's
+    point term makes the height: fitted to the surface alone the (grid-laid) cap ended on the sphere
+    but 5.7 % too low."""
     from simfab.deploy import pipeline
     from simfab.deploy.scene import bundled_path, load_scene
 
