@@ -50,14 +50,16 @@ import dataclasses
 import time
 
 import numpy as np
+import scipy.sparse as sp
 
 from simfab.coupling.converge import extrapolate
+from simfab.coupling.guide import CoarseGuide
 from simfab.coupling.model import make_coupling_model
 from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
 from simfab.design.problem import linear_mesh, profile_figures
 from simfab.fem.model import make_model
-from simfab.fem.p2 import to_p2
+from simfab.fem.p2 import shape_functions, to_p2
 from simfab.fem.subdivide import midpoint_mask, subdivide
 
 
@@ -111,6 +113,34 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
     return make_coupling_model(name=cm.name, fem=new, field=cm.field, path=cm.path,
                                fixed_vertices=np.flatnonzero(fixed), options=options,
                                object_vertices=cm.object_vertices, object_faces=cm.object_faces, contact=cm.contact)
+
+
+def p2_prolongation(coarse, fine) -> sp.csr_matrix:
+    """(n_fine, n_coarse) prolongation from a P2 model ``coarse`` to the P2 model ``fine`` of its
+    mesh subdivided once (:func:`refined_model` with one more subdivision): fine node i's position
+    is sum_a N_a(L_i) x_a over its parent element's 6 / 10 nodes, L_i its barycentric coordinates
+    in the parent's (affine) rest simplex and N_a the P2 shape functions. Every fine node lies in a
+    coarse element, so this is exact interpolation of the coarse quadratic field. Parents:
+    :func:`simfab.fem.subdivide.subdivide` writes child c of coarse element e as row c m + e (m
+    coarse elements); checked here (every fine node inside its parent, to 1e-9)."""
+    dim = coarse.dim
+    m, fe = coarse.n_elements, np.asarray(fine.elements, np.int64)
+    if len(fe) != m * 2 ** dim:
+        raise ValueError(f"fine has {len(fe)} elements, not the {m * 2 ** dim} of coarse subdivided once")
+    node_el = np.empty(len(fine.rest), np.int64)
+    node_el[fe.ravel()] = np.repeat(np.arange(len(fe)), fe.shape[1])  # one element holding each node
+    parent = node_el % m
+    corners = np.asarray(coarse.rest)[np.asarray(coarse.elements, np.int64)[parent, :dim + 1]]  # (n_f, d+1, d)
+    edges = (corners[:, 1:] - corners[:, :1]).transpose(0, 2, 1)  # (n_f, d, d): columns X_a - X_0
+    lam = np.linalg.solve(edges, (np.asarray(fine.rest) - corners[:, 0])[..., None])[..., 0]
+    L = np.column_stack([1.0 - lam.sum(axis=1), lam])
+    if L.min() < -1e-9:
+        raise ValueError("fine nodes outside their parent elements: fine is not coarse subdivided once")
+    N, _ = shape_functions(L, dim)
+    k = N.shape[1]
+    cols = np.asarray(coarse.elements, np.int64)[parent]
+    return sp.csr_matrix((N.ravel(), (np.repeat(np.arange(len(L)), k), cols.ravel())),
+                         shape=(len(fine.rest), len(coarse.rest)))
 
 
 def level_figures(res, stress_radius: float) -> dict:
@@ -172,7 +202,7 @@ def _run_figures(problem, res) -> dict:
 
 
 def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, result0=None, levels=None,
-               quiet: bool = True) -> dict:
+               quiet: bool = True, two_grid: bool = True) -> dict:
     """Run the design ``rest`` at each level and compare (see the module docstring).
 
     figures0 : the optimizer's figures of ``rest`` (level 0), reused instead of simulating again
@@ -181,7 +211,12 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
         step check (:func:`step_check`) reads its warnings (without it, level 0 reused, none runs)
     levels : (element order, subdivisions) pairs (or ints: linear), first the optimization mesh
         (its element order, 0); default :func:`check_levels` of the brief's ``check_refinements``
-    Returns {"levels": [{element_order, subdivisions, elements, nodes, seconds, category}],
+    two_grid : a P2 level refined t > 0 times starts each step from the P2 level refined t - 1
+        times when that level ran just before it (:class:`simfab.coupling.guide.CoarseGuide`, with
+        :func:`p2_prolongation`): its Newton solves start near their solutions on the big moves;
+        the records stay the level's own equilibria (Newton's tolerance)
+    Returns {"levels": [{element_order, subdivisions, elements, nodes, seconds, category,
+    newton_iterations, guided_steps}],
     "figures": {name: {values, extrapolated, order, converging, difference_of_optimization_mesh,
     reference_change}}, "constraints": [{name, value, lo, hi, satisfied}] at the reference values,
     "feasible_fine": bool, "reference", "units"}.
@@ -191,15 +226,21 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
     levels = as_levels(check_levels(problem.brief.check_refinements, order) if levels is None else levels, order)
     rows, figs, profiles = [], [], []
     steps = None
+    last = None  # the previous level's (order, subdivisions, insertion result), a coarse guide
     for o, t in levels:
         t0 = time.perf_counter()
+        res = None
         if (o, t) == (order, 0) and figures0 is not None and problem.target is None:
             f, n, nodes = figures0, cm.fem.n_elements, cm.fem.n_vertices
             if (o, t) == (2, 0) and result0 is not None:
+                res = result0
                 steps = step_check(problem, rest, result0, f, quiet=quiet)
         else:
             m = refined_model(cm, rest, t, o)
-            res = simulate(m, quiet=quiet)
+            guide = None
+            if two_grid and o == 2 and last is not None and last[:2] == (2, t - 1) and last[2] is not None:
+                guide = CoarseGuide.from_records(last[2].steps, p2_prolongation(last[2].model.fem, m.fem))
+            res = simulate(m, quiet=quiet, guide=guide)
             # (with a target: the profile-matching error, a figure like the others)
             f, n, nodes = _run_figures(problem, res), m.fem.n_elements, m.fem.n_vertices
             if problem.target is not None:
@@ -207,8 +248,11 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
             if (o, t) == (2, 0):
                 steps = step_check(problem, rest, res, f, quiet=quiet)
         rows.append({"element_order": int(o), "subdivisions": int(t), "elements": int(n), "nodes": int(nodes),
-                     "seconds": time.perf_counter() - t0, "category": f["category"]})
+                     "seconds": time.perf_counter() - t0, "category": f["category"],
+                     "newton_iterations": None if res is None else int(sum(r.iterations for r in res.steps)),
+                     "guided_steps": None if res is None else int(res.guided_steps)})
         figs.append(f)
+        last = (o, t, res)
     # the reference run: the trailing levels of the finest level's element order (P2 converges at a
     # higher order than linear elements, so the two orders' values are not one h-sequence)
     top = levels[-1][0]
