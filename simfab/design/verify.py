@@ -167,23 +167,30 @@ def reference_value(fig: dict) -> float:
     return v * fig.get("step_factor", 1.0)
 
 
-def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = True) -> dict | None:
+def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = True,
+               two_grid: bool = True) -> dict | None:
     """The step check: when the insertion ``res`` of the P2 level on the optimization mesh (with
     ``figures``, its :func:`level_figures`) warns that its steps are too coarse for the profile
     (:func:`simfab.coupling.settle.warnings`: a snap skipped between steps, a peak force between
     them), the same level is run with STEP_CHECK_FACTOR times the steps; each figure's ratio
     (finer steps / the scene's steps) is its step factor, which multiplies the reference value
     (the step error and the mesh error taken as independent: the step factor is measured on the
-    cheapest level that is not locked). None when the steps resolve the profile."""
+    cheapest level that is not locked). None when the steps resolve the profile. With ``two_grid``
+    the run at the scene's steps guides the finer steps' warm starts while it loads (the same
+    mesh: :class:`simfab.coupling.guide.CoarseGuide` with the identity as prolongation)."""
     if not _steps_too_coarse(res):
         return None
     t0 = time.perf_counter()
     m = refined_model(problem.base, rest, 0, 2, steps_factor=STEP_CHECK_FACTOR)
-    fine_res = simulate(m, quiet=quiet)
+    n = len(m.fem.rest)
+    same = two_grid and len(res.model.fem.rest) == n  # (the same nodes: P2 on the optimization mesh)
+    guide = CoarseGuide.from_records(res.steps, sp.identity(n, format="csr")) if same else None
+    fine_res = simulate(m, quiet=quiet, guide=guide)
     fine = _run_figures(problem, fine_res)
     factors = {k: figure_ratio(k, fine[k], figures[k])
                for k in FIGURES + (("rms_error",) if problem.target is not None else ())}
     return {"steps": int(len(m.s_steps) - 1), "factor": STEP_CHECK_FACTOR, "seconds": time.perf_counter() - t0,
+            "newton_iterations": int(sum(r.iterations for r in fine_res.steps)), "guided_steps": fine_res.guided_steps,
             "factors": factors, "category": fine["category"],
             "still_too_coarse": _steps_too_coarse(fine_res)}
 
@@ -234,7 +241,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
             f, n, nodes = figures0, cm.fem.n_elements, cm.fem.n_vertices
             if (o, t) == (2, 0) and result0 is not None:
                 res = result0
-                steps = step_check(problem, rest, result0, f, quiet=quiet)
+                steps = step_check(problem, rest, result0, f, quiet=quiet, two_grid=two_grid)
         else:
             m = refined_model(cm, rest, t, o)
             guide = None
@@ -246,7 +253,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
             if problem.target is not None:
                 profiles.append((res.column("s"), res.column("force")))
             if (o, t) == (2, 0):
-                steps = step_check(problem, rest, res, f, quiet=quiet)
+                steps = step_check(problem, rest, res, f, quiet=quiet, two_grid=two_grid)
         rows.append({"element_order": int(o), "subdivisions": int(t), "elements": int(n), "nodes": int(nodes),
                      "seconds": time.perf_counter() - t0, "category": f["category"],
                      "newton_iterations": None if res is None else int(sum(r.iterations for r in res.steps)),
