@@ -35,7 +35,7 @@ def test_p2_prolongation_interpolates_a_quadratic_field_exactly(scene, overrides
     assert np.abs(P @ quadratic(coarse.rest) - quadratic(fine.rest)).max() <= 1e-12 * scale
     assert np.allclose(P @ np.ones(len(coarse.rest)), 1.0, rtol=0, atol=1e-12)  # a partition of unity
     with pytest.raises(ValueError):  # not coarse subdivided once
-        p2_prolongation(coarse, refined_model(cm, cm.fem.rest, 2, 2).fem)
+        p2_prolongation(fine, coarse)
 
 
 def record(s, x, energy):
