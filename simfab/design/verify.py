@@ -30,6 +30,14 @@ between steps), :func:`step_check` runs that level again with STEP_CHECK_FACTOR 
 steps and multiplies each reference value by its step factor (the step and mesh errors taken as
 independent); a design whose profile its steps resolve is not run again.
 
+**Two-grid start.** A P2 level refined t > 0 times is run after the P2 level refined t - 1 times
+and starts each of its steps from the best of its own extrapolations and that level's equilibrium
+at the same s, prolonged (:func:`p2_prolongation`; :class:`simfab.coupling.guide.CoarseGuide`,
+offered only where the coarser level loads); the step check is guided by the run at the scene's
+steps the same way. Newton still solves every step to its tolerance, so the figures are the
+level's own; the start saves Newton iterations on the big moves (``mesh_check(two_grid=False)``
+runs without it; measurements in docs/decisions.md).
+
 Reported per figure: the value at every level; the reference: the finest level's, or, with
 three levels of the finest order whose changes shrink, f = f_inf + b h^p fitted over them
 (:func:`simfab.coupling.converge.extrapolate`: the linear-only check, ``levels=(0, 1, 2)``);
