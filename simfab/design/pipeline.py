@@ -60,10 +60,9 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         :mod:`simfab.design.optimize`); None: "gradient", or "anneal" with ``restarts`` > 1 (restarts are
         independent annealing runs). The gradient method is the default: it needs one insertion per
         iteration where annealing needs one per proposal (measured: scenes/coupling/README.md).
-    quick_checks : the optimized design's check stops before the refined level when the design
-        misses the brief on the optimization mesh's P2 level already, and the first correction
-        round is aimed with that level's factors; the rounds' designs and the kept design get the
-        full check (:func:`mesh_corrected`)
+    quick_checks : a check whose design misses the brief already on the optimization mesh's P2
+        level stops there (no refined level) and its round is aimed with that level's factors; the
+        kept design always gets the full check (:func:`mesh_corrected`)
     """
     if method is None:
         method = "anneal" if restarts > 1 else "gradient"
@@ -160,11 +159,10 @@ def mesh_corrected(res, seed: int, workers, quiet: bool, quick: bool = False):
     force and stress bounds, since the next design's factors differ) and check again. A round can
     make things worse (the factors change along the way, e.g. when a contact event moves with the mesh), so
     the best checked design is kept: feasible on the refined meshes first, then the lowest
-    objective there (:func:`simfab.design.verify.checked_objective`). With ``quick``, the first
-    check stops before the refined level when its design misses the brief on the optimization
-    mesh's levels already (``mesh_check(stop_missed=True)``: that design is corrected either way),
-    and the first round aims with those levels' factors; every round's design gets the full check
-    (its factors aim the next round), and so does a kept design whose check stopped.
+    objective there (:func:`simfab.design.verify.checked_objective`). With ``quick``, a check
+    whose design misses the brief on the optimization mesh's levels stops before the refined
+    level (``mesh_check(stop_missed=True)``: that design is corrected either way; its round aims
+    with the unrefined factors), and a kept design whose check stopped there is checked in full.
 
     Returns (result, its check, [per round: factors, factors_refined (whether the check they came
     from ran the refined level), feasible_fine, checked objective, iterations, seconds, kept]).
@@ -193,7 +191,8 @@ def mesh_corrected(res, seed: int, workers, quiet: bool, quick: bool = False):
             nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet,
                            workers=workers if problem.source is not None else 1, start=res_b.best.h,
                            iterations=max(problem.brief.iterations // 2, 1))
-        c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, result0=nxt.best.result, quiet=quiet)
+        c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, result0=nxt.best.result, quiet=quiet,
+                       stop_missed=quick)
         better = key(nxt, c) < key(*best)
         rounds.append({"round": k + 1, "factors": factors, "factors_refined": not check_b.get("stopped_before_refined"),
                        "feasible_fine": c["feasible_fine"],

@@ -52,7 +52,7 @@ def run(argv) -> dict:
     ap.add_argument("--friction", type=float, default=None)
     ap.add_argument("--anneal-workers", type=int, default=2)
     ap.add_argument("--quick-checks", action="store_true",
-                    help="the first check stops before the refined level when its design misses the brief unrefined")
+                    help="checks of designs that miss the brief unrefined stop before the refined level")
     a = ap.parse_args(argv)
     orders = [None] if a.element_orders is None else [int(o) for o in a.element_orders.split(",")]
     contact = {} if a.friction is None else {"friction": a.friction}
