@@ -37,7 +37,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
                    contact: dict | None = None, device: str = "cpu",
                    quiet: bool = True, seed: int = 0, revolve: tuple[str, float] | None = None, restarts: int = 1,
                    scheduler: str | None = None, workers: int = 1, mesh_check: bool = True,
-                   method: str | None = None, quick_checks: bool = False) -> dict:
+                   method: str | None = None) -> dict:
     """Optimize a design scene's part and write every output into ``out``; returns the summary.
 
     design : overrides of the ``[design]`` table (e.g. ``{"iterations": 60, "handles": 4}``)
@@ -60,9 +60,6 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         :mod:`simfab.design.optimize`); None: "gradient", or "anneal" with ``restarts`` > 1 (restarts are
         independent annealing runs). The gradient method is the default: it needs one insertion per
         iteration where annealing needs one per proposal (measured: scenes/coupling/README.md).
-    quick_checks : a check whose design misses the brief already on the optimization mesh's P2
-        level stops there (no refined level) and its round is aimed with that level's factors; the
-        kept design always gets the full check (:func:`mesh_corrected`)
     """
     if method is None:
         method = "anneal" if restarts > 1 else "gradient"
@@ -96,8 +93,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         procs = stack.enter_context(Workers(workers)) if workers > 1 and restarts <= 1 else 1
         source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}),
                                contact=dict(contact or {}), device=device)
-        res, extra = _anneal_checked(ds, source, seed, restarts, scheduler, procs, mesh_check, quiet, method,
-                                     quick_checks)
+        res, extra = _anneal_checked(ds, source, seed, restarts, scheduler, procs, mesh_check, quiet, method)
     summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
     if revolve is not None:
         rev = write_revolved(res, out, cm.name, *revolve, scene=ds, optimized=summary["outputs"], quiet=quiet)
@@ -116,7 +112,7 @@ METHODS = ("anneal", "gradient")
 
 
 def _anneal_checked(ds, source: ProblemSource, seed, restarts, scheduler, workers, mesh_check, quiet,
-                    method: str = "anneal", quick_checks: bool = False):
+                    method: str = "anneal"):
     """Place the handles, anneal (``restarts`` runs, or one on ``workers``: a count or running
     :class:`simfab.design.parallel.Workers`), check the design on refined meshes and correct;
     returns (DesignResult, summary extras)."""
@@ -141,15 +137,14 @@ def _anneal_checked(ds, source: ProblemSource, seed, restarts, scheduler, worker
     extra = {} if runs is None else {"restarts": runs}
     if mesh_check and res.best.status == "ok":
         first, insertions = res.iterations, outputs.insertions(res)
-        res, extra["mesh_check"], extra["correction_rounds"] = mesh_corrected(res, seed, workers, quiet,
-                                                                              quick=quick_checks)
+        res, extra["mesh_check"], extra["correction_rounds"] = mesh_corrected(res, seed, workers, quiet)
         extra["iterations_total"] = first + sum(r["iterations"] for r in extra["correction_rounds"])
         extra["insertions_total"] = insertions + sum(r["insertions"] for r in extra["correction_rounds"])
         extra["objective_fine"] = checked_objective(res.problem, res.best, extra["mesh_check"])
     return res, extra
 
 
-def mesh_corrected(res, seed: int, workers, quiet: bool, quick: bool = False):
+def mesh_corrected(res, seed: int, workers, quiet: bool):
     """Mesh check of the optimized shape (:mod:`simfab.design.verify`); while the mesh-converged
     figures miss the brief, or a target profile is matched only on the coarse mesh
     (:func:`simfab.design.verify.needs_correction`; at most ``[design] correction_rounds``
@@ -159,18 +154,14 @@ def mesh_corrected(res, seed: int, workers, quiet: bool, quick: bool = False):
     force and stress bounds, since the next design's factors differ) and check again. A round can
     make things worse (the factors change along the way, e.g. when a contact event moves with the mesh), so
     the best checked design is kept: feasible on the refined meshes first, then the lowest
-    objective there (:func:`simfab.design.verify.checked_objective`). With ``quick``, a check
-    whose design misses the brief on the optimization mesh's levels stops before the refined
-    level (``mesh_check(stop_missed=True)``: that design is corrected either way; its round aims
-    with the unrefined factors), and a kept design whose check stopped there is checked in full.
+    objective there (:func:`simfab.design.verify.checked_objective`).
 
-    Returns (result, its check, [per round: factors, factors_refined (whether the check they came
-    from ran the refined level), feasible_fine, checked objective, iterations, seconds, kept]).
+    Returns (result, its check, [per round: factors, feasible_fine, checked objective, iterations,
+    seconds, kept]).
     """
     name = res.problem.base.name
     log(f"couple optimize: {name}: mesh check of the optimized shape (quadratic elements)", quiet=quiet)
-    check = check_mesh(res.problem, res.best.rest, figures0=res.best.figures, result0=res.best.result, quiet=quiet,
-                       stop_missed=quick)
+    check = check_mesh(res.problem, res.best.rest, figures0=res.best.figures, result0=res.best.result, quiet=quiet)
 
     def key(r, c):
         return (not c["feasible_fine"], checked_objective(r.problem, r.best, c))
@@ -191,20 +182,15 @@ def mesh_corrected(res, seed: int, workers, quiet: bool, quick: bool = False):
             nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet,
                            workers=workers if problem.source is not None else 1, start=res_b.best.h,
                            iterations=max(problem.brief.iterations // 2, 1))
-        c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, result0=nxt.best.result, quiet=quiet,
-                       stop_missed=quick)
+        c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, result0=nxt.best.result, quiet=quiet)
         better = key(nxt, c) < key(*best)
-        rounds.append({"round": k + 1, "factors": factors, "factors_refined": not check_b.get("stopped_before_refined"),
-                       "feasible_fine": c["feasible_fine"],
+        rounds.append({"round": k + 1, "factors": factors, "feasible_fine": c["feasible_fine"],
                        "objective_fine": key(nxt, c)[1], "iterations": nxt.iterations, "seconds": nxt.seconds,
                        "insertions": outputs.insertions(nxt), "kept": better})
         if better:
             best = (nxt, c)
         elif res_b.method == "gradient":  # the same start and factors: the next round would repeat this one
             break
-    if best[1].get("stopped_before_refined"):  # the kept design's acceptance test is the full check
-        r = best[0]
-        best = (r, check_mesh(r.problem, r.best.rest, figures0=r.best.figures, result0=r.best.result, quiet=quiet))
     return best[0], best[1], rounds
 
 

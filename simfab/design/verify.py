@@ -217,7 +217,7 @@ def _run_figures(problem, res) -> dict:
 
 
 def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, result0=None, levels=None,
-               quiet: bool = True, two_grid: bool = True, stop_missed: bool = False) -> dict:
+               quiet: bool = True, two_grid: bool = True) -> dict:
     """Run the design ``rest`` at each level and compare (see the module docstring).
 
     figures0 : the optimizer's figures of ``rest`` (level 0), reused instead of simulating again
@@ -230,10 +230,6 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
         times when that level ran just before it (:class:`simfab.coupling.guide.CoarseGuide`, with
         :func:`p2_prolongation`): its Newton solves start near their solutions on the big moves;
         the records stay the level's own equilibria (Newton's tolerance)
-    stop_missed : stop before the first refined level when the brief is already missed on the
-        levels of the optimization mesh (their finest, times the step factors): a design that a
-        correction round will correct (see :func:`simfab.design.pipeline.mesh_corrected`); the
-        result then has "stopped_before_refined": True and its reference is that level
     Returns {"levels": [{element_order, subdivisions, elements, nodes, seconds, category,
     newton_iterations, guided_steps}],
     "figures": {name: {values, extrapolated, order, converging, difference_of_optimization_mesh,
@@ -246,11 +242,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
     rows, figs, profiles = [], [], []
     steps = None
     last = None  # the previous level's (order, subdivisions, insertion result), a coarse guide
-    stopped = False
-    for i, (o, t) in enumerate(levels):
-        if stop_missed and t > 0 and figs and missed_unrefined(problem, figs[-1], steps):
-            levels, stopped = levels[:i], True
-            break
+    for o, t in levels:
         t0 = time.perf_counter()
         res = None
         if (o, t) == (order, 0) and figures0 is not None and problem.target is None:
@@ -313,8 +305,6 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
     what = "P2 (quadratic) elements" if top == 2 else "linear elements"
     if steps is not None:
         extra["step_check"] = steps
-    if stopped:
-        extra["stopped_before_refined"] = True
     return {**extra, "levels": rows, "figures": out,
             "constraints": [{"name": c.name, "value": c.value, "lo": c.lo, "hi": c.hi, "satisfied": c.satisfied}
                             for c in cons],
@@ -325,14 +315,6 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
                              if steps is not None else ""),
             "units": {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N",
                       "von_mises": "Pa", "von_mises_peak": "Pa", "rms_error": "N"}}
-
-
-def missed_unrefined(problem, figures: dict, steps: dict | None) -> bool:
-    """Whether ``figures`` (a level's :func:`level_figures`), times the step check's factors
-    (``steps``, or None), miss a constraint of ``problem``'s brief."""
-    f = figures if steps is None else dict(figures, **{k: figures[k] * v for k, v in steps["factors"].items()
-                                                         if k in figures})
-    return not all(c.satisfied for c in B.constraints(f, problem.limits))
 
 
 def profile_factor(coarse, fine, s_path: float) -> float:

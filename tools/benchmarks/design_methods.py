@@ -51,8 +51,6 @@ def run(argv) -> dict:
     ap.add_argument("--element-orders", default=None, help="e.g. 1,2 (default: the scene's)")
     ap.add_argument("--friction", type=float, default=None)
     ap.add_argument("--anneal-workers", type=int, default=2)
-    ap.add_argument("--quick-checks", action="store_true",
-                    help="checks of designs that miss the brief unrefined stop before the refined level")
     a = ap.parse_args(argv)
     orders = [None] if a.element_orders is None else [int(o) for o in a.element_orders.split(",")]
     contact = {} if a.friction is None else {"friction": a.friction}
@@ -76,7 +74,7 @@ def run(argv) -> dict:
                 name = f"{scene}{'' if k is None else f'_h{k}'}_{method}_{seed}_{order}"
                 s = optimize_scene(scene, out=out / name, quiet=True, seed=seed, design=design,
                                    workers=a.anneal_workers if method == "anneal" else 1, method=method, simulation=sim,
-                                   contact=contact, quick_checks=a.quick_checks)
+                                   contact=contact)
                 mc = s.get("mesh_check") or {}
                 rows.append({"scene": scene, "handles": s["handles"]["active"], "method": method, "seed": seed,
                              "element_order": order, "friction": a.friction,
