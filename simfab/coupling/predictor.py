@@ -90,7 +90,8 @@ def _lagrange(past, t: float) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class WarmStart:
     """A step's warm start: x (n, dim) [m] the positions Newton starts from; source: "linear" or
-    "quadratic" (an extrapolation of the last steps) or "predictor" (the contact predictor);
+    "quadratic" (an extrapolation of the last steps), "coarse" or "coarse increment" (a coarser
+    run's candidates, :class:`simfab.coupling.guide.CoarseGuide`) or "predictor" (the contact predictor);
     snapped: the candidate with its contact gaps restored (None when there was no contact to
     restore, or when restoring them was infeasible)."""
 
@@ -101,16 +102,26 @@ class WarmStart:
 
 def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjective, ctx: StepContext) -> WarmStart:
     """The warm start: the feasible candidate with the lowest objective among the linear and quadratic
-    extrapolations of the last steps, or the contact predictor (:func:`predict`) when no
-    extrapolation is feasible, with its contact gaps restored (:func:`snap_contacts`: the
+    extrapolations of the last steps and, with a guide (``ctx.guide``, forward along a frictionless
+    insertion), a coarser run's two candidates with the points inside O lifted out
+    (:class:`simfab.coupling.guide.CoarseGuide`), or the contact predictor (:func:`predict`) when no
+    candidate is feasible, with its contact gaps restored (:func:`snap_contacts`: the
     predictor's pushes also carry contact points along chords of O's curved surface) and near
     points lifted.
     Raises ConvergenceError when no candidate is feasible."""
     best_x, best_f, source = None, np.inf, "predictor"
-    for xc, kind in zip(extrapolations(state, s_new), ("linear", "quadratic")):
+    cands = list(zip(extrapolations(state, s_new), ("linear", "quadratic")))
+    if ctx.guide is not None and state.direction > 0 and cm.contact.friction == 0:
+        for xc, kind in zip(ctx.guide.candidates(state.x, state.s, s_new), ("coarse", "coarse increment")):
+            xc = lift_points(cm, state.points, xc, obj, below=0.0, to=C.LIFT_TO * obj.dhat)
+            if xc is not None:
+                cands.append((xc, kind))
+    for xc, kind in cands:
         fc = obj.value(xc)
         if np.isfinite(fc) and fc < best_f:
             best_x, best_f, source = xc, fc, kind
+    if source.startswith("coarse"):
+        ctx.guided += 1
     if best_x is None:
         best_x = predict(cm, state, s_new, ctx)
     xs = snap_contacts(cm, state, best_x, s_new, ctx)

@@ -103,6 +103,7 @@ import numpy as np
 from simfab._threads import single_threaded_blas
 from simfab.coupling import config as C
 from simfab.coupling import rigid, settle
+from simfab.coupling.guide import CoarseGuide
 from simfab.coupling.model import CouplingModel, default_insertion_length, make_coupling_model  # noqa: F401
 from simfab.coupling.record import StepResult  # noqa: F401 (public API)
 from simfab.coupling.stepper import Stepper
@@ -124,7 +125,8 @@ class InsertionResult:
     removal : with friction, one :class:`StepResult` per step of the removal (O moved back from where
     the insertion left it over the insertion's step positions, phase "remove"); empty without
     friction (removal is then the insertion played backwards); jammed_at : the path length [m] where
-    a frictional insertion self-locked (see :func:`jammed`), None when it did not."""
+    a frictional insertion self-locked (see :func:`jammed`), None when it did not; guided_steps :
+    solves whose warm start was a coarser run's candidate (``simulate``'s ``guide``)."""
 
     model: CouplingModel
     steps: list
@@ -136,6 +138,7 @@ class InsertionResult:
     refined_facets: tuple = ()
     removal: list = field(default_factory=list)
     jammed_at: float | None = None
+    guided_steps: int = 0
 
     def column(self, name: str, phase: str = "insert") -> np.ndarray:
         """One field of every record of a phase ("insert" or "remove") as an array."""
@@ -143,7 +146,8 @@ class InsertionResult:
         return np.array([getattr(r, name) for r in records], dtype=float)
 
 
-def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=(), recorder=None) -> InsertionResult:
+def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=(), recorder=None,
+             guide: CoarseGuide | None = None) -> InsertionResult:
     """Run the insertion along all steps of ``cm``; see the module docstring for the method.
 
     callback : optional ``callback(k, StepResult)`` after every step (it may raise to stop the run)
@@ -156,6 +160,9 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()
     recorder : optional ``recorder(StepResult, StepState)`` with every kept record and its converged
         state (:class:`simfab.coupling.stepper.Stepper`), e.g. the adjoint sensitivities
         (:class:`simfab.coupling.adjoint.SensitivityRecorder`); it does not change the run.
+    guide : optional :class:`simfab.coupling.guide.CoarseGuide`, a coarser run of the same insertion
+        whose states, prolonged to this mesh, are offered as warm starts (a two-grid start: fewer
+        Newton iterations on big moves; the records are this run's equilibria to Newton's tolerance).
 
     Returns :class:`InsertionResult` (one :class:`StepResult` per step including the start pose).
     Raises ConvergenceError when a step cannot be solved to tolerance, InputError when O starts
@@ -163,7 +170,7 @@ def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=()
     """
     with single_threaded_blas():  # small dense products in the loop (see simfab._threads)
         t_start = time.perf_counter()
-        stepper = Stepper(cm, refined=refined, callback=callback, recorder=recorder)
+        stepper = Stepper(cm, refined=refined, callback=callback, recorder=recorder, guide=guide)
         check_start(cm)
         jam = None
         for s in progress(cm.s_steps, total=len(cm.s_steps), desc=f"insertion {cm.name}", quiet=quiet):
@@ -239,7 +246,7 @@ def _result(stepper: Stepper, rest: str, jam: float | None, seconds: float) -> I
     phases["other"] = seconds - sum(phases.values())
     return InsertionResult(model=cm, steps=stepper.steps, seconds=seconds, timings=dict(ctx.timer.t), phases=phases,
                            warnings=warnings, notes=notes, refined_facets=tuple(sorted(state.refined)),
-                           removal=stepper.removal, jammed_at=jam)
+                           removal=stepper.removal, jammed_at=jam, guided_steps=ctx.guided)
 
 
 def check_start(cm: CouplingModel) -> None:

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from simfab.coupling.guide import CoarseGuide
 from simfab.coupling.points import ContactPoints
 from simfab.coupling.timing import Timer
 from simfab.solve.linear import SPDSolver
@@ -107,12 +108,17 @@ class StepContext:
     solves, contact_field, barrier, line_search, predictor; see :mod:`simfab.coupling.timing`),
     ``phases`` (seconds per loop phase: warm_start, newton, facet_check, record, rigid_check) and
     the sparse ``solver`` whose symbolic factorization every solve reuses; ``exact_failed``: the
-    last Newton solve found the exact Hessian indefinite (see :func:`simfab.coupling.objective.solve`)."""
+    last Newton solve found the exact Hessian indefinite (see :func:`simfab.coupling.objective.solve`);
+    ``guide``: a coarser run of the same insertion offering warm-start candidates
+    (:class:`simfab.coupling.guide.CoarseGuide`), or None; ``guided``: the steps whose warm start
+    was one of its candidates."""
 
     timer: Timer = field(default_factory=Timer)
     phases: Timer = field(default_factory=Timer)
     solver: SPDSolver = field(default_factory=SPDSolver)
     exact_failed: bool = False
+    guide: CoarseGuide | None = None
+    guided: int = 0
 
 
 def accept(state: StepState, x: np.ndarray, s: float, kappa: float, evaluation: Evaluation | None) -> None:

@@ -19,6 +19,7 @@ import numpy as np
 from simfab.coupling import config as C
 from simfab.coupling import friction, predictor, rigid
 from simfab.coupling.friction import FrictionLag
+from simfab.coupling.guide import CoarseGuide
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.objective import adapt_kappa, evaluation, make_objective, solve
 from simfab.coupling.points import vertex_points
@@ -46,15 +47,18 @@ class Stepper:
     stop the run); recorder : optional ``recorder(StepResult, StepState)`` called with every kept
     record and the converged state it was recorded at, its ``pin_basis`` the pin it was solved with
     and ``prev`` the state it was solved from (the pin's and the friction anchors' origin; e.g.
-    :class:`simfab.coupling.adjoint.SensitivityRecorder`). Attributes: ``state`` (:class:`StepState`),
+    :class:`simfab.coupling.adjoint.SensitivityRecorder`); guide : optional
+    :class:`simfab.coupling.guide.CoarseGuide` (warm-start candidates from a coarser run, see
+    :func:`simfab.coupling.predictor.warm_start`). Attributes: ``state`` (:class:`StepState`),
     ``ctx`` (:class:`StepContext`),
     ``steps`` (the kept insertion records), ``removal`` (the kept removal records, see
     :meth:`reverse`), ``weakest`` (the least resisted rigid motion over the kept steps)."""
 
-    def __init__(self, cm: CouplingModel, *, refined=(), callback=None, recorder=None):
+    def __init__(self, cm: CouplingModel, *, refined=(), callback=None, recorder=None,
+                 guide: CoarseGuide | None = None):
         self.cm, self.callback, self.recorder = cm, callback, recorder
         self._states: dict[int, StepState] = {}  # id(record) -> the state it was recorded at (with a recorder)
-        self.ctx = StepContext()
+        self.ctx = StepContext(guide=guide)
         order = cm.options.samples_per_edge if cm.dim == 2 else cm.options.face_lattice
         self.state = StepState(x=np.array(cm.fem.rest, dtype=np.float64), s=0.0, refined=set(), order=order,
                                points=vertex_points(np.asarray(cm.fem.boundary_vertices, dtype=np.int64), cm.dim),

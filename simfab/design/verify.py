@@ -30,6 +30,14 @@ between steps), :func:`step_check` runs that level again with STEP_CHECK_FACTOR 
 steps and multiplies each reference value by its step factor (the step and mesh errors taken as
 independent); a design whose profile its steps resolve is not run again.
 
+**Two-grid start.** A P2 level refined t > 0 times is run after the P2 level refined t - 1 times
+and starts each of its steps from the best of its own extrapolations and that level's equilibrium
+at the same s, prolonged (:func:`p2_prolongation`; :class:`simfab.coupling.guide.CoarseGuide`,
+offered only where the coarser level loads); the step check is guided by the run at the scene's
+steps the same way. Newton still solves every step to its tolerance, so the figures are the
+level's own; the start saves Newton iterations on the big moves (``mesh_check(two_grid=False)``
+runs without it; measurements in docs/decisions.md).
+
 Reported per figure: the value at every level; the reference: the finest level's, or, with
 three levels of the finest order whose changes shrink, f = f_inf + b h^p fitted over them
 (:func:`simfab.coupling.converge.extrapolate`: the linear-only check, ``levels=(0, 1, 2)``);
@@ -50,14 +58,16 @@ import dataclasses
 import time
 
 import numpy as np
+import scipy.sparse as sp
 
 from simfab.coupling.converge import extrapolate
+from simfab.coupling.guide import CoarseGuide
 from simfab.coupling.model import make_coupling_model
 from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
 from simfab.design.problem import linear_mesh, profile_figures
 from simfab.fem.model import make_model
-from simfab.fem.p2 import to_p2
+from simfab.fem.p2 import shape_functions, to_p2
 from simfab.fem.subdivide import midpoint_mask, subdivide
 
 
@@ -113,6 +123,34 @@ def refined_model(cm, rest: np.ndarray, times: int, order: int = 1, steps_factor
                                object_vertices=cm.object_vertices, object_faces=cm.object_faces, contact=cm.contact)
 
 
+def p2_prolongation(coarse, fine) -> sp.csr_matrix:
+    """(n_fine, n_coarse) prolongation from a P2 model ``coarse`` to the P2 model ``fine`` of its
+    mesh subdivided once (:func:`refined_model` with one more subdivision): fine node i's position
+    is sum_a N_a(L_i) x_a over its parent element's 6 / 10 nodes, L_i its barycentric coordinates
+    in the parent's (affine) rest simplex and N_a the P2 shape functions. Every fine node lies in a
+    coarse element, so this is exact interpolation of the coarse quadratic field. Parents:
+    :func:`simfab.fem.subdivide.subdivide` writes child c of coarse element e as row c m + e (m
+    coarse elements); checked here (every fine node inside its parent, to 1e-9)."""
+    dim = coarse.dim
+    m, fe = coarse.n_elements, np.asarray(fine.elements, np.int64)
+    if len(fe) != m * 2 ** dim:
+        raise ValueError(f"fine has {len(fe)} elements, not the {m * 2 ** dim} of coarse subdivided once")
+    node_el = np.empty(len(fine.rest), np.int64)
+    node_el[fe.ravel()] = np.repeat(np.arange(len(fe)), fe.shape[1])  # one element holding each node
+    parent = node_el % m
+    corners = np.asarray(coarse.rest)[np.asarray(coarse.elements, np.int64)[parent, :dim + 1]]  # (n_f, d+1, d)
+    edges = (corners[:, 1:] - corners[:, :1]).transpose(0, 2, 1)  # (n_f, d, d): columns X_a - X_0
+    lam = np.linalg.solve(edges, (np.asarray(fine.rest) - corners[:, 0])[..., None])[..., 0]
+    L = np.column_stack([1.0 - lam.sum(axis=1), lam])
+    if L.min() < -1e-9:
+        raise ValueError("fine nodes outside their parent elements: fine is not coarse subdivided once")
+    N, _ = shape_functions(L, dim)
+    k = N.shape[1]
+    cols = np.asarray(coarse.elements, np.int64)[parent]
+    return sp.csr_matrix((N.ravel(), (np.repeat(np.arange(len(L)), k), cols.ravel())),
+                         shape=(len(fine.rest), len(coarse.rest)))
+
+
 def level_figures(res, stress_radius: float) -> dict:
     """:func:`simfab.design.problem.profile_figures` of an insertion (on P2 elements the averaged
     stress at quadrature-point resolution, :func:`simfab.design.stress.record_averaged_von_mises`)."""
@@ -137,23 +175,30 @@ def reference_value(fig: dict) -> float:
     return v * fig.get("step_factor", 1.0)
 
 
-def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = True) -> dict | None:
+def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = True,
+               two_grid: bool = True) -> dict | None:
     """The step check: when the insertion ``res`` of the P2 level on the optimization mesh (with
     ``figures``, its :func:`level_figures`) warns that its steps are too coarse for the profile
     (:func:`simfab.coupling.settle.warnings`: a snap skipped between steps, a peak force between
     them), the same level is run with STEP_CHECK_FACTOR times the steps; each figure's ratio
     (finer steps / the scene's steps) is its step factor, which multiplies the reference value
     (the step error and the mesh error taken as independent: the step factor is measured on the
-    cheapest level that is not locked). None when the steps resolve the profile."""
+    cheapest level that is not locked). None when the steps resolve the profile. With ``two_grid``
+    the run at the scene's steps guides the finer steps' warm starts while it loads (the same
+    mesh: :class:`simfab.coupling.guide.CoarseGuide` with the identity as prolongation)."""
     if not _steps_too_coarse(res):
         return None
     t0 = time.perf_counter()
     m = refined_model(problem.base, rest, 0, 2, steps_factor=STEP_CHECK_FACTOR)
-    fine_res = simulate(m, quiet=quiet)
+    n = len(m.fem.rest)
+    same = two_grid and len(res.model.fem.rest) == n  # (the same nodes: P2 on the optimization mesh)
+    guide = CoarseGuide.from_records(res.steps, sp.identity(n, format="csr")) if same else None
+    fine_res = simulate(m, quiet=quiet, guide=guide)
     fine = _run_figures(problem, fine_res)
     factors = {k: figure_ratio(k, fine[k], figures[k])
                for k in FIGURES + (("rms_error",) if problem.target is not None else ())}
     return {"steps": int(len(m.s_steps) - 1), "factor": STEP_CHECK_FACTOR, "seconds": time.perf_counter() - t0,
+            "newton_iterations": int(sum(r.iterations for r in fine_res.steps)), "guided_steps": fine_res.guided_steps,
             "factors": factors, "category": fine["category"],
             "still_too_coarse": _steps_too_coarse(fine_res)}
 
@@ -172,7 +217,7 @@ def _run_figures(problem, res) -> dict:
 
 
 def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, result0=None, levels=None,
-               quiet: bool = True) -> dict:
+               quiet: bool = True, two_grid: bool = True) -> dict:
     """Run the design ``rest`` at each level and compare (see the module docstring).
 
     figures0 : the optimizer's figures of ``rest`` (level 0), reused instead of simulating again
@@ -181,7 +226,12 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
         step check (:func:`step_check`) reads its warnings (without it, level 0 reused, none runs)
     levels : (element order, subdivisions) pairs (or ints: linear), first the optimization mesh
         (its element order, 0); default :func:`check_levels` of the brief's ``check_refinements``
-    Returns {"levels": [{element_order, subdivisions, elements, nodes, seconds, category}],
+    two_grid : a P2 level refined t > 0 times starts each step from the P2 level refined t - 1
+        times when that level ran just before it (:class:`simfab.coupling.guide.CoarseGuide`, with
+        :func:`p2_prolongation`): its Newton solves start near their solutions on the big moves;
+        the records stay the level's own equilibria (Newton's tolerance)
+    Returns {"levels": [{element_order, subdivisions, elements, nodes, seconds, category,
+    newton_iterations, guided_steps}],
     "figures": {name: {values, extrapolated, order, converging, difference_of_optimization_mesh,
     reference_change}}, "constraints": [{name, value, lo, hi, satisfied}] at the reference values,
     "feasible_fine": bool, "reference", "units"}.
@@ -191,24 +241,33 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
     levels = as_levels(check_levels(problem.brief.check_refinements, order) if levels is None else levels, order)
     rows, figs, profiles = [], [], []
     steps = None
+    last = None  # the previous level's (order, subdivisions, insertion result), a coarse guide
     for o, t in levels:
         t0 = time.perf_counter()
+        res = None
         if (o, t) == (order, 0) and figures0 is not None and problem.target is None:
             f, n, nodes = figures0, cm.fem.n_elements, cm.fem.n_vertices
             if (o, t) == (2, 0) and result0 is not None:
-                steps = step_check(problem, rest, result0, f, quiet=quiet)
+                res = result0
+                steps = step_check(problem, rest, result0, f, quiet=quiet, two_grid=two_grid)
         else:
             m = refined_model(cm, rest, t, o)
-            res = simulate(m, quiet=quiet)
+            guide = None
+            if two_grid and o == 2 and last is not None and last[:2] == (2, t - 1) and last[2] is not None:
+                guide = CoarseGuide.from_records(last[2].steps, p2_prolongation(last[2].model.fem, m.fem))
+            res = simulate(m, quiet=quiet, guide=guide)
             # (with a target: the profile-matching error, a figure like the others)
             f, n, nodes = _run_figures(problem, res), m.fem.n_elements, m.fem.n_vertices
             if problem.target is not None:
                 profiles.append((res.column("s"), res.column("force")))
             if (o, t) == (2, 0):
-                steps = step_check(problem, rest, res, f, quiet=quiet)
+                steps = step_check(problem, rest, res, f, quiet=quiet, two_grid=two_grid)
         rows.append({"element_order": int(o), "subdivisions": int(t), "elements": int(n), "nodes": int(nodes),
-                     "seconds": time.perf_counter() - t0, "category": f["category"]})
+                     "seconds": time.perf_counter() - t0, "category": f["category"],
+                     "newton_iterations": None if res is None else int(sum(r.iterations for r in res.steps)),
+                     "guided_steps": None if res is None else int(res.guided_steps)})
         figs.append(f)
+        last = (o, t, res)
     # the reference run: the trailing levels of the finest level's element order (P2 converges at a
     # higher order than linear elements, so the two orders' values are not one h-sequence)
     top = levels[-1][0]
