@@ -652,7 +652,7 @@ def gap_gradient(res, index: int, Jh: np.ndarray, temperature_rel: float = 0.1) 
     w = np.exp(-(d - d.min()) / (temperature_rel * float(np.max(cm.dhat))))
     gX = np.zeros(np.asarray(r.x).shape)
     gX[bv[near]] = -(w / w.sum())[:, None] * np.asarray(ev.grad, float)[near]
-    return gX.ravel() @ Jh
+    return linear_rest_derivative(cm.fem, gX).ravel() @ Jh  # (P2: edge nodes chained to the corners)
 
 
 def in_contact(ev: Evaluation) -> bool:

@@ -104,6 +104,26 @@ def test_flat_start_closes_the_gap():
     assert res.best.objective < res.initial.objective
 
 
+def test_gap_gradient_on_p2_candidates():
+    # a P2 scene's candidates (--element-order 2) put edge nodes at the linear mesh's midpoints: the gap's
+    # derivative on every node is chained to the corners before dX/dh, so it matches whole evaluations too
+    cm = load_coupling_scene("paddleside2d", overrides={"compliant": {"target_elements": 300},
+                                                        "simulation": {"steps": 8, "element_order": 2}})
+    P = make_problem(cm, DesignBrief(grip="tight", grip_force=(5.0, math.inf), handles=3, placement="spatial"))
+    Jh = G.handle_jacobian(P.handles)
+    ev = evaluate(P, P.handles.identity(), keep_result=True)
+    assert ev.result.model.fem.element_order == 2 and ev.figures["category"] == "none"
+    g = G.gap_gradient(ev.result, len(ev.result.steps) - 1, Jh, temperature_rel=1e-9)
+    dh = np.random.default_rng(1).standard_normal(len(g)) * P.sigma0
+    eps = 1e-3
+    ep, em = evaluate(P, P.handles.identity() + eps * dh), evaluate(P, P.handles.identity() - eps * dh)
+    fd = (ep.figures["seat_clearance"] - em.figures["seat_clearance"]) / (2 * eps)
+    # the nearest node is an edge node (its derivative goes half to each corner; a wrong chain is off by O(1));
+    # measured 1.3e-3, the same at eps 1e-3 and 1e-4: the part's residual deformation (~4e-8 m) is not
+    # differentiated (the gradient assumes the undeformed part)
+    assert float(g @ dh) == pytest.approx(fd, rel=5e-3)
+
+
 def test_an_ejecting_start_with_a_coupling_ratio_bound_is_a_flat_start():
     # clip2d_eject's profile has no dip after its peak: CR = 100 % for every shape nearby (gradient
     # zero), which no SQP step can linearize towards a loose or tight brief's bound
