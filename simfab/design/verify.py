@@ -241,7 +241,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
     levels = as_levels(check_levels(problem.brief.check_refinements, order) if levels is None else levels, order)
     rows, figs, profiles = [], [], []
     steps = None
-    last = None  # the previous level's (order, subdivisions, insertion result), a coarse guide
+    prev_level, prev_res = None, None  # the previous level's (order, subdivisions) and insertion: a coarse guide
     for o, t in levels:
         t0 = time.perf_counter()
         res = None
@@ -253,8 +253,8 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
         else:
             m = refined_model(cm, rest, t, o)
             guide = None
-            if two_grid and o == 2 and last is not None and last[:2] == (2, t - 1) and last[2] is not None:
-                guide = CoarseGuide.from_records(last[2].steps, p2_prolongation(last[2].model.fem, m.fem))
+            if two_grid and o == 2 and prev_level == (2, t - 1) and prev_res is not None:
+                guide = CoarseGuide.from_records(prev_res.steps, p2_prolongation(prev_res.model.fem, m.fem))
             res = simulate(m, quiet=quiet, guide=guide)
             # (with a target: the profile-matching error, a figure like the others)
             f, n, nodes = _run_figures(problem, res), m.fem.n_elements, m.fem.n_vertices
@@ -267,7 +267,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
                      "newton_iterations": None if res is None else int(sum(r.iterations for r in res.steps)),
                      "guided_steps": None if res is None else int(res.guided_steps)})
         figs.append(f)
-        last = (o, t, res)
+        prev_level, prev_res = (o, t), res
     # the reference run: the trailing levels of the finest level's element order (P2 converges at a
     # higher order than linear elements, so the two orders' values are not one h-sequence)
     top = levels[-1][0]
