@@ -489,19 +489,6 @@ def step_link(cm: CouplingModel, state: StepState, previous: StepState | None) -
     return StepLink(friction_motion=M, pin=pin, followed=followed, from_rest=prev is None)
 
 
-def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
-                     stress: StressMeasure | None = None, solver: SPDSolver | None = None,
-                     link: StepLink | None = None) -> StepSensitivity:
-    """:class:`StepSensitivity` of the converged ``state`` (see the module docstring) at a fixed
-    starting state x_prev (no backward pass: :class:`SensitivityRecorder` adds it); with ``stress``
-    also that of the averaged von Mises stress's maximum (:class:`StressMeasure`); ``solver``: the
-    sparse solver to factorize with (one per run reuses its symbolic analysis); ``link``: the step's
-    dependence on its start (:func:`step_link`; default: as if its start were not recorded)."""
-    _, sens, _ = _step(cm, state, phase, stress, SPDSolver() if solver is None else solver,
-                         step_link(cm, state, None) if link is None else link)
-    return sens
-
-
 def _step(cm, state, phase, stress, solver, link, held_lag=False):
     """(linearization, sensitivity at a fixed start, lambda stack (k, n, dim))."""
     lin = StepLinearization(cm, state, link, solver, held_lag)

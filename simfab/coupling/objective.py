@@ -125,7 +125,7 @@ class StepObjective:
         if np.any(d <= 0):
             return np.inf, g.ravel(), H
         with self.timer.timed("barrier"):
-            act, B, gy, Hy = self._barrier(d, gd, hd)
+            act, B, gy, Hy = self.contact_barrier(d, gd, hd)
             gc = self.points.scatter(gy, self.n, rows=act)
             Hf = None
             if self.friction is not None:
@@ -139,10 +139,10 @@ class StepObjective:
                     xc = x.copy()
                     H_exact, H = LazyHessian(self, xc, contact, psd=False), LazyHessian(self, xc, contact)
                 elif H_exact is not None:
-                    self._add_contact(H_exact, contact, psd=False)
+                    self.add_contact(H_exact, contact, psd=False)
                     H = LazyHessian(self, x.copy(), contact)
                 else:
-                    self._add_contact(H, contact, psd=True)
+                    self.add_contact(H, contact, psd=True)
                 self._remember(xf, d, gd, H, E, g)
                 # curvature bound for the step cap: twice the largest |hess d| seen near O, at least
                 # CURVATURE_FLOOR / sigma (a violated bound only costs a rejected line-search trial)
@@ -159,7 +159,7 @@ class StepObjective:
             self.memo = (xf.copy(), out)
         return out
 
-    def _barrier(self, d, gd, hd):
+    def contact_barrier(self, d, gd, hd):
         """(active point indices (a,), energy [J], gradient (a, dim) [N], exact Hessian blocks
         (a, dim, dim) [N/m] or None without ``hd``) of the barrier at distances d (k,) with their
         derivatives (see :func:`simfab.contact.barrier.point_barrier`), in one pass."""
@@ -196,7 +196,7 @@ class StepObjective:
         D = float(self.friction.evaluate(x, hessian=False).energy.sum()) if self.friction is not None else 0.0
         return E + self.kappa * float(barrier(d[act], self.dhat[act]).sum()) + D
 
-    def _add_contact(self, H, contact, *, psd: bool) -> None:
+    def add_contact(self, H, contact, *, psd: bool) -> None:
         """Add the barrier Hessian blocks (PSD-projected per point if ``psd``) and the rigid-mode
         regularization to the FEM Hessian ``H`` (in place)."""
         act, Hy, Hf = contact  # active points (a,), exact barrier blocks (a, dim, dim), friction blocks or None
@@ -254,11 +254,11 @@ class LazyHessian:
             with obj.timer.timed("assembly"):
                 _, _, H = energy_gradient_hessian(obj.cm.fem, self.x, project_psd=self.psd)
             if self.contact is None:
-                act, _, _, Hy = obj._barrier(*obj.distances(self.x, True))
+                act, _, _, Hy = obj.contact_barrier(*obj.distances(self.x, True))
                 Hf = obj.friction.evaluate(self.x, hessian=True).hessian if obj.friction is not None else None
                 self.contact = (act, Hy, Hf)
             with obj.timer.timed("barrier"):
-                obj._add_contact(H, self.contact, psd=self.psd)
+                obj.add_contact(H, self.contact, psd=self.psd)
             self.H = H
         return self.H
 

@@ -158,7 +158,7 @@ class FemModel(MeshModel):
         return self.elements
 
 
-def _edge_matrices(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
+def edge_matrices(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
     """(m, dim, dim) matrices whose columns are the edge vectors x_i - x_0, i = 1..dim."""
     p = points[elements]  # (m, dim+1, dim)
     return np.swapaxes(p[:, 1:, :] - p[:, :1, :], 1, 2)
@@ -237,7 +237,7 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     if not (np.isfinite(thickness) and thickness > 0):
         raise InputError(f"thickness must be > 0, got {thickness}", where=where)
 
-    Dm = _edge_matrices(pts, el)
+    Dm = edge_matrices(pts, el)
     det = np.linalg.det(Dm)
     h = _mean_edge_length(pts, el)
     degenerate = np.abs(det) <= DEGENERATE_REL * h**dim
@@ -248,7 +248,7 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     neg = det < 0
     if neg.any():  # swap the last two vertices: flips the orientation
         el[neg, -2:] = el[neg, -1:-3:-1]
-        Dm = _edge_matrices(pts, el)
+        Dm = edge_matrices(pts, el)
         det = np.linalg.det(Dm)
     # simplex measure = det Dm / dim!  (triangle area = det/2, tet volume = det/6)
     volume = det / 6.0 if dim == 3 else det / 2.0 * thickness
