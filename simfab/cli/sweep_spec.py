@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from simfab.errors import InputError
+from simfab.io.tables import FieldError, check_keys, load_table
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _MJCF = re.compile(r"^(?P<tag>[A-Za-z_]+):(?P<name>[^.\[\]]+)(?:\.(?P<attr>[A-Za-z_]+))?(?:\[(?P<idx>[0-9, ]+)\])?$")
@@ -115,14 +116,54 @@ class Figure:
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class PlotSpec:
+class PlotConfig:
+    """The ``[plot]`` table.
+
+    Args:
+        x, y: the columns on the plot's axes (None: the swept parameters).
+        figures: the columns plotted (None: every collected and derived figure).
+    """
+
     x: str | None = None
     y: str | None = None
     figures: tuple[str, ...] | None = None
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class SweepSpec:
+class SweepTableConfig:
+    """The ``[sweep]`` table (see the module docstring).
+
+    Args:
+        command: the simfab command line each run executes (a list, or a string split like a shell).
+        name: the table's and plots' file stem (None: the spec's stem).
+        scene: the base scene, relative to the spec or to the bundled scenes (None: none).
+        combine: "product" (grid) or "zip" (equal-length lists).
+        seed: ``--seed`` of every run and of random parameters.
+        keep_outputs: keep each run's folder.
+    """
+
+    command: str | tuple[str | int | float, ...] | None = None
+    name: str | None = None
+    scene: str | None = None
+    combine: str = "product"
+    seed: int = 0
+    keep_outputs: bool = True
+
+    def __post_init__(self):
+        cmd = self.command
+        if not (isinstance(cmd, (str, tuple)) and cmd
+                and (isinstance(cmd, str) or all(isinstance(c, (str, int, float)) for c in cmd))):
+            raise FieldError("command must be a simfab command line, e.g. ['couple', 'simulate', '{scene}']",
+                             key="command", where="[sweep] command")
+        if self.combine not in ("product", "zip"):
+            raise FieldError(f"combine must be 'product' or 'zip', got {self.combine!r}", key="combine",
+                             where="[sweep]")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool):
+            raise FieldError(f"seed must be an integer, got {self.seed!r}", key="seed", where="[sweep]")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SweepConfig:
     """A parsed spec (see the module docstring). ``source``: the spec file; ``scene``: resolved
     base scene file or None; ``fixed``: (address, value) applied to every run."""
 
@@ -137,7 +178,7 @@ class SweepSpec:
     parameters: tuple[Parameter, ...]
     figures: tuple[Figure, ...]
     derived: tuple[tuple[str, str], ...]
-    plot: PlotSpec
+    plot: PlotConfig
 
     @property
     def swept(self) -> tuple[Parameter, ...]:
@@ -270,12 +311,18 @@ def find_spec(text: str) -> Path:
 
 
 _TOP = {"sweep", "set", "parameters", "collect", "derived", "plot"}
-_SWEEP = {"name", "command", "scene", "combine", "seed", "keep_outputs"}
 _PARAM = {"set", "values", "range", "num", "log", "random", "low", "high", "samples", "unit"}
 
 
-def load_spec(path) -> SweepSpec:
-    """Parse and check a sweep spec file (InputError naming the file and field)."""
+def load_spec(path) -> SweepConfig:
+    """Parse and check a sweep spec file.
+
+    Args:
+        path: SPEC.toml, or the name of a bundled spec (scenes/sweeps).
+
+    Returns:
+        The spec; InputError naming the file, the table and the key when it is refused.
+    """
     path = find_spec(str(path))
     f = str(path)
     try:
@@ -287,20 +334,17 @@ def load_spec(path) -> SweepSpec:
     for k in d:
         if k not in _TOP:
             raise InputError(f"unknown table [{k}] (have: {', '.join(sorted(_TOP))})", where=f)
-    sw = d.get("sweep")
-    if not isinstance(sw, dict):
+    if not isinstance(d.get("sweep"), dict):
         raise InputError("missing the [sweep] table (command = [...])", where=f)
-    for k in sw:
-        if k not in _SWEEP:
-            raise InputError(f"unknown key {k!r} (have: {', '.join(sorted(_SWEEP))})", where=f"{f} [sweep]")
-    cmd = sw.get("command")
+    sw = load_table(SweepTableConfig, d["sweep"], table_name="sweep", file=f)
+    cmd = sw.command
     if isinstance(cmd, str):
         import shlex
 
         cmd = shlex.split(cmd)
-    if not (isinstance(cmd, list) and cmd and all(isinstance(c, (str, int, float)) for c in cmd)):
-        raise InputError("command must be a simfab command line, e.g. ['couple', 'simulate', '{scene}']",
-                         where=f"{f} [sweep] command")
+        if not cmd:
+            raise InputError("command must be a simfab command line, e.g. ['couple', 'simulate', '{scene}']",
+                             where=f"{f} [sweep] command")
     cmd = tuple(str(c) for c in cmd)
     from simfab.cli import SUBCOMMANDS
 
@@ -310,18 +354,13 @@ def load_spec(path) -> SweepSpec:
     if any(c in ("--out", "--json") for c in cmd):
         raise InputError("the sweep sets --out (one folder per run) and reads the summary itself; drop --out/--json",
                          where=f"{f} [sweep] command")
-    scene = resolve_scene(str(sw["scene"]), path.parent) if "scene" in sw else None
+    scene = resolve_scene(sw.scene, path.parent) if sw.scene is not None else None
     if scene is not None and scene.suffix not in (".toml", ".xml"):
         raise InputError(f"the base scene must be a .toml or .xml file, got {scene.name}", where=f"{f} [sweep] scene")
     if scene is not None and "{scene}" not in cmd:
         raise InputError("the command must place the scene: put '{scene}' where the scene path goes",
                          where=f"{f} [sweep] command")
-    combine = sw.get("combine", "product")
-    if combine not in ("product", "zip"):
-        raise InputError(f"combine must be 'product' or 'zip', got {combine!r}", where=f"{f} [sweep]")
-    seed = sw.get("seed", 0)
-    if not isinstance(seed, int) or isinstance(seed, bool):
-        raise InputError(f"seed must be an integer, got {seed!r}", where=f"{f} [sweep]")
+    combine, seed = sw.combine, sw.seed
 
     def address(text, where):
         a = Address.parse(text, where)
@@ -341,9 +380,7 @@ def load_spec(path) -> SweepSpec:
         _ident(name, where)
         if not isinstance(pd, dict):
             pd = {"values": pd}
-        for k in pd:
-            if k not in _PARAM:
-                raise InputError(f"unknown key {k!r} (have: {', '.join(sorted(_PARAM))})", where=where)
+        check_keys(pd, _PARAM, table_name=f"parameters.{name}", file=f)
         vals, log = _values(name, pd, seed, where)
         params.append(Parameter(name=name, address=address(pd.get("set", name), where), values=vals,
                                 unit=str(pd.get("unit", "")), log=log))
@@ -372,21 +409,21 @@ def load_spec(path) -> SweepSpec:
     dup = {c for c in cols if cols.count(c) > 1}
     if dup:
         raise InputError(f"column {sorted(dup)[0]!r} is defined twice", where=f)
-    pl = d.get("plot") or {}
-    for k in pl:
-        if k not in ("x", "y", "figures"):
-            raise InputError(f"unknown key {k!r} (have: figures, x, y)", where=f"{f} [plot]")
+    plot = load_table(PlotConfig, d.get("plot"), table_name="plot", file=f)
     for k in ("x", "y"):
-        if k in pl and pl[k] not in cols:
-            raise InputError(f"{k} = {pl[k]!r} is not a parameter or figure column", where=f"{f} [plot]")
-    figs = pl.get("figures")
-    if figs is not None:
-        bad = [c for c in figs if c not in cols]
+        if getattr(plot, k) is not None and getattr(plot, k) not in cols:
+            raise InputError(f"{k} = {getattr(plot, k)!r} is not a parameter or figure column", where=f"{f} [plot]")
+    if plot.figures is not None:
+        bad = [c for c in plot.figures if c not in cols]
         if bad:
             raise InputError(f"figure {bad[0]!r} is not a collected or derived column", where=f"{f} [plot]")
-    return SweepSpec(
-        name=str(sw.get("name", path.stem)), source=path.resolve(), command=cmd, scene=scene, combine=combine,
-        seed=seed, keep_outputs=bool(sw.get("keep_outputs", True)), fixed=fixed, parameters=tuple(params),
-        figures=tuple(figures), derived=tuple(derived),
-        plot=PlotSpec(x=pl.get("x"), y=pl.get("y"), figures=tuple(figs) if figs is not None else None),
+    return SweepConfig(
+        name=sw.name if sw.name is not None else path.stem, source=path.resolve(), command=cmd, scene=scene,
+        combine=combine, seed=seed, keep_outputs=sw.keep_outputs, fixed=fixed, parameters=tuple(params),
+        figures=tuple(figures), derived=tuple(derived), plot=plot,
     )
+
+
+#: The earlier names of the spec's config types (``...Config`` is the package's one suffix for configuration).
+SweepSpec = SweepConfig
+PlotSpec = PlotConfig

@@ -1,16 +1,18 @@
 """Configuration of the insertion simulation (keyword-only dataclasses) and the area's tolerances.
 
 Lengths are relative to A's mean edge length ``h_A`` where noted (``*_rel``), so one set of
-defaults works at any scale and resolution.
+defaults works at any scale and resolution. Each config class is one table of a coupling scene's
+TOML, loaded by :func:`simfab.io.tables.load_table` (unknown keys, types, and the ranges its
+``__post_init__`` checks, each error naming the file and table or the flag that gave the value).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
-from simfab.errors import InputError
+from simfab.io.tables import FieldError, load_table
 
 # ---------------------------------------------------------------------------- tolerances (one place)
 #: Max penetration allowed at the end of every step, relative to h_A (checked, else ConvergenceError).
@@ -91,7 +93,7 @@ LOOSE_REL = 1e-3
 
 
 @dataclass(frozen=True, kw_only=True)
-class ContactOptions:
+class ContactConfig:
     """Contact between the object O and the part A (scene TOML table ``[contact]``).
 
     friction : Coulomb coefficient mu >= 0 between O and A [-]; 0 (the default) is frictionless.
@@ -118,7 +120,8 @@ class ContactOptions:
 
     def __post_init__(self):
         def bad(name, why):
-            raise InputError(f"{name}={getattr(self, name)!r} {why}", where="[contact]")
+            v = getattr(self, name)
+            raise FieldError(f"{name}={v!r} {why}", key=name, where="[contact]", flag_message=f"{why}, got {v!r}")
 
         for name in ("friction", "friction_eps_rel", "lag_tol"):
             v = getattr(self, name)
@@ -135,12 +138,21 @@ class ContactOptions:
             bad("max_lag_iterations", "must be an integer in [1, 50]")
 
     @classmethod
-    def from_dict(cls, d: dict, where: str = "[contact]") -> "ContactOptions":
+    def from_dict(cls, d: dict, where: str = "[contact]") -> "ContactConfig":
+        """The ``[contact]`` table ``d`` as a config (:func:`from_table`).
+
+        Args:
+            d: the table's keys and values.
+            where: the file and table, for messages.
+
+        Returns:
+            The config.
+        """
         return from_table(cls, d, where)
 
 
 @dataclass(frozen=True, kw_only=True)
-class InsertionOptions:
+class InsertionConfig:
     """Insertion-simulation parameters (scene TOML table ``[simulation]``).
 
     h_in : insertion step along the path [m] (path length: translation plus rotation angle times
@@ -185,7 +197,8 @@ class InsertionOptions:
 
     def __post_init__(self):
         def bad(name, why):
-            raise InputError(f"{name}={getattr(self, name)!r} {why}", where="[simulation]")
+            v = getattr(self, name)
+            raise FieldError(f"{name}={v!r} {why}", key=name, where="[simulation]", flag_message=f"{why}, got {v!r}")
 
         if self.h_in is not None and not (isinstance(self.h_in, (int, float)) and self.h_in > 0):
             bad("h_in", "must be a positive length [m]")
@@ -212,12 +225,21 @@ class InsertionOptions:
                 bad(name, "must be a positive number")
 
     @classmethod
-    def from_dict(cls, d: dict, where: str = "[simulation]") -> "InsertionOptions":
+    def from_dict(cls, d: dict, where: str = "[simulation]") -> "InsertionConfig":
+        """The ``[simulation]`` table ``d`` as a config (:func:`from_table`).
+
+        Args:
+            d: the table's keys and values.
+            where: the file and table, for messages.
+
+        Returns:
+            The config.
+        """
         return from_table(cls, d, where)
 
 
 @dataclass(frozen=True, kw_only=True)
-class ObjectOptions:
+class ObjectConfig:
     """The rigid object O (scene TOML table ``[object]``).
 
     body : name of O's mocap body in the MJCF.
@@ -238,7 +260,8 @@ class ObjectOptions:
 
     def __post_init__(self):
         def bad(name, why):
-            raise InputError(f"{name}={getattr(self, name)!r} {why}", where="[object]")
+            v = getattr(self, name)
+            raise FieldError(f"{name}={v!r} {why}", key=name, where="[object]", flag_message=f"{why}, got {v!r}")
 
         if not (isinstance(self.body, str) and self.body):
             bad("body", "must be the name of O's mocap body")
@@ -253,16 +276,36 @@ class ObjectOptions:
             bad("seed", "must be an integer in [0, 2**32)")
 
     @classmethod
-    def from_dict(cls, d: dict, where: str = "[object]") -> "ObjectOptions":
+    def from_dict(cls, d: dict, where: str = "[object]") -> "ObjectConfig":
+        """The ``[object]`` table ``d`` as a config (:func:`from_table`).
+
+        Args:
+            d: the table's keys and values.
+            where: the file and table, for messages.
+
+        Returns:
+            The config.
+        """
         return from_table(cls, d, where)
 
 
 def from_table(cls, d: dict, where: str):
-    """``cls(**d)`` for a keyword-only options dataclass read from a scene table: an unknown key is an
-    InputError naming ``where`` (the file and table); a value its validation rejects raises the
-    class's own InputError, which names the table (the scene loader adds the file)."""
-    known = {f.name for f in fields(cls)}
-    unknown = sorted(set(d) - known)
-    if unknown:
-        raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
-    return cls(**d)
+    """``cls`` built from a table ``d`` by :func:`simfab.io.tables.load_table` (kept for callers that
+    hold a table and its location in one string).
+
+    Args:
+        cls: a config class of this module.
+        d: the table's keys and values.
+        where: ``"FILE [table]"`` or ``"[table]"``.
+
+    Returns:
+        The config; an unknown key or a refused value raises InputError naming ``where`` and the key.
+    """
+    file, _, table = where.rpartition(" ")
+    return load_table(cls, d, table_name=table.strip("[]"), file=file or None)
+
+
+#: The earlier names of the config classes (``...Config`` is the package's one suffix for configuration).
+ContactOptions = ContactConfig
+InsertionOptions = InsertionConfig
+ObjectOptions = ObjectConfig

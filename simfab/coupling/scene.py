@@ -22,12 +22,12 @@ The **TOML** (``NAME.toml``) defines A and the run (all lengths in metres, SI un
     # mesh_file = "part.npz": a ready simplicial mesh (arrays points, elements) used instead of
     #   meshing (the bundled 3D scenes ship theirs: fTetWild is not bit-reproducible)
     [object]  body = "object", samples = 50, sigma = (optional) [m], seed = 0, rot_length_scale [m/rad]
-              (ObjectOptions; an object made only of sphere / capsule / cylinder / box geoms uses
+              (ObjectConfig; an object made only of sphere / capsule / cylinder / box geoms uses
               their exact signed distance, simfab.contact.sdf, unless sigma is given: samples
               then only sets its display samples)
     [fixed]   site = "fixed"
     [simulation]  steps = 35 (or h_in [m]), L_max [m], fix_all_axes, refine, element_order = 1 | 2, ...
-                  (InsertionOptions)
+                  (InsertionConfig)
     [design]  the design brief (simfab.design.brief.DesignBrief; read by ``couple optimize``)
 
 Every table and key is checked against :data:`SCENE_TABLES` before anything is built: an
@@ -38,7 +38,6 @@ option must not silently fall back to its default). An outline CSV may start wit
 from __future__ import annotations
 
 import inspect
-import tomllib
 from dataclasses import fields
 from pathlib import Path
 
@@ -48,16 +47,19 @@ from simfab._bundled import scenes_dir
 from simfab.contact.imls import build_imls
 from simfab.contact.sdf import build_primitive_field, primitives_of_body, section_primitives
 from simfab.coupling import geometry
-from simfab.coupling.config import ContactOptions, InsertionOptions, ObjectOptions
+from simfab.coupling.config import ContactConfig, InsertionConfig, ObjectConfig
 from simfab.coupling.simulate import make_coupling_model
 from simfab.errors import InputError
 from simfab.fem.materials import Material, material_by_name
 from simfab.fem.meshing import extrude_triangles, tetrahedralize, triangulate_polygon
 from simfab.fem.model import make_model
 from simfab.fem.p2 import to_p2
+from simfab.io import tables
 from simfab.io.companion import read_csv_numbers, read_npz
 from simfab.io.mesh import load_mesh
-from simfab.io.mjcf import Trajectory, load_scene
+from simfab.io.mjcf_load import load_mjcf
+from simfab.io.trajectory import Trajectory
+from simfab.progress import log as progress_log
 from simfab.rotations import quat_to_matrix
 
 GENERATORS_2D = ("c_clamp", "outline")
@@ -91,14 +93,14 @@ TOP_LEVEL_KEYS = frozenset({"name", "dim"})
 #: Every table a coupling scene's TOML may hold and the keys allowed in it: a set of names, or a
 #: function (table, dim) -> names when they depend on the table's values ([compliant]: its
 #: generator's parameters; None there leaves the error to the generator check). The table's own
-#: configuration (e.g. InsertionOptions) validates the values. A new table is one line here.
+#: configuration (e.g. InsertionConfig) validates the values. A new table is one line here.
 SCENE_TABLES: dict = {
     "material": frozenset({"name", "youngs_modulus", "poisson_ratio", "yield_stress", "density"}),
     "compliant": _compliant_keys,
-    "object": _names(ObjectOptions),
+    "object": _names(ObjectConfig),
     "fixed": frozenset({"site"}),
-    "simulation": _names(InsertionOptions),
-    "contact": _names(ContactOptions),
+    "simulation": _names(InsertionConfig),
+    "contact": _names(ContactConfig),
     "design": None,  # keys and values checked by simfab.design.brief.DesignBrief where the brief is read
 }
 
@@ -128,12 +130,15 @@ def check_tables(cfg: dict, where: str) -> None:
 
 
 def read_toml(path: Path) -> dict:
-    if not path.is_file():
-        raise InputError("companion TOML file not found (a coupling scene is NAME.xml + NAME.toml)", where=str(path))
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"invalid TOML: {e}", where=str(path)) from None
+    """A coupling scene's TOML document (InputError naming the file when missing or not TOML).
+
+    Args:
+        path: the scene's ``NAME.toml``.
+
+    Returns:
+        Its tables.
+    """
+    return tables.read_toml(path, missing="companion TOML file not found (a coupling scene is NAME.xml + NAME.toml)")
 
 
 def scene_paths(scene) -> tuple[Path, Path]:
@@ -160,17 +165,33 @@ def _section(cfg: dict, name: str, where: str) -> dict:
     return dict(v)
 
 
-def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "cpu"):
-    """Build a :class:`simfab.coupling.simulate.CouplingModel` from a scene (see module docstring).
+#: The tables read into config classes (:func:`simfab.io.tables.load_table`): their overrides may carry
+#: their source (a command-line flag, :class:`simfab.io.tables.Override`).
+CONFIG_TABLES = {"simulation": InsertionConfig, "contact": ContactConfig, "object": ObjectConfig}
 
-    overrides : optional dict of dicts merged into the TOML tables (e.g. ``{"simulation": {"steps": 5}}``).
+
+def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "cpu", quiet: bool = True):
+    """Build a :class:`simfab.coupling.model.CouplingModel` from a scene (see the module docstring).
+
+    Args:
+        scene: ``NAME.xml``, ``NAME.toml`` or a bundled scene's name.
+        overrides: {table: {key: value}} replacing the TOML's values (e.g. ``{"simulation": {"steps": 5}}``);
+            a value may be a :class:`simfab.io.tables.Override` naming its source (``--friction``), which
+            an error then names instead of the file; ``None`` removes a key.
+        device: the Warp device.
+        quiet: do not log the flags that replace a value of the scene file.
+
+    Returns:
+        The coupling model.
     """
 
     xml, toml = scene_paths(scene)
     if not xml.is_file():
         raise InputError("scene file not found", where=str(xml))
     cfg = read_toml(toml)
-    for k, v in (overrides or {}).items():
+    overrides = dict(overrides or {})
+    config_overrides = {t: overrides.pop(t) or {} for t in CONFIG_TABLES if t in overrides}
+    for k, v in overrides.items():
         if isinstance(v, dict):
             cfg.setdefault(k, {}).update(v)
         else:
@@ -203,18 +224,11 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
             raise InputError(f"[material] name: {e.message}", where=where) from None
 
     comp = _section(cfg, "compliant", where)
-    obj = _section(cfg, "object", where)
     fixed_cfg = _section(cfg, "fixed", where)
-    sim = _section(cfg, "simulation", where)
-    try:
-        options = InsertionOptions.from_dict(sim, where=f"{where} [simulation]")
-        contact = ContactOptions.from_dict({k: v for k, v in _section(cfg, "contact", where).items() if v is not None},
-                                           where=f"{where} [contact]")
-        obj_opts = ObjectOptions.from_dict({k: v for k, v in obj.items() if v is not None}, where=f"{where} [object]")
-    except TypeError as e:
-        raise InputError(f"[simulation]: {e}", where=where) from None
-    except InputError as e:
-        raise e.in_file(where) from None
+    log = None if quiet else progress_log
+    options, contact, obj_opts = (
+        tables.load_table(cls, cfg.get(t), table_name=t, file=where, overrides=config_overrides.get(t), log=log)
+        for t, cls in CONFIG_TABLES.items())
 
     points, elements, thickness = build_compliant(comp, dim, base=toml.parent, where=f"{where} [compliant]")
     fem = make_model(points, elements, material, thickness=thickness, device=device)
@@ -222,7 +236,7 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
 
         fem = to_p2(fem)  # the fixed region below then holds the midpoints inside it as well
 
-    sc = load_scene(xml)
+    sc = load_mjcf(xml)
     body = obj_opts.body
     rho = obj_opts.rot_length_scale
     path = Trajectory.from_scene(sc, body=body, **({} if rho is None else {"rot_length_scale": float(rho)}))
@@ -390,7 +404,7 @@ def _triangulate_to_target(outline: np.ndarray, target: int | None):
 
     if target is None:
         return triangulate_polygon(outline)
-    max_area = abs(geometry._signed_area(outline)) / target
+    max_area = abs(geometry.signed_area(outline)) / target
     best = None
     for _ in range(4):
         V, F = triangulate_polygon(outline, max_area=max_area)

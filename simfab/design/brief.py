@@ -61,8 +61,9 @@ squared force error [N^2] (the constraints, if any are given, still apply).
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -71,6 +72,7 @@ from simfab.coupling import config as C
 from simfab.design.stress import STRESS_RADIUS
 from simfab.errors import InputError
 from simfab.io.companion import read_csv_numbers
+from simfab.io.tables import FieldError, flag_overrides, load_table
 
 #: Weight of the squared, scaled constraint violations against E_L.
 PENALTY_WEIGHT = 1.0e3
@@ -95,8 +97,25 @@ GRIPS = ("tight", "loose", "any")
 
 
 @dataclass(frozen=True, kw_only=True)
-class DesignBrief:
-    """The ``[design]`` table (see the module docstring for meanings and units)."""
+class DesignConfig:
+    """The ``[design]`` table: the design brief (see the module docstring for meanings and units).
+
+    Args:
+        grip: "tight", "loose" or "any" (no coupling-ratio constraint).
+        grip_force, insertion_force, removal_force, hold_force: bounds (lo, hi) [N]; None: unconstrained.
+        yield_stress: the von Mises bound [Pa]; None: the material's.
+        target_profile: a force profile CSV to match (distance [m], force [N]); None: none.
+        handles: active handles.
+        placement: "displacement", "spatial" or "random".
+        keep: box sites whose vertices stay unchanged.
+        iterations: optimizer iterations at most.
+        patience: annealing stops after this many iterations without improvement.
+        max_translation: handle translation bound per axis, fraction of the bounding-box diagonal.
+        scale_range: bounds of the per-axis handle scales.
+        stress_radius: radius of the stress average [m].
+        correction_rounds: re-optimizations with mesh-corrected figures.
+        check_refinements: refinements of the mesh check (at most 3).
+    """
 
     grip: str = "any"
     grip_force: tuple[float, float] | None = None
@@ -116,60 +135,72 @@ class DesignBrief:
     correction_rounds: int = 2
     check_refinements: int = 1
 
+    def __post_init__(self):
+        self.validate()
+
     @classmethod
-    def from_dict(cls, d: dict, *, where: str = "[design]") -> "DesignBrief":
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise InputError(f"unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})", where=where)
-        kw = {}
-        for k, v in d.items():
-            if k in (*FORCES, "scale_range"):
-                kw[k] = _bounds(v, f"{where} {k}")
-            elif k == "keep":
-                kw[k] = (v,) if isinstance(v, str) else tuple(str(s) for s in v)
-            else:
-                kw[k] = v
-        try:
-            b = cls(**kw)
-        except TypeError as e:
-            raise InputError(str(e), where=where) from None
-        b.validate(where)
-        return b
+    def from_dict(cls, d: dict, *, where: str = "[design]", overrides: dict | None = None,
+                  log=None) -> "DesignConfig":
+        """The brief from a ``[design]`` table (:func:`simfab.io.tables.load_table`).
+
+        Args:
+            d: the table's keys and values.
+            where: ``"FILE [design]"`` (or ``"[design]"``), for messages.
+            overrides: {key: value or :class:`simfab.io.tables.Override`} replacing the table's values
+                (command-line options; an error names the flag an Override carries).
+            log: called with a note for each flag that replaces a value of the file.
+
+        Returns:
+            The brief; InputError naming the file, table and key (or the flag) when it is refused.
+        """
+        file = where.rpartition(" ")[0] if where.endswith("[design]") else where
+        return load_table(cls, d, table_name="design", file=file or None, overrides=overrides, parsers=PARSERS,
+                          log=log)
 
     def validate(self, where: str = "[design]") -> None:
+        """Check the values (FieldError naming ``where`` and the key); run on construction."""
+        def bad(key, msg):
+            raise FieldError(msg, key=key, where=f"{where} {key}")
+
         if self.grip not in GRIPS:
-            raise InputError(f"grip must be one of {GRIPS}, got {self.grip!r}", where=f"{where} grip")
+            bad("grip", f"grip must be one of {GRIPS}, got {self.grip!r}")
         if self.placement not in PLACEMENTS:
-            raise InputError(f"placement must be one of {PLACEMENTS}, got {self.placement!r}",
-                             where=f"{where} placement")
+            bad("placement", f"placement must be one of {PLACEMENTS}, got {self.placement!r}")
         if not (isinstance(self.stress_radius, (int, float)) and not isinstance(self.stress_radius, bool)
                 and 0 < self.stress_radius < 1):
-            raise InputError(f"must be a length in (0, 1) m, got {self.stress_radius!r}",
-                             where=f"{where} stress_radius")
+            bad("stress_radius", f"must be a length in (0, 1) m, got {self.stress_radius!r}")
         for k in ("handles", "iterations", "patience", "correction_rounds", "check_refinements"):
             v = getattr(self, k)
             zero_ok = k in ("iterations", "correction_rounds", "check_refinements")
             if not isinstance(v, int) or isinstance(v, bool) or v < (0 if zero_ok else 1):
-                raise InputError(f"must be a {'non-negative' if zero_ok else 'positive'} integer, got {v!r}",
-                                 where=f"{where} {k}")
+                bad(k, f"must be a {'non-negative' if zero_ok else 'positive'} integer, got {v!r}")
         if self.check_refinements > 3:
-            raise InputError(f"must be at most 3 (each refinement multiplies the check's elements by 4 in 2D, "
-                             f"8 in 3D), got {self.check_refinements}", where=f"{where} check_refinements")
+            bad("check_refinements", f"must be at most 3 (each refinement multiplies the check's elements by 4 "
+                                     f"in 2D, 8 in 3D), got {self.check_refinements}")
         ys = self.yield_stress
         if ys is not None and not (isinstance(ys, (int, float)) and ys > 0):
-            raise InputError(f"must be a positive stress [Pa], got {ys!r}", where=f"{where} yield_stress")
+            bad("yield_stress", f"must be a positive stress [Pa], got {ys!r}")
         if not (isinstance(self.max_translation, (int, float)) and 0 < self.max_translation <= 1):
-            raise InputError(f"must be in (0, 1], got {self.max_translation!r}", where=f"{where} max_translation")
+            bad("max_translation", f"must be in (0, 1], got {self.max_translation!r}")
         lo, hi = self.scale_range
         if not 0 < lo <= 1 <= hi:
-            raise InputError(f"must satisfy 0 < lo <= 1 <= hi, got {list(self.scale_range)}",
-                             where=f"{where} scale_range")
+            bad("scale_range", f"must satisfy 0 < lo <= 1 <= hi, got {list(self.scale_range)}")
 
-    def with_overrides(self, **kw) -> "DesignBrief":
-        b = replace(self, **{k: v for k, v in kw.items() if v is not None})
-        b.validate("command line")
-        return b
+    def with_overrides(self, **kw) -> "DesignConfig":
+        """This brief with command-line values (``None``: not given).
+
+        Args:
+            **kw: {key: value}; an error names the flag ``--key-with-dashes``.
+
+        Returns:
+            The new brief.
+        """
+        return self.from_dict({k: v for k, v in dataclasses.asdict(self).items() if v is not None},
+                              overrides=flag_overrides(kw))
+
+
+#: The brief's earlier name (``...Config`` is the package's one suffix for configuration).
+DesignBrief = DesignConfig
 
 
 def _bounds(v, where: str) -> tuple[float, float]:
@@ -182,6 +213,14 @@ def _bounds(v, where: str) -> tuple[float, float]:
     if math.isnan(lo) or math.isnan(hi) or lo > hi or lo < 0:
         raise InputError(f"need 0 <= lo <= hi, got {v!r}", where=where)
     return lo, hi
+
+
+def _keep(v, where: str) -> tuple:
+    return (v,) if isinstance(v, str) else tuple(str(x) for x in v) if isinstance(v, (list, tuple)) else v
+
+
+#: Values read by their own functions before the type check (pairs [lo, hi] with their messages).
+PARSERS = {**{k: _bounds for k in (*FORCES, "scale_range")}, "keep": _keep}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -319,5 +358,5 @@ class TargetProfile:
         return float(np.sqrt(total / (t1 - t0)))
 
 
-__all__ = ["DesignBrief", "Constraint", "TargetProfile", "bounds", "constraints", "penalty", "read_target_profile",
-           "run_to_rest", "PENALTY_WEIGHT", "SCALES", "UNITS"]
+__all__ = ["DesignConfig", "DesignBrief", "Constraint", "TargetProfile", "bounds", "constraints", "penalty",
+           "read_target_profile", "run_to_rest", "PENALTY_WEIGHT", "SCALES", "UNITS"]
