@@ -1,8 +1,8 @@
 """Sweep specification (``SPEC.toml``): which command, which parameters, which figures.
 
 A spec names a base command (any ``simfab`` subcommand line), optionally a base scene whose
-parameters it varies, the swept parameters with their values, and the figures to collect
-from each run's JSON summary::
+parameters it varies, the swept parameters with their values, and the figures to collect from each
+run's JSON summary (:class:`SweepConfig`; tables read by :func:`simfab.io.tables.load_table`)::
 
     [sweep]
     name = "cclamp2d_chart"                     # table / plot file stem (default: the spec's stem)
@@ -10,33 +10,19 @@ from each run's JSON summary::
     scene = "coupling/cclamp2d.toml"            # relative to the spec, else to the bundled scenes/
     combine = "product"                         # "product" (grid) | "zip" (equal-length lists)
     seed = 0                                    # --seed of every run, and of random parameters
-    keep_outputs = true                         # keep each run's folder under OUT/runs/
-
     [set]                                       # fixed for every run (same addresses as below)
     "material.poisson_ratio" = 0.36
-
     [parameters.youngs_modulus]                 # a column of the table
     set = "material.youngs_modulus"             # where the value goes (default: the name)
-    values = [1.0e9, 2.0e9, 3.5e9]              # or range = [lo, hi] + num = N (+ log = true),
-    unit = "Pa"                                 # or random = "uniform" | "loguniform" |
-                                                #   "integers" | "choice", low/high/values, samples
+    values = [1.0e9, 2.0e9, 3.5e9]              # or range = [lo, hi] + num (+ log), or random = ...
     [collect]                                   # column = dotted path in the run's summary
-    category = "category"
     F_in = { path = "F_in", unit = "N" }
-
     [derived]                                   # columns computed from others (pandas.eval)
-    stiffness_ratio = "youngs_modulus / 3.5e9"
+    [plot]                                      # optional: x, y, figures
 
-    [plot]                                      # optional (defaults: the 1-2 swept parameters,
-    x = "youngs_modulus"                        #   every collected and derived figure)
-    y = "arm_width"
-    figures = ["category", "F_in"]
-
-Addresses (``set``): ``"--flag"`` is a command-line option of the command (``true`` adds a
-bare flag, ``false`` omits it, a list gives several values); ``"table.key"`` a key of the
-scene's TOML (a coupling scene's ``NAME.toml``); ``"tag:name.attr[i,j]"`` an attribute of the
-MJCF element ``<tag name="name">`` of the scene's XML (``numeric:cell_gap`` sets a custom
-numeric's data; ``[i,j]`` sets those components of a vector attribute to the value).
+Addresses (``set``): ``"--flag"`` a command-line option; ``"table.key"`` a key of the scene's TOML;
+``"tag:name.attr[i,j]"`` an attribute of the MJCF element ``<tag name="name">``. The full format:
+docs/methods.md, "simfab.cli.sweep_spec".
 """
 
 from __future__ import annotations

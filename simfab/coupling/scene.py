@@ -1,38 +1,28 @@
 """Coupling scenes: an MJCF file plus a companion TOML file with the same stem.
 
-The **MJCF** (``NAME.xml``, opens in the MuJoCo viewer) holds
-- the rigid object O: a mocap body (default ``object``) whose geoms are O's shape, in O's body
-  frame; in 2D scenes O is the cross-section of those geoms with the body's z = 0 plane;
-- O's path: keyframes ``<key mpos=".." mquat=".."/>`` of the mocap body (translations and
-  rotations; see :class:`simfab.io.mjcf.Trajectory`);
-- the fixed region of A: a box site (default ``fixed``, axis-aligned, ``size`` = half extents);
-- A's rest shape as a display mesh (body ``part``), informational only.
+The **MJCF** (``NAME.xml``, opens in the MuJoCo viewer) holds the rigid object O (a mocap body,
+default ``object``; in 2D its cross-section with z = 0), O's path (keyframes of the mocap body,
+:class:`simfab.io.trajectory.Trajectory`), the fixed region of A (a box site, default ``fixed``)
+and A's rest shape as a display mesh (informational).
 
-The **TOML** (``NAME.toml``) defines A and the run (all lengths in metres, SI units)::
+The **TOML** (``NAME.toml``) defines A and the run (SI units)::
 
     name = "cclamp2d"
     dim = 2                              # 2 (plane strain) or 3
     [material]  name = "PLA"             # or youngs_modulus [Pa], poisson_ratio, yield_stress [Pa]
-    [compliant]
-    generator = "c_clamp"                # c_clamp (2D) | extruded_clamp | cross_claw (3D) | outline | mesh
-    target_elements = 450                # approximate triangle / tetrahedron count
-    thickness = 0.005                    # 2D only: out-of-plane extent [m]
-    ...generator parameters (see simfab.coupling.geometry)...
-    # outline = "part.csv" (2D, x,y per line) or mesh = "part.stl" (3D surface), units = "m" | "mm"
-    # mesh_file = "part.npz": a ready simplicial mesh (arrays points, elements) used instead of
-    #   meshing (the bundled 3D scenes ship theirs: fTetWild is not bit-reproducible)
-    [object]  body = "object", samples = 50, sigma = (optional) [m], seed = 0, rot_length_scale [m/rad]
-              (ObjectConfig; an object made only of sphere / capsule / cylinder / box geoms uses
-              their exact signed distance, simfab.contact.sdf, unless sigma is given: samples
-              then only sets its display samples)
-    [fixed]   site = "fixed"
-    [simulation]  steps = 35 (or h_in [m]), L_max [m], fix_all_axes, refine, element_order = 1 | 2, ...
-                  (InsertionConfig)
-    [design]  the design brief (simfab.design.brief.DesignBrief; read by ``couple optimize``)
+    [compliant] generator = "c_clamp", target_elements = 450, thickness = 0.005 (2D), ...
+                # c_clamp | extruded_clamp | cross_claw | outline = "part.csv" | mesh = "part.stl";
+                # mesh_file = "part.npz": a ready mesh (points, elements)
+    [object]    body, samples, sigma, seed, rot_length_scale   (ObjectConfig)
+    [fixed]     site = "fixed"
+    [simulation] steps = 35 (or h_in [m]), L_max [m], element_order = 1 | 2, ...  (InsertionConfig)
+    [contact]   friction, friction_eps_rel, lag_tol, max_lag_iterations  (ContactConfig)
+    [design]    the design brief (simfab.design.brief.DesignConfig; read by ``couple optimize``)
 
-Every table and key is checked against :data:`SCENE_TABLES` before anything is built: an
-unknown table or key is an InputError naming the file, the table and the key (a misspelt
-option must not silently fall back to its default). An outline CSV may start with a header row.
+Every table and key is checked against :data:`SCENE_TABLES` before anything is built; the config
+tables load through :func:`simfab.io.tables.load_table`, so an error names the file, table and key,
+or the flag (:class:`simfab.io.tables.Override`) a value came from. The full format:
+docs/methods.md, "simfab.coupling.scene".
 """
 
 from __future__ import annotations
@@ -106,8 +96,16 @@ SCENE_TABLES: dict = {
 
 
 def check_tables(cfg: dict, where: str) -> None:
-    """InputError naming ``where`` (the TOML file), the table and the key of the first unknown
-    table, unknown key, or table given as a plain value (see :data:`SCENE_TABLES`)."""
+    """Check every table and key of a coupling scene's TOML against :data:`SCENE_TABLES`.
+
+    Args:
+        cfg: the TOML document.
+        where: the TOML file, for messages.
+
+    Raises:
+        InputError: naming ``where``, the table and the key of the first unknown table, unknown key,
+            or table given as a plain value.
+    """
     dim = cfg.get("dim", 2)
     for key, value in cfg.items():
         if key in TOP_LEVEL_KEYS:
@@ -142,7 +140,15 @@ def read_toml(path: Path) -> dict:
 
 
 def scene_paths(scene) -> tuple[Path, Path]:
-    """(xml, toml) for a scene given as NAME.xml, NAME.toml or NAME (bundled: scenes/coupling/NAME)."""
+    """The two files of a coupling scene.
+
+    Args:
+        scene: NAME.xml, NAME.toml or NAME (a bundled scene: scenes/coupling/NAME, unless a file of
+            that name exists).
+
+    Returns:
+        (xml, toml) paths.
+    """
     p = Path(scene)
     if p.suffix in (".xml", ".toml"):
         return p.with_suffix(".xml"), p.with_suffix(".toml")
@@ -155,6 +161,11 @@ def scene_paths(scene) -> tuple[Path, Path]:
 
 
 def bundled_dir() -> Path:
+    """The folder of the bundled coupling scenes.
+
+    Returns:
+        scenes/coupling inside the installed package.
+    """
     return scenes_dir("coupling")
 
 
@@ -274,10 +285,20 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
 
 
 def primitive_field(sc, body: str, dim: int, samples: int):
-    """Exact signed-distance field (:class:`simfab.contact.sdf.PrimitiveField`) of O when all its
-    geoms are spheres, capsules, cylinders, boxes or tori (in 2D: whose z = 0 section is a circle or an
-    aligned rectangle), else None (O is then sampled and its IMLS field used). The geoms' poses are
-    taken relative to the mocap body (MuJoCo's geom_pos / geom_quat are in the body frame)."""
+    """Exact signed-distance field of O when all its geoms are primitives.
+
+    Spheres, capsules, cylinders, boxes or tori (in 2D: whose z = 0 section is a circle or an aligned
+    rectangle); the geoms' poses are taken relative to the mocap body.
+
+    Args:
+        sc: the loaded scene.
+        body: O's mocap body.
+        dim: 2 or 3.
+        samples: display samples of the field.
+
+    Returns:
+        :class:`simfab.contact.sdf.PrimitiveField`, or None (O is then sampled and its IMLS field used).
+    """
     import mujoco
 
 
@@ -289,7 +310,15 @@ def primitive_field(sc, body: str, dim: int, samples: int):
 
 
 def object_mesh_body_frame(sc, body: str):
-    """O's geoms as one trimesh in O's body frame (the mocap body's pose at qpos0 undone)."""
+    """O's geoms as one mesh in O's body frame (the mocap body's pose at qpos0 undone).
+
+    Args:
+        sc: the loaded scene.
+        body: O's mocap body.
+
+    Returns:
+        ``trimesh.Trimesh``; InputError naming the MJCF when the body has no geometry.
+    """
     import mujoco
 
     meshes = sc.body_meshes()
@@ -308,7 +337,17 @@ def object_mesh_body_frame(sc, body: str):
 
 
 def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
-    """A's mesh from the [compliant] table: (points (n, dim) [m], elements, thickness [m])."""
+    """A's mesh from the ``[compliant]`` table.
+
+    Args:
+        comp: the table (its keys are consumed).
+        dim: 2 or 3.
+        base: the folder relative paths (outline, mesh, mesh_file) are read from.
+        where: the file and table, for messages.
+
+    Returns:
+        (points (n, dim) [m], elements (m, dim + 1), thickness [m]; 1 in 3D).
+    """
 
     gen = comp.pop("generator", None)
     cached = comp.pop("mesh_file", None)
@@ -370,10 +409,18 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
 
 
 def load_mesh_file(path: Path, dim: int):
-    """(points (n, dim) [m], elements (m, dim+1)) from an ``.npz`` with arrays ``points`` and ``elements``.
+    """A ready simplicial mesh from an ``.npz`` with arrays ``points`` and ``elements``.
 
     Bundled 3D scenes ship their tetrahedral mesh this way: fTetWild is not bit-reproducible across
     runs, so the mesh generated once by ``scenes/coupling/make_scenes.py`` is stored with the scene.
+
+    Args:
+        path: the ``.npz`` file.
+        dim: 2 or 3.
+
+    Returns:
+        (points (n, dim) [m] float64, elements (m, dim + 1) int64); InputError naming the file when
+        the arrays are missing, of the wrong shape, not finite or out of range.
     """
     z = read_npz(path, ("points", "elements"), what="mesh file (.npz with points and elements)")
     P, T = z["points"], z["elements"]

@@ -2,58 +2,23 @@
 Hessian side by side) and their :data:`LINEAR` record. The public functions that launch them, for
 every element order, are in :mod:`simfab.fem.elastic`.
 
-Per element (volume V, Lame parameters mu, lam, dimension d):
+Per element (volume V, Lame parameters mu, lam, dimension d; 2D is plane strain, V = area * thickness):
 
     Psi(F) = mu/2 (||F||_F^2 - d) - mu log J + lam/2 (log J)^2,      E_e = V Psi(F),  J = det F
-    F = Ds Dm^-1,  Ds = [x1 - x0, x2 - x0(, x3 - x0)]
+    F = Ds Dm^-1,  Ds = [x1 - x0, x2 - x0(, x3 - x0)],    P = dPsi/dF = mu (F - F^-T) + lam log J F^-T
 
-2D is plane strain: the body is extruded by ``model.thickness`` with F_zz = 1, for which the 3D
-energy density equals the d = 2 formula above (||F||^2 - 3 = ||F_2D||^2 - 2, det F = det F_2D);
-V = area * thickness.
+Nodal gradient: dE/dx_i = V P Dm^-T e_i (i = 1..d), dE/dx_0 = -sum_i dE/dx_i (the elastic force is
+``-gradient``). Hessian d2Psi/dF2 through its analytic eigensystem (Smith, De Goes, Kim 2019); the
+PSD projection clamps negative eigenvalues in the d^2-dimensional stress space. In the common case
+dPsi/dJ <= 0 only the twist block can be indefinite, and its negative part is removed in closed form
+from the polar decomposition (no SVD); otherwise the full SVD eigensystem is used. Hessian modes:
+EXACT (validated against finite differences), PROJECT and PROJECT_SVD (agree to round-off), BOTH.
+The helpers the P2 kernels share (:mod:`simfab.fem.neohookean_p2`) are public: ``psi``, ``pk1``,
+``negative_part_sym3``, ``polar_rotation3``, ``stress_hessian_svd``, ``store_hessian_entry``,
+``void_element``, ``dim_float``, ``dim_int``, ``mat44d``, ``mat99d`` and the ``HESSIAN_*`` constants.
 
-First Piola-Kirchhoff stress (dPsi/dF):
-
-    P = mu (F - F^-T) + lam log J F^-T
-
-Nodal gradient: dE/dx_i = V P Dm^-T e_i (i = 1..d), dE/dx_0 = -sum_i dE/dx_i. Sign: the gradient
-is the internal force with the sign of the energy increase; the elastic force on the nodes is
-``-gradient``.
-
-Hessian d2Psi/dF2 via its analytic eigensystem (Smith, De Goes, Kim 2019, "Analytic eigensystems
-for isotropic distortion energies"). With the SVD F = U diag(s) V^T (J > 0, so det U det V = 1) and
-dPsi/dJ = (lam log J - mu) / J:
-
-    twist modes  U T_k V^T:  eigenvalue mu + dPsi/dJ * s_k      (3D; 2D: mu + dPsi/dJ)
-    flip modes   U L_k V^T:  eigenvalue mu - dPsi/dJ * s_k      (3D; 2D: mu - dPsi/dJ)
-    scaling modes U diag(q) V^T: q, eigenvalue of the d x d matrix
-        A_ii = mu + (mu + lam (1 - log J)) / s_i^2,   A_ij = lam / (s_i s_j)
-
-(T_k skew and L_k symmetric unit off-diagonal pairs in the plane orthogonal to axis k; the
-twist/flip values come from the mu ||F||^2 term (2 * mu/2 * I) plus dPsi/dJ times the Hessian of
-det F, whose eigenvalues on those modes are +-s_k.) The PSD projection clamps negative
-eigenvalues to zero in this d^2-dimensional stress space, which makes the element block PSD.
-
-3D evaluation (no eigensolver in the common case, about half the cost of the SVD route): when
-dPsi/dJ <= 0 (lam log J <= mu - all but strong volumetric expansion) the flip and scaling
-eigenvalues are provably positive, so only the 3-dimensional twist block can be indefinite. That
-block is T = mu I + dPsi/dJ S in the basis R [e_i]x / sqrt 2, with F = R S the polar decomposition
-(cheap Newton iteration instead of an SVD). The kernel assembles the exact Hessian directly
-(mu I + d2Psi/dJ2 g g^T + dPsi/dJ d2J/dF2, g = cof F) and subtracts the negative part of T, whose
-spectral projectors come from closed-form eigenvalues (accurate also for clustered eigenvalues).
-With dPsi/dJ > 0 the full SVD eigensystem is used. 2D works the same way with its single twist
-mode (polar rotation in closed form).
-The exact Hessian (mode EXACT) is validated against finite differences; the two projected routes
-(PROJECT, PROJECT_SVD) agree to round-off and with numpy ``eigh`` of the exact blocks (tests).
-
-All kernels run in float64 with one thread per element (argument lists and launch codes:
-:mod:`simfab.fem.workspace`); energy, gradient and Hessian blocks come from the same kernel when the
-Hessian is wanted, and the Hessian kernel adds its values straight into the CSR ``data`` of the
-model's fixed pattern through precomputed slots. Warp CPU kernels run single-threaded, so results
-are bit-reproducible there; on CUDA the additions are atomic and their order (hence the last bits)
-can vary between runs.
-
-An element with det F <= 0 makes the energy +inf (the log barrier of Neo-Hookean); such an
-element contributes nothing to the gradient and Hessian, which are then not meaningful.
+All kernels run in float64 with one thread per element (:mod:`simfab.fem.workspace`). The
+eigensystem's derivation: docs/methods.md, "simfab.fem.neohookean".
 """
 
 from __future__ import annotations

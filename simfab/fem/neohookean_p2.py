@@ -2,49 +2,20 @@
 gradient, Hessian side by side) and their :data:`QUADRATIC` record; the public functions that
 launch them, for every element order, are in :mod:`simfab.fem.elastic`.
 
-Same energy density as :mod:`simfab.fem.neohookean` (2D = plane strain with thickness):
+Same energy density as :mod:`simfab.fem.neohookean`, but F varies linearly over a P2 element, so
+the element energy is a quadrature sum over the points q of the model's rule
+(:data:`simfab.fem.p2.RULES`, weights w_q = volume * rule weight):
 
-    Psi(F) = mu/2 (||F||_F^2 - d) - mu log J + lam/2 (log J)^2,     J = det F
+    E_e = sum_q w_q Psi(F_q),    F_q = sum_a x_a (x) g_qa,    g_qa = grad N_a(X_q)
+    dE/dx_a = sum_q w_q P(F_q) g_qa
+    K_ab[i, j] = sum_q w_q sum_{k,l} A_q[(i,k), (j,l)] g_qa[k] g_qb[l],   A = d2Psi/dF2
 
-but F varies linearly over a P2 element, so the element energy is a quadrature sum over the
-points q of the model's rule (:data:`simfab.fem.p2.RULES`, weights w_q = volume * rule weight):
-
-    E_e = sum_q w_q Psi(F_q),    F_q = sum_a x_a (x) g_qa,    g_qa = grad N_a(X_q)  (model.grad_N)
-
-Gradient (sign: energy increase; the elastic nodal force is ``-gradient``):
-
-    dE/dx_a = sum_q w_q P(F_q) g_qa,     P = mu (F - F^-T) + lam log J F^-T
-
-Hessian: block (a, b), entries (i, j), through the stress-space Hessian A = d2Psi/dF2 (a d^2 x d^2
-matrix indexed by vec(F)_(i,k) = F_ik, row-major):
-
-    K_ab[i, j] = sum_q w_q sum_{k,l} A_q[(i,k), (j,l)] g_qa[k] g_qb[l]
-    A = mu I + d2Psi/dJ2 vec(g) vec(g)^T + dPsi/dJ d2J/dF2,   g = cof F,
-    dPsi/dJ = (lam log J - mu) / J,  d2Psi/dJ2 = (mu + lam (1 - log J)) / J^2,
-    d2J/dF_ik dF_jl = eps_ijm eps_klp F_mp (3D),  eps_ij eps_kl (2D)
-
-PSD projection (``project_psd=True``) clamps the negative eigenvalues of each A_q; with positive
-quadrature weights the element Hessian sum_q w_q G_q^T A_q G_q is then PSD. The eigensystem is the
-analytic one of :mod:`simfab.fem.neohookean` (Smith, De Goes, Kim 2019), reused from there: with
-dPsi/dJ <= 0 only the twist block T = mu I + dPsi/dJ S (F = R S) can be indefinite and its negative
-part (``negative_part_sym3``, ``polar_rotation3``) is removed in the basis R [e_i]x / sqrt 2
-(2D: one twist mode, eigenvalue mu + dPsi/dJ); with dPsi/dJ > 0 A is rebuilt from the full
-SVD eigensystem with clamped eigenvalues.
-
-Inversion: the energy is +inf when J <= 0 at any quadrature point of any element; such an element
-contributes nothing to the gradient and Hessian (not meaningful then). Inversion between the
-quadrature points is not seen by the energy; :func:`simfab.fem.p2.det_F_lower_bound` bounds det F
-over whole elements (Bernstein coefficients) for a stricter admissibility test. The stress launch
-reports the smallest J over each element's quadrature points and the largest von Mises stress over
-them (conservative for inversion and yield checks).
-
-Kernels run in float64 with one thread per element and the quadrature loop inside (argument
-lists and launch codes: :mod:`simfab.fem.workspace`; on the CPU a mesh of :data:`SPLIT_ELEMENTS`
-(per dimension) or more runs its Hessian as two launches of half the elements on two threads).
-Each quadrature point's Hessian blocks come from the closed form above (mu, cofactor and
-cross-product terms plus the twist correction) rather than by contracting the d^2 x d^2 matrix
-A, which costs several times more; only the rare SVD route contracts A. Cost per element relative to a linear simplex:
-``python tools/bench.py p2`` ("cost_per_element").
+PSD projection clamps the negative eigenvalues of each A_q (positive weights keep the sum PSD),
+with the analytic eigensystem of :mod:`simfab.fem.neohookean`. The energy is +inf when J <= 0 at
+any quadrature point (:func:`simfab.fem.p2.det_F_lower_bound` bounds det F over whole elements).
+Kernels run in float64 with one thread per element and the quadrature loop inside; on the CPU a
+mesh of :data:`SPLIT_ELEMENTS` or more runs its Hessian as two launches on two threads. The
+closed forms of each block: docs/methods.md, "simfab.fem.neohookean_p2".
 """
 
 from __future__ import annotations

@@ -57,7 +57,14 @@ def _on_warning(msg: str) -> None:
 
 
 def mujoco_warnings(clear: bool = True) -> list[str]:
-    """MuJoCo warnings since the last call (simfab keeps them off stdout and out of MUJOCO_LOG.TXT)."""
+    """MuJoCo warnings since the last call (simfab keeps them off stdout and out of MUJOCO_LOG.TXT).
+
+    Args:
+        clear: forget them once returned.
+
+    Returns:
+        The warnings, one line each, oldest first.
+    """
     out = list(_WARNINGS)
     if clear:
         _WARNINGS.clear()
@@ -104,16 +111,15 @@ _NON_NUMERIC_ATTRIBUTES = frozenset(("name", "file", "class", "childclass", "mes
 class Scene:
     """A loaded MJCF scene.
 
-    Attributes
-    ----------
-    path : the MJCF file.
-    model : ``mujoco.MjModel``.
-    sites : site name -> (3,) world position [m] at ``qpos0`` (mocap bodies at their body pos).
-    site_size : site name -> (3,) MuJoCo site size [m] (sphere radius is ``size[0]``).
-    custom_numeric : ``<numeric name data>`` name -> (k,) float array.
-    custom_text : ``<text name data>`` name -> str.
-    sdf_plugins : plugin instance id -> (plugin name, config dict of strings), e.g. the
-        ``mujoco.sdf.torus`` instance of an SDF geom (empty without plugins).
+    Args:
+        path: the MJCF file.
+        model: ``mujoco.MjModel``.
+        sites: site name -> (3,) world position [m] at ``qpos0`` (mocap bodies at their body pos).
+        site_size: site name -> (3,) MuJoCo site size [m] (sphere radius is ``size[0]``).
+        custom_numeric: ``<numeric name data>`` name -> (k,) float array.
+        custom_text: ``<text name data>`` name -> str.
+        sdf_plugins: plugin instance id -> (plugin name, config dict of strings), e.g. the
+            ``mujoco.sdf.torus`` instance of an SDF geom (empty without plugins).
     """
 
     path: Path
@@ -125,15 +131,25 @@ class Scene:
     sdf_plugins: dict = dataclasses.field(default_factory=dict)
 
     def body_names(self) -> list[str]:
+        """The model's body names (``body<i>`` for an unnamed body).
+
+        Returns:
+            One name per body, in MuJoCo's order (world first).
+        """
         mj = mujoco_module()
         return [mj.mj_id2name(self.model, mj.mjtObj.mjOBJ_BODY, i) or f"body{i}" for i in range(self.model.nbody)]
 
     def body_meshes(self, *, include_world: bool = True) -> dict:
         """Triangle meshes of all visible geoms per body, world frame at ``qpos0``.
 
-        Returns body name -> ``trimesh.Trimesh`` (geoms of one body concatenated). Planes are
-        skipped (infinite); primitives are meshed (spheres subdivided twice, cylinders with 48
-        sides). Bodies without meshable geoms are absent.
+        Planes are skipped (infinite); primitives are meshed (spheres subdivided twice, cylinders with
+        48 sides). Bodies without meshable geoms are absent.
+
+        Args:
+            include_world: include the world body's geoms.
+
+        Returns:
+            body name -> ``trimesh.Trimesh`` (geoms of one body concatenated).
         """
         import trimesh
 
@@ -159,9 +175,19 @@ class Scene:
 
 
 def geom_mesh(model, g: int, plugins: dict | None = None):
-    """Mesh of geom ``g`` in its own frame (``trimesh.Trimesh``), or None for planes/heightfields.
-    SDF geoms: a torus (``mujoco.sdf.torus`` in ``plugins``, :attr:`Scene.sdf_plugins`) is meshed
-    with 128 x 32 sections, others use the mesh MuJoCo extracts from their distance field."""
+    """Mesh of a geom in its own frame.
+
+    SDF geoms: a torus (``mujoco.sdf.torus`` in ``plugins``) is meshed with 128 x 32 sections, others
+    use the mesh MuJoCo extracts from their distance field.
+
+    Args:
+        model: ``mujoco.MjModel``.
+        g: the geom's index.
+        plugins: :attr:`Scene.sdf_plugins`.
+
+    Returns:
+        ``trimesh.Trimesh``, or None for planes and heightfields.
+    """
     import trimesh
 
     mj = mujoco_module()
@@ -200,9 +226,16 @@ TORUS_PLUGIN = "mujoco.sdf.torus"
 
 
 def torus_radii(model, g: int, plugins: dict | None) -> tuple | None:
-    """(major, tube) radii [m] of geom ``g`` when it is an SDF geom of the ``mujoco.sdf.torus``
-    plugin (``plugins``: instance id -> (plugin name, config), :attr:`Scene.sdf_plugins`),
-    else None."""
+    """The radii of a torus geom of the ``mujoco.sdf.torus`` plugin.
+
+    Args:
+        model: ``mujoco.MjModel``.
+        g: the geom's index.
+        plugins: instance id -> (plugin name, config), :attr:`Scene.sdf_plugins`.
+
+    Returns:
+        (major, tube) radii [m], or None when the geom is not such a torus.
+    """
     if int(model.geom_type[g]) != int(mujoco_module().mjtGeom.mjGEOM_SDF) or not plugins:
         return None
     name, config = plugins.get(int(model.geom_plugin[g]), (None, {}))
@@ -212,7 +245,14 @@ def torus_radii(model, g: int, plugins: dict | None) -> tuple | None:
 
 
 def load_model(path: str | os.PathLike):
-    """``mujoco.MjModel`` from an MJCF file; InputError (one line) when missing or invalid."""
+    """``mujoco.MjModel`` from an MJCF file, its numbers checked finite first.
+
+    Args:
+        path: the MJCF file.
+
+    Returns:
+        The compiled model; InputError (one line naming the file) when missing or invalid.
+    """
     mj = mujoco_module()
     path = Path(path)
     if not path.is_file():
@@ -229,7 +269,14 @@ def load_model(path: str | os.PathLike):
 
 
 def load_mjcf(path: str | os.PathLike) -> Scene:
-    """Load an MJCF scene with its sites and custom parameters (see :class:`Scene`)."""
+    """Load an MJCF scene with its sites and custom parameters.
+
+    Args:
+        path: the MJCF file.
+
+    Returns:
+        The :class:`Scene`; InputError naming the file when it is missing or invalid.
+    """
     mj = mujoco_module()
     path = Path(path)
     model = load_model(path)
@@ -267,12 +314,20 @@ def _plugin_configs(path: Path, model) -> dict:
 
 
 def numeric_config(scene: Scene, prefix: str, config_type):
-    """Keyword arguments for dataclass ``config_type`` from ``<numeric name="<prefix><field>">``.
+    """Keyword arguments for a dataclass from ``<numeric name="<prefix><field>">`` elements.
 
     Every field holds exactly one finite number, a whole number for an ``int`` field (a count);
     anything else, and a ``<prefix>...`` name that is not a field (a typo must not silently fall
     back to a default), is an InputError naming the file and the ``<numeric>``. Ranges are the
-    dataclass's to check. Returns a dict of the fields given.
+    dataclass's to check.
+
+    Args:
+        scene: the loaded scene.
+        prefix: the name prefix of the parameters (e.g. ``"cell_"``).
+        config_type: the dataclass.
+
+    Returns:
+        {field: value} of the fields given.
     """
     import dataclasses
 

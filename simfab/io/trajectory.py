@@ -29,11 +29,10 @@ class Trajectory:
     and a pure translation by its length, so that insertion steps of size h make sense for
     both.
 
-    Attributes
-    ----------
-    positions : (k, 3) keyframe positions [m].
-    quats : (k, 4) keyframe orientations (w, x, y, z).
-    rot_length_scale : ρ [m/rad].
+    Args:
+        positions: (k, 3) keyframe positions [m].
+        quats: (k, 4) keyframe orientations (w, x, y, z).
+        rot_length_scale: ρ [m/rad].
     """
 
     positions: np.ndarray
@@ -91,8 +90,14 @@ class Trajectory:
         return i, (0.0 if seg[i] <= 0 else (s - cum[i]) / seg[i])
 
     def sampled_positions(self, samples: int) -> np.ndarray:
-        """(samples, 3) positions [m] at ``samples`` evenly spaced path lengths from 0 to the end
-        (computed once per count: the path is immutable)."""
+        """Positions at evenly spaced path lengths from 0 to the end (computed once per count).
+
+        Args:
+            samples: how many.
+
+        Returns:
+            (samples, 3) positions [m].
+        """
         cache = self.__dict__.setdefault("_sampled", {})
         if samples not in cache:  # pose_at's positions, vectorized (linear within each segment)
             s = np.linspace(0.0, self.length, samples)
@@ -104,7 +109,14 @@ class Trajectory:
         return cache[samples]
 
     def pose_at_key(self, u: float):
-        """Pose at keyframe parameter u in [0, k-1] (u = 1.5: halfway between keys 1 and 2)."""
+        """Pose at a keyframe parameter.
+
+        Args:
+            u: in [0, k-1] (u = 1.5: halfway between keys 1 and 2).
+
+        Returns:
+            (pos (3,) [m], quat (4,)).
+        """
         k = len(self.positions)
         u = float(np.clip(u, 0.0, k - 1))
         i = min(int(np.floor(u)), k - 2)
@@ -113,21 +125,40 @@ class Trajectory:
         return pos, quat_slerp(self.quats[i], self.quats[i + 1], f)
 
     def pose_at(self, s: float):
-        """Pose ``(pos (3,), quat (4,))`` at path length s [m], clamped to [0, length]."""
+        """Pose at a path length.
+
+        Args:
+            s: path length [m], clamped to [0, length].
+
+        Returns:
+            (pos (3,) [m], quat (4,)).
+        """
         i, f = self._locate(s)
         return self.pose_at_key(i + f)
 
     def direction_at(self, s: float) -> np.ndarray:
-        """Unit translation direction (3,) of the segment containing s (zero for pure rotations)."""
+        """Translation direction of the segment containing a path length.
+
+        Args:
+            s: path length [m].
+
+        Returns:
+            Unit vector (3,) (zero for a pure rotation).
+        """
         i, _ = self._locate(s)
         d = self.positions[i + 1] - self.positions[i]
         n = np.linalg.norm(d)
         return d / n if n > 0 else np.zeros(3)
 
     def sample(self, h: float, *, length: float | None = None):
-        """Poses every h [m] from 0 to ``length`` (default the whole path), end included.
+        """Poses every h [m] from 0 to ``length``, end included.
 
-        Returns a list of ``(s, pos (3,), quat (4,))``; insertion step k is entry k.
+        Args:
+            h: the step [m].
+            length: where to end [m] (None: the whole path).
+
+        Returns:
+            A list of ``(s, pos (3,), quat (4,))``; insertion step k is entry k.
         """
         if not h > 0:
             raise InputError(f"step size must be positive, got {h}", where="h_in")
@@ -140,7 +171,16 @@ class Trajectory:
 
     @classmethod
     def from_model(cls, model, body: str = "object", *, rot_length_scale: float | None = None) -> "Trajectory":
-        """Trajectory of mocap ``body`` through the model's keyframes, in keyframe order."""
+        """Trajectory of a mocap body through the model's keyframes, in keyframe order.
+
+        Args:
+            model: ``mujoco.MjModel``.
+            body: the mocap body's name.
+            rot_length_scale: ρ [m/rad]; None: the body's bounding radius (:func:`body_radius`).
+
+        Returns:
+            The trajectory; InputError when the body is not a mocap body or the keys are too few.
+        """
         mj = mujoco_module()
         bid = mj.mj_name2id(model, mj.mjtObj.mjOBJ_BODY, body)
         if bid < 0:
@@ -158,7 +198,16 @@ class Trajectory:
 
     @classmethod
     def from_scene(cls, scene: Scene, body: str = "object", **kw) -> "Trajectory":
-        """Trajectory of mocap ``body`` in a loaded :class:`Scene` (an InputError names the scene's file)."""
+        """Trajectory of a mocap body in a loaded scene.
+
+        Args:
+            scene: the :class:`~simfab.io.mjcf_load.Scene`.
+            body: the mocap body's name.
+            **kw: as :meth:`from_model`.
+
+        Returns:
+            The trajectory (an InputError names the scene's file).
+        """
         try:
             return cls.from_model(scene.model, body, **kw)
         except InputError as e:
@@ -166,10 +215,19 @@ class Trajectory:
 
 
 def body_radius(model, bid: int) -> float:
-    """Largest distance of a body's geometry from the body frame origin [m]: exact for meshes (an
-    SDF geom: its MuJoCo mesh) and for primitives centred on the body's origin (MuJoCo's bounding
-    radius ``geom_rbound``); |geom pos| + that radius (an upper bound) for an offset primitive.
-    No meshing (the scene loads without trimesh)."""
+    """Largest distance of a body's geometry from the body frame origin [m].
+
+    Exact for meshes (an SDF geom: its MuJoCo mesh) and for primitives centred on the body's origin
+    (MuJoCo's bounding radius ``geom_rbound``); |geom pos| + that radius (an upper bound) for an
+    offset primitive. No meshing (the scene loads without trimesh).
+
+    Args:
+        model: ``mujoco.MjModel``.
+        bid: the body's index.
+
+    Returns:
+        The radius [m].
+    """
     mj = mujoco_module()
     G = mj.mjtGeom
     r = 0.0

@@ -1,41 +1,19 @@
 """Projected Newton's method with a backtracking (Armijo) line search.
 
-Generic over the objective: the caller supplies ``fun(x, need_hessian) -> (f, g, H)`` with a
-positive semi-definite sparse Hessian (e.g. per-element PSD-projected FEM Hessians plus a
-barrier term). Each iteration solves ``H_ff dx_f = -g_f`` on the free dofs with a sparse
-Cholesky factorization (:class:`simfab.solve.linear.SPDSolver`, symbolic analysis reused while
-the pattern is unchanged), then backtracks along ``dx`` until the Armijo sufficient-decrease
-condition holds at an admissible point.
+Generic over the objective: ``fun(x, need_hessian) -> (f, g, H)`` with a positive semi-definite
+sparse Hessian. Each iteration solves ``H_ff dx_f = -g_f`` on the free dofs with a sparse Cholesky
+factorization (:class:`simfab.solve.linear.SPDSolver`), then backtracks along ``dx`` until the Armijo
+condition holds at an admissible point. Exact-first steps: ``H`` may be a pair ``(H_exact, H_psd)``
+(each possibly a callable building it on demand); the exact one is used while it factorizes.
 
-Exact-first steps: ``fun`` may return the Hessian as a pair ``(H_exact, H_psd)`` (either may be
-a zero-argument callable building it on demand, so that it is only assembled when needed). The exact
-Hessian is then factorized first; when its Cholesky factorization succeeds it is positive definite and the step is
-an exact Newton step (quadratic convergence also where element-wise PSD projection would only
-converge linearly, e.g. large rotations); otherwise the projected Hessian is used (with
-``retry_exact=False`` for the rest of the solve).
+Feasibility hooks: ``max_step(x, dx) -> alpha_max`` caps the step before the line search;
+``admissible(x) -> bool`` rejects trial points (as does an objective of +inf or NaN).
 
-Feasibility hooks (used by barrier-based contact):
-
-- ``max_step(x, dx) -> alpha_max`` caps the step before the line search (e.g. conservative
-  advancement so that no vertex crosses an obstacle within the step);
-- ``admissible(x) -> bool`` rejects trial points (e.g. an inverted element); an objective
-  value of ``+inf`` or NaN is rejected as well.
-
-Convergence (checked at every iterate, on the free dofs only):
-
-1. gradient: ``||g_f||_inf <= grad_tol * scale`` where ``scale = options.grad_scale`` when given
-   (absolute, in the units of ``g``), otherwise ``||g_f(x0)||_inf`` (a relative reduction of
-   the starting residual; a start with ``g_f(x0) == 0`` is converged at once);
-2. Newton step: ``||dx_f||_inf <= step_tol * x_scale`` with ``x_scale = options.x_scale`` when
-   given, otherwise ``max(||x0_f||_inf, 1)`` in the units of ``x`` - the Newton step estimates
-   the distance to the minimizer, so once it is at round-off level nothing further is gained;
-3. round-off: the predicted decrease ``-g.dx`` is below ``roundoff * max(|f|, tiny)`` (so ``f``
-   cannot resolve it; trial steps are then accepted when they reduce ``||g_f||_inf``) and no
-   step along the Newton direction reduces the gradient norm either.
-
-Anything else - ``max_iter`` reached, or a line search that fails with a meaningful predicted
-decrease left - raises :class:`simfab.errors.ConvergenceError` naming the iteration count and
-the residual. A result that did not converge is never returned.
+Convergence, on the free dofs: ``||g_f||_inf <= grad_tol * scale`` (``options.grad_scale``, else the
+start's residual); or ``||dx_f||_inf <= step_tol * x_scale``; or the predicted decrease is below
+round-off and no step along the Newton direction reduces the gradient norm. Anything else raises
+:class:`simfab.errors.ConvergenceError` naming the iteration count and the residual; a result that
+did not converge is never returned. The criteria in full: docs/methods.md, "simfab.solve.newton".
 """
 
 from __future__ import annotations
