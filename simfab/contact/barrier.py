@@ -71,8 +71,9 @@ def point_barrier(dist: np.ndarray, grad_dist: np.ndarray, hess_dist: np.ndarray
                   *, psd: bool = True):
     """Barrier energy and per-point derivatives from distances and their derivatives.
 
-    dist : (k,) d_j [m]; grad_dist : (k, dim); hess_dist : (k, dim, dim) [1/m] or None;
-    dhat : activation distance [m], a scalar or one per point (k,)
+    Args:
+        dist: (k,) d_j [m]; grad_dist : (k, dim); hess_dist : (k, dim, dim) [1/m] or None;
+        dhat: activation distance [m], a scalar or one per point (k,)
     Returns (B [J], g (k, dim) [N], H (k, dim, dim) [N/m] or None), H PSD-projected if ``psd``.
     """
     if len(dist) and (dist.min() <= 0.0 or np.any(dist >= dhat)):  # not all active: general route

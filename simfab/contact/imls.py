@@ -131,9 +131,11 @@ class ImlsEval:
     """IMLS evaluated at k query points (world frame).
 
     psi  : (k,) [m], > 0 inside O
-    grad : (k, dim) d psi / d x [-]
-    hess : (k, dim, dim) d2 psi / d x2 [1/m] (zeros when not requested)
-    near : (k,) bool, False where no sample lies within the kernel radius (field undefined there)
+
+    Args:
+        grad: (k, dim) d psi / d x [-]
+        hess: (k, dim, dim) d2 psi / d x2 [1/m] (zeros when not requested)
+        near: (k,) bool, False where no sample lies within the kernel radius (field undefined there)
     """
 
     psi: np.ndarray
@@ -147,7 +149,8 @@ class ImlsField:
     """IMLS field of a rigid object in its body frame (immutable model data + a cell grid of
     neighbour lists).
 
-    vertices : (n, dim) body-frame surface samples [m]
+    Args:
+        vertices: (n, dim) body-frame surface samples [m]
     normals  : (n, dim) unit outward normals
     sigma    : Gaussian width [m]
     radius   : kernel truncation radius [m]
@@ -242,7 +245,8 @@ def build_imls(
 ) -> ImlsField:
     """Build the IMLS field of O from body-frame samples.
 
-    vertices : (n, dim) [m]; normals : (n, dim), normalized here (outward).
+    Args:
+        vertices: (n, dim) [m]; normals : (n, dim), normalized here (outward).
     sigma    : kernel width [m]; default ``spacing`` (O's mean edge length), or when that is None
                :func:`default_sigma` of the samples.
     cutoff_sigmas : truncation radius in sigmas.
@@ -418,7 +422,8 @@ def body_frame(points, pose=None) -> np.ndarray:
 def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
     """Evaluate the IMLS field at world points in one Warp launch.
 
-    points : (k, dim) world positions [m]
+    Args:
+        points: (k, dim) world positions [m]
     pose   : O's pose, world x = R x_body + p: None, (R (3,3), p (3,)) or (pos (3,), quat_wxyz (4,))
     hessian : compute Hessians; ``hessian_band`` [m] limits them to points with psi > -hessian_band
         (others get zeros), which is all a barrier with activation distance d_hat needs.

@@ -102,35 +102,36 @@ def shape_functions(L: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
 class P2Model(MeshModel):
     """Quadratic simplicial FEM discretization of an elastic body (immutable), affine elements.
 
-    dim : 2 (6-node triangles, plane strain) or 3 (10-node tetrahedra)
-    rest : (n, dim) float64 [m] rest node positions: the corners (``n_corners`` first), then the
-        edge midpoints
-    elements : (m, k) int32 node indices, k = 6 / 10, local order in the module docstring,
-        positively oriented corners
-    n_corners : number of corner nodes (the linear mesh's vertices)
-    edges : (n - n_corners, 2) int32 corner pairs (sorted): node n_corners + i is edges[i]'s midpoint
-    corner_elements : (m, dim+1) int32 the linear simplices (= elements[:, :dim+1])
-    Dm_inv : (m, dim, dim) float64 [1/m] inverse rest edge matrix of the linear simplex; the
-        element map is affine, so this is the inverse Jacobian at every quadrature point
-    volume : (m,) float64 [m^3] rest volume; 2D: triangle area * thickness
-    degree : polynomial degree the quadrature rule integrates exactly (see :data:`RULES`)
-    qp_bary : (nq, dim+1) float64 quadrature points in barycentric coordinates
-    qp_weight : (m, nq) float64 [m^3] quadrature weights: volume * rule weight
-    grad_N : (m, nq, k, dim) float64 [1/m] rest gradient of each shape function at each
-        quadrature point: F(X_q) = sum_a x_a (x) grad_N[e, q, a]
-    mu, lam : (m,) float64 [Pa] Lame parameters
-    thickness : [m] out-of-plane extent of a 2D body; 1.0 for 3D
-    boundary_facets : 2D (f, 3) quadratic boundary edges [v0, v1, m01]; 3D (f, 6) quadratic boundary
-        triangles [v0, v1, v2, m01, m12, m20]; corners oriented like FemModel.boundary_facets
-        (2D: body on the left; 3D: counter-clockwise seen from outside)
-    boundary_subfacets : linear pieces of the boundary facets with the same orientation: 2D
-        (2f, 2) segments [v0, m01], [m01, v1]; 3D (4f, 3) triangles [v0, m01, m20], [m01, v1, m12],
-        [m20, m12, v2], [m01, m12, m20] (facet i's pieces are rows 2i.. / 4i..)
-    boundary_vertices : (b,) int32 sorted boundary nodes (corners and midpoints)
-    pattern : :class:`HessianPattern` of the (n*dim, n*dim) Hessian (node pairs sharing an element)
-    material : the material the Lame parameters came from (None if given per element)
-    device : Warp device the kernels run on
-    linear : the linear :class:`FemModel` on the corner mesh this model was lifted from
+    Args:
+        dim: 2 (6-node triangles, plane strain) or 3 (10-node tetrahedra)
+        rest: (n, dim) float64 [m] rest node positions: the corners (``n_corners`` first), then the
+            edge midpoints
+        elements: (m, k) int32 node indices, k = 6 / 10, local order in the module docstring,
+            positively oriented corners
+        n_corners: number of corner nodes (the linear mesh's vertices)
+        edges: (n - n_corners, 2) int32 corner pairs (sorted): node n_corners + i is edges[i]'s midpoint
+        corner_elements: (m, dim+1) int32 the linear simplices (= elements[:, :dim+1])
+        Dm_inv: (m, dim, dim) float64 [1/m] inverse rest edge matrix of the linear simplex; the
+            element map is affine, so this is the inverse Jacobian at every quadrature point
+        volume: (m,) float64 [m^3] rest volume; 2D: triangle area * thickness
+        degree: polynomial degree the quadrature rule integrates exactly (see :data:`RULES`)
+        qp_bary: (nq, dim+1) float64 quadrature points in barycentric coordinates
+        qp_weight: (m, nq) float64 [m^3] quadrature weights: volume * rule weight
+        grad_N: (m, nq, k, dim) float64 [1/m] rest gradient of each shape function at each
+            quadrature point: F(X_q) = sum_a x_a (x) grad_N[e, q, a]
+        mu, lam: (m,) float64 [Pa] Lame parameters
+        thickness: [m] out-of-plane extent of a 2D body; 1.0 for 3D
+        boundary_facets: 2D (f, 3) quadratic boundary edges [v0, v1, m01]; 3D (f, 6) quadratic boundary
+            triangles [v0, v1, v2, m01, m12, m20]; corners oriented like FemModel.boundary_facets
+            (2D: body on the left; 3D: counter-clockwise seen from outside)
+        boundary_subfacets: linear pieces of the boundary facets with the same orientation: 2D
+            (2f, 2) segments [v0, m01], [m01, v1]; 3D (4f, 3) triangles [v0, m01, m20], [m01, v1, m12],
+            [m20, m12, v2], [m01, m12, m20] (facet i's pieces are rows 2i.. / 4i..)
+        boundary_vertices: (b,) int32 sorted boundary nodes (corners and midpoints)
+        pattern: :class:`HessianPattern` of the (n*dim, n*dim) Hessian (node pairs sharing an element)
+        material: the material the Lame parameters came from (None if given per element)
+        device: Warp device the kernels run on
+        linear: the linear :class:`FemModel` on the corner mesh this model was lifted from
     """
 
     n_corners: int
@@ -237,8 +238,9 @@ def to_p2(model: FemModel, *, degree: int | None = None) -> P2Model:
     """The P2 counterpart of a linear model: same corners, material, thickness and device, one
     midpoint node per edge.
 
-    degree : quadrature degree, one of :data:`RULES` for the dimension (default
-        :data:`DEFAULT_DEGREE`)
+    Args:
+        degree: quadrature degree, one of :data:`RULES` for the dimension (default
+            :data:`DEFAULT_DEGREE`)
     """
     if getattr(model, "element_order", None) != 1:
         raise InputError(f"to_p2 needs a linear FemModel, got {type(model).__name__}", where="model")

@@ -52,10 +52,11 @@ class Hessian(IntEnum):
 class ElementKernels:
     """The Warp kernels of one element order (argument lists in the module docstring).
 
-    grad_dtype : dim -> Warp vector type of one element's nodal gradient (length k d)
-    geometry_dtype : dim -> Warp type of the entries of ``model.element_geometry()[0]``
-    split_elements : dim -> CPU meshes of that dimension with at least this many elements run their
-        Hessian launches as two halves on two threads (None, or a dimension missing: always one launch)
+    Args:
+        grad_dtype: dim -> Warp vector type of one element's nodal gradient (length k d)
+        geometry_dtype: dim -> Warp type of the entries of ``model.element_geometry()[0]``
+        split_elements: dim -> CPU meshes of that dimension with at least this many elements run their
+            Hessian launches as two halves on two threads (None, or a dimension missing: always one launch)
     """
 
     energy: Any

@@ -90,10 +90,9 @@ class SPDSolver:
     per-call overhead of small systems stays below the factorization itself. A new pattern
     triggers a new analysis.
 
-    Parameters
-    ----------
-    backend : "cholmod" | "splu" | "auto"
-        "auto" uses CHOLMOD when cvxopt is importable, else SciPy's SuperLU.
+    Args:
+        backend: "cholmod" | "splu" | "auto"
+            "auto" uses CHOLMOD when cvxopt is importable, else SciPy's SuperLU.
 
     Attribute ``timer``: None, or an object with ``timed(key)`` returning a context manager (e.g.
     :class:`simfab.coupling.timing.Timer`); each numeric factorization is then timed under

@@ -88,14 +88,15 @@ class NewtonOptions:
 class NewtonResult:
     """Outcome of a converged :func:`minimize`.
 
-    x : (N,) float64 minimizer (fixed dofs equal to x0)
-    energy : objective value at x
-    grad_norm : ||g_f(x)||_inf on the free dofs
-    iterations : Newton iterations taken (linear solves)
-    converged : always True for a returned result (non-convergence raises)
-    reason : which criterion stopped the iteration ("gradient", "step", "roundoff")
-    history : one dict per iteration: energy, grad_norm, alpha, backtracks, shift
-    exact_failures : exact Hessians offered whose factorization failed (not positive definite)
+    Args:
+        x: (N,) float64 minimizer (fixed dofs equal to x0)
+        energy: objective value at x
+        grad_norm: ||g_f(x)||_inf on the free dofs
+        iterations: Newton iterations taken (linear solves)
+        converged: always True for a returned result (non-convergence raises)
+        reason: which criterion stopped the iteration ("gradient", "step", "roundoff")
+        history: one dict per iteration: energy, grad_norm, alpha, backtracks, shift
+        exact_failures: exact Hessians offered whose factorization failed (not positive definite)
     """
 
     x: np.ndarray
@@ -219,26 +220,24 @@ def minimize(
 ) -> NewtonResult:
     """Minimize ``fun`` from ``x0`` by projected Newton with backtracking line search.
 
-    Parameters
-    ----------
-    fun : callable ``fun(x, need_hessian) -> (f, g, H)``
-        ``x`` (N,) float64; ``f`` float (``+inf`` marks an infeasible point); ``g`` (N,) gradient;
-        ``H`` scipy.sparse (N, N) positive semi-definite (PSD-projected) when ``need_hessian``,
-        else may be None. ``H`` may also be a pair ``(H_exact, H_psd)`` of the exact and the
-        PSD-projected Hessian: the exact one is used whenever its Cholesky factorization succeeds
-        (positive definite: exact Newton step, quadratic convergence near a stable minimizer where
-        per-element projection would only give linear convergence), the projected one otherwise.
-    x0 : (N,) array, start point; must be admissible with a finite ``f``.
-    free : (N,) bool mask of unknown dofs; the others stay at ``x0``'s values. None: all free.
-    options : :class:`NewtonOptions`.
-    max_step : ``max_step(x, dx) -> alpha_max`` in (0, 1], the largest feasible step fraction
-        along the full-length direction ``dx`` (zero on fixed dofs).
-    admissible : ``admissible(x) -> bool``; trial points failing it are rejected.
-    solver : an :class:`SPDSolver` to reuse (keeps the symbolic analysis across calls).
+    Args:
+        fun: callable ``fun(x, need_hessian) -> (f, g, H)``
+            ``x`` (N,) float64; ``f`` float (``+inf`` marks an infeasible point); ``g`` (N,) gradient;
+            ``H`` scipy.sparse (N, N) positive semi-definite (PSD-projected) when ``need_hessian``,
+            else may be None. ``H`` may also be a pair ``(H_exact, H_psd)`` of the exact and the
+            PSD-projected Hessian: the exact one is used whenever its Cholesky factorization succeeds
+            (positive definite: exact Newton step, quadratic convergence near a stable minimizer where
+            per-element projection would only give linear convergence), the projected one otherwise.
+        x0: (N,) array, start point; must be admissible with a finite ``f``.
+        free: (N,) bool mask of unknown dofs; the others stay at ``x0``'s values. None: all free.
+        options: :class:`NewtonOptions`.
+        max_step: ``max_step(x, dx) -> alpha_max`` in (0, 1], the largest feasible step fraction
+            along the full-length direction ``dx`` (zero on fixed dofs).
+        admissible: ``admissible(x) -> bool``; trial points failing it are rejected.
+        solver: an :class:`SPDSolver` to reuse (keeps the symbolic analysis across calls).
 
-    Returns
-    -------
-    NewtonResult with ``converged=True``. Raises ConvergenceError otherwise.
+    Returns:
+        NewtonResult with ``converged=True``. Raises ConvergenceError otherwise.
     """
     x = np.array(x0, dtype=np.float64).ravel()
     n = x.size
