@@ -49,8 +49,17 @@ META_COLUMNS = ("run", "key", "status", "message", "seconds", "worker", "outputs
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Address:
-    """Where a value goes: kind "flag" (``--flag``), "toml" (key path) or "mjcf" (tag, name,
-    attr, component indices)."""
+    """Where a swept or fixed value goes.
+
+    Args:
+        text: the address as written in the spec.
+        kind: "flag" (``--flag``), "toml" (a key path of the scene's TOML) or "mjcf" (an MJCF attribute).
+        path: the TOML key path.
+        tag: the MJCF element's tag.
+        name: the MJCF element's name.
+        attr: the MJCF attribute.
+        index: the components of a vector attribute to set (empty: the whole attribute).
+    """
 
     text: str
     kind: str
@@ -62,6 +71,15 @@ class Address:
 
     @classmethod
     def parse(cls, text: str, where: str) -> "Address":
+        """Parse an address.
+
+        Args:
+            text: ``"--flag"``, ``"table.key"`` or ``"tag:name.attr[i,j]"``.
+            where: the file and table, for messages.
+
+        Returns:
+            The address; InputError naming ``where`` when it is malformed.
+        """
         text = str(text).strip()
         if text.startswith("--"):
             return cls(text=text, kind="flag")
@@ -82,8 +100,15 @@ class Address:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Parameter:
-    """One swept parameter: column ``name``, ``address``, its (n,) ``values``, ``unit``, and
-    whether to plot it on a log axis."""
+    """One swept parameter.
+
+    Args:
+        name: its column.
+        address: where its value goes.
+        values: its (n,) values.
+        unit: its unit.
+        log: plot it on a log axis.
+    """
 
     name: str
     address: Address
@@ -94,7 +119,13 @@ class Parameter:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Figure:
-    """A collected figure: column ``name`` = the value at dotted ``path`` in the summary."""
+    """A collected figure.
+
+    Args:
+        name: its column.
+        path: the dotted path of its value in the run's summary.
+        unit: its unit.
+    """
 
     name: str
     path: str
@@ -150,8 +181,22 @@ class SweepTableConfig:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SweepConfig:
-    """A parsed spec (see the module docstring). ``source``: the spec file; ``scene``: resolved
-    base scene file or None; ``fixed``: (address, value) applied to every run."""
+    """A parsed spec (see the module docstring).
+
+    Args:
+        name: the table's and plots' file stem.
+        source: the spec file.
+        command: the command line of every run.
+        scene: the resolved base scene file, or None.
+        combine: "product" or "zip".
+        seed: the runs' seed.
+        keep_outputs: keep each run's folder.
+        fixed: (address, value) applied to every run.
+        parameters: the swept parameters.
+        figures: the collected figures.
+        derived: (column, expression) computed from others.
+        plot: the ``[plot]`` table.
+    """
 
     name: str
     source: Path
@@ -172,7 +217,11 @@ class SweepConfig:
         return tuple(p for p in self.parameters if len(set(map(_canon, p.values))) > 1)
 
     def points(self) -> list[dict]:
-        """The runs' parameter values, [{name: value}], in the order the spec expands them."""
+        """The runs' parameter values, in the order the spec expands them.
+
+        Returns:
+            [{parameter name: value}] (one empty dict without parameters).
+        """
         names = [p.name for p in self.parameters]
         if not names:
             return [{}]
@@ -181,8 +230,16 @@ class SweepConfig:
         return [dict(zip(names, vals)) for vals in itertools.product(*(p.values for p in self.parameters))]
 
     def run_key(self, point: dict, version: str) -> str:
-        """Hash of everything that determines a run: its parameter values, the fixed values,
-        the command, the base scene's content and simfab's ``version`` (16 hex digits)."""
+        """Hash of everything that determines a run.
+
+        Args:
+            point: the run's parameter values.
+            version: simfab's version.
+
+        Returns:
+            16 hex digits over the parameter values, the fixed values, the command, the base scene's
+            content and ``version``.
+        """
         scene = ""
         if self.scene is not None:
             scene = "".join(hashlib.sha256(f.read_bytes()).hexdigest() for f in scene_files(self.scene))
@@ -204,7 +261,14 @@ def _canon(v):
 
 
 def scene_files(scene: Path) -> list[Path]:
-    """The base scene and its companion (a coupling scene is NAME.xml + NAME.toml)."""
+    """The base scene and its companion (a coupling scene is NAME.xml + NAME.toml).
+
+    Args:
+        scene: the base scene file.
+
+    Returns:
+        The scene file, then its companion when it exists.
+    """
     other = scene.with_suffix(".xml" if scene.suffix == ".toml" else ".toml")
     return [scene] + ([other] if other.is_file() else [])
 
@@ -273,7 +337,15 @@ def _ident(name: str, where: str) -> str:
 
 
 def resolve_scene(text: str, base: Path) -> Path:
-    """A scene path from a spec: relative to the spec's folder, else to the bundled scenes/."""
+    """A scene path from a spec.
+
+    Args:
+        text: the ``[sweep] scene`` value.
+        base: the spec's folder.
+
+    Returns:
+        The scene file, relative to the spec's folder, else to the bundled scenes/ (InputError when neither).
+    """
     from simfab._bundled import scenes_dir
 
     for p in (base / text, scenes_dir(text)):
@@ -284,7 +356,14 @@ def resolve_scene(text: str, base: Path) -> Path:
 
 
 def find_spec(text: str) -> Path:
-    """SPEC.toml, or the name of a bundled spec in scenes/sweeps (``cclamp2d_chart``)."""
+    """The spec file.
+
+    Args:
+        text: SPEC.toml, or the name of a bundled spec in scenes/sweeps (``cclamp2d_chart``).
+
+    Returns:
+        Its path (InputError when it is neither).
+    """
     from simfab._bundled import scenes_dir
 
     p = Path(text)

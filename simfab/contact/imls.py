@@ -246,14 +246,20 @@ def build_imls(
     """Build the IMLS field of O from body-frame samples.
 
     Args:
-        vertices: (n, dim) [m]; normals : (n, dim), normalized here (outward).
-    sigma    : kernel width [m]; default ``spacing`` (O's mean edge length), or when that is None
-               :func:`default_sigma` of the samples.
-    cutoff_sigmas : truncation radius in sigmas.
-    weights  : (n,) sample weights (areas); default :func:`density_weights`.
-    area     : O's surface area [m^2] (3D), for the sign of points beyond the kernel radius
-               (:meth:`ImlsField.inside`); 2D: the sample polygon's perimeter by default. Without
-               it (3D) far points are reported outside.
+        vertices: (n, dim) samples [m].
+        normals: (n, dim) outward normals (normalized here).
+        sigma: kernel width [m]; default ``spacing`` (O's mean edge length), or when that is None
+            :func:`default_sigma` of the samples.
+        spacing: the samples' spacing [m] (see ``sigma``).
+        cutoff_sigmas: truncation radius in sigmas.
+        device: Warp device.
+        weights: (n,) sample weights (areas); default :func:`density_weights`.
+        area: O's surface area [m^2] (3D), for the sign of points beyond the kernel radius
+            (:meth:`ImlsField.inside`); 2D: the sample polygon's perimeter by default. Without it (3D)
+            far points are reported outside.
+
+    Returns:
+        The :class:`ImlsField`.
     """
     v = np.asarray(vertices, dtype=np.float64)
     n = np.asarray(normals, dtype=np.float64)

@@ -417,7 +417,16 @@ def _fibonacci(m: int) -> np.ndarray:
 
 
 def build_primitive_field(prims: tuple, dim: int, samples: int = 2000) -> PrimitiveField:
-    """:class:`PrimitiveField` of ``prims`` (body frame; for dim 2 already the z = 0 section)."""
+    """The exact signed-distance field of primitive geoms.
+
+    Args:
+        prims: the primitives (body frame; for dim 2 already the z = 0 section, :func:`section_primitives`).
+        dim: 2 or 3.
+        samples: display samples of the surface.
+
+    Returns:
+        The :class:`PrimitiveField`.
+    """
     v, w = surface_samples(prims, samples, dim)
     feature = min(p.feature() for p in prims)
     return PrimitiveField(primitives=tuple(prims), dim=dim, vertices=v, normals=w, sigma=0.1 * feature)

@@ -20,7 +20,7 @@ from simfab.coupling.points import ContactPoints
 from simfab.coupling.state import Evaluation, StepContext, StepState
 from simfab.coupling.timing import TimedSolver, Timer
 from simfab.fem.elastic import energy, energy_gradient, energy_gradient_hessian
-from simfab.solve.newton import NewtonOptions, minimize
+from simfab.solve.newton import NewtonConfig, minimize
 
 
 class StepObjective:
@@ -52,7 +52,7 @@ class StepObjective:
         self.d_ref = None
         self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
         # P2: the exact Hessian too is assembled on demand (LazyHessian), so that Newton, once it
-        # has stopped offering it (NewtonOptions.retry_exact), assembles the projected one only; the
+        # has stopped offering it (NewtonConfig.retry_exact), assembles the projected one only; the
         # elastic energy and gradient then come from a gradient launch (~1/15 of a Hessian's),
         # reused from the line-search trial at the same positions (_fem: (x, E, gradient))
         self.lazy_exact = cm.fem.element_order == 2
@@ -310,7 +310,7 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n, floor)
-    opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
+    opts = NewtonConfig(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
                          step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=cm.fem.element_order == 1,
                          eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False,
                          exact_first=not (obj.lazy_exact and ctx.exact_failed))

@@ -286,22 +286,30 @@ def modification_hessian(problem: DesignProblem, Jh: np.ndarray) -> np.ndarray:
 
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
                       callback=None, start=None, resume=None) -> DesignResult:
-    """A trust-region SQP on the brief (:func:`simfab.design.sqp.trust_region_sqp`; see the module
-    docstring): one insertion per iteration; returns a :class:`DesignResult` whose ``simulations``
-    counts every insertion (the pre-phase's and the final run as ``couple simulate`` runs the design
-    included) and ``gradient_evaluations`` those that gave gradients. ``seed`` seeds the annealing
-    pre-phase, which runs only when the start gives no direction (:func:`flat_start`: at most
-    PRE_PHASE_ITERATIONS iterations, until a design is in the brief's category; the SQP starts from
-    the best one); otherwise the method is deterministic. ``iterations`` caps the SQP's iterations
-    (default: the brief's, at most MAX_ITERATIONS). ``start``: the design to start from (a correction
-    round's: the trust region then starts at RADIUS_FROM_DESIGN, and a brief's round stops at its first
-    design that meets the corrected brief, :class:`simfab.design.sqp.SQPOptions` ``stop_when_feasible``:
-    the factors were measured at the start and move with the design by more than the objective's
-    further steps would gain; the mesh check decides), default the initial shape. ``resume``: a
-    previous result's ``resume`` (its best design's simulation with gradients); when ``start`` is that
-    design and the problem a brief, the run starts from it re-scored (the round's corrections change
-    the scoring, not the simulation: same held steps and seeded refinement) instead of simulating it
-    again. Raises ConvergenceError when the initial shape cannot be simulated."""
+    """A trust-region SQP on the brief (:func:`simfab.design.sqp.trust_region_sqp`; see the module docstring).
+
+    One insertion per iteration. The annealing pre-phase runs only when the start gives no direction
+    (:func:`flat_start`: at most PRE_PHASE_ITERATIONS iterations, until a design is in the brief's
+    category; the SQP starts from the best one); otherwise the method is deterministic.
+
+    Args:
+        problem: the design problem.
+        iterations: cap of the SQP's iterations (default: the brief's, at most MAX_ITERATIONS).
+        seed: seeds the annealing pre-phase.
+        quiet: no progress log.
+        callback: called with each simulated design's evaluation.
+        start: the design to start from (a correction round's: the trust region then starts at
+            RADIUS_FROM_DESIGN, and a brief's round stops at its first design that meets the corrected
+            brief, ``SQPOptions.stop_when_feasible``); default the initial shape.
+        resume: a previous result's ``resume`` (its best design's simulation with gradients); when
+            ``start`` is that design and the problem a brief, the run starts from it re-scored instead
+            of simulating it again.
+
+    Returns:
+        A :class:`~simfab.design.optimize.DesignResult` whose ``simulations`` counts every insertion
+        (the pre-phase's and the final run included) and ``gradient_evaluations`` those that gave
+        gradients. Raises ConvergenceError when the initial shape cannot be simulated.
+    """
     t0 = time.perf_counter()
     problem = problem.with_settings(hold_steps=True)  # derivatives are at fixed step positions
     H = problem.handles

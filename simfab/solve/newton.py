@@ -31,7 +31,7 @@ Objective = Callable[[np.ndarray, bool], tuple]
 
 
 @dataclass(frozen=True, kw_only=True)
-class NewtonOptions:
+class NewtonConfig:
     """Stopping and line-search parameters of :func:`minimize` (see the module docstring)."""
 
     max_iter: int = 50
@@ -81,7 +81,7 @@ class NewtonOptions:
         }
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
-            raise ValueError(f"invalid NewtonOptions: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
+            raise ValueError(f"invalid NewtonConfig: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
 
 
 @dataclass
@@ -161,7 +161,7 @@ def _free_block(free_idx: np.ndarray, n: int) -> _FreeBlock:
     return fb
 
 
-def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonOptions, try_exact: bool = True):
+def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonConfig, try_exact: bool = True):
     """Newton direction on the free dofs. ``H`` is a PSD sparse matrix, or a pair
     ``(H_exact, H_psd)``: the exact Hessian is tried first (a successful Cholesky factorization
     proves it positive definite, so the step is an exact Newton step: quadratic convergence);
@@ -192,7 +192,7 @@ def _solve_block(solver: SPDSolver, sub: "_FreeBlock", H, rhs: np.ndarray) -> np
     return solver.solve(sub(H), rhs)
 
 
-def _solve_shifted(solver: SPDSolver, H: sp.csr_matrix, rhs: np.ndarray, opts: NewtonOptions):
+def _solve_shifted(solver: SPDSolver, H: sp.csr_matrix, rhs: np.ndarray, opts: NewtonConfig):
     """Solve (H + shift I) dx = rhs for H found not positive definite, with the smallest shift of
     a growing sequence that factorizes. Returns (dx, shift)."""
     diag = np.abs(H.diagonal())
@@ -213,7 +213,7 @@ def minimize(
     x0: np.ndarray,
     *,
     free: np.ndarray | None = None,
-    options: NewtonOptions = NewtonOptions(),
+    options: NewtonConfig = NewtonConfig(),
     max_step: Callable[[np.ndarray, np.ndarray], float] | None = None,
     admissible: Callable[[np.ndarray], bool] | None = None,
     solver: SPDSolver | None = None,
@@ -230,7 +230,7 @@ def minimize(
             per-element projection would only give linear convergence), the projected one otherwise.
         x0: (N,) array, start point; must be admissible with a finite ``f``.
         free: (N,) bool mask of unknown dofs; the others stay at ``x0``'s values. None: all free.
-        options: :class:`NewtonOptions`.
+        options: :class:`NewtonConfig`.
         max_step: ``max_step(x, dx) -> alpha_max`` in (0, 1], the largest feasible step fraction
             along the full-length direction ``dx`` (zero on fixed dofs).
         admissible: ``admissible(x) -> bool``; trial points failing it are rejected.
@@ -340,3 +340,7 @@ def minimize(
 
 def _inf_norm(v: np.ndarray) -> float:
     return float(np.max(np.abs(v))) if v.size else 0.0
+
+
+#: The earlier name (``...Config`` is the package's one suffix for configuration).
+NewtonOptions = NewtonConfig
