@@ -135,10 +135,16 @@ def _evaluate(run: _Run, h: np.ndarray) -> _Evaluated:
 
 
 def nonsmooth_events(signatures: list) -> dict:
-    """How often consecutive simulated designs differ in a discrete feature the gradient does not see:
-    {feature: count} over ``pairs`` consecutive pairs (steady-state index, category, the set of refined
-    facets, the final barrier stiffness kappa, the number of records and the positions of those past
-    the planned steps: the rest search's)."""
+    """How often consecutive simulated designs differ in a discrete feature the gradient does not see.
+
+    Args:
+        signatures: per complete insertion, its discrete features (steady-state index, category, the
+            set of refined facets, the final barrier stiffness kappa, the number of records and the
+            positions of those past the planned steps: the rest search's).
+
+    Returns:
+        {feature: count} over ``pairs`` consecutive pairs (and ``pairs`` itself).
+    """
     out = {k: 0 for k in ("steady_state_index", "category", "refinement", "kappa", "steps", "rest_positions")}
     for a, b in zip(signatures, signatures[1:]):
         for k in out:
@@ -161,13 +167,20 @@ ROOT_BELOW = 1.0
 
 @dataclass(frozen=True, kw_only=True)
 class ConstraintRow:
-    """One finite bound the SQP linearizes: c = sign (v - bound) / scale >= 0 with v = value * correction,
-    or with ``root`` c = sign (sqrt(v) - sqrt(bound)) / sqrt(scale).
+    """One finite bound the SQP linearizes.
 
-    The root is the smooth surrogate of a category bound: a loose grip asks CR = 100 E_ss / E_max <=
-    1e-3 %, and E_ss vanishes quadratically as the seat's overlap closes (the barrier and the elastic
-    energy are quadratic in it), so dCR/dh -> 0 on the way and each linearization asks for a step that
-    is too long by a growing factor; sqrt(CR) is about linear in the overlap."""
+    c = sign (v - bound) / scale >= 0 with v = value * correction, or with ``root``
+    c = sign (sqrt(v) - sqrt(bound)) / sqrt(scale): the smooth surrogate of a category bound (a loose
+    grip's CR <= 1e-3 %: E_ss vanishes quadratically as the seat's overlap closes, so dCR/dh -> 0 on
+    the way; sqrt(CR) is about linear in the overlap).
+
+    Args:
+        name: the figure.
+        sign: +1 for a lower bound, -1 for an upper one.
+        bound: the bound [unit].
+        scale: the violation that counts one [unit].
+        root: linearize in sqrt(v).
+    """
 
     name: str
     sign: float
@@ -176,19 +189,42 @@ class ConstraintRow:
     root: bool = False
 
     def value(self, v: float) -> float:
+        """The row's value at a figure value.
+
+        Args:
+            v: the figure's (corrected) value [unit].
+
+        Returns:
+            c (>= 0 where the bound holds).
+        """
         if self.root:
             return self.sign * (math.sqrt(max(v, 0.0)) - math.sqrt(self.bound)) / math.sqrt(self.scale)
         return self.sign * (v - self.bound) / self.scale
 
     def gradient(self, v: float, g: np.ndarray) -> np.ndarray:
-        """dc/dh from dv/dh ``g``."""
+        """The row's gradient.
+
+        Args:
+            v: the figure's value [unit].
+            g: dv/dh (n_vars,).
+
+        Returns:
+            dc/dh (n_vars,).
+        """
         if self.root:
             return self.sign * g / (2.0 * math.sqrt(v * self.scale)) if v > 0 else np.zeros_like(g)
         return self.sign * g / self.scale
 
 
 def constraint_rows(problem: DesignProblem) -> list:
-    """[:class:`ConstraintRow`]: one row per finite bound (a force's lower bound 0 always holds)."""
+    """The rows of a problem's brief: one per finite bound (a force's lower bound 0 always holds).
+
+    Args:
+        problem: the design problem.
+
+    Returns:
+        [:class:`ConstraintRow`].
+    """
     rows = []
     for name, (lo, hi) in problem.limits.items():
         if name in NOT_DIFFERENTIATED:  # checked on every design (the best is a feasible one), not linearized
@@ -208,12 +244,21 @@ PRE_PHASE_ITERATIONS = 60
 
 
 def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
-    """The start gives the SQP no direction: some constraint row is violated and every violated row's
-    gradient is zero or missing (a part that does not touch the object: no figure depends on its shape),
-    or a coupling-ratio row is violated while the profile ejects (no dip after its peak: CR = 100 %
-    for every shape nearby, its gradient zero, and no linearization of that row can be satisfied)
-    and the ratio could not be continued past the category (:func:`ejecting_ratio`: a path that ends in
-    a pose, pressing harder than the snap before it, as knocker3d_design's clip squeezes the ring)."""
+    """Whether the start gives the SQP no direction.
+
+    Some constraint row is violated and every violated row's gradient is zero or missing (a part that
+    does not touch the object), or a coupling-ratio row is violated while the profile ejects (CR = 100 %
+    for every shape nearby) and the ratio could not be continued past the category
+    (:func:`~simfab.design.figure_gradients.ejecting_ratio`).
+
+    Args:
+        rows: the constraint rows.
+        fg: the start's figure gradients.
+        corrections: {figure: mesh-correction factor}.
+
+    Returns:
+        True when the annealing pre-phase must find a start.
+    """
     violated = [r for r in rows if r.value(fg.values[r.name] * corrections.get(r.name, 1.0)) < 0]
     flat = all(fg.gradients.get(r.name) is None or not np.any(fg.gradients[r.name]) for r in violated)
     ejects = (fg.values.get("category") == "ejects" and not fg.ratio_continued
@@ -222,25 +267,49 @@ def flat_start(rows: list, fg: FigureGradients, corrections: dict) -> bool:
 
 
 def lost_grip(category: str, tight: bool, reached: dict) -> bool:
-    """A design the SQP counts as failed: one that touches nothing once a design touched (``reached``
-    ["contact"]), or, for a tight brief, one whose category is not tight once a tight one was reached.
-    Such a design's figures have no gradient towards the brief (a grip of 0 at a rest point that
-    touches nothing), so a step there ends the descent; its violation alone (the l1 merit) may still
-    look like progress when the step relieved another constraint (a stress bound traded for the grip)."""
+    """Whether the SQP counts a design as failed.
+
+    One that touches nothing once a design touched, or, for a tight brief, one whose category is not
+    tight once a tight one was reached: its figures have no gradient towards the brief, so a step there
+    ends the descent.
+
+    Args:
+        category: the design's category.
+        tight: the brief asks a tight grip.
+        reached: {"contact": bool, "tight": bool} reached so far.
+
+    Returns:
+        True for a failed design.
+    """
     if category == "none" and reached["contact"]:
         return True
     return tight and category != "tight" and reached["tight"]
 
 
 def in_contact(ev: Evaluation) -> bool:
-    """A complete evaluation whose part touched the object (category other than "none")."""
+    """Whether a complete evaluation's part touched the object (category other than "none").
+
+    Args:
+        ev: the evaluation.
+
+    Returns:
+        True in contact.
+    """
     return ev.status == "ok" and ev.figures.get("category") not in (None, "none")
 
 
 def in_category(ev: Evaluation) -> bool:
-    """In contact and within the brief's coupling-ratio bounds (its category: tight, loose), the
-    pre-phase's goal: a design that merely grazes the object (a grip of millinewtons, in the
-    barrier's range only) has gradients too small for a linearization of a newton-sized bound."""
+    """Whether an evaluation is in contact and within the brief's coupling-ratio bounds (the pre-phase's goal).
+
+    A design that merely grazes the object has gradients too small for a linearization of a
+    newton-sized bound.
+
+    Args:
+        ev: the evaluation.
+
+    Returns:
+        True in the brief's category.
+    """
     return in_contact(ev) and all(c.satisfied for c in ev.constraints if c.name == "coupling_ratio")
 
 
@@ -272,9 +341,16 @@ RESTARTS = 2
 
 
 def modification_hessian(problem: DesignProblem, Jh: np.ndarray) -> np.ndarray:
-    """d2E_L/dh2 (n_vars, n_vars), constant: E_L = sum_axes v_a^T M_L v_a over the boundary vertices'
-    displacements v_a (linear in h), so the Hessian is 2 sum_a J_a^T M_L J_a with J_a the rows of dX/dh
-    of the boundary vertices' axis a."""
+    """d2E_L/dh2, constant: E_L = sum_axes v_a^T M_L v_a over the boundary vertices' displacements v_a
+    (linear in h), so the Hessian is 2 sum_a J_a^T M_L J_a with J_a the rows of dX/dh of axis a.
+
+    Args:
+        problem: the design problem.
+        Jh: dX/dh (n*dim, n_vars).
+
+    Returns:
+        (n_vars, n_vars).
+    """
     en = problem.energy
     d = problem.handles.dim
     out = np.zeros((Jh.shape[1], Jh.shape[1]))
