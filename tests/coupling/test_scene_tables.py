@@ -157,3 +157,22 @@ def test_a_mistyped_value_is_refused_naming_the_key(tmp_path):
     with pytest.raises(InputError) as e:
         load_coupling_scene(xml)
     assert str(e.value).startswith(f"{tmp_path / 's.toml'}: [simulation]: refine='no' must be of type `bool`")
+
+
+def test_help_does_not_load_the_table_library():
+    """The scene-table loader's library (msgspec) is imported on first use only: ``--help`` of the
+    commands whose scene files it reads does not load it."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from simfab.cli import main\n"
+            "for argv in (['--help'], ['couple', 'simulate', '--help'], ['couple', 'optimize', '--help'],\n"
+            "             ['sweep', '--help']):\n"
+            "    try:\n"
+            "        main(argv)\n"
+            "    except SystemExit:\n"
+            "        pass\n"
+            "print('msgspec' in sys.modules, 'simfab.io.tables' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split()[-2:] == ["False", "False"]
