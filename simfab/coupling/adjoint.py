@@ -44,17 +44,23 @@ from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class StepSensitivity:
-    """Derivatives of one step's figures with respect to the rest positions X (n, dim) of every node
-    of ``cm.fem`` (P2: corners and edge nodes; :func:`simfab.fem.shape_derivative.linear_rest_derivative`
+    """Derivatives of one step's figures with respect to the rest positions X (n, dim) of every node of
+    ``cm.fem`` (P2: corners and edge nodes; :func:`simfab.fem.shape_derivative.linear_rest_derivative`
     chains them to the linear mesh's vertices).
 
-    s [m], phase: the record's; energy [J/m]: dE/dX; force [N/m]: dF/dX (insertion force,
-    :class:`simfab.coupling.record.StepResult` ``force``); grip [N/m]: dG/dX; stress [Pa/m] and
-    stress_value [Pa]: the averaged von Mises stress's maximum and its (smoothed) derivative, None
-    / NaN without a :class:`StressMeasure`; stable: H_ff was
-    positive definite; supported: every dependence of the step is followed (False: it was solved from
-    an unrecorded state, held fixed); friction_lag_held: the friction's normal forces and normals
-    were held at their values (``SensitivityRecorder(held_lag=True)``, an approximation)."""
+    Args:
+        s: the record's path length [m].
+        phase: the record's phase ("insert" or "remove").
+        energy: dE/dX (n, dim) [J/m].
+        force: dF/dX (n, dim) [N/m] of the insertion force (:class:`simfab.coupling.record.StepResult` ``force``).
+        grip: dG/dX (n, dim) [N/m].
+        stress: the averaged von Mises maximum's (smoothed) derivative [Pa/m], None without a :class:`StressMeasure`.
+        stress_value: that maximum [Pa] (NaN without one).
+        stable: H_ff was positive definite.
+        supported: every dependence of the step is followed (False: solved from an unrecorded state, held fixed).
+        friction_lag_held: the friction's normal forces and normals were held at their values
+            (``SensitivityRecorder(held_lag=True)``, an approximation).
+    """
 
     s: float
     phase: str
@@ -171,14 +177,17 @@ def _rows(pts: ContactPoints, rows: np.ndarray) -> ContactPoints:
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class StressMeasure:
-    """The stress figure of a step: max_e (A sigma_vm)_e with A (p, p) the row-stochastic averaging
-    over a critical distance of the per-point stresses of :func:`simfab.fem.shape_derivative.von_mises`
-    (linear: per element, :func:`simfab.design.stress.averaging_matrix`; P2: per quadrature point,
-    element-major, as :func:`simfab.design.stress.p2_averaged_von_mises` averages them), held fixed:
-    its dependence on X, through volumes and which points lie within the radius, is not
-    differentiated. Its gradient is that of the log-sum-exp T log sum_e exp((A sigma)_e / T) at
-    T = ``temperature_rel`` * max (the softmax-weighted element gradients; -> the max's gradient
-    where one element dominates); the value reported is the exact maximum."""
+    """The stress figure of a step: max_e (A sigma_vm)_e, A the row-stochastic averaging over a critical
+    distance of the per-point stresses of :func:`simfab.fem.shape_derivative.von_mises`.
+
+    A is held fixed (its dependence on X is not differentiated). The gradient is that of the log-sum-exp
+    T log sum_e exp((A sigma)_e / T) at T = ``temperature_rel`` * max; the value reported is the exact maximum.
+
+    Args:
+        averaging: A (p, p) (linear: per element, :func:`simfab.design.stress.averaging_matrix`; P2: per
+            quadrature point, element-major).
+        temperature_rel: the smooth maximum's temperature relative to the maximum.
+    """
 
     averaging: object
     temperature_rel: float = 0.02
@@ -500,15 +509,18 @@ def _depends(link: StepLink, lin: StepLinearization) -> bool:
 
 
 class SensitivityRecorder:
-    """Collects a :class:`StepSensitivity` per kept step of a run: pass as ``simulate(...,
-    recorder=...)`` (it receives each kept record with the converged state it was recorded at).
-    ``insert`` and ``remove``: the sensitivities of the run's insertion and removal records, in order.
+    """Collects a :class:`StepSensitivity` per kept step of a run: pass as ``simulate(..., recorder=...)``.
 
-    Each record's sensitivity is computed when it is kept, at its start held fixed; where steps depend
-    on their start (friction anchors, a pin), reading ``insert`` / ``remove`` first runs the backward
-    pass (:meth:`finish`): the right-hand sides lambda_k^T dR_k/dx_(k-1) of every later record are
-    solved at each earlier one in turn, and their contributions added (one more assembly and
-    factorization per step passed through)."""
+    ``insert`` and ``remove``: the sensitivities of the run's insertion and removal records, in order.
+    Each record's sensitivity is computed when it is kept, at its start held fixed; where steps depend on
+    their start (friction anchors, a pin), reading ``insert`` / ``remove`` first runs the backward pass
+    (:meth:`finish`): the right-hand sides of every later record are solved at each earlier one in turn.
+
+    Args:
+        cm: the coupling model of the run.
+        stress: the stress figure to differentiate too, or None.
+        held_lag: hold the friction's normal forces and normals fixed (an approximation).
+    """
 
     def __init__(self, cm: CouplingModel, stress: StressMeasure | None = None, *, held_lag: bool = False):
         self.cm, self.stress, self.held_lag = cm, stress, held_lag

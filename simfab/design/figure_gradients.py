@@ -47,8 +47,15 @@ TEMPERATURE_REL = 0.02
 
 
 def handle_jacobian(handles: Handles) -> np.ndarray:
-    """dX/dh (n * d, n_vars): the rest shape's derivative with respect to the design vector (packed
-    per active handle as [t_j (d), s_j (d)], :func:`simfab.design.handles.pack`)."""
+    """The rest shape's derivative with respect to the design vector.
+
+    Args:
+        handles: the design's handles (packed per active handle as [t_j (d), s_j (d)],
+            :func:`simfab.design.handles.pack`).
+
+    Returns:
+        dX/dh (n * d, n_vars).
+    """
     X, C, W = handles.rest, handles.centers, handles.weights
     n, d = X.shape
     act = np.flatnonzero(handles.active)
@@ -62,14 +69,17 @@ def handle_jacobian(handles: Handles) -> np.ndarray:
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class FigureGradients:
-    """The brief's figures of one insertion with their gradients with respect to h (n_vars,) each:
-    ``values`` {figure: value} (those of :func:`simfab.design.problem.profile_figures`),
-    ``gradients`` {figure: (n_vars,) or None (not differentiated)} (with a target profile also
-    "force_samples" (K, n_vars), the insertion records' path forces' Jacobian); ``supported``: every
-    step's dependence on the ones before is followed (see :mod:`simfab.coupling.adjoint`);
-    ``steady_index``: the steady-state index the figures were read at; ``ratio_continued``: the profile
-    ejects at an end pose and ``values["coupling_ratio"]`` is :func:`ejecting_ratio` (above 100 %), not the
-    profile's 100 %."""
+    """The brief's figures of one insertion with their gradients with respect to h.
+
+    Args:
+        values: {figure: value} (those of :func:`simfab.design.problem.profile_figures`).
+        gradients: {figure: (n_vars,) or None (not differentiated)}; with a target profile also
+            "force_samples" (K, n_vars), the insertion records' path forces' Jacobian.
+        steady_index: the steady-state index the figures were read at.
+        supported: every step's dependence on the ones before is followed.
+        ratio_continued: the profile ejects at an end pose and ``values["coupling_ratio"]`` is
+            :func:`ejecting_ratio` (above 100 %), not the profile's 100 %.
+    """
 
     values: dict
     gradients: dict
@@ -79,9 +89,16 @@ class FigureGradients:
 
 
 def stress_measure(problem: DesignProblem, cm) -> StressMeasure:
-    """The yield constraint's stress (averaged over the brief's radius) on ``cm``'s mesh: per element
-    on linear elements, over the quadrature points on P2 (as :func:`simfab.design.problem.profile_figures`
-    reads it)."""
+    """The yield constraint's stress (averaged over the brief's radius) on a model's mesh: per element on
+    linear elements, over the quadrature points on P2 (as :func:`simfab.design.problem.profile_figures` reads it).
+
+    Args:
+        problem: the design problem (its brief's stress radius).
+        cm: the coupling model.
+
+    Returns:
+        The :class:`~simfab.coupling.adjoint.StressMeasure`.
+    """
     return _stress_measure(cm, problem.brief.stress_radius)
 
 
@@ -91,9 +108,17 @@ def _stress_measure(cm, radius: float) -> StressMeasure:
 
 
 def design_recorder(cm, brief: B.DesignBrief) -> "DeferredRecorder":
-    """The recorder the gradient method runs ``cm``'s insertion with: pass the initial shape's
-    insertion one (``simulate(cm, recorder=...)``) as ``make_problem``'s ``initial_recorder`` and
-    the method reuses that insertion instead of simulating the initial shape again."""
+    """The recorder the gradient method runs a model's insertion with: pass the initial shape's insertion
+    one (``simulate(cm, recorder=...)``) as ``make_problem``'s ``initial_recorder`` and the method
+    reuses that insertion instead of simulating the initial shape again.
+
+    Args:
+        cm: the coupling model.
+        brief: the design brief (its stress radius).
+
+    Returns:
+        A :class:`DeferredRecorder`.
+    """
     return DeferredRecorder(cm, _stress_measure(cm, brief.stress_radius))
 
 
@@ -197,9 +222,18 @@ def needed_records(problem: DesignProblem, res, prof, stresses: np.ndarray) -> n
 
 
 def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> FigureGradients:
-    """:class:`FigureGradients` of an evaluation run with a :class:`DeferredRecorder` (the
-    sensitivities of :func:`needed_records` only) or a :class:`SensitivityRecorder` (every record's)
-    (``evaluate(..., recorder=...)``, status "ok", result kept); Jh: :func:`handle_jacobian`."""
+    """The figure gradients of an evaluated design.
+
+    Args:
+        problem: the design problem.
+        ev: an evaluation run with a :class:`DeferredRecorder` (the sensitivities of
+            :func:`needed_records` only) or a :class:`~simfab.coupling.adjoint.SensitivityRecorder`
+            (``evaluate(..., recorder=...)``, status "ok", result kept).
+        Jh: :func:`handle_jacobian`.
+
+    Returns:
+        The :class:`FigureGradients`.
+    """
     res, rec = ev.result, ev.recorder
     prof = analyze_run(res)
     g, supported = _figure_gradients(problem, res, rec, prof, Jh)
