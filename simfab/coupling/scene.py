@@ -236,9 +236,10 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
 
     comp = _section(cfg, "compliant", where)
     fixed_cfg = _section(cfg, "fixed", where)
-    log = None if quiet else progress_log
+    notes = []  # flags that replace values of the file: logged once the scene is built (an error stays one line)
     options, contact, obj_opts = (
-        tables.load_table(cls, cfg.get(t), table_name=t, file=where, overrides=config_overrides.get(t), log=log)
+        tables.load_table(cls, cfg.get(t), table_name=t, file=where, overrides=config_overrides.get(t),
+                          log=notes.append)
         for t, cls in CONFIG_TABLES.items())
 
     points, elements, thickness = build_compliant(comp, dim, base=toml.parent, where=f"{where} [compliant]")
@@ -280,8 +281,11 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
         half = np.r_[half[:2], np.inf]
     inside = np.all(np.abs(fem.rest - c) <= half + 1e-12, axis=1)
     fixed = np.flatnonzero(inside)
-    return make_coupling_model(name=name, fem=fem, field=fld, path=path, fixed_vertices=fixed, options=options,
-                               object_vertices=disp_v, object_faces=disp_f, contact=contact)
+    cm = make_coupling_model(name=name, fem=fem, field=fld, path=path, fixed_vertices=fixed, options=options,
+                             object_vertices=disp_v, object_faces=disp_f, contact=contact)
+    for note in notes:
+        progress_log(note, quiet=quiet)
+    return cm
 
 
 def primitive_field(sc, body: str, dim: int, samples: int):

@@ -56,7 +56,8 @@ def load_design_scene(scene, *, design: dict | None = None, simulation: dict | N
     table = cfg.get("design", {})
     if not isinstance(table, dict):
         raise InputError("[design] must be a table", where=str(toml))
-    brief = DesignBrief.from_dict(dict(table), where=f"{toml} [design]", log=None if quiet else log,
+    notes = []  # flags that replace values of [design]: logged once the scene is loaded
+    brief = DesignBrief.from_dict(dict(table), where=f"{toml} [design]", log=notes.append,
                                   overrides={k: v for k, v in (design or {}).items() if v is not None})
     cm = load_coupling_scene(xml, overrides={"simulation": simulation or {}, "contact": contact or {}}, device=device,
                              quiet=quiet)
@@ -81,4 +82,6 @@ def load_design_scene(scene, *, design: dict | None = None, simulation: dict | N
             if inside.size == 0:
                 raise InputError(f"site {name!r} contains no vertex of the part", where=f"{toml} [design] keep")
             regions.append(inside)
+    for note in notes:
+        log(note, quiet=quiet)
     return DesignScene(cm=cm, brief=brief, kept_regions=tuple(regions), target=target, xml=xml, toml=toml)

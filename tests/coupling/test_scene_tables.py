@@ -146,6 +146,11 @@ def test_a_flag_over_a_scene_value_is_logged_once(tmp_path, capsys):
     load_coupling_scene(xml, overrides=ov)  # quiet (the default for library calls): nothing
     load_coupling_scene(xml, overrides={"contact": {"friction": Override(0.4, "--friction")}}, quiet=False)
     assert capsys.readouterr().err == ""  # the same value as the file's: nothing replaced
+    # a bad value elsewhere: the error alone (no note before it: bad input is one line)
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace("samples = 50", "samples = 5"))
+    with pytest.raises(InputError, match=r"\[object\]: samples=5"):
+        load_coupling_scene(xml, overrides=ov, quiet=False)
+    assert capsys.readouterr().err == ""
 
 
 def test_a_mistyped_value_is_refused_naming_the_key(tmp_path):
