@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simfab.io.tables import FieldError, load_table
+from simfab.io.tables import FieldError
 
 # ---------------------------------------------------------------------------- tolerances (one place)
 #: Max penetration allowed at the end of every step, relative to h_A (checked, else ConvergenceError).
@@ -136,18 +136,6 @@ class ContactConfig:
                 or not 1 <= self.max_lag_iterations <= 50:
             bad("max_lag_iterations", "must be an integer in [1, 50]")
 
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "[contact]") -> "ContactConfig":
-        """The ``[contact]`` table ``d`` as a config (:func:`from_table`).
-
-        Args:
-            d: the table's keys and values.
-            where: the file and table, for messages.
-
-        Returns:
-            The config.
-        """
-        return from_table(cls, d, where)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -224,18 +212,6 @@ class InsertionConfig:
             if not (isinstance(v, (int, float)) and v > 0):
                 bad(name, "must be a positive number")
 
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "[simulation]") -> "InsertionConfig":
-        """The ``[simulation]`` table ``d`` as a config (:func:`from_table`).
-
-        Args:
-            d: the table's keys and values.
-            where: the file and table, for messages.
-
-        Returns:
-            The config.
-        """
-        return from_table(cls, d, where)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -276,34 +252,6 @@ class ObjectConfig:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**32:
             bad("seed", "must be an integer in [0, 2**32)")
 
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "[object]") -> "ObjectConfig":
-        """The ``[object]`` table ``d`` as a config (:func:`from_table`).
-
-        Args:
-            d: the table's keys and values.
-            where: the file and table, for messages.
-
-        Returns:
-            The config.
-        """
-        return from_table(cls, d, where)
-
-
-def from_table(cls, d: dict, where: str):
-    """``cls`` built from a table ``d`` by :func:`simfab.io.tables.load_table` (kept for callers that
-    hold a table and its location in one string).
-
-    Args:
-        cls: a config class of this module.
-        d: the table's keys and values.
-        where: ``"FILE [table]"`` or ``"[table]"``.
-
-    Returns:
-        The config; an unknown key or a refused value raises InputError naming ``where`` and the key.
-    """
-    file, _, table = where.rpartition(" ")
-    return load_table(cls, d, table_name=table.strip("[]"), file=file or None)
 
 
 #: The earlier names of the config classes (``...Config`` is the package's one suffix for configuration).

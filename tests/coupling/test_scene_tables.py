@@ -7,7 +7,7 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
-from simfab.coupling.config import InsertionOptions, ObjectOptions
+from simfab.coupling.config import InsertionConfig, ObjectConfig
 from simfab.coupling.scene import SCENE_TABLES, bundled_dir, check_tables, load_coupling_scene, read_toml
 from simfab.errors import InputError
 
@@ -18,8 +18,8 @@ def test_every_bundled_scene_passes_the_table_check(toml):
 
 
 def test_each_table_knows_its_configuration_fields():
-    assert SCENE_TABLES["simulation"] == {f.name for f in fields(InsertionOptions)}
-    assert SCENE_TABLES["object"] == {f.name for f in fields(ObjectOptions)}
+    assert SCENE_TABLES["simulation"] == {f.name for f in fields(InsertionConfig)}
+    assert SCENE_TABLES["object"] == {f.name for f in fields(ObjectConfig)}
 
 
 CLAMP = dict(inner_radius=0.0095, width=0.0025, opening_deg=60.0, base_depth=0.004, base_height=0.02)
