@@ -127,3 +127,86 @@ def test_library_never_imports_cli():
            if (b == "simfab.cli" or b.startswith("simfab.cli."))
            and not any(a == m or a.startswith(m + ".") for m in CLI_IMPORTERS)]
     assert not bad, "the library imports the command line:\n" + "\n".join(bad)
+
+
+#: Private names still imported across modules, in files other helpers of issue 40 own this round
+#: ("module: name"); the integrator empties it once their public names have landed.
+PRIVATE_IMPORT_ALLOWLIST = frozenset({
+    "simfab.design.outputs: simfab.coupling.outputs._display_faces",
+    "simfab.design.outputs: simfab.coupling.outputs._object_display",
+    "simfab.crowd.bracket: simfab.crowd.plots._plt",
+})
+
+
+def private_imports(root: Path = ROOT) -> list[str]:
+    """``"importer: module.name"`` for every ``from module import _name`` (and ``module._name`` read
+    through an imported module) across modules of the package at ``root``: a name with one leading
+    underscore that is not itself a module of the importer's own package."""
+    modules = _modules(root)
+    out = []
+    for mod, path in modules.items():
+        package = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
+        aliases = {}
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = package.split(".")
+                    base = base[: len(base) - (node.level - 1)]
+                    origin = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    origin = node.module or ""
+                for a in node.names:
+                    full = f"{origin}.{a.name}"
+                    if full in modules:
+                        aliases[a.asname or a.name] = full
+                    if origin in modules and origin != mod and _private(a.name) and not (
+                            full in modules and full.rpartition(".")[0] == package):
+                        out.append(f"{mod}: {full}")
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    if a.name in modules and a.asname:
+                        aliases[a.asname] = a.name
+            elif isinstance(node, ast.Attribute) and _private(node.attr):
+                chain = _dotted(node.value)
+                target = aliases.get(chain, chain)
+                if target in modules and target != mod and f"{target}.{node.attr}" not in modules:
+                    out.append(f"{mod}: {target}.{node.attr}")
+    return sorted(set(out))
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def _dotted(node) -> str:
+    """``a.b.c`` of a chain of attribute reads on a name, else ""."""
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    return ".".join([node.id, *reversed(parts)]) if isinstance(node, ast.Name) else ""
+
+
+def test_private_imports_are_found(tmp_path):
+    """On a small package: ``from pkg.a import _x``, ``pkg.a._x`` and ``m._x`` (``import pkg.a as m``)
+    are found; a private module of the importer's own package and a dunder are not."""
+    files = {
+        "__init__.py": "",
+        "a.py": "_x = 1\n__version__ = '1'\n",
+        "b.py": "from pkg.a import _x\nfrom pkg.a import __version__\nfrom pkg import _k\n",
+        "c.py": "import pkg.a\nimport pkg.a as m\ny = pkg.a._x + m._x\n",
+        "_k.py": "",
+    }
+    root = tmp_path / "pkg"
+    root.mkdir()
+    for name, text in files.items():
+        (root / name).write_text(text)
+    assert private_imports(root) == ["pkg.b: pkg.a._x", "pkg.c: pkg.a._x"]
+
+
+def test_no_private_name_crosses_modules():
+    found = private_imports()
+    bad = [p for p in found if p not in PRIVATE_IMPORT_ALLOWLIST]
+    assert not bad, "private names imported across modules (give them public names):\n" + "\n".join(bad)
+    stale = sorted(PRIVATE_IMPORT_ALLOWLIST - set(found))
+    assert not stale, "allowlisted private imports that are gone (drop them from the list):\n" + "\n".join(stale)

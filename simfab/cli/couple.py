@@ -130,7 +130,9 @@ def run(args) -> dict:
             raise InputError("give at least two positive factors", where="--factors")
         ov = {} if args.element_order is None else {"simulation": {"element_order": args.element_order}}
         if args.friction is not None:
-            ov["contact"] = {"friction": args.friction}
+            from simfab.io.tables import flag_overrides
+
+            ov["contact"] = flag_overrides({"friction": args.friction})
         from simfab.design.scene import check_brief_table
 
         check_brief_table(args.scene)
@@ -163,7 +165,9 @@ def run(args) -> dict:
         sim["refine"] = False
     if args.element_order is not None:
         sim["element_order"] = args.element_order
-    contact = {} if args.friction is None else {"friction": args.friction}
+    from simfab.io.tables import flag_overrides
+
+    contact = flag_overrides({"friction": args.friction})
     return simulate_scene(args.scene, out=args.out, device=args.device, quiet=args.quiet, simulation=sim,
                           contact=contact)
 
@@ -180,7 +184,8 @@ def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simul
     from simfab.progress import log
 
     dev = check_device(device)
-    cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}, "contact": contact or {}}, device=dev)
+    cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}, "contact": contact or {}}, device=dev,
+                             quiet=quiet)
     check_brief_table(scene)  # the scene's [design] table, though simulating does not read it
     check_start(cm)  # before the log line: bad input gives exactly one line on stderr
     kind = "quadratic elements" if cm.options.element_order == 2 else "elements"

@@ -125,6 +125,7 @@ def add_study_args(s) -> None:
 
 def design_overrides(args) -> dict:
     from simfab.errors import InputError
+    from simfab.io.tables import flag_overrides
 
     d = {}
     for k in ("grip", "yield_stress", "target_profile", "handles", "placement", "iterations", "patience",
@@ -140,7 +141,7 @@ def design_overrides(args) -> dict:
         lo = 0 if k in ("iterations", "correction_rounds", "check_refinements") else 1
         if k in d and d[k] < lo:
             raise InputError(f"must be >= {lo}, got {d[k]}", where=f"--{k.replace('_', '-')}")
-    return d
+    return flag_overrides(d)
 
 
 def simulation_overrides(args) -> dict:
@@ -169,7 +170,9 @@ def run_optimize(args) -> dict:
     if args.revolve_arms < 0 or args.revolve_arms == 1:
         raise InputError(f"must be 0 (a full turn) or >= 2, got {args.revolve_arms}", where="--revolve-arms")
     revolve = (args.revolve_axis, args.revolve_offset, args.revolve_arms) if args.revolve_axis else None
-    contact = {} if args.friction is None else {"friction": args.friction}
+    from simfab.io.tables import flag_overrides
+
+    contact = flag_overrides({"friction": args.friction})
     sim = simulation_overrides(args) | ({} if args.element_order is None else {"element_order": args.element_order})
     return optimize_scene(args.scene, out=args.out, design=design_overrides(args),
                           simulation=sim, contact=contact, device=dev, quiet=args.quiet,

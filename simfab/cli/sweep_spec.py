@@ -1,8 +1,8 @@
 """Sweep specification (``SPEC.toml``): which command, which parameters, which figures.
 
 A spec names a base command (any ``simfab`` subcommand line), optionally a base scene whose
-parameters it varies, the swept parameters with their values, and the figures to collect
-from each run's JSON summary::
+parameters it varies, the swept parameters with their values, and the figures to collect from each
+run's JSON summary (:class:`SweepConfig`; tables read by :func:`simfab.io.tables.load_table`)::
 
     [sweep]
     name = "cclamp2d_chart"                     # table / plot file stem (default: the spec's stem)
@@ -10,33 +10,19 @@ from each run's JSON summary::
     scene = "coupling/cclamp2d.toml"            # relative to the spec, else to the bundled scenes/
     combine = "product"                         # "product" (grid) | "zip" (equal-length lists)
     seed = 0                                    # --seed of every run, and of random parameters
-    keep_outputs = true                         # keep each run's folder under OUT/runs/
-
     [set]                                       # fixed for every run (same addresses as below)
     "material.poisson_ratio" = 0.36
-
     [parameters.youngs_modulus]                 # a column of the table
     set = "material.youngs_modulus"             # where the value goes (default: the name)
-    values = [1.0e9, 2.0e9, 3.5e9]              # or range = [lo, hi] + num = N (+ log = true),
-    unit = "Pa"                                 # or random = "uniform" | "loguniform" |
-                                                #   "integers" | "choice", low/high/values, samples
+    values = [1.0e9, 2.0e9, 3.5e9]              # or range = [lo, hi] + num (+ log), or random = ...
     [collect]                                   # column = dotted path in the run's summary
-    category = "category"
     F_in = { path = "F_in", unit = "N" }
-
     [derived]                                   # columns computed from others (pandas.eval)
-    stiffness_ratio = "youngs_modulus / 3.5e9"
+    [plot]                                      # optional: x, y, figures
 
-    [plot]                                      # optional (defaults: the 1-2 swept parameters,
-    x = "youngs_modulus"                        #   every collected and derived figure)
-    y = "arm_width"
-    figures = ["category", "F_in"]
-
-Addresses (``set``): ``"--flag"`` is a command-line option of the command (``true`` adds a
-bare flag, ``false`` omits it, a list gives several values); ``"table.key"`` a key of the
-scene's TOML (a coupling scene's ``NAME.toml``); ``"tag:name.attr[i,j]"`` an attribute of the
-MJCF element ``<tag name="name">`` of the scene's XML (``numeric:cell_gap`` sets a custom
-numeric's data; ``[i,j]`` sets those components of a vector attribute to the value).
+Addresses (``set``): ``"--flag"`` a command-line option; ``"table.key"`` a key of the scene's TOML;
+``"tag:name.attr[i,j]"`` an attribute of the MJCF element ``<tag name="name">``. The full format:
+docs/methods.md, "simfab.cli.sweep_spec".
 """
 
 from __future__ import annotations
@@ -53,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from simfab.errors import InputError
+from simfab.io.tables import FieldError, check_keys, load_table
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _MJCF = re.compile(r"^(?P<tag>[A-Za-z_]+):(?P<name>[^.\[\]]+)(?:\.(?P<attr>[A-Za-z_]+))?(?:\[(?P<idx>[0-9, ]+)\])?$")
@@ -62,8 +49,17 @@ META_COLUMNS = ("run", "key", "status", "message", "seconds", "worker", "outputs
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Address:
-    """Where a value goes: kind "flag" (``--flag``), "toml" (key path) or "mjcf" (tag, name,
-    attr, component indices)."""
+    """Where a swept or fixed value goes.
+
+    Args:
+        text: the address as written in the spec.
+        kind: "flag" (``--flag``), "toml" (a key path of the scene's TOML) or "mjcf" (an MJCF attribute).
+        path: the TOML key path.
+        tag: the MJCF element's tag.
+        name: the MJCF element's name.
+        attr: the MJCF attribute.
+        index: the components of a vector attribute to set (empty: the whole attribute).
+    """
 
     text: str
     kind: str
@@ -75,6 +71,15 @@ class Address:
 
     @classmethod
     def parse(cls, text: str, where: str) -> "Address":
+        """Parse an address.
+
+        Args:
+            text: ``"--flag"``, ``"table.key"`` or ``"tag:name.attr[i,j]"``.
+            where: the file and table, for messages.
+
+        Returns:
+            The address; InputError naming ``where`` when it is malformed.
+        """
         text = str(text).strip()
         if text.startswith("--"):
             return cls(text=text, kind="flag")
@@ -95,8 +100,15 @@ class Address:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Parameter:
-    """One swept parameter: column ``name``, ``address``, its (n,) ``values``, ``unit``, and
-    whether to plot it on a log axis."""
+    """One swept parameter.
+
+    Args:
+        name: its column.
+        address: where its value goes.
+        values: its (n,) values.
+        unit: its unit.
+        log: plot it on a log axis.
+    """
 
     name: str
     address: Address
@@ -107,7 +119,13 @@ class Parameter:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Figure:
-    """A collected figure: column ``name`` = the value at dotted ``path`` in the summary."""
+    """A collected figure.
+
+    Args:
+        name: its column.
+        path: the dotted path of its value in the run's summary.
+        unit: its unit.
+    """
 
     name: str
     path: str
@@ -115,16 +133,70 @@ class Figure:
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class PlotSpec:
+class PlotConfig:
+    """The ``[plot]`` table.
+
+    Args:
+        x, y: the columns on the plot's axes (None: the swept parameters).
+        figures: the columns plotted (None: every collected and derived figure).
+    """
+
     x: str | None = None
     y: str | None = None
     figures: tuple[str, ...] | None = None
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class SweepSpec:
-    """A parsed spec (see the module docstring). ``source``: the spec file; ``scene``: resolved
-    base scene file or None; ``fixed``: (address, value) applied to every run."""
+class SweepTableConfig:
+    """The ``[sweep]`` table (see the module docstring).
+
+    Args:
+        command: the simfab command line each run executes (a list, or a string split like a shell).
+        name: the table's and plots' file stem (None: the spec's stem).
+        scene: the base scene, relative to the spec or to the bundled scenes (None: none).
+        combine: "product" (grid) or "zip" (equal-length lists).
+        seed: ``--seed`` of every run and of random parameters.
+        keep_outputs: keep each run's folder.
+    """
+
+    command: str | tuple[str | int | float, ...] | None = None
+    name: str | None = None
+    scene: str | None = None
+    combine: str = "product"
+    seed: int = 0
+    keep_outputs: bool = True
+
+    def __post_init__(self):
+        cmd = self.command
+        if not (isinstance(cmd, (str, tuple)) and cmd
+                and (isinstance(cmd, str) or all(isinstance(c, (str, int, float)) for c in cmd))):
+            raise FieldError("command must be a simfab command line, e.g. ['couple', 'simulate', '{scene}']",
+                             key="command", where="[sweep] command")
+        if self.combine not in ("product", "zip"):
+            raise FieldError(f"combine must be 'product' or 'zip', got {self.combine!r}", key="combine",
+                             where="[sweep]")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool):
+            raise FieldError(f"seed must be an integer, got {self.seed!r}", key="seed", where="[sweep]")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SweepConfig:
+    """A parsed spec (see the module docstring).
+
+    Args:
+        name: the table's and plots' file stem.
+        source: the spec file.
+        command: the command line of every run.
+        scene: the resolved base scene file, or None.
+        combine: "product" or "zip".
+        seed: the runs' seed.
+        keep_outputs: keep each run's folder.
+        fixed: (address, value) applied to every run.
+        parameters: the swept parameters.
+        figures: the collected figures.
+        derived: (column, expression) computed from others.
+        plot: the ``[plot]`` table.
+    """
 
     name: str
     source: Path
@@ -137,7 +209,7 @@ class SweepSpec:
     parameters: tuple[Parameter, ...]
     figures: tuple[Figure, ...]
     derived: tuple[tuple[str, str], ...]
-    plot: PlotSpec
+    plot: PlotConfig
 
     @property
     def swept(self) -> tuple[Parameter, ...]:
@@ -145,7 +217,11 @@ class SweepSpec:
         return tuple(p for p in self.parameters if len(set(map(_canon, p.values))) > 1)
 
     def points(self) -> list[dict]:
-        """The runs' parameter values, [{name: value}], in the order the spec expands them."""
+        """The runs' parameter values, in the order the spec expands them.
+
+        Returns:
+            [{parameter name: value}] (one empty dict without parameters).
+        """
         names = [p.name for p in self.parameters]
         if not names:
             return [{}]
@@ -154,8 +230,16 @@ class SweepSpec:
         return [dict(zip(names, vals)) for vals in itertools.product(*(p.values for p in self.parameters))]
 
     def run_key(self, point: dict, version: str) -> str:
-        """Hash of everything that determines a run: its parameter values, the fixed values,
-        the command, the base scene's content and simfab's ``version`` (16 hex digits)."""
+        """Hash of everything that determines a run.
+
+        Args:
+            point: the run's parameter values.
+            version: simfab's version.
+
+        Returns:
+            16 hex digits over the parameter values, the fixed values, the command, the base scene's
+            content and ``version``.
+        """
         scene = ""
         if self.scene is not None:
             scene = "".join(hashlib.sha256(f.read_bytes()).hexdigest() for f in scene_files(self.scene))
@@ -177,7 +261,14 @@ def _canon(v):
 
 
 def scene_files(scene: Path) -> list[Path]:
-    """The base scene and its companion (a coupling scene is NAME.xml + NAME.toml)."""
+    """The base scene and its companion (a coupling scene is NAME.xml + NAME.toml).
+
+    Args:
+        scene: the base scene file.
+
+    Returns:
+        The scene file, then its companion when it exists.
+    """
     other = scene.with_suffix(".xml" if scene.suffix == ".toml" else ".toml")
     return [scene] + ([other] if other.is_file() else [])
 
@@ -246,7 +337,15 @@ def _ident(name: str, where: str) -> str:
 
 
 def resolve_scene(text: str, base: Path) -> Path:
-    """A scene path from a spec: relative to the spec's folder, else to the bundled scenes/."""
+    """A scene path from a spec.
+
+    Args:
+        text: the ``[sweep] scene`` value.
+        base: the spec's folder.
+
+    Returns:
+        The scene file, relative to the spec's folder, else to the bundled scenes/ (InputError when neither).
+    """
     from simfab._bundled import scenes_dir
 
     for p in (base / text, scenes_dir(text)):
@@ -257,7 +356,14 @@ def resolve_scene(text: str, base: Path) -> Path:
 
 
 def find_spec(text: str) -> Path:
-    """SPEC.toml, or the name of a bundled spec in scenes/sweeps (``cclamp2d_chart``)."""
+    """The spec file.
+
+    Args:
+        text: SPEC.toml, or the name of a bundled spec in scenes/sweeps (``cclamp2d_chart``).
+
+    Returns:
+        Its path (InputError when it is neither).
+    """
     from simfab._bundled import scenes_dir
 
     p = Path(text)
@@ -270,12 +376,18 @@ def find_spec(text: str) -> Path:
 
 
 _TOP = {"sweep", "set", "parameters", "collect", "derived", "plot"}
-_SWEEP = {"name", "command", "scene", "combine", "seed", "keep_outputs"}
 _PARAM = {"set", "values", "range", "num", "log", "random", "low", "high", "samples", "unit"}
 
 
-def load_spec(path) -> SweepSpec:
-    """Parse and check a sweep spec file (InputError naming the file and field)."""
+def load_spec(path) -> SweepConfig:
+    """Parse and check a sweep spec file.
+
+    Args:
+        path: SPEC.toml, or the name of a bundled spec (scenes/sweeps).
+
+    Returns:
+        The spec; InputError naming the file, the table and the key when it is refused.
+    """
     path = find_spec(str(path))
     f = str(path)
     try:
@@ -287,20 +399,17 @@ def load_spec(path) -> SweepSpec:
     for k in d:
         if k not in _TOP:
             raise InputError(f"unknown table [{k}] (have: {', '.join(sorted(_TOP))})", where=f)
-    sw = d.get("sweep")
-    if not isinstance(sw, dict):
+    if not isinstance(d.get("sweep"), dict):
         raise InputError("missing the [sweep] table (command = [...])", where=f)
-    for k in sw:
-        if k not in _SWEEP:
-            raise InputError(f"unknown key {k!r} (have: {', '.join(sorted(_SWEEP))})", where=f"{f} [sweep]")
-    cmd = sw.get("command")
+    sw = load_table(SweepTableConfig, d["sweep"], table_name="sweep", file=f)
+    cmd = sw.command
     if isinstance(cmd, str):
         import shlex
 
         cmd = shlex.split(cmd)
-    if not (isinstance(cmd, list) and cmd and all(isinstance(c, (str, int, float)) for c in cmd)):
-        raise InputError("command must be a simfab command line, e.g. ['couple', 'simulate', '{scene}']",
-                         where=f"{f} [sweep] command")
+        if not cmd:
+            raise InputError("command must be a simfab command line, e.g. ['couple', 'simulate', '{scene}']",
+                             where=f"{f} [sweep] command")
     cmd = tuple(str(c) for c in cmd)
     from simfab.cli import SUBCOMMANDS
 
@@ -310,18 +419,13 @@ def load_spec(path) -> SweepSpec:
     if any(c in ("--out", "--json") for c in cmd):
         raise InputError("the sweep sets --out (one folder per run) and reads the summary itself; drop --out/--json",
                          where=f"{f} [sweep] command")
-    scene = resolve_scene(str(sw["scene"]), path.parent) if "scene" in sw else None
+    scene = resolve_scene(sw.scene, path.parent) if sw.scene is not None else None
     if scene is not None and scene.suffix not in (".toml", ".xml"):
         raise InputError(f"the base scene must be a .toml or .xml file, got {scene.name}", where=f"{f} [sweep] scene")
     if scene is not None and "{scene}" not in cmd:
         raise InputError("the command must place the scene: put '{scene}' where the scene path goes",
                          where=f"{f} [sweep] command")
-    combine = sw.get("combine", "product")
-    if combine not in ("product", "zip"):
-        raise InputError(f"combine must be 'product' or 'zip', got {combine!r}", where=f"{f} [sweep]")
-    seed = sw.get("seed", 0)
-    if not isinstance(seed, int) or isinstance(seed, bool):
-        raise InputError(f"seed must be an integer, got {seed!r}", where=f"{f} [sweep]")
+    combine, seed = sw.combine, sw.seed
 
     def address(text, where):
         a = Address.parse(text, where)
@@ -341,9 +445,7 @@ def load_spec(path) -> SweepSpec:
         _ident(name, where)
         if not isinstance(pd, dict):
             pd = {"values": pd}
-        for k in pd:
-            if k not in _PARAM:
-                raise InputError(f"unknown key {k!r} (have: {', '.join(sorted(_PARAM))})", where=where)
+        check_keys(pd, _PARAM, table_name=f"parameters.{name}", file=f)
         vals, log = _values(name, pd, seed, where)
         params.append(Parameter(name=name, address=address(pd.get("set", name), where), values=vals,
                                 unit=str(pd.get("unit", "")), log=log))
@@ -372,21 +474,21 @@ def load_spec(path) -> SweepSpec:
     dup = {c for c in cols if cols.count(c) > 1}
     if dup:
         raise InputError(f"column {sorted(dup)[0]!r} is defined twice", where=f)
-    pl = d.get("plot") or {}
-    for k in pl:
-        if k not in ("x", "y", "figures"):
-            raise InputError(f"unknown key {k!r} (have: figures, x, y)", where=f"{f} [plot]")
+    plot = load_table(PlotConfig, d.get("plot"), table_name="plot", file=f)
     for k in ("x", "y"):
-        if k in pl and pl[k] not in cols:
-            raise InputError(f"{k} = {pl[k]!r} is not a parameter or figure column", where=f"{f} [plot]")
-    figs = pl.get("figures")
-    if figs is not None:
-        bad = [c for c in figs if c not in cols]
+        if getattr(plot, k) is not None and getattr(plot, k) not in cols:
+            raise InputError(f"{k} = {getattr(plot, k)!r} is not a parameter or figure column", where=f"{f} [plot]")
+    if plot.figures is not None:
+        bad = [c for c in plot.figures if c not in cols]
         if bad:
             raise InputError(f"figure {bad[0]!r} is not a collected or derived column", where=f"{f} [plot]")
-    return SweepSpec(
-        name=str(sw.get("name", path.stem)), source=path.resolve(), command=cmd, scene=scene, combine=combine,
-        seed=seed, keep_outputs=bool(sw.get("keep_outputs", True)), fixed=fixed, parameters=tuple(params),
-        figures=tuple(figures), derived=tuple(derived),
-        plot=PlotSpec(x=pl.get("x"), y=pl.get("y"), figures=tuple(figs) if figs is not None else None),
+    return SweepConfig(
+        name=sw.name if sw.name is not None else path.stem, source=path.resolve(), command=cmd, scene=scene,
+        combine=combine, seed=seed, keep_outputs=sw.keep_outputs, fixed=fixed, parameters=tuple(params),
+        figures=tuple(figures), derived=tuple(derived), plot=plot,
     )
+
+
+#: The earlier names of the spec's config types (``...Config`` is the package's one suffix for configuration).
+SweepSpec = SweepConfig
+PlotSpec = PlotConfig

@@ -43,7 +43,15 @@ def _on_active(d: np.ndarray, dhat, term: int, at_zero: float) -> np.ndarray:
 
 
 def barrier(d: np.ndarray, dhat: float) -> np.ndarray:
-    """b(d) [m^2] elementwise; +inf for d <= 0, 0 for d >= dhat."""
+    """The barrier b(d) elementwise.
+
+    Args:
+        d: distances [m].
+        dhat: activation distance [m].
+
+    Returns:
+        b(d) [m^2]; +inf for d <= 0, 0 for d >= dhat.
+    """
     return _on_active(d, dhat, 0, np.inf)
 
 
@@ -71,9 +79,16 @@ def point_barrier(dist: np.ndarray, grad_dist: np.ndarray, hess_dist: np.ndarray
                   *, psd: bool = True):
     """Barrier energy and per-point derivatives from distances and their derivatives.
 
-    dist : (k,) d_j [m]; grad_dist : (k, dim); hess_dist : (k, dim, dim) [1/m] or None;
-    dhat : activation distance [m], a scalar or one per point (k,)
-    Returns (B [J], g (k, dim) [N], H (k, dim, dim) [N/m] or None), H PSD-projected if ``psd``.
+    Args:
+        dist: (k,) distances d_j [m].
+        grad_dist: (k, dim) their gradients [-].
+        hess_dist: (k, dim, dim) their Hessians [1/m], or None (no Hessian).
+        dhat: activation distance [m], a scalar or one per point (k,).
+        kappa: barrier stiffness [N/m].
+        psd: project each point's Hessian block to PSD.
+
+    Returns:
+        (B [J], g (k, dim) [N], H (k, dim, dim) [N/m] or None).
     """
     if len(dist) and (dist.min() <= 0.0 or np.any(dist >= dhat)):  # not all active: general route
         b, db, ddb = barrier(dist, dhat), barrier_gradient(dist, dhat), barrier_hessian(dist, dhat)

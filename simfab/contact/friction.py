@@ -1,32 +1,16 @@
 """Lagged Coulomb friction as an incremental potential (IPC: Li et al. 2020, "Incremental Potential
 Contact", sec. 5), with energy, gradient and Hessian per contact point in one Warp launch.
 
-Per contact point j, with the normal force magnitude lambda_j >= 0 [N] and an orthonormal tangent
-basis T_j (dim, dim - 1) both lagged (held fixed during a Newton solve), the tangential relative
-displacement over the step is u_j = T_j^T dy_j [m], dy_j the displacement of the point relative to
-the object's material point it started the step on. The dissipative potential is
+Per contact point j, with the normal force lambda_j >= 0 [N] and tangent basis T_j lagged (held
+during a Newton solve), u_j = T_j^T dy_j [m] is the tangential slip over the step and
 
     D = sum_j mu lambda_j f0(|u_j|)   [J]
-
-with the C1 mollifier of |u| at the stick-slip transition eps [m]:
-
     f0(y) = -y^3 / (3 eps^2) + y^2 / eps + eps / 3    (y < eps),   f0(y) = y   (y >= eps)
-    f1(y) = f0'(y) = 2 y / eps - y^2 / eps^2           (y < eps),   f1(y) = 1   (y >= eps)
 
-so the friction force -dD/du_j = -mu lambda_j f1(|u_j|) u_j / |u_j| has magnitude mu lambda_j once
-the point slips by more than eps, and is a spring of stiffness 2 mu lambda_j / eps at sticking.
-
-    dD/du_j   = mu lambda_j (f1(y) / y) u_j                                  (y = |u_j|)
-    d2D/du_j2 = mu lambda_j [ (f1'(y) y - f1(y)) / y^3  u_j u_j^T + f1(y) / y  I ]
-    with (f1' y - f1) / y^3 = -1 / (eps^2 y) (y < eps), -1 / y^3 (y >= eps);  f1 / y = 2 / eps - y / eps^2
-    (y < eps), 1 / y (y >= eps).
-
-The Hessian is positive semi-definite without projection: its eigenvalues are f1 / y across u and
-f1' = 2 / eps - 2 y / eps^2 >= 0 (y < eps) or 0 (y >= eps) along u. The derivatives with respect to
-dy are T (d/du) and T (d2/du2) T^T (T fixed: lagged).
-
-Dimensions: one kernel serves 2D and 3D; points are vec3 (z = 0 in 2D) with two tangents t1, t2
-(t2 = 0 in 2D, so u = (t1 . dy, 0)).
+so the friction force has magnitude mu lambda_j once the point slips by more than eps, and is a
+spring of stiffness 2 mu lambda_j / eps at sticking. The Hessian is positive semi-definite without
+projection. One kernel serves 2D and 3D (points as vec3, z = 0 and t2 = 0 in 2D). The derivatives
+in full: docs/methods.md, "simfab.contact.friction".
 """
 
 from __future__ import annotations

@@ -1,33 +1,17 @@
 """Kolluri's implicit moving least squares (IMLS) surface of a rigid object O.
 
-For query point x (in O's body frame), O's surface samples v_i with unit outward normals n_i,
-sample weights a_i (the surface area each sample stands for, mean 1) and Gaussian weights
-phi_i(x) = a_i exp(-|x - v_i|^2 / sigma^2):
+For a query point x (O's body frame), samples v_i with unit outward normals n_i, sample weights a_i
+and Gaussian weights phi_i(x) = a_i exp(-|x - v_i|^2 / sigma^2):
 
     psi(x) = - sum_i n_i . (x - v_i) phi_i(x) / sum_i phi_i(x)
 
-Sign convention: **psi > 0 inside O**, psi < 0 outside, and |psi| approximates the Euclidean
-distance to O's surface within a few sigma of it. The kernel is truncated at ``radius`` (a few
-sigma, default 4 sigma where exp(-16) ~ 1e-7, so the truncation changes psi by ~1e-7 sigma) and
-neighbours are read from lists precomputed per cell of a uniform grid in the body frame; O moves
-rigidly, so query points are mapped into the body frame by the inverse pose and results rotated
-back.
-
-Sample weights: with unevenly spread samples (random, or the vertices of a graded mesh) the
-plain kernel average leans toward the denser side and the error exceeds the sigma^2 / R bound
-of even samples several times; a_i = 1 / rho_i with rho_i = sum_j exp(-|v_i - v_j|^2 / sigma^2)
-the samples' own kernel density (normalized to mean 1) makes each sample stand for its share of
-the surface (:func:`density_weights`; even samples get a_i ~ 1).
-
-A query point with no sample within ``radius`` is "far": the field is not defined there. It
-reports ``near = False``, psi = +-``far_distance`` (a conservative lower bound of its distance to
-O's surface, used by step-size control) with the sign of the side it is on, found from the
-generalized winding number of O's surface (:meth:`ImlsField.inside`: libigl's fast winding
-number of the oriented, area-weighted samples in 3D, of the closed sample polygon in 2D), zero
-gradient and Hessian.
-
-2D objects are curves in the z = 0 plane: samples (n, 2), normals (n, 2) in the plane; the same
-kernel runs with z = 0 and returns 2-component gradients and 2x2 Hessians.
+**psi > 0 inside O**; |psi| approximates the distance to O's surface within a few sigma. The kernel
+is truncated at ``radius`` (4 sigma by default) with neighbour lists per cell of a uniform grid; O
+moves rigidly, so queries are mapped into the body frame. Sample weights a_i = 1 / (kernel density)
+correct unevenly spread samples (:func:`density_weights`). A point with no sample within ``radius``
+is "far": ``near = False``, psi = +-``far_distance`` with the side from the generalized winding
+number (:meth:`ImlsField.inside`), zero derivatives. 2D objects are curves in the z = 0 plane. The
+accuracy notes: docs/methods.md, "simfab.contact.imls".
 """
 
 from __future__ import annotations
@@ -147,9 +131,11 @@ class ImlsEval:
     """IMLS evaluated at k query points (world frame).
 
     psi  : (k,) [m], > 0 inside O
-    grad : (k, dim) d psi / d x [-]
-    hess : (k, dim, dim) d2 psi / d x2 [1/m] (zeros when not requested)
-    near : (k,) bool, False where no sample lies within the kernel radius (field undefined there)
+
+    Args:
+        grad: (k, dim) d psi / d x [-]
+        hess: (k, dim, dim) d2 psi / d x2 [1/m] (zeros when not requested)
+        near: (k,) bool, False where no sample lies within the kernel radius (field undefined there)
     """
 
     psi: np.ndarray
@@ -163,7 +149,8 @@ class ImlsField:
     """IMLS field of a rigid object in its body frame (immutable model data + a cell grid of
     neighbour lists).
 
-    vertices : (n, dim) body-frame surface samples [m]
+    Args:
+        vertices: (n, dim) body-frame surface samples [m]
     normals  : (n, dim) unit outward normals
     sigma    : Gaussian width [m]
     radius   : kernel truncation radius [m]
@@ -258,14 +245,21 @@ def build_imls(
 ) -> ImlsField:
     """Build the IMLS field of O from body-frame samples.
 
-    vertices : (n, dim) [m]; normals : (n, dim), normalized here (outward).
-    sigma    : kernel width [m]; default ``spacing`` (O's mean edge length), or when that is None
-               :func:`default_sigma` of the samples.
-    cutoff_sigmas : truncation radius in sigmas.
-    weights  : (n,) sample weights (areas); default :func:`density_weights`.
-    area     : O's surface area [m^2] (3D), for the sign of points beyond the kernel radius
-               (:meth:`ImlsField.inside`); 2D: the sample polygon's perimeter by default. Without
-               it (3D) far points are reported outside.
+    Args:
+        vertices: (n, dim) samples [m].
+        normals: (n, dim) outward normals (normalized here).
+        sigma: kernel width [m]; default ``spacing`` (O's mean edge length), or when that is None
+            :func:`default_sigma` of the samples.
+        spacing: the samples' spacing [m] (see ``sigma``).
+        cutoff_sigmas: truncation radius in sigmas.
+        device: Warp device.
+        weights: (n,) sample weights (areas); default :func:`density_weights`.
+        area: O's surface area [m^2] (3D), for the sign of points beyond the kernel radius
+            (:meth:`ImlsField.inside`); 2D: the sample polygon's perimeter by default. Without it (3D)
+            far points are reported outside.
+
+    Returns:
+        The :class:`ImlsField`.
     """
     v = np.asarray(vertices, dtype=np.float64)
     n = np.asarray(normals, dtype=np.float64)
@@ -434,7 +428,8 @@ def body_frame(points, pose=None) -> np.ndarray:
 def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
     """Evaluate the IMLS field at world points in one Warp launch.
 
-    points : (k, dim) world positions [m]
+    Args:
+        points: (k, dim) world positions [m]
     pose   : O's pose, world x = R x_body + p: None, (R (3,3), p (3,)) or (pos (3,), quat_wxyz (4,))
     hessian : compute Hessians; ``hessian_band`` [m] limits them to points with psi > -hessian_band
         (others get zeros), which is all a barrier with activation distance d_hat needs.

@@ -1,33 +1,18 @@
 """Exact signed distance of objects made of primitive geoms (sphere, capsule, cylinder, box, torus).
 
-An MJCF sphere meshed into a 320-face polyhedron and then sampled has flat faces up to 1.5% of R
-inside the true sphere, half the indentation of a contact at d = 0.03 R; the IMLS of its samples
-adds a curvature bias of order sigma^2 / R. For an object whose geoms are all primitives the
-contact uses their exact signed distance instead: the same interface as
-:class:`simfab.contact.imls.ImlsField` (``evaluate`` -> ImlsEval with psi > 0 inside, gradient,
-Hessian), defined everywhere (no kernel radius: every point is "near", inside/outside is exact).
+For an object whose geoms are all primitives the contact uses their exact signed distance instead
+of the IMLS of sampled meshes (whose faceting and curvature bias cost accuracy: docs/methods.md,
+"simfab.contact.sdf"): the interface of :class:`simfab.contact.imls.ImlsField` (``evaluate`` ->
+ImlsEval with psi > 0 inside, gradient, Hessian), defined everywhere. Per primitive (local
+q = Q^T (x - c)):
 
-Per primitive (body-frame centre c, rotation Q with columns the geom's axes; local q = Q^T (x - c)):
+- sphere radius r: psi = r - |q|; capsule (half-length h along z): psi = r - |q - (0, 0, clamp(q_z, -h, h))|
+- cylinder: a = |q_xy| - r, b = |q_z| - h, psi = -(|max((a, b), 0)| + min(max(a, b), 0))
+- box half-extents e: u = |q| - e, psi = -(|max(u, 0)| + min(max(u), 0))
+- torus (MuJoCo's ``mujoco.sdf.torus`` plugin, R = radius1, r = radius2): w = (|q_xy| - R, q_z), psi = r - |w|
 
-- sphere radius r: psi = r - |q|
-- capsule radius r, half-length h along local z: psi = r - |q - (0, 0, clamp(q_z, -h, h))|
-- cylinder radius r, half-length h along z: with a = |q_xy| - r, b = |q_z| - h,
-  psi = -(|max((a, b), 0)| + min(max(a, b), 0))
-- box half-extents e: with u = |q| - e, psi = -(|max(u, 0)| + min(max(u), 0))
-- torus major radius R, tube radius r, axis along local z (MuJoCo's ``mujoco.sdf.torus`` plugin
-  geom, ``radius1`` = R, ``radius2`` = r): with w = (|q_xy| - R, q_z), psi = r - |w|
-
-MJCF has no torus geom; a ring described by the SDF plugin (``<geom type="sdf">`` with a
-``mujoco.sdf.torus`` instance) is read here as an exact torus. Meshed and sampled instead (the door
-knocker's ring as a 96 x 24 facet mesh), its facets sit up to 26 um inside the tube and the IMLS
-of the samples resolves them as it converges: the knocker's insertion force still moved 12 % from
-16,000 to 32,000 samples.
-
-A union of geoms takes the largest psi (the union's distance outside, a lower bound of the depth
-inside, exact except near intersections). 2D objects are cross-sections at z = 0: spheres,
-capsules and cylinders whose axis is the body's z become circles, boxes aligned with z rectangles
-(:func:`section_primitives`). The gradient is exact; the Hessian is that of the active primitive's
-distance (zero on flat faces and inside boxes: the distance is piecewise linear there).
+A union of geoms takes the largest psi. 2D objects are cross-sections at z = 0
+(:func:`section_primitives`). The gradient is exact; the Hessian is the active primitive's.
 """
 
 from __future__ import annotations
@@ -432,7 +417,16 @@ def _fibonacci(m: int) -> np.ndarray:
 
 
 def build_primitive_field(prims: tuple, dim: int, samples: int = 2000) -> PrimitiveField:
-    """:class:`PrimitiveField` of ``prims`` (body frame; for dim 2 already the z = 0 section)."""
+    """The exact signed-distance field of primitive geoms.
+
+    Args:
+        prims: the primitives (body frame; for dim 2 already the z = 0 section, :func:`section_primitives`).
+        dim: 2 or 3.
+        samples: display samples of the surface.
+
+    Returns:
+        The :class:`PrimitiveField`.
+    """
     v, w = surface_samples(prims, samples, dim)
     feature = min(p.feature() for p in prims)
     return PrimitiveField(primitives=tuple(prims), dim=dim, vertices=v, normals=w, sigma=0.1 * feature)

@@ -1,67 +1,25 @@
 """Sensitivities of an insertion step's record to A's rest shape X, by the adjoint method.
 
 A converged step's state x(X) solves R(x; X, x_prev) = 0 over the free dofs, R = grad_x (E + B)
-(+ the friction forces, + the rigid-mode pin's gradient), E: the Neo-Hookean energy (linear or P2
-elements), B = kappa sum_j b(d_j(x), dhat_j): the barrier; both depend on X, E through the rest
-geometry, B through the per-point activation distances dhat_j, which are fractions of the rest
-edge lengths at the point, and in 3D through kappa, proportional to the mean edge length. The
-fixed dofs sit at their rest positions, x_fixed = X_fixed. For a figure q(x, X) of the step,
-implicit differentiation of R = 0 gives
+(+ the friction forces, + the rigid-mode pin's gradient), E the Neo-Hookean energy, B the barrier
+(whose activation distances dhat_j follow the rest edge lengths). For a figure q(x, X) of the step
 
     dq/dX = dq/dX|_x - lambda^T dR/dX + [fixed dofs] (dq/dx - J^T lambda)_fixed
             + (-lambda^T dR/dx_prev) dx_prev/dX,
     (J^T)_ff lambda = (dq/dx)_free,   J = dR/dx                          (one back-substitution)
 
-(lambda extended by zeros to the fixed dofs). Without friction J is the exact Hessian H of
-E + B (+ pin) at the converged x, symmetric. The mixed term is never formed: ``lambda^T dR/dX``
-is the derivative of lambda . R with respect to X at fixed x, :func:`simfab.fem.shape_derivative.
-mixed_product` for E and, for B, kappa sum_j (db'/d dhat)_j (grad d_j . lambda_j) d dhat_j/dX (+ its
-kappa part in 3D). P2: derivatives are with respect to every node; ``shape_derivative.
-linear_rest_derivative`` chains them to the linear mesh's vertices (edge nodes at midpoints).
+The mixed term lambda^T dR/dX is never formed (:func:`simfab.fem.shape_derivative.mixed_product`
+for E, the barrier's per point). The dependence on the step's start (the rigid-mode pin's anchor,
+the friction anchors) is followed by a backward pass (:class:`SensitivityRecorder`). With friction
+the converged lag is differentiated as a function of x and X (:class:`_Friction`, SuperLU).
 
-Dependence on the step's start x_prev (the previous record's positions; the rest shape X for
-the first), followed by a backward pass (:class:`SensitivityRecorder`): the rigid-mode pin
-mu/2 |U^T (x - x_prev)|^2 (motions nothing resists yet; U held) and, with friction, the anchors
-c_j = M (y_j(x_prev) - p_a) + p_b the points slip from. The right-hand side
--lambda_k^T dR_k/dx_(k-1) of every later record is solved at each earlier one in turn. A step solved
-from a state that was not recorded (a bisected step, a step solved again after its pin changed)
-holds that state fixed and is marked ``supported = False``.
-
-Friction (:mod:`simfab.coupling.friction`): the lagging iterations converge (to ``lag_tol``) to a
-step whose normal forces lambda_j and normals n_j are those of its own solution, so they are
-differentiated as functions of x and X (lambda_j = -kappa b'(d_j(x); dhat_j(X)), n_j = grad d_j /
-|grad d_j|): J = H + Hf + the non-symmetric terms of :class:`_Friction`, solved with SuperLU. The
-residual difference between the lag the step was solved with and its own solution (up to
-``lag_tol`` of the largest normal force) is not differentiated. Holding lambda_j and n_j fixed
-instead (``held_lag``) drops the force's dependence on the normal force: tens of percent error in
-the force's derivative at mu = 0.3 (``python tools/bench.py sensitivities``).
-
-Figures per step (:class:`StepSensitivity`): the elastic energy E (q = E), the insertion force
-F = u . sum over the fixed dofs of R (the support's reaction along O's translation u: dq/dx =
-J^T v, dq/dX|_x = (dR/dX)^T v with v = u on the fixed dofs) and the grip force
-G = |a|, a_d = 1/2 sum_v |grad_v B|_d (dq/dx = H_B w, w_vd = 1/2 sign(grad_v B)_d a_d / G); with a
-:class:`StressMeasure` also the averaged von Mises stress's maximum (per quadrature point on P2).
-
-One sparse factorization per step (CHOLMOD through :class:`simfab.solve.linear.SPDSolver`, the
-insertion's solver class, its symbolic analysis reused over a run; SuperLU for the non-symmetric
-frictional J) and one back-substitution per figure (3, or 4 with the stress); the backward pass
-assembles and factorizes each step it passes through once more. The exact Hessian is used (not
-Newton's PSD-projected one): at a stable equilibrium H_ff is positive definite; where it is not,
-the step is marked ``stable = False`` and solved with SuperLU. A pinned step is solved as Newton
-solved it (Woodbury on the Hessian with a tiny diagonal regularization), then refined by two
-residual sweeps against the unregularized system.
-
-Not differentiated: the path positions s_k (the planned steps' positions follow A's farthest point
-along the path when ``L_max`` is unset, in jumps of 1/2000 of the path, :func:`simfab.coupling.
-model.default_insertion_length`; the rest search places its records anew for every design).
-Non-smooth events: a constraint point entering or leaving the barrier's range (b is C2 at d = dhat,
-so derivatives stay continuous; with friction a point entering contact starts carrying friction
-with lambda_j from 0, continuous too), contact onset of the part as a whole (the pin's set of
-unresisted motions changes: a different equation, a kink in the profile), refinement points added
-(a new, discrete constraint set: the profile jumps by the discretization error), kappa doubling (a
-jump in B's scale), a friction point's stick-slip transition (C1 mollifier: continuous force,
-jumping stiffness); none is differentiated, the figures' derivatives are those of the branch the
-run took.
+Figures per step (:class:`StepSensitivity`): the elastic energy, the insertion force (the
+support's reaction along O's translation), the grip force and, with a :class:`StressMeasure`,
+the averaged von Mises maximum. One sparse factorization per step (:class:`simfab.solve.linear.SPDSolver`;
+SuperLU for a non-symmetric or unstable J) and one back-substitution per figure. Not differentiated:
+the path positions s_k and the non-smooth events (contact onset, refinement, kappa doubling,
+stick-slip); the derivatives are those of the branch the run took. The full derivation:
+docs/methods.md, "simfab.coupling.adjoint".
 """
 
 from __future__ import annotations
@@ -86,17 +44,23 @@ from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class StepSensitivity:
-    """Derivatives of one step's figures with respect to the rest positions X (n, dim) of every node
-    of ``cm.fem`` (P2: corners and edge nodes; :func:`simfab.fem.shape_derivative.linear_rest_derivative`
+    """Derivatives of one step's figures with respect to the rest positions X (n, dim) of every node of
+    ``cm.fem`` (P2: corners and edge nodes; :func:`simfab.fem.shape_derivative.linear_rest_derivative`
     chains them to the linear mesh's vertices).
 
-    s [m], phase: the record's; energy [J/m]: dE/dX; force [N/m]: dF/dX (insertion force,
-    :class:`simfab.coupling.record.StepResult` ``force``); grip [N/m]: dG/dX; stress [Pa/m] and
-    stress_value [Pa]: the averaged von Mises stress's maximum and its (smoothed) derivative, None
-    / NaN without a :class:`StressMeasure`; stable: H_ff was
-    positive definite; supported: every dependence of the step is followed (False: it was solved from
-    an unrecorded state, held fixed); friction_lag_held: the friction's normal forces and normals
-    were held at their values (``SensitivityRecorder(held_lag=True)``, an approximation)."""
+    Args:
+        s: the record's path length [m].
+        phase: the record's phase ("insert" or "remove").
+        energy: dE/dX (n, dim) [J/m].
+        force: dF/dX (n, dim) [N/m] of the insertion force (:class:`simfab.coupling.record.StepResult` ``force``).
+        grip: dG/dX (n, dim) [N/m].
+        stress: the averaged von Mises maximum's (smoothed) derivative [Pa/m], None without a :class:`StressMeasure`.
+        stress_value: that maximum [Pa] (NaN without one).
+        stable: H_ff was positive definite.
+        supported: every dependence of the step is followed (False: solved from an unrecorded state, held fixed).
+        friction_lag_held: the friction's normal forces and normals were held at their values
+            (``SensitivityRecorder(held_lag=True)``, an approximation).
+    """
 
     s: float
     phase: str
@@ -213,14 +177,17 @@ def _rows(pts: ContactPoints, rows: np.ndarray) -> ContactPoints:
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class StressMeasure:
-    """The stress figure of a step: max_e (A sigma_vm)_e with A (p, p) the row-stochastic averaging
-    over a critical distance of the per-point stresses of :func:`simfab.fem.shape_derivative.von_mises`
-    (linear: per element, :func:`simfab.design.stress.averaging_matrix`; P2: per quadrature point,
-    element-major, as :func:`simfab.design.stress.p2_averaged_von_mises` averages them), held fixed:
-    its dependence on X, through volumes and which points lie within the radius, is not
-    differentiated. Its gradient is that of the log-sum-exp T log sum_e exp((A sigma)_e / T) at
-    T = ``temperature_rel`` * max (the softmax-weighted element gradients; -> the max's gradient
-    where one element dominates); the value reported is the exact maximum."""
+    """The stress figure of a step: max_e (A sigma_vm)_e, A the row-stochastic averaging over a critical
+    distance of the per-point stresses of :func:`simfab.fem.shape_derivative.von_mises`.
+
+    A is held fixed (its dependence on X is not differentiated). The gradient is that of the log-sum-exp
+    T log sum_e exp((A sigma)_e / T) at T = ``temperature_rel`` * max; the value reported is the exact maximum.
+
+    Args:
+        averaging: A (p, p) (linear: per element, :func:`simfab.design.stress.averaging_matrix`; P2: per
+            quadrature point, element-major).
+        temperature_rel: the smooth maximum's temperature relative to the maximum.
+    """
 
     averaging: object
     temperature_rel: float = 0.02
@@ -489,19 +456,6 @@ def step_link(cm: CouplingModel, state: StepState, previous: StepState | None) -
     return StepLink(friction_motion=M, pin=pin, followed=followed, from_rest=prev is None)
 
 
-def step_sensitivity(cm: CouplingModel, state: StepState, phase: str = "insert",
-                     stress: StressMeasure | None = None, solver: SPDSolver | None = None,
-                     link: StepLink | None = None) -> StepSensitivity:
-    """:class:`StepSensitivity` of the converged ``state`` (see the module docstring) at a fixed
-    starting state x_prev (no backward pass: :class:`SensitivityRecorder` adds it); with ``stress``
-    also that of the averaged von Mises stress's maximum (:class:`StressMeasure`); ``solver``: the
-    sparse solver to factorize with (one per run reuses its symbolic analysis); ``link``: the step's
-    dependence on its start (:func:`step_link`; default: as if its start were not recorded)."""
-    _, sens, _ = _step(cm, state, phase, stress, SPDSolver() if solver is None else solver,
-                         step_link(cm, state, None) if link is None else link)
-    return sens
-
-
 def _step(cm, state, phase, stress, solver, link, held_lag=False):
     """(linearization, sensitivity at a fixed start, lambda stack (k, n, dim))."""
     lin = StepLinearization(cm, state, link, solver, held_lag)
@@ -555,15 +509,18 @@ def _depends(link: StepLink, lin: StepLinearization) -> bool:
 
 
 class SensitivityRecorder:
-    """Collects a :class:`StepSensitivity` per kept step of a run: pass as ``simulate(...,
-    recorder=...)`` (it receives each kept record with the converged state it was recorded at).
-    ``insert`` and ``remove``: the sensitivities of the run's insertion and removal records, in order.
+    """Collects a :class:`StepSensitivity` per kept step of a run: pass as ``simulate(..., recorder=...)``.
 
-    Each record's sensitivity is computed when it is kept, at its start held fixed; where steps depend
-    on their start (friction anchors, a pin), reading ``insert`` / ``remove`` first runs the backward
-    pass (:meth:`finish`): the right-hand sides lambda_k^T dR_k/dx_(k-1) of every later record are
-    solved at each earlier one in turn, and their contributions added (one more assembly and
-    factorization per step passed through)."""
+    ``insert`` and ``remove``: the sensitivities of the run's insertion and removal records, in order.
+    Each record's sensitivity is computed when it is kept, at its start held fixed; where steps depend on
+    their start (friction anchors, a pin), reading ``insert`` / ``remove`` first runs the backward pass
+    (:meth:`finish`): the right-hand sides of every later record are solved at each earlier one in turn.
+
+    Args:
+        cm: the coupling model of the run.
+        stress: the stress figure to differentiate too, or None.
+        held_lag: hold the friction's normal forces and normals fixed (an approximation).
+    """
 
     def __init__(self, cm: CouplingModel, stress: StressMeasure | None = None, *, held_lag: bool = False):
         self.cm, self.stress, self.held_lag = cm, stress, held_lag

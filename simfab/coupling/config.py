@@ -1,16 +1,18 @@
 """Configuration of the insertion simulation (keyword-only dataclasses) and the area's tolerances.
 
 Lengths are relative to A's mean edge length ``h_A`` where noted (``*_rel``), so one set of
-defaults works at any scale and resolution.
+defaults works at any scale and resolution. Each config class is one table of a coupling scene's
+TOML, loaded by :func:`simfab.io.tables.load_table` (unknown keys, types, and the ranges its
+``__post_init__`` checks, each error naming the file and table or the flag that gave the value).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
-from simfab.errors import InputError
+from simfab.io.tables import FieldError
 
 # ---------------------------------------------------------------------------- tolerances (one place)
 #: Max penetration allowed at the end of every step, relative to h_A (checked, else ConvergenceError).
@@ -91,24 +93,23 @@ LOOSE_REL = 1e-3
 
 
 @dataclass(frozen=True, kw_only=True)
-class ContactOptions:
+class ContactConfig:
     """Contact between the object O and the part A (scene TOML table ``[contact]``).
 
-    friction : Coulomb coefficient mu >= 0 between O and A [-]; 0 (the default) is frictionless.
-        Printed PLA on PLA or on metal: roughly 0.2-0.5.
-    friction_eps_rel : the stick-slip transition eps of the friction mollifier
-        (:mod:`simfab.contact.friction`) relative to the local boundary edge length at each contact
-        point [-]: below eps of tangential slip over a step a point sticks (a spring of stiffness
-        2 mu lambda / eps), beyond it it slides with the force mu lambda. 3e-3: the snap-fit's contact
-        law stays within 2.5 % of the wedge formula, and Newton needs fewer iterations where points
-        change between sticking and slipping than at 1e-3 (docs/decisions.md).
-    lag_tol : the normal forces and tangent bases are lagged (from the step's start, then from its
-        solution); a step is solved again with the refreshed ones until its normal forces change by
-        less than this fraction of the largest normal force [-]. The friction forces are consistent
-        with the normal forces to this tolerance; 3 % moves the bundled scenes' forces by about 1 %
-        against 1 % and saves a third of the frictional Newton iterations (docs/decisions.md).
-    max_lag_iterations : solves per step at most (the first included); a step whose normal forces
-        still change by more than ``lag_tol`` after them is reported in the run's warnings.
+    Args:
+        friction: Coulomb coefficient mu >= 0 between O and A [-]; 0 (the default) is frictionless.
+            Printed PLA on PLA or on metal: roughly 0.2-0.5.
+        friction_eps_rel: the stick-slip transition eps of the friction mollifier
+            (:mod:`simfab.contact.friction`) relative to the local boundary edge length at each contact
+            point [-]: below eps of tangential slip over a step a point sticks (a spring of stiffness
+            2 mu lambda / eps), beyond it it slides with the force mu lambda (the measured choice of the
+            default: docs/decisions.md).
+        lag_tol: the normal forces and tangent bases are lagged (from the step's start, then from its
+            solution); a step is solved again with the refreshed ones until its normal forces change by
+            less than this fraction of the largest normal force [-]. The friction forces are consistent
+            with the normal forces to this tolerance (the measured choice of the default: docs/decisions.md).
+        max_lag_iterations: solves per step at most (the first included); a step whose normal forces
+            still change by more than ``lag_tol`` after them is reported in the run's warnings.
     """
 
     friction: float = 0.0
@@ -118,7 +119,8 @@ class ContactOptions:
 
     def __post_init__(self):
         def bad(name, why):
-            raise InputError(f"{name}={getattr(self, name)!r} {why}", where="[contact]")
+            v = getattr(self, name)
+            raise FieldError(f"{name}={v!r} {why}", key=name, where="[contact]", flag_message=f"{why}, got {v!r}")
 
         for name in ("friction", "friction_eps_rel", "lag_tol"):
             v = getattr(self, name)
@@ -134,40 +136,38 @@ class ContactOptions:
                 or not 1 <= self.max_lag_iterations <= 50:
             bad("max_lag_iterations", "must be an integer in [1, 50]")
 
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "[contact]") -> "ContactOptions":
-        return from_table(cls, d, where)
 
 
 @dataclass(frozen=True, kw_only=True)
-class InsertionOptions:
+class InsertionConfig:
     """Insertion-simulation parameters (scene TOML table ``[simulation]``).
 
-    h_in : insertion step along the path [m] (path length: translation plus rotation angle times
-        the object's radius); None: ``L_max / steps``.
-    steps : number of steps when ``h_in`` is None.
-    L_max : insertion length [m]; None: until O's centre passes A's farthest point along the
-        insertion direction, or the whole keyframe path if it ends before that.
-    fix_all_axes : fix the fixed region in all axes (default: only along the insertion axis).
-    fixed_axes : the axes the fixed region is held along, e.g. "xz" (must include the insertion
-        axis); None: the insertion axis only (or all with ``fix_all_axes``). Hold an axis for the
-        part's physics (how it is mounted), not for the solver: rigid motions that neither the
-        supports nor the contact resist are pinned by the solver (simfab.coupling.rigid).
-    refine : add interpolated constraint points on boundary edges/faces that cross into O.
-    samples_per_edge : 2D refinement points per boundary edge (paper: 10).
-    face_lattice : 3D refinement: barycentric lattice order per boundary face (order m gives
-        (m+1)(m+2)/2 - 3 points; 4 -> 12).
-    dhat_rel : barrier activation distance / the local boundary edge length at each constraint point
-        (CouplingModel.dhat is the same fraction of the mean edge length h_A, for reference).
-    kappa_rel : initial barrier stiffness kappa = kappa_rel * E * h_A (3D) or E * thickness (2D)
-        [N/m] (the stiffness per node of A's elements); adapted during the run (see simulate).
-    penetration_tol_rel : max penetration / h_A accepted at the end of a step.
-    element_order : 1 (linear triangles / tets, the scene's mesh as it is) or 2 (quadratic: the
-        mesh lifted to 6-node triangles / 10-node tets by :func:`simfab.fem.p2.to_p2`, which do
-        not lock in bending; contact then acts at every boundary node, corners and edge
-        midpoints, and on the linear sub-facets of the quadratic boundary, whose edges, half the
-        element's, set the local d_hat). h_A stays the corner mesh's mean edge length. The
-        rest-shape optimizer needs 1.
+    Args:
+        h_in: insertion step along the path [m] (path length: translation plus rotation angle times
+            the object's radius); None: ``L_max / steps``.
+        steps: number of steps when ``h_in`` is None.
+        L_max: insertion length [m]; None: until O's centre passes A's farthest point along the
+            insertion direction, or the whole keyframe path if it ends before that.
+        fix_all_axes: fix the fixed region in all axes (default: only along the insertion axis).
+        fixed_axes: the axes the fixed region is held along, e.g. "xz" (must include the insertion
+            axis); None: the insertion axis only (or all with ``fix_all_axes``). Hold an axis for the
+            part's physics (how it is mounted), not for the solver: rigid motions that neither the
+            supports nor the contact resist are pinned by the solver (simfab.coupling.rigid).
+        refine: add interpolated constraint points on boundary edges/faces that cross into O.
+        samples_per_edge: 2D refinement points per boundary edge (paper: 10).
+        face_lattice: 3D refinement: barycentric lattice order per boundary face (order m gives
+            (m+1)(m+2)/2 - 3 points; 4 -> 12).
+        dhat_rel: barrier activation distance / the local boundary edge length at each constraint point
+            (CouplingModel.dhat is the same fraction of the mean edge length h_A, for reference).
+        kappa_rel: initial barrier stiffness kappa = kappa_rel * E * h_A (3D) or E * thickness (2D)
+            [N/m] (the stiffness per node of A's elements); adapted during the run (see simulate).
+        penetration_tol_rel: max penetration / h_A accepted at the end of a step.
+        element_order: 1 (linear triangles / tets, the scene's mesh as it is) or 2 (quadratic: the
+            mesh lifted to 6-node triangles / 10-node tets by :func:`simfab.fem.p2.to_p2`, which do
+            not lock in bending; contact then acts at every boundary node, corners and edge
+            midpoints, and on the linear sub-facets of the quadratic boundary, whose edges, half the
+            element's, set the local d_hat). h_A stays the corner mesh's mean edge length. The
+            rest-shape optimizer needs 1.
     """
 
     h_in: float | None = None
@@ -185,7 +185,8 @@ class InsertionOptions:
 
     def __post_init__(self):
         def bad(name, why):
-            raise InputError(f"{name}={getattr(self, name)!r} {why}", where="[simulation]")
+            v = getattr(self, name)
+            raise FieldError(f"{name}={v!r} {why}", key=name, where="[simulation]", flag_message=f"{why}, got {v!r}")
 
         if self.h_in is not None and not (isinstance(self.h_in, (int, float)) and self.h_in > 0):
             bad("h_in", "must be a positive length [m]")
@@ -211,23 +212,21 @@ class InsertionOptions:
             if not (isinstance(v, (int, float)) and v > 0):
                 bad(name, "must be a positive number")
 
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "[simulation]") -> "InsertionOptions":
-        return from_table(cls, d, where)
 
 
 @dataclass(frozen=True, kw_only=True)
-class ObjectOptions:
+class ObjectConfig:
     """The rigid object O (scene TOML table ``[object]``).
 
-    body : name of O's mocap body in the MJCF.
-    samples : surface samples of O for its IMLS field (>= 8); None: 50 in 2D, 2000 in 3D. An
-        object made only of primitive geoms uses their exact signed distance unless ``sigma`` is
-        given (samples then only sets its display samples).
-    sigma : IMLS support radius [m]; None: from the sample spacing (and the exact field for primitives).
-    seed : seed of O's 3D surface sampling (an integer >= 0).
-    rot_length_scale : rho [m/rad], the length a rotation of O along its path counts per radian;
-        None: O's bounding radius (simfab.io.mjcf.Trajectory).
+    Args:
+        body: name of O's mocap body in the MJCF.
+        samples: surface samples of O for its IMLS field (>= 8); None: 50 in 2D, 2000 in 3D. An
+            object made only of primitive geoms uses their exact signed distance unless ``sigma`` is
+            given (samples then only sets its display samples).
+        sigma: IMLS support radius [m]; None: from the sample spacing (and the exact field for primitives).
+        seed: seed of O's 3D surface sampling (an integer >= 0).
+        rot_length_scale: rho [m/rad], the length a rotation of O along its path counts per radian;
+            None: O's bounding radius (simfab.io.mjcf.Trajectory).
     """
 
     body: str = "object"
@@ -238,7 +237,8 @@ class ObjectOptions:
 
     def __post_init__(self):
         def bad(name, why):
-            raise InputError(f"{name}={getattr(self, name)!r} {why}", where="[object]")
+            v = getattr(self, name)
+            raise FieldError(f"{name}={v!r} {why}", key=name, where="[object]", flag_message=f"{why}, got {v!r}")
 
         if not (isinstance(self.body, str) and self.body):
             bad("body", "must be the name of O's mocap body")
@@ -252,17 +252,9 @@ class ObjectOptions:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**32:
             bad("seed", "must be an integer in [0, 2**32)")
 
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "[object]") -> "ObjectOptions":
-        return from_table(cls, d, where)
 
 
-def from_table(cls, d: dict, where: str):
-    """``cls(**d)`` for a keyword-only options dataclass read from a scene table: an unknown key is an
-    InputError naming ``where`` (the file and table); a value its validation rejects raises the
-    class's own InputError, which names the table (the scene loader adds the file)."""
-    known = {f.name for f in fields(cls)}
-    unknown = sorted(set(d) - known)
-    if unknown:
-        raise InputError(f"unknown key(s) {unknown}; known: {sorted(known)}", where=where)
-    return cls(**d)
+#: The earlier names of the config classes (``...Config`` is the package's one suffix for configuration).
+ContactOptions = ContactConfig
+InsertionOptions = InsertionConfig
+ObjectOptions = ObjectConfig

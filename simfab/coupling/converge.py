@@ -57,7 +57,7 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     for f in factors:
         ov = {k: dict(v) for k, v in (overrides or {}).items()}
         ov.setdefault("compliant", {}).update(level_mesh(comp, f))
-        cm = load_coupling_scene(scene, overrides=ov)
+        cm = load_coupling_scene(scene, overrides=ov, quiet=quiet or f != factors[0])  # flags logged once
         t0 = time.perf_counter()
         res = simulate(cm, quiet=quiet)
         dt = time.perf_counter() - t0

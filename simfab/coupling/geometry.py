@@ -51,12 +51,12 @@ def c_clamp_outline(*, inner_radius: float, width: float, opening_deg: float, ba
         raise InputError("c_clamp parameters give a disconnected outline")
     shape = shape.simplify(1e-9 * ro)
     ring = np.asarray(shape.exterior.coords)[:-1]
-    if _signed_area(ring) < 0:
+    if signed_area(ring) < 0:
         ring = ring[::-1]
     return ring
 
 
-def _signed_area(p: np.ndarray) -> float:
+def signed_area(p: np.ndarray) -> float:
     x, y = p[:, 0], p[:, 1]
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
@@ -119,7 +119,7 @@ def section_samples(mesh, n: int) -> tuple[np.ndarray, np.ndarray]:
         raise InputError("the object's cross-section at z = 0 is not a closed curve")
     poly = max(polys, key=lambda p: p.area)
     ring = np.asarray(poly.exterior.coords)[:-1]
-    if _signed_area(ring) < 0:
+    if signed_area(ring) < 0:
         ring = ring[::-1]
     pts = resample_closed(ring, n)
     return pts, curve_normals(pts)

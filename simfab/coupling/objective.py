@@ -20,12 +20,23 @@ from simfab.coupling.points import ContactPoints
 from simfab.coupling.state import Evaluation, StepContext, StepState
 from simfab.coupling.timing import TimedSolver, Timer
 from simfab.fem.elastic import energy, energy_gradient, energy_gradient_hessian
-from simfab.solve.newton import NewtonOptions, minimize
+from simfab.solve.newton import NewtonConfig, minimize
 
 
 class StepObjective:
-    """E_d(x) + kappa sum_j b(d_j(x)) (+ the lagged friction potential D(x)) for a fixed pose of O
-    and a fixed set of constraint points."""
+    """E_d(x) + kappa sum_j b(d_j(x)) (+ the lagged friction potential D(x)) for a fixed pose of O and a
+    fixed set of constraint points; called as Newton's objective ``obj(x, need_hessian)``.
+
+    Args:
+        cm: the coupling model.
+        points: the constraint points on A's boundary.
+        R: O's rotation (dim, dim) at the step's pose.
+        p: O's position (dim,) [m].
+        timer: where the evaluations' time books.
+        kappa: barrier stiffness [N/m] (None: the model's initial one).
+        pin: pin of the rigid motions nothing resists (:class:`simfab.coupling.rigid.Pin`), or None.
+        friction: the lagged friction over the step (:mod:`simfab.coupling.friction`), or None.
+    """
 
     def __init__(self, cm: CouplingModel, points: ContactPoints, R: np.ndarray, p: np.ndarray, timer: Timer,
                  kappa: float | None = None, pin: rigid.Pin | None = None, friction: FrictionLag | None = None):
@@ -52,15 +63,23 @@ class StepObjective:
         self.d_ref = None
         self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
         # P2: the exact Hessian too is assembled on demand (LazyHessian), so that Newton, once it
-        # has stopped offering it (NewtonOptions.retry_exact), assembles the projected one only; the
+        # has stopped offering it (NewtonConfig.retry_exact), assembles the projected one only; the
         # elastic energy and gradient then come from a gradient launch (~1/15 of a Hessian's),
         # reused from the line-search trial at the same positions (_fem: (x, E, gradient))
         self.lazy_exact = cm.fem.element_order == 2
         self._fem = None
 
     def distances(self, x: np.ndarray, hessian: bool):
-        """(d (k,) [m], grad d (k, dim), hess d (k, dim, dim) or None): exact near O, lower bounds
-        (zero derivatives) for points certified farther than the band."""
+        """Distances of the constraint points to O: exact near O, lower bounds (zero derivatives) for points
+        certified farther than the band.
+
+        Args:
+            x: positions (n, dim) [m].
+            hessian: also the distances' Hessians.
+
+        Returns:
+            (d (k,) [m], grad d (k, dim), hess d (k, dim, dim) [1/m] or None).
+        """
         with self.timer.timed("contact_field"):
             y = self.points.positions(x)
             k, dim = len(y), self.dim
@@ -125,7 +144,7 @@ class StepObjective:
         if np.any(d <= 0):
             return np.inf, g.ravel(), H
         with self.timer.timed("barrier"):
-            act, B, gy, Hy = self._barrier(d, gd, hd)
+            act, B, gy, Hy = self.contact_barrier(d, gd, hd)
             gc = self.points.scatter(gy, self.n, rows=act)
             Hf = None
             if self.friction is not None:
@@ -139,10 +158,10 @@ class StepObjective:
                     xc = x.copy()
                     H_exact, H = LazyHessian(self, xc, contact, psd=False), LazyHessian(self, xc, contact)
                 elif H_exact is not None:
-                    self._add_contact(H_exact, contact, psd=False)
+                    self.add_contact(H_exact, contact, psd=False)
                     H = LazyHessian(self, x.copy(), contact)
                 else:
-                    self._add_contact(H, contact, psd=True)
+                    self.add_contact(H, contact, psd=True)
                 self._remember(xf, d, gd, H, E, g)
                 # curvature bound for the step cap: twice the largest |hess d| seen near O, at least
                 # CURVATURE_FLOOR / sigma (a violated bound only costs a rejected line-search trial)
@@ -159,10 +178,18 @@ class StepObjective:
             self.memo = (xf.copy(), out)
         return out
 
-    def _barrier(self, d, gd, hd):
-        """(active point indices (a,), energy [J], gradient (a, dim) [N], exact Hessian blocks
-        (a, dim, dim) [N/m] or None without ``hd``) of the barrier at distances d (k,) with their
-        derivatives (see :func:`simfab.contact.barrier.point_barrier`), in one pass."""
+    def contact_barrier(self, d, gd, hd):
+        """The barrier of the active points (``d < d_hat``), in one pass.
+
+        Args:
+            d: distances (k,) [m].
+            gd: their gradients (k, dim).
+            hd: their Hessians (k, dim, dim), or None.
+
+        Returns:
+            (active point indices (a,), energy [J], gradient (a, dim) [N], exact Hessian blocks
+            (a, dim, dim) [N/m] or None without ``hd``); see :func:`simfab.contact.barrier.point_barrier`.
+        """
         act = np.flatnonzero(d < self.dhat)
         B, gy, Hy = point_barrier(d[act], gd[act], None if hd is None else hd[act], self.dhat[act], self.kappa,
                                   psd=False)
@@ -178,8 +205,14 @@ class StepObjective:
         self.last_fem = (E, g)  # elastic energy and gradient at last_x (reused by the step record)
 
     def value(self, x: np.ndarray) -> float:
-        """Objective value [J] only (no derivatives) at positions x (n, dim); +inf when infeasible
-        (its time books under "line_search")."""
+        """The objective's value only (no derivatives); its time books under "line_search".
+
+        Args:
+            x: positions (n, dim) [m].
+
+        Returns:
+            The value [J]; +inf when infeasible.
+        """
         with self.timer.into("line_search"):
             return self._value(x)
 
@@ -196,9 +229,14 @@ class StepObjective:
         D = float(self.friction.evaluate(x, hessian=False).energy.sum()) if self.friction is not None else 0.0
         return E + self.kappa * float(barrier(d[act], self.dhat[act]).sum()) + D
 
-    def _add_contact(self, H, contact, *, psd: bool) -> None:
-        """Add the barrier Hessian blocks (PSD-projected per point if ``psd``) and the rigid-mode
-        regularization to the FEM Hessian ``H`` (in place)."""
+    def add_contact(self, H, contact, *, psd: bool) -> None:
+        """Add the barrier Hessian blocks and the rigid-mode regularization to a FEM Hessian, in place.
+
+        Args:
+            H: the FEM Hessian (CSR, the model's pattern).
+            contact: (active points (a,), exact barrier blocks (a, dim, dim), friction blocks or None).
+            psd: project each point's barrier block to PSD.
+        """
         act, Hy, Hf = contact  # active points (a,), exact barrier blocks (a, dim, dim), friction blocks or None
         add_point_blocks(self.cm, self.points, H, act, project_psd(Hy) if psd and len(act) else Hy)
         if Hf is not None:  # PSD by construction (simfab.contact.friction)
@@ -206,17 +244,22 @@ class StepObjective:
         regularize(self.cm, H)
 
     def max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
-        """Step cap keeping every constraint point outside O along the whole step (see below).
+        """Step cap keeping every constraint point outside O along the whole step.
 
-        Per point, with d its distance to O, a = grad d . dy and K a curvature bound of the field
-        (from the Hessians near O, see ``__call__``), d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2;
-        the cap is the largest alpha keeping this above t = min(0.1 d, CAP_LAND_DHATS d_hat) (a point far
-        from O may land inside the barrier's range, where the next Newton step sees it). It lets points in
-        contact slide along O (a ~ 0) and move away freely, while approaching points stop short of O.
-        Conservative advancement, alpha <= (d - t) / (L |dy|) with L a Lipschitz bound of psi, is always
-        allowed as well.
-        The line search still rejects any trial point inside O (energy +inf). Its time books under
-        "line_search".
+        Per point, with d its distance to O, a = grad d . dy and K a curvature bound of the field,
+        d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2; the cap is the largest alpha keeping this above
+        t = min(0.1 d, CAP_LAND_DHATS d_hat) (a point far from O may land inside the barrier's range,
+        where the next Newton step sees it). Points in contact slide along O (a ~ 0) and move away freely,
+        approaching points stop short of O. Conservative advancement, alpha <= (d - t) / (L |dy|) with L a
+        Lipschitz bound of psi, is always allowed as well. The line search still rejects any trial point
+        inside O. Its time books under "line_search".
+
+        Args:
+            xf: positions (flat) [m].
+            dx: the Newton direction (flat) [m].
+
+        Returns:
+            alpha_max in (0, 1].
         """
         with self.timer.into("line_search"):
             return self._max_step(xf, dx)
@@ -241,9 +284,15 @@ class StepObjective:
 
 
 class LazyHessian:
-    """PSD-projected (``psd``) or exact Hessian of a :class:`StepObjective` at x, assembled on first
-    call (once); ``contact`` (active points, exact barrier blocks) as found with the exact Hessian,
-    or None to evaluate the distances at x again (deterministic: the same active points and blocks)."""
+    """PSD-projected or exact Hessian of a :class:`StepObjective` at x, assembled on first call (once).
+
+    Args:
+        obj: the objective.
+        x: positions (flat) [m].
+        contact: (active points, exact barrier blocks, friction blocks) as found with the exact Hessian,
+            or None to evaluate the distances at x again (deterministic: the same blocks).
+        psd: the PSD-projected Hessian (else the exact one).
+    """
 
     def __init__(self, obj, x, contact, psd: bool = True):
         self.obj, self.x, self.contact, self.H, self.psd = obj, x, contact, None, psd
@@ -254,24 +303,41 @@ class LazyHessian:
             with obj.timer.timed("assembly"):
                 _, _, H = energy_gradient_hessian(obj.cm.fem, self.x, project_psd=self.psd)
             if self.contact is None:
-                act, _, _, Hy = obj._barrier(*obj.distances(self.x, True))
+                act, _, _, Hy = obj.contact_barrier(*obj.distances(self.x, True))
                 Hf = obj.friction.evaluate(self.x, hessian=True).hessian if obj.friction is not None else None
                 self.contact = (act, Hy, Hf)
             with obj.timer.timed("barrier"):
-                obj._add_contact(H, self.contact, psd=self.psd)
+                obj.add_contact(H, self.contact, psd=self.psd)
             self.H = H
         return self.H
 
 
 def dim_factor(dim: int) -> float:
-    """Bound of the spectral norm of a dim x dim matrix by its max |entry| times this factor."""
+    """Bound of the spectral norm of a dim x dim matrix by its max |entry| times this factor.
+
+    Args:
+        dim: 2 or 3.
+
+    Returns:
+        The factor.
+    """
     return float(dim)
 
 
 def make_objective(cm: CouplingModel, state: StepState, s: float, ctx: StepContext,
                    friction: FrictionLag | None = None) -> StepObjective:
-    """The step objective at path length s over the state's points, with its barrier stiffness, the
-    pin of its unresisted rigid motions anchored at the state's positions and the lagged friction."""
+    """The step objective at path length s over the state's points.
+
+    Args:
+        cm: the coupling model.
+        state: the step's state (points, barrier stiffness, pin basis, positions).
+        s: path length [m].
+        ctx: the run's context (timer).
+        friction: the lagged friction, or None.
+
+    Returns:
+        The objective, with the pin of the unresisted rigid motions anchored at the state's positions.
+    """
     R, p = cm.pose(s)
     pin = rigid.pin_for(cm, state.pin_basis, rigid.motion_basis(cm)[1], state.x)
     return StepObjective(cm, state.points, R, p, ctx.timer, state.kappa, pin, friction)
@@ -279,9 +345,14 @@ def make_objective(cm: CouplingModel, state: StepState, s: float, ctx: StepConte
 
 def adapt_kappa(cm: CouplingModel, state: StepState, obj: StepObjective) -> None:
     """IPC-style stiffness adaptation: when a converged step leaves a point closer to O than
-    KAPPA_GROW_BELOW * d_hat (the barrier then works in its ill-conditioned 1/d^2 range), double
-    kappa for the following steps (at most KAPPA_MAX_GROWTH times the initial value); a stiffer
-    barrier keeps contact gaps ~ kappa d_hat^2 / f larger."""
+    KAPPA_GROW_BELOW * d_hat, double kappa for the following steps (at most KAPPA_MAX_GROWTH times the
+    initial value); a stiffer barrier keeps contact gaps ~ kappa d_hat^2 / f larger.
+
+    Args:
+        cm: the coupling model.
+        state: the state whose ``kappa`` is updated in place.
+        obj: the step's objective (its last distances).
+    """
     d = obj.last_d
     if d is None or not len(d):
         return
@@ -291,26 +362,30 @@ def adapt_kappa(cm: CouplingModel, state: StepState, obj: StepObjective) -> None
 
 def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContext, *,
           floor: float = 0.0) -> tuple[np.ndarray, int]:
-    """Barrier Newton from x0. Stops when the free-dof force residual is below
-    max(NEWTON_GRAD_TOL_REL * force_scale, NEWTON_GRAD_TOL_START * |residual at x0|) or the Newton
-    step is below NEWTON_STEP_TOL_REL * h_A (projected Newton converges linearly once the PSD
-    projections are active, so a purely absolute force target would spend many iterations on the
-    last digits). On quadratic elements line-search trials are evaluated without the Hessian (energy
-    and gradient), and the Hessian only at an accepted trial that is not converged: it costs ~15-20
-    energy and gradient evaluations there, and the first trial of most steps is converged. On linear
-    ones, where it costs about one objective evaluation, the first trial carries it (unless the
-    residual is within NEWTON_EAGER_ABOVE_TOL of the target). Once the exact Hessian has failed to
-    factorize, the rest of the solve uses the PSD-projected one (``retry_exact=False``): where it
-    is indefinite it mostly stays so, and each failed attempt costs up to a factorization. On
-    quadratic elements a solve that follows one where the exact Hessian failed uses the projected
-    one throughout (``exact_first=False``; the next solve offers the exact one again): consecutive
-    steps see similar Hessians, and a failed attempt costs an exact assembly and up to a
-    factorization. ``floor`` [N] raises the force tolerance for a solve that is not final (a lagging
-    iteration). Returns (x (n, dim), Newton iterations)."""
+    """Barrier Newton from x0.
+
+    Stops when the free-dof force residual is below max(NEWTON_GRAD_TOL_REL * force_scale,
+    NEWTON_GRAD_TOL_START * |residual at x0|, ``floor``) or the Newton step is below
+    NEWTON_STEP_TOL_REL * h_A. On quadratic elements line-search trials are evaluated without the
+    Hessian (it costs many energy evaluations there), on linear ones the first trial carries it (unless
+    the residual is within NEWTON_EAGER_ABOVE_TOL of the target). Once the exact Hessian has failed to
+    factorize, the rest of the solve uses the PSD-projected one; on quadratic elements the next solve
+    too. The measured reasons: docs/decisions.md.
+
+    Args:
+        cm: the coupling model.
+        obj: the step's objective.
+        x0: start positions (n, dim) [m].
+        ctx: the run's context (solver, timer, whether the last exact Hessian failed).
+        floor: [N] raises the force tolerance of a solve that is not final (a lagging iteration).
+
+    Returns:
+        (x (n, dim) [m], Newton iterations).
+    """
     _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n, floor)
-    opts = NewtonOptions(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
+    opts = NewtonConfig(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
                          step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=cm.fem.element_order == 1,
                          eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False,
                          exact_first=not (obj.lazy_exact and ctx.exact_failed))
@@ -321,13 +396,28 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
 
 
 def pinned(solver, pin):
-    """``solver`` with the rigid-mode pin's Woodbury update (rigid.PinnedSolver) when there is one."""
+    """A solver with the rigid-mode pin's Woodbury update.
+
+    Args:
+        solver: the SPD solver.
+        pin: the pin, or None.
+
+    Returns:
+        ``solver`` itself without a pin, else :class:`simfab.coupling.rigid.PinnedSolver`.
+    """
     return solver if pin is None else rigid.PinnedSolver(solver, pin)
 
 
 def evaluation(obj: StepObjective, x: np.ndarray) -> Evaluation | None:
-    """The objective's last evaluation as an :class:`Evaluation` when it was at x (Newton's
-    converged point), else None."""
+    """The objective's last evaluation when it was at x (Newton's converged point).
+
+    Args:
+        obj: the objective.
+        x: positions (n, dim) [m].
+
+    Returns:
+        The :class:`simfab.coupling.state.Evaluation`, or None.
+    """
     if obj.last_x is None or not np.array_equal(obj.last_x, x.ravel()):
         return None
     E, gE = obj.last_fem

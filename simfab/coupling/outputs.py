@@ -262,7 +262,7 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     b.add(o, "joint", name="insertion", type="slide", axis=quat_to_matrix(q0).T @ u, range=[lo, hi],
           damping=2 * PLAYER_MASS * w)
     b.geom(o, type="mesh", mesh="object", rgba=[0.5, 0.6, 0.7, 0.8], contype=0, conaffinity=0, mass=0)
-    b.add(b._section("actuator"), "position", name="insertion", joint="insertion", kp=PLAYER_MASS * w * w,
+    b.add(b.section("actuator"), "position", name="insertion", joint="insertion", kp=PLAYER_MASS * w * w,
           ctrlrange=[lo, hi])
     b.root.find("option").set("integrator", "implicitfast")
     for k, sk in enumerate(s):

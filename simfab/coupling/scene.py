@@ -1,44 +1,33 @@
 """Coupling scenes: an MJCF file plus a companion TOML file with the same stem.
 
-The **MJCF** (``NAME.xml``, opens in the MuJoCo viewer) holds
-- the rigid object O: a mocap body (default ``object``) whose geoms are O's shape, in O's body
-  frame; in 2D scenes O is the cross-section of those geoms with the body's z = 0 plane;
-- O's path: keyframes ``<key mpos=".." mquat=".."/>`` of the mocap body (translations and
-  rotations; see :class:`simfab.io.mjcf.Trajectory`);
-- the fixed region of A: a box site (default ``fixed``, axis-aligned, ``size`` = half extents);
-- A's rest shape as a display mesh (body ``part``), informational only.
+The **MJCF** (``NAME.xml``, opens in the MuJoCo viewer) holds the rigid object O (a mocap body,
+default ``object``; in 2D its cross-section with z = 0), O's path (keyframes of the mocap body,
+:class:`simfab.io.trajectory.Trajectory`), the fixed region of A (a box site, default ``fixed``)
+and A's rest shape as a display mesh (informational).
 
-The **TOML** (``NAME.toml``) defines A and the run (all lengths in metres, SI units)::
+The **TOML** (``NAME.toml``) defines A and the run (SI units)::
 
     name = "cclamp2d"
     dim = 2                              # 2 (plane strain) or 3
     [material]  name = "PLA"             # or youngs_modulus [Pa], poisson_ratio, yield_stress [Pa]
-    [compliant]
-    generator = "c_clamp"                # c_clamp (2D) | extruded_clamp | cross_claw (3D) | outline | mesh
-    target_elements = 450                # approximate triangle / tetrahedron count
-    thickness = 0.005                    # 2D only: out-of-plane extent [m]
-    ...generator parameters (see simfab.coupling.geometry)...
-    # outline = "part.csv" (2D, x,y per line) or mesh = "part.stl" (3D surface), units = "m" | "mm"
-    # mesh_file = "part.npz": a ready simplicial mesh (arrays points, elements) used instead of
-    #   meshing (the bundled 3D scenes ship theirs: fTetWild is not bit-reproducible)
-    [object]  body = "object", samples = 50, sigma = (optional) [m], seed = 0, rot_length_scale [m/rad]
-              (ObjectOptions; an object made only of sphere / capsule / cylinder / box geoms uses
-              their exact signed distance, simfab.contact.sdf, unless sigma is given: samples
-              then only sets its display samples)
-    [fixed]   site = "fixed"
-    [simulation]  steps = 35 (or h_in [m]), L_max [m], fix_all_axes, refine, element_order = 1 | 2, ...
-                  (InsertionOptions)
-    [design]  the design brief (simfab.design.brief.DesignBrief; read by ``couple optimize``)
+    [compliant] generator = "c_clamp", target_elements = 450, thickness = 0.005 (2D), ...
+                # c_clamp | extruded_clamp | cross_claw | outline = "part.csv" | mesh = "part.stl";
+                # mesh_file = "part.npz": a ready mesh (points, elements)
+    [object]    body, samples, sigma, seed, rot_length_scale   (ObjectConfig)
+    [fixed]     site = "fixed"
+    [simulation] steps = 35 (or h_in [m]), L_max [m], element_order = 1 | 2, ...  (InsertionConfig)
+    [contact]   friction, friction_eps_rel, lag_tol, max_lag_iterations  (ContactConfig)
+    [design]    the design brief (simfab.design.brief.DesignConfig; read by ``couple optimize``)
 
-Every table and key is checked against :data:`SCENE_TABLES` before anything is built: an
-unknown table or key is an InputError naming the file, the table and the key (a misspelt
-option must not silently fall back to its default). An outline CSV may start with a header row.
+Every table and key is checked against :data:`SCENE_TABLES` before anything is built; the config
+tables load through :func:`simfab.io.tables.load_table`, so an error names the file, table and key,
+or the flag (:class:`simfab.io.tables.Override`) a value came from. The full format:
+docs/methods.md, "simfab.coupling.scene".
 """
 
 from __future__ import annotations
 
 import inspect
-import tomllib
 from dataclasses import fields
 from pathlib import Path
 
@@ -48,16 +37,19 @@ from simfab._bundled import scenes_dir
 from simfab.contact.imls import build_imls
 from simfab.contact.sdf import build_primitive_field, primitives_of_body, section_primitives
 from simfab.coupling import geometry
-from simfab.coupling.config import ContactOptions, InsertionOptions, ObjectOptions
+from simfab.coupling.config import ContactConfig, InsertionConfig, ObjectConfig
 from simfab.coupling.simulate import make_coupling_model
 from simfab.errors import InputError
 from simfab.fem.materials import Material, material_by_name
 from simfab.fem.meshing import extrude_triangles, tetrahedralize, triangulate_polygon
 from simfab.fem.model import make_model
 from simfab.fem.p2 import to_p2
+from simfab.io import tables
 from simfab.io.companion import read_csv_numbers, read_npz
 from simfab.io.mesh import load_mesh
-from simfab.io.mjcf import Trajectory, load_scene
+from simfab.io.mjcf_load import load_mjcf
+from simfab.io.trajectory import Trajectory
+from simfab.progress import log as progress_log
 from simfab.rotations import quat_to_matrix
 
 GENERATORS_2D = ("c_clamp", "outline")
@@ -91,21 +83,29 @@ TOP_LEVEL_KEYS = frozenset({"name", "dim"})
 #: Every table a coupling scene's TOML may hold and the keys allowed in it: a set of names, or a
 #: function (table, dim) -> names when they depend on the table's values ([compliant]: its
 #: generator's parameters; None there leaves the error to the generator check). The table's own
-#: configuration (e.g. InsertionOptions) validates the values. A new table is one line here.
+#: configuration (e.g. InsertionConfig) validates the values. A new table is one line here.
 SCENE_TABLES: dict = {
     "material": frozenset({"name", "youngs_modulus", "poisson_ratio", "yield_stress", "density"}),
     "compliant": _compliant_keys,
-    "object": _names(ObjectOptions),
+    "object": _names(ObjectConfig),
     "fixed": frozenset({"site"}),
-    "simulation": _names(InsertionOptions),
-    "contact": _names(ContactOptions),
+    "simulation": _names(InsertionConfig),
+    "contact": _names(ContactConfig),
     "design": None,  # keys and values checked by simfab.design.brief.DesignBrief where the brief is read
 }
 
 
 def check_tables(cfg: dict, where: str) -> None:
-    """InputError naming ``where`` (the TOML file), the table and the key of the first unknown
-    table, unknown key, or table given as a plain value (see :data:`SCENE_TABLES`)."""
+    """Check every table and key of a coupling scene's TOML against :data:`SCENE_TABLES`.
+
+    Args:
+        cfg: the TOML document.
+        where: the TOML file, for messages.
+
+    Raises:
+        InputError: naming ``where``, the table and the key of the first unknown table, unknown key,
+            or table given as a plain value.
+    """
     dim = cfg.get("dim", 2)
     for key, value in cfg.items():
         if key in TOP_LEVEL_KEYS:
@@ -128,16 +128,27 @@ def check_tables(cfg: dict, where: str) -> None:
 
 
 def read_toml(path: Path) -> dict:
-    if not path.is_file():
-        raise InputError("companion TOML file not found (a coupling scene is NAME.xml + NAME.toml)", where=str(path))
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"invalid TOML: {e}", where=str(path)) from None
+    """A coupling scene's TOML document (InputError naming the file when missing or not TOML).
+
+    Args:
+        path: the scene's ``NAME.toml``.
+
+    Returns:
+        Its tables.
+    """
+    return tables.read_toml(path, missing="companion TOML file not found (a coupling scene is NAME.xml + NAME.toml)")
 
 
 def scene_paths(scene) -> tuple[Path, Path]:
-    """(xml, toml) for a scene given as NAME.xml, NAME.toml or NAME (bundled: scenes/coupling/NAME)."""
+    """The two files of a coupling scene.
+
+    Args:
+        scene: NAME.xml, NAME.toml or NAME (a bundled scene: scenes/coupling/NAME, unless a file of
+            that name exists).
+
+    Returns:
+        (xml, toml) paths.
+    """
     p = Path(scene)
     if p.suffix in (".xml", ".toml"):
         return p.with_suffix(".xml"), p.with_suffix(".toml")
@@ -150,6 +161,11 @@ def scene_paths(scene) -> tuple[Path, Path]:
 
 
 def bundled_dir() -> Path:
+    """The folder of the bundled coupling scenes.
+
+    Returns:
+        scenes/coupling inside the installed package.
+    """
     return scenes_dir("coupling")
 
 
@@ -160,17 +176,33 @@ def _section(cfg: dict, name: str, where: str) -> dict:
     return dict(v)
 
 
-def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "cpu"):
-    """Build a :class:`simfab.coupling.simulate.CouplingModel` from a scene (see module docstring).
+#: The tables read into config classes (:func:`simfab.io.tables.load_table`): their overrides may carry
+#: their source (a command-line flag, :class:`simfab.io.tables.Override`).
+CONFIG_TABLES = {"simulation": InsertionConfig, "contact": ContactConfig, "object": ObjectConfig}
 
-    overrides : optional dict of dicts merged into the TOML tables (e.g. ``{"simulation": {"steps": 5}}``).
+
+def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "cpu", quiet: bool = True):
+    """Build a :class:`simfab.coupling.model.CouplingModel` from a scene (see the module docstring).
+
+    Args:
+        scene: ``NAME.xml``, ``NAME.toml`` or a bundled scene's name.
+        overrides: {table: {key: value}} replacing the TOML's values (e.g. ``{"simulation": {"steps": 5}}``);
+            a value may be a :class:`simfab.io.tables.Override` naming its source (``--friction``), which
+            an error then names instead of the file; ``None`` removes a key.
+        device: the Warp device.
+        quiet: do not log the flags that replace a value of the scene file.
+
+    Returns:
+        The coupling model.
     """
 
     xml, toml = scene_paths(scene)
     if not xml.is_file():
         raise InputError("scene file not found", where=str(xml))
     cfg = read_toml(toml)
-    for k, v in (overrides or {}).items():
+    overrides = dict(overrides or {})
+    config_overrides = {t: overrides.pop(t) or {} for t in CONFIG_TABLES if t in overrides}
+    for k, v in overrides.items():
         if isinstance(v, dict):
             cfg.setdefault(k, {}).update(v)
         else:
@@ -203,18 +235,12 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
             raise InputError(f"[material] name: {e.message}", where=where) from None
 
     comp = _section(cfg, "compliant", where)
-    obj = _section(cfg, "object", where)
     fixed_cfg = _section(cfg, "fixed", where)
-    sim = _section(cfg, "simulation", where)
-    try:
-        options = InsertionOptions.from_dict(sim, where=f"{where} [simulation]")
-        contact = ContactOptions.from_dict({k: v for k, v in _section(cfg, "contact", where).items() if v is not None},
-                                           where=f"{where} [contact]")
-        obj_opts = ObjectOptions.from_dict({k: v for k, v in obj.items() if v is not None}, where=f"{where} [object]")
-    except TypeError as e:
-        raise InputError(f"[simulation]: {e}", where=where) from None
-    except InputError as e:
-        raise e.in_file(where) from None
+    notes = []  # flags that replace values of the file: logged once the scene is built (an error stays one line)
+    options, contact, obj_opts = (
+        tables.load_table(cls, cfg.get(t), table_name=t, file=where, overrides=config_overrides.get(t),
+                          log=notes.append)
+        for t, cls in CONFIG_TABLES.items())
 
     points, elements, thickness = build_compliant(comp, dim, base=toml.parent, where=f"{where} [compliant]")
     fem = make_model(points, elements, material, thickness=thickness, device=device)
@@ -222,7 +248,7 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
 
         fem = to_p2(fem)  # the fixed region below then holds the midpoints inside it as well
 
-    sc = load_scene(xml)
+    sc = load_mjcf(xml)
     body = obj_opts.body
     rho = obj_opts.rot_length_scale
     path = Trajectory.from_scene(sc, body=body, **({} if rho is None else {"rot_length_scale": float(rho)}))
@@ -255,15 +281,28 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
         half = np.r_[half[:2], np.inf]
     inside = np.all(np.abs(fem.rest - c) <= half + 1e-12, axis=1)
     fixed = np.flatnonzero(inside)
-    return make_coupling_model(name=name, fem=fem, field=fld, path=path, fixed_vertices=fixed, options=options,
-                               object_vertices=disp_v, object_faces=disp_f, contact=contact)
+    cm = make_coupling_model(name=name, fem=fem, field=fld, path=path, fixed_vertices=fixed, options=options,
+                             object_vertices=disp_v, object_faces=disp_f, contact=contact)
+    for note in notes:
+        progress_log(note, quiet=quiet)
+    return cm
 
 
 def primitive_field(sc, body: str, dim: int, samples: int):
-    """Exact signed-distance field (:class:`simfab.contact.sdf.PrimitiveField`) of O when all its
-    geoms are spheres, capsules, cylinders, boxes or tori (in 2D: whose z = 0 section is a circle or an
-    aligned rectangle), else None (O is then sampled and its IMLS field used). The geoms' poses are
-    taken relative to the mocap body (MuJoCo's geom_pos / geom_quat are in the body frame)."""
+    """Exact signed-distance field of O when all its geoms are primitives.
+
+    Spheres, capsules, cylinders, boxes or tori (in 2D: whose z = 0 section is a circle or an aligned
+    rectangle); the geoms' poses are taken relative to the mocap body.
+
+    Args:
+        sc: the loaded scene.
+        body: O's mocap body.
+        dim: 2 or 3.
+        samples: display samples of the field.
+
+    Returns:
+        :class:`simfab.contact.sdf.PrimitiveField`, or None (O is then sampled and its IMLS field used).
+    """
     import mujoco
 
 
@@ -275,7 +314,15 @@ def primitive_field(sc, body: str, dim: int, samples: int):
 
 
 def object_mesh_body_frame(sc, body: str):
-    """O's geoms as one trimesh in O's body frame (the mocap body's pose at qpos0 undone)."""
+    """O's geoms as one mesh in O's body frame (the mocap body's pose at qpos0 undone).
+
+    Args:
+        sc: the loaded scene.
+        body: O's mocap body.
+
+    Returns:
+        ``trimesh.Trimesh``; InputError naming the MJCF when the body has no geometry.
+    """
     import mujoco
 
     meshes = sc.body_meshes()
@@ -294,7 +341,17 @@ def object_mesh_body_frame(sc, body: str):
 
 
 def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
-    """A's mesh from the [compliant] table: (points (n, dim) [m], elements, thickness [m])."""
+    """A's mesh from the ``[compliant]`` table.
+
+    Args:
+        comp: the table (its keys are consumed).
+        dim: 2 or 3.
+        base: the folder relative paths (outline, mesh, mesh_file) are read from.
+        where: the file and table, for messages.
+
+    Returns:
+        (points (n, dim) [m], elements (m, dim + 1), thickness [m]; 1 in 3D).
+    """
 
     gen = comp.pop("generator", None)
     cached = comp.pop("mesh_file", None)
@@ -356,10 +413,18 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
 
 
 def load_mesh_file(path: Path, dim: int):
-    """(points (n, dim) [m], elements (m, dim+1)) from an ``.npz`` with arrays ``points`` and ``elements``.
+    """A ready simplicial mesh from an ``.npz`` with arrays ``points`` and ``elements``.
 
     Bundled 3D scenes ship their tetrahedral mesh this way: fTetWild is not bit-reproducible across
     runs, so the mesh generated once by ``scenes/coupling/make_scenes.py`` is stored with the scene.
+
+    Args:
+        path: the ``.npz`` file.
+        dim: 2 or 3.
+
+    Returns:
+        (points (n, dim) [m] float64, elements (m, dim + 1) int64); InputError naming the file when
+        the arrays are missing, of the wrong shape, not finite or out of range.
     """
     z = read_npz(path, ("points", "elements"), what="mesh file (.npz with points and elements)")
     P, T = z["points"], z["elements"]
@@ -390,7 +455,7 @@ def _triangulate_to_target(outline: np.ndarray, target: int | None):
 
     if target is None:
         return triangulate_polygon(outline)
-    max_area = abs(geometry._signed_area(outline)) / target
+    max_area = abs(geometry.signed_area(outline)) / target
     best = None
     for _ in range(4):
         V, F = triangulate_polygon(outline, max_area=max_area)

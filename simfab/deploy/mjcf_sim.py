@@ -53,7 +53,7 @@ import numpy as np
 from simfab.deploy.compare import kabsch
 from simfab.errors import InputError
 from simfab.io.atomic import atomic_path
-from simfab.io.mjcf import MJCFBuilder, _mujoco
+from simfab.io.mjcf import MJCFBuilder, mujoco_module
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -290,7 +290,7 @@ def compile_in_parts(root, xml: str, *, part_bodies: int = PART_BODIES):
     grows with the square of its links (more than half of the MJCF compile of a 165-insert
     network); the parts keep that quadratic cost per part. Documents with mesh assets or few
     bodies are compiled whole."""
-    mj = _mujoco()
+    mj = mujoco_module()
     wb = root.find("worldbody")
     tops = [el for el in wb if el.tag == "body"]
     if root.find("asset/mesh") is not None or len(tops) <= part_bodies:

@@ -1,68 +1,37 @@
 """The design brief: what behaviour the user asks of the part, and its constraint penalties.
 
-The ``[design]`` table of a coupling scene's TOML (all optional; SI units)::
+The ``[design]`` table of a coupling scene's TOML (all optional; SI units; :class:`DesignConfig`)::
 
     [design]
     grip = "tight"                 # "tight" | "loose" | "any" (no coupling-ratio constraint)
     grip_force = [5.0, 40.0]       # [lo, hi] N at the steady state (inf allowed: [5.0, inf])
-    insertion_force = [0.0, 20.0]  # [lo, hi] N, largest force to push the object in
-    removal_force = [0.0, 30.0]    # [lo, hi] N, largest force to pull it out
-    hold_force = [5.0, inf]        # [lo, hi] N, force to start sliding the seated object out
-                                   #   (with friction: elastic draw plus static friction)
+    insertion_force = [0.0, 20.0]  # [lo, hi] N; removal_force, hold_force alike
     yield_stress = 60e6            # Pa; default: the material's; max von Mises must stay below
     target_profile = "target.csv"  # optional: match a force profile (distance [m], force [N])
-    handles = 5                    # active handles
-    placement = "displacement"     # "displacement" | "spatial" | "random"
-    keep = ["keep"]                # box sites whose vertices stay unchanged (inactive handles)
-    iterations = 300               # simulated-annealing iterations (at most)
-    patience = 60                  # stop early when the best design is feasible and has not
-                                   #   improved by PATIENCE_REL for this many iterations
-    max_translation = 0.25         # |t| bound per axis, fraction of the part's bounding-box diagonal
+    handles = 5                    # active handles; placement = "displacement" | "spatial" | "random"
+    keep = ["keep"]                # box sites whose vertices stay unchanged
+    iterations = 300               # optimizer iterations at most; patience = 60 (annealing)
+    max_translation = 0.25         # |t| bound per axis, fraction of the bounding-box diagonal
     scale_range = [0.5, 1.6]       # bounds of the per-axis handle scales
     stress_radius = 0.0005         # m, the von Mises stress is averaged over this radius
-                                   #   (critical distance, see simfab.design.stress)
-    correction_rounds = 2          # re-optimizations with mesh-corrected figures while the
-                                   #   mesh check (simfab.design.verify) finds the brief missed
-    check_refinements = 1          # the mesh check's P2 levels: on the optimization mesh and
-                                   #   refined this many times (0: P2 on it only, quick but
-                                   #   blind to its own error; each refinement costs 4x / 8x+)
+    correction_rounds = 2          # re-optimizations with mesh-corrected figures
+    check_refinements = 1          # the mesh check's P2 refinement levels (at most 3)
 
-The random seed (handle placement, annealing) is the command's ``--seed``.
-
-Constraints (thesis, "Optimization"), each a value with bounds [lo, hi]:
-
-- coupling ratio CR = E_ss / E_max * 100 [%] (E_ss = E_max without a steady state):
-  tight: CR <= kappa_cr = 95 and CR >= 100 * LOOSE_REL (a non-zero steady state, i.e. category
-  "tight"); loose: CR <= kappa_cr = 1e-3;
-- tight only, beyond the thesis: the seat clearance (gap between part and object at the steady
-  state) <= 0 [m]. A loose design's grip force and coupling ratio are 0 whatever its clearance,
-  so their penalties are flat over all loose designs and give the annealer no direction back to
-  a grip; the clearance does (it is <= 0, hence free, for every design in contact);
-- grip force F_g, insertion force F_in, removal force F_rm, hold force F_hold [N] within their
-  bounds. With friction ([contact] friction or ``--friction``) F_in is read from the frictional
-  insertion, F_rm and F_hold from the removal simulated as its own traversal
-  (:func:`simfab.coupling.profile.analyze_run`); without it F_hold = F_rm;
-- max over the insertion of the von Mises stress averaged over ``stress_radius`` <= yield
-  stress [Pa] (the raw element maximum is singular at sharp corners: simfab.design.stress).
-
-Penalty: each violation is measured in its natural unit - percent for CR, newtons for forces,
-megapascals for stress, 0.1 mm for the clearance (SCALES) - so that one unit of violation of any
-of them weighs the same:
-a 1 % ratio, 1 N and 1 MPa are about equally significant for hand-sized printed parts (forces of
-1-100 N, yield stresses ~60 MPa). The objective is
+Constraints (thesis, "Optimization"), each a value within [lo, hi]: the coupling ratio
+CR = E_ss / E_max * 100 [%] (tight: <= 95 and > 0 with a seat clearance <= 0; loose: <= 1e-3), the
+grip, insertion, removal and hold forces [N], the averaged von Mises maximum [Pa]. The objective is
 
     E = E_L + W * sum_c max(0, c / scale_c)^2,      W = PENALTY_WEIGHT,
 
-with c = lo - value or value - hi. E_L (dimensionless, :mod:`simfab.design.modification`) is ~1
-for a modification of one edge length, so W = 1e3 makes a 1 N or 1 MPa violation outweigh any
-shape change the optimizer would consider. Target-profile matching replaces E_L by the mean
-squared force error [N^2] (the constraints, if any are given, still apply).
+with c = lo - value or value - hi counted in SCALES units (%, N, MPa, 0.1 mm). The reasoning behind
+the units and the clearance: docs/methods.md, "simfab.design.brief".
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -71,6 +40,7 @@ from simfab.coupling import config as C
 from simfab.design.stress import STRESS_RADIUS
 from simfab.errors import InputError
 from simfab.io.companion import read_csv_numbers
+from simfab.io.tables import FieldError, flag_overrides, load_table
 
 #: Weight of the squared, scaled constraint violations against E_L.
 PENALTY_WEIGHT = 1.0e3
@@ -95,8 +65,25 @@ GRIPS = ("tight", "loose", "any")
 
 
 @dataclass(frozen=True, kw_only=True)
-class DesignBrief:
-    """The ``[design]`` table (see the module docstring for meanings and units)."""
+class DesignConfig:
+    """The ``[design]`` table: the design brief (see the module docstring for meanings and units).
+
+    Args:
+        grip: "tight", "loose" or "any" (no coupling-ratio constraint).
+        grip_force, insertion_force, removal_force, hold_force: bounds (lo, hi) [N]; None: unconstrained.
+        yield_stress: the von Mises bound [Pa]; None: the material's.
+        target_profile: a force profile CSV to match (distance [m], force [N]); None: none.
+        handles: active handles.
+        placement: "displacement", "spatial" or "random".
+        keep: box sites whose vertices stay unchanged.
+        iterations: optimizer iterations at most.
+        patience: annealing stops after this many iterations without improvement.
+        max_translation: handle translation bound per axis, fraction of the bounding-box diagonal.
+        scale_range: bounds of the per-axis handle scales.
+        stress_radius: radius of the stress average [m].
+        correction_rounds: re-optimizations with mesh-corrected figures.
+        check_refinements: refinements of the mesh check (at most 3).
+    """
 
     grip: str = "any"
     grip_force: tuple[float, float] | None = None
@@ -116,60 +103,79 @@ class DesignBrief:
     correction_rounds: int = 2
     check_refinements: int = 1
 
+    def __post_init__(self):
+        self.validate()
+
     @classmethod
-    def from_dict(cls, d: dict, *, where: str = "[design]") -> "DesignBrief":
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise InputError(f"unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})", where=where)
-        kw = {}
-        for k, v in d.items():
-            if k in (*FORCES, "scale_range"):
-                kw[k] = _bounds(v, f"{where} {k}")
-            elif k == "keep":
-                kw[k] = (v,) if isinstance(v, str) else tuple(str(s) for s in v)
-            else:
-                kw[k] = v
-        try:
-            b = cls(**kw)
-        except TypeError as e:
-            raise InputError(str(e), where=where) from None
-        b.validate(where)
-        return b
+    def from_dict(cls, d: dict, *, where: str = "[design]", overrides: dict | None = None,
+                  log=None) -> "DesignConfig":
+        """The brief from a ``[design]`` table (:func:`simfab.io.tables.load_table`).
+
+        Args:
+            d: the table's keys and values.
+            where: ``"FILE [design]"`` (or ``"[design]"``), for messages.
+            overrides: {key: value or :class:`simfab.io.tables.Override`} replacing the table's values
+                (command-line options; an error names the flag an Override carries).
+            log: called with a note for each flag that replaces a value of the file.
+
+        Returns:
+            The brief; InputError naming the file, table and key (or the flag) when it is refused.
+        """
+        file = where.rpartition(" ")[0] if where.endswith("[design]") else where
+        return load_table(cls, d, table_name="design", file=file or None, overrides=overrides, parsers=PARSERS,
+                          log=log)
 
     def validate(self, where: str = "[design]") -> None:
+        """Check the values (run on construction).
+
+        Args:
+            where: the table, prefixed to each key in messages.
+
+        Raises:
+            FieldError: naming the key and what is wrong.
+        """
+        def bad(key, msg):
+            raise FieldError(msg, key=key, where=f"{where} {key}")
+
         if self.grip not in GRIPS:
-            raise InputError(f"grip must be one of {GRIPS}, got {self.grip!r}", where=f"{where} grip")
+            bad("grip", f"grip must be one of {GRIPS}, got {self.grip!r}")
         if self.placement not in PLACEMENTS:
-            raise InputError(f"placement must be one of {PLACEMENTS}, got {self.placement!r}",
-                             where=f"{where} placement")
+            bad("placement", f"placement must be one of {PLACEMENTS}, got {self.placement!r}")
         if not (isinstance(self.stress_radius, (int, float)) and not isinstance(self.stress_radius, bool)
                 and 0 < self.stress_radius < 1):
-            raise InputError(f"must be a length in (0, 1) m, got {self.stress_radius!r}",
-                             where=f"{where} stress_radius")
+            bad("stress_radius", f"must be a length in (0, 1) m, got {self.stress_radius!r}")
         for k in ("handles", "iterations", "patience", "correction_rounds", "check_refinements"):
             v = getattr(self, k)
             zero_ok = k in ("iterations", "correction_rounds", "check_refinements")
             if not isinstance(v, int) or isinstance(v, bool) or v < (0 if zero_ok else 1):
-                raise InputError(f"must be a {'non-negative' if zero_ok else 'positive'} integer, got {v!r}",
-                                 where=f"{where} {k}")
+                bad(k, f"must be a {'non-negative' if zero_ok else 'positive'} integer, got {v!r}")
         if self.check_refinements > 3:
-            raise InputError(f"must be at most 3 (each refinement multiplies the check's elements by 4 in 2D, "
-                             f"8 in 3D), got {self.check_refinements}", where=f"{where} check_refinements")
+            bad("check_refinements", f"must be at most 3 (each refinement multiplies the check's elements by 4 "
+                                     f"in 2D, 8 in 3D), got {self.check_refinements}")
         ys = self.yield_stress
         if ys is not None and not (isinstance(ys, (int, float)) and ys > 0):
-            raise InputError(f"must be a positive stress [Pa], got {ys!r}", where=f"{where} yield_stress")
+            bad("yield_stress", f"must be a positive stress [Pa], got {ys!r}")
         if not (isinstance(self.max_translation, (int, float)) and 0 < self.max_translation <= 1):
-            raise InputError(f"must be in (0, 1], got {self.max_translation!r}", where=f"{where} max_translation")
+            bad("max_translation", f"must be in (0, 1], got {self.max_translation!r}")
         lo, hi = self.scale_range
         if not 0 < lo <= 1 <= hi:
-            raise InputError(f"must satisfy 0 < lo <= 1 <= hi, got {list(self.scale_range)}",
-                             where=f"{where} scale_range")
+            bad("scale_range", f"must satisfy 0 < lo <= 1 <= hi, got {list(self.scale_range)}")
 
-    def with_overrides(self, **kw) -> "DesignBrief":
-        b = replace(self, **{k: v for k, v in kw.items() if v is not None})
-        b.validate("command line")
-        return b
+    def with_overrides(self, **kw) -> "DesignConfig":
+        """This brief with command-line values (``None``: not given).
+
+        Args:
+            **kw: {key: value}; an error names the flag ``--key-with-dashes``.
+
+        Returns:
+            The new brief.
+        """
+        return self.from_dict({k: v for k, v in dataclasses.asdict(self).items() if v is not None},
+                              overrides=flag_overrides(kw))
+
+
+#: The brief's earlier name (``...Config`` is the package's one suffix for configuration).
+DesignBrief = DesignConfig
 
 
 def _bounds(v, where: str) -> tuple[float, float]:
@@ -184,9 +190,26 @@ def _bounds(v, where: str) -> tuple[float, float]:
     return lo, hi
 
 
+def _keep(v, where: str) -> tuple:
+    return (v,) if isinstance(v, str) else tuple(str(x) for x in v) if isinstance(v, (list, tuple)) else v
+
+
+#: Values read by their own functions before the type check (pairs [lo, hi] with their messages).
+PARSERS = {**{k: _bounds for k in (*FORCES, "scale_range")}, "keep": _keep}
+
+
 @dataclass(frozen=True, kw_only=True)
 class Constraint:
-    """One functional constraint: ``lo <= value <= hi`` in ``unit``; violations count in ``scale``."""
+    """One functional constraint ``lo <= value <= hi``; violations count in ``scale``.
+
+    Args:
+        name: the figure (a key of :data:`UNITS`).
+        value: its value [unit].
+        lo: lower bound [unit].
+        hi: upper bound [unit].
+        unit: the unit.
+        scale: the violation that counts one [unit].
+    """
 
     name: str
     value: float
@@ -205,11 +228,24 @@ class Constraint:
         return self.violation == 0.0
 
     def as_dict(self) -> dict:
+        """The constraint as JSON-ready values.
+
+        Returns:
+            {value, lo, hi, unit, satisfied}.
+        """
         return {"value": self.value, "lo": self.lo, "hi": self.hi, "unit": self.unit, "satisfied": self.satisfied}
 
 
 def bounds(brief: DesignBrief, yield_stress: float | None) -> dict[str, tuple[float, float]]:
-    """The brief's constraint bounds {name: (lo, hi)} in their units (see :data:`UNITS`)."""
+    """The brief's constraint bounds.
+
+    Args:
+        brief: the design brief.
+        yield_stress: the material's yield stress [Pa] (None: no stress bound unless the brief has one).
+
+    Returns:
+        {name: (lo, hi)} in their units (see :data:`UNITS`).
+    """
     out = {}
     if brief.grip == "tight":
         out["coupling_ratio"] = (100.0 * C.LOOSE_REL, KAPPA_TIGHT)
@@ -226,36 +262,74 @@ def bounds(brief: DesignBrief, yield_stress: float | None) -> dict[str, tuple[fl
 
 
 def constraints(figures: dict, limits: dict[str, tuple[float, float]]) -> list[Constraint]:
-    """Evaluate ``limits`` on a profile's ``figures`` {coupling_ratio, grip_force,
-    insertion_force, removal_force, von_mises} (see :func:`simfab.design.problem.profile_figures`)."""
+    """Evaluate bounds on a profile's figures.
+
+    Args:
+        figures: {coupling_ratio, grip_force, insertion_force, removal_force, hold_force, von_mises,
+            seat_clearance} (:func:`simfab.design.problem.profile_figures`).
+        limits: {name: (lo, hi)} (:func:`bounds`).
+
+    Returns:
+        One :class:`Constraint` per bound.
+    """
     return [Constraint(name=k, value=float(figures[k]), lo=lo, hi=hi, unit=UNITS[k], scale=SCALES[k])
             for k, (lo, hi) in limits.items()]
 
 
 def penalty(cons: list[Constraint], margin: float = 0.0) -> float:
-    """W * sum of squared scaled violations [-] (0 when every constraint holds); with ``margin`` the
-    bounds of the force and stress constraints (MARGIN_FIGURES) move that far (relative) inside:
-    lo (1 + margin), hi (1 - margin)."""
+    """W * sum of squared scaled violations [-] (0 when every constraint holds).
+
+    Args:
+        cons: the constraints.
+        margin: move the force and stress bounds (MARGIN_FIGURES) this far (relative) inside:
+            lo (1 + margin), hi (1 - margin).
+
+    Returns:
+        The penalty.
+    """
     return PENALTY_WEIGHT * float(sum(aimed(c, margin).violation ** 2 for c in cons))
 
 
 def aimed(c: Constraint, margin: float) -> Constraint:
-    """``c`` with :func:`aimed_bounds` (see :func:`penalty`)."""
+    """A constraint with its bounds moved inside (:func:`aimed_bounds`; see :func:`penalty`).
+
+    Args:
+        c: the constraint.
+        margin: relative margin.
+
+    Returns:
+        ``c`` itself when the bounds do not move, else a copy with the moved bounds.
+    """
     lo, hi = aimed_bounds(c.name, c.lo, c.hi, margin)
     return c if (lo, hi) == (c.lo, c.hi) else replace(c, lo=lo, hi=hi)
 
 
 def aimed_bounds(name: str, lo: float, hi: float, margin: float) -> tuple[float, float]:
-    """Constraint ``name``'s bounds moved ``margin`` (relative) inside when it is a force or stress
-    constraint (MARGIN_FIGURES): (lo (1 + margin), hi (1 - margin)); else (lo, hi)."""
+    """A constraint's bounds moved ``margin`` (relative) inside when it is a force or stress constraint.
+
+    Args:
+        name: the figure.
+        lo: lower bound.
+        hi: upper bound.
+        margin: relative margin.
+
+    Returns:
+        (lo (1 + margin), hi (1 - margin)) for MARGIN_FIGURES, else (lo, hi).
+    """
     if not margin or name not in MARGIN_FIGURES:
         return lo, hi
     return lo * (1.0 + margin), hi * (1.0 - margin)
 
 
 def read_target_profile(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(s (k,) [m], F (k,) [N]) of a target force profile CSV (distance, force per row; an optional
-    header line; distances strictly increasing)."""
+    """A target force profile CSV (distance, force per row; an optional header; distances increasing).
+
+    Args:
+        path: the CSV file.
+
+    Returns:
+        (s (k,) [m], F (k,) [N]); InputError naming the file when it is unreadable or not increasing.
+    """
     a = read_csv_numbers(path, 2, what="target profile (distance_m, force_N per row)", min_rows=2)
     if np.any(np.diff(a[:, 0]) <= 0):
         raise InputError("target profile distances must be strictly increasing", where=str(path))
@@ -263,11 +337,20 @@ def read_target_profile(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def run_to_rest(s: np.ndarray, force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(s, F) of a run cut at its rest point: when its last two records bracket a zero crossing of
-    the force from above (F_a > 0 >= F_b: the rest search's overshoot into the seat, or a planned step
-    past it), the last record becomes the rest point s* = s_a + w (s_b - s_a), w = F_a / (F_a - F_b),
-    with force 0 (where O rests; :func:`simfab.design.gradient.rest_grip_gradient` reads the grip
-    there too); otherwise the run unchanged."""
+    """A run cut at its rest point.
+
+    When its last two records bracket a zero crossing of the force from above (F_a > 0 >= F_b: the
+    rest search's overshoot into the seat, or a planned step past it), the last record becomes the rest
+    point s* = s_a + w (s_b - s_a), w = F_a / (F_a - F_b), with force 0 (where O rests;
+    :func:`simfab.design.figure_gradients.rest_grip_gradient` reads the grip there too).
+
+    Args:
+        s: record positions [m].
+        force: record forces [N].
+
+    Returns:
+        (s, F) cut at the rest point, or the run unchanged.
+    """
     s, force = np.asarray(s, float), np.asarray(force, float)
     if len(s) < 2 or not (force[-2] > 0.0 >= force[-1]):
         return s, force
@@ -277,26 +360,34 @@ def run_to_rest(s: np.ndarray, force: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 @dataclass(frozen=True, kw_only=True)
 class TargetProfile:
-    """A force profile to match: distances s [m] and forces F [N] (resisting < 0)."""
+    """A force profile to match (resisting forces < 0).
+
+    Args:
+        s: distances (k,) [m].
+        force: forces (k,) [N].
+        source: the file it was read from.
+    """
 
     s: np.ndarray
     force: np.ndarray
     source: str = ""
 
     def rms_error(self, s: np.ndarray, force: np.ndarray) -> float:
-        """RMS force error [N] over the target's distance range: sqrt(1/L int (F_sim - F_target)^2 ds)
-        with both profiles linear between their samples (exact for that: per piece of the merged
-        samples, h (e0^2 + e0 e1 + e1^2) / 3).
+        """RMS force error [N] over the target's distance range, sqrt(1/L int (F_sim - F_target)^2 ds).
 
-        A distance integral, not a mean over samples: each sample weighs by the distance it covers,
-        so a densely sampled stretch (a run's search for its rest point, records micrometres apart
-        across the seat's force jump) does not decide the error, and a seat a few micrometres off
-        costs micrometres' worth of it. The run ends where O comes to rest (:func:`run_to_rest`: its
-        last record may be the rest search's overshoot into the seat, whose force is not what holds O
-        there; the piece towards it would charge that force's square, tens of newtons that depend on
-        how deep the search overshot). Past the run's end the force is 0, so a design that seats
-        before the target does is charged for the target's forces past its seat (left out, they
-        would reward seating early)."""
+        Both profiles are linear between their samples (exact for that: per piece of the merged samples,
+        h (e0^2 + e0 e1 + e1^2) / 3). A distance integral, not a mean over samples: a densely sampled
+        stretch (the rest search's records across the seat's force jump) does not decide the error. The
+        run ends where O comes to rest (:func:`run_to_rest`); past its end the force is 0, so a design that
+        seats before the target does is charged for the target's forces past its seat.
+
+        Args:
+            s: the run's record positions [m].
+            force: the run's forces [N].
+
+        Returns:
+            The RMS error [N] (inf for an empty run).
+        """
         s, force = run_to_rest(s, force)
         if not len(s):
             return float("inf")
@@ -319,5 +410,5 @@ class TargetProfile:
         return float(np.sqrt(total / (t1 - t0)))
 
 
-__all__ = ["DesignBrief", "Constraint", "TargetProfile", "bounds", "constraints", "penalty", "read_target_profile",
-           "run_to_rest", "PENALTY_WEIGHT", "SCALES", "UNITS"]
+__all__ = ["DesignConfig", "DesignBrief", "Constraint", "TargetProfile", "bounds", "constraints", "penalty",
+           "read_target_profile", "run_to_rest", "PENALTY_WEIGHT", "SCALES", "UNITS"]

@@ -67,7 +67,7 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         raise InputError(f"must be one of {', '.join(METHODS)}, got {method!r}", where="--method")
     if method == "gradient" and restarts > 1:
         raise InputError("the gradient method is deterministic: restarts would repeat it", where="--restarts")
-    ds = load_design_scene(scene, design=design, simulation=simulation, contact=contact, device=device)
+    ds = load_design_scene(scene, design=design, simulation=simulation, contact=contact, device=device, quiet=quiet)
     cm = ds.cm
     if method == "gradient" and cm.contact.friction > 0 and cm.contact.lag_tol > GRADIENT_LAG_TOL:
         # finite differences of whole frictional insertions jump with the number of lagging

@@ -14,6 +14,7 @@ from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
 from simfab.design.brief import DesignBrief, TargetProfile, read_target_profile
 from simfab.errors import InputError
 from simfab.io.mjcf import load_scene
+from simfab.progress import log
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -43,9 +44,11 @@ def check_brief_table(scene) -> None:
 
 
 def load_design_scene(scene, *, design: dict | None = None, simulation: dict | None = None,
-                      contact: dict | None = None, device: str = "cpu") -> DesignScene:
+                      contact: dict | None = None, device: str = "cpu", quiet: bool = True) -> DesignScene:
     """Load a coupling scene with its design brief; ``design`` overrides keys of ``[design]``
-    (command-line options), ``simulation`` those of ``[simulation]``, ``contact`` those of ``[contact]``."""
+    (command-line options), ``simulation`` those of ``[simulation]``, ``contact`` those of ``[contact]``
+    (values or :class:`simfab.io.tables.Override` naming their flag); ``quiet``: do not log the flags
+    that replace values of the scene file."""
     xml, toml = scene_paths(scene)
     if not xml.is_file():
         raise InputError("scene file not found", where=str(xml))
@@ -53,10 +56,11 @@ def load_design_scene(scene, *, design: dict | None = None, simulation: dict | N
     table = cfg.get("design", {})
     if not isinstance(table, dict):
         raise InputError("[design] must be a table", where=str(toml))
-    table = dict(table)
-    table.update({k: v for k, v in (design or {}).items() if v is not None})
-    brief = DesignBrief.from_dict(table, where=f"{toml} [design]")
-    cm = load_coupling_scene(xml, overrides={"simulation": simulation or {}, "contact": contact or {}}, device=device)
+    notes = []  # flags that replace values of [design]: logged once the scene is loaded
+    brief = DesignBrief.from_dict(dict(table), where=f"{toml} [design]", log=notes.append,
+                                  overrides={k: v for k, v in (design or {}).items() if v is not None})
+    cm = load_coupling_scene(xml, overrides={"simulation": simulation or {}, "contact": contact or {}}, device=device,
+                             quiet=quiet)
     target = None
     if brief.target_profile:
         p = Path(brief.target_profile)
@@ -78,4 +82,6 @@ def load_design_scene(scene, *, design: dict | None = None, simulation: dict | N
             if inside.size == 0:
                 raise InputError(f"site {name!r} contains no vertex of the part", where=f"{toml} [design] keep")
             regions.append(inside)
+    for note in notes:
+        log(note, quiet=quiet)
     return DesignScene(cm=cm, brief=brief, kept_regions=tuple(regions), target=target, xml=xml, toml=toml)

@@ -19,18 +19,16 @@ import scipy.sparse as sp
 class HessianPattern:
     """CSR structure of the vertex-pair block pattern of a mesh.
 
-    Parameters
-    ----------
-    elements : (m, k) int vertex indices per element (k = dim + 1 for simplices)
-    n_vertices : n
-    dim : 2 or 3 (block size)
+    Args:
+        elements: (m, k) int vertex indices per element (k = dim + 1 for simplices)
+        n_vertices: n
+        dim: 2 or 3 (block size)
 
-    Attributes
-    ----------
-    shape : (n*dim, n*dim)
-    nnz : number of stored entries
-    indptr, indices : CSR structure (int32), columns sorted within rows
-    element_slots : (m, k*dim, k*dim) int64, position in ``data`` of each element-block entry
+    Attributes:
+        shape: (n*dim, n*dim)
+        nnz: number of stored entries
+        indptr, indices: CSR structure (int32), columns sorted within rows
+        element_slots: (m, k*dim, k*dim) int64, position in ``data`` of each element-block entry
     """
 
     def __init__(self, elements: np.ndarray, n_vertices: int, dim: int):
@@ -99,7 +97,8 @@ class HessianPattern:
     def block_slots(self, rows, cols) -> np.ndarray:
         """Indices into ``csr.data`` of the ``dim x dim`` blocks of vertex pairs.
 
-        rows, cols : (k,) vertex indices. Returns (k, dim, dim) int64: entry [i, a, b] is the
+        Args:
+            rows, cols: (k,) vertex indices. Returns (k, dim, dim) int64: entry [i, a, b] is the
         position of H[rows[i]*dim + a, cols[i]*dim + b]. Raises ValueError if a pair does not share
         an element (and is not a diagonal pair).
         """

@@ -26,8 +26,14 @@ _PROJECTIONS = {"auto": Hessian.PROJECT, "svd": Hessian.PROJECT_SVD}
 
 
 def kernels(model) -> ElementKernels:
-    """The kernels of the model's element order: :data:`~simfab.fem.neohookean.LINEAR` (1) or
-    :data:`~simfab.fem.neohookean_p2.QUADRATIC` (2)."""
+    """The kernels of the model's element order.
+
+    Args:
+        model: the FEM model.
+
+    Returns:
+        :data:`~simfab.fem.neohookean.LINEAR` (order 1) or :data:`~simfab.fem.neohookean_p2.QUADRATIC` (2).
+    """
     order = model.element_order
     if order == 1:
         return LINEAR
@@ -49,40 +55,69 @@ def _mode(project_psd: bool, projection: str) -> Hessian:
 
 
 def energy(model, x) -> float:
-    """Elastic energy [J] at positions x; +inf if any element is inverted."""
+    """Elastic energy at positions x.
+
+    Args:
+        model: the FEM model (:class:`~simfab.fem.model.FemModel`, linear or P2).
+        x: positions (n, dim) [m] (or flat (n*dim,)).
+
+    Returns:
+        The energy [J]; +inf if any element is inverted.
+    """
     return launch(model, kernels(model), x, Launch.ENERGY).total_energy()
 
 
 def energy_gradient(model, x) -> tuple[float, np.ndarray]:
-    """(energy [J], gradient dE/dx (n, dim) [N])."""
+    """Elastic energy and its gradient.
+
+    Args:
+        model: the FEM model (:class:`~simfab.fem.model.FemModel`, linear or P2).
+        x: positions (n, dim) [m] (or flat (n*dim,)).
+
+    Returns:
+        (energy [J], gradient dE/dx (n, dim) [N]).
+    """
     ws = launch(model, kernels(model), x, Launch.GRADIENT)
     return ws.total_energy(), ws.gradient()
 
 
 def energy_gradient_hessian(model, x, *, project_psd: bool = True,
                             projection: str = "auto") -> tuple[float, np.ndarray, sp.csr_matrix]:
-    """(energy [J], gradient (n, dim) [N], Hessian (n*dim, n*dim) CSR [N/m]).
+    """Elastic energy, gradient and Hessian.
 
-    With ``project_psd`` (default) the negative eigenvalues of d2Psi/dF2 are clamped to zero at
-    every element (P2: every quadrature point), so the assembled Hessian is PSD; otherwise it is the
-    exact Hessian. ``projection``: "auto" removes the negative twist modes in closed form where
-    dPsi/dJ <= 0 and uses the SVD eigensystem elsewhere; "svd" uses the SVD eigensystem everywhere
-    (the reference route; the two agree to round-off). The CSR has the model's fixed pattern
-    (``model.pattern``); its ``data`` is a fresh array the caller may modify (e.g. add contact
-    blocks via ``pattern.block_slots``).
+    With ``project_psd`` the negative eigenvalues of d2Psi/dF2 are clamped to zero at every element
+    (P2: every quadrature point), so the assembled Hessian is PSD; otherwise it is the exact Hessian.
+    The CSR has the model's fixed pattern (``model.pattern``); its ``data`` is a fresh array the caller
+    may modify (e.g. add contact blocks via ``pattern.block_slots``).
+
+    Args:
+        model: the FEM model (:class:`~simfab.fem.model.FemModel`, linear or P2).
+        x: positions (n, dim) [m] (or flat (n*dim,)).
+        project_psd: project per element (default) or return the exact Hessian.
+        projection: "auto" removes the negative twist modes in closed form where dPsi/dJ <= 0 and uses
+            the SVD eigensystem elsewhere; "svd" uses the SVD eigensystem everywhere (the reference
+            route; the two agree to round-off).
+
+    Returns:
+        (energy [J], gradient (n, dim) [N], Hessian (n*dim, n*dim) CSR [N/m]).
     """
     ws = launch(model, kernels(model), x, Launch.HESSIAN, _mode(project_psd, projection))
     return ws.total_energy(), ws.gradient(), model.pattern.matrix(ws.csr_values())
 
 
 def energy_gradient_hessians(model, x) -> tuple[float, np.ndarray, sp.csr_matrix, sp.csr_matrix]:
-    """(energy [J], gradient (n, dim) [N], exact Hessian, PSD-projected Hessian), both CSR
-    (n*dim, n*dim) [N/m] with the model's pattern, from a single kernel launch.
+    """Elastic energy, gradient, exact and PSD-projected Hessians from a single kernel launch.
 
-    For :func:`simfab.solve.newton.minimize` return ``(H_exact, H_psd)`` as the Hessian: it takes
-    exact Newton steps whenever the exact Hessian is positive definite (quadratic convergence near
-    stable equilibria with large rotations, where per-element projection converges only linearly)
-    and falls back to the projected one otherwise.
+    For :func:`simfab.solve.newton.minimize` return ``(H_exact, H_psd)`` as the Hessian: it takes exact
+    Newton steps whenever the exact Hessian is positive definite and falls back to the projected one.
+
+    Args:
+        model: the FEM model (:class:`~simfab.fem.model.FemModel`, linear or P2).
+        x: positions (n, dim) [m] (or flat (n*dim,)).
+
+    Returns:
+        (energy [J], gradient (n, dim) [N], exact Hessian, projected Hessian), both CSR (n*dim, n*dim)
+        [N/m] with the model's pattern.
     """
     ws = launch(model, kernels(model), x, Launch.HESSIAN, Hessian.BOTH)
     return (ws.total_energy(), ws.gradient(), model.pattern.matrix(ws.csr_values()),
@@ -90,20 +125,44 @@ def energy_gradient_hessians(model, x) -> tuple[float, np.ndarray, sp.csr_matrix
 
 
 def element_hessians(model, x, *, project_psd: bool = True, projection: str = "auto") -> np.ndarray:
-    """Per-element Hessian blocks (m, k*dim, k*dim) [N/m], dofs ordered (local node, axis);
-    ``project_psd`` and ``projection`` as in :func:`energy_gradient_hessian`."""
+    """Per-element Hessian blocks.
+
+    Args:
+        model: the FEM model (:class:`~simfab.fem.model.FemModel`, linear or P2).
+        x: positions (n, dim) [m] (or flat (n*dim,)).
+        project_psd: as in :func:`energy_gradient_hessian`.
+        projection: as in :func:`energy_gradient_hessian`.
+
+    Returns:
+        (m, k*dim, k*dim) [N/m], dofs ordered (local node, axis).
+    """
     ws = launch(model, kernels(model), x, Launch.BLOCKS, _mode(project_psd, projection))
     return ws.hess.numpy().copy()
 
 
 def det_F(model, x) -> np.ndarray:
-    """det F per element (m,) [-] (P2: the smallest over the quadrature points); <= 0 means inverted."""
+    """det F per element.
+
+    Args:
+        model: the FEM model (:class:`~simfab.fem.model.FemModel`, linear or P2).
+        x: positions (n, dim) [m] (or flat (n*dim,)).
+
+    Returns:
+        (m,) [-] (P2: the smallest over the quadrature points); <= 0 means inverted.
+    """
     return launch(model, kernels(model), x, Launch.ENERGY).outputs()[1].copy()
 
 
 def det_and_von_mises(model, x) -> tuple[np.ndarray, np.ndarray]:
-    """(det F (m,) [-], von Mises stress (m,) [Pa]) per element in one launch (P2: the smallest det F
-    and the largest stress over the quadrature points); +inf stress where det F <= 0. Formula:
-    :func:`simfab.fem.stress.det_and_von_mises`."""
+    """det F and von Mises stress per element in one launch (formula: :func:`simfab.fem.stress.det_and_von_mises`).
+
+    Args:
+        model: the FEM model (:class:`~simfab.fem.model.FemModel`, linear or P2).
+        x: positions (n, dim) [m] (or flat (n*dim,)).
+
+    Returns:
+        (det F (m,) [-], von Mises stress (m,) [Pa]) (P2: the smallest det F and the largest stress over
+        the quadrature points); +inf stress where det F <= 0.
+    """
     ws = launch(model, kernels(model), x, Launch.STRESS)
     return ws.det_F.numpy().copy(), ws.von_mises.numpy().copy()

@@ -23,7 +23,8 @@ def body_force_loads(model: FemModel | P2Model, density: Callable[[np.ndarray], 
     volume of the extruded body), integrated with the rule of ``degree`` (default: the highest
     in :data:`simfab.fem.p2.RULES`) on every element.
 
-    density : maps rest points (q, dim) [m] to force densities (q, dim)
+    Args:
+        density: maps rest points (q, dim) [m] to force densities (q, dim)
     """
     dim = model.dim
     if degree is None:

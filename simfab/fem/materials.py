@@ -20,13 +20,14 @@ from simfab.errors import InputError
 
 @dataclass(frozen=True, kw_only=True)
 class Material:
-    """Isotropic material.
+    """Isotropic elastic material of an FEM body.
 
-    name : identifier
-    youngs_modulus : E [Pa], > 0
-    poisson_ratio : nu [-], in (-1, 0.5)
-    yield_stress : von Mises yield / failure stress [Pa], > 0
-    density : [kg/m^3], > 0
+    Args:
+        name: identifier.
+        youngs_modulus: E [Pa], > 0.
+        poisson_ratio: nu [-], in (-1, 0.5).
+        yield_stress: von Mises yield / failure stress [Pa], > 0.
+        density: [kg/m^3], > 0.
     """
 
     name: str
@@ -48,9 +49,12 @@ class Material:
             bad("poisson_ratio", "must lie in (-1, 0.5)")
 
     def lame(self) -> tuple[float, float]:
-        """Lame parameters (mu, lambda) [Pa] from E and nu (3D relations, also used for plane strain).
+        """Lame parameters from E and nu (3D relations, also used for plane strain).
 
         mu = E / (2 (1 + nu)),  lambda = E nu / ((1 + nu)(1 - 2 nu)).
+
+        Returns:
+            (mu, lambda) [Pa].
         """
         E, nu = float(self.youngs_modulus), float(self.poisson_ratio)
         return E / (2.0 * (1.0 + nu)), E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
@@ -63,7 +67,14 @@ _BY_NAME = {m.name.lower(): m for m in (PLA, VEROWHITE)}
 
 
 def material_by_name(name: str) -> Material:
-    """Built-in material by (case-insensitive) name; InputError naming the choices otherwise."""
+    """A built-in material by (case-insensitive) name.
+
+    Args:
+        name: "PLA" or "VeroWhite".
+
+    Returns:
+        The :class:`Material`; InputError naming the choices otherwise.
+    """
     try:
         return _BY_NAME[str(name).strip().lower()]
     except KeyError:

@@ -34,10 +34,11 @@ def _as_loop(poly, where: str) -> np.ndarray:
 def triangulate_polygon(outline, *, holes=(), max_area: float | None = None, min_angle: float = 30.0):
     """Quality triangulation of a polygon with holes.
 
-    outline : (k, 2) vertices of the outer boundary (either orientation, not self-intersecting)
-    holes : sequence of (k_i, 2) hole boundaries lying inside the outline
-    max_area : maximum triangle area [units^2]; None: no area constraint
-    min_angle : minimum angle [deg] (Triangle guarantees termination for <= ~33 deg)
+    Args:
+        outline: (k, 2) vertices of the outer boundary (either orientation, not self-intersecting)
+        holes: sequence of (k_i, 2) hole boundaries lying inside the outline
+        max_area: maximum triangle area [units^2]; None: no area constraint
+        min_angle: minimum angle [deg] (Triangle guarantees termination for <= ~33 deg)
 
     Returns V (n, 2) float64 and F (m, 3) int32, counter-clockwise (positive) triangles. The
     polygon's boundary segments are kept (Steiner points may split them).
@@ -111,14 +112,15 @@ def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, tar
                    coarsen: bool = False):
     """Tetrahedral mesh of the volume enclosed by a triangle surface (fTetWild via pytetwild).
 
-    vertices : (n, 3) surface vertices; faces : (f, 3) triangles (closed surface)
-    edge_length_fac : target edge length as a fraction of the bounding-box diagonal (fTetWild's
-        default 0.05 when both this and ``target_tets`` are None)
-    target_tets : approximate number of tetrahedra wanted; sets the absolute edge length from the
-        enclosed volume assuming regular tets (V_tet = l^3 / (6 sqrt 2)). The count fTetWild
-        delivers is typically within a factor ~2 of it.
-    coarsen : let fTetWild coarsen the result as far as its quality bound allows (closer to the
-        target edge length on thin parts, which fTetWild otherwise refines).
+    Args:
+        vertices: (n, 3) surface vertices; faces : (f, 3) triangles (closed surface)
+        edge_length_fac: target edge length as a fraction of the bounding-box diagonal (fTetWild's
+            default 0.05 when both this and ``target_tets`` are None)
+        target_tets: approximate number of tetrahedra wanted; sets the absolute edge length from the
+            enclosed volume assuming regular tets (V_tet = l^3 / (6 sqrt 2)). The count fTetWild
+            delivers is typically within a factor ~2 of it.
+        coarsen: let fTetWild coarsen the result as far as its quality bound allows (closer to the
+            target edge length on thin parts, which fTetWild otherwise refines).
 
     Returns V (n, 3) float64 and T (m, 4) int32 positively oriented tets.
     """
@@ -174,7 +176,8 @@ def structured_box(lengths, cells):
     """Tetrahedral mesh of the box [0, lx] x [0, ly] x [0, lz]: nx*ny*nz cubes of 6 tets each
     (Freudenthal/Kuhn split along the main diagonal, conforming across cubes).
 
-    lengths : (lx, ly, lz) [m]; cells : (nx, ny, nz) >= 1. Returns V ((nx+1)(ny+1)(nz+1), 3) float64
+    Args:
+        lengths: (lx, ly, lz) [m]; cells : (nx, ny, nz) >= 1. Returns V ((nx+1)(ny+1)(nz+1), 3) float64
     and T (6 nx ny nz, 4) int32, positively oriented.
     """
     lx, ly, lz = (float(v) for v in lengths)
@@ -252,8 +255,9 @@ def graded_box(lo, hi, *, centre, h0: float, growth: float, h_max: float | None 
     than its neighbour closer to the centre), so the elements stay well shaped (no needles, unlike a
     graded tensor grid) and a box many times the fine zone costs a few thousand elements more.
 
-    lo, hi : (3,) opposite corners [m]; centre : (3,) point the mesh is refined toward [m];
-    h0 : edge length at the centre [m]; growth : dh/dr; h_max : largest edge length (default: a
+    Args:
+        lo, hi: (3,) opposite corners [m]; centre : (3,) point the mesh is refined toward [m];
+        h0: edge length at the centre [m]; growth : dh/dr; h_max : largest edge length (default: a
     quarter of the box's smallest side). Returns V (n, 3) float64 and T (m, 4) int32 positively
     oriented tets. Deterministic (Gmsh's fixed seed, one thread).
     """
@@ -311,7 +315,8 @@ def extrude_triangles(points, triangles, z0: float, z1: float, layers: int = 1):
     field), so in-plane bending is resolved as finely as by the 2D mesh: an extruded part bending
     in its plane needs layers only for what varies along z (e.g. the Poisson thickening).
 
-    points : (n, 2) [m]; triangles : (m, 3); layers >= 1. Returns V (n (layers + 1), 3) float64
+    Args:
+        points: (n, 2) [m]; triangles : (m, 3); layers >= 1. Returns V (n (layers + 1), 3) float64
     (layer-major: V[l * n + i] is point i at layer l) and T (3 m layers, 4) int32 positively oriented.
     """
     P = np.asarray(points, dtype=np.float64)

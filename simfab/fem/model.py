@@ -111,20 +111,21 @@ class MeshModel:
 class FemModel(MeshModel):
     """Linear simplicial FEM discretization of an elastic body (immutable).
 
-    dim : 2 (triangles, plane strain) or 3 (tetrahedra)
-    rest : (n, dim) float64 [m] rest positions X
-    elements : (m, dim+1) int32 vertex indices, positively oriented (det Dm > 0)
-    Dm_inv : (m, dim, dim) float64 [1/m] inverse of the rest edge matrix Dm = [X1-X0, X2-X0(, X3-X0)]
-    volume : (m,) float64 [m^3] rest volume; 2D: triangle area * thickness
-    mu, lam : (m,) float64 [Pa] Lame parameters
-    thickness : [m] out-of-plane extent of a 2D (plane-strain) body; 1.0 for 3D (unused)
-    boundary_facets : 2D (f, 2) boundary edges oriented with the body on their left (counter-
-        clockwise outer boundary; outward normal (dy, -dx)); 3D (f, 3) boundary triangles with
-        counter-clockwise winding seen from outside (right-hand normal points out)
-    boundary_vertices : (b,) int32 sorted vertices on the boundary
-    pattern : :class:`HessianPattern` of the (n*dim, n*dim) Hessian
-    material : the material the Lame parameters came from (None if given per element)
-    device : Warp device the kernels run on ("cpu", "cuda:0")
+    Args:
+        dim: 2 (triangles, plane strain) or 3 (tetrahedra)
+        rest: (n, dim) float64 [m] rest positions X
+        elements: (m, dim+1) int32 vertex indices, positively oriented (det Dm > 0)
+        Dm_inv: (m, dim, dim) float64 [1/m] inverse of the rest edge matrix Dm = [X1-X0, X2-X0(, X3-X0)]
+        volume: (m,) float64 [m^3] rest volume; 2D: triangle area * thickness
+        mu, lam: (m,) float64 [Pa] Lame parameters
+        thickness: [m] out-of-plane extent of a 2D (plane-strain) body; 1.0 for 3D (unused)
+        boundary_facets: 2D (f, 2) boundary edges oriented with the body on their left (counter-
+            clockwise outer boundary; outward normal (dy, -dx)); 3D (f, 3) boundary triangles with
+            counter-clockwise winding seen from outside (right-hand normal points out)
+        boundary_vertices: (b,) int32 sorted vertices on the boundary
+        pattern: :class:`HessianPattern` of the (n*dim, n*dim) Hessian
+        material: the material the Lame parameters came from (None if given per element)
+        device: Warp device the kernels run on ("cpu", "cuda:0")
     """
 
     @property
@@ -158,8 +159,16 @@ class FemModel(MeshModel):
         return self.elements
 
 
-def _edge_matrices(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
-    """(m, dim, dim) matrices whose columns are the edge vectors x_i - x_0, i = 1..dim."""
+def edge_matrices(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    """The elements' edge matrices.
+
+    Args:
+        points: (n, dim) positions [m].
+        elements: (m, dim + 1) vertex indices.
+
+    Returns:
+        (m, dim, dim) matrices whose columns are the edge vectors x_i - x_0, i = 1..dim [m].
+    """
     p = points[elements]  # (m, dim+1, dim)
     return np.swapaxes(p[:, 1:, :] - p[:, :1, :], 1, 2)
 
@@ -185,16 +194,19 @@ def _boundary(elements: np.ndarray, dim: int) -> np.ndarray:
 def make_model(points, elements, material: Material | str, *, thickness: float = 1.0, device: str = "cpu") -> FemModel:
     """Build a :class:`FemModel` from a simplicial mesh.
 
-    points : (n, 2) or (n, 3) rest positions [m]; dim = points.shape[1]
-    elements : (m, dim+1) vertex indices; negatively oriented elements are re-oriented (two
-        vertices swapped)
-    material : :class:`Material` or a built-in material name ("PLA", "VeroWhite"); homogeneous body
-    thickness : [m] out-of-plane extent for 2D plane strain (volume = area * thickness)
-    device : Warp device name
+    Args:
+        points: (n, 2) or (n, 3) rest positions [m]; dim = points.shape[1].
+        elements: (m, dim+1) vertex indices; negatively oriented elements are re-oriented (two
+            vertices swapped).
+        material: :class:`~simfab.fem.materials.Material` or a built-in material name ("PLA",
+            "VeroWhite"); homogeneous body.
+        thickness: [m] out-of-plane extent for 2D plane strain (volume = area * thickness).
+        device: Warp device name.
 
-    InputError for: wrong shapes, NaN/inf coordinates, out-of-range indices, vertices used by no
-    element, degenerate elements (|det Dm| <= DEGENERATE_REL * h^dim, h = mean edge length),
-    thickness <= 0.
+    Returns:
+        The model. InputError for: wrong shapes, NaN/inf coordinates, out-of-range indices, vertices
+        used by no element, degenerate elements (|det Dm| <= DEGENERATE_REL * h^dim, h = mean edge
+        length), thickness <= 0.
     """
     # deferred: importing simfab._warp loads Warp, which building a model needs only for the device name
     from simfab._warp import device as _validate_device
@@ -237,7 +249,7 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     if not (np.isfinite(thickness) and thickness > 0):
         raise InputError(f"thickness must be > 0, got {thickness}", where=where)
 
-    Dm = _edge_matrices(pts, el)
+    Dm = edge_matrices(pts, el)
     det = np.linalg.det(Dm)
     h = _mean_edge_length(pts, el)
     degenerate = np.abs(det) <= DEGENERATE_REL * h**dim
@@ -248,7 +260,7 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     neg = det < 0
     if neg.any():  # swap the last two vertices: flips the orientation
         el[neg, -2:] = el[neg, -1:-3:-1]
-        Dm = _edge_matrices(pts, el)
+        Dm = edge_matrices(pts, el)
         det = np.linalg.det(Dm)
     # simplex measure = det Dm / dim!  (triangle area = det/2, tet volume = det/6)
     volume = det / 6.0 if dim == 3 else det / 2.0 * thickness

@@ -2,58 +2,23 @@
 Hessian side by side) and their :data:`LINEAR` record. The public functions that launch them, for
 every element order, are in :mod:`simfab.fem.elastic`.
 
-Per element (volume V, Lame parameters mu, lam, dimension d):
+Per element (volume V, Lame parameters mu, lam, dimension d; 2D is plane strain, V = area * thickness):
 
     Psi(F) = mu/2 (||F||_F^2 - d) - mu log J + lam/2 (log J)^2,      E_e = V Psi(F),  J = det F
-    F = Ds Dm^-1,  Ds = [x1 - x0, x2 - x0(, x3 - x0)]
+    F = Ds Dm^-1,  Ds = [x1 - x0, x2 - x0(, x3 - x0)],    P = dPsi/dF = mu (F - F^-T) + lam log J F^-T
 
-2D is plane strain: the body is extruded by ``model.thickness`` with F_zz = 1, for which the 3D
-energy density equals the d = 2 formula above (||F||^2 - 3 = ||F_2D||^2 - 2, det F = det F_2D);
-V = area * thickness.
+Nodal gradient: dE/dx_i = V P Dm^-T e_i (i = 1..d), dE/dx_0 = -sum_i dE/dx_i (the elastic force is
+``-gradient``). Hessian d2Psi/dF2 through its analytic eigensystem (Smith, De Goes, Kim 2019); the
+PSD projection clamps negative eigenvalues in the d^2-dimensional stress space. In the common case
+dPsi/dJ <= 0 only the twist block can be indefinite, and its negative part is removed in closed form
+from the polar decomposition (no SVD); otherwise the full SVD eigensystem is used. Hessian modes:
+EXACT (validated against finite differences), PROJECT and PROJECT_SVD (agree to round-off), BOTH.
+The helpers the P2 kernels share (:mod:`simfab.fem.neohookean_p2`) are public: ``psi``, ``pk1``,
+``negative_part_sym3``, ``polar_rotation3``, ``stress_hessian_svd``, ``store_hessian_entry``,
+``void_element``, ``dim_float``, ``dim_int``, ``mat44d``, ``mat99d`` and the ``HESSIAN_*`` constants.
 
-First Piola-Kirchhoff stress (dPsi/dF):
-
-    P = mu (F - F^-T) + lam log J F^-T
-
-Nodal gradient: dE/dx_i = V P Dm^-T e_i (i = 1..d), dE/dx_0 = -sum_i dE/dx_i. Sign: the gradient
-is the internal force with the sign of the energy increase; the elastic force on the nodes is
-``-gradient``.
-
-Hessian d2Psi/dF2 via its analytic eigensystem (Smith, De Goes, Kim 2019, "Analytic eigensystems
-for isotropic distortion energies"). With the SVD F = U diag(s) V^T (J > 0, so det U det V = 1) and
-dPsi/dJ = (lam log J - mu) / J:
-
-    twist modes  U T_k V^T:  eigenvalue mu + dPsi/dJ * s_k      (3D; 2D: mu + dPsi/dJ)
-    flip modes   U L_k V^T:  eigenvalue mu - dPsi/dJ * s_k      (3D; 2D: mu - dPsi/dJ)
-    scaling modes U diag(q) V^T: q, eigenvalue of the d x d matrix
-        A_ii = mu + (mu + lam (1 - log J)) / s_i^2,   A_ij = lam / (s_i s_j)
-
-(T_k skew and L_k symmetric unit off-diagonal pairs in the plane orthogonal to axis k; the
-twist/flip values come from the mu ||F||^2 term (2 * mu/2 * I) plus dPsi/dJ times the Hessian of
-det F, whose eigenvalues on those modes are +-s_k.) The PSD projection clamps negative
-eigenvalues to zero in this d^2-dimensional stress space, which makes the element block PSD.
-
-3D evaluation (no eigensolver in the common case, about half the cost of the SVD route): when
-dPsi/dJ <= 0 (lam log J <= mu - all but strong volumetric expansion) the flip and scaling
-eigenvalues are provably positive, so only the 3-dimensional twist block can be indefinite. That
-block is T = mu I + dPsi/dJ S in the basis R [e_i]x / sqrt 2, with F = R S the polar decomposition
-(cheap Newton iteration instead of an SVD). The kernel assembles the exact Hessian directly
-(mu I + d2Psi/dJ2 g g^T + dPsi/dJ d2J/dF2, g = cof F) and subtracts the negative part of T, whose
-spectral projectors come from closed-form eigenvalues (accurate also for clustered eigenvalues).
-With dPsi/dJ > 0 the full SVD eigensystem is used. 2D works the same way with its single twist
-mode (polar rotation in closed form).
-The exact Hessian (mode EXACT) is validated against finite differences; the two projected routes
-(PROJECT, PROJECT_SVD) agree to round-off and with numpy ``eigh`` of the exact blocks (tests).
-
-All kernels run in float64 with one thread per element (argument lists and launch codes:
-:mod:`simfab.fem.workspace`); energy, gradient and Hessian blocks come from the same kernel when the
-Hessian is wanted, and the Hessian kernel adds its values straight into the CSR ``data`` of the
-model's fixed pattern through precomputed slots. Warp CPU kernels run single-threaded, so results
-are bit-reproducible there; on CUDA the additions are atomic and their order (hence the last bits)
-can vary between runs.
-
-An element with det F <= 0 makes the energy +inf (the log barrier of Neo-Hookean); such an
-element contributes nothing to the gradient and Hessian, which are then not meaningful.
+All kernels run in float64 with one thread per element (:mod:`simfab.fem.workspace`). The
+eigensystem's derivation: docs/methods.md, "simfab.fem.neohookean".
 """
 
 from __future__ import annotations
@@ -72,15 +37,15 @@ _vec4d = wp.types.vector(length=4, dtype=wp.float64)
 _vec9d = wp.types.vector(length=9, dtype=wp.float64)
 _mat4x6d = wp.types.matrix(shape=(4, 6), dtype=wp.float64)
 _mat9x12d = wp.types.matrix(shape=(9, 12), dtype=wp.float64)
-_mat44d = wp.types.matrix(shape=(4, 4), dtype=wp.float64)
-_mat99d = wp.types.matrix(shape=(9, 9), dtype=wp.float64)
+mat44d = wp.types.matrix(shape=(4, 4), dtype=wp.float64)
+mat99d = wp.types.matrix(shape=(9, 9), dtype=wp.float64)
 
 _HALF_SQRT2 = 0.7071067811865476  # 1/sqrt(2): unit Frobenius norm of the twist/flip modes
 # Hessian kernel modes (simfab.fem.workspace.Hessian)
-_EXACT = wp.constant(int(Hessian.EXACT))
-_PROJECT = wp.constant(int(Hessian.PROJECT))
-_PROJECT_SVD = wp.constant(int(Hessian.PROJECT_SVD))
-_BOTH = wp.constant(int(Hessian.BOTH))
+HESSIAN_EXACT = wp.constant(int(Hessian.EXACT))
+HESSIAN_PROJECT = wp.constant(int(Hessian.PROJECT))
+HESSIAN_PROJECT_SVD = wp.constant(int(Hessian.PROJECT_SVD))
+HESSIAN_BOTH = wp.constant(int(Hessian.BOTH))
 _POLAR_STEP_SQ_TOL = wp.constant(wp.float64(tolerances.POLAR_STEP_SQ_TOL))
 _POLAR_MAX_ITER = wp.constant(tolerances.POLAR_MAX_ITER)
 
@@ -93,7 +58,7 @@ def _clamp(lam: wp.float64, project: int):
 
 
 @wp.func
-def _store(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dtype=wp.float64),
+def store_hessian_entry(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dtype=wp.float64),
            data: wp.array(dtype=wp.float64), e: int, r: int, c: int, val: wp.float64):
     """Symmetric entry (r, c) and (c, r) of element e's Hessian block: added straight into the CSR
     values through the precomputed slots (scatter != 0), or stored in the (m, k, k) block array."""
@@ -107,7 +72,7 @@ def _store(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3d(dty
 
 
 @wp.func
-def _void(e: int, scatter: int, energy: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
+def void_element(e: int, scatter: int, energy: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
           hess: wp.array3d(dtype=wp.float64)):
     """Zero element e's energy, gradient and (with block storage, scatter == 0) Hessian block: an
     inverted element contributes nothing."""
@@ -120,14 +85,14 @@ def _void(e: int, scatter: int, energy: wp.array(dtype=wp.float64), grad: wp.arr
 
 
 @wp.func
-def _psi(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64, d: wp.float64):
+def psi(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64, d: wp.float64):
     """Neo-Hookean energy density [Pa] (J > 0)."""
     logJ = wp.log(J)
     return wp.float64(0.5) * mu * (wp.ddot(F, F) - d) - mu * logJ + wp.float64(0.5) * lam * logJ * logJ
 
 
 @wp.func
-def _pk1(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64):
+def pk1(F: Any, J: wp.float64, mu: wp.float64, lam: wp.float64):
     """First Piola-Kirchhoff stress P = mu (F - F^-T) + lam log J F^-T [Pa]."""
     FinvT = wp.transpose(wp.inverse(F))
     return mu * (F - FinvT) + lam * wp.log(J) * FinvT
@@ -163,7 +128,7 @@ def _store_block3(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.arra
     for a in range(3):
         for b in range(3):
             if l != lp or b >= a:
-                _store(scatter, slots, hess, data, e, 3 * l + a, 3 * lp + b, K[a, b])
+                store_hessian_entry(scatter, slots, hess, data, e, 3 * l + a, 3 * lp + b, K[a, b])
 
 
 @wp.func
@@ -191,7 +156,7 @@ def _store_all3(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.array3
 
 
 @wp.func
-def _negative_part_sym3(T: wp.mat33d):
+def negative_part_sym3(T: wp.mat33d):
     """Negative part sum_{t_k < 0} t_k v_k v_k^T of a symmetric 3x3 matrix, from its eigenvalues only.
 
     Eigenvalues in closed form (trigonometric Cardano). The spectral projector of the isolated sign
@@ -228,7 +193,7 @@ def _negative_part_sym3(T: wp.mat33d):
 
 
 @wp.func
-def _polar_rotation3(F: wp.mat33d):
+def polar_rotation3(F: wp.mat33d):
     """Rotation R of the polar decomposition F = R S (det F > 0), by scaled Newton iteration
     X <- (g X + X^-T / g) / 2 (Higham), quadratically convergent."""
     X = F
@@ -287,10 +252,10 @@ def _hessian_direct(x: wp.array(dtype=wp.vec3d), elements: wp.array2d(dtype=wp.i
     if both != 0:  # exact Hessian into data, projected into data2
         _store_all3(scatter, slots, hess, data, e, K11, K22, K33, K12, K23, K13)
     if project != 0:
-        R = _polar_rotation3(F)
+        R = polar_rotation3(F)
         S = wp.transpose(R) * F
         S = wp.float64(0.5) * (S + wp.transpose(S))
-        N = _negative_part_sym3(mu * I + dPsi_dJ * S)
+        N = negative_part_sym3(mu * I + dPsi_dJ * S)
         if wp.ddot(N, N) > zero:
             # P_l = -R [d_l]x / sqrt 2 (columns: twist modes seen at vertex l); block -= V P_l N P_l'^T
             P1 = R * wp.skew(wp.vec3d(Dmi[0, 0], Dmi[0, 1], Dmi[0, 2]))
@@ -324,7 +289,7 @@ def _eigensystem(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
     dPsi_dJ = (lam * logJ - mu) / J
     h = wp.float64(_HALF_SQRT2)
     Vt = wp.transpose(Vs)
-    modes = _mat99d()
+    modes = mat99d()
     w = _vec9d()
     modes[0] = _vec(U * wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero) * Vt)
     w[0] = _clamp(mu + dPsi_dJ * s[0], 1)
@@ -376,12 +341,12 @@ def _hessian_svd(F: wp.mat33d, J: wp.float64, Dmi: wp.mat33d, V: wp.float64, mu:
     B = _mat9x12d()  # rows: nodal vectors of the 9 eigenmodes
     for k in range(9):
         B[k] = _nodal(_unvec(modes[k]), Dmi)
-    for r in range(12):  # symmetric: the upper triangle, mirrored by _store
+    for r in range(12):  # symmetric: the upper triangle, mirrored by store_hessian_entry
         for c in range(r, 12):
             acc = zero
             for k in range(9):
                 acc += w[k] * B[k, r] * B[k, c]
-            _store(scatter, slots, hess, data, e, r, c, V * acc)
+            store_hessian_entry(scatter, slots, hess, data, e, r, c, V * acc)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -413,7 +378,7 @@ def _store_block2(scatter: int, slots: wp.array3d(dtype=wp.int32), hess: wp.arra
     for a in range(2):
         for b in range(2):
             if l != lp or b >= a:
-                _store(scatter, slots, hess, data, e, 2 * l + a, 2 * lp + b, K[a, b])
+                store_hessian_entry(scatter, slots, hess, data, e, 2 * l + a, 2 * lp + b, K[a, b])
 
 
 @wp.func
@@ -489,7 +454,7 @@ def _eigensystem(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64): 
     dPsi_dJ = (lam * logJ - mu) / J
     h = wp.float64(_HALF_SQRT2)
     Vt = wp.transpose(Vs)
-    modes = _mat44d()
+    modes = mat44d()
     w = _vec4d()
     modes[0] = _vec(U * wp.mat22d(zero, -h, h, zero) * Vt)  # twist
     w[0] = _clamp(mu + dPsi_dJ, 1)
@@ -533,7 +498,7 @@ def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu:
             acc = zero
             for k in range(4):
                 acc += w[k] * B[k, r] * B[k, c]
-            _store(scatter, slots, hess, data, e, r, c, V * acc)
+            store_hessian_entry(scatter, slots, hess, data, e, r, c, V * acc)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -541,19 +506,19 @@ def _hessian_svd(F: wp.mat22d, J: wp.float64, Dmi: wp.mat22d, V: wp.float64, mu:
 # (built mode by mode rather than from ``_eigensystem``: see docs/decisions.md)
 # ----------------------------------------------------------------------------------------------
 @wp.func
-def _dimi(M: wp.mat33d):
+def dim_int(M: wp.mat33d):
     return 3
 
 
 @wp.func
-def _dimi(M: wp.mat22d):  # noqa: F811
+def dim_int(M: wp.mat22d):  # noqa: F811
     return 2
 
 
 @wp.func
 def _outer_vec(A: Any, M: Any, c: wp.float64):
     """A + c vec(M) vec(M)^T (vec row-major, M d x d)."""
-    d = _dimi(M)
+    d = dim_int(M)
     B = A
     for i in range(d):
         for k in range(d):
@@ -570,7 +535,7 @@ def _svd_mode(A: Any, U: Any, M: Any, Vs: Any, lam_k: wp.float64):
 
 
 @wp.func
-def _stress_hessian_svd(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
+def stress_hessian_svd(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64):
     """d2Psi/dF2 rebuilt from its analytic eigensystem with clamped eigenvalues (PSD)."""
     zero = wp.float64(0.0)
     U = wp.mat33d()
@@ -580,7 +545,7 @@ def _stress_hessian_svd(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.flo
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
     h = wp.float64(_HALF_SQRT2)
-    A = _mat99d()
+    A = mat99d()
     A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, -h, zero, h, zero), Vs, _clamp(mu + dPsi_dJ * s[0], 1))
     A = _svd_mode(A, U, wp.mat33d(zero, zero, zero, zero, zero, h, zero, h, zero), Vs, _clamp(mu - dPsi_dJ * s[0], 1))
     A = _svd_mode(A, U, wp.mat33d(zero, zero, h, zero, zero, zero, -h, zero, zero), Vs, _clamp(mu + dPsi_dJ * s[1], 1))
@@ -602,7 +567,7 @@ def _stress_hessian_svd(F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.flo
 
 
 @wp.func
-def _stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
+def stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64):  # noqa: F811
     zero = wp.float64(0.0)
     U = wp.mat22d()
     s = wp.vec2d()
@@ -611,7 +576,7 @@ def _stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.flo
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
     h = wp.float64(_HALF_SQRT2)
-    A = _mat44d()
+    A = mat44d()
     A = _svd_mode(A, U, wp.mat22d(zero, -h, h, zero), Vs, _clamp(mu + dPsi_dJ, 1))  # twist
     A = _svd_mode(A, U, wp.mat22d(zero, h, h, zero), Vs, _clamp(mu - dPsi_dJ, 1))  # flip
     cs = mu + lam * (wp.float64(1.0) - logJ)
@@ -633,12 +598,12 @@ def _stress_hessian_svd(F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.flo
 # explicit overloads below, so the module is built once for both)
 # ----------------------------------------------------------------------------------------------
 @wp.func
-def _dim(F: wp.mat33d):
+def dim_float(F: wp.mat33d):
     return wp.float64(3.0)
 
 
 @wp.func
-def _dim(F: wp.mat22d):  # noqa: F811
+def dim_float(F: wp.mat22d):  # noqa: F811
     return wp.float64(2.0)
 
 
@@ -653,7 +618,7 @@ def _energy_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtyp
     det_F[e] = J
     energy[e] = wp.float64(0.0)
     if J > wp.float64(0.0):
-        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], _dim(F))
+        energy[e] = volume[e] * psi(F, J, mu[e], lam[e], dim_float(F))
 
 
 @wp.kernel
@@ -668,8 +633,8 @@ def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dt
     energy[e] = wp.float64(0.0)
     grad[e] = grad.dtype()
     if J > wp.float64(0.0):
-        energy[e] = volume[e] * _psi(F, J, mu[e], lam[e], _dim(F))
-        grad[e] = volume[e] * _nodal(_pk1(F, J, mu[e], lam[e]), Dm_inv[e])
+        energy[e] = volume[e] * psi(F, J, mu[e], lam[e], dim_float(F))
+        grad[e] = volume[e] * _nodal(pk1(F, J, mu[e], lam[e]), Dm_inv[e])
 
 
 @wp.kernel
@@ -685,26 +650,27 @@ def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dty
     det_F[e] = J
     zero = wp.float64(0.0)
     if J <= zero:
-        _void(e, scatter, energy, grad, hess)
+        void_element(e, scatter, energy, grad, hess)
         return
     V = volume[e]
     mu = mu_e[e]
     lam = lam_e[e]
     Dmi = Dm_inv[e]
-    energy[e] = V * _psi(F, J, mu, lam, _dim(F))
-    grad[e] = V * _nodal(_pk1(F, J, mu, lam), Dmi)
+    energy[e] = V * psi(F, J, mu, lam, dim_float(F))
+    grad[e] = V * _nodal(pk1(F, J, mu, lam), Dmi)
 
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
     mode = project
     both = 0
-    if mode == _BOTH:  # exact Hessian into data, projected into data2
-        mode = _PROJECT
+    if mode == HESSIAN_BOTH:  # exact Hessian into data, projected into data2
+        mode = HESSIAN_PROJECT
         both = 1
-    if mode == _EXACT or (mode == _PROJECT and dPsi_dJ <= zero):
+    if mode == HESSIAN_EXACT or (mode == HESSIAN_PROJECT and dPsi_dJ <= zero):
         _hessian_direct(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, mode, both, scatter, slots, hess, data, data2)
     elif both != 0:
-        _hessian_direct(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, _EXACT, 0, scatter, slots, hess, data, data)
+        _hessian_direct(x, elements, e, F, J, Dmi, V, mu, lam, dPsi_dJ, HESSIAN_EXACT, 0, scatter, slots, hess, data,
+                        data)
         _hessian_svd(F, J, Dmi, V, mu, lam, scatter, slots, hess, data2, e)
     else:
         _hessian_svd(F, J, Dmi, V, mu, lam, scatter, slots, hess, data, e)

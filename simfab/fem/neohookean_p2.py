@@ -2,49 +2,20 @@
 gradient, Hessian side by side) and their :data:`QUADRATIC` record; the public functions that
 launch them, for every element order, are in :mod:`simfab.fem.elastic`.
 
-Same energy density as :mod:`simfab.fem.neohookean` (2D = plane strain with thickness):
+Same energy density as :mod:`simfab.fem.neohookean`, but F varies linearly over a P2 element, so
+the element energy is a quadrature sum over the points q of the model's rule
+(:data:`simfab.fem.p2.RULES`, weights w_q = volume * rule weight):
 
-    Psi(F) = mu/2 (||F||_F^2 - d) - mu log J + lam/2 (log J)^2,     J = det F
+    E_e = sum_q w_q Psi(F_q),    F_q = sum_a x_a (x) g_qa,    g_qa = grad N_a(X_q)
+    dE/dx_a = sum_q w_q P(F_q) g_qa
+    K_ab[i, j] = sum_q w_q sum_{k,l} A_q[(i,k), (j,l)] g_qa[k] g_qb[l],   A = d2Psi/dF2
 
-but F varies linearly over a P2 element, so the element energy is a quadrature sum over the
-points q of the model's rule (:data:`simfab.fem.p2.RULES`, weights w_q = volume * rule weight):
-
-    E_e = sum_q w_q Psi(F_q),    F_q = sum_a x_a (x) g_qa,    g_qa = grad N_a(X_q)  (model.grad_N)
-
-Gradient (sign: energy increase; the elastic nodal force is ``-gradient``):
-
-    dE/dx_a = sum_q w_q P(F_q) g_qa,     P = mu (F - F^-T) + lam log J F^-T
-
-Hessian: block (a, b), entries (i, j), through the stress-space Hessian A = d2Psi/dF2 (a d^2 x d^2
-matrix indexed by vec(F)_(i,k) = F_ik, row-major):
-
-    K_ab[i, j] = sum_q w_q sum_{k,l} A_q[(i,k), (j,l)] g_qa[k] g_qb[l]
-    A = mu I + d2Psi/dJ2 vec(g) vec(g)^T + dPsi/dJ d2J/dF2,   g = cof F,
-    dPsi/dJ = (lam log J - mu) / J,  d2Psi/dJ2 = (mu + lam (1 - log J)) / J^2,
-    d2J/dF_ik dF_jl = eps_ijm eps_klp F_mp (3D),  eps_ij eps_kl (2D)
-
-PSD projection (``project_psd=True``) clamps the negative eigenvalues of each A_q; with positive
-quadrature weights the element Hessian sum_q w_q G_q^T A_q G_q is then PSD. The eigensystem is the
-analytic one of :mod:`simfab.fem.neohookean` (Smith, De Goes, Kim 2019), reused from there: with
-dPsi/dJ <= 0 only the twist block T = mu I + dPsi/dJ S (F = R S) can be indefinite and its negative
-part (``_negative_part_sym3``, ``_polar_rotation3``) is removed in the basis R [e_i]x / sqrt 2
-(2D: one twist mode, eigenvalue mu + dPsi/dJ); with dPsi/dJ > 0 A is rebuilt from the full
-SVD eigensystem with clamped eigenvalues.
-
-Inversion: the energy is +inf when J <= 0 at any quadrature point of any element; such an element
-contributes nothing to the gradient and Hessian (not meaningful then). Inversion between the
-quadrature points is not seen by the energy; :func:`simfab.fem.p2.det_F_lower_bound` bounds det F
-over whole elements (Bernstein coefficients) for a stricter admissibility test. The stress launch
-reports the smallest J over each element's quadrature points and the largest von Mises stress over
-them (conservative for inversion and yield checks).
-
-Kernels run in float64 with one thread per element and the quadrature loop inside (argument
-lists and launch codes: :mod:`simfab.fem.workspace`; on the CPU a mesh of :data:`SPLIT_ELEMENTS`
-(per dimension) or more runs its Hessian as two launches of half the elements on two threads).
-Each quadrature point's Hessian blocks come from the closed form above (mu, cofactor and
-cross-product terms plus the twist correction) rather than by contracting the d^2 x d^2 matrix
-A, which costs several times more; only the rare SVD route contracts A. Cost per element relative to a linear simplex:
-``python tools/bench.py p2`` ("cost_per_element").
+PSD projection clamps the negative eigenvalues of each A_q (positive weights keep the sum PSD),
+with the analytic eigensystem of :mod:`simfab.fem.neohookean`. The energy is +inf when J <= 0 at
+any quadrature point (:func:`simfab.fem.p2.det_F_lower_bound` bounds det F over whole elements).
+Kernels run in float64 with one thread per element and the quadrature loop inside; on the CPU a
+mesh of :data:`SPLIT_ELEMENTS` or more runs its Hessian as two launches on two threads. The
+closed forms of each block: docs/methods.md, "simfab.fem.neohookean_p2".
 """
 
 from __future__ import annotations
@@ -55,21 +26,21 @@ import numpy as np
 
 from simfab._warp import wp
 from simfab.fem.neohookean import (
-    _BOTH,
-    _EXACT,
-    _PROJECT,
-    _PROJECT_SVD,
-    _dim,
-    _dimi,
-    _mat44d,
-    _mat99d,
-    _negative_part_sym3,
-    _pk1,
-    _polar_rotation3,
-    _psi,
-    _store,
-    _stress_hessian_svd,
-    _void,
+    HESSIAN_BOTH,
+    HESSIAN_EXACT,
+    HESSIAN_PROJECT,
+    HESSIAN_PROJECT_SVD,
+    dim_float,
+    dim_int,
+    mat44d,
+    mat99d,
+    negative_part_sym3,
+    pk1,
+    polar_rotation3,
+    psi,
+    store_hessian_entry,
+    stress_hessian_svd,
+    void_element,
 )
 from simfab.fem.workspace import ElementKernels
 
@@ -141,23 +112,23 @@ def _add_qp_hessian(K: _mat30d, F: wp.mat33d, J: wp.float64, mu: wp.float64, lam
     gamma_a = cof(F) g_a (from d2J/dF_ik dF_jl = eps_ijm eps_klp F_mp contracted with g_a, g_b).
     Projection with dPsi/dJ <= 0: minus 1/2 P_a N P_b^T, P_a = R [g_a]x = [R g_a]x R (the twist
     modes R [e_i]x / sqrt 2 seen at node a; N the negative part of T = mu I + dPsi/dJ S), as
-    in the linear kernel's direct route. With dPsi/dJ > 0 (or _PROJECT_SVD): the SVD eigensystem.
+    in the linear kernel's direct route. With dPsi/dJ > 0 (or HESSIAN_PROJECT_SVD): the SVD eigensystem.
     """
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
-    if mode == _PROJECT_SVD or (mode == _PROJECT and dPsi_dJ > wp.float64(0.0)):
-        return _add_svd_route(K, _stress_hessian_svd(F, J, mu, lam), gN, e, q, 3, w)
+    if mode == HESSIAN_PROJECT_SVD or (mode == HESSIAN_PROJECT and dPsi_dJ > wp.float64(0.0)):
+        return _add_svd_route(K, stress_hessian_svd(F, J, mu, lam), gN, e, q, 3, w)
     d2 = (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)
     I = wp.identity(n=3, dtype=wp.float64)
     cof = J * wp.transpose(wp.inverse(F))
     project = 0
     R = I
     Nt = wp.mat33d()
-    if mode == _PROJECT:
-        R = _polar_rotation3(F)
+    if mode == HESSIAN_PROJECT:
+        R = polar_rotation3(F)
         S = wp.transpose(R) * F
         S = wp.float64(0.5) * (S + wp.transpose(S))
-        N = _negative_part_sym3(mu * I + dPsi_dJ * S)
+        N = negative_part_sym3(mu * I + dPsi_dJ * S)
         if wp.ddot(N, N) > wp.float64(0.0):
             project = 1
             Nt = wp.float64(0.5) * w * (R * N * wp.transpose(R))
@@ -191,8 +162,8 @@ def _add_qp_hessian(K: _mat12d, F: wp.mat22d, J: wp.float64, mu: wp.float64, lam
     one = wp.float64(1.0)
     logJ = wp.log(J)
     dPsi_dJ = (lam * logJ - mu) / J
-    if mode == _PROJECT_SVD or (mode == _PROJECT and dPsi_dJ > zero):
-        return _add_svd_route(K, _stress_hessian_svd(F, J, mu, lam), gN, e, q, 2, w)
+    if mode == HESSIAN_PROJECT_SVD or (mode == HESSIAN_PROJECT and dPsi_dJ > zero):
+        return _add_svd_route(K, stress_hessian_svd(F, J, mu, lam), gN, e, q, 2, w)
     d2 = (mu + lam * (one - logJ)) / (J * J)
     I = wp.identity(n=2, dtype=wp.float64)
     E2 = wp.mat22d(zero, one, -one, zero)
@@ -200,7 +171,7 @@ def _add_qp_hessian(K: _mat12d, F: wp.mat22d, J: wp.float64, mu: wp.float64, lam
     t = mu + dPsi_dJ
     project = 0
     RJ = wp.mat22d()
-    if mode == _PROJECT and t < zero:
+    if mode == HESSIAN_PROJECT and t < zero:
         project = 1
         cr = F[0, 0] + F[1, 1]
         sr = F[1, 0] - F[0, 1]
@@ -238,7 +209,7 @@ def _energy_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtyp
         J = wp.determinant(F)
         Jmin = wp.min(Jmin, J)
         if J > wp.float64(0.0):
-            E += wq[e, q] * _psi(F, J, mu[e], lam[e], _dim(F))
+            E += wq[e, q] * psi(F, J, mu[e], lam[e], dim_float(F))
     det_F[e] = Jmin
     energy[e] = wp.where(Jmin > wp.float64(0.0), E, wp.float64(0.0))
 
@@ -259,9 +230,9 @@ def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dt
         Jmin = wp.min(Jmin, J)
         if J > wp.float64(0.0):
             w = wq[e, q]
-            E += w * _psi(F, J, mu[e], lam[e], _dim(F))
-            P = _pk1(F, J, mu[e], lam[e])
-            d = _dimi(F)
+            E += w * psi(F, J, mu[e], lam[e], dim_float(F))
+            P = pk1(F, J, mu[e], lam[e])
+            d = dim_int(F)
             for a in range(k):
                 f = w * (P * gN[e, q, a])
                 for i in range(d):
@@ -293,12 +264,12 @@ def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dty
         Jmin = wp.min(Jmin, wp.determinant(_F_at(x, elements, gN, e, q)))
     det_F[e] = Jmin
     if Jmin <= zero:
-        _void(e, scatter, energy, grad, hess)
+        void_element(e, scatter, energy, grad, hess)
         return
     mode = project
     both = 0
-    if mode == _BOTH:
-        mode = _PROJECT
+    if mode == HESSIAN_BOTH:
+        mode = HESSIAN_PROJECT
         both = 1
     E = zero
     g = grad.dtype()
@@ -309,26 +280,26 @@ def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dty
         F = _F_at(x, elements, gN, e, q)
         J = wp.determinant(F)
         w = wq[e, q]
-        E += w * _psi(F, J, mu, lam, _dim(F))
-        P = _pk1(F, J, mu, lam)
-        d = _dimi(F)
+        E += w * psi(F, J, mu, lam, dim_float(F))
+        P = pk1(F, J, mu, lam)
+        d = dim_int(F)
         for a in range(k):
             f = w * (P * gN[e, q, a])
             for i in range(d):
                 g[d * a + i] = g[d * a + i] + f[i]
         if both != 0:  # exact Hessian into K2
-            K2 = _add_qp_hessian(K2, F, J, mu, lam, w, _EXACT, gN, e, q)
+            K2 = _add_qp_hessian(K2, F, J, mu, lam, w, HESSIAN_EXACT, gN, e, q)
         K = _add_qp_hessian(K, F, J, mu, lam, w, mode, gN, e, q)
     energy[e] = E
     grad[e] = g
-    kd = k * _dimi(F0)
+    kd = k * dim_int(F0)
     for r in range(kd):
         for c in range(r, kd):
             if both != 0:  # exact into data, projected into data2
-                _store(scatter, slots, hess, data, e, r, c, K2[r, c])
-                _store(scatter, slots, hess, data2, e, r, c, K[r, c])
+                store_hessian_entry(scatter, slots, hess, data, e, r, c, K2[r, c])
+                store_hessian_entry(scatter, slots, hess, data2, e, r, c, K[r, c])
             else:
-                _store(scatter, slots, hess, data, e, r, c, K[r, c])
+                store_hessian_entry(scatter, slots, hess, data, e, r, c, K[r, c])
 
 
 @wp.kernel
@@ -347,7 +318,7 @@ def _stress_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtyp
         Jmin = wp.min(Jmin, J)
         if J > wp.float64(0.0):
             C = F * wp.transpose(F)
-            for i in range(_dimi(F)):
+            for i in range(dim_int(F)):
                 C[i, i] = C[i, i] - wp.float64(1.0)
             tr = wp.trace(C)
             dev2 = wp.max(wp.ddot(C, C) - tr * tr / wp.float64(3.0), wp.float64(0.0))
@@ -361,11 +332,11 @@ def _stress_hessian_kernel(F: wp.array(dtype=Any), J: wp.array(dtype=wp.float64)
                            out: wp.array(dtype=Any)):
     """PSD-projected d2Psi/dF2 from the SVD eigensystem, for a batch of F (tests)."""
     t = wp.tid()
-    out[t] = _stress_hessian_svd(F[t], J[t], mu, lam)
+    out[t] = stress_hessian_svd(F[t], J[t], mu, lam)
 
 
 def _declare_overloads():
-    for vec, mat, gvec, amat in ((wp.vec2d, wp.mat22d, _vec12d, _mat44d), (wp.vec3d, wp.mat33d, _vec30d, _mat99d)):
+    for vec, mat, gvec, amat in ((wp.vec2d, wp.mat22d, _vec12d, mat44d), (wp.vec3d, wp.mat33d, _vec30d, mat99d)):
         types = {"x": wp.array(dtype=vec), "gN": wp.array3d(dtype=vec)}
         wp.overload(_energy_kernel, types)
         wp.overload(_stress_kernel, types)
@@ -397,7 +368,7 @@ def projected_stress_hessian(F, mu: float, lam: float) -> np.ndarray:
     on their SVD route (one launch, CPU)."""
     F = np.ascontiguousarray(F, dtype=np.float64)
     d = F.shape[-1]
-    mat, amat = (wp.mat33d, _mat99d) if d == 3 else (wp.mat22d, _mat44d)
+    mat, amat = (wp.mat33d, mat99d) if d == 3 else (wp.mat22d, mat44d)
     out = wp.zeros(F.shape[0], dtype=amat, device="cpu")
     wp.launch(_stress_hessian_kernel, dim=F.shape[0], device="cpu",
               inputs=[wp.array(F, dtype=mat, device="cpu"), wp.array(np.linalg.det(F), dtype=wp.float64, device="cpu"),

@@ -1,43 +1,20 @@
 """Quadratic (P2) simplicial FEM models: 6-node triangles (2D plane strain) and 10-node tetrahedra.
 
-Linear simplices lock in bending (a 3D cantilever with 2 linear tets through the thickness
-reaches about half the beam-theory deflection); P2 elements represent the linear strain
-variation of bending exactly and do not. A P2 model is built from a linear mesh by adding one
-node at the midpoint of every edge (straight-sided, i.e. affine, elements): :func:`to_p2` lifts a
-:class:`~simfab.fem.model.FemModel`, :func:`make_p2_model` does the same from points and elements.
-
-Node numbering: the linear mesh's vertices keep their indices ``0 .. n_corners-1``; the
-midpoint of edge ``edges[i]`` is node ``n_corners + i``. Local node order per element (VTK's
-``QUADRATIC_TRIANGLE`` / ``QUADRATIC_TETRA``, also meshio's ``triangle6`` / ``tetra10``):
+Linear simplices lock in bending; P2 elements represent the linear strain variation of bending
+exactly. A P2 model is built from a linear mesh by adding one node at the midpoint of every edge
+(affine elements): :func:`to_p2` lifts a :class:`~simfab.fem.model.FemModel`, :func:`make_p2_model`
+does the same from points and elements. The linear mesh's vertices keep their indices; the midpoint
+of edge ``edges[i]`` is node ``n_corners + i``. Local node order (VTK's QUADRATIC_TRIANGLE / TETRA):
 
     triangle: v0 v1 v2 | m01 m12 m20
     tet:      v0 v1 v2 v3 | m01 m12 m20 m03 m13 m23
 
-Shape functions in barycentric coordinates L_0..L_d of the (affine) element:
-
-    corner a:        N_a = L_a (2 L_a - 1)
-    edge (a, b):     N_ab = 4 L_a L_b
-
-Their gradients are linear in X, ``grad N = sum_i dN/dL_i grad L_i`` with constant ``grad L``
-(rows of Dm^-1 for i = 1..d, minus their sum for i = 0), so F = sum_a x_a (x) grad N_a is linear
-over the element and the energy is integrated by quadrature (see :data:`RULES`). det F is then a
-polynomial of degree dim over the element: :func:`det_F_lower_bound` bounds it from below
-everywhere (not just at the quadrature points) through its Bernstein coefficients.
-
-Quadrature (all rules have positive weights, so the sum of per-point PSD-projected stress
-Hessians is PSD):
-
-    degree 2 (default): 3-point triangle / 4-point tet. Exact for the small-strain stiffness of
-        affine P2 (grad N . grad N is quadratic, d2Psi/dF2 constant) and rank-sufficient (3 x 3 >=
-        12 - 3 and 4 x 6 >= 30 - 6 strain samples vs deformation modes: no spurious zero-energy
-        modes), and by Strang's lemma degree 2p - 2 = 2 keeps the optimal convergence order. Not
-        exact beyond small strain (the geometric stiffness, stress x grad N grad N, is cubic and
-        Psi(F) is not polynomial), but on a strongly bent cantilever its deflection stays within a
-        small fraction of a percent of the degree 4/5 rules' at about half their Hessian cost
-        (``python tools/bench.py p2``, "large_deflection"; docs/decisions.md).
-    degree 4 (triangle, 6 points, Dunavant) / degree 5 (tet, 14 points, Walkington): exact for the
-        geometric stiffness of a linear stress field; samples det F at more points (inversion is
-        checked at the quadrature points only), for strongly nonlinear states where that matters.
+Shape functions in barycentric coordinates: corner N_a = L_a (2 L_a - 1), edge N_ab = 4 L_a L_b.
+F is linear over the element, the energy integrated by quadrature (:data:`RULES`: degree 2 by
+default, 3-point triangle / 4-point tet, exact for the small-strain stiffness and free of spurious
+modes; degree 4 / 5 for strongly nonlinear states). det F is a polynomial of degree dim:
+:func:`det_F_lower_bound` bounds it over the whole element through its Bernstein coefficients. The
+choice of rules and their measured effect: docs/methods.md, "simfab.fem.p2".
 """
 
 from __future__ import annotations
@@ -125,35 +102,36 @@ def shape_functions(L: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
 class P2Model(MeshModel):
     """Quadratic simplicial FEM discretization of an elastic body (immutable), affine elements.
 
-    dim : 2 (6-node triangles, plane strain) or 3 (10-node tetrahedra)
-    rest : (n, dim) float64 [m] rest node positions: the corners (``n_corners`` first), then the
-        edge midpoints
-    elements : (m, k) int32 node indices, k = 6 / 10, local order in the module docstring,
-        positively oriented corners
-    n_corners : number of corner nodes (the linear mesh's vertices)
-    edges : (n - n_corners, 2) int32 corner pairs (sorted): node n_corners + i is edges[i]'s midpoint
-    corner_elements : (m, dim+1) int32 the linear simplices (= elements[:, :dim+1])
-    Dm_inv : (m, dim, dim) float64 [1/m] inverse rest edge matrix of the linear simplex; the
-        element map is affine, so this is the inverse Jacobian at every quadrature point
-    volume : (m,) float64 [m^3] rest volume; 2D: triangle area * thickness
-    degree : polynomial degree the quadrature rule integrates exactly (see :data:`RULES`)
-    qp_bary : (nq, dim+1) float64 quadrature points in barycentric coordinates
-    qp_weight : (m, nq) float64 [m^3] quadrature weights: volume * rule weight
-    grad_N : (m, nq, k, dim) float64 [1/m] rest gradient of each shape function at each
-        quadrature point: F(X_q) = sum_a x_a (x) grad_N[e, q, a]
-    mu, lam : (m,) float64 [Pa] Lame parameters
-    thickness : [m] out-of-plane extent of a 2D body; 1.0 for 3D
-    boundary_facets : 2D (f, 3) quadratic boundary edges [v0, v1, m01]; 3D (f, 6) quadratic boundary
-        triangles [v0, v1, v2, m01, m12, m20]; corners oriented like FemModel.boundary_facets
-        (2D: body on the left; 3D: counter-clockwise seen from outside)
-    boundary_subfacets : linear pieces of the boundary facets with the same orientation: 2D
-        (2f, 2) segments [v0, m01], [m01, v1]; 3D (4f, 3) triangles [v0, m01, m20], [m01, v1, m12],
-        [m20, m12, v2], [m01, m12, m20] (facet i's pieces are rows 2i.. / 4i..)
-    boundary_vertices : (b,) int32 sorted boundary nodes (corners and midpoints)
-    pattern : :class:`HessianPattern` of the (n*dim, n*dim) Hessian (node pairs sharing an element)
-    material : the material the Lame parameters came from (None if given per element)
-    device : Warp device the kernels run on
-    linear : the linear :class:`FemModel` on the corner mesh this model was lifted from
+    Args:
+        dim: 2 (6-node triangles, plane strain) or 3 (10-node tetrahedra)
+        rest: (n, dim) float64 [m] rest node positions: the corners (``n_corners`` first), then the
+            edge midpoints
+        elements: (m, k) int32 node indices, k = 6 / 10, local order in the module docstring,
+            positively oriented corners
+        n_corners: number of corner nodes (the linear mesh's vertices)
+        edges: (n - n_corners, 2) int32 corner pairs (sorted): node n_corners + i is edges[i]'s midpoint
+        corner_elements: (m, dim+1) int32 the linear simplices (= elements[:, :dim+1])
+        Dm_inv: (m, dim, dim) float64 [1/m] inverse rest edge matrix of the linear simplex; the
+            element map is affine, so this is the inverse Jacobian at every quadrature point
+        volume: (m,) float64 [m^3] rest volume; 2D: triangle area * thickness
+        degree: polynomial degree the quadrature rule integrates exactly (see :data:`RULES`)
+        qp_bary: (nq, dim+1) float64 quadrature points in barycentric coordinates
+        qp_weight: (m, nq) float64 [m^3] quadrature weights: volume * rule weight
+        grad_N: (m, nq, k, dim) float64 [1/m] rest gradient of each shape function at each
+            quadrature point: F(X_q) = sum_a x_a (x) grad_N[e, q, a]
+        mu, lam: (m,) float64 [Pa] Lame parameters
+        thickness: [m] out-of-plane extent of a 2D body; 1.0 for 3D
+        boundary_facets: 2D (f, 3) quadratic boundary edges [v0, v1, m01]; 3D (f, 6) quadratic boundary
+            triangles [v0, v1, v2, m01, m12, m20]; corners oriented like FemModel.boundary_facets
+            (2D: body on the left; 3D: counter-clockwise seen from outside)
+        boundary_subfacets: linear pieces of the boundary facets with the same orientation: 2D
+            (2f, 2) segments [v0, m01], [m01, v1]; 3D (4f, 3) triangles [v0, m01, m20], [m01, v1, m12],
+            [m20, m12, v2], [m01, m12, m20] (facet i's pieces are rows 2i.. / 4i..)
+        boundary_vertices: (b,) int32 sorted boundary nodes (corners and midpoints)
+        pattern: :class:`HessianPattern` of the (n*dim, n*dim) Hessian (node pairs sharing an element)
+        material: the material the Lame parameters came from (None if given per element)
+        device: Warp device the kernels run on
+        linear: the linear :class:`FemModel` on the corner mesh this model was lifted from
     """
 
     n_corners: int
@@ -260,8 +238,9 @@ def to_p2(model: FemModel, *, degree: int | None = None) -> P2Model:
     """The P2 counterpart of a linear model: same corners, material, thickness and device, one
     midpoint node per edge.
 
-    degree : quadrature degree, one of :data:`RULES` for the dimension (default
-        :data:`DEFAULT_DEGREE`)
+    Args:
+        degree: quadrature degree, one of :data:`RULES` for the dimension (default
+            :data:`DEFAULT_DEGREE`)
     """
     if getattr(model, "element_order", None) != 1:
         raise InputError(f"to_p2 needs a linear FemModel, got {type(model).__name__}", where="model")

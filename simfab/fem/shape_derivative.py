@@ -1,38 +1,19 @@
 """Shape derivatives of the Neo-Hookean energy: how E(x; X) changes with the rest shape X at fixed
-deformed positions x, side by side with the energy they differentiate; linear (P1) and quadratic
-(P2) simplices through one path, the quadrature point.
+deformed positions x; linear (P1) and quadratic (P2) simplices through one path, the quadrature point.
 
-Per quadrature point q of element e (see :mod:`simfab.fem.neohookean` for Psi and P; a linear
-simplex is the one-point case), with the rest gradients G_qa = grad N_a(X_q) (k nodes a) and
-weights w_q [m^3] of :meth:`~simfab.fem.model.MeshModel.element_geometry` (P1: G = grad of the
-barycentrics from Dm^-1, w = volume), F_q = sum_a x_a (x) G_qa and E = sum_q w_q Psi(F_q).
-
-Varying the rest nodes (isoparametric: X(xi) = sum_a X_a N_a(xi)) changes each point's rest map by
-K_q = sum_a dX_a (x) G_qa + I, so that G -> G K^-1, F -> F K^-1, w -> w det K. At K = I
+Per quadrature point q (rest gradients G_qa, weights w_q of
+:meth:`~simfab.fem.model.MeshModel.element_geometry`), varying the rest nodes changes the rest map by
+K_q = sum_a dX_a (x) G_qa + I; at K = I
 
     dE_q/dK = w_q (Psi I - F^T P)                            (the Eshelby stress)
     dE/dX_a = sum_q (dE_q/dK) G_qa
+    dQ_q/dK = w_q ((P : L) I - F^T dP[L] - L^T P),   L_q = sum_a w_a (x) G_qa   (mixed product along w)
 
-(for a linear simplex this is V (Psi I - F^T P) Dm^-T pulled to the edge matrix's columns). For a
-fixed direction w (n, dim) of the deformed positions, with L_q = sum_a w_a (x) G_qa and
-Q = w . dE/dx = sum_q w_q P : L_q, the mixed second derivative applied to w is
-
-    dQ_q/dK = w_q ((P : L) I - F^T dP[L] - L^T P),
-    dP[L]   = mu L + (mu - lam log J) F^-T L^T F^-T + lam (F^-T : L) F^-T       (Neo-Hookean)
-
-(dP[L]: P's derivative along L), to the nodes like dE/dK. The mixed product ``w^T d2E/dx dX`` is
-what the adjoint method needs (``lambda^T d2E/dx dX``, :mod:`simfab.coupling.adjoint`); it is never
-formed as a matrix. The Lame parameters are per element and do not depend on X.
-
-Derivatives are with respect to every node of the model (P2: corners and edge nodes, the latter
-as if the elements could curve). A P2 model built by :func:`simfab.fem.p2.to_p2` has straight
-edges, its edge nodes at their corners' midpoints: :func:`linear_rest_derivative` chains a
-derivative to the corner positions (the linear mesh's rest shape, which a design moves).
-
-Written in batched numpy over the elements and points (one einsum per term): the derivatives are
-evaluated once per converged insertion step, beside one sparse factorization, so they are not on
-the hot path. Checked against finite differences of :func:`simfab.fem.elastic.energy` /
-``energy_gradient`` on perturbed rest shapes (tests/fem/test_shape_derivative.py).
+The mixed product ``w^T d2E/dx dX`` is what the adjoint method needs
+(:mod:`simfab.coupling.adjoint`); it is never formed as a matrix. Derivatives are with respect to
+every node; :func:`linear_rest_derivative` chains a P2 model's edge nodes to their corners. Batched
+numpy (evaluated once per converged step, off the hot path); checked against finite differences
+(tests/fem/test_shape_derivative.py). The derivation: docs/methods.md, "simfab.fem.shape_derivative".
 """
 
 from __future__ import annotations

@@ -13,12 +13,12 @@ from __future__ import annotations
 import numpy as np
 
 from simfab.fem import elastic
-from simfab.fem.model import FemModel, _edge_matrices
+from simfab.fem.model import FemModel, edge_matrices
 
 
 def deformation_gradient(model: FemModel, x) -> np.ndarray:
     """F = Ds Dm^-1 per element, (m, dim, dim) [-] at positions x (n, dim) [m]."""
-    return _edge_matrices(model.check_positions(x), model.elements) @ model.Dm_inv
+    return edge_matrices(model.check_positions(x), model.elements) @ model.Dm_inv
 
 
 def cauchy_stress(model: FemModel, x) -> np.ndarray:

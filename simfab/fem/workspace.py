@@ -1,30 +1,19 @@
 """Recorded kernel launches over the elements of an FEM model, for every element order.
 
 An element order supplies its Warp kernels as an :class:`ElementKernels` record
-(:data:`simfab.fem.neohookean.LINEAR`, :data:`simfab.fem.neohookean_p2.QUADRATIC`), and the model
-supplies the per-element rest geometry they read through
-:meth:`~simfab.fem.model.MeshModel.element_geometry`: the quadrature rule's weights w_q [m^3]
-(dim = 2: area * thickness) and what F is computed from at each point (linear simplices are the
-one-point rule, F = Ds Dm^-1 constant, w = volume; P2 elements read the shape-function gradients at
-their points). Every kernel has the same argument list,
+(:data:`simfab.fem.neohookean.LINEAR`, :data:`simfab.fem.neohookean_p2.QUADRATIC`) and the model
+the per-element rest geometry through :meth:`~simfab.fem.model.MeshModel.element_geometry`
+(quadrature weights w_q [m^3] and what F is computed from). Every kernel has the same argument list,
 
     inputs:  first, x, elements, geometry, weights, mu, lam  [, hessian mode, scatter, CSR slots]
     outputs: energy (m,), det F (m,), nodal gradient (m,) [, blocks (m, kd, kd), data, data2]
              (the stress kernel: det F (m,), von Mises stress (m,))
 
-with one thread per element ``first + tid`` (k nodes, d dimensions, kd = k d); what a launch
-computes is a :class:`Launch` code, and the Hessian kernel's treatment of d2Psi/dF2 is a
-:class:`Hessian` mode.
-
-Small meshes are dominated by per-call overhead, so the :class:`Workspace` (one per model, kept
-in ``model._cache``) holds persistent device buffers (on the CPU the position buffer is a numpy
-array the kernels read through an alias) and records each launch once (``record_cmd``), then
-replays it. On the CPU the Hessian launches of a mesh with at least ``kernels.split_elements``
-elements run as two launches of half the elements on two threads (Warp CPU kernels run on one
-thread and release the GIL): per-element outputs are disjoint and each half adds its Hessian into
-its own CSR buffer, summed afterwards. The energy, gradient and stress launches stay whole: they
-cost less than handing half of them to the second thread. The Hessian launch adds the element
-blocks straight into the CSR ``data`` of the model's fixed pattern through precomputed slots.
+with one thread per element ``first + tid``; what a launch computes is a :class:`Launch` code, the
+Hessian's treatment of d2Psi/dF2 a :class:`Hessian` mode. The :class:`Workspace` (one per model)
+holds persistent device buffers and records each launch once, then replays it; on the CPU the
+Hessian launches of a large mesh run as two half launches on two threads, each adding into its
+own CSR buffer. Details: docs/methods.md, "simfab.fem.workspace".
 """
 
 from __future__ import annotations
@@ -63,10 +52,11 @@ class Hessian(IntEnum):
 class ElementKernels:
     """The Warp kernels of one element order (argument lists in the module docstring).
 
-    grad_dtype : dim -> Warp vector type of one element's nodal gradient (length k d)
-    geometry_dtype : dim -> Warp type of the entries of ``model.element_geometry()[0]``
-    split_elements : dim -> CPU meshes of that dimension with at least this many elements run their
-        Hessian launches as two halves on two threads (None, or a dimension missing: always one launch)
+    Args:
+        grad_dtype: dim -> Warp vector type of one element's nodal gradient (length k d)
+        geometry_dtype: dim -> Warp type of the entries of ``model.element_geometry()[0]``
+        split_elements: dim -> CPU meshes of that dimension with at least this many elements run their
+            Hessian launches as two halves on two threads (None, or a dimension missing: always one launch)
     """
 
     energy: Any

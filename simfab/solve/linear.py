@@ -27,8 +27,8 @@ def import_cholmod():
 
     cvxopt's wheel bundles OpenBLAS 0.3.15 (single-threaded, runtime kernel choice), which does
     not recognize CPUs newer than itself and then falls back to its oldest x86-64 kernels
-    ("Prescott", SSE3): on this project's Xeon machines that doubles CHOLMOD's factorization time
-    (knocker3d P2 Hessian: 0.56 s instead of 0.27 s of CPU). When the CPU has AVX2 and FMA and the
+    ("Prescott", SSE3), which doubles CHOLMOD's factorization time on recent Xeons
+    (docs/decisions.md, "Sparse factorization"). When the CPU has AVX2 and FMA and the
     user has not chosen a kernel set (OPENBLAS_CORETYPE), the Haswell kernels are selected for
     that library: OpenBLAS reads the variable once, when cvxopt loads it, so it is set only
     around the first import and the process environment is left as it was."""
@@ -90,10 +90,9 @@ class SPDSolver:
     per-call overhead of small systems stays below the factorization itself. A new pattern
     triggers a new analysis.
 
-    Parameters
-    ----------
-    backend : "cholmod" | "splu" | "auto"
-        "auto" uses CHOLMOD when cvxopt is importable, else SciPy's SuperLU.
+    Args:
+        backend: "cholmod" | "splu" | "auto"
+            "auto" uses CHOLMOD when cvxopt is importable, else SciPy's SuperLU.
 
     Attribute ``timer``: None, or an object with ``timed(key)`` returning a context manager (e.g.
     :class:`simfab.coupling.timing.Timer`); each numeric factorization is then timed under
@@ -101,8 +100,8 @@ class SPDSolver:
 
     CHOLMOD's input is the lower triangle in column-major order, which for a symmetric matrix is
     the upper triangle of its CSR in row-major order: the value map takes the CSR entries on and
-    above the diagonal, in their storage order, so each gather reads ``A.data`` front to back (a
-    random-order gather of a 3D P2 Hessian's ~2 M values costs ~7 ms, an ordered one ~1-2 ms).
+    above the diagonal, in their storage order, so each gather reads ``A.data`` front to back (several
+    times faster than a random-order gather: docs/decisions.md, "Sparse factorization").
     """
 
     def __init__(self, backend: str = "auto"):
@@ -280,8 +279,7 @@ class SPDSolver:
         self._A = cvxopt.spmatrix(cvxopt.matrix(A.data[self._perm]), cvxopt.matrix(r.astype(np.int64)),
                                   cvxopt.matrix(c.astype(np.int64)), (n, n))
         # CHOLMOD's own choice (supernodal when the flops per factor entry are high): simplicial on
-        # small 2D systems (stand side, 551 unknowns: 0.15 ms per factorization, 0.22 supernodal),
-        # supernodal on 3D ones (clip3d, 7,425: 17-20 ms, 53 simplicial)
+        # small 2D systems, supernodal on 3D ones (docs/decisions.md, "Sparse factorization")
         cholmod.options["supernodal"] = 1
         self._F = cholmod.symbolic(self._A)
         self._key = (A.indptr.copy(), A.indices.copy())

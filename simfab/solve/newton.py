@@ -1,41 +1,19 @@
 """Projected Newton's method with a backtracking (Armijo) line search.
 
-Generic over the objective: the caller supplies ``fun(x, need_hessian) -> (f, g, H)`` with a
-positive semi-definite sparse Hessian (e.g. per-element PSD-projected FEM Hessians plus a
-barrier term). Each iteration solves ``H_ff dx_f = -g_f`` on the free dofs with a sparse
-Cholesky factorization (:class:`simfab.solve.linear.SPDSolver`, symbolic analysis reused while
-the pattern is unchanged), then backtracks along ``dx`` until the Armijo sufficient-decrease
-condition holds at an admissible point.
+Generic over the objective: ``fun(x, need_hessian) -> (f, g, H)`` with a positive semi-definite
+sparse Hessian. Each iteration solves ``H_ff dx_f = -g_f`` on the free dofs with a sparse Cholesky
+factorization (:class:`simfab.solve.linear.SPDSolver`), then backtracks along ``dx`` until the Armijo
+condition holds at an admissible point. Exact-first steps: ``H`` may be a pair ``(H_exact, H_psd)``
+(each possibly a callable building it on demand); the exact one is used while it factorizes.
 
-Exact-first steps: ``fun`` may return the Hessian as a pair ``(H_exact, H_psd)`` (either may be
-a zero-argument callable building it on demand, so that it is only assembled when needed). The exact
-Hessian is then factorized first; when its Cholesky factorization succeeds it is positive definite and the step is
-an exact Newton step (quadratic convergence also where element-wise PSD projection would only
-converge linearly, e.g. large rotations); otherwise the projected Hessian is used (with
-``retry_exact=False`` for the rest of the solve).
+Feasibility hooks: ``max_step(x, dx) -> alpha_max`` caps the step before the line search;
+``admissible(x) -> bool`` rejects trial points (as does an objective of +inf or NaN).
 
-Feasibility hooks (used by barrier-based contact):
-
-- ``max_step(x, dx) -> alpha_max`` caps the step before the line search (e.g. conservative
-  advancement so that no vertex crosses an obstacle within the step);
-- ``admissible(x) -> bool`` rejects trial points (e.g. an inverted element); an objective
-  value of ``+inf`` or NaN is rejected as well.
-
-Convergence (checked at every iterate, on the free dofs only):
-
-1. gradient: ``||g_f||_inf <= grad_tol * scale`` where ``scale = options.grad_scale`` when given
-   (absolute, in the units of ``g``), otherwise ``||g_f(x0)||_inf`` (a relative reduction of
-   the starting residual; a start with ``g_f(x0) == 0`` is converged at once);
-2. Newton step: ``||dx_f||_inf <= step_tol * x_scale`` with ``x_scale = options.x_scale`` when
-   given, otherwise ``max(||x0_f||_inf, 1)`` in the units of ``x`` - the Newton step estimates
-   the distance to the minimizer, so once it is at round-off level nothing further is gained;
-3. round-off: the predicted decrease ``-g.dx`` is below ``roundoff * max(|f|, tiny)`` (so ``f``
-   cannot resolve it; trial steps are then accepted when they reduce ``||g_f||_inf``) and no
-   step along the Newton direction reduces the gradient norm either.
-
-Anything else - ``max_iter`` reached, or a line search that fails with a meaningful predicted
-decrease left - raises :class:`simfab.errors.ConvergenceError` naming the iteration count and
-the residual. A result that did not converge is never returned.
+Convergence, on the free dofs: ``||g_f||_inf <= grad_tol * scale`` (``options.grad_scale``, else the
+start's residual); or ``||dx_f||_inf <= step_tol * x_scale``; or the predicted decrease is below
+round-off and no step along the Newton direction reduces the gradient norm. Anything else raises
+:class:`simfab.errors.ConvergenceError` naming the iteration count and the residual; a result that
+did not converge is never returned. The criteria in full: docs/methods.md, "simfab.solve.newton".
 """
 
 from __future__ import annotations
@@ -53,7 +31,7 @@ Objective = Callable[[np.ndarray, bool], tuple]
 
 
 @dataclass(frozen=True, kw_only=True)
-class NewtonOptions:
+class NewtonConfig:
     """Stopping and line-search parameters of :func:`minimize` (see the module docstring)."""
 
     max_iter: int = 50
@@ -103,21 +81,22 @@ class NewtonOptions:
         }
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
-            raise ValueError(f"invalid NewtonOptions: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
+            raise ValueError(f"invalid NewtonConfig: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
 
 
 @dataclass
 class NewtonResult:
     """Outcome of a converged :func:`minimize`.
 
-    x : (N,) float64 minimizer (fixed dofs equal to x0)
-    energy : objective value at x
-    grad_norm : ||g_f(x)||_inf on the free dofs
-    iterations : Newton iterations taken (linear solves)
-    converged : always True for a returned result (non-convergence raises)
-    reason : which criterion stopped the iteration ("gradient", "step", "roundoff")
-    history : one dict per iteration: energy, grad_norm, alpha, backtracks, shift
-    exact_failures : exact Hessians offered whose factorization failed (not positive definite)
+    Args:
+        x: (N,) float64 minimizer (fixed dofs equal to x0)
+        energy: objective value at x
+        grad_norm: ||g_f(x)||_inf on the free dofs
+        iterations: Newton iterations taken (linear solves)
+        converged: always True for a returned result (non-convergence raises)
+        reason: which criterion stopped the iteration ("gradient", "step", "roundoff")
+        history: one dict per iteration: energy, grad_norm, alpha, backtracks, shift
+        exact_failures: exact Hessians offered whose factorization failed (not positive definite)
     """
 
     x: np.ndarray
@@ -182,7 +161,7 @@ def _free_block(free_idx: np.ndarray, n: int) -> _FreeBlock:
     return fb
 
 
-def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonOptions, try_exact: bool = True):
+def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonConfig, try_exact: bool = True):
     """Newton direction on the free dofs. ``H`` is a PSD sparse matrix, or a pair
     ``(H_exact, H_psd)``: the exact Hessian is tried first (a successful Cholesky factorization
     proves it positive definite, so the step is an exact Newton step: quadratic convergence);
@@ -213,7 +192,7 @@ def _solve_block(solver: SPDSolver, sub: "_FreeBlock", H, rhs: np.ndarray) -> np
     return solver.solve(sub(H), rhs)
 
 
-def _solve_shifted(solver: SPDSolver, H: sp.csr_matrix, rhs: np.ndarray, opts: NewtonOptions):
+def _solve_shifted(solver: SPDSolver, H: sp.csr_matrix, rhs: np.ndarray, opts: NewtonConfig):
     """Solve (H + shift I) dx = rhs for H found not positive definite, with the smallest shift of
     a growing sequence that factorizes. Returns (dx, shift)."""
     diag = np.abs(H.diagonal())
@@ -234,33 +213,31 @@ def minimize(
     x0: np.ndarray,
     *,
     free: np.ndarray | None = None,
-    options: NewtonOptions = NewtonOptions(),
+    options: NewtonConfig = NewtonConfig(),
     max_step: Callable[[np.ndarray, np.ndarray], float] | None = None,
     admissible: Callable[[np.ndarray], bool] | None = None,
     solver: SPDSolver | None = None,
 ) -> NewtonResult:
     """Minimize ``fun`` from ``x0`` by projected Newton with backtracking line search.
 
-    Parameters
-    ----------
-    fun : callable ``fun(x, need_hessian) -> (f, g, H)``
-        ``x`` (N,) float64; ``f`` float (``+inf`` marks an infeasible point); ``g`` (N,) gradient;
-        ``H`` scipy.sparse (N, N) positive semi-definite (PSD-projected) when ``need_hessian``,
-        else may be None. ``H`` may also be a pair ``(H_exact, H_psd)`` of the exact and the
-        PSD-projected Hessian: the exact one is used whenever its Cholesky factorization succeeds
-        (positive definite: exact Newton step, quadratic convergence near a stable minimizer where
-        per-element projection would only give linear convergence), the projected one otherwise.
-    x0 : (N,) array, start point; must be admissible with a finite ``f``.
-    free : (N,) bool mask of unknown dofs; the others stay at ``x0``'s values. None: all free.
-    options : :class:`NewtonOptions`.
-    max_step : ``max_step(x, dx) -> alpha_max`` in (0, 1], the largest feasible step fraction
-        along the full-length direction ``dx`` (zero on fixed dofs).
-    admissible : ``admissible(x) -> bool``; trial points failing it are rejected.
-    solver : an :class:`SPDSolver` to reuse (keeps the symbolic analysis across calls).
+    Args:
+        fun: callable ``fun(x, need_hessian) -> (f, g, H)``
+            ``x`` (N,) float64; ``f`` float (``+inf`` marks an infeasible point); ``g`` (N,) gradient;
+            ``H`` scipy.sparse (N, N) positive semi-definite (PSD-projected) when ``need_hessian``,
+            else may be None. ``H`` may also be a pair ``(H_exact, H_psd)`` of the exact and the
+            PSD-projected Hessian: the exact one is used whenever its Cholesky factorization succeeds
+            (positive definite: exact Newton step, quadratic convergence near a stable minimizer where
+            per-element projection would only give linear convergence), the projected one otherwise.
+        x0: (N,) array, start point; must be admissible with a finite ``f``.
+        free: (N,) bool mask of unknown dofs; the others stay at ``x0``'s values. None: all free.
+        options: :class:`NewtonConfig`.
+        max_step: ``max_step(x, dx) -> alpha_max`` in (0, 1], the largest feasible step fraction
+            along the full-length direction ``dx`` (zero on fixed dofs).
+        admissible: ``admissible(x) -> bool``; trial points failing it are rejected.
+        solver: an :class:`SPDSolver` to reuse (keeps the symbolic analysis across calls).
 
-    Returns
-    -------
-    NewtonResult with ``converged=True``. Raises ConvergenceError otherwise.
+    Returns:
+        NewtonResult with ``converged=True``. Raises ConvergenceError otherwise.
     """
     x = np.array(x0, dtype=np.float64).ravel()
     n = x.size
@@ -363,3 +340,7 @@ def minimize(
 
 def _inf_norm(v: np.ndarray) -> float:
     return float(np.max(np.abs(v))) if v.size else 0.0
+
+
+#: The earlier name (``...Config`` is the package's one suffix for configuration).
+NewtonOptions = NewtonConfig

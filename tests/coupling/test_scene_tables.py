@@ -7,7 +7,7 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
-from simfab.coupling.config import InsertionOptions, ObjectOptions
+from simfab.coupling.config import InsertionConfig, ObjectConfig
 from simfab.coupling.scene import SCENE_TABLES, bundled_dir, check_tables, load_coupling_scene, read_toml
 from simfab.errors import InputError
 
@@ -18,8 +18,8 @@ def test_every_bundled_scene_passes_the_table_check(toml):
 
 
 def test_each_table_knows_its_configuration_fields():
-    assert SCENE_TABLES["simulation"] == {f.name for f in fields(InsertionOptions)}
-    assert SCENE_TABLES["object"] == {f.name for f in fields(ObjectOptions)}
+    assert SCENE_TABLES["simulation"] == {f.name for f in fields(InsertionConfig)}
+    assert SCENE_TABLES["object"] == {f.name for f in fields(ObjectConfig)}
 
 
 CLAMP = dict(inner_radius=0.0095, width=0.0025, opening_deg=60.0, base_depth=0.004, base_height=0.02)
@@ -86,3 +86,98 @@ def test_object_options_are_validated_naming_the_key(tmp_path):
         with pytest.raises(InputError) as e:
             load_coupling_scene(tmp_path / "s.xml")
         assert str(tmp_path / "s.toml") in str(e.value) and "[object]" in str(e.value) and key in str(e.value)
+
+
+# --- issue 44 class 1: a value given on the command line is blamed on the flag, not on the scene file
+@pytest.mark.parametrize("argv, flag", [
+    (["couple", "simulate", "cclamp2d", "--friction", "-0.3", "--steps", "3"], "--friction"),
+    (["couple", "converge", "cclamp2d", "--friction", "2.5"], "--friction"),
+    (["couple", "optimize", "block2d_tight", "--friction", "nan"], "--friction"),
+    (["couple", "optimize", "cclamp2d", "--hold-force", "5", "1"], "--hold-force"),
+    (["couple", "optimize", "cclamp2d", "--grip-force", "-1", "3"], "--grip-force"),
+])
+def test_a_flag_value_is_blamed_on_the_flag(argv, flag, tmp_path, capsys):
+    from simfab.cli import main
+
+    out = tmp_path / "o"
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"simfab: error: {flag}: "), err
+    assert ".toml" not in err[0] and "Traceback" not in err[0]
+    assert not out.exists() or not any(out.iterdir())
+
+
+def _scene_with(tmp_path, extra: str):
+    src = bundled_dir()
+    shutil.copy(src / "cclamp2d.xml", tmp_path / "s.xml")
+    (tmp_path / "s.toml").write_text((src / "cclamp2d.toml").read_text() + extra)
+    return tmp_path / "s.xml"
+
+
+def test_a_file_value_is_blamed_on_the_file_table_and_key(tmp_path):
+    from simfab.io.tables import Override
+
+    xml = _scene_with(tmp_path, "\n[contact]\nfriction = -0.3\n")
+    with pytest.raises(InputError) as e:
+        load_coupling_scene(xml)
+    assert str(e.value) == f"{tmp_path / 's.toml'}: [contact]: friction=-0.3 must be a Coulomb coefficient in [0, 2]"
+    # the same value from a flag names the flag; a valid flag replaces the file's bad value
+    with pytest.raises(InputError) as e:
+        (tmp_path / "clean").mkdir()
+        load_coupling_scene(_scene_with(tmp_path / "clean", ""),
+                            overrides={"contact": {"friction": Override(-0.3, "--friction")}})
+    assert str(e.value) == "--friction: must be a Coulomb coefficient in [0, 2], got -0.3"
+    cm = load_coupling_scene(xml, overrides={"contact": {"friction": Override(0.2, "--friction")}})
+    assert cm.contact.friction == pytest.approx(0.2)
+
+
+def test_a_flag_over_a_scene_value_is_logged_once(tmp_path, capsys):
+    from simfab.io.tables import Override
+
+    xml = _scene_with(tmp_path, "\n[contact]\nfriction = 0.4\n")
+    ov = {"contact": {"friction": Override(0.1, "--friction")}, "simulation": {"steps": Override(3, "--steps")},
+          "object": {"seed": Override(4, "--seed")}}
+    cm = load_coupling_scene(xml, overrides=ov, quiet=False)
+    assert cm.contact.friction == pytest.approx(0.1) and len(cm.s_steps) == 4
+    err = capsys.readouterr().err.strip().splitlines()
+    # one line per flag that replaces a value of the file ([object] seed is not in it: nothing to say)
+    assert err == ["--steps 3 overrides s.toml [simulation] steps = 35",
+                   "--friction 0.1 overrides s.toml [contact] friction = 0.4"]
+    load_coupling_scene(xml, overrides=ov)  # quiet (the default for library calls): nothing
+    load_coupling_scene(xml, overrides={"contact": {"friction": Override(0.4, "--friction")}}, quiet=False)
+    assert capsys.readouterr().err == ""  # the same value as the file's: nothing replaced
+    # a bad value elsewhere: the error alone (no note before it: bad input is one line)
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace("samples = 50", "samples = 5"))
+    with pytest.raises(InputError, match=r"\[object\]: samples=5"):
+        load_coupling_scene(xml, overrides=ov, quiet=False)
+    assert capsys.readouterr().err == ""
+
+
+def test_a_mistyped_value_is_refused_naming_the_key(tmp_path):
+    """Types come from the config classes' annotations (msgspec): a value their own range checks would
+    let through is refused too (``refine = "no"`` is not a boolean)."""
+    xml = _scene_with(tmp_path, "")
+    text = (tmp_path / "s.toml").read_text()
+    (tmp_path / "s.toml").write_text(text.replace("[simulation]", '[simulation]\nrefine = "no"'))
+    with pytest.raises(InputError) as e:
+        load_coupling_scene(xml)
+    assert str(e.value).startswith(f"{tmp_path / 's.toml'}: [simulation]: refine='no' must be of type `bool`")
+
+
+def test_help_does_not_load_the_table_library():
+    """The scene-table loader's library (msgspec) is imported on first use only: ``--help`` of the
+    commands whose scene files it reads does not load it."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from simfab.cli import main\n"
+            "for argv in (['--help'], ['couple', 'simulate', '--help'], ['couple', 'optimize', '--help'],\n"
+            "             ['sweep', '--help']):\n"
+            "    try:\n"
+            "        main(argv)\n"
+            "    except SystemExit:\n"
+            "        pass\n"
+            "print('msgspec' in sys.modules, 'simfab.io.tables' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split()[-2:] == ["False", "False"]

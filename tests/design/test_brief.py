@@ -100,3 +100,27 @@ def test_target_profile_rms(tmp_path):
     (tmp_path / "bad.csv").write_text("0,0\n0,1\n")
     with pytest.raises(InputError):
         B.read_target_profile(tmp_path / "bad.csv")
+
+
+def test_an_override_is_blamed_on_its_flag_a_file_value_on_the_file():
+    from simfab.io.tables import Override
+
+    table = {"grip": "tight", "hold_force": [5.0, 10.0]}
+    # the file's value: file, table and key
+    with pytest.raises(InputError) as e:
+        B.DesignConfig.from_dict({"hold_force": [5, 1]}, where="x.toml [design]")
+    assert str(e.value) == "x.toml: [design] hold_force: need 0 <= lo <= hi, got [5, 1]"
+    # the same value from --hold-force names the flag, not the file that does not hold it
+    for bad, flag in (({"hold_force": Override([5.0, 1.0], "--hold-force")}, "--hold-force"),
+                      ({"handles": Override(0, "--handles")}, "--handles"),
+                      ({"placement": Override("k-means", "--placement")}, "--placement")):
+        with pytest.raises(InputError) as e:
+            B.DesignConfig.from_dict(table, where="x.toml [design]", overrides=bad)
+        assert str(e.value).startswith(f"{flag}: ") and "x.toml" not in str(e.value), str(e.value)
+    notes = []
+    b = B.DesignConfig.from_dict(table, where="x.toml [design]", log=notes.append,
+                                 overrides={"hold_force": Override((1.0, 2.0), "--hold-force")})
+    assert b.hold_force == (1.0, 2.0) and b.grip == "tight"
+    assert notes == ["--hold-force (1.0, 2.0) overrides x.toml [design] hold_force = [5.0, 10.0]"]
+    with pytest.raises(InputError, match="^--iterations: "):
+        b.with_overrides(iterations=-3)

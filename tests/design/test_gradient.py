@@ -9,6 +9,7 @@ import pytest
 
 from simfab.coupling import config as C
 from simfab.coupling.scene import load_coupling_scene
+from simfab.design import figure_gradients as FG
 from simfab.design import gradient as G
 from simfab.design.brief import DesignBrief
 from simfab.design.problem import element_quality, evaluate, make_problem
@@ -33,7 +34,7 @@ def problem_p2():
 def _check_against_finite_differences(P, monkeypatch, names, rel=1e-4, rel_of=None):
     # exact maxima's gradients (T = 0) and equilibria solved far below the simulation's force
     # tolerance (see tests/coupling/test_adjoint.py): what is checked is the derivative itself
-    monkeypatch.setattr(G, "TEMPERATURE_REL", 0.0)
+    monkeypatch.setattr(FG, "TEMPERATURE_REL", 0.0)  # the smooth maxima: simfab.design.figure_gradients
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_REL", 1e-10)
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_START", 1e-10)
     monkeypatch.setattr(C, "NEWTON_STEP_TOL_REL", 1e-12)

@@ -10,6 +10,7 @@ import pytest
 
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
+from simfab.design import figure_gradients as FG
 from simfab.design import gradient as G
 from simfab.design.brief import DesignBrief, TargetProfile
 from simfab.design.problem import evaluate, make_problem
@@ -186,7 +187,7 @@ def test_ejecting_end_pose_continues_the_coupling_ratio(monkeypatch):
     # starts without the annealing pre-phase
     from simfab.coupling import config as C
 
-    monkeypatch.setattr(G, "TEMPERATURE_REL", 0.0)
+    monkeypatch.setattr(FG, "TEMPERATURE_REL", 0.0)  # the smooth maxima: simfab.design.figure_gradients
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_REL", 1e-10)
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_START", 1e-10)
     monkeypatch.setattr(C, "NEWTON_STEP_TOL_REL", 1e-12)

@@ -79,6 +79,11 @@ def test_run_keys(tiny_spec):
      "[parameters.x]"),
     ("[sweep]\ncommand = ['crowd', 'simulate']\n[collect]\n'bad name' = 'raters'\n", "[collect] bad name"),
     ("[sweep]\ncommand = ['crowd', 'simulate']\n[plot]\nx = 'nothing'\n", "[plot]"),
+    # typed by the loader (simfab.io.tables): a value of the wrong type names its table and key
+    ("[sweep]\ncommand = ['crowd', 'simulate']\nkeep_outputs = 'yes'\n", "[sweep]: keep_outputs='yes'"),
+    ("[sweep]\ncommand = ['crowd', 'simulate']\nseed = 1.5\n", "[sweep]: seed must be an integer"),
+    ("[sweep]\ncommand = ['crowd', 'simulate']\n[parameters.x]\nvalus = [1]\n", "[parameters.x]: unknown key 'valus'"),
+    ("[sweep]\ncommand = ['crowd', 'simulate']\n[plot]\nfigures = 'F_in'\n", "[plot]: figures="),
 ])
 def test_bad_spec_names_file_and_field(tmp_path, capsys, text, field):
     p = _spec(tmp_path, text)
