@@ -7,7 +7,7 @@
 
 :func:`simulate` is :func:`simfab.coupling.run` (one insertion, typed
 :class:`~simfab.coupling.insertion.CouplingResult`); :func:`optimize` is :func:`simfab.design.run`
-(the rest-shape design, typed :class:`~simfab.design.pipeline.DesignRunResult`).
+(the rest-shape design, typed :class:`~simfab.design.pipeline.DesignResult`).
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ def optimize(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: b
             ``steps=8``) and run options (``method``, ``mesh_check``, ``restarts``, ...) of :func:`simfab.design.run`.
 
     Returns:
-        A :class:`simfab.design.pipeline.DesignRunResult`.
+        A :class:`simfab.design.pipeline.DesignResult`.
     """
     from simfab.design.pipeline import run
 

@@ -154,11 +154,10 @@ def simulation_overrides(args) -> dict:
 
 
 def run_optimize(args) -> dict:
-    from simfab._warp import device as check_device
-    from simfab.design.pipeline import optimize_scene
+    from simfab.design import run
     from simfab.errors import InputError
+    from simfab.progress import log
 
-    dev = check_device(args.device)
     if args.restarts < 1:
         raise InputError(f"must be >= 1, got {args.restarts}", where="--restarts")
     if args.workers is not None and args.workers < 1:
@@ -171,10 +170,12 @@ def run_optimize(args) -> dict:
     revolve = (args.revolve_axis, args.revolve_offset, args.revolve_arms) if args.revolve_axis else None
     contact = {} if args.friction is None else {"friction": args.friction}
     sim = simulation_overrides(args) | ({} if args.element_order is None else {"element_order": args.element_order})
-    return optimize_scene(args.scene, out=args.out, design=design_overrides(args),
-                          simulation=sim, contact=contact, device=dev, quiet=args.quiet,
-                          seed=args.seed, revolve=revolve, restarts=args.restarts, scheduler=args.scheduler,
-                          workers=workers, mesh_check=not args.no_mesh_check, method=args.method)
+    result = run(args.scene, out=args.out, design=design_overrides(args), simulation=sim, contact=contact,
+                 device=args.device, progress=not args.quiet, seed=args.seed, revolve=revolve, restarts=args.restarts,
+                 scheduler=args.scheduler, workers=workers, mesh_check=not args.no_mesh_check, method=args.method)
+    for w in result.warnings:  # warnings show even with --quiet
+        log(f"simfab: warning: {w}")
+    return result.to_json()
 
 
 def run_study(args) -> dict:

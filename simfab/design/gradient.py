@@ -70,7 +70,7 @@ from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_m
 from simfab.coupling.profile import SLIDING_REL, analyze_run, rest_bracket
 from simfab.design import brief as B
 from simfab.design.handles import Handles
-from simfab.design.optimize import DesignResult, optimize
+from simfab.design.optimize import OptimizationResult, optimize_anneal
 from simfab.design.problem import (
     CONTACT_STRAIN_FLOOR,
     QUALITY_REL,
@@ -797,9 +797,9 @@ def target_model(target, s: np.ndarray, force: np.ndarray, dF: np.ndarray) -> Ta
 
 
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
-                      callback=None, start=None, resume=None) -> DesignResult:
+                      callback=None, start=None, resume=None) -> OptimizationResult:
     """A trust-region SQP on the brief (:func:`simfab.design.sqp.trust_region_sqp`; see the module
-    docstring): one insertion per iteration; returns a :class:`DesignResult` whose ``simulations``
+    docstring): one insertion per iteration; returns an :class:`OptimizationResult` whose ``simulations``
     counts every insertion (the pre-phase's and the final run as ``couple simulate`` runs the design
     included) and ``gradient_evaluations`` those that gave gradients. ``seed`` seeds the annealing
     pre-phase, which runs only when the start gives no direction (:func:`flat_start`: at most
@@ -855,7 +855,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             log(f"couple optimize: {problem.base.name}: the start gives no gradient ({why}); annealing "
                 f"pre-phase until a design is in the brief's category, at most {PRE_PHASE_ITERATIONS} iterations",
                 quiet=quiet)
-            pre = optimize(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
+            pre = optimize_anneal(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
                            start=None if start is None else np.asarray(start, float), until=in_category)
             run.insertions += pre.simulations + pre.stopped_simulations + pre.speculative
             if in_contact(pre.best):
@@ -975,7 +975,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
                    f"{message}")
     if problem.initial is None:  # the initial shape's run, for correction rounds started from this result
         problem = dataclasses.replace(problem, initial=initial.result)
-    return DesignResult(problem=problem, initial=initial, best=best, history=hist,
+    return OptimizationResult(problem=problem, initial=initial, best=best, history=hist,
                         accepted=[(k, ev.rest, ev.objective) for k, (ev, acc) in enumerate(history) if acc],
                         simulations=run.insertions, stopped_simulations=0, rejected=rejected,
                         seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),

@@ -140,7 +140,7 @@ def _crowd(client, workers: int, n_sub: int) -> dict:
 
     from simfab._bundled import scenes_dir
     from simfab.crowd.data import Scale, load_ratings, load_truth
-    from simfab.crowd.study import micro_crowd_study
+    from simfab.crowd.microcrowd import micro_crowd_study
 
     ratings = load_ratings(str(scenes_dir("crowd", "ratings_practitioners.csv")), Scale(lo=1, hi=10))
     truth = load_truth(str(scenes_dir("crowd", "truth_support.csv")), ratings)
