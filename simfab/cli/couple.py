@@ -139,6 +139,13 @@ def run(args) -> dict:
     if cmd != "simulate":
         raise InputError("choose an action: 'simfab couple simulate SCENE', 'optimize SCENE', 'study handles SCENE' "
                          "or 'scenes'")
+    return simulate(args.scene, out=args.out, device=args.device, quiet=args.quiet, **simulate_overrides(args))
+
+
+def simulate_overrides(args) -> dict:
+    """``simfab couple simulate``'s flags as the scene overrides of :func:`simfab.coupling.run`."""
+    from simfab.errors import InputError
+
     sim = {}
     if args.steps is not None:
         if args.steps < 1:
@@ -164,7 +171,23 @@ def run(args) -> dict:
     if args.element_order is not None:
         sim["element_order"] = args.element_order
     contact = {} if args.friction is None else {"friction": args.friction}
-    return simulate(args.scene, out=args.out, device=args.device, quiet=args.quiet, simulation=sim, contact=contact)
+    return {"simulation": sim, "contact": contact}
+
+
+def api_call(args):
+    """The area function a ``couple`` command line calls (for sweeps), or None."""
+    from simfab.sweep.runs import ApiCall
+
+    cmd = getattr(args, "couple_command", None)
+    if cmd == "simulate":
+        return ApiCall(command="couple simulate", args=(args.scene,),
+                       kwargs=dict(seed=args.seed, device=args.device, **simulate_overrides(args)))
+    if cmd == "optimize":
+        from simfab.cli import couple_design
+
+        return ApiCall(command="couple optimize", args=(args.scene,),
+                       kwargs=dict(seed=args.seed, device=args.device, **couple_design.optimize_kwargs(args)))
+    return None
 
 
 def simulate(scene, *, out, device: str, quiet: bool, **overrides) -> dict:

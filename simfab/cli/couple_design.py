@@ -153,10 +153,10 @@ def simulation_overrides(args) -> dict:
     return {"steps": args.steps, "h_in": None}
 
 
-def run_optimize(args) -> dict:
-    from simfab.design import run
+def optimize_kwargs(args) -> dict:
+    """``simfab couple optimize``'s flags as the keyword arguments of :func:`simfab.design.run`
+    (besides scene, out, seed, device, progress)."""
     from simfab.errors import InputError
-    from simfab.progress import log
 
     if args.restarts < 1:
         raise InputError(f"must be >= 1, got {args.restarts}", where="--restarts")
@@ -170,9 +170,17 @@ def run_optimize(args) -> dict:
     revolve = (args.revolve_axis, args.revolve_offset, args.revolve_arms) if args.revolve_axis else None
     contact = {} if args.friction is None else {"friction": args.friction}
     sim = simulation_overrides(args) | ({} if args.element_order is None else {"element_order": args.element_order})
-    result = run(args.scene, out=args.out, design=design_overrides(args), simulation=sim, contact=contact,
-                 device=args.device, progress=not args.quiet, seed=args.seed, revolve=revolve, restarts=args.restarts,
-                 scheduler=args.scheduler, workers=workers, mesh_check=not args.no_mesh_check, method=args.method)
+    return dict(design=design_overrides(args), simulation=sim, contact=contact, revolve=revolve,
+                restarts=args.restarts, scheduler=args.scheduler, workers=workers, mesh_check=not args.no_mesh_check,
+                method=args.method)
+
+
+def run_optimize(args) -> dict:
+    from simfab.design import run
+    from simfab.progress import log
+
+    result = run(args.scene, out=args.out, device=args.device, progress=not args.quiet, seed=args.seed,
+                 **optimize_kwargs(args))
     for w in result.warnings:  # warnings show even with --quiet
         log(f"simfab: warning: {w}")
     return result.to_json()

@@ -180,58 +180,54 @@ def add_args(p):
 
 
 def run(args):
+    from simfab.crowd import pipeline
+
     cmd = getattr(args, "crowd_command", None)
     if cmd is None:
         raise InputError("choose an action: aggregate, study, truth, simulate or bracket (see 'simfab crowd --help')")
-    return {"aggregate": run_aggregate, "study": run_study, "truth": run_truth, "simulate": run_simulate,
-            "bracket": run_bracket}[cmd](args)
+    name, pos, kw = call_args(args)
+    r = getattr(pipeline, name)(*pos, out=args.out, progress=not args.quiet, **kw)
+    # shown even with --quiet: the sampler's warnings; the mesh not taken exactly as read
+    _log_warnings(getattr(r, "warnings", None) or getattr(r, "mesh_notes", None) or [])
+    return r.to_json()
+
+
+def call_args(args) -> tuple[str, tuple, dict]:
+    """(function of :mod:`simfab.crowd.pipeline`, positional, keyword arguments) of a crowd command line."""
+    cmd = args.crowd_command
+    common = dict(seed=args.seed, device=args.device)
+    if cmd == "aggregate":
+        return "aggregate", (args.ratings,), dict(scale=tuple(args.scale), truth=args.truth,
+                                                   config=_sampler_config(args, study=False), **common)
+    if cmd == "study":
+        return "study", (args.ratings,), dict(scale=tuple(args.scale), truth=args.truth, subcrowds=args.subcrowds,
+                                               min_size=args.min_size, scheduler=args.scheduler,
+                                               config=_sampler_config(args, study=True), **common)
+    if cmd == "truth":
+        return "truth", (args.mesh,), dict(orientations=args.orientations, units=args.units, scale=tuple(args.scale),
+                                           raycast=not args.no_raycast, **common)
+    if cmd == "simulate":
+        return "synthesize", (), dict(scale=tuple(args.scale), tasks=args.tasks, truth=args.truth,
+                                      practitioners=args.practitioners, public=args.public, malicious=args.malicious,
+                                      difficulty=args.difficulty, **common)
+    return "bracket", (), dict(designs=args.designs, load=args.load, material=args.material, **common)
+
+
+def api_call(args):
+    """The area function a ``crowd`` command line calls (for sweeps)."""
+    from simfab.sweep.runs import ApiCall
+
+    if getattr(args, "crowd_command", None) is None:
+        return None
+    _, pos, kw = call_args(args)
+    return ApiCall(command=f"crowd {args.crowd_command}", args=pos, kwargs=kw)
 
 
 def _log_warnings(lines) -> None:
     from simfab.progress import log
 
-    for m in lines:  # warnings show even with --quiet
+    for m in lines:
         log(f"simfab: warning: {m}")
-
-
-def run_aggregate(args):
-    from simfab.crowd.pipeline import aggregate
-
-    r = aggregate(args.ratings, scale=tuple(args.scale), truth=args.truth, config=_sampler_config(args, study=False),
-                  out=args.out, seed=args.seed, device=args.device, progress=not args.quiet)
-    _log_warnings(r.warnings)
-    return r.to_json()
-
-
-def run_study(args):
-    from simfab.crowd.pipeline import study
-
-    return study(args.ratings, scale=tuple(args.scale), truth=args.truth, subcrowds=args.subcrowds,
-                 min_size=args.min_size, scheduler=args.scheduler, config=_sampler_config(args, study=True),
-                 out=args.out, seed=args.seed, device=args.device, progress=not args.quiet).to_json()
-
-
-def run_truth(args):
-    from simfab.crowd.pipeline import truth
-
-    r = truth(args.mesh, orientations=args.orientations, units=args.units, scale=tuple(args.scale),
-              raycast=not args.no_raycast, out=args.out)
-    _log_warnings(r.mesh_notes)  # shown even with --quiet: the part was not taken exactly as read
-    return r.to_json()
-
-
-def run_simulate(args):
-    from simfab.crowd.pipeline import synthesize
-
-    return synthesize(scale=tuple(args.scale), tasks=args.tasks, truth=args.truth, practitioners=args.practitioners,
-                      public=args.public, malicious=args.malicious, difficulty=args.difficulty, out=args.out,
-                      seed=args.seed).to_json()
-
-
-def run_bracket(args):
-    from simfab.crowd.pipeline import bracket
-
-    return bracket(designs=args.designs, load=args.load, material=args.material, out=args.out).to_json()
 
 
 def demo(ctx):

@@ -61,14 +61,19 @@ def add_buckling_args(p) -> None:
     p.add_argument("--scene", default=None, help="elastica MJCF scene (default scenes/deploy/elastica.xml)")
 
 
+def buckling_kwargs(args) -> dict:
+    """``simfab validate buckling``'s flags as :func:`simfab.validate.buckling`'s keyword arguments."""
+    return dict(g_over_L=args.g_over_L, n=args.n, support=args.support, path=args.path, scene=args.scene,
+                seed=args.seed, device=args.device)
+
+
 def run_buckling(args) -> dict:
     import os
 
     from simfab.errors import ValidationFailed
     from simfab.validate import buckling
 
-    r = buckling(g_over_L=args.g_over_L, n=args.n, support=args.support, path=args.path, scene=args.scene,
-                 out=args.out, seed=args.seed, device=args.device, progress=not args.quiet)
+    r = buckling(out=args.out, progress=not args.quiet, **buckling_kwargs(args))
     if not args.json and not args.quiet:
         _print_table(r.rows)
     if not r.passed:
