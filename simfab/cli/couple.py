@@ -141,6 +141,13 @@ def run(args) -> dict:
     if cmd != "simulate":
         raise InputError("choose an action: 'simfab couple simulate SCENE', 'optimize SCENE', 'study handles SCENE' "
                          "or 'scenes'")
+    return simulate(args.scene, out=args.out, device=args.device, quiet=args.quiet, **simulate_overrides(args))
+
+
+def simulate_overrides(args) -> dict:
+    """``simfab couple simulate``'s flags as the scene overrides of :func:`simfab.coupling.run`."""
+    from simfab.errors import InputError
+
     sim = {}
     if args.steps is not None:
         if args.steps < 1:
@@ -168,60 +175,34 @@ def run(args) -> dict:
     from simfab.io.tables import flag_overrides
 
     contact = flag_overrides({"friction": args.friction})
-    return simulate_scene(args.scene, out=args.out, device=args.device, quiet=args.quiet, simulation=sim,
-                          contact=contact)
+    return {"simulation": sim, "contact": contact}
 
 
-def simulate_scene(scene, *, out, device: str = "cpu", quiet: bool = True, simulation: dict | None = None,
-                   contact: dict | None = None, stem: str | None = None) -> dict:
-    """Load a coupling scene, run the insertion and write every output; returns the summary."""
-    from simfab._warp import device as check_device  # quiet Warp initialization
-    from simfab.contact.sdf import PrimitiveField
-    from simfab.coupling.outputs import write_all
-    from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import check_start, simulate
-    from simfab.design.scene import check_brief_table
+def api_call(args):
+    """The area function a ``couple`` command line calls (for sweeps), or None."""
+    from simfab.sweep.runs import ApiCall
+
+    cmd = getattr(args, "couple_command", None)
+    if cmd == "simulate":
+        return ApiCall(command="couple simulate", args=(args.scene,),
+                       kwargs=dict(seed=args.seed, device=args.device, **simulate_overrides(args)))
+    if cmd == "optimize":
+        from simfab.cli import couple_design
+
+        return ApiCall(command="couple optimize", args=(args.scene,),
+                       kwargs=dict(seed=args.seed, device=args.device, **couple_design.optimize_kwargs(args)))
+    return None
+
+
+def simulate(scene, *, out, device: str, quiet: bool, **overrides) -> dict:
+    """``simfab.coupling.run`` with the CLI's logging: its warnings on stderr (also with --quiet)."""
+    from simfab.coupling import run
     from simfab.progress import log
 
-    dev = check_device(device)
-    cm = load_coupling_scene(scene, overrides={"simulation": simulation or {}, "contact": contact or {}}, device=dev,
-                             quiet=quiet)
-    check_brief_table(scene)  # the scene's [design] table, though simulating does not read it
-    check_start(cm)  # before the log line: bad input gives exactly one line on stderr
-    kind = "quadratic elements" if cm.options.element_order == 2 else "elements"
-    exact = isinstance(cm.field, PrimitiveField)  # exact signed distance, not sampled
-    obj = (f"object: exact {', '.join(p.kind for p in cm.field.primitives)}" if exact
-           else f"{len(cm.field.vertices)} object samples")
-    mu = f", friction {cm.contact.friction:g}" if cm.contact.friction > 0 else ", frictionless"
-    log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {obj}, {len(cm.s_steps) - 1} steps{mu}", quiet=quiet)
-    res = simulate(cm, quiet=quiet)
-    for m in res.warnings:  # warnings show even with --quiet
+    result = run(scene, out=out, device=device, progress=not quiet, **overrides)
+    for m in result.warnings:  # warnings show even with --quiet
         log(f"simfab: warning: {m}")
-    return write_all(res, Path(out), stem=stem, figures=averaged_stress(res, stress_radius(scene)))
-
-
-def stress_radius(scene) -> float:
-    """The scene's [design] stress_radius [m], else the default the design brief uses."""
-    from simfab.coupling.scene import read_toml, scene_paths
-    from simfab.design.brief import DesignBrief
-
-    table = read_toml(scene_paths(scene)[1]).get("design")
-    return DesignBrief.from_dict(dict(table or {})).stress_radius
-
-
-def averaged_stress(res, radius: float) -> dict:
-    """The von Mises stress the design's yield constraint reads (simfab.design.stress): the maximum
-    over the insertion of the stress averaged over ``radius`` [m] around each element (P1) or
-    quadrature point (P2); {"averaged_von_mises" [Pa], "stress_radius" [m]}."""
-    from simfab.design.stress import averaged_von_mises, p2_averaged_von_mises
-
-    fem = res.model.fem
-    records = [*res.steps, *res.removal]
-    if res.model.options.element_order == 2:
-        vm = max(p2_averaged_von_mises(fem, r.x, radius) for r in records)
-    else:
-        vm = max(averaged_von_mises(fem, r.von_mises, radius) for r in records)
-    return {"averaged_von_mises": float(vm), "stress_radius": float(radius)}
+    return result.to_json()
 
 
 #: Iteration cap of the demo's design run (the scene's brief allows 300; the gradient method, the default,
@@ -234,15 +215,15 @@ def demo(ctx) -> dict:
     shape (block2d_tight, 450 triangles) optimized for its design brief (tight, 3-5 N grip,
     below the yield stress) by the default method (gradient), checked on refined
     meshes (and corrected, if it misses the brief there)."""
-    from simfab.design.pipeline import optimize_scene
+    from simfab.design import run as design
 
     out = Path(ctx.out)
-    a = simulate_scene("cclamp2d", out=out, device=ctx.device, quiet=ctx.quiet)
-    b = simulate_scene("clip3d", out=out, device=ctx.device, quiet=ctx.quiet)
+    a = simulate("cclamp2d", out=out, device=ctx.device, quiet=ctx.quiet)
+    b = simulate("clip3d", out=out, device=ctx.device, quiet=ctx.quiet)
     keys = ("category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises", "seconds",
             "usd", "plot_png", "mjcf")
-    d = optimize_scene("block2d_tight", out=out / "design", design={"iterations": DEMO_DESIGN_ITERATIONS},
-                       device=ctx.device, quiet=ctx.quiet)
+    d = design("block2d_tight", out=out / "design", iterations=DEMO_DESIGN_ITERATIONS, device=ctx.device,
+               progress=not ctx.quiet).to_json()
     design = {k: d[k] for k in ("feasible", "E_L", "iterations", "simulations", "seconds")}
     design["constraints"] = {k: v["satisfied"] for k, v in d["constraints"].items()}
     design["feasible_mesh_converged"] = d["mesh_check"]["feasible_fine"]

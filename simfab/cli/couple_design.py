@@ -154,12 +154,11 @@ def simulation_overrides(args) -> dict:
     return {"steps": args.steps, "h_in": None}
 
 
-def run_optimize(args) -> dict:
-    from simfab._warp import device as check_device
-    from simfab.design.pipeline import optimize_scene
+def optimize_kwargs(args) -> dict:
+    """``simfab couple optimize``'s flags as the keyword arguments of :func:`simfab.design.run`
+    (besides scene, out, seed, device, progress)."""
     from simfab.errors import InputError
 
-    dev = check_device(args.device)
     if args.restarts < 1:
         raise InputError(f"must be >= 1, got {args.restarts}", where="--restarts")
     if args.workers is not None and args.workers < 1:
@@ -174,10 +173,20 @@ def run_optimize(args) -> dict:
 
     contact = flag_overrides({"friction": args.friction})
     sim = simulation_overrides(args) | ({} if args.element_order is None else {"element_order": args.element_order})
-    return optimize_scene(args.scene, out=args.out, design=design_overrides(args),
-                          simulation=sim, contact=contact, device=dev, quiet=args.quiet,
-                          seed=args.seed, revolve=revolve, restarts=args.restarts, scheduler=args.scheduler,
-                          workers=workers, mesh_check=not args.no_mesh_check, method=args.method)
+    return dict(design=design_overrides(args), simulation=sim, contact=contact, revolve=revolve,
+                restarts=args.restarts, scheduler=args.scheduler, workers=workers, mesh_check=not args.no_mesh_check,
+                method=args.method)
+
+
+def run_optimize(args) -> dict:
+    from simfab.design import run
+    from simfab.progress import log
+
+    result = run(args.scene, out=args.out, device=args.device, progress=not args.quiet, seed=args.seed,
+                 **optimize_kwargs(args))
+    for w in result.warnings:  # warnings show even with --quiet
+        log(f"simfab: warning: {w}")
+    return result.to_json()
 
 
 def run_study(args) -> dict:

@@ -13,9 +13,6 @@ bundled 3D-printing survey is in ``scenes/crowd`` (see its README).
 
 from __future__ import annotations
 
-import os
-
-from simfab.crowd.outputs import aggregate_outputs, bracket_outputs, study_outputs, truth_outputs
 from simfab.errors import InputError
 
 #: units of summary keys for the plain-text table
@@ -183,154 +180,67 @@ def add_args(p):
 
 
 def run(args):
+    from simfab.crowd import pipeline
+
     cmd = getattr(args, "crowd_command", None)
     if cmd is None:
         raise InputError("choose an action: aggregate, study, truth, simulate or bracket (see 'simfab crowd --help')")
-    return {"aggregate": run_aggregate, "study": run_study, "truth": run_truth, "simulate": run_simulate,
-            "bracket": run_bracket}[cmd](args)
+    name, pos, kw = call_args(args)
+    r = getattr(pipeline, name)(*pos, out=args.out, progress=not args.quiet, **kw)
+    # shown even with --quiet: the sampler's warnings; the mesh not taken exactly as read
+    _log_warnings(getattr(r, "warnings", None) or getattr(r, "mesh_notes", None) or [])
+    return r.to_json()
 
 
-def _device(args) -> str:
-    from simfab._warp import device
+def call_args(args) -> tuple[str, tuple, dict]:
+    """(function of :mod:`simfab.crowd.pipeline`, positional, keyword arguments) of a crowd command line."""
+    cmd = args.crowd_command
+    common = dict(seed=args.seed, device=args.device)
+    if cmd == "aggregate":
+        return "aggregate", (args.ratings,), dict(scale=tuple(args.scale), truth=args.truth,
+                                                   config=_sampler_config(args, study=False), **common)
+    if cmd == "study":
+        return "study", (args.ratings,), dict(scale=tuple(args.scale), truth=args.truth, subcrowds=args.subcrowds,
+                                               min_size=args.min_size, scheduler=args.scheduler,
+                                               config=_sampler_config(args, study=True), **common)
+    if cmd == "truth":
+        return "truth", (args.mesh,), dict(orientations=args.orientations, units=args.units, scale=tuple(args.scale),
+                                           raycast=not args.no_raycast, **common)
+    if cmd == "simulate":
+        return "synthesize", (), dict(scale=tuple(args.scale), tasks=args.tasks, truth=args.truth,
+                                      practitioners=args.practitioners, public=args.public, malicious=args.malicious,
+                                      difficulty=args.difficulty, **common)
+    return "bracket", (), dict(designs=args.designs, load=args.load, material=args.material, **common)
 
-    return device(args.device)
+
+def api_call(args):
+    """The area function a ``crowd`` command line calls (for sweeps)."""
+    from simfab.sweep.runs import ApiCall
+
+    if getattr(args, "crowd_command", None) is None:
+        return None
+    _, pos, kw = call_args(args)
+    return ApiCall(command=f"crowd {args.crowd_command}", args=pos, kwargs=kw)
 
 
-def _scale(args):
-    from simfab.crowd.data import Scale
-
-    return Scale(lo=args.scale[0], hi=args.scale[1])
-
-
-def run_aggregate(args):
-    from simfab.crowd.analysis import aggregate_all
-    from simfab.crowd.data import load_ratings, load_truth
+def _log_warnings(lines) -> None:
     from simfab.progress import log
 
-    scale = _scale(args)
-    cfg = _sampler_config(args, study=False)
-    ratings = load_ratings(args.ratings, scale)
-    truth = load_truth(args.truth, ratings) if args.truth else None
-    result = aggregate_all(ratings, truth, config=cfg, seed=args.seed, quiet=args.quiet, device=_device(args))
-    for m in result["warnings"]:  # warnings show even with --quiet
+    for m in lines:
         log(f"simfab: warning: {m}")
-    summary = aggregate_outputs(ratings, truth, result, args.out, title=os.path.basename(args.ratings))
-    summary["bayes"] = {k: summary["bayes"][k] for k in ("rhat_max", "ess_min", "seconds", "converged",
-                                                         "iterations_per_chain", "chains", "credible_mass",
-                                                         "x_interval")}
-    return summary
-
-
-def run_study(args):
-    from simfab.crowd.data import load_ratings, load_truth
-    from simfab.crowd.study import micro_crowd_study
-
-    scale = _scale(args)
-    cfg = _sampler_config(args, study=True)
-    ratings = load_ratings(args.ratings, scale)
-    truth = load_truth(args.truth, ratings)
-    res = micro_crowd_study(ratings, truth, n_sub=args.subcrowds, min_size=args.min_size, config=cfg, seed=args.seed,
-                            quiet=args.quiet, device=_device(args), scheduler=args.scheduler)
-    return study_outputs(res, args.out, title=f"Micro-crowd study of {os.path.basename(args.ratings)}")
-
-
-def run_truth(args):
-    from simfab.crowd.truth import load_part, orientation_table, parse_orientations
-    from simfab.progress import log
-
-    orients = parse_orientations(args.orientations)
-    lo, hi = args.scale
-    if not lo < hi:
-        raise InputError(f"scale must have lo < hi, got {lo:g} {hi:g}", where="--scale")
-    mesh, notes = load_part(args.mesh, units=args.units)
-    for n in notes:  # shown even with --quiet: the part was not taken exactly as read
-        log(f"simfab: warning: {n}")
-    rows = orientation_table(mesh.vertices, mesh.faces, orients, raycast=not args.no_raycast, scale=(lo, hi))
-    summary = truth_outputs(rows, args.out, scale=(lo, hi), notes=notes)
-    return summary
-
-
-def run_simulate(args):
-    import dataclasses
-
-    from simfab.crowd import synth
-    from simfab.crowd.config import GENERAL_PUBLIC, PRACTITIONERS
-    from simfab.crowd.data import read_truth
-    from simfab.io.atomic import write_csv, write_json
-
-    scale = _scale(args)
-    if args.practitioners < 0 or args.public < 0 or args.practitioners + args.public < 1:
-        raise InputError("need at least one rater (--practitioners / --public, both >= 0)")
-    mal = GENERAL_PUBLIC.malicious_fraction if args.malicious is None else args.malicious
-    if not 0.0 <= mal <= 1.0:
-        raise InputError(f"must be within [0, 1], got {mal}", where="--malicious")
-    mixes = []
-    if args.practitioners:
-        mixes.append(dataclasses.replace(PRACTITIONERS, size=args.practitioners))
-    if args.public:
-        mixes.append(dataclasses.replace(GENERAL_PUBLIC, size=args.public, malicious_fraction=mal))
-    if args.truth:
-        tasks, truth = read_truth(args.truth, scale)
-    else:
-        if args.tasks < 1:
-            raise InputError(f"must be >= 1, got {args.tasks}", where="--tasks")
-        tasks, truth = None, None
-    Q = len(tasks) if tasks else args.tasks
-    if len(args.difficulty) not in (1, Q):
-        raise InputError(f"give one difficulty or {Q} (one per question), got {len(args.difficulty)}",
-                         where="--difficulty")
-    beta = args.difficulty if len(args.difficulty) > 1 else args.difficulty[0]
-    crowd = synth.simulate(mixes, scale=scale, truth=truth, n_tasks=Q, beta=beta, seed=args.seed)
-    r = crowd.ratings
-    if tasks:
-        r = dataclasses.replace(r, tasks=tuple(tasks))
-    os.makedirs(args.out, exist_ok=True)
-    outputs = {
-        "ratings_csv": str(write_csv(os.path.join(args.out, "ratings.csv"), ["worker", "task", "label"], r.to_long())),
-        "truth_csv": str(write_csv(os.path.join(args.out, "truth.csv"), ["task", "truth"],
-                                   list(zip(r.tasks, crowd.truth.tolist())))),
-    }
-    planted = {"alpha": dict(zip(r.workers, crowd.alpha.tolist())),
-               "malicious": [w for w, b in zip(r.workers, crowd.malicious) if b],
-               "beta": dict(zip(r.tasks, crowd.beta.tolist())), "truth": dict(zip(r.tasks, crowd.truth.tolist()))}
-    outputs["planted_json"] = str(write_json(os.path.join(args.out, "planted.json"), planted))
-    return {"raters": len(r.workers), "tasks": list(r.tasks), "malicious": len(planted["malicious"]),
-            "outputs": outputs}
-
-
-def run_bracket(args):
-    import dataclasses
-
-    from simfab.crowd.bracket import BracketSetup, bracket_survey
-
-    setup = BracketSetup()
-    if args.load is not None:
-        if not (args.load > 0 and args.load < float("inf")):
-            raise InputError(f"must be a positive force in N, got {args.load}", where="--load")
-        setup = dataclasses.replace(setup, load=args.load)
-    if args.material is not None:
-        from simfab.fem.materials import material_by_name
-
-        try:
-            material_by_name(args.material)
-        except InputError as e:
-            raise InputError(e.message, where="--material") from None
-        setup = dataclasses.replace(setup, material=args.material)
-    results = bracket_survey(setup, names=args.designs)
-    if len(results) < 2:
-        raise InputError("need at least two designs to scale scores", where="--designs")
-    return bracket_outputs(results, setup, args.out)
 
 
 def demo(ctx):
     """The bundled 3D-printing survey (truth from the mesh, practitioners vs general public,
     micro-crowd study) and the bracket-strength truth of the structural survey (FEM)."""
-    from simfab.crowd.bracket import BracketSetup, bracket_survey
+    import os
+
+    from simfab.crowd.pipeline import bracket
     from simfab.crowd.survey import run_bundled_survey
     from simfab.progress import log
 
     summary = run_bundled_survey(out=ctx.out, seed=ctx.seed, quiet=ctx.quiet)
     log("crowd demo: bracket strength truth (FEM)", quiet=ctx.quiet)
-    b = bracket_outputs(bracket_survey(BracketSetup()), BracketSetup(), os.path.join(ctx.out, "bracket"))
+    b = bracket(out=os.path.join(ctx.out, "bracket")).to_json()
     summary["bracket"] = {"scores": {k: v["score"] for k, v in b["designs"].items()}, "outputs": b["outputs"]}
     return summary

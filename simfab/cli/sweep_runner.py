@@ -1,23 +1,24 @@
-"""One run of a sweep, executed on a Dask worker: write the run's scene, call the subcommand
-in-process (its ``run(args) -> dict``, no shell), pick the figures out of its summary.
+"""A sweep spec's runs as library calls: :func:`run_task` turns a run's command line into the
+area function it names (:class:`simfab.sweep.runs.ApiCall`, through the subcommand module's
+``api_call(args)``) and the task's arguments; the task itself is the library's
+:func:`simfab.sweep.runs.execute_run`. A command whose module has no ``api_call`` (or whose line is
+bad input, reported by its run) runs as :class:`ArgvCall`: the subcommand in-process.
 
-:func:`run_task` builds the picklable arguments on the client; :func:`execute_run` is the
-task itself. The base scene travels as text (the worker need not see the client's files);
-file references inside it (meshes, outlines) are made absolute against the client's scene
-folder, so they must be reachable there on the workers (the bundled scenes always are when
-client and workers share the installation path; otherwise use a shared file system).
+The base scene travels as text (the worker need not see the client's files); file references
+inside it (meshes, outlines) are made absolute against the client's scene folder, so they must be
+reachable there on the workers (the bundled scenes always are when client and workers share the
+installation path; otherwise use a shared file system).
 """
 
 from __future__ import annotations
 
-import contextlib
-import json
-import os
-import tempfile
-from pathlib import Path
+import dataclasses
 
 from simfab.cli.sweep_spec import SweepSpec, scene_files
 from simfab.errors import InputError
+from simfab.sweep.runs import ApiCall, cell, execute_run, lookup, write_scene
+
+__all__ = ["ArgvCall", "command_call", "run_task", "execute_run", "lookup", "cell", "write_scene"]
 
 _PARSER = None  # one argparse tree per worker process (building it imports every subcommand)
 
@@ -61,127 +62,45 @@ def run_task(spec: SweepSpec, point: dict, *, run_dir: str) -> dict:
             }
         else:
             argv = [s.replace("{scene}", str(spec.scene)) for s in argv]
-    return {"argv": argv, "figures": [(g.name, g.path) for g in spec.figures], "run_dir": run_dir,
+    return {"call": command_call(argv), "figures": [(g.name, g.path) for g in spec.figures], "run_dir": run_dir,
             "keep": spec.keep_outputs, "scene": scene}
 
 
-def execute_run(*, argv: list[str], figures: list[tuple[str, str]], run_dir: str, keep: bool,
-                scene: dict | None) -> dict:
-    """Run ``simfab ARGV --out RUN_DIR --quiet`` in this process; return {figure: value}.
-
-    With ``scene``, first writes the edited base scene into RUN_DIR/scene and puts its path
-    where the command line says ``{scene}``. ``keep=False`` runs in a temporary folder that is
-    removed afterwards. Raises what the subcommand raises (the task wrapper turns it into a row).
-    """
+def _parse(argv: list[str]):
     from simfab.cli import DEFAULTS
-    from simfab.io.atomic import to_jsonable
 
-    with contextlib.ExitStack() as stack:
-        d = Path(run_dir) if keep else Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="simfab-run-")))
-        d.mkdir(parents=True, exist_ok=True)
-        if scene is not None:
-            main = write_scene(scene, d / "scene")
-            argv = [s.replace("{scene}", str(main)) for s in argv]
-        args = _parser().parse_args(list(argv) + ["--out", str(d), "--quiet"])
-        for k, v in DEFAULTS.items():
-            if not hasattr(args, k):
-                setattr(args, k, v)
-        args.quiet, args.json = True, False
-        summary = to_jsonable(args._module.run(args) or {})
-    return {name: cell(lookup(summary, path)) for name, path in figures}
+    args = _parser().parse_args(list(argv))
+    for k, v in DEFAULTS.items():
+        if not hasattr(args, k):
+            setattr(args, k, v)
+    args.quiet, args.json = True, False
+    return args
 
 
-def lookup(summary: dict, path: str):
-    """The value at dotted ``path`` (dict keys; integers index lists); KeyError naming the
-    missing part and the keys that are there."""
-    cur = summary
-    for i, part in enumerate(path.split(".")):
-        if isinstance(cur, dict) and part in cur:
-            cur = cur[part]
-        elif isinstance(cur, list) and part.lstrip("-").isdigit() and -len(cur) <= int(part) < len(cur):
-            cur = cur[int(part)]
-        else:
-            here = ".".join(path.split(".")[:i]) or "the summary"
-            have = ", ".join(list(cur)[:12]) if isinstance(cur, dict) else f"a {type(cur).__name__}"
-            raise KeyError(f"{here} has no {part!r} (has: {have})")
-    return cur
-
-
-def cell(v):
-    """A table cell: scalars as they are, anything nested as compact JSON."""
-    if isinstance(v, (dict, list)):
-        return json.dumps(v, separators=(",", ":"))
-    return v
-
-
-def write_scene(scene: dict, folder: Path) -> Path:
-    """Write the base scene's files with the edits applied into ``folder``; returns the main
-    file's path. File references relative to the base folder become absolute."""
-    folder.mkdir(parents=True, exist_ok=True)
-    base = Path(scene["base"])
-    for name, text in scene["files"].items():
-        if name.endswith(".toml"):
-            text = _edit_toml(text, scene["toml"], base, where=name)
-        else:
-            text = _edit_mjcf(text, scene["mjcf"], base, where=name)
-        (folder / name).write_text(text, encoding="utf-8")
-    return folder / scene["main"]
-
-
-def _edit_toml(text: str, edits, base: Path, *, where: str) -> str:
-    import tomllib
-
-    import tomli_w
-
-    d = tomllib.loads(text)
-
-    def absolute(x):  # relative file names (outline, mesh, mesh_file) keep pointing at the base folder
-        if isinstance(x, dict):
-            return {k: absolute(v) for k, v in x.items()}
-        if isinstance(x, str) and x and not os.path.isabs(x) and (base / x).is_file():
-            return str(base / x)
-        return x
-
-    d = absolute(d)
-    for path, v in edits:
-        cur = d
-        for k in path[:-1]:
-            cur = cur.setdefault(k, {})
-            if not isinstance(cur, dict):
-                raise InputError(f"{'.'.join(path)}: {k!r} is not a table", where=where)
-        cur[path[-1]] = v
-    return tomli_w.dumps(d)
-
-
-def _edit_mjcf(text: str, edits, base: Path, *, where: str) -> str:
-    import xml.etree.ElementTree as ET
-
+def command_call(argv: list[str]):
+    """The call a run's command line makes: an :class:`ApiCall` when its module offers ``api_call``
+    and the line is good, else an :class:`ArgvCall` (which reports bad input when the run runs)."""
     try:
-        root = ET.fromstring(text)
-    except ET.ParseError as e:
-        raise InputError(f"not valid XML: {e}", where=where) from None
-    for el in root.iter():  # file references stay valid from the run folder
-        for attr in ("file", "meshdir", "texturedir", "assetdir"):
-            v = el.get(attr)
-            if v and not os.path.isabs(v) and (base / v).exists():
-                el.set(attr, str(base / v))
-    for tag, name, attr, index, v in edits:
-        hits = [el for el in root.iter(tag) if el.get("name") == name]
-        if not hits:
-            raise InputError(f"no <{tag} name={name!r}> in the MJCF scene", where=where)
-        for el in hits:
-            if index:
-                old = el.get(attr)
-                if old is None:
-                    raise InputError(f"<{tag} name={name!r}> has no {attr!r} to set components of", where=where)
-                comps = old.split()
-                if max(index) >= len(comps):
-                    raise InputError(f"<{tag} name={name!r}> {attr}={old!r} has no component {max(index)}", where=where)
-                for i in index:
-                    comps[i] = repr(float(v)) if isinstance(v, float) else str(v)
-                el.set(attr, " ".join(comps))
-            else:
-                text = " ".join(map(str, v)) if isinstance(v, (list, tuple)) else (
-                    repr(v) if isinstance(v, float) else str(v))
-                el.set(attr, text)
-    return ET.tostring(root, encoding="unicode")
+        args = _parse(argv)
+        hook = getattr(args._module, "api_call", None)
+        call = hook(args) if hook is not None else None
+    except InputError:
+        call = None
+    return call if isinstance(call, ApiCall) else ArgvCall(argv=tuple(argv))
+
+
+@dataclasses.dataclass(frozen=True)
+class ArgvCall:
+    """A run as ``simfab ARGV --out OUT --quiet`` in this process (for subcommands without an area
+    function yet); the protocol of :class:`simfab.sweep.runs.ApiCall`."""
+
+    argv: tuple
+
+    def __call__(self, *, scene_path: str | None, out: str) -> dict:
+        from simfab.io.atomic import to_jsonable
+
+        argv = [s.replace("{scene}", scene_path) for s in self.argv] if scene_path else list(self.argv)
+        args = _parse([*argv, "--out", out, "--quiet"])
+        return to_jsonable(args._module.run(args) or {})
+
+

@@ -277,27 +277,32 @@ def _loop_edges(k: int) -> np.ndarray:
     return np.c_[i, (i + 1) % k]
 
 
-def write_all(res: InsertionResult, out: Path, stem: str | None = None, *, figures: dict | None = None) -> dict:
-    """Write every output into ``out``; return the summary dict with the output paths. The files
-    appear together: a failure while writing any of them leaves none. ``figures``: further summary
-    entries computed by the caller (e.g. the averaged stress the design reads), placed after
-    ``max_von_mises`` in the summary and its JSON."""
+def write_all(result, out: Path, stem: str | None = None):
+    """Write every output of an insertion run into ``out`` together: a failure while writing any of
+    them leaves none.
+
+    Args:
+        result: a :class:`simfab.coupling.insertion.CouplingResult` (its ``insertion`` and ``profile``).
+        out: the output folder.
+        stem: the files' stem (default: the scene's name).
+
+    Returns:
+        ``result`` with ``outputs`` (profile_csv, plot_png, usd, mjcf, profile_json); the JSON file
+        holds its ``to_json()``.
+    """
+    import dataclasses
 
     out = Path(out)
-
+    res = result.insertion
     stem = safe_name(stem or res.model.name)  # the scene's name comes from a file: no separators, no '..'
-    prof, summary = summarize(res)
-    if figures:
-        items = list(summary.items())
-        at = next(i for i, (k, _) in enumerate(items) if k == "max_von_mises") + 1
-        summary = dict(items[:at] + list(figures.items()) + items[at:])
+    prof = analyze_run(res)
     paths = {"profile_csv": out / f"{stem}_profile.csv", "plot_png": out / f"{stem}_profile.png",
              "usd": out / f"{stem}.usda", "mjcf": out / f"{stem}.xml", "profile_json": out / f"{stem}_summary.json"}
-    summary.update({k: str(v) for k, v in paths.items()})
+    result = dataclasses.replace(result, outputs={k: str(v) for k, v in paths.items()})
     with atomic_paths(paths) as tmp:
         write_profile_csv(res, tmp["profile_csv"])
         plot_profile(res, prof, tmp["plot_png"])
         write_usd(res, tmp["usd"])
         write_mjcf(res, prof, tmp["mjcf"])
-        write_json(tmp["profile_json"], summary)
-    return summary
+        write_json(tmp["profile_json"], result.to_json())
+    return result

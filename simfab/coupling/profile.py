@@ -181,3 +181,99 @@ def analyze_run(res) -> ProfileSummary:
         category = "held by friction"
     return replace(prof, category=category, F_rm=F_rm, F_hold=F_hold, friction=mu)
 
+
+
+#: Per-record columns of a :class:`Profile` and their units (the profile CSV's columns).
+PROFILE_COLUMNS = {
+    "s": "m", "energy": "J", "force": "N", "path_force": "N", "grip": "N", "max_von_mises": "Pa",
+    "penetration": "m", "min_det_F": "-", "iterations": "-", "contact_points": "-", "phase": "-",
+    "normal_force": "N", "path_force_friction": "N", "dissipated": "J", "lag_solves": "-",
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Profile:
+    """The deformation profile of an insertion: its key figures and, per record (the insertion's,
+    then with friction the removal's; ``phase`` says which), the arrays it was read from.
+
+    Args:
+        category: "tight", "loose", "ejects", "jams" or "held by friction".
+        E_max: largest elastic energy along the insertion [J].
+        E_ss: elastic energy at the steady state [J] (E_max when there is none).
+        coupling_ratio: E_ss / E_max [%].
+        F_in: largest force needed to push O in [N].
+        F_rm: largest force needed to pull O out [N].
+        F_hold: force to start sliding O out of its seat [N] (F_rm without friction).
+        F_grip: grip force at the steady state [N].
+        friction: Coulomb coefficient the profile was simulated with [-].
+        stationary: whether E_ss is a minimum of the energy along the path.
+        index_max, index_ss: the insertion records of E_max and of the steady state.
+        s, energy, force, path_force, grip, max_von_mises, penetration, min_det_F, iterations,
+            contact_points, phase, normal_force, path_force_friction, dissipated, lag_solves: one entry
+            per record, units in :data:`PROFILE_COLUMNS` (force: support reactions along O's
+            translation, resisting < 0; path_force: the force on O along the path's forward tangent).
+    """
+
+    category: str
+    E_max: float
+    E_ss: float
+    coupling_ratio: float
+    F_in: float
+    F_rm: float
+    F_hold: float
+    F_grip: float
+    friction: float
+    stationary: bool
+    index_max: int
+    index_ss: int
+    s: np.ndarray
+    energy: np.ndarray
+    force: np.ndarray
+    path_force: np.ndarray
+    grip: np.ndarray
+    max_von_mises: np.ndarray
+    penetration: np.ndarray
+    min_det_F: np.ndarray
+    iterations: np.ndarray
+    contact_points: np.ndarray
+    phase: np.ndarray
+    normal_force: np.ndarray
+    path_force_friction: np.ndarray
+    dissipated: np.ndarray
+    lag_solves: np.ndarray
+
+    def to_pandas(self):
+        """The per-record table as a :class:`pandas.DataFrame`, one column per entry of
+        :data:`PROFILE_COLUMNS` (named ``<name>_<unit>`` when it has a unit, e.g. ``s_m``, ``force_N``).
+
+        Returns:
+            A DataFrame with one row per record (the insertion's, then the removal's).
+        """
+        import pandas as pd  # deferred: only tables need it
+
+        return pd.DataFrame({(k if u == "-" else f"{k}_{u}"): getattr(self, k) for k, u in PROFILE_COLUMNS.items()})
+
+
+def profile_of(res) -> Profile:
+    """The typed :class:`Profile` of an insertion.
+
+    Args:
+        res: a :class:`simfab.coupling.simulate.InsertionResult`.
+
+    Returns:
+        Its figures (:func:`analyze_run`) and per-record arrays.
+    """
+    summary = analyze_run(res)
+    records = [*res.steps, *res.removal]
+    cols = {}
+    for k in PROFILE_COLUMNS:
+        if k == "phase":
+            cols[k] = np.array([r.phase for r in records], dtype=str)
+        elif k in ("iterations", "contact_points", "lag_solves"):
+            cols[k] = np.array([getattr(r, k) for r in records], dtype=int)
+        else:
+            cols[k] = np.array([getattr(r, k) for r in records], dtype=float)
+    return Profile(category=summary.category, E_max=summary.E_max, E_ss=summary.E_ss,
+                   coupling_ratio=summary.coupling_ratio, F_in=summary.F_in, F_rm=summary.F_rm,
+                   F_hold=summary.F_hold, F_grip=summary.F_grip, friction=summary.friction,
+                   stationary=summary.stationary, index_max=summary.index_max, index_ss=summary.index_ss, **cols)

@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from simfab.crowd import aggregate as A
+from simfab.crowd import aggregators as A
 from simfab.crowd import metrics
 from simfab.crowd.config import Priors, SamplerConfig
 from simfab.crowd.data import Ratings

@@ -104,3 +104,20 @@ def bracket_outputs(results, setup, out: str) -> dict:
     }
     outputs["summary_json"] = str(write_json(os.path.join(out, "brackets.json"), summary))
     return summary
+
+
+def synth_outputs(crowd, out: str) -> dict:
+    """ratings.csv, truth.csv and planted.json (planted expertise, difficulty, malicious raters) of a
+    synthetic crowd (:class:`simfab.crowd.synth.SyntheticCrowd`); returns label -> path."""
+    os.makedirs(out, exist_ok=True)
+    r = crowd.ratings
+    outputs = {
+        "ratings_csv": str(write_csv(os.path.join(out, "ratings.csv"), ["worker", "task", "label"], r.to_long())),
+        "truth_csv": str(write_csv(os.path.join(out, "truth.csv"), ["task", "truth"],
+                                   list(zip(r.tasks, crowd.truth.tolist())))),
+    }
+    planted = {"alpha": dict(zip(r.workers, crowd.alpha.tolist())),
+               "malicious": [w for w, b in zip(r.workers, crowd.malicious) if b],
+               "beta": dict(zip(r.tasks, crowd.beta.tolist())), "truth": dict(zip(r.tasks, crowd.truth.tolist()))}
+    outputs["planted_json"] = str(write_json(os.path.join(out, "planted.json"), planted))
+    return outputs

@@ -24,8 +24,8 @@ from simfab.crowd import synth
 from simfab.crowd.analysis import aggregate_all
 from simfab.crowd.config import CrowdMix
 from simfab.crowd.data import Scale, load_ratings, load_truth
+from simfab.crowd.microcrowd import micro_crowd_study
 from simfab.crowd.outputs import aggregate_outputs, study_outputs, truth_outputs
-from simfab.crowd.study import micro_crowd_study
 from simfab.crowd.truth import orientation_table, parse_orientations
 from simfab.errors import InputError
 from simfab.io.atomic import write_csv

@@ -52,7 +52,7 @@ from simfab.design.figure_gradients import (  # the figure gradients, re-exporte
     stress_measure,
     target_model,
 )
-from simfab.design.optimize import DesignResult, optimize
+from simfab.design.optimize import OptimizationResult, optimize_anneal
 from simfab.design.problem import (
     QUALITY_REL,
     DesignProblem,
@@ -361,7 +361,7 @@ def modification_hessian(problem: DesignProblem, Jh: np.ndarray) -> np.ndarray:
 
 
 def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
-                      callback=None, start=None, resume=None) -> DesignResult:
+                      callback=None, start=None, resume=None) -> OptimizationResult:
     """A trust-region SQP on the brief (:func:`simfab.design.sqp.trust_region_sqp`; see the module docstring).
 
     One insertion per iteration. The annealing pre-phase runs only when the start gives no direction
@@ -382,7 +382,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             of simulating it again.
 
     Returns:
-        A :class:`~simfab.design.optimize.DesignResult` whose ``simulations`` counts every insertion
+        A :class:`~simfab.design.optimize.OptimizationResult` whose ``simulations`` counts every insertion
         (the pre-phase's and the final run included) and ``gradient_evaluations`` those that gave
         gradients. Raises ConvergenceError when the initial shape cannot be simulated.
     """
@@ -427,7 +427,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             log(f"couple optimize: {problem.base.name}: the start gives no gradient ({why}); annealing "
                 f"pre-phase until a design is in the brief's category, at most {PRE_PHASE_ITERATIONS} iterations",
                 quiet=quiet)
-            pre = optimize(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
+            pre = optimize_anneal(problem, iterations=PRE_PHASE_ITERATIONS, seed=seed, quiet=True,
                            start=None if start is None else np.asarray(start, float), until=in_category)
             run.insertions += pre.simulations + pre.stopped_simulations + pre.speculative
             if in_contact(pre.best):
@@ -547,7 +547,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
                    f"{message}")
     if problem.initial is None:  # the initial shape's run, for correction rounds started from this result
         problem = dataclasses.replace(problem, initial=initial.result)
-    return DesignResult(problem=problem, initial=initial, best=best, history=hist,
+    return OptimizationResult(problem=problem, initial=initial, best=best, history=hist,
                         accepted=[(k, ev.rest, ev.objective) for k, (ev, acc) in enumerate(history) if acc],
                         simulations=run.insertions, stopped_simulations=0, rejected=rejected,
                         seconds=time.perf_counter() - t0, sim_seconds=sum(ev.sim_seconds for ev in run.evaluations),

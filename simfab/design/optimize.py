@@ -36,11 +36,11 @@ PATIENCE_REL = 1e-3
 
 
 @dataclass(kw_only=True)
-class DesignResult:
-    """Outcome of :func:`optimize`.
+class OptimizationResult:
+    """Outcome of an optimizer run (:func:`optimize_anneal`, :func:`simfab.design.gradient.optimize_gradient`).
 
     initial, best : :class:`Evaluation` (with their InsertionResults)
-    history : one dict per iteration (see :func:`history_rows`)
+    history : the optimizer's log, one dict per iteration (typed: :func:`history_rows`)
     accepted : [(iteration, rest (n, d) [m], objective)] of every accepted design, in order
     simulations : insertion simulations run to the end; stopped_simulations : stopped early (their
     candidate provably rejected); rejected : {reason: count} of invalid candidates
@@ -49,7 +49,7 @@ class DesignResult:
     evaluated candidates; branches : the annealer's acceptance branches (drawn, adopted)
     seconds : wall time; sim_seconds : inside the simulator, summed over the evaluations used (with
     several workers it may exceed the wall time); stopped_early : bool
-    method : "anneal" (:func:`optimize`) or "gradient" (:func:`simfab.design.gradient.optimize_gradient`);
+    method : "anneal" (:func:`optimize_anneal`) or "gradient" (:func:`simfab.design.gradient.optimize_gradient`);
     gradient_evaluations : insertions that also gave the figures' gradients; message : the
     optimizer's own closing message ("" for annealing); events : the gradient method's count of
     non-smooth events between consecutive simulated designs
@@ -80,8 +80,8 @@ class DesignResult:
     resume: object = None
 
 
-def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
-             callback=None, workers=1, start=None, until=None) -> DesignResult:
+def optimize_anneal(problem: DesignProblem, *, iterations: int | None = None, seed: int = 0, quiet: bool = True,
+             callback=None, workers=1, start=None, until=None) -> OptimizationResult:
     """Run simulated annealing on ``problem`` (see the module docstring) with random ``seed``;
     ``iterations`` defaults to the brief's. ``workers`` > 1 evaluates that many proposals at once
     (:mod:`simfab.design.parallel`; needs ``problem.source``): the same result, sooner; running
@@ -173,8 +173,64 @@ def optimize(problem: DesignProblem, *, iterations: int | None = None, seed: int
             best.result = evaluate(problem, best.h, keep_result=True).result
     history = [dict(rec, evaluation=history_evals[i]) for i, rec in enumerate(out.history)]
     speculative = sum(1 for ev in out.discarded if ev.sim_seconds > 0)
-    return DesignResult(problem=problem, initial=initial, best=best, history=history, accepted=accepted,
+    return OptimizationResult(problem=problem, initial=initial, best=best, history=history, accepted=accepted,
                         simulations=counts["simulations"], stopped_simulations=counts["stopped"], rejected=rejected,
                         seconds=time.perf_counter() - t0, sim_seconds=counts["sim_seconds"], iterations=out.iterations,
                         stopped_early=out.stopped_early, speculative=speculative, workers=workers,
                         branches=tuple(out.branches))
+
+
+@dataclass(frozen=True, kw_only=True)
+class HistoryRow:
+    """One iteration of an optimization.
+
+    Args:
+        iteration: the iteration (0: the start design).
+        evaluation: the design evaluated (:class:`simfab.design.problem.Evaluation`: status, objective,
+            E_L, figures, seconds).
+        accepted: whether the optimizer moved to it.
+        current_objective: the objective of the design the optimizer stands on after it [-].
+        best_objective: the best objective so far [-].
+    """
+
+    iteration: int
+    evaluation: Evaluation
+    accepted: bool
+    current_objective: float
+    best_objective: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class AnnealRow(HistoryRow):
+    """One iteration of simulated annealing: a :class:`HistoryRow` and the annealer's state.
+
+    Args:
+        temperature: the acceptance temperature [-] (None at the start design, before the first proposal).
+        sigma_rel: the proposal step relative to its initial value, averaged over the parameters [-].
+    """
+
+    temperature: float | None
+    sigma_rel: float
+
+
+def history_rows(res: OptimizationResult) -> tuple[HistoryRow, ...]:
+    """The typed history of an optimizer run: :class:`AnnealRow` per iteration of annealing,
+    :class:`HistoryRow` (no annealing state) per iteration of the gradient method.
+
+    Args:
+        res: an :class:`OptimizationResult`.
+
+    Returns:
+        One row per iteration, in order.
+    """
+    rows = []
+    for rec in res.history:
+        common = dict(iteration=int(rec["k"]), evaluation=rec["evaluation"], accepted=bool(rec["accepted"]),
+                      current_objective=float(rec["current"]), best_objective=float(rec["best"]))
+        if res.method == "anneal":
+            t = float(rec["temperature"])
+            rows.append(AnnealRow(**common, temperature=t if math.isfinite(t) else None,
+                                  sigma_rel=float(rec["sigma"])))
+        else:
+            rows.append(HistoryRow(**common))
+    return tuple(rows)

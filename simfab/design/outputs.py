@@ -9,7 +9,8 @@ Written together into ``--out`` (temporaries renamed only when all succeeded):
   same connectivity): ``simfab couple simulate OUT/NAME_optimized.xml`` runs it unchanged;
 - ``NAME_design_profile.png``: initial vs optimized energy and force profiles with the brief's
   bands; ``NAME_design_shape.png``: initial silhouette under the optimized shape, handles marked;
-- ``NAME_design_history.csv``: one row per iteration;
+- ``NAME_design_history.csv``: one row per iteration (the annealer's temperature and sigma_rel
+  columns under annealing only);
 - ``NAME_design.usda``: time codes 0..A-1 replay the A accepted rest shapes (custom attribute
   ``simfab:objective`` per time code), then the final design's insertion (object animated);
 - ``NAME_design_summary.json``: objective, E_L, each constraint's value/bounds/satisfied,
@@ -30,7 +31,6 @@ from simfab.coupling.outputs import _display_faces, _object_display, extrude_tri
 from simfab.design import brief as B
 from simfab.design.problem import lift_rest
 from simfab.design.synthesis import boundary_loops
-from simfab.design.verify import check_warnings
 from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json, write_text
 from simfab.io.mesh import save_mesh
 from simfab.io.usd import StageWriter
@@ -57,7 +57,8 @@ def output_paths(out: Path, stem: str, dim: int, *, target: bool = False) -> dic
 
 
 def summary(res, *, scene: str | None = None) -> dict:
-    """JSON-ready summary of a :class:`simfab.design.optimize.DesignResult`."""
+    """JSON-ready summary of an :class:`simfab.design.optimize.OptimizationResult` (the figures of
+    :class:`simfab.design.pipeline.DesignResult`)."""
     best, init = res.best, res.initial
     cons = {c.name: c.as_dict() for c in best.constraints}
     for c in init.constraints:
@@ -136,14 +137,25 @@ def _figures(f: dict) -> dict:
     return {v: f.get(k) for k, v in names.items()}
 
 
-def history_rows(res):
-    for rec in res.history:
-        ev = rec["evaluation"]
+#: The annealing-only columns of the history CSV (left out under the gradient method).
+ANNEAL_COLUMNS = ("temperature", "sigma_rel")
+
+
+def history_table(rows) -> tuple[list[str], list[list]]:
+    """The history CSV: (header, rows) of typed history rows (:func:`simfab.design.optimize.history_rows`);
+    the annealing columns only when the rows carry them."""
+    anneal = bool(rows) and all(hasattr(r, "sigma_rel") for r in rows)
+    header = [h for h in HISTORY_HEADER if anneal or h not in ANNEAL_COLUMNS]
+    table = []
+    for r in rows:
+        ev = r.evaluation
         f = ev.figures
-        yield [rec["k"], ev.status, ev.reason, ev.objective, ev.E_L, ev.rms_error, int(bool(rec["accepted"])),
-               rec["current"], rec["best"], rec["temperature"], rec["sigma"], f.get("coupling_ratio"),
-               f.get("grip_force"), f.get("insertion_force"), f.get("removal_force"), f.get("von_mises"),
-               f.get("von_mises_peak"), f.get("seat_clearance"), f.get("category", ""), ev.seconds]
+        state = [r.temperature, r.sigma_rel] if anneal else []
+        table.append([r.iteration, ev.status, ev.reason, ev.objective, ev.E_L, ev.rms_error, int(r.accepted),
+                      r.current_objective, r.best_objective, *state, f.get("coupling_ratio"), f.get("grip_force"),
+                      f.get("insertion_force"), f.get("removal_force"), f.get("von_mises"), f.get("von_mises_peak"),
+                      f.get("seat_clearance"), f.get("category", ""), ev.seconds])
+    return header, table
 
 
 def part_mesh_mm(fem, X: np.ndarray):
@@ -365,26 +377,34 @@ def write_usd(res, path) -> Path:
     return w.save()
 
 
-def write_all(res, out: Path, *, scene_xml: Path, scene_toml: Path, stem: str | None = None,
-              extra: dict | None = None) -> dict:
-    """Write every output (see the module docstring) together; return the summary with paths
-    (``extra`` keys added to it, e.g. the restarts)."""
+def write_all(result, out: Path, *, stem: str | None = None):
+    """Write every output (see the module docstring) together.
+
+    Args:
+        result: a :class:`simfab.design.pipeline.DesignResult` (its ``optimization``, ``history``,
+            ``scene_xml``/``scene_toml``).
+        out: the output folder.
+        stem: the files' stem (default: the scene's name).
+
+    Returns:
+        ``result`` with ``outputs``; the summary JSON holds its ``to_json()``.
+    """
+    import dataclasses
+
+    res = result.optimization
     fem = res.problem.mesh
     stem = stem or res.problem.base.name
     paths = output_paths(out, stem, fem.dim, target=res.problem.target is not None)
-    s = summary(res)
-    s.update(extra or {})
-    if s.get("mesh_check"):
-        s["warnings"] = s["warnings"] + check_warnings(s["mesh_check"])
-    s["outputs"] = {k: str(v) for k, v in paths.items()}
+    result = dataclasses.replace(result, outputs={k: str(v) for k, v in paths.items()})
+    header, rows = history_table(result.history)
     with atomic_paths(paths) as tmp:
         save_mesh(part_mesh_mm(fem, res.best.rest), tmp["part_stl"])
         if fem.dim == 2:
             write_outline_csv(fem, res.best.rest, tmp["outline_csv"])
-        write_scene(res, scene_xml, scene_toml, paths, tmp, stem)
-        plot_profiles(res, tmp["profile_png"], s.get("mesh_check"))
+        write_scene(res, result.scene_xml, result.scene_toml, paths, tmp, stem)
+        plot_profiles(res, tmp["profile_png"], result.mesh_check)
         plot_shape(res, tmp["shape_png"])
-        write_csv(tmp["history_csv"], HISTORY_HEADER, history_rows(res))
+        write_csv(tmp["history_csv"], header, rows)
         write_usd(res, tmp["usd"])
-        write_json(tmp["summary_json"], s)
-    return s
+        write_json(tmp["summary_json"], result.to_json())
+    return result

@@ -1,13 +1,15 @@
-"""``simfab couple optimize``'s pipeline: load the design scene, place handles (from one
-insertion of the initial shape), anneal (:mod:`simfab.design.optimize`, on worker processes:
-:mod:`simfab.design.parallel`) or descend by gradients (:mod:`simfab.design.gradient`), check the
-design on refined meshes and re-optimize with
-mesh-corrected figures while it misses the brief there (:mod:`simfab.design.verify`), write the
-outputs (:mod:`simfab.design.outputs`)."""
+"""``simfab couple optimize`` as a function: :func:`run` loads the design scene, places handles
+(from one insertion of the initial shape), descends by gradients (:mod:`simfab.design.gradient`,
+the default) or anneals (:mod:`simfab.design.optimize`, on worker processes:
+:mod:`simfab.design.parallel`), checks the design on refined meshes and re-optimizes with
+mesh-corrected figures while it misses the brief there (:mod:`simfab.design.verify`), and returns
+a typed :class:`DesignResult`; with ``out`` it writes the outputs
+(:func:`simfab.design.outputs.write_all`)."""
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import time
 from pathlib import Path
 
@@ -18,55 +20,259 @@ from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
 from simfab.design import outputs
 from simfab.design.gradient import GRADIENT_LAG_TOL, MAX_ITERATIONS, design_recorder, optimize_gradient
-from simfab.design.optimize import optimize
+from simfab.design.optimize import HistoryRow, history_rows, optimize_anneal
 from simfab.design.parallel import Workers
 from simfab.design.problem import EvaluationSettings, ProblemSource, evaluate, make_problem, rebuild
 from simfab.design.scene import load_design_scene
 from simfab.design.synthesis import boundary_loops, revolve_outline, revolved_scene
-from simfab.design.verify import checked_objective, correction_factors, level_figures, needs_correction
-from simfab.design.verify import mesh_check as check_mesh  # (optimize_scene's mesh_check is its switch)
+from simfab.design.verify import check_warnings, checked_objective, correction_factors, level_figures, needs_correction
+from simfab.design.verify import mesh_check as check_mesh  # (run's mesh_check is its switch)
 from simfab.errors import ConvergenceError, InputError
 from simfab.io.atomic import write_json
 from simfab.io.mesh import save_mesh
 from simfab.io.outpaths import make_out_dir
 from simfab.progress import log
+from simfab.results import Result, field
 from simfab.sweep import run_tasks
 
 
-def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict | None = None,
-                   contact: dict | None = None, device: str = "cpu",
-                   quiet: bool = True, seed: int = 0, revolve: tuple[str, float] | None = None, restarts: int = 1,
-                   scheduler: str | None = None, workers: int = 1, mesh_check: bool = True,
-                   method: str | None = None) -> dict:
-    """Optimize a design scene's part and write every output into ``out``; returns the summary.
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DesignFigures:
+    """A design's profile figures (``None`` where the brief's evaluation did not read one).
 
-    design : overrides of the ``[design]`` table (e.g. ``{"iterations": 60, "handles": 4}``)
-    simulation : overrides of ``[simulation]``; contact : of ``[contact]`` (e.g. ``{"friction": 0.3}``)
-    seed : random seed of the handle placement and the annealing
-    restarts : independent annealing runs (seeds seed, seed+1, ...) on the same handles, run as
-        Dask tasks (:func:`simfab.sweep.run_tasks`, on ``scheduler`` or a local cluster); the
-        best final design is kept and every run is reported
-    revolve : (axis "x"|"y", offset [m], arms) to also write the optimized 2D section revolved into a
-        3D part (``NAME_optimized_revolved.stl``, mm): a full turn (arms 0), or the base revolved
-        and the arms replicated ``arms`` times (:func:`simfab.design.synthesis.revolve_arms`), then
-        written as a 3D scene and simulated (summary ``revolved``: its figures against the brief)
-    workers : processes evaluating the annealer's proposals (:mod:`simfab.design.parallel`; the
-        result does not depend on it); without restarts only
-    mesh_check : re-run the optimized shape with quadratic elements, refined in 2D
-        (:mod:`simfab.design.verify`) and report how far the optimization mesh's figures are from
-        the mesh-converged ones, warning when a constraint holds only on the coarse mesh
-    method : "gradient" (a trust-region SQP on the adjoint sensitivities, :mod:`simfab.design.gradient`: one
-        run; with friction its lag solved to at most GRADIENT_LAG_TOL) or "anneal" (simulated annealing,
-        :mod:`simfab.design.optimize`); None: "gradient", or "anneal" with ``restarts`` > 1 (restarts are
-        independent annealing runs). The gradient method is the default: it needs one insertion per
-        iteration where annealing needs one per proposal (measured: scenes/coupling/README.md).
+    Args:
+        category: "tight", "loose", "ejects", ...
+        coupling_ratio_pct: E_ss / E_max [%].
+        E_max_J, E_ss_J: peak and steady-state elastic energy [J].
+        F_in_N, F_rm_N, F_hold_N, F_grip_N: insertion, removal, hold and grip force [N].
+        von_mises_avg_Pa: von Mises stress averaged over the brief's stress_radius (what the yield
+            constraint reads) [Pa]; max_von_mises_Pa: the largest element stress [Pa].
+        seat_clearance_m: the seat's clearance [m]; friction: the Coulomb coefficient [-].
     """
+
+    category: str | None = None
+    coupling_ratio_pct: float | None = None
+    E_max_J: float | None = None
+    E_ss_J: float | None = None
+    F_in_N: float | None = None
+    F_rm_N: float | None = None
+    F_hold_N: float | None = None
+    F_grip_N: float | None = None
+    von_mises_avg_Pa: float | None = None
+    max_von_mises_Pa: float | None = None
+    seat_clearance_m: float | None = None
+    friction: float | None = None
+
+
+#: DesignResult fields present only in some runs, left out of its JSON when None (as before the typed result).
+OPTIONAL = ("rms_error", "rms_error_initial", "restarts", "mesh_check", "correction_rounds", "iterations_total",
+            "insertions_total", "objective_fine", "revolved")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DesignResult(Result):
+    """A rest-shape optimization: the ``--json`` summary of ``simfab couple optimize``, typed.
+
+    Args:
+        scene: the scene's name.
+        feasible: the best design meets every constraint (on the optimizer's figures).
+        objective, objective_initial: the objective of the best and the initial design [-].
+        E_L: the best design's Laplacian editing energy [-].
+        constraints: per constraint: value, lo, hi, unit, satisfied, initial (values mesh-corrected).
+        corrections: per figure, the factor applied to the coarse figure (mesh check); {} without.
+        category, category_initial: the best and the initial design's coupling category.
+        profile, profile_initial: their :class:`DesignFigures`.
+        handles: active, inactive, placement.
+        method: "gradient" or "anneal".
+        iterations: the first run's iterations; stopped_early: it stopped on patience or convergence.
+        optimizer_message: the optimizer's closing message.
+        insertions: insertion simulations of the optimization (the mesh check's excluded).
+        gradient_evaluations: insertions that also gave gradients.
+        nonsmooth_events: the gradient method's non-smooth events between consecutive designs (None: anneal).
+        simulations, simulations_stopped_early, speculative_simulations: insertion counts by kind.
+        acceptance_branches: the annealer's speculative branches (drawn, adopted).
+        workers: processes that evaluated candidates; accepted: accepted designs; rejected: count per reason.
+        seconds, simulation_seconds: wall time and time inside the simulator [s].
+        fraction_outside_simulator: the share of the workers' time outside the simulator [-].
+        units: key -> unit.
+        rms_error, rms_error_initial: target profile matching's RMS force error [N] (None without a target).
+        warnings: one line each.
+        restarts: per annealing restart: seed, status, message, feasible, objective, E_L, iterations, seconds.
+        mesh_check: the check on refined meshes (levels, figures, constraints, feasible_fine, ...).
+        correction_rounds: per round: factors, feasible_fine, objective_fine, iterations, seconds, kept.
+        iterations_total, insertions_total: every round's.
+        objective_fine: the kept design's objective with mesh-converged figures [-].
+        revolved: the revolved 3D part's simulation (with revolve arms).
+        history: one typed row per iteration (:class:`simfab.design.optimize.HistoryRow`,
+            :class:`~simfab.design.optimize.AnnealRow` under annealing).
+        optimization: the optimizer's :class:`simfab.design.optimize.OptimizationResult` (problem,
+            designs, their insertions).
+        scene_xml, scene_toml: the scene's files (the optimized scene is written from them).
+        outputs: label -> path of every file written.
+    """
+
+    scene: str
+    feasible: bool
+    objective: float = field(unit="-")
+    objective_initial: float = field(unit="-")
+    E_L: float = field(unit="-")
+    constraints: dict
+    corrections: dict
+    category: str | None
+    category_initial: str | None
+    profile: DesignFigures
+    profile_initial: DesignFigures
+    handles: dict
+    method: str
+    iterations: int
+    stopped_early: bool
+    optimizer_message: str
+    insertions: int
+    gradient_evaluations: int
+    nonsmooth_events: dict | None
+    simulations: int
+    simulations_stopped_early: int
+    speculative_simulations: int
+    acceptance_branches: dict
+    workers: int
+    accepted: int
+    rejected: dict
+    seconds: float = field(unit="s")
+    simulation_seconds: float = field(unit="s")
+    fraction_outside_simulator: float = field(unit="-")
+    units: dict
+    rms_error: float | None = field(unit="N", default=None)
+    rms_error_initial: float | None = field(unit="N", default=None)
+    warnings: list
+    restarts: list | None = None
+    mesh_check: dict | None = None
+    correction_rounds: list | None = None
+    iterations_total: int | None = None
+    insertions_total: int | None = None
+    objective_fine: float | None = field(unit="-", default=None)
+    revolved: dict | None = None
+    history: tuple[HistoryRow, ...] = field(json=False, default=())
+    optimization: object = field(json=False, default=None)
+    scene_xml: Path | None = field(json=False, default=None)
+    scene_toml: Path | None = field(json=False, default=None)
+
+    def to_json(self) -> dict:
+        """The ``--json`` summary (fields of :data:`OPTIONAL` only when set; ``outputs`` after the figures).
+
+        Returns:
+            A dict of JSON values.
+        """
+        d = super().to_json()
+        paths = d.pop("outputs")
+        d = {k: v for k, v in d.items() if not (k in OPTIONAL and v is None)}
+        if paths:
+            revolved = d.pop("revolved", None)
+            d["outputs"] = paths
+            if revolved is not None:
+                d["revolved"] = revolved
+        return d
+
+
+def design_result(res, *, scene_xml: Path, scene_toml: Path, extra: dict | None = None) -> DesignResult:
+    """The typed :class:`DesignResult` of an optimizer run (nothing written).
+
+    Args:
+        res: an :class:`simfab.design.optimize.OptimizationResult`.
+        scene_xml, scene_toml: the design scene's files.
+        extra: the mesh check's and restarts' entries (:func:`optimize_checked`).
+
+    Returns:
+        The result; its warnings include the mesh check's.
+    """
+    s = outputs.summary(res)
+    s.update(extra or {})
+    if s.get("mesh_check"):
+        s["warnings"] = s["warnings"] + check_warnings(s["mesh_check"])
+    s["profile"] = DesignFigures(**s["profile"])
+    s["profile_initial"] = DesignFigures(**s["profile_initial"])
+    return DesignResult(**s, history=history_rows(res), optimization=res, scene_xml=Path(scene_xml),
+                        scene_toml=Path(scene_toml))
+
+
+#: Options of :func:`run` that are neither brief entries nor scene options.
+RUN_OPTIONS = ("method", "restarts", "scheduler", "workers", "mesh_check", "revolve")
+
+
+def split_overrides(overrides: dict) -> tuple[dict, dict, dict]:
+    """Split :func:`run`'s keyword overrides into the scene tables they override.
+
+    Args:
+        overrides: brief entries (``iterations=40``; :class:`simfab.design.brief.DesignBrief` fields),
+            [simulation]/[contact] options (``steps=8``, ``friction=0.3``), or whole tables as dicts
+            (``design={...}``, ``simulation={...}``, ``contact={...}``).
+
+    Returns:
+        (design, simulation, contact) override dicts.
+
+    Raises:
+        InputError: a keyword that is none of these.
+    """
+    import dataclasses
+
+    from simfab.coupling.insertion import scene_overrides
+
+    brief_keys = {f.name for f in dataclasses.fields(B.DesignBrief)}
+    design = dict(overrides.pop("design", None) or {})
+    design.update({k: overrides.pop(k) for k in list(overrides) if k in brief_keys})
+    tables = scene_overrides(overrides)
+    extra = set(tables) - {"simulation", "contact"}
+    if extra:
+        k = sorted(extra)[0]
+        raise InputError(f"unknown override {k!r} (a [design] entry, a [simulation] or [contact] option, or a run "
+                         f"option: {', '.join(RUN_OPTIONS)})", where=k)
+    return design, tables.get("simulation", {}), tables.get("contact", {})
+
+
+def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool | None = None,
+        method: str | None = None, restarts: int = 1, scheduler: str | None = None, workers: int = 1,
+        mesh_check: bool = True, revolve: tuple | None = None, **overrides) -> DesignResult:
+    """Optimize a design scene's rest shape for its design brief (``simfab couple optimize``).
+
+    Args:
+        scene: a coupling scene with a [design] table (NAME.xml or a bundled name).
+        out: folder for every output (:func:`simfab.design.outputs.write_all`); None writes nothing.
+        seed: seed of the handle placement and the annealing.
+        device: Warp device.
+        progress: True shows log lines and progress bars.
+        method: "gradient" (a trust-region SQP on the adjoint sensitivities, one insertion per iteration; with
+            friction its lag solved to at most GRADIENT_LAG_TOL) or "anneal" (simulated annealing); None:
+            "gradient", or "anneal" with ``restarts`` > 1.
+        restarts: independent annealing runs (seeds seed, seed+1, ...) as Dask tasks on ``scheduler`` (or a
+            local cluster); the best design is kept, every run reported.
+        scheduler: Dask scheduler address for the restarts.
+        workers: processes evaluating the annealer's proposals (the result does not depend on it).
+        mesh_check: re-run the optimized shape with quadratic elements on refined meshes, report the
+            figures' discretization error and re-optimize with mesh-corrected figures while the brief is
+            missed there (:mod:`simfab.design.verify`).
+        revolve: (axis "x"|"y", offset [m], arms) to also write the 2D section revolved (needs ``out``;
+            :func:`write_revolved`).
+        **overrides: brief entries, scene options or tables (:func:`split_overrides`).
+
+    Returns:
+        The :class:`DesignResult`.
+
+    Raises:
+        InputError: bad scene, brief or option (before anything is computed or written).
+        ConvergenceError: the initial shape cannot be simulated.
+    """
+    from simfab._warp import device as check_device
+
+    quiet = not progress
+    device = check_device(device)
+    design, simulation, contact = split_overrides(dict(overrides))
     if method is None:
         method = "anneal" if restarts > 1 else "gradient"
     if method not in METHODS:
         raise InputError(f"must be one of {', '.join(METHODS)}, got {method!r}", where="--method")
     if method == "gradient" and restarts > 1:
         raise InputError("the gradient method is deterministic: restarts would repeat it", where="--restarts")
+    if revolve is not None and out is None:
+        raise InputError("revolving writes the revolved part: give an output folder", where="revolve")
     ds = load_design_scene(scene, design=design, simulation=simulation, contact=contact, device=device, quiet=quiet)
     cm = ds.cm
     if method == "gradient" and cm.contact.friction > 0 and cm.contact.lag_tol > GRADIENT_LAG_TOL:
@@ -82,7 +288,8 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
     if revolve is not None and len(revolve) > 2 and revolve[2] and not ds.kept_regions:
         raise InputError("replicating arms needs the base marked by a keep site ([design] keep)",
                          where="--revolve-arms")
-    out = make_out_dir(out)  # after every input check: bad input leaves no output directory
+    if out is not None:
+        out = make_out_dir(out)  # after every input check: bad input leaves no output directory
     cap = min(MAX_ITERATIONS, ds.brief.iterations) if method == "gradient" else ds.brief.iterations
     log(f"couple optimize: {cm.name}: {cm.fem.n_elements} elements, {len(cm.s_steps) - 1} steps, "
         f"{ds.brief.handles} handles ({ds.brief.placement}), up to {cap} {'SQP ' if method == 'gradient' else ''}"
@@ -93,29 +300,29 @@ def optimize_scene(scene, *, out, design: dict | None = None, simulation: dict |
         procs = stack.enter_context(Workers(workers)) if workers > 1 and restarts <= 1 else 1
         source = ProblemSource(scene=str(ds.xml), design=dict(design or {}), simulation=dict(simulation or {}),
                                contact=dict(contact or {}), device=device)
-        res, extra = _anneal_checked(ds, source, seed, restarts, scheduler, procs, mesh_check, quiet, method)
-    summary = outputs.write_all(res, out, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
+        res, extra = optimize_checked(ds, source, seed, restarts, scheduler, procs, mesh_check, quiet, method)
+    result = design_result(res, scene_xml=ds.xml, scene_toml=ds.toml, extra=extra)
+    if out is None:
+        return result
+    result = outputs.write_all(result, out)
     if revolve is not None:
-        rev = write_revolved(res, out, cm.name, *revolve, scene=ds, optimized=summary["outputs"], quiet=quiet)
-        summary["outputs"].update({k: str(v) for k, v in rev.pop("outputs").items()})
-        if rev:
-            summary["revolved"] = rev
-            summary["warnings"] += rev["warnings"]
-        write_json(summary["outputs"]["summary_json"], summary)  # with the revolved part's entries
-    for w in summary["warnings"]:
-        log(f"simfab: warning: {w}")
-    return summary
+        rev = write_revolved(res, out, cm.name, *revolve, scene=ds, optimized=result.outputs, quiet=quiet)
+        paths = {**result.outputs, **{k: str(v) for k, v in rev.pop("outputs").items()}}
+        result = dataclasses.replace(result, outputs=paths, revolved=rev or None,
+                                     warnings=result.warnings + (rev["warnings"] if rev else []))
+        write_json(result.outputs["summary_json"], result.to_json())  # with the revolved part's entries
+    return result
 
 
 #: The optimizers ``couple optimize --method`` offers.
 METHODS = ("anneal", "gradient")
 
 
-def _anneal_checked(ds, source: ProblemSource, seed, restarts, scheduler, workers, mesh_check, quiet,
-                    method: str = "anneal"):
-    """Place the handles, anneal (``restarts`` runs, or one on ``workers``: a count or running
-    :class:`simfab.design.parallel.Workers`), check the design on refined meshes and correct;
-    returns (DesignResult, summary extras)."""
+def optimize_checked(ds, source: ProblemSource, seed, restarts, scheduler, workers, mesh_check, quiet,
+                     method: str = "anneal"):
+    """Place the handles, optimize by ``method`` (the gradient method, or annealing: ``restarts`` runs,
+    or one on ``workers``: a count or running :class:`simfab.design.parallel.Workers`), check the
+    design on refined meshes and correct; returns (OptimizationResult, summary extras)."""
     cm = ds.cm
     # (the gradient method reuses the placement's insertion of the initial shape, recorded)
     rec = design_recorder(cm, ds.brief) if method == "gradient" else None
@@ -131,7 +338,7 @@ def _anneal_checked(ds, source: ProblemSource, seed, restarts, scheduler, worker
     if method == "gradient":
         res, runs = optimize_gradient(problem, quiet=quiet, seed=seed), None
     elif restarts <= 1:
-        res, runs = optimize(problem, quiet=quiet, seed=seed, workers=workers), None
+        res, runs = optimize_anneal(problem, quiet=quiet, seed=seed, workers=workers), None
     else:
         res, runs = _restarts(problem, seed, restarts, quiet, scheduler)
     extra = {} if runs is None else {"restarts": runs}
@@ -179,7 +386,7 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
         if res_b.method == "gradient":
             nxt = optimize_gradient(problem, quiet=quiet, start=res_b.best.h, seed=seed + 1 + k, resume=res_b.resume)
         else:
-            nxt = optimize(problem, seed=seed + 1 + k, quiet=quiet,
+            nxt = optimize_anneal(problem, seed=seed + 1 + k, quiet=quiet,
                            workers=workers if problem.source is not None else 1, start=res_b.best.h,
                            iterations=max(problem.brief.iterations // 2, 1))
         c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, result0=nxt.best.result, quiet=quiet)
@@ -235,9 +442,9 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
 def anneal_task(*, source: ProblemSource, settings: EvaluationSettings, seed: int):
     """One restart (a Dask task): the annealing of the problem ``source`` rebuilds
     (:class:`simfab.design.problem.ProblemSource`, handles already placed), scored with
-    ``settings``, with ``seed``; returns the :class:`simfab.design.optimize.DesignResult` without
+    ``settings``, with ``seed``; returns the :class:`simfab.design.optimize.OptimizationResult` without
     its unpicklable parts (the problem and the insertion results, which the client rebuilds)."""
-    res = optimize(rebuild(source, settings), seed=seed)
+    res = optimize_anneal(rebuild(source, settings), seed=seed)
     res.problem = None
     res.initial.result = res.best.result = None
     return res

@@ -177,7 +177,7 @@ class EvaluationSettings:
         constraints report the brief's own bounds
     refined : boundary facet ids every candidate's insertion starts refined with (``simulate``'s
         ``refined``): those the initial shape's insertion refined, set by
-        :func:`simfab.design.optimize.optimize`
+        :func:`simfab.design.optimize.optimize_anneal`
     hold_steps : every candidate's insertion runs at the initial shape's planned path positions
         (``base.s_steps``) instead of its own (whose insertion length follows A's farthest point
         along the path in jumps of 1/2000 of the path): the gradient method

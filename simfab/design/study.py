@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from simfab._warp import device as check_device
-from simfab.design.optimize import optimize
+from simfab.design.optimize import optimize_anneal
 from simfab.design.problem import make_problem
 from simfab.design.scene import load_design_scene
 from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json
@@ -49,7 +49,7 @@ def run_one(*, scene: str, design: dict, simulation: dict, method: str, count: i
     check_device("cpu")
     ds = load_design_scene(scene, design=dict(design, handles=count, placement=method), simulation=simulation)
     problem = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, seed=seed)
-    res = optimize(problem, seed=seed)
+    res = optimize_anneal(problem, seed=seed)
     return {"method": method, "handles": count, "seed": seed, "converged": bool(res.best.feasible),
             "E_L": float(res.best.E_L), "objective": float(res.best.objective), "iterations": res.iterations,
             "simulations": res.simulations, "seconds": res.seconds,

@@ -48,7 +48,7 @@ the last two levels of its order (its discretization error, as far as the levels
 constraint: its value at the reference and whether it is satisfied. A design that meets its
 brief only on the coarse mesh gets a warning in the summary, and :func:`correction_factors`
 turn the check into the next round's correction of the coarse figures
-(:func:`simfab.design.pipeline.optimize_scene`). The averaged stress of a P2 level is computed
+(:func:`simfab.design.pipeline.run`). The averaged stress of a P2 level is computed
 at its quadrature points (:func:`simfab.design.stress.p2_averaged_von_mises`).
 """
 

@@ -39,8 +39,7 @@ import socket
 import time
 from typing import Any, Callable, Iterator, Sequence
 
-import simfab
-from simfab import __version__
+from simfab._version import __version__
 from simfab.errors import ConvergenceError, InputError
 from simfab.progress import log
 
@@ -155,9 +154,10 @@ def check_worker_versions(client, version: str | None = None, *, where: str = "-
     version = version or __version__
 
     def probe():  # pickled by value: runs even where simfab is missing
-        try:
+        import importlib
 
-            return simfab.__version__
+        try:
+            return importlib.import_module("simfab").__version__  # (the worker's installation, by name)
         except ImportError as e:
             return f"not installed ({e})"
 

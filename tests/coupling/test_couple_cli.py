@@ -56,7 +56,7 @@ def test_summary_reports_the_averaged_stress_the_yield_constraint_reads(order):
     # averaged_von_mises is the figure the design's yield constraint and its mesh check read
     # (simfab.design.verify.level_figures: element means for P1, quadrature-point means for P2);
     # averaging over a radius smaller than any element gives back the raw element maximum (P1)
-    from simfab.cli.couple import averaged_stress, stress_radius
+    from simfab.coupling.insertion import averaged_stress, stress_radius
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import simulate
     from simfab.design.brief import DesignBrief
@@ -79,10 +79,9 @@ def test_a_failing_writer_leaves_no_output_file(tmp_path, monkeypatch):
     # the outputs of a run appear together: the MJCF writer failing after the CSV, plot and USD
     # were written leaves none of them (and no temporary) behind
     import simfab.coupling.outputs as outputs
-    from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling import run
 
-    res = simulate(load_coupling_scene("clip2d_loose", overrides={"simulation": {"steps": 3}}))
+    res = run("clip2d_loose", steps=3)
 
     def broken(*a, **k):
         raise OSError("disk full")

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from simfab.crowd import aggregate as A
+from simfab.crowd import aggregators as A
 from simfab.crowd import metrics
 from simfab.crowd.data import Scale, from_matrix
 

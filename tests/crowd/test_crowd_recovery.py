@@ -3,7 +3,7 @@ that pytest-xdist runs it beside the other crowd tests)."""
 
 import numpy as np
 
-from simfab.crowd import aggregate, metrics, synth
+from simfab.crowd import aggregators, metrics, synth
 from simfab.crowd.config import PRACTITIONERS, SamplerConfig
 from simfab.crowd.data import Scale
 from simfab.crowd.sampler import sample
@@ -28,7 +28,7 @@ def test_recovers_planted_truth_better_than_the_mean_over_30_practitioner_crowds
         assert np.isfinite(post.x[k, :, :n]).all() and np.isnan(post.x[k, :, n:]).all()
     xb = post.mean("x")
     rms_bayes = np.mean([metrics.rms(xb[k], c.x) for k, c in enumerate(crowds)])
-    rms_mean = np.mean([metrics.rms(SCALE.to_unit(aggregate.arithmetic_mean(c.ratings.labels)), c.x) for c in crowds])
+    rms_mean = np.mean([metrics.rms(SCALE.to_unit(aggregators.arithmetic_mean(c.ratings.labels)), c.x) for c in crowds])
     # measured: ~0.07 vs ~0.10; a sampler or likelihood bug lands at or above the mean
     assert rms_bayes < 0.9 * rms_mean
     # the 90 % credible intervals cover the planted truth at roughly the nominal rate

@@ -8,7 +8,7 @@ import pytest
 
 from simfab.coupling.scene import load_coupling_scene
 from simfab.design.brief import DesignBrief
-from simfab.design.optimize import optimize
+from simfab.design.optimize import optimize_anneal
 from simfab.design.problem import element_quality, evaluate, make_problem
 from simfab.errors import ConvergenceError
 
@@ -53,7 +53,7 @@ def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypat
         return real(cm, **kw)
 
     monkeypatch.setattr(design_problem, "simulate", flaky)
-    res = optimize(P, iterations=6, seed=1)
+    res = optimize_anneal(P, iterations=6, seed=1)
     reasons = [r["evaluation"].reason for r in res.history]
     assert any(r.startswith("simulation did not converge") for r in reasons)
     assert res.rejected.get("simulation did not converge", 0) >= 2
@@ -71,7 +71,7 @@ def test_small_design_problem_meets_every_constraint(scene):
     P = make_problem(scene, brief)
     init = evaluate(P, P.handles.identity())
     assert not init.feasible  # the start violates the brief (yield)
-    res = optimize(P, seed=0)
+    res = optimize_anneal(P, seed=0)
     assert res.iterations <= 60
     assert res.best.feasible, [c for c in res.best.constraints if not c.satisfied]
     assert res.best.E_L > 0
@@ -80,7 +80,7 @@ def test_small_design_problem_meets_every_constraint(scene):
     assert fig["category"] == "tight"
     assert fig["von_mises"] < 60e6 and fig["insertion_force"] <= 12.0
     # reproducible: the same seed gives the same design
-    res2 = optimize(P, seed=0)
+    res2 = optimize_anneal(P, seed=0)
     assert np.array_equal(res2.best.h, res.best.h)
 
 
@@ -155,8 +155,8 @@ def test_parallel_workers_make_the_same_decisions_as_one_process():
     src = ProblemSource(scene=str(ds.xml), design={"handles": 3, "placement": "spatial"}, simulation={"steps": 8})
     P = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, source=src)
     assert P.source.handle_vertices == tuple(int(v) for v in P.handles.vertex[P.handles.active])
-    one = optimize(P, iterations=10, seed=2)
-    two = optimize(P, iterations=10, seed=2, workers=2)
+    one = optimize_anneal(P, iterations=10, seed=2)
+    two = optimize_anneal(P, iterations=10, seed=2, workers=2)
     assert two.workers == 2 and one.workers == 1
     assert [r["value"] for r in two.history] == [r["value"] for r in one.history]
     assert [r["accepted"] for r in two.history] == [r["accepted"] for r in one.history]
@@ -181,9 +181,9 @@ def test_workers_started_early_serve_several_problems():
         P = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, source=src)
         corr = {"von_mises": 0.5, "insertion_force": 0.5}
         Pc = P.with_settings(corrections=corr)
-        runs = [optimize(p, iterations=8, seed=5, workers=w) for p in (P, Pc)]
+        runs = [optimize_anneal(p, iterations=8, seed=5, workers=w) for p in (P, Pc)]
     for p, two in zip((P, Pc), runs):
-        one = optimize(p, iterations=8, seed=5)
+        one = optimize_anneal(p, iterations=8, seed=5)
         assert two.workers == 2
         assert [r["value"] for r in two.history] == [r["value"] for r in one.history]
         assert [r["accepted"] for r in two.history] == [r["accepted"] for r in one.history]

@@ -23,10 +23,10 @@ def test_handle_study_reports_every_method_and_count(tmp_path):
 
 
 def test_restarts_keep_the_best_run(tmp_path):
-    from simfab.design.pipeline import optimize_scene
+    from simfab.design import run as optimize_design
 
-    s = optimize_scene("block2d_tight", out=tmp_path, design={"iterations": 3, "handles": 2, "placement": "spatial"},
-                       simulation={"steps": 6}, seed=0, restarts=2, scheduler="serial")
+    s = optimize_design("block2d_tight", out=tmp_path, design={"iterations": 3, "handles": 2, "placement": "spatial"},
+                        simulation={"steps": 6}, seed=0, restarts=2, scheduler="serial").to_json()
     assert [r["seed"] for r in s["restarts"]] == [0, 1]
     best = min(s["restarts"], key=lambda r: (not r["feasible"], r["objective"]))
     assert np.isclose(s["objective"], best["objective"], rtol=1e-12)  # re-evaluated in the client: identical

@@ -8,8 +8,8 @@ from simfab.crowd import metrics, synth
 from simfab.crowd.analysis import half_width
 from simfab.crowd.config import PRACTITIONERS, STUDY_SAMPLER
 from simfab.crowd.data import Scale
+from simfab.crowd.microcrowd import micro_crowd_study, subcrowds
 from simfab.crowd.sampler import sample
-from simfab.crowd.study import micro_crowd_study, subcrowds
 
 
 def _serial_reference(ratings, truth, *, n_sub, min_size, config, seed):

@@ -38,7 +38,7 @@ def _finest_rms(check: dict):
 
 
 def run(argv) -> dict:
-    from simfab.design.pipeline import optimize_scene
+    from simfab.design import run as optimize_design
     from simfab.design.scene import load_design_scene
     from simfab.design.study import iterations_per_handle_budget
 
@@ -72,9 +72,9 @@ def run(argv) -> dict:
                 t0 = time.perf_counter()
                 sim = {} if order is None else {"element_order": order}
                 name = f"{scene}{'' if k is None else f'_h{k}'}_{method}_{seed}_{order}"
-                s = optimize_scene(scene, out=out / name, quiet=True, seed=seed, design=design,
-                                   workers=a.anneal_workers if method == "anneal" else 1, method=method, simulation=sim,
-                                   contact=contact)
+                s = optimize_design(scene, out=out / name, seed=seed, design=design,
+                                    workers=a.anneal_workers if method == "anneal" else 1, method=method,
+                                    simulation=sim, contact=contact).to_json()
                 mc = s.get("mesh_check") or {}
                 rows.append({"scene": scene, "handles": s["handles"]["active"], "method": method, "seed": seed,
                              "element_order": order, "friction": a.friction,

@@ -73,7 +73,7 @@ def _rms_row(s: dict, seconds: float) -> dict:
 
 
 def _profile_handles(s_scene: dict, seconds_scene: float, out: Path, a) -> dict:
-    from simfab.design.pipeline import optimize_scene
+    from simfab.design import run as optimize_design
     from simfab.design.scene import load_design_scene
     from simfab.design.study import iterations_per_handle_budget
 
@@ -85,7 +85,8 @@ def _profile_handles(s_scene: dict, seconds_scene: float, out: Path, a) -> dict:
             continue
         t0 = time.perf_counter()
         design = {"handles": k, "iterations": iterations_per_handle_budget(brief, k)}
-        sk = optimize_scene("profile2d", out=out / f"profile2d_h{k}", design=design, seed=0, restarts=a.restarts)
+        sk = optimize_design("profile2d", out=out / f"profile2d_h{k}", design=design, seed=0,
+                             restarts=a.restarts).to_json()
         rows[k] = _rms_row(sk, time.perf_counter() - t0)
     return rows
 
@@ -98,13 +99,13 @@ def run(argv) -> dict:
     ap.add_argument("--restarts", type=int, default=2)
     a = ap.parse_args(argv)
 
-    from simfab.design.pipeline import optimize_scene
+    from simfab.design import run as optimize_design
 
     out = Path(a.out)
     report = {}
     for name in a.scenes.split(","):
         t0 = time.perf_counter()
-        s = optimize_scene(name, out=out / name, seed=0, restarts=a.restarts)
+        s = optimize_design(name, out=out / name, seed=0, restarts=a.restarts).to_json()
         re = _resimulate(s, out / name)
         report[name] = {"restarts": s.get("restarts"), "feasible": s["feasible"], "E_L": s["E_L"],
                         "iterations": s["iterations"], "simulations": s["simulations"],

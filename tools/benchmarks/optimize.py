@@ -109,7 +109,7 @@ def _run_once(a) -> dict:
     from benchmarks._reference import figures
     from simfab.coupling.simulate import simulate
     from simfab.design.gradient import design_recorder, optimize_gradient
-    from simfab.design.optimize import optimize
+    from simfab.design.optimize import optimize_anneal
     from simfab.design.outputs import insertions
     from simfab.design.parallel import Workers
     from simfab.design.problem import ProblemSource, make_problem
@@ -134,7 +134,7 @@ def _run_once(a) -> dict:
         if a.method == "gradient":
             res = optimize_gradient(problem, iterations=a.iterations, seed=a.seed)
         else:
-            res = optimize(problem, iterations=a.iterations, seed=a.seed, workers=procs)
+            res = optimize_anneal(problem, iterations=a.iterations, seed=a.seed, workers=procs)
         total = time.perf_counter() - t0
         cpu = time.process_time() - c0
         ref_after = machine_reference_ms()

@@ -10,8 +10,9 @@
    the wall time). Cross-check: T/4 tasks that sleep 0.2 s, whose efficiency is
    (T/4 * 0.2 s / W) / wall.
 2. A 16-run insertion sweep: the cclamp2d coupling scene over 4 Young's moduli x 4 arm widths
-   (``simfab sweep`` machinery, each run a full ``couple simulate`` with its outputs), serial
-   (in this process, one run after the other) and on the LocalCluster.
+   (the sweep's runs, :func:`simfab.sweep.runs.execute_run`: each ``simfab.coupling.run`` on an
+   edited scene copy with all its outputs), serial (in this process, one run after the other) and
+   on the LocalCluster; the figures must be identical.
 3. The micro-crowd study of the bundled practitioner crowd (15 raters, sizes 5..14,
    ``--subcrowds`` per size, one task per size), serial and on the LocalCluster; the two
    results must be identical.
@@ -90,48 +91,47 @@ def _overhead(client, workers: int, n: int) -> dict:
     }
 
 
-INSERTION_SPEC = """
-[sweep]
-name = "insertion16"
-command = ["couple", "simulate", "{scene}"]
-scene = "coupling/cclamp2d.toml"
-[set]
-"material.poisson_ratio" = 0.36
-[parameters.youngs_modulus]
-set = "material.youngs_modulus"
-values = [0.5e9, 1.0e9, 2.0e9, 3.5e9]
-[parameters.arm_width]
-set = "compliant.width"
-values = [0.002, 0.0025, 0.003, 0.0035]
-[collect]
-category = "category"
-F_in = "F_in"
-"""
+#: The insertion sweep: cclamp2d (Poisson ratio 0.36) over Young's modulus [Pa] x arm width [m].
+YOUNGS_MODULI = (0.5e9, 1.0e9, 2.0e9, 3.5e9)
+ARM_WIDTHS = (0.002, 0.0025, 0.003, 0.0035)
+
+
+def _insertion_tasks(tmp: str, name: str) -> list[dict]:
+    """One :func:`simfab.sweep.runs.execute_run` task per (E, width): ``simfab.coupling.run`` on an
+    edited copy of the bundled scene, writing every output into its own folder."""
+    from simfab._bundled import scenes_dir
+    from simfab.sweep.runs import ApiCall
+
+    toml = scenes_dir("coupling", "cclamp2d.toml")
+    files = {f.name: f.read_text(encoding="utf-8") for f in (toml, toml.with_suffix(".xml"))}
+    tasks = []
+    for i, (E, w) in enumerate((E, w) for E in YOUNGS_MODULI for w in ARM_WIDTHS):
+        scene = {"main": toml.with_suffix(".xml").name, "base": str(toml.parent), "files": files,
+                 "toml": [(("material", "poisson_ratio"), 0.36), (("material", "youngs_modulus"), E),
+                          (("compliant", "width"), w)], "mjcf": []}
+        tasks.append({"call": ApiCall(command="couple simulate", args=("{scene}",)),
+                      "figures": [("category", "category"), ("F_in", "F_in")],
+                      "run_dir": os.path.join(tmp, name, f"run{i}"), "keep": True, "scene": scene})
+    return tasks
 
 
 def _insertion(client, workers: int, tmp: str) -> dict:
-    import pandas as pd
+    from simfab.sweep import run_tasks
+    from simfab.sweep.runs import execute_run
 
-    from simfab.cli.sweep_spec import load_spec
-    from simfab.cli.sweep_study import run_sweep
-
-    p = os.path.join(tmp, "insertion16.toml")
-    with open(p, "w") as f:
-        f.write(INSERTION_SPEC)
-    spec = load_spec(p)
     c0, t0 = _cpu_seconds(), time.perf_counter()
-    s = run_sweep(spec, os.path.join(tmp, "serial"), scheduler="serial", quiet=True)
+    s = run_tasks(execute_run, _insertion_tasks(tmp, "serial"), scheduler="serial", quiet=True)
     serial, serial_cpu = time.perf_counter() - t0, _cpu_seconds() - c0
     c0, t0 = _cpu_seconds(), time.perf_counter()
-    d = run_sweep(spec, os.path.join(tmp, "dask"), scheduler=client, quiet=True)
+    d = run_tasks(execute_run, _insertion_tasks(tmp, "dask"), scheduler=client, quiet=True)
     dask, dask_cpu = time.perf_counter() - t0, _cpu_seconds() - c0
-    a, b = (pd.read_parquet(x["outputs"]["table_parquet"]).drop(columns=["seconds", "worker"]) for x in (s, d))
     return {
-        "runs": s["runs"], "ok": d["ok"], "serial_seconds": serial, "dask_seconds": dask,
+        "runs": len(s), "ok": sum(r.ok for r in d), "serial_seconds": serial, "dask_seconds": dask,
         "speedup": serial / dask, "parallel_efficiency": serial / (workers * dask),
-        "mean_run_seconds_serial": s["run_seconds"] / s["runs"], "mean_run_seconds_dask": d["run_seconds"] / d["runs"],
+        "mean_run_seconds_serial": sum(r.seconds for r in s) / len(s),
+        "mean_run_seconds_dask": sum(r.seconds for r in d) / len(d),
         "serial_cores_used": serial_cpu / serial, "dask_cores_used": dask_cpu / dask,
-        "tables_identical": bool(a.equals(b)),
+        "results_identical": [r.value for r in s] == [r.value for r in d],
     }
 
 
@@ -140,7 +140,7 @@ def _crowd(client, workers: int, n_sub: int) -> dict:
 
     from simfab._bundled import scenes_dir
     from simfab.crowd.data import Scale, load_ratings, load_truth
-    from simfab.crowd.study import micro_crowd_study
+    from simfab.crowd.microcrowd import micro_crowd_study
 
     ratings = load_ratings(str(scenes_dir("crowd", "ratings_practitioners.csv")), Scale(lo=1, hi=10))
     truth = load_truth(str(scenes_dir("crowd", "truth_support.csv")), ratings)

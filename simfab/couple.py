@@ -1,0 +1,55 @@
+"""``simfab.couple``: the ``simfab couple`` command as functions.
+
+    import simfab
+    r = simfab.couple.simulate("cclamp2d", friction=0.3)
+    r.profile.F_in, r.profile.to_pandas()
+    d = simfab.couple.optimize("block2d_tight", iterations=20)
+
+:func:`simulate` is :func:`simfab.coupling.run` (one insertion, typed
+:class:`~simfab.coupling.insertion.CouplingResult`); :func:`optimize` is :func:`simfab.design.run`
+(the rest-shape design, typed :class:`~simfab.design.pipeline.DesignResult`).
+"""
+
+from __future__ import annotations
+
+__all__ = ["simulate", "optimize"]
+
+
+def simulate(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool | None = None, **overrides):
+    """Simulate inserting a coupling scene's object into its compliant part.
+
+    Args:
+        scene: NAME.xml (with NAME.toml) or a bundled scene's name.
+        out: folder for the outputs (CSV, JSON, PNG, USD, MJCF); None writes nothing.
+        seed: accepted for the common signature (the insertion is deterministic).
+        device: Warp device.
+        progress: True shows log lines and progress bars.
+        **overrides: scene options, e.g. ``friction=0.3``, ``steps=8``, ``element_order=2``
+            (:func:`simfab.coupling.insertion.scene_overrides`).
+
+    Returns:
+        A :class:`simfab.coupling.insertion.CouplingResult`.
+    """
+    from simfab.coupling.insertion import run
+
+    return run(scene, out=out, seed=seed, device=device, progress=progress, **overrides)
+
+
+def optimize(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool | None = None, **overrides):
+    """Optimize a design scene's rest shape for its design brief.
+
+    Args:
+        scene: a coupling scene with a [design] table (path or bundled name).
+        out: folder for the optimized part, scene, plots, history and summary; None writes nothing.
+        seed: seed of the handle placement and the annealing.
+        device: Warp device.
+        progress: True shows log lines and progress bars.
+        **overrides: brief entries (``iterations=40``, ``grip="tight"``), scene options (``friction=0.3``,
+            ``steps=8``) and run options (``method``, ``mesh_check``, ``restarts``, ...) of :func:`simfab.design.run`.
+
+    Returns:
+        A :class:`simfab.design.pipeline.DesignResult`.
+    """
+    from simfab.design.pipeline import run
+
+    return run(scene, out=out, seed=seed, device=device, progress=progress, **overrides)
