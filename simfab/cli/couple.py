@@ -234,8 +234,8 @@ def demo(ctx) -> dict:
     out = Path(ctx.out)
     a = simulate_scene("cclamp2d", out=out, device=ctx.device, quiet=ctx.quiet)
     b = simulate_scene("clip3d", out=out, device=ctx.device, quiet=ctx.quiet)
-    keys = ("category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises", "seconds",
-            "usd", "plot_png", "mjcf")
+    keys = ("category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises",
+            "averaged_von_mises", "yield_stress", "seconds", "usd", "plot_png", "mjcf")
     d = optimize_scene("block2d_tight", out=out / "design", design={"iterations": DEMO_DESIGN_ITERATIONS},
                        device=ctx.device, quiet=ctx.quiet)
     design = {k: d[k] for k in ("feasible", "E_L", "iterations", "simulations", "seconds")}

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import os
 
-from simfab.crowd.outputs import aggregate_outputs, bracket_outputs, study_outputs, truth_outputs
 from simfab.errors import InputError
 
 #: units of summary keys for the plain-text table
@@ -214,6 +213,8 @@ def run_aggregate(args):
     result = aggregate_all(ratings, truth, config=cfg, seed=args.seed, quiet=args.quiet, device=_device(args))
     for m in result["warnings"]:  # warnings show even with --quiet
         log(f"simfab: warning: {m}")
+    from simfab.crowd.outputs import aggregate_outputs
+
     summary = aggregate_outputs(ratings, truth, result, args.out, title=os.path.basename(args.ratings))
     summary["bayes"] = {k: summary["bayes"][k] for k in ("rhat_max", "ess_min", "seconds", "converged",
                                                          "iterations_per_chain", "chains", "credible_mass",
@@ -231,6 +232,8 @@ def run_study(args):
     truth = load_truth(args.truth, ratings)
     res = micro_crowd_study(ratings, truth, n_sub=args.subcrowds, min_size=args.min_size, config=cfg, seed=args.seed,
                             quiet=args.quiet, device=_device(args), scheduler=args.scheduler)
+    from simfab.crowd.outputs import study_outputs
+
     return study_outputs(res, args.out, title=f"Micro-crowd study of {os.path.basename(args.ratings)}")
 
 
@@ -246,6 +249,8 @@ def run_truth(args):
     for n in notes:  # shown even with --quiet: the part was not taken exactly as read
         log(f"simfab: warning: {n}")
     rows = orientation_table(mesh.vertices, mesh.faces, orients, raycast=not args.no_raycast, scale=(lo, hi))
+    from simfab.crowd.outputs import truth_outputs
+
     summary = truth_outputs(rows, args.out, scale=(lo, hi), notes=notes)
     return summary
 
@@ -319,6 +324,8 @@ def run_bracket(args):
     results = bracket_survey(setup, names=args.designs)
     if len(results) < 2:
         raise InputError("need at least two designs to scale scores", where="--designs")
+    from simfab.crowd.outputs import bracket_outputs
+
     return bracket_outputs(results, setup, args.out)
 
 
@@ -331,6 +338,8 @@ def demo(ctx):
 
     summary = run_bundled_survey(out=ctx.out, seed=ctx.seed, quiet=ctx.quiet)
     log("crowd demo: bracket strength truth (FEM)", quiet=ctx.quiet)
+    from simfab.crowd.outputs import bracket_outputs
+
     b = bracket_outputs(bracket_survey(BracketSetup()), BracketSetup(), os.path.join(ctx.out, "bracket"))
     summary["bracket"] = {"scores": {k: v["score"] for k, v in b["designs"].items()}, "outputs": b["outputs"]}
     return summary

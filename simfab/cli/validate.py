@@ -2,8 +2,9 @@
 
 Validations are registered in :data:`VALIDATIONS` (name -> module path); each module defines
 ``HELP``, optional ``DESCRIPTION``, ``add_args(parser)`` and ``run(args) -> dict``, like a
-subcommand. Modules are imported when the parser is built, so they must keep heavy imports
-(Warp, MuJoCo) inside ``run``.
+subcommand. A module is imported only when its validation is invoked (its ``--help`` too): the
+listing reads ``HELP`` and ``DESCRIPTION`` from the module's source, so ``simfab --help`` and
+``simfab validate --help`` load no simulator.
 """
 
 from __future__ import annotations
@@ -20,15 +21,66 @@ VALIDATIONS = {
 
 
 def add_args(p) -> None:
-    from simfab.cli import add_common_args
-
-    sub = p.add_subparsers(dest="validation", metavar="VALIDATION", parser_class=type(p))
+    sub = p.add_subparsers(dest="validation", metavar="VALIDATION", parser_class=_lazy_parser_class(type(p)))
     for name, modname in VALIDATIONS.items():
-        mod = importlib.import_module(modname)
-        sp = sub.add_parser(name, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP))
-        add_common_args(sp)
-        mod.add_args(sp)
-        sp.set_defaults(_validation=mod)
+        text = _module_strings(modname)
+        sub.add_parser(name, help=text["HELP"], description=text.get("DESCRIPTION", text["HELP"]), module=modname)
+
+
+def _module_strings(modname: str) -> dict:
+    """The module's top-level string literals (HELP, and DESCRIPTION unless it is computed), read
+    from its source without importing it."""
+    import ast
+    import importlib.util
+
+    origin = importlib.util.find_spec(modname).origin
+    with open(origin, encoding="utf-8") as fh:
+        tree = ast.parse(fh.read())
+    out = {}
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+            try:
+                value = ast.literal_eval(node.value)
+            except ValueError:
+                continue
+            if isinstance(value, str):
+                out[node.targets[0].id] = value
+    return out
+
+
+def _lazy_parser_class(base):
+    """A parser class that imports its validation module and adds its arguments the first time it
+    parses or prints help."""
+
+    class LazyParser(base):
+        def __init__(self, *a, module: str | None = None, **kw):
+            super().__init__(*a, **kw)
+            self._module_name = module
+
+        def _load(self):
+            if self._module_name is not None:
+                from simfab.cli import add_common_args
+
+                mod = importlib.import_module(self._module_name)
+                self._module_name = None
+                self.description = getattr(mod, "DESCRIPTION", mod.HELP)  # (may be computed: an f-string)
+                add_common_args(self)
+                mod.add_args(self)
+                self.set_defaults(_validation=mod)
+
+        def parse_known_args(self, *a, **kw):
+            self._load()
+            return super().parse_known_args(*a, **kw)
+
+        def format_help(self):
+            self._load()
+            return super().format_help()
+
+        def format_usage(self):
+            self._load()
+            return super().format_usage()
+
+    return LazyParser
 
 
 def run(args) -> dict:
