@@ -167,8 +167,10 @@ class _Journal:
                     path.unlink()
                 else:
                     os.replace(backup, path)
-        for root in self.new_roots:  # a folder the run created holds nothing but the run's files
-            shutil.rmtree(root, ignore_errors=True)
+        for root in self.new_roots:  # a folder the run created: its (now empty) sub-folders and itself
+            for folder, _, _ in sorted(os.walk(root), key=lambda w: -len(w[0])):
+                with contextlib.suppress(OSError):
+                    os.rmdir(folder)  # only when empty: never a file someone else put there
         for d in [*reversed(self.dirs), *(a for r in self.new_roots for a in reversed(self.root_ancestors[r]))]:
             with contextlib.suppress(OSError):
                 d.rmdir()  # only when empty
