@@ -54,6 +54,7 @@ def _rendered_description(parser, columns: int, monkeypatch) -> list[str]:
 
 @pytest.mark.parametrize("prog, parser", PARSERS, ids=[p for p, _ in PARSERS])
 def test_description_paragraphs_render_as_written(prog, parser, monkeypatch):
+    parser.format_help()  # (a validation's parser adds its arguments and description when first shown)
     source = [line.rstrip() for line in parser.description.splitlines()]
     src_items = [item for item in _help_items(source) if item[0].strip()]
     # wide enough for every line: exactly as written
