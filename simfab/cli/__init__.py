@@ -115,7 +115,6 @@ def _help_items(lines: list[str]) -> list[list[str]]:
 def _refill(item: list[str], width: int, indent: str) -> list[str]:
     """One item refilled to ``width``: its first line's indentation first, its continuation lines'
     (or two more spaces) after."""
-    import re
     import textwrap
 
     lead = item[0][: _lead(item[0])]

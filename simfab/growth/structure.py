@@ -193,7 +193,7 @@ def require_ground(scene: GrowthScene) -> list:
     if not ground:
         where = f"{scene.path}: " if scene.path else ""
         raise InputError(f"no object under the roots to clamp the support to: a root must stand on an object "
-                         f"(within {tol.GROUND_CONTACT:g} of its diagonal) for the structural check",
+                         f"(within {100 * tol.GROUND_CONTACT:g} % of the object's diagonal) for the structural check",
                          where=f"{where}site {', '.join(scene.root_names)}")
     return ground
 
