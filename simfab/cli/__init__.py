@@ -13,7 +13,8 @@ folder: exit 2 before any computation), and while it runs every file written thr
 :mod:`simfab.io.atomic` must lie inside one of them (:mod:`simfab.io.outpaths`). A run's outputs
 are all or nothing: when it fails (or is interrupted: Ctrl-C, SIGTERM) every file it wrote is
 removed again, every file it replaced restored and the folders it created removed, so ``--out``
-is as before (``sweep`` keeps what it finished: it resumes from it).
+is as before (``sweep`` keeps what it finished: it resumes from it; a validation that ran and
+missed its tolerance keeps its report, exit 1).
 
 Exit codes: 0 ok; 2 bad input (one line on stderr naming the file/field, no traceback);
 1 internal failure or a solver that did not converge (one line, traceback only with
@@ -252,7 +253,9 @@ def _all_or_nothing(command: str, roots):
     """The run's outputs published on success only (:func:`simfab.io.outpaths.published_on_success`)."""
     import contextlib
 
-    return contextlib.nullcontext() if command in _KEEPS_PARTIAL else published_on_success(roots)
+    if command in _KEEPS_PARTIAL:
+        return contextlib.nullcontext()
+    return published_on_success(roots, keep_on=(ValidationFailed,))  # a missed tolerance: its report stays
 
 
 class _interrupt_on_sigterm:

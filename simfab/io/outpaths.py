@@ -187,15 +187,24 @@ def _missing_ancestors(folder: Path) -> list[Path]:
 
 
 @contextlib.contextmanager
-def published_on_success(roots) -> Iterator[None]:
+def published_on_success(roots, *, keep_on: tuple = ()) -> Iterator[None]:
     """All-or-nothing outputs for one run writing into the folders ``roots`` (module docstring):
     when the block raises, every file an atomic write created or replaced inside it is removed or
     restored, and the folders created (``roots`` themselves when they did not exist) are removed;
-    files the run did not write are never touched."""
+    files the run did not write are never touched.
+
+    Args:
+        roots: the folders the run writes into.
+        keep_on: exception types after which the outputs stay (a run that completed and reports a
+            failed check, whose outputs are the evidence).
+    """
     journal = _Journal(roots)
     token = _JOURNAL.set(journal)
     try:
         yield
+    except keep_on:
+        journal.commit()
+        raise
     except BaseException:
         journal.rollback()
         raise

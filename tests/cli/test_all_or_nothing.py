@@ -135,3 +135,14 @@ def test_grow_check_load_on_a_target_without_support(tmp_path, case):
     else:  # refused before growing
         _assert_one_line(r.stderr, "--load", "unknown target site(s) target_9")
     assert _tree(out) == before
+
+
+def test_a_completed_check_that_fails_keeps_its_report(tmp_path):
+    from simfab.errors import ValidationFailed
+
+    out = tmp_path / "out"
+    with pytest.raises(ValidationFailed):
+        with confine([out]), published_on_success([out], keep_on=(ValidationFailed,)):
+            write_text(out / "report.json", "the evidence")
+            raise ValidationFailed("missed tolerance")
+    assert _tree(out) == {"report.json": b"the evidence"} and not list(tmp_path.rglob("*simfab-undo*"))
