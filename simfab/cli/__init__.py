@@ -10,13 +10,17 @@ key suffixes). A module may also define ``demo(ctx: DemoContext) -> dict`` to ta
 
 Before a subcommand runs, every output folder is checked (an existing file, an unwritable
 folder: exit 2 before any computation), and while it runs every file written through
-:mod:`simfab.io.atomic` must lie inside one of them (:mod:`simfab.io.outpaths`).
+:mod:`simfab.io.atomic` must lie inside one of them (:mod:`simfab.io.outpaths`). A run's outputs
+are all or nothing: when it fails (or is interrupted: Ctrl-C, SIGTERM) every file it wrote is
+removed again, every file it replaced restored and the folders it created removed, so ``--out``
+is as before (``sweep`` keeps what it finished: it resumes from it; a validation that ran and
+missed its tolerance keeps its report, exit 1).
 
 Exit codes: 0 ok; 2 bad input (one line on stderr naming the file/field, no traceback);
 1 internal failure or a solver that did not converge (one line, traceback only with
-``SIMFAB_DEBUG=1``). Numeric warnings raised while a subcommand runs (NumPy's invalid value,
+``SIMFAB_DEBUG=1``). Warnings raised while a subcommand runs (simfab's own, NumPy's invalid value,
 divide by zero) are shown after a successful run and dropped on the error path, so an error
-stays the one line on stderr.
+stays the one line on stderr (progress lines without --quiet go on as they come).
 
 Subcommand modules import the library inside their functions, deliberately: ``simfab --help``,
 a subcommand's ``--help`` and argument errors answer without loading Warp, MuJoCo, OpenUSD and
@@ -29,10 +33,11 @@ import argparse
 import importlib
 import json
 import os
+import re
 import sys
 
 from simfab.errors import ConvergenceError, InputError, ValidationFailed
-from simfab.io.outpaths import check_out_dir, confine, require_nonempty
+from simfab.io.outpaths import check_out_dir, confine, published_on_success, require_nonempty
 
 #: Subcommands in the order ``simfab --help`` lists them.
 SUBCOMMANDS = ("grow", "couple", "deploy", "crowd", "sweep", "validate", "demo", "render", "inspect")
@@ -72,21 +77,60 @@ def _seed(text: str) -> int:
 
 
 class _Formatter(argparse.RawDescriptionHelpFormatter):
-    """Descriptions keep their line breaks and indentation; lines longer than the terminal are
-    wrapped (hanging indent kept), so both hand-laid lists and one-line paragraphs read well."""
+    """Descriptions render as written: hand-laid lists, examples and line breaks are kept when the
+    terminal is wide enough; on a narrower one each paragraph (or list item with its hanging
+    continuation lines) is refilled as a whole, so no sentence breaks in the middle."""
 
     def _fill_text(self, text, width, indent):
-        import textwrap
-
         out = []
-        for line in text.splitlines():
-            lead = line[: len(line) - len(line.lstrip())]
-            if len(line) + len(indent) <= width or not line.strip():
-                out.append(indent + line)
+        for item in _help_items(text.splitlines()):
+            if not item[0].strip():
+                out.append("")
+            elif all(len(indent) + len(line) <= width for line in item):
+                out += [indent + line for line in item]  # as written
             else:
-                out += textwrap.wrap(line.strip(), width, break_on_hyphens=False, initial_indent=indent + lead,
-                                     subsequent_indent=indent + lead + ("  " if lead else ""))
+                out += _refill(item, width, indent)
         return "\n".join(out)
+
+
+def _lead(line: str) -> int:
+    return len(line) - len(line.lstrip())
+
+
+def _help_items(lines: list[str]) -> list[list[str]]:
+    """A description's lines grouped into items: a blank line; an unindented paragraph (its lines
+    up to a blank or an indented line); an indented line with the lines below indented deeper (a
+    list entry and its hanging continuation). Indented lines after a line ending in ':' are a list."""
+    items: list[list[str]] = []
+    for line in lines:
+        prev = items[-1] if items else None
+        if prev and line.strip() and prev[0].strip() and (
+                (_lead(prev[0]) == 0 and _lead(line) == 0)
+                or (_lead(line) > _lead(prev[0]) and not prev[-1].rstrip().endswith(":"))):
+            prev.append(line)
+        else:
+            items.append([line])
+    return items
+
+
+def _refill(item: list[str], width: int, indent: str) -> list[str]:
+    """One item refilled to ``width``: its first line's indentation first, its continuation lines'
+    (or two more spaces) after."""
+    import textwrap
+
+    lead = item[0][: _lead(item[0])]
+    column = re.match(r"\s+\S+(?: \S+)*\s{2,}", item[0])  # an indented entry's text column: "  name    text"
+    if len(item) > 1:
+        hang = item[1][: _lead(item[1])]
+    elif column and len(column.group(0)) <= width // 2:
+        hang = " " * len(column.group(0))
+    else:
+        hang = lead + ("  " if lead else "")
+    text = ""
+    for line in (x.strip() for x in item):  # a word hyphenated across lines ("mesh-" "converged") stays one
+        text += line if not text or re.search(r"[A-Za-z]-$", text) else " " + line
+    return textwrap.wrap(text, max(width, 20), break_on_hyphens=False,
+                         break_long_words=False, initial_indent=indent + lead, subsequent_indent=indent + hang)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -170,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
         roots = _output_roots(args)
         for r in roots:  # before any computation: a bad --out is bad input (exit 2), not a late crash
             check_out_dir(r, where=_OUT_FLAG.get(args.command, "--out"))
-        with confine(roots):
+        with confine(roots), _interrupt_on_sigterm(), _all_or_nothing(args.command, roots), _HoldWarningLines():
             result = args._module.run(args)
         _flush_held_warnings()
         _report(result, args)
@@ -201,6 +245,43 @@ def main(argv: list[str] | None = None) -> int:
 
 _OUT_FLAG = {"render": "-o/--output or --out"}
 
+#: Subcommands whose finished work stays on failure: a sweep resumes from the runs already in its table.
+_KEEPS_PARTIAL = ("sweep",)
+
+
+def _all_or_nothing(command: str, roots):
+    """The run's outputs published on success only (:func:`simfab.io.outpaths.published_on_success`)."""
+    import contextlib
+
+    if command in _KEEPS_PARTIAL:
+        return contextlib.nullcontext()
+    return published_on_success(roots, keep_on=(ValidationFailed,))  # a missed tolerance: its report stays
+
+
+class _interrupt_on_sigterm:
+    """SIGTERM (``kill``, a batch system's time limit) raises KeyboardInterrupt like Ctrl-C, so the
+    run's partial outputs are taken back; in the main thread only (signals cannot be set elsewhere)."""
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        self._old = None
+        if threading.current_thread() is threading.main_thread():
+            self._old = signal.signal(signal.SIGTERM, _raise_interrupt)
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+
+        if self._old is not None:
+            signal.signal(signal.SIGTERM, self._old)
+        return False
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
 
 def _output_roots(args) -> list:
     """The folders the subcommand will write into (checked before it runs, then enforced)."""
@@ -208,10 +289,41 @@ def _output_roots(args) -> list:
     return list(fn(args)) if fn is not None else [args.out]
 
 
-#: Numeric warnings (NumPy's ``RuntimeWarning``: invalid value, divide by zero, overflow) held back
-#: while a subcommand runs: after a successful run they are shown; on the error path they are
-#: dropped (shown only with SIMFAB_DEBUG=1), so an error is the one line on stderr.
+#: Warnings held back while a subcommand runs - numeric ones (NumPy's ``RuntimeWarning``: invalid
+#: value, divide by zero, overflow) and every "simfab...: warning: ..." line written to stderr: after a
+#: successful run they are shown; on the error path they are dropped (shown only with
+#: SIMFAB_DEBUG=1), so an error is the one line on stderr.
 _HELD: list[str] = []
+
+_WARNING_LINE = re.compile(r"simfab[\w ]*: warning: ")
+
+
+class _HoldWarningLines:
+    """Within the block, lines written to stderr that are simfab warnings go to ``_HELD``; everything
+    else (progress, log lines) passes through at once."""
+
+    def __enter__(self):
+        self._stream, self._newline = sys.stderr, False
+        sys.stderr = self
+        return self
+
+    def __exit__(self, *exc):
+        sys.stderr = self._stream
+        return False
+
+    def write(self, text: str) -> int:
+        if self._newline and text == "\n":  # print() writes its end separately
+            self._newline = False
+            return len(text)
+        self._newline = False
+        if _WARNING_LINE.match(text):
+            _HELD.extend(line for line in text.splitlines() if line.strip())
+            self._newline = not text.endswith("\n")
+            return len(text)
+        return self._stream.write(text)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

@@ -3,7 +3,10 @@
 A run's summary dict is shown as one table of its top-level figures (4 significant digits,
 with units), one sub-table per nested result (dicts of figures, lists of rows) and a table of
 the output files. Units come from the summary's own ``units`` dict, then the subcommand
-module's ``UNITS``, then the key's suffix (``_m``, ``_m3``, ``_pa``, ``seconds``...).
+module's ``UNITS``, then the key's suffix (``_m``, ``_m3``, ``_pa``, ``seconds``...); a units key
+may be a dotted path's tail (``deviation.rms``) to name one figure among like-named ones. A
+figure whose unit is ``fraction`` is shown in percent. Lists of names are shown whole; output
+paths relative to the working folder when they lie in it, else absolute (either pastes).
 ``--quiet`` does not change it (it silences progress bars and log lines only).
 """
 
@@ -24,7 +27,12 @@ KNOWN_UNITS = {"insert_half_size": "m", "gap_half_size": "m", "gaussian_curvatur
                "saddle_amplitude": "m", "angle_deficit": "rad", "gaussian_curvature_per_increment": "1/m²",
                "energy": "J", "max_bending_strain": "-",
                "critical_load": "N", "euler_load": "N", "volume": "m³", "yield_stress": "Pa",
-               "penetration_tolerance": "m", "time_split": "s", "phase_split": "s"}
+               "penetration_tolerance": "m", "time_split": "s", "phase_split": "s",
+               # deploy surface: deviations as fractions of the target's diameter (its README quotes percent)
+               "deviation.rms": "fraction", "deviation.hausdorff": "fraction", "tuning.rms_before": "fraction",
+               "tuning.hausdorff_before": "fraction", "relaxed.rms_rel": "fraction"}
+#: the unit that marks a fraction: shown x100 in percent
+FRACTION = "fraction"
 MAX_COLS = 9
 MAX_DEPTH = 3
 
@@ -53,15 +61,39 @@ def _scalar(v) -> bool:
     return v is None or isinstance(v, (bool, int, float, str))
 
 
-def _unit(key: str, units: dict) -> str:
+def _unit(key: str, units: dict, path: tuple = ()) -> str:
+    """The unit of ``key`` (reached through the keys ``path``): the longest dotted tail of
+    ``path + (key,)`` that ``units`` names, else the key's suffix."""
     units = {**KNOWN_UNITS, **units}
-    if key in units:
-        return "" if units[key] in ("-", None) else str(units[key])
+    keys = (*path, key)
+    for i in range(len(keys)):
+        tail = ".".join(map(str, keys[i:]))
+        if tail in units:
+            return "" if units[tail] in ("-", None) else str(units[tail])
     k = key.lower()
     for suf, u in SUFFIX_UNITS:
         if k.endswith(suf):
             return u
     return ""
+
+
+def _shown(v, unit: str):
+    """(value, unit) as shown: a fraction in percent."""
+    if unit == FRACTION:
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            return 100.0 * v, "%"
+        if isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            return [100.0 * x for x in v], "%"
+        return v, "%"
+    return v, unit
+
+
+def display_path(p: str) -> str:
+    """An output path a user can paste: relative to the working folder when it lies inside it,
+    else absolute."""
+    a = os.path.abspath(p)
+    cwd = os.getcwd()
+    return os.path.relpath(a, cwd) if a == cwd or a.startswith(cwd.rstrip(os.sep) + os.sep) else a
 
 
 def _list_cell(v: list) -> str:
@@ -70,11 +102,8 @@ def _list_cell(v: list) -> str:
             return ", ".join(fmt(x) for x in v)
         return f"{len(v)} values, {fmt(min(v))} … {fmt(max(v))}"
     if all(isinstance(x, str) for x in v) and any(len(x) > 30 for x in v):
-        return "\n".join(v[:8]) + (f"\n… ({len(v)} in all)" if len(v) > 8 else "")
-    if all(_scalar(x) for x in v):
-        s = ", ".join(fmt(x) for x in v[:8])
-        return s + (f", … ({len(v)} in all)" if len(v) > 8 else "")
-    return f"{len(v)} entries"
+        return "\n".join(v)  # sentences (warnings): every one, one a line
+    return ", ".join(fmt(x) for x in v)  # a listing (names): the whole list
 
 
 def _row_cell(x) -> bool:
@@ -110,8 +139,8 @@ def _collect_paths(d, prefix: str, paths: list) -> None:
         paths.append((short, d))
 
 
-def build_tables(result: dict, *, units: dict | None = None, title: str = "simfab") -> list:
-    """rich renderables for a summary (see the module docstring)."""
+def build_tables(result: dict, *, units: dict | None = None, title: str = "simfab", width: int = 110) -> list:
+    """rich renderables for a summary (see the module docstring) on a console ``width`` wide."""
     from rich import box
     from rich.markup import escape
     from rich.table import Table
@@ -130,16 +159,15 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
 
     subs: list = []
 
-    def walk(d: dict, name: str, depth: int, inherited: str = ""):
+    def walk(d: dict, name: str, depth: int, inherited: str = "", path: tuple = ()):
         t = figures_table(d, name)
         nested = []
         for k, v in d.items():
             if (k == "units" and isinstance(v, dict)) or (is_path(v) and k not in INPUT_KEYS):
                 continue
-            if _scalar(v):
-                t.add_row(Text(str(k)), _cell(fmt(v)), Text(_unit(str(k), units) or inherited))
-            elif isinstance(v, list) and (not v or all(_scalar(x) for x in v)):
-                t.add_row(Text(str(k)), _cell(_list_cell(v)), Text(_unit(str(k), units) or inherited))
+            if _scalar(v) or (isinstance(v, list) and (not v or all(_scalar(x) for x in v))):
+                shown, unit = _shown(v, _unit(str(k), units, path) or inherited)
+                t.add_row(Text(str(k)), _cell(fmt(shown) if _scalar(shown) else _list_cell(shown)), Text(unit))
             elif isinstance(v, dict) and v and all(is_path(x) for x in v.values()):
                 continue  # an 'outputs' dict: shown in the files table
             else:
@@ -153,19 +181,19 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
             if isinstance(v, dict) and len(v) > 1 and all(isinstance(x, dict) for x in v.values()) and \
                     _same_keys(list(v.values())):
                 if len(v) <= MAX_SIDE_BY_SIDE:  # a few named results: one column each
-                    side_by_side(v, sub)
+                    side_by_side(v, sub, (*path, k))
                 else:  # many: one row each
-                    rows_table([{"name": kk, **vv} for kk, vv in v.items()], sub)
+                    rows_table([{"name": kk, **vv} for kk, vv in v.items()], sub, (*path, k))
                 for kk, vv in v.items():  # and what does not fit a row
                     inner = {a: b for a, b in vv.items() if isinstance(b, (dict, list)) and not _row_cell(b)}
                     if inner:
-                        walk(inner, f"{sub} › {kk}", depth + 2)
-            elif isinstance(v, dict):
-                walk(v, sub, depth + 1, _unit(str(k), units))  # e.g. time_split [s]: its entries in s
+                        walk(inner, f"{sub} › {kk}", depth + 2, path=(*path, k, kk))
+            elif isinstance(v, dict):  # e.g. time_split [s]: its entries in s
+                walk(v, sub, depth + 1, _unit(str(k), units, path), path=(*path, k))
             elif isinstance(v, list) and all(isinstance(x, dict) for x in v):
-                rows_table(v, sub)
+                rows_table(v, sub, (*path, k))
 
-    def side_by_side(d: dict, name: str):
+    def side_by_side(d: dict, name: str, path: tuple):
         keys = []
         for vv in d.values():
             keys += [k for k, x in vv.items() if k not in keys and _row_cell(x) and not is_path(x)]
@@ -173,32 +201,49 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
                   min_width=len(name) + 2)
         t.add_column("quantity", style="bold", no_wrap=True)
         for kk in d:
-            t.add_column(escape(str(kk)), justify="right", overflow="fold")
+            t.add_column(escape(str(kk)), justify="right", overflow="fold", min_width=len(str(kk)))
         t.add_column("unit", no_wrap=True)
         for k in keys:
-            cells = [d[kk].get(k) for kk in d]
+            unit = _unit(str(k), units, path)
+            cells = [_shown(d[kk].get(k), unit)[0] for kk in d]
             t.add_row(Text(str(k)), *(Text(fmt(c) if _scalar(c) else _list_cell(c)) for c in cells),
-                      Text(_unit(str(k), units)))
+                      Text(_shown(None, unit)[1]))
         subs.append(t)
 
-    def rows_table(rows: list, name: str):
+    def rows_table(rows: list, name: str, path: tuple):
         cols = []
         for r in rows:
             for k, x in r.items():
                 if k not in cols and _row_cell(x) and not is_path(x):
                     cols.append(k)
-        cols = cols[:MAX_COLS]
+        heads, used = [], 0
+        for i, c in enumerate(cols[:MAX_COLS]):  # as many columns as fit with whole header words (values fold)
+            u = _unit(str(c), units, path)
+            head = f"{c} [{_shown(None, u)[1]}]" if u else str(c)
+            need = max(len(w) for w in head.split())
+            if i == 0:  # the first column does not wrap
+                need = max([need, *(len(fmt(r.get(c))) for r in rows[:MAX_ROWS] if _scalar(r.get(c)))])
+            if heads and used + need + 3 > width:
+                break
+            heads.append((c, u, head))
+            used += need + 3  # the cell's padding and the gap to the next column
+        cols, col_units = [c for c, _, _ in heads], [u for _, u, _ in heads]
         t = Table(title=escape(name), box=box.SIMPLE_HEAD, title_justify="left", show_edge=False, pad_edge=False,
                   min_width=len(name) + 2)
-        for i, c in enumerate(cols):
-            u = _unit(str(c), units)
-            t.add_column(escape(f"{c} [{u}]" if u else str(c)), justify="left" if i == 0 else "right", overflow="fold",
-                         no_wrap=i == 0)
+        for i, (_, _, head) in enumerate(heads):
+            t.add_column(escape(head), justify="left" if i == 0 else "right", overflow="fold", no_wrap=i == 0,
+                         min_width=max(len(w) for w in head.split()))
         for r in rows[:MAX_ROWS]:
-            t.add_row(*(Text(fmt(r.get(c)) if _scalar(r.get(c)) else _list_cell(r.get(c))) for c in cols))
+            cells = [_shown(r.get(c), u)[0] for c, u in zip(cols, col_units)]
+            t.add_row(*(Text(fmt(x) if _scalar(x) else _list_cell(x)) for x in cells))
+        left = [f"{len(rows)} rows"] if len(rows) > MAX_ROWS else []
         if len(rows) > MAX_ROWS:
             t.add_row(*(["…"] * len(cols)))
-            t.caption = f"{len(rows)} rows; all of them with --json"
+        n_all = len({k for r in rows for k, x in r.items() if _row_cell(x) and not is_path(x)})
+        if n_all > len(cols):
+            left.append(f"{n_all - len(cols)} more columns")
+        if left:
+            t.caption = f"{'; '.join(left)}: all of them with --json"
         subs.append(t)
 
     walk(result, title, 0)
@@ -209,7 +254,7 @@ def build_tables(result: dict, *, units: dict | None = None, title: str = "simfa
         t.add_column("output", style="bold")
         t.add_column("path", overflow="fold")
         for k, p in paths:
-            t.add_row(Text(k), Text(p))
+            t.add_row(Text(k), Text(display_path(p)))
         subs.append(t)
     return subs
 
@@ -221,7 +266,7 @@ def render_text(result: dict, *, units: dict | None = None, title: str = "simfab
 
     buf = io.StringIO()
     con = Console(file=buf, width=width or 110, color_system=None, highlight=False, soft_wrap=False)
-    for t in build_tables(result, units=units, title=title):
+    for t in build_tables(result, units=units, title=title, width=width or 110):
         con.print(t)
     return buf.getvalue().rstrip() + "\n"
 
@@ -232,7 +277,7 @@ def print_summary(result: dict, *, units: dict | None = None, title: str = "simf
         from rich.console import Console
 
         con = Console(highlight=False)
-        for t in build_tables(result, units=units, title=title):
+        for t in build_tables(result, units=units, title=title, width=con.width):
             con.print(t)
     else:
         sys.stdout.write(render_text(result, units=units, title=title))

@@ -220,8 +220,8 @@ def demo(ctx) -> dict:
     out = Path(ctx.out)
     a = simulate("cclamp2d", out=out, device=ctx.device, quiet=ctx.quiet)
     b = simulate("clip3d", out=out, device=ctx.device, quiet=ctx.quiet)
-    keys = ("category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises", "seconds",
-            "usd", "plot_png", "mjcf")
+    keys = ("category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises",
+            "averaged_von_mises", "yield_stress", "seconds", "usd", "plot_png", "mjcf")
     d = design("block2d_tight", out=out / "design", iterations=DEMO_DESIGN_ITERATIONS, device=ctx.device,
                progress=not ctx.quiet).to_json()
     design = {k: d[k] for k in ("feasible", "E_L", "iterations", "simulations", "seconds")}

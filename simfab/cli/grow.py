@@ -161,14 +161,33 @@ def _check_options(args):
     return loads, target
 
 
+def _reached_loads(skeleton, scene, loads: dict) -> None:
+    """InputError naming where a load on a target the support does not reach came from: --load, or
+    the scene TOML's [loads] table."""
+    from simfab.errors import InputError
+    from simfab.growth.structure import load_points
+
+    points = load_points(skeleton)
+    reached = ", ".join(sorted(n for n in scene.target_names if n in points)) or "none"
+    toml = f"{scene.path.with_suffix('.toml')}: [loads]" if scene.path else "scene: [loads]"
+    for where, names in (("--load", list(loads)), (toml, [n for n, _ in scene.structure.loads if n not in loads])):
+        missing = [n for n in names if n not in points]
+        if missing:
+            raise InputError(f"target(s) {', '.join(missing)} not reached by the support, so nothing carries "
+                             f"the load (reached: {reached}); grow until it reaches them or load a reached one",
+                             where=where)
+
+
 def _known_targets(loads: dict, scene_path) -> None:
-    """InputError (before anything is grown or written) when --load names no target of the scene."""
+    """InputError (before anything is grown or written) when --load names no target of the scene or
+    no root stands on an object (nothing to clamp the support to)."""
     from simfab.errors import InputError
     from simfab.growth.scene import load_growth_scene
+    from simfab.growth.structure import require_ground
 
-    if not loads:
-        return
-    names = load_growth_scene(scene_path).target_names
+    scene = load_growth_scene(scene_path)
+    require_ground(scene)
+    names = scene.target_names
     unknown = [n for n in loads if n not in names]
     if unknown:
         raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(names)})", where="--load")
@@ -191,6 +210,7 @@ def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, t
     if unknown:
         raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(scene.target_names)})",
                          where="--load")
+    _reached_loads(skeleton, scene, loads)
     merged = {**dict(scene.structure.loads), **loads}
     log(f"simfab grow check: {stem}: meshing and solving", quiet=quiet)
     c = check_structure(skeleton, scene, loads=merged)

@@ -241,7 +241,8 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool |
     check_start(cm)  # before the log line: bad input gives exactly one line on stderr
     kind = "quadratic elements" if cm.options.element_order == 2 else "elements"
     exact = isinstance(cm.field, PrimitiveField)  # exact signed distance, not sampled
-    obj = (f"object: exact {', '.join(p.kind for p in cm.field.primitives)}" if exact
+    section = {"sphere": "circle", "box": "rectangle"} if cm.dim == 2 else {}  # 2D: the primitives' sections
+    obj = (f"object: exact {', '.join(section.get(p.kind, p.kind) for p in cm.field.primitives)}" if exact
            else f"{len(cm.field.vertices)} object samples")
     mu = f", friction {cm.contact.friction:g}" if cm.contact.friction > 0 else ", frictionless"
     log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {obj}, {len(cm.s_steps) - 1} steps{mu}", quiet=quiet)

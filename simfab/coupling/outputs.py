@@ -15,7 +15,7 @@ from simfab.coupling.profile import ProfileSummary, analyze_run
 from simfab.coupling.settle import energy_balance
 from simfab.coupling.simulate import InsertionResult
 from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json
-from simfab.io.mjcf import MJCFBuilder
+from simfab.io.mjcf import MAX_KEYFRAMES, MJCFBuilder
 from simfab.io.outpaths import safe_name
 from simfab.io.usd import StageWriter
 from simfab.rotations import quat_to_matrix
@@ -250,8 +250,8 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     if line is None:
         o = b.body("object", pos=r_ss.pos, quat=r_ss.quat, mocap=True)
         b.geom(o, type="mesh", mesh="object", rgba=[0.5, 0.6, 0.7, 0.8], contype=0, conaffinity=0)
-        for k, r in enumerate(res.steps):
-            b.key(f"step{k}", mpos=r.pos, mquat=r.quat)
+        for k in key_steps(len(res.steps), prof.index_ss):
+            b.key(f"step{k}", mpos=res.steps[k].pos, mquat=res.steps[k].quat)
         return b.save(path)
     p0, u, s = line
     q0 = np.asarray(res.steps[0].quat, float)
@@ -265,9 +265,27 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     b.add(b.section("actuator"), "position", name="insertion", joint="insertion", kp=PLAYER_MASS * w * w,
           ctrlrange=[lo, hi])
     b.root.find("option").set("integrator", "implicitfast")
-    for k, sk in enumerate(s):
-        b.key(f"step{k}", qpos=[sk], ctrl=[sk])
+    for k in key_steps(len(s), prof.index_ss):
+        b.key(f"step{k}", qpos=[s[k]], ctrl=[s[k]])
     return b.save(path)
+
+
+def key_steps(n: int, keep: int) -> np.ndarray:
+    """Indices of the records that get a viewer keyframe: every one of ``n`` when there are at most
+    :data:`simfab.io.mjcf.MAX_KEYFRAMES` (the most an MJCF simfab reads may hold), else that many
+    evenly spread, the first, the last and ``keep`` (the steady state) among them.
+
+    Args:
+        n: number of records.
+        keep: a record that must have its key.
+
+    Returns:
+        Sorted record indices, at most ``MAX_KEYFRAMES``.
+    """
+    if n <= MAX_KEYFRAMES:
+        return np.arange(n)
+    # n > MAX_KEYFRAMES: the spread indices are more than one apart, so rounding merges none
+    return np.unique(np.r_[np.linspace(0, n - 1, MAX_KEYFRAMES - 1).round().astype(int), keep])
 
 
 def _loop_edges(k: int) -> np.ndarray:

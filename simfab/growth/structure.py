@@ -179,6 +179,25 @@ def ground_objects(scene: GrowthScene) -> list:
     return out
 
 
+def require_ground(scene: GrowthScene) -> list:
+    """:func:`ground_objects`, or InputError naming the scene file and its root sites when no root
+    stands on an object (the structural check clamps the support there).
+
+    Args:
+        scene: the growth scene.
+
+    Returns:
+        The names of the objects a root stands on (at least one).
+    """
+    ground = ground_objects(scene)
+    if not ground:
+        where = f"{scene.path}: " if scene.path else ""
+        raise InputError(f"no object under the roots to clamp the support to: a root must stand on an object "
+                         f"(within {100 * tol.GROUND_CONTACT:g} % of the object's diagonal) for the structural check",
+                         where=f"{where}site {', '.join(scene.root_names)}")
+    return ground
+
+
 def load_points(skeleton: Skeleton) -> dict:
     """Where the support meets what it holds: name -> skeleton node, the reached targets (by
     their site names) and, in surface mode, the contacts (``contact_<node>``)."""
@@ -314,10 +333,7 @@ def buckling_factor(check: StructureCheck) -> float:
 
 def _clamped(model: P2Model, scene: GrowthScene, band: float) -> np.ndarray:
     """(n,) bool: boundary nodes within ``band`` [m] of a ground object's surface."""
-    ground = ground_objects(scene)
-    if not ground:
-        raise InputError("no object under the roots to clamp the support to (a root must stand on an object)",
-                         where="scene")
+    ground = require_ground(scene)
     fixed = np.zeros(model.n_vertices, bool)
     b = np.asarray(model.boundary_vertices)
     for name in ground:

@@ -1,7 +1,8 @@
 """Atomic file writes: write to a temporary name in the same folder, then rename.
 
 An interrupted run never leaves a half-written output: either the old file (or none)
-or the complete new one exists.
+or the complete new one exists. Inside :func:`simfab.io.outpaths.published_on_success` (every CLI
+run) each write is journaled, so a run that fails takes all its files back.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
-from simfab.io.outpaths import check_inside
+from simfab.io.outpaths import check_inside, journal_mkdir, journal_replace, journal_temporary
 
 
 @contextlib.contextmanager
@@ -27,15 +28,18 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None) -> Iterat
 
     path = Path(path)
     check_inside(path)  # inside simfab's CLI, outputs stay in the folders the user named
+    journal_mkdir(path.parent)
     path.parent.mkdir(parents=True, exist_ok=True)
     suffix = path.suffix if suffix is None else suffix
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp" + suffix, dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
+    journal_temporary(tmp_path)
     try:
         yield tmp_path
         # mkstemp creates 0600 files; give the result the permissions a plain open() would.
         os.chmod(tmp_path, 0o666 & ~_umask())
+        journal_replace(path)  # a failing run removes the file again (or restores the one it replaced)
         os.replace(tmp_path, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):

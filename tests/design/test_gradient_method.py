@@ -15,6 +15,10 @@ from simfab.design import gradient as G
 from simfab.design.brief import DesignBrief, TargetProfile
 from simfab.design.problem import evaluate, make_problem
 
+#: an ejecting run's CR = 100 E_ss / E_max with E_ss = E_max: a product and a quotient, each rounded
+#: (100.00000000000001 on some machines), so 100 to a couple of ulps
+CR_ROUND = 2 * np.finfo(float).eps
+
 
 def test_grip_gradient_follows_the_rest_point():
     # block2d_tight's ball seats against the socket's bottom: the force jumps from +5 N to -2 N within
@@ -134,7 +138,7 @@ def test_an_ejecting_start_with_a_coupling_ratio_bound_is_a_flat_start():
     ev = evaluate(P.with_settings(hold_steps=True), P.handles.identity(), keep_result=True,
                   recorder=lambda cm: G.DeferredRecorder(cm, G.stress_measure(P, cm)))
     fg = G.figure_gradients(P, ev, Jh)
-    assert ev.figures["category"] == "ejects" and ev.figures["coupling_ratio"] == 100.0
+    assert ev.figures["category"] == "ejects" and ev.figures["coupling_ratio"] == pytest.approx(100.0, rel=CR_ROUND)
     assert np.abs(fg.gradients["coupling_ratio"]).max() <= 1e-9 * np.abs(fg.gradients["E_max"]).max()
     assert G.flat_start(G.constraint_rows(P), fg, {})
     # without a coupling-ratio bound ("any" grip) the forces' gradients give the SQP its direction
@@ -197,7 +201,7 @@ def test_ejecting_end_pose_continues_the_coupling_ratio(monkeypatch):
     h0 = P.handles.identity()
     ev = evaluate(Ph, h0, keep_result=True, recorder=lambda cm: G.DeferredRecorder(cm, G.stress_measure(P, cm)))
     fg = G.figure_gradients(P, ev, Jh)
-    assert ev.figures["category"] == "ejects" and ev.figures["coupling_ratio"] == 100.0
+    assert ev.figures["category"] == "ejects" and ev.figures["coupling_ratio"] == pytest.approx(100.0, rel=CR_ROUND)
     assert fg.ratio_continued and fg.values["coupling_ratio"] == G.ejecting_ratio(ev.result) > 100.0
     assert not G.flat_start(G.constraint_rows(P), fg, {})
     dh = np.random.default_rng(0).standard_normal(len(h0)) * P.sigma0
