@@ -2,8 +2,8 @@
 
 Model (linear elastostatics on quadratic tetrahedra):
 
-1. the skin (:func:`simfab.growth.skinning.skin`, objects carved out) is tetrahedralized by
-   fTetWild (:func:`simfab.fem.meshing.tetrahedralize`) with a target edge length of
+1. the skin (:func:`simfab.growth.skinning.skin`, objects carved out) is tetrahedralized
+   deterministically by Gmsh (:func:`simfab.growth.tetmesh.tetrahedralize_skin`) with edges of
    ``EDGE_PER_RMIN`` r_min (r_min the thinnest branch radius) and lifted to 10-node tets
    (:func:`simfab.fem.p2.to_p2`): a branch is a beam, and P2 elements carry the linear strain
    of bending exactly where linear tets lock;
@@ -44,7 +44,6 @@ import simfab.growth.tolerances as tol
 from simfab.errors import ConvergenceError, InputError
 from simfab.fem import elastic
 from simfab.fem.loads import body_force_loads, traction_loads
-from simfab.fem.meshing import tetrahedralize
 from simfab.fem.model import make_model
 from simfab.fem.p2 import P2Model, corner_gradients, to_p2
 from simfab.growth.config import StructureSpec
@@ -52,14 +51,13 @@ from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene
 from simfab.growth.skeleton import Skeleton
 from simfab.growth.skinning import skin
+from simfab.growth.tetmesh import tetrahedralize_skin
 from simfab.io.mjcf import load_scene
 from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
-#: fTetWild's target edge length as a multiple of the thinnest branch radius. fTetWild refines
-#: below it wherever its surface envelope (1e-3 of the diagonal) asks, which on the bundled
-#: supports gives edges of about one thinnest radius; a target at that size itself costs several
-#: times the meshing time for a mesh of about the same count (docs/decisions.md)
-EDGE_PER_RMIN = 4.0
+#: tet edge length as a multiple of the thinnest branch radius (:mod:`simfab.growth.tetmesh`;
+#: about two P2 tets across the thinnest branch)
+EDGE_PER_RMIN = 2.0
 #: clamp band: boundary nodes this fraction of the skin's diagonal from a ground object
 FIX_TOL = 2e-3
 #: standard gravity [m/s^2] when the scene has no MJCF model to read it from
@@ -236,10 +234,11 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
     p = scene.params
     mesh, _ = skin(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects, fixed=skeleton.fixed_mask(),
                    segments=options.segments or p.skin_segments, subtract=p.subtract_objects)
-    h = options.edge_length if options.edge_length is not None else EDGE_PER_RMIN * float(skeleton.radius.min())
+    r_min = float(skeleton.radius.min())
+    h = options.edge_length if options.edge_length is not None else EDGE_PER_RMIN * r_min
     diag = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
-    V, T = tetrahedralize(mesh.vertices, mesh.faces, edge_length_fac=min(1.0, h / diag))
-    model = to_p2(make_model(V, T, mat))
+    tm = tetrahedralize_skin(mesh, edge_length=h, r_min=r_min)
+    model = to_p2(make_model(tm.vertices, tm.tets, mat))
     X = model.rest
     fixed = _clamped(model, scene, FIX_TOL * diag)
     g = gravity(scene)
