@@ -53,7 +53,9 @@ DESCRIPTION = (
     "stroke in red).\n\n"
     "--json keys (check, and grow --check under 'check'): safety_factor, max_von_mises_Pa (critical-distance "
     "mean), peak_point_m, max_point_von_mises_Pa, deflection_m (per target), max_deflection_m, mass_kg, volume_m3, "
-    "material, yield_stress_Pa, critical_distance_m, target_forces_N, tets, fem_nodes, seconds_check, check_usd, "
+    "material, yield_stress_Pa, critical_distance_m, target_forces_N, targets (per load point: object, touching, "
+    "gap_m, contact_area_m2, min_contact_area_m2, load_N), supported_objects (per object: mass_kg, mass_source, "
+    "weight_N, carried_by), dropped_weight_N, tets, fem_nodes, seconds_check, check_usd, "
     "check_png, with --buckling buckling_factor; with --strengthen also 'strengthened' (the same figures of the "
     "final design plus target_safety_factor, reached, checks, safety_factor_before/after, volume_before/after_m3, "
     "volume_change, skeleton_json, skin_stl, check_usd, check_png)."
@@ -77,8 +79,9 @@ def add_args(p):
     g.add_argument("--smooth-iterations", type=int, metavar="K", help="smoothing iterations (0 = none)")
     g.add_argument("--max-steps", type=int, metavar="K", help="growth step cap (default: the scene's)")
     g.add_argument("--best-effort", action="store_true",
-                   help="keep and write a structure that leaves targets unreached (default: that is a failed "
-                        "growth, exit 1, nothing written)")
+                   help="keep and write a structure that leaves targets unreached, and check a support that "
+                        "leaves a supported object's weight without a load path (default: both fail, exit 1, "
+                        "nothing written; with it: a warning, the summary names the dropped weight)")
     c = p.add_argument_group("structural check")
     c.add_argument("--check", action="store_true", help="check the grown support under its loads (see 'check')")
     c.add_argument("--load", action="append", metavar="TARGET=FX,FY,FZ",
@@ -121,10 +124,17 @@ def run(args) -> dict:
     if args.skeleton is not None or args.stroke or args.camera or args.chain is not None:
         raise InputError("SKELETON_JSON, --stroke, --camera and --chain belong to 'simfab grow edit'")
     structural = args.check or args.load or args.strengthen is not None or args.thin or args.buckling
+    checked = {}
+    before_write = None
     if structural:
         loads, target = _check_options(args)
         _known_targets(loads, args.scene)
-    s = grow_scene(args.scene, out=args.out, seed=args.seed, quiet=args.quiet,
+
+        def before_write(result):  # the check runs before any file is written: a failed check writes nothing
+            checked["run"] = compute_check(result.skeleton, result.scene, loads=loads, strengthen=target,
+                                           thin=args.thin, buckling=args.buckling, quiet=args.quiet,
+                                           best_effort=args.best_effort, stem=result.scene.name)
+    s = grow_scene(args.scene, out=args.out, seed=args.seed, quiet=args.quiet, before_write=before_write,
                    attractors=_positive("--attractors", args.attractors),
                    influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
                    branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
@@ -134,8 +144,7 @@ def run(args) -> dict:
     if not structural:
         return s
     result = s.pop("_result")
-    s["check"] = check_outputs(result.skeleton, result.scene, out=args.out, stem=result.scene.name, loads=loads,
-                               strengthen=target, thin=args.thin, buckling=args.buckling, quiet=args.quiet)
+    s["check"] = write_check_outputs(checked["run"], result.scene, out=args.out, stem=result.scene.name)
     return s
 
 
@@ -162,29 +171,37 @@ def _check_options(args):
 
 
 def _known_targets(loads: dict, scene_path) -> None:
-    """InputError (before anything is grown or written) when --load names no target of the scene."""
+    """InputError (before anything is grown or written) when --load names no target of the scene
+    or a supported object has no mass."""
     from simfab.errors import InputError
     from simfab.growth.scene import load_growth_scene
+    from simfab.growth.structure import validate_loads
 
+    scene = load_growth_scene(scene_path)
+    validate_loads(scene)
     if not loads:
         return
-    names = load_growth_scene(scene_path).target_names
+    names = scene.target_names
     unknown = [n for n in loads if n not in names]
     if unknown:
         raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(names)})", where="--load")
 
 
 def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, thin=False, buckling=False,
-                  quiet=True) -> dict:
+                  quiet=True, best_effort=False) -> dict:
     """Check (and optionally strengthen) a support, write the USD/PNG (and the strengthened
     skeleton and skin), return the summary."""
+    run = compute_check(skeleton, scene, loads=loads, strengthen=strengthen, thin=thin, buckling=buckling,
+                        quiet=quiet, best_effort=best_effort, stem=stem)
+    return write_check_outputs(run, scene, out=out, stem=stem)
+
+
+def compute_check(skeleton, scene, *, loads: dict, strengthen=None, thin=False, buckling=False, quiet=True,
+                  best_effort=False, stem="scene") -> dict:
+    """The check (and strengthening) of a support, nothing written: {"check", "summary", "strengthened"}."""
     from simfab.errors import InputError
-    from simfab.growth.outputs import save_skin, write_check
-    from simfab.growth.skeleton import to_json_dict
     from simfab.growth.structure import buckling_factor, check_structure
     from simfab.growth.structure import strengthen as strengthen_support
-    from simfab.io.atomic import atomic_paths, write_json
-    from simfab.io.outpaths import safe_name
     from simfab.progress import log
 
     unknown = [n for n in loads if n not in scene.target_names]
@@ -193,16 +210,32 @@ def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, t
                          where="--load")
     merged = {**dict(scene.structure.loads), **loads}
     log(f"simfab grow check: {stem}: meshing and solving", quiet=quiet)
-    c = check_structure(skeleton, scene, loads=merged)
+    c = check_structure(skeleton, scene, loads=merged, best_effort=best_effort)
+    for o, d in c.dropped.items():  # shown even with --quiet: the figures leave this weight out
+        log(f"simfab grow check: warning: the support carries none of {o}'s weight ({d.weight_N:.3g} N; targets "
+            f"{', '.join(d.targets) or 'none'} do not touch it): the figures leave it out")
     summary = c.summary()
     if buckling:
         summary["buckling_factor"] = buckling_factor(c)
+    res = None
     if strengthen is not None:
         log(f"simfab grow check: {stem}: strengthening to safety factor {strengthen:g}", quiet=quiet)
-        res = strengthen_support(skeleton, scene, strengthen, loads=merged, thin=thin, check=c)
+        res = strengthen_support(skeleton, scene, strengthen, loads=merged, thin=thin, check=c,
+                                 best_effort=best_effort)
+    return {"check": c, "summary": summary, "strengthened": res}
+
+
+def write_check_outputs(run: dict, scene, *, out, stem) -> dict:
+    """Write the files of a :func:`compute_check` run under ``out``; returns the summary with their paths."""
+    from simfab.growth.outputs import save_skin, write_check
+    from simfab.growth.skeleton import to_json_dict
+    from simfab.io.atomic import atomic_paths, write_json
+    from simfab.io.outpaths import safe_name
+
+    c, summary, res = run["check"], dict(run["summary"]), run["strengthened"]
     stem = safe_name(stem)
     summary.update(write_check(c, scene, Path(out), stem=stem))
-    if strengthen is not None:
+    if res is not None:
         st = {**res.check.summary(), **res.summary()}
         paths = {"skeleton_json": Path(out) / f"{stem}_strengthened_skeleton.json",
                  "skin_stl": Path(out) / f"{stem}_strengthened_skin.stl"}
@@ -217,9 +250,12 @@ def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, t
 
 
 def _run_check(args) -> dict:
+    import numpy as np
+
     from simfab.errors import InputError
     from simfab.growth.scene import load_growth_scene
     from simfab.growth.skeleton import load_skeleton_json
+    from simfab.growth.structure import validate_loads
 
     if args.skeleton is None:
         raise InputError("simfab grow check needs SKELETON_JSON")
@@ -234,12 +270,18 @@ def _run_check(args) -> dict:
         raise InputError(f"the skeleton names no readable scene ({scene_path!r})", where=f"{args.skeleton}: scene")
     scene = load_growth_scene(scene_path)
     names = set(scene.target_names)
-    if any(n not in names for n in sk.target_names):
-        raise InputError("the skeleton's targets are not its scene's", where=f"{args.skeleton}: target_names")
+    foreign = [n for n in sk.target_names if n not in names]
+    if foreign:
+        raise InputError(f"target(s) {', '.join(foreign)} are not sites of its scene {scene_path} (its targets: "
+                         f"{', '.join(scene.target_names) or 'none'})", where=f"{args.skeleton}: target_names")
+    if not np.any(sk.parent >= 0):
+        raise InputError(f"the skeleton has no segments ({len(sk.nodes)} node(s)): nothing to check",
+                         where=f"{args.skeleton}: parent")
+    validate_loads(scene)
     stem = Path(args.skeleton).stem.removesuffix("_skeleton")
     return {"skeleton": str(args.skeleton), "scene": str(scene_path),
             **check_outputs(sk, scene, out=args.out, stem=stem, loads=loads, strengthen=target, thin=args.thin,
-                            buckling=args.buckling, quiet=args.quiet)}
+                            buckling=args.buckling, quiet=args.quiet, best_effort=args.best_effort)}
 
 
 def _nonneg(v):
@@ -256,9 +298,10 @@ _FLAGS = {"branch_length": "--branch-length", "kill": "--kill", "influence": "--
 
 
 def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool = False, keep_result: bool = False,
-               **overrides) -> dict:
+               before_write=None, **overrides) -> dict:
     """Grow, skin, check and write every output for one scene; returns the summary (with the
-    :class:`GrowthResult` under ``_result`` when ``keep_result``).
+    :class:`GrowthResult` under ``_result`` when ``keep_result``). ``before_write(result)`` runs
+    after the skin and before any file is written (an error there leaves ``out`` untouched).
 
     A target left unreached is a failed growth (ConvergenceError, exit 1) unless ``best_effort``."""
     from simfab.errors import ConvergenceError, InputError
@@ -294,6 +337,8 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool =
     if rep.penetration > tol_pen + PENETRATION_ROUNDOFF * result.resolved.diag:
         raise ConvergenceError(f"the skin penetrates the objects by {rep.penetration:.3g} m, more than the "
                                f"tolerance {tol_pen:.3g} m (enable skin.subtract_objects or raise skin.tolerance)")
+    if before_write is not None:
+        before_write(result)
     paths = write_all(result, mesh, Path(out), stem=stem or result.scene.name)
     s.update({
         "watertight": rep.watertight, "is_volume": rep.is_volume, "bodies": rep.bodies, "volume": rep.volume,
@@ -304,7 +349,7 @@ def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool =
     })
     s.update(paths)
     s["skin_units"] = SKIN_FILE_UNITS
-    if keep_result:
+    if keep_result or before_write is not None:
         s["_result"] = result
     return s
 

@@ -28,6 +28,7 @@ import simfab.growth.tolerances as tol
 from simfab.errors import InputError
 from simfab.growth.colonize import ColonizeSettings, Tree, colonize
 from simfab.growth.config import Resolved, SymmetrySpec, resolve
+from simfab.growth.contact import aim_targets
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene, load_growth_scene, validate_scene
 from simfab.growth.skeleton import Skeleton, keep_ancestors, radius_by_age, smooth_positions, subset
@@ -129,6 +130,7 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
     if symmetric is False:
         scene = dataclasses.replace(scene, params=dataclasses.replace(p, symmetry=None))
         p = scene.params
+    scene = aim_targets(scene)  # targets a few mm off their object: grow onto its surface
     seed = p.seed if seed is None else int(seed)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
