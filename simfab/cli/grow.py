@@ -55,7 +55,7 @@ DESCRIPTION = (
     "mean), peak_point_m, max_point_von_mises_Pa, deflection_m (per target), max_deflection_m, mass_kg, volume_m3, "
     "material, yield_stress_Pa, critical_distance_m, target_forces_N, targets (per load point: object, touching, "
     "gap_m, contact_area_m2, min_contact_area_m2, load_N), supported_objects (per object: mass_kg, mass_source, "
-    "weight_N, carried_by), dropped_weight_N, tets, fem_nodes, seconds_check, check_usd, "
+    "weight_N, carried_by), dropped_weight_N, mesher, tets, fem_nodes, seconds_check, check_usd, "
     "check_png, with --buckling buckling_factor; with --strengthen also 'strengthened' (the same figures of the "
     "final design plus target_safety_factor, reached, checks, safety_factor_before/after, volume_before/after_m3, "
     "volume_change, skeleton_json, skin_stl, check_usd, check_png)."
@@ -211,6 +211,8 @@ def compute_check(skeleton, scene, *, loads: dict, strengthen=None, thin=False, 
     merged = {**dict(scene.structure.loads), **loads}
     log(f"simfab grow check: {stem}: meshing and solving", quiet=quiet)
     c = check_structure(skeleton, scene, loads=merged, best_effort=best_effort)
+    if c.mesher != "gmsh":  # shown even with --quiet: the figures will differ from run to run
+        log(f"simfab grow check: warning: meshed by {c.mesher}")
     for o, d in c.dropped.items():  # shown even with --quiet: the figures leave this weight out
         log(f"simfab grow check: warning: the support carries none of {o}'s weight ({d.weight_N:.3g} N; targets "
             f"{', '.join(d.targets) or 'none'} do not touch it): the figures leave it out")

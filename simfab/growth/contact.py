@@ -5,8 +5,8 @@
   ``AIM_DISTANCE`` D of it (D the objects' bounding-box diagonal), or, in surface mode, when its
   surface is sampled.
 - :func:`aim_targets` moves each target site that lies off its supported object (farther than
-  ``GROUND_CONTACT`` of the object's diagonal) onto the nearest point of the object's surface, so
-  the final branch grows onto the object and the carved skin rests on it.
+  half the thinnest branch radius) onto the nearest point of the object's surface, so the final
+  branch grows onto the object and the carved skin rests on it.
 - :func:`target_contacts`: a load point (a reached target or a surface contact, node i, radius
   r) *touches* the held object nearest to it when the skin within d + 2 r of the node (d the
   node's distance to the object) has a contact patch, facets whose corners all lie within
@@ -105,9 +105,11 @@ def supported_objects(scene) -> dict:
     return out
 
 
-def aim_targets(scene):
+def aim_targets(scene, *, min_offset: float = 0.0):
     """``scene`` with every target site that belongs to a held object (:func:`supported_objects`)
-    but lies off its surface moved onto the nearest surface point (module docstring)."""
+    but lies more than ``min_offset`` [m] (and ``GROUND_CONTACT`` of its diagonal) off its
+    surface moved onto the nearest surface point (module docstring). A smaller offset is left
+    alone: the skin's ball around the target (radius >= 2 ``min_offset``) still reaches the object."""
     ground = set(ground_objects(scene))
     held = [n for n in scene.objects if n not in ground]
     if not held or not len(scene.targets):
@@ -117,7 +119,7 @@ def aim_targets(scene):
     for i, (jj, dd) in enumerate(zip(j, d)):
         if jj < 0 or dd > AIM_DISTANCE * _diag(scene):
             continue
-        if dd > tol.GROUND_CONTACT * float(np.linalg.norm(scene.objects[held[jj]].extents)):
+        if dd > max(min_offset, tol.GROUND_CONTACT * float(np.linalg.norm(scene.objects[held[jj]].extents))):
             T[i] = c[i]
     if np.array_equal(T, scene.targets):
         return scene

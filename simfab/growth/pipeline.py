@@ -130,7 +130,6 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
     if symmetric is False:
         scene = dataclasses.replace(scene, params=dataclasses.replace(p, symmetry=None))
         p = scene.params
-    scene = aim_targets(scene)  # targets a few mm off their object: grow onto its surface
     seed = p.seed if seed is None else int(seed)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
@@ -138,9 +137,6 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
     box = np.asarray(p.box, np.float64) if p.box is not None else scene.objects_bbox()
     diag = float(np.linalg.norm(box[1] - box[0]))
     obstacles = Obstacles.of_scene(scene, diag)
-
-    sym = _Symmetry(scene, diag) if p.symmetry is not None else None
-    keep = sym.keep if sym else None
 
     # design-space size for the default distances
     area = None
@@ -150,6 +146,11 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
     elif p.mode == "profile":
         _, area = attr.profile(p.profile, p.attractors, np.random.default_rng(seed), obstacles)
     res = resolve(p, box, area=area)
+    # targets off their object by more than half the thinnest branch: grow onto its surface instead
+    scene = aim_targets(scene, min_offset=0.5 * res.r_min)
+
+    sym = _Symmetry(scene, diag) if p.symmetry is not None else None
+    keep = sym.keep if sym else None
 
     roots = sym.half_roots(res) if sym else scene.roots
     target_ok = sym.half_targets() if sym else np.ones(len(scene.targets), bool)

@@ -117,6 +117,9 @@ class StructureCheck:
     element_von_mises : (m,) per element the largest averaged corner stress [Pa].
     points, point_von_mises : (4m, 3) rest positions [m] of the element corners and their averaged stress [Pa].
     mesh : the skin (``trimesh.Trimesh``) that was meshed. tets, nodes : mesh sizes.
+    contacts : per load point its :class:`simfab.growth.contact.TargetContact`. object_masses : supported
+    object -> :class:`simfab.growth.masses.ObjectMass`. dropped : object -> :class:`DroppedWeight`
+    (``best_effort`` only). gravity (3,) [m/s^2]. nodal_forces (n, 3) [N] the consistent load vector.
     seconds : wall time of skin, mesh, solve and stress.
     """
 
@@ -145,6 +148,8 @@ class StructureCheck:
     object_masses: dict = dataclasses.field(default_factory=dict)
     dropped: dict = dataclasses.field(default_factory=dict)
     gravity: np.ndarray | None = None
+    nodal_forces: np.ndarray | None = None
+    mesher: str = "gmsh"
 
     def summary(self) -> dict:
         """JSON-ready figures (the ``simfab grow check`` keys)."""
@@ -173,6 +178,7 @@ class StructureCheck:
                                       "carried_by": [ld.name for ld in self.loads if n in ld.objects]}
                                   for n, m in self.object_masses.items()},
             "dropped_weight_N": {o: d.weight_N for o, d in self.dropped.items()},
+            "mesher": self.mesher,
             "tets": self.tets,
             "fem_nodes": self.nodes,
             "seconds_check": self.seconds,
@@ -312,7 +318,7 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
         yield_stress_Pa=mat.yield_stress, critical_distance_m=spec.critical_distance, model=model, u=u,
         fixed=fixed, element_von_mises=avg.reshape(vm.shape).max(axis=1), mesh=mesh, tets=int(model.n_elements),
         nodes=int(model.n_vertices), seconds=time.perf_counter() - t0, points=cells, point_von_mises=avg,
-        contacts=contacts, object_masses=masses, dropped=dropped, gravity=g)
+        contacts=contacts, object_masses=masses, dropped=dropped, gravity=g, nodal_forces=f, mesher=tm.mesher)
 
 
 def geometric_stiffness(model: P2Model, sigma_corners: np.ndarray):

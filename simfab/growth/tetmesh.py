@@ -14,7 +14,8 @@ The tet mesh conforms to that surface: its boundary facets are exactly the refin
 Same skin and ``h`` give the same mesh, bit for bit, in any process (fTetWild, the mesher of
 :func:`simfab.fem.meshing.tetrahedralize`, shuffles its input triangles with a hardware random
 seed and does not). When Gmsh rejects a surface, the simplification tolerance grows
-(``SIMPLIFY_RETRY``) before the mesh is given up.
+(``SIMPLIFY_RETRY``) before the mesh is given up. Where Gmsh cannot load (its wheel needs the
+system's X11/GLU libraries), fTetWild meshes the skin instead and ``SkinTets.mesher`` says so.
 """
 
 from __future__ import annotations
@@ -34,13 +35,15 @@ SIMPLIFY_RETRY = (1.0, 3.0, 10.0)
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SkinTets:
     """A tet mesh of a skin: ``vertices`` (n, 3) [m], ``tets`` (m, 4) int32 positively oriented,
-    ``surface`` the meshed boundary (``trimesh.Trimesh``, the simplified and refined skin) and
-    ``simplify_m`` the simplification tolerance that was used [m]."""
+    ``surface`` the meshed boundary (``trimesh.Trimesh``, the simplified and refined skin),
+    ``simplify_m`` the simplification tolerance that was used [m] and ``mesher`` "gmsh" or, when
+    Gmsh cannot load, "fTetWild (not deterministic: ...)"."""
 
     vertices: np.ndarray
     tets: np.ndarray
     surface: object
     simplify_m: float
+    mesher: str = "gmsh"
 
 
 def tetrahedralize_skin(mesh, *, edge_length: float, r_min: float) -> SkinTets:
@@ -51,8 +54,18 @@ def tetrahedralize_skin(mesh, *, edge_length: float, r_min: float) -> SkinTets:
     Returns:
         :class:`SkinTets`. Raises ConvergenceError when no tolerance gives a surface Gmsh meshes.
     """
+    from simfab.fem.meshing import load_gmsh
     from simfab.growth.skinning import to_manifold, to_trimesh
 
+    try:
+        load_gmsh()
+    except RuntimeError as e:
+        from simfab.fem.meshing import tetrahedralize
+
+        diag = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+        V, T = tetrahedralize(mesh.vertices, mesh.faces, edge_length_fac=min(1.0, 2.0 * edge_length / diag))
+        return SkinTets(vertices=V, tets=T, surface=mesh, simplify_m=0.0,
+                        mesher=f"fTetWild (not deterministic: {str(e).split(';')[0]})")
     man = to_manifold(mesh)
     if man is None:
         raise ConvergenceError("the skin is not a closed manifold: it cannot be tetrahedralized")
