@@ -114,6 +114,8 @@ def _positive(name, v):
 
 def run(args) -> dict:
     from simfab.errors import InputError
+    from simfab.growth import run as grow_run
+    from simfab.progress import log
 
     if args.scene == "edit":
         if args.check or args.load or args.strengthen is not None or args.thin or args.buckling:
@@ -123,29 +125,31 @@ def run(args) -> dict:
         return _run_check(args)
     if args.skeleton is not None or args.stroke or args.camera or args.chain is not None:
         raise InputError("SKELETON_JSON, --stroke, --camera and --chain belong to 'simfab grow edit'")
-    structural = args.check or args.load or args.strengthen is not None or args.thin or args.buckling
-    checked = {}
-    before_write = None
-    if structural:
-        loads, target = _check_options(args)
-        _known_targets(loads, args.scene)
-
-        def before_write(result):  # the check runs before any file is written: a failed check writes nothing
-            checked["run"] = compute_check(result.skeleton, result.scene, loads=loads, strengthen=target,
-                                           thin=args.thin, buckling=args.buckling, quiet=args.quiet,
-                                           best_effort=args.best_effort, stem=result.scene.name)
-    s = grow_scene(args.scene, out=args.out, seed=args.seed, quiet=args.quiet, before_write=before_write,
+    loads, target = _check_options(args)
+    res = grow_run(args.scene, out=args.out, seed=args.seed, progress=lambda m: log(m, quiet=args.quiet),
+                   check=bool(args.check), best_effort=args.best_effort, loads=loads, strengthen=target,
+                   thin=args.thin, buckling=args.buckling,
                    attractors=_positive("--attractors", args.attractors),
                    influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
                    branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
                    symmetric=args.symmetric, smoothing_iterations=_nonneg(args.smooth_iterations),
-                   max_steps=_positive("--max-steps", args.max_steps), best_effort=args.best_effort,
-                   keep_result=structural)
-    if not structural:
-        return s
-    result = s.pop("_result")
-    s["check"] = write_check_outputs(checked["run"], result.scene, out=args.out, stem=result.scene.name)
-    return s
+                   max_steps=_positive("--max-steps", args.max_steps))
+    return summary_json(res)
+
+
+#: keys left out of the --json object when None (they do not apply to that run)
+OPTIONAL_KEYS = ("check", "buckling_factor", "strengthened", "skeleton", "scene")
+
+
+def summary_json(res) -> dict:
+    """The ``--json`` object of a GrowthResult / CheckResult: its ``to_json()`` without the
+    :data:`OPTIONAL_KEYS` that are None (no check, no buckling, no strengthening, no skeleton file)."""
+
+    def prune(d: dict) -> dict:
+        return {k: prune(v) if k in ("check", "strengthened") and isinstance(v, dict) else v
+                for k, v in d.items() if not (k in OPTIONAL_KEYS and v is None)}
+
+    return prune(res.to_json())
 
 
 def _check_options(args):
@@ -170,94 +174,10 @@ def _check_options(args):
     return loads, target
 
 
-def _known_targets(loads: dict, scene_path) -> None:
-    """InputError (before anything is grown or written) when --load names no target of the scene
-    or a supported object has no mass."""
-    from simfab.errors import InputError
-    from simfab.growth.scene import load_growth_scene
-    from simfab.growth.structure import validate_loads
-
-    scene = load_growth_scene(scene_path)
-    validate_loads(scene)
-    if not loads:
-        return
-    names = scene.target_names
-    unknown = [n for n in loads if n not in names]
-    if unknown:
-        raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(names)})", where="--load")
-
-
-def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, thin=False, buckling=False,
-                  quiet=True, best_effort=False) -> dict:
-    """Check (and optionally strengthen) a support, write the USD/PNG (and the strengthened
-    skeleton and skin), return the summary."""
-    run = compute_check(skeleton, scene, loads=loads, strengthen=strengthen, thin=thin, buckling=buckling,
-                        quiet=quiet, best_effort=best_effort, stem=stem)
-    return write_check_outputs(run, scene, out=out, stem=stem)
-
-
-def compute_check(skeleton, scene, *, loads: dict, strengthen=None, thin=False, buckling=False, quiet=True,
-                  best_effort=False, stem="scene") -> dict:
-    """The check (and strengthening) of a support, nothing written: {"check", "summary", "strengthened"}."""
-    from simfab.errors import InputError
-    from simfab.growth.structure import buckling_factor, check_structure
-    from simfab.growth.structure import strengthen as strengthen_support
-    from simfab.progress import log
-
-    unknown = [n for n in loads if n not in scene.target_names]
-    if unknown:
-        raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(scene.target_names)})",
-                         where="--load")
-    merged = {**dict(scene.structure.loads), **loads}
-    log(f"simfab grow check: {stem}: meshing and solving", quiet=quiet)
-    c = check_structure(skeleton, scene, loads=merged, best_effort=best_effort)
-    if c.mesher != "gmsh":  # shown even with --quiet: the figures will differ from run to run
-        log(f"simfab grow check: warning: meshed by {c.mesher}")
-    for o, d in c.dropped.items():  # shown even with --quiet: the figures leave this weight out
-        log(f"simfab grow check: warning: the support carries none of {o}'s weight ({d.weight_N:.3g} N; targets "
-            f"{', '.join(d.targets) or 'none'} do not touch it): the figures leave it out")
-    summary = c.summary()
-    if buckling:
-        summary["buckling_factor"] = buckling_factor(c)
-    res = None
-    if strengthen is not None:
-        log(f"simfab grow check: {stem}: strengthening to safety factor {strengthen:g}", quiet=quiet)
-        res = strengthen_support(skeleton, scene, strengthen, loads=merged, thin=thin, check=c,
-                                 best_effort=best_effort)
-    return {"check": c, "summary": summary, "strengthened": res}
-
-
-def write_check_outputs(run: dict, scene, *, out, stem) -> dict:
-    """Write the files of a :func:`compute_check` run under ``out``; returns the summary with their paths."""
-    from simfab.growth.outputs import save_skin, write_check
-    from simfab.growth.skeleton import to_json_dict
-    from simfab.io.atomic import atomic_paths, write_json
-    from simfab.io.outpaths import safe_name
-
-    c, summary, res = run["check"], dict(run["summary"]), run["strengthened"]
-    stem = safe_name(stem)
-    summary.update(write_check(c, scene, Path(out), stem=stem))
-    if res is not None:
-        st = {**res.check.summary(), **res.summary()}
-        paths = {"skeleton_json": Path(out) / f"{stem}_strengthened_skeleton.json",
-                 "skin_stl": Path(out) / f"{stem}_strengthened_skin.stl"}
-        with atomic_paths(paths) as tmp:
-            write_json(tmp["skeleton_json"], to_json_dict(res.skeleton, scene=str(scene.path.resolve()) if scene.path
-                                                          else None, strengthen=res.summary()))
-            save_skin(res.check.mesh, tmp["skin_stl"])
-        st.update({k: str(v) for k, v in paths.items()})
-        st.update(write_check(res.check, scene, Path(out), stem=f"{stem}_strengthened"))
-        summary["strengthened"] = st
-    return summary
-
-
 def _run_check(args) -> dict:
-    import numpy as np
-
     from simfab.errors import InputError
-    from simfab.growth.scene import load_growth_scene
-    from simfab.growth.skeleton import load_skeleton_json
-    from simfab.growth.structure import validate_loads
+    from simfab.growth import check
+    from simfab.progress import log
 
     if args.skeleton is None:
         raise InputError("simfab grow check needs SKELETON_JSON")
@@ -266,24 +186,10 @@ def _run_check(args) -> dict:
         if getattr(args, name, None) not in (None, False):
             raise InputError(f"--{name.replace('_', '-')} does not apply to 'check'")
     loads, target = _check_options(args)
-    sk, doc = load_skeleton_json(args.skeleton)
-    scene_path = doc.get("scene")
-    if not scene_path or not Path(scene_path).is_file():
-        raise InputError(f"the skeleton names no readable scene ({scene_path!r})", where=f"{args.skeleton}: scene")
-    scene = load_growth_scene(scene_path)
-    names = set(scene.target_names)
-    foreign = [n for n in sk.target_names if n not in names]
-    if foreign:
-        raise InputError(f"target(s) {', '.join(foreign)} are not sites of its scene {scene_path} (its targets: "
-                         f"{', '.join(scene.target_names) or 'none'})", where=f"{args.skeleton}: target_names")
-    if not np.any(sk.parent >= 0):
-        raise InputError(f"the skeleton has no segments ({len(sk.nodes)} node(s)): nothing to check",
-                         where=f"{args.skeleton}: parent")
-    validate_loads(scene)
-    stem = Path(args.skeleton).stem.removesuffix("_skeleton")
-    return {"skeleton": str(args.skeleton), "scene": str(scene_path),
-            **check_outputs(sk, scene, out=args.out, stem=stem, loads=loads, strengthen=target, thin=args.thin,
-                            buckling=args.buckling, quiet=args.quiet, best_effort=args.best_effort)}
+    res = check(args.skeleton, out=args.out, loads=loads, strengthen=target, thin=args.thin, buckling=args.buckling,
+                best_effort=args.best_effort, progress=lambda m: log(m, quiet=args.quiet))
+    d = summary_json(res)
+    return {"skeleton": d.pop("skeleton", str(args.skeleton)), "scene": d.pop("scene", None), **d}
 
 
 def _nonneg(v):
@@ -292,68 +198,6 @@ def _nonneg(v):
     if v is not None and v < 0:
         raise InputError(f"must be >= 0, got {v}", where="--smooth-iterations")
     return v
-
-
-#: GrowthParams field -> the command-line option that sets it (errors name the option the value came from)
-_FLAGS = {"branch_length": "--branch-length", "kill": "--kill", "influence": "--influence",
-          "attractors": "--attractors", "max_steps": "--max-steps"}
-
-
-def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool = False, keep_result: bool = False,
-               before_write=None, **overrides) -> dict:
-    """Grow, skin, check and write every output for one scene; returns the summary (with the
-    :class:`GrowthResult` under ``_result`` when ``keep_result``). ``before_write(result)`` runs
-    after the skin and before any file is written (an error there leaves ``out`` untouched).
-
-    A target left unreached is a failed growth (ConvergenceError, exit 1) unless ``best_effort``."""
-    from simfab.errors import ConvergenceError, InputError
-    from simfab.growth import grow, skin_result
-    from simfab.growth.outputs import SKIN_FILE_UNITS, write_all
-    from simfab.growth.tolerances import PENETRATION_ROUNDOFF
-    from simfab.progress import log
-
-    symmetric = overrides.pop("symmetric", None)
-    try:
-        result = grow(scene, seed=seed, symmetric=symmetric, **overrides)
-    except InputError as e:  # name the scene's file with the field (its TOML holds the growth parameters)
-        toml = Path(scene).with_suffix(".toml")
-        if (e.where or "").startswith("--"):
-            raise
-        key = (e.where or "").removeprefix("growth.")
-        if key in _FLAGS and overrides.get(key) is not None:  # the value came from the command line
-            raise InputError(e.message, where=_FLAGS[key]) from None
-        raise e.in_file(toml if toml.is_file() else scene) from None
-    s = result.summary()
-    if s["segments"] == 0:
-        raise ConvergenceError(f"{scene}: growth produced no structure ({'; '.join(s['stop_reasons'])}); "
-                               f"unreached targets: {', '.join(s['targets_unreached']) or 'none'}")
-    if s["targets_unreached"]:
-        msg = (f"{scene}: {len(s['targets_unreached'])} of {s['targets_total']} targets unreached "
-               f"({', '.join(s['targets_unreached'])}; {'; '.join(s['stop_reasons'])})")
-        if not best_effort:
-            raise ConvergenceError(f"{msg}; change the growth parameters (e.g. --branch-length, --influence, "
-                                   "--max-steps) or pass --best-effort to keep the partial structure")
-        log(f"simfab grow: warning: {msg}")  # shown even with --quiet: the result is partial
-    mesh, rep, seconds_skin = skin_result(result)
-    tol_pen = result.scene.params.skin_tolerance
-    if rep.penetration > tol_pen + PENETRATION_ROUNDOFF * result.resolved.diag:
-        raise ConvergenceError(f"the skin penetrates the objects by {rep.penetration:.3g} m, more than the "
-                               f"tolerance {tol_pen:.3g} m (enable skin.subtract_objects or raise skin.tolerance)")
-    if before_write is not None:
-        before_write(result)
-    paths = write_all(result, mesh, Path(out), stem=stem or result.scene.name)
-    s.update({
-        "watertight": rep.watertight, "is_volume": rep.is_volume, "bodies": rep.bodies, "volume": rep.volume,
-        "nodes_in_skin": rep.nodes_contained, "overlap_volume": rep.overlap_volume,
-        "penetration": rep.penetration, "skin_attempts": rep.attempts,
-        "objects_subtracted": rep.objects_subtracted, "objects_not_manifold": rep.objects_not_manifold,
-        "seconds_skin": seconds_skin,
-    })
-    s.update(paths)
-    s["skin_units"] = SKIN_FILE_UNITS
-    if keep_result or before_write is not None:
-        s["_result"] = result
-    return s
 
 
 def _run_edit(args) -> dict:
@@ -444,12 +288,13 @@ def demo(ctx) -> dict:
     edit of the phone stand (scenes/growth/phone_stand_stroke.json over its preview)."""
     import argparse
 
+    from simfab.growth import run as grow_run
     from simfab.progress import log
 
     res = {}
     for path in bundled_scenes():
         log(f"  grow {path.stem}", quiet=ctx.quiet)
-        s = grow_scene(path, out=os.path.join(ctx.out, path.stem), seed=ctx.seed, quiet=ctx.quiet)
+        s = summary_json(grow_run(path, out=os.path.join(ctx.out, path.stem), seed=ctx.seed))
         res[path.stem] = {k: s[k] for k in ("targets_total", "targets_reached", "nodes", "segments", "watertight",
                                             "bodies", "volume", "seconds_growth", "seconds_skin", "png", "usd")}
         if path.stem == "phone_stand":

@@ -14,7 +14,8 @@ The tet mesh conforms to that surface: its boundary facets are exactly the refin
 Same skin and ``h`` give the same mesh, bit for bit, in any process (fTetWild, the mesher of
 :func:`simfab.fem.meshing.tetrahedralize`, shuffles its input triangles with a hardware random
 seed and does not). When Gmsh rejects a surface, the simplification tolerance grows
-(``SIMPLIFY_RETRY``) before the mesh is given up. Where Gmsh cannot load (its wheel needs the
+(``SIMPLIFY_RETRY``), as it does when Gmsh leaves flat (zero-volume) tets between near-coplanar
+boundary facets; at the last tolerance such tets are dropped. Where Gmsh cannot load (its wheel needs the
 system's X11/GLU libraries), fTetWild meshes the skin instead and ``SkinTets.mesher`` says so.
 """
 
@@ -79,8 +80,26 @@ def tetrahedralize_skin(mesh, *, edge_length: float, r_min: float) -> SkinTets:
         except Exception as e:  # noqa: BLE001 - Gmsh raises a bare Exception with its last error
             last = str(e)
             continue
+        flat = _flat_tets(V, T)
+        if flat.any() and k != SIMPLIFY_RETRY[-1]:
+            last = f"{int(flat.sum())} flat tetrahedra"
+            continue  # a coarser simplification removes the near-coplanar boundary facets behind them
+        if flat.any():  # zero-volume slivers between boundary facets: dropping them changes no volume
+            T = T[~flat]
+            used = np.zeros(len(V), bool)
+            used[T.ravel()] = True
+            V, T = V[used], (np.cumsum(used) - 1)[T].astype(np.int32)
         return SkinTets(vertices=V, tets=T, surface=surf, simplify_m=tol_m)
     raise ConvergenceError(f"Gmsh could not tetrahedralize the skin ({last})")
+
+
+def _flat_tets(V: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """(m,) bool: tets the FEM model would reject as degenerate (``DEGENERATE_REL``)."""
+    from simfab.fem.tolerances import DEGENERATE_REL
+
+    i, j = np.triu_indices(4, 1)
+    h = float(np.linalg.norm(V[T[:, i]] - V[T[:, j]], axis=-1).mean())
+    return np.abs(np.linalg.det(V[T[:, 1:]] - V[T[:, :1]])) <= DEGENERATE_REL * h**3
 
 
 def _gmsh_delaunay(V: np.ndarray, F: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ from simfab.cli import main
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCENES = ROOT / "scenes" / "growth"
 #: figures that depend on time or on the output folder
-VOLATILE = {"seconds_check", "check_usd", "check_png", "skeleton"}
+VOLATILE = {"seconds_check", "check_usd", "check_png", "skeleton", "outputs"}
 
 
 def _check_in_subprocess(skeleton: pathlib.Path, out: pathlib.Path) -> dict:
