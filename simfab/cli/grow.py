@@ -53,7 +53,9 @@ DESCRIPTION = (
     "stroke in red).\n\n"
     "--json keys (check, and grow --check under 'check'): safety_factor, max_von_mises_Pa (critical-distance "
     "mean), peak_point_m, max_point_von_mises_Pa, deflection_m (per target), max_deflection_m, mass_kg, volume_m3, "
-    "material, yield_stress_Pa, critical_distance_m, target_forces_N, tets, fem_nodes, seconds_check, check_usd, "
+    "material, yield_stress_Pa, critical_distance_m, target_forces_N, targets (per load point: object, touching, "
+    "gap_m, contact_area_m2, min_contact_area_m2, load_N), supported_objects (per object: mass_kg, mass_source, "
+    "weight_N, carried_by), dropped_weight_N, mesher, tets, fem_nodes, seconds_check, check_usd, "
     "check_png, with --buckling buckling_factor; with --strengthen also 'strengthened' (the same figures of the "
     "final design plus target_safety_factor, reached, checks, safety_factor_before/after, volume_before/after_m3, "
     "volume_change, skeleton_json, skin_stl, check_usd, check_png)."
@@ -77,8 +79,9 @@ def add_args(p):
     g.add_argument("--smooth-iterations", type=int, metavar="K", help="smoothing iterations (0 = none)")
     g.add_argument("--max-steps", type=int, metavar="K", help="growth step cap (default: the scene's)")
     g.add_argument("--best-effort", action="store_true",
-                   help="keep and write a structure that leaves targets unreached (default: that is a failed "
-                        "growth, exit 1, nothing written)")
+                   help="keep and write a structure that leaves targets unreached, and check a support that "
+                        "leaves a supported object's weight without a load path (default: both fail, exit 1, "
+                        "nothing written; with it: a warning, the summary names the dropped weight)")
     c = p.add_argument_group("structural check")
     c.add_argument("--check", action="store_true", help="check the grown support under its loads (see 'check')")
     c.add_argument("--load", action="append", metavar="TARGET=FX,FY,FZ",
@@ -111,6 +114,8 @@ def _positive(name, v):
 
 def run(args) -> dict:
     from simfab.errors import InputError
+    from simfab.growth import run as grow_run
+    from simfab.progress import log
 
     if args.scene == "edit":
         if args.check or args.load or args.strengthen is not None or args.thin or args.buckling:
@@ -120,23 +125,31 @@ def run(args) -> dict:
         return _run_check(args)
     if args.skeleton is not None or args.stroke or args.camera or args.chain is not None:
         raise InputError("SKELETON_JSON, --stroke, --camera and --chain belong to 'simfab grow edit'")
-    structural = args.check or args.load or args.strengthen is not None or args.thin or args.buckling
-    if structural:
-        loads, target = _check_options(args)
-        _known_targets(loads, args.scene)
-    s = grow_scene(args.scene, out=args.out, seed=args.seed, quiet=args.quiet,
+    loads, target = _check_options(args)
+    res = grow_run(args.scene, out=args.out, seed=args.seed, progress=lambda m: log(m, quiet=args.quiet),
+                   check=bool(args.check), best_effort=args.best_effort, loads=loads, strengthen=target,
+                   thin=args.thin, buckling=args.buckling,
                    attractors=_positive("--attractors", args.attractors),
                    influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
                    branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
                    symmetric=args.symmetric, smoothing_iterations=_nonneg(args.smooth_iterations),
-                   max_steps=_positive("--max-steps", args.max_steps), best_effort=args.best_effort,
-                   keep_result=structural)
-    if not structural:
-        return s
-    result = s.pop("_result")
-    s["check"] = check_outputs(result.skeleton, result.scene, out=args.out, stem=result.scene.name, loads=loads,
-                               strengthen=target, thin=args.thin, buckling=args.buckling, quiet=args.quiet)
-    return s
+                   max_steps=_positive("--max-steps", args.max_steps))
+    return summary_json(res)
+
+
+#: keys left out of the --json object when None (they do not apply to that run)
+OPTIONAL_KEYS = ("check", "buckling_factor", "strengthened", "skeleton", "scene")
+
+
+def summary_json(res) -> dict:
+    """The ``--json`` object of a GrowthResult / CheckResult: its ``to_json()`` without the
+    :data:`OPTIONAL_KEYS` that are None (no check, no buckling, no strengthening, no skeleton file)."""
+
+    def prune(d: dict) -> dict:
+        return {k: prune(v) if k in ("check", "strengthened") and isinstance(v, dict) else v
+                for k, v in d.items() if not (k in OPTIONAL_KEYS and v is None)}
+
+    return prune(res.to_json())
 
 
 def _check_options(args):
@@ -161,85 +174,10 @@ def _check_options(args):
     return loads, target
 
 
-def _reached_loads(skeleton, scene, loads: dict) -> None:
-    """InputError naming where a load on a target the support does not reach came from: --load, or
-    the scene TOML's [loads] table."""
-    from simfab.errors import InputError
-    from simfab.growth.structure import load_points
-
-    points = load_points(skeleton)
-    reached = ", ".join(sorted(n for n in scene.target_names if n in points)) or "none"
-    toml = f"{scene.path.with_suffix('.toml')}: [loads]" if scene.path else "scene: [loads]"
-    for where, names in (("--load", list(loads)), (toml, [n for n, _ in scene.structure.loads if n not in loads])):
-        missing = [n for n in names if n not in points]
-        if missing:
-            raise InputError(f"target(s) {', '.join(missing)} not reached by the support, so nothing carries "
-                             f"the load (reached: {reached}); grow until it reaches them or load a reached one",
-                             where=where)
-
-
-def _known_targets(loads: dict, scene_path) -> None:
-    """InputError (before anything is grown or written) when --load names no target of the scene or
-    no root stands on an object (nothing to clamp the support to)."""
-    from simfab.errors import InputError
-    from simfab.growth.scene import load_growth_scene
-    from simfab.growth.structure import require_ground
-
-    scene = load_growth_scene(scene_path)
-    require_ground(scene)
-    names = scene.target_names
-    unknown = [n for n in loads if n not in names]
-    if unknown:
-        raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(names)})", where="--load")
-
-
-def check_outputs(skeleton, scene, *, out, stem, loads: dict, strengthen=None, thin=False, buckling=False,
-                  quiet=True) -> dict:
-    """Check (and optionally strengthen) a support, write the USD/PNG (and the strengthened
-    skeleton and skin), return the summary."""
-    from simfab.errors import InputError
-    from simfab.growth.outputs import save_skin, write_check
-    from simfab.growth.skeleton import to_json_dict
-    from simfab.growth.structure import buckling_factor, check_structure
-    from simfab.growth.structure import strengthen as strengthen_support
-    from simfab.io.atomic import atomic_paths, write_json
-    from simfab.io.outpaths import safe_name
-    from simfab.progress import log
-
-    unknown = [n for n in loads if n not in scene.target_names]
-    if unknown:
-        raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(scene.target_names)})",
-                         where="--load")
-    _reached_loads(skeleton, scene, loads)
-    merged = {**dict(scene.structure.loads), **loads}
-    log(f"simfab grow check: {stem}: meshing and solving", quiet=quiet)
-    c = check_structure(skeleton, scene, loads=merged)
-    summary = c.summary()
-    if buckling:
-        summary["buckling_factor"] = buckling_factor(c)
-    if strengthen is not None:
-        log(f"simfab grow check: {stem}: strengthening to safety factor {strengthen:g}", quiet=quiet)
-        res = strengthen_support(skeleton, scene, strengthen, loads=merged, thin=thin, check=c)
-    stem = safe_name(stem)
-    summary.update(write_check(c, scene, Path(out), stem=stem))
-    if strengthen is not None:
-        st = {**res.check.summary(), **res.summary()}
-        paths = {"skeleton_json": Path(out) / f"{stem}_strengthened_skeleton.json",
-                 "skin_stl": Path(out) / f"{stem}_strengthened_skin.stl"}
-        with atomic_paths(paths) as tmp:
-            write_json(tmp["skeleton_json"], to_json_dict(res.skeleton, scene=str(scene.path.resolve()) if scene.path
-                                                          else None, strengthen=res.summary()))
-            save_skin(res.check.mesh, tmp["skin_stl"])
-        st.update({k: str(v) for k, v in paths.items()})
-        st.update(write_check(res.check, scene, Path(out), stem=f"{stem}_strengthened"))
-        summary["strengthened"] = st
-    return summary
-
-
 def _run_check(args) -> dict:
     from simfab.errors import InputError
-    from simfab.growth.scene import load_growth_scene
-    from simfab.growth.skeleton import load_skeleton_json
+    from simfab.growth import check
+    from simfab.progress import log
 
     if args.skeleton is None:
         raise InputError("simfab grow check needs SKELETON_JSON")
@@ -248,18 +186,10 @@ def _run_check(args) -> dict:
         if getattr(args, name, None) not in (None, False):
             raise InputError(f"--{name.replace('_', '-')} does not apply to 'check'")
     loads, target = _check_options(args)
-    sk, doc = load_skeleton_json(args.skeleton)
-    scene_path = doc.get("scene")
-    if not scene_path or not Path(scene_path).is_file():
-        raise InputError(f"the skeleton names no readable scene ({scene_path!r})", where=f"{args.skeleton}: scene")
-    scene = load_growth_scene(scene_path)
-    names = set(scene.target_names)
-    if any(n not in names for n in sk.target_names):
-        raise InputError("the skeleton's targets are not its scene's", where=f"{args.skeleton}: target_names")
-    stem = Path(args.skeleton).stem.removesuffix("_skeleton")
-    return {"skeleton": str(args.skeleton), "scene": str(scene_path),
-            **check_outputs(sk, scene, out=args.out, stem=stem, loads=loads, strengthen=target, thin=args.thin,
-                            buckling=args.buckling, quiet=args.quiet)}
+    res = check(args.skeleton, out=args.out, loads=loads, strengthen=target, thin=args.thin, buckling=args.buckling,
+                best_effort=args.best_effort, progress=lambda m: log(m, quiet=args.quiet))
+    d = summary_json(res)
+    return {"skeleton": d.pop("skeleton", str(args.skeleton)), "scene": d.pop("scene", None), **d}
 
 
 def _nonneg(v):
@@ -268,65 +198,6 @@ def _nonneg(v):
     if v is not None and v < 0:
         raise InputError(f"must be >= 0, got {v}", where="--smooth-iterations")
     return v
-
-
-#: GrowthParams field -> the command-line option that sets it (errors name the option the value came from)
-_FLAGS = {"branch_length": "--branch-length", "kill": "--kill", "influence": "--influence",
-          "attractors": "--attractors", "max_steps": "--max-steps"}
-
-
-def grow_scene(scene, *, out, seed=0, quiet=True, stem=None, best_effort: bool = False, keep_result: bool = False,
-               **overrides) -> dict:
-    """Grow, skin, check and write every output for one scene; returns the summary (with the
-    :class:`GrowthResult` under ``_result`` when ``keep_result``).
-
-    A target left unreached is a failed growth (ConvergenceError, exit 1) unless ``best_effort``."""
-    from simfab.errors import ConvergenceError, InputError
-    from simfab.growth import grow, skin_result
-    from simfab.growth.outputs import SKIN_FILE_UNITS, write_all
-    from simfab.growth.tolerances import PENETRATION_ROUNDOFF
-    from simfab.progress import log
-
-    symmetric = overrides.pop("symmetric", None)
-    try:
-        result = grow(scene, seed=seed, symmetric=symmetric, **overrides)
-    except InputError as e:  # name the scene's file with the field (its TOML holds the growth parameters)
-        toml = Path(scene).with_suffix(".toml")
-        if (e.where or "").startswith("--"):
-            raise
-        key = (e.where or "").removeprefix("growth.")
-        if key in _FLAGS and overrides.get(key) is not None:  # the value came from the command line
-            raise InputError(e.message, where=_FLAGS[key]) from None
-        raise e.in_file(toml if toml.is_file() else scene) from None
-    s = result.summary()
-    if s["segments"] == 0:
-        raise ConvergenceError(f"{scene}: growth produced no structure ({'; '.join(s['stop_reasons'])}); "
-                               f"unreached targets: {', '.join(s['targets_unreached']) or 'none'}")
-    if s["targets_unreached"]:
-        msg = (f"{scene}: {len(s['targets_unreached'])} of {s['targets_total']} targets unreached "
-               f"({', '.join(s['targets_unreached'])}; {'; '.join(s['stop_reasons'])})")
-        if not best_effort:
-            raise ConvergenceError(f"{msg}; change the growth parameters (e.g. --branch-length, --influence, "
-                                   "--max-steps) or pass --best-effort to keep the partial structure")
-        log(f"simfab grow: warning: {msg}")  # shown even with --quiet: the result is partial
-    mesh, rep, seconds_skin = skin_result(result)
-    tol_pen = result.scene.params.skin_tolerance
-    if rep.penetration > tol_pen + PENETRATION_ROUNDOFF * result.resolved.diag:
-        raise ConvergenceError(f"the skin penetrates the objects by {rep.penetration:.3g} m, more than the "
-                               f"tolerance {tol_pen:.3g} m (enable skin.subtract_objects or raise skin.tolerance)")
-    paths = write_all(result, mesh, Path(out), stem=stem or result.scene.name)
-    s.update({
-        "watertight": rep.watertight, "is_volume": rep.is_volume, "bodies": rep.bodies, "volume": rep.volume,
-        "nodes_in_skin": rep.nodes_contained, "overlap_volume": rep.overlap_volume,
-        "penetration": rep.penetration, "skin_attempts": rep.attempts,
-        "objects_subtracted": rep.objects_subtracted, "objects_not_manifold": rep.objects_not_manifold,
-        "seconds_skin": seconds_skin,
-    })
-    s.update(paths)
-    s["skin_units"] = SKIN_FILE_UNITS
-    if keep_result:
-        s["_result"] = result
-    return s
 
 
 def _run_edit(args) -> dict:
@@ -417,12 +288,13 @@ def demo(ctx) -> dict:
     edit of the phone stand (scenes/growth/phone_stand_stroke.json over its preview)."""
     import argparse
 
+    from simfab.growth import run as grow_run
     from simfab.progress import log
 
     res = {}
     for path in bundled_scenes():
         log(f"  grow {path.stem}", quiet=ctx.quiet)
-        s = grow_scene(path, out=os.path.join(ctx.out, path.stem), seed=ctx.seed, quiet=ctx.quiet)
+        s = summary_json(grow_run(path, out=os.path.join(ctx.out, path.stem), seed=ctx.seed))
         res[path.stem] = {k: s[k] for k in ("targets_total", "targets_reached", "nodes", "segments", "watertight",
                                             "bodies", "volume", "seconds_growth", "seconds_skin", "png", "usd")}
         if path.stem == "phone_stand":

@@ -8,6 +8,11 @@ Python API (mirrors ``simfab grow``)::
     mesh = skin(result)            # trimesh.Trimesh, watertight, objects carved out
     result.summary()               # targets reached, nodes, segments, timings
 
+    from simfab.growth import run, check
+    res = run("scenes/growth/phone_stand.xml", out="out/phone", check=True)   # GrowthResult
+    res.check.safety_factor, res.to_json()                                     # the --json object
+    check("out/phone/phone_stand_skeleton.json", loads={"target_0": (0, 0, -2)})  # CheckResult
+
 Modules: :mod:`~simfab.growth.config` (parameters, TOML), :mod:`~simfab.growth.scene`
 (MJCF scenes), :mod:`~simfab.growth.attractors`, :mod:`~simfab.growth.obstacles`,
 :mod:`~simfab.growth.colonize` (the growth algorithm), :mod:`~simfab.growth.skeleton`
@@ -17,14 +22,15 @@ imported on its own: it loads the FEM), :mod:`~simfab.growth.outputs` (files).
 """
 
 from simfab.growth.config import GrowthParams, ProfileSpec, SymmetrySpec
-from simfab.growth.pipeline import GrowthResult, grow, skin_result
+from simfab.growth.pipeline import Growth, check, grow, run, skin_result
+from simfab.growth.results import CheckResult, GrowthResult, StrengthenedResult
 from simfab.growth.scene import GrowthScene, load_growth_scene
 from simfab.growth.skeleton import Skeleton, smooth_positions
 from simfab.growth.sketch import Camera, edit_chain
 
 
-def skin(result: GrowthResult, **kw):
-    """Skin of a :class:`GrowthResult` as a watertight ``trimesh.Trimesh`` (objects carved out).
+def skin(result: Growth, **kw):
+    """Skin of a :class:`Growth` as a watertight ``trimesh.Trimesh`` (objects carved out).
 
     Keywords: ``segments`` (joint-sphere resolution), ``subtract`` (carve the objects).
     Use :func:`skin_result` for the checks and timing as well.
@@ -32,5 +38,6 @@ def skin(result: GrowthResult, **kw):
     return skin_result(result, **kw)[0]
 
 
-__all__ = ["GrowthParams", "ProfileSpec", "SymmetrySpec", "GrowthResult", "grow", "skin", "skin_result",
+__all__ = ["GrowthParams", "ProfileSpec", "SymmetrySpec", "Growth", "grow", "skin", "skin_result", "run", "check",
+           "GrowthResult", "CheckResult", "StrengthenedResult",
            "GrowthScene", "load_growth_scene", "Skeleton", "smooth_positions", "Camera", "edit_chain"]

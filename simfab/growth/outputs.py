@@ -264,3 +264,30 @@ def write_check(check, scene, out: Path, *, stem: str) -> dict:
         write_check_usd(check, scene, tmp["check_usd"])
         write_check_png(check, tmp["check_png"], title=title)
     return {k: str(v) for k, v in paths.items()}
+
+
+def write_check_outputs(check, strengthened, scene, out: Path, *, stem: str) -> dict:
+    """Write a check's USD/PNG (and, with ``strengthened``, a :class:`simfab.growth.structure.
+    StrengthenResult`, the strengthened skeleton, skin and check) under ``out``.
+
+    Returns:
+        {"check": {label: path}, "strengthened": {label: path} or None}.
+    """
+    from simfab.growth.skeleton import to_json_dict
+    from simfab.io.atomic import atomic_paths, write_json
+    from simfab.io.outpaths import safe_name
+
+    stem = safe_name(stem)
+    out = Path(out)
+    files = {"check": write_check(check, scene, out, stem=stem), "strengthened": None}
+    if strengthened is not None:
+        paths = {"skeleton_json": out / f"{stem}_strengthened_skeleton.json",
+                 "skin_stl": out / f"{stem}_strengthened_skin.stl"}
+        with atomic_paths(paths) as tmp:
+            write_json(tmp["skeleton_json"], to_json_dict(strengthened.skeleton, scene=str(scene.path.resolve())
+                                                          if scene.path else None, strengthen=strengthened.summary()))
+            save_skin(strengthened.check.mesh, tmp["skin_stl"])
+        st = {k: str(v) for k, v in paths.items()}
+        st.update(write_check(strengthened.check, scene, out, stem=f"{stem}_strengthened"))
+        files["strengthened"] = st
+    return files

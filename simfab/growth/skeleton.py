@@ -236,18 +236,60 @@ def load_skeleton_json(path) -> tuple[Skeleton, dict]:
         raise InputError(f"not valid JSON: {e}", where=str(path)) from None
     if not isinstance(d, dict) or d.get("format") != "simfab.growth.skeleton/1":
         raise InputError("not a simfab growth skeleton (format simfab.growth.skeleton/1)", where=str(path))
-    try:
-        V = np.asarray(d["nodes"], np.float64).reshape(-1, 3)
-        n = len(V)
-        par = np.asarray(d["parent"], np.int64).reshape(n)
-        sk = Skeleton(nodes=V, parent=par, birth=np.asarray(d["birth_step"], np.int64).reshape(n),
-                      target=np.asarray(d["target"], np.int64).reshape(n),
-                      root=np.asarray(d["root"], np.int64).reshape(n),
-                      radius=np.asarray(d["radius"], np.float64).reshape(n),
-                      target_names=tuple(d.get("target_names", ())),
-                      contact=np.asarray(d.get("contact", np.zeros(n, bool)), bool).reshape(n))
-    except (KeyError, ValueError, TypeError) as e:
-        raise InputError(f"malformed skeleton ({type(e).__name__}: {e})", where=str(path)) from None
-    if not np.all(np.isfinite(V)) or np.any(par >= np.arange(n)) or np.any(par < -1) or not np.all(sk.radius > 0):
-        raise InputError("malformed skeleton (non-finite nodes, bad parent order or radii)", where=str(path))
+
+    def field(key, dtype, default=None):
+        if key not in d and default is None:
+            raise InputError("missing", where=f"{path}: {key}")
+        try:
+            return np.asarray(d.get(key, default), dtype)
+        except (ValueError, TypeError) as e:
+            raise InputError(f"not an array of numbers ({type(e).__name__}: {e})", where=f"{path}: {key}") from None
+
+    V = field("nodes", np.float64)
+    if V.size == 0:
+        raise InputError("empty skeleton: no nodes", where=f"{path}: nodes")
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise InputError(f"expected a list of [x, y, z] points, got shape {V.shape}", where=f"{path}: nodes")
+    if not np.all(np.isfinite(V)):
+        raise InputError("non-finite node coordinates", where=f"{path}: nodes")
+    n = len(V)
+    arrays = {}
+    for key, dtype, default in (("parent", np.float64, None), ("birth_step", np.float64, None),
+                                ("target", np.float64, None), ("root", np.float64, None),
+                                ("radius", np.float64, None), ("contact", bool, np.zeros(n, bool))):
+        a = field(key, dtype, default)
+        if a.shape != (n,):
+            raise InputError(f"expected {n} values (one per node), got shape {a.shape}", where=f"{path}: {key}")
+        if dtype is np.float64 and not np.all(np.isfinite(a)):
+            raise InputError(f"non-finite value at node {int(np.nonzero(~np.isfinite(a))[0][0])}",
+                             where=f"{path}: {key}")
+        if key != "radius" and dtype is np.float64:
+            if np.any(a != np.round(a)):
+                raise InputError("expected integers", where=f"{path}: {key}")
+            a = a.astype(np.int64)
+        arrays[key] = a
+    par, radius = arrays["parent"], arrays["radius"]
+    bad = np.nonzero((par >= np.arange(n)) | (par < -1))[0]
+    if len(bad):
+        raise InputError(f"node {int(bad[0])} has parent {int(par[bad[0]])} (parents come first; -1 for roots)",
+                         where=f"{path}: parent")
+    if not np.all(radius > 0):
+        raise InputError(f"radius {radius[radius <= 0][0]:g} at node {int(np.nonzero(radius <= 0)[0][0])} "
+                         "(radii are positive)", where=f"{path}: radius")
+    names = d.get("target_names", [])
+    if not isinstance(names, list) or not all(isinstance(t, str) for t in names) or len(set(names)) != len(names):
+        raise InputError("expected a list of distinct site names", where=f"{path}: target_names")
+    tgt = arrays["target"]
+    bad = np.nonzero((tgt < -1) | (tgt >= len(names)))[0]
+    if len(bad):
+        raise InputError(f"node {int(bad[0])} names target index {int(tgt[bad[0]])}, but there are {len(names)} "
+                         "target names", where=f"{path}: target")
+    tn = d.get("target_nodes")
+    if tn is not None:
+        want = {names[int(t)]: int(i) for i, t in enumerate(tgt) if t >= 0}
+        if not isinstance(tn, dict) or any(k not in want for k in tn):
+            raise InputError(f"lists targets {sorted(tn) if isinstance(tn, dict) else tn!r} that no node reaches "
+                             f"(reached: {sorted(want)})", where=f"{path}: target_nodes")
+    sk = Skeleton(nodes=V, parent=par, birth=arrays["birth_step"], target=tgt, root=arrays["root"], radius=radius,
+                  target_names=tuple(names), contact=arrays["contact"])
     return sk, d

@@ -2,8 +2,8 @@
 
 Model (linear elastostatics on quadratic tetrahedra):
 
-1. the skin (:func:`simfab.growth.skinning.skin`, objects carved out) is tetrahedralized by
-   fTetWild (:func:`simfab.fem.meshing.tetrahedralize`) with a target edge length of
+1. the skin (:func:`simfab.growth.skinning.skin`, objects carved out) is tetrahedralized
+   deterministically by Gmsh (:func:`simfab.growth.tetmesh.tetrahedralize_skin`) with edges of
    ``EDGE_PER_RMIN`` r_min (r_min the thinnest branch radius) and lifted to 10-node tets
    (:func:`simfab.fem.p2.to_p2`): a branch is a beam, and P2 elements carry the linear strain
    of bending exactly where linear tets lock;
@@ -40,26 +40,25 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-import simfab.growth.tolerances as tol
 from simfab.errors import ConvergenceError, InputError
 from simfab.fem import elastic
 from simfab.fem.loads import body_force_loads, traction_loads
-from simfab.fem.meshing import tetrahedralize
 from simfab.fem.model import make_model
 from simfab.fem.p2 import P2Model, corner_gradients, to_p2
 from simfab.growth.config import StructureSpec
+from simfab.growth.contact import ground_objects, load_paths, load_points, require_ground, target_contacts
+from simfab.growth.masses import object_masses
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene
 from simfab.growth.skeleton import Skeleton
 from simfab.growth.skinning import skin
+from simfab.growth.tetmesh import tetrahedralize_skin
 from simfab.io.mjcf import load_scene
 from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
-#: fTetWild's target edge length as a multiple of the thinnest branch radius. fTetWild refines
-#: below it wherever its surface envelope (1e-3 of the diagonal) asks, which on the bundled
-#: supports gives edges of about one thinnest radius; a target at that size itself costs several
-#: times the meshing time for a mesh of about the same count (docs/decisions.md)
-EDGE_PER_RMIN = 4.0
+#: tet edge length as a multiple of the thinnest branch radius (:mod:`simfab.growth.tetmesh`;
+#: about two P2 tets across the thinnest branch)
+EDGE_PER_RMIN = 2.0
 #: clamp band: boundary nodes this fraction of the skin's diagonal from a ground object
 FIX_TOL = 2e-3
 #: standard gravity [m/s^2] when the scene has no MJCF model to read it from
@@ -70,13 +69,25 @@ G0 = 9.81
 class TargetLoad:
     """Force on one load point (a reached target or a surface contact, :func:`load_points`):
     ``force`` (3,) [N] = ``weight`` (its share of the objects it touches) + ``extra`` ([loads] /
-    --load); ``objects`` the touched objects' names (none: the point only reports its deflection)."""
+    --load); ``objects`` the touched objects' names (none: the point only reports its deflection);
+    ``contact`` its :class:`simfab.growth.contact.TargetContact` (None without a skin)."""
 
     name: str
     force: np.ndarray
     weight: np.ndarray
     extra: np.ndarray
     objects: tuple
+    contact: object = None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DroppedWeight:
+    """A supported object whose weight the support does not carry (checked with ``best_effort``):
+    ``weight_N`` [N] = m |g|, ``targets`` the load points meant to carry it."""
+
+    object: str
+    weight_N: float
+    targets: tuple
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -106,6 +117,9 @@ class StructureCheck:
     element_von_mises : (m,) per element the largest averaged corner stress [Pa].
     points, point_von_mises : (4m, 3) rest positions [m] of the element corners and their averaged stress [Pa].
     mesh : the skin (``trimesh.Trimesh``) that was meshed. tets, nodes : mesh sizes.
+    contacts : per load point its :class:`simfab.growth.contact.TargetContact`. object_masses : supported
+    object -> :class:`simfab.growth.masses.ObjectMass`. dropped : object -> :class:`DroppedWeight`
+    (``best_effort`` only). gravity (3,) [m/s^2]. nodal_forces (n, 3) [N] the consistent load vector.
     seconds : wall time of skin, mesh, solve and stress.
     """
 
@@ -130,6 +144,12 @@ class StructureCheck:
     seconds: float
     points: np.ndarray
     point_von_mises: np.ndarray
+    contacts: tuple = ()
+    object_masses: dict = dataclasses.field(default_factory=dict)
+    dropped: dict = dataclasses.field(default_factory=dict)
+    gravity: np.ndarray | None = None
+    nodal_forces: np.ndarray | None = None
+    mesher: str = "gmsh"
 
     def summary(self) -> dict:
         """JSON-ready figures (the ``simfab grow check`` keys)."""
@@ -146,6 +166,19 @@ class StructureCheck:
             "yield_stress_Pa": self.yield_stress_Pa,
             "critical_distance_m": self.critical_distance_m,
             "target_forces_N": {ld.name: [float(v) for v in ld.force] for ld in self.loads},
+            "targets": {ld.name: {"object": ld.contact.object if ld.contact else None,
+                                  "touching": bool(ld.contact.touching) if ld.contact else False,
+                                  "gap_m": ld.contact.gap_m if ld.contact else None,
+                                  "contact_area_m2": ld.contact.contact_area_m2 if ld.contact else 0.0,
+                                  "min_contact_area_m2": ld.contact.min_area_m2 if ld.contact else None,
+                                  "load_N": [float(v) for v in ld.force]} for ld in self.loads},
+            "supported_objects": {n: {"mass_kg": m.mass_kg, "mass_source": m.source,
+                                      "weight_N": float(m.mass_kg * np.linalg.norm(self.gravity))
+                                      if self.gravity is not None else None,
+                                      "carried_by": [ld.name for ld in self.loads if n in ld.objects]}
+                                  for n, m in self.object_masses.items()},
+            "dropped_weight_N": {o: d.weight_N for o, d in self.dropped.items()},
+            "mesher": self.mesher,
             "tets": self.tets,
             "fem_nodes": self.nodes,
             "seconds_check": self.seconds,
@@ -162,106 +195,102 @@ def gravity(scene: GrowthScene) -> np.ndarray:
 
 def body_masses(scene: GrowthScene) -> dict:
     """Object name -> mass [kg] (MJCF body masses, MuJoCo's inertia from the geoms' density)."""
-    if scene.path is None:
+    return {n: m.mass_kg for n, m in object_masses(scene).items()}
+
+
+def validate_loads(scene: GrowthScene) -> dict:
+    """The masses of the supported objects (:func:`simfab.growth.contact.supported_objects`):
+    object name -> :class:`simfab.growth.masses.ObjectMass`. InputError (naming the MJCF file and
+    the body) when one has no mass to load the support with, or when the scene has no MJCF file."""
+    from simfab.growth.contact import supported_objects
+
+    sup = supported_objects(scene)
+    if not sup:
         return {}
-
-    sc = load_scene(scene.path)
-    return {n: float(m) for n, m in zip(sc.body_names(), sc.model.body_mass) if n in scene.objects}
-
-
-def ground_objects(scene: GrowthScene) -> list:
-    """Names of the objects a root stands on (within ``GROUND_CONTACT`` of their diagonal)."""
-    out = []
-    for name, m in scene.objects.items():
-        _, d, _ = m.nearest.on_surface(scene.roots)
-        if np.any(d <= tol.GROUND_CONTACT * float(np.linalg.norm(m.extents))):
-            out.append(name)
-    return out
+    if scene.path is None:
+        raise InputError("the supported objects' masses come from the MJCF model: this scene has no MJCF file",
+                         where="scene")
+    masses = object_masses(scene)
+    for name in sup:
+        m = masses.get(name)
+        if m is None or not (m.mass_kg > 0 and np.isfinite(m.mass_kg)):
+            raise InputError(f"supported object {name!r} has no mass (set mass= or density= on its geoms)",
+                             where=f"{scene.path}: body {name} mass")
+    return {n: masses[n] for n in sup}
 
 
-def require_ground(scene: GrowthScene) -> list:
-    """:func:`ground_objects`, or InputError naming the scene file and its root sites when no root
-    stands on an object (the structural check clamps the support there).
-
-    Args:
-        scene: the growth scene.
-
-    Returns:
-        The names of the objects a root stands on (at least one).
-    """
-    ground = ground_objects(scene)
-    if not ground:
-        where = f"{scene.path}: " if scene.path else ""
-        raise InputError(f"no object under the roots to clamp the support to: a root must stand on an object "
-                         f"(within {100 * tol.GROUND_CONTACT:g} % of the object's diagonal) for the structural check",
-                         where=f"{where}site {', '.join(scene.root_names)}")
-    return ground
-
-
-def load_points(skeleton: Skeleton) -> dict:
-    """Where the support meets what it holds: name -> skeleton node, the reached targets (by
-    their site names) and, in surface mode, the contacts (``contact_<node>``)."""
-    out = dict(skeleton.target_nodes())
-    for i in np.nonzero(skeleton.contact_mask())[0]:
-        out.setdefault(f"contact_{int(i)}", int(i))
-    return out
-
-
-def target_loads(scene: GrowthScene, skeleton: Skeleton, extra: dict | None = None) -> tuple:
+def target_loads(scene: GrowthScene, skeleton: Skeleton, extra: dict | None = None, *, contacts=None) -> tuple:
     """The force on every load point of :func:`load_points` (see :class:`TargetLoad`): each
-    non-ground object's weight shared equally among the points touching it (within the branch
-    radius there, or ``GROUND_CONTACT`` of its diagonal), plus ``extra`` (target name -> (3,) [N];
-    the scene's ``[loads]`` when None). InputError when an extra load names an unreached target."""
+    supported object's weight shared equally among the points touching it
+    (:func:`simfab.growth.contact.target_contacts`; ``contacts`` those of the skeleton's skin,
+    computed from a fresh skin when None), plus ``extra`` (target name -> (3,) [N]; the scene's
+    ``[loads]`` when None). InputError when an extra load names an unreached target."""
     extra = dict(scene.structure.loads) if extra is None else dict(extra)
     points = load_points(skeleton)
     missing = [n for n in extra if n not in points]
     if missing:
         raise InputError(f"load on target(s) {', '.join(missing)} that the support does not reach "
                          f"(reached: {', '.join(points)})", where="loads")
+    if contacts is None:
+        p = scene.params
+        mesh, _ = skin(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects, fixed=skeleton.fixed_mask(),
+                       segments=p.skin_segments, subtract=p.subtract_objects)
+        contacts = target_contacts(mesh, skeleton, scene)
     g = gravity(scene)
     mass = body_masses(scene)
-    ground = set(ground_objects(scene))
-    names = list(points)
-    idx = np.array([points[n] for n in names], np.int64)
-    touch = {}
-    for name, m in scene.objects.items():
-        if name in ground or not names:
-            continue
-        _, d, _ = m.nearest.on_surface(skeleton.nodes[idx])
-        tol_d = np.maximum(tol.GROUND_CONTACT * float(np.linalg.norm(m.extents)), skeleton.radius[idx])
-        on = [n for n, hit in zip(names, d <= tol_d) if hit]
-        if on:
-            touch[name] = on
+    paths = load_paths(scene, contacts, mass)
+    by_name = {c.name: c for c in contacts}
     out = []
-    for t in names:
-        objs = tuple(o for o, ts in touch.items() if t in ts)
-        w = sum((mass.get(o, 0.0) * g / len(touch[o]) for o in objs), np.zeros(3))
+    for t in points:
+        objs = tuple(o for o, ts in paths.carriers.items() if t in ts)
+        w = sum((mass.get(o, 0.0) * g / len(paths.carriers[o]) for o in objs), np.zeros(3))
         e = np.asarray(extra.get(t, (0.0, 0.0, 0.0)), np.float64)
-        out.append(TargetLoad(name=t, force=w + e, weight=w, extra=e, objects=objs))
+        out.append(TargetLoad(name=t, force=w + e, weight=w, extra=e, objects=objs, contact=by_name.get(t)))
     return tuple(out)
 
 
 def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | None = None,
-                    options: CheckOptions = CheckOptions(), spec: StructureSpec | None = None) -> StructureCheck:
+                    options: CheckOptions = CheckOptions(), spec: StructureSpec | None = None,
+                    best_effort: bool = False) -> StructureCheck:
     """Skin, mesh, load and solve the support ``skeleton`` grown in ``scene`` (module docstring).
 
-    loads : extra target forces name -> (3,) [N] replacing the scene's ``[loads]`` (None: keep).
-    spec : material and critical distance (None: the scene's ``[material]``).
+    Args:
+        skeleton: the support. scene: the scene it was grown in.
+        loads: extra target forces name -> (3,) [N] replacing the scene's ``[loads]`` (None: keep).
+        options: mesh options. spec: material and critical distance (None: the scene's ``[material]``).
+        best_effort: check a support that leaves a supported object's weight without a load path
+            (reported under ``dropped``) instead of raising.
+
+    Returns:
+        :class:`StructureCheck`. Raises InputError when a supported object has no mass,
+        ConvergenceError when a supported object's weight has no load path (unless ``best_effort``).
     """
     t0 = time.perf_counter()
     spec = scene.structure if spec is None else spec
     mat = spec.material
-    tl = target_loads(scene, skeleton, loads)
+    masses = validate_loads(scene)
     p = scene.params
     mesh, _ = skin(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects, fixed=skeleton.fixed_mask(),
                    segments=options.segments or p.skin_segments, subtract=p.subtract_objects)
-    h = options.edge_length if options.edge_length is not None else EDGE_PER_RMIN * float(skeleton.radius.min())
+    contacts = target_contacts(mesh, skeleton, scene)
+    g = gravity(scene)
+    paths = load_paths(scene, contacts, {n: m.mass_kg for n, m in masses.items()})
+    dropped = {o: DroppedWeight(object=o, weight_N=float(masses[o].mass_kg * np.linalg.norm(g)), targets=tuple(ts))
+               for o, ts in paths.dropped.items()}
+    if dropped and not best_effort:
+        o, d = next(iter(dropped.items()))
+        gaps = {c.name: c.gap_m for c in contacts}
+        detail = ", ".join(f"{t} (gap {gaps[t] * 1e3:.3g} mm)" if t in gaps else f"{t} (unreached)" for t in d.targets)
+        raise ConvergenceError(f"the support carries none of {o}'s weight ({d.weight_N:.3g} N): no target touches "
+                               f"it: {detail}; regrow the support or pass --best-effort to check it without that load")
+    tl = target_loads(scene, skeleton, loads, contacts=contacts)
+    r_min = float(skeleton.radius.min())
+    h = options.edge_length if options.edge_length is not None else EDGE_PER_RMIN * r_min
     diag = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
-    V, T = tetrahedralize(mesh.vertices, mesh.faces, edge_length_fac=min(1.0, h / diag))
-    model = to_p2(make_model(V, T, mat))
+    tm = tetrahedralize_skin(mesh, edge_length=h, r_min=r_min)
+    model = to_p2(make_model(tm.vertices, tm.tets, mat))
     X = model.rest
     fixed = _clamped(model, scene, FIX_TOL * diag)
-    g = gravity(scene)
     f = np.zeros_like(X)
     if options.self_weight:
         f += body_force_loads(model, lambda Xq: np.broadcast_to(mat.density * g, Xq.shape))
@@ -269,7 +298,8 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
     tnode = load_points(skeleton)
     for ld in tl:
         i = tnode[ld.name]
-        w = _patch_weights(model, skeleton.nodes[i], float(skeleton.radius[i]))
+        w = _patch_weights(model, skeleton.nodes[i], float(skeleton.radius[i]),
+                           scene.objects[ld.contact.object] if ld.objects else None)
         share[ld.name] = w
         f += w[:, None] * ld.force[None, :]
     u = _solve(model, fixed, f)
@@ -287,7 +317,8 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
         deflection_m=defl, mass_kg=mat.density * vol, volume_m3=vol, loads=tl, material_name=mat.name,
         yield_stress_Pa=mat.yield_stress, critical_distance_m=spec.critical_distance, model=model, u=u,
         fixed=fixed, element_von_mises=avg.reshape(vm.shape).max(axis=1), mesh=mesh, tets=int(model.n_elements),
-        nodes=int(model.n_vertices), seconds=time.perf_counter() - t0, points=cells, point_von_mises=avg)
+        nodes=int(model.n_vertices), seconds=time.perf_counter() - t0, points=cells, point_von_mises=avg,
+        contacts=contacts, object_masses=masses, dropped=dropped, gravity=g, nodal_forces=f, mesher=tm.mesher)
 
 
 def geometric_stiffness(model: P2Model, sigma_corners: np.ndarray):
@@ -348,12 +379,26 @@ def _clamped(model: P2Model, scene: GrowthScene, band: float) -> np.ndarray:
     return fixed
 
 
-def _patch_weights(model: P2Model, point: np.ndarray, radius: float) -> np.ndarray:
+def _patch_weights(model: P2Model, point: np.ndarray, radius: float, obj=None) -> np.ndarray:
     """(n,) nodal weights summing to 1 of a uniform traction on the boundary facets whose
-    centroid lies within ``radius`` [m] of ``point`` (at least the 3 nearest facets)."""
+    centroid lies within ``radius`` [m] of ``point`` (at least the 3 nearest facets); with the
+    touched object ``obj`` (``trimesh.Trimesh``), on the contact patch instead: the facets within
+    the contact reach (:mod:`simfab.growth.contact`) whose corners lie on its surface."""
+    from simfab.growth.contact import GAP_PER_R
+
     c = model.rest[model.boundary_facets[:, :3]].mean(axis=1)
     d = np.linalg.norm(c - point, axis=1)
     on = d <= radius
+    if obj is not None:
+        _, dist, _ = obj.nearest.on_surface(point[None])
+        cand = np.nonzero(d <= float(dist[0]) + 2.0 * radius)[0]
+        if len(cand):
+            corners = model.boundary_facets[cand, :3]
+            _, dv, _ = obj.nearest.on_surface(model.rest[corners.ravel()])
+            patch = np.zeros(len(c), bool)
+            patch[cand[np.all(dv.reshape(-1, 3) <= GAP_PER_R * radius, axis=1)]] = True
+            if patch.sum() >= 3:
+                on = patch
     if on.sum() < 3:
         on = np.zeros(len(c), bool)
         on[np.argsort(d)[:3]] = True
@@ -482,7 +527,7 @@ def radius_caps(skeleton: Skeleton, scene: GrowthScene) -> np.ndarray:
 
 def strengthen(skeleton: Skeleton, scene: GrowthScene, target: float, *, loads: dict | None = None,
                options: CheckOptions = CheckOptions(), spec: StructureSpec | None = None, thin: bool = False,
-               rounds: int = 5, check: StructureCheck | None = None) -> StrengthenResult:
+               rounds: int = 5, check: StructureCheck | None = None, best_effort: bool = False) -> StrengthenResult:
     """Scale branch radii until the safety factor is at least ``target`` (topology unchanged).
 
     Each round: the allowed stress sigma_a = yield / target; each node's stress s_i
@@ -498,7 +543,8 @@ def strengthen(skeleton: Skeleton, scene: GrowthScene, target: float, *, loads: 
         raise InputError(f"the safety factor to reach must be a positive number, got {target}", where="--strengthen")
     spec = scene.structure if spec is None else spec
     sigma_a = spec.material.yield_stress / target
-    c = check if check is not None else check_structure(skeleton, scene, loads=loads, options=options, spec=spec)
+    c = check if check is not None else check_structure(skeleton, scene, loads=loads, options=options, spec=spec,
+                                                         best_effort=best_effort)
     history = [(c.safety_factor, c.volume_m3)]
     r_floor = float(skeleton.radius.min())
     caps = radius_caps(skeleton, scene)
@@ -523,7 +569,7 @@ def strengthen(skeleton: Skeleton, scene: GrowthScene, target: float, *, loads: 
         if np.allclose(r, sk.radius, rtol=1e-3):
             break
         cand = sk.replace(radius=r)
-        cc = check_structure(cand, scene, loads=loads, options=options, spec=spec)
+        cc = check_structure(cand, scene, loads=loads, options=options, spec=spec, best_effort=best_effort)
         history.append((cc.safety_factor, cc.volume_m3))
         if thin and cc.safety_factor < target <= c.safety_factor:
             break  # thinning went too far: keep the last design that met the target
