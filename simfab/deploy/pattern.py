@@ -325,6 +325,29 @@ def edge_fitted_growth(P: np.ndarray, edges: np.ndarray, u: np.ndarray, free: np
     return d
 
 
+#: most pattern cells (domain area / spacing^2) a layout accepts: the deployment's and the tuning's cost
+#: (dense normal equations over the inserts) grow with them
+MAX_CELLS = 4000
+
+
+def check_cell_count(area: float, h: float, *, what: str = "the target") -> None:
+    """Refuse a spacing that would lay more than :data:`MAX_CELLS` cells on ``area``.
+
+    Args:
+        area: the surface's (or flat domain's) area [m^2].
+        h: the pattern spacing [m].
+        what: what the area is, for the message.
+
+    Raises:
+        InputError: naming ``pattern.spacing``.
+    """
+    cells = area / h**2
+    if not cells <= MAX_CELLS:
+        raise InputError(f"{cells:.3g} cells of {h:.4g} m on {what} ({area:.4g} m^2): more than {MAX_CELLS}; "
+                         f"make the spacing at least {np.sqrt(area / MAX_CELLS):.3g} m (or check the target's units)",
+                         where="pattern.spacing")
+
+
 def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig, *,
            seams=(), cone_tips=()) -> Pattern:
     """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,)).
@@ -338,6 +361,7 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     if not poly.is_valid:
         raise InputError("the flattened boundary self-intersects; the target needs cuts or cones")
     h = cfg.spacing
+    check_cell_count(poly.area, h, what="the flat domain")
     if cfg.layout == "grid":
         meshes = [_clipped_grid(poly, uv, h)]
     elif cfg.layout == "mesh":

@@ -107,6 +107,7 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     sec = {}
     t = time.perf_counter()
     tgt = scene.target
+    pattern.check_cell_count(float(np.sum(flatten.face_areas(tgt.V, tgt.F))), scene.pattern.spacing)
     log(f"deploy surface: flatten {len(tgt.V)} vertices (BFF)", quiet=quiet)
     cut_flat = None
     if getattr(scene, "cuts", None) is not None and scene.cuts.max_cones > 0:  # cones + cuts (the cut mesh)

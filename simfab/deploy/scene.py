@@ -102,14 +102,17 @@ def load_scene(path, *, units: str | None = None, overrides: dict | None = None)
             if tt:
                 raise InputError(f"unknown field(s) {', '.join(sorted(tt))} beside 'mesh'", where=f"{where}: [target]")
             target = surface.load(mesh, units=u)
+            surface.check_size(target, units=u, where=f"{where}: [target] mesh")
         elif "kind" in tt:
             kind = tt.pop("kind")
             target = surface.procedural(kind, tt, where=f"{where}: [target]")
+            surface.check_size(target, units="m", where=f"{where}: [target]")
         else:
             raise InputError("[target] needs 'kind' (procedural) or 'mesh' (file)", where=where)
     else:
         doc = {}
         target = surface.load(p, units=units or "m")
+        surface.check_size(target, units=units or "m", where=where)
     tables = {k: {**doc.get(k, {}), **overrides.get(k, {})}
               for k in ("pattern", "material", "deploy", "mujoco", "tune", "cuts")}
     pat = _make(PatternConfig, tables["pattern"], where, "pattern")
