@@ -53,6 +53,7 @@ class SurfaceScene:
     path: str
     tune: object = None
     cuts: object = None
+    decisions: object = None  # simfab.deploy.auto.Decisions: what the defaults decided from the target
 
 
 def bundled_path(name: str) -> str:
@@ -74,12 +75,14 @@ def _make(cls, table: dict, where: str, section: str):
         raise InputError(str(e), where=f"{where}: [{section}]") from None
 
 
-def load_scene(path, *, units: str | None = None, overrides: dict | None = None) -> SurfaceScene:
+def load_scene(path, *, units: str | None = None, overrides: dict | None = None, auto: bool = True) -> SurfaceScene:
     """Read a scene TOML, or a bare mesh file (then all parameters are defaults + ``overrides``).
 
     ``overrides``: {"pattern": {...}, "material": {...}, "deploy": {...}, "mujoco": {...}, "tune": {...},
     "cuts": {...}}
-    (command-line values, applied over the file's)."""
+    (command-line values, applied over the file's). ``auto``: the fields neither sets (spacing,
+    cuts, insert catalogue, layout, tuning) decided from the target (:func:`simfab.deploy.auto.complete`;
+    False: the dataclasses' fixed defaults)."""
 
     p = Path(path)
     where = str(p)
@@ -120,4 +123,10 @@ def load_scene(path, *, units: str | None = None, overrides: dict | None = None)
     sim = _make(SimConfig, tables["mujoco"], where, "mujoco")
     tune = _make(TuneConfig, tables["tune"], where, "tune")
     cut = _make(CutsConfig, tables["cuts"], where, "cuts")
-    return SurfaceScene(target=target, pattern=pat, deploy=dep, mujoco=sim, path=where, tune=tune, cuts=cut)
+    scene = SurfaceScene(target=target, pattern=pat, deploy=dep, mujoco=sim, path=where, tune=tune, cuts=cut)
+    if not auto:
+        return scene
+    from simfab.deploy import auto as auto_
+
+    scene, decisions = auto_.complete(scene, {k: set(tables[k]) for k in ("pattern", "cuts", "tune")})
+    return dataclasses.replace(scene, decisions=decisions)

@@ -169,7 +169,7 @@ def test_cli_surface_writes_everything(tmp_path, capsys):
                      '[pattern]\nspacing = 0.03\n[deploy]\nincrements = 4\nperturbation = 0.5\n'
                      '[mujoco]\nstability_seconds = 0.1\n')
     out = tmp_path / "o"
-    assert main(["deploy", "surface", str(scene), "--out", str(out), "--json", "--quiet"]) == 0
+    assert main(["deploy", "surface", str(scene), "--out", str(out), "--json", "--quiet", "--tune", "0"]) == 0
     res = json.loads(capsys.readouterr().out)
     for p in res["outputs"].values():
         assert (out / p.split("/")[-1]).is_file()
