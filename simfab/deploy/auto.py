@@ -91,7 +91,7 @@ def catalogue(d: np.ndarray, h: float, pc) -> tuple[list, int]:
     sizes = []
     while len(left) and len(sizes) < MAX_SIZES:
         r = max(np.ceil((left[0] + lo) / SIZE_STEP - 1e-9) * SIZE_STEP, MIN_INSERT)
-        if r > r_max:  # this growth needs a plate larger than the cell allows
+        if r > r_max or (sizes and r >= sizes[-1]):  # a plate larger than the cell allows / no smaller size helps
             break
         g = r - left
         sizes.append(float(r))
