@@ -16,7 +16,7 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
 - layout: ``conforming`` (grid core, regular, growths fitted to the edges) without cuts, ``mesh``
   with them: both cover >= 99 % of the flat domain;
 - tuning: on (``AUTO_TUNE``), stopping once the deviation bound is met, when progress stalls or
-  at the time budget.
+  at its budget of steps.
 
 :func:`complete` returns the scene with these filled in and :class:`Decisions` (what was decided
 and why, for the summary).
@@ -37,8 +37,11 @@ MAX_SIZES = 3  # insert sizes in a catalogue
 SIZE_STEP = 0.0005  # catalogue sizes rounded to this [m]
 MARGIN = 0.0005  # gap margin kept from either achievable limit [m] (layouts' edges differ from h)
 MAX_CONES = 8
-#: the tuning on by default: Gauss-Newton steps, towards the surface and each vertex's own point
-AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.005, min_gain=0.02, seconds=40.0)
+#: the tuning on by default: Gauss-Newton steps, towards the surface and each vertex's own point; it
+#: stops at the bound (RMS 0.5 % of the diameter, half the deployment bound), when a step gains < 2 %,
+#: or after 8 steps. Its budget is counted in steps, not seconds, so that the same input gives the same
+#: pattern on any machine and load (``[tune] seconds`` sets a wall-clock budget too).
+AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.005, min_gain=0.02)
 
 
 @dataclass(frozen=True, kw_only=True)
