@@ -113,6 +113,11 @@ def run_surface(args) -> dict:
     paths = {k: os.path.join(out, v) for k, v in names.items()}
     summary = pipeline.summary(res)
     summary["outputs"] = paths
+    if summary["bounds"]["missed"]:  # a missed bound is said, with what would help
+        import warnings
+
+        warnings.warn(f"{scene.path}: deployment bound missed: " + "; ".join(summary["bounds"]["missed"]),
+                      stacklevel=2)
     with atomic_paths(paths) as tmp:
         write_svg(tmp["svg"], res.cut)
         write_dxf(tmp["dxf"], res.cut)
@@ -184,6 +189,17 @@ def format_text(summary: dict) -> str:
             f"{g['insert']}{g['size_class']}: {g['required_mm']:.3g} mm needed, {g['cut_mm']:.3g} cut "
             f"(deviation there {g['deviation_mm']:.3g} mm)" for g in s["unreachable_gaps"][:8])
             + (f", ... ({len(s['unreachable_gaps'])} in all, surface.json)" if len(s["unreachable_gaps"]) > 8 else ""))
+    df = s.get("defaults")
+    if df:
+        rows.append(f"defaults          decided {', '.join(df['decided']) or 'nothing'}; cuts "
+                    f"{'needed' if df['needs_cuts'] else 'not needed'} (uncut growth up to "
+                    f"{df['uncut_growth_max']:.3g})")
+    bd = s.get("bounds")
+    if bd:
+        rows.append(f"bounds            RMS {100 * bd['rms']:.3g} % (<= {100 * bd['rms_bound']:g}), height "
+                    f"{100 * bd['height_error']:+.3g} % (within {100 * bd['height_bound']:g}), "
+                    f"{bd['unreachable_gaps']} gaps unreachable, {bd['springs_short']} springs short: "
+                    + ("met" if not bd["missed"] else "MISSED - " + "; ".join(bd["missed"])))
     rows.append("seconds           " + ", ".join(f"{k} {v:.3g}" for k, v in s["seconds"].items()))
     rows.append(f"outputs           {os.path.dirname(s['outputs']['json'])}/")
     return "\n".join(rows)

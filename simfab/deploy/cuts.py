@@ -47,6 +47,7 @@ import numpy as np
 import scipy.sparse as sp
 import shapely
 from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
 
 from simfab.deploy import flatten as bff
 from simfab.deploy.pattern import near_seams
@@ -329,11 +330,17 @@ def seam_ties(pat, Y: np.ndarray, cf: CutFlattening) -> SeamTies:
     S = np.flatnonzero(bnd & near_seams(pat.P, poly, [p for _, p in seam_lines(cf)], h))
     if len(S) < 2:
         return SeamTies(pairs=np.zeros((0, 2), dtype=np.int64), length=np.zeros(0))
-    d3 = np.linalg.norm(Y[S][:, None] - Y[S][None], axis=2)
-    d2 = np.linalg.norm(pat.P[S][:, None] - pat.P[S][None], axis=2)
+    # candidate pairs within reach on the target from a k-d tree (memory linear in the seam vertices)
+    ij = cKDTree(Y[S]).query_pairs(TIE_REACH * h, output_type="ndarray").reshape(-1, 2)
+    d3 = np.linalg.norm(Y[S[ij[:, 0]]] - Y[S[ij[:, 1]]], axis=1)
+    d2 = np.linalg.norm(pat.P[S[ij[:, 0]]] - pat.P[S[ij[:, 1]]], axis=1)
     ok = (d2 > TIE_ACROSS * d3) & (d3 < TIE_REACH * h)
-    D = np.where(ok, d3, np.inf)
-    nn = np.argmin(D, axis=1)
-    pairs = [(S[i], S[j]) for i, j in enumerate(nn) if np.isfinite(D[i, j]) and nn[j] == i and i < j]
+    ij, d3 = ij[ok], d3[ok]
+    nn = np.full(len(S), -1)
+    best = np.full(len(S), np.inf)
+    for (a, b), d in zip(np.concatenate([ij, ij[:, ::-1]]), np.r_[d3, d3]):  # each one's nearest (first on ties)
+        if d < best[a] or (d == best[a] and b < nn[a]):
+            best[a], nn[a] = d, b
+    pairs = [(S[i], S[j]) for i, j in enumerate(nn) if j >= 0 and nn[j] == i and i < j]
     P = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     return SeamTies(pairs=P, length=np.linalg.norm(Y[P[:, 0]] - Y[P[:, 1]], axis=1))

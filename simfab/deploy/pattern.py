@@ -7,8 +7,8 @@ Layout (all in the flat domain, metres):
   the nearest boundary point; cells that become too small (an edge < h/4) or non-convex are
   dropped, and the largest edge-connected set of cells is the quad mesh (``layout = "grid"``;
   ``"conforming"``: a grid core with a pillow layer on the outline, :func:`conforming_quads`;
-  ``"mesh"``: an unstructured Gmsh quad mesh of the domain, :func:`mesh_quads`, the best of a few
-  meshings, :data:`MESH_RECIPES`);
+  ``"mesh"``: an unstructured quad mesh of the domain (Triangle's triangulation paired into quads),
+  :func:`mesh_quads`, the best of a few meshings, :data:`MESH_RECIPES`);
 - every quad edge is a **beam** (width ``w``, sheet thickness ``t``), split at its midpoint
   by a rigid junction; each quad gets a **torsional spring**: four cubic Bezier arcs joining
   consecutive edge midpoints, bulging towards the quad centre, each quad's bulge sized so that
@@ -71,7 +71,6 @@ from scipy.sparse.csgraph import connected_components
 from simfab.deploy._config import require_positive
 from simfab.deploy.springs import bezier, size_arcs, size_bulges, size_zigzag, zigzag_layout, zigzag_points
 from simfab.errors import InputError
-from simfab.fem.meshing import gmsh_elements, gmsh_session
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -83,7 +82,7 @@ class PatternConfig:
     inserts); insert_half_sizes: the insert catalogue, a list of such sizes (when given it
     replaces insert_half_size; each insert gets one, see module doc); layout: "grid" (the
     clipped square grid), "conforming" (:func:`conforming_quads`) or "mesh" (:func:`mesh_quads`:
-    Gmsh quads that follow any outline, the seams of a cut flattening included); spring_bulge [-]: smallest
+    quads that follow any outline, the seams of a cut flattening included); spring_bulge [-]: smallest
     Bezier handle pull towards the quad centre; spring_slack [-]: arc length margin over the
     deployed chord (see :mod:`simfab.deploy.springs`); spring_width: in-plane width of the spring
     arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:
@@ -325,6 +324,29 @@ def edge_fitted_growth(P: np.ndarray, edges: np.ndarray, u: np.ndarray, free: np
     return d
 
 
+#: most pattern cells (domain area / spacing^2) a layout accepts: the deployment's and the tuning's cost
+#: (dense normal equations over the inserts) grow with them
+MAX_CELLS = 4000
+
+
+def check_cell_count(area: float, h: float, *, what: str = "the target") -> None:
+    """Refuse a spacing that would lay more than :data:`MAX_CELLS` cells on ``area``.
+
+    Args:
+        area: the surface's (or flat domain's) area [m^2].
+        h: the pattern spacing [m].
+        what: what the area is, for the message.
+
+    Raises:
+        InputError: naming ``pattern.spacing``.
+    """
+    cells = area / h**2
+    if not cells <= MAX_CELLS:
+        raise InputError(f"{cells:.3g} cells of {h:.4g} m on {what} ({area:.4g} m^2): more than {MAX_CELLS}; "
+                         f"make the spacing at least {np.sqrt(area / MAX_CELLS):.3g} m (or check the target's units)",
+                         where="pattern.spacing")
+
+
 def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig, *,
            seams=(), cone_tips=()) -> Pattern:
     """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,)).
@@ -338,6 +360,7 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
     if not poly.is_valid:
         raise InputError("the flattened boundary self-intersects; the target needs cuts or cones")
     h = cfg.spacing
+    check_cell_count(poly.area, h, what="the flat domain")
     if cfg.layout == "grid":
         meshes = [_clipped_grid(poly, uv, h)]
     elif cfg.layout == "mesh":
@@ -666,45 +689,65 @@ MESH_CORNER_DEG = 25.0  # outline vertices turning by more than this are corners
 
 @dataclass(frozen=True, kw_only=True)
 class MeshRecipe:
-    """One Gmsh meshing of the flat domain (:func:`mesh_quads`). algorithm: Gmsh ``Mesh.Algorithm``
-    (5 Delaunay, 6 Frontal-Delaunay, 8 Frontal-Delaunay for quads); recombination: Gmsh
-    ``Mesh.RecombinationAlgorithm`` (1 Blossom: a perfect matching of the triangles into quads,
-    which exists for an even number of boundary edges but may leave triangles; 2 simple
-    full-quad: every element split into quads, no triangle left); size [spacings]: the element
-    size; uniform_outline: each outline curve (between corners) divided into round(L / h) equal
-    edges (at least one; one curve gets one more when the total is odd, so that a full matching
-    can exist) - the two sides of a seam, of equal flat length, then get facing vertices."""
+    """One quad meshing of the flat domain (:func:`mesh_quads`). full_quad: True - a triangulation
+    of edge 2 ``size`` h, its triangles paired into quads (a maximum-weight matching, the quads'
+    squareness the weight), then every quad split into 4 and every unpaired triangle into 3 (edge ~h,
+    no triangle left, inserts with 3-6 beams); False - a triangulation of edge ``size`` h whose
+    triangles are all paired into quads (a perfect matching; None when none exists: an odd number
+    of outline edges, or the triangles' adjacency has none); size [spacings]; uniform_outline: each
+    outline curve (between corners) divided into round(L / h) equal edges (at least one; one curve
+    gets one more when a perfect matching needs an even total) - the two sides of a seam, of equal
+    flat length, then get facing vertices. lattice: the interior seeded with a square lattice of the
+    triangulation's edge centred on the domain (its triangles pair back into squares: a regular core,
+    split into h squares when full_quad), its points at least ``margin`` edges from the outline;
+    False: Triangle's own quality refinement places them."""
 
-    algorithm: int
-    recombination: int
+    full_quad: bool
     size: float
     uniform_outline: bool
+    lattice: bool = False
+    margin: float = 0.5
 
 
 #: the meshings :func:`layout` tries with ``layout = "mesh"``, keeping the pattern with the fewest
 #: defects (unreachable gaps, quads short of spring slack or without a spring), then the largest
-#: covered area. The first (the outline's own discretization, full-quad) always yields quads only;
-#: the uniform outline keeps short outline curves (a rim piece between two seams) from seeding
-#: strips of thin quads whose short edges leave no room for a gap.
-MESH_RECIPES = (MeshRecipe(algorithm=6, recombination=2, size=1.2, uniform_outline=False),
-                MeshRecipe(algorithm=5, recombination=1, size=1.0, uniform_outline=True),
-                MeshRecipe(algorithm=6, recombination=1, size=1.0, uniform_outline=True),
-                MeshRecipe(algorithm=8, recombination=1, size=1.0, uniform_outline=True))
+#: covered area. The full-quad ones always yield quads only; the uniform outline keeps short outline
+#: curves (a rim piece between two seams) from seeding strips of thin quads whose short edges leave
+#: no room for a gap.
+MESH_RECIPES = (MeshRecipe(full_quad=True, size=1.0, uniform_outline=True, lattice=True, margin=0.5),
+                MeshRecipe(full_quad=True, size=1.0, uniform_outline=True, lattice=True, margin=0.35),
+                MeshRecipe(full_quad=True, size=1.0, uniform_outline=True, lattice=True, margin=0.7),
+                MeshRecipe(full_quad=True, size=1.2, uniform_outline=False),
+                MeshRecipe(full_quad=False, size=1.0, uniform_outline=True, lattice=True, margin=0.6),
+                MeshRecipe(full_quad=False, size=1.1, uniform_outline=True))
+
+MESH_MIN_ANGLE_DEG = 28.0  # smallest triangle angle asked of Triangle (its quality bound)
+MESH_SHORT_EDGE = 0.6  # [spacings] the smoothing lengthens edges shorter than this
+MESH_SMOOTHING = 10  # Laplacian sweeps of the quad mesh's interior vertices (undone where a quad folds)
 
 
 def mesh_quads(poly, h: float, recipe: MeshRecipe = MESH_RECIPES[0]) -> tuple[np.ndarray, np.ndarray] | None:
-    """Boundary-following unstructured quad mesh of the flat domain ``poly`` (``layout = "mesh"``):
-    (P (n,2) [m], quads (q,4) CCW), for outlines a grid cannot follow (the notches a cut
-    flattening's wedges leave, :mod:`simfab.deploy.cuts`); None when the recipe leaves triangles
-    (Blossom without a perfect matching: they would be holes in the pattern).
+    """Boundary-following unstructured quad mesh of the flat domain ``poly`` (``layout = "mesh"``).
 
-    Gmsh: the outline split at its corners (turning angle > ``MESH_CORNER_DEG``: cone tips, where a
-    seam meets the rim) into splines through the outline's points, a triangulation of element size
-    ``recipe.size`` h recombined into quads (:class:`MeshRecipe`), Laplacian smoothing. The mesh
-    vertices on the outline lie on it; what a boundary edge leaves out is its chord's segment
-    (2/3 s L, sagitta s ~ h^2 / (8 R) on a rim of radius R: ~1.1 % of the bundled dome's area, so
-    ``conforming`` covers more of an uncut domain). Valence 3 or 5 at the irregular vertices:
-    inserts with 3 or 5 beams. Deterministic (one thread, Gmsh's fixed seed)."""
+    For outlines a grid cannot follow (the notches a cut flattening's wedges leave,
+    :mod:`simfab.deploy.cuts`). The outline is split at its corners (turning angle >
+    ``MESH_CORNER_DEG``: cone tips, where a seam meets the rim) into curves, each divided into equal
+    arc-length edges (points on the outline); Triangle (Shewchuk's quality Delaunay mesher, the
+    ``triangle`` package: no system libraries) meshes the domain without adding outline points, the
+    triangles are paired into quads (:class:`MeshRecipe`), and the interior vertices are smoothed.
+    What a boundary edge leaves out is its chord's segment (2/3 s L, sagitta s ~ h^2 / (8 R) on a
+    rim of radius R). Deterministic.
+
+    Args:
+        poly: the flat domain (a shapely Polygon) [m].
+        h: the spacing [m].
+        recipe: how to mesh it.
+
+    Returns:
+        (P (n,2) [m], quads (q,4) CCW), or None when the recipe leaves triangles (no perfect matching).
+    """
+    import triangle
+
     ring = np.asarray(poly.exterior.coords)[:-1]
     if not poly.exterior.is_ccw:
         ring = ring[::-1]
@@ -713,37 +756,188 @@ def mesh_quads(poly, h: float, recipe: MeshRecipe = MESH_RECIPES[0]) -> tuple[np
     corners = np.flatnonzero(turn > np.radians(MESH_CORNER_DEG))
     corners = corners if len(corners) else np.array([0])
     n = len(ring)
-    with gmsh_session("flat_domain") as gmsh:
-        geo = gmsh.model.geo
-        size = recipe.size * h
-        tag = {int(c): geo.addPoint(*ring[c], 0.0, size) for c in corners}
-        curves, lengths = [], []
-        for a, b in zip(corners, np.r_[corners[1:], corners[0]]):
-            idx = np.arange(a, b + (n if b <= a else 0) + 1) % n
-            mids = [geo.addPoint(*ring[i], 0.0, size) for i in idx[1:-1]]
-            curves.append(geo.addSpline([tag[int(a)], *mids, tag[int(b)]]))
-            lengths.append(float(np.sum(np.linalg.norm(np.diff(ring[idx], axis=0), axis=1))))
-        geo.addPlaneSurface([geo.addCurveLoop(curves)])
-        if recipe.uniform_outline:
-            count = [max(1, int(round(L / h))) for L in lengths]
-            if sum(count) % 2:
-                count[int(np.argmax(np.asarray(lengths) / count))] += 1
-            for c, m in zip(curves, count):
-                geo.mesh.setTransfiniteCurve(c, m + 1)
-        geo.synchronize()
-        for key, val in (("Mesh.Algorithm", recipe.algorithm), ("Mesh.RecombineAll", 1),
-                         ("Mesh.RecombinationAlgorithm", recipe.recombination), ("Mesh.MeshSizeMin", size),
-                         ("Mesh.MeshSizeMax", size), ("Mesh.MeshSizeFromPoints", 0),
-                         ("Mesh.MeshSizeExtendFromBoundary", 0), ("Mesh.Smoothing", 10)):
-            gmsh.option.setNumber(key, val)
-        gmsh.model.mesh.generate(2)
-        X, quads = gmsh_elements(gmsh, 3, 4)  # 4-node quadrangles
-        _, triangles = gmsh_elements(gmsh, 2, 3)
-    if len(triangles) or not len(quads):
+    edge = recipe.size * h * (2.0 if recipe.full_quad else 1.0)
+    curves = []
+    for a, b in zip(corners, np.r_[corners[1:], corners[0]]):
+        pts = ring[np.arange(a, b + (n if b <= a else 0) + 1) % n]
+        curves.append(pts)
+    lengths = [float(np.sum(np.linalg.norm(np.diff(c, axis=0), axis=1))) for c in curves]
+    count = [max(1, int(round(L / edge))) for L in lengths]
+    if not recipe.full_quad and sum(count) % 2:
+        count[int(np.argmax(np.asarray(lengths) / count))] += 1
+    outline = []
+    for c, L, m in zip(curves, lengths, count):
+        s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))]
+        if recipe.uniform_outline or recipe.full_quad:
+            t = np.linspace(0.0, L, m + 1)[:-1]
+        else:  # the outline's own points, thinned to about the edge length
+            keep = np.r_[0, np.flatnonzero(np.diff(np.floor(s / edge)) > 0) + 1]
+            t = s[keep[keep < len(s) - 1]]
+        outline.append(np.column_stack([np.interp(t, s, c[:, 0]), np.interp(t, s, c[:, 1])]))
+    B = np.concatenate(outline)
+    if len(B) < 3:
+        return None
+    seg = np.column_stack([np.arange(len(B)), np.roll(np.arange(len(B)), -1)])
+    area = np.sqrt(3) / 4 * edge**2
+    opts = f"pq{MESH_MIN_ANGLE_DEG:g}a{area:.6g}YQ"
+    if recipe.lattice:
+        x0, y0, x1, y1 = poly.bounds
+        c = np.asarray(poly.centroid.coords[0])
+        gx = c[0] + edge * np.arange(np.floor((x0 - c[0]) / edge), np.ceil((x1 - c[0]) / edge) + 1)
+        gy = c[1] + edge * np.arange(np.floor((y0 - c[1]) / edge), np.ceil((y1 - c[1]) / edge) + 1)
+        G = np.stack(np.meshgrid(gx, gy, indexing="ij"), axis=-1).reshape(-1, 2)
+        inner = poly.buffer(-recipe.margin * edge)
+        G = G[shapely.contains_xy(inner, G[:, 0], G[:, 1])] if not inner.is_empty else G[:0]
+        B = np.concatenate([B, G])
+        opts = f"pq{MESH_MIN_ANGLE_DEG:g}YQ"
+    try:
+        tri = triangle.triangulate(dict(vertices=B, segments=seg), opts)
+    except Exception:  # Triangle rejects a self-touching outline
+        return None
+    X, T = np.asarray(tri["vertices"], dtype=np.float64), np.asarray(tri["triangles"], dtype=np.int64)
+    if len(T) == 0:
+        return None
+    quads, single = _pair_triangles(X, T, n_fixed=len(B) - (len(G) if recipe.lattice else 0))
+    if recipe.full_quad:
+        X, quads = _split_into_quads(X, quads, T[single], poly)
+    elif len(single):
+        return None
+    fixed = np.zeros(len(X), dtype=bool)
+    fixed[_outline(quads)] = True
+    quads = _ccw(X, quads)
+    X = _smart_smooth(X, quads, fixed, MESH_SMOOTHING, short_edge=MESH_SHORT_EDGE * h)
+    if not np.all(_convex(X, quads)):
         return None
     used, inv = np.unique(quads, return_inverse=True)
-    P = X.reshape(-1, 3)[used, :2]
+    P = X[used]
     return P, _ccw(P, inv.reshape(-1, 4))
+
+
+def _corner_sines(Q: np.ndarray) -> np.ndarray:
+    """(..., 4) the sine of each corner of CCW quads Q (..., 4, 2) (< 0: a reflex corner)."""
+    a, b = np.roll(Q, 1, axis=-2) - Q, np.roll(Q, -1, axis=-2) - Q
+    cross = b[..., 0] * a[..., 1] - b[..., 1] * a[..., 0]
+    return cross / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1) + 1e-300)
+
+
+def _smart_smooth(P: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sweeps: int,
+                  short_edge: float = 0.0) -> np.ndarray:
+    """Gauss-Seidel Laplacian smoothing of the free vertices over the quad edges, a move kept only
+    where it does not lower the vertex's quality: the smallest corner sine of its quads (so a reflex
+    corner can only open up, a convex mesh stays convex) and, with ``short_edge`` [m], its shortest
+    edge over ``short_edge`` (short edges lengthen: an insert needs room for its gap)."""
+    X = P.copy()
+    e = np.unique(np.sort(np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)]), axis=1), axis=0)
+    nbr = [[] for _ in range(len(X))]
+    for a, b in e:
+        nbr[a].append(b)
+        nbr[b].append(a)
+    inq = [[] for _ in range(len(X))]
+    for q, vs in enumerate(quads):
+        for v in vs:
+            inq[v].append(q)
+    free = [v for v in range(len(X)) if not fixed[v] and nbr[v]]
+    def quality(v, qs):
+        q = _corner_sines(X[qs]).min()
+        if short_edge:
+            q = min(q, np.linalg.norm(X[nbr[v]] - X[v], axis=1).min() / short_edge)
+        return q
+
+    for _ in range(sweeps):
+        for v in free:
+            qs = quads[inq[v]]
+            old = X[v].copy()
+            before = quality(v, qs)
+            lap, ring = X[nbr[v]].mean(axis=0), X[np.unique(qs)].mean(axis=0)
+            near = X[nbr[v]][np.argmin(np.linalg.norm(X[nbr[v]] - old, axis=1))]
+            best, best_q = old, before
+            for cand in (lap, 0.5 * (old + lap), ring, 0.5 * (old + ring), old + 0.2 * (old - near)):
+                X[v] = cand
+                q = quality(v, qs)
+                if q > best_q or (q == best_q and cand is lap):
+                    best, best_q = cand, q
+                    if cand is lap:
+                        break
+            X[v] = best
+    return X
+
+
+def _convex(P: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    """(q,) bool: every corner of each (CCW) quad turns left."""
+    Q = P[quads]
+    a, b = np.roll(Q, 1, axis=1) - Q, np.roll(Q, -1, axis=1) - Q
+    return np.all(b[..., 0] * a[..., 1] - b[..., 1] * a[..., 0] > 0, axis=1)
+
+
+def _pair_triangles(X: np.ndarray, T: np.ndarray, n_fixed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Pair adjacent triangles into convex quads: a maximum-cardinality matching of the triangles'
+    adjacency (pairs forming a convex quad only) of largest total squareness (1 - the largest
+    deviation of a corner from 90 deg over 90 deg, plus 1); a non-convex pair only at a tiny weight, and
+    only when its reflex corner is a free vertex (ids >= ``n_fixed``: the smoothing may open it).
+    Returns (quads (p,4), unpaired triangle ids)."""
+    import networkx as nx
+
+    e = np.concatenate([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]])
+    opp = np.concatenate([T[:, 0], T[:, 1], T[:, 2]])
+    tid = np.tile(np.arange(len(T)), 3)
+    key = np.sort(e, axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    k = key[order]
+    same = np.flatnonzero(np.all(k[1:] == k[:-1], axis=1))
+    i, j = order[same], order[same + 1]
+    # the quad (opp_i, e_i[0], opp_j, e_i[1]) - CCW when T is CCW
+    cand = np.column_stack([opp[i], e[i, 0], opp[j], e[i, 1]])
+    cand = _ccw(X, cand)
+    Q = X[cand]
+    a, b = np.roll(Q, 1, axis=1) - Q, np.roll(Q, -1, axis=1) - Q
+    cross = b[..., 0] * a[..., 1] - b[..., 1] * a[..., 0]
+    cos = np.einsum("qki,qki->qk", a, b) / (np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2))
+    dev = np.max(np.abs(np.degrees(np.arccos(np.clip(cos, -1, 1))) - 90.0), axis=1)
+    convex = np.all(cross > 0, axis=1)
+    fixable = ~np.any((cross <= 0) & (cand < n_fixed), axis=1)
+    G = nx.Graph()
+    G.add_nodes_from(range(len(T)))
+    rim = np.sum(T < n_fixed, axis=1) >= 2  # a triangle on the outline: paired first (its split would
+    bonus = rim.astype(float)  # leave a short edge at an outline insert, whose gap then has no room)
+    for q in np.flatnonzero(convex | fixable):  # a non-convex pair only where the matching needs it
+        a_, b_ = int(tid[i[q]]), int(tid[j[q]])
+        G.add_edge(a_, b_, weight=(2.0 - dev[q] / 90.0 if convex[q] else 0.01) + bonus[a_] + bonus[b_], quad=q)
+    match = nx.max_weight_matching(G, maxcardinality=True)
+    pairs = sorted(tuple(sorted(m)) for m in match)
+    quads = np.array([cand[G.edges[a_, b_]["quad"]] for a_, b_ in pairs], dtype=np.int64).reshape(-1, 4)
+    paired = np.zeros(len(T), dtype=bool)
+    paired[np.asarray(pairs, dtype=np.int64).ravel()] = True
+    return quads, np.flatnonzero(~paired)
+
+
+def _split_into_quads(X: np.ndarray, quads: np.ndarray, tris: np.ndarray, poly):
+    """Every quad into 4 and every triangle into 3 quads (edge midpoints, face centroid); the midpoints
+    of outline edges moved onto the outline ``poly``. Returns (X', quads')."""
+    faces = [list(q) for q in quads] + [list(t) for t in tris]
+    mid: dict = {}
+    pts = [p for p in X]
+
+    def midpoint(a, b):
+        k = (min(a, b), max(a, b))
+        if k not in mid:
+            mid[k] = len(pts)
+            pts.append(0.5 * (X[a] + X[b]))
+        return mid[k]
+
+    out = []
+    for f in faces:
+        c = len(pts)
+        pts.append(X[f].mean(axis=0))
+        m = [midpoint(f[k], f[(k + 1) % len(f)]) for k in range(len(f))]
+        for k in range(len(f)):
+            out.append([f[k], m[k], c, m[k - 1]])
+    quads = np.asarray(out, dtype=np.int64)
+    P = np.asarray(pts)
+    ring = poly.exterior
+    for v in _outline(quads):
+        if v >= len(X):  # a new outline midpoint: onto the outline
+            P[v] = np.asarray(ring.interpolate(ring.project(shapely.Point(P[v]))).coords[0])
+    return P, quads
 
 
 CORE_MARGIN = 0.5  # core grid nodes keep >= CORE_MARGIN x spacing from the boundary

@@ -107,6 +107,7 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     sec = {}
     t = time.perf_counter()
     tgt = scene.target
+    pattern.check_cell_count(float(np.sum(flatten.face_areas(tgt.V, tgt.F))), scene.pattern.spacing)
     log(f"deploy surface: flatten {len(tgt.V)} vertices (BFF)", quiet=quiet)
     cut_flat = None
     if getattr(scene, "cuts", None) is not None and scene.cuts.max_cones > 0:  # cones + cuts (the cut mesh)
@@ -144,7 +145,7 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         tuned = tuning.tune_pattern(pat, net, dep, Y, tgt, scene.tune, scene.deploy, ties=ties, device=device)
         pat, net, dep = tuned.pattern, tuned.network, tuned.deployment
         cut = lasercut.layout(pat, seams=seams)
-        tune_info = dict(steps=tuned.steps, solves=tuned.solves, rms_before=before.rms,
+        tune_info = dict(steps=tuned.steps, solves=tuned.solves, stop=tuned.stop, rms_before=before.rms,
                          hausdorff_before=before.hausdorff, point_weight=scene.tune.point_weight,
                          point_to_plane_rms_mm=[1e3 * r for r in tuned.rms_history],
                          point_to_target_rms_mm=[1e3 * r for r in tuned.point_rms_history],
@@ -249,10 +250,56 @@ def summary(res: SurfaceResult) -> dict:
                        deployed_height_mm=out_of_plane_extent(dv.aligned) * 1e3,
                        target_height_mm=out_of_plane_extent(res.target_points) * 1e3),
         tuning=res.tuning,
+        defaults=defaults_summary(res.scene),
+        bounds=bounds(res),
         cuts=cuts_summary(res),
         mujoco=res.sim_check,
         seconds=dict(res.seconds, total=float(sum(res.seconds.values()))),
     )
+
+
+def defaults_summary(scene) -> dict | None:
+    """What the defaults decided from the target (:mod:`simfab.deploy.auto`; None when off)."""
+    d = getattr(scene, "decisions", None)
+    if d is None:
+        return None
+    pc = scene.pattern
+    return dict(decided=list(d.decided), needs_cuts=d.needs_cuts, uncut_unreachable_vertices=d.uncut_unreachable,
+                uncut_growth_max=d.uncut_growth_max, spacing_mm=pc.spacing * 1e3,
+                insert_half_sizes_mm=[r * 1e3 for r in pc.sizes], layout=pc.layout, max_cones=scene.cuts.max_cones)
+
+
+#: the deployment bounds a run is checked against (issue 42): RMS deviation over the diameter, height error
+BOUND_RMS = 0.01
+BOUND_HEIGHT = 0.03
+
+
+def bounds(res: SurfaceResult) -> dict:
+    """The run against the deployment bounds: RMS <= ``BOUND_RMS`` of the diameter, out-of-plane height
+    within ``BOUND_HEIGHT``, no gap unreachable, no spring short of its slack; ``missed``: one line
+    per missed bound with the scene key or flag that would help."""
+    dv, p = res.deviation, res.pattern
+    th = out_of_plane_extent(res.target_points)
+    herr = out_of_plane_extent(dv.aligned) / th - 1.0 if th > 0 else 0.0
+    sc = res.scene
+    cut = sc.cuts is not None and sc.cuts.max_cones > 0
+    tuned = sc.tune is not None and sc.tune.iterations > 0
+    missed = []
+    if dv.rms > BOUND_RMS:
+        missed.append(f"RMS deviation {100 * dv.rms:.3g} % of the diameter (bound {100 * BOUND_RMS:g} %): "
+                      + ("more tuning steps (--tune N, [tune] iterations, seconds)" if tuned else "tune the gaps "
+                         "(--tune N)") + "; a finer pattern ([pattern] spacing, --spacing)")
+    if abs(herr) > BOUND_HEIGHT:
+        missed.append(f"height {100 * herr:+.3g} % (bound {100 * BOUND_HEIGHT:g} %): [tune] point_weight (the pull "
+                      "towards each vertex's own target point)")
+    if len(p.unreachable):
+        missed.append(f"{len(p.unreachable)} gaps unreachable: [pattern] insert_half_sizes (a catalogue spanning "
+                      "their growth)" + ("" if cut else ", or cuts: [cuts] max_cones"))
+    if len(p.tight_springs):
+        missed.append(f"{len(p.tight_springs)} quads' springs short of their reach: [pattern] springs = \"zigzag\", "
+                      "spring_width" + ("" if cut else ", or cuts: [cuts] max_cones, max_growth"))
+    return dict(rms=dv.rms, rms_bound=BOUND_RMS, height_error=herr, height_bound=BOUND_HEIGHT,
+                unreachable_gaps=int(len(p.unreachable)), springs_short=int(len(p.tight_springs)), missed=missed)
 
 
 def flat_area_covered(res: SurfaceResult) -> float:

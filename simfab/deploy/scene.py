@@ -53,6 +53,7 @@ class SurfaceScene:
     path: str
     tune: object = None
     cuts: object = None
+    decisions: object = None  # simfab.deploy.auto.Decisions: what the defaults decided from the target
 
 
 def bundled_path(name: str) -> str:
@@ -74,12 +75,14 @@ def _make(cls, table: dict, where: str, section: str):
         raise InputError(str(e), where=f"{where}: [{section}]") from None
 
 
-def load_scene(path, *, units: str | None = None, overrides: dict | None = None) -> SurfaceScene:
+def load_scene(path, *, units: str | None = None, overrides: dict | None = None, auto: bool = True) -> SurfaceScene:
     """Read a scene TOML, or a bare mesh file (then all parameters are defaults + ``overrides``).
 
     ``overrides``: {"pattern": {...}, "material": {...}, "deploy": {...}, "mujoco": {...}, "tune": {...},
     "cuts": {...}}
-    (command-line values, applied over the file's)."""
+    (command-line values, applied over the file's). ``auto``: the fields neither sets (spacing,
+    cuts, insert catalogue, layout, tuning) decided from the target (:func:`simfab.deploy.auto.complete`;
+    False: the dataclasses' fixed defaults)."""
 
     p = Path(path)
     where = str(p)
@@ -102,14 +105,17 @@ def load_scene(path, *, units: str | None = None, overrides: dict | None = None)
             if tt:
                 raise InputError(f"unknown field(s) {', '.join(sorted(tt))} beside 'mesh'", where=f"{where}: [target]")
             target = surface.load(mesh, units=u)
+            surface.check_size(target, units=u, where=f"{where}: [target] mesh")
         elif "kind" in tt:
             kind = tt.pop("kind")
             target = surface.procedural(kind, tt, where=f"{where}: [target]")
+            surface.check_size(target, units="m", where=f"{where}: [target]")
         else:
             raise InputError("[target] needs 'kind' (procedural) or 'mesh' (file)", where=where)
     else:
         doc = {}
         target = surface.load(p, units=units or "m")
+        surface.check_size(target, units=units or "m", where=where)
     tables = {k: {**doc.get(k, {}), **overrides.get(k, {})}
               for k in ("pattern", "material", "deploy", "mujoco", "tune", "cuts")}
     pat = _make(PatternConfig, tables["pattern"], where, "pattern")
@@ -117,4 +123,10 @@ def load_scene(path, *, units: str | None = None, overrides: dict | None = None)
     sim = _make(SimConfig, tables["mujoco"], where, "mujoco")
     tune = _make(TuneConfig, tables["tune"], where, "tune")
     cut = _make(CutsConfig, tables["cuts"], where, "cuts")
-    return SurfaceScene(target=target, pattern=pat, deploy=dep, mujoco=sim, path=where, tune=tune, cuts=cut)
+    scene = SurfaceScene(target=target, pattern=pat, deploy=dep, mujoco=sim, path=where, tune=tune, cuts=cut)
+    if not auto:
+        return scene
+    from simfab.deploy import auto as auto_
+
+    scene, decisions = auto_.complete(scene, {k: set(tables[k]) for k in ("pattern", "cuts", "tune")})
+    return dataclasses.replace(scene, decisions=decisions)

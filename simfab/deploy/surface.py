@@ -32,6 +32,9 @@ from simfab.errors import InputError
 from simfab.io.mesh import read_mesh
 
 KINDS = ("spherical_cap", "saddle", "mixed", "cylinder", "petal")
+#: plausible size of a deployable target [m] (its bounding-box diagonal): a laser-cut sheet larger than
+#: the upper bound or a pattern smaller than the lower one is a file in other units than declared
+SIZE_RANGE_M = (0.005, 10.0)
 
 
 @dataclass(frozen=True)
@@ -191,6 +194,28 @@ def validate(V, F, name: str = "target", *, where: str | None = None) -> Target:
     if len(d) != len(e):
         raise InputError("inconsistent face winding (an edge is traversed twice in the same direction)", where=where)
     return Target(V=V, F=F, name=name)
+
+
+def check_size(target: Target, *, units: str, where: str) -> None:
+    """Refuse a target whose size (bounding-box diagonal) is implausible for its units.
+
+    Args:
+        target: the loaded target (coordinates in metres).
+        units: the units its coordinates were read in ("m", "mm", "cm"), named in the message.
+        where: the file (or scene field) to name.
+
+    Raises:
+        InputError: the diagonal is ``<= SIZE_RANGE_M[0]`` or ``>= SIZE_RANGE_M[1]``.
+    """
+    lo, hi = SIZE_RANGE_M
+    d = target.diameter
+    if lo < d < hi:
+        return
+    scale = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}.get(units, 1.0)
+    hint = next((f"; read in {u} it would be {d / scale * f * 1e3:.4g} mm across" for u, f in
+                 (("mm", 1e-3), ("cm", 1e-2), ("m", 1.0)) if u != units and lo < d / scale * f < hi), "")
+    raise InputError(f"target is {d:.4g} m across read in {units} (plausible: {lo * 1e3:g} mm to {hi:g} m){hint}: "
+                     f"give its units (--units, or [target] units in a scene file)", where=where)
 
 
 def load(path, *, units: str = "m") -> Target:

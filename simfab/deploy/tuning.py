@@ -76,14 +76,25 @@ class TuneConfig:
     offsets the gaps cannot remove (a network whose deployed metric is off along the surface), so
     it is a per-scene choice (scenes/deploy/README.md). escalations: how many times a step whose
     halvings all fail to lower E is retried with mu x ``ESCALATION_FACTOR`` (a shorter step turned
-    towards the gradient) before the tuning stops (0: stop at the first such step)."""
+    towards the gradient) before the tuning stops (0: stop at the first such step). Stops, each 0
+    for none: target_rms [-]: the RMS distance of the deployed vertices to the surface over the
+    target's diameter at which the tuning stops (the bound is met); min_gain [-]: it stops when a
+    step lowers the objective by less than this fraction (progress stalls); seconds: the time budget
+    (no step starts after it)."""
 
     iterations: int = 0
     damping: float = 1e-3
     point_weight: float = 0.0
     escalations: int = 0
+    target_rms: float = 0.0
+    min_gain: float = 0.0
+    seconds: float = 0.0
 
     def __post_init__(self):
+        for f in ("target_rms", "min_gain", "seconds"):
+            v = getattr(self, f)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and v >= 0):
+                raise InputError(f"must be a non-negative number (got {v!r})", where=f"tune.{f}")
         if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or self.iterations < 0:
             raise InputError(f"must be a non-negative integer (got {self.iterations!r})", where="tune.iterations")
         if isinstance(self.damping, bool) or not isinstance(self.damping, (int, float)) or not (
@@ -280,7 +291,8 @@ class TunedPattern:
     """Result of :func:`tune_pattern`: the last accepted re-cut pattern, its network and deployment;
     per accepted step (first: before tuning) the RMS distances to the surface and to the vertices'
     target points of the re-cut pattern's equilibrium [m]; steps, equilibrium solves (trial and
-    re-cut), seconds."""
+    re-cut), seconds; stop: why it stopped ("iterations", "bound met", "time budget", "progress
+    stalled", "no step lowers the objective")."""
 
     pattern: object
     network: object
@@ -290,6 +302,7 @@ class TunedPattern:
     steps: int
     solves: int
     seconds: float
+    stop: str = "iterations"
 
 
 def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_cfg, *, ties=None,
@@ -303,7 +316,14 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
     fit = fit_residual(dep.vertex_positions(), Y, target, cfg.point_weight)
     hist, phist = [fit.plane_rms], [fit.point_rms]
     steps = solves = 0
+    stop = "iterations"
     for _ in range(cfg.iterations):
+        if cfg.target_rms and fit.plane_rms <= cfg.target_rms * target.diameter:
+            stop = "bound met"
+            break
+        if cfg.seconds and time.perf_counter() - t0 >= cfg.seconds:
+            stop = "time budget"
+            break
         accepted = False
         for k in range(cfg.escalations + 1):  # a re-cut that does not lower E: the step again at mu x 10
             one = dataclasses.replace(cfg, iterations=1, damping=cfg.damping * ESCALATION_FACTOR**k,
@@ -324,10 +344,17 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
                 accepted = True
                 break
         if not accepted:
+            stop = "no step lowers the objective"
             break
+        gain = 1.0 - fit2.cost / fit.cost if fit.cost > 0 else 0.0
         pat, net, dep, fit = pat2, net2, dep2, fit2
         hist.append(fit.plane_rms)
         phist.append(fit.point_rms)
         steps += 1
+        if cfg.min_gain and gain < cfg.min_gain:
+            stop = "progress stalled"
+            break
+    if stop == "iterations" and cfg.target_rms and fit.plane_rms <= cfg.target_rms * target.diameter:
+        stop = "bound met"
     return TunedPattern(pattern=pat, network=net, deployment=dep, rms_history=hist, point_rms_history=phist,
-                        steps=steps, solves=solves, seconds=time.perf_counter() - t0)
+                        steps=steps, solves=solves, seconds=time.perf_counter() - t0, stop=stop)

@@ -169,7 +169,7 @@ def test_cli_surface_writes_everything(tmp_path, capsys):
                      '[pattern]\nspacing = 0.03\n[deploy]\nincrements = 4\nperturbation = 0.5\n'
                      '[mujoco]\nstability_seconds = 0.1\n')
     out = tmp_path / "o"
-    assert main(["deploy", "surface", str(scene), "--out", str(out), "--json", "--quiet"]) == 0
+    assert main(["deploy", "surface", str(scene), "--out", str(out), "--json", "--quiet", "--tune", "0"]) == 0
     res = json.loads(capsys.readouterr().out)
     for p in res["outputs"].values():
         assert (out / p.split("/")[-1]).is_file()
@@ -417,3 +417,84 @@ def _deployed_with_growth_directions(pat, net, dep):
         Dv[net.pull_nodes[sel]] = net.pull_dir[sel]
         D.append(Dv)
     return solver, offset, st, D
+
+
+@pytest.mark.parametrize("scale, units, words", [
+    (1e3, "m", ["277.7 m across", "read in m", "read in mm it would be 277.7 mm"]),  # a mm file read as metres
+    (1e-2, "m", ["read in m", "0.002777 m across"]),  # 2.8 mm: a tiny part (or the wrong units)
+])
+def test_cli_refuses_a_target_implausible_for_its_units(scale, units, words, tmp_path, capsys):
+    """A cap 190 mm wide (278 mm bounding-box diagonal; the issue's: read as metres it ran out of memory
+    after minutes) is refused with its units named, in one line, exit 2, before any flattening, and no
+    output folder."""
+    import time
+
+    import trimesh
+
+    from simfab.cli import main
+
+    t = surface.spherical_cap(0.1, np.radians(72), 12)  # 0.19 m across
+    trimesh.Trimesh(t.V * scale, t.F, process=False).export(tmp_path / "cap.obj")
+    out = tmp_path / "o"
+    t0 = time.perf_counter()
+    assert main(["deploy", "surface", str(tmp_path / "cap.obj"), "--units", units, "--out", str(out)]) == 2
+    assert time.perf_counter() - t0 < 20  # refused on load, not after a layout of 7000 cells
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--units" in err and "cap.obj" in err
+    for w in words:
+        assert w in err
+    assert not out.exists()
+
+
+def test_scene_file_target_size_is_checked(tmp_path):
+    from simfab.deploy import scene
+    from simfab.errors import InputError
+
+    p = tmp_path / "big.toml"
+    p.write_text('[target]\nkind = "saddle"\ndisk_radius = 60\ncurvature_radius = 100\nrings = 8\n')
+    with pytest.raises(InputError, match=r"big.toml: \[target\].*read in m"):
+        scene.load_scene(p)
+
+
+def test_spacing_too_fine_for_the_target_is_refused(tmp_path, capsys):
+    """More cells than the layout's bound (pattern.MAX_CELLS) is refused before the flattening: every
+    later stage (and the tuning's dense normal equations over the inserts) grows with the cells."""
+    from simfab.cli import main
+
+    out = tmp_path / "o"
+    big = tmp_path / "big.toml"  # a 6 m disk at 3 cm: 31,000 cells
+    big.write_text('[target]\nkind = "saddle"\ndisk_radius = 3\ncurvature_radius = 6\nrings = 8\n')
+    assert main(["deploy", "surface", str(big), "--spacing", "0.03", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "pattern.spacing" in err and "cells" in err
+    assert not out.exists()
+    with pytest.raises(Exception, match="cells"):
+        pattern.check_cell_count(1.0, 0.01)
+    pattern.check_cell_count(1.0, 0.02)  # 2500 cells: accepted
+
+
+def test_seam_ties_are_mutual_nearest_neighbours_across_a_cut():
+    """The k-d tree pairing (memory linear in the seam vertices) pairs facing seam vertices as the
+    mutual nearest neighbours on the target among those across the cut (brute force, below)."""
+    from simfab.deploy import cuts
+
+    t = surface.spherical_cap(0.1, np.radians(80), 12)
+    pc = pattern.PatternConfig(spacing=0.025, insert_half_sizes=[0.003, 0.006, 0.009], spring_width=0.001)
+    cf = cuts.flatten_with_cuts(t.V, t.F, cuts.CutsConfig(max_cones=8), pc)
+    lines = [p for _, p in cuts.seam_lines(cf)]
+    pat = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, pc, seams=lines)
+    Y = pattern.map_to_surface(cf.flat.uv, cf.F, cf.V, pat.P)
+    ties = cuts.seam_ties(pat, Y, cf)
+    assert len(ties.pairs) >= 4
+    import shapely
+
+    bnd = np.zeros(len(pat.P), dtype=bool)
+    bnd[pat.edges[pat.edge_quads[:, 1] < 0].ravel()] = True
+    S = np.flatnonzero(bnd & pattern.near_seams(pat.P, shapely.Polygon(cf.flat.uv[cf.flat.boundary]), lines,
+                                                 pc.spacing))
+    d3 = np.linalg.norm(Y[S][:, None] - Y[S][None], axis=2)
+    d2 = np.linalg.norm(pat.P[S][:, None] - pat.P[S][None], axis=2)
+    D = np.where((d2 > cuts.TIE_ACROSS * d3) & (d3 < cuts.TIE_REACH * pc.spacing), d3, np.inf)
+    nn = np.argmin(D, axis=1)
+    brute = {(S[i], S[j]) for i, j in enumerate(nn) if np.isfinite(D[i, j]) and nn[j] == i and i < j}
+    assert {tuple(p) for p in ties.pairs.tolist()} == {tuple(map(int, p)) for p in brute}

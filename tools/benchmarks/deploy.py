@@ -1,7 +1,17 @@
 """Benchmark: ``simfab deploy surface`` end to end, and how the deployment's cost grows with the inserts.
 
 ``python tools/bench.py deploy [--scene dome] [--scales 1 1.4 2] [--no-scaling] [--no-cli]
-[--baseline DIR [--pairs 3] [--ab-scale 2]]``
+[--baseline DIR [--pairs 3] [--ab-scale 2]]``; ``python tools/bench.py deploy --family [--rings 12 24]
+[--members NAME ...] [--rows FILE.jsonl] [--table]``
+
+Family (issue 42, :mod:`simfab.deploy.families`): every member written as a bare mesh (OBJ) and
+deployed by ``python -m simfab deploy surface MESH --out TMP`` - no scene file, no flags: the
+defaults decide spacing, cuts, catalogue, layout and tuning - one at a time, each a fresh process;
+per member RMS and Hausdorff (of the diameter), height error, unreachable gaps, springs short,
+cones, inserts per size, covered flat area, MuJoCo at rest, wall / CPU seconds, and which targets
+it meets (RMS <= 1 %, height within 3 %, no gap unreachable, MuJoCo at rest, <= 60 s for <= 150
+inserts). ``--rows``: each row appended as it finishes (a long run keeps what it measured);
+``--table``: also the Markdown table of scenes/deploy/README.md.
 
 End to end: ``python -m simfab deploy surface SCENE --out TMP`` as a user runs it (a fresh
 process: imports, flattening, layout, laser-cut files, deployment, comparison, the MuJoCo scene
@@ -171,8 +181,91 @@ def _sphere_radius(tgt) -> float:
     return float(np.median(-(np.sum(V**2, axis=1)) / (2 * V[:, 2])))
 
 
+TARGET_FAMILY_S = 60.0  # <= 150 inserts, end to end
+
+
+def _family_row(name: str) -> dict:
+    """One family member deployed on the defaults, as a bare mesh, by the CLI in a fresh process."""
+    import trimesh
+
+    from simfab.deploy import families
+
+    t = families.member(name)
+    with tempfile.TemporaryDirectory() as tmp:
+        mesh = os.path.join(tmp, "target.obj")
+        trimesh.Trimesh(t.V, t.F, process=False).export(mesh)
+        out = os.path.join(tmp, "out")
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        p = subprocess.run([sys.executable, "-m", "simfab", "deploy", "surface", mesh, "--out", out, "--quiet"],
+                           cwd=ROOT, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=ROOT))
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if p.returncode != 0:
+            return dict(member=name, error=p.stderr.strip().splitlines()[-1][-300:] if p.stderr.strip() else "")
+        s = json.loads(open(os.path.join(out, "surface.json")).read())
+    st = (s.get("mujoco") or {}).get("stability", {})
+    bd, df = s["bounds"], s["defaults"] or {}
+    row = dict(member=name, vertices=len(t.V), spacing_mm=df.get("spacing_mm"), layout=s["layout"],
+               rms=s["deviation"]["rms"], hausdorff=s["deviation"]["hausdorff"], height_error=bd["height_error"],
+               unreachable_gaps=bd["unreachable_gaps"], springs_short=bd["springs_short"],
+               cones=(s.get("cuts") or {}).get("cones", 0), inserts=s["inserts"],
+               inserts_per_size={f"{b['half_size_mm']:g} mm": b["count"] for b in s["bill_of_materials"]},
+               covered=s["flat_area_covered"], tuning_steps=(s.get("tuning") or {}).get("steps", 0),
+               tuning_stop=(s.get("tuning") or {}).get("stop"), mujoco_at_rest=st.get("settled"),
+               wall_s=wall, cpu_s=(after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
+               stages_s=s["seconds"], missed=bd["missed"])
+    row["meets"] = dict(rms=row["rms"] <= bd["rms_bound"], height=abs(row["height_error"]) <= bd["height_bound"],
+                        gaps=row["unreachable_gaps"] == 0, mujoco=bool(row["mujoco_at_rest"]),
+                        seconds=row["inserts"] > 150 or wall <= TARGET_FAMILY_S)
+    return row
+
+
+def family_table(rows) -> str:
+    """The Markdown table of the family rows (scenes/deploy/README.md)."""
+    head = ("| member | spacing [mm] | layout | RMS [%] | Hausdorff [%] | height [%] | unreachable gaps "
+            "| springs short | cones | inserts per size | covered [%] | tuning steps (stop) | MuJoCo at rest "
+            "| wall / CPU [s] | misses |")
+    lines = [head, "|" + "---|" * 15]
+    for r in rows:
+        if "error" in r:
+            lines.append(f"| {r['member']} | failed: {r['error']} |" + " |" * 13)
+            continue
+        miss = ", ".join(k for k, ok in r["meets"].items() if not ok) or "-"
+        lines.append(f"| {r['member']} | {r['spacing_mm']:g} | {r['layout']} | {100 * r['rms']:.3g} | "
+                     f"{100 * r['hausdorff']:.3g} | {100 * r['height_error']:+.3g} | {r['unreachable_gaps']} | "
+                     f"{r['springs_short']} | {r['cones']} | "
+                     + ", ".join(f"{n} x {k}" for k, n in r["inserts_per_size"].items())
+                     + f" | {100 * r['covered']:.1f} | {r['tuning_steps']} ({r['tuning_stop']}) | "
+                     f"{'yes' if r['mujoco_at_rest'] else 'no'} | {r['wall_s']:.0f} / {r['cpu_s']:.0f} | {miss} |")
+    return "\n".join(lines)
+
+
+def _family(a) -> dict:
+    from simfab.deploy import families
+
+    rows = []
+    for name in a.members or families.names(tuple(a.rings)):
+        row = _family_row(name)
+        rows.append(row)
+        if a.rows:
+            with open(a.rows, "a") as f:
+                f.write(json.dumps(row) + "\n")
+    out = dict(benchmark="deploy --family", rows=rows, target_s=TARGET_FAMILY_S,
+               members_meeting_all=sum(1 for r in rows if "meets" in r and all(r["meets"].values())),
+               members=len(rows))
+    if a.table:
+        out["table"] = family_table(rows)
+    return out
+
+
 def run(argv) -> dict:
     p = argparse.ArgumentParser(prog="bench deploy")
+    p.add_argument("--family", action="store_true", help="the target families on the defaults (issue 42)")
+    p.add_argument("--rings", type=int, nargs="+", default=[12, 24], help="--family: the resolutions")
+    p.add_argument("--members", nargs="+", help="--family: only these members (shape@rings)")
+    p.add_argument("--rows", help="--family: append each row to this JSONL file as it finishes")
+    p.add_argument("--table", action="store_true", help="--family: also the Markdown table")
     p.add_argument("--scene", default="dome")
     p.add_argument("--scales", type=float, nargs="+", default=[1.0, 1.4, 2.0])
     p.add_argument("--no-scaling", action="store_true")
@@ -181,6 +274,10 @@ def run(argv) -> dict:
     p.add_argument("--pairs", type=int, default=3, help="A/B pairs (baseline, this) per case")
     p.add_argument("--ab-scale", type=float, default=2.0, help="scale of the dome's cap in the A/B (2: 165 inserts)")
     a = p.parse_args(argv)
+    if a.family:
+        out = _family(a)
+        out["load_average_1min"] = os.getloadavg()[0]
+        return out
     out = dict(benchmark="deploy", machine_reference_ms_before=machine_reference_ms())
     if a.baseline:
         out["ab"] = _ab(a.baseline, a.scene, a.ab_scale, a.pairs)

@@ -1,0 +1,169 @@
+"""Defaults decided from the target: spacing, cuts, insert catalogue, layout and tuning.
+
+What a scene file (or a command-line flag) leaves unset is decided here, before the pipeline runs:
+
+- spacing h: sqrt(A / CELLS) for the surface area A, at most ``CURVATURE_SPACING`` / sqrt(K_med)
+  (the median |Gaussian curvature|: a cell spans a bounded angle of the surface), rounded down to
+  a millimetre, within ``SPACING_RANGE``;
+- cuts: the growth each interior vertex needs, d = (h/2)(e^{-u} - 1) of the uncut flattening
+  (:mod:`simfab.deploy.pattern`), must fit a catalogue of at most ``MAX_SIZES`` sizes between
+  ``MIN_INSERT`` and h/2 - beam_width, and the cells' growth e^{-u} the springs' reach
+  (``[cuts] max_growth``); if not, cones and cuts (``[cuts] max_cones = MAX_CONES``, seams tied),
+  placed until every vertex's growth is within the springs' reach (:func:`simfab.deploy.cuts.place_cones`
+  with every size the plates allow);
+- the catalogue (:func:`catalogue`): from the flattening (cut, with cuts) the target will get,
+  the fewest sizes covering every vertex's growth with a margin, smallest inserts first;
+- layout: ``conforming`` (grid core, regular, growths fitted to the edges) without cuts, ``mesh``
+  with them: both cover >= 99 % of the flat domain;
+- tuning: on (``AUTO_TUNE``), stopping once the deviation bound is met, when progress stalls or
+  at its budget of steps.
+
+:func:`complete` returns the scene with these filled in and :class:`Decisions` (what was decided
+and why, for the summary).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+CELLS = 64  # cells aimed at over the surface
+CURVATURE_SPACING = 0.25  # h <= this / sqrt(median |K|) [-]
+SPACING_RANGE = (0.02, 0.08)  # [m]
+MIN_INSERT = 0.003  # smallest insert half-size [m]
+MAX_SIZES = 3  # insert sizes in a catalogue
+SIZE_STEP = 0.0005  # catalogue sizes rounded to this [m]
+MARGIN = 0.0005  # gap margin kept from either achievable limit [m] (layouts' edges differ from h)
+MAX_CONES = 8
+#: the tuning on by default: Gauss-Newton steps, towards the surface and each vertex's own point; it
+#: stops at the bound (RMS 0.5 % of the diameter, half the deployment bound), when a step gains < 2 %,
+#: or after 8 steps. Its budget is counted in steps, not seconds, so that the same input gives the same
+#: pattern on any machine and load (``[tune] seconds`` sets a wall-clock budget too).
+AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.005, min_gain=0.02)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Decisions:
+    """What :func:`complete` decided: the fields it set (``scene table.field``), whether the target
+    needs cuts and why (``uncut_unreachable``: interior vertices no catalogue of ``MAX_SIZES`` sizes
+    reaches uncut; ``uncut_growth_max``: the largest cell growth e^{-u} uncut)."""
+
+    decided: tuple
+    needs_cuts: bool
+    uncut_unreachable: int
+    uncut_growth_max: float
+
+
+def spacing(target) -> float:
+    """The default spacing [m] of a target (see module doc)."""
+    from simfab.deploy.flatten import face_areas
+
+    V, F = target.V, target.F
+    area = float(np.sum(face_areas(V, F)))
+    h = np.sqrt(area / CELLS)
+    K = _vertex_curvature(V, F)
+    k_med = float(np.median(np.abs(K)))
+    if k_med > 0:
+        h = min(h, CURVATURE_SPACING / np.sqrt(k_med))
+    return float(np.clip(np.floor(h * 1e3) / 1e3, *SPACING_RANGE))
+
+
+def _vertex_curvature(V, F) -> np.ndarray:
+    """Angle defect over a third of the incident faces' area at interior vertices [1/m^2] (0 on the boundary)."""
+    from simfab.deploy import flatten as bff
+
+    n = len(V)
+    ang = bff.corner_angles(V, F)
+    area = np.bincount(F.ravel(), weights=np.repeat(bff.face_areas(V, F) / 3, 3), minlength=n)
+    K = (2 * np.pi - np.bincount(F.ravel(), weights=ang.ravel(), minlength=n)) / np.maximum(area, 1e-300)
+    K[bff.boundary_loop(F, n)] = 0.0
+    return K
+
+
+def catalogue(d: np.ndarray, h: float, pc) -> tuple[list, int]:
+    """The fewest insert sizes [m] that give every growth ``d`` (n,) [m] an achievable gap
+    ``min_gap + MARGIN <= r - d <= h/2 - min_beam - MARGIN``: greedily, the largest uncovered growth
+    sets the next (smaller) size r = d + min_gap + MARGIN (rounded up to ``SIZE_STEP``, at least
+    ``MIN_INSERT``). Returns (sizes ascending, growths left uncovered by ``MAX_SIZES`` sizes or
+    above the largest size the plates allow, r < h/2 - beam_width)."""
+    lo, hi = pc.min_gap + MARGIN, h / 2 - pc.min_beam - MARGIN
+    r_max = h / 2 - pc.beam_width - SIZE_STEP
+    left = np.sort(np.asarray(d, dtype=np.float64))[::-1]
+    sizes = []
+    while len(left) and len(sizes) < MAX_SIZES:
+        r = max(np.ceil((left[0] + lo) / SIZE_STEP - 1e-9) * SIZE_STEP, MIN_INSERT)
+        if r > r_max or (sizes and r >= sizes[-1]):  # a plate larger than the cell allows / no smaller size helps
+            break
+        g = r - left
+        sizes.append(float(r))
+        left = left[~((g >= lo - 1e-12) & (g <= hi + 1e-12))]
+    return sorted(sizes), int(len(left))
+
+
+def complete(scene, given: dict):
+    """The scene with every field that ``given`` ({"pattern": set of field names, "cuts": ...,
+    "tune": ...}: set by the scene file or a flag) does not name decided from its target.
+
+    Args:
+        scene: a :class:`simfab.deploy.scene.SurfaceScene`.
+        given: the fields set explicitly, per table.
+
+    Returns:
+        (scene, :class:`Decisions`).
+    """
+    from simfab.deploy import cuts, flatten, pattern
+
+    tgt = scene.target
+    gp, gc, gt = given.get("pattern", set()), given.get("cuts", set()), given.get("tune", set())
+    decided = []
+    pc, cc, tc = scene.pattern, scene.cuts, scene.tune
+    upd = {}
+    if "spacing" not in gp:
+        upd["spacing"] = spacing(tgt)
+        decided.append("pattern.spacing")
+    h = upd.get("spacing", pc.spacing)
+    pattern.check_cell_count(float(np.sum(flatten.face_areas(tgt.V, tgt.F))), h)
+    sizes_given = bool({"insert_half_size", "insert_half_sizes"} & gp)
+    f = flatten.flatten(tgt.V, tgt.F)
+    interior = np.ones(len(tgt.V), dtype=bool)
+    interior[f.boundary] = False
+    d0 = 0.5 * h * np.expm1(-f.u[interior])
+    _, left0 = catalogue(d0, h, pc)
+    growth0 = float(np.exp(-f.u.min()))
+    needs = left0 > 0 or growth0 > cc.max_growth
+    if "max_cones" not in gc and needs:
+        cc = dataclasses.replace(cc, max_cones=MAX_CONES, **({} if "join_seams" in gc else {"join_seams": True}))
+        decided += ["cuts.max_cones"] + ([] if "join_seams" in gc else ["cuts.join_seams"])
+    cut = cc.max_cones > 0
+    if not sizes_given:
+        if cut:  # the cones' u: placed with every size the plates allow (the springs' reach decides)
+            wide = dataclasses.replace(pc, spacing=h, insert_half_sizes=tuple(
+                np.arange(MIN_INSERT, h / 2 - pc.beam_width - 1e-9, SIZE_STEP)))
+            cones, u = cuts.place_cones(tgt.V, tgt.F, cc, wide)
+            d = 0.5 * h * np.expm1(-u[interior & ~np.isin(np.arange(len(u)), cones)])
+        else:
+            d = d0
+        sizes, _ = catalogue(d, h, pc)
+        if sizes:
+            upd["insert_half_sizes"] = tuple(sizes)
+            decided.append("pattern.insert_half_sizes")
+    if "layout" not in gp:
+        upd["layout"] = "mesh" if cut else "conforming"
+        decided.append("pattern.layout")
+        if not cut:
+            for k, v in (("conforming_core", "regular"), ("growth_fit", "edges")):
+                if k not in gp:
+                    upd[k] = v
+                    decided.append(f"pattern.{k}")
+    if "spring_width" not in gp:
+        upd["spring_width"] = 0.001
+        decided.append("pattern.spring_width")
+    if "iterations" not in gt:
+        tc = dataclasses.replace(tc, **{k: v for k, v in AUTO_TUNE.items() if k not in gt})
+        decided += [f"tune.{k}" for k in AUTO_TUNE if k not in gt]
+    pc = dataclasses.replace(pc, **upd)
+    return (dataclasses.replace(scene, pattern=pc, cuts=cc, tune=tc),
+            Decisions(decided=tuple(decided), needs_cuts=bool(needs), uncut_unreachable=int(left0),
+                      uncut_growth_max=growth0))

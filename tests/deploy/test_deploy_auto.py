@@ -1,0 +1,89 @@
+"""The defaults decided from the target (simfab.deploy.auto): spacing, cuts, catalogue, layout, tuning."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from simfab.deploy import auto, families, flatten, surface
+from simfab.deploy.pattern import PatternConfig
+from simfab.deploy.scene import load_scene
+
+
+def _bare(tmp_path, t):
+    p = tmp_path / "t.obj"
+    trimesh.Trimesh(t.V, t.F, process=False).export(p)
+    return load_scene(p)
+
+
+@pytest.mark.parametrize("h", [0.02, 0.03])
+def test_catalogue_gives_every_growth_an_achievable_gap(h):
+    """Every growth d gets a size r with min_gap + MARGIN <= r - d <= h/2 - min_beam - MARGIN (the gap
+    rule's achievable range with the margin), in at most MAX_SIZES sizes, each a plate that fits the
+    cell (r < h/2 - beam_width); a spread wider than the sizes can span is reported, not hidden."""
+    pc = PatternConfig(spacing=h)
+    rng = np.random.default_rng(0)
+    for lo, hi in ((-0.004, 0.0), (0.0, 0.004), (-0.002, 0.006)):
+        d = rng.uniform(lo, hi, 400)
+        sizes, left = auto.catalogue(d, h, pc)
+        r = np.asarray(sizes)[None, :]
+        g = r - d[:, None]
+        lo_g, hi_g = pc.min_gap + auto.MARGIN - 1e-12, h / 2 - pc.min_beam - auto.MARGIN + 1e-12
+        ok = np.any((g >= lo_g) & (g <= hi_g), axis=1)
+        assert left == np.sum(~ok) and len(sizes) <= auto.MAX_SIZES and len(set(sizes)) == len(sizes)
+        if not sizes:  # the largest growth needs a plate wider than the cell allows
+            assert left == len(d) and d.max() + pc.min_gap + auto.MARGIN > h / 2 - pc.beam_width - auto.SIZE_STEP
+            continue
+        assert max(sizes) < h / 2 - pc.beam_width and min(sizes) >= auto.MIN_INSERT
+        if h == 0.03:  # a 4 mm spread fits the 30 mm cell's 10.5 mm of gap range with 3 mm inserts or more
+            assert left == 0
+    sizes, left = auto.catalogue(np.array([0.02]), 0.03, pc)  # a growth beyond any plate the cell allows
+    assert sizes == [] and left == 1
+
+
+def test_gentle_dome_needs_no_cuts_and_steep_cap_does(tmp_path):
+    """The bundled dome's cap (50 deg): one insert size, no cuts, the conforming layout (>= 99 %
+    covered), tuning on; an 80 deg cap: its uncut growth e^{-u} (1.7) is beyond the springs' reach
+    (max_growth 1.25), so cones and tied seams, the mesh layout."""
+    s = _bare(tmp_path, surface.spherical_cap(0.15, np.radians(50), 16))
+    d = s.decisions
+    assert not d.needs_cuts and s.cuts.max_cones == 0 and s.pattern.layout == "conforming"
+    assert len(s.pattern.sizes) == 1 and s.tune.iterations > 0 and "pattern.spacing" in d.decided
+    assert 0.02 <= s.pattern.spacing <= 0.035
+    s = _bare(tmp_path, surface.spherical_cap(0.15, np.radians(80), 16))
+    assert s.decisions.needs_cuts and s.decisions.uncut_growth_max > 1.5
+    assert s.cuts.max_cones > 0 and s.cuts.join_seams and s.pattern.layout == "mesh"
+
+
+def test_saddle_catalogue_pulls(tmp_path):
+    """A saddle grows (u > 0): its growths are <= 0, so the smallest insert with a gap >= min_gap reaches
+    all of them (g > r: the inserts pull)."""
+    t = surface.saddle(0.1, 0.1, 16)
+    s = _bare(tmp_path, t)
+    f = flatten.flatten(t.V, t.F)
+    assert f.u.min() >= -1e-9 and not s.decisions.needs_cuts
+    assert s.pattern.sizes == (auto.MIN_INSERT,)
+
+
+def test_given_fields_are_kept(tmp_path):
+    """What a scene file (or a flag) sets is not decided: the bundled steep cap keeps its catalogue,
+    layout and cuts; a flag's tuning steps stay."""
+    from simfab.deploy.scene import bundled_path
+
+    s = load_scene(bundled_path("cap80"), overrides={"tune": {"iterations": 2}})
+    assert s.pattern.sizes == (0.004, 0.007, 0.01) and s.pattern.spacing == 0.03 and s.cuts.max_cones == 8
+    assert s.tune.iterations == 2 and "pattern.insert_half_sizes" not in s.decisions.decided
+    assert load_scene(bundled_path("dome"), auto=False).tune.iterations == 0
+
+
+def test_spacing_follows_size_and_curvature():
+    """Larger targets get larger cells; the spacing is at most sqrt(area / CELLS) and, on a curved
+    target, CURVATURE_SPACING / sqrt(median |K|) (a sphere: K = 1/R^2), within SPACING_RANGE."""
+    small, big = (auto.spacing(surface.saddle(a, 4 * a, 12)) for a in (0.08, 0.16))
+    assert small < big
+    for R in (0.1, 0.2):
+        t = surface.spherical_cap(R, np.radians(80), 12)
+        h = auto.spacing(t)
+        assert h <= max(auto.CURVATURE_SPACING * R, auto.SPACING_RANGE[0]) + 1e-12
+        assert h <= max(np.sqrt(np.sum(flatten.face_areas(t.V, t.F)) / auto.CELLS), auto.SPACING_RANGE[0]) + 1e-12
+    for n in families.names((12,)):
+        assert auto.SPACING_RANGE[0] <= auto.spacing(families.member(n)) <= auto.SPACING_RANGE[1]
