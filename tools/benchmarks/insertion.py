@@ -2,7 +2,8 @@
 against the factorization floor.
 
 ``python tools/bench.py insertion [--only NAME,...] [--repeat K | --budget SECONDS] [--max-repeat K]
-[--friction MU]``
+[--friction MU]``; ``--scaling [--scenes clip3d,claw3d] [--factors 1,2,4,8] [--frictions 0,0.3]``: the cost's
+growth with the mesh (tools/benchmarks/_scaling.py).
 
 Cases (bundled scenes, closest to the sizes of the thesis' timing table):
   cclamp2d  (450 6-node triangles, 35 steps) vs "stand side (2D)"  450 elements, 35 steps
@@ -117,7 +118,29 @@ def run(argv) -> dict:
     ap.add_argument("--max-repeat", type=int, default=MAX_REPEAT, help="at most this many runs per case")
     ap.add_argument("--friction", type=float, default=None,
                     help="Coulomb friction coefficient mu for every case (default: the scene's)")
+    ap.add_argument("--scaling", action="store_true",
+                    help="cost growth with the mesh: clip3d and claw3d at 1x..8x their tets (see _scaling.py)")
+    ap.add_argument("--scenes", default="clip3d,claw3d", help="--scaling: scenes")
+    ap.add_argument("--factors", default="1,2,4,8", help="--scaling: tet-count factors")
+    ap.add_argument("--frictions", default="0,0.3", help="--scaling: friction coefficients")
+    ap.add_argument("--level-timeout", type=float, default=1800.0, help="--scaling: seconds per level at most")
+    ap.add_argument("--scaling-level", default=None, help=argparse.SUPPRESS)  # SCENE:FACTOR:MU, one child
     a = ap.parse_args(argv)
+    if a.scaling_level:
+        from benchmarks._scaling import parse_level, run_level
+
+        return run_level(*parse_level(a.scaling_level))
+    if a.scaling:
+        from benchmarks._scaling import run_scaling
+
+        try:
+            factors = [float(f) for f in a.factors.split(",")]
+            frictions = [float(f) for f in a.frictions.split(",")]
+        except ValueError:
+            raise InputError("--factors and --frictions must be comma-separated numbers") from None
+        if not all(f > 0 for f in factors) or not all(f >= 0 for f in frictions):
+            raise InputError("--factors must be > 0 and --frictions >= 0")
+        return run_scaling(a.scenes.split(","), factors, frictions, a.level_timeout)
     if a.friction is not None and not a.friction >= 0:
         raise InputError(f"--friction must be >= 0, got {a.friction}")
     only = set(a.only.split(",")) if a.only else None

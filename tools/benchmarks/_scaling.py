@@ -1,0 +1,187 @@
+"""Cost growth of an insertion with the mesh: ``python tools/bench.py insertion --scaling``.
+
+Each level runs in a child process of its own (``--scaling-level SCENE:FACTOR:MU``), so that its
+peak resident memory (``ru_maxrss``) is that level's alone. A level is the insertion benchmark's case
+(tools/benchmarks/insertion.py, P2 tets) with its part meshed at FACTOR times the tet count
+(simfab.coupling.converge.level_mesh: an extrusion's layers grow as FACTOR^(1/3); claw3d's
+generator is asked for FACTOR x 5,130 / CLAW_OVERSHOOT tets, since it overshoots its target by
+about that much). Per level: tets, free dofs, steps, seconds (wall, CPU; scene loading and meshing
+excluded), peak memory, Newton iterations (and per step), sparse factorizations (numeric, the
+exact-first attempts included) and their share of the wall time, the triangular solves' share, the
+assembly's, the factor's fill (entries of L over entries of the lower triangle of the free
+Hessian) and the category and figures of the profile. Per scene and friction: the exponent of a
+least-squares fit of log(seconds) against log(free dofs), overall and between consecutive levels.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+#: claw3d's generator gives ~1.22x the tets asked for (10,300 -> 12,584; 20,600 -> 25,519)
+CLAW_OVERSHOOT = 1.22
+FIGURES = ("E_max", "F_in", "F_rm", "F_grip")
+
+
+def level_overrides(scene: str, factor: float, base: dict) -> dict:
+    """The ``[compliant]`` overrides of ``scene`` at ``factor`` times its benchmark case's tets."""
+    from simfab.coupling.converge import level_mesh
+    from simfab.coupling.scene import read_toml, scene_paths
+
+    comp = dict(read_toml(scene_paths(scene)[1])["compliant"])
+    comp.update(base.get("compliant", {}))
+    if factor == 1.0:
+        return dict(base.get("compliant", {}))
+    out = dict(base.get("compliant", {}))
+    if scene == "claw3d":
+        out.update(level_mesh(comp, factor / CLAW_OVERSHOOT))
+        out["mesh_file"] = None
+    else:
+        out.update(level_mesh(comp, factor))
+    return out
+
+
+def run_level(scene: str, factor: float, mu: float) -> dict:
+    """One level in this process (see the module docstring)."""
+    from benchmarks.insertion import ORIGINAL_SIZE
+    from simfab.coupling.outputs import summarize
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import simulate
+    from simfab.solve import linear
+
+    base = {k: dict(v) for k, v in ORIGINAL_SIZE.get(scene, {}).items()}
+    over = dict(base)
+    over["compliant"] = level_overrides(scene, factor, base)
+    over.setdefault("contact", {})["friction"] = mu
+    cm = load_coupling_scene(scene, overrides=over)
+    count = {"factorizations": 0}
+    orig = linear.SPDSolver._factor
+
+    def counted(self, values):
+        count["factorizations"] += 1
+        return orig(self, values)
+
+    linear.SPDSolver._factor = counted
+    try:
+        t0, c0 = time.perf_counter(), time.process_time()
+        res = simulate(cm)
+        dt, dc = time.perf_counter() - t0, time.process_time() - c0
+    finally:
+        linear.SPDSolver._factor = orig
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    _, summ = summarize(res)
+    records = list(res.steps[1:]) + list(res.removal)
+    iters = int(sum(r.iterations for r in records) + res.steps[0].iterations)
+    t = dict(res.timings)
+    fill = factor_fill(cm, res.steps[-1].x)
+    return {
+        "scene": scene, "factor": factor, "friction": mu, "tets": int(cm.fem.n_elements),
+        "free_dofs": int(np.asarray(cm.free).sum()), "steps": len(records),
+        "seconds": round(dt, 2), "cpu_seconds": round(dc, 2), "peak_memory_mib": round(rss, 1),
+        "newton_iterations": iters, "newton_iterations_per_step": round(iters / max(1, len(records)), 2),
+        "factorizations": count["factorizations"],
+        "factorization_share": round(t.get("factorization", 0.0) / dt, 3),
+        "solves_share": round(t.get("solves", 0.0) / dt, 3),
+        "assembly_share": round(t.get("assembly", 0.0) / dt, 3),
+        "ms_per_factorization": round(1e3 * t.get("factorization", 0.0) / max(1, count["factorizations"]), 1),
+        **fill, "category": summ["category"], "figures": {k: float(summ[k]) for k in FIGURES if k in summ},
+        "stage_seconds": {k: round(float(v), 2) for k, v in t.items()},
+        "load_average_1min": round(os.getloadavg()[0], 2),
+    }
+
+
+def factor_fill(cm, x) -> dict:
+    """Entries of the Cholesky factor of the run's free Hessian (CHOLMOD, supernodal, its own
+    ordering) against those of the matrix's lower triangle."""
+    import cvxopt
+
+    from simfab.coupling.layout import regularize
+    from simfab.fem.elastic import energy_gradient_hessian
+    from simfab.solve.linear import SPDSolver, import_cholmod
+
+    _, _, H = energy_gradient_hessian(cm.fem, np.asarray(x))
+    regularize(cm, H)
+    free = np.flatnonzero(np.asarray(cm.free).ravel())
+    s = SPDSolver()
+    s.solve_free(H, free, np.ones(len(free)))
+    L = import_cholmod().getfactor(s._F)
+    nnz_l = len(cvxopt.matrix(L.V)) if isinstance(L, cvxopt.spmatrix) else int(L.size[0] * L.size[1])
+    nnz_a = len(s._factored)
+    return {"factor_entries": int(nnz_l), "matrix_lower_entries": int(nnz_a), "fill": round(nnz_l / nnz_a, 2)}
+
+
+def exponents(rows: list, key: str = "seconds") -> dict:
+    """Least-squares slope of log(rows' ``key``) against log(free dofs), overall and per interval."""
+    if len(rows) < 2:
+        return {"overall": None, "intervals": []}
+    n = np.log([r["free_dofs"] for r in rows])
+    t = np.log([r[key] for r in rows])
+    slope = float(np.polyfit(n, t, 1)[0])
+    return {"overall": round(slope, 2),
+            "intervals": [round(float((t[i + 1] - t[i]) / (n[i + 1] - n[i])), 2) for i in range(len(rows) - 1)]}
+
+
+def run_scaling(scenes, factors, frictions, timeout: float) -> dict:
+    """Every level in a child process; rows grouped per (scene, friction) with their exponents."""
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    groups = []
+    for scene in scenes:
+        for mu in frictions:
+            rows = []
+            for f in factors:
+                cmd = [sys.executable, os.path.join(here, "bench.py"), "insertion", "--scaling-level",
+                       f"{scene}:{f:g}:{mu:g}"]
+                try:
+                    p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+                except subprocess.TimeoutExpired:
+                    rows.append({"scene": scene, "factor": f, "friction": mu, "error": f"over {timeout:g} s"})
+                    break
+                if p.returncode != 0:
+                    rows.append({"scene": scene, "factor": f, "friction": mu,
+                                 "error": (p.stderr.strip().splitlines() or ["failed"])[-1]})
+                    break
+                row = json.loads(p.stdout.strip().splitlines()[-1])
+                rows.append(row)
+                print(format_row(row), file=sys.stderr, flush=True)
+            ok = [r for r in rows if "error" not in r]
+            groups.append({"scene": scene, "friction": mu, "rows": rows, "time_exponent_vs_dofs": exponents(ok),
+                           "cpu_time_exponent_vs_dofs": exponents(ok, "cpu_seconds")})
+    return {"benchmark": "insertion --scaling", "targets": "time ~ dof^<=1.25; clip3d 8x <= 300 s; peak <= 8 GiB",
+            "groups": groups, "table": format_table(groups)}
+
+
+def format_row(r: dict) -> str:
+    if "error" in r:
+        return f"{r['scene']:8s} {r['factor']:>4g} {r['friction']:>4g}  error: {r['error']}"
+    return (f"{r['scene']:8s} {r['factor']:>4g} {r['friction']:>4g} {r['tets']:>7d} {r['free_dofs']:>8d} "
+            f"{r['seconds']:>8.1f} {r['cpu_seconds']:>8.1f} {r['peak_memory_mib']:>8.0f} "
+            f"{r['newton_iterations_per_step']:>6.2f} {r['factorizations']:>6d} {r['ms_per_factorization']:>8.0f} "
+            f"{100 * r['factorization_share']:>6.0f} {100 * r['assembly_share']:>6.0f} {r['fill']:>6.1f}")
+
+
+def format_table(groups: list) -> str:
+    head = (f"{'scene':8s} {'x':>4s} {'mu':>4s} {'tets':>7s} {'dofs':>8s} {'wall s':>8s} {'cpu s':>8s} "
+            f"{'peak MiB':>8s} {'it/st':>6s} {'facts':>6s} {'ms/fact':>8s} {'fact%':>6s} {'asm%':>6s} {'fill':>6s}")
+    lines = [head]
+    for g in groups:
+        lines += [format_row(r) for r in g["rows"]]
+        e, c = g["time_exponent_vs_dofs"], g["cpu_time_exponent_vs_dofs"]
+        lines.append(f"  {g['scene']} mu={g['friction']:g}: wall ~ dofs^{e['overall']} (intervals {e['intervals']}),"
+                     f" cpu ~ dofs^{c['overall']} (intervals {c['intervals']})")
+    return "\n".join(lines)
+
+
+def parse_level(spec: str) -> tuple[str, float, float]:
+    from simfab.errors import InputError
+
+    try:
+        scene, f, mu = spec.split(":")
+        return scene, float(f), float(mu)
+    except ValueError:
+        raise InputError(f"--scaling-level must be SCENE:FACTOR:MU, got {spec!r}") from None

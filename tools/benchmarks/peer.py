@@ -1,0 +1,505 @@
+"""simfab's insertion beside an IPC reference built on the IPC Toolkit (``ipctk``).
+
+``python tools/bench.py peer [--scenes snapfit2d,cclamp2d] [--frictions 0,0.3] [--plot DIR]``
+
+The reference solves the same quasi-static insertion the way the IPC paper (Li et al. 2020) does:
+
+- the part's energy is simfab's Neo-Hookean (simfab.fem.elastic, PSD-projected element Hessians) on
+  the same linear mesh, the same supports (the scene's fixed dofs);
+- the object is a kinematic collision mesh (its boundary polygon in 2D, triangles in 3D) moved to
+  simfab's recorded poses in order (the insertion's steps, its rest search, the removal's), its
+  polygonal error below 1 % of d_hat; its vertices are degrees of freedom pulled to their targets by
+  IPC's augmented Lagrangian (kappa_A doubled when the constraint's progress stalls, else the
+  multipliers updated) and fixed at them once within 1e-3 of the step's motion and the CCD lets them;
+- contact is ipctk's log barrier over part-object pairs (self-contact filtered out, as simfab has
+  none) with the same d_hat as simfab's, its stiffness from ``initial_barrier_stiffness`` and
+  adapted by ``update_barrier_stiffness``; friction through ipctk's tangential collisions and
+  friction potential on the step's displacement, lagged (normal forces and bases from the step's
+  start, then its solution) until the normal forces change by less than simfab's ``lag_tol``, with
+  simfab's stick-slip eps;
+- Newton's steps are bounded by ipctk's CCD (Tight Inclusion, its 0.8 conservative rescaling), then
+  backtracked until the total energy decreases; the linear solves are simfab's SPDSolver (CHOLMOD,
+  symbolic analysis reused while the pattern holds); converged at simfab's force tolerance.
+
+Forces: the support reaction along O's motion, as simfab records it; the profile figures (F_in,
+F_rm, F_hold, E_max) by simfab's own analysis of the reference's records (F_hold's onset of sliding
+read from simfab's records). Reported per scene and friction: both runs' figures and relative
+differences, wall and CPU seconds, Newton iterations per step and the speed ratio (reference over
+simfab); ``--plot DIR`` draws both force profiles per case.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+FIGURES = ("E_max", "F_in", "F_rm", "F_hold")
+#: The object's polygonal error (sagitta of its boundary segments) below this fraction of d_hat.
+POLY_ERR_REL = 0.01
+#: Kinematic dofs are switched from the augmented Lagrangian to fixed once this close (relative to
+#: the step's motion), IPC's eta >= 0.999.
+AL_SWITCH = 1e-3
+
+
+@dataclass(frozen=True, kw_only=True)
+class PeerOptions:
+    """The reference's parameters (see the module docstring). Lengths [m], forces [N]."""
+
+    dhat: float
+    grad_tol: float  # free-dof force residual at convergence [N]
+    mu: float = 0.0
+    eps_v: float = 1e-6  # stick-slip transition of the step's tangential displacement [m]
+    lag_tol: float = 3e-2
+    max_lag: int = 6
+    max_newton: int = 300
+    al_kappa_rel: float = 1e3  # kappa_A / mean diagonal stiffness of the part
+    density: float = 1240.0  # PLA [kg/m^3]: the mass scale of initial_barrier_stiffness
+
+
+@dataclass(frozen=True, kw_only=True)
+class PeerStep:
+    s: float
+    phase: str
+    force: float
+    energy: float
+    iterations: int
+    kappa: float
+
+
+def object_polygon(cm) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (k, dim) in O's body frame, edges (k, 2) or faces (f, 3)): O's boundary as a
+    collision mesh, fine enough that its polygonal error is below POLY_ERR_REL d_hat."""
+    from simfab.errors import InputError
+
+    prims = getattr(cm.field, "primitives", None)
+    if not prims or len(prims) != 1:
+        raise InputError(f"the peer needs an object of one primitive, {cm.name} has another")
+    p = prims[0]
+    dim = cm.dim
+    tol = POLY_ERR_REL * cm.dhat
+    if dim == 2 and p.kind == "box":
+        ex, ey = p.size[:2]
+        Q = np.asarray(p.rotation)[:2, :2]
+        c = np.asarray(p.centre)[:2]
+        corners = np.array([[-ex, -ey], [ex, -ey], [ex, ey], [-ex, ey]])
+        # split each side so the edges are no longer than the part's edges (the barrier's
+        # point-edge pairs then resolve the contact as finely as the part does)
+        pts = []
+        for i in range(4):
+            a, b = corners[i], corners[(i + 1) % 4]
+            k = max(1, int(np.ceil(np.linalg.norm(b - a) / cm.h)))
+            pts += [a + (b - a) * t for t in np.arange(k) / k]
+        V = np.asarray(pts) @ Q.T + c
+        return V, np.c_[np.arange(len(V)), (np.arange(len(V)) + 1) % len(V)]
+    if dim == 2 and p.kind == "sphere":
+        R = float(p.size[0])
+        k = int(np.ceil(np.pi / np.arccos(1.0 - tol / R)))
+        t = 2 * np.pi * np.arange(k) / k
+        V = np.c_[R * np.cos(t), R * np.sin(t)] + np.asarray(p.centre)[:2]
+        return V, np.c_[np.arange(k), (np.arange(k) + 1) % k]
+    if dim == 3 and p.kind == "cylinder":
+        R, half = float(p.size[0]), float(p.size[1])
+        k = int(np.ceil(np.pi / np.arccos(1.0 - tol / R)))
+        t = 2 * np.pi * np.arange(k) / k
+        nz = max(1, int(np.ceil(2 * half / cm.h)))
+        zs = np.linspace(-half, half, nz + 1)
+        ring = np.c_[R * np.cos(t), R * np.sin(t)]
+        V = np.vstack([np.c_[ring, np.full(k, z)] for z in zs] + [[[0, 0, -half]], [[0, 0, half]]])
+        F = []
+        for j in range(nz):
+            a, b = j * k, (j + 1) * k
+            for i in range(k):
+                i1 = (i + 1) % k
+                F += [[a + i, a + i1, b + i1], [a + i, b + i1, b + i]]
+        c0, c1 = len(V) - 2, len(V) - 1
+        F += [[c0, (i + 1) % k, i] for i in range(k)]
+        F += [[c1, nz * k + i, nz * k + (i + 1) % k] for i in range(k)]
+        V = V @ np.asarray(p.rotation).T + np.asarray(p.centre)
+        return V, np.asarray(F)
+    raise InputError(f"the peer has no collision mesh for a {dim}D {p.kind}")
+
+
+class IpcReference:
+    """The IPC reference of one coupling model (linear elements; see the module docstring)."""
+
+    def __init__(self, cm, opts: PeerOptions):
+        import ipctk
+
+        from simfab.solve.linear import SPDSolver
+
+        self.ipctk, self.cm, self.o = ipctk, cm, opts
+        fem = cm.fem
+        self.dim, self.n = cm.dim, fem.n_vertices
+        facets = np.asarray(cm.contact_facets)
+        self.S = np.unique(facets)  # part boundary vertices in the collision mesh
+        local = np.full(self.n, -1)
+        local[self.S] = np.arange(len(self.S))
+        self.Vb, obj = object_polygon(cm)
+        self.k = len(self.Vb)
+        nS = len(self.S)
+        prim = np.r_[local[facets], obj + nS].astype(np.int32)
+        rest = np.vstack([fem.rest[self.S], self._object_at(float(cm.s_steps[0]))])
+        if self.dim == 2:
+            self.mesh = ipctk.CollisionMesh(np.asfortranarray(rest), np.asfortranarray(prim))
+            tri = np.c_[prim, prim[:, 1]].astype(np.int32)  # edges as degenerate triangles: components
+        else:
+            edges = ipctk.edges(np.asfortranarray(prim))
+            self.mesh = ipctk.CollisionMesh(np.asfortranarray(rest), edges, np.asfortranarray(prim))
+            tri = prim
+        # part-object pairs only: each body is one connected component of the collision mesh
+        self.mesh.can_collide = ipctk.make_connected_components_filter(np.asfortranarray(tri))
+        # collision dofs -> full dofs [part (n dim), object (k dim)]
+        cols = np.r_[self.S, self.n + np.arange(self.k)]
+        rows = np.arange(len(cols))
+        ii = (rows[:, None] * self.dim + np.arange(self.dim)).ravel()
+        jj = (cols[:, None] * self.dim + np.arange(self.dim)).ravel()
+        self.N = (self.n + self.k) * self.dim
+        self.P = sp.csr_matrix((np.ones(len(ii)), (ii, jj)), shape=(len(ii), self.N))
+        self.part_free = np.asarray(cm.free, bool).ravel()
+        self.solver = SPDSolver()
+        self.barrier = ipctk.ClampedLogBarrier()
+        self.ccd = ipctk.TightInclusionCCD(conservative_rescaling=0.8)
+        self.bp = ipctk.BroadPhase.make_default() if hasattr(ipctk.BroadPhase, "make_default") else None
+        lo, hi = rest.min(0), rest.max(0)
+        self.diag = float(np.linalg.norm(hi - lo))
+        area = float(np.sum(fem.volumes)) if hasattr(fem, "volumes") else None
+        vol = area * (fem.thickness if self.dim == 2 else 1.0) if area else None
+        self.mass = opts.density * (vol if vol else 1.0) / self.n
+        self.kappa = None
+        self.kappa_max = None
+
+    # -- geometry ------------------------------------------------------------------------
+    def _object_at(self, s: float) -> np.ndarray:
+        R, p = self.cm.pose(s)
+        V3 = np.zeros((self.k if hasattr(self, "k") else len(self.Vb), 3))
+        V3[:, : self.dim] = self.Vb
+        return (V3 @ R.T + p)[:, : self.dim]
+
+    def _collision_vertices(self, z: np.ndarray) -> np.ndarray:
+        Z = z.reshape(-1, self.dim)
+        return np.asfortranarray(np.vstack([Z[self.S], Z[self.n:]]))
+
+    # -- energy --------------------------------------------------------------------------
+    def _terms(self, z, need_h: bool, al, fric):
+        """Total energy, gradient (N,) and Hessian (CSR or None) at z, the barrier's collisions."""
+        from simfab.fem.elastic import energy_gradient, energy_gradient_hessian
+
+        ipctk, dim, n = self.ipctk, self.dim, self.n
+        X = z[: n * dim].reshape(n, dim)
+        if need_h:
+            E, g_el, H_el = energy_gradient_hessian(self.cm.fem, X)
+        else:
+            E, g_el = energy_gradient(self.cm.fem, X)
+        V = self._collision_vertices(z)
+        col = ipctk.NormalCollisions()
+        col.build(self.mesh, V, self.o.dhat)
+        B = ipctk.BarrierPotential(self.barrier, self.o.dhat, self.kappa)
+        f = float(E) + B(col, self.mesh, V)
+        gc = B.gradient(col, self.mesh, V)
+        if fric is not None:
+            tc, V0, D = fric
+            U = np.asfortranarray(V - V0)
+            f += D(tc, self.mesh, U)
+            gc = gc + D.gradient(tc, self.mesh, U)
+        g = np.zeros(self.N)
+        g[: n * dim] = np.asarray(g_el).ravel()
+        g += self.P.T @ gc
+        kA, lam, target = al
+        y = z[n * dim:]
+        if kA is not None:
+            r = y - target
+            f += 0.5 * kA * r @ r - lam @ r
+            g[n * dim:] += kA * r - lam
+        H = None
+        if need_h:
+            Hc = B.hessian(col, self.mesh, V, ipctk.PSDProjectionMethod.CLAMP)
+            if fric is not None:
+                Hc = Hc + D.hessian(tc, self.mesh, U, ipctk.PSDProjectionMethod.CLAMP)
+            Hel = sp.csr_matrix(H_el)
+            pad = sp.block_diag([Hel, sp.csr_matrix((self.k * dim, self.k * dim))], format="csr")
+            H = pad + self.P.T @ sp.csr_matrix(Hc) @ self.P
+            diag = np.zeros(self.N)
+            diag[n * dim:] = kA if kA is not None else 0.0
+            diag[: n * dim] = self._reg
+            H = (H + sp.diags(diag)).tocsr()
+        return f, g, H, col, V, E
+
+    # -- one step ------------------------------------------------------------------------
+    def _normals(self, z):
+        """(tangential collisions, their normal force magnitudes) at state z (IPC's lagged friction)."""
+        ipctk = self.ipctk
+        V = self._collision_vertices(z)
+        col = ipctk.NormalCollisions()
+        col.build(self.mesh, V, self.o.dhat)
+        tc = ipctk.TangentialCollisions()
+        tc.build(self.mesh, V, col, ipctk.BarrierPotential(self.barrier, self.o.dhat, self.kappa), self.o.mu)
+        return tc, np.array([c.normal_force_magnitude for c in _tangential(tc)])
+
+    def step(self, z: np.ndarray, s: float) -> tuple[np.ndarray, int]:
+        """Solve the step moving O to its pose at s starting from z; (z, Newton iterations)."""
+        dim, n = self.dim, self.n
+        target = self._object_at(s).ravel()
+        move = float(np.linalg.norm(target - z[n * dim:]))
+        if self.o.mu == 0:
+            return self._solve_al(z, target, move, None)
+        V_start = self._collision_vertices(z)
+        tc, normals = self._normals(z)
+        iters = 0
+        for _lag in range(self.o.max_lag):
+            fric = (tc, V_start, self.ipctk.FrictionPotential(self.o.eps_v))
+            z, it = self._solve_al(z, target, move, fric)
+            iters += it
+            tc, new = self._normals(z)
+            scale = max(new.max(initial=0.0), normals.max(initial=0.0))
+            if scale == 0 or (len(new) == len(normals) and np.max(np.abs(new - normals)) <= self.o.lag_tol * scale):
+                break
+            normals = new
+        return z, iters
+
+    def _solve_al(self, z, target, move, fric):
+        """The step's augmented-Lagrangian loop, then Newton with O fixed at its target."""
+        ipctk, dim, n = self.ipctk, self.dim, self.n
+        kA = self.o.al_kappa_rel * self._kmean
+        lam = np.zeros_like(target)
+        iters = 0
+        free_al = np.r_[self.part_free, np.ones(self.k * dim, bool)]
+        for _outer in range(30):
+            y = z[n * dim:]
+            if np.linalg.norm(y - target) <= AL_SWITCH * max(move, 1e-300):
+                V0 = self._collision_vertices(z)
+                z1 = z.copy()
+                z1[n * dim:] = target
+                if ipctk.compute_collision_free_stepsize(self.mesh, V0, self._collision_vertices(z1),
+                                                         narrow_phase_ccd=self.ccd) >= 1.0:
+                    z = z1
+                    break
+            d_before = float(np.linalg.norm(y - target))
+            z, it = self._newton(z, free_al, (kA, lam, target), fric)
+            iters += it
+            d_after = float(np.linalg.norm(z[n * dim:] - target))
+            if d_after <= AL_SWITCH * max(move, 1e-300):
+                continue
+            if d_before > 0 and 1.0 - d_after / d_before < 0.99:  # IPC: eta below 0.99 -> stiffer
+                kA *= 2.0
+            else:
+                lam = lam - kA * (z[n * dim:] - target)
+        else:
+            raise RuntimeError("augmented Lagrangian did not reach the object's pose")
+        free = np.r_[self.part_free, np.zeros(self.k * dim, bool)]
+        z, it = self._newton(z, free, (None, None, None), fric)
+        return z, iters + it
+
+    def _newton(self, z, free, al, fric):
+        ipctk = self.ipctk
+        idx = np.flatnonzero(free)
+        f, g, H, col, V, _ = self._terms(z, True, al, fric)
+        prev_d = col.compute_minimum_distance(self.mesh, V) if len(col) else np.inf
+        for it in range(self.o.max_newton):
+            if np.max(np.abs(g[idx]), initial=0.0) <= self.o.grad_tol:
+                return z, it
+            Hf = H[idx][:, idx]
+            dx = np.zeros(self.N)
+            dx[idx] = self.solver.solve(Hf, -g[idx])
+            z1 = z + dx
+            alpha = ipctk.compute_collision_free_stepsize(self.mesh, V, self._collision_vertices(z1),
+                                                          narrow_phase_ccd=self.ccd)
+            alpha = min(1.0, alpha)
+            while True:
+                zt = z + alpha * dx
+                ft = self._terms(zt, False, al, fric)[0]
+                if ft <= f or alpha < 1e-12:
+                    break
+                alpha *= 0.5
+            z = zt
+            f, g, H, col, V, _ = self._terms(z, True, al, fric)
+            d = col.compute_minimum_distance(self.mesh, V) if len(col) else np.inf
+            if np.isfinite(d) and np.isfinite(prev_d):
+                k1 = ipctk.update_barrier_stiffness(prev_d, d, self.kappa_max, self.kappa, self.diag)
+                if k1 != self.kappa:
+                    self.kappa = k1
+                    f, g, H, col, V, _ = self._terms(z, True, al, fric)
+            prev_d = d
+        raise RuntimeError(f"reference Newton did not converge in {self.o.max_newton} iterations "
+                           f"(|g| {np.max(np.abs(g[idx])):.3g} N)")
+
+    # -- the run -------------------------------------------------------------------------
+    def run(self, poses: list) -> list:
+        """Solve O's poses ``poses`` [(s, phase)] in order from the rest shape; one PeerStep each."""
+        from simfab.fem.elastic import energy_gradient_hessian
+
+        ipctk, dim, n = self.ipctk, self.dim, self.n
+        z = np.r_[self.cm.fem.rest.ravel(), self._object_at(poses[0][0]).ravel()]
+        _, _, H_el = energy_gradient_hessian(self.cm.fem, self.cm.fem.rest)
+        self._kmean = float(np.mean(H_el.diagonal()))
+        self._reg = 1e-8 * self._kmean
+        # IPC's initial barrier stiffness from the elastic and barrier gradients at the start; the
+        # mass scale of a quasi-static problem is the elastic stiffness per dof (M / dt^2 in IPC's
+        # incremental potential)
+        V = self._collision_vertices(z)
+        col = ipctk.NormalCollisions()
+        col.build(self.mesh, V, self.o.dhat)
+        gb = ipctk.BarrierPotential(self.barrier, self.o.dhat, 1.0).gradient(col, self.mesh, V)
+        ge = np.zeros(len(gb))
+        self.kappa, self.kappa_max = ipctk.initial_barrier_stiffness(self.diag, self.barrier, self.o.dhat,
+                                                                     self._kmean, ge, gb)
+        out = []
+        fixed = np.flatnonzero(~self.part_free)
+        for s, phase in poses:
+            z, it = self.step(z, s)
+            _, g, _, _, _, E = self._terms(z, False, (None, None, None), None)
+            u = self.cm.direction(s)
+            gfix = np.zeros(n * dim)
+            gfix[fixed] = g[fixed]
+            F = float(np.sum(gfix.reshape(n, dim) @ u))
+            out.append(PeerStep(s=float(s), phase=phase, force=F, energy=float(E), iterations=it, kappa=self.kappa))
+        return out
+
+
+def _tangential(tc) -> list:
+    out = []
+    for name in ("vv_collisions", "ev_collisions", "ee_collisions", "fv_collisions"):
+        out += list(getattr(tc, name, []))
+    return out
+
+
+# -- the comparison ---------------------------------------------------------------------------
+SCENES = ("snapfit2d", "cclamp2d", "clip3d")
+SNAPFIT_ALPHA = 30.0
+
+
+def case_model(scene: str, mu: float):
+    """The coupling model of a peer case on linear elements (the reference's elements)."""
+    from simfab.errors import InputError
+
+    if scene == "snapfit2d":
+        from simfab.verification.snapfit import snapfit_model
+
+        return snapfit_model(SNAPFIT_ALPHA, mu)
+    from simfab.coupling.scene import load_coupling_scene
+
+    over = {"simulation": {"element_order": 1}, "contact": {"friction": mu}}
+    if scene == "clip3d":
+        over["compliant"] = {"target_elements": 1040, "layers": 1, "segments": 48}
+    elif scene != "cclamp2d":
+        raise InputError(f"--scenes: unknown peer scene {scene!r} (choose from {', '.join(SCENES)})")
+    return load_coupling_scene(scene, overrides=over)
+
+
+def compare(scene: str, mu: float) -> dict:
+    """simfab's run and the reference's on one case: figures, differences, seconds, iterations."""
+    from simfab.coupling import config as C
+    from simfab.coupling.profile import analyze_run
+    from simfab.coupling.simulate import simulate
+
+    cm = case_model(scene, mu)
+    t0, c0 = time.perf_counter(), time.process_time()
+    res = simulate(cm)
+    t_s, c_s = time.perf_counter() - t0, time.process_time() - c0
+    poses = [(float(r.s), "insert") for r in res.steps] + [(float(r.s), "remove") for r in res.removal]
+    opts = PeerOptions(dhat=float(cm.dhat), grad_tol=C.NEWTON_GRAD_TOL_REL * float(cm.force_scale), mu=float(mu),
+                       eps_v=float(cm.contact.friction_eps_rel) * float(cm.h), lag_tol=float(cm.contact.lag_tol),
+                       max_lag=int(cm.contact.max_lag_iterations))
+    t0, c0 = time.perf_counter(), time.process_time()
+    ref = IpcReference(cm, opts)
+    steps = ref.run(poses)
+    t_r, c_r = time.perf_counter() - t0, time.process_time() - c0
+    ins, rem = steps[: len(res.steps)], steps[len(res.steps):]
+    peer_res = dataclasses.replace(
+        res, steps=[dataclasses.replace(r, force=p.force, energy=p.energy) for r, p in zip(res.steps, ins)],
+        removal=[dataclasses.replace(r, force=p.force, energy=p.energy) for r, p in zip(res.removal, rem)])
+    a, b = analyze_run(res), analyze_run(peer_res)
+    fs = {k: float(getattr(a, k)) for k in FIGURES}
+    fr = {k: float(getattr(b, k)) for k in FIGURES}
+    peak_f = max(abs(fs["F_in"]), abs(fs["F_rm"]), 1e-300)
+    rel = {k: ((fr[k] - fs[k]) / (abs(fs[k]) if k == "E_max" else peak_f)) for k in FIGURES}
+    n_s = len(res.steps) - 1 + len(res.removal)
+    it_s = int(sum(r.iterations for r in res.steps[1:]) + sum(r.iterations for r in res.removal))
+    it_r = int(sum(p.iterations for p in steps[1:]))
+    return {
+        "scene": scene, "friction": mu, "elements": int(cm.fem.n_elements), "element_order": 1,
+        "object_collision_vertices": int(ref.k), "dhat": float(cm.dhat), "records": n_s,
+        "simfab": {**fs, "category": a.category, "seconds": round(t_s, 3), "cpu_seconds": round(c_s, 3),
+                   "newton_iterations": it_s, "iterations_per_step": round(it_s / max(1, n_s), 2)},
+        "ipc": {**fr, "category": b.category, "seconds": round(t_r, 3), "cpu_seconds": round(c_r, 3),
+                "newton_iterations": it_r, "iterations_per_step": round(it_r / max(1, n_s), 2),
+                "kappa_final": float(ref.kappa), "max_iterations_in_a_step": int(max(p.iterations for p in steps))},
+        # relative to E_max for E_max, to the larger of simfab's F_in and F_rm for the forces
+        "relative_difference": {k: round(v, 4) for k, v in rel.items()},
+        "speed_ratio": round(t_r / t_s, 2), "speed_ratio_cpu": round(c_r / c_s, 2),
+        "profile": {"s": [p.s for p in steps], "phase": [p.phase for p in steps],
+                    "force_simfab": [float(r.force) for r in [*res.steps, *res.removal]],
+                    "force_ipc": [p.force for p in steps]},
+    }
+
+
+def plot(row: dict, path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pr = row["profile"]
+    s, ph = np.asarray(pr["s"]) * 1e3, np.asarray(pr["phase"])
+    fig, ax = plt.subplots(figsize=(6.4, 4))
+    for phase, style in (("insert", "-"), ("remove", "--")):
+        m = ph == phase
+        if m.any():
+            ax.plot(s[m], np.asarray(pr["force_simfab"])[m], "o" + style, ms=3, label=f"simfab ({phase})")
+            ax.plot(s[m], np.asarray(pr["force_ipc"])[m], "x" + style, ms=4, label=f"IPC reference ({phase})")
+    ax.set_xlabel("path length s [mm]")
+    ax.set_ylabel("insertion force F [N] (resisting < 0)")
+    ax.set_title(f"{row['scene']}, mu = {row['friction']:g}: simfab vs ipctk IPC reference")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def format_table(rows: list) -> str:
+    head = (f"{'scene':10s} {'mu':>4s} {'fig':6s} {'simfab':>10s} {'IPC':>10s} {'rel.diff':>9s}")
+    lines = [head]
+    for r in rows:
+        for k in FIGURES:
+            lines.append(f"{r['scene']:10s} {r['friction']:>4g} {k:6s} {r['simfab'][k]:>10.4g} {r['ipc'][k]:>10.4g} "
+                         f"{100 * r['relative_difference'][k]:>8.2f}%")
+        lines.append(f"{r['scene']:10s} {r['friction']:>4g} wall s {r['simfab']['seconds']:>10.2f} "
+                     f"{r['ipc']['seconds']:>10.2f}  ratio {r['speed_ratio']:.1f} (cpu {r['speed_ratio_cpu']:.1f}); "
+                     f"it/step {r['simfab']['iterations_per_step']} vs {r['ipc']['iterations_per_step']}")
+    return "\n".join(lines)
+
+
+def run(argv) -> dict:
+    from simfab.errors import InputError
+
+    ap = argparse.ArgumentParser(prog="bench peer")
+    ap.add_argument("--scenes", default=",".join(SCENES))
+    ap.add_argument("--frictions", default="0,0.3")
+    ap.add_argument("--plot", default=None, help="directory for the force-profile PNGs")
+    a = ap.parse_args(argv)
+    try:
+        frictions = [float(f) for f in a.frictions.split(",")]
+    except ValueError:
+        raise InputError("--frictions must be comma-separated numbers") from None
+    scenes = a.scenes.split(",")
+    for sc in scenes:
+        if sc not in SCENES:
+            raise InputError(f"--scenes: unknown peer scene {sc!r} (choose from {', '.join(SCENES)})")
+    rows = []
+    for sc in scenes:
+        for mu in frictions:
+            row = compare(sc, mu)
+            if a.plot:
+                os.makedirs(a.plot, exist_ok=True)
+                p = os.path.join(a.plot, f"peer_{sc}_mu{mu:g}.png")
+                plot(row, p)
+                row["plot"] = p
+            rows.append(row)
+    return {"benchmark": "peer", "reference": "IPC (Li et al. 2020) on ipctk", "rows": rows,
+            "table": format_table(rows)}
