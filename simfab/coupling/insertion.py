@@ -110,8 +110,8 @@ class CouplingResult(Result):
         return {**d, **paths}
 
 
-#: Override keys of the scene's [simulation] table (``InsertionOptions``) and [contact] table.
 def _table_keys() -> dict[str, str]:
+    """Option name -> its table: the fields of [simulation] (``InsertionOptions``) and [contact]."""
     from simfab.coupling.config import ContactOptions, InsertionOptions
 
     keys = {f.name: "simulation" for f in dataclasses.fields(InsertionOptions)}

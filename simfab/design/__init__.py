@@ -12,12 +12,10 @@ Optimization").
 - :mod:`simfab.design.modification` - the Laplacian editing energy E_L of the boundary
 - :mod:`simfab.design.brief` - the design brief ([design] table) and its constraint penalties
 - :mod:`simfab.design.anneal` - simulated annealing (seeded, exponential cooling)
-- :mod:`simfab.design.gradient` - the gradient method: a trust-region SQP on the profile's adjoint
-  sensitivities (the default optimizer)
+- :mod:`simfab.design.gradient` - the default optimizer: a trust-region SQP on adjoint sensitivities
 - :mod:`simfab.design.problem` - the design problem and the evaluation of one design: candidate ->
   validity -> insertion (stopped once provably rejected) -> objective; rebuilt from its scene in a worker
-- :mod:`simfab.design.optimize` - the annealing loop over the problem's designs (:func:`optimize_anneal`),
-  the optimizer's record and its typed history rows
+- :mod:`simfab.design.optimize` - the annealing loop (``optimize_anneal``), typed history rows
 - :mod:`simfab.design.parallel` - speculative evaluation of proposals on worker processes
 - :mod:`simfab.design.stress` - the von Mises stress averaged over a critical distance (yield)
 - :mod:`simfab.design.verify` - the design on refined meshes: mesh-converged figures, corrections
@@ -25,11 +23,8 @@ Optimization").
 - :mod:`simfab.design.study` - the handle-placement study
 - :mod:`simfab.design.synthesis` - 2D -> 3D: extrusion and revolution of an optimized section
 - :mod:`simfab.design.scene` - design scenes (a coupling scene with a [design] table, keep sites)
-- :mod:`simfab.design.pipeline` - :func:`run` (``simfab couple optimize``): load, place, optimize
-  (gradient, annealing, or annealing restarts on Dask), mesh check and correction rounds -> the
-  typed :class:`DesignResult`; written with ``out``
-
-``simfab.design.run(scene, ...)`` (or ``simfab.couple.optimize``) is the entry point.
+- :mod:`simfab.design.pipeline` - the entry point :func:`run` (``simfab couple optimize``,
+  ``simfab.couple.optimize``): load, place, optimize, mesh check, correct -> typed :class:`DesignResult`
 """
 
 __all__ = ["run", "DesignResult"]
