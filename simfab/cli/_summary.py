@@ -30,7 +30,8 @@ KNOWN_UNITS = {"insert_half_size": "m", "gap_half_size": "m", "gaussian_curvatur
                "penetration_tolerance": "m", "time_split": "s", "phase_split": "s",
                # deploy surface: deviations as fractions of the target's diameter (its README quotes percent)
                "deviation.rms": "fraction", "deviation.hausdorff": "fraction", "tuning.rms_before": "fraction",
-               "tuning.hausdorff_before": "fraction", "relaxed.rms_rel": "fraction"}
+               "tuning.hausdorff_before": "fraction", "relaxation.rms_rel": "fraction",
+               "relaxation.max_rel": "fraction"}
 #: the unit that marks a fraction: shown x100 in percent
 FRACTION = "fraction"
 MAX_COLS = 9
