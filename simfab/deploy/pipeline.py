@@ -296,8 +296,10 @@ def bounds(res: SurfaceResult) -> dict:
         missed.append(f"{len(p.unreachable)} gaps unreachable: [pattern] insert_half_sizes (a catalogue spanning "
                       "their growth)" + ("" if cut else ", or cuts: [cuts] max_cones"))
     if len(p.tight_springs):
-        missed.append(f"{len(p.tight_springs)} quads' springs short of their reach: [pattern] springs = \"zigzag\", "
-                      "spring_width" + ("" if cut else ", or cuts: [cuts] max_cones, max_growth"))
+        shrinks = float(np.min(res.flat.u)) < 0  # cones help where the flattening shrank (u < 0) only
+        missed.append(f"{len(p.tight_springs)} quads' springs short of their reach: a narrower [pattern] spring_width "
+                      "(bends further) or a finer spacing" + (", or cuts: [cuts] max_cones, max_growth"
+                                                              if shrinks and not cut else ""))
     return dict(rms=dv.rms, rms_bound=BOUND_RMS, height_error=herr, height_bound=BOUND_HEIGHT,
                 unreachable_gaps=int(len(p.unreachable)), springs_short=int(len(p.tight_springs)), missed=missed)
 
