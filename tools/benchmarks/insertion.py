@@ -123,6 +123,7 @@ def run(argv) -> dict:
     ap.add_argument("--scenes", default="clip3d,claw3d", help="--scaling: scenes")
     ap.add_argument("--factors", default="1,2,4,8", help="--scaling: tet-count factors")
     ap.add_argument("--frictions", default="0,0.3", help="--scaling: friction coefficients")
+    ap.add_argument("--plot", default=None, help="--scaling: PNG path of the time-vs-dofs plot")
     ap.add_argument("--level-timeout", type=float, default=1800.0, help="--scaling: seconds per level at most")
     ap.add_argument("--scaling-level", default=None, help=argparse.SUPPRESS)  # SCENE:FACTOR:MU, one child
     a = ap.parse_args(argv)
@@ -140,7 +141,7 @@ def run(argv) -> dict:
             raise InputError("--factors and --frictions must be comma-separated numbers") from None
         if not all(f > 0 for f in factors) or not all(f >= 0 for f in frictions):
             raise InputError("--factors must be > 0 and --frictions >= 0")
-        return run_scaling(a.scenes.split(","), factors, frictions, a.level_timeout)
+        return run_scaling(a.scenes.split(","), factors, frictions, a.level_timeout, a.plot)
     if a.friction is not None and not a.friction >= 0:
         raise InputError(f"--friction must be >= 0, got {a.friction}")
     only = set(a.only.split(",")) if a.only else None

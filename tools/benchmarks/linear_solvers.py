@@ -213,7 +213,12 @@ def run(argv) -> dict:
     ap.add_argument("--libraries", default=",".join(ALL), help=f"comma-separated subset of {','.join(ALL)}")
     ap.add_argument("--no-3d", action="store_true", help="only the small 2D system")
     ap.add_argument("--table", action="store_true", help="also print a table on stderr")
+    ap.add_argument("--amg", action="store_true",
+                    help="CHOLMOD against pyamg's smoothed-aggregation AMG + CG on clip3d's P2 Hessians at --factors")
+    ap.add_argument("--factors", default="1,2,4,8", help="--amg: clip3d's tet-count factors (insertion --scaling's)")
     a = ap.parse_args(argv)
+    if a.amg:
+        return amg_against_cholmod([float(f) for f in a.factors.split(",")])
     names = [s for s in a.libraries.split(",") if s]
     rng = np.random.default_rng(0)
     out = {"benchmark": "linear_solvers", "reference": None,
@@ -237,3 +242,84 @@ def run(argv) -> dict:
                       f"{r['cpu_per_call_s']:11.4g} {r['max_rel_residual']:9.1e} {str(r['factor_nnz'] or '-'):>11s} "
                       f"{str(r['speedup_vs_cholmod'] or '-'):>10s}", file=sys.stderr)
     return out
+
+
+def rigid_modes(X: np.ndarray) -> np.ndarray:
+    """(n dim, 6 or 3) the rigid-body motions of points X (n, dim): translations and linearized
+    rotations, the near-null space of elasticity that smoothed aggregation keeps on every level."""
+    n, dim = X.shape
+    c = X - X.mean(0)
+    cols = []
+    for k in range(dim):
+        t = np.zeros((n, dim))
+        t[:, k] = 1.0
+        cols.append(t.ravel())
+    axes = [(0, 1), (1, 2), (0, 2)] if dim == 3 else [(0, 1)]
+    for i, j in axes:
+        r = np.zeros((n, dim))
+        r[:, i], r[:, j] = -c[:, j], c[:, i]
+        cols.append(r.ravel())
+    return np.column_stack(cols)
+
+
+def amg_against_cholmod(factors) -> dict:
+    """Per clip3d level (P2, the insertion benchmark's case at FACTOR x its tets; the free block of
+    the PSD Hessian at the rest shape, the rigid-mode regularization included, as the floor uses):
+    CHOLMOD's analysis and numeric factorization + solve (fastest of 2), and pyamg's smoothed
+    aggregation (rigid-body near-null space, symmetric strength, Jacobi prolongation smoothing)
+    setup and CG to a relative residual of 1e-2 (an inexact-Newton forcing term) and 1e-8."""
+    import pyamg
+    from scipy.sparse.linalg import cg
+
+    from benchmarks._scaling import level_overrides
+    from benchmarks.insertion import ORIGINAL_SIZE
+    from simfab.coupling.layout import regularize
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.fem.elastic import energy_gradient_hessian
+    from simfab.solve.linear import SPDSolver
+
+    rows = []
+    for f in factors:
+        base = {k: dict(v) for k, v in ORIGINAL_SIZE["clip3d"].items()}
+        cm = load_coupling_scene("clip3d", overrides={"compliant": level_overrides("clip3d", f, base)})
+        X = np.asarray(cm.fem.rest)
+        _, _, H = energy_gradient_hessian(cm.fem, X)
+        regularize(cm, H)
+        free = np.flatnonzero(np.asarray(cm.free).ravel())
+        A = sp.csr_matrix(H)[free][:, free].tocsr()
+        b = np.random.default_rng(0).standard_normal(len(free))
+        s = SPDSolver()
+        t0, c0 = time.perf_counter(), _cpu()
+        s.solve(A, b)
+        t_first = time.perf_counter() - t0
+        best = (np.inf, np.inf)
+        for _ in range(2):
+            A.data *= 1.0 + 1e-9
+            t0, c0 = time.perf_counter(), _cpu()
+            x = s.solve(A, b)
+            best = min(best, (time.perf_counter() - t0, _cpu() - c0))
+        res_ch = float(np.linalg.norm(A @ x - b) / np.linalg.norm(b))
+        B = rigid_modes(X)[free]
+        t0, c0 = time.perf_counter(), _cpu()
+        ml = pyamg.smoothed_aggregation_solver(A, B=B, symmetry="symmetric", strength=("symmetric", {"theta": 0.0}),
+                                               smooth="jacobi", max_coarse=500)
+        t_setup, c_setup = time.perf_counter() - t0, _cpu() - c0
+        M = ml.aspreconditioner(cycle="V")
+        row = {"factor": f, "tets": int(cm.fem.n_elements), "free_dofs": int(len(free)), "nnz": int(A.nnz),
+               "cholmod_first_s": round(t_first, 3), "cholmod_factor_solve_s": round(best[0], 3),
+               "cholmod_factor_solve_cpu_s": round(best[1], 3), "cholmod_residual": res_ch,
+               "amg_setup_s": round(t_setup, 3), "amg_setup_cpu_s": round(c_setup, 3),
+               "amg_levels": len(ml.levels), "amg_operator_complexity": round(float(ml.operator_complexity()), 2)}
+        for rtol in (1e-2, 1e-8):
+            it = [0]
+            t0, c0 = time.perf_counter(), _cpu()
+            y, info = cg(A, b, rtol=rtol, maxiter=2000, M=M, callback=lambda _x: it.__setitem__(0, it[0] + 1))
+            key = f"cg_{rtol:g}"
+            row[key] = {"iterations": it[0], "seconds": round(time.perf_counter() - t0, 3),
+                        "cpu_seconds": round(_cpu() - c0, 3), "converged": info == 0,
+                        "residual": float(np.linalg.norm(A @ y - b) / np.linalg.norm(b))}
+        rows.append(row)
+        print(f"x{f:g} {row['tets']} tets {row['free_dofs']} dofs: CHOLMOD {row['cholmod_factor_solve_s']} s; "
+              f"AMG setup {row['amg_setup_s']} s, CG 1e-2 {row['cg_0.01']}, 1e-8 {row['cg_1e-08']}", file=sys.stderr)
+    return {"benchmark": "linear_solvers --amg", "system": "clip3d P2 free Hessian at rest (PSD, regularized)",
+            "rows": rows}

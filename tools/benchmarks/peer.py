@@ -60,6 +60,9 @@ class PeerOptions:
     max_newton: int = 300
     al_kappa_rel: float = 1e3  # kappa_A / mean diagonal stiffness of the part
     density: float = 1240.0  # PLA [kg/m^3]: the mass scale of initial_barrier_stiffness
+    psd: str = "CLAMP"  # ipctk's PSD projection of the contact Hessians (CLAMP or ABS)
+    extrapolate: bool = False  # start each step from the last increment repeated (CCD-cut; no gain measured)
+    mass_scale: str = "stiffness"  # "mass": lumped mass; "stiffness": mean diag of H_el
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -168,11 +171,11 @@ class IpcReference:
         self.bp = ipctk.BroadPhase.make_default() if hasattr(ipctk.BroadPhase, "make_default") else None
         lo, hi = rest.min(0), rest.max(0)
         self.diag = float(np.linalg.norm(hi - lo))
-        area = float(np.sum(fem.volumes)) if hasattr(fem, "volumes") else None
-        vol = area * (fem.thickness if self.dim == 2 else 1.0) if area else None
-        self.mass = opts.density * (vol if vol else 1.0) / self.n
+        self.mass = opts.density * float(np.sum(fem.volume)) / self.n  # (2D: volume = area x thickness)
         self.kappa = None
         self.kappa_max = None
+        self._psd = getattr(ipctk.PSDProjectionMethod, opts.psd)
+        self.trace = None  # a list: (AL phase, step length, |g_f|, collisions) per Newton iteration
 
     # -- geometry ------------------------------------------------------------------------
     def _object_at(self, s: float) -> np.ndarray:
@@ -218,9 +221,9 @@ class IpcReference:
             g[n * dim:] += kA * r - lam
         H = None
         if need_h:
-            Hc = B.hessian(col, self.mesh, V, ipctk.PSDProjectionMethod.CLAMP)
+            Hc = B.hessian(col, self.mesh, V, self._psd)
             if fric is not None:
-                Hc = Hc + D.hessian(tc, self.mesh, U, ipctk.PSDProjectionMethod.CLAMP)
+                Hc = Hc + D.hessian(tc, self.mesh, U, self._psd)
             Hel = sp.csr_matrix(H_el)
             pad = sp.block_diag([Hel, sp.csr_matrix((self.k * dim, self.k * dim))], format="csr")
             H = pad + self.P.T @ sp.csr_matrix(Hc) @ self.P
@@ -229,6 +232,14 @@ class IpcReference:
             diag[: n * dim] = self._reg
             H = (H + sp.diags(diag)).tocsr()
         return f, g, H, col, V, E
+
+    def _extrapolated(self, z, z_prev):
+        """The step's start: the last step's increment repeated (the quasi-static analogue of IPC's
+        x + h v initial guess), cut by the CCD so that it stays intersection-free."""
+        z1 = 2.0 * z - z_prev
+        alpha = self.ipctk.compute_collision_free_stepsize(self.mesh, self._collision_vertices(z),
+                                                           self._collision_vertices(z1), narrow_phase_ccd=self.ccd)
+        return z + min(1.0, alpha) * (z1 - z)
 
     # -- one step ------------------------------------------------------------------------
     def _normals(self, z):
@@ -318,6 +329,8 @@ class IpcReference:
                 alpha *= 0.5
             z = zt
             f, g, H, col, V, _ = self._terms(z, True, al, fric)
+            if self.trace is not None:
+                self.trace.append((al[0] is not None, alpha, float(np.max(np.abs(g[idx]))), len(col)))
             d = col.compute_minimum_distance(self.mesh, V) if len(col) else np.inf
             if np.isfinite(d) and np.isfinite(prev_d):
                 k1 = ipctk.update_barrier_stiffness(prev_d, d, self.kappa_max, self.kappa, self.diag)
@@ -346,12 +359,17 @@ class IpcReference:
         col.build(self.mesh, V, self.o.dhat)
         gb = ipctk.BarrierPotential(self.barrier, self.o.dhat, 1.0).gradient(col, self.mesh, V)
         ge = np.zeros(len(gb))
-        self.kappa, self.kappa_max = ipctk.initial_barrier_stiffness(self.diag, self.barrier, self.o.dhat,
-                                                                     self._kmean, ge, gb)
+        m = self._kmean if self.o.mass_scale == "stiffness" else self.mass
+        self.kappa, self.kappa_max = ipctk.initial_barrier_stiffness(self.diag, self.barrier, self.o.dhat, m, ge, gb)
         out = []
         fixed = np.flatnonzero(~self.part_free)
+        z_prev = None
         for s, phase in poses:
+            z_now = z
+            if self.o.extrapolate and z_prev is not None and out and out[-1].phase == phase:
+                z = self._extrapolated(z, z_prev)
             z, it = self.step(z, s)
+            z_prev = z_now
             _, g, _, _, _, E = self._terms(z, False, (None, None, None), None)
             u = self.cm.direction(s)
             gfix = np.zeros(n * dim)
@@ -383,7 +401,10 @@ def case_model(scene: str, mu: float):
         return snapfit_model(SNAPFIT_ALPHA, mu)
     from simfab.coupling.scene import load_coupling_scene
 
-    over = {"simulation": {"element_order": 1}, "contact": {"friction": mu}}
+    # the support held in every axis (for both solvers): the scene's support holds the insertion axis
+    # only and leaves the part's sideways rigid motion to contact, which simfab pins by a Woodbury
+    # update while IPC has no counterpart (its Newton then wanders along the unresisted mode)
+    over = {"simulation": {"element_order": 1, "fix_all_axes": True}, "contact": {"friction": mu}}
     if scene == "clip3d":
         over["compliant"] = {"target_elements": 1040, "layers": 1, "segments": 48}
     elif scene != "cclamp2d":
