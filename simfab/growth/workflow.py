@@ -46,8 +46,8 @@ def _check_result(c, *, extra: dict, files: dict | None, skeleton=None, scene=No
 
 def _check(skeleton, scene, *, stem, loads, strengthen, thin, buckling, best_effort, progress,
            skeleton_path=None, scene_path=None):
-    """Compute (and with ``out`` write) the check of ``skeleton`` in ``scene`` (see :func:`check`);
-    returns (compute, write) so that :func:`run` can check before writing the growth's files."""
+    """Compute the check of ``skeleton`` in ``scene`` (see :func:`check`) and return its writer,
+    ``write(out_dir or None) -> CheckResult``, so that :func:`run` checks before writing the growth's files."""
     from simfab.growth.structure import buckling_factor, check_structure
     from simfab.growth.structure import strengthen as strengthen_support
     from simfab.progress import log
