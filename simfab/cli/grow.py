@@ -47,7 +47,7 @@ DESCRIPTION = (
     "collisions_resolved, collisions_unresolved, dead_ends, dropped_oscillating, seconds_growth [s], watertight, "
     "is_volume, bodies, volume [m^3], nodes_in_skin, overlap_volume [m^3], penetration [m], skin_attempts, "
     "objects_subtracted, objects_not_manifold, seconds_skin [s], skin_units, and the paths skin_stl, skin_ply, "
-    "skeleton_json, usd, mjcf, png, camera_json.\n\n"
+    "skeleton_json, usd, mjcf, png, camera_json, and outputs (label -> path of every file written).\n\n"
     "--json keys (edit): chain, segments_colliding and the other edit figures, nodes, segments, watertight, bodies, "
     "volume [m^3], skin_units, skeleton_json, skin_stl, skin_ply, png (the edit seen through --camera, the "
     "stroke in red).\n\n"

@@ -22,11 +22,12 @@ imported on its own: it loads the FEM), :mod:`~simfab.growth.outputs` (files).
 """
 
 from simfab.growth.config import GrowthParams, ProfileSpec, SymmetrySpec
-from simfab.growth.pipeline import Growth, check, grow, run, skin_result
+from simfab.growth.pipeline import Growth, grow, skin_result
 from simfab.growth.results import CheckResult, GrowthResult, StrengthenedResult
 from simfab.growth.scene import GrowthScene, load_growth_scene
 from simfab.growth.skeleton import Skeleton, smooth_positions
 from simfab.growth.sketch import Camera, edit_chain
+from simfab.growth.workflow import check, run
 
 
 def skin(result: Growth, **kw):
