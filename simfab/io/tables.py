@@ -9,8 +9,8 @@ the flag (``--friction: ...``) for an :class:`Override` carrying its source. A f
 value of the file is reported once through ``log``.
 
 Config types end in ``Config`` (``ContactConfig``, ``DesignConfig``, ``SweepConfig``). A new scene
-table is a dataclass plus one ``load_table`` call; a table whose keys map onto nested dataclasses
-(growth's) loads each sub-table with its own call. msgspec is imported on first use only (``simfab
+table is a dataclass plus one ``load_table`` call; a config nested like its TOML (one dataclass per
+table, e.g. growth's parameters) loads with :func:`load_nested`. msgspec is imported on first use only (``simfab
 --help`` never loads it).
 """
 
@@ -25,7 +25,7 @@ from typing import Any
 
 from simfab.errors import InputError
 
-__all__ = ["FieldError", "Override", "check_keys", "flag_overrides", "load_table", "read_toml"]
+__all__ = ["FieldError", "Override", "check_keys", "flag_overrides", "load_nested", "load_table", "read_toml"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -191,3 +191,52 @@ def _typed(value, tp) -> tuple[Any, str]:
         return msgspec.convert(value, tp, strict=True), ""
     except msgspec.ValidationError as e:
         return value, "must be of type " + str(e).split(" - at ")[0].removeprefix("Expected ").split(", got")[0]
+
+
+def load_nested(cls, doc: Mapping | None, *, file: str | None = None, overrides: Mapping | None = None,
+                log: Callable[[str], None] | None = None):
+    """Build a config whose fields are config dataclasses, one per TOML table (``[colonize]`` ->
+    field ``colonize``), each loaded by :func:`load_table`; the remaining fields are top-level keys.
+
+    A check across tables belongs in ``cls.__post_init__``: a :class:`FieldError` whose key is
+    ``"table.key"`` is then blamed on the flag that gave that value, or on the file's table and key.
+
+    Args:
+        cls: a ``kw_only`` dataclass.
+        doc: the TOML document (None: empty).
+        file: the file it was read from.
+        overrides: {table: {key: value or Override}} for the table fields, {key: value or Override}
+            for the top-level ones.
+        log: as in :func:`load_table`.
+
+    Returns:
+        The ``cls`` instance; InputError naming the file, table and key (or the flag).
+    """
+    doc = dict(doc or {})
+    overrides = dict(overrides or {})
+    hints = typing.get_type_hints(cls)
+    tables = {f.name for f in dataclasses.fields(cls) if dataclasses.is_dataclass(hints[f.name])}
+    top = {f.name for f in dataclasses.fields(cls)} - tables
+    for k, v in doc.items():
+        if k not in tables and k not in top:
+            what = f"table [{k}]" if isinstance(v, Mapping) else f"key {k!r}"
+            raise InputError(f"unknown {what} (known: {', '.join([f'[{t}]' for t in sorted(tables)] + sorted(top))})",
+                             where=file)
+    kw, sources = {}, {}
+    for t in sorted(tables):
+        ov = overrides.get(t) or {}
+        kw[t] = load_table(hints[t], doc.get(t), table_name=t, file=file, overrides=ov, log=log)
+        sources.update({f"{t}.{k}": v.source for k, v in ov.items() if isinstance(v, Override)})
+    for k in top:
+        v = overrides.get(k, doc.get(k))
+        if isinstance(v, Override):
+            sources[k] = v.source
+            v = v.value
+        if v is not None:
+            kw[k] = v
+    try:
+        return cls(**kw)
+    except FieldError as e:
+        if e.key in sources:
+            raise InputError(e.flag_message, where=sources[e.key]) from None
+        raise e.in_file(file) if file else e from None
