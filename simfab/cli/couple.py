@@ -216,14 +216,18 @@ def demo(ctx) -> dict:
     below the yield stress) by the default method (gradient), checked on refined
     meshes (and corrected, if it misses the brief there)."""
     from simfab.design import run as design
+    from simfab.progress import log
 
     out = Path(ctx.out)
     a = simulate("cclamp2d", out=out, device=ctx.device, quiet=ctx.quiet)
     b = simulate("clip3d", out=out, device=ctx.device, quiet=ctx.quiet)
     keys = ("category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises",
             "averaged_von_mises", "yield_stress", "seconds", "usd", "plot_png", "mjcf")
-    d = design("block2d_tight", out=out / "design", iterations=DEMO_DESIGN_ITERATIONS, device=ctx.device,
-               progress=not ctx.quiet).to_json()
+    r = design("block2d_tight", out=out / "design", iterations=DEMO_DESIGN_ITERATIONS, device=ctx.device,
+               progress=not ctx.quiet)
+    for w in r.warnings:  # warnings show even with --quiet
+        log(f"simfab: warning: {w}")
+    d = r.to_json()
     design = {k: d[k] for k in ("feasible", "E_L", "iterations", "simulations", "seconds")}
     design["constraints"] = {k: v["satisfied"] for k, v in d["constraints"].items()}
     design["feasible_mesh_converged"] = d["mesh_check"]["feasible_fine"]
