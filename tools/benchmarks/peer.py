@@ -181,7 +181,7 @@ class IpcReference:
     # -- geometry ------------------------------------------------------------------------
     def _object_at(self, s: float) -> np.ndarray:
         R, p = self.cm.pose(s)
-        V3 = np.zeros((self.k if hasattr(self, "k") else len(self.Vb), 3))
+        V3 = np.zeros((self.k, 3))
         V3[:, : self.dim] = self.Vb
         return (V3 @ R.T + p)[:, : self.dim]
 
