@@ -2,8 +2,8 @@
 against the factorization floor.
 
 ``python tools/bench.py insertion [--only NAME,...] [--repeat K | --budget SECONDS] [--max-repeat K]
-[--friction MU]``; ``--scaling [--scenes clip3d,claw3d] [--factors 1,2,4,8] [--frictions 0,0.3]``: the cost's
-growth with the mesh (tools/benchmarks/_scaling.py).
+[--friction MU]``; ``--scaling [--scenes clip3d,claw3d] [--factors 1,2,4,8] [--frictions 0,0.3]
+[--plot PNG]``: the cost's growth with the mesh (tools/benchmarks/_scaling.py).
 
 Cases (bundled scenes, closest to the sizes of the thesis' timing table):
   cclamp2d  (450 6-node triangles, 35 steps) vs "stand side (2D)"  450 elements, 35 steps

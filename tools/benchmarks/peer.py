@@ -61,6 +61,7 @@ class PeerOptions:
     al_kappa_rel: float = 1e3  # kappa_A / mean diagonal stiffness of the part
     density: float = 1240.0  # PLA [kg/m^3]: the mass scale of initial_barrier_stiffness
     psd: str = "CLAMP"  # ipctk's PSD projection of the contact Hessians (CLAMP or ABS)
+    kappa_per_step: bool = False  # initial_barrier_stiffness again at each step's start (kept when larger)
     extrapolate: bool = False  # start each step from the last increment repeated (CCD-cut; no gain measured)
     mass_scale: str = "stiffness"  # "mass": lumped mass; "stiffness": mean diag of H_el
 
@@ -180,7 +181,7 @@ class IpcReference:
     # -- geometry ------------------------------------------------------------------------
     def _object_at(self, s: float) -> np.ndarray:
         R, p = self.cm.pose(s)
-        V3 = np.zeros((self.k if hasattr(self, "k") else len(self.Vb), 3))
+        V3 = np.zeros((self.k, 3))
         V3[:, : self.dim] = self.Vb
         return (V3 @ R.T + p)[:, : self.dim]
 
@@ -232,6 +233,24 @@ class IpcReference:
             diag[: n * dim] = self._reg
             H = (H + sp.diags(diag)).tocsr()
         return f, g, H, col, V, E
+
+    def _balance_kappa(self, z):
+        """IPC's initial stiffness again at a step's start, from the elastic and barrier gradients
+        there (kept when larger): the barrier balances the elastic forces once contact exists."""
+        from simfab.fem.elastic import energy_gradient
+
+        ipctk, dim, n = self.ipctk, self.dim, self.n
+        V = self._collision_vertices(z)
+        col = ipctk.NormalCollisions()
+        col.build(self.mesh, V, self.o.dhat)
+        if len(col) == 0:
+            return
+        gb = ipctk.BarrierPotential(self.barrier, self.o.dhat, 1.0).gradient(col, self.mesh, V)
+        _, g_el = energy_gradient(self.cm.fem, z[: n * dim].reshape(n, dim))
+        ge = self.P @ np.r_[np.asarray(g_el).ravel(), np.zeros(self.k * dim)]
+        m = self._kmean if self.o.mass_scale == "stiffness" else self.mass
+        k, kmax = ipctk.initial_barrier_stiffness(self.diag, self.barrier, self.o.dhat, m, ge, gb)
+        self.kappa, self.kappa_max = max(self.kappa, k), max(self.kappa_max, kmax)
 
     def _extrapolated(self, z, z_prev):
         """The step's start: the last step's increment repeated (the quasi-static analogue of IPC's
@@ -365,6 +384,8 @@ class IpcReference:
         fixed = np.flatnonzero(~self.part_free)
         z_prev = None
         for s, phase in poses:
+            if self.o.kappa_per_step:
+                self._balance_kappa(z)
             z_now = z
             if self.o.extrapolate and z_prev is not None and out and out[-1].phase == phase:
                 z = self._extrapolated(z, z_prev)
