@@ -1,5 +1,7 @@
 """The defaults decided from the target (simfab.deploy.auto): spacing, cuts, catalogue, layout, tuning."""
 
+import json
+
 import numpy as np
 import pytest
 import trimesh
@@ -111,3 +113,25 @@ def test_bare_mesh_deploys_within_the_bounds_on_the_defaults(name, tmp_path):
     assert b["rms"] <= pipeline.BOUND_RMS and abs(b["height_error"]) <= pipeline.BOUND_HEIGHT
     assert b["unreachable_gaps"] == 0
     assert pipeline.flat_area_covered(r) >= 0.99
+
+
+def test_a_missed_bound_is_said_with_what_would_help(tmp_path, capsys, monkeypatch):
+    """The summary's ``bounds`` and a warning state each missed bound with the key or flag that would
+    help (the bounds tightened here so that a small, quick saddle misses them)."""
+    from simfab.cli import main
+    from simfab.deploy import pipeline
+
+    monkeypatch.setattr(pipeline, "BOUND_RMS", 1e-6)
+    monkeypatch.setattr(pipeline, "BOUND_HEIGHT", 1e-6)
+    scene = tmp_path / "tiny.toml"
+    scene.write_text('[target]\nkind = "saddle"\ndisk_radius = 0.06\ncurvature_radius = 0.1\nrings = 8\n'
+                     '[pattern]\nspacing = 0.03\n[deploy]\nincrements = 4\nperturbation = 0.5\n')
+    out = tmp_path / "o"
+    assert main(["deploy", "surface", str(scene), "--out", str(out), "--json", "--quiet", "--tune", "0",
+                 "--no-mujoco-check"]) == 0
+    cap = capsys.readouterr()
+    b = json.loads(cap.out)["bounds"]
+    assert b["rms"] > b["rms_bound"] and len(b["missed"]) >= 2
+    assert "--tune N" in b["missed"][0] and "point_weight" in b["missed"][1]
+    assert "deployment bound missed" in cap.err and "tiny.toml" in cap.err
+    assert json.loads((out / "surface.json").read_text())["bounds"]["missed"] == b["missed"]
