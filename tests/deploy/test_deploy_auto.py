@@ -135,3 +135,31 @@ def test_a_missed_bound_is_said_with_what_would_help(tmp_path, capsys, monkeypat
     assert "--tune N" in b["missed"][0] and "point_weight" in b["missed"][1]
     assert "deployment bound missed" in cap.err and "tiny.toml" in cap.err
     assert json.loads((out / "surface.json").read_text())["bounds"]["missed"] == b["missed"]
+
+
+def test_run_api_writes_only_with_out_and_keeps_the_json_keys(tmp_path):
+    """``simfab.deploy.run`` (issue 40's shape): a frozen result, nothing written without ``out``; with
+    it, every output file, and ``to_json()`` is the CLI's ``--json`` summary (same keys); ``import
+    simfab.deploy`` loads neither Warp nor MuJoCo."""
+    import dataclasses
+    import subprocess
+    import sys
+
+    import simfab.deploy
+    from simfab.deploy import outputs
+
+    code = "import sys, simfab.deploy; simfab.deploy.run; print('warp' in sys.modules, 'mujoco' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True).stdout.split() == ["False", "False"]
+    scene = tmp_path / "tiny.toml"
+    scene.write_text('[target]\nkind = "saddle"\ndisk_radius = 0.06\ncurvature_radius = 0.1\nrings = 8\n'
+                     '[pattern]\nspacing = 0.03\n[deploy]\nincrements = 4\nperturbation = 0.5\n')
+    r = simfab.deploy.run(str(scene), tune=0, mujoco_check=False)
+    assert r.outputs == {} and not list(tmp_path.glob("*/*")) and 0 < r.rms < 0.05
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.rms = 0.0
+    r2 = simfab.deploy.run(str(scene), out=str(tmp_path / "o"), tune=0, mujoco_check=False)
+    assert set(r2.outputs) == set(outputs.NAMES) and all((tmp_path / "o" / n).is_file() for n in outputs.NAMES.values())
+    j = r2.to_json()
+    assert j["outputs"] == r2.outputs and j["deviation"]["rms"] == r2.rms == r.rms
+    assert json.loads((tmp_path / "o" / "surface.json").read_text()).keys() == j.keys()
