@@ -72,68 +72,28 @@ def run(args) -> dict:
 
 
 def run_surface(args) -> dict:
-    from simfab.deploy import pipeline
-    from simfab.deploy import scene as sc
-    from simfab.deploy import surface_outputs as so
-    from simfab.deploy.lasercut import write_dxf, write_svg
+    import warnings
+
+    import simfab.deploy
+    from simfab.deploy import api
     from simfab.errors import InputError
-    from simfab.io.atomic import atomic_paths, write_json
 
     if not args.target:
         raise InputError("needs a TARGET: scene TOML, bundled name (dome, saddle, mixed, cap80, saddle_steep, "
                          "petal) or mesh file",
                          where="simfab deploy surface")
-    target = (sc.bundled_path(args.target) if args.target in sc.NAMES and not os.path.exists(args.target)
-              else args.target)
-    ov = {"pattern": {}, "material": {}, "tune": {}}
-    for flag, table, field in (("spacing", "pattern", "spacing"), ("beam_width", "pattern", "beam_width"),
-                               ("beam_thickness", "pattern", "beam_thickness"),
-                               ("insert_size", "pattern", "insert_half_size"), ("young", "material", "young"),
-                               ("tune", "tune", "iterations")):
-        v = getattr(args, flag, None)
-        if v is not None:
-            ov[table][field] = v
-    scene = sc.load_scene(target, units=args.units, overrides=ov)
-    size = scene.target.diameter
-    if scene.pattern.spacing > size:  # not one grid cell fits: an input error, not an empty pattern
-        raise InputError(f"{scene.pattern.spacing:.4g} m is larger than the target surface (its bounding-box "
-                         f"diagonal {size:.4g} m)", where="--spacing" if args.spacing is not None
-                         else f"{scene.path}: pattern.spacing")
-    out = os.path.abspath(args.out)
-    if os.path.exists(out) and not os.path.isdir(out):
-        raise InputError("output location exists and is not a folder", where=out)
-    import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
-    from simfab._warp import device as _device
-
-    res = pipeline.run(scene, device=_device(args.device), quiet=args.quiet,
-                       mujoco_check=not getattr(args, "no_mujoco_check", False))
-    names = dict(svg="pattern.svg", dxf="pattern.dxf", flat_png="flattening.png", pattern_png="pattern.png",
-                 deviation_png="deviation.png", usd="deploy.usda", mjcf="deployed.xml", bom="inserts.csv",
-                 json="surface.json")
-    paths = {k: os.path.join(out, v) for k, v in names.items()}
-    summary = pipeline.summary(res)
-    summary["outputs"] = paths
-    if summary["bounds"]["missed"]:  # a missed bound is said, with what would help
-        import warnings
-
-        warnings.warn(f"{scene.path}: deployment bound missed: " + "; ".join(summary["bounds"]["missed"]),
-                      stacklevel=2)
-    with atomic_paths(paths) as tmp:
-        write_svg(tmp["svg"], res.cut)
-        write_dxf(tmp["dxf"], res.cut)
-        so.write_flattening_png(tmp["flat_png"], res)
-        so.write_pattern_png(tmp["pattern_png"], res)
-        so.write_deviation_png(tmp["deviation_png"], res)
-        so.write_usd(tmp["usd"], res)
-        so.write_bom_csv(tmp["bom"], res)
-        if res.sim is None:
-            from simfab.deploy import mjcf_sim
-
-            res.sim = mjcf_sim.build(res.network.model, res.network.state, res.deployment.final,
-                                     density=scene.deploy.density, cfg=scene.mujoco, name="deployed_surface",
-                                     body_geoms=pipeline.insert_geoms(res.pattern, res.network))
-        res.sim.save(tmp["mjcf"])
-        write_json(tmp["json"], summary)
+    flags = {k: getattr(args, k, None) for k in api.OVERRIDES}
+    try:
+        res = simfab.deploy.run(args.target, out=args.out, device=args.device, units=args.units,
+                                progress=None if args.quiet else True,
+                                mujoco_check=not getattr(args, "no_mujoco_check", False), **flags)
+    except InputError as e:
+        if e.where in api.OVERRIDES:  # a keyword of run() is a flag here
+            raise InputError(e.message, where=f"--{e.where.replace('_', '-')}") from None
+        raise
+    summary = res.to_json()
+    if res.missed:  # a missed bound is said, with what would help
+        warnings.warn(f"{summary['scene']}: deployment bound missed: " + "; ".join(res.missed), stacklevel=2)
     return summary
 
 

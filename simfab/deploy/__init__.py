@@ -18,5 +18,20 @@ Inverse design from a target surface (``simfab deploy surface``), one stage per 
 - :mod:`simfab.deploy.network`: the pattern as a rod network with free inserts, deployment;
 - :mod:`simfab.deploy.compare`: deviation from the target after the best rigid alignment;
 - :mod:`simfab.deploy.mjcf_sim`: a MuJoCo scene of a rod network that MuJoCo simulates;
-- :mod:`simfab.deploy.pipeline`, :mod:`simfab.deploy.surface_outputs`: the run and its files.
+- :mod:`simfab.deploy.pipeline`, :mod:`simfab.deploy.surface_outputs`, :mod:`simfab.deploy.outputs`:
+  the run and its files; :mod:`simfab.deploy.auto`: the defaults decided from the target;
+- ``simfab.deploy.run`` (:func:`simfab.deploy.api.run`): the whole deployment as one call, loaded on
+  first use (``import simfab.deploy`` loads no Warp or MuJoCo). ``simfab.deploy.surface`` stays the
+  target-surface module (:mod:`simfab.deploy.surface`): a lazy alias of the same name would be
+  shadowed by the module as soon as anything imports it.
 """
+
+__all__ = ["run"]
+
+
+def __getattr__(name: str):
+    if name == "run":
+        from simfab.deploy.api import run
+
+        return run
+    raise AttributeError(f"module 'simfab.deploy' has no attribute {name!r}")

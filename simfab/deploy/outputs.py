@@ -1,0 +1,57 @@
+"""The files of a surface deployment (``simfab deploy surface --out DIR``) and their names.
+
+:data:`NAMES` maps each output's label to its file name; :func:`write_all` writes them all
+together (none if any write fails): the laser-cut pattern (SVG, DXF), the flattening, pattern
+and deviation PNGs, the USD timeline, the simulatable MuJoCo scene, the bill of materials and
+the JSON summary.
+"""
+
+from __future__ import annotations
+
+import os
+
+NAMES = dict(svg="pattern.svg", dxf="pattern.dxf", flat_png="flattening.png", pattern_png="pattern.png",
+             deviation_png="deviation.png", usd="deploy.usda", mjcf="deployed.xml", bom="inserts.csv",
+             json="surface.json")
+
+
+def paths(out: str) -> dict:
+    """Label -> path of every output in folder ``out``."""
+    out = os.path.abspath(out)
+    return {k: os.path.join(out, v) for k, v in NAMES.items()}
+
+
+def write_all(res, summary: dict, out: str) -> dict:
+    """Write every output of a run into ``out`` (atomically: all or none).
+
+    Args:
+        res: the :class:`simfab.deploy.pipeline.SurfaceResult` of the run.
+        summary: its JSON summary (:func:`simfab.deploy.pipeline.summary`, with ``outputs``).
+        out: the output folder.
+
+    Returns:
+        Label -> path of the files written.
+    """
+    from simfab.deploy import mjcf_sim, pipeline
+    from simfab.deploy import surface_outputs as so
+    from simfab.deploy.lasercut import write_dxf, write_svg
+    from simfab.io.atomic import atomic_paths, write_json
+
+    p = paths(out)
+    with atomic_paths(p) as tmp:
+        write_svg(tmp["svg"], res.cut)
+        write_dxf(tmp["dxf"], res.cut)
+        so.write_flattening_png(tmp["flat_png"], res)
+        so.write_pattern_png(tmp["pattern_png"], res)
+        so.write_deviation_png(tmp["deviation_png"], res)
+        so.write_usd(tmp["usd"], res)
+        so.write_bom_csv(tmp["bom"], res)
+        sim = res.sim
+        if sim is None:
+            sc = res.scene
+            sim = mjcf_sim.build(res.network.model, res.network.state, res.deployment.final,
+                                 density=sc.deploy.density, cfg=sc.mujoco, name="deployed_surface",
+                                 body_geoms=pipeline.insert_geoms(res.pattern, res.network))
+        sim.save(tmp["mjcf"])
+        write_json(tmp["json"], summary)
+    return p
