@@ -44,6 +44,22 @@ def _check_result(c, *, extra: dict, files: dict | None, skeleton=None, scene=No
                outputs={k: str(v) for k, v in (files or {}).items() if v is not None}, **kw)
 
 
+def _reached_loads(skeleton, scene, loads: dict) -> None:
+    """InputError naming where a load on a target the support does not reach came from: ``loads``
+    (the ``--load`` flag) or the scene TOML's ``[loads]`` table; before any meshing."""
+    from simfab.growth.structure import load_points
+
+    points = load_points(skeleton)
+    reached = ", ".join(sorted(n for n in scene.target_names if n in points)) or "none"
+    toml = f"{scene.path.with_suffix('.toml')}: [loads]" if scene.path else "scene: [loads]"
+    for where, names in (("--load", list(loads)), (toml, [n for n, _ in scene.structure.loads if n not in loads])):
+        missing = [n for n in names if n not in points]
+        if missing:
+            raise InputError(f"target(s) {', '.join(missing)} not reached by the support, so nothing carries "
+                             f"the load (reached: {reached}); grow until it reaches them or load a reached one",
+                             where=where)
+
+
 def _check(skeleton, scene, *, stem, loads, strengthen, thin, buckling, best_effort, progress,
            skeleton_path=None, scene_path=None):
     """Compute the check of ``skeleton`` in ``scene`` (see :func:`check`) and return its writer,
@@ -60,6 +76,7 @@ def _check(skeleton, scene, *, stem, loads, strengthen, thin, buckling, best_eff
         raise InputError(f"must be a positive finite number, got {strengthen}", where="--strengthen")
     if thin and strengthen is None:
         raise InputError("--thin goes with --strengthen SF", where="--thin")
+    _reached_loads(skeleton, scene, loads)
     merged = {**dict(scene.structure.loads), **loads}
     _say(progress, f"simfab grow check: {stem}: meshing and solving")
     c = check_structure(skeleton, scene, loads=merged, best_effort=best_effort)
@@ -114,6 +131,7 @@ def check(skeleton, *, scene=None, out=None, loads: dict | None = None, strength
     """
     from pathlib import Path
 
+    from simfab.growth.contact import require_ground
     from simfab.growth.skeleton import load_skeleton_json
     from simfab.growth.structure import validate_loads
 
@@ -148,6 +166,7 @@ def check(skeleton, *, scene=None, out=None, loads: dict | None = None, strength
         raise InputError(f"the skeleton has no segments ({len(sk.nodes)} node(s)): nothing to check",
                          where=f"{where}: parent")
     validate_loads(sc)
+    require_ground(sc)
     write = _check(sk, sc, stem=stem or sc.name, loads=dict(loads or {}), strengthen=strengthen, thin=thin,
                    buckling=buckling, best_effort=best_effort, progress=progress, skeleton_path=skeleton_path,
                    scene_path=scene_path)
@@ -178,6 +197,7 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress=None, c
     from pathlib import Path
 
     from simfab.errors import ConvergenceError
+    from simfab.growth.contact import require_ground
     from simfab.growth.outputs import SKIN_FILE_UNITS, write_all
     from simfab.growth.results import GrowthResult
     from simfab.growth.structure import validate_loads
@@ -188,6 +208,7 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress=None, c
     if structural:
         sc0 = as_scene(scene)
         validate_loads(sc0)
+        require_ground(sc0)  # before growing: the check clamps the support to what a root stands on
         unknown = [n for n in (loads or {}) if n not in sc0.target_names]
         if unknown:
             raise InputError(f"unknown target site(s) {', '.join(unknown)} (targets: {', '.join(sc0.target_names)})",

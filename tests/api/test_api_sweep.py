@@ -20,7 +20,8 @@ def test_command_lines_become_api_calls_where_the_area_has_one():
 
     c = command_call(["couple", "simulate", "{scene}", "--steps", "6", "--friction", "0.3", "--seed", "0"])
     assert isinstance(c, ApiCall) and c.command == "couple simulate" and c.args == ("{scene}",)
-    assert c.kwargs["simulation"] == {"steps": 6, "h_in": None} and c.kwargs["contact"] == {"friction": 0.3}
+    assert c.kwargs["simulation"] == {"steps": 6, "h_in": None} and c.kwargs["contact"]["friction"].value == 0.3
+    assert c.kwargs["contact"]["friction"].source == "--friction"  # a bad value is blamed on the spec's flag
     bad = command_call(["couple", "simulate", "{scene}", "--steps", "0"])  # reported by the run (bad_input row)
     assert isinstance(bad, ArgvCall)
 
