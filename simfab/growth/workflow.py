@@ -15,6 +15,7 @@ from simfab.errors import InputError
 from simfab.growth.pipeline import as_scene, grow, skin_result
 from simfab.growth.scene import GrowthScene
 from simfab.growth.skeleton import Skeleton
+from simfab.io.tables import Override
 
 #: GrowthParams field -> the command-line option that sets it (errors name the option the value came from)
 FLAGS = {"branch_length": "--branch-length", "kill": "--kill", "influence": "--influence",
@@ -202,7 +203,10 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress=None, c
             raise
         toml = Path(scene).with_suffix(".toml")
         key = (e.where or "").removeprefix("growth.")
-        if key in FLAGS and overrides.get(key) is not None:  # the value came from the command line
+        given = overrides.get(key)
+        if isinstance(given, Override) and given.value is not None:  # the value came from a flag
+            raise InputError(e.message, where=given.source) from None
+        if key in FLAGS and given is not None:  # the value came from the command line
             raise InputError(e.message, where=FLAGS[key]) from None
         raise e.in_file(toml if toml.is_file() else scene) from None
     s = result.summary()
@@ -227,6 +231,8 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress=None, c
         write_check = _check(result.skeleton, result.scene, stem=name, loads=dict(loads or {}),
                              strengthen=strengthen, thin=thin, buckling=buckling, best_effort=best_effort,
                              progress=progress)
+    for note in result.scene.notes:  # flags that replaced values of the scene file, once the run stands
+        _say(progress, note)
     paths = write_all(result, mesh, Path(out), stem=name) if out is not None else {}
     c = write_check(out) if write_check is not None else None
     s.update({
