@@ -1,65 +1,19 @@
-"""Growth parameters: keyword-only dataclasses, read from a scene's companion TOML.
+"""Growth parameters: keyword-only dataclasses nested like a scene's companion TOML.
 
-Every length is in metres. Parameters left at ``None`` are derived from the design space
-by :func:`resolve` (see :class:`Resolved`), so that a typical scene needs no tuning.
+One config per TOML table (every table and key optional; the full layout with defaults is in
+``scenes/growth/README.md``): ``[growth]`` :class:`GrowthConfig` (mode, attractors, influence,
+kill, branch_length, box, ...), ``[radius]`` :class:`RadiusConfig` (r = r_min + (r_max - r_min)
+exp(-decay age)), ``[smoothing]`` :class:`SmoothingConfig` (v += lambda1 Lap(v) + lambda2
+Lap(Lap(v))), ``[symmetry]`` :class:`SymmetryConfig`, ``[profile]`` :class:`ProfileConfig`,
+``[stages]`` :class:`StagesConfig`, ``[skin]`` :class:`SkinConfig`; together :class:`GrowthParams`
+(whose old flat names, e.g. ``p.attractors``, still read). ``[material]`` :class:`MaterialConfig`
+and ``[loads]`` (target site -> force [N]) make the structural check's :class:`StructureConfig`.
 
-TOML layout (all tables and keys optional; see ``scenes/growth/README.md``)::
-
-    [growth]
-    mode = "volume"            # "volume" | "surface" | "profile"
-    attractors = 2000
-    influence = 0.05           # [m] attractor influence distance
-    kill = 0.012               # [m] attractor kill distance
-    branch_length = 0.006      # [m] L
-    box = [[x0, y0, z0], [x1, y1, z1]]   # design box (default: bounding box of the objects)
-    surface_objects = ["egg"]  # surface mode: bodies to sample (default: all)
-    max_steps = 400
-    max_nodes = 50000
-    max_trials = 32            # random directions tried when a branch hits an obstacle
-    seed = 0                   # seed of grow() when none is given (the CLI always passes --seed, default 0)
-
-    [radius]                   # r = r_min + (r_max - r_min) exp(-k age)
-    r_min = 0.0015
-    r_max = 0.004
-    decay = 0.05               # k [1/step]
-    age = "front"              # "front": age = birth step (roots thickest);
-                               # "since_birth": age = steps lived until the end (tips thickest)
-
-    [smoothing]                # v += l1 Lap(v) + l2 Lap(Lap(v))
-    iterations = 10
-    lambda1 = 0.2
-    lambda2 = 0.1
-
-    [symmetry]                 # mirror-symmetric growth (also enabled by --symmetric)
-    enabled = true
-    point = [0, 0, 0]
-    normal = [1, 0, 0]
-
-    [profile]                  # mode = "profile": closed 2D profile swept along u x v
-    origin = [0, 0, 0]
-    u = [1, 0, 0]
-    v = [0, 0, 1]
-    points = [[u0, v0], [u1, v1], ...]
-    depth = [-0.01, 0.01]      # sweep range along the view direction u x v [m]
-
-    [stages]                   # guided progressive growth: target site names per stage
-    targets = [["target_0", "target_1"], ["target_2"]]
-
-    [skin]
-    segments = 12              # circular resolution of joint spheres (rounded up to a multiple of 4)
-    subtract_objects = true    # carve the objects out of the skin
-    tolerance = 0.0            # [m] largest allowed penetration of the skin into an object
-
-    [material]                 # structural check (simfab grow check): the printed material
-    name = "PLA"               # built-in base material (PLA, VeroWhite); the keys below override it
-    youngs_modulus = 3.5e9     # [Pa]
-    poisson_ratio = 0.36       # [-]
-    yield_stress = 60e6        # [Pa] von Mises yield stress
-    density = 1240.0           # [kg/m^3]
-    critical_distance = 5e-4   # [m] radius the von Mises stress is averaged over (0: the largest point value)
-
-    [loads]                    # structural check: extra force per target site [N], world frame
-    target_0 = [0.0, 0.0, -2.0]
+Each table loads through :func:`simfab.io.tables.load_table`: an unknown table or key is refused
+naming the file, table and key; a refused value names ``FILE: table.key`` or, when it came from a
+flag (:class:`simfab.io.tables.Override`), the flag. Every length is in metres. Parameters left at
+``None`` are derived from the design space by :func:`resolve` (see :class:`Resolved`), which also
+checks lengths against the box and influence > kill across keys.
 """
 
 from __future__ import annotations

@@ -170,8 +170,10 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress=None, c
         best_effort: keep a growth that leaves targets unreached, and check a support that leaves a
             weight without a load path (both warn instead of failing).
         loads, strengthen, thin, buckling: as :func:`check`. stem: output file stem (default: the scene's name).
-        **overrides: :class:`simfab.growth.config.GrowthParams` fields (``attractors``, ``kill``,
-            ``symmetric``, ...; None = keep the scene's).
+        **overrides: :class:`simfab.growth.config.GrowthParams` flat names (``attractors``, ``kill``,
+            ``symmetric``, ...; None = keep the scene's), a value or a :class:`simfab.io.tables.Override`
+            (an error then names its flag; a note that it replaced a value of the scene file goes to
+            ``progress`` once the growth stands).
 
     Returns:
         :class:`simfab.growth.results.GrowthResult`.

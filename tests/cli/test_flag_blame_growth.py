@@ -88,3 +88,16 @@ def test_a_flag_over_a_value_of_the_file_is_noted_once(tmp_path):
     with pytest.raises(InputError) as e:  # a bad flag value through the library: still the flag's name
         scene.with_params(attractors=Override(0, "--attractors"))
     assert str(e.value) == "--attractors: must be positive, got 0"
+
+
+def test_the_note_is_logged_once_by_a_run_that_stands(tmp_path, capsys):
+    # a strut from the ground to one target: a small growth that succeeds
+    xml = tmp_path / "s.xml"
+    xml.write_text('<mujoco><worldbody><body name="ground"><geom type="box" size="0.03 0.03 0.005" '
+                   'pos="0 0 -0.005"/></body><site name="root_0" pos="0 0 0"/><site name="target_0" pos="0 0 0.04"/>'
+                   '</worldbody></mujoco>')
+    (tmp_path / "s.toml").write_text("[growth]\nattractors = 300\n")
+    code = main(["grow", str(xml), "--attractors", "250", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert err.count("--attractors 250 overrides s.toml [growth] attractors = 300") == 1, err
