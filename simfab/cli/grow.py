@@ -128,13 +128,22 @@ def run(args) -> dict:
     loads, target = _check_options(args)
     res = grow_run(args.scene, out=args.out, seed=args.seed, progress=lambda m: log(m, quiet=args.quiet),
                    check=bool(args.check), best_effort=args.best_effort, loads=loads, strengthen=target,
-                   thin=args.thin, buckling=args.buckling,
-                   attractors=_positive("--attractors", args.attractors),
-                   influence=_positive("--influence", args.influence), kill=_positive("--kill", args.kill),
-                   branch_length=_positive("--branch-length", args.branch_length), mode=args.mode,
-                   symmetric=args.symmetric, smoothing_iterations=_nonneg(args.smooth_iterations),
-                   max_steps=_positive("--max-steps", args.max_steps))
+                   thin=args.thin, buckling=args.buckling, symmetric=args.symmetric, **growth_overrides(args))
     return summary_json(res)
+
+
+def growth_overrides(args) -> dict:
+    """The growth flags given, as :class:`simfab.io.tables.Override` s named after their flags
+    (a refused value, alone or against a scene value, is blamed on the flag)."""
+    from simfab.io.tables import Override, flag_overrides
+
+    ov = flag_overrides({"attractors": _positive("--attractors", args.attractors),
+                         "influence": _positive("--influence", args.influence), "kill": _positive("--kill", args.kill),
+                         "branch_length": _positive("--branch-length", args.branch_length), "mode": args.mode,
+                         "max_steps": _positive("--max-steps", args.max_steps)})
+    if args.smooth_iterations is not None:
+        ov["smoothing_iterations"] = Override(_nonneg(args.smooth_iterations), "--smooth-iterations")
+    return ov
 
 
 #: keys left out of the --json object when None (they do not apply to that run)

@@ -1,104 +1,92 @@
-"""Growth parameters: keyword-only dataclasses, read from a scene's companion TOML.
+"""Growth parameters: keyword-only dataclasses nested like a scene's companion TOML.
 
-Every length is in metres. Parameters left at ``None`` are derived from the design space
-by :func:`resolve` (see :class:`Resolved`), so that a typical scene needs no tuning.
+One config per TOML table (every table and key optional; the full layout with defaults is in
+``scenes/growth/README.md``): ``[growth]`` :class:`GrowthConfig` (mode, attractors, influence,
+kill, branch_length, box, ...), ``[radius]`` :class:`RadiusConfig` (r = r_min + (r_max - r_min)
+exp(-decay age)), ``[smoothing]`` :class:`SmoothingConfig` (v += lambda1 Lap(v) + lambda2
+Lap(Lap(v))), ``[symmetry]`` :class:`SymmetryConfig`, ``[profile]`` :class:`ProfileConfig`,
+``[stages]`` :class:`StagesConfig`, ``[skin]`` :class:`SkinConfig`; together :class:`GrowthParams`
+(whose old flat names, e.g. ``p.attractors``, still read). ``[material]`` :class:`MaterialConfig`
+and ``[loads]`` (target site -> force [N]) make the structural check's :class:`StructureConfig`.
 
-TOML layout (all tables and keys optional; see ``scenes/growth/README.md``)::
-
-    [growth]
-    mode = "volume"            # "volume" | "surface" | "profile"
-    attractors = 2000
-    influence = 0.05           # [m] attractor influence distance
-    kill = 0.012               # [m] attractor kill distance
-    branch_length = 0.006      # [m] L
-    box = [[x0, y0, z0], [x1, y1, z1]]   # design box (default: bounding box of the objects)
-    surface_objects = ["egg"]  # surface mode: bodies to sample (default: all)
-    max_steps = 400
-    max_nodes = 50000
-    max_trials = 32            # random directions tried when a branch hits an obstacle
-    seed = 0                   # seed of grow() when none is given (the CLI always passes --seed, default 0)
-
-    [radius]                   # r = r_min + (r_max - r_min) exp(-k age)
-    r_min = 0.0015
-    r_max = 0.004
-    decay = 0.05               # k [1/step]
-    age = "front"              # "front": age = birth step (roots thickest);
-                               # "since_birth": age = steps lived until the end (tips thickest)
-
-    [smoothing]                # v += l1 Lap(v) + l2 Lap(Lap(v))
-    iterations = 10
-    lambda1 = 0.2
-    lambda2 = 0.1
-
-    [symmetry]                 # mirror-symmetric growth (also enabled by --symmetric)
-    enabled = true
-    point = [0, 0, 0]
-    normal = [1, 0, 0]
-
-    [profile]                  # mode = "profile": closed 2D profile swept along u x v
-    origin = [0, 0, 0]
-    u = [1, 0, 0]
-    v = [0, 0, 1]
-    points = [[u0, v0], [u1, v1], ...]
-    depth = [-0.01, 0.01]      # sweep range along the view direction u x v [m]
-
-    [stages]                   # guided progressive growth: target site names per stage
-    targets = [["target_0", "target_1"], ["target_2"]]
-
-    [skin]
-    segments = 12              # circular resolution of joint spheres (rounded up to a multiple of 4)
-    subtract_objects = true    # carve the objects out of the skin
-    tolerance = 0.0            # [m] largest allowed penetration of the skin into an object
-
-    [material]                 # structural check (simfab grow check): the printed material
-    name = "PLA"               # built-in base material (PLA, VeroWhite); the keys below override it
-    youngs_modulus = 3.5e9     # [Pa]
-    poisson_ratio = 0.36       # [-]
-    yield_stress = 60e6        # [Pa] von Mises yield stress
-    density = 1240.0           # [kg/m^3]
-    critical_distance = 5e-4   # [m] radius the von Mises stress is averaged over (0: the largest point value)
-
-    [loads]                    # structural check: extra force per target site [N], world frame
-    target_0 = [0.0, 0.0, -2.0]
+Each table loads through :func:`simfab.io.tables.load_table`: an unknown table or key is refused
+naming the file, table and key; a refused value names ``FILE: table.key`` or, when it came from a
+flag (:class:`simfab.io.tables.Override`), the flag. Every length is in metres. Parameters left at
+``None`` are derived from the design space by :func:`resolve` (see :class:`Resolved`), which also
+checks lengths against the box and influence > kill across keys.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
 import simfab.growth.tolerances as tol
 from simfab.errors import InputError
 from simfab.fem.materials import PLA, Material, material_by_name
+from simfab.io.tables import FieldError, Override, load_table
 
 MODES = ("volume", "surface", "profile")
+AGES = ("front", "since_birth")
 
 
+# --------------------------------------------------------------------------- value checks
+def _fail(table: str, key: str, message: str):
+    raise FieldError(message, key=key, where=f"{table}.{key}")
+
+
+def _number(obj, table: str, key: str, *, integer=False, positive=True, allow_inf=False) -> None:
+    """Check the number ``obj.<key>`` (None: left to its default) and store it as int/float;
+    FieldError naming ``table.key``. ``allow_inf``: +inf is accepted too."""
+    x = getattr(obj, key)
+    if x is None:
+        return
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        _fail(table, key, f"expected a number, got {x!r}")
+    if integer and not float(x).is_integer():
+        _fail(table, key, f"expected an integer, got {x!r}")
+    if not math.isfinite(float(x)) and not (allow_inf and x == math.inf):
+        _fail(table, key, f"expected a finite number, got {x!r}")
+    if positive and not x > 0:
+        _fail(table, key, f"must be positive, got {x!r}")
+    object.__setattr__(obj, key, int(x) if integer else float(x))
+
+
+def _vec(x, n, where: str, *, key: str | None = None) -> tuple:
+    """``n`` finite numbers as a tuple; FieldError (key ``key``) located at ``where`` otherwise."""
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise FieldError(f"expected {n} numbers, got {x!r}", key=key or where, where=where) from None
+    if a.shape != (n,) or not np.all(np.isfinite(a)):
+        raise FieldError(f"expected {n} finite numbers, got {x!r}", key=key or where, where=where)
+    return tuple(float(v) for v in a)
+
+
+def _integral(v, where):
+    """A TOML float with an integer value (``2000.0``) read as the int it is (a parser of :func:`load_table`)."""
+    return int(v) if isinstance(v, float) and v.is_integer() else v
+
+
+# --------------------------------------------------------------------------- one dataclass per TOML table
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class SymmetrySpec:
-    """Mirror plane through ``point`` (3,) [m] with unit ``normal`` (3,)."""
+class GrowthConfig:
+    """The ``[growth]`` table: attractors and distances of space colonization (``None``: derived
+    from the design space by :func:`resolve`).
 
-    point: tuple = (0.0, 0.0, 0.0)
-    normal: tuple = (1.0, 0.0, 0.0)
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class ProfileSpec:
-    """Closed 2D profile ``points`` (k, 2) [m] in the plane ``origin + a u + b v``, swept along
-    the view direction ``u x v`` over ``depth`` = (d0, d1) [m]."""
-
-    origin: tuple
-    u: tuple
-    v: tuple
-    points: tuple
-    depth: tuple
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class GrowthParams:
-    """User-facing growth parameters (``None`` = derived from the scene, see :func:`resolve`)."""
+    Args:
+        mode: "volume", "surface" or "profile" attractor placement.
+        attractors: number of attractors. influence, kill: attractor influence / kill distance [m].
+        branch_length: growth step L [m]. box: design box ((x0, y0, z0), (x1, y1, z1)) [m].
+        surface_objects: surface mode: the bodies to sample (None: all).
+        target_influence: influence distance of target attractors [m]; infinite by default so that
+            a target keeps pulling its nearest node after every ordinary attractor has died.
+        max_steps, max_nodes, max_trials: step cap, node cap, random directions tried at an obstacle.
+        seed: seed of grow() when none is given.
+    """
 
     mode: str = "volume"
     attractors: int = 2000
@@ -107,31 +95,276 @@ class GrowthParams:
     branch_length: float | None = None
     box: tuple | None = None
     surface_objects: tuple | None = None
-    #: Influence distance of target attractors [m]; infinite by default so that a target
-    #: keeps pulling its nearest node after every ordinary attractor has died.
     target_influence: float = math.inf
     max_steps: int | None = None
     max_nodes: int = 50000
     max_trials: int = 32
+    seed: int = 0
+
+    def __post_init__(self):
+        t = "growth"
+        if self.mode not in MODES:
+            _fail(t, "mode", f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        for key in ("attractors", "max_steps", "max_nodes", "max_trials"):
+            _number(self, t, key, integer=True)
+        _number(self, t, "seed", integer=True, positive=False)
+        for key in ("influence", "kill", "branch_length", "target_influence"):
+            _number(self, t, key, allow_inf=key == "target_influence")
+        if self.box is not None:
+            b = self.box
+            if not (isinstance(b, (list, tuple)) and len(b) == 2):
+                _fail(t, "box", "expected [[x0, y0, z0], [x1, y1, z1]]")
+            lo, hi = _vec(b[0], 3, "growth.box", key="box"), _vec(b[1], 3, "growth.box", key="box")
+            if not all(h > l for l, h in zip(lo, hi)):
+                _fail(t, "box", "box max corner must exceed the min corner on every axis")
+            object.__setattr__(self, "box", (lo, hi))
+        if self.surface_objects is not None:
+            so = self.surface_objects
+            if not (isinstance(so, (list, tuple)) and so and all(isinstance(s, str) for s in so)):
+                _fail(t, "surface_objects", "expected a non-empty list of body names")
+            object.__setattr__(self, "surface_objects", tuple(so))
+
+
+def _exceed(influence: float, kill: float) -> str:
+    return f"influence distance ({influence:.4g} m) must exceed kill distance ({kill:.4g} m)"
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RadiusConfig:
+    """The ``[radius]`` table: branch radius r = r_min + (r_max - r_min) exp(-decay age).
+
+    Args:
+        r_min, r_max: thinnest and thickest radius [m] (None: derived). decay: k [1/step] (None: derived).
+        age: how a node's age is counted: "front" (its birth step, so the root is oldest in
+            growth-front terms and gets r_max) or "since_birth" (steps from its birth to the end of
+            growth, the literal reading; the root then gets r_min).
+    """
+
     r_min: float | None = None
     r_max: float | None = None
-    radius_decay: float | None = None
-    #: How a node's age α is counted: "front" (α = its birth step, so the root is oldest in
-    #: growth-front terms and gets r_max) or "since_birth" (α = steps from its birth to the
-    #: end of growth, the literal reading; the root then gets r_min).
-    radius_age: str = "front"
-    smoothing_iterations: int = 10
+    decay: float | None = None
+    age: str = "front"
+
+    def __post_init__(self):
+        if self.age not in AGES:
+            _fail("radius", "age", f"expected 'front' or 'since_birth', got {self.age!r}")
+        _number(self, "radius", "r_min")
+        _number(self, "radius", "r_max")
+        _number(self, "radius", "decay", positive=False)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SmoothingConfig:
+    """The ``[smoothing]`` table: ``iterations`` of v += lambda1 Lap(v) + lambda2 Lap(Lap(v))."""
+
+    iterations: int = 10
     lambda1: float = 0.2
     lambda2: float = 0.1
-    symmetry: SymmetrySpec | None = None
-    profile: ProfileSpec | None = None
-    stages: tuple | None = None
-    skin_segments: int = 12
+
+    def __post_init__(self):
+        _number(self, "smoothing", "iterations", integer=True, positive=False)
+        _number(self, "smoothing", "lambda1", positive=False)
+        _number(self, "smoothing", "lambda2", positive=False)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SymmetryConfig:
+    """The ``[symmetry]`` table: mirror plane through ``point`` (3,) [m] with ``normal`` (3,)
+    (stored unit length); ``enabled = false`` turns it off."""
+
+    enabled: bool = True
+    point: tuple = (0.0, 0.0, 0.0)
+    normal: tuple = (1.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        n = np.array(_vec(self.normal, 3, "symmetry.normal", key="normal"))
+        if not np.linalg.norm(n) > 0:
+            _fail("symmetry", "normal", "normal must be non-zero")
+        object.__setattr__(self, "normal", tuple(float(x) for x in n / np.linalg.norm(n)))
+        object.__setattr__(self, "point", _vec(self.point, 3, "symmetry.point", key="point"))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ProfileConfig:
+    """The ``[profile]`` table (mode "profile"): closed 2D profile ``points`` (k, 2) [m] in the plane
+    ``origin + a u + b v`` (``u``, ``v`` stored unit length), swept along the view direction
+    ``u x v`` over ``depth`` = (d0, d1) [m]. Every key is required."""
+
+    origin: tuple | None = None
+    u: tuple | None = None
+    v: tuple | None = None
+    points: tuple | None = None
+    depth: tuple | None = None
+
+    def __post_init__(self):
+        for key in ("origin", "u", "v", "points", "depth"):
+            if getattr(self, key) is None:
+                raise FieldError(f"missing key {key!r}", key=key, where="profile")
+        u = np.array(_vec(self.u, 3, "profile.u", key="u"))
+        v = np.array(_vec(self.v, 3, "profile.v", key="v"))
+        if np.linalg.norm(np.cross(u, v)) < 1e-9 * max(np.linalg.norm(u) * np.linalg.norm(v), 1e-300):
+            raise FieldError("u and v must be non-zero and not parallel", key="v", where="profile")
+        pts = self.points
+        if not isinstance(pts, (list, tuple)) or len(pts) < 3:
+            _fail("profile", "points", "a closed profile needs at least 3 points")
+        d = _vec(self.depth, 2, "profile.depth", key="depth")
+        if not d[1] >= d[0]:
+            _fail("profile", "depth", "depth must be [d0, d1] with d1 >= d0")
+        object.__setattr__(self, "points", tuple(_vec(q, 2, "profile.points", key="points") for q in pts))
+        object.__setattr__(self, "depth", d)
+        object.__setattr__(self, "origin", _vec(self.origin, 3, "profile.origin", key="origin"))
+        object.__setattr__(self, "u", tuple(float(x) for x in u / np.linalg.norm(u)))
+        object.__setattr__(self, "v", tuple(float(x) for x in v / np.linalg.norm(v)))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class StagesConfig:
+    """The ``[stages]`` table: guided progressive growth, ``targets`` = target site names per stage."""
+
+    targets: tuple | None = None
+
+    def __post_init__(self):
+        t = self.targets
+        if not (isinstance(t, (list, tuple)) and t
+                and all(isinstance(x, (list, tuple)) and x and all(isinstance(n, str) for n in x) for x in t)):
+            _fail("stages", "targets", "expected a list of non-empty lists of target site names")
+        object.__setattr__(self, "targets", tuple(tuple(x) for x in t))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SkinConfig:
+    """The ``[skin]`` table.
+
+    Args:
+        segments: circular resolution of joint spheres (>= 6). subtract_objects: carve the objects out.
+        tolerance: largest penetration depth [m] of the skin into an object that is accepted (with
+            carving it is 0 up to round-off; without, the run fails above it).
+    """
+
+    segments: int = 12
     subtract_objects: bool = True
-    #: Largest penetration depth [m] of the skin into an object that is accepted (with
-    #: carving it is 0 up to round-off; without, the run fails above it).
-    skin_tolerance: float = 0.0
-    seed: int = 0
+    tolerance: float = 0.0
+
+    def __post_init__(self):
+        _number(self, "skin", "tolerance", positive=False)
+        if self.tolerance < 0:
+            _fail("skin", "tolerance", "must be >= 0")
+        _number(self, "skin", "segments", integer=True)
+        if self.segments < 6:
+            _fail("skin", "segments", "need at least 6 segments")
+        if not isinstance(self.subtract_objects, bool):
+            _fail("skin", "subtract_objects", "expected true or false")
+
+
+#: the tables of :class:`GrowthParams` and their config types (None: the table is optional, absent = off)
+TABLES = {"growth": GrowthConfig, "radius": RadiusConfig, "smoothing": SmoothingConfig, "symmetry": SymmetryConfig,
+          "profile": ProfileConfig, "stages": StagesConfig, "skin": SkinConfig}
+#: the old flat names of the growth parameters -> (table, key)
+FLAT = {**{k: ("growth", k) for k in ("mode", "attractors", "influence", "kill", "branch_length", "box",
+                                       "surface_objects", "target_influence", "max_steps", "max_nodes",
+                                       "max_trials", "seed")},
+        "r_min": ("radius", "r_min"), "r_max": ("radius", "r_max"), "radius_decay": ("radius", "decay"),
+        "radius_age": ("radius", "age"), "smoothing_iterations": ("smoothing", "iterations"),
+        "lambda1": ("smoothing", "lambda1"), "lambda2": ("smoothing", "lambda2"),
+        "skin_segments": ("skin", "segments"), "subtract_objects": ("skin", "subtract_objects"),
+        "skin_tolerance": ("skin", "tolerance")}
+_PARSERS = {"growth": dict.fromkeys(("attractors", "max_steps", "max_nodes", "max_trials", "seed"), _integral),
+            "smoothing": {"iterations": _integral}, "skin": {"segments": _integral}}
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GrowthParams:
+    """Growth parameters nested like the scene's TOML tables (see the module docstring).
+
+    Args:
+        growth, radius, smoothing, skin: the tables' configs (defaults when the table is absent).
+        symmetry, profile, stages: the optional tables (None: absent, or ``[symmetry] enabled = false``).
+        from_file: the ``"table.key"`` s the scene file set (so that a flag replacing one is noted).
+
+    The old flat names (``p.attractors``, ``p.radius_decay``, ``p.skin_tolerance``, ...; :data:`FLAT`)
+    read the nested values; :meth:`of` and :meth:`replace` take them.
+    """
+
+    growth: GrowthConfig = dataclasses.field(default_factory=GrowthConfig)
+    radius: RadiusConfig = dataclasses.field(default_factory=RadiusConfig)
+    smoothing: SmoothingConfig = dataclasses.field(default_factory=SmoothingConfig)
+    symmetry: SymmetryConfig | None = None
+    profile: ProfileConfig | None = None
+    stages: StagesConfig | None = None
+    skin: SkinConfig = dataclasses.field(default_factory=SkinConfig)
+    from_file: frozenset = dataclasses.field(default=frozenset(), compare=False, repr=False)
+
+    @classmethod
+    def of(cls, **values) -> "GrowthParams":
+        """Parameters from flat names (``GrowthParams.of(mode="surface", kill=0.01)``), checked.
+
+        Args:
+            **values: :data:`FLAT` names, or ``symmetry`` / ``profile`` / ``stages`` configs.
+
+        Returns:
+            The parameters; InputError naming the key of a refused value.
+        """
+        return cls().replace(**values)
+
+    def replace(self, *, file: str | None = None, log: Callable[[str], None] | None = None,
+                **values) -> "GrowthParams":
+        """A copy with some values replaced, each table re-checked through :func:`simfab.io.tables.load_table`.
+
+        Args:
+            file: the scene TOML the current values came from (a refused one of its values is
+                located there; a note names it).
+            log: called once per :class:`Override` that replaces a value differing from the default.
+            **values: :data:`FLAT` names -> value or :class:`Override` (its source names the flag in
+                an error); ``symmetry`` / ``profile`` / ``stages``: a config or None (absent).
+
+        Returns:
+            The new parameters; InputError naming the flag or the file, table and key.
+        """
+        unknown = sorted(set(values) - set(FLAT) - {"symmetry", "profile", "stages"})
+        if unknown:
+            raise InputError(f"unknown growth parameter(s) {', '.join(unknown)}")
+        kw = {k: values.pop(k) for k in ("symmetry", "profile", "stages") if k in values}
+        per_table: dict[str, dict] = {}
+        for name, v in values.items():
+            table, key = FLAT[name]
+            per_table.setdefault(table, {})[key] = v
+        if "growth" in per_table:
+            _blame_exceed(self.growth, per_table["growth"])
+        for table, ov in per_table.items():
+            kw[table] = load_table(TABLES[table], self._given(table), table_name=table, file=file,
+                                   overrides=ov, parsers=_PARSERS.get(table), log=log)
+        return dataclasses.replace(self, **kw)
+
+    def _given(self, table: str) -> dict:
+        """The values of a table the scene file set or that differ from their defaults."""
+        cfg = getattr(self, table)
+        return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)
+                if getattr(cfg, f.name) != f.default or f"{table}.{f.name}" in self.from_file}
+
+
+def _blame_exceed(g: GrowthConfig, ov: Mapping) -> None:
+    """The check influence > kill across two keys, blamed on the flag that gave one of them
+    (:func:`resolve` checks it again with derived values, blaming the key given)."""
+    val = {k: (ov[k].value if isinstance(ov[k], Override) else ov[k]) if k in ov else getattr(g, k)
+           for k in ("influence", "kill")}
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < math.inf for v in val.values()):
+        return  # each key's own check speaks first
+    if not val["influence"] > val["kill"]:
+        src = next((ov[k].source for k in ("kill", "influence") if isinstance(ov.get(k), Override)), None)
+        if src is not None:
+            raise InputError(_exceed(val["influence"], val["kill"]), where=src)
+
+
+def _flat_property(table: str, key: str):
+    return property(lambda self: getattr(getattr(self, table), key), doc=f"``[{table}] {key}``")
+
+
+for _name, (_table, _key) in FLAT.items():
+    setattr(GrowthParams, _name, _flat_property(_table, _key))
+
+# the former names (simfab.growth exports them)
+SymmetrySpec = SymmetryConfig
+ProfileSpec = ProfileConfig
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -187,8 +420,10 @@ def resolve(p: GrowthParams, box: np.ndarray, *, area: float | None = None) -> R
         raise InputError(f"branch length, kill and influence distances must be positive (got {L}, {kill}, {infl})",
                          where="growth")
     check_scale(p, box)
-    if not infl > kill:
-        raise InputError(f"influence distance ({infl:.4g} m) must exceed kill distance ({kill:.4g} m)", where="growth")
+    if not infl > kill:  # blamed on kill, or on influence when only it was given (flags: GrowthParams.replace)
+        key = "kill" if p.kill is not None else "influence" if p.influence is not None else None
+        raise FieldError(_exceed(infl, kill), key=f"growth.{key}" if key else "growth",
+                         where=f"growth.{key}" if key else "growth")
     r_max = p.r_max if p.r_max is not None else R_MAX_PER_DIAG * diag
     r_min = p.r_min if p.r_min is not None else R_MIN_PER_R_MAX * r_max
     if not (0 < r_min <= r_max):
@@ -223,36 +458,51 @@ def check_scale(p: GrowthParams, box: np.ndarray) -> None:
 
 
 # --------------------------------------------------------------------------- TOML
-_GROWTH_KEYS = {"mode", "attractors", "influence", "kill", "branch_length", "box", "surface_objects",
-                "target_influence", "max_steps", "max_nodes", "max_trials", "seed"}
-_TABLES = {"growth", "radius", "smoothing", "symmetry", "profile", "stages", "skin", "material", "loads"}
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MaterialConfig:
+    """The ``[material]`` table: the printed material of the structural check.
 
+    Args:
+        name: a built-in base material (PLA, VeroWhite; None: PLA); the keys below override it.
+        youngs_modulus [Pa], poisson_ratio [-] in (-1, 0.5), yield_stress [Pa] (von Mises),
+            density [kg/m^3]: None keeps the base material's.
+        critical_distance: radius [m] the von Mises stress is averaged over (0: the largest point value).
+    """
 
-def _vec(x, n, where):
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InputError(f"expected {n} numbers, got {x!r}", where=where) from None
-    if a.shape != (n,) or not np.all(np.isfinite(a)):
-        raise InputError(f"expected {n} finite numbers, got {x!r}", where=where)
-    return tuple(float(v) for v in a)
+    name: str | None = None
+    youngs_modulus: float | None = None
+    poisson_ratio: float | None = None
+    yield_stress: float | None = None
+    density: float | None = None
+    critical_distance: float = tol.CRITICAL_DISTANCE
 
+    def __post_init__(self):
+        if self.name is not None:
+            if not isinstance(self.name, str):
+                _fail("material", "name", f"expected a material name, got {self.name!r}")
+            try:
+                material_by_name(self.name)
+            except InputError as e:
+                _fail("material", "name", e.message)
+        for key in ("youngs_modulus", "yield_stress", "density"):
+            _number(self, "material", key)
+        _number(self, "material", "poisson_ratio", positive=False)
+        if self.poisson_ratio is not None and not -1.0 < self.poisson_ratio < 0.5:
+            _fail("material", "poisson_ratio", f"must lie in (-1, 0.5), got {self.poisson_ratio}")
+        _number(self, "material", "critical_distance", positive=False)
+        if self.critical_distance < 0:
+            _fail("material", "critical_distance", f"must be >= 0, got {self.critical_distance}")
 
-def _num(x, where, *, integer=False, positive=True, allow_inf=False):
-    """A number from the TOML (``allow_inf``: +inf is accepted too); InputError naming ``where``."""
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
-        raise InputError(f"expected a number, got {x!r}", where=where)
-    if integer and not float(x).is_integer():
-        raise InputError(f"expected an integer, got {x!r}", where=where)
-    if not math.isfinite(float(x)) and not (allow_inf and x == math.inf):
-        raise InputError(f"expected a finite number, got {x!r}", where=where)
-    if positive and not x > 0:
-        raise InputError(f"must be positive, got {x!r}", where=where)
-    return int(x) if integer else float(x)
+    def material(self) -> Material:
+        """The :class:`simfab.fem.materials.Material` (the base material with the given keys replaced)."""
+        base = material_by_name(self.name) if self.name is not None else PLA
+        over = {k: getattr(self, k) for k in ("youngs_modulus", "poisson_ratio", "yield_stress", "density")
+                if getattr(self, k) is not None}
+        return dataclasses.replace(base, name=self.name or base.name, **over) if over else base
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class StructureSpec:
+class StructureConfig:
     """The structural check's inputs from the ``[material]`` and ``[loads]`` tables.
 
     material : the printed material (:class:`simfab.fem.materials.Material`; PLA by default).
@@ -268,164 +518,69 @@ class StructureSpec:
     loads: tuple = ()
 
 
-_MATERIAL_KEYS = {"name", "youngs_modulus", "poisson_ratio", "yield_stress", "density", "critical_distance"}
+StructureSpec = StructureConfig  # the former name
+
+#: every table of a growth scene's TOML ([loads] is free-form: target site name -> force)
+SCENE_TABLES = (*TABLES, "material", "loads")
 
 
-def structure_from_toml(doc: dict, where: str) -> StructureSpec:
-    """:class:`StructureSpec` from a parsed scene TOML (``[material]``, ``[loads]``); InputError
-    names the file, table and key. Target names in ``[loads]`` are checked against the scene's
-    sites by :func:`simfab.growth.scene.load_growth_scene`."""
-    m = doc.get("material", {})
-    if not isinstance(m, dict):
-        raise InputError("expected a table", where=f"{where}: [material]")
-    _check_unknown(m, _MATERIAL_KEYS, f"{where}: [material]")
-    base = PLA
-    if "name" in m:
-        if not isinstance(m["name"], str):
-            raise InputError(f"expected a material name, got {m['name']!r}", where=f"{where}: material.name")
-        try:
-            base = material_by_name(m["name"])
-        except InputError as e:
-            raise InputError(e.message, where=f"{where}: material.name") from None
-    over = {}
-    for key in ("youngs_modulus", "yield_stress", "density"):
-        if key in m:
-            over[key] = _num(m[key], f"{where}: material.{key}")
-    if "poisson_ratio" in m:
-        nu = _num(m["poisson_ratio"], f"{where}: material.poisson_ratio", positive=False)
-        if not -1.0 < nu < 0.5:
-            raise InputError(f"must lie in (-1, 0.5), got {nu}", where=f"{where}: material.poisson_ratio")
-        over["poisson_ratio"] = nu
-    material = dataclasses.replace(base, name=str(m.get("name", base.name)), **over) if over else base
-    radius = tol.CRITICAL_DISTANCE
-    if "critical_distance" in m:
-        radius = _num(m["critical_distance"], f"{where}: material.critical_distance", positive=False)
-        if radius < 0:
-            raise InputError(f"must be >= 0, got {radius}", where=f"{where}: material.critical_distance")
+def check_tables(doc: Mapping, file: str | None) -> None:
+    """Refuse a top-level entry of a growth TOML that is not one of :data:`SCENE_TABLES`.
+
+    Args:
+        doc: the parsed TOML. file: its path.
+
+    Raises:
+        InputError: ``FILE: unknown table [t] (known: [growth], ...)``.
+    """
+    for k, v in doc.items():
+        if k not in SCENE_TABLES:
+            what = f"table [{k}]" if isinstance(v, Mapping) else f"key {k!r}"
+            raise InputError(f"unknown {what} (known: {', '.join(f'[{t}]' for t in sorted(SCENE_TABLES))})",
+                             where=file)
+
+
+def structure_from_toml(doc: dict, where: str) -> StructureConfig:
+    """:class:`StructureConfig` from a parsed scene TOML (``[material]``, ``[loads]``).
+
+    Args:
+        doc: the parsed TOML. where: its path.
+
+    Returns:
+        The config; InputError names the file, table and key. Target names in ``[loads]`` are checked
+        against the scene's sites by :func:`simfab.growth.scene.load_growth_scene`.
+    """
+    m = load_table(MaterialConfig, doc.get("material"), table_name="material", file=where)
     ld = doc.get("loads", {})
     if not isinstance(ld, dict):
         raise InputError("expected a table", where=f"{where}: [loads]")
-    loads = tuple((str(k), _vec(v, 3, f"{where}: loads.{k}")) for k, v in ld.items())
-    return StructureSpec(material=material, critical_distance=radius, loads=loads)
+    try:
+        loads = tuple((str(k), _vec(v, 3, f"loads.{k}")) for k, v in ld.items())
+    except InputError as e:
+        raise e.in_file(where) from None
+    return StructureConfig(material=m.material(), critical_distance=m.critical_distance, loads=loads)
 
 
-def _check_unknown(d: dict, allowed: set, where: str):
-    extra = sorted(set(d) - allowed)
-    if extra:
-        raise InputError(f"unknown key(s) {', '.join(extra)} (allowed: {', '.join(sorted(allowed))})", where=where)
+def params_from_toml(doc: dict, where: str, *, overrides: Mapping | None = None,
+                     log: Callable[[str], None] | None = None) -> GrowthParams:
+    """:class:`GrowthParams` from a parsed scene TOML, each table through :func:`simfab.io.tables.load_table`.
 
+    Args:
+        doc: the parsed TOML. where: its path.
+        overrides: :data:`FLAT` names -> value or :class:`Override` (e.g. command-line flags).
+        log: called once per flag that replaces a value of the file.
 
-def params_from_toml(doc: dict, where: str) -> GrowthParams:
-    """Build :class:`GrowthParams` from a parsed TOML document; InputError names the bad key."""
-    _check_unknown(doc, _TABLES, where)
-    kw: dict = {}
-    g = doc.get("growth", {})
-    _check_unknown(g, _GROWTH_KEYS, f"{where}: [growth]")
-    w = f"{where}: growth."
-    if "mode" in g:
-        if g["mode"] not in MODES:
-            raise InputError(f"mode must be one of {', '.join(MODES)}, got {g['mode']!r}", where=w + "mode")
-        kw["mode"] = g["mode"]
-    for key in ("attractors", "max_steps", "max_nodes", "max_trials"):
-        if key in g:
-            kw[key] = _num(g[key], w + key, integer=True)
-    if "seed" in g:
-        kw["seed"] = _num(g["seed"], w + "seed", integer=True, positive=False)
-    for key in ("influence", "kill", "branch_length", "target_influence"):
-        if key in g:
-            # an infinite target influence is the default: a target pulls from anywhere
-            kw[key] = _num(g[key], w + key, allow_inf=key == "target_influence")
-    if "box" in g:
-        b = g["box"]
-        if not (isinstance(b, list) and len(b) == 2):
-            raise InputError("expected [[x0, y0, z0], [x1, y1, z1]]", where=w + "box")
-        lo, hi = _vec(b[0], 3, w + "box"), _vec(b[1], 3, w + "box")
-        if not all(h > l for l, h in zip(lo, hi)):
-            raise InputError("box max corner must exceed the min corner on every axis", where=w + "box")
-        kw["box"] = (lo, hi)
-    if "surface_objects" in g:
-        so = g["surface_objects"]
-        if not (isinstance(so, list) and so and all(isinstance(s, str) for s in so)):
-            raise InputError("expected a non-empty list of body names", where=w + "surface_objects")
-        kw["surface_objects"] = tuple(so)
-
-    r = doc.get("radius", {})
-    _check_unknown(r, {"r_min", "r_max", "decay", "age"}, f"{where}: [radius]")
-    if "age" in r:
-        if r["age"] not in ("front", "since_birth"):
-            raise InputError(f"expected 'front' or 'since_birth', got {r['age']!r}", where=f"{where}: radius.age")
-        kw["radius_age"] = r["age"]
-    for key, name in (("r_min", "r_min"), ("r_max", "r_max")):
-        if key in r:
-            kw[name] = _num(r[key], f"{where}: radius.{key}")
-    if "decay" in r:
-        kw["radius_decay"] = _num(r["decay"], f"{where}: radius.decay", positive=False)
-
-    s = doc.get("smoothing", {})
-    _check_unknown(s, {"iterations", "lambda1", "lambda2"}, f"{where}: [smoothing]")
-    if "iterations" in s:
-        kw["smoothing_iterations"] = _num(s["iterations"], f"{where}: smoothing.iterations", integer=True,
-                                          positive=False)
-    for key in ("lambda1", "lambda2"):
-        if key in s:
-            kw[key] = _num(s[key], f"{where}: smoothing.{key}", positive=False)
-
-    sym = doc.get("symmetry")
-    if sym is not None:
-        _check_unknown(sym, {"enabled", "point", "normal"}, f"{where}: [symmetry]")
-        if sym.get("enabled", True):
-            n = np.array(_vec(sym.get("normal", [1, 0, 0]), 3, f"{where}: symmetry.normal"))
-            if not np.linalg.norm(n) > 0:
-                raise InputError("normal must be non-zero", where=f"{where}: symmetry.normal")
-            kw["symmetry"] = SymmetrySpec(point=_vec(sym.get("point", [0, 0, 0]), 3, f"{where}: symmetry.point"),
-                                          normal=tuple(n / np.linalg.norm(n)))
-
-    pr = doc.get("profile")
-    if pr is not None:
-        kw["profile"] = _profile(pr, f"{where}: profile")
-
-    st = doc.get("stages")
-    if st is not None:
-        _check_unknown(st, {"targets"}, f"{where}: [stages]")
-        t = st.get("targets")
-        if not (isinstance(t, list) and t
-                and all(isinstance(x, list) and x and all(isinstance(n, str) for n in x) for x in t)):
-            raise InputError("expected a list of non-empty lists of target site names",
-                             where=f"{where}: stages.targets")
-        kw["stages"] = tuple(tuple(x) for x in t)
-
-    sk = doc.get("skin", {})
-    _check_unknown(sk, {"segments", "subtract_objects", "tolerance"}, f"{where}: [skin]")
-    if "tolerance" in sk:
-        kw["skin_tolerance"] = _num(sk["tolerance"], f"{where}: skin.tolerance", positive=False)
-        if kw["skin_tolerance"] < 0:
-            raise InputError("must be >= 0", where=f"{where}: skin.tolerance")
-    if "segments" in sk:
-        kw["skin_segments"] = _num(sk["segments"], f"{where}: skin.segments", integer=True)
-        if kw["skin_segments"] < 6:
-            raise InputError("need at least 6 segments", where=f"{where}: skin.segments")
-    if "subtract_objects" in sk:
-        if not isinstance(sk["subtract_objects"], bool):
-            raise InputError("expected true or false", where=f"{where}: skin.subtract_objects")
-        kw["subtract_objects"] = sk["subtract_objects"]
-    return GrowthParams(**kw)
-
-
-def _profile(pr: dict, where: str) -> ProfileSpec:
-    _check_unknown(pr, {"origin", "u", "v", "points", "depth"}, where)
-    for key in ("origin", "u", "v", "points", "depth"):
-        if key not in pr:
-            raise InputError(f"missing key {key!r}", where=where)
-    u = np.array(_vec(pr["u"], 3, where + ".u"))
-    v = np.array(_vec(pr["v"], 3, where + ".v"))
-    if np.linalg.norm(np.cross(u, v)) < 1e-9 * max(np.linalg.norm(u) * np.linalg.norm(v), 1e-300):
-        raise InputError("u and v must be non-zero and not parallel", where=where)
-    pts = pr["points"]
-    if not isinstance(pts, list) or len(pts) < 3:
-        raise InputError("a closed profile needs at least 3 points", where=where + ".points")
-    P = tuple(_vec(q, 2, where + ".points") for q in pts)
-    d = _vec(pr["depth"], 2, where + ".depth")
-    if not d[1] >= d[0]:
-        raise InputError("depth must be [d0, d1] with d1 >= d0", where=where + ".depth")
-    return ProfileSpec(origin=_vec(pr["origin"], 3, where + ".origin"), u=tuple(u / np.linalg.norm(u)),
-                       v=tuple(v / np.linalg.norm(v)), points=P, depth=d)
+    Returns:
+        The parameters; InputError naming the file, table and key (or the flag a value came from).
+    """
+    check_tables(doc, where)
+    kw = {}
+    for table, cls in TABLES.items():
+        if table in ("symmetry", "profile", "stages") and doc.get(table) is None:
+            continue
+        kw[table] = load_table(cls, doc.get(table), table_name=table, file=where, parsers=_PARSERS.get(table))
+    if "symmetry" in kw and not kw["symmetry"].enabled:
+        kw["symmetry"] = None
+    given = frozenset(f"{t}.{k}" for t in TABLES if isinstance(doc.get(t), Mapping) for k in doc[t])
+    p = GrowthParams(**kw, from_file=given)
+    return p.replace(file=where, log=log, **overrides) if overrides else p

@@ -116,11 +116,7 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
     mean root x). ``seed`` defaults to the scene's seed. Same seed → identical result.
     """
     scene = as_scene(scene_or_path)
-    known = {f.name for f in dataclasses.fields(scene.params)}
-    unknown = sorted(set(overrides) - known)
-    if unknown:
-        raise InputError(f"unknown growth parameter(s) {', '.join(unknown)}")
-    if overrides:
+    if overrides:  # checked (unknown names too) by GrowthParams.replace
         scene = scene.with_params(**overrides)
         validate_scene(scene)
     p = scene.params
@@ -201,11 +197,11 @@ def _stages(scene: GrowthScene) -> list[list[int]]:
 
     Stages are cumulative: a target of an earlier stage stays a target later on.
     """
-    if not scene.params.stages:
+    if scene.params.stages is None:
         return [list(range(len(scene.targets)))]
     index = {n: i for i, n in enumerate(scene.target_names)}
     out, acc = [], []
-    for st in scene.params.stages:
+    for st in scene.params.stages.targets:
         acc = acc + [index[n] for n in st if index[n] not in acc]
         out.append(list(acc))
     listed = set(acc)

@@ -21,15 +21,15 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
 import simfab.growth.tolerances as tol
 from simfab.errors import InputError
-from simfab.growth.config import GrowthParams, StructureSpec, params_from_toml, structure_from_toml
+from simfab.growth.config import GrowthParams, StructureConfig, params_from_toml, structure_from_toml
 from simfab.io.mjcf import load_scene
+from simfab.io.tables import read_toml
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -42,6 +42,8 @@ class GrowthScene:
     sphere_centers : (s, 3), sphere_radii : (s,) obstacle spheres. sphere_names : s names.
     params : growth parameters. path : the MJCF file (None when built in Python).
     structure : material and extra loads of the structural check ([material], [loads]).
+    notes : what :meth:`with_params` overrode of the scene file (``--kill 0.003 overrides P.toml [growth]
+        kill = 0.004``), for the caller to log once the run is under way.
     """
 
     objects: dict
@@ -54,7 +56,8 @@ class GrowthScene:
     sphere_names: tuple = ()
     params: GrowthParams = dataclasses.field(default_factory=GrowthParams)
     path: Path | None = None
-    structure: StructureSpec = dataclasses.field(default_factory=StructureSpec)
+    structure: StructureConfig = dataclasses.field(default_factory=StructureConfig)
+    notes: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "roots", np.asarray(self.roots, dtype=np.float64).reshape(-1, 3))
@@ -79,9 +82,22 @@ class GrowthScene:
         return np.array([pts.min(axis=0), pts.max(axis=0)])
 
     def with_params(self, **overrides) -> "GrowthScene":
-        """Copy with some :class:`GrowthParams` fields replaced (``None`` values ignored)."""
-        kw = {k: v for k, v in overrides.items() if v is not None}
-        return dataclasses.replace(self, params=dataclasses.replace(self.params, **kw))
+        """Copy with some growth parameters replaced, checked by :meth:`GrowthParams.replace`.
+
+        Args:
+            **overrides: flat parameter names (``kill``, ``attractors``, ``radius_decay``, ...) ->
+                value or :class:`simfab.io.tables.Override` (an error then names its flag);
+                ``None`` values are ignored.
+
+        Returns:
+            The scene; InputError naming the flag, or the companion TOML's table and key.
+        """
+        kw = {k: v for k, v in overrides.items() if v is not None and getattr(v, "value", 0) is not None}
+        toml = self.path.with_suffix(".toml") if self.path is not None else None
+        notes: list[str] = []
+        params = self.params.replace(file=str(toml) if toml is not None and toml.is_file() else None,
+                                     log=notes.append, **kw)
+        return dataclasses.replace(self, params=params, notes=self.notes + tuple(notes))
 
 
 def load_growth_scene(path: str | os.PathLike) -> GrowthScene:
@@ -93,12 +109,9 @@ def load_growth_scene(path: str | os.PathLike) -> GrowthScene:
     sc = load_scene(path)
     toml_path = path.with_suffix(".toml")
     params = GrowthParams()
-    structure = StructureSpec()
+    structure = StructureConfig()
     if toml_path.is_file():
-        try:
-            doc = tomllib.loads(toml_path.read_text(encoding="utf-8"))
-        except tomllib.TOMLDecodeError as e:
-            raise InputError(f"invalid TOML: {e}", where=str(toml_path)) from None
+        doc = read_toml(toml_path)
         params = params_from_toml(doc, str(toml_path))
         structure = structure_from_toml(doc, str(toml_path))
 
@@ -147,7 +160,7 @@ def validate_scene(scene: GrowthScene) -> None:
                              where=where)
     if p.stages:
         named = set(scene.target_names)
-        for i, st in enumerate(p.stages):
+        for i, st in enumerate(p.stages.targets):
             bad = [n for n in st if n not in named]
             if bad:
                 raise InputError(f"stage {i} names unknown target sites {bad}", where=where)

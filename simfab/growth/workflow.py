@@ -15,6 +15,7 @@ from simfab.errors import InputError
 from simfab.growth.pipeline import as_scene, grow, skin_result
 from simfab.growth.scene import GrowthScene
 from simfab.growth.skeleton import Skeleton
+from simfab.io.tables import Override
 
 #: GrowthParams field -> the command-line option that sets it (errors name the option the value came from)
 FLAGS = {"branch_length": "--branch-length", "kill": "--kill", "influence": "--influence",
@@ -188,8 +189,10 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress=None, c
         best_effort: keep a growth that leaves targets unreached, and check a support that leaves a
             weight without a load path (both warn instead of failing).
         loads, strengthen, thin, buckling: as :func:`check`. stem: output file stem (default: the scene's name).
-        **overrides: :class:`simfab.growth.config.GrowthParams` fields (``attractors``, ``kill``,
-            ``symmetric``, ...; None = keep the scene's).
+        **overrides: :class:`simfab.growth.config.GrowthParams` flat names (``attractors``, ``kill``,
+            ``symmetric``, ...; None = keep the scene's), a value or a :class:`simfab.io.tables.Override`
+            (an error then names its flag; a note that it replaced a value of the scene file goes to
+            ``progress`` once the growth stands).
 
     Returns:
         :class:`simfab.growth.results.GrowthResult`.
@@ -223,7 +226,10 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress=None, c
             raise
         toml = Path(scene).with_suffix(".toml")
         key = (e.where or "").removeprefix("growth.")
-        if key in FLAGS and overrides.get(key) is not None:  # the value came from the command line
+        given = overrides.get(key)
+        if isinstance(given, Override) and given.value is not None:  # the value came from a flag
+            raise InputError(e.message, where=given.source) from None
+        if key in FLAGS and given is not None:  # the value came from the command line
             raise InputError(e.message, where=FLAGS[key]) from None
         raise e.in_file(toml if toml.is_file() else scene) from None
     s = result.summary()
@@ -248,6 +254,8 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress=None, c
         write_check = _check(result.skeleton, result.scene, stem=name, loads=dict(loads or {}),
                              strengthen=strengthen, thin=thin, buckling=buckling, best_effort=best_effort,
                              progress=progress)
+    for note in result.scene.notes:  # flags that replaced values of the scene file, once the run stands
+        _say(progress, note)
     paths = write_all(result, mesh, Path(out), stem=name) if out is not None else {}
     c = write_check(out) if write_check is not None else None
     s.update({
