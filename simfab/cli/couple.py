@@ -8,6 +8,7 @@ Usage:
     simfab couple study handles SCENE [--counts K ...] [--random N]
     simfab couple converge SCENE [--factors 0.25,0.5,1,1.5] [--element-order 1|2] [--friction MU]
     simfab couple scenes
+    simfab couple new PART OBJECT --into AXIS_OR_POINT [--fixed REGION] [--depth D | --to-rest] --out DIR
 
 SCENE is a coupling scene: NAME.xml (MJCF: the object O as the mocap body 'object' with
 keyframes for its path, the box site 'fixed') plus NAME.toml (the compliant part A, its
@@ -103,6 +104,9 @@ def add_args(p):
                         description=couple_design.STUDY_DESCRIPTION,
                         formatter_class=argparse.RawDescriptionHelpFormatter)
     couple_design.add_study_args(st)
+    from simfab.cli import couple_new
+
+    couple_new.register(sub, add_common_args)  # simfab couple new: a scene from the user's meshes
     for q in (s, conv, listing, o, st):
         add_common_args(q)  # e.g. 'simfab couple scenes --json'
 
@@ -115,6 +119,10 @@ def run(args) -> dict:
         from simfab.coupling.scene import bundled_dir
 
         return {"scenes": sorted(p.stem for p in bundled_dir().glob("*.xml"))}
+    if cmd == "new":
+        from simfab.cli import couple_new
+
+        return couple_new.run(args)
     if cmd in ("optimize", "study"):
         from simfab.cli import couple_design
 
