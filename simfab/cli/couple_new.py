@@ -76,4 +76,6 @@ def run(args) -> dict:
     for n in res.notes:
         log(f"couple new: {n}", quiet=args.quiet)
     log(f"next: {res.next_commands[0]}", quiet=args.quiet)
-    return res.to_json()
+    from simfab.results import units
+
+    return {**res.to_json(), "units": units(res)}
