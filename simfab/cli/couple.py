@@ -18,8 +18,8 @@ scenes/coupling ('simfab couple scenes' lists them). Scene format: scenes/coupli
 Outputs under --out: NAME_profile.csv (per record: distance along the path [m], energy [J],
 insertion force [N] (support reactions along O's translation), path force [N] (the force on O along
 the path's forward tangent, = -dE/ds without friction, also defined during rotations), grip [N], max
-von Mises [Pa], max penetration [m], min det F, Newton iterations, contact points, phase (insert, or
-remove: with friction the removal is simulated as its own traversal back over the same positions),
+von Mises [Pa], max penetration [m], min det F, Newton iterations, contact points, phase (insert; rest:
+the search for the rest point past the keyframes' end; remove: with friction the removal traversal),
 normal contact force [N], friction's part of the path force [N], dissipated work [J], lagging
 iterations), NAME_summary.json (the --json summary), NAME_profile.png
 (energy solid, force dashed, markers at E_max and E_ss), NAME.usda (A's deforming mesh with a

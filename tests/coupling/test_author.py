@@ -53,6 +53,18 @@ def test_tutorial_commands_give_a_tight_profile(meshes, tmp_path, capsys):
     rows = np.genfromtxt(s["profile_csv"], delimiter=",", names=True)
     assert np.all(np.isfinite(rows["energy_J"])) and rows["energy_J"].max() == pytest.approx(s["E_max"])
     assert s["max_penetration"] <= s["penetration_tolerance"]
+    # profiles a user can read: the rest search's records are told apart from the planned insertion
+    # (the path ended before the seat, so the run searched on for the rest point) ...
+    phases = [str(p, "ascii") if isinstance(p, bytes) else str(p) for p in
+              np.genfromtxt(s["profile_csv"], delimiter=",", names=True, dtype=None, encoding="ascii")["phase"]]
+    n_insert = phases.count("insert")
+    assert n_insert == 41 and set(phases[n_insert:]) == {"rest"} and len(phases) > n_insert
+    # ... and every column's meaning and sign convention is in the JSON summary
+    from simfab.coupling.outputs import CSV_HEADER
+
+    summary = json.loads(open(s["profile_json"]).read())
+    assert set(summary["profile_columns"]) == set(CSV_HEADER)
+    assert "negative = the part resists" in summary["profile_columns"]["force_N"]
 
 
 def test_3d_scene_loads_and_starts_outside(meshes, tmp_path, capsys):
