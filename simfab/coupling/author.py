@@ -46,23 +46,23 @@ _AXES = {"x": 0, "y": 1, "z": 2}
 class CouplingSceneSpec:
     """What ``simfab couple new`` is asked for (lengths in ``units``).
 
-    part : mesh file of the compliant part A (STL / OBJ / PLY, watertight).
-    object : mesh file of the rigid object O, in the same frame as the part.
-    into : the insertion direction, an axis (``-x``, ``+y``, ``z``) or a point ``X,Y,Z`` O's centre
-        moves towards.
-    name : the scene's name (file stem); None: the part file's stem.
-    dim : 2 (plane strain: the section of both meshes with the plane z = O's centre; the
-        part's extent along z is its thickness) or 3.
-    units : the meshes' and the lengths' units, "mm" or "m".
-    fixed : the region of A held fixed: ``back`` (a slab at A's far side along the insertion
-        direction), a face ``-x`` / ``+y`` / ..., or a box ``X0,Y0,Z0,X1,Y1,Z1``.
-    depth : the insertion depth past the first contact [units]; None: up to the seat, then to rest.
-    friction : Coulomb coefficient between O and A [-] (0: frictionless).
-    brief : the ``[design]`` table for ``couple optimize`` (simfab.design.brief.DesignBrief keys).
-    material : material name (simfab.fem.materials).
-    elements : target triangle (2D) / tetrahedron (3D) count.
-    steps : insertion steps over the path.
-    object_samples : surface samples of O for its contact field; None: 100 in 2D, 2000 in 3D.
+    Attributes:
+        part: mesh file of the compliant part A (STL / OBJ / PLY, watertight).
+        object: mesh file of the rigid object O, in the same frame as the part.
+        into: the insertion direction, an axis (``-x``, ``+y``, ``z``) or a point ``X,Y,Z`` O's centre moves towards.
+        name: the scene's name (file stem); None: the part file's stem.
+        dim: 2 (plane strain: the section of both meshes with the plane z = O's centre; the part's extent
+            along z is its thickness) or 3.
+        units: the meshes' and the lengths' units, "mm" or "m".
+        fixed: the region of A held fixed: ``back`` (a slab at A's far side along the insertion direction),
+            a face ``-x`` / ``+y`` / ..., or a box ``X0,Y0,Z0,X1,Y1,Z1``.
+        depth: the insertion depth past the first contact [units]; None: up to the seat, then to rest.
+        friction: Coulomb coefficient between O and A [-] (0: frictionless).
+        brief: the ``[design]`` table for ``couple optimize`` (:class:`simfab.design.brief.DesignBrief` keys).
+        material: material name (:mod:`simfab.fem.materials`).
+        elements: target triangle (2D) / tetrahedron (3D) count; None: 1500 / 3000.
+        steps: insertion steps over the path.
+        object_samples: surface samples of O for its contact field; None: 100 in 2D, 2000 in 3D.
     """
 
     part: Path
@@ -85,9 +85,10 @@ class CouplingSceneSpec:
 class OverlapProfile:
     """How deep O and A overlap as O moves along the line ``centre + s * direction``.
 
-    s : positions along the line [m] (0: O's position in its file).
-    depth : the deepest boundary point of either shape inside the other, per position [m] (0: apart).
-    where : that point, per position (world frame) [m].
+    Attributes:
+        s: positions along the line [m] (0: O's position in its file).
+        depth: the deepest boundary point of either shape inside the other, per position [m] (0: apart).
+        where: that point, per position (world frame) [m].
     """
 
     s: np.ndarray

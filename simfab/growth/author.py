@@ -34,13 +34,14 @@ PLATE_MARGIN_REL = 0.2
 class GrowthSceneSpec:
     """What ``simfab grow new`` is asked for (points in ``units``).
 
-    objects : mesh files of the objects to support (STL / OBJ / PLY, watertight), one common frame.
-    roots : points growth starts from (on the plate or on an object used as the ground).
-    targets : points the support must touch (snapped onto the nearest object's surface).
-    masses : the objects' masses [kg], one per object, or one for all; empty: MuJoCo's default density.
-    name : the scene's name; None: the first object's stem.
-    units : "mm" or "m".
-    plate : add a plate whose top is at the lowest root (the objects are then all loads).
+    Attributes:
+        objects: mesh files of the objects to support (STL / OBJ / PLY, watertight), one common frame.
+        roots: points ``X,Y,Z`` growth starts from (on the plate, or on an object used as the ground).
+        targets: points ``X,Y,Z`` the support must touch (snapped onto the nearest object's surface).
+        masses: the objects' masses [kg], one per object or one for all; empty: MuJoCo's default density.
+        name: the scene's name; None: the first object's stem.
+        units: "mm" or "m".
+        plate: add a plate whose top is at the lowest root (the objects are then all loads).
     """
 
     objects: tuple
