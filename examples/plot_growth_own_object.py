@@ -31,6 +31,16 @@ print("masses [kg]:", made["masses"])
 # %%
 # Grow
 # ----
-grown = simfab("grow", made["outputs"]["scene_xml"], "--attractors", "800", "--out", d / "grown")
+grown = simfab("grow", made["outputs"]["scene_xml"], "--attractors", "800", "--check", "--out", d / "grown")
 print(f"{grown['targets_reached']} of {grown['targets_total']} targets reached in {grown['steps']} steps")
 show_png(d / "grown" / "block_preview.png")
+
+# %%
+# Its stress under the block's weight
+# -----------------------------------
+# ``--check`` meshes the skin in tetrahedra, clamps it on the plate and loads it with the block's
+# 0.25 kg (shared among the targets that touch it) and its own weight: the safety factor against
+# yield, the peak von Mises stress and the deflection at each target.
+check = grown["check"]
+print({k: check[k] for k in ("safety_factor", "max_von_mises_Pa", "max_deflection_m", "mass_kg") if k in check})
+show_png(d / "grown" / "block_check.png")
