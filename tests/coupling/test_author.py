@@ -101,3 +101,28 @@ def test_in_plane_direction_required_in_2d(meshes, tmp_path, capsys):
     assert _new(meshes, out, "--dim", "2", "--into=+z") == 2  # the last --into wins: out of the plane
     err = capsys.readouterr().err
     assert "--into" in err and "xy-plane" in err and not out.exists()
+
+
+def test_point_direction_is_the_axis_towards_it(meshes, tmp_path, capsys):
+    assert _new(meshes, tmp_path / "p", "--dim", "2", "--into=-50,0,0") == 0  # the cylinder's centre is the origin
+    by_point = json.loads(capsys.readouterr().out)
+    assert _new(meshes, tmp_path / "a", "--dim", "2") == 0
+    by_axis = json.loads(capsys.readouterr().out)
+    assert by_point["start"] == pytest.approx(by_axis["start"], abs=1e-12)
+    assert by_point["end"] == pytest.approx(by_axis["end"], abs=1e-12)
+
+
+def test_overlap_profile_of_a_disk_entering_a_block():
+    """A disk of radius R whose centre starts at x = R + g to the right of the block x <= 0 overlaps
+    it by max(0, s - g) after moving s along -x (the deepest point: the disk's leftmost point)."""
+    from shapely.geometry import Point, box
+
+    from simfab.coupling.author import _Shape2D, overlap_profile
+
+    R, g = 0.01, 0.002
+    block = _Shape2D(box(-0.05, -0.05, 0.0, 0.05))
+    disk = _Shape2D(Point(R + g, 0.0).buffer(R, quad_segs=256))
+    s = np.linspace(0.0, 0.006, 13)
+    prof = overlap_profile(block, disk, np.array([R + g, 0.0]), np.array([-1.0, 0.0, 0.0]), s)
+    # boundary samples every 2 pi R / 400 = 0.16 mm: the depth is resolved to (that spacing)^2 / (8 R)
+    assert prof.depth == pytest.approx(np.maximum(0.0, s - g), abs=2e-6)
