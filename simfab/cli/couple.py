@@ -50,7 +50,8 @@ SIMULATE_DESCRIPTION = """Run an insertion simulation of a coupling scene and wr
   newton_iterations_removal, dissipated [J] (work friction dissipated over both traversals),
   energy_balance [-] (|work on the part - stored - dissipated| / E_max over both traversals),
   lag_solves_per_step, jammed_at [m] (where a frictional insertion self-locked, else null),
-  warnings, units {key: unit}, and the output paths profile_csv, plot_png, usd, mjcf,
+  warnings, units {key: unit}, profile_columns {CSV column: meaning, unit and sign convention},
+  and the output paths profile_csv, plot_png, usd, mjcf,
   profile_json. With friction F_rm is read from the removal and the category may be "jams" or
   "held by friction"."""
 
