@@ -328,7 +328,40 @@ class DictTable(SphinxDirective):
         return [table]
 
 
+class CouplingTables(SphinxDirective):
+    """``.. coupling-tables::``: every table of a coupling scene's TOML and the keys it accepts, read
+    from :data:`simfab.coupling.scene.SCENE_TABLES` (``[compliant]``: per generator and dimension)."""
+
+    def run(self):
+        from simfab.coupling import scene
+
+        table = nodes.table()
+        tgroup = nodes.tgroup(cols=2)
+        table += tgroup
+        tgroup += nodes.colspec(colwidth=30)
+        tgroup += nodes.colspec(colwidth=70)
+        head = nodes.thead()
+        tgroup += head
+        head += SceneKeys._row(["table", "keys accepted (any other is an error naming file, table and key)"])
+        body = nodes.tbody()
+        tgroup += body
+        body += SceneKeys._row(["(top level)", ", ".join(sorted(scene.TOP_LEVEL_KEYS))], code=(0,))
+        for name, allowed in scene.SCENE_TABLES.items():
+            if callable(allowed):
+                for dim, gens in ((2, scene.GENERATORS_2D), (3, scene.GENERATORS_3D)):
+                    for g in gens:
+                        keys = allowed({"generator": g}, dim)
+                        body += SceneKeys._row([f"[{name}] generator = {g!r} (dim {dim})", ", ".join(sorted(keys))],
+                                               code=(0,))
+            elif allowed is None:
+                body += SceneKeys._row([f"[{name}]", "checked where it is read (see its table below)"], code=(0,))
+            else:
+                body += SceneKeys._row([f"[{name}]", ", ".join(sorted(allowed))], code=(0,))
+        return [table]
+
+
 def setup(app):
+    app.add_directive("coupling-tables", CouplingTables)
     app.add_directive("dict-table", DictTable)
     app.add_directive("scene-keys", SceneKeys)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
