@@ -8,6 +8,7 @@ Usage:
     simfab couple study handles SCENE [--counts K ...] [--random N]
     simfab couple converge SCENE [--factors 0.25,0.5,1,1.5] [--element-order 1|2] [--friction MU]
     simfab couple scenes
+    simfab couple new PART OBJECT --into AXIS_OR_POINT [--fixed REGION] [--depth D | --to-rest] --out DIR
 
 SCENE is a coupling scene: NAME.xml (MJCF: the object O as the mocap body 'object' with
 keyframes for its path, the box site 'fixed') plus NAME.toml (the compliant part A, its
@@ -17,8 +18,8 @@ scenes/coupling ('simfab couple scenes' lists them). Scene format: scenes/coupli
 Outputs under --out: NAME_profile.csv (per record: distance along the path [m], energy [J],
 insertion force [N] (support reactions along O's translation), path force [N] (the force on O along
 the path's forward tangent, = -dE/ds without friction, also defined during rotations), grip [N], max
-von Mises [Pa], max penetration [m], min det F, Newton iterations, contact points, phase (insert, or
-remove: with friction the removal is simulated as its own traversal back over the same positions),
+von Mises [Pa], max penetration [m], min det F, Newton iterations, contact points, phase (insert; rest:
+the search for the rest point past the keyframes' end; remove: with friction the removal traversal),
 normal contact force [N], friction's part of the path force [N], dissipated work [J], lagging
 iterations), NAME_summary.json (the --json summary), NAME_profile.png
 (energy solid, force dashed, markers at E_max and E_ss), NAME.usda (A's deforming mesh with a
@@ -49,7 +50,8 @@ SIMULATE_DESCRIPTION = """Run an insertion simulation of a coupling scene and wr
   newton_iterations_removal, dissipated [J] (work friction dissipated over both traversals),
   energy_balance [-] (|work on the part - stored - dissipated| / E_max over both traversals),
   lag_solves_per_step, jammed_at [m] (where a frictional insertion self-locked, else null),
-  warnings, units {key: unit}, and the output paths profile_csv, plot_png, usd, mjcf,
+  warnings, units {key: unit}, profile_columns {CSV column: meaning, unit and sign convention},
+  and the output paths profile_csv, plot_png, usd, mjcf,
   profile_json. With friction F_rm is read from the removal and the category may be "jams" or
   "held by friction"."""
 
@@ -103,6 +105,9 @@ def add_args(p):
                         description=couple_design.STUDY_DESCRIPTION,
                         formatter_class=argparse.RawDescriptionHelpFormatter)
     couple_design.add_study_args(st)
+    from simfab.cli import couple_new
+
+    couple_new.register(sub, add_common_args)  # simfab couple new: a scene from the user's meshes
     for q in (s, conv, listing, o, st):
         add_common_args(q)  # e.g. 'simfab couple scenes --json'
 
@@ -115,6 +120,10 @@ def run(args) -> dict:
         from simfab.coupling.scene import bundled_dir
 
         return {"scenes": sorted(p.stem for p in bundled_dir().glob("*.xml"))}
+    if cmd == "new":
+        from simfab.cli import couple_new
+
+        return couple_new.run(args)
     if cmd in ("optimize", "study"):
         from simfab.cli import couple_design
 

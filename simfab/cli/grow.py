@@ -2,6 +2,7 @@
 
     simfab grow SCENE.xml [--attractors N --influence D --kill D --branch-length L
                            --mode volume|surface|profile --symmetric --smooth-iterations K]
+    simfab grow new OBJECT... --root X,Y,Z --target X,Y,Z ... [--mass KG ...] --out DIR
     simfab grow edit SKELETON.json --stroke STROKE.json --camera CAMERA.json [--chain K]
     simfab grow check SKELETON.json [--load TARGET=FX,FY,FZ ...] [--strengthen SF [--thin]]
     simfab grow SCENE.xml --check [--load ...] [--strengthen SF [--thin]]
@@ -96,6 +97,9 @@ def add_args(p):
     e.add_argument("--stroke", metavar="FILE", help="(edit) stroke: JSON {\"points\": [[x, y], ...]} or CSV, pixels")
     e.add_argument("--camera", metavar="FILE|JSON", help="(edit) camera: eye, target, up, fovy_deg, width, height")
     e.add_argument("--chain", type=int, metavar="K", help="(edit) chain index (default: the one nearest the stroke)")
+    from simfab.cli import grow_new
+
+    grow_new.add_args(p)  # simfab grow new OBJECT... --root --target: a scene from the user's meshes
 
 
 #: upper bounds of the count options (beyond them a run would exhaust memory rather than finish)
@@ -113,10 +117,15 @@ def _positive(name, v):
 
 
 def run(args) -> dict:
+    from simfab.cli import grow_new
     from simfab.errors import InputError
     from simfab.growth import run as grow_run
     from simfab.progress import log
 
+    if args.scene == "new":
+        return grow_new.run(args)
+    if grow_new.misused(args):
+        raise InputError("OBJECT..., --root, --target, --mass, --no-plate and --name belong to 'simfab grow new'")
     if args.scene == "edit":
         if args.check or args.load or args.strengthen is not None or args.thin or args.buckling:
             raise InputError("--check, --load, --strengthen, --thin and --buckling do not apply to 'edit'")

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simfab.coupling.profile import ProfileSummary, analyze_run
+from simfab.coupling.profile import ProfileSummary, analyze_run, record_phases, rest_bracket
 from simfab.coupling.settle import energy_balance
 from simfab.coupling.simulate import InsertionResult
 from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json
@@ -35,6 +35,31 @@ SUMMARY_UNITS = {
 CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "path_force_N", "grip_N", "max_von_mises_Pa", "max_penetration_m",
               "min_det_F", "newton_iterations", "contact_points", "phase", "normal_force_N", "path_force_friction_N",
               "dissipated_J", "lag_solves"]
+#: What each profile column means, its unit and its sign convention (written into the JSON summary as
+#: ``profile_columns``; the user guide's table is generated from it).
+PROFILE_COLUMNS = {
+    "step": "record index (0: the start)",
+    "s_m": "position of O along its path [m] (translation plus rotation angle times rho)",
+    "energy_J": "elastic energy stored in the part [J]",
+    "force_N": "force on O along its translation from the supports' reactions [N]: negative = the part resists "
+               "(pushing O in takes -force_N), positive = the part draws O in",
+    "path_force_N": "force on O along the path's forward tangent [N], = -dE/ds without friction: same sign "
+                    "convention as force_N (negative resists forward motion)",
+    "grip_N": "grip force: total normal contact force squeezing O [N], >= 0",
+    "max_von_mises_Pa": "largest element von Mises stress [Pa]",
+    "max_penetration_m": "deepest penetration of the part into O [m] (<= the penetration tolerance)",
+    "min_det_F": "smallest deformation-gradient determinant [-] (> 0: no inverted element)",
+    "newton_iterations": "Newton iterations of the record's step",
+    "contact_points": "constraint points within the barrier's range",
+    "phase": "insert (planned steps along the keyframes), rest (the search for the rest point past the keyframes' "
+             "end; its last probe may overshoot it: read F_in/F_grip from the summary), remove (with friction: "
+             "the removal traversal back over the same positions)",
+    "normal_force_N": "sum of the contact normal forces [N], >= 0",
+    "path_force_friction_N": "friction's part of path_force_N [N] (opposes the motion: negative on insertion, "
+                             "positive on removal)",
+    "dissipated_J": "work dissipated by friction over the record's step [J], >= 0",
+    "lag_solves": "friction lagging solves of the step",
+}
 
 
 def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
@@ -82,6 +107,7 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
         "warnings": list(res.warnings),
         "notes": list(getattr(res, "notes", [])),
         "units": SUMMARY_UNITS,
+        "profile_columns": PROFILE_COLUMNS,
     }
     return prof, d
 
@@ -89,8 +115,8 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
 def write_profile_csv(res: InsertionResult, path) -> Path:
     """The profile CSV (:data:`CSV_HEADER`), SI units."""
     rows = [[k, r.s, r.energy, r.force, r.path_force, r.grip, r.max_von_mises, r.penetration, r.min_det_F, r.iterations,
-             r.contact_points, r.phase, r.normal_force, r.path_force_friction, r.dissipated, r.lag_solves]
-            for k, r in enumerate([*res.steps, *res.removal])]
+             r.contact_points, ph, r.normal_force, r.path_force_friction, r.dissipated, r.lag_solves]
+            for k, (r, ph) in enumerate(zip([*res.steps, *res.removal], record_phases(res)))]
     return write_csv(path, CSV_HEADER, rows)
 
 
@@ -102,14 +128,25 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-
-    s = res.column("s") * 1e3
-    E = res.column("energy")
-    F = res.column("force")
+    # the insertion traversal: its planned steps and the rest search up to the steady state (not the
+    # search's probes past the rest point, which push O on into its seat): when a probe brackets the
+    # rest point the curves end there, at F = 0 interpolated between the bracket's records
+    phases = record_phases(res)[:len(res.steps)]
+    F_all, s_all, E_all = res.column("force"), res.column("s"), res.column("energy")
+    a = rest_bracket(F_all, prof.index_ss, phases.index("rest") if "rest" in phases else None)
+    last = prof.index_ss if a is None or phases[a + 1] != "rest" else a
+    keep = [k for k, ph in enumerate(phases) if ph == "insert" or k <= last]
+    s, E, F = s_all[keep] * 1e3, E_all[keep], F_all[keep]
+    if last != prof.index_ss:  # the rest point between records a and a + 1
+        w = F_all[a] / (F_all[a] - F_all[a + 1])
+        s = np.r_[s, 1e3 * (s_all[a] + w * (s_all[a + 1] - s_all[a]))]
+        E, F = np.r_[E, E_all[a] + w * (E_all[a + 1] - E_all[a])], np.r_[F, 0.0]
+    at = {k: i for i, k in enumerate(keep)}
+    at[prof.index_ss] = at.get(prof.index_ss, len(s) - 1)
     fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=120)
     ax.plot(s, E, "-", color="tab:blue", lw=2, label="elastic energy")
-    ax.plot(s[prof.index_max], E[prof.index_max], "o", color="tab:red", ms=8, label=r"$E_d^{max}$")
-    ax.plot(s[prof.index_ss], E[prof.index_ss], "s", color="tab:green", ms=8, label=r"$E_d^{ss}$")
+    ax.plot(s[at[prof.index_max]], E[at[prof.index_max]], "o", color="tab:red", ms=8, label=r"$E_d^{max}$")
+    ax.plot(s[at[prof.index_ss]], E[at[prof.index_ss]], "s", color="tab:green", ms=8, label=r"$E_d^{ss}$")
     ax.set_xlabel("insertion distance [mm]")
     ax.set_ylabel("elastic energy [J]", color="tab:blue")
     ax2 = ax.twinx()
@@ -121,7 +158,8 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
                  label="force on removal")
     q = np.array([r.quat for r in res.steps])
     if np.abs(np.abs(q @ q[0]) - 1.0).max() > 1e-9:  # rotating path: also the work-conjugate force
-        ax2.plot(s, res.column("path_force"), ":", color="tab:purple", lw=1.5, label="path force (-dE/ds)")
+        ax2.plot(s[:len(keep)], res.column("path_force")[keep], ":", color="tab:purple", lw=1.5,
+                 label="path force (-dE/ds)")
     ax2.axhline(0.0, color="0.7", lw=0.8)
     ax2.set_ylabel("force on O along the path [N] (resisting < 0)", color="tab:orange")
     lines = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]

@@ -158,6 +158,17 @@ def hold_force(force: np.ndarray, slipping: np.ndarray, F_rm: float) -> float:
     return max(0.0, float(np.max(force[:k], initial=at)), at)
 
 
+#: The phases of a run's records, in order: the planned insertion steps, the rest search's records
+#: past the keyframes' end (its probes may overshoot the rest point), the removal (with friction).
+PHASES = ("insert", "rest", "remove")
+
+
+def record_phases(res) -> list[str]:
+    """The phase (:data:`PHASES`) of each record of an insertion result, its steps then its removal."""
+    planned = len(res.model.s_steps)
+    return ["insert" if k < planned else "rest" for k in range(len(res.steps))] + ["remove"] * len(res.removal)
+
+
 def analyze_run(res) -> ProfileSummary:
     """:func:`analyze` of an :class:`simfab.coupling.simulate.InsertionResult`, its steady state at
     the end pose when its path ends in a rotation (``model.end_direction`` None); with friction F_rm

@@ -1,0 +1,128 @@
+"""``simfab couple new``: the coupling tutorial's commands on a user's own meshes give a valid profile.
+
+The meshes are made here as a user's CAD would export them (trimesh): a C-clip STL in millimetres
+and a cylinder STL, in assembly position (the cylinder sitting in the clip's seat).
+"""
+
+import json
+
+import numpy as np
+import pytest
+
+from simfab.cli import main
+
+
+@pytest.fixture(scope="module")
+def meshes(tmp_path_factory):
+    import trimesh
+
+    from simfab.coupling.geometry import c_clamp_outline, extrude
+
+    d = tmp_path_factory.mktemp("meshes")
+    outline = c_clamp_outline(inner_radius=9.5, width=2.5, opening_deg=60.0, base_depth=4.0, base_height=20.0,
+                              segments=48)  # mm: the bundled cclamp2d's clip
+    extrude(outline, 5.0).export(d / "clip.stl")
+    trimesh.creation.cylinder(radius=10.0, height=10.0, sections=64).export(d / "cylinder.stl")
+    return d
+
+
+def _new(meshes, out, *extra):
+    return main(["couple", "new", str(meshes / "clip.stl"), str(meshes / "cylinder.stl"), "--into=-x",
+                 "--out", str(out), "--json", *extra])
+
+
+def test_tutorial_commands_give_a_tight_profile(meshes, tmp_path, capsys):
+    scene_dir = tmp_path / "scene"
+    assert _new(meshes, scene_dir, "--dim", "2", "--brief", "grip=tight") == 0
+    made = json.loads(capsys.readouterr().out)
+    xml = made["outputs"]["scene_xml"]
+    assert made["next_commands"][0] == f"simfab couple simulate {xml}"
+    # the cylinder sat in the seat (it overlaps the 9.5 mm arc by 0.5 mm): the start was moved out and said so
+    assert any("starts inside the part" in n for n in made["notes"])
+    # start: the 10 mm cylinder clears the arm tips (x = 9.5 cos 60 deg, y = 9.5 sin 60 deg): first contact at
+    # x = 4.75 + sqrt(100 - 8.227^2) = 10.43 mm, the start 5 % of the cylinder's 20 mm before it
+    assert made["start"][0] == pytest.approx(0.01043 + 0.001, abs=2e-4)
+    assert made["seat"] == pytest.approx(made["start"][0], abs=2e-4)  # the seat: x = 0 (the arc's centre)
+    assert made["to_rest"] and 0 < made["end"][0] <= 0.002  # ends just before the seat, runs on to rest
+    out = tmp_path / "run"
+    assert main(["couple", "simulate", xml, "--out", str(out), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    # the same clip as the bundled cclamp2d: a tight grip; the seated cylinder rests near x = 0
+    assert s["category"] == "tight"
+    assert 1.0 < s["F_in"] < 100.0 and s["F_grip"] > 1.0 and s["E_ss"] > 0
+    rows = np.genfromtxt(s["profile_csv"], delimiter=",", names=True)
+    assert np.all(np.isfinite(rows["energy_J"])) and rows["energy_J"].max() == pytest.approx(s["E_max"])
+    assert s["max_penetration"] <= s["penetration_tolerance"]
+    # profiles a user can read: the rest search's records are told apart from the planned insertion
+    # (the path ended before the seat, so the run searched on for the rest point) ...
+    phases = [str(p, "ascii") if isinstance(p, bytes) else str(p) for p in
+              np.genfromtxt(s["profile_csv"], delimiter=",", names=True, dtype=None, encoding="ascii")["phase"]]
+    n_insert = phases.count("insert")
+    assert n_insert == 41 and set(phases[n_insert:]) == {"rest"} and len(phases) > n_insert
+    # ... and every column's meaning and sign convention is in the JSON summary
+    from simfab.coupling.outputs import CSV_HEADER
+
+    summary = json.loads(open(s["profile_json"]).read())
+    assert set(summary["profile_columns"]) == set(CSV_HEADER)
+    assert "negative = the part resists" in summary["profile_columns"]["force_N"]
+
+
+def test_3d_scene_loads_and_starts_outside(meshes, tmp_path, capsys):
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import check_start
+
+    assert _new(meshes, tmp_path / "s3", "--elements", "800") == 0
+    made = json.loads(capsys.readouterr().out)
+    cm = load_coupling_scene(made["outputs"]["scene_xml"])
+    check_start(cm)  # raises if the object starts inside the part
+    assert cm.fem.rest.shape[1] == 3 and len(cm.fixed_vertices) > 0
+    # the fixed slab is the clip's back (x = -16 mm) only
+    assert np.all(cm.fem.rest[cm.fixed_vertices, 0] < -0.0155)
+
+
+def test_depth_past_the_seat_is_refused_with_where(meshes, tmp_path, capsys):
+    out = tmp_path / "bad"
+    assert _new(meshes, out, "--dim", "2", "--depth", "25") == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--depth" in err and "inside the part" in err and "seat is at" in err
+    assert not out.exists() or not any(out.iterdir())  # no partial output
+
+
+def test_depth_before_the_seat_stops_there(meshes, tmp_path, capsys):
+    assert _new(meshes, tmp_path / "d", "--dim", "2", "--depth", "5") == 0
+    made = json.loads(capsys.readouterr().out)
+    assert not made["to_rest"] and made["path_length"] == pytest.approx(0.005 + 0.001, abs=2e-4)
+    toml = (tmp_path / "d" / "clip.toml").read_text()
+    assert "L_max" in toml  # the run stops at the given depth instead of searching for rest
+
+
+def test_in_plane_direction_required_in_2d(meshes, tmp_path, capsys):
+    out = tmp_path / "m"
+    assert _new(meshes, out, "--dim", "2", "--into=+z") == 2  # the last --into wins: out of the plane
+    err = capsys.readouterr().err
+    assert "--into" in err and "xy-plane" in err and not out.exists()
+
+
+def test_point_direction_is_the_axis_towards_it(meshes, tmp_path, capsys):
+    assert _new(meshes, tmp_path / "p", "--dim", "2", "--into=-50,0,0") == 0  # the cylinder's centre is the origin
+    by_point = json.loads(capsys.readouterr().out)
+    assert _new(meshes, tmp_path / "a", "--dim", "2") == 0
+    by_axis = json.loads(capsys.readouterr().out)
+    assert by_point["start"] == pytest.approx(by_axis["start"], abs=1e-12)
+    assert by_point["end"] == pytest.approx(by_axis["end"], abs=1e-12)
+
+
+def test_overlap_profile_of_a_disk_entering_a_block():
+    """A disk of radius R whose centre starts at x = R + g to the right of the block x <= 0 overlaps
+    it by max(0, s - g) after moving s along -x (the deepest point: the disk's leftmost point)."""
+    from shapely.geometry import Point, box
+
+    from simfab.coupling.author import _Shape2D, overlap_profile
+
+    R, g = 0.01, 0.002
+    block = _Shape2D(box(-0.05, -0.05, 0.0, 0.05))
+    disk = _Shape2D(Point(R + g, 0.0).buffer(R, quad_segs=256))
+    s = np.linspace(0.0, 0.006, 13)
+    prof = overlap_profile(block, disk, np.array([R + g, 0.0]), np.array([-1.0, 0.0, 0.0]), s)
+    # boundary samples every 2 pi R / 400 = 0.16 mm: the depth is resolved to (that spacing)^2 / (8 R)
+    assert prof.depth == pytest.approx(np.maximum(0.0, s - g), abs=2e-6)
