@@ -35,36 +35,6 @@ LOG = logging.getLogger(__name__)
 
 #: Descriptions of fields their dataclass leaves undocumented (class path -> field -> text).
 EXTRA: dict[str, dict[str, str]] = {
-    "simfab.growth.config.GrowthParams": {
-        "mode": '"volume" (attractors in the design box), "surface" (on the objects\' surfaces) or "profile" '
-                "(in a 2D profile swept along its normal)",
-        "attractors": "random attractors per growth (per stage)",
-        "influence": "attractor influence distance [m]; default 4 s (s: the attractor spacing; 8 s in surface "
-                     "and profile modes)",
-        "kill": "attractor kill distance [m]; default 1 s (3 s in surface and profile modes)",
-        "branch_length": "growth step L [m]; default 0.5 s (1.5 s in surface and profile modes)",
-        "box": "design box [[x0, y0, z0], [x1, y1, z1]] [m]; default: the bounding box of objects, roots, targets",
-        "surface_objects": "surface mode: the bodies whose surfaces are sampled (default: all)",
-        "max_steps": "growth step cap; default 12 x the steps needed to cross the design box",
-        "max_nodes": "growth stops at this many nodes",
-        "max_trials": "random directions tried when a branch hits an obstacle",
-        "r_min": "[radius] r_min: thinnest branch radius [m]; default 0.4 r_max "
-                 "(r = r_min + (r_max - r_min) exp(-k age))",
-        "r_max": "[radius] r_max: thickest branch radius [m]; default D / 60 (D: the design box's diagonal)",
-        "radius_decay": "[radius] decay: k [1/step]; default 3 L / D",
-        "smoothing_iterations": "[smoothing] iterations: v += l1 Lap(v) + l2 Lap(Lap(v)), roots, targets and "
-                                "leaves fixed; 0: none",
-        "lambda1": "[smoothing] lambda1 (l1)",
-        "lambda2": "[smoothing] lambda2 (l2)",
-        "symmetry": "[symmetry] enabled, point [m], normal: mirror-symmetric growth (also --symmetric)",
-        "profile": "[profile] origin, u, v, points [m], depth [m]: the closed 2D profile of mode "
-                   '"profile", swept along u x v over depth',
-        "stages": "[stages] targets = [[names], ...]: guided progressive growth, one stage per list; targets "
-                  "not listed grow in a last stage",
-        "skin_segments": "[skin] segments: circular resolution of the joint spheres",
-        "subtract_objects": "[skin] subtract_objects: carve the objects out of the skin",
-        "seed": "seed used by the Python API when none is given (the CLI always passes --seed, default 0)",
-    },
     "simfab.deploy.pattern.PatternConfig": {
         "beam_width": "in-plane width of the beams [m]",
         "beam_thickness": "sheet thickness of the beams [m]",
@@ -305,7 +275,7 @@ class SceneKeys(SphinxDirective):
 
 class DictTable(SphinxDirective):
     """``.. dict-table:: module.NAME``: a two-column table of a ``{name: description}`` dict in the code
-    (e.g. :data:`simfab.coupling.outputs.PROFILE_COLUMNS`)."""
+    (e.g. :data:`simfab.coupling.outputs.CSV_COLUMN_DOCS`)."""
 
     required_arguments = 1
     option_spec = {"header": directives.unchanged}

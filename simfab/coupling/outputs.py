@@ -37,7 +37,7 @@ CSV_HEADER = ["step", "s_m", "energy_J", "force_N", "path_force_N", "grip_N", "m
               "dissipated_J", "lag_solves"]
 #: What each profile column means, its unit and its sign convention (written into the JSON summary as
 #: ``profile_columns``; the user guide's table is generated from it).
-PROFILE_COLUMNS = {
+CSV_COLUMN_DOCS = {
     "step": "record index (0: the start)",
     "s_m": "position of O along its path [m] (translation plus rotation angle times rho)",
     "energy_J": "elastic energy stored in the part [J]",
@@ -107,7 +107,7 @@ def summarize(res: InsertionResult) -> tuple[ProfileSummary, dict]:
         "warnings": list(res.warnings),
         "notes": list(getattr(res, "notes", [])),
         "units": SUMMARY_UNITS,
-        "profile_columns": PROFILE_COLUMNS,
+        "profile_columns": CSV_COLUMN_DOCS,
     }
     return prof, d
 

@@ -78,13 +78,20 @@ class GrowthConfig:
     from the design space by :func:`resolve`).
 
     Args:
-        mode: "volume", "surface" or "profile" attractor placement.
-        attractors: number of attractors. influence, kill: attractor influence / kill distance [m].
-        branch_length: growth step L [m]. box: design box ((x0, y0, z0), (x1, y1, z1)) [m].
+        mode: "volume" (attractors in the design box), "surface" (on the objects' surfaces) or
+            "profile" (in a 2D profile swept along its normal).
+        attractors: random attractors per growth (per stage).
+        influence: attractor influence distance [m] (None: 4 s, s the attractor spacing; 8 s in
+            surface and profile modes).
+        kill: attractor kill distance [m] (None: 1 s; 3 s in surface and profile modes).
+        branch_length: growth step L [m] (None: 0.5 s; 1.5 s in surface and profile modes).
+        box: design box ((x0, y0, z0), (x1, y1, z1)) [m] (None: the bounding box of objects, roots, targets).
         surface_objects: surface mode: the bodies to sample (None: all).
         target_influence: influence distance of target attractors [m]; infinite by default so that
             a target keeps pulling its nearest node after every ordinary attractor has died.
-        max_steps, max_nodes, max_trials: step cap, node cap, random directions tried at an obstacle.
+        max_steps: growth step cap (None: 12 x the steps needed to cross the design box).
+        max_nodes: growth stops at this many nodes.
+        max_trials: random directions tried when a branch hits an obstacle.
         seed: seed of grow() when none is given.
     """
 
@@ -155,7 +162,13 @@ class RadiusConfig:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SmoothingConfig:
-    """The ``[smoothing]`` table: ``iterations`` of v += lambda1 Lap(v) + lambda2 Lap(Lap(v))."""
+    """The ``[smoothing]`` table: v += lambda1 Lap(v) + lambda2 Lap(Lap(v)), roots, targets and leaves fixed.
+
+    Args:
+        iterations: smoothing passes (0: none).
+        lambda1: weight of the Laplacian term [-].
+        lambda2: weight of the bi-Laplacian term [-].
+    """
 
     iterations: int = 10
     lambda1: float = 0.2
@@ -169,8 +182,13 @@ class SmoothingConfig:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SymmetryConfig:
-    """The ``[symmetry]`` table: mirror plane through ``point`` (3,) [m] with ``normal`` (3,)
-    (stored unit length); ``enabled = false`` turns it off."""
+    """The ``[symmetry]`` table: mirror-symmetric growth (also ``--symmetric``).
+
+    Args:
+        enabled: grow mirror-symmetrically (``false`` turns the table off).
+        point: a point of the mirror plane, (3,) [m].
+        normal: the mirror plane's normal, (3,) (stored unit length).
+    """
 
     enabled: bool = True
     point: tuple = (0.0, 0.0, 0.0)
@@ -186,9 +204,16 @@ class SymmetryConfig:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class ProfileConfig:
-    """The ``[profile]`` table (mode "profile"): closed 2D profile ``points`` (k, 2) [m] in the plane
-    ``origin + a u + b v`` (``u``, ``v`` stored unit length), swept along the view direction
-    ``u x v`` over ``depth`` = (d0, d1) [m]. Every key is required."""
+    """The ``[profile]`` table (mode "profile"): a closed 2D profile swept along ``u x v``. Every key
+    is required.
+
+    Args:
+        origin: the profile plane's origin, (3,) [m].
+        u: the plane's first in-plane direction, (3,) (stored unit length).
+        v: the plane's second in-plane direction, (3,) (stored unit length).
+        points: the closed profile, (k, 2) [m] in the plane origin + a u + b v.
+        depth: (d0, d1) [m]: the sweep's extent along u x v.
+    """
 
     origin: tuple | None = None
     u: tuple | None = None
@@ -219,7 +244,11 @@ class ProfileConfig:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class StagesConfig:
-    """The ``[stages]`` table: guided progressive growth, ``targets`` = target site names per stage."""
+    """The ``[stages]`` table: guided progressive growth.
+
+    Args:
+        targets: target site names per stage, ``[[names], ...]``; targets not listed grow in a last stage.
+    """
 
     targets: tuple | None = None
 
@@ -464,8 +493,10 @@ class MaterialConfig:
 
     Args:
         name: a built-in base material (PLA, VeroWhite; None: PLA); the keys below override it.
-        youngs_modulus [Pa], poisson_ratio [-] in (-1, 0.5), yield_stress [Pa] (von Mises),
-            density [kg/m^3]: None keeps the base material's.
+        youngs_modulus: Young's modulus [Pa] (None keeps the base material's).
+        poisson_ratio: Poisson's ratio [-] in (-1, 0.5) (None keeps the base material's).
+        yield_stress: von Mises yield stress [Pa] (None keeps the base material's).
+        density: density [kg/m^3] (None keeps the base material's).
         critical_distance: radius [m] the von Mises stress is averaged over (0: the largest point value).
     """
 
