@@ -72,7 +72,13 @@ def _scene(target, units, overrides: dict):
         return dataclasses.replace(s, target=target, path=target.name)
     target = str(target)
     path = sc.bundled_path(target) if target in sc.NAMES and not os.path.exists(target) else target
-    return sc.load_scene(path, units=units, overrides=ov)
+    try:
+        return sc.load_scene(path, units=units, overrides=ov)
+    except InputError as e:  # a given override's bad value is blamed on the override, not on the file
+        for k, (table, name) in OVERRIDES.items():
+            if overrides.get(k) is not None and str(e.where or "").endswith(f"{table}.{name}"):
+                raise InputError(e.message, where=k) from None
+        raise
 
 
 def run(target, *, out=None, seed: int = 0, device: str = "cpu", progress=None, units: str | None = None,
