@@ -25,7 +25,7 @@ extensions = [
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 # docs/decisions.md and docs/benchmarks.md are design and measurement logs kept beside the site (linked
 # from it, not rendered); _build is the output
-exclude_patterns = ["_build", "decisions.md", "benchmarks.md", "auto_examples/*.ipynb", "auto_examples/*.py",
+exclude_patterns = ["_build", "decisions.md", "auto_examples/*.ipynb", "auto_examples/*.py",
                     "auto_examples/*.zip"]
 
 napoleon_google_docstring = True
