@@ -48,6 +48,7 @@ class CouplingResult(Result):
         lag_solves_per_step: friction lag solves per record [-].
         warnings, notes: one line each.
         units: key -> unit of the figures above (also in the written JSON).
+        profile_columns: profile CSV column -> its meaning, unit and sign convention.
         profile: the typed deformation profile (figures and per-record arrays, ``.to_pandas()``).
         insertion: the :class:`simfab.coupling.simulate.InsertionResult` (model, records).
         outputs: label -> path (profile_csv, plot_png, usd, mjcf, profile_json) when written.
@@ -95,6 +96,7 @@ class CouplingResult(Result):
     warnings: list
     notes: list
     units: dict
+    profile_columns: dict
     profile: Any = field(json=False)
     insertion: Any = field(json=False)
 
