@@ -19,7 +19,7 @@ import dataclasses
 import numpy as np
 
 from simfab.crowd.config import TOL
-from simfab.crowd.plots import _plt
+from simfab.crowd.plots import pyplot
 from simfab.crowd.truth import scale_to_survey
 from simfab.errors import InputError
 from simfab.fem import elastic as nh
@@ -170,7 +170,7 @@ def plot_brackets(results, scores, path) -> str:
     from matplotlib import cm, colors
 
 
-    plt = _plt()
+    plt = pyplot()
     n = len(results)
     cols = min(4, n)
     rows = (n + cols - 1) // cols
