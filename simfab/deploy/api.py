@@ -68,11 +68,11 @@ def _scene(target, units, overrides: dict):
         with tempfile.TemporaryDirectory() as tmp:
             p = os.path.join(tmp, "target.obj")
             trimesh.Trimesh(target.V, target.F, process=False).export(p)
-            s = sc.load_scene(p, overrides=ov)
+            s = sc.load_deploy_scene(p, overrides=ov)
         return dataclasses.replace(s, target=target, path=target.name)
     target = str(target)
     path = sc.bundled_path(target) if target in sc.NAMES and not os.path.exists(target) else target
-    return sc.load_scene(path, units=units, overrides=ov)
+    return sc.load_deploy_scene(path, units=units, overrides=ov)
 
 
 def run(target, *, out=None, seed: int = 0, device: str = "cpu", progress=None, units: str | None = None,

@@ -27,7 +27,7 @@ def write_all(res, summary: dict, out: str) -> dict:
     """Write every output of a run into ``out`` (atomically: all or none).
 
     Args:
-        res: the :class:`simfab.deploy.pipeline.SurfaceResult` of the run.
+        res: the :class:`simfab.deploy.pipeline.SurfaceRun` of the run.
         summary: its JSON summary (:func:`simfab.deploy.pipeline.summary`, with ``outputs``).
         out: the output folder.
 
