@@ -3,13 +3,14 @@
     import simfab
     r = simfab.grow.run("bridge")            # grow a support structure (typed result)
     c = simfab.grow.check("skeleton.json")   # check a grown skeleton
+    e = simfab.grow.edit("skeleton.json", stroke="stroke.json", camera="camera.json")  # sketch edit
 
-Both forward to :func:`simfab.growth.run` and :func:`simfab.growth.check`.
+They forward to :func:`simfab.growth.run`, :func:`simfab.growth.check` and :func:`simfab.growth.edit`.
 """
 
 from __future__ import annotations
 
-__all__ = ["run", "check"]
+__all__ = ["run", "check", "edit"]
 
 
 def run(scene, *, check: bool = False, out=None, seed: int = 0, device: str = "cpu", progress: bool | None = None,
@@ -46,3 +47,18 @@ def check(skeleton, **kwargs):
     from simfab.growth import check as grow_check
 
     return grow_check(skeleton, **kwargs)
+
+
+def edit(skeleton, **kwargs):
+    """Sketch edit of a grown skeleton (:func:`simfab.growth.edit`).
+
+    Args:
+        skeleton: the skeleton file (or object) to edit.
+        **kwargs: passed to :func:`simfab.growth.edit` (``stroke``, ``camera``, ``chain``, ``out``, ...).
+
+    Returns:
+        The edit's typed result.
+    """
+    from simfab.growth import edit as grow_edit
+
+    return grow_edit(skeleton, **kwargs)

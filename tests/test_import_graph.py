@@ -129,13 +129,8 @@ def test_library_never_imports_cli():
     assert not bad, "the library imports the command line:\n" + "\n".join(bad)
 
 
-#: Private names still imported across modules, in files other helpers of issue 40 own this round
-#: ("module: name"); the integrator empties it once their public names have landed.
-PRIVATE_IMPORT_ALLOWLIST = frozenset({
-    "simfab.design.outputs: simfab.coupling.outputs._display_faces",
-    "simfab.design.outputs: simfab.coupling.outputs._object_display",
-    "simfab.crowd.bracket: simfab.crowd.plots._plt",
-})
+#: Private names still imported across modules ("module: name"): none.
+PRIVATE_IMPORT_ALLOWLIST: frozenset[str] = frozenset()
 
 
 def private_imports(root: Path = ROOT) -> list[str]:

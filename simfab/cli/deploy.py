@@ -165,56 +165,22 @@ def format_text(summary: dict) -> str:
     return "\n".join(rows)
 
 
+#: keyword of :func:`simfab.deploy.cell` -> its flag (errors name the flag)
+CELL_FLAGS = {"increments": "--increments", "inserts": "--insert", "mjcf_rods": "--mjcf-rods"}
+
+
 def run_cell(args) -> dict:
-    import dataclasses
-
-    import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
-    from simfab._warp import device as _device
-    from simfab.deploy import export, unitcell
+    import simfab.deploy
     from simfab.errors import InputError
-    from simfab.io.atomic import atomic_paths, write_json
-    from simfab.progress import log
 
-    dev = _device(args.device)
-    scene = args.scene or unitcell.default_scene_path()
-    cfg, inserts = unitcell.load_cell_scene(scene)
-    if args.increments is not None:
-        lo, hi = unitcell.COUNT_RANGES["increments"]
-        if not lo <= args.increments <= hi:
-            raise InputError(f"must be in [{lo}, {hi}] (got {args.increments})", where="--increments")
-        cfg = dataclasses.replace(cfg, increments=args.increments)
-    names = args.insert or sorted(inserts)
-    for n in names:
-        if n not in inserts:
-            raise InputError(f"no insert body {n!r} in the scene (have: {', '.join(sorted(inserts))})",
-                             where="--insert")
-    out = os.path.abspath(args.out)
-    deployments = {}
-    for n in names:
-        ins = inserts[n]
-        log(f"deploy: {n} (half-size {ins.r * 1e3:.1f} mm, gap half-size {cfg.gap * 1e3:.1f} mm)", quiet=args.quiet)
-        deployments[n] = unitcell.deploy(cfg, ins, device=dev, quiet=args.quiet)
-    # every file of every insert plus the summary appear together (none if any write fails)
-    paths = {(n, kind): os.path.join(out, n, f) for n in names
-             for kind, f in (("usd", "deploy.usda"), ("mjcf", "deployed.xml"), ("png", "deployed.png"))}
-    paths["json"] = os.path.join(out, "deploy.json")
-    results = {}
-    with atomic_paths(paths) as tmp:
-        for n, d in deployments.items():
-            ins = d.insert
-            export.write_usd(tmp[n, "usd"], d)
-            export.write_mjcf(tmp[n, "mjcf"], d, name=f"deployed_{n}", rods=args.mjcf_rods)
-            export.write_png(tmp[n, "png"], tmp[n, "mjcf"])
-            results[n] = dict(insert_half_size=ins.r, gap_half_size=cfg.gap,
-                              relation="larger" if ins.r > cfg.gap else "smaller",
-                              **d.curvature, stable=d.stable, increments=len(d.iterations),
-                              newton_iterations=d.iterations, energy=d.energy,
-                              gaussian_curvature_per_increment=d.curvature_history,
-                              max_bending_strain=float(export.bending_strain(d.cell.model, d.states[-1]).max()),
-                              outputs={k: paths[n, k] for k in ("usd", "mjcf", "png")})
-        summary = dict(scene=str(scene), inserts=results, summary_json=paths["json"])
-        write_json(tmp["json"], summary)
-    return summary
+    try:
+        res = simfab.deploy.cell(args.scene, out=args.out, inserts=args.insert, increments=args.increments,
+                                 mjcf_rods=args.mjcf_rods, device=args.device, progress=None if args.quiet else True)
+    except InputError as e:
+        if e.where in CELL_FLAGS:
+            raise InputError(e.message, where=CELL_FLAGS[e.where]) from None
+        raise
+    return res.to_json()
 
 
 def demo(ctx) -> dict:

@@ -219,16 +219,9 @@ def _nonneg(v):
 
 
 def _run_edit(args) -> dict:
-    import numpy as np
-
     from simfab.errors import InputError
-    from simfab.growth.obstacles import Obstacles
-    from simfab.growth.outputs import SKIN_FILE_UNITS, save_skin
-    from simfab.growth.scene import load_growth_scene
-    from simfab.growth.skeleton import load_skeleton_json, to_json_dict
-    from simfab.growth.sketch import edit_chain, load_camera, load_stroke
-    from simfab.growth.skinning import skin
-    from simfab.io.atomic import atomic_paths, write_json
+    from simfab.growth import edit
+    from simfab.progress import log
 
     if args.skeleton is None:
         raise InputError("simfab grow edit needs SKELETON_JSON")
@@ -237,63 +230,9 @@ def _run_edit(args) -> dict:
     for name in ("attractors", "influence", "kill", "branch_length", "mode", "symmetric", "smooth_iterations"):
         if getattr(args, name) is not None:
             raise InputError(f"--{name.replace('_', '-')} applies to growth, not to 'edit'")
-    sk, doc = load_skeleton_json(args.skeleton)
-    camera = load_camera(args.camera)
-    stroke = load_stroke(args.stroke)
-    objects, obstacles = {}, None
-    scene_path = doc.get("scene")
-    if scene_path and Path(scene_path).is_file():
-        scene = load_growth_scene(scene_path)
-        objects = scene.objects
-        diag = float(np.linalg.norm(np.ptp(scene.objects_bbox(), axis=0)))
-        obstacles = Obstacles.of_scene(scene, diag)
-    edited, rep = edit_chain(sk, camera, stroke, chain=args.chain, obstacles=obstacles)
-    mesh, srep = skin(edited.nodes, edited.parent, edited.radius, objects)
-    if rep.get("segments_colliding") or srep.bodies != 1:
-        from simfab.progress import log
-
-        log(f"simfab grow edit: warning: the edited chain crosses objects in {rep.get('segments_colliding', 0)} "
-            f"segment(s); the skin has {srep.bodies} bodies", quiet=args.quiet)
-    out = Path(args.out)
-    stem = Path(args.skeleton).stem.removesuffix("_skeleton") + "_edited"
-    paths = {"skeleton_json": out / f"{stem}_skeleton.json", "skin_stl": out / f"{stem}_skin.stl",
-             "skin_ply": out / f"{stem}_skin.ply", "png": out / f"{stem}_preview.png"}
-    with atomic_paths(paths) as tmp:  # the files appear together or not at all
-        write_json(tmp["skeleton_json"], to_json_dict(edited, scene=scene_path, seed=doc.get("seed"), edit=rep))
-        save_skin(mesh, tmp["skin_stl"])
-        save_skin(mesh, tmp["skin_ply"])
-        edit_preview(tmp["png"], mesh, objects, camera, stroke, title=f"{stem}: chain {rep.get('chain')} moved "
-                                                                         "onto the stroke (red)")
-    paths = {k: str(v) for k, v in paths.items()}
-    return {**rep, "nodes": len(edited.nodes), "segments": int((edited.parent >= 0).sum()),
-            "watertight": srep.watertight, "bodies": srep.bodies, "volume": srep.volume, "skin_units": SKIN_FILE_UNITS,
-            **paths}
-
-
-def edit_preview(png, mesh, objects: dict, camera, stroke, *, title: str):
-    """The edited skin with the scene's objects, seen through the edit's camera, the stroke drawn
-    over it in red, titled and with a scale bar."""
-    import dataclasses
-
-    from PIL import Image, ImageDraw
-
-    from simfab.growth.outputs import OBJECT_RGBA, SKIN_RGBA
-    from simfab.io.atomic import atomic_path
-    from simfab.io.render import annotate_png, render_meshes
-
-    cam = dataclasses.asdict(camera)
-    items = [(m.vertices, m.faces, OBJECT_RGBA[:3]) for m in objects.values()] + [(mesh.vertices, mesh.faces,
-                                                                                    SKIN_RGBA[:3])]
-    got: dict = {}
-    render_meshes(items, png, width=camera.width, height=camera.height, view=cam, camera=got, floor=False)
-    img = Image.open(png).convert("RGB")
-    d = ImageDraw.Draw(img)
-    d.line([tuple(map(float, p)) for p in stroke], fill=(230, 30, 30), width=max(2, camera.height // 160))
-    with atomic_path(png) as tmp:
-        img.save(tmp, format="PNG")
-    if got:
-        annotate_png(png, got, title=title)
-    return png
+    res = edit(args.skeleton, stroke=args.stroke, camera=args.camera, chain=args.chain, out=args.out,
+               progress=lambda m: log(m, quiet=args.quiet))
+    return res.to_json()
 
 
 def bundled_scenes() -> list[Path]:

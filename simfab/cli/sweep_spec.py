@@ -40,11 +40,10 @@ import numpy as np
 
 from simfab.errors import InputError
 from simfab.io.tables import FieldError, check_keys, load_table
+from simfab.sweep.runs import META_COLUMNS  # columns every table has besides parameters and figures
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _MJCF = re.compile(r"^(?P<tag>[A-Za-z_]+):(?P<name>[^.\[\]]+)(?:\.(?P<attr>[A-Za-z_]+))?(?:\[(?P<idx>[0-9, ]+)\])?$")
-#: Columns every table has besides parameters and figures.
-META_COLUMNS = ("run", "key", "status", "message", "seconds", "worker", "outputs")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)

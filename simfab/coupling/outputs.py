@@ -186,12 +186,12 @@ def vertex_von_mises(fem, vm: np.ndarray) -> np.ndarray:
     return s / np.maximum(c, 1)
 
 
-def _display_faces(cm) -> np.ndarray:
+def display_faces(cm) -> np.ndarray:
     """Triangles over A's nodes to display it: 2D its (sub-)elements, 3D its boundary (sub-)facets."""
     return cm.display_elements if cm.dim == 2 else cm.contact_facets
 
 
-def _object_display(cm):
+def object_display(cm):
     """O's display mesh in its body frame: (vertices (k, 3), faces (f, 3))."""
     if cm.object_faces is not None:
         return cm.object_vertices, cm.object_faces
@@ -210,9 +210,9 @@ def write_usd(res: InsertionResult, path) -> Path:
     cm = res.model
     fem = cm.fem
     w = StageWriter(path, time_codes_per_second=12.0)
-    faces = _display_faces(cm)
+    faces = display_faces(cm)
     w.add_mesh("part", faces, res.steps[0].x)
-    ov, of = _object_display(cm)
+    ov, of = object_display(cm)
     w.add_rigid("object", points=ov, faces=of, color=[0.55, 0.6, 0.7])
     records = [*res.steps, *res.removal]
     vmax = float(max(r.max_von_mises for r in records)) or 1.0
@@ -276,7 +276,7 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
         remap = np.full(len(V), -1)
         remap[used] = np.arange(len(used))
         V, F = V[used], remap[F]
-    ov, of = _object_display(cm)
+    ov, of = object_display(cm)
     if cm.dim == 2:
         ov, of = extrude_triangles(ov[:, :2], of, _loop_edges(len(cm.object_vertices)), fem.thickness * 1.5)
     line = straight_path(res)

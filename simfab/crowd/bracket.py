@@ -19,7 +19,7 @@ import dataclasses
 import numpy as np
 
 from simfab.crowd.config import TOL
-from simfab.crowd.plots import _plt
+from simfab.crowd.plots import pyplot
 from simfab.crowd.truth import scale_to_survey
 from simfab.errors import InputError
 from simfab.fem import elastic as nh
@@ -99,7 +99,7 @@ def designs(s: BracketSetup = BracketSetup()) -> dict[str, tuple[np.ndarray, lis
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class BracketResult:
+class BracketDeflection:
     name: str
     deflection: float  #: mean downward displacement of the loaded nodes, m
     area: float  #: design area, m^2
@@ -110,7 +110,8 @@ class BracketResult:
     displacement: np.ndarray  #: (n, 2) equilibrium minus rest, m
 
 
-def tip_deflection(outline, holes=(), *, setup: BracketSetup = BracketSetup(), name: str = "design") -> BracketResult:
+def tip_deflection(outline, holes=(), *, setup: BracketSetup = BracketSetup(),
+                   name: str = "design") -> BracketDeflection:
     """Mesh, clamp at x = 0, load at (L, load_y), solve statics; return the tip deflection."""
 
     P, T = triangulate_polygon(outline, holes=holes, max_area=setup.max_area)
@@ -142,11 +143,11 @@ def tip_deflection(outline, holes=(), *, setup: BracketSetup = BracketSetup(), n
     x = res.x.reshape(-1, 2)
     u = x - X
     area = float(model.volume.sum()) / setup.thickness  # plane strain: element volume = area * thickness
-    return BracketResult(name=name, deflection=float(-u[loaded, 1].mean()), area=area, n_triangles=len(T),
+    return BracketDeflection(name=name, deflection=float(-u[loaded, 1].mean()), area=area, n_triangles=len(T),
                          newton_iterations=res.iterations, points=P, triangles=T, displacement=u)
 
 
-def bracket_survey(setup: BracketSetup = BracketSetup(), *, names=None) -> list[BracketResult]:
+def bracket_survey(setup: BracketSetup = BracketSetup(), *, names=None) -> list[BracketDeflection]:
     """Tip deflection of every design (or of ``names``)."""
     d = designs(setup)
     names = list(d) if names is None else list(names)
@@ -170,7 +171,7 @@ def plot_brackets(results, scores, path) -> str:
     from matplotlib import cm, colors
 
 
-    plt = _plt()
+    plt = pyplot()
     n = len(results)
     cols = min(4, n)
     rows = (n + cols - 1) // cols

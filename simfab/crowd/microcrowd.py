@@ -30,7 +30,7 @@ from simfab.sweep.tasks import run_tasks
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class StudyResult:
+class MicrocrowdStudy:
     """Per crowd size (K sizes): sizes (K,) int; n_subcrowds (K,) int; percentile_mean/sd (K,)
     in percent; bias_mean/sd (K,) unit-scale RMS; unconverged (K,) fraction of fits with
     R-hat above the study sampler's target; rhat_median (K,) median worst R-hat of the fits.
@@ -89,7 +89,7 @@ def micro_crowd_study(
     quiet: bool = True,
     device: str = "cpu",
     scheduler=None,
-) -> StudyResult:
+) -> MicrocrowdStudy:
     """Run the study on ``ratings`` with ``truth`` ((Q,) scale units). See module docstring.
 
     Each crowd size is one task of :func:`simfab.sweep.run_tasks` (``scheduler``: None for a
@@ -127,7 +127,7 @@ def micro_crowd_study(
         if not r.ok:
             raise RuntimeError(f"micro-crowd study, size {k}: {r.message}")
     cols = {key: np.array([r.value[key] for r in results]) for key in ("n", "pm", "ps", "bm", "bs", "u", "rm")}
-    return StudyResult(
+    return MicrocrowdStudy(
         sizes=np.arange(min_size, N), n_subcrowds=cols["n"], percentile_mean=cols["pm"], percentile_sd=cols["ps"],
         bias_mean=cols["bm"], bias_sd=cols["bs"], unconverged=cols["u"], rhat_median=cols["rm"],
         seconds=time.perf_counter() - t0,

@@ -70,7 +70,7 @@ class StudyResult(Result):
         sizes: per sub-crowd size: size, subcrowds, percentile_mean/sd [%], bias_mean/sd (unit scale),
             unconverged_fraction, rhat_median.
         seconds: wall time [s].
-        study: the :class:`simfab.crowd.study.StudyResult` (per-sub-crowd figures).
+        study: the :class:`simfab.crowd.microcrowd.MicrocrowdStudy` (per-sub-crowd figures).
     """
 
     sizes: list

@@ -7,7 +7,8 @@ import numpy as np
 from simfab.io.atomic import save_figure
 
 
-def _plt():
+def pyplot():
+    """``matplotlib.pyplot`` on the Agg backend (imported on first use)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -18,7 +19,7 @@ def _plt():
 
 def plot_study(result, path, *, title: str = "Micro-crowd study") -> str:
     """Percentile rank and population bias (mean +- 1 sd over sub-crowds) against crowd size."""
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
     k = result.sizes
     for ax, m, s, label, color, top in (
@@ -46,7 +47,7 @@ def plot_study(result, path, *, title: str = "Micro-crowd study") -> str:
 def plot_expert_network(crowd_error: float, individual, names, path, *, title: str = "Expert network") -> str:
     """Crowd error at the centre, each individual's error around it, coloured by error;
     individuals who beat the crowd get a dashed ring. Errors: unit-scale RMS."""
-    plt = _plt()
+    plt = pyplot()
     from matplotlib import cm, colors
     from matplotlib.patches import Circle
 
@@ -93,7 +94,7 @@ NETWORK_MAX_NODES = 30
 def _plot_expert_ranking(crowd_error: float, e: np.ndarray, names, path, *, title: str) -> str:
     """Every individual's error, sorted, against the crowd's (a horizontal line); individuals
     better than the crowd are named."""
-    plt = _plt()
+    plt = pyplot()
     order = np.argsort(e)
     n = e.size
     better = e[order] < crowd_error
@@ -120,7 +121,7 @@ def _plot_expert_ranking(crowd_error: float, e: np.ndarray, names, path, *, titl
 
 def plot_method_errors(per_question: dict, tasks, path, *, title: str = "Crowd error per question") -> str:
     """Bars of |estimate - truth| (unit scale) per question, one bar per aggregation method."""
-    plt = _plt()
+    plt = pyplot()
     names = list(per_question)
     Q = len(tasks)
     fig, ax = plt.subplots(figsize=(max(6, 1.2 * Q + 2), 3.8), constrained_layout=True)

@@ -21,17 +21,18 @@ Inverse design from a target surface (``simfab deploy surface``), one stage per 
 - :mod:`simfab.deploy.pipeline`, :mod:`simfab.deploy.surface_outputs`, :mod:`simfab.deploy.outputs`:
   the run and its files; :mod:`simfab.deploy.auto`: the defaults decided from the target;
 - ``simfab.deploy.run`` (:func:`simfab.deploy.api.run`): the whole deployment as one call, loaded on
-  first use (``import simfab.deploy`` loads no Warp or MuJoCo). ``simfab.deploy.surface`` stays the
-  target-surface module (:mod:`simfab.deploy.surface`): a lazy alias of the same name would be
-  shadowed by the module as soon as anything imports it.
+  first use (``import simfab.deploy`` loads no Warp or MuJoCo); ``simfab.deploy.cell``
+  (:func:`simfab.deploy.api.cell`): the unit cell deployed by each insert (``simfab deploy``).
+  ``simfab.deploy.surface`` stays the target-surface module (:mod:`simfab.deploy.surface`): a lazy
+  alias of the same name would be shadowed by the module as soon as anything imports it.
 """
 
-__all__ = ["run"]
+__all__ = ["run", "cell"]
 
 
 def __getattr__(name: str):
-    if name == "run":
-        from simfab.deploy.api import run
+    if name in ("run", "cell"):
+        from simfab.deploy import api
 
-        return run
+        return getattr(api, name)
     raise AttributeError(f"module 'simfab.deploy' has no attribute {name!r}")

@@ -68,12 +68,12 @@ def _scene(target, units, overrides: dict):
         with tempfile.TemporaryDirectory() as tmp:
             p = os.path.join(tmp, "target.obj")
             trimesh.Trimesh(target.V, target.F, process=False).export(p)
-            s = sc.load_scene(p, overrides=ov)
+            s = sc.load_deploy_scene(p, overrides=ov)
         return dataclasses.replace(s, target=target, path=target.name)
     target = str(target)
     path = sc.bundled_path(target) if target in sc.NAMES and not os.path.exists(target) else target
     try:
-        return sc.load_scene(path, units=units, overrides=ov)
+        return sc.load_deploy_scene(path, units=units, overrides=ov)
     except InputError as e:  # a given override's bad value is blamed on the override, not on the file
         for k, (table, name) in OVERRIDES.items():
             if overrides.get(k) is not None and str(e.where or "").endswith(f"{table}.{name}"):
@@ -124,3 +124,113 @@ def run(target, *, out=None, seed: int = 0, device: str = "cpu", progress=None, 
                          unreachable_gaps=b["unreachable_gaps"], cones=(summary.get("cuts") or {}).get("cones", 0),
                          covered=summary["flat_area_covered"], mujoco_at_rest=st.get("settled"),
                          missed=tuple(b["missed"]), summary=summary, run=res)
+
+
+#: ``mjcf_rods`` values of :func:`cell`
+MJCF_RODS = ("capsules", "chain", "flexcomp")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class CellInsertResult:
+    """One insert of the unit cell deployed: sizes, the deployed shape's curvature figures
+    (:func:`simfab.deploy.unitcell.gaussian_curvature`), stability, the solve's counts and the
+    files written (``outputs``: usd, mjcf, png; empty without ``out``)."""
+
+    insert_half_size: float = field(unit="m")
+    gap_half_size: float = field(unit="m")
+    relation: str
+    """"larger" or "smaller": the insert's half-size against the gap's."""
+    angle_deficit: float = field(unit="rad")
+    gaussian_curvature: float = field(unit="1/m^2")
+    kind: str
+    """"dome" (positive discrete Gaussian curvature) or "saddle"."""
+    insert_rise: float = field(unit="m")
+    saddle_amplitude: float = field(unit="m")
+    stable: bool
+    increments: int
+    newton_iterations: list
+    """Newton iterations per increment."""
+    energy: float = field(unit="J")
+    gaussian_curvature_per_increment: list = field(unit="1/m^2")
+    max_bending_strain: float = field(unit="-")
+    outputs: dict = dataclasses.field(default_factory=dict)
+    deployment: object = field(json=False, default=None)
+    """The :class:`simfab.deploy.unitcell.CellDeployment` (states per increment, cell, insert)."""
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class CellResult(Result):
+    """The unit cell deployed by each of its inserts (``simfab deploy``); ``to_json()`` is the
+    ``--json`` summary (scene, inserts, summary_json), also written as ``deploy.json`` with ``out``."""
+
+    scene: str
+    inserts: dict
+    """Insert body name -> :class:`CellInsertResult`."""
+    summary_json: str | None = None
+    """Path of ``deploy.json`` (None without ``out``)."""
+
+    def to_json(self) -> dict:
+        """The ``--json`` summary (keys unchanged from ``simfab deploy``; the per-insert ``outputs`` inside)."""
+        d = super().to_json()
+        d.pop("outputs")
+        return d
+
+
+def cell(scene=None, *, out=None, inserts=None, increments: int | None = None, mjcf_rods: str = "capsules",
+         device: str = "cpu", progress=None) -> CellResult:
+    """Deploy the four-beam unit cell by each insert of its scene (``simfab deploy``).
+
+    Args:
+        scene: unit-cell MJCF scene (None: the bundled ``scenes/deploy/unit_cell.xml``).
+        out: folder for the outputs (per insert ``<body>/deploy.usda``, ``deployed.xml``,
+            ``deployed.png``; ``deploy.json``), written together or not at all; None: nothing written.
+        inserts: insert body names to deploy (None: every ``insert*`` body of the scene).
+        increments: quasi-static increments (None: the scene's ``cell_increments``).
+        mjcf_rods: rods in the deployed MJCF: "capsules" (static), "chain" (simulatable) or "flexcomp".
+        device: Warp device ("cpu").
+        progress: None for quiet, anything else to log each insert and show the increments.
+
+    Returns:
+        The :class:`CellResult`. InputError (naming the keyword) on a bad value, before any solve.
+    """
+    import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
+    from simfab._warp import device as _device
+    from simfab.deploy import export, unitcell
+    from simfab.deploy import outputs as outs
+    from simfab.progress import log
+
+    if mjcf_rods not in MJCF_RODS:
+        raise InputError(f"must be one of {', '.join(MJCF_RODS)} (got {mjcf_rods!r})", where="mjcf_rods")
+    if out is not None and os.path.exists(out) and not os.path.isdir(out):
+        raise InputError("output location exists and is not a folder", where=str(out))
+    quiet = progress is None
+    dev = _device(device)
+    scene = str(scene) if scene is not None else unitcell.default_scene_path()
+    cfg, bodies = unitcell.load_cell_scene(scene)
+    if increments is not None:
+        lo, hi = unitcell.COUNT_RANGES["increments"]
+        if not lo <= increments <= hi:
+            raise InputError(f"must be in [{lo}, {hi}] (got {increments})", where="increments")
+        cfg = dataclasses.replace(cfg, increments=increments)
+    names = list(inserts) if inserts else sorted(bodies)
+    for n in names:
+        if n not in bodies:
+            raise InputError(f"no insert body {n!r} in the scene (have: {', '.join(sorted(bodies))})",
+                             where="inserts")
+    paths = outs.cell_paths(out, names) if out is not None else None
+    results = {}
+    for n in names:
+        ins = bodies[n]
+        log(f"deploy: {n} (half-size {ins.r * 1e3:.1f} mm, gap half-size {cfg.gap * 1e3:.1f} mm)", quiet=quiet)
+        d = unitcell.deploy(cfg, ins, device=dev, quiet=quiet)
+        results[n] = CellInsertResult(
+            insert_half_size=ins.r, gap_half_size=cfg.gap, relation="larger" if ins.r > cfg.gap else "smaller",
+            **d.curvature, stable=d.stable, increments=len(d.iterations), newton_iterations=d.iterations,
+            energy=d.energy, gaussian_curvature_per_increment=d.curvature_history,
+            max_bending_strain=float(export.bending_strain(d.cell.model, d.states[-1]).max()),
+            outputs={k: paths[n, k] for k in outs.CELL_NAMES} if paths else {}, deployment=d)
+    files = {f"{k[0]}/{k[1]}" if isinstance(k, tuple) else k: v for k, v in (paths or {}).items()}
+    res = CellResult(scene=scene, inserts=results, summary_json=paths["json"] if paths else None, outputs=files)
+    if paths is not None:
+        outs.write_cell(res, paths, mjcf_rods=mjcf_rods)
+    return res

@@ -33,8 +33,8 @@ from simfab.deploy import elastica
 from simfab.deploy import tolerances as tol
 from simfab.deploy._config import require_positive
 from simfab.errors import ConvergenceError, InputError
-from simfab.io.mjcf import load_scene, numeric_config
-from simfab.rods.model import Material, NetworkBuilder, Section, synchronize
+from simfab.io.mjcf import load_mjcf, numeric_config
+from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
 from simfab.rods.statics import StaticSolver, StaticsOptions
 
 DEFAULT_RATIOS = (0.99, 0.95, 0.90, 0.80, 0.60)
@@ -84,7 +84,7 @@ def load_insert_scene(path) -> InsertScene:
     """Read the elastica scene: body ``insert`` (start pose = beam's moving end), site ``anchor``
     (fixed end, origin), beam parameters as ``<numeric name="beam_<field>">``."""
 
-    sc = load_scene(path)
+    sc = load_mjcf(path)
     kw = numeric_config(sc, "beam_", BeamSetup)
     try:
         setup = BeamSetup(**kw)
@@ -173,7 +173,7 @@ def build_beam(setup: BeamSetup, n: int, support: str, path: str = "direct", *, 
     rest = np.stack([s, np.zeros_like(s), np.zeros_like(s)], axis=1)
     nb = NetworkBuilder()
     nb.add_rod("beam", pts, rest_points=rest, section=Section(width=setup.width, thickness=setup.thickness),
-               material=Material(young=setup.young, poisson=setup.poisson), director=(0.0, 0.0, 1.0),
+               material=RodMaterial(young=setup.young, poisson=setup.poisson), director=(0.0, 0.0, 1.0),
                stretch_stiffness=setup.axial_ratio * setup.B / L**2)
     start, moving = ends[: len(ends) // 2], ends[len(ends) // 2:]
     attached = moving if path == "insert" else []  # these follow the insert, which stays in the plane

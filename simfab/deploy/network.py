@@ -52,7 +52,7 @@ from simfab.deploy._config import require_positive
 from simfab.deploy.compare import kabsch
 from simfab.errors import ConvergenceError, InputError
 from simfab.progress import progress
-from simfab.rods.model import Material, NetworkBuilder, Section, synchronize
+from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
 from simfab.rods.statics import StaticSolver, StaticsOptions
 
 #: Newton step cap of the deployment's solves [longest rod] (StaticsOptions.max_step): the tangent
@@ -133,7 +133,7 @@ def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
     pc = pat.config
     sec = Section(width=pc.beam_width, thickness=pc.beam_thickness)
     sec_spring = Section(width=pc.spring_width, thickness=pc.beam_thickness)
-    mat = Material(young=cfg.young, poisson=cfg.poisson)
+    mat = RodMaterial(young=cfg.young, poisson=cfg.poisson)
     nb = NetworkBuilder()
     P3 = np.column_stack([pat.P, np.zeros(len(pat.P))])
     mids = np.column_stack([pat.midpoints(), np.zeros(len(pat.edges))])

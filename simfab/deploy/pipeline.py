@@ -36,7 +36,7 @@ from simfab.progress import log
 
 
 @dataclass
-class SurfaceResult:
+class SurfaceRun:
     """Everything a run produced (for the writers and the summary)."""
 
     scene: object
@@ -101,7 +101,7 @@ def shape_descriptors(pat, X: np.ndarray, Y: np.ndarray | None = None) -> dict:
     return out
 
 
-def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = True) -> SurfaceResult:
+def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = True) -> SurfaceRun:
     """Run every stage on a loaded :class:`simfab.deploy.scene.SurfaceScene`."""
 
     sec = {}
@@ -162,7 +162,7 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         log("deploy surface: MuJoCo scene (stability + relaxation check)", quiet=quiet)
         sim, check = mujoco_check_run(net, dep, pat, scene)
         sec["mujoco"] = time.perf_counter() - t
-    return SurfaceResult(scene=scene, flat=flat, pattern=pat, cut=cut, network=net, deployment=dep, target_points=Y,
+    return SurfaceRun(scene=scene, flat=flat, pattern=pat, cut=cut, network=net, deployment=dep, target_points=Y,
                          deviation=dev, sim=sim, sim_check=check, shape=shape, seconds=sec, tuning=tune_info,
                          cuts=cut_flat, ties=ties)
 
@@ -211,7 +211,7 @@ def out_of_plane_extent(X: np.ndarray) -> float:
     return float(np.ptp((X - X.mean(axis=0)) @ np.linalg.svd(X - X.mean(axis=0))[2][2]))
 
 
-def summary(res: SurfaceResult) -> dict:
+def summary(res: SurfaceRun) -> dict:
     """The JSON summary (units in the keys)."""
 
     f, p, dv = res.flat, res.pattern, res.deviation
@@ -274,7 +274,7 @@ BOUND_RMS = 0.01
 BOUND_HEIGHT = 0.03
 
 
-def bounds(res: SurfaceResult) -> dict:
+def bounds(res: SurfaceRun) -> dict:
     """The run against the deployment bounds: RMS <= ``BOUND_RMS`` of the diameter, out-of-plane height
     within ``BOUND_HEIGHT``, no gap unreachable, no spring short of its slack; ``missed``: one line
     per missed bound with the scene key or flag that would help."""
@@ -304,7 +304,7 @@ def bounds(res: SurfaceResult) -> dict:
                 unreachable_gaps=int(len(p.unreachable)), springs_short=int(len(p.tight_springs)), missed=missed)
 
 
-def flat_area_covered(res: SurfaceResult) -> float:
+def flat_area_covered(res: SurfaceRun) -> float:
     """The fraction [-] of the flat domain (cut, with cuts) that the pattern's quads cover."""
     import shapely
 
@@ -312,7 +312,7 @@ def flat_area_covered(res: SurfaceResult) -> float:
     return pattern.covered_fraction(res.pattern, shapely.Polygon(f.uv[f.boundary]))
 
 
-def cuts_summary(res: SurfaceResult) -> dict | None:
+def cuts_summary(res: SurfaceRun) -> dict | None:
     """Cones and seams of a run with cuts (None without): per cone its angle defect [deg] and
     seam length [mm] (the cut path in 3D), the interior mesh vertices whose growth no insert size
     reaches without and with the cones, the inserts on cone tips (insert number, size class,

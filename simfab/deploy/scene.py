@@ -75,7 +75,8 @@ def _make(cls, table: dict, where: str, section: str):
         raise InputError(str(e), where=f"{where}: [{section}]") from None
 
 
-def load_scene(path, *, units: str | None = None, overrides: dict | None = None, auto: bool = True) -> SurfaceScene:
+def load_deploy_scene(path, *, units: str | None = None, overrides: dict | None = None,
+                      auto: bool = True) -> SurfaceScene:
     """Read a scene TOML, or a bare mesh file (then all parameters are defaults + ``overrides``).
 
     ``overrides``: {"pattern": {...}, "material": {...}, "deploy": {...}, "mujoco": {...}, "tune": {...},

@@ -41,9 +41,9 @@ import numpy as np
 from simfab._bundled import scenes_dir
 from simfab.deploy._config import require_positive
 from simfab.errors import ConvergenceError, InputError
-from simfab.io.mjcf import geom_mesh, load_scene, numeric_config
+from simfab.io.mjcf import geom_mesh, load_mjcf, numeric_config
 from simfab.progress import progress
-from simfab.rods.model import Material, NetworkBuilder, Section, synchronize
+from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
 from simfab.rods.statics import StaticSolver
 
 U = np.array([[1.0, 0, 0], [0, 1.0, 0], [-1.0, 0, 0], [0, -1.0, 0]])
@@ -107,7 +107,7 @@ def load_cell_scene(path) -> tuple[CellConfig, dict]:
     """Cell parameters and all inserts (bodies whose name starts with ``insert``) of the scene."""
     import mujoco  # (simfab.io, imported above, set up headless GL before MuJoCo loads)
 
-    sc = load_scene(path)
+    sc = load_mjcf(path)
     kw = numeric_config(sc, "cell_", CellConfig)
     try:
         cfg = CellConfig(**kw)
@@ -166,7 +166,7 @@ def build_cell(cfg: CellConfig, insert_name: str = "insert") -> Cell:
     c = cfg.corner_gap
     n = int(cfg.segments)
     sec = Section(width=cfg.beam_width, thickness=cfg.beam_thickness)
-    mat = Material(young=cfg.young, poisson=cfg.poisson)
+    mat = RodMaterial(young=cfg.young, poisson=cfg.poisson)
     nb = NetworkBuilder()
     nb.add_body(insert_name, pos=(0, 0, 0))  # a free 6-DOF rigid body
     line = lambda p, q: p + np.linspace(0, 1, n + 1)[:, None] * (q - p)  # noqa: E731
@@ -243,7 +243,7 @@ def gaussian_curvature(cell: Cell, state) -> dict:
 
 
 @dataclass
-class Deployment:
+class CellDeployment:
     """Result of one deployment: states per increment (index 0 = flat), the insert, curvature
     measures of the final state, stability, Newton iterations per increment."""
 
@@ -258,7 +258,7 @@ class Deployment:
     curvature_history: list  # discrete Gaussian curvature [1/m^2] per increment (0 = flat)
 
 
-def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> Deployment:
+def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> CellDeployment:
     """Draw the spokes onto ``insert`` in ``cfg.increments`` steps and return the deployment."""
 
     cell = build_cell(cfg, insert.name)
@@ -308,5 +308,5 @@ def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool 
     curv = curvatures[-1]
     history = [c["gaussian_curvature"] for c in curvatures]
     mats = {r.name: (cfg.young, cfg.poisson) for r in model.rods}
-    return Deployment(cell=cell, insert=insert, states=states, curvature=curv, stable=solver.is_stable(state),
+    return CellDeployment(cell=cell, insert=insert, states=states, curvature=curv, stable=solver.is_stable(state),
                       iterations=iters, energy=res.energy, materials=mats, curvature_history=history)

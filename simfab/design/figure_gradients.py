@@ -31,7 +31,7 @@ from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_m
 from simfab.coupling.profile import SLIDING_REL, analyze_run, rest_bracket
 from simfab.design import brief as B
 from simfab.design.handles import Handles
-from simfab.design.problem import CONTACT_STRAIN_FLOOR, DesignProblem, Evaluation
+from simfab.design.problem import CONTACT_STRAIN_FLOOR, DesignEvaluation, DesignProblem
 from simfab.design.stress import averaging_matrix, quadrature_averaging_matrix
 from simfab.errors import ConvergenceError
 from simfab.fem.shape_derivative import linear_rest_derivative, von_mises
@@ -221,7 +221,7 @@ def needed_records(problem: DesignProblem, res, prof, stresses: np.ndarray) -> n
     return out
 
 
-def figure_gradients(problem: DesignProblem, ev: Evaluation, Jh: np.ndarray) -> FigureGradients:
+def figure_gradients(problem: DesignProblem, ev: DesignEvaluation, Jh: np.ndarray) -> FigureGradients:
     """The figure gradients of an evaluated design.
 
     Args:

@@ -55,8 +55,8 @@ from simfab.design.figure_gradients import (  # the figure gradients, re-exporte
 from simfab.design.optimize import OptimizationResult, optimize_anneal
 from simfab.design.problem import (
     QUALITY_REL,
+    DesignEvaluation,
     DesignProblem,
-    Evaluation,
     element_quality,
     evaluate,
     initial_evaluation,
@@ -88,7 +88,7 @@ class _Evaluated:
     """One simulated design: the evaluation, its :class:`FigureGradients` (None unless complete) and
     (target matching) the records' force derivatives dF_k/dh (k, n_vars) at fixed positions."""
 
-    ev: Evaluation
+    ev: DesignEvaluation
     fg: FigureGradients | None
     force_jacobian: np.ndarray | None = None
 
@@ -286,7 +286,7 @@ def lost_grip(category: str, tight: bool, reached: dict) -> bool:
     return tight and category != "tight" and reached["tight"]
 
 
-def in_contact(ev: Evaluation) -> bool:
+def in_contact(ev: DesignEvaluation) -> bool:
     """Whether a complete evaluation's part touched the object (category other than "none").
 
     Args:
@@ -298,7 +298,7 @@ def in_contact(ev: Evaluation) -> bool:
     return ev.status == "ok" and ev.figures.get("category") not in (None, "none")
 
 
-def in_category(ev: Evaluation) -> bool:
+def in_category(ev: DesignEvaluation) -> bool:
     """Whether an evaluation is in contact and within the brief's coupling-ratio bounds (the pre-phase's goal).
 
     A design that merely grazes the object has gradients too small for a linearization of a

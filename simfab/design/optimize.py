@@ -27,7 +27,7 @@ import numpy as np
 
 from simfab.design.anneal import AnnealOptions, anneal
 from simfab.design.parallel import EvaluationPool, Workers
-from simfab.design.problem import DesignProblem, Evaluation, evaluate, initial_evaluation
+from simfab.design.problem import DesignEvaluation, DesignProblem, evaluate, initial_evaluation
 from simfab.errors import ConvergenceError
 from simfab.progress import progress
 
@@ -39,7 +39,7 @@ PATIENCE_REL = 1e-3
 class OptimizationResult:
     """Outcome of an optimizer run (:func:`optimize_anneal`, :func:`simfab.design.gradient.optimize_gradient`).
 
-    initial, best : :class:`Evaluation` (with their InsertionResults)
+    initial, best : :class:`DesignEvaluation` (with their InsertionResults)
     history : the optimizer's log, one dict per iteration (typed: :func:`history_rows`)
     accepted : [(iteration, rest (n, d) [m], objective)] of every accepted design, in order
     simulations : insertion simulations run to the end; stopped_simulations : stopped early (their
@@ -59,8 +59,8 @@ class OptimizationResult:
     """
 
     problem: DesignProblem
-    initial: Evaluation
-    best: Evaluation
+    initial: DesignEvaluation
+    best: DesignEvaluation
     history: list
     accepted: list
     simulations: int
@@ -96,7 +96,7 @@ def optimize_anneal(problem: DesignProblem, *, iterations: int | None = None, se
     counts = {"simulations": 0, "stopped": 0, "sim_seconds": 0.0}
     rejected: dict[str, int] = {}
     accepted: list = []
-    history_evals: list[Evaluation] = []
+    history_evals: list[DesignEvaluation] = []
 
     def f(h, threshold):
         if start is None and not history_evals:  # the annealer's start: the initial shape, evaluated below
@@ -186,7 +186,7 @@ class HistoryRow:
 
     Args:
         iteration: the iteration (0: the start design).
-        evaluation: the design evaluated (:class:`simfab.design.problem.Evaluation`: status, objective,
+        evaluation: the design evaluated (:class:`simfab.design.problem.DesignEvaluation`: status, objective,
             E_L, figures, seconds).
         accepted: whether the optimizer moved to it.
         current_objective: the objective of the design the optimizer stands on after it [-].
@@ -194,7 +194,7 @@ class HistoryRow:
     """
 
     iteration: int
-    evaluation: Evaluation
+    evaluation: DesignEvaluation
     accepted: bool
     current_objective: float
     best_objective: float

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from simfab.coupling.outputs import _display_faces, _object_display, extrude_triangles, vertex_von_mises
+from simfab.coupling.outputs import display_faces, extrude_triangles, object_display, vertex_von_mises
 from simfab.design import brief as B
 from simfab.design.problem import lift_rest
 from simfab.design.synthesis import boundary_loops
@@ -354,8 +354,8 @@ def write_usd(res, path) -> Path:
     cm = res.problem.base
     fem = cm.fem
     w = StageWriter(path, time_codes_per_second=12.0)
-    w.add_mesh("part", _display_faces(cm), fem.rest, color=[0.85, 0.55, 0.25])
-    ov, of = _object_display(cm)
+    w.add_mesh("part", display_faces(cm), fem.rest, color=[0.85, 0.55, 0.25])
+    ov, of = object_display(cm)
     w.add_rigid("object", points=ov, faces=of, color=[0.55, 0.6, 0.7])
     final = res.best.result
     start_pos, start_quat = final.steps[0].pos, final.steps[0].quat

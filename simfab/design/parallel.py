@@ -33,8 +33,8 @@ import numpy as np
 
 from simfab._warp import device
 from simfab.design.problem import (
+    DesignEvaluation,
     DesignProblem,
-    Evaluation,
     EvaluationSettings,
     ProblemSource,
     evaluate,
@@ -76,7 +76,7 @@ def _ready(source: ProblemSource | None = None) -> bool:
 
 
 def _evaluate_remote(source: ProblemSource, settings: EvaluationSettings, h: np.ndarray, threshold: float,
-                     ticket: int) -> Evaluation:
+                     ticket: int) -> DesignEvaluation:
     # without its InsertionResult (not sent back); aborted once the annealer cancels it
     slot = ticket % CANCEL_SLOTS
     return evaluate(_problem(source, settings), h, threshold=threshold, abort=lambda: _CANCEL[slot] != 0)
@@ -158,7 +158,7 @@ class EvaluationPool:
 
 
 class _Pending:
-    """A submitted evaluation: ``result()`` -> (objective, Evaluation)."""
+    """A submitted evaluation: ``result()`` -> (objective, DesignEvaluation)."""
 
     def __init__(self, future, flags, slot: int):
         self._f, self._flags, self._slot = future, flags, slot

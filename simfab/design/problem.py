@@ -315,7 +315,7 @@ def max_displacement(res) -> np.ndarray:
 
 
 @dataclass(kw_only=True)
-class Evaluation:
+class DesignEvaluation:
     """One design's evaluation.
 
     h : (n_vars,) the design; rest : (n, d) [m] its rest shape
@@ -352,7 +352,7 @@ class Evaluation:
         return self.status == "ok" and all(c.satisfied for c in self.constraints)
 
 
-def restricted(problem: DesignProblem, ev: Evaluation, threshold: float) -> Evaluation:
+def restricted(problem: DesignProblem, ev: DesignEvaluation, threshold: float) -> DesignEvaluation:
     """``ev``, evaluated with a threshold at least ``threshold``, as :func:`evaluate` with
     ``threshold`` returns it: screened out when E_L alone exceeds it, stopped at the first step
     whose objective bound exceeds it, else ``ev`` itself."""
@@ -478,13 +478,13 @@ def _step_watch(bound, abort):
     return watch
 
 
-def screen(problem: DesignProblem, h: np.ndarray, threshold: float = math.inf) -> Evaluation:
+def screen(problem: DesignProblem, h: np.ndarray, threshold: float = math.inf) -> DesignEvaluation:
     """The cheap part of :func:`evaluate`: the rest shape, its validity and E_L against the
     acceptance threshold. A returned evaluation with a ``reason`` is decided (rejected, or
     stopped with objective E_L > threshold); without one, the candidate needs its simulation."""
     t0 = time.perf_counter()
     X = problem.handles.apply(h)
-    ev = Evaluation(h=np.array(h, float), rest=X, status="rejected")
+    ev = DesignEvaluation(h=np.array(h, float), rest=X, status="rejected")
     ev.reason = shape_defect(problem, X)
     if not ev.reason:
         ev.E_L = problem.energy(X)
@@ -496,7 +496,7 @@ def screen(problem: DesignProblem, h: np.ndarray, threshold: float = math.inf) -
 
 
 def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False,
-             threshold: float = math.inf, abort=None, recorder=None) -> Evaluation:
+             threshold: float = math.inf, abort=None, recorder=None) -> DesignEvaluation:
     """Evaluate design vector h (see the module docstring); never raises for a bad candidate.
 
     threshold : acceptance threshold of the annealer; the simulation stops (status "stopped",
@@ -505,7 +505,7 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
         the simulation stops (status "aborted": a speculative evaluation no longer needed).
     recorder : optional factory ``recorder(cm)`` of the insertion's per-step recorder (``simulate``'s
         ``recorder``, e.g. :class:`simfab.coupling.adjoint.SensitivityRecorder`), made for the
-        candidate's model; the recorder is returned as ``Evaluation.recorder``.
+        candidate's model; the recorder is returned as ``DesignEvaluation.recorder``.
     """
     t0 = time.perf_counter()
     ev = screen(problem, h, threshold)
@@ -542,7 +542,7 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     return ev
 
 
-def _score(problem: DesignProblem, ev: Evaluation, res, keep_result: bool) -> None:
+def _score(problem: DesignProblem, ev: DesignEvaluation, res, keep_result: bool) -> None:
     """Fill ``ev`` (status "ok") from the complete insertion ``res`` of its rest shape: figures,
     constraints, objective (or "rejected" for non-finite figures)."""
     ev.status = "ok"
@@ -553,7 +553,7 @@ def _score(problem: DesignProblem, ev: Evaluation, res, keep_result: bool) -> No
         ev.result = res
 
 
-def score_figures(problem: DesignProblem, ev: Evaluation, res) -> None:
+def score_figures(problem: DesignProblem, ev: DesignEvaluation, res) -> None:
     """Set ``ev``'s constraints and objective from its figures (and, with a target profile, the
     complete insertion ``res``) under ``problem``'s corrections and margin: E_L + penalty, or the squared
     RMS force error + penalty; "rejected" for non-finite figures. A correction round re-scores the
@@ -570,7 +570,7 @@ def score_figures(problem: DesignProblem, ev: Evaluation, res) -> None:
         ev.status, ev.reason, ev.objective = "rejected", "non-finite profile figures", math.inf
 
 
-def initial_evaluation(problem: DesignProblem) -> Evaluation:
+def initial_evaluation(problem: DesignProblem) -> DesignEvaluation:
     """The evaluation of the unmodified shape (identity handles: the mesh exactly), scored from
     ``problem.initial`` when the caller already ran it, else simulated."""
     h = problem.handles.identity()

@@ -13,7 +13,7 @@ from simfab.coupling.model import CouplingModel
 from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
 from simfab.design.brief import DesignBrief, TargetProfile, read_target_profile
 from simfab.errors import InputError
-from simfab.io.mjcf import load_scene
+from simfab.io.mjcf import load_mjcf
 from simfab.progress import log
 
 
@@ -70,7 +70,7 @@ def load_design_scene(scene, *, design: dict | None = None, simulation: dict | N
         target = TargetProfile(s=s, force=f, source=str(p))
     regions = []
     if brief.keep:
-        sc = load_scene(xml)
+        sc = load_mjcf(xml)
         for name in brief.keep:
             if name not in sc.sites:
                 raise InputError(f"no site named {name!r} (a region to keep unchanged)", where=f"{toml} [design] keep")

@@ -12,6 +12,7 @@ Python API (mirrors ``simfab grow``)::
     res = run("scenes/growth/phone_stand.xml", out="out/phone", check=True)   # GrowthResult
     res.check.safety_factor, res.to_json()                                     # the --json object
     check("out/phone/phone_stand_skeleton.json", loads={"target_0": (0, 0, -2)})  # CheckResult
+    edit("out/phone/phone_stand_skeleton.json", stroke="stroke.json", camera="camera.json")  # EditResult
 
 Modules: :mod:`~simfab.growth.config` (parameters, TOML), :mod:`~simfab.growth.scene`
 (MJCF scenes), :mod:`~simfab.growth.attractors`, :mod:`~simfab.growth.obstacles`,
@@ -23,11 +24,11 @@ imported on its own: it loads the FEM), :mod:`~simfab.growth.outputs` (files).
 
 from simfab.growth.config import GrowthParams, ProfileSpec, SymmetrySpec
 from simfab.growth.pipeline import Growth, grow, skin_result
-from simfab.growth.results import CheckResult, GrowthResult, StrengthenedResult
+from simfab.growth.results import CheckResult, EditResult, GrowthResult, StrengthenedResult
 from simfab.growth.scene import GrowthScene, load_growth_scene
 from simfab.growth.skeleton import Skeleton, smooth_positions
 from simfab.growth.sketch import Camera, edit_chain
-from simfab.growth.workflow import check, run
+from simfab.growth.workflow import check, edit, run
 
 
 def skin(result: Growth, **kw):
@@ -40,5 +41,5 @@ def skin(result: Growth, **kw):
 
 
 __all__ = ["GrowthParams", "ProfileSpec", "SymmetrySpec", "Growth", "grow", "skin", "skin_result", "run", "check",
-           "GrowthResult", "CheckResult", "StrengthenedResult",
+           "edit", "GrowthResult", "CheckResult", "StrengthenedResult", "EditResult",
            "GrowthScene", "load_growth_scene", "Skeleton", "smooth_positions", "Camera", "edit_chain"]

@@ -60,9 +60,9 @@ def object_masses(scene) -> dict:
     """
     if scene.path is None:
         return {}
-    from simfab.io.mjcf import load_scene
+    from simfab.io.mjcf import load_mjcf
 
-    sc = load_scene(scene.path)
+    sc = load_mjcf(scene.path)
     mass = {n: float(m) for n, m in zip(sc.body_names(), sc.model.body_mass)}
     try:
         root = ET.parse(scene.path).getroot()

@@ -1,4 +1,5 @@
-"""Files of a growth run: skin (STL, PLY), skeleton (JSON), growth replay (USD), MJCF, PNG.
+"""Files of a growth run: skin (STL, PLY), skeleton (JSON), growth replay (USD), MJCF, PNG; of a
+sketch edit (:func:`write_edit`) and of a structural check.
 
 Units: the skin STL/PLY are in **millimetres** (what slicers expect); everything else
 (skeleton JSON, USD with metersPerUnit = 1, MJCF) is in metres.
@@ -291,3 +292,59 @@ def write_check_outputs(check, strengthened, scene, out: Path, *, stem: str) -> 
         st.update(write_check(strengthened.check, scene, out, stem=f"{stem}_strengthened"))
         files["strengthened"] = st
     return files
+
+
+def edit_paths(out: Path, stem: str) -> dict:
+    """Label -> path of the files of a sketch edit (``simfab grow edit``) with file stem ``stem``."""
+    out = Path(out)
+    return {"skeleton_json": out / f"{stem}_skeleton.json", "skin_stl": out / f"{stem}_skin.stl",
+            "skin_ply": out / f"{stem}_skin.ply", "png": out / f"{stem}_preview.png"}
+
+
+def write_edit(edited, mesh, objects: dict, camera, stroke, paths: dict, *, skeleton_extra: dict,
+               title: str) -> dict:
+    """Write a sketch edit's files together (none if any write fails).
+
+    Args:
+        edited: the edited :class:`simfab.growth.skeleton.Skeleton`.
+        mesh: its skin (``trimesh.Trimesh``, metres).
+        objects: the scene's object meshes (name -> mesh) drawn in the preview.
+        camera: the edit's :class:`simfab.growth.sketch.Camera`; stroke: the stroke (m, 2) [px].
+        paths: :func:`edit_paths`.
+        skeleton_extra: extra keys of the skeleton JSON (scene, seed, edit report).
+        title: the preview's title.
+
+    Returns:
+        Label -> path (strings) of the files written.
+    """
+    with atomic_paths(paths) as tmp:
+        write_json(tmp["skeleton_json"], to_json_dict(edited, **skeleton_extra))
+        save_skin(mesh, tmp["skin_stl"])
+        save_skin(mesh, tmp["skin_ply"])
+        edit_preview(tmp["png"], mesh, objects, camera, stroke, title=title)
+    return {k: str(v) for k, v in paths.items()}
+
+
+def edit_preview(png, mesh, objects: dict, camera, stroke, *, title: str):
+    """The edited skin with the scene's objects, seen through the edit's camera, the stroke drawn
+    over it in red, titled and with a scale bar."""
+    import dataclasses
+
+    from PIL import Image, ImageDraw
+
+    from simfab.io.atomic import atomic_path
+    from simfab.io.render import render_meshes
+
+    cam = dataclasses.asdict(camera)
+    items = [(m.vertices, m.faces, OBJECT_RGBA[:3]) for m in objects.values()] + [(mesh.vertices, mesh.faces,
+                                                                                    SKIN_RGBA[:3])]
+    got: dict = {}
+    render_meshes(items, png, width=camera.width, height=camera.height, view=cam, camera=got, floor=False)
+    img = Image.open(png).convert("RGB")
+    d = ImageDraw.Draw(img)
+    d.line([tuple(map(float, p)) for p in stroke], fill=(230, 30, 30), width=max(2, camera.height // 160))
+    with atomic_path(png) as tmp:
+        img.save(tmp, format="PNG")
+    if got:
+        annotate_png(png, got, title=title)
+    return png

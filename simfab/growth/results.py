@@ -1,5 +1,6 @@
-"""Typed results of :func:`simfab.growth.run` and :func:`simfab.growth.check` (the ``--json`` keys
-of ``simfab grow`` and ``simfab grow check``; units in the field metadata)."""
+"""Typed results of :func:`simfab.growth.run`, :func:`simfab.growth.check` and
+:func:`simfab.growth.edit` (the ``--json`` keys of ``simfab grow``, ``simfab grow check`` and
+``simfab grow edit``; units in the field metadata)."""
 
 from __future__ import annotations
 
@@ -112,3 +113,40 @@ class GrowthResult(Result):
     """The :class:`simfab.growth.pipeline.Growth` (scene, skeletons, attractors, history)."""
     mesh: object = field(json=False, default=None)
     """The skin (``trimesh.Trimesh``, metres)."""
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class EditResult(Result):
+    """One sketch edit (``simfab grow edit``): the moved chain, the edited skeleton's size, its
+    skin's checks and the files written (None without ``out``). ``to_json()`` is the ``--json``
+    object (without ``outputs``; ``segments_colliding`` only when the skeleton's scene was read)."""
+
+    chain: int
+    """Index of the moved chain (:func:`simfab.growth.sketch.skeleton_chains`)."""
+    nodes_moved: int
+    nodes_kept_for_collisions: int
+    max_move: float = field(unit="m")
+    segments_colliding: int | None = None
+    """Segments of the edited skeleton crossing an object (None: no scene to test against)."""
+    nodes: int
+    segments: int
+    watertight: bool
+    bodies: int
+    volume: float = field(unit="m³")
+    skin_units: str
+    skeleton_json: str | None = None
+    skin_stl: str | None = None
+    skin_ply: str | None = None
+    png: str | None = None
+    skeleton: object = field(json=False, default=None)
+    """The edited :class:`simfab.growth.skeleton.Skeleton`."""
+    mesh: object = field(json=False, default=None)
+    """Its skin (``trimesh.Trimesh``, metres)."""
+
+    def to_json(self) -> dict:
+        """The ``--json`` object of ``simfab grow edit``."""
+        d = super().to_json()
+        d.pop("outputs")
+        if d["segments_colliding"] is None:
+            del d["segments_colliding"]
+        return d

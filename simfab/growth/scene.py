@@ -28,7 +28,7 @@ import numpy as np
 import simfab.growth.tolerances as tol
 from simfab.errors import InputError
 from simfab.growth.config import GrowthParams, StructureConfig, params_from_toml, structure_from_toml
-from simfab.io.mjcf import load_scene
+from simfab.io.mjcf import load_mjcf
 from simfab.io.tables import read_toml
 
 
@@ -106,7 +106,7 @@ def load_growth_scene(path: str | os.PathLike) -> GrowthScene:
     path = Path(path)
     if path.suffix.lower() != ".xml":
         raise InputError("a growth scene is an MJCF .xml file", where=str(path))
-    sc = load_scene(path)
+    sc = load_mjcf(path)
     toml_path = path.with_suffix(".toml")
     params = GrowthParams()
     structure = StructureConfig()

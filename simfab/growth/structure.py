@@ -53,7 +53,7 @@ from simfab.growth.scene import GrowthScene
 from simfab.growth.skeleton import Skeleton
 from simfab.growth.skinning import skin
 from simfab.growth.tetmesh import tetrahedralize_skin
-from simfab.io.mjcf import load_scene
+from simfab.io.mjcf import load_mjcf
 from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
 #: tet edge length as a multiple of the thinnest branch radius (:mod:`simfab.growth.tetmesh`;
@@ -190,7 +190,7 @@ def gravity(scene: GrowthScene) -> np.ndarray:
     if scene.path is None:
         return np.array([0.0, 0.0, -G0])
 
-    return np.asarray(load_scene(scene.path).model.opt.gravity, np.float64).copy()
+    return np.asarray(load_mjcf(scene.path).model.opt.gravity, np.float64).copy()
 
 
 def body_masses(scene: GrowthScene) -> dict:

@@ -1,5 +1,6 @@
-"""The ``simfab grow`` workflow as library calls: :func:`run` (grow, skin, check, write) and
-:func:`check` (the structural check of a skeleton), returning the frozen results of
+"""The ``simfab grow`` workflow as library calls: :func:`run` (grow, skin, check, write),
+:func:`check` (the structural check of a skeleton) and :func:`edit` (a sketch edit of a
+skeleton chain), returning the frozen results of
 :mod:`simfab.growth.results`. Files are written only when ``out`` is given; a check runs before
 any file of its run is written, so a failed check writes nothing.
 """
@@ -270,3 +271,70 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress=None, c
         outputs.update({f"check_{k}" if not k.startswith("check_") else k: v for k, v in c.outputs.items()})
     return GrowthResult(**s, **paths, skin_units=SKIN_FILE_UNITS, check=c, growth=result, mesh=mesh,
                         outputs=outputs)
+
+
+def edit(skeleton, *, stroke, camera, chain: int | None = None, scene=None, out=None, progress=None,
+         stem: str | None = None):
+    """Sketch edit (``simfab grow edit``): move one skeleton chain onto the surface of rays through
+    a 2D stroke (objects of the scene avoided) and re-skin the result.
+
+    Args:
+        skeleton: a skeleton JSON path written by ``simfab grow`` (its scene, when readable, gives the
+            objects to avoid and to carve out) or a :class:`Skeleton`.
+        stroke: the stroke in the camera's pixels: a JSON/CSV file path or an (m, 2) array.
+        camera: the camera the stroke was drawn in: a JSON file path, an inline JSON object or a
+            :class:`simfab.growth.sketch.Camera` (``simfab grow`` writes its preview's).
+        chain: index of the chain to move (None: the one nearest the stroke on screen).
+        scene: the :class:`GrowthScene` or MJCF path (None: the skeleton file's, if readable).
+        out: folder for the edited skeleton JSON, skin STL/PLY and preview PNG; None writes nothing.
+        progress: callable taking a status line (warnings of a colliding edit), or None.
+        stem: output file stem (default: the skeleton file's name, ``_edited`` appended).
+
+    Returns:
+        :class:`simfab.growth.results.EditResult`. InputError on unusable input (nothing written).
+    """
+    from pathlib import Path
+
+    from simfab.growth.obstacles import Obstacles
+    from simfab.growth.outputs import SKIN_FILE_UNITS, edit_paths, write_edit
+    from simfab.growth.results import EditResult
+    from simfab.growth.skeleton import load_skeleton_json
+    from simfab.growth.sketch import Camera, edit_chain, load_camera, load_stroke
+    from simfab.growth.skinning import skin
+
+    doc = {}
+    if isinstance(skeleton, (str, os.PathLike)):
+        sk, doc = load_skeleton_json(skeleton)
+        stem = stem or Path(skeleton).stem.removesuffix("_skeleton") + "_edited"
+    elif isinstance(skeleton, Skeleton):
+        sk = skeleton
+        stem = stem or "skeleton_edited"
+    else:
+        raise InputError(f"expected a skeleton JSON path or a Skeleton, got {type(skeleton).__name__}",
+                         where="skeleton")
+    cam = camera if isinstance(camera, Camera) else load_camera(str(camera))
+    strk = load_stroke(str(stroke)) if isinstance(stroke, (str, os.PathLike)) else np.asarray(stroke, np.float64)
+    objects, obstacles, scene_path = {}, None, None
+    if scene is not None:
+        sc = as_scene(scene)
+        scene_path = str(sc.path) if sc.path is not None else None
+    else:
+        scene_path = doc.get("scene")
+        sc = as_scene(scene_path) if scene_path and Path(scene_path).is_file() else None
+    if sc is not None:
+        objects = sc.objects
+        diag = float(np.linalg.norm(np.ptp(sc.objects_bbox(), axis=0)))
+        obstacles = Obstacles.of_scene(sc, diag)
+    edited, rep = edit_chain(sk, cam, strk, chain=chain, obstacles=obstacles)
+    mesh, srep = skin(edited.nodes, edited.parent, edited.radius, objects)
+    if rep.get("segments_colliding") or srep.bodies != 1:
+        _say(progress, f"simfab grow edit: warning: the edited chain crosses objects in "
+                       f"{rep.get('segments_colliding', 0)} segment(s); the skin has {srep.bodies} bodies")
+    files = {}
+    if out is not None:
+        files = write_edit(edited, mesh, objects, cam, strk, edit_paths(Path(out), stem),
+                           skeleton_extra=dict(scene=scene_path, seed=doc.get("seed"), edit=rep),
+                           title=f"{stem}: chain {rep.get('chain')} moved onto the stroke (red)")
+    return EditResult(**rep, nodes=len(edited.nodes), segments=int((edited.parent >= 0).sum()),
+                      watertight=srep.watertight, bodies=srep.bodies, volume=srep.volume,
+                      skin_units=SKIN_FILE_UNITS, **files, skeleton=edited, mesh=mesh, outputs=dict(files))

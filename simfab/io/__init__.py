@@ -60,9 +60,9 @@ def inspect_file(path, *, units: str = "m") -> dict:
 def _inspect_mjcf(path: Path) -> dict:
     import mujoco
 
-    from simfab.io.mjcf import Trajectory, load_scene
+    from simfab.io.mjcf import Trajectory, load_mjcf
 
-    s = load_scene(path)
+    s = load_mjcf(path)
     m = s.model
     out = {"kind": "mjcf", "file": str(path), "bodies": m.nbody - 1, "geoms": m.ngeom, "meshes": m.nmesh,
            "sites": sorted(s.sites), "keyframes": m.nkey, "flexes": m.nflex,

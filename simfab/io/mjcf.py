@@ -10,7 +10,6 @@ from simfab.io.mjcf_load import (
     geom_mesh,
     load_mjcf,
     load_model,
-    load_scene,
     mujoco_module,
     mujoco_warnings,
     numeric_config,
@@ -19,7 +18,6 @@ from simfab.io.mjcf_load import (
 from simfab.io.trajectory import Trajectory, body_radius
 
 __all__ = ["MAX_KEYFRAMES", "MJCFBuilder", "Scene", "Trajectory", "body_radius", "format_attribute", "geom_mesh",
-           "load_mjcf", "load_model", "load_scene", "mujoco_module", "mujoco_warnings", "numeric_config",
+           "load_mjcf", "load_model", "mujoco_module", "mujoco_warnings", "numeric_config",
            "torus_radii"]
 
-_mujoco = mujoco_module  # the earlier private name (deploy/mjcf_sim.py imported it)

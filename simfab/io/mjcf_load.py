@@ -356,7 +356,3 @@ def numeric_config(scene: Scene, prefix: str, config_type):
             kw[f.name] = v
     return kw
 
-
-#: The earlier names (``load_mjcf`` says what it loads; the deploy area has its own ``load_scene``).
-load_scene = load_mjcf
-_mujoco = mujoco_module

@@ -1,6 +1,6 @@
 """Discrete elastic rods (Bergou et al. 2008) in Warp, float64, with rigid bodies.
 
-- :mod:`simfab.rods.model`: :class:`Material`, :class:`Section`, :class:`NetworkBuilder`,
+- :mod:`simfab.rods.model`: :class:`RodMaterial`, :class:`Section`, :class:`NetworkBuilder`,
   :class:`RodModel` (immutable) and :class:`RodState`;
 - :mod:`simfab.rods.stretch`, :mod:`simfab.rods.bend`, :mod:`simfab.rods.twist`: one Warp
   kernel per energy (energy, gradient, Hessian side by side), batched over all rods;
@@ -12,4 +12,4 @@ Importing this package initializes Warp (kept out of ``import simfab``).
 """
 
 import simfab._warp  # noqa: F401  (quiet Warp initialization, shared by all kernel modules)
-from simfab.rods.model import Material, NetworkBuilder, RodModel, RodState, Section  # noqa: F401
+from simfab.rods.model import NetworkBuilder, RodMaterial, RodModel, RodState, Section  # noqa: F401

@@ -25,7 +25,7 @@ from simfab.rods import frames as fr
 
 # ----------------------------------------------------------------------------- materials
 @dataclass(frozen=True, kw_only=True)
-class Material:
+class RodMaterial:
     """Linear elastic material: Young's modulus ``young`` [Pa], Poisson ratio ``poisson`` [-]."""
 
     young: float
@@ -69,7 +69,7 @@ class Section:
     def area(self) -> float:
         return self.width * self.thickness if self.shape == "rect" else np.pi * self.radius**2
 
-    def stiffness(self, mat: Material) -> dict:
+    def stiffness(self, mat: RodMaterial) -> dict:
         """Axial EA [N], bending B1 (about m2), B2 (about m1) [N m^2], torsion GJ [N m^2].
 
         Rectangle: B1 = E w t^3/12, B2 = E t w^3/12, J = a b^3 (1/3 - 0.21 b/a (1 - b^4/(12 a^4)))
@@ -256,7 +256,7 @@ class _RodSpec:
     points: np.ndarray
     rest_points: np.ndarray
     section: Section
-    material: Material
+    material: RodMaterial
     director: np.ndarray
     stretch_stiffness: float | None
 
@@ -269,7 +269,7 @@ class NetworkBuilder:
 
         nb = NetworkBuilder()
         ins = nb.add_body("insert", pos=[0.1, 0, 0], driven=True)
-        r = nb.add_rod("beam", pts, section=Section(width=5e-3, thickness=1e-3), material=Material(young=2e9),
+        r = nb.add_rod("beam", pts, section=Section(width=5e-3, thickness=1e-3), material=RodMaterial(young=2e9),
                        director=[0, 0, 1])
         nb.clamp("beam", "end", "insert")
         nb.fix("beam", nodes=[0, 1], thetas=[0])
@@ -291,7 +291,7 @@ class NetworkBuilder:
         self.bodies.append((name, np.asarray(pos, dtype=np.float64), R, bool(driven)))
         return name
 
-    def add_rod(self, name: str, points, *, section: Section, material: Material, director=(0.0, 0.0, 1.0),
+    def add_rod(self, name: str, points, *, section: Section, material: RodMaterial, director=(0.0, 0.0, 1.0),
                 rest_points=None, stretch_stiffness: float | None = None) -> str:
         """A rod through ``points`` (k+1,3) [m], k >= 1. ``rest_points`` (default ``points``) give
         the natural shape (curvature). ``director`` is the initial m1 of the first edge (the sheet

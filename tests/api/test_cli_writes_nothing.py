@@ -14,9 +14,8 @@ import pytest
 
 CLI = Path(__file__).resolve().parents[2] / "simfab" / "cli"
 
-#: CLI modules whose orchestration has not moved into the library yet (issue 40; the integrator
-#: empties this list once they call ``simfab.growth.run`` / ``simfab.deploy.run``, which other work writes).
-KNOWN_EXCEPTIONS = {"grow.py", "deploy.py"}
+#: CLI modules whose orchestration has not moved into the library yet (none left).
+KNOWN_EXCEPTIONS: set[str] = set()
 
 WRITER_NAMES = {"write_csv", "write_json", "write_text", "write_all", "save_figure", "savefig", "save_mesh",
                 "atomic_path", "atomic_paths", "make_out_dir", "makedirs", "mkdir", "write_bytes", "save", "savez",

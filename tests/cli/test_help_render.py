@@ -96,11 +96,6 @@ def _help_commands():
     return out
 
 
-#: simfab.deploy.validation keeps Warp and the rods at module level and defines the validation's
-#: arguments there (simfab/deploy is another helper's area in issue 44)
-_KNOWN_HEAVY = {"validate buckling"}
-
-
 @pytest.mark.parametrize("words", _help_commands(), ids=lambda w: "simfab " + " ".join(w))
 def test_help_loads_no_simulator(words):
     code = ("import sys\nfrom simfab.cli import main\n"
@@ -110,8 +105,6 @@ def test_help_loads_no_simulator(words):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
     assert r.returncode == 0, r.stderr
     loaded = r.stdout.strip().splitlines()[-1].removeprefix("LOADED:")
-    if loaded and " ".join(words) in _KNOWN_HEAVY:
-        pytest.xfail(f"loads {loaded or 'nothing'}: simfab.deploy.validation imports Warp at module level")
     assert loaded == "", f"simfab {' '.join(words)} --help imports {loaded}"
 
 

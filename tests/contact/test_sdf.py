@@ -95,14 +95,14 @@ def test_torus_plugin_geom_is_an_exact_torus(tmp_path):
     import mujoco
 
     from simfab.contact.sdf import primitives_of_body
-    from simfab.io.mjcf import MJCFBuilder, load_scene
+    from simfab.io.mjcf import MJCFBuilder, load_mjcf
 
     R, r = 0.02, 0.003
     b = MJCFBuilder("ring")
     b.sdf_asset("ring", "mujoco.sdf.torus", radius1=R, radius2=r)
     o = b.body("object", pos=[0.001, 0, 0], mocap=True)
     b.geom(o, sdf="ring", pos=[R, 0, 0], quat=[np.sqrt(0.5), np.sqrt(0.5), 0, 0], contype=0, conaffinity=0)
-    sc = load_scene(b.save(tmp_path / "ring.xml"))
+    sc = load_mjcf(b.save(tmp_path / "ring.xml"))
     bid = mujoco.mj_name2id(sc.model, mujoco.mjtObj.mjOBJ_BODY, "object")
     (prim,) = primitives_of_body(sc.model, bid, sc.sdf_plugins)
     assert prim.kind == "torus" and prim.size == (R, r)

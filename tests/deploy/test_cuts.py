@@ -7,7 +7,7 @@ import shapely
 
 from simfab.deploy import cuts, flatten, lasercut, pattern, surface
 from simfab.deploy.pattern import PatternConfig
-from simfab.deploy.scene import load_scene
+from simfab.deploy.scene import load_deploy_scene
 from simfab.errors import InputError
 
 
@@ -163,9 +163,9 @@ def test_mesh_layout_follows_the_cuts():
     libraries)."""
     import dataclasses
 
-    from simfab.deploy.scene import bundled_path, load_scene
+    from simfab.deploy.scene import bundled_path, load_deploy_scene
 
-    s = load_scene(bundled_path("cap80"))
+    s = load_deploy_scene(bundled_path("cap80"))
     assert s.pattern.layout == "mesh"
     cf = cuts.flatten_with_cuts(s.target.V, s.target.F, s.cuts, s.pattern)
     lines = [p for _, p in cuts.seam_lines(cf)]
@@ -212,14 +212,14 @@ def test_cuts_table_is_validated(tmp_path):
     base = (tmp_path / "s.toml")
     base.write_text('[target]\nkind = "spherical_cap"\nradius = 0.15\nangle_deg = 80\nrings = 8\n'
                     '[cuts]\nmax_cones = 2\n')
-    assert load_scene(base).cuts.max_cones == 2
+    assert load_deploy_scene(base).cuts.max_cones == 2
     for body, field in (("max_cones = -1", "cuts.max_cones"), ("max_growth = 0", "cuts.max_growth"),
                         ("join_seams = 1", "cuts.join_seams"), ("bogus = 1", "[cuts]")):
         p = tmp_path / "bad.toml"
         p.write_text('[target]\nkind = "spherical_cap"\nradius = 0.15\nangle_deg = 80\nrings = 8\n'
                      f"[cuts]\n{body}\n")
         with pytest.raises(InputError) as e:
-            load_scene(p)
+            load_deploy_scene(p)
         assert field in str(e.value) and str(p) in str(e.value)
 
 
@@ -288,9 +288,9 @@ def test_bundled_cap80_meets_the_deployment_bound():
     point term makes the height: fitted to the surface alone the (grid-laid) cap ended on the sphere
     but 5.7 % too low."""
     from simfab.deploy import pipeline
-    from simfab.deploy.scene import bundled_path, load_scene
+    from simfab.deploy.scene import bundled_path, load_deploy_scene
 
-    s = load_scene(bundled_path("cap80"), overrides={"tune": {"iterations": 2}})
+    s = load_deploy_scene(bundled_path("cap80"), overrides={"tune": {"iterations": 2}})
     r = pipeline.run(s, mujoco_check=False)
     height = pipeline.out_of_plane_extent(r.deviation.aligned) / pipeline.out_of_plane_extent(r.target_points)
     assert r.deployment.stable and len(r.pattern.unreachable) <= 3 and r.tuning["steps"] >= 1
@@ -308,9 +308,9 @@ def test_cone_tip_insert_grows_with_its_half_edges():
     holds an insert whose growth is the half edges' integral of e^{-u} - 1
     (pattern.cone_tip_growth): within 10 % of the mean target growth (the target polylines are
     sampled on the 24-ring triangulation that u is interpolated on)."""
-    from simfab.deploy.scene import bundled_path, load_scene
+    from simfab.deploy.scene import bundled_path, load_deploy_scene
 
-    s = load_scene(bundled_path("petal"))
+    s = load_deploy_scene(bundled_path("petal"))
     assert s.pattern.layout == "mesh"
     cf = cuts.flatten_with_cuts(s.target.V, s.target.F, s.cuts, s.pattern)
     pat = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, s.pattern,

@@ -8,13 +8,13 @@ import trimesh
 
 from simfab.deploy import auto, families, flatten, surface
 from simfab.deploy.pattern import PatternConfig
-from simfab.deploy.scene import load_scene
+from simfab.deploy.scene import load_deploy_scene
 
 
 def _bare(tmp_path, t):
     p = tmp_path / "t.obj"
     trimesh.Trimesh(t.V, t.F, process=False).export(p)
-    return load_scene(p)
+    return load_deploy_scene(p)
 
 
 @pytest.mark.parametrize("h", [0.02, 0.03])
@@ -71,10 +71,10 @@ def test_given_fields_are_kept(tmp_path):
     layout and cuts; a flag's tuning steps stay."""
     from simfab.deploy.scene import bundled_path
 
-    s = load_scene(bundled_path("cap80"), overrides={"tune": {"iterations": 2}})
+    s = load_deploy_scene(bundled_path("cap80"), overrides={"tune": {"iterations": 2}})
     assert s.pattern.sizes == (0.004, 0.007, 0.01) and s.pattern.spacing == 0.03 and s.cuts.max_cones == 8
     assert s.tune.iterations == 2 and "pattern.insert_half_sizes" not in s.decisions.decided
-    assert load_scene(bundled_path("dome"), auto=False).tune.iterations == 0
+    assert load_deploy_scene(bundled_path("dome"), auto=False).tune.iterations == 0
 
 
 def test_spacing_follows_size_and_curvature():

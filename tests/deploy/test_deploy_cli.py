@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from simfab.cli import main
+from simfab.errors import InputError
 
 
 def test_validate_buckling_small_case_writes_outputs(tmp_path, capsys):
@@ -149,3 +150,29 @@ def test_a_bad_pattern_value_names_its_file_and_field_once(tmp_path, capsys):
     assert err == (f"simfab: error: {scene}: pattern.insert_half_sizes: entry 0 must be a positive number "
                    "(got -1.0)")
     assert not out.exists()
+
+
+def test_cell_library_call_writes_nothing_without_out_and_matches_the_cli(tmp_path, capsys):
+    """simfab.deploy.cell: the CLI's figures, a frozen typed result, no file without ``out``."""
+    import dataclasses
+
+    import simfab.deploy
+
+    res = simfab.deploy.cell(inserts=["insert_small"], increments=2)
+    assert res.outputs == {} and res.summary_json is None and res.inserts["insert_small"].outputs == {}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.scene = ""
+    ins = res.inserts["insert_small"]
+    assert ins.kind == "saddle" and len(ins.deployment.states) == 3  # flat + 2 increments
+    out = tmp_path / "dep"
+    assert main(["deploy", "--insert", "insert_small", "--increments", "2", "--out", str(out), "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    lib = res.to_json()
+    assert list(lib) == list(cli) == ["scene", "inserts", "summary_json"]
+    c, li = cli["inserts"]["insert_small"], lib["inserts"]["insert_small"]
+    assert list(li) == list(c)
+    assert {k: v for k, v in li.items() if k != "outputs"} == {k: v for k, v in c.items() if k != "outputs"}
+    assert json.loads((out / "deploy.json").read_text()) == cli
+    with pytest.raises(InputError, match="increments"):
+        simfab.deploy.cell(increments=0, out=str(tmp_path / "x"))
+    assert not (tmp_path / "x").exists()

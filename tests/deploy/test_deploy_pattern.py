@@ -12,7 +12,7 @@ from simfab.errors import InputError
 def laid_out(request):
     """Each bundled target flattened without cuts and laid out on the clipped grid (the layouts the
     scenes choose have their own tests)."""
-    sc = scene.load_scene(scene.bundled_path(request.param), overrides={"pattern": {"layout": "grid"}})
+    sc = scene.load_deploy_scene(scene.bundled_path(request.param), overrides={"pattern": {"layout": "grid"}})
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     return request.param, sc, f, pat
@@ -99,7 +99,7 @@ def test_svg_and_dxf_reread_same_outlines_mm(tmp_path):
     import ezdxf
     from svgelements import SVG, Path
 
-    sc = scene.load_scene(scene.bundled_path("dome"))
+    sc = scene.load_deploy_scene(scene.bundled_path("dome"))
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     cut = lasercut.layout(pat)
@@ -182,7 +182,7 @@ def test_steep_cap_springs_reach_their_slack():
     segments the zigzag's pieces need (the cap uncut, on the clipped grid)."""
     from simfab.deploy import network, springs
 
-    sc = scene.load_scene(scenes_dir("deploy", "cap80.toml"), overrides={"pattern": {"layout": "grid"}})
+    sc = scene.load_deploy_scene(scenes_dir("deploy", "cap80.toml"), overrides={"pattern": {"layout": "grid"}})
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     need = (1 + sc.pattern.spring_slack) * np.maximum(pat.growth, 1.0)
@@ -335,7 +335,7 @@ def test_conforming_layout_covers_the_domain_without_degenerate_quads(name):
     the spacing."""
     import shapely
 
-    sc = scene.load_scene(scene.bundled_path(name))
+    sc = scene.load_deploy_scene(scene.bundled_path(name))
     f = flatten.flatten(sc.target.V, sc.target.F)
     h = sc.pattern.spacing
     poly = shapely.Polygon(f.uv[f.boundary])
@@ -411,7 +411,7 @@ def test_conforming_core_regular_keeps_the_grid_and_options_are_checked():
     """conforming_core = "regular": the core's vertices stay on the grid (every core edge h long;
     the pillow quads alone follow the outline), the coverage is the smoothed layout's; bad choices
     name their field."""
-    sc = scene.load_scene(scene.bundled_path("dome"), overrides={"pattern": {"layout": "conforming"}})
+    sc = scene.load_deploy_scene(scene.bundled_path("dome"), overrides={"pattern": {"layout": "conforming"}})
     f = flatten.flatten(sc.target.V, sc.target.F)
     h = sc.pattern.spacing
     pats = {}
@@ -481,7 +481,7 @@ def test_skewed_quad_springs_take_per_arc_pulls():
 def test_bundled_mixed_layout_has_every_spring_at_its_slack():
     """The bundled mixed surface as laid out (conforming): a spring in every quad, none short of its
     slack (the skewed quad above among them)."""
-    sc = scene.load_scene(scene.bundled_path("mixed"))
+    sc = scene.load_deploy_scene(scene.bundled_path("mixed"))
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     need = (1 + sc.pattern.spring_slack) * np.maximum(pat.growth, 1.0)

@@ -209,17 +209,17 @@ def test_scene_rejects_unknown_fields(tmp_path):
     p = tmp_path / "s.toml"
     p.write_text('[target]\nkind = "saddle"\ndisk_radius = 0.06\ncurvature_radius = 0.1\n[pattern]\nspcing = 0.03\n')
     with pytest.raises(InputError, match="spcing"):
-        scene.load_scene(p)
+        scene.load_deploy_scene(p)
     p.write_text('[target]\nkind = "torus"\n')
     with pytest.raises(InputError, match="torus"):
-        scene.load_scene(p)
+        scene.load_deploy_scene(p)
     base = '[target]\nkind = "saddle"\ndisk_radius = 0.06\ncurvature_radius = 0.1\n'
     for table, bad, field in (("pattern", 'insert_half_sizes = [0.004, "x"]', "pattern.insert_half_sizes"),
                               ("pattern", 'layout = "hex"', "pattern.layout"),
                               ("tune", "iterations = 1.5", "tune.iterations"), ("tune", "step = 1", "step")):
         p.write_text(base + f"[{table}]\n{bad}\n")
         with pytest.raises(InputError, match=field) as e:
-            scene.load_scene(p)
+            scene.load_deploy_scene(p)
         assert str(p) in str(e.value) or str(p) in str(getattr(e.value, "where", ""))
 
 
@@ -230,10 +230,10 @@ def test_mesh_target_in_millimetres(tmp_path):
 
     t = surface.spherical_cap(0.1, np.radians(40), 6)
     trimesh.Trimesh(t.V * 1e3, t.F, process=False).export(tmp_path / "cap.obj")
-    sc = scene.load_scene(tmp_path / "cap.obj", units="mm")
+    sc = scene.load_deploy_scene(tmp_path / "cap.obj", units="mm")
     assert np.allclose(sc.target.V, t.V, atol=1e-9) and len(sc.target.F) == len(t.F)
     (tmp_path / "s.toml").write_text('[target]\nmesh = "cap.obj"\nunits = "mm"\n[pattern]\nspacing = 0.02\n')
-    sc = scene.load_scene(tmp_path / "s.toml")
+    sc = scene.load_deploy_scene(tmp_path / "s.toml")
     assert sc.pattern.spacing == 0.02 and np.allclose(sc.target.V, t.V, atol=1e-9)
 
 
@@ -453,7 +453,7 @@ def test_scene_file_target_size_is_checked(tmp_path):
     p = tmp_path / "big.toml"
     p.write_text('[target]\nkind = "saddle"\ndisk_radius = 60\ncurvature_radius = 100\nrings = 8\n')
     with pytest.raises(InputError, match=r"big.toml: \[target\].*read in m"):
-        scene.load_scene(p)
+        scene.load_deploy_scene(p)
 
 
 def test_spacing_too_fine_for_the_target_is_refused(tmp_path, capsys):

@@ -37,7 +37,7 @@ def test_bending_strain_of_a_circular_arc(plane, half):
     import numpy as np
 
     from simfab.deploy.export import bending_strain
-    from simfab.rods.model import Material, NetworkBuilder, Section
+    from simfab.rods.model import NetworkBuilder, RodMaterial, Section
 
     R, n, L = 0.05, 20, 0.04
     phi = np.linspace(0.0, L / R, n + 1)
@@ -46,7 +46,8 @@ def test_bending_strain_of_a_circular_arc(plane, half):
     straight = np.stack([np.linspace(0.0, L, n + 1), 0 * a, 0 * a], axis=1)
     sec = Section(width=4e-3, thickness=1e-3)
     nb = NetworkBuilder()
-    nb.add_rod("strip", arc, rest_points=straight, section=sec, material=Material(young=1e9), director=(0.0, 0.0, 1.0))
+    nb.add_rod("strip", arc, rest_points=straight, section=sec, material=RodMaterial(young=1e9),
+               director=(0.0, 0.0, 1.0))
     model, state = nb.build()
     eps = bending_strain(model, state)
     c = 0.5 * (sec.width if half == "width" else sec.thickness)

@@ -88,6 +88,20 @@ def test_grow_edit(tmp_path, capsys):
     assert e["nodes_moved"] >= 0.8 * (len(chain) - 2) and e["watertight"] is True and e["bodies"] == 1
     assert e["segments_colliding"] == 0
     assert pathlib.Path(e["skeleton_json"]).is_file() and pathlib.Path(e["skin_stl"]).is_file()
+    # the library call: same figures, nothing written without out, the stroke as an array (rounded as the CSV)
+    import dataclasses
+
+    import simfab.growth
+
+    before = sorted(tmp_path.rglob("*"))
+    r = simfab.growth.edit(s["skeleton_json"], stroke=np.round(stroke, 4), camera=camera, chain=k)  # the CSV's
+    assert sorted(tmp_path.rglob("*")) == before and r.outputs == {} and r.skin_stl is None
+    lib, files = r.to_json(), ("skeleton_json", "skin_stl", "skin_ply", "png")
+    assert list(lib) == list(e) and {k: v for k, v in lib.items() if k not in files} == \
+        {k: v for k, v in e.items() if k not in files}
+    assert len(r.skeleton.nodes) == e["nodes"] and r.mesh.is_watertight
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.chain = 0
 
 
 BAD = [

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from simfab.io.mjcf import Trajectory, load_scene
+from simfab.io.mjcf import Trajectory, load_mjcf
 from simfab.io.render import render_mjcf
 
 SCENES = sorted((pathlib.Path(__file__).resolve().parents[2] / "scenes").rglob("*.xml"))
@@ -15,7 +15,7 @@ SCENES = sorted((pathlib.Path(__file__).resolve().parents[2] / "scenes").rglob("
 
 @pytest.mark.parametrize("path", SCENES, ids=[str(p.relative_to(p.parents[1])) for p in SCENES])
 def test_scene_loads_and_renders(path, tmp_path):
-    scene = load_scene(path)
+    scene = load_mjcf(path)
     m = scene.model
     for b in range(1, m.nbody):
         if m.body_mocapid[b] >= 0 and m.nkey >= 2:

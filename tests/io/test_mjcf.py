@@ -5,7 +5,7 @@ import pytest
 import trimesh
 
 from simfab.errors import InputError
-from simfab.io.mjcf import MJCFBuilder, Trajectory, load_scene
+from simfab.io.mjcf import MJCFBuilder, Trajectory, load_mjcf
 from simfab.rotations import quat_angle, quat_slerp, quat_to_matrix
 
 
@@ -35,7 +35,7 @@ def scene_path(tmp_path):
 
 
 def test_scene_loads_sites_and_custom(scene_path):
-    s = load_scene(scene_path)
+    s = load_mjcf(scene_path)
     np.testing.assert_allclose(s.sites["fixed"], [0, 0, 0.03])
     assert s.custom_numeric["h_in"][0] == pytest.approx(0.01)
     assert s.custom_text["material"] == "PLA"
@@ -46,7 +46,7 @@ def test_scene_loads_sites_and_custom(scene_path):
 
 
 def test_trajectory_matches_analytic_interpolation(scene_path):
-    traj = Trajectory.from_scene(load_scene(scene_path))
+    traj = Trajectory.from_scene(load_mjcf(scene_path))
     rho = traj.rot_length_scale
     assert rho == pytest.approx(0.05, rel=1e-6)  # icosphere radius: bounding radius of the object
     seg2 = np.hypot(0.1, rho * np.pi / 2)  # sqrt(|dp|^2 + (rho theta)^2)
@@ -84,16 +84,16 @@ def test_missing_mocap_and_keys(tmp_path):
     b.geom(b.body("object"), type="sphere", size=0.1)
     p = b.save(tmp_path / "s.xml")
     with pytest.raises(InputError, match="not a mocap body"):
-        Trajectory.from_scene(load_scene(p))
+        Trajectory.from_scene(load_mjcf(p))
     with pytest.raises(InputError, match="no body named"):
-        Trajectory.from_scene(load_scene(p), body="nope")
+        Trajectory.from_scene(load_mjcf(p), body="nope")
 
 
 def test_invalid_mjcf_is_an_input_error_and_builder_refuses_to_save(tmp_path):
     bad = tmp_path / "bad.xml"
     bad.write_text("<mujoco><worldbody><geom type='sphere'/></worldbody>")
     with pytest.raises(InputError, match="bad.xml"):
-        load_scene(bad)
+        load_mjcf(bad)
     b = MJCFBuilder("x")
     b.geom(b.body("a"), type="mesh", mesh="missing")
     with pytest.raises(ValueError):
@@ -117,11 +117,11 @@ def test_numeric_config_reads_prefixed_fields_and_rejects_typos(tmp_path):
     b.custom_numeric("cell_width", 0.25)
     b.custom_numeric("cell_segments", 7.0)
     b.custom_numeric("other_thing", 1.0)
-    kw = numeric_config(load_scene(b.save(tmp_path / "ok.xml")), "cell_", Cfg)
+    kw = numeric_config(load_mjcf(b.save(tmp_path / "ok.xml")), "cell_", Cfg)
     assert kw == {"width": 0.25, "segments": 7} and isinstance(kw["segments"], int)
     b.custom_numeric("cell_widht", 0.3)
     with pytest.raises(InputError, match="unknown parameter <numeric name='cell_widht'>"):
-        numeric_config(load_scene(b.save(tmp_path / "typo.xml")), "cell_", Cfg)
+        numeric_config(load_mjcf(b.save(tmp_path / "typo.xml")), "cell_", Cfg)
 
 
 def test_segment_lengths_are_each_segments_translation_and_rotation():
@@ -176,7 +176,7 @@ def test_more_keyframes_than_the_limit_are_refused_before_mujoco_compiles(tmp_pa
     path = tmp_path / "many.xml"
     path.write_text(b.to_xml())
     with pytest.raises(InputError, match=rf"many.xml: <keyframe> holds more than the {MAX_KEYFRAMES} keys"):
-        load_scene(path)
+        load_mjcf(path)
 
 
 @pytest.mark.parametrize("data, match", [([0.25, 0.5], "data must be one number, got 2"),
@@ -198,4 +198,4 @@ def test_numeric_config_checks_count_and_type(tmp_path, data, match):
     path = tmp_path / "cfg.xml"
     path.write_text(b.to_xml())
     with pytest.raises(InputError, match=rf"cfg.xml: <numeric name='{name}'>: {match}"):
-        numeric_config(load_scene(path), "cell_", Cfg)
+        numeric_config(load_mjcf(path), "cell_", Cfg)

@@ -5,10 +5,10 @@ import pytest
 
 from simfab.rods.energy import Evaluator
 from simfab.rods.frames import signed_angle
-from simfab.rods.model import Material, NetworkBuilder, Section, synchronize
+from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
 from simfab.rotations import expmap
 
-MAT = Material(young=2e9, poisson=0.35)
+MAT = RodMaterial(young=2e9, poisson=0.35)
 SEC = Section(width=5e-3, thickness=1e-3)
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from simfab.rods.energy import Evaluator
-from simfab.rods.model import Material, NetworkBuilder, Section, synchronize
+from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
 
 TERMS = ["stretch", "bend", "twist"]
 
@@ -23,7 +23,7 @@ def random_network(seed, section):
     for r in range(2):  # two rods in one batch: checks the batched launch and DOF maps
         P = np.cumsum(rng.normal(scale=0.02, size=(6, 3)) + [0.02, 0, 0], axis=0) + r * 0.1
         rest = P + rng.normal(scale=0.003, size=P.shape)  # curved, non-trivial natural shape
-        nb.add_rod(f"r{r}", P, rest_points=rest, section=section, material=Material(young=1e9, poisson=0.3),
+        nb.add_rod(f"r{r}", P, rest_points=rest, section=section, material=RodMaterial(young=1e9, poisson=0.3),
                    director=rng.normal(size=3))
     model, st0 = nb.build()
     # a deformed state with random twist angles and a non-zero reference twist

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from simfab.errors import InputError
-from simfab.rods.model import Material, NetworkBuilder, Section
+from simfab.rods.model import NetworkBuilder, RodMaterial, Section
 from simfab.rods.statics import StaticSolver
 
-MAT = Material(young=2e9, poisson=0.35)
+MAT = RodMaterial(young=2e9, poisson=0.35)
 SEC = Section(width=5e-3, thickness=1e-3)
 
 
@@ -67,7 +67,7 @@ def test_builder_rejects_bad_input():
     with pytest.raises(InputError):
         Section(width=-1, thickness=1e-3)
     with pytest.raises(InputError):
-        Material(young=1e9, poisson=0.7)
+        RodMaterial(young=1e9, poisson=0.7)
     nb.add_rod("r", np.linspace([0, 0, 0], [1, 0, 0], 5), section=SEC, material=MAT)
     nb.clamp("r", "start", "nobody")
     with pytest.raises(InputError):

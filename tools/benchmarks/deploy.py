@@ -127,7 +127,7 @@ def _ab(baseline: str, scene: str, scale: float, pairs: int) -> dict:
 def _scaled(scene_name: str, s: float) -> dict:
     from simfab.deploy import pipeline, scene, surface
 
-    sc = scene.load_scene(scene.bundled_path(scene_name))
+    sc = scene.load_deploy_scene(scene.bundled_path(scene_name))
     tgt = sc.target
     if s != 1.0:  # the bundled dome's cap with the sphere radius scaled (spherical_cap: apex at the origin)
         R = _sphere_radius(tgt)

@@ -77,7 +77,7 @@ def run(argv) -> dict:
 
         scenes = {}
         for name in a.scenes:
-            sc = scene.load_scene(scene.bundled_path(name))
+            sc = scene.load_deploy_scene(scene.bundled_path(name))
             t0 = time.perf_counter()
             res = pipeline.run(sc, quiet=True, mujoco_check=not a.no_mujoco)
             total = time.perf_counter() - t0
