@@ -189,8 +189,8 @@ def test_cli_surface_writes_everything(tmp_path, capsys):
 @pytest.mark.parametrize("argv, field", [
     (["deploy", "surface"], "TARGET"),
     (["deploy", "surface", "/nonexistent.obj"], "file not found"),
-    (["deploy", "surface", "dome", "--spacing", "-1"], "pattern.spacing"),
-    (["deploy", "surface", "dome", "--insert-size", "0.5"], "insert_half_size"),
+    (["deploy", "surface", "dome", "--spacing", "-1"], "--spacing"),  # a flag's value is blamed on the flag
+    (["deploy", "surface", "dome", "--insert-size", "0.5"], "--insert-size"),
 ])
 def test_cli_surface_bad_input(argv, field, tmp_path, capsys):
     from simfab.cli import main
@@ -466,7 +466,7 @@ def test_spacing_too_fine_for_the_target_is_refused(tmp_path, capsys):
     big.write_text('[target]\nkind = "saddle"\ndisk_radius = 3\ncurvature_radius = 6\nrings = 8\n')
     assert main(["deploy", "surface", str(big), "--spacing", "0.03", "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert len(err.strip().splitlines()) == 1 and "pattern.spacing" in err and "cells" in err
+    assert len(err.strip().splitlines()) == 1 and "--spacing" in err and "cells" in err
     assert not out.exists()
     with pytest.raises(Exception, match="cells"):
         pattern.check_cell_count(1.0, 0.01)
