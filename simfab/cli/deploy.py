@@ -82,7 +82,9 @@ def run_surface(args) -> dict:
         raise InputError("needs a TARGET: scene TOML, bundled name (dome, saddle, mixed, cap80, saddle_steep, "
                          "petal) or mesh file",
                          where="simfab deploy surface")
-    flags = {k: getattr(args, k, None) for k in api.OVERRIDES}
+    from simfab.io.tables import flag_overrides
+
+    flags = flag_overrides({k: getattr(args, k, None) for k in api.OVERRIDES})
     try:
         res = simfab.deploy.run(args.target, out=args.out, device=args.device, units=args.units,
                                 progress=None if args.quiet else True,

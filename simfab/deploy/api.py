@@ -49,7 +49,10 @@ class SurfaceResult(Result):
         return {**self.summary, "outputs": dict(self.outputs)} if self.outputs else dict(self.summary)
 
 
-def _scene(target, units, overrides: dict):
+def _scene(target, units, overrides: dict, sources: dict, notes: list | None = None):
+    """The scene with ``overrides`` applied; ``sources``: override name -> what an error or the
+    override note names (the flag, or the keyword); ``notes`` gets one line per override that replaces
+    a value of the scene file."""
     from simfab.deploy import scene as sc
     from simfab.deploy import surface
 
@@ -73,12 +76,22 @@ def _scene(target, units, overrides: dict):
     target = str(target)
     path = sc.bundled_path(target) if target in sc.NAMES and not os.path.exists(target) else target
     try:
-        return sc.load_deploy_scene(path, units=units, overrides=ov)
+        scene = sc.load_deploy_scene(path, units=units, overrides=ov)
     except InputError as e:  # a given override's bad value is blamed on the override, not on the file
         for k, (table, name) in OVERRIDES.items():
             if overrides.get(k) is not None and str(e.where or "").endswith(f"{table}.{name}"):
-                raise InputError(e.message, where=k) from None
+                raise InputError(e.message, where=sources.get(k, k)) from None
         raise
+    if notes is not None and str(path).lower().endswith(".toml"):  # where an override replaces a file value
+        import tomllib
+
+        with open(path, "rb") as fh:
+            doc = tomllib.load(fh)
+        for k, (table, name) in OVERRIDES.items():
+            if overrides.get(k) is not None and name in doc.get(table, {}):
+                notes.append(f"{sources.get(k, k)} {overrides[k]!r} overrides {os.path.basename(str(path))} "
+                             f"[{table}] {name} = {doc[table][name]!r}")
+    return scene
 
 
 def run(target, *, out=None, seed: int = 0, device: str = "cpu", progress=None, units: str | None = None,
@@ -100,12 +113,18 @@ def run(target, *, out=None, seed: int = 0, device: str = "cpu", progress=None, 
         The :class:`SurfaceResult`.
     """
     del seed
-    scene = _scene(target, units, overrides)
+    from simfab.io.tables import Override
+
+    # an Override (a command-line flag) names its flag in errors and notes; a plain keyword names itself
+    sources = {k: (v.source if isinstance(v, Override) else k) for k, v in overrides.items()}
+    overrides = {k: (v.value if isinstance(v, Override) else v) for k, v in overrides.items()}
+    notes: list = []
+    scene = _scene(target, units, overrides, sources, notes)
     size = scene.target.diameter
     if scene.pattern.spacing > size:  # not one grid cell fits: an input error, not an empty pattern
         raise InputError(f"{scene.pattern.spacing:.4g} m is larger than the target surface (its bounding-box "
-                         f"diagonal {size:.4g} m)", where="spacing" if overrides.get("spacing") is not None
-                         else f"{scene.path}: pattern.spacing")
+                         f"diagonal {size:.4g} m)", where=sources.get("spacing", "spacing")
+                         if overrides.get("spacing") is not None else f"{scene.path}: pattern.spacing")
     if out is not None and os.path.exists(out) and not os.path.isdir(out):
         raise InputError("output location exists and is not a folder", where=str(out))
     import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
@@ -113,6 +132,10 @@ def run(target, *, out=None, seed: int = 0, device: str = "cpu", progress=None, 
     from simfab.deploy import outputs, pipeline
 
     res = pipeline.run(scene, device=_device(device), quiet=progress is None, mujoco_check=mujoco_check)
+    from simfab.progress import log
+
+    for n in notes:  # once, after the run: a failing run stays one line
+        log(n, quiet=progress is None)
     summary = pipeline.summary(res)
     paths = {}
     if out is not None:
