@@ -1,4 +1,4 @@
-"""Sphinx directive ``api-entry``: document a public name when it exists, say so when it does not yet.
+"""Sphinx directive ``api-entry``: document a public name of the API; a name that does not exist fails the build.
 
 Usage::
 
@@ -7,10 +7,8 @@ Usage::
        :kind: function
 
 ``kind`` is ``module`` (default: ``automodule`` with its members) or ``function`` / ``class``
-(``autofunction`` / ``autoclass``). A name that cannot be imported renders as a short note naming
-it (no warning): the public API is being merged area by area, and the reference fills in as it
-lands. Every page listing names that are missing is printed at the end of the build
-(``api-entry: waiting for ...``), so the integrator sees what the merged API must add.
+(``autofunction`` / ``autoclass``). A name that cannot be imported, or is not of its kind, is a
+Sphinx warning (an error under ``-W``, as CI builds): the reference cannot silently lose an entry.
 """
 
 from __future__ import annotations
@@ -24,7 +22,6 @@ from sphinx.util import logging
 from sphinx.util.docutils import SphinxDirective
 
 LOG = logging.getLogger(__name__)
-MISSING: dict[str, list[str]] = {}
 
 
 def resolve(name: str):
@@ -49,13 +46,10 @@ class ApiEntry(SphinxDirective):
         kind = self.options.get("kind", "module")
         obj = resolve(name)
         if kind == "function" and (obj is None or not callable(obj) or isinstance(obj, type)):
-            obj = None  # e.g. simfab.deploy.surface is still a module, not the command's function
+            obj = None
         if obj is None:
-            MISSING.setdefault(self.env.docname, []).append(name)
-            para = nodes.paragraph()
-            para += nodes.literal(text=name)
-            para += nodes.Text(" - not in this build yet (part of the public API being merged).")
-            return [nodes.note("", para)]
+            LOG.warning(f"api-entry: {name} is not a public {kind} of simfab", location=self.get_location())
+            return []
         directive = {"module": "automodule", "function": "autofunction", "class": "autoclass"}[kind]
         lines = [f".. {directive}:: {name}"]
         if kind in ("module", "class"):
@@ -66,12 +60,6 @@ class ApiEntry(SphinxDirective):
         return node.children
 
 
-def report(app, exc):
-    for doc, names in sorted(MISSING.items()):
-        LOG.info(f"api-entry: waiting for {', '.join(sorted(set(names)))} ({doc})")
-
-
 def setup(app):
     app.add_directive("api-entry", ApiEntry)
-    app.connect("build-finished", report)
     return {"version": "1", "parallel_read_safe": False, "parallel_write_safe": True}
