@@ -1,7 +1,7 @@
 """``simfab.grow``: the ``simfab grow`` command as functions.
 
     import simfab
-    r = simfab.grow.run("bridge")            # grow a support structure (typed result)
+    r = simfab.grow.run("phone_stand")       # grow a support structure (typed result)
     c = simfab.grow.check("skeleton.json")   # check a grown skeleton
     e = simfab.grow.edit("skeleton.json", stroke="stroke.json", camera="camera.json")  # sketch edit
 
@@ -18,7 +18,7 @@ def run(scene, *, check: bool = False, out=None, seed: int = 0, device: str = "c
     """Grow a support structure for a growth scene (and with ``check`` check it).
 
     Args:
-        scene: a growth scene (path or bundled name).
+        scene: a growth scene: its MJCF path or a bundled name (``"phone_stand"``).
         check: also run the structural check of the grown structure.
         out: output folder; None writes nothing.
         seed: the growth's seed.

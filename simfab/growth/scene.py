@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 import simfab.growth.tolerances as tol
+from simfab._bundled import scenes_dir
 from simfab.errors import InputError
 from simfab.growth.config import GrowthParams, StructureConfig, params_from_toml, structure_from_toml
 from simfab.io.mjcf import load_mjcf
@@ -101,9 +102,13 @@ class GrowthScene:
 
 
 def load_growth_scene(path: str | os.PathLike) -> GrowthScene:
-    """Read ``path`` (MJCF) and its companion ``.toml``; InputError on anything unusable."""
+    """Read ``path`` (MJCF, or the name of a bundled scene such as ``"phone_stand"``) and its
+    companion ``.toml``; InputError on anything unusable."""
 
     path = Path(path)
+    bundled = scenes_dir("growth", f"{path.name}.xml")
+    if not path.suffix and not path.exists() and bundled.is_file():  # a bundled name, as the other areas take
+        path = bundled
     if path.suffix.lower() != ".xml":
         raise InputError("a growth scene is an MJCF .xml file", where=str(path))
     sc = load_mjcf(path)

@@ -120,3 +120,9 @@ def test_profile_attractors_lie_on_the_swept_profile(scenes_dir):
     # and the grown structure stays close to that surface (within a couple of branch lengths)
     sk = r.skeleton
     assert np.all(np.abs((sk.nodes - o) @ view) < pr.depth[1] + 3 * r.resolved.branch_length)
+
+
+def test_a_bundled_scene_loads_by_name_as_in_the_other_areas():
+    by_name = load_growth_scene("phone_stand")
+    by_path = load_growth_scene(SCENES / "phone_stand.xml")
+    assert by_name.path.resolve() == by_path.path.resolve() and by_name.target_names == by_path.target_names
