@@ -110,7 +110,7 @@ def yield_notes(couple: dict) -> list[str]:
                 f"{y / 1e6:.3g} MPa, at a sharp corner where it grows with mesh refinement")
         if avg is not None and avg <= y:
             line += (f"; averaged over the design's stress radius it is {avg / 1e6:.3g} MPa, below yield: expected "
-                     "for this bundled scene, not a failure (scenes/coupling/README.md)")
+                     "for this bundled scene, not a failure (docs/validation/coupling.md)")
         elif avg is not None:
             line += (f"; averaged over the design's stress radius it is still {avg / 1e6:.3g} MPa: the part as "
                      "bundled would yield ('simfab couple optimize' designs one that does not)")

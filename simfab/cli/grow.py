@@ -30,7 +30,7 @@ from simfab._bundled import scenes_dir
 UNITS = {"buckling_factor": "-", "influence": "m", "kill": "m", "branch_length": "m", "volume": "m³",
          "overlap_volume": "m³", "penetration": "m", "seconds_growth": "s", "seconds_skin": "s", "safety_factor": "-",
          "max_von_mises_Pa": "Pa", "max_point_von_mises_Pa": "Pa", "yield_stress_Pa": "Pa", "mass_kg": "kg",
-         "critical_distance_m": "m", "max_deflection_m": "m", "seconds_check": "s"}
+         "critical_distance_m": "m", "max_deflection_m": "m", "seconds_check": "s", "max_move": "m"}
 
 HELP = "grow a support structure between objects (space colonization) and skin it for 3D printing"
 DESCRIPTION = (
