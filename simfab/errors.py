@@ -17,7 +17,13 @@ class SimfabError(Exception):
 
 
 class InputError(SimfabError, ValueError):
-    """Bad user input. ``str(err)`` is a one-line message naming where the problem is."""
+    """Bad user input. ``str(err)`` is a one-line message naming where the problem is.
+
+    Args:
+        message: what is wrong, one line.
+        where: the file, field or CLI flag at fault (``str(err)`` is ``"WHERE: message"``); None when
+            the message names it.
+    """
 
     def __init__(self, message: str, *, where: str | None = None):
         self.where = where
@@ -25,7 +31,14 @@ class InputError(SimfabError, ValueError):
         super().__init__(f"{where}: {message}" if where else message)
 
     def in_file(self, file) -> "InputError":
-        """The same error located in ``file`` (its field kept): ``FILE: FIELD: message``."""
+        """The same error located in ``file`` (its field kept): ``FILE: FIELD: message``.
+
+        Args:
+            file: the file the error's input came from.
+
+        Returns:
+            An :class:`InputError` naming ``file`` (this error itself when it already does).
+        """
         if str(file) in str(self) or (self.where and os.path.basename(str(file)) in str(self.where)):
             return self  # already located
         field = f"{self.where}: " if self.where else ""

@@ -74,7 +74,14 @@ def to_json(result: Any) -> dict:
 
 
 def units(result: Any) -> dict[str, str]:
-    """Field name -> unit of a result dataclass's fields that state one."""
+    """Field name -> unit of a result dataclass's fields that state one.
+
+    Args:
+        result: a result dataclass (instance or class).
+
+    Returns:
+        A dict field name -> unit string, for the fields declared with ``field(unit=...)``.
+    """
     return {f.name: f.metadata["unit"] for f in dataclasses.fields(result) if f.metadata.get("unit")}
 
 
@@ -86,5 +93,9 @@ class Result:
     """Label -> path of every file the run wrote (empty when ``out`` was None)."""
 
     def to_json(self) -> dict:
-        """This result as the JSON object ``--json`` prints (:func:`to_json`)."""
+        """This result as the JSON object ``--json`` prints (:func:`to_json`).
+
+        Returns:
+            A dict of JSON values, in field order.
+        """
         return to_json(self)

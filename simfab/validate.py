@@ -39,6 +39,8 @@ class BucklingResult(Result):
         scene: the elastica MJCF scene's path.
         rows: one per case (the CSV's columns: delta_over_L [-], force [N], rel_err [-], order, seconds [s], ...).
         shapes: (support, path, n, g/L) -> the deformed centreline (k, 2) [m] (for the plot).
+        ratios, supports, paths, ns: the gap ratios g/L [-], supports, paths and segment counts that ran
+            (for the plot; not in the JSON).
         outputs: csv, json, png when written.
     """
 

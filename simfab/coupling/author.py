@@ -98,7 +98,20 @@ class OverlapProfile:
 
 @dataclass(frozen=True, kw_only=True)
 class AuthoredScene(Result):
-    """The scene ``simfab couple new`` wrote."""
+    """The scene ``simfab couple new`` wrote.
+
+    Args:
+        scene: the MJCF scene's path.
+        dim: 2 or 3.
+        start, end: O's path's start and end position [m].
+        path_length: the path's length [m].
+        first_contact: path length at O's first contact with A [m].
+        seat: path length of the seat (the first overlap minimum after the mouth) [m]; None when none was found.
+        to_rest: the simulation draws O on to rest past the path's end.
+        notes: one line each (what was corrected or assumed).
+        next_commands: the commands to run next.
+        outputs: label -> path of the files written.
+    """
 
     scene: str = field(default="")
     dim: int = field(default=3)

@@ -32,33 +32,60 @@ from simfab.fem.elastic import det_and_von_mises, energy_gradient
 
 @dataclass(kw_only=True)
 class StepResult:
-    """One insertion step. Units: s, penetration [m]; energy [J]; forces [N]; stress [Pa]."""
+    """One insertion step. Units: s, penetration [m]; energy [J]; forces [N]; stress [Pa].
+
+    Args:
+        s: path length of O's reference point [m].
+        pos, quat: O's pose (position [m], unit quaternion wxyz).
+        x: (n, dim) deformed positions of A's nodes [m].
+        energy: elastic energy of A [J].
+        force: insertion force: support reactions along O's translation (resisting < 0) [N].
+        path_force: generalized force along the path, sum_j f_j(on O) . dy_j/ds = -d(E + B)/ds [N].
+        barrier_energy: kappa sum_j b(d_j) at this state [J] (not part of the elastic energy).
+        grip: grip force: total normal contact force squeezing O [N], >= 0.
+        max_von_mises: the largest element von Mises stress [Pa].
+        von_mises: (m,) per element [Pa].
+        penetration: deepest penetration of A into O [m].
+        min_det_F: the smallest deformation-gradient determinant [-].
+        iterations: Newton iterations of the step.
+        contact_points: active contact points.
+        kappa: barrier stiffness used for this step [N/m].
+        phase: "insert" (O moving forward along the path) or "remove" (moving back).
+        normal_force: total normal contact force sum_j lambda_j [N].
+        path_force_friction: friction's part of path_force [N].
+        dissipated: work dissipated by friction over the step leading to this record [J].
+        slipping: fraction of the normal force at points that slipped more than eps [-].
+        lag_solves: solves of the step with refreshed friction lags (lagging iterations).
+        lag_change: relative change of the normal forces at the step's last lagging iteration [-].
+        reaction: (dim,) force of the support on A = force of A on O [N].
+        locked: fraction of the normal force at self-locked contact points [-] (friction.FrictionRecord).
+    """
 
     s: float
     pos: np.ndarray
     quat: np.ndarray
-    x: np.ndarray  # (n, dim) deformed positions [m]
+    x: np.ndarray
     energy: float
-    force: float  # insertion force: support reactions along O's translation (resisting < 0)
-    path_force: float  # generalized force along the path, sum_j f_j(on O) . dy_j/ds = -d(E + B)/ds [N]
-    barrier_energy: float  # kappa sum_j b(d_j) at this state [J] (not part of the elastic energy)
+    force: float
+    path_force: float
+    barrier_energy: float
     grip: float
     max_von_mises: float
-    von_mises: np.ndarray  # (m,) per element [Pa]
+    von_mises: np.ndarray
     penetration: float
     min_det_F: float
     iterations: int
     contact_points: int
-    kappa: float  # barrier stiffness used for this step [N/m]
-    phase: str = "insert"  # "insert" (O moving forward along the path) or "remove" (moving back)
-    normal_force: float = 0.0  # total normal contact force sum_j lambda_j [N]
-    path_force_friction: float = 0.0  # friction's part of path_force [N]
-    dissipated: float = 0.0  # work dissipated by friction over the step leading to this record [J]
-    slipping: float = 0.0  # fraction of the normal force at points that slipped more than eps [-]
-    lag_solves: int = 0  # solves of the step with refreshed friction lags (lagging iterations)
-    lag_change: float = 0.0  # relative change of the normal forces at the step's last lagging iteration [-]
-    reaction: np.ndarray | None = None  # (dim,) force of the support on A = force of A on O [N]
-    locked: float = 0.0  # fraction of the normal force at self-locked contact points [-] (friction.FrictionRecord)
+    kappa: float
+    phase: str = "insert"
+    normal_force: float = 0.0
+    path_force_friction: float = 0.0
+    dissipated: float = 0.0
+    slipping: float = 0.0
+    lag_solves: int = 0
+    lag_change: float = 0.0
+    reaction: np.ndarray | None = None
+    locked: float = 0.0
 
 
 def path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:

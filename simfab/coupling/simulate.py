@@ -113,20 +113,28 @@ from simfab.progress import progress
 
 @dataclass(kw_only=True)
 class InsertionResult:
-    """steps : one :class:`StepResult` per step (the start pose first); seconds : wall time;
-    timings : seconds per stage, each counted once (assembly, factorization, solves, contact_field,
-    barrier, line_search, predictor; :mod:`simfab.coupling.timing`; they cut across phases);
-    phases : wall seconds per phase of the insertion loop, each counted once (warm_start, newton,
-    facet_check, record, rigid_check; "other" is the rest of ``seconds``);
-    warnings : one line each (e.g. steps too coarse, an unfinished insertion, stress above yield);
-    notes : one line each about how the run was solved (e.g. a rigid motion of A that nothing
-    resists, pinned by the solver); refined_facets : ids (rows of ``model.contact_facets``) of the
-    facets that carried refinement points at the end (``simulate``'s ``refined`` for a similar run);
-    removal : with friction, one :class:`StepResult` per step of the removal (O moved back from where
-    the insertion left it over the insertion's step positions, phase "remove"); empty without
-    friction (removal is then the insertion played backwards); jammed_at : the path length [m] where
-    a frictional insertion self-locked (see :func:`jammed`), None when it did not; guided_steps :
-    solves whose warm start was a coarser run's candidate (``simulate``'s ``guide``)."""
+    """One insertion run: its records, timings and notes.
+
+    Args:
+        model: the :class:`CouplingModel` simulated.
+        steps: one :class:`StepResult` per step (the start pose first).
+        seconds: wall time [s].
+        timings: seconds per stage, each counted once (assembly, factorization, solves, contact_field,
+            barrier, line_search, predictor; :mod:`simfab.coupling.timing`; they cut across phases) [s].
+        phases: wall seconds per phase of the insertion loop, each counted once (warm_start, newton,
+            facet_check, record, rigid_check; "other" is the rest of ``seconds``) [s].
+        warnings: one line each (e.g. steps too coarse, an unfinished insertion, stress above yield).
+        notes: one line each about how the run was solved (e.g. a rigid motion of A that nothing
+            resists, pinned by the solver).
+        refined_facets: ids (rows of ``model.contact_facets``) of the facets that carried refinement
+            points at the end (``simulate``'s ``refined`` for a similar run).
+        removal: with friction, one :class:`StepResult` per step of the removal (O moved back from where
+            the insertion left it over the insertion's step positions, phase "remove"); empty without
+            friction (removal is then the insertion played backwards).
+        jammed_at: the path length [m] where a frictional insertion self-locked (see :func:`jammed`),
+            None when it did not.
+        guided_steps: solves whose warm start was a coarser run's candidate (``simulate``'s ``guide``).
+    """
 
     model: CouplingModel
     steps: list
@@ -141,7 +149,15 @@ class InsertionResult:
     guided_steps: int = 0
 
     def column(self, name: str, phase: str = "insert") -> np.ndarray:
-        """One field of every record of a phase ("insert" or "remove") as an array."""
+        """One field of every record of a phase as an array.
+
+        Args:
+            name: a :class:`StepResult` field (``"force"``, ``"energy"``, ...).
+            phase: "insert" or "remove".
+
+        Returns:
+            A float array, one value per record.
+        """
         records = self.removal if phase == "remove" else self.steps
         return np.array([getattr(r, name) for r in records], dtype=float)
 

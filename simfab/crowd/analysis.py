@@ -21,8 +21,17 @@ METHODS = ("arithmetic_mean", "geometric_mean", "median", "majority", "bayesian"
 class BayesResult:
     """Posterior summary of one crowd, scale units for x, model units for alpha and beta.
 
-    estimate: (Q,) posterior mean true score; x_interval: (Q, 2) central credible interval;
-    alpha_mean/alpha_interval: (R,), (R, 2); beta_mean/beta_interval: (Q,), (Q, 2).
+    Args:
+        estimate: (Q,) posterior mean true score [scale units].
+        x_interval: (Q, 2) its central credible interval [scale units].
+        alpha_mean, alpha_interval: (R,) rater expertise means and (R, 2) intervals [model units].
+        beta_mean, beta_interval: (Q,) question difficulty means and (Q, 2) intervals [model units].
+        rhat_max: the largest rank-normalized split R-hat over the parameters [-].
+        ess_min: the smallest bulk effective sample size [draws].
+        converged: R-hat and ESS within the sampler's thresholds.
+        iterations: iterations per chain.
+        seconds: the sampler's wall time [s].
+        warnings: one line each.
     """
 
     estimate: np.ndarray

@@ -78,7 +78,11 @@ class StudyResult(Result):
     study: object = field(json=False, default=None)
 
     def to_json(self) -> dict:
-        """The ``--json`` object: sizes, seconds, outputs."""
+        """The ``--json`` object: sizes, seconds, outputs.
+
+        Returns:
+            A dict of JSON values.
+        """
         d = to_json(self)
         return {"sizes": d["sizes"], "seconds": d["seconds"], "outputs": d["outputs"]}
 
@@ -99,7 +103,11 @@ class TruthResult(Result):
     mesh_notes: list
 
     def to_json(self) -> dict:
-        """The ``--json`` object: orientations, scale, mesh_notes, outputs."""
+        """The ``--json`` object: orientations, scale, mesh_notes, outputs.
+
+        Returns:
+            A dict of JSON values.
+        """
         d = to_json(self)
         return {k: d[k] for k in ("orientations", "scale", "mesh_notes", "outputs")}
 
@@ -119,7 +127,11 @@ class SynthResult(Result):
     crowd: object = field(json=False, default=None)
 
     def to_json(self) -> dict:
-        """The ``--json`` object: raters, tasks, malicious, outputs."""
+        """The ``--json`` object: raters, tasks, malicious, outputs.
+
+        Returns:
+            A dict of JSON values.
+        """
         d = to_json(self)
         return {k: d[k] for k in ("raters", "tasks", "malicious", "outputs")}
 
@@ -139,7 +151,11 @@ class BracketResult(Result):
     results: list = field(json=False, default_factory=list)
 
     def to_json(self) -> dict:
-        """The ``--json`` object: setup, designs, outputs."""
+        """The ``--json`` object: setup, designs, outputs.
+
+        Returns:
+            A dict of JSON values.
+        """
         d = to_json(self)
         return {k: d[k] for k in ("setup", "designs", "outputs")}
 

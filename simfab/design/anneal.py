@@ -134,11 +134,19 @@ class _Restricted:
 
 @dataclass(kw_only=True)
 class AnnealResult:
-    """best x (n,), its value and info; history: one dict per iteration (k, value, accepted,
-    current, best, temperature, sigma, info); iterations run; stopped_early; discarded: infos of
-    speculative evaluations that were not needed (a proposal before them was accepted, or the one
-    an acceptance branch assumed accepted was rejected); branches: acceptance branches [drawn,
-    adopted]."""
+    """Outcome of :func:`anneal`.
+
+    Args:
+        x: (n,) the best point.
+        value: f(x) [units of f].
+        info: what f returned with it.
+        history: one dict per iteration (k, value, accepted, current, best, temperature, sigma, info).
+        iterations: iterations run.
+        stopped_early: ``stop`` ended the run.
+        discarded: infos of speculative evaluations that were not needed (a proposal before them was
+            accepted, or the one an acceptance branch assumed accepted was rejected).
+        branches: acceptance branches [drawn, adopted].
+    """
 
     x: np.ndarray
     value: float

@@ -39,23 +39,31 @@ PATIENCE_REL = 1e-3
 class OptimizationResult:
     """Outcome of an optimizer run (:func:`optimize_anneal`, :func:`simfab.design.gradient.optimize_gradient`).
 
-    initial, best : :class:`DesignEvaluation` (with their InsertionResults)
-    history : the optimizer's log, one dict per iteration (typed: :func:`history_rows`)
-    accepted : [(iteration, rest (n, d) [m], objective)] of every accepted design, in order
-    simulations : insertion simulations run to the end; stopped_simulations : stopped early (their
-    candidate provably rejected); rejected : {reason: count} of invalid candidates
-    speculative : insertion simulations run ahead on a worker and not needed (a proposal before
-    them was accepted, or an acceptance branch's head rejected); workers : processes that
-    evaluated candidates; branches : the annealer's acceptance branches (drawn, adopted)
-    seconds : wall time; sim_seconds : inside the simulator, summed over the evaluations used (with
-    several workers it may exceed the wall time); stopped_early : bool
-    method : "anneal" (:func:`optimize_anneal`) or "gradient" (:func:`simfab.design.gradient.optimize_gradient`);
-    gradient_evaluations : insertions that also gave the figures' gradients; message : the
-    optimizer's own closing message ("" for annealing); events : the gradient method's count of
-    non-smooth events between consecutive simulated designs
-    (:func:`simfab.design.gradient.nonsmooth_events`), None for annealing; resume : the gradient
-    method's simulation of its best design with its gradients (held steps), which a correction round
-    started from that design reuses instead of simulating it again; None for annealing
+    Args:
+        problem: the :class:`DesignProblem` optimized.
+        initial, best: :class:`DesignEvaluation` (with their InsertionResults).
+        history: the optimizer's log, one dict per iteration (typed: :func:`history_rows`).
+        accepted: [(iteration, rest (n, d) [m], objective)] of every accepted design, in order.
+        simulations: insertion simulations run to the end.
+        stopped_simulations: simulations stopped early (their candidate provably rejected).
+        rejected: {reason: count} of invalid candidates.
+        seconds: wall time [s].
+        sim_seconds: time inside the simulator, summed over the evaluations used (with several
+            workers it may exceed the wall time) [s].
+        iterations: optimizer iterations run.
+        stopped_early: the run stopped before its iteration budget.
+        speculative: insertion simulations run ahead on a worker and not needed (a proposal before
+            them was accepted, or an acceptance branch's head rejected).
+        workers: processes that evaluated candidates.
+        branches: the annealer's acceptance branches (drawn, adopted).
+        method: "anneal" (:func:`optimize_anneal`) or "gradient" (:func:`simfab.design.gradient.optimize_gradient`).
+        gradient_evaluations: insertions that also gave the figures' gradients.
+        message: the optimizer's own closing message ("" for annealing).
+        events: the gradient method's count of non-smooth events between consecutive simulated designs
+            (:func:`simfab.design.gradient.nonsmooth_events`), None for annealing.
+        resume: the gradient method's simulation of its best design with its gradients (held steps),
+            which a correction round started from that design reuses instead of simulating it again;
+            None for annealing.
     """
 
     problem: DesignProblem

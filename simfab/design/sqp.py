@@ -141,9 +141,16 @@ class SQPStep:
 
 @dataclass(kw_only=True, eq=False)
 class SQPResult:
-    """``z`` the last accepted design and its ``sample``; ``steps`` [:class:`SQPStep`]; ``evaluations``
-    (the start's included); ``converged``: stopped by the tolerance (a feasible design where no step
-    predicts progress); ``message`` why it stopped."""
+    """Outcome of the trust-region SQP.
+
+    Args:
+        z: the last accepted design, in [0, 1]^n (the design scaled by its bounds).
+        sample: its :class:`Sample` (figures and gradients).
+        steps: one :class:`SQPStep` per step.
+        evaluations: designs evaluated (the start's included).
+        converged: stopped by the tolerance (a feasible design where no step predicts progress).
+        message: why it stopped.
+    """
 
     z: np.ndarray
     sample: Sample

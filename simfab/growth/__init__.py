@@ -34,8 +34,14 @@ from simfab.growth.workflow import check, edit, run
 def skin(result: Growth, **kw):
     """Skin of a :class:`Growth` as a watertight ``trimesh.Trimesh`` (objects carved out).
 
-    Keywords: ``segments`` (joint-sphere resolution), ``subtract`` (carve the objects).
     Use :func:`skin_result` for the checks and timing as well.
+
+    Args:
+        result: the growth.
+        **kw: ``segments`` (joint-sphere resolution), ``subtract`` (carve the objects).
+
+    Returns:
+        The skin, a ``trimesh.Trimesh`` in metres.
     """
     return skin_result(result, **kw)[0]
 

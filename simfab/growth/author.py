@@ -55,7 +55,16 @@ class GrowthSceneSpec:
 
 @dataclass(frozen=True, kw_only=True)
 class AuthoredGrowthScene(Result):
-    """The scene ``simfab grow new`` wrote."""
+    """The scene ``simfab grow new`` wrote.
+
+    Args:
+        scene: the MJCF scene's path.
+        masses: object -> mass used [kg].
+        targets: the target points, snapped onto the objects [m].
+        notes: one line each (what was assumed or adjusted).
+        next_commands: the commands to run next (grow, check).
+        outputs: label -> path of the files written.
+    """
 
     scene: str = field(default="")
     masses: dict = field(unit="kg", default_factory=dict)

@@ -42,14 +42,19 @@ ROOT_SPLIT = 0.25
 class Growth:
     """Everything one growth run produced.
 
-    scene : the problem. resolved : the distances actually used. seed : RNG seed.
-    attractors : (m, 3) all random attractors placed (both halves when symmetric) [m].
-    attractor_death_step : (m,) growth step at which each attractor died (-1: never).
-    history : unpruned tree (replay of the growth; node births are growth steps).
-    pruned : skeleton after pruning (before smoothing). skeleton : final skeleton with radii.
-    reports : one :class:`ColonizeReport` per stage.
-    targets_reached / targets_unreached : target names.
-    seconds_growth : wall time of placement + colonization + pruning + smoothing [s].
+    Args:
+        scene: the problem.
+        resolved: the distances actually used.
+        seed: RNG seed.
+        attractors: (m, 3) all random attractors placed (both halves when symmetric) [m].
+        attractor_death_step: (m,) growth step at which each attractor died (-1: never).
+        history: unpruned tree (replay of the growth; node births are growth steps).
+        pruned: skeleton after pruning (before smoothing).
+        skeleton: final skeleton with radii.
+        reports: one :class:`ColonizeReport` per stage.
+        targets_reached, targets_unreached: target names.
+        seconds_growth: wall time of placement + colonization + pruning + smoothing [s].
+        symmetric: grown with mirror symmetry.
     """
 
     scene: GrowthScene
@@ -71,6 +76,11 @@ class Growth:
         return int(sum(r.steps for r in self.reports))
 
     def summary(self) -> dict:
+        """The growth's figures (the growth keys of ``simfab grow --json``).
+
+        Returns:
+            A dict of JSON values (counts, distances [m], seconds_growth [s]).
+        """
         sk = self.skeleton
         return {
             "scene": str(self.scene.path) if self.scene.path else self.scene.name,
@@ -108,12 +118,18 @@ def as_scene(scene_or_path) -> GrowthScene:
 
 
 def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = None, **overrides) -> Growth:
-    """Grow a support structure for a scene (path to the MJCF or a :class:`GrowthScene`).
+    """Grow a support structure for a scene. Same seed → identical result.
 
-    ``overrides`` replace :class:`simfab.growth.config.GrowthParams` fields (``attractors``,
-    ``influence``, ``kill``, ``branch_length``, ``mode``, ...; None = keep). ``symmetric=True``
-    enables mirror symmetry (plane from the scene's [symmetry] table, else the plane x =
-    mean root x). ``seed`` defaults to the scene's seed. Same seed → identical result.
+    Args:
+        scene_or_path: the MJCF path, a bundled scene's name or a :class:`GrowthScene`.
+        seed: the growth's seed (None: the scene's).
+        symmetric: True enables mirror symmetry (plane from the scene's [symmetry] table, else the
+            plane x = mean root x); None keeps the scene's setting.
+        **overrides: :class:`simfab.growth.config.GrowthParams` fields (``attractors``, ``influence``,
+            ``kill``, ``branch_length``, ``mode``, ...; None = keep).
+
+    Returns:
+        The :class:`Growth` (skeletons, attractors, history, reports).
     """
     scene = as_scene(scene_or_path)
     if overrides:  # checked (unknown names too) by GrowthParams.replace
@@ -396,7 +412,16 @@ class _Symmetry:
 
 
 def skin_result(result: Growth, *, segments: int | None = None, subtract: bool | None = None):
-    """Skin the final skeleton of ``result``: returns (trimesh, SkinReport, seconds)."""
+    """Skin the final skeleton of a growth.
+
+    Args:
+        result: the :class:`Growth`.
+        segments: joint-sphere resolution (None: the scene's).
+        subtract: carve the objects out of the skin (None: the scene's).
+
+    Returns:
+        A tuple (``trimesh.Trimesh`` [m], :class:`simfab.growth.skinning.SkinReport`, seconds [s]).
+    """
 
     p = result.scene.params
     t0 = time.perf_counter()

@@ -12,9 +12,32 @@ from simfab.results import Result, field
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class CheckResult(Result):
     """Structural check of one support (:mod:`simfab.growth.structure`): figures, per-target
-    contacts and loads, the supported objects' masses, and the files written (``check_usd``,
-    ``check_png``; None without ``out``). ``skeleton`` / ``scene``: the files checked (None when
-    checked right after growing)."""
+    contacts and loads, the supported objects' masses, and the files written.
+
+    Args:
+        skeleton, scene: the files checked (None when checked right after growing).
+        safety_factor: yield stress / max_von_mises_Pa [-].
+        max_von_mises_Pa: the peak of the critical-distance mean of the von Mises stress [Pa].
+        peak_point_m: (3,) where that peak is [m].
+        max_point_von_mises_Pa: the largest element-corner von Mises stress, unaveraged [Pa].
+        deflection_m: load point name -> magnitude of the mean displacement of its facets [m].
+        max_deflection_m: the largest of those [m].
+        mass_kg, volume_m3: the support's mass [kg] and volume [m³].
+        material: the material's name; yield_stress_Pa: its yield stress [Pa].
+        critical_distance_m: the radius the stress is averaged over [m].
+        target_forces_N: load point -> the force on it (3,) [N].
+        targets: load point -> object, touching, gap_m [m], contact_area_m2 [m²], min_contact_area_m2 [m²],
+            load_N [N].
+        supported_objects: object -> mass_kg [kg], mass_source, weight_N [N], carried_by (load points).
+        dropped_weight_N: object -> weight without a load path [N] (``best_effort`` only).
+        mesher: the tet mesher used ("gmsh" or a fallback); tets, fem_nodes: the P2 mesh's sizes.
+        seconds_check: wall time of skin, mesh, solve and stress [s].
+        check_usd, check_png: the stress stage and picture written (None without ``out``).
+        buckling_factor: the critical-load factor of the linear buckling analysis [-] (None unless asked).
+        strengthened: the strengthened design's check (None unless asked).
+        structure: the :class:`simfab.growth.structure.StructureCheck` (model, displacements, stresses).
+        outputs: label -> path of the files written.
+    """
 
     skeleton: str | None = None
     scene: str | None = None
@@ -47,7 +70,18 @@ class CheckResult(Result):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class StrengthenedResult(CheckResult):
-    """The strengthened design's check plus the strengthening's figures and files."""
+    """The strengthened design's check (the :class:`CheckResult` fields) plus the strengthening's
+    figures and files.
+
+    Args:
+        target_safety_factor: the safety factor asked for [-]; reached: whether the final one is at least it.
+        checks: structural checks run (the first the input's).
+        safety_factor_before, safety_factor_after: of the input and of the final design [-].
+        volume_before_m3, volume_after_m3: the support's volume before and after [m³].
+        volume_change: volume_after / volume_before - 1 [-].
+        skeleton_json, skin_stl: the strengthened skeleton and skin written (None without ``out``).
+        skeleton_strengthened: the strengthened :class:`simfab.growth.skeleton.Skeleton`.
+    """
 
     target_safety_factor: float = field(unit="-")
     reached: bool
@@ -65,8 +99,31 @@ class StrengthenedResult(CheckResult):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class GrowthResult(Result):
-    """One ``simfab grow`` run: growth, skin and (with ``check``) the structural check; the
-    output paths are None without ``out``."""
+    """One ``simfab grow`` run: growth, skin and (with ``check``) the structural check.
+
+    Args:
+        scene: the scene's path or name; mode: the growth mode; symmetric: mirror symmetry used; seed: the seed.
+        attractors: random attractors placed (both halves when symmetric).
+        influence, kill, branch_length: the space-colonization distances used [m].
+        steps: growth steps; stop_reasons: why each stage stopped.
+        targets_total, targets_reached: target counts; targets_unreached: their names.
+        nodes, segments: the final skeleton's size; nodes_grown: nodes of the unpruned tree.
+        collisions_resolved, collisions_unresolved, dead_ends, dropped_oscillating: obstacle-avoidance counts.
+        seconds_growth: wall time of placement, colonization, pruning and smoothing [s].
+        watertight, is_volume, bodies: the skin's checks (after an STL round trip).
+        volume: the skin's volume [m³]; overlap_volume: skin ∩ objects [m³].
+        nodes_in_skin: skeleton nodes inside the skin.
+        penetration: the deepest skin vertex inside an object that was not carved [m].
+        skin_attempts: skins built until one passed the round trip.
+        objects_subtracted, objects_not_manifold: objects carved out of the skin / skipped.
+        seconds_skin: the skin's wall time [s].
+        skin_stl, skin_ply, skeleton_json, usd, mjcf, png, camera_json: the files written (None without ``out``).
+        skin_units: the length unit of the skin files.
+        check: the structural check (None without ``check``).
+        growth: the :class:`simfab.growth.pipeline.Growth` (scene, skeletons, attractors, history).
+        mesh: the skin (``trimesh.Trimesh``, metres).
+        outputs: label -> path of the files written.
+    """
 
     scene: str
     mode: str
@@ -118,8 +175,20 @@ class GrowthResult(Result):
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class EditResult(Result):
     """One sketch edit (``simfab grow edit``): the moved chain, the edited skeleton's size, its
-    skin's checks and the files written (None without ``out``). ``to_json()`` is the ``--json``
-    object (without ``outputs``; ``segments_colliding`` only when the skeleton's scene was read)."""
+    skin's checks and the files written. ``to_json()`` is the ``--json`` object (without
+    ``outputs``; ``segments_colliding`` only when the skeleton's scene was read).
+
+    Args:
+        chain: index of the moved chain (:func:`simfab.growth.sketch.skeleton_chains`).
+        nodes_moved: nodes the stroke moved; nodes_kept_for_collisions: nodes held back to avoid an object.
+        max_move: the largest node displacement [m].
+        segments_colliding: segments of the edited skeleton crossing an object (None: no scene to test against).
+        nodes, segments: the edited skeleton's size.
+        watertight, bodies: its skin's checks; volume: the skin's volume [m³]; skin_units: the skin files' unit.
+        skeleton_json, skin_stl, skin_ply, png: the files written (None without ``out``).
+        skeleton: the edited :class:`simfab.growth.skeleton.Skeleton`; mesh: its skin (``trimesh.Trimesh``, metres).
+        outputs: label -> path of the files written.
+    """
 
     chain: int
     """Index of the moved chain (:func:`simfab.growth.sketch.skeleton_chains`)."""
@@ -144,7 +213,11 @@ class EditResult(Result):
     """Its skin (``trimesh.Trimesh``, metres)."""
 
     def to_json(self) -> dict:
-        """The ``--json`` object of ``simfab grow edit``."""
+        """The ``--json`` object of ``simfab grow edit``.
+
+        Returns:
+            A dict of JSON values (no ``outputs``).
+        """
         d = super().to_json()
         d.pop("outputs")
         if d["segments_colliding"] is None:

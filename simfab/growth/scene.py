@@ -37,14 +37,17 @@ from simfab.io.tables import read_toml
 class GrowthScene:
     """Geometry and parameters of one growth problem (world frame, metres).
 
-    objects : body name -> ``trimesh.Trimesh`` (world frame).
-    roots : (k, 3) root points. root_names : k names.
-    targets : (t, 3) target points. target_names : t names.
-    sphere_centers : (s, 3), sphere_radii : (s,) obstacle spheres. sphere_names : s names.
-    params : growth parameters. path : the MJCF file (None when built in Python).
-    structure : material and extra loads of the structural check ([material], [loads]).
-    notes : what :meth:`with_params` overrode of the scene file (``--kill 0.003 overrides P.toml [growth]
-        kill = 0.004``), for the caller to log once the run is under way.
+    Args:
+        objects: body name -> ``trimesh.Trimesh`` (world frame).
+        roots: (k, 3) root points [m]; root_names: k names.
+        targets: (t, 3) target points [m]; target_names: t names.
+        sphere_centers, sphere_radii: (s, 3) centres and (s,) radii of the obstacle spheres [m];
+            sphere_names: s names.
+        params: growth parameters (:class:`simfab.growth.config.GrowthParams`).
+        path: the MJCF file (None when built in Python).
+        structure: material and extra loads of the structural check ([material], [loads]).
+        notes: what :meth:`with_params` overrode of the scene file (``--kill 0.003 overrides P.toml [growth]
+            kill = 0.004``), for the caller to log once the run is under way.
     """
 
     objects: dict
@@ -77,7 +80,11 @@ class GrowthScene:
         return self.path.stem if self.path is not None else "scene"
 
     def objects_bbox(self) -> np.ndarray:
-        """(2, 3) bounding box of all objects (and roots/targets) [m]."""
+        """Bounding box of all objects (and roots/targets).
+
+        Returns:
+            A (2, 3) array, min and max corner [m].
+        """
         pts = [m.bounds for m in self.objects.values()] + [self.roots, self.targets]
         pts = np.concatenate([np.asarray(p).reshape(-1, 3) for p in pts if len(p)])
         return np.array([pts.min(axis=0), pts.max(axis=0)])
@@ -102,8 +109,17 @@ class GrowthScene:
 
 
 def load_growth_scene(path: str | os.PathLike) -> GrowthScene:
-    """Read ``path`` (MJCF, or the name of a bundled scene such as ``"phone_stand"``) and its
-    companion ``.toml``; InputError on anything unusable."""
+    """Read a growth scene: its MJCF and its companion ``.toml``.
+
+    Args:
+        path: the MJCF file, or the name of a bundled scene such as ``"phone_stand"``.
+
+    Returns:
+        The :class:`GrowthScene`.
+
+    Raises:
+        InputError: anything unusable, naming the file and the field.
+    """
 
     path = Path(path)
     bundled = scenes_dir("growth", f"{path.name}.xml")

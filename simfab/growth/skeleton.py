@@ -20,13 +20,15 @@ from simfab.errors import InputError
 class Skeleton:
     """A pruned/smoothed tree with radii.
 
-    nodes : (n, 3) positions [m]. parent : (n,) parent index (-1 for roots).
-    birth : (n,) growth step of creation (the node's age α in the radius law).
-    target : (n,) index of the target the node lies on (-1 otherwise).
-    root : (n,) index of the root the node descends from.
-    radius : (n,) skin radius [m].
-    target_names : names of the targets (index -> name).
-    contact : (n,) bool, surface-mode contacts (leaves on an object surface), or None.
+    Args:
+        nodes: (n, 3) positions [m].
+        parent: (n,) parent index (-1 for roots).
+        birth: (n,) growth step of creation (the node's age α in the radius law).
+        target: (n,) index of the target the node lies on (-1 otherwise).
+        root: (n,) index of the root the node descends from.
+        radius: (n,) skin radius [m].
+        target_names: names of the targets (index -> name).
+        contact: (n,) bool, surface-mode contacts (leaves on an object surface), or None.
     """
 
     nodes: np.ndarray
@@ -39,6 +41,11 @@ class Skeleton:
     contact: np.ndarray | None = None
 
     def contact_mask(self) -> np.ndarray:
+        """(n,) bool surface-mode contacts (all False without them).
+
+        Returns:
+            A (n,) bool array.
+        """
         return np.zeros(len(self.nodes), bool) if self.contact is None else np.asarray(self.contact, bool)
 
     @property
@@ -48,26 +55,49 @@ class Skeleton:
         return np.column_stack([self.parent[c], c])
 
     def degree(self) -> np.ndarray:
-        """(n,) number of segments at each node."""
+        """Number of segments at each node.
+
+        Returns:
+            A (n,) int array.
+        """
         e = self.edges
         return np.bincount(e.ravel(), minlength=len(self.nodes))
 
     def on_surface_mask(self) -> np.ndarray:
-        """(n,) nodes lying on an object surface by design: roots, targets and contacts."""
+        """Nodes lying on an object surface by design: roots, targets and contacts.
+
+        Returns:
+            A (n,) bool array.
+        """
         return (self.parent < 0) | (self.target >= 0) | self.contact_mask()
 
     def segment_hits(self, obstacles) -> np.ndarray:
-        """(e,) bool per segment of :attr:`edges`: crosses an object or sphere."""
+        """Which segments of :attr:`edges` cross an object or sphere.
+
+        Args:
+            obstacles: the scene's :class:`simfab.growth.obstacles.Obstacles`.
+
+        Returns:
+            An (e,) bool array, one per segment.
+        """
         e = self.edges
         s = self.on_surface_mask()
         return obstacles.segment_hits(self.nodes[e[:, 0]], self.nodes[e[:, 1]], s[e[:, 0]], s[e[:, 1]])
 
     def fixed_mask(self) -> np.ndarray:
-        """(n,) nodes held fixed by smoothing and sketch edits: roots, targets and leaves."""
+        """Nodes held fixed by smoothing and sketch edits: roots, targets and leaves.
+
+        Returns:
+            A (n,) bool array.
+        """
         return (self.parent < 0) | (self.target >= 0) | (self.degree() <= 1)
 
     def target_nodes(self) -> dict:
-        """target name -> node index of the (first) node lying on it."""
+        """Where the skeleton meets its targets.
+
+        Returns:
+            A dict target name -> node index of the (first) node lying on it.
+        """
         out = {}
         for i in np.nonzero(self.target >= 0)[0]:
             name = self.target_names[self.target[i]] if self.target[i] < len(self.target_names) else str(self.target[i])
@@ -75,6 +105,14 @@ class Skeleton:
         return out
 
     def replace(self, **kw) -> "Skeleton":
+        """A copy with some fields replaced (:func:`dataclasses.replace`).
+
+        Args:
+            **kw: field name -> new value.
+
+        Returns:
+            A new :class:`Skeleton`.
+        """
         return dataclasses.replace(self, **kw)
 
 
@@ -133,12 +171,22 @@ def umbrella(n: int, edges: np.ndarray) -> sp.csr_matrix:
 
 def smooth_positions(nodes: np.ndarray, edges: np.ndarray, fixed: np.ndarray, *, lambda1: float = 0.2,
                      lambda2: float = 0.1, iterations: int = 10, obstacles=None, on_surface=None) -> np.ndarray:
-    """Iterate v_i += λ1 Δv_i + λ2 Δ(Δv_i) on the free nodes (fixed (n,) bool held in place).
+    """Iterate v_i += λ1 Δv_i + λ2 Δ(Δv_i) on the free nodes (fixed nodes held in place).
 
     With ``obstacles`` every iteration is checked: nodes of segments that would cross an
-    object or sphere go back to their previous (collision-free) position (``on_surface``
-    (n,) bool marks nodes lying on a surface by design, see ``Obstacles.segment_hits``).
-    Returns the new (n, 3) positions.
+    object or sphere go back to their previous (collision-free) position.
+
+    Args:
+        nodes: (n, 3) positions [m].
+        edges: (e, 2) segments as node indices.
+        fixed: (n,) bool, nodes held in place.
+        lambda1, lambda2: the Laplacian and bi-Laplacian step weights [-].
+        iterations: smoothing iterations.
+        obstacles: the scene's obstacles (None: no collision check).
+        on_surface: (n,) bool, nodes lying on a surface by design (see ``Obstacles.segment_hits``).
+
+    Returns:
+        The new (n, 3) positions [m].
     """
     V = np.asarray(nodes, np.float64).copy()
     e = np.asarray(edges, np.int64).reshape(-1, 2)

@@ -25,8 +25,14 @@ from simfab.io.companion import read_csv_numbers, reading
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class Camera:
-    """Pinhole camera: ``eye`` (3,) and ``target`` (3,) [m], ``up`` (3,), vertical field of
-    view ``fovy_deg`` [deg], image ``width`` × ``height`` [px]."""
+    """Pinhole camera.
+
+    Args:
+        eye, target: (3,) the camera's position and the point it looks at [m].
+        up: (3,) the up direction.
+        fovy_deg: vertical field of view [deg].
+        width, height: the image's size [px].
+    """
 
     eye: tuple
     target: tuple
@@ -36,7 +42,11 @@ class Camera:
     height: int = 480
 
     def frame(self):
-        """(forward, right, up) unit vectors."""
+        """The camera's orthonormal frame.
+
+        Returns:
+            A tuple (forward, right, up) of (3,) unit vectors.
+        """
         e, t, u = (np.asarray(a, np.float64) for a in (self.eye, self.target, self.up))
         f = t - e
         f /= np.linalg.norm(f)
@@ -49,7 +59,14 @@ class Camera:
         return h * self.width / self.height, h
 
     def project(self, X: np.ndarray) -> np.ndarray:
-        """(n, 3) world points -> (n, 2) pixel coordinates."""
+        """Project world points onto the image.
+
+        Args:
+            X: (n, 3) world points [m].
+
+        Returns:
+            (n, 2) pixel coordinates [px].
+        """
         f, r, u = self.frame()
         d = np.asarray(X, np.float64).reshape(-1, 3) - np.asarray(self.eye, np.float64)
         z = d @ f
@@ -59,7 +76,14 @@ class Camera:
         return np.column_stack([(x + 1.0) * 0.5 * self.width, (1.0 - y) * 0.5 * self.height])
 
     def rays(self, px: np.ndarray) -> np.ndarray:
-        """(m, 2) pixels -> (m, 3) unit ray directions from the eye."""
+        """The rays through image points.
+
+        Args:
+            px: (m, 2) pixel coordinates [px].
+
+        Returns:
+            (m, 3) unit ray directions from the eye.
+        """
         f, r, u = self.frame()
         p = np.asarray(px, np.float64).reshape(-1, 2)
         sx, sy = self._scale()
@@ -105,12 +129,22 @@ def skeleton_chains(sk: Skeleton) -> list[np.ndarray]:
 
 def edit_chain(sk: Skeleton, camera: Camera, stroke, *, chain: int | None = None,
                obstacles=None) -> tuple[Skeleton, dict]:
-    """Move one chain onto the ray surface of ``stroke`` (m, 2) [px].
+    """Move one chain of a skeleton onto the ray surface of a stroke drawn on screen.
 
-    ``chain`` indexes :func:`skeleton_chains` (default: the chain closest to the stroke on
-    screen). With ``obstacles``, nodes whose new segments would cross an object keep their
-    old position. Returns the edited skeleton and a report (chain index, nodes moved, nodes
-    kept because of collisions, largest move [m], segments colliding after the edit).
+    Args:
+        sk: the skeleton.
+        camera: the camera the stroke was drawn in.
+        stroke: (m, 2) the stroke's pixel points [px], m >= 2.
+        chain: index into :func:`skeleton_chains` (None: the chain closest to the stroke on screen).
+        obstacles: the scene's obstacles; nodes whose new segments would cross an object keep their
+            old position (None: no check).
+
+    Returns:
+        A tuple (the edited :class:`Skeleton`, a report dict: chain index, nodes moved, nodes kept
+        because of collisions, largest move [m], segments colliding after the edit).
+
+    Raises:
+        InputError: a stroke of fewer than 2 finite points, or an unknown chain.
     """
     stroke = np.asarray(stroke, np.float64)
     if stroke.ndim != 2 or stroke.shape[1] != 2 or len(stroke) < 2 or not np.all(np.isfinite(stroke)):

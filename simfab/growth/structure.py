@@ -457,10 +457,16 @@ def ball_mean(points: np.ndarray, weights: np.ndarray, values: np.ndarray, radiu
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class StrengthenResult:
-    """Outcome of :func:`strengthen`: the final ``skeleton`` and its ``check``; ``history`` one
-    (safety factor, volume [m^3]) per check run, the first the input's (a thinning round that
-    fell below the target is listed but not kept); ``reached`` whether the final safety factor
-    is at least ``target``."""
+    """Outcome of :func:`strengthen`.
+
+    Args:
+        skeleton: the final skeleton.
+        check: its :class:`StructureCheck`.
+        target: the safety factor asked for [-].
+        history: one (safety factor [-], volume [m^3]) per check run, the first the input's (a
+            thinning round that fell below the target is listed but not kept).
+        reached: whether the final safety factor is at least ``target``.
+    """
 
     skeleton: Skeleton
     check: StructureCheck
@@ -469,6 +475,12 @@ class StrengthenResult:
     reached: bool
 
     def summary(self) -> dict:
+        """The strengthening's figures (the ``strengthened`` keys of ``simfab grow check --json``).
+
+        Returns:
+            A dict: target_safety_factor, reached, checks, safety factors before/after [-], volumes
+            before/after [m^3], volume_change [-].
+        """
         sf0, v0 = self.history[0]
         sf1, v1 = self.check.safety_factor, self.check.volume_m3
         return {"target_safety_factor": self.target, "reached": self.reached, "checks": len(self.history),

@@ -24,7 +24,20 @@ def inspect_file(path, *, units: str = "m") -> dict:
     """Summary and validation of a mesh, MJCF scene or USD stage (what ``simfab inspect`` prints).
 
     The format modules are imported here, not at the package's top: every module that writes a file
-    imports this package (``simfab.io.atomic``), and MuJoCo, OpenUSD and trimesh take seconds."""
+    imports this package (``simfab.io.atomic``), and MuJoCo, OpenUSD and trimesh take seconds.
+
+    Args:
+        path: a mesh (any suffix of :data:`simfab.io.mesh.SUFFIXES`), an MJCF ``.xml`` or a USD stage.
+        units: the length unit a mesh file is in ("m", "mm", ...).
+
+    Returns:
+        A dict of JSON values: ``kind`` ("mesh", "mjcf" or "usd"), ``file`` and the format's figures
+        (a mesh's repairs, problems and extents [m]; a scene's bodies, sites, keyframes and trajectory
+        lengths [m]; a stage's prims, up axis, units and compliance errors).
+
+    Raises:
+        InputError: the file does not exist or its type is unknown.
+    """
     from simfab.errors import InputError
 
     path = Path(path)

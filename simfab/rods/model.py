@@ -26,7 +26,15 @@ from simfab.rods import frames as fr
 # ----------------------------------------------------------------------------- materials
 @dataclass(frozen=True, kw_only=True)
 class RodMaterial:
-    """Linear elastic material: Young's modulus ``young`` [Pa], Poisson ratio ``poisson`` [-]."""
+    """Linear elastic material.
+
+    Args:
+        young: Young's modulus [Pa], > 0.
+        poisson: Poisson ratio [-], in (-1, 0.5).
+
+    Raises:
+        InputError: a modulus or ratio out of range.
+    """
 
     young: float
     poisson: float = 0.35
@@ -45,9 +53,16 @@ class RodMaterial:
 class Section:
     """Rod cross-section.
 
-    ``shape="rect"``: ``width`` [m] along the material director m2 (in the sheet plane for
-    laser-cut beams) and ``thickness`` [m] along m1 (the sheet normal), so bending out of the
-    sheet (kappa1) is the weak direction. ``shape="circle"``: ``radius`` [m].
+    Args:
+        shape: ``"rect"`` or ``"circle"``.
+        width: a rectangle's side along the material director m2 (in the sheet plane for laser-cut
+            beams) [m].
+        thickness: a rectangle's side along m1 (the sheet normal) [m], so bending out of the sheet
+            (kappa1) is the weak direction.
+        radius: a circle's radius [m].
+
+    Raises:
+        InputError: an unknown shape or a non-positive size.
     """
 
     shape: str = "rect"
@@ -67,13 +82,24 @@ class Section:
             raise InputError(f"section shape must be 'rect' or 'circle' (got {self.shape!r})")
 
     def area(self) -> float:
+        """The cross-section's area.
+
+        Returns:
+            The area [m^2].
+        """
         return self.width * self.thickness if self.shape == "rect" else np.pi * self.radius**2
 
     def stiffness(self, mat: RodMaterial) -> dict:
-        """Axial EA [N], bending B1 (about m2), B2 (about m1) [N m^2], torsion GJ [N m^2].
+        """The section's stiffnesses in a material.
 
         Rectangle: B1 = E w t^3/12, B2 = E t w^3/12, J = a b^3 (1/3 - 0.21 b/a (1 - b^4/(12 a^4)))
         (a >= b the sides; Roark). Circle: B1 = B2 = E pi r^4/4, J = pi r^4/2.
+
+        Args:
+            mat: the rod's material.
+
+        Returns:
+            A dict: axial ``EA`` [N], bending ``B1`` (about m2) and ``B2`` (about m1) [N m^2], torsion ``GJ`` [N m^2].
         """
         E, G = mat.young, mat.shear
         if self.shape == "rect":
@@ -86,14 +112,22 @@ class Section:
                     GJ=G * np.pi * r**4 / 2.0)
 
     def half_extents(self) -> tuple[float, float]:
-        """Distances [m] from the centreline to the outer fibre along m1 (half the thickness) and
-        along m2 (half the width); ``(radius, radius)`` for a circle."""
+        """Distances from the centreline to the outer fibre.
+
+        Returns:
+            A tuple (along m1: half the thickness, along m2: half the width) [m]; ``(radius, radius)``
+            for a circle.
+        """
         if self.shape == "rect":
             return 0.5 * self.thickness, 0.5 * self.width
         return self.radius, self.radius
 
     def draw_width(self) -> float:
-        """Width [m] used for drawing (USD curve widths, capsule radii)."""
+        """Width used for drawing (USD curve widths, capsule radii).
+
+        Returns:
+            The width [m].
+        """
         return self.width if self.shape == "rect" else 2.0 * self.radius
 
 
@@ -112,23 +146,31 @@ class RodInfo:
 class RodModel:
     """Immutable description of a rod network (arrays are float64 / int32, SI units).
 
-    Edges and hinges
-    ----------------
-    edges : (E,2) node indices; edge vector = x[b] - x[a].
-    rest_len : (E,) rest lengths [m].  stretch_stiff : (E,) EA [N].
-    hinge_nodes : (H,3) (x0, x1, x2) of each interior vertex; hinge_edges : (H,2) (e, f).
-    vor_len : (H,) Voronoi length (|e|+|f|)/2 at rest [m].
-    kappa_bar : (H,2) rest material curvatures (kappa1, kappa2) [-] (integrated, 2 tan(phi/2)).
-    bend_stiff : (H,2) (B1, B2) [N m^2]. twist_stiff : (H,) GJ [N m^2]. twist_bar : (H,) rest twist [rad].
+    Built by :class:`NetworkBuilder`.
 
-    Attachments and boundary conditions
-    -----------------------------------
-    body_names : (B,) names; body_driven : (B,) bool (pose prescribed by the driver).
-    node_body : (N,) body index or -1; node_offset : (N,3) position in the body frame [m].
-    edge_body : (E,) body index or -1 (clamped edges); edge_m1_local : (E,3) m1 in the body frame.
-    node_fixed : (N,3) bool prescribed coordinates; theta_fixed : (E,) bool prescribed angles.
-    length_scale : mean rest edge length [m] (scales angle unknowns so all have length units).
-    force_scale : max bending stiffness / (longest rod)^2 [N], the force unit of tolerances.
+    Args:
+        n_nodes: N, the number of nodes.
+        edges: (E,2) node indices; edge vector = x[b] - x[a].
+        rest_len: (E,) rest lengths [m].
+        stretch_stiff: (E,) EA [N].
+        hinge_nodes: (H,3) (x0, x1, x2) of each interior vertex.
+        hinge_edges: (H,2) (e, f), the incoming and outgoing edge of each hinge.
+        vor_len: (H,) Voronoi length (|e|+|f|)/2 at rest [m].
+        kappa_bar: (H,2) rest material curvatures (kappa1, kappa2) [-] (integrated, 2 tan(phi/2)).
+        bend_stiff: (H,2) (B1, B2) [N m^2].
+        twist_stiff: (H,) GJ [N m^2].
+        twist_bar: (H,) rest twist [rad].
+        rods: one :class:`RodInfo` per rod.
+        body_names: (B,) names.
+        body_driven: (B,) bool (pose prescribed by the driver).
+        node_body: (N,) body index or -1.
+        node_offset: (N,3) position in the body frame [m].
+        edge_body: (E,) body index or -1 (clamped edges).
+        edge_m1_local: (E,3) m1 in the body frame.
+        node_fixed: (N,3) bool prescribed coordinates.
+        theta_fixed: (E,) bool prescribed angles.
+        length_scale: mean rest edge length [m] (scales angle unknowns so all have length units).
+        force_scale: max bending stiffness / (longest rod)^2 [N], the force unit of tolerances.
     """
 
     n_nodes: int
@@ -167,12 +209,34 @@ class RodModel:
         return len(self.body_names)
 
     def body_index(self, name: str) -> int:
+        """The index of a rigid body.
+
+        Args:
+            name: the body's name.
+
+        Returns:
+            Its index into ``body_names``.
+
+        Raises:
+            InputError: no body has that name.
+        """
         try:
             return self.body_names.index(name)
         except ValueError:
             raise InputError(f"no body named {name!r} (bodies: {', '.join(self.body_names)})") from None
 
     def rod(self, name: str) -> RodInfo:
+        """One rod of the network.
+
+        Args:
+            name: the rod's name.
+
+        Returns:
+            Its :class:`RodInfo` (global node and edge indices, section).
+
+        Raises:
+            InputError: no rod has that name.
+        """
         for r in self.rods:
             if r.name == name:
                 return r
@@ -183,10 +247,14 @@ class RodModel:
 class RodState:
     """Configuration of a network (a new object per step; arrays are not modified in place).
 
-    x : (N,3) node positions [m]; theta : (E,) twist angles [rad];
-    d1 : (E,3) reference directors (unit, normal to the tangents ``t`` (E,3));
-    ref_twist : (H,) reference twist [rad];
-    body_pos : (B,3) [m]; body_rot : (B,3,3) rotation matrices (body -> world).
+    Args:
+        x: (N,3) node positions [m].
+        theta: (E,) twist angles [rad].
+        d1: (E,3) reference directors (unit, normal to the tangents ``t``).
+        t: (E,3) unit edge tangents.
+        ref_twist: (H,) reference twist [rad].
+        body_pos: (B,3) body positions [m].
+        body_rot: (B,3,3) rotation matrices (body -> world).
     """
 
     x: np.ndarray
@@ -198,10 +266,22 @@ class RodState:
     body_rot: np.ndarray
 
     def replace(self, **kw) -> "RodState":
+        """A copy with some fields replaced (:func:`dataclasses.replace`).
+
+        Args:
+            **kw: field name -> new value.
+
+        Returns:
+            A new :class:`RodState`.
+        """
         return dataclasses.replace(self, **kw)
 
     def material_frames(self) -> tuple[np.ndarray, np.ndarray]:
-        """(m1, m2) each (E,3)."""
+        """The material frames of the edges.
+
+        Returns:
+            A tuple (m1, m2) of (E,3) unit directors.
+        """
         return fr.material_frames(self.d1, self.t, self.theta)
 
 
@@ -274,6 +354,10 @@ class NetworkBuilder:
         nb.clamp("beam", "end", "insert")
         nb.fix("beam", nodes=[0, 1], thetas=[0])
         model, state = nb.build()
+
+    Args:
+        rods, bodies, clamps, pins, fixed_nodes, fixed_thetas: what was added so far (filled by the
+            methods below; start empty).
     """
 
     rods: list = field(default_factory=list)
@@ -284,7 +368,20 @@ class NetworkBuilder:
     fixed_thetas: list = field(default_factory=list)  # (rod, local edge)
 
     def add_body(self, name: str, *, pos=(0.0, 0.0, 0.0), rot=None, driven: bool = False) -> str:
-        """A rigid body (insert or junction frame) at ``pos`` [m] with rotation ``rot`` (3,3)."""
+        """Add a rigid body (insert or junction frame).
+
+        Args:
+            name: the body's name (unique).
+            pos: (3,) its position [m].
+            rot: (3,3) its rotation (body -> world); None for the identity.
+            driven: its pose is prescribed by the driver.
+
+        Returns:
+            ``name``.
+
+        Raises:
+            InputError: a duplicate name.
+        """
         if any(b[0] == name for b in self.bodies):
             raise InputError(f"duplicate body name {name!r}")
         R = np.eye(3) if rot is None else np.asarray(rot, dtype=np.float64)
@@ -293,10 +390,23 @@ class NetworkBuilder:
 
     def add_rod(self, name: str, points, *, section: Section, material: RodMaterial, director=(0.0, 0.0, 1.0),
                 rest_points=None, stretch_stiffness: float | None = None) -> str:
-        """A rod through ``points`` (k+1,3) [m], k >= 1. ``rest_points`` (default ``points``) give
-        the natural shape (curvature). ``director`` is the initial m1 of the first edge (the sheet
-        normal for laser-cut beams). ``stretch_stiffness`` overrides EA [N] (e.g. to approach the
-        inextensible limit)."""
+        """Add a rod.
+
+        Args:
+            name: the rod's name (unique).
+            points: (k+1,3) its node positions [m], k >= 1.
+            section: its cross-section.
+            material: its material.
+            director: (3,) the initial m1 of the first edge (the sheet normal for laser-cut beams).
+            rest_points: (k+1,3) the natural shape (curvature) [m]; None: ``points``.
+            stretch_stiffness: overrides EA [N] (e.g. to approach the inextensible limit).
+
+        Returns:
+            ``name``.
+
+        Raises:
+            InputError: bad points (shape, non-finite, repeated) or a duplicate name.
+        """
         P = np.asarray(points, dtype=np.float64)
         if P.ndim != 2 or P.shape[1] != 3 or len(P) < 2:
             raise InputError(f"rod {name!r}: points must be (k+1, 3) with k >= 1, got {P.shape}")
@@ -313,21 +423,48 @@ class NetworkBuilder:
         return name
 
     def clamp(self, rod: str, end: str, body: str) -> None:
-        """Clamp the ``end`` ("start"/"end") edge of ``rod`` to ``body`` (position and frame)."""
+        """Clamp an end edge of a rod to a body (position and frame).
+
+        Args:
+            rod: the rod's name.
+            end: "start" or "end".
+            body: the body's name.
+        """
         self.clamps.append((rod, _end(end), body))
 
     def pin(self, rod: str, end: str, body: str) -> None:
-        """Pin the ``end`` node of ``rod`` to ``body`` (position only)."""
+        """Pin an end node of a rod to a body (position only).
+
+        Args:
+            rod: the rod's name.
+            end: "start" or "end".
+            body: the body's name.
+        """
         self.pins.append((rod, _end(end), body))
 
     def fix(self, rod: str, *, nodes=(), thetas=(), comps=(0, 1, 2)) -> None:
-        """Prescribe coordinates ``comps`` of local ``nodes`` and the angles of local edges ``thetas``."""
+        """Prescribe coordinates of nodes and twist angles of edges of a rod.
+
+        Args:
+            rod: the rod's name.
+            nodes: local node indices (Python indexing) whose coordinates are held.
+            thetas: local edge indices whose angles are held.
+            comps: the coordinates held (0, 1, 2 for x, y, z).
+        """
         for n in nodes:
             self.fixed_nodes.append((rod, int(n), tuple(comps)))
         for e in thetas:
             self.fixed_thetas.append((rod, int(e)))
 
     def build(self) -> tuple[RodModel, RodState]:
+        """Assemble the network.
+
+        Returns:
+            A tuple (the immutable :class:`RodModel`, its initial :class:`RodState`).
+
+        Raises:
+            InputError: no rod, or an attachment or fixed index naming an unknown rod, body, node or edge.
+        """
         if not self.rods:
             raise InputError("a rod network needs at least one rod")
         body_idx = {b[0]: i for i, b in enumerate(self.bodies)}

@@ -197,8 +197,16 @@ class Reduction:
 
 @dataclass
 class StaticResult:
-    """Converged equilibrium: ``state``, total potential ``energy`` [J], Newton ``iterations``,
-    residual ``grad_norm`` [N] and the elastic energy ``parts`` per term [J]."""
+    """Converged equilibrium.
+
+    Args:
+        state: the equilibrium :class:`RodState`.
+        energy: total potential energy [J].
+        iterations: Newton iterations.
+        grad_norm: the residual's infinity norm [N].
+        parts: elastic energy per term (stretch, bend, twist, ...) [J].
+        history: per Newton iteration: (energy [J], ||g||_inf [N], step fraction alpha); None unless recorded.
+    """
 
     state: RodState
     energy: float

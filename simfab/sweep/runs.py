@@ -125,7 +125,11 @@ class SweepResult(Result):
     simfab_version: str
 
     def to_json(self) -> dict:
-        """The summary (``outputs`` last)."""
+        """The summary (``outputs`` last).
+
+        Returns:
+            A dict of JSON values.
+        """
         d = super().to_json()
         return {**{k: v for k, v in d.items() if k != "outputs"}, "outputs": d["outputs"]}
 

@@ -13,20 +13,12 @@ Results come back in the order of ``kwargs_list``, one :class:`TaskResult` per t
 value, or the failure as data (``status`` and a one-line ``message``) -- an exception in one
 task never stops the others.
 
-Where the tasks run (``scheduler``):
-
-- ``None``: a ``distributed.LocalCluster`` started for the call, one single-threaded worker
-  process per core of this machine (Warp's CPU kernels and numpy hold one core each);
-- ``"HOST:PORT"`` or ``"tcp://HOST:PORT"``: an existing Dask cluster (``dask scheduler`` and
-  ``dask worker`` processes, see README.md); every worker must have the same simfab version
-  installed, checked at connect time (:class:`InputError` on a mismatch);
-- a ``distributed.Client``: reused and left open (to amortize one cluster over many calls);
-- ``"serial"``: in this process, one task after the other, no Dask (for debugging and as the
-  serial baseline of the benchmark).
-
-A worker process that dies while running a task is replaced and the task rescheduled by Dask
-(``distributed.scheduler.allowed-failures`` times); past that the task's row says
-``worker_died``.
+Where the tasks run (``scheduler``): ``None``, a ``distributed.LocalCluster`` started for the
+call (one single-threaded worker process per core); ``"HOST:PORT"``, an existing Dask cluster
+whose workers have the same simfab version (checked at connect time); a ``distributed.Client``,
+reused and left open; ``"serial"``, in this process without Dask (:func:`connect`,
+:func:`run_tasks`). A worker that dies while running a task is replaced and the task rescheduled
+(``distributed.scheduler.allowed-failures`` times); past that the task's row says ``worker_died``.
 """
 
 from __future__ import annotations
@@ -57,12 +49,15 @@ GATHER_INTERVAL = 0.1
 class TaskResult:
     """Outcome of one task.
 
-    index: position in ``kwargs_list``; value: what ``fn`` returned (None unless ok);
-    status: one of :data:`STATUSES` ("ok", "bad_input" for :class:`InputError`,
-    "not_converged" for :class:`ConvergenceError`, "error" for any other exception,
-    "worker_died", "version_mismatch"); message: one line, "" when ok; seconds: wall time of
-    ``fn`` on the worker [s] (0 when the worker died); worker: the worker's address
-    ("serial" in-process).
+    Args:
+        index: position in ``kwargs_list``.
+        value: what ``fn`` returned (None unless ok).
+        status: one of :data:`STATUSES` ("ok", "bad_input" for :class:`InputError`, "not_converged"
+            for :class:`ConvergenceError`, "error" for any other exception, "worker_died",
+            "version_mismatch").
+        message: one line, "" when ok.
+        seconds: wall time of ``fn`` on the worker [s] (0 when the worker died).
+        worker: the worker's address ("serial" in-process).
     """
 
     index: int
@@ -173,9 +168,25 @@ def check_worker_versions(client, version: str | None = None, *, where: str = "-
 
 @contextlib.contextmanager
 def connect(scheduler=None, *, quiet: bool = False, min_workers: int = 1, timeout: float = 30.0) -> Iterator:
-    """Yield a ``distributed.Client`` for ``scheduler`` (see the module docstring; not
-    ``"serial"``). A cluster started here is closed on exit; a passed-in Client is left open.
-    A remote cluster must have ``min_workers`` workers within ``timeout`` seconds."""
+    """Yield a ``distributed.Client`` for ``scheduler`` (a context manager).
+
+    A cluster started here is closed on exit; a passed-in Client is left open.
+
+    Args:
+        scheduler: None (a ``LocalCluster``, one single-threaded worker process per core: Warp's CPU
+            kernels and numpy hold one core each), ``"HOST:PORT"`` / ``"tcp://HOST:PORT"`` (an existing
+            cluster of ``dask scheduler`` and ``dask worker`` processes, see README.md) or a
+            ``distributed.Client`` (not ``"serial"``).
+        quiet: no chatter on stderr.
+        min_workers: the workers a remote cluster must have within ``timeout``.
+        timeout: seconds to wait for the connection and the workers [s].
+
+    Yields:
+        A connected ``distributed.Client``.
+
+    Raises:
+        InputError: the scheduler cannot be reached, has no workers, or a worker runs another simfab version.
+    """
     from distributed import Client, LocalCluster
 
 
@@ -265,13 +276,23 @@ def run_tasks(fn: Callable, kwargs_list: Sequence[dict], *, scheduler=None, quie
               on_result: Callable[[TaskResult], None] | None = None) -> list[TaskResult]:
     """Run ``fn(**kw)`` for every ``kw`` in ``kwargs_list`` as independent Dask tasks.
 
-    fn: picklable module-level function (workers import it by name, so it must live in an
-    installed module, e.g. simfab's); kwargs_list: (T,) dicts of picklable arguments;
-    scheduler: None (LocalCluster sized to this machine) | "HOST:PORT" | distributed.Client |
-    "serial" (see the module docstring); quiet: no progress bar or chatter; desc: progress
-    label; on_result: called in the client as each task finishes (completion order), e.g. to
-    save partial results. Returns (T,) :class:`TaskResult` in the order of ``kwargs_list``.
-    Raises InputError when the scheduler cannot be reached or a worker has another simfab.
+    Args:
+        fn: picklable module-level function (workers import it by name, so it must live in an
+            installed module, e.g. simfab's).
+        kwargs_list: (T,) dicts of picklable arguments.
+        scheduler: None (LocalCluster sized to this machine), ``"HOST:PORT"``, a ``distributed.Client``
+            or ``"serial"`` (in this process, no Dask: for debugging and as a benchmark's serial baseline);
+            see :func:`connect`.
+        quiet: no progress bar or chatter.
+        desc: progress label.
+        on_result: called in the client as each task finishes (completion order), e.g. to save
+            partial results.
+
+    Returns:
+        (T,) :class:`TaskResult` in the order of ``kwargs_list``.
+
+    Raises:
+        InputError: the scheduler cannot be reached or a worker has another simfab version.
     """
 
     kwargs_list = list(kwargs_list)

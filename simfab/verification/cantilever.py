@@ -39,8 +39,16 @@ BEAM = Material(name="beam", youngs_modulus=1.0e6, poisson_ratio=0.3, yield_stre
 
 @dataclass(frozen=True, kw_only=True)
 class CantileverResult:
-    """delta [m] work-conjugate tip deflection, reference [m] Timoshenko's, ratio = delta /
-    reference, dofs (free), seconds (static solve wall time), iterations (Newton)."""
+    """One cantilever solve against Timoshenko beam theory.
+
+    Args:
+        delta: the work-conjugate tip deflection [m].
+        reference: Timoshenko's tip deflection [m].
+        ratio: delta / reference [-].
+        dofs: free degrees of freedom.
+        seconds: the static solve's wall time [s].
+        iterations: Newton iterations.
+    """
 
     delta: float
     reference: float
