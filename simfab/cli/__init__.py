@@ -8,19 +8,17 @@ key suffixes). A module may also define ``demo(ctx: DemoContext) -> dict`` to ta
 ``simfab demo``, and ``output_roots(args) -> list`` (the folders it writes into; default
 ``[args.out]``, empty for commands that write nothing).
 
-Before a subcommand runs, every output folder is checked (an existing file, an unwritable
-folder: exit 2 before any computation), and while it runs every file written through
-:mod:`simfab.io.atomic` must lie inside one of them (:mod:`simfab.io.outpaths`). A run's outputs
-are all or nothing: when it fails (or is interrupted: Ctrl-C, SIGTERM) every file it wrote is
-removed again, every file it replaced restored and the folders it created removed, so ``--out``
-is as before (``sweep`` keeps what it finished: it resumes from it; a validation that ran and
-missed its tolerance keeps its report, exit 1).
+Before a subcommand runs, every output folder is checked (an existing file, an unwritable folder:
+exit 2 before any computation), and every file written through :mod:`simfab.io.atomic` must lie
+inside one of them (:mod:`simfab.io.outpaths`). Outputs are all or nothing: when a run fails (or
+is interrupted: Ctrl-C, SIGTERM) every file it wrote is removed, every file it replaced restored
+and the folders it created removed (``sweep`` keeps what it finished: it resumes from it; a
+validation that ran and missed its tolerance keeps its report, exit 1).
 
-Exit codes: 0 ok; 2 bad input (one line on stderr naming the file/field, no traceback);
-1 internal failure or a solver that did not converge (one line, traceback only with
-``SIMFAB_DEBUG=1``). Warnings raised while a subcommand runs (simfab's own, NumPy's invalid value,
-divide by zero) are shown after a successful run and dropped on the error path, so an error
-stays the one line on stderr (progress lines without --quiet go on as they come).
+Exit codes: 0 ok; 2 bad input (one line on stderr naming the file/field, no traceback); 1 internal
+failure or a solver that did not converge (one line, traceback only with ``SIMFAB_DEBUG=1``).
+Warnings raised while a subcommand runs (simfab's own, NumPy's invalid value, divide by zero) are
+shown after a successful run and dropped on the error path, so an error stays one line on stderr.
 
 Subcommand modules import the library inside their functions, deliberately: ``simfab --help``,
 a subcommand's ``--help`` and argument errors answer without loading Warp, MuJoCo, OpenUSD and

@@ -15,16 +15,10 @@ keyframes for its path, the box site 'fixed') plus NAME.toml (the compliant part
 material and the simulation options); a bare NAME refers to a bundled scene in
 scenes/coupling ('simfab couple scenes' lists them). Scene format: scenes/coupling/README.md.
 
-Outputs under --out: NAME_profile.csv (per record: distance along the path [m], energy [J],
-insertion force [N] (support reactions along O's translation), path force [N] (the force on O along
-the path's forward tangent, = -dE/ds without friction, also defined during rotations), grip [N], max
-von Mises [Pa], max penetration [m], min det F, Newton iterations, contact points, phase (insert; rest:
-the search for the rest point past the keyframes' end; remove: with friction the removal traversal),
-normal contact force [N], friction's part of the path force [N], dissipated work [J], lagging
-iterations), NAME_summary.json (the --json summary), NAME_profile.png
-(energy solid, force dashed, markers at E_max and E_ss), NAME.usda (A's deforming mesh with a
-von_mises primvar, O's animated transform, one time code per step) and NAME.xml (MJCF for the
-viewer: A at the steady state, O with one keyframe per step).
+Outputs under --out (:mod:`simfab.coupling.outputs`): NAME_profile.csv (one row per record, its
+columns in :data:`simfab.coupling.outputs.CSV_COLUMN_DOCS`), NAME_summary.json (the --json
+summary), NAME_profile.png, NAME.usda (A's deforming mesh with von Mises stress, O's animated pose)
+and NAME.xml (MJCF for the viewer); described in docs/guide/coupling.rst, "Outputs".
 """
 
 from __future__ import annotations

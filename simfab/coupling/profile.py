@@ -3,43 +3,25 @@
 Definitions (thesis, "Fundamentals and Overview"):
 
 - E_max: the largest elastic energy along the insertion [J].
-- E_ss: backtracking from the last step, the first local minimum of the energy profile. If that
-  minimum is not after the maximum (no dip after the peak), the profile has no steady state and
-  E_ss = E_max.
+- E_ss: backtracking from the last step, the first local minimum of the energy profile; without a
+  dip after the peak there is no steady state and E_ss = E_max. A path that ends in a prescribed
+  pose has its steady state at that end pose (``end_pose``).
 - coupling ratio = E_ss / E_max * 100 [%].
-- Category: **ejects** (no dip), **loose** (a dip down to E_ss ~ 0, here E_ss <= LOOSE_REL E_max),
-  **tight** (a dip to a non-zero E_ss < E_max).
-- Insertion force F along O's motion, resisting = negative. F_in = max(0, -min F) is the largest
-  force needed to push O in; removal reverses the traversal (quasi-static, frictionless), so the
-  force needed to pull O out is F_rm = max(0, max F) (A drawing O in) [N].
-- F_grip: grip force at the steady state [N]. When the force passes through zero between the
-  steady-state step and the next one (O at rest between them: the run's rest search brackets it),
-  the grip is interpolated linearly in the force to where it is zero: at a seat the grip jumps
-  within micrometres, so the value at the bracket's lower end would depend on how close the search
-  came (figures in docs/decisions.md). Likewise when the steady state is the rest search's last
-  record, already past the zero crossing, and the record before it is the search's too (``rest_from``):
-  the bracket is those two, and the grip is interpolated over it, not read at the record the search
-  stopped at.
-- With friction (a run's ``removal`` records: the removal simulated as its own traversal) F_in is
-  read from the insertion and F_rm = max(0, max F) from the removal; F_hold, the force needed to
-  start sliding O out of its seat (elastic draw plus static friction), is max(0, max F) over the
-  removal records up to the onset of sliding (points carrying SLIDING_REL of the normal force slip;
-  :func:`hold_force`): the removal's graded first steps resolve that travel, and reading F_hold at the
-  onset of sliding, not over a fixed travel, keeps the removal profile beyond it (a detent's draw)
-  out of it whatever the step size. A contact that never slides drags the part out: F_hold = F_rm.
-  A design whose elastic profile ejects O (no dip) but
-  which friction holds in place (F_hold > 0) is **held by friction**; an insertion that self-locks
-  (O pushed inside the friction cone of the contact, which sticks: a snap-fit with
-  mu tan alpha >= 1) **jams**.
-- Forces are read up to the steady state (the insertion ends there; past it O is pushed into its
-  seat), over the whole run for **ejects**.
-- A path that ends in a prescribed pose (its last segment turns O, so the run cannot continue it
-  until O comes to rest, e.g. the door knocker's rotation) has its steady state at that end pose:
-  O stays there, so energy stored in the last steps (O pressed into A while turning) is the
-  coupling's steady state, not a push past a seat (``end_pose``).
+- Category: **ejects** (no dip), **loose** (E_ss <= LOOSE_REL E_max), **tight** (a dip to a non-zero
+  E_ss < E_max); with friction, **held by friction** (ejects, but F_hold > 0) and **jams** (the
+  insertion self-locks: O inside the friction cone of a sticking contact).
+- Insertion force F along O's motion, resisting = negative, read up to the steady state (over the
+  whole run for ejects): F_in = max(0, -min F); F_rm = max(0, max F) [N] (the insertion reversed,
+  or with friction the removal records).
+- F_grip: grip force at the steady state [N], interpolated to where the force crosses zero when
+  the rest search brackets the crossing.
+- F_hold: the force to start sliding O out of its seat, max(0, max F) over the removal records up to
+  the onset of sliding (:func:`hold_force`); F_rm without friction.
 - stationary: E_ss is a local minimum of the energy along the path (the energy rises after it, or
-  the force there does not draw O in by more than REST_FORCE_REL of the peak force), not just
-  the run's last step.
+  the force there does not draw O in by more than REST_FORCE_REL of the peak force).
+
+The reasoning behind the grip's interpolation and the hold force's onset of sliding:
+docs/methods.md, "simfab.coupling.profile".
 """
 
 from __future__ import annotations

@@ -1,33 +1,25 @@
 """Vectorized blocked Metropolis-within-Gibbs for the expertise/difficulty model.
 
-Given the rest, the expertises alpha_i are conditionally independent (rater i only touches
-row i of the likelihood), as are the difficulties beta_j and the true scores x_j (column j).
-So one sweep is three block updates, each proposing every scalar at once with its own
-random-walk step and accepting/rejecting each independently from row or column sums of a
-single (crowds, chains, raters, questions) likelihood evaluation. A fourth, likelihood-free
-move rescales all alpha and beta of a chain by a common factor c (alpha/beta, hence the
-likelihood, is unchanged; only priors and the Jacobian c^(R+Q) enter), which crosses the
-ridge along which alpha and beta trade off and which one-at-a-time updates crawl along.
+Given the rest, the expertises alpha_i are conditionally independent (rater i only touches row i
+of the likelihood), as are the difficulties beta_j and the true scores x_j (column j). One sweep
+is three block updates, each proposing every scalar at once with its own random-walk step and
+accepting each independently from row or column sums of one (crowds, chains, raters, questions)
+likelihood evaluation, plus a likelihood-free move that rescales all alpha and beta of a chain by
+a common factor c (only priors and the Jacobian c^(R+Q) enter), crossing the alpha-beta ridge.
 
-beta is sampled as log beta (Jacobian +log beta in the target) and x as logit x (Jacobian
-x (1 - x)); proposals of beta below eps are rejected (exact for a symmetric random walk).
-Increments are normal with a random scale (1/3, 1 or 3 times the step, :func:`_jump`), a
-symmetric mixture. Steps adapt during burn-in toward the 0.44 acceptance rate that is
-optimal in one dimension (Robbins-Monro on log step, gain 1/sqrt(k)) and are frozen after,
-so the recorded chain is a time-homogeneous Markov chain.
+beta is sampled as log beta and x as logit x (with their Jacobians); increments are normal with a
+random scale (1/3, 1 or 3 times the step, :func:`_jump`). Steps adapt during burn-in toward the
+0.44 acceptance rate (Robbins-Monro on log step, gain 1/sqrt(k)) and are frozen after.
 
-Several chains start from over-dispersed points (prior draws, x uniform on [0.05, 0.95]);
-R-hat and ESS (:mod:`simfab.crowd.diagnostics`) decide whether to extend the run.
-
-Two implementations of the identical sweep: a Warp kernel (default; one thread per chain,
-all sweeps of a round in one launch, :mod:`simfab.crowd._kernels`) and numpy broadcasting
-over (crowds, chains, raters, questions) (:class:`_NumpyKernel`, the reference the tests
-compare the kernel against).
+Several chains start from over-dispersed points; R-hat and ESS (:mod:`simfab.crowd.diagnostics`)
+decide whether to extend the run. Two implementations of the identical sweep: a Warp kernel
+(default; one thread per chain, :mod:`simfab.crowd._kernels`) and numpy broadcasting
+(:class:`_NumpyKernel`, the reference the tests compare the kernel against).
 
 The likelihood is the probability of each integer answer's rounding cell
-(:func:`simfab.crowd.model.loglik_rounded`), not the thesis' density at the rounded value:
-with the density, raters who give the identical integer answer make the posterior
-unbounded (delta -> 0), which splits it into spikes no chain can mix between.
+(:func:`simfab.crowd.model.loglik_rounded`), not the thesis' density at the rounded value, which
+makes the posterior unbounded when raters give the identical answer. Full notes: docs/methods.md,
+"simfab.crowd.sampler".
 """
 
 from __future__ import annotations

@@ -3,47 +3,24 @@
 Per iteration k (thesis, Algorithm "Rest Shape Optimization"):
 
 1. proposal  x_i = clip(x_cur + sigma_k * N(0, I) * mask, lower, upper)   (Gaussian around the current
-   state; with ``blocks`` (one block per handle) the mask selects each block with probability
-   1 / n_blocks, at least one: mostly one handle moves at a time, a local edit whose effect the
-   acceptance test can judge, instead of every handle at once)
-2. temperature  T_k = tau_k * |E_cur|,  tau_k = tau_0 (tau_end / tau_0)^(k / K)   (exponential cooling)
-3. Metropolis: accept if E_i < E_cur, else with probability exp(-(E_i - E_cur) / T_k); the best
-   state seen is kept and returned. The uniform number u of the test is drawn before E_i is
-   evaluated, so the test is the threshold E_i < E_cur - T_k ln u; ``f`` receives that threshold
-   and may stop computing as soon as a lower bound of E_i exceeds it (returning the bound: the
-   proposal is rejected exactly as it would have been).
+   state; with ``blocks`` (one per handle) the mask moves mostly one handle at a time)
+2. temperature  T_k = tau_k * |E_cur|,  tau_k = tau_0 (tau_end / tau_0)^(k / K)   (exponential cooling,
+   relative to the current objective: scale-free Metropolis)
+3. Metropolis: accept if E_i < E_cur - T_k ln u, u drawn before E_i is evaluated, so ``f`` receives
+   that threshold and may stop at a lower bound that exceeds it; the best state seen is returned.
 4. adaptive, decaying step: sigma_{k+1} = sigma_k * GROW after an accepted proposal, * SHRINK
    after a rejected one, within [SIGMA_MIN_REL sigma_0, sigma_0].
 
-The temperature is relative to the current objective (scale-free Metropolis): the objective of a
-rest-shape design spans orders of magnitude (penalties of violated constraints ~1e6, a feasible
-design's modification energy ~1), and a fixed temperature would either freeze the start or let
-a feasible design wander back into violation. With T_k = tau_k |E_cur| an uphill move by the
-fraction tau_k of the current value is accepted with probability 1/e at every scale.
+A candidate whose value is +inf (rejected: invalid shape, failed simulation) is never accepted.
+Stops after K iterations or when ``stop(best_info, k)`` says so.
 
-A candidate whose value is +inf (rejected: invalid shape, failed simulation) is never accepted
-and counts as a rejection. Stops after K iterations or when ``stop(best_info, k)`` says so.
+With an ``evaluator``, proposals k+1, k+2, ... are drawn before k is decided (each assuming the
+pending ones rejected) and evaluated concurrently; while most proposals are accepted a free slot
+runs the acceptance branch (the proposals after the head as if it were accepted). Every decision,
+hence the result, is exactly that of the serial loop with the same seed.
 
-**Speculative evaluation** (``evaluator``). Most proposals are rejected, and a rejection leaves
-the current state unchanged, so proposals k+1, k+2, ... can be drawn before k is decided, each
-assuming every pending one before it is rejected (sigma shrunk accordingly). Each is first
-screened cheaply (e.g. its modification energy alone exceeds its threshold: decided at once);
-those that need the expensive evaluation run concurrently on the evaluator's ``slots``.
-Decisions are still taken in order; at the first acceptance the later proposals are discarded
-(running ones are cancelled) and the random stream is rewound to where the accepted proposal's
-draws ended.
-
-When most evaluated proposals are accepted (the rate so far above 1/2),
-a free slot serves the **acceptance branch** instead: the proposals after the running head drawn
-as if it were accepted (from its design, with the grown sigma and the stream where its draws
-ended), up to the first that needs its full evaluation. Their thresholds E_h - tau_k |E_h| ln u
-depend on the head's unknown value E_h; an accepted head has E_h < its own threshold, and for
-E >= 0 the thresholds grow with E_h, so they are screened and evaluated with the bound that
-threshold gives. Once the head is accepted, each gets its exact threshold: it is screened again
-with it, and an evaluation made with the looser bound is read as one with the exact threshold
-(``evaluator.restrict``: the same value, or the same early stop). If the head is rejected, the
-branch is dropped. Every decision, hence the result, is exactly that of the serial loop with the
-same seed; only the wall time changes.
+The reasoning (relative temperature, speculative evaluation, acceptance branch): docs/methods.md,
+"simfab.design.anneal".
 """
 
 from __future__ import annotations

@@ -17,14 +17,11 @@ The ``[design]`` table of a coupling scene's TOML (all optional; SI units; :clas
     correction_rounds = 2          # re-optimizations with mesh-corrected figures
     check_refinements = 1          # the mesh check's P2 refinement levels (at most 3)
 
-Constraints (thesis, "Optimization"), each a value within [lo, hi]: the coupling ratio
-CR = E_ss / E_max * 100 [%] (tight: <= 95 and > 0 with a seat clearance <= 0; loose: <= 1e-3), the
-grip, insertion, removal and hold forces [N], the averaged von Mises maximum [Pa]. The objective is
-
-    E = E_L + W * sum_c max(0, c / scale_c)^2,      W = PENALTY_WEIGHT,
-
-with c = lo - value or value - hi counted in SCALES units (%, N, MPa, 0.1 mm). The reasoning behind
-the units and the clearance: docs/methods.md, "simfab.design.brief".
+Constraints (thesis, "Optimization"), each a value within [lo, hi]: the coupling ratio CR = E_ss /
+E_max * 100 [%] (tight: <= 95 and > 0 with a seat clearance <= 0; loose: <= 1e-3), the grip,
+insertion, removal and hold forces [N], the averaged von Mises maximum [Pa]. The objective is
+E = E_L + W * sum_c max(0, c / scale_c)^2 (W = PENALTY_WEIGHT, c = lo - value or value - hi in
+SCALES units: %, N, MPa, 0.1 mm). Why these units and the clearance: docs/methods.md, "simfab.design.brief".
 """
 
 from __future__ import annotations

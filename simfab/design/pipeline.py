@@ -86,11 +86,14 @@ class DesignResult(Result):
         method: "gradient" or "anneal".
         iterations: the first run's iterations; stopped_early: it stopped on patience or convergence.
         optimizer_message: the optimizer's closing message.
-        insertions: insertion simulations of the optimization (the mesh check's excluded).
+        insertions: every insertion simulation of the optimization: complete, stopped early or speculative
+            (the mesh check's excluded).
         gradient_evaluations: insertions that also gave gradients.
-        nonsmooth_events: the gradient method's non-smooth events between consecutive designs (None: anneal).
+        nonsmooth_events: the gradient method's non-smooth events: how many consecutive simulated designs
+            differ in steady_state_index, category, refinement, kappa, steps, of pairs (None: anneal).
         simulations, simulations_stopped_early, speculative_simulations: insertion counts by kind.
-        acceptance_branches: the annealer's speculative branches (drawn, adopted).
+        acceptance_branches: the annealer's proposals evaluated as if the running one were accepted
+            (drawn, adopted).
         workers: processes that evaluated candidates; accepted: accepted designs; rejected: count per reason.
         seconds, simulation_seconds: wall time and time inside the simulator [s].
         fraction_outside_simulator: the share of the workers' time outside the simulator [-].
@@ -98,17 +101,26 @@ class DesignResult(Result):
         rms_error, rms_error_initial: target profile matching's RMS force error [N] (None without a target).
         warnings: one line each.
         restarts: per annealing restart: seed, status, message, feasible, objective, E_L, iterations, seconds.
-        mesh_check: the check on refined meshes (levels, figures, constraints, feasible_fine, ...).
-        correction_rounds: per round: factors, feasible_fine, objective_fine, iterations, seconds, kept.
+        mesh_check: the check on refined meshes (None with ``mesh_check=False``): levels (element_order,
+            subdivisions, elements, nodes, seconds, category), figures (per figure: values per level,
+            extrapolated, order, converging, difference_of_optimization_mesh, reference_change, step_factor),
+            step_check (when the scene's steps do not resolve the profile: steps, factor, seconds, factors per
+            figure, category, still_too_coarse), constraints at the mesh-converged values, feasible_fine,
+            reference, units.
+        correction_rounds: per round: factors, feasible_fine, objective_fine, iterations, seconds, kept
+            (whether its design was better on the refined meshes; the outputs are the kept design's run).
         iterations_total, insertions_total: every round's.
         objective_fine: the kept design's objective with mesh-converged figures [-].
-        revolved: the revolved 3D part's simulation (with revolve arms).
+        revolved: with revolve arms, the revolved 3D part's simulation: elements, category, figures, the
+            brief's constraints with their values and satisfied flags.
         history: one typed row per iteration (:class:`simfab.design.optimize.HistoryRow`,
             :class:`~simfab.design.optimize.AnnealRow` under annealing).
         optimization: the optimizer's :class:`simfab.design.optimize.OptimizationResult` (problem,
             designs, their insertions).
         scene_xml, scene_toml: the scene's files (the optimized scene is written from them).
-        outputs: label -> path of every file written.
+        outputs: label -> path of every file written: part_stl, outline_csv (2D), scene_xml, scene_toml,
+            scene_mesh, profile_png, shape_png, history_csv, usd, summary_json; revolved_stl with a revolve
+            axis; with revolve arms also revolved_scene_xml, revolved_scene_toml, revolved_mesh.
     """
 
     scene: str

@@ -2,29 +2,24 @@
 
 - **displacement** (the thesis' choice): one insertion of the initial shape gives every vertex's
   largest displacement d_i = max_k |x_i(k) - X_i| [m]. The vertices are clustered by affinity
-  propagation (Frey & Dueck 2007; scikit-learn ``AffinityPropagation`` with a precomputed
-  similarity) on
+  propagation (Frey & Dueck 2007; scikit-learn ``AffinityPropagation``, precomputed similarity) on
 
       s_ij = -((d_i - d_j) / sd)^2 - (g_ij / sg)^2,
 
-  g_ij the shortest-path distance between i and j along the mesh's edges (so that clusters are
-  connected regions of the mesh graph that deform alike), sd the spread (standard deviation) of
-  d and sg the mesh graph's diameter / 4. The handle of a cluster is its vertex nearest to the
-  cluster's centroid.
-- **spatial**: the same clustering with s_ij = -(|X_i - X_j| / sg)^2 (coordinates only; needs
-  no simulation).
+  g_ij the shortest-path distance along the mesh's edges (clusters are connected regions that
+  deform alike), sd the standard deviation of d, sg the mesh graph's diameter / 4. A cluster's
+  handle is its vertex nearest to the cluster's centroid.
+- **spatial**: the same clustering with s_ij = -(|X_i - X_j| / sg)^2 (no simulation).
 - **random**: ``count`` vertices drawn uniformly (seeded) outside the kept regions.
 
-Clusters that contain a kept vertex (the fixed support, keep sites) represent regions that must
-not change: they get no active handle (the kept vertices are inactive handles,
-:func:`simfab.design.handles.make_handles`). The shared preference of affinity propagation
-(which sets how many clusters form) is bisected until ``count`` clusters remain without a kept
-vertex (or the closest count reachable).
+Clusters that contain a kept vertex (the fixed support, keep sites) get no active handle (the kept
+vertices are inactive handles, :func:`simfab.design.handles.make_handles`). The shared preference
+of affinity propagation is bisected until ``count`` clusters remain without a kept vertex (or the
+closest count reachable).
 
-Cost: the similarity matrix is dense, (n, n) float64: 8 n^2 bytes (12k vertices: 1.2 GB), and
-each affinity-propagation fit costs O(n^2) per iteration, up to BISECTIONS fits. Larger meshes
-are therefore first reduced to MAX_POINTS samples (farthest-point, on the graph's geodesic
-distance), which are clustered and among which the handles are chosen (the choice of
+The similarity matrix is dense (n, n): meshes larger than MAX_POINTS vertices are first reduced to
+MAX_POINTS farthest-point samples on the geodesic distance, clustered, and the handles chosen
+among them (its memory and time cost: docs/methods.md, "simfab.design.placement"; the choice of
 MAX_POINTS: docs/decisions.md).
 """
 

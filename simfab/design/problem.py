@@ -6,36 +6,22 @@ the evaluation of one design (thesis, "Rest Shape Optimization").
 
 Each evaluation of a design h (:func:`evaluate`):
 
-1. X' = M_LBS T(h); **validity**: every element keeps its orientation and at least
-   QUALITY_REL of its initial shape quality q (mean ratio: 4 sqrt(3) A / sum l^2 for a triangle,
-   12 (3 V)^(2/3) / sum l^2 for a tetrahedron; 1 for the regular simplex, 0 when degenerate,
-   negative when inverted). A candidate that fails is rejected ("inverted element",
-   "degenerate element") without simulating.
-2. The insertion of the initial scene is re-run on X' (same object, path, steps, fixed region,
-   material, simulation options): :func:`simfab.coupling.simulate.simulate`, starting with the
-   boundary facets the initial shape's insertion refined (``EvaluationSettings.refined``: no
-   second solve of the steps where they would be found crossing). A simulation that raises (no
-   convergence, the object starting inside the part, a numerical failure) makes a rejected
-   candidate with its reason - never a crash of the optimization.
-3. The profile gives E_ss, E_max, F_grip, F_in, F_rm and max von Mises
-   (:func:`profile_figures`); the objective adds their penalties (:mod:`simfab.design.brief`).
+1. X' = M_LBS T(h); **validity**: every element keeps its orientation and at least QUALITY_REL of
+   its initial mean-ratio quality q (4 sqrt(3) A / sum l^2 for a triangle, 12 (3 V)^(2/3) / sum l^2
+   for a tetrahedron); a candidate that fails is rejected without simulating.
+2. The initial scene's insertion is re-run on X' (:func:`simfab.coupling.simulate.simulate`,
+   starting with the facets the initial insertion refined); a simulation that raises makes a
+   rejected candidate with its reason, never a crash of the optimization.
+3. The profile gives E_ss, E_max, F_grip, F_in, F_rm and max von Mises (:func:`profile_figures`);
+   the objective adds their penalties (:mod:`simfab.design.brief`).
 
-**Early rejection.** The annealer's acceptance test is a threshold known before the candidate is
-simulated (E_i < E_cur - T ln u). E_L is known before simulating, and the running maximum of the
-von Mises stress only grows along the insertion (the constraint reads its maximum over the whole
-run), so E_L + W (violation of the yield bound so far)^2 is a lower bound of E_i at every step. So are
-the upper bounds of the insertion and removal forces, read over the records up to the energy's
-running maximum (the profile reads the forces up to its steady state, which comes after the
-energy's overall maximum: those records are always among them; see ``_bound_watch``).
-Once it exceeds the threshold the candidate would be rejected whatever the rest of its profile:
-its simulation stops there (status "stopped", objective = the bound). The decisions, hence the
-optimization's result, are exactly those of running every simulation to the end.
+**Early rejection.** E_L plus the penalties of the bounds the run has already violated (yield,
+insertion and removal forces read up to the energy's running maximum) is a lower bound of E at
+every step; once it exceeds the annealer's threshold the simulation stops (status "stopped").
 
-**One problem, two processes.** The annealer (:mod:`simfab.design.optimize`) and the worker pool
-(:mod:`simfab.design.parallel`) both evaluate designs with this module. A worker cannot receive a
-:class:`DesignProblem` (its Warp arrays and caches do not cross process boundaries), so it
-rebuilds one from its :class:`ProblemSource` (:func:`rebuild`; deterministic) and receives the
-:class:`EvaluationSettings` that change during an optimization with each task.
+**One problem, two processes.** A worker (:mod:`simfab.design.parallel`) rebuilds the
+:class:`DesignProblem` from its :class:`ProblemSource` (:func:`rebuild`; deterministic) and receives
+the :class:`EvaluationSettings` with each task. Full notes: docs/methods.md, "simfab.design.problem".
 """
 
 from __future__ import annotations

@@ -6,40 +6,22 @@ Problem, over z in [0, 1]^n (the design scaled by its bounds):
     min f(z)    s.t.   c(z) >= 0   (m expensive constraints: one evaluation gives c, A = dc/dz, f, g, B)
                        q(z) >= 0   (cheap constraints in closed form: the element-quality bound)
 
-Each iteration costs exactly one evaluation (one insertion). At the current design z_k with its
-sample (f, g = df/dz, B the objective's model Hessian: exact for a quadratic, Gauss-Newton J^T Q J for a
-least-squares sum; c, A), a step dz is found without any evaluation, inside the trust region
-|dz|_inf <= Delta and the box 0 <= z_k + dz <= 1, with q(z_k + dz) >= 0 imposed exactly:
+Each iteration costs exactly one evaluation. A step dz in the trust region |dz|_inf <= Delta, the
+box and q(z_k + dz) >= 0 is found in two subproblems (SciPy's SLSQP):
 
-1. **Feasibility** (only when some linearized constraint is violated at dz = 0): the smallest
-   linearized l1 violation v(dz) = sum_i max(0, -(c_i + A_i dz)) reachable in the region, r_i its
-   per-row residual (Byrd-Omojokun's normal step, in l1: a linear program; SciPy's SLSQP because
-   q is nonlinear).
-2. **Optimality**: min m(dz) = g^T dz + dz^T B dz / 2 s.t. c + A dz >= -r (the violations no larger
-   than step 1 reached), the box, the region and q (SLSQP from step 1's point, which is feasible).
+1. **Feasibility** (only when a linearized constraint is violated at dz = 0): the smallest l1
+   violation v(dz) = sum_i max(0, -(c_i + A_i dz)) reachable, r_i its per-row residual.
+2. **Optimality**: min g^T dz + dz^T (B + S) dz / 2 s.t. c + A dz >= -r, S an SR1 secant of the
+   constraints' curvature.
 
-The step minimizes the Lagrangian's model: B + S, with S ~ -sum_i lambda_i d2c_i/dz2 the constraints'
-curvature, a symmetric rank-one (SR1) secant of the constraint part of grad L = g - A^T lambda between
-the designs evaluated (lambda the subproblem's multipliers); without it a step along a curved
-constraint overshoots and the iterates zig-zag along it (tests/design/test_sqp.py's disc).
+The step is judged by the l1 merit phi(z) = f(z) + mu v(z), v = sum_i max(0, -c_i - ctol_i):
+rho = (phi(z_k) - phi(z_k + dz)) / pred; taken when rho >= ETA; the radius shrinks to
+SHRINK |dz|_inf when rho < 1/4 or the evaluation fails, doubles when rho > 3/4 at the region's edge.
 
-The step is simulated once and judged by the l1 merit phi(z) = f(z) + mu v(z),
-v = sum_i max(0, -c_i - ctol_i) (Fletcher's exact penalty; violations within ``ctol`` are free: the
-caller aims its constraints that far inside their true bounds, so designs between the aim and the
-bound meet the brief and are not penalized, while the subproblems aim at c >= 0):
-rho = (phi(z_k) - phi(z_k + dz)) / pred, pred = -(g^T dz + dz^T B dz / 2) + mu (v(0) - v_lin(dz)) - the
-objective's own model (exact for a quadratic f) and the linearized violation - with mu raised so
-that pred >= RHO_M mu (v(0) - v_lin(dz)). The step is taken when rho >= ETA; the radius shrinks to
-SHRINK |dz|_inf when rho < 1/4 or the evaluation fails (non-smooth events of the simulation - a
-category change, the steady state moving to another step, a seat - show up as such ratios: the radius
-handles them), and doubles when rho > 3/4 on a step at the region's edge. With an exact objective
-model the ratio measures how well the constraints' linearization predicted the simulation.
-
-Stops when the current design is feasible (every violation within ``ctol``) and the model predicts
-no reduction of f above ``rtol`` |f| + ``atol``, or ``patience`` trials in a row from it were rejected
-(a kink the radius does not get below), or at once with ``stop_when_feasible``; when infeasible and no
-step reduces the linearized violation; when the radius falls below ``min_radius``; or after
-``max_evaluations``.
+Stops when the design is feasible and the model predicts no reduction of f above
+``rtol`` |f| + ``atol``, after ``patience`` rejected trials, at once with ``stop_when_feasible``;
+when infeasible and no step reduces the violation; below ``min_radius``; or after ``max_evaluations``.
+Full notes (the merit's pred, mu, the SR1 secant): docs/methods.md, "simfab.design.sqp".
 """
 
 from __future__ import annotations

@@ -1,33 +1,25 @@
 """The stress the yield constraint reads: von Mises averaged over a critical distance.
 
-Linear elasticity puts a stress singularity at every sharp re-entrant corner (sigma ~ r^(-lambda),
-lambda ~ 0.3-0.5 in 2D), and the design parts have such corners (slots cut into blocks, jaw
-roots). The largest element stress there grows without bound as the mesh is refined, so it has
-no mesh-converged value, and a yield constraint on it would say less about the part than
-about its mesh. The Theory of Critical Distances (Taylor 2007) judges notched parts by the
-stress averaged over a material length instead; here every element's von Mises stress is
-replaced by the volume-weighted mean over the elements whose centroids lie within ``radius``
-of its own centroid:
+Linear elasticity puts a stress singularity at every sharp re-entrant corner, and the design parts
+have such corners (slots, jaw roots): the largest element stress has no mesh-converged value. The
+Theory of Critical Distances (Taylor 2007) judges notched parts by the stress averaged over a
+material length instead: every element's von Mises stress is replaced by the volume-weighted mean
+over the elements whose centroids lie within ``radius`` of its own centroid,
 
     sigma_bar_e = sum_{f : |c_f - c_e| <= r} V_f sigma_f / sum_{f : ...} V_f
 
 and the constraint reads max_e sigma_bar_e over the insertion. The mean of an integrable
-singularity over a fixed ball converges with refinement (the mesh check of
-:mod:`simfab.design.verify` shows it). The default radius, 0.5 mm, is half of PLA's critical
-distance L = (K_IC / sigma_u)^2 / pi ~ 1 mm (K_IC ~ 3 MPa m^0.5, sigma_u ~ 55 MPa): the TCD
-point method's distance, on the conservative side of the area method's ~1.3 L. A mesh coarser
-than the radius averages each element with itself (the raw element maximum).
+singularity over a fixed ball converges with refinement. The default radius, 0.5 mm, is half of
+PLA's critical distance L = (K_IC / sigma_u)^2 / pi (the TCD point method's distance). A mesh
+coarser than the radius averages each element with itself (the raw element maximum).
 
-Quadratic (P2) elements carry a stress that varies over the element (linear in F): the insertion
-records only each element's largest quadrature-point stress, which biases the mean upwards by
-O(h |grad sigma|). :func:`p2_averaged_von_mises`
-applies the same definition at the quadrature points instead - each point a cell of volume
-V_e w_q at its rest position, its stress replaced by the volume-weighted mean over the points
-within ``radius``:
+:func:`p2_averaged_von_mises` applies the same definition at the quadrature points of quadratic
+(P2) elements, each point a cell of volume V_e w_q at its rest position:
 
     sigma_bar_q = sum_{p : |X_p - X_q| <= r} V_p sigma_p / sum_{p : ...} V_p
 
-which for linear elements (one point, the centroid) is the element formula above.
+which for linear elements (one point, the centroid) is the element formula above. Full notes (the
+singularity's exponent, PLA's K_IC and sigma_u): docs/methods.md, "simfab.design.stress".
 """
 
 from __future__ import annotations

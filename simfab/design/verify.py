@@ -2,54 +2,27 @@
 mesh?
 
 The optimizer simulates every candidate on the scene's own (coarse) mesh of linear simplices,
-which lock in bending: at the design scenes' resolution the coupling forces are tens of percent
-too high (``simfab couple converge`` measures it). The optimized shape exists only as a mesh, so
-the same insertion (object, path, steps, support, options) is run again at finer *levels*, each
-an element order and a number of uniform subdivisions
-(:func:`simfab.fem.subdivide.subdivide`: every edge split, the same piecewise-linear domain,
-h -> h/2):
+which lock in bending. The same insertion (object, path, steps, support, options) is run again at
+finer *levels*, each an element order and a number of uniform subdivisions
+(:func:`simfab.fem.subdivide.subdivide`: every edge split, h -> h/2):
 
     linear 1x (the optimization mesh), P2 1x, P2 refined once (2D 4x, 3D 8x the elements)
 
-(:func:`check_levels`; ``[design] check_refinements`` sets the number of P2 refinements, 1 by
-default, 0 for a quick check that cannot see its own error).
+(:func:`check_levels`; ``[design] check_refinements`` sets the number of P2 refinements). P2
+elements (:func:`simfab.fem.p2.to_p2`) do not lock: the finest P2 level is the reference, or, with
+three levels of one order whose changes shrink, f = f_inf + b h^p fitted over them
+(:func:`simfab.coupling.converge.extrapolate`). When the P2 level's steps are too coarse for the
+profile, :func:`step_check` reruns it with STEP_CHECK_FACTOR times the steps. A refined P2 level
+starts its steps from the coarser level's equilibrium, prolonged (two-grid start,
+:func:`p2_prolongation`).
 
-Quadratic (P2) elements (:func:`simfab.fem.p2.to_p2`) do not lock, so they are the reference:
-P2 refined once is within 2 % of P2 at 16x on every figure of the 2D scenes it was compared on,
-without a fitted convergence order. Linear elements refined and extrapolated (f = f_inf + b h^p
-over three levels) are as accurate where a figure converges smoothly but fail on one that jumps
-between levels (the grip force, read where the object comes to rest). In 3D P2 refined once is
-still needed: P2's own refinement moves the forces by tens of percent on a thin snap-fit
-(measurements and the alternatives: docs/decisions.md). The check reports the reference's own
-change between its last two levels (``reference_change``), so a reference that is itself not
-converged shows.
+Reported per figure: the value at every level, the reference, whether the changes shrink, the
+optimization mesh's relative difference from the reference and the reference's own change
+between its last two levels (``reference_change``); per constraint, its value at the reference and
+whether it is met. :func:`correction_factors` turn the check into the next round's correction of
+the coarse figures (:func:`simfab.design.pipeline.run`).
 
-**Steps.** The levels refine the mesh, not the steps along the path. When the P2 level on the
-optimization mesh warns that its steps are too coarse for the profile (a snap or a force peak
-between steps), :func:`step_check` runs that level again with STEP_CHECK_FACTOR (4) times the
-steps and multiplies each reference value by its step factor (the step and mesh errors taken as
-independent); a design whose profile its steps resolve is not run again.
-
-**Two-grid start.** A P2 level refined t > 0 times is run after the P2 level refined t - 1 times
-and starts each of its steps from the best of its own extrapolations and that level's equilibrium
-at the same s, prolonged (:func:`p2_prolongation`; :class:`simfab.coupling.guide.CoarseGuide`,
-offered only where the coarser level loads); the step check is guided by the run at the scene's
-steps the same way. Newton still solves every step to its tolerance, so the figures are the
-level's own; the start saves Newton iterations on the big moves (``mesh_check(two_grid=False)``
-runs without it; measurements in docs/decisions.md).
-
-Reported per figure: the value at every level; the reference: the finest level's, or, with
-three levels of the finest order whose changes shrink, f = f_inf + b h^p fitted over them
-(:func:`simfab.coupling.converge.extrapolate`: the linear-only check, ``levels=(0, 1, 2)``);
-whether the changes shrink from level to level (a figure whose changes grow - the max von Mises
-stress at a sharp re-entrant corner is singular - is flagged as not converging); the relative
-difference of the optimization mesh from the reference; and the reference's own change between
-the last two levels of its order (its discretization error, as far as the levels show it). Per
-constraint: its value at the reference and whether it is satisfied. A design that meets its
-brief only on the coarse mesh gets a warning in the summary, and :func:`correction_factors`
-turn the check into the next round's correction of the coarse figures
-(:func:`simfab.design.pipeline.run`). The averaged stress of a P2 level is computed
-at its quadrature points (:func:`simfab.design.stress.p2_averaged_von_mises`).
+The full notes and the measurements behind the levels: docs/methods.md, "simfab.design.verify".
 """
 
 from __future__ import annotations

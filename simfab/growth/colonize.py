@@ -2,34 +2,25 @@
 
 One growth step (Runions et al. 2005, with the target attractors of the thesis):
 
-1. every live attractor is associated with its nearest *growing* tree node, if that node is
-   within the attractor's influence distance (ordinary attractors: ``influence``; target
-   attractors: ``target_influence``, infinite by default so that a target keeps pulling
-   after the ordinary attractors are gone);
-2. each attracted node v gets one child v' = v + L n̂, n̂ the normalized sum of the unit
-   vectors from v to its attractors; a node whose target attractor is within reach
-   (``TARGET_REACH`` L) lands exactly on it instead, v' = t, and becomes a tip (a contact
-   with the supported object: it does not grow further);
-3. a new segment v→v' that crosses an object mesh or enters an obstacle sphere is replaced
-   by the best-aligned collision-free direction among ``max_trials`` random unit vectors
-   (none free: the node waits for the next step);
-4. a new node within ``MIN_NODE_SPACING`` L of an existing node is dropped, and the
-   ordinary attractors that pulled it are killed (this stops a node oscillating between two
-   attractors from piling up nodes); a node that is attracted but cannot grow for
-   ``NODE_FAIL_LIMIT`` consecutive steps (boxed in by obstacles, or only producing dropped
-   children) stops growing, and its attractors turn to their next nearest growing node;
-5. ordinary attractors within the kill distance of a new node die; target attractors die
-   only when reached.
+1. every live attractor is associated with its nearest *growing* tree node within its influence
+   distance (ordinary attractors: ``influence``; target attractors: ``target_influence``,
+   infinite by default so that a target keeps pulling after the ordinary attractors are gone);
+2. each attracted node v gets one child v' = v + L n̂, n̂ the normalized sum of the unit vectors
+   from v to its attractors; a node within ``TARGET_REACH`` L of its target attractor lands
+   exactly on it instead, v' = t, and becomes a tip;
+3. a new segment v→v' that crosses an object or enters an obstacle sphere is replaced by the
+   best-aligned collision-free direction among ``max_trials`` random unit vectors (none: wait);
+4. a new node within ``MIN_NODE_SPACING`` L of an existing node is dropped and the ordinary
+   attractors that pulled it are killed; a node that cannot grow for ``NODE_FAIL_LIMIT``
+   consecutive steps stops growing;
+5. ordinary attractors within the kill distance of a new node die; target attractors die only
+   when reached.
 
-Growth stops when every attractor is dead, or reports why it stopped early (step cap,
-node cap, stalled). Nearest-node distances are kept per attractor and updated with the
-new nodes only. Ordinary attractors only need their nearest growing node when it is within
-the influence distance R (farther, they do not attract), so each step enumerates the pairs
-(new node, live attractor) closer than R from a k-d tree of the live attractors: a step costs
-O(new nodes x attractors per influence ball), not O(live attractors x new nodes). Target
-attractors (few, unbounded influence) are compared with every new node. Nearest-node
-distances beyond R are not tracked, and growth is the same as with exact tracking
-(:class:`_Nearest` says why).
+Growth stops when every attractor is dead, or reports why it stopped early (step cap, node cap,
+stalled). Each step enumerates the pairs (new node, live attractor) closer than the influence
+distance R from a k-d tree of the live attractors: O(new nodes x attractors per influence ball);
+target attractors (few, unbounded influence) are compared with every new node. Full notes
+(nearest-node tracking, :class:`_Nearest`): docs/methods.md, "simfab.growth.colonize".
 """
 
 from __future__ import annotations

@@ -2,34 +2,25 @@
 
 Model (linear elastostatics on quadratic tetrahedra):
 
-1. the skin (:func:`simfab.growth.skinning.skin`, objects carved out) is tetrahedralized
-   deterministically by Gmsh (:func:`simfab.growth.tetmesh.tetrahedralize_skin`) with edges of
-   ``EDGE_PER_RMIN`` r_min (r_min the thinnest branch radius) and lifted to 10-node tets
-   (:func:`simfab.fem.p2.to_p2`): a branch is a beam, and P2 elements carry the linear strain
-   of bending exactly where linear tets lock;
-2. boundary nodes within ``FIX_TOL`` D (D the skin's bounding-box diagonal, the order of
-   fTetWild's surface envelope) of a *ground* object (one a root stands on) are clamped, u = 0;
-3. loads: each supported object's weight m g (MJCF body mass, the model's gravity vector) is
-   shared equally among the reached targets that touch it (within ``GROUND_CONTACT`` of its
-   diagonal, or the branch radius there), plus the ``[loads]`` / ``--load`` force of each target;
-   surface-mode contacts count as targets; a target's force F acts as
-   a uniform traction F / A on the skin facets within the branch radius of the target point
-   (area A; consistent nodal loads, :func:`simfab.fem.loads.traction_loads`), and the support's
-   own weight as the body force rho g (:func:`simfab.fem.loads.body_force_loads`);
-4. K u = f on the free dofs, K the Hessian of the Neo-Hookean energy at the rest shape (the
-   small-strain stiffness with the material's Lame parameters mu, lambda:
-   :func:`simfab.fem.elastic.energy_gradient_hessian`), by sparse Cholesky
-   (:class:`simfab.solve.linear.SPDSolver`);
+1. the skin (objects carved out) is tetrahedralized by Gmsh
+   (:func:`simfab.growth.tetmesh.tetrahedralize_skin`, edges ``EDGE_PER_RMIN`` r_min) and lifted to
+   10-node tets (:func:`simfab.fem.p2.to_p2`), which do not lock in bending;
+2. boundary nodes within ``FIX_TOL`` D of a *ground* object (one a root stands on) are clamped;
+3. loads: each supported object's weight m g shared among the reached targets that touch it, plus
+   each target's ``[loads]`` / ``--load`` force, as a uniform traction F / A on the skin facets near
+   the target (:func:`simfab.fem.loads.traction_loads`), and the support's own weight rho g
+   (:func:`simfab.fem.loads.body_force_loads`);
+4. K u = f on the free dofs, K the Neo-Hookean Hessian at the rest shape (the small-strain
+   stiffness), by sparse Cholesky (:class:`simfab.solve.linear.SPDSolver`);
 5. stress at every element corner (:func:`corner_stress`): eps = sym(grad u), sigma =
-   lambda tr(eps) I + 2 mu eps, sigma_vm = sqrt(3/2 s:s) (s the deviator), averaged over a ball of
-   radius ``critical_distance`` (the coupling's yield rule, :mod:`simfab.design.stress`):
-   sigma_bar_q = sum_{|X_p - X_q| <= r} V_p sigma_p / sum V_p, each corner a cell of volume V_e / 4;
+   lambda tr(eps) I + 2 mu eps, sigma_vm = sqrt(3/2 s:s), averaged over a ball of radius
+   ``critical_distance`` (:mod:`simfab.design.stress`): sigma_bar_q = sum V_p sigma_p / sum V_p;
 
-and reports the safety factor SF = sigma_yield / max_q sigma_bar_q, where the peak is, the
-deflection of each target (the traction-weighted mean displacement of its loaded facets), and
-the support's mass rho V (V the skin's volume; the tet mesh's differs by fTetWild's envelope).
-:func:`buckling_factor` adds the linearized buckling load factor of that state, and
-:func:`strengthen` rescales branch radii until the safety factor reaches a target.
+and reports the safety factor SF = sigma_yield / max_q sigma_bar_q, where the peak is, each
+target's deflection (the traction-weighted mean displacement of its loaded facets) and the mass
+rho V. :func:`buckling_factor` adds the linearized buckling load factor, :func:`strengthen`
+rescales branch radii until the safety factor reaches a target. Full notes: docs/methods.md,
+"simfab.growth.structure".
 """
 
 from __future__ import annotations

@@ -1,31 +1,26 @@
 """Static equilibrium of rod networks with rigid bodies (Newton with line search).
 
-Unknowns ``q`` (all in length units so one tolerance fits all):
-
-- free node coordinates [m] (not fixed, not attached to a body);
-- free twist angles times ``model.length_scale`` [m] (not fixed, not clamped to a body);
-- per free rigid body: translation [m] and rotation-vector update times ``length_scale``.
+Unknowns ``q`` (all in length units so one tolerance fits all): free node coordinates [m], free
+twist angles times ``model.length_scale`` [m], and per free rigid body its translation [m] and
+rotation-vector update times ``length_scale``.
 
 ``q`` is an *increment* from a base state: node coordinates and angles add, bodies move as
-``c = c0 + dc``, ``R = exp(w) R0``. Attached nodes follow their bodies
-(``x = c + R p``), clamped edges take the body's material frame, reference directors are
-time-parallel transported from the base (see :func:`simfab.rods.model.synchronize`).
+``c = c0 + dc``, ``R = exp(w) R0``. Attached nodes follow their bodies (``x = c + R p``), clamped
+edges take the body's material frame, reference directors are time-parallel transported from the
+base (:func:`simfab.rods.model.synchronize`).
 
-The reduced gradient and Hessian are exact at ``q = 0`` (checked against finite differences in
-tests/rods): ``g_q = J^T g`` with ``J = dx/dq``, and ``H_q = J^T H J`` plus the geometric term of
-the attached nodes, ``1/2 (g r^T + r g^T) - (g.r) I`` per node (``r`` its world offset). A
-clamped edge's angle changes by ``t . w`` with no second-order term (swing-twist
-decomposition: the twist part of ``exp(w)`` about ``t`` is ``t . w + O(|w|^3)``).
+The reduced gradient and Hessian are exact at ``q = 0``: ``g_q = J^T g`` with ``J = dx/dq``, and
+``H_q = J^T H J`` plus the geometric term of the attached nodes, ``1/2 (g r^T + r g^T) - (g.r) I``
+per node (``r`` its world offset). A clamped edge's angle changes by ``t . w`` (swing-twist
+decomposition, no second-order term).
 
-Newton iteration (own loop, not :func:`simfab.solve.newton.minimize`, because DER needs it):
-after every accepted step the state becomes the new base, i.e. reference directors are
-time-parallel transported *between Newton iterates* and ``q`` restarts at 0. The analytic
-Hessians are exact for frames transported from the current iterate; transporting from an
-older base instead differs by a holonomy rotation of the frames, which makes the gradient
-inexact away from the base and Newton only linearly convergent in 3D. Each iteration:
-shifted-Cholesky solve (:class:`ShiftedCholesky`), step capped by ``max_step``, Armijo
-backtracking on the total potential; converged when ``||g_q||_inf <= grad_tol * force_scale``
-(or the step / the predicted decrease reach round-off). Otherwise ConvergenceError.
+Newton iteration (own loop, not :func:`simfab.solve.newton.minimize`): after every accepted step
+the state becomes the new base, so reference directors are transported *between Newton iterates*
+and ``q`` restarts at 0 (transporting from an older base would make the gradient inexact and
+Newton linear in 3D). Each iteration: shifted-Cholesky solve (:class:`ShiftedCholesky`), step
+capped by ``max_step``, Armijo backtracking on the total potential; converged when
+``||g_q||_inf <= grad_tol * force_scale`` (or the step / the predicted decrease reach round-off),
+else ConvergenceError. Full notes: docs/methods.md, "simfab.rods.statics".
 """
 
 from __future__ import annotations
