@@ -3,7 +3,8 @@
 NumPy's and SciPy's OpenBLAS (``libscipy_openblas``) use every core for a matrix-vector product,
 and a product that takes microseconds then waits for the library's helper threads to wake. The
 insertion loop's small dense products (the rigid-mode pin, U^T x with U (N, r <= 6), and its
-Woodbury solve) run one to two orders of magnitude faster on one thread. The big linear algebra
+Woodbury solve) run much faster on one thread (docs/decisions.md, "One BLAS thread in the
+insertion loop"). The big linear algebra
 does not go through that library: sparse factorizations run in CHOLMOD (cvxopt's own OpenBLAS) or
 MKL PARDISO, whose threads are left alone.
 """

@@ -165,7 +165,7 @@ def invoked_subcommand(argv: list[str]) -> str | None:
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The CLI's parser; ``only``: build (and import) that subcommand's module alone - the one argv
-    invokes - so a command does not pay the imports of the others (the crowd CLI's FEM kernels: ~1 s)."""
+    invokes - so a command does not pay the imports of the others (the crowd CLI's FEM kernels, say)."""
     from simfab import __version__
 
     parser = _Parser(prog="simfab", description="Computational fabrication design built around physics simulation.")

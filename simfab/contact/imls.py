@@ -346,8 +346,9 @@ MAX_CELLS = 1 << 24
 class _CellLists:
     """Neighbour lists on a uniform grid over O's sample box grown by the kernel radius: cell c
     lists (ascending) every sample within ``radius`` of some point of c, so a query point needs only
-    its own cell's list (1.4x the samples within ``radius`` on average near clip3d's object, where
-    a hash-grid query walks the 27 cells of size ``radius`` around the point). Built once per
+    its own cell's list (a few more than the samples within ``radius``, where a hash-grid query walks
+    the 27 cells of size ``radius`` around the point; the figure: docs/decisions.md, "IMLS neighbour
+    lists"). Built once per
     object; O moves rigidly."""
 
     origin: np.ndarray  # (3,) body-frame corner [m]

@@ -5,8 +5,8 @@ own resolution.
 The scene is run at ``target_elements`` times each refinement factor (the generator meshes the
 part again). An extruded part (``extruded_clamp``) is refined in its section and through its height
 alike: ``layers`` times factor^(1/3) (rounded, at least 1), the rest of the factor in the section
-(refining the section alone left the error through the height, 2.6% of E_max on clip3d's linear
-tets, out of the study). A 3D scene that ships its part's mesh (``mesh_file``, fTetWild output stored because
+(refining the section alone left the error through the height out of the study:
+docs/validation/coupling.md). A 3D scene that ships its part's mesh (``mesh_file``, fTetWild output stored because
 fTetWild is not reproducible) keeps that mesh at factor 1 (the error of what users run) and is
 meshed again from its generator at the other factors; a part with no generator (a ready mesh
 only) cannot be refined and raises InputError. With

@@ -367,10 +367,10 @@ def rest_grip_gradient(res, i_ss: int, dF: np.ndarray, dG: np.ndarray) -> np.nda
 
         dG* = (1 - w) dG_a + w dG_b + (G_b - G_a) dw,    dw = (F_a dF_b - F_b dF_a) / (F_a - F_b)^2
 
-    At a seat (block2d_tight: the ball on the socket's bottom) the force and the grip change by
-    ~10^6 N/m over the bracket's micrometres and the terms nearly cancel: the derivative at fixed
-    positions alone is off by an order of magnitude or more (the seat is a kink: no derivative is
-    exact there; tests/design/test_gradient_method.py). Without such a bracket (a planned record,
+    At a seat (block2d_tight: the ball on the socket's bottom) the force and the grip change steeply
+    over the bracket's micrometres and the terms nearly cancel: the derivative at fixed positions
+    alone is far off (the seat is a kink: no derivative is exact there; tests/design/test_gradient_method.py;
+    the figures: docs/decisions.md, "Figures out of the code's docstrings"). Without such a bracket (a planned record,
     whose position is held; or the rest search's last record with a planned record before it, a
     secant over a whole step: docs/decisions.md): dG at i_ss."""
     F, G = res.column("force"), res.column("grip")

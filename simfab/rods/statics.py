@@ -57,8 +57,8 @@ class StaticsOptions:
         scaled by this factor (to ``homotopy_grad_tol``), then solves the real problem from
         there. Nearly inextensible rods (EA L^2 / B ~ 1e8) make Newton's quadratic model poor
         far from equilibrium (small transverse moves stretch edges at second order); the
-        softened problem gets close cheaply (2-3x fewer iterations for the elastica; it does
-        not help networks whose nonlinearity is not axial, hence off by default). Only the
+        softened problem gets close cheaply (fewer iterations for the elastica, docs/decisions.md;
+        it does not help networks whose nonlinearity is not axial, hence off by default). Only the
         final, unscaled solve is reported.
     """
 

@@ -91,7 +91,8 @@ def linear_centre_displacement(cm, *, R: float, d: float, E: float, nu: float, q
     supports and symmetry planes of ``cm.free``) under the Hertz pressure of indentation d,
     p(r) = p0 sqrt(1 - r^2 / a^2), p0 = 3 F / (2 pi a^2), on its top face (quarter: a quarter of
     the load). On a half-space the centre moves exactly d; a mesh that gives s d is stiffer, and a
-    rigid sphere driven to travel d meets about F_Hertz s^-1.5 (measured: within 2%).
+    rigid sphere driven to travel d meets about F_Hertz s^-1.5 (docs/decisions.md, "Verification:
+    the Hertz check").
     The pressure is integrated per top triangle by the midpoint rule on quad^2 sub-triangles."""
     import scipy.sparse.linalg as spl
 
