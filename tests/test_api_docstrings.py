@@ -269,7 +269,8 @@ def _unit_problems(cls, section: str) -> list[str]:
     problems = []
     lines = section.splitlines()
     for f in dataclasses.fields(cls):
-        if not (isinstance(f.type, str) and re.fullmatch(r"float( \| None)?", f.type)) or f.metadata.get("unit"):
+        ftype = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
+        if not re.fullmatch(r"float( \| None)?", ftype) or f.metadata.get("unit"):
             continue
         doc = next((ln for i, ln in enumerate(lines) if re.search(rf"(^|[\s,(`]){re.escape(f.name)}\b", ln)), "")
         idx = lines.index(doc) if doc else -1

@@ -1,6 +1,5 @@
-"""Two-grid warm start: a finished insertion of the same part on a coarser discretization guides
-the warm starts of a finer one (:func:`simfab.design.verify.mesh_check`'s refined level, started
-from the P2 level on the optimization mesh).
+"""Two-grid warm start: a finished insertion of the same part on a coarser discretization guides the
+warm starts of a finer one (:func:`simfab.design.verify.mesh_check`'s refined level, from its P2 level).
 
 The coarse run's insertion records (s_k, x_k) are interpolated linearly in s and mapped to the
 fine nodes by a prolongation P (n_fine, n_coarse), sparse; P2 on a mesh -> P2 on its uniform

@@ -7,11 +7,10 @@ stage. Stages carry ``defaultPrim`` (``/World``), ``upAxis``, ``metersPerUnit``,
 ``timeCodesPerSecond`` and start/end time codes covering every sample written, and pass
 ``pxr.UsdUtils.ComplianceChecker`` (see :func:`check_compliance`).
 
-Conventions
------------
-- ``name`` arguments are slash-separated prim paths below ``/World`` ("growth/skeleton");
-  each component must be a valid USD identifier (letters, digits, underscore, not
-  starting with a digit). Missing parents are created as ``Xform`` prims.
+Conventions: ``name`` arguments are slash-separated prim paths below ``/World``
+("growth/skeleton"), each component a valid USD identifier (letters, digits, underscore, not
+starting with a digit); missing parents are created as ``Xform`` prims.
+
 - Points may be (n, 3) or (n, 2); 2D points are placed in the z = 0 plane.
 - Time codes ``t`` are floats (usually the integer step index).
 - Quaternions are (w, x, y, z), as in MuJoCo.
