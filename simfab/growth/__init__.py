@@ -8,7 +8,7 @@ Python API (mirrors ``simfab grow``)::
     mesh = skin(result)            # trimesh.Trimesh, watertight, objects carved out
     result.summary()               # targets reached, nodes, segments, timings
 
-    from simfab.growth import run, check
+    from simfab.growth import check, edit, run
     res = run("scenes/growth/phone_stand.xml", out="out/phone", check=True)   # GrowthResult
     res.check.safety_factor, res.to_json()                                     # the --json object
     check("out/phone/phone_stand_skeleton.json", loads={"target_0": (0, 0, -2)})  # CheckResult
