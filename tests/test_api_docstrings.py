@@ -9,7 +9,8 @@ name is copied here by hand):
   package without ``__all__``: the public functions and classes bound in its ``__init__``);
 - the top-level command modules and ``simfab.results`` / ``simfab.errors``;
 - every result dataclass of an area (a :class:`simfab.results.Result` subclass or a dataclass named
-  ``*Result`` defined in one of the area packages' modules).
+  ``*Result`` defined in one of the area packages' modules), and the simfab dataclasses their fields
+  are typed with (a design's figures, an optimizer's problem and evaluations, a check's structure).
 
 A function (or a class's constructor, or a public method of a collected class) that takes arguments
 has an ``Args:`` section; one that returns a value has ``Returns:`` (``Yields:`` for a generator). A
@@ -26,6 +27,7 @@ import inspect
 import pkgutil
 import re
 import textwrap
+import typing
 from pathlib import Path
 
 import pytest
@@ -109,6 +111,23 @@ def _result_classes() -> dict[str, type]:
     return out
 
 
+def _field_types(classes) -> dict[str, type]:
+    """The simfab dataclasses the fields of ``classes`` are typed with (one level: ``X``, ``X | None``,
+    ``tuple[X, ...]``), e.g. a design result's figures or an optimizer result's problem."""
+    out = {}
+
+    def walk(t):
+        if inspect.isclass(t) and dataclasses.is_dataclass(t) and t.__module__.startswith("simfab"):
+            out[f"{t.__module__}.{t.__qualname__}"] = t
+        for arg in typing.get_args(t):
+            walk(arg)
+
+    for cls in classes:
+        for hint in typing.get_type_hints(cls).values():
+            walk(hint)
+    return out
+
+
 def collect_api() -> dict[str, object]:
     """Qualified name -> object of every public function and class of the API (simfab.deploy excluded)."""
     api: dict[str, object] = {}
@@ -119,7 +138,9 @@ def collect_api() -> dict[str, object]:
         api.update(_package_exports(importlib.import_module(f"simfab.{area}")))
     for top in TOP:
         api.update(_module_members(importlib.import_module(f"simfab.{top}")))
-    api.update(_result_classes())
+    results = _result_classes()
+    api.update(results)
+    api.update(_field_types([*results.values(), *(v for v in api.values() if _is_result_class(v))]))
     out, seen = {}, set()
     for name, obj in api.items():  # one entry per object (a package re-exports its modules' names)
         home = f"{getattr(obj, '__module__', '')}.{getattr(obj, '__qualname__', '')}"

@@ -17,22 +17,29 @@ from simfab.rotations import pose_matrix
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class CouplingModel:
-    """Immutable description of one insertion simulation.
+    """Immutable description of one insertion simulation (built by :func:`make_coupling_model`).
 
-    fem : A's FEM model (SI units): a linear :class:`simfab.fem.model.FemModel` or, with
-        ``options.element_order = 2``, a quadratic :class:`simfab.fem.p2.P2Model` (energies through
-        :mod:`simfab.fem.elastic`; the facets contact works on: :attr:`contact_facets`)
-    field : :class:`ImlsField` of O in O's body frame
-    path : :class:`simfab.io.mjcf.Trajectory` of O's pose, parameterized by path length [m]
-    s_steps : (K+1,) path length at each step [m]; step 0 is the start pose
-    fixed_vertices : (f,) vertices of A in the fixed region
-    free : (n*dim,) bool, dofs solved for (fixed: the fixed vertices' dofs along the insertion axis,
-        along ``options.fixed_axes``, or along all axes with ``options.fix_all_axes``)
-    axis : (dim,) unit insertion axis (coordinate axis closest to O's overall translation)
-    h : A's mean edge length h_A [m]; dhat [m]; kappa [N/m]; tol : penetration tolerance [m]
-    object_vertices, object_faces : O's display geometry in its body frame (3D mesh, or a closed
-        curve (k, 2) with faces None in 2D)
-    contact : :class:`ContactOptions` (friction between O and A)
+    Args:
+        name: the scene's name.
+        fem: A's FEM model (SI units): a linear :class:`simfab.fem.model.FemModel` or, with
+            ``options.element_order = 2``, a quadratic :class:`simfab.fem.p2.P2Model` (energies through
+            :mod:`simfab.fem.elastic`; the facets contact works on: :attr:`contact_facets`).
+        field: :class:`ImlsField` of O in O's body frame.
+        path: :class:`simfab.io.mjcf.Trajectory` of O's pose, parameterized by path length [m].
+        s_steps: (K+1,) path length at each step [m]; step 0 is the start pose.
+        fixed_vertices: (f,) vertices of A in the fixed region.
+        free: (n*dim,) bool, dofs solved for (fixed: the fixed vertices' dofs along the insertion axis,
+            along ``options.fixed_axes``, or along all axes with ``options.fix_all_axes``).
+        axis: (dim,) unit insertion axis (coordinate axis closest to O's overall translation).
+        options: the scene's :class:`InsertionOptions`.
+        h: A's mean edge length h_A [m].
+        dhat: the barrier's activation distance [m].
+        kappa: the barrier stiffness [N/m].
+        tol: penetration tolerance [m].
+        force_scale: E h width, the force unit of the solver's tolerances [N].
+        object_vertices, object_faces: O's display geometry in its body frame (3D mesh, or a closed
+            curve (k, 2) with faces None in 2D).
+        contact: :class:`ContactOptions` (friction between O and A).
     """
 
     name: str
@@ -84,7 +91,14 @@ class CouplingModel:
         return out
 
     def pose(self, s: float):
-        """O's pose at path length s: (R (3, 3), p (3,)) with world x = R x_body + p (memoized)."""
+        """O's pose at a path length (memoized).
+
+        Args:
+            s: path length [m].
+
+        Returns:
+            A tuple (R (3, 3), p (3,) [m]) with world x = R x_body + p.
+        """
         key = ("pose", float(s))
         out = self._cache.get(key)
         if out is None:
@@ -92,14 +106,28 @@ class CouplingModel:
         return out
 
     def motion(self, s_a: float, s_b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """O's rigid motion from path length s_a to s_b: (M (3, 3), p_a (3,), p_b (3,)) with
-        y -> M (y - p_a) + p_b for O's material points."""
+        """O's rigid motion between two path lengths.
+
+        Args:
+            s_a, s_b: path lengths from and to [m].
+
+        Returns:
+            A tuple (M (3, 3), p_a (3,) [m], p_b (3,) [m]) with y -> M (y - p_a) + p_b for O's material points.
+        """
         Ra, pa = self.pose(s_a)
         Rb, pb = self.pose(s_b)
         return Rb @ Ra.T, pa, pb
 
     def carry(self, y: np.ndarray, s_a: float, s_b: float) -> np.ndarray:
-        """Points y (k, dim) [m] moved with O from path length s_a to s_b (:meth:`motion`)."""
+        """Points moved with O from one path length to another (:meth:`motion`).
+
+        Args:
+            y: (k, dim) points [m].
+            s_a, s_b: path lengths from and to [m].
+
+        Returns:
+            The moved points, (k, dim) [m].
+        """
         M, pa, pb = self.motion(s_a, s_b)
         dim = y.shape[1]
         y3 = np.zeros((len(y), 3))
@@ -107,8 +135,14 @@ class CouplingModel:
         return ((y3 - pa) @ M.T + pb)[:, :dim]
 
     def pos_quat(self, s: float):
-        """O's pose at path length s as the path gives it: (pos (3,) [m], quat_wxyz (4,)) (memoized;
-        do not modify the arrays)."""
+        """O's pose at a path length as the path gives it (memoized; do not modify the arrays).
+
+        Args:
+            s: path length [m]; past the last keyframe O goes on along a translating last segment.
+
+        Returns:
+            A tuple (pos (3,) [m], quat_wxyz (4,)).
+        """
         key = ("pos_quat", float(s))
         out = self._cache.get(key)
         if out is None:
@@ -136,7 +170,14 @@ class CouplingModel:
         return self._cache[key]
 
     def direction(self, s: float) -> np.ndarray:
-        """(dim,) unit translation direction of O at s (zero during a pure rotation; memoized)."""
+        """O's unit translation direction at a path length (memoized).
+
+        Args:
+            s: path length [m].
+
+        Returns:
+            A (dim,) unit vector (zero during a pure rotation).
+        """
         key = ("direction", float(s))
         out = self._cache.get(key)
         if out is None:

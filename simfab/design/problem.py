@@ -180,20 +180,24 @@ class EvaluationSettings:
 class DesignProblem:
     """Everything fixed during one optimization (the model of the loop).
 
-    base : the initial :class:`simfab.coupling.model.CouplingModel`
-    brief : :class:`simfab.design.brief.DesignBrief`; limits : {constraint: (lo, hi)} in UNITS
-    handles : :class:`Handles`; energy : :class:`ModificationEnergy`
-    target : :class:`simfab.design.brief.TargetProfile` or None
-    kept : (k,) vertices held unchanged; q0 : (m,) initial element qualities
-    lower, upper, sigma0 : (n_vars,) design bounds and initial proposal deviations
-    source : the :class:`ProblemSource` that rebuilds this problem in another process (parallel
-        evaluation, restarts), or None (a problem not loaded from a scene file)
-    settings : :class:`EvaluationSettings` (mesh corrections, margin, seeded refinement)
-    initial : the unmodified shape's insertion (``simulate(base)``, e.g. run for the displacement
-        placement), which :func:`initial_evaluation` scores instead of running it again; None:
-        it is simulated there
-    initial_recorder : the recorder ``initial`` was run with (``simulate``'s ``recorder``, e.g. the
-        gradient method's :class:`simfab.design.gradient.DeferredRecorder`), or None
+    Args:
+        base: the initial :class:`simfab.coupling.model.CouplingModel`.
+        brief: :class:`simfab.design.brief.DesignBrief`.
+        limits: {constraint: (lo, hi)} in UNITS.
+        handles: :class:`Handles`.
+        energy: :class:`ModificationEnergy`.
+        target: :class:`simfab.design.brief.TargetProfile` or None.
+        kept: (k,) vertices held unchanged.
+        q0: (m,) initial element qualities [-].
+        lower, upper, sigma0: (n_vars,) design bounds and initial proposal deviations.
+        source: the :class:`ProblemSource` that rebuilds this problem in another process (parallel
+            evaluation, restarts), or None (a problem not loaded from a scene file).
+        settings: :class:`EvaluationSettings` (mesh corrections, margin, seeded refinement).
+        initial: the unmodified shape's insertion (``simulate(base)``, e.g. run for the displacement
+            placement), which :func:`initial_evaluation` scores instead of running it again; None:
+            it is simulated there.
+        initial_recorder: the recorder ``initial`` was run with (``simulate``'s ``recorder``, e.g. the
+            gradient method's :class:`simfab.design.gradient.DeferredRecorder`), or None.
     """
 
     base: CouplingModel
@@ -219,11 +223,25 @@ class DesignProblem:
         return linear_mesh(self.base.fem)
 
     def with_settings(self, **changes) -> "DesignProblem":
-        """This problem with :class:`EvaluationSettings` fields ``changes`` replaced."""
+        """This problem with some :class:`EvaluationSettings` fields replaced.
+
+        Args:
+            **changes: :class:`EvaluationSettings` field -> new value.
+
+        Returns:
+            A new :class:`DesignProblem`.
+        """
         return dataclasses.replace(self, settings=dataclasses.replace(self.settings, **changes))
 
     def constraints(self, figures: dict) -> list:
-        """The brief's constraints on simulated ``figures``, mesh-corrected (``settings.corrections``)."""
+        """The brief's constraints on simulated figures, mesh-corrected (``settings.corrections``).
+
+        Args:
+            figures: :func:`profile_figures` of a design.
+
+        Returns:
+            A list of :class:`simfab.design.brief.Constraint`.
+        """
         c = self.settings.corrections
         return B.constraints({k: v * c.get(k, 1.0) if isinstance(v, float) else v for k, v in figures.items()},
                              self.limits)
@@ -304,17 +322,22 @@ def max_displacement(res) -> np.ndarray:
 class DesignEvaluation:
     """One design's evaluation.
 
-    h : (n_vars,) the design; rest : (n, d) [m] its rest shape
-    status : "ok" | "rejected" (invalid) | "stopped" (provably above the acceptance threshold) |
-        "aborted" (a speculative run no longer needed, never decided on); reason : why not ok
-    objective [-] : +inf when rejected, a lower bound when stopped; E_L [-]; rms_error [N]
-        (target matching)
-    constraints : list of :class:`simfab.design.brief.Constraint`; figures : :func:`profile_figures`
-    result : the InsertionResult (kept only while needed); sim_seconds, seconds : in the
-        simulation, in total
-    bounds : the objective's lower bound after each insertion step; newton_iterations : of a
-        complete insertion (status "ok"); recorder : the insertion's per-step recorder (``evaluate``'s
-        ``recorder``), None without one
+    Args:
+        h: (n_vars,) the design.
+        rest: (n, d) its rest shape [m].
+        status: "ok" | "rejected" (invalid) | "stopped" (provably above the acceptance threshold) |
+            "aborted" (a speculative run no longer needed, never decided on).
+        objective: the objective [-]: +inf when rejected, a lower bound when stopped.
+        reason: why not ok.
+        E_L: the Laplacian editing energy [-].
+        rms_error: the RMS force error of target matching [N] (None without a target).
+        constraints: list of :class:`simfab.design.brief.Constraint`.
+        figures: :func:`profile_figures`.
+        result: the InsertionResult (kept only while needed).
+        sim_seconds, seconds: wall time in the simulation and in total [s].
+        bounds: the objective's lower bound after each insertion step [-].
+        newton_iterations: of a complete insertion (status "ok").
+        recorder: the insertion's per-step recorder (``evaluate``'s ``recorder``), None without one.
     """
 
     h: np.ndarray

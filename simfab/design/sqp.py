@@ -46,10 +46,16 @@ SHRINK = 0.3
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Sample:
-    """One expensive evaluation at z: ``f`` the objective, ``g`` (n,) its gradient, ``B`` (n, n) its
-    model Hessian (symmetric positive semi-definite), ``c`` (m,) the constraints (>= 0 wanted) and
-    ``A`` (m, n) their Jacobian; ``ok`` False when the design could not be evaluated (the other fields
-    are then unused)."""
+    """One expensive evaluation at z.
+
+    Args:
+        ok: False when the design could not be evaluated (the other fields are then unused).
+        f: the objective [units of f].
+        g: (n,) its gradient.
+        B: (n, n) its model Hessian (symmetric positive semi-definite).
+        c: (m,) the constraints (>= 0 wanted).
+        A: (m, n) their Jacobian.
+    """
 
     ok: bool
     f: float = math.nan
@@ -59,7 +65,14 @@ class Sample:
     A: np.ndarray | None = None
 
     def violation(self, tol: float | np.ndarray = 0.0) -> float:
-        """sum_i max(0, -c_i - tol_i) (l1, in the constraints' units)."""
+        """The l1 constraint violation beyond a tolerance.
+
+        Args:
+            tol: per-constraint tolerance (scalar or (m,)), in the constraints' units.
+
+        Returns:
+            sum_i max(0, -c_i - tol_i) (inf when the design could not be evaluated).
+        """
         return float(np.sum(np.maximum(0.0, -self.c - tol))) if self.ok else math.inf
 
 

@@ -99,19 +99,30 @@ class CheckOptions:
 class StructureCheck:
     """Result of :func:`check_structure` (SI units).
 
-    safety_factor : yield stress / max_von_mises_Pa. max_von_mises_Pa : the peak of the
-    critical-distance mean of the von Mises stress [Pa]; peak_point (3,) [m] where it is.
-    max_point_von_mises_Pa : the largest corner value (unaveraged) [Pa].
-    deflection_m : load point name -> |mean displacement of its facets| [m] (every reached target and contact).
-    mass_kg, volume_m3 : of the support. loads : the :class:`TargetLoad` per loaded target.
-    model : the P2 model; u (n, 3) [m] displacement of its nodes; fixed (n,) bool clamped nodes.
-    element_von_mises : (m,) per element the largest averaged corner stress [Pa].
-    points, point_von_mises : (4m, 3) rest positions [m] of the element corners and their averaged stress [Pa].
-    mesh : the skin (``trimesh.Trimesh``) that was meshed. tets, nodes : mesh sizes.
-    contacts : per load point its :class:`simfab.growth.contact.TargetContact`. object_masses : supported
-    object -> :class:`simfab.growth.masses.ObjectMass`. dropped : object -> :class:`DroppedWeight`
-    (``best_effort`` only). gravity (3,) [m/s^2]. nodal_forces (n, 3) [N] the consistent load vector.
-    seconds : wall time of skin, mesh, solve and stress.
+    Args:
+        safety_factor: yield stress / max_von_mises_Pa [-].
+        max_von_mises_Pa: the peak of the critical-distance mean of the von Mises stress [Pa].
+        peak_point: (3,) where it is [m].
+        max_point_von_mises_Pa: the largest corner value (unaveraged) [Pa].
+        deflection_m: load point name -> |mean displacement of its facets| [m] (every reached target and contact).
+        mass_kg, volume_m3: of the support [kg], [m^3].
+        loads: the :class:`TargetLoad` per loaded target.
+        material_name: the material's name; yield_stress_Pa: its yield stress [Pa].
+        critical_distance_m: the radius the stress is averaged over [m].
+        model: the P2 model.
+        u: (n, 3) displacement of its nodes [m].
+        fixed: (n,) bool clamped nodes.
+        element_von_mises: (m,) per element the largest averaged corner stress [Pa].
+        mesh: the skin (``trimesh.Trimesh``) that was meshed.
+        tets, nodes: mesh sizes.
+        seconds: wall time of skin, mesh, solve and stress [s].
+        points, point_von_mises: (4m, 3) rest positions [m] of the element corners and their averaged stress [Pa].
+        contacts: per load point its :class:`simfab.growth.contact.TargetContact`.
+        object_masses: supported object -> :class:`simfab.growth.masses.ObjectMass`.
+        dropped: object -> :class:`DroppedWeight` (``best_effort`` only).
+        gravity: (3,) [m/s^2].
+        nodal_forces: (n, 3) the consistent load vector [N].
+        mesher: the tet mesher used ("gmsh" or a fallback).
     """
 
     safety_factor: float
@@ -143,7 +154,11 @@ class StructureCheck:
     mesher: str = "gmsh"
 
     def summary(self) -> dict:
-        """JSON-ready figures (the ``simfab grow check`` keys)."""
+        """JSON-ready figures (the ``simfab grow check`` keys).
+
+        Returns:
+            A dict of JSON values: the :class:`simfab.growth.results.CheckResult` figures.
+        """
         return {
             "safety_factor": self.safety_factor,
             "max_von_mises_Pa": self.max_von_mises_Pa,
