@@ -15,10 +15,12 @@ keyframes for its path, the box site 'fixed') plus NAME.toml (the compliant part
 material and the simulation options); a bare NAME refers to a bundled scene in
 scenes/coupling ('simfab couple scenes' lists them). Scene format: scenes/coupling/README.md.
 
-Outputs under --out (:mod:`simfab.coupling.outputs`): NAME_profile.csv (one row per record, its
-columns in :data:`simfab.coupling.outputs.CSV_COLUMN_DOCS`), NAME_summary.json (the --json
-summary), NAME_profile.png, NAME.usda (A's deforming mesh with von Mises stress, O's animated pose)
-and NAME.xml (MJCF for the viewer); described in docs/guide/coupling.rst, "Outputs".
+Outputs under --out: NAME_profile.csv (one row per record: distance along the path [m], energy [J],
+forces [N], stress [Pa], penetration [m], Newton iterations, phase, ...; every column's meaning is
+in NAME_summary.json's profile_columns), NAME_summary.json (the --json summary), NAME_profile.png
+(energy solid, force dashed, markers at E_max and E_ss), NAME.usda (A's deforming mesh with a
+von_mises primvar, O's animated transform) and NAME.xml (MJCF for the viewer: A at the steady
+state, O with one keyframe per step). Described in docs/guide/coupling.rst, "Outputs".
 """
 
 from __future__ import annotations

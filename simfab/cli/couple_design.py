@@ -4,10 +4,7 @@ only; the work is in :mod:`simfab.design`).
 simfab couple optimize SCENE changes the part's rest shape as little as possible (Laplacian
 editing energy of the boundary) until the simulated insertion meets the scene's design brief
 ([design] in NAME.toml: grip tight|loose, grip/insertion/removal force bounds [N], yield
-stress [Pa], or a target force profile). Command-line options override the brief. Its --json
-object is :meth:`simfab.design.pipeline.DesignResult.to_json`: the result's fields, documented
-there with their units (constraints and profiles, the optimizer's counts, restarts, mesh_check,
-correction_rounds, revolved, outputs).
+stress [Pa], or a target force profile). Command-line options override the brief.
 
 simfab couple study handles SCENE runs the handle-placement study: displacement-based and
 spatial placement and --random random picks, for each handle count of --counts, each an
@@ -16,6 +13,9 @@ constraint and the final E_L per method (table, CSV, PNG).
 
 --json keys: scene, runs, failed_runs, rows (method, handles, runs, converged_fraction, E_L_median, E_L_best),
 outputs (runs_csv, summary_csv, plot_png, summary_json), units.
+
+The --json keys of optimize, which its --help prints, are :data:`OPTIMIZE_JSON_KEYS`; the typed
+result with units is :class:`simfab.design.pipeline.DesignResult`.
 """
 
 from __future__ import annotations
@@ -23,9 +23,40 @@ from __future__ import annotations
 import os
 import textwrap
 
-_PARTS = [textwrap.fill(" ".join(p.split()), 78) for p in __doc__.split("\n\n")]
-OPTIMIZE_DESCRIPTION = "\n\n".join(_PARTS[1:3])
-STUDY_DESCRIPTION = "\n\n".join(_PARTS[3:5])
+#: The ``--json`` keys of ``simfab couple optimize``, printed by its ``--help`` (the typed fields, with units:
+#: :class:`simfab.design.pipeline.DesignResult`).
+OPTIMIZE_JSON_KEYS = """--json keys: scene, feasible, objective, objective_initial, E_L, constraints (per
+constraint: value, lo, hi, unit, satisfied, initial; values mesh-corrected), corrections
+(per figure: factor applied to the coarse figure, from the mesh check), category, category_initial, profile and
+profile_initial (category, coupling_ratio_pct, E_max_J, E_ss_J, F_in_N, F_rm_N, F_grip_N,
+max_von_mises_Pa (largest element stress), von_mises_avg_Pa (averaged over [design]
+stress_radius: what the yield constraint reads)), handles, method (anneal | gradient), iterations,
+stopped_early, insertions (every insertion simulation of the optimization: complete, stopped early or
+speculative; the mesh check's excluded), gradient_evaluations (insertions that also gave gradients),
+nonsmooth_events (gradient method: how many consecutive simulated designs differ in steady_state_index,
+category, refinement, kappa, steps, of pairs; null for anneal),
+simulations, simulations_stopped_early, speculative_simulations, acceptance_branches (the
+annealer's proposals evaluated as if the running one were accepted: drawn, adopted), workers,
+accepted, rejected
+(count per reason), seconds,
+simulation_seconds, fraction_outside_simulator, warnings, outputs (paths: part_stl, outline_csv
+(2D), scene_xml, scene_toml, scene_mesh, profile_png, shape_png, history_csv, usd, summary_json,
+revolved_stl with --revolve-axis; with --revolve-arms also revolved_scene_xml, revolved_scene_toml,
+revolved_mesh), revolved (with --revolve-arms: the 3D part's simulation: elements, category,
+figures, constraints of the brief with their values and satisfied flags), restarts (with --restarts: per
+run seed, status, message, feasible, objective, E_L, iterations, seconds), mesh_check (unless --no-mesh-check: levels
+(element_order, subdivisions, elements, nodes, seconds, category), figures (per figure: values per
+level, extrapolated, order, converging, difference_of_optimization_mesh, reference_change, step_factor),
+step_check (when the scene's steps do not resolve the profile: steps, factor, seconds, factors per figure,
+category, still_too_coarse), constraints at the mesh-converged values, feasible_fine, reference, units),
+correction_rounds (per round:
+factors, feasible_fine, objective_fine, iterations, seconds, kept: whether its design was
+better on the refined meshes; the outputs are the kept design's run), iterations_total (every
+round's), insertions_total (every round's), objective_fine (the kept design's objective with mesh-converged figures)."""
+
+_PARTS = [textwrap.fill(" ".join(p.split()), 78) for p in [*__doc__.split("\n\n"), OPTIMIZE_JSON_KEYS]]
+OPTIMIZE_DESCRIPTION = "\n\n".join([_PARTS[1], _PARTS[-1]])
+STUDY_DESCRIPTION = "\n\n".join(_PARTS[2:4])
 
 
 def add_optimize_args(s) -> None:
