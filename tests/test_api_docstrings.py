@@ -38,7 +38,7 @@ from simfab.results import Result
 ROOT = Path(simfab.__file__).resolve().parent
 API_RST = ROOT.parent / "docs" / "api.rst"
 #: The area packages whose exports are the API (besides docs/api.rst).
-AREAS = ("coupling", "design", "growth", "crowd", "sweep", "rods", "verification", "fem", "contact", "io")
+AREAS = ("coupling", "design", "growth", "crowd", "deploy", "sweep", "rods", "verification", "fem", "contact", "io")
 #: The top-level modules: the commands as functions, the result base and the errors.
 TOP = ("couple", "grow", "validate", "results", "errors")
 #: simfab.deploy is documented by its own change (issue 40's deploy part) and left out here until it
@@ -91,6 +91,8 @@ def _package_exports(pkg) -> dict[str, object]:
 def _area_modules():
     """Every module of the area packages (their result dataclasses live in them)."""
     for area in AREAS:
+        if _excluded(f"simfab.{area}"):
+            continue
         pkg = importlib.import_module(f"simfab.{area}")
         yield pkg
         for info in pkgutil.walk_packages(pkg.__path__, prefix=f"simfab.{area}."):
@@ -135,7 +137,8 @@ def collect_api() -> dict[str, object]:
         obj = _resolve(name)
         api.update(_module_members(obj) if inspect.ismodule(obj) else {name: obj})
     for area in AREAS:
-        api.update(_package_exports(importlib.import_module(f"simfab.{area}")))
+        if not _excluded(f"simfab.{area}"):
+            api.update(_package_exports(importlib.import_module(f"simfab.{area}")))
     for top in TOP:
         api.update(_module_members(importlib.import_module(f"simfab.{top}")))
     results = _result_classes()
