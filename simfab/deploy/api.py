@@ -49,20 +49,22 @@ class SurfaceResult(Result):
         return {**self.summary, "outputs": dict(self.outputs)} if self.outputs else dict(self.summary)
 
 
-def _scene(target, units, overrides: dict, sources: dict, notes: list | None = None):
-    """The scene with ``overrides`` applied; ``sources``: override name -> what an error or the
-    override note names (the flag, or the keyword); ``notes`` gets one line per override that replaces
-    a value of the scene file."""
+def _scene(target, units, overrides: dict, notes: list | None = None):
+    """The scene with ``overrides`` ({name: value or Override}) applied; an error of an override's
+    value names its flag (an Override's source) or its keyword; ``notes`` gets one line per override
+    that replaces a value of the scene file."""
     from simfab.deploy import scene as sc
     from simfab.deploy import surface
+    from simfab.io.tables import Override
 
-    ov = {"pattern": {}, "material": {}, "tune": {}}
+    ov: dict = {}
     for k, v in overrides.items():
         if k not in OVERRIDES:
             raise InputError(f"unknown override {k!r} (known: {', '.join(sorted(OVERRIDES))})", where="run")
-        if v is not None:
+        if v is not None and not (isinstance(v, Override) and v.value is None):
             table, name = OVERRIDES[k]
-            ov[table][name] = v
+            ov.setdefault(table, {})[name] = v if isinstance(v, Override) else Override(v, k)
+    log = notes.append if notes is not None else None
     if isinstance(target, surface.Target):
         import tempfile
 
@@ -71,27 +73,11 @@ def _scene(target, units, overrides: dict, sources: dict, notes: list | None = N
         with tempfile.TemporaryDirectory() as tmp:
             p = os.path.join(tmp, "target.obj")
             trimesh.Trimesh(target.V, target.F, process=False).export(p)
-            s = sc.load_deploy_scene(p, overrides=ov)
+            s = sc.load_deploy_scene(p, overrides=ov, log=log)
         return dataclasses.replace(s, target=target, path=target.name)
     target = str(target)
     path = sc.bundled_path(target) if target in sc.NAMES and not os.path.exists(target) else target
-    try:
-        scene = sc.load_deploy_scene(path, units=units, overrides=ov)
-    except InputError as e:  # a given override's bad value is blamed on the override, not on the file
-        for k, (table, name) in OVERRIDES.items():
-            if overrides.get(k) is not None and str(e.where or "").endswith(f"{table}.{name}"):
-                raise InputError(e.message, where=sources.get(k, k)) from None
-        raise
-    if notes is not None and str(path).lower().endswith(".toml"):  # where an override replaces a file value
-        import tomllib
-
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
-        for k, (table, name) in OVERRIDES.items():
-            if overrides.get(k) is not None and name in doc.get(table, {}):
-                notes.append(f"{sources.get(k, k)} {overrides[k]!r} overrides {os.path.basename(str(path))} "
-                             f"[{table}] {name} = {doc[table][name]!r}")
-    return scene
+    return sc.load_deploy_scene(path, units=units, overrides=ov, log=log)
 
 
 def run(target, *, out=None, seed: int = 0, device: str = "cpu", progress=None, units: str | None = None,
@@ -117,9 +103,9 @@ def run(target, *, out=None, seed: int = 0, device: str = "cpu", progress=None, 
 
     # an Override (a command-line flag) names its flag in errors and notes; a plain keyword names itself
     sources = {k: (v.source if isinstance(v, Override) else k) for k, v in overrides.items()}
-    overrides = {k: (v.value if isinstance(v, Override) else v) for k, v in overrides.items()}
     notes: list = []
-    scene = _scene(target, units, overrides, sources, notes)
+    scene = _scene(target, units, overrides, notes)
+    overrides = {k: (v.value if isinstance(v, Override) else v) for k, v in overrides.items()}
     size = scene.target.diameter
     if scene.pattern.spacing > size:  # not one grid cell fits: an input error, not an empty pattern
         raise InputError(f"{scene.pattern.spacing:.4g} m is larger than the target surface (its bounding-box "

@@ -34,6 +34,7 @@ from simfab.deploy import tolerances as tol
 from simfab.deploy._config import require_positive
 from simfab.errors import ConvergenceError, InputError
 from simfab.io.mjcf import load_mjcf, numeric_config
+from simfab.io.tables import load_table
 from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
 from simfab.rods.statics import StaticSolver, StaticsOptions
 
@@ -43,7 +44,7 @@ PATHS = ("direct", "insert")
 
 
 @dataclass(frozen=True, kw_only=True)
-class BeamSetup:
+class BeamConfig:
     """Beam of the buckling validation (loaded from ``scenes/deploy/elastica.xml`` custom fields).
 
     length, width, thickness [m]; young [Pa]; poisson [-]; axial_ratio = EA L^2 / B1 [-];
@@ -76,7 +77,7 @@ class InsertScene:
 
     path: str
     insert_pos: np.ndarray
-    setup: BeamSetup
+    setup: BeamConfig
     mesh: object
 
 
@@ -85,11 +86,7 @@ def load_insert_scene(path) -> InsertScene:
     (fixed end, origin), beam parameters as ``<numeric name="beam_<field>">``."""
 
     sc = load_mjcf(path)
-    kw = numeric_config(sc, "beam_", BeamSetup)
-    try:
-        setup = BeamSetup(**kw)
-    except InputError as e:  # name the scene file as well as the field
-        raise e.in_file(path) from None
+    setup = load_table(BeamConfig, numeric_config(sc, "beam_", BeamConfig), table_name="custom", file=str(path))
     if "anchor" not in sc.sites:
         raise InputError("the scene needs a site named 'anchor' at the fixed beam end", where=str(path))
     meshes = sc.body_meshes(include_world=False)
@@ -142,7 +139,7 @@ def check_segments(n) -> int:
     return int(n)
 
 
-def build_beam(setup: BeamSetup, n: int, support: str, path: str = "direct", *, free_end: bool = False) -> Beam:
+def build_beam(setup: BeamConfig, n: int, support: str, path: str = "direct", *, free_end: bool = False) -> Beam:
     """The beam with ``n`` segments, start state carrying the first-mode imperfection.
 
     ``free_end=True`` (critical load): the moving end's x is an unknown (loaded by a force)."""
@@ -244,7 +241,7 @@ def _sync(beam: Beam, prev, x, body_pos):
     return synchronize(beam.model, prev, x, prev.theta, body_pos, prev.body_rot)
 
 
-def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: str = "direct", device: str = "cpu",
+def run_continuation(setup: BeamConfig, support: str, n: int, ratios, *, path: str = "direct", device: str = "cpu",
                      keep_states: bool = False) -> list[dict]:
     """Push the beam through the gap ratios (sorted descending) and measure each equilibrium.
 
@@ -290,7 +287,7 @@ def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: st
     return rows
 
 
-def critical_load(setup: BeamSetup, n: int, support: str = "pinned", *, device: str = "cpu") -> dict:
+def critical_load(setup: BeamConfig, n: int, support: str = "pinned", *, device: str = "cpu") -> dict:
     """Smallest compressive end load at which the straight beam's Hessian stops being positive definite.
 
     The straight beam under end load P is uniformly compressed (EA eps = -P); its elastic

@@ -88,7 +88,7 @@ class DeployConfig:
     perturbation: float = 0.05
 
     def __post_init__(self):
-        require_positive(self, "")
+        require_positive(self, lambda f: f"material.{f}" if f in ("young", "poisson", "density") else f"deploy.{f}")
         if not -1.0 < self.poisson < 0.5:
             raise InputError(f"must be in (-1, 0.5) (got {self.poisson})", where="material.poisson")
         if not self.clamp_edge <= 1.0:

@@ -42,6 +42,7 @@ from simfab._bundled import scenes_dir
 from simfab.deploy._config import require_positive
 from simfab.errors import ConvergenceError, InputError
 from simfab.io.mjcf import geom_mesh, load_mjcf, numeric_config
+from simfab.io.tables import load_table
 from simfab.progress import progress
 from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
 from simfab.rods.statics import StaticSolver
@@ -108,11 +109,7 @@ def load_cell_scene(path) -> tuple[CellConfig, dict]:
     import mujoco  # (simfab.io, imported above, set up headless GL before MuJoCo loads)
 
     sc = load_mjcf(path)
-    kw = numeric_config(sc, "cell_", CellConfig)
-    try:
-        cfg = CellConfig(**kw)
-    except InputError as e:  # name the scene file as well as the field
-        raise e.in_file(path) from None
+    cfg = load_table(CellConfig, numeric_config(sc, "cell_", CellConfig), table_name="custom", file=str(path))
     m = sc.model
     inserts = {}
     for b in range(1, m.nbody):
