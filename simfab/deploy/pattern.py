@@ -43,25 +43,29 @@ from simfab.errors import InputError
 class PatternConfig:
     """Pattern parameters (scene ``[pattern]`` table). Lengths [m].
 
-    spacing: grid spacing h; beam_width (in plane) and beam_thickness (sheet); insert_half_size
-    r: distance from an insert's centre to where it clamps the beams (one size for all
-    inserts); insert_half_sizes: the insert catalogue, a list of such sizes (when given it
-    replaces insert_half_size; each insert gets one, see module doc); layout: "grid" (the
-    clipped square grid), "conforming" (:func:`conforming_quads`) or "mesh" (:func:`mesh_quads`:
-    quads that follow any outline, the seams of a cut flattening included); spring_bulge [-]: smallest
-    Bezier handle pull towards the quad centre; spring_slack [-]: arc length margin over the
-    deployed chord (see :mod:`simfab.deploy.springs`); spring_width: in-plane width of the spring
-    arcs (narrower than the beams: the springs let the cells grow in plane); min_gap, min_beam:
-    achievable-gap limits (see module doc); degenerate_angle_deg [deg]: interior angle above
-    which a boundary quad gets no spring; springs: "zigzag" (an arc the Bezier family cannot make
-    long enough becomes a zigzag, :func:`zigzag_springs`; a quad where no zigzag fits either takes
-    one pull per arc, :func:`simfab.deploy.springs.size_arcs`) or "bezier" (Bezier arcs at one pull
-    per quad only, those short of the slack reported); growth_fit: "vertex" (each insert's growth
-    from its own u and mean edge length, the gap rule of the module doc) or "edges" (the growths fitted to every
-    edge's own length and u, :func:`edge_fitted_growth`: for meshes whose edges differ in length);
-    conforming_core: "smoothed" (the conforming layout's core outline Laplacian-smoothed) or
-    "regular" (left on the grid: every core edge h long, as the vertex gap rule assumes; the
-    pillow's boundary vertices on the core outline's bisectors; :func:`conforming_quads`).
+    Args:
+        spacing: grid spacing h [m] (``layout = "mesh"``: the target edge length).
+        beam_width: in-plane beam width [m].
+        beam_thickness: sheet thickness [m].
+        insert_half_size: r, the distance from an insert's centre to where it clamps the beams [m]
+            (one size for all inserts).
+        insert_half_sizes: the insert catalogue, a list of such sizes [m] (when given it replaces
+            ``insert_half_size``; each insert gets one, :func:`assign_sizes`).
+        spring_bulge: smallest Bezier handle pull towards the quad centre [-].
+        spring_slack: arc length margin over the deployed chord [-] (:mod:`simfab.deploy.springs`).
+        spring_width: in-plane width of the spring arcs [m] (narrower than the beams: the springs let
+            the cells grow in plane).
+        min_gap: smallest gap that can be cut [m].
+        min_beam: shortest half beam that carries its spring junction [m].
+        degenerate_angle_deg: interior angle above which a boundary quad gets no spring [deg].
+        layout: "grid", "conforming" or "mesh" (:func:`simfab.deploy.quadmesh.quad_meshes`).
+        springs: "zigzag" (an arc the Bezier family cannot make long enough becomes a zigzag,
+            :func:`zigzag_springs`; a quad where no zigzag fits takes one pull per arc) or "bezier"
+            (Bezier arcs at one pull per quad only, those short of the slack reported).
+        growth_fit: "vertex" (each insert's growth from its own u and mean edge length, :func:`gap_rule`)
+            or "edges" (fitted to every edge's length and u, :func:`edge_fitted_growth`).
+        conforming_core: "smoothed" (the conforming layout's core outline Laplacian-smoothed) or
+            "regular" (left on the grid: every core edge h long, as the vertex gap rule assumes).
     """
 
     spacing: float = 0.025
@@ -111,20 +115,33 @@ class PatternConfig:
 
 @dataclass(frozen=True)
 class Pattern:
-    """A flat pattern (arrays index the quad-mesh vertices, edges and quads).
+    """A flat pattern (arrays index the quad-mesh vertices, edges and quads); built by :func:`layout`.
 
-    P (n,2) [m]: quad vertices; quads (q,4) CCW; edges (e,2); edge_quads (e,2) (-1: none);
-    interior (n,) bool (insert vertices); u (n,) [-]: flattening log scale factor at the
-    vertices; gap (n,) [m]: gap half-size (0 on boundary vertices); gap_required (n,) [m]
-    (before clamping); unreachable (k,) vertex indices; spring (q,) bool; insert_ids (n,) int
-    (label number, -1 on the boundary); insert_size (n,) [m]: each insert's half-size r_i (0 on
-    the boundary); insert_class (n,) int: its index in ``config.sizes`` (-1 on the boundary);
-    bulge (q,4) [-]: spring handle pull per arc (one per quad, or per arc where a quad needs it:
-    :func:`simfab.deploy.springs.size_arcs`); growth (q,4) [-]: the growth of its four spring
-    arcs' chords in deployment (:func:`quad_growth`; about e^{-u} in a regular cell);
-    spring_ratio (q,4) [-]: the arcs' length/chord ratios; spring_legs (q,4) int: legs of each arc's zigzag (0: a
-    Bezier arc), spring_amplitude (q,4) [-]: the zigzag's leg height fraction; tight_springs (k,) quads whose arcs
-    cannot get the slack (see :mod:`simfab.deploy.springs`); config.
+    Args:
+        P: (n,2) [m] quad vertices.
+        quads: (q,4) vertex ids, CCW.
+        edges: (e,2) vertex ids.
+        edge_quads: (e,2) the quads on either side of each edge (-1: none).
+        interior: (n,) bool, the vertices with an insert.
+        u: (n,) [-] the flattening's log scale factor at the vertices.
+        gap: (n,) [m] gap half-size (0 on boundary vertices).
+        gap_required: (n,) [m] the gap before clamping to the achievable range.
+        unreachable: (k,) vertex ids whose required gap is outside the achievable range.
+        spring: (q,) bool, the quads with a torsional spring.
+        insert_ids: (n,) insert label numbers (-1 on the boundary).
+        insert_size: (n,) [m] each insert's half-size r_i (0 on the boundary).
+        insert_class: (n,) its index in ``config.sizes`` (-1 on the boundary).
+        bulge: (q,4) [-] spring handle pull per arc (one per quad, or per arc where a quad needs it:
+            :func:`simfab.deploy.springs.size_arcs`).
+        growth: (q,4) [-] the growth of the four spring arcs' chords in deployment (:func:`quad_growth`;
+            about e^{-u} in a regular cell).
+        spring_ratio: (q,4) [-] the arcs' length / chord ratios.
+        spring_legs: (q,4) legs of each arc's zigzag (0: a Bezier arc).
+        spring_amplitude: (q,4) [-] the zigzag's leg height fraction.
+        tight_springs: (k,) quads whose arcs cannot get the slack.
+        config: the :class:`PatternConfig`.
+        gap_max: (n,) [m] the largest gap the tuning may cut (:func:`tuning_gap_limit`).
+        cone_tip: (n,) bool, the vertex sits on a cone tip of a cut flattening.
     """
 
     P: np.ndarray
@@ -152,15 +169,27 @@ class Pattern:
 
     @property
     def n_inserts(self) -> int:
+        """The number of inserts."""
         return int(np.sum(self.interior))
 
     def class_label(self, v: int) -> str:
-        """Size-class letter (A = smallest) of the insert at vertex v ('' with a one-size catalogue)."""
+        """Size-class letter of an insert.
+
+        Args:
+            v: the vertex id.
+
+        Returns:
+            "A" for the smallest catalogue size, "B", ...; "" with a one-size catalogue.
+        """
         return CLASS_LETTERS[int(self.insert_class[v])] if len(self.config.sizes) > 1 else ""
 
     def bill_of_materials(self) -> list[dict]:
-        """Per catalogue size: class letter, half-size r [mm], plate side 2 (r + beam_width) [mm]
-        (the insert part as cut), count and the insert numbers."""
+        """The inserts to make, per catalogue size.
+
+        Returns:
+            One dict per size: size_class (letter), half_size_mm, plate_side_mm (2 (r + beam_width), the
+            insert part as cut), count and the insert numbers.
+        """
         out = []
         for k, r in enumerate(self.config.sizes):
             vs = np.flatnonzero(self.interior & (self.insert_class == k))
@@ -170,11 +199,19 @@ class Pattern:
         return out
 
     def midpoints(self) -> np.ndarray:
-        """(e,2) edge midpoints [m] (junction positions)."""
+        """Edge midpoints (the junction positions).
+
+        Returns:
+            (e,2) [m].
+        """
         return 0.5 * (self.P[self.edges[:, 0]] + self.P[self.edges[:, 1]])
 
     def beam_halves(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
-        """Per edge and end: (edge, vertex, start = midpoint (2,), end = beam end at the vertex (2,))."""
+        """Every half beam, from its edge's midpoint to its end at the vertex's gap.
+
+        Returns:
+            Per edge and end: (edge, vertex, start = midpoint (2,) [m], end = beam end at the vertex (2,) [m]).
+        """
         out = []
         mids = self.midpoints()
         for e, (a, b) in enumerate(self.edges):
@@ -185,15 +222,29 @@ class Pattern:
         return out
 
     def spring_curves(self, n=12) -> list[tuple[int, int, int, np.ndarray]]:
-        """Per spring arc: (quad, edge from, edge to, points (k,2) [m]) as cut: a Bezier arc at n+1
-        uniform parameters, a zigzag as its drawn polyline (:func:`simfab.deploy.springs.zigzag_points`)."""
+        """The spring arcs as cut.
+
+        Args:
+            n: segments of a Bezier arc (n + 1 uniform parameters).
+
+        Returns:
+            Per spring arc: (quad, edge from, edge to, points (k,2) [m]); a zigzag as its drawn polyline
+            (:func:`simfab.deploy.springs.zigzag_points`).
+        """
         return [(q, e0, e1, self._zigzag(q, k, e0, e1, rod=False) if self.spring_legs[q, k] else
                  bezier(*self._arc_ends(q, e0, e1), float(self.bulge[q, k]), n))
                 for q, k, e0, e1 in self._arcs()]
 
     def spring_rods(self, params: np.ndarray) -> list[tuple[int, int, int, np.ndarray]]:
-        """Per spring arc: (quad, edge from, edge to, rod nodes (k,2) [m]): a Bezier arc at the
-        parameters ``params`` (in [0, 1]), a zigzag at its own nodes (``ZIGZAG_SEGMENTS`` per piece)."""
+        """The spring arcs as rods.
+
+        Args:
+            params: the Bezier parameters (in [0, 1]) of a Bezier arc's rod nodes.
+
+        Returns:
+            Per spring arc: (quad, edge from, edge to, rod nodes (k,2) [m]); a zigzag at its own nodes
+            (``ZIGZAG_SEGMENTS`` per piece).
+        """
         return [(q, e0, e1, self._zigzag(q, k, e0, e1, rod=True) if self.spring_legs[q, k] else
                  bezier(*self._arc_ends(q, e0, e1), float(self.bulge[q, k]), params))
                 for q, k, e0, e1 in self._arcs()]
@@ -223,9 +274,19 @@ CLASS_LETTERS = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
 
 
 def assign_sizes(d: np.ndarray, gmax: np.ndarray, sizes, min_gap: float) -> np.ndarray:
-    """Catalogue index (k,) per insert (see module doc): d (k,) [m] the growth r - g each needs,
-    gmax (k,) [m] its largest achievable gap, sizes (s,) [m] the catalogue; the achievable gap
-    nearest the middle of [min_gap, gmax], else the smallest shortfall."""
+    """Catalogue size per insert: of the sizes whose gap ``g = r - d`` is achievable, the one nearest
+    the middle of [min_gap, gmax] (most margin for cut tolerances); where none is, the one with the
+    smallest shortfall.
+
+    Args:
+        d: (k,) [m] the growth r - g each insert needs.
+        gmax: (k,) [m] its largest achievable gap.
+        sizes: (s,) [m] the catalogue.
+        min_gap: the smallest gap [m].
+
+    Returns:
+        (k,) catalogue index per insert.
+    """
     r = np.asarray(sizes, dtype=np.float64)[None, :]
     g = r - np.asarray(d)[:, None]  # (k, s) gap each size would need
     hi = np.asarray(gmax)[:, None]
@@ -236,8 +297,16 @@ def assign_sizes(d: np.ndarray, gmax: np.ndarray, sizes, min_gap: float) -> np.n
 
 
 def gap_rule(u: np.ndarray, h: np.ndarray, r: float) -> np.ndarray:
-    """Gap half-size g = r - (h/2)(e^{-u} - 1) [m] for log scale factors u (n,) [-] and mean flat
-    edge lengths h (n,) [m] (see module doc)."""
+    """Gap half-size g = r - (h/2)(e^{-u} - 1) (see the module doc).
+
+    Args:
+        u: (n,) [-] log scale factors.
+        h: (n,) [m] mean flat edge lengths.
+        r: the insert half-size [m].
+
+    Returns:
+        (n,) [m].
+    """
     return r - 0.5 * h * np.expm1(-np.asarray(u, dtype=np.float64))
 
 
@@ -246,22 +315,27 @@ GROWTH_FIT_DIFFERENCE = 0.3
 
 
 def edge_fitted_growth(P: np.ndarray, edges: np.ndarray, u: np.ndarray, free: np.ndarray) -> np.ndarray:
-    """Insert growths d (n,) [m] fitted to the edges (``growth_fit = "edges"``): P (n,2) [m] the
-    vertices, edges (e,2), u (n,) [-] the log scale factor at the vertices, free (n,) bool the
-    vertices with an insert (the others join their beams rigidly: d = 0).
+    """Insert growths fitted to the edges (``growth_fit = "edges"``).
 
-    Deployment lengthens edge (a, b) of flat length L_e by d_a + d_b (its two beam ends move by
-    the inserts' growths); the target asks for G_e = (L_e/2)(e^{-u_a} + e^{-u_b} - 2) (the
-    trapezoid rule of e^{-u} along it), and each end's share differs by
-    D_e = (L_e/2)(e^{-u_a} - e^{-u_b}). Least squares in relative terms,
+    Deployment lengthens edge (a, b) of flat length L_e by d_a + d_b; the target asks for
+    G_e = (L_e/2)(e^{-u_a} + e^{-u_b} - 2) (the trapezoid rule of e^{-u} along it), each end's share
+    differing by D_e = (L_e/2)(e^{-u_a} - e^{-u_b}). Least squares in relative terms,
 
         min_d  sum_e ((d_a + d_b - G_e) / L_e)^2 + mu^2 sum_{e: a, b free} ((d_a - d_b - D_e) / L_e)^2,
 
-    mu = :data:`GROWTH_FIT_DIFFERENCE`: the sums carry the metric; the differences, weaker, remove
-    the null direction of the sums on a bipartite quad mesh (alternating +t / -t on its two vertex
-    classes). On a uniform grid d = (h/2)(e^{-u} - 1), the vertex rule, zeroes every residual;
-    where edges differ in length (a smoothed pillow layer, an unstructured mesh) the edges' sums
-    are matched instead of each vertex's mean edge length's growth."""
+    mu = :data:`GROWTH_FIT_DIFFERENCE` (the differences remove the sums' null direction on a
+    bipartite quad mesh). On a uniform grid d = (h/2)(e^{-u} - 1), the vertex rule, zeroes every
+    residual; where edges differ in length the edges' sums are matched instead.
+
+    Args:
+        P: (n,2) [m] the vertices.
+        edges: (e,2) vertex ids.
+        u: (n,) [-] the log scale factor at the vertices.
+        free: (n,) bool, the vertices with an insert (the others join their beams rigidly: d = 0).
+
+    Returns:
+        d (n,) [m].
+    """
 
     n = len(P)
     a, b = edges[:, 0], edges[:, 1]
@@ -315,12 +389,26 @@ def check_cell_count(area: float, h: float, *, what: str = "the target") -> None
 
 def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarray, cfg: PatternConfig, *,
            seams=(), cone_tips=()) -> Pattern:
-    """Lay the pattern out on a flattening (uv (n,2) [m], ordered boundary loop, faces, u (n,)).
-    ``seams``: flat polylines [(k,2) m] of the cut sides of a cut flattening (their boundary
-    vertices get inserts); ``cone_tips`` (c,2) [m]: the cones' flat positions (a pattern vertex
-    there takes its growth from :func:`cone_tip_growth`). ``Pattern.gap_max``: the largest gap the
-    tuning may cut (:func:`tuning_gap_limit`). ``layout = "mesh"``: the pattern of the best of the
-    :data:`MESH_RECIPES` meshings (fewest :func:`defects`, then the largest covered area)."""
+    """Lay the pattern out on a flattening.
+
+    With ``layout = "mesh"`` the pattern of the best of the candidate meshings (fewest
+    :func:`defects`, then the largest covered area).
+
+    Args:
+        uv: (n,2) [m] the flat vertices.
+        boundary: the ordered boundary loop (vertex ids).
+        faces: (m,3) the triangles.
+        u: (n,) [-] the log scale factor.
+        cfg: the :class:`PatternConfig`.
+        seams: flat polylines [(k,2) m] of the cut sides of a cut flattening (their boundary vertices
+            get inserts).
+        cone_tips: (c,2) [m] the cones' flat positions (a pattern vertex there takes its growth from
+            :func:`cone_tip_growth`).
+
+    Returns:
+        The :class:`Pattern` (``gap_max``: the largest gap the tuning may cut). InputError when the
+        boundary self-intersects or no quad fits.
+    """
 
     poly = shapely.Polygon(uv[boundary])
     if not poly.is_valid:
@@ -338,14 +426,28 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
 
 
 def covered_fraction(pat: Pattern, poly) -> float:
-    """The fraction [-] of the flat domain ``poly`` (a shapely Polygon) that the pattern's quads cover
-    (their parts outside it not counted)."""
+    """The fraction of the flat domain the pattern's quads cover (their parts outside it not counted).
+
+    Args:
+        pat: the :class:`Pattern`.
+        poly: the flat domain (a shapely Polygon).
+
+    Returns:
+        The fraction [-].
+    """
 
     return float(np.sum(shapely.area(shapely.intersection(shapely.polygons(pat.P[pat.quads]), poly))) / poly.area)
 
 
 def defects(pat: Pattern) -> int:
-    """Inserts whose gap is unreachable, quads short of spring slack and quads without a spring."""
+    """Count what a layout leaves wanting.
+
+    Args:
+        pat: the :class:`Pattern`.
+
+    Returns:
+        Inserts whose gap is unreachable + quads short of spring slack + quads without a spring.
+    """
     return int(len(pat.unreachable) + len(pat.tight_springs) + np.sum(~pat.spring))
 
 
@@ -435,16 +537,26 @@ TIP_QUADRATURE = 8
 
 
 def cone_tip_growth(P: np.ndarray, edges: np.ndarray, v: int, uv, faces, u) -> float:
-    """Growth d [m] of the insert at a cone tip v: the mean over its edges of the half edge's
-    growth in deployment,
+    """Growth of the insert at a cone tip: the mean over its edges of the half edge's growth,
 
         d = mean_e  int_0^{L_e/2} (e^{-u(s)} - 1) ds      (s from the tip along edge e),
 
-    u interpolated on the flat triangulation (uv, faces, u), Gauss-Legendre with
-    :data:`TIP_QUADRATURE` points. The gap rule's endpoint value (h/2)(e^{-u_v} - 1) is 0 there (u = 0
-    at a cone, :mod:`simfab.deploy.cuts`) while the first ring around the cone shrank: the cone
-    metric's u is singular at a cone (its vertex value 0 is the discrete convention), so the
-    endpoint rule misses the whole half edge."""
+    u interpolated on the flat triangulation, Gauss-Legendre with :data:`TIP_QUADRATURE` points. The
+    gap rule's endpoint value is 0 there (u = 0 at a cone, :mod:`simfab.deploy.cuts`) while the first
+    ring around the cone shrank: the cone metric's u is singular at the cone, so the endpoint rule
+    misses the whole half edge.
+
+    Args:
+        P: (n,2) [m] the pattern's vertices.
+        edges: (e,2) its edges.
+        v: the tip vertex.
+        uv: (m,2) [m] the flat triangulation's vertices.
+        faces: its triangles.
+        u: (m,) [-] the log scale factor on it.
+
+    Returns:
+        d [m].
+    """
     es = edges[np.any(edges == v, axis=1)]
     other = es.sum(axis=1) - v
     x, w = np.polynomial.legendre.leggauss(TIP_QUADRATURE)
@@ -456,13 +568,25 @@ def cone_tip_growth(P: np.ndarray, edges: np.ndarray, v: int, uv, faces, u) -> f
 
 
 def zigzag_springs(P, quads, qmids, growth, ratio, tight, cfg: PatternConfig):
-    """Zigzag springs where a Bezier arc cannot get the slack: each arc of a ``tight`` quad (q,)
-    bool short of S/c >= (1 + spring_slack) max(growth, 1) becomes the shortest zigzag that reaches
-    it (:func:`simfab.deploy.springs.size_zigzag`), or the longest one that fits where that is
-    longer than the Bezier arc. The zigzag stays ``spring_width`` inside its triangle (edge
-    midpoints and quad centre); the quad's Bezier arcs keep ``spring_width`` from the centre (their
-    sizing), which they approach only near the triangles' shared apex. Returns legs (q,4)
-    int (0: Bezier), amplitude (q,4), S/c (q,4) and the quads still short of the slack (q,) bool."""
+    """Zigzag springs where a Bezier arc cannot get the slack.
+
+    Each arc of a ``tight`` quad short of S/c >= (1 + spring_slack) max(growth, 1) becomes the
+    shortest zigzag that reaches it (:func:`simfab.deploy.springs.size_zigzag`), or the longest one
+    that fits where that is longer than the Bezier arc; the zigzag stays ``spring_width`` inside its
+    triangle (edge midpoints and quad centre).
+
+    Args:
+        P: (n,2) [m] the vertices.
+        quads: (q,4) the quads.
+        qmids: (q,4,2) [m] the midpoint of each quad's edge (v_k, v_k+1).
+        growth: (q,4) [-] the arcs' chord growths (:func:`quad_growth`).
+        ratio: (q,4) [-] the Bezier arcs' S/c.
+        tight: (q,) bool, the quads short of the slack.
+        cfg: the :class:`PatternConfig`.
+
+    Returns:
+        (legs (q,4) int (0: Bezier), amplitude (q,4) [-], S/c (q,4), the quads still short (q,) bool).
+    """
     legs, amp = np.zeros((len(quads), 4), dtype=np.int64), np.zeros((len(quads), 4))
     ratio, tight = ratio.copy(), tight.copy()
     need = (1.0 + cfg.spring_slack) * np.maximum(growth, 1.0)
@@ -477,10 +601,19 @@ def zigzag_springs(P, quads, qmids, growth, ratio, tight, cfg: PatternConfig):
 
 
 def tuning_gap_limit(gmax, emin, gap, min_beam: float, cut: bool) -> np.ndarray:
-    """(n,) [m] the largest gap the tuning may cut (``Pattern.gap_max``): the achievable limit
-    ``gmax``; on a cut pattern (``cut``: the wedges leave short clipped edges next to inserts) also
-    at most half the vertex's shortest edge ``emin`` less ``min_beam``, or the gap the layout cut
-    (a beam half would otherwise shrink to zero length, measured on the petal)."""
+    """The largest gap the tuning may cut (``Pattern.gap_max``).
+
+    Args:
+        gmax: (n,) [m] the achievable limit.
+        emin: (n,) [m] each vertex's shortest edge.
+        gap: (n,) [m] the gap the layout cut.
+        min_beam: the shortest half beam [m].
+        cut: a cut pattern (its wedges leave short clipped edges next to inserts): then also at most
+            emin/2 - min_beam, or the layout's gap (a half beam would otherwise shrink to nothing).
+
+    Returns:
+        (n,) [m].
+    """
     if not cut:
         return gmax
     return np.minimum(gmax, np.maximum(0.5 * emin - min_beam, gap))
@@ -490,9 +623,18 @@ SEAM_TOL = 1e-6  # [spacings] where the seams are cut out of the domain's outlin
 
 
 def near_seams(P: np.ndarray, poly, seams, h: float) -> np.ndarray:
-    """(n,) bool: points P (n,2) [m] nearer to one of the seam polylines [(k,2)] than to the rim (the
-    flat domain ``poly``'s outline without the seams; u = 0 there): the pattern's outline along a
-    cut, on the seam or inside the domain where the grid dropped the cells a wedge crosses."""
+    """The points nearer a seam than the rim (the pattern's outline along a cut, on the seam or inside
+    the domain where the grid dropped the cells a wedge crosses).
+
+    Args:
+        P: (n,2) [m] points.
+        poly: the flat domain (a shapely Polygon); its outline without the seams is the rim (u = 0).
+        seams: the seam polylines [(k,2) m].
+        h: the spacing [m].
+
+    Returns:
+        (n,) bool.
+    """
 
     if not len(seams):
         return np.zeros(len(P), dtype=bool)
@@ -506,10 +648,18 @@ OUTSIDE_AREA = 0.1  # a quad with more than this fraction of its area outside th
 
 
 def drop_outside_quads(poly, P: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Drop quads with more than ``OUTSIDE_AREA`` of their area outside the flat domain ``poly``
-    (a grid cell whose corners lie on both sides of a cut's wedge, :mod:`simfab.deploy.cuts`, would
-    bridge the seam), keep the largest edge-connected set: (P, quads) re-indexed. A no-op on a
-    domain without notches (the cells' corners lie in it or on its boundary)."""
+    """Drop quads with more than :data:`OUTSIDE_AREA` of their area outside the flat domain (a cell whose
+    corners lie on both sides of a cut's wedge would bridge the seam) and keep the largest
+    edge-connected set; a no-op on a domain without notches.
+
+    Args:
+        poly: the flat domain (a shapely Polygon).
+        P: (n,2) [m] vertices.
+        quads: (q,4) quads.
+
+    Returns:
+        (P, quads) re-indexed.
+    """
 
     cells = shapely.polygons(P[quads])
     out = shapely.area(shapely.difference(cells, poly)) > OUTSIDE_AREA * shapely.area(cells)
@@ -521,11 +671,21 @@ def drop_outside_quads(poly, P: np.ndarray, quads: np.ndarray) -> tuple[np.ndarr
 
 
 def quad_growth(P: np.ndarray, quads: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """(q,4) [-] growth of the chords of each quad's four spring arcs, arc k around corner k+1 (the
-    order of :meth:`Pattern.spring_curves`). The arc around corner
-    v joins the midpoints of v's two edges, at distances a, b from v; deployment lengthens both
-    half-edges by d_v (d (n,) [m] = r - g, 0 on the boundary), so with the corner angle alpha kept
-    the chord grows from sqrt(a^2 + b^2 - 2ab cos alpha) to the same with a + d_v, b + d_v."""
+    """Growth of the chords of each quad's four spring arcs in deployment.
+
+    Arc k lies around corner k+1 (the order of :meth:`Pattern.spring_curves`) and joins the midpoints
+    of that corner's two edges, at distances a, b from it; deployment lengthens both half edges by
+    d_v, so with the corner angle alpha kept the chord grows from sqrt(a^2 + b^2 - 2ab cos alpha) to
+    the same with a + d_v, b + d_v.
+
+    Args:
+        P: (n,2) [m] vertices.
+        quads: (q,4) quads.
+        d: (n,) [m] each vertex's growth r - g (0 on the boundary).
+
+    Returns:
+        (q,4) [-] chord growth factors.
+    """
     v = quads
     prev, nxt = np.roll(quads, 1, axis=1), np.roll(quads, -1, axis=1)
     A = 0.5 * (P[prev] - P[v])  # (q,4,2) corner -> midpoint of the edge to the previous corner
@@ -546,10 +706,21 @@ def _max_angle(Q: np.ndarray) -> float:
 
 
 def interpolate(uv, faces, values, P) -> np.ndarray:
-    """Piecewise-linear interpolation of per-vertex ``values`` (n,) or (n,k) on the flat triangulation
-    at P (m,2); points outside (a conforming layout's boundary vertices, up to ~ a sagitta off the
-    boundary) take the value at their nearest point of the triangulation's boundary edges (linear
-    along the edge): the field extended constant along the boundary's normal."""
+    """Piecewise-linear interpolation of per-vertex values on the flat triangulation.
+
+    Points outside it (a conforming layout's boundary vertices, up to about a sagitta off the
+    boundary) take the value at their nearest point of the boundary edges (the field extended
+    constant along the boundary's normal).
+
+    Args:
+        uv: (n,2) [m] the triangulation's vertices.
+        faces: (m,3) its triangles.
+        values: (n,) or (n,k) per-vertex values.
+        P: (p,2) [m] the points.
+
+    Returns:
+        (p,) or (p,k).
+    """
     import matplotlib.tri as mtri
 
     vals = np.asarray(values, dtype=np.float64)
@@ -579,5 +750,15 @@ def interpolate(uv, faces, values, P) -> np.ndarray:
 
 
 def map_to_surface(uv, faces, V, P) -> np.ndarray:
-    """3D target points (k,3) [m] of flat points P (k,2): barycentric on the flat triangulation."""
+    """The target points of flat points (barycentric on the flat triangulation).
+
+    Args:
+        uv: (n,2) [m] the flattening.
+        faces: (m,3) its triangles.
+        V: (n,3) [m] the target's vertices.
+        P: (k,2) [m] flat points.
+
+    Returns:
+        (k,3) [m].
+    """
     return interpolate(uv, faces, V, P)

@@ -67,6 +67,14 @@ def _good_quad(Q: np.ndarray, h: float) -> bool:
 
 def largest_component(quads: np.ndarray) -> np.ndarray:
 
+    """The largest edge-connected set of quads.
+
+    Args:
+        quads: (q,4) vertex ids.
+
+    Returns:
+        (q',4) the quads of the largest component.
+    """
     e = np.sort(np.concatenate([quads[:, [k, (k + 1) % 4]] for k in range(4)]), axis=1)
     q = np.tile(np.arange(len(quads)), 4)
     _, inv = np.unique(e, axis=0, return_inverse=True)
@@ -77,7 +85,20 @@ def largest_component(quads: np.ndarray) -> np.ndarray:
 
 
 def clipped_grid(poly, uv, h):
-    """The clipped square grid (``layout = "grid"``): (P (n,2), quads (q,4) CCW)."""
+    """The clipped square grid (``layout = "grid"``).
+
+    Grid nodes inside the domain are kept; a cell with three or two (adjacent) corners inside gets its
+    outside corners projected to the nearest boundary point; cells that become too small (an edge
+    < h/4) or non-convex are dropped.
+
+    Args:
+        poly: the flat domain (a shapely Polygon) [m].
+        uv: (n,2) [m] the flattening's vertices (the grid's extent).
+        h: the spacing [m].
+
+    Returns:
+        (P (n,2) [m], quads (q,4) CCW); InputError naming ``pattern.spacing`` when no cell fits.
+    """
 
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     ni = np.arange(np.floor(lo[0] / h) - 1, np.ceil(hi[0] / h) + 2)
@@ -119,18 +140,22 @@ MESH_CORNER_DEG = 25.0  # outline vertices turning by more than this are corners
 
 @dataclass(frozen=True, kw_only=True)
 class MeshRecipe:
-    """One quad meshing of the flat domain (:func:`mesh_quads`). full_quad: True - a triangulation
-    of edge 2 ``size`` h, its triangles paired into quads (a maximum-weight matching, the quads'
-    squareness the weight), then every quad split into 4 and every unpaired triangle into 3 (edge ~h,
-    no triangle left, inserts with 3-6 beams); False - a triangulation of edge ``size`` h whose
-    triangles are all paired into quads (a perfect matching; None when none exists: an odd number
-    of outline edges, or the triangles' adjacency has none); size [spacings]; uniform_outline: each
-    outline curve (between corners) divided into round(L / h) equal edges (at least one; one curve
-    gets one more when a perfect matching needs an even total) - the two sides of a seam, of equal
-    flat length, then get facing vertices. lattice: the interior seeded with a square lattice of the
-    triangulation's edge centred on the domain (its triangles pair back into squares: a regular core,
-    split into h squares when full_quad), its points at least ``margin`` edges from the outline;
-    False: Triangle's own quality refinement places them."""
+    """One quad meshing of the flat domain (:func:`mesh_quads`).
+
+    Args:
+        full_quad: True: a triangulation of edge 2 ``size`` h, its triangles paired into quads (a
+            maximum-weight matching, the quads' squareness the weight), then every quad split into 4
+            and every unpaired triangle into 3 (edge ~h, inserts with 3-6 beams); False: a
+            triangulation of edge ``size`` h whose triangles are all paired into quads (a perfect
+            matching; none when it does not exist).
+        size: the triangulation's edge [spacings].
+        uniform_outline: each outline curve (between corners) divided into round(L / h) equal edges
+            (the two sides of a seam, of equal flat length, then get facing vertices).
+        lattice: the interior seeded with a square lattice of the triangulation's edge centred on the
+            domain (its triangles pair back into squares: a regular core); False: Triangle's own
+            quality refinement places the points.
+        margin: the lattice points' distance from the outline [edges].
+    """
 
     full_quad: bool
     size: float
@@ -383,34 +408,24 @@ SMOOTHING_ITERATIONS = 20  # sweeps of conforming_core = "smoothed"
 
 def conforming_quads(poly, h: float, uv: np.ndarray, *,
                      sweeps: int = SMOOTHING_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
-    """Boundary-conforming quad mesh of the flat domain ``poly`` (``layout = "conforming"``):
-    (P (n,2) [m], quads (q,4) CCW).
+    """Boundary-conforming quad mesh of the flat domain (``layout = "conforming"``).
 
-    Method (a square grid with one *pillow* layer, as in hexahedral meshing): the core is the
-    grid cells (spacing h, on the grid through the origin) whose four corners lie inside the
-    domain at least ``CORE_MARGIN`` h from its boundary (the largest edge-connected set, cells that
-    touch the rest at one corner only removed, so its outline is one simple loop v_0 .. v_m).
-    Every loop vertex gets a boundary vertex p_k (its nearest boundary point, then spread along
-    the boundary by arc length so that their order follows the loop's), and every loop edge
-    (v_k, v_k+1) one quad (v_k, p_k, p_k+1, v_k+1): each pillow quad has exactly two vertices on
-    the boundary, so no quad degenerates into a triangle with three boundary vertices on a line
-    (what clipping a grid cell does where the boundary runs across it). Then Laplacian smoothing of
-    the core's outline vertices (``sweeps`` Jacobi sweeps, boundary vertices fixed; the uniform
-    grid is its fixed point, so only the cells near the boundary move). Smoothing lifts the pillow
-    quads' angles at the staircase corners below ``degenerate_angle_deg``, but moves the outline
-    vertices off the grid: the vertex gap rule, which gives all of an insert's beams one growth
-    from their mean edge length, then over- and under-grows its unequal edges (docs/decisions.md:
-    the dome). ``sweeps = 0`` keeps the core on the grid and puts each p_k where the outward
-    bisector of its loop vertex meets the boundary instead (:func:`_bisector_positions`, not
-    relaxed along it): at a convex staircase corner the nearest point would continue one of the
-    core's edges, a straight angle in its pillow quad. The chord
-    polygon of the p_k on the boundary would leave out the segments between the chords and the
-    boundary (sagitta s ~ h^2 / (8 R) for a boundary of curvature radius R, ~1.2 % of the bundled
-    targets' area); the p_k are moved off the boundary so that every chord's segment is balanced
-    (:func:`_area_preserving`): the outline crosses the boundary, and what it leaves out is
-    (4/9) s a per chord (a: the half length over which the boundary lies outside it; 0.128 s L for a
-    circular arc instead of 2/3 s L), matched by as much outside. Staircase corners of
-    the core give loop vertices of valence 3 (convex) or 5 (concave) - inserts with 3 or 5 beams.
+    A square grid core with one *pillow* layer (as in hexahedral meshing): the core is the grid cells
+    whose corners lie at least :data:`CORE_MARGIN` h inside the domain; every vertex v_k of its outline
+    loop gets a boundary vertex p_k, and every loop edge one quad (v_k, p_k, p_k+1, v_k+1), so no quad
+    has three boundary vertices on a line. ``sweeps`` Laplacian sweeps then smooth the core's outline
+    (``sweeps = 0``: the core stays on the grid and each p_k lies on its loop vertex's outward
+    bisector). The p_k are moved off the boundary so that each chord's segment area is balanced
+    (:func:`_area_preserving`). Method notes: docs/methods.md, "simfab.deploy.quadmesh".
+
+    Args:
+        poly: the flat domain (a shapely Polygon) [m].
+        h: the spacing [m].
+        uv: (n,2) [m] the flattening's vertices (the grid's extent).
+        sweeps: Jacobi sweeps of the core's outline (0: left on the grid).
+
+    Returns:
+        (P (n,2) [m], quads (q,4) CCW); InputError naming ``pattern.spacing`` when no core cell fits.
     """
 
     ring = poly.exterior
