@@ -1,42 +1,24 @@
 """Cuts: BFF with cone singularities chosen automatically, cut paths from the cones to the boundary.
 
-Why. The flat pattern grows (or shrinks) each cell by e^{-u}; the inserts reach only a bounded
-growth (``min_gap <= r - d <= h/2 - min_beam`` for d = (h/2)(e^{-u} - 1) and r from the insert
-catalogue, :mod:`simfab.deploy.pattern`). A steep cap shrinks its centre beyond that. A cone
-singularity concentrates curvature at one vertex, so the flat metric ``e^{2u} g`` needs less
-scaling around it; a cut from the cone to the boundary lets that metric lie flat.
-
-Cone metric (discrete Yamabe equation, the notation of :mod:`simfab.deploy.flatten`). With the
-cones C added to the Dirichlet set, ``u = 0`` on the boundary and at the cones and
+A steep cap shrinks its centre beyond the growth the inserts reach; a cone concentrates curvature
+at one vertex so that the flat metric e^{2u} g needs less scaling around it. Cone metric (the
+notation of :mod:`simfab.deploy.flatten`; u = 0 on the boundary and at the cones C):
 
     A_{I'I'} u_{I'} = -Omega_{I'}            (I' = interior vertices that are not cones),
 
-the metric ``e^{2u} g`` is flat at every vertex of I' and has the angle defect
-``Omega~_c = Omega_c + (A u)_c`` at each cone c (Gauss-Bonnet: sum Omega~ + sum k~ = 2 pi). u = 0 at
-a cone is the choice of Ben-Chen, Gotsman and Bunin (2008): each cone absorbs the curvature around
-it so that the scale there is 1. One Cholesky factor per cone set (the meshes are small).
+flat at every vertex of I', with the angle defect Omega~_c = Omega_c + (A u)_c at each cone c
+(Ben-Chen, Gotsman and Bunin 2008; :func:`cone_metric`).
 
-Greedy placement. Repeat: solve for u; if every interior vertex's growth is reachable by some
-catalogue size (``reachable``) and within the springs' reach (``e^{-u} <= max_growth``), stop;
-else put a cone at the vertex with the most negative u among
-those at least ``boundary_distance`` spacings (graph distance along mesh edges) from the boundary
-and ``cone_distance`` spacings from every cone, up to ``max_cones``. Only u < 0 vertices (the
-flattening shrank them) are candidates: their cones have Omega~ > 0 and open into a wedge in the
-plane; a cone at u > 0 would have Omega~ < 0, and its two cut sides would overlap in the plane
-(not one sheet).
+- :func:`place_cones`: greedy; while some interior vertex's growth is unreachable by the
+  catalogue (:func:`reachable`) or beyond ``max_growth``, a cone at the most negative u at least
+  ``boundary_distance`` / ``cone_distance`` spacings from the boundary and the other cones;
+- :func:`cut_paths`: shortest mesh-edge paths from each cone to the boundary (a forest: the cut
+  mesh stays a disk); :func:`cut_mesh` duplicates the cut vertices;
+- :func:`flatten_with_cuts`: BFF of the cut mesh with the cone metric's u prescribed on its
+  boundary; both sides of a cut are congruent (the seams), free in deployment or tied
+  (:func:`seam_ties`, ``join_seams``).
 
-Cut paths. Each cone in turn is joined by the shortest mesh-edge path (Dijkstra on 3D edge
-lengths) to the boundary, around the earlier cuts (or onto one, where they wall the cone off):
-the cuts form a forest rooted on the boundary, so the cut mesh is again a disk. Cutting
-duplicates each cut vertex once per wedge of faces between its cut edges (:func:`cut_mesh`).
-
-Flattening with cones. The cut mesh is flattened by BFF with the cone metric's u prescribed on
-its whole boundary (0 on the original boundary and the cones, u along both sides of every cut):
-:func:`simfab.deploy.flatten.flatten` (``u_boundary``). Both sides of a cut get the same lengths
-``e^{(u_i+u_j)/2} l_ij`` and, the metric being flat, are congruent up to a rigid motion (rotation by
-the cone angle): the seams. In deployment the seams stay free (two boundary edges of the
-network), or, with ``join_seams``, facing seam vertices are tied (:func:`seam_ties`); the
-deviation is measured against the target surface.
+The reasoning in full: docs/methods.md, "simfab.deploy.cuts".
 """
 
 from __future__ import annotations

@@ -1,37 +1,19 @@
 """Boundary First Flattening (Sawhney & Crane 2017) with zero (or prescribed) boundary scale factors.
 
-Input: a disk-topology triangle mesh V (n,3) [m], F (m,3). Output: flat positions (n,2) [m]
-whose metric is conformal to the input's, ``g_flat = e^{2u} g``, with ``u = 0`` on the
-boundary (boundary edge lengths kept; the flattening of least area distortion, Springborn et
-al. 2008) and no cone singularities. Cones enter as prescribed boundary scale factors of a cut
-mesh (``flatten(..., u_boundary=...)``, :mod:`simfab.deploy.cuts`).
+A disk-topology mesh V (n,3) [m], F (m,3) is flattened to (n,2) [m] with a metric conformal to its
+own, g_flat = e^{2u} g, u = 0 on the boundary (the flattening of least area distortion) or the
+``u_boundary`` given (the cone metric of a cut mesh, :mod:`simfab.deploy.cuts`). With A the cotan
+Laplacian, Omega the interior angle defects and k the boundary geodesic curvatures
+(:func:`flatten`, one Cholesky factor of A_II for every solve):
 
-Discrete quantities (A: the cotan Laplacian, positive semi-definite, ``(A u)_i = sum_j w_ij
-(u_i - u_j)``, ``w_ij = (cot a_ij + cot b_ij) / 2`` over the two angles opposite edge ij):
+1. A_II u_I = -Omega_I (a flat metric; u <= 0 where the surface is positively curved);
+2. k~_B = k_B + A_BI u_I (the target boundary curvature);
+3. the boundary curve from the edge lengths e^{(u_i+u_j)/2} l_ij and tangent angles sum k~, closed
+   by the least-squares angle correction (``closure_angle_correction`` [rad]);
+4. the interior: harmonic extension A_II x_I = -A_IB x_B.
 
-- angle defect ``Omega_i = 2 pi - sum theta_i`` at interior vertices (integrated Gaussian
-  curvature [rad]) and ``k_i = pi - sum theta_i`` at boundary vertices (integrated geodesic
-  curvature [rad]);
-- discrete Yamabe equation: the conformally scaled metric has curvatures
-  ``Omega~ = Omega + (A u)_I``, ``k~ = k + (A u)_B`` (a vertex with smaller u than its
-  neighbours sees larger angles around it, so its defect drops). Gauss-Bonnet is kept since
-  ``1^T A = 0``.
-
-Steps (one Cholesky factorization of A_II, reused for every solve):
-
-1. interior Dirichlet problem for a flat metric with ``u_B = 0``:
-   ``A_II u_I = -Omega_I``  (u <= 0 where the surface is positively curved);
-2. target boundary curvature ``k~_B = k_B + A_BI u_I`` (Dirichlet-to-Neumann map);
-3. boundary curve: edge lengths ``l~ = e^{(u_i+u_j)/2} l = l`` (u_B = 0), tangent angles
-   ``phi_i = sum_{j<=i} k~_j``; the polygon closes only up to discretization error, so the
-   tangent angles get the least-squares (minimum-norm) correction that closes it (Gauss-Newton
-   on ``sum_i l_i (cos phi_i, sin phi_i) = 0``). The lengths stay exact (to round-off);
-   ``closure_angle_correction`` [rad] reports the largest angle change;
-4. interior: harmonic extension of the boundary positions, ``A_II x_I = -A_IB x_B`` (two more
-   solves with the same factor).
-
-Outputs per vertex ``u`` (n,) [-] and per face the area distortion ``sigma_f = 1/2 log(area_flat
-/ area_3d)`` [-] (the piecewise-constant log scale factor the flat map realizes; sigma ~ u).
+Outputs: u per vertex and the area distortion sigma_f = 1/2 log(area_flat / area_3d) per face.
+The discrete quantities in full: docs/methods.md, "simfab.deploy.flatten".
 """
 
 from __future__ import annotations

@@ -1,45 +1,22 @@
 """Deployment of a flat pattern as a network of discrete elastic rods with rigid inserts.
 
-Network (built from a :class:`simfab.deploy.pattern.Pattern`, flat in z = 0):
+Network (:func:`build_network`, from a :class:`simfab.deploy.pattern.Pattern`, flat in z = 0):
+free rigid bodies for the inserts (``I<id>``), the boundary junctions (``B<v>``) and the edge
+midpoints (``J<e>``); two half-beam rods per edge (midpoint junction to the vertex's insert at the
+gap g, or to the boundary junction); one rod per spring arc (rest shape: the flat, cut shape);
+optional seam ties across the wedges of a cut pattern (:func:`simfab.deploy.cuts.seam_ties`); a
+statically determinate 3-2-1 support on three spring arcs' middle nodes.
 
-- bodies (all free 6-DOF rigid bodies of :mod:`simfab.rods`): one insert per interior quad
-  vertex (``I<id>``), one junction per boundary vertex (``B<v>``) and one per edge midpoint
-  (``J<e>``);
-- rods (rectangular section: width in the sheet, thickness along the sheet normal): each
-  edge is two half beams from its midpoint junction (clamped) to the vertex (clamped to the
-  vertex's insert at the beam end, i.e. at distance g from the insert centre in the flat state,
-  or to the boundary junction); each spring arc is a rod clamped to the junctions of the two
-  edge midpoints it joins. Rest shape = the flat, cut shape (springs carry their Bezier or zigzag curvature).
-- seam ties (optional, a cut pattern whose seams are closed, :func:`simfab.deploy.cuts.seam_ties`):
-  a straight beam across the wedge between two seam vertices facing each other on the
-  target, clamped to both (its short end edges rigid in the vertex bodies, like a beam's:
-  :data:`TIE_SEGMENTS_PER_BEAM_SEGMENT`); in deployment its clamp
-  offsets move outwards along it by (L_flat - L_target)/2 at each end, like an insert's beam
-  ends, so the two vertices are drawn from their flat distance to their target distance (the
-  seam is closed; the tie is not part of the laser-cut sheet but a joint made at assembly);
-- support: a statically determinate 3-2-1 support on the middle nodes of three spring arcs
-  (near the centre: x, y, z; towards +x: y, z; towards +y: z) removes the six rigid motions
-  without constraining the deformation (as in the unit cell).
+Deployment (:func:`deploy`, quasi-static as in :mod:`simfab.deploy.unitcell`): the beam ends'
+attachment points move from the gap (g_i) to the insert's edge (r) in ``increments`` steps, each
+solved to equilibrium from the last.
 
-Deployment (quasi-static, as in :mod:`simfab.deploy.unitcell`): the beam ends' attachment
-points on the inserts move from the gap (g_i) to the insert's edge (r) in ``increments``
-steps, each solved to equilibrium from the last.
-
-Branch selection (the flat pattern can buckle into many shapes; the target says which one is
-meant): (1) predictor: each increment starts from the tangent continuation of the last
-equilibrium, dq = -H^{-1} (dg/dlambda) / increments (implicit function theorem,
-:meth:`simfab.rods.statics.StaticSolver.offset_sensitivity`; the nearly inextensible beams make a
-plain restart from the last state cost 2x the Newton iterations), and the first increment
-also moves by 1/increments of the out-of-plane part of the displacement field D that takes
-every node and body from its flat position to the target point its flat position maps to (the
-target rigidly aligned to the flat pattern, D = 0 at the fully supported node; its in-plane
-part is the metric change that the tangent already carries). It is only the Newton start, the
-equilibrium is the rods'; (2) while drawing in,
-every insert carries a small out-of-plane load ``f_i = perturbation * B1 / h^2 * s_i`` with
-``s_i`` in [-1, 1] the target's height at the insert above its best-fit plane, minus its
-least-squares plane over the inserts' flat positions (no resultant force or moment), normalised. The
-load is removed for the final solve, so the reported state is an unloaded equilibrium whose
-stability (positive-definite reduced Hessian) is reported.
+Branch selection: (1) each increment starts from the tangent continuation of the last equilibrium,
+dq = -H^{-1} (dg/dlambda) / increments, the first also moved by 1/increments of the out-of-plane
+part of the displacement to the target (a Newton start only); (2) while drawing in, each insert
+carries a small out-of-plane load f_i = perturbation B1 / h^2 s_i (s_i: the target's normalised
+height there, no resultant force or moment), removed for the final solve, so the reported state is
+an unloaded equilibrium whose stability is reported. In full: docs/methods.md, "simfab.deploy.network".
 """
 
 from __future__ import annotations

@@ -1,48 +1,21 @@
-"""Torsional springs of a pattern: cubic Bezier arcs between consecutive edge midpoints of a quad,
-with their bulge sized from the growth the quad must undergo.
+"""Torsional springs of a pattern: cubic Bezier arcs (or zigzags) between consecutive edge midpoints
+of a quad, sized from the growth the quad undergoes in deployment.
 
-Arc (quad with centre c, consecutive edge midpoints M0, M1; handle pull b [-]):
+Arc (quad centre c, consecutive edge midpoints M0, M1; handle pull b [-]):
 
     P1 = M0 + b (c - M0),  P2 = M1 + b (c - M1),
-    B(t) = (1-t)^3 M0 + 3 (1-t)^2 t P1 + 3 (1-t) t^2 P2 + t^3 M1,   t in [0, 1],
+    B(t) = (1-t)^3 M0 + 3 (1-t)^2 t P1 + 3 (1-t) t^2 P2 + t^3 M1,   t in [0, 1].
 
-so the arc leaves each midpoint towards the quad centre and bulges inwards (b = 1: both handles
-at the centre; b > 1: the arc passes closer to the centre than its handles' foot points).
+Deployment grows an arc's chord c by s (:func:`simfab.deploy.pattern.quad_growth`); an arc of
+length S follows by bending only while S > s c (straightened, it carries the growth in tension and
+the beams buckle locally). Each quad's b is the smallest b >= ``spring_bulge`` with
 
-Sizing rule (why). Deployment scales the quad by s_q = e^{-u_q} (u_q: flattening log scale
-factor at the quad): the two midpoints an arc joins move apart, its chord c grows to s_q c
-(the pattern passes each arc's own chord growth, from the growth r - g of the insert at the
-corner the arc turns around: :func:`simfab.deploy.pattern.quad_growth`). An arc of length S can
-follow only by bending while S > s_q c; as S -> s_q c it straightens and its resistance to
-further growth diverges (it ends up carrying the growth in tension, which compresses the beams:
-they buckle out of plane locally at every insert instead of the network growing into the target
-- measured on the bundled dome: a 16 mm high deployment for a 54 mm target with the earlier
-fixed b = 0.7, S/c = 1.16 < s_q = 1.22 at the centre).
-Hence each quad's b is the smallest b >= ``spring_bulge`` with
+    S_k(b) / c_k >= (1 + spring_slack) max(s_k, 1)           for all four arcs k,
 
-    S_k(b) / c_k >= (1 + spring_slack) max(s_k, 1)           for all four arcs k of the quad,
-
-found by bisection (S/c grows monotonically with b). b is capped where an arc would come within
-``spring_width`` of the quad centre (the four arcs of a quad must stay apart for the cut); a
-quad that needs more is reported (``tight``) and keeps the capped b. Shrinking quads (u > 0,
-saddles) need no growth slack (their arcs bend further); they keep the plain margin.
-
-Zigzags (:func:`zigzag_layout`). A Bezier arc reaches S/c ~ 1.2-1.5 before it comes within a
-spring width of the centre; steeper growth (1.5-1.7 on an 80 deg cap) takes an arc that packs
-its length into its triangle (M0, M1, centre): vertical legs (in the chord's frame) joined by half
-circles, one clearance inside the triangle, about (triangle area) / (leg pitch) long - up to
-~2.4 c in a 30 mm cell with 1 mm springs. :func:`size_zigzag` takes the fewest legs that reach the
-length, then the lowest legs (bisection on their height fraction), as the Bezier sizing takes
-the smallest b.
-
-Per-arc pulls (:func:`size_arcs`). In a skewed quad one arc may need more length than its
-neighbours while the common b's cap is set by its own approach to the centre. Such a quad, all
-Bezier and still short, gives each arc its own b_k: the smallest that reaches its own need. The
-arcs approach the centre along the quad's half-diagonals (opposite arcs along one line, adjacent
-ones at about a right angle), so their centre clearances c_k bound their separations: opposite
-c_k + c_{k+2}, adjacent about sqrt(c_k^2 + c_{k+1}^2). The per-arc pulls are kept where these stay
-at least what four arcs at the cap give (c_k = w: 2 w and sqrt(2) w), so a deep arc opposite a
-shallow one is allowed.
+by bisection (:func:`size_bulges`), capped where an arc comes within ``spring_width`` of the centre
+(the quad is then ``tight``). Longer arcs: zigzags packed into the arc's triangle (:func:`zigzag_layout`,
+:func:`size_zigzag`); a skewed quad may take one pull per arc (:func:`size_arcs`). The reasoning and
+the figures behind it: docs/methods.md, "simfab.deploy.springs".
 """
 
 from __future__ import annotations

@@ -1,35 +1,21 @@
 """Unit-cell deployment: four spokes around a gap, side beams, torsional-spring corners, an insert.
 
-Geometry (flat, z = 0, centred at the origin; ``u_k`` = +x, +y, -x, -y):
+The cell (:func:`build_cell`, flat, centred at the origin; u_k = +x, +y, -x, -y): spoke k from
+``gap u_k`` to ``size/2 u_k``; side k through ``size/2 u_k`` in two halves joined with the spoke at
+a rigid T-junction; corner k a cubic Bezier torsional spring; the insert a free rigid body whose
+half-size r (its MuJoCo box geom) is where the spokes' inner ends are clamped; a statically
+determinate 3-2-1 support on three corner-spring midpoints.
 
-- spoke k: straight beam from ``gap * u_k`` (edge of the central gap) to ``size/2 * u_k``;
-- side k: straight beam through ``size/2 * u_k`` along ``v_k = u_{k+1}``, ending ``corner_gap``
-  before the corners, in two halves joined with the spoke at a rigid T-junction body;
-- corner k: a curved torsional spring (cubic Bezier, natural curvature = its flat shape)
-  joining side k to side k+1 through rigid junction bodies at both ends;
-- the insert: a free rigid body (6 DOF) at the centre; the four spokes' inner ends are clamped
-  to it at distance ``r`` (its half-size from the MuJoCo box geom) from the centre;
-- support: a statically determinate 3-2-1 support on three corner-spring midpoints removes the
-  six rigid motions of the free-floating cell without constraining its deformation.
+Deployment (:func:`deploy`, quasi-static): the spokes' clamp points are drawn from ``gap`` to r in
+``increments`` steps. A small out-of-plane load f = perturbation B1 / spoke_length^2 selects the
+branch (4 f up on an insert larger than the gap: a dome; f alternating on the T-junctions for a
+smaller one: a saddle) and is removed for the final solve (an unloaded equilibrium, its stability
+reported).
 
-Deployment (quasi-static): the spokes' clamp points are drawn from the gap edge (``gap``) to
-the insert's edge (``r``) in ``increments`` steps, each solved to equilibrium from the last
-(the insert and all junctions are free rigid bodies).
-
-Buckling perturbation: while drawing in, a small out-of-plane load ``f = perturbation * B1 /
-spoke_length^2`` selects the branch: ``4 f`` upwards on the insert for an insert larger than
-the gap (the dome mode), ``f`` alternating on the T-junctions (+z on the x-spokes, -z on the
-y-spokes) for a smaller one (the saddle mode). It is removed for a final solve, so the reported state is an unloaded
-equilibrium; its stability (positive-definite Hessian) is reported.
-
-Shape descriptors, measured in the ring's best-fit plane: ``insert_rise`` (height of the insert
-centre above it, a dome) and ``saddle_amplitude`` (amplitude of the ring's cos/sin 2 phi height
-pattern).
-
-Discrete Gaussian curvature: angle deficit ``2 pi - sum(angles)`` of the triangle fan from the
-insert centre to the eight ring points (T-junctions and corner-spring midpoints), divided by a
-third of the fan area [1/m^2]. Positive: dome (the interior grew relative to the boundary);
-negative: saddle.
+Shape (:func:`gaussian_curvature`): the insert rise and the ring's cos/sin 2 phi saddle amplitude in
+the ring's best-fit plane; the discrete Gaussian curvature, the angle deficit of the fan from the
+insert centre to the eight ring points over a third of its area [1/m^2] (> 0: dome). In full:
+docs/methods.md, "simfab.deploy.unitcell".
 """
 
 from __future__ import annotations
