@@ -66,7 +66,6 @@ def _good_quad(Q: np.ndarray, h: float) -> bool:
 
 
 def largest_component(quads: np.ndarray) -> np.ndarray:
-
     """The largest edge-connected set of quads.
 
     Args:

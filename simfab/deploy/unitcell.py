@@ -43,12 +43,20 @@ COUNT_RANGES = {"segments": (2, 200), "increments": (1, 1000)}
 
 @dataclass(frozen=True, kw_only=True)
 class CellConfig:
-    """Unit-cell parameters (``<numeric name="cell_<field>">`` in the scene). Lengths [m], moduli [Pa].
+    """Unit-cell parameters (``<numeric name="cell_<field>">`` in the scene).
 
-    size: side of the cell; gap: half-size of the central gap; corner_gap: where sides stop
-    before a corner; spring_bulge: Bezier handle length of the corner springs; beam_width (in
-    plane) and beam_thickness (sheet); young, poisson; segments: rod segments per beam piece;
-    increments: quasi-static steps; perturbation: out-of-plane load factor (see module doc).
+    Args:
+        size: side of the cell [m].
+        gap: half-size of the central gap [m].
+        corner_gap: where the sides stop before a corner [m].
+        spring_bulge: Bezier handle length of the corner springs [m].
+        beam_width: in-plane beam width [m].
+        beam_thickness: sheet thickness [m].
+        young: Young's modulus [Pa].
+        poisson: Poisson ratio [-].
+        segments: rod segments per beam piece (a whole number, :data:`COUNT_RANGES`).
+        increments: quasi-static steps (a whole number, :data:`COUNT_RANGES`).
+        perturbation: out-of-plane load factor [-] (see the module doc).
     """
 
     size: float = 0.08
@@ -79,8 +87,16 @@ class CellConfig:
 
 @dataclass(frozen=True)
 class Insert:
-    """A rigid insert from the MJCF scene: name, half-size ``r`` [m] (box geom along x), mesh in its
-    own frame (trimesh), parking pose ``pos`` (3,) and ``quat`` (w, x, y, z), mass [kg]."""
+    """A rigid insert from the MJCF scene.
+
+    Args:
+        name: the body's name.
+        r: half-size [m] (its box geom along x): where the spokes are clamped.
+        mesh: its mesh in its own frame (trimesh).
+        pos: (3,) [m] parking position.
+        quat: (4,) parking orientation (w, x, y, z).
+        mass: [kg].
+    """
 
     name: str
     r: float
@@ -91,7 +107,17 @@ class Insert:
 
 
 def load_cell_scene(path) -> tuple[CellConfig, dict]:
-    """Cell parameters and all inserts (bodies whose name starts with ``insert``) of the scene."""
+    """Read a unit-cell scene.
+
+    The ``<numeric name="cell_...">`` parameters load through :func:`simfab.io.tables.load_table`
+    (an unknown name, a bad count or value: InputError naming the file and the parameter).
+
+    Args:
+        path: the MJCF scene.
+
+    Returns:
+        (:class:`CellConfig`, {name: :class:`Insert`} of every body whose name starts with ``insert``).
+    """
     import mujoco  # (simfab.io, imported above, set up headless GL before MuJoCo loads)
 
     sc = load_mjcf(path)
@@ -123,7 +149,11 @@ def load_cell_scene(path) -> tuple[CellConfig, dict]:
 
 
 def default_scene_path() -> str:
-    """The bundled scene ``scenes/deploy/unit_cell.xml`` of the source tree."""
+    """The bundled unit-cell scene.
+
+    Returns:
+        The path of ``scenes/deploy/unit_cell.xml``.
+    """
     return str(scenes_dir("deploy", "unit_cell.xml"))
 
 
@@ -134,6 +164,17 @@ def _bezier(P0, P1, P2, P3, n):
 
 @dataclass
 class Cell:
+    """The unit cell's rod network (:func:`build_cell`).
+
+    Args:
+        model: the :class:`simfab.rods.model.RodModel`.
+        state: its flat state.
+        spokes: the spoke rods' names.
+        t_bodies: the T-junction body indices.
+        spring_mid_nodes: the middle node of each corner spring.
+        insert_body: the insert's body index.
+        spoke_len: a spoke's length [m].
+    """
     model: object
     state: object
     spokes: list  # rod names
@@ -144,7 +185,15 @@ class Cell:
 
 
 def build_cell(cfg: CellConfig, insert_name: str = "insert") -> Cell:
+    """The flat unit cell (see the module doc): spokes, sides, corner springs, the insert body, the support.
 
+    Args:
+        cfg: the :class:`CellConfig`.
+        insert_name: the insert body's name.
+
+    Returns:
+        The :class:`Cell`.
+    """
     a2 = cfg.size / 2
     c = cfg.corner_gap
     n = int(cfg.segments)
@@ -194,7 +243,16 @@ def build_cell(cfg: CellConfig, insert_name: str = "insert") -> Cell:
 
 
 def gaussian_curvature(cell: Cell, state) -> dict:
-    """Angle-deficit discrete Gaussian curvature at the insert centre (see module doc)."""
+    """Shape of a deployed cell at its insert (see the module doc).
+
+    Args:
+        cell: the :class:`Cell`.
+        state: its state.
+
+    Returns:
+        {angle_deficit [rad], gaussian_curvature [1/m^2], kind ("dome" or "saddle"), insert_rise [m],
+        saddle_amplitude [m]}.
+    """
     C = state.body_pos[cell.insert_body]
     ring = []
     for k in range(4):
@@ -227,8 +285,19 @@ def gaussian_curvature(cell: Cell, state) -> dict:
 
 @dataclass
 class CellDeployment:
-    """Result of one deployment: states per increment (index 0 = flat), the insert, curvature
-    measures of the final state, stability, Newton iterations per increment."""
+    """One deployment of the cell by an insert (:func:`deploy`).
+
+    Args:
+        cell: the :class:`Cell`.
+        insert: the :class:`Insert`.
+        states: the state per increment (index 0: flat).
+        curvature: :func:`gaussian_curvature` of the final state.
+        stable: the final (unloaded) equilibrium is stable.
+        iterations: Newton iterations per increment.
+        energy: elastic energy of the final state [J].
+        materials: rod name -> (young [Pa], poisson [-]) for the exports.
+        curvature_history: discrete Gaussian curvature per increment [1/m^2] (0: flat).
+    """
 
     cell: Cell
     insert: Insert
@@ -242,7 +311,17 @@ class CellDeployment:
 
 
 def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> CellDeployment:
-    """Draw the spokes onto ``insert`` in ``cfg.increments`` steps and return the deployment."""
+    """Draw the spokes onto an insert in ``cfg.increments`` steps (see the module doc).
+
+    Args:
+        cfg: the :class:`CellConfig`.
+        insert: the :class:`Insert`.
+        device: Warp device.
+        quiet: no progress bar.
+
+    Returns:
+        The :class:`CellDeployment`; ConvergenceError when an increment's solve does not converge.
+    """
 
     cell = build_cell(cfg, insert.name)
     model = cell.model
