@@ -31,11 +31,14 @@ from simfab.solve.linear import import_cholmod
 class Flattening:
     """Result of :func:`flatten`.
 
-    uv (n,2) [m]: flat positions; u (n,) [-]: log scale factor (0 on the boundary);
-    sigma (m,) [-]: per-face log area-scale factor 1/2 log(A_flat/A_3d); boundary (b,) int:
-    ordered boundary loop (counter-clockwise in the plane); interior (n-b,) int;
-    closure_angle_correction [rad]: largest tangent-angle change that closed the boundary;
-    seconds: wall time per step {assemble, factor, solve, boundary}.
+    Args:
+        uv: (n,2) [m] flat positions.
+        u: (n,) [-] log scale factor (0 on the boundary, or the prescribed values).
+        sigma: (m,) [-] per-face log area-scale factor 1/2 log(A_flat / A_3d).
+        boundary: (b,) ordered boundary loop (counter-clockwise in the plane).
+        interior: (n-b,) the interior vertices.
+        closure_angle_correction: largest tangent-angle change that closed the boundary [rad].
+        seconds: wall time per step {assemble, factor, solve, boundary} [s].
     """
 
     uv: np.ndarray
@@ -48,7 +51,15 @@ class Flattening:
 
 
 def corner_angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """(m,3) interior angle of each face at each of its corners [rad]."""
+    """Interior angle of each face at each of its corners.
+
+    Args:
+        V: (n,3) [m] vertices.
+        F: (m,3) faces.
+
+    Returns:
+        (m,3) [rad].
+    """
     P = V[F]  # (m,3,3)
     out = np.empty(F.shape)
     for k in range(3):
@@ -60,8 +71,16 @@ def corner_angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def cotan_laplacian(V: np.ndarray, F: np.ndarray, angles: np.ndarray | None = None) -> sp.csr_matrix:
-    """Positive semi-definite cotan Laplacian A (n,n) [-]: ``A_ij = -(cot a_ij + cot b_ij)/2``,
-    ``A_ii = -sum_j A_ij``."""
+    """Positive semi-definite cotan Laplacian: ``A_ij = -(cot a_ij + cot b_ij)/2``, ``A_ii = -sum_j A_ij``.
+
+    Args:
+        V: (n,3) [m] vertices.
+        F: (m,3) faces.
+        angles: their :func:`corner_angles` (None: computed).
+
+    Returns:
+        A (n,n) [-], CSR.
+    """
     n = len(V)
     ang = corner_angles(V, F) if angles is None else angles
     cot = 1.0 / np.tan(ang)
@@ -74,9 +93,15 @@ def cotan_laplacian(V: np.ndarray, F: np.ndarray, angles: np.ndarray | None = No
 
 
 def boundary_loop(F: np.ndarray, n: int) -> np.ndarray:
-    """The ordered boundary loop (b,) of a disk-topology mesh, following the face winding.
+    """The ordered boundary loop of a disk-topology mesh, following the face winding.
 
-    Raises InputError unless the boundary is exactly one simple loop (edges in one face only)."""
+    Args:
+        F: (m,3) faces.
+        n: the vertex count.
+
+    Returns:
+        (b,) vertex ids; InputError unless the boundary is exactly one simple loop.
+    """
     e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     key = np.minimum(e[:, 0], e[:, 1]) * np.int64(n) + np.maximum(e[:, 0], e[:, 1])
     uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
@@ -121,12 +146,19 @@ def _close_polygon(lengths: np.ndarray, phi: np.ndarray, *, tol: float = 1e-14, 
 
 
 def flatten(V, F, *, u_boundary=None) -> Flattening:
-    """Boundary First Flattening with u = 0 on the boundary (see module doc). V (n,3) [m], F (m,3).
+    """Boundary First Flattening with u = 0 on the boundary (see the module doc).
 
-    ``u_boundary`` (n,) [-] (read at the boundary vertices; default 0): prescribed boundary scale
-    factors (BFF's Dirichlet case; :mod:`simfab.deploy.cuts` passes the cone metric's u along
-    the cut sides). Then step 1 solves ``A_II u_I = -Omega_I - A_IB u_B``, step 2 adds
-    ``A_BB u_B`` to the boundary curvature, and step 3 uses the lengths ``l~ = e^{(u_i+u_j)/2} l``.
+    With ``u_boundary`` (BFF's Dirichlet case; :mod:`simfab.deploy.cuts` passes the cone metric's u
+    along the cut sides), step 1 solves ``A_II u_I = -Omega_I - A_IB u_B``, step 2 adds ``A_BB u_B``
+    to the boundary curvature, and step 3 uses the lengths ``l~ = e^{(u_i+u_j)/2} l``.
+
+    Args:
+        V: (n,3) [m] vertices of a disk-topology mesh.
+        F: (m,3) faces.
+        u_boundary: (n,) [-] prescribed scale factors, read at the boundary vertices (None: 0).
+
+    Returns:
+        The :class:`Flattening`.
     """
     import time
 
@@ -184,8 +216,12 @@ def flatten(V, F, *, u_boundary=None) -> Flattening:
 
 
 class CholeskyFactor:
-    """Sparse Cholesky factor of an SPD matrix (CHOLMOD through cvxopt), computed once and reused
-    for any number of right-hand sides (the fill-reducing ordering is CHOLMOD's default)."""
+    """Sparse Cholesky factor of an SPD matrix (CHOLMOD through cvxopt), computed once and reused for any
+    number of right-hand sides (the fill-reducing ordering is CHOLMOD's default).
+
+    Args:
+        A: the SPD matrix (n,n).
+    """
 
     def __init__(self, A: sp.spmatrix):
 
@@ -205,7 +241,14 @@ class CholeskyFactor:
                                    "(obtuse/degenerate triangles; remesh the target)") from None
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        """x with A x = b; b (n,) or (n,k)."""
+        """Solve A x = b.
+
+        Args:
+            b: (n,) or (n,k).
+
+        Returns:
+            x, shaped as b.
+        """
         import cvxopt
         import cvxopt.cholmod as cholmod
 
@@ -224,5 +267,13 @@ def _areas(P, F) -> np.ndarray:
 
 
 def face_areas(P, F) -> np.ndarray:
-    """(m,) triangle areas [m^2]; signed (positive counter-clockwise) for 2D points."""
+    """Triangle areas.
+
+    Args:
+        P: (n,3) or (n,2) [m] vertices.
+        F: (m,3) faces.
+
+    Returns:
+        (m,) [m^2]; signed (positive counter-clockwise) for 2D points.
+    """
     return _areas(np.asarray(P, dtype=np.float64), np.asarray(F))

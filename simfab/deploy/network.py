@@ -47,12 +47,18 @@ TIE_SEGMENTS_PER_BEAM_SEGMENT = 3
 class DeployConfig:
     """Material and simulation parameters (scene ``[material]`` and ``[deploy]`` tables).
 
-    young [Pa], poisson [-], density [kg/m^3] (sheet material); beam_segments,
-    spring_segments: rod segments per half beam / Bezier spring arc (a zigzag arc has its own, per
-    piece: :data:`simfab.deploy.springs.ZIGZAG_SEGMENTS`); clamp_edge [-]: length of a rod's
-    two clamped end edges relative to its other edges (a clamped edge is rigid within its body,
-    so uniform edges would stiffen a 3-segment beam by leaving only its middle third free);
-    increments: quasi-static steps; perturbation [-]: branch-selection load factor (see module doc).
+    Args:
+        young: the sheet's Young's modulus [Pa] (``[material]``).
+        poisson: its Poisson ratio [-] (``[material]``).
+        density: its density [kg/m^3] (``[material]``).
+        beam_segments: rod segments per half beam.
+        spring_segments: rod segments per Bezier spring arc (a zigzag arc has its own, per piece:
+            :data:`simfab.deploy.springs.ZIGZAG_SEGMENTS`).
+        clamp_edge: length of a rod's two clamped end edges relative to its other edges [-] (a
+            clamped edge is rigid within its body, so uniform edges would stiffen a 3-segment beam by
+            leaving only its middle third free).
+        increments: quasi-static steps.
+        perturbation: branch-selection load factor [-] (see the module doc).
     """
 
     young: float = 2.5e9
@@ -77,10 +83,20 @@ class DeployConfig:
 
 @dataclass
 class Network:
-    """The rod network of a pattern: model/state (flat), body indices of the pattern vertices
-    (n,) (insert or boundary junction), edge junction bodies (e,), the insert-clamped nodes and
-    their unit direction (k,), (k,3), grow distance (k,) [m] = r - g of their vertex and that
-    vertex (k,), the node supported in x, y, z."""
+    """The rod network of a pattern (:func:`build_network`).
+
+    Args:
+        model: the :class:`simfab.rods.model.RodModel`.
+        state: its flat state.
+        vertex_body: (n,) body index of each pattern vertex (insert or boundary junction).
+        edge_body: (e,) the edge midpoint junctions' body indices.
+        pull_nodes: (k,) the insert-clamped rod nodes.
+        pull_dir: (k,3) their unit direction from the insert centre.
+        pull_grow: (k,) [m] their grow distance r - g.
+        pull_vertex: (k,) their pattern vertex.
+        held_node: the fully supported node (the predictor's origin).
+        tie_offset: (N,3) [m] the seam ties' clamp-offset change at full deployment (None: no ties).
+    """
 
     model: object
     state: object
@@ -95,8 +111,16 @@ class Network:
 
 
 def rod_parameters(n: int, clamp_edge: float) -> np.ndarray:
-    """(n+1,) node parameters in [0, 1] of a rod of n segments whose two end edges are
-    ``clamp_edge`` times as long as the n - 2 uniform inner ones (n = 1, 2: uniform)."""
+    """Node parameters of a rod whose two end edges are ``clamp_edge`` times as long as the n - 2
+    uniform inner ones (n = 1, 2: uniform).
+
+    Args:
+        n: segments.
+        clamp_edge: the end edges' relative length [-].
+
+    Returns:
+        (n+1,) parameters in [0, 1].
+    """
     if n <= 2:
         return np.linspace(0.0, 1.0, n + 1)
     d = clamp_edge / (n - 2 + 2 * clamp_edge)
@@ -104,8 +128,17 @@ def rod_parameters(n: int, clamp_edge: float) -> np.ndarray:
 
 
 def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
-    """The rod network of ``pat`` (see module doc); ``ties``: :class:`simfab.deploy.cuts.SeamTies`
-    (seam vertex pairs (k,2) and their target distances (k,) [m]) or None (seams free)."""
+    """The rod network of a pattern (see the module doc).
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        cfg: the :class:`DeployConfig`.
+        ties: the :class:`simfab.deploy.cuts.SeamTies` (seam vertex pairs and their target distances)
+            or None (seams free).
+
+    Returns:
+        The :class:`Network`.
+    """
 
     pc = pat.config
     sec = Section(width=pc.beam_width, thickness=pc.beam_thickness)
@@ -187,8 +220,16 @@ def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
 
 @dataclass
 class Deployment:
-    """States per increment (0 = flat), final unloaded state, stability, Newton iterations,
-    energy [J], seconds."""
+    """A deployed network (:func:`deploy`).
+
+    Args:
+        network: the :class:`Network`.
+        states: the state per increment (0: flat; the last: the unloaded final state).
+        stable: the final state's reduced Hessian is positive definite.
+        iterations: Newton iterations per increment.
+        energy: elastic energy of the final state [J].
+        seconds: wall time [s].
+    """
 
     network: Network
     states: list
@@ -199,17 +240,33 @@ class Deployment:
 
     @property
     def final(self):
+        """The final (unloaded) state."""
         return self.states[-1]
 
     def vertex_positions(self, state=None) -> np.ndarray:
-        """(n,3) [m] positions of the pattern vertices (insert centres / boundary junctions)."""
+        """Positions of the pattern vertices (insert centres / boundary junctions).
+
+        Args:
+            state: a state of the network (None: the final one).
+
+        Returns:
+            (n,3) [m].
+        """
         st = self.final if state is None else state
         return st.body_pos[self.network.vertex_body]
 
 
 def target_heights(pat, target_points: np.ndarray) -> np.ndarray:
-    """s_i in [-1, 1]: height of the target points (n,3) above their best-fit plane, normalised;
-    sign chosen so that the plane normal is +z-ish (positive = towards the target's +z side)."""
+    """Branch-selection signs: the target points' height above their best-fit plane, normalised (the
+    plane normal +z-ish: positive towards the target's +z side).
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        target_points: (n,3) [m] the pattern vertices' target points.
+
+    Returns:
+        s (n,) in [-1, 1].
+    """
     c = target_points.mean(axis=0)
     normal = np.linalg.svd(target_points - c)[2][2]
     if normal[2] < 0:
@@ -221,8 +278,17 @@ def target_heights(pat, target_points: np.ndarray) -> np.ndarray:
 
 
 def target_displacement(net: Network, flat_to_target) -> tuple[np.ndarray, np.ndarray]:
-    """Predictor field D (see module doc): (N,3) for the nodes and (B,3) for the bodies [m].
-    ``flat_to_target``: function (k,2) flat points -> (k,3) target points."""
+    """The predictor field D (see the module doc): each node and body from its flat position to the
+    target point its flat position maps to (the target rigidly aligned to the flat pattern, D = 0 at
+    the fully supported node).
+
+    Args:
+        net: the :class:`Network`.
+        flat_to_target: function (k,2) flat points [m] -> (k,3) target points [m].
+
+    Returns:
+        (nodes (N,3) [m], bodies (B,3) [m]).
+    """
 
     X0 = np.vstack([net.state.x, net.state.body_pos])
     T = flat_to_target(X0[:, :2])
@@ -234,10 +300,22 @@ def target_displacement(net: Network, flat_to_target) -> tuple[np.ndarray, np.nd
 
 def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device: str = "cpu", quiet: bool = True,
            callback=None, predictor=None) -> Deployment:
-    """Draw the beam ends onto the inserts in ``cfg.increments`` steps (see module doc).
-    ``heights`` (n,) [-]: branch-selection signs per pattern vertex (:func:`target_heights`);
-    ``predictor``: (node (N,3), body (B,3)) displacement field towards the target
-    (:func:`target_displacement`) or None."""
+    """Draw the beam ends onto the inserts in ``cfg.increments`` steps (see the module doc).
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        net: its :class:`Network`.
+        cfg: the :class:`DeployConfig`.
+        heights: (n,) [-] branch-selection signs per pattern vertex (:func:`target_heights`).
+        device: Warp device.
+        quiet: no progress bar.
+        callback: called as callback(increment, state) after each increment's equilibrium (None: none).
+        predictor: (nodes (N,3), bodies (B,3)) [m] displacement towards the target
+            (:func:`target_displacement`), or None.
+
+    Returns:
+        The :class:`Deployment`; ConvergenceError when an increment does not converge.
+    """
     import time
 
 
@@ -294,8 +372,17 @@ def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device:
 
 
 def discrete_gaussian_curvature(P: np.ndarray, quads: np.ndarray, interior: np.ndarray) -> np.ndarray:
-    """Angle defect 2 pi - sum of quad corner angles at each interior vertex of a quad mesh with
-    3D vertex positions P (n,3) [rad] (NaN on the boundary). Positive: dome, negative: saddle."""
+    """Angle defect 2 pi - the sum of the quad corner angles at each interior vertex of a quad mesh
+    (positive: dome, negative: saddle).
+
+    Args:
+        P: (n,3) [m] vertex positions.
+        quads: (q,4) the quads.
+        interior: (n,) bool, the interior vertices.
+
+    Returns:
+        (n,) [rad] (NaN on the boundary).
+    """
     n = len(P)
     s = np.zeros(n)
     for k in range(4):
