@@ -30,13 +30,29 @@ FLEX_TIMESTEP = 2e-3  # [s] time step of the flexcomp export
 
 
 def rod_polylines(model, state) -> list[np.ndarray]:
-    """One (k+1, 3) polyline per rod [m]."""
+    """The rods' centerlines.
+
+    Args:
+        model: the :class:`simfab.rods.model.RodModel`.
+        state: its state.
+
+    Returns:
+        One (k+1, 3) [m] polyline per rod.
+    """
     return [state.x[r.nodes] for r in model.rods]
 
 
 def bending_strain(model, state) -> np.ndarray:
-    """Largest bending fibre strain per node (N,) [-]: ``|dk1| t/2 + |dk2| w/2`` over the Voronoi
-    length, with ``dk`` the change of material curvature from the rest shape; 0 at rod ends."""
+    """Largest bending fibre strain per node: ``|dk1| t/2 + |dk2| w/2`` over the Voronoi length, with
+    ``dk`` the change of material curvature from the rest shape; 0 at rod ends.
+
+    Args:
+        model: the :class:`simfab.rods.model.RodModel`.
+        state: its state.
+
+    Returns:
+        (N,) [-].
+    """
 
     out = np.zeros(model.n_nodes)
     if model.n_hinges == 0:
@@ -51,8 +67,16 @@ def bending_strain(model, state) -> np.ndarray:
 
 
 def write_usd(path, deployment) -> Path:
-    """Timeline of the deployment; rods carry a per-vertex ``bending_strain`` primvar (colour scale
-    0 .. the largest strain of the whole timeline)."""
+    """The deployment's timeline as USD; rods carry a per-vertex ``bending_strain`` primvar (colour scale
+    0 .. the largest strain of the whole timeline).
+
+    Args:
+        path: the ``.usda`` file.
+        deployment: the :class:`simfab.deploy.unitcell.CellDeployment`.
+
+    Returns:
+        The path.
+    """
 
     d = deployment
     model = d.cell.model
@@ -74,7 +98,17 @@ def write_usd(path, deployment) -> Path:
 
 
 def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsules") -> Path:
+    """The deployed state as MJCF (see the module doc).
 
+    Args:
+        path: the file.
+        deployment: the :class:`simfab.deploy.unitcell.CellDeployment`.
+        name: the model's name.
+        rods: "capsules", "flexcomp" or "chain".
+
+    Returns:
+        The path.
+    """
     if rods not in ("flexcomp", "capsules", "chain"):
         raise ValueError(f"rods must be 'flexcomp', 'capsules' or 'chain' (got {rods!r})")
     d = deployment
@@ -120,5 +154,13 @@ def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsule
 
 
 def write_png(png, mjcf_path) -> Path:
+    """An MJCF rendered offscreen (:func:`simfab.io.render.render_mjcf`, 640 x 480).
 
+    Args:
+        png: the image file.
+        mjcf_path: the MJCF.
+
+    Returns:
+        The image's path.
+    """
     return render_mjcf(mjcf_path, png, width=640, height=480)
