@@ -34,8 +34,7 @@ from simfab.rods.statics import StaticSolver, StaticsOptions
 
 #: Newton step cap of the deployment's solves [longest rod] (StaticsOptions.max_step): the tangent
 #: predictor starts each increment near its equilibrium, so the cap only binds in the first
-#: increment's buckling, where 0.05 held 40-60 Newton steps in a row at alpha ~ 0.27 (0.2: 227 -> 176
-#: iterations on a 165-insert dome, same equilibria on the bundled targets; docs/decisions.md).
+#: increment's buckling (the measurements: docs/validation/deploy.md, "simfab.deploy.network").
 MAX_STEP = 0.2
 #: rod segments of a seam tie per ``beam_segments``: a tie spans up to 1.5 spacings (three half
 #: beams), so it gets three half beams' segments and, like them, short clamped end edges
