@@ -184,7 +184,14 @@ def load_deploy_scene(path, *, units: str | None = None, overrides: dict | None 
 
     given = {t: {k for k in (*(doc.get(t) or {}), *(overrides.get(t) or {}))
                  if _value(overrides.get(t, {}).get(k, True)) is not None} for t in ("pattern", "cuts", "tune")}
-    scene, decisions = auto_.complete(scene, given)
+    try:
+        scene, decisions = auto_.complete(scene, given)
+    except InputError as e:  # a check of the decided values (e.g. the cell count) at a flag's key names the flag
+        sources = {f"{t}.{k}": v.source for t, ov in overrides.items() for k, v in ov.items()
+                   if isinstance(v, Override)}
+        if e.where in sources:
+            raise InputError(e.message, where=sources[e.where]) from None
+        raise
     return dataclasses.replace(scene, decisions=decisions)
 
 

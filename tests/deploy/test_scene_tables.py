@@ -119,3 +119,12 @@ def test_a_bad_cell_parameter_names_the_scene_file_and_numeric(tmp_path):
     assert str(e.value).startswith(f"{bad}: cell_gap: ") and "no room for the spokes" in str(e.value)
     cfg, inserts = unitcell.load_cell_scene(unitcell.default_scene_path())
     assert cfg.gap == pytest.approx(0.015) and isinstance(cfg.segments, int) and inserts
+
+
+def test_a_check_of_the_decided_values_at_a_flags_key_names_the_flag(tmp_path):
+    # the cell-count bound is checked after the tables load (simfab.deploy.auto); a flag's spacing is blamed
+    big = tmp_path / "big.toml"  # a 6 m disk: 31,000 cells of 3 cm
+    big.write_text('[target]\nkind = "saddle"\ndisk_radius = 3\ncurvature_radius = 6\nrings = 8\n')
+    with pytest.raises(InputError) as e:
+        load_deploy_scene(big, overrides={"pattern": {"spacing": Override(0.03, "--spacing")}})
+    assert str(e.value).startswith("--spacing: ") and "cells" in str(e.value)
