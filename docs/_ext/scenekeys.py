@@ -7,7 +7,8 @@ Usage::
        :table: simulation
 
 Every field of the dataclass is a row: key, type, default (from ``dataclasses.fields``) and its
-description, read from (in order) the class docstring's ``name : description`` entries, ``#:``
+description, read from (in order) the class docstring's ``Args:`` / ``Attributes:`` section (Google
+style) or ``name : description`` entries, ``#:``
 comments above the field, an attribute docstring below it, the ``key = value  # comment`` lines of
 a TOML block in the docstring of the module named by ``:toml-doc:``, or :data:`EXTRA` below for
 fields the code leaves undocumented. A field with no description anywhere, or an :data:`EXTRA` entry
@@ -76,6 +77,38 @@ def docstring_entries(doc: str) -> dict[str, str]:
             cur.append(line.strip())
         else:
             cur = None
+    return {k: " ".join(v) for k, v in out.items()}
+
+
+_SECTION = re.compile(r"^\s*(Args|Arguments|Attributes|Parameters):\s*$")
+_ARG = re.compile(r"^\s*([A-Za-z_]\w*(?:\s*,\s*[A-Za-z_]\w*)*)\s*(?:\([^)]*\))?:\s+(.*)$")
+
+
+def args_entries(doc: str) -> dict[str, str]:
+    """``name: description`` entries (with indented continuation lines) of a Google-style ``Args:`` /
+    ``Attributes:`` section; a blank line or a dedent ends the section."""
+    out: dict[str, str] = {}
+    inside, base, cur = False, None, None
+    for line in inspect.cleandoc(doc or "").splitlines():
+        if _SECTION.match(line):
+            inside, base, cur = True, None, None
+            continue
+        if not inside:
+            continue
+        if not line.strip():
+            inside = False
+            continue
+        ind = len(line) - len(line.lstrip())
+        base = ind if base is None else base
+        m = _ARG.match(line) if ind == base else None
+        if m:
+            cur = [m.group(2).strip()]
+            for name in re.split(r"\s*,\s*", m.group(1)):
+                out[name] = cur
+        elif cur is not None and ind > base:
+            cur.append(line.strip())
+        else:
+            inside = False
     return {k: " ".join(v) for k, v in out.items()}
 
 
@@ -206,6 +239,7 @@ def rows_for(path: str, *, toml_doc: str | None = None, keys: dict | None = None
         docs.update(toml_comments(importlib.import_module(toml_doc).__doc__ or ""))
     field_names = {f.name for f in dataclasses.fields(cls)}
     docs.update({k: v for k, v in prose_entries(cls.__doc__ or "", field_names).items() if not v.startswith("@")})
+    docs.update(args_entries(cls.__doc__ or ""))
     docs.update(source_comments(cls))
     docs.update(docstring_entries(cls.__doc__ or ""))
     docs.update(EXTRA.get(path, {}))

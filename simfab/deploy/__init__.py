@@ -1,30 +1,24 @@
 """Deployment of flat beam patterns by rigid inserts (thesis chapter "Buckling Behavior Design").
 
-- :mod:`simfab.deploy.elastica`: the exact elastica (analytic reference);
-- :mod:`simfab.deploy.buckling`: the elastica validation of the rod solver (direct and
-  rigid-insert paths, critical load);
-- :mod:`simfab.deploy.unitcell`: the four-beam unit cell deployed by a larger / smaller insert;
-- :mod:`simfab.deploy.export`: USD timelines, MJCF of the deployed state, PNG previews.
-
-Inverse design from a target surface (``simfab deploy surface``), one stage per module:
-
-- :mod:`simfab.deploy.surface`: disk-topology targets (validation, procedural cap / saddle /
-  mixed / cylinder); :mod:`simfab.deploy.scene`: the scene TOML;
-- :mod:`simfab.deploy.flatten`: Boundary First Flattening (u = 0 on the boundary);
-- :mod:`simfab.deploy.cuts`: cone singularities placed automatically, cut paths, BFF of the cut
-  mesh, seam ties;
-- :mod:`simfab.deploy.pattern`: quad layout, beams, Bezier torsional springs, the gap rule;
-- :mod:`simfab.deploy.lasercut`: SVG / DXF export (mm);
-- :mod:`simfab.deploy.network`: the pattern as a rod network with free inserts, deployment;
-- :mod:`simfab.deploy.compare`: deviation from the target after the best rigid alignment;
-- :mod:`simfab.deploy.mjcf_sim`: a MuJoCo scene of a rod network that MuJoCo simulates;
-- :mod:`simfab.deploy.pipeline`, :mod:`simfab.deploy.surface_outputs`, :mod:`simfab.deploy.outputs`:
-  the run and its files; :mod:`simfab.deploy.auto`: the defaults decided from the target;
-- ``simfab.deploy.run`` (:func:`simfab.deploy.api.run`): the whole deployment as one call, loaded on
-  first use (``import simfab.deploy`` loads no Warp or MuJoCo); ``simfab.deploy.cell``
-  (:func:`simfab.deploy.api.cell`): the unit cell deployed by each insert (``simfab deploy``).
-  ``simfab.deploy.surface`` stays the target-surface module (:mod:`simfab.deploy.surface`): a lazy
-  alias of the same name would be shadowed by the module as soon as anything imports it.
+- ``simfab.deploy.run`` (:func:`simfab.deploy.api.run`): a target surface deployed, as one call
+  (``simfab deploy surface``); ``simfab.deploy.cell`` (:func:`simfab.deploy.api.cell`): the unit
+  cell deployed by each insert (``simfab deploy``). Both load on first use: ``import simfab.deploy``
+  loads no Warp or MuJoCo.
+- Validation: :mod:`~simfab.deploy.elastica` (the exact elastica), :mod:`~simfab.deploy.buckling`
+  (the rod solver against it), :mod:`~simfab.deploy.unitcell` (the four-beam cell),
+  :mod:`~simfab.deploy.export` (USD, MJCF, PNG of a deployment).
+- Inverse design from a target surface, one stage per module: :mod:`~simfab.deploy.surface`
+  (targets) and :mod:`~simfab.deploy.scene` (the scene TOML); :mod:`~simfab.deploy.flatten` (BFF);
+  :mod:`~simfab.deploy.cuts` (cones, cuts, seam ties); :mod:`~simfab.deploy.quadmesh` (quad meshes
+  of the flat domain) and :mod:`~simfab.deploy.pattern` (beams, inserts, springs, the gap rule;
+  :mod:`~simfab.deploy.springs`); :mod:`~simfab.deploy.lasercut` (SVG / DXF);
+  :mod:`~simfab.deploy.network` (the rod network, deployment); :mod:`~simfab.deploy.tuning` (gap
+  tuning); :mod:`~simfab.deploy.compare` (deviation); :mod:`~simfab.deploy.mjcf_sim` (a MuJoCo
+  scene that simulates it); :mod:`~simfab.deploy.pipeline`, :mod:`~simfab.deploy.surface_outputs`,
+  :mod:`~simfab.deploy.outputs` (the run and its files); :mod:`~simfab.deploy.auto` (the defaults
+  decided from the target).
+- ``simfab.deploy.surface`` stays the target-surface module: a lazy alias of that name would be
+  shadowed by the module as soon as anything imports it.
 """
 
 __all__ = ["run", "cell"]

@@ -23,9 +23,23 @@ OVERRIDES = dict(spacing=("pattern", "spacing"), beam_width=("pattern", "beam_wi
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SurfaceResult(Result):
-    """A deployed target's headline figures; ``summary`` is the whole JSON summary (``to_json()``
-    returns it with ``outputs``, the keys of ``simfab deploy surface --json``); ``run`` the pipeline's
-    own result (arrays, pattern, network, deployment; not in the JSON)."""
+    """A deployed target's headline figures (:func:`run`).
+
+    Args:
+        rms: RMS deviation after the best rigid alignment over the target's diameter [-].
+        hausdorff: Hausdorff deviation over the diameter [-].
+        height_error: deployed out-of-plane height over the target's, less 1 [-].
+        inserts: the number of inserts.
+        unreachable_gaps: inserts whose gap is out of the achievable range.
+        cones: cone singularities of the cut flattening (0: no cuts).
+        covered: fraction of the (cut) flat domain the pattern's quads cover [-].
+        mujoco_at_rest: the MuJoCo relaxation settled (None: not checked).
+        missed: one line per missed deployment bound, with the key or flag that would help.
+        summary: the whole JSON summary (the keys of ``simfab deploy surface --json``; not in the JSON form).
+        run: the pipeline's own :class:`simfab.deploy.pipeline.SurfaceRun` (arrays, pattern, network,
+            deployment; not in the JSON form).
+        outputs: label -> path of the files written (empty without ``out``).
+    """
 
     rms: float = field(unit="-", default=0.0)
     """RMS deviation after the best rigid alignment over the target's diameter."""
@@ -45,24 +59,30 @@ class SurfaceResult(Result):
     run: object = field(json=False, default=None)
 
     def to_json(self) -> dict:
-        """The ``--json`` summary (keys unchanged from ``simfab deploy surface``), with ``outputs``."""
+        """The ``--json`` summary (keys unchanged from ``simfab deploy surface``).
+
+        Returns:
+            ``summary`` with ``outputs`` (when files were written).
+        """
         return {**self.summary, "outputs": dict(self.outputs)} if self.outputs else dict(self.summary)
 
 
-def _scene(target, units, overrides: dict, sources: dict, notes: list | None = None):
-    """The scene with ``overrides`` applied; ``sources``: override name -> what an error or the
-    override note names (the flag, or the keyword); ``notes`` gets one line per override that replaces
-    a value of the scene file."""
+def _scene(target, units, overrides: dict, notes: list | None = None):
+    """The scene with ``overrides`` ({name: value or Override}) applied; an error of an override's
+    value names its flag (an Override's source) or its keyword; ``notes`` gets one line per override
+    that replaces a value of the scene file."""
     from simfab.deploy import scene as sc
     from simfab.deploy import surface
+    from simfab.io.tables import Override
 
-    ov = {"pattern": {}, "material": {}, "tune": {}}
+    ov: dict = {}
     for k, v in overrides.items():
         if k not in OVERRIDES:
             raise InputError(f"unknown override {k!r} (known: {', '.join(sorted(OVERRIDES))})", where="run")
-        if v is not None:
+        if v is not None and not (isinstance(v, Override) and v.value is None):
             table, name = OVERRIDES[k]
-            ov[table][name] = v
+            ov.setdefault(table, {})[name] = v if isinstance(v, Override) else Override(v, k)
+    log = notes.append if notes is not None else None
     if isinstance(target, surface.Target):
         import tempfile
 
@@ -71,27 +91,11 @@ def _scene(target, units, overrides: dict, sources: dict, notes: list | None = N
         with tempfile.TemporaryDirectory() as tmp:
             p = os.path.join(tmp, "target.obj")
             trimesh.Trimesh(target.V, target.F, process=False).export(p)
-            s = sc.load_deploy_scene(p, overrides=ov)
+            s = sc.load_deploy_scene(p, overrides=ov, log=log)
         return dataclasses.replace(s, target=target, path=target.name)
     target = str(target)
     path = sc.bundled_path(target) if target in sc.NAMES and not os.path.exists(target) else target
-    try:
-        scene = sc.load_deploy_scene(path, units=units, overrides=ov)
-    except InputError as e:  # a given override's bad value is blamed on the override, not on the file
-        for k, (table, name) in OVERRIDES.items():
-            if overrides.get(k) is not None and str(e.where or "").endswith(f"{table}.{name}"):
-                raise InputError(e.message, where=sources.get(k, k)) from None
-        raise
-    if notes is not None and str(path).lower().endswith(".toml"):  # where an override replaces a file value
-        import tomllib
-
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
-        for k, (table, name) in OVERRIDES.items():
-            if overrides.get(k) is not None and name in doc.get(table, {}):
-                notes.append(f"{sources.get(k, k)} {overrides[k]!r} overrides {os.path.basename(str(path))} "
-                             f"[{table}] {name} = {doc[table][name]!r}")
-    return scene
+    return sc.load_deploy_scene(path, units=units, overrides=ov, log=log)
 
 
 def run(target, *, out=None, seed: int = 0, device: str = "cpu", progress=None, units: str | None = None,
@@ -117,9 +121,9 @@ def run(target, *, out=None, seed: int = 0, device: str = "cpu", progress=None, 
 
     # an Override (a command-line flag) names its flag in errors and notes; a plain keyword names itself
     sources = {k: (v.source if isinstance(v, Override) else k) for k, v in overrides.items()}
-    overrides = {k: (v.value if isinstance(v, Override) else v) for k, v in overrides.items()}
     notes: list = []
-    scene = _scene(target, units, overrides, sources, notes)
+    scene = _scene(target, units, overrides, notes)
+    overrides = {k: (v.value if isinstance(v, Override) else v) for k, v in overrides.items()}
     size = scene.target.diameter
     if scene.pattern.spacing > size:  # not one grid cell fits: an input error, not an empty pattern
         raise InputError(f"{scene.pattern.spacing:.4g} m is larger than the target surface (its bounding-box "
@@ -155,9 +159,28 @@ MJCF_RODS = ("capsules", "chain", "flexcomp")
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class CellInsertResult:
-    """One insert of the unit cell deployed: sizes, the deployed shape's curvature figures
-    (:func:`simfab.deploy.unitcell.gaussian_curvature`), stability, the solve's counts and the
-    files written (``outputs``: usd, mjcf, png; empty without ``out``)."""
+    """One insert of the unit cell deployed (an entry of :attr:`CellResult.inserts`).
+
+    Args:
+        insert_half_size: the insert's half-size r [m].
+        gap_half_size: the cell's gap half-size [m].
+        relation: "larger" or "smaller": the insert's half-size against the gap's.
+        angle_deficit: the fan's angle deficit at the insert centre [rad]
+            (:func:`simfab.deploy.unitcell.gaussian_curvature`).
+        gaussian_curvature: the discrete Gaussian curvature [1/m^2].
+        kind: "dome" (positive) or "saddle".
+        insert_rise: height of the insert centre above the ring's best-fit plane [m].
+        saddle_amplitude: amplitude of the ring's cos/sin 2 phi height pattern [m].
+        stable: the unloaded equilibrium's Hessian is positive definite.
+        increments: quasi-static increments.
+        newton_iterations: Newton iterations per increment.
+        energy: elastic energy of the deployed state [J].
+        gaussian_curvature_per_increment: the discrete Gaussian curvature per increment [1/m^2].
+        max_bending_strain: the largest bending strain of the deployed rods [-].
+        outputs: the files written (usd, mjcf, png; empty without ``out``).
+        deployment: the :class:`simfab.deploy.unitcell.CellDeployment` (states per increment, cell,
+            insert; not in the JSON form).
+    """
 
     insert_half_size: float = field(unit="m")
     gap_half_size: float = field(unit="m")
@@ -183,8 +206,14 @@ class CellInsertResult:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class CellResult(Result):
-    """The unit cell deployed by each of its inserts (``simfab deploy``); ``to_json()`` is the
-    ``--json`` summary (scene, inserts, summary_json), also written as ``deploy.json`` with ``out``."""
+    """The unit cell deployed by each of its inserts (:func:`cell`, ``simfab deploy``).
+
+    Args:
+        scene: the unit-cell MJCF scene.
+        inserts: insert body name -> :class:`CellInsertResult`.
+        summary_json: path of ``deploy.json`` (None without ``out``).
+        outputs: label -> path of every file written (``<body>/<label>`` and ``json``).
+    """
 
     scene: str
     inserts: dict
@@ -193,7 +222,11 @@ class CellResult(Result):
     """Path of ``deploy.json`` (None without ``out``)."""
 
     def to_json(self) -> dict:
-        """The ``--json`` summary (keys unchanged from ``simfab deploy``; the per-insert ``outputs`` inside)."""
+        """The ``--json`` summary (keys unchanged from ``simfab deploy``), also written as ``deploy.json``.
+
+        Returns:
+            {scene, inserts (each with its ``outputs``), summary_json}.
+        """
         d = super().to_json()
         d.pop("outputs")
         return d

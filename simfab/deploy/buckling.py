@@ -34,6 +34,7 @@ from simfab.deploy import tolerances as tol
 from simfab.deploy._config import require_positive
 from simfab.errors import ConvergenceError, InputError
 from simfab.io.mjcf import load_mjcf, numeric_config
+from simfab.io.tables import load_table
 from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
 from simfab.rods.statics import StaticSolver, StaticsOptions
 
@@ -43,12 +44,18 @@ PATHS = ("direct", "insert")
 
 
 @dataclass(frozen=True, kw_only=True)
-class BeamSetup:
-    """Beam of the buckling validation (loaded from ``scenes/deploy/elastica.xml`` custom fields).
+class BeamConfig:
+    """Beam of the buckling validation (``<numeric name="beam_<field>">`` of ``scenes/deploy/elastica.xml``).
 
-    length, width, thickness [m]; young [Pa]; poisson [-]; axial_ratio = EA L^2 / B1 [-];
-    imperfection: initial first-mode amplitude / L [-]; max_increment: largest change of g/L
-    per quasi-static increment [-].
+    Args:
+        length: [m].
+        width: [m].
+        thickness: [m].
+        young: Young's modulus [Pa].
+        poisson: Poisson ratio [-].
+        axial_ratio: EA L^2 / B1 [-] (nearly inextensible).
+        imperfection: initial first-mode amplitude / L [-].
+        max_increment: largest change of g/L per quasi-static increment [-].
     """
 
     length: float = 0.1
@@ -71,25 +78,35 @@ class BeamSetup:
 
 @dataclass(frozen=True)
 class InsertScene:
-    """What the insert path takes from the MJCF scene: the insert body's start position (3,) [m],
-    its mesh (for outputs) and the beam setup."""
+    """What the insert path takes from the MJCF scene (:func:`load_insert_scene`).
+
+    Args:
+        path: the scene file.
+        insert_pos: (3,) [m] the insert body's start position (the beam's moving end).
+        setup: the :class:`BeamConfig`.
+        mesh: the insert's mesh (for outputs).
+    """
 
     path: str
     insert_pos: np.ndarray
-    setup: BeamSetup
+    setup: BeamConfig
     mesh: object
 
 
 def load_insert_scene(path) -> InsertScene:
-    """Read the elastica scene: body ``insert`` (start pose = beam's moving end), site ``anchor``
-    (fixed end, origin), beam parameters as ``<numeric name="beam_<field>">``."""
+    """Read the elastica scene: body ``insert`` (start pose: the beam's moving end), site ``anchor``
+    (the fixed end, origin), the beam's parameters as ``<numeric name="beam_<field>">`` (through
+    :func:`simfab.io.tables.load_table`).
+
+    Args:
+        path: the MJCF scene.
+
+    Returns:
+        The :class:`InsertScene`; InputError naming the file and what is missing or wrong.
+    """
 
     sc = load_mjcf(path)
-    kw = numeric_config(sc, "beam_", BeamSetup)
-    try:
-        setup = BeamSetup(**kw)
-    except InputError as e:  # name the scene file as well as the field
-        raise e.in_file(path) from None
+    setup = load_table(BeamConfig, numeric_config(sc, "beam_", BeamConfig), table_name="custom", file=str(path))
     if "anchor" not in sc.sites:
         raise InputError("the scene needs a site named 'anchor' at the fixed beam end", where=str(path))
     meshes = sc.body_meshes(include_world=False)
@@ -108,13 +125,28 @@ def load_insert_scene(path) -> InsertScene:
 
 
 def default_scene_path() -> str:
-    """The bundled scene ``scenes/deploy/elastica.xml`` of the source tree."""
+    """The bundled elastica scene.
+
+    Returns:
+        The path of ``scenes/deploy/elastica.xml``.
+    """
     return str(scenes_dir("deploy", "elastica.xml"))
 
 
 # ----------------------------------------------------------------------------- the beam
 @dataclass
 class Beam:
+    """A beam of the buckling validation (:func:`build_beam`).
+
+    Args:
+        model: the :class:`simfab.rods.model.RodModel`.
+        state: its start state (with the imperfection).
+        support: "pinned" or "clamped".
+        path: "direct" (the end moved) or "insert" (drawn by an insert body).
+        n: segments.
+        moving_nodes: the nodes at the moving end.
+        span: the flat span L [m].
+    """
     model: object
     state: object
     support: str
@@ -124,8 +156,15 @@ class Beam:
     span: float  # support-to-support length L [m]
 
     def rise(self, state) -> float:
-        """Midspan rise [m]. Pinned: the midspan node. Clamped (nodes straddle midspan at
-        +-h/2, +-3h/2): the symmetric quadratic through them, (9 z_1 - z_3) / 8."""
+        """Midspan rise. Pinned: the midspan node. Clamped (nodes straddle midspan at +-h/2, +-3h/2): the
+        symmetric quadratic through them, (9 z_1 - z_3) / 8.
+
+        Args:
+            state: a state of the beam.
+
+        Returns:
+            The rise [m].
+        """
         z = state.x[:, 2]
         if self.support == "pinned":
             return float(z[self.n // 2])
@@ -136,16 +175,32 @@ class Beam:
 
 
 def check_segments(n) -> int:
-    """``n`` as an int; InputError unless it is an even segment count >= 4 (the midspan is a node)."""
+    """A segment count checked.
+
+    Args:
+        n: the count.
+
+    Returns:
+        ``n`` as an int; InputError unless it is an even count >= 4 (the midspan is a node).
+    """
     if int(n) != n or int(n) < 4 or int(n) % 2:
         raise InputError(f"segment count must be an even integer >= 4 (got {n})", where="--n")
     return int(n)
 
 
-def build_beam(setup: BeamSetup, n: int, support: str, path: str = "direct", *, free_end: bool = False) -> Beam:
-    """The beam with ``n`` segments, start state carrying the first-mode imperfection.
+def build_beam(setup: BeamConfig, n: int, support: str, path: str = "direct", *, free_end: bool = False) -> Beam:
+    """The beam with ``n`` segments, its start state carrying the first-mode imperfection.
 
-    ``free_end=True`` (critical load): the moving end's x is an unknown (loaded by a force)."""
+    Args:
+        setup: the :class:`BeamConfig`.
+        n: segments (:func:`check_segments`).
+        support: "pinned" or "clamped".
+        path: "direct" or "insert".
+        free_end: the moving end's x is an unknown, loaded by a force (the critical load).
+
+    Returns:
+        The :class:`Beam`.
+    """
 
     if support not in elastica.SUPPORTS:
         raise InputError(f"support must be one of {elastica.SUPPORTS} (got {support!r})", where="--support")
@@ -244,13 +299,24 @@ def _sync(beam: Beam, prev, x, body_pos):
     return synchronize(beam.model, prev, x, prev.theta, body_pos, prev.body_rot)
 
 
-def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: str = "direct", device: str = "cpu",
+def run_continuation(setup: BeamConfig, support: str, n: int, ratios, *, path: str = "direct", device: str = "cpu",
                      keep_states: bool = False) -> list[dict]:
     """Push the beam through the gap ratios (sorted descending) and measure each equilibrium.
 
-    Returns one row per ratio: rise, force (simulated and exact), errors, wall time of the
-    increments since the flat start [s], Newton iterations and quasi-static increments since the
-    flat start, and the shape (x, z) when ``keep_states``.
+    Args:
+        setup: the :class:`BeamConfig`.
+        support: "pinned" or "clamped".
+        n: segments.
+        ratios: the gap ratios g/L [-].
+        path: "direct" or "insert".
+        device: Warp device.
+        keep_states: add each equilibrium's shape.
+
+    Returns:
+        One dict per ratio: support, path, g_over_L, n, delta_over_L (simulated and exact, rel_err),
+        force [N] (simulated and exact, force_rel_err), seconds (wall time of the increments since
+        the flat start), newton_iterations and increments since the flat start, and shape (x, z) [m]
+        with ``keep_states``.
     """
 
     beam = build_beam(setup, n, support, path)
@@ -290,13 +356,22 @@ def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: st
     return rows
 
 
-def critical_load(setup: BeamSetup, n: int, support: str = "pinned", *, device: str = "cpu") -> dict:
+def critical_load(setup: BeamConfig, n: int, support: str = "pinned", *, device: str = "cpu") -> dict:
     """Smallest compressive end load at which the straight beam's Hessian stops being positive definite.
 
-    The straight beam under end load P is uniformly compressed (EA eps = -P); its elastic
-    Hessian (the load is linear, so it adds nothing) is factorized by Cholesky; bisection on
-    P brackets the loss of definiteness to ``CRITICAL_LOAD_BISECTION_RTOL``.
-    Compare with pi^2 B / L^2 (pinned) / 4 pi^2 B / L^2 (clamped).
+    The straight beam under end load P is uniformly compressed (EA eps = -P); its elastic Hessian (the
+    load is linear, so it adds nothing) is factorized by Cholesky; bisection on P brackets the loss of
+    definiteness to ``CRITICAL_LOAD_BISECTION_RTOL``. Compare with pi^2 B / L^2 (pinned) and
+    4 pi^2 B / L^2 (clamped).
+
+    Args:
+        setup: the :class:`BeamConfig`.
+        n: segments.
+        support: "pinned" or "clamped".
+        device: Warp device.
+
+    Returns:
+        {support, n, critical_load [N], euler_load [N], rel_err}.
     """
 
     beam = build_beam(setup, n, support, "direct", free_end=True)

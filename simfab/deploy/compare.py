@@ -24,8 +24,19 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Deviation:
-    """aligned (n,3) [m]: deployed vertices after alignment; per_vertex (n,) [m]; rms, hausdorff [-]
-    (relative to diameter [m]); rms_m, hausdorff_m [m]; R (3,3), t (3,) the alignment."""
+    """A deployed shape's deviation from the target (:func:`deviation`).
+
+    Args:
+        aligned: (n,3) [m] the deployed vertices after alignment.
+        per_vertex: (n,) [m] each one's distance to the target.
+        rms: RMS distance over the diameter [-].
+        hausdorff: Hausdorff distance over the diameter [-].
+        rms_m: RMS distance [m].
+        hausdorff_m: Hausdorff distance [m].
+        diameter: the target's diameter [m].
+        R: (3,3) the alignment's rotation.
+        t: (3,) [m] its translation.
+    """
 
     aligned: np.ndarray
     per_vertex: np.ndarray
@@ -39,7 +50,15 @@ class Deviation:
 
 
 def kabsch(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation R (3,3) and translation t (3,) minimising sum |R x_i + t - y_i|^2."""
+    """The rigid motion minimising sum |R x_i + t - y_i|^2.
+
+    Args:
+        X: (n,3) points.
+        Y: (n,3) their targets.
+
+    Returns:
+        (R (3,3), t (3,)).
+    """
     cx, cy = X.mean(axis=0), Y.mean(axis=0)
     U, _, Wt = np.linalg.svd((X - cx).T @ (Y - cy))
     d = np.sign(np.linalg.det(Wt.T @ U.T))
@@ -48,14 +67,32 @@ def kabsch(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def quad_triangles(quads: np.ndarray) -> np.ndarray:
-    """(2q,3) triangles of a quad mesh (q,4)."""
+    """Triangles of a quad mesh.
+
+    Args:
+        quads: (q,4).
+
+    Returns:
+        (2q,3).
+    """
     return np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
 
 
 def deviation(X, Y, quads, target, *, target_under=None, icp_iters: int = 30) -> Deviation:
-    """Align X (n,3) to the target (:class:`simfab.deploy.surface.Target`) with correspondences
-    Y (n,3) and measure (see module doc). ``target_under``: target vertices (k,3) under the pattern
-    for the Hausdorff distance's second half (default: Y)."""
+    """Align deployed points to the target and measure (see the module doc).
+
+    Args:
+        X: (n,3) [m] deployed vertices.
+        Y: (n,3) [m] their target points (the correspondences the alignment starts from).
+        quads: (q,4) the pattern's quads (X's surface).
+        target: the :class:`simfab.deploy.surface.Target`.
+        target_under: (k,3) [m] target vertices under the pattern, for the Hausdorff distance's second
+            half (None: Y).
+        icp_iters: closest-point alignment iterations.
+
+    Returns:
+        The :class:`Deviation`.
+    """
     import trimesh
 
     tm = trimesh.Trimesh(target.V, target.F, process=False)

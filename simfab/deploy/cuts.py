@@ -1,42 +1,24 @@
 """Cuts: BFF with cone singularities chosen automatically, cut paths from the cones to the boundary.
 
-Why. The flat pattern grows (or shrinks) each cell by e^{-u}; the inserts reach only a bounded
-growth (``min_gap <= r - d <= h/2 - min_beam`` for d = (h/2)(e^{-u} - 1) and r from the insert
-catalogue, :mod:`simfab.deploy.pattern`). A steep cap shrinks its centre beyond that. A cone
-singularity concentrates curvature at one vertex, so the flat metric ``e^{2u} g`` needs less
-scaling around it; a cut from the cone to the boundary lets that metric lie flat.
-
-Cone metric (discrete Yamabe equation, the notation of :mod:`simfab.deploy.flatten`). With the
-cones C added to the Dirichlet set, ``u = 0`` on the boundary and at the cones and
+A steep cap shrinks its centre beyond the growth the inserts reach; a cone concentrates curvature
+at one vertex so that the flat metric e^{2u} g needs less scaling around it. Cone metric (the
+notation of :mod:`simfab.deploy.flatten`; u = 0 on the boundary and at the cones C):
 
     A_{I'I'} u_{I'} = -Omega_{I'}            (I' = interior vertices that are not cones),
 
-the metric ``e^{2u} g`` is flat at every vertex of I' and has the angle defect
-``Omega~_c = Omega_c + (A u)_c`` at each cone c (Gauss-Bonnet: sum Omega~ + sum k~ = 2 pi). u = 0 at
-a cone is the choice of Ben-Chen, Gotsman and Bunin (2008): each cone absorbs the curvature around
-it so that the scale there is 1. One Cholesky factor per cone set (the meshes are small).
+flat at every vertex of I', with the angle defect Omega~_c = Omega_c + (A u)_c at each cone c
+(Ben-Chen, Gotsman and Bunin 2008; :func:`cone_metric`).
 
-Greedy placement. Repeat: solve for u; if every interior vertex's growth is reachable by some
-catalogue size (``reachable``) and within the springs' reach (``e^{-u} <= max_growth``), stop;
-else put a cone at the vertex with the most negative u among
-those at least ``boundary_distance`` spacings (graph distance along mesh edges) from the boundary
-and ``cone_distance`` spacings from every cone, up to ``max_cones``. Only u < 0 vertices (the
-flattening shrank them) are candidates: their cones have Omega~ > 0 and open into a wedge in the
-plane; a cone at u > 0 would have Omega~ < 0, and its two cut sides would overlap in the plane
-(not one sheet).
+- :func:`place_cones`: greedy; while some interior vertex's growth is unreachable by the
+  catalogue (:func:`reachable`) or beyond ``max_growth``, a cone at the most negative u at least
+  ``boundary_distance`` / ``cone_distance`` spacings from the boundary and the other cones;
+- :func:`cut_paths`: shortest mesh-edge paths from each cone to the boundary (a forest: the cut
+  mesh stays a disk); :func:`cut_mesh` duplicates the cut vertices;
+- :func:`flatten_with_cuts`: BFF of the cut mesh with the cone metric's u prescribed on its
+  boundary; both sides of a cut are congruent (the seams), free in deployment or tied
+  (:func:`seam_ties`, ``join_seams``).
 
-Cut paths. Each cone in turn is joined by the shortest mesh-edge path (Dijkstra on 3D edge
-lengths) to the boundary, around the earlier cuts (or onto one, where they wall the cone off):
-the cuts form a forest rooted on the boundary, so the cut mesh is again a disk. Cutting
-duplicates each cut vertex once per wedge of faces between its cut edges (:func:`cut_mesh`).
-
-Flattening with cones. The cut mesh is flattened by BFF with the cone metric's u prescribed on
-its whole boundary (0 on the original boundary and the cones, u along both sides of every cut):
-:func:`simfab.deploy.flatten.flatten` (``u_boundary``). Both sides of a cut get the same lengths
-``e^{(u_i+u_j)/2} l_ij`` and, the metric being flat, are congruent up to a rigid motion (rotation by
-the cone angle): the seams. In deployment the seams stay free (two boundary edges of the
-network), or, with ``join_seams``, facing seam vertices are tied (:func:`seam_ties`); the
-deviation is measured against the target surface.
+The reasoning in full: docs/methods.md, "simfab.deploy.cuts".
 """
 
 from __future__ import annotations
@@ -56,14 +38,20 @@ from simfab.errors import InputError
 
 @dataclass(frozen=True, kw_only=True)
 class CutsConfig:
-    """Scene ``[cuts]`` table. max_cones: cone singularities the greedy placement may add (0: no
-    cuts); boundary_distance, cone_distance [-]: smallest graph distance of a cone from the
-    boundary and from another cone, in pattern spacings (a cone nearer the boundary would only
-    cut off a sliver; two cones closer than a cell would share one); max_growth [-]: largest cell
-    growth e^{-u} the torsional springs follow (their Bezier arcs reach 1.2-1.4 x their chord,
-    :mod:`simfab.deploy.springs`): cones are added until every interior vertex has a reachable gap
-    and e^{-u} <= max_growth; join_seams: close the seams in deployment by ties between facing seam
-    vertices (:func:`seam_ties`; false: the seams stay free)."""
+    """Scene ``[cuts]`` table.
+
+    Args:
+        max_cones: cone singularities the greedy placement may add (0: no cuts).
+        boundary_distance: smallest graph distance of a cone from the boundary, in pattern spacings
+            [-] (a cone nearer the boundary would only cut off a sliver).
+        cone_distance: smallest graph distance between two cones, in pattern spacings [-] (two cones
+            closer than a cell would share one).
+        max_growth: largest cell growth e^{-u} the torsional springs follow [-]
+            (:mod:`simfab.deploy.springs`): cones are added until every interior vertex has a
+            reachable gap and e^{-u} <= max_growth.
+        join_seams: close the seams in deployment by ties between facing seam vertices
+            (:func:`seam_ties`; false: the seams stay free).
+    """
 
     max_cones: int = 0
     boundary_distance: float = 1.5
@@ -84,9 +72,15 @@ class CutsConfig:
 
 @dataclass(frozen=True)
 class Seam:
-    """One cut path: ``path`` (k,) original vertex ids from the cone (or branch point) to where it
-    meets the boundary or an earlier cut; ``sides`` (2, k) the cut-mesh vertex ids of its two sides
-    (side 0 / 1: the copies on either side, same order as ``path``)."""
+    """One cut path.
+
+    Args:
+        cone: the cone's vertex id.
+        path: (k,) original vertex ids from the cone (or branch point) to where it meets the
+            boundary or an earlier cut.
+        sides: (2,k) the cut-mesh vertex ids of its two sides (the copies on either side, in the
+            order of ``path``).
+    """
 
     cone: int
     path: np.ndarray
@@ -97,12 +91,18 @@ class Seam:
 class CutFlattening:
     """Result of :func:`flatten_with_cuts`.
 
-    V (n',3) [m], F (m,3): the cut mesh (vertex copies along the cuts; ``orig`` (n',) the original
-    vertex of each); flat: :class:`simfab.deploy.flatten.Flattening` of the cut mesh; cones (c,)
-    original vertex ids; cone_defect (c,) [rad]: the cone metric's angle defect at each;
-    u_uncut (n,) [-]: the cone metric's u on the original mesh; seams: one :class:`Seam` per cone;
-    unreachable_vertices: interior mesh vertices whose growth no catalogue size reaches, without
-    cones and with them (counts)."""
+    Args:
+        V: (n',3) [m] the cut mesh's vertices (copies along the cuts).
+        F: (m,3) its faces.
+        orig: (n',) the original vertex of each.
+        flat: the :class:`simfab.deploy.flatten.Flattening` of the cut mesh.
+        cones: (c,) original vertex ids.
+        cone_defect: (c,) [rad] the cone metric's angle defect at each.
+        u_uncut: (n,) [-] the cone metric's u on the original mesh.
+        seams: one :class:`Seam` per cone.
+        unreachable_vertices: interior vertices whose growth no catalogue size reaches, without cones
+            and with them (counts).
+    """
 
     V: np.ndarray
     F: np.ndarray
@@ -116,9 +116,19 @@ class CutFlattening:
 
 
 def reachable(u: np.ndarray, spacing: float, sizes, min_gap: float, min_beam: float) -> np.ndarray:
-    """(n,) bool: some catalogue size r has an achievable gap for the growth d = (h/2)(e^{-u} - 1)
-    (h = spacing [m], sizes [m]), i.e. ``min_gap <= r - d <= h/2 - min_beam`` (the gap rule of
-    :mod:`simfab.deploy.pattern` at a regular cell)."""
+    """Where some catalogue size r has an achievable gap for the growth d = (h/2)(e^{-u} - 1), i.e.
+    ``min_gap <= r - d <= h/2 - min_beam`` (the gap rule of :mod:`simfab.deploy.pattern` at a regular cell).
+
+    Args:
+        u: (n,) [-] log scale factors.
+        spacing: h [m].
+        sizes: the catalogue [m].
+        min_gap: [m].
+        min_beam: [m].
+
+    Returns:
+        (n,) bool.
+    """
     d = 0.5 * spacing * np.expm1(-np.asarray(u, dtype=np.float64))[:, None]
     g = np.asarray(sizes, dtype=np.float64)[None, :] - d
     return np.any((g >= min_gap) & (g <= 0.5 * spacing - min_beam), axis=1)
@@ -136,8 +146,16 @@ def _graph(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
 
 
 def cone_metric(V: np.ndarray, F: np.ndarray, cones) -> tuple[np.ndarray, np.ndarray]:
-    """u (n,) [-] of the cone metric with u = 0 on the boundary and at the cones, and the cones'
-    angle defects Omega~ (c,) [rad] (see module doc)."""
+    """The cone metric with u = 0 on the boundary and at the cones (see the module doc).
+
+    Args:
+        V: (n,3) [m] vertices.
+        F: (m,3) faces.
+        cones: (c,) vertex ids.
+
+    Returns:
+        (u (n,) [-], the cones' angle defects Omega~ (c,) [rad]).
+    """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     n = len(V)
@@ -157,7 +175,17 @@ def cone_metric(V: np.ndarray, F: np.ndarray, cones) -> tuple[np.ndarray, np.nda
 
 
 def place_cones(V: np.ndarray, F: np.ndarray, cfg: CutsConfig, pattern_cfg) -> tuple[np.ndarray, np.ndarray]:
-    """Greedy cone placement (see module doc): (cones (c,) vertex ids, u (n,) of the cone metric)."""
+    """Greedy cone placement (see the module doc).
+
+    Args:
+        V: (n,3) [m] vertices.
+        F: (m,3) faces.
+        cfg: the :class:`CutsConfig`.
+        pattern_cfg: the :class:`simfab.deploy.pattern.PatternConfig` (spacing, catalogue, gap limits).
+
+    Returns:
+        (cones (c,) vertex ids, u (n,) [-] of the cone metric).
+    """
     n = len(V)
     loop = bff.boundary_loop(F, n)
     G = _graph(V, F)
@@ -182,10 +210,18 @@ def place_cones(V: np.ndarray, F: np.ndarray, cfg: CutsConfig, pattern_cfg) -> t
 
 
 def cut_paths(V: np.ndarray, F: np.ndarray, cones) -> list[np.ndarray]:
-    """Per cone (in order), the shortest mesh-edge path (k,) from it to the boundary that avoids the
-    earlier cuts (their vertices removed from the graph: separate darts, each from one cone to the
-    boundary); where the earlier cuts wall a cone off, the path may end on an earlier cut instead.
-    The last vertex of each path is on the boundary or an earlier cut."""
+    """Per cone (in order), the shortest mesh-edge path from it to the boundary that avoids the earlier
+    cuts (their vertices removed from the graph); where the earlier cuts wall a cone off, the path
+    may end on an earlier cut instead.
+
+    Args:
+        V: (n,3) [m] vertices.
+        F: (m,3) faces.
+        cones: (c,) vertex ids.
+
+    Returns:
+        One path (k,) of vertex ids per cone, its last vertex on the boundary or an earlier cut.
+    """
     n = len(V)
     G = _graph(V, F).tolil()
     bnd = set(bff.boundary_loop(F, n).tolist())
@@ -212,9 +248,18 @@ def cut_paths(V: np.ndarray, F: np.ndarray, cones) -> list[np.ndarray]:
 
 
 def cut_mesh(F: np.ndarray, n: int, cut_edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cut a triangle mesh along edges (k,2): (F' (m,3), orig (n',)). Each vertex on a cut gets one
-    copy per wedge of its faces (faces joined across its uncut edges); the first wedge keeps the
-    vertex's id, the others get new ids n, n+1, ... (``orig`` maps back)."""
+    """Cut a triangle mesh along edges. Each vertex on a cut gets one copy per wedge of its faces (faces
+    joined across its uncut edges); the first wedge keeps the vertex's id, the others get new ids
+    n, n+1, ...
+
+    Args:
+        F: (m,3) faces.
+        n: the vertex count.
+        cut_edges: (k,2) the edges to cut.
+
+    Returns:
+        (F' (m,3), orig (n',): the original vertex of each vertex of the cut mesh).
+    """
     F = np.asarray(F, dtype=np.int64)
     cut = {(int(min(a, b)), int(max(a, b))) for a, b in cut_edges}
     Fn = F.copy()
@@ -267,8 +312,19 @@ def _seam_sides(F_cut: np.ndarray, orig: np.ndarray, path: np.ndarray) -> np.nda
 
 
 def flatten_with_cuts(V, F, cfg: CutsConfig, pattern_cfg, *, cones=None) -> CutFlattening:
-    """Cones (greedy unless ``cones`` (c,) vertex ids are given), cut paths, and the BFF flattening of
-    the cut mesh with the cone metric's u on its boundary (see module doc). V (n,3) [m], F (m,3)."""
+    """Cones, cut paths, and the BFF flattening of the cut mesh with the cone metric's u on its
+    boundary (see the module doc).
+
+    Args:
+        V: (n,3) [m] vertices.
+        F: (m,3) faces.
+        cfg: the :class:`CutsConfig`.
+        pattern_cfg: the :class:`simfab.deploy.pattern.PatternConfig`.
+        cones: (c,) vertex ids (None: placed greedily, :func:`place_cones`).
+
+    Returns:
+        The :class:`CutFlattening`.
+    """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     n = len(V)
@@ -297,7 +353,12 @@ def flatten_with_cuts(V, F, cfg: CutsConfig, pattern_cfg, *, cones=None) -> CutF
 
 @dataclass(frozen=True)
 class SeamTies:
-    """Seam vertex pairs (k,2) (pattern vertex ids) and their distance on the target (k,) [m]."""
+    """Ties across the seams (:func:`seam_ties`).
+
+    Args:
+        pairs: (k,2) pattern vertex ids facing each other across a cut.
+        length: (k,) [m] their distance on the target.
+    """
 
     pairs: np.ndarray
     length: np.ndarray
@@ -308,21 +369,44 @@ TIE_REACH = 1.5  # [spacings] largest target distance of a tied pair
 
 
 def cone_points(cf: CutFlattening) -> np.ndarray:
-    """(c,2) [m] the cones' flat positions (a cut path's cone end is one vertex of the cut mesh)."""
+    """The cones' flat positions (a cut path's cone end is one vertex of the cut mesh).
+
+    Args:
+        cf: the :class:`CutFlattening`.
+
+    Returns:
+        (c,2) [m].
+    """
     return np.array([cf.flat.uv[np.flatnonzero(cf.orig == c)[0]] for c in cf.cones]).reshape(-1, 2)
 
 
 def seam_lines(cf: CutFlattening) -> list:
-    """[(label S<k>, (j,2) flat polyline [m])]: both sides of every cut path (the seams)."""
+    """Both sides of every cut path (the seams) in the flat domain.
+
+    Args:
+        cf: the :class:`CutFlattening`.
+
+    Returns:
+        [(label "S<k>", (j,2) [m] flat polyline)].
+    """
     return [(f"S{k + 1}", cf.flat.uv[side]) for k, s in enumerate(cf.seams) for side in s.sides]
 
 
 def seam_ties(pat, Y: np.ndarray, cf: CutFlattening) -> SeamTies:
-    """Pairs of seam vertices (pattern boundary vertices along a seam of ``cf``,
-    :func:`simfab.deploy.pattern.near_seams`) that face each other across a cut: mutual nearest neighbours by
-    their target points Y (n,3) [m], within ``TIE_REACH`` spacings on the target and at least
-    ``TIE_ACROSS`` times that apart in the flat pattern (two vertices along the same side of a seam
-    are about as far apart flat as on the target, e^u ~ 1)."""
+    """Pairs of seam vertices (pattern boundary vertices along a seam,
+    :func:`simfab.deploy.pattern.near_seams`) that face each other across a cut: mutual nearest
+    neighbours by their target points, within ``TIE_REACH`` spacings on the target and at least
+    ``TIE_ACROSS`` times that apart in the flat pattern (two vertices along the same side of a seam are
+    about as far apart flat as on the target).
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        Y: (n,3) [m] the pattern vertices' target points.
+        cf: the :class:`CutFlattening`.
+
+    Returns:
+        The :class:`SeamTies`.
+    """
     h = pat.config.spacing
     bnd = np.zeros(len(pat.P), dtype=bool)
     bnd[pat.edges[pat.edge_quads[:, 1] < 0].ravel()] = True

@@ -37,8 +37,18 @@ def _force_factor(support: str) -> float:
 
 @dataclass(frozen=True)
 class ElasticaSolution:
-    """Exact elastica for one gap ratio: modulus ``k``, end/inflection angle ``alpha`` [rad],
-    ``K``, ``E``, rise ``delta_over_L`` and the dimensionless force ``P L^2 / B``."""
+    """The exact elastica for one gap ratio (:func:`solve`).
+
+    Args:
+        support: "pinned" or "clamped".
+        g_over_L: the gap ratio [-].
+        k: the elliptic modulus [-].
+        alpha: the end (pinned) or inflection (clamped) angle [rad].
+        K: the complete elliptic integral of the first kind K(k) [-].
+        E: that of the second kind E(k) [-].
+        delta_over_L: the rise over the length [-].
+        force_factor: the dimensionless force P L^2 / B [-].
+    """
 
     support: str
     g_over_L: float
@@ -50,7 +60,15 @@ class ElasticaSolution:
     force_factor: float  # P L^2 / B
 
     def shape(self, L: float = 1.0, num: int = 201) -> np.ndarray:
-        """(num, 2) points (x, z) [m] of the buckled centerline of length ``L``."""
+        """The buckled centerline.
+
+        Args:
+            L: its length [m].
+            num: points.
+
+        Returns:
+            (num, 2) [m] points (x, z).
+        """
         m = self.k**2
         s = np.linspace(0.0, L, num)
         lam = np.sqrt(self.force_factor) / L
@@ -79,7 +97,14 @@ def _ellipeinc(phi, m: float) -> np.ndarray:
 
 
 def check_ratio(g_over_L: float) -> float:
-    """``g_over_L`` as a float; InputError unless 0 < g/L < 1."""
+    """A gap ratio checked.
+
+    Args:
+        g_over_L: the ratio.
+
+    Returns:
+        It as a float; InputError unless 0 < g/L < 1.
+    """
     r = float(g_over_L)
     if not 0.0 < r < 1.0:
         raise InputError(f"g/L must lie strictly between 0 and 1 (got {g_over_L})", where="--g-over-L")
@@ -87,7 +112,15 @@ def check_ratio(g_over_L: float) -> float:
 
 
 def solve(g_over_L: float, support: str = "pinned") -> ElasticaSolution:
-    """Exact first-mode elastica for ``0 < g_over_L < 1`` (brentq on g/L = 2E/K - 1)."""
+    """The exact first-mode elastica (brentq on g/L = 2E/K - 1).
+
+    Args:
+        g_over_L: the gap ratio, 0 < g/L < 1.
+        support: "pinned" or "clamped".
+
+    Returns:
+        The :class:`ElasticaSolution`.
+    """
     mult = _force_factor(support)
     r = check_ratio(g_over_L)
 
@@ -104,5 +137,12 @@ def solve(g_over_L: float, support: str = "pinned") -> ElasticaSolution:
 
 
 def euler_load_factor(support: str) -> float:
-    """Critical load P_cr L^2 / B: pi^2 (pinned) or 4 pi^2 (clamped)."""
+    """The critical load P_cr L^2 / B.
+
+    Args:
+        support: "pinned" (pi^2) or "clamped" (4 pi^2).
+
+    Returns:
+        The factor [-].
+    """
     return _force_factor(support) * np.pi**2

@@ -1,27 +1,16 @@
 """Outputs of a deployment: USD timeline, MJCF of the deployed state, PNG preview.
 
-- USD: rods as linear basis curves with widths (the beam width), one time code per
-  increment (0 = flat); each insert as an animated rigid mesh (its MuJoCo geometry); junction
-  frames are not drawn.
-- MJCF: the insert as a body at its final pose with its MuJoCo geom and mass; the rods as
-  static capsule chains (``rods="capsules"``, default: one capsule per edge, radius half the
-  sheet thickness; stable in the viewer) or as MuJoCo 4 1D ``flexcomp`` cables
-  (``rods="flexcomp"``) through the deployed node
-  positions, with ``<elasticity>`` of the rods' Young's modulus and Poisson ratio, radius half
-  the sheet thickness, and both end vertices pinned (the ends sit in junctions/inserts). Note
-  that MuJoCo takes a flex's initial shape as its rest shape, so the cable is stress-free in
-  MuJoCo: the file shows the deployed geometry and can be probed in the viewer, it does not
-  carry simfab's internal stresses. Stability: with ``<elasticity>`` of the strip's modulus the
-  cable blew up (NaN within 0.004 s at the default step; with mass scaling it still drifted by
-  metres in 2 s: MuJoCo 4's 1D flex elasticity is too ill-conditioned for a 1 mm x 4 mm strip).
-  The flexcomp form therefore keeps the edge lengths by equality constraints (``<edge
-  equality="true">``, inextensible; stable at ``FLEX_TIMESTEP``), carries no bending stiffness
-  and has no gravity: a geometry that can be probed in the viewer. Stepping 2 s stays finite
-  (tests/deploy/test_deploy_cli.py). ``rods="chain"`` writes the mechanically faithful scene of
-  :mod:`simfab.deploy.mjcf_sim` instead (opens on the deployed state; hinge springs with the
-  rods' bending and twist stiffness at rest in the flat state; the insert and junctions as free
-  bodies welded to the rod ends).
-- PNG: the deployed MJCF rendered offscreen (simfab.io.render).
+- USD (:func:`write_usd`): rods as linear basis curves with widths, one time code per increment
+  (0 = flat); each insert an animated rigid mesh.
+- MJCF (:func:`write_mjcf`): the insert at its final pose; the rods as static capsule chains
+  (``rods="capsules"``, default), as MuJoCo 1D ``flexcomp`` cables through the deployed nodes
+  (``rods="flexcomp"``: edge lengths kept by equality constraints, no bending stiffness, no
+  gravity; MuJoCo takes the initial shape as rest shape, so the file carries the deployed geometry,
+  not simfab's stresses), or the mechanically faithful scene of :mod:`simfab.deploy.mjcf_sim`
+  (``rods="chain"``: opens on the deployed state, hinge springs at rest in the flat state).
+- PNG (:func:`write_png`): the deployed MJCF rendered offscreen (:mod:`simfab.io.render`).
+
+Why the flexcomp cable carries no elasticity: docs/methods.md, "simfab.deploy.export".
 """
 
 from __future__ import annotations
@@ -41,13 +30,29 @@ FLEX_TIMESTEP = 2e-3  # [s] time step of the flexcomp export
 
 
 def rod_polylines(model, state) -> list[np.ndarray]:
-    """One (k+1, 3) polyline per rod [m]."""
+    """The rods' centerlines.
+
+    Args:
+        model: the :class:`simfab.rods.model.RodModel`.
+        state: its state.
+
+    Returns:
+        One (k+1, 3) [m] polyline per rod.
+    """
     return [state.x[r.nodes] for r in model.rods]
 
 
 def bending_strain(model, state) -> np.ndarray:
-    """Largest bending fibre strain per node (N,) [-]: ``|dk1| t/2 + |dk2| w/2`` over the Voronoi
-    length, with ``dk`` the change of material curvature from the rest shape; 0 at rod ends."""
+    """Largest bending fibre strain per node: ``|dk1| t/2 + |dk2| w/2`` over the Voronoi length, with
+    ``dk`` the change of material curvature from the rest shape; 0 at rod ends.
+
+    Args:
+        model: the :class:`simfab.rods.model.RodModel`.
+        state: its state.
+
+    Returns:
+        (N,) [-].
+    """
 
     out = np.zeros(model.n_nodes)
     if model.n_hinges == 0:
@@ -62,8 +67,16 @@ def bending_strain(model, state) -> np.ndarray:
 
 
 def write_usd(path, deployment) -> Path:
-    """Timeline of the deployment; rods carry a per-vertex ``bending_strain`` primvar (colour scale
-    0 .. the largest strain of the whole timeline)."""
+    """The deployment's timeline as USD; rods carry a per-vertex ``bending_strain`` primvar (colour scale
+    0 .. the largest strain of the whole timeline).
+
+    Args:
+        path: the ``.usda`` file.
+        deployment: the :class:`simfab.deploy.unitcell.CellDeployment`.
+
+    Returns:
+        The path.
+    """
 
     d = deployment
     model = d.cell.model
@@ -85,7 +98,17 @@ def write_usd(path, deployment) -> Path:
 
 
 def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsules") -> Path:
+    """The deployed state as MJCF (see the module doc).
 
+    Args:
+        path: the file.
+        deployment: the :class:`simfab.deploy.unitcell.CellDeployment`.
+        name: the model's name.
+        rods: "capsules", "flexcomp" or "chain".
+
+    Returns:
+        The path.
+    """
     if rods not in ("flexcomp", "capsules", "chain"):
         raise ValueError(f"rods must be 'flexcomp', 'capsules' or 'chain' (got {rods!r})")
     d = deployment
@@ -131,5 +154,13 @@ def write_mjcf(path, deployment, *, name: str = "deployed", rods: str = "capsule
 
 
 def write_png(png, mjcf_path) -> Path:
+    """An MJCF rendered offscreen (:func:`simfab.io.render.render_mjcf`, 640 x 480).
 
+    Args:
+        png: the image file.
+        mjcf_path: the MJCF.
+
+    Returns:
+        The image's path.
+    """
     return render_mjcf(mjcf_path, png, width=640, height=480)

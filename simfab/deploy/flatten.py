@@ -1,37 +1,19 @@
 """Boundary First Flattening (Sawhney & Crane 2017) with zero (or prescribed) boundary scale factors.
 
-Input: a disk-topology triangle mesh V (n,3) [m], F (m,3). Output: flat positions (n,2) [m]
-whose metric is conformal to the input's, ``g_flat = e^{2u} g``, with ``u = 0`` on the
-boundary (boundary edge lengths kept; the flattening of least area distortion, Springborn et
-al. 2008) and no cone singularities. Cones enter as prescribed boundary scale factors of a cut
-mesh (``flatten(..., u_boundary=...)``, :mod:`simfab.deploy.cuts`).
+A disk-topology mesh V (n,3) [m], F (m,3) is flattened to (n,2) [m] with a metric conformal to its
+own, g_flat = e^{2u} g, u = 0 on the boundary (the flattening of least area distortion) or the
+``u_boundary`` given (the cone metric of a cut mesh, :mod:`simfab.deploy.cuts`). With A the cotan
+Laplacian, Omega the interior angle defects and k the boundary geodesic curvatures
+(:func:`flatten`, one Cholesky factor of A_II for every solve):
 
-Discrete quantities (A: the cotan Laplacian, positive semi-definite, ``(A u)_i = sum_j w_ij
-(u_i - u_j)``, ``w_ij = (cot a_ij + cot b_ij) / 2`` over the two angles opposite edge ij):
+1. A_II u_I = -Omega_I (a flat metric; u <= 0 where the surface is positively curved);
+2. k~_B = k_B + A_BI u_I (the target boundary curvature);
+3. the boundary curve from the edge lengths e^{(u_i+u_j)/2} l_ij and tangent angles sum k~, closed
+   by the least-squares angle correction (``closure_angle_correction`` [rad]);
+4. the interior: harmonic extension A_II x_I = -A_IB x_B.
 
-- angle defect ``Omega_i = 2 pi - sum theta_i`` at interior vertices (integrated Gaussian
-  curvature [rad]) and ``k_i = pi - sum theta_i`` at boundary vertices (integrated geodesic
-  curvature [rad]);
-- discrete Yamabe equation: the conformally scaled metric has curvatures
-  ``Omega~ = Omega + (A u)_I``, ``k~ = k + (A u)_B`` (a vertex with smaller u than its
-  neighbours sees larger angles around it, so its defect drops). Gauss-Bonnet is kept since
-  ``1^T A = 0``.
-
-Steps (one Cholesky factorization of A_II, reused for every solve):
-
-1. interior Dirichlet problem for a flat metric with ``u_B = 0``:
-   ``A_II u_I = -Omega_I``  (u <= 0 where the surface is positively curved);
-2. target boundary curvature ``k~_B = k_B + A_BI u_I`` (Dirichlet-to-Neumann map);
-3. boundary curve: edge lengths ``l~ = e^{(u_i+u_j)/2} l = l`` (u_B = 0), tangent angles
-   ``phi_i = sum_{j<=i} k~_j``; the polygon closes only up to discretization error, so the
-   tangent angles get the least-squares (minimum-norm) correction that closes it (Gauss-Newton
-   on ``sum_i l_i (cos phi_i, sin phi_i) = 0``). The lengths stay exact (to round-off);
-   ``closure_angle_correction`` [rad] reports the largest angle change;
-4. interior: harmonic extension of the boundary positions, ``A_II x_I = -A_IB x_B`` (two more
-   solves with the same factor).
-
-Outputs per vertex ``u`` (n,) [-] and per face the area distortion ``sigma_f = 1/2 log(area_flat
-/ area_3d)`` [-] (the piecewise-constant log scale factor the flat map realizes; sigma ~ u).
+Outputs: u per vertex and the area distortion sigma_f = 1/2 log(area_flat / area_3d) per face.
+The discrete quantities in full: docs/methods.md, "simfab.deploy.flatten".
 """
 
 from __future__ import annotations
@@ -49,11 +31,14 @@ from simfab.solve.linear import import_cholmod
 class Flattening:
     """Result of :func:`flatten`.
 
-    uv (n,2) [m]: flat positions; u (n,) [-]: log scale factor (0 on the boundary);
-    sigma (m,) [-]: per-face log area-scale factor 1/2 log(A_flat/A_3d); boundary (b,) int:
-    ordered boundary loop (counter-clockwise in the plane); interior (n-b,) int;
-    closure_angle_correction [rad]: largest tangent-angle change that closed the boundary;
-    seconds: wall time per step {assemble, factor, solve, boundary}.
+    Args:
+        uv: (n,2) [m] flat positions.
+        u: (n,) [-] log scale factor (0 on the boundary, or the prescribed values).
+        sigma: (m,) [-] per-face log area-scale factor 1/2 log(A_flat / A_3d).
+        boundary: (b,) ordered boundary loop (counter-clockwise in the plane).
+        interior: (n-b,) the interior vertices.
+        closure_angle_correction: largest tangent-angle change that closed the boundary [rad].
+        seconds: wall time per step {assemble, factor, solve, boundary} [s].
     """
 
     uv: np.ndarray
@@ -66,7 +51,15 @@ class Flattening:
 
 
 def corner_angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """(m,3) interior angle of each face at each of its corners [rad]."""
+    """Interior angle of each face at each of its corners.
+
+    Args:
+        V: (n,3) [m] vertices.
+        F: (m,3) faces.
+
+    Returns:
+        (m,3) [rad].
+    """
     P = V[F]  # (m,3,3)
     out = np.empty(F.shape)
     for k in range(3):
@@ -78,8 +71,16 @@ def corner_angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def cotan_laplacian(V: np.ndarray, F: np.ndarray, angles: np.ndarray | None = None) -> sp.csr_matrix:
-    """Positive semi-definite cotan Laplacian A (n,n) [-]: ``A_ij = -(cot a_ij + cot b_ij)/2``,
-    ``A_ii = -sum_j A_ij``."""
+    """Positive semi-definite cotan Laplacian: ``A_ij = -(cot a_ij + cot b_ij)/2``, ``A_ii = -sum_j A_ij``.
+
+    Args:
+        V: (n,3) [m] vertices.
+        F: (m,3) faces.
+        angles: their :func:`corner_angles` (None: computed).
+
+    Returns:
+        A (n,n) [-], CSR.
+    """
     n = len(V)
     ang = corner_angles(V, F) if angles is None else angles
     cot = 1.0 / np.tan(ang)
@@ -92,9 +93,15 @@ def cotan_laplacian(V: np.ndarray, F: np.ndarray, angles: np.ndarray | None = No
 
 
 def boundary_loop(F: np.ndarray, n: int) -> np.ndarray:
-    """The ordered boundary loop (b,) of a disk-topology mesh, following the face winding.
+    """The ordered boundary loop of a disk-topology mesh, following the face winding.
 
-    Raises InputError unless the boundary is exactly one simple loop (edges in one face only)."""
+    Args:
+        F: (m,3) faces.
+        n: the vertex count.
+
+    Returns:
+        (b,) vertex ids; InputError unless the boundary is exactly one simple loop.
+    """
     e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     key = np.minimum(e[:, 0], e[:, 1]) * np.int64(n) + np.maximum(e[:, 0], e[:, 1])
     uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
@@ -139,12 +146,19 @@ def _close_polygon(lengths: np.ndarray, phi: np.ndarray, *, tol: float = 1e-14, 
 
 
 def flatten(V, F, *, u_boundary=None) -> Flattening:
-    """Boundary First Flattening with u = 0 on the boundary (see module doc). V (n,3) [m], F (m,3).
+    """Boundary First Flattening with u = 0 on the boundary (see the module doc).
 
-    ``u_boundary`` (n,) [-] (read at the boundary vertices; default 0): prescribed boundary scale
-    factors (BFF's Dirichlet case; :mod:`simfab.deploy.cuts` passes the cone metric's u along
-    the cut sides). Then step 1 solves ``A_II u_I = -Omega_I - A_IB u_B``, step 2 adds
-    ``A_BB u_B`` to the boundary curvature, and step 3 uses the lengths ``l~ = e^{(u_i+u_j)/2} l``.
+    With ``u_boundary`` (BFF's Dirichlet case; :mod:`simfab.deploy.cuts` passes the cone metric's u
+    along the cut sides), step 1 solves ``A_II u_I = -Omega_I - A_IB u_B``, step 2 adds ``A_BB u_B``
+    to the boundary curvature, and step 3 uses the lengths ``l~ = e^{(u_i+u_j)/2} l``.
+
+    Args:
+        V: (n,3) [m] vertices of a disk-topology mesh.
+        F: (m,3) faces.
+        u_boundary: (n,) [-] prescribed scale factors, read at the boundary vertices (None: 0).
+
+    Returns:
+        The :class:`Flattening`.
     """
     import time
 
@@ -202,8 +216,12 @@ def flatten(V, F, *, u_boundary=None) -> Flattening:
 
 
 class CholeskyFactor:
-    """Sparse Cholesky factor of an SPD matrix (CHOLMOD through cvxopt), computed once and reused
-    for any number of right-hand sides (the fill-reducing ordering is CHOLMOD's default)."""
+    """Sparse Cholesky factor of an SPD matrix (CHOLMOD through cvxopt), computed once and reused for any
+    number of right-hand sides (the fill-reducing ordering is CHOLMOD's default).
+
+    Args:
+        A: the SPD matrix (n,n).
+    """
 
     def __init__(self, A: sp.spmatrix):
 
@@ -223,7 +241,14 @@ class CholeskyFactor:
                                    "(obtuse/degenerate triangles; remesh the target)") from None
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        """x with A x = b; b (n,) or (n,k)."""
+        """Solve A x = b.
+
+        Args:
+            b: (n,) or (n,k).
+
+        Returns:
+            x, shaped as b.
+        """
         import cvxopt
         import cvxopt.cholmod as cholmod
 
@@ -242,5 +267,13 @@ def _areas(P, F) -> np.ndarray:
 
 
 def face_areas(P, F) -> np.ndarray:
-    """(m,) triangle areas [m^2]; signed (positive counter-clockwise) for 2D points."""
+    """Triangle areas.
+
+    Args:
+        P: (n,3) or (n,2) [m] vertices.
+        F: (m,3) faces.
+
+    Returns:
+        (m,) [m^2]; signed (positive counter-clockwise) for 2D points.
+    """
     return _areas(np.asarray(P, dtype=np.float64), np.asarray(F))

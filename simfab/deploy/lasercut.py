@@ -30,9 +30,18 @@ SCALE_BAR_MM = 50.0
 
 @dataclass(frozen=True)
 class CutLayout:
-    """Everything drawn, in mm (y up): cut rings [(k,2) closed, first != last], labels
-    [(text, (x, y), height)], scale-bar segments [((x0,y0),(x1,y1))], parts, cut_length [mm],
-    extent (xmin, ymin, xmax, ymax) [mm]; seams [(label, (k,2) open polyline)] (empty without cuts)."""
+    """Everything drawn, in mm (y up; :func:`layout`).
+
+    Args:
+        rings: cut rings [(k,2) closed, first != last] [mm].
+        labels: [(text, (x, y), height)] [mm].
+        scale_bar: segments [((x0, y0), (x1, y1))] [mm].
+        parts: separate parts (the pattern and the inserts).
+        inserts: insert parts.
+        cut_length: total cut length [mm].
+        extent: (xmin, ymin, xmax, ymax) [mm].
+        seams: [(label, (k,2) open polyline [mm])] (empty without cuts).
+    """
 
     rings: list
     labels: list
@@ -45,8 +54,16 @@ class CutLayout:
 
 
 def layout(pat, *, arc_points: int = 12, seams=()) -> CutLayout:
-    """Outlines of the pattern ``pat`` (:class:`simfab.deploy.pattern.Pattern`) and its inserts;
-    ``seams``: [(label, (k,2) polyline [m])] for the seam layer."""
+    """Outlines of a pattern and its inserts (see the module doc).
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        arc_points: points per spring arc.
+        seams: [(label, (k,2) polyline [m])] for the seam layer.
+
+    Returns:
+        The :class:`CutLayout`.
+    """
     import shapely
 
     w = pat.config.beam_width * MM
@@ -102,13 +119,25 @@ SVG_MARGIN = 5.0  # mm around the drawing
 
 
 def svg_origin(cut: CutLayout) -> tuple[float, float, float, float]:
-    """(x0, y1, W, H) [mm]: the SVG sheet's top-left corner in drawing coordinates and its size."""
+    """The SVG sheet's frame.
+
+    Args:
+        cut: the :class:`CutLayout`.
+
+    Returns:
+        (x0, y1, W, H) [mm]: the sheet's top-left corner in drawing coordinates and its size.
+    """
     x0, y0, x1, y1 = cut.extent
     return x0 - SVG_MARGIN, y1 + SVG_MARGIN, x1 - x0 + 2 * SVG_MARGIN, y1 - y0 + 2 * SVG_MARGIN
 
 
 def write_svg(path, cut: CutLayout) -> None:
-    """SVG in millimetres (see module doc); ``path`` is written as given (use an atomic temp path)."""
+    """SVG in millimetres (see the module doc).
+
+    Args:
+        path: the file, written as given (pass an atomic temporary path).
+        cut: the :class:`CutLayout`.
+    """
     X0, Y1, W, H = svg_origin(cut)
     f = lambda v: f"{v:.4f}"  # noqa: E731
     fx = lambda x: f(x - X0)  # noqa: E731
@@ -146,7 +175,12 @@ def write_svg(path, cut: CutLayout) -> None:
 
 
 def write_dxf(path, cut: CutLayout) -> None:
-    """DXF R2010 in millimetres, layers CUT / ENGRAVE (see module doc)."""
+    """DXF R2010 in millimetres, layers CUT / ENGRAVE (see the module doc).
+
+    Args:
+        path: the file.
+        cut: the :class:`CutLayout`.
+    """
     import ezdxf
     from ezdxf.enums import TextEntityAlignment
 
@@ -173,6 +207,14 @@ def write_dxf(path, cut: CutLayout) -> None:
 
 
 def summary(cut: CutLayout) -> dict:
+    """The cut layout's figures for the JSON summary.
+
+    Args:
+        cut: the :class:`CutLayout`.
+
+    Returns:
+        {parts, inserts, cut_outlines, cut_length_mm, sheet_mm [w, h], seams}.
+    """
     x0, y0, x1, y1 = cut.extent
     return dict(parts=cut.parts, inserts=cut.inserts, cut_outlines=len(cut.rings), cut_length_mm=cut.cut_length,
                 sheet_mm=[x1 - x0, y1 - y0], seams=len({lab for lab, _ in cut.seams}))

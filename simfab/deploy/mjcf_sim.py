@@ -1,44 +1,22 @@
 """A MuJoCo scene of a rod network with rigid bodies that MuJoCo can simulate (not a picture).
 
-Model (built from a :class:`simfab.rods.model.RodModel`, its flat state and a deployed state):
+Built from a :class:`simfab.rods.model.RodModel`, its flat state and a deployed state
+(:func:`build`):
 
-- every simfab body (insert, junction) is a free MuJoCo body (pose: see below) - three slide
-  joints along the world axes and a ball joint, so that translations and rotations get their own
-  damping (``SimConfig.body_damping``); a *driven* (held) body is attached to the world instead;
-- every rod is a chain of rigid links, one per rod edge (box geom: edge length x thickness x
-  width, no contacts). Link frame: origin at the edge's first node, axes (t, m1, m2) = (tangent,
-  sheet normal, in-plane width direction). The first link is rigidly part of the body the rod
-  starts clamped to (a geom of that body, not a body of its own: MuJoCo's compile time grows
-  with the square of the body count); each further link hangs from the previous one by three
-  hinges at the node:
-  twist about t (stiffness GJ / l), in-plane bending about m1 (B2 / l) and out-of-plane bending
-  about m2 (B1 / l), l = the Voronoi length (l_{k-1} + l_k) / 2: the discrete elastic rod's
-  bending/twist energy 1/2 (B / l) phi^2 for a hinge angle phi, stretch-free (links are rigid);
-- the rod's last link is welded (``<equality weld>``) to the body its end is clamped to, with the
-  relative pose of the *deployed* state (the inserts' clamp offsets are those after insertion).
+- every simfab body (insert, junction) is a free MuJoCo body (three slides and a ball joint, so that
+  translations and rotations get their own damping); a driven body is attached to the world;
+- every rod is a chain of rigid links, one per edge, each hanging from the previous one by three
+  hinges (twist GJ / l, in-plane bending B2 / l, out-of-plane bending B1 / l; l the Voronoi
+  length): the discrete elastic rod's energy 1/2 (B / l) phi^2, stretch-free; its first link is a
+  geom of the body it starts clamped to, its last welded to the body its end is clamped to;
+- the body tree is in the **deployed** state (``qpos0``, keyframe ``deployed``); every hinge's
+  ``springref`` is its angle in the **flat** state (keyframe ``flat``): the cut pattern at rest.
 
-The body tree is defined in simfab's **deployed** state, so ``qpos0`` (what the viewer opens
-on) is the deployed state, also stored as keyframe ``deployed``; the **flat**, stress-free cut
-pattern is the springs' rest configuration: every hinge's ``springref`` is its angle in the
-flat state (intrinsic x-y-z angles of the flat relation R_{k-1}^T R_k relative to the deployed
-one), and keyframe ``flat`` holds the flat pattern (free bodies at their flat poses, hinges at
-their springref; the welds at the inserts are then violated by r - g: the inserts are not yet
-pushed in).
-
-Stability (explicit spring forces, implicit damping with ``implicitfast``): every hinge gets an
-armature ``a = k (dt / omega_dt)^2`` so that its own mode has omega dt <= ``omega_dt`` whatever the
-link's tiny inertia, and damping ``zeta * 2 sqrt(k a)`` (critical for zeta = 1). Both change the
-dynamics, not the equilibria (quasi-static inspection). Welds use ``solref = (2 dt, 1)`` and a
-stiff ``solimp``; gravity is off (simfab's deployment is unloaded).
-
-Measured (tests/deploy small saddle, 2 s from the key, default settings, mass_scale 100):
-dt = 2 ms keeps the elastic energy to -3 % and the shape to 2 % of the out-of-plane height
-(kinetic energy 5e-6 J at the end); 5 ms stays finite but releases 36 % of the energy, 10-20 ms
-stay finite and release ~90 % (the motion is then not a relaxation). Hence ``timestep = 2e-3``.
-The bodies' damping (``body_damping``) lets the relaxation check come to rest in 0.1-0.25 s of
-simulated time on the bundled surfaces instead of oscillating for seconds; with it, dt = 4 ms
-still lets the welds slip (PGS at its iteration cap: the saddle's relaxed state ends 0.33 mm from
-simfab's instead of 0.01 mm), so dt stays 2 ms.
+Stability: each hinge gets an armature a = k (dt / omega_dt)^2 (its own mode at omega dt <=
+``omega_dt``) and damping zeta 2 sqrt(k a); welds ``solref = (2 dt, 1)``, no gravity. Both change
+the dynamics, not the equilibria. :func:`step_from_key` relaxes from the deployed key and compares
+with simfab's equilibrium. The model's details and the time-step measurements: docs/methods.md
+and docs/validation/deploy.md, "simfab.deploy.mjcf_sim".
 """
 
 from __future__ import annotations
@@ -60,24 +38,29 @@ from simfab.io.mjcf import MJCFBuilder, mujoco_module
 class SimConfig:
     """MuJoCo scene settings (scene ``[mujoco]`` table).
 
-    timestep [s]; omega_dt [-]: target hinge frequency x dt; damping_ratio [-] (zeta of every
-    hinge); body_mass [kg] (each junction; inserts get ``insert_mass``); insert_mass [kg];
-    stability_seconds [s]: simulated time of the stability check, a damped relaxation from the
-    deployed key whose end state is compared with simfab's equilibrium; settle_tol [-]: the
-    relaxation stops early once its bodies' speed, kept up for ``stability_seconds``, would move
-    none of them by more than settle_tol x the deployment's out-of-plane height (see
-    :func:`step_from_key`); impedance [-]: weld solimp;
-    body_inertia_factor [-]: free bodies' rotational inertia / the stiffest hinge's armature;
-    mass_scale [-]: factor on the links' density and the bodies' masses (mass scaling: with the real
-    strip density the links' own modes make the motion spurious at dt >= 1e-3 - a relaxation
-    then released 95 % of the elastic energy into motion - while equilibria do not depend on it);
-    solver, iterations: MuJoCo constraint solver and its iterations per step (PGS is 2x faster per
-    step than Newton on these weld-heavy scenes; 20 iterations would be 4x faster again but let
-    the welds slip: the unit cell then drifts by 26 mm in 2 s instead of 2 mm);
-    body_damping [1/s]: mass-proportional damping of the free bodies, c = body_damping x mass on
-    their translations and x rotational inertia on their rotations (absolute velocities: the
-    scene floats freely, so this damps the network's slow, nearly rigid modes, which the hinges'
-    stiffness-proportional damping leaves oscillating; equilibria do not depend on it).
+    Args:
+        timestep: the step dt [s].
+        omega_dt: target hinge frequency x dt [-] (sets each hinge's armature).
+        damping_ratio: zeta of every hinge [-].
+        body_mass: mass of each junction body [kg].
+        insert_mass: mass of each insert [kg].
+        stability_seconds: simulated time of the stability check [s]: a damped relaxation from the
+            deployed key whose end state is compared with simfab's equilibrium.
+        settle_tol: the relaxation stops early once its bodies' speed, kept up for
+            ``stability_seconds``, would move none of them by more than settle_tol x the deployment's
+            out-of-plane height [-] (:func:`step_from_key`).
+        impedance: the welds' solimp [-].
+        body_inertia_factor: free bodies' rotational inertia / the stiffest hinge's armature [-].
+        solver: MuJoCo's constraint solver, "PGS", "CG" or "Newton".
+        mass_scale: factor on the links' density and the bodies' masses [-] (mass scaling: with the
+            real strip density the links' own modes make the motion spurious; equilibria do not
+            depend on it).
+        iterations: the constraint solver's iterations per step (fewer let the welds slip).
+        body_damping: mass-proportional damping of the free bodies [1/s] (c = body_damping x mass on
+            their translations, x rotational inertia on their rotations: it damps the network's slow,
+            nearly rigid modes, which the hinges' stiffness-proportional damping leaves oscillating).
+
+    The measurements behind the defaults: docs/validation/deploy.md, "simfab.deploy.mjcf_sim".
     """
 
     timestep: float = 2e-3
@@ -120,9 +103,15 @@ def _quat(R) -> np.ndarray:
 
 @dataclass
 class SimScene:
-    """What :func:`build` returns: the MJCF text (keys ``deployed`` and ``flat`` in it; ``save``
-    writes it), the flat key's values per joint name, the body names, the deployed key's full
-    qpos and the compiled ``mujoco.MjModel`` (its ``qpos0`` is the deployed key)."""
+    """What :func:`build` returns.
+
+    Args:
+        xml: the MJCF text (keys ``deployed`` and ``flat`` in it).
+        key_values: the flat key's values per joint name.
+        body_names: the simfab body names.
+        key_qpos: the deployed key's full qpos.
+        model: the compiled ``mujoco.MjModel`` (its ``qpos0`` is the deployed key).
+    """
 
     xml: str
     key_values: dict
@@ -131,7 +120,14 @@ class SimScene:
     model: object = None
 
     def save(self, path):
-        """Write the MJCF (compiled by MuJoCo in :func:`build` already) atomically; returns the path."""
+        """Write the MJCF (compiled by MuJoCo in :func:`build` already) atomically.
+
+        Args:
+            path: the file.
+
+        Returns:
+            The path.
+        """
         from pathlib import Path
 
 
@@ -162,8 +158,21 @@ def _key_qpos(root, values: dict) -> np.ndarray:
 
 def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = "deployed",
           body_geoms: dict | None = None) -> SimScene:
-    """MJCF of the network (see module doc). ``body_geoms``: simfab body name -> dict(mesh=(V,F) or
-    box=half sizes (3,), mass, rgba) for inserts; other bodies get a small sphere."""
+    """The MuJoCo scene of a rod network (see the module doc).
+
+    Args:
+        model: the :class:`simfab.rods.model.RodModel`.
+        flat: its flat (rest) state.
+        deployed: its deployed state (the body tree's and ``qpos0``'s).
+        density: the rods' density [kg/m^3].
+        cfg: the :class:`SimConfig`.
+        name: the model's name.
+        body_geoms: simfab body name -> dict(mesh=(V,F) or box=half sizes (3,) [m], mass [kg], rgba)
+            for inserts; other bodies get a small sphere.
+
+    Returns:
+        The :class:`SimScene`.
+    """
     from scipy.spatial.transform import Rotation
 
 
@@ -282,14 +291,23 @@ _EMPTY_PREFIX = "empty prefix"  # MuJoCo's warning on attach(prefix=""): about s
 
 
 def compile_in_parts(root, xml: str, *, part_bodies: int = PART_BODIES):
-    """``mujoco.MjModel`` of the MJCF document ``root`` (ElementTree; ``xml`` is its text), the same
-    model as ``MjModel.from_xml_string(xml)``, compiled from parts: the document without its
-    top-level bodies (options, assets, equalities, keys) and groups of ``part_bodies`` top-level
-    bodies, each parsed on its own and attached (``MjSpec.attach``, no name prefix). MuJoCo's
-    parser rebuilds its tree lists after every added element, so one parse of the whole network
-    grows with the square of its links (more than half of the MJCF compile of a 165-insert
-    network); the parts keep that quadratic cost per part. Documents with mesh assets or few
-    bodies are compiled whole."""
+    """The ``mujoco.MjModel`` of an MJCF document, compiled from parts.
+
+    The same model as ``MjModel.from_xml_string(xml)``: the document without its top-level bodies
+    (options, assets, equalities, keys) and groups of ``part_bodies`` top-level bodies, each parsed on
+    its own and attached (``MjSpec.attach``, no name prefix). MuJoCo's parser rebuilds its tree lists
+    after every added element, so one parse of the whole network grows with the square of its links;
+    the parts keep that quadratic cost per part. Documents with mesh assets or few bodies are compiled
+    whole.
+
+    Args:
+        root: the MJCF document (ElementTree).
+        xml: its text.
+        part_bodies: top-level bodies per part.
+
+    Returns:
+        The compiled model.
+    """
     mj = mujoco_module()
     wb = root.find("worldbody")
     tops = [el for el in wb if el.tag == "body"]
@@ -331,10 +349,20 @@ def _link_geom(b, body, length, w, t, density, *, pos=None, R=None):
 
 @dataclass(frozen=True)
 class Stability:
-    """Stepping from the key: finite throughout, seconds simulated, timestep [s], max |qvel| [m/s or
-    rad/s], kinetic energy at the end [J], drift (max body displacement from the key after the
-    best rigid alignment: the scene floats freely) [m], wall time [s], settled (the relaxation met
-    its convergence test before ``seconds``; None when not asked for), steps taken."""
+    """Stepping from the key (:func:`step_from_key`).
+
+    Args:
+        finite: finite throughout.
+        seconds: simulated time [s].
+        timestep: the step [s].
+        max_speed: max |qvel| [m/s or rad/s].
+        final_kinetic: kinetic energy at the end [J].
+        max_drift: max body displacement from the key after the best rigid alignment (the scene
+            floats freely) [m].
+        wall: wall time [s].
+        settled: the relaxation met its convergence test before ``seconds`` (None: not asked for).
+        steps: steps taken.
+    """
 
     finite: bool
     seconds: float
@@ -348,7 +376,15 @@ class Stability:
 
 
 def aligned_drift(X0: np.ndarray, X1: np.ndarray) -> float:
-    """Largest distance [m] between points X1 (n,3) rigidly aligned onto X0 (n,3) and X0."""
+    """Largest distance between points rigidly aligned onto reference points and those points.
+
+    Args:
+        X0: (n,3) [m] the reference.
+        X1: (n,3) [m] the points.
+
+    Returns:
+        The distance [m].
+    """
 
     R, t = kabsch(X1, X0)
     return float(np.max(np.linalg.norm(X1 @ R.T + t - X0, axis=1)))
@@ -356,20 +392,30 @@ def aligned_drift(X0: np.ndarray, X1: np.ndarray) -> float:
 
 def step_from_key(m, seconds: float, key: str | None = "deployed", *, settle: float | None = None,
                   window: float = 0.05, bodies=None) -> tuple[Stability, object]:
-    """Reset to ``key`` (None: ``qpos0``, which is the deployed key of :func:`build`'s scenes) and
-    step up to ``seconds``; returns the measures and the final MjData.
+    """Reset to a key and step up to ``seconds``.
 
-    ``settle`` [m] (optional convergence test of a damped relaxation): over windows of simulated
-    time alternating between ``window`` and 0.6 ``window`` [s] (incommensurate, so that an
-    oscillation cannot return to the same place at both ends of two consecutive windows), the
-    bodies' largest displacement over the window (after the best rigid alignment) gives their
-    speed; stepping stops once, in two consecutive windows, that speed kept up for the whole
-    ``seconds`` would move no body by more than ``settle``. The end state is then within about
-    ``settle`` of the one stepping the full ``seconds`` would reach, as long as the motion only
-    slows down (the hinges' damping is stiffness-proportional, so slow modes oscillate rather
-    than creep: a state still moving keeps stepping). ``bodies``: MuJoCo body ids the test
-    watches (default: all but the world; the pipeline watches the bodies it compares, not the
-    rods' links, whose small vibration would otherwise keep the test from ever passing)."""
+    ``settle`` (optional convergence test of a damped relaxation): over windows of simulated time
+    alternating between ``window`` and 0.6 ``window`` (incommensurate, so that an oscillation cannot
+    return to the same place at both ends of two consecutive windows), the bodies' largest
+    displacement over the window (after the best rigid alignment) gives their speed; stepping stops
+    once, in two consecutive windows, that speed kept up for the whole ``seconds`` would move no body
+    by more than ``settle``. The end state is then within about ``settle`` of the one stepping the full
+    ``seconds`` would reach, as long as the motion only slows down (the hinges' damping is
+    stiffness-proportional, so slow modes oscillate rather than creep).
+
+    Args:
+        m: the ``mujoco.MjModel``.
+        seconds: simulated time at most [s].
+        key: the keyframe (None: ``qpos0``, the deployed key of :func:`build`'s scenes).
+        settle: the convergence test's distance [m] (None: step the full ``seconds``).
+        window: the test's window [s].
+        bodies: MuJoCo body ids the test watches (default: all but the world; the pipeline watches
+            the bodies it compares, not the rods' links, whose small vibration would otherwise keep
+            the test from ever passing).
+
+    Returns:
+        (:class:`Stability`, the final MjData).
+    """
     import time
 
     import mujoco

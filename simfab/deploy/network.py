@@ -1,45 +1,22 @@
 """Deployment of a flat pattern as a network of discrete elastic rods with rigid inserts.
 
-Network (built from a :class:`simfab.deploy.pattern.Pattern`, flat in z = 0):
+Network (:func:`build_network`, from a :class:`simfab.deploy.pattern.Pattern`, flat in z = 0):
+free rigid bodies for the inserts (``I<id>``), the boundary junctions (``B<v>``) and the edge
+midpoints (``J<e>``); two half-beam rods per edge (midpoint junction to the vertex's insert at the
+gap g, or to the boundary junction); one rod per spring arc (rest shape: the flat, cut shape);
+optional seam ties across the wedges of a cut pattern (:func:`simfab.deploy.cuts.seam_ties`); a
+statically determinate 3-2-1 support on three spring arcs' middle nodes.
 
-- bodies (all free 6-DOF rigid bodies of :mod:`simfab.rods`): one insert per interior quad
-  vertex (``I<id>``), one junction per boundary vertex (``B<v>``) and one per edge midpoint
-  (``J<e>``);
-- rods (rectangular section: width in the sheet, thickness along the sheet normal): each
-  edge is two half beams from its midpoint junction (clamped) to the vertex (clamped to the
-  vertex's insert at the beam end, i.e. at distance g from the insert centre in the flat state,
-  or to the boundary junction); each spring arc is a rod clamped to the junctions of the two
-  edge midpoints it joins. Rest shape = the flat, cut shape (springs carry their Bezier or zigzag curvature).
-- seam ties (optional, a cut pattern whose seams are closed, :func:`simfab.deploy.cuts.seam_ties`):
-  a straight beam across the wedge between two seam vertices facing each other on the
-  target, clamped to both (its short end edges rigid in the vertex bodies, like a beam's:
-  :data:`TIE_SEGMENTS_PER_BEAM_SEGMENT`); in deployment its clamp
-  offsets move outwards along it by (L_flat - L_target)/2 at each end, like an insert's beam
-  ends, so the two vertices are drawn from their flat distance to their target distance (the
-  seam is closed; the tie is not part of the laser-cut sheet but a joint made at assembly);
-- support: a statically determinate 3-2-1 support on the middle nodes of three spring arcs
-  (near the centre: x, y, z; towards +x: y, z; towards +y: z) removes the six rigid motions
-  without constraining the deformation (as in the unit cell).
+Deployment (:func:`deploy`, quasi-static as in :mod:`simfab.deploy.unitcell`): the beam ends'
+attachment points move from the gap (g_i) to the insert's edge (r) in ``increments`` steps, each
+solved to equilibrium from the last.
 
-Deployment (quasi-static, as in :mod:`simfab.deploy.unitcell`): the beam ends' attachment
-points on the inserts move from the gap (g_i) to the insert's edge (r) in ``increments``
-steps, each solved to equilibrium from the last.
-
-Branch selection (the flat pattern can buckle into many shapes; the target says which one is
-meant): (1) predictor: each increment starts from the tangent continuation of the last
-equilibrium, dq = -H^{-1} (dg/dlambda) / increments (implicit function theorem,
-:meth:`simfab.rods.statics.StaticSolver.offset_sensitivity`; the nearly inextensible beams make a
-plain restart from the last state cost 2x the Newton iterations), and the first increment
-also moves by 1/increments of the out-of-plane part of the displacement field D that takes
-every node and body from its flat position to the target point its flat position maps to (the
-target rigidly aligned to the flat pattern, D = 0 at the fully supported node; its in-plane
-part is the metric change that the tangent already carries). It is only the Newton start, the
-equilibrium is the rods'; (2) while drawing in,
-every insert carries a small out-of-plane load ``f_i = perturbation * B1 / h^2 * s_i`` with
-``s_i`` in [-1, 1] the target's height at the insert above its best-fit plane, minus its
-least-squares plane over the inserts' flat positions (no resultant force or moment), normalised. The
-load is removed for the final solve, so the reported state is an unloaded equilibrium whose
-stability (positive-definite reduced Hessian) is reported.
+Branch selection: (1) each increment starts from the tangent continuation of the last equilibrium,
+dq = -H^{-1} (dg/dlambda) / increments, the first also moved by 1/increments of the out-of-plane
+part of the displacement to the target (a Newton start only); (2) while drawing in, each insert
+carries a small out-of-plane load f_i = perturbation B1 / h^2 s_i (s_i: the target's normalised
+height there, no resultant force or moment), removed for the final solve, so the reported state is
+an unloaded equilibrium whose stability is reported. In full: docs/methods.md, "simfab.deploy.network".
 """
 
 from __future__ import annotations
@@ -57,8 +34,7 @@ from simfab.rods.statics import StaticSolver, StaticsOptions
 
 #: Newton step cap of the deployment's solves [longest rod] (StaticsOptions.max_step): the tangent
 #: predictor starts each increment near its equilibrium, so the cap only binds in the first
-#: increment's buckling, where 0.05 held 40-60 Newton steps in a row at alpha ~ 0.27 (0.2: 227 -> 176
-#: iterations on a 165-insert dome, same equilibria on the bundled targets; docs/decisions.md).
+#: increment's buckling (the measurements: docs/validation/deploy.md, "simfab.deploy.network").
 MAX_STEP = 0.2
 #: rod segments of a seam tie per ``beam_segments``: a tie spans up to 1.5 spacings (three half
 #: beams), so it gets three half beams' segments and, like them, short clamped end edges
@@ -70,12 +46,18 @@ TIE_SEGMENTS_PER_BEAM_SEGMENT = 3
 class DeployConfig:
     """Material and simulation parameters (scene ``[material]`` and ``[deploy]`` tables).
 
-    young [Pa], poisson [-], density [kg/m^3] (sheet material); beam_segments,
-    spring_segments: rod segments per half beam / Bezier spring arc (a zigzag arc has its own, per
-    piece: :data:`simfab.deploy.springs.ZIGZAG_SEGMENTS`); clamp_edge [-]: length of a rod's
-    two clamped end edges relative to its other edges (a clamped edge is rigid within its body,
-    so uniform edges would stiffen a 3-segment beam by leaving only its middle third free);
-    increments: quasi-static steps; perturbation [-]: branch-selection load factor (see module doc).
+    Args:
+        young: the sheet's Young's modulus [Pa] (``[material]``).
+        poisson: its Poisson ratio [-] (``[material]``).
+        density: its density [kg/m^3] (``[material]``).
+        beam_segments: rod segments per half beam.
+        spring_segments: rod segments per Bezier spring arc (a zigzag arc has its own, per piece:
+            :data:`simfab.deploy.springs.ZIGZAG_SEGMENTS`).
+        clamp_edge: length of a rod's two clamped end edges relative to its other edges [-] (a
+            clamped edge is rigid within its body, so uniform edges would stiffen a 3-segment beam by
+            leaving only its middle third free).
+        increments: quasi-static steps.
+        perturbation: branch-selection load factor [-] (see the module doc).
     """
 
     young: float = 2.5e9
@@ -88,7 +70,7 @@ class DeployConfig:
     perturbation: float = 0.05
 
     def __post_init__(self):
-        require_positive(self, "")
+        require_positive(self, lambda f: f"material.{f}" if f in ("young", "poisson", "density") else f"deploy.{f}")
         if not -1.0 < self.poisson < 0.5:
             raise InputError(f"must be in (-1, 0.5) (got {self.poisson})", where="material.poisson")
         if not self.clamp_edge <= 1.0:
@@ -100,10 +82,20 @@ class DeployConfig:
 
 @dataclass
 class Network:
-    """The rod network of a pattern: model/state (flat), body indices of the pattern vertices
-    (n,) (insert or boundary junction), edge junction bodies (e,), the insert-clamped nodes and
-    their unit direction (k,), (k,3), grow distance (k,) [m] = r - g of their vertex and that
-    vertex (k,), the node supported in x, y, z."""
+    """The rod network of a pattern (:func:`build_network`).
+
+    Args:
+        model: the :class:`simfab.rods.model.RodModel`.
+        state: its flat state.
+        vertex_body: (n,) body index of each pattern vertex (insert or boundary junction).
+        edge_body: (e,) the edge midpoint junctions' body indices.
+        pull_nodes: (k,) the insert-clamped rod nodes.
+        pull_dir: (k,3) their unit direction from the insert centre.
+        pull_grow: (k,) [m] their grow distance r - g.
+        pull_vertex: (k,) their pattern vertex.
+        held_node: the fully supported node (the predictor's origin).
+        tie_offset: (N,3) [m] the seam ties' clamp-offset change at full deployment (None: no ties).
+    """
 
     model: object
     state: object
@@ -118,8 +110,16 @@ class Network:
 
 
 def rod_parameters(n: int, clamp_edge: float) -> np.ndarray:
-    """(n+1,) node parameters in [0, 1] of a rod of n segments whose two end edges are
-    ``clamp_edge`` times as long as the n - 2 uniform inner ones (n = 1, 2: uniform)."""
+    """Node parameters of a rod whose two end edges are ``clamp_edge`` times as long as the n - 2
+    uniform inner ones (n = 1, 2: uniform).
+
+    Args:
+        n: segments.
+        clamp_edge: the end edges' relative length [-].
+
+    Returns:
+        (n+1,) parameters in [0, 1].
+    """
     if n <= 2:
         return np.linspace(0.0, 1.0, n + 1)
     d = clamp_edge / (n - 2 + 2 * clamp_edge)
@@ -127,8 +127,17 @@ def rod_parameters(n: int, clamp_edge: float) -> np.ndarray:
 
 
 def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
-    """The rod network of ``pat`` (see module doc); ``ties``: :class:`simfab.deploy.cuts.SeamTies`
-    (seam vertex pairs (k,2) and their target distances (k,) [m]) or None (seams free)."""
+    """The rod network of a pattern (see the module doc).
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        cfg: the :class:`DeployConfig`.
+        ties: the :class:`simfab.deploy.cuts.SeamTies` (seam vertex pairs and their target distances)
+            or None (seams free).
+
+    Returns:
+        The :class:`Network`.
+    """
 
     pc = pat.config
     sec = Section(width=pc.beam_width, thickness=pc.beam_thickness)
@@ -210,8 +219,16 @@ def build_network(pat, cfg: DeployConfig, *, ties=None) -> Network:
 
 @dataclass
 class Deployment:
-    """States per increment (0 = flat), final unloaded state, stability, Newton iterations,
-    energy [J], seconds."""
+    """A deployed network (:func:`deploy`).
+
+    Args:
+        network: the :class:`Network`.
+        states: the state per increment (0: flat; the last: the unloaded final state).
+        stable: the final state's reduced Hessian is positive definite.
+        iterations: Newton iterations per increment.
+        energy: elastic energy of the final state [J].
+        seconds: wall time [s].
+    """
 
     network: Network
     states: list
@@ -222,17 +239,33 @@ class Deployment:
 
     @property
     def final(self):
+        """The final (unloaded) state."""
         return self.states[-1]
 
     def vertex_positions(self, state=None) -> np.ndarray:
-        """(n,3) [m] positions of the pattern vertices (insert centres / boundary junctions)."""
+        """Positions of the pattern vertices (insert centres / boundary junctions).
+
+        Args:
+            state: a state of the network (None: the final one).
+
+        Returns:
+            (n,3) [m].
+        """
         st = self.final if state is None else state
         return st.body_pos[self.network.vertex_body]
 
 
 def target_heights(pat, target_points: np.ndarray) -> np.ndarray:
-    """s_i in [-1, 1]: height of the target points (n,3) above their best-fit plane, normalised;
-    sign chosen so that the plane normal is +z-ish (positive = towards the target's +z side)."""
+    """Branch-selection signs: the target points' height above their best-fit plane, normalised (the
+    plane normal +z-ish: positive towards the target's +z side).
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        target_points: (n,3) [m] the pattern vertices' target points.
+
+    Returns:
+        s (n,) in [-1, 1].
+    """
     c = target_points.mean(axis=0)
     normal = np.linalg.svd(target_points - c)[2][2]
     if normal[2] < 0:
@@ -244,8 +277,17 @@ def target_heights(pat, target_points: np.ndarray) -> np.ndarray:
 
 
 def target_displacement(net: Network, flat_to_target) -> tuple[np.ndarray, np.ndarray]:
-    """Predictor field D (see module doc): (N,3) for the nodes and (B,3) for the bodies [m].
-    ``flat_to_target``: function (k,2) flat points -> (k,3) target points."""
+    """The predictor field D (see the module doc): each node and body from its flat position to the
+    target point its flat position maps to (the target rigidly aligned to the flat pattern, D = 0 at
+    the fully supported node).
+
+    Args:
+        net: the :class:`Network`.
+        flat_to_target: function (k,2) flat points [m] -> (k,3) target points [m].
+
+    Returns:
+        (nodes (N,3) [m], bodies (B,3) [m]).
+    """
 
     X0 = np.vstack([net.state.x, net.state.body_pos])
     T = flat_to_target(X0[:, :2])
@@ -257,10 +299,22 @@ def target_displacement(net: Network, flat_to_target) -> tuple[np.ndarray, np.nd
 
 def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device: str = "cpu", quiet: bool = True,
            callback=None, predictor=None) -> Deployment:
-    """Draw the beam ends onto the inserts in ``cfg.increments`` steps (see module doc).
-    ``heights`` (n,) [-]: branch-selection signs per pattern vertex (:func:`target_heights`);
-    ``predictor``: (node (N,3), body (B,3)) displacement field towards the target
-    (:func:`target_displacement`) or None."""
+    """Draw the beam ends onto the inserts in ``cfg.increments`` steps (see the module doc).
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        net: its :class:`Network`.
+        cfg: the :class:`DeployConfig`.
+        heights: (n,) [-] branch-selection signs per pattern vertex (:func:`target_heights`).
+        device: Warp device.
+        quiet: no progress bar.
+        callback: called as callback(increment, state) after each increment's equilibrium (None: none).
+        predictor: (nodes (N,3), bodies (B,3)) [m] displacement towards the target
+            (:func:`target_displacement`), or None.
+
+    Returns:
+        The :class:`Deployment`; ConvergenceError when an increment does not converge.
+    """
     import time
 
 
@@ -317,8 +371,17 @@ def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device:
 
 
 def discrete_gaussian_curvature(P: np.ndarray, quads: np.ndarray, interior: np.ndarray) -> np.ndarray:
-    """Angle defect 2 pi - sum of quad corner angles at each interior vertex of a quad mesh with
-    3D vertex positions P (n,3) [rad] (NaN on the boundary). Positive: dome, negative: saddle."""
+    """Angle defect 2 pi - the sum of the quad corner angles at each interior vertex of a quad mesh
+    (positive: dome, negative: saddle).
+
+    Args:
+        P: (n,3) [m] vertex positions.
+        quads: (q,4) the quads.
+        interior: (n,) bool, the interior vertices.
+
+    Returns:
+        (n,) [rad] (NaN on the boundary).
+    """
     n = len(P)
     s = np.zeros(n)
     for k in range(4):

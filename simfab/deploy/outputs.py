@@ -18,7 +18,14 @@ NAMES = dict(svg="pattern.svg", dxf="pattern.dxf", flat_png="flattening.png", pa
 
 
 def paths(out: str) -> dict:
-    """Label -> path of every output in folder ``out``."""
+    """The output files of a surface deployment.
+
+    Args:
+        out: the output folder.
+
+    Returns:
+        Label -> path of every output in ``out``.
+    """
     out = os.path.abspath(out)
     return {k: os.path.join(out, v) for k, v in NAMES.items()}
 
@@ -66,7 +73,15 @@ CELL_JSON = "deploy.json"
 
 
 def cell_paths(out: str, inserts) -> dict:
-    """(insert, label) -> path of every output of a unit-cell run, and "json" -> the summary's path."""
+    """The output files of a unit-cell run.
+
+    Args:
+        out: the output folder.
+        inserts: the insert body names.
+
+    Returns:
+        (insert, label) -> path of every insert's output, and "json" -> the summary's path.
+    """
     out = os.path.abspath(out)
     p = {(n, k): os.path.join(out, n, f) for n in inserts for k, f in CELL_NAMES.items()}
     p["json"] = os.path.join(out, CELL_JSON)

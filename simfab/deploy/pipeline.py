@@ -37,7 +37,25 @@ from simfab.progress import log
 
 @dataclass
 class SurfaceRun:
-    """Everything a run produced (for the writers and the summary)."""
+    """Everything a run produced (:func:`run`; for the writers and the summary).
+
+    Args:
+        scene: the :class:`simfab.deploy.scene.SurfaceScene`.
+        flat: the :class:`simfab.deploy.flatten.Flattening` (of the cut mesh, with cuts).
+        pattern: the :class:`simfab.deploy.pattern.Pattern`.
+        cut: the :class:`simfab.deploy.lasercut.CutLayout`.
+        network: the :class:`simfab.deploy.network.Network`.
+        deployment: the :class:`simfab.deploy.network.Deployment` (the tuned one, with tuning).
+        target_points: (n,3) [m] the pattern vertices' target points.
+        deviation: the :class:`simfab.deploy.compare.Deviation`.
+        sim: the :class:`simfab.deploy.mjcf_sim.SimScene` (None without the MuJoCo check).
+        sim_check: the MuJoCo check's figures (:func:`mujoco_check_run`; empty without it).
+        shape: :func:`shape_descriptors` of the deployed vertices.
+        seconds: wall time per stage [s].
+        tuning: the gap tuning's figures (None without tuning).
+        cuts: the :class:`simfab.deploy.cuts.CutFlattening` when the scene has ``[cuts] max_cones > 0``.
+        ties: the :class:`simfab.deploy.cuts.SeamTies` when the seams are joined.
+    """
 
     scene: object
     flat: object
@@ -57,7 +75,15 @@ class SurfaceRun:
 
 
 def quadric_curvature(X: np.ndarray) -> float:
-    """K_fit = 4 a c - b^2 [1/m^2] of the least-squares quadric over the points' best-fit plane."""
+    """K_fit = 4 a c - b^2 of the least-squares quadric z = a x^2 + b x y + c y^2 + ... over the points'
+    best-fit plane.
+
+    Args:
+        X: (n,3) [m] points.
+
+    Returns:
+        K_fit [1/m^2].
+    """
     c = X.mean(axis=0)
     _, _, Wt = np.linalg.svd(X - c)
     e1, e2, n = Wt
@@ -78,8 +104,15 @@ def _kind(K: np.ndarray) -> str:
 
 
 def local_curvature(pat, X: np.ndarray) -> np.ndarray:
-    """(n,) [1/m^2] per insert: K_fit of the quadric through the insert and its one-ring of the
-    quad mesh (NaN at boundary vertices); X (n,3) [m] vertex positions."""
+    """Per insert, K_fit of the quadric through the insert and its one-ring of the quad mesh.
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        X: (n,3) [m] vertex positions.
+
+    Returns:
+        (n,) [1/m^2] (NaN at boundary vertices).
+    """
     out = np.full(len(X), np.nan)
     for v in np.flatnonzero(pat.interior):
         ring = np.unique(pat.quads[np.any(pat.quads == v, axis=1)])
@@ -88,8 +121,17 @@ def local_curvature(pat, X: np.ndarray) -> np.ndarray:
 
 
 def shape_descriptors(pat, X: np.ndarray, Y: np.ndarray | None = None) -> dict:
-    """Shape of the deployed vertices X (n,3) [m] (see module doc); Y (n,3) [m]: the target points
-    (for the sign agreement)."""
+    """Shape of the deployed vertices (see the module doc).
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        X: (n,3) [m] deployed vertices.
+        Y: (n,3) [m] the target points (for the sign agreement; None: left out).
+
+    Returns:
+        {quadric_gaussian_curvature [1/m^2], total_angle_defect [rad], curvature_sign_at_inserts
+        {positive, negative}, kind ("dome", "saddle" or "mixed"), curvature_sign_agreement [-] (with Y)}.
+    """
 
     K = discrete_gaussian_curvature(X, pat.quads, pat.interior)
     Kl = local_curvature(pat, X)[pat.interior]
@@ -102,7 +144,18 @@ def shape_descriptors(pat, X: np.ndarray, Y: np.ndarray | None = None) -> dict:
 
 
 def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = True) -> SurfaceRun:
-    """Run every stage on a loaded :class:`simfab.deploy.scene.SurfaceScene`."""
+    """Run every stage on a loaded scene: flattening (with cuts), pattern, laser-cut layout, network,
+    deployment, tuning, deviation, MuJoCo check.
+
+    Args:
+        scene: the :class:`simfab.deploy.scene.SurfaceScene`.
+        device: Warp device.
+        quiet: no progress output.
+        mujoco_check: build and step the MuJoCo scene.
+
+    Returns:
+        The :class:`SurfaceRun`.
+    """
 
     sec = {}
     t = time.perf_counter()
@@ -168,7 +221,15 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
 
 
 def insert_geoms(pat, net) -> dict:
-    """MuJoCo/USD geometry of the inserts: square plates of half-side r_i + beam_width, 2 t thick."""
+    """MuJoCo/USD geometry of the inserts: square plates of half-side r_i + beam_width, 2 t thick.
+
+    Args:
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        net: its :class:`simfab.deploy.network.Network`.
+
+    Returns:
+        simfab body name -> dict(box=half sizes [m], rgba).
+    """
     pc = pat.config
     out = {}
     for v in np.flatnonzero(pat.interior):
@@ -178,7 +239,18 @@ def insert_geoms(pat, net) -> dict:
 
 
 def mujoco_check_run(net, dep, pat, scene):
-    """Build the MuJoCo scene, step it from the key (stability) and relax it (agreement with simfab)."""
+    """Build the MuJoCo scene, step it from the key (stability) and relax it (agreement with simfab).
+
+    Args:
+        net: the :class:`simfab.deploy.network.Network`.
+        dep: its :class:`simfab.deploy.network.Deployment`.
+        pat: the :class:`simfab.deploy.pattern.Pattern`.
+        scene: the :class:`simfab.deploy.scene.SurfaceScene` (its ``[mujoco]`` and material).
+
+    Returns:
+        (the :class:`simfab.deploy.mjcf_sim.SimScene`, the check's figures: model sizes, timestep,
+        stability, relaxation).
+    """
     import mujoco
 
 
@@ -207,12 +279,26 @@ def mujoco_check_run(net, dep, pat, scene):
 
 
 def out_of_plane_extent(X: np.ndarray) -> float:
-    """Extent [m] of points (n,3) along the normal of their best-fit plane."""
+    """Extent of points along the normal of their best-fit plane.
+
+    Args:
+        X: (n,3) [m] points.
+
+    Returns:
+        The extent [m].
+    """
     return float(np.ptp((X - X.mean(axis=0)) @ np.linalg.svd(X - X.mean(axis=0))[2][2]))
 
 
 def summary(res: SurfaceRun) -> dict:
-    """The JSON summary (units in the keys)."""
+    """The JSON summary of a run (units in the keys; ``simfab deploy surface --json``).
+
+    Args:
+        res: the :class:`SurfaceRun`.
+
+    Returns:
+        The summary dict.
+    """
 
     f, p, dv = res.flat, res.pattern, res.deviation
     ins = p.interior
@@ -259,7 +345,14 @@ def summary(res: SurfaceRun) -> dict:
 
 
 def defaults_summary(scene) -> dict | None:
-    """What the defaults decided from the target (:mod:`simfab.deploy.auto`; None when off)."""
+    """What the defaults decided from the target (:mod:`simfab.deploy.auto`).
+
+    Args:
+        scene: the :class:`simfab.deploy.scene.SurfaceScene`.
+
+    Returns:
+        The decisions as a dict; None when the defaults were off.
+    """
     d = getattr(scene, "decisions", None)
     if d is None:
         return None
@@ -276,8 +369,15 @@ BOUND_HEIGHT = 0.03
 
 def bounds(res: SurfaceRun) -> dict:
     """The run against the deployment bounds: RMS <= ``BOUND_RMS`` of the diameter, out-of-plane height
-    within ``BOUND_HEIGHT``, no gap unreachable, no spring short of its slack; ``missed``: one line
-    per missed bound with the scene key or flag that would help."""
+    within ``BOUND_HEIGHT``, no gap unreachable, no spring short of its slack.
+
+    Args:
+        res: the :class:`SurfaceRun`.
+
+    Returns:
+        The figures, whether each bound is met, and ``missed``: one line per missed bound with the
+        scene key or flag that would help.
+    """
     dv, p = res.deviation, res.pattern
     th = out_of_plane_extent(res.target_points)
     herr = out_of_plane_extent(dv.aligned) / th - 1.0 if th > 0 else 0.0
@@ -305,7 +405,14 @@ def bounds(res: SurfaceRun) -> dict:
 
 
 def flat_area_covered(res: SurfaceRun) -> float:
-    """The fraction [-] of the flat domain (cut, with cuts) that the pattern's quads cover."""
+    """The fraction of the flat domain (cut, with cuts) that the pattern's quads cover.
+
+    Args:
+        res: the :class:`SurfaceRun`.
+
+    Returns:
+        The fraction [-].
+    """
     import shapely
 
     f = res.flat
@@ -313,12 +420,19 @@ def flat_area_covered(res: SurfaceRun) -> float:
 
 
 def cuts_summary(res: SurfaceRun) -> dict | None:
-    """Cones and seams of a run with cuts (None without): per cone its angle defect [deg] and
-    seam length [mm] (the cut path in 3D), the interior mesh vertices whose growth no insert size
-    reaches without and with the cones, the inserts on cone tips (insert number, size class,
-    growth [mm]: :func:`simfab.deploy.pattern.cone_tip_growth`), the seam ties, and the flat area
-    the pattern's quads cover (of the cut domain, also the summary's ``flat_area_covered``: the grid
-    cells clipped at the wedges leave notches the deviation does not see)."""
+    """Cones and seams of a run with cuts: per cone its angle defect [deg] and seam length [mm] (the cut
+    path in 3D), the interior mesh vertices whose growth no insert size reaches without and with the
+    cones, the inserts on cone tips (insert number, size class, growth [mm]:
+    :func:`simfab.deploy.pattern.cone_tip_growth`), the seam ties, and the flat area the pattern's
+    quads cover (of the cut domain: the cells clipped at the wedges leave notches the deviation does
+    not see).
+
+    Args:
+        res: the :class:`SurfaceRun`.
+
+    Returns:
+        The dict; None without cuts.
+    """
     cf = res.cuts
     if cf is None:
         return None

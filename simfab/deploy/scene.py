@@ -10,19 +10,21 @@
     # units = "mm"
 
     [pattern]    # simfab.deploy.pattern.PatternConfig   (spacing, beam_width, ..., lengths in m)
-    [material]   # young [Pa], poisson [-], density [kg/m^3]
-    [deploy]     # increments, perturbation, beam_segments, spring_segments
+    [material]   # young [Pa], poisson [-], density [kg/m^3]      } simfab.deploy.network.DeployConfig
+    [deploy]     # increments, perturbation, beam_segments, ...   }
     [mujoco]     # simfab.deploy.mjcf_sim.SimConfig
     [tune]       # simfab.deploy.tuning.TuneConfig (iterations = 0: no tuning)
     [cuts]       # simfab.deploy.cuts.CutsConfig (max_cones = 0: no cuts)
 
-Unknown tables or fields are errors naming the file and the field.
+The config tables load through :func:`simfab.io.tables.load_table` (:data:`TABLES`): an unknown
+table or key is refused naming the file, the table and the key; a bad value names the file and
+``table.key``, or the flag (:class:`simfab.io.tables.Override`) that gave it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +36,7 @@ from simfab.deploy.network import DeployConfig
 from simfab.deploy.pattern import PatternConfig
 from simfab.deploy.tuning import TuneConfig
 from simfab.errors import InputError
+from simfab.io.tables import Override, check_keys, load_table, read_toml
 
 BUNDLED = ("dome", "saddle", "mixed")
 # the steep targets (insert catalogues; cuts with cones on the cap and the petal): bundled names too
@@ -43,8 +46,19 @@ NAMES = BUNDLED + BUNDLED_STEEP
 
 @dataclass(frozen=True)
 class SurfaceScene:
-    """A loaded scene: target (:class:`simfab.deploy.surface.Target`), pattern / deploy / MuJoCo
-    configurations, the file path."""
+    """A loaded surface scene (:func:`load_deploy_scene`).
+
+    Args:
+        target: the :class:`simfab.deploy.surface.Target`.
+        pattern: the :class:`simfab.deploy.pattern.PatternConfig` (``[pattern]``).
+        deploy: the :class:`simfab.deploy.network.DeployConfig` (``[material]`` and ``[deploy]``).
+        mujoco: the :class:`simfab.deploy.mjcf_sim.SimConfig` (``[mujoco]``).
+        path: the scene file (or the target's name).
+        tune: the :class:`simfab.deploy.tuning.TuneConfig` (``[tune]``).
+        cuts: the :class:`simfab.deploy.cuts.CutsConfig` (``[cuts]``).
+        decisions: the :class:`simfab.deploy.auto.Decisions` (what the defaults decided from the
+            target; None without ``auto``).
+    """
 
     target: object
     pattern: object
@@ -57,77 +71,129 @@ class SurfaceScene:
 
 
 def bundled_path(name: str) -> str:
-    """``scenes/deploy/<name>.toml`` of the bundled surface scenes."""
+    """The file of a bundled surface scene.
+
+    Args:
+        name: one of :data:`NAMES`.
+
+    Returns:
+        The path of ``scenes/deploy/<name>.toml``.
+    """
     return str(scenes_dir("deploy", f"{name}.toml"))
 
 
-def _make(cls, table: dict, where: str, section: str):
-    names = {f.name for f in dataclasses.fields(cls)}
-    bad = sorted(set(table) - names)
-    if bad:
-        raise InputError(f"unknown field(s) {', '.join(bad)} (known: {', '.join(sorted(names))})",
-                         where=f"{where}: [{section}]")
-    try:
-        return cls(**table)
-    except InputError as e:
-        raise InputError(e.message, where=f"{where}: {e.where or section}") from None
-    except TypeError as e:
-        raise InputError(str(e), where=f"{where}: [{section}]") from None
+#: The config tables of a surface scene and what each loads into (``[material]`` and ``[deploy]``
+#: both fill :class:`simfab.deploy.network.DeployConfig`, each with its own keys).
+TABLES = {"pattern": PatternConfig, "material": DeployConfig, "deploy": DeployConfig, "mujoco": SimConfig,
+          "tune": TuneConfig, "cuts": CutsConfig}
+#: The keys of ``[material]``; the other fields of DeployConfig are ``[deploy]``'s.
+MATERIAL_KEYS = ("young", "poisson", "density")
+
+
+def _integral(v, where):
+    """A count written as a float (``8.0``) read as the int it is, as the scenes always allowed."""
+    return int(v) if isinstance(v, float) and v.is_integer() else v
+
+
+#: Parsers of :func:`simfab.io.tables.load_table` per table: the counts that accept a whole float.
+PARSERS = {"deploy": dict.fromkeys(("beam_segments", "spring_segments", "increments"), _integral),
+           "mujoco": {"iterations": _integral}}
+
+
+def _keys(table: str) -> tuple[str, ...] | None:
+    """The keys ``table`` may hold (None: every field of its config)."""
+    if TABLES[table] is not DeployConfig:
+        return None
+    fields = [f.name for f in dataclasses.fields(DeployConfig)]
+    return MATERIAL_KEYS if table == "material" else tuple(k for k in fields if k not in MATERIAL_KEYS)
+
+
+def _target(doc: dict, p: Path, units: str | None) -> surface.Target:
+    """The ``[target]`` table's surface: a procedural kind or a mesh file (relative to the scene)."""
+    where = str(p)
+    tt = doc.get("target", {})
+    if not isinstance(tt, dict):
+        raise InputError(f"[target] must be a table, got {tt!r}", where=where)
+    tt = dict(tt)
+    if "mesh" in tt:
+        check_keys(tt, ("mesh", "units"), table_name="target", file=where)
+        mesh = (p.parent / tt.pop("mesh")).resolve()
+        u = units or tt.get("units", "m")
+        target = surface.load(mesh, units=u)
+        surface.check_size(target, units=u, where=f"{where}: [target] mesh")
+        return target
+    if "kind" in tt:
+        kind = tt.pop("kind")
+        target = surface.procedural(kind, tt, where=f"{where}: [target]")
+        surface.check_size(target, units="m", where=f"{where}: [target]")
+        return target
+    raise InputError("[target] needs 'kind' (procedural) or 'mesh' (file)", where=where)
 
 
 def load_deploy_scene(path, *, units: str | None = None, overrides: dict | None = None,
-                      auto: bool = True) -> SurfaceScene:
-    """Read a scene TOML, or a bare mesh file (then all parameters are defaults + ``overrides``).
+                      auto: bool = True, log: Callable[[str], None] | None = None) -> SurfaceScene:
+    """Read a surface scene TOML, or a bare mesh file (then every parameter is a default or an override).
 
-    ``overrides``: {"pattern": {...}, "material": {...}, "deploy": {...}, "mujoco": {...}, "tune": {...},
-    "cuts": {...}}
-    (command-line values, applied over the file's). ``auto``: the fields neither sets (spacing,
-    cuts, insert catalogue, layout, tuning) decided from the target (:func:`simfab.deploy.auto.complete`;
-    False: the dataclasses' fixed defaults)."""
+    Every config table loads through :func:`simfab.io.tables.load_table`: an unknown table or key is
+    refused naming the file, the table and the key; a bad value names the file and ``table.key``, or
+    the flag an :class:`simfab.io.tables.Override` carries.
 
+    Args:
+        path: the scene TOML, or a mesh file (OBJ/STL/PLY).
+        units: units of a mesh file ("m", "cm", "mm"; a scene's ``[target] units`` otherwise).
+        overrides: {table: {key: value or Override}} applied over the file's values (``None``: the
+            key's default), for the tables of :data:`TABLES`.
+        auto: decide the fields neither the file nor ``overrides`` sets (spacing, cuts, insert
+            catalogue, layout, tuning) from the target (:func:`simfab.deploy.auto.complete`);
+            False: the dataclasses' fixed defaults.
+        log: called once with a note for each Override that replaces a value of the file.
+
+    Returns:
+        The :class:`SurfaceScene`.
+    """
     p = Path(path)
     where = str(p)
-    if not p.is_file():
-        raise InputError("file not found", where=where)
     overrides = overrides or {}
+    for t in overrides:
+        if t not in TABLES:
+            raise InputError(f"unknown table [{t}] (known: {', '.join(f'[{k}]' for k in TABLES)})", where="overrides")
     if p.suffix.lower() == ".toml":
-        try:
-            doc = tomllib.loads(p.read_text(encoding="utf-8"))
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-            raise InputError(f"not valid TOML: {e}", where=where) from None
-        unknown = sorted(set(doc) - {"target", "pattern", "material", "deploy", "mujoco", "tune", "cuts"})
-        if unknown:
-            raise InputError(f"unknown table(s) {', '.join(unknown)}", where=where)
-        tt = dict(doc.get("target", {}))
-        if "mesh" in tt:
-            mesh = (p.parent / tt.pop("mesh")).resolve()
-            u = units or tt.pop("units", "m")
-            tt.pop("units", None)
-            if tt:
-                raise InputError(f"unknown field(s) {', '.join(sorted(tt))} beside 'mesh'", where=f"{where}: [target]")
-            target = surface.load(mesh, units=u)
-            surface.check_size(target, units=u, where=f"{where}: [target] mesh")
-        elif "kind" in tt:
-            kind = tt.pop("kind")
-            target = surface.procedural(kind, tt, where=f"{where}: [target]")
-            surface.check_size(target, units="m", where=f"{where}: [target]")
-        else:
-            raise InputError("[target] needs 'kind' (procedural) or 'mesh' (file)", where=where)
+        doc = read_toml(p)
+        known = ("target", *TABLES)
+        for k, v in doc.items():
+            if k not in known:
+                what = f"table [{k}]" if isinstance(v, dict) else f"key {k!r}"
+                raise InputError(f"unknown {what} (known: {', '.join(f'[{t}]' for t in sorted(known))})", where=where)
+        target = _target(doc, p, units)
+        file = where
     else:
-        doc = {}
+        if not p.is_file():
+            raise InputError("file not found", where=where)
+        doc, file = {}, None
         target = surface.load(p, units=units or "m")
         surface.check_size(target, units=units or "m", where=where)
-    tables = {k: {**doc.get(k, {}), **overrides.get(k, {})}
-              for k in ("pattern", "material", "deploy", "mujoco", "tune", "cuts")}
-    pat = _make(PatternConfig, tables["pattern"], where, "pattern")
-    dep = _make(DeployConfig, {**tables["material"], **tables["deploy"]}, where, "material/deploy")
-    sim = _make(SimConfig, tables["mujoco"], where, "mujoco")
-    tune = _make(TuneConfig, tables["tune"], where, "tune")
-    cut = _make(CutsConfig, tables["cuts"], where, "cuts")
-    scene = SurfaceScene(target=target, pattern=pat, deploy=dep, mujoco=sim, path=where, tune=tune, cuts=cut)
+    cfg = {t: load_table(cls, doc.get(t), table_name=t, file=file, overrides=overrides.get(t), log=log,
+                         keys=_keys(t), parsers=PARSERS.get(t))
+           for t, cls in TABLES.items()}
+    dep = dataclasses.replace(cfg["deploy"], **{k: getattr(cfg["material"], k) for k in MATERIAL_KEYS})
+    scene = SurfaceScene(target=target, pattern=cfg["pattern"], deploy=dep, mujoco=cfg["mujoco"], path=where,
+                         tune=cfg["tune"], cuts=cfg["cuts"])
     if not auto:
         return scene
     from simfab.deploy import auto as auto_
 
-    scene, decisions = auto_.complete(scene, {k: set(tables[k]) for k in ("pattern", "cuts", "tune")})
+    given = {t: {k for k in (*(doc.get(t) or {}), *(overrides.get(t) or {}))
+                 if _value(overrides.get(t, {}).get(k, True)) is not None} for t in ("pattern", "cuts", "tune")}
+    try:
+        scene, decisions = auto_.complete(scene, given)
+    except InputError as e:  # a check of the decided values (e.g. the cell count) at a flag's key names the flag
+        sources = {f"{t}.{k}": v.source for t, ov in overrides.items() for k, v in ov.items()
+                   if isinstance(v, Override)}
+        if e.where in sources:
+            raise InputError(e.message, where=sources[e.where]) from None
+        raise
     return dataclasses.replace(scene, decisions=decisions)
+
+
+def _value(v):
+    return v.value if isinstance(v, Override) else v

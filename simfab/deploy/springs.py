@@ -1,48 +1,21 @@
-"""Torsional springs of a pattern: cubic Bezier arcs between consecutive edge midpoints of a quad,
-with their bulge sized from the growth the quad must undergo.
+"""Torsional springs of a pattern: cubic Bezier arcs (or zigzags) between consecutive edge midpoints
+of a quad, sized from the growth the quad undergoes in deployment.
 
-Arc (quad with centre c, consecutive edge midpoints M0, M1; handle pull b [-]):
+Arc (quad centre c, consecutive edge midpoints M0, M1; handle pull b [-]):
 
     P1 = M0 + b (c - M0),  P2 = M1 + b (c - M1),
-    B(t) = (1-t)^3 M0 + 3 (1-t)^2 t P1 + 3 (1-t) t^2 P2 + t^3 M1,   t in [0, 1],
+    B(t) = (1-t)^3 M0 + 3 (1-t)^2 t P1 + 3 (1-t) t^2 P2 + t^3 M1,   t in [0, 1].
 
-so the arc leaves each midpoint towards the quad centre and bulges inwards (b = 1: both handles
-at the centre; b > 1: the arc passes closer to the centre than its handles' foot points).
+Deployment grows an arc's chord c by s (:func:`simfab.deploy.pattern.quad_growth`); an arc of
+length S follows by bending only while S > s c (straightened, it carries the growth in tension and
+the beams buckle locally). Each quad's b is the smallest b >= ``spring_bulge`` with
 
-Sizing rule (why). Deployment scales the quad by s_q = e^{-u_q} (u_q: flattening log scale
-factor at the quad): the two midpoints an arc joins move apart, its chord c grows to s_q c
-(the pattern passes each arc's own chord growth, from the growth r - g of the insert at the
-corner the arc turns around: :func:`simfab.deploy.pattern.quad_growth`). An arc of length S can
-follow only by bending while S > s_q c; as S -> s_q c it straightens and its resistance to
-further growth diverges (it ends up carrying the growth in tension, which compresses the beams:
-they buckle out of plane locally at every insert instead of the network growing into the target
-- measured on the bundled dome: a 16 mm high deployment for a 54 mm target with the earlier
-fixed b = 0.7, S/c = 1.16 < s_q = 1.22 at the centre).
-Hence each quad's b is the smallest b >= ``spring_bulge`` with
+    S_k(b) / c_k >= (1 + spring_slack) max(s_k, 1)           for all four arcs k,
 
-    S_k(b) / c_k >= (1 + spring_slack) max(s_k, 1)           for all four arcs k of the quad,
-
-found by bisection (S/c grows monotonically with b). b is capped where an arc would come within
-``spring_width`` of the quad centre (the four arcs of a quad must stay apart for the cut); a
-quad that needs more is reported (``tight``) and keeps the capped b. Shrinking quads (u > 0,
-saddles) need no growth slack (their arcs bend further); they keep the plain margin.
-
-Zigzags (:func:`zigzag_layout`). A Bezier arc reaches S/c ~ 1.2-1.5 before it comes within a
-spring width of the centre; steeper growth (1.5-1.7 on an 80 deg cap) takes an arc that packs
-its length into its triangle (M0, M1, centre): vertical legs (in the chord's frame) joined by half
-circles, one clearance inside the triangle, about (triangle area) / (leg pitch) long - up to
-~2.4 c in a 30 mm cell with 1 mm springs. :func:`size_zigzag` takes the fewest legs that reach the
-length, then the lowest legs (bisection on their height fraction), as the Bezier sizing takes
-the smallest b.
-
-Per-arc pulls (:func:`size_arcs`). In a skewed quad one arc may need more length than its
-neighbours while the common b's cap is set by its own approach to the centre. Such a quad, all
-Bezier and still short, gives each arc its own b_k: the smallest that reaches its own need. The
-arcs approach the centre along the quad's half-diagonals (opposite arcs along one line, adjacent
-ones at about a right angle), so their centre clearances c_k bound their separations: opposite
-c_k + c_{k+2}, adjacent about sqrt(c_k^2 + c_{k+1}^2). The per-arc pulls are kept where these stay
-at least what four arcs at the cap give (c_k = w: 2 w and sqrt(2) w), so a deep arc opposite a
-shallow one is allowed.
+by bisection (:func:`size_bulges`), capped where an arc comes within ``spring_width`` of the centre
+(the quad is then ``tight``). Longer arcs: zigzags packed into the arc's triangle (:func:`zigzag_layout`,
+:func:`size_zigzag`); a skewed quad may take one pull per arc (:func:`size_arcs`). The reasoning and
+the figures behind it: docs/methods.md, "simfab.deploy.springs".
 """
 
 from __future__ import annotations
@@ -55,8 +28,18 @@ _B_UPPER = 2.0  # bisection bracket of the cap search (the arc reaches the centr
 
 
 def bezier(M0: np.ndarray, M1: np.ndarray, c: np.ndarray, b: float, n) -> np.ndarray:
-    """(n+1,2) points of one arc from M0 to M1 (2,) with handles pulled by b towards c (2,) [m], at
-    n+1 uniform parameters (n int) or at the parameters n (array, in [0, 1])."""
+    """Points of one arc from M0 to M1 with handles pulled by b towards c.
+
+    Args:
+        M0: (2,) [m] start.
+        M1: (2,) [m] end.
+        c: (2,) [m] the quad centre.
+        b: the pull [-].
+        n: segments (n+1 uniform parameters), or the parameters (array, in [0, 1]).
+
+    Returns:
+        (k,2) [m].
+    """
     t = (np.linspace(0.0, 1.0, n + 1) if np.ndim(n) == 0 else np.asarray(n, dtype=np.float64))[:, None]
     P1, P2 = M0 + b * (c - M0), M1 + b * (c - M1)
     return (1 - t) ** 3 * M0 + 3 * (1 - t) ** 2 * t * P1 + 3 * (1 - t) * t**2 * P2 + t**3 * M1
@@ -79,7 +62,17 @@ def _arc_ratios(M0, M1, c, b) -> np.ndarray:
 
 
 def length_ratio(M0, M1, c, b) -> np.ndarray:
-    """(q,) smallest arc length / chord over each quad's four arcs."""
+    """Smallest arc length / chord over each quad's four arcs.
+
+    Args:
+        M0: (q,4,2) [m] each arc's start.
+        M1: (q,4,2) [m] each arc's end.
+        c: (q,1,2) [m] the quad centres.
+        b: (q,) or (q,4) [-] the pulls.
+
+    Returns:
+        (q,) [-].
+    """
     return np.min(_arc_ratios(M0, M1, c, b), axis=1)
 
 
@@ -103,13 +96,22 @@ def _bisect(ok, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 def size_bulges(P: np.ndarray, quads: np.ndarray, mids_of_quad: np.ndarray, growth: np.ndarray, *, bulge_min: float,
                 slack: float, width: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per quad: handle pull b (q,) [-], its four arcs' length/chord ratios S/c at b (q,4) [-], and
-    whether the quad is ``tight`` (q,) (an arc needs more than the centre clearance allows).
+    """Per quad, the smallest pull that gives every arc its slack (see the module doc).
 
-    P (n,2) [m] quad vertices; quads (q,4); mids_of_quad (q,4,2) [m] midpoints of the quad's
-    edges k = (v_k, v_{k+1}); growth (q,) or (q,4) [-] the quad's s_q or each arc's own chord
-    growth (arc k joins the midpoints of edges k and k+1); bulge_min, slack [-]; width [m] spring
-    width (the clearance kept from the quad centre)."""
+    Args:
+        P: (n,2) [m] quad vertices.
+        quads: (q,4) the quads.
+        mids_of_quad: (q,4,2) [m] midpoints of the quad's edges k = (v_k, v_{k+1}).
+        growth: (q,) or (q,4) [-] the quad's s_q or each arc's own chord growth (arc k joins the
+            midpoints of edges k and k+1).
+        bulge_min: the smallest pull [-].
+        slack: the length margin [-].
+        width: spring width [m] (the clearance kept from the quad centre).
+
+    Returns:
+        (pull b (q,) [-], the four arcs' S/c at b (q,4) [-], tight (q,) bool: an arc needs more than
+        the centre clearance allows).
+    """
     nq = len(quads)
     if nq == 0:
         return np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
@@ -128,10 +130,25 @@ def size_bulges(P: np.ndarray, quads: np.ndarray, mids_of_quad: np.ndarray, grow
 
 def size_arcs(M0: np.ndarray, M1: np.ndarray, c: np.ndarray, need: np.ndarray, b: np.ndarray, *,
               bulge_min: float, width: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per-arc pulls (see module doc) for quads short of the slack at their common pull b (q,):
-    M0, M1 (q,4,2) [m] each arc's midpoints, c (q,1,2) [m] the centres, need (q,4) [-] the S/c each arc
-    needs. Returns the pulls (q,4) [-] (the common b repeated where the per-arc ones would bring
-    two arcs nearer than the cap allows, or an arc does not reach its need) and their S/c (q,4)."""
+    """Per-arc pulls for quads short of the slack at their common pull.
+
+    Each arc gets the smallest pull that reaches its own need; the per-arc pulls are kept where the
+    arcs' centre clearances c_k keep them as far apart as four arcs at the cap would (opposite arcs
+    c_k + c_{k+2} >= 2 w, adjacent ones about sqrt(c_k^2 + c_{k+1}^2) >= sqrt(2) w).
+
+    Args:
+        M0: (q,4,2) [m] each arc's start midpoint.
+        M1: (q,4,2) [m] each arc's end midpoint.
+        c: (q,1,2) [m] the quad centres.
+        need: (q,4) [-] the S/c each arc needs.
+        b: (q,) [-] the common pulls.
+        bulge_min: the smallest pull [-].
+        width: spring width [m].
+
+    Returns:
+        (pulls (q,4) [-] (the common b repeated where the per-arc ones would bring two arcs nearer
+        than the cap allows, or an arc does not reach its need), their S/c (q,4) [-]).
+    """
     q = len(b)
     lo, hi = np.full(q, float(bulge_min)), np.full(q, _B_UPPER)
     bk = np.empty((q, 4))
@@ -159,7 +176,14 @@ ZIGZAG_SEGMENTS = {"lead": 1, "quarter": 1, "leg": 2, "half": 3}
 
 
 def zigzag_segments(legs: int) -> int:
-    """Rod segments of a zigzag with ``legs`` legs (see :data:`ZIGZAG_SEGMENTS`)."""
+    """Rod segments of a zigzag.
+
+    Args:
+        legs: its legs.
+
+    Returns:
+        The segment count (:data:`ZIGZAG_SEGMENTS` per piece).
+    """
     s = ZIGZAG_SEGMENTS
     return 2 * (s["lead"] + s["quarter"]) + legs * s["leg"] + (legs - 1) * s["half"]
 
@@ -187,28 +211,39 @@ def _zigzag_frame(M0, M1, c):
 
 
 def zigzag_layout(M0, M1, c, legs: int, amplitude: float, clearance: float):
-    """Pieces of a zigzag spring from M0 to M1 (2,) [m] inside the triangle (M0, M1, c) (c: the
-    quad centre), or None where ``legs`` legs do not fit.
+    """Pieces of a zigzag spring from M0 to M1 inside the triangle (M0, M1, c).
 
     Local frame: x along the chord M0 -> M1 (length L), y towards c. The path runs along the chord
     from M0, turns up by a quarter circle into leg 0, and alternates ``legs`` (even) vertical legs at
-    pitch p = 2 rho joined by half circles of radius rho (at the top between legs 2i and 2i+1, at
-    the bottom - touching the chord - between legs 2i+1 and 2i+2), then turns down by a quarter
-    circle into the chord to M1. Every turn's circle keeps ``clearance`` + rho from both sides
-    M0-c, M1-c (inward normals n0, n1): the spring's centre line stays ``clearance`` inside the
-    triangle (apart from its ends on the chord), so the four springs of a quad stay 2 clearance
-    apart. With X_min + rho = x_0 the first leg (n0 . (X_min, rho) = rho + clearance, linear in
-    rho) and likewise the last, the legs fill [X_min + rho, X_max - rho]:
+    pitch p = 2 rho joined by half circles of radius rho (at the top between legs 2i and 2i+1, at the
+    bottom - touching the chord - between legs 2i+1 and 2i+2), then turns down by a quarter circle
+    into the chord to M1. Every turn's circle keeps ``clearance`` + rho from both sides M0-c, M1-c
+    (inward normals n0, n1): the spring's centre line stays ``clearance`` inside the triangle (apart
+    from its ends on the chord), so the four springs of a quad stay 2 clearance apart. With
+    X_min + rho = x_0 the first leg (n0 . (X_min, rho) = rho + clearance, linear in rho) and likewise
+    the last, the legs fill [X_min + rho, X_max - rho]:
 
         rho = (gamma - alpha) / (2 legs + beta + epsilon),
         X_min = alpha + beta rho,  X_max = gamma - epsilon rho.
 
-    The top of the pair (2i, 2i+1) is t_i = t_lo + amplitude (t_max,i - t_lo), with t_max,i the
-    height at which the top half circle (centre X_i) touches the clearance line of a side and
+    The top of the pair (2i, 2i+1) is t_i = t_lo + amplitude (t_max,i - t_lo), with t_max,i the height
+    at which the top half circle (centre X_i) touches the clearance line of a side and
     t_lo = rho + clearance (every leg at least one clearance long). ``legs`` legs fit when
-    rho >= clearance (legs at least one clearance apart) and every t_max,i >= t_lo. Returns
-    (pieces, rho): pieces in world coordinates, ("line", P, Q) and ("arc", centre, radius, angle
-    from, angle to, R) - the angles in the chord's frame, R (2,2) its axes as columns."""
+    rho >= clearance and every t_max,i >= t_lo.
+
+    Args:
+        M0: (2,) [m] start.
+        M1: (2,) [m] end.
+        c: (2,) [m] the quad centre.
+        legs: the legs (even).
+        amplitude: the leg height fraction [-].
+        clearance: [m].
+
+    Returns:
+        (pieces, rho [m]), or None where ``legs`` legs do not fit: pieces in world coordinates,
+        ("line", P, Q) and ("arc", centre, radius, angle from, angle to, R) - the angles in the chord's
+        frame, R (2,2) its axes as columns.
+    """
     L, ex, ey, n0, n1 = _zigzag_frame(M0, M1, c)
     M0 = np.asarray(M0, dtype=np.float64)
     # n0 . (X, rho) >= rho + clearance  ->  X >= (rho (1 - n0y) + clearance) / n0x
@@ -269,8 +304,16 @@ def _piece_kind(p, k: int, n: int) -> str:
 
 
 def zigzag_points(pieces, *, rod: bool = False) -> np.ndarray:
-    """Polyline of a zigzag's pieces: drawn (``_TURN_SAMPLES`` points per half turn, straight pieces
-    as they are) or, with ``rod``, the rod's nodes (:data:`ZIGZAG_SEGMENTS` per piece)."""
+    """Polyline of a zigzag's pieces.
+
+    Args:
+        pieces: :func:`zigzag_layout`'s pieces.
+        rod: the rod's nodes (:data:`ZIGZAG_SEGMENTS` per piece) instead of the drawn polyline
+            (``_TURN_SAMPLES`` points per half turn, straight pieces as they are).
+
+    Returns:
+        (k,2) [m].
+    """
     out = []
     for k, p in enumerate(pieces):
         kind = _piece_kind(p, k, len(pieces))
@@ -288,9 +331,20 @@ def _polyline_ratio(pts: np.ndarray) -> float:
 
 
 def size_zigzag(M0, M1, c, need: float, clearance: float) -> tuple[int, float, float]:
-    """(legs, amplitude, S/c) of the shortest zigzag (fewest legs, then the smallest leg height by
-    bisection - its length grows monotonically with the amplitude) whose drawn length is at least
-    ``need`` x its chord; the longest that fits where none reaches (legs 0: none fits)."""
+    """The shortest zigzag (fewest legs, then the smallest leg height by bisection - its length grows
+    monotonically with the amplitude) whose drawn length is at least ``need`` x its chord; the
+    longest that fits where none reaches.
+
+    Args:
+        M0: (2,) [m] start.
+        M1: (2,) [m] end.
+        c: (2,) [m] the quad centre.
+        need: the S/c needed [-].
+        clearance: [m].
+
+    Returns:
+        (legs (0: none fits), amplitude [-], S/c [-]).
+    """
     best = (0, 0.0, 0.0)
     for legs in range(2, ZIGZAG_MAX_LEGS + 1, 2):
         lay = zigzag_layout(M0, M1, c, legs, 1.0, clearance)

@@ -39,7 +39,13 @@ SIZE_RANGE_M = (0.005, 10.0)
 
 @dataclass(frozen=True)
 class Target:
-    """A validated disk-topology target surface: V (n,3) [m], F (m,3) int, name."""
+    """A validated disk-topology target surface (:func:`validate`).
+
+    Args:
+        V: (n,3) [m] vertices.
+        F: (m,3) int faces.
+        name: its name (for messages and outputs).
+    """
 
     V: np.ndarray
     F: np.ndarray
@@ -52,8 +58,15 @@ class Target:
 
 
 def disk_mesh(a: float, rings: int) -> tuple[np.ndarray, np.ndarray]:
-    """Triangulated disk of radius ``a``: centre + ``rings`` rings of 6k points (k = 1..rings),
-    Delaunay-triangulated. Returns P (n,2) [m] (boundary = the outer ring), F (m,3) CCW."""
+    """Triangulated disk: the centre and ``rings`` rings of 6k points (k = 1..rings), Delaunay-triangulated.
+
+    Args:
+        a: the radius [m].
+        rings: the rings.
+
+    Returns:
+        (P (n,2) [m] (boundary: the outer ring), F (m,3) CCW).
+    """
     from scipy.spatial import Delaunay
 
     pts = [np.zeros((1, 2))]
@@ -70,7 +83,16 @@ def disk_mesh(a: float, rings: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def spherical_cap(R: float, theta0: float, rings: int) -> Target:
-    """Cap of a sphere of radius R [m] up to polar angle theta0 [rad], apex at (0, 0, R) - R = 0."""
+    """Cap of a sphere up to a polar angle, apex at the origin (z = (0, 0, R) - R shifted).
+
+    Args:
+        R: the sphere's radius [m].
+        theta0: the polar half-angle [rad].
+        rings: triangulation rings.
+
+    Returns:
+        The :class:`Target`.
+    """
     P, F = disk_mesh(1.0, rings)
     rho = np.linalg.norm(P, axis=1)
     th = rho * theta0
@@ -80,14 +102,35 @@ def spherical_cap(R: float, theta0: float, rings: int) -> Target:
 
 
 def saddle(a: float, c: float, rings: int) -> Target:
-    """Hyperbolic paraboloid z = (x^2 - y^2) / (2 c) over the disk of radius a [m]."""
+    """Hyperbolic paraboloid z = (x^2 - y^2) / (2 c) over a disk.
+
+    Args:
+        a: the disk's radius [m].
+        c: the curvature radius [m].
+        rings: triangulation rings.
+
+    Returns:
+        The :class:`Target`.
+    """
     P, F = disk_mesh(a, rings)
     z = (P[:, 0] ** 2 - P[:, 1] ** 2) / (2.0 * c)
     return validate(np.column_stack([P, z]), F, "saddle")
 
 
 def mixed(a: float, c: float, h: float, s: float, x0: float, rings: int) -> Target:
-    """Saddle z = (x^2 - y^2)/(2c) plus a bump h exp(-|p - (x0,0)|^2/s^2) over the disk of radius a [m]."""
+    """Saddle z = (x^2 - y^2) / (2c) plus a bump h exp(-|p - (x0, 0)|^2 / s^2) over a disk.
+
+    Args:
+        a: the disk's radius [m].
+        c: the saddle's curvature radius [m].
+        h: the bump's height [m].
+        s: its width [m].
+        x0: its offset along x [m].
+        rings: triangulation rings.
+
+    Returns:
+        The :class:`Target`.
+    """
     P, F = disk_mesh(a, rings)
     z = (P[:, 0] ** 2 - P[:, 1] ** 2) / (2.0 * c) + h * np.exp(-((P[:, 0] - x0) ** 2 + P[:, 1] ** 2) / s**2)
     return validate(np.column_stack([P, z]), F, "mixed")
@@ -95,7 +138,19 @@ def mixed(a: float, c: float, h: float, s: float, x0: float, rings: int) -> Targ
 
 def petal(a: float, b: float, s: float, w: float, c: float, rings: int) -> Target:
     """Folded petal z = s (sqrt(x^2 + w^2) - w) + y^2 / (2 c) over the ellipse x^2/b^2 + y^2/a^2 <= 1
-    (a, b, w, c [m], s [-]; see module doc)."""
+    (see the module doc).
+
+    Args:
+        a: half length [m].
+        b: half width [m].
+        s: fold slope [-].
+        w: fold width [m] (rounding).
+        c: curl radius [m].
+        rings: triangulation rings.
+
+    Returns:
+        The :class:`Target`.
+    """
     P, F = disk_mesh(1.0, rings)
     x, y = b * P[:, 0], a * P[:, 1]
     z = s * (np.sqrt(x * x + w * w) - w) + y * y / (2.0 * c)
@@ -103,8 +158,20 @@ def petal(a: float, b: float, s: float, w: float, c: float, rings: int) -> Targe
 
 
 def cylinder(R: float, angle: float, length: float, n: int, *, jitter: float = 0.25, seed: int = 0) -> Target:
-    """Patch of a cylinder (radius R [m], opening ``angle`` [rad], axial ``length`` [m]) meshed by
-    Delaunay triangulation of a jittered (n+1)^2 grid of its developed rectangle."""
+    """Patch of a cylinder, meshed by Delaunay triangulation of a jittered (n+1)^2 grid of its developed
+    rectangle.
+
+    Args:
+        R: radius [m].
+        angle: opening angle [rad].
+        length: axial length [m].
+        n: grid cells per side.
+        jitter: the grid points' jitter [cells].
+        seed: the jitter's random seed.
+
+    Returns:
+        The :class:`Target`.
+    """
     from scipy.spatial import Delaunay
 
     rng = np.random.default_rng(seed)
@@ -120,7 +187,17 @@ def cylinder(R: float, angle: float, length: float, n: int, *, jitter: float = 0
 
 
 def procedural(kind: str, params: dict, *, where: str = "target") -> Target:
-    """A procedural target by name (see module doc); ``params`` from the scene's [target] table."""
+    """A procedural target by name (see the module doc).
+
+    Args:
+        kind: "spherical_cap", "saddle", "mixed", "petal" or "cylinder".
+        params: the kind's parameters (the scene's ``[target]`` table without ``kind``).
+        where: what an error names (the file and table).
+
+    Returns:
+        The :class:`Target`; InputError naming ``where`` on an unknown kind, a missing, bad or unknown
+        parameter.
+    """
     p = dict(params)
     try:
         rings = int(p.pop("rings", 24))
@@ -149,9 +226,18 @@ def procedural(kind: str, params: dict, *, where: str = "target") -> Target:
 
 
 def validate(V, F, name: str = "target", *, where: str | None = None) -> Target:
-    """Check disk topology; InputError (naming ``where``) on: non-finite coordinates, degenerate
-    faces, non-manifold edges, no/several boundary loops, several components, Euler
-    characteristic != 1."""
+    """Check disk topology.
+
+    Args:
+        V: (n,3) [m] vertices.
+        F: (m,3) faces.
+        name: the target's name.
+        where: what an error names (None: ``name``).
+
+    Returns:
+        The :class:`Target`; InputError (naming ``where``) on non-finite coordinates, degenerate faces,
+        non-manifold edges, no or several boundary loops, several components, Euler characteristic != 1.
+    """
 
     where = where or name
     V = np.asarray(V, dtype=np.float64)
@@ -219,7 +305,15 @@ def check_size(target: Target, *, units: str, where: str) -> None:
 
 
 def load(path, *, units: str = "m") -> Target:
-    """Read an OBJ/STL/PLY target (``units`` m, mm or cm) and validate it (see :func:`validate`)."""
+    """Read an OBJ/STL/PLY target and validate it (:func:`validate`).
+
+    Args:
+        path: the mesh file.
+        units: its units ("m", "mm" or "cm").
+
+    Returns:
+        The :class:`Target` (metres).
+    """
 
     mesh, _ = read_mesh(path, units=units)
     return validate(np.asarray(mesh.vertices), np.asarray(mesh.faces), name=str(path), where=str(path))

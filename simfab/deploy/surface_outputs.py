@@ -33,7 +33,12 @@ def _plt():
 
 
 def write_flattening_png(path, res) -> None:
+    """The flattening PNG (see the module doc).
 
+    Args:
+        path: the image file.
+        res: the :class:`simfab.deploy.pipeline.SurfaceRun`.
+    """
     plt = _plt()
     tgt, f, cf = res.scene.target, res.flat, getattr(res, "cuts", None)
     V, F = (tgt.V, tgt.F) if cf is None else (cf.V, cf.F)  # with cuts: the cut mesh (its flattening)
@@ -77,6 +82,12 @@ def write_flattening_png(path, res) -> None:
 
 
 def write_pattern_png(path, res) -> None:
+    """The pattern PNG (see the module doc).
+
+    Args:
+        path: the image file.
+        res: the :class:`simfab.deploy.pipeline.SurfaceRun`.
+    """
     from matplotlib.collections import LineCollection
 
 
@@ -117,6 +128,12 @@ def write_pattern_png(path, res) -> None:
 
 
 def write_deviation_png(path, res) -> None:
+    """The deviation PNG (see the module doc).
+
+    Args:
+        path: the image file.
+        res: the :class:`simfab.deploy.pipeline.SurfaceRun`.
+    """
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
 
@@ -152,6 +169,12 @@ def write_deviation_png(path, res) -> None:
 
 
 def write_usd(path, res) -> None:
+    """The USD stage of the deployment (see the module doc).
+
+    Args:
+        path: the ``.usda`` file.
+        res: the :class:`simfab.deploy.pipeline.SurfaceRun`.
+    """
     import trimesh
     from pxr import UsdGeom, Vt
 
@@ -186,8 +209,13 @@ def write_usd(path, res) -> None:
 
 
 def write_bom_csv(path, res) -> None:
-    """Bill of materials of the inserts: one row per catalogue size (class, half-size r [mm], plate
-    side [mm], count, insert numbers separated by spaces)."""
+    """Bill of materials of the inserts: one row per catalogue size (class, half-size r [mm], plate side
+    [mm], count, insert numbers separated by spaces).
+
+    Args:
+        path: the CSV file.
+        res: the :class:`simfab.deploy.pipeline.SurfaceRun`.
+    """
     import csv
 
     with open(path, "w", newline="", encoding="utf-8") as fh:

@@ -1,35 +1,21 @@
 """Unit-cell deployment: four spokes around a gap, side beams, torsional-spring corners, an insert.
 
-Geometry (flat, z = 0, centred at the origin; ``u_k`` = +x, +y, -x, -y):
+The cell (:func:`build_cell`, flat, centred at the origin; u_k = +x, +y, -x, -y): spoke k from
+``gap u_k`` to ``size/2 u_k``; side k through ``size/2 u_k`` in two halves joined with the spoke at
+a rigid T-junction; corner k a cubic Bezier torsional spring; the insert a free rigid body whose
+half-size r (its MuJoCo box geom) is where the spokes' inner ends are clamped; a statically
+determinate 3-2-1 support on three corner-spring midpoints.
 
-- spoke k: straight beam from ``gap * u_k`` (edge of the central gap) to ``size/2 * u_k``;
-- side k: straight beam through ``size/2 * u_k`` along ``v_k = u_{k+1}``, ending ``corner_gap``
-  before the corners, in two halves joined with the spoke at a rigid T-junction body;
-- corner k: a curved torsional spring (cubic Bezier, natural curvature = its flat shape)
-  joining side k to side k+1 through rigid junction bodies at both ends;
-- the insert: a free rigid body (6 DOF) at the centre; the four spokes' inner ends are clamped
-  to it at distance ``r`` (its half-size from the MuJoCo box geom) from the centre;
-- support: a statically determinate 3-2-1 support on three corner-spring midpoints removes the
-  six rigid motions of the free-floating cell without constraining its deformation.
+Deployment (:func:`deploy`, quasi-static): the spokes' clamp points are drawn from ``gap`` to r in
+``increments`` steps. A small out-of-plane load f = perturbation B1 / spoke_length^2 selects the
+branch (4 f up on an insert larger than the gap: a dome; f alternating on the T-junctions for a
+smaller one: a saddle) and is removed for the final solve (an unloaded equilibrium, its stability
+reported).
 
-Deployment (quasi-static): the spokes' clamp points are drawn from the gap edge (``gap``) to
-the insert's edge (``r``) in ``increments`` steps, each solved to equilibrium from the last
-(the insert and all junctions are free rigid bodies).
-
-Buckling perturbation: while drawing in, a small out-of-plane load ``f = perturbation * B1 /
-spoke_length^2`` selects the branch: ``4 f`` upwards on the insert for an insert larger than
-the gap (the dome mode), ``f`` alternating on the T-junctions (+z on the x-spokes, -z on the
-y-spokes) for a smaller one (the saddle mode). It is removed for a final solve, so the reported state is an unloaded
-equilibrium; its stability (positive-definite Hessian) is reported.
-
-Shape descriptors, measured in the ring's best-fit plane: ``insert_rise`` (height of the insert
-centre above it, a dome) and ``saddle_amplitude`` (amplitude of the ring's cos/sin 2 phi height
-pattern).
-
-Discrete Gaussian curvature: angle deficit ``2 pi - sum(angles)`` of the triangle fan from the
-insert centre to the eight ring points (T-junctions and corner-spring midpoints), divided by a
-third of the fan area [1/m^2]. Positive: dome (the interior grew relative to the boundary);
-negative: saddle.
+Shape (:func:`gaussian_curvature`): the insert rise and the ring's cos/sin 2 phi saddle amplitude in
+the ring's best-fit plane; the discrete Gaussian curvature, the angle deficit of the fan from the
+insert centre to the eight ring points over a third of its area [1/m^2] (> 0: dome). In full:
+docs/methods.md, "simfab.deploy.unitcell".
 """
 
 from __future__ import annotations
@@ -42,6 +28,7 @@ from simfab._bundled import scenes_dir
 from simfab.deploy._config import require_positive
 from simfab.errors import ConvergenceError, InputError
 from simfab.io.mjcf import geom_mesh, load_mjcf, numeric_config
+from simfab.io.tables import load_table
 from simfab.progress import progress
 from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
 from simfab.rods.statics import StaticSolver
@@ -56,12 +43,20 @@ COUNT_RANGES = {"segments": (2, 200), "increments": (1, 1000)}
 
 @dataclass(frozen=True, kw_only=True)
 class CellConfig:
-    """Unit-cell parameters (``<numeric name="cell_<field>">`` in the scene). Lengths [m], moduli [Pa].
+    """Unit-cell parameters (``<numeric name="cell_<field>">`` in the scene).
 
-    size: side of the cell; gap: half-size of the central gap; corner_gap: where sides stop
-    before a corner; spring_bulge: Bezier handle length of the corner springs; beam_width (in
-    plane) and beam_thickness (sheet); young, poisson; segments: rod segments per beam piece;
-    increments: quasi-static steps; perturbation: out-of-plane load factor (see module doc).
+    Args:
+        size: side of the cell [m].
+        gap: half-size of the central gap [m].
+        corner_gap: where the sides stop before a corner [m].
+        spring_bulge: Bezier handle length of the corner springs [m].
+        beam_width: in-plane beam width [m].
+        beam_thickness: sheet thickness [m].
+        young: Young's modulus [Pa].
+        poisson: Poisson ratio [-].
+        segments: rod segments per beam piece (a whole number, :data:`COUNT_RANGES`).
+        increments: quasi-static steps (a whole number, :data:`COUNT_RANGES`).
+        perturbation: out-of-plane load factor [-] (see the module doc).
     """
 
     size: float = 0.08
@@ -92,8 +87,16 @@ class CellConfig:
 
 @dataclass(frozen=True)
 class Insert:
-    """A rigid insert from the MJCF scene: name, half-size ``r`` [m] (box geom along x), mesh in its
-    own frame (trimesh), parking pose ``pos`` (3,) and ``quat`` (w, x, y, z), mass [kg]."""
+    """A rigid insert from the MJCF scene.
+
+    Args:
+        name: the body's name.
+        r: half-size [m] (its box geom along x): where the spokes are clamped.
+        mesh: its mesh in its own frame (trimesh).
+        pos: (3,) [m] parking position.
+        quat: (4,) parking orientation (w, x, y, z).
+        mass: [kg].
+    """
 
     name: str
     r: float
@@ -104,15 +107,21 @@ class Insert:
 
 
 def load_cell_scene(path) -> tuple[CellConfig, dict]:
-    """Cell parameters and all inserts (bodies whose name starts with ``insert``) of the scene."""
+    """Read a unit-cell scene.
+
+    The ``<numeric name="cell_...">`` parameters load through :func:`simfab.io.tables.load_table`
+    (an unknown name, a bad count or value: InputError naming the file and the parameter).
+
+    Args:
+        path: the MJCF scene.
+
+    Returns:
+        (:class:`CellConfig`, {name: :class:`Insert`} of every body whose name starts with ``insert``).
+    """
     import mujoco  # (simfab.io, imported above, set up headless GL before MuJoCo loads)
 
     sc = load_mjcf(path)
-    kw = numeric_config(sc, "cell_", CellConfig)
-    try:
-        cfg = CellConfig(**kw)
-    except InputError as e:  # name the scene file as well as the field
-        raise e.in_file(path) from None
+    cfg = load_table(CellConfig, numeric_config(sc, "cell_", CellConfig), table_name="custom", file=str(path))
     m = sc.model
     inserts = {}
     for b in range(1, m.nbody):
@@ -140,7 +149,11 @@ def load_cell_scene(path) -> tuple[CellConfig, dict]:
 
 
 def default_scene_path() -> str:
-    """The bundled scene ``scenes/deploy/unit_cell.xml`` of the source tree."""
+    """The bundled unit-cell scene.
+
+    Returns:
+        The path of ``scenes/deploy/unit_cell.xml``.
+    """
     return str(scenes_dir("deploy", "unit_cell.xml"))
 
 
@@ -151,6 +164,17 @@ def _bezier(P0, P1, P2, P3, n):
 
 @dataclass
 class Cell:
+    """The unit cell's rod network (:func:`build_cell`).
+
+    Args:
+        model: the :class:`simfab.rods.model.RodModel`.
+        state: its flat state.
+        spokes: the spoke rods' names.
+        t_bodies: the T-junction body indices.
+        spring_mid_nodes: the middle node of each corner spring.
+        insert_body: the insert's body index.
+        spoke_len: a spoke's length [m].
+    """
     model: object
     state: object
     spokes: list  # rod names
@@ -161,7 +185,15 @@ class Cell:
 
 
 def build_cell(cfg: CellConfig, insert_name: str = "insert") -> Cell:
+    """The flat unit cell (see the module doc): spokes, sides, corner springs, the insert body, the support.
 
+    Args:
+        cfg: the :class:`CellConfig`.
+        insert_name: the insert body's name.
+
+    Returns:
+        The :class:`Cell`.
+    """
     a2 = cfg.size / 2
     c = cfg.corner_gap
     n = int(cfg.segments)
@@ -211,7 +243,16 @@ def build_cell(cfg: CellConfig, insert_name: str = "insert") -> Cell:
 
 
 def gaussian_curvature(cell: Cell, state) -> dict:
-    """Angle-deficit discrete Gaussian curvature at the insert centre (see module doc)."""
+    """Shape of a deployed cell at its insert (see the module doc).
+
+    Args:
+        cell: the :class:`Cell`.
+        state: its state.
+
+    Returns:
+        {angle_deficit [rad], gaussian_curvature [1/m^2], kind ("dome" or "saddle"), insert_rise [m],
+        saddle_amplitude [m]}.
+    """
     C = state.body_pos[cell.insert_body]
     ring = []
     for k in range(4):
@@ -244,8 +285,19 @@ def gaussian_curvature(cell: Cell, state) -> dict:
 
 @dataclass
 class CellDeployment:
-    """Result of one deployment: states per increment (index 0 = flat), the insert, curvature
-    measures of the final state, stability, Newton iterations per increment."""
+    """One deployment of the cell by an insert (:func:`deploy`).
+
+    Args:
+        cell: the :class:`Cell`.
+        insert: the :class:`Insert`.
+        states: the state per increment (index 0: flat).
+        curvature: :func:`gaussian_curvature` of the final state.
+        stable: the final (unloaded) equilibrium is stable.
+        iterations: Newton iterations per increment.
+        energy: elastic energy of the final state [J].
+        materials: rod name -> (young [Pa], poisson [-]) for the exports.
+        curvature_history: discrete Gaussian curvature per increment [1/m^2] (0: flat).
+    """
 
     cell: Cell
     insert: Insert
@@ -259,7 +311,17 @@ class CellDeployment:
 
 
 def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> CellDeployment:
-    """Draw the spokes onto ``insert`` in ``cfg.increments`` steps and return the deployment."""
+    """Draw the spokes onto an insert in ``cfg.increments`` steps (see the module doc).
+
+    Args:
+        cfg: the :class:`CellConfig`.
+        insert: the :class:`Insert`.
+        device: Warp device.
+        quiet: no progress bar.
+
+    Returns:
+        The :class:`CellDeployment`; ConvergenceError when an increment's solve does not converge.
+    """
 
     cell = build_cell(cfg, insert.name)
     model = cell.model

@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import tomllib
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -111,12 +111,12 @@ def check_keys(table: Mapping, known, *, table_name: str, file: str | None) -> N
 
 def load_table(cls, table: Mapping | None, *, table_name: str, file: str | None = None,
                overrides: Mapping[str, Any] | None = None, parsers: Mapping[str, Callable] | None = None,
-               log: Callable[[str], None] | None = None):
+               log: Callable[[str], None] | None = None, keys: Collection[str] | None = None):
     """Build the keyword-only config dataclass ``cls`` from a scene table and its overrides.
 
     Args:
         cls: a ``kw_only`` dataclass whose ``__post_init__`` checks its values (raising
-            :class:`FieldError`, or InputError located at the table).
+            :class:`FieldError`, or InputError located at the table or at ``table.key``).
         table: the table as read from ``file`` (None: the file has none).
         table_name: the table's name in the file (``"contact"``).
         file: the file it was read from (None: none).
@@ -125,13 +125,15 @@ def load_table(cls, table: Mapping | None, *, table_name: str, file: str | None 
         parsers: {key: function(value, where) -> value} run on a key's value before the type check
             (e.g. a pair [lo, hi] read into a tuple with its own messages).
         log: called once with a note for each flag that replaces a value of the file.
+        keys: the keys this table may hold (None: every field of ``cls``; fewer where one config
+            is read from several tables, the others' fields left at their defaults).
 
     Returns:
         The ``cls`` instance. Raises InputError naming the file, table and key (or the flag).
     """
     if table is not None and not isinstance(table, Mapping):
         raise InputError(f"[{table_name}] must be a table, got {table!r}", where=file)
-    known = {f.name for f in dataclasses.fields(cls)}
+    known = set(keys) if keys is not None else {f.name for f in dataclasses.fields(cls)}
     values = dict(table or {})
     check_keys(values, known, table_name=table_name, file=file)
     sources: dict[str, str] = {}
@@ -170,8 +172,9 @@ def load_table(cls, table: Mapping | None, *, table_name: str, file: str | None 
         obj = cls(**kw)
     except FieldError as e:
         raise located(e, e.key) from None
-    except InputError as e:
-        raise located(e, next(iter(refused), None) if len(refused) == 1 else None) from None
+    except InputError as e:  # a plain InputError at ``table.key`` belongs to that key
+        key = str(e.where or "").rpartition(".")[2]
+        raise located(e, key if key in known else next(iter(refused), None) if len(refused) == 1 else None) from None
     except TypeError:  # a check that could not compare a value of the wrong type: msgspec's reason below
         if not refused:
             raise

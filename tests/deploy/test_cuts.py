@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import shapely
 
-from simfab.deploy import cuts, flatten, lasercut, pattern, surface
+from simfab.deploy import cuts, flatten, lasercut, pattern, quadmesh, surface
 from simfab.deploy.pattern import PatternConfig
 from simfab.deploy.scene import load_deploy_scene
 from simfab.errors import InputError
@@ -338,7 +338,7 @@ def test_mesh_layout_needs_no_gmsh(monkeypatch):
     monkeypatch.setitem(sys.modules, "gmsh", None)  # import gmsh -> ImportError
     t = np.linspace(0.3, 2 * np.pi - 0.3, 60)
     poly = shapely.Polygon(np.r_[[[0.0, 0.0]], 0.1 * np.column_stack([np.cos(t), np.sin(t)])])
-    P, quads = pattern.mesh_quads(poly, 0.02)
+    P, quads = quadmesh.mesh_quads(poly, 0.02)
     Q = P[quads]
     a, b = np.roll(Q, 1, axis=1) - Q, np.roll(Q, -1, axis=1) - Q
     assert np.all(b[..., 0] * a[..., 1] - b[..., 1] * a[..., 0] > 0)

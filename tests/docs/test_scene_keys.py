@@ -59,3 +59,24 @@ def test_docstring_parsers_read_the_project_styles():
     assert got["omega_dt"] == "target frequency x dt [-]"
     assert got["body_mass"] == got["insert_mass"] == "masses. [kg]"
     assert "timestep" not in got  # a unit without a description is no description
+
+
+def test_google_args_sections_are_read_entry_by_entry():
+    # each entry ends where the next begins (the prose reader would run on to the next ';')
+    doc = """Pattern parameters.
+
+    Args:
+        spacing: grid spacing h [m] (``layout = "mesh"``: the target edge length).
+        beam_width, beam_thickness: the section [m];
+            continued here.
+        layout (str): "grid" or "mesh".
+
+    A closing paragraph: not an entry.
+    """
+    assert scenekeys.args_entries(doc) == {
+        "spacing": 'grid spacing h [m] (``layout = "mesh"``: the target edge length).',
+        "beam_width": "the section [m]; continued here.", "beam_thickness": "the section [m]; continued here.",
+        "layout": '"grid" or "mesh".'}
+    rows, _, _ = scenekeys.rows_for("simfab.deploy.pattern.PatternConfig")
+    spacing = next(desc for key, _, _, desc in rows if key == "spacing")
+    assert spacing.startswith("grid spacing h [m]") and "beam_width" not in spacing
