@@ -23,7 +23,6 @@ CONVENTIONS = frozenset({"add_args", "run", "demo", "format_text", "write_all", 
 #: renamed to what each one does; a name leaves the list when only one module defines it.
 KNOWN_DUPLICATES = {
     "api_call": {"simfab.cli.couple", "simfab.cli.crowd"},
-    "bounds": {"simfab.deploy.pipeline", "simfab.design.brief"},
     "cell": {"simfab.deploy.api", "simfab.sweep.runs"},
     "check_tables": {"simfab.coupling.scene", "simfab.growth.config"},
     "default_scene_path": {"simfab.deploy.buckling", "simfab.deploy.unitcell"},
@@ -43,7 +42,7 @@ KNOWN_DUPLICATES = {
     "solve": {"simfab.coupling.objective", "simfab.deploy.elastica"},
     "study": {"simfab.coupling.converge", "simfab.crowd.pipeline"},
     "summarize": {"simfab.coupling.outputs", "simfab.design.study"},
-    "summary": {"simfab.deploy.lasercut", "simfab.deploy.pipeline", "simfab.design.outputs"},
+    "summary": {"simfab.deploy.lasercut", "simfab.deploy.pipeline"},
     "surface_samples": {"simfab.contact.sdf", "simfab.coupling.geometry"},
     "von_mises": {"simfab.fem.shape_derivative", "simfab.fem.stress"},
     "write_scene": {"simfab.design.outputs", "simfab.sweep.runs"},
