@@ -201,9 +201,9 @@ def result_of(res, *, radius: float) -> CouplingResult:
     from simfab.coupling.outputs import summarize
     from simfab.coupling.profile import profile_of
 
-    _, d = summarize(res)
+    prof, d = summarize(res)
     d.update(averaged_stress(res, radius))
-    return CouplingResult(**d, profile=profile_of(res), insertion=res)
+    return CouplingResult(**d, profile=profile_of(res, prof), insertion=res)
 
 
 def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool | None = None,

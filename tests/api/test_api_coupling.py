@@ -32,6 +32,17 @@ def test_simulate_returns_a_typed_frozen_result_with_its_profile(loose):
     assert r.units["F_in"] == "N"  # (the JSON's own units table agrees)
 
 
+def test_profile_is_its_summary_plus_the_records(loose):
+    from simfab.coupling.profile import ProfileSummary, analyze_run
+
+    # one declaration of the figures: Profile adds only the per-record arrays to ProfileSummary
+    assert issubclass(simfab.coupling.Profile, ProfileSummary)
+    summary = analyze_run(loose.insertion)
+    for f in dataclasses.fields(ProfileSummary):
+        assert getattr(loose.profile, f.name) == getattr(summary, f.name), f.name
+    assert units(loose.profile)["F_grip"] == "N" and units(loose.profile)["E_ss"] == "J"
+
+
 def test_profile_to_pandas_has_one_row_per_record_with_units_in_the_names(loose):
     df = loose.profile.to_pandas()
     assert len(df) == len(loose.insertion.steps) + len(loose.insertion.removal)
