@@ -79,7 +79,8 @@ def buckling(*, g_over_L=None, n=None, support: str = "both", path: str = "both"
         path: the end displacement applied "direct", through the rigid "insert", or "both".
         scene: the elastica MJCF scene (default scenes/deploy/elastica.xml).
         out: folder for buckling.csv, buckling.json and buckling_shapes.png; None writes nothing.
-        seed: accepted for the common signature (the continuation is deterministic).
+        seed: no effect, kept for the common signature: nothing is drawn at random (the continuation starts
+            from a deterministic first-mode imperfection, :mod:`simfab.deploy.buckling`).
         device: Warp device.
         progress: True logs each case on stderr.
 
@@ -98,7 +99,7 @@ def buckling(*, g_over_L=None, n=None, support: str = "both", path: str = "both"
     from simfab.errors import InputError
     from simfab.progress import log
 
-    del seed  # deterministic (see Args)
+    del seed  # no effect (see Args)
     quiet = not progress
     ratios = list(g_over_L or bk.DEFAULT_RATIOS)
     ns = sorted(set(n or bk.DEFAULT_N))
