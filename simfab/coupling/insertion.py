@@ -159,10 +159,10 @@ def stress_radius(scene) -> float:
     Returns:
         The radius [m].
     """
-    from simfab.coupling.scene import read_toml, scene_paths
+    from simfab.coupling.scene import read_scene_toml, scene_paths
     from simfab.design.brief import DesignBrief
 
-    table = read_toml(scene_paths(scene)[1]).get("design")
+    table = read_scene_toml(scene_paths(scene)[1]).get("design")
     return DesignBrief.from_dict(dict(table or {})).stress_radius
 
 

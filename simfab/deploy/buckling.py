@@ -107,7 +107,7 @@ def load_insert_scene(path) -> InsertScene:
     return InsertScene(path=str(path), insert_pos=pos, setup=setup, mesh=meshes["insert"])
 
 
-def default_scene_path() -> str:
+def elastica_scene_path() -> str:
     """The bundled scene ``scenes/deploy/elastica.xml`` of the source tree."""
     return str(scenes_dir("deploy", "elastica.xml"))
 
@@ -275,7 +275,7 @@ def run_continuation(setup: BeamSetup, support: str, n: int, ratios, *, path: st
             iters += res.iterations
             increments += 1
         seconds = time.perf_counter() - t0
-        ex = elastica.solve(target, support)
+        ex = elastica.solve_elastica(target, support)
         delta = beam.rise(state) / L
         g = solver.reactions(state)
         force = -float(np.sum(g[3 * beam.moving_nodes]))

@@ -86,7 +86,7 @@ def check_ratio(g_over_L: float) -> float:
     return r
 
 
-def solve(g_over_L: float, support: str = "pinned") -> ElasticaSolution:
+def solve_elastica(g_over_L: float, support: str = "pinned") -> ElasticaSolution:
     """Exact first-mode elastica for ``0 < g_over_L < 1`` (brentq on g/L = 2E/K - 1)."""
     mult = _force_factor(support)
     r = check_ratio(g_over_L)

@@ -172,7 +172,7 @@ def write_dxf(path, cut: CutLayout) -> None:
     doc.saveas(path)
 
 
-def summary(cut: CutLayout) -> dict:
+def cut_summary(cut: CutLayout) -> dict:
     x0, y0, x1, y1 = cut.extent
     return dict(parts=cut.parts, inserts=cut.inserts, cut_outlines=len(cut.rings), cut_length_mm=cut.cut_length,
                 sheet_mm=[x1 - x0, y1 - y0], seams=len({lab for lab, _ in cut.seams}))

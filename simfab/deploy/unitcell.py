@@ -258,7 +258,7 @@ class CellDeployment:
     curvature_history: list  # discrete Gaussian curvature [1/m^2] per increment (0 = flat)
 
 
-def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> CellDeployment:
+def deploy_cell(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> CellDeployment:
     """Draw the spokes onto ``insert`` in ``cfg.increments`` steps and return the deployment."""
 
     cell = build_cell(cfg, insert.name)

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from simfab.coupling.outputs import display_faces, extrude_triangles, object_display, vertex_von_mises
+from simfab.coupling.outputs import display_faces, extruded_slab, object_display, vertex_von_mises
 from simfab.design import brief as B
 from simfab.design.problem import lift_rest
 from simfab.design.synthesis import boundary_loops
@@ -88,7 +88,7 @@ def part_mesh_mm(fem, X: np.ndarray):
     import trimesh  # deferred: about a second of start-up, for writing the part only
 
     if fem.dim == 2:
-        V, F = extrude_triangles(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
+        V, F = extruded_slab(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
     else:
         V, F = X, np.asarray(fem.boundary_facets)
     m = trimesh.Trimesh(np.asarray(V) * 1e3, np.asarray(F), process=True)
@@ -103,7 +103,7 @@ def write_outline_csv(fem, X: np.ndarray, path) -> Path:
     return write_csv(path, ["loop", "x_mm", "y_mm"], rows)
 
 
-def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, stem: str) -> None:
+def write_optimized_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, stem: str) -> None:
     """The optimized scene: the original MJCF with the part's display mesh replaced, the TOML with
     the optimized mesh as ``mesh_file`` (same material, object, path, fixed region, options)."""
     fem = res.problem.mesh  # (the design's linear mesh: a P2 scene's TOML lifts it again)
@@ -145,7 +145,7 @@ def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, 
 
 def _display_mesh(fem, X):
     if fem.dim == 2:
-        return extrude_triangles(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
+        return extruded_slab(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
     F = np.asarray(fem.boundary_facets)
     used = np.unique(F)
     remap = np.full(len(X), -1)
@@ -326,7 +326,7 @@ def write_all(result, out: Path, *, stem: str | None = None):
         save_mesh(part_mesh_mm(fem, res.best.rest), tmp["part_stl"])
         if fem.dim == 2:
             write_outline_csv(fem, res.best.rest, tmp["outline_csv"])
-        write_scene(res, result.scene_xml, result.scene_toml, paths, tmp, stem)
+        write_optimized_scene(res, result.scene_xml, result.scene_toml, paths, tmp, stem)
         plot_profiles(res, tmp["profile_png"], result.mesh_check)
         plot_shape(res, tmp["shape_png"])
         write_csv(tmp["history_csv"], header, rows)

@@ -2,7 +2,7 @@
 
 Model (linear elastostatics on quadratic tetrahedra):
 
-1. the skin (:func:`simfab.growth.skinning.skin`, objects carved out) is tetrahedralized
+1. the skin (:func:`simfab.growth.skinning.skin_skeleton`, objects carved out) is tetrahedralized
    deterministically by Gmsh (:func:`simfab.growth.tetmesh.tetrahedralize_skin`) with edges of
    ``EDGE_PER_RMIN`` r_min (r_min the thinnest branch radius) and lifted to 10-node tets
    (:func:`simfab.fem.p2.to_p2`): a branch is a beam, and P2 elements carry the linear strain
@@ -51,7 +51,7 @@ from simfab.growth.masses import object_masses
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene
 from simfab.growth.skeleton import Skeleton
-from simfab.growth.skinning import skin
+from simfab.growth.skinning import skin_skeleton
 from simfab.growth.tetmesh import tetrahedralize_skin
 from simfab.io.mjcf import load_mjcf
 from simfab.solve.linear import NotPositiveDefinite, SPDSolver
@@ -233,8 +233,8 @@ def target_loads(scene: GrowthScene, skeleton: Skeleton, extra: dict | None = No
                          f"(reached: {', '.join(points)})", where="loads")
     if contacts is None:
         p = scene.params
-        mesh, _ = skin(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects, fixed=skeleton.fixed_mask(),
-                       segments=p.skin_segments, subtract=p.subtract_objects)
+        mesh, _ = skin_skeleton(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects,
+                                fixed=skeleton.fixed_mask(), segments=p.skin_segments, subtract=p.subtract_objects)
         contacts = target_contacts(mesh, skeleton, scene)
     g = gravity(scene)
     mass = body_masses(scene)
@@ -270,8 +270,9 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
     mat = spec.material
     masses = validate_loads(scene)
     p = scene.params
-    mesh, _ = skin(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects, fixed=skeleton.fixed_mask(),
-                   segments=options.segments or p.skin_segments, subtract=p.subtract_objects)
+    mesh, _ = skin_skeleton(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects,
+                            fixed=skeleton.fixed_mask(), segments=options.segments or p.skin_segments,
+                            subtract=p.subtract_objects)
     contacts = target_contacts(mesh, skeleton, scene)
     g = gravity(scene)
     paths = load_paths(scene, contacts, {n: m.mass_kg for n, m in masses.items()})
