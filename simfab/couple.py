@@ -21,7 +21,8 @@ def simulate(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: b
     Args:
         scene: NAME.xml (with NAME.toml) or a bundled scene's name.
         out: folder for the outputs (CSV, JSON, PNG, USD, MJCF); None writes nothing.
-        seed: accepted for the common signature (the insertion is deterministic).
+        seed: no effect, kept for the common signature (the insertion is deterministic; a 3D mesh
+            object's surface sampling takes the scene's ``[object] seed``: ``object={"seed": 3}``).
         device: Warp device.
         progress: True shows log lines and progress bars.
         **overrides: scene options, e.g. ``friction=0.3``, ``steps=8``, ``element_order=2``

@@ -6,7 +6,8 @@ Figures are plain fields whose units are stated in the field's docstring (or its
 ``outputs`` (label -> path). :func:`to_json` is the one function that turns any result into
 the JSON object the CLI prints with ``--json``: nested dataclasses become objects, NumPy
 scalars become numbers, NaN and infinities become ``null``, paths become strings; fields
-marked ``metadata={"json": False}`` (large arrays, meshes, models) are left out.
+marked ``metadata={"json": False}`` (large arrays, meshes, models) are left out, and fields
+marked ``optional`` only when they are None (entries a run has only in some modes).
 """
 
 from __future__ import annotations
@@ -21,18 +22,22 @@ import numpy as np
 __all__ = ["Result", "field", "to_json", "units"]
 
 
-def field(*, unit: str | None = None, json: bool = True, **kw) -> Any:
+def field(*, unit: str | None = None, json: bool = True, optional: bool = False, **kw) -> Any:
     """A dataclass field with its unit and whether it belongs in the JSON summary.
 
     Args:
         unit: the field's unit ("m", "N", "Pa", "-" for dimensionless), shown by the CLI's tables.
         json: False for fields left out of :func:`to_json` (arrays, meshes, models).
+        optional: True for a field left out of :func:`to_json` when it is None (an entry only some runs
+            have); its default is None unless ``kw`` gives one.
         **kw: passed to :func:`dataclasses.field` (``default``, ``default_factory``).
 
     Returns:
         A :class:`dataclasses.Field`.
     """
-    return dataclasses.field(metadata={"unit": unit, "json": json}, **kw)
+    if optional and "default" not in kw and "default_factory" not in kw:
+        kw["default"] = None
+    return dataclasses.field(metadata={"unit": unit, "json": json, "optional": optional}, **kw)
 
 
 def _jsonable(v: Any) -> Any:
@@ -67,9 +72,10 @@ def to_json(result: Any) -> dict:
     """
     out = {}
     for f in dataclasses.fields(result):
-        if not f.metadata.get("json", True):
+        v = getattr(result, f.name)
+        if not f.metadata.get("json", True) or (v is None and f.metadata.get("optional", False)):
             continue
-        out[f.name] = _jsonable(getattr(result, f.name))
+        out[f.name] = _jsonable(v)
     return out
 
 

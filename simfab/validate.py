@@ -81,7 +81,8 @@ def buckling(*, g_over_L=None, n=None, support: str = "both", path: str = "both"
         path: the end displacement applied "direct", through the rigid "insert", or "both".
         scene: the elastica MJCF scene (default scenes/deploy/elastica.xml).
         out: folder for buckling.csv, buckling.json and buckling_shapes.png; None writes nothing.
-        seed: accepted for the common signature (the continuation is deterministic).
+        seed: no effect, kept for the common signature: nothing is drawn at random (the continuation starts
+            from a deterministic first-mode imperfection, :mod:`simfab.deploy.buckling`).
         device: Warp device.
         progress: True logs each case on stderr.
 
@@ -100,7 +101,7 @@ def buckling(*, g_over_L=None, n=None, support: str = "both", path: str = "both"
     from simfab.errors import InputError
     from simfab.progress import log
 
-    del seed  # deterministic (see Args)
+    del seed  # no effect (see Args)
     quiet = not progress
     ratios = list(g_over_L or bk.DEFAULT_RATIOS)
     ns = sorted(set(n or bk.DEFAULT_N))
@@ -114,7 +115,7 @@ def buckling(*, g_over_L=None, n=None, support: str = "both", path: str = "both"
         raise InputError(f"must be {', '.join(bk.PATHS)} or both, got {path!r}", where="--path")
     supports = elastica.SUPPORTS if support == "both" else (support,)
     paths = bk.PATHS if path == "both" else (path,)
-    scene = bk.load_insert_scene(scene or bk.default_scene_path())
+    scene = bk.load_insert_scene(scene or bk.elastica_scene_path())
     setup = scene.setup
     import simfab.rods  # noqa: F401  (quiet Warp start-up before simfab._warp initializes it)
 
@@ -229,7 +230,7 @@ def _plot(path, shapes, rows, ratios, supports, paths, ns, L):
     fig, axes = plt.subplots(len(supports), 1, figsize=(8, 3.2 * len(supports)), squeeze=False)
     for ax, support in zip(axes[:, 0], supports):
         for i, r in enumerate(sorted(set(ratios), reverse=True)):
-            ex = elastica.solve(r, support).shape(1.0, 301)
+            ex = elastica.solve_elastica(r, support).shape(1.0, 301)
             ax.plot(ex[:, 0], ex[:, 1], color=f"C{i}", lw=1.5, label=f"exact g/L={r:.2f}")
             sim = shapes.get((support, paths[0], n_show, r))
             if sim is not None:

@@ -16,37 +16,20 @@ from pathlib import Path
 SIMFAB = Path(__file__).resolve().parents[1] / "simfab"
 
 #: Function names that many modules define by design: the CLI subcommand protocol (``add_args``,
-#: ``run``, ``demo``, ``format_text``), every area's ``run`` and the writers of its files.
-CONVENTIONS = frozenset({"add_args", "run", "demo", "format_text", "write_all", "write_usd", "write_mjcf"})
+#: ``run``, ``demo``, ``format_text``, ``output_roots``, ``api_call``: hooks :mod:`simfab.cli` and the
+#: sweep runner look up on a subcommand's module), every area's ``run``, ``author.new_scene`` (``simfab
+#: couple new``, ``simfab grow new``) and the writers of its files.
+CONVENTIONS = frozenset({"add_args", "run", "demo", "format_text", "output_roots", "api_call", "new_scene",
+                         "write_all", "write_usd", "write_mjcf"})
 
 #: Public functions still defined under the same name in several modules ("name": modules), to be
 #: renamed to what each one does; a name leaves the list when only one module defines it.
 KNOWN_DUPLICATES = {
-    "api_call": {"simfab.cli.couple", "simfab.cli.crowd"},
-    "bounds": {"simfab.deploy.pipeline", "simfab.design.brief"},
-    "cell": {"simfab.deploy.api", "simfab.sweep.runs"},
-    "check_tables": {"simfab.coupling.scene", "simfab.growth.config"},
-    "default_scene_path": {"simfab.deploy.buckling", "simfab.deploy.unitcell"},
-    "deploy": {"simfab.deploy.network", "simfab.deploy.unitcell"},
-    "det_and_von_mises": {"simfab.fem.elastic", "simfab.fem.stress"},
-    "energy": {"simfab.fem.elastic", "simfab.fem.shape_derivative"},
-    "evaluate": {"simfab.contact.imls", "simfab.design.problem"},
-    "extrude_triangles": {"simfab.coupling.outputs", "simfab.fem.meshing"},
-    "launch": {"simfab.fem.workspace", "simfab.rods.bend", "simfab.rods.stretch", "simfab.rods.twist"},
+    # simfab.deploy.pattern is being split (quad meshing); lasercut's layout is renamed with it
     "layout": {"simfab.deploy.lasercut", "simfab.deploy.pattern"},
-    "new_scene": {"simfab.coupling.author", "simfab.growth.author"},
-    "output_roots": {"simfab.cli.inspect_", "simfab.cli.render"},
-    "read_toml": {"simfab.coupling.scene", "simfab.io.tables"},
-    "simulate": {"simfab.cli.couple", "simfab.couple", "simfab.coupling.simulate", "simfab.crowd.synth"},
-    "skew": {"simfab.rods._stencil", "simfab.rotations"},
-    "skin": {"simfab.growth", "simfab.growth.skinning"},
-    "solve": {"simfab.coupling.objective", "simfab.deploy.elastica"},
-    "study": {"simfab.coupling.converge", "simfab.crowd.pipeline"},
-    "summarize": {"simfab.coupling.outputs", "simfab.design.study"},
-    "summary": {"simfab.deploy.lasercut", "simfab.deploy.pipeline", "simfab.design.outputs"},
-    "surface_samples": {"simfab.contact.sdf", "simfab.coupling.geometry"},
-    "von_mises": {"simfab.fem.shape_derivative", "simfab.fem.stress"},
-    "write_scene": {"simfab.design.outputs", "simfab.sweep.runs"},
+    # simfab.couple.simulate is the top-level convenience named after ``simfab couple simulate`` (issue 40);
+    # simfab.coupling.simulate.simulate is the simulator itself, called from some thirty places
+    "simulate": {"simfab.couple", "simfab.coupling.simulate"},
 }
 
 

@@ -125,7 +125,7 @@ def run(args) -> dict:
 
         return couple_design.run_optimize(args) if cmd == "optimize" else couple_design.run_study(args)
     if cmd == "converge":
-        from simfab.coupling.converge import format_table, study
+        from simfab.coupling.converge import convergence_study, format_table
 
         try:
             factors = tuple(float(f) for f in args.factors.split(","))
@@ -141,12 +141,12 @@ def run(args) -> dict:
         from simfab.design.scene import check_brief_table
 
         check_brief_table(args.scene)
-        rep = study(args.scene, factors, overrides=ov, quiet=args.quiet)
+        rep = convergence_study(args.scene, factors, overrides=ov, quiet=args.quiet)
         return {**rep, "table": "\n" + format_table(rep)}
     if cmd != "simulate":
         raise InputError("choose an action: 'simfab couple simulate SCENE', 'optimize SCENE', 'study handles SCENE' "
                          "or 'scenes'")
-    return simulate(args.scene, out=args.out, device=args.device, quiet=args.quiet, **simulate_overrides(args))
+    return simulate_summary(args.scene, out=args.out, device=args.device, quiet=args.quiet, **simulate_overrides(args))
 
 
 def simulate_overrides(args) -> dict:
@@ -199,7 +199,7 @@ def api_call(args):
     return None
 
 
-def simulate(scene, *, out, device: str, quiet: bool, **overrides) -> dict:
+def simulate_summary(scene, *, out, device: str, quiet: bool, **overrides) -> dict:
     """``simfab.coupling.run`` with the CLI's logging: its warnings on stderr (also with --quiet)."""
     from simfab.coupling import run
     from simfab.progress import log
@@ -224,8 +224,8 @@ def demo(ctx) -> dict:
     from simfab.progress import log
 
     out = Path(ctx.out)
-    a = simulate("cclamp2d", out=out, device=ctx.device, quiet=ctx.quiet)
-    b = simulate("clip3d", out=out, device=ctx.device, quiet=ctx.quiet)
+    a = simulate_summary("cclamp2d", out=out, device=ctx.device, quiet=ctx.quiet)
+    b = simulate_summary("clip3d", out=out, device=ctx.device, quiet=ctx.quiet)
     keys = ("category", "E_max", "E_ss", "coupling_ratio", "F_in", "F_rm", "F_grip", "max_von_mises",
             "averaged_von_mises", "yield_stress", "seconds", "usd", "plot_png", "mjcf")
     r = design("block2d_tight", out=out / "design", iterations=DEMO_DESIGN_ITERATIONS, device=ctx.device,

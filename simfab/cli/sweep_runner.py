@@ -16,9 +16,9 @@ import dataclasses
 
 from simfab.cli.sweep_spec import SweepSpec, scene_files
 from simfab.errors import InputError
-from simfab.sweep.runs import ApiCall, cell, execute_run, lookup, write_scene
+from simfab.sweep.runs import ApiCall, execute_run, lookup, table_cell, write_scene
 
-__all__ = ["ArgvCall", "command_call", "run_task", "execute_run", "lookup", "cell", "write_scene"]
+__all__ = ["ArgvCall", "command_call", "run_task", "execute_run", "lookup", "table_cell", "write_scene"]
 
 _PARSER = None  # one argparse tree per worker process (building it imports every subcommand)
 

@@ -199,12 +199,12 @@ class ImlsField:
         return np.abs(ang.sum(axis=1)) > np.pi
 
     def evaluate(self, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
-        """Evaluate psi, its gradient and Hessian at world points (k, dim); see :func:`evaluate`."""
-        return evaluate(self, points, pose, hessian=hessian, hessian_band=hessian_band)
+        """Evaluate psi, its gradient and Hessian at world points (k, dim); see :func:`evaluate_imls`."""
+        return evaluate_imls(self, points, pose, hessian=hessian, hessian_band=hessian_band)
 
     def far_lower_bound(self, points, pose=None) -> np.ndarray:
         """(k,) lower bound of the distance [m] from world points (k, dim) that are *far* (no sample
-        within ``radius``; ``near`` False in :func:`evaluate`) to O's surface, sharper than
+        within ``radius``; ``near`` False in :func:`evaluate_imls`) to O's surface, sharper than
         ``far_distance`` for points well beyond the radius: the distance to the nearest sample
         minus the same 2 sigma surface-to-sample allowance ``far_distance`` is built on, and never
         below ``far_distance``. Meaningless for near points (use psi there)."""
@@ -216,7 +216,7 @@ class ImlsField:
 
     def nearest_sample(self, points, pose=None) -> np.ndarray:
         """(k,) distance [m] from world points (k, dim) to their nearest sample of O; a point is far
-        (``near`` False in :func:`evaluate`) when it is at least ``radius``."""
+        (``near`` False in :func:`evaluate_imls`) when it is at least ``radius``."""
         from scipy.spatial import cKDTree
 
         tree = self._buffers.get("kdtree")
@@ -426,7 +426,8 @@ def body_frame(points, pose=None) -> np.ndarray:
     return body.reshape(pts.shape[:-1] + (3,))
 
 
-def evaluate(fld: ImlsField, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
+def evaluate_imls(fld: ImlsField, points, pose=None, *, hessian: bool = True,
+                  hessian_band: float | None = None) -> ImlsEval:
     """Evaluate the IMLS field at world points in one Warp launch.
 
     Args:

@@ -185,7 +185,7 @@ class PrimitiveField:
 
     def evaluate(self, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
         """psi (> 0 inside), gradient and Hessian (zeros where psi <= -hessian_band) at world points
-        (k, dim) for O's ``pose`` (as in :func:`simfab.contact.imls.evaluate`)."""
+        (k, dim) for O's ``pose`` (as in :func:`simfab.contact.imls.evaluate_imls`)."""
         dim = self.dim
         pts = np.asarray(points, dtype=np.float64).reshape(-1, dim)
         R, p = pose_matrix(pose)
@@ -304,7 +304,7 @@ def section_primitives(prims: tuple) -> tuple | None:
     return tuple(out) or None
 
 
-def surface_samples(prims: tuple, n: int, dim: int) -> tuple[np.ndarray, np.ndarray]:
+def primitive_surface_samples(prims: tuple, n: int, dim: int) -> tuple[np.ndarray, np.ndarray]:
     """About n points on the union's exact surface with exact outward normals (deterministic;
     points inside another primitive dropped): display geometry and sample counts."""
     pts, nrm = [], []
@@ -427,6 +427,6 @@ def build_primitive_field(prims: tuple, dim: int, samples: int = 2000) -> Primit
     Returns:
         The :class:`PrimitiveField`.
     """
-    v, w = surface_samples(prims, samples, dim)
+    v, w = primitive_surface_samples(prims, samples, dim)
     feature = min(p.feature() for p in prims)
     return PrimitiveField(primitives=tuple(prims), dim=dim, vertices=v, normals=w, sigma=0.1 * feature)

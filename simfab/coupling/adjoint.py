@@ -178,7 +178,7 @@ def _rows(pts: ContactPoints, rows: np.ndarray) -> ContactPoints:
 @dataclass(frozen=True, kw_only=True, eq=False)
 class StressMeasure:
     """The stress figure of a step: max_e (A sigma_vm)_e, A the row-stochastic averaging over a critical
-    distance of the per-point stresses of :func:`simfab.fem.shape_derivative.von_mises`.
+    distance of the per-point stresses of :func:`simfab.fem.shape_derivative.point_von_mises`.
 
     A is held fixed (its dependence on X is not differentiated). The gradient is that of the log-sum-exp
     T log sum_e exp((A sigma)_e / T) at T = ``temperature_rel`` * max; the value reported is the exact maximum.
@@ -476,7 +476,7 @@ def _step(cm, state, phase, stress, solver, link, held_lag=False):
     direct = [gE_rest, zero, zero]
     stress_value = float("nan")
     if stress is not None:
-        avg = stress.averaging @ shape_derivative.von_mises(fem, x)
+        avg = stress.averaging @ shape_derivative.point_von_mises(fem, x)
         stress_value = float(avg.max())
         c = stress.averaging.T @ smooth_max_weights(avg, stress.temperature_rel * abs(stress_value))
         sx, sX = shape_derivative.von_mises_derivatives(fem, x, c)

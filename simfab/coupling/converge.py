@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simfab.coupling.outputs import summarize
-from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
+from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
 from simfab.coupling.simulate import simulate
 from simfab.errors import InputError
 
@@ -48,7 +48,7 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     """One :class:`Level` per refinement factor (element count times the factor)."""
 
     _, toml = scene_paths(scene)
-    cfg = read_toml(toml)
+    cfg = read_scene_toml(toml)
     comp = cfg.get("compliant", {})
     if comp.get("target_elements") is None or ("mesh_file" in comp and comp.get("generator") in (None, "mesh")):
         raise InputError("a convergence study needs a scene whose part is meshed from target_elements "
@@ -99,7 +99,7 @@ def extrapolate(N: np.ndarray, f: np.ndarray, dim: int, finest: int = 4) -> tupl
     return best[1], best[2]
 
 
-def study(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True) -> dict:
+def convergence_study(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True) -> dict:
     """Run the levels and summarize them (:func:`report`)."""
     levels = run_levels(scene, factors, overrides=overrides, quiet=quiet)
     return report(str(scene), levels, 2 if _is_2d(scene) else 3)
@@ -139,11 +139,11 @@ def report(scene: str, levels: list, dim: int) -> dict:
 def _is_2d(scene) -> bool:
     """The refinement is two-dimensional (h ~ N^(-1/2)): a 2D scene."""
 
-    return read_toml(scene_paths(scene)[1]).get("dim", 2) == 2
+    return read_scene_toml(scene_paths(scene)[1]).get("dim", 2) == 2
 
 
 def format_table(rep: dict) -> str:
-    """A compact text table of :func:`study`'s report (units: J, N; errors in %)."""
+    """A compact text table of :func:`convergence_study`'s report (units: J, N; errors in %)."""
     lv = rep["levels"]
     head = f"{'figure':8s}" + "".join(f"{'N=' + str(x['elements']):>12s}" for x in lv) + f"{'extrap.':>12s}{'p':>6s}"
     lines = [f"convergence study: {rep['scene']}", head]

@@ -14,7 +14,7 @@ Compliant parts
 
 Rigid objects (surface samples with outward unit normals for the IMLS field)
 - :func:`circle_samples` (2D), :func:`section_samples` (2D cross-section of any mesh at z = 0),
-  :func:`surface_samples` (3D, evenly spaced surface samples with face normals, seeded).
+  :func:`mesh_surface_samples` (3D, evenly spaced surface samples with face normals, seeded).
 """
 
 from __future__ import annotations
@@ -125,7 +125,7 @@ def section_samples(mesh, n: int) -> tuple[np.ndarray, np.ndarray]:
     return pts, curve_normals(pts)
 
 
-def surface_samples(mesh, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def mesh_surface_samples(mesh, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """About n evenly spread samples on a 3D surface with their face normals (seeded)."""
     import trimesh
 

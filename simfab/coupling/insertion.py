@@ -159,10 +159,10 @@ def stress_radius(scene) -> float:
     Returns:
         The radius [m].
     """
-    from simfab.coupling.scene import read_toml, scene_paths
+    from simfab.coupling.scene import read_scene_toml, scene_paths
     from simfab.design.brief import DesignBrief
 
-    table = read_toml(scene_paths(scene)[1]).get("design")
+    table = read_scene_toml(scene_paths(scene)[1]).get("design")
     return DesignBrief.from_dict(dict(table or {})).stress_radius
 
 
@@ -201,9 +201,9 @@ def result_of(res, *, radius: float) -> CouplingResult:
     from simfab.coupling.outputs import summarize
     from simfab.coupling.profile import profile_of
 
-    _, d = summarize(res)
+    prof, d = summarize(res)
     d.update(averaged_stress(res, radius))
-    return CouplingResult(**d, profile=profile_of(res), insertion=res)
+    return CouplingResult(**d, profile=profile_of(res, prof), insertion=res)
 
 
 def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool | None = None,
@@ -213,8 +213,9 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool |
     Args:
         scene: NAME.xml (with NAME.toml), or a bundled scene's name (``"cclamp2d"``).
         out: folder to write the outputs into (:func:`simfab.coupling.outputs.write_all`); None writes nothing.
-        seed: accepted for the common signature; the insertion is deterministic (the object's
-            sampling seed is the scene's [object] seed).
+        seed: no effect, kept for the areas' common signature: the insertion is deterministic, and its one
+            seeded step, sampling a 3D mesh object's surface for its IMLS field, belongs to the scene and takes
+            the scene's ``[object] seed`` (override it as ``object={"seed": 3}``).
         device: Warp device ("cpu" or "cuda").
         progress: True shows log lines and progress bars on stderr; None/False runs silently.
         stem: the output files' stem (default: the scene's name).
@@ -235,7 +236,7 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool |
     from simfab.design.scene import check_brief_table
     from simfab.progress import log
 
-    del seed  # deterministic (see Args)
+    del seed  # no effect (see Args)
     quiet = not progress
     dev = check_device(device)
     cm = load_coupling_scene(scene, overrides=scene_overrides(overrides), device=dev)

@@ -224,7 +224,7 @@ def write_usd(res: InsertionResult, path) -> Path:
     return w.save()
 
 
-def extrude_triangles(V2: np.ndarray, F: np.ndarray, edges: np.ndarray, thickness: float):
+def extruded_slab(V2: np.ndarray, F: np.ndarray, edges: np.ndarray, thickness: float):
     """Extrude a 2D triangle mesh along z to a closed slab: (vertices (2n, 3), faces)."""
     n = len(V2)
     h = 0.5 * thickness
@@ -269,7 +269,7 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     fem = cm.fem
     r_ss = res.steps[prof.index_ss]
     if fem.dim == 2:
-        V, F = extrude_triangles(r_ss.x, cm.display_elements, cm.contact_facets, fem.thickness)
+        V, F = extruded_slab(r_ss.x, cm.display_elements, cm.contact_facets, fem.thickness)
     else:
         V, F = r_ss.x, cm.contact_facets
         used = np.unique(F)
@@ -278,7 +278,7 @@ def write_mjcf(res: InsertionResult, prof: ProfileSummary, path) -> Path:
         V, F = V[used], remap[F]
     ov, of = object_display(cm)
     if cm.dim == 2:
-        ov, of = extrude_triangles(ov[:, :2], of, _loop_edges(len(cm.object_vertices)), fem.thickness * 1.5)
+        ov, of = extruded_slab(ov[:, :2], of, _loop_edges(len(cm.object_vertices)), fem.thickness * 1.5)
     line = straight_path(res)
     b = MJCFBuilder(f"{cm.name}_insertion", gravity=[0, 0, 0] if line is not None else None)
     b.mesh_asset("part", V, F)

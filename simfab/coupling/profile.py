@@ -26,11 +26,13 @@ docs/methods.md, "simfab.coupling.profile".
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from simfab.coupling import config as C
+from simfab.results import field
 
 #: The force at a steady state at the run's end is ~0 within this fraction of the peak |force|.
 REST_FORCE_REL = 1e-2
@@ -38,20 +40,35 @@ REST_FORCE_REL = 1e-2
 
 @dataclass(frozen=True, kw_only=True)
 class ProfileSummary:
-    """Key figures of a deformation profile (units in the field names' docs above)."""
+    """Key figures of a deformation profile (definitions: the module docstring); :class:`Profile` adds
+    the per-record arrays they were read from.
+
+    Args:
+        category: "tight", "loose", "ejects", "jams" or "held by friction".
+        E_max: largest elastic energy along the insertion [J].
+        E_ss: elastic energy at the steady state [J] (E_max when there is none).
+        coupling_ratio: E_ss / E_max [%].
+        F_in: largest force needed to push O in [N].
+        F_rm: largest force needed to pull O out [N].
+        F_grip: grip force at the steady state [N].
+        index_max, index_ss: the insertion records of E_max and of the steady state.
+        stationary: whether E_ss is a minimum of the energy along the path (not the run's end).
+        F_hold: force to start sliding O out of its seat [N] (F_rm without friction).
+        friction: Coulomb coefficient the profile was simulated with [-].
+    """
 
     category: str
-    E_max: float
-    E_ss: float
-    coupling_ratio: float
-    F_in: float
-    F_rm: float
-    F_grip: float
+    E_max: float = field(unit="J")
+    E_ss: float = field(unit="J")
+    coupling_ratio: float = field(unit="%")
+    F_in: float = field(unit="N")
+    F_rm: float = field(unit="N")
+    F_grip: float = field(unit="N")
     index_max: int
     index_ss: int
-    stationary: bool = True  # E_ss is a minimum of the energy along the path (not the run's end)
-    F_hold: float = 0.0  # with friction: the force to start sliding O out of its seat [N] (else F_rm's elastic part)
-    friction: float = 0.0  # the Coulomb coefficient the profile was simulated with [-]
+    stationary: bool = True
+    F_hold: float = field(unit="N", default=0.0)
+    friction: float = field(unit="-", default=0.0)
 
 
 def steady_state_index(energy: np.ndarray, tol: float) -> int:
@@ -185,40 +202,18 @@ PROFILE_COLUMNS = {
 
 
 @dataclass(frozen=True, kw_only=True)
-class Profile:
-    """The deformation profile of an insertion: its key figures and, per record (the insertion's,
-    then with friction the removal's; ``phase`` says which), the arrays it was read from.
+class Profile(ProfileSummary):
+    """The deformation profile of an insertion: its key figures (the fields of :class:`ProfileSummary`)
+    and, per record (the insertion's, then with friction the removal's; ``phase`` says which), the
+    arrays they were read from.
 
     Args:
-        category: "tight", "loose", "ejects", "jams" or "held by friction".
-        E_max: largest elastic energy along the insertion [J].
-        E_ss: elastic energy at the steady state [J] (E_max when there is none).
-        coupling_ratio: E_ss / E_max [%].
-        F_in: largest force needed to push O in [N].
-        F_rm: largest force needed to pull O out [N].
-        F_hold: force to start sliding O out of its seat [N] (F_rm without friction).
-        F_grip: grip force at the steady state [N].
-        friction: Coulomb coefficient the profile was simulated with [-].
-        stationary: whether E_ss is a minimum of the energy along the path.
-        index_max, index_ss: the insertion records of E_max and of the steady state.
         s, energy, force, path_force, grip, max_von_mises, penetration, min_det_F, iterations,
             contact_points, phase, normal_force, path_force_friction, dissipated, lag_solves: one entry
             per record, units in :data:`PROFILE_COLUMNS` (force: support reactions along O's
             translation, resisting < 0; path_force: the force on O along the path's forward tangent).
     """
 
-    category: str
-    E_max: float
-    E_ss: float
-    coupling_ratio: float
-    F_in: float
-    F_rm: float
-    F_hold: float
-    F_grip: float
-    friction: float
-    stationary: bool
-    index_max: int
-    index_ss: int
     s: np.ndarray
     energy: np.ndarray
     force: np.ndarray
@@ -247,16 +242,17 @@ class Profile:
         return pd.DataFrame({(k if u == "-" else f"{k}_{u}"): getattr(self, k) for k, u in PROFILE_COLUMNS.items()})
 
 
-def profile_of(res) -> Profile:
+def profile_of(res, summary: ProfileSummary | None = None) -> Profile:
     """The typed :class:`Profile` of an insertion.
 
     Args:
         res: a :class:`simfab.coupling.simulate.InsertionResult`.
+        summary: its :func:`analyze_run`, if already read.
 
     Returns:
         Its figures (:func:`analyze_run`) and per-record arrays.
     """
-    summary = analyze_run(res)
+    summary = analyze_run(res) if summary is None else summary
     records = [*res.steps, *res.removal]
     cols = {}
     for k in PROFILE_COLUMNS:
@@ -266,7 +262,5 @@ def profile_of(res) -> Profile:
             cols[k] = np.array([getattr(r, k) for r in records], dtype=int)
         else:
             cols[k] = np.array([getattr(r, k) for r in records], dtype=float)
-    return Profile(category=summary.category, E_max=summary.E_max, E_ss=summary.E_ss,
-                   coupling_ratio=summary.coupling_ratio, F_in=summary.F_in, F_rm=summary.F_rm,
-                   F_hold=summary.F_hold, F_grip=summary.F_grip, friction=summary.friction,
-                   stationary=summary.stationary, index_max=summary.index_max, index_ss=summary.index_ss, **cols)
+    figures = {f.name: getattr(summary, f.name) for f in dataclasses.fields(ProfileSummary)}
+    return Profile(**figures, **cols)

@@ -127,7 +127,7 @@ def check_tables(cfg: dict, where: str) -> None:
             raise InputError(f"[{key}]: unknown key {extra[0]!r} (known: {', '.join(sorted(allowed))})", where=where)
 
 
-def read_toml(path: Path) -> dict:
+def read_scene_toml(path: Path) -> dict:
     """A coupling scene's TOML document (InputError naming the file when missing or not TOML).
 
     Args:
@@ -199,7 +199,7 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
     xml, toml = scene_paths(scene)
     if not xml.is_file():
         raise InputError("scene file not found", where=str(xml))
-    cfg = read_toml(toml)
+    cfg = read_scene_toml(toml)
     overrides = dict(overrides or {})
     config_overrides = {t: overrides.pop(t) or {} for t in CONFIG_TABLES if t in overrides}
     for k, v in overrides.items():
@@ -263,7 +263,7 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
         spacing = float(np.linalg.norm(np.diff(np.vstack([ov, ov[:1]]), axis=0), axis=1).mean())
         disp_v, disp_f = ov, None
     else:
-        ov, on = geometry.surface_samples(mesh, n_samples, seed=obj_opts.seed)
+        ov, on = geometry.mesh_surface_samples(mesh, n_samples, seed=obj_opts.seed)
         spacing = None
         disp_v, disp_f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     if fld is None:

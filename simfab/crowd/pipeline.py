@@ -354,7 +354,7 @@ def synthesize(*, scale, tasks: int | None = None, truth=None, practitioners: in
         raise InputError(f"give one difficulty or {Q} (one per question), got {len(difficulty)}",
                          where="--difficulty")
     beta = difficulty if len(difficulty) > 1 else difficulty[0]
-    crowd = synth.simulate(mixes, scale=sc, truth=values, n_tasks=Q, beta=beta, seed=seed)
+    crowd = synth.simulate_crowd(mixes, scale=sc, truth=values, n_tasks=Q, beta=beta, seed=seed)
     if names:
         crowd = dataclasses.replace(crowd, ratings=dataclasses.replace(crowd.ratings, tasks=tuple(names)))
     outputs = {}

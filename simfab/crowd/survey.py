@@ -188,7 +188,7 @@ def make_bundle(spec: SurveySpec | None = None) -> dict:
     if len(spec.difficulty) not in (1, len(tasks)):
         raise InputError(f"survey.difficulty needs 1 or {len(tasks)} values", where=str(spec.root))
     for k, c in enumerate(spec.crowds):
-        crowd = synth.simulate(c.mix, scale=scale, truth=truth, beta=np.resize(spec.difficulty, len(tasks)),
+        crowd = synth.simulate_crowd(c.mix, scale=scale, truth=truth, beta=np.resize(spec.difficulty, len(tasks)),
                                seed=spec.seed + k, worker_prefix=f"{c.name[:2]}")
         r = dataclasses.replace(crowd.ratings, tasks=tuple(tasks))
         write_csv(spec.root / c.file, ["worker", "task", "label"], r.to_long())

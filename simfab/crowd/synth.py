@@ -48,7 +48,7 @@ def draw_alpha(mix: CrowdMix, rng: np.random.Generator) -> tuple[np.ndarray, np.
     return alpha, bad
 
 
-def simulate(
+def simulate_crowd(
     mixes: list[CrowdMix] | CrowdMix,
     *,
     scale: Scale,

@@ -278,7 +278,7 @@ def cell(scene=None, *, out=None, inserts=None, increments: int | None = None, m
     for n in names:
         ins = bodies[n]
         log(f"deploy: {n} (half-size {ins.r * 1e3:.1f} mm, gap half-size {cfg.gap * 1e3:.1f} mm)", quiet=quiet)
-        d = unitcell.deploy(cfg, ins, device=dev, quiet=quiet)
+        d = unitcell.deploy_cell(cfg, ins, device=dev, quiet=quiet)
         results[n] = CellInsertResult(
             insert_half_size=ins.r, gap_half_size=cfg.gap, relation="larger" if ins.r > cfg.gap else "smaller",
             **d.curvature, stable=d.stable, increments=len(d.iterations), newton_iterations=d.iterations,

@@ -124,7 +124,7 @@ def load_insert_scene(path) -> InsertScene:
     return InsertScene(path=str(path), insert_pos=pos, setup=setup, mesh=meshes["insert"])
 
 
-def default_scene_path() -> str:
+def elastica_scene_path() -> str:
     """The bundled elastica scene.
 
     Returns:
@@ -341,7 +341,7 @@ def run_continuation(setup: BeamConfig, support: str, n: int, ratios, *, path: s
             iters += res.iterations
             increments += 1
         seconds = time.perf_counter() - t0
-        ex = elastica.solve(target, support)
+        ex = elastica.solve_elastica(target, support)
         delta = beam.rise(state) / L
         g = solver.reactions(state)
         force = -float(np.sum(g[3 * beam.moving_nodes]))

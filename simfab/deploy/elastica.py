@@ -111,7 +111,7 @@ def check_ratio(g_over_L: float) -> float:
     return r
 
 
-def solve(g_over_L: float, support: str = "pinned") -> ElasticaSolution:
+def solve_elastica(g_over_L: float, support: str = "pinned") -> ElasticaSolution:
     """The exact first-mode elastica (brentq on g/L = 2E/K - 1).
 
     Args:

@@ -206,7 +206,7 @@ def write_dxf(path, cut: CutLayout) -> None:
     doc.saveas(path)
 
 
-def summary(cut: CutLayout) -> dict:
+def cut_summary(cut: CutLayout) -> dict:
     """The cut layout's figures for the JSON summary.
 
     Args:

@@ -328,7 +328,7 @@ def summary(res: SurfaceRun) -> dict:
                                      deviation_mm=float(np.max(dv.per_vertex[p.quads[q]]) * 1e3))
                                 for q in p.tight_springs
                                 for k in [int(np.argmin(p.spring_ratio[q] / np.maximum(p.growth[q], 1.0)))]],
-        lasercut=lasercut.summary(res.cut),
+        lasercut=lasercut.cut_summary(res.cut),
         deployment=dict(stable=res.deployment.stable, increments=len(res.deployment.iterations),
                         newton_iterations=res.deployment.iterations, energy_J=res.deployment.energy, **res.shape),
         deviation=dict(rms=dv.rms, hausdorff=dv.hausdorff, rms_mm=dv.rms_m * 1e3, hausdorff_mm=dv.hausdorff_m * 1e3,

@@ -310,7 +310,7 @@ class CellDeployment:
     curvature_history: list  # discrete Gaussian curvature [1/m^2] per increment (0 = flat)
 
 
-def deploy(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> CellDeployment:
+def deploy_cell(cfg: CellConfig, insert: Insert, *, device: str = "cpu", quiet: bool = True) -> CellDeployment:
     """Draw the spokes onto an insert in ``cfg.increments`` steps (see the module doc).
 
     Args:

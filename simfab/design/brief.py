@@ -38,6 +38,7 @@ from simfab.design.stress import STRESS_RADIUS
 from simfab.errors import InputError
 from simfab.io.companion import read_csv_numbers
 from simfab.io.tables import FieldError, flag_overrides, load_table
+from simfab.results import field
 
 #: Weight of the squared, scaled constraint violations against E_L.
 PENALTY_WEIGHT = 1.0e3
@@ -224,16 +225,46 @@ class Constraint:
     def satisfied(self) -> bool:
         return self.violation == 0.0
 
-    def as_dict(self) -> dict:
-        """The constraint as JSON-ready values.
+    def report(self, *, named: bool = True, with_unit: bool = True, initial: float | None = None
+               ) -> ConstraintReport:
+        """The constraint as a result reports it.
+
+        Args:
+            named: include the name (False where the reports are keyed by it).
+            with_unit: include the unit (False where the report's table states the units).
+            initial: the initial design's value [unit], if reported.
 
         Returns:
-            {value, lo, hi, unit, satisfied}.
+            A :class:`ConstraintReport`.
         """
-        return {"value": self.value, "lo": self.lo, "hi": self.hi, "unit": self.unit, "satisfied": self.satisfied}
+        return ConstraintReport(name=self.name if named else None, value=self.value, lo=self.lo, hi=self.hi,
+                                unit=self.unit if with_unit else None, satisfied=self.satisfied, initial=initial)
 
 
-def bounds(brief: DesignBrief, yield_stress: float | None) -> dict[str, tuple[float, float]]:
+@dataclass(frozen=True, kw_only=True)
+class ConstraintReport:
+    """A constraint ``lo <= value <= hi`` as a result reports it (entries that are None are left out of its JSON).
+
+    Args:
+        name: the figure (a key of :data:`UNITS`); None where the reports are keyed by it.
+        value: its value [unit].
+        lo: lower bound [unit].
+        hi: upper bound [unit].
+        unit: the unit; None where the report's table states the units.
+        satisfied: ``lo <= value <= hi``.
+        initial: the initial design's value [unit] (the design result's constraints).
+    """
+
+    name: str | None = field(optional=True)
+    value: float
+    lo: float
+    hi: float
+    unit: str | None = field(optional=True)
+    satisfied: bool
+    initial: float | None = field(optional=True)
+
+
+def constraint_bounds(brief: DesignBrief, yield_stress: float | None) -> dict[str, tuple[float, float]]:
     """The brief's constraint bounds.
 
     Args:
@@ -264,7 +295,7 @@ def constraints(figures: dict, limits: dict[str, tuple[float, float]]) -> list[C
     Args:
         figures: {coupling_ratio, grip_force, insertion_force, removal_force, hold_force, von_mises,
             seat_clearance} (:func:`simfab.design.problem.profile_figures`).
-        limits: {name: (lo, hi)} (:func:`bounds`).
+        limits: {name: (lo, hi)} (:func:`constraint_bounds`).
 
     Returns:
         One :class:`Constraint` per bound.
@@ -407,5 +438,5 @@ class TargetProfile:
         return float(np.sqrt(total / (t1 - t0)))
 
 
-__all__ = ["DesignConfig", "DesignBrief", "Constraint", "TargetProfile", "bounds", "constraints", "penalty",
-           "read_target_profile", "run_to_rest", "PENALTY_WEIGHT", "SCALES", "UNITS"]
+__all__ = ["DesignConfig", "DesignBrief", "Constraint", "TargetProfile", "ConstraintReport", "constraint_bounds",
+           "constraints", "penalty", "read_target_profile", "run_to_rest", "PENALTY_WEIGHT", "SCALES", "UNITS"]

@@ -34,7 +34,7 @@ from simfab.design.handles import Handles
 from simfab.design.problem import CONTACT_STRAIN_FLOOR, DesignEvaluation, DesignProblem
 from simfab.design.stress import averaging_matrix, quadrature_averaging_matrix
 from simfab.errors import ConvergenceError
-from simfab.fem.shape_derivative import linear_rest_derivative, von_mises
+from simfab.fem.shape_derivative import linear_rest_derivative, point_von_mises
 
 __all__ = ["DeferredRecorder", "FigureGradients", "TEMPERATURE_REL", "TargetModel", "WEIGHT_FLOOR", "design_recorder",
            "ejecting_ratio", "figure_gradients", "gap_gradient", "handle_jacobian", "modification_gradient",
@@ -156,7 +156,7 @@ class DeferredRecorder:
     def stress_values(self) -> np.ndarray:
         """(records,) the stress measure's value max_e (A sigma_vm)_e of every record [Pa]."""
         A = self.stress.averaging
-        return np.array([float((A @ von_mises(self.cm.fem, st.x)).max()) for _, st in self.records])
+        return np.array([float((A @ point_von_mises(self.cm.fem, st.x)).max()) for _, st in self.records])
 
     def sensitivities(self, needed) -> dict:
         """{record index: StepSensitivity} of the records ``needed`` (indices in the run's order,

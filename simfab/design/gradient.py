@@ -134,8 +134,31 @@ def _evaluate(run: _Run, h: np.ndarray) -> _Evaluated:
     return out
 
 
-def nonsmooth_events(signatures: list) -> dict:
+@dataclass(frozen=True, kw_only=True)
+class NonsmoothEvents:
     """How often consecutive simulated designs differ in a discrete feature the gradient does not see.
+
+    Args:
+        steady_state_index: in the record read as the steady state.
+        category: in the coupling category.
+        refinement: in the set of refined facets.
+        kappa: in the final barrier stiffness.
+        steps: in the number of records.
+        rest_positions: in the positions of the records past the planned steps (the rest search's).
+        pairs: the consecutive pairs compared.
+    """
+
+    steady_state_index: int = 0
+    category: int = 0
+    refinement: int = 0
+    kappa: int = 0
+    steps: int = 0
+    rest_positions: int = 0
+    pairs: int = 0
+
+
+def nonsmooth_events(signatures: list) -> NonsmoothEvents:
+    """Count how often consecutive simulated designs differ in a discrete feature the gradient does not see.
 
     Args:
         signatures: per complete insertion, its discrete features (steady-state index, category, the
@@ -143,14 +166,11 @@ def nonsmooth_events(signatures: list) -> dict:
             positions of those past the planned steps: the rest search's).
 
     Returns:
-        {feature: count} over ``pairs`` consecutive pairs (and ``pairs`` itself).
+        The :class:`NonsmoothEvents` over the consecutive pairs.
     """
-    out = {k: 0 for k in ("steady_state_index", "category", "refinement", "kappa", "steps", "rest_positions")}
-    for a, b in zip(signatures, signatures[1:]):
-        for k in out:
-            out[k] += int(a[k] != b[k])
-    out["pairs"] = max(len(signatures) - 1, 0)
-    return out
+    keys = ("steady_state_index", "category", "refinement", "kappa", "steps", "rest_positions")
+    counts = {k: sum(int(a[k] != b[k]) for a, b in zip(signatures, signatures[1:])) for k in keys}
+    return NonsmoothEvents(**counts, pairs=max(len(signatures) - 1, 0))
 
 
 #: Constraints without a gradient: the SQP would see them as flat (the seat clearance turns positive as
@@ -558,7 +578,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
 
 __all__ = [  # the optimizer driver, and the figure gradients (simfab.design.figure_gradients) it is built on
     "GRADIENT_LAG_TOL", "MAX_ITERATIONS", "ConstraintRow", "constraint_rows", "flat_start", "in_category",
-    "in_contact", "lost_grip", "modification_hessian", "nonsmooth_events", "optimize_gradient",
+    "in_contact", "lost_grip", "modification_hessian", "NonsmoothEvents", "nonsmooth_events", "optimize_gradient",
     "DeferredRecorder", "FigureGradients", "TEMPERATURE_REL", "TargetModel", "WEIGHT_FLOOR", "design_recorder",
     "ejecting_ratio", "figure_gradients", "gap_gradient", "handle_jacobian", "modification_gradient",
     "needed_records", "quality_jacobian", "removal_gradients", "rest_grip_gradient", "stress_measure",

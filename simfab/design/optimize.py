@@ -84,7 +84,7 @@ class OptimizationResult:
     method: str = "anneal"
     gradient_evaluations: int = 0
     message: str = ""
-    events: dict | None = None
+    events: object = None  # a simfab.design.gradient.NonsmoothEvents (gradient method)
     resume: object = None
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from simfab.coupling.outputs import display_faces, extrude_triangles, object_display, vertex_von_mises
+from simfab.coupling.outputs import display_faces, extruded_slab, object_display, vertex_von_mises
 from simfab.design import brief as B
 from simfab.design.problem import lift_rest
 from simfab.design.synthesis import boundary_loops
@@ -56,85 +56,10 @@ def output_paths(out: Path, stem: str, dim: int, *, target: bool = False) -> dic
     return p
 
 
-def summary(res, *, scene: str | None = None) -> dict:
-    """JSON-ready summary of an :class:`simfab.design.optimize.OptimizationResult` (the figures of
-    :class:`simfab.design.pipeline.DesignResult`)."""
-    best, init = res.best, res.initial
-    cons = {c.name: c.as_dict() for c in best.constraints}
-    for c in init.constraints:
-        cons[c.name]["initial"] = c.value
-    out = {
-        "scene": scene or res.problem.base.name,
-        "feasible": best.feasible,
-        "objective": best.objective,
-        "objective_initial": init.objective,
-        "E_L": best.E_L,
-        "constraints": cons,
-        # the constraints read the coarse figures times these (mesh correction rounds; {} without)
-        "corrections": dict(res.problem.settings.corrections),
-        "category": best.figures.get("category"),
-        "category_initial": init.figures.get("category"),
-        "profile": _figures(best.figures),
-        "profile_initial": _figures(init.figures),
-        "handles": {"active": int(res.problem.handles.n_active), "inactive": int((~res.problem.handles.active).sum()),
-                    "placement": res.problem.brief.placement},
-        "method": res.method,
-        "iterations": res.iterations,
-        "stopped_early": res.stopped_early,
-        "optimizer_message": res.message,
-        "insertions": insertions(res),
-        "gradient_evaluations": res.gradient_evaluations,
-        "nonsmooth_events": res.events,
-        "simulations": res.simulations,
-        "simulations_stopped_early": res.stopped_simulations,
-        "speculative_simulations": res.speculative,
-        "acceptance_branches": {"drawn": int(res.branches[0]), "adopted": int(res.branches[1])},
-        "workers": res.workers,
-        "accepted": len(res.accepted),
-        "rejected": dict(res.rejected),
-        "seconds": res.seconds,
-        "simulation_seconds": res.sim_seconds,
-        # with several workers the simulations overlap: the share of the workers' time they took
-        "fraction_outside_simulator": (max(0.0, 1.0 - res.sim_seconds / (res.seconds * res.workers))
-                                       if res.seconds > 0 else 0.0),
-        "units": {"objective": "-", "E_L": "-", "seconds": "s", "constraints": dict(B.UNITS)},
-    }
-    if best.rms_error is not None:
-        out["rms_error"] = best.rms_error
-        out["rms_error_initial"] = init.rms_error
-        out["units"]["rms_error"] = "N"
-    warnings = []
-    vm = best.figures.get("von_mises")
-    ys = res.problem.limits.get("von_mises", (0, None))[1]
-    if ys is not None and vm is not None and vm > ys:
-        warnings.append(f"the optimized part exceeds its yield stress: von Mises averaged over "
-                        f"{res.problem.brief.stress_radius * 1e3:.3g} mm {vm / 1e6:.4g} MPa > {ys / 1e6:.4g} MPa")
-    if not best.feasible:
-        bad = [c.name for c in best.constraints if not c.satisfied]
-        warnings.append(f"not every constraint is met after {res.iterations} iterations: {', '.join(bad)}")
-    radius = res.problem.brief.stress_radius
-    for w in (best.result.warnings if best.result is not None else []):
-        if "exceeds the yield stress" in w and vm is not None:  # the simulator reads the raw element peak
-            w += (f"; that is the largest element stress, singular at sharp corners: the yield constraint reads "
-                  f"the stress averaged over {radius * 1e3:.3g} mm, {vm / 1e6:.4g} MPa")
-        warnings.append(w)
-    out["warnings"] = warnings
-    return out
-
-
 def insertions(res) -> int:
     """Every insertion simulation an optimization ran: complete, stopped early, and (annealing on
     workers) run ahead and not needed; the mesh check's are not counted."""
     return int(res.simulations + res.stopped_simulations + res.speculative)
-
-
-def _figures(f: dict) -> dict:
-    """The profile's figures with unit-bearing names (E in J, forces in N, stress in Pa)."""
-    names = {"category": "category", "coupling_ratio": "coupling_ratio_pct", "E_max": "E_max_J", "E_ss": "E_ss_J",
-             "insertion_force": "F_in_N", "removal_force": "F_rm_N", "hold_force": "F_hold_N", "grip_force": "F_grip_N",
-             "von_mises": "von_mises_avg_Pa", "von_mises_peak": "max_von_mises_Pa",
-             "seat_clearance": "seat_clearance_m", "friction": "friction"}
-    return {v: f.get(k) for k, v in names.items()}
 
 
 #: The annealing-only columns of the history CSV (left out under the gradient method).
@@ -163,7 +88,7 @@ def part_mesh_mm(fem, X: np.ndarray):
     import trimesh  # deferred: about a second of start-up, for writing the part only
 
     if fem.dim == 2:
-        V, F = extrude_triangles(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
+        V, F = extruded_slab(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
     else:
         V, F = X, np.asarray(fem.boundary_facets)
     m = trimesh.Trimesh(np.asarray(V) * 1e3, np.asarray(F), process=True)
@@ -178,7 +103,7 @@ def write_outline_csv(fem, X: np.ndarray, path) -> Path:
     return write_csv(path, ["loop", "x_mm", "y_mm"], rows)
 
 
-def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, stem: str) -> None:
+def write_optimized_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, stem: str) -> None:
     """The optimized scene: the original MJCF with the part's display mesh replaced, the TOML with
     the optimized mesh as ``mesh_file`` (same material, object, path, fixed region, options)."""
     fem = res.problem.mesh  # (the design's linear mesh: a P2 scene's TOML lifts it again)
@@ -220,7 +145,7 @@ def write_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, 
 
 def _display_mesh(fem, X):
     if fem.dim == 2:
-        return extrude_triangles(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
+        return extruded_slab(X, np.asarray(fem.elements), np.asarray(fem.boundary_facets), fem.thickness)
     F = np.asarray(fem.boundary_facets)
     used = np.unique(F)
     remap = np.full(len(X), -1)
@@ -228,10 +153,10 @@ def _display_mesh(fem, X):
     return X[used], remap[F]
 
 
-def plot_profiles(res, path, mesh_check: dict | None = None) -> Path:
+def plot_profiles(res, path, mesh_check=None) -> Path:
     """Energy and force profiles of the initial and the optimized design, with the brief's bands.
     The titles list the constraints: the mesh check's mesh-converged figures when ``mesh_check``
-    (the summary's) is given, which decide whether the design meets the brief, else the
+    (a :class:`simfab.design.verify.MeshCheck`) is given, which decide whether the design meets the brief, else the
     optimizer's own (coarse-mesh, mesh-corrected) figures."""
     import matplotlib  # deferred: pyplot costs about a second of start-up, and only plotting needs it
 
@@ -279,8 +204,8 @@ def plot_profiles(res, path, mesh_check: dict | None = None) -> Path:
     ax2.set_xlabel("insertion distance [mm]")
     ax1.legend(fontsize=8, loc="upper left")
     ax2.legend(fontsize=7, loc="lower left")
-    if mesh_check:
-        cons = [(c["name"], c["value"], c["lo"], c["hi"], c["satisfied"]) for c in mesh_check["constraints"]]
+    if mesh_check is not None:
+        cons = [(c.name, c.value, c.lo, c.hi, c.satisfied) for c in mesh_check.constraints]
         what = " (constraints: mesh-converged figures)"
     else:
         cons = [(c.name, c.value, c.lo, c.hi, c.satisfied) for c in res.best.constraints]
@@ -401,7 +326,7 @@ def write_all(result, out: Path, *, stem: str | None = None):
         save_mesh(part_mesh_mm(fem, res.best.rest), tmp["part_stl"])
         if fem.dim == 2:
             write_outline_csv(fem, res.best.rest, tmp["outline_csv"])
-        write_scene(res, result.scene_xml, result.scene_toml, paths, tmp, stem)
+        write_optimized_scene(res, result.scene_xml, result.scene_toml, paths, tmp, stem)
         plot_profiles(res, tmp["profile_png"], result.mesh_check)
         plot_shape(res, tmp["shape_png"])
         write_csv(tmp["history_csv"], header, rows)

@@ -19,13 +19,20 @@ from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate
 from simfab.design import brief as B
 from simfab.design import outputs
-from simfab.design.gradient import GRADIENT_LAG_TOL, MAX_ITERATIONS, design_recorder, optimize_gradient
+from simfab.design.gradient import GRADIENT_LAG_TOL, MAX_ITERATIONS, NonsmoothEvents, design_recorder, optimize_gradient
 from simfab.design.optimize import HistoryRow, history_rows, optimize_anneal
 from simfab.design.parallel import Workers
 from simfab.design.problem import EvaluationSettings, ProblemSource, evaluate, make_problem, rebuild
 from simfab.design.scene import load_design_scene
 from simfab.design.synthesis import boundary_loops, revolve_outline, revolved_scene
-from simfab.design.verify import check_warnings, checked_objective, correction_factors, level_figures, needs_correction
+from simfab.design.verify import (
+    MeshCheck,
+    check_warnings,
+    checked_objective,
+    correction_factors,
+    level_figures,
+    needs_correction,
+)
 from simfab.design.verify import mesh_check as check_mesh  # (run's mesh_check is its switch)
 from simfab.errors import ConvergenceError, InputError
 from simfab.io.atomic import write_json
@@ -63,10 +70,130 @@ class DesignFigures:
     seat_clearance_m: float | None = None
     friction: float | None = None
 
+    #: figure name of :func:`simfab.design.problem.profile_figures` -> field
+    NAMES = {"category": "category", "coupling_ratio": "coupling_ratio_pct", "E_max": "E_max_J", "E_ss": "E_ss_J",
+             "insertion_force": "F_in_N", "removal_force": "F_rm_N", "hold_force": "F_hold_N",
+             "grip_force": "F_grip_N", "von_mises": "von_mises_avg_Pa", "von_mises_peak": "max_von_mises_Pa",
+             "seat_clearance": "seat_clearance_m", "friction": "friction"}
 
-#: DesignResult fields present only in some runs, left out of its JSON when None (as before the typed result).
-OPTIONAL = ("rms_error", "rms_error_initial", "restarts", "mesh_check", "correction_rounds", "iterations_total",
-            "insertions_total", "objective_fine", "revolved")
+    @classmethod
+    def from_figures(cls, figures: dict) -> DesignFigures:
+        """The figures of a design's evaluation, by their unit-bearing names.
+
+        Args:
+            figures: :func:`simfab.design.problem.profile_figures` of its insertion.
+
+        Returns:
+            The :class:`DesignFigures`.
+        """
+        return cls(**{v: figures.get(k) for k, v in cls.NAMES.items()})
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class HandleCounts:
+    """The design's handles.
+
+    Args:
+        active: handles the optimizer moves; inactive: the others.
+        placement: "displacement", "spatial" or "random".
+    """
+
+    active: int
+    inactive: int
+    placement: str
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class AcceptanceBranches:
+    """The annealer's speculative acceptance branches.
+
+    Args:
+        drawn: branches drawn; adopted: branches whose head was accepted.
+    """
+
+    drawn: int
+    adopted: int
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DesignUnits:
+    """The units of a :class:`DesignResult`'s figures.
+
+    Args:
+        objective, E_L, seconds: of those fields.
+        constraints: constraint name -> unit.
+        rms_error: of the RMS force error (None without a target profile).
+    """
+
+    objective: str = "-"
+    E_L: str = "-"
+    seconds: str = "s"
+    constraints: dict[str, str]
+    rms_error: str | None = field(optional=True)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RestartRun:
+    """One annealing restart (``restarts`` > 1); the figures are None where it failed.
+
+    Args:
+        seed: its seed; status: "ok" or the failure; message: the failure's message.
+        seconds: its wall time [s].
+        feasible, objective, E_L, iterations: its best design's (None if it failed).
+    """
+
+    seed: int
+    status: str
+    message: str
+    seconds: float = field(unit="s")
+    feasible: bool | None = field(optional=True)
+    objective: float | None = field(optional=True, unit="-")
+    E_L: float | None = field(optional=True, unit="-")
+    iterations: int | None = field(optional=True)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class CorrectionRound:
+    """One mesh-corrected re-optimization (:func:`mesh_corrected`).
+
+    Args:
+        round: 1, 2, ...
+        factors: per figure, the factor applied to the coarse figure.
+        feasible_fine: its design meets the brief on the refined meshes.
+        objective_fine: its design's objective with mesh-converged figures [-].
+        iterations, seconds, insertions: its optimizer run's.
+        kept: its design replaced the best one.
+    """
+
+    round: int
+    factors: dict[str, float]
+    feasible_fine: bool
+    objective_fine: float = field(unit="-")
+    iterations: int
+    seconds: float = field(unit="s")
+    insertions: int
+    kept: bool
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RevolvedPart:
+    """The simulation of the optimized section revolved with replicated arms (:func:`write_revolved`).
+
+    Args:
+        elements: its 10-node tets.
+        seconds: the simulation's wall time [s].
+        category: its coupling category.
+        figures: its profile figures (:func:`simfab.design.verify.level_figures`, without the category).
+        constraints: the 2D brief's constraints on them.
+        warnings: one line each.
+    """
+
+    elements: int
+    seconds: float = field(unit="s")
+    category: str | None
+    figures: dict[str, float]
+    constraints: tuple[B.ConstraintReport, ...]
+    warnings: tuple[str, ...]
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -78,41 +205,33 @@ class DesignResult(Result):
         feasible: the best design meets every constraint (on the optimizer's figures).
         objective, objective_initial: the objective of the best and the initial design [-].
         E_L: the best design's Laplacian editing energy [-].
-        constraints: per constraint: value, lo, hi, unit, satisfied, initial (values mesh-corrected).
+        constraints: per constraint, its :class:`~simfab.design.brief.ConstraintReport` with the initial
+            design's value (values mesh-corrected).
         corrections: per figure, the factor applied to the coarse figure (mesh check); {} without.
         category, category_initial: the best and the initial design's coupling category.
         profile, profile_initial: their :class:`DesignFigures`.
-        handles: active, inactive, placement.
+        handles: the :class:`HandleCounts`.
         method: "gradient" or "anneal".
         iterations: the first run's iterations; stopped_early: it stopped on patience or convergence.
         optimizer_message: the optimizer's closing message.
         insertions: every insertion simulation of the optimization: complete, stopped early or speculative
             (the mesh check's excluded).
         gradient_evaluations: insertions that also gave gradients.
-        nonsmooth_events: the gradient method's non-smooth events: how many consecutive simulated designs
-            differ in steady_state_index, category, refinement, kappa, steps, of pairs (None: anneal).
+        nonsmooth_events: the gradient method's :class:`~simfab.design.gradient.NonsmoothEvents` (None: anneal).
         simulations, simulations_stopped_early, speculative_simulations: insertion counts by kind.
-        acceptance_branches: the annealer's proposals evaluated as if the running one were accepted
-            (drawn, adopted).
+        acceptance_branches: the annealer's speculative :class:`AcceptanceBranches`.
         workers: processes that evaluated candidates; accepted: accepted designs; rejected: count per reason.
         seconds, simulation_seconds: wall time and time inside the simulator [s].
         fraction_outside_simulator: the share of the workers' time outside the simulator [-].
-        units: key -> unit.
+        units: the :class:`DesignUnits`.
         rms_error, rms_error_initial: target profile matching's RMS force error [N] (None without a target).
         warnings: one line each.
-        restarts: per annealing restart: seed, status, message, feasible, objective, E_L, iterations, seconds.
-        mesh_check: the check on refined meshes (None with ``mesh_check=False``): levels (element_order,
-            subdivisions, elements, nodes, seconds, category), figures (per figure: values per level,
-            extrapolated, order, converging, difference_of_optimization_mesh, reference_change, step_factor),
-            step_check (when the scene's steps do not resolve the profile: steps, factor, seconds, factors per
-            figure, category, still_too_coarse), constraints at the mesh-converged values, feasible_fine,
-            reference, units.
-        correction_rounds: per round: factors, feasible_fine, objective_fine, iterations, seconds, kept
-            (whether its design was better on the refined meshes; the outputs are the kept design's run).
+        restarts: a :class:`RestartRun` per annealing restart (with ``restarts`` > 1).
+        mesh_check: the :class:`~simfab.design.verify.MeshCheck` on refined meshes.
+        correction_rounds: a :class:`CorrectionRound` each.
         iterations_total, insertions_total: every round's.
         objective_fine: the kept design's objective with mesh-converged figures [-].
-        revolved: with revolve arms, the revolved 3D part's simulation: elements, category, figures, the
-            brief's constraints with their values and satisfied flags.
+        revolved: the revolved 3D part's simulation, a :class:`RevolvedPart` (with revolve arms).
         history: one typed row per iteration (:class:`simfab.design.optimize.HistoryRow`,
             :class:`~simfab.design.optimize.AnnealRow` under annealing).
         optimization: the optimizer's :class:`simfab.design.optimize.OptimizationResult` (problem,
@@ -128,55 +247,54 @@ class DesignResult(Result):
     objective: float = field(unit="-")
     objective_initial: float = field(unit="-")
     E_L: float = field(unit="-")
-    constraints: dict
-    corrections: dict
+    constraints: dict[str, B.ConstraintReport]
+    corrections: dict[str, float]
     category: str | None
     category_initial: str | None
     profile: DesignFigures
     profile_initial: DesignFigures
-    handles: dict
+    handles: HandleCounts
     method: str
     iterations: int
     stopped_early: bool
     optimizer_message: str
     insertions: int
     gradient_evaluations: int
-    nonsmooth_events: dict | None
+    nonsmooth_events: NonsmoothEvents | None
     simulations: int
     simulations_stopped_early: int
     speculative_simulations: int
-    acceptance_branches: dict
+    acceptance_branches: AcceptanceBranches
     workers: int
     accepted: int
-    rejected: dict
+    rejected: dict[str, int]
     seconds: float = field(unit="s")
     simulation_seconds: float = field(unit="s")
     fraction_outside_simulator: float = field(unit="-")
-    units: dict
-    rms_error: float | None = field(unit="N", default=None)
-    rms_error_initial: float | None = field(unit="N", default=None)
-    warnings: list
-    restarts: list | None = None
-    mesh_check: dict | None = None
-    correction_rounds: list | None = None
-    iterations_total: int | None = None
-    insertions_total: int | None = None
-    objective_fine: float | None = field(unit="-", default=None)
-    revolved: dict | None = None
+    units: DesignUnits
+    rms_error: float | None = field(unit="N", optional=True)
+    rms_error_initial: float | None = field(unit="N", optional=True)
+    warnings: tuple[str, ...]
+    restarts: tuple[RestartRun, ...] | None = field(optional=True)
+    mesh_check: MeshCheck | None = field(optional=True)
+    correction_rounds: tuple[CorrectionRound, ...] | None = field(optional=True)
+    iterations_total: int | None = field(optional=True)
+    insertions_total: int | None = field(optional=True)
+    objective_fine: float | None = field(unit="-", optional=True)
+    revolved: RevolvedPart | None = field(optional=True)
     history: tuple[HistoryRow, ...] = field(json=False, default=())
     optimization: object = field(json=False, default=None)
     scene_xml: Path | None = field(json=False, default=None)
     scene_toml: Path | None = field(json=False, default=None)
 
     def to_json(self) -> dict:
-        """The ``--json`` summary (fields of :data:`OPTIONAL` only when set; ``outputs`` after the figures).
+        """The ``--json`` summary (optional fields only when set; ``outputs`` after the figures).
 
         Returns:
             A dict of JSON values.
         """
         d = super().to_json()
         paths = d.pop("outputs")
-        d = {k: v for k, v in d.items() if not (k in OPTIONAL and v is None)}
         if paths:
             revolved = d.pop("revolved", None)
             d["outputs"] = paths
@@ -191,19 +309,70 @@ def design_result(res, *, scene_xml: Path, scene_toml: Path, extra: dict | None 
     Args:
         res: an :class:`simfab.design.optimize.OptimizationResult`.
         scene_xml, scene_toml: the design scene's files.
-        extra: the mesh check's and restarts' entries (:func:`optimize_checked`).
+        extra: the mesh check's and restarts' fields (:func:`optimize_checked`).
 
     Returns:
         The result; its warnings include the mesh check's.
     """
-    s = outputs.summary(res)
-    s.update(extra or {})
-    if s.get("mesh_check"):
-        s["warnings"] = s["warnings"] + check_warnings(s["mesh_check"])
-    s["profile"] = DesignFigures(**s["profile"])
-    s["profile_initial"] = DesignFigures(**s["profile_initial"])
-    return DesignResult(**s, history=history_rows(res), optimization=res, scene_xml=Path(scene_xml),
-                        scene_toml=Path(scene_toml))
+    extra = dict(extra or {})
+    best, init, problem = res.best, res.initial, res.problem
+    initial = {c.name: c.value for c in init.constraints}
+    cons = {c.name: c.report(named=False, initial=initial.get(c.name)) for c in best.constraints}
+    target = best.rms_error is not None
+    warnings = design_warnings(res)
+    if extra.get("mesh_check") is not None:
+        warnings += check_warnings(extra["mesh_check"])
+    return DesignResult(
+        scene=problem.base.name, feasible=best.feasible, objective=best.objective, objective_initial=init.objective,
+        E_L=best.E_L, constraints=cons,
+        # the constraints read the coarse figures times these (mesh correction rounds; {} without)
+        corrections=dict(problem.settings.corrections),
+        category=best.figures.get("category"), category_initial=init.figures.get("category"),
+        profile=DesignFigures.from_figures(best.figures), profile_initial=DesignFigures.from_figures(init.figures),
+        handles=HandleCounts(active=int(problem.handles.n_active), inactive=int((~problem.handles.active).sum()),
+                             placement=problem.brief.placement),
+        method=res.method, iterations=res.iterations, stopped_early=res.stopped_early, optimizer_message=res.message,
+        insertions=outputs.insertions(res), gradient_evaluations=res.gradient_evaluations,
+        nonsmooth_events=res.events, simulations=res.simulations, simulations_stopped_early=res.stopped_simulations,
+        speculative_simulations=res.speculative,
+        acceptance_branches=AcceptanceBranches(drawn=int(res.branches[0]), adopted=int(res.branches[1])),
+        workers=res.workers, accepted=len(res.accepted), rejected=dict(res.rejected), seconds=res.seconds,
+        simulation_seconds=res.sim_seconds,
+        # with several workers the simulations overlap: the share of the workers' time they took
+        fraction_outside_simulator=(max(0.0, 1.0 - res.sim_seconds / (res.seconds * res.workers))
+                                    if res.seconds > 0 else 0.0),
+        units=DesignUnits(constraints=dict(B.UNITS), rms_error="N" if target else None),
+        rms_error=best.rms_error if target else None, rms_error_initial=init.rms_error if target else None,
+        warnings=tuple(warnings), **extra, history=history_rows(res), optimization=res, scene_xml=Path(scene_xml),
+        scene_toml=Path(scene_toml))
+
+
+def design_warnings(res) -> list[str]:
+    """The warnings of an optimizer run: yielding, constraints missed, the best insertion's own.
+
+    Args:
+        res: an :class:`simfab.design.optimize.OptimizationResult`.
+
+    Returns:
+        One line each.
+    """
+    best = res.best
+    warnings = []
+    vm = best.figures.get("von_mises")
+    ys = res.problem.limits.get("von_mises", (0, None))[1]
+    if ys is not None and vm is not None and vm > ys:
+        warnings.append(f"the optimized part exceeds its yield stress: von Mises averaged over "
+                        f"{res.problem.brief.stress_radius * 1e3:.3g} mm {vm / 1e6:.4g} MPa > {ys / 1e6:.4g} MPa")
+    if not best.feasible:
+        bad = [c.name for c in best.constraints if not c.satisfied]
+        warnings.append(f"not every constraint is met after {res.iterations} iterations: {', '.join(bad)}")
+    radius = res.problem.brief.stress_radius
+    for w in (best.result.warnings if best.result is not None else []):
+        if "exceeds the yield stress" in w and vm is not None:  # the simulator reads the raw element peak
+            w += (f"; that is the largest element stress, singular at sharp corners: the yield constraint reads "
+                  f"the stress averaged over {radius * 1e3:.3g} mm, {vm / 1e6:.4g} MPa")
+        warnings.append(w)
+    return warnings
 
 
 #: Options of :func:`run` that are neither brief entries nor scene options.
@@ -318,10 +487,11 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool |
         return result
     result = outputs.write_all(result, out)
     if revolve is not None:
-        rev = write_revolved(res, out, cm.name, *revolve, scene=ds, optimized=result.outputs, quiet=quiet)
-        paths = {**result.outputs, **{k: str(v) for k, v in rev.pop("outputs").items()}}
-        result = dataclasses.replace(result, outputs=paths, revolved=rev or None,
-                                     warnings=result.warnings + (rev["warnings"] if rev else []))
+        rev_paths, rev = write_revolved(res, out, cm.name, *revolve, scene=ds, optimized=result.outputs,
+                                        quiet=quiet)
+        paths = {**result.outputs, **{k: str(v) for k, v in rev_paths.items()}}
+        result = dataclasses.replace(result, outputs=paths, revolved=rev,
+                                     warnings=result.warnings + (rev.warnings if rev is not None else ()))
         write_json(result.outputs["summary_json"], result.to_json())  # with the revolved part's entries
     return result
 
@@ -334,7 +504,8 @@ def optimize_checked(ds, source: ProblemSource, seed, restarts, scheduler, worke
                      method: str = "anneal"):
     """Place the handles, optimize by ``method`` (the gradient method, or annealing: ``restarts`` runs,
     or one on ``workers``: a count or running :class:`simfab.design.parallel.Workers`), check the
-    design on refined meshes and correct; returns (OptimizationResult, summary extras)."""
+    design on refined meshes and correct; returns (OptimizationResult, the :class:`DesignResult` fields
+    of the restarts and the mesh check)."""
     cm = ds.cm
     # (the gradient method reuses the placement's insertion of the initial shape, recorded)
     rec = design_recorder(cm, ds.brief) if method == "gradient" else None
@@ -353,12 +524,13 @@ def optimize_checked(ds, source: ProblemSource, seed, restarts, scheduler, worke
         res, runs = optimize_anneal(problem, quiet=quiet, seed=seed, workers=workers), None
     else:
         res, runs = _restarts(problem, seed, restarts, quiet, scheduler)
+        runs = tuple(runs)
     extra = {} if runs is None else {"restarts": runs}
     if mesh_check and res.best.status == "ok":
         first, insertions = res.iterations, outputs.insertions(res)
         res, extra["mesh_check"], extra["correction_rounds"] = mesh_corrected(res, seed, workers, quiet)
-        extra["iterations_total"] = first + sum(r["iterations"] for r in extra["correction_rounds"])
-        extra["insertions_total"] = insertions + sum(r["insertions"] for r in extra["correction_rounds"])
+        extra["iterations_total"] = first + sum(r.iterations for r in extra["correction_rounds"])
+        extra["insertions_total"] = insertions + sum(r.insertions for r in extra["correction_rounds"])
         extra["objective_fine"] = checked_objective(res.problem, res.best, extra["mesh_check"])
     return res, extra
 
@@ -375,15 +547,14 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
     the best checked design is kept: feasible on the refined meshes first, then the lowest
     objective there (:func:`simfab.design.verify.checked_objective`).
 
-    Returns (result, its check, [per round: factors, feasible_fine, checked objective, iterations,
-    seconds, kept]).
+    Returns (result, its :class:`~simfab.design.verify.MeshCheck`, a :class:`CorrectionRound` per round).
     """
     name = res.problem.base.name
     log(f"couple optimize: {name}: mesh check of the optimized shape (quadratic elements)", quiet=quiet)
     check = check_mesh(res.problem, res.best.rest, figures0=res.best.figures, result0=res.best.result, quiet=quiet)
 
     def key(r, c):
-        return (not c["feasible_fine"], checked_objective(r.problem, r.best, c))
+        return (not c.feasible_fine, checked_objective(r.problem, r.best, c))
 
     best, rounds = (res, check), []
     for k in range(res.problem.brief.correction_rounds):
@@ -403,29 +574,28 @@ def mesh_corrected(res, seed: int, workers, quiet: bool):
                            iterations=max(problem.brief.iterations // 2, 1))
         c = check_mesh(problem, nxt.best.rest, figures0=nxt.best.figures, result0=nxt.best.result, quiet=quiet)
         better = key(nxt, c) < key(*best)
-        rounds.append({"round": k + 1, "factors": factors, "feasible_fine": c["feasible_fine"],
-                       "objective_fine": key(nxt, c)[1], "iterations": nxt.iterations, "seconds": nxt.seconds,
-                       "insertions": outputs.insertions(nxt), "kept": better})
+        rounds.append(CorrectionRound(round=k + 1, factors=factors, feasible_fine=c.feasible_fine,
+                                      objective_fine=key(nxt, c)[1], iterations=nxt.iterations, seconds=nxt.seconds,
+                                      insertions=outputs.insertions(nxt), kept=better))
         if better:
             best = (nxt, c)
         elif res_b.method == "gradient":  # the same start and factors: the next round would repeat this one
             break
-    return best[0], best[1], rounds
+    return best[0], best[1], tuple(rounds)
 
 
 def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: int = 0, *, scene=None,
-                   optimized: dict | None = None, quiet: bool = True) -> dict:
+                   optimized: dict | None = None, quiet: bool = True) -> tuple[dict, RevolvedPart | None]:
     """The optimized 2D section revolved about ``axis`` (mm STL): a full turn of its outer outline
     (``arms`` 0), else the base revolved with ``arms`` replicated arms as a 3D scene next to the
     optimized 2D one (``optimized``: its output paths; ``scene``: the DesignScene, for its keep
-    sites), simulated: {"outputs": paths, and with arms: "elements", "seconds", "category",
-    "figures", "constraints", "warnings"}."""
+    sites), simulated: (label -> path of the files written, the :class:`RevolvedPart` with arms, else None)."""
     fem = res.problem.mesh  # (the design's linear mesh)
     if not arms:
         loop = boundary_loops(fem.boundary_facets)[0]
         mesh = revolve_outline(res.best.rest[loop], axis=axis, offset=offset)
         mesh.apply_scale(1e3)
-        return {"outputs": {"revolved_stl": save_mesh(mesh, Path(out) / f"{stem}_optimized_revolved.stl")}}
+        return {"revolved_stl": save_mesh(mesh, Path(out) / f"{stem}_optimized_revolved.stl")}, None
     cm = res.problem.base
     kept = np.concatenate(scene.kept_regions) if scene is not None and scene.kept_regions else np.zeros(0, int)
     paths = revolved_scene(res.best.rest, fem, kept=kept, object_start=cm.pose(0.0)[1],
@@ -443,12 +613,10 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
         warnings.append(f"{stem}: the revolved 3D part ({arms} arms) misses the 2D brief on {', '.join(missed)} "
                         "(a plane-strain section and a 3D part with discrete arms on a ball are different mechanics: "
                         "see summary 'revolved')")
-    return {"outputs": {"revolved_" + k: v for k, v in paths.items()} | {"revolved_stl": paths["stl"]},
-            "elements": int(cm3.fem.n_elements), "seconds": time.perf_counter() - t0, "category": fig["category"],
-            "figures": {k: v for k, v in fig.items() if k != "category"},
-            "constraints": [dict(name=c.name, value=c.value, lo=c.lo, hi=c.hi, unit=c.unit, satisfied=c.satisfied)
-                            for c in cons],
-            "warnings": warnings}
+    part = RevolvedPart(elements=int(cm3.fem.n_elements), seconds=time.perf_counter() - t0, category=fig["category"],
+                        figures={k: v for k, v in fig.items() if k != "category"},
+                        constraints=tuple(c.report() for c in cons), warnings=tuple(warnings))
+    return {"revolved_" + k: v for k, v in paths.items()} | {"revolved_stl": paths["stl"]}, part
 
 
 def anneal_task(*, source: ProblemSource, settings: EvaluationSettings, seed: int):
@@ -468,11 +636,10 @@ def _restarts(problem, seed, restarts, quiet, scheduler):
                         desc=f"optimize {problem.base.name} restarts")
     runs = []
     for t, r in zip(tasks, results):
-        row = {"seed": t["seed"], "status": r.status, "message": r.message, "seconds": r.seconds}
-        if r.ok:
-            row.update(feasible=r.value.best.feasible, objective=r.value.best.objective, E_L=r.value.best.E_L,
-                       iterations=r.value.iterations)
-        runs.append(row)
+        best = r.value.best if r.ok else None
+        runs.append(RestartRun(seed=t["seed"], status=r.status, message=r.message, seconds=r.seconds,
+                               **({} if best is None else dict(feasible=best.feasible, objective=best.objective,
+                                                               E_L=best.E_L, iterations=r.value.iterations))))
     ok = [r.value for r in results if r.ok]
     if not ok:
         raise ConvergenceError(f"every restart failed; first: {results[0].message}")

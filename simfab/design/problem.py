@@ -293,7 +293,7 @@ def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), ta
     sigma0 = np.tile(np.r_[np.full(d, SIGMA_TRANSLATION_REL * diag), np.full(d, SIGMA_SCALE)], m)
     mat = cm.fem.material
     ys = mat.yield_stress if mat is not None else None
-    return DesignProblem(base=cm, brief=brief, limits=B.bounds(brief, ys), handles=H,
+    return DesignProblem(base=cm, brief=brief, limits=B.constraint_bounds(brief, ys), handles=H,
                          energy=ModificationEnergy(X, fem.boundary_facets), target=target, kept=kept,
                          q0=element_quality(X, fem.elements), lower=lower, upper=upper, sigma0=sigma0,
                          source=None if source is None else dataclasses.replace(

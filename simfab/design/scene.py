@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from simfab.coupling.model import CouplingModel
-from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
+from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
 from simfab.design.brief import DesignBrief, TargetProfile, read_target_profile
 from simfab.errors import InputError
 from simfab.io.mjcf import load_mjcf
@@ -35,7 +35,7 @@ def check_brief_table(scene) -> None:
     the file, the table and the key): commands that only simulate the scene check it too, so a
     misspelt brief key is reported by every command, not first by ``couple optimize``."""
     _, toml = scene_paths(scene)
-    table = read_toml(toml).get("design")
+    table = read_scene_toml(toml).get("design")
     if table is None:
         return
     if not isinstance(table, dict):
@@ -52,7 +52,7 @@ def load_design_scene(scene, *, design: dict | None = None, simulation: dict | N
     xml, toml = scene_paths(scene)
     if not xml.is_file():
         raise InputError("scene file not found", where=str(xml))
-    cfg = read_toml(toml)
+    cfg = read_scene_toml(toml)
     table = cfg.get("design", {})
     if not isinstance(table, dict):
         raise InputError("[design] must be a table", where=str(toml))

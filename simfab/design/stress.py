@@ -62,7 +62,7 @@ def _ball_mean_matrix(c: np.ndarray, V: np.ndarray, radius: float) -> sp.csr_mat
 def quadrature_von_mises(fem, x) -> np.ndarray:
     """von Mises stress (m, nq) [Pa] at a P2 model's quadrature points, deformed positions x (n, dim)
     [m]: F(L) = sum_i L_i F_i from the corner gradients (F is affine over an element), sigma_vm =
-    sqrt(3/2) mu |dev(F F^T - I)| / J (:func:`simfab.fem.stress.det_and_von_mises`; plane strain in
+    sqrt(3/2) mu |dev(F F^T - I)| / J (:func:`simfab.fem.elastic.det_and_von_mises`; plane strain in
     2D: the out-of-plane entry of F F^T - I is 0); +inf where det F <= 0."""
     F = np.einsum("qc,mcij->mqij", fem.qp_bary, corner_gradients(fem, x))
     J = np.linalg.det(F)

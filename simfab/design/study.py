@@ -83,7 +83,7 @@ def handle_study(scene, *, out, counts=(2, 4, 6), randoms: int = 10, design: dic
             row.update(converged=False, E_L=math.nan, objective=math.nan, iterations=0, simulations=0,
                        seconds=r.seconds)
         runs.append(row)
-    rows = summarize(runs, counts)
+    rows = study_rows(runs, counts)
     paths = {"runs_csv": out / f"{name}_handle_study.csv", "summary_csv": out / f"{name}_handle_study_summary.csv",
              "plot_png": out / f"{name}_handle_study.png", "summary_json": out / f"{name}_handle_study.json"}
     result = {"scene": name, "rows": rows, "runs": len(runs), "failed_runs": sum(r["status"] != "ok" for r in runs),
@@ -98,7 +98,7 @@ def handle_study(scene, *, out, counts=(2, 4, 6), randoms: int = 10, design: dic
     return result
 
 
-def summarize(runs: list[dict], counts) -> list[dict]:
+def study_rows(runs: list[dict], counts) -> list[dict]:
     rows = []
     for k in counts:
         for m in METHODS:

@@ -1,7 +1,7 @@
 """2D -> 3D synthesis of an optimized section: extrusion (plane strain) or revolution.
 
 - extrusion: the section's triangles are extruded by the scene's thickness along z
-  (:func:`simfab.coupling.outputs.extrude_triangles`);
+  (:func:`simfab.coupling.outputs.extruded_slab`);
 - revolution: the section's outline is revolved a full turn about an axis in its plane, the
   line x = ``offset`` (axis "y") or y = ``offset`` (axis "x"). The section must lie on one side
   of the axis (a part that crosses it would overlap itself); the outline is revolved with

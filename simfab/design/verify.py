@@ -42,6 +42,103 @@ from simfab.design.problem import linear_mesh, profile_figures
 from simfab.fem.model import make_model
 from simfab.fem.p2 import shape_functions, to_p2
 from simfab.fem.subdivide import midpoint_mask, subdivide
+from simfab.results import field
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class CheckLevel:
+    """One level of a :func:`mesh_check`.
+
+    Args:
+        element_order: 1 (linear) or 2 (P2).
+        subdivisions: uniform subdivisions of the optimization mesh.
+        elements, nodes: the level's mesh size.
+        seconds: its simulation's wall time [s].
+        category: its coupling category.
+        newton_iterations: Newton iterations of its insertion (None: the optimizer's run reused).
+        guided_steps: steps started from the coarser level's equilibrium (None: reused).
+    """
+
+    element_order: int
+    subdivisions: int
+    elements: int
+    nodes: int
+    seconds: float = field(unit="s")
+    category: str | None
+    newton_iterations: int | None
+    guided_steps: int | None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class FigureCheck:
+    """One figure across the levels of a :func:`mesh_check`.
+
+    Args:
+        values: the figure at every level.
+        extrapolated: f_inf of f = f_inf + b h^p over three levels of the finest order (None: not fitted).
+        order: the fitted p (NaN: not fitted).
+        converging: the changes shrink from level to level.
+        difference_of_optimization_mesh: (optimization mesh - reference) / reference [-].
+        reference_change: the reference order's change between its last two levels, relative [-] (None: one
+            level of it).
+        step_factor: finer steps / the scene's steps (:func:`step_check`; None where it did not run).
+    """
+
+    values: list[float]
+    extrapolated: float | None
+    order: float
+    converging: bool
+    difference_of_optimization_mesh: float
+    reference_change: float | None
+    step_factor: float | None = field(optional=True)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class StepCheck:
+    """The step check of :func:`step_check`.
+
+    Args:
+        steps: the finer run's steps; factor: times the scene's steps.
+        seconds: its wall time [s].
+        newton_iterations: its Newton iterations; guided_steps: steps guided by the run at the scene's steps.
+        factors: per figure, finer steps / the scene's steps.
+        category: the finer run's coupling category.
+        still_too_coarse: the finer run's own step checks still warn.
+    """
+
+    steps: int
+    factor: int
+    seconds: float = field(unit="s")
+    newton_iterations: int
+    guided_steps: int
+    factors: dict[str, float]
+    category: str | None
+    still_too_coarse: bool
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MeshCheck:
+    """A :func:`mesh_check`: the design on refined meshes (entries that are None are left out of its JSON).
+
+    Args:
+        profile_force_factor: target matching: c of c F_coarse(s) ~ F_finest(s) (:func:`profile_factor`).
+        step_check: the :class:`StepCheck`, where the steps did not resolve the profile.
+        levels: one :class:`CheckLevel` each, the optimization mesh first.
+        figures: per figure, its :class:`FigureCheck`.
+        constraints: the brief's constraints at the reference values (units: ``units``).
+        feasible_fine: all of them are satisfied.
+        reference: what the reference values are, in words.
+        units: figure -> unit.
+    """
+
+    profile_force_factor: float | None = field(optional=True)
+    step_check: StepCheck | None = field(optional=True)
+    levels: tuple[CheckLevel, ...]
+    figures: dict[str, FigureCheck]
+    constraints: tuple[B.ConstraintReport, ...]
+    feasible_fine: bool
+    reference: str
+    units: dict[str, str]
 
 
 def check_levels(refinements: int = 1, order: int = 1) -> tuple:
@@ -141,15 +238,15 @@ def as_levels(levels, order: int = 1) -> tuple:
     return out
 
 
-def reference_value(fig: dict) -> float:
+def reference_value(fig: FigureCheck) -> float:
     """The reference (mesh-converged) value of a :func:`mesh_check` figure: extrapolated where
     that was possible, else the finest level's; times its step factor where the step check ran."""
-    v = fig["values"][-1] if fig["extrapolated"] is None else fig["extrapolated"]
-    return v * fig.get("step_factor", 1.0)
+    v = fig.values[-1] if fig.extrapolated is None else fig.extrapolated
+    return v * (1.0 if fig.step_factor is None else fig.step_factor)
 
 
 def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = True,
-               two_grid: bool = True) -> dict | None:
+               two_grid: bool = True) -> StepCheck | None:
     """The step check: when the insertion ``res`` of the P2 level on the optimization mesh (with
     ``figures``, its :func:`level_figures`) warns that its steps are too coarse for the profile
     (:func:`simfab.coupling.settle.warnings`: a snap skipped between steps, a peak force between
@@ -170,10 +267,10 @@ def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = T
     fine = _run_figures(problem, fine_res)
     factors = {k: figure_ratio(k, fine[k], figures[k])
                for k in FIGURES + (("rms_error",) if problem.target is not None else ())}
-    return {"steps": int(len(m.s_steps) - 1), "factor": STEP_CHECK_FACTOR, "seconds": time.perf_counter() - t0,
-            "newton_iterations": int(sum(r.iterations for r in fine_res.steps)), "guided_steps": fine_res.guided_steps,
-            "factors": factors, "category": fine["category"],
-            "still_too_coarse": _steps_too_coarse(fine_res)}
+    return StepCheck(steps=int(len(m.s_steps) - 1), factor=STEP_CHECK_FACTOR, seconds=time.perf_counter() - t0,
+                     newton_iterations=int(sum(r.iterations for r in fine_res.steps)),
+                     guided_steps=int(fine_res.guided_steps), factors=factors, category=fine["category"],
+                     still_too_coarse=_steps_too_coarse(fine_res))
 
 
 def _steps_too_coarse(res) -> bool:
@@ -190,7 +287,7 @@ def _run_figures(problem, res) -> dict:
 
 
 def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, result0=None, levels=None,
-               quiet: bool = True, two_grid: bool = True) -> dict:
+               quiet: bool = True, two_grid: bool = True) -> MeshCheck:
     """Run the design ``rest`` at each level and compare (see the module docstring).
 
     figures0 : the optimizer's figures of ``rest`` (level 0), reused instead of simulating again
@@ -203,11 +300,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
         times when that level ran just before it (:class:`simfab.coupling.guide.CoarseGuide`, with
         :func:`p2_prolongation`): its Newton solves start near their solutions on the big moves;
         the records stay the level's own equilibria (Newton's tolerance)
-    Returns {"levels": [{element_order, subdivisions, elements, nodes, seconds, category,
-    newton_iterations, guided_steps}],
-    "figures": {name: {values, extrapolated, order, converging, difference_of_optimization_mesh,
-    reference_change}}, "constraints": [{name, value, lo, hi, satisfied}] at the reference values,
-    "feasible_fine": bool, "reference", "units"}.
+    Returns the :class:`MeshCheck`.
     """
     cm = problem.base
     order = int(cm.options.element_order)
@@ -235,10 +328,10 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
                 profiles.append((res.column("s"), res.column("force")))
             if (o, t) == (2, 0):
                 steps = step_check(problem, rest, res, f, quiet=quiet, two_grid=two_grid)
-        rows.append({"element_order": int(o), "subdivisions": int(t), "elements": int(n), "nodes": int(nodes),
-                     "seconds": time.perf_counter() - t0, "category": f["category"],
-                     "newton_iterations": None if res is None else int(sum(r.iterations for r in res.steps)),
-                     "guided_steps": None if res is None else int(res.guided_steps)})
+        rows.append(CheckLevel(element_order=int(o), subdivisions=int(t), elements=int(n), nodes=int(nodes),
+                               seconds=time.perf_counter() - t0, category=f["category"],
+                               newton_iterations=None if res is None else int(sum(r.iterations for r in res.steps)),
+                               guided_steps=None if res is None else int(res.guided_steps)))
         figs.append(f)
         prev_level, prev_res = (o, t), res
     # the reference run: the trailing levels of the finest level's element order (P2 converges at a
@@ -248,7 +341,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
     while k0 > 0 and levels[k0 - 1][0] == top:
         k0 -= 1
     seq = list(range(k0, len(levels)))
-    N = np.array([rows[i]["elements"] for i in seq], float)
+    N = np.array([rows[i].elements for i in seq], float)
     out = {}
     for k in FIGURES + (("rms_error",) if problem.target is not None else ()):
         v = np.array([f[k] for f in figs], float)
@@ -264,30 +357,26 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
         # the reference's own discretization error, as far as the levels show it: the relative change
         # between the last two levels of the reference order (None with one level of it)
         change = float((v[-1] - v[-2]) / ref) if len(seq) >= 2 and ref else None
-        out[k] = {"values": v.tolist(), "extrapolated": f_inf, "order": p, "converging": converging,
-                  "difference_of_optimization_mesh": float((v[0] - ref) / ref) if ref else 0.0,
-                  "reference_change": change}
-        if steps is not None and k in steps["factors"]:
-            out[k]["step_factor"] = steps["factors"][k]
+        out[k] = FigureCheck(values=v.tolist(), extrapolated=f_inf, order=p, converging=converging,
+                             difference_of_optimization_mesh=float((v[0] - ref) / ref) if ref else 0.0,
+                             reference_change=change,
+                             step_factor=None if steps is None else steps.factors.get(k))
     # the mesh-converged answer: extrapolated values where they exist, else the finest level's
     fine = dict(figs[-1], **{k: reference_value(v) for k, v in out.items()})
     cons = B.constraints(fine, problem.limits)
-    extra = {}
-    if profiles:  # least-squares factor c of c F_coarse(s) ~ F_finest(s): the profile's mesh correction
-        extra["profile_force_factor"] = profile_factor(profiles[0], profiles[-1], float(cm.s_steps[-1]))
+    # target matching: least-squares factor c of c F_coarse(s) ~ F_finest(s), the profile's mesh correction
+    pff = profile_factor(profiles[0], profiles[-1], float(cm.s_steps[-1])) if profiles else None
     what = "P2 (quadratic) elements" if top == 2 else "linear elements"
-    if steps is not None:
-        extra["step_check"] = steps
-    return {**extra, "levels": rows, "figures": out,
-            "constraints": [{"name": c.name, "value": c.value, "lo": c.lo, "hi": c.hi, "satisfied": c.satisfied}
-                            for c in cons],
-            "feasible_fine": all(c.satisfied for c in cons),
-            "reference": f"{what} on the finest level ({rows[-1]['elements']} elements); extrapolated where "
-                         f"three levels of that order converge" + (
-                             f"; times the step factors of P2 on the optimization mesh at {steps['steps']} steps"
-                             if steps is not None else ""),
-            "units": {"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N",
-                      "von_mises": "Pa", "von_mises_peak": "Pa", "rms_error": "N"}}
+    return MeshCheck(
+        profile_force_factor=pff, step_check=steps, levels=tuple(rows), figures=out,
+        constraints=tuple(c.report(with_unit=False) for c in cons),
+        feasible_fine=all(c.satisfied for c in cons),
+        reference=f"{what} on the finest level ({rows[-1].elements} elements); extrapolated where "
+                  f"three levels of that order converge" + (
+                      f"; times the step factors of P2 on the optimization mesh at {steps.steps} steps"
+                      if steps is not None else ""),
+        units={"coupling_ratio": "%", "grip_force": "N", "insertion_force": "N", "removal_force": "N",
+               "von_mises": "Pa", "von_mises_peak": "Pa", "rms_error": "N"})
 
 
 def profile_factor(coarse, fine, s_path: float) -> float:
@@ -302,24 +391,24 @@ def profile_factor(coarse, fine, s_path: float) -> float:
     return float(f0 @ ref / (f0 @ f0)) if f0 @ f0 > 0 else 1.0
 
 
-def check_warnings(check: dict) -> list[str]:
+def check_warnings(check: MeshCheck) -> list[str]:
     """Summary warnings of a :func:`mesh_check`: constraints met only on the optimization mesh."""
-    lv = check["levels"]
+    lv = check.levels
     out = []
-    st = check.get("step_check")
-    if st is not None and st["still_too_coarse"]:
-        out.append(f"the step check's {st['steps']} steps do not resolve the profile either, so its step factors "
-                   f"({', '.join(f'{k} x{v:.3g}' for k, v in st['factors'].items() if v != 1.0)}) are not converged; "
+    st = check.step_check
+    if st is not None and st.still_too_coarse:
+        out.append(f"the step check's {st.steps} steps do not resolve the profile either, so its step factors "
+                   f"({', '.join(f'{k} x{v:.3g}' for k, v in st.factors.items() if v != 1.0)}) are not converged; "
                    "use more steps ([simulation] steps)")
-    bad = [c for c in check["constraints"] if not c["satisfied"]]
+    bad = [c for c in check.constraints if not c.satisfied]
     if not bad:
         return out
-    what = ", ".join(f"{c['name']} {c['value']:.4g} (bounds {c['lo']:.4g}..{c['hi']:.4g})" for c in bad)
-    ref = f"P{lv[-1].get('element_order', 1)} on {lv[-1]['elements']} elements"
+    what = ", ".join(f"{c.name} {c.value:.4g} (bounds {c.lo:.4g}..{c.hi:.4g})" for c in bad)
+    ref = f"P{lv[-1].element_order} on {lv[-1].elements} elements"
     if st is not None:
-        ref += f", with the step factors of {st['steps']} steps"
-    kind = "P2" if lv[0].get("element_order", 1) == 2 else "linear"
-    return out + [f"mesh-converged ({ref}; the optimization mesh: {lv[0]['elements']} {kind}) "
+        ref += f", with the step factors of {st.steps} steps"
+    kind = "P2" if lv[0].element_order == 2 else "linear"
+    return out + [f"mesh-converged ({ref}; the optimization mesh: {lv[0].elements} {kind}) "
                   f"the design misses: {what}"]
 
 
@@ -339,34 +428,34 @@ def figure_ratio(name: str, value: float, base: float) -> float:
     return float(np.clip(r, *FACTOR_RANGE)) if np.isfinite(r) and r > 0 else 1.0
 
 
-def correction_factors(check: dict) -> dict:
+def correction_factors(check: MeshCheck) -> dict:
     """{figure: reference value / optimization-mesh value} of a :func:`mesh_check` (space mapping
     of the coarse model's outputs: the optimizer multiplies its coarse figures by these, so that
     the next round aims at the mesh-converged values; figures with a zero coarse value keep 1)."""
-    out = {k: figure_ratio(k, reference_value(v), v["values"][0]) for k, v in check["figures"].items()}
-    if "profile_force_factor" in check:  # target matching: the whole force profile, scaled
-        out["force_profile"] = check["profile_force_factor"]
+    out = {k: figure_ratio(k, reference_value(v), v.values[0]) for k, v in check.figures.items()}
+    if check.profile_force_factor is not None:  # target matching: the whole force profile, scaled
+        out["force_profile"] = check.profile_force_factor
     return out
 
 
-def needs_correction(check: dict, applied: dict) -> bool:
+def needs_correction(check: MeshCheck, applied: dict) -> bool:
     """Another correction round is due when the mesh-converged figures miss the brief, or (target
     matching) when the coarse force profile, as corrected so far, is still more than
     PROFILE_TOL off the finest level's."""
-    if not check["feasible_fine"]:
+    if not check.feasible_fine:
         return True
-    c = check.get("profile_force_factor")
+    c = check.profile_force_factor
     return c is not None and abs(c / applied.get("force_profile", 1.0) - 1.0) > PROFILE_TOL
 
 
-def checked_objective(problem, ev, check: dict) -> float:
+def checked_objective(problem, ev, check: MeshCheck) -> float:
     """The design objective with the mesh-converged figures of ``check``: E_L (or, for target
     matching, the squared RMS force error of the finest level) plus the penalties of the
     constraints at the reference values."""
-    cons = [B.Constraint(name=c["name"], value=c["value"], lo=c["lo"], hi=c["hi"], unit=B.UNITS[c["name"]],
-                         scale=B.SCALES[c["name"]]) for c in check["constraints"]]
+    cons = [B.Constraint(name=c.name, value=c.value, lo=c.lo, hi=c.hi, unit=B.UNITS[c.name],
+                         scale=B.SCALES[c.name]) for c in check.constraints]
     if problem.target is not None:
-        base = reference_value(check["figures"]["rms_error"]) ** 2
+        base = reference_value(check.figures["rms_error"]) ** 2
     else:
         base = ev.E_L
     return float(base + B.penalty(cons))

@@ -154,7 +154,13 @@ def det_F(model, x) -> np.ndarray:
 
 
 def det_and_von_mises(model, x) -> tuple[np.ndarray, np.ndarray]:
-    """det F and von Mises stress per element in one launch (formula: :func:`simfab.fem.stress.det_and_von_mises`).
+    """det F and von Mises stress per element in one launch.
+
+    The isotropic terms of sigma = (mu (B - I) + lam log J I) / J (B = F F^T; in plane strain
+    B = diag(F F^T, 1)) drop out of the deviator, so sigma_vm = sqrt(3/2) mu |dev B| / J with
+    |dev B|^2 = C:C - tr(C)^2 / 3 (C = B - I): no inverse, logarithm or 3x3 stress tensor per element (this
+    runs once per insertion step). ``simfab.fem.stress`` re-exports it; the tests check it against the
+    same formula in NumPy.
 
     Args:
         model: the FEM model (:class:`~simfab.fem.model.FemModel`, linear or P2).

@@ -692,7 +692,7 @@ def _stress_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtyp
                    lam_e: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64),
                    von_mises: wp.array(dtype=wp.float64)):
     """det F and the von Mises stress sqrt(3/2) mu |dev(F F^T - I)| / J per element (see
-    simfab.fem.stress.det_and_von_mises); +inf where det F <= 0 (stress undefined)."""
+    simfab.fem.elastic.det_and_von_mises); +inf where det F <= 0 (stress undefined)."""
     e = first + wp.tid()
     F = _F(x, elements, Dm_inv, e)
     J = wp.determinant(F)

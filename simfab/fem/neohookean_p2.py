@@ -308,7 +308,7 @@ def _stress_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtyp
                    lam_e: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64),
                    von_mises: wp.array(dtype=wp.float64)):
     """min det F and max von Mises sqrt(3/2) mu |dev(F F^T - I)| / J over the quadrature points
-    (see simfab.fem.stress.det_and_von_mises); +inf stress where any det F <= 0."""
+    (see simfab.fem.elastic.det_and_von_mises); +inf stress where any det F <= 0."""
     e = first + wp.tid()  # this launch's part of the elements
     Jmin = wp.float64(wp.inf)
     vm = wp.float64(0.0)

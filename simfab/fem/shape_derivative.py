@@ -105,7 +105,7 @@ def _to_nodes(model: MeshModel, k: _Kinematics, M: np.ndarray) -> np.ndarray:
     return np.moveaxis(out.reshape(n, B, d), 1, 0).reshape(*lead, n, d)
 
 
-def energy(model: MeshModel, x: np.ndarray) -> float:
+def quadrature_energy(model: MeshModel, x: np.ndarray) -> float:
     """E(x; X) [J] of the model's rest shape X (the same value as :func:`simfab.fem.elastic.energy`,
     for the derivative tests)."""
     k = _kinematics(model, x)
@@ -145,10 +145,10 @@ def mixed_product(model: MeshModel, x: np.ndarray, w: np.ndarray) -> np.ndarray:
     return out[0] if single else out
 
 
-def von_mises(model: MeshModel, x: np.ndarray) -> np.ndarray:
+def point_von_mises(model: MeshModel, x: np.ndarray) -> np.ndarray:
     """(m * nq,) von Mises stress [Pa] per quadrature point, element-major (linear simplices: (m,),
     one per element), sigma_vm = sqrt(3/2 dev2) mu / J with C = F F^T - I and dev2 = C : C - tr(C)^2
-    / 3 (:func:`simfab.fem.stress.det_and_von_mises`'s formula; P2: the points of
+    / 3 (:func:`simfab.fem.elastic.det_and_von_mises`'s formula; P2: the points of
     :func:`simfab.design.stress.quadrature_von_mises`)."""
     k = _kinematics(model, x)
     return _von_mises(k)[0].ravel()
@@ -163,7 +163,7 @@ def _von_mises(k: _Kinematics):
 
 def von_mises_derivatives(model: MeshModel, x: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(dq/dx, dq/dX) (n, d) each of q = sum_p c_p sigma_vm,p over the quadrature points p (c
-    (m * nq,) fixed weights [-], the order of :func:`von_mises`).
+    (m * nq,) fixed weights [-], the order of :func:`point_von_mises`).
 
     d sigma_vm/dF = sigma_vm (d dev2/dF / (2 dev2) - F^-T), d dev2/dF = 4 C F - 4/3 tr(C) F; with
     S_p = c_p d sigma_vm,p/dF: dq/dx_a = sum_p S_p G_pa and, at fixed x (F -> F K^-1),

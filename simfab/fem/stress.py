@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from simfab.fem import elastic
+from simfab.fem.elastic import det_and_von_mises  # (the Warp kernel; its formula is documented there)
 from simfab.fem.model import FemModel, edge_matrices
 
 
@@ -58,16 +58,3 @@ def von_mises(model: FemModel, x) -> np.ndarray:
     if np.any(J <= 0):
         raise ValueError(f"{int((J <= 0).sum())} inverted elements (det F <= 0): von Mises stress undefined")
     return vm
-
-
-def det_and_von_mises(model: FemModel, x) -> tuple[np.ndarray, np.ndarray]:
-    """(det F (m,) [-], von Mises stress (m,) [Pa]) per element at positions x (n, dim) [m].
-
-    The isotropic terms of sigma = (mu (B - I) + lam log J I) / J (B = F F^T; in plane strain
-    B = diag(F F^T, 1)) drop out of the deviator, so sigma_vm = sqrt(3/2) mu |dev B| / J with
-    |dev B|^2 = C:C - tr(C)^2 / 3 (C = B - I): no inverse, logarithm or 3x3 stress tensor per element (this
-    runs once per insertion step). Elements with det F <= 0 (stress undefined) get +inf.
-    Computed by a Warp kernel (:func:`simfab.fem.elastic.det_and_von_mises`, which also takes P2
-    models); the tests check it against the same formula in NumPy.
-    """
-    return elastic.det_and_von_mises(model, x)

@@ -555,7 +555,7 @@ StructureSpec = StructureConfig  # the former name
 SCENE_TABLES = (*TABLES, "material", "loads")
 
 
-def check_tables(doc: Mapping, file: str | None) -> None:
+def check_growth_tables(doc: Mapping, file: str | None) -> None:
     """Refuse a top-level entry of a growth TOML that is not one of :data:`SCENE_TABLES`.
 
     Args:
@@ -604,7 +604,7 @@ def params_from_toml(doc: dict, where: str, *, overrides: Mapping | None = None,
     Returns:
         The parameters; InputError naming the file, table and key (or the flag a value came from).
     """
-    check_tables(doc, where)
+    check_growth_tables(doc, where)
     kw = {}
     for table, cls in TABLES.items():
         if table in ("symmetry", "profile", "stages") and doc.get(table) is None:

@@ -32,7 +32,7 @@ from simfab.growth.contact import aim_targets
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene, load_growth_scene, validate_scene
 from simfab.growth.skeleton import Skeleton, keep_ancestors, radius_by_age, smooth_positions, subset
-from simfab.growth.skinning import skin
+from simfab.growth.skinning import skin_skeleton
 
 #: root nudge off the symmetry plane, as a fraction of r_max (must stay < 1 to fuse halves)
 ROOT_SPLIT = 0.25
@@ -426,7 +426,7 @@ def skin_result(result: Growth, *, segments: int | None = None, subtract: bool |
     p = result.scene.params
     t0 = time.perf_counter()
     sk = result.skeleton
-    mesh, rep = skin(sk.nodes, sk.parent, sk.radius, result.scene.objects, fixed=sk.fixed_mask(),
+    mesh, rep = skin_skeleton(sk.nodes, sk.parent, sk.radius, result.scene.objects, fixed=sk.fixed_mask(),
                      segments=segments or p.skin_segments,
                      subtract=p.subtract_objects if subtract is None else subtract)
     return mesh, rep, time.perf_counter() - t0

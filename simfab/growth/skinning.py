@@ -30,7 +30,7 @@ class SkinReport:
     penetration : largest depth [m] of a skin vertex inside an object that was not carved
         (carved objects are exact: their overlap is ``overlap_volume``).
     objects_subtracted / objects_not_manifold : object names carved out / skipped.
-    attempts : skins built until one passed the round trip (see :func:`skin`).
+    attempts : skins built until one passed the round trip (see :func:`skin_skeleton`).
     """
 
     watertight: bool = False
@@ -90,7 +90,7 @@ def skin_solid(nodes: np.ndarray, parent: np.ndarray, radius: np.ndarray, *, seg
     """Union of sphere-pair hulls along every segment (isolated nodes become spheres): a Manifold.
 
     ``rotation`` (3, 3) turns the sphere tessellation (used to retry a skin whose STL
-    round trip failed, see :func:`skin`).
+    round trip failed, see :func:`skin_skeleton`).
     """
     m3 = _m3()
     S = _unit_sphere(segments)
@@ -331,7 +331,7 @@ def _touches(mesh, x: np.ndarray, radius: float) -> np.ndarray:
     return out
 
 
-def skin(nodes, parent, radius, objects: dict | None = None, *, segments: int = 12, subtract: bool = True,
+def skin_skeleton(nodes, parent, radius, objects: dict | None = None, *, segments: int = 12, subtract: bool = True,
          attempts: int = 3, simplify: float | None = 0.25, fixed=None):
     """Skin a skeleton: returns (``trimesh.Trimesh``, :class:`SkinReport`).
 

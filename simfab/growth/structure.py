@@ -42,7 +42,7 @@ from simfab.growth.masses import object_masses
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene
 from simfab.growth.skeleton import Skeleton
-from simfab.growth.skinning import skin
+from simfab.growth.skinning import skin_skeleton
 from simfab.growth.tetmesh import tetrahedralize_skin
 from simfab.io.mjcf import load_mjcf
 from simfab.solve.linear import NotPositiveDefinite, SPDSolver
@@ -239,8 +239,8 @@ def target_loads(scene: GrowthScene, skeleton: Skeleton, extra: dict | None = No
                          f"(reached: {', '.join(points)})", where="loads")
     if contacts is None:
         p = scene.params
-        mesh, _ = skin(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects, fixed=skeleton.fixed_mask(),
-                       segments=p.skin_segments, subtract=p.subtract_objects)
+        mesh, _ = skin_skeleton(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects,
+                                fixed=skeleton.fixed_mask(), segments=p.skin_segments, subtract=p.subtract_objects)
         contacts = target_contacts(mesh, skeleton, scene)
     g = gravity(scene)
     mass = body_masses(scene)
@@ -276,8 +276,9 @@ def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | Non
     mat = spec.material
     masses = validate_loads(scene)
     p = scene.params
-    mesh, _ = skin(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects, fixed=skeleton.fixed_mask(),
-                   segments=options.segments or p.skin_segments, subtract=p.subtract_objects)
+    mesh, _ = skin_skeleton(skeleton.nodes, skeleton.parent, skeleton.radius, scene.objects,
+                            fixed=skeleton.fixed_mask(), segments=options.segments or p.skin_segments,
+                            subtract=p.subtract_objects)
     contacts = target_contacts(mesh, skeleton, scene)
     g = gravity(scene)
     paths = load_paths(scene, contacts, {n: m.mass_kg for n, m in masses.items()})

@@ -300,7 +300,7 @@ def edit(skeleton, *, stroke, camera, chain: int | None = None, scene=None, out=
     from simfab.growth.results import EditResult
     from simfab.growth.skeleton import load_skeleton_json
     from simfab.growth.sketch import Camera, edit_chain, load_camera, load_stroke
-    from simfab.growth.skinning import skin
+    from simfab.growth.skinning import skin_skeleton
 
     doc = {}
     if isinstance(skeleton, (str, os.PathLike)):
@@ -326,7 +326,7 @@ def edit(skeleton, *, stroke, camera, chain: int | None = None, scene=None, out=
         diag = float(np.linalg.norm(np.ptp(sc.objects_bbox(), axis=0)))
         obstacles = Obstacles.of_scene(sc, diag)
     edited, rep = edit_chain(sk, cam, strk, chain=chain, obstacles=obstacles)
-    mesh, srep = skin(edited.nodes, edited.parent, edited.radius, objects)
+    mesh, srep = skin_skeleton(edited.nodes, edited.parent, edited.radius, objects)
     if rep.get("segments_colliding") or srep.bodies != 1:
         _say(progress, f"simfab grow edit: warning: the edited chain crosses objects in "
                        f"{rep.get('segments_colliding', 0)} segment(s); the skin has {srep.bodies} bodies")

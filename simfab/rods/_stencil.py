@@ -25,13 +25,6 @@ wp.set_module_options({"enable_backward": False})
 
 
 @wp.func
-def skew(v: wp.vec3d) -> wp.mat33d:
-    """Cross-product matrix: skew(v) @ w == v x w."""
-    z = f64(0.0)
-    return wp.mat33d(z, -v[2], v[1], v[2], z, -v[0], -v[1], v[0], z)
-
-
-@wp.func
 def material(d1: wp.vec3d, t: wp.vec3d, theta: wp.float64) -> wp.mat33d:
     """Rows (m1, m2, 0) of the material frame: reference director d1 rotated by theta about t."""
     d2 = wp.cross(t, d1)

@@ -20,7 +20,7 @@ frames: d m1/d theta = m2, d m2/d theta = -m1.
 from __future__ import annotations
 
 from simfab._warp import wp
-from simfab.rods._stencil import expand_grad, expand_hess, f64, hinge_geometry, mat11d, material, scatter11, skew
+from simfab.rods._stencil import expand_grad, expand_hess, f64, hinge_geometry, mat11d, material, scatter11
 
 # analytic derivatives only: no adjoint code (halves compile time)
 wp.set_module_options({"enable_backward": False})
@@ -86,7 +86,7 @@ def _bend(x: wp.array(dtype=wp.vec3d), theta: wp.array(dtype=wp.float64), d1: wp
             + quarter / ne2 * (_outer3(kb, m2e) + _outer3(m2e, kb))
         Hff = (two * k1 * ttt + _outer3(b, tt) + _outer3(tt, b)) / nf2 - k1 / (chi * nf2) * Pf \
             + quarter / nf2 * (_outer3(kb, m2f) + _outer3(m2f, kb))
-        Hef = -k1 / (chi * nef) * Q + (two * k1 * ttt - _outer3(a, tt) + _outer3(tt, b) - skew(d2t)) / nef
+        Hef = -k1 / (chi * nef) * Q + (two * k1 * ttt - _outer3(a, tt) + _outer3(tt, b) - wp.skew(d2t)) / nef
         H1 = expand_hess(Hee, Hef, Hff,
                          (half * wp.dot(kb, m1e) * tt - wp.cross(tf, m1e) / chi) / ne,
                          (half * wp.dot(kb, m1f) * tt - wp.cross(tf, m1f) / chi) / ne,
@@ -100,7 +100,7 @@ def _bend(x: wp.array(dtype=wp.vec3d), theta: wp.array(dtype=wp.float64), d1: wp
             - quarter / ne2 * (_outer3(kb, m1e) + _outer3(m1e, kb))
         Hff = (two * k2 * ttt - _outer3(b, tt) - _outer3(tt, b)) / nf2 - k2 / (chi * nf2) * Pf \
             - quarter / nf2 * (_outer3(kb, m1f) + _outer3(m1f, kb))
-        Hef = -k2 / (chi * nef) * Q + (two * k2 * ttt + _outer3(a, tt) - _outer3(tt, b) + skew(d1t)) / nef
+        Hef = -k2 / (chi * nef) * Q + (two * k2 * ttt + _outer3(a, tt) - _outer3(tt, b) + wp.skew(d1t)) / nef
         H2 = expand_hess(Hee, Hef, Hff,
                          (half * wp.dot(kb, m2e) * tt - wp.cross(tf, m2e) / chi) / ne,
                          (half * wp.dot(kb, m2f) * tt - wp.cross(tf, m2f) / chi) / ne,
@@ -111,7 +111,7 @@ def _bend(x: wp.array(dtype=wp.vec3d), theta: wp.array(dtype=wp.float64), d1: wp
     scatter11(s, g, H, need_grad, need_hess, dofs, slots, grad, hess)
 
 
-def launch(dev, need_grad: bool, need_hess: bool) -> None:
+def launch_bend(dev, need_grad: bool, need_hess: bool) -> None:
     """Accumulate bending energy per hinge into ``dev.e_bend`` (H,) and its gradient/Hessian
     into ``dev.grad`` (n_dofs,) / ``dev.hess`` (nnz,) for all hinges of all rods in one launch.
 

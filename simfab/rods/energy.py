@@ -16,7 +16,7 @@ from simfab.rods import bend, stretch, twist
 from simfab.rods.model import RodModel, RodState
 
 TERMS = ("stretch", "bend", "twist")
-_LAUNCH = {"stretch": stretch.launch, "bend": bend.launch, "twist": twist.launch}
+_LAUNCH = {"stretch": stretch.launch_stretch, "bend": bend.launch_bend, "twist": twist.launch_twist}
 
 
 def _hinge_dofs(model: RodModel) -> np.ndarray:

@@ -61,7 +61,7 @@ def _stretch(x: wp.array(dtype=wp.vec3d), edges: wp.array2d(dtype=wp.int32),
                     wp.atomic_add(hess, k11, v)
 
 
-def launch(dev, need_grad: bool, need_hess: bool) -> None:
+def launch_stretch(dev, need_grad: bool, need_hess: bool) -> None:
     """Accumulate stretching energy per edge into ``dev.e_stretch`` (E,) and its gradient/Hessian
     into ``dev.grad`` / ``dev.hess`` for all edges of all rods in one launch."""
     if dev.n_edges == 0:

@@ -14,7 +14,7 @@ Hessian is exact for reference frames updated by time-parallel transport (tests/
 from __future__ import annotations
 
 from simfab._warp import wp
-from simfab.rods._stencil import expand_grad, expand_hess, f64, hinge_geometry, mat11d, scatter11, skew
+from simfab.rods._stencil import expand_grad, expand_hess, f64, hinge_geometry, mat11d, scatter11
 
 # analytic derivatives only: no adjoint code (halves compile time)
 wp.set_module_options({"enable_backward": False})
@@ -49,13 +49,13 @@ def _twist(x: wp.array(dtype=wp.vec3d), theta: wp.array(dtype=wp.float64), ref_t
         b = tf + tt
         Hee = -quarter / (ne * ne) * (wp.outer(kb, a) + wp.outer(a, kb))
         Hff = -quarter / (nf * nf) * (wp.outer(kb, b) + wp.outer(b, kb))
-        Hef = half / (ne * nf) * (two / chi * skew(te) - wp.outer(kb, tt))
+        Hef = half / (ne * nf) * (two / chi * wp.skew(te) - wp.outer(kb, tt))
         Hm = expand_hess(Hee, Hef, Hff, z3, z3, z3, z3, f64(0.0), f64(0.0), f64(0.0))
         H = w * (wp.outer(gm, gm) + dm * Hm)
     scatter11(s, g, H, need_grad, need_hess, dofs, slots, grad, hess)
 
 
-def launch(dev, need_grad: bool, need_hess: bool) -> None:
+def launch_twist(dev, need_grad: bool, need_hess: bool) -> None:
     """Accumulate twisting energy per hinge into ``dev.e_twist`` (H,) and its gradient/Hessian
     into ``dev.grad`` / ``dev.hess`` for all hinges of all rods in one launch."""
     if dev.n_hinges == 0:

@@ -97,7 +97,7 @@ def execute_run(*, call: Callable[..., dict], figures: list[tuple[str, str]], ru
         d.mkdir(parents=True, exist_ok=True)
         scene_path = str(write_scene(scene, d / "scene")) if scene is not None else None
         summary = call(scene_path=scene_path, out=str(d))
-    return {name: cell(lookup(summary, path)) for name, path in figures}
+    return {name: table_cell(lookup(summary, path)) for name, path in figures}
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -236,7 +236,7 @@ def run_sweep(spec, out, *, make_task: Callable[[dict, str], dict], scheduler=No
         k = keys[i]
         figs = r.value if r.ok else {}
         kept = spec.keep_outputs and r.status not in ("worker_died", "version_mismatch")
-        rows[k] = {"run": i, "key": k, **{p: cell(v) for p, v in points[i].items()},
+        rows[k] = {"run": i, "key": k, **{p: table_cell(v) for p, v in points[i].items()},
                    **{g.name: figs.get(g.name) for g in spec.figures},
                    "status": r.status, "message": r.message, "seconds": r.seconds, "worker": r.worker,
                    "outputs": f"runs/{k}" if kept else ""}
@@ -284,7 +284,7 @@ def lookup(summary: dict, path: str):
     return cur
 
 
-def cell(v):
+def table_cell(v):
     """A table cell: scalars as they are, anything nested as compact JSON."""
     if isinstance(v, (dict, list)):
         return json.dumps(v, separators=(",", ":"))

@@ -32,6 +32,17 @@ def test_simulate_returns_a_typed_frozen_result_with_its_profile(loose):
     assert r.units["F_in"] == "N"  # (the JSON's own units table agrees)
 
 
+def test_profile_is_its_summary_plus_the_records(loose):
+    from simfab.coupling.profile import ProfileSummary, analyze_run
+
+    # one declaration of the figures: Profile adds only the per-record arrays to ProfileSummary
+    assert issubclass(simfab.coupling.Profile, ProfileSummary)
+    summary = analyze_run(loose.insertion)
+    for f in dataclasses.fields(ProfileSummary):
+        assert getattr(loose.profile, f.name) == getattr(summary, f.name), f.name
+    assert units(loose.profile)["F_grip"] == "N" and units(loose.profile)["E_ss"] == "J"
+
+
 def test_profile_to_pandas_has_one_row_per_record_with_units_in_the_names(loose):
     df = loose.profile.to_pandas()
     assert len(df) == len(loose.insertion.steps) + len(loose.insertion.removal)
@@ -54,6 +65,16 @@ def test_friction_override_reaches_the_scene():
     r = simfab.couple.simulate("clip2d_loose", steps=3, friction=0.2)
     assert r.friction == pytest.approx(0.2) and r.profile.friction == pytest.approx(0.2)
     assert r.removal_steps > 0 and "remove" in set(r.profile.phase)  # with friction the removal is simulated
+
+
+def test_seed_has_no_effect_the_figures_are_bit_identical(loose):
+    # the insertion is deterministic (a 3D mesh object's sampling takes the scene's [object] seed): any
+    # run seed gives the same figures, bit for bit (wall times aside)
+    timing = {"seconds", "time_split", "phase_split"}
+    other = simfab.couple.simulate("clip2d_loose", steps=3, seed=12345)
+    assert {k: v for k, v in other.to_json().items() if k not in timing} == \
+        {k: v for k, v in loose.to_json().items() if k not in timing}
+    np.testing.assert_array_equal(other.profile.force, loose.profile.force)
 
 
 def test_unknown_override_is_bad_input_naming_it():

@@ -7,8 +7,11 @@ import math
 import pytest
 
 import simfab
+from simfab.design.brief import ConstraintReport
+from simfab.design.gradient import NonsmoothEvents
 from simfab.design.optimize import AnnealRow, HistoryRow
-from simfab.design.pipeline import DesignFigures
+from simfab.design.pipeline import AcceptanceBranches, CorrectionRound, DesignFigures, DesignUnits, HandleCounts
+from simfab.design.verify import CheckLevel, FigureCheck, MeshCheck
 from simfab.errors import InputError
 from simfab.results import units
 
@@ -30,6 +33,36 @@ def test_optimize_returns_a_typed_result(gradient):
     with pytest.raises(dataclasses.FrozenInstanceError):
         r.objective = 0.0
     assert r.E_L >= 0 and r.objective <= r.objective_initial  # the optimizer keeps its best design
+
+
+def test_nested_entries_are_typed_and_their_json_keeps_the_keys(gradient):
+    r, _ = gradient
+    assert isinstance(r.handles, HandleCounts) and r.handles.active == 2
+    assert isinstance(r.acceptance_branches, AcceptanceBranches) and isinstance(r.units, DesignUnits)
+    assert isinstance(r.nonsmooth_events, NonsmoothEvents) and r.nonsmooth_events.pairs >= 0
+    c = r.constraints["grip_force"]
+    assert isinstance(c, ConstraintReport) and c.name is None and c.unit == "N" and c.initial is not None
+    assert c.satisfied == (c.lo <= c.value <= c.hi)
+    d = r.to_json()
+    assert list(d["constraints"]["grip_force"]) == ["value", "lo", "hi", "unit", "satisfied", "initial"]
+    assert list(d["handles"]) == ["active", "inactive", "placement"]
+    assert "rms_error" not in d and "rms_error" not in d["units"]  # no target profile: left out, not null
+    assert r.mesh_check is None and "mesh_check" not in d  # (mesh_check=False)
+
+
+def test_mesh_check_is_typed():
+    r = simfab.design.run("block2d_tight", iterations=1, steps=6, handles=2, placement="spatial",
+                          check_refinements=0, correction_rounds=0)
+    mc = r.mesh_check
+    assert isinstance(mc, MeshCheck) and all(isinstance(lv, CheckLevel) for lv in mc.levels)
+    assert [(lv.element_order, lv.subdivisions) for lv in mc.levels] == [(1, 0), (2, 0)]
+    assert all(isinstance(f, FigureCheck) and len(f.values) == 2 for f in mc.figures.values())
+    assert mc.feasible_fine == all(c.satisfied for c in mc.constraints)
+    assert r.correction_rounds == () and all(isinstance(x, CorrectionRound) for x in r.correction_rounds)
+    d = r.to_json()["mesh_check"]
+    assert list(d)[-6:] == ["levels", "figures", "constraints", "feasible_fine", "reference", "units"]
+    assert list(d["constraints"][0]) == ["name", "value", "lo", "hi", "satisfied"]  # (units: the check's table)
+    assert ("step_check" in d) == (mc.step_check is not None)
 
 
 def test_gradient_history_rows_carry_no_annealing_state(gradient):

@@ -5,7 +5,7 @@ import numpy as np
 import trimesh
 
 from simfab.contact.barrier import barrier, barrier_gradient, barrier_hessian, point_barrier, project_psd
-from simfab.contact.imls import build_imls, evaluate
+from simfab.contact.imls import build_imls, evaluate_imls
 
 DHAT = 1e-5
 
@@ -44,11 +44,11 @@ def test_point_barrier_chain_rule_through_imls():
     y = dirs * (R + f.sigma**2 / R + rng.uniform(0.1, 0.6, 30)[:, None] * dhat)
 
     def energy(yy):
-        e = evaluate(f, yy)
+        e = evaluate_imls(f, yy)
         return np.array([point_barrier(-e.psi[i:i + 1], -e.grad[i:i + 1], None, dhat, kappa)[0]
                          for i in range(len(yy))])
 
-    e = evaluate(f, y)
+    e = evaluate_imls(f, y)
     assert np.all(-e.psi > 0) and np.all(-e.psi < dhat)
     _, g, H = point_barrier(-e.psi, -e.grad, -e.hess, dhat, kappa, psd=False)
     h = 1e-4 * dhat
@@ -57,7 +57,7 @@ def test_point_barrier_chain_rule_through_imls():
         dy[a] = h
         fd = (energy(y + dy) - energy(y - dy)) / (2 * h)
         assert np.allclose(g[:, a], fd, rtol=1e-5, atol=1e-8 * np.abs(g).max())
-        ep, em = evaluate(f, y + dy), evaluate(f, y - dy)
+        ep, em = evaluate_imls(f, y + dy), evaluate_imls(f, y - dy)
         gp = point_barrier(-ep.psi, -ep.grad, None, dhat, kappa)[1]
         gm = point_barrier(-em.psi, -em.grad, None, dhat, kappa)[1]
         assert np.allclose(H[:, :, a], (gp - gm) / (2 * h), rtol=1e-4, atol=1e-6 * np.abs(H).max())

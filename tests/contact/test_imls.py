@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from simfab.contact.imls import build_imls, curve_normals, evaluate, imls_reference
+from simfab.contact.imls import build_imls, curve_normals, evaluate_imls, imls_reference
 from simfab.rotations import pose_matrix
 
 
@@ -28,7 +28,7 @@ def test_sphere_matches_exact_signed_distance():
     rng = np.random.default_rng(0)
     r = R + rng.uniform(-2, 2, 4000) * f.sigma
     q = _random_dirs(rng, 4000) * r[:, None]
-    e = evaluate(f, q)
+    e = evaluate_imls(f, q)
     assert e.near.all()
     sdf = R - r  # > 0 inside
     assert np.abs(e.psi - sdf).max() <= f.sigma**2 / R
@@ -51,7 +51,7 @@ def test_box_matches_exact_signed_distance():
     q = rng.uniform(-a - f.sigma, a + f.sigma, (30000, 3))
     qq = np.abs(q) - a
     sdf = -(np.linalg.norm(np.maximum(qq, 0), axis=1) + np.minimum(qq.max(1), 0))
-    e = evaluate(f, q)
+    e = evaluate_imls(f, q)
     near = np.abs(sdf) < f.sigma
     srt = np.sort(np.abs(q), axis=1)
     on_face = srt[:, 1] < a - 3 * f.sigma
@@ -69,7 +69,7 @@ def test_circle_2d_matches_exact_distance():
     rng = np.random.default_rng(2)
     r = R + rng.uniform(-2, 2, 2000) * f.sigma
     q = _random_dirs(rng, 2000, 2) * r[:, None]
-    e = evaluate(f, q)
+    e = evaluate_imls(f, q)
     assert e.grad.shape == (2000, 2) and e.hess.shape == (2000, 2, 2)
     assert np.abs(e.psi - (R - r)).max() <= f.sigma**2 / R
 
@@ -94,12 +94,12 @@ def test_gradient_and_hessian_match_finite_differences(dim):
     # query points near the (posed) surface
     body = f.vertices[rng.integers(0, len(f.vertices), 40)] + rng.normal(size=(40, dim)) * f.sigma
     q = (body @ R[:dim, :dim].T) + p[:dim]
-    e = evaluate(f, q, (R, p))
+    e = evaluate_imls(f, q, (R, p))
     h = 1e-7
     for a in range(dim):
         dq = np.zeros(dim)
         dq[a] = h
-        ep, em = evaluate(f, q + dq, (R, p)), evaluate(f, q - dq, (R, p))
+        ep, em = evaluate_imls(f, q + dq, (R, p)), evaluate_imls(f, q - dq, (R, p))
         fd_g = (ep.psi - em.psi) / (2 * h)
         fd_h = (ep.grad - em.grad) / (2 * h)
         assert np.allclose(e.grad[:, a], fd_g, rtol=1e-5, atol=1e-6)
@@ -111,7 +111,7 @@ def test_warp_kernel_matches_numpy_reference():
     f = _sphere_field()
     rng = np.random.default_rng(7)
     q = f.vertices[rng.integers(0, len(f.vertices), 300)] + rng.normal(size=(300, 3)) * 2 * f.sigma
-    e = evaluate(f, q)
+    e = evaluate_imls(f, q)
     psi, grad = imls_reference(q, f.vertices, f.normals, f.sigma, f.radius, f.weights)
     assert np.allclose(e.psi[e.near], psi[e.near], rtol=1e-10, atol=1e-14)
     assert np.allclose(e.grad[e.near], grad[e.near], rtol=1e-9, atol=1e-12)
@@ -144,7 +144,7 @@ def test_neighbour_lists_find_every_sample_within_the_radius(monkeypatch, dim, m
     lo, hi = v.min(0) - 1.5 * f.radius, v.max(0) + 1.5 * f.radius
     q = np.vstack([rng.uniform(lo, hi, size=(3000, dim)),
                    v[rng.integers(0, len(v), 1000)] + rng.normal(size=(1000, dim)) * f.radius])
-    e = evaluate(f, q, hessian=False)
+    e = evaluate_imls(f, q, hessian=False)
     dist = np.linalg.norm(q[:, None, :] - v[None], axis=2).min(axis=1)
     clear = np.abs(dist - f.radius) > 1e-12 * f.radius  # not on the cut itself
     assert np.array_equal(e.near[clear], dist[clear] < f.radius)
@@ -160,8 +160,8 @@ def test_pose_is_a_rigid_transform_of_the_field():
     q = rng.normal(size=(50, 3)) * 0.006
     pos, quat = np.array([0.01, -0.02, 0.005]), np.array([0.9, 0.1, -0.3, 0.2])
     R, p = pose_matrix((pos, quat / np.linalg.norm(quat)))
-    e0 = evaluate(f, q)
-    e1 = evaluate(f, q @ R.T + p, (pos, quat / np.linalg.norm(quat)))
+    e0 = evaluate_imls(f, q)
+    e1 = evaluate_imls(f, q @ R.T + p, (pos, quat / np.linalg.norm(quat)))
     assert np.allclose(e1.psi, e0.psi, atol=1e-15)
     assert np.allclose(e1.grad, e0.grad @ R.T, atol=1e-12)
 
@@ -169,7 +169,7 @@ def test_pose_is_a_rigid_transform_of_the_field():
 def test_far_points_report_no_neighbours_and_a_safe_distance():
     f = _sphere_field()
     q = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]])  # centre (deep inside) and far outside
-    e = evaluate(f, q)
+    e = evaluate_imls(f, q)
     assert not e.near.any()
     assert np.all(e.psi == -f.far_distance) and np.all(e.grad == 0)
     assert f.far_distance >= 0.5 * f.radius
@@ -188,7 +188,7 @@ def test_far_lower_bound_is_a_lower_bound_of_the_distance_outside():
     pose = (np.array([0.02, -0.01, 0.005]), np.array([np.cos(0.3), 0.0, np.sin(0.3), 0.0]))
     Rm, p = pose_matrix(pose)
     qw = q @ Rm.T + p  # the same body-frame points seen through O's pose
-    e = evaluate(f, qw, pose, hessian=False)
+    e = evaluate_imls(f, qw, pose, hessian=False)
     far = ~e.near
     assert far.sum() > 100
     lb = f.far_lower_bound(qw[far], pose)
@@ -211,8 +211,8 @@ def test_large_evaluations_split_over_two_threads_give_the_same_values(monkeypat
     runs = []
     for n_min in (10**9, 1024):
         monkeypatch.setattr(imls, "PARALLEL_MIN_POINTS", n_min)
-        runs.append([evaluate(f, q, hessian=h, hessian_band=2 * f.sigma) for h in (True, False)])
-        runs.append([submit(evaluate, f, q, hessian=h, hessian_band=2 * f.sigma).result() for h in (True, False)])
+        runs.append([evaluate_imls(f, q, hessian=h, hessian_band=2 * f.sigma) for h in (True, False)])
+        runs.append([submit(evaluate_imls, f, q, hessian=h, hessian_band=2 * f.sigma).result() for h in (True, False)])
     for run in runs[1:]:
         for a, b in zip(runs[0], run):
             for name in ("psi", "grad", "hess", "near"):
@@ -235,7 +235,7 @@ def test_uneven_samples_keep_the_curvature_bound(sampling):
     assert np.ptp(f.weights) > 0.1  # the samples really are uneven: their weights differ
     r = R + rng.uniform(-2, 2, 4000) * f.sigma
     q = _random_dirs(rng, 4000) * r[:, None]
-    e = evaluate(f, q)
+    e = evaluate_imls(f, q)
     assert e.near.all() and np.abs(e.psi - (R - r)).max() <= f.sigma**2 / R
 
 
@@ -255,7 +255,7 @@ def test_points_beyond_the_kernel_radius_get_the_side_of_the_winding_number(dim)
     rng = np.random.default_rng(5)
     inner = _random_dirs(rng, 200, dim) * rng.uniform(0, R - 2 * f.radius, 200)[:, None]
     outer = _random_dirs(rng, 200, dim) * rng.uniform(R + 2 * f.radius, 3 * R, 200)[:, None]
-    e_in, e_out = evaluate(f, inner), evaluate(f, outer)
+    e_in, e_out = evaluate_imls(f, inner), evaluate_imls(f, outer)
     assert not e_in.near.any() and not e_out.near.any()
     assert np.all(e_in.psi > 0) and np.all(e_out.psi < 0)
     assert np.all(e_in.psi <= R - np.linalg.norm(inner, axis=1))  # a lower bound of the depth

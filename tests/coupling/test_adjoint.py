@@ -57,9 +57,9 @@ def smooth_field(cm, seed):
 
 def stresses(fem, x):
     """Per-point von Mises stresses: per element (linear), at the quadrature points (P2)."""
-    from simfab.fem.shape_derivative import von_mises
+    from simfab.fem.shape_derivative import point_von_mises
 
-    return quadrature_von_mises(fem, x).ravel() if fem.element_order == 2 else von_mises(fem, x)
+    return quadrature_von_mises(fem, x).ravel() if fem.element_order == 2 else point_von_mises(fem, x)
 
 
 def compare(cm, sens, plus, minus, dX, A, figures, ok):

@@ -71,15 +71,15 @@ def checks(problem):
 
 def test_two_grid_start_saves_newton_iterations(problem):
     plain, guided = checks(problem)
-    p, g = plain["levels"][-1], guided["levels"][-1]
-    assert (p["element_order"], p["subdivisions"]) == (2, 1)
-    assert p["guided_steps"] == 0 and g["guided_steps"] >= 2
-    assert g["newton_iterations"] < p["newton_iterations"]
-    assert plain["levels"][1]["newton_iterations"] == guided["levels"][1]["newton_iterations"]  # P2 1x: unguided
+    p, g = plain.levels[-1], guided.levels[-1]
+    assert (p.element_order, p.subdivisions) == (2, 1)
+    assert p.guided_steps == 0 and g.guided_steps >= 2
+    assert g.newton_iterations < p.newton_iterations
+    assert plain.levels[1].newton_iterations == guided.levels[1].newton_iterations  # P2 1x: unguided
     # the step check (P2 1x at 4x the steps) is guided by P2 1x at the scene's steps
-    ps, gs = plain["step_check"], guided["step_check"]
-    assert ps["guided_steps"] == 0 and gs["guided_steps"] >= 2
-    assert gs["newton_iterations"] <= ps["newton_iterations"]
+    ps, gs = plain.step_check, guided.step_check
+    assert ps.guided_steps == 0 and gs.guided_steps >= 2
+    assert gs.newton_iterations <= ps.newton_iterations
 
 
 def test_two_grid_start_keeps_the_checks_figures(problem, monkeypatch):
@@ -90,9 +90,9 @@ def test_two_grid_start_keeps_the_checks_figures(problem, monkeypatch):
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_START", 1e-10)
     monkeypatch.setattr(C, "NEWTON_STEP_TOL_REL", 1e-12)
     plain, guided = checks(problem)
-    assert guided["levels"][-1]["guided_steps"] >= 2 and guided["step_check"]["guided_steps"] >= 2
+    assert guided.levels[-1].guided_steps >= 2 and guided.step_check.guided_steps >= 2
     for k in FIGURES:
-        a, b = plain["figures"][k], guided["figures"][k]
-        assert b["values"] == pytest.approx(a["values"], rel=1e-6, abs=1e-9), k
-        assert b["step_factor"] == pytest.approx(a["step_factor"], rel=1e-6), k
-    assert plain["feasible_fine"] == guided["feasible_fine"]
+        a, b = plain.figures[k], guided.figures[k]
+        assert b.values == pytest.approx(a.values, rel=1e-6, abs=1e-9), k
+        assert b.step_factor == pytest.approx(a.step_factor, rel=1e-6), k
+    assert plain.feasible_fine == guided.feasible_fine

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from simfab.coupling.config import InsertionConfig, ObjectConfig
-from simfab.coupling.scene import SCENE_TABLES, bundled_dir, check_tables, load_coupling_scene, read_toml
+from simfab.coupling.scene import SCENE_TABLES, bundled_dir, check_tables, load_coupling_scene, read_scene_toml
 from simfab.errors import InputError
 
 
 @pytest.mark.parametrize("toml", sorted(bundled_dir().glob("*.toml")), ids=lambda p: p.stem)
 def test_every_bundled_scene_passes_the_table_check(toml):
-    check_tables(read_toml(toml), str(toml))
+    check_tables(read_scene_toml(toml), str(toml))
 
 
 def test_each_table_knows_its_configuration_fields():

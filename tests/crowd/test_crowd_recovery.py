@@ -16,7 +16,7 @@ def test_recovers_planted_truth_better_than_the_mean_over_30_practitioner_crowds
     """30 seeded synthetic practitioner crowds (15 raters x 6 questions, planted truth):
     the Bayesian posterior mean's RMS error, averaged over crowds, is below the arithmetic
     mean's, and every crowd's chains agree (R-hat < 1.05)."""
-    crowds = [synth.simulate(PRACTITIONERS, scale=SCALE, n_tasks=6, seed=100 + k) for k in range(30)]
+    crowds = [synth.simulate_crowd(PRACTITIONERS, scale=SCALE, n_tasks=6, seed=100 + k) for k in range(30)]
     Y = np.stack([c.ratings.unit for c in crowds])
     # run until every crowd's R-hat < 1.05 (the sampler extends the run; capped)
     cfg = SamplerConfig(burn_in=500, draws=1000, max_draws=8000, rhat_target=1.05, ess_target=0)

@@ -69,7 +69,7 @@ def test_sampler_reproduces_the_prior_without_data(backend):
 
 
 def test_warp_and_numpy_backends_agree_on_a_crowd():
-    c = synth.simulate(PRACTITIONERS, scale=SCALE, n_tasks=4, seed=11)
+    c = synth.simulate_crowd(PRACTITIONERS, scale=SCALE, n_tasks=4, seed=11)
     cfg = SamplerConfig(burn_in=500, draws=3000, max_draws=3000, ess_target=0)
     a = sample(c.ratings.unit, config=cfg, seed=1, half_width=HW, backend="warp")
     b = sample(c.ratings.unit, config=cfg, seed=2, half_width=HW, backend="numpy")
@@ -79,7 +79,7 @@ def test_warp_and_numpy_backends_agree_on_a_crowd():
 
 
 def test_same_seed_same_draws():
-    c = synth.simulate(PRACTITIONERS, scale=SCALE, n_tasks=4, seed=3)
+    c = synth.simulate_crowd(PRACTITIONERS, scale=SCALE, n_tasks=4, seed=3)
     cfg = SamplerConfig(burn_in=50, draws=100, max_draws=100)
     a = sample(c.ratings.unit, config=cfg, seed=9, half_width=HW)
     b = sample(c.ratings.unit, config=cfg, seed=9, half_width=HW)

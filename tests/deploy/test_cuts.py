@@ -148,7 +148,7 @@ def test_pattern_around_the_cuts():
         assert np.linalg.norm(end - start) >= CAP80.min_beam - 1e-12
     # the seam layer: both sides of every cut, in the SVG and the DXF
     cut = lasercut.layout(pat, seams=lines)
-    assert len(cut.seams) == 2 * len(cf.seams) and lasercut.summary(cut)["seams"] == len(cf.seams)
+    assert len(cut.seams) == 2 * len(cf.seams) and lasercut.cut_summary(cut)["seams"] == len(cf.seams)
     assert np.allclose(cut.seams[0][1], lines[0][1] * 1e3)
 
 

@@ -9,7 +9,7 @@ from simfab.deploy import tolerances as tol
 
 @pytest.fixture(scope="module")
 def setup():
-    return bk.load_insert_scene(bk.default_scene_path()).setup
+    return bk.load_insert_scene(bk.elastica_scene_path()).setup
 
 
 @pytest.mark.parametrize("support,ratios", [("pinned", [0.95, 0.8]), ("clamped", [0.9])])

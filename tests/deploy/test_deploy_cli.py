@@ -86,9 +86,9 @@ def test_deploy_cli_small_insert(tmp_path, capsys, rods):
 
 def test_validation_failure_exits_1_after_writing_outputs(tmp_path, capsys):
     """A soft axial stiffness (extensible beam) misses the inextensible elastica at n = 80: exit 1."""
-    from simfab.deploy.buckling import default_scene_path
+    from simfab.deploy.buckling import elastica_scene_path
 
-    text = open(default_scene_path()).read().replace('name="beam_axial_ratio" data="1e8"',
+    text = open(elastica_scene_path()).read().replace('name="beam_axial_ratio" data="1e8"',
                                                      'name="beam_axial_ratio" data="300"')
     scene = tmp_path / "soft.xml"
     scene.write_text(text)

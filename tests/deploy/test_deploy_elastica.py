@@ -27,7 +27,7 @@ ELASTICA_FIRST_MODE = (  # (g/L, alpha [deg], delta/L)
 @pytest.mark.parametrize("support", elastica.SUPPORTS)
 @pytest.mark.parametrize("g_over_L, alpha_deg, delta_over_L", ELASTICA_FIRST_MODE)
 def test_matches_published_table(support, g_over_L, alpha_deg, delta_over_L):
-    sol = elastica.solve(g_over_L, support)
+    sol = elastica.solve_elastica(g_over_L, support)
     # half a unit in the last published digit
     assert sol.delta_over_L == pytest.approx(delta_over_L, abs=6e-6)
     assert np.degrees(sol.alpha) == pytest.approx(alpha_deg, abs=6e-3)
@@ -46,7 +46,7 @@ def test_table_is_the_shared_reference():
 @pytest.mark.parametrize("support", elastica.SUPPORTS)
 @pytest.mark.parametrize("r", [0.99, 0.8, 0.3])
 def test_shape_closes_the_gap_with_the_right_rise_and_length(support, r):
-    sol = elastica.solve(r, support)
+    sol = elastica.solve_elastica(r, support)
     xz = sol.shape(1.0, 4001)
     assert xz[0] == pytest.approx([0, 0], abs=1e-14)
     assert xz[-1] == pytest.approx([r, 0], abs=1e-12)
@@ -58,6 +58,6 @@ def test_shape_closes_the_gap_with_the_right_rise_and_length(support, r):
 
 def test_bad_ratio_is_input_error():
     with pytest.raises(InputError):
-        elastica.solve(1.2)
+        elastica.solve_elastica(1.2)
     with pytest.raises(InputError):
-        elastica.solve(0.5, "hinged")
+        elastica.solve_elastica(0.5, "hinged")

@@ -14,8 +14,8 @@ def test_larger_insert_dome_smaller_insert_saddle(scene):
     cfg, inserts = scene
     large, small = inserts["insert_large"], inserts["insert_small"]
     assert large.r > cfg.gap > small.r
-    dome = unitcell.deploy(cfg, large)
-    saddle = unitcell.deploy(cfg, small)
+    dome = unitcell.deploy_cell(cfg, large)
+    saddle = unitcell.deploy_cell(cfg, small)
     assert dome.curvature["gaussian_curvature"] > 0 and dome.curvature["kind"] == "dome"
     assert saddle.curvature["gaussian_curvature"] < 0 and saddle.curvature["kind"] == "saddle"
     # the shapes are genuinely 3D: the dome lifts the insert, the saddle bends the ring (> 10% of the cell)

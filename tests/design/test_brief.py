@@ -49,10 +49,10 @@ def test_correction_margin_aims_inside_force_and_stress_bounds():
 
 
 def test_bounds_from_grip():
-    assert B.bounds(B.DesignBrief(grip="tight"), 60e6)["coupling_ratio"] == (0.1, 95.0)
-    assert B.bounds(B.DesignBrief(grip="loose"), 60e6)["coupling_ratio"] == (0.0, 1e-3)
-    assert "coupling_ratio" not in B.bounds(B.DesignBrief(grip="any"), 60e6)
-    assert B.bounds(B.DesignBrief(yield_stress=30e6), 60e6)["von_mises"] == (0.0, 30e6)
+    assert B.constraint_bounds(B.DesignBrief(grip="tight"), 60e6)["coupling_ratio"] == (0.1, 95.0)
+    assert B.constraint_bounds(B.DesignBrief(grip="loose"), 60e6)["coupling_ratio"] == (0.0, 1e-3)
+    assert "coupling_ratio" not in B.constraint_bounds(B.DesignBrief(grip="any"), 60e6)
+    assert B.constraint_bounds(B.DesignBrief(yield_stress=30e6), 60e6)["von_mises"] == (0.0, 30e6)
 
 
 @pytest.mark.parametrize("table, field", [({"grip": "firm"}, "grip"), ({"handles": 0}, "handles"),

@@ -7,6 +7,7 @@ import pytest
 from simfab.design.brief import DesignBrief
 from simfab.design.problem import make_problem, profile_figures
 from simfab.design.verify import check_levels, check_warnings, mesh_check, refined_model
+from simfab.results import to_json
 
 
 @pytest.fixture(scope="module")
@@ -65,21 +66,21 @@ def test_linear_mesh_check_extrapolates_three_levels(problem):
     cm = problem.base
     r = mesh_check(problem, cm.fem.rest, levels=(0, 1, 2))
     n = cm.fem.n_elements
-    assert [lv["elements"] for lv in r["levels"]] == [n, 4 * n, 16 * n]
-    f = r["figures"]["insertion_force"]
+    assert [lv.elements for lv in r.levels] == [n, 4 * n, 16 * n]
+    f = r.figures["insertion_force"]
     # linear triangles lock in bending: the coarse mesh is stiffer, forces fall with refinement
-    assert f["values"][0] > f["values"][1] > f["values"][2]
-    assert f["converging"] and f["extrapolated"] < f["values"][2]
-    assert 0.05 < f["difference_of_optimization_mesh"] < 1.0
-    fine = {c["name"]: c for c in r["constraints"]}
+    assert f.values[0] > f.values[1] > f.values[2]
+    assert f.converging and f.extrapolated < f.values[2]
+    assert 0.05 < f.difference_of_optimization_mesh < 1.0
+    fine = {c.name: c for c in r.constraints}
     for k in ("grip_force", "von_mises"):  # the constraints read the mesh-converged values
-        g = r["figures"][k]
-        assert fine[k]["value"] == (g["values"][-1] if g["extrapolated"] is None else g["extrapolated"])
+        g = r.figures[k]
+        assert fine[k].value == (g.values[-1] if g.extrapolated is None else g.extrapolated)
     # the averaged stress converges (the raw element maximum need not: corner singularities)
-    assert r["figures"]["von_mises"]["converging"]
-    assert r["feasible_fine"] == all(c["satisfied"] for c in r["constraints"])
+    assert r.figures["von_mises"].converging
+    assert r.feasible_fine == all(c.satisfied for c in r.constraints)
     w = check_warnings(r)
-    assert bool(w) == (not r["feasible_fine"])
+    assert bool(w) == (not r.feasible_fine)
 
 
 def test_default_check_reads_p2_levels(problem):
@@ -92,17 +93,17 @@ def test_default_check_reads_p2_levels(problem):
     cm = problem.base
     r = mesh_check(problem, cm.fem.rest)
     n = cm.fem.n_elements
-    assert [(lv["element_order"], lv["elements"]) for lv in r["levels"]] == [(1, n), (2, n), (2, 4 * n)]
-    assert "P2" in r["reference"]
+    assert [(lv.element_order, lv.elements) for lv in r.levels] == [(1, n), (2, n), (2, 4 * n)]
+    assert "P2" in r.reference
     for k in ("insertion_force", "removal_force"):
-        f = r["figures"][k]
-        assert f["extrapolated"] is None and reference_value(f) == f["values"][-1]  # two P2 levels: no fit
-        assert 0.05 < f["difference_of_optimization_mesh"] < 1.0  # linear locks: too stiff
-        assert abs(f["reference_change"]) < 0.25 * f["difference_of_optimization_mesh"]
-        assert f["converging"]
+        f = r.figures[k]
+        assert f.extrapolated is None and reference_value(f) == f.values[-1]  # two P2 levels: no fit
+        assert 0.05 < f.difference_of_optimization_mesh < 1.0  # linear locks: too stiff
+        assert abs(f.reference_change) < 0.25 * f.difference_of_optimization_mesh
+        assert f.converging
     c = correction_factors(r)
-    assert np.isclose(c["insertion_force"] * r["figures"]["insertion_force"]["values"][0],
-                      r["figures"]["insertion_force"]["values"][-1])
+    assert np.isclose(c["insertion_force"] * r.figures["insertion_force"].values[0],
+                      r.figures["insertion_force"].values[-1])
 
 
 def test_correction_factors_map_the_coarse_figures_to_the_reference(problem):
@@ -112,8 +113,8 @@ def test_correction_factors_map_the_coarse_figures_to_the_reference(problem):
     c = correction_factors(r)
     from simfab.design.verify import FACTOR_RANGE, figure_unit
 
-    for k, v in r["figures"].items():
-        coarse, fine = v["values"][0], v["values"][-1]
+    for k, v in r.figures.items():
+        coarse, fine = v.values[0], v.values[-1]
         if abs(coarse) < figure_unit(k):  # below its constraint unit: noise, left uncorrected
             assert c[k] == 1.0
         elif FACTOR_RANGE[0] <= fine / coarse <= FACTOR_RANGE[1]:
@@ -122,9 +123,9 @@ def test_correction_factors_map_the_coarse_figures_to_the_reference(problem):
             assert c[k] in FACTOR_RANGE
     assert c["insertion_force"] < 1.0  # linear triangles: the coarse mesh is too stiff
     corrected = problem.with_settings(corrections=c)
-    coarse = {k: v["values"][0] for k, v in r["figures"].items()}
+    coarse = {k: v.values[0] for k, v in r.figures.items()}
     vals = {x.name: x.value for x in corrected.constraints(dict(coarse, seat_clearance=0.0))}
-    assert np.isclose(vals["grip_force"], r["figures"]["grip_force"]["values"][-1])
+    assert np.isclose(vals["grip_force"], r.figures["grip_force"].values[-1])
 
 
 def test_target_matching_gets_a_profile_correction():
@@ -136,9 +137,9 @@ def test_target_matching_gets_a_profile_correction():
     ds = load_design_scene("profile2d", design={"handles": 2, "placement": "spatial"}, simulation={"steps": 8})
     P = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target)
     r = mesh_check(P, ds.cm.fem.rest, levels=(0, 1))
-    c = r["profile_force_factor"]
+    c = r.profile_force_factor
     assert 0.5 < c < 0.98
-    assert len(r["figures"]["rms_error"]["values"]) == 2
+    assert len(r.figures["rms_error"].values) == 2
     assert correction_factors(r)["force_profile"] == c
     assert needs_correction(r, {}) and not needs_correction(r, {"force_profile": c})
 
@@ -154,21 +155,23 @@ def test_step_check_runs_where_the_steps_do_not_resolve_the_profile():
     ds = load_design_scene("block2d_tight", design={"handles": 3, "placement": "spatial"}, simulation={"steps": 3})
     P = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions)
     r = mesh_check(P, ds.cm.fem.rest, levels=(0, (2, 0)))
-    st = r["step_check"]
-    assert st["steps"] == 12 and st["factor"] == verify.STEP_CHECK_FACTOR
+    st = r.step_check
+    assert st.steps == 12 and st.factor == verify.STEP_CHECK_FACTOR
     moved = 0
-    for k, fig in r["figures"].items():
-        c = st["factors"].get(k, 1.0)
-        assert fig.get("step_factor", 1.0) == c
-        assert np.isclose(verify.reference_value(fig), fig["values"][-1] * c)
+    for k, fig in r.figures.items():
+        c = st.factors.get(k, 1.0)
+        assert (1.0 if fig.step_factor is None else fig.step_factor) == c
+        assert np.isclose(verify.reference_value(fig), fig.values[-1] * c)
         moved += abs(c - 1.0) > 0.02
     assert moved >= 1  # the coarse steps did miss something
-    vals = {c["name"]: c["value"] for c in r["constraints"]}
-    assert np.isclose(vals["grip_force"], r["figures"]["grip_force"]["values"][-1] * st["factors"]["grip_force"])
+    vals = {c.name: c.value for c in r.constraints}
+    assert np.isclose(vals["grip_force"], r.figures["grip_force"].values[-1] * st.factors["grip_force"])
     # 35 steps resolve the block's profile: no step check
     ds35 = load_design_scene("block2d_tight", design={"handles": 3, "placement": "spatial"})
     P35 = make_problem(ds35.cm, ds35.brief, kept_regions=ds35.kept_regions)
-    assert "step_check" not in mesh_check(P35, ds35.cm.fem.rest, levels=(0, (2, 0)))
+    r35 = mesh_check(P35, ds35.cm.fem.rest, levels=(0, (2, 0)))
+    assert r35.step_check is None and "step_check" not in to_json(r35)  # (left out of the summary's JSON)
+    assert "step_check" in to_json(r) and "step_factor" in to_json(r)["figures"]["grip_force"]
 
 
 def test_profile_factor_leaves_out_the_search_for_the_rest_point():

@@ -47,7 +47,7 @@ def test_rest_gradient_and_mixed_product_match_finite_differences(dim, order):
     dX = h * rng.standard_normal(X.shape)
     w = rng.standard_normal(x.shape)
 
-    assert shape_derivative.energy(model, x) == pytest.approx(elastic.energy(model, x), rel=1e-12)
+    assert shape_derivative.quadrature_energy(model, x) == pytest.approx(elastic.energy(model, x), rel=1e-12)
     # dE/dX . dX against (E(X + eps dX) - E(X - eps dX)) / 2 eps
     fd = (elastic.energy(at(X + EPS * dX), x) - elastic.energy(at(X - EPS * dX), x)) / (2 * EPS)
     an = float(np.sum(_corners(model, shape_derivative.rest_gradient(model, x)) * dX))
@@ -73,7 +73,7 @@ def test_von_mises_derivatives_match_finite_differences(dim, order):
     def stresses(m, xe):  # the public per-point stresses: P1 per element, P2 at the quadrature points
         return det_and_von_mises(m, xe)[1] if order == 1 else quadrature_von_mises(m, xe).ravel()
 
-    assert np.allclose(shape_derivative.von_mises(model, x), stresses(model, x), rtol=1e-10)
+    assert np.allclose(shape_derivative.point_von_mises(model, x), stresses(model, x), rtol=1e-10)
     c = rng.uniform(0, 1, stresses(model, x).size)
     dx, dX = h * rng.standard_normal(x.shape), h * rng.standard_normal(X.shape)
     gx, gX = shape_derivative.von_mises_derivatives(model, x, c)

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from simfab.growth import grow, skin_result
-from simfab.growth.skinning import skin
+from simfab.growth.skinning import skin_skeleton
 
 SCENES = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "growth"
 SCENE_NAMES = sorted(p.stem for p in SCENES.glob("*.xml"))
@@ -64,6 +64,6 @@ def test_non_manifold_objects_are_reported_not_silently_ignored():
     radius = np.array([0.006, 0.004, 0.003])
     open_box = trimesh.creation.box(extents=[0.1, 0.1, 0.01])
     open_box = trimesh.Trimesh(open_box.vertices, open_box.faces[:-2])  # a hole: not a closed manifold
-    mesh, rep = skin(nodes, parent, radius, {"broken": open_box})
+    mesh, rep = skin_skeleton(nodes, parent, radius, {"broken": open_box})
     assert rep.objects_not_manifold == ["broken"] and rep.objects_subtracted == []
     assert rep.watertight and rep.bodies == 1 and rep.nodes_contained == 3

@@ -30,7 +30,8 @@ def _serial_reference(ratings, truth, *, n_sub, min_size, config, seed):
 
 
 def test_study_on_local_cluster_identical_to_serial_loop():
-    crowd = synth.simulate(dataclasses.replace(PRACTITIONERS, size=9), scale=Scale(lo=1, hi=10), n_tasks=5, seed=3)
+    crowd = synth.simulate_crowd(dataclasses.replace(PRACTITIONERS, size=9), scale=Scale(lo=1, hi=10), n_tasks=5,
+                                 seed=3)
     truth = crowd.ratings.scale.from_unit(crowd.x)
     cfg = dataclasses.replace(STUDY_SAMPLER, burn_in=60, draws=60, max_draws=60)
     kw = dict(n_sub=5, min_size=5, config=cfg, seed=11)

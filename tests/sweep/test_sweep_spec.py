@@ -112,7 +112,7 @@ def test_lookup_nested_paths():
 
 def test_scene_edits_toml_and_mjcf(tmp_path):
     """The edited copies load with the new values; relative file references stay valid."""
-    from simfab.coupling.scene import read_toml
+    from simfab.coupling.scene import read_scene_toml
 
     p = _spec(tmp_path, """
 [sweep]
@@ -127,7 +127,7 @@ values = [1.0e9]
     s = load_spec(p)
     kw = run_task(s, s.points()[0], run_dir=str(tmp_path / "run"))
     main_file = write_scene(kw["scene"], tmp_path / "copy")
-    cfg = read_toml(main_file)
+    cfg = read_scene_toml(main_file)
     assert cfg["material"]["youngs_modulus"] == 1.0e9 and cfg["simulation"]["steps"] == 3
     assert (main_file.parent / cfg["compliant"]["mesh_file"]).is_file()  # npz reference made absolute
     assert main_file.with_suffix(".xml").is_file()

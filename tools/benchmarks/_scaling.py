@@ -32,9 +32,9 @@ FIGURES = ("E_max", "F_in", "F_rm", "F_grip")
 def level_overrides(scene: str, factor: float, base: dict) -> dict:
     """The ``[compliant]`` overrides of ``scene`` at ``factor`` times its benchmark case's tets."""
     from simfab.coupling.converge import level_mesh
-    from simfab.coupling.scene import read_toml, scene_paths
+    from simfab.coupling.scene import read_scene_toml, scene_paths
 
-    comp = dict(read_toml(scene_paths(scene)[1])["compliant"])
+    comp = dict(read_scene_toml(scene_paths(scene)[1])["compliant"])
     comp.update(base.get("compliant", {}))
     if factor == 1.0:
         return dict(base.get("compliant", {}))

@@ -18,7 +18,7 @@ import argparse
 
 
 def run(argv) -> dict:
-    from simfab.coupling.converge import format_table, study
+    from simfab.coupling.converge import convergence_study, format_table
 
     ap = argparse.ArgumentParser(prog="bench converge")
     ap.add_argument("--scenes", default="cclamp2d,clip2d_loose,clip2d_eject")
@@ -27,7 +27,7 @@ def run(argv) -> dict:
     factors = tuple(float(f) for f in a.factors.split(","))
     out = {"benchmark": "converge", "factors": factors, "scenes": {}}
     for scene in a.scenes.split(","):
-        rep = study(scene, factors)
+        rep = convergence_study(scene, factors)
         i = factors.index(1.0) if 1.0 in factors else 0
         rep["error_at_bundled"] = {k: v["relative_error"][i] for k, v in rep["figures"].items()}
         rep["table"] = format_table(rep)

@@ -92,7 +92,7 @@ def run(argv):
     burn = int(round(a.ref_iterations * mc["burn_in"] / mc["iterations"]))
 
     scale = Scale(lo=1, hi=10)
-    crowd = synth.simulate(PRACTITIONERS, scale=scale, n_tasks=6, seed=a.seed)
+    crowd = synth.simulate_crowd(PRACTITIONERS, scale=scale, n_tasks=6, seed=a.seed)
     y01, hw = crowd.ratings.unit, 0.5 / scale.span
 
     cfg = SamplerConfig()  # 4 chains, R-hat < 1.01, ESS >= 400
@@ -126,7 +126,7 @@ def run(argv):
         "ours_mc_se_rms": float(np.sqrt(np.mean(ours.x[0].var(axis=(0, 1)) / ours.ess[0, : ours_x.size]))),
     }
 
-    corpus = [synth.simulate(PRACTITIONERS, scale=scale, n_tasks=6, seed=1000 + k) for k in range(a.corpus)]
+    corpus = [synth.simulate_crowd(PRACTITIONERS, scale=scale, n_tasks=6, seed=1000 + k) for k in range(a.corpus)]
     Y = np.stack([c.ratings.unit for c in corpus])
     t0 = time.perf_counter()
     post = sample(Y, config=cfg, seed=a.seed, half_width=hw)  # all 30 run until the worst converges

@@ -47,11 +47,12 @@ def run(argv) -> dict:
     if a.mesh_check:
         from simfab.design.problem import make_problem
         from simfab.design.verify import check_warnings, mesh_check
+        from simfab.results import to_json
 
         P = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target)
         t0 = time.perf_counter()
         r = mesh_check(P, cm.fem.rest)
-        return {"benchmark": "design_check", "scene": a.scene, "steps": len(cm.s_steps) - 1, "mesh_check": r,
+        return {"benchmark": "design_check", "scene": a.scene, "steps": len(cm.s_steps) - 1, "mesh_check": to_json(r),
                 "warnings": check_warnings(r), "seconds": time.perf_counter() - t0}
     rows = []
     for o, t in levels:

@@ -37,19 +37,21 @@ def _resimulate(summary: dict, out: Path) -> dict:
     from simfab.design import brief as B
     from simfab.design.problem import profile_figures
     from simfab.design.scene import load_design_scene
+    from simfab.results import to_json
 
     xml = summary["outputs"]["scene_xml"]
     ds = load_design_scene(xml)
     res = simulate(load_coupling_scene(xml))
     fig = profile_figures(res, ds.brief.stress_radius)
     ys = ds.cm.fem.material.yield_stress
-    cons = B.constraints(fig, B.bounds(ds.brief, ys))
+    cons = B.constraints(fig, B.constraint_bounds(ds.brief, ys))
     mc = summary.get("mesh_check")
     # the optimized scene reproduces the optimizer's (coarse-mesh) figures; whether the brief is
     # met is judged on the mesh check's mesh-converged figures (the coarse ones are biased)
     same = all(abs(fig[k] - summary["profile"][v]) <= 1e-9 * max(abs(fig[k]), 1e-12) for k, v in
                (("insertion_force", "F_in_N"), ("grip_force", "F_grip_N"), ("coupling_ratio", "coupling_ratio_pct")))
-    out = {"figures": fig, "coarse_constraints": {c.name: c.as_dict() for c in cons}, "reproduces_optimizer": same,
+    out = {"figures": fig, "coarse_constraints": {c.name: to_json(c.report(named=False)) for c in cons},
+           "reproduces_optimizer": same,
            "mesh_converged_constraints": None if mc is None else mc["constraints"],
            "all_met": (mc["feasible_fine"] if mc is not None else all(c.satisfied for c in cons)) and same,
            "warnings": res.warnings}
@@ -60,10 +62,10 @@ def _resimulate(summary: dict, out: Path) -> dict:
 
 def _rms_row(s: dict, seconds: float) -> dict:
     """Per handle count: the optimizer's (coarse, mesh-corrected) and the mesh check's RMS [N]."""
-    from simfab.design.verify import reference_value
+    from simfab.design.verify import FigureCheck, reference_value
 
-    mc = (s.get("mesh_check") or {}).get("figures", {}).get("rms_error")
-    fine = None if mc is None else reference_value(mc)
+    mc = (s.get("mesh_check") or {}).get("figures", {}).get("rms_error")  # (the summary's JSON)
+    fine = None if mc is None else reference_value(FigureCheck(**mc))
     return {"rms_error_coarse_N": s.get("rms_error"), "rms_error_mesh_converged_N": fine,
             "rms_error_levels_N": None if mc is None else mc["values"],
             "rms_error_initial_N": s.get("rms_error_initial"),

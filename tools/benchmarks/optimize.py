@@ -144,9 +144,9 @@ def _run_once(a) -> dict:
 
             t2 = time.perf_counter()
             _, mc, rounds = mesh_corrected(res, a.seed, procs, True)
-            check = {"seconds": time.perf_counter() - t2, "feasible_mesh_converged": mc["feasible_fine"],
-                     "correction_rounds": len(rounds), "elements": [lv["elements"] for lv in mc["levels"]],
-                     "constraints_mesh_converged": {c["name"]: c["value"] for c in mc["constraints"]}}
+            check = {"seconds": time.perf_counter() - t2, "feasible_mesh_converged": mc.feasible_fine,
+                     "correction_rounds": len(rounds), "elements": [lv.elements for lv in mc.levels],
+                     "constraints_mesh_converged": {c.name: c.value for c in mc.constraints}}
     first = next((r["k"] for r in res.history if r["evaluation"].feasible), None)
     ins = insertions(res)
     done = [r["evaluation"] for r in res.history[1:] if r["evaluation"].status == "ok"]

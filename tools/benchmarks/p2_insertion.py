@@ -57,7 +57,7 @@ def _run(cm) -> dict:
 
 
 def run(argv) -> dict:
-    from simfab.coupling.scene import load_coupling_scene, read_toml, scene_paths
+    from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
 
     ap = argparse.ArgumentParser(prog="bench p2_insertion")
     ap.add_argument("--scenes", default="cclamp2d,knocker3d")
@@ -70,7 +70,7 @@ def run(argv) -> dict:
         runs = {}
         for order in (1, 2):
             runs[f"p{order}"] = _run(load_coupling_scene(scene, overrides={"simulation": {"element_order": order}}))
-        comp = read_toml(scene_paths(scene)[1]).get("compliant", {})
+        comp = read_scene_toml(scene_paths(scene)[1]).get("compliant", {})
         if a.coarse and "mesh_file" not in comp and comp.get("target_elements"):
             for order in (1, 2):
                 ov = {"simulation": {"element_order": order}, "compliant": {"target_elements": a.coarse}}

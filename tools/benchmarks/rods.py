@@ -31,10 +31,10 @@ def run(argv) -> dict:
     from simfab.deploy import tolerances as tol
 
     rtol = tol.PINNED_RISE_RTOL
-    exact = elastica.solve(a.r, "pinned")
+    exact = elastica.solve_elastica(a.r, "pinned")
     ref_rows = figures().get("elastica_first_mode", {}).get("rows", [])
     ref = next((row["delta_over_L"] for row in ref_rows if abs(row["g_over_L"] - a.r) < 1e-9), None)
-    setup = bk.load_insert_scene(bk.default_scene_path()).setup
+    setup = bk.load_insert_scene(bk.elastica_scene_path()).setup
     bk.run_continuation(setup, "pinned", a.n, [a.r])  # warm-up: Warp module load, first factorization
     times, row = [], None
     for _ in range(max(1, a.repeat)):

@@ -76,9 +76,9 @@ def _linear(cm):
 
 def _stresses(fem, x):
     from simfab.design.stress import quadrature_von_mises
-    from simfab.fem.shape_derivative import von_mises
+    from simfab.fem.shape_derivative import point_von_mises
 
-    return quadrature_von_mises(fem, x).ravel() if fem.element_order == 2 else von_mises(fem, x)
+    return quadrature_von_mises(fem, x).ravel() if fem.element_order == 2 else point_von_mises(fem, x)
 
 
 def _errors(cm, figures, eps) -> list[dict]:
