@@ -41,9 +41,8 @@ API_RST = ROOT.parent / "docs" / "api.rst"
 AREAS = ("coupling", "design", "growth", "crowd", "deploy", "sweep", "rods", "verification", "fem", "contact", "io")
 #: The top-level modules: the commands as functions, the result base and the errors.
 TOP = ("couple", "grow", "validate", "results", "errors")
-#: simfab.deploy is documented by its own change (issue 40's deploy part) and left out here until it
-#: lands; the integrator drops this exclusion then. Nothing else is excluded.
-EXCLUDED_PREFIXES = ("simfab.deploy",)
+#: Nothing is excluded (a prefix here would leave a package's API unchecked).
+EXCLUDED_PREFIXES = ()
 
 ARGS = re.compile(r"^\s*(Args|Arguments|Parameters|Keyword Args|Keyword Arguments|Attributes):\s*$", re.M)
 RETURNS = re.compile(r"^\s*(Returns|Return):\s*$", re.M)
