@@ -25,8 +25,6 @@ CONVENTIONS = frozenset({"add_args", "run", "demo", "format_text", "output_roots
 #: Public functions still defined under the same name in several modules ("name": modules), to be
 #: renamed to what each one does; a name leaves the list when only one module defines it.
 KNOWN_DUPLICATES = {
-    # simfab.deploy.pattern is being split (quad meshing); lasercut's layout is renamed with it
-    "layout": {"simfab.deploy.lasercut", "simfab.deploy.pattern"},
     # simfab.couple.simulate is the top-level convenience named after ``simfab couple simulate`` (issue 40);
     # simfab.coupling.simulate.simulate is the simulator itself, called from some thirty places
     "simulate": {"simfab.couple", "simfab.coupling.simulate"},

@@ -53,7 +53,7 @@ class CutLayout:
     seams: tuple = ()
 
 
-def layout(pat, *, arc_points: int = 12, seams=()) -> CutLayout:
+def cut_layout(pat, *, arc_points: int = 12, seams=()) -> CutLayout:
     """Outlines of a pattern and its inserts (see the module doc).
 
     Args:

@@ -178,7 +178,7 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     Y = pattern.map_to_surface(flat.uv, mF, mV, pat.P)
     sec["layout"] = time.perf_counter() - t
     t = time.perf_counter()
-    cut = lasercut.layout(pat, seams=seams)
+    cut = lasercut.cut_layout(pat, seams=seams)
     sec["lasercut"] = time.perf_counter() - t
     t = time.perf_counter()
     log(f"deploy surface: {pat.n_inserts} inserts, {len(pat.edges)} beams, {int(pat.spring.sum())} springs",
@@ -197,7 +197,7 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         gap0 = pat.gap
         tuned = tuning.tune_pattern(pat, net, dep, Y, tgt, scene.tune, scene.deploy, ties=ties, device=device)
         pat, net, dep = tuned.pattern, tuned.network, tuned.deployment
-        cut = lasercut.layout(pat, seams=seams)
+        cut = lasercut.cut_layout(pat, seams=seams)
         tune_info = dict(steps=tuned.steps, solves=tuned.solves, stop=tuned.stop, rms_before=before.rms,
                          hausdorff_before=before.hausdorff, point_weight=scene.tune.point_weight,
                          point_to_plane_rms_mm=[1e3 * r for r in tuned.rms_history],

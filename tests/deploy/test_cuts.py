@@ -147,7 +147,7 @@ def test_pattern_around_the_cuts():
     for _, v, start, end in pat.beam_halves():
         assert np.linalg.norm(end - start) >= CAP80.min_beam - 1e-12
     # the seam layer: both sides of every cut, in the SVG and the DXF
-    cut = lasercut.layout(pat, seams=lines)
+    cut = lasercut.cut_layout(pat, seams=lines)
     assert len(cut.seams) == 2 * len(cf.seams) and lasercut.cut_summary(cut)["seams"] == len(cf.seams)
     assert np.allclose(cut.seams[0][1], lines[0][1] * 1e3)
 
@@ -198,7 +198,7 @@ def test_seam_layer_files(tmp_path):
     cf = cuts.flatten_with_cuts(t.V, t.F, cuts.CutsConfig(max_cones=8), CAP80)
     lines = cuts.seam_lines(cf)
     pat = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, CAP80, seams=[p for _, p in lines])
-    cut = lasercut.layout(pat, seams=lines)
+    cut = lasercut.cut_layout(pat, seams=lines)
     lasercut.write_svg(tmp_path / "p.svg", cut)
     lasercut.write_dxf(tmp_path / "p.dxf", cut)
     svg = (tmp_path / "p.svg").read_text()

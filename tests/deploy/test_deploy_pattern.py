@@ -102,7 +102,7 @@ def test_svg_and_dxf_reread_same_outlines_mm(tmp_path):
     sc = scene.load_deploy_scene(scene.bundled_path("dome"))
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
-    cut = lasercut.layout(pat)
+    cut = lasercut.cut_layout(pat)
     svg, dxf = tmp_path / "p.svg", tmp_path / "p.dxf"
     lasercut.write_svg(svg, cut)
     lasercut.write_dxf(dxf, cut)
@@ -298,7 +298,7 @@ def test_catalogue_in_pattern_files_and_bill_of_materials(tmp_path):
     assert [b["size_class"] for b in bom] == ["A", "B", "C"]
     assert sum(b["count"] for b in bom) == cat.n_inserts
     assert sorted(i for b in bom for i in b["inserts"]) == list(range(1, cat.n_inserts + 1))
-    cut = lasercut.layout(cat)
+    cut = lasercut.cut_layout(cat)
     texts = [t for t, _, _ in cut.labels]
     for v in np.flatnonzero(ins):
         label = f"{cat.insert_ids[v]} {'ABC'[cat.insert_class[v]]}"
