@@ -14,11 +14,10 @@ rest state and keyframe 'flat'), checked for stability and against simfab's equi
 Outputs in --out: pattern.svg, pattern.dxf, flattening.png, pattern.png, deviation.png,
 deploy.usda, deployed.xml, inserts.csv (bill of materials: inserts per size), surface.json.
 
-Unit cell: for every insert body of the scene (default scenes/deploy/unit_cell.xml) the cell's spokes
-are drawn onto the insert in quasi-static increments; writes per insert a USD timeline (rods as
-curves, the insert as an animated rigid mesh, one time code per increment), the deployed MJCF
-(opens in python -m mujoco.viewer) and a PNG preview, and reports the sign of the discrete
-Gaussian curvature (dome / saddle) and whether the deployed state is stable.
+Unit cell: for every insert body of the scene (default scenes/deploy/unit_cell.xml) the spokes are drawn
+onto the insert in quasi-static increments; writes per insert a USD timeline (rods as curves, the insert
+an animated rigid mesh, a time code per increment), the deployed MJCF (python -m mujoco.viewer) and a
+PNG, and reports the sign of the discrete Gaussian curvature (dome / saddle) and the stability.
 
 --json keys: scene, summary_json (path), inserts {BODY: insert_half_size, gap_half_size [m],
   relation (larger/smaller than the gap), kind (dome/saddle), gaussian_curvature and the other
