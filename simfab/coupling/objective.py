@@ -388,7 +388,8 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     opts = NewtonConfig(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
                          step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=cm.fem.element_order == 1,
                          eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False,
-                         exact_first=not (obj.lazy_exact and ctx.exact_failed))
+                         exact_first=not (obj.lazy_exact and ctx.exact_failed),
+                         chord_within=C.NEWTON_CHORD_WITHIN)
     solver = TimedSolver(pinned(ctx.solver, obj.pin), ctx.timer)
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
     ctx.exact_failed = res.exact_failures > 0
