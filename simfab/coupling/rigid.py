@@ -85,7 +85,7 @@ SHIFT_START = 1e-7
 SHIFT_MAX = 1e-4
 #: ... and conjugate gradients on A + mu U U^T, preconditioned by that factorization, solve to this
 #: relative residual in at most PCG_MAX_ITER iterations.
-PCG_TOL = 1e-3
+PCG_TOL = 1e-2
 PCG_MAX_ITER = 25
 
 
