@@ -5,6 +5,8 @@ sparse Hessian. Each iteration solves ``H_ff dx_f = -g_f`` on the free dofs with
 factorization (:class:`simfab.solve.linear.SPDSolver`), then backtracks along ``dx`` until the Armijo
 condition holds at an admissible point. Exact-first steps: ``H`` may be a pair ``(H_exact, H_psd)``
 (each possibly a callable building it on demand); the exact one is used while it factorizes.
+Chord steps (``NewtonConfig.chord_within``): near the target an iterate may reuse the solve's last
+factorization instead of a fresh Hessian (the stopping rule is the same).
 
 Feasibility hooks: ``max_step(x, dx) -> alpha_max`` caps the step before the line search;
 ``admissible(x) -> bool`` rejects trial points (as does an objective of +inf or NaN).
