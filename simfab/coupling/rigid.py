@@ -84,8 +84,13 @@ def pin_for(cm, Q: np.ndarray, c: np.ndarray, x: np.ndarray) -> Pin | None:
 SHIFT_START = 1e-7
 SHIFT_MAX = 1e-4
 #: ... and conjugate gradients on A + mu U U^T, preconditioned by that factorization, solve to this
-#: relative residual in at most PCG_MAX_ITER iterations.
+#: relative residual (inexact-Newton forcing), or to PCG_TOL_NEAR when the caller gives Newton's force
+#: target and the right-hand side is within PCG_NEAR times it (Newton's last steps: exact, so that
+#: a tight target is reached as with a direct solve), in at most PCG_MAX_ITER iterations (past them
+#: the PCG_TOL criterion alone).
 PCG_TOL = 1e-2
+PCG_NEAR = 100.0
+PCG_TOL_NEAR = 1e-8
 PCG_MAX_ITER = 25
 
 
@@ -104,8 +109,9 @@ class PinnedSolver:
     Negative curvature found by the iterations (A + mu U U^T indefinite) raises NotPositiveDefinite,
     as a failed factorization does."""
 
-    def __init__(self, solver, pin: Pin):
+    def __init__(self, solver, pin: Pin, target: float | None = None):
         self.solver, self.pin = solver, pin
+        self.target = target  # Newton's force target (inf-norm of the residual) [units of b], or None
         self.pcg_iterations = 0  # conjugate-gradient iterations of the shifted solves so far
         self._Uf = None
 
@@ -165,6 +171,8 @@ class PinnedSolver:
         x = np.zeros_like(b)
         if bn == 0.0:
             return x
+        near = self.target is not None and np.abs(b).max() <= PCG_NEAR * self.target
+        tol = PCG_TOL_NEAR if near else PCG_TOL
         r = b.copy()
         p = z.copy()
         rz = float(r @ z)
@@ -177,11 +185,15 @@ class PinnedSolver:
             x += a * p
             r -= a * Kp
             self.pcg_iterations += 1
-            if np.linalg.norm(r) <= PCG_TOL * bn:
+            rn = np.linalg.norm(r)
+            relative = rn <= PCG_TOL * bn
+            if rn <= tol * bn:
                 return x
             z = M(r)
             rz, rz_old = float(r @ z), rz
             p = z + (rz / rz_old) * p
+        if relative:
+            return x
         raise NotPositiveDefinite(f"conjugate gradients on the pinned Hessian did not converge in {PCG_MAX_ITER} "
                                   "iterations")
 
