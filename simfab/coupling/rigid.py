@@ -100,8 +100,8 @@ class PinnedSolver:
     ``solve_free(A, free, b)``, or with ``solve_free_update`` (:class:`simfab.solve.linear.SPDSolver`:
     the same update with U through half the triangular solves).
 
-    A loaded part's exact Hessian A is indefinite along the rigid motions the pin holds (their
-    geometric stiffness), by ~1e-7 of its diagonal, while A + mu U U^T is positive definite. When A
+    A loaded part's exact Hessian A can be slightly indefinite along the rigid motions the pin
+    holds (their geometric stiffness; docs/decisions.md) while A + mu U U^T is positive definite. When A
     does not factorize, A + shift I (the smallest shift of a ladder, see SHIFT_START) is factorized
     instead and serves as the preconditioner of conjugate gradients on A + mu U U^T itself (the
     shift moves the other modes' eigenvalues by a small fraction: a few iterations), so the solve
