@@ -56,6 +56,10 @@ NEWTON_MAX_ITER = 100
 #: likely the converged point, which needs no Hessian). On quadratic ones never: their Hessian costs
 #: ~15-20 energy and gradient evaluations, the linear ones' about one objective evaluation.
 NEWTON_EAGER_ABOVE_TOL = 10.0
+#: A Newton iterate within this factor of the force target takes a chord step (the solve's last
+#: factorization reused: no Hessian, no factorization) before a fresh Newton step
+#: (``NewtonConfig.chord_within``; the measurements: docs/decisions.md).
+NEWTON_CHORD_WITHIN = 10.0
 #: Predictor: penalty weight (relative to max |diag H|) pushing reachable points with O.
 PREDICTOR_PENALTY = 1e4
 #: Predictor: retries carrying newly infeasible points fully with O before bisecting the step.

@@ -388,24 +388,26 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     opts = NewtonConfig(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
                          step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=cm.fem.element_order == 1,
                          eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False,
-                         exact_first=not (obj.lazy_exact and ctx.exact_failed))
-    solver = TimedSolver(pinned(ctx.solver, obj.pin), ctx.timer)
+                         exact_first=not (obj.lazy_exact and ctx.exact_failed),
+                         chord_within=C.NEWTON_CHORD_WITHIN)
+    solver = TimedSolver(pinned(ctx.solver, obj.pin, target=scale), ctx.timer)
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
     ctx.exact_failed = res.exact_failures > 0
     return res.x.reshape(x0.shape), res.iterations
 
 
-def pinned(solver, pin):
+def pinned(solver, pin, target: float | None = None):
     """A solver with the rigid-mode pin's Woodbury update.
 
     Args:
         solver: the SPD solver.
         pin: the pin, or None.
+        target: Newton's force target [N] (the accuracy of an iterative pinned solve), or None.
 
     Returns:
         ``solver`` itself without a pin, else :class:`simfab.coupling.rigid.PinnedSolver`.
     """
-    return solver if pin is None else rigid.PinnedSolver(solver, pin)
+    return solver if pin is None else rigid.PinnedSolver(solver, pin, target)
 
 
 def evaluation(obj: StepObjective, x: np.ndarray) -> Evaluation | None:

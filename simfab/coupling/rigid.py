@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from simfab.fem.elastic import energy_gradient_hessian
+from simfab.solve.linear import NotPositiveDefinite
 
 #: A rigid motion whose contact stiffness is below this fraction of the stiffness it would have if
 #: every contact normal were aligned with the motion counts as unresisted.
@@ -78,27 +79,123 @@ def pin_for(cm, Q: np.ndarray, c: np.ndarray, x: np.ndarray) -> Pin | None:
     return pin
 
 
+#: PinnedSolver: when A alone does not factorize, A + shift I does with the smallest shift of
+#: SHIFT_START * mu * 10^k up to SHIFT_MAX * mu (mu the pin's stiffness, the mean diagonal stiffness)...
+SHIFT_START = 1e-7
+SHIFT_MAX = 1e-4
+#: ... and conjugate gradients on A + mu U U^T, preconditioned by that factorization, solve to this
+#: relative residual (inexact-Newton forcing), or to PCG_TOL_NEAR when the caller gives Newton's force
+#: target and the right-hand side is within PCG_NEAR times it (Newton's last steps: exact, so that
+#: a tight target is reached as with a direct solve), in at most PCG_MAX_ITER iterations (past them
+#: the PCG_TOL criterion alone).
+PCG_TOL = 1e-2
+PCG_NEAR = 100.0
+PCG_TOL_NEAR = 1e-8
+PCG_MAX_ITER = 25
+
+
 class PinnedSolver:
     """Solves (A + mu U U^T)[free] x = b with one factorization of A[free] (Woodbury):
     y = A^-1 b, Z = A^-1 U, x = y - Z (I/mu + U^T Z)^-1 U^T y. Wraps a solver with
     ``solve_free(A, free, b)``, or with ``solve_free_update`` (:class:`simfab.solve.linear.SPDSolver`:
-    the same update with U through half the triangular solves); A must be factorizable (see
-    simulate: a tiny diagonal term)."""
+    the same update with U through half the triangular solves).
 
-    def __init__(self, solver, pin: Pin):
+    A loaded part's exact Hessian A can be slightly indefinite along the rigid motions the pin
+    holds (their geometric stiffness; docs/decisions.md) while A + mu U U^T is positive definite. When A
+    does not factorize, A + shift I (the smallest shift of a ladder, see SHIFT_START) is factorized
+    instead and serves as the preconditioner of conjugate gradients on A + mu U U^T itself (the
+    shift moves the other modes' eigenvalues by a small fraction: a few iterations), so the solve
+    stays exact; the shift is remembered for the run's later solves (``SPDSolver.shift_hint``).
+    Negative curvature found by the iterations (A + mu U U^T indefinite) raises NotPositiveDefinite,
+    as a failed factorization does."""
+
+    def __init__(self, solver, pin: Pin, target: float | None = None):
         self.solver, self.pin = solver, pin
+        self.target = target  # Newton's force target (inf-norm of the residual) [units of b], or None
+        self.pcg_iterations = 0  # conjugate-gradient iterations of the shifted solves so far
+        self._Uf = None
 
     def solve_free(self, A, free, b):
-        Uf = self.pin.U[free]
-        if hasattr(self.solver, "solve_free_update"):
-            return self.solver.solve_free_update(A, free, b, Uf, self.pin.mu)
-        X = self.solver.solve_free(A, free, np.column_stack([b, Uf]))
-        y, Z = X[:, 0], X[:, 1:]
-        S = np.eye(Uf.shape[1]) / self.pin.mu + Uf.T @ Z
-        return y - Z @ np.linalg.solve(S, Uf.T @ y)
+        if self._Uf is None or self._Uf[0] is not free:
+            self._Uf = (free, self.pin.U[free])  # one array per free set: the solver reuses its half solve
+        Uf = self._Uf[1]
+        if not hasattr(self.solver, "solve_free_update"):
+            X = self.solver.solve_free(A, free, np.column_stack([b, Uf]))
+            y, Z = X[:, 0], X[:, 1:]
+            S = np.eye(Uf.shape[1]) / self.pin.mu + Uf.T @ Z
+            return y - Z @ np.linalg.solve(S, Uf.T @ y)
+        hint = getattr(self.solver, "shift_hint", None)
+        if not hint:
+            try:
+                return self.solver.solve_free_update(A, free, b, Uf, self.pin.mu)
+            except NotPositiveDefinite:
+                if hint is None:
+                    raise
+        return self._shifted(A, free, b, Uf)
 
     def solve(self, A, b):
         return self.solve_free(A, np.arange(A.shape[0]), b)
+
+    def _shifted(self, A, free, b, Uf):
+        """(A[free] + mu Uf Uf^T)^-1 b by PCG preconditioned with the shifted factorization."""
+        b = np.asarray(b, dtype=np.float64)
+        if b.ndim == 2:
+            return np.column_stack([self._shifted(A, free, b[:, j], Uf) for j in range(b.shape[1])])
+        mu, solver = self.pin.mu, self.solver
+        rel = max(solver.shift_hint, SHIFT_START)
+        while True:
+            try:  # the first preconditioning factorizes
+                z = solver.solve_free_update(A, free, b, Uf, mu, rel * mu)
+                break
+            except NotPositiveDefinite:
+                rel *= 10.0
+                if rel > SHIFT_MAX:
+                    raise
+        solver.shift_hint = rel
+        return self._pcg(A, free, b, z, Uf, rel * mu)
+
+    def _pcg(self, A, free, b, z, Uf, shift):
+        """Conjugate gradients on (A[free] + mu Uf Uf^T) x = b, z the preconditioned b."""
+        solver, mu = self.solver, self.pin.mu
+        n = A.shape[0]
+        z_full = np.zeros(n)
+
+        def K(v):
+            z_full[free] = v
+            return (A @ z_full)[free] + mu * (Uf @ (Uf.T @ v))
+
+        def M(r):  # the factorization of A + shift I is reused (same values)
+            return solver.solve_free_update(A, free, r, Uf, mu, shift)
+
+        bn = float(np.linalg.norm(b))
+        x = np.zeros_like(b)
+        if bn == 0.0:
+            return x
+        near = self.target is not None and np.abs(b).max() <= PCG_NEAR * self.target
+        tol = PCG_TOL_NEAR if near else PCG_TOL
+        r = b.copy()
+        p = z.copy()
+        rz = float(r @ z)
+        for _ in range(PCG_MAX_ITER):
+            Kp = K(p)
+            pKp = float(p @ Kp)
+            if not pKp > 0.0:
+                raise NotPositiveDefinite("the pinned Hessian is not positive definite (negative curvature in CG)")
+            a = rz / pKp
+            x += a * p
+            r -= a * Kp
+            self.pcg_iterations += 1
+            rn = np.linalg.norm(r)
+            relative = rn <= PCG_TOL * bn
+            if rn <= tol * bn:
+                return x
+            z = M(r)
+            rz, rz_old = float(r @ z), rz
+            p = z + (rz / rz_old) * p
+        if relative:
+            return x
+        raise NotPositiveDefinite(f"conjugate gradients on the pinned Hessian did not converge in {PCG_MAX_ITER} "
+                                  "iterations")
 
 
 def unresisted(Q: np.ndarray, c: np.ndarray, y: np.ndarray, normals: np.ndarray, weights: np.ndarray) -> np.ndarray:

@@ -134,6 +134,10 @@ class InsertionResult:
         jammed_at: the path length [m] where a frictional insertion self-locked (see :func:`jammed`),
             None when it did not.
         guided_steps: solves whose warm start was a coarser run's candidate (``simulate``'s ``guide``).
+        counts: how many times each stage of ``timings`` ran (machine-independent: "factorization" the
+            numeric factorizations, "solves" Newton's linear solves, i.e. its iterations over every solve of
+            the run, the rest search's discarded trials included, "assembly" the Hessian evaluations; the
+            predictor's work books under "predictor" only).
     """
 
     model: CouplingModel
@@ -147,6 +151,7 @@ class InsertionResult:
     removal: list = field(default_factory=list)
     jammed_at: float | None = None
     guided_steps: int = 0
+    counts: dict = field(default_factory=dict)
 
     def column(self, name: str, phase: str = "insert") -> np.ndarray:
         """One field of every record of a phase as an array.
@@ -262,7 +267,8 @@ def _result(stepper: Stepper, rest: str, jam: float | None, seconds: float) -> I
     phases["other"] = seconds - sum(phases.values())
     return InsertionResult(model=cm, steps=stepper.steps, seconds=seconds, timings=dict(ctx.timer.t), phases=phases,
                            warnings=warnings, notes=notes, refined_facets=tuple(sorted(state.refined)),
-                           removal=stepper.removal, jammed_at=jam, guided_steps=ctx.guided)
+                           removal=stepper.removal, jammed_at=jam, guided_steps=ctx.guided,
+                           counts=dict(ctx.timer.n))
 
 
 def check_start(cm: CouplingModel) -> None:

@@ -124,8 +124,13 @@ class SPDSolver:
         # solve_free: (full pattern key, free indices, value map full -> factor input, the index
         # arrays (indptr, indices) last seen with that key)
         self._full = None
+        self._diag = None  # positions of the diagonal entries in the factor's input (values) order
+        self._update = None  # solve_free_update: (factor values, U, mu, L^-1 P U, D^-1 L^-1 P U, capacitance)
         self.timer = None
         self.factorizations = 0
+        #: the diagonal shift (relative to the pin's stiffness) a :class:`simfab.coupling.rigid.PinnedSolver`
+        #: last needed to factorize with this solver (0: none); its later solves start from it
+        self.shift_hint = 0.0
 
     def solve(self, A: sp.spmatrix, b: np.ndarray) -> np.ndarray:
         """Solve ``A x = b`` for SPD ``A`` (n, n) and ``b`` (n,) or (n, k); returns x shaped like b.
@@ -152,9 +157,10 @@ class SPDSolver:
         return self._solve_factored(np.asarray(b, dtype=np.float64))
 
     def solve_free_update(self, A: sp.spmatrix, free: np.ndarray, b: np.ndarray, U: np.ndarray,
-                          mu: float) -> np.ndarray:
-        """Solve ``(A[free][:, free] + mu U U^T) x = b`` (U (m, r) dense, mu > 0 [units of A], b (m,)
-        or (m, k)) with one sparse factorization of ``A``'s block (Woodbury).
+                          mu: float, shift: float = 0.0) -> np.ndarray:
+        """Solve ``(A[free][:, free] + shift I + mu U U^T) x = b`` (U (m, r) dense, mu > 0 [units of
+        A], shift >= 0 [units of A], b (m,) or (m, k)) with one sparse factorization of ``A``'s block
+        plus the shift (Woodbury).
 
         With CHOLMOD's factor P A P^T = L D L^T (D = I for a supernodal L L^T) and the half solves
         f(v) = L^-1 P v, g(v) = P^T L^-T v (so A^-1 = g D^-1 f): V = f(U), v = f(b),
@@ -163,27 +169,35 @@ class SPDSolver:
         Raises :class:`NotPositiveDefinite` when the factorization fails."""
         b = np.asarray(b, dtype=np.float64)
         U = np.asarray(U, dtype=np.float64)
-        self._factor_free(A, free)
+        self._factor_free(A, free, shift)
         k = 1 if b.ndim == 1 else b.shape[1]
         if self.backend == "splu":
             X = self._lu.solve(np.column_stack([b.reshape(len(b), k), U]))
             y, Z = X[:, :k], X[:, k:]
             return (y - Z @ np.linalg.solve(np.eye(U.shape[1]) / mu + U.T @ Z, U.T @ y)).reshape(b.shape)
-        F = self._half(np.column_stack([b.reshape(len(b), k), U]), forward=True)
-        v, V = F[:, :k], F[:, k:]
-        Dv, DV = self._inv_d * v, self._inv_d * V
-        c = np.linalg.solve(np.eye(U.shape[1]) / mu + V.T @ DV, V.T @ Dv)
+        upd = self._update
+        if upd is not None and upd[0] is self._factored and upd[1] is U and upd[2] == mu:
+            V, DV, S = upd[3:]  # the same factorization and U: their half solve is reused
+            v = self._half(b.reshape(len(b), k), forward=True)
+        else:
+            F = self._half(np.column_stack([b.reshape(len(b), k), U]), forward=True)
+            v, V = F[:, :k], F[:, k:]
+            DV = self._inv_d * V
+            S = np.eye(U.shape[1]) / mu + V.T @ DV
+            self._update = (self._factored, U, mu, V, DV, S)
+        Dv = self._inv_d * v
+        c = np.linalg.solve(S, V.T @ Dv)
         return self._half(Dv - DV @ c, forward=False).reshape(b.shape)
 
-    def _factor_free(self, A: sp.spmatrix, free: np.ndarray) -> None:
-        """Factorize ``A[free][:, free]`` numerically (see :meth:`solve_free`)."""
+    def _factor_free(self, A: sp.spmatrix, free: np.ndarray, shift: float = 0.0) -> None:
+        """Factorize ``A[free][:, free] + shift I`` numerically (see :meth:`solve_free`)."""
         free = np.asarray(free)
         if self.backend == "splu":
             from scipy.sparse.linalg import splu
 
             A = canonical_csr(A)
-            self._lu = splu(sp.csc_matrix(A[free][:, free]), permc_spec="MMD_AT_PLUS_A",
-                            options={"SymmetricMode": True})
+            Af = A[free][:, free] + shift * sp.identity(len(free), format="csr") if shift else A[free][:, free]
+            self._lu = splu(sp.csc_matrix(Af), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
             return
         full = self._full
         # a model's Hessians share its pattern's index arrays (never modified in place): the same
@@ -201,7 +215,10 @@ class SPDSolver:
             full = self._full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed, (A.indptr, A.indices))
         elif not same:
             full = self._full = full[:3] + ((A.indptr, A.indices),)
-        self._ensure_factor(A.data[full[2]])
+        values = A.data[full[2]]
+        if shift:
+            values[self._diag] += shift
+        self._ensure_factor(values)
 
     def _solve_cholmod(self, A, b):
         A = canonical_csr(A)  # the value map gathers one value per entry
@@ -273,6 +290,7 @@ class SPDSolver:
         # the upper triangle in CSR storage order (rows j, columns i ascending) is CHOLMOD's order
         self._perm = np.flatnonzero(cols >= rows)
         c, r = rows[self._perm], cols[self._perm]
+        self._diag = np.flatnonzero(c == r)  # the diagonal's entries in the factor's input order
         cholmod = import_cholmod()
         import cvxopt
 

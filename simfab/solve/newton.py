@@ -5,6 +5,8 @@ sparse Hessian. Each iteration solves ``H_ff dx_f = -g_f`` on the free dofs with
 factorization (:class:`simfab.solve.linear.SPDSolver`), then backtracks along ``dx`` until the Armijo
 condition holds at an admissible point. Exact-first steps: ``H`` may be a pair ``(H_exact, H_psd)``
 (each possibly a callable building it on demand); the exact one is used while it factorizes.
+Chord steps (``NewtonConfig.chord_within``): near the target an iterate may reuse the solve's last
+factorization instead of a fresh Hessian (the stopping rule is the same).
 
 Feasibility hooks: ``max_step(x, dx) -> alpha_max`` caps the step before the line search;
 ``admissible(x) -> bool`` rejects trial points (as does an objective of +inf or NaN).
@@ -63,6 +65,13 @@ class NewtonConfig:
     reg_initial: float = 1e-10
     reg_growth: float = 100.0
     reg_max: float = 1e2
+    # Chord steps: when an accepted trial was evaluated without its Hessian and its gradient is
+    # within this factor of the target, the next step reuses the solve's last factorization (no
+    # Hessian assembly, no factorization: one solve) instead of a fresh Newton step; 0: never. A
+    # further chord step follows only while each cut the gradient by at least chord_contraction;
+    # otherwise (or when the factorization cannot be reused) the Hessian is evaluated as usual.
+    chord_within: float = 0.0
+    chord_contraction: float = 0.1
 
     def __post_init__(self):
         checks = {
@@ -78,6 +87,8 @@ class NewtonConfig:
             "reg_initial": 0 < self.reg_initial <= self.reg_max,
             "reg_growth": self.reg_growth > 1,
             "eager_above_tol": self.eager_above_tol >= 0,
+            "chord_within": self.chord_within >= 0,
+            "chord_contraction": 0 < self.chord_contraction < 1,
         }
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
@@ -97,6 +108,8 @@ class NewtonResult:
         reason: which criterion stopped the iteration ("gradient", "step", "roundoff")
         history: one dict per iteration: energy, grad_norm, alpha, backtracks, shift
         exact_failures: exact Hessians offered whose factorization failed (not positive definite)
+        chord_steps: iterations that reused the previous iteration's factorization (see
+            ``NewtonConfig.chord_within``; counted in ``iterations`` too)
     """
 
     x: np.ndarray
@@ -107,6 +120,7 @@ class NewtonResult:
     reason: str = ""
     history: list = field(default_factory=list)
     exact_failures: int = 0
+    chord_steps: int = 0
 
 
 class _FreeBlock:
@@ -166,22 +180,23 @@ def _newton_direction(solver: SPDSolver, sub, H, rhs: np.ndarray, opts: NewtonCo
     ``(H_exact, H_psd)``: the exact Hessian is tried first (a successful Cholesky factorization
     proves it positive definite, so the step is an exact Newton step: quadratic convergence);
     when it is indefinite (or ``try_exact`` is False) the PSD-projected one is used. Returns
-    (dx, shift, "exact"|"psd", whether an exact factorization failed)."""
+    (dx, shift, "exact"|"psd", whether an exact factorization failed, the matrix factorized: None
+    when it needed a diagonal shift)."""
     failed = False
     if isinstance(H, tuple):
         H_exact, H_psd = H
         if try_exact:
             try:
                 H_exact = H_exact() if callable(H_exact) else H_exact
-                return _solve_block(solver, sub, H_exact, rhs), 0.0, "exact", False
+                return _solve_block(solver, sub, H_exact, rhs), 0.0, "exact", False, H_exact
             except NotPositiveDefinite:
                 failed = True
         H = H_psd() if callable(H_psd) else H_psd
     try:
-        return _solve_block(solver, sub, H, rhs), 0.0, "psd", failed
+        return _solve_block(solver, sub, H, rhs), 0.0, "psd", failed, H
     except NotPositiveDefinite:
         dx, shift = _solve_shifted(solver, sub(H), rhs, opts)
-    return dx, shift, "psd", failed
+    return dx, shift, "psd", failed, None
 
 
 def _solve_block(solver: SPDSolver, sub: "_FreeBlock", H, rhs: np.ndarray) -> np.ndarray:
@@ -265,15 +280,29 @@ def minimize(
     xscale = opts.x_scale if opts.x_scale is not None else max(_inf_norm(x[free_idx]), 1.0)
     history: list[dict] = []
 
+    chords = 0
+    factored = None  # the matrix of this solve's last factorization (what a chord step reuses)
+    chord = False  # the next step is a chord step
+    g_before = np.inf  # gradient norm before the last step
+
     def done(reason: str, it: int) -> NewtonResult:
         return NewtonResult(x=x, energy=float(f), grad_norm=gnorm, iterations=it, converged=True,
-                            reason=reason, history=history, exact_failures=exact_failures)
+                            reason=reason, history=history, exact_failures=exact_failures, chord_steps=chords)
 
     if free_idx.size == 0 or gnorm <= opts.grad_tol * gscale:
         return done("gradient", 0)
 
     for it in range(1, opts.max_iter + 1):
-        dx_f, shift, used, failed = _newton_direction(solver, sub, H, -g[free_idx], opts, try_exact)
+        dx_f = None
+        if chord:
+            try:  # the same values: the solver reuses its factorization (no numeric factorization)
+                dx_f, shift, used, failed = _solve_block(solver, sub, factored, -g[free_idx]), 0.0, "chord", False
+                chords += 1
+            except NotPositiveDefinite:
+                factored = None
+                f, g, H = fun(x, True)
+        if dx_f is None:
+            dx_f, shift, used, failed, factored = _newton_direction(solver, sub, H, -g[free_idx], opts, try_exact)
         exact_failures += int(failed)
         if failed and not opts.retry_exact:
             try_exact = False
@@ -299,7 +328,7 @@ def minimize(
         flat = -slope <= opts.roundoff * max(abs(f), tiny)
         accepted = False
         Ht = None
-        eager_now = opts.eager_hessian and gnorm > opts.eager_above_tol * opts.grad_tol * gscale
+        eager_now = opts.eager_hessian and gnorm > opts.eager_above_tol * opts.grad_tol * gscale and not chord
         for bt in range(opts.max_backtracks + 1):
             xt = x + alpha * dx
             if admissible is None or admissible(xt):
@@ -325,11 +354,13 @@ def minimize(
             )
         x = xt
         f, g, H = ft, np.asarray(gt), Ht  # H None: the accepted trial was evaluated without it
-        gnorm = _inf_norm(g[free_idx])
+        g_before, gnorm = gnorm, _inf_norm(g[free_idx])
         history.append(dict(energy=float(f), grad_norm=gnorm, alpha=alpha, backtracks=bt, shift=shift, hessian=used))
         if gnorm <= opts.grad_tol * gscale:
             return done("gradient", it)
-        if H is None:
+        chord = (H is None and factored is not None and gnorm <= opts.chord_within * opts.grad_tol * gscale
+                 and (not chord or gnorm <= opts.chord_contraction * g_before))
+        if H is None and not chord:
             f, g, H = fun(x, True)
 
     raise ConvergenceError(
