@@ -24,11 +24,7 @@ CONVENTIONS = frozenset({"add_args", "run", "demo", "format_text", "output_roots
 
 #: Public functions still defined under the same name in several modules ("name": modules), to be
 #: renamed to what each one does; a name leaves the list when only one module defines it.
-KNOWN_DUPLICATES = {
-    # simfab.couple.simulate is the top-level convenience named after ``simfab couple simulate`` (issue 40);
-    # simfab.coupling.simulate.simulate is the simulator itself, called from some thirty places
-    "simulate": {"simfab.couple", "simfab.coupling.simulate"},
-}
+KNOWN_DUPLICATES: dict = {}
 
 
 def _module(path: Path, root: Path) -> str:

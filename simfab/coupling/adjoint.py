@@ -509,7 +509,7 @@ def _depends(link: StepLink, lin: StepLinearization) -> bool:
 
 
 class SensitivityRecorder:
-    """Collects a :class:`StepSensitivity` per kept step of a run: pass as ``simulate(..., recorder=...)``.
+    """Collects a :class:`StepSensitivity` per kept step of a run: pass as ``simulate_insertion(..., recorder=...)``.
 
     ``insert`` and ``remove``: the sensitivities of the run's insertion and removal records, in order.
     Each record's sensitivity is computed when it is kept, at its start held fixed; where steps depend on

@@ -25,7 +25,7 @@ import numpy as np
 
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 from simfab.errors import InputError
 
 FIGURES = ("E_max", "E_ss", "F_in", "F_rm", "F_grip")
@@ -59,7 +59,7 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
         ov.setdefault("compliant", {}).update(level_mesh(comp, f))
         cm = load_coupling_scene(scene, overrides=ov, quiet=quiet or f != factors[0])  # flags logged once
         t0 = time.perf_counter()
-        res = simulate(cm, quiet=quiet)
+        res = simulate_insertion(cm, quiet=quiet)
         dt = time.perf_counter() - t0
         prof, d = summarize(res)
         out.append(Level(factor=float(f), elements=int(cm.fem.n_elements), seconds=dt,

@@ -1,7 +1,7 @@
 """One insertion run of a coupling scene as a typed result: :func:`run` -> :class:`CouplingResult`.
 
 :func:`run` loads the scene (MJCF + TOML, or a bundled name) with the given overrides, runs the
-quasi-static insertion (:func:`simfab.coupling.simulate.simulate`), reads its deformation profile
+quasi-static insertion (:func:`simfab.coupling.simulate.simulate_insertion`), reads its deformation profile
 (:func:`simfab.coupling.profile.profile_of`) and the stress the design's yield constraint reads
 (:func:`averaged_stress`), and writes every output (:func:`simfab.coupling.outputs.write_all`) only
 when ``out`` is given. ``simfab couple simulate`` is this function and a table.
@@ -232,7 +232,7 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool |
     from simfab._warp import device as check_device  # quiet Warp initialization
     from simfab.contact.sdf import PrimitiveField
     from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import check_start, simulate
+    from simfab.coupling.simulate import check_start, simulate_insertion
     from simfab.design.scene import check_brief_table
     from simfab.progress import log
 
@@ -249,7 +249,7 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool |
            else f"{len(cm.field.vertices)} object samples")
     mu = f", friction {cm.contact.friction:g}" if cm.contact.friction > 0 else ", frictionless"
     log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {obj}, {len(cm.s_steps) - 1} steps{mu}", quiet=quiet)
-    result = result_of(simulate(cm, quiet=quiet), radius=stress_radius(scene))
+    result = result_of(simulate_insertion(cm, quiet=quiet), radius=stress_radius(scene))
     if out is None:
         return result
     from simfab.coupling.outputs import write_all

@@ -45,7 +45,7 @@ refinement points on boundary edges/faces). Method, per step (interior point / I
    ConvergenceError. A step that cannot be taken (predictor infeasible, Newton failure) is
    bisected along the path up to ``MAX_BISECTIONS`` times before giving up loudly.
 
-Layout: :func:`simulate` runs a :class:`simfab.coupling.stepper.Stepper` over the planned steps
+Layout: :func:`simulate_insertion` runs a :class:`simfab.coupling.stepper.Stepper` over the planned steps
 and then to O's rest point (:mod:`.settle`). Each stage is a module of public functions of typed
 data (:mod:`.state`: the step state, a converged step's evaluation and the contact it ends with):
 :mod:`.objective` (the step objective and its Newton solve), :mod:`.predictor` (warm start),
@@ -127,13 +127,13 @@ class InsertionResult:
         notes: one line each about how the run was solved (e.g. a rigid motion of A that nothing
             resists, pinned by the solver).
         refined_facets: ids (rows of ``model.contact_facets``) of the facets that carried refinement
-            points at the end (``simulate``'s ``refined`` for a similar run).
+            points at the end (``simulate_insertion``'s ``refined`` for a similar run).
         removal: with friction, one :class:`StepResult` per step of the removal (O moved back from where
             the insertion left it over the insertion's step positions, phase "remove"); empty without
             friction (removal is then the insertion played backwards).
         jammed_at: the path length [m] where a frictional insertion self-locked (see :func:`jammed`),
             None when it did not.
-        guided_steps: solves whose warm start was a coarser run's candidate (``simulate``'s ``guide``).
+        guided_steps: solves whose warm start was a coarser run's candidate (``simulate_insertion``'s ``guide``).
         counts: how many times each stage of ``timings`` ran (machine-independent: "factorization" the
             numeric factorizations, "solves" Newton's linear solves, i.e. its iterations over every solve of
             the run, the rest search's discarded trials included, "assembly" the Hessian evaluations; the
@@ -167,7 +167,7 @@ class InsertionResult:
         return np.array([getattr(r, name) for r in records], dtype=float)
 
 
-def simulate(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=(), recorder=None,
+def simulate_insertion(cm: CouplingModel, *, quiet: bool = True, callback=None, refined=(), recorder=None,
              guide: CoarseGuide | None = None) -> InsertionResult:
     """Run the insertion along all steps of ``cm``; see the module docstring for the method.
 

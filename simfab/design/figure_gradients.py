@@ -109,7 +109,7 @@ def _stress_measure(cm, radius: float) -> StressMeasure:
 
 def design_recorder(cm, brief: B.DesignBrief) -> "DeferredRecorder":
     """The recorder the gradient method runs a model's insertion with: pass the initial shape's insertion
-    one (``simulate(cm, recorder=...)``) as ``make_problem``'s ``initial_recorder`` and the method
+    one (``simulate_insertion(cm, recorder=...)``) as ``make_problem``'s ``initial_recorder`` and the method
     reuses that insertion instead of simulating the initial shape again.
 
     Args:
@@ -136,7 +136,7 @@ WEIGHT_FLOOR = 1e-6
 
 
 class DeferredRecorder:
-    """A run's recorder (``simulate(..., recorder=...)``) that keeps each record's converged state
+    """A run's recorder (``simulate_insertion(..., recorder=...)``) that keeps each record's converged state
     and computes the adjoint sensitivities (:class:`simfab.coupling.adjoint.SensitivityRecorder`)
     afterwards, of the records asked for only (:meth:`sensitivities`): the brief's figures read
     a few records each (maxima through softmax weights that vanish away from the peak, the steady

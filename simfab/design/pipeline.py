@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 from simfab.design import brief as B
 from simfab.design import outputs
 from simfab.design.gradient import GRADIENT_LAG_TOL, MAX_ITERATIONS, NonsmoothEvents, design_recorder, optimize_gradient
@@ -509,7 +509,7 @@ def optimize_checked(ds, source: ProblemSource, seed, restarts, scheduler, worke
     cm = ds.cm
     # (the gradient method reuses the placement's insertion of the initial shape, recorded)
     rec = design_recorder(cm, ds.brief) if method == "gradient" else None
-    initial = simulate(cm, recorder=rec) if ds.brief.placement == "displacement" else None
+    initial = simulate_insertion(cm, recorder=rec) if ds.brief.placement == "displacement" else None
     problem = make_problem(cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial, seed=seed,
                            source=source, initial_recorder=rec)
     if mesh_check and problem.target is not None:
@@ -604,7 +604,7 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
     cm3 = load_coupling_scene(paths["scene_xml"], device=fem.device)
     log(f"couple optimize: simulating the revolved part ({arms} arms, {cm3.fem.n_elements} 10-node tets)", quiet=quiet)
     t0 = time.perf_counter()
-    r3 = simulate(cm3)
+    r3 = simulate_insertion(cm3)
     fig = level_figures(r3, res.problem.brief.stress_radius)  # P2: stress averaged at quadrature points
     cons = B.constraints(fig, res.problem.limits)
     missed = [c.name for c in cons if not c.satisfied]

@@ -9,7 +9,7 @@ Each evaluation of a design h (:func:`evaluate`):
 1. X' = M_LBS T(h); **validity**: every element keeps its orientation and at least QUALITY_REL of
    its initial mean-ratio quality q (4 sqrt(3) A / sum l^2 for a triangle, 12 (3 V)^(2/3) / sum l^2
    for a tetrahedron); a candidate that fails is rejected without simulating.
-2. The initial scene's insertion is re-run on X' (:func:`simfab.coupling.simulate.simulate`,
+2. The initial scene's insertion is re-run on X' (:func:`simfab.coupling.simulate.simulate_insertion`,
    starting with the facets the initial insertion refined); a simulation that raises makes a
    rejected candidate with its reason, never a crash of the optimization.
 3. The profile gives E_ss, E_max, F_grip, F_in, F_rm and max von Mises (:func:`profile_figures`);
@@ -37,7 +37,7 @@ from simfab._warp import device as check_device
 from simfab.coupling import settle
 from simfab.coupling.model import CouplingModel, with_rest_shape
 from simfab.coupling.profile import analyze_run
-from simfab.coupling.simulate import InsertionResult, check_start, simulate
+from simfab.coupling.simulate import InsertionResult, check_start, simulate_insertion
 from simfab.design import brief as B
 from simfab.design.handles import Handles, make_handles
 from simfab.design.modification import ModificationEnergy
@@ -161,7 +161,7 @@ class EvaluationSettings:
     margin : relative margin inside the force and stress bounds that the penalties aim at
         (:data:`simfab.design.brief.CORRECTION_MARGIN` in correction rounds, else 0); the
         constraints report the brief's own bounds
-    refined : boundary facet ids every candidate's insertion starts refined with (``simulate``'s
+    refined : boundary facet ids every candidate's insertion starts refined with (``simulate_insertion``'s
         ``refined``): those the initial shape's insertion refined, set by
         :func:`simfab.design.optimize.optimize_anneal`
     hold_steps : every candidate's insertion runs at the initial shape's planned path positions
@@ -193,10 +193,10 @@ class DesignProblem:
         source: the :class:`ProblemSource` that rebuilds this problem in another process (parallel
             evaluation, restarts), or None (a problem not loaded from a scene file).
         settings: :class:`EvaluationSettings` (mesh corrections, margin, seeded refinement).
-        initial: the unmodified shape's insertion (``simulate(base)``, e.g. run for the displacement
+        initial: the unmodified shape's insertion (``simulate_insertion(base)``, e.g. run for the displacement
             placement), which :func:`initial_evaluation` scores instead of running it again; None:
             it is simulated there.
-        initial_recorder: the recorder ``initial`` was run with (``simulate``'s ``recorder``, e.g. the
+        initial_recorder: the recorder ``initial`` was run with (``simulate_insertion``'s ``recorder``, e.g. the
             gradient method's :class:`simfab.design.gradient.DeferredRecorder`), or None.
     """
 
@@ -254,7 +254,7 @@ def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), ta
     """Set up the optimization of scene ``cm``'s part.
 
     kept_regions : vertex index arrays kept unchanged besides the fixed support (keep sites)
-    initial : the initial shape's InsertionResult, ``simulate(cm)`` (displacement placement needs it;
+    initial : the initial shape's InsertionResult, ``simulate_insertion(cm)`` (displacement placement needs it;
         simulated here when missing); kept as the problem's ``initial``
     handle_vertices : explicit active handle vertices (overrides the brief's placement)
     seed : placement seed (random placement; affinity propagation's tie-breaking)
@@ -279,7 +279,7 @@ def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), ta
         disp = None
         if brief.placement == "displacement":
             if initial is None:
-                initial = simulate(cm)
+                initial = simulate_insertion(cm)
             disp = max_displacement(initial)[:n]
         handle_vertices = place_handles(X, fem.elements, brief.handles, kept, method=brief.placement,
                                         displacement=disp, seed=seed)
@@ -512,7 +512,7 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
         objective = a lower bound > threshold) as soon as the objective provably exceeds it.
     abort : optional callable () -> bool polled after every insertion step; when it returns True
         the simulation stops (status "aborted": a speculative evaluation no longer needed).
-    recorder : optional factory ``recorder(cm)`` of the insertion's per-step recorder (``simulate``'s
+    recorder : optional factory ``recorder(cm)`` of the insertion's per-step recorder (``simulate_insertion``'s
         ``recorder``, e.g. :class:`simfab.coupling.adjoint.SensitivityRecorder`), made for the
         candidate's model; the recorder is returned as ``DesignEvaluation.recorder``.
     """
@@ -529,7 +529,7 @@ def evaluate(problem: DesignProblem, h: np.ndarray, *, keep_result: bool = False
     try:
         check_start(cm)
         rec = ev.recorder = recorder(cm) if recorder is not None else None
-        res = simulate(cm, callback=_step_watch(_bound_watch(problem, cm, base, threshold, ev.bounds), abort),
+        res = simulate_insertion(cm, callback=_step_watch(_bound_watch(problem, cm, base, threshold, ev.bounds), abort),
                        refined=problem.settings.refined, recorder=rec)
     except _Aborted as e:
         ev.status, ev.reason = "aborted", f"no longer needed at step {e.step}"

@@ -36,7 +36,7 @@ import scipy.sparse as sp
 from simfab.coupling.converge import extrapolate
 from simfab.coupling.guide import CoarseGuide
 from simfab.coupling.model import make_coupling_model
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 from simfab.design import brief as B
 from simfab.design.problem import linear_mesh, profile_figures
 from simfab.fem.model import make_model
@@ -263,7 +263,7 @@ def step_check(problem, rest: np.ndarray, res, figures: dict, *, quiet: bool = T
     n = len(m.fem.rest)
     same = two_grid and len(res.model.fem.rest) == n  # (the same nodes: P2 on the optimization mesh)
     guide = CoarseGuide.from_records(res.steps, sp.identity(n, format="csr")) if same else None
-    fine_res = simulate(m, quiet=quiet, guide=guide)
+    fine_res = simulate_insertion(m, quiet=quiet, guide=guide)
     fine = _run_figures(problem, fine_res)
     factors = {k: figure_ratio(k, fine[k], figures[k])
                for k in FIGURES + (("rms_error",) if problem.target is not None else ())}
@@ -321,7 +321,7 @@ def mesh_check(problem, rest: np.ndarray, *, figures0: dict | None = None, resul
             guide = None
             if two_grid and o == 2 and prev_level == (2, t - 1) and prev_res is not None:
                 guide = CoarseGuide.from_records(prev_res.steps, p2_prolongation(prev_res.model.fem, m.fem))
-            res = simulate(m, quiet=quiet, guide=guide)
+            res = simulate_insertion(m, quiet=quiet, guide=guide)
             # (with a target: the profile-matching error, a figure like the others)
             f, n, nodes = _run_figures(problem, res), m.fem.n_elements, m.fem.n_vertices
             if problem.target is not None:

@@ -29,7 +29,7 @@ import numpy as np
 
 from simfab.contact.sdf import Primitive, build_primitive_field
 from simfab.coupling.config import InsertionOptions
-from simfab.coupling.simulate import make_coupling_model, simulate
+from simfab.coupling.simulate import make_coupling_model, simulate_insertion
 from simfab.fem.elastic import energy_gradient_hessian
 from simfab.fem.materials import Material
 from simfab.fem.meshing import graded_box
@@ -66,7 +66,7 @@ def sphere_on_block(*, h0: float = 0.0025, growth: float = 0.1, W: float = 20.0,
     free[np.abs(P[:, 0]) <= 1e-12 * R, 0] = False  # symmetry planes
     free[np.abs(P[:, 1]) <= 1e-12 * R, 1] = False
     cm = replace(cm, free=free.ravel())
-    res = simulate(cm)
+    res = simulate_insertion(cm)
     top = np.flatnonzero(np.abs(P[:, 2]) <= 1e-12 * R)
     centre = top[np.argmin(np.linalg.norm(P[top, :2], axis=1))]
     facets = np.asarray(fem.boundary_facets)

@@ -25,7 +25,7 @@ from simfab.coupling import config as C
 from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure
 from simfab.coupling.model import with_rest_shape
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 from simfab.design.stress import averaging_matrix, quadrature_von_mises
 from simfab.fem.shape_derivative import linear_rest_derivative
 
@@ -84,9 +84,9 @@ def check(cm, seed=0, min_supported=3, figures=("energy", "force", "grip", "stre
     else:
         A = averaging_matrix(cm.fem, 0.5e-3)
     rec = SensitivityRecorder(cm, StressMeasure(averaging=A, temperature_rel=0.0))  # T = 0: the max's gradient
-    base = simulate(cm, recorder=rec)
-    plus = simulate(with_rest_shape(cm, X + EPS * dX))
-    minus = simulate(with_rest_shape(cm, X - EPS * dX))
+    base = simulate_insertion(cm, recorder=rec)
+    plus = simulate_insertion(with_rest_shape(cm, X + EPS * dX))
+    minus = simulate_insertion(with_rest_shape(cm, X - EPS * dX))
     assert [r.s for r in plus.steps] == [r.s for r in base.steps] == [r.s for r in minus.steps]
     assert plus.refined_facets == minus.refined_facets == base.refined_facets  # no refinement event between
     ok = [k for k, sn in enumerate(rec.insert) if sn.supported]

@@ -58,11 +58,12 @@ def test_summary_reports_the_averaged_stress_the_yield_constraint_reads(order):
     # averaging over a radius smaller than any element gives back the raw element maximum (P1)
     from simfab.coupling.insertion import averaged_stress, stress_radius
     from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.design.brief import DesignBrief
     from simfab.design.verify import level_figures
 
-    res = simulate(load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 4, "element_order": order}}))
+    overrides = {"simulation": {"steps": 4, "element_order": order}}
+    res = simulate_insertion(load_coupling_scene("block2d_tight", overrides=overrides))
     r = stress_radius("block2d_tight")
     assert r == DesignBrief().stress_radius  # the scene's brief leaves the default
     got = averaged_stress(res, r)

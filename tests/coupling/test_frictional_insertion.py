@@ -16,7 +16,7 @@ from simfab.coupling.points import edge_weights, facet_points, vertex_points
 from simfab.coupling.profile import analyze_run
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.settle import energy_balance
-from simfab.coupling.simulate import TURN_STEPS, make_coupling_model, simulate
+from simfab.coupling.simulate import TURN_STEPS, make_coupling_model, simulate_insertion
 from simfab.coupling.timing import Timer
 from simfab.fem.materials import PLA
 from simfab.fem.meshing import triangulate_polygon
@@ -46,8 +46,8 @@ def test_snapfit_forces_follow_the_wedge_formula(alpha, mu, dim):
     # within 5 %; at the same position they differ by how much the larger axial tip load softens and
     # bends the beam (simfab.verification.snapfit), within 5 % where mu tan a <= 0.2.
     steps = 24 if dim == 2 else 12
-    r0 = simulate(snapfit_model(alpha, 0.0, dim=dim, steps=steps))
-    r1 = simulate(snapfit_model(alpha, mu, dim=dim, steps=steps))
+    r0 = simulate_insertion(snapfit_model(alpha, 0.0, dim=dim, steps=steps))
+    r1 = simulate_insertion(snapfit_model(alpha, mu, dim=dim, steps=steps))
     # the removal turns O around in TURN_STEPS graded steps, then runs back over the insertion's positions
     assert r0.removal == [] and r1.jammed_at is None and len(r1.removal) == len(r1.steps) - 1 + TURN_STEPS
     sel = _deflected(r0)
@@ -73,17 +73,17 @@ def test_snapfit_forces_follow_the_wedge_formula(alpha, mu, dim):
 def test_a_self_locking_snapfit_is_reported_as_jammed():
     # mu tan(alpha) = 0.5 tan 70 deg = 1.37 >= 1: the box is pushed inside the tip's friction cone,
     # the contact sticks and drags the beam tip along (a jam, not a solver failure); at 0.2 it slides
-    jam = simulate(snapfit_model(70, 0.5, steps=24))
+    jam = simulate_insertion(snapfit_model(70, 0.5, steps=24))
     assert jam.jammed_at is not None and analyze_run(jam).category == "jams"
     assert any("jams" in w for w in jam.warnings) and jam.removal == []
-    ok = simulate(snapfit_model(70, 0.2, steps=24))
+    ok = simulate_insertion(snapfit_model(70, 0.2, steps=24))
     assert ok.jammed_at is None and analyze_run(ok).category != "jams"
 
 
 def test_energy_balance_over_insertion_and_removal():
     # work done on the part = change of stored energy + what friction dissipated, step by step
     # (trapezoidal normal force, the step's own friction force): within 1 % of the peak energy in total
-    res = simulate(snapfit_model(30, 0.3, steps=48))
+    res = simulate_insertion(snapfit_model(30, 0.3, steps=48))
     bal = energy_balance(res.steps, res.removal)
     assert bal["dissipated_J"] > 0.5 * bal["E_max_J"]  # friction dissipates a real share of the work
     assert bal["total"] < 0.01 and bal["step"] < 0.01
@@ -107,7 +107,7 @@ def _block_and_plate(mu: float, slide: float, h_in: float = 20e-6):
 
 def test_a_sliding_block_feels_mu_times_the_normal_force():
     mu = 0.3
-    res = simulate(_block_and_plate(mu, 1e-3, h_in=40e-6))
+    res = simulate_insertion(_block_and_plate(mu, 1e-3, h_in=40e-6))
     sliding = [r for r in res.steps if r.pos[0] > 0.2e-3]  # past the shear ramp: the contact slips
     assert len(sliding) > 5 and all(r.slipping > 0.99 for r in sliding)
     lag_tol = res.model.contact.lag_tol  # the friction reads normal forces lagged to this tolerance
@@ -121,7 +121,7 @@ def test_below_the_slip_threshold_the_contact_sticks():
     # as in Cattaneo-Mindlin partial slip), and the friction force stays inside the cone
     mu = 0.3
     cm = _block_and_plate(mu, 10e-6, h_in=5e-6)
-    res = simulate(cm)
+    res = simulate_insertion(cm)
     pressed = [r for r in res.steps if r.pos[0] < 1e-12][-1]
     moved = [r for r in res.steps if r.pos[0] >= 1e-12]
     assert len(moved) == 2 and all(abs(r.path_force) < mu * r.normal_force for r in moved)
@@ -165,7 +165,7 @@ def test_frictional_objective_gradient_and_hessian_match_finite_differences(coar
 def test_friction_through_refinement_events():
     # the stand side refines facets during steps: the friction lag is rebuilt for the new points and
     # the normal-force extrapolation only reads normal forces over the same points
-    res = simulate(load_coupling_scene("standside2d", overrides={"contact": {"friction": 0.3}}))
+    res = simulate_insertion(load_coupling_scene("standside2d", overrides={"contact": {"friction": 0.3}}))
     assert res.refined_facets and res.jammed_at is None and res.removal
     assert res.removal[-1].s == 0.0 and res.removal[-1].normal_force == 0.0  # O back out of the part
     prof = analyze_run(res)

@@ -8,7 +8,7 @@ from _coupling_checks import check_every_step
 
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 from simfab.errors import ConvergenceError
 
 CATEGORY = {"cclamp2d": "tight", "clip2d_loose": "loose", "clip2d_eject": "ejects"}
@@ -16,7 +16,7 @@ CATEGORY = {"cclamp2d": "tight", "clip2d_loose": "loose", "clip2d_eject": "eject
 
 @pytest.fixture(scope="module")
 def runs():
-    return {name: simulate(load_coupling_scene(name)) for name in CATEGORY}
+    return {name: simulate_insertion(load_coupling_scene(name)) for name in CATEGORY}
 
 
 @pytest.mark.parametrize("name", sorted(CATEGORY))
@@ -54,8 +54,8 @@ def test_refinement_catches_a_penetration_the_vertices_miss(coarse_block_model):
     R, p = cm.pose(cm.s_steps[-1])
     assert np.all(cm.field.evaluate(cm.fem.rest, (R, p), hessian=False).psi < 0)  # vertices all outside
     with pytest.raises(ConvergenceError, match="penetration"):
-        simulate(cm)  # vertex constraints alone let the circle cut through the top edge
-    res = simulate(coarse_block_model(refine=True))
+        simulate_insertion(cm)  # vertex constraints alone let the circle cut through the top edge
+    res = simulate_insertion(coarse_block_model(refine=True))
     check_every_step(res)
     last = res.steps[-1]
     assert last.contact_points > 4  # refinement points were added on the top edge
@@ -82,7 +82,7 @@ def test_rotating_path_keeps_every_step_feasible(ellipse_in_clamp_model):
     # An ellipse rotated by 90 degrees inside the loose clamp: its long axis (11.2 mm) exceeds the
     # clamp's inner radius (10.6 mm) only once it turns across the clamp, so the energy is zero
     # while it is aligned with the path and grows as it turns; every step stays feasible.
-    res = simulate(ellipse_in_clamp_model())
+    res = simulate_insertion(ellipse_in_clamp_model())
     check_every_step(res)
     E = res.column("energy")
     assert E[0] < 1e-9 and E[1] < 1e-9 and E[-1] > 1e-3 and E[-1] >= 0.9 * E.max()
@@ -102,7 +102,7 @@ def test_forces_use_the_barrier_stiffness_of_their_own_step(monkeypatch):
     from simfab.coupling import config as C
 
     monkeypatch.setattr(C, "KAPPA_GROW_BELOW", 0.9)
-    res = simulate(load_coupling_scene("cclamp2d"))
+    res = simulate_insertion(load_coupling_scene("cclamp2d"))
     check_every_step(res)
     kappa = res.column("kappa")
     assert kappa.max() >= 4 * kappa[0]  # the stiffness really changed during the run
@@ -133,6 +133,6 @@ def test_work_matches_the_energy_at_finer_steps():
     # step must not grow with finer steps (issue 15): at 70 steps it stays within 1 % of E_max
     from simfab.coupling.settle import work_energy_mismatch
 
-    res = simulate(load_coupling_scene("clip2d_eject", overrides={"simulation": {"steps": 70}}))
+    res = simulate_insertion(load_coupling_scene("clip2d_eject", overrides={"simulation": {"steps": 70}}))
     m = work_energy_mismatch(res.steps, planned=len(res.model.s_steps))
     assert m["work_refined"] <= 0.01 and m["force"] <= 0.01, m

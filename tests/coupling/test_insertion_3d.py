@@ -5,11 +5,11 @@ from _coupling_checks import check_every_step
 
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 
 
 def test_3d_clip_every_step_feasible_and_tight():
-    res = simulate(load_coupling_scene("clip3d"))
+    res = simulate_insertion(load_coupling_scene("clip3d"))
     check_every_step(res)
     prof, _ = summarize(res)
     assert prof.category == "tight" and prof.F_grip > 0

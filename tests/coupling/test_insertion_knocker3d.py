@@ -5,14 +5,14 @@ import numpy as np
 from _coupling_checks import check_every_step
 
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 
 
 def test_knocker_every_step_feasible_through_the_rotation():
     # linear tets on the bundled mesh (the scene runs P2: ~20x the time); the rotating path, the
     # feasibility of every step and the end-of-path warning do not depend on the elements
     cm = load_coupling_scene("knocker3d", overrides={"simulation": {"element_order": 1}})
-    res = simulate(cm)
+    res = simulate_insertion(cm)
     # the path ends in the prescribed rotation, which a run cannot continue: when the ring is still
     # drawn in at its last step the run says so (the sign of that small last force, ~5% of the
     # peak, is not robust), and it never says so otherwise

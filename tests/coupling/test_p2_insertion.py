@@ -19,7 +19,7 @@ from simfab.coupling.config import InsertionOptions
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.settle import work_energy_mismatch
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 from simfab.errors import InputError
 from simfab.fem.model import FemModel
 from simfab.fem.p2 import P2Model
@@ -31,7 +31,7 @@ def _run(order: int, elements: int | None):
     ov = {"simulation": {"element_order": order, "steps": STEPS, "h_in": None}}
     if elements is not None:
         ov["compliant"] = {"target_elements": elements}
-    return simulate(load_coupling_scene("cclamp2d", overrides=ov))
+    return simulate_insertion(load_coupling_scene("cclamp2d", overrides=ov))
 
 
 @pytest.fixture(scope="module")

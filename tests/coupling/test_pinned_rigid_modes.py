@@ -8,7 +8,7 @@ import pytest
 from simfab.coupling import rigid
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 
 
 def test_pinned_solve_is_the_woodbury_update():
@@ -39,8 +39,8 @@ def clip_runs():
     # and, for reference, held along the cylinder's axis z too; 18 steps and 3,600 linear tets
     # (the pin acts on the rigid modes, whatever the elements) keep the test short
     sim, comp = {"steps": 18, "element_order": 1}, {"target_elements": 3600}
-    free = simulate(load_coupling_scene("clip3d", overrides={"simulation": sim, "compliant": comp}))
-    held = simulate(load_coupling_scene("clip3d", overrides={"simulation": {**sim, "fixed_axes": "xz"},
+    free = simulate_insertion(load_coupling_scene("clip3d", overrides={"simulation": sim, "compliant": comp}))
+    held = simulate_insertion(load_coupling_scene("clip3d", overrides={"simulation": {**sim, "fixed_axes": "xz"},
                                                              "compliant": comp}))
     return free, held
 
@@ -73,7 +73,7 @@ def test_friction_resists_the_slide_along_the_cylinder():
 
     sim, comp = {"steps": 18, "element_order": 1}, {"target_elements": 3600}
     cm = load_coupling_scene("clip3d", overrides={"simulation": sim, "compliant": comp})
-    res = simulate(dataclasses.replace(cm, contact=ContactOptions(friction=0.3)))
+    res = simulate_insertion(dataclasses.replace(cm, contact=ContactOptions(friction=0.3)))
     assert not any("translation along z" in n for n in res.notes)
     assert res.removal and res.jammed_at is None
     for r in [*res.steps, *res.removal]:

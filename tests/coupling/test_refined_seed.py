@@ -1,19 +1,19 @@
-"""simulate(refined=...): starting with the facets a similar run refined (what the rest-shape
+"""simulate_insertion(refined=...): starting with the facets a similar run refined (what the rest-shape
 optimizer does for every candidate) gives the same profile with fewer Newton iterations."""
 
 import numpy as np
 import pytest
 
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 from simfab.design.problem import profile_figures
 from simfab.design.scene import load_design_scene
 
 
 def test_seeded_refinement_keeps_the_profile_and_saves_the_second_solves():
     cm = load_design_scene("standside2d").cm
-    plain = simulate(cm)
+    plain = simulate_insertion(cm)
     assert 0 < len(plain.refined_facets) < len(cm.fem.boundary_facets)
-    seeded = simulate(cm, refined=plain.refined_facets)
+    seeded = simulate_insertion(cm, refined=plain.refined_facets)
     assert set(plain.refined_facets) <= set(seeded.refined_facets)
     it0 = sum(s.iterations for s in plain.steps)
     it1 = sum(s.iterations for s in seeded.steps)
@@ -32,4 +32,4 @@ def test_seeded_refinement_keeps_the_profile_and_saves_the_second_solves():
 def test_seeded_refinement_rejects_facet_ids_outside_the_boundary():
     cm = load_design_scene("standside2d").cm
     with pytest.raises(ValueError, match="facet ids"):
-        simulate(cm, refined=[len(cm.fem.boundary_facets)])
+        simulate_insertion(cm, refined=[len(cm.fem.boundary_facets)])

@@ -7,12 +7,12 @@ import pytest
 from simfab.coupling.outputs import summarize
 from simfab.coupling.profile import analyze
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 
 
 @pytest.fixture(scope="module")
 def cclamp():
-    return simulate(load_coupling_scene("cclamp2d"))
+    return simulate_insertion(load_coupling_scene("cclamp2d"))
 
 
 def test_cclamp_continues_past_the_keyframes_until_the_cylinder_seats(cclamp):
@@ -38,7 +38,7 @@ def test_cclamp_continues_past_the_keyframes_until_the_cylinder_seats(cclamp):
 
 def test_a_run_cut_short_warns_and_its_steady_state_is_not_stationary():
     cm = load_coupling_scene("cclamp2d", overrides={"simulation": {"L_max": 0.0095}})
-    res = simulate(cm)
+    res = simulate_insertion(cm)
     assert len(res.steps) == len(cm.s_steps)  # an explicit L_max is not extended
     assert any("still draws the object in" in w and "E_ss is not a stationary point" in w for w in res.warnings)
     prof, _ = summarize(res)
@@ -49,7 +49,7 @@ def test_too_few_steps_warn_and_the_default_steps_do_not(cclamp):
     # --steps 1 and 2 change the answer (category, F_in by 40%): the work of the force over a step
     # no longer matches the change of stored energy; the 35-step default resolves the profile
     for steps in (1, 2):
-        res = simulate(load_coupling_scene("cclamp2d", overrides={"simulation": {"steps": steps}}))
+        res = simulate_insertion(load_coupling_scene("cclamp2d", overrides={"simulation": {"steps": steps}}))
         assert any("steps too coarse" in w for w in res.warnings), (steps, res.warnings)
     assert not any("steps too coarse" in w for w in cclamp.warnings)
 
@@ -57,7 +57,7 @@ def test_too_few_steps_warn_and_the_default_steps_do_not(cclamp):
 def test_yield_warning_follows_the_material(cclamp):
     vm = cclamp.column("max_von_mises").max()
     for yield_stress, warned in ((0.5 * vm, True), (2.0 * vm, False)):
-        res = simulate(load_coupling_scene("cclamp2d", overrides={
+        res = simulate_insertion(load_coupling_scene("cclamp2d", overrides={
             "material": {"name": "stiff", "youngs_modulus": 3.5e9, "poisson_ratio": 0.36,
                          "yield_stress": yield_stress}}))
         assert any("exceeds the yield stress" in w for w in res.warnings) == warned

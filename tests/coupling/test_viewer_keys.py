@@ -12,7 +12,7 @@ import pytest
 from simfab.coupling.outputs import key_steps, write_mjcf
 from simfab.coupling.profile import analyze_run
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 from simfab.io.mjcf import MAX_KEYFRAMES, load_model
 
 
@@ -26,7 +26,7 @@ def test_key_steps():
 
 
 def test_a_run_of_more_records_than_keyframes_writes_an_mjcf_simfab_reads(tmp_path):
-    res = simulate(load_coupling_scene("cclamp2d", overrides={"simulation": {"steps": 3}}), quiet=True)
+    res = simulate_insertion(load_coupling_scene("cclamp2d", overrides={"simulation": {"steps": 3}}), quiet=True)
     n = MAX_KEYFRAMES + 40  # the records of a 10,039-step run (O's poses along the same straight path)
     p0, p1 = np.asarray(res.steps[0].pos, float), np.asarray(res.steps[-1].pos, float)
     steps = [dataclasses.replace(res.steps[min(3 * i // (n - 1), len(res.steps) - 1)], pos=p0 + t * (p1 - p0))

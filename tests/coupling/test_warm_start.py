@@ -11,7 +11,7 @@ from simfab.coupling.layout import point_dhat
 from simfab.coupling.objective import make_objective
 from simfab.coupling.points import ContactPoints, vertex_points
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 from simfab.coupling.state import PastStep, StepState
 from simfab.coupling.stepper import Stepper
 from simfab.errors import InputError
@@ -146,10 +146,10 @@ def test_a_field_steeper_than_the_lipschitz_bound_is_reported(monkeypatch):
     # The facet check and the lazy distance bounds certify points outside O with |grad psi| <= L.
     # The bundled clamp's field has |grad psi| ~ 1.0 at its evaluated points: with L just below
     # that the run must say that its certificates are not rigorous; with the default L = 2, not.
-    res = simulate(load_coupling_scene("cclamp2d"))
+    res = simulate_insertion(load_coupling_scene("cclamp2d"))
     assert not any("gradient reached" in w for w in res.warnings)
     monkeypatch.setattr(C, "PSI_LIPSCHITZ", 0.99)
-    res = simulate(load_coupling_scene("cclamp2d"))
+    res = simulate_insertion(load_coupling_scene("cclamp2d"))
     assert any("gradient reached" in w and "above the Lipschitz bound 0.99" in w for w in res.warnings)
 
 

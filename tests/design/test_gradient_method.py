@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from simfab.coupling.scene import load_coupling_scene
-from simfab.coupling.simulate import simulate
+from simfab.coupling.simulate import simulate_insertion
 from simfab.design import figure_gradients as FG
 from simfab.design import gradient as G
 from simfab.design.brief import DesignBrief, TargetProfile
@@ -211,5 +211,5 @@ def test_ejecting_end_pose_continues_the_coupling_ratio(monkeypatch):
     assert abs(fd) > 0
     assert float(fg.gradients["coupling_ratio"] @ dh) == pytest.approx(fd, rel=1e-4)
     # a translation's end (clip2d_eject) is not an end pose: no continued ratio
-    res = simulate(load_coupling_scene("clip2d_eject", overrides={"simulation": {"steps": 10}}))
+    res = simulate_insertion(load_coupling_scene("clip2d_eject", overrides={"simulation": {"steps": 10}}))
     assert G.analyze_run(res).category == "ejects" and G.ejecting_ratio(res) is None

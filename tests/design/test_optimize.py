@@ -52,7 +52,7 @@ def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypat
             raise ConvergenceError("step 7: Newton did not converge (test)")
         return real(cm, **kw)
 
-    monkeypatch.setattr(design_problem, "simulate", flaky)
+    monkeypatch.setattr(design_problem, "simulate_insertion", flaky)
     res = optimize_anneal(P, iterations=6, seed=1)
     reasons = [r["evaluation"].reason for r in res.history]
     assert any(r.startswith("simulation did not converge") for r in reasons)
@@ -64,7 +64,7 @@ def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypat
 def test_small_design_problem_meets_every_constraint(scene):
     """The building block's socket exceeds PLA's 60 MPa yield stress; ask for a tight grip with
     an insertion force <= 12 N and no yielding, and check by re-simulating the optimized shape."""
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.design.problem import candidate_model, profile_figures
 
     brief = DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=4, iterations=60, patience=15)
@@ -76,7 +76,7 @@ def test_small_design_problem_meets_every_constraint(scene):
     assert res.best.feasible, [c for c in res.best.constraints if not c.satisfied]
     assert res.best.E_L > 0
     cm, why = candidate_model(P, res.best.rest)
-    fig = profile_figures(simulate(cm))
+    fig = profile_figures(simulate_insertion(cm))
     assert fig["category"] == "tight"
     assert fig["von_mises"] < 60e6 and fig["insertion_force"] <= 12.0
     # reproducible: the same seed gives the same design
@@ -218,11 +218,11 @@ def test_initial_insertion_run_for_the_placement_is_scored_not_run_again(scene):
     """The unmodified shape's insertion, run before the optimization (displacement placement), is the
     optimizer's initial evaluation: scored as evaluate() would score that shape (identity handles
     reproduce the mesh), not simulated again; a run of another model is not taken for it."""
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.design.problem import initial_evaluation
 
     brief = DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=3, placement="displacement")
-    run = simulate(scene)
+    run = simulate_insertion(scene)
     P = make_problem(scene, brief, initial=run)
     assert P.initial is run
     ev = initial_evaluation(P)
@@ -231,7 +231,7 @@ def test_initial_insertion_run_for_the_placement_is_scored_not_run_again(scene):
     assert ev.objective == pytest.approx(fresh.objective, rel=1e-9)
     assert all(ev.figures[k] == pytest.approx(fresh.figures[k], rel=1e-9, abs=1e-12)
                for k in fresh.figures if k != "category")
-    other = simulate(load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": STEPS}}))
+    other = simulate_insertion(load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": STEPS}}))
     assert make_problem(scene, brief, initial=other).initial is None  # not this problem's model
 
 

@@ -19,11 +19,11 @@ def problem():
 
 
 def test_refined_model_keeps_the_shape_support_and_options(problem):
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
 
     cm = problem.base
     same = refined_model(cm, cm.fem.rest, 0)
-    a, b = profile_figures(simulate(cm)), profile_figures(simulate(same))
+    a, b = profile_figures(simulate_insertion(cm)), profile_figures(simulate_insertion(same))
     assert a["insertion_force"] == b["insertion_force"] and a["von_mises"] == b["von_mises"]
     fine = refined_model(cm, cm.fem.rest, 1)
     assert fine.fem.n_elements == 4 * cm.fem.n_elements
@@ -46,7 +46,7 @@ def test_p2_level_matches_the_scene_loaded_with_quadratic_elements(problem):
     refined), the scene every node inside the fixed box, which adds the midpoints of edges
     leaving the box. Measured: 0.1 % in F_in; the support's discretization, not the element's."""
     from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
 
     cm = problem.base
     mine = refined_model(cm, cm.fem.rest, 0, 2)
@@ -56,8 +56,8 @@ def test_p2_level_matches_the_scene_loaded_with_quadratic_elements(problem):
     assert np.all(np.isin(mine.fixed_vertices, scene.fixed_vertices)) and np.all(extra >= cm.fem.n_vertices)
     held = np.isin(mine.fem.edges[extra - cm.fem.n_vertices], cm.fixed_vertices)
     assert np.all(held.sum(axis=1) == 1)  # each extra node sits on an edge with one held corner
-    a = profile_figures(simulate(mine))
-    b = profile_figures(simulate(scene))
+    a = profile_figures(simulate_insertion(mine))
+    b = profile_figures(simulate_insertion(scene))
     for k in ("insertion_force", "removal_force", "grip_force", "von_mises"):
         assert np.isclose(a[k], b[k], rtol=5e-3), k
 

@@ -52,7 +52,7 @@ def run_level(scene: str, factor: float, mu: float) -> dict:
     from benchmarks.insertion import ORIGINAL_SIZE
     from simfab.coupling.outputs import summarize
     from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.solve import linear
 
     base = {k: dict(v) for k, v in ORIGINAL_SIZE.get(scene, {}).items()}
@@ -70,7 +70,7 @@ def run_level(scene: str, factor: float, mu: float) -> dict:
     linear.SPDSolver._factor = counted
     try:
         t0, c0 = time.perf_counter(), time.process_time()
-        res = simulate(cm)
+        res = simulate_insertion(cm)
         dt, dc = time.perf_counter() - t0, time.process_time() - c0
     finally:
         linear.SPDSolver._factor = orig

@@ -30,7 +30,7 @@ def run(argv) -> dict:
     import numpy as np
 
     from simfab.coupling.converge import extrapolate
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.design.scene import load_design_scene
     from simfab.design.verify import level_figures, refined_model
 
@@ -58,7 +58,7 @@ def run(argv) -> dict:
     for o, t in levels:
         m = refined_model(cm, cm.fem.rest, t, o)
         t0 = time.perf_counter()
-        res = simulate(m)
+        res = simulate_insertion(m)
         dt = time.perf_counter() - t0
         f = level_figures(res, ds.brief.stress_radius)
         rows.append({"element_order": o, "subdivisions": t, "elements": int(m.fem.n_elements),

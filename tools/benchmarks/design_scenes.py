@@ -33,7 +33,7 @@ SCENES_3D = ["alligator3d", "knocker3d_design"]
 
 def _resimulate(summary: dict, out: Path) -> dict:
     from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.design import brief as B
     from simfab.design.problem import profile_figures
     from simfab.design.scene import load_design_scene
@@ -41,7 +41,7 @@ def _resimulate(summary: dict, out: Path) -> dict:
 
     xml = summary["outputs"]["scene_xml"]
     ds = load_design_scene(xml)
-    res = simulate(load_coupling_scene(xml))
+    res = simulate_insertion(load_coupling_scene(xml))
     fig = profile_figures(res, ds.brief.stress_radius)
     ys = ds.cm.fem.material.yield_stress
     cons = B.constraints(fig, B.constraint_bounds(ds.brief, ys))

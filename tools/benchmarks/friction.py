@@ -28,12 +28,12 @@ import numpy as np
 
 def _snapfit_row(alpha: float, mu: float, dim: int, steps: int) -> dict:
     from simfab.coupling.settle import energy_balance
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.verification.snapfit import GAP, contact_law, ratio_formula, snapfit_model
 
-    r0 = simulate(snapfit_model(alpha, 0.0, dim=dim, steps=steps))
+    r0 = simulate_insertion(snapfit_model(alpha, 0.0, dim=dim, steps=steps))
     t0 = time.perf_counter()
-    r1 = simulate(snapfit_model(alpha, mu, dim=dim, steps=steps))
+    r1 = simulate_insertion(snapfit_model(alpha, mu, dim=dim, steps=steps))
     secs = time.perf_counter() - t0
     row = {"alpha_deg": alpha, "mu": mu, "dim": dim, "mu_tan_alpha": round(mu * np.tan(np.radians(alpha)), 3),
            "seconds": round(secs, 2)}
@@ -75,7 +75,7 @@ def _scene_row(scene: str, mu: float) -> dict:
     from simfab.coupling.profile import analyze_run
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.settle import energy_balance
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
 
     out = {}
     for m in (0.0, mu):
@@ -88,7 +88,7 @@ def _scene_row(scene: str, mu: float) -> dict:
                 marks["insert"] = time.perf_counter()
 
         t0 = time.perf_counter()
-        res = simulate(cm, callback=mark)
+        res = simulate_insertion(cm, callback=mark)
         secs = time.perf_counter() - t0
         p = analyze_run(res)
         records = [*res.steps, *res.removal]
@@ -118,11 +118,11 @@ def _refined_row(scene: str, mu: float) -> dict:
     from simfab.coupling.profile import analyze_run
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.settle import energy_balance
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
 
     steps = 2 * load_coupling_scene(scene).options.steps
     cm = load_coupling_scene(scene, overrides={"simulation": {"steps": steps}, "contact": {"friction": mu}})
-    res = simulate(cm)
+    res = simulate_insertion(cm)
     p = analyze_run(res)
     return {"steps": steps, "F_in_N": float(f"{p.F_in:.4g}"), "F_rm_N": float(f"{p.F_rm:.4g}"),
             "F_hold_N": float(f"{p.F_hold:.4g}"),

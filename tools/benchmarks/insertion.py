@@ -108,7 +108,7 @@ def run(argv) -> dict:
     from simfab.contact.sdf import PrimitiveField
     from simfab.coupling.outputs import summarize
     from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.errors import InputError
 
     ap = argparse.ArgumentParser(prog="bench insertion")
@@ -160,7 +160,7 @@ def run(argv) -> dict:
         runs = []
         while len(runs) < _runs_wanted(a, runs):
             t0, c0 = time.perf_counter(), time.process_time()
-            res = simulate(cm)
+            res = simulate_insertion(cm)
             dt, dc = time.perf_counter() - t0, time.process_time() - c0
             runs.append(dt)
             if best is None or dt < best[0]:

@@ -25,7 +25,7 @@ def run(argv) -> dict:
     from simfab.contact.sdf import PrimitiveField
     from simfab.coupling.profile import analyze_run
     from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.errors import InputError
 
     ap = argparse.ArgumentParser(prog="bench object_samples")
@@ -42,7 +42,7 @@ def run(argv) -> dict:
             raise InputError(f"{a.scene}'s object is made of primitives (exact signed distance): "
                              "no sampling to converge")
         t0 = time.perf_counter()
-        res = simulate(cm)
+        res = simulate_insertion(cm)
         p = analyze_run(res)
         rows.append({"samples": n, "sigma_m": float(cm.field.sigma), "seconds": time.perf_counter() - t0,
                      "newton_iterations": int(sum(r.iterations for r in res.steps)), "category": p.category,

@@ -107,7 +107,7 @@ def _run_once(a) -> dict:
     """One timed optimization in this process (and the mesh check unless a.no_mesh_check)."""
     from benchmarks._machine import machine_reference_ms
     from benchmarks._reference import figures
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.design.gradient import design_recorder, optimize_gradient
     from simfab.design.optimize import optimize_anneal
     from simfab.design.outputs import insertions
@@ -116,7 +116,7 @@ def _run_once(a) -> dict:
     from simfab.design.scene import load_design_scene
 
     ds = load_design_scene(a.scene)
-    simulate(ds.cm)  # warm-up: Warp kernels loaded, caches built (not timed)
+    simulate_insertion(ds.cm)  # warm-up: Warp kernels loaded, caches built (not timed)
     ref_before = machine_reference_ms()
     t0, c0 = time.perf_counter(), time.process_time()
     ds = load_design_scene(a.scene)
@@ -127,7 +127,7 @@ def _run_once(a) -> dict:
         t1 = time.perf_counter()
         # (the gradient method reuses this insertion of the initial shape, recorded, as couple optimize does)
         rec = design_recorder(ds.cm, ds.brief) if a.method == "gradient" else None
-        initial = simulate(ds.cm, recorder=rec)
+        initial = simulate_insertion(ds.cm, recorder=rec)
         problem = make_problem(ds.cm, ds.brief, kept_regions=ds.kept_regions, target=ds.target, initial=initial,
                                seed=a.seed, source=ProblemSource(scene=str(ds.xml)), initial_recorder=rec)
         t_setup = time.perf_counter() - t1

@@ -44,10 +44,10 @@ def _red_refined(scene):
 
 def _run(cm) -> dict:
     from simfab.coupling.outputs import summarize
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
 
     t0 = time.perf_counter()
-    res = simulate(cm)
+    res = simulate_insertion(cm)
     dt = time.perf_counter() - t0
     _, d = summarize(res)
     return {"elements": int(cm.fem.n_elements), "nodes": int(cm.fem.n_vertices),

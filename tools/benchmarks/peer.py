@@ -437,11 +437,11 @@ def compare(scene: str, mu: float) -> dict:
     """simfab's run and the reference's on one case: figures, differences, seconds, iterations."""
     from simfab.coupling import config as C
     from simfab.coupling.profile import analyze_run
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
 
     cm = case_model(scene, mu)
     t0, c0 = time.perf_counter(), time.process_time()
-    res = simulate(cm)
+    res = simulate_insertion(cm)
     t_s, c_s = time.perf_counter() - t0, time.process_time() - c0
     poses = [(float(r.s), "insert") for r in res.steps] + [(float(r.s), "remove") for r in res.removal]
     opts = PeerOptions(dhat=float(cm.dhat), grad_tol=C.NEWTON_GRAD_TOL_REL * float(cm.force_scale), mu=float(mu),

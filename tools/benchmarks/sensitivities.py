@@ -86,7 +86,7 @@ def _errors(cm, figures, eps) -> list[dict]:
 
     from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure
     from simfab.coupling.model import with_rest_shape
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.design.stress import averaging_matrix
     from simfab.fem.shape_derivative import linear_rest_derivative
 
@@ -102,14 +102,14 @@ def _errors(cm, figures, eps) -> list[dict]:
     for held in variants:
         recs[held] = SensitivityRecorder(cm, StressMeasure(averaging=A, temperature_rel=0.0), held_lag=held)
         t0 = time.perf_counter()
-        simulate(cm, recorder=recs[held])
+        simulate_insertion(cm, recorder=recs[held])
         recs[held].insert  # the backward pass runs on first access
         if not held:
             t_adj = time.perf_counter() - t0
     t0 = time.perf_counter()
-    plus = simulate(with_rest_shape(cm, X + eps * dX))
+    plus = simulate_insertion(with_rest_shape(cm, X + eps * dX))
     t_plain = time.perf_counter() - t0
-    minus = simulate(with_rest_shape(cm, X - eps * dX))
+    minus = simulate_insertion(with_rest_shape(cm, X - eps * dX))
 
     def table(sens, pr, mr, keys):
         ok = [i for i, sn in enumerate(sens) if sn.supported]

@@ -21,7 +21,7 @@ import time
 def run(argv) -> dict:
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.settle import work_energy_mismatch
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
 
     ap = argparse.ArgumentParser(prog="bench work_energy")
     ap.add_argument("--scenes", default="cclamp2d,clip2d_loose,clip2d_eject")
@@ -31,7 +31,7 @@ def run(argv) -> dict:
     for scene in a.scenes.split(","):
         for n in (int(x) for x in a.steps.split(",")):
             t0 = time.perf_counter()
-            res = simulate(load_coupling_scene(scene, overrides={"simulation": {"steps": n}}))
+            res = simulate_insertion(load_coupling_scene(scene, overrides={"simulation": {"steps": n}}))
             m = work_energy_mismatch(res.steps, planned=len(res.model.s_steps))
             rows.append({"scene": scene, "steps": n, "records": len(res.steps),
                          "seconds": round(time.perf_counter() - t0, 2),
