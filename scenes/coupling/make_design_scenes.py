@@ -161,7 +161,7 @@ def profile2d() -> None:
 
     from simfab.coupling.geometry import c_clamp_outline
     from simfab.coupling.scene import load_coupling_scene
-    from simfab.coupling.simulate import simulate
+    from simfab.coupling.simulate import simulate_insertion
     from simfab.io.atomic import write_text
 
     clamp = dict(CLAMP_TIGHT)
@@ -178,7 +178,7 @@ def profile2d() -> None:
         variant = dict(clamp, inner_radius=0.0098, width=0.0021)
         design_scene("_profile_target", doc="temporary", **dict(common, ring=c_clamp_outline(**variant, segments=48)),
                      design=dict(grip="any"))
-        res = simulate(load_coupling_scene(HERE / "_profile_target.xml"))
+        res = simulate_insertion(load_coupling_scene(HERE / "_profile_target.xml"))
         for suffix in (".xml", ".toml", "_outline.csv"):
             (HERE / f"_profile_target{suffix}").unlink()
         write_text(HERE / "profile2d_target.csv",
