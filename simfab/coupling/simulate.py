@@ -4,93 +4,23 @@ At every insertion step O is moved to its next pose along the path and A settles
 
     minimize_x  E_d(x)   subject to  psi(y_j(x)) <= 0   for all constraint points y_j
 
-(E_d: Neo-Hookean energy, psi: IMLS field of O, > 0 inside; y_j: A's boundary vertices plus
-refinement points on boundary edges/faces). Method, per step (interior point / IPC style):
+(E_d: Neo-Hookean energy, psi: IMLS or exact signed distance of O, > 0 inside; y_j: A's boundary
+nodes plus refinement points on boundary facets). Per step (interior point / IPC style):
 
-1. **Predictor.** Constraint points that O could reach during the step (distance to O below the
-   Lipschitz bound of psi times O's displacement there, plus d_hat) are pushed along O's normal
-   by O's normal displacement (free to slide tangentially) and the rest of A follows through one
-   linear solve with the tangent stiffness of the previous step (a penalty in the same sparsity
-   pattern, so the symbolic factorization is reused). Points still inside O are then carried
-   rigidly with O (rigid motion keeps their distance to O) and the solve repeated. The result is a
-   feasible, non-inverted warm start: every point outside O. The linear and quadratic
-   extrapolations of the last two / three converged steps come first (for a trial of the rest
-   search between steps it has bracketed, their interpolations); the feasible one with the
-   lowest objective E_d + B is the warm start (fewer Newton iterations when the deformation
-   evolves smoothly along the path); the contact predictor above is computed only when no
-   extrapolation is feasible (its PSD tangent stiffness is then assembled on demand). Either way
-   the vertices that were in contact are moved back to their last gap to O (extrapolations and
-   the predictor's pushes slide them along chords off O's curved surface, out of the barrier's
-   range).
-2. **Corrector.** Newton (:func:`simfab.solve.newton.minimize`, exact Hessian first, the
-   PSD-projected one when the exact one is indefinite) on
-   E_d(x) + kappa * sum_j b(-psi(y_j)) with the log barrier b of :mod:`simfab.contact.barrier`.
-   Every step is capped so that no point can reach O (a curvature-aware bound, with conservative
-   advancement alpha <= 0.9 d_j / (L |dy_j|), L a Lipschitz bound of psi, as a floor), and the
-   Armijo line search rejects trial points with an inverted element (E_d = +inf) or a point
-   inside O (b = +inf). The iterate therefore stays feasible. kappa starts at the nodal stiffness
-   of A's elements and is doubled (IPC-style) after a step that leaves a point closer than
-   1e-3 d_hat to O.
-3. **Refinement.** Boundary facets near O are checked at interpolated points; facets whose interior
-   crosses into O receive ``samples_per_edge`` points per edge (2D) or a barycentric lattice
-   (3D) as extra constraints and the step is solved again: from the current (converged) state
-   with the new points that lie inside O lifted out along O's normal (a local move of their
-   facets' vertices), or, when that is infeasible or fails, from the previous step's state (which
-   is feasible for them, because every earlier step ended with all facets checked outside O).
-   Refined facets keep their points for the rest of the simulation. If refined facets still
-   penetrate O by more than the tolerance between their points, the density is doubled (the new
-   points are the old check points, pushed out of O first) and the step solved again.
-4. **Check.** The step ends only if the max penetration at vertices and at dense check points on
-   facets near O is <= ``penetration_tol_rel * h_A`` and no element is inverted; otherwise
-   ConvergenceError. A step that cannot be taken (predictor infeasible, Newton failure) is
-   bisected along the path up to ``MAX_BISECTIONS`` times before giving up loudly.
+1. predictor: the feasible extrapolation of the last converged steps with the lowest objective, or
+   a contact predictor (points O could reach pushed along its normal, one linear solve);
+2. corrector: Newton on E_d(x) + kappa sum_j b(-psi(y_j)) (log barrier b, :mod:`simfab.contact.barrier`),
+   every step capped so that no point reaches O, kappa doubled after a step that ends too close;
+3. refinement: facets whose interior crosses into O get extra constraint points, the step re-solved;
+4. check: max penetration <= ``penetration_tol_rel * h_A`` and no inverted element, else the step
+   is bisected along the path up to ``MAX_BISECTIONS`` times, then ConvergenceError.
 
-Layout: :func:`simulate_insertion` runs a :class:`simfab.coupling.stepper.Stepper` over the planned steps
-and then to O's rest point (:mod:`.settle`). Each stage is a module of public functions of typed
-data (:mod:`.state`: the step state, a converged step's evaluation and the contact it ends with):
-:mod:`.objective` (the step objective and its Newton solve), :mod:`.predictor` (warm start),
-:mod:`.refine` (facet check and refinement), :mod:`.rigid_check` and :mod:`.rigid` (unresisted rigid
-motions and their pin), :mod:`.record` (the step's record: forces, stresses, admissibility),
-:mod:`.layout` (where per-point contact terms land in the Hessian) and :mod:`.timing`.
-
-Cost control: the contact field is evaluated in one Warp launch per call (two, on two threads,
-for 1024 points or more), with neighbours from per-cell lists, only for points that are not
-certified (by the Lipschitz bound and their travel since their last exact evaluation) to be
-farther than a band of a few d_hat from O; Hessians of psi only within d_hat. CHOLMOD's symbolic analysis and
-the value map of the fixed FEM sparsity pattern are reused for every solve
-(:class:`simfab.solve.linear.SPDSolver`); the facet check of a converged state is memoized, takes
-its vertices' distances from Newton's last evaluation, and check points already certified outside
-O by the Lipschitz bound from their facet's vertices, or from their own values at earlier checks,
-are not evaluated; lifting near points reads the objective's lazy distances. Per Newton iterate
-only the exact FEM Hessian is assembled (the PSD-projected one, twice as expensive, only when the
-exact one fails to factorize), on quadratic elements not at line-search trials (energy and
-gradient only; their Hessian costs ~15-20 of those, and the first trial of most steps is their last
-iterate), on linear ones already at the first trial unless the force residual is within
-NEWTON_EAGER_ABOVE_TOL of the target; the step record reuses Newton's last evaluation. The forces
-of a step use the barrier stiffness its equilibrium was solved with.
-
-Well-posedness: a rigid motion of A that the supports leave free and no contact normal opposes
-(a clip sliding along a frictionless cylinder, a claw turning on a sphere) costs no energy, so the
-equilibrium is not unique along it. When the supports leave any rigid motion free, every step's
-objective carries a weak pin mu/2 |x - x_start|^2 on the free dofs (:func:`simfab.coupling.rigid.
-pin_stiffness`): along an unresisted motion A stays where the step began, elsewhere the bias is
-~1e-5. After every step the rigid motion the contact resists least is found
-(:mod:`simfab.coupling.rigid`); when one is unresisted the run notes it (``InsertionResult.notes``).
-
-Certificates: the facet check and the lazy distances certify points outside O from a Lipschitz
-bound L of psi (PSI_LIPSCHITZ = 2; |grad psi| ~ 1 away from sharp features). IMLS fields can be
-steeper near sharp rims of O; the run tracks the largest |grad psi| at its converged constraint
-and check points and warns when it exceeds L (the certificates are then not rigorous there).
-
-Element order: with ``options.element_order = 2`` A is the scene's mesh lifted to quadratic
-elements (:class:`simfab.fem.p2.P2Model`); every stage reads the energy, det F and stress through
-:mod:`simfab.fem.elastic` and the boundary it works on from ``cm.contact_facets`` (the linear
-sub-facets of the quadratic boundary), so the loop is the same for both orders: constraint points
-are all boundary nodes (corners and edge midpoints) plus refinement points on sub-facets, whose
-parents share an element (the contact Hessian stays inside the FEM pattern). Inversion is checked
-at the quadrature points (det F there), as the energy sees it.
-
-Forces: see :mod:`simfab.coupling.record`.
+:func:`simulate_insertion` runs a :class:`simfab.coupling.stepper.Stepper` over the planned steps and
+then to O's rest point (:mod:`.settle`); the stages are modules over typed state (:mod:`.state`,
+:mod:`.objective`, :mod:`.predictor`, :mod:`.refine`, :mod:`.rigid_check`, :mod:`.rigid`, :mod:`.record`,
+:mod:`.layout`, :mod:`.timing`). The same loop serves linear and quadratic elements (``element_order``).
+The full method - cost control, the weak pin on unresisted rigid motions, the Lipschitz certificates,
+element orders - is in docs/methods.md, "simfab.coupling.simulate"; forces: :mod:`simfab.coupling.record`.
 """
 
 from __future__ import annotations
