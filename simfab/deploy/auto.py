@@ -38,10 +38,11 @@ SIZE_STEP = 0.0005  # catalogue sizes rounded to this [m]
 MARGIN = 0.0005  # gap margin kept from either achievable limit [m] (layouts' edges differ from h)
 MAX_CONES = 8
 #: the tuning on by default: Gauss-Newton steps, towards the surface and each vertex's own point; it
-#: stops at the bound (RMS 0.5 % of the diameter, half the deployment bound), when a step gains < 2 %,
-#: or after 8 steps. Its budget is counted in steps, not seconds, so that the same input gives the same
+#: stops at the bound (RMS 0.5 % of the diameter, half the deployment bound, and the height within 2 %,
+#: two thirds of its bound; both measured as the run's deviation is), when a step gains < 2 %, or after
+#: 8 steps. Its budget is counted in steps, not seconds, so that the same input gives the same
 #: pattern on any machine and load (``[tune] seconds`` sets a wall-clock budget too).
-AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.005, min_gain=0.02)
+AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.005, target_height=0.02, min_gain=0.02)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -160,7 +161,7 @@ def complete(scene, given: dict):
     if "spring_width" not in gp:
         upd["spring_width"] = 0.001
         decided.append("pattern.spring_width")
-    if "iterations" not in gt:
+    if "iterations" not in gt or tc.iterations > 0:  # steps given (--tune N): the rest still decided
         tc = dataclasses.replace(tc, **{k: v for k, v in AUTO_TUNE.items() if k not in gt})
         decided += [f"tune.{k}" for k in AUTO_TUNE if k not in gt]
     pc = dataclasses.replace(pc, **upd)

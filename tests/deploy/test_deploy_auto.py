@@ -67,13 +67,21 @@ def test_saddle_catalogue_pulls(tmp_path):
 
 
 def test_given_fields_are_kept(tmp_path):
-    """What a scene file (or a flag) sets is not decided: the bundled steep cap keeps its catalogue,
-    layout and cuts; a flag's tuning steps stay."""
+    """What a scene file (or a flag) sets is not decided: a steep cap's file keeps its catalogue,
+    spacing, layout and cuts; a flag's tuning steps stay, and the tuning's other settings (point
+    weight, stops) are still decided; ``--tune 0`` turns the tuning off."""
     from simfab.deploy.scene import bundled_path
 
-    s = load_deploy_scene(bundled_path("cap80"), overrides={"tune": {"iterations": 2}})
-    assert s.pattern.sizes == (0.004, 0.007, 0.01) and s.pattern.spacing == 0.03 and s.cuts.max_cones == 8
-    assert s.tune.iterations == 2 and "pattern.insert_half_sizes" not in s.decisions.decided
+    p = tmp_path / "cap.toml"
+    p.write_text('[target]\nkind = "spherical_cap"\nradius = 0.15\nangle_deg = 80\nrings = 12\n'
+                 '[pattern]\nspacing = 0.03\ninsert_half_sizes = [0.004, 0.007, 0.010]\nlayout = "grid"\n'
+                 '[cuts]\nmax_cones = 4\n')
+    s = load_deploy_scene(p, overrides={"tune": {"iterations": 2}})
+    assert s.pattern.sizes == (0.004, 0.007, 0.01) and s.pattern.spacing == 0.03 and s.cuts.max_cones == 4
+    assert s.pattern.layout == "grid" and s.tune.iterations == 2
+    assert "pattern.insert_half_sizes" not in s.decisions.decided and "tune.iterations" not in s.decisions.decided
+    assert s.tune.point_weight == auto.AUTO_TUNE["point_weight"] and s.tune.target_rms > 0
+    assert load_deploy_scene(p, overrides={"tune": {"iterations": 0}}).tune.point_weight == 0
     assert load_deploy_scene(bundled_path("dome"), auto=False).tune.iterations == 0
 
 
