@@ -12,7 +12,8 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
   placed until every vertex's growth is within the springs' reach (:func:`simfab.deploy.cuts.place_cones`
   with every size the plates allow);
 - the catalogue (:func:`catalogue`): from the flattening (cut, with cuts) the target will get,
-  the fewest sizes covering every vertex's growth with a margin, smallest inserts first;
+  the fewest sizes covering every vertex's growth with room for the tuning (``TUNE_ROOM``),
+  smallest inserts first;
 - layout: ``conforming`` (grid core, regular, growths fitted to the edges) without cuts, ``mesh``
   with them: both cover >= 99 % of the flat domain;
 - tuning: on (``AUTO_TUNE``), stopping once the deviation bound is met, when progress stalls or
@@ -37,6 +38,10 @@ MAX_SIZES = 3  # insert sizes in a catalogue
 SIZE_STEP = 0.0005  # catalogue sizes rounded to this [m]
 MARGIN = 0.0005  # gap margin kept from either achievable limit [m] (layouts' edges differ from h)
 MAX_CONES = 8
+#: the fraction of the gap range kept free at either end of every insert's gap when the catalogue is sized
+#: (when its sizes can): the tuning moves gaps by millimetres, and an insert whose gap sits at a limit cannot
+#: grow or shrink further (a single size fitted to the largest growth left a steep cap's tuned gaps at min_gap)
+TUNE_ROOM = 0.2
 #: the tuning on by default: Gauss-Newton steps, towards the surface and each vertex's own point; it
 #: stops at the bound (RMS 0.5 % of the diameter, half the deployment bound, and the height within 2 %,
 #: two thirds of its bound; both measured as the run's deviation is), when a step gains < 2 %, or after
@@ -83,13 +88,15 @@ def _vertex_curvature(V, F) -> np.ndarray:
     return K
 
 
-def catalogue(d: np.ndarray, h: float, pc) -> tuple[list, int]:
+def catalogue(d: np.ndarray, h: float, pc, *, room: float = 0.0) -> tuple[list, int]:
     """The fewest insert sizes [m] that give every growth ``d`` (n,) [m] an achievable gap
-    ``min_gap + MARGIN <= r - d <= h/2 - min_beam - MARGIN``: greedily, the largest uncovered growth
-    sets the next (smaller) size r = d + min_gap + MARGIN (rounded up to ``SIZE_STEP``, at least
-    ``MIN_INSERT``). Returns (sizes ascending, growths left uncovered by ``MAX_SIZES`` sizes or
-    above the largest size the plates allow, r < h/2 - beam_width)."""
-    lo, hi = pc.min_gap + MARGIN, h / 2 - pc.min_beam - MARGIN
+    ``min_gap + m <= r - d <= h/2 - min_beam - m``, m = MARGIN + ``room`` x (h/2 - min_beam - min_gap)
+    (``room``: the fraction of the gap range kept free at either end for the tuning): greedily, the
+    largest uncovered growth sets the next (smaller) size r = d + min_gap + m (rounded up to
+    ``SIZE_STEP``, at least ``MIN_INSERT``). Returns (sizes ascending, growths left uncovered by
+    ``MAX_SIZES`` sizes or above the largest size the plates allow, r < h/2 - beam_width)."""
+    m = MARGIN + room * (h / 2 - pc.min_beam - pc.min_gap)
+    lo, hi = pc.min_gap + m, h / 2 - pc.min_beam - m
     r_max = h / 2 - pc.beam_width - SIZE_STEP
     left = np.sort(np.asarray(d, dtype=np.float64))[::-1]
     sizes = []
@@ -98,7 +105,7 @@ def catalogue(d: np.ndarray, h: float, pc) -> tuple[list, int]:
         if r > r_max or (sizes and r >= sizes[-1]):  # a plate larger than the cell allows / no smaller size helps
             break
         g = r - left
-        sizes.append(float(r))
+        sizes.append(round(float(r), 6))
         left = left[~((g >= lo - 1e-12) & (g <= hi + 1e-12))]
     return sorted(sizes), int(len(left))
 
@@ -146,7 +153,9 @@ def complete(scene, given: dict):
             d = 0.5 * h * np.expm1(-u[interior & ~np.isin(np.arange(len(u)), cones)])
         else:
             d = d0
-        sizes, _ = catalogue(d, h, pc)
+        sizes, left = catalogue(d, h, pc, room=TUNE_ROOM)
+        if left:  # no room for the tuning at either end: the achievable range alone
+            sizes, _ = catalogue(d, h, pc)
         if sizes:
             upd["insert_half_sizes"] = tuple(sizes)
             decided.append("pattern.insert_half_sizes")
