@@ -13,11 +13,12 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
   with every size the plates allow);
 - the catalogue (:func:`catalogue`): from the flattening (cut, with cuts) the target will get,
   the fewest sizes covering every vertex's growth with room for the tuning (``TUNE_ROOM``),
-  smallest inserts first;
+  smallest inserts first; with cuts, smaller sizes for the seams' short edges (``SEAM_EDGE``);
 - layout: ``conforming`` (grid core, regular, growths fitted to the edges) without cuts, ``mesh``
   with them: both cover >= 99 % of the flat domain;
-- tuning: on (``AUTO_TUNE``), stopping once the deviation bound is met, when progress stalls or
-  at its budget of steps.
+- tuning: on (``AUTO_TUNE``; the point weight from the positively curved share of the area,
+  :func:`point_weight`), stopping once the deviation bound is met, when progress stalls or at its
+  budget of steps.
 
 :func:`complete` returns the scene with these filled in and :class:`Decisions` (what was decided
 and why, for the summary).
@@ -42,6 +43,10 @@ MAX_CONES = 8
 #: (when its sizes can): the tuning moves gaps by millimetres, and an insert whose gap sits at a limit cannot
 #: grow or shrink further (a single size fitted to the largest growth left a steep cap's tuned gaps at min_gap)
 TUNE_ROOM = 0.2
+#: the shortest edges at an insert along a cut's seams, relative to the spacing (the mesh layout divides each
+#: seam into equal edges of about the spacing; where seams and the outline meet they run down to ~0.5 h): with
+#: cuts the catalogue adds the smaller sizes such an insert needs for its gap to be achievable
+SEAM_EDGE = 0.5
 #: the tuning on by default: Gauss-Newton steps, towards the surface and each vertex's own point; it
 #: stops at the bound (RMS 0.5 % of the diameter, half the deployment bound, and the height within 2 %,
 #: two thirds of its bound; both measured as the run's deviation is), when a step gains < 2 %, or after
@@ -76,6 +81,25 @@ def spacing(target) -> float:
     return float(np.clip(np.floor(h * 1e3) / 1e3, *SPACING_RANGE))
 
 
+def point_weight(target) -> float:
+    """The tuning's point weight w for a target: ``AUTO_TUNE["point_weight"]`` times the fraction of its
+    area where the Gaussian curvature is positive (above 1e-3 of the largest |K|, the triangulation's
+    noise), to a tenth. The point term holds each vertex to its own target point where the distance to
+    the surface alone lets the deployed shape slide along the target (a cap turns within its sphere);
+    a saddle holds its place by its shape, and the point term there pulls against tangential offsets
+    the gaps cannot remove (w = 0)."""
+    from simfab.deploy.flatten import face_areas
+
+    V, F = target.V, target.F
+    K = _vertex_curvature(V, F)
+    a = np.bincount(F.ravel(), weights=np.repeat(face_areas(V, F) / 3, 3), minlength=len(V))
+    inner = K != 0
+    if not inner.any():
+        return 0.0
+    pos = K > 1e-3 * np.max(np.abs(K[inner]))
+    return round(float(AUTO_TUNE["point_weight"] * np.sum(a[pos]) / np.sum(a[inner])), 1)
+
+
 def _vertex_curvature(V, F) -> np.ndarray:
     """Angle defect over a third of the incident faces' area at interior vertices [1/m^2] (0 on the boundary)."""
     from simfab.deploy import flatten as bff
@@ -88,15 +112,16 @@ def _vertex_curvature(V, F) -> np.ndarray:
     return K
 
 
-def catalogue(d: np.ndarray, h: float, pc, *, room: float = 0.0) -> tuple[list, int]:
+def catalogue(d: np.ndarray, h: float, pc, *, room: float = 0.0, short: float = 1.0) -> tuple[list, int]:
     """The fewest insert sizes [m] that give every growth ``d`` (n,) [m] an achievable gap
-    ``min_gap + m <= r - d <= h/2 - min_beam - m``, m = MARGIN + ``room`` x (h/2 - min_beam - min_gap)
-    (``room``: the fraction of the gap range kept free at either end for the tuning): greedily, the
+    ``min_gap + m <= r - d <= s h/2 - min_beam - m``, m = MARGIN + ``room`` x (s h/2 - min_beam - min_gap)
+    (``room``: the fraction of the gap range kept free at either end for the tuning; s = ``short``: the
+    inserts' edges relative to h, e.g. along seams): greedily, the
     largest uncovered growth sets the next (smaller) size r = d + min_gap + m (rounded up to
     ``SIZE_STEP``, at least ``MIN_INSERT``). Returns (sizes ascending, growths left uncovered by
     ``MAX_SIZES`` sizes or above the largest size the plates allow, r < h/2 - beam_width)."""
-    m = MARGIN + room * (h / 2 - pc.min_beam - pc.min_gap)
-    lo, hi = pc.min_gap + m, h / 2 - pc.min_beam - m
+    m = MARGIN + room * (short * h / 2 - pc.min_beam - pc.min_gap)
+    lo, hi = pc.min_gap + m, short * h / 2 - pc.min_beam - m
     r_max = h / 2 - pc.beam_width - SIZE_STEP
     left = np.sort(np.asarray(d, dtype=np.float64))[::-1]
     sizes = []
@@ -156,6 +181,12 @@ def complete(scene, given: dict):
         sizes, left = catalogue(d, h, pc, room=TUNE_ROOM)
         if left:  # no room for the tuning at either end: the achievable range alone
             sizes, _ = catalogue(d, h, pc)
+        if cut and sizes and len(sizes) < MAX_SIZES:  # the seams' short edges: smaller sizes where needed
+            g = np.asarray(sizes)[None, :] - d[:, None]
+            ok = np.any((g >= pc.min_gap + MARGIN) & (g <= SEAM_EDGE * h / 2 - pc.min_beam - MARGIN), axis=1)
+            if not ok.all():
+                extra, _ = catalogue(d[~ok], h, pc, short=SEAM_EDGE)
+                sizes = sorted(set(sizes) | {r for r in extra[::-1][:MAX_SIZES - len(sizes)] if r not in sizes})
         if sizes:
             upd["insert_half_sizes"] = tuple(sizes)
             decided.append("pattern.insert_half_sizes")
@@ -171,8 +202,9 @@ def complete(scene, given: dict):
         upd["spring_width"] = 0.001
         decided.append("pattern.spring_width")
     if "iterations" not in gt or tc.iterations > 0:  # steps given (--tune N): the rest still decided
-        tc = dataclasses.replace(tc, **{k: v for k, v in AUTO_TUNE.items() if k not in gt})
-        decided += [f"tune.{k}" for k in AUTO_TUNE if k not in gt]
+        auto_tune = {**AUTO_TUNE, "point_weight": point_weight(tgt)}
+        tc = dataclasses.replace(tc, **{k: v for k, v in auto_tune.items() if k not in gt})
+        decided += [f"tune.{k}" for k in auto_tune if k not in gt]
     pc = dataclasses.replace(pc, **upd)
     return (dataclasses.replace(scene, pattern=pc, cuts=cc, tune=tc),
             Decisions(decided=tuple(decided), needs_cuts=bool(needs), uncut_unreachable=int(left0),
