@@ -111,9 +111,8 @@ def test_bare_mesh_deploys_within_the_bounds_on_the_defaults(name, tmp_path):
     """A steep spherical cap (70 deg, R = 100 mm: cones and tied seams decided by the defaults) and a
     strong saddle (curvature radius = the disk radius, 45 deg slopes at the rim), each read as a bare
     mesh - no scene file, no flag - deploy within the bounds: RMS <= 1 % of the diameter, height
-    within 3 %, no gap unreachable. Measured (bench deploy --family, scenes/deploy/README.md): the
-    cap 0.51 % / +1.7 %, the saddle 0.37 % / 0.0 % (triangulated with 24 rings; with 12 it misses
-    the RMS bound: 1.10 % after the 8 default tuning steps, the README's table)."""
+    within 3 %, no gap unreachable. Measured (bench deploy --family, docs/validation/deploy.md): the
+    cap 0.479 % / +2.45 %, the saddle 0.485 % / -1.6 % (with 12 rings 0.341 % / -0.5 %)."""
     from simfab.deploy import pipeline
 
     s = _bare(tmp_path, families.member(name))
