@@ -16,8 +16,8 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
   smallest inserts first; with cuts, smaller sizes for the seams' short edges (``SEAM_EDGE``);
 - layout: ``conforming`` (grid core, regular, growths fitted to the edges) without cuts, ``mesh``
   with them: both cover >= 99 % of the flat domain;
-- tuning: on (``AUTO_TUNE``; the point weight from the positively curved share of the area,
-  :func:`point_weight`), stopping once the deviation bound is met, when progress stalls or at its
+- tuning: on (``AUTO_TUNE``; the point weight from the share of the area that is not
+  saddle-shaped, :func:`point_weight`), stopping once the deviation bound is met, when progress stalls or at its
   budget of steps.
 
 :func:`complete` returns the scene with these filled in and :class:`Decisions` (what was decided
@@ -82,12 +82,13 @@ def spacing(target) -> float:
 
 
 def point_weight(target) -> float:
-    """The tuning's point weight w for a target: ``AUTO_TUNE["point_weight"]`` times the fraction of its
-    area where the Gaussian curvature is positive (above 1e-3 of the largest |K|, the triangulation's
-    noise), to a tenth. The point term holds each vertex to its own target point where the distance to
-    the surface alone lets the deployed shape slide along the target (a cap turns within its sphere);
-    a saddle holds its place by its shape, and the point term there pulls against tangential offsets
-    the gaps cannot remove (w = 0)."""
+    """The tuning's point weight w for a target: ``AUTO_TUNE["point_weight"]`` times the share of its
+    area that is not saddle-shaped (K >= -1/(4 A), A the target's area: curvature radii beyond twice
+    sqrt(A), about the target's size, count as flat), to a tenth. The point term holds each vertex to
+    its own target point where the distance to the surface alone lets the deployed shape slide along
+    the target (a cap turns within its sphere, a cylinder slides along and around its axis); a saddle
+    holds its place by its shape, and the point term there pulls against tangential offsets the gaps
+    cannot remove (w = 0)."""
     from simfab.deploy.flatten import face_areas
 
     V, F = target.V, target.F
@@ -95,9 +96,9 @@ def point_weight(target) -> float:
     a = np.bincount(F.ravel(), weights=np.repeat(face_areas(V, F) / 3, 3), minlength=len(V))
     inner = K != 0
     if not inner.any():
-        return 0.0
-    pos = K > 1e-3 * np.max(np.abs(K[inner]))
-    return round(float(AUTO_TUNE["point_weight"] * np.sum(a[pos]) / np.sum(a[inner])), 1)
+        return float(AUTO_TUNE["point_weight"])
+    saddle = K < -1.0 / (4.0 * np.sum(a))
+    return round(float(AUTO_TUNE["point_weight"] * (1.0 - np.sum(a[saddle]) / np.sum(a[inner]))), 1)
 
 
 def _vertex_curvature(V, F) -> np.ndarray:

@@ -210,11 +210,13 @@ def test_bundled_scene_meets_the_bounds_on_the_defaults(name):
         assert r.sim_check["stability"]["settled"]
 
 
-def test_point_weight_follows_the_positively_curved_area():
+def test_point_weight_follows_the_saddle_shaped_area():
     """The tuning's point weight: the full AUTO_TUNE weight on a cap (K > 0 everywhere: the shape could
-    turn within its sphere), none on a saddle (K < 0 everywhere), in between on the mixed patch (a bump on
-    a saddle: K > 0 on about an eighth of it)."""
+    turn within its sphere) and on a cylinder (K = 0 up to the triangulation's noise: it could slide
+    along and around its axis), none on a saddle (K < 0 everywhere), in between on the mixed patch (a
+    bump on a saddle: saddle-shaped over about four fifths of it)."""
     w = auto.AUTO_TUNE["point_weight"]
     assert auto.point_weight(surface.spherical_cap(0.15, np.radians(50), 12)) == w
+    assert auto.point_weight(families.member("cylinder-R100@12")) == w
     assert auto.point_weight(surface.saddle(0.1, 0.1, 12)) == 0.0
     assert 0.0 < auto.point_weight(families.member("mixed@12")) < 0.5 * w
