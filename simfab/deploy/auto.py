@@ -12,11 +12,13 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
   placed until every vertex's growth is within the springs' reach (:func:`simfab.deploy.cuts.place_cones`
   with every size the plates allow);
 - the catalogue (:func:`catalogue`): from the flattening (cut, with cuts) the target will get,
-  the fewest sizes covering every vertex's growth with a margin, smallest inserts first;
+  the fewest sizes covering every vertex's growth with room for the tuning (``TUNE_ROOM``),
+  smallest inserts first; with cuts, smaller sizes for the seams' short edges (``SEAM_EDGE``);
 - layout: ``conforming`` (grid core, regular, growths fitted to the edges) without cuts, ``mesh``
   with them: both cover >= 99 % of the flat domain;
-- tuning: on (``AUTO_TUNE``), stopping once the deviation bound is met, when progress stalls or
-  at its budget of steps.
+- tuning: on (``AUTO_TUNE``; the point weight from the share of the area that is not
+  saddle-shaped, :func:`point_weight`), stopping once the deviation bound is met, when progress stalls or at its
+  budget of steps.
 
 :func:`complete` returns the scene with these filled in and :class:`Decisions` (what was decided
 and why, for the summary).
@@ -37,11 +39,20 @@ MAX_SIZES = 3  # insert sizes in a catalogue
 SIZE_STEP = 0.0005  # catalogue sizes rounded to this [m]
 MARGIN = 0.0005  # gap margin kept from either achievable limit [m] (layouts' edges differ from h)
 MAX_CONES = 8
+#: the fraction of the gap range kept free at either end of every insert's gap when the catalogue is sized
+#: (when its sizes can): the tuning moves gaps by millimetres, and an insert whose gap sits at a limit cannot
+#: grow or shrink further (a single size fitted to the largest growth left a steep cap's tuned gaps at min_gap)
+TUNE_ROOM = 0.2
+#: the shortest edges at an insert along a cut's seams, relative to the spacing (the mesh layout divides each
+#: seam into equal edges of about the spacing; where seams and the outline meet they run down to ~0.5 h): with
+#: cuts the catalogue adds the smaller sizes such an insert needs for its gap to be achievable
+SEAM_EDGE = 0.5
 #: the tuning on by default: Gauss-Newton steps, towards the surface and each vertex's own point; it
-#: stops at the bound (RMS 0.5 % of the diameter, half the deployment bound), when a step gains < 2 %,
-#: or after 8 steps. Its budget is counted in steps, not seconds, so that the same input gives the same
+#: stops at the bound (RMS 0.5 % of the diameter, half the deployment bound, and the height within 2 %,
+#: two thirds of its bound; both measured as the run's deviation is), when a step gains < 2 %, or after
+#: 8 steps. Its budget is counted in steps, not seconds, so that the same input gives the same
 #: pattern on any machine and load (``[tune] seconds`` sets a wall-clock budget too).
-AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.005, min_gain=0.02)
+AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.005, target_height=0.02, min_gain=0.02)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -70,6 +81,26 @@ def spacing(target) -> float:
     return float(np.clip(np.floor(h * 1e3) / 1e3, *SPACING_RANGE))
 
 
+def point_weight(target) -> float:
+    """The tuning's point weight w for a target: ``AUTO_TUNE["point_weight"]`` times the share of its
+    area that is not saddle-shaped (K >= -1/(4 A), A the target's area: curvature radii beyond twice
+    sqrt(A), about the target's size, count as flat), to a tenth. The point term holds each vertex to
+    its own target point where the distance to the surface alone lets the deployed shape slide along
+    the target (a cap turns within its sphere, a cylinder slides along and around its axis); a saddle
+    holds its place by its shape, and the point term there pulls against tangential offsets the gaps
+    cannot remove (w = 0)."""
+    from simfab.deploy.flatten import face_areas
+
+    V, F = target.V, target.F
+    K = _vertex_curvature(V, F)
+    a = np.bincount(F.ravel(), weights=np.repeat(face_areas(V, F) / 3, 3), minlength=len(V))
+    inner = K != 0
+    if not inner.any():
+        return float(AUTO_TUNE["point_weight"])
+    saddle = K < -1.0 / (4.0 * np.sum(a))
+    return round(float(AUTO_TUNE["point_weight"] * (1.0 - np.sum(a[saddle]) / np.sum(a[inner]))), 1)
+
+
 def _vertex_curvature(V, F) -> np.ndarray:
     """Angle defect over a third of the incident faces' area at interior vertices [1/m^2] (0 on the boundary)."""
     from simfab.deploy import flatten as bff
@@ -82,13 +113,16 @@ def _vertex_curvature(V, F) -> np.ndarray:
     return K
 
 
-def catalogue(d: np.ndarray, h: float, pc) -> tuple[list, int]:
+def catalogue(d: np.ndarray, h: float, pc, *, room: float = 0.0, short: float = 1.0) -> tuple[list, int]:
     """The fewest insert sizes [m] that give every growth ``d`` (n,) [m] an achievable gap
-    ``min_gap + MARGIN <= r - d <= h/2 - min_beam - MARGIN``: greedily, the largest uncovered growth
-    sets the next (smaller) size r = d + min_gap + MARGIN (rounded up to ``SIZE_STEP``, at least
-    ``MIN_INSERT``). Returns (sizes ascending, growths left uncovered by ``MAX_SIZES`` sizes or
-    above the largest size the plates allow, r < h/2 - beam_width)."""
-    lo, hi = pc.min_gap + MARGIN, h / 2 - pc.min_beam - MARGIN
+    ``min_gap + m <= r - d <= s h/2 - min_beam - m``, m = MARGIN + ``room`` x (s h/2 - min_beam - min_gap)
+    (``room``: the fraction of the gap range kept free at either end for the tuning; s = ``short``: the
+    inserts' edges relative to h, e.g. along seams): greedily, the
+    largest uncovered growth sets the next (smaller) size r = d + min_gap + m (rounded up to
+    ``SIZE_STEP``, at least ``MIN_INSERT``). Returns (sizes ascending, growths left uncovered by
+    ``MAX_SIZES`` sizes or above the largest size the plates allow, r < h/2 - beam_width)."""
+    m = MARGIN + room * (short * h / 2 - pc.min_beam - pc.min_gap)
+    lo, hi = pc.min_gap + m, short * h / 2 - pc.min_beam - m
     r_max = h / 2 - pc.beam_width - SIZE_STEP
     left = np.sort(np.asarray(d, dtype=np.float64))[::-1]
     sizes = []
@@ -97,7 +131,7 @@ def catalogue(d: np.ndarray, h: float, pc) -> tuple[list, int]:
         if r > r_max or (sizes and r >= sizes[-1]):  # a plate larger than the cell allows / no smaller size helps
             break
         g = r - left
-        sizes.append(float(r))
+        sizes.append(round(float(r), 6))
         left = left[~((g >= lo - 1e-12) & (g <= hi + 1e-12))]
     return sorted(sizes), int(len(left))
 
@@ -145,7 +179,15 @@ def complete(scene, given: dict):
             d = 0.5 * h * np.expm1(-u[interior & ~np.isin(np.arange(len(u)), cones)])
         else:
             d = d0
-        sizes, _ = catalogue(d, h, pc)
+        sizes, left = catalogue(d, h, pc, room=TUNE_ROOM)
+        if left:  # no room for the tuning at either end: the achievable range alone
+            sizes, _ = catalogue(d, h, pc)
+        if cut and sizes and len(sizes) < MAX_SIZES:  # the seams' short edges: smaller sizes where needed
+            g = np.asarray(sizes)[None, :] - d[:, None]
+            ok = np.any((g >= pc.min_gap + MARGIN) & (g <= SEAM_EDGE * h / 2 - pc.min_beam - MARGIN), axis=1)
+            if not ok.all():
+                extra, _ = catalogue(d[~ok], h, pc, short=SEAM_EDGE)
+                sizes = sorted(set(sizes) | {r for r in extra[::-1][:MAX_SIZES - len(sizes)] if r not in sizes})
         if sizes:
             upd["insert_half_sizes"] = tuple(sizes)
             decided.append("pattern.insert_half_sizes")
@@ -160,9 +202,10 @@ def complete(scene, given: dict):
     if "spring_width" not in gp:
         upd["spring_width"] = 0.001
         decided.append("pattern.spring_width")
-    if "iterations" not in gt:
-        tc = dataclasses.replace(tc, **{k: v for k, v in AUTO_TUNE.items() if k not in gt})
-        decided += [f"tune.{k}" for k in AUTO_TUNE if k not in gt]
+    if "iterations" not in gt or tc.iterations > 0:  # steps given (--tune N): the rest still decided
+        auto_tune = {**AUTO_TUNE, "point_weight": point_weight(tgt)}
+        tc = dataclasses.replace(tc, **{k: v for k, v in auto_tune.items() if k not in gt})
+        decided += [f"tune.{k}" for k in auto_tune if k not in gt]
     pc = dataclasses.replace(pc, **upd)
     return (dataclasses.replace(scene, pattern=pc, cuts=cc, tune=tc),
             Decisions(decided=tuple(decided), needs_cuts=bool(needs), uncut_unreachable=int(left0),

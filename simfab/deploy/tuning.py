@@ -57,7 +57,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from simfab.deploy.compare import kabsch
+from simfab.deploy.compare import deviation, kabsch
 from simfab.deploy.network import Deployment, build_network
 from simfab.errors import ConvergenceError, InputError
 from simfab.rods.model import synchronize
@@ -80,7 +80,10 @@ class TuneConfig:
     for none: target_rms [-]: the RMS distance of the deployed vertices to the surface over the
     target's diameter at which the tuning stops (the bound is met); min_gain [-]: it stops when a
     step lowers the objective by less than this fraction (progress stalls); seconds: the time budget
-    (no step starts after it)."""
+    (no step starts after it). The bound is measured as the deployment's deviation is (the RMS distance
+    after the alignment to the surface alone, :func:`simfab.deploy.compare.deviation`), not by the
+    tuning's own objective; target_height [-]: with ``target_rms``, the bound is met only once the
+    deployed out-of-plane height is also within this fraction of the target's (0: not checked)."""
 
     iterations: int = 0
     damping: float = 1e-3
@@ -89,9 +92,10 @@ class TuneConfig:
     target_rms: float = 0.0
     min_gain: float = 0.0
     seconds: float = 0.0
+    target_height: float = 0.0
 
     def __post_init__(self):
-        for f in ("target_rms", "min_gain", "seconds"):
+        for f in ("target_rms", "min_gain", "seconds", "target_height"):
             v = getattr(self, f)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and v >= 0):
                 raise InputError(f"must be a non-negative number (got {v!r})", where=f"tune.{f}")
@@ -286,6 +290,26 @@ def redeploy(pat, net, dep, tuned: Tuning, *, device: str = "cpu"):
                       seconds=dep.seconds + tuned.seconds + time.perf_counter() - t0)
 
 
+def bound_met(pat, dep, Y: np.ndarray, target, cfg: TuneConfig) -> bool:
+    """Whether the deployment ``dep`` of ``pat`` meets the tuning's stop bound (``cfg.target_rms``, and
+    ``cfg.target_height`` when set), measured as the run's deviation and height are."""
+    if not cfg.target_rms:
+        return False
+    dv = deviation(dep.vertex_positions(), Y, pat.quads, target)
+    if dv.rms > cfg.target_rms:
+        return False
+    if not cfg.target_height:
+        return True
+    th = _extent(Y)
+    return th <= 0 or abs(_extent(dv.aligned) / th - 1.0) <= cfg.target_height
+
+
+def _extent(X: np.ndarray) -> float:
+    """Extent [m] of points (n,3) along the normal of their best-fit plane (the run's height)."""
+    c = X - X.mean(axis=0)
+    return float(np.ptp(c @ np.linalg.svd(c, full_matrices=False)[2][2]))
+
+
 @dataclass
 class TunedPattern:
     """Result of :func:`tune_pattern`: the last accepted re-cut pattern, its network and deployment;
@@ -318,7 +342,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
     steps = solves = 0
     stop = "iterations"
     for _ in range(cfg.iterations):
-        if cfg.target_rms and fit.plane_rms <= cfg.target_rms * target.diameter:
+        if bound_met(pat, dep, Y, target, cfg):
             stop = "bound met"
             break
         if cfg.seconds and time.perf_counter() - t0 >= cfg.seconds:
@@ -354,7 +378,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
         if cfg.min_gain and gain < cfg.min_gain:
             stop = "progress stalled"
             break
-    if stop == "iterations" and cfg.target_rms and fit.plane_rms <= cfg.target_rms * target.diameter:
+    if stop == "iterations" and bound_met(pat, dep, Y, target, cfg):
         stop = "bound met"
     return TunedPattern(pattern=pat, network=net, deployment=dep, rms_history=hist, point_rms_history=phist,
                         steps=steps, solves=solves, seconds=time.perf_counter() - t0, stop=stop)

@@ -7,12 +7,24 @@ from simfab._bundled import scenes_dir
 from simfab.deploy import flatten, lasercut, pattern, scene
 from simfab.errors import InputError
 
+#: the patterns these layout tests were written on: the bundled targets with the spacing, insert size and layout
+#: their scene files set by hand before the files were left to the defaults (simfab.deploy.auto)
+PINNED = {"dome": dict(spacing=0.03, insert_half_size=0.005, layout="conforming", conforming_core="regular",
+                       growth_fit="edges"),
+          "saddle": dict(spacing=0.025, insert_half_size=0.005, layout="conforming"),
+          "mixed": dict(spacing=0.025, insert_half_size=0.005, layout="conforming")}
+
+
+def _pinned(name, **pattern_):
+    """A bundled target with the pattern of ``PINNED`` (and ``pattern_`` over it)."""
+    return scene.load_deploy_scene(scene.bundled_path(name), overrides={"pattern": {**PINNED[name], **pattern_}})
+
 
 @pytest.fixture(scope="module", params=scene.BUNDLED)
 def laid_out(request):
     """Each bundled target flattened without cuts and laid out on the clipped grid (the layouts the
     scenes choose have their own tests)."""
-    sc = scene.load_deploy_scene(scene.bundled_path(request.param), overrides={"pattern": {"layout": "grid"}})
+    sc = _pinned(request.param, layout="grid")
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     return request.param, sc, f, pat
@@ -182,7 +194,8 @@ def test_steep_cap_springs_reach_their_slack():
     segments the zigzag's pieces need (the cap uncut, on the clipped grid)."""
     from simfab.deploy import network, springs
 
-    sc = scene.load_deploy_scene(scenes_dir("deploy", "cap80.toml"), overrides={"pattern": {"layout": "grid"}})
+    sc = scene.load_deploy_scene(scenes_dir("deploy", "cap80.toml"), overrides={"pattern": {
+        "layout": "grid", "spacing": 0.03, "insert_half_sizes": [0.004, 0.007, 0.010]}})
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     need = (1 + sc.pattern.spring_slack) * np.maximum(pat.growth, 1.0)
@@ -335,7 +348,7 @@ def test_conforming_layout_covers_the_domain_without_degenerate_quads(name):
     the spacing."""
     import shapely
 
-    sc = scene.load_deploy_scene(scene.bundled_path(name))
+    sc = _pinned(name)
     f = flatten.flatten(sc.target.V, sc.target.F)
     h = sc.pattern.spacing
     poly = shapely.Polygon(f.uv[f.boundary])
@@ -479,9 +492,9 @@ def test_skewed_quad_springs_take_per_arc_pulls():
 
 
 def test_bundled_mixed_layout_has_every_spring_at_its_slack():
-    """The bundled mixed surface as laid out (conforming): a spring in every quad, none short of its
-    slack (the skewed quad above among them)."""
-    sc = scene.load_deploy_scene(scene.bundled_path("mixed"))
+    """The bundled mixed surface's 25 mm conforming layout (``PINNED``): a spring in every quad, none short
+    of its slack (the skewed quad above among them)."""
+    sc = _pinned("mixed")
     f = flatten.flatten(sc.target.V, sc.target.F)
     pat = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, sc.pattern)
     need = (1 + sc.pattern.spring_slack) * np.maximum(pat.growth, 1.0)

@@ -354,6 +354,24 @@ def test_tune_pattern_recuts_after_every_step(small_dome):
     assert after.rms < 0.9 * before.rms
 
 
+def test_tuning_stops_at_the_bound_measured_as_the_runs_deviation(small_dome):
+    """The tuning's stop at the bound reads the run's own deviation (RMS after the alignment to the
+    surface, compare.deviation) and height error: a bound the untuned deployment already meets stops it
+    before any step; with the height held to 1e-9 (never met) the same RMS bound does not stop it."""
+    from simfab.deploy import tuning
+
+    pat, net, dep, cfg, Y = small_dome
+    tgt = surface.spherical_cap(0.1, np.radians(50), 10)
+    rms = compare.deviation(dep.vertex_positions(), Y, pat.quads, tgt).rms
+    met = tuning.TuneConfig(iterations=2, target_rms=1.01 * rms)
+    assert tuning.bound_met(pat, dep, Y, tgt, met)
+    assert not tuning.bound_met(pat, dep, Y, tgt, tuning.TuneConfig(iterations=2, target_rms=0.99 * rms))
+    res = tuning.tune_pattern(pat, net, dep, Y, tgt, met, cfg)
+    assert res.steps == 0 and res.stop == "bound met"
+    tight = tuning.TuneConfig(iterations=2, target_rms=1.01 * rms, target_height=1e-9)
+    assert not tuning.bound_met(pat, dep, Y, tgt, tight)
+
+
 def test_damping_escalation_only_acts_on_a_rejected_step(small_dome):
     """``escalations`` retries a rejected step with a larger damping; a step accepted at the first
     damping is the same with or without it (gaps to round-off), and with it the objective still
