@@ -43,7 +43,7 @@ def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypat
 
     import simfab.design.problem as design_problem  # the simulator as the design problem calls it
 
-    real = design_problem.simulate
+    real = design_problem.simulate_insertion
     calls = {"n": 0}
 
     def flaky(cm, **kw):  # every second simulation does not converge
