@@ -3,7 +3,7 @@ configuration dataclass so it cannot drift from the code.
 
 Usage::
 
-    .. scene-keys:: simfab.coupling.config.InsertionOptions
+    .. scene-keys:: simfab.coupling.config.InsertionConfig
        :table: simulation
 
 Every field of the dataclass is a row: key, type, default (from ``dataclasses.fields``) and its

@@ -65,10 +65,10 @@ def register(sub, add_common_args) -> argparse.ArgumentParser:
 def run(args) -> dict:
     from pathlib import Path
 
-    from simfab.coupling.author import CouplingSceneSpec, new_scene, parse_brief
+    from simfab.coupling.author import CouplingAuthorConfig, new_scene, parse_brief
     from simfab.progress import log
 
-    spec = CouplingSceneSpec(part=Path(args.part), object=Path(args.object), into=args.into, name=args.name,
+    spec = CouplingAuthorConfig(part=Path(args.part), object=Path(args.object), into=args.into, name=args.name,
                              dim=args.dim, units=args.units, fixed=args.fixed, depth=args.depth,
                              friction=args.friction, brief=parse_brief(args.brief), material=args.material,
                              elements=args.elements, steps=args.steps)

@@ -27,12 +27,12 @@ def add_args(p) -> None:
 
 
 def run(args) -> dict:
-    from simfab.growth.author import GrowthSceneSpec, new_scene
+    from simfab.growth.author import GrowthAuthorConfig, new_scene
     from simfab.progress import log
     from simfab.results import units
 
     objects = tuple(o for o in (args.skeleton, *args.more_objects) if o is not None)
-    spec = GrowthSceneSpec(objects=objects, roots=tuple(args.root or ()), targets=tuple(args.target or ()),
+    spec = GrowthAuthorConfig(objects=objects, roots=tuple(args.root or ()), targets=tuple(args.target or ()),
                            masses=tuple(args.mass or ()), name=args.name, units=args.units, plate=not args.no_plate)
     res = new_scene(spec, args.out)
     for n in res.notes:

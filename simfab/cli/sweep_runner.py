@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from simfab.cli.sweep_spec import SweepSpec, scene_files
+from simfab.cli.sweep_spec import SweepConfig, scene_files
 from simfab.errors import InputError
 from simfab.sweep.runs import ApiCall, execute_run, lookup, table_cell, write_scene
 
@@ -40,7 +40,7 @@ def _flag_args(flag: str, v) -> list[str]:
     return [flag, str(v)]
 
 
-def run_task(spec: SweepSpec, point: dict, *, run_dir: str) -> dict:
+def run_task(spec: SweepConfig, point: dict, *, run_dir: str) -> dict:
     """Keyword arguments of :func:`execute_run` for the run with parameter values ``point``."""
     settings = list(spec.fixed) + [(p.address, point[p.name]) for p in spec.parameters]
     argv = list(spec.command)

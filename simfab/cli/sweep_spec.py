@@ -489,5 +489,3 @@ def load_spec(path) -> SweepConfig:
 
 
 #: The earlier names of the spec's config types (``...Config`` is the package's one suffix for configuration).
-SweepSpec = SweepConfig
-PlotSpec = PlotConfig

@@ -4,10 +4,10 @@ tasks, the resumable table, plots, summary)."""
 
 from __future__ import annotations
 
-from simfab.cli.sweep_spec import SweepSpec
+from simfab.cli.sweep_spec import SweepConfig
 
 
-def run_sweep(spec: SweepSpec, out, *, scheduler=None, quiet: bool = False, retry_failed: bool = False) -> dict:
+def run_sweep(spec: SweepConfig, out, *, scheduler=None, quiet: bool = False, retry_failed: bool = False) -> dict:
     """Run ``spec`` into the folder ``out``; returns the summary (the :class:`simfab.sweep.runs.SweepResult`'s
     JSON): counts per status, the paths of the table (Parquet, CSV), plots (PNG) and summary JSON."""
     from simfab.cli.sweep_runner import run_task

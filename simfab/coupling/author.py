@@ -28,7 +28,7 @@ import numpy as np
 from simfab.errors import InputError
 from simfab.results import Result, field
 
-__all__ = ["AuthoredScene", "CouplingSceneSpec", "OverlapProfile", "new_scene", "overlap_profile"]
+__all__ = ["AuthoredScene", "CouplingAuthorConfig", "OverlapProfile", "new_scene", "overlap_profile"]
 
 #: Start margin before first contact, relative to O's size along the path [-].
 START_MARGIN_REL = 0.05
@@ -43,7 +43,7 @@ _AXES = {"x": 0, "y": 1, "z": 2}
 
 
 @dataclass(frozen=True, kw_only=True)
-class CouplingSceneSpec:
+class CouplingAuthorConfig:
     """What ``simfab couple new`` is asked for (lengths in ``units``).
 
     Attributes:
@@ -58,7 +58,7 @@ class CouplingSceneSpec:
             a face ``-x`` / ``+y`` / ..., or a box ``X0,Y0,Z0,X1,Y1,Z1``.
         depth: the insertion depth past the first contact [units]; None: up to the seat, then to rest.
         friction: Coulomb coefficient between O and A [-] (0: frictionless).
-        brief: the ``[design]`` table for ``couple optimize`` (:class:`simfab.design.brief.DesignBrief` keys).
+        brief: the ``[design]`` table for ``couple optimize`` (:class:`simfab.design.brief.DesignConfig` keys).
         material: material name (:mod:`simfab.fem.materials`).
         elements: target triangle (2D) / tetrahedron (3D) count; None: 1500 / 3000.
         steps: insertion steps over the path.
@@ -235,9 +235,9 @@ def parse_brief(items) -> dict:
         except tomllib.TOMLDecodeError:
             out[k] = v
     if out:
-        from simfab.design.brief import DesignBrief
+        from simfab.design.brief import DesignConfig
 
-        DesignBrief.from_dict(out, where="--brief")
+        DesignConfig.from_dict(out, where="--brief")
     return out
 
 
@@ -285,11 +285,11 @@ def _fmt_pt(p, scale: float, units: str) -> str:
 
 
 # ---------------------------------------------------------------------------- the scene
-def new_scene(spec: CouplingSceneSpec, out) -> AuthoredScene:
+def new_scene(spec: CouplingAuthorConfig, out) -> AuthoredScene:
     """Write a coupling scene for the user's part and object meshes (see the module docstring).
 
     Args:
-        spec: the request (:class:`CouplingSceneSpec`).
+        spec: the request (:class:`CouplingAuthorConfig`).
         out: the folder the scene's files are written to (created).
 
     Returns:
@@ -318,9 +318,9 @@ def new_scene(spec: CouplingSceneSpec, out) -> AuthoredScene:
         raise InputError(f"must be letters, digits, '_' or '-', got {name!r}", where="--name")
     brief = dict(spec.brief or {})
     if brief:
-        from simfab.design.brief import DesignBrief
+        from simfab.design.brief import DesignConfig
 
-        DesignBrief.from_dict(brief, where="--brief")
+        DesignConfig.from_dict(brief, where="--brief")
     dim = spec.dim
     lo_o, hi_o = O.bounds
     centre = 0.5 * (lo_o + hi_o)

@@ -259,6 +259,3 @@ class ObjectConfig:
 
 
 #: The earlier names of the config classes (``...Config`` is the package's one suffix for configuration).
-ContactOptions = ContactConfig
-InsertionOptions = InsertionConfig
-ObjectOptions = ObjectConfig

@@ -113,11 +113,11 @@ class CouplingResult(Result):
 
 
 def _table_keys() -> dict[str, str]:
-    """Option name -> its table: the fields of [simulation] (``InsertionOptions``) and [contact]."""
-    from simfab.coupling.config import ContactOptions, InsertionOptions
+    """Option name -> its table: the fields of [simulation] (``InsertionConfig``) and [contact]."""
+    from simfab.coupling.config import ContactConfig, InsertionConfig
 
-    keys = {f.name: "simulation" for f in dataclasses.fields(InsertionOptions)}
-    keys.update({f.name: "contact" for f in dataclasses.fields(ContactOptions)})
+    keys = {f.name: "simulation" for f in dataclasses.fields(InsertionConfig)}
+    keys.update({f.name: "contact" for f in dataclasses.fields(ContactConfig)})
     return keys
 
 
@@ -160,10 +160,10 @@ def stress_radius(scene) -> float:
         The radius [m].
     """
     from simfab.coupling.scene import read_scene_toml, scene_paths
-    from simfab.design.brief import DesignBrief
+    from simfab.design.brief import DesignConfig
 
     table = read_scene_toml(scene_paths(scene)[1]).get("design")
-    return DesignBrief.from_dict(dict(table or {})).stress_radius
+    return DesignConfig.from_dict(dict(table or {})).stress_radius
 
 
 def averaged_stress(res, radius: float) -> dict:

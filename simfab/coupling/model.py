@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from simfab.contact.imls import ImlsField
-from simfab.coupling.config import ContactOptions, InsertionOptions
+from simfab.coupling.config import ContactConfig, InsertionConfig
 from simfab.errors import InputError
 from simfab.fem.model import make_model
 from simfab.fem.p2 import to_p2
@@ -31,7 +31,7 @@ class CouplingModel:
         free: (n*dim,) bool, dofs solved for (fixed: the fixed vertices' dofs along the insertion axis,
             along ``options.fixed_axes``, or along all axes with ``options.fix_all_axes``).
         axis: (dim,) unit insertion axis (coordinate axis closest to O's overall translation).
-        options: the scene's :class:`InsertionOptions`.
+        options: the scene's :class:`InsertionConfig`.
         h: A's mean edge length h_A [m].
         dhat: the barrier's activation distance [m].
         kappa: the barrier stiffness [N/m].
@@ -39,7 +39,7 @@ class CouplingModel:
         force_scale: E h width, the force unit of the solver's tolerances [N].
         object_vertices, object_faces: O's display geometry in its body frame (3D mesh, or a closed
             curve (k, 2) with faces None in 2D).
-        contact: :class:`ContactOptions` (friction between O and A).
+        contact: :class:`ContactConfig` (friction between O and A).
     """
 
     name: str
@@ -50,7 +50,7 @@ class CouplingModel:
     fixed_vertices: np.ndarray
     free: np.ndarray
     axis: np.ndarray
-    options: InsertionOptions
+    options: InsertionConfig
     h: float
     dhat: float
     kappa: float
@@ -58,7 +58,7 @@ class CouplingModel:
     force_scale: float
     object_vertices: np.ndarray
     object_faces: np.ndarray | None = None
-    contact: ContactOptions = field(default_factory=ContactOptions)
+    contact: ContactConfig = field(default_factory=ContactConfig)
     _cache: dict = field(default_factory=dict, repr=False, init=False)  # fresh on dataclasses.replace
 
     @property
@@ -203,8 +203,8 @@ def with_rest_shape(cm: CouplingModel, X: np.ndarray) -> CouplingModel:
                                contact=cm.contact)
 
 
-def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertices, options: InsertionOptions,
-                        object_vertices, object_faces=None, contact: ContactOptions | None = None) -> CouplingModel:
+def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertices, options: InsertionConfig,
+                        object_vertices, object_faces=None, contact: ContactConfig | None = None) -> CouplingModel:
     """Assemble a :class:`CouplingModel`: steps along the path, boundary conditions, barrier scales."""
     dim = fem.dim
     n = fem.n_vertices
@@ -251,7 +251,7 @@ def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertice
         tol=options.penetration_tol_rel * h, force_scale=E * h * width,
         object_vertices=np.asarray(object_vertices, float),
         object_faces=None if object_faces is None else np.asarray(object_faces, int),
-        contact=ContactOptions() if contact is None else contact,
+        contact=ContactConfig() if contact is None else contact,
     )
 
 

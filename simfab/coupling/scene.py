@@ -91,7 +91,7 @@ SCENE_TABLES: dict = {
     "fixed": frozenset({"site"}),
     "simulation": _names(InsertionConfig),
     "contact": _names(ContactConfig),
-    "design": None,  # keys and values checked by simfab.design.brief.DesignBrief where the brief is read
+    "design": None,  # keys and values checked by simfab.design.brief.DesignConfig where the brief is read
 }
 
 

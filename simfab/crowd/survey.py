@@ -40,14 +40,14 @@ SURVEY_TOML = SURVEY_DIR / "printing_survey.toml"
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class CrowdSpec:
+class CrowdConfig:
     name: str
     mix: CrowdMix
     file: str  #: ratings CSV, relative to the TOML
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class SurveySpec:
+class SurveyConfig:
     """A survey scene. Paths are relative to the TOML's folder (``root``)."""
 
     root: Path
@@ -61,7 +61,7 @@ class SurveySpec:
     seed: int
     truth_file: str
     picture: str  #: MJCF showing the part in every orientation
-    crowds: tuple[CrowdSpec, ...]
+    crowds: tuple[CrowdConfig, ...]
     demo_subcrowds: int
 
     @property
@@ -70,7 +70,7 @@ class SurveySpec:
         return "support_score" if self.question == "support" else "finish_score"
 
 
-def load_survey(path=SURVEY_TOML) -> SurveySpec:
+def load_survey(path=SURVEY_TOML) -> SurveyConfig:
     """Read and validate a survey TOML (InputError naming the field on problems)."""
     path = Path(path)
     if not path.is_file():
@@ -102,12 +102,12 @@ def load_survey(path=SURVEY_TOML) -> SurveySpec:
             alpha_sd=get(c, "alpha_sd", float, w),
             malicious_fraction=float(c.get("malicious_fraction", 0.0)),
         )
-        crowds.append(CrowdSpec(name=name, mix=mix, file=get(c, "file", str, w)))
+        crowds.append(CrowdConfig(name=name, mix=mix, file=get(c, "file", str, w)))
     if not crowds:
         raise InputError("no [crowds.*] tables", where=str(path))
     scale = get(s, "scale", list, "survey")
     diff = get(s, "difficulty", list, "survey")
-    return SurveySpec(
+    return SurveyConfig(
         root=path.parent, title=get(s, "title", str, "survey"), mesh=get(s, "mesh", str, "survey"),
         units=get(s, "units", str, "survey"), question=question,
         orientations=tuple(get(s, "orientations", list, "survey")), scale=(float(scale[0]), float(scale[1])),
@@ -136,7 +136,7 @@ def build_part_mm():
     return np.asarray(m.vert_properties, float)[:, :3], np.asarray(m.tri_verts, np.int64)
 
 
-def survey_truth(spec: SurveySpec, *, raycast: bool = True) -> list[dict]:
+def survey_truth(spec: SurveyConfig, *, raycast: bool = True) -> list[dict]:
     """Orientation table of the survey's mesh (see :func:`simfab.crowd.truth.orientation_table`)."""
 
     mesh = load_mesh(spec.root / spec.mesh, units=spec.units, require_watertight=True)
@@ -144,7 +144,7 @@ def survey_truth(spec: SurveySpec, *, raycast: bool = True) -> list[dict]:
                              scale=spec.scale)
 
 
-def _picture(spec: SurveySpec, vertices_m, faces, path):
+def _picture(spec: SurveyConfig, vertices_m, faces, path):
     """MJCF with the part once per orientation, side by side on the build plate."""
     from scipy.spatial.transform import Rotation
 
@@ -171,7 +171,7 @@ def _picture(spec: SurveySpec, vertices_m, faces, path):
     b.save(path)
 
 
-def make_bundle(spec: SurveySpec | None = None) -> dict:
+def make_bundle(spec: SurveyConfig | None = None) -> dict:
     """(Re)generate mesh, picture, truth and synthetic responses of a survey from its TOML."""
 
     spec = spec or load_survey()
@@ -195,7 +195,7 @@ def make_bundle(spec: SurveySpec | None = None) -> dict:
     return {"tasks": tasks, "truth": truth.tolist()}
 
 
-def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: SurveySpec | None = None,
+def run_bundled_survey(*, out: str, seed: int = 0, quiet: bool = True, spec: SurveyConfig | None = None,
                        subcrowds: int | None = None) -> dict:
     """The demo: recompute the truth from the mesh, aggregate each crowd, expert network,
     a micro-crowd study of the practitioners, a picture of the six orientations."""

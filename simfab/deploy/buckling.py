@@ -36,7 +36,7 @@ from simfab.errors import ConvergenceError, InputError
 from simfab.io.mjcf import load_mjcf, numeric_config
 from simfab.io.tables import load_table
 from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
-from simfab.rods.statics import StaticSolver, StaticsOptions
+from simfab.rods.statics import StaticsConfig, StaticSolver
 
 DEFAULT_RATIOS = (0.99, 0.95, 0.90, 0.80, 0.60)
 DEFAULT_N = (20, 40, 80, 160)
@@ -320,8 +320,8 @@ def run_continuation(setup: BeamConfig, support: str, n: int, ratios, *, path: s
     """
 
     beam = build_beam(setup, n, support, path)
-    # nearly inextensible beam: relax each increment with EA / 100 first (see StaticsOptions)
-    solver = StaticSolver(beam.model, device=device, options=StaticsOptions(stretch_homotopy=1e-2))
+    # nearly inextensible beam: relax each increment with EA / 100 first (see StaticsConfig)
+    solver = StaticSolver(beam.model, device=device, options=StaticsConfig(stretch_homotopy=1e-2))
     L = setup.length
     targets = sorted({float(r) for r in ratios}, reverse=True)
     state = beam.state

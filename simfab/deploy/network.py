@@ -30,9 +30,9 @@ from simfab.deploy.compare import kabsch
 from simfab.errors import ConvergenceError, InputError
 from simfab.progress import progress
 from simfab.rods.model import NetworkBuilder, RodMaterial, Section, synchronize
-from simfab.rods.statics import StaticSolver, StaticsOptions
+from simfab.rods.statics import StaticsConfig, StaticSolver
 
-#: Newton step cap of the deployment's solves [longest rod] (StaticsOptions.max_step): the tangent
+#: Newton step cap of the deployment's solves [longest rod] (StaticsConfig.max_step): the tangent
 #: predictor starts each increment near its equilibrium, so the cap only binds in the first
 #: increment's buckling (the measurements: docs/validation/deploy.md, "simfab.deploy.network").
 MAX_STEP = 0.2
@@ -320,7 +320,7 @@ def deploy(pat, net: Network, cfg: DeployConfig, heights: np.ndarray, *, device:
 
     t0 = time.perf_counter()
     model = net.model
-    solver = StaticSolver(model, device=device, options=StaticsOptions(max_step=MAX_STEP))
+    solver = StaticSolver(model, device=device, options=StaticsConfig(max_step=MAX_STEP))
     offset0 = model.node_offset.copy()
     direction = np.zeros_like(offset0)
     direction[net.pull_nodes] = net.pull_dir * net.pull_grow[:, None]

@@ -40,7 +40,7 @@ SIGMA_MIN_REL = 0.05
 
 
 @dataclass(frozen=True, kw_only=True)
-class AnnealOptions:
+class AnnealConfig:
     """iterations K; tau_0, tau_end: relative temperatures at the first and last iteration;
     sigma0 (n,): initial proposal standard deviations; lower, upper (n,): bounds; blocks (n,) int:
     block id per variable (None: every variable moves in every proposal); seed."""
@@ -135,7 +135,7 @@ class AnnealResult:
     branches: list = field(default_factory=lambda: [0, 0])  # acceptance branches drawn, adopted
 
 
-def anneal(f, x0: np.ndarray, options: AnnealOptions, *, stop=None, callback=None, evaluator=None) -> AnnealResult:
+def anneal(f, x0: np.ndarray, options: AnnealConfig, *, stop=None, callback=None, evaluator=None) -> AnnealResult:
     """Minimize ``f`` by simulated annealing from ``x0``.
 
     f : callable (x, threshold) -> (value, info); value may be +inf for a rejected candidate, or

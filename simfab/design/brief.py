@@ -173,7 +173,6 @@ class DesignConfig:
 
 
 #: The brief's earlier name (``...Config`` is the package's one suffix for configuration).
-DesignBrief = DesignConfig
 
 
 def _bounds(v, where: str) -> tuple[float, float]:
@@ -264,7 +263,7 @@ class ConstraintReport:
     initial: float | None = field(optional=True)
 
 
-def constraint_bounds(brief: DesignBrief, yield_stress: float | None) -> dict[str, tuple[float, float]]:
+def constraint_bounds(brief: DesignConfig, yield_stress: float | None) -> dict[str, tuple[float, float]]:
     """The brief's constraint bounds.
 
     Args:
@@ -438,5 +437,5 @@ class TargetProfile:
         return float(np.sqrt(total / (t1 - t0)))
 
 
-__all__ = ["DesignConfig", "DesignBrief", "Constraint", "TargetProfile", "ConstraintReport", "constraint_bounds",
+__all__ = ["DesignConfig", "Constraint", "TargetProfile", "ConstraintReport", "constraint_bounds",
            "constraints", "penalty", "read_target_profile", "run_to_rest", "PENALTY_WEIGHT", "SCALES", "UNITS"]

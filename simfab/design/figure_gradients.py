@@ -107,7 +107,7 @@ def _stress_measure(cm, radius: float) -> StressMeasure:
     return StressMeasure(averaging=A, temperature_rel=TEMPERATURE_REL)
 
 
-def design_recorder(cm, brief: B.DesignBrief) -> "DeferredRecorder":
+def design_recorder(cm, brief: B.DesignConfig) -> "DeferredRecorder":
     """The recorder the gradient method runs a model's insertion with: pass the initial shape's insertion
     one (``simulate_insertion(cm, recorder=...)``) as ``make_problem``'s ``initial_recorder`` and the method
     reuses that insertion instead of simulating the initial shape again.

@@ -17,7 +17,7 @@ only when neither helps (:func:`flat_start`) a seeded annealing pre-phase runs u
 the brief's category (:func:`in_category`). Target matching restarts the SQP from its best design at
 the initial radius when the trust region collapsed (at most RESTARTS times). The best design is the
 feasible one with the lowest objective among all simulated (else the lowest penalized objective).
-Every candidate runs at the initial shape's planned step positions (``EvaluationSettings.hold_steps``).
+Every candidate runs at the initial shape's planned step positions (``EvaluationConfig.hold_steps``).
 The full derivation: docs/design-gradients.md.
 """
 
@@ -62,7 +62,7 @@ from simfab.design.problem import (
     initial_evaluation,
     score_figures,
 )
-from simfab.design.sqp import CheapConstraints, Sample, SQPOptions, trust_region_sqp
+from simfab.design.sqp import CheapConstraints, Sample, SQPConfig, trust_region_sqp
 from simfab.errors import ConvergenceError
 from simfab.progress import log
 
@@ -396,7 +396,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         callback: called with each simulated design's evaluation.
         start: the design to start from (a correction round's: the trust region then starts at
             RADIUS_FROM_DESIGN, and a brief's round stops at its first design that meets the corrected
-            brief, ``SQPOptions.stop_when_feasible``); default the initial shape.
+            brief, ``SQPConfig.stop_when_feasible``); default the initial shape.
         resume: a previous result's ``resume`` (its best design's simulation with gradients); when
             ``start`` is that design and the problem a brief, the run starts from it re-scored instead
             of simulating it again.
@@ -511,7 +511,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
             f"ratio {st.rho:.3g} (predicted {st.predicted:.3g}), radius {st.radius:.3g}, "
             f"{'accepted' if st.accepted else 'rejected'}, insertions {run.insertions}", quiet=quiet)
 
-    opts = SQPOptions(radius=RADIUS if start is None or pre is not None else RADIUS_FROM_DESIGN,
+    opts = SQPConfig(radius=RADIUS if start is None or pre is not None else RADIUS_FROM_DESIGN,
                       max_evaluations=cap + 1, rtol=RTOL, ctol=aim, min_radius=MIN_RADIUS,
                       stop_when_feasible=start is not None and not target)
     if not sample(z0).ok:  # (memoized: the SQP's first evaluation)

@@ -12,7 +12,7 @@ has not improved by PATIENCE_REL for ``patience`` iterations.
 With several workers the annealer's speculative proposals are evaluated on worker processes
 (:mod:`simfab.design.parallel`); the decisions, hence the result, are those of one worker.
 The best design's insertion is finally run again without the seeded refinement
-(``EvaluationSettings.refined``), as ``couple simulate`` runs it, so that its reported figures
+(``EvaluationConfig.refined``), as ``couple simulate`` runs it, so that its reported figures
 are those of the plain simulation.
 """
 
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simfab.design.anneal import AnnealOptions, anneal
+from simfab.design.anneal import AnnealConfig, anneal
 from simfab.design.parallel import EvaluationPool, Workers
 from simfab.design.problem import DesignEvaluation, DesignProblem, evaluate, initial_evaluation
 from simfab.errors import ConvergenceError
@@ -150,7 +150,7 @@ def optimize_anneal(problem: DesignProblem, *, iterations: int | None = None, se
 
     progress_ref = {"value": math.inf, "k": 0}
     blocks = np.repeat(np.arange(problem.handles.n_active), 2 * problem.handles.dim)  # one block per handle
-    opts = AnnealOptions(iterations=K, sigma0=problem.sigma0, lower=problem.lower, upper=problem.upper, blocks=blocks,
+    opts = AnnealConfig(iterations=K, sigma0=problem.sigma0, lower=problem.lower, upper=problem.upper, blocks=blocks,
                          seed=seed)
     procs = workers if isinstance(workers, Workers) else None
     workers = max(1, min(procs.n if procs is not None else int(workers), K))

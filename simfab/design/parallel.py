@@ -10,7 +10,7 @@ before it was accepted) is cancelled at its next step instead of holding its wor
 
 Each worker holds its own :class:`~simfab.design.problem.DesignProblem`, rebuilt from the
 problem's :class:`~simfab.design.problem.ProblemSource` (:func:`simfab.design.problem.rebuild`),
-and receives the problem's :class:`~simfab.design.problem.EvaluationSettings` with every task:
+and receives the problem's :class:`~simfab.design.problem.EvaluationConfig` with every task:
 the problem's Warp arrays and caches do not cross process boundaries, and workers are spawned,
 not forked, because Warp's runtime is not fork-safe. Rebuilding is deterministic, so a worker
 evaluates a design to exactly the figures this process would (tested), and the optimization's
@@ -35,7 +35,7 @@ from simfab._warp import device
 from simfab.design.problem import (
     DesignEvaluation,
     DesignProblem,
-    EvaluationSettings,
+    EvaluationConfig,
     ProblemSource,
     evaluate,
     rebuild,
@@ -58,7 +58,7 @@ def _init_worker(cancel) -> None:
     device("cpu")
 
 
-def _problem(source: ProblemSource, settings: EvaluationSettings | None = None) -> DesignProblem:
+def _problem(source: ProblemSource, settings: EvaluationConfig | None = None) -> DesignProblem:
     """This worker's problem for ``source``, rebuilt when the source changed, with ``settings``
     (set without a rebuild: they change between the rounds of one optimization)."""
     global _WORKER
@@ -75,7 +75,7 @@ def _ready(source: ProblemSource | None = None) -> bool:
     return True
 
 
-def _evaluate_remote(source: ProblemSource, settings: EvaluationSettings, h: np.ndarray, threshold: float,
+def _evaluate_remote(source: ProblemSource, settings: EvaluationConfig, h: np.ndarray, threshold: float,
                      ticket: int) -> DesignEvaluation:
     # without its InsertionResult (not sent back); aborted once the annealer cancels it
     slot = ticket % CANCEL_SLOTS

@@ -22,7 +22,7 @@ from simfab.design import outputs
 from simfab.design.gradient import GRADIENT_LAG_TOL, MAX_ITERATIONS, NonsmoothEvents, design_recorder, optimize_gradient
 from simfab.design.optimize import HistoryRow, history_rows, optimize_anneal
 from simfab.design.parallel import Workers
-from simfab.design.problem import EvaluationSettings, ProblemSource, evaluate, make_problem, rebuild
+from simfab.design.problem import EvaluationConfig, ProblemSource, evaluate, make_problem, rebuild
 from simfab.design.scene import load_design_scene
 from simfab.design.synthesis import boundary_loops, revolve_outline, revolved_scene
 from simfab.design.verify import (
@@ -383,7 +383,7 @@ def split_overrides(overrides: dict) -> tuple[dict, dict, dict]:
     """Split :func:`run`'s keyword overrides into the scene tables they override.
 
     Args:
-        overrides: brief entries (``iterations=40``; :class:`simfab.design.brief.DesignBrief` fields),
+        overrides: brief entries (``iterations=40``; :class:`simfab.design.brief.DesignConfig` fields),
             [simulation]/[contact] options (``steps=8``, ``friction=0.3``), or whole tables as dicts
             (``design={...}``, ``simulation={...}``, ``contact={...}``).
 
@@ -397,7 +397,7 @@ def split_overrides(overrides: dict) -> tuple[dict, dict, dict]:
 
     from simfab.coupling.insertion import scene_overrides
 
-    brief_keys = {f.name for f in dataclasses.fields(B.DesignBrief)}
+    brief_keys = {f.name for f in dataclasses.fields(B.DesignConfig)}
     design = dict(overrides.pop("design", None) or {})
     design.update({k: overrides.pop(k) for k in list(overrides) if k in brief_keys})
     tables = scene_overrides(overrides)
@@ -619,7 +619,7 @@ def write_revolved(res, out: Path, stem: str, axis: str, offset: float, arms: in
     return {"revolved_" + k: v for k, v in paths.items()} | {"revolved_stl": paths["stl"]}, part
 
 
-def anneal_task(*, source: ProblemSource, settings: EvaluationSettings, seed: int):
+def anneal_task(*, source: ProblemSource, settings: EvaluationConfig, seed: int):
     """One restart (a Dask task): the annealing of the problem ``source`` rebuilds
     (:class:`simfab.design.problem.ProblemSource`, handles already placed), scored with
     ``settings``, with ``seed``; returns the :class:`simfab.design.optimize.OptimizationResult` without

@@ -21,7 +21,7 @@ every step; once it exceeds the annealer's threshold the simulation stops (statu
 
 **One problem, two processes.** A worker (:mod:`simfab.design.parallel`) rebuilds the
 :class:`DesignProblem` from its :class:`ProblemSource` (:func:`rebuild`; deterministic) and receives
-the :class:`EvaluationSettings` with each task. Full notes: docs/methods.md, "simfab.design.problem".
+the :class:`EvaluationConfig` with each task. Full notes: docs/methods.md, "simfab.design.problem".
 """
 
 from __future__ import annotations
@@ -151,7 +151,7 @@ class ProblemSource:
 
 
 @dataclass(frozen=True, kw_only=True)
-class EvaluationSettings:
+class EvaluationConfig:
     """How a problem's designs are scored, beyond the scene: what changes between the rounds of one
     optimization, and travels with every task to a worker (one value; the problem itself does not).
 
@@ -182,7 +182,7 @@ class DesignProblem:
 
     Args:
         base: the initial :class:`simfab.coupling.model.CouplingModel`.
-        brief: :class:`simfab.design.brief.DesignBrief`.
+        brief: :class:`simfab.design.brief.DesignConfig`.
         limits: {constraint: (lo, hi)} in UNITS.
         handles: :class:`Handles`.
         energy: :class:`ModificationEnergy`.
@@ -192,7 +192,7 @@ class DesignProblem:
         lower, upper, sigma0: (n_vars,) design bounds and initial proposal deviations.
         source: the :class:`ProblemSource` that rebuilds this problem in another process (parallel
             evaluation, restarts), or None (a problem not loaded from a scene file).
-        settings: :class:`EvaluationSettings` (mesh corrections, margin, seeded refinement).
+        settings: :class:`EvaluationConfig` (mesh corrections, margin, seeded refinement).
         initial: the unmodified shape's insertion (``simulate_insertion(base)``, e.g. run for the displacement
             placement), which :func:`initial_evaluation` scores instead of running it again; None:
             it is simulated there.
@@ -201,7 +201,7 @@ class DesignProblem:
     """
 
     base: CouplingModel
-    brief: B.DesignBrief
+    brief: B.DesignConfig
     limits: dict
     handles: Handles
     energy: ModificationEnergy
@@ -212,7 +212,7 @@ class DesignProblem:
     upper: np.ndarray
     sigma0: np.ndarray
     source: ProblemSource | None = None
-    settings: EvaluationSettings = field(default_factory=EvaluationSettings)
+    settings: EvaluationConfig = field(default_factory=EvaluationConfig)
     initial: InsertionResult | None = None
     initial_recorder: object = None
 
@@ -223,10 +223,10 @@ class DesignProblem:
         return linear_mesh(self.base.fem)
 
     def with_settings(self, **changes) -> "DesignProblem":
-        """This problem with some :class:`EvaluationSettings` fields replaced.
+        """This problem with some :class:`EvaluationConfig` fields replaced.
 
         Args:
-            **changes: :class:`EvaluationSettings` field -> new value.
+            **changes: :class:`EvaluationConfig` field -> new value.
 
         Returns:
             A new :class:`DesignProblem`.
@@ -247,9 +247,9 @@ class DesignProblem:
                              self.limits)
 
 
-def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), target: B.TargetProfile | None = None,
+def make_problem(cm: CouplingModel, brief: B.DesignConfig, *, kept_regions=(), target: B.TargetProfile | None = None,
                  initial: InsertionResult | None = None, handle_vertices=None, seed: int = 0,
-                 source: ProblemSource | None = None, settings: EvaluationSettings | None = None,
+                 source: ProblemSource | None = None, settings: EvaluationConfig | None = None,
                  initial_recorder=None) -> DesignProblem:
     """Set up the optimization of scene ``cm``'s part.
 
@@ -260,7 +260,7 @@ def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), ta
     seed : placement seed (random placement; affinity propagation's tie-breaking)
     source : a :class:`ProblemSource` naming the scene this problem was loaded from (its handle
         vertices and seed are filled in here); needed by parallel evaluation
-    settings : :class:`EvaluationSettings` (default: none)
+    settings : :class:`EvaluationConfig` (default: none)
     initial_recorder : the recorder ``initial`` was simulated with (kept with it), or None
     """
     # handles, E_L and the quality bound act on the linear mesh; a P2 model's candidates are lifted
@@ -298,12 +298,12 @@ def make_problem(cm: CouplingModel, brief: B.DesignBrief, *, kept_regions=(), ta
                          q0=element_quality(X, fem.elements), lower=lower, upper=upper, sigma0=sigma0,
                          source=None if source is None else dataclasses.replace(
                              source, handle_vertices=tuple(int(v) for v in H.vertex[H.active]), seed=seed),
-                         settings=EvaluationSettings() if settings is None else settings,
+                         settings=EvaluationConfig() if settings is None else settings,
                          initial=initial if initial is not None and initial.model is cm else None,
                          initial_recorder=initial_recorder if initial is not None and initial.model is cm else None)
 
 
-def rebuild(source: ProblemSource, settings: EvaluationSettings | None = None) -> DesignProblem:
+def rebuild(source: ProblemSource, settings: EvaluationConfig | None = None) -> DesignProblem:
     """The :class:`DesignProblem` that ``source`` describes, scored with ``settings``."""
     ds = load_design_scene(source.scene, design=source.design, simulation=source.simulation, contact=source.contact,
                            device=check_device(source.device))

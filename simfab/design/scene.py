@@ -1,5 +1,5 @@
 """Design scenes: a coupling scene (:mod:`simfab.coupling.scene`) whose TOML has a ``[design]``
-table (:class:`simfab.design.brief.DesignBrief`). Box sites named in ``keep`` mark regions of the
+table (:class:`simfab.design.brief.DesignConfig`). Box sites named in ``keep`` mark regions of the
 part that must stay unchanged (inactive handles), as the fixed support does."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
-from simfab.design.brief import DesignBrief, TargetProfile, read_target_profile
+from simfab.design.brief import DesignConfig, TargetProfile, read_target_profile
 from simfab.errors import InputError
 from simfab.io.mjcf import load_mjcf
 from simfab.progress import log
@@ -23,7 +23,7 @@ class DesignScene:
     target: TargetProfile or None; xml, toml: the scene's files."""
 
     cm: CouplingModel
-    brief: DesignBrief
+    brief: DesignConfig
     kept_regions: tuple
     target: TargetProfile | None
     xml: Path
@@ -40,7 +40,7 @@ def check_brief_table(scene) -> None:
         return
     if not isinstance(table, dict):
         raise InputError("[design] must be a table", where=str(toml))
-    DesignBrief.from_dict(dict(table), where=f"{toml} [design]")
+    DesignConfig.from_dict(dict(table), where=f"{toml} [design]")
 
 
 def load_design_scene(scene, *, design: dict | None = None, simulation: dict | None = None,
@@ -57,7 +57,7 @@ def load_design_scene(scene, *, design: dict | None = None, simulation: dict | N
     if not isinstance(table, dict):
         raise InputError("[design] must be a table", where=str(toml))
     notes = []  # flags that replace values of [design]: logged once the scene is loaded
-    brief = DesignBrief.from_dict(dict(table), where=f"{toml} [design]", log=notes.append,
+    brief = DesignConfig.from_dict(dict(table), where=f"{toml} [design]", log=notes.append,
                                   overrides={k: v for k, v in (design or {}).items() if v is not None})
     cm = load_coupling_scene(xml, overrides={"simulation": simulation or {}, "contact": contact or {}}, device=device,
                              quiet=quiet)

@@ -86,7 +86,7 @@ class CheapConstraints:
 
 
 @dataclass(frozen=True, kw_only=True)
-class SQPOptions:
+class SQPConfig:
     """radius : initial trust-region radius (inf-norm, in z's units: a fraction of each variable's
     range); max_radius, min_radius : its bounds (below min_radius the method stops);
     max_evaluations : expensive evaluations at most, the start's included;
@@ -250,7 +250,7 @@ def optimality_step(s: Sample, z: np.ndarray, radius: float, dz0: np.ndarray, ch
 
 
 def trust_region_sqp(evaluate: Callable[[np.ndarray], Sample], z0: np.ndarray, *,
-                     options: SQPOptions = SQPOptions(), cheap: CheapConstraints | None = None,
+                     options: SQPConfig = SQPConfig(), cheap: CheapConstraints | None = None,
                      callback: Callable[[SQPStep], None] | None = None) -> SQPResult:
     """Minimize f subject to c >= 0 and the cheap constraints over [0, 1]^n from z0 (see the module
     docstring); ``evaluate(z)`` -> :class:`Sample` is called once per iteration (z0 first), never twice

@@ -29,7 +29,7 @@ METHODS = ("displacement", "spatial", "random")
 
 def iterations_per_handle_budget(brief, handles: int) -> int:
     """Annealing iterations for an optimization with ``handles`` active handles at the budget per
-    handle of ``brief`` (a :class:`simfab.design.brief.DesignBrief`: its ``iterations`` for its
+    handle of ``brief`` (a :class:`simfab.design.brief.DesignConfig`: its ``iterations`` for its
     ``handles``): round(iterations * handles / brief.handles), at least 1.
 
     A comparison of handle counts gives each the same iterations per design variable (2 d per

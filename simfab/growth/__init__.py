@@ -22,7 +22,7 @@ Modules: :mod:`~simfab.growth.config` (parameters, TOML), :mod:`~simfab.growth.s
 imported on its own: it loads the FEM), :mod:`~simfab.growth.outputs` (files).
 """
 
-from simfab.growth.config import GrowthParams, ProfileSpec, SymmetrySpec
+from simfab.growth.config import GrowthSceneConfig, ProfileConfig, SymmetryConfig
 from simfab.growth.pipeline import Growth, grow, skin_result
 from simfab.growth.results import CheckResult, EditResult, GrowthResult, StrengthenedResult
 from simfab.growth.scene import GrowthScene, load_growth_scene
@@ -46,6 +46,6 @@ def skin(result: Growth, **kw):
     return skin_result(result, **kw)[0]
 
 
-__all__ = ["GrowthParams", "ProfileSpec", "SymmetrySpec", "Growth", "grow", "skin", "skin_result", "run", "check",
-           "edit", "GrowthResult", "CheckResult", "StrengthenedResult", "EditResult",
+__all__ = ["GrowthSceneConfig", "ProfileConfig", "SymmetryConfig", "Growth", "grow", "skin", "skin_result", "run",
+           "check", "edit", "GrowthResult", "CheckResult", "StrengthenedResult", "EditResult",
            "GrowthScene", "load_growth_scene", "Skeleton", "smooth_positions", "Camera", "edit_chain"]

@@ -107,7 +107,7 @@ def surface(meshes: list, n: int, rng: np.random.Generator, obstacles, *, lift: 
 
 
 def profile(spec, n: int, rng: np.random.Generator, obstacles, *, keep=None):
-    """``n`` points on the closed 2D profile swept along the view direction (see ProfileSpec)."""
+    """``n`` points on the closed 2D profile swept along the view direction (see ProfileConfig)."""
     P = np.asarray(spec.points, dtype=np.float64)
     Q = np.roll(P, -1, axis=0)
     seg = np.linalg.norm(Q - P, axis=1)

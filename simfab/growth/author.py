@@ -19,7 +19,7 @@ import numpy as np
 from simfab.errors import InputError
 from simfab.results import Result, field
 
-__all__ = ["GrowthSceneSpec", "AuthoredGrowthScene", "new_scene"]
+__all__ = ["GrowthAuthorConfig", "AuthoredGrowthScene", "new_scene"]
 
 #: MuJoCo's default geom density [kg/m^3]: the load of a body given no mass.
 MUJOCO_DEFAULT_DENSITY = 1000.0
@@ -31,7 +31,7 @@ PLATE_MARGIN_REL = 0.2
 
 
 @dataclass(frozen=True, kw_only=True)
-class GrowthSceneSpec:
+class GrowthAuthorConfig:
     """What ``simfab grow new`` is asked for (points in ``units``).
 
     Attributes:
@@ -84,11 +84,11 @@ def parse_point(text: str, where: str, scale: float) -> np.ndarray:
     return p
 
 
-def new_scene(spec: GrowthSceneSpec, out) -> AuthoredGrowthScene:
+def new_scene(spec: GrowthAuthorConfig, out) -> AuthoredGrowthScene:
     """Write a growth scene for the user's objects, roots and targets (module docstring).
 
     Args:
-        spec: the request (:class:`GrowthSceneSpec`).
+        spec: the request (:class:`GrowthAuthorConfig`).
         out: the folder the scene's files are written to (created).
 
     Returns:

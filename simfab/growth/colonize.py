@@ -94,7 +94,7 @@ class Tree:
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class ColonizeSettings:
+class ColonizeConfig:
     """Distances [m] and caps of one colonization run (see :class:`simfab.growth.config.Resolved`)."""
 
     influence: float
@@ -123,7 +123,7 @@ class ColonizeReport:
 
 
 def colonize(tree: Tree, attractors: np.ndarray, targets: np.ndarray, target_ids: np.ndarray, obstacles,
-             s: ColonizeSettings, rng: np.random.Generator, *, step0: int = 0) -> ColonizeReport:
+             s: ColonizeConfig, rng: np.random.Generator, *, step0: int = 0) -> ColonizeReport:
     """Grow ``tree`` in place towards ``attractors`` (m, 3) and ``targets`` (t, 3).
 
     ``target_ids`` (t,) are the indices recorded in ``tree.target`` when a target is reached.

@@ -5,7 +5,7 @@ One config per TOML table (every table and key optional; the full layout with de
 kill, branch_length, box, ...), ``[radius]`` :class:`RadiusConfig` (r = r_min + (r_max - r_min)
 exp(-decay age)), ``[smoothing]`` :class:`SmoothingConfig` (v += lambda1 Lap(v) + lambda2
 Lap(Lap(v))), ``[symmetry]`` :class:`SymmetryConfig`, ``[profile]`` :class:`ProfileConfig`,
-``[stages]`` :class:`StagesConfig`, ``[skin]`` :class:`SkinConfig`; together :class:`GrowthParams`
+``[stages]`` :class:`StagesConfig`, ``[skin]`` :class:`SkinConfig`; together :class:`GrowthSceneConfig`
 (whose old flat names, e.g. ``p.attractors``, still read). ``[material]`` :class:`MaterialConfig`
 and ``[loads]`` (target site -> force [N]) make the structural check's :class:`StructureConfig`.
 
@@ -285,7 +285,7 @@ class SkinConfig:
             _fail("skin", "subtract_objects", "expected true or false")
 
 
-#: the tables of :class:`GrowthParams` and their config types (None: the table is optional, absent = off)
+#: the tables of :class:`GrowthSceneConfig` and their config types (None: the table is optional, absent = off)
 TABLES = {"growth": GrowthConfig, "radius": RadiusConfig, "smoothing": SmoothingConfig, "symmetry": SymmetryConfig,
           "profile": ProfileConfig, "stages": StagesConfig, "skin": SkinConfig}
 #: the old flat names of the growth parameters -> (table, key)
@@ -302,7 +302,7 @@ _PARSERS = {"growth": dict.fromkeys(("attractors", "max_steps", "max_nodes", "ma
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class GrowthParams:
+class GrowthSceneConfig:
     """Growth parameters nested like the scene's TOML tables (see the module docstring).
 
     Args:
@@ -324,8 +324,8 @@ class GrowthParams:
     from_file: frozenset = dataclasses.field(default=frozenset(), compare=False, repr=False)
 
     @classmethod
-    def of(cls, **values) -> "GrowthParams":
-        """Parameters from flat names (``GrowthParams.of(mode="surface", kill=0.01)``), checked.
+    def of(cls, **values) -> "GrowthSceneConfig":
+        """Parameters from flat names (``GrowthSceneConfig.of(mode="surface", kill=0.01)``), checked.
 
         Args:
             **values: :data:`FLAT` names, or ``symmetry`` / ``profile`` / ``stages`` configs.
@@ -336,7 +336,7 @@ class GrowthParams:
         return cls().replace(**values)
 
     def replace(self, *, file: str | None = None, log: Callable[[str], None] | None = None,
-                **values) -> "GrowthParams":
+                **values) -> "GrowthSceneConfig":
         """A copy with some values replaced, each table re-checked through :func:`simfab.io.tables.load_table`.
 
         Args:
@@ -389,11 +389,9 @@ def _flat_property(table: str, key: str):
 
 
 for _name, (_table, _key) in FLAT.items():
-    setattr(GrowthParams, _name, _flat_property(_table, _key))
+    setattr(GrowthSceneConfig, _name, _flat_property(_table, _key))
 
 # the former names (simfab.growth exports them)
-SymmetrySpec = SymmetryConfig
-ProfileSpec = ProfileConfig
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -430,7 +428,7 @@ DECAY_E_FOLDS = 3.0
 STEPS_PER_CROSSING = 12.0
 
 
-def resolve(p: GrowthParams, box: np.ndarray, *, area: float | None = None) -> Resolved:
+def resolve(p: GrowthSceneConfig, box: np.ndarray, *, area: float | None = None) -> Resolved:
     """Fill derived defaults from the design box (2, 3) [m] (``area`` [m²] for surface modes)."""
     box = np.asarray(box, dtype=np.float64)
     ext = box[1] - box[0]
@@ -449,7 +447,7 @@ def resolve(p: GrowthParams, box: np.ndarray, *, area: float | None = None) -> R
         raise InputError(f"branch length, kill and influence distances must be positive (got {L}, {kill}, {infl})",
                          where="growth")
     check_scale(p, box)
-    if not infl > kill:  # blamed on kill, or on influence when only it was given (flags: GrowthParams.replace)
+    if not infl > kill:  # blamed on kill, or on influence when only it was given (flags: GrowthSceneConfig.replace)
         key = "kill" if p.kill is not None else "influence" if p.influence is not None else None
         raise FieldError(_exceed(infl, kill), key=f"growth.{key}" if key else "growth",
                          where=f"growth.{key}" if key else "growth")
@@ -466,7 +464,7 @@ def resolve(p: GrowthParams, box: np.ndarray, *, area: float | None = None) -> R
                     radius_decay=float(decay))
 
 
-def check_scale(p: GrowthParams, box: np.ndarray) -> None:
+def check_scale(p: GrowthSceneConfig, box: np.ndarray) -> None:
     """InputError for a given length that cannot make sense in the design box (2, 3) [m]: a
     growth step longer than the box's longest side, a kill or influence distance or a maximum
     branch radius larger than its diagonal D (every attractor would be killed or seen at once,
@@ -549,7 +547,6 @@ class StructureConfig:
     loads: tuple = ()
 
 
-StructureSpec = StructureConfig  # the former name
 
 #: every table of a growth scene's TOML ([loads] is free-form: target site name -> force)
 SCENE_TABLES = (*TABLES, "material", "loads")
@@ -593,8 +590,8 @@ def structure_from_toml(doc: dict, where: str) -> StructureConfig:
 
 
 def params_from_toml(doc: dict, where: str, *, overrides: Mapping | None = None,
-                     log: Callable[[str], None] | None = None) -> GrowthParams:
-    """:class:`GrowthParams` from a parsed scene TOML, each table through :func:`simfab.io.tables.load_table`.
+                     log: Callable[[str], None] | None = None) -> GrowthSceneConfig:
+    """:class:`GrowthSceneConfig` from a parsed scene TOML, each table through :func:`simfab.io.tables.load_table`.
 
     Args:
         doc: the parsed TOML. where: its path.
@@ -613,5 +610,5 @@ def params_from_toml(doc: dict, where: str, *, overrides: Mapping | None = None,
     if "symmetry" in kw and not kw["symmetry"].enabled:
         kw["symmetry"] = None
     given = frozenset(f"{t}.{k}" for t in TABLES if isinstance(doc.get(t), Mapping) for k in doc[t])
-    p = GrowthParams(**kw, from_file=given)
+    p = GrowthSceneConfig(**kw, from_file=given)
     return p.replace(file=where, log=log, **overrides) if overrides else p

@@ -26,8 +26,8 @@ import numpy as np
 import simfab.growth.attractors as attr
 import simfab.growth.tolerances as tol
 from simfab.errors import InputError
-from simfab.growth.colonize import ColonizeSettings, Tree, colonize
-from simfab.growth.config import Resolved, SymmetrySpec, resolve
+from simfab.growth.colonize import ColonizeConfig, Tree, colonize
+from simfab.growth.config import Resolved, SymmetryConfig, resolve
 from simfab.growth.contact import aim_targets
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.scene import GrowthScene, load_growth_scene, validate_scene
@@ -125,20 +125,20 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
         seed: the growth's seed (None: the scene's).
         symmetric: True enables mirror symmetry (plane from the scene's [symmetry] table, else the
             plane x = mean root x); None keeps the scene's setting.
-        **overrides: :class:`simfab.growth.config.GrowthParams` fields (``attractors``, ``influence``,
+        **overrides: :class:`simfab.growth.config.GrowthSceneConfig` fields (``attractors``, ``influence``,
             ``kill``, ``branch_length``, ``mode``, ...; None = keep).
 
     Returns:
         The :class:`Growth` (skeletons, attractors, history, reports).
     """
     scene = as_scene(scene_or_path)
-    if overrides:  # checked (unknown names too) by GrowthParams.replace
+    if overrides:  # checked (unknown names too) by GrowthSceneConfig.replace
         scene = scene.with_params(**overrides)
         validate_scene(scene)
     p = scene.params
     if symmetric and p.symmetry is None:
-
-        scene = scene.with_params(symmetry=SymmetrySpec(point=tuple(scene.roots.mean(axis=0)), normal=(1.0, 0.0, 0.0)))
+        plane = SymmetryConfig(point=tuple(scene.roots.mean(axis=0)), normal=(1.0, 0.0, 0.0))
+        scene = scene.with_params(symmetry=plane)
         p = scene.params
     if symmetric is False:
         scene = dataclasses.replace(scene, params=dataclasses.replace(p, symmetry=None))
@@ -168,7 +168,7 @@ def grow(scene_or_path, *, seed: int | None = None, symmetric: bool | None = Non
     roots = sym.half_roots(res) if sym else scene.roots
     target_ok = sym.half_targets() if sym else np.ones(len(scene.targets), bool)
     stages = _stages(scene)
-    settings = ColonizeSettings(influence=res.influence, kill=res.kill, branch_length=res.branch_length,
+    settings = ColonizeConfig(influence=res.influence, kill=res.kill, branch_length=res.branch_length,
                                 target_influence=p.target_influence, max_steps=res.max_steps,
                                 max_nodes=p.max_nodes, max_trials=p.max_trials)
 

@@ -28,7 +28,7 @@ import numpy as np
 import simfab.growth.tolerances as tol
 from simfab._bundled import scenes_dir
 from simfab.errors import InputError
-from simfab.growth.config import GrowthParams, StructureConfig, params_from_toml, structure_from_toml
+from simfab.growth.config import GrowthSceneConfig, StructureConfig, params_from_toml, structure_from_toml
 from simfab.io.mjcf import load_mjcf
 from simfab.io.tables import read_toml
 
@@ -43,7 +43,7 @@ class GrowthScene:
         targets: (t, 3) target points [m]; target_names: t names.
         sphere_centers, sphere_radii: (s, 3) centres and (s,) radii of the obstacle spheres [m];
             sphere_names: s names.
-        params: growth parameters (:class:`simfab.growth.config.GrowthParams`).
+        params: growth parameters (:class:`simfab.growth.config.GrowthSceneConfig`).
         path: the MJCF file (None when built in Python).
         structure: material and extra loads of the structural check ([material], [loads]).
         notes: what :meth:`with_params` overrode of the scene file (``--kill 0.003 overrides P.toml [growth]
@@ -58,7 +58,7 @@ class GrowthScene:
     sphere_centers: np.ndarray
     sphere_radii: np.ndarray
     sphere_names: tuple = ()
-    params: GrowthParams = dataclasses.field(default_factory=GrowthParams)
+    params: GrowthSceneConfig = dataclasses.field(default_factory=GrowthSceneConfig)
     path: Path | None = None
     structure: StructureConfig = dataclasses.field(default_factory=StructureConfig)
     notes: tuple = ()
@@ -90,7 +90,7 @@ class GrowthScene:
         return np.array([pts.min(axis=0), pts.max(axis=0)])
 
     def with_params(self, **overrides) -> "GrowthScene":
-        """Copy with some growth parameters replaced, checked by :meth:`GrowthParams.replace`.
+        """Copy with some growth parameters replaced, checked by :meth:`GrowthSceneConfig.replace`.
 
         Args:
             **overrides: flat parameter names (``kill``, ``attractors``, ``radius_decay``, ...) ->
@@ -129,7 +129,7 @@ def load_growth_scene(path: str | os.PathLike) -> GrowthScene:
         raise InputError("a growth scene is an MJCF .xml file", where=str(path))
     sc = load_mjcf(path)
     toml_path = path.with_suffix(".toml")
-    params = GrowthParams()
+    params = GrowthSceneConfig()
     structure = StructureConfig()
     if toml_path.is_file():
         doc = read_toml(toml_path)

@@ -36,7 +36,7 @@ from simfab.fem import elastic
 from simfab.fem.loads import body_force_loads, traction_loads
 from simfab.fem.model import make_model
 from simfab.fem.p2 import P2Model, corner_gradients, to_p2
-from simfab.growth.config import StructureSpec
+from simfab.growth.config import StructureConfig
 from simfab.growth.contact import ground_objects, load_paths, load_points, require_ground, target_contacts
 from simfab.growth.masses import object_masses
 from simfab.growth.obstacles import Obstacles
@@ -82,7 +82,7 @@ class DroppedWeight:
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class CheckOptions:
+class CheckConfig:
     """Mesh and output options of :func:`check_structure`.
 
     edge_length : target tet edge length [m] (None: ``EDGE_PER_RMIN`` x the smallest radius).
@@ -256,7 +256,7 @@ def target_loads(scene: GrowthScene, skeleton: Skeleton, extra: dict | None = No
 
 
 def check_structure(skeleton: Skeleton, scene: GrowthScene, *, loads: dict | None = None,
-                    options: CheckOptions = CheckOptions(), spec: StructureSpec | None = None,
+                    options: CheckConfig = CheckConfig(), spec: StructureConfig | None = None,
                     best_effort: bool = False) -> StructureCheck:
     """Skin, mesh, load and solve the support ``skeleton`` grown in ``scene`` (module docstring).
 
@@ -545,7 +545,7 @@ def radius_caps(skeleton: Skeleton, scene: GrowthScene) -> np.ndarray:
 
 
 def strengthen(skeleton: Skeleton, scene: GrowthScene, target: float, *, loads: dict | None = None,
-               options: CheckOptions = CheckOptions(), spec: StructureSpec | None = None, thin: bool = False,
+               options: CheckConfig = CheckConfig(), spec: StructureConfig | None = None, thin: bool = False,
                rounds: int = 5, check: StructureCheck | None = None, best_effort: bool = False) -> StrengthenResult:
     """Scale branch radii until the safety factor is at least ``target`` (topology unchanged).
 

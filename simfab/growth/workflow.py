@@ -18,7 +18,7 @@ from simfab.growth.scene import GrowthScene
 from simfab.growth.skeleton import Skeleton
 from simfab.io.tables import Override
 
-#: GrowthParams field -> the command-line option that sets it (errors name the option the value came from)
+#: GrowthSceneConfig field -> the command-line option that sets it (errors name the option the value came from)
 FLAGS = {"branch_length": "--branch-length", "kill": "--kill", "influence": "--influence",
          "attractors": "--attractors", "max_steps": "--max-steps"}
 
@@ -190,7 +190,7 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress=None, c
         best_effort: keep a growth that leaves targets unreached, and check a support that leaves a
             weight without a load path (both warn instead of failing).
         loads, strengthen, thin, buckling: as :func:`check`. stem: output file stem (default: the scene's name).
-        **overrides: :class:`simfab.growth.config.GrowthParams` flat names (``attractors``, ``kill``,
+        **overrides: :class:`simfab.growth.config.GrowthSceneConfig` flat names (``attractors``, ``kill``,
             ``symmetric``, ...; None = keep the scene's), a value or a :class:`simfab.io.tables.Override`
             (an error then names its flag; a note that it replaced a value of the scene file goes to
             ``progress`` once the growth stands).

@@ -39,7 +39,7 @@ from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
 
 @dataclass(frozen=True, kw_only=True)
-class StaticsOptions:
+class StaticsConfig:
     """Tolerances of the static solver (the one place they live for rods).
 
     grad_tol : equilibrium residual ||g_q||_inf <= grad_tol * model.force_scale [N]. The
@@ -218,7 +218,7 @@ class StaticSolver:
     (B,3) [N] act on body origins.
     """
 
-    def __init__(self, model: RodModel, *, device: str = "cpu", options: StaticsOptions = StaticsOptions()):
+    def __init__(self, model: RodModel, *, device: str = "cpu", options: StaticsConfig = StaticsConfig()):
         self.model = model
         self.options = options
         self.evaluator = Evaluator(model, device=device)

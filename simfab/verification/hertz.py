@@ -28,7 +28,7 @@ from dataclasses import replace
 import numpy as np
 
 from simfab.contact.sdf import Primitive, build_primitive_field
-from simfab.coupling.config import InsertionOptions
+from simfab.coupling.config import InsertionConfig
 from simfab.coupling.simulate import make_coupling_model, simulate_insertion
 from simfab.fem.elastic import energy_gradient_hessian
 from simfab.fem.materials import Material
@@ -60,7 +60,7 @@ def sphere_on_block(*, h0: float = 0.0025, growth: float = 0.1, W: float = 20.0,
     path = Trajectory(np.array([[0, 0, R + gap], [0, 0, R - d_max * R]]), np.array([[1.0, 0, 0, 0]] * 2))
     bottom = np.flatnonzero(P[:, 2] <= -D * R * (1 - 1e-12))
     cm = make_coupling_model(name="hertz", fem=fem, field=fld, path=path, fixed_vertices=bottom,
-                             options=InsertionOptions(steps=steps, fix_all_axes=True, L_max=path.length),
+                             options=InsertionConfig(steps=steps, fix_all_axes=True, L_max=path.length),
                              object_vertices=fld.vertices)
     free = cm.free.reshape(-1, 3).copy()
     free[np.abs(P[:, 0]) <= 1e-12 * R, 0] = False  # symmetry planes

@@ -24,7 +24,7 @@ at large alpha and mu).
 import numpy as np
 
 from simfab.contact.sdf import Primitive, build_primitive_field
-from simfab.coupling.config import ContactOptions, InsertionOptions
+from simfab.coupling.config import ContactConfig, InsertionConfig
 from simfab.coupling.simulate import make_coupling_model
 from simfab.fem.materials import PLA
 from simfab.fem.meshing import structured_box
@@ -52,7 +52,7 @@ def snapfit_model(alpha_deg: float, mu: float, *, dim: int = 2, steps: int = 24,
                   lag_tol: float = 0.01):
     """The snap-fit at face angle alpha [deg] and friction mu (see the module docstring): the box
     travels GAP to first touch, then until the tip is deflected by DEFLECTION. ``lag_tol``: the
-    friction's lag tolerance (:class:`simfab.coupling.config.ContactOptions`), tighter than the
+    friction's lag tolerance (:class:`simfab.coupling.config.ContactConfig`), tighter than the
     default so that the check measures the contact law, not the lag."""
     fem = _beam(dim, cells_t)
     a = np.radians(alpha_deg)
@@ -66,10 +66,10 @@ def snapfit_model(alpha_deg: float, mu: float, *, dim: int = 2, steps: int = 24,
     travel = GAP + DEFLECTION / np.tan(a)
     path = Trajectory(np.array([[0.0, 0.0, 0.0], [0.0, -travel, 0.0]]), np.array([[1.0, 0, 0, 0]] * 2))
     root = np.flatnonzero(fem.rest[:, 1] < 1e-9)
-    opts = InsertionOptions(steps=steps, L_max=travel, fix_all_axes=True)
+    opts = InsertionConfig(steps=steps, L_max=travel, fix_all_axes=True)
     return make_coupling_model(name=f"snapfit{dim}d", fem=fem, field=field, path=path, fixed_vertices=root,
                                options=opts, object_vertices=field.vertices,
-                               contact=ContactOptions(friction=mu, lag_tol=lag_tol))
+                               contact=ContactConfig(friction=mu, lag_tol=lag_tol))
 
 
 def ratio_formula(alpha_deg: float, mu: float, phase: str) -> float:

@@ -4,7 +4,7 @@ assertion helpers live in _coupling_checks.py)."""
 import numpy as np
 import pytest
 
-from simfab.coupling.config import InsertionOptions
+from simfab.coupling.config import InsertionConfig
 from simfab.coupling.simulate import make_coupling_model
 
 
@@ -24,7 +24,7 @@ def _coarse_block_model(refine: bool):
     v, _ = circle_samples(3e-3, 200)
     fld = build_imls(v, curve_normals(v))
     path = Trajectory(np.array([[0, 3.3e-3, 0], [0, 2.4e-3, 0]]), np.array([[1.0, 0, 0, 0]] * 2))
-    opts = InsertionOptions(steps=4, fix_all_axes=True, refine=refine, samples_per_edge=20)
+    opts = InsertionConfig(steps=4, fix_all_axes=True, refine=refine, samples_per_edge=20)
     return make_coupling_model(name="block", fem=fem, field=fld, path=path, fixed_vertices=[0, 1], options=opts,
                                object_vertices=v)
 
@@ -48,7 +48,7 @@ def _ellipse_in_clamp_model(steps: int = 16):
     q90 = [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)]
     path = Trajectory(np.array([[1.0e-3, 0, 0], [0.9e-3, 0, 0], [0.9e-3, 0, 0]]),
                       np.array([[1.0, 0, 0, 0], [1.0, 0, 0, 0], q90]), rot_length_scale=0.01)
-    opts = InsertionOptions(steps=steps, fix_all_axes=True)
+    opts = InsertionConfig(steps=steps, fix_all_axes=True)
     return make_coupling_model(name="ellipse", fem=base.fem, field=fld, path=path,
                                fixed_vertices=base.fixed_vertices, options=opts, object_vertices=v)
 

@@ -59,13 +59,13 @@ def test_summary_reports_the_averaged_stress_the_yield_constraint_reads(order):
     from simfab.coupling.insertion import averaged_stress, stress_radius
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import simulate_insertion
-    from simfab.design.brief import DesignBrief
+    from simfab.design.brief import DesignConfig
     from simfab.design.verify import level_figures
 
     overrides = {"simulation": {"steps": 4, "element_order": order}}
     res = simulate_insertion(load_coupling_scene("block2d_tight", overrides=overrides))
     r = stress_radius("block2d_tight")
-    assert r == DesignBrief().stress_radius  # the scene's brief leaves the default
+    assert r == DesignConfig().stress_radius  # the scene's brief leaves the default
     got = averaged_stress(res, r)
     assert got == {"averaged_von_mises": pytest.approx(level_figures(res, r)["von_mises"], rel=1e-12),
                    "stress_radius": r}

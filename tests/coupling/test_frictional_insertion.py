@@ -10,7 +10,7 @@ import pytest
 
 from simfab.contact.sdf import Primitive, build_primitive_field
 from simfab.coupling import friction
-from simfab.coupling.config import ContactOptions, InsertionOptions
+from simfab.coupling.config import ContactConfig, InsertionConfig
 from simfab.coupling.objective import StepObjective
 from simfab.coupling.points import edge_weights, facet_points, vertex_points
 from simfab.coupling.profile import analyze_run
@@ -99,10 +99,10 @@ def _block_and_plate(mu: float, slide: float, h_in: float = 20e-6):
     top = 4e-3 + 2e-3
     keys = np.array([[0.0, top + 0.05e-3, 0.0], [0.0, top - 0.02e-3, 0.0], [slide, top - 0.02e-3, 0.0]])
     path = Trajectory(keys, np.array([[1.0, 0, 0, 0]] * 3))
-    opts = InsertionOptions(h_in=h_in, L_max=float(path.length), fix_all_axes=True)
+    opts = InsertionConfig(h_in=h_in, L_max=float(path.length), fix_all_axes=True)
     return make_coupling_model(name="block", fem=fem, field=field, path=path, options=opts,
                                fixed_vertices=np.flatnonzero(P[:, 1] < 1e-9), object_vertices=field.vertices,
-                               contact=ContactOptions(friction=mu))
+                               contact=ContactConfig(friction=mu))
 
 
 def test_a_sliding_block_feels_mu_times_the_normal_force():
@@ -132,7 +132,7 @@ def test_below_the_slip_threshold_the_contact_sticks():
 
 def test_frictional_objective_gradient_and_hessian_match_finite_differences(coarse_block_model):
     cm = coarse_block_model(refine=True)
-    cm = dataclasses.replace(cm, contact=ContactOptions(friction=0.4, friction_eps_rel=1e-2))
+    cm = dataclasses.replace(cm, contact=ContactConfig(friction=0.4, friction_eps_rel=1e-2))
     facets = np.asarray(cm.fem.boundary_facets)
     top = [i for i, f in enumerate(facets) if set(f.tolist()) == {2, 3}]
     pts = vertex_points(np.asarray(cm.fem.boundary_vertices), 2).concat(facet_points(facets, top, edge_weights(20)))

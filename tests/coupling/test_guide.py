@@ -8,7 +8,7 @@ from simfab.coupling import config as C
 from simfab.coupling.guide import CoarseGuide
 from simfab.coupling.record import StepResult
 from simfab.coupling.scene import load_coupling_scene
-from simfab.design.brief import DesignBrief
+from simfab.design.brief import DesignConfig
 from simfab.design.problem import make_problem
 from simfab.design.verify import FIGURES, mesh_check, p2_prolongation, refined_model
 
@@ -62,7 +62,7 @@ def test_guide_offers_candidates_only_while_the_coarse_run_loads():
 def problem():
     # 4 steps: too coarse for the snap, so the check runs its step check too
     cm = load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 4}})
-    return make_problem(cm, DesignBrief(grip="tight", grip_force=(3.0, 10.0), handles=3, placement="spatial"))
+    return make_problem(cm, DesignConfig(grip="tight", grip_force=(3.0, 10.0), handles=3, placement="spatial"))
 
 
 def checks(problem):

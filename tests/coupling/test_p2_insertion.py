@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from _coupling_checks import check_every_step
 
-from simfab.coupling.config import InsertionOptions
+from simfab.coupling.config import InsertionConfig
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.settle import work_energy_mismatch
@@ -78,7 +78,7 @@ def test_p2_work_matches_energy(runs):
 
 
 def test_default_order_is_linear_and_unchanged(runs):
-    assert InsertionOptions().element_order == 1
+    assert InsertionConfig().element_order == 1
     cm = load_coupling_scene("cclamp2d", overrides={"compliant": {"target_elements": 450}})
     assert type(cm.fem) is FemModel and cm.options.element_order == 1
     # contact and output geometry are the linear mesh's own arrays
@@ -123,11 +123,11 @@ def test_cli_p2_writes_valid_outputs(tmp_path, capsys):
 def test_rest_shape_optimizer_takes_p2_parts_with_handles_on_the_linear_mesh():
     # the handles, E_L and the quality bound act on the P2 part's linear mesh (its vertices); candidates
     # are the P2 part with its edge nodes at the moved edges' midpoints
-    from simfab.design.brief import DesignBrief
+    from simfab.design.brief import DesignConfig
     from simfab.design.problem import make_problem
 
     cm = load_coupling_scene("cclamp2d", overrides={"compliant": {"target_elements": 450},
                                                      "simulation": {"element_order": 2}})
-    P = make_problem(cm, DesignBrief(placement="spatial"))
+    P = make_problem(cm, DesignConfig(placement="spatial"))
     assert P.mesh.elements.shape[1] == 3 and cm.fem.elements.shape[1] == 6
     assert P.handles.apply(P.handles.identity()).shape[0] == int(P.mesh.elements.max()) + 1

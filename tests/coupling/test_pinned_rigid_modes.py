@@ -69,11 +69,11 @@ def test_friction_resists_the_slide_along_the_cylinder():
     # it is not reported as unresisted, and the part still does not drift along z
     import dataclasses
 
-    from simfab.coupling.config import ContactOptions
+    from simfab.coupling.config import ContactConfig
 
     sim, comp = {"steps": 18, "element_order": 1}, {"target_elements": 3600}
     cm = load_coupling_scene("clip3d", overrides={"simulation": sim, "compliant": comp})
-    res = simulate_insertion(dataclasses.replace(cm, contact=ContactOptions(friction=0.3)))
+    res = simulate_insertion(dataclasses.replace(cm, contact=ContactConfig(friction=0.3)))
     assert not any("translation along z" in n for n in res.notes)
     assert res.removal and res.jammed_at is None
     for r in [*res.steps, *res.removal]:

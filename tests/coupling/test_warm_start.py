@@ -6,7 +6,7 @@ import pytest
 
 import simfab.coupling.config as C
 from simfab.coupling import predictor
-from simfab.coupling.config import InsertionOptions
+from simfab.coupling.config import InsertionConfig
 from simfab.coupling.layout import point_dhat
 from simfab.coupling.objective import make_objective
 from simfab.coupling.points import ContactPoints, vertex_points
@@ -100,12 +100,12 @@ def test_warm_starts_keep_the_contact_the_last_step_ended_with():
 @pytest.mark.parametrize("axes, message", [("xq", "axis letters"), ("xx", "axis letters"), ("", "axis letters")])
 def test_fixed_axes_must_be_distinct_axis_letters(axes, message):
     with pytest.raises(InputError, match=message):
-        InsertionOptions(fixed_axes=axes)
+        InsertionConfig(fixed_axes=axes)
 
 
 def test_fixed_axes_cannot_be_combined_with_fix_all_axes():
     with pytest.raises(InputError, match="fix_all_axes"):
-        InsertionOptions(fixed_axes="xz", fix_all_axes=True)
+        InsertionConfig(fixed_axes="xz", fix_all_axes=True)
 
 
 def test_fixed_axes_must_include_the_insertion_axis_and_exist_in_2d():

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from simfab.design.anneal import AnnealOptions, anneal
+from simfab.design.anneal import AnnealConfig, anneal
 
 
 def double_well(x, threshold=None):
@@ -16,7 +16,7 @@ def test_escapes_local_minimum_to_global_minimum():
     x_star = np.full(2, -1.03557789)  # d/dx [(x^2-1)^2 + 0.3 x] = 4x^3 - 4x + 0.3 = 0
     found = 0
     for seed in range(10):
-        r = anneal(double_well, np.array([1.0, 1.0]), AnnealOptions(
+        r = anneal(double_well, np.array([1.0, 1.0]), AnnealConfig(
             iterations=600, sigma0=np.ones(2), lower=np.full(2, -3.0), upper=np.full(2, 3.0), tau0=0.5, seed=seed))
         found += bool(np.allclose(r.x, x_star, atol=0.05)) and abs(r.value - double_well(x_star)[0]) < 1e-2
     # started in the local minimum (a descent method would stay there)
@@ -27,7 +27,7 @@ def test_rosenbrock_valley_and_reproducibility():
     def f(x, threshold=None):
         return float((1 - x[0]) ** 2 + 100 * (x[1] - x[0] ** 2) ** 2), None
 
-    opts = AnnealOptions(iterations=4000, sigma0=np.full(2, 0.3), lower=np.full(2, -2.0), upper=np.full(2, 2.0), seed=7)
+    opts = AnnealConfig(iterations=4000, sigma0=np.full(2, 0.3), lower=np.full(2, -2.0), upper=np.full(2, 2.0), seed=7)
     a = anneal(f, np.array([-1.5, 2.0]), opts)
     b = anneal(f, np.array([-1.5, 2.0]), opts)
     assert np.allclose(a.x, [1.0, 1.0], atol=0.05)
@@ -41,7 +41,7 @@ def test_rejected_candidates_are_never_accepted_and_stop_is_honoured():
         calls.append(x.copy())
         return (np.inf if x[0] > 0 else float(x @ x)), None
 
-    r = anneal(f, np.array([-1.0]), AnnealOptions(iterations=200, sigma0=np.ones(1), lower=-np.full(1, 3.0),
+    r = anneal(f, np.array([-1.0]), AnnealConfig(iterations=200, sigma0=np.ones(1), lower=-np.full(1, 3.0),
                                                   upper=np.full(1, 3.0), seed=0),
                stop=lambda info, value, k, kb: k >= 50)
     assert r.iterations == 50 and r.stopped_early
@@ -59,7 +59,7 @@ def test_threshold_is_the_metropolis_test():
         seen.append((v, threshold))
         return v, None
 
-    r = anneal(f, np.array([2.0, 2.0]), AnnealOptions(iterations=300, sigma0=np.full(2, 0.5), lower=np.full(2, -5.0),
+    r = anneal(f, np.array([2.0, 2.0]), AnnealConfig(iterations=300, sigma0=np.full(2, 0.5), lower=np.full(2, -5.0),
                                                       upper=np.full(2, 5.0), seed=3))
     for (v, thr), rec in zip(seen[1:], r.history[1:]):
         assert rec["accepted"] == (v < thr)
@@ -102,7 +102,7 @@ def test_speculative_evaluation_makes_exactly_the_serial_decisions(slots):
     def f(x, threshold):
         return float((x[0] - 1) ** 2 + 10 * (x[1] + x[0] ** 2) ** 2), {"x": x.copy()}
 
-    opts = AnnealOptions(iterations=150, sigma0=np.array([0.4, 0.4, 0.2]), lower=np.full(3, -3.0),
+    opts = AnnealConfig(iterations=150, sigma0=np.array([0.4, 0.4, 0.2]), lower=np.full(3, -3.0),
                          upper=np.full(3, 3.0), blocks=np.array([0, 0, 1]), seed=3)
     serial = anneal(f, np.array([-1.5, 2.0, 0.0]), opts)
     ev = _Speculative(f, slots)
@@ -143,7 +143,7 @@ def test_acceptance_branch_makes_exactly_the_serial_decisions(slots, iterations)
             v = threshold + 0.5 * (v - threshold)
         return v, {"x": x.copy()}
 
-    opts = AnnealOptions(iterations=iterations, sigma0=np.array([0.2, 0.2, 0.1]), lower=np.full(3, -3.0),
+    opts = AnnealConfig(iterations=iterations, sigma0=np.array([0.2, 0.2, 0.1]), lower=np.full(3, -3.0),
                          upper=np.full(3, 3.0), seed=5, tau0=2.0, tau_end=0.5)
     serial = anneal(f, np.array([-1.5, 2.0, 0.5]), opts)
     ev = _Branching(f, slots)
@@ -219,7 +219,7 @@ def test_asynchronous_evaluations_make_exactly_the_serial_decisions():
         v = float((x[0] - 1) ** 2 + 10 * (x[1] + x[0] ** 2) ** 2 + x[2] ** 2)
         return (threshold + 0.5 * (v - threshold) if v > threshold else v), {"x": x.copy()}
 
-    opts = AnnealOptions(iterations=120, sigma0=np.array([0.2, 0.2, 0.1]), lower=np.full(3, -3.0),
+    opts = AnnealConfig(iterations=120, sigma0=np.array([0.2, 0.2, 0.1]), lower=np.full(3, -3.0),
                          upper=np.full(3, 3.0), seed=7, tau0=2.0, tau_end=0.5)
     serial = anneal(f, np.array([-1.5, 2.0, 0.5]), opts)
     with ThreadPoolExecutor(max_workers=8) as pool:  # more threads than slots: the annealer must hold back

@@ -49,10 +49,10 @@ def test_correction_margin_aims_inside_force_and_stress_bounds():
 
 
 def test_bounds_from_grip():
-    assert B.constraint_bounds(B.DesignBrief(grip="tight"), 60e6)["coupling_ratio"] == (0.1, 95.0)
-    assert B.constraint_bounds(B.DesignBrief(grip="loose"), 60e6)["coupling_ratio"] == (0.0, 1e-3)
-    assert "coupling_ratio" not in B.constraint_bounds(B.DesignBrief(grip="any"), 60e6)
-    assert B.constraint_bounds(B.DesignBrief(yield_stress=30e6), 60e6)["von_mises"] == (0.0, 30e6)
+    assert B.constraint_bounds(B.DesignConfig(grip="tight"), 60e6)["coupling_ratio"] == (0.1, 95.0)
+    assert B.constraint_bounds(B.DesignConfig(grip="loose"), 60e6)["coupling_ratio"] == (0.0, 1e-3)
+    assert "coupling_ratio" not in B.constraint_bounds(B.DesignConfig(grip="any"), 60e6)
+    assert B.constraint_bounds(B.DesignConfig(yield_stress=30e6), 60e6)["von_mises"] == (0.0, 30e6)
 
 
 @pytest.mark.parametrize("table, field", [({"grip": "firm"}, "grip"), ({"handles": 0}, "handles"),
@@ -64,7 +64,7 @@ def test_bounds_from_grip():
                                           ({"check_refinements": 4}, "check_refinements")])
 def test_bad_brief_names_the_field(table, field):
     with pytest.raises(InputError) as e:
-        B.DesignBrief.from_dict(table, where="x.toml [design]")
+        B.DesignConfig.from_dict(table, where="x.toml [design]")
     assert "x.toml" in str(e.value) and field in str(e.value)
 
 

@@ -11,7 +11,7 @@ from simfab.coupling import config as C
 from simfab.coupling.scene import load_coupling_scene
 from simfab.design import figure_gradients as FG
 from simfab.design import gradient as G
-from simfab.design.brief import DesignBrief
+from simfab.design.brief import DesignConfig
 from simfab.design.problem import element_quality, evaluate, make_problem
 
 
@@ -20,7 +20,7 @@ def problem():
     cm = load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 12}})
     # the step positions held (the default insertion length follows A's farthest point)
     cm = dataclasses.replace(cm, options=dataclasses.replace(cm.options, L_max=float(cm.s_steps[-1])))
-    return make_problem(cm, DesignBrief(grip="tight", handles=3, placement="spatial"))
+    return make_problem(cm, DesignConfig(grip="tight", handles=3, placement="spatial"))
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +28,7 @@ def problem_p2():
     """The same problem on P2 elements: handles on the linear mesh, candidates lifted to P2."""
     cm = load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 12, "element_order": 2}})
     cm = dataclasses.replace(cm, options=dataclasses.replace(cm.options, L_max=float(cm.s_steps[-1])))
-    return make_problem(cm, DesignBrief(grip="tight", handles=3, placement="spatial"))
+    return make_problem(cm, DesignConfig(grip="tight", handles=3, placement="spatial"))
 
 
 def _check_against_finite_differences(P, monkeypatch, names, rel=1e-4, rel_of=None):
@@ -137,7 +137,7 @@ def test_frictional_figure_gradients_match_finite_differences(monkeypatch):
     cm = load_coupling_scene("block2d_tight", overrides={
         "simulation": {"steps": 12}, "contact": {"friction": 0.3, "lag_tol": 1e-6, "max_lag_iterations": 50}})
     cm = dataclasses.replace(cm, options=dataclasses.replace(cm.options, L_max=float(cm.s_steps[-1])))
-    P = make_problem(cm, DesignBrief(grip="tight", handles=3, placement="spatial"))
+    P = make_problem(cm, DesignConfig(grip="tight", handles=3, placement="spatial"))
     ev, fg, _ = _check_against_finite_differences(
         P, monkeypatch, ("E_max", "insertion_force", "grip_force", "removal_force", "hold_force"))
     assert ev.result.removal and fg.supported

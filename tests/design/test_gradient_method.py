@@ -12,7 +12,7 @@ from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate_insertion
 from simfab.design import figure_gradients as FG
 from simfab.design import gradient as G
-from simfab.design.brief import DesignBrief, TargetProfile
+from simfab.design.brief import DesignConfig, TargetProfile
 from simfab.design.problem import evaluate, make_problem
 
 #: an ejecting run's CR = 100 E_ss / E_max with E_ss = E_max: a product and a quotient, each rounded
@@ -26,7 +26,7 @@ def test_grip_gradient_follows_the_rest_point():
     # The seat is a kink, so no derivative is exact there: the test asks for the secant's sign and size,
     # which the grip's derivative at the record's fixed position misses by an order of magnitude.
     cm = load_coupling_scene("block2d_tight")
-    P = make_problem(cm, DesignBrief(grip="tight", handles=3, placement="spatial")).with_settings(hold_steps=True)
+    P = make_problem(cm, DesignConfig(grip="tight", handles=3, placement="spatial")).with_settings(hold_steps=True)
     Jh = G.handle_jacobian(P.handles)
     h0 = P.handles.identity()
     dh = np.random.default_rng(0).standard_normal(len(h0)) * P.sigma0
@@ -85,7 +85,7 @@ def test_flat_start_closes_the_gap():
     # gap to the blade is not, and the SQP closes it (the clearance bound linearized) before the grip's
     cm = load_coupling_scene("paddleside2d", overrides={"compliant": {"target_elements": 500},
                                                         "simulation": {"steps": 15}})
-    P = make_problem(cm, DesignBrief(grip="tight", grip_force=(5.0, math.inf), handles=3, placement="spatial"))
+    P = make_problem(cm, DesignConfig(grip="tight", grip_force=(5.0, math.inf), handles=3, placement="spatial"))
     Jh = G.handle_jacobian(P.handles)
     Ph = P.with_settings(hold_steps=True)
     ev = evaluate(Ph, P.handles.identity(), keep_result=True,
@@ -114,7 +114,7 @@ def test_gap_gradient_on_p2_candidates():
     # derivative on every node is chained to the corners before dX/dh, so it matches whole evaluations too
     cm = load_coupling_scene("paddleside2d", overrides={"compliant": {"target_elements": 300},
                                                         "simulation": {"steps": 8, "element_order": 2}})
-    P = make_problem(cm, DesignBrief(grip="tight", grip_force=(5.0, math.inf), handles=3, placement="spatial"))
+    P = make_problem(cm, DesignConfig(grip="tight", grip_force=(5.0, math.inf), handles=3, placement="spatial"))
     Jh = G.handle_jacobian(P.handles)
     ev = evaluate(P, P.handles.identity(), keep_result=True)
     assert ev.result.model.fem.element_order == 2 and ev.figures["category"] == "none"
@@ -133,7 +133,7 @@ def test_an_ejecting_start_with_a_coupling_ratio_bound_is_a_flat_start():
     # clip2d_eject's profile has no dip after its peak: CR = 100 % for every shape nearby (gradient
     # zero), which no SQP step can linearize towards a loose or tight brief's bound
     cm = load_coupling_scene("clip2d_eject", overrides={"simulation": {"steps": 10}})
-    P = make_problem(cm, DesignBrief(grip="loose", handles=3, placement="spatial"))
+    P = make_problem(cm, DesignConfig(grip="loose", handles=3, placement="spatial"))
     Jh = G.handle_jacobian(P.handles)
     ev = evaluate(P.with_settings(hold_steps=True), P.handles.identity(), keep_result=True,
                   recorder=lambda cm: G.DeferredRecorder(cm, G.stress_measure(P, cm)))
@@ -142,7 +142,7 @@ def test_an_ejecting_start_with_a_coupling_ratio_bound_is_a_flat_start():
     assert np.abs(fg.gradients["coupling_ratio"]).max() <= 1e-9 * np.abs(fg.gradients["E_max"]).max()
     assert G.flat_start(G.constraint_rows(P), fg, {})
     # without a coupling-ratio bound ("any" grip) the forces' gradients give the SQP its direction
-    P_any = make_problem(cm, DesignBrief(grip="any", insertion_force=(0.0, 0.1), handles=3, placement="spatial"))
+    P_any = make_problem(cm, DesignConfig(grip="any", insertion_force=(0.0, 0.1), handles=3, placement="spatial"))
     assert not G.flat_start(G.constraint_rows(P_any), fg, {})
 
 
@@ -152,7 +152,7 @@ def test_a_correction_round_resumes_from_the_previous_best():
     # it (one insertion fewer) and takes the same steps as a round that simulates its start again
     cm = load_coupling_scene("block2d_tight", overrides={"compliant": {"target_elements": 250},
                                                          "simulation": {"steps": 10}})
-    P = make_problem(cm, DesignBrief(grip="tight", grip_force=(3.0, 5.0), handles=3, placement="spatial"))
+    P = make_problem(cm, DesignConfig(grip="tight", grip_force=(3.0, 5.0), handles=3, placement="spatial"))
     res = G.optimize_gradient(P, iterations=3, seed=0)
     assert res.resume is not None
     P2 = res.problem.with_settings(corrections={"grip_force": 0.7, "insertion_force": 0.7, "removal_force": 0.7})
@@ -169,7 +169,7 @@ def _ellipse_turned_twice():
     then 270 deg while its centre moves 0.3 mm away from the clamp's bottom: the end pose presses the arc
     harder than the snap did, so the profile ejects at its end pose."""
     from simfab.contact.imls import build_imls, curve_normals
-    from simfab.coupling.config import InsertionOptions
+    from simfab.coupling.config import InsertionConfig
     from simfab.coupling.simulate import make_coupling_model
     from simfab.io.mjcf import Trajectory
 
@@ -181,7 +181,7 @@ def _ellipse_turned_twice():
                       np.array(q), rot_length_scale=0.01)
     return make_coupling_model(name="ellipse", fem=base.fem, field=build_imls(v, curve_normals(v)), path=path,
                                fixed_vertices=base.fixed_vertices, object_vertices=v,
-                               options=InsertionOptions(steps=16, fix_all_axes=True))
+                               options=InsertionConfig(steps=16, fix_all_axes=True))
 
 
 def test_ejecting_end_pose_continues_the_coupling_ratio(monkeypatch):
@@ -195,7 +195,7 @@ def test_ejecting_end_pose_continues_the_coupling_ratio(monkeypatch):
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_REL", 1e-10)
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_START", 1e-10)
     monkeypatch.setattr(C, "NEWTON_STEP_TOL_REL", 1e-12)
-    P = make_problem(_ellipse_turned_twice(), DesignBrief(grip="loose", handles=3, placement="spatial"))
+    P = make_problem(_ellipse_turned_twice(), DesignConfig(grip="loose", handles=3, placement="spatial"))
     Ph = P.with_settings(hold_steps=True)
     Jh = G.handle_jacobian(P.handles)
     h0 = P.handles.identity()

@@ -13,8 +13,8 @@ h = 0 (RMS ~6.5 N)."""
 
 import numpy as np
 
-from simfab.design.anneal import AnnealOptions, anneal
-from simfab.design.brief import DesignBrief
+from simfab.design.anneal import AnnealConfig, anneal
+from simfab.design.brief import DesignConfig
 from simfab.design.study import iterations_per_handle_budget
 
 N_SAMPLES = 39
@@ -37,7 +37,7 @@ def fit(handles: int, iterations: int, seed: int) -> tuple[float, float]:
         return float(np.mean((B @ h - TARGET) ** 2)), None  # mean squared error [N^2], as problem.evaluate
 
     blocks = np.repeat(np.arange(handles), VARS_PER_HANDLE)
-    r = anneal(f, np.zeros(n), AnnealOptions(iterations=iterations, sigma0=np.ones(n), lower=np.full(n, -20.0),
+    r = anneal(f, np.zeros(n), AnnealConfig(iterations=iterations, sigma0=np.ones(n), lower=np.full(n, -20.0),
                                              upper=np.full(n, 20.0), blocks=blocks, seed=seed))
     return float(np.sqrt(r.value)), rms_star
 
@@ -49,9 +49,9 @@ def gap(handles: int, iterations: int) -> float:
 
 
 def test_budget_per_handle_is_the_scene_budget_scaled_by_the_count():
-    brief = DesignBrief(iterations=300, handles=4)  # profile2d's
+    brief = DesignConfig(iterations=300, handles=4)  # profile2d's
     assert [iterations_per_handle_budget(brief, k) for k in (2, 4, 8)] == [150, 300, 600]
-    assert iterations_per_handle_budget(DesignBrief(iterations=1, handles=4), 1) == 1
+    assert iterations_per_handle_budget(DesignConfig(iterations=1, handles=4), 1) == 1
 
 
 def test_optimum_falls_with_handle_count():
@@ -65,7 +65,7 @@ def test_one_budget_for_all_counts_leaves_the_largest_count_furthest_from_its_op
     within the spread of the seeds - the budget rule of a handle-count comparison."""
     fixed = {k: gap(k, 300) for k in (2, 8)}
     assert fixed[8] > 3.0 * fixed[2]
-    brief = DesignBrief(iterations=300, handles=4)
+    brief = DesignConfig(iterations=300, handles=4)
     scaled = {k: gap(k, iterations_per_handle_budget(brief, k)) for k in (2, 8)}
     assert scaled[8] < 1.5 * scaled[2]
     assert scaled[8] < 0.4 * fixed[8]

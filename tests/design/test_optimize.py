@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from simfab.coupling.scene import load_coupling_scene
-from simfab.design.brief import DesignBrief
+from simfab.design.brief import DesignConfig
 from simfab.design.optimize import optimize_anneal
 from simfab.design.problem import element_quality, evaluate, make_problem
 from simfab.errors import ConvergenceError
@@ -32,7 +32,7 @@ def test_element_quality():
 
 
 def test_invalid_and_failing_candidates_are_rejected_not_raised(scene, monkeypatch):
-    P = make_problem(scene, DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=3, placement="spatial"))
+    P = make_problem(scene, DesignConfig(grip="tight", insertion_force=(0.0, 12.0), handles=3, placement="spatial"))
     h = P.handles.identity()
     t, s = P.handles.split(h)
     bad = h.copy().reshape(P.handles.n_active, -1)
@@ -67,7 +67,7 @@ def test_small_design_problem_meets_every_constraint(scene):
     from simfab.coupling.simulate import simulate_insertion
     from simfab.design.problem import candidate_model, profile_figures
 
-    brief = DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=4, iterations=60, patience=15)
+    brief = DesignConfig(grip="tight", insertion_force=(0.0, 12.0), handles=4, iterations=60, patience=15)
     P = make_problem(scene, brief)
     init = evaluate(P, P.handles.identity())
     assert not init.feasible  # the start violates the brief (yield)
@@ -196,7 +196,7 @@ def test_objective_bounds_along_the_insertion_are_lower_bounds_that_bite(scene):
     what stops a candidate's insertion early) never exceed the finished objective, and the force
     bounds (the yield bound set out of reach here) prove a large part of the penalty by the energy's
     peak (the block needs ~14 N on the way in, ~18 N at its seat: asked for <= 4 N)."""
-    P = make_problem(scene, DesignBrief(grip="tight", insertion_force=(0.0, 4.0), removal_force=(0.0, 4.0),
+    P = make_problem(scene, DesignConfig(grip="tight", insertion_force=(0.0, 4.0), removal_force=(0.0, 4.0),
                                         yield_stress=1e12, handles=3, placement="spatial"))  # force terms only
     h = P.handles.identity()
     rng = np.random.default_rng(3)
@@ -221,7 +221,7 @@ def test_initial_insertion_run_for_the_placement_is_scored_not_run_again(scene):
     from simfab.coupling.simulate import simulate_insertion
     from simfab.design.problem import initial_evaluation
 
-    brief = DesignBrief(grip="tight", insertion_force=(0.0, 12.0), handles=3, placement="displacement")
+    brief = DesignConfig(grip="tight", insertion_force=(0.0, 12.0), handles=3, placement="displacement")
     run = simulate_insertion(scene)
     P = make_problem(scene, brief, initial=run)
     assert P.initial is run

@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from simfab.design.brief import DesignBrief
+from simfab.design.brief import DesignConfig
 from simfab.design.problem import make_problem, profile_figures
 from simfab.design.verify import check_levels, check_warnings, mesh_check, refined_model
 from simfab.results import to_json
@@ -15,7 +15,7 @@ def problem():
     from simfab.coupling.scene import load_coupling_scene
 
     cm = load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": 8}})
-    return make_problem(cm, DesignBrief(grip="tight", grip_force=(3.0, 10.0), handles=3, placement="spatial"))
+    return make_problem(cm, DesignConfig(grip="tight", grip_force=(3.0, 10.0), handles=3, placement="spatial"))
 
 
 def test_refined_model_keeps_the_shape_support_and_options(problem):

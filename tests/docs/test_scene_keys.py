@@ -12,10 +12,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "docs" / "_ext"))
 import scenekeys  # noqa: E402
 
 TABLES = [
-    ("simfab.coupling.config.InsertionOptions", None),
-    ("simfab.coupling.config.ContactOptions", None),
-    ("simfab.coupling.config.ObjectOptions", None),
-    ("simfab.design.brief.DesignBrief", "simfab.design.brief"),
+    ("simfab.coupling.config.InsertionConfig", None),
+    ("simfab.coupling.config.ContactConfig", None),
+    ("simfab.coupling.config.ObjectConfig", None),
+    ("simfab.design.brief.DesignConfig", "simfab.design.brief"),
     ("simfab.growth.config.GrowthConfig", None),
     ("simfab.growth.config.RadiusConfig", None),
     ("simfab.growth.config.SmoothingConfig", None),

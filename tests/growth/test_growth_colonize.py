@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from simfab.growth import tolerances as tol
-from simfab.growth.colonize import ColonizeSettings, Tree, colonize
+from simfab.growth.colonize import ColonizeConfig, Tree, colonize
 from simfab.growth.obstacles import Obstacles
 from simfab.growth.skeleton import radius_by_age
 
@@ -13,7 +13,7 @@ def _settings(**kw):
     base = dict(influence=1.0, kill=0.05, branch_length=0.1, target_influence=np.inf, max_steps=200,
                 max_nodes=10000, max_trials=32)
     base.update(kw)
-    return ColonizeSettings(**base)
+    return ColonizeConfig(**base)
 
 
 def _free():

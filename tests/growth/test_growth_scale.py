@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from simfab.errors import InputError
-from simfab.growth.config import GrowthParams, resolve
+from simfab.growth.config import GrowthSceneConfig, resolve
 
 BOX = np.array([[0.0, 0.0, 0.0], [0.12, 0.13, 0.15]])  # longest side 0.15 m, diagonal 0.2319 m
 DIAG = float(np.linalg.norm(BOX[1] - BOX[0]))
@@ -14,7 +14,7 @@ DIAG = float(np.linalg.norm(BOX[1] - BOX[0]))
 @pytest.mark.parametrize("mode", ["volume", "surface"])
 def test_defaults_fit_every_box(mode):
     for scale in (1e-3, 1.0, 1e3):
-        r = resolve(GrowthParams.of(mode=mode), BOX * scale, area=None if mode == "volume" else 0.05 * scale**2)
+        r = resolve(GrowthSceneConfig.of(mode=mode), BOX * scale, area=None if mode == "volume" else 0.05 * scale**2)
         assert r.branch_length < 0.15 * scale and r.influence < r.diag and r.kill < r.diag
 
 
@@ -26,7 +26,7 @@ def test_defaults_fit_every_box(mode):
 ])
 def test_a_length_beyond_the_box_names_the_parameter_and_the_box(key, ok, bad, where):
     extra = {"kill": 1e-3} if key == "influence" else {"influence": DIAG} if key == "kill" else {}
-    resolve(GrowthParams.of(**{key: ok}, **extra), BOX)
+    resolve(GrowthSceneConfig.of(**{key: ok}, **extra), BOX)
     with pytest.raises(InputError) as e:
-        resolve(GrowthParams.of(**{key: bad}, **extra), BOX)
+        resolve(GrowthSceneConfig.of(**{key: bad}, **extra), BOX)
     assert e.value.where == where and "0.12 x 0.13 x 0.15 m" in str(e.value) and "0.2319 m" in str(e.value)

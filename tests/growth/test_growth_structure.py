@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from simfab.errors import InputError
-from simfab.growth.config import StructureSpec
+from simfab.growth.config import StructureConfig
 from simfab.growth.scene import load_growth_scene
 from simfab.growth.skeleton import Skeleton
-from simfab.growth.structure import CheckOptions, buckling_factor, check_structure, corner_stress, target_loads
+from simfab.growth.structure import CheckConfig, buckling_factor, check_structure, corner_stress, target_loads
 
 R, LENGTH, P = 0.004, 0.08, 1.0  # strut radius and length [m], tip load [N]
 
@@ -45,7 +45,7 @@ def _section(mesh, z: float):
 def strut(tmp_path_factory):
     scene = load_growth_scene(_strut_scene(tmp_path_factory.mktemp("strut")))
     return check_structure(_strut_skeleton(), scene, loads={"target_0": (P, 0.0, 0.0)},
-                           options=CheckOptions(self_weight=False))
+                           options=CheckConfig(self_weight=False))
 
 
 def test_strut_tip_deflection_matches_timoshenko(strut):
@@ -122,7 +122,7 @@ def test_column_buckling_load_matches_euler(tmp_path):
     Mesh: edge 2R, the check's default (2 r_min): 1.014 of Euler's (fTetWild's meshes at its old
     default, 4 r_min, ranged 0.88-1.00 over repeated runs)."""
     scene = load_growth_scene(_strut_scene(tmp_path))
-    opts = CheckOptions(self_weight=False, edge_length=2 * R)
+    opts = CheckConfig(self_weight=False, edge_length=2 * R)
     res = check_structure(_strut_skeleton(), scene, loads={"target_0": (0.0, 0.0, -P)}, options=opts)
     E = res.model.material.youngs_modulus
     _, I, _ = _section(res.mesh, LENGTH / 2)  # the 12-gon's I is the same about every axis
@@ -186,7 +186,7 @@ def test_material_and_loads_tables(tmp_path):
     xml = _strut_scene(tmp_path, '[material]\nname = "VeroWhite"\nyield_stress = 4e7\ncritical_distance = 0.001\n'
                                  '[loads]\ntarget_0 = [0.0, 1.0, 0.0]\n')
     s = load_growth_scene(xml)
-    assert isinstance(s.structure, StructureSpec)
+    assert isinstance(s.structure, StructureConfig)
     assert s.structure.material.name == "VeroWhite" and s.structure.material.yield_stress == 4e7
     assert s.structure.material.youngs_modulus == 2.5e9 and s.structure.critical_distance == 1e-3
     assert s.structure.loads == (("target_0", (0.0, 1.0, 0.0)),)

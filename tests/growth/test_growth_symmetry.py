@@ -44,7 +44,7 @@ def test_symmetric_flag_on_a_plain_scene(scenes_dir):
 
 def test_asymmetric_targets_are_rejected(scenes_dir):
     scene = load_growth_scene(scenes_dir / "phone_stand.xml")
-    from simfab.growth.config import SymmetrySpec
+    from simfab.growth.config import SymmetryConfig
 
     with pytest.raises(InputError, match="mirror-symmetric"):
-        grow(scene, symmetry=SymmetrySpec(point=(0.01, 0, 0), normal=(1.0, 0, 0)))
+        grow(scene, symmetry=SymmetryConfig(point=(0.01, 0, 0), normal=(1.0, 0, 0)))

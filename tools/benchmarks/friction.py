@@ -71,7 +71,7 @@ def _snapfit_row(alpha: float, mu: float, dim: int, steps: int) -> dict:
 
 
 def _scene_row(scene: str, mu: float) -> dict:
-    from simfab.coupling.config import ContactOptions
+    from simfab.coupling.config import ContactConfig
     from simfab.coupling.profile import analyze_run
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.settle import energy_balance
@@ -80,7 +80,7 @@ def _scene_row(scene: str, mu: float) -> dict:
     out = {}
     for m in (0.0, mu):
         cm = load_coupling_scene(scene)
-        cm = dataclasses.replace(cm, contact=ContactOptions(friction=m))
+        cm = dataclasses.replace(cm, contact=ContactConfig(friction=m))
         marks = {}
 
         def mark(k, rec, marks=marks):  # the clock at the last insertion record

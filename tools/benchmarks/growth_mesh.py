@@ -15,7 +15,7 @@ from pathlib import Path
 def run(argv) -> dict:
     from simfab.cli.grow import SCENES_DIR
     from simfab.growth import grow
-    from simfab.growth.structure import CheckOptions, check_structure
+    from simfab.growth.structure import CheckConfig, check_structure
 
     ap = argparse.ArgumentParser(prog="bench growth_mesh")
     ap.add_argument("--scene", default="phone_stand")
@@ -29,7 +29,7 @@ def run(argv) -> dict:
     rows = []
     for k in (float(v) for v in a.edges.split(",")):
         t = time.perf_counter()
-        c = check_structure(sk, scene, options=CheckOptions(edge_length=k * r_min))
+        c = check_structure(sk, scene, options=CheckConfig(edge_length=k * r_min))
         rows.append({"edge_per_rmin": k, "tets": c.tets, "safety_factor": c.safety_factor,
                      "max_von_mises_Pa": c.max_von_mises_Pa, "peak_point_m": [float(v) for v in c.peak_point],
                      "max_deflection_m": max(c.deflection_m.values(), default=0.0),

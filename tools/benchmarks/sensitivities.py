@@ -32,7 +32,7 @@ FRICTION = 0.3
 def _models() -> dict:
     """name -> (model, figures); built on demand (the 3D ones take seconds)."""
     from simfab.contact.imls import build_imls, curve_normals
-    from simfab.coupling.config import InsertionOptions
+    from simfab.coupling.config import InsertionConfig
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import make_coupling_model
     from simfab.io.mjcf import Trajectory
@@ -50,7 +50,7 @@ def _models() -> dict:
                           np.array([[1.0, 0, 0, 0], [1.0, 0, 0, 0], q90]), rot_length_scale=0.01)
         return make_coupling_model(name="ellipse", fem=base.fem, field=build_imls(v, curve_normals(v)), path=path,
                                    fixed_vertices=base.fixed_vertices,
-                                   options=InsertionOptions(steps=10, fix_all_axes=True), object_vertices=v,
+                                   options=InsertionConfig(steps=10, fix_all_axes=True), object_vertices=v,
                                    contact=base.contact)
 
     def clip(order=1, held=True, mu=0.0):
