@@ -1,51 +1,23 @@
 """Pattern tuned by simulation: the insert gaps adjusted so that the deployed shape matches the target.
 
 The gap rule (:mod:`simfab.deploy.pattern`) is first order in the cell size and ignores the
-network's bending: the deployed shape misses the target where the rods cannot follow the metric
-(steep caps, boundary cells). Here the growth of each insert, ``d_i = r_i - g_i`` [m], is the
-unknown of a least-squares problem on the deployed shape itself.
+network's bending; here the growth of each insert, ``d_i = r_i - g_i`` [m], is the unknown of a
+least-squares problem on the deployed shape itself. Residual: the distance to the surface stacked
+with a weighted point-to-point term towards each vertex's own target point y_j,
 
-Residual: the distance to the surface (the quantity the deviation's RMS measures) stacked with a
-weighted point-to-point term towards each vertex's own target point,
+    e = [ |R x_j + t - c_j| ,  sqrt(w) (R x_j + t - y_j) ]   (n + 3n rows),   E = |e|^2 / 2,
 
-    e = [ |R x_j + t - c_j| ,  sqrt(w) (R x_j + t - y_j) ]   (n + 3n rows),
-    E = |e|^2 / 2,
+c_j the closest target point, w = ``point_weight``, (R, t) the ICP alignment minimising the same E
+(so dE/d(R, t) = 0 and the Gauss-Newton gradient J^T e needs no alignment term).
 
-with c_j the closest target point and y_j the vertex's target point (the flattening's map of its
-flat position); w = ``point_weight``. The distance is linearized along n_j = (R x_j + t - c_j) /
-|R x_j + t - c_j|: the face normal where c_j lies inside a face (point to plane), and still the
-distance's gradient where c_j lies on the target's rim, where the face normal is not. The surface
-term alone accepts a shape that lies on the surface but covers a different part of it (a steep
-cap's vertices sliding up the sphere: on the surface, yet too low); the point term ties each
-vertex to its own place. Alignment (R, t): ICP on the same objective - each iteration a Kabsch fit
-onto the blended points (c_j + w y_j) / (1 + w), the minimiser of sum |A - c|^2 + w |A - y|^2 for
-fixed c - so at convergence dE/d(R, t) = 0 and the Gauss-Newton gradient J^T e below needs no
-alignment term (checked against finite differences of E with re-solved equilibria in tests/deploy).
-
-Sensitivities (implicit function theorem): the equilibrium q*(d) satisfies g_q(q*, d) = 0, so
-``dq*/dd_i = -H_q^{-1} dg_q/dd_i`` with the reduced Hessian at the equilibrium, one factorization
-for all inserts (:meth:`simfab.rods.statics.StaticSolver.offset_sensitivity`, checked against
-re-solved equilibria in tests/deploy). Growing insert i moves its beam ends' clamp points
-outwards along the beams by d_i, i.e. the parameter is the clamp offset; a changed gap g_i also
-changes the flat beam's length by the same amount, so at the end the re-cut pattern's own
-equilibrium is solved from the tuned state (:func:`redeploy`) and the reported shape is the
-re-cut pattern's.
-
-Step (Levenberg-Marquardt): ``(J^T J + mu I) delta = -J^T e`` with J = [n_j^T R dX_j/dd;
-sqrt(w) R dX/dd] ((n + 3n), k; c_j, n_j, R held fixed in the step) and mu
-= ``damping`` x the largest diagonal of J^T J (the inserts far from the boundary barely move the
-aligned shape's normal distance; mu keeps their steps bounded); d + delta is clipped into the
-achievable range ``min_gap <= r_i - d_i <= h_i/2 - min_beam``; the new equilibrium is solved from
-the tangent prediction q + dq*/dd delta; a step that does not lower E is halved (up to 3 times),
-then (``escalations``) recomputed with mu x 10 and halved again, else the tuning stops: the clipped
-Gauss-Newton step is not a descent direction where gaps sit at their bounds, the damped one tends
-to the (projected) gradient.
-
-Re-cut after every step (:func:`tune_pattern`): the step's parameter is the clamp offset, the
-pattern's is the gap, whose change also lengthens the flexible half beam (a few mm long) by d_i -
-and its bending stiffness with it, a difference that grows with every step. So each step is
-followed by the re-cut pattern's own equilibrium, the next step's sensitivities are taken there,
-and a step whose re-cut pattern does not lower E ends the tuning (the pattern before it is kept).
+Sensitivities (implicit function theorem): ``dq*/dd_i = -H_q^{-1} dg_q/dd_i`` at the equilibrium,
+one factorization for all inserts (:meth:`simfab.rods.statics.StaticSolver.offset_sensitivity`).
+Step (Levenberg-Marquardt): ``(J^T J + mu I) delta = -J^T e``, mu = ``damping`` x the largest
+diagonal of J^T J, d + delta clipped into the achievable range ``min_gap <= r_i - d_i <= h_i/2 -
+min_beam``, halved while it does not lower E, then retried with mu x 10 (``escalations``).
+After every step the pattern is re-cut and its own equilibrium solved (:func:`tune_pattern`,
+:func:`redeploy`); the tuning stops at the deviation bound, when progress stalls, at its budget or
+when no step lowers E. The full derivation: docs/methods.md, "simfab.deploy.tuning".
 """
 
 from __future__ import annotations
