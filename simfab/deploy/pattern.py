@@ -20,12 +20,13 @@ r - g_i in deployment:
 
 u < 0 (positive curvature): g < r, the insert pushes (a dome); u > 0: g > r, it pulls (a saddle).
 Achievable gaps: ``min_gap <= g <= h_i/2 - min_beam``; others are clamped and reported unreachable.
-Each insert takes the catalogue size whose gap is nearest the middle of that range
-(:func:`assign_sizes`). Derivation and catalogue: docs/methods.md, "simfab.deploy.pattern".
+Each insert takes the catalogue size whose gap is nearest the middle of that range (:func:`assign_sizes`;
+unused sizes leave the catalogue, :func:`used_sizes_only`). Derivation: docs/methods.md, "simfab.deploy.pattern".
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -422,7 +423,29 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
         key = (defects(pat), -covered_fraction(pat, poly))
         if best_key is None or key < best_key:
             best, best_key = pat, key
-    return best
+    return used_sizes_only(best)
+
+
+def used_sizes_only(pat: Pattern) -> Pattern:
+    """The pattern with its catalogue cut to the sizes some insert takes: a size no insert takes (the
+    catalogue is sized before the layout) would be listed in the bill of materials with count 0.
+    Every insert keeps its size, gap and number; ``insert_class`` is renumbered in the same order.
+
+    Args:
+        pat: the :class:`Pattern`.
+
+    Returns:
+        The :class:`Pattern` (``pat`` itself when every size is used or there is no insert).
+    """
+    sizes = pat.config.sizes
+    used = np.unique(pat.insert_class[pat.interior])
+    if len(used) in (0, len(sizes)):
+        return pat
+    new = np.full(len(sizes), -1)
+    new[used] = np.arange(len(used))
+    cls = np.where(pat.interior, new[np.maximum(pat.insert_class, 0)], -1)
+    cfg = dataclasses.replace(pat.config, insert_half_sizes=tuple(sizes[k] for k in used))
+    return dataclasses.replace(pat, insert_class=cls, config=cfg)
 
 
 def covered_fraction(pat: Pattern, poly) -> float:

@@ -308,13 +308,14 @@ def test_catalogue_in_pattern_files_and_bill_of_materials(tmp_path):
     d = cat.insert_size[ins] - cat.gap_required[ins]
     assert np.allclose(d, one.insert_size[ins] - one.gap_required[ins])  # the growth does not depend on r
     bom = cat.bill_of_materials()
-    assert [b["size_class"] for b in bom] == ["A", "B", "C"]
+    assert [b["size_class"] for b in bom] == ["A", "B", "C"][:len(cat.config.sizes)] and len(bom) >= 2
     assert sum(b["count"] for b in bom) == cat.n_inserts
     assert sorted(i for b in bom for i in b["inserts"]) == list(range(1, cat.n_inserts + 1))
     cut = lasercut.cut_layout(cat)
     texts = [t for t, _, _ in cut.labels]
     for v in np.flatnonzero(ins):
         label = f"{cat.insert_ids[v]} {'ABC'[cat.insert_class[v]]}"
+        assert cat.class_label(v) == 'ABC'[cat.insert_class[v]]
         assert texts.count(label) == 2  # at the gap and on the insert part
     # insert parts: one square per insert, of side 2 (r_i + beam_width)
     squares = [r for r in cut.rings[-cat.n_inserts:]]  # the parts come last
@@ -322,6 +323,34 @@ def test_catalogue_in_pattern_files_and_bill_of_materials(tmp_path):
     sides = sorted(round(float(np.ptp(r[:, 0])), 6) for r in squares)
     want = sorted(round(2e3 * (float(cat.insert_size[v]) + 0.003), 6) for v in np.flatnonzero(ins))
     assert sides == want
+
+
+def test_catalogue_size_no_insert_takes_leaves_the_bill():
+    """A catalogue size no insert takes (1 and 4 mm on the steep cap, whose inserts grow 2-11 mm) is not
+    in the pattern's catalogue, its bill of materials (no size of count 0), its size letters or its
+    laser-cut labels; every insert keeps the size and gap it gets from the catalogue without that size."""
+    from simfab.deploy import surface
+
+    tgt = surface.spherical_cap(0.15, np.radians(80), 16)
+    f = flatten.flatten(tgt.V, tgt.F)
+    lay = lambda sizes: pattern.layout(f.uv, f.boundary, tgt.F, f.u,  # noqa: E731
+                                       pattern.PatternConfig(spacing=0.03, insert_half_sizes=sizes))
+    spare, used = lay([0.001, 0.004, 0.007, 0.010]), lay([0.007, 0.010])
+    ins = spare.interior
+    # 1 and 4 mm: for no insert the size whose gap is nearest the middle of its range (assign_sizes)
+    assert spare.config.sizes == used.config.sizes == (0.007, 0.010)
+    assert np.array_equal(spare.insert_size, used.insert_size) and np.array_equal(spare.gap, used.gap)
+    assert np.array_equal(spare.insert_class, used.insert_class)
+    bom = spare.bill_of_materials()
+    assert all(b["count"] > 0 for b in bom) and sum(b["count"] for b in bom) == spare.n_inserts
+    assert [(b["size_class"], b["half_size_mm"]) for b in bom] == [("A", 7.0), ("B", 10.0)]
+    for b in bom:  # each size's inserts are the ones of that half-size
+        k = np.isin(spare.insert_ids, b["inserts"])
+        assert np.allclose(spare.insert_size[k] * 1e3, b["half_size_mm"])
+    texts = {t for t, _, _ in lasercut.cut_layout(spare).labels}
+    assert {f"{spare.insert_ids[v]} {spare.class_label(v)}" for v in np.flatnonzero(ins)} <= texts
+    # with every size used, the catalogue is the pattern's as given
+    assert pattern.used_sizes_only(used) is used
 
 
 def test_catalogue_config_errors():
