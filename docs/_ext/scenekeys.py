@@ -278,16 +278,8 @@ class SceneKeys(SphinxDirective):
                         f"docs/_ext/scenekeys.py EXTRA)", location=loc)
         for s in stale:
             LOG.warning(f"scene-keys: EXTRA describes {path}.{s}, which is no field any more", location=loc)
-        table = nodes.table(classes=["scene-keys"])
-        tgroup = nodes.tgroup(cols=4)
-        table += tgroup
-        for w in (18, 14, 14, 54):
-            tgroup += nodes.colspec(colwidth=w)
-        head = nodes.thead()
-        tgroup += head
-        head += self._row(["key", "type", "default", "meaning (units in brackets)"])
-        body = nodes.tbody()
-        tgroup += body
+        table, body = _table(["key", "type", "default", "meaning (units in brackets)"], (18, 14, 14, 54),
+                             classes=["scene-keys"])
         for r in rows:
             body += self._row(list(r), code=(0, 2))
         if "table" in self.options:
@@ -307,6 +299,21 @@ class SceneKeys(SphinxDirective):
         return row
 
 
+
+def _table(header, widths, classes=()):
+    """A docutils table with a header row and column widths; returns (table, body) to append rows to."""
+    table = nodes.table(classes=list(classes))
+    tgroup = nodes.tgroup(cols=len(widths))
+    table += tgroup
+    for w in widths:
+        tgroup += nodes.colspec(colwidth=w)
+    head = nodes.thead()
+    tgroup += head
+    head += SceneKeys._row(list(header))
+    body = nodes.tbody()
+    tgroup += body
+    return table, body
+
 class DictTable(SphinxDirective):
     """``.. dict-table:: module.NAME``: a two-column table of a ``{name: description}`` dict in the code
     (e.g. :data:`simfab.coupling.outputs.CSV_COLUMN_DOCS`)."""
@@ -317,16 +324,7 @@ class DictTable(SphinxDirective):
     def run(self):
         mod, _, name = self.arguments[0].rpartition(".")
         data = getattr(importlib.import_module(mod), name)
-        table = nodes.table()
-        tgroup = nodes.tgroup(cols=2)
-        table += tgroup
-        tgroup += nodes.colspec(colwidth=25)
-        tgroup += nodes.colspec(colwidth=75)
-        head = nodes.thead()
-        tgroup += head
-        head += SceneKeys._row(_csv_list(self.options.get("header", "column, meaning")))
-        body = nodes.tbody()
-        tgroup += body
+        table, body = _table(_csv_list(self.options.get("header", "column, meaning")), (25, 75))
         for k, v in data.items():
             body += SceneKeys._row([str(k), _plain(str(v))], code=(0,))
         return [table]
@@ -339,16 +337,7 @@ class CouplingTables(SphinxDirective):
     def run(self):
         from simfab.coupling import scene
 
-        table = nodes.table()
-        tgroup = nodes.tgroup(cols=2)
-        table += tgroup
-        tgroup += nodes.colspec(colwidth=30)
-        tgroup += nodes.colspec(colwidth=70)
-        head = nodes.thead()
-        tgroup += head
-        head += SceneKeys._row(["table", "keys accepted (any other is an error naming file, table and key)"])
-        body = nodes.tbody()
-        tgroup += body
+        table, body = _table(["table", "keys accepted (any other is an error naming file, table and key)"], (30, 70))
         body += SceneKeys._row(["(top level)", ", ".join(sorted(scene.TOP_LEVEL_KEYS))], code=(0,))
         for name, allowed in scene.SCENE_TABLES.items():
             if callable(allowed):

@@ -116,3 +116,29 @@ def deviation(X, Y, quads, target, *, target_under=None, icp_iters: int = 30) ->
     hd = float(max(np.max(dist), np.max(back)))
     return Deviation(aligned=A, per_vertex=dist, rms=rms / D, hausdorff=hd / D, rms_m=rms, hausdorff_m=hd,
                      diameter=D, R=R, t=t)
+
+
+def out_of_plane_extent(X: np.ndarray) -> float:
+    """Extent of points along the normal of their best-fit plane.
+
+    Args:
+        X: (n,3) [m] points.
+
+    Returns:
+        The extent [m].
+    """
+    return float(np.ptp((X - X.mean(axis=0)) @ np.linalg.svd(X - X.mean(axis=0))[2][2]))
+
+
+def height_error(aligned: np.ndarray, target_points: np.ndarray) -> float:
+    """The deployed height against the target's: out-of-plane extents' ratio minus one.
+
+    Args:
+        aligned: (n,3) [m] deployed vertices after the alignment.
+        target_points: (n,3) [m] their target points.
+
+    Returns:
+        The relative height error [-] (0 for a flat target).
+    """
+    th = out_of_plane_extent(target_points)
+    return out_of_plane_extent(aligned) / th - 1.0 if th > 0 else 0.0

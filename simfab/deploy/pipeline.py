@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simfab.deploy import compare, cuts, flatten, lasercut, mjcf_sim, network, pattern, tuning
+from simfab.deploy.compare import height_error, out_of_plane_extent
 from simfab.deploy.network import discrete_gaussian_curvature
 from simfab.progress import log
 
@@ -278,18 +279,6 @@ def mujoco_check_run(net, dep, pat, scene):
     return sim, check
 
 
-def out_of_plane_extent(X: np.ndarray) -> float:
-    """Extent of points along the normal of their best-fit plane.
-
-    Args:
-        X: (n,3) [m] points.
-
-    Returns:
-        The extent [m].
-    """
-    return float(np.ptp((X - X.mean(axis=0)) @ np.linalg.svd(X - X.mean(axis=0))[2][2]))
-
-
 def summary(res: SurfaceRun) -> dict:
     """The JSON summary of a run (units in the keys; ``simfab deploy surface --json``).
 
@@ -379,8 +368,7 @@ def bounds(res: SurfaceRun) -> dict:
         scene key or flag that would help.
     """
     dv, p = res.deviation, res.pattern
-    th = out_of_plane_extent(res.target_points)
-    herr = out_of_plane_extent(dv.aligned) / th - 1.0 if th > 0 else 0.0
+    herr = height_error(dv.aligned, res.target_points)
     sc = res.scene
     cut = sc.cuts is not None and sc.cuts.max_cones > 0
     tuned = sc.tune is not None and sc.tune.iterations > 0

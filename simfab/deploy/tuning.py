@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from simfab.deploy.compare import deviation, kabsch
+from simfab.deploy.compare import deviation, height_error, kabsch
 from simfab.deploy.network import Deployment, build_network
 from simfab.errors import ConvergenceError, InputError
 from simfab.rods.model import synchronize
@@ -272,14 +272,7 @@ def bound_met(pat, dep, Y: np.ndarray, target, cfg: TuneConfig) -> bool:
         return False
     if not cfg.target_height:
         return True
-    th = _extent(Y)
-    return th <= 0 or abs(_extent(dv.aligned) / th - 1.0) <= cfg.target_height
-
-
-def _extent(X: np.ndarray) -> float:
-    """Extent [m] of points (n,3) along the normal of their best-fit plane (the run's height)."""
-    c = X - X.mean(axis=0)
-    return float(np.ptp(c @ np.linalg.svd(c, full_matrices=False)[2][2]))
+    return abs(height_error(dv.aligned, Y)) <= cfg.target_height
 
 
 @dataclass
