@@ -7,6 +7,7 @@ the insertion distance in mm.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -120,6 +121,55 @@ def write_profile_csv(res: InsertionResult, path) -> Path:
     return write_csv(path, CSV_HEADER, rows)
 
 
+@dataclass(frozen=True, kw_only=True)
+class TraversalCurve:
+    """The insertion traversal the profile plot draws: its planned steps and the rest search up to the
+    steady state (not the search's probes past the rest point, which push O on into its seat). When
+    two rest-search records bracket the rest point the curve ends there, at F = 0 interpolated between
+    them.
+
+    Args:
+        s_mm: insertion distance of each point [mm].
+        energy: elastic energy [J].
+        force: force on O along its translation [N] (resisting < 0).
+        records: the record index of each point (the interpolated rest point has none: it is last).
+        marker_index: point index of a record (``index_max``, ``index_ss``; index_ss the rest point
+            when its record is past it).
+    """
+
+    s_mm: np.ndarray
+    energy: np.ndarray
+    force: np.ndarray
+    records: list
+    marker_index: dict
+
+
+def traversal_curve(res: InsertionResult, prof: ProfileSummary) -> TraversalCurve:
+    """The curve :func:`plot_profile` draws (see :class:`TraversalCurve`).
+
+    Args:
+        res: the insertion run.
+        prof: its profile summary (``index_ss``, ``index_max``).
+
+    Returns:
+        The :class:`TraversalCurve`.
+    """
+    phases = record_phases(res)[:len(res.steps)]
+    F_all, s_all, E_all = res.column("force"), res.column("s"), res.column("energy")
+    a = rest_bracket(F_all, prof.index_ss, phases.index("rest") if "rest" in phases else None)
+    bracket = a is not None and phases[a + 1] == "rest"
+    last = a if bracket else prof.index_ss
+    keep = [k for k, ph in enumerate(phases) if ph == "insert" or k <= last]
+    s, E, F = s_all[keep] * 1e3, E_all[keep], F_all[keep]
+    if bracket:  # the rest point between records a and a + 1 (a = index_ss or the record before it)
+        w = F_all[a] / (F_all[a] - F_all[a + 1])
+        s = np.r_[s, 1e3 * (s_all[a] + w * (s_all[a + 1] - s_all[a]))]
+        E, F = np.r_[E, E_all[a] + w * (E_all[a + 1] - E_all[a])], np.r_[F, 0.0]
+    at = {k: i for i, k in enumerate(keep)}
+    at[prof.index_ss] = at.get(prof.index_ss, len(s) - 1)
+    return TraversalCurve(s_mm=s, energy=E, force=F, records=keep, marker_index=at)
+
+
 def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     """Energy (solid, left axis) and insertion force (dashed, right axis) against insertion
     distance, with markers at E_max and E_ss (the style of the thesis' deformation profiles)."""
@@ -128,21 +178,8 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    # the insertion traversal: its planned steps and the rest search up to the steady state (not the
-    # search's probes past the rest point, which push O on into its seat): when a probe brackets the
-    # rest point the curves end there, at F = 0 interpolated between the bracket's records
-    phases = record_phases(res)[:len(res.steps)]
-    F_all, s_all, E_all = res.column("force"), res.column("s"), res.column("energy")
-    a = rest_bracket(F_all, prof.index_ss, phases.index("rest") if "rest" in phases else None)
-    last = prof.index_ss if a is None or phases[a + 1] != "rest" else a
-    keep = [k for k, ph in enumerate(phases) if ph == "insert" or k <= last]
-    s, E, F = s_all[keep] * 1e3, E_all[keep], F_all[keep]
-    if last != prof.index_ss:  # the rest point between records a and a + 1
-        w = F_all[a] / (F_all[a] - F_all[a + 1])
-        s = np.r_[s, 1e3 * (s_all[a] + w * (s_all[a + 1] - s_all[a]))]
-        E, F = np.r_[E, E_all[a] + w * (E_all[a + 1] - E_all[a])], np.r_[F, 0.0]
-    at = {k: i for i, k in enumerate(keep)}
-    at[prof.index_ss] = at.get(prof.index_ss, len(s) - 1)
+    c = traversal_curve(res, prof)
+    s, E, F, keep, at = c.s_mm, c.energy, c.force, c.records, c.marker_index
     fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=120)
     ax.plot(s, E, "-", color="tab:blue", lw=2, label="elastic energy")
     ax.plot(s[at[prof.index_max]], E[at[prof.index_max]], "o", color="tab:red", ms=8, label=r"$E_d^{max}$")

@@ -95,3 +95,27 @@ def test_grip_interpolated_over_the_rest_search_bracket_at_its_last_record():
         assert p.index_ss == 7 and p.F_grip == pytest.approx(4.0)
         assert analyze(s, E, F, G).F_grip == pytest.approx(G[7])  # no rest search: the record itself
         assert analyze(s, E, F, G, rest_from=7).F_grip == pytest.approx(G[7])  # record before it planned
+
+
+def test_plotted_traversal_ends_at_the_rest_point_between_the_bracketing_probes():
+    """The profile plot's curve (coupling.outputs.traversal_curve) ends where the force crosses zero
+    between the two rest-search records that bracket the rest point (linear interpolation, F = 0 there),
+    and draws no record past it - whether the bracket starts at the steady-state record or the one
+    before it (cclamp2d: E_ss at a probe with F = +1.6 N, the next probe -29 N)."""
+    import simfab
+    from simfab.coupling.outputs import traversal_curve
+    from simfab.coupling.profile import record_phases, rest_bracket
+
+    r = simfab.coupling.run("cclamp2d")
+    res, prof = r.insertion, r.profile
+    phases = record_phases(res)[:len(res.steps)]
+    F = res.column("force")
+    a = rest_bracket(F, prof.index_ss, phases.index("rest"))
+    assert a is not None and phases[a + 1] == "rest"
+    c = traversal_curve(res, prof)
+    s = res.column("s") * 1e3
+    assert c.force[-1] == 0.0
+    assert s[a] < c.s_mm[-1] < s[a + 1]
+    assert max(c.records) == a  # nothing drawn past the bracket's first record but the rest point
+    if a == prof.index_ss:  # the E_ss marker sits on its own record, the curve goes on to the rest point
+        assert c.records[c.marker_index[prof.index_ss]] == prof.index_ss
