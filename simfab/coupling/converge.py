@@ -6,8 +6,8 @@ The scene is run at ``target_elements`` times each refinement factor (the genera
 part again). An extruded part (``extruded_clamp``) is refined in its section and through its height
 alike: ``layers`` times factor^(1/3) (rounded, at least 1), the rest of the factor in the section
 (refining the section alone left the error through the height out of the study:
-docs/validation/coupling.md). A 3D scene that ships its part's mesh (``mesh_file``, fTetWild output stored because
-fTetWild is not reproducible) keeps that mesh at factor 1 (the error of what users run) and is
+docs/validation/coupling.md). A 3D scene that ships its part's mesh (``mesh_file``, e.g. claw3d's stored fTetWild
+mesh) keeps that mesh at factor 1 (the error of what users run) and is
 meshed again from its generator at the other factors; a part with no generator (a ready mesh
 only) cannot be refined and raises InputError. With
 element counts N_k and a figure f_k, the discretization error of linear elements falls like

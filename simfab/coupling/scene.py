@@ -415,8 +415,8 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
 def load_mesh_file(path: Path, dim: int):
     """A ready simplicial mesh from an ``.npz`` with arrays ``points`` and ``elements``.
 
-    Bundled 3D scenes ship their tetrahedral mesh this way: fTetWild is not bit-reproducible across
-    runs, so the mesh generated once by ``scenes/coupling/make_scenes.py`` is stored with the scene.
+    Bundled 3D scenes ship their tetrahedral mesh this way (the mesh generated once by
+    ``scenes/coupling/make_scenes.py`` is stored with the scene, so its figures stay fixed).
 
     Args:
         path: the ``.npz`` file.

@@ -157,8 +157,8 @@ def revolved_scene(X: np.ndarray, fem, *, kept: np.ndarray, object_start: np.nda
     scene_xml, scene_toml : the optimized 2D scene (its object, path, fixed region, material and
         simulation table carry over; the fixed box is widened out of the plane to hold the
         revolved base)
-    target_tets : tetrahedra wanted (fTetWild, coarsened as far as its quality bound allows: the thin
-        arms still take about twice as many), lifted to 10-node tets
+    target_tets : tetrahedra wanted (:func:`simfab.fem.meshing.tetrahedralize`: the thin arms take
+        more), lifted to 10-node tets
         (``element_order = 2``: linear tets of this size would be tens of percent too stiff)
 
     Writes STEM_optimized_revolved.{stl (mm, for printing), xml, toml} and

@@ -13,7 +13,7 @@
 - :mod:`simfab.fem.workspace` - the recorded kernel launches both element orders share
 - :mod:`simfab.fem.loads` - consistent nodal loads (body force, traction) for linear and P2 models
 - :mod:`simfab.fem.stress` - Cauchy and von Mises stress
-- :mod:`simfab.fem.meshing` - Triangle (2D) and fTetWild (3D) meshing, structured tet boxes
+- :mod:`simfab.fem.meshing` - Triangle (2D) and Gmsh (3D; fTetWild as the fallback) meshing, structured tet boxes
 - :mod:`simfab.fem.tolerances` - the area's numerical tolerances
 
 The shared Newton solver lives in :mod:`simfab.solve.newton`.

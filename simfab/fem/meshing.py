@@ -1,5 +1,6 @@
-"""Simplicial meshing: 2D with Shewchuk's Triangle (quality constrained Delaunay), 3D with fTetWild
-(surfaces) and Gmsh (boxes graded toward a point).
+"""Simplicial meshing: 2D with Shewchuk's Triangle (quality constrained Delaunay), 3D with Gmsh
+(surfaces remeshed at their feature edges, then Delaunay; boxes graded toward a point), fTetWild
+where Gmsh cannot load or mesh a surface.
 
 Units are whatever the input is in (SI metres inside simfab).
 """
@@ -8,16 +9,26 @@ from __future__ import annotations
 
 import contextlib
 import tempfile
+import warnings
 
 import numpy as np
 import shapely
 import triangle
 
 from simfab.errors import InputError
+from simfab.fem.tolerances import DEGENERATE_REL
+from simfab.io.mesh import MeshWarning
 
 #: Refuse meshing requests that would need more elements than this (the mesher would otherwise
 #: run until memory runs out on slivers, near-zero areas or absurd size targets).
 MAX_ELEMENTS = 2_000_000
+#: dihedral angle [deg] above which a surface edge is a feature the remeshed boundary keeps
+FEATURE_ANGLE_DEG = 40.0
+#: fTetWild's default edge length, as a fraction of the bounding-box diagonal
+TETWILD_EDGE_FAC = 0.05
+#: surface simplification tolerances tried in turn, as fractions of the edge length, when Gmsh
+#: cannot remesh the surface as given (thin features: edges far shorter than the target size)
+SIMPLIFY_RETRY_REL = (0.0, 0.03, 0.1)
 
 
 def _as_loop(poly, where: str) -> np.ndarray:
@@ -110,19 +121,28 @@ def check_polygon_size(poly, max_area: float | None = None) -> None:
 
 def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, target_tets: int | None = None,
                    coarsen: bool = False):
-    """Tetrahedral mesh of the volume enclosed by a triangle surface (fTetWild via pytetwild).
+    """Tetrahedral mesh of the volume enclosed by a triangle surface, the same in every process.
+
+    Gmsh remeshes the surface patch by patch between its feature edges and fills it by Delaunay
+    (:func:`gmsh_tets`), deterministic on one thread; where it rejects the surface as given (thin
+    features whose edges are far shorter than the target size), the surface is first simplified
+    (``SIMPLIFY_RETRY_REL``: vertices move by at most 3 %, then 10 %, of the edge length). Where
+    Gmsh cannot load (its wheel needs the system's X11/GLU libraries) or mesh the surface, or
+    leaves flat tets, fTetWild (pytetwild) meshes it instead, with a
+    :class:`~simfab.io.mesh.MeshWarning`: fTetWild shuffles its input with a hardware random seed,
+    so its mesh varies from run to run.
 
     Args:
         vertices: (n, 3) surface vertices; faces : (f, 3) triangles (closed surface)
-        edge_length_fac: target edge length as a fraction of the bounding-box diagonal (fTetWild's
-            default 0.05 when both this and ``target_tets`` are None)
+        edge_length_fac: target edge length as a fraction of the bounding-box diagonal (0.05,
+            fTetWild's default, when both this and ``target_tets`` are None)
         target_tets: approximate number of tetrahedra wanted; sets the absolute edge length from the
-            enclosed volume assuming regular tets (V_tet = l^3 / (6 sqrt 2)). The count fTetWild
-            delivers is typically within a factor ~2 of it.
-        coarsen: let fTetWild coarsen the result as far as its quality bound allows (closer to the
-            target edge length on thin parts, which fTetWild otherwise refines).
+            enclosed volume assuming regular tets (V_tet = l^3 / (6 sqrt 2)). The count delivered
+            is typically 1-1.5x of it (more on thin parts, where the surface's edges set the size).
+        coarsen: (fTetWild only) let it coarsen the result as far as its quality bound allows.
 
-    Returns V (n, 3) float64 and T (m, 4) int32 positively oriented tets.
+    Returns:
+        V (n, 3) float64 and T (m, 4) int32 positively oriented tets.
     """
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces)
@@ -150,6 +170,23 @@ def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, tar
             raise InputError(f"edge length asks for about {n_est:.3g} tetrahedra (limit {MAX_ELEMENTS})",
                              where="edge_length_fac")
         kwargs["edge_length_fac"] = float(edge_length_fac)
+    if target_tets is not None:
+        h = float(kwargs["edge_length_abs"])
+    else:
+        h = float(kwargs.get("edge_length_fac", TETWILD_EDGE_FAC)) * diag
+    reason = ""
+    for rel in SIMPLIFY_RETRY_REL:
+        try:
+            sv, sf = (v, f) if rel == 0 else _simplified(v, f, rel * h)
+            X, T = gmsh_tets(sv, sf, h, remesh_surface=True)
+            if flat_tets(X, T).any():
+                raise RuntimeError(f"{int(flat_tets(X, T).sum())} flat tetrahedra")
+        except Exception as e:  # noqa: BLE001 - Gmsh raises a bare Exception with its last error
+            reason = str(e).split(";")[0]
+        else:
+            return X, T
+    warnings.warn(f"surface: Gmsh could not mesh it ({reason}); fTetWild meshed it instead, whose mesh (and "
+                  "every figure computed on it) varies from run to run", MeshWarning, stacklevel=2)
     import pytetwild  # deferred for start-up time: importing it loads pyvista (~0.4 s)
 
     # fTetWild drops a scratch file (__tracked_surface.stl) into the working directory: run it
@@ -160,10 +197,79 @@ def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, tar
     T = np.asarray(T, dtype=np.int32)
     if len(T) == 0:
         raise InputError("fTetWild produced no tetrahedra (is the surface closed?)", where="surface")
-    d = V[T[:, 1:]] - V[T[:, :1]]
-    neg = np.linalg.det(d) < 0
+    return V, _positive(V, T)
+
+
+def _positive(V: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """T (m, 4) int32 with each negatively oriented tet's last two vertices swapped."""
+    T = np.asarray(T, dtype=np.int32)
+    neg = np.linalg.det(V[T[:, 1:]] - V[T[:, :1]]) < 0
     T[neg] = T[neg][:, [0, 1, 3, 2]]
-    return V, T
+    return T
+
+
+def _simplified(v: np.ndarray, f: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The surface (v, f) with edges shorter than its features collapsed (manifold3d's
+    ``simplify``: vertices move by at most ``tol``); raises RuntimeError if it is not a manifold."""
+    import manifold3d  # deferred: only the retry after Gmsh rejected the raw surface needs it
+
+    man = manifold3d.Manifold(manifold3d.Mesh(np.asarray(v, np.float32), np.asarray(f, np.uint32)))
+    if man.status() != manifold3d.Error.NoError:
+        raise RuntimeError(f"the surface is not a closed manifold ({man.status()})")
+    m = man.simplify(float(tol)).to_mesh()
+    return np.asarray(m.vert_properties[:, :3], np.float64), np.asarray(m.tri_verts, np.int64)
+
+
+def flat_tets(V: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """(m,) bool: the tets of (V, T) the FEM model would reject as degenerate (|det| <=
+    ``DEGENERATE_REL`` h^3, h the mean edge length)."""
+    i, j = np.triu_indices(4, 1)
+    h = float(np.linalg.norm(V[T[:, i]] - V[T[:, j]], axis=-1).mean())
+    return np.abs(np.linalg.det(V[T[:, 1:]] - V[T[:, :1]])) <= DEGENERATE_REL * h**3
+
+
+def gmsh_tets(V: np.ndarray, F: np.ndarray, h: float, *, remesh_surface: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Tets of the volume bounded by the closed triangle surface (V, F): Gmsh's 3D Delaunay with
+    interior edges of about ``h``, on one thread with a fixed seed (the same mesh, bit for bit, in
+    every process).
+
+    Args:
+        V: (n, 3) surface vertices; F: (f, 3) outward triangles.
+        h: target edge length, in V's units.
+        remesh_surface: split the surface into patches at its feature edges (dihedral angle above
+            ``FEATURE_ANGLE_DEG``), remesh each patch with edges of about ``h`` (points on the input
+            triangles) and mesh the volume inside; False keeps the triangles as the boundary.
+
+    Returns:
+        (X (N, 3) float64, T (M, 4) int32 positively oriented), unused nodes dropped. Raises
+        RuntimeError when Gmsh cannot load or mesh the surface, or leaves no tetrahedra.
+    """
+    with gmsh_session("volume") as gmsh:
+        gmsh.option.setNumber("Mesh.Algorithm3D", 1)  # Delaunay: sequential and deterministic
+        gmsh.option.setNumber("Mesh.MeshSizeMax", float(h))
+        gmsh.option.setNumber("Mesh.RandomSeed", 1)
+        s = gmsh.model.addDiscreteEntity(2)
+        gmsh.model.mesh.addNodes(2, s, np.arange(1, len(V) + 1), np.asarray(V, np.float64).ravel())
+        gmsh.model.mesh.addElementsByType(s, 2, [], (np.asarray(F, np.int64) + 1).ravel())
+        if remesh_surface:
+            gmsh.option.setNumber("Mesh.MeshSizeMin", float(h) / 3)
+            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+            gmsh.model.mesh.classifySurfaces(np.radians(FEATURE_ANGLE_DEG), True, True, np.pi)
+            gmsh.model.mesh.createGeometry()
+            loop = gmsh.model.geo.addSurfaceLoop([tag for _, tag in gmsh.model.getEntities(2)])
+        else:
+            gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
+            loop = gmsh.model.geo.addSurfaceLoop([s])
+        gmsh.model.geo.addVolume([loop])
+        gmsh.model.geo.synchronize()
+        gmsh.model.mesh.generate(3)
+        X, T = gmsh_elements(gmsh, 4, 4)
+    used = np.zeros(len(X), bool)
+    used[T.ravel()] = True
+    X, T = np.ascontiguousarray(X[used], np.float64), (np.cumsum(used) - 1)[T]
+    if len(T) == 0:
+        raise RuntimeError("no tetrahedra")
+    return X, _positive(X, T)
 
 
 def _enclosed_volume(v: np.ndarray, f: np.ndarray) -> float:

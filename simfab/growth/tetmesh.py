@@ -55,7 +55,7 @@ def tetrahedralize_skin(mesh, *, edge_length: float, r_min: float) -> SkinTets:
     Returns:
         :class:`SkinTets`. Raises ConvergenceError when no tolerance gives a surface Gmsh meshes.
     """
-    from simfab.fem.meshing import load_gmsh
+    from simfab.fem.meshing import flat_tets, gmsh_tets, load_gmsh
     from simfab.growth.skinning import to_manifold, to_trimesh
 
     try:
@@ -75,12 +75,12 @@ def tetrahedralize_skin(mesh, *, edge_length: float, r_min: float) -> SkinTets:
         tol_m = k * SIMPLIFY_PER_RMIN * r_min
         surf = to_trimesh(man.simplify(tol_m).refine_to_length(edge_length))
         try:
-            V, T = _gmsh_delaunay(np.asarray(surf.vertices, np.float64), np.asarray(surf.faces, np.int64),
-                                  edge_length)
+            V, T = gmsh_tets(np.asarray(surf.vertices, np.float64), np.asarray(surf.faces, np.int64),
+                             edge_length, remesh_surface=False)
         except Exception as e:  # noqa: BLE001 - Gmsh raises a bare Exception with its last error
             last = str(e)
             continue
-        flat = _flat_tets(V, T)
+        flat = flat_tets(V, T)
         if flat.any() and k != SIMPLIFY_RETRY[-1]:
             last = f"{int(flat.sum())} flat tetrahedra"
             continue  # a coarser simplification removes the near-coplanar boundary facets behind them
@@ -92,38 +92,3 @@ def tetrahedralize_skin(mesh, *, edge_length: float, r_min: float) -> SkinTets:
         return SkinTets(vertices=V, tets=T, surface=surf, simplify_m=tol_m)
     raise ConvergenceError(f"Gmsh could not tetrahedralize the skin ({last})")
 
-
-def _flat_tets(V: np.ndarray, T: np.ndarray) -> np.ndarray:
-    """(m,) bool: tets the FEM model would reject as degenerate (``DEGENERATE_REL``)."""
-    from simfab.fem.tolerances import DEGENERATE_REL
-
-    i, j = np.triu_indices(4, 1)
-    h = float(np.linalg.norm(V[T[:, i]] - V[T[:, j]], axis=-1).mean())
-    return np.abs(np.linalg.det(V[T[:, 1:]] - V[T[:, :1]])) <= DEGENERATE_REL * h**3
-
-
-def _gmsh_delaunay(V: np.ndarray, F: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """Tets of the volume bounded by the triangles (V, F), boundary kept, interior edges <= ``h``."""
-    from simfab.fem.meshing import gmsh_elements, gmsh_session
-
-    with gmsh_session("skin") as gmsh:
-        gmsh.option.setNumber("Mesh.Algorithm3D", 1)  # Delaunay: sequential and deterministic
-        gmsh.option.setNumber("Mesh.MeshSizeMax", float(h))
-        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
-        gmsh.option.setNumber("Mesh.RandomSeed", 1)
-        s = gmsh.model.addDiscreteEntity(2)
-        gmsh.model.mesh.addNodes(2, s, np.arange(1, len(V) + 1), V.ravel())
-        gmsh.model.mesh.addElementsByType(s, 2, [], (F + 1).ravel())
-        gmsh.model.geo.addVolume([gmsh.model.geo.addSurfaceLoop([s])])
-        gmsh.model.geo.synchronize()
-        gmsh.model.mesh.generate(3)
-        X, T = gmsh_elements(gmsh, 4, 4)
-    used = np.zeros(len(X), bool)
-    used[T.ravel()] = True
-    remap = np.cumsum(used) - 1
-    X, T = np.ascontiguousarray(X[used], np.float64), remap[T]
-    if len(T) == 0:
-        raise RuntimeError("no tetrahedra")
-    neg = np.linalg.det(X[T[:, 1:]] - X[T[:, :1]]) < 0
-    T[neg] = T[neg][:, [0, 1, 3, 2]]
-    return X, T.astype(np.int32)
