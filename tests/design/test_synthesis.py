@@ -52,7 +52,7 @@ def test_bad_synthesis_inputs_are_named():
         revolve_arms([SECTION], axis="x", cut=5.0, arms=4, width=0.1)
 
 
-def test_block_section_becomes_a_3d_scene_with_its_object_path_and_support(tmp_path):
+def test_block_section_becomes_a_3d_scene_with_its_object_path_and_support(tmp_path, require_gmsh):
     """The building block's section (its base kept) as a 3D scene: 10-node tets, the ball starting
     outside the part, the fixed box widened to hold the revolved base all around the axis."""
     import shutil

@@ -79,7 +79,7 @@ print(hashlib.sha256(V.tobytes() + T.tobytes()).hexdigest(), len(T), d.sum() / s
 """
 
 
-def test_tetrahedralize_gives_the_same_mesh_in_every_process():
+def test_tetrahedralize_gives_the_same_mesh_in_every_process(require_gmsh):
     """A part's tet mesh (the four-finger claw, a boolean union) is the same, bit for bit, in two
     processes (fTetWild's was not: 2046 vs 2188 tets for one input), close to the asked count,
     encloses the part's volume, and has no sliver (shape quality 6 sqrt(2) V / l_mean^3, 1 for
