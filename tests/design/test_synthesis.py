@@ -52,16 +52,14 @@ def test_bad_synthesis_inputs_are_named():
         revolve_arms([SECTION], axis="x", cut=5.0, arms=4, width=0.1)
 
 
-def test_block_section_becomes_a_3d_scene_with_its_object_path_and_support(tmp_path, require_gmsh):
+def test_block_section_becomes_a_3d_scene_with_its_object_path_and_support(tmp_path):
     """The building block's section (its base kept) as a 3D scene: 10-node tets, the ball starting
     outside the part, the fixed box widened to hold the revolved base all around the axis."""
     import shutil
 
-    from simfab.coupling.scene import load_coupling_scene, scene_paths
-    from simfab.coupling.simulate import check_start
+    from simfab.coupling.scene import scene_paths
     from simfab.design.scene import load_design_scene
     from simfab.design.synthesis import revolved_scene
-    from simfab.fem.p2 import P2Model
 
     ds = load_design_scene("block2d_tight")
     cm = ds.cm
@@ -73,12 +71,29 @@ def test_block_section_becomes_a_3d_scene_with_its_object_path_and_support(tmp_p
                            scene_xml=tmp_path / xml.name, scene_toml=tmp_path / toml.name, out=tmp_path / "o",
                            stem="block", axis="x", offset=0.0, arms=4, target_tets=600)
     assert all(p.is_file() for p in paths.values())
-    # the same section gives the same tet mesh again (fTetWild's differed run to run: 2046 vs 2188 tets)
+    # the same section gives the same tet mesh again (fTetWild's differed run to run: 2046 vs 2188
+    # tets; it is the fallback where Gmsh's library cannot load, and then this check is left out)
+    from simfab.fem.meshing import load_gmsh
+
+    try:
+        load_gmsh()
+    except RuntimeError:
+        return check_scene(paths, cm)
     again = revolved_scene(cm.fem.rest, cm.fem, kept=np.concatenate(ds.kept_regions), object_start=cm.pose(0.0)[1],
                            scene_xml=tmp_path / xml.name, scene_toml=tmp_path / toml.name, out=tmp_path / "o2",
                            stem="block", axis="x", offset=0.0, arms=4, target_tets=600)
     first, second = np.load(paths["mesh"]), np.load(again["mesh"])
     assert all(np.array_equal(first[k], second[k]) for k in first.files)
+    check_scene(paths, cm)
+
+
+def check_scene(paths, cm):
+    """The revolved scene has 10-node tets, the ball starts outside the part, the fixed box holds
+    the base all around the axis, and the object, path and material are the 2D scene's."""
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import check_start
+    from simfab.fem.p2 import P2Model
+
     cm3 = load_coupling_scene(paths["scene_xml"])
     assert cm3.dim == 3 and isinstance(cm3.fem, P2Model)
     check_start(cm3)  # the ball starts outside the part
