@@ -29,6 +29,8 @@ TETWILD_EDGE_FAC = 0.05
 #: surface simplification tolerances tried in turn, as fractions of the edge length, when Gmsh
 #: cannot remesh the surface as given (thin features: edges far shorter than the target size)
 SIMPLIFY_RETRY_REL = (0.0, 0.03, 0.1)
+#: relative miss of ``target_tets`` above which the edge length is corrected once and the part remeshed
+COUNT_TOL = 0.15
 
 
 def _as_loop(poly, where: str) -> np.ndarray:
@@ -137,8 +139,8 @@ def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, tar
         edge_length_fac: target edge length as a fraction of the bounding-box diagonal (0.05,
             fTetWild's default, when both this and ``target_tets`` are None)
         target_tets: approximate number of tetrahedra wanted; sets the absolute edge length from the
-            enclosed volume assuming regular tets (V_tet = l^3 / (6 sqrt 2)). The count delivered
-            is typically 1-1.5x of it (more on thin parts, where the surface's edges set the size).
+            enclosed volume assuming regular tets (V_tet = l^3 / (6 sqrt 2)), corrected once from
+            the count the first mesh has when it misses by more than ``COUNT_TOL``.
         coarsen: (fTetWild only) let it coarsen the result as far as its quality bound allows.
 
     Returns:
@@ -179,6 +181,10 @@ def tetrahedralize(vertices, faces, *, edge_length_fac: float | None = None, tar
         try:
             sv, sf = (v, f) if rel == 0 else _simplified(v, f, rel * h)
             X, T = gmsh_tets(sv, sf, h, remesh_surface=True)
+            if target_tets is not None and abs(len(T) / target_tets - 1) > COUNT_TOL:
+                # one secant step on the count ~ h^-3 (thin parts and Delaunay's own tet shapes
+                # move it away from the regular-tet estimate)
+                X, T = gmsh_tets(sv, sf, h * (len(T) / target_tets) ** (1 / 3), remesh_surface=True)
             if flat_tets(X, T).any():
                 raise RuntimeError(f"{int(flat_tets(X, T).sum())} flat tetrahedra")
         except Exception as e:  # noqa: BLE001 - Gmsh raises a bare Exception with its last error

@@ -91,7 +91,7 @@ def test_tetrahedralize_gives_the_same_mesh_in_every_process(require_gmsh):
             for _ in range(2)]
     (h1, n, vol_ratio, q_min), (h2, *_) = (r.stdout.split() for r in runs)
     assert h1 == h2
-    assert 0.8 * 3000 < int(n) < 2.0 * 3000
+    assert 0.7 * 3000 < int(n) < 1.4 * 3000  # the count corrected once toward the asked one
     assert float(vol_ratio) == pytest.approx(1.0, abs=2e-3)
     assert float(q_min) > 0.02
 
