@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from simfab.coupling import config as C
+from simfab.coupling.layout import point_dhat
 
 #: O is at rest when the path force (A drawing O in, > 0) is at most this fraction of the peak |force|.
 from simfab.coupling.profile import REST_FORCE_REL  # noqa: E402 (one definition)
@@ -45,6 +46,10 @@ MIN_SETTLE_STEPS = 20
 REST_ENERGY_REL = 1e-3
 #: Trials to find the rest point once a step has overshot it.
 REST_TRIALS = 16
+#: :func:`seat_onset` takes the points' closing rates by a finite difference over this fraction of the step.
+SEAT_RATE_REL = 1e-3
+#: A secant trial of the rest search lies at least this fraction of the bracket inside its ends.
+SECANT_MARGIN = 0.02
 #: Largest mismatch between a step's work and its change of stored energy, relative to E_max.
 STEP_WORK_REL = 0.05
 #: Largest difference between F_in at a step and the peak of the parabola through its neighbours.
@@ -100,39 +105,92 @@ def to_rest(cm, stepper) -> str:
     peak = float(max(abs(r.path_force) for r in steps))
     E_max = float(max(r.energy for r in steps))
     tol = REST_FORCE_REL * peak
-    for _ in range(int(np.ceil(SETTLE_MAX_STEPS_REL * (len(cm.s_steps) - 1)))):
+    n_steps = int(np.ceil(SETTLE_MAX_STEPS_REL * (len(cm.s_steps) - 1)))
+    s_cap = steps[-1].s + n_steps * h  # as far again as the planned path
+    for _ in range(2 * n_steps):  # (steps cut short at a predicted seat are at least half a step)
         if not still_drawn_in(steps):
             return "rest"
-        attempt = stepper.step(steps[-1].s + h, tolerate=True)
+        if steps[-1].s >= s_cap - 1e-9 * h:
+            break
+        s_to = min(steps[-1].s + h, s_cap)
+        onset = seat_onset(cm, stepper.state, s_to)
+        s_try = s_to if onset is None else 0.5 * (onset + s_to)
+        attempt = stepper.step(s_try, tolerate=True)
         rec = attempt.record
         if rec is not None and rec.path_force >= -tol:
             stepper.keep(rec)
             continue
         if rec is None or stepper.history_dependent:  # (with friction every trial goes forward from the last kept)
             stepper.undo(attempt)
-        return _bracket(steps[-1], rec, steps[-1].s + h, stepper, tol, REST_ENERGY_REL * E_max)
+        return _bracket(steps[-1], rec, s_try, stepper, tol, REST_ENERGY_REL * E_max, onset=onset)
     return "rest" if not still_drawn_in(steps) else "cap"
 
 
-def _bracket(lo, hi, hi_s, stepper, tol, e_tol) -> str:
+def seat_onset(cm, state, s_to: float) -> float | None:
+    """Where O, moved on from ``state`` towards path length ``s_to`` [m] with A held in place, first
+    brings a constraint point that is not in contact yet (distance above its d_hat) within d_hat:
+    the onset of a new contact, typically O's seat. Each point's distance is extrapolated linearly
+    from its rate of change at ``state.s`` (a finite difference over SEAT_RATE_REL of the step).
+
+    Args:
+        cm: the coupling model.
+        state: the current :class:`simfab.coupling.state.StepState` (its positions, path length and points).
+        s_to: the end of the step [m].
+
+    Returns:
+        The predicted onset in (state.s, s_to) [m], or None when no point engages within the step.
+    """
+    pts = state.points
+    y = pts.positions(state.x)
+    dh = point_dhat(cm, pts)
+    ds = SEAT_RATE_REL * (s_to - state.s)
+    if not ds > 0:
+        return None
+    d = []
+    for s in (state.s, state.s + ds):
+        ev = cm.field.evaluate(y, cm.pose(s), hessian=False)
+        d.append(np.where(ev.near, -ev.psi, np.inf))
+    with np.errstate(invalid="ignore"):
+        rate = (d[0] - d[1]) / ds  # closing speed of each point's gap per metre of path
+        t = np.where((d[0] > dh) & (rate > 0) & np.isfinite(d[0]) & np.isfinite(d[1]), (d[0] - dh) / rate, np.inf)
+    s_on = state.s + float(t.min(initial=np.inf))
+    return s_on if s_on < s_to else None
+
+
+def _bracket(lo, hi, hi_s, stepper, tol, e_tol, onset=None) -> str:
     """Find the rest point between the kept record ``lo`` (path force > 0) and an overshoot at
     ``hi_s`` (record ``hi``, None when unsolvable); see :func:`to_rest`.
 
-    Bisection on the sign of the path force P = -dW/ds (W = E + B), each trial solved from the
-    last trial's state, until P_lo (s_hi - s_lo) <= e_tol [J]: W falls at most that much from the
-    lower end to the rest point (W convex on the bracket, P <= P_lo). The rest point is often a
-    kink (O seating against a stiff part of A: P jumps from drawing in to pushing back within a
-    micrometre), so the two ends are kept as the last records (the trials' own records; the run's
-    state is then the last trial's): force through zero between them, the energy's minimum along
-    the path at the lower end. With friction (``stepper.history_dependent``) every trial is solved
-    forward from the lower end's state (an overshoot is undone: stepping back would reverse the
-    friction), and only the lower end is kept.
+    Trials on the path force P = -dW/ds (W = E + B), each solved from the last trial's state, until
+    P_lo (s_hi - s_lo) <= e_tol [J]: W falls at most that much from the lower end to the rest point
+    (W convex on the bracket, P <= P_lo). The rest point is often a kink (O seating against a stiff
+    part of A: P falls from drawing in to pushing back within micrometres), where a secant through
+    the bracket's ends lands next to the lower end. With the seat's ``onset`` [m] (:func:`seat_onset`,
+    inside the bracket) the trials take the secant from (onset, P_lo) instead while the lower end lies
+    before the onset (P is about flat up to it and smooth past it; dropped when two trials in a row
+    push back). Secants otherwise between the ends (Illinois: the end two trials in a row did not
+    replace has its force halved), a bisection whenever a trial shrank the bracket by less than half,
+    and always a bisection towards an unsolvable end.
+
+    The two ends are kept as the last records (the trials' own records; the run's state is then the
+    last trial's): force through zero between them, the energy's minimum along the path at the lower
+    end. With friction (``stepper.history_dependent``) every trial is solved forward from the lower
+    end's state (an overshoot is undone: stepping back would reverse the friction), and only the
+    lower end is kept.
     """
     steps_last = lo
+    pivot = onset if onset is not None and lo.s < onset < hi_s else None
+    f_lo, f_hi = lo.path_force, None if hi is None else hi.path_force  # the secant's values at the ends
+    bisect, side, width = pivot is None, None, hi_s - lo.s  # side: the end the last trial replaced
     for _ in range(REST_TRIALS):
         if lo.path_force * (hi_s - lo.s) <= e_tol:
             break
-        s_try = 0.5 * (lo.s + hi_s)
+        s_a = lo.s if pivot is None or lo.s >= pivot else pivot
+        if bisect or f_hi is None:
+            s_try = 0.5 * (s_a + hi_s)
+        else:  # the secant's zero, kept off the ends
+            s_try = float(np.clip(s_a + (hi_s - s_a) * f_lo / (f_lo - f_hi), s_a + SECANT_MARGIN * (hi_s - s_a),
+                                  hi_s - SECANT_MARGIN * (hi_s - s_a)))
         attempt = stepper.step(s_try, tolerate=True)
         rec = attempt.record
         if rec is not None and abs(rec.path_force) <= tol:
@@ -140,11 +198,19 @@ def _bracket(lo, hi, hi_s, stepper, tol, e_tol) -> str:
             return "rest"
         if rec is None or (stepper.history_dependent and rec.path_force <= 0):
             stepper.undo(attempt)
-            hi, hi_s = (None if rec is None else rec), s_try
-        elif rec.path_force > 0:  # still drawn in: the new lower end
-            lo = rec
+        if rec is not None and rec.path_force > 0:  # still drawn in: the new lower end
+            lo, f_lo = rec, rec.path_force
+            if side == "lo" and f_hi is not None:
+                f_hi *= 0.5
+            side = "lo"
         else:
-            hi, hi_s = rec, s_try
+            hi, hi_s, f_hi = rec, s_try, None if rec is None else rec.path_force
+            if side == "hi":  # the lower end stays twice: the onset may be late, the secant's pivot is lo
+                f_lo *= 0.5
+                pivot = None
+            side = "hi"
+        bisect = (hi_s - lo.s) > 0.5 * width
+        width = hi_s - lo.s
     else:
         if lo is not steps_last:
             stepper.keep(lo)
