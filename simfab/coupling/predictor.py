@@ -19,6 +19,12 @@ from simfab.coupling.timing import TimedSolver
 from simfab.errors import ConvergenceError
 from simfab.fem.elastic import det_F, energy_gradient_hessian
 
+#: The contact predictor pushes a point that O meets part way through the step only by what O's
+#: normal displacement exceeds its gap beyond this many d_hat (it ends about that far from O, inside
+#: the barrier's range; a point pushed by O's whole displacement deformed A as if it had been in
+#: contact from the step's start, and Newton's first iterations undid that).
+PREDICT_GAP = 0.9
+
 
 def lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj: StepObjective, *, below: float,
                  to: float, prev: np.ndarray | None = None):
@@ -189,10 +195,11 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext)
     """Feasible warm start at s_new (see the module docstring, step 1).
 
     Points O can reach during the step (distance below L |O's displacement there| + d_hat) are
-    pushed along O's normal by O's normal displacement (they may slide tangentially, as in
-    frictionless contact); the rest of A follows through one linear solve with the previous
-    tangent stiffness. Points still inside O afterwards are carried fully (rigidly with O) and the
-    solve is repeated; as a last resort every reachable point is carried rigidly.
+    pushed along O's normal by O's normal displacement less their gap beyond PREDICT_GAP * d_hat (they
+    may slide tangentially, as in frictionless contact); the rest of A follows through one linear
+    solve with the previous tangent stiffness. Points still inside O afterwards are carried fully
+    (rigidly with O) and the solve is repeated; as a last resort every reachable point is carried
+    rigidly.
     """
     timer = ctx.timer
     x = state.x
@@ -212,11 +219,15 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext)
     g = -ev_a.grad
     nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
     nrm = nrm @ M[:dim, :dim].T
-    push = np.einsum("kd,kd->k", nrm, delta)
+    # a point short of contact (gap above PREDICT_GAP * d_hat) is pushed only by what O's normal
+    # displacement exceeds that gap by (it is met part way through the step)
+    slack = np.maximum(-ev_a.psi - PREDICT_GAP * point_dhat(cm, pts), 0.0)
+    push = np.einsum("kd,kd->k", nrm, delta) - slack
     normal = reach & (push > 0)
+    delta_n = delta - slack[:, None] * nrm  # (its normal part is what the penalty holds the normal points to)
     full = np.zeros(len(pts), dtype=bool)
     for _ in range(C.PREDICTOR_RETRIES + 1):
-        x0 = penalty_solve(cm, state, x, pts, normal & ~full, full, nrm, delta, ctx)
+        x0 = penalty_solve(cm, state, x, pts, normal & ~full, full, nrm, np.where(full[:, None], delta, delta_n), ctx)
         d_new = feasible_distances(cm, x0, s_new, pts, ctx)
         if d_new is not None and np.all(d_new > 0):
             return x0

@@ -4,7 +4,8 @@
 seats: at its last pose A still draws O in (path force > 0) and the energy is still falling, so
 E_ss read there is not the steady state. When the path's last segment is a pure translation and
 the insertion length is the default one, the run continues past the last keyframe straight on,
-with quarter steps, until the path force has gone through zero (O at rest: the energy at its
+with quarter steps, cut short where a new contact (the seat) is predicted to engage or the
+force to reach zero, until the path force has gone through zero (O at rest: the energy at its
 minimum along the path), at most as far again as the planned path (:func:`to_rest`).
 
 **Checks** (:func:`warnings`, one line each, copied into the run's warnings):
@@ -40,6 +41,11 @@ SETTLE_MAX_STEPS_REL = 4.0
 #: (O meeting a stiff part of A) where a step that overshoots deep costs many Newton iterations
 #: (cclamp2d: a full step 18, a quarter step 7).
 SETTLE_STEP_REL = 0.25
+#: A step over the seat's predicted onset ends this fraction of the way from the onset to the step's end.
+SEAT_STEP_REL = 0.5
+#: A step towards the rest point predicted by the last records' forces (:func:`_zero_ahead`) is at least this
+#: fraction of the extension step.
+MIN_SETTLE_STEP_REL = 1 / 16
 #: Extension steps are at most the path length over this.
 MIN_SETTLE_STEPS = 20
 #: The rest point is found when the energy between the bracket's ends is known to within this fraction of E_max.
@@ -88,12 +94,15 @@ def to_rest(cm, stepper) -> str:
 
     stepper : the run's :class:`simfab.coupling.stepper.Stepper` (its ``steps`` so far; ``step`` solves a step from
     the current state, ``undo`` returns to the state before it, ``keep`` appends its record). Steps of SETTLE_STEP_REL
-    times the last planned one (at most 1/MIN_SETTLE_STEPS of the path) go on while :func:`still_drawn_in`; a step
-    that overshoots the rest point (path force below -REST_FORCE_REL * peak: O pushed into a stiffer contact, or no
-    solution: undone) starts the search; the rest point is bracketed (:func:`_bracket`), every trial solved from the
-    last one's state (a step back from past the rest point is short and feasible: O moves away from A). It ends when
-    the path force is within REST_FORCE_REL * peak of zero, or when the energy between the bracket's ends is known to
-    within REST_ENERGY_REL * E_max (see :func:`_bracket`).
+    times the last planned one (at most 1/MIN_SETTLE_STEPS of the path) go on while :func:`still_drawn_in`, each cut
+    short when the seat's onset (:func:`seat_onset`) lies inside it (to SEAT_STEP_REL of the way on from the onset:
+    a step deep into a stiff seat costs many Newton iterations) or when the line through the last two records' forces
+    reaches zero inside it (:func:`_zero_ahead`, at least MIN_SETTLE_STEP_REL of a step). A step that overshoots the
+    rest point (path force below -REST_FORCE_REL * peak: O pushed into a stiffer contact, or no solution: undone)
+    starts the search; the rest point is bracketed (:func:`_bracket`), every trial solved from the last one's state (a
+    step back from past the rest point is short and feasible: O moves away from A). It ends when the path force is
+    within REST_FORCE_REL * peak of zero, or when the energy between the bracket's ends is known to within
+    REST_ENERGY_REL * E_max (see :func:`_bracket`).
 
     Returns "rest" (O came to rest), "not continued" (the path cannot be continued or was already
     at rest) or why it stopped short ("cap": the extension limit, "bracket": no rest point found).
@@ -107,23 +116,42 @@ def to_rest(cm, stepper) -> str:
     tol = REST_FORCE_REL * peak
     n_steps = int(np.ceil(SETTLE_MAX_STEPS_REL * (len(cm.s_steps) - 1)))
     s_cap = steps[-1].s + n_steps * h  # as far again as the planned path
-    for _ in range(2 * n_steps):  # (steps cut short at a predicted seat are at least half a step)
+    pivot = None  # a seat's onset the last kept step passed (see _zero_ahead)
+    for _ in range(2 * n_steps):  # (steps cut short at a predicted seat or rest point: see below)
         if not still_drawn_in(steps):
             return "rest"
         if steps[-1].s >= s_cap - 1e-9 * h:
             break
         s_to = min(steps[-1].s + h, s_cap)
         onset = seat_onset(cm, stepper.state, s_to)
-        s_try = s_to if onset is None else 0.5 * (onset + s_to)
+        s_try = s_to if onset is None else onset + SEAT_STEP_REL * (s_to - onset)
+        s_zero = _zero_ahead(steps, pivot)
+        predicted = s_zero is not None and s_zero < s_try
+        if predicted:
+            s_try = max(s_zero, steps[-1].s + MIN_SETTLE_STEP_REL * h)
         attempt = stepper.step(s_try, tolerate=True)
         rec = attempt.record
         if rec is not None and rec.path_force >= -tol:
             stepper.keep(rec)
+            if onset is not None and onset < rec.s:
+                pivot = onset
             continue
         if rec is None or stepper.history_dependent:  # (with friction every trial goes forward from the last kept)
             stepper.undo(attempt)
-        return _bracket(steps[-1], rec, s_try, stepper, tol, REST_ENERGY_REL * E_max, onset=onset)
+        return _bracket(steps[-1], rec, s_try, stepper, tol, REST_ENERGY_REL * E_max,
+                        onset=None if predicted else onset, secant=predicted)
     return "rest" if not still_drawn_in(steps) else "cap"
+
+
+def _zero_ahead(steps, pivot: float | None) -> float | None:
+    """Where the line through the last two records' path forces crosses zero ahead of the last one,
+    when the force falls between them (None otherwise); with a seat's onset ``pivot`` [m] between
+    them, the line from (pivot, the earlier force) instead: the force is about flat up to the onset."""
+    a, b = steps[-2], steps[-1]
+    if not a.path_force > b.path_force > 0:
+        return None
+    s_a = pivot if pivot is not None and a.s < pivot < b.s else a.s
+    return b.s + b.path_force * (b.s - s_a) / (a.path_force - b.path_force)
 
 
 def seat_onset(cm, state, s_to: float) -> float | None:
@@ -157,7 +185,7 @@ def seat_onset(cm, state, s_to: float) -> float | None:
     return s_on if s_on < s_to else None
 
 
-def _bracket(lo, hi, hi_s, stepper, tol, e_tol, onset=None) -> str:
+def _bracket(lo, hi, hi_s, stepper, tol, e_tol, onset=None, secant=False) -> str:
     """Find the rest point between the kept record ``lo`` (path force > 0) and an overshoot at
     ``hi_s`` (record ``hi``, None when unsolvable); see :func:`to_rest`.
 
@@ -181,7 +209,7 @@ def _bracket(lo, hi, hi_s, stepper, tol, e_tol, onset=None) -> str:
     steps_last = lo
     pivot = onset if onset is not None and lo.s < onset < hi_s else None
     f_lo, f_hi = lo.path_force, None if hi is None else hi.path_force  # the secant's values at the ends
-    bisect, side, width = pivot is None, None, hi_s - lo.s  # side: the end the last trial replaced
+    bisect, side, width = pivot is None and not secant, None, hi_s - lo.s  # side: the end the last trial replaced
     for _ in range(REST_TRIALS):
         if lo.path_force * (hi_s - lo.s) <= e_tol:
             break
