@@ -19,12 +19,6 @@ from simfab.coupling.timing import TimedSolver
 from simfab.errors import ConvergenceError
 from simfab.fem.elastic import det_F, energy_gradient_hessian
 
-#: The contact predictor pushes a point that O meets part way through the step only by what O's
-#: normal displacement exceeds its gap beyond this many d_hat (it ends about that far from O, inside
-#: the barrier's range; a point pushed by O's whole displacement deformed A as if it had been in
-#: contact from the step's start, and Newton's first iterations undid that).
-PREDICT_GAP = 0.9
-
 
 def lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj: StepObjective, *, below: float,
                  to: float, prev: np.ndarray | None = None):
@@ -195,11 +189,10 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext)
     """Feasible warm start at s_new (see the module docstring, step 1).
 
     Points O can reach during the step (distance below L |O's displacement there| + d_hat) are
-    pushed along O's normal by O's normal displacement less their gap beyond PREDICT_GAP * d_hat (they
-    may slide tangentially, as in frictionless contact); the rest of A follows through one linear
-    solve with the previous tangent stiffness. Points still inside O afterwards are carried fully
-    (rigidly with O) and the solve is repeated; as a last resort every reachable point is carried
-    rigidly.
+    pushed along O's normal by O's normal displacement (they may slide tangentially, as in
+    frictionless contact); the rest of A follows through one linear solve with the previous
+    tangent stiffness. Points still inside O afterwards are carried fully (rigidly with O) and the
+    solve is repeated; as a last resort every reachable point is carried rigidly.
     """
     timer = ctx.timer
     x = state.x
@@ -219,37 +212,14 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext)
     g = -ev_a.grad
     nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
     nrm = nrm @ M[:dim, :dim].T
-    # a point short of contact (gap above d_hat) is pushed only by what O's normal displacement
-    # exceeds its gap beyond PREDICT_GAP * d_hat by (O meets it part way through the step); should
-    # that lose every contact the last step had (a contact point O moves away from was held by the
-    # pushes of its neighbours), every reachable point is pushed by O's whole normal displacement
-    d_a, dh = -ev_a.psi, point_dhat(cm, pts)
     push = np.einsum("kd,kd->k", nrm, delta)
-    in_contact = d_a < dh
-    for slack in (np.where(d_a > dh, d_a - PREDICT_GAP * dh, 0.0), None):
-        if slack is None:
-            x0, d_new = _pushed(cm, state, x, pts, reach, reach & (push > 0), nrm, delta, s_new, ctx)
-            break
-        x0, d_new = _pushed(cm, state, x, pts, reach, reach & (push > slack), nrm, delta - slack[:, None] * nrm,
-                            s_new, ctx, delta)
-        if x0 is not None and (not in_contact.any() or np.any(d_new[in_contact] < dh[in_contact])):
-            break
-    if x0 is not None:
-        return x0
-    raise ConvergenceError(f"no feasible warm start for the step to s={s_new:.6g} m")
-
-
-def _pushed(cm, state, x, pts, reach, normal, nrm, delta_n, s_new, ctx, delta=None):
-    """The contact predictor's penalty solves (see :func:`predict`): ``normal`` points held to the normal
-    part of ``delta_n``, points found inside O afterwards carried fully with O (``delta``, default
-    ``delta_n``), at last every reachable point. Returns (x0, its distances) or (None, None)."""
-    delta = delta_n if delta is None else delta
+    normal = reach & (push > 0)
     full = np.zeros(len(pts), dtype=bool)
     for _ in range(C.PREDICTOR_RETRIES + 1):
-        x0 = penalty_solve(cm, state, x, pts, normal & ~full, full, nrm, np.where(full[:, None], delta, delta_n), ctx)
+        x0 = penalty_solve(cm, state, x, pts, normal & ~full, full, nrm, delta, ctx)
         d_new = feasible_distances(cm, x0, s_new, pts, ctx)
         if d_new is not None and np.all(d_new > 0):
-            return x0, d_new
+            return x0
         if d_new is None:
             full |= reach  # an element inverted: carry everything reachable rigidly
             continue
@@ -261,8 +231,8 @@ def _pushed(cm, state, x, pts, reach, normal, nrm, delta_n, s_new, ctx, delta=No
     x0 = penalty_solve(cm, state, x, pts, np.zeros_like(full), full, nrm, delta, ctx)
     d_new = feasible_distances(cm, x0, s_new, pts, ctx)
     if d_new is not None and np.all(d_new > 0):
-        return x0, d_new
-    return None, None
+        return x0
+    raise ConvergenceError(f"no feasible warm start for the step to s={s_new:.6g} m")
 
 
 def restore_feasibility(cm: CouplingModel, state: StepState, ctx: StepContext) -> None:
