@@ -354,7 +354,8 @@ def work_energy_mismatch(steps, planned: int | None = None) -> dict:
     (trapezoidal rule, error h^3 |P''| / 12 on a smooth profile). Returns the largest |m_k| / E_max
     ("work": over all steps, "work_refined": over steps where refinement points were added) and the
     largest |m_k| / (h_k max |P|) ("force": the step's secant -Delta(E + B) / h against its mean
-    force) over all steps and over "smooth" steps only: among the first ``planned`` records (the
+    force; max |P| the peak over the first ``planned`` records, the insertion's, not the seat's push
+    at the rest search's trials) over all steps and over "smooth" steps only: among the first ``planned`` records (the
     planned steps, not the rest search's bracket around the seat), the object in contact at both
     ends (B > 0) with the barrier energy within a factor BARRIER_JUMP between them and the force
     keeping its sign (no contact starting, ending, or a new contact zone engaging inside the step,
@@ -366,7 +367,7 @@ def work_energy_mismatch(steps, planned: int | None = None) -> dict:
     P = np.array([r.path_force for r in steps])
     cp = np.array([r.contact_points for r in steps])
     E_max = float(max(r.energy for r in steps))
-    P_max = float(np.abs(P).max())
+    P_max = float(np.abs(P[:planned]).max())
     if len(steps) < 2 or E_max <= 0 or P_max <= 0:
         return {"work": 0.0, "work_refined": 0.0, "force": 0.0, "force_smooth": 0.0, "worst_step": None,
                 "worst_smooth_step": None}
