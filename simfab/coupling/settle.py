@@ -178,7 +178,7 @@ def seat_onset(cm, state, s_to: float) -> float | None:
     for s in (state.s, state.s + ds):
         ev = cm.field.evaluate(y, cm.pose(s), hessian=False)
         d.append(np.where(ev.near, -ev.psi, np.inf))
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore"):  # (far points: inf - inf; rates of 0 are left out)
         rate = (d[0] - d[1]) / ds  # closing speed of each point's gap per metre of path
         t = np.where((d[0] > dh) & (rate > 0) & np.isfinite(d[0]) & np.isfinite(d[1]), (d[0] - dh) / rate, np.inf)
     s_on = state.s + float(t.min(initial=np.inf))
