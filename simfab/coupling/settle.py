@@ -102,7 +102,9 @@ def to_rest(cm, stepper) -> str:
     starts the search; the rest point is bracketed (:func:`_bracket`), every trial solved from the last one's state (a
     step back from past the rest point is short and feasible: O moves away from A). It ends when the path force is
     within REST_FORCE_REL * peak of zero, or when the energy between the bracket's ends is known to within
-    REST_ENERGY_REL * E_max (see :func:`_bracket`).
+    REST_ENERGY_REL * E_max (see :func:`_bracket`). With friction (``stepper.history_dependent``) the steps are not
+    cut short and the search bisects: the removal starts from where the search stops, and the hold force read on it
+    moved by 5 % between two stops within the search's tolerance (docs/decisions.md).
 
     Returns "rest" (O came to rest), "not continued" (the path cannot be continued or was already
     at rest) or why it stopped short ("cap": the extension limit, "bracket": no rest point found).
@@ -123,9 +125,9 @@ def to_rest(cm, stepper) -> str:
         if steps[-1].s >= s_cap - 1e-9 * h:
             break
         s_to = min(steps[-1].s + h, s_cap)
-        onset = seat_onset(cm, stepper.state, s_to)
+        onset = None if stepper.history_dependent else seat_onset(cm, stepper.state, s_to)
         s_try = s_to if onset is None else onset + SEAT_STEP_REL * (s_to - onset)
-        s_zero = _zero_ahead(steps, pivot)
+        s_zero = None if stepper.history_dependent else _zero_ahead(steps, pivot)
         predicted = s_zero is not None and s_zero < s_try
         if predicted:
             s_try = max(s_zero, steps[-1].s + MIN_SETTLE_STEP_REL * h)
@@ -214,7 +216,7 @@ def _bracket(lo, hi, hi_s, stepper, tol, e_tol, onset=None, secant=False) -> str
         if lo.path_force * (hi_s - lo.s) <= e_tol:
             break
         s_a = lo.s if pivot is None or lo.s >= pivot else pivot
-        if bisect or f_hi is None:
+        if bisect or f_hi is None or stepper.history_dependent:
             s_try = 0.5 * (s_a + hi_s)
         else:  # the secant's zero, kept off the ends
             s_try = float(np.clip(s_a + (hi_s - s_a) * f_lo / (f_lo - f_hi), s_a + SECANT_MARGIN * (hi_s - s_a),
