@@ -105,6 +105,8 @@ def analyze(s: np.ndarray, energy: np.ndarray, force: np.ndarray, grip: np.ndarr
     # the insertion ends at the steady state: forces past it (O pushed on into A's seat) are not
     # part of inserting or removing O
     end = len(F) if category == "ejects" else i_ss + 1
+    if category != "ejects" and rest_bracket(F, i_ss, rest_from) == i_ss - 1:
+        end = i_ss  # E_ss at the rest search's upper end, past the rest point: its force is the seat's push
     Fi = F[:end]
     # E_ss is a stationary point (a minimum along the path) when the energy rises again after it, or
     # the force there no longer draws O in (~0, or pushing back: a minimum at a kink, O seated); at

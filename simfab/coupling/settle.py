@@ -4,7 +4,8 @@
 seats: at its last pose A still draws O in (path force > 0) and the energy is still falling, so
 E_ss read there is not the steady state. When the path's last segment is a pure translation and
 the insertion length is the default one, the run continues past the last keyframe straight on,
-with quarter steps, until the path force has gone through zero (O at rest: the energy at its
+with quarter steps, cut short where a new contact (the seat) is predicted to engage or the
+force to reach zero, until the path force has gone through zero (O at rest: the energy at its
 minimum along the path), at most as far again as the planned path (:func:`to_rest`).
 
 **Checks** (:func:`warnings`, one line each, copied into the run's warnings):
@@ -28,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from simfab.coupling import config as C
+from simfab.coupling.layout import point_dhat
 
 #: O is at rest when the path force (A drawing O in, > 0) is at most this fraction of the peak |force|.
 from simfab.coupling.profile import REST_FORCE_REL  # noqa: E402 (one definition)
@@ -39,12 +41,21 @@ SETTLE_MAX_STEPS_REL = 4.0
 #: (O meeting a stiff part of A) where a step that overshoots deep costs many Newton iterations
 #: (cclamp2d: a full step 18, a quarter step 7).
 SETTLE_STEP_REL = 0.25
+#: A step over the seat's predicted onset ends this fraction of the way from the onset to the step's end.
+SEAT_STEP_REL = 0.5
+#: A step towards the rest point predicted by the last records' forces (:func:`_zero_ahead`) is at least this
+#: fraction of the extension step.
+MIN_SETTLE_STEP_REL = 1 / 16
 #: Extension steps are at most the path length over this.
 MIN_SETTLE_STEPS = 20
 #: The rest point is found when the energy between the bracket's ends is known to within this fraction of E_max.
 REST_ENERGY_REL = 1e-3
 #: Trials to find the rest point once a step has overshot it.
 REST_TRIALS = 16
+#: :func:`seat_onset` takes the points' closing rates by a finite difference over this fraction of the step.
+SEAT_RATE_REL = 1e-3
+#: A secant trial of the rest search lies at least this fraction of the bracket inside its ends.
+SECANT_MARGIN = 0.02
 #: Largest mismatch between a step's work and its change of stored energy, relative to E_max.
 STEP_WORK_REL = 0.05
 #: Largest difference between F_in at a step and the peak of the parabola through its neighbours.
@@ -83,12 +94,17 @@ def to_rest(cm, stepper) -> str:
 
     stepper : the run's :class:`simfab.coupling.stepper.Stepper` (its ``steps`` so far; ``step`` solves a step from
     the current state, ``undo`` returns to the state before it, ``keep`` appends its record). Steps of SETTLE_STEP_REL
-    times the last planned one (at most 1/MIN_SETTLE_STEPS of the path) go on while :func:`still_drawn_in`; a step
-    that overshoots the rest point (path force below -REST_FORCE_REL * peak: O pushed into a stiffer contact, or no
-    solution: undone) starts the search; the rest point is bracketed (:func:`_bracket`), every trial solved from the
-    last one's state (a step back from past the rest point is short and feasible: O moves away from A). It ends when
-    the path force is within REST_FORCE_REL * peak of zero, or when the energy between the bracket's ends is known to
-    within REST_ENERGY_REL * E_max (see :func:`_bracket`).
+    times the last planned one (at most 1/MIN_SETTLE_STEPS of the path) go on while :func:`still_drawn_in`, each cut
+    short when the seat's onset (:func:`seat_onset`) lies inside it (to SEAT_STEP_REL of the way on from the onset:
+    a step deep into a stiff seat costs many Newton iterations) or when the line through the last two records' forces
+    reaches zero inside it (:func:`_zero_ahead`, at least MIN_SETTLE_STEP_REL of a step). A step that overshoots the
+    rest point (path force below -REST_FORCE_REL * peak: O pushed into a stiffer contact, or no solution: undone)
+    starts the search; the rest point is bracketed (:func:`_bracket`), every trial solved from the last one's state (a
+    step back from past the rest point is short and feasible: O moves away from A). It ends when the path force is
+    within REST_FORCE_REL * peak of zero, or when the energy between the bracket's ends is known to within
+    REST_ENERGY_REL * E_max (see :func:`_bracket`). With friction (``stepper.history_dependent``) the steps are not
+    cut short and the search bisects: the removal starts from where the search stops, and the hold force read on it
+    moved by 5 % between two stops within the search's tolerance (docs/decisions.md).
 
     Returns "rest" (O came to rest), "not continued" (the path cannot be continued or was already
     at rest) or why it stopped short ("cap": the extension limit, "bracket": no rest point found).
@@ -100,39 +116,111 @@ def to_rest(cm, stepper) -> str:
     peak = float(max(abs(r.path_force) for r in steps))
     E_max = float(max(r.energy for r in steps))
     tol = REST_FORCE_REL * peak
-    for _ in range(int(np.ceil(SETTLE_MAX_STEPS_REL * (len(cm.s_steps) - 1)))):
+    n_steps = int(np.ceil(SETTLE_MAX_STEPS_REL * (len(cm.s_steps) - 1)))
+    s_cap = steps[-1].s + n_steps * h  # as far again as the planned path
+    pivot = None  # a seat's onset the last kept step passed (see _zero_ahead)
+    for _ in range(2 * n_steps):  # (steps cut short at a predicted seat or rest point: see below)
         if not still_drawn_in(steps):
             return "rest"
-        attempt = stepper.step(steps[-1].s + h, tolerate=True)
+        if steps[-1].s >= s_cap - 1e-9 * h:
+            break
+        s_to = min(steps[-1].s + h, s_cap)
+        onset = None if stepper.history_dependent else seat_onset(cm, stepper.state, s_to)
+        s_try = s_to if onset is None else onset + SEAT_STEP_REL * (s_to - onset)
+        s_zero = None if stepper.history_dependent else _zero_ahead(steps, pivot)
+        predicted = s_zero is not None and s_zero < s_try
+        if predicted:
+            s_try = max(s_zero, steps[-1].s + MIN_SETTLE_STEP_REL * h)
+        attempt = stepper.step(s_try, tolerate=True)
         rec = attempt.record
         if rec is not None and rec.path_force >= -tol:
             stepper.keep(rec)
+            if onset is not None and onset < rec.s:
+                pivot = onset
             continue
         if rec is None or stepper.history_dependent:  # (with friction every trial goes forward from the last kept)
             stepper.undo(attempt)
-        return _bracket(steps[-1], rec, steps[-1].s + h, stepper, tol, REST_ENERGY_REL * E_max)
+        return _bracket(steps[-1], rec, s_try, stepper, tol, REST_ENERGY_REL * E_max,
+                        onset=None if predicted else onset, secant=predicted)
     return "rest" if not still_drawn_in(steps) else "cap"
 
 
-def _bracket(lo, hi, hi_s, stepper, tol, e_tol) -> str:
+def _zero_ahead(steps, pivot: float | None) -> float | None:
+    """Where the line through the last two records' path forces crosses zero ahead of the last one,
+    when the force falls between them (None otherwise); with a seat's onset ``pivot`` [m] between
+    them, the line from (pivot, the earlier force) instead: the force is about flat up to the onset."""
+    a, b = steps[-2], steps[-1]
+    if not a.path_force > b.path_force > 0:
+        return None
+    s_a = pivot if pivot is not None and a.s < pivot < b.s else a.s
+    return b.s + b.path_force * (b.s - s_a) / (a.path_force - b.path_force)
+
+
+def seat_onset(cm, state, s_to: float) -> float | None:
+    """Where O, moved on from ``state`` towards path length ``s_to`` [m] with A held in place, first
+    brings a constraint point that is not in contact yet (distance above its d_hat) within d_hat:
+    the onset of a new contact, typically O's seat. Each point's distance is extrapolated linearly
+    from its rate of change at ``state.s`` (a finite difference over SEAT_RATE_REL of the step).
+
+    Args:
+        cm: the coupling model.
+        state: the current :class:`simfab.coupling.state.StepState` (its positions, path length and points).
+        s_to: the end of the step [m].
+
+    Returns:
+        The predicted onset in (state.s, s_to) [m], or None when no point engages within the step.
+    """
+    pts = state.points
+    y = pts.positions(state.x)
+    dh = point_dhat(cm, pts)
+    ds = SEAT_RATE_REL * (s_to - state.s)
+    if not ds > 0:
+        return None
+    d = []
+    for s in (state.s, state.s + ds):
+        ev = cm.field.evaluate(y, cm.pose(s), hessian=False)
+        d.append(np.where(ev.near, -ev.psi, np.inf))
+    with np.errstate(invalid="ignore", divide="ignore"):  # (far points: inf - inf; rates of 0 are left out)
+        rate = (d[0] - d[1]) / ds  # closing speed of each point's gap per metre of path
+        t = np.where((d[0] > dh) & (rate > 0) & np.isfinite(d[0]) & np.isfinite(d[1]), (d[0] - dh) / rate, np.inf)
+    s_on = state.s + float(t.min(initial=np.inf))
+    return s_on if s_on < s_to else None
+
+
+def _bracket(lo, hi, hi_s, stepper, tol, e_tol, onset=None, secant=False) -> str:
     """Find the rest point between the kept record ``lo`` (path force > 0) and an overshoot at
     ``hi_s`` (record ``hi``, None when unsolvable); see :func:`to_rest`.
 
-    Bisection on the sign of the path force P = -dW/ds (W = E + B), each trial solved from the
-    last trial's state, until P_lo (s_hi - s_lo) <= e_tol [J]: W falls at most that much from the
-    lower end to the rest point (W convex on the bracket, P <= P_lo). The rest point is often a
-    kink (O seating against a stiff part of A: P jumps from drawing in to pushing back within a
-    micrometre), so the two ends are kept as the last records (the trials' own records; the run's
-    state is then the last trial's): force through zero between them, the energy's minimum along
-    the path at the lower end. With friction (``stepper.history_dependent``) every trial is solved
-    forward from the lower end's state (an overshoot is undone: stepping back would reverse the
-    friction), and only the lower end is kept.
+    Trials on the path force P = -dW/ds (W = E + B), each solved from the last trial's state, until
+    P_lo (s_hi - s_lo) <= e_tol [J]: W falls at most that much from the lower end to the rest point
+    (W convex on the bracket, P <= P_lo). The rest point is often a kink (O seating against a stiff
+    part of A: P falls from drawing in to pushing back within micrometres), where a secant through
+    the bracket's ends lands next to the lower end. With the seat's ``onset`` [m] (:func:`seat_onset`,
+    inside the bracket) the trials take the secant from (onset, P_lo) instead while the lower end lies
+    before the onset (P is about flat up to it and smooth past it; dropped when two trials in a row
+    push back). Secants otherwise between the ends (Illinois: the end two trials in a row did not
+    replace has its force halved), a bisection whenever a trial shrank the bracket by less than half,
+    and always a bisection towards an unsolvable end.
+
+    The two ends are kept as the last records (the trials' own records; the run's state is then the
+    last trial's): force through zero between them, the energy's minimum along the path at the lower
+    end. With friction (``stepper.history_dependent``) every trial is solved forward from the lower
+    end's state (an overshoot is undone: stepping back would reverse the friction), and only the
+    lower end is kept.
     """
     steps_last = lo
+    pivot = onset if onset is not None and lo.s < onset < hi_s else None
+    f_lo, f_hi = lo.path_force, None if hi is None else hi.path_force  # the secant's values at the ends
+    bisect, side, width = pivot is None and not secant, None, hi_s - lo.s  # side: the end the last trial replaced
     for _ in range(REST_TRIALS):
         if lo.path_force * (hi_s - lo.s) <= e_tol:
             break
-        s_try = 0.5 * (lo.s + hi_s)
+        s_a = lo.s if pivot is None or lo.s >= pivot else pivot
+        if bisect or f_hi is None or stepper.history_dependent:
+            s_try = 0.5 * (s_a + hi_s)
+        else:  # the secant's zero, kept off the ends
+            s_try = float(np.clip(s_a + (hi_s - s_a) * f_lo / (f_lo - f_hi), s_a + SECANT_MARGIN * (hi_s - s_a),
+                                  hi_s - SECANT_MARGIN * (hi_s - s_a)))
         attempt = stepper.step(s_try, tolerate=True)
         rec = attempt.record
         if rec is not None and abs(rec.path_force) <= tol:
@@ -140,11 +228,19 @@ def _bracket(lo, hi, hi_s, stepper, tol, e_tol) -> str:
             return "rest"
         if rec is None or (stepper.history_dependent and rec.path_force <= 0):
             stepper.undo(attempt)
-            hi, hi_s = (None if rec is None else rec), s_try
-        elif rec.path_force > 0:  # still drawn in: the new lower end
-            lo = rec
+        if rec is not None and rec.path_force > 0:  # still drawn in: the new lower end
+            lo, f_lo = rec, rec.path_force
+            if side == "lo" and f_hi is not None:
+                f_hi *= 0.5
+            side = "lo"
         else:
-            hi, hi_s = rec, s_try
+            hi, hi_s, f_hi = rec, s_try, None if rec is None else rec.path_force
+            if side == "hi":  # the lower end stays twice: the onset may be late, the secant's pivot is lo
+                f_lo *= 0.5
+                pivot = None
+            side = "hi"
+        bisect = (hi_s - lo.s) > 0.5 * width
+        width = hi_s - lo.s
     else:
         if lo is not steps_last:
             stepper.keep(lo)
@@ -260,7 +356,8 @@ def work_energy_mismatch(steps, planned: int | None = None) -> dict:
     (trapezoidal rule, error h^3 |P''| / 12 on a smooth profile). Returns the largest |m_k| / E_max
     ("work": over all steps, "work_refined": over steps where refinement points were added) and the
     largest |m_k| / (h_k max |P|) ("force": the step's secant -Delta(E + B) / h against its mean
-    force) over all steps and over "smooth" steps only: among the first ``planned`` records (the
+    force; max |P| the peak over the first ``planned`` records, the insertion's, not the seat's push
+    at the rest search's trials) over all steps and over "smooth" steps only: among the first ``planned`` records (the
     planned steps, not the rest search's bracket around the seat), the object in contact at both
     ends (B > 0) with the barrier energy within a factor BARRIER_JUMP between them and the force
     keeping its sign (no contact starting, ending, or a new contact zone engaging inside the step,
@@ -272,7 +369,7 @@ def work_energy_mismatch(steps, planned: int | None = None) -> dict:
     P = np.array([r.path_force for r in steps])
     cp = np.array([r.contact_points for r in steps])
     E_max = float(max(r.energy for r in steps))
-    P_max = float(np.abs(P).max())
+    P_max = float(np.abs(P[:planned]).max())
     if len(steps) < 2 or E_max <= 0 or P_max <= 0:
         return {"work": 0.0, "work_refined": 0.0, "force": 0.0, "force_smooth": 0.0, "worst_step": None,
                 "worst_smooth_step": None}

@@ -104,3 +104,54 @@ def test_step_checks_ignore_a_negligible_profile(scale, coarse):
     P = scale * floor / s[-1] * np.array([0.0, -40.0, -10.0, 80.0, 5.0])
     out = settle.warnings(cm, _records(s, E, P))
     assert any("steps too coarse" in w for w in out) == coarse, out
+
+
+def _run_to_rest(cm, monkeypatch=None, rest_energy_rel=None):
+    """The planned steps, then the rest search with every solve past the path's end counted:
+    (outcome, the kept records, [(s, Newton iterations or None)] of the rest search's solves)."""
+    from simfab.coupling import settle
+    from simfab.coupling.stepper import Stepper
+
+    class Counting(Stepper):
+        def step(self, s, *, tolerate=False):
+            attempt = super().step(s, tolerate=tolerate)
+            if self.steps and s > self.steps[0].s and len(self.steps) >= len(cm.s_steps):
+                self.solves.append((s, None if attempt.record is None else attempt.record.iterations))
+            return attempt
+
+    stepper = Counting(cm)
+    stepper.solves = []
+    for s in cm.s_steps:
+        stepper.keep(stepper.step(float(s)).record)
+    if rest_energy_rel is not None:
+        monkeypatch.setattr(settle, "REST_ENERGY_REL", rest_energy_rel)
+    return settle.to_rest(cm, stepper), stepper.steps, stepper.solves
+
+
+def test_rest_search_brackets_the_seat_in_few_solves(monkeypatch):
+    # cclamp2d at 455 P2 triangles (the bench case): the clamp still draws the cylinder in at the
+    # last keyframe (P ~ +12.5 N, flat) and the seat engages ~0.1 mm on, where P falls to -120 N
+    # within 40 um. The search predicts the seat's onset from the contact points' closing rates and
+    # stops the step into the seat short of it: at most 3 solves and 20 Newton iterations past the
+    # path (bisection after a quarter step into the seat took 4 solves and 28 iterations), ending
+    # with the rest point bracketed to the search's tolerance, P_lo (s_hi - s_lo) <= REST_ENERGY_REL
+    # E_max, and that bracket containing the rest point of a search 1000x tighter
+    from simfab.coupling import settle
+
+    over = {"compliant": {"target_elements": 450}, "simulation": {"element_order": 2}}
+    cm = load_coupling_scene("cclamp2d", overrides=over)
+    rest, steps, solves = _run_to_rest(cm)
+    assert rest == "rest"
+    assert len(solves) <= 3 and sum(it for _, it in solves) <= 20, solves
+    P = np.array([r.path_force for r in steps])
+    s = np.array([r.s for r in steps])
+    E_max = max(r.energy for r in steps)
+    assert P[-2] > 0 >= P[-1]
+    assert P[-2] * (s[-1] - s[-2]) <= settle.REST_ENERGY_REL * E_max
+    rest_f, steps_f, solves_f = _run_to_rest(load_coupling_scene("cclamp2d", overrides=over), monkeypatch, 1e-6)
+    P_f, s_f = np.array([r.path_force for r in steps_f]), np.array([r.s for r in steps_f])
+    assert rest_f == "rest" and len(solves_f) > len(solves)
+    # the tight search's rest point: where its last bracket crosses zero (or its last record at rest)
+    at_rest = abs(P_f[-1]) <= settle.REST_FORCE_REL * np.abs(P_f).max()
+    s_rest = s_f[-1] if at_rest else s_f[-2] + (s_f[-1] - s_f[-2]) * P_f[-2] / (P_f[-2] - P_f[-1])
+    assert s[-2] - 1e-9 <= s_rest <= s[-1] + 1e-9, (s[-2:], s_rest, solves_f)
