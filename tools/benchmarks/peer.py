@@ -1,6 +1,6 @@
 """simfab's insertion beside an IPC reference built on the IPC Toolkit (``ipctk``).
 
-``python tools/bench.py peer [--scenes snapfit2d,cclamp2d] [--frictions 0,0.3] [--plot DIR]``
+``python tools/bench.py peer [--scenes snapfit2d,cclamp2d] [--frictions 0,0.3] [--refine 1,2] [--plot DIR]``
 
 The reference solves the same quasi-static insertion the way the IPC paper (Li et al. 2020) does:
 
@@ -25,7 +25,10 @@ Forces: the support reaction along O's motion, as simfab records it; the profile
 F_rm, F_hold, E_max) by simfab's own analysis of the reference's records (F_hold's onset of sliding
 read from simfab's records). Reported per scene and friction: both runs' figures and relative
 differences, wall and CPU seconds, Newton iterations per step and the speed ratio (reference over
-simfab); ``--plot DIR`` draws both force profiles per case.
+simfab); ``--plot DIR`` draws both force profiles per case. ``--refine`` runs each case at these
+element-count factors of its mesh (both solvers on the same refined mesh), refined by the scene's own
+rule (:func:`simfab.coupling.converge.level_mesh`, as ``simfab couple converge --factors``; the
+snap-fit's beam: cells through its thickness times the factor's square root).
 """
 
 from __future__ import annotations
@@ -412,34 +415,81 @@ SCENES = ("snapfit2d", "cclamp2d", "clip3d")
 SNAPFIT_ALPHA = 30.0
 
 
-def case_model(scene: str, mu: float):
-    """The coupling model of a peer case on linear elements (the reference's elements)."""
+#: The peer's meshes at refinement 1 (clip3d: linear tets near the original's size; the snap-fit's
+#: beam cells through its thickness).
+CLIP3D_PART = {"target_elements": 1040, "layers": 1, "segments": 48}
+SNAPFIT_CELLS_T = 3
+MAX_REFINE = 64.0
+
+
+def parse_refine(text: str) -> list[float]:
+    """The ``--refine`` factors: comma-separated element-count factors in [1, MAX_REFINE].
+
+    Args:
+        text: e.g. ``"1,2,4"``.
+
+    Returns:
+        The factors in the given order.
+    """
+    from simfab.errors import InputError
+
+    try:
+        out = [float(f) for f in text.split(",")]
+    except ValueError:
+        raise InputError(f"--refine must be comma-separated numbers, got {text!r}") from None
+    for f in out:
+        if not 1.0 <= f <= MAX_REFINE:
+            raise InputError(f"--refine factors must be in [1, {MAX_REFINE:g}], got {f:g}")
+    return out
+
+
+def case_model(scene: str, mu: float, refine: float = 1.0):
+    """The coupling model of a peer case on linear elements (the reference's elements), its mesh
+    refined to ``refine`` times the element count (see the module docstring)."""
     from simfab.errors import InputError
 
     if scene == "snapfit2d":
         from simfab.verification.snapfit import snapfit_model
 
-        return snapfit_model(SNAPFIT_ALPHA, mu)
-    from simfab.coupling.scene import load_coupling_scene
+        return snapfit_model(SNAPFIT_ALPHA, mu, cells_t=max(1, int(round(SNAPFIT_CELLS_T * refine ** 0.5))))
+    from simfab.coupling.converge import level_mesh
+    from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
 
     # the support held in every axis (for both solvers): the scene's support holds the insertion axis
     # only and leaves the part's sideways rigid motion to contact, which simfab pins by a Woodbury
     # update while IPC has no counterpart (its Newton then wanders along the unresisted mode)
     over = {"simulation": {"element_order": 1, "fix_all_axes": True}, "contact": {"friction": mu}}
-    if scene == "clip3d":
-        over["compliant"] = {"target_elements": 1040, "layers": 1, "segments": 48}
-    elif scene != "cclamp2d":
+    if scene not in SCENES:
         raise InputError(f"--scenes: unknown peer scene {scene!r} (choose from {', '.join(SCENES)})")
+    comp = dict(read_scene_toml(scene_paths(scene)[1])["compliant"])
+    if scene == "clip3d":
+        comp.update(CLIP3D_PART)
+    over["compliant"] = {**({"segments": comp["segments"]} if scene == "clip3d" else {}), **level_mesh(comp, refine)}
     return load_coupling_scene(scene, overrides=over)
 
 
-def compare(scene: str, mu: float) -> dict:
-    """simfab's run and the reference's on one case: figures, differences, seconds, iterations."""
+def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True) -> dict:
+    """simfab's run and the reference's on one case: figures, differences, seconds, iterations.
+
+    Args:
+        scene: one of SCENES.
+        mu: friction coefficient.
+        refine: element-count factor of the case's mesh (:func:`case_model`).
+        warm: time both solvers after an untimed first run (else the first, simfab's, pays the
+            process's one-off costs that the reference then reuses).
+
+    Returns:
+        The case's row (see :func:`run`).
+    """
     from simfab.coupling import config as C
     from simfab.coupling.profile import analyze_run
     from simfab.coupling.simulate import simulate_insertion
 
-    cm = case_model(scene, mu)
+    # both timed warm: a first run of each (simfab's whole run, the reference's first two poses)
+    # loads the Warp kernels (of the elastic energy both use), CHOLMOD and ipctk untimed
+    if warm:
+        simulate_insertion(case_model(scene, mu, refine))
+    cm = case_model(scene, mu, refine)
     t0, c0 = time.perf_counter(), time.process_time()
     res = simulate_insertion(cm)
     t_s, c_s = time.perf_counter() - t0, time.process_time() - c0
@@ -447,6 +497,8 @@ def compare(scene: str, mu: float) -> dict:
     opts = PeerOptions(dhat=float(cm.dhat), grad_tol=C.NEWTON_GRAD_TOL_REL * float(cm.force_scale), mu=float(mu),
                        eps_v=float(cm.contact.friction_eps_rel) * float(cm.h), lag_tol=float(cm.contact.lag_tol),
                        max_lag=int(cm.contact.max_lag_iterations))
+    if warm:
+        IpcReference(cm, opts).run(poses[:2])
     t0, c0 = time.perf_counter(), time.process_time()
     ref = IpcReference(cm, opts)
     steps = ref.run(poses)
@@ -464,7 +516,7 @@ def compare(scene: str, mu: float) -> dict:
     it_s = int(sum(r.iterations for r in res.steps[1:]) + sum(r.iterations for r in res.removal))
     it_r = int(sum(p.iterations for p in steps[1:]))
     return {
-        "scene": scene, "friction": mu, "elements": int(cm.fem.n_elements), "element_order": 1,
+        "scene": scene, "friction": mu, "refine": refine, "elements": int(cm.fem.n_elements), "element_order": 1,
         "object_collision_vertices": int(ref.k), "dhat": float(cm.dhat), "records": n_s,
         "simfab": {**fs, "category": a.category, "seconds": round(t_s, 3), "cpu_seconds": round(c_s, 3),
                    "newton_iterations": it_s, "iterations_per_step": round(it_s / max(1, n_s), 2)},
@@ -496,7 +548,9 @@ def plot(row: dict, path: str) -> None:
             ax.plot(s[m], np.asarray(pr["force_ipc"])[m], "x" + style, ms=4, label=f"IPC reference ({phase})")
     ax.set_xlabel("path length s [mm]")
     ax.set_ylabel("insertion force F [N] (resisting < 0)")
-    ax.set_title(f"{row['scene']}, mu = {row['friction']:g}: simfab vs ipctk IPC reference")
+    ref = f", refined x{row['refine']:g}" if row.get("refine", 1.0) != 1.0 else ""
+    ax.set_title(f"{row['scene']}, mu = {row['friction']:g}, {row['elements']:,} elements{ref}:\n"
+                 "simfab vs ipctk IPC reference", fontsize=10)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -505,13 +559,13 @@ def plot(row: dict, path: str) -> None:
 
 
 def format_table(rows: list) -> str:
-    head = (f"{'scene':10s} {'mu':>4s} {'fig':6s} {'simfab':>10s} {'IPC':>10s} {'rel.diff':>9s}")
+    head = (f"{'scene':10s} {'mu':>4s} {'elems':>6s} {'fig':6s} {'simfab':>10s} {'IPC':>10s} {'rel.diff':>9s}")
     lines = [head]
     for r in rows:
         for k in FIGURES:
-            lines.append(f"{r['scene']:10s} {r['friction']:>4g} {k:6s} {r['simfab'][k]:>10.4g} {r['ipc'][k]:>10.4g} "
-                         f"{100 * r['relative_difference'][k]:>8.2f}%")
-        lines.append(f"{r['scene']:10s} {r['friction']:>4g} wall s {r['simfab']['seconds']:>10.2f} "
+            lines.append(f"{r['scene']:10s} {r['friction']:>4g} {r['elements']:>6d} {k:6s} {r['simfab'][k]:>10.4g} "
+                         f"{r['ipc'][k]:>10.4g} {100 * r['relative_difference'][k]:>8.2f}%")
+        lines.append(f"{r['scene']:10s} {r['friction']:>4g} {r['elements']:>6d} wall s {r['simfab']['seconds']:>10.2f} "
                      f"{r['ipc']['seconds']:>10.2f}  ratio {r['speed_ratio']:.1f} (cpu {r['speed_ratio_cpu']:.1f}); "
                      f"it/step {r['simfab']['iterations_per_step']} vs {r['ipc']['iterations_per_step']}")
     return "\n".join(lines)
@@ -523,8 +577,10 @@ def run(argv) -> dict:
     ap = argparse.ArgumentParser(prog="bench peer")
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--frictions", default="0,0.3")
+    ap.add_argument("--refine", default="1", help="element-count factors of each case's mesh, e.g. 1,2,4")
     ap.add_argument("--plot", default=None, help="directory for the force-profile PNGs")
     a = ap.parse_args(argv)
+    factors = parse_refine(a.refine)
     try:
         frictions = [float(f) for f in a.frictions.split(",")]
     except ValueError:
@@ -536,12 +592,13 @@ def run(argv) -> dict:
     rows = []
     for sc in scenes:
         for mu in frictions:
-            row = compare(sc, mu)
-            if a.plot:
-                os.makedirs(a.plot, exist_ok=True)
-                p = os.path.join(a.plot, f"peer_{sc}_mu{mu:g}.png")
-                plot(row, p)
-                row["plot"] = p
-            rows.append(row)
+            for f in factors:
+                row = compare(sc, mu, f)
+                if a.plot:
+                    os.makedirs(a.plot, exist_ok=True)
+                    p = os.path.join(a.plot, f"peer_{sc}_mu{mu:g}" + (f"_r{f:g}" if f != 1.0 else "") + ".png")
+                    plot(row, p)
+                    row["plot"] = p
+                rows.append(row)
     return {"benchmark": "peer", "reference": "IPC (Li et al. 2020) on ipctk", "rows": rows,
             "table": format_table(rows)}
