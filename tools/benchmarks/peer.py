@@ -420,6 +420,10 @@ SNAPFIT_ALPHA = 30.0
 CLIP3D_PART = {"target_elements": 1040, "layers": 1, "segments": 48}
 SNAPFIT_CELLS_T = 3
 MAX_REFINE = 64.0
+#: Records within this many d_hat of the seat (the deepest pose) are left out of
+#: ``profile_difference_off_seat``: there O is within d_hat of the part's base in clip3d, where each
+#: barrier's own force law sets the force.
+SEAT_DHATS = 5.0
 
 
 def parse_refine(text: str) -> list[float]:
@@ -512,6 +516,10 @@ def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True) ->
     fr = {k: float(getattr(b, k)) for k in FIGURES}
     peak_f = max(abs(fs["F_in"]), abs(fs["F_rm"]), 1e-300)
     rel = {k: ((fr[k] - fs[k]) / (abs(fs[k]) if k == "E_max" else peak_f)) for k in FIGURES}
+    f_s = np.array([float(r.force) for r in [*res.steps, *res.removal]])
+    f_r = np.array([p.force for p in steps])
+    s_all = np.array([p.s for p in steps])
+    off_seat = s_all < s_all.max() - SEAT_DHATS * float(cm.dhat)
     n_s = len(res.steps) - 1 + len(res.removal)
     it_s = int(sum(r.iterations for r in res.steps[1:]) + sum(r.iterations for r in res.removal))
     it_r = int(sum(p.iterations for p in steps[1:]))
@@ -525,10 +533,13 @@ def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True) ->
                 "kappa_final": float(ref.kappa), "max_iterations_in_a_step": int(max(p.iterations for p in steps))},
         # relative to E_max for E_max, to the larger of simfab's F_in and F_rm for the forces
         "relative_difference": {k: round(v, 4) for k, v in rel.items()},
+        # the largest force difference of the whole profile, and of the records farther than
+        # SEAT_DHATS d_hat along the path from the deepest pose (the seat; see docs/benchmarks.md)
+        "profile_difference": round(float(np.max(np.abs(f_r - f_s))) / peak_f, 4),
+        "profile_difference_off_seat": round(float(np.max(np.abs(f_r - f_s)[off_seat], initial=0.0)) / peak_f, 4),
         "speed_ratio": round(t_r / t_s, 2), "speed_ratio_cpu": round(c_r / c_s, 2),
         "profile": {"s": [p.s for p in steps], "phase": [p.phase for p in steps],
-                    "force_simfab": [float(r.force) for r in [*res.steps, *res.removal]],
-                    "force_ipc": [p.force for p in steps]},
+                    "force_simfab": f_s.tolist(), "force_ipc": f_r.tolist()},
     }
 
 
@@ -546,10 +557,22 @@ def plot(row: dict, path: str) -> None:
         if m.any():
             ax.plot(s[m], np.asarray(pr["force_simfab"])[m], "o" + style, ms=3, label=f"simfab ({phase})")
             ax.plot(s[m], np.asarray(pr["force_ipc"])[m], "x" + style, ms=4, label=f"IPC reference ({phase})")
+    # the y-range of simfab's profile: a reference record far outside it (the stiff contact at the
+    # seat, see docs/benchmarks.md) is marked at the edge and its value given in the legend
+    fs, fi = np.asarray(pr["force_simfab"]), np.asarray(pr["force_ipc"])
+    lo, hi = float(min(fs.min(), 0.0)), float(max(fs.max(), 0.0))
+    pad = 0.15 * (hi - lo)
+    lo, hi = lo - pad, hi + pad
+    off = (fi < lo) | (fi > hi)
+    if off.any():
+        k = int(np.argmax(np.abs(fi) * off))
+        ax.plot(s[off], np.clip(fi[off], lo, hi), "v" if fi[k] < lo else "^", color="k", ms=6,
+                label=f"IPC off scale ({off.sum()}; extreme {fi[k]:.0f} N at s = {s[k]:.3f} mm)")
+        ax.set_ylim(lo, hi)
     ax.set_xlabel("path length s [mm]")
     ax.set_ylabel("insertion force F [N] (resisting < 0)")
     ref = f", refined x{row['refine']:g}" if row.get("refine", 1.0) != 1.0 else ""
-    ax.set_title(f"{row['scene']}, mu = {row['friction']:g}, {row['elements']:,} elements{ref}:\n"
+    ax.set_title(f"{row['scene']}, mu = {row['friction']:g}, {row['elements']:,} linear elements{ref}:\n"
                  "simfab vs ipctk IPC reference", fontsize=10)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
