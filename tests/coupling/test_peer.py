@@ -44,6 +44,8 @@ def test_refine_factors_are_parsed_and_checked(peer):
             peer.parse_refine(bad)
     with pytest.raises(InputError, match="--refine"):  # before any case runs
         peer.run(["--scenes", "snapfit2d", "--refine", "1,0"])
+    with pytest.raises(InputError, match="--frictions"):
+        peer.run(["--scenes", "snapfit2d", "--frictions", "-0.3"])
 
 
 def test_refine_scales_the_element_count(peer):

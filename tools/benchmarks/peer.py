@@ -595,6 +595,15 @@ def format_table(rows: list) -> str:
 
 
 def run(argv) -> dict:
+    """The bench's entry point (``python tools/bench.py peer ...``; options in the module docstring).
+
+    Args:
+        argv: the command line after ``peer``.
+
+    Returns:
+        {"benchmark", "reference", "rows": one :func:`compare` row per scene, friction and refinement
+        factor, "table": the printed table}. Raises InputError on a bad option before any case runs.
+    """
     from simfab.errors import InputError
 
     ap = argparse.ArgumentParser(prog="bench peer")
@@ -608,6 +617,8 @@ def run(argv) -> dict:
         frictions = [float(f) for f in a.frictions.split(",")]
     except ValueError:
         raise InputError("--frictions must be comma-separated numbers") from None
+    if not all(0.0 <= f < 10.0 for f in frictions):
+        raise InputError(f"--frictions must lie in [0, 10), got {a.frictions!r}")
     scenes = a.scenes.split(",")
     for sc in scenes:
         if sc not in SCENES:
