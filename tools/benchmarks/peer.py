@@ -21,14 +21,12 @@ The reference solves the same quasi-static insertion the way the IPC paper (Li e
   backtracked until the total energy decreases; the linear solves are simfab's SPDSolver (CHOLMOD,
   symbolic analysis reused while the pattern holds); converged at simfab's force tolerance.
 
-Forces: the support reaction along O's motion, as simfab records it; the profile figures (F_in,
-F_rm, F_hold, E_max) by simfab's own analysis of the reference's records (F_hold's onset of sliding
-read from simfab's records). Reported per scene and friction: both runs' figures and relative
-differences, wall and CPU seconds, Newton iterations per step and the speed ratio (reference over
-simfab); ``--plot DIR`` draws both force profiles per case. ``--refine`` runs each case at these
-element-count factors of its mesh (both solvers on the same refined mesh), refined by the scene's own
-rule (:func:`simfab.coupling.converge.level_mesh`, as ``simfab couple converge --factors``; the
-snap-fit's beam: cells through its thickness times the factor's square root).
+Reported per case: the profile figures of both runs (the support reaction along O's motion;
+simfab's analysis of each run's records, F_hold's onset of sliding from simfab's), their
+differences, the profiles' largest difference, wall and CPU seconds (both timed warm), Newton
+iterations per step and the speed ratio; ``--plot DIR`` draws both profiles. ``--refine`` factors
+refine each case's mesh by the scene's own rule (:func:`simfab.coupling.converge.level_mesh`; the
+snap-fit: cells through its thickness times the factor's square root).
 """
 
 from __future__ import annotations
