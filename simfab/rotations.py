@@ -12,7 +12,8 @@ from scipy.spatial.transform import Rotation
 
 def quat_to_matrix(q) -> np.ndarray:
     """(w, x, y, z) -> (3, 3) rotation matrix (q is normalized first)."""
-    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    w, x, y, z = (np.asarray(q, dtype=np.float64) / np.linalg.norm(q)).tolist()  # (Python floats: the same
+    # IEEE arithmetic as NumPy's scalars, a fraction of their overhead)
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],

@@ -112,23 +112,23 @@ def _local_sdf(kind: str, size, q: np.ndarray, hessian: bool):
     u = np.abs(q) - e
     s = np.where(q >= 0, 1.0, -1.0)
     pos = np.maximum(u, 0.0)
-    n = np.linalg.norm(pos, axis=1)
+    n = np.sqrt(np.einsum("kd,kd->k", pos, pos))
     outside = n > 0
     psi = np.where(outside, -n, -u.max(axis=1))
-    g = np.zeros((k, 3))
-    g[outside] = -(pos[outside] * s[outside]) / n[outside, None]
+    n_out = np.where(outside, n, 1.0)  # (inside, pos = 0: g's row is set below)
+    g = -(pos * s) / n_out[:, None]
     ins = ~outside
     if ins.any():
         j = np.argmax(u[ins], axis=1)
         g[np.flatnonzero(ins), j] = -s[ins, j]
     if hessian and outside.any():
         # outside: distance to a face (flat: 0), an edge or a corner: (I - n n^T) / d over the axes
-        # that are outside (the others move the nearest point along)
-        m = (pos[outside] > 0).astype(float)
-        nn = g[outside]
+        # that are outside (the others move the nearest point along); every row at once, inside
+        # rows zeroed after
+        m = (pos > 0).astype(float)
         Pm = m[:, :, None] * np.eye(3)[None] * m[:, None, :]
-        Hd = (Pm - nn[:, :, None] * nn[:, None, :]) / n[outside, None, None]
-        H[outside] = -Hd
+        H = -(Pm - g[:, :, None] * g[:, None, :]) / n_out[:, None, None]
+        H[ins] = 0.0
     return psi, g, H
 
 
@@ -195,6 +195,8 @@ class PrimitiveField:
         b = body_frame(pts, (R, p))
         if dim == 2:
             b[:, 2] = 0.0
+        if len(self.primitives) == 1:
+            return self._single(b, R, hessian, hessian_band)
         psi = np.full(k, -np.inf)
         grad = np.zeros((k, 3))
         hess = np.zeros((k, 3, 3)) if hessian else None
@@ -214,6 +216,26 @@ class PrimitiveField:
                 hess[psi <= -hessian_band] = 0.0
         else:
             hess = np.zeros((k, dim, dim))
+        return ImlsEval(psi=psi, grad=grad, hess=hess, near=np.ones(k, dtype=bool))
+
+    def _single(self, b, R, hessian, hessian_band) -> ImlsEval:
+        """One primitive (no union): :meth:`evaluate`'s loop without its masks, the frames' rotations
+        applied as (k * 3, 3) products."""
+        dim, k = self.dim, len(b)
+        prim = self.primitives[0]
+        Q = prim.rotation
+        psi, g, H = _local_sdf(prim.kind, prim.size, (b - prim.centre) @ Q, hessian)
+        M = R[:dim, :dim]
+        grad = (g @ Q.T)[:, :dim] @ M.T
+        if not hessian:
+            return ImlsEval(psi=psi, grad=grad, hess=np.zeros((k, dim, dim)), near=np.ones(k, dtype=bool))
+        # Q H Q^T per point: A = H Q^T, then A^T Q^T (H symmetric), as products of (k * 3, 3) arrays
+        A = (H.reshape(-1, 3) @ Q.T).reshape(k, 3, 3)
+        Hq = (A.transpose(0, 2, 1).reshape(-1, 3) @ Q.T).reshape(k, 3, 3)[:, :dim, :dim]
+        A = (Hq.reshape(-1, dim) @ M.T).reshape(k, dim, dim)
+        hess = (A.transpose(0, 2, 1).reshape(-1, dim) @ M.T).reshape(k, dim, dim)
+        if hessian_band is not None:
+            hess[psi <= -hessian_band] = 0.0
         return ImlsEval(psi=psi, grad=grad, hess=hess, near=np.ones(k, dtype=bool))
 
     def _sphere(self, pts, R, p, hessian, hessian_band) -> ImlsEval:

@@ -85,8 +85,8 @@ class Trajectory:
     def _locate(self, s: float) -> tuple[int, float]:
         """Segment index i and fraction f in [0, 1] of path length s (clamped to the path)."""
         seg, cum = self.segment_lengths, self._cumulative
-        s = float(np.clip(s, 0.0, cum[-1]))
-        i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
+        s = min(max(float(s), 0.0), float(cum[-1]))  # (scalar clamps: np.clip costs microseconds per call)
+        i = min(max(int(np.searchsorted(cum, s, side="right")) - 1, 0), len(seg) - 1)
         return i, (0.0 if seg[i] <= 0 else (s - cum[i]) / seg[i])
 
     def sampled_positions(self, samples: int) -> np.ndarray:
@@ -118,7 +118,7 @@ class Trajectory:
             (pos (3,) [m], quat (4,)).
         """
         k = len(self.positions)
-        u = float(np.clip(u, 0.0, k - 1))
+        u = min(max(float(u), 0.0), float(k - 1))
         i = min(int(np.floor(u)), k - 2)
         f = u - i
         pos = (1 - f) * self.positions[i] + f * self.positions[i + 1]

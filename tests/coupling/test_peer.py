@@ -33,3 +33,35 @@ def test_snapfit_forces_agree_with_the_ipc_reference(peer):
     peak = max(abs(v) for v in f_s)
     assert max(abs(a - b) for a, b in zip(f_s, f_i)) < 0.02 * peak  # the whole profile, step by step
     assert row["ipc"]["newton_iterations"] >= row["records"]  # the reference solved every step
+
+
+def test_refine_factors_are_parsed_and_checked(peer):
+    from simfab.errors import InputError
+
+    assert peer.parse_refine("1,2,4") == [1.0, 2.0, 4.0]
+    for bad in ("0.5", "x", "1,,2", "100"):
+        with pytest.raises(InputError, match="--refine"):
+            peer.parse_refine(bad)
+    with pytest.raises(InputError, match="--refine"):  # before any case runs
+        peer.run(["--scenes", "snapfit2d", "--refine", "1,0"])
+    with pytest.raises(InputError, match="--frictions"):
+        peer.run(["--scenes", "snapfit2d", "--frictions", "-0.3"])
+
+
+def test_refine_scales_the_element_count(peer):
+    # the snap-fit's beam: cells through the thickness times sqrt(factor), so 4x the triangles
+    base = peer.case_model("snapfit2d", 0.0, 1.0).fem.n_elements
+    assert peer.case_model("snapfit2d", 0.0, 4.0).fem.n_elements == 4 * base
+    # clip3d by the scene's own rule (converge.level_mesh): at 2x the section is meshed twice as finely
+    n1, n2 = (peer.case_model("clip3d", 0.0, f).fem.n_elements for f in (1.0, 2.0))
+    assert 1.6 < n2 / n1 < 2.4, (n1, n2)
+
+
+def test_bench_cli_rejects_a_bad_refine_factor():
+    import subprocess
+
+    out = subprocess.run([sys.executable, str(TOOLS / "bench.py"), "peer", "--refine", "0"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert out.stderr.strip().count("\n") == 0 and "--refine" in out.stderr
+    assert out.stdout == ""

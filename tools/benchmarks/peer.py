@@ -1,6 +1,6 @@
 """simfab's insertion beside an IPC reference built on the IPC Toolkit (``ipctk``).
 
-``python tools/bench.py peer [--scenes snapfit2d,cclamp2d] [--frictions 0,0.3] [--plot DIR]``
+``python tools/bench.py peer [--scenes snapfit2d,cclamp2d] [--frictions 0,0.3] [--refine 1,2] [--plot DIR]``
 
 The reference solves the same quasi-static insertion the way the IPC paper (Li et al. 2020) does:
 
@@ -21,11 +21,12 @@ The reference solves the same quasi-static insertion the way the IPC paper (Li e
   backtracked until the total energy decreases; the linear solves are simfab's SPDSolver (CHOLMOD,
   symbolic analysis reused while the pattern holds); converged at simfab's force tolerance.
 
-Forces: the support reaction along O's motion, as simfab records it; the profile figures (F_in,
-F_rm, F_hold, E_max) by simfab's own analysis of the reference's records (F_hold's onset of sliding
-read from simfab's records). Reported per scene and friction: both runs' figures and relative
-differences, wall and CPU seconds, Newton iterations per step and the speed ratio (reference over
-simfab); ``--plot DIR`` draws both force profiles per case.
+Reported per case: the profile figures of both runs (the support reaction along O's motion;
+simfab's analysis of each run's records, F_hold's onset of sliding from simfab's), their
+differences, the profiles' largest difference, wall and CPU seconds (both timed warm), Newton
+iterations per step and the speed ratio; ``--plot DIR`` draws both profiles. ``--refine`` factors
+refine each case's mesh by the scene's own rule (:func:`simfab.coupling.converge.level_mesh`; the
+snap-fit: cells through its thickness times the factor's square root).
 """
 
 from __future__ import annotations
@@ -412,34 +413,85 @@ SCENES = ("snapfit2d", "cclamp2d", "clip3d")
 SNAPFIT_ALPHA = 30.0
 
 
-def case_model(scene: str, mu: float):
-    """The coupling model of a peer case on linear elements (the reference's elements)."""
+#: The peer's meshes at refinement 1 (clip3d: linear tets near the original's size; the snap-fit's
+#: beam cells through its thickness).
+CLIP3D_PART = {"target_elements": 1040, "layers": 1, "segments": 48}
+SNAPFIT_CELLS_T = 3
+MAX_REFINE = 64.0
+#: Records within this many d_hat of the seat (the deepest pose) are left out of
+#: ``profile_difference_off_seat``: there O is within d_hat of the part's base in clip3d, where each
+#: barrier's own force law sets the force.
+SEAT_DHATS = 5.0
+
+
+def parse_refine(text: str) -> list[float]:
+    """The ``--refine`` factors: comma-separated element-count factors in [1, MAX_REFINE].
+
+    Args:
+        text: e.g. ``"1,2,4"``.
+
+    Returns:
+        The factors in the given order.
+    """
+    from simfab.errors import InputError
+
+    try:
+        out = [float(f) for f in text.split(",")]
+    except ValueError:
+        raise InputError(f"--refine must be comma-separated numbers, got {text!r}") from None
+    for f in out:
+        if not 1.0 <= f <= MAX_REFINE:
+            raise InputError(f"--refine factors must be in [1, {MAX_REFINE:g}], got {f:g}")
+    return out
+
+
+def case_model(scene: str, mu: float, refine: float = 1.0):
+    """The coupling model of a peer case on linear elements (the reference's elements), its mesh
+    refined to ``refine`` times the element count (see the module docstring)."""
     from simfab.errors import InputError
 
     if scene == "snapfit2d":
         from simfab.verification.snapfit import snapfit_model
 
-        return snapfit_model(SNAPFIT_ALPHA, mu)
-    from simfab.coupling.scene import load_coupling_scene
+        return snapfit_model(SNAPFIT_ALPHA, mu, cells_t=max(1, int(round(SNAPFIT_CELLS_T * refine ** 0.5))))
+    from simfab.coupling.converge import level_mesh
+    from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
 
     # the support held in every axis (for both solvers): the scene's support holds the insertion axis
     # only and leaves the part's sideways rigid motion to contact, which simfab pins by a Woodbury
     # update while IPC has no counterpart (its Newton then wanders along the unresisted mode)
     over = {"simulation": {"element_order": 1, "fix_all_axes": True}, "contact": {"friction": mu}}
-    if scene == "clip3d":
-        over["compliant"] = {"target_elements": 1040, "layers": 1, "segments": 48}
-    elif scene != "cclamp2d":
+    if scene not in SCENES:
         raise InputError(f"--scenes: unknown peer scene {scene!r} (choose from {', '.join(SCENES)})")
+    comp = dict(read_scene_toml(scene_paths(scene)[1])["compliant"])
+    if scene == "clip3d":
+        comp.update(CLIP3D_PART)
+    over["compliant"] = {**({"segments": comp["segments"]} if scene == "clip3d" else {}), **level_mesh(comp, refine)}
     return load_coupling_scene(scene, overrides=over)
 
 
-def compare(scene: str, mu: float) -> dict:
-    """simfab's run and the reference's on one case: figures, differences, seconds, iterations."""
+def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True) -> dict:
+    """simfab's run and the reference's on one case: figures, differences, seconds, iterations.
+
+    Args:
+        scene: one of SCENES.
+        mu: friction coefficient.
+        refine: element-count factor of the case's mesh (:func:`case_model`).
+        warm: time both solvers after an untimed first run (else the first, simfab's, pays the
+            process's one-off costs that the reference then reuses).
+
+    Returns:
+        The case's row (see :func:`run`).
+    """
     from simfab.coupling import config as C
     from simfab.coupling.profile import analyze_run
     from simfab.coupling.simulate import simulate_insertion
 
-    cm = case_model(scene, mu)
+    # both timed warm: a first run of each (simfab's whole run, the reference's first two poses)
+    # loads the Warp kernels (of the elastic energy both use), CHOLMOD and ipctk untimed
+    if warm:
+        simulate_insertion(case_model(scene, mu, refine))
+    cm = case_model(scene, mu, refine)
     t0, c0 = time.perf_counter(), time.process_time()
     res = simulate_insertion(cm)
     t_s, c_s = time.perf_counter() - t0, time.process_time() - c0
@@ -447,6 +499,8 @@ def compare(scene: str, mu: float) -> dict:
     opts = PeerOptions(dhat=float(cm.dhat), grad_tol=C.NEWTON_GRAD_TOL_REL * float(cm.force_scale), mu=float(mu),
                        eps_v=float(cm.contact.friction_eps_rel) * float(cm.h), lag_tol=float(cm.contact.lag_tol),
                        max_lag=int(cm.contact.max_lag_iterations))
+    if warm:
+        IpcReference(cm, opts).run(poses[:2])
     t0, c0 = time.perf_counter(), time.process_time()
     ref = IpcReference(cm, opts)
     steps = ref.run(poses)
@@ -460,11 +514,15 @@ def compare(scene: str, mu: float) -> dict:
     fr = {k: float(getattr(b, k)) for k in FIGURES}
     peak_f = max(abs(fs["F_in"]), abs(fs["F_rm"]), 1e-300)
     rel = {k: ((fr[k] - fs[k]) / (abs(fs[k]) if k == "E_max" else peak_f)) for k in FIGURES}
+    f_s = np.array([float(r.force) for r in [*res.steps, *res.removal]])
+    f_r = np.array([p.force for p in steps])
+    s_all = np.array([p.s for p in steps])
+    off_seat = s_all < s_all.max() - SEAT_DHATS * float(cm.dhat)
     n_s = len(res.steps) - 1 + len(res.removal)
     it_s = int(sum(r.iterations for r in res.steps[1:]) + sum(r.iterations for r in res.removal))
     it_r = int(sum(p.iterations for p in steps[1:]))
     return {
-        "scene": scene, "friction": mu, "elements": int(cm.fem.n_elements), "element_order": 1,
+        "scene": scene, "friction": mu, "refine": refine, "elements": int(cm.fem.n_elements), "element_order": 1,
         "object_collision_vertices": int(ref.k), "dhat": float(cm.dhat), "records": n_s,
         "simfab": {**fs, "category": a.category, "seconds": round(t_s, 3), "cpu_seconds": round(c_s, 3),
                    "newton_iterations": it_s, "iterations_per_step": round(it_s / max(1, n_s), 2)},
@@ -473,10 +531,13 @@ def compare(scene: str, mu: float) -> dict:
                 "kappa_final": float(ref.kappa), "max_iterations_in_a_step": int(max(p.iterations for p in steps))},
         # relative to E_max for E_max, to the larger of simfab's F_in and F_rm for the forces
         "relative_difference": {k: round(v, 4) for k, v in rel.items()},
+        # the largest force difference of the whole profile, and of the records farther than
+        # SEAT_DHATS d_hat along the path from the deepest pose (the seat; see docs/benchmarks.md)
+        "profile_difference": round(float(np.max(np.abs(f_r - f_s))) / peak_f, 4),
+        "profile_difference_off_seat": round(float(np.max(np.abs(f_r - f_s)[off_seat], initial=0.0)) / peak_f, 4),
         "speed_ratio": round(t_r / t_s, 2), "speed_ratio_cpu": round(c_r / c_s, 2),
         "profile": {"s": [p.s for p in steps], "phase": [p.phase for p in steps],
-                    "force_simfab": [float(r.force) for r in [*res.steps, *res.removal]],
-                    "force_ipc": [p.force for p in steps]},
+                    "force_simfab": f_s.tolist(), "force_ipc": f_r.tolist()},
     }
 
 
@@ -494,9 +555,23 @@ def plot(row: dict, path: str) -> None:
         if m.any():
             ax.plot(s[m], np.asarray(pr["force_simfab"])[m], "o" + style, ms=3, label=f"simfab ({phase})")
             ax.plot(s[m], np.asarray(pr["force_ipc"])[m], "x" + style, ms=4, label=f"IPC reference ({phase})")
+    # the y-range of simfab's profile: a reference record far outside it (the stiff contact at the
+    # seat, see docs/benchmarks.md) is marked at the edge and its value given in the legend
+    fs, fi = np.asarray(pr["force_simfab"]), np.asarray(pr["force_ipc"])
+    lo, hi = float(min(fs.min(), 0.0)), float(max(fs.max(), 0.0))
+    pad = 0.15 * (hi - lo)
+    lo, hi = lo - pad, hi + pad
+    off = (fi < lo) | (fi > hi)
+    if off.any():
+        k = int(np.argmax(np.abs(fi) * off))
+        ax.plot(s[off], np.clip(fi[off], lo, hi), "v" if fi[k] < lo else "^", color="k", ms=6,
+                label=f"IPC off scale ({off.sum()}; extreme {fi[k]:.0f} N at s = {s[k]:.3f} mm)")
+        ax.set_ylim(lo, hi)
     ax.set_xlabel("path length s [mm]")
     ax.set_ylabel("insertion force F [N] (resisting < 0)")
-    ax.set_title(f"{row['scene']}, mu = {row['friction']:g}: simfab vs ipctk IPC reference")
+    ref = f", refined x{row['refine']:g}" if row.get("refine", 1.0) != 1.0 else ""
+    ax.set_title(f"{row['scene']}, mu = {row['friction']:g}, {row['elements']:,} linear elements{ref}:\n"
+                 "simfab vs ipctk IPC reference", fontsize=10)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -505,30 +580,43 @@ def plot(row: dict, path: str) -> None:
 
 
 def format_table(rows: list) -> str:
-    head = (f"{'scene':10s} {'mu':>4s} {'fig':6s} {'simfab':>10s} {'IPC':>10s} {'rel.diff':>9s}")
+    head = (f"{'scene':10s} {'mu':>4s} {'elems':>6s} {'fig':6s} {'simfab':>10s} {'IPC':>10s} {'rel.diff':>9s}")
     lines = [head]
     for r in rows:
         for k in FIGURES:
-            lines.append(f"{r['scene']:10s} {r['friction']:>4g} {k:6s} {r['simfab'][k]:>10.4g} {r['ipc'][k]:>10.4g} "
-                         f"{100 * r['relative_difference'][k]:>8.2f}%")
-        lines.append(f"{r['scene']:10s} {r['friction']:>4g} wall s {r['simfab']['seconds']:>10.2f} "
+            lines.append(f"{r['scene']:10s} {r['friction']:>4g} {r['elements']:>6d} {k:6s} {r['simfab'][k]:>10.4g} "
+                         f"{r['ipc'][k]:>10.4g} {100 * r['relative_difference'][k]:>8.2f}%")
+        lines.append(f"{r['scene']:10s} {r['friction']:>4g} {r['elements']:>6d} wall s {r['simfab']['seconds']:>10.2f} "
                      f"{r['ipc']['seconds']:>10.2f}  ratio {r['speed_ratio']:.1f} (cpu {r['speed_ratio_cpu']:.1f}); "
                      f"it/step {r['simfab']['iterations_per_step']} vs {r['ipc']['iterations_per_step']}")
     return "\n".join(lines)
 
 
 def run(argv) -> dict:
+    """The bench's entry point (``python tools/bench.py peer ...``; options in the module docstring).
+
+    Args:
+        argv: the command line after ``peer``.
+
+    Returns:
+        {"benchmark", "reference", "rows": one :func:`compare` row per scene, friction and refinement
+        factor, "table": the printed table}. Raises InputError on a bad option before any case runs.
+    """
     from simfab.errors import InputError
 
     ap = argparse.ArgumentParser(prog="bench peer")
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--frictions", default="0,0.3")
+    ap.add_argument("--refine", default="1", help="element-count factors of each case's mesh, e.g. 1,2,4")
     ap.add_argument("--plot", default=None, help="directory for the force-profile PNGs")
     a = ap.parse_args(argv)
+    factors = parse_refine(a.refine)
     try:
         frictions = [float(f) for f in a.frictions.split(",")]
     except ValueError:
         raise InputError("--frictions must be comma-separated numbers") from None
+    if not all(0.0 <= f < 10.0 for f in frictions):
+        raise InputError(f"--frictions must lie in [0, 10), got {a.frictions!r}")
     scenes = a.scenes.split(",")
     for sc in scenes:
         if sc not in SCENES:
@@ -536,12 +624,13 @@ def run(argv) -> dict:
     rows = []
     for sc in scenes:
         for mu in frictions:
-            row = compare(sc, mu)
-            if a.plot:
-                os.makedirs(a.plot, exist_ok=True)
-                p = os.path.join(a.plot, f"peer_{sc}_mu{mu:g}.png")
-                plot(row, p)
-                row["plot"] = p
-            rows.append(row)
+            for f in factors:
+                row = compare(sc, mu, f)
+                if a.plot:
+                    os.makedirs(a.plot, exist_ok=True)
+                    p = os.path.join(a.plot, f"peer_{sc}_mu{mu:g}" + (f"_r{f:g}" if f != 1.0 else "") + ".png")
+                    plot(row, p)
+                    row["plot"] = p
+                rows.append(row)
     return {"benchmark": "peer", "reference": "IPC (Li et al. 2020) on ipctk", "rows": rows,
             "table": format_table(rows)}
