@@ -229,7 +229,14 @@ def test_initial_insertion_run_for_the_placement_is_scored_not_run_again(scene):
     fresh = evaluate(P, P.handles.identity())
     assert ev.status == fresh.status == "ok" and ev.result is run
     assert ev.objective == pytest.approx(fresh.objective, rel=1e-9)
-    assert all(ev.figures[k] == pytest.approx(fresh.figures[k], rel=1e-9, abs=1e-12)
+    # the rest search's secant trials follow the forces, so a re-simulation of the same shape (the
+    # mesh reproduced up to round-off) stops at another point within the search's own tolerance
+    # (REST_ENERGY_REL): the figures read there agree to that, the rest to round-off
+    from simfab.coupling.settle import REST_ENERGY_REL
+
+    at_rest = {"E_ss", "seat_clearance"}
+    assert all(ev.figures[k] == pytest.approx(fresh.figures[k], rel=REST_ENERGY_REL if k in at_rest else 1e-9,
+                                              abs=1e-12)
                for k in fresh.figures if k != "category")
     other = simulate_insertion(load_coupling_scene("block2d_tight", overrides={"simulation": {"steps": STEPS}}))
     assert make_problem(scene, brief, initial=other).initial is None  # not this problem's model
