@@ -64,6 +64,11 @@ class NotPositiveDefinite(ConvergenceError):
     """The matrix handed to :class:`SPDSolver` is not numerically positive definite."""
 
 
+#: A lagged solve whose residual has not fallen fast enough to reach its tolerance within
+#: ``LagConfig.max_iter`` iterations (at the mean rate so far) is given up after this many.
+ABORT_AFTER = 3
+
+
 @dataclass(frozen=True, kw_only=True)
 class LagConfig:
     """Lagged factorization of :class:`SPDSolver` (inexact Newton with a reused preconditioner).
@@ -283,7 +288,8 @@ and the iterations of every lagged attempt (converged or not).
         p = z.copy()
         rz = float(r @ z)
         tol = self.lag.rtol * bn
-        for _ in range(self.lag.max_iter):
+        reach = max(tol, atol or 0.0)  # a 2-norm that meets either criterion
+        for k in range(1, self.lag.max_iter + 1):
             Kp = apply(p)
             pKp = float(p @ Kp)
             self.pcg_iterations += 1
@@ -293,8 +299,11 @@ and the iterations of every lagged attempt (converged or not).
             a = rz / pKp
             x += a * p
             r -= a * Kp
-            if float(np.linalg.norm(r)) <= tol or (atol is not None and np.abs(r).max() <= atol):
+            rn = float(np.linalg.norm(r))
+            if rn <= tol or (atol is not None and np.abs(r).max() <= atol):
                 return x
+            if k >= ABORT_AFTER and k * np.log(reach / bn) / np.log(min(rn / bn, 1.0 - 1e-12)) > self.lag.max_iter:
+                return None  # at this rate the iterations would not converge within max_iter
             z = precondition(r)
             rz, rz_old = float(r @ z), rz
             p = z + (rz / rz_old) * p

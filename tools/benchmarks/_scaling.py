@@ -132,7 +132,8 @@ def exponents(rows: list, key: str = "seconds") -> dict:
 
 
 def plot_scaling(groups: list, path: str) -> None:
-    """Log-log plot of CPU and wall seconds and of ms per factorization against free dofs."""
+    """Log-log plot of CPU and wall seconds and of ms per factorization against free dofs (a group's
+    optional "label" names its run, e.g. "main" against a branch: see :func:`main`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -144,7 +145,7 @@ def plot_scaling(groups: list, path: str) -> None:
         if not ok:
             continue
         n = np.array([r["free_dofs"] for r in ok], float)
-        lab = f"{g['scene']} mu={g['friction']:g}"
+        lab = f"{g['scene']} mu={g['friction']:g}" + (f" ({g['label']})" if g.get("label") else "")
         line = ax.loglog(n, [r["cpu_seconds"] for r in ok], "o-", label=f"{lab} CPU")[0]
         ax.loglog(n, [r["seconds"] for r in ok], "x--", color=line.get_color(), label=f"{lab} wall (loaded machine)")
         bx.loglog(n, [r["ms_per_factorization"] for r in ok], "o-", color=line.get_color(), label=lab)
@@ -231,3 +232,30 @@ def parse_level(spec: str) -> tuple[str, float, float]:
         return scene, float(f), float(mu)
     except ValueError:
         raise InputError(f"--scaling-level must be SCENE:FACTOR:MU, got {spec!r}") from None
+
+
+def main(argv=None) -> int:
+    """``python tools/benchmarks/_scaling.py --plot PNG RUN.json[:LABEL] ...``: one plot of several
+    ``insertion --scaling`` outputs (e.g. main's and a branch's levels), each run's groups labelled."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="_scaling.py", description=main.__doc__.split("\n")[0])
+    ap.add_argument("--plot", required=True, help="PNG path")
+    ap.add_argument("runs", nargs="+", help="JSON outputs of bench.py insertion --scaling, each optionally :LABEL")
+    a = ap.parse_args(argv)
+    groups = []
+    for spec in a.runs:
+        path, _, label = spec.partition(":")
+        try:
+            with open(path) as f:
+                run = json.loads(f.read().strip().splitlines()[-1])
+        except (OSError, ValueError, IndexError) as e:
+            print(f"_scaling.py: error: {path}: {e}", file=sys.stderr)
+            return 2
+        groups += [{**g, "label": label} for g in run.get("groups", [])]
+    plot_scaling(groups, a.plot)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
