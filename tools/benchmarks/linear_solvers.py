@@ -357,8 +357,12 @@ def _level_hessian(scene: str, factor: float):
 def nested_dissection(A: sp.csr_matrix, node: np.ndarray) -> np.ndarray:
     """A fill-reducing permutation of A's unknowns (new -> old): METIS nested dissection of the mesh's
     vertex graph (the unknowns of one vertex kept together)."""
-    import pymetis
+    try:
+        import pymetis
+    except ImportError:
+        from simfab.errors import InputError
 
+        raise InputError("--ordering needs pymetis (pip install pymetis)") from None
     uniq, nid = np.unique(node, return_inverse=True)
     P = sp.csr_matrix((np.ones(len(nid)), (np.arange(len(nid)), nid)), shape=(len(nid), len(uniq)))
     G = (P.T @ (abs(A) > 0).astype(float) @ P).tocsr()
