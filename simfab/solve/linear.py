@@ -83,7 +83,7 @@ class LagConfig:
     does. Below ``min_unknowns`` (where a factorization costs few triangular solves) every new
     matrix is factorized."""
 
-    min_unknowns: int = 60_000
+    min_unknowns: int = 50_000
     rtol: float = 1e-6
     max_iter: int = 12
 
