@@ -77,7 +77,8 @@ class LagConfig:
     pattern whose values differ from the current factorization's is first done by conjugate
     gradients on that matrix, preconditioned with the current factorization (the Newton Hessians of
     one simulation change little from one solve to the next), until the residual's 2-norm is at most
-    ``rtol`` times the right-hand side's; only when that takes more than ``max_iter`` iterations is
+    ``rtol`` times the right-hand side's (or a caller's absolute bound is met); only when that takes
+    more than ``max_iter`` iterations (or would, at the rate of the first :data:`ABORT_AFTER`) is
     the matrix factorized (and solved directly). A curvature p^T A p <= 0 met by the iterations
     proves the matrix indefinite and raises :class:`NotPositiveDefinite`, as a failed factorization
     does. Below ``min_unknowns`` (where a factorization costs few triangular solves) every new
@@ -132,8 +133,8 @@ class SPDSolver:
     Attribute ``timer``: None, or an object with ``timed(key)`` returning a context manager (e.g.
     :class:`simfab.coupling.timing.Timer`); each numeric factorization is then timed under
     "factorization". Attribute ``factorizations``: the numeric factorizations attempted so far;
-``lagged_solves`` / ``pcg_iterations``: the solves done by lagged conjugate gradients (converged)
-and the iterations of every lagged attempt (converged or not).
+    ``lagged_solves`` / ``pcg_iterations``: the solves done by lagged conjugate gradients (converged)
+    and the iterations of every lagged attempt (converged or not).
 
     CHOLMOD's input is the lower triangle in column-major order, which for a symmetric matrix is
     the upper triangle of its CSR in row-major order: the value map takes the CSR entries on and
