@@ -92,6 +92,9 @@ PCG_TOL = 1e-2
 PCG_NEAR = 100.0
 PCG_TOL_NEAR = 1e-8
 PCG_MAX_ITER = 25
+#: A lagged solve (:class:`simfab.solve.linear.LagConfig`) stops once its residual is within this fraction
+#: of Newton's force target (when the caller gives it).
+LAG_TARGET = 0.1
 
 
 class PinnedSolver:
@@ -107,7 +110,9 @@ class PinnedSolver:
     shift moves the other modes' eigenvalues by a small fraction: a few iterations), so the solve
     stays exact; the shift is remembered for the run's later solves (``SPDSolver.shift_hint``).
     Negative curvature found by the iterations (A + mu U U^T indefinite) raises NotPositiveDefinite,
-    as a failed factorization does."""
+    as a failed factorization does. A solver that lags its factorizations
+    (:class:`simfab.solve.linear.LagConfig`) is first asked for the lagged solve of A + mu U U^T
+    (conjugate gradients preconditioned with its current factorization and the same update)."""
 
     def __init__(self, solver, pin: Pin, target: float | None = None):
         self.solver, self.pin = solver, pin
@@ -119,6 +124,11 @@ class PinnedSolver:
         if self._Uf is None or self._Uf[0] is not free:
             self._Uf = (free, self.pin.U[free])  # one array per free set: the solver reuses its half solve
         Uf = self._Uf[1]
+        if hasattr(self.solver, "solve_free_lagged") and np.ndim(b) == 1:
+            atol = None if self.target is None else LAG_TARGET * self.target
+            x = self.solver.solve_free_lagged(A, free, b, Uf, self.pin.mu, atol)  # None: not lagged
+            if x is not None:
+                return x
         if not hasattr(self.solver, "solve_free_update"):
             X = self.solver.solve_free(A, free, np.column_stack([b, Uf]))
             y, Z = X[:, 0], X[:, 1:]

@@ -17,7 +17,7 @@ import numpy as np
 from simfab.coupling.guide import CoarseGuide
 from simfab.coupling.points import ContactPoints
 from simfab.coupling.timing import Timer
-from simfab.solve.linear import SPDSolver
+from simfab.solve.linear import LagConfig, SPDSolver
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -115,7 +115,7 @@ class StepContext:
 
     timer: Timer = field(default_factory=Timer)
     phases: Timer = field(default_factory=Timer)
-    solver: SPDSolver = field(default_factory=SPDSolver)
+    solver: SPDSolver = field(default_factory=lambda: SPDSolver(lag=LagConfig()))
     exact_failed: bool = False
     guide: CoarseGuide | None = None
     guided: int = 0

@@ -6,7 +6,9 @@ per core as MKL PARDISO on them once its BLAS uses the machine's vector instruct
 :func:`import_cholmod`; ``tools/bench.py linear_solvers`` compares the libraries). The symbolic
 analysis (fill-reducing ordering) and the value map are kept and reused while the sparsity
 pattern is unchanged, which is the case across Newton iterations of one simulation; a matrix
-whose values equal those of the last factorization is not factorized again.
+whose values equal those of the last factorization is not factorized again. Large systems can lag
+the factorization (:class:`LagConfig`): a new matrix is first solved by conjugate gradients
+preconditioned with the current factorization, and factorized only when that does not converge.
 
     solver = SPDSolver()
     x = solver.solve(A, b)      # A: scipy.sparse (n, n) SPD, b: (n,) or (n, k)
@@ -15,6 +17,7 @@ whose values equal those of the last factorization is not factorized again.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -61,6 +64,37 @@ class NotPositiveDefinite(ConvergenceError):
     """The matrix handed to :class:`SPDSolver` is not numerically positive definite."""
 
 
+#: A lagged solve whose residual has not fallen fast enough to reach its tolerance within
+#: ``LagConfig.max_iter`` iterations (at the mean rate so far) is given up after this many.
+ABORT_AFTER = 3
+
+
+@dataclass(frozen=True, kw_only=True)
+class LagConfig:
+    """Lagged factorization of :class:`SPDSolver` (inexact Newton with a reused preconditioner).
+
+    For systems of at least ``min_unknowns`` unknowns, a one-column solve of a matrix of the analysed
+    pattern whose values differ from the current factorization's is first done by conjugate
+    gradients on that matrix, preconditioned with the current factorization (the Newton Hessians of
+    one simulation change little from one solve to the next), until the residual's 2-norm is at most
+    ``rtol`` times the right-hand side's (or a caller's absolute bound is met); only when that takes
+    more than ``max_iter`` iterations (or would, at the rate of the first :data:`ABORT_AFTER`) is
+    the matrix factorized (and solved directly). A curvature p^T A p <= 0 met by the iterations
+    proves the matrix indefinite and raises :class:`NotPositiveDefinite`, as a failed factorization
+    does. Below ``min_unknowns`` (where a factorization costs few triangular solves) every new
+    matrix is factorized."""
+
+    min_unknowns: int = 50_000
+    rtol: float = 1e-6
+    max_iter: int = 12
+
+    def __post_init__(self):
+        bad = [k for k, ok in {"min_unknowns": self.min_unknowns >= 0, "rtol": 0.0 < self.rtol < 1.0,
+                               "max_iter": self.max_iter >= 1}.items() if not ok]
+        if bad:
+            raise ValueError(f"invalid LagConfig: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
+
+
 def canonical_csr(A) -> sp.csr_matrix:
     """``A`` as CSR with sorted, unique entries (a copy only when needed; the caller's matrix is
     never mutated). Value maps that gather ``A.data`` by position rely on this."""
@@ -93,10 +127,14 @@ class SPDSolver:
     Args:
         backend: "cholmod" | "splu" | "auto"
             "auto" uses CHOLMOD when cvxopt is importable, else SciPy's SuperLU.
+        lag: None (every new matrix is factorized), or the :class:`LagConfig` of lagged
+            factorizations in :meth:`solve_free` and :meth:`solve_free_lagged` (CHOLMOD only).
 
     Attribute ``timer``: None, or an object with ``timed(key)`` returning a context manager (e.g.
     :class:`simfab.coupling.timing.Timer`); each numeric factorization is then timed under
-    "factorization". Attribute ``factorizations``: the numeric factorizations attempted so far.
+    "factorization". Attribute ``factorizations``: the numeric factorizations attempted so far;
+    ``lagged_solves`` / ``pcg_iterations``: the solves done by lagged conjugate gradients (converged)
+    and the iterations of every lagged attempt (converged or not).
 
     CHOLMOD's input is the lower triangle in column-major order, which for a symmetric matrix is
     the upper triangle of its CSR in row-major order: the value map takes the CSR entries on and
@@ -104,7 +142,7 @@ class SPDSolver:
     times faster than a random-order gather: docs/decisions.md, "Sparse factorization").
     """
 
-    def __init__(self, backend: str = "auto"):
+    def __init__(self, backend: str = "auto", lag: LagConfig | None = None):
         if backend == "auto":
             try:
                 import_cholmod()
@@ -114,6 +152,7 @@ class SPDSolver:
         if backend not in ("cholmod", "splu"):
             raise ValueError(f"unknown linear-solver backend {backend!r}")
         self.backend = backend
+        self.lag = lag if backend == "cholmod" else None
         self._key = None  # (indptr, indices) of the analysed CSR pattern
         self._perm = None  # CSR value index of each CHOLMOD (lower, column-major) entry
         self._inv_d = None  # D^-1 of the current factorization (n, 1)
@@ -126,8 +165,11 @@ class SPDSolver:
         self._full = None
         self._diag = None  # positions of the diagonal entries in the factor's input (values) order
         self._update = None  # solve_free_update: (factor values, U, mu, L^-1 P U, D^-1 L^-1 P U, capacitance)
+        self._upper = None  # (indptr, indices, rows of the diagonal entries): the factor input as upper-CSR
         self.timer = None
         self.factorizations = 0
+        self.lagged_solves = 0
+        self.pcg_iterations = 0
         #: the diagonal shift (relative to the pin's stiffness) a :class:`simfab.coupling.rigid.PinnedSolver`
         #: last needed to factorize with this solver (0: none); its later solves start from it
         self.shift_hint = 0.0
@@ -150,7 +192,12 @@ class SPDSolver:
         of the unknowns, ``b`` (m,) or (m, k). With CHOLMOD, the map from ``A``'s values straight to
         the factor's input order is computed once per (pattern, free set), so each later call is
         one gather and a numeric factorization (Newton on the free dofs of a fixed FEM pattern).
-        Raises :class:`NotPositiveDefinite` when the factorization fails."""
+        Raises :class:`NotPositiveDefinite` when the factorization fails (or, lagging, when the
+        iterations meet negative curvature)."""
+        if self.lag is not None:
+            x = self.solve_free_lagged(A, free, b)
+            if x is not None:
+                return x
         self._factor_free(A, free)
         if self.backend == "splu":
             return self._lu.solve(np.asarray(b, dtype=np.float64))
@@ -175,6 +222,97 @@ class SPDSolver:
             X = self._lu.solve(np.column_stack([b.reshape(len(b), k), U]))
             y, Z = X[:, :k], X[:, k:]
             return (y - Z @ np.linalg.solve(np.eye(U.shape[1]) / mu + U.T @ Z, U.T @ y)).reshape(b.shape)
+        return self._woodbury(b, U, mu)
+
+    def solve_free_lagged(self, A: sp.spmatrix, free: np.ndarray, b: np.ndarray, U: np.ndarray | None = None,
+                          mu: float = 0.0, atol: float | None = None) -> np.ndarray | None:
+        """The lagged solve of ``(A[free][:, free] + mu U U^T) x = b`` (see :class:`LagConfig`; U (m, r)
+        dense or None, mu [units of A], b (m,)): conjugate gradients preconditioned with the current
+        factorization (with U's Woodbury update when U is given), to ``LagConfig.rtol`` or until the
+        residual's largest entry is at most ``atol`` [units of b] (None: rtol only; e.g. a fraction of
+        Newton's force target, below which the residual cannot matter). Returns x, or None when the solve
+        is not lagged (no lag configured, too few unknowns, no factorization of this pattern and
+        free set yet, b with several columns) or the iterations did not converge: the caller then
+        factorizes. A matrix equal to the factorized one is solved directly.
+        Raises :class:`NotPositiveDefinite` when the iterations meet negative curvature."""
+        lag = self.lag
+        free = np.asarray(free)
+        b = np.asarray(b, dtype=np.float64)
+        if lag is None or b.ndim != 1 or len(free) < lag.min_unknowns or self._factored is None:
+            return None
+        full = self._full
+        same = full is not None and getattr(A, "indices", None) is full[3][1] and A.indptr is full[3][0]
+        if not same:
+            A = canonical_csr(A)
+        if full is None or not (full[1].shape == free.shape and np.array_equal(full[1], free)
+                                and (same or same_pattern(full[0], A))):
+            return None
+        values = A.data[full[2]]
+        if U is None:
+            def precondition(r):
+                return self._solve_factored(r)
+        else:
+            U = np.asarray(U, dtype=np.float64)
+
+            def precondition(r):
+                return self._woodbury(r, U, mu)
+        if np.array_equal(values, self._factored):
+            return precondition(b)
+        x = self._pcg(values, b, precondition, U, mu, atol)
+        if x is not None:
+            self.lagged_solves += 1
+        return x
+
+    def _pcg(self, values: np.ndarray, b: np.ndarray, precondition, U: np.ndarray | None, mu: float,
+             atol: float | None):
+        """Conjugate gradients on (K + mu U U^T) x = b, K the symmetric matrix with the factor input
+        ``values``; None when not converged in ``lag.max_iter`` iterations."""
+        indptr, indices, diag_rows = self._upper
+        n = len(b)
+        K = sp.csr_matrix((values, indices, indptr), shape=(n, n))  # the upper triangle
+        Kt = K.T.tocsr()
+        d = np.zeros(n)
+        d[diag_rows] = values[self._diag]
+
+        def apply(v):
+            y = K @ v + Kt @ v - d * v
+            if U is not None:
+                y += mu * (U @ (U.T @ v))
+            return y
+
+        bn = float(np.linalg.norm(b))
+        x = np.zeros(n)
+        if bn == 0.0:
+            return x
+        r = b.copy()
+        z = precondition(r)
+        p = z.copy()
+        rz = float(r @ z)
+        tol = self.lag.rtol * bn
+        reach = max(tol, atol or 0.0)  # a 2-norm that meets either criterion
+        for k in range(1, self.lag.max_iter + 1):
+            Kp = apply(p)
+            pKp = float(p @ Kp)
+            self.pcg_iterations += 1
+            if not pKp > 0.0:
+                raise NotPositiveDefinite("the matrix is not positive definite (negative curvature in conjugate "
+                                          "gradients)")
+            a = rz / pKp
+            x += a * p
+            r -= a * Kp
+            rn = float(np.linalg.norm(r))
+            if rn <= tol or (atol is not None and np.abs(r).max() <= atol):
+                return x
+            if k >= ABORT_AFTER and k * np.log(reach / bn) / np.log(min(rn / bn, 1.0 - 1e-12)) > self.lag.max_iter:
+                return None  # at this rate the iterations would not converge within max_iter
+            z = precondition(r)
+            rz, rz_old = float(r @ z), rz
+            p = z + (rz / rz_old) * p
+        return None
+
+    def _woodbury(self, b: np.ndarray, U: np.ndarray, mu: float) -> np.ndarray:
+        """(F + mu U U^T)^-1 b, F the current factorization's matrix (see :meth:`solve_free_update`)."""
+        k = 1 if b.ndim == 1 else b.shape[1]
         upd = self._update
         if upd is not None and upd[0] is self._factored and upd[1] is U and upd[2] == mu:
             V, DV, S = upd[3:]  # the same factorization and U: their half solve is reused
@@ -291,6 +429,8 @@ class SPDSolver:
         self._perm = np.flatnonzero(cols >= rows)
         c, r = rows[self._perm], cols[self._perm]
         self._diag = np.flatnonzero(c == r)  # the diagonal's entries in the factor's input order
+        # the factor's input as the upper triangle in CSR (row c, column r): lagged solves' products
+        self._upper = (np.concatenate([[0], np.cumsum(np.bincount(c, minlength=n))]), r, c[self._diag])
         cholmod = import_cholmod()
         import cvxopt
 

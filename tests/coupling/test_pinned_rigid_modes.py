@@ -33,6 +33,34 @@ def test_pinned_solve_is_the_woodbury_update():
     assert np.allclose(x, ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
 
 
+
+def test_pinned_solve_with_a_lagged_factorization():
+    # a solver lagging its factorizations solves the next, nearby pinned system by conjugate
+    # gradients preconditioned with the last factorization and its Woodbury update: the residual of
+    # (A1 + mu U U^T) x = b is within LAG_TARGET of Newton's target, with no second factorization
+    import scipy.sparse as sp
+
+    from simfab.solve.linear import LagConfig, SPDSolver
+
+    rng = np.random.default_rng(2)
+    n = 40
+    U = np.linalg.qr(rng.normal(size=(n, 2)))[0]
+    B = rng.normal(size=(n, n))
+    A0 = B @ B.T / n + 0.5 * np.eye(n)
+    D = np.diag(1.0 + 0.05 * rng.random(n))
+    A1 = D @ A0 @ D
+    free = np.arange(3, n)
+    pin = rigid.Pin(U, 3.0, np.zeros(n))
+    b = rng.normal(size=len(free))
+    target = 1e-6 * np.abs(b).max()
+    solver = SPDSolver(lag=LagConfig(min_unknowns=0, rtol=1e-12, max_iter=40))
+    ps = rigid.PinnedSolver(solver, pin, target=target)
+    ps.solve_free(sp.csr_matrix(A0), free, b)
+    x = ps.solve_free(sp.csr_matrix(A1), free, b)
+    K = (A1 + 3.0 * U @ U.T)[np.ix_(free, free)]
+    assert np.abs(K @ x - b).max() <= rigid.LAG_TARGET * target
+    assert solver.factorizations == 1 and solver.lagged_solves == 1
+
 @pytest.fixture(scope="module")
 def clip_runs():
     # the bundled clip3d with the original's boundary condition (held along x only: its default)

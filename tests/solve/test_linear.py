@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from simfab.solve.linear import NotPositiveDefinite, SPDSolver
+from simfab.solve.linear import LagConfig, NotPositiveDefinite, SPDSolver
 
 
 def _laplacian_2d(k, shift=0.1):
@@ -215,3 +215,91 @@ def test_solve_free_update_on_a_3d_quadratic_element_system():
     Hf = H[free][:, free]
     assert np.linalg.norm(Hf @ x + mu * U @ (U.T @ x) - b) <= 1e-10 * np.linalg.norm(b)
     assert np.linalg.norm(x - ref) <= 1e-8 * np.linalg.norm(ref)
+
+
+def _free_system(k=14, seed=0):
+    """A 2D Laplacian-like SPD matrix with a few held dofs, and a nearby matrix of the same pattern
+    (a Newton Hessian a step later: values changed by up to 5 %)."""
+    rng = np.random.default_rng(seed)
+    A = _laplacian_2d(k)
+    n = A.shape[0]
+    free = np.setdiff1d(np.arange(n), rng.choice(n, 10, replace=False))
+    D = sp.diags(1.0 + 0.05 * rng.random(n))
+    A1 = (D @ A @ D).tocsr()  # congruent: still SPD, same pattern
+    A1.sort_indices()
+    return A.tocsr(), A1, free, rng
+
+
+def test_lagged_solve_matches_the_direct_solve_without_a_factorization():
+    # the lagged path (conjugate gradients preconditioned with the last factorization) solves the
+    # new matrix to LagConfig.rtol: the error against the direct solve is bounded by the residual
+    # times ||A^-1||, checked here at 1e-8 relative to x
+    A0, A1, free, rng = _free_system()
+    lag = LagConfig(min_unknowns=0, rtol=1e-10, max_iter=30)
+    solver = SPDSolver(lag=lag)
+    b = rng.standard_normal(len(free))
+    solver.solve_free(A0, free, b)  # the first matrix is factorized
+    assert solver.factorizations == 1
+    x = solver.solve_free(A1, free, b)
+    exact = np.linalg.solve(A1.toarray()[np.ix_(free, free)], b)
+    assert np.abs(x - exact).max() <= 1e-8 * np.abs(exact).max()
+    assert solver.factorizations == 1 and solver.lagged_solves == 1 and 1 < solver.pcg_iterations <= 30
+
+
+def test_lagged_update_solve_matches_the_woodbury_direct_solve():
+    A0, A1, free, rng = _free_system(seed=1)
+    m = len(free)
+    U = np.linalg.qr(rng.standard_normal((m, 3)))[0]
+    mu = 2.0
+    b = rng.standard_normal(m)
+    solver = SPDSolver(lag=LagConfig(min_unknowns=0, rtol=1e-10, max_iter=30))
+    solver.solve_free_update(A0, free, b, U, mu)
+    x = solver.solve_free_lagged(A1, free, b, U, mu)
+    K = A1.toarray()[np.ix_(free, free)] + mu * U @ U.T
+    exact = np.linalg.solve(K, b)
+    assert x is not None and np.abs(x - exact).max() <= 1e-8 * np.abs(exact).max()
+    assert solver.factorizations == 1
+    # an absolute tolerance on the residual's largest entry stops earlier, and the residual honours it
+    solver2 = SPDSolver(lag=LagConfig(min_unknowns=0, rtol=1e-12, max_iter=30))
+    solver2.solve_free_update(A0, free, b, U, mu)
+    y = solver2.solve_free_lagged(A1, free, b, U, mu, atol=1e-3 * np.abs(b).max())
+    assert y is not None and np.abs(K @ y - b).max() <= 1e-3 * np.abs(b).max()
+    assert solver2.pcg_iterations < solver.pcg_iterations
+
+
+def test_lagging_falls_back_to_a_factorization_and_respects_its_size_threshold():
+    A0, A1, free, rng = _free_system(seed=2)
+    b = rng.standard_normal(len(free))
+    exact = np.linalg.solve(A1.toarray()[np.ix_(free, free)], b)
+    # one iteration cannot reach 1e-12: the new matrix is factorized and solved directly
+    solver = SPDSolver(lag=LagConfig(min_unknowns=0, rtol=1e-12, max_iter=1))
+    solver.solve_free(A0, free, b)
+    np.testing.assert_allclose(solver.solve_free(A1, free, b), exact, rtol=1e-9, atol=1e-12)
+    assert solver.factorizations == 2 and solver.lagged_solves == 0 and solver.pcg_iterations == 1
+    # below min_unknowns the solver factorizes as without lag
+    small = SPDSolver(lag=LagConfig(min_unknowns=len(free) + 1))
+    small.solve_free(A0, free, b)
+    np.testing.assert_allclose(small.solve_free(A1, free, b), exact, rtol=1e-9, atol=1e-12)
+    assert small.factorizations == 2 and small.pcg_iterations == 0
+
+
+def test_lagged_solve_of_an_indefinite_matrix_raises():
+    # the exact-first Newton step relies on NotPositiveDefinite for an indefinite Hessian; the lagged
+    # path meets negative curvature in the iterations (a matrix with eigenvalue -1 along b's largest
+    # components) and must raise, not return a non-descent step
+    A0, _, free, rng = _free_system(seed=3)
+    A_bad = (A0 - 5.0 * sp.eye(A0.shape[0])).tocsr()
+    A_bad.sort_indices()
+    solver = SPDSolver(lag=LagConfig(min_unknowns=0, rtol=1e-10, max_iter=50))
+    b = rng.standard_normal(len(free))
+    solver.solve_free(A0, free, b)
+    with pytest.raises(NotPositiveDefinite):
+        solver.solve_free(A_bad, free, b)
+    assert solver.factorizations == 1  # proved indefinite by the iterations, no factorization tried
+
+
+def test_lag_config_rejects_bad_fields():
+    with pytest.raises(ValueError, match="rtol"):
+        LagConfig(rtol=0.0)
+    with pytest.raises(ValueError, match="max_iter"):
+        LagConfig(max_iter=0)

@@ -7,7 +7,9 @@ peak resident memory (``ru_maxrss``) is that level's alone. A level is the inser
 generator is asked for FACTOR x 5,130 / CLAW_OVERSHOOT tets, since it overshoots its target by
 about that much). Per level: tets, free dofs, steps, seconds (wall, CPU; scene loading and meshing
 excluded), peak memory, Newton iterations (and per step), sparse factorizations (numeric, the
-exact-first attempts included) and their share of the wall time, the triangular solves' share, the
+exact-first attempts included) and their share of the wall time, the solves lagged on an earlier
+factorization (simfab.solve.linear.LagConfig) and their conjugate-gradient iterations (the failed
+attempts' included), the triangular solves' share, the
 assembly's, the factor's fill (entries of L over entries of the lower triangle of the free
 Hessian) and the category and figures of the profile. Per scene and friction: the exponent of a
 least-squares fit of log(seconds) against log(free dofs), overall and between consecutive levels.
@@ -60,20 +62,21 @@ def run_level(scene: str, factor: float, mu: float) -> dict:
     over["compliant"] = level_overrides(scene, factor, base)
     over.setdefault("contact", {})["friction"] = mu
     cm = load_coupling_scene(scene, overrides=over)
-    count = {"factorizations": 0}
-    orig = linear.SPDSolver._factor
+    solvers = []
+    orig = linear.SPDSolver.__init__
 
-    def counted(self, values):
-        count["factorizations"] += 1
-        return orig(self, values)
+    def registered(self, *args, **kwargs):
+        orig(self, *args, **kwargs)
+        solvers.append(self)
 
-    linear.SPDSolver._factor = counted
+    linear.SPDSolver.__init__ = registered
     try:
         t0, c0 = time.perf_counter(), time.process_time()
         res = simulate_insertion(cm)
         dt, dc = time.perf_counter() - t0, time.process_time() - c0
     finally:
-        linear.SPDSolver._factor = orig
+        linear.SPDSolver.__init__ = orig
+    count = {k: sum(getattr(s, k) for s in solvers) for k in ("factorizations", "lagged_solves", "pcg_iterations")}
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     _, summ = summarize(res)
     records = list(res.steps[1:]) + list(res.removal)
@@ -85,7 +88,8 @@ def run_level(scene: str, factor: float, mu: float) -> dict:
         "free_dofs": int(np.asarray(cm.free).sum()), "steps": len(records),
         "seconds": round(dt, 2), "cpu_seconds": round(dc, 2), "peak_memory_mib": round(rss, 1),
         "newton_iterations": iters, "newton_iterations_per_step": round(iters / max(1, len(records)), 2),
-        "factorizations": count["factorizations"],
+        "factorizations": count["factorizations"], "lagged_solves": count["lagged_solves"],
+        "pcg_iterations": count["pcg_iterations"],
         "factorization_share": round(t.get("factorization", 0.0) / dt, 3),
         "solves_share": round(t.get("solves", 0.0) / dt, 3),
         "assembly_share": round(t.get("assembly", 0.0) / dt, 3),
@@ -128,7 +132,8 @@ def exponents(rows: list, key: str = "seconds") -> dict:
 
 
 def plot_scaling(groups: list, path: str) -> None:
-    """Log-log plot of CPU and wall seconds and of ms per factorization against free dofs."""
+    """Log-log plot of CPU and wall seconds and of ms per factorization against free dofs (a group's
+    optional "label" names its run, e.g. "main" against a branch: see :func:`main`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -140,7 +145,7 @@ def plot_scaling(groups: list, path: str) -> None:
         if not ok:
             continue
         n = np.array([r["free_dofs"] for r in ok], float)
-        lab = f"{g['scene']} mu={g['friction']:g}"
+        lab = f"{g['scene']} mu={g['friction']:g}" + (f" ({g['label']})" if g.get("label") else "")
         line = ax.loglog(n, [r["cpu_seconds"] for r in ok], "o-", label=f"{lab} CPU")[0]
         ax.loglog(n, [r["seconds"] for r in ok], "x--", color=line.get_color(), label=f"{lab} wall (loaded machine)")
         bx.loglog(n, [r["ms_per_factorization"] for r in ok], "o-", color=line.get_color(), label=lab)
@@ -201,13 +206,15 @@ def format_row(r: dict) -> str:
         return f"{r['scene']:8s} {r['factor']:>4g} {r['friction']:>4g}  error: {r['error']}"
     return (f"{r['scene']:8s} {r['factor']:>4g} {r['friction']:>4g} {r['tets']:>7d} {r['free_dofs']:>8d} "
             f"{r['seconds']:>8.1f} {r['cpu_seconds']:>8.1f} {r['peak_memory_mib']:>8.0f} "
-            f"{r['newton_iterations_per_step']:>6.2f} {r['factorizations']:>6d} {r['ms_per_factorization']:>8.0f} "
+            f"{r['newton_iterations_per_step']:>6.2f} {r['factorizations']:>6d} {r.get('lagged_solves', 0):>6d} "
+            f"{r.get('pcg_iterations', 0):>6d} {r['ms_per_factorization']:>8.0f} "
             f"{100 * r['factorization_share']:>6.0f} {100 * r['assembly_share']:>6.0f} {r['fill']:>6.1f}")
 
 
 def format_table(groups: list) -> str:
     head = (f"{'scene':8s} {'x':>4s} {'mu':>4s} {'tets':>7s} {'dofs':>8s} {'wall s':>8s} {'cpu s':>8s} "
-            f"{'peak MiB':>8s} {'it/st':>6s} {'facts':>6s} {'ms/fact':>8s} {'fact%':>6s} {'asm%':>6s} {'fill':>6s}")
+            f"{'peak MiB':>8s} {'it/st':>6s} {'facts':>6s} {'lagged':>6s} {'pcg':>6s} "
+            f"{'ms/fact':>8s} {'fact%':>6s} {'asm%':>6s} {'fill':>6s}")
     lines = [head]
     for g in groups:
         lines += [format_row(r) for r in g["rows"]]
@@ -225,3 +232,30 @@ def parse_level(spec: str) -> tuple[str, float, float]:
         return scene, float(f), float(mu)
     except ValueError:
         raise InputError(f"--scaling-level must be SCENE:FACTOR:MU, got {spec!r}") from None
+
+
+def main(argv=None) -> int:
+    """``python tools/benchmarks/_scaling.py --plot PNG RUN.json[:LABEL] ...``: one plot of several
+    ``insertion --scaling`` outputs (e.g. main's and a branch's levels), each run's groups labelled."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="_scaling.py", description=main.__doc__.split("\n")[0])
+    ap.add_argument("--plot", required=True, help="PNG path")
+    ap.add_argument("runs", nargs="+", help="JSON outputs of bench.py insertion --scaling, each optionally :LABEL")
+    a = ap.parse_args(argv)
+    groups = []
+    for spec in a.runs:
+        path, _, label = spec.partition(":")
+        try:
+            with open(path) as f:
+                run = json.loads(f.read().strip().splitlines()[-1])
+        except (OSError, ValueError, IndexError) as e:
+            print(f"_scaling.py: error: {path}: {e}", file=sys.stderr)
+            return 2
+        groups += [{**g, "label": label} for g in run.get("groups", [])]
+    plot_scaling(groups, a.plot)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -216,9 +216,21 @@ def run(argv) -> dict:
     ap.add_argument("--amg", action="store_true",
                     help="CHOLMOD against pyamg's smoothed-aggregation AMG + CG on clip3d's P2 Hessians at --factors")
     ap.add_argument("--factors", default="1,2,4,8", help="--amg: clip3d's tet-count factors (insertion --scaling's)")
+    ap.add_argument("--ordering", default=None, metavar="SCENE:F,F,...;SCENE:F,...",
+                    help="CHOLMOD's AMD ordering against METIS nested dissection (pymetis) on the scaling levels' "
+                         "Hessians, e.g. 'clip3d:1,2,4,8;claw3d:1,2,4'")
     a = ap.parse_args(argv)
     if a.amg:
         return amg_against_cholmod([float(f) for f in a.factors.split(",")])
+    if a.ordering:
+        from simfab.errors import InputError
+
+        try:
+            levels = [(sc, float(f)) for part in a.ordering.split(";") for sc, fs in [part.split(":")]
+                      for f in fs.split(",")]
+        except ValueError:
+            raise InputError(f"--ordering must be SCENE:F,F;SCENE:F, got {a.ordering!r}") from None
+        return ordering_against_amd(levels)
     names = [s for s in a.libraries.split(",") if s]
     rng = np.random.default_rng(0)
     out = {"benchmark": "linear_solvers", "reference": None,
@@ -323,3 +335,89 @@ def amg_against_cholmod(factors) -> dict:
               f"AMG setup {row['amg_setup_s']} s, CG 1e-2 {row['cg_0.01']}, 1e-8 {row['cg_1e-08']}", file=sys.stderr)
     return {"benchmark": "linear_solvers --amg", "system": "clip3d P2 free Hessian at rest (PSD, regularized)",
             "rows": rows}
+
+
+def _level_hessian(scene: str, factor: float):
+    """(A_ff CSR, node of each free dof): the free block of the insertion-scaling level's PSD Hessian
+    at the rest shape, the rigid-mode regularization included (as the factorization floor uses)."""
+    from benchmarks._scaling import level_overrides
+    from benchmarks.insertion import ORIGINAL_SIZE
+    from simfab.coupling.layout import regularize
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.fem.elastic import energy_gradient_hessian
+
+    base = {k: dict(v) for k, v in ORIGINAL_SIZE.get(scene, {}).items()}
+    cm = load_coupling_scene(scene, overrides={**base, "compliant": level_overrides(scene, factor, base)})
+    _, _, H = energy_gradient_hessian(cm.fem, np.asarray(cm.fem.rest))
+    regularize(cm, H)
+    free = np.flatnonzero(np.asarray(cm.free).ravel())
+    return sp.csr_matrix(H)[free][:, free].tocsr(), free // cm.dim, int(cm.fem.n_elements)
+
+
+def nested_dissection(A: sp.csr_matrix, node: np.ndarray) -> np.ndarray:
+    """A fill-reducing permutation of A's unknowns (new -> old): METIS nested dissection of the mesh's
+    vertex graph (the unknowns of one vertex kept together)."""
+    try:
+        import pymetis
+    except ImportError:
+        from simfab.errors import InputError
+
+        raise InputError("--ordering needs pymetis (pip install pymetis)") from None
+    uniq, nid = np.unique(node, return_inverse=True)
+    P = sp.csr_matrix((np.ones(len(nid)), (np.arange(len(nid)), nid)), shape=(len(nid), len(uniq)))
+    G = (P.T @ (abs(A) > 0).astype(float) @ P).tocsr()
+    G.setdiag(0)
+    G.eliminate_zeros()
+    order_nodes = np.asarray(pymetis.nested_dissection(pymetis.CSRAdjacency(G.indptr, G.indices))[0])
+    by_node = np.argsort(nid, kind="stable")
+    starts = np.concatenate([[0], np.cumsum(np.bincount(nid, minlength=len(uniq)))])
+    return np.concatenate([by_node[starts[k]:starts[k + 1]] for k in order_nodes])
+
+
+def ordering_against_amd(levels) -> dict:
+    """Per (scene, factor): entries of CHOLMOD's supernodal factor L and the factorization's flops
+    (sum of the squared column counts of L), the ordering's CPU seconds and
+    the numeric factorization's and a solve's CPU seconds (fastest of 3) with CHOLMOD's own ordering
+    (cvxopt's CHOLMOD is built without METIS: AMD) and with METIS nested dissection (``pymetis``)."""
+    import cvxopt
+
+    from simfab.solve.linear import import_cholmod
+
+    cholmod = import_cholmod()
+    rows = []
+    for scene, f in levels:
+        A, node, tets = _level_hessian(scene, f)
+        lo = sp.tril(A).tocoo()
+        row = {"scene": scene, "factor": f, "tets": tets, "free_dofs": A.shape[0], "nnz": int(A.nnz)}
+        for label in ("amd", "metis_nd"):
+            Ac = cvxopt.spmatrix(cvxopt.matrix(lo.data), cvxopt.matrix(lo.row.astype(np.int64)),
+                                 cvxopt.matrix(lo.col.astype(np.int64)), A.shape)
+            c0 = _cpu()
+            perm = None if label == "amd" else nested_dissection(A, node)
+            t_order = _cpu() - c0
+            saved = dict(cholmod.options)
+            cholmod.options["supernodal"] = 1
+            cholmod.options["nmethods"] = 0 if perm is None else 1  # 1: the given permutation only
+            try:
+                F = (cholmod.symbolic(Ac) if perm is None
+                     else cholmod.symbolic(Ac, p=cvxopt.matrix(perm.astype(np.int64))))
+            finally:  # CHOLMOD keeps a setting once made: nmethods back to its default, 0
+                cholmod.options.clear()
+                cholmod.options.update({"nmethods": 0, **saved})
+            fact, solve = np.inf, np.inf
+            for _ in range(3):
+                c0 = _cpu()
+                cholmod.numeric(Ac, F)
+                fact = min(fact, _cpu() - c0)
+                x = cvxopt.matrix(np.ones(A.shape[0]))
+                c0 = _cpu()
+                cholmod.solve(F, x)
+                solve = min(solve, _cpu() - c0)
+            L = cholmod.getfactor(F)
+            counts = np.bincount(np.asarray(L.J, dtype=np.int64).ravel(), minlength=A.shape[0]).astype(float)
+            row[label] = {"factor_entries": len(L.V), "factor_gflop": round(float(counts @ counts) / 1e9, 3),
+                          "ordering_cpu_s": round(t_order, 3),
+                          "factorization_cpu_s": round(fact, 3), "solve_cpu_s": round(solve, 4)}
+        rows.append(row)
+        print(f"{scene} x{f:g} {row['free_dofs']} dofs: AMD {row['amd']}; METIS ND {row['metis_nd']}", file=sys.stderr)
+    return {"benchmark": "linear_solvers --ordering", "system": "free PSD Hessian at rest (regularized)", "rows": rows}
