@@ -37,11 +37,14 @@ from simfab.rods.statics import StaticsConfig, StaticSolver
 
 ESCALATION_FACTOR = 10.0  # mu's factor per escalation (TuneConfig.escalations)
 #: Newton iterations a trial equilibrium of :func:`tune` may take before the trial is abandoned like one
-#: that does not converge (the step halved): a step the linearization predicts well converges from its
-#: predictor in a few iterations, one too long for it sends the network over to another configuration,
-#: a long slide whose end the objective then rejects (docs/decisions.md, "Tuning: abandoned trials")
-TRIAL_NEWTON_ITERATIONS = 30
+#: that does not converge (the step halved). The static solver's own limit: trials of long steps that
+#: end rejected take 80-135 iterations on cap80, but accepted ones up to 65 on the saddle, so no shorter
+#: cap separates them (docs/decisions.md, "Deployment tuning: where its time goes")
+TRIAL_NEWTON_ITERATIONS = 200
 HALVINGS = 4  # trials per escalation: the step, then halved three times
+#: :func:`tune_pattern` starts a step this many trials before the one its last step was accepted at (a
+#: step up to 4 x as long; one before, 2 x, cost the saddle its long second step: RMS 0.125 -> 0.377 %)
+RESTART_BACK = 2
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -185,8 +188,9 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
 
     Trials in order (``trial`` = ``HALVINGS`` x escalation + halvings): the step at mu x
     ``ESCALATION_FACTOR``^k, then halved ``HALVINGS - 1`` times, for k = 0 .. ``cfg.escalations``;
-    ``first_trial`` skips the first ones (the first step only: :func:`tune_pattern` starts a step at
-    the trial before the one its last step was accepted at). ``Tuning.trial``: the accepted step's."""
+    ``first_trial`` skips the first ones (the first step only: :func:`tune_pattern` starts a step
+    ``RESTART_BACK`` trials before the one its last step was accepted at). ``Tuning.trial``: the
+    accepted step's."""
 
     t0 = time.perf_counter()
     model = net.model
@@ -322,8 +326,8 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
     the re-cut pattern (:func:`retuned_pattern`), its network (``deploy_cfg``, ``ties`` as built
     for ``net``) and its own equilibrium (:func:`redeploy`); a step whose re-cut equilibrium does not
     lower the objective E is retried with mu x ``ESCALATION_FACTOR`` (up to ``cfg.escalations``
-    times), else the tuning stops (see module doc). Each step's trials start one before the trial its
-    last step was accepted at (a step twice as long; Levenberg-Marquardt's damping kept between steps),
+    times), else the tuning stops (see module doc). Each step's trials start ``RESTART_BACK`` before the
+    trial its last step was accepted at (Levenberg-Marquardt's damping kept between steps, loosened),
     all of them when none of those lowers E."""
     t0 = time.perf_counter()
     fit = fit_residual(dep.vertex_positions(), Y, target, cfg.point_weight)
@@ -341,7 +345,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
         for k in range(cfg.escalations + 1):  # a re-cut that does not lower E: the step again at mu x 10
             one = dataclasses.replace(cfg, iterations=1, damping=cfg.damping * ESCALATION_FACTOR**k,
                                       escalations=cfg.escalations - k)
-            first = max(0, last - 1) if k == 0 else 0
+            first = max(0, last - RESTART_BACK) if k == 0 else 0
             tuned = tune(pat, net, dep, Y, target, one, device=device, first_trial=first)
             solves += tuned.solves
             abandoned += tuned.abandoned
