@@ -37,13 +37,14 @@ from simfab.rods.statics import StaticsConfig, StaticSolver
 
 ESCALATION_FACTOR = 10.0  # mu's factor per escalation (TuneConfig.escalations)
 #: Newton iterations a trial equilibrium of :func:`tune` may take before the trial is abandoned like one
-#: that does not converge (the step halved). The static solver's own limit: trials of long steps that
-#: end rejected take 80-135 iterations on cap80, but accepted ones up to 65 on the saddle, so no shorter
-#: cap separates them (docs/decisions.md, "Deployment tuning: where its time goes")
+#: that does not converge (the step halved). The static solver's own limit: the iteration counts of
+#: rejected and accepted trials overlap, so no shorter cap separates them (docs/decisions.md,
+#: "Deployment tuning: where its time goes")
 TRIAL_NEWTON_ITERATIONS = 200
 HALVINGS = 4  # trials per escalation: the step, then halved three times
 #: :func:`tune_pattern` starts a step this many trials before the one its last step was accepted at (a
-#: step up to 4 x as long; one before, 2 x, cost the saddle its long second step: RMS 0.125 -> 0.377 %)
+#: step up to 4 x as long; one before cut a saddle's long second step short: docs/decisions.md,
+#: "Deployment tuning: where its time goes")
 RESTART_BACK = 2
 
 
