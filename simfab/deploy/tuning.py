@@ -33,9 +33,19 @@ from simfab.deploy.compare import deviation, height_error, kabsch
 from simfab.deploy.network import Deployment, build_network
 from simfab.errors import ConvergenceError, InputError
 from simfab.rods.model import synchronize
-from simfab.rods.statics import StaticSolver
+from simfab.rods.statics import StaticsConfig, StaticSolver
 
 ESCALATION_FACTOR = 10.0  # mu's factor per escalation (TuneConfig.escalations)
+#: Newton iterations a trial equilibrium of :func:`tune` may take before the trial is abandoned like one
+#: that does not converge (the step halved). The static solver's own limit: the iteration counts of
+#: rejected and accepted trials overlap, so no shorter cap separates them (docs/decisions.md,
+#: "Deployment tuning: where its time goes")
+TRIAL_NEWTON_ITERATIONS = 200
+HALVINGS = 4  # trials per escalation: the step, then halved three times
+#: :func:`tune_pattern` starts a step this many trials before the one its last step was accepted at (a
+#: step up to 4 x as long; one before cut a saddle's long second step short: docs/decisions.md,
+#: "Deployment tuning: where its time goes")
+RESTART_BACK = 2
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -88,7 +98,9 @@ class Tuning:
     """Result: tuned gaps (n,) [m] (0 on the boundary), the tuned equilibrium (a RodState of the
     network it was computed on), per accepted iterate (first: before tuning) the RMS distance to the
     surface [m] (``rms_history``) and the RMS distance to the vertices' own target points [m]
-    (``point_rms_history``), Gauss-Newton steps taken, equilibrium solves, seconds."""
+    (``point_rms_history``), Gauss-Newton steps taken, equilibrium solves (converged trials), seconds,
+    trials abandoned (not converged within ``TRIAL_NEWTON_ITERATIONS``), the last accepted step's trial
+    (:func:`tune`)."""
 
     gap: np.ndarray
     state: object
@@ -97,6 +109,8 @@ class Tuning:
     steps: int
     solves: int
     seconds: float
+    abandoned: int = 0
+    trial: int = 0
 
 
 @dataclass(frozen=True)
@@ -167,10 +181,17 @@ def achievable_growth(pat) -> tuple[np.ndarray, np.ndarray]:
     return pat.insert_size - gmax, pat.insert_size - pc.min_gap
 
 
-def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str = "cpu") -> Tuning:
+def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str = "cpu",
+         first_trial: int = 0) -> Tuning:
     """Tune the gaps of ``pat`` from its deployment ``dep`` (network ``net``) towards ``target`` with
     correspondences Y (n,3) (see module doc). Returns the tuned gaps; the caller re-cuts and
-    re-deploys."""
+    re-deploys.
+
+    Trials in order (``trial`` = ``HALVINGS`` x escalation + halvings): the step at mu x
+    ``ESCALATION_FACTOR``^k, then halved ``HALVINGS - 1`` times, for k = 0 .. ``cfg.escalations``;
+    ``first_trial`` skips the first ones (the first step only: :func:`tune_pattern` starts a step
+    ``RESTART_BACK`` trials before the one its last step was accepted at). ``Tuning.trial``: the
+    accepted step's."""
 
     t0 = time.perf_counter()
     model = net.model
@@ -188,14 +209,15 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
     col = {int(v): j for j, v in enumerate(ins)}
     for row, (n_, v) in enumerate(zip(net.pull_nodes, net.pull_vertex)):
         D[col[int(v)], n_] = net.pull_dir[row]
-    solver = StaticSolver(model, device=device)
+    solver = StaticSolver(model, device=device, options=StaticsConfig(max_iter=TRIAL_NEWTON_ITERATIONS))
     solver.set_attachment_offsets(offsets(d))
     state = dep.final
     pos_of = {int(b): i for i, b in enumerate(solver.red.bodies)}
     rows = solver.red.body_trans_cols.reshape(-1, 3)[[pos_of[int(b)] for b in net.vertex_body]]  # (n,3)
     fit = fit_residual(state.body_pos[net.vertex_body], Y, target, cfg.point_weight)
     hist, phist = [fit.plane_rms], [fit.point_rms]
-    steps = solves = 0
+    steps = solves = abandoned = trial = 0
+    skip = min(int(first_trial), HALVINGS * (cfg.escalations + 1) - 1)
     for _ in range(cfg.iterations):
         dq = solver.offset_sensitivity(state, D)  # (nq, k)
         dX = dq[rows]  # (n, 3, k)
@@ -203,18 +225,21 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
         A = J.T @ J
         d_try = d.copy()
         accepted = False
-        for k in range(cfg.escalations + 1):
+        for k in range(skip // HALVINGS, cfg.escalations + 1):
             mu = cfg.damping * ESCALATION_FACTOR**k * float(np.max(np.diag(A)))
             step = -np.linalg.solve(A + mu * np.eye(len(ins)), J.T @ fit.e)
-            alpha = 1.0
-            for _ in range(4):
+            h0 = skip % HALVINGS if k == skip // HALVINGS else 0
+            alpha = 0.5**h0
+            for h in range(h0, HALVINGS):
+                trial = HALVINGS * k + h
                 d_try[ins] = np.clip(d[ins] + alpha * step, lo[ins], hi[ins])
                 solver.set_attachment_offsets(offsets(d_try))
                 st = solver.red.apply(state, dq @ (d_try[ins] - d[ins]))
                 try:
                     res = solver.solve(st)
                     solves += 1
-                except ConvergenceError:
+                except ConvergenceError:  # no equilibrium near the predictor: the step is too long
+                    abandoned += 1
                     alpha *= 0.5
                     continue
                 fit_try = fit_residual(res.state.body_pos[net.vertex_body], Y, target, cfg.point_weight)
@@ -228,12 +253,13 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
             solver.set_attachment_offsets(offsets(d))
             break
         d, state, fit = d_try.copy(), res.state, fit_try
+        skip = 0
         hist.append(fit.plane_rms)
         phist.append(fit.point_rms)
         steps += 1
     gap = np.where(pat.interior, pat.insert_size - d, 0.0)
     return Tuning(gap=gap, state=state, rms_history=hist, point_rms_history=phist, steps=steps, solves=solves,
-                  seconds=time.perf_counter() - t0)
+                  seconds=time.perf_counter() - t0, abandoned=abandoned, trial=trial)
 
 
 def retuned_pattern(pat, gap: np.ndarray):
@@ -281,7 +307,7 @@ class TunedPattern:
     per accepted step (first: before tuning) the RMS distances to the surface and to the vertices'
     target points of the re-cut pattern's equilibrium [m]; steps, equilibrium solves (trial and
     re-cut), seconds; stop: why it stopped ("iterations", "bound met", "time budget", "progress
-    stalled", "no step lowers the objective")."""
+    stalled", "no step lowers the objective"); trials abandoned (:data:`TRIAL_NEWTON_ITERATIONS`)."""
 
     pattern: object
     network: object
@@ -292,6 +318,7 @@ class TunedPattern:
     solves: int
     seconds: float
     stop: str = "iterations"
+    abandoned: int = 0
 
 
 def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_cfg, *, ties=None,
@@ -300,11 +327,13 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
     the re-cut pattern (:func:`retuned_pattern`), its network (``deploy_cfg``, ``ties`` as built
     for ``net``) and its own equilibrium (:func:`redeploy`); a step whose re-cut equilibrium does not
     lower the objective E is retried with mu x ``ESCALATION_FACTOR`` (up to ``cfg.escalations``
-    times), else the tuning stops (see module doc)."""
+    times), else the tuning stops (see module doc). Each step's trials start ``RESTART_BACK`` before the
+    trial its last step was accepted at (Levenberg-Marquardt's damping kept between steps, loosened),
+    all of them when none of those lowers E."""
     t0 = time.perf_counter()
     fit = fit_residual(dep.vertex_positions(), Y, target, cfg.point_weight)
     hist, phist = [fit.plane_rms], [fit.point_rms]
-    steps = solves = 0
+    steps = solves = abandoned = last = 0
     stop = "iterations"
     for _ in range(cfg.iterations):
         if bound_met(pat, dep, Y, target, cfg):
@@ -317,8 +346,14 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
         for k in range(cfg.escalations + 1):  # a re-cut that does not lower E: the step again at mu x 10
             one = dataclasses.replace(cfg, iterations=1, damping=cfg.damping * ESCALATION_FACTOR**k,
                                       escalations=cfg.escalations - k)
-            tuned = tune(pat, net, dep, Y, target, one, device=device)
+            first = max(0, last - RESTART_BACK) if k == 0 else 0
+            tuned = tune(pat, net, dep, Y, target, one, device=device, first_trial=first)
             solves += tuned.solves
+            abandoned += tuned.abandoned
+            if tuned.steps == 0 and first > 0:  # none of the shorter steps: the longer ones skipped too
+                tuned = tune(pat, net, dep, Y, target, one, device=device)
+                solves += tuned.solves
+                abandoned += tuned.abandoned
             if tuned.steps == 0:
                 break
             pat2 = retuned_pattern(pat, tuned.gap)
@@ -335,6 +370,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
         if not accepted:
             stop = "no step lowers the objective"
             break
+        last = HALVINGS * k + tuned.trial
         gain = 1.0 - fit2.cost / fit.cost if fit.cost > 0 else 0.0
         pat, net, dep, fit = pat2, net2, dep2, fit2
         hist.append(fit.plane_rms)
@@ -346,4 +382,4 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
     if stop == "iterations" and bound_met(pat, dep, Y, target, cfg):
         stop = "bound met"
     return TunedPattern(pattern=pat, network=net, deployment=dep, rms_history=hist, point_rms_history=phist,
-                        steps=steps, solves=solves, seconds=time.perf_counter() - t0, stop=stop)
+                        steps=steps, solves=solves, seconds=time.perf_counter() - t0, stop=stop, abandoned=abandoned)

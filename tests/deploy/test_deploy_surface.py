@@ -392,6 +392,28 @@ def test_damping_escalation_only_acts_on_a_rejected_step(small_dome):
     assert np.all(np.diff(E) < 0)
 
 
+def test_tuning_trials_start_where_asked_and_stop_at_their_iteration_cap(small_dome, monkeypatch):
+    """``first_trial`` = HALVINGS starts the step at mu x ESCALATION_FACTOR: the same gaps (to round-off)
+    as a tuning whose damping is that large, and the accepted trial is reported; a trial whose
+    equilibrium needs more than ``TRIAL_NEWTON_ITERATIONS`` Newton iterations is abandoned as one that
+    does not converge (with a cap of one iteration every trial is: no step, every trial counted)."""
+    from simfab.deploy import tuning
+
+    pat, net, dep, cfg, Y = small_dome
+    tgt = surface.spherical_cap(0.1, np.radians(50), 10)
+    c = tuning.TuneConfig(iterations=1, point_weight=1.0, escalations=1)
+    skipped = tuning.tune(pat, net, dep, Y, tgt, c, first_trial=tuning.HALVINGS)
+    damped = tuning.tune(pat, net, dep, Y, tgt, tuning.TuneConfig(iterations=1, point_weight=1.0,
+                                                                  damping=c.damping * tuning.ESCALATION_FACTOR))
+    assert skipped.steps == 1 and damped.steps == 1 and skipped.trial == tuning.HALVINGS + damped.trial
+    assert np.max(np.abs(skipped.gap - damped.gap)) < 1e-12
+    assert np.max(np.abs(skipped.gap - tuning.tune(pat, net, dep, Y, tgt, c).gap)) > 1e-6  # a different step
+    monkeypatch.setattr(tuning, "TRIAL_NEWTON_ITERATIONS", 1)
+    capped = tuning.tune(pat, net, dep, Y, tgt, c)
+    assert capped.steps == 0 and capped.abandoned == tuning.HALVINGS * 2 and capped.solves == 0
+    assert np.max(np.abs(capped.gap - np.where(pat.interior, pat.gap, 0.0))) < 1e-15
+
+
 def test_tune_config_errors():
     from simfab.deploy import tuning
     from simfab.errors import InputError
