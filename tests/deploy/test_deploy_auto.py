@@ -210,6 +210,30 @@ def test_bundled_scene_meets_the_bounds_on_the_defaults(name):
         assert r.sim_check["stability"]["settled"]
 
 
+def test_strongly_curved_target_gets_smaller_cells_with_scaled_features(tmp_path):
+    """An 85 deg cap on a 60 mm sphere: the curvature rule asks for cells below SPACING_RANGE[0] (0.25 R =
+    15 mm), where the default features (3 mm beams, 4 mm beam ends, 1.5 mm gaps) leave no gap range; the
+    defaults then take the smaller cell and scale those features with it, and every catalogue size is a
+    plate the cell allows. Given beams (a scene's sheet) keep the cell at SPACING_RANGE[0]."""
+    t = families.member("cap85-R60@12")
+    s = _bare(tmp_path, t)
+    h, pc = s.pattern.spacing, s.pattern
+    assert auto.SPACING_RANGE[0] * auto.FEATURE_SCALE_MIN <= h < auto.SPACING_RANGE[0]
+    scale = h / auto.SPACING_RANGE[0]
+    base = PatternConfig()
+    for k in ("beam_width", "min_beam", "min_gap"):
+        assert getattr(pc, k) == pytest.approx(scale * getattr(base, k), abs=1e-6), k
+        assert f"pattern.{k}" in s.decisions.decided
+    assert s.cuts.max_cones > 0 and all(scale * auto.MIN_INSERT - auto.SIZE_STEP <= r < h / 2 - pc.beam_width
+                                        for r in pc.sizes)
+    given = tmp_path / "given.toml"
+    trimesh.Trimesh(t.V, t.F, process=False).export(tmp_path / "c.obj")
+    given.write_text('[target]\nmesh = "c.obj"\n[pattern]\nbeam_width = 0.003\n')
+    s2 = load_deploy_scene(given)
+    assert s2.pattern.spacing == auto.SPACING_RANGE[0] and s2.pattern.beam_width == 0.003
+    assert s2.pattern.min_beam == base.min_beam
+
+
 def test_point_weight_follows_the_saddle_shaped_area():
     """The tuning's point weight: the full AUTO_TUNE weight on a cap (K > 0 everywhere: the shape could
     turn within its sphere) and on a cylinder (K = 0 up to the triangulation's noise: it could slide
