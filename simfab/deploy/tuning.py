@@ -5,13 +5,14 @@ network's bending; here the growth of each insert, ``d_i = r_i - g_i`` [m], is t
 least-squares problem on the deployed shape itself. Residual: the distance to the surface stacked
 with a weighted point-to-point term towards each vertex's own target point y_j,
 
-    e = [ |R x_j + t - c_j| ,  sqrt(w) (R x_j + t - y_j) ,  sqrt(w_h n) (H(x) - H(y)) ]   (n + 3n + 1 rows),
+    e = [ |R x_j + t - c_j| ,  sqrt(w) (R x_j + t - y_j) ,  sqrt(w_h n) s(H(x) - H(y)) ]   (n + 3n + 1 rows),
 
 E = |e|^2 / 2, c_j the closest target point, w = ``point_weight``, H the out-of-plane extent
 (:func:`simfab.deploy.compare.out_of_plane_extent`, the deployed height the bounds read; its maximum
-and minimum smoothed by log-sum-exp over ``HEIGHT_SMOOTHING`` of the height), w_h =
-``height_weight``, (R, t) the ICP alignment minimising the same E (H is invariant under it, so
-dE/d(R, t) = 0 and the Gauss-Newton gradient J^T e needs no alignment term).
+and minimum smoothed by log-sum-exp over ``HEIGHT_SMOOTHING`` of the height), w_h = ``height_weight``,
+s(x) = sign(x) max(|x| - tol, 0) with tol = ``target_height`` x H(y) (the height row acts only on a
+height outside the stop's tolerance), (R, t) the ICP alignment minimising the same E (H is invariant
+under it, so dE/d(R, t) = 0 and the Gauss-Newton gradient J^T e needs no alignment term).
 
 Sensitivities (implicit function theorem): ``dq*/dd_i = -H_q^{-1} dg_q/dd_i`` at the equilibrium,
 one factorization for all inserts (:meth:`simfab.rods.statics.StaticSolver.offset_sensitivity`).
@@ -61,8 +62,9 @@ class TuneConfig:
     tuning's own objective; target_height [-]: with ``target_rms``, the bound is met only once the
     deployed out-of-plane height is also within this fraction of the target's (0: not checked);
     height_weight [-]: w_h, the weight of the height row (the deployed out-of-plane extent against the
-    target's): at w_h = 1 a height 1 mm off weighs as much as every vertex 1 mm off the surface (0: no
-    height row; the surface distance alone leaves the height free where the shape can bend within it)."""
+    target's, beyond ``target_height`` of it): at w_h = 1 a height 1 mm beyond that weighs as much as
+    every vertex 1 mm off the surface (0: no height row; the surface distance alone leaves the height
+    free where the shape can bend within it)."""
 
     iterations: int = 0
     damping: float = 1e-3
@@ -134,9 +136,10 @@ def _closest(tm, A):
 
 
 def fit_residual(X: np.ndarray, Y: np.ndarray, target, point_weight: float, *, height_weight: float = 0.0,
-                 icp_iters: int = 30) -> Fit:
+                 height_tolerance: float = 0.0, icp_iters: int = 30) -> Fit:
     """Residual of deployed vertices X (n,3) [m] against the target surface (``target.V``, ``target.F``),
-    the vertices' target points Y (n,3) [m] and the target points' height (``height_weight``), after the
+    the vertices' target points Y (n,3) [m] and the target points' height (``height_weight``, beyond
+    ``height_tolerance`` of it), after the
     alignment that minimises the same objective (ICP from the Kabsch fit onto Y, until E changes by less
     than 1e-12 relative)."""
     tm = trimesh.Trimesh(target.V, target.F, process=False)
@@ -159,10 +162,19 @@ def fit_residual(X: np.ndarray, Y: np.ndarray, target, point_weight: float, *, h
     wh = float(height_weight)
     tau = HEIGHT_SMOOTHING * (out_of_plane_extent(Y) or target.diameter)
     H, G = _height_and_gradient(A, tau)
-    dh = H - _height_and_gradient(Y, tau)[0]
+    HY = _height_and_gradient(Y, tau)[0]
+    dh = H - HY
+    tol = height_tolerance * HY
+    dh, G = np.sign(dh) * max(abs(dh) - tol, 0.0), G * float(abs(dh) > tol)
     e = np.concatenate([dist, np.sqrt(w) * (A - Y).ravel(), [np.sqrt(wh * len(A)) * dh]])
     return Fit(e=e, R=R, t=t, N=N, point_weight=w, cost=0.5 * float(e @ e), plane_rms=float(np.sqrt(np.mean(dist**2))),
                point_rms=float(np.sqrt(np.mean(np.sum((A - Y) ** 2, axis=1)))), height_weight=wh, height_grad=G)
+
+
+def _fit(X: np.ndarray, Y: np.ndarray, target, cfg: TuneConfig) -> Fit:
+    """:func:`fit_residual` with the weights and height tolerance of ``cfg``."""
+    return fit_residual(X, Y, target, cfg.point_weight, height_weight=cfg.height_weight,
+                        height_tolerance=cfg.target_height)
 
 
 def _height_and_gradient(A: np.ndarray, tau: float) -> tuple[float, np.ndarray]:
@@ -236,8 +248,7 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
     state = dep.final
     pos_of = {int(b): i for i, b in enumerate(solver.red.bodies)}
     rows = solver.red.body_trans_cols.reshape(-1, 3)[[pos_of[int(b)] for b in net.vertex_body]]  # (n,3)
-    fit = fit_residual(state.body_pos[net.vertex_body], Y, target, cfg.point_weight,
-                       height_weight=cfg.height_weight)
+    fit = _fit(state.body_pos[net.vertex_body], Y, target, cfg)
     hist, phist = [fit.plane_rms], [fit.point_rms]
     steps = solves = 0
     for _ in range(cfg.iterations):
@@ -261,8 +272,7 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
                 except ConvergenceError:
                     alpha *= 0.5
                     continue
-                fit_try = fit_residual(res.state.body_pos[net.vertex_body], Y, target, cfg.point_weight,
-                                       height_weight=cfg.height_weight)
+                fit_try = _fit(res.state.body_pos[net.vertex_body], Y, target, cfg)
                 if fit_try.cost < fit.cost:
                     accepted = True
                     break
@@ -347,8 +357,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
     lower the objective E is retried with mu x ``ESCALATION_FACTOR`` (up to ``cfg.escalations``
     times), else the tuning stops (see module doc)."""
     t0 = time.perf_counter()
-    fit = fit_residual(dep.vertex_positions(), Y, target, cfg.point_weight,
-                       height_weight=cfg.height_weight)
+    fit = _fit(dep.vertex_positions(), Y, target, cfg)
     hist, phist = [fit.plane_rms], [fit.point_rms]
     steps = solves = 0
     stop = "iterations"
@@ -374,8 +383,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
             except ConvergenceError:
                 continue
             solves += 1
-            fit2 = fit_residual(dep2.vertex_positions(), Y, target, cfg.point_weight,
-                                height_weight=cfg.height_weight)
+            fit2 = _fit(dep2.vertex_positions(), Y, target, cfg)
             if fit2.cost < fit.cost:
                 accepted = True
                 break
