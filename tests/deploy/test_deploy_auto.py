@@ -106,13 +106,14 @@ def test_spacing_follows_size_and_curvature():
         assert auto.SPACING_RANGE[0] <= auto.spacing(families.member(n)) <= auto.SPACING_RANGE[1]
 
 
-@pytest.mark.parametrize("name", ["cap70-R100@12", "saddle-c100@24"])
+@pytest.mark.parametrize("name", ["cap70-R100@12", "saddle-c110-a90@16"])
 def test_bare_mesh_deploys_within_the_bounds_on_the_defaults(name, tmp_path):
     """A steep spherical cap (70 deg, R = 100 mm: cones and tied seams decided by the defaults) and a
-    strong saddle (curvature radius = the disk radius, 45 deg slopes at the rim), each read as a bare
-    mesh - no scene file, no flag - deploy within the bounds: RMS <= 1 % of the diameter, height
-    within 3 %, no gap unreachable. Measured (bench deploy --family, docs/validation/deploy.md): the
-    cap 0.479 % / +2.45 %, the saddle 0.485 % / -1.6 % (with 12 rings 0.341 % / -0.5 %)."""
+    strong saddle (curvature radius 110 mm over a 90 mm disk, 39 deg slopes at the rim), each read as a
+    bare mesh - no scene file, no flag - deploy within the bounds: RMS <= 1 % of the diameter, height
+    within 3 %, no gap unreachable. The saddle's height is held by the tuning's height row: without it
+    (w = 0 on saddles) it deployed 6.6 % too high. Measured (bench deploy --family,
+    docs/validation/deploy.md): the cap 0.501 % / +2.85 %, the saddle 0.822 % / -1.86 %."""
     from simfab.deploy import pipeline
 
     s = _bare(tmp_path, families.member(name))
