@@ -4,7 +4,9 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
 
 - spacing h: sqrt(A / CELLS) for the surface area A, at most ``CURVATURE_SPACING`` / sqrt(K_med)
   (the median |Gaussian curvature|: a cell spans a bounded angle of the surface), rounded down to
-  a millimetre, within ``SPACING_RANGE``;
+  a millimetre, within ``SPACING_RANGE``; below its lower end (the smallest cell the default beams,
+  beam ends, gaps and inserts fit) down to ``FEATURE_SCALE_MIN`` of it, with those features scaled
+  by h / ``SPACING_RANGE[0]`` (``FEATURES``, when the scene sets none of them);
 - cuts: the growth each interior vertex needs, d = (h/2)(e^{-u} - 1) of the uncut flattening
   (:mod:`simfab.deploy.pattern`), must fit a catalogue of at most ``MAX_SIZES`` sizes between
   ``MIN_INSERT`` and h/2 - beam_width, and the cells' growth e^{-u} the springs' reach
@@ -17,8 +19,8 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
 - layout: ``conforming`` (grid core, regular, growths fitted to the edges) without cuts, ``mesh``
   with them: both cover >= 99 % of the flat domain;
 - tuning: on (``AUTO_TUNE``; the point weight from the share of the area that is not
-  saddle-shaped, :func:`point_weight`), stopping once the deviation bound is met, when progress stalls or at its
-  budget of steps.
+  saddle-shaped, :func:`point_weight`; a height row beyond the stop's height tolerance), stopping
+  once the deviation bound is met, when progress stalls or at its budget of steps.
 
 :func:`complete` returns the scene with these filled in and :class:`Decisions` (what was decided
 and why, for the summary).
@@ -34,7 +36,12 @@ import numpy as np
 CELLS = 64  # cells aimed at over the surface
 CURVATURE_SPACING = 0.25  # h <= this / sqrt(median |K|) [-]
 SPACING_RANGE = (0.02, 0.08)  # [m]
-MIN_INSERT = 0.003  # smallest insert half-size [m]
+MIN_INSERT = 0.003  # smallest insert half-size [m] (at the features' full size)
+#: the pattern's features that scale with a cell below SPACING_RANGE[0] (a strongly curved target: the
+#: 3 mm beams, 4 mm beam ends, 1.5 mm gaps and 3 mm inserts leave no gap range in smaller cells), down to this
+#: fraction of their size; MIN_INSERT scales with them
+FEATURE_SCALE_MIN = 0.6
+FEATURES = ("beam_width", "min_beam", "min_gap", "spring_width")
 MAX_SIZES = 3  # insert sizes in a catalogue
 SIZE_STEP = 0.0005  # catalogue sizes rounded to this [m]
 MARGIN = 0.0005  # gap margin kept from either achievable limit [m] (layouts' edges differ from h)
@@ -47,12 +54,15 @@ TUNE_ROOM = 0.2
 #: seam into equal edges of about the spacing; where seams and the outline meet they run down to ~0.5 h): with
 #: cuts the catalogue adds the smaller sizes such an insert needs for its gap to be achievable
 SEAM_EDGE = 0.5
-#: the tuning on by default: Gauss-Newton steps, towards the surface and each vertex's own point; it
-#: stops at the bound (RMS 0.5 % of the diameter, half the deployment bound, and the height within 2 %,
-#: two thirds of its bound; both measured as the run's deviation is), when a step gains < 2 %, or after
-#: 8 steps. Its budget is counted in steps, not seconds, so that the same input gives the same
-#: pattern on any machine and load (``[tune] seconds`` sets a wall-clock budget too).
-AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.005, target_height=0.02, min_gain=0.02)
+#: the tuning on by default: Gauss-Newton steps, towards the surface, each vertex's own point and (beyond
+#: the stop's height tolerance) the target's height, w_h = 0.3 (the surface distance alone lets a saddle's
+#: height drift: the point weight is 0 there, :func:`point_weight`); it stops at the bound (RMS 0.5 % of
+#: the diameter, half the deployment bound, and the height within 2 %, two thirds of its bound; both
+#: measured as the run's deviation is), when a step gains < 2 %, or after 8 steps. Its budget is counted
+#: in steps, not seconds, so that the same input gives the same pattern on any machine and load
+#: (``[tune] seconds`` sets a wall-clock budget too).
+AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.005, target_height=0.02, min_gain=0.02,
+                 height_weight=0.3)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -67,8 +77,8 @@ class Decisions:
     uncut_growth_max: float
 
 
-def spacing(target) -> float:
-    """The default spacing [m] of a target (see module doc)."""
+def spacing(target, *, floor: float = SPACING_RANGE[0]) -> float:
+    """The default spacing [m] of a target (see module doc), at least ``floor`` [m]."""
     from simfab.deploy.flatten import face_areas
 
     V, F = target.V, target.F
@@ -78,7 +88,7 @@ def spacing(target) -> float:
     k_med = float(np.median(np.abs(K)))
     if k_med > 0:
         h = min(h, CURVATURE_SPACING / np.sqrt(k_med))
-    return float(np.clip(np.floor(h * 1e3) / 1e3, *SPACING_RANGE))
+    return float(np.clip(np.floor(h * 1e3) / 1e3, floor, SPACING_RANGE[1]))
 
 
 def point_weight(target) -> float:
@@ -113,13 +123,14 @@ def _vertex_curvature(V, F) -> np.ndarray:
     return K
 
 
-def catalogue(d: np.ndarray, h: float, pc, *, room: float = 0.0, short: float = 1.0) -> tuple[list, int]:
+def catalogue(d: np.ndarray, h: float, pc, *, room: float = 0.0, short: float = 1.0,
+              min_insert: float = MIN_INSERT) -> tuple[list, int]:
     """The fewest insert sizes [m] that give every growth ``d`` (n,) [m] an achievable gap
     ``min_gap + m <= r - d <= s h/2 - min_beam - m``, m = MARGIN + ``room`` x (s h/2 - min_beam - min_gap)
     (``room``: the fraction of the gap range kept free at either end for the tuning; s = ``short``: the
     inserts' edges relative to h, e.g. along seams): greedily, the
     largest uncovered growth sets the next (smaller) size r = d + min_gap + m (rounded up to
-    ``SIZE_STEP``, at least ``MIN_INSERT``). Returns (sizes ascending, growths left uncovered by
+    ``SIZE_STEP``, at least ``min_insert``). Returns (sizes ascending, growths left uncovered by
     ``MAX_SIZES`` sizes or above the largest size the plates allow, r < h/2 - beam_width)."""
     m = MARGIN + room * (short * h / 2 - pc.min_beam - pc.min_gap)
     lo, hi = pc.min_gap + m, short * h / 2 - pc.min_beam - m
@@ -127,7 +138,7 @@ def catalogue(d: np.ndarray, h: float, pc, *, room: float = 0.0, short: float = 
     left = np.sort(np.asarray(d, dtype=np.float64))[::-1]
     sizes = []
     while len(left) and len(sizes) < MAX_SIZES:
-        r = max(np.ceil((left[0] + lo) / SIZE_STEP - 1e-9) * SIZE_STEP, MIN_INSERT)
+        r = max(np.ceil((left[0] + lo) / SIZE_STEP - 1e-9) * SIZE_STEP, min_insert)
         if r > r_max or (sizes and r >= sizes[-1]):  # a plate larger than the cell allows / no smaller size helps
             break
         g = r - left
@@ -154,9 +165,21 @@ def complete(scene, given: dict):
     decided = []
     pc, cc, tc = scene.pattern, scene.cuts, scene.tune
     upd = {}
+    scale = 1.0
     if "spacing" not in gp:
-        upd["spacing"] = spacing(tgt)
+        free = not ({*FEATURES, "beam_thickness"} & gp)  # the features scale with the cell unless the scene sets them
+        upd["spacing"] = spacing(tgt, floor=SPACING_RANGE[0] * (FEATURE_SCALE_MIN if free else 1.0))
         decided.append("pattern.spacing")
+        scale = min(1.0, upd["spacing"] / SPACING_RANGE[0])
+    if "spring_width" not in gp:
+        upd["spring_width"] = 0.001
+        decided.append("pattern.spring_width")
+    if scale < 1.0:
+        for k in FEATURES:
+            upd[k] = round(scale * upd.get(k, getattr(pc, k)), 6)
+        decided += [f"pattern.{k}" for k in FEATURES if f"pattern.{k}" not in decided]
+    pc = dataclasses.replace(pc, **{k: v for k, v in upd.items() if k in FEATURES})
+    min_insert = round(scale * MIN_INSERT / SIZE_STEP) * SIZE_STEP
     h = upd.get("spacing", pc.spacing)
     pattern.check_cell_count(float(np.sum(flatten.face_areas(tgt.V, tgt.F))), h)
     sizes_given = bool({"insert_half_size", "insert_half_sizes"} & gp)
@@ -164,7 +187,7 @@ def complete(scene, given: dict):
     interior = np.ones(len(tgt.V), dtype=bool)
     interior[f.boundary] = False
     d0 = 0.5 * h * np.expm1(-f.u[interior])
-    _, left0 = catalogue(d0, h, pc)
+    _, left0 = catalogue(d0, h, pc, min_insert=min_insert)
     growth0 = float(np.exp(-f.u.min()))
     needs = left0 > 0 or growth0 > cc.max_growth
     if "max_cones" not in gc and needs:
@@ -174,19 +197,21 @@ def complete(scene, given: dict):
     if not sizes_given:
         if cut:  # the cones' u: placed with every size the plates allow (the springs' reach decides)
             wide = dataclasses.replace(pc, spacing=h, insert_half_sizes=tuple(
-                np.arange(MIN_INSERT, h / 2 - pc.beam_width - 1e-9, SIZE_STEP)))
+                np.arange(min_insert, h / 2 - pc.beam_width - 1e-9, SIZE_STEP)))
             cones, u = cuts.place_cones(tgt.V, tgt.F, cc, wide)
             d = 0.5 * h * np.expm1(-u[interior & ~np.isin(np.arange(len(u)), cones)])
         else:
             d = d0
-        sizes, left = catalogue(d, h, pc, room=TUNE_ROOM)
+        sizes, left = catalogue(d, h, pc, room=TUNE_ROOM, min_insert=min_insert)
         if left:  # no room for the tuning at either end: the achievable range alone
-            sizes, _ = catalogue(d, h, pc)
+            sizes, _ = catalogue(d, h, pc, min_insert=min_insert)
         if cut and sizes and len(sizes) < MAX_SIZES:  # the seams' short edges: smaller sizes where needed
+            # (edges so short that no gap fits in them cannot be served: the shortest with a gap range)
+            short = max(SEAM_EDGE, 2 * (pc.min_gap + pc.min_beam + 2 * MARGIN + SIZE_STEP) / h)
             g = np.asarray(sizes)[None, :] - d[:, None]
-            ok = np.any((g >= pc.min_gap + MARGIN) & (g <= SEAM_EDGE * h / 2 - pc.min_beam - MARGIN), axis=1)
+            ok = np.any((g >= pc.min_gap + MARGIN) & (g <= short * h / 2 - pc.min_beam - MARGIN), axis=1)
             if not ok.all():
-                extra, _ = catalogue(d[~ok], h, pc, short=SEAM_EDGE)
+                extra, _ = catalogue(d[~ok], h, pc, short=short, min_insert=min_insert)
                 sizes = sorted(set(sizes) | {r for r in extra[::-1][:MAX_SIZES - len(sizes)] if r not in sizes})
         if sizes:
             upd["insert_half_sizes"] = tuple(sizes)
@@ -199,9 +224,6 @@ def complete(scene, given: dict):
                 if k not in gp:
                     upd[k] = v
                     decided.append(f"pattern.{k}")
-    if "spring_width" not in gp:
-        upd["spring_width"] = 0.001
-        decided.append("pattern.spring_width")
     if "iterations" not in gt or tc.iterations > 0:  # steps given (--tune N): the rest still decided
         auto_tune = {**AUTO_TUNE, "point_weight": point_weight(tgt)}
         tc = dataclasses.replace(tc, **{k: v for k, v in auto_tune.items() if k not in gt})

@@ -381,7 +381,8 @@ def cone_points(cf: CutFlattening) -> np.ndarray:
 
 
 def seam_lines(cf: CutFlattening) -> list:
-    """Both sides of every cut path (the seams) in the flat domain.
+    """Both sides of every cut path (the seams) in the flat domain; a cone placed on an earlier cut's path
+    (its path is the one vertex) adds none.
 
     Args:
         cf: the :class:`CutFlattening`.
@@ -389,7 +390,7 @@ def seam_lines(cf: CutFlattening) -> list:
     Returns:
         [(label "S<k>", (j,2) [m] flat polyline)].
     """
-    return [(f"S{k + 1}", cf.flat.uv[side]) for k, s in enumerate(cf.seams) for side in s.sides]
+    return [(f"S{k + 1}", cf.flat.uv[side]) for k, s in enumerate(cf.seams) if len(s.path) > 1 for side in s.sides]
 
 
 def seam_ties(pat, Y: np.ndarray, cf: CutFlattening) -> SeamTies:

@@ -5,7 +5,7 @@ arrive (a :class:`simfab.deploy.surface.Target`, no scene settings):
 
 - spherical caps of polar angle 30-85 deg on spheres of radius 60-200 mm;
 - hyperbolic-paraboloid saddles over a 100 mm disk, curvature radius c from 200 mm down to the
-  disk radius (slopes up to 45 deg at the rim);
+  disk radius (slopes up to 45 deg at the rim), and one between them on a 90 mm disk (c = 110 mm);
 - petals: folded along the midrib and curled along the length, and curled only;
 - a cylinder patch (developable);
 - a mixed-curvature patch (a saddle with an off-centre bump);
@@ -30,6 +30,7 @@ def _shapes(rings: int) -> dict:
         "cap85-R60": lambda: surface.spherical_cap(0.06, np.radians(85), rings),
         "saddle-c200": lambda: surface.saddle(0.1, 0.2, rings),
         "saddle-c100": lambda: surface.saddle(0.1, 0.1, rings),
+        "saddle-c110-a90": lambda: surface.saddle(0.09, 0.11, rings),
         "petal-folded": lambda: surface.petal(0.15, 0.08, 0.8, 0.01, 0.15, rings),
         "petal-curled": lambda: surface.petal(0.15, 0.08, 0.0, 0.01, 0.1, rings),
         "cylinder-R100": lambda: surface.cylinder(0.1, np.radians(90), 0.15, rings),

@@ -5,10 +5,14 @@ network's bending; here the growth of each insert, ``d_i = r_i - g_i`` [m], is t
 least-squares problem on the deployed shape itself. Residual: the distance to the surface stacked
 with a weighted point-to-point term towards each vertex's own target point y_j,
 
-    e = [ |R x_j + t - c_j| ,  sqrt(w) (R x_j + t - y_j) ]   (n + 3n rows),   E = |e|^2 / 2,
+    e = [ |R x_j + t - c_j| ,  sqrt(w) (R x_j + t - y_j) ,  sqrt(w_h n) s(H(x) - H(y)) ]   (n + 3n + 1 rows),
 
-c_j the closest target point, w = ``point_weight``, (R, t) the ICP alignment minimising the same E
-(so dE/d(R, t) = 0 and the Gauss-Newton gradient J^T e needs no alignment term).
+E = |e|^2 / 2, c_j the closest target point, w = ``point_weight``, H the out-of-plane extent
+(:func:`simfab.deploy.compare.out_of_plane_extent`, the deployed height the bounds read; its maximum
+and minimum smoothed by log-sum-exp over ``HEIGHT_SMOOTHING`` of the height), w_h = ``height_weight``,
+s(x) = sign(x) max(|x| - tol, 0) with tol = ``target_height`` x H(y) (the height row acts only on a
+height outside the stop's tolerance), (R, t) the ICP alignment minimising the same E (H is invariant
+under it, so dE/d(R, t) = 0 and the Gauss-Newton gradient J^T e needs no alignment term).
 
 Sensitivities (implicit function theorem): ``dq*/dd_i = -H_q^{-1} dg_q/dd_i`` at the equilibrium,
 one factorization for all inserts (:meth:`simfab.rods.statics.StaticSolver.offset_sensitivity`).
@@ -29,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from simfab.deploy.compare import deviation, height_error, kabsch
+from simfab.deploy.compare import deviation, height_error, kabsch, out_of_plane_extent
 from simfab.deploy.network import Deployment, build_network
 from simfab.errors import ConvergenceError, InputError
 from simfab.rods.model import synchronize
@@ -46,6 +50,7 @@ HALVINGS = 4  # trials per escalation: the step, then halved three times
 #: step up to 4 x as long; one before cut a saddle's long second step short: docs/decisions.md,
 #: "Deployment tuning: where its time goes")
 RESTART_BACK = 2
+HEIGHT_SMOOTHING = 0.01  # the height row's smoothing tau, relative to the target points' height
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -65,7 +70,11 @@ class TuneConfig:
     (no step starts after it). The bound is measured as the deployment's deviation is (the RMS distance
     after the alignment to the surface alone, :func:`simfab.deploy.compare.deviation`), not by the
     tuning's own objective; target_height [-]: with ``target_rms``, the bound is met only once the
-    deployed out-of-plane height is also within this fraction of the target's (0: not checked)."""
+    deployed out-of-plane height is also within this fraction of the target's (0: not checked);
+    height_weight [-]: w_h, the weight of the height row (the deployed out-of-plane extent against the
+    target's, beyond ``target_height`` of it): at w_h = 1 a height 1 mm beyond that weighs as much as
+    every vertex 1 mm off the surface (0: no height row; the surface distance alone leaves the height
+    free where the shape can bend within it)."""
 
     iterations: int = 0
     damping: float = 1e-3
@@ -75,9 +84,10 @@ class TuneConfig:
     min_gain: float = 0.0
     seconds: float = 0.0
     target_height: float = 0.0
+    height_weight: float = 0.0
 
     def __post_init__(self):
-        for f in ("target_rms", "min_gain", "seconds", "target_height"):
+        for f in ("target_rms", "min_gain", "seconds", "target_height", "height_weight"):
             v = getattr(self, f)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and v >= 0):
                 raise InputError(f"must be a non-negative number (got {v!r})", where=f"tune.{f}")
@@ -115,11 +125,12 @@ class Tuning:
 
 @dataclass(frozen=True)
 class Fit:
-    """The tuning's residual at deployed vertices X (see module doc): e (4n,) [m] (n distances to the
-    surface, then the 3n weighted point-to-point rows, vertex-major), the alignment R (3,3), t (3,),
-    the unit directions N (n,3) from the closest points (the distances' gradients), the point weight
-    w, the objective E = |e|^2 / 2 [m^2], the RMS distance to the surface [m] (``plane_rms``) and the
-    RMS distance of the aligned vertices to their target points [m]."""
+    """The tuning's residual at deployed vertices X (see module doc): e (4n + 1,) [m] (n distances to the
+    surface, then the 3n weighted point-to-point rows, vertex-major, then the weighted height row), the
+    alignment R (3,3), t (3,), the unit directions N (n,3) from the closest points (the distances'
+    gradients), the point weight w, the objective E = |e|^2 / 2 [m^2], the RMS distance to the surface
+    [m] (``plane_rms``), the RMS distance of the aligned vertices to their target points [m], the height
+    weight w_h and the gradient of the deployed height H over the aligned vertices (n,3) [-]."""
 
     e: np.ndarray
     R: np.ndarray
@@ -129,6 +140,8 @@ class Fit:
     cost: float
     plane_rms: float
     point_rms: float
+    height_weight: float = 0.0
+    height_grad: np.ndarray = None
 
 
 def _closest(tm, A):
@@ -136,10 +149,13 @@ def _closest(tm, A):
     return C, tm.face_normals[tri]
 
 
-def fit_residual(X: np.ndarray, Y: np.ndarray, target, point_weight: float, *, icp_iters: int = 30) -> Fit:
-    """Residual of deployed vertices X (n,3) [m] against the target surface (``target.V``, ``target.F``)
-    and the vertices' target points Y (n,3) [m], after the alignment that minimises the same
-    objective (ICP from the Kabsch fit onto Y, until E changes by less than 1e-12 relative)."""
+def fit_residual(X: np.ndarray, Y: np.ndarray, target, point_weight: float, *, height_weight: float = 0.0,
+                 height_tolerance: float = 0.0, icp_iters: int = 30) -> Fit:
+    """Residual of deployed vertices X (n,3) [m] against the target surface (``target.V``, ``target.F``),
+    the vertices' target points Y (n,3) [m] and the target points' height (``height_weight``, beyond
+    ``height_tolerance`` of it), after the
+    alignment that minimises the same objective (ICP from the Kabsch fit onto Y, until E changes by less
+    than 1e-12 relative)."""
     tm = trimesh.Trimesh(target.V, target.F, process=False)
     w = float(point_weight)
     R, t = kabsch(X, Y)
@@ -157,17 +173,56 @@ def fit_residual(X: np.ndarray, Y: np.ndarray, target, point_weight: float, *, i
     dist = np.linalg.norm(A - C, axis=1)
     far = dist > 1e-12 * target.diameter
     N[far] = (A - C)[far] / dist[far, None]  # grad of the distance (the face normal inside a face)
-    e = np.concatenate([dist, np.sqrt(w) * (A - Y).ravel()])
+    wh = float(height_weight)
+    tau = HEIGHT_SMOOTHING * (out_of_plane_extent(Y) or target.diameter)
+    H, G = _height_and_gradient(A, tau)
+    HY = _height_and_gradient(Y, tau)[0]
+    dh = H - HY
+    tol = height_tolerance * HY
+    dh, G = np.sign(dh) * max(abs(dh) - tol, 0.0), G * float(abs(dh) > tol)
+    e = np.concatenate([dist, np.sqrt(w) * (A - Y).ravel(), [np.sqrt(wh * len(A)) * dh]])
     return Fit(e=e, R=R, t=t, N=N, point_weight=w, cost=0.5 * float(e @ e), plane_rms=float(np.sqrt(np.mean(dist**2))),
-               point_rms=float(np.sqrt(np.mean(np.sum((A - Y) ** 2, axis=1)))))
+               point_rms=float(np.sqrt(np.mean(np.sum((A - Y) ** 2, axis=1)))), height_weight=wh, height_grad=G)
+
+
+def _fit(X: np.ndarray, Y: np.ndarray, target, cfg: TuneConfig) -> Fit:
+    """:func:`fit_residual` with the weights and height tolerance of ``cfg``."""
+    return fit_residual(X, Y, target, cfg.point_weight, height_weight=cfg.height_weight,
+                        height_tolerance=cfg.target_height)
+
+
+def _height_and_gradient(A: np.ndarray, tau: float) -> tuple[float, np.ndarray]:
+    """The out-of-plane extent of points A (n,3) [m], smoothed: H = tau log sum exp(z / tau) + tau log
+    sum exp(-z / tau), z_j = (a_j - mean) . n along their best-fit plane's normal n (the extent's
+    maximum and minimum, each within tau log n; smooth where extreme points tie, as on a symmetric
+    saddle's rim), and dH/da_j (n,3): w_j n (w = the two softmax weights' difference) plus the normal's
+    turn, dn = -sum_k v_k (v_k^T dC n) / (s_k^2 - s_3^2) (first-order perturbation of the smallest
+    eigenvector of C = A_c^T A_c, v_k its other eigenvectors, s the singular values)."""
+    Ac = A - A.mean(axis=0)
+    _, sv, Vt = np.linalg.svd(Ac, full_matrices=False)
+    n = Vt[2]
+    z = Ac @ n
+    hi, lo = np.exp((z - z.max()) / tau), np.exp((z.min() - z) / tau)
+    H = z.max() + tau * np.log(hi.sum()) - z.min() + tau * np.log(lo.sum())
+    w = hi / hi.sum() - lo / lo.sum()
+    G = w[:, None] * n[None, :]
+    span = w @ Ac
+    for k in (0, 1):  # v_k^T dC n = sum_j (v_k . da_j) z_j + (a_j . v_k)(n . da_j)
+        gap = sv[k] ** 2 - sv[2] ** 2
+        if gap > 0:
+            c = float(span @ Vt[k]) / gap
+            G -= c * (z[:, None] * Vt[k][None, :] + (Ac @ Vt[k])[:, None] * n[None, :])
+    return float(H), G
 
 
 def fit_jacobian(fit: Fit, dX: np.ndarray) -> np.ndarray:
-    """J (4n, k) = de/dp of :func:`fit_residual` for vertex derivatives dX (n,3,k) [m per unit p],
-    with the closest points, normals and alignment held fixed (rows as ``fit.e``)."""
+    """J (4n + 1, k) = de/dp of :func:`fit_residual` for vertex derivatives dX (n,3,k) [m per unit p],
+    with the closest points, normals, alignment, best-fit plane and the height's extreme vertices held
+    fixed (rows as ``fit.e``)."""
     RdX = np.einsum("jl,nlk->njk", fit.R, dX)  # (n,3,k)
     Jp = np.einsum("nj,njk->nk", fit.N, RdX)
-    return np.concatenate([Jp, np.sqrt(fit.point_weight) * RdX.reshape(-1, dX.shape[2])])
+    Jh = np.sqrt(fit.height_weight * len(dX)) * np.einsum("nj,njk->k", fit.height_grad, RdX)
+    return np.concatenate([Jp, np.sqrt(fit.point_weight) * RdX.reshape(-1, dX.shape[2]), Jh[None, :]])
 
 
 def achievable_growth(pat) -> tuple[np.ndarray, np.ndarray]:
@@ -214,7 +269,7 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
     state = dep.final
     pos_of = {int(b): i for i, b in enumerate(solver.red.bodies)}
     rows = solver.red.body_trans_cols.reshape(-1, 3)[[pos_of[int(b)] for b in net.vertex_body]]  # (n,3)
-    fit = fit_residual(state.body_pos[net.vertex_body], Y, target, cfg.point_weight)
+    fit = _fit(state.body_pos[net.vertex_body], Y, target, cfg)
     hist, phist = [fit.plane_rms], [fit.point_rms]
     steps = solves = abandoned = trial = 0
     skip = min(int(first_trial), HALVINGS * (cfg.escalations + 1) - 1)
@@ -242,7 +297,7 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
                     abandoned += 1
                     alpha *= 0.5
                     continue
-                fit_try = fit_residual(res.state.body_pos[net.vertex_body], Y, target, cfg.point_weight)
+                fit_try = _fit(res.state.body_pos[net.vertex_body], Y, target, cfg)
                 if fit_try.cost < fit.cost:
                     accepted = True
                     break
@@ -331,7 +386,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
     trial its last step was accepted at (Levenberg-Marquardt's damping kept between steps, loosened),
     all of them when none of those lowers E."""
     t0 = time.perf_counter()
-    fit = fit_residual(dep.vertex_positions(), Y, target, cfg.point_weight)
+    fit = _fit(dep.vertex_positions(), Y, target, cfg)
     hist, phist = [fit.plane_rms], [fit.point_rms]
     steps = solves = abandoned = last = 0
     stop = "iterations"
@@ -363,7 +418,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
             except ConvergenceError:
                 continue
             solves += 1
-            fit2 = fit_residual(dep2.vertex_positions(), Y, target, cfg.point_weight)
+            fit2 = _fit(dep2.vertex_positions(), Y, target, cfg)
             if fit2.cost < fit.cost:
                 accepted = True
                 break

@@ -106,13 +106,14 @@ def test_spacing_follows_size_and_curvature():
         assert auto.SPACING_RANGE[0] <= auto.spacing(families.member(n)) <= auto.SPACING_RANGE[1]
 
 
-@pytest.mark.parametrize("name", ["cap70-R100@12", "saddle-c100@24"])
+@pytest.mark.parametrize("name", ["cap70-R100@12", "saddle-c110-a90@16"])
 def test_bare_mesh_deploys_within_the_bounds_on_the_defaults(name, tmp_path):
     """A steep spherical cap (70 deg, R = 100 mm: cones and tied seams decided by the defaults) and a
-    strong saddle (curvature radius = the disk radius, 45 deg slopes at the rim), each read as a bare
-    mesh - no scene file, no flag - deploy within the bounds: RMS <= 1 % of the diameter, height
-    within 3 %, no gap unreachable. Measured (bench deploy --family, docs/validation/deploy.md): the
-    cap 0.479 % / +2.45 %, the saddle 0.485 % / -1.6 % (with 12 rings 0.341 % / -0.5 %)."""
+    strong saddle (curvature radius 110 mm over a 90 mm disk, 39 deg slopes at the rim), each read as a
+    bare mesh - no scene file, no flag - deploy within the bounds: RMS <= 1 % of the diameter, height
+    within 3 %, no gap unreachable. The saddle's height is held by the tuning's height row: without it
+    (w = 0 on saddles) it deployed 6.6 % too high. Measured (bench deploy --family,
+    docs/validation/deploy.md): the cap 0.460 % / +2.04 %, the saddle 0.578 % / +1.18 %."""
     from simfab.deploy import pipeline
 
     s = _bare(tmp_path, families.member(name))
@@ -208,6 +209,30 @@ def test_bundled_scene_meets_the_bounds_on_the_defaults(name):
     assert b["unreachable_gaps"] == 0 and pipeline.flat_area_covered(r) >= 0.99
     if name == "dome":
         assert r.sim_check["stability"]["settled"]
+
+
+def test_strongly_curved_target_gets_smaller_cells_with_scaled_features(tmp_path):
+    """An 85 deg cap on a 60 mm sphere: the curvature rule asks for cells below SPACING_RANGE[0] (0.25 R =
+    15 mm), where the default features (3 mm beams, 4 mm beam ends, 1.5 mm gaps) leave no gap range; the
+    defaults then take the smaller cell and scale those features with it, and every catalogue size is a
+    plate the cell allows. Given beams (a scene's sheet) keep the cell at SPACING_RANGE[0]."""
+    t = families.member("cap85-R60@12")
+    s = _bare(tmp_path, t)
+    h, pc = s.pattern.spacing, s.pattern
+    assert auto.SPACING_RANGE[0] * auto.FEATURE_SCALE_MIN <= h < auto.SPACING_RANGE[0]
+    scale = h / auto.SPACING_RANGE[0]
+    base = PatternConfig()
+    for k in ("beam_width", "min_beam", "min_gap"):
+        assert getattr(pc, k) == pytest.approx(scale * getattr(base, k), abs=1e-6), k
+        assert f"pattern.{k}" in s.decisions.decided
+    assert s.cuts.max_cones > 0 and all(scale * auto.MIN_INSERT - auto.SIZE_STEP <= r < h / 2 - pc.beam_width
+                                        for r in pc.sizes)
+    given = tmp_path / "given.toml"
+    trimesh.Trimesh(t.V, t.F, process=False).export(tmp_path / "c.obj")
+    given.write_text('[target]\nmesh = "c.obj"\n[pattern]\nbeam_width = 0.003\n')
+    s2 = load_deploy_scene(given)
+    assert s2.pattern.spacing == auto.SPACING_RANGE[0] and s2.pattern.beam_width == 0.003
+    assert s2.pattern.min_beam == base.min_beam
 
 
 def test_point_weight_follows_the_saddle_shaped_area():

@@ -271,8 +271,8 @@ def test_offset_sensitivity_matches_re_solved_equilibria(tiny_saddle):
     assert np.max(np.abs(dpos - fd)) < 2e-4 * np.max(np.abs(fd))
 
 
-@pytest.mark.parametrize("weight, icp_iters", [(1.0, 30), (0.0, 3000)])
-def test_tuning_gradient_matches_re_solved_equilibria(tiny_saddle, weight, icp_iters):
+@pytest.mark.parametrize("weight, height_weight, icp_iters", [(1.0, 0.0, 30), (0.0, 0.0, 3000), (0.0, 1.0, 3000)])
+def test_tuning_gradient_matches_re_solved_equilibria(tiny_saddle, weight, height_weight, icp_iters):
     """The tuning's Gauss-Newton gradient J^T e (IFT sensitivities through ``fit_jacobian``, closest
     points and alignment held fixed) is the derivative of its objective E = |e|^2 / 2 with the
     alignment re-fitted: the central difference of E over re-solved equilibria (offset +-1 um) for
@@ -280,7 +280,9 @@ def test_tuning_gradient_matches_re_solved_equilibria(tiny_saddle, weight, icp_i
     the direction to the closest point (with face normals at points whose closest point is on the
     target's rim it was off by 56 %). Measured max error relative to the largest component: 2.8e-6
     with the point term (w = 1); 9.6e-6 for the surface term alone, whose ICP slides slowly along
-    the saddle (30 iterations: 13 %, hence 3000 here)."""
+    the saddle (30 iterations: 13 %, hence 3000 here). With the height row (w_h = 1) its gradient
+    includes the best-fit plane's turn (held fixed, the normal's turn is missing: same order as the
+    extreme points' own move)."""
     from simfab.deploy import tuning
     from simfab.rods.model import synchronize
 
@@ -290,7 +292,8 @@ def test_tuning_gradient_matches_re_solved_equilibria(tiny_saddle, weight, icp_i
     pos_of = {int(b): i for i, b in enumerate(solver.red.bodies)}
     rows = solver.red.body_trans_cols.reshape(-1, 3)[[pos_of[int(b)] for b in net.vertex_body]]
     dX = solver.offset_sensitivity(st, np.array(D))[rows]  # (n, 3, k)
-    fit = tuning.fit_residual(st.body_pos[net.vertex_body], Y, tgt, weight, icp_iters=icp_iters)
+    fit = tuning.fit_residual(st.body_pos[net.vertex_body], Y, tgt, weight, height_weight=height_weight,
+                              icp_iters=icp_iters)
     grad = tuning.fit_jacobian(fit, dX).T @ fit.e
     h = 1e-6
     fd = []
@@ -300,7 +303,7 @@ def test_tuning_gradient_matches_re_solved_equilibria(tiny_saddle, weight, icp_i
             solver.set_attachment_offsets(offset + sgn * h * Dv)
             moved = synchronize(solver.model, st, st.x, st.theta, st.body_pos, st.body_rot)
             X = solver.solve(moved).state.body_pos[net.vertex_body]
-            E.append(tuning.fit_residual(X, Y, tgt, weight, icp_iters=icp_iters).cost)
+            E.append(tuning.fit_residual(X, Y, tgt, weight, height_weight=height_weight, icp_iters=icp_iters).cost)
         fd.append((E[0] - E[1]) / (2 * h))
     fd = np.array(fd)
     assert len(fd) >= 4 and np.max(np.abs(fd)) > 1e-3  # every insert moves E
