@@ -4,15 +4,15 @@ Each level runs in a child process of its own (``--scaling-level SCENE:FACTOR:MU
 peak resident memory (``ru_maxrss``) is that level's alone. A level is the insertion benchmark's case
 (tools/benchmarks/insertion.py, P2 tets) with its part meshed at FACTOR times the tet count
 (simfab.coupling.converge.level_mesh: an extrusion's layers grow as FACTOR^(1/3); claw3d's
-generator is asked for FACTOR x 5,130 / CLAW_OVERSHOOT tets, since it overshoots its target by
-about that much). Per level: tets, free dofs, steps, seconds (wall, CPU; scene loading and meshing
-excluded), peak memory, Newton iterations (and per step), sparse factorizations (numeric, the
-exact-first attempts included) and their share of the wall time, the solves lagged on an earlier
-factorization (simfab.solve.linear.LagConfig) and their conjugate-gradient iterations (the failed
-attempts' included), the triangular solves' share, the
-assembly's, the factor's fill (entries of L over entries of the lower triangle of the free
-Hessian) and the category and figures of the profile. Per scene and friction: the exponent of a
-least-squares fit of log(seconds) against log(free dofs), overall and between consecutive levels.
+generator, meshed by :func:`simfab.fem.meshing.tetrahedralize`, is asked for FACTOR x 5,130 tets).
+Per level: tets, free dofs, steps, seconds (wall, CPU; scene loading and meshing excluded), peak
+memory, Newton iterations (and per step), sparse factorizations (numeric, the exact-first attempts
+included) and their share of the wall time, the solves lagged on an earlier factorization
+(simfab.solve.linear.LagConfig) and their conjugate-gradient iterations (the failed attempts'
+included), the triangular solves' share, the assembly's, the factor's fill (entries of L over
+entries of the lower triangle of the free Hessian) and the category and figures of the profile. Per
+scene and friction: the exponent of a least-squares fit of log(seconds) against log(free dofs),
+overall and between consecutive levels.
 """
 
 from __future__ import annotations
@@ -26,9 +26,8 @@ import time
 
 import numpy as np
 
-#: claw3d's generator gives ~1.22x the tets asked for (10,300 -> 12,584; 20,600 -> 25,519)
-CLAW_OVERSHOOT = 1.22
 FIGURES = ("E_max", "F_in", "F_rm", "F_grip")
+CLAW_TETS = 5130  # claw3d's stored mesh (its level 1)
 
 
 def level_overrides(scene: str, factor: float, base: dict) -> dict:
@@ -42,7 +41,7 @@ def level_overrides(scene: str, factor: float, base: dict) -> dict:
         return dict(base.get("compliant", {}))
     out = dict(base.get("compliant", {}))
     if scene == "claw3d":
-        out.update(level_mesh(comp, factor / CLAW_OVERSHOOT))
+        out.update(level_mesh(comp, factor * CLAW_TETS / comp["target_elements"]))
         out["mesh_file"] = None
     else:
         out.update(level_mesh(comp, factor))
