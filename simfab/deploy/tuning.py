@@ -278,13 +278,10 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
         dX = dq[rows]  # (n, 3, k)
         J = fit_jacobian(fit, dX)
         A = J.T @ J
-        # the damping's scale from the surface and point rows: the height row, one residual over all
-        # inserts, would set it alone where it dominates and leave the steps too short to move the gaps
-        scale = float(np.max(np.diag(A) - J[-1] ** 2))
         d_try = d.copy()
         accepted = False
         for k in range(skip // HALVINGS, cfg.escalations + 1):
-            mu = cfg.damping * ESCALATION_FACTOR**k * scale
+            mu = cfg.damping * ESCALATION_FACTOR**k * float(np.max(np.diag(A)))
             step = -np.linalg.solve(A + mu * np.eye(len(ins)), J.T @ fit.e)
             h0 = skip % HALVINGS if k == skip // HALVINGS else 0
             alpha = 0.5**h0
