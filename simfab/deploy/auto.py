@@ -10,9 +10,8 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
 - cuts: the growth each interior vertex needs, d = (h/2)(e^{-u} - 1) of the uncut flattening
   (:mod:`simfab.deploy.pattern`), must fit a catalogue of at most ``MAX_SIZES`` sizes between
   ``MIN_INSERT`` and h/2 - beam_width, and the cells' growth e^{-u} the springs' reach
-  (``[cuts] max_growth``); if not, cones and cuts (``[cuts] max_cones = MAX_CONES``, seams tied),
-  placed until every vertex's growth is within the springs' reach (:func:`simfab.deploy.cuts.place_cones`
-  with every size the plates allow);
+  (``[cuts] max_growth``); if not, cones and cuts (``[cuts] max_cones = MAX_CONES``, seams tied) until
+  every vertex's growth is within reach (:func:`simfab.deploy.cuts.place_cones`);
 - the catalogue (:func:`catalogue`): from the flattening (cut, with cuts) the target will get,
   the fewest sizes covering every vertex's growth with room for the tuning (``TUNE_ROOM``),
   smallest inserts first; with cuts, smaller sizes for the seams' short edges (``SEAM_EDGE``);
