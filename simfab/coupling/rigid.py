@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from simfab.fem.elastic import energy_gradient_hessian
-from simfab.solve.linear import NotPositiveDefinite
+from simfab.solve.linear import NotPositiveDefinite, conjugate_gradients
 
 #: A rigid motion whose contact stiffness is below this fraction of the stiffness it would have if
 #: every contact normal were aligned with the motion counts as unresisted.
@@ -178,32 +178,14 @@ class PinnedSolver:
             return solver.solve_free_update(A, free, r, Uf, mu, shift)
 
         bn = float(np.linalg.norm(b))
-        x = np.zeros_like(b)
         if bn == 0.0:
-            return x
+            return np.zeros_like(b)
         near = self.target is not None and np.abs(b).max() <= PCG_NEAR * self.target
         tol = PCG_TOL_NEAR if near else PCG_TOL
-        r = b.copy()
-        p = z.copy()
-        rz = float(r @ z)
-        for _ in range(PCG_MAX_ITER):
-            Kp = K(p)
-            pKp = float(p @ Kp)
-            if not pKp > 0.0:
-                raise NotPositiveDefinite("the pinned Hessian is not positive definite (negative curvature in CG)")
-            a = rz / pKp
-            x += a * p
-            r -= a * Kp
-            self.pcg_iterations += 1
-            rn = np.linalg.norm(r)
-            relative = rn <= PCG_TOL * bn
-            if rn <= tol * bn:
-                return x
-            z = M(r)
-            rz, rz_old = float(r @ z), rz
-            p = z + (rz / rz_old) * p
-        if relative:
-            return x
+        res = conjugate_gradients(K, M, b, z=z, max_iter=PCG_MAX_ITER, converged=lambda r, rn: rn <= tol * bn)
+        self.pcg_iterations += res.iterations
+        if res.converged or res.residual <= PCG_TOL * bn:  # past PCG_MAX_ITER the PCG_TOL criterion alone
+            return res.x
         raise NotPositiveDefinite(f"conjugate gradients on the pinned Hessian did not converge in {PCG_MAX_ITER} "
                                   "iterations")
 

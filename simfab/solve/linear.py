@@ -95,6 +95,61 @@ class LagConfig:
             raise ValueError(f"invalid LagConfig: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
 
 
+@dataclass(frozen=True)
+class CGResult:
+    """What :func:`conjugate_gradients` ended with: the iterate x, its residual's 2-norm, the
+    iterations taken and whether the caller's convergence test was met."""
+
+    x: np.ndarray
+    residual: float
+    iterations: int
+    converged: bool
+
+
+def conjugate_gradients(apply, precondition, b: np.ndarray, *, max_iter: int, converged, give_up=None,
+                        z: np.ndarray | None = None) -> CGResult:
+    """Preconditioned conjugate gradients on K x = b from x = 0, for a K known only by its products.
+
+    Hand-written rather than scipy's ``cg`` for the curvature test: p^T K p <= 0 proves K not
+    positive definite, which the callers treat as a failed factorization.
+
+    Args:
+        apply: v -> K v.
+        precondition: r -> M^-1 r (M an approximation of K).
+        b: (n,) right-hand side.
+        max_iter: iterations at most.
+        converged: (r, |r|_2) -> bool, tested after every iteration.
+        give_up: None, or (iteration k, |r|_2) -> bool: stop unconverged (e.g. too slow a rate).
+        z: M^-1 b when the caller has it already.
+
+    Returns:
+        :class:`CGResult`. Raises :class:`NotPositiveDefinite` on a non-positive curvature.
+    """
+    x = np.zeros_like(b)
+    r = b.copy()
+    z = precondition(r) if z is None else z
+    p = z.copy()
+    rz = float(r @ z)
+    rn = float(np.linalg.norm(b))
+    for k in range(1, max_iter + 1):
+        Kp = apply(p)
+        pKp = float(p @ Kp)
+        if not pKp > 0.0:
+            raise NotPositiveDefinite("the matrix is not positive definite (negative curvature in conjugate gradients)")
+        a = rz / pKp
+        x += a * p
+        r -= a * Kp
+        rn = float(np.linalg.norm(r))
+        if converged(r, rn):
+            return CGResult(x, rn, k, True)
+        if give_up is not None and give_up(k, rn):
+            return CGResult(x, rn, k, False)
+        z = precondition(r)
+        rz, rz_old = float(r @ z), rz
+        p = z + (rz / rz_old) * p
+    return CGResult(x, rn, max_iter, False)
+
+
 def canonical_csr(A) -> sp.csr_matrix:
     """``A`` as CSR with sorted, unique entries (a copy only when needed; the caller's matrix is
     never mutated). Value maps that gather ``A.data`` by position rely on this."""
@@ -240,14 +295,10 @@ class SPDSolver:
         b = np.asarray(b, dtype=np.float64)
         if lag is None or b.ndim != 1 or len(free) < lag.min_unknowns or self._factored is None:
             return None
-        full = self._full
-        same = full is not None and getattr(A, "indices", None) is full[3][1] and A.indptr is full[3][0]
-        if not same:
-            A = canonical_csr(A)
-        if full is None or not (full[1].shape == free.shape and np.array_equal(full[1], free)
-                                and (same or same_pattern(full[0], A))):
+        A, known = self._analysed(A, free)
+        if not known:
             return None
-        values = A.data[full[2]]
+        values = A.data[self._full[2]]
         if U is None:
             def precondition(r):
                 return self._solve_factored(r)
@@ -281,34 +332,37 @@ class SPDSolver:
             return y
 
         bn = float(np.linalg.norm(b))
-        x = np.zeros(n)
         if bn == 0.0:
-            return x
-        r = b.copy()
-        z = precondition(r)
-        p = z.copy()
-        rz = float(r @ z)
+            return np.zeros(n)
         tol = self.lag.rtol * bn
         reach = max(tol, atol or 0.0)  # a 2-norm that meets either criterion
-        for k in range(1, self.lag.max_iter + 1):
-            Kp = apply(p)
-            pKp = float(p @ Kp)
+
+        def converged(r, rn):
+            return rn <= tol or (atol is not None and np.abs(r).max() <= atol)
+
+        def give_up(k, rn):  # at this rate the iterations would not converge within max_iter
+            return k >= ABORT_AFTER and k * np.log(reach / bn) / np.log(min(rn / bn, 1.0 - 1e-12)) > self.lag.max_iter
+
+        try:
+            res = conjugate_gradients(apply, precondition, b, max_iter=self.lag.max_iter, converged=converged,
+                                      give_up=give_up)
+        except NotPositiveDefinite:
             self.pcg_iterations += 1
-            if not pKp > 0.0:
-                raise NotPositiveDefinite("the matrix is not positive definite (negative curvature in conjugate "
-                                          "gradients)")
-            a = rz / pKp
-            x += a * p
-            r -= a * Kp
-            rn = float(np.linalg.norm(r))
-            if rn <= tol or (atol is not None and np.abs(r).max() <= atol):
-                return x
-            if k >= ABORT_AFTER and k * np.log(reach / bn) / np.log(min(rn / bn, 1.0 - 1e-12)) > self.lag.max_iter:
-                return None  # at this rate the iterations would not converge within max_iter
-            z = precondition(r)
-            rz, rz_old = float(r @ z), rz
-            p = z + (rz / rz_old) * p
-        return None
+            raise
+        self.pcg_iterations += res.iterations
+        return res.x if res.converged else None
+
+    def _analysed(self, A, free: np.ndarray):
+        """(A as canonical CSR, whether its pattern and the free set are those of the analysis)."""
+        full = self._full
+        # a model's Hessians share its pattern's index arrays (never modified in place): the same
+        # arrays as last time need no comparison
+        same = full is not None and getattr(A, "indices", None) is full[3][1] and A.indptr is full[3][0]
+        if not same:
+            A = canonical_csr(A)
+        known = full is not None and full[1].shape == free.shape and np.array_equal(full[1], free) and (
+            same or same_pattern(full[0], A))
+        return A, known
 
     def _woodbury(self, b: np.ndarray, U: np.ndarray, mu: float) -> np.ndarray:
         """(F + mu U U^T)^-1 b, F the current factorization's matrix (see :meth:`solve_free_update`)."""
@@ -337,21 +391,16 @@ class SPDSolver:
             Af = A[free][:, free] + shift * sp.identity(len(free), format="csr") if shift else A[free][:, free]
             self._lu = splu(sp.csc_matrix(Af), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
             return
+        A, known = self._analysed(A, free)
         full = self._full
-        # a model's Hessians share its pattern's index arrays (never modified in place): the same
-        # arrays as last time need no comparison
-        same = full is not None and getattr(A, "indices", None) is full[3][1] and A.indptr is full[3][0]
-        if not same:
-            A = canonical_csr(A)
-        if full is None or not (full[1].shape == free.shape and np.array_equal(full[1], free)
-                                and (same or same_pattern(full[0], A))):
+        if not known:
             # positions (+1, so that no entry is an explicit zero) of A's values in the submatrix
             pos = sp.csr_matrix((np.arange(1.0, A.nnz + 1.0), A.indices, A.indptr), shape=A.shape)[free][:, free]
             pos = canonical_csr(pos)
             self._analyse(pos)
             composed = pos.data.astype(np.int64)[self._perm] - 1
             full = self._full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed, (A.indptr, A.indices))
-        elif not same:
+        elif A.indices is not full[3][1] or A.indptr is not full[3][0]:  # the same pattern in new arrays
             full = self._full = full[:3] + ((A.indptr, A.indices),)
         values = A.data[full[2]]
         if shift:
