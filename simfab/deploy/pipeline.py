@@ -379,8 +379,8 @@ def bounds(res: SurfaceRun) -> dict:
                       + ("more tuning steps (--tune N, [tune] iterations, seconds)" if tuned else "tune the gaps "
                          "(--tune N)") + "; a finer pattern ([pattern] spacing, --spacing)")
     if abs(herr) > BOUND_HEIGHT:
-        missed.append(f"height {100 * herr:+.3g} % (bound {100 * BOUND_HEIGHT:g} %): [tune] point_weight (the pull "
-                      "towards each vertex's own target point)")
+        missed.append(f"height {100 * herr:+.3g} % (bound {100 * BOUND_HEIGHT:g} %): [tune] height_weight (the "
+                      "height row's pull), point_weight (the pull towards each vertex's own target point)")
     if len(p.unreachable):
         missed.append(f"{len(p.unreachable)} gaps unreachable: [pattern] insert_half_sizes (a catalogue spanning "
                       "their growth)" + ("" if cut else ", or cuts: [cuts] max_cones"))
