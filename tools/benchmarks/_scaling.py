@@ -4,7 +4,7 @@ Each level runs in a child process of its own (``--scaling-level SCENE:FACTOR:MU
 peak resident memory (``ru_maxrss``) is that level's alone. A level is the insertion benchmark's case
 (tools/benchmarks/insertion.py, P2 tets) with its part meshed at FACTOR times the tet count
 (simfab.coupling.converge.level_mesh: an extrusion's layers grow as FACTOR^(1/3); claw3d's
-generator, meshed by :func:`simfab.fem.meshing.tetrahedralize`, is asked for FACTOR x 5,130 tets).
+generator, meshed by :func:`simfab.fem.meshing.tetrahedralize`, is asked for FACTOR x its stored mesh's tets).
 Per level: tets, free dofs, steps, seconds (wall, CPU; scene loading and meshing excluded), peak
 memory, Newton iterations (and per step), sparse factorizations (numeric, the exact-first attempts
 included) and their share of the wall time, the solves lagged on an earlier factorization
@@ -27,7 +27,6 @@ import time
 import numpy as np
 
 FIGURES = ("E_max", "F_in", "F_rm", "F_grip")
-CLAW_TETS = 5130  # claw3d's stored mesh (its level 1)
 
 
 def level_overrides(scene: str, factor: float, base: dict) -> dict:
@@ -41,7 +40,9 @@ def level_overrides(scene: str, factor: float, base: dict) -> dict:
         return dict(base.get("compliant", {}))
     out = dict(base.get("compliant", {}))
     if scene == "claw3d":
-        out.update(level_mesh(comp, factor * CLAW_TETS / comp["target_elements"]))
+        # level 1 is the stored mesh: the generator is asked for factor times its tets
+        stored = len(np.load(scene_paths(scene)[1].parent / comp["mesh_file"])["elements"])
+        out.update(level_mesh(comp, factor * stored / comp["target_elements"]))
         out["mesh_file"] = None
     else:
         out.update(level_mesh(comp, factor))
