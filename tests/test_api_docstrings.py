@@ -239,9 +239,10 @@ def _constructor_args(cls) -> list[str]:
     return []
 
 
-def _field_docs(cls) -> set[str]:
-    """Fields of a dataclass documented by a string right after their declaration (in any simfab base)."""
-    out = set()
+def _field_docs(cls) -> dict[str, str]:
+    """Fields of a dataclass documented by a string right after their declaration (in any simfab
+    base, the nearest first): name -> that string."""
+    out: dict[str, str] = {}
     for klass in cls.__mro__:
         if not klass.__module__.startswith("simfab"):
             continue
@@ -253,7 +254,7 @@ def _field_docs(cls) -> set[str]:
         for a, b in zip(body, body[1:]):
             if isinstance(a, ast.AnnAssign) and isinstance(a.target, ast.Name) and isinstance(b, ast.Expr) \
                     and isinstance(b.value, ast.Constant) and isinstance(b.value.value, str):
-                out.add(a.target.id)
+                out.setdefault(a.target.id, b.value.value)
     return out
 
 
@@ -297,23 +298,10 @@ def _unit_problems(cls, section: str) -> list[str]:
             continue
         doc = next((ln for i, ln in enumerate(lines) if re.search(rf"(^|[\s,(`]){re.escape(f.name)}\b", ln)), "")
         idx = lines.index(doc) if doc else -1
-        text = " ".join(lines[idx:idx + 3]) if doc else _attr_doc(cls, f.name)
+        text = " ".join(lines[idx:idx + 3]) if doc else _field_docs(cls).get(f.name, "")
         if "[" not in text:
             problems.append(f"field {f.name}: no unit")
     return problems
-
-
-def _attr_doc(cls, fname: str) -> str:
-    for klass in cls.__mro__:
-        try:
-            tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
-        except (OSError, TypeError):
-            continue
-        body = tree.body[0].body
-        for a, b in zip(body, body[1:]):
-            if isinstance(a, ast.AnnAssign) and getattr(a.target, "id", None) == fname and isinstance(b, ast.Expr):
-                return str(getattr(b.value, "value", ""))
-    return ""
 
 
 API = collect_api()
