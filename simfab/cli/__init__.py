@@ -81,7 +81,7 @@ class _Formatter(argparse.RawDescriptionHelpFormatter):
 
     def _fill_text(self, text, width, indent):
         out = []
-        for item in _help_items(text.splitlines()):
+        for item in help_items(text.splitlines()):
             if not item[0].strip():
                 out.append("")
             elif all(len(indent) + len(line) <= width for line in item):
@@ -95,10 +95,17 @@ def _lead(line: str) -> int:
     return len(line) - len(line.lstrip())
 
 
-def _help_items(lines: list[str]) -> list[list[str]]:
+def help_items(lines: list[str]) -> list[list[str]]:
     """A description's lines grouped into items: a blank line; an unindented paragraph (its lines
     up to a blank or an indented line); an indented line with the lines below indented deeper (a
-    list entry and its hanging continuation). Indented lines after a line ending in ':' are a list."""
+    list entry and its hanging continuation). Indented lines after a line ending in ':' are a list.
+
+    Args:
+        lines: the description's lines as written.
+
+    Returns:
+        The items, each a list of its lines; the help formatter refills each item on its own.
+    """
     items: list[list[str]] = []
     for line in lines:
         prev = items[-1] if items else None

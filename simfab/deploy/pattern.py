@@ -526,7 +526,7 @@ def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams, cone_ti
     unreachable = np.flatnonzero(interior & ((req < cfg.min_gap) | (req > gmax)))
     gap = np.where(interior, np.clip(req, cfg.min_gap, gmax), 0.0)
     # springs: none in quads with nearly collinear neighbouring edges
-    spring = np.array([_max_angle(P[q]) < np.radians(cfg.degenerate_angle_deg) for q in quads])
+    spring = np.array([max_angle(P[q]) < np.radians(cfg.degenerate_angle_deg) for q in quads])
     growth = quad_growth(P, quads, r_v - gap)
     qmids = 0.5 * (P[quads] + P[np.roll(quads, -1, axis=1)])  # (q,4,2) midpoint of edge (v_k, v_k+1)
     bulge, ratio, tight = size_bulges(P, quads, qmids, growth, bulge_min=cfg.spring_bulge, slack=cfg.spring_slack,
@@ -719,8 +719,15 @@ def quad_growth(P: np.ndarray, quads: np.ndarray, d: np.ndarray) -> np.ndarray:
     return np.roll(chord(a + d[v], b + d[v]) / chord(a, b), -1, axis=1)
 
 
-def _max_angle(Q: np.ndarray) -> float:
-    """Largest interior angle [rad] of a convex quad (4,2)."""
+def max_angle(Q: np.ndarray) -> float:
+    """Largest interior angle of a convex quad; a quad with one above ``degenerate_angle_deg`` gets no spring.
+
+    Args:
+        Q: (4,2) corners in order [m].
+
+    Returns:
+        The largest interior angle [rad].
+    """
     out = 0.0
     for k in range(4):
         a, b = Q[k - 1] - Q[k], Q[(k + 1) % 4] - Q[k]

@@ -287,8 +287,16 @@ def zigzag_layout(M0, M1, c, legs: int, amplitude: float, clearance: float):
     return out, rho
 
 
-def _piece_points(p, m: int) -> np.ndarray:
-    """(m+1,2) points of a piece at m uniform steps of its arc length."""
+def piece_points(p, m: int) -> np.ndarray:
+    """Points of one zigzag piece (a line or an arc) at uniform steps of its arc length.
+
+    Args:
+        p: one of :func:`zigzag_layout`'s pieces.
+        m: number of steps.
+
+    Returns:
+        (m+1,2) points [m].
+    """
     s = np.linspace(0.0, 1.0, m + 1)[:, None]
     if p[0] == "line":
         return p[1] + s * (p[2] - p[1])
@@ -321,7 +329,7 @@ def zigzag_points(pieces, *, rod: bool = False) -> np.ndarray:
             m = ZIGZAG_SEGMENTS[kind]
         else:
             m = 1 if p[0] == "line" else _TURN_SAMPLES // 2 if kind == "quarter" else _TURN_SAMPLES
-        pts = _piece_points(p, m)
+        pts = piece_points(p, m)
         out.append(pts if k == 0 else pts[1:])
     return np.vstack(out)
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from simfab.cli import _help_items, build_parser
+from simfab.cli import build_parser, help_items
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -56,7 +56,7 @@ def _rendered_description(parser, columns: int, monkeypatch) -> list[str]:
 def test_description_paragraphs_render_as_written(prog, parser, monkeypatch):
     parser.format_help()  # (a validation's parser adds its arguments and description when first shown)
     source = [line.rstrip() for line in parser.description.splitlines()]
-    src_items = [item for item in _help_items(source) if item[0].strip()]
+    src_items = [item for item in help_items(source) if item[0].strip()]
     # wide enough for every line: exactly as written
     assert _rendered_description(parser, 5000, monkeypatch) == source
     for columns in (60, 80):

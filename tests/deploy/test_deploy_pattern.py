@@ -242,7 +242,7 @@ def test_zigzag_geometry_against_closed_form():
     # chords of a circular arc: relative shortfall (dtheta)^2 / 24 per turn sample; 16 samples per half turn
     assert 0 < err < (np.pi / 16) ** 2 / 24
     # clearance from the sides M0-c and M1-c (signed distance, inside positive), leads excluded
-    pts = np.vstack([springs._piece_points(p, 64) for p in lay[1:-1]])
+    pts = np.vstack([springs.piece_points(p, 64) for p in lay[1:-1]])
     for A in (M0, M1):
         d = c - A
         n = np.array([-d[1], d[0]]) / np.linalg.norm(d)
@@ -391,7 +391,7 @@ def test_conforming_layout_covers_the_domain_without_degenerate_quads(name):
     assert cover["conforming"] >= 0.99 and cover["conforming"] > cover["grid"]
     assert outside < 0.004
     assert np.all(pat.spring)
-    angles = np.array([pattern._max_angle(pat.P[q]) for q in pat.quads])
+    angles = np.array([pattern.max_angle(pat.P[q]) for q in pat.quads])
     assert np.degrees(angles.max()) < 140.0  # smoothed <= 135; the dome's regular core 136 (bisectors)
     Q = pat.P[pat.quads]
     edge = np.linalg.norm(np.roll(Q, -1, axis=1) - Q, axis=2)
