@@ -85,9 +85,10 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
         dv[bv] = final.distances[: len(bv)]
         state.grad_peak = max(state.grad_peak, _max_norm(final.distance_gradients))
         out = np.flatnonzero(dv[bv] > point_dhat(cm, state.points)[: len(bv)] * C.LAZY_BAND_DHATS)
-        nn = cm.field.nearest_sample(x[bv[out]], (R, p))
-        far = nn >= cm.field.radius
-        dv[bv[out[far]]] = np.maximum(dv[bv[out[far]]], cm.field.far_bound(nn[far]))
+        if len(out) and np.isfinite(cm.field.radius):  # (an exact field has no far points: radius inf)
+            nn = cm.field.nearest_sample(x[bv[out]], (R, p))
+            far = nn >= cm.field.radius
+            dv[bv[out[far]]] = np.maximum(dv[bv[out[far]]], cm.field.far_bound(nn[far]))
     else:
         ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
         dv[bv] = -ev.psi
