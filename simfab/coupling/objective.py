@@ -62,6 +62,9 @@ class StepObjective:
         self.y_ref = None
         self.d_ref = None
         self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
+        # (x, d, grad d) of the last evaluation without Hessians (e.g. a warm start's value, then its
+        # lift): the same x gives the same distances until the lazy bounds are re-anchored
+        self._distances = None
         # P2: the exact Hessian too is assembled on demand (LazyHessian), so that Newton, once it
         # has stopped offering it (NewtonConfig.retry_exact), assembles the projected one only; the
         # elastic energy and gradient then come from a gradient launch (~1/15 of a Hessian's),
@@ -80,6 +83,9 @@ class StepObjective:
         Returns:
             (d (k,) [m], grad d (k, dim), hess d (k, dim, dim) [1/m] or None).
         """
+        memo = self._distances
+        if not hessian and memo is not None and np.array_equal(memo[0], x):
+            return memo[1], memo[2], None
         with self.timer.timed("contact_field"):
             y = self.points.positions(x)
             k, dim = len(y), self.dim
@@ -103,6 +109,9 @@ class StepObjective:
                 elif hessian:  # re-anchor at accepted iterates only (need_hessian marks them)
                     self.y_ref[todo] = y[todo]
                     self.d_ref[todo] = d[todo]
+                    self._distances = None  # (the bounds beyond the band have moved)
+            if not hessian:
+                self._distances = (np.array(x, copy=True), d, gd)
         return d, gd, hd
 
     def __call__(self, xf: np.ndarray, need_hessian: bool):
