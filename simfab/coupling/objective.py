@@ -93,9 +93,10 @@ class StepObjective:
                 todo = np.arange(k)
                 bound = None
             else:
-                bound = self.d_ref - C.PSI_LIPSCHITZ * np.linalg.norm(y - self.y_ref, axis=1)
+                r = y - self.y_ref
+                bound = self.d_ref - C.PSI_LIPSCHITZ * np.sqrt(np.add.reduce(r * r, axis=1))  # (np.linalg.norm's sum)
                 todo = np.flatnonzero(bound < self.band)
-            d = np.empty(k) if bound is None else bound.copy()
+            d = np.empty(k) if bound is None else bound  # (a fresh array)
             gd = np.zeros((k, dim))
             hd = np.zeros((k, dim, dim)) if hessian else None
             if len(todo):
@@ -279,7 +280,7 @@ class StepObjective:
         else:
             d, gd, _ = self.distances(xf.reshape(self.n, self.dim), False)
         dy = self.points.positions(dx.reshape(self.n, self.dim))
-        sp = np.linalg.norm(dy, axis=1)
+        sp = np.sqrt(np.add.reduce(dy * dy, axis=1))  # (np.linalg.norm's sum)
         m = sp > 0
         if not m.any():
             return 1.0
