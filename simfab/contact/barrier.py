@@ -42,6 +42,28 @@ def _on_active(d: np.ndarray, dhat, term: int, at_zero: float) -> np.ndarray:
     return out
 
 
+def _all_terms(d: np.ndarray, dhat) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(:func:`barrier`, :func:`barrier_gradient`, :func:`barrier_hessian`) at d (k,) from one pass."""
+    d = np.asarray(d, float)
+    act = d < dhat
+    pos = act & (d > 0)
+    terms = barrier_terms(d[pos], dhat if np.ndim(dhat) == 0 else np.asarray(dhat)[pos])
+    out = []
+    for t, at_zero in zip(terms, (np.inf, 0.0, 0.0)):
+        o = np.zeros_like(d)
+        o[pos] = t
+        o[act & ~pos] = at_zero
+        out.append(o)
+    return out[0], out[1], out[2]
+
+
+def barrier_value(d: np.ndarray, dhat) -> np.ndarray:
+    """b(d) (k,) [m^2] at distances strictly inside the active range, 0 < d < dhat (the first term
+    of :func:`barrier_terms` alone: a line search's value)."""
+    r = d - dhat
+    return -(r**2) * np.log(d / dhat)
+
+
 def barrier(d: np.ndarray, dhat: float) -> np.ndarray:
     """The barrier b(d) elementwise.
 
@@ -91,7 +113,7 @@ def point_barrier(dist: np.ndarray, grad_dist: np.ndarray, hess_dist: np.ndarray
         (B [J], g (k, dim) [N], H (k, dim, dim) [N/m] or None).
     """
     if len(dist) and (dist.min() <= 0.0 or np.any(dist >= dhat)):  # not all active: general route
-        b, db, ddb = barrier(dist, dhat), barrier_gradient(dist, dhat), barrier_hessian(dist, dhat)
+        b, db, ddb = _all_terms(dist, dhat)
     else:
         b, db, ddb = barrier_terms(dist, dhat)
     E = kappa * float(b.sum())

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from simfab.contact.barrier import barrier, point_barrier, project_psd
+from simfab.contact.barrier import barrier_value, point_barrier, project_psd
 from simfab.coupling import config as C
 from simfab.coupling import rigid
 from simfab.coupling.friction import FrictionLag
@@ -235,9 +235,9 @@ class StepObjective:
         d, _, _ = self.distances(x, False)
         if np.any(d <= 0):
             return np.inf
-        act = d < self.dhat
+        act = d < self.dhat  # (all d > 0 here)
         D = float(self.friction.evaluate(x, hessian=False).energy.sum()) if self.friction is not None else 0.0
-        return E + self.kappa * float(barrier(d[act], self.dhat[act]).sum()) + D
+        return E + self.kappa * float(barrier_value(d[act], self.dhat[act]).sum()) + D
 
     def add_contact(self, H, contact, *, psd: bool) -> None:
         """Add the barrier Hessian blocks and the rigid-mode regularization to a FEM Hessian, in place.
