@@ -1,10 +1,11 @@
 """Interleaved A/B of the insertion loop's CPU time between two source trees, in one process.
 
 Each round imports one tree's ``simfab`` (the other's modules dropped from ``sys.modules``), runs
-one untimed insertion (Warp kernels, CHOLMOD) and then ``--reps`` timed ones on fresh models, and
-alternates; on a loaded machine the two trees then share its slow and fast moments, which separate
-processes minutes apart do not. Also prints machine-independent counts of one run per tree: Python
-calls (cProfile), contact-field evaluations and FEM kernel launches, and a hash of the records
+one untimed insertion (Warp kernels, CHOLMOD) and then ``--reps`` timed ones on fresh models; the
+rounds alternate the order (A B, B A, ...: the tree imported second in a round can run slower). On
+a loaded machine the two trees then share its slow and fast moments, which separate processes
+minutes apart do not. Also prints machine-independent counts of one run per tree: Python calls
+(cProfile), contact-field evaluations and FEM kernel launches, and a hash of the records
 (equal hashes: bit-identical records).
 
     python tools/ab_inprocess.py /work/main /work/wt/branch --scene snapfit2d --friction 0 --rounds 6 --reps 5
@@ -100,7 +101,7 @@ def main(argv=None) -> None:
     times = {t: [] for t in args.trees}
     counts = {}
     for rnd in range(args.rounds):
-        for tree in args.trees:
+        for tree in (args.trees if rnd % 2 == 0 else args.trees[::-1]):  # ABBA: neither is always second
             simulate = _load(os.path.abspath(tree))
             simulate(_model(args))  # untimed: kernels, CHOLMOD
             for _ in range(args.reps):
