@@ -30,14 +30,20 @@ def matrix_to_quat(R: np.ndarray) -> np.ndarray:
 
 def quat_slerp(q0, q1, u: float) -> np.ndarray:
     """Spherical linear interpolation of unit quaternions (w, x, y, z) at u in [0, 1], shortest arc."""
-    q0 = np.asarray(q0, dtype=np.float64) / np.linalg.norm(q0)
-    q1 = np.asarray(q1, dtype=np.float64) / np.linalg.norm(q1)
+    q0 = np.asarray(q0, dtype=np.float64)
+    same = q1 is q0 or (np.shape(q1) == q0.shape and np.asarray(q1, dtype=np.float64).tobytes() == q0.tobytes())
+    q0 = q0 / np.sqrt(q0.dot(q0))  # (np.linalg.norm's sum for a vector, without its dispatch)
+    if same:  # (two keyframes with the same rotation: the nlerp below of q0 with itself)
+        q = q0 + u * (q0 - q0)
+        return q / np.sqrt(q.dot(q))
+    q1 = np.asarray(q1, dtype=np.float64)
+    q1 = q1 / np.sqrt(q1.dot(q1))
     dot = float(np.dot(q0, q1))
     if dot < 0.0:  # q and -q are the same rotation; take the short way round
         q1, dot = -q1, -dot
     if dot > 1.0 - 1e-12:
         q = q0 + u * (q1 - q0)
-        return q / np.linalg.norm(q)
+        return q / np.sqrt(q.dot(q))
     theta = np.arccos(min(dot, 1.0))
     s = np.sin(theta)
     return (np.sin((1 - u) * theta) * q0 + np.sin(u * theta) * q1) / s

@@ -22,12 +22,18 @@ from __future__ import annotations
 import numpy as np
 
 
-def barrier_terms(d: np.ndarray, dhat: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def barrier_terms(d: np.ndarray, dhat: float, terms: int = 3) -> tuple:
     """(b, b', b'') at distances strictly inside the active range, 0 < d < dhat (k,), from one log:
-    the hot path of an objective, which selects its active points first."""
+    the hot path of an objective, which selects its active points first; the first ``terms`` of
+    them only (each computed alike whichever are asked for)."""
     r = d - dhat
     log = np.log(d / dhat)
-    return -(r**2) * log, -2.0 * r * log - r**2 / d, -2.0 * log - 4.0 * r / d + r**2 / d**2
+    out = (-(r**2) * log,)
+    if terms > 1:
+        out += (-2.0 * r * log - r**2 / d,)
+    if terms > 2:
+        out += (-2.0 * log - 4.0 * r / d + r**2 / d**2,)
+    return out
 
 
 def _on_active(d: np.ndarray, dhat, term: int, at_zero: float) -> np.ndarray:
@@ -37,9 +43,33 @@ def _on_active(d: np.ndarray, dhat, term: int, at_zero: float) -> np.ndarray:
     out = np.zeros_like(d)
     act = d < dhat
     pos = act & (d > 0)
-    out[pos] = barrier_terms(d[pos], dhat if np.ndim(dhat) == 0 else np.asarray(dhat)[pos])[term]
+    out[pos] = barrier_terms(d[pos], dhat if np.ndim(dhat) == 0 else np.asarray(dhat)[pos], term + 1)[term]
     out[act & ~pos] = at_zero
     return out
+
+
+def _all_terms(d: np.ndarray, dhat, terms: int = 3) -> tuple:
+    """The first ``terms`` of (:func:`barrier`, :func:`barrier_gradient`, :func:`barrier_hessian`)
+    at d (k,) from one pass."""
+    d = np.asarray(d, float)
+    act = d < dhat
+    pos = act & (d > 0)
+    zero = act & ~pos
+    out = ()
+    for t, at_zero in zip(barrier_terms(d[pos], dhat if np.ndim(dhat) == 0 else np.asarray(dhat)[pos], terms),
+                          (np.inf, 0.0, 0.0)):
+        o = np.zeros_like(d)
+        o[pos] = t
+        o[zero] = at_zero
+        out += (o,)
+    return out
+
+
+def barrier_value(d: np.ndarray, dhat) -> np.ndarray:
+    """b(d) (k,) [m^2] at distances strictly inside the active range, 0 < d < dhat (the first term
+    of :func:`barrier_terms` alone: a line search's value)."""
+    r = d - dhat
+    return -(r**2) * np.log(d / dhat)
 
 
 def barrier(d: np.ndarray, dhat: float) -> np.ndarray:
@@ -90,14 +120,16 @@ def point_barrier(dist: np.ndarray, grad_dist: np.ndarray, hess_dist: np.ndarray
     Returns:
         (B [J], g (k, dim) [N], H (k, dim, dim) [N/m] or None).
     """
+    terms = 2 if hess_dist is None else 3
     if len(dist) and (dist.min() <= 0.0 or np.any(dist >= dhat)):  # not all active: general route
-        b, db, ddb = barrier(dist, dhat), barrier_gradient(dist, dhat), barrier_hessian(dist, dhat)
+        b, db, *ddb = _all_terms(dist, dhat, terms)
     else:
-        b, db, ddb = barrier_terms(dist, dhat)
+        b, db, *ddb = barrier_terms(dist, dhat, terms)
     E = kappa * float(b.sum())
     g = kappa * db[:, None] * grad_dist
     if hess_dist is None:
         return E, g, None
+    ddb = ddb[0]
     H = kappa * (ddb[:, None, None] * np.einsum("ki,kj->kij", grad_dist, grad_dist) + db[:, None, None] * hess_dist)
     if psd:
         H = project_psd(H)

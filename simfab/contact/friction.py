@@ -15,6 +15,7 @@ in full: docs/methods.md, "simfab.contact.friction".
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,41 +88,25 @@ class FrictionEval:
 
 
 class FrictionPoints:
-    """The lagged friction data of ``a`` contact points on the device, for repeated evaluations at
-    changing relative displacements (a Newton solve evaluates one lag tens of times): tangent bases
+    """The lagged friction data of ``a`` contact points, for repeated evaluations at changing
+    relative displacements (a Newton solve evaluates one lag tens of times): tangent bases
     ``tangents`` (a, dim, dim - 1), ``mu_lambda`` (a,) = mu lambda_j [N] and mollifier widths ``eps``
-    (a,) [m] are uploaded once, the output buffers persist, and the launch (with and without the
-    Hessian) is recorded once and replayed (on the CPU the displacement and output buffers alias
-    numpy arrays)."""
+    (a,) [m]. The device buffers and the recorded launches (with and without the Hessian) belong to
+    a pool per thread, device, ``a`` and ``dim`` (:class:`_Slots`), which a set of points loads its data
+    into when another set used them last: an insertion builds a new lag per solve, and building
+    the buffers and recording the launches cost ten evaluations (on the CPU the buffers alias numpy
+    arrays)."""
 
     def __init__(self, tangents: np.ndarray, mu_lambda: np.ndarray, eps: np.ndarray, *, device: str = "cpu"):
         tangents = np.asarray(tangents, dtype=np.float64)
         a, dim = tangents.shape[0], tangents.shape[1]
         self.a, self.dim, self.device = a, dim, device
-        self.cpu = wp.get_device(device).is_cpu
         t = np.zeros((a, 3, 2))
         t[:, :dim, : dim - 1] = tangents
         self._t = t
-        self._dy = np.zeros((a, 3))
-        self._dy_wp = wp.array(self._dy, dtype=wp.vec3d, device=device, copy=not self.cpu)
-        self._inputs = [self._dy_wp,
-                        wp.array(np.ascontiguousarray(t[:, :, 0]), dtype=wp.vec3d, device=device),
-                        wp.array(np.ascontiguousarray(t[:, :, 1]), dtype=wp.vec3d, device=device),
-                        wp.array(np.asarray(mu_lambda, dtype=np.float64).reshape(a), dtype=wp.float64, device=device),
-                        wp.array(np.asarray(eps, dtype=np.float64).reshape(a), dtype=wp.float64, device=device)]
-        self._energy = wp.zeros(max(a, 1), dtype=wp.float64, device=device)
-        self._grad = wp.zeros(max(a, 1), dtype=wp.vec3d, device=device)
-        self._hess = wp.zeros(max(a, 1), dtype=wp.mat33d, device=device)
-        self._commands: dict = {}
-
-    def _command(self, hessian: bool):
-        cmd = self._commands.get(hessian)
-        if cmd is None:
-            with RECORD_LOCK:  # the first launch loads the module: one thread at a time
-                cmd = self._commands[hessian] = wp.launch(
-                    _friction_kernel, dim=self.a, inputs=[*self._inputs, int(hessian)],
-                    outputs=[self._energy, self._grad, self._hess], device=self.device, record_cmd=True)
-        return cmd
+        self._data = (np.ascontiguousarray(t[:, :, 0]), np.ascontiguousarray(t[:, :, 1]),
+                      np.asarray(mu_lambda, dtype=np.float64).reshape(a).copy(),
+                      np.asarray(eps, dtype=np.float64).reshape(a).copy())
 
     def evaluate(self, dy: np.ndarray, *, hessian: bool = True) -> FrictionEval:
         """The potential at relative displacements ``dy`` (a, dim) [m] (the module docstring)."""
@@ -132,13 +117,78 @@ class FrictionPoints:
         if a == 0:
             return FrictionEval(np.zeros(0), np.zeros((0, dim)), np.zeros((0, dim, dim)) if hessian else None,
                                 np.zeros(0))
-        self._dy[:, :dim] = dy
+        slots = _Slots.get(a, dim, self.device)
+        if slots.owner is not self:
+            slots.load(self._data)
+            slots.owner = self
+        slots.dy[:, :dim] = dy
+        energy, grad, hess = slots.launch(hessian)
+        slip = np.linalg.norm(np.einsum("kdt,kd->kt", self._t, slots.dy), axis=1)
+        H = hess[:a, :dim, :dim].copy() if hessian else None
+        return FrictionEval(energy[:a].copy(), grad[:a, :dim].copy(), H, slip)
+
+
+_POOL = threading.local()  # per thread: (a, dim, device) -> _Slots
+_POOL_MAX = 32
+
+
+class _Slots:
+    """Device buffers of ``a`` points (displacements, tangents, mu lambda, eps, outputs; on the CPU
+    aliasing numpy arrays) and their recorded launches, loaded by one :class:`FrictionPoints` at a
+    time (``owner``)."""
+
+    def __init__(self, a: int, dim: int, device: str):
+        self.cpu = wp.get_device(device).is_cpu
+        self.device, self.owner = device, None
+        self.dy = np.zeros((a, 3))  # (z = 0 in 2D: only the first dim columns are ever written)
+        host = (np.zeros((a, 3)), np.zeros((a, 3)), np.zeros(a), np.zeros(a))
+        dtypes = (wp.vec3d, wp.vec3d, wp.float64, wp.float64)
+        self._host = host if self.cpu else None
+        self._dy_wp = wp.array(self.dy, dtype=wp.vec3d, device=device, copy=not self.cpu)
+        self._inputs = [self._dy_wp, *(wp.array(h, dtype=d, device=device, copy=not self.cpu)
+                                       for h, d in zip(host, dtypes))]
+        self._outputs = [wp.zeros(max(a, 1), dtype=wp.float64, device=device),
+                         wp.zeros(max(a, 1), dtype=wp.vec3d, device=device),
+                         wp.zeros(max(a, 1), dtype=wp.mat33d, device=device)]
+        self._views = tuple(o.numpy() for o in self._outputs) if self.cpu else None
+        self.a = a
+        self._commands: dict = {}
+
+    @staticmethod
+    def get(a: int, dim: int, device: str) -> "_Slots":
+        pool = getattr(_POOL, "slots", None)
+        if pool is None:
+            pool = _POOL.slots = {}
+        key = (a, dim, str(device))
+        slots = pool.get(key)
+        if slots is None:
+            if len(pool) >= _POOL_MAX:
+                pool.pop(next(iter(pool)))
+            slots = pool[key] = _Slots(a, dim, device)
+        return slots
+
+    def load(self, data: tuple) -> None:
+        """Copy (t1 (a, 3), t2 (a, 3), mu lambda (a,), eps (a,)) into the input buffers."""
+        if self.cpu:
+            for h, d in zip(self._host, data):
+                h[...] = d
+        else:
+            for arr, d in zip(self._inputs[1:], data):
+                arr.assign(d)
+
+    def launch(self, hessian: bool) -> tuple:
+        """Run the kernel on the loaded data and ``dy``: (energy (a,), grad (a, 3), hess (a, 3, 3)) as
+        host arrays (views on the CPU: read before the next launch)."""
         if not self.cpu:
-            self._dy_wp.assign(self._dy)
-        self._command(hessian).launch()
-        slip = np.linalg.norm(np.einsum("kdt,kd->kt", self._t, self._dy), axis=1)
-        H = self._hess.numpy()[:a, :dim, :dim].copy() if hessian else None
-        return FrictionEval(self._energy.numpy()[:a].copy(), self._grad.numpy()[:a, :dim].copy(), H, slip)
+            self._dy_wp.assign(self.dy)
+        cmd = self._commands.get(hessian)
+        if cmd is None:
+            with RECORD_LOCK:  # the first launch loads the module: one thread at a time
+                cmd = self._commands[hessian] = wp.launch(
+                    _friction_kernel, dim=self.a, inputs=[*self._inputs, int(hessian)], outputs=self._outputs,
+                    device=self.device, record_cmd=True)
+        cmd.launch()
+        return self._views if self.cpu else tuple(o.numpy() for o in self._outputs)
 
 
 def friction_potential(dy: np.ndarray, tangents: np.ndarray, mu_lambda: np.ndarray, eps: np.ndarray, *,

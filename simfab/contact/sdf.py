@@ -108,27 +108,39 @@ def _local_sdf(kind: str, size, q: np.ndarray, hessian: bool):
         return -dist, -gd, (-Hd if hessian else None)
     if kind == "torus":
         return _torus_sdf(size, q, hessian)
-    e = np.asarray(size, float)
+    return _box_sdf(np.asarray(size, float), q, hessian)
+
+
+def _box_sdf(e: np.ndarray, q: np.ndarray, hessian: bool):
+    """:func:`_local_sdf` of a box of half-extents e (3,) [m]."""
     u = np.abs(q) - e
-    s = np.where(q >= 0, 1.0, -1.0)
+    up = q >= 0
     pos = np.maximum(u, 0.0)
     n = np.sqrt(np.einsum("kd,kd->k", pos, pos))
     outside = n > 0
-    psi = np.where(outside, -n, -u.max(axis=1))
-    n_out = np.where(outside, n, 1.0)  # (inside, pos = 0: g's row is set below)
-    g = -(pos * s) / n_out[:, None]
-    ins = ~outside
-    if ins.any():
-        j = np.argmax(u[ins], axis=1)
-        g[np.flatnonzero(ins), j] = -s[ins, j]
-    if hessian and outside.any():
-        # outside: distance to a face (flat: 0), an edge or a corner: (I - n n^T) / d over the axes
-        # that are outside (the others move the nearest point along); every row at once, inside
-        # rows zeroed after
-        m = (pos > 0).astype(float)
-        Pm = m[:, :, None] * np.eye(3)[None] * m[:, None, :]
-        H = -(Pm - g[:, :, None] * g[:, None, :]) / n_out[:, None, None]
-        H[ins] = 0.0
+    if outside.all():  # (the usual case: every point outside O)
+        psi, n_out, ins = -n, n, None
+    else:
+        psi = np.where(outside, -n, -u.max(axis=1))
+        n_out = np.where(outside, n, 1.0)  # (inside, pos = 0: g's row is set below)
+        ins = ~outside
+    g = np.where(up, -pos, pos) / n_out[:, None]  # -(pos * sign(q)), sign(0) = 1
+    if ins is not None:
+        rows = np.flatnonzero(ins)
+        j = np.argmax(u[rows], axis=1)
+        g[rows, j] = np.where(up[rows, j], -1.0, 1.0)
+    H = None
+    if hessian:
+        H = np.zeros((len(q), 3, 3))
+        if ins is None or not ins.all():
+            # outside: distance to a face (flat: 0), an edge or a corner: (I - n n^T) / d over the axes
+            # that are outside (the others move the nearest point along); every row at once, inside
+            # rows zeroed after
+            m = (pos > 0).astype(float)
+            Pm = m[:, :, None] * np.eye(3)[None] * m[:, None, :]
+            H = -(Pm - g[:, :, None] * g[:, None, :]) / n_out[:, None, None]
+            if ins is not None:
+                H[ins] = 0.0
     return psi, g, H
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from simfab.contact.barrier import barrier, point_barrier, project_psd
+from simfab.contact.barrier import barrier_value, point_barrier, project_psd
 from simfab.coupling import config as C
 from simfab.coupling import rigid
 from simfab.coupling.friction import FrictionLag
@@ -62,6 +62,14 @@ class StepObjective:
         self.y_ref = None
         self.d_ref = None
         self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
+        # (x, d, grad d) of the last evaluation without Hessians (e.g. a warm start's value, then its
+        # lift): the same x gives the same distances until the lazy bounds are re-anchored
+        self._distances = None
+        self.anchored = None  # see distances
+        # Newton's Hessians within a solve are assembled when Newton asks for them (linear elements,
+        # see _DeferredHessian); set by solve after the start's evaluation
+        self.defer_hessian = False
+        self._curv_from = None  # a _DeferredHessian whose curvature bound curv awaits
         # P2: the exact Hessian too is assembled on demand (LazyHessian), so that Newton, once it
         # has stopped offering it (NewtonConfig.retry_exact), assembles the projected one only; the
         # elastic energy and gradient then come from a gradient launch (~1/15 of a Hessian's),
@@ -69,17 +77,24 @@ class StepObjective:
         self.lazy_exact = cm.fem.element_order == 2
         self._fem = None
 
-    def distances(self, x: np.ndarray, hessian: bool):
+    def distances(self, x: np.ndarray, hessian: bool, anchor: bool | None = None):
         """Distances of the constraint points to O: exact near O, lower bounds (zero derivatives) for points
         certified farther than the band.
 
         Args:
             x: positions (n, dim) [m].
             hessian: also the distances' Hessians.
+            anchor: re-anchor the lazy bounds at x (None: with ``hessian``, which marks Newton's
+                iterates); without ``hessian`` the points evaluated exactly are kept in ``anchored``
+                ((their positions (t, dim), their indices (t,))) for :class:`_DeferredHessian`.
 
         Returns:
             (d (k,) [m], grad d (k, dim), hess d (k, dim, dim) [1/m] or None).
         """
+        anchor = hessian if anchor is None else anchor
+        memo = self._distances
+        if not anchor and memo is not None and np.array_equal(memo[0], x):
+            return memo[1], memo[2], None
         with self.timer.timed("contact_field"):
             y = self.points.positions(x)
             k, dim = len(y), self.dim
@@ -87,9 +102,10 @@ class StepObjective:
                 todo = np.arange(k)
                 bound = None
             else:
-                bound = self.d_ref - C.PSI_LIPSCHITZ * np.linalg.norm(y - self.y_ref, axis=1)
+                r = y - self.y_ref
+                bound = self.d_ref - C.PSI_LIPSCHITZ * np.sqrt(np.add.reduce(r * r, axis=1))  # (np.linalg.norm's sum)
                 todo = np.flatnonzero(bound < self.band)
-            d = np.empty(k) if bound is None else bound.copy()
+            d = np.empty(k) if bound is None else bound  # (a fresh array)
             gd = np.zeros((k, dim))
             hd = np.zeros((k, dim, dim)) if hessian else None
             if len(todo):
@@ -100,9 +116,14 @@ class StepObjective:
                     hd[todo] = -ev.hess
                 if self.y_ref is None:
                     self.y_ref, self.d_ref = y.copy(), d.copy()
-                elif hessian:  # re-anchor at accepted iterates only (need_hessian marks them)
+                elif anchor:  # re-anchor at accepted iterates only (need_hessian marks them)
                     self.y_ref[todo] = y[todo]
                     self.d_ref[todo] = d[todo]
+                    self._distances = None  # (the bounds beyond the band have moved)
+            if anchor and not hessian:
+                self.anchored = (y[todo], todo)
+            elif not hessian:
+                self._distances = (np.array(x, copy=True), d, gd)
         return d, gd, hd
 
     def __call__(self, xf: np.ndarray, need_hessian: bool):
@@ -122,6 +143,8 @@ class StepObjective:
             self.memo = None  # hand the cached Hessian out once (the caller may modify it)
             return memo[1]
         x = xf.reshape(self.n, self.dim)
+        if need_hessian and self.defer_hessian and not self.lazy_exact:
+            return self._evaluate_deferred(xf, x)
         H_exact = None
         with self.timer.timed("assembly"):
             H = None
@@ -165,8 +188,7 @@ class StepObjective:
                 self._remember(xf, d, gd, H, E, g)
                 # curvature bound for the step cap: twice the largest |hess d| seen near O, at least
                 # CURVATURE_FLOOR / sigma (a violated bound only costs a rejected line-search trial)
-                kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if len(act) else 0.0
-                self.curv = max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / cm.field.sigma)
+                self.curv, self._curv_from = self.curvature_bound(act, hd), None
             else:
                 # Newton may stop at a trial evaluated without its Hessian (see solve): this
                 # evaluation may be the final one, with the PSD Hessian deferred
@@ -177,6 +199,48 @@ class StepObjective:
         if need_hessian:
             self.memo = (xf.copy(), out)
         return out
+
+    def _evaluate_deferred(self, xf: np.ndarray, x: np.ndarray):
+        """:meth:`_evaluate` with the Hessian for a solve's iterates on linear elements: the value and
+        gradient as with it, the lazy bounds re-anchored at x; the distances' Hessians, the contact
+        blocks, the FEM Hessian and the curvature bound follow when Newton asks for the Hessian or
+        the step cap (:class:`_DeferredHessian`): a line-search trial that ends the solve needs none."""
+        cm = self.cm
+        with self.timer.timed("assembly"):
+            fem = self._fem
+            if fem is not None and np.array_equal(fem[0], xf):
+                E, g = fem[1], fem[2]
+            else:
+                E, g = energy_gradient(cm.fem, x)
+                self._fem = (xf.copy(), E, g)
+        if self.pin is not None:
+            E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
+        if not np.isfinite(E):
+            return np.inf, g.ravel(), None
+        d, gd, _ = self.distances(x, False, anchor=True)
+        if np.any(d <= 0):
+            return np.inf, g.ravel(), None
+        with self.timer.timed("barrier"):
+            act, B, gy, _ = self.contact_barrier(d, gd, None)
+            gc = self.points.scatter(gy, self.n, rows=act)
+            if self.friction is not None:
+                fr = self.friction.evaluate(x, hessian=False)
+                B += float(fr.energy.sum())
+                gc += self.points.scatter(fr.gradient, self.n, rows=self.friction.rows)
+        deferred = _DeferredHessian(self, x.copy(), d, gd, act, self.anchored)
+        self._curv_from = deferred
+        H = LazyHessian(self, deferred.x, deferred)
+        self._remember(xf, d, gd, H, E, g)
+        out = (E + B, (g + gc).ravel(), (deferred, H))
+        self.memo = (xf.copy(), out)
+        return out
+
+    def curvature_bound(self, act: np.ndarray, hd: np.ndarray) -> float:
+        """The step cap's curvature bound [1/m] from the distances' Hessians hd (k, dim, dim) at the
+        active points ``act``: twice the largest |hess d| seen near O, at least CURVATURE_FLOOR /
+        sigma (a violated bound only costs a rejected line-search trial)."""
+        kmax = float(np.abs(hd[act]).max()) * dim_factor(self.dim) if len(act) else 0.0
+        return max(C.CURVATURE_SAFETY * kmax, C.CURVATURE_FLOOR / self.cm.field.sigma)
 
     def contact_barrier(self, d, gd, hd):
         """The barrier of the active points (``d < d_hat``), in one pass.
@@ -225,9 +289,9 @@ class StepObjective:
         d, _, _ = self.distances(x, False)
         if np.any(d <= 0):
             return np.inf
-        act = d < self.dhat
+        act = d < self.dhat  # (all d > 0 here)
         D = float(self.friction.evaluate(x, hessian=False).energy.sum()) if self.friction is not None else 0.0
-        return E + self.kappa * float(barrier(d[act], self.dhat[act]).sum()) + D
+        return E + self.kappa * float(barrier_value(d[act], self.dhat[act]).sum()) + D
 
     def add_contact(self, H, contact, *, psd: bool) -> None:
         """Add the barrier Hessian blocks and the rigid-mode regularization to a FEM Hessian, in place.
@@ -265,12 +329,15 @@ class StepObjective:
             return self._max_step(xf, dx)
 
     def _max_step(self, xf: np.ndarray, dx: np.ndarray) -> float:
+        if self._curv_from is not None:
+            self.curv = self._curv_from.contact()[3]
+            self._curv_from = None
         if self.last_x is not None and np.array_equal(self.last_x, xf):
             d, gd = self.last_d, self.last_gd
         else:
             d, gd, _ = self.distances(xf.reshape(self.n, self.dim), False)
         dy = self.points.positions(dx.reshape(self.n, self.dim))
-        sp = np.linalg.norm(dy, axis=1)
+        sp = np.sqrt(np.add.reduce(dy * dy, axis=1))  # (np.linalg.norm's sum)
         m = sp > 0
         if not m.any():
             return 1.0
@@ -302,12 +369,54 @@ class LazyHessian:
             obj = self.obj
             with obj.timer.timed("assembly"):
                 _, _, H = energy_gradient_hessian(obj.cm.fem, self.x, project_psd=self.psd)
+            if isinstance(self.contact, _DeferredHessian):
+                self.contact = self.contact.contact()[:3]
             if self.contact is None:
                 act, _, _, Hy = obj.contact_barrier(*obj.distances(self.x, True))
                 Hf = obj.friction.evaluate(self.x, hessian=True).hessian if obj.friction is not None else None
                 self.contact = (act, Hy, Hf)
             with obj.timer.timed("barrier"):
                 obj.add_contact(H, self.contact, psd=self.psd)
+            self.H = H
+        return self.H
+
+
+class _DeferredHessian:
+    """The exact Hessian of a :class:`StepObjective` at x as :meth:`StepObjective._evaluate` assembles
+    it, from the state of that evaluation (x, the distances d and gradients gd, the active points,
+    the points evaluated exactly ``anchored``), assembled on first call (once); :meth:`contact`
+    gives its contact blocks and the curvature bound (also read by the step cap)."""
+
+    def __init__(self, obj, x, d, gd, act, anchored):
+        self.obj, self.x, self.d, self.gd, self.act, self.anchored = obj, x, d, gd, act, anchored
+        self._contact = None
+        self.H = None
+
+    def contact(self) -> tuple:
+        """(active points, exact barrier blocks, friction blocks or None, curvature bound [1/m])."""
+        if self._contact is None:
+            obj = self.obj
+            k, dim = len(self.d), obj.dim
+            hd = np.zeros((k, dim, dim))
+            y, todo = self.anchored
+            if len(todo):
+                with obj.timer.timed("contact_field"):
+                    ev = obj.cm.field.evaluate(y, (obj.R, obj.p), hessian=True, hessian_band=obj.dhat_max)
+                hd[todo] = -ev.hess
+            with obj.timer.timed("barrier"):
+                act, _, _, Hy = obj.contact_barrier(self.d, self.gd, hd)
+                Hf = obj.friction.evaluate(self.x, hessian=True).hessian if obj.friction is not None else None
+            self._contact = (act, Hy, Hf, obj.curvature_bound(act, hd))
+        return self._contact
+
+    def __call__(self):
+        if self.H is None:
+            obj = self.obj
+            contact = self.contact()[:3]
+            with obj.timer.timed("assembly"):
+                _, _, H = energy_gradient_hessian(obj.cm.fem, self.x, project_psd=False)
+            with obj.timer.timed("barrier"):
+                obj.add_contact(H, contact, psd=False)
             self.H = H
         return self.H
 
@@ -383,6 +492,7 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
         (x (n, dim) [m], Newton iterations).
     """
     _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
+    obj.defer_hessian = True  # (the start's Hessian is wanted unless x0 already converged: assembled now)
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n, floor)
     opts = NewtonConfig(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,

@@ -12,6 +12,25 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+try:  # the kernel of scipy's own CSR @ dense (csr_matrix._matmul_multivector), without its dispatch
+    from scipy.sparse import _sparsetools as _spt
+
+    _CSR_MATVECS = _spt.csr_matvecs
+except (ImportError, AttributeError):  # pragma: no cover - another scipy: the operator instead
+    _CSR_MATVECS = None
+
+
+def csr_times(A, X: np.ndarray) -> np.ndarray:
+    """A @ X for a CSR matrix A (m, n) and a dense X (n, c), the same sums in the same order as
+    scipy's operator (its kernel called directly: the insertion loop forms point positions many
+    times per Newton iteration, where the operator's checks cost more than the product)."""
+    if (_CSR_MATVECS is None or X.ndim != 2 or X.dtype != np.float64 or A.dtype != np.float64
+            or not X.flags.c_contiguous or X.shape[0] != A.shape[1]):
+        return A @ X
+    out = np.zeros((A.shape[0], X.shape[1]))
+    _CSR_MATVECS(A.shape[0], A.shape[1], X.shape[1], A.indptr, A.indices, A.data, X.ravel(), out.ravel())
+    return out
+
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class ContactPoints:
@@ -47,7 +66,7 @@ class ContactPoints:
     def positions(self, x: np.ndarray) -> np.ndarray:
         """(k, dim) point positions (or displacements when ``x`` is a displacement field)."""
         P = self.interpolation[0]
-        return P @ x[: P.shape[1]]
+        return csr_times(P, x[: P.shape[1]])
 
     def scatter(self, g_points: np.ndarray, n_vertices: int, rows: np.ndarray | None = None) -> np.ndarray:
         """Vertex vectors (n, dim) = sum_j w_ja g_j (transpose of :meth:`positions`). With ``rows``
@@ -59,7 +78,7 @@ class ContactPoints:
             np.add.at(out, self.verts[rows].ravel(), contrib.reshape(-1, dim))
             return out
         PT = self.interpolation[1]
-        out[: PT.shape[0]] = PT @ g_points
+        out[: PT.shape[0]] = csr_times(PT, g_points)
         return out
 
     def concat(self, other: "ContactPoints") -> "ContactPoints":

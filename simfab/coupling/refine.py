@@ -76,7 +76,7 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
         return memo
     facets = cm.contact_facets
     R, p = cm.pose(s)
-    bv = np.asarray(cm.fem.boundary_vertices)
+    bv = cm.fem.boundary_vertices
     dv = np.full(cm.fem.n_vertices, np.inf)
     if final is not None and final.x is x and len(final.distances) >= len(bv):
         # Newton's converged evaluation at x (the first len(bv) constraint points are the boundary
@@ -84,10 +84,12 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
         # those beyond the kernel radius get the sharper nearest-sample bound
         dv[bv] = final.distances[: len(bv)]
         state.grad_peak = max(state.grad_peak, _max_norm(final.distance_gradients))
-        out = np.flatnonzero(dv[bv] > point_dhat(cm, state.points)[: len(bv)] * C.LAZY_BAND_DHATS)
-        nn = cm.field.nearest_sample(x[bv[out]], (R, p))
-        far = nn >= cm.field.radius
-        dv[bv[out[far]]] = np.maximum(dv[bv[out[far]]], cm.field.far_bound(nn[far]))
+        if np.isfinite(cm.field.radius):  # (an exact field has no far points: radius inf)
+            out = np.flatnonzero(dv[bv] > point_dhat(cm, state.points)[: len(bv)] * C.LAZY_BAND_DHATS)
+            if len(out):
+                nn = cm.field.nearest_sample(x[bv[out]], (R, p))
+                far = nn >= cm.field.radius
+                dv[bv[out[far]]] = np.maximum(dv[bv[out[far]]], cm.field.far_bound(nn[far]))
     else:
         ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
         dv[bv] = -ev.psi
@@ -97,29 +99,37 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
             dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
     xf = x[facets]  # (F, nv, dim)
     a, c = EDGE_PAIRS[cm.dim]
-    edges2 = np.einsum("fed,fed->fe", xf[:, a] - xf[:, c], xf[:, a] - xf[:, c])  # (F, e) squared edge lengths
+    ev_ = xf[:, a] - xf[:, c]
+    edges2 = np.einsum("fed,fed->fe", ev_, ev_)  # (F, e) squared edge lengths
     # every point of a facet lies within `cover` of one of its vertices: half the edge (2D), and
     # longest edge / sqrt(3) on a triangle (the farthest point is the circumcentre when acute,
     # R = c / (2 sin gamma) with gamma >= 60 deg; else within half the longest edge). A facet whose
     # vertices are all farther than L * cover from O is certified outside by the vertex bounds.
     cover = np.sqrt(edges2.max(axis=1)) * COVER[cm.dim]
-    ids = np.flatnonzero(np.min(dv[facets], axis=1) <= C.PSI_LIPSCHITZ * cover)
-    refined = np.zeros(len(facets), dtype=bool)
-    refined[list(state.refined)] = True
-    refined = refined[ids]
+    dvf = dv[facets]  # (F, nv)
+    ids = np.flatnonzero(dvf.min(axis=1) <= C.PSI_LIPSCHITZ * cover)
+    if state.refined:
+        refined = np.zeros(len(facets), dtype=bool)
+        refined[list(state.refined)] = True
+        refined = refined[ids]
+    else:
+        refined = np.zeros(len(ids), dtype=bool)
     psi_max = np.full(len(ids), -np.inf)
     for is_refined in (False, True):
+        if not len(ids):
+            break
         sel = refined if is_refined else ~refined
-        if sel.any():
+        every = not is_refined and not state.refined  # (no refined facet: every one near O)
+        if every or sel.any():
             w, gap_map = check_lattice(cm.dim, state.order, is_refined)
-            f_sel = ids[sel]
+            f_sel = ids if every else ids[sel]
             xv = xf[f_sel]  # (f, nv, dim) the facets' vertices
             y = w @ xv  # (f, p, dim) check points
             # psi(y) <= psi(v) + L |y - v| for each vertex v of the facet: points this bounds below
             # zero are outside O and need no evaluation (their bound stands in for psi: every use
             # of psi_max only asks whether it is positive or above the tolerance)
             gap = np.sqrt(np.maximum(edges2[f_sel] @ gap_map, 0.0)).reshape(len(f_sel), len(w), -1)  # (f, p, nv)
-            bound = C.PSI_LIPSCHITZ * gap - dv[facets[f_sel]][:, None, :]
+            bound = C.PSI_LIPSCHITZ * gap - dvf[f_sel][:, None, :]
             psi = bound[:, :, 0]
             for v in range(1, bound.shape[2]):  # min over the nv vertices (faster than min(axis=2))
                 psi = np.minimum(psi, bound[:, :, v])
@@ -137,7 +147,10 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
                 psi[todo] = ev.psi
                 state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
             known_body[f_sel], known_psi[f_sel] = body, psi
-            psi_max[sel] = psi.max(axis=1)
+            if every:
+                psi_max = psi.max(axis=1)
+            else:
+                psi_max[sel] = psi.max(axis=1)
     out = FacetCheck(x, s, state.order, ids, psi_max, refined)
     state.check = out
     return out

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import time
 
+_clock = time.perf_counter
+
 
 class Timer:
     """Accumulates exclusive wall time per category in ``t`` (seconds) and the number of blocks
@@ -47,21 +49,25 @@ class Span:
 
     def __enter__(self):
         timer = self.timer
-        now = time.perf_counter()
-        if timer._open:  # pause the enclosing span
-            outer = timer._open[-1]
-            timer.add(outer.key, now - outer.t0)
+        now = _clock()
+        opened = timer._open
+        if opened:  # pause the enclosing span
+            outer = opened[-1]
+            t = timer.t
+            t[outer.key] = t.get(outer.key, 0.0) + (now - outer.t0)
         self.t0 = now
-        timer._open.append(self)
+        opened.append(self)
 
     def __exit__(self, *exc):
         timer = self.timer
-        now = time.perf_counter()
-        timer.add(self.key, now - self.t0)
-        timer.n[self.key] = timer.n.get(self.key, 0) + 1
-        timer._open.pop()
-        if timer._open:  # resume the enclosing span
-            timer._open[-1].t0 = now
+        now = _clock()
+        key, t, n = self.key, timer.t, timer.n
+        t[key] = t.get(key, 0.0) + (now - self.t0)
+        n[key] = n.get(key, 0) + 1
+        opened = timer._open
+        opened.pop()
+        if opened:  # resume the enclosing span
+            opened[-1].t0 = now
 
 
 class _Null:

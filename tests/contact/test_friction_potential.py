@@ -63,3 +63,25 @@ def test_normal_displacement_costs_nothing():
     assert np.allclose(ev.gradient, 0.0, atol=1e-9) and np.allclose(ev.slip, 0.0, atol=1e-15)
     # the tangent bases are orthonormal and orthogonal to the normals
     assert np.allclose(np.einsum("kdi,kdj->kij", T, T), np.eye(2)) and np.allclose(np.einsum("kd,kdi->ki", n, T), 0)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_point_sets_sharing_pooled_buffers_keep_their_own_data(dim):
+    # two sets of the same size share the pooled device buffers (FrictionPoints loads its data when
+    # another set used them last): evaluations interleaved must equal each set evaluated alone
+    from simfab.contact.friction import FrictionPoints
+
+    rng = np.random.default_rng(11 + dim)
+    eps = 1e-6
+    sets = [_points(dim, 5, rng, eps, scale) for scale in (0.3, 5.0)]
+    alone = [friction_potential(dy, T, ml, e) for dy, T, ml, e in sets]
+    fps = [FrictionPoints(T, ml, e) for _, T, ml, e in sets]
+    for _ in range(2):
+        for fp, (dy, _, _, _), ref in zip(fps, sets, alone):
+            for hessian in (False, True):
+                ev = fp.evaluate(dy, hessian=hessian)
+                np.testing.assert_array_equal(ev.energy, ref.energy)
+                np.testing.assert_array_equal(ev.gradient, ref.gradient)
+                np.testing.assert_array_equal(ev.slip, ref.slip)
+                if hessian:
+                    np.testing.assert_array_equal(ev.hessian, ref.hessian)
