@@ -55,8 +55,8 @@ def crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: StepState
 
 def warm_crossings(cm: CouplingModel, x: np.ndarray, s: float, state: StepState) -> list:
     """Unrefined boundary facets whose interior crosses into O at a step's warm start (x, s): refined
-    before the step is solved (:func:`simfab.coupling.stepper.advance`), where Newton would otherwise
-    converge with them crossing and the step be solved again. Refined facets are left to the check
+    before the step is solved (:func:`simfab.coupling.stepper.advance`, frictionless runs), where Newton
+    would otherwise converge with them crossing and the step be solved again. Refined facets are left to the check
     after the solve (:func:`crossing_facets`, which may double the density).
 
     Args:

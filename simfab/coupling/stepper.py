@@ -240,13 +240,14 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                         predictor.restore_feasibility(cm, state, ctx)
                         refined = False
                     x0 = predictor.warm_start(cm, state, s_new, obj, ctx).x
-                    ahead = warm_crossings(cm, x0, s_new, state)
+                    # facets the warm start already pushes into O: refined before the solve (else
+                    # Newton converges with them crossing and the step is solved again); frictionless
+                    # runs only (with friction the refined set's history is part of the solution's)
+                    ahead = [] if frictional else warm_crossings(cm, x0, s_new, state)
                     if ahead and rounds + 1 < C.MAX_REFINEMENT_ROUNDS:
-                        # facets the warm start already pushes into O: refine them before the solve
-                        # (else Newton converges with them crossing and the step is solved again)
                         rounds += 1
                         add_refinement(cm, state, ahead)
-                        refined, resume, settled = True, x0, not frictional
+                        refined, resume = True, x0
                         continue
             with ctx.phases.timed("newton"):
                 x, it = solve(cm, obj, x0, ctx, floor=0.0 if settled else lag_floor(cm, lagged))
