@@ -53,6 +53,27 @@ def crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: StepState
     return [int(f) for f in ids[(psi_max > 0) & ~refined]]
 
 
+def warm_crossings(cm: CouplingModel, x: np.ndarray, s: float, state: StepState) -> list:
+    """Unrefined boundary facets whose interior crosses into O at a step's warm start (x, s): refined
+    before the step is solved (:func:`simfab.coupling.stepper.advance`, frictionless runs), where Newton
+    would otherwise converge with them crossing and the step be solved again. Refined facets are left to the check
+    after the solve (:func:`crossing_facets`, which may double the density).
+
+    Args:
+        cm: the coupling model.
+        x: the warm start (n, dim) [m].
+        s: the step's path length [m].
+        state: the state the step starts from (its refined facets, density and check caches).
+
+    Returns:
+        Facet ids (rows of ``cm.contact_facets``), empty when none crosses or refinement is off.
+    """
+    if not cm.options.refine:
+        return []
+    fc = facet_check(cm, x, s, state)
+    return [int(f) for f in fc.ids[(fc.psi_max > 0) & ~fc.refined]]
+
+
 #: The largest distance from a point of a facet to its nearest vertex, over its longest edge.
 COVER = {2: 0.5, 3: 1.0 / np.sqrt(3.0)}  # max distance from a facet point to its nearest vertex / longest edge
 

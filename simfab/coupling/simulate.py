@@ -11,7 +11,8 @@ nodes plus refinement points on boundary facets). Per step (interior point / IPC
    a contact predictor (points O could reach pushed along its normal, one linear solve);
 2. corrector: Newton on E_d(x) + kappa sum_j b(-psi(y_j)) (log barrier b, :mod:`simfab.contact.barrier`),
    every step capped so that no point reaches O, kappa doubled after a step that ends too close;
-3. refinement: facets whose interior crosses into O get extra constraint points, the step re-solved;
+3. refinement: facets whose interior crosses into O get extra constraint points, before the solve
+   when the warm start already pushes them into O, else after it and the step re-solved;
 4. check: max penetration <= ``penetration_tol_rel * h_A`` and no inverted element, else the step
    is bisected along the path up to ``MAX_BISECTIONS`` times, then ConvergenceError.
 

@@ -24,7 +24,7 @@ from simfab.coupling.model import CouplingModel
 from simfab.coupling.objective import adapt_kappa, evaluation, make_objective, solve
 from simfab.coupling.points import vertex_points
 from simfab.coupling.record import StepResult, record_step
-from simfab.coupling.refine import add_refinement, crossing_facets
+from simfab.coupling.refine import add_refinement, crossing_facets, warm_crossings
 from simfab.coupling.rigid_check import WeakMotion, rigid_contact
 from simfab.coupling.state import PastStep, StepContext, StepState, accept
 from simfab.errors import ConvergenceError
@@ -240,6 +240,15 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                         predictor.restore_feasibility(cm, state, ctx)
                         refined = False
                     x0 = predictor.warm_start(cm, state, s_new, obj, ctx).x
+                    # facets the warm start already pushes into O: refined before the solve (else
+                    # Newton converges with them crossing and the step is solved again); frictionless
+                    # runs only (with friction the refined set's history is part of the solution's)
+                    ahead = [] if frictional else warm_crossings(cm, x0, s_new, state)
+                    if ahead and rounds + 1 < C.MAX_REFINEMENT_ROUNDS:
+                        rounds += 1
+                        add_refinement(cm, state, ahead)
+                        refined, resume = True, x0
+                        continue
             with ctx.phases.timed("newton"):
                 x, it = solve(cm, obj, x0, ctx, floor=0.0 if settled else lag_floor(cm, lagged))
         except ConvergenceError:
