@@ -50,7 +50,7 @@ HALVINGS = 4  # trials per escalation: the step, then halved three times
 #: step up to 4 x as long; one before cut a saddle's long second step short: docs/decisions.md,
 #: "Deployment tuning: where its time goes")
 RESTART_BACK = 2
-HEIGHT_SMOOTHING = 0.01  # the height row's smoothing tau, relative to the target points' height
+HEIGHT_SMOOTHING = 0.003  # the height row's smoothing tau, relative to the target points' height
 
 
 @dataclass(frozen=True, kw_only=True)
