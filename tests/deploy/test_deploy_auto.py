@@ -265,3 +265,28 @@ def test_point_weight_follows_the_saddle_shaped_area():
     assert auto.point_weight(families.member("cylinder-R100@12")) == w
     assert auto.point_weight(surface.saddle(0.1, 0.1, 12)) == 0.0
     assert 0.0 < auto.point_weight(families.member("mixed@12")) < 0.5 * w
+
+
+def test_inserts_on_short_edges_keep_beam_ends_scaled_with_them(tmp_path):
+    """The 85 deg cap of a 60 mm sphere (14 mm cells, 100 inserts): valence-3 vertices of the mesh layout
+    next to the seams have edges of ~0.6 h, where half an edge less the beam end (min_beam) leaves less
+    than the gap the smallest insert needs; those inserts keep beam ends scaled with their edges (min_beam
+    x e / h, at least pattern.SHORT_BEAM_MIN of it) and become reachable: 6 unreachable before, 2 now
+    (each 0.1 mm short: no catalogue size is small enough). No other insert changes (the bundled targets'
+    patterns are bit-identical)."""
+    from simfab.deploy import cuts, pattern
+
+    s = _bare(tmp_path, families.member("cap85-R60@12"))
+    pc = s.pattern
+    cf = cuts.flatten_with_cuts(s.target.V, s.target.F, s.cuts, pc)
+    pat = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, pc,
+                         seams=[p for _, p in cuts.seam_lines(cf)], cone_tips=cuts.cone_points(cf))
+    assert len(pat.unreachable) <= 2
+    elen = np.linalg.norm(pat.P[pat.edges[:, 0]] - pat.P[pat.edges[:, 1]], axis=1)
+    val = np.bincount(pat.edges.ravel(), minlength=len(pat.P))
+    hv = np.bincount(pat.edges.ravel(), weights=np.repeat(elen, 2), minlength=len(pat.P)) / np.maximum(val, 1)
+    ok = pat.interior.copy()
+    ok[pat.unreachable] = False
+    end = 0.5 * hv - pat.gap  # the beam end each insert leaves on its mean half edge
+    assert np.sum(ok & (end < pc.min_beam - 1e-9)) >= 3  # inserts that fit only with scaled beam ends
+    assert np.all(end[ok] >= pattern.SHORT_BEAM_MIN * pc.min_beam - 1e-9)
