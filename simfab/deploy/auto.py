@@ -54,14 +54,14 @@ TUNE_ROOM = 0.2
 #: cuts the catalogue adds the smaller sizes such an insert needs for its gap to be achievable
 SEAM_EDGE = 0.5
 #: the tuning on by default: Gauss-Newton steps, towards the surface, each vertex's own point and (beyond
-#: the stop's height tolerance) the target's height, w_h = 0.3 (the surface distance alone lets a saddle's
+#: the stop's height tolerance) the target's height, w_h = 0.2 (the surface distance alone lets a saddle's
 #: height drift: the point weight is 0 there, :func:`point_weight`); it stops at the bound (RMS 0.5 % of
 #: the diameter, half the deployment bound, and the height within 2 %, two thirds of its bound; both
 #: measured as the run's deviation is), when a step gains < 2 %, or after 8 steps. Its budget is counted
 #: in steps, not seconds, so that the same input gives the same pattern on any machine and load
 #: (``[tune] seconds`` sets a wall-clock budget too).
 AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.005, target_height=0.02, min_gain=0.02,
-                 height_weight=0.3)
+                 height_weight=0.2)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -274,6 +274,12 @@ class Pattern:
 CLASS_LETTERS = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
 
 
+#: the shortest beam end an insert on short edges keeps, relative to ``min_beam`` (:func:`_pattern_on`: the
+#: beam ends of an insert whose gap does not fit otherwise scale with its edges, as the features scale with
+#: the cell below 20 mm, simfab.deploy.auto.FEATURE_SCALE_MIN)
+SHORT_BEAM_MIN = 0.5
+
+
 def assign_sizes(d: np.ndarray, gmax: np.ndarray, sizes, min_gap: float) -> np.ndarray:
     """Catalogue size per insert: of the sizes whose gap ``g = r - d`` is achievable, the one nearest
     the middle of [min_gap, gmax] (most margin for cut tolerances); where none is, the one with the
@@ -523,6 +529,17 @@ def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams, cone_ti
     cls[interior] = assign_sizes(-need[interior], gmax[interior], cfg.sizes, cfg.min_gap)
     r_v = np.where(interior, np.asarray(cfg.sizes)[np.maximum(cls, 0)], 0.0)
     req = np.where(interior, r_v + need, 0.0)
+    # an insert whose gap does not fit its beam ends (short edges: a mesh layout's valence-3 vertices, seams)
+    # keeps beam ends scaled with its edges, min_beam x e / h (e: its mean edge, on a seam its shortest; at
+    # least SHORT_BEAM_MIN of min_beam), the size re-chosen for that limit; every other insert is unchanged
+    over = interior & (req > gmax + 1e-12)
+    if over.any():
+        e = np.where(seam, emin, hv)
+        g_short = 0.5 * e - cfg.min_beam * np.clip(e / h, SHORT_BEAM_MIN, 1.0)
+        gmax = np.where(over, np.maximum(gmax, g_short), gmax)
+        cls[over] = assign_sizes(-need[over], gmax[over], cfg.sizes, cfg.min_gap)
+        r_v = np.where(interior, np.asarray(cfg.sizes)[np.maximum(cls, 0)], 0.0)
+        req = np.where(interior, r_v + need, 0.0)
     unreachable = np.flatnonzero(interior & ((req < cfg.min_gap) | (req > gmax)))
     gap = np.where(interior, np.clip(req, cfg.min_gap, gmax), 0.0)
     # springs: none in quads with nearly collinear neighbouring edges

@@ -9,7 +9,7 @@ with a weighted point-to-point term towards each vertex's own target point y_j,
 
 E = |e|^2 / 2, c_j the closest target point, w = ``point_weight``, H the out-of-plane extent
 (:func:`simfab.deploy.compare.out_of_plane_extent`, the deployed height the bounds read; its maximum
-and minimum smoothed by log-sum-exp over ``HEIGHT_SMOOTHING`` of the height), w_h = ``height_weight``,
+and minimum smoothed as softmax-weighted means over ``HEIGHT_SMOOTHING`` of the height), w_h = ``height_weight``,
 s(x) = sign(x) max(|x| - tol, 0) with tol = ``target_height`` x H(y) (the height row acts only on a
 height outside the stop's tolerance), (R, t) the ICP alignment minimising the same E (H is invariant
 under it, so dE/d(R, t) = 0 and the Gauss-Newton gradient J^T e needs no alignment term).
@@ -50,7 +50,7 @@ HALVINGS = 4  # trials per escalation: the step, then halved three times
 #: step up to 4 x as long; one before cut a saddle's long second step short: docs/decisions.md,
 #: "Deployment tuning: where its time goes")
 RESTART_BACK = 2
-HEIGHT_SMOOTHING = 0.01  # the height row's smoothing tau, relative to the target points' height
+HEIGHT_SMOOTHING = 0.003  # the height row's smoothing tau, relative to the target points' height
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -192,19 +192,23 @@ def _fit(X: np.ndarray, Y: np.ndarray, target, cfg: TuneConfig) -> Fit:
 
 
 def _height_and_gradient(A: np.ndarray, tau: float) -> tuple[float, np.ndarray]:
-    """The out-of-plane extent of points A (n,3) [m], smoothed: H = tau log sum exp(z / tau) + tau log
-    sum exp(-z / tau), z_j = (a_j - mean) . n along their best-fit plane's normal n (the extent's
-    maximum and minimum, each within tau log n; smooth where extreme points tie, as on a symmetric
-    saddle's rim), and dH/da_j (n,3): w_j n (w = the two softmax weights' difference) plus the normal's
-    turn, dn = -sum_k v_k (v_k^T dC n) / (s_k^2 - s_3^2) (first-order perturbation of the smallest
-    eigenvector of C = A_c^T A_c, v_k its other eigenvectors, s the singular values)."""
+    """The out-of-plane extent of points A (n,3) [m], smoothed: H = M - m, M = sum p_j z_j and m = sum q_j z_j
+    the softmax-weighted means (p = softmax(z / tau), q = softmax(-z / tau)) of z_j = (a_j - mean) . n along
+    their best-fit plane's normal n: the extent's maximum and minimum, smooth where extreme points tie (a
+    symmetric saddle's corners, a cap's rim) and, unlike log-sum-exp, not shifted by the number of points
+    that tie (each within tau of the true extreme, exact where they tie); and dH/da_j (n,3): w_j n, w_j =
+    p_j (1 + (z_j - M) / tau) - q_j (1 - (z_j - m) / tau), plus the normal's turn, dn = -sum_k v_k (v_k^T dC n)
+    / (s_k^2 - s_3^2) (first-order perturbation of the smallest eigenvector of C = A_c^T A_c, v_k its other
+    eigenvectors, s the singular values)."""
     Ac = A - A.mean(axis=0)
     _, sv, Vt = np.linalg.svd(Ac, full_matrices=False)
     n = Vt[2]
     z = Ac @ n
-    hi, lo = np.exp((z - z.max()) / tau), np.exp((z.min() - z) / tau)
-    H = z.max() + tau * np.log(hi.sum()) - z.min() + tau * np.log(lo.sum())
-    w = hi / hi.sum() - lo / lo.sum()
+    p, q = np.exp((z - z.max()) / tau), np.exp((z.min() - z) / tau)
+    p, q = p / p.sum(), q / q.sum()
+    top, bottom = float(p @ z), float(q @ z)
+    H = top - bottom
+    w = p * (1.0 + (z - top) / tau) - q * (1.0 - (z - bottom) / tau)
     G = w[:, None] * n[None, :]
     span = w @ Ac
     for k in (0, 1):  # v_k^T dC n = sum_j (v_k . da_j) z_j + (a_j . v_k)(n . da_j)
