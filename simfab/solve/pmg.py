@@ -122,6 +122,8 @@ class TwoLevelP2:
         self._Ac = None
         self._inv_diag = None
         self._lmax = None
+        self._eigvec = None
+        self._AP = None
 
     def setup(self, A: sp.spmatrix, U: np.ndarray | None = None, mu: float = 0.0, shift: float = 0.0) -> None:
         """Prepare the cycle for K = A + mu U U^T (A (m, m) symmetric, U (m, r) dense or None, mu >= 0 [units of
@@ -133,7 +135,8 @@ class TwoLevelP2:
         A = canonical_csr(A)
         self._A, self._mu = A, float(mu)
         self._U = None if U is None or mu == 0.0 else np.asarray(U, dtype=np.float64)
-        Ac = self.PT @ A @ self.P
+        self._AP = A @ self.P  # the coarse correction's residual update, and the Galerkin product
+        Ac = self.PT @ self._AP
         if shift:
             Ac = Ac + shift * (self.PT @ self.P)
         Ac = canonical_csr(Ac)
@@ -158,8 +161,13 @@ class TwoLevelP2:
     def __call__(self, r: np.ndarray) -> np.ndarray:
         """M^-1 r: smooth from zero, coarse correction, smooth (the adjoint sweep)."""
         x = self._smooth(np.zeros_like(r), r, forward=True)
-        x += self.P @ self._coarse_solve(self.PT @ (r - self.apply(x)))
-        return self._smooth(x, r, forward=False)
+        res = r - self.apply(x)
+        e = self._coarse_solve(self.PT @ res)
+        x += self.P @ e
+        res -= self._AP @ e  # K P e, with K = A + mu U U^T
+        if self._U is not None:
+            res -= self._mu * (self._U @ (self._U.T @ (self.P @ e)))
+        return self._smooth(x, r, forward=False, residual=res)
 
     def _coarse_solve(self, rc: np.ndarray) -> np.ndarray:
         if self._Uc is None:
@@ -167,16 +175,23 @@ class TwoLevelP2:
         return self.coarse.solve_free_update(self._Ac, np.arange(self.coarse_unknowns), rc, self._Uc, self._mu)
 
     def _power_lambda_max(self) -> float:
-        """lambda_max of D^-1 K by the power method from a fixed start (enlarged by 1.1 in the smoother)."""
-        v = np.random.default_rng(0).standard_normal(self._A.shape[0])
+        """lambda_max of D^-1 K by the power method (enlarged by 1.1 in the smoother): from a fixed start,
+        or, on a later setup of the same size, from the last estimate's vector (the Newton Hessians of
+        one run change little between solves) with a third of the iterations."""
+        n = self._A.shape[0]
+        v, its = self._eigvec, max(1, self.smoother.power_iterations // 3)
+        if v is None or v.shape != (n,):
+            v, its = np.random.default_rng(0).standard_normal(n), self.smoother.power_iterations
         lam = 1.0
-        for _ in range(self.smoother.power_iterations):
+        for _ in range(its):
             w = self._inv_diag * self.apply(v)
             lam = float(np.linalg.norm(w) / np.linalg.norm(v))
             v = w / np.linalg.norm(w)
+        self._eigvec = v
         return lam
 
-    def _smooth(self, x: np.ndarray, b: np.ndarray, *, forward: bool) -> np.ndarray:
+    def _smooth(self, x: np.ndarray, b: np.ndarray, *, forward: bool, residual: np.ndarray | None = None) -> np.ndarray:
+        """``sweeps`` smoothing steps on K x = b from x (``residual``: b - K x when known)."""
         s = self.smoother
         if s.kind == "sgs":
             from pyamg.relaxation.relaxation import gauss_seidel
@@ -192,7 +207,7 @@ class TwoLevelP2:
         theta, delta = 0.5 * (c + a), 0.5 * (c - a)
         sigma = theta / delta
         rho = 1.0 / sigma
-        r = b - self.apply(x) if np.any(x) else b.copy()
+        r = residual if residual is not None else (b - self.apply(x) if np.any(x) else b.copy())
         d = self._inv_diag * r / theta
         for k in range(s.sweeps):
             x = x + d
@@ -258,19 +273,30 @@ class MultigridSolver(SPDSolver):
         self.multigrid = multigrid or MultigridConfig()
         self.multigrid_solves = 0
         self.multigrid_iterations = 0
-        self._mg = None  # (free, value map A.data -> A_ff.data, A_ff, TwoLevelP2)
+        self._mg = None  # (free, value map A.data -> A_ff.data, A_ff, TwoLevelP2, the pattern's index arrays)
+        self._lag_failed = -1  # the factorization count when a lagged solve last failed
 
     @property
     def coarse_factorizations(self) -> int:
         return 0 if self._mg is None else self._mg[3].coarse.factorizations
 
     def solve_free(self, A, free, b):
-        x = self._multigrid(A, free, b, None, 0.0, None)
+        x = self.solve_free_lagged(A, free, b)
         return super().solve_free(A, free, b) if x is None else x
 
     def solve_free_lagged(self, A, free, b, U=None, mu=0.0, atol=None):
-        x = self._multigrid(A, free, b, U, mu, atol)
-        return super().solve_free_lagged(A, free, b, U, mu, atol) if x is None else x
+        """As :meth:`SPDSolver.solve_free_lagged` (the same arguments), with the p-multigrid solve in
+        the order of their cost: a lagged solve on the current factorization first (a triangular
+        solve per iteration), unless the last one on this factorization did not converge; then
+        p-multigrid CG; None when neither converged (the caller then factorizes)."""
+        if self._lag_failed != self.factorizations:
+            tried = self.pcg_iterations
+            x = super().solve_free_lagged(A, free, b, U, mu, atol)
+            if x is not None:
+                return x
+            if self.pcg_iterations > tried:  # iterated without converging
+                self._lag_failed = self.factorizations  # not tried again on this factorization
+        return self._multigrid(A, free, b, U, mu, atol)
 
     def _multigrid(self, A, free, b, U, mu, atol):
         """x of (A[free][:, free] + mu U U^T) x = b by p-multigrid CG, or None (not tried or not converged)."""

@@ -133,3 +133,35 @@ def test_a_linear_model_gets_the_plain_solver_and_configs_are_checked():
     for bad in ({"kind": "jacobi"}, {"sweeps": 0}, {"ratio": 1.0}):
         with pytest.raises(ValueError):
             SmootherConfig(**bad)
+
+
+def test_a_lagged_solve_comes_first_and_is_skipped_after_it_fails():
+    # cost order: on a factorization of this pattern, the lagged solve (LagConfig) is tried first; once
+    # it has failed on that factorization, later solves go straight to p-multigrid CG
+    from simfab.solve.linear import LagConfig
+
+    m, H, free = _p2_box()
+    rng = np.random.default_rng(4)
+    b = rng.standard_normal(len(free))
+    s = insertion_solver(m, lag=LagConfig(min_unknowns=0, max_iter=12),
+                         multigrid=MultigridConfig(min_unknowns=0, rtol=1e-9))
+    s.solve_free(H, free, b)
+    assert s.factorizations == 0 and s.multigrid_solves == 1  # no factorization to lag on yet
+    H2 = H.copy()
+    H2.data = H2.data * 1.001  # a nearby Hessian: the factorization preconditions it within 12 iterations
+    s.solve_free(H, free, np.column_stack([b, b]))  # two columns: neither iteration, H is factorized
+    assert s.factorizations == 1
+    x = s.solve_free(H2, free, b)
+    assert s.lagged_solves == 1 and s.multigrid_solves == 1
+    assert np.linalg.norm(H2[free][:, free] @ x - b) <= 1e-6 * np.linalg.norm(b)
+    # a Hessian far from the factorized one (a stiff diagonal term, as a barrier's): the lagged solve
+    # does not converge in 12 iterations, p-multigrid CG does
+    H3 = H.copy()
+    H3.setdiag(H.diagonal() + 5.0 * float(H.diagonal().mean()))  # the same pattern
+    iters = s.pcg_iterations
+    y = s.solve_free(H3, free, b)
+    assert s.pcg_iterations > iters and s.lagged_solves == 1 and s.multigrid_solves == 2
+    assert np.linalg.norm(H3[free][:, free] @ y - b) <= 1.01e-9 * np.linalg.norm(b)
+    iters = s.pcg_iterations
+    s.solve_free(H2, free, b)  # the same factorization: not lagged again
+    assert s.pcg_iterations == iters and s.multigrid_solves == 3
