@@ -1,7 +1,9 @@
 """Sparse SPD factorizations on the systems simfab's Newton solves: which library, at which size.
 
 ``python tools/bench.py linear_solvers [--repeat 5] [--repeat-2d 200] [--libraries cholmod,pardiso,...]
-[--no-3d] [--table]``
+[--no-3d] [--table]``; ``--amg``, ``--ordering`` and ``--pmg`` (CG with the two-level P2 -> P1
+p-multigrid of simfab.solve.pmg) compare CHOLMOD with the alternatives at the large end on the
+insertion scaling levels' Hessians (docs/benchmarks.md, section 1b).
 
 Systems (stiffness of a Neo-Hookean part slightly stretched, PSD-projected, free block):
 
@@ -500,7 +502,8 @@ def pmg_against_cholmod(levels, smoothers, snapshots: int) -> dict:
     rank-6 term included, with their own right-hand sides): CHOLMOD's numeric factorization + solve
     (CPU seconds, fastest of 2, its analysis done before) against CG preconditioned by
     :class:`simfab.solve.pmg.TwoLevelP2` per smoother: setup CPU seconds (the Galerkin product, the
-    coarse factorization, the eigenvalue estimate; fastest of 2, the coarse analysis done before), CG
+    coarse factorization, the eigenvalue estimate; fastest of 2 repeated setups, as the run's later
+    Newton solves do them: the coarse analysis done before, the power method warm-started), CG
     iterations and CPU seconds to relative residuals 1e-2 and 1e-8, and the error against CHOLMOD's
     solution at 1e-8. NumPy's BLAS on one thread, as in the insertion loop."""
     from benchmarks._scaling import level_overrides
