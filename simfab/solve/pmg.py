@@ -239,7 +239,7 @@ class MultigridConfig:
         smoother: :class:`SmootherConfig` (Chebyshev: it takes the pin's low-rank term).
     """
 
-    min_unknowns: int = 50_000
+    min_unknowns: int = 75_000
     rtol: float = 1e-6
     max_iter: int = 60
     smoother: SmootherConfig = SmootherConfig(kind="chebyshev", sweeps=2)
@@ -275,6 +275,7 @@ class MultigridSolver(SPDSolver):
         self.multigrid_iterations = 0
         self._mg = None  # (free, value map A.data -> A_ff.data, A_ff, TwoLevelP2, the pattern's index arrays)
         self._lag_failed = -1  # the factorization count when a lagged solve last failed
+        self._direct = False  # within SPDSolver.solve_free's own path
 
     @property
     def coarse_factorizations(self) -> int:
@@ -282,13 +283,21 @@ class MultigridSolver(SPDSolver):
 
     def solve_free(self, A, free, b):
         x = self.solve_free_lagged(A, free, b)
-        return super().solve_free(A, free, b) if x is None else x
+        if x is not None:
+            return x
+        self._direct = True  # SPDSolver.solve_free asks solve_free_lagged again: tried already
+        try:
+            return super().solve_free(A, free, b)
+        finally:
+            self._direct = False
 
     def solve_free_lagged(self, A, free, b, U=None, mu=0.0, atol=None):
         """As :meth:`SPDSolver.solve_free_lagged` (the same arguments), with the p-multigrid solve in
         the order of their cost: a lagged solve on the current factorization first (a triangular
         solve per iteration), unless the last one on this factorization did not converge; then
         p-multigrid CG; None when neither converged (the caller then factorizes)."""
+        if self._direct:
+            return None
         if self._lag_failed != self.factorizations:
             tried = self.pcg_iterations
             x = super().solve_free_lagged(A, free, b, U, mu, atol)
