@@ -450,10 +450,12 @@ class _Captured(Exception):
 
 
 def _insertion_systems(cm, count: int) -> list:
-    """``count`` Newton systems of ``cm``'s insertion (the first solve of steps spread evenly over the
-    insertion's steps, after the first): dicts with the free block A (CSR), b, the pin's U (free rows)
-    and mu (None, 0.0 without a pin), the diagonal shift the direct solver factorized A with (where A
-    alone is indefinite along the pinned motions, simfab.coupling.rigid.PinnedSolver) and the step."""
+    """``count`` Newton systems of ``cm``'s insertion run with direct solves (the first solve of steps
+    spread evenly over the insertion's steps, after the first): dicts with the free block A (CSR), b,
+    the pin's U (free rows) and mu (None, 0.0 without a pin), the diagonal shift the direct solver
+    factorized A with (where A alone is indefinite along the pinned motions,
+    simfab.coupling.rigid.PinnedSolver) and the step."""
+    from simfab.coupling import stepper
     from simfab.coupling.simulate import simulate_insertion
     from simfab.solve import linear
 
@@ -487,12 +489,15 @@ def _insertion_systems(cm, count: int) -> list:
         state["step"] = k + 1
 
     linear.SPDSolver.solve_free, linear.SPDSolver.solve_free_update = solve_free, solve_free_update
+    # every Newton system through the direct solver (no lagged or multigrid solve bypasses the capture)
+    orig_step_solver, stepper.step_solver = stepper.step_solver, lambda _model: linear.SPDSolver()
     try:
         simulate_insertion(cm, callback=callback)
     except _Captured:
         pass
     finally:
         linear.SPDSolver.solve_free, linear.SPDSolver.solve_free_update = orig_free, orig_update
+        stepper.step_solver = orig_step_solver
     return out
 
 
