@@ -357,7 +357,7 @@ class MultigridSolver(SPDSolver):
             old = None if mg is None else mg[3]
             pre = TwoLevelP2(P, self.multigrid.smoother)
             if old is not None and old.P.shape == P.shape:
-                pre.coarse = old.coarse  # the coarse analysis is reused when the coarse pattern is
+                pre.coarse = old.coarse  # its analysis is kept while the coarse pattern stays
             Aff = sp.csr_matrix((A.data[vmap], pos.indices, pos.indptr), shape=pos.shape)
             mg = self._mg = (free.copy(), vmap, Aff, pre, (A.indptr.copy(), A.indices.copy()))
             return Aff, pre
