@@ -276,10 +276,12 @@ class MultigridSolver(SPDSolver):
         self._mg = None  # (free, value map A.data -> A_ff.data, A_ff, TwoLevelP2, the pattern's index arrays)
         self._lag_failed = -1  # the factorization count when a lagged solve last failed
         self._direct = False  # within SPDSolver.solve_free's own path
+        self._coarse_done = 0  # factorizations of the coarse solvers of earlier free sets
 
     @property
     def coarse_factorizations(self) -> int:
-        return 0 if self._mg is None else self._mg[3].coarse.factorizations
+        """Numeric factorizations of coarse matrices so far (attempts included)."""
+        return self._coarse_done + (0 if self._mg is None else self._mg[3].coarse.factorizations)
 
     def solve_free(self, A, free, b):
         x = self.solve_free_lagged(A, free, b)
@@ -358,6 +360,8 @@ class MultigridSolver(SPDSolver):
             pre = TwoLevelP2(P, self.multigrid.smoother)
             if old is not None and old.P.shape == P.shape:
                 pre.coarse = old.coarse  # its analysis is kept while the coarse pattern stays
+            elif old is not None:
+                self._coarse_done += old.coarse.factorizations
             Aff = sp.csr_matrix((A.data[vmap], pos.indices, pos.indptr), shape=pos.shape)
             mg = self._mg = (free.copy(), vmap, Aff, pre, (A.indptr.copy(), A.indices.copy()))
             return Aff, pre

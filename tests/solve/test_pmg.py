@@ -165,3 +165,13 @@ def test_a_lagged_solve_comes_first_and_is_skipped_after_it_fails():
     iters = s.pcg_iterations
     s.solve_free(H2, free, b)  # the same factorization: not lagged again
     assert s.pcg_iterations == iters and s.multigrid_solves == 3
+
+
+def test_coarse_factorizations_are_counted_across_free_sets():
+    # a new free set (fewer clamped vertices) builds a new coarse solver; the count keeps the old one's
+    m, H, free = _p2_box()
+    s = insertion_solver(m, multigrid=MultigridConfig(min_unknowns=0, rtol=1e-9))
+    s.solve_free(H, free, np.ones(len(free)))
+    free2 = free[3:]  # one more node held
+    s.solve_free(H, free2, np.ones(len(free2)))
+    assert s.multigrid_solves == 2 and s.coarse_factorizations == 2 and s.factorizations == 0
