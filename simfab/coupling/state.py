@@ -18,6 +18,7 @@ from simfab.coupling.guide import CoarseGuide
 from simfab.coupling.points import ContactPoints
 from simfab.coupling.timing import Timer
 from simfab.solve.linear import LagConfig, SPDSolver
+from simfab.solve.pmg import MultigridConfig, insertion_solver
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -100,6 +101,12 @@ class StepState:
         if ev is None or ev.x is not self.x or len(ev.distances) != len(self.points):
             return None
         return ev
+
+
+def step_solver(model) -> SPDSolver:
+    """The insertion's sparse solver on ``model``: lagged factorizations (:class:`LagConfig`) and, on a
+    quadratic model, p-multigrid conjugate gradients at large sizes (:class:`MultigridConfig`)."""
+    return insertion_solver(model, lag=LagConfig(), multigrid=MultigridConfig())
 
 
 @dataclass(kw_only=True)

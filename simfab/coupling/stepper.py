@@ -26,7 +26,7 @@ from simfab.coupling.points import vertex_points
 from simfab.coupling.record import StepResult, record_step
 from simfab.coupling.refine import add_refinement, crossing_facets, warm_crossings
 from simfab.coupling.rigid_check import WeakMotion, rigid_contact
-from simfab.coupling.state import PastStep, StepContext, StepState, accept
+from simfab.coupling.state import PastStep, StepContext, StepState, accept, step_solver
 from simfab.errors import ConvergenceError
 
 
@@ -58,7 +58,7 @@ class Stepper:
                  guide: CoarseGuide | None = None):
         self.cm, self.callback, self.recorder = cm, callback, recorder
         self._states: dict[int, StepState] = {}  # id(record) -> the state it was recorded at (with a recorder)
-        self.ctx = StepContext(guide=guide)
+        self.ctx = StepContext(guide=guide, solver=step_solver(cm.fem))
         order = cm.options.samples_per_edge if cm.dim == 2 else cm.options.face_lattice
         self.state = StepState(x=np.array(cm.fem.rest, dtype=np.float64), s=0.0, refined=set(), order=order,
                                points=vertex_points(np.asarray(cm.fem.boundary_vertices, dtype=np.int64), cm.dim),

@@ -9,7 +9,8 @@ Per level: tets, free dofs, steps, seconds (wall, CPU; scene loading and meshing
 memory, Newton iterations (and per step), sparse factorizations (numeric, the exact-first attempts
 included) and their share of the wall time, the solves lagged on an earlier factorization
 (simfab.solve.linear.LagConfig) and their conjugate-gradient iterations (the failed attempts'
-included), the triangular solves' share, the assembly's, the factor's fill (entries of L over
+included), the solves by p-multigrid conjugate gradients (simfab.solve.pmg.MultigridConfig), their
+iterations and coarse factorizations, the triangular solves' share, the assembly's, the factor's fill (entries of L over
 entries of the lower triangle of the free Hessian) and the category and figures of the profile. Per
 scene and friction: the exponent of a least-squares fit of log(seconds) against log(free dofs),
 overall and between consecutive levels.
@@ -76,7 +77,10 @@ def run_level(scene: str, factor: float, mu: float) -> dict:
         dt, dc = time.perf_counter() - t0, time.process_time() - c0
     finally:
         linear.SPDSolver.__init__ = orig
-    count = {k: sum(getattr(s, k) for s in solvers) for k in ("factorizations", "lagged_solves", "pcg_iterations")}
+    count = {k: sum(getattr(s, k, 0) for s in solvers)
+             for k in ("factorizations", "lagged_solves", "pcg_iterations", "multigrid_solves", "multigrid_iterations",
+                       "coarse_factorizations")}
+    count["factorizations"] -= count["coarse_factorizations"]  # the coarse solvers are SPDSolvers too
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     _, summ = summarize(res)
     records = list(res.steps[1:]) + list(res.removal)
@@ -89,7 +93,8 @@ def run_level(scene: str, factor: float, mu: float) -> dict:
         "seconds": round(dt, 2), "cpu_seconds": round(dc, 2), "peak_memory_mib": round(rss, 1),
         "newton_iterations": iters, "newton_iterations_per_step": round(iters / max(1, len(records)), 2),
         "factorizations": count["factorizations"], "lagged_solves": count["lagged_solves"],
-        "pcg_iterations": count["pcg_iterations"],
+        "pcg_iterations": count["pcg_iterations"], "multigrid_solves": count["multigrid_solves"],
+        "multigrid_iterations": count["multigrid_iterations"], "coarse_factorizations": count["coarse_factorizations"],
         "factorization_share": round(t.get("factorization", 0.0) / dt, 3),
         "solves_share": round(t.get("solves", 0.0) / dt, 3),
         "assembly_share": round(t.get("assembly", 0.0) / dt, 3),
@@ -207,13 +212,14 @@ def format_row(r: dict) -> str:
     return (f"{r['scene']:8s} {r['factor']:>4g} {r['friction']:>4g} {r['tets']:>7d} {r['free_dofs']:>8d} "
             f"{r['seconds']:>8.1f} {r['cpu_seconds']:>8.1f} {r['peak_memory_mib']:>8.0f} "
             f"{r['newton_iterations_per_step']:>6.2f} {r['factorizations']:>6d} {r.get('lagged_solves', 0):>6d} "
-            f"{r.get('pcg_iterations', 0):>6d} {r['ms_per_factorization']:>8.0f} "
+            f"{r.get('pcg_iterations', 0):>6d} {r.get('multigrid_solves', 0):>5d} "
+            f"{r.get('multigrid_iterations', 0):>6d} {r['ms_per_factorization']:>8.0f} "
             f"{100 * r['factorization_share']:>6.0f} {100 * r['assembly_share']:>6.0f} {r['fill']:>6.1f}")
 
 
 def format_table(groups: list) -> str:
     head = (f"{'scene':8s} {'x':>4s} {'mu':>4s} {'tets':>7s} {'dofs':>8s} {'wall s':>8s} {'cpu s':>8s} "
-            f"{'peak MiB':>8s} {'it/st':>6s} {'facts':>6s} {'lagged':>6s} {'pcg':>6s} "
+            f"{'peak MiB':>8s} {'it/st':>6s} {'facts':>6s} {'lagged':>6s} {'pcg':>6s} {'mg':>5s} {'mg it':>6s} "
             f"{'ms/fact':>8s} {'fact%':>6s} {'asm%':>6s} {'fill':>6s}")
     lines = [head]
     for g in groups:

@@ -1,7 +1,9 @@
 """Sparse SPD factorizations on the systems simfab's Newton solves: which library, at which size.
 
 ``python tools/bench.py linear_solvers [--repeat 5] [--repeat-2d 200] [--libraries cholmod,pardiso,...]
-[--no-3d] [--table]``
+[--no-3d] [--table]``; ``--amg``, ``--ordering`` and ``--pmg`` (CG with the two-level P2 -> P1
+p-multigrid of simfab.solve.pmg) compare CHOLMOD with the alternatives at the large end on the
+insertion scaling levels' Hessians (docs/benchmarks.md, section 1b).
 
 Systems (stiffness of a Neo-Hookean part slightly stretched, PSD-projected, free block):
 
@@ -219,7 +221,27 @@ def run(argv) -> dict:
     ap.add_argument("--ordering", default=None, metavar="SCENE:F,F,...;SCENE:F,...",
                     help="CHOLMOD's AMD ordering against METIS nested dissection (pymetis) on the scaling levels' "
                          "Hessians, e.g. 'clip3d:1,2,4,8;claw3d:1,2,4'")
+    ap.add_argument("--pmg", default=None, metavar="SCENE:F,F,...;SCENE:F,...",
+                    help="CHOLMOD against CG preconditioned by the two-level P2 -> P1 p-multigrid "
+                         "(simfab.solve.pmg) on the scaling levels' Hessians at rest and mid-insertion, "
+                         "e.g. 'clip3d:1,2,4,8;claw3d:1,2'")
+    ap.add_argument("--smoothers", default="chebyshev:2,chebyshev:3,sgs:2", metavar="KIND:SWEEPS,...",
+                    help="--pmg: the smoothers compared (sgs needs pyamg)")
+    ap.add_argument("--snapshots", type=int, default=2,
+                    help="--pmg: mid-insertion Hessians per level (the first Newton solve of steps spread over "
+                         "the insertion; 0: the rest shape's only)")
     a = ap.parse_args(argv)
+    if a.pmg:
+        from simfab.errors import InputError
+
+        try:
+            levels = [(sc, float(f)) for part in a.pmg.split(";") for sc, fs in [part.split(":")]
+                      for f in fs.split(",")]
+            smoothers = [(k, int(n)) for k, n in (t.split(":") for t in a.smoothers.split(","))]
+        except ValueError:
+            raise InputError(f"--pmg must be SCENE:F,F;SCENE:F and --smoothers KIND:N,KIND:N, got {a.pmg!r}, "
+                             f"{a.smoothers!r}") from None
+        return pmg_against_cholmod(levels, smoothers, a.snapshots)
     if a.amg:
         return amg_against_cholmod([float(f) for f in a.factors.split(",")])
     if a.ordering:
@@ -421,3 +443,154 @@ def ordering_against_amd(levels) -> dict:
         rows.append(row)
         print(f"{scene} x{f:g} {row['free_dofs']} dofs: AMD {row['amd']}; METIS ND {row['metis_nd']}", file=sys.stderr)
     return {"benchmark": "linear_solvers --ordering", "system": "free PSD Hessian at rest (regularized)", "rows": rows}
+
+
+class _Captured(Exception):
+    """Stops an insertion once its Hessians are captured."""
+
+
+def _insertion_systems(cm, count: int) -> list:
+    """``count`` Newton systems of ``cm``'s insertion run with direct solves (the first solve of steps
+    spread evenly over the insertion's steps, after the first): dicts with the free block A (CSR), b,
+    the pin's U (free rows) and mu (None, 0.0 without a pin), the diagonal shift the direct solver
+    factorized A with (where A alone is indefinite along the pinned motions,
+    simfab.coupling.rigid.PinnedSolver) and the step."""
+    from simfab.coupling import stepper
+    from simfab.coupling.simulate import simulate_insertion
+    from simfab.solve import linear
+
+    n_steps = len(cm.s_steps)
+    picks = [int(round(n_steps * (k + 1) / (count + 1))) for k in range(count)]
+    state = {"step": 0, "taken": set()}
+    out = []
+
+    def record(A, free, b, U=None, mu=0.0, shift=0.0):
+        step = state["step"]
+        if picks and step >= picks[0] and step not in state["taken"] and np.ndim(b) == 1:
+            state["taken"].add(step)
+            picks.pop(0)
+            A = sp.csr_matrix(A)[free][:, free].tocsr()
+            out.append({"A": A, "b": np.array(b, dtype=float), "U": None if U is None else np.array(U),
+                        "mu": float(mu), "shift": float(shift), "step": step})
+            if not picks:
+                raise _Captured
+
+    orig_free, orig_update = linear.SPDSolver.solve_free, linear.SPDSolver.solve_free_update
+
+    def solve_free(self, A, free, b):
+        record(A, free, b)
+        return orig_free(self, A, free, b)
+
+    def solve_free_update(self, A, free, b, U, mu, shift=0.0):
+        record(A, free, b, U, mu, shift)
+        return orig_update(self, A, free, b, U, mu, shift)
+
+    def callback(k, _step):
+        state["step"] = k + 1
+
+    linear.SPDSolver.solve_free, linear.SPDSolver.solve_free_update = solve_free, solve_free_update
+    # every Newton system through the direct solver (no lagged or multigrid solve bypasses the capture)
+    orig_step_solver, stepper.step_solver = stepper.step_solver, lambda _model: linear.SPDSolver()
+    try:
+        simulate_insertion(cm, callback=callback)
+    except _Captured:
+        pass
+    finally:
+        linear.SPDSolver.solve_free, linear.SPDSolver.solve_free_update = orig_free, orig_update
+        stepper.step_solver = orig_step_solver
+    return out
+
+
+def pmg_against_cholmod(levels, smoothers, snapshots: int) -> dict:
+    """Per (scene, factor) and per system (the rest shape's free PSD Hessian, regularized, as the floor
+    uses, with a random right-hand side; then ``snapshots`` Newton systems of the insertion, the pin's
+    rank-6 term included, with their own right-hand sides): CHOLMOD's numeric factorization + solve
+    (CPU seconds, fastest of 2, its analysis done before) against CG preconditioned by
+    :class:`simfab.solve.pmg.TwoLevelP2` per smoother: setup CPU seconds (the Galerkin product, the
+    coarse factorization, the eigenvalue estimate; fastest of 2 repeated setups, as the run's later
+    Newton solves do them: the coarse analysis done before, the power method warm-started), CG
+    iterations and CPU seconds to relative residuals 1e-2 and 1e-8, and the error against CHOLMOD's
+    solution at 1e-8. NumPy's BLAS on one thread, as in the insertion loop."""
+    from benchmarks._scaling import level_overrides
+    from benchmarks.insertion import ORIGINAL_SIZE
+    from simfab._threads import single_threaded_blas
+    from simfab.coupling.layout import regularize
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.fem.elastic import energy_gradient_hessian
+    from simfab.solve.linear import SPDSolver, conjugate_gradients
+    from simfab.solve.pmg import SmootherConfig, TwoLevelP2, p2_prolongation
+
+    rows = []
+    for scene, f in levels:
+        base = {k: dict(v) for k, v in ORIGINAL_SIZE.get(scene, {}).items()}
+        cm = load_coupling_scene(scene, overrides={**base, "compliant": level_overrides(scene, f, base)})
+        m = cm.fem
+        free = np.flatnonzero(np.asarray(cm.free).ravel())
+        _, _, H = energy_gradient_hessian(m, np.asarray(m.rest))
+        regularize(cm, H)
+        A0 = sp.csr_matrix(H)[free][:, free].tocsr()
+        systems = [{"A": A0, "b": np.random.default_rng(0).standard_normal(len(free)), "U": None, "mu": 0.0,
+                    "shift": 0.0, "step": None}]
+        if snapshots:
+            systems += _insertion_systems(cm, snapshots)
+        P = p2_prolongation(m.n_corners, m.edges, m.dim, free)
+        d0 = A0.diagonal()  # the barrier's stiffness shows as diagonal entries above the rest shape's
+        with single_threaded_blas():
+            for sysm in systems:
+                A, b, U, mu, shift = sysm["A"], sysm["b"], sysm["U"], sysm["mu"], sysm["shift"]
+                row = {"scene": scene, "factor": f, "tets": int(m.n_elements), "free_dofs": len(free),
+                       "coarse_unknowns": P.shape[1], "nnz": int(A.nnz),
+                       "system": "rest" if sysm["step"] is None else f"step {sysm['step']}",
+                       "max_diagonal_over_rest": round(float(np.max(A.diagonal() / d0)), 2),
+                       "shift_over_mu": shift / mu if mu else 0.0}
+                s = SPDSolver()
+                idx = np.arange(len(free))
+
+                def direct(s=s, A=A, b=b, U=U, mu=mu, shift=shift):  # shifted: the factorization of the
+                    # preconditioner PinnedSolver's CG then iterates with (its iterations not counted)
+                    return s.solve_free(A, idx, b) if U is None else s.solve_free_update(A, idx, b, U, mu, shift)
+
+                try:
+                    x = direct()
+                except Exception as e:  # an indefinite exact Hessian: Newton then takes the projected one
+                    row["cholmod"] = f"failed: {type(e).__name__}"
+                    rows.append(row)
+                    print(row, file=sys.stderr)
+                    continue
+                best = np.inf
+                for _ in range(2):
+                    A.data *= 1.0 + 1e-12  # new values: a numeric factorization each time
+                    c0 = _cpu()
+                    x = direct()
+                    best = min(best, _cpu() - c0)
+                row["cholmod_factor_solve_cpu_s"] = round(best, 4)
+                for kind, sweeps in smoothers:
+                    pre = TwoLevelP2(P, SmootherConfig(kind=kind, sweeps=sweeps))
+                    if kind == "sgs" and U is not None:
+                        row[f"{kind}{sweeps}"] = "n/a (low-rank term)"
+                        continue
+                    pre.setup(A, U, mu, shift)
+                    setup = np.inf
+                    for _ in range(2):
+                        c0 = _cpu()
+                        pre.setup(A, U, mu, shift)
+                        setup = min(setup, _cpu() - c0)
+                    res = {"setup_cpu_s": round(setup, 4)}
+                    bn = float(np.linalg.norm(b))
+                    for rtol in (1e-2, 1e-8):
+                        c0 = _cpu()
+                        try:
+                            r = conjugate_gradients(pre.apply, pre, b, max_iter=1000,
+                                                    converged=lambda _r, rn, t=rtol * bn: rn <= t)
+                        except Exception as e:
+                            res[f"cg_{rtol:g}"] = f"failed: {type(e).__name__}"
+                            continue
+                        res[f"cg_{rtol:g}"] = {"iterations": r.iterations, "cpu_s": round(_cpu() - c0, 4),
+                                               "converged": r.converged}
+                        if rtol == 1e-8 and not shift:
+                            res["error_vs_cholmod"] = float(f"{np.linalg.norm(r.x - x) / np.linalg.norm(x):.2g}")
+                    row[f"{kind}{sweeps}"] = res
+                rows.append(row)
+                print(row, file=sys.stderr)
+    return {"benchmark": "linear_solvers --pmg",
+            "system": "free Hessian at rest (PSD, regularized) and Newton systems mid-insertion", "rows": rows}
