@@ -145,20 +145,26 @@ class _FitCheck:
     """The fit check of a trial's Newton iterates (a :meth:`StaticSolver.solve` monitor): every
     :data:`FIT_CHECK_ITERATIONS` iterations, E at the iterate (vertex positions ``X_of(state)``); it
     raises :class:`_RejectedEarly` when E is above (1 + :data:`EARLY_REJECT_MARGIN`) x ``accepted_cost``
-    and above E at the previous check. ``iterations``: the last iterate it saw."""
+    and above E at the previous check (evaluated only then). ``iterations``: the last iterate it saw."""
 
     def __init__(self, X_of, Y: np.ndarray, target, cfg: TuneConfig, accepted_cost: float):
         self.X_of, self.Y, self.target, self.cfg, self.accepted = X_of, Y, target, cfg, accepted_cost
-        self.costs = {}
+        self.previous = None  # the previous check's iterate, or its E once evaluated
         self.iterations = 0
+
+    def _cost(self, state) -> float:
+        return _fit(self.X_of(state), self.Y, self.target, self.cfg).cost
 
     def __call__(self, it: int, state) -> None:
         self.iterations = it
         if it % FIT_CHECK_ITERATIONS:
             return
-        c = self.costs[it] = _fit(self.X_of(state), self.Y, self.target, self.cfg).cost
-        prev = self.costs.get(it - FIT_CHECK_ITERATIONS)
-        if prev is not None and c > (1.0 + EARLY_REJECT_MARGIN) * self.accepted and c > prev:
+        prev, self.previous = self.previous, state
+        if prev is None:
+            return
+        c = self.previous = self._cost(state)
+        if c > (1.0 + EARLY_REJECT_MARGIN) * self.accepted and c > (prev if isinstance(prev, float) else
+                                                                      self._cost(prev)):
             raise _RejectedEarly(it)
 
 
