@@ -226,7 +226,8 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
     ang_h = Rotation.from_matrix(Jh).as_euler("XYZ") if len(Jh) else np.zeros((0, 3))
     quat_h = _quat(Qh) if len(Qh) else np.zeros((0, 4))
     hinge_of = {(int(a), int(c)): h for h, (a, c) in enumerate(model.hinge_edges)}
-    for r in model.rods:
+    q_link0, q_link1, q_weld = _rod_end_quats(model, deployed, Rd, Qh, hinge_of)
+    for ri, r in enumerate(model.rods):
         e0, e1 = int(r.edges[0]), int(r.edges[-1])
         sb, eb = int(model.edge_body[e0]), int(model.edge_body[e1])
         if sb < 0 or eb < 0:
@@ -239,7 +240,7 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
         Rb = deployed.body_rot[sb]
         rel_p = Rb.T @ (deployed.x[n0] - deployed.body_pos[sb])
         rel_R = Rb.T @ Rd[e0]
-        _link_geom(b, mb[sb], L[0], w, t, None, pos=rel_p, R=rel_R)
+        _link_geom(b, mb[sb], L[0], w, t, None, pos=rel_p, R=rel_R, quat=q_link0[ri])
         parent = mb[sb]
         for k in range(1, len(r.edges)):
             h = hinge_of[int(r.edges[k - 1]), int(r.edges[k])]
@@ -247,7 +248,7 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
             GJ = model.twist_stiff[h]
             lv = model.vor_len[h]
             if k == 1:
-                pos, quat = rel_p + L[0] * rel_R[:, 0], _quat(rel_R @ Qh[h])
+                pos, quat = rel_p + L[0] * rel_R[:, 0], q_link1[ri]
             else:
                 pos, quat = [L[k - 1], 0.0, 0.0], quat_h[h]
             child = b.add(parent, "body", name=f"{r.name}_{k}", pos=pos, quat=quat)
@@ -267,11 +268,11 @@ def build(model, flat, deployed, *, density: float, cfg: SimConfig, name: str = 
         if len(r.edges) > 1:
             n_last = int(model.edges[e1][0])
             relpos = Re.T @ (deployed.x[n_last] - deployed.body_pos[eb])
-            relq = _quat(Re.T @ Rd[e1])
+            relq = q_weld[ri]
             last = f"{r.name}_{len(r.edges) - 1}"
         else:
             relpos = Re.T @ (deployed.body_pos[sb] - deployed.body_pos[eb])
-            relq = _quat(Re.T @ Rb)
+            relq = q_weld[ri]
             last = model.body_names[sb]
         # relpose: pose of body2 (the link) in body1's (the end body's) frame
         b.equality("weld", body1=model.body_names[eb], body2=last,
@@ -336,15 +337,35 @@ def compile_in_parts(root, xml: str, *, part_bodies: int = PART_BODIES):
         mj.set_mju_user_warning(prev)
 
 
-def _link_geom(b, body, length, w, t, density, *, pos=None, R=None):
+def _rod_end_quats(model, deployed, Rd: np.ndarray, Qh: np.ndarray, hinge_of: dict):
+    """Per rod of :func:`build` (one batch each): the quaternion of its first link in its start body,
+    of its second link's body in the start body (zeros for a one-edge rod) and of its weld's relative
+    pose (the last link, or the start body, in the end body's frame)."""
+    R0, R1, RW = [], [], []
+    for r in model.rods:
+        e0, e1 = int(r.edges[0]), int(r.edges[-1])
+        sb, eb = int(model.edge_body[e0]), int(model.edge_body[e1])
+        Rb, Re = deployed.body_rot[sb], deployed.body_rot[eb]
+        rel_R = Rb.T @ Rd[e0]
+        R0.append(rel_R)
+        R1.append(rel_R @ Qh[hinge_of[e0, int(r.edges[1])]] if len(r.edges) > 1 else np.eye(3))
+        RW.append(Re.T @ Rd[e1] if len(r.edges) > 1 else Re.T @ Rb)
+    if not R0:
+        return np.zeros((0, 4)), np.zeros((0, 4)), np.zeros((0, 4))
+    return _quat(np.array(R0)), _quat(np.array(R1)), _quat(np.array(RW))
+
+
+def _link_geom(b, body, length, w, t, density, *, pos=None, R=None, quat=None):
     """Box geom of a link of the given length along the frame's x axis from ``pos`` (default: the
-    body's origin), frame ``R`` (default: the body's); ``density`` None: massless (the geom sits in
-    a simfab body, whose inertial is its own)."""
+    body's origin), frame ``R`` (default: the body's; ``quat``: its quaternion when known); ``density``
+    None: massless (the geom sits in a simfab body, whose inertial is its own)."""
     p0 = np.zeros(3) if pos is None else np.asarray(pos, dtype=np.float64)
     ax = np.eye(3) if R is None else np.asarray(R, dtype=np.float64)
     extra = dict(mass=0) if density is None else dict(density=density)
+    if R is not None and quat is None:
+        quat = _quat(ax)
     b.geom(body, type="box", size=[0.5 * length, 0.5 * t, 0.5 * w], pos=p0 + 0.5 * length * ax[:, 0],
-           quat=None if R is None else _quat(ax), contype=0, conaffinity=0, rgba=[0.95, 0.9, 0.75, 1], **extra)
+           quat=None if R is None else quat, contype=0, conaffinity=0, rgba=[0.95, 0.9, 0.75, 1], **extra)
 
 
 @dataclass(frozen=True)

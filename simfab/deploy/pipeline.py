@@ -199,7 +199,9 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         tuned = tuning.tune_pattern(pat, net, dep, Y, tgt, scene.tune, scene.deploy, ties=ties, device=device)
         pat, net, dep = tuned.pattern, tuned.network, tuned.deployment
         cut = lasercut.cut_layout(pat, seams=seams)
-        tune_info = dict(steps=tuned.steps, solves=tuned.solves, abandoned_trials=tuned.abandoned, stop=tuned.stop,
+        tune_info = dict(steps=tuned.steps, solves=tuned.solves, abandoned_trials=tuned.abandoned,
+                         rejected_early_trials=tuned.rejected_early, newton_iterations=tuned.newton_iterations,
+                         stop=tuned.stop,
                          rms_before=before.rms,
                          hausdorff_before=before.hausdorff, point_weight=scene.tune.point_weight,
                          point_to_plane_rms_mm=[1e3 * r for r in tuned.rms_history],
@@ -208,7 +210,8 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
         sec["tune"] = time.perf_counter() - t
     t = time.perf_counter()
     X = dep.vertex_positions()
-    dev = compare.deviation(X, Y, pat.quads, tgt)
+    untuned = tune_info is not None and tune_info["steps"] == 0  # the deployment measured before the tuning
+    dev = before if untuned else compare.deviation(X, Y, pat.quads, tgt)
     shape = shape_descriptors(pat, X, Y)
     sec["compare"] = time.perf_counter() - t
     sim, check = None, {}

@@ -18,7 +18,8 @@ Sensitivities (implicit function theorem): ``dq*/dd_i = -H_q^{-1} dg_q/dd_i`` at
 one factorization for all inserts (:meth:`simfab.rods.statics.StaticSolver.offset_sensitivity`).
 Step (Levenberg-Marquardt): ``(J^T J + mu I) delta = -J^T e``, mu = ``damping`` x the largest
 diagonal of J^T J, d + delta clipped into the achievable range ``min_gap <= r_i - d_i <= h_i/2 -
-min_beam``, halved while it does not lower E, then retried with mu x 10 (``escalations``).
+min_beam``, halved while it does not lower E (a trial whose Newton iterates' E rises above the accepted
+one's is rejected before it converges), then retried with mu x 10 (``escalations``).
 After every step the pattern is re-cut and its own equilibrium solved (:func:`tune_pattern`,
 :func:`redeploy`); the tuning stops at the deviation bound, when progress stalls, at its budget or
 when no step lowers E. The full derivation: docs/methods.md, "simfab.deploy.tuning".
@@ -50,6 +51,12 @@ HALVINGS = 4  # trials per escalation: the step, then halved three times
 #: step up to 4 x as long; one before cut a saddle's long second step short: docs/decisions.md,
 #: "Deployment tuning: where its time goes")
 RESTART_BACK = 2
+#: a trial's equilibrium solve is checked every this many Newton iterations: it is rejected early when the
+#: objective E at the iterate is above (1 + ``EARLY_REJECT_MARGIN``) x the accepted one's and higher than at
+#: the previous check (its fit getting worse, away from the accepted state: docs/decisions.md,
+#: "Deployment tuning: rejecting a trial early"); an accepted trial is always a converged solve
+FIT_CHECK_ITERATIONS = 10
+EARLY_REJECT_MARGIN = 0.05
 HEIGHT_SMOOTHING = 0.003  # the height row's smoothing tau, relative to the target points' height
 
 
@@ -110,7 +117,8 @@ class Tuning:
     surface [m] (``rms_history``) and the RMS distance to the vertices' own target points [m]
     (``point_rms_history``), Gauss-Newton steps taken, equilibrium solves (converged trials), seconds,
     trials abandoned (not converged within ``TRIAL_NEWTON_ITERATIONS``), the last accepted step's trial
-    (:func:`tune`)."""
+    (:func:`tune`), trials rejected early by their fit check (:data:`FIT_CHECK_ITERATIONS`), the trials'
+    Newton iterations."""
 
     gap: np.ndarray
     state: object
@@ -121,6 +129,43 @@ class Tuning:
     seconds: float
     abandoned: int = 0
     trial: int = 0
+    rejected_early: int = 0
+    newton_iterations: int = 0
+
+
+class _RejectedEarly(Exception):
+    """A trial's equilibrium solve stopped by its fit check (:data:`FIT_CHECK_ITERATIONS`)."""
+
+    def __init__(self, iterations: int):
+        super().__init__(iterations)
+        self.iterations = iterations
+
+
+class _FitCheck:
+    """The fit check of a trial's Newton iterates (a :meth:`StaticSolver.solve` monitor): every
+    :data:`FIT_CHECK_ITERATIONS` iterations, E at the iterate (vertex positions ``X_of(state)``); it
+    raises :class:`_RejectedEarly` when E is above (1 + :data:`EARLY_REJECT_MARGIN`) x ``accepted_cost``
+    and above E at the previous check (evaluated only then). ``iterations``: the last iterate it saw."""
+
+    def __init__(self, X_of, Y: np.ndarray, target, cfg: TuneConfig, accepted_cost: float):
+        self.X_of, self.Y, self.target, self.cfg, self.accepted = X_of, Y, target, cfg, accepted_cost
+        self.previous = None  # the previous check's iterate, or its E once evaluated
+        self.iterations = 0
+
+    def _cost(self, state) -> float:
+        return _fit(self.X_of(state), self.Y, self.target, self.cfg).cost
+
+    def __call__(self, it: int, state) -> None:
+        self.iterations = it
+        if it % FIT_CHECK_ITERATIONS:
+            return
+        prev, self.previous = self.previous, state
+        if prev is None:
+            return
+        c = self.previous = self._cost(state)
+        if c > (1.0 + EARLY_REJECT_MARGIN) * self.accepted and c > (prev if isinstance(prev, float) else
+                                                                      self._cost(prev)):
+            raise _RejectedEarly(it)
 
 
 @dataclass(frozen=True)
@@ -275,7 +320,8 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
     rows = solver.red.body_trans_cols.reshape(-1, 3)[[pos_of[int(b)] for b in net.vertex_body]]  # (n,3)
     fit = _fit(state.body_pos[net.vertex_body], Y, target, cfg)
     hist, phist = [fit.plane_rms], [fit.point_rms]
-    steps = solves = abandoned = trial = 0
+    steps = solves = abandoned = trial = early = newton = 0
+    vertices = lambda st: st.body_pos[net.vertex_body]  # noqa: E731
     skip = min(int(first_trial), HALVINGS * (cfg.escalations + 1) - 1)
     for _ in range(cfg.iterations):
         dq = solver.offset_sensitivity(state, D)  # (nq, k)
@@ -294,14 +340,20 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
                 d_try[ins] = np.clip(d[ins] + alpha * step, lo[ins], hi[ins])
                 solver.set_attachment_offsets(offsets(d_try))
                 st = solver.red.apply(state, dq @ (d_try[ins] - d[ins]))
+                check = _FitCheck(vertices, Y, target, cfg, fit.cost)
                 try:
-                    res = solver.solve(st)
+                    res = solver.solve(st, monitor=check)
                     solves += 1
-                except ConvergenceError:  # no equilibrium near the predictor: the step is too long
-                    abandoned += 1
+                    newton += res.iterations
+                except (ConvergenceError, _RejectedEarly) as err:  # the step too long: halved
+                    # not converged (no equilibrium near the predictor), or its fit worse than the
+                    # accepted one's and getting worse
+                    early += isinstance(err, _RejectedEarly)
+                    abandoned += isinstance(err, ConvergenceError)
+                    newton += check.iterations + isinstance(err, ConvergenceError)
                     alpha *= 0.5
                     continue
-                fit_try = _fit(res.state.body_pos[net.vertex_body], Y, target, cfg)
+                fit_try = _fit(vertices(res.state), Y, target, cfg)
                 if fit_try.cost < fit.cost:
                     accepted = True
                     break
@@ -318,7 +370,8 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
         steps += 1
     gap = np.where(pat.interior, pat.insert_size - d, 0.0)
     return Tuning(gap=gap, state=state, rms_history=hist, point_rms_history=phist, steps=steps, solves=solves,
-                  seconds=time.perf_counter() - t0, abandoned=abandoned, trial=trial)
+                  seconds=time.perf_counter() - t0, abandoned=abandoned, trial=trial, rejected_early=early,
+                  newton_iterations=newton)
 
 
 def retuned_pattern(pat, gap: np.ndarray):
@@ -366,7 +419,8 @@ class TunedPattern:
     per accepted step (first: before tuning) the RMS distances to the surface and to the vertices'
     target points of the re-cut pattern's equilibrium [m]; steps, equilibrium solves (trial and
     re-cut), seconds; stop: why it stopped ("iterations", "bound met", "time budget", "progress
-    stalled", "no step lowers the objective"); trials abandoned (:data:`TRIAL_NEWTON_ITERATIONS`)."""
+    stalled", "no step lowers the objective"); trials abandoned (:data:`TRIAL_NEWTON_ITERATIONS`), trials
+    rejected early (:data:`FIT_CHECK_ITERATIONS`), Newton iterations (trials and re-cuts)."""
 
     pattern: object
     network: object
@@ -378,6 +432,8 @@ class TunedPattern:
     seconds: float
     stop: str = "iterations"
     abandoned: int = 0
+    rejected_early: int = 0
+    newton_iterations: int = 0
 
 
 def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_cfg, *, ties=None,
@@ -392,7 +448,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
     t0 = time.perf_counter()
     fit = _fit(dep.vertex_positions(), Y, target, cfg)
     hist, phist = [fit.plane_rms], [fit.point_rms]
-    steps = solves = abandoned = last = 0
+    steps = solves = abandoned = early = newton = last = 0
     stop = "iterations"
     for _ in range(cfg.iterations):
         if bound_met(pat, dep, Y, target, cfg):
@@ -407,12 +463,12 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
                                       escalations=cfg.escalations - k)
             first = max(0, last - RESTART_BACK) if k == 0 else 0
             tuned = tune(pat, net, dep, Y, target, one, device=device, first_trial=first)
-            solves += tuned.solves
-            abandoned += tuned.abandoned
+            solves, abandoned = solves + tuned.solves, abandoned + tuned.abandoned
+            early, newton = early + tuned.rejected_early, newton + tuned.newton_iterations
             if tuned.steps == 0 and first > 0:  # none of the shorter steps: the longer ones skipped too
                 tuned = tune(pat, net, dep, Y, target, one, device=device)
-                solves += tuned.solves
-                abandoned += tuned.abandoned
+                solves, abandoned = solves + tuned.solves, abandoned + tuned.abandoned
+                early, newton = early + tuned.rejected_early, newton + tuned.newton_iterations
             if tuned.steps == 0:
                 break
             pat2 = retuned_pattern(pat, tuned.gap)
@@ -422,6 +478,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
             except ConvergenceError:
                 continue
             solves += 1
+            newton += dep2.iterations[-1]
             fit2 = _fit(dep2.vertex_positions(), Y, target, cfg)
             if fit2.cost < fit.cost:
                 accepted = True
@@ -441,4 +498,5 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
     if stop == "iterations" and bound_met(pat, dep, Y, target, cfg):
         stop = "bound met"
     return TunedPattern(pattern=pat, network=net, deployment=dep, rms_history=hist, point_rms_history=phist,
-                        steps=steps, solves=solves, seconds=time.perf_counter() - t0, stop=stop, abandoned=abandoned)
+                        steps=steps, solves=solves, seconds=time.perf_counter() - t0, stop=stop, abandoned=abandoned,
+                        rejected_early=early, newton_iterations=newton)

@@ -256,8 +256,10 @@ class StaticSolver:
                 Hq = Hq + G
         return E, gq, Hq
 
-    def solve(self, state: RodState, *, node_forces=None, body_forces=None) -> StaticResult:
-        """Equilibrium reached from ``state`` (prescribed values already set, e.g. by :func:`prescribe`)."""
+    def solve(self, state: RodState, *, node_forces=None, body_forces=None, monitor=None) -> StaticResult:
+        """Equilibrium reached from ``state`` (prescribed values already set, e.g. by :func:`prescribe`).
+        ``monitor(iteration, iterate)``, when given, is called at every Newton iterate of the final
+        (unscaled) solve that is not yet converged; an exception it raises abandons the solve."""
         opts = self.options
         nf = None if node_forces is None else np.asarray(node_forces, dtype=np.float64)
         bf = None if body_forces is None else np.asarray(body_forces, dtype=np.float64)
@@ -274,11 +276,11 @@ class StaticSolver:
                 pass  # the softened stage is only a predictor; solve the real problem from the start
             finally:
                 self.evaluator.buf.set_stretch_scale(1.0)
-        res = self._newton(state, nf, bf, opts.grad_tol)
+        res = self._newton(state, nf, bf, opts.grad_tol, monitor)
         res.iterations += extra
         return res
 
-    def _newton(self, state: RodState, nf, bf, grad_tol: float) -> StaticResult:
+    def _newton(self, state: RodState, nf, bf, grad_tol: float, monitor=None) -> StaticResult:
         opts = self.options
         gtol = grad_tol * self.model.force_scale
         cap = opts.max_step * self.length
@@ -294,6 +296,8 @@ class StaticSolver:
                 return StaticResult(st, E, it, gnorm, dict(self.evaluator.parts), hist)
             if it == opts.max_iter:
                 break
+            if monitor is not None:
+                monitor(it, st)
             d = -self.linear.solve(Hq, gq)
             slope = float(gq @ d)
             if not slope < 0.0:

@@ -439,6 +439,54 @@ def test_tuning_trials_start_where_asked_and_stop_at_their_iteration_cap(small_d
     assert np.max(np.abs(capped.gap - np.where(pat.interior, pat.gap, 0.0))) < 1e-15
 
 
+def test_trials_rejected_early_keep_the_accepted_step(small_dome, monkeypatch):
+    """A trial whose Newton iterates' objective rises above the accepted one's (by EARLY_REJECT_MARGIN)
+    is rejected before it converges: on the small dome the full step is (it converges to a higher E,
+    rejected, when the check is off), and the tuning accepts the same half step with the same gaps (to
+    round-off) in fewer Newton iterations; the rejected trial is counted, not solved."""
+    from simfab.deploy import tuning
+
+    pat, net, dep, cfg, Y = small_dome
+    tgt = surface.spherical_cap(0.1, np.radians(50), 10)
+    c = tuning.TuneConfig(iterations=1, point_weight=1.0, escalations=1)
+    checked = tuning.tune(pat, net, dep, Y, tgt, c)
+    monkeypatch.setattr(tuning, "FIT_CHECK_ITERATIONS", 10**6)  # only the predictor's E: never a check
+    plain = tuning.tune(pat, net, dep, Y, tgt, c)
+    assert plain.rejected_early == 0 and plain.trial >= 1 and plain.steps == 1
+    assert checked.rejected_early >= 1 and checked.trial == plain.trial and checked.steps == 1
+    assert checked.solves + checked.rejected_early == plain.solves
+    assert checked.newton_iterations < plain.newton_iterations
+    assert np.max(np.abs(checked.gap - plain.gap)) < 1e-12
+
+
+def test_static_solve_monitor_sees_every_iterate_and_can_abandon(small_dome):
+    """``StaticSolver.solve(monitor=...)`` calls the monitor at every Newton iterate before convergence
+    (iterations 0 .. n-1, the result unchanged by it), and an exception it raises abandons the solve."""
+    from simfab.rods.statics import StaticSolver
+
+    pat, net, dep, cfg, Y = small_dome
+    solver = StaticSolver(net.model)
+    o = net.model.node_offset.copy()
+    o[net.pull_nodes] += net.pull_dir * 1.2 * net.pull_grow[:, None]  # away from the deployed equilibrium
+    solver.set_attachment_offsets(o)
+    start = solver.red.apply(dep.final, np.zeros(solver.red.nq))  # attached nodes at the new offsets
+    seen = []
+    watched = solver.solve(start, monitor=lambda it, st: seen.append(it))
+    alone = solver.solve(start)
+    assert watched.iterations >= 2 and seen == list(range(watched.iterations))
+    assert np.max(np.abs(watched.state.body_pos - alone.state.body_pos)) < 1e-15
+
+    class Stop(Exception):
+        pass
+
+    def stop(it, st):
+        if it == 1:
+            raise Stop
+
+    with pytest.raises(Stop):
+        solver.solve(start, monitor=stop)
+
+
 def test_tune_config_errors():
     from simfab.deploy import tuning
     from simfab.errors import InputError
