@@ -16,3 +16,20 @@ def require_gmsh():
         load_gmsh()
     except RuntimeError as e:
         pytest.skip(str(e))
+
+
+@pytest.fixture
+def spd_solvers(monkeypatch):
+    """Every :class:`simfab.solve.linear.SPDSolver` (and subclass) built while the test runs, in
+    order; a test that runs twice clears the list in between."""
+    from simfab.solve import linear
+
+    solvers = []
+    init = linear.SPDSolver.__init__
+
+    def registered(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        solvers.append(self)
+
+    monkeypatch.setattr(linear.SPDSolver, "__init__", registered)
+    return solvers

@@ -153,12 +153,7 @@ class StepObjective:
                 # assembled on demand, when the exact one turns out indefinite (see LazyHessian)
                 E, g, H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)
             else:
-                fem = self._fem
-                if fem is not None and np.array_equal(fem[0], xf):  # Newton's Hessian at its accepted trial
-                    E, g = fem[1], fem[2]
-                else:
-                    E, g = energy_gradient(cm.fem, x)
-                    self._fem = (xf.copy(), E, g)
+                E, g = self._fem_value(xf, x)
         if self.pin is not None:
             E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
         if not np.isfinite(E):
@@ -200,19 +195,23 @@ class StepObjective:
             self.memo = (xf.copy(), out)
         return out
 
+    def _fem_value(self, xf: np.ndarray, x: np.ndarray):
+        """The FEM energy and gradient at x, remembered for the last x (Newton asks for the Hessian at
+        the line search's accepted trial, whose value was evaluated without it)."""
+        fem = self._fem
+        if fem is not None and np.array_equal(fem[0], xf):
+            return fem[1], fem[2]
+        E, g = energy_gradient(self.cm.fem, x)
+        self._fem = (xf.copy(), E, g)
+        return E, g
+
     def _evaluate_deferred(self, xf: np.ndarray, x: np.ndarray):
         """:meth:`_evaluate` with the Hessian for a solve's iterates on linear elements: the value and
         gradient as with it, the lazy bounds re-anchored at x; the distances' Hessians, the contact
         blocks, the FEM Hessian and the curvature bound follow when Newton asks for the Hessian or
         the step cap (:class:`_DeferredHessian`): a line-search trial that ends the solve needs none."""
-        cm = self.cm
         with self.timer.timed("assembly"):
-            fem = self._fem
-            if fem is not None and np.array_equal(fem[0], xf):
-                E, g = fem[1], fem[2]
-            else:
-                E, g = energy_gradient(cm.fem, x)
-                self._fem = (xf.copy(), E, g)
+            E, g = self._fem_value(xf, x)
         if self.pin is not None:
             E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
         if not np.isfinite(E):

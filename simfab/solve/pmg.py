@@ -2,7 +2,7 @@
 vertices as the coarse space.
 
 A P2 field's restriction to the vertices, interpolated linearly along every edge, is the P1 field
-of the corner mesh: the prolongation P (:func:`p2_prolongation`) copies a vertex's unknowns to
+of the corner mesh: the prolongation P (:func:`corner_prolongation`) copies a vertex's unknowns to
 itself and gives each edge node the mean of its edge's two vertices, per component, so it
 reproduces every linear field (rigid motions included) exactly. :class:`TwoLevelP2` is the
 symmetric two-level cycle on the free block A of a P2 Hessian (plus an optional low-rank term
@@ -12,7 +12,7 @@ correction P (P^T A P)^-1 P^T by a sparse Cholesky factorization of the Galerkin
 smoother again. It serves as the preconditioner of conjugate gradients
 (:func:`simfab.solve.linear.conjugate_gradients`).
 
-    pre = TwoLevelP2(p2_prolongation(model.n_corners, model.edges, model.dim, free))
+    pre = TwoLevelP2(corner_prolongation(model.n_corners, model.edges, model.dim, free))
     pre.setup(A_ff)
     res = conjugate_gradients(lambda v: A_ff @ v, pre, b, max_iter=200,
                               converged=lambda r, rn: rn <= 1e-8 * np.linalg.norm(b))
@@ -39,7 +39,7 @@ from simfab.solve.linear import (
 COARSE_SHIFTS = (1e-6, 1e-4, 1e-2)
 
 
-def p2_prolongation(n_corners: int, edges: np.ndarray, dim: int, free: np.ndarray | None = None) -> sp.csr_matrix:
+def corner_prolongation(n_corners: int, edges: np.ndarray, dim: int, free: np.ndarray | None = None) -> sp.csr_matrix:
     """The P1 -> P2 prolongation of a P2 mesh whose first ``n_corners`` nodes are the vertices and
     whose node ``n_corners + i`` is the midpoint of ``edges[i]`` (:class:`simfab.fem.p2.P2Model`).
 
@@ -102,7 +102,7 @@ class TwoLevelP2:
     module docstring). Call :meth:`setup` with each new matrix, then the object itself on residuals.
 
     Args:
-        P: (m, m_c) prolongation (:func:`p2_prolongation`, restricted to the free unknowns).
+        P: (m, m_c) prolongation (:func:`corner_prolongation`, restricted to the free unknowns).
         smoother: :class:`SmootherConfig`.
 
     Attributes ``coarse_unknowns``; ``coarse``: the :class:`SPDSolver` of the coarse matrix (its
@@ -257,7 +257,7 @@ class MultigridSolver(SPDSolver):
     two-level p-multigrid preconditioner (:class:`MultigridConfig`) before lagging or factorizing.
 
     Args:
-        prolongation: (n, n_c) the P1 -> P2 prolongation on all unknowns (:func:`p2_prolongation`
+        prolongation: (n, n_c) the P1 -> P2 prolongation on all unknowns (:func:`corner_prolongation`
             without ``free``); its rows and columns are restricted to each free set.
         multigrid: :class:`MultigridConfig`.
         lag: as :class:`SPDSolver`'s (the fallback when the multigrid solve does not converge).
@@ -396,5 +396,5 @@ def insertion_solver(model, *, lag: LagConfig | None = None, multigrid: Multigri
     """
     if getattr(model, "n_corners", None) is None or getattr(model, "edges", None) is None:
         return SPDSolver(lag=lag)
-    P = p2_prolongation(int(model.n_corners), np.asarray(model.edges), int(model.dim))
+    P = corner_prolongation(int(model.n_corners), np.asarray(model.edges), int(model.dim))
     return MultigridSolver(P, multigrid=multigrid, lag=lag)

@@ -12,19 +12,12 @@ from simfab.coupling.simulate import simulate_insertion
 from simfab.solve import linear
 
 
-def _run(monkeypatch, lag):
+def _run(monkeypatch, solvers, lag):
     # the clip slides freely along the cylinder (the rigid-mode pin's Woodbury update is in every
     # solve); 18 steps of linear tets keep the test short
     monkeypatch.setattr(state, "LagConfig", (lambda: None) if lag is None else functools.partial(linear.LagConfig,
                                                                                                   **lag))
-    solvers = []
-    init = linear.SPDSolver.__init__
-
-    def registered(self, *args, **kwargs):
-        init(self, *args, **kwargs)
-        solvers.append(self)
-
-    monkeypatch.setattr(linear.SPDSolver, "__init__", registered)
+    solvers.clear()
     cm = load_coupling_scene("clip3d", overrides={"simulation": {"steps": 18, "element_order": 1},
                                                   "compliant": {"target_elements": 2000}})
     res = simulate_insertion(cm)
@@ -32,9 +25,9 @@ def _run(monkeypatch, lag):
     return summ, sum(s.factorizations for s in solvers), sum(s.lagged_solves for s in solvers)
 
 
-def test_lagged_factorizations_give_the_same_figures(monkeypatch):
-    direct, n_direct, lagged_direct = _run(monkeypatch, None)
-    lagged, n_lagged, lagged_solves = _run(monkeypatch, {"min_unknowns": 0})
+def test_lagged_factorizations_give_the_same_figures(monkeypatch, spd_solvers):
+    direct, n_direct, lagged_direct = _run(monkeypatch, spd_solvers, None)
+    lagged, n_lagged, lagged_solves = _run(monkeypatch, spd_solvers, {"min_unknowns": 0})
     assert lagged_direct == 0 and lagged_solves > 0 and n_lagged < n_direct
     # the converged states differ within Newton's force tolerance, which the history of the pin's
     # anchors carries along (here up to 4e-5 of F_in); 2e-4 bounds that, a wrong solve would not be

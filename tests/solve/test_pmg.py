@@ -11,8 +11,8 @@ from simfab.solve.pmg import (
     MultigridSolver,
     SmootherConfig,
     TwoLevelP2,
+    corner_prolongation,
     insertion_solver,
-    p2_prolongation,
 )
 
 
@@ -38,10 +38,10 @@ def test_prolongation_reproduces_linear_fields():
     rng = np.random.default_rng(0)
     G, c = rng.standard_normal((3, 3)), rng.standard_normal(3)
     u = m.rest @ G.T + c  # (n, 3)
-    P = p2_prolongation(m.n_corners, m.edges, 3)
+    P = corner_prolongation(m.n_corners, m.edges, 3)
     assert P.shape == (3 * len(m.rest), 3 * m.n_corners)
     np.testing.assert_allclose(P @ u[: m.n_corners].ravel(), u.ravel(), rtol=0, atol=1e-12 * np.abs(u).max())
-    Pf = p2_prolongation(m.n_corners, m.edges, 3, free)
+    Pf = corner_prolongation(m.n_corners, m.edges, 3, free)
     coarse = free[free < 3 * m.n_corners]
     assert Pf.shape == (len(free), len(coarse))
     uc = u.ravel()[coarse]
@@ -64,7 +64,7 @@ def test_preconditioned_cg_matches_cholmod_on_a_p2_hessian(kind):
     A = H[free][:, free].tocsr()
     b = np.random.default_rng(1).standard_normal(len(free))
     ref = SPDSolver().solve(A, b)
-    pre = TwoLevelP2(p2_prolongation(m.n_corners, m.edges, 3, free), SmootherConfig(kind=kind, sweeps=2))
+    pre = TwoLevelP2(corner_prolongation(m.n_corners, m.edges, 3, free), SmootherConfig(kind=kind, sweeps=2))
     pre.setup(A)
     bn = np.linalg.norm(b)
     res = conjugate_gradients(pre.apply, pre, b, max_iter=200, converged=lambda r, rn: rn <= 1e-10 * bn)
@@ -82,7 +82,7 @@ def test_preconditioner_is_symmetric_with_the_low_rank_term():
     A = H[free][:, free].tocsr()
     rng = np.random.default_rng(2)
     U = np.linalg.qr(rng.standard_normal((len(free), 3)))[0]
-    pre = TwoLevelP2(p2_prolongation(m.n_corners, m.edges, 3, free))
+    pre = TwoLevelP2(corner_prolongation(m.n_corners, m.edges, 3, free))
     pre.setup(A, U, float(A.diagonal().mean()))
     u, v = rng.standard_normal((2, len(free)))
     assert u @ pre(v) == pytest.approx(v @ pre(u), rel=1e-10)

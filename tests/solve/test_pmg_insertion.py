@@ -9,20 +9,13 @@ from simfab.coupling import state
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate_insertion
-from simfab.solve import linear, pmg
+from simfab.solve import pmg
 
 
-def _run(monkeypatch, min_unknowns):
+def _run(monkeypatch, solvers, min_unknowns):
     # clip3d on P2 tets in one layer, 18 steps: the pin's rank-6 term is in every solve
     monkeypatch.setattr(state, "MultigridConfig", functools.partial(pmg.MultigridConfig, min_unknowns=min_unknowns))
-    solvers = []
-    init = linear.SPDSolver.__init__
-
-    def registered(self, *args, **kwargs):
-        init(self, *args, **kwargs)
-        solvers.append(self)
-
-    monkeypatch.setattr(linear.SPDSolver, "__init__", registered)
+    solvers.clear()
     cm = load_coupling_scene("clip3d", overrides={"simulation": {"steps": 18},
                                                   "compliant": {"target_elements": 600, "layers": 1}})
     res = simulate_insertion(cm)
@@ -31,9 +24,9 @@ def _run(monkeypatch, min_unknowns):
     return summ, sum(s.multigrid_solves for s in mg), sum(s.factorizations for s in mg)
 
 
-def test_multigrid_solves_give_the_same_figures(monkeypatch):
-    direct, mg_direct, _ = _run(monkeypatch, 10**9)
-    forced, mg_solves, fine_factorizations = _run(monkeypatch, 0)
+def test_multigrid_solves_give_the_same_figures(monkeypatch, spd_solvers):
+    direct, mg_direct, _ = _run(monkeypatch, spd_solvers, 10**9)
+    forced, mg_solves, fine_factorizations = _run(monkeypatch, spd_solvers, 0)
     assert mg_direct == 0 and mg_solves > 0 and fine_factorizations < mg_solves
     # the solves stop at 0.1x Newton's force target (or 1e-6 relative): the converged states differ
     # within Newton's tolerance, carried along by the pin's anchors (docs/benchmarks.md 1b: up to

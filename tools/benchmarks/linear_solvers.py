@@ -518,7 +518,7 @@ def pmg_against_cholmod(levels, smoothers, snapshots: int) -> dict:
     from simfab.coupling.scene import load_coupling_scene
     from simfab.fem.elastic import energy_gradient_hessian
     from simfab.solve.linear import SPDSolver, conjugate_gradients
-    from simfab.solve.pmg import SmootherConfig, TwoLevelP2, p2_prolongation
+    from simfab.solve.pmg import SmootherConfig, TwoLevelP2, corner_prolongation
 
     rows = []
     for scene, f in levels:
@@ -533,7 +533,7 @@ def pmg_against_cholmod(levels, smoothers, snapshots: int) -> dict:
                     "shift": 0.0, "step": None}]
         if snapshots:
             systems += _insertion_systems(cm, snapshots)
-        P = p2_prolongation(m.n_corners, m.edges, m.dim, free)
+        P = corner_prolongation(m.n_corners, m.edges, m.dim, free)
         d0 = A0.diagonal()  # the barrier's stiffness shows as diagonal entries above the rest shape's
         with single_threaded_blas():
             for sysm in systems:
