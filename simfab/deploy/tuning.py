@@ -145,10 +145,12 @@ class _FitCheck:
     """The fit check of a trial's Newton iterates (a :meth:`StaticSolver.solve` monitor): every
     :data:`FIT_CHECK_ITERATIONS` iterations, E at the iterate (vertex positions ``X_of(state)``); it
     raises :class:`_RejectedEarly` when E is above (1 + :data:`EARLY_REJECT_MARGIN`) x ``accepted_cost``
-    and above E at the previous check (evaluated only then). ``iterations``: the last iterate it saw."""
+    and above E at the previous check (evaluated only then); with ``reject`` False it only counts.
+    ``iterations``: the last iterate it saw."""
 
-    def __init__(self, X_of, Y: np.ndarray, target, cfg: TuneConfig, accepted_cost: float):
+    def __init__(self, X_of, Y: np.ndarray, target, cfg: TuneConfig, accepted_cost: float, *, reject: bool = True):
         self.X_of, self.Y, self.target, self.cfg, self.accepted = X_of, Y, target, cfg, accepted_cost
+        self.reject = reject
         self.previous = None  # the previous check's iterate, or its E once evaluated
         self.iterations = 0
 
@@ -157,7 +159,7 @@ class _FitCheck:
 
     def __call__(self, it: int, state) -> None:
         self.iterations = it
-        if it % FIT_CHECK_ITERATIONS:
+        if not self.reject or it % FIT_CHECK_ITERATIONS:
             return
         prev, self.previous = self.previous, state
         if prev is None:
@@ -286,7 +288,7 @@ def achievable_growth(pat) -> tuple[np.ndarray, np.ndarray]:
 
 
 def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str = "cpu",
-         first_trial: int = 0) -> Tuning:
+         first_trial: int = 0, early_reject: bool = True) -> Tuning:
     """Tune the gaps of ``pat`` from its deployment ``dep`` (network ``net``) towards ``target`` with
     correspondences Y (n,3) (see module doc). Returns the tuned gaps; the caller re-cuts and
     re-deploys.
@@ -295,7 +297,8 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
     ``ESCALATION_FACTOR``^k, then halved ``HALVINGS - 1`` times, for k = 0 .. ``cfg.escalations``;
     ``first_trial`` skips the first ones (the first step only: :func:`tune_pattern` starts a step
     ``RESTART_BACK`` trials before the one its last step was accepted at). ``Tuning.trial``: the
-    accepted step's."""
+    accepted step's. ``early_reject``: trials may be abandoned by their fit check (:class:`_FitCheck`);
+    when every trial is rejected and some early, the trials are solved again to equilibrium."""
 
     t0 = time.perf_counter()
     model = net.model
@@ -330,35 +333,42 @@ def tune(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, *, device: str =
         A = J.T @ J
         d_try = d.copy()
         accepted = False
-        for k in range(skip // HALVINGS, cfg.escalations + 1):
-            mu = cfg.damping * ESCALATION_FACTOR**k * float(np.max(np.diag(A)))
-            step = -np.linalg.solve(A + mu * np.eye(len(ins)), J.T @ fit.e)
-            h0 = skip % HALVINGS if k == skip // HALVINGS else 0
-            alpha = 0.5**h0
-            for h in range(h0, HALVINGS):
-                trial = HALVINGS * k + h
-                d_try[ins] = np.clip(d[ins] + alpha * step, lo[ins], hi[ins])
-                solver.set_attachment_offsets(offsets(d_try))
-                st = solver.red.apply(state, dq @ (d_try[ins] - d[ins]))
-                check = _FitCheck(vertices, Y, target, cfg, fit.cost)
-                try:
-                    res = solver.solve(st, monitor=check)
-                    solves += 1
-                    newton += res.iterations
-                except (ConvergenceError, _RejectedEarly) as err:  # the step too long: halved
-                    # not converged (no equilibrium near the predictor), or its fit worse than the
-                    # accepted one's and getting worse
-                    early += isinstance(err, _RejectedEarly)
-                    abandoned += isinstance(err, ConvergenceError)
-                    newton += check.iterations + isinstance(err, ConvergenceError)
+        # a step whose trials were all rejected, some early by their fit check, is searched again
+        # with every trial solved to equilibrium: the tuning stops only on converged trials' fits
+        for checked in (True, False):
+            step_early = 0
+            for k in range(skip // HALVINGS, cfg.escalations + 1):
+                mu = cfg.damping * ESCALATION_FACTOR**k * float(np.max(np.diag(A)))
+                step = -np.linalg.solve(A + mu * np.eye(len(ins)), J.T @ fit.e)
+                h0 = skip % HALVINGS if k == skip // HALVINGS else 0
+                alpha = 0.5**h0
+                for h in range(h0, HALVINGS):
+                    trial = HALVINGS * k + h
+                    d_try[ins] = np.clip(d[ins] + alpha * step, lo[ins], hi[ins])
+                    solver.set_attachment_offsets(offsets(d_try))
+                    st = solver.red.apply(state, dq @ (d_try[ins] - d[ins]))
+                    check = _FitCheck(vertices, Y, target, cfg, fit.cost, reject=checked and early_reject)
+                    try:
+                        res = solver.solve(st, monitor=check)
+                        solves += 1
+                        newton += res.iterations
+                    except (ConvergenceError, _RejectedEarly) as err:  # the step too long: halved
+                        # not converged (no equilibrium near the predictor), or its fit worse than the
+                        # accepted one's and getting worse
+                        step_early += isinstance(err, _RejectedEarly)
+                        abandoned += isinstance(err, ConvergenceError)
+                        newton += check.iterations + isinstance(err, ConvergenceError)
+                        alpha *= 0.5
+                        continue
+                    fit_try = _fit(vertices(res.state), Y, target, cfg)
+                    if fit_try.cost < fit.cost:
+                        accepted = True
+                        break
                     alpha *= 0.5
-                    continue
-                fit_try = _fit(vertices(res.state), Y, target, cfg)
-                if fit_try.cost < fit.cost:
-                    accepted = True
+                if accepted:
                     break
-                alpha *= 0.5
-            if accepted:
+            early += step_early
+            if accepted or not step_early:
                 break
         if not accepted:
             solver.set_attachment_offsets(offsets(d))
@@ -457,35 +467,48 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
         if cfg.seconds and time.perf_counter() - t0 >= cfg.seconds:
             stop = "time budget"
             break
-        accepted = False
-        for k in range(cfg.escalations + 1):  # a re-cut that does not lower E: the step again at mu x 10
-            one = dataclasses.replace(cfg, iterations=1, damping=cfg.damping * ESCALATION_FACTOR**k,
-                                      escalations=cfg.escalations - k)
-            first = max(0, last - RESTART_BACK) if k == 0 else 0
-            tuned = tune(pat, net, dep, Y, target, one, device=device, first_trial=first)
-            solves, abandoned = solves + tuned.solves, abandoned + tuned.abandoned
-            early, newton = early + tuned.rejected_early, newton + tuned.newton_iterations
-            if tuned.steps == 0 and first > 0:  # none of the shorter steps: the longer ones skipped too
-                tuned = tune(pat, net, dep, Y, target, one, device=device)
+        def attempt(check: bool):
+            """One tuning step (its re-cut escalated at mu x 10 when it does not lower E): the accepted
+            (k, tuning, pattern, network, deployment, fit), or None; adds to the run's counts."""
+            nonlocal solves, abandoned, early, newton
+            for k in range(cfg.escalations + 1):
+                one = dataclasses.replace(cfg, iterations=1, damping=cfg.damping * ESCALATION_FACTOR**k,
+                                          escalations=cfg.escalations - k)
+                first = max(0, last - RESTART_BACK) if k == 0 else 0
+                tuned = tune(pat, net, dep, Y, target, one, device=device, first_trial=first, early_reject=check)
                 solves, abandoned = solves + tuned.solves, abandoned + tuned.abandoned
                 early, newton = early + tuned.rejected_early, newton + tuned.newton_iterations
-            if tuned.steps == 0:
-                break
-            pat2 = retuned_pattern(pat, tuned.gap)
-            net2 = build_network(pat2, deploy_cfg, ties=ties)
-            try:
-                dep2 = redeploy(pat2, net2, dep, tuned, device=device)
-            except ConvergenceError:
-                continue
-            solves += 1
-            newton += dep2.iterations[-1]
-            fit2 = _fit(dep2.vertex_positions(), Y, target, cfg)
-            if fit2.cost < fit.cost:
-                accepted = True
-                break
-        if not accepted:
+                if tuned.steps == 0 and first > 0:  # none of the shorter steps: the longer ones skipped too
+                    tuned = tune(pat, net, dep, Y, target, one, device=device, early_reject=check)
+                    solves, abandoned = solves + tuned.solves, abandoned + tuned.abandoned
+                    early, newton = early + tuned.rejected_early, newton + tuned.newton_iterations
+                if tuned.steps == 0:
+                    return None
+                pat2 = retuned_pattern(pat, tuned.gap)
+                net2 = build_network(pat2, deploy_cfg, ties=ties)
+                try:
+                    dep2 = redeploy(pat2, net2, dep, tuned, device=device)
+                except ConvergenceError:
+                    continue
+                solves += 1
+                newton += dep2.iterations[-1]
+                fit2 = _fit(dep2.vertex_positions(), Y, target, cfg)
+                if fit2.cost < fit.cost:
+                    return k, tuned, pat2, net2, dep2, fit2
+            return None
+
+        got = attempt(True)
+        # the tuning stalls only on trials solved to equilibrium: a step that gained too little after
+        # rejecting longer trials early by their fit check is searched again without it (a step that
+        # found nothing is, within :func:`tune`)
+        if got is not None and got[1].rejected_early and cfg.min_gain and 1.0 - got[5].cost / fit.cost < cfg.min_gain:
+            full = attempt(False)
+            if full is not None and full[5].cost < got[5].cost:
+                got = full
+        if got is None:
             stop = "no step lowers the objective"
             break
+        k, tuned, pat2, net2, dep2, fit2 = got
         last = HALVINGS * k + tuned.trial
         gain = 1.0 - fit2.cost / fit.cost if fit.cost > 0 else 0.0
         pat, net, dep, fit = pat2, net2, dep2, fit2
