@@ -37,7 +37,7 @@ def import_cholmod():
     around the first import and the process environment is left as it was."""
     import sys
 
-    if "cvxopt" not in sys.modules and "OPENBLAS_CORETYPE" not in os.environ and _has_avx2_fma():
+    if "cvxopt" not in sys.modules and "OPENBLAS_CORETYPE" not in os.environ and has_avx2_fma():
         os.environ["OPENBLAS_CORETYPE"] = "Haswell"
         try:
             import cvxopt.cholmod
@@ -48,7 +48,12 @@ def import_cholmod():
     return cvxopt.cholmod
 
 
-def _has_avx2_fma() -> bool:
+def has_avx2_fma() -> bool:
+    """Whether this CPU has AVX2 and FMA (the Haswell kernels of OpenBLAS run on it).
+
+    Returns:
+        True on Linux when /proc/cpuinfo lists both flags; False otherwise (and off Linux).
+    """
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:

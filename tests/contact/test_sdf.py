@@ -7,7 +7,13 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from simfab.contact.sdf import Primitive, PrimitiveField, _sample, build_primitive_field, section_primitives
+from simfab.contact.sdf import (
+    Primitive,
+    PrimitiveField,
+    build_primitive_field,
+    primitive_surface_samples,
+    section_primitives,
+)
 
 SIZES = {"sphere": (0.01,), "capsule": (0.004, 0.01), "cylinder": (0.01, 0.006), "box": (0.01, 0.004, 0.007),
          "torus": (0.01, 0.003)}
@@ -33,7 +39,7 @@ def test_primitive_field_is_its_exact_signed_distance(kind):
     Q = Rotation.from_euler("xyz", rng.uniform(0, 3, 3)).as_matrix()
     prim = Primitive(kind=kind, size=SIZES[kind], centre=np.array([0.002, -0.001, 0.003]), rotation=Q)
     f = build_primitive_field((prim,), 3, 500)
-    dense, _ = _sample(prim, 400_000, 3)
+    dense, _ = primitive_surface_samples((prim,), 400_000, 3)
     spacing = np.sqrt(prim.area() / len(dense))
     q = prim.centre + rng.uniform(-1.6, 1.6, (3000, 3)) * max(SIZES[kind])
     e = f.evaluate(q)

@@ -152,9 +152,9 @@ def test_cholmod_blas_uses_the_machines_vector_kernels():
     import subprocess
     import sys
 
-    from simfab.solve.linear import _has_avx2_fma
+    from simfab.solve.linear import has_avx2_fma
 
-    if not _has_avx2_fma():
+    if not has_avx2_fma():
         pytest.skip("a CPU without AVX2/FMA: OpenBLAS's own kernel choice stands")
     code = """
 import ctypes, os, pathlib
