@@ -115,6 +115,7 @@ class TwoLevelP2:
         self.smoother = smoother or SmootherConfig()
         self.coarse = SPDSolver("cholmod")
         self.coarse_unknowns = self.P.shape[1]
+        self._all = np.arange(self.coarse_unknowns)  # the coarse solve's free set: every coarse unknown
         self._A = None
         self._U = None
         self._mu = 0.0
@@ -172,7 +173,7 @@ class TwoLevelP2:
     def _coarse_solve(self, rc: np.ndarray) -> np.ndarray:
         if self._Uc is None:
             return self.coarse.solve(self._Ac, rc)
-        return self.coarse.solve_free_update(self._Ac, np.arange(self.coarse_unknowns), rc, self._Uc, self._mu)
+        return self.coarse.solve_free_update(self._Ac, self._all, rc, self._Uc, self._mu)
 
     def _power_lambda_max(self) -> float:
         """lambda_max of D^-1 K by the power method (enlarged by 1.1 in the smoother): from a fixed start,
