@@ -53,5 +53,8 @@ def member(name: str):
         The :class:`simfab.deploy.surface.Target`, named ``name``.
     """
     shape, _, rings = name.partition("@")
-    t = _shapes(int(rings))[shape]()
+    shapes = _shapes(int(rings)) if rings.isdigit() else {}
+    if shape not in shapes:
+        raise ValueError(f"family member {name!r}: not shape@rings with shape one of {', '.join(_shapes(12))}")
+    t = shapes[shape]()
     return surface.Target(V=t.V, F=t.F, name=name)

@@ -305,3 +305,11 @@ def test_inserts_on_short_edges_keep_beam_ends_scaled_with_them(tmp_path):
     end = 0.5 * hv - pat.gap  # the beam end each insert leaves on its mean half edge
     assert np.sum(ok & (end < pc.min_beam - 1e-9)) >= 3  # inserts that fit only with scaled beam ends
     assert np.all(end[ok] >= pattern.SHORT_BEAM_MIN * pc.min_beam - 1e-9)
+
+
+@pytest.mark.parametrize("name", ["bogus@12", "cap70-R100", "cap70-R100@x"])
+def test_an_unknown_family_member_is_named_with_the_known_shapes(name):
+    """A member name that is not shape@rings of a known shape is refused with the shapes named."""
+    with pytest.raises(ValueError, match="cap70-R100, cap85-R60") as e:
+        families.member(name)
+    assert repr(name) in str(e.value)

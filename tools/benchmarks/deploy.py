@@ -245,7 +245,14 @@ def _family(a) -> dict:
     from simfab.deploy import families
 
     rows = []
-    for name in a.members or families.names(tuple(a.rings)):
+    members = [m for arg in a.members or [] for m in arg.split(",") if m] or families.names(tuple(a.rings))
+    for m in members:
+        try:
+            families.member(m)
+        except ValueError as e:
+            print(f"bench deploy --members: {e}", file=sys.stderr)
+            raise SystemExit(2) from None
+    for name in members:
         row = _family_row(name)
         rows.append(row)
         if a.rows:
@@ -263,7 +270,7 @@ def run(argv) -> dict:
     p = argparse.ArgumentParser(prog="bench deploy")
     p.add_argument("--family", action="store_true", help="the target families on the defaults (issue 42)")
     p.add_argument("--rings", type=int, nargs="+", default=[12, 24], help="--family: the resolutions")
-    p.add_argument("--members", nargs="+", help="--family: only these members (shape@rings)")
+    p.add_argument("--members", nargs="+", help="--family: only these members (shape@rings, spaces or commas between)")
     p.add_argument("--rows", help="--family: append each row to this JSONL file as it finishes")
     p.add_argument("--table", action="store_true", help="--family: also the Markdown table")
     p.add_argument("--scene", default="dome")
