@@ -129,21 +129,15 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     cover = np.sqrt(edges2.max(axis=1)) * COVER[cm.dim]
     dvf = dv[facets]  # (F, nv)
     ids = np.flatnonzero(dvf.min(axis=1) <= C.PSI_LIPSCHITZ * cover)
-    if state.refined:
-        refined = np.zeros(len(facets), dtype=bool)
-        refined[list(state.refined)] = True
-        refined = refined[ids]
-    else:
-        refined = np.zeros(len(ids), dtype=bool)
+    refined = np.zeros(len(facets), dtype=bool)
+    refined[list(state.refined)] = True
+    refined = refined[ids]
     psi_max = np.full(len(ids), -np.inf)
     for is_refined in (False, True):
-        if not len(ids):
-            break
         sel = refined if is_refined else ~refined
-        every = not is_refined and not state.refined  # (no refined facet: every one near O)
-        if every or sel.any():
+        if sel.any():
             w, gap_map = check_lattice(cm.dim, state.order, is_refined)
-            f_sel = ids if every else ids[sel]
+            f_sel = ids[sel]
             xv = xf[f_sel]  # (f, nv, dim) the facets' vertices
             y = w @ xv  # (f, p, dim) check points
             # psi(y) <= psi(v) + L |y - v| for each vertex v of the facet: points this bounds below
@@ -168,10 +162,7 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
                 psi[todo] = ev.psi
                 state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
             known_body[f_sel], known_psi[f_sel] = body, psi
-            if every:
-                psi_max = psi.max(axis=1)
-            else:
-                psi_max[sel] = psi.max(axis=1)
+            psi_max[sel] = psi.max(axis=1)
     out = FacetCheck(x, s, state.order, ids, psi_max, refined)
     state.check = out
     return out
