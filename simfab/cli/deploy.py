@@ -159,7 +159,8 @@ def format_text(summary: dict) -> str:
     if bd:
         rows.append(f"bounds            RMS {100 * bd['rms']:.3g} % (<= {100 * bd['rms_bound']:g}), height "
                     f"{100 * bd['height_error']:+.3g} % (within {100 * bd['height_bound']:g}), "
-                    f"{bd['unreachable_gaps']} gaps unreachable, {bd['springs_short']} springs short: "
+                    f"{bd['unreachable_gaps']} gaps unreachable, {bd['springs_short']} springs short of their reach "
+                    f"({bd.get('springs_below_slack', 0)} within reach, below the slack margin): "
                     + ("met" if not bd["missed"] else "MISSED - " + "; ".join(bd["missed"])))
     rows.append("seconds           " + ", ".join(f"{k} {v:.3g}" for k, v in s["seconds"].items()))
     rows.append(f"outputs           {os.path.dirname(s['outputs']['json'])}/")

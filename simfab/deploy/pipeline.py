@@ -362,7 +362,7 @@ BOUND_HEIGHT = 0.03
 
 def bounds(res: SurfaceRun) -> dict:
     """The run against the deployment bounds: RMS <= ``BOUND_RMS`` of the diameter, out-of-plane height
-    within ``BOUND_HEIGHT``, no gap unreachable, no spring short of its slack.
+    within ``BOUND_HEIGHT``, no gap unreachable, no spring short of its reach (:func:`taut_springs`).
 
     Args:
         res: the :class:`SurfaceRun`.
@@ -387,13 +387,33 @@ def bounds(res: SurfaceRun) -> dict:
     if len(p.unreachable):
         missed.append(f"{len(p.unreachable)} gaps unreachable: [pattern] insert_half_sizes (a catalogue spanning "
                       "their growth)" + ("" if cut else ", or cuts: [cuts] max_cones"))
-    if len(p.tight_springs):
+    taut = taut_springs(p)
+    if len(taut):
         shrinks = float(np.min(res.flat.u)) < 0  # cones help where the flattening shrank (u < 0) only
-        missed.append(f"{len(p.tight_springs)} quads' springs short of their reach: a narrower [pattern] spring_width "
+        missed.append(f"{len(taut)} quads' springs short of their reach: a narrower [pattern] spring_width "
                       "(bends further) or a finer spacing" + (", or cuts: [cuts] max_cones, max_growth"
                                                               if shrinks and not cut else ""))
     return dict(rms=dv.rms, rms_bound=BOUND_RMS, height_error=herr, height_bound=BOUND_HEIGHT,
-                unreachable_gaps=int(len(p.unreachable)), springs_short=int(len(p.tight_springs)), missed=missed)
+                unreachable_gaps=int(len(p.unreachable)), springs_short=int(len(taut)),
+                springs_below_slack=int(len(p.tight_springs) - len(taut)), missed=missed)
+
+
+def taut_springs(p) -> np.ndarray:
+    """The quads of ``p`` with a spring arc shorter than its deployed chord, S/c < max(growth, 1): pulled
+    taut, the spring holds its inserts short of their positions (a bound). A quad in
+    ``p.tight_springs`` whose arcs all reach but keep less than the ``spring_slack`` margin over the
+    chord deploys as designed (the deployment's equilibrium includes its springs); it is reported
+    (``springs_below_slack``), not a missed bound.
+
+    Args:
+        p: the :class:`~simfab.deploy.pattern.Pattern`.
+
+    Returns:
+        (k,) the quads, a subset of ``p.tight_springs``.
+    """
+    q = np.asarray(p.tight_springs, dtype=np.int64)
+    reach = np.maximum(p.growth[q], 1.0)
+    return q[np.any(p.spring_ratio[q] < reach - 1e-9, axis=1)]
 
 
 def flat_area_covered(res: SurfaceRun) -> float:

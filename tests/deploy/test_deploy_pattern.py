@@ -216,6 +216,17 @@ def test_steep_cap_springs_reach_their_slack():
     bez = pattern.layout(f.uv, f.boundary, sc.target.F, f.u, pattern.PatternConfig(
         **{**sc.pattern.__dict__, "springs": "bezier"}))
     assert not np.any(bez.spring_legs) and len(bez.tight_springs) > 0.8 * len(bez.quads)
+    # of those, the taut ones (an arc shorter than its deployed chord: a missed bound) are the quads where
+    # the cell grows beyond what a Bezier arc reaches; the others reach, with less than the slack margin
+    from simfab.deploy.pipeline import taut_springs
+
+    taut = taut_springs(bez)
+    assert 0 < len(taut) < len(bez.tight_springs) and np.all(np.isin(taut, bez.tight_springs))
+    reach = np.maximum(bez.growth, 1.0)
+    assert np.all(np.any(bez.spring_ratio[taut] < reach[taut] - 1e-9, axis=1))
+    rest = np.setdiff1d(bez.tight_springs, taut)
+    assert np.all(bez.spring_ratio[rest] >= reach[rest] - 1e-9)
+    assert np.all(bez.growth[taut].max(axis=1) > bez.spring_ratio[rest].min())  # the taut ones grow most
     with pytest.raises(InputError, match="pattern.springs"):
         pattern.PatternConfig(springs="meander")
 
