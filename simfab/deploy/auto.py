@@ -14,7 +14,8 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
   every vertex's growth is within reach (:func:`simfab.deploy.cuts.place_cones`);
 - the catalogue (:func:`catalogue`): from the flattening (cut, with cuts) the target will get,
   the fewest sizes covering every vertex's growth with room for the tuning (``TUNE_ROOM``),
-  smallest inserts first; with cuts, smaller sizes for the seams' short edges (``SEAM_EDGE``);
+  smallest inserts first; with cuts, smaller sizes for the seams' short edges (``SEAM_EDGE``; up to
+  ``SEAM_SIZES`` beyond ``MAX_SIZES``);
 - layout: ``conforming`` (grid core, regular, growths fitted to the edges) without cuts, ``mesh``
   with them: both cover >= 99 % of the flat domain;
 - tuning: on (``AUTO_TUNE``; the point weight from the share of the area that is not
@@ -53,6 +54,9 @@ TUNE_ROOM = 0.2
 #: seam into equal edges of about the spacing; where seams and the outline meet they run down to ~0.5 h): with
 #: cuts the catalogue adds the smaller sizes such an insert needs for its gap to be achievable
 SEAM_EDGE = 0.5
+#: sizes the seams' short edges may add beyond ``MAX_SIZES`` (a full catalogue left a steep cap's seam insert
+#: with no achievable gap: its short edges hold a smaller gap than its size asks for)
+SEAM_SIZES = 1
 #: the tuning on by default: Gauss-Newton steps, towards the surface, each vertex's own point and (beyond
 #: the stop's height tolerance) the target's height, w_h = 0.2 (the surface distance alone lets a saddle's
 #: height drift: the point weight is 0 there, :func:`point_weight`); it stops at the bound (RMS 0.75 % of
@@ -75,6 +79,7 @@ class Decisions:
     needs_cuts: bool
     uncut_unreachable: int
     uncut_growth_max: float
+    min_insert: float = MIN_INSERT
 
 
 def spacing(target, *, floor: float = SPACING_RANGE[0]) -> float:
@@ -205,14 +210,15 @@ def complete(scene, given: dict):
         sizes, left = catalogue(d, h, pc, room=TUNE_ROOM, min_insert=min_insert)
         if left:  # no room for the tuning at either end: the achievable range alone
             sizes, _ = catalogue(d, h, pc, min_insert=min_insert)
-        if cut and sizes and len(sizes) < MAX_SIZES:  # the seams' short edges: smaller sizes where needed
+        if cut and sizes:  # the seams' short edges: smaller sizes where needed
             # (edges so short that no gap fits in them cannot be served: the shortest with a gap range)
             short = max(SEAM_EDGE, 2 * (pc.min_gap + pc.min_beam + 2 * MARGIN + SIZE_STEP) / h)
             g = np.asarray(sizes)[None, :] - d[:, None]
             ok = np.any((g >= pc.min_gap + MARGIN) & (g <= short * h / 2 - pc.min_beam - MARGIN), axis=1)
             if not ok.all():
                 extra, _ = catalogue(d[~ok], h, pc, short=short, min_insert=min_insert)
-                sizes = sorted(set(sizes) | {r for r in extra[::-1][:MAX_SIZES - len(sizes)] if r not in sizes})
+                room = max(MAX_SIZES - len(sizes), SEAM_SIZES)
+                sizes = sorted({*sizes, *[r for r in extra[::-1] if r not in sizes][:room]})
         if sizes:
             upd["insert_half_sizes"] = tuple(sizes)
             decided.append("pattern.insert_half_sizes")
@@ -231,4 +237,38 @@ def complete(scene, given: dict):
     pc = dataclasses.replace(pc, **upd)
     return (dataclasses.replace(scene, pattern=pc, cuts=cc, tune=tc),
             Decisions(decided=tuple(decided), needs_cuts=bool(needs), uncut_unreachable=int(left0),
-                      uncut_growth_max=growth0))
+                      uncut_growth_max=growth0, min_insert=float(min_insert)))
+
+
+def unreachable_size(pat, decisions: Decisions) -> float | None:
+    """One more catalogue size [m] for the inserts the layout left with no achievable gap, or None.
+
+    The catalogue is sized before the layout, from the flattening's growths and an estimate of the
+    seams' shortest edges (``SEAM_EDGE``); an insert whose laid-out edges hold a smaller gap range
+    than that estimate (an outline corner, a seam's end) can still find no size: growth d = r - g_req,
+    its gap range [min_gap, g_max] (the layout's cut gap where the required one is beyond it). A size
+    r in [min_gap + d + MARGIN, g_max + d - MARGIN], rounded to ``SIZE_STEP`` and at least the
+    decided smallest insert, serves it; the one serving the most of them is returned (None when the
+    catalogue was given, when the layout left nothing unreachable or when no such size exists).
+
+    Args:
+        pat: the laid-out :class:`simfab.deploy.pattern.Pattern`.
+        decisions: the :class:`Decisions` the scene was completed with.
+
+    Returns:
+        The half-size [m], or None.
+    """
+    if "pattern.insert_half_sizes" not in decisions.decided or not len(pat.unreachable):
+        return None
+    v = np.asarray(pat.unreachable)
+    min_gap = pat.config.min_gap
+    d = pat.insert_size[v] - pat.gap_required[v]
+    g_max = np.where(pat.gap_required[v] > pat.gap[v], pat.gap[v], np.inf)  # beyond reach: the gap cut there
+    lo = np.maximum(np.ceil((min_gap + d + MARGIN) / SIZE_STEP - 1e-9) * SIZE_STEP, decisions.min_insert)
+    hi = np.floor((g_max + d - MARGIN) / SIZE_STEP + 1e-9) * SIZE_STEP
+    best, served = None, 0
+    for r in np.unique(np.concatenate([lo, hi[np.isfinite(hi)]])):
+        n = int(np.sum((lo <= r + 1e-12) & (r <= hi + 1e-12)))
+        if n > served and r > 0 and r not in pat.config.sizes:
+            best, served = round(float(r), 6), n
+    return best

@@ -25,12 +25,13 @@ all deployed vertices in their best-fit plane, K_fit = 4 a c - b^2 [1/m^2] (the 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from simfab.deploy import compare, cuts, flatten, lasercut, mjcf_sim, network, pattern, tuning
+from simfab.deploy import auto, compare, cuts, flatten, lasercut, mjcf_sim, network, pattern, tuning
 from simfab.deploy.compare import height_error, out_of_plane_extent
 from simfab.deploy.network import discrete_gaussian_curvature
 from simfab.progress import log
@@ -176,6 +177,13 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     tips = np.zeros((0, 2)) if cut_flat is None else cuts.cone_points(cut_flat)
     pat = pattern.layout(flat.uv, flat.boundary, mF, flat.u, scene.pattern, seams=[p for _, p in seams],
                          cone_tips=tips)
+    extra = None if scene.decisions is None else auto.unreachable_size(pat, scene.decisions)
+    if extra is not None:  # a decided catalogue the layout left inserts out of reach with: one more size
+        pc = dataclasses.replace(scene.pattern, insert_half_sizes=tuple(sorted((*pat.config.sizes, extra))))
+        scene = dataclasses.replace(scene, pattern=pc)
+        log(f"deploy surface: {len(pat.unreachable)} gaps out of reach, the catalogue takes {1e3 * extra:g} mm too",
+            quiet=quiet)
+        pat = pattern.layout(flat.uv, flat.boundary, mF, flat.u, pc, seams=[p for _, p in seams], cone_tips=tips)
     Y = pattern.map_to_surface(flat.uv, mF, mV, pat.P)
     sec["layout"] = time.perf_counter() - t
     t = time.perf_counter()

@@ -307,6 +307,29 @@ def test_inserts_on_short_edges_keep_beam_ends_scaled_with_them(tmp_path):
     assert np.all(end[ok] >= pattern.SHORT_BEAM_MIN * pc.min_beam - 1e-9)
 
 
+
+def test_a_size_is_added_for_gaps_the_layout_leaves_out_of_reach(tmp_path):
+    """cap85-R60@12's decided catalogue (3, 3.5, 4 mm, sized before the layout) leaves 1-2 inserts next to
+    the seams with no achievable gap (required 2.67 mm where their edges hold 2.30 mm with a 3 mm insert);
+    the defaults add the size that serves them (the decided smallest insert, 2 mm) and lay out again:
+    none is out of reach. A catalogue the scene gives is kept as given."""
+    from simfab.deploy import cuts, pattern
+
+    s = _bare(tmp_path, families.member("cap85-R60@12"))
+    cf = cuts.flatten_with_cuts(s.target.V, s.target.F, s.cuts, s.pattern)
+    seams, tips = [p for _, p in cuts.seam_lines(cf)], cuts.cone_points(cf)
+    pat = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, s.pattern, seams=seams, cone_tips=tips)
+    assert len(pat.unreachable) >= 1 and len(s.pattern.sizes) == auto.MAX_SIZES
+    r = auto.unreachable_size(pat, s.decisions)
+    assert r is not None and r not in s.pattern.sizes and r >= s.decisions.min_insert - 1e-12
+    more = pattern.PatternConfig(**{**s.pattern.__dict__, "insert_half_sizes": (*s.pattern.sizes, r)})
+    pat2 = pattern.layout(cf.flat.uv, cf.flat.boundary, cf.F, cf.flat.u, more, seams=seams, cone_tips=tips)
+    assert len(pat2.unreachable) == 0
+    assert np.any(pat2.insert_size[pat.unreachable] == r)  # the inserts out of reach took the new size
+    given = auto.Decisions(**{**s.decisions.__dict__, "decided": tuple(
+        d for d in s.decisions.decided if d != "pattern.insert_half_sizes")})
+    assert auto.unreachable_size(pat, given) is None
+
 @pytest.mark.parametrize("name", ["bogus@12", "cap70-R100", "cap70-R100@x"])
 def test_an_unknown_family_member_is_named_with_the_known_shapes(name):
     """A member name that is not shape@rings of a known shape is refused with the shapes named."""
