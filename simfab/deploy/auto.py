@@ -14,8 +14,7 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
   every vertex's growth is within reach (:func:`simfab.deploy.cuts.place_cones`);
 - the catalogue (:func:`catalogue`): from the flattening (cut, with cuts) the target will get,
   the fewest sizes covering every vertex's growth with room for the tuning (``TUNE_ROOM``),
-  smallest inserts first; with cuts, smaller sizes for the seams' short edges (``SEAM_EDGE``; up to
-  ``SEAM_SIZES`` beyond ``MAX_SIZES``);
+  smallest inserts first; with cuts, sizes for the seams' short edges (``SEAM_EDGE``, ``SEAM_SIZES``);
 - layout: ``conforming`` (grid core, regular, growths fitted to the edges) without cuts, ``mesh``
   with them or where the conforming one covers less than ``MIN_COVERED`` of the flat domain;
 - tuning: on (``AUTO_TUNE``; the point weight from the share of the area that is not
