@@ -126,6 +126,21 @@ class StepObjective:
                 self._distances = (np.array(x, copy=True), d, gd)
         return d, gd, hd
 
+    def known_distances(self, x: np.ndarray):
+        """The distances and their gradients of the last evaluation without Hessians when it was at x
+        (as :meth:`distances` gives them: exact within the lazy band, lower bounds beyond), else None.
+
+        Args:
+            x: positions (n, dim) [m].
+
+        Returns:
+            (d (k,) [m], grad d (k, dim)) or None.
+        """
+        memo = self._distances
+        if memo is not None and np.array_equal(memo[0], x):
+            return memo[1], memo[2]
+        return None
+
     def __call__(self, xf: np.ndarray, need_hessian: bool):
         """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O.
         An evaluation without the Hessian (a line-search trial) books its whole time under

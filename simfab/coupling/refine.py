@@ -53,7 +53,7 @@ def crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: StepState
     return [int(f) for f in ids[(psi_max > 0) & ~refined]]
 
 
-def warm_crossings(cm: CouplingModel, x: np.ndarray, s: float, state: StepState) -> list:
+def warm_crossings(cm: CouplingModel, x: np.ndarray, s: float, state: StepState, distances=None) -> list:
     """Unrefined boundary facets whose interior crosses into O at a step's warm start (x, s): refined
     before the step is solved (:func:`simfab.coupling.stepper.advance`, frictionless runs), where Newton
     would otherwise converge with them crossing and the step be solved again. Refined facets are left to the check
@@ -64,13 +64,16 @@ def warm_crossings(cm: CouplingModel, x: np.ndarray, s: float, state: StepState)
         x: the warm start (n, dim) [m].
         s: the step's path length [m].
         state: the state the step starts from (its refined facets, density and check caches).
+        distances: (d (k,) [m], grad d (k, dim)) of the state's constraint points at x when the step's
+            objective knows them (:meth:`simfab.coupling.objective.StepObjective.known_distances`), or
+            None (the boundary vertices' distances are evaluated).
 
     Returns:
         Facet ids (rows of ``cm.contact_facets``), empty when none crosses or refinement is off.
     """
     if not cm.options.refine:
         return []
-    fc = facet_check(cm, x, s, state)
+    fc = facet_check(cm, x, s, state, distances=distances)
     return [int(f) for f in fc.ids[(fc.psi_max > 0) & ~fc.refined]]
 
 
@@ -79,7 +82,7 @@ COVER = {2: 0.5, 3: 1.0 / np.sqrt(3.0)}  # max distance from a facet point to it
 
 
 def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
-                final: Evaluation | None = None) -> FacetCheck:
+                final: Evaluation | None = None, distances=None) -> FacetCheck:
     """Max psi over check points of each boundary facet that could reach into O at (x, s).
 
     Returns a :class:`FacetCheck`. Unrefined facets are checked
@@ -90,7 +93,10 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     whose Lipschitz bound, from the facet's vertices or from their own values at earlier checks (in
     O's body frame), is negative are not evaluated; their bound stands in for psi. The result is
     remembered for the same (x, s) (``final``: Newton's converged evaluation at x, whose distances
-    stand in for the boundary vertices').
+    stand in for the boundary vertices'; ``distances``: (d, grad d) of the state's points at x
+    from elsewhere, used alike). Lower bounds of the vertices' distances (beyond an objective's lazy
+    band) only weaken the bounds of the check points: more of them are evaluated, and psi_max is the
+    same wherever it is positive (the only use of it: a positive psi is never bounded away).
     """
     memo = state.check
     if memo is not None and memo.x is x and memo.s == s and memo.order == state.order:
@@ -100,11 +106,14 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     bv = cm.fem.boundary_vertices
     dv = np.full(cm.fem.n_vertices, np.inf)
     if final is not None and final.x is x and len(final.distances) >= len(bv):
-        # Newton's converged evaluation at x (the first len(bv) constraint points are the boundary
-        # vertices, in vertex_points order): exact within the lazy band, lower bounds beyond it;
-        # those beyond the kernel radius get the sharper nearest-sample bound
-        dv[bv] = final.distances[: len(bv)]
-        state.grad_peak = max(state.grad_peak, _max_norm(final.distance_gradients))
+        distances = (final.distances, final.distance_gradients)
+    if distances is not None and len(distances[0]) >= len(bv):
+        # Newton's converged evaluation at x, or the step objective's at a warm start (the first
+        # len(bv) constraint points are the boundary vertices, in vertex_points order): exact within
+        # the lazy band, lower bounds beyond it; those beyond the kernel radius get the sharper
+        # nearest-sample bound
+        dv[bv] = distances[0][: len(bv)]
+        state.grad_peak = max(state.grad_peak, _max_norm(distances[1]))
         if np.isfinite(cm.field.radius):  # (an exact field has no far points: radius inf)
             out = np.flatnonzero(dv[bv] > point_dhat(cm, state.points)[: len(bv)] * C.LAZY_BAND_DHATS)
             if len(out):
