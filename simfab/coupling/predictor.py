@@ -30,13 +30,12 @@ def lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj: StepO
     # the objective's (lazy) distances: exact with gradients within its band (> below), lower
     # bounds without gradients beyond it, so only points near O are evaluated
     d, gd, _ = obj.distances(x, False)
-    below, to = np.broadcast_to(below, d.shape), np.broadcast_to(to, d.shape)
-    lift = (d <= below) & np.any(gd != 0.0, axis=1)
+    lift = (d <= below) & np.logical_or.reduce(gd != 0.0, axis=1)
     if prev is not None:
         lift &= prev > below
     if not lift.any():
         return x
-    x1 = move_points(cm, pts, x, lift, to[lift] - d[lift], gd[lift])
+    x1 = move_points(cm, pts, x, lift, (to[lift] if np.ndim(to) else to) - d[lift], gd[lift])
     return x1 if np.isfinite(obj.value(x1)) else None
 
 
