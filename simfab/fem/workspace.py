@@ -30,6 +30,13 @@ import scipy.sparse as sp
 from simfab._parallel import submit
 from simfab._warp import RECORD_LOCK, wp
 
+try:  # the kernel of scipy's CSR @ vector (csr_matrix._matmul_vector)
+    from scipy.sparse import _sparsetools
+
+    _CSR_MATVEC = _sparsetools.csr_matvec
+except (ImportError, AttributeError):  # pragma: no cover - another scipy: the operator instead
+    _CSR_MATVEC = None
+
 
 class Launch(IntEnum):
     """What one launch over all elements computes."""
@@ -202,8 +209,15 @@ class Workspace:
         return float(energy.sum())
 
     def gradient(self) -> np.ndarray:
-        """The assembled nodal gradient (n, dim) [N] of the last GRADIENT / HESSIAN / BLOCKS launch."""
-        return (self.scatter @ self.outputs()[2].reshape(-1)).reshape(self.x_np.shape)
+        """The assembled nodal gradient (n, dim) [N] of the last GRADIENT / HESSIAN / BLOCKS launch
+        (scipy's CSR @ vector kernel called directly: the same sums, without the operator's dispatch)."""
+        v = self.outputs()[2].reshape(-1)
+        S = self.scatter
+        if _CSR_MATVEC is None or v.dtype != np.float64 or not v.flags.c_contiguous:
+            return (S @ v).reshape(self.x_np.shape)
+        out = np.zeros(S.shape[0])
+        _CSR_MATVEC(S.shape[0], S.shape[1], S.indptr, S.indices, S.data, v, out)
+        return out.reshape(self.x_np.shape)
 
 
 class _Replay:
