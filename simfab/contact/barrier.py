@@ -121,7 +121,7 @@ def point_barrier(dist: np.ndarray, grad_dist: np.ndarray, hess_dist: np.ndarray
         (B [J], g (k, dim) [N], H (k, dim, dim) [N/m] or None).
     """
     terms = 2 if hess_dist is None else 3
-    if len(dist) and (dist.min() <= 0.0 or np.any(dist >= dhat)):  # not all active: general route
+    if len(dist) and (dist.min() <= 0.0 or (dist >= dhat).any()):  # not all active: general route
         b, db, *ddb = _all_terms(dist, dhat, terms)
     else:
         b, db, *ddb = barrier_terms(dist, dhat, terms)

@@ -23,6 +23,11 @@ from simfab.fem.elastic import energy, energy_gradient, energy_gradient_hessian
 from simfab.solve.newton import NewtonConfig, minimize
 
 
+def _equal(a: np.ndarray, b: np.ndarray) -> bool:
+    """``np.array_equal(a, b)`` for two arrays (the memo checks of every evaluation: without its dispatch)."""
+    return a.shape == b.shape and np.count_nonzero(a != b) == 0
+
+
 class StepObjective:
     """E_d(x) + kappa sum_j b(d_j(x)) (+ the lagged friction potential D(x)) for a fixed pose of O and a
     fixed set of constraint points; called as Newton's objective ``obj(x, need_hessian)``.
@@ -93,7 +98,7 @@ class StepObjective:
         """
         anchor = hessian if anchor is None else anchor
         memo = self._distances
-        if not anchor and memo is not None and np.array_equal(memo[0], x):
+        if not anchor and memo is not None and _equal(memo[0], x):
             return memo[1], memo[2], None
         with self.timer.timed("contact_field"):
             y = self.points.positions(x)
@@ -104,7 +109,7 @@ class StepObjective:
             else:
                 r = y - self.y_ref
                 bound = self.d_ref - C.PSI_LIPSCHITZ * np.sqrt(np.add.reduce(r * r, axis=1))  # (np.linalg.norm's sum)
-                todo = np.flatnonzero(bound < self.band)
+                todo = (bound < self.band).nonzero()[0]
             d = np.empty(k) if bound is None else bound  # (a fresh array)
             gd = np.zeros((k, dim))
             hd = np.zeros((k, dim, dim)) if hessian else None
@@ -137,7 +142,7 @@ class StepObjective:
             (d (k,) [m], grad d (k, dim)) or None.
         """
         memo = self._distances
-        if memo is not None and np.array_equal(memo[0], x):
+        if memo is not None and _equal(memo[0], x):
             return memo[1], memo[2]
         return None
 
@@ -154,7 +159,7 @@ class StepObjective:
     def _evaluate(self, xf: np.ndarray, need_hessian: bool):
         cm = self.cm
         memo = self.memo
-        if need_hessian and memo is not None and memo[0].shape == xf.shape and np.array_equal(memo[0], xf):
+        if need_hessian and memo is not None and memo[0].shape == xf.shape and _equal(memo[0], xf):
             self.memo = None  # hand the cached Hessian out once (the caller may modify it)
             return memo[1]
         x = xf.reshape(self.n, self.dim)
@@ -174,7 +179,7 @@ class StepObjective:
         if not np.isfinite(E):
             return np.inf, g.ravel(), H
         d, gd, hd = self.distances(x, need_hessian)
-        if np.any(d <= 0):
+        if (d <= 0).any():
             return np.inf, g.ravel(), H
         with self.timer.timed("barrier"):
             act, B, gy, Hy = self.contact_barrier(d, gd, hd)
@@ -214,7 +219,7 @@ class StepObjective:
         """The FEM energy and gradient at x, remembered for the last x (Newton asks for the Hessian at
         the line search's accepted trial, whose value was evaluated without it)."""
         fem = self._fem
-        if fem is not None and np.array_equal(fem[0], xf):
+        if fem is not None and _equal(fem[0], xf):
             return fem[1], fem[2]
         E, g = energy_gradient(self.cm.fem, x)
         self._fem = (xf.copy(), E, g)
@@ -232,7 +237,7 @@ class StepObjective:
         if not np.isfinite(E):
             return np.inf, g.ravel(), None
         d, gd, _ = self.distances(x, False, anchor=True)
-        if np.any(d <= 0):
+        if (d <= 0).any():
             return np.inf, g.ravel(), None
         with self.timer.timed("barrier"):
             act, B, gy, _ = self.contact_barrier(d, gd, None)
@@ -268,7 +273,7 @@ class StepObjective:
             (active point indices (a,), energy [J], gradient (a, dim) [N], exact Hessian blocks
             (a, dim, dim) [N/m] or None without ``hd``); see :func:`simfab.contact.barrier.point_barrier`.
         """
-        act = np.flatnonzero(d < self.dhat)
+        act = (d < self.dhat).nonzero()[0]
         B, gy, Hy = point_barrier(d[act], gd[act], None if hd is None else hd[act], self.dhat[act], self.kappa,
                                   psd=False)
         return act, B, gy, Hy
@@ -301,7 +306,7 @@ class StepObjective:
             return np.inf
         x = np.asarray(x).reshape(self.n, self.dim)
         d, _, _ = self.distances(x, False)
-        if np.any(d <= 0):
+        if (d <= 0).any():
             return np.inf
         act = d < self.dhat  # (all d > 0 here)
         D = float(self.friction.evaluate(x, hessian=False).energy.sum()) if self.friction is not None else 0.0
@@ -346,7 +351,7 @@ class StepObjective:
         if self._curv_from is not None:
             self.curv = self._curv_from.contact()[3]
             self._curv_from = None
-        if self.last_x is not None and np.array_equal(self.last_x, xf):
+        if self.last_x is not None and _equal(self.last_x, xf):
             d, gd = self.last_d, self.last_gd
         else:
             d, gd, _ = self.distances(xf.reshape(self.n, self.dim), False)
@@ -479,7 +484,7 @@ def adapt_kappa(cm: CouplingModel, state: StepState, obj: StepObjective) -> None
     d = obj.last_d
     if d is None or not len(d):
         return
-    if np.any(d < C.KAPPA_GROW_BELOW * obj.dhat) and state.kappa < C.KAPPA_MAX_GROWTH * cm.kappa:
+    if (d < C.KAPPA_GROW_BELOW * obj.dhat).any() and state.kappa < C.KAPPA_MAX_GROWTH * cm.kappa:
         state.kappa = min(2.0 * state.kappa, C.KAPPA_MAX_GROWTH * cm.kappa)
 
 
@@ -544,7 +549,7 @@ def evaluation(obj: StepObjective, x: np.ndarray) -> Evaluation | None:
     Returns:
         The :class:`simfab.coupling.state.Evaluation`, or None.
     """
-    if obj.last_x is None or not np.array_equal(obj.last_x, x.ravel()):
+    if obj.last_x is None or not _equal(obj.last_x, x.ravel()):
         return None
     E, gE = obj.last_fem
     return Evaluation(x=x, kappa=obj.kappa, points=obj.points, elastic_energy=float(E), elastic_gradient=gE,
