@@ -366,7 +366,7 @@ class StepObjective:
         keep = d - np.minimum((1.0 - C.STEP_FRACTION) * d, C.CAP_LAND_DHATS * self.dhat[m])
         alpha_curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
         cons = keep / (C.PSI_LIPSCHITZ * sp)
-        return float(min(1.0, np.min(np.maximum(alpha_curv, cons))))
+        return float(min(1.0, np.maximum(alpha_curv, cons).min()))
 
 
 class LazyHessian:
