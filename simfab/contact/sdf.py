@@ -222,6 +222,8 @@ class PrimitiveField:
     radius: float = np.inf
     far_distance: float = np.inf
     _cache: dict = field(default_factory=dict, repr=False)
+    #: |grad psi| = 1 wherever it is evaluated (a unit normal): the coupling need not watch its peak
+    unit_gradient = True
 
     def evaluate(self, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
         """psi (> 0 inside), gradient and Hessian (zeros where psi <= -hessian_band) at world points

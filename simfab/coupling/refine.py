@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simfab.contact.imls import body_frame
+from simfab.contact.imls import unrotated
 from simfab.coupling import config as C
 from simfab.coupling.layout import EDGE_PAIRS, point_dhat
 from simfab.coupling.model import CouplingModel
@@ -104,6 +104,8 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     facets = cm.contact_facets
     R, p = cm.pose(s)
     bv = cm.fem.boundary_vertices
+    # an exact field's gradient is a unit vector: nothing for grad_peak to watch
+    watch = not getattr(cm.field, "unit_gradient", False)
     dv = np.full(cm.fem.n_vertices, np.inf)
     if final is not None and final.x is x and len(final.distances) >= len(bv):
         distances = (final.distances, final.distance_gradients)
@@ -113,7 +115,8 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
         # the lazy band, lower bounds beyond it; those beyond the kernel radius get the sharper
         # nearest-sample bound
         dv[bv] = distances[0][: len(bv)]
-        state.grad_peak = max(state.grad_peak, _max_norm(distances[1]))
+        if watch:
+            state.grad_peak = max(state.grad_peak, _max_norm(distances[1]))
         if np.isfinite(cm.field.radius):  # (an exact field has no far points: radius inf)
             out = np.flatnonzero(dv[bv] > point_dhat(cm, state.points)[: len(bv)] * C.LAZY_BAND_DHATS)
             if len(out):
@@ -123,13 +126,17 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     else:
         ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
         dv[bv] = -ev.psi
-        state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
+        if watch:
+            state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
         far = ~ev.near
         if far.any():  # far vertices: a sharper lower bound of their distance than far_distance
             dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
     xf = x[facets]  # (F, nv, dim)
-    a, c = EDGE_PAIRS[cm.dim]
-    ev_ = xf[:, a] - xf[:, c]
+    if cm.dim == 2:  # (the one edge of a 2D facet: slices, not EDGE_PAIRS' gathers)
+        ev_ = xf[:, 0:1] - xf[:, 1:2]
+    else:
+        a, c = EDGE_PAIRS[cm.dim]
+        ev_ = xf[:, a] - xf[:, c]
     edges2 = np.einsum("fed,fed->fe", ev_, ev_)  # (F, e) squared edge lengths
     # every point of a facet lies within `cover` of one of its vertices: half the edge (2D), and
     # longest edge / sqrt(3) on a triangle (the farthest point is the circumcentre when acute,
@@ -137,16 +144,22 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     # vertices are all farther than L * cover from O is certified outside by the vertex bounds.
     cover = np.sqrt(edges2.max(axis=1)) * COVER[cm.dim]
     dvf = dv[facets]  # (F, nv)
-    ids = np.flatnonzero(dvf.min(axis=1) <= C.PSI_LIPSCHITZ * cover)
-    refined = np.zeros(len(facets), dtype=bool)
-    refined[list(state.refined)] = True
-    refined = refined[ids]
+    ids = (dvf.min(axis=1) <= C.PSI_LIPSCHITZ * cover).nonzero()[0]
+    if state.refined:
+        refined = np.zeros(len(facets), dtype=bool)
+        refined[list(state.refined)] = True
+        refined = refined[ids]
+    else:
+        refined = np.zeros(len(ids), dtype=bool)
     psi_max = np.full(len(ids), -np.inf)
+    n_refined = np.count_nonzero(refined)
     for is_refined in (False, True):
-        sel = refined if is_refined else ~refined
-        if sel.any():
+        count = n_refined if is_refined else len(ids) - n_refined
+        if count:
+            every = count == len(ids)  # (all of ids: no selection to gather)
+            sel = None if every else (refined if is_refined else ~refined)
             w, gap_map = check_lattice(cm.dim, state.order, is_refined)
-            f_sel = ids[sel]
+            f_sel = ids if every else ids[sel]
             xv = xf[f_sel]  # (f, nv, dim) the facets' vertices
             y = w @ xv  # (f, p, dim) check points
             # psi(y) <= psi(v) + L |y - v| for each vertex v of the facet: points this bounds below
@@ -159,22 +172,35 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
                 psi = np.minimum(psi, bound[:, :, v])
             # the same check points' values (or bounds) from earlier checks: O moved rigidly, so in
             # O's body frame psi is the same L-Lipschitz function and psi(y) <= psi(y') + L |b - b'|
-            # with b, b' the body-frame positions now and then
-            body = body_frame(y, (R, p))
+            # with b, b' the body-frame positions now and then (never checked: b' NaN, whose bound
+            # fmin passes over)
+            body = _body_frame(y, R, p)
             known_body, known_psi = _check_cache(cm, state, is_refined, len(w))
             step = body - known_body[f_sel]
             moved = np.sqrt(np.einsum("fpd,fpd->fp", step, step))
-            psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
+            psi = np.fmin(psi, known_psi[f_sel] + C.PSI_LIPSCHITZ * moved)
             todo = psi >= 0.0
             if todo.any():
                 ev = cm.field.evaluate(y[todo], (R, p), hessian=False)
                 psi[todo] = ev.psi
-                state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
+                if watch:
+                    state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
             known_body[f_sel], known_psi[f_sel] = body, psi
-            psi_max[sel] = psi.max(axis=1)
+            if every:
+                psi_max = psi.max(axis=1)
+            else:
+                psi_max[sel] = psi.max(axis=1)
     out = FacetCheck(x, s, state.order, ids, psi_max, refined)
     state.check = out
     return out
+
+
+def _body_frame(y: np.ndarray, R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """:func:`simfab.contact.imls.body_frame` of points y (..., dim) for O at (R, p), padded in place."""
+    body = np.zeros(y.shape[:-1] + (3,))
+    body[..., : y.shape[-1]] = y
+    body -= p
+    return body if unrotated(R) else (body.reshape(-1, 3) @ R).reshape(body.shape)
 
 
 def _max_norm(v: np.ndarray) -> float:
