@@ -104,6 +104,7 @@ class Workspace:
         self.grad = wp.zeros(m, dtype=kernels.grad_dtype[d], device=dev)
         # host arrays of the per-element outputs: on the CPU views of the Warp arrays' memory (no copy)
         self._host = (self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()) if self.cpu else None
+        self._host_vm = self.von_mises.numpy() if self.cpu else None
         self.hess = None  # element blocks (m, kd, kd), allocated on the first BLOCKS launch
         self.slots = None  # model.pattern.element_slots as int32, on the first HESSIAN launch
         self.csr: dict = {}  # (0: data / 1: data2, part) -> (warp array, numpy alias on the CPU or None)
@@ -200,6 +201,13 @@ class Workspace:
         if self._host is not None:
             return self._host
         return self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()
+
+    def stresses(self) -> tuple[np.ndarray, np.ndarray]:
+        """(det F (m,), von Mises stress (m,)) of the last STRESS launch as host arrays (views on the
+        CPU: read before the next launch)."""
+        if self._host_vm is not None:
+            return self._host[1], self._host_vm
+        return self.det_F.numpy(), self.von_mises.numpy()
 
     def total_energy(self) -> float:
         """Sum of the element energies [J] of the last launch; +inf if any det F <= 0."""
