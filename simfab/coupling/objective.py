@@ -8,6 +8,8 @@ and :func:`adapt_kappa` stiffens the barrier for the following steps."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from simfab.contact.barrier import barrier_value, point_barrier, project_psd
@@ -176,7 +178,7 @@ class StepObjective:
                 E, g = self._fem_value(xf, x)
         if self.pin is not None:
             E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
-        if not np.isfinite(E):
+        if not math.isfinite(E):
             return np.inf, g.ravel(), H
         d, gd, hd = self.distances(x, need_hessian)
         if (d <= 0).any():
@@ -234,7 +236,7 @@ class StepObjective:
             E, g = self._fem_value(xf, x)
         if self.pin is not None:
             E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
-        if not np.isfinite(E):
+        if not math.isfinite(E):
             return np.inf, g.ravel(), None
         d, gd, _ = self.distances(x, False, anchor=True)
         if (d <= 0).any():
@@ -302,7 +304,7 @@ class StepObjective:
     def _value(self, x: np.ndarray) -> float:
         with self.timer.timed("assembly"):
             E = energy(self.cm.fem, x) + (self.pin.energy(np.ravel(x)) if self.pin is not None else 0.0)
-        if not np.isfinite(E):
+        if not math.isfinite(E):
             return np.inf
         x = np.asarray(x).reshape(self.n, self.dim)
         d, _, _ = self.distances(x, False)

@@ -176,7 +176,7 @@ def move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.nd
     n = cm.fem.n_vertices
     on = pts.weights[rows] > 0
     far = np.full(n, -np.inf)
-    np.maximum.at(far, pts.verts[rows][on], np.broadcast_to(dist[:, None], on.shape)[on])
+    np.maximum.at(far, pts.verts[rows][on], dist[on.nonzero()[0]])  # (each point's move, once per parent)
     hit = np.isfinite(far)
     mean = pts.scatter(nrm, n, rows=rows)[hit]
     x1 = x.copy()
