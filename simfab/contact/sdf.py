@@ -126,6 +126,19 @@ def _local_sdf(kind: str, size, q: np.ndarray, hessian: bool):
 _DIAG = np.arange(3)
 
 
+_NEAR = np.ones(0, dtype=bool)
+
+
+def _near(k: int) -> np.ndarray:
+    """(k,) True, read-only: an exact field is defined everywhere (a view of one shared array)."""
+    global _NEAR
+    if len(_NEAR) < k:
+        near = np.ones(max(k, 2 * len(_NEAR), 256), dtype=bool)
+        near.flags.writeable = False
+        _NEAR = near
+    return _NEAR[:k]
+
+
 @functools.lru_cache(maxsize=64)
 def _extents(size: tuple) -> np.ndarray:
     """A box's half-extents as a read-only float64 array (once per size)."""
@@ -266,7 +279,7 @@ class PrimitiveField:
                 hess[psi <= -hessian_band] = 0.0
         else:
             hess = np.zeros((k, dim, dim))
-        return ImlsEval(psi=psi, grad=grad, hess=hess, near=np.ones(k, dtype=bool))
+        return ImlsEval(psi=psi, grad=grad, hess=hess, near=_near(k))
 
     def _single(self, b, R, hessian, hessian_band) -> ImlsEval:
         """One primitive (no union): :meth:`evaluate`'s loop without its masks, the frames' rotations
@@ -280,7 +293,7 @@ class PrimitiveField:
         if not unrotated(R):  # (an unrotated O: the world frame's gradient is the body frame's)
             grad = grad @ M.T
         if not hessian:
-            return ImlsEval(psi=psi, grad=grad, hess=np.zeros((k, dim, dim)), near=np.ones(k, dtype=bool))
+            return ImlsEval(psi=psi, grad=grad, hess=np.zeros((k, dim, dim)), near=_near(k))
         # Q H Q^T per point: A = H Q^T, then A^T Q^T (H symmetric), as products of (k * 3, 3) arrays
         A = (H.reshape(-1, 3) @ Q.T).reshape(k, 3, 3)
         Hq = (A.transpose(0, 2, 1).reshape(-1, 3) @ Q.T).reshape(k, 3, 3)[:, :dim, :dim]
@@ -291,7 +304,7 @@ class PrimitiveField:
             hess = (A.transpose(0, 2, 1).reshape(-1, dim) @ M.T).reshape(k, dim, dim)
         if hessian_band is not None:
             hess[psi <= -hessian_band] = 0.0
-        return ImlsEval(psi=psi, grad=grad, hess=hess, near=np.ones(k, dtype=bool))
+        return ImlsEval(psi=psi, grad=grad, hess=hess, near=_near(k))
 
     def _sphere(self, pts, R, p, hessian, hessian_band) -> ImlsEval:
         """Fast path of a single sphere (a circle in 2D): psi = r - |x - c|, grad = -u,
@@ -313,7 +326,7 @@ class PrimitiveField:
                 h = us[:, :, None] * us[:, None, :]
                 h[:, range(dim), range(dim)] -= 1.0
                 hess[sel] = h * inv_s[:, None, None]
-        return ImlsEval(psi=psi, grad=-u, hess=hess, near=np.ones(k, dtype=bool))
+        return ImlsEval(psi=psi, grad=-u, hess=hess, near=_near(k))
 
     def far_lower_bound(self, points, pose=None) -> np.ndarray:
         return -self.evaluate(points, pose, hessian=False).psi
