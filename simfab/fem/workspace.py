@@ -212,9 +212,9 @@ class Workspace:
     def total_energy(self) -> float:
         """Sum of the element energies [J] of the last launch; +inf if any det F <= 0."""
         energy, det_F, _ = self.outputs()
-        if det_F.min() <= 0.0:
+        if np.minimum.reduce(det_F) <= 0.0:  # (ndarray.min / .sum without their Python wrappers)
             return float("inf")
-        return float(energy.sum())
+        return float(np.add.reduce(energy))
 
     def gradient(self) -> np.ndarray:
         """The assembled nodal gradient (n, dim) [N] of the last GRADIENT / HESSIAN / BLOCKS launch
@@ -223,8 +223,9 @@ class Workspace:
         S = self.scatter
         if _CSR_MATVEC is None or v.dtype != np.float64 or not v.flags.c_contiguous:
             return (S @ v).reshape(self.x_np.shape)
-        out = np.zeros(S.shape[0])
-        _CSR_MATVEC(S.shape[0], S.shape[1], S.indptr, S.indices, S.data, v, out)
+        m, n = S.shape
+        out = np.zeros(m)
+        _CSR_MATVEC(m, n, S.indptr, S.indices, S.data, v, out)
         return out.reshape(self.x_np.shape)
 
 
