@@ -181,7 +181,7 @@ class StepObjective:
         if not math.isfinite(E):
             return np.inf, g.ravel(), H
         d, gd, hd = self.distances(x, need_hessian)
-        if (d <= 0).any():
+        if np.count_nonzero(d <= 0):
             return np.inf, g.ravel(), H
         with self.timer.timed("barrier"):
             act, B, gy, Hy = self.contact_barrier(d, gd, hd)
@@ -239,7 +239,7 @@ class StepObjective:
         if not math.isfinite(E):
             return np.inf, g.ravel(), None
         d, gd, _ = self.distances(x, False, anchor=True)
-        if (d <= 0).any():
+        if np.count_nonzero(d <= 0):
             return np.inf, g.ravel(), None
         with self.timer.timed("barrier"):
             act, B, gy, _ = self.contact_barrier(d, gd, None)
@@ -308,11 +308,11 @@ class StepObjective:
             return np.inf
         x = np.asarray(x).reshape(self.n, self.dim)
         d, _, _ = self.distances(x, False)
-        if (d <= 0).any():
+        if np.count_nonzero(d <= 0):
             return np.inf
         act = d < self.dhat  # (all d > 0 here)
         D = float(self.friction.evaluate(x, hessian=False).energy.sum()) if self.friction is not None else 0.0
-        return E + self.kappa * float(barrier_value(d[act], self.dhat[act]).sum()) + D
+        return E + self.kappa * float(np.add.reduce(barrier_value(d[act], self.dhat[act]))) + D
 
     def add_contact(self, H, contact, *, psd: bool) -> None:
         """Add the barrier Hessian blocks and the rigid-mode regularization to a FEM Hessian, in place.
@@ -360,7 +360,7 @@ class StepObjective:
         dy = self.points.positions(dx.reshape(self.n, self.dim))
         sp = np.sqrt(np.add.reduce(dy * dy, axis=1))  # (np.linalg.norm's sum)
         m = sp > 0
-        if not m.any():
+        if not np.count_nonzero(m):
             return 1.0
         d, gd, dy, sp = d[m], gd[m], dy[m], sp[m]
         a = np.einsum("kd,kd->k", gd, dy)
@@ -368,7 +368,7 @@ class StepObjective:
         keep = d - np.minimum((1.0 - C.STEP_FRACTION) * d, C.CAP_LAND_DHATS * self.dhat[m])
         alpha_curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
         cons = keep / (C.PSI_LIPSCHITZ * sp)
-        return float(min(1.0, np.maximum(alpha_curv, cons).min()))
+        return float(min(1.0, np.minimum.reduce(np.maximum(alpha_curv, cons))))
 
 
 class LazyHessian:

@@ -142,9 +142,9 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     # longest edge / sqrt(3) on a triangle (the farthest point is the circumcentre when acute,
     # R = c / (2 sin gamma) with gamma >= 60 deg; else within half the longest edge). A facet whose
     # vertices are all farther than L * cover from O is certified outside by the vertex bounds.
-    cover = np.sqrt(edges2.max(axis=1)) * COVER[cm.dim]
+    cover = np.sqrt(np.maximum.reduce(edges2, axis=1)) * COVER[cm.dim]
     dvf = dv[facets]  # (F, nv)
-    ids = (dvf.min(axis=1) <= C.PSI_LIPSCHITZ * cover).nonzero()[0]
+    ids = (np.minimum.reduce(dvf, axis=1) <= C.PSI_LIPSCHITZ * cover).nonzero()[0]
     if state.refined:
         refined = np.zeros(len(facets), dtype=bool)
         refined[list(state.refined)] = True
@@ -180,16 +180,16 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
             moved = np.sqrt(np.einsum("fpd,fpd->fp", step, step))
             psi = np.fmin(psi, known_psi[f_sel] + C.PSI_LIPSCHITZ * moved)
             todo = psi >= 0.0
-            if todo.any():
+            if np.count_nonzero(todo):
                 ev = cm.field.evaluate(y[todo], (R, p), hessian=False)
                 psi[todo] = ev.psi
                 if watch:
                     state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
             known_body[f_sel], known_psi[f_sel] = body, psi
             if every:
-                psi_max = psi.max(axis=1)
+                psi_max = np.maximum.reduce(psi, axis=1)
             else:
-                psi_max[sel] = psi.max(axis=1)
+                psi_max[sel] = np.maximum.reduce(psi, axis=1)
     out = FacetCheck(x, s, state.order, ids, psi_max, refined)
     state.check = out
     return out
