@@ -113,9 +113,15 @@ class StepObjective:
                 bound = self.d_ref - C.PSI_LIPSCHITZ * np.sqrt(np.add.reduce(r * r, axis=1))  # (np.linalg.norm's sum)
                 todo = (bound < self.band).nonzero()[0]
             d = np.empty(k) if bound is None else bound  # (a fresh array)
-            gd = np.zeros((k, dim))
-            hd = np.zeros((k, dim, dim)) if hessian else None
-            if len(todo):
+            gd = np.zeros((k, dim)) if bound is not None or not k else None
+            hd = np.zeros((k, dim, dim)) if hessian and gd is not None else None
+            if bound is None and k:  # (the first evaluation: every point, no gathers)
+                ev = self.cm.field.evaluate(y, (self.R, self.p), hessian=hessian, hessian_band=self.dhat_max)
+                d, gd = -ev.psi, -ev.grad
+                if hessian:
+                    hd = -ev.hess
+                self.y_ref, self.d_ref = y.copy(), d.copy()
+            elif len(todo):
                 ev = self.cm.field.evaluate(y[todo], (self.R, self.p), hessian=hessian, hessian_band=self.dhat_max)
                 d[todo] = -ev.psi
                 gd[todo] = -ev.grad
