@@ -33,6 +33,12 @@ def csr_times(A, X: np.ndarray) -> np.ndarray:
     return out
 
 
+def row_norms(v: np.ndarray) -> np.ndarray:
+    """(k,) row norms of (k, dim) v: ``np.linalg.norm(v, axis=1)``, its sums without its dispatch
+    (called on every evaluation of the insertion loop)."""
+    return np.sqrt(np.add.reduce(v * v, axis=1))
+
+
 @dataclass(frozen=True, kw_only=True, eq=False)
 class ContactPoints:
     """verts : (k, nv) int parent vertices; weights : (k, nv) barycentric weights (rows sum to 1);

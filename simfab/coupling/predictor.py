@@ -13,7 +13,7 @@ from simfab.coupling import rigid
 from simfab.coupling.layout import add_point_blocks, diag_slots, point_dhat, regularize
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.objective import StepObjective, pinned
-from simfab.coupling.points import ContactPoints
+from simfab.coupling.points import ContactPoints, row_norms
 from simfab.coupling.state import StepContext, StepState
 from simfab.coupling.timing import TimedSolver
 from simfab.errors import ConvergenceError
@@ -171,7 +171,7 @@ def move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.nd
     of their directions by the largest of their moves, so no point on it is carried closer to O
     than it asks (the mean of the moves would carry a vertex point that wants a small move toward O
     between refinement points that want larger ones into O)."""
-    nrm = direction / np.maximum(_row_norms(direction), 1e-300)
+    nrm = direction / np.maximum(row_norms(direction)[:, None], 1e-300)
     rows = sel.nonzero()[0]
     n = cm.fem.n_vertices
     on = pts.weights[rows] > 0
@@ -180,13 +180,10 @@ def move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.nd
     hit = np.isfinite(far)
     mean = pts.scatter(nrm, n, rows=rows)[hit]
     x1 = x.copy()
-    x1[hit] += far[hit, None] * mean / np.maximum(_row_norms(mean), 1e-300)
+    x1[hit] += far[hit, None] * mean / np.maximum(row_norms(mean)[:, None], 1e-300)
     return x1
 
 
-def _row_norms(v: np.ndarray) -> np.ndarray:
-    """(k, 1) row norms of (k, dim) v: ``np.linalg.norm(v, axis=1, keepdims=True)``'s sums without its dispatch."""
-    return np.sqrt(np.add.reduce(v * v, axis=1, keepdims=True))
 
 
 def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext) -> np.ndarray:

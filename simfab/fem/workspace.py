@@ -18,8 +18,6 @@ own CSR buffer. Details: docs/methods.md, "simfab.fem.workspace".
 
 from __future__ import annotations
 
-import ctypes
-import functools
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
@@ -28,7 +26,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from simfab._parallel import submit
-from simfab._warp import RECORD_LOCK, wp
+from simfab._warp import RECORD_LOCK, Replay, wp
 
 try:  # the kernel of scipy's CSR @ vector (csr_matrix._matmul_vector)
     from scipy.sparse import _sparsetools
@@ -190,7 +188,7 @@ class Workspace:
             else:
                 kernel, outputs = kern.stress, [self.det_F, self.von_mises]
             with RECORD_LOCK:  # the first launch loads the module: one thread at a time
-                cmds.append(_Replay(wp.launch(kernel, dim=count, device=self.device, inputs=inputs,
+                cmds.append(Replay(wp.launch(kernel, dim=count, device=self.device, inputs=inputs,
                                               outputs=outputs, record_cmd=True)))
         cmds = self.commands[(what, mode)] = tuple(cmds)
         return cmds
@@ -227,35 +225,6 @@ class Workspace:
         out = np.zeros(m)
         _CSR_MATVEC(m, n, S.indptr, S.indices, S.data, v, out)
         return out.reshape(self.x_np.shape)
-
-
-class _Replay:
-    """A recorded launch (``wp.launch(..., record_cmd=True)``) as ``launch()``. On the CPU it calls the
-    kernel's entry point with an argument struct built once: ``wp.Launch.launch`` builds that ctypes
-    struct field by field on every call, a few microseconds against a kernel of a few microseconds on
-    a small mesh (every buffer the launch reads or writes is persistent, so the struct stays valid).
-    Where the recorded launch does not have that form (another device, a block launch, another Warp
-    release's attributes) ``launch`` is the recorded one's."""
-
-    __slots__ = ("launch", "_keep")
-
-    def __init__(self, cmd):
-        self.launch, self._keep = cmd.launch, cmd
-        try:
-            if not (cmd.device.is_cpu and not cmd.adjoint and cmd.block_dim == 1):
-                return
-            params, names = cmd.params, [a.label for a in cmd.kernel.adj.args]
-            if len(params) != len(names) + 1:
-                return
-            fields = [(name, type(v)) for name, v in zip(names, params[1:])]
-            args = type("LaunchArgs", (ctypes.Structure,), {"_fields_": fields})()
-            for name, v in zip(names, params[1:]):
-                setattr(args, name, v)
-            forward = cmd.hooks.forward
-        except (AttributeError, TypeError):
-            return
-        self._keep = (cmd, args)  # (the struct and the arrays it points into stay alive with the command)
-        self.launch = functools.partial(forward, ctypes.byref(params[0]), ctypes.byref(args))
 
 
 def launch(model, kernels: ElementKernels, x, what: Launch, mode: Hessian = Hessian.EXACT) -> Workspace:
