@@ -235,7 +235,7 @@ class PrimitiveField:
     radius: float = np.inf
     far_distance: float = np.inf
     _cache: dict = field(default_factory=dict, repr=False)
-    #: |grad psi| = 1 wherever it is evaluated (a unit normal): the coupling need not watch its peak
+    #: |grad psi| = 1 (to round-off) wherever it is evaluated: the coupling need not watch its peak
     unit_gradient = True
 
     def evaluate(self, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
