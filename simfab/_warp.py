@@ -2,6 +2,8 @@
 
 Modules that define kernels do ``from simfab._warp import wp`` at import time; Warp's
 own start-up cost is paid only by code that uses kernels, never by ``import simfab``.
+:class:`Replay` replays a recorded launch with its argument struct built once (the FEM workspace's
+and the friction kernel's launches).
 """
 
 from __future__ import annotations
