@@ -35,6 +35,9 @@ def import_cholmod():
     user has not chosen a kernel set (OPENBLAS_CORETYPE), the Haswell kernels are selected for
     that library: OpenBLAS reads the variable once, when cvxopt loads it, so it is set only
     around the first import and the process environment is left as it was."""
+    global _CHOLMOD
+    if _CHOLMOD is not None:
+        return _CHOLMOD
     import sys
 
     if "cvxopt" not in sys.modules and "OPENBLAS_CORETYPE" not in os.environ and has_avx2_fma():
@@ -45,7 +48,11 @@ def import_cholmod():
             del os.environ["OPENBLAS_CORETYPE"]
     import cvxopt.cholmod
 
-    return cvxopt.cholmod
+    _CHOLMOD = cvxopt.cholmod
+    return _CHOLMOD
+
+
+_CHOLMOD = None  # cvxopt.cholmod once imported (import_cholmod runs on every factorization and solve)
 
 
 def has_avx2_fma() -> bool:
@@ -467,7 +474,7 @@ class SPDSolver:
         inv_d = cvxopt.matrix(1.0, (self._A.size[0], 1))
         cholmod.solve(self._F, inv_d, sys=6)  # D^-1 1 (D = I for L L^T)
         inv_d = np.array(inv_d)
-        if not (np.all(np.isfinite(inv_d)) and inv_d.min(initial=np.inf) > 0.0):
+        if not (np.count_nonzero(np.isfinite(inv_d)) == inv_d.size and inv_d.min(initial=np.inf) > 0.0):
             raise NotPositiveDefinite("Cholesky factorization failed: matrix is not positive definite")
         self._inv_d = inv_d  # (n, 1) D^-1 of the factor (ones for L L^T), for solve_free_update
 
