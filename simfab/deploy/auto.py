@@ -17,7 +17,7 @@ What a scene file (or a command-line flag) leaves unset is decided here, before 
   smallest inserts first; with cuts, smaller sizes for the seams' short edges (``SEAM_EDGE``; up to
   ``SEAM_SIZES`` beyond ``MAX_SIZES``);
 - layout: ``conforming`` (grid core, regular, growths fitted to the edges) without cuts, ``mesh``
-  with them: both cover >= 99 % of the flat domain;
+  with them or where the conforming one covers less than ``MIN_COVERED`` of the flat domain;
 - tuning: on (``AUTO_TUNE``; the point weight from the share of the area that is not
   saddle-shaped, :func:`point_weight`; a height row beyond the stop's height tolerance), stopping
   once the deviation bound is met, when progress stalls or at its budget of steps.
@@ -46,6 +46,9 @@ MAX_SIZES = 3  # insert sizes in a catalogue
 SIZE_STEP = 0.0005  # catalogue sizes rounded to this [m]
 MARGIN = 0.0005  # gap margin kept from either achievable limit [m] (layouts' edges differ from h)
 MAX_CONES = 8
+#: the share of the (cut) flat domain a decided layout covers at least: a conforming layout below it (a
+#: narrow outline its grid core cannot follow) is replaced by the mesh layout (:func:`simfab.deploy.pipeline.run`)
+MIN_COVERED = 0.99
 #: the fraction of the gap range kept free at either end of every insert's gap when the catalogue is sized
 #: (when its sizes can): the tuning moves gaps by millimetres, and an insert whose gap sits at a limit cannot
 #: grow or shrink further (a single size fitted to the largest growth left a steep cap's tuned gaps at min_gap)

@@ -175,15 +175,27 @@ def run(scene, *, device: str = "cpu", quiet: bool = True, mujoco_check: bool = 
     t = time.perf_counter()
     seams = [] if cut_flat is None else cuts.seam_lines(cut_flat)
     tips = np.zeros((0, 2)) if cut_flat is None else cuts.cone_points(cut_flat)
-    pat = pattern.layout(flat.uv, flat.boundary, mF, flat.u, scene.pattern, seams=[p for _, p in seams],
-                         cone_tips=tips)
+    import shapely
+
+    def lay(pc):
+        return pattern.layout(flat.uv, flat.boundary, mF, flat.u, pc, seams=[p for _, p in seams], cone_tips=tips)
+
+    pat = lay(scene.pattern)
+    decided = () if scene.decisions is None else scene.decisions.decided
+    if "pattern.layout" in decided and scene.pattern.layout == "conforming" and pattern.covered_fraction(
+            pat, shapely.Polygon(flat.uv[flat.boundary])) < auto.MIN_COVERED:
+        # a decided conforming layout leaving too much of the domain uncovered (a narrow outline its grid
+        # core cannot follow): the mesh layout, which follows the outline
+        scene = dataclasses.replace(scene, pattern=dataclasses.replace(scene.pattern, layout="mesh"))
+        log("deploy surface: the conforming layout leaves the outline uncovered, the mesh layout instead", quiet=quiet)
+        pat = lay(scene.pattern)
     extra = None if scene.decisions is None else auto.unreachable_size(pat, scene.decisions)
     if extra is not None:  # a decided catalogue the layout left inserts out of reach with: one more size
-        pc = dataclasses.replace(scene.pattern, insert_half_sizes=tuple(sorted((*pat.config.sizes, extra))))
-        scene = dataclasses.replace(scene, pattern=pc)
+        scene = dataclasses.replace(scene, pattern=dataclasses.replace(
+            scene.pattern, insert_half_sizes=tuple(sorted((*pat.config.sizes, extra)))))
         log(f"deploy surface: {len(pat.unreachable)} gaps out of reach, the catalogue takes {1e3 * extra:g} mm too",
             quiet=quiet)
-        pat = pattern.layout(flat.uv, flat.boundary, mF, flat.u, pc, seams=[p for _, p in seams], cone_tips=tips)
+        pat = lay(scene.pattern)
     Y = pattern.map_to_surface(flat.uv, mF, mV, pat.P)
     sec["layout"] = time.perf_counter() - t
     t = time.perf_counter()

@@ -330,6 +330,23 @@ def test_a_size_is_added_for_gaps_the_layout_leaves_out_of_reach(tmp_path):
         d for d in s.decisions.decided if d != "pattern.insert_half_sizes")})
     assert auto.unreachable_size(pat, given) is None
 
+
+def test_a_conforming_layout_leaving_the_outline_uncovered_becomes_the_mesh_layout(tmp_path):
+    """The curled petal's narrow outline: the decided conforming layout (no cuts: K = 0) covers 94 % of the
+    flat domain, below auto.MIN_COVERED; the run lays it out again with the mesh layout (>= 99 %). A layout
+    the scene gives is kept."""
+    import simfab.deploy as D
+
+    p = tmp_path / "t.obj"
+    t = families.member("petal-curled@12")
+    trimesh.Trimesh(t.V, t.F, process=False).export(p)
+    res = D.run(str(p), mujoco_check=False, tune=0)
+    assert res.summary["layout"] == "mesh" and res.covered >= auto.MIN_COVERED
+    assert "pattern.layout" in res.summary["defaults"]["decided"]
+    (tmp_path / "s.toml").write_text('[target]\nmesh = "t.obj"\n\n[pattern]\nlayout = "conforming"\n')
+    kept = D.run(str(tmp_path / "s.toml"), mujoco_check=False, tune=0)
+    assert kept.summary["layout"] == "conforming"
+
 @pytest.mark.parametrize("name", ["bogus@12", "cap70-R100", "cap70-R100@x"])
 def test_an_unknown_family_member_is_named_with_the_known_shapes(name):
     """A member name that is not shape@rings of a known shape is refused with the shapes named."""
