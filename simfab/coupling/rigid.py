@@ -92,6 +92,9 @@ PCG_TOL = 1e-2
 PCG_NEAR = 100.0
 PCG_TOL_NEAR = 1e-8
 PCG_MAX_ITER = 25
+#: ... or, either way, once the residual's largest entry is within this fraction of Newton's force target
+#: (when the caller gives it): the step's own residual then cannot keep Newton from its target.
+PCG_ATOL = 0.1
 #: A lagged solve (:class:`simfab.solve.linear.LagConfig`) stops once its residual is within this fraction
 #: of Newton's force target (when the caller gives it).
 LAG_TARGET = 0.1
@@ -174,15 +177,24 @@ class PinnedSolver:
             z_full[free] = v
             return (A @ z_full)[free] + mu * (Uf @ (Uf.T @ v))
 
-        def M(r):  # the factorization of A + shift I is reused (same values)
-            return solver.solve_free_update(A, free, r, Uf, mu, shift)
+        if hasattr(solver, "solve_factored_update"):
+            def M(r):  # the factorization of A + shift I, as it is (no gather, no comparison of values)
+                return solver.solve_factored_update(r, Uf, mu)
+        else:
+            def M(r):  # the factorization of A + shift I is reused (same values)
+                return solver.solve_free_update(A, free, r, Uf, mu, shift)
 
         bn = float(np.linalg.norm(b))
         if bn == 0.0:
             return np.zeros_like(b)
         near = self.target is not None and np.abs(b).max() <= PCG_NEAR * self.target
         tol = PCG_TOL_NEAR if near else PCG_TOL
-        res = conjugate_gradients(K, M, b, z=z, max_iter=PCG_MAX_ITER, converged=lambda r, rn: rn <= tol * bn)
+        atol = np.inf if self.target is None else PCG_ATOL * self.target
+
+        def converged(r, rn):
+            return rn <= tol * bn or np.abs(r).max() <= atol
+
+        res = conjugate_gradients(K, M, b, z=z, max_iter=PCG_MAX_ITER, converged=converged)
         self.pcg_iterations += res.iterations
         if res.converged or res.residual <= PCG_TOL * bn:  # past PCG_MAX_ITER the PCG_TOL criterion alone
             return res.x

@@ -284,6 +284,32 @@ class SPDSolver:
             return (y - Z @ np.linalg.solve(np.eye(U.shape[1]) / mu + U.T @ Z, U.T @ y)).reshape(b.shape)
         return self._woodbury(b, U, mu)
 
+    def solve_factored_update(self, b: np.ndarray, U: np.ndarray, mu: float) -> np.ndarray:
+        """Solve ``(F + mu U U^T) x = b`` with F the matrix of the current factorization (the last
+        :meth:`solve_free_update`'s block with its shift, or :meth:`solve_free`'s): no gather of values,
+        no comparison with the factorized ones (an iterative solve's preconditioner, applied many times
+        per factorization). With CHOLMOD the half solve of U is reused while U and the factor are the same.
+
+        Args:
+            b: (m,) or (m, k) right-hand side.
+            U: (m, r) dense update columns.
+            mu: the update's weight > 0 [units of F].
+
+        Returns:
+            x shaped like b. Raises RuntimeError when nothing has been factorized yet.
+        """
+        b = np.asarray(b, dtype=np.float64)
+        if self.backend == "splu":
+            if self._lu is None:
+                raise RuntimeError("solve_factored_update: no factorization yet")
+            k = 1 if b.ndim == 1 else b.shape[1]
+            X = self._lu.solve(np.column_stack([b.reshape(len(b), k), U]))
+            y, Z = X[:, :k], X[:, k:]
+            return (y - Z @ np.linalg.solve(np.eye(U.shape[1]) / mu + U.T @ Z, U.T @ y)).reshape(b.shape)
+        if self._factored is None:
+            raise RuntimeError("solve_factored_update: no factorization yet")
+        return self._woodbury(b, np.asarray(U, dtype=np.float64), mu)
+
     def solve_free_lagged(self, A: sp.spmatrix, free: np.ndarray, b: np.ndarray, U: np.ndarray | None = None,
                           mu: float = 0.0, atol: float | None = None) -> np.ndarray | None:
         """The lagged solve of ``(A[free][:, free] + mu U U^T) x = b`` (see :class:`LagConfig`; U (m, r)
