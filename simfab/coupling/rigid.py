@@ -98,6 +98,9 @@ PCG_ATOL = 0.1
 #: A lagged solve (:class:`simfab.solve.linear.LagConfig`) stops once its residual is within this fraction
 #: of Newton's force target (when the caller gives it).
 LAG_TARGET = 0.1
+#: ... and, while its right-hand side is more than PCG_NEAR times that target, at this relative residual
+#: (the inexact-Newton forcing of the shifted solves, PCG_TOL; None: the LagConfig's rtol).
+LAG_RTOL_FAR = 1e-2
 
 
 class PinnedSolver:
@@ -128,8 +131,11 @@ class PinnedSolver:
             self._Uf = (free, self.pin.U[free])  # one array per free set: the solver reuses its half solve
         Uf = self._Uf[1]
         if hasattr(self.solver, "solve_free_lagged") and np.ndim(b) == 1:
-            atol = None if self.target is None else LAG_TARGET * self.target
-            x = self.solver.solve_free_lagged(A, free, b, Uf, self.pin.mu, atol)  # None: not lagged
+            atol = rtol = None
+            if self.target is not None:  # far from the target: the forcing term of the shifted solves
+                atol = LAG_TARGET * self.target
+                rtol = None if np.abs(b).max() <= PCG_NEAR * self.target else LAG_RTOL_FAR
+            x = self.solver.solve_free_lagged(A, free, b, Uf, self.pin.mu, atol, rtol=rtol)  # None: not lagged
             if x is not None:
                 return x
         if not hasattr(self.solver, "solve_free_update"):
