@@ -118,7 +118,8 @@ class PinnedSolver:
     Negative curvature found by the iterations (A + mu U U^T indefinite) raises NotPositiveDefinite,
     as a failed factorization does. A solver that lags its factorizations
     (:class:`simfab.solve.linear.LagConfig`) is first asked for the lagged solve of A + mu U U^T
-    (conjugate gradients preconditioned with its current factorization and the same update)."""
+    (conjugate gradients preconditioned with its current factorization and the same update; far from
+    Newton's target at the shifted solves' forcing, LAG_RTOL_FAR)."""
 
     def __init__(self, solver, pin: Pin, target: float | None = None):
         self.solver, self.pin = solver, pin
@@ -132,7 +133,7 @@ class PinnedSolver:
         Uf = self._Uf[1]
         if hasattr(self.solver, "solve_free_lagged") and np.ndim(b) == 1:
             atol = rtol = None
-            if self.target is not None:  # far from the target: the forcing term of the shifted solves
+            if self.target is not None:
                 atol = LAG_TARGET * self.target
                 rtol = None if np.abs(b).max() <= PCG_NEAR * self.target else LAG_RTOL_FAR
             x = self.solver.solve_free_lagged(A, free, b, Uf, self.pin.mu, atol, rtol=rtol)  # None: not lagged

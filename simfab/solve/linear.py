@@ -6,9 +6,10 @@ per core as MKL PARDISO on them once its BLAS uses the machine's vector instruct
 :func:`import_cholmod`; ``tools/bench.py linear_solvers`` compares the libraries). The symbolic
 analysis (fill-reducing ordering) and the value map are kept and reused while the sparsity
 pattern is unchanged, which is the case across Newton iterations of one simulation; a matrix
-whose values equal those of the last factorization is not factorized again. Large systems can lag
-the factorization (:class:`LagConfig`): a new matrix is first solved by conjugate gradients
-preconditioned with the current factorization, and factorized only when that does not converge.
+whose values equal those of the last factorization is not factorized again. Large systems (and any
+once a pinned solve has needed a diagonal shift) can lag the factorization (:class:`LagConfig`): a
+new matrix is first solved by conjugate gradients preconditioned with the current factorization,
+and factorized only when that does not converge.
 
     solver = SPDSolver()
     x = solver.solve(A, b)      # A: scipy.sparse (n, n) SPD, b: (n,) or (n, k)
