@@ -2,10 +2,14 @@
 
 Modules that define kernels do ``from simfab._warp import wp`` at import time; Warp's
 own start-up cost is paid only by code that uses kernels, never by ``import simfab``.
+:class:`Replay` replays a recorded launch with its argument struct built once (the FEM workspace's
+and the friction kernel's launches).
 """
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import threading
 
 import warp as wp
@@ -69,4 +73,33 @@ def device(name: str | None = None) -> str:
         raise InputError(f"Warp device {name!r} is not available here ({e})", where="--device") from None
 
 
-__all__ = ["wp", "device"]
+class Replay:
+    """A recorded launch (``wp.launch(..., record_cmd=True)``) as ``launch()``. On the CPU it calls the
+    kernel's entry point with an argument struct built once: ``wp.Launch.launch`` builds that ctypes
+    struct field by field on every call, a few microseconds against a kernel of a few microseconds on
+    a small mesh (every buffer the launch reads or writes is persistent, so the struct stays valid).
+    Where the recorded launch does not have that form (another device, a block launch, another Warp
+    release's attributes) ``launch`` is the recorded one's."""
+
+    __slots__ = ("launch", "_keep")
+
+    def __init__(self, cmd):
+        self.launch, self._keep = cmd.launch, cmd
+        try:
+            if not (cmd.device.is_cpu and not cmd.adjoint and cmd.block_dim == 1):
+                return
+            params, names = cmd.params, [a.label for a in cmd.kernel.adj.args]
+            if len(params) != len(names) + 1:
+                return
+            fields = [(name, type(v)) for name, v in zip(names, params[1:])]
+            args = type("LaunchArgs", (ctypes.Structure,), {"_fields_": fields})()
+            for name, v in zip(names, params[1:]):
+                setattr(args, name, v)
+            forward = cmd.hooks.forward
+        except (AttributeError, TypeError):
+            return
+        self._keep = (cmd, args)  # (the struct and the arrays it points into stay alive with the command)
+        self.launch = functools.partial(forward, ctypes.byref(params[0]), ctypes.byref(args))
+
+
+__all__ = ["wp", "device", "Replay", "RECORD_LOCK"]

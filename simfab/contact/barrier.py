@@ -121,11 +121,11 @@ def point_barrier(dist: np.ndarray, grad_dist: np.ndarray, hess_dist: np.ndarray
         (B [J], g (k, dim) [N], H (k, dim, dim) [N/m] or None).
     """
     terms = 2 if hess_dist is None else 3
-    if len(dist) and (dist.min() <= 0.0 or np.any(dist >= dhat)):  # not all active: general route
+    if len(dist) and (np.minimum.reduce(dist) <= 0.0 or np.count_nonzero(dist >= dhat)):  # not all active
         b, db, *ddb = _all_terms(dist, dhat, terms)
     else:
         b, db, *ddb = barrier_terms(dist, dhat, terms)
-    E = kappa * float(b.sum())
+    E = kappa * float(np.add.reduce(b))  # (b.sum() without its wrapper)
     g = kappa * db[:, None] * grad_dist
     if hess_dist is None:
         return E, g, None

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simfab._warp import RECORD_LOCK, wp
+from simfab._warp import RECORD_LOCK, Replay, wp
 
 
 @wp.func
@@ -123,7 +123,8 @@ class FrictionPoints:
             slots.owner = self
         slots.dy[:, :dim] = dy
         energy, grad, hess = slots.launch(hessian)
-        slip = np.linalg.norm(np.einsum("kdt,kd->kt", self._t, slots.dy), axis=1)
+        t_dy = np.einsum("kdt,kd->kt", self._t, slots.dy)
+        slip = np.sqrt(np.add.reduce(t_dy * t_dy, axis=1))  # (np.linalg.norm(t_dy, axis=1)'s sums)
         H = hess[:a, :dim, :dim].copy() if hessian else None
         return FrictionEval(energy[:a].copy(), grad[:a, :dim].copy(), H, slip)
 
@@ -184,9 +185,9 @@ class _Slots:
         cmd = self._commands.get(hessian)
         if cmd is None:
             with RECORD_LOCK:  # the first launch loads the module: one thread at a time
-                cmd = self._commands[hessian] = wp.launch(
+                cmd = self._commands[hessian] = Replay(wp.launch(
                     _friction_kernel, dim=self.a, inputs=[*self._inputs, int(hessian)], outputs=self._outputs,
-                    device=self.device, record_cmd=True)
+                    device=self.device, record_cmd=True))
         cmd.launch()
         return self._views if self.cpu else tuple(o.numpy() for o in self._outputs)
 

@@ -409,7 +409,7 @@ def _cell_lists(v3: np.ndarray, radius: float, sigma: float, dim: int, device: s
 _EYE3_BYTES = np.eye(3).tobytes()
 
 
-def _unrotated(R: np.ndarray) -> bool:
+def unrotated(R: np.ndarray) -> bool:
     """Whether the (3, 3) float64 rotation R is exactly the identity (a byte comparison: this runs
     on every field evaluation, where np.array_equal costs several microseconds)."""
     return R.tobytes() == _EYE3_BYTES
@@ -421,7 +421,7 @@ def body_frame(points, pose=None) -> np.ndarray:
     R, p = pose_matrix(pose)
     pts = np.asarray(points, dtype=np.float64)
     body = _pad3(pts.reshape(-1, pts.shape[-1])) - p
-    if not _unrotated(R):  # (an unrotated O: nothing to rotate)
+    if not unrotated(R):  # (an unrotated O: nothing to rotate)
         body = body @ R
     return body.reshape(pts.shape[:-1] + (3,))
 
@@ -477,7 +477,7 @@ def _prepare(fld: ImlsField, points, pose, hessian: bool, hessian_band: float | 
     pts = np.asarray(points, dtype=np.float64).reshape(-1, fld.dim)
     R, p = pose_matrix(pose)
     body = body_frame(pts, (R, p))
-    R = None if _unrotated(R) else R
+    R = None if unrotated(R) else R
     band = -np.inf if not hessian else (np.inf if hessian_band is None else float(hessian_band))
     return _Query(dim=fld.dim, R=R, body=body, band=band)
 

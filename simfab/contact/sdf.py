@@ -17,11 +17,12 @@ A union of geoms takes the largest psi. 2D objects are cross-sections at z = 0
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab.contact.imls import ImlsEval, body_frame
+from simfab.contact.imls import ImlsEval, body_frame, unrotated
 from simfab.io.mjcf import torus_radii
 from simfab.rotations import pose_matrix, quat_to_matrix
 
@@ -56,6 +57,17 @@ class Primitive:
     def feature(self) -> float:
         """Smallest radius of curvature or half-extent [m] (the field's length scale)."""
         return float(min(self.size))
+
+
+def _rigid_pose(pose) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`simfab.rotations.pose_matrix` of ``pose``, returning an (R (3, 3), p (3,)) float64 pair as it
+    is (the coupling's poses: this runs on every field evaluation)."""
+    if type(pose) is tuple and len(pose) == 2:
+        R, p = pose
+        if (type(R) is np.ndarray and type(p) is np.ndarray and R.shape == (3, 3) and p.shape == (3,)
+                and R.dtype == np.float64 and p.dtype == np.float64):
+            return R, p
+    return pose_matrix(pose)
 
 
 def _local_sdf(kind: str, size, q: np.ndarray, hessian: bool):
@@ -108,37 +120,66 @@ def _local_sdf(kind: str, size, q: np.ndarray, hessian: bool):
         return -dist, -gd, (-Hd if hessian else None)
     if kind == "torus":
         return _torus_sdf(size, q, hessian)
-    return _box_sdf(np.asarray(size, float), q, hessian)
+    return _box_sdf(_extents(size) if type(size) is tuple else np.asarray(size, float), q, hessian)
+
+
+_DIAG = np.arange(3)
+
+
+_NEAR = np.ones(0, dtype=bool)
+
+
+def _near(k: int) -> np.ndarray:
+    """(k,) True, read-only: an exact field is defined everywhere (a view of one shared array)."""
+    global _NEAR
+    if len(_NEAR) < k:
+        near = np.ones(max(k, 2 * len(_NEAR), 256), dtype=bool)
+        near.flags.writeable = False
+        _NEAR = near
+    return _NEAR[:k]
+
+
+@functools.lru_cache(maxsize=64)
+def _extents(size: tuple) -> np.ndarray:
+    """A box's half-extents as a read-only float64 array (once per size)."""
+    e = np.asarray(size, dtype=np.float64)
+    e.flags.writeable = False
+    return e
 
 
 def _box_sdf(e: np.ndarray, q: np.ndarray, hessian: bool):
     """:func:`_local_sdf` of a box of half-extents e (3,) [m]."""
-    u = np.abs(q) - e
-    up = q >= 0
+    u = np.abs(q)
+    u -= e
     pos = np.maximum(u, 0.0)
     n = np.sqrt(np.einsum("kd,kd->k", pos, pos))
     outside = n > 0
-    if outside.all():  # (the usual case: every point outside O)
+    if np.count_nonzero(outside) == len(n):  # (the usual case: every point outside O)
         psi, n_out, ins = -n, n, None
     else:
         psi = np.where(outside, -n, -u.max(axis=1))
         n_out = np.where(outside, n, 1.0)  # (inside, pos = 0: g's row is set below)
         ins = ~outside
-    g = np.where(up, -pos, pos) / n_out[:, None]  # -(pos * sign(q)), sign(0) = 1
+    # -(pos * sign(q)), sign(0) = 1 (pos = 0 where q = 0: the copied sign only signs a zero)
+    g = np.copysign(pos, np.negative(q))
+    g /= n_out[:, None]
     if ins is not None:
         rows = np.flatnonzero(ins)
         j = np.argmax(u[rows], axis=1)
-        g[rows, j] = np.where(up[rows, j], -1.0, 1.0)
+        g[rows, j] = np.where(q[rows, j] >= 0, -1.0, 1.0)
     H = None
     if hessian:
-        H = np.zeros((len(q), 3, 3))
-        if ins is None or not ins.all():
+        if ins is not None and np.count_nonzero(ins) == len(q):
+            H = np.zeros((len(q), 3, 3))
+        else:
             # outside: distance to a face (flat: 0), an edge or a corner: (I - n n^T) / d over the axes
             # that are outside (the others move the nearest point along); every row at once, inside
-            # rows zeroed after
-            m = (pos > 0).astype(float)
-            Pm = m[:, :, None] * np.eye(3)[None] * m[:, None, :]
-            H = -(Pm - g[:, :, None] * g[:, None, :]) / n_out[:, None, None]
+            # rows zeroed after. P_m = diag(m) with m = 1 on those axes (m m^T I: 0 off the diagonal)
+            Pm = np.zeros((len(q), 3, 3))
+            Pm[:, _DIAG, _DIAG] = pos > 0
+            Pm -= g[:, :, None] * g[:, None, :]
+            Pm /= n_out[:, None, None]
+            H = np.negative(Pm, out=Pm)
             if ins is not None:
                 H[ins] = 0.0
     return psi, g, H
@@ -194,21 +235,31 @@ class PrimitiveField:
     radius: float = np.inf
     far_distance: float = np.inf
     _cache: dict = field(default_factory=dict, repr=False)
+    #: |grad psi| = 1 (to round-off) wherever it is evaluated: the coupling need not watch its peak
+    unit_gradient = True
 
     def evaluate(self, points, pose=None, *, hessian: bool = True, hessian_band: float | None = None) -> ImlsEval:
         """psi (> 0 inside), gradient and Hessian (zeros where psi <= -hessian_band) at world points
         (k, dim) for O's ``pose`` (as in :func:`simfab.contact.imls.evaluate_imls`)."""
         dim = self.dim
         pts = np.asarray(points, dtype=np.float64).reshape(-1, dim)
-        R, p = pose_matrix(pose)
+        R, p = _rigid_pose(pose)
         k = len(pts)
-        if len(self.primitives) == 1 and self.primitives[0].kind == "sphere":
-            return self._sphere(pts, R, p, hessian, hessian_band)
+        if len(self.primitives) == 1:
+            if self.primitives[0].kind == "sphere":
+                return self._sphere(pts, R, p, hessian, hessian_band)
+            # body_frame's R^T (x - p), its padded copy made in place
+            b = np.zeros((k, 3))
+            b[:, :dim] = pts
+            b -= p
+            if not unrotated(R):
+                b = b @ R
+            if dim == 2:
+                b[:, 2] = 0.0
+            return self._single(b, R, hessian, hessian_band)
         b = body_frame(pts, (R, p))
         if dim == 2:
             b[:, 2] = 0.0
-        if len(self.primitives) == 1:
-            return self._single(b, R, hessian, hessian_band)
         psi = np.full(k, -np.inf)
         grad = np.zeros((k, 3))
         hess = np.zeros((k, 3, 3)) if hessian else None
@@ -228,7 +279,7 @@ class PrimitiveField:
                 hess[psi <= -hessian_band] = 0.0
         else:
             hess = np.zeros((k, dim, dim))
-        return ImlsEval(psi=psi, grad=grad, hess=hess, near=np.ones(k, dtype=bool))
+        return ImlsEval(psi=psi, grad=grad, hess=hess, near=_near(k))
 
     def _single(self, b, R, hessian, hessian_band) -> ImlsEval:
         """One primitive (no union): :meth:`evaluate`'s loop without its masks, the frames' rotations
@@ -238,17 +289,22 @@ class PrimitiveField:
         Q = prim.rotation
         psi, g, H = _local_sdf(prim.kind, prim.size, (b - prim.centre) @ Q, hessian)
         M = R[:dim, :dim]
-        grad = (g @ Q.T)[:, :dim] @ M.T
+        grad = (g @ Q.T)[:, :dim]
+        if not unrotated(R):  # (an unrotated O: the world frame's gradient is the body frame's)
+            grad = grad @ M.T
         if not hessian:
-            return ImlsEval(psi=psi, grad=grad, hess=np.zeros((k, dim, dim)), near=np.ones(k, dtype=bool))
+            return ImlsEval(psi=psi, grad=grad, hess=np.zeros((k, dim, dim)), near=_near(k))
         # Q H Q^T per point: A = H Q^T, then A^T Q^T (H symmetric), as products of (k * 3, 3) arrays
         A = (H.reshape(-1, 3) @ Q.T).reshape(k, 3, 3)
         Hq = (A.transpose(0, 2, 1).reshape(-1, 3) @ Q.T).reshape(k, 3, 3)[:, :dim, :dim]
-        A = (Hq.reshape(-1, dim) @ M.T).reshape(k, dim, dim)
-        hess = (A.transpose(0, 2, 1).reshape(-1, dim) @ M.T).reshape(k, dim, dim)
+        if unrotated(R):
+            hess = Hq
+        else:
+            A = (Hq.reshape(-1, dim) @ M.T).reshape(k, dim, dim)
+            hess = (A.transpose(0, 2, 1).reshape(-1, dim) @ M.T).reshape(k, dim, dim)
         if hessian_band is not None:
             hess[psi <= -hessian_band] = 0.0
-        return ImlsEval(psi=psi, grad=grad, hess=hess, near=np.ones(k, dtype=bool))
+        return ImlsEval(psi=psi, grad=grad, hess=hess, near=_near(k))
 
     def _sphere(self, pts, R, p, hessian, hessian_band) -> ImlsEval:
         """Fast path of a single sphere (a circle in 2D): psi = r - |x - c|, grad = -u,
@@ -270,7 +326,7 @@ class PrimitiveField:
                 h = us[:, :, None] * us[:, None, :]
                 h[:, range(dim), range(dim)] -= 1.0
                 hess[sel] = h * inv_s[:, None, None]
-        return ImlsEval(psi=psi, grad=-u, hess=hess, near=np.ones(k, dtype=bool))
+        return ImlsEval(psi=psi, grad=-u, hess=hess, near=_near(k))
 
     def far_lower_bound(self, points, pose=None) -> np.ndarray:
         return -self.evaluate(points, pose, hessian=False).psi

@@ -22,7 +22,7 @@ from simfab.contact.barrier import barrier_gradient
 from simfab.contact.friction import FrictionEval, FrictionPoints, tangent_bases
 from simfab.coupling.layout import point_dhat
 from simfab.coupling.model import CouplingModel
-from simfab.coupling.points import ContactPoints
+from simfab.coupling.points import ContactPoints, row_norms
 
 #: A stuck contact counts as self-locked only where O's motion has a tangential part of at least this
 #: fraction of it (O pressing straight into a face sticks without locking anything).
@@ -86,7 +86,7 @@ def lag(cm: CouplingModel, points: ContactPoints, anchors: np.ndarray, travel: n
     pose (from the step's start), None when they are at it already; ``normal_force`` (k,) [N]
     replaces the normal forces of the distances (a prediction), on the points whose normal is known."""
     dh = point_dhat(cm, points)
-    gn = np.linalg.norm(distance_gradients, axis=1)
+    gn = row_norms(distance_gradients)
     lam = normal_forces(cm, points, distances, kappa) if normal_force is None else np.where(gn > 0, normal_force, 0.0)
     rows = np.flatnonzero((lam > 0) & (gn > 0))
     n = distance_gradients[rows] / gn[rows, None]
@@ -129,9 +129,9 @@ def record(lagged: FrictionLag, x: np.ndarray, velocity: np.ndarray) -> Friction
     total = float(lam.sum())
     v = lagged.travel[rows]
     vn = np.einsum("kd,kd->k", v, lagged.normals)
-    vt = np.linalg.norm(v - vn[:, None] * lagged.normals, axis=1)
+    vt = row_norms(v - vn[:, None] * lagged.normals)
     mu = lagged.mu_lambda / np.maximum(lam, 1e-300)
-    locked = ~slip & (mu * np.abs(vn) >= vt) & (vt >= LOCK_TANGENTIAL_REL * np.linalg.norm(v, axis=1)) & (vt > 0)
+    locked = ~slip & (mu * np.abs(vn) >= vt) & (vt >= LOCK_TANGENTIAL_REL * row_norms(v)) & (vt > 0)
     return FrictionRecord(point_forces=fe.gradient,
                           path_force=float(np.einsum("kd,kd->", fe.gradient, velocity[rows])),
                           dissipated=float(np.einsum("kd,kd->", fe.gradient, dy)),

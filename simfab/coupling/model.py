@@ -102,7 +102,12 @@ class CouplingModel:
         key = ("pose", float(s))
         out = self._cache.get(key)
         if out is None:
-            out = self._cache[key] = pose_matrix(self.pos_quat(s))
+            pos, quat = self.pos_quat(s)
+            rkey = ("rotation", quat.tobytes())  # (one matrix per quaternion: a translating O has one)
+            R = self._cache.get(rkey)
+            if R is None:
+                R = self._cache[rkey] = pose_matrix((pos, quat))[0]
+            out = self._cache[key] = pose_matrix((R, pos))
         return out
 
     def motion(self, s_a: float, s_b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -8,6 +8,8 @@ and :func:`adapt_kappa` stiffens the barrier for the following steps."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from simfab.contact.barrier import barrier_value, point_barrier, project_psd
@@ -21,6 +23,11 @@ from simfab.coupling.state import Evaluation, StepContext, StepState
 from simfab.coupling.timing import TimedSolver, Timer
 from simfab.fem.elastic import energy, energy_gradient, energy_gradient_hessian
 from simfab.solve.newton import NewtonConfig, minimize
+
+
+def _equal(a: np.ndarray, b: np.ndarray) -> bool:
+    """``np.array_equal(a, b)`` for two arrays (the memo checks of every evaluation: without its dispatch)."""
+    return a.shape == b.shape and np.count_nonzero(a != b) == 0
 
 
 class StepObjective:
@@ -93,7 +100,7 @@ class StepObjective:
         """
         anchor = hessian if anchor is None else anchor
         memo = self._distances
-        if not anchor and memo is not None and np.array_equal(memo[0], x):
+        if not anchor and memo is not None and _equal(memo[0], x):
             return memo[1], memo[2], None
         with self.timer.timed("contact_field"):
             y = self.points.positions(x)
@@ -104,11 +111,17 @@ class StepObjective:
             else:
                 r = y - self.y_ref
                 bound = self.d_ref - C.PSI_LIPSCHITZ * np.sqrt(np.add.reduce(r * r, axis=1))  # (np.linalg.norm's sum)
-                todo = np.flatnonzero(bound < self.band)
+                todo = (bound < self.band).nonzero()[0]
             d = np.empty(k) if bound is None else bound  # (a fresh array)
-            gd = np.zeros((k, dim))
-            hd = np.zeros((k, dim, dim)) if hessian else None
-            if len(todo):
+            gd = np.zeros((k, dim)) if bound is not None or not k else None
+            hd = np.zeros((k, dim, dim)) if hessian and gd is not None else None
+            if bound is None and k:  # (the first evaluation: every point, no gathers)
+                ev = self.cm.field.evaluate(y, (self.R, self.p), hessian=hessian, hessian_band=self.dhat_max)
+                d, gd = -ev.psi, -ev.grad
+                if hessian:
+                    hd = -ev.hess
+                self.y_ref, self.d_ref = y.copy(), d.copy()
+            elif len(todo):
                 ev = self.cm.field.evaluate(y[todo], (self.R, self.p), hessian=hessian, hessian_band=self.dhat_max)
                 d[todo] = -ev.psi
                 gd[todo] = -ev.grad
@@ -126,6 +139,21 @@ class StepObjective:
                 self._distances = (np.array(x, copy=True), d, gd)
         return d, gd, hd
 
+    def known_distances(self, x: np.ndarray):
+        """The distances and their gradients of the last evaluation without Hessians when it was at x
+        (as :meth:`distances` gives them: exact within the lazy band, lower bounds beyond), else None.
+
+        Args:
+            x: positions (n, dim) [m].
+
+        Returns:
+            (d (k,) [m], grad d (k, dim)) or None.
+        """
+        memo = self._distances
+        if memo is not None and _equal(memo[0], x):
+            return memo[1], memo[2]
+        return None
+
     def __call__(self, xf: np.ndarray, need_hessian: bool):
         """(f [J], g (N,) [N], H csr [N/m] or None); f = +inf at an inverted element or a point inside O.
         An evaluation without the Hessian (a line-search trial) books its whole time under
@@ -139,7 +167,7 @@ class StepObjective:
     def _evaluate(self, xf: np.ndarray, need_hessian: bool):
         cm = self.cm
         memo = self.memo
-        if need_hessian and memo is not None and memo[0].shape == xf.shape and np.array_equal(memo[0], xf):
+        if need_hessian and memo is not None and memo[0].shape == xf.shape and _equal(memo[0], xf):
             self.memo = None  # hand the cached Hessian out once (the caller may modify it)
             return memo[1]
         x = xf.reshape(self.n, self.dim)
@@ -156,10 +184,10 @@ class StepObjective:
                 E, g = self._fem_value(xf, x)
         if self.pin is not None:
             E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
-        if not np.isfinite(E):
+        if not math.isfinite(E):
             return np.inf, g.ravel(), H
         d, gd, hd = self.distances(x, need_hessian)
-        if np.any(d <= 0):
+        if np.count_nonzero(d <= 0):
             return np.inf, g.ravel(), H
         with self.timer.timed("barrier"):
             act, B, gy, Hy = self.contact_barrier(d, gd, hd)
@@ -199,7 +227,7 @@ class StepObjective:
         """The FEM energy and gradient at x, remembered for the last x (Newton asks for the Hessian at
         the line search's accepted trial, whose value was evaluated without it)."""
         fem = self._fem
-        if fem is not None and np.array_equal(fem[0], xf):
+        if fem is not None and _equal(fem[0], xf):
             return fem[1], fem[2]
         E, g = energy_gradient(self.cm.fem, x)
         self._fem = (xf.copy(), E, g)
@@ -214,10 +242,10 @@ class StepObjective:
             E, g = self._fem_value(xf, x)
         if self.pin is not None:
             E, g = E + self.pin.energy(xf), g + self.pin.gradient(xf).reshape(g.shape)
-        if not np.isfinite(E):
+        if not math.isfinite(E):
             return np.inf, g.ravel(), None
         d, gd, _ = self.distances(x, False, anchor=True)
-        if np.any(d <= 0):
+        if np.count_nonzero(d <= 0):
             return np.inf, g.ravel(), None
         with self.timer.timed("barrier"):
             act, B, gy, _ = self.contact_barrier(d, gd, None)
@@ -253,7 +281,7 @@ class StepObjective:
             (active point indices (a,), energy [J], gradient (a, dim) [N], exact Hessian blocks
             (a, dim, dim) [N/m] or None without ``hd``); see :func:`simfab.contact.barrier.point_barrier`.
         """
-        act = np.flatnonzero(d < self.dhat)
+        act = (d < self.dhat).nonzero()[0]
         B, gy, Hy = point_barrier(d[act], gd[act], None if hd is None else hd[act], self.dhat[act], self.kappa,
                                   psd=False)
         return act, B, gy, Hy
@@ -282,15 +310,15 @@ class StepObjective:
     def _value(self, x: np.ndarray) -> float:
         with self.timer.timed("assembly"):
             E = energy(self.cm.fem, x) + (self.pin.energy(np.ravel(x)) if self.pin is not None else 0.0)
-        if not np.isfinite(E):
+        if not math.isfinite(E):
             return np.inf
         x = np.asarray(x).reshape(self.n, self.dim)
         d, _, _ = self.distances(x, False)
-        if np.any(d <= 0):
+        if np.count_nonzero(d <= 0):
             return np.inf
         act = d < self.dhat  # (all d > 0 here)
         D = float(self.friction.evaluate(x, hessian=False).energy.sum()) if self.friction is not None else 0.0
-        return E + self.kappa * float(barrier_value(d[act], self.dhat[act]).sum()) + D
+        return E + self.kappa * float(np.add.reduce(barrier_value(d[act], self.dhat[act]))) + D
 
     def add_contact(self, H, contact, *, psd: bool) -> None:
         """Add the barrier Hessian blocks and the rigid-mode regularization to a FEM Hessian, in place.
@@ -331,14 +359,14 @@ class StepObjective:
         if self._curv_from is not None:
             self.curv = self._curv_from.contact()[3]
             self._curv_from = None
-        if self.last_x is not None and np.array_equal(self.last_x, xf):
+        if self.last_x is not None and _equal(self.last_x, xf):
             d, gd = self.last_d, self.last_gd
         else:
             d, gd, _ = self.distances(xf.reshape(self.n, self.dim), False)
         dy = self.points.positions(dx.reshape(self.n, self.dim))
         sp = np.sqrt(np.add.reduce(dy * dy, axis=1))  # (np.linalg.norm's sum)
         m = sp > 0
-        if not m.any():
+        if not np.count_nonzero(m):
             return 1.0
         d, gd, dy, sp = d[m], gd[m], dy[m], sp[m]
         a = np.einsum("kd,kd->k", gd, dy)
@@ -346,7 +374,7 @@ class StepObjective:
         keep = d - np.minimum((1.0 - C.STEP_FRACTION) * d, C.CAP_LAND_DHATS * self.dhat[m])
         alpha_curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
         cons = keep / (C.PSI_LIPSCHITZ * sp)
-        return float(min(1.0, np.min(np.maximum(alpha_curv, cons))))
+        return float(min(1.0, np.minimum.reduce(np.maximum(alpha_curv, cons))))
 
 
 class LazyHessian:
@@ -464,7 +492,7 @@ def adapt_kappa(cm: CouplingModel, state: StepState, obj: StepObjective) -> None
     d = obj.last_d
     if d is None or not len(d):
         return
-    if np.any(d < C.KAPPA_GROW_BELOW * obj.dhat) and state.kappa < C.KAPPA_MAX_GROWTH * cm.kappa:
+    if (d < C.KAPPA_GROW_BELOW * obj.dhat).any() and state.kappa < C.KAPPA_MAX_GROWTH * cm.kappa:
         state.kappa = min(2.0 * state.kappa, C.KAPPA_MAX_GROWTH * cm.kappa)
 
 
@@ -529,7 +557,7 @@ def evaluation(obj: StepObjective, x: np.ndarray) -> Evaluation | None:
     Returns:
         The :class:`simfab.coupling.state.Evaluation`, or None.
     """
-    if obj.last_x is None or not np.array_equal(obj.last_x, x.ravel()):
+    if obj.last_x is None or not _equal(obj.last_x, x.ravel()):
         return None
     E, gE = obj.last_fem
     return Evaluation(x=x, kappa=obj.kappa, points=obj.points, elastic_energy=float(E), elastic_gradient=gE,

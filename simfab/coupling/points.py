@@ -24,12 +24,19 @@ def csr_times(A, X: np.ndarray) -> np.ndarray:
     """A @ X for a CSR matrix A (m, n) and a dense X (n, c), the same sums in the same order as
     scipy's operator (its kernel called directly: the insertion loop forms point positions many
     times per Newton iteration, where the operator's checks cost more than the product)."""
+    m, n = A.shape  # (scipy's shape is a property: read once)
     if (_CSR_MATVECS is None or X.ndim != 2 or X.dtype != np.float64 or A.dtype != np.float64
-            or not X.flags.c_contiguous or X.shape[0] != A.shape[1]):
+            or not X.flags.c_contiguous or X.shape[0] != n):
         return A @ X
-    out = np.zeros((A.shape[0], X.shape[1]))
-    _CSR_MATVECS(A.shape[0], A.shape[1], X.shape[1], A.indptr, A.indices, A.data, X.ravel(), out.ravel())
+    out = np.zeros((m, X.shape[1]))
+    _CSR_MATVECS(m, n, X.shape[1], A.indptr, A.indices, A.data, X.ravel(), out.ravel())
     return out
+
+
+def row_norms(v: np.ndarray) -> np.ndarray:
+    """(k,) row norms of (k, dim) v: ``np.linalg.norm(v, axis=1)``, its sums without its dispatch
+    (called on every evaluation of the insertion loop)."""
+    return np.sqrt(np.add.reduce(v * v, axis=1))
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

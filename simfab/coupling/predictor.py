@@ -13,7 +13,7 @@ from simfab.coupling import rigid
 from simfab.coupling.layout import add_point_blocks, diag_slots, point_dhat, regularize
 from simfab.coupling.model import CouplingModel
 from simfab.coupling.objective import StepObjective, pinned
-from simfab.coupling.points import ContactPoints
+from simfab.coupling.points import ContactPoints, row_norms
 from simfab.coupling.state import StepContext, StepState
 from simfab.coupling.timing import TimedSolver
 from simfab.errors import ConvergenceError
@@ -30,13 +30,12 @@ def lift_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, obj: StepO
     # the objective's (lazy) distances: exact with gradients within its band (> below), lower
     # bounds without gradients beyond it, so only points near O are evaluated
     d, gd, _ = obj.distances(x, False)
-    below, to = np.broadcast_to(below, d.shape), np.broadcast_to(to, d.shape)
-    lift = (d <= below) & np.any(gd != 0.0, axis=1)
+    lift = (d <= below) & np.logical_or.reduce(gd != 0.0, axis=1)
     if prev is not None:
         lift &= prev > below
     if not lift.any():
         return x
-    x1 = move_points(cm, pts, x, lift, to[lift] - d[lift], gd[lift])
+    x1 = move_points(cm, pts, x, lift, (to[lift] if np.ndim(to) else to) - d[lift], gd[lift])
     return x1 if np.isfinite(obj.value(x1)) else None
 
 
@@ -172,17 +171,19 @@ def move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.nd
     of their directions by the largest of their moves, so no point on it is carried closer to O
     than it asks (the mean of the moves would carry a vertex point that wants a small move toward O
     between refinement points that want larger ones into O)."""
-    nrm = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
-    rows = np.flatnonzero(sel)
+    nrm = direction / np.maximum(row_norms(direction)[:, None], 1e-300)
+    rows = sel.nonzero()[0]
     n = cm.fem.n_vertices
     on = pts.weights[rows] > 0
     far = np.full(n, -np.inf)
-    np.maximum.at(far, pts.verts[rows][on], np.broadcast_to(dist[:, None], on.shape)[on])
+    np.maximum.at(far, pts.verts[rows][on], dist[on.nonzero()[0]])  # (each point's move, once per parent)
     hit = np.isfinite(far)
     mean = pts.scatter(nrm, n, rows=rows)[hit]
     x1 = x.copy()
-    x1[hit] += far[hit, None] * mean / np.maximum(np.linalg.norm(mean, axis=1, keepdims=True), 1e-300)
+    x1[hit] += far[hit, None] * mean / np.maximum(row_norms(mean)[:, None], 1e-300)
     return x1
+
+
 
 
 def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext) -> np.ndarray:

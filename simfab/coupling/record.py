@@ -97,7 +97,7 @@ def path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
     s1 = s + h if cm.end_direction is not None else min(L, s + h)  # straight on past the end
     (R0, p0), (R1, p1) = cm.pose(s0), cm.pose(s1)
     dim = y.shape[1]
-    if R0.tobytes() == R1.tobytes():  # O translates between s0 and s1: every point moves alike
+    if R0 is R1 or R0.tobytes() == R1.tobytes():  # O translates between s0 and s1: every point moves alike
         return np.repeat(((p1 - p0) / (s1 - s0))[None, :dim], len(y), axis=0)
     # y -> R_b R_s^T (y - p_s) + p_b for b = 0, 1 (cm.carry), differenced
     Rs, ps = cm.pose(s)
@@ -146,11 +146,12 @@ def record_step(cm: CouplingModel, state: StepState, iterations: int) -> StepRes
     if pen > cm.tol:
         raise ConvergenceError(f"penetration {pen:.3e} m exceeds the tolerance {cm.tol:.3e} m at s={state.s:.6g} m")
     pos, quat = (np.asarray(a).copy() for a in cm.pos_quat(state.s))
+    normal = float(np.sqrt(np.add.reduce(gy * gy, axis=1)).sum())  # (np.linalg.norm(gy, axis=1)'s sums)
     return StepResult(
         s=state.s, pos=pos, quat=quat, x=x.copy(), energy=float(E), force=force, path_force=path_force,
         barrier_energy=float(B), grip=grip, max_von_mises=float(vm.max()), von_mises=vm, penetration=pen,
         min_det_F=min_det, iterations=int(iterations), contact_points=len(pts), kappa=float(state.kappa_step),
-        phase="remove" if state.direction < 0 else "insert", normal_force=float(np.linalg.norm(gy, axis=1).sum()),
+        phase="remove" if state.direction < 0 else "insert", normal_force=normal,
         path_force_friction=fr.path_force if fr else 0.0, dissipated=fr.dissipated if fr else 0.0,
         slipping=fr.slipping if fr else 0.0, lag_solves=state.lag_solves, lag_change=state.lag_change,
         reaction=reaction, locked=fr.locked if fr else 0.0,

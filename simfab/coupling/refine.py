@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simfab.contact.imls import body_frame
+from simfab.contact.imls import unrotated
 from simfab.coupling import config as C
 from simfab.coupling.layout import EDGE_PAIRS, point_dhat
 from simfab.coupling.model import CouplingModel
@@ -53,7 +53,7 @@ def crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: StepState
     return [int(f) for f in ids[(psi_max > 0) & ~refined]]
 
 
-def warm_crossings(cm: CouplingModel, x: np.ndarray, s: float, state: StepState) -> list:
+def warm_crossings(cm: CouplingModel, x: np.ndarray, s: float, state: StepState, distances=None) -> list:
     """Unrefined boundary facets whose interior crosses into O at a step's warm start (x, s): refined
     before the step is solved (:func:`simfab.coupling.stepper.advance`, frictionless runs), where Newton
     would otherwise converge with them crossing and the step be solved again. Refined facets are left to the check
@@ -64,13 +64,16 @@ def warm_crossings(cm: CouplingModel, x: np.ndarray, s: float, state: StepState)
         x: the warm start (n, dim) [m].
         s: the step's path length [m].
         state: the state the step starts from (its refined facets, density and check caches).
+        distances: (d (k,) [m], grad d (k, dim)) of the state's constraint points at x when the step's
+            objective knows them (:meth:`simfab.coupling.objective.StepObjective.known_distances`), or
+            None (the boundary vertices' distances are evaluated).
 
     Returns:
         Facet ids (rows of ``cm.contact_facets``), empty when none crosses or refinement is off.
     """
     if not cm.options.refine:
         return []
-    fc = facet_check(cm, x, s, state)
+    fc = facet_check(cm, x, s, state, distances=distances)
     return [int(f) for f in fc.ids[(fc.psi_max > 0) & ~fc.refined]]
 
 
@@ -79,7 +82,7 @@ COVER = {2: 0.5, 3: 1.0 / np.sqrt(3.0)}  # max distance from a facet point to it
 
 
 def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
-                final: Evaluation | None = None) -> FacetCheck:
+                final: Evaluation | None = None, distances=None) -> FacetCheck:
     """Max psi over check points of each boundary facet that could reach into O at (x, s).
 
     Returns a :class:`FacetCheck`. Unrefined facets are checked
@@ -90,7 +93,10 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     whose Lipschitz bound, from the facet's vertices or from their own values at earlier checks (in
     O's body frame), is negative are not evaluated; their bound stands in for psi. The result is
     remembered for the same (x, s) (``final``: Newton's converged evaluation at x, whose distances
-    stand in for the boundary vertices').
+    stand in for the boundary vertices'; ``distances``: (d, grad d) of the state's points at x
+    from elsewhere, used alike). Lower bounds of the vertices' distances (beyond an objective's lazy
+    band) only weaken the bounds of the check points: more of them are evaluated, and psi_max is the
+    same wherever it is positive (the only use of it: a positive psi is never bounded away).
     """
     memo = state.check
     if memo is not None and memo.x is x and memo.s == s and memo.order == state.order:
@@ -98,13 +104,20 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     facets = cm.contact_facets
     R, p = cm.pose(s)
     bv = cm.fem.boundary_vertices
+    # an exact field's gradient is a unit vector (to round-off): nothing for grad_peak to watch
+    # while the Lipschitz bound exceeds 1
+    watch = not (getattr(cm.field, "unit_gradient", False) and C.PSI_LIPSCHITZ > 1.0 + 1e-9)
     dv = np.full(cm.fem.n_vertices, np.inf)
     if final is not None and final.x is x and len(final.distances) >= len(bv):
-        # Newton's converged evaluation at x (the first len(bv) constraint points are the boundary
-        # vertices, in vertex_points order): exact within the lazy band, lower bounds beyond it;
-        # those beyond the kernel radius get the sharper nearest-sample bound
-        dv[bv] = final.distances[: len(bv)]
-        state.grad_peak = max(state.grad_peak, _max_norm(final.distance_gradients))
+        distances = (final.distances, final.distance_gradients)
+    if distances is not None and len(distances[0]) >= len(bv):
+        # Newton's converged evaluation at x, or the step objective's at a warm start (the first
+        # len(bv) constraint points are the boundary vertices, in vertex_points order): exact within
+        # the lazy band, lower bounds beyond it; those beyond the kernel radius get the sharper
+        # nearest-sample bound
+        dv[bv] = distances[0][: len(bv)]
+        if watch:
+            state.grad_peak = max(state.grad_peak, _max_norm(distances[1]))
         if np.isfinite(cm.field.radius):  # (an exact field has no far points: radius inf)
             out = np.flatnonzero(dv[bv] > point_dhat(cm, state.points)[: len(bv)] * C.LAZY_BAND_DHATS)
             if len(out):
@@ -114,30 +127,40 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     else:
         ev = cm.field.evaluate(x[bv], (R, p), hessian=False)
         dv[bv] = -ev.psi
-        state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
+        if watch:
+            state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
         far = ~ev.near
         if far.any():  # far vertices: a sharper lower bound of their distance than far_distance
             dv[bv[far]] = cm.field.far_lower_bound(x[bv[far]], (R, p))
     xf = x[facets]  # (F, nv, dim)
-    a, c = EDGE_PAIRS[cm.dim]
-    ev_ = xf[:, a] - xf[:, c]
+    if cm.dim == 2:  # (the one edge of a 2D facet: slices, not EDGE_PAIRS' gathers)
+        ev_ = xf[:, 0:1] - xf[:, 1:2]
+    else:
+        a, c = EDGE_PAIRS[cm.dim]
+        ev_ = xf[:, a] - xf[:, c]
     edges2 = np.einsum("fed,fed->fe", ev_, ev_)  # (F, e) squared edge lengths
     # every point of a facet lies within `cover` of one of its vertices: half the edge (2D), and
     # longest edge / sqrt(3) on a triangle (the farthest point is the circumcentre when acute,
     # R = c / (2 sin gamma) with gamma >= 60 deg; else within half the longest edge). A facet whose
     # vertices are all farther than L * cover from O is certified outside by the vertex bounds.
-    cover = np.sqrt(edges2.max(axis=1)) * COVER[cm.dim]
+    cover = np.sqrt(np.maximum.reduce(edges2, axis=1)) * COVER[cm.dim]
     dvf = dv[facets]  # (F, nv)
-    ids = np.flatnonzero(dvf.min(axis=1) <= C.PSI_LIPSCHITZ * cover)
-    refined = np.zeros(len(facets), dtype=bool)
-    refined[list(state.refined)] = True
-    refined = refined[ids]
+    ids = (np.minimum.reduce(dvf, axis=1) <= C.PSI_LIPSCHITZ * cover).nonzero()[0]
+    if state.refined:
+        refined = np.zeros(len(facets), dtype=bool)
+        refined[list(state.refined)] = True
+        refined = refined[ids]
+    else:
+        refined = np.zeros(len(ids), dtype=bool)
     psi_max = np.full(len(ids), -np.inf)
+    n_refined = np.count_nonzero(refined)
     for is_refined in (False, True):
-        sel = refined if is_refined else ~refined
-        if sel.any():
+        count = n_refined if is_refined else len(ids) - n_refined
+        if count:
+            every = count == len(ids)  # (all of ids: no selection to gather)
+            sel = None if every else (refined if is_refined else ~refined)
             w, gap_map = check_lattice(cm.dim, state.order, is_refined)
-            f_sel = ids[sel]
+            f_sel = ids if every else ids[sel]
             xv = xf[f_sel]  # (f, nv, dim) the facets' vertices
             y = w @ xv  # (f, p, dim) check points
             # psi(y) <= psi(v) + L |y - v| for each vertex v of the facet: points this bounds below
@@ -150,22 +173,35 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
                 psi = np.minimum(psi, bound[:, :, v])
             # the same check points' values (or bounds) from earlier checks: O moved rigidly, so in
             # O's body frame psi is the same L-Lipschitz function and psi(y) <= psi(y') + L |b - b'|
-            # with b, b' the body-frame positions now and then
-            body = body_frame(y, (R, p))
+            # with b, b' the body-frame positions now and then (never checked: b' NaN, whose bound
+            # fmin passes over)
+            body = _body_frame(y, R, p)
             known_body, known_psi = _check_cache(cm, state, is_refined, len(w))
             step = body - known_body[f_sel]
             moved = np.sqrt(np.einsum("fpd,fpd->fp", step, step))
-            psi = np.minimum(psi, np.where(np.isfinite(moved), known_psi[f_sel] + C.PSI_LIPSCHITZ * moved, np.inf))
+            psi = np.fmin(psi, known_psi[f_sel] + C.PSI_LIPSCHITZ * moved)
             todo = psi >= 0.0
-            if todo.any():
+            if np.count_nonzero(todo):
                 ev = cm.field.evaluate(y[todo], (R, p), hessian=False)
                 psi[todo] = ev.psi
-                state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
+                if watch:
+                    state.grad_peak = max(state.grad_peak, _max_norm(ev.grad))
             known_body[f_sel], known_psi[f_sel] = body, psi
-            psi_max[sel] = psi.max(axis=1)
+            if every:
+                psi_max = np.maximum.reduce(psi, axis=1)
+            else:
+                psi_max[sel] = np.maximum.reduce(psi, axis=1)
     out = FacetCheck(x, s, state.order, ids, psi_max, refined)
     state.check = out
     return out
+
+
+def _body_frame(y: np.ndarray, R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """:func:`simfab.contact.imls.body_frame` of points y (..., dim) for O at (R, p), padded in place."""
+    body = np.zeros(y.shape[:-1] + (3,))
+    body[..., : y.shape[-1]] = y
+    body -= p
+    return body if unrotated(R) else (body.reshape(-1, 3) @ R).reshape(body.shape)
 
 
 def _max_norm(v: np.ndarray) -> float:

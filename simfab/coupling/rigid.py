@@ -92,9 +92,15 @@ PCG_TOL = 1e-2
 PCG_NEAR = 100.0
 PCG_TOL_NEAR = 1e-8
 PCG_MAX_ITER = 25
+#: ... or, either way, once the residual's largest entry is within this fraction of Newton's force target
+#: (when the caller gives it): the step's own residual then cannot keep Newton from its target.
+PCG_ATOL = 0.1
 #: A lagged solve (:class:`simfab.solve.linear.LagConfig`) stops once its residual is within this fraction
 #: of Newton's force target (when the caller gives it).
 LAG_TARGET = 0.1
+#: ... and, while its right-hand side is more than PCG_NEAR times that target, at this relative residual
+#: (the inexact-Newton forcing of the shifted solves, PCG_TOL; None: the LagConfig's rtol).
+LAG_RTOL_FAR = 1e-2
 
 
 class PinnedSolver:
@@ -112,7 +118,8 @@ class PinnedSolver:
     Negative curvature found by the iterations (A + mu U U^T indefinite) raises NotPositiveDefinite,
     as a failed factorization does. A solver that lags its factorizations
     (:class:`simfab.solve.linear.LagConfig`) is first asked for the lagged solve of A + mu U U^T
-    (conjugate gradients preconditioned with its current factorization and the same update)."""
+    (conjugate gradients preconditioned with its current factorization and the same update; far from
+    Newton's target at the shifted solves' forcing, LAG_RTOL_FAR)."""
 
     def __init__(self, solver, pin: Pin, target: float | None = None):
         self.solver, self.pin = solver, pin
@@ -125,8 +132,11 @@ class PinnedSolver:
             self._Uf = (free, self.pin.U[free])  # one array per free set: the solver reuses its half solve
         Uf = self._Uf[1]
         if hasattr(self.solver, "solve_free_lagged") and np.ndim(b) == 1:
-            atol = None if self.target is None else LAG_TARGET * self.target
-            x = self.solver.solve_free_lagged(A, free, b, Uf, self.pin.mu, atol)  # None: not lagged
+            atol = rtol = None
+            if self.target is not None:
+                atol = LAG_TARGET * self.target
+                rtol = None if np.abs(b).max() <= PCG_NEAR * self.target else LAG_RTOL_FAR
+            x = self.solver.solve_free_lagged(A, free, b, Uf, self.pin.mu, atol, rtol=rtol)  # None: not lagged
             if x is not None:
                 return x
         if not hasattr(self.solver, "solve_free_update"):
@@ -174,15 +184,24 @@ class PinnedSolver:
             z_full[free] = v
             return (A @ z_full)[free] + mu * (Uf @ (Uf.T @ v))
 
-        def M(r):  # the factorization of A + shift I is reused (same values)
-            return solver.solve_free_update(A, free, r, Uf, mu, shift)
+        if hasattr(solver, "solve_factored_update"):
+            def M(r):  # the factorization of A + shift I, as it is (no gather, no comparison of values)
+                return solver.solve_factored_update(r, Uf, mu)
+        else:
+            def M(r):  # the factorization of A + shift I is reused (same values)
+                return solver.solve_free_update(A, free, r, Uf, mu, shift)
 
         bn = float(np.linalg.norm(b))
         if bn == 0.0:
             return np.zeros_like(b)
         near = self.target is not None and np.abs(b).max() <= PCG_NEAR * self.target
         tol = PCG_TOL_NEAR if near else PCG_TOL
-        res = conjugate_gradients(K, M, b, z=z, max_iter=PCG_MAX_ITER, converged=lambda r, rn: rn <= tol * bn)
+        atol = np.inf if self.target is None else PCG_ATOL * self.target
+
+        def converged(r, rn):
+            return rn <= tol * bn or np.abs(r).max() <= atol
+
+        res = conjugate_gradients(K, M, b, z=z, max_iter=PCG_MAX_ITER, converged=converged)
         self.pcg_iterations += res.iterations
         if res.converged or res.residual <= PCG_TOL * bn:  # past PCG_MAX_ITER the PCG_TOL criterion alone
             return res.x

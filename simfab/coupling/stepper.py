@@ -243,7 +243,7 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                     # facets the warm start already pushes into O: refined before the solve (else
                     # Newton converges with them crossing and the step is solved again); frictionless
                     # runs only (with friction the refined set's history is part of the solution's)
-                    ahead = [] if frictional else warm_crossings(cm, x0, s_new, state)
+                    ahead = [] if frictional else warm_crossings(cm, x0, s_new, state, obj.known_distances(x0))
                     if ahead and rounds + 1 < C.MAX_REFINEMENT_ROUNDS:
                         rounds += 1
                         add_refinement(cm, state, ahead)

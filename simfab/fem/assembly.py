@@ -12,6 +12,8 @@ Dof numbering: vertex ``v``, axis ``a`` -> row ``v*dim + a``. Within a row, colu
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -112,8 +114,22 @@ class HessianPattern:
 
     # -- assembly ----------------------------------------------------------------------
     def matrix(self, data: np.ndarray) -> sp.csr_matrix:
-        """CSR matrix with this pattern and the given ``data`` (nnz,) (not copied)."""
-        return sp.csr_matrix((data, self.indices, self.indptr), shape=self.shape, copy=False)
+        """CSR matrix with this pattern and the given ``data`` (nnz,) (not copied).
+
+        Every such matrix of float64 values shares one set of index arrays (scipy's constructor
+        converts and checks them on each call, and a solver that sees the same arrays again knows
+        the pattern without comparing it); they must not be modified in place."""
+        data = np.asarray(data)
+        template = self.__dict__.get("_template")
+        if template is None:
+            template = sp.csr_matrix((np.zeros(self.nnz), self.indices, self.indptr), shape=self.shape)
+            template.has_canonical_format  # (computed once: sorted and unique, whatever the values)
+            self._template = template
+        if data.dtype != np.float64 or data.shape != (self.nnz,):
+            return sp.csr_matrix((data, self.indices, self.indptr), shape=self.shape, copy=False)
+        H = copy.copy(template)
+        H.data = data
+        return H
 
     def assemble(self, element_blocks: np.ndarray) -> sp.csr_matrix:
         """Assemble element blocks (m, (dim+1)*dim, (dim+1)*dim) into a CSR matrix of this pattern.

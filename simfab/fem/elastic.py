@@ -170,5 +170,5 @@ def det_and_von_mises(model, x) -> tuple[np.ndarray, np.ndarray]:
         (det F (m,) [-], von Mises stress (m,) [Pa]) (P2: the smallest det F and the largest stress over
         the quadrature points); +inf stress where det F <= 0.
     """
-    ws = launch(model, kernels(model), x, Launch.STRESS)
-    return ws.det_F.numpy().copy(), ws.von_mises.numpy().copy()
+    det, vm = launch(model, kernels(model), x, Launch.STRESS).stresses()
+    return det.copy(), vm.copy()

@@ -26,7 +26,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from simfab._parallel import submit
-from simfab._warp import RECORD_LOCK, wp
+from simfab._warp import RECORD_LOCK, Replay, wp
+
+try:  # the kernel of scipy's CSR @ vector (csr_matrix._matmul_vector)
+    from scipy.sparse import _sparsetools
+
+    _CSR_MATVEC = _sparsetools.csr_matvec
+except (ImportError, AttributeError):  # pragma: no cover - another scipy: the operator instead
+    _CSR_MATVEC = None
 
 
 class Launch(IntEnum):
@@ -95,6 +102,7 @@ class Workspace:
         self.grad = wp.zeros(m, dtype=kernels.grad_dtype[d], device=dev)
         # host arrays of the per-element outputs: on the CPU views of the Warp arrays' memory (no copy)
         self._host = (self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()) if self.cpu else None
+        self._host_vm = self.von_mises.numpy() if self.cpu else None
         self.hess = None  # element blocks (m, kd, kd), allocated on the first BLOCKS launch
         self.slots = None  # model.pattern.element_slots as int32, on the first HESSIAN launch
         self.csr: dict = {}  # (0: data / 1: data2, part) -> (warp array, numpy alias on the CPU or None)
@@ -180,8 +188,8 @@ class Workspace:
             else:
                 kernel, outputs = kern.stress, [self.det_F, self.von_mises]
             with RECORD_LOCK:  # the first launch loads the module: one thread at a time
-                cmds.append(wp.launch(kernel, dim=count, device=self.device, inputs=inputs, outputs=outputs,
-                                      record_cmd=True))
+                cmds.append(Replay(wp.launch(kernel, dim=count, device=self.device, inputs=inputs,
+                                              outputs=outputs, record_cmd=True)))
         cmds = self.commands[(what, mode)] = tuple(cmds)
         return cmds
 
@@ -192,16 +200,31 @@ class Workspace:
             return self._host
         return self.energy.numpy(), self.det_F.numpy(), self.grad.numpy()
 
+    def stresses(self) -> tuple[np.ndarray, np.ndarray]:
+        """(det F (m,), von Mises stress (m,)) of the last STRESS launch as host arrays (views on the
+        CPU: read before the next launch)."""
+        if self._host_vm is not None:
+            return self._host[1], self._host_vm
+        return self.det_F.numpy(), self.von_mises.numpy()
+
     def total_energy(self) -> float:
         """Sum of the element energies [J] of the last launch; +inf if any det F <= 0."""
         energy, det_F, _ = self.outputs()
-        if det_F.min() <= 0.0:
+        if np.minimum.reduce(det_F) <= 0.0:  # (ndarray.min / .sum without their Python wrappers)
             return float("inf")
-        return float(energy.sum())
+        return float(np.add.reduce(energy))
 
     def gradient(self) -> np.ndarray:
-        """The assembled nodal gradient (n, dim) [N] of the last GRADIENT / HESSIAN / BLOCKS launch."""
-        return (self.scatter @ self.outputs()[2].reshape(-1)).reshape(self.x_np.shape)
+        """The assembled nodal gradient (n, dim) [N] of the last GRADIENT / HESSIAN / BLOCKS launch
+        (scipy's CSR @ vector kernel called directly: the same sums, without the operator's dispatch)."""
+        v = self.outputs()[2].reshape(-1)
+        S = self.scatter
+        if _CSR_MATVEC is None or v.dtype != np.float64 or not v.flags.c_contiguous:
+            return (S @ v).reshape(self.x_np.shape)
+        m, n = S.shape
+        out = np.zeros(m)
+        _CSR_MATVEC(m, n, S.indptr, S.indices, S.data, v, out)
+        return out.reshape(self.x_np.shape)
 
 
 def launch(model, kernels: ElementKernels, x, what: Launch, mode: Hessian = Hessian.EXACT) -> Workspace:

@@ -6,9 +6,10 @@ per core as MKL PARDISO on them once its BLAS uses the machine's vector instruct
 :func:`import_cholmod`; ``tools/bench.py linear_solvers`` compares the libraries). The symbolic
 analysis (fill-reducing ordering) and the value map are kept and reused while the sparsity
 pattern is unchanged, which is the case across Newton iterations of one simulation; a matrix
-whose values equal those of the last factorization is not factorized again. Large systems can lag
-the factorization (:class:`LagConfig`): a new matrix is first solved by conjugate gradients
-preconditioned with the current factorization, and factorized only when that does not converge.
+whose values equal those of the last factorization is not factorized again. Large systems (and any
+once a pinned solve has needed a diagonal shift) can lag the factorization (:class:`LagConfig`): a
+new matrix is first solved by conjugate gradients preconditioned with the current factorization,
+and factorized only when that does not converge.
 
     solver = SPDSolver()
     x = solver.solve(A, b)      # A: scipy.sparse (n, n) SPD, b: (n,) or (n, k)
@@ -35,6 +36,9 @@ def import_cholmod():
     user has not chosen a kernel set (OPENBLAS_CORETYPE), the Haswell kernels are selected for
     that library: OpenBLAS reads the variable once, when cvxopt loads it, so it is set only
     around the first import and the process environment is left as it was."""
+    global _CHOLMOD
+    if _CHOLMOD is not None:
+        return _CHOLMOD
     import sys
 
     if "cvxopt" not in sys.modules and "OPENBLAS_CORETYPE" not in os.environ and has_avx2_fma():
@@ -45,7 +49,11 @@ def import_cholmod():
             del os.environ["OPENBLAS_CORETYPE"]
     import cvxopt.cholmod
 
-    return cvxopt.cholmod
+    _CHOLMOD = cvxopt.cholmod
+    return _CHOLMOD
+
+
+_CHOLMOD = None  # cvxopt.cholmod once imported (import_cholmod runs on every factorization and solve)
 
 
 def has_avx2_fma() -> bool:
@@ -87,11 +95,15 @@ class LagConfig:
     the matrix factorized (and solved directly). A curvature p^T A p <= 0 met by the iterations
     proves the matrix indefinite and raises :class:`NotPositiveDefinite`, as a failed factorization
     does. Below ``min_unknowns`` (where a factorization costs few triangular solves) every new
-    matrix is factorized."""
+    matrix is factorized, unless ``when_shifted`` and the solver's ``shift_hint`` is set: a pinned
+    solve (:class:`simfab.coupling.rigid.PinnedSolver`) has needed a diagonal shift, so every solve is
+    already conjugate gradients preconditioned by a factorization that is not the matrix's own, and an
+    older one serves nearly as well."""
 
     min_unknowns: int = 50_000
     rtol: float = 1e-6
     max_iter: int = 12
+    when_shifted: bool = True
 
     def __post_init__(self):
         bad = [k for k, ok in {"min_unknowns": self.min_unknowns >= 0, "rtol": 0.0 < self.rtol < 1.0,
@@ -225,7 +237,6 @@ class SPDSolver:
         self._full = None
         self._diag = None  # positions of the diagonal entries in the factor's input (values) order
         self._update = None  # solve_free_update: (factor values, U, mu, L^-1 P U, D^-1 L^-1 P U, capacitance)
-        self._upper = None  # (indptr, indices, rows of the diagonal entries): the factor input as upper-CSR
         self.timer = None
         self.factorizations = 0
         self.lagged_solves = 0
@@ -284,21 +295,50 @@ class SPDSolver:
             return (y - Z @ np.linalg.solve(np.eye(U.shape[1]) / mu + U.T @ Z, U.T @ y)).reshape(b.shape)
         return self._woodbury(b, U, mu)
 
+    def solve_factored_update(self, b: np.ndarray, U: np.ndarray, mu: float) -> np.ndarray:
+        """Solve ``(F + mu U U^T) x = b`` with F the matrix of the current factorization (the last
+        :meth:`solve_free_update`'s block with its shift, or :meth:`solve_free`'s): no gather of values,
+        no comparison with the factorized ones (an iterative solve's preconditioner, applied many times
+        per factorization). With CHOLMOD the half solve of U is reused while U and the factor are the same.
+
+        Args:
+            b: (m,) or (m, k) right-hand side.
+            U: (m, r) dense update columns.
+            mu: the update's weight > 0 [units of F].
+
+        Returns:
+            x shaped like b. Raises RuntimeError when nothing has been factorized yet.
+        """
+        b = np.asarray(b, dtype=np.float64)
+        if self.backend == "splu":
+            if self._lu is None:
+                raise RuntimeError("solve_factored_update: no factorization yet")
+            k = 1 if b.ndim == 1 else b.shape[1]
+            X = self._lu.solve(np.column_stack([b.reshape(len(b), k), U]))
+            y, Z = X[:, :k], X[:, k:]
+            return (y - Z @ np.linalg.solve(np.eye(U.shape[1]) / mu + U.T @ Z, U.T @ y)).reshape(b.shape)
+        if self._factored is None:
+            raise RuntimeError("solve_factored_update: no factorization yet")
+        return self._woodbury(b, np.asarray(U, dtype=np.float64), mu)
+
     def solve_free_lagged(self, A: sp.spmatrix, free: np.ndarray, b: np.ndarray, U: np.ndarray | None = None,
-                          mu: float = 0.0, atol: float | None = None) -> np.ndarray | None:
+                          mu: float = 0.0, atol: float | None = None, rtol: float | None = None) -> np.ndarray | None:
         """The lagged solve of ``(A[free][:, free] + mu U U^T) x = b`` (see :class:`LagConfig`; U (m, r)
         dense or None, mu [units of A], b (m,)): conjugate gradients preconditioned with the current
-        factorization (with U's Woodbury update when U is given), to ``LagConfig.rtol`` or until the
-        residual's largest entry is at most ``atol`` [units of b] (None: rtol only; e.g. a fraction of
-        Newton's force target, below which the residual cannot matter). Returns x, or None when the solve
-        is not lagged (no lag configured, too few unknowns, no factorization of this pattern and
-        free set yet, b with several columns) or the iterations did not converge: the caller then
-        factorizes. A matrix equal to the factorized one is solved directly.
+        factorization (with U's Woodbury update when U is given), to ``rtol`` (None: ``LagConfig.rtol``;
+        e.g. an inexact-Newton forcing term far from the target) or until the residual's largest entry
+        is at most ``atol`` [units of b] (None: rtol only; e.g. a fraction of Newton's force target,
+        below which the residual cannot matter). Returns x, or None when the solve is not lagged (no lag
+        configured, too few unknowns and no shift, no factorization of this pattern and free set yet, b
+        with several columns) or the iterations did not converge: the caller then factorizes. A matrix
+        equal to the factorized one is solved directly.
         Raises :class:`NotPositiveDefinite` when the iterations meet negative curvature."""
         lag = self.lag
         free = np.asarray(free)
         b = np.asarray(b, dtype=np.float64)
-        if lag is None or b.ndim != 1 or len(free) < lag.min_unknowns or self._factored is None:
+        if lag is None or b.ndim != 1 or self._factored is None:
+            return None
+        if len(free) < lag.min_unknowns and not (lag.when_shifted and self.shift_hint):
             return None
         A, known = self._analysed(A, free)
         if not known:
@@ -314,24 +354,22 @@ class SPDSolver:
                 return self._woodbury(r, U, mu)
         if np.array_equal(values, self._factored):
             return precondition(b)
-        x = self._pcg(values, b, precondition, U, mu, atol)
+        x = self._pcg(A, free, b, precondition, U, mu, atol, lag.rtol if rtol is None else rtol)
         if x is not None:
             self.lagged_solves += 1
         return x
 
-    def _pcg(self, values: np.ndarray, b: np.ndarray, precondition, U: np.ndarray | None, mu: float,
-             atol: float | None):
-        """Conjugate gradients on (K + mu U U^T) x = b, K the symmetric matrix with the factor input
-        ``values``; None when not converged in ``lag.max_iter`` iterations."""
-        indptr, indices, diag_rows = self._upper
+    def _pcg(self, A: sp.csr_matrix, free: np.ndarray, b: np.ndarray, precondition, U: np.ndarray | None,
+             mu: float, atol: float | None, rtol: float):
+        """Conjugate gradients on (A[free][:, free] + mu U U^T) x = b (A the whole CSR: its product with
+        a vector zero off ``free``, no submatrix or transpose built); None when not converged in
+        ``lag.max_iter`` iterations."""
         n = len(b)
-        K = sp.csr_matrix((values, indices, indptr), shape=(n, n))  # the upper triangle
-        Kt = K.T.tocsr()
-        d = np.zeros(n)
-        d[diag_rows] = values[self._diag]
+        v_full = np.zeros(A.shape[0])
 
         def apply(v):
-            y = K @ v + Kt @ v - d * v
+            v_full[free] = v
+            y = (A @ v_full)[free]
             if U is not None:
                 y += mu * (U @ (U.T @ v))
             return y
@@ -339,7 +377,7 @@ class SPDSolver:
         bn = float(np.linalg.norm(b))
         if bn == 0.0:
             return np.zeros(n)
-        tol = self.lag.rtol * bn
+        tol = rtol * bn
         reach = max(tol, atol or 0.0)  # a 2-norm that meets either criterion
 
         def converged(r, rn):
@@ -467,7 +505,7 @@ class SPDSolver:
         inv_d = cvxopt.matrix(1.0, (self._A.size[0], 1))
         cholmod.solve(self._F, inv_d, sys=6)  # D^-1 1 (D = I for L L^T)
         inv_d = np.array(inv_d)
-        if not (np.all(np.isfinite(inv_d)) and inv_d.min(initial=np.inf) > 0.0):
+        if not (np.count_nonzero(np.isfinite(inv_d)) == inv_d.size and inv_d.min(initial=np.inf) > 0.0):
             raise NotPositiveDefinite("Cholesky factorization failed: matrix is not positive definite")
         self._inv_d = inv_d  # (n, 1) D^-1 of the factor (ones for L L^T), for solve_free_update
 
@@ -483,8 +521,6 @@ class SPDSolver:
         self._perm = np.flatnonzero(cols >= rows)
         c, r = rows[self._perm], cols[self._perm]
         self._diag = np.flatnonzero(c == r)  # the diagonal's entries in the factor's input order
-        # the factor's input as the upper triangle in CSR (row c, column r): lagged solves' products
-        self._upper = (np.concatenate([[0], np.cumsum(np.bincount(c, minlength=n))]), r, c[self._diag])
         cholmod = import_cholmod()
         import cvxopt
 

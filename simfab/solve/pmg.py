@@ -294,7 +294,7 @@ class MultigridSolver(SPDSolver):
         finally:
             self._direct = False
 
-    def solve_free_lagged(self, A, free, b, U=None, mu=0.0, atol=None):
+    def solve_free_lagged(self, A, free, b, U=None, mu=0.0, atol=None, rtol=None):
         """As :meth:`SPDSolver.solve_free_lagged` (the same arguments), with the p-multigrid solve in
         the order of their cost: a lagged solve on the current factorization first (a triangular
         solve per iteration), unless the last one on this factorization did not converge; then
@@ -303,7 +303,7 @@ class MultigridSolver(SPDSolver):
             return None
         if self._lag_failed != self.factorizations:
             tried = self.pcg_iterations
-            x = super().solve_free_lagged(A, free, b, U, mu, atol)
+            x = super().solve_free_lagged(A, free, b, U, mu, atol, rtol)
             if x is not None:
                 return x
             if self.pcg_iterations > tried:  # iterated without converging

@@ -119,3 +119,37 @@ def test_torus_plugin_geom_is_an_exact_torus(tmp_path):
     mesh = sc.body_meshes()["object"]  # world frame: the body sits at x = 1 mm
     v = mesh.vertices - [0.001 + R, 0, 0]
     assert np.allclose(np.hypot(np.hypot(v[:, 0], v[:, 2]) - R, v[:, 1]), r, atol=1e-9)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("turned", [False, True])
+def test_single_primitive_evaluation_matches_the_union_route(dim, turned):
+    """A field of one primitive takes its own route (the pose as given, the body frame padded in
+    place, no world rotation for an unrotated O, the box's sign and inside tests in one call each);
+    the union route transforms every frame separately. A second box far away (never the largest
+    psi) makes the same field go through the union route: both give the same psi, gradient and
+    Hessian, at points outside, on the faces and inside the box, for an unrotated and a turned O."""
+    rng = np.random.default_rng(7 + dim + 2 * turned)
+    Q = Rotation.from_euler("z", 0.52).as_matrix()  # (a 2D section needs the box's z axis kept)
+    box = Primitive(kind="box", size=(0.01, 0.004, 0.007 if dim == 3 else np.inf),
+                    centre=np.array([0.001, -0.002, 0.0]), rotation=Q)
+    far = Primitive(kind="box", size=(0.001, 0.001, 0.001), centre=np.array([5.0, 5.0, 0.0]), rotation=np.eye(3))
+    one = PrimitiveField(primitives=(box,), dim=dim, vertices=np.zeros((1, dim)), normals=np.zeros((1, dim)),
+                         sigma=1e-4)
+    two = PrimitiveField(primitives=(box, far), dim=dim, vertices=np.zeros((1, dim)), normals=np.zeros((1, dim)),
+                         sigma=1e-4)
+    R = Rotation.from_euler("z", 0.3).as_matrix() if turned else np.eye(3)
+    pose = (R, np.array([0.003, 0.001, 0.0]))
+    # world points: around the box, inside it, and on its faces (local |q_x| = e_x)
+    local = rng.uniform(-0.02, 0.02, (200, 3)) * np.array([1, 1, dim == 3])
+    local = np.vstack([local, rng.uniform(-0.003, 0.003, (20, 3)) * np.array([1, 1, dim == 3]),
+                       np.c_[np.full(10, 0.01), rng.uniform(-0.003, 0.003, (10, 2)) * np.array([1, dim == 3])]])
+    world = ((local @ Q.T + box.centre) @ R.T + pose[1])[:, :dim]
+    for hessian in (False, True):
+        a = one.evaluate(world, pose, hessian=hessian, hessian_band=0.004)
+        b = two.evaluate(world, pose, hessian=hessian, hessian_band=0.004)
+        assert (a.psi > 0).sum() >= 20  # points inside are tested
+        np.testing.assert_allclose(a.psi, b.psi, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(a.grad, b.grad, rtol=0, atol=1e-13)
+        np.testing.assert_allclose(a.hess, b.hess, rtol=0, atol=1e-9)  # [1/m]: |hess| up to ~1e3
+        assert a.near.all() and a.grad.shape == (len(world), dim) and a.hess.shape == (len(world), dim, dim)

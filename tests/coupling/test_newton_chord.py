@@ -93,6 +93,25 @@ def test_pinned_solver_solves_a_hessian_indefinite_along_the_pin():
     assert solver.factorizations == before  # the same values: the shifted factor is reused
 
 
+def test_pinned_solver_near_the_target_leaves_a_residual_below_a_fraction_of_it():
+    # Newton's last steps (right-hand side within PCG_NEAR of the force target t): the shifted solve's
+    # residual must not keep Newton from t, |K x - b|_inf <= PCG_ATOL t (the step then lands within
+    # ~PCG_ATOL t of the quadratic model's minimizer); far from t, the relative PCG_TOL is enough
+    n = 60
+    K = _stiff_chain(n).toarray()
+    w, V = np.linalg.eigh(K)
+    U = V[:, :2]
+    A = sp.csr_matrix(K - U @ np.diag(w[:2] + 5e-6) @ U.T)
+    mu = float(np.abs(K.diagonal()).mean())
+    Kp = A.toarray() + mu * U @ U.T
+    b = np.random.default_rng(2).standard_normal(n)
+    for target in (np.abs(b).max() / 50.0, np.abs(b).max() / 5.0):
+        ps = rigid.PinnedSolver(SPDSolver(), rigid.Pin(U, mu, np.zeros(n)), target=target)
+        x = ps.solve_free(A, np.arange(n), b)
+        r = Kp @ x - b
+        assert np.abs(r).max() <= rigid.PCG_ATOL * target or np.linalg.norm(r) <= rigid.PCG_TOL_NEAR * np.linalg.norm(b)
+
+
 def test_pinned_solver_refuses_a_hessian_indefinite_outside_the_pin():
     n = 60
     K = _stiff_chain(n).toarray()

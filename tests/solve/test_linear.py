@@ -283,6 +283,50 @@ def test_lagging_falls_back_to_a_factorization_and_respects_its_size_threshold()
     assert small.factorizations == 2 and small.pcg_iterations == 0
 
 
+def test_lagging_below_the_size_threshold_once_a_pinned_solve_needed_its_shift():
+    # LagConfig.when_shifted: below min_unknowns a solver lags only after a pinned solve has set its
+    # shift_hint (every solve is then conjugate gradients on a factorization that is not the matrix's
+    # own); the lagged solve at an explicit rtol reaches that relative residual
+    A0, A1, free, rng = _free_system(seed=4)
+    m = len(free)
+    U = np.linalg.qr(rng.standard_normal((m, 3)))[0]
+    mu, b = 2.0, rng.standard_normal(m)
+    K = A1.toarray()[np.ix_(free, free)] + mu * U @ U.T
+    for hint, lags in ((0.0, False), (1e-7, True)):
+        solver = SPDSolver(lag=LagConfig(min_unknowns=m + 1, max_iter=30))
+        solver.shift_hint = hint
+        solver.solve_free_update(A0, free, b, U, mu)
+        x = solver.solve_free_lagged(A1, free, b, U, mu, rtol=1e-6)
+        assert (x is not None) == lags
+        if lags:
+            assert np.linalg.norm(K @ x - b) <= 1e-6 * np.linalg.norm(b) and solver.factorizations == 1
+    off = SPDSolver(lag=LagConfig(min_unknowns=m + 1, when_shifted=False))
+    off.shift_hint = 1e-7
+    off.solve_free_update(A0, free, b, U, mu)
+    assert off.solve_free_lagged(A1, free, b, U, mu) is None
+
+
+@pytest.mark.parametrize("backend", ["cholmod", "splu"])
+def test_solve_factored_update_reuses_the_current_factorization(backend):
+    # the preconditioner of the pinned solve's conjugate gradients: (F + mu U U^T)^-1 b with F the
+    # last factorized block (its shift included), no new factorization; against a dense solve
+    rng = np.random.default_rng(9)
+    A = _laplacian_2d(8)
+    free = np.arange(4, A.shape[0])
+    U, mu = _woodbury_case(A, free, rng)
+    shift = 0.3
+    solver = SPDSolver(backend)
+    with pytest.raises(RuntimeError):
+        solver.solve_factored_update(np.ones(len(free)), U, mu)
+    solver.solve_free_update(A, free, np.ones(len(free)), U, mu, shift)
+    done = solver.factorizations
+    dense = A.toarray()[np.ix_(free, free)] + shift * np.eye(len(free)) + mu * U @ U.T
+    b = rng.standard_normal(len(free))
+    x = solver.solve_factored_update(b, U, mu)
+    np.testing.assert_allclose(x, np.linalg.solve(dense, b), rtol=1e-10, atol=1e-12 * np.abs(x).max())
+    assert solver.factorizations == done
+
+
 def test_lagged_solve_of_an_indefinite_matrix_raises():
     # the exact-first Newton step relies on NotPositiveDefinite for an indefinite Hessian; the lagged
     # path meets negative curvature in the iterations (a matrix with eigenvalue -1 along b's largest
