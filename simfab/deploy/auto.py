@@ -64,7 +64,7 @@ SEAM_SIZES = 1
 #: height drift: the point weight is 0 there, :func:`point_weight`); it stops at the bound (RMS 0.75 % of
 #: the diameter, three quarters of the deployment bound, and the height within 2 %, two thirds of its bound;
 #: both measured as the run's deviation is: a margin, not a second goal - each step past the bound costs an
-#: equilibrium per trial for a figure the bound does not ask for), when a step gains < 2 %, or after 8 steps.
+#: equilibrium per trial for a figure the bound does not ask for), when two steps in a row gain < 2 %, or after 8 steps.
 #: Its budget is counted in steps, not seconds, so that the same input gives the same pattern on any machine and load
 #: (``[tune] seconds`` sets a wall-clock budget too).
 AUTO_TUNE = dict(iterations=8, point_weight=3.0, escalations=2, target_rms=0.0075, target_height=0.02, min_gain=0.02,

@@ -57,6 +57,9 @@ RESTART_BACK = 2
 #: "Deployment tuning: rejecting a trial early"); an accepted trial is always a converged solve
 FIT_CHECK_ITERATIONS = 10
 EARLY_REJECT_MARGIN = 0.05
+#: consecutive steps each gaining less than ``min_gain`` that stop the tuning (progress stalled): one short
+#: step is often the damping adapting, with long ones after it (docs/validation/deploy.md)
+STALL_STEPS = 2
 HEIGHT_SMOOTHING = 0.003  # the height row's smoothing tau, relative to the target points' height
 
 
@@ -72,8 +75,8 @@ class TuneConfig:
     halvings all fail to lower E is retried with mu x ``ESCALATION_FACTOR`` (a shorter step turned
     towards the gradient) before the tuning stops (0: stop at the first such step). Stops, each 0
     for none: target_rms [-]: the RMS distance of the deployed vertices to the surface over the
-    target's diameter at which the tuning stops (the bound is met); min_gain [-]: it stops when a
-    step lowers the objective by less than this fraction (progress stalls); seconds: the time budget
+    target's diameter at which the tuning stops (the bound is met); min_gain [-]: it stops when
+    ``STALL_STEPS`` steps in a row each lower the objective by less than this fraction (progress stalls); seconds: the time budget
     (no step starts after it). The bound is measured as the deployment's deviation is (the RMS distance
     after the alignment to the surface alone, :func:`simfab.deploy.compare.deviation`), not by the
     tuning's own objective; target_height [-]: with ``target_rms``, the bound is met only once the
@@ -458,7 +461,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
     t0 = time.perf_counter()
     fit = _fit(dep.vertex_positions(), Y, target, cfg)
     hist, phist = [fit.plane_rms], [fit.point_rms]
-    steps = solves = abandoned = early = newton = last = 0
+    steps = solves = abandoned = early = newton = last = slow = 0
     stop = "iterations"
     for _ in range(cfg.iterations):
         if bound_met(pat, dep, Y, target, cfg):
@@ -515,7 +518,8 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
         hist.append(fit.plane_rms)
         phist.append(fit.point_rms)
         steps += 1
-        if cfg.min_gain and gain < cfg.min_gain:
+        slow = slow + 1 if cfg.min_gain and gain < cfg.min_gain else 0
+        if slow >= STALL_STEPS:
             stop = "progress stalled"
             break
     if stop == "iterations" and bound_met(pat, dep, Y, target, cfg):

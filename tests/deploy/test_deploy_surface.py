@@ -397,6 +397,22 @@ def test_tuning_stops_at_the_bound_measured_as_the_runs_deviation(small_dome):
     assert not tuning.bound_met(pat, dep, Y, tgt, tight)
 
 
+def test_tuning_stalls_only_after_consecutive_short_steps(small_dome):
+    """``min_gain`` stops the tuning ("progress stalled") once ``STALL_STEPS`` consecutive steps each gain
+    less than it, not at the first (one short step is often the damping adapting): with a gain no step
+    reaches it takes exactly that many steps (the first rule stopped after one); without it, the same steps."""
+    from simfab.deploy import tuning
+
+    pat, net, dep, cfg, Y = small_dome
+    tgt = surface.spherical_cap(0.1, np.radians(50), 10)
+    n = tuning.STALL_STEPS
+    res = tuning.tune_pattern(pat, net, dep, Y, tgt, tuning.TuneConfig(iterations=n, point_weight=1.0,
+                                                                       min_gain=0.999), cfg)
+    assert tuning.STALL_STEPS >= 2 and res.steps == tuning.STALL_STEPS and res.stop == "progress stalled"
+    free = tuning.tune_pattern(pat, net, dep, Y, tgt, tuning.TuneConfig(iterations=n, point_weight=1.0), cfg)
+    assert free.steps == n and free.stop == "iterations"
+    assert free.rms_history[:n] == res.rms_history[:n]  # the same steps up to the stop
+
 def test_damping_escalation_only_acts_on_a_rejected_step(small_dome):
     """``escalations`` retries a rejected step with a larger damping; a step accepted at the first
     damping is the same with or without it (gaps to round-off), and with it the objective still
