@@ -65,26 +65,24 @@ HEIGHT_SMOOTHING = 0.003  # the height row's smoothing tau, relative to the targ
 
 @dataclass(frozen=True, kw_only=True)
 class TuneConfig:
-    """Scene ``[tune]`` table. iterations: Gauss-Newton steps (0: no tuning); damping [-]:
-    Levenberg-Marquardt mu relative to the largest diagonal of J^T J; point_weight [-]: w, the
-    weight of the point-to-point residual towards each vertex's own target point against the
-    distance to the surface (0: fit the surface only; at w = 1 a vertex 1 mm from its own target
-    point weighs as much as one 1 mm off the surface). The point term also pulls on tangential
-    offsets the gaps cannot remove (a network whose deployed metric is off along the surface), so
-    it is a per-scene choice (scenes/deploy/README.md). escalations: how many times a step whose
-    halvings all fail to lower E is retried with mu x ``ESCALATION_FACTOR`` (a shorter step turned
-    towards the gradient) before the tuning stops (0: stop at the first such step). Stops, each 0
-    for none: target_rms [-]: the RMS distance of the deployed vertices to the surface over the
-    target's diameter at which the tuning stops (the bound is met); min_gain [-]: it stops when
-    ``STALL_STEPS`` steps in a row each lower the objective by less than this fraction (progress stalls); seconds: the time budget
-    (no step starts after it). The bound is measured as the deployment's deviation is (the RMS distance
-    after the alignment to the surface alone, :func:`simfab.deploy.compare.deviation`), not by the
-    tuning's own objective; target_height [-]: with ``target_rms``, the bound is met only once the
-    deployed out-of-plane height is also within this fraction of the target's (0: not checked);
-    height_weight [-]: w_h, the weight of the height row (the deployed out-of-plane extent against the
-    target's, beyond ``target_height`` of it): at w_h = 1 a height 1 mm beyond that weighs as much as
-    every vertex 1 mm off the surface (0: no height row; the surface distance alone leaves the height
-    free where the shape can bend within it)."""
+    """Scene ``[tune]`` table. iterations: Gauss-Newton steps (0: no tuning); damping [-]: Levenberg-Marquardt mu
+    relative to the largest diagonal of J^T J; point_weight [-]: w, the weight of the point-to-point residual
+    towards each vertex's own target point against the distance to the surface (0: fit the surface only; at w =
+    1 a vertex 1 mm from its own target point weighs as much as one 1 mm off the surface). The point term also
+    pulls on tangential offsets the gaps cannot remove (a network whose deployed metric is off along the
+    surface), so it is a per-scene choice (scenes/deploy/README.md). escalations: how many times a step whose
+    halvings all fail to lower E is retried with mu x ``ESCALATION_FACTOR`` (a shorter step turned towards the
+    gradient) before the tuning stops (0: stop at the first such step). Stops, each 0 for none: target_rms [-]:
+    the RMS distance of the deployed vertices to the surface over the target's diameter at which the tuning
+    stops (the bound is met); min_gain [-]: it stops when ``STALL_STEPS`` steps in a row each lower the
+    objective by less than this fraction (progress stalls); seconds: the time budget (no step starts after it).
+    The bound is measured as the deployment's deviation is (the RMS distance after the alignment to the surface
+    alone, :func:`simfab.deploy.compare.deviation`), not by the tuning's own objective; target_height [-]: with
+    ``target_rms``, the bound is met only once the deployed out-of-plane height is also within this fraction of
+    the target's (0: not checked); height_weight [-]: w_h, the weight of the height row (the deployed
+    out-of-plane extent against the target's, beyond ``target_height`` of it): at w_h = 1 a height 1 mm beyond
+    that weighs as much as every vertex 1 mm off the surface (0: no height row; the surface distance alone
+    leaves the height free where the shape can bend within it)."""
 
     iterations: int = 0
     damping: float = 1e-3
