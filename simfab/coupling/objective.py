@@ -83,6 +83,11 @@ class StepObjective:
         # reused from the line-search trial at the same positions (_fem: (x, E, gradient))
         self.lazy_exact = cm.fem.element_order == 2
         self._fem = None
+        # ... except at a solve's start when Newton will offer the exact Hessian (set by solve for
+        # that one evaluation): one Hessian launch gives the energy and gradient too (bit for bit those
+        # of the gradient launch), instead of a gradient launch now and a Hessian launch at the first
+        # Newton direction
+        self.eager_exact = False
 
     def distances(self, x: np.ndarray, hessian: bool, anchor: bool | None = None):
         """Distances of the constraint points to O: exact near O, lower bounds (zero derivatives) for points
@@ -176,10 +181,14 @@ class StepObjective:
         H_exact = None
         with self.timer.timed("assembly"):
             H = None
+            H_fem = None  # the exact FEM Hessian assembled now for a LazyHessian (eager_exact)
             if need_hessian and not self.lazy_exact:
                 # exact Hessian only (half the cost of the eigen-projected one); the projected one is
                 # assembled on demand, when the exact one turns out indefinite (see LazyHessian)
                 E, g, H_exact = energy_gradient_hessian(cm.fem, x, project_psd=False)
+            elif need_hessian and self.eager_exact:
+                E, g, H_fem = energy_gradient_hessian(cm.fem, x, project_psd=False)
+                self._fem = (xf.copy(), E, g)
             else:
                 E, g = self._fem_value(xf, x)
         if self.pin is not None:
@@ -202,7 +211,7 @@ class StepObjective:
                 contact = (act, Hy, Hf)
                 if self.lazy_exact:
                     xc = x.copy()
-                    H_exact, H = LazyHessian(self, xc, contact, psd=False), LazyHessian(self, xc, contact)
+                    H_exact, H = LazyHessian(self, xc, contact, psd=False, fem=H_fem), LazyHessian(self, xc, contact)
                 elif H_exact is not None:
                     self.add_contact(H_exact, contact, psd=False)
                     H = LazyHessian(self, x.copy(), contact)
@@ -386,16 +395,21 @@ class LazyHessian:
         contact: (active points, exact barrier blocks, friction blocks) as found with the exact Hessian,
             or None to evaluate the distances at x again (deterministic: the same blocks).
         psd: the PSD-projected Hessian (else the exact one).
+        fem: the FEM Hessian at x of that kind, already assembled (the contact blocks are added on
+            the call), or None.
     """
 
-    def __init__(self, obj, x, contact, psd: bool = True):
+    def __init__(self, obj, x, contact, psd: bool = True, fem=None):
         self.obj, self.x, self.contact, self.H, self.psd = obj, x, contact, None, psd
+        self._fem = fem
 
     def __call__(self):
         if self.H is None:
             obj = self.obj
-            with obj.timer.timed("assembly"):
-                _, _, H = energy_gradient_hessian(obj.cm.fem, self.x, project_psd=self.psd)
+            H, self._fem = self._fem, None
+            if H is None:
+                with obj.timer.timed("assembly"):
+                    _, _, H = energy_gradient_hessian(obj.cm.fem, self.x, project_psd=self.psd)
             if isinstance(self.contact, _DeferredHessian):
                 self.contact = self.contact.contact()[:3]
             if self.contact is None:
@@ -518,14 +532,19 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     Returns:
         (x (n, dim) [m], Newton iterations).
     """
-    _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
+    exact_first = not (obj.lazy_exact and ctx.exact_failed)
+    obj.eager_exact = exact_first  # (P2: the start's exact Hessian assembled with its gradient)
+    try:
+        _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
+    finally:
+        obj.eager_exact = False
     obj.defer_hessian = True  # (the start's Hessian is wanted unless x0 already converged: assembled now)
     g0n = float(np.abs(g0[cm.free]).max()) if cm.free.any() else 0.0
     scale = max(C.NEWTON_GRAD_TOL_REL * cm.force_scale, C.NEWTON_GRAD_TOL_START * g0n, floor)
     opts = NewtonConfig(max_iter=C.NEWTON_MAX_ITER, grad_tol=1.0, grad_scale=scale,
                          step_tol=C.NEWTON_STEP_TOL_REL, x_scale=cm.h, eager_hessian=cm.fem.element_order == 1,
                          eager_above_tol=C.NEWTON_EAGER_ABOVE_TOL, retry_exact=False,
-                         exact_first=not (obj.lazy_exact and ctx.exact_failed),
+                         exact_first=exact_first,
                          chord_within=C.NEWTON_CHORD_WITHIN)
     solver = TimedSolver(pinned(ctx.solver, obj.pin, target=scale), ctx.timer)
     res = minimize(obj, x0.ravel(), free=cm.free, options=opts, max_step=obj.max_step, solver=solver)
