@@ -447,6 +447,19 @@ class TunedPattern:
     newton_iterations: int = 0
 
 
+@dataclass(frozen=True)
+class _Step:
+    """One accepted tuning step of :func:`tune_pattern`: its escalation k, the tuning, the re-cut
+    pattern, its network, deployment and fit."""
+
+    k: int
+    tuned: Tuning
+    pattern: object
+    network: object
+    deployment: object
+    fit: Fit
+
+
 def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_cfg, *, ties=None,
                  device: str = "cpu") -> TunedPattern:
     """Up to ``cfg.iterations`` Gauss-Newton steps (:func:`tune`, one at a time), each followed by
@@ -470,7 +483,7 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
             break
         def attempt(check: bool):
             """One tuning step (its re-cut escalated at mu x 10 when it does not lower E): the accepted
-            (k, tuning, pattern, network, deployment, fit), or None; adds to the run's counts."""
+            :class:`_Step`, or None; adds to the run's counts."""
             nonlocal solves, abandoned, early, newton
             for k in range(cfg.escalations + 1):
                 one = dataclasses.replace(cfg, iterations=1, damping=cfg.damping * ESCALATION_FACTOR**k,
@@ -495,24 +508,24 @@ def tune_pattern(pat, net, dep, Y: np.ndarray, target, cfg: TuneConfig, deploy_c
                 newton += dep2.iterations[-1]
                 fit2 = _fit(dep2.vertex_positions(), Y, target, cfg)
                 if fit2.cost < fit.cost:
-                    return k, tuned, pat2, net2, dep2, fit2
+                    return _Step(k, tuned, pat2, net2, dep2, fit2)
             return None
 
         got = attempt(True)
         # the tuning stalls only on trials solved to equilibrium: a step that gained too little after
         # rejecting longer trials early by their fit check is searched again without it (a step that
         # found nothing is, within :func:`tune`)
-        if got is not None and got[1].rejected_early and cfg.min_gain and 1.0 - got[5].cost / fit.cost < cfg.min_gain:
+        short = got is not None and cfg.min_gain and 1.0 - got.fit.cost / fit.cost < cfg.min_gain
+        if short and got.tuned.rejected_early:
             full = attempt(False)
-            if full is not None and full[5].cost < got[5].cost:
+            if full is not None and full.fit.cost < got.fit.cost:
                 got = full
         if got is None:
             stop = "no step lowers the objective"
             break
-        k, tuned, pat2, net2, dep2, fit2 = got
-        last = HALVINGS * k + tuned.trial
-        gain = 1.0 - fit2.cost / fit.cost if fit.cost > 0 else 0.0
-        pat, net, dep, fit = pat2, net2, dep2, fit2
+        last = HALVINGS * got.k + got.tuned.trial
+        gain = 1.0 - got.fit.cost / fit.cost if fit.cost > 0 else 0.0
+        pat, net, dep, fit = got.pattern, got.network, got.deployment, got.fit
         hist.append(fit.plane_rms)
         phist.append(fit.point_rms)
         steps += 1
