@@ -32,6 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simfab.errors import InputError
+
 CELLS = 64  # cells aimed at over the surface
 CURVATURE_SPACING = 0.25  # h <= this / sqrt(median |K|) [-]
 SPACING_RANGE = (0.02, 0.08)  # [m]
@@ -45,6 +47,9 @@ MAX_SIZES = 3  # insert sizes in a catalogue
 SIZE_STEP = 0.0005  # catalogue sizes rounded to this [m]
 MARGIN = 0.0005  # gap margin kept from either achievable limit [m] (layouts' edges differ from h)
 MAX_CONES = 8
+#: the largest cell growth e^{-u} of the uncut flattening a target may ask for (cones take a steep cap's ~2x
+#: to the springs' reach); beyond it the mesh has a spike or fold and is refused before any heavy work
+MAX_PLAUSIBLE_GROWTH = 50.0
 #: the share of the (cut) flat domain a decided layout covers at least: a conforming layout below it (a
 #: narrow outline its grid core cannot follow) is replaced by the mesh layout (:func:`simfab.deploy.pipeline.run`)
 MIN_COVERED = 0.99
@@ -196,6 +201,11 @@ def complete(scene, given: dict):
     d0 = 0.5 * h * np.expm1(-f.u[interior])
     _, left0 = catalogue(d0, h, pc, min_insert=min_insert)
     growth0 = float(np.exp(-f.u.min()))
+    if growth0 > MAX_PLAUSIBLE_GROWTH:  # a spike or fold of the mesh, not a surface a pattern can follow
+        v = int(np.argmin(f.u))
+        raise InputError(f"the flattening grows the cells at vertex {v} ({', '.join(f'{c:.4g}' for c in tgt.V[v])} m) "
+                         f"by {growth0:.3g}x (a spike or fold in the mesh?): no pattern deploys beyond "
+                         f"{MAX_PLAUSIBLE_GROWTH:g}x", where=getattr(scene, "path", "target"))
     needs = left0 > 0 or growth0 > cc.max_growth
     if "max_cones" not in gc and needs:
         cc = dataclasses.replace(cc, max_cones=MAX_CONES, **({} if "join_seams" in gc else {"join_seams": True}))

@@ -347,6 +347,23 @@ def test_a_conforming_layout_leaving_the_outline_uncovered_becomes_the_mesh_layo
     kept = D.run(str(tmp_path / "s.toml"), mujoco_check=False, tune=0)
     assert kept.summary["layout"] == "conforming"
 
+
+def test_a_mesh_with_a_spike_is_refused_before_the_deployment(tmp_path):
+    """A dome whose apex vertex is pulled down to the base plane (a spike: the flattening grows its cells
+    thousands of times) is refused on load naming the file and the vertex, instead of failing in the
+    deployment's Newton solve; the same dome without the spike loads."""
+    from simfab.errors import InputError
+
+    t = families.member("cap50-R150@12")
+    V = t.V.copy()
+    top = int(np.argmax(V[:, 2]))
+    trimesh.Trimesh(V, t.F, process=False).export(tmp_path / "ok.obj")
+    assert load_deploy_scene(tmp_path / "ok.obj").decisions.uncut_growth_max < auto.MAX_PLAUSIBLE_GROWTH
+    V[top, 2] = V[:, 2].min()
+    trimesh.Trimesh(V, t.F, process=False).export(tmp_path / "spike.obj")
+    with pytest.raises(InputError, match=f"spike.obj.*vertex {top} .*spike or fold"):
+        load_deploy_scene(tmp_path / "spike.obj")
+
 @pytest.mark.parametrize("name", ["bogus@12", "cap70-R100", "cap70-R100@x"])
 def test_an_unknown_family_member_is_named_with_the_known_shapes(name):
     """A member name that is not shape@rings of a known shape is refused with the shapes named."""
