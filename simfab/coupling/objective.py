@@ -561,9 +561,15 @@ def pinned(solver, pin, target: float | None = None):
         target: Newton's force target [N] (the accuracy of an iterative pinned solve), or None.
 
     Returns:
-        ``solver`` itself without a pin, else :class:`simfab.coupling.rigid.PinnedSolver`.
+        :class:`simfab.coupling.rigid.PinnedSolver` with a pin; without one
+        :class:`simfab.coupling.rigid.ForcedSolver` when a target is given and the solver can lag
+        (its iterative solves then stop at the target, as the pinned ones do), else ``solver`` itself.
     """
-    return solver if pin is None else rigid.PinnedSolver(solver, pin, target)
+    if pin is not None:
+        return rigid.PinnedSolver(solver, pin, target)
+    if target is not None and hasattr(solver, "solve_free_lagged"):
+        return rigid.ForcedSolver(solver, target)
+    return solver
 
 
 def evaluation(obj: StepObjective, x: np.ndarray) -> Evaluation | None:

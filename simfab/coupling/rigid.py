@@ -103,6 +103,41 @@ LAG_TARGET = 0.1
 LAG_RTOL_FAR = 1e-2
 
 
+def forcing(b: np.ndarray, target: float | None) -> tuple[float | None, float | None]:
+    """The accuracy of an iterative (lagged or multigrid) Newton solve with right-hand side b (m,):
+    (atol, rtol) = (LAG_TARGET * target, LAG_RTOL_FAR) while b's largest entry is more than PCG_NEAR
+    times Newton's force target [units of b], (LAG_TARGET * target, None: the solver's own rtol) near
+    it; (None, None) without a target. A residual within a tenth of the target cannot keep Newton
+    from it, and far from it a step solved to two digits costs no Newton iterations (inexact
+    Newton's forcing term)."""
+    if target is None:
+        return None, None
+    return LAG_TARGET * target, (None if np.abs(b).max() <= PCG_NEAR * target else LAG_RTOL_FAR)
+
+
+class ForcedSolver:
+    """A solver without the pin whose iterative solves stop at Newton's force target (:func:`forcing`),
+    as :class:`PinnedSolver`'s do; a factorization's solve is exact either way.
+
+    Args:
+        solver: the SPD solver (:class:`simfab.solve.linear.SPDSolver`; its ``solve_free`` takes
+            ``atol`` and ``rtol``).
+        target: Newton's force target (inf-norm of the residual) [units of b].
+    """
+
+    def __init__(self, solver, target: float):
+        self.solver, self.target = solver, target
+
+    def solve_free(self, A, free, b):
+        if np.ndim(b) != 1:
+            return self.solver.solve_free(A, free, b)
+        atol, rtol = forcing(b, self.target)
+        return self.solver.solve_free(A, free, b, atol=atol, rtol=rtol)
+
+    def solve(self, A, b):
+        return self.solve_free(A, np.arange(A.shape[0]), b)
+
+
 class PinnedSolver:
     """Solves (A + mu U U^T)[free] x = b with one factorization of A[free] (Woodbury):
     y = A^-1 b, Z = A^-1 U, x = y - Z (I/mu + U^T Z)^-1 U^T y. Wraps a solver with
@@ -132,10 +167,7 @@ class PinnedSolver:
             self._Uf = (free, self.pin.U[free])  # one array per free set: the solver reuses its half solve
         Uf = self._Uf[1]
         if hasattr(self.solver, "solve_free_lagged") and np.ndim(b) == 1:
-            atol = rtol = None
-            if self.target is not None:
-                atol = LAG_TARGET * self.target
-                rtol = None if np.abs(b).max() <= PCG_NEAR * self.target else LAG_RTOL_FAR
+            atol, rtol = forcing(b, self.target)
             x = self.solver.solve_free_lagged(A, free, b, Uf, self.pin.mu, atol, rtol=rtol)  # None: not lagged
             if x is not None:
                 return x

@@ -258,15 +258,18 @@ class SPDSolver:
             return lu.solve(b)
         return self._solve_cholmod(A, b)
 
-    def solve_free(self, A: sp.spmatrix, free: np.ndarray, b: np.ndarray) -> np.ndarray:
+    def solve_free(self, A: sp.spmatrix, free: np.ndarray, b: np.ndarray, *, atol: float | None = None,
+                   rtol: float | None = None) -> np.ndarray:
         """Solve ``A[free][:, free] x = b`` without forming the submatrix: ``free`` (m,) int indices
         of the unknowns, ``b`` (m,) or (m, k). With CHOLMOD, the map from ``A``'s values straight to
         the factor's input order is computed once per (pattern, free set), so each later call is
         one gather and a numeric factorization (Newton on the free dofs of a fixed FEM pattern).
+        ``atol`` and ``rtol`` bound a lagged solve's residual as in :meth:`solve_free_lagged` (a
+        factorization's solve is exact).
         Raises :class:`NotPositiveDefinite` when the factorization fails (or, lagging, when the
         iterations meet negative curvature)."""
         if self.lag is not None:
-            x = self.solve_free_lagged(A, free, b)
+            x = self.solve_free_lagged(A, free, b, atol=atol, rtol=rtol)
             if x is not None:
                 return x
         self._factor_free(A, free)

@@ -284,8 +284,8 @@ class MultigridSolver(SPDSolver):
         """Numeric factorizations of coarse matrices so far (attempts included)."""
         return self._coarse_done + (0 if self._mg is None else self._mg[3].coarse.factorizations)
 
-    def solve_free(self, A, free, b):
-        x = self.solve_free_lagged(A, free, b)
+    def solve_free(self, A, free, b, *, atol=None, rtol=None):
+        x = self.solve_free_lagged(A, free, b, None, 0.0, atol, rtol)
         if x is not None:
             return x
         self._direct = True  # SPDSolver.solve_free asks solve_free_lagged again: tried already
@@ -308,9 +308,9 @@ class MultigridSolver(SPDSolver):
                 return x
             if self.pcg_iterations > tried:  # iterated without converging
                 self._lag_failed = self.factorizations  # not tried again on this factorization
-        return self._multigrid(A, free, b, U, mu, atol)
+        return self._multigrid(A, free, b, U, mu, atol, rtol)
 
-    def _multigrid(self, A, free, b, U, mu, atol):
+    def _multigrid(self, A, free, b, U, mu, atol, rtol):
         """x of (A[free][:, free] + mu U U^T) x = b by p-multigrid CG, or None (not tried or not converged)."""
         cfg = self.multigrid
         free = np.asarray(free)
@@ -326,7 +326,7 @@ class MultigridSolver(SPDSolver):
         bn = float(np.linalg.norm(b))
         if bn == 0.0:
             return np.zeros_like(b)
-        tol = cfg.rtol * bn
+        tol = (cfg.rtol if rtol is None else rtol) * bn
         reach = max(tol, atol or 0.0)
 
         def converged(r, rn):

@@ -106,6 +106,42 @@ def test_multigrid_solver_matches_the_woodbury_direct_solve():
     assert np.linalg.norm(H[free][:, free] @ y - b) <= 1e-9 * np.linalg.norm(b)
 
 
+def test_iterative_solves_stop_at_the_forcing_they_are_given():
+    # inexact Newton: a multigrid solve stops at the rtol or the residual's largest entry (atol) it is
+    # given; the insertion's unpinned solves get them from Newton's force target (far from it two
+    # digits, near it the solver's own rtol, either way a tenth of the target), as its pinned ones do
+    from simfab.coupling.objective import pinned
+    from simfab.coupling.rigid import LAG_RTOL_FAR, LAG_TARGET, PCG_NEAR, ForcedSolver
+
+    m, H, free = _p2_box()
+    rng = np.random.default_rng(5)
+    b = rng.standard_normal(len(free))
+    Aff = H[free][:, free]
+    s = insertion_solver(m, multigrid=MultigridConfig(min_unknowns=0, rtol=1e-9))
+    x = s.solve_free(H, free, b)
+    full = s.multigrid_iterations
+    assert np.linalg.norm(Aff @ x - b) <= 1e-9 * np.linalg.norm(b)
+    x = s.solve_free(H, free, b, rtol=1e-2)
+    loose = s.multigrid_iterations - full
+    assert np.linalg.norm(Aff @ x - b) <= 1e-2 * np.linalg.norm(b) and 0 < loose < full / 2
+    atol = 1e-4 * np.abs(b).max()
+    x = s.solve_free(H, free, b, atol=atol)
+    assert np.abs(Aff @ x - b).max() <= atol and s.factorizations == 0
+    # far from the target (|b| > PCG_NEAR target): two digits
+    far = float(np.abs(b).max()) / (10 * PCG_NEAR)
+    forced = pinned(s, None, target=far)
+    assert isinstance(forced, ForcedSolver) and pinned(s, None) is s
+    done = s.multigrid_iterations
+    x = forced.solve_free(H, free, b)
+    r = Aff @ x - b
+    assert np.linalg.norm(r) <= LAG_RTOL_FAR * np.linalg.norm(b) or np.abs(r).max() <= LAG_TARGET * far
+    assert s.multigrid_iterations - done <= loose
+    # near it: the solver's rtol, or a tenth of the target
+    near = float(np.abs(b).max()) / 10
+    x = pinned(s, None, target=near).solve_free(H, free, b)
+    assert np.abs(Aff @ x - b).max() <= LAG_TARGET * near
+
+
 def test_below_the_threshold_it_factorizes_and_indefinite_matrices_raise():
     m, H, free = _p2_box()
     b = np.ones(len(free))
