@@ -103,10 +103,18 @@ class StepState:
         return ev
 
 
+#: Lagged factorizations from this many unknowns on a quadratic (P2) model: at every size, since its
+#: iterative solves stop at Newton's force target (:func:`simfab.coupling.rigid.forcing`); measured
+#: in docs/benchmarks.md, section 3e. A linear model lags from :class:`LagConfig`'s own threshold.
+P2_LAG_MIN_UNKNOWNS = 0
+
+
 def step_solver(model) -> SPDSolver:
-    """The insertion's sparse solver on ``model``: lagged factorizations (:class:`LagConfig`) and, on a
-    quadratic model, p-multigrid conjugate gradients at large sizes (:class:`MultigridConfig`)."""
-    return insertion_solver(model, lag=LagConfig(), multigrid=MultigridConfig())
+    """The insertion's sparse solver on ``model``: lagged factorizations (:class:`LagConfig`; on a
+    quadratic model from :data:`P2_LAG_MIN_UNKNOWNS`) and, on a quadratic model, p-multigrid conjugate
+    gradients at large sizes (:class:`MultigridConfig`)."""
+    lag = LagConfig(min_unknowns=P2_LAG_MIN_UNKNOWNS) if model.element_order == 2 else LagConfig()
+    return insertion_solver(model, lag=lag, multigrid=MultigridConfig())
 
 
 @dataclass(kw_only=True)
