@@ -45,6 +45,11 @@ class NewtonConfig:
     backtrack: float = 0.5  # step shrink factor per rejected trial
     max_backtracks: int = 40
     roundoff: float = 1e-12  # decrease (relative to |f|) below which f cannot resolve it
+    # When every trial fails the sufficient-decrease test, the full step is still taken if it lowers
+    # the gradient norm and changes f by at most this (relative to |f|): f is a sum of terms that
+    # cancel, so its rounding is ulps of the terms, not of f (an inexact Newton step near a tight
+    # target lands where f no longer resolves the decrease while the gradient still does)
+    roundoff_terms: float = 1e-10
     # Evaluate the Hessian already at the first trial point of each line search: when most full
     # (or capped) steps are accepted, this saves a separate value/gradient evaluation per
     # iteration; a rejected first trial wastes one Hessian evaluation.
@@ -84,6 +89,7 @@ class NewtonConfig:
             "backtrack": 0 < self.backtrack < 1,
             "max_backtracks": self.max_backtracks >= 0,
             "roundoff": self.roundoff >= 0,
+            "roundoff_terms": self.roundoff_terms >= 0,
             "reg_initial": 0 < self.reg_initial <= self.reg_max,
             "reg_growth": self.reg_growth > 1,
             "eager_above_tol": self.eager_above_tol >= 0,
@@ -329,6 +335,7 @@ def minimize(
         accepted = False
         Ht = None
         eager_now = opts.eager_hessian and gnorm > opts.eager_above_tol * opts.grad_tol * gscale and not chord
+        full = None  # the first trial's (alpha, x, f, g, H)
         for bt in range(opts.max_backtracks + 1):
             xt = x + alpha * dx
             if admissible is None or admissible(xt):
@@ -336,6 +343,8 @@ def minimize(
                 ft, gt, Ht = fun(xt, eager)
                 if not eager:
                     Ht = None
+                if bt == 0:
+                    full = (alpha, xt, ft, gt, Ht)
                 if np.isfinite(ft):
                     if flat:
                         accepted = _inf_norm(np.asarray(gt)[free_idx]) < gnorm
@@ -344,6 +353,10 @@ def minimize(
                     if accepted:
                         break
             alpha *= opts.backtrack
+        if not accepted and not flat and full is not None and np.isfinite(full[2]) \
+                and abs(full[2] - f) <= opts.roundoff_terms * max(abs(f), tiny) \
+                and _inf_norm(np.asarray(full[3])[free_idx]) < gnorm:
+            (alpha, xt, ft, gt, Ht), bt, accepted = full, 0, True
         if not accepted:
             if flat:
                 # neither f nor ||g|| can be improved along the Newton direction: round-off floor

@@ -157,6 +157,28 @@ def test_line_search_failure_raises():
         minimize(fun, np.array([1.0, -2.0]))
 
 
+def test_a_step_whose_energy_change_is_below_resolution_is_taken_when_it_lowers_the_gradient():
+    # f = 1 + q(x) + e(x): q = 1e-10/2 |x - c|^2 decreases by 2.5e-12 at the Newton step, less than
+    # the 1e-11 that e (the rounding of a sum of cancelling terms, made deterministic here) adds at
+    # every point but the start, so no trial passes the sufficient-decrease test while the predicted
+    # decrease is above f's own rounding (not a flat search). The full step is within 1e-10 |f| and
+    # zeroes the gradient: it is taken; a step that raises f by more is still a failure (above).
+    c = np.array([0.1, -0.2])
+    x0 = np.zeros(2)
+    k = 1e-10
+
+    def fun(x, need_h):
+        r = x - c
+        e = 0.0 if np.array_equal(x, x0) else 1e-11
+        return 1.0 + 0.5 * k * r @ r + e, k * r, (sp.identity(2, format="csr") * k if need_h else None)
+
+    with pytest.raises(ConvergenceError, match="line search failed"):
+        minimize(fun, x0, options=NewtonOptions(grad_tol=1e-3, roundoff_terms=0.0))
+    res = minimize(fun, x0, options=NewtonOptions(grad_tol=1e-3))
+    assert res.converged and res.iterations == 1
+    np.testing.assert_allclose(res.x, c, rtol=0, atol=1e-12)
+
+
 def test_free_mask_shape_is_checked_and_all_fixed_returns_x0():
     A = _spd(4, 5)
     fun = _quadratic(A, np.ones(4))
