@@ -227,8 +227,9 @@ class MultigridConfig:
 
     For one-column solves of at least ``min_unknowns`` unknowns, CG preconditioned by
     :class:`TwoLevelP2` (a fresh setup per matrix: no earlier factorization needed) runs until the
-    residual's 2-norm is at most ``rtol`` times the right-hand side's (or the caller's absolute bound
-    is met); a solve that does not converge within ``max_iter`` iterations (or would not, at the
+    residual's 2-norm is at most ``rtol`` times the right-hand side's (the caller's rtol instead when
+    it gives one, e.g. an inexact-Newton forcing term far from Newton's target; or the caller's
+    absolute bound is met); a solve that does not converge within ``max_iter`` iterations (or would not, at the
     rate of the first :data:`simfab.solve.linear.ABORT_AFTER`) falls back to the factorization path.
     Negative curvature raises :class:`simfab.solve.linear.NotPositiveDefinite`, as a failed
     factorization does.
