@@ -152,7 +152,7 @@ def plot_scaling(groups: list, path: str) -> None:
         n = np.array([r["free_dofs"] for r in ok], float)
         lab = f"{g['scene']} mu={g['friction']:g}" + (f" ({g['label']})" if g.get("label") else "")
         line = ax.loglog(n, [r["cpu_seconds"] for r in ok], "o-", label=f"{lab} CPU")[0]
-        ax.loglog(n, [r["seconds"] for r in ok], "x--", color=line.get_color(), label=f"{lab} wall (loaded machine)")
+        ax.loglog(n, [r["seconds"] for r in ok], "x--", color=line.get_color(), label=f"{lab} wall")
         fact = np.array([r["ms_per_factorization"] for r in ok], float)
         has = fact > 0  # a level solved by p-multigrid alone has no fine factorization to time
         bx.loglog(n[has], fact[has], "o-", color=line.get_color(), label=lab)
@@ -168,7 +168,7 @@ def plot_scaling(groups: list, path: str) -> None:
     ax.legend(fontsize=7)
     bx.set_xlabel("free dofs")
     bx.set_ylabel("wall ms per CHOLMOD factorization")
-    bx.set_title("Cost of one factorization (wall, loaded machine)")
+    bx.set_title("Cost of one factorization (wall seconds)")
     bx.legend(fontsize=7)
     for a in (ax, bx):
         a.grid(alpha=0.3, which="both")
