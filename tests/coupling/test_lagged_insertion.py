@@ -33,3 +33,25 @@ def test_lagged_factorizations_give_the_same_figures(monkeypatch, spd_solvers):
     # anchors carries along (here up to 4e-5 of F_in); 2e-4 bounds that, a wrong solve would not be
     for key in ("F_in", "F_rm", "E_max"):
         assert lagged[key] == pytest.approx(direct[key], rel=2e-4), key
+
+
+def test_a_quadratic_model_lags_at_every_size_and_keeps_its_figures_to_newtons_target(monkeypatch, spd_solvers):
+    # P2 lags from 0 unknowns (state.P2_LAG_MIN_UNKNOWNS), every iterative solve stopping at Newton's
+    # force target: its figures differ from a run that factorizes every Hessian by what that target
+    # leaves (the force on O sums the residuals of its contact nodes), here bounded by 3 targets;
+    # a solve that missed its target would not be
+    from simfab.coupling import config as C
+
+    cm = load_coupling_scene("clip3d", overrides={"simulation": {"steps": 12, "element_order": 2},
+                                                  "compliant": {"target_elements": 300, "layers": 1}})
+    target = C.NEWTON_GRAD_TOL_REL * cm.force_scale
+    _, lagged = summarize(simulate_insertion(cm))
+    n_lagged, fact_lagged = sum(s.lagged_solves for s in spd_solvers), sum(s.factorizations for s in spd_solvers)
+    spd_solvers.clear()
+    monkeypatch.setattr(state, "P2_LAG_MIN_UNKNOWNS", 10**9)
+    _, direct = summarize(simulate_insertion(cm))
+    assert sum(s.lagged_solves for s in spd_solvers) == 0 and n_lagged > 0
+    assert fact_lagged < sum(s.factorizations for s in spd_solvers)
+    for key in ("F_in", "F_rm", "F_grip"):
+        assert abs(lagged[key] - direct[key]) <= 3 * target, key
+    assert lagged["E_max"] == pytest.approx(direct["E_max"], rel=1e-4)
