@@ -78,7 +78,9 @@ def add_args(p):
                                       "part's layers x factor^(1/3)) and report the profile figures, their "
                                       "extrapolated values and the error of the scene's own mesh.\n\n--json keys: "
                                       "scene, levels (factor, elements, seconds, category), figures (per "
-                                      "figure: values, extrapolated, order, relative_error), error_of_default, table.",
+                                      "figure: values, extrapolated, order, relative_error), error_of_default, "
+                                      "warnings (levels that are the same mesh, fits that are no power law), "
+                                      "table.",
                           formatter_class=argparse.RawDescriptionHelpFormatter)
     conv.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
     conv.add_argument("--factors", default="0.25,0.5,1,1.5",
@@ -142,6 +144,10 @@ def run(args) -> dict:
 
         check_brief_table(args.scene)
         rep = convergence_study(args.scene, factors, overrides=ov, quiet=args.quiet)
+        from simfab.progress import log
+
+        for w in rep["warnings"]:  # warnings show even with --quiet
+            log(f"simfab: warning: {w}")
         return {**rep, "table": "\n" + format_table(rep)}
     if cmd != "simulate":
         raise InputError("choose an action: 'simfab couple simulate SCENE', 'optimize SCENE', 'study handles SCENE' "

@@ -32,6 +32,11 @@ FIGURES = ("E_max", "E_ss", "F_in", "F_rm", "F_grip")
 #: A figure below this fraction of its kind's peak (E_max; the larger of F_in, F_rm) is zero up to
 #: the solver's tolerances: its error is reported relative to that peak.
 ZERO_REL = 1e-3
+#: Two levels whose element counts differ by less than this fraction are the same refinement (the
+#: mesher's floor or cap): their difference says nothing about convergence, and the report warns.
+SAME_MESH_REL = 0.1
+#: The range of orders p the fit searches (:func:`extrapolate`); a fit at either end is no rate.
+ORDER_RANGE = (0.5, 4.0)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -90,7 +95,7 @@ def extrapolate(N: np.ndarray, f: np.ndarray, dim: int, finest: int = 4) -> tupl
         return float(f[-1]), float("nan")
     h, f = h[-finest:], f[-finest:]
     best = None
-    for p in np.arange(0.5, 4.0001, 0.01):
+    for p in np.arange(ORDER_RANGE[0], ORDER_RANGE[1] + 1e-4, 0.01):
         A = np.c_[np.ones_like(h), h**p]
         coef, *_ = np.linalg.lstsq(A, f, rcond=None)
         r = float(np.sum((A @ coef - f) ** 2))
@@ -108,7 +113,9 @@ def convergence_study(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = N
 def report(scene: str, levels: list, dim: int) -> dict:
     """Per figure the values, the extrapolated value, the observed order and each level's relative error (a figure
     below ZERO_REL of its kind's peak, e.g. a loose coupling's E_ss, relative to that peak); per level the element
-    count and seconds; ``error_of_default``: the errors of the scene's own mesh (factor 1, else the first level)."""
+    count and seconds; ``error_of_default``: the errors of the scene's own mesh (factor 1, else the first level);
+    ``warnings``: levels that are the same refinement (element counts within SAME_MESH_REL) and figures whose
+    fitted order is at an end of ORDER_RANGE (the levels do not follow h^p: an unreliable extrapolation)."""
     N = np.array([lv.elements for lv in levels])
     i_default = next((i for i, lv in enumerate(levels) if lv.factor == 1.0), 0)  # the scene's own mesh
     figures = {}
@@ -126,9 +133,21 @@ def report(scene: str, levels: list, dim: int) -> dict:
         v["relative_of"] = peak if tiny else k
         ref = figures[v["relative_of"]]["extrapolated"]
         v["relative_error"] = [(x - v["extrapolated"]) / ref if ref else 0.0 for x in v["values"]]
+    warnings = []
+    for a, b in zip(levels, levels[1:]):
+        if abs(b.elements - a.elements) < SAME_MESH_REL * max(a.elements, b.elements):
+            warnings.append(f"{scene}: the levels at factors {a.factor:g} and {b.factor:g} have nearly the same mesh "
+                            f"({a.elements} and {b.elements} elements: the mesher's floor or cap), so their "
+                            "difference says nothing about convergence; choose factors further apart")
+    for k in FIGURES:
+        v = figures[k]
+        if v["relative_of"] == k and np.isfinite(v["order"]) and min(abs(v["order"] - e) for e in ORDER_RANGE) < 1e-9:
+            warnings.append(f"{scene}: {k}'s fitted order is at the end of the range searched ({v['order']:g}): "
+                            "the levels do not follow a power law, so its extrapolation and errors are unreliable")
     return {
         "scene": scene,
         "friction": levels[0].friction if levels else 0.0,
+        "warnings": warnings,
         "levels": [{"factor": lv.factor, "elements": lv.elements, "seconds": lv.seconds, "category": lv.category}
                    for lv in levels],
         "figures": figures,

@@ -69,3 +69,25 @@ def test_an_extrusion_is_refined_through_its_height_with_its_section():
     assert level_mesh(shipped, 1.0) == {"target_elements": 1000}
     assert level_mesh(shipped, 2.0) == {"target_elements": 2000, "mesh_file": None}
 
+
+
+def test_the_report_warns_of_levels_that_are_the_same_mesh_and_of_fits_that_are_no_rate():
+    # the mesher's floor gave factors 0.5 and 1 nearly the same mesh (as clip3d's section does): the report
+    # says so, and a fit driven to the end of the order range by it is flagged; a clean h^2 sequence is not
+    from simfab.coupling.converge import Level, report
+
+    def levels(N, figs):
+        return [Level(factor=f, elements=n, seconds=1.0, figures=g, category="tight")
+                for f, n, g in zip((0.5, 1, 2, 4), N, figs)]
+
+    def fig(h2):
+        return dict(E_max=4.5 + 10 * h2, E_ss=1.0 + 3 * h2, F_in=17.0 + 100 * h2, F_rm=19.0 + 80 * h2,
+                    F_grip=9.0 + 10 * h2)
+
+    N = [500, 1000, 2000, 4000]
+    clean = report("x", levels(N, [fig(1.0 / n) for n in N]), 2)
+    assert clean["warnings"] == []
+    floored = [4668, 4692, 7389]
+    rep = report("x", levels(floored, [fig(1.0 / 4668), fig(1.0 / 4668), fig(1.0 / 7389)]), 3)
+    assert any("factors 0.5 and 1 have nearly the same mesh" in w for w in rep["warnings"])
+    assert any("F_in's fitted order is at the end" in w for w in rep["warnings"])
