@@ -204,8 +204,10 @@ def run_scaling(scenes, factors, frictions, timeout: float, plot: str | None = N
                            "cpu_time_exponent_vs_dofs": exponents(ok, "cpu_seconds")})
     if plot:
         plot_scaling(groups, plot)
+    table = format_table(groups)
+    print(table, file=sys.stderr)  # for the reader (the rows above as they ran, then the exponents)
     return {"benchmark": "insertion --scaling", "targets": "time ~ dof^<=1.25; clip3d 8x <= 300 s; peak <= 8 GiB",
-            "groups": groups, "table": format_table(groups)}
+            "groups": groups, "table": table}
 
 
 def format_row(r: dict) -> str:

@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import sys
 import time
 from dataclasses import dataclass
 
@@ -632,5 +633,6 @@ def run(argv) -> dict:
                     plot(row, p)
                     row["plot"] = p
                 rows.append(row)
-    return {"benchmark": "peer", "reference": "IPC (Li et al. 2020) on ipctk", "rows": rows,
-            "table": format_table(rows)}
+    table = format_table(rows)
+    print(table, file=sys.stderr)  # for the reader; the JSON on stdout carries it too
+    return {"benchmark": "peer", "reference": "IPC (Li et al. 2020) on ipctk", "rows": rows, "table": table}
