@@ -339,10 +339,11 @@ def warnings(cm, steps, rest: str = "not continued", removal: list = ()) -> list
                    "the friction forces there are not consistent with the normal forces to that tolerance")
     mat = cm.fem.material
     if mat is not None:
-        vm = np.array([r.max_von_mises for r in steps])
-        k = int(np.argmax(vm))
-        if vm[k] > mat.yield_stress:
-            out.append(f"{name}: the max von Mises stress {vm[k] / 1e6:.4g} MPa (at s={s[k] * 1e3:.4g} mm) exceeds "
+        run = [*steps, *removal]  # (a frictional removal can load the part more than the insertion)
+        r = run[int(np.argmax([r.max_von_mises for r in run]))]
+        if r.max_von_mises > mat.yield_stress:
+            at = f"s={r.s * 1e3:.4g} mm" + (", removal" if r.phase == "remove" else "")
+            out.append(f"{name}: the max von Mises stress {r.max_von_mises / 1e6:.4g} MPa (at {at}) exceeds "
                        f"the yield stress {mat.yield_stress / 1e6:.4g} MPa of {mat.name}: the part would deform "
                        "plastically (the model is elastic)")
     return out

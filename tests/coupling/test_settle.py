@@ -155,3 +155,28 @@ def test_rest_search_brackets_the_seat_in_few_solves(monkeypatch):
     at_rest = abs(P_f[-1]) <= settle.REST_FORCE_REL * np.abs(P_f).max()
     s_rest = s_f[-1] if at_rest else s_f[-2] + (s_f[-1] - s_f[-2]) * P_f[-2] / (P_f[-2] - P_f[-1])
     assert s[-2] - 1e-9 <= s_rest <= s[-1] + 1e-9, (s[-2:], s_rest, solves_f)
+
+
+def test_the_stress_figures_and_the_yield_warning_read_the_removal_too():
+    # with friction the removal can load the part more than the insertion (claw3d at mu = 0.3: F_rm 65 N
+    # against F_in 56 N); the summary's max von Mises stress, penetration and min det F and the yield
+    # warning are over every record, as the averaged stress is
+    import dataclasses
+
+    from simfab.coupling.outputs import summarize
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.settle import warnings
+    from simfab.coupling.simulate import simulate_insertion
+
+    cm = load_coupling_scene("cclamp2d", overrides={"contact": {"friction": 0.3}, "simulation": {"steps": 12}})
+    res = simulate_insertion(cm)
+    assert res.removal
+    peak = max(r.max_von_mises for r in res.steps)
+    k = len(res.removal) // 2
+    r = res.removal[k]
+    res.removal[k] = dataclasses.replace(r, max_von_mises=2.0 * peak, penetration=1e-3, min_det_F=0.5)
+    _, summ = summarize(res)
+    assert summ["max_von_mises"] == 2.0 * peak
+    assert summ["max_penetration"] == 1e-3 and summ["min_det_F"] == 0.5
+    msg = [w for w in warnings(cm, res.steps, removal=res.removal) if "yield stress" in w]
+    assert len(msg) == 1 and f"{2.0 * peak / 1e6:.4g} MPa" in msg[0] and "removal" in msg[0]
