@@ -353,10 +353,11 @@ def minimize(
                     if accepted:
                         break
             alpha *= opts.backtrack
-        if not accepted and not flat and full is not None and np.isfinite(full[2]) \
-                and abs(full[2] - f) <= opts.roundoff_terms * max(abs(f), tiny) \
-                and _inf_norm(np.asarray(full[3])[free_idx]) < gnorm:
-            (alpha, xt, ft, gt, Ht), bt, accepted = full, 0, True
+        if not accepted and not flat and full is not None:
+            alpha_1, x_1, f_1, g_1, H_1 = full
+            if np.isfinite(f_1) and abs(f_1 - f) <= opts.roundoff_terms * max(abs(f), tiny) \
+                    and _inf_norm(np.asarray(g_1)[free_idx]) < gnorm:
+                alpha, xt, ft, gt, Ht, bt, accepted = alpha_1, x_1, f_1, g_1, H_1, 0, True
         if not accepted:
             if flat:
                 # neither f nor ||g|| can be improved along the Newton direction: round-off floor
