@@ -28,6 +28,7 @@ the solvers (seconds of start-up).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import os
@@ -219,7 +220,8 @@ def main(argv: list[str] | None = None) -> int:
         roots = _output_roots(args)
         for r in roots:  # before any computation: a bad --out is bad input (exit 2), not a late crash
             check_out_dir(r, where=_OUT_FLAG.get(args.command, "--out"))
-        with confine(roots), _interrupt_on_sigterm(), _all_or_nothing(args.command, roots), _HoldWarningLines():
+        interrupts = _Interrupts()
+        with confine(roots), interrupts, _all_or_nothing(args.command, roots), interrupts.run(), _HoldWarningLines():
             result = args._module.run(args)
         _flush_held_warnings()
         _report(result, args)
@@ -237,8 +239,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"simfab: did not converge: {_one_line(e)}", file=sys.stderr)
         _debug_trace()
         return 1
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
         _drop_held_warnings()
+        _release_quietly(e)
         print("simfab: interrupted", file=sys.stderr)
         return 130
     except Exception as e:  # internal failure: one line unless debugging
@@ -256,36 +259,90 @@ _KEEPS_PARTIAL = ("sweep",)
 
 def _all_or_nothing(command: str, roots):
     """The run's outputs published on success only (:func:`simfab.io.outpaths.published_on_success`)."""
-    import contextlib
-
     if command in _KEEPS_PARTIAL:
         return contextlib.nullcontext()
     return published_on_success(roots, keep_on=(ValidationFailed,))  # a missed tolerance: its report stays
 
 
-class _interrupt_on_sigterm:
-    """SIGTERM (``kill``, a batch system's time limit) raises KeyboardInterrupt like Ctrl-C, so the
-    run's partial outputs are taken back; in the main thread only (signals cannot be set elsewhere)."""
+class _Interrupts:
+    """Ctrl-C and SIGTERM (``kill``, a batch system's time limit) raise KeyboardInterrupt in the
+    main thread, so the run's partial outputs are taken back (signals cannot be set elsewhere).
+
+    Some libraries catch ``BaseException`` around their optional imports (trimesh, at over a hundred
+    sites), which swallows an interrupt that lands in such an import: the run would go on and publish.
+    So once a signal came, it is sent again every ``RESEND`` seconds until the interrupt has left the
+    run (:meth:`run`); a repeat raises only where no KeyboardInterrupt is being handled (the clean-up
+    it runs on its way out, such as closing a Dask cluster, is not broken), and a run that returns, or
+    fails otherwise, after a swallowed interrupt ends as interrupted. From then on further signals are
+    ignored, so the rollback that follows completes.
+    ``with interrupts:`` holds the handlers around the rollback; ``with interrupts.run():`` wraps the
+    run inside it.
+    """
+
+    RESEND = 0.2
 
     def __enter__(self):
         import signal
         import threading
 
-        self._old = None
+        self._old, self._requested, self._left, self._resender = {}, False, threading.Event(), None
         if threading.current_thread() is threading.main_thread():
-            self._old = signal.signal(signal.SIGTERM, _raise_interrupt)
+            self._old = {s: signal.signal(s, self._handle) for s in (signal.SIGINT, signal.SIGTERM)}
         return self
 
     def __exit__(self, *exc):
         import signal
 
-        if self._old is not None:
-            signal.signal(signal.SIGTERM, self._old)
+        self._left.set()
+        if self._resender is not None:
+            self._resender.join()
+        for s, h in self._old.items():
+            signal.signal(s, h)
         return False
 
+    def _handle(self, signum, frame):
+        import threading
 
-def _raise_interrupt(signum, frame):
-    raise KeyboardInterrupt
+        if self._left.is_set() or _handling_interrupt():  # rollback or clean-up on the interrupt's way out
+            return
+        if not self._requested:
+            self._requested = True
+            self._resender = threading.Thread(target=self._resend, name="simfab-interrupt", daemon=True)
+            self._resender.start()
+        raise KeyboardInterrupt
+
+    def _resend(self):
+        import signal
+        import threading
+
+        main_thread = threading.main_thread().ident
+        while not self._left.wait(self.RESEND):
+            signal.pthread_kill(main_thread, signal.SIGTERM)
+
+    @contextlib.contextmanager
+    def run(self):
+        """The scope of the run itself: an interrupt that leaves it, or was swallowed in it, ends here."""
+        try:
+            yield
+        except BaseException as e:
+            self._left.set()
+            if self._requested and not isinstance(e, KeyboardInterrupt):
+                raise KeyboardInterrupt from e  # a failure after a swallowed interrupt: still interrupted
+            raise
+        self._left.set()
+        if self._requested:
+            raise KeyboardInterrupt
+
+
+def _handling_interrupt() -> bool:
+    """Whether the code a signal interrupted is handling a KeyboardInterrupt (``except``, ``finally``,
+    ``__exit__``), directly or as the context of the exception it handles."""
+    e = sys.exc_info()[1]
+    while e is not None:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        e = e.__context__
+    return False
 
 
 def _output_roots(args) -> list:
@@ -358,6 +415,23 @@ def _one_line(e: BaseException) -> str:
     return " ".join(str(e).split()) or type(e).__name__
 
 
+def _release_quietly(e: BaseException) -> None:
+    """Free what the frames of an interrupted run held, without reporting a destructor's failure: an
+    interrupt can land inside a constructor (a MuJoCo renderer making its GL context), and the half-built
+    object's destructor then fails; an interrupted run says one line (all of it with SIMFAB_DEBUG=1)."""
+    if os.environ.get("SIMFAB_DEBUG"):
+        return
+    import gc
+
+    hook, sys.unraisablehook = sys.unraisablehook, lambda unraisable: None
+    try:
+        while e is not None:
+            e.__traceback__, e = None, e.__cause__ or e.__context__
+        gc.collect()
+    finally:
+        sys.unraisablehook = hook
+
+
 def _debug_trace() -> None:
     if os.environ.get("SIMFAB_DEBUG"):
         import traceback
@@ -382,4 +456,7 @@ def _report(result: dict | None, args) -> None:
 
 def entry() -> None:
     """Console-script entry point."""
-    sys.exit(main())
+    code = main()
+    if code == 130 and not os.environ.get("SIMFAB_DEBUG"):  # what is freed as the interpreter exits, likewise
+        sys.unraisablehook = lambda unraisable: None
+    sys.exit(code)
