@@ -6,8 +6,11 @@ The scene is run at ``target_elements`` times each refinement factor (the genera
 part again). An extruded part (``extruded_clamp``) is refined in its section and through its height
 alike: ``layers`` times factor^(1/3) (rounded, at least 1), the rest of the factor in the section
 (refining the section alone left the error through the height out of the study:
-docs/validation/coupling.md). A 3D scene that ships its part's mesh (``mesh_file``, e.g. claw3d's stored fTetWild
-mesh) keeps that mesh at factor 1 (the error of what users run) and is
+docs/validation/coupling.md). A C-clamp's section (``c_clamp``, ``extruded_clamp``) is refined with its
+arcs' default sampling, and the factors multiply the scene mesh's actual element count where the
+triangulation's floor made more than its target (:func:`level_mesh`). A 3D scene that ships its
+part's mesh (``mesh_file``, e.g. claw3d's stored fTetWild mesh) keeps that mesh at factor 1 (the
+error of what users run) and is
 meshed again from its generator at the other factors; a part with no generator (a ready mesh
 only) cannot be refined and raises InputError. With
 element counts N_k and a figure f_k, the discretization error of linear elements falls like
@@ -23,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simfab.coupling.geometry import C_CLAMP_SEGMENTS
 from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
 from simfab.coupling.simulate import simulate_insertion
@@ -37,6 +41,8 @@ ZERO_REL = 1e-3
 SAME_MESH_REL = 0.1
 #: The range of orders p the fit searches (:func:`extrapolate`); a fit at either end is no rate.
 ORDER_RANGE = (0.5, 4.0)
+#: Generators whose section is a triangulated C-clamp outline (:func:`level_mesh`).
+CLAMP_GENERATORS = ("c_clamp", "extruded_clamp")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -58,10 +64,13 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     if comp.get("target_elements") is None or ("mesh_file" in comp and comp.get("generator") in (None, "mesh")):
         raise InputError("a convergence study needs a scene whose part is meshed from target_elements "
                          "by a generator (not only a ready mesh_file)", where=str(toml))
+    elements = None  # the scene mesh's element count: the factors multiply it (level_mesh)
+    if comp.get("generator") in CLAMP_GENERATORS:
+        elements = load_coupling_scene(scene, overrides=overrides, quiet=True).fem.n_elements
     out = []
     for f in factors:
         ov = {k: dict(v) for k, v in (overrides or {}).items()}
-        ov.setdefault("compliant", {}).update(level_mesh(comp, f))
+        ov.setdefault("compliant", {}).update(level_mesh(comp, f, elements=elements))
         cm = load_coupling_scene(scene, overrides=ov, quiet=quiet or f != factors[0])  # flags logged once
         t0 = time.perf_counter()
         res = simulate_insertion(cm, quiet=quiet)
@@ -72,14 +81,39 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     return out
 
 
-def level_mesh(comp: dict, factor: float) -> dict:
+def level_mesh(comp: dict, factor: float, *, elements: int | None = None) -> dict:
     """The ``[compliant]`` overrides of the level at ``factor`` for a part table ``comp``: the
     target element count times the factor; an extrusion's layers times factor^(1/3) (rounded, at
     least 1: uniform refinement, the section takes the rest); a shipped mesh file is meshed again
-    from the generator except at factor 1."""
-    out = {"target_elements": int(round(int(comp["target_elements"]) * factor))}
+    from the generator except at factor 1.
+
+    A C-clamp's outline (``c_clamp``, ``extruded_clamp``) bounds its triangles' size by its boundary
+    edges: below some target the triangulation gives the same mesh whatever is asked (clip3d's
+    section: 782 triangles for a target of 450). So for these generators the factor multiplies the
+    scene's actual element count (``elements``) where it exceeds the target, and the arcs' default
+    sampling (no ``segments`` in the table) follows the section's element size, as the discretization of
+    a true arc it is; a given ``segments`` is the part's polygon and is kept.
+
+    Args:
+        comp: the scene's ``[compliant]`` table.
+        factor: the level's refinement: its element count over the scene's.
+        elements: the element count of the scene's own mesh (the level at factor 1), if known.
+
+    Returns:
+        The overrides (``target_elements``, and ``layers``, ``segments``, ``mesh_file`` as they apply).
+    """
+    target = int(comp["target_elements"])
+    clamp = comp.get("generator") in CLAMP_GENERATORS
+    if clamp and elements is not None and factor != 1.0:
+        target = max(target, int(elements))
+    out = {"target_elements": int(round(target * factor))}
+    section = factor  # the factor of the section's element count
     if comp.get("generator") == "extruded_clamp":
-        out["layers"] = max(1, int(round(int(comp.get("layers", 1)) * factor ** (1.0 / 3.0))))
+        layers = int(comp.get("layers", 1))
+        out["layers"] = max(1, int(round(layers * factor ** (1.0 / 3.0))))
+        section = factor * layers / out["layers"]
+    if clamp and "segments" not in comp and factor != 1.0:
+        out["segments"] = max(4, int(round(C_CLAMP_SEGMENTS * np.sqrt(section))))
     if "mesh_file" in comp and factor != 1.0:
         out["mesh_file"] = None
     return out

@@ -24,9 +24,12 @@ import numpy as np
 from simfab.contact.imls import curve_normals
 from simfab.errors import InputError
 
+#: The points on each of a C-clamp's arcs when the part table does not give ``segments``.
+C_CLAMP_SEGMENTS = 96
+
 
 def c_clamp_outline(*, inner_radius: float, width: float, opening_deg: float, base_depth: float,
-                    base_height: float, segments: int = 96) -> np.ndarray:
+                    base_height: float, segments: int = C_CLAMP_SEGMENTS) -> np.ndarray:
     """CCW outline (k, 2) of a C-clamp: arc of inner radius r_i and radial width w whose mouth is
     the sector |angle| < ``opening_deg`` around +x, joined to a base block behind the arc
     (x in [-(r_i + w) - base_depth, -(r_i + w) + w/2], |y| <= base_height/2).

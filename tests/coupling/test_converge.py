@@ -61,13 +61,34 @@ def test_an_extrusion_is_refined_through_its_height_with_its_section():
     from simfab.coupling.converge import level_mesh
 
     comp = {"generator": "extruded_clamp", "target_elements": 2700, "layers": 2}
-    assert level_mesh(comp, 8.0) == {"target_elements": 21600, "layers": 4}
+    # the arcs' default sampling (96 points) follows the section: 4x its triangles, 2x the points on an arc
+    assert level_mesh(comp, 8.0) == {"target_elements": 21600, "layers": 4, "segments": 192}
     assert level_mesh(comp, 1.0) == {"target_elements": 2700, "layers": 2}
     assert level_mesh(comp, 0.125)["layers"] == 1
+    # a given sampling is the part's polygon: kept
+    assert level_mesh(comp | {"segments": 48}, 8.0) == {"target_elements": 21600, "layers": 4}
+    # the factor multiplies the elements the scene's mesh has where the generator's floor made more than asked
+    assert level_mesh(comp, 2.0, elements=4692)["target_elements"] == 9384
+    assert level_mesh(comp, 1.0, elements=4692) == {"target_elements": 2700, "layers": 2}  # the scene's own mesh
     # a shipped mesh is kept at factor 1 only; a generator that is not an extrusion has no layers
     shipped = {"generator": "cross_claw", "target_elements": 1000, "mesh_file": "part.npz"}
     assert level_mesh(shipped, 1.0) == {"target_elements": 1000}
     assert level_mesh(shipped, 2.0) == {"target_elements": 2000, "mesh_file": None}
+    assert level_mesh(shipped, 2.0, elements=1300)["target_elements"] == 2000  # a tet mesher's count is its own
+
+
+def test_clip3d_levels_have_the_element_counts_of_their_factors():
+    # clip3d's section sits on the triangulation's floor (782 triangles for a target of 450): with the arcs'
+    # sampling fixed, factors 0.5 and 1 gave 4,668 and 4,692 tets and factor 2 only 1.6x; the levels' counts
+    # now follow the factors (within the rounding of the layers and the floor left under coarse sections)
+    from simfab.coupling.converge import level_mesh
+    from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
+
+    comp = read_scene_toml(scene_paths("clip3d")[1])["compliant"]
+    n1 = load_coupling_scene("clip3d").fem.n_elements
+    ratios = [load_coupling_scene("clip3d", overrides={"compliant": level_mesh(comp, f, elements=n1)}).fem.n_elements
+              / n1 for f in (0.5, 2.0)]
+    assert 0.45 < ratios[0] < 0.65 and 1.8 < ratios[1] < 2.3, ratios
 
 
 
