@@ -106,7 +106,8 @@ def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjec
     (:class:`simfab.coupling.guide.CoarseGuide`), or the contact predictor (:func:`predict`) when no
     candidate is feasible, with its contact gaps restored (:func:`snap_contacts`: the
     predictor's pushes also carry contact points along chords of O's curved surface) and near
-    points lifted.
+    points lifted. Where restoring the gaps is infeasible (points new to the contact carried into O),
+    the lowest of every candidate restored with those points lifted out (:func:`_restored`).
     Raises ConvergenceError when no candidate is feasible."""
     best_x, best_f, source = None, np.inf, "predictor"
     cands = list(zip(extrapolations(state, s_new), ("linear", "quadratic")))
@@ -124,10 +125,13 @@ def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjec
     if best_x is None:
         best_x = predict(cm, state, s_new, ctx)
     xs = snap_contacts(cm, state, best_x, s_new, ctx)
-    if xs is not None and np.isfinite(obj.value(xs)):  # (+inf: infeasible, inside O or inverted)
+    if xs is not None and not np.isfinite(obj.value(xs)):  # (+inf: infeasible, inside O or inverted)
+        # restoring the gaps carried points that were not in contact into O (where the contact spreads):
+        # lift those out, from every candidate, and take the lowest; a start that keeps only the contacts
+        # it is given costs Newton a capped iteration for every few points it finds again
+        xs = _restored(cm, state, [xc for xc, _ in cands] + [best_x], s_new, obj, ctx)
+    if xs is not None:
         best_x = xs
-    else:
-        xs = None
     # a point that ends up almost touching O costs one Newton iteration per doubling of its
     # distance (the log barrier): start such points at LIFT_TO * d_hat instead
     ev = state.current_evaluation()
@@ -135,6 +139,20 @@ def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjec
     xl = lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * obj.dhat,
                       to=C.LIFT_TO * obj.dhat, prev=prev)
     return WarmStart(x=best_x if xl is None else xl, source=source, snapped=xs)
+
+
+def _restored(cm: CouplingModel, state: StepState, cands: list, s_new: float, obj: StepObjective,
+              ctx: StepContext) -> np.ndarray | None:
+    """The feasible candidate with the lowest objective among ``cands`` with their contact gaps restored
+    (:func:`snap_contacts`) and then the points inside O lifted out to LIFT_TO * d_hat; None if none is."""
+    best, best_f = None, np.inf
+    for xc in cands:
+        xs = snap_contacts(cm, state, xc, s_new, ctx)
+        xs = None if xs is None else lift_points(cm, state.points, xs, obj, below=0.0, to=C.LIFT_TO * obj.dhat)
+        fs = np.inf if xs is None else obj.value(xs)
+        if fs < best_f:
+            best, best_f = xs, fs
+    return best
 
 
 def snap_contacts(cm: CouplingModel, state: StepState, x: np.ndarray, s_new: float,

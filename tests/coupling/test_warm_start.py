@@ -55,6 +55,24 @@ def test_snapped_warm_start_puts_contact_vertices_back_at_their_last_gap():
     assert calls > 10  # the clamp is in contact for most of the insertion
 
 
+def test_a_warm_start_keeps_the_contact_where_restoring_its_gaps_pushed_new_points_into_O():
+    # alligator2d's jaws slide over O with their contact spreading: restoring the last gaps on the best
+    # extrapolation carried neighbours new to the contact into O, and 11 of its steps started with the
+    # contact lost (Newton then found it again a capped step at a time: 217 iterations). Every step
+    # after one with contact now starts from a restored, feasible candidate.
+    cm = load_coupling_scene("alligator2d")
+    lost = kept = 0
+    for state, obj, ws, _ in _warm_starts(cm):
+        if not np.any(state.current_evaluation().distances < point_dhat(cm, state.points)):
+            continue
+        if ws.snapped is None:
+            lost += 1
+        else:
+            kept += 1
+            assert np.isfinite(obj.value(ws.x))
+    assert lost == 0 and kept > 15, (lost, kept)
+
+
 def test_a_moved_vertex_takes_the_largest_move_its_points_ask_for():
     # Vertex 0 carries its own point (wants 12 um toward O, i.e. -12 um) and, with weights 0.9 and
     # 0.5, two points of its edge to vertex 1 (want -20 um and -18 um). The mean of the wanted
