@@ -120,8 +120,6 @@ def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjec
         fc = obj.value(xc)
         if np.isfinite(fc) and fc < best_f:
             best_x, best_f, source = xc, fc, kind
-    if source.startswith("coarse"):
-        ctx.guided += 1
     if best_x is None:
         best_x = predict(cm, state, s_new, ctx)
     xs = snap_contacts(cm, state, best_x, s_new, ctx)
@@ -129,9 +127,13 @@ def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjec
         # restoring the gaps carried points that were not in contact into O (where the contact spreads):
         # lift those out, from every candidate, and take the lowest; a start that keeps only the contacts
         # it is given costs Newton a capped iteration for every few points it finds again
-        xs = _restored(cm, state, [xc for xc, _ in cands] + [best_x], s_new, obj, ctx)
+        every = cands + ([(best_x, source)] if source == "predictor" else [])
+        xs, kind = _restored(cm, state, every, s_new, obj, ctx)
+        source = kind or source
     if xs is not None:
         best_x = xs
+    if source.startswith("coarse"):
+        ctx.guided += 1
     # a point that ends up almost touching O costs one Newton iteration per doubling of its
     # distance (the log barrier): start such points at LIFT_TO * d_hat instead
     ev = state.current_evaluation()
@@ -142,17 +144,18 @@ def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjec
 
 
 def _restored(cm: CouplingModel, state: StepState, cands: list, s_new: float, obj: StepObjective,
-              ctx: StepContext) -> np.ndarray | None:
-    """The feasible candidate with the lowest objective among ``cands`` with their contact gaps restored
-    (:func:`snap_contacts`) and then the points inside O lifted out to LIFT_TO * d_hat; None if none is."""
-    best, best_f = None, np.inf
-    for xc in cands:
+              ctx: StepContext) -> tuple:
+    """(x, kind): the feasible one with the lowest objective of the candidates ``cands`` ((x, kind) pairs)
+    with their contact gaps restored (:func:`snap_contacts`) and then their points inside O lifted out to
+    LIFT_TO * d_hat; (None, None) when none is feasible."""
+    best, best_kind, best_f = None, None, np.inf
+    for xc, kind in cands:
         xs = snap_contacts(cm, state, xc, s_new, ctx)
         xs = None if xs is None else lift_points(cm, state.points, xs, obj, below=0.0, to=C.LIFT_TO * obj.dhat)
         fs = np.inf if xs is None else obj.value(xs)
         if fs < best_f:
-            best, best_f = xs, fs
-    return best
+            best, best_kind, best_f = xs, kind, fs
+    return best, best_kind
 
 
 def snap_contacts(cm: CouplingModel, state: StepState, x: np.ndarray, s_new: float,
