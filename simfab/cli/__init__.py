@@ -29,11 +29,14 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import importlib
 import json
 import os
 import re
+import signal
 import sys
+import threading
 
 from simfab.errors import ConvergenceError, InputError, ValidationFailed
 from simfab.io.outpaths import check_out_dir, confine, published_on_success, require_nonempty
@@ -282,17 +285,12 @@ class _Interrupts:
     RESEND = 0.2
 
     def __enter__(self):
-        import signal
-        import threading
-
         self._old, self._requested, self._left, self._resender = {}, False, threading.Event(), None
         if threading.current_thread() is threading.main_thread():
             self._old = {s: signal.signal(s, self._handle) for s in (signal.SIGINT, signal.SIGTERM)}
         return self
 
     def __exit__(self, *exc):
-        import signal
-
         self._left.set()
         if self._resender is not None:
             self._resender.join()
@@ -301,8 +299,6 @@ class _Interrupts:
         return False
 
     def _handle(self, signum, frame):
-        import threading
-
         if self._left.is_set() or _handling_interrupt():  # rollback or clean-up on the interrupt's way out
             return
         if not self._requested:
@@ -312,9 +308,6 @@ class _Interrupts:
         raise KeyboardInterrupt
 
     def _resend(self):
-        import signal
-        import threading
-
         main_thread = threading.main_thread().ident
         while not self._left.wait(self.RESEND):
             signal.pthread_kill(main_thread, signal.SIGTERM)
@@ -421,8 +414,6 @@ def _release_quietly(e: BaseException) -> None:
     object's destructor then fails; an interrupted run says one line (all of it with SIMFAB_DEBUG=1)."""
     if os.environ.get("SIMFAB_DEBUG"):
         return
-    import gc
-
     hook, sys.unraisablehook = sys.unraisablehook, lambda unraisable: None
     try:
         while e is not None:
