@@ -64,14 +64,18 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     if comp.get("target_elements") is None or ("mesh_file" in comp and comp.get("generator") in (None, "mesh")):
         raise InputError("a convergence study needs a scene whose part is meshed from target_elements "
                          "by a generator (not only a ready mesh_file)", where=str(toml))
-    elements = None  # the scene mesh's element count: the factors multiply it (level_mesh)
+    base = None  # the scene's own model (factor 1): for a C-clamp the factors multiply its element count
     if comp.get("generator") in CLAMP_GENERATORS:
-        elements = load_coupling_scene(scene, overrides=overrides, quiet=True).fem.n_elements
+        base = load_coupling_scene(scene, overrides=overrides, quiet=quiet)
+    elements = None if base is None else base.fem.n_elements
     out = []
     for f in factors:
         ov = {k: dict(v) for k, v in (overrides or {}).items()}
         ov.setdefault("compliant", {}).update(level_mesh(comp, f, elements=elements))
-        cm = load_coupling_scene(scene, overrides=ov, quiet=quiet or f != factors[0])  # flags logged once
+        if f == 1.0 and base is not None:
+            cm = base
+        else:  # (scene flags logged once)
+            cm = load_coupling_scene(scene, overrides=ov, quiet=quiet or base is not None or f != factors[0])
         t0 = time.perf_counter()
         res = simulate_insertion(cm, quiet=quiet)
         dt = time.perf_counter() - t0

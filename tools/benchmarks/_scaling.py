@@ -168,7 +168,7 @@ def plot_scaling(groups: list, path: str) -> None:
     ax.legend(fontsize=7)
     bx.set_xlabel("free dofs")
     bx.set_ylabel("wall ms per CHOLMOD factorization")
-    bx.set_title("Cost of one factorization (wall seconds)")
+    bx.set_title("Cost of one factorization (wall ms)")
     bx.legend(fontsize=7)
     for a in (ax, bx):
         a.grid(alpha=0.3, which="both")
@@ -181,6 +181,7 @@ def run_scaling(scenes, factors, frictions, timeout: float, plot: str | None = N
     """Every level in a child process; rows grouped per (scene, friction) with their exponents."""
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     groups = []
+    print(format_header(), file=sys.stderr, flush=True)  # the rows below as they run
     for scene in scenes:
         for mu in frictions:
             rows = []
@@ -205,7 +206,7 @@ def run_scaling(scenes, factors, frictions, timeout: float, plot: str | None = N
     if plot:
         plot_scaling(groups, plot)
     table = format_table(groups)
-    print(table, file=sys.stderr)  # for the reader (the rows above as they ran, then the exponents)
+    print(table, file=sys.stderr)  # for the reader: every group's rows with its exponents
     return {"benchmark": "insertion --scaling", "targets": "time ~ dof^<=1.25; clip3d 8x <= 300 s; peak <= 8 GiB",
             "groups": groups, "table": table}
 
@@ -221,11 +222,14 @@ def format_row(r: dict) -> str:
             f"{100 * r['factorization_share']:>6.0f} {100 * r['assembly_share']:>6.0f} {r['fill']:>6.1f}")
 
 
-def format_table(groups: list) -> str:
-    head = (f"{'scene':8s} {'x':>4s} {'mu':>4s} {'tets':>7s} {'dofs':>8s} {'wall s':>8s} {'cpu s':>8s} "
+def format_header() -> str:
+    return (f"{'scene':8s} {'x':>4s} {'mu':>4s} {'tets':>7s} {'dofs':>8s} {'wall s':>8s} {'cpu s':>8s} "
             f"{'peak MiB':>8s} {'it/st':>6s} {'facts':>6s} {'lagged':>6s} {'pcg':>6s} {'mg':>5s} {'mg it':>6s} "
             f"{'ms/fact':>8s} {'fact%':>6s} {'asm%':>6s} {'fill':>6s}")
-    lines = [head]
+
+
+def format_table(groups: list) -> str:
+    lines = [format_header()]
     for g in groups:
         lines += [format_row(r) for r in g["rows"]]
         e, c = g["time_exponent_vs_dofs"], g["cpu_time_exponent_vs_dofs"]
