@@ -63,7 +63,9 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     comp = cfg.get("compliant", {})
     if comp.get("target_elements") is None or ("mesh_file" in comp and comp.get("generator") in (None, "mesh")):
         raise InputError("a convergence study needs a scene whose part is meshed from target_elements "
-                         "by a generator (not only a ready mesh_file)", where=str(toml))
+                         "by a generator (not only a ready mesh_file); for a part of your own, give [compliant] "
+                         'generator = "mesh", mesh = its surface file, units and target_elements instead of '
+                         "mesh_file", where=str(toml))
     base = None  # the scene's own model (factor 1): for a C-clamp the factors multiply its element count
     if comp.get("generator") in CLAMP_GENERATORS:
         base = load_coupling_scene(scene, overrides=overrides, quiet=quiet)
