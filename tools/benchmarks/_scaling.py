@@ -233,6 +233,9 @@ def format_table(groups: list) -> str:
     for g in groups:
         lines += [format_row(r) for r in g["rows"]]
         e, c = g["time_exponent_vs_dofs"], g["cpu_time_exponent_vs_dofs"]
+        if e["overall"] is None:
+            lines.append(f"  {g['scene']} mu={g['friction']:g}: no exponent (fewer than two levels ran)")
+            continue
         lines.append(f"  {g['scene']} mu={g['friction']:g}: wall ~ dofs^{e['overall']} (intervals {e['intervals']}),"
                      f" cpu ~ dofs^{c['overall']} (intervals {c['intervals']})")
     return "\n".join(lines)
