@@ -21,11 +21,14 @@ PENETRATION_TOL_REL = 1e-3
 DHAT_REL = 1e-2
 #: Lipschitz bound of the IMLS field used by the conservative step cap (|grad psi| ~ 1 near O).
 PSI_LIPSCHITZ = 2.0
-#: Fraction of the distance to O a point may travel in one Newton step (conservative advancement).
+#: Fraction of the distance to O a point within the barrier's range (d < d_hat) may travel in one
+#: Newton step (conservative advancement; Newton's model holds its barrier).
 STEP_FRACTION = 0.9
-#: ... but a point farther than (1 - STEP_FRACTION)^-1 CAP_LAND_DHATS * d_hat from O may travel until
-#: it is CAP_LAND_DHATS * d_hat away: it lands inside the barrier's range, so the next Newton step
-#: sees it (at 10 % of its gap it would still be outside, and cap the next step again).
+#: A point outside the barrier's range may travel until it is CAP_LAND_DHATS * d_hat away: it lands
+#: inside the range, so the next Newton step sees it (at 10 % of a gap of more than 10 d_hat it would
+#: still be outside and cap that step again), and no deeper, since the step that carried it did not see
+#: its barrier: from 10 % of a gap of 1-5 d_hat it landed at 0.1-0.5 d_hat, where each Newton iteration
+#: of the log barrier at most doubles the gap of a point whose equilibrium lies at ~0.75 d_hat.
 CAP_LAND_DHATS = 0.5
 #: Barrier stiffness adaptation: double kappa after a step that ends with a point closer than
 #: KAPPA_GROW_BELOW * d_hat to O, up to KAPPA_MAX_GROWTH times its initial value.

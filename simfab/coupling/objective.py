@@ -348,8 +348,9 @@ class StepObjective:
 
         Per point, with d its distance to O, a = grad d . dy and K a curvature bound of the field,
         d(alpha) >= d + alpha a - alpha^2 K |dy|^2 / 2; the cap is the largest alpha keeping this above
-        t = min(0.1 d, CAP_LAND_DHATS d_hat) (a point far from O may land inside the barrier's range,
-        where the next Newton step sees it). Points in contact slide along O (a ~ 0) and move away freely,
+        t = 0.1 d within the barrier's range (d < d_hat, STEP_FRACTION), t = CAP_LAND_DHATS d_hat
+        outside it (a point the step's model does not see lands inside the range, where the next Newton
+        step sees it, but not deep in its steep part). Points in contact slide along O (a ~ 0) and move away freely,
         approaching points stop short of O. Conservative advancement, alpha <= (d - t) / (L |dy|) with L a
         Lipschitz bound of psi, is always allowed as well. The line search still rejects any trial point
         inside O. Its time books under "line_search".
@@ -380,7 +381,8 @@ class StepObjective:
         d, gd, dy, sp = d[m], gd[m], dy[m], sp[m]
         a = np.einsum("kd,kd->k", gd, dy)
         q = 0.5 * sp**2 * self.curv
-        keep = d - np.minimum((1.0 - C.STEP_FRACTION) * d, C.CAP_LAND_DHATS * self.dhat[m])
+        dhat = self.dhat[m]
+        keep = d - np.where(d < dhat, (1.0 - C.STEP_FRACTION) * d, C.CAP_LAND_DHATS * dhat)
         alpha_curv = (a + np.sqrt(a * a + 4.0 * q * keep)) / (2.0 * q)
         cons = keep / (C.PSI_LIPSCHITZ * sp)
         return float(min(1.0, np.minimum.reduce(np.maximum(alpha_curv, cons))))

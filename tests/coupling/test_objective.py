@@ -84,11 +84,12 @@ def test_evaluation_without_hessian_defers_the_same_psd_hessian(coarse_block_mod
     assert diff.nnz == 0 or np.abs(diff.data).max() == 0.0
 
 
-@pytest.mark.parametrize("gap_dhats", [0.5, 3.0, 7.0])
+@pytest.mark.parametrize("gap_dhats", [0.5, 1.5, 3.0, 7.0])
 def test_step_cap_stops_approaching_points_outside_o(coarse_block_model, gap_dhats):
     # the top edge pushed straight into the circle by more than its gap: the full step penetrates,
-    # the capped one leaves every point at least t = min(0.1 d, CAP_LAND_DHATS d_hat) from O (d its
-    # gap before the step; the curvature bound K >= 0.1 / sigma exceeds the circle's 1 / (3 mm))
+    # the capped one leaves every point at least t from O: 0.1 d within the barrier's range, else
+    # CAP_LAND_DHATS d_hat (d its gap before the step: at 1.5 d_hat no deeper than 0.5 d_hat, not 0.15;
+    # the curvature bound K >= 0.1 / sigma exceeds the circle's 1 / (3 mm))
     cm = coarse_block_model(refine=True)
     facets = np.asarray(cm.fem.boundary_facets)
     top = [i for i, f in enumerate(facets) if set(f.tolist()) == {2, 3}]
@@ -105,7 +106,7 @@ def test_step_cap_stops_approaching_points_outside_o(coarse_block_model, gap_dha
     full = -cm.field.evaluate(pts.positions(x + dx), (R_, p_), hessian=False).psi
     capped = -cm.field.evaluate(pts.positions(x + alpha * dx), (R_, p_), hessian=False).psi
     assert full.min() < 0 and 0 < alpha < 1
-    t = np.minimum((1 - C.STEP_FRACTION) * d0, C.CAP_LAND_DHATS * obj.dhat)
+    t = np.where(d0 < obj.dhat, (1 - C.STEP_FRACTION) * d0, C.CAP_LAND_DHATS * obj.dhat)
     assert np.all(capped >= t * (1 - 1e-6))
 
 
