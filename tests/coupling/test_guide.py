@@ -8,6 +8,7 @@ from simfab.coupling import config as C
 from simfab.coupling.guide import CoarseGuide
 from simfab.coupling.record import StepResult
 from simfab.coupling.scene import load_coupling_scene
+from simfab.coupling.settle import REST_ENERGY_REL
 from simfab.design.brief import DesignConfig
 from simfab.design.problem import make_problem
 from simfab.design.verify import FIGURES, mesh_check, p2_prolongation, refined_model
@@ -89,10 +90,16 @@ def test_two_grid_start_keeps_the_checks_figures(problem, monkeypatch):
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_REL", 1e-10)
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_START", 1e-10)
     monkeypatch.setattr(C, "NEWTON_STEP_TOL_REL", 1e-12)
+    # The seat's figures are the rest search's: it stops once the energy between its bracket's ends is
+    # known to REST_ENERGY_REL of E_max, so where the two runs' first trial past the seat (a step deep
+    # into it, from different starts) ends on different sides, their rest points differ within that
+    # (measured on the finest level: coupling ratio 1.3e-3, grip 2e-4; the ratio E_max / E_ss ~ 8 makes
+    # the bound 8e-3 on it).
+    seat = {"coupling_ratio": 8 * REST_ENERGY_REL, "grip_force": 8 * REST_ENERGY_REL}
     plain, guided = checks(problem)
     assert guided.levels[-1].guided_steps >= 2 and guided.step_check.guided_steps >= 2
     for k in FIGURES:
         a, b = plain.figures[k], guided.figures[k]
-        assert b.values == pytest.approx(a.values, rel=1e-6, abs=1e-9), k
-        assert b.step_factor == pytest.approx(a.step_factor, rel=1e-6), k
+        assert b.values == pytest.approx(a.values, rel=seat.get(k, 1e-6), abs=1e-9), k
+        assert b.step_factor == pytest.approx(a.step_factor, rel=2 * seat.get(k, 1e-6)), k
     assert plain.feasible_fine == guided.feasible_fine
