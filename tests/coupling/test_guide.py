@@ -92,11 +92,12 @@ def test_two_grid_start_keeps_the_checks_figures(problem, monkeypatch):
     monkeypatch.setattr(C, "NEWTON_STEP_TOL_REL", 1e-12)
     # The seat's figures are the rest search's: it stops once the energy between its bracket's ends is
     # known to REST_ENERGY_REL of E_max, so where the two runs' first trial past the seat (a step deep
-    # into it, from different starts) ends on different sides, their rest points differ within that
-    # (measured on the finest level: coupling ratio 1.3e-3, grip 2e-4; the ratio E_max / E_ss ~ 8 makes
-    # the bound 8e-3 on it).
-    seat = {"coupling_ratio": 8 * REST_ENERGY_REL, "grip_force": 8 * REST_ENERGY_REL}
+    # into it, from different starts) ends on different sides, their rest points differ within that:
+    # E_ss within REST_ENERGY_REL E_max, the coupling ratio 100 E_ss / E_max within REST_ENERGY_REL
+    # relative to it times E_max / E_ss (measured on the finest level: coupling ratio 1.3e-3, grip 2e-4)
     plain, guided = checks(problem)
+    rel_seat = REST_ENERGY_REL * 100.0 / min(plain.figures["coupling_ratio"].values)  # (1.2e-2 here)
+    seat = {"coupling_ratio": rel_seat, "grip_force": rel_seat}
     assert guided.levels[-1].guided_steps >= 2 and guided.step_check.guided_steps >= 2
     for k in FIGURES:
         a, b = plain.figures[k], guided.figures[k]
