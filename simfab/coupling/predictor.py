@@ -89,8 +89,9 @@ def _lagrange(past, t: float) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class WarmStart:
     """A step's warm start: x (n, dim) [m] the positions Newton starts from; source: "linear" or
-    "quadratic" (an extrapolation of the last steps), "coarse" or "coarse increment" (a coarser
-    run's candidates, :class:`simfab.coupling.guide.CoarseGuide`) or "predictor" (the contact predictor);
+    "quadratic" (an extrapolation of the last steps), "rest" (A's rest shape, offered when no point
+    was within d_hat at the last step), "coarse" or "coarse increment" (a coarser run's candidates,
+    :class:`simfab.coupling.guide.CoarseGuide`) or "predictor" (the contact predictor);
     snapped: the candidate with its contact gaps restored (None when there was no contact to
     restore, or when restoring them was infeasible)."""
 
@@ -101,16 +102,22 @@ class WarmStart:
 
 def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjective, ctx: StepContext) -> WarmStart:
     """The warm start: the feasible candidate with the lowest objective among the linear and quadratic
-    extrapolations of the last steps and, with a guide (``ctx.guide``, forward along a frictionless
-    insertion), a coarser run's two candidates with the points inside O lifted out
-    (:class:`simfab.coupling.guide.CoarseGuide`), or the contact predictor (:func:`predict`) when no
-    candidate is feasible, with its contact gaps restored (:func:`snap_contacts`: the
-    predictor's pushes also carry contact points along chords of O's curved surface) and near
-    points lifted. Where restoring the gaps is infeasible (points new to the contact carried into O),
-    the lowest of every candidate restored with those points lifted out (:func:`_restored`).
+    extrapolations of the last steps, A's rest shape when no point was within d_hat at the last step
+    and, with a guide (``ctx.guide``, forward along a frictionless insertion), a coarser run's two
+    candidates with the points inside O lifted out (:class:`simfab.coupling.guide.CoarseGuide`), or
+    the contact predictor (:func:`predict`) when no candidate is feasible, with its contact gaps
+    restored (:func:`snap_contacts`: the predictor's pushes also carry contact points along chords of
+    O's curved surface) and near points lifted. Where restoring the gaps is infeasible (points new to
+    the contact carried into O), the lowest of every candidate restored with those points lifted out
+    (:func:`_restored`).
     Raises ConvergenceError when no candidate is feasible."""
     best_x, best_f, source = None, np.inf, "predictor"
     cands = list(zip(extrapolations(state, s_new), ("linear", "quadratic")))
+    ev = state.current_evaluation()
+    if ev is not None and not (ev.distances < point_dhat(cm, state.points)).any():
+        # out of contact A relaxes toward its rest shape (its only equilibrium without O): where contact
+        # ends, an extrapolation carries the last steps' release of the deformation past it
+        cands.append((cm.fem.rest.copy(), "rest"))
     if ctx.guide is not None and state.direction > 0 and cm.contact.friction == 0:
         for xc, kind in zip(ctx.guide.candidates(state.x, state.s, s_new), ("coarse", "coarse increment")):
             xc = lift_points(cm, state.points, xc, obj, below=0.0, to=C.LIFT_TO * obj.dhat)
@@ -136,7 +143,6 @@ def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjec
         ctx.guided += 1
     # a point that ends up almost touching O costs one Newton iteration per doubling of its
     # distance (the log barrier): start such points at LIFT_TO * d_hat instead
-    ev = state.current_evaluation()
     prev = ev.distances if ev is not None else None
     xl = lift_points(cm, state.points, best_x, obj, below=C.WARM_START_FLOOR * obj.dhat,
                       to=C.LIFT_TO * obj.dhat, prev=prev)

@@ -92,6 +92,14 @@ def seat_clearance(res, index: int) -> float:
     return float(d.min() - np.max(cm.dhat))
 
 
+def clearance_index(res, index_ss: int, touched: bool) -> int:
+    """The insertion record :func:`seat_clearance` reads: the steady state ``index_ss`` of a part O
+    touched, else the last planned step's (the path's end): an untouched part's energies are round-off,
+    so the steady state read from them is noise (a design and its neighbour would be read at different
+    steps)."""
+    return index_ss if touched else len(res.model.s_steps) - 1
+
+
 def linear_mesh(fem):
     """The linear mesh the design acts on: ``fem`` itself, or for a quadratic (P2) model the linear
     :class:`simfab.fem.model.FemModel` it was lifted from (its corners; the edge nodes follow at the
@@ -117,7 +125,8 @@ def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
     the removal traversal), von_mises [Pa] (max over the insertion and removal of the von Mises
     stress averaged over ``stress_radius`` [m], :mod:`simfab.design.stress`; on P2 elements at the
     quadrature points, :func:`simfab.design.stress.record_averaged_von_mises`), seat_clearance [m]
-    (gap between part and object at the steady state, <= 0 in contact), and category, E_max, E_ss
+    (gap between part and object at the steady state, or at the path's end when O never touched the
+    part (:func:`clearance_index`); <= 0 in contact), and category, E_max, E_ss
     [J], von_mises_peak [Pa] (the largest element stress, mesh-dependent at sharp corners)."""
     prof = analyze_run(res)
     fem = res.model.fem
@@ -128,7 +137,7 @@ def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
             "insertion_force": prof.F_in, "removal_force": prof.F_rm, "hold_force": prof.F_hold,
             "von_mises": max(record_averaged_von_mises(fem, r, stress_radius) for r in [*res.steps, *res.removal]),
             "von_mises_peak": float(max(r.max_von_mises for r in [*res.steps, *res.removal])),
-            "seat_clearance": seat_clearance(res, prof.index_ss),
+            "seat_clearance": seat_clearance(res, clearance_index(res, prof.index_ss, touched)),
             "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss,
             "friction": prof.friction}
 

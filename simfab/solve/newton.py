@@ -45,10 +45,11 @@ class NewtonConfig:
     backtrack: float = 0.5  # step shrink factor per rejected trial
     max_backtracks: int = 40
     roundoff: float = 1e-12  # decrease (relative to |f|) below which f cannot resolve it
-    # When every trial fails the sufficient-decrease test, the full step is still taken if it lowers
-    # the gradient norm and changes f by at most this (relative to |f|): f is a sum of terms that
-    # cancel, so its rounding is ulps of the terms, not of f (an inexact Newton step near a tight
-    # target lands where f no longer resolves the decrease while the gradient still does)
+    # When the first (full or capped) trial fails the sufficient-decrease test but changes f by at most
+    # this (relative to |f|), it is taken if it lowers the gradient norm, without backtracking: f is a
+    # sum of terms that cancel, so its rounding is ulps of the terms, not of f (an inexact Newton step
+    # near a tight target lands where f no longer resolves the decrease while the gradient still does),
+    # and shorter trials would pass or fail the test on that rounding alone
     roundoff_terms: float = 1e-10
     # Evaluate the Hessian already at the first trial point of each line search: when most full
     # (or capped) steps are accepted, this saves a separate value/gradient evaluation per
@@ -335,7 +336,6 @@ def minimize(
         accepted = False
         Ht = None
         eager_now = opts.eager_hessian and gnorm > opts.eager_above_tol * opts.grad_tol * gscale and not chord
-        full = None  # the first trial's (alpha, x, f, g, H)
         for bt in range(opts.max_backtracks + 1):
             xt = x + alpha * dx
             if admissible is None or admissible(xt):
@@ -343,21 +343,18 @@ def minimize(
                 ft, gt, Ht = fun(xt, eager)
                 if not eager:
                     Ht = None
-                if bt == 0:
-                    full = (alpha, xt, ft, gt, Ht)
                 if np.isfinite(ft):
                     if flat:
                         accepted = _inf_norm(np.asarray(gt)[free_idx]) < gnorm
                     else:
                         accepted = ft <= f + opts.armijo * alpha * slope
+                        if not accepted and bt == 0 and abs(ft - f) <= opts.roundoff_terms * max(abs(f), tiny):
+                            # f cannot resolve the full step's change: the gradient norm decides (a
+                            # shorter trial would pass or fail Armijo on f's rounding alone)
+                            accepted = _inf_norm(np.asarray(gt)[free_idx]) < gnorm
                     if accepted:
                         break
             alpha *= opts.backtrack
-        if not accepted and not flat and full is not None:
-            alpha_1, x_1, f_1, g_1, H_1 = full
-            if np.isfinite(f_1) and abs(f_1 - f) <= opts.roundoff_terms * max(abs(f), tiny) \
-                    and _inf_norm(np.asarray(g_1)[free_idx]) < gnorm:
-                alpha, xt, ft, gt, Ht, bt, accepted = alpha_1, x_1, f_1, g_1, H_1, 0, True
         if not accepted:
             if flat:
                 # neither f nor ||g|| can be improved along the Newton direction: round-off floor

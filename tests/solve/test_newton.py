@@ -179,6 +179,25 @@ def test_a_step_whose_energy_change_is_below_resolution_is_taken_when_it_lowers_
     np.testing.assert_allclose(res.x, c, rtol=0, atol=1e-12)
 
 
+def test_a_full_step_below_resolution_is_not_traded_for_a_shorter_one_that_passes_on_rounding():
+    # f = 1 + q(x) + e(x): q = 1/2 |x - c|^2, e = 3e-11 (rounding, made deterministic here) only at the
+    # minimizer c. From |x0 - c|^2 = 5e-11 the full Newton step lands on c and raises f by 5e-12 (<=
+    # 1e-10 |f|: unresolved) while zeroing the gradient; the half step misses the bump and passes the
+    # sufficient-decrease test on q alone. Taking the half step would repeat at every iteration (the
+    # gradient halving each time): a Newton solve at a tight target was measured doing so 100 times.
+    c = np.array([0.1, -0.2])
+    x0 = c + np.sqrt(5e-11 / 2.0) * np.ones(2)
+
+    def fun(x, need_h):
+        r = x - c
+        e = 3e-11 if np.allclose(x, c, rtol=0, atol=1e-15) else 0.0
+        return 1.0 + 0.5 * r @ r + e, r, (sp.identity(2, format="csr") if need_h else None)
+
+    res = minimize(fun, x0, options=NewtonOptions(grad_tol=1e-9))
+    assert res.converged and res.reason == "gradient" and res.iterations == 1
+    np.testing.assert_allclose(res.x, c, rtol=0, atol=1e-15)
+
+
 def test_free_mask_shape_is_checked_and_all_fixed_returns_x0():
     A = _spd(4, 5)
     fun = _quadratic(A, np.ones(4))
