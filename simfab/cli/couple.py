@@ -31,7 +31,7 @@ from pathlib import Path
 SIMULATE_DESCRIPTION = """Run an insertion simulation of a coupling scene and write its deformation profile
 (CSV, JSON, PNG), a USD replay and an MJCF scene for the viewer under --out.
 
---json keys: scene, category (tight/loose/...), E_max, E_ss [J], coupling_ratio [%], F_in, F_rm,
+--json keys: scene, category (tight/loose/.../none: no contact), E_max, E_ss [J], coupling_ratio [%], F_in, F_rm,
   F_grip [N], s_max, s_ss [m] (path length at E_max / steady state), max_von_mises [Pa] (the raw
   element maximum over the insertion), averaged_von_mises [Pa] (the von Mises stress averaged over
   stress_radius [m] around each element, the figure the design's yield constraint reads: the

@@ -25,7 +25,7 @@ class CouplingResult(Result):
 
     Args:
         scene: the scene's name.
-        category: "tight", "loose", "ejects", "jams" or "held by friction".
+        category: "tight", "loose", "ejects", "jams", "held by friction" or "none" (O never touched A).
         E_max, E_ss: peak and steady-state elastic energy [J].
         coupling_ratio: E_ss / E_max [%].
         F_in, F_rm, F_grip: insertion, removal and grip force [N].

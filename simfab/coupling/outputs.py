@@ -204,7 +204,8 @@ def plot_profile(res: InsertionResult, prof: ProfileSummary, path) -> Path:
     ax.legend(lines, labels, loc="upper left", fontsize=8)
     p2 = ", P2 elements" if res.model.options.element_order == 2 else ""
     mu = f", friction {prof.friction:g}" if prof.friction > 0 else ""
-    ax.set_title(f"{res.model.name}: {prof.category} (coupling ratio {prof.coupling_ratio:.1f}%{p2}{mu})")
+    category = "no contact" if prof.category == "none" else prof.category
+    ax.set_title(f"{res.model.name}: {category} (coupling ratio {prof.coupling_ratio:.1f}%{p2}{mu})")
     fig.tight_layout()
     try:
         return save_figure(fig, path)

@@ -9,7 +9,8 @@ Definitions (thesis, "Fundamentals and Overview"):
 - coupling ratio = E_ss / E_max * 100 [%].
 - Category: **ejects** (no dip), **loose** (E_ss <= LOOSE_REL E_max), **tight** (a dip to a non-zero
   E_ss < E_max); with friction, **held by friction** (ejects, but F_hold > 0) and **jams** (the
-  insertion self-locks: O inside the friction cone of a sticking contact).
+  insertion self-locks: O inside the friction cone of a sticking contact); **none** when O never
+  touched the part (:func:`touched`): coupling ratio 100 %, the steady state at the path's end.
 - Insertion force F along O's motion, resisting = negative, read up to the steady state (over the
   whole run for ejects): F_in = max(0, -min F); F_rm = max(0, max F) [N] (the insertion reversed,
   or with friction the removal records).
@@ -36,6 +37,10 @@ from simfab.results import field
 
 #: The force at a steady state at the run's end is ~0 within this fraction of the peak |force|.
 REST_FORCE_REL = 1e-2
+#: A profile whose peak energy is below that of a uniform strain of this size over the whole part
+#: never really touched the object: its energies are round-off (a category or a steady state read
+#: from them is noise, and a design cannot meet a grip constraint with a ratio of two of them).
+CONTACT_STRAIN_FLOOR = 1e-5
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,7 +49,7 @@ class ProfileSummary:
     the per-record arrays they were read from.
 
     Args:
-        category: "tight", "loose", "ejects", "jams" or "held by friction".
+        category: "tight", "loose", "ejects", "jams", "held by friction" or "none" (no contact).
         E_max: largest elastic energy along the insertion [J].
         E_ss: elastic energy at the steady state [J] (E_max when there is none).
         coupling_ratio: E_ss / E_max [%].
@@ -170,14 +175,28 @@ def record_phases(res) -> list[str]:
     return ["insert" if k < planned else "rest" for k in range(len(res.steps))] + ["remove"] * len(res.removal)
 
 
+def touched(fem, E_max: float) -> bool:
+    """Whether a profile's largest elastic energy E_max [J] is above round-off: above that of a uniform
+    strain CONTACT_STRAIN_FLOOR over the whole part ``fem``, 1/2 E V eps^2 (E Young's modulus, or 3 times
+    the mean shear modulus without a material; V the part's volume, or area in 2D)."""
+    E = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
+    return E_max > 0.5 * E * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
+
+
 def analyze_run(res) -> ProfileSummary:
     """:func:`analyze` of an :class:`simfab.coupling.simulate.InsertionResult`, its steady state at
     the end pose when its path ends in a rotation (``model.end_direction`` None); with friction F_rm
-    and F_hold from its removal records and the frictional categories (module docstring)."""
+    and F_hold from its removal records and the frictional categories; "none" when O never touched
+    the part (:func:`touched`; module docstring)."""
     planned = len(res.model.s_steps)
-    prof = analyze(res.column("s"), res.column("energy"), res.column("force"), res.column("grip"),
+    E = res.column("energy")
+    prof = analyze(res.column("s"), E, res.column("force"), res.column("grip"),
                    end_pose=res.model.end_direction is None, rest_from=planned if len(res.steps) > planned else None)
     mu = float(res.model.contact.friction)
+    if not touched(res.model.fem, prof.E_max):
+        end = min(planned, len(E)) - 1
+        return replace(prof, category="none", E_ss=float(E[end]), coupling_ratio=100.0, index_ss=end,
+                       F_grip=float(res.column("grip")[end]), stationary=True, F_hold=prof.F_rm, friction=mu)
     if res.jammed_at is not None:
         return replace(prof, category="jams", F_rm=0.0, F_hold=0.0, friction=mu)
     if not res.removal:

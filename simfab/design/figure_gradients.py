@@ -31,7 +31,7 @@ from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_m
 from simfab.coupling.profile import SLIDING_REL, analyze_run, rest_bracket
 from simfab.design import brief as B
 from simfab.design.handles import Handles
-from simfab.design.problem import CONTACT_STRAIN_FLOOR, DesignEvaluation, DesignProblem
+from simfab.design.problem import DesignEvaluation, DesignProblem
 from simfab.design.stress import averaging_matrix, quadrature_averaging_matrix
 from simfab.errors import ConvergenceError
 from simfab.fem.shape_derivative import linear_rest_derivative, point_von_mises
@@ -283,8 +283,7 @@ def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) ->
     dF = np.array([pull(j, "force") for j in range(K)])
     dG = np.array([pull(j, "grip") for j in range(K)])
     E, F = res.column("energy"), res.column("force")
-    Ey = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
-    touched = prof.E_max > 0.5 * Ey * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
+    touched = prof.category != "none"
     i_ss = prof.index_ss
     g: dict = {}
     g_Emax = _smax(E, dE)
@@ -304,7 +303,7 @@ def _figure_gradients(problem: DesignProblem, res, rec, prof, Jh: np.ndarray) ->
     else:
         g["removal_force"] = _smax(F[:end], dF[:end]) if prof.F_rm > 0 else zero
         g["hold_force"] = g["removal_force"]
-    g["grip_force"] = rest_grip_gradient(res, i_ss, dF, dG) if prof.category != "ejects" else dG[i_ss]
+    g["grip_force"] = rest_grip_gradient(res, i_ss, dF, dG) if prof.category not in ("ejects", "none") else dG[i_ss]
     if all(s.stress is not None for s in sens.values()):
         dS = np.array([pull(j, "stress") for j in range(K + R)])
         g["von_mises"] = _smax(stresses, dS)

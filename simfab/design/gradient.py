@@ -57,7 +57,6 @@ from simfab.design.problem import (
     QUALITY_REL,
     DesignEvaluation,
     DesignProblem,
-    clearance_index,
     element_quality,
     evaluate,
     initial_evaluation,
@@ -435,7 +434,7 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
     e0 = _evaluate(run, H.identity() if start is None else np.asarray(start, float))
     if e0.fg is not None and flat_start(rows, e0.fg, corr):
         touches_nothing = e0.ev.figures.get("category") == "none"
-        g_gap = (gap_gradient(e0.ev.result, clearance_index(e0.ev.result, e0.fg.steady_index, False), Jh)
+        g_gap = (gap_gradient(e0.ev.result, e0.fg.steady_index, Jh)
                  if touches_nothing and "seat_clearance" in problem.limits else None)
         if g_gap is not None and np.any(g_gap):
             # no figure depends on the shape, but the gap to O does: close it first (the clearance bound, linearized)
@@ -488,8 +487,8 @@ def optimize_gradient(problem: DesignProblem, *, iterations: int | None = None, 
         for i, r in enumerate(rows):
             gr = fg.gradients.get(r.name)
             if r.name == "seat_clearance":  # (a flat start's gap; 0 once in contact, where it holds)
-                gr = (gap_gradient(e.ev.result, clearance_index(e.ev.result, fg.steady_index, False), Jh)
-                      if e.ev.figures.get("category") == "none" else None)
+                gr = (gap_gradient(e.ev.result, fg.steady_index, Jh) if e.ev.figures.get("category") == "none"
+                      else None)
             if gr is not None:
                 k = corr.get(r.name, 1.0)
                 A[i] = r.gradient(fg.values[r.name] * k, gr * k) * span

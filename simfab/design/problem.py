@@ -70,12 +70,6 @@ def element_quality(X: np.ndarray, elements: np.ndarray) -> np.ndarray:
     return np.sign(vol) * 12.0 * np.cbrt(3.0 * np.abs(vol)) ** 2 / l2
 
 
-#: A profile whose peak energy is below that of a uniform strain of this size over the whole part
-#: never really touched the object (round-off): it has no coupling ("none", coupling ratio 100 %),
-#: so that a design cannot meet a grip constraint with a ratio of two round-off energies.
-CONTACT_STRAIN_FLOOR = 1e-5
-
-
 def seat_clearance(res, index: int) -> float:
     """Gap [m] between the part and the object at step ``index`` beyond the contact range: the
     smallest distance from A's boundary vertices to O (-psi near O, the field's far lower bound
@@ -90,14 +84,6 @@ def seat_clearance(res, index: int) -> float:
     if far.any():
         d[far] = cm.field.far_lower_bound(y[far], pose)
     return float(d.min() - np.max(cm.dhat))
-
-
-def clearance_index(res, index_ss: int, touched: bool) -> int:
-    """The insertion record :func:`seat_clearance` reads: the steady state ``index_ss`` of a part O
-    touched, else the last planned step's (the path's end): an untouched part's energies are round-off,
-    so the steady state read from them is noise (a design and its neighbour would be read at different
-    steps)."""
-    return index_ss if touched else len(res.model.s_steps) - 1
 
 
 def linear_mesh(fem):
@@ -125,20 +111,18 @@ def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
     the removal traversal), von_mises [Pa] (max over the insertion and removal of the von Mises
     stress averaged over ``stress_radius`` [m], :mod:`simfab.design.stress`; on P2 elements at the
     quadrature points, :func:`simfab.design.stress.record_averaged_von_mises`), seat_clearance [m]
-    (gap between part and object at the steady state, or at the path's end when O never touched the
-    part (:func:`clearance_index`); <= 0 in contact), and category, E_max, E_ss
+    (gap between part and object at the steady state, which is the path's end when O never touched
+    the part: category "none", :func:`simfab.coupling.profile.analyze_run`; <= 0 in contact), and
+    category, E_max, E_ss
     [J], von_mises_peak [Pa] (the largest element stress, mesh-dependent at sharp corners)."""
     prof = analyze_run(res)
     fem = res.model.fem
-    E = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
-    floor = 0.5 * E * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
-    touched = prof.E_max > floor
-    return {"coupling_ratio": prof.coupling_ratio if touched else 100.0, "grip_force": prof.F_grip,
+    return {"coupling_ratio": prof.coupling_ratio, "grip_force": prof.F_grip,
             "insertion_force": prof.F_in, "removal_force": prof.F_rm, "hold_force": prof.F_hold,
             "von_mises": max(record_averaged_von_mises(fem, r, stress_radius) for r in [*res.steps, *res.removal]),
             "von_mises_peak": float(max(r.max_von_mises for r in [*res.steps, *res.removal])),
-            "seat_clearance": seat_clearance(res, clearance_index(res, prof.index_ss, touched)),
-            "category": prof.category if touched else "none", "E_max": prof.E_max, "E_ss": prof.E_ss,
+            "seat_clearance": seat_clearance(res, prof.index_ss),
+            "category": prof.category, "E_max": prof.E_max, "E_ss": prof.E_ss,
             "friction": prof.friction}
 
 

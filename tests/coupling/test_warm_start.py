@@ -10,6 +10,7 @@ from simfab.coupling.config import InsertionConfig
 from simfab.coupling.layout import point_dhat
 from simfab.coupling.objective import make_objective
 from simfab.coupling.points import ContactPoints, vertex_points
+from simfab.coupling.profile import analyze_run
 from simfab.coupling.scene import load_coupling_scene
 from simfab.coupling.simulate import simulate_insertion
 from simfab.coupling.state import PastStep, StepState
@@ -113,6 +114,23 @@ def test_warm_starts_keep_the_contact_the_last_step_ended_with():
             if not np.any(d < obj.dhat):
                 lost.append(s)
     assert len(seen) > 25 and lost == []
+
+
+def test_a_part_out_of_contact_starts_each_step_at_its_rest_shape_and_is_reported_untouched():
+    # paddleside2d's channel matches the blade: O never comes within d_hat. Out of contact A's only
+    # equilibrium is its rest shape, a warm-start candidate then: every step starts there, converged
+    # (an extrapolation of the last steps instead carries Newton's residual deformation on and costs
+    # iterations: 5 at the first step). The profile is category "none" (its energies are round-off:
+    # tight or ejects as they fell), its steady state the path's end.
+    cm = load_coupling_scene("paddleside2d", overrides={"compliant": {"target_elements": 300},
+                                                        "simulation": {"steps": 8}})
+    res = simulate_insertion(cm)
+    assert sum(r.iterations for r in res.steps) == 0
+    for r in res.steps:
+        np.testing.assert_array_equal(r.x, cm.fem.rest)
+    prof = analyze_run(res)
+    assert prof.category == "none" and prof.coupling_ratio == 100.0 and prof.F_grip == 0.0
+    assert prof.index_ss == len(cm.s_steps) - 1
 
 
 @pytest.mark.parametrize("axes, message", [("xq", "axis letters"), ("xx", "axis letters"), ("", "axis letters")])

@@ -13,7 +13,7 @@ from simfab.coupling.simulate import simulate_insertion
 from simfab.design import figure_gradients as FG
 from simfab.design import gradient as G
 from simfab.design.brief import DesignConfig, TargetProfile
-from simfab.design.problem import clearance_index, evaluate, make_problem
+from simfab.design.problem import evaluate, make_problem
 
 #: an ejecting run's CR = 100 E_ss / E_max with E_ss = E_max: a product and a quotient, each rounded
 #: (100.00000000000001 on some machines), so 100 to a couple of ulps
@@ -95,7 +95,7 @@ def test_flat_start_closes_the_gap():
     assert G.flat_start(G.constraint_rows(P), fg, {})
     # the gap's gradient (at a vanishing temperature: the nearest vertex's) against a central difference of
     # whole evaluations (the part is undeformed: exact while the nearest vertex stays the nearest)
-    g = G.gap_gradient(ev.result, clearance_index(ev.result, fg.steady_index, False), Jh, temperature_rel=1e-9)
+    g = G.gap_gradient(ev.result, fg.steady_index, Jh, temperature_rel=1e-9)
     dh = np.random.default_rng(0).standard_normal(len(g)) * P.sigma0
     eps = 1e-3
     ep, em = evaluate(Ph, P.handles.identity() + eps * dh), evaluate(Ph, P.handles.identity() - eps * dh)
