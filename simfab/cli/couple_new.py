@@ -20,7 +20,8 @@ seat's depth in the message.
 
 Files under --out: NAME.xml (the mocap body 'object' with keyframes k0, k1, the box site 'fixed',
 the part as a display mesh), NAME.toml, and NAME_outline.csv (2D: the part's section through the
-object's centre) or NAME_part.npz (3D: the part's tetrahedral mesh, stored so runs are reproducible).
+object's centre, which is the scene's plane z = 0: the scene's frame is the files' moved along z, and
+the notes say so) or NAME_part.npz (3D: the part's tetrahedral mesh, stored so runs are reproducible).
 
 --json keys: scene, dim, start, end [m] (the object's centre at the path's ends), path_length [m],
   first_contact, seat [m] (along the path from its start; seat null if none), to_rest, notes,

@@ -331,6 +331,14 @@ def new_scene(spec: CouplingAuthorConfig, out) -> AuthoredScene:
             raise InputError("a 2D scene inserts in the xy-plane: the direction must have no z component",
                              where="--into")
         zc = float(centre[2])
+        if zc != 0.0:  # a 2D scene's plane is z = 0: its frame is the files' moved along z by -zc
+            A, O = A.copy(), O.copy()
+            A.apply_translation([0.0, 0.0, -zc])
+            O.apply_translation([0.0, 0.0, -zc])
+            centre = centre - np.array([0.0, 0.0, zc])
+            notes.append(f"2D: the section through the object's centre (z = {zc / scale:.4g} {spec.units} in the "
+                         "files) is the scene's plane z = 0: the scene's frame is the files' moved along z")
+            zc = 0.0
         part_shape = _Shape2D(_section(A, zc, "part", str(spec.part)))
         obj_shape = _Shape2D(_section(O, zc, "object", str(spec.object)))
         c2 = centre[:2]

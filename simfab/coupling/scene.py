@@ -252,6 +252,8 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
     body = obj_opts.body
     rho = obj_opts.rot_length_scale
     path = Trajectory.from_scene(sc, body=body, **({} if rho is None else {"rot_length_scale": float(rho)}))
+    if dim == 2:
+        check_planar_path(path, where=str(xml))
     n_samples = obj_opts.samples if obj_opts.samples is not None else (50 if dim == 2 else 2000)
     fld = primitive_field(sc, body, dim, n_samples) if obj_opts.sigma is None else None
     # O's mesh: sampled for its IMLS field, or displayed in 3D (a 2D primitive shows its exact samples)
@@ -410,6 +412,34 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
     except InputError as e:
         raise e.in_file(where) from None
     return V, T, 1.0
+
+
+#: A 2D scene's keyframes lie in the plane z = 0 within this distance [m] and turn about z within this
+#: sine of the tilt.
+PLANE_TOL = 1e-9
+
+
+def check_planar_path(path: Trajectory, *, where: str) -> None:
+    """Raise an InputError unless every keyframe of a 2D scene's path puts O in the plane z = 0 and turns
+    it about z only: the 2D model meets O's section with that plane (its body frame's z = 0 section carried
+    by the poses), and a keyframe off the plane leaves every point of the part beyond O's field (the barrier
+    never acts, and the first contact is an infeasible step).
+
+    Args:
+        path: O's path.
+        where: the scene file, for the message.
+    """
+    z = path.positions[:, 2]
+    k = np.flatnonzero(np.abs(z) > PLANE_TOL)
+    if k.size:
+        raise InputError(f"keyframe {int(k[0])} puts the object at z = {z[k[0]]:.6g} m; a 2D scene's object moves "
+                         "in the plane z = 0 (set the keyframes' mpos z, and the body's pos, to 0)", where=where)
+    tilt = np.hypot(path.quats[:, 1], path.quats[:, 2])
+    k = np.flatnonzero(tilt > PLANE_TOL)
+    if k.size:
+        raise InputError(f"keyframe {int(k[0])} turns the object about an axis other than z (mquat "
+                         f"{tuple(np.round(path.quats[k[0]], 6).tolist())}); a 2D scene's object turns in the plane",
+                         where=where)
 
 
 def load_mesh_file(path: Path, dim: int):

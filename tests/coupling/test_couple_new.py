@@ -67,6 +67,32 @@ def test_tutorial_commands_give_a_tight_profile(meshes, tmp_path, capsys):
     assert "negative = the part resists" in summary["profile_columns"]["force_N"]
 
 
+def test_a_2d_scene_from_an_assembly_off_the_xy_plane_meets_the_part(meshes, tmp_path, capsys):
+    # the assembly 2.5 mm above the xy-plane (the clip on z = 0..5 mm, the cylinder centred on its
+    # mid-plane): the section through the object's centre becomes the scene's plane z = 0 (keyframes
+    # written at z = 2.5 mm left every point of the part beyond the object's field, and the first contact
+    # was an infeasible step)
+    import trimesh
+
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import simulate_insertion
+
+    for name in ("clip", "cylinder"):
+        m = trimesh.load(meshes / f"{name}.stl")
+        m.apply_translation([0.0, 0.0, 2.5])
+        m.export(tmp_path / f"{name}_up.stl")
+    assert main(["couple", "new", str(tmp_path / "clip_up.stl"), str(tmp_path / "cylinder_up.stl"), "--into=-x",
+                 "--dim", "2", "--out", str(tmp_path / "scene"), "--json"]) == 0
+    made = json.loads(capsys.readouterr().out)
+    assert made["start"][2] == 0.0 and made["end"][2] == 0.0
+    assert any("z = 2.5 mm in the files" in n for n in made["notes"])
+    cm = load_coupling_scene(made["outputs"]["scene_xml"], overrides={"simulation": {"steps": 12},
+                                                                     "compliant": {"target_elements": 400}})
+    res = simulate_insertion(cm)
+    F = res.column("force")
+    assert -F.min() > 1.0 and res.column("energy").max() > 0  # the arms resist: contact is seen
+
+
 def test_3d_scene_loads_and_starts_outside(meshes, tmp_path, capsys):
     from simfab.coupling.scene import load_coupling_scene
     from simfab.coupling.simulate import check_start

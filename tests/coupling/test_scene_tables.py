@@ -181,3 +181,21 @@ def test_help_does_not_load_the_table_library():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split()[-2:] == ["False", "False"]
+
+
+@pytest.mark.parametrize("edit, where", [
+    (('mpos="0.0007 0 0"', 'mpos="0.0007 0 0.002"'), "keyframe 1 puts the object at z = 0.002 m"),
+    (('<key name="k1" mpos="0.0007 0 0" mquat="1 0 0 0"', '<key name="k1" mpos="0.0007 0 0" mquat="0.9 0.1 0 0"'),
+     "keyframe 1 turns the object about an axis other than z"),
+])
+def test_a_2d_scene_whose_object_leaves_the_plane_is_refused_naming_the_keyframe(tmp_path, edit, where):
+    # the 2D model meets O's section with z = 0: off the plane no point of the part would ever be within O's
+    # field (the barrier never acts; the first contact became an infeasible step, "not finite at the start")
+    src = bundled_dir()
+    shutil.copy(src / "cclamp2d.toml", tmp_path / "cclamp2d.toml")
+    xml = (src / "cclamp2d.xml").read_text()
+    assert edit[0] in xml
+    (tmp_path / "cclamp2d.xml").write_text(xml.replace(edit[0], edit[1]))
+    with pytest.raises(InputError) as e:
+        load_coupling_scene(tmp_path / "cclamp2d.xml")
+    assert str(e.value).startswith(f"{tmp_path / 'cclamp2d.xml'}: ") and where in str(e.value)
