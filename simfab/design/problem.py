@@ -113,8 +113,8 @@ def profile_figures(res, stress_radius: float = STRESS_RADIUS) -> dict:
     quadrature points, :func:`simfab.design.stress.record_averaged_von_mises`), seat_clearance [m]
     (gap between part and object at the steady state, which is the path's end when O never touched
     the part: category "none", :func:`simfab.coupling.profile.analyze_run`; <= 0 in contact), and
-    category, E_max, E_ss
-    [J], von_mises_peak [Pa] (the largest element stress, mesh-dependent at sharp corners)."""
+    category, E_max, E_ss [J], von_mises_peak [Pa] (the largest element stress, mesh-dependent at
+    sharp corners)."""
     prof = analyze_run(res)
     fem = res.model.fem
     return {"coupling_ratio": prof.coupling_ratio, "grip_force": prof.F_grip,
