@@ -20,6 +20,7 @@ smoother again. It serves as the preconditioner of conjugate gradients
 
 from __future__ import annotations
 
+import importlib.util
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,6 +96,8 @@ class SmootherConfig:
         bad = [k for k, v in ok.items() if not v]
         if bad:
             raise ValueError(f"invalid SmootherConfig: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
+        if self.kind == "sgs" and importlib.util.find_spec("pyamg") is None:
+            raise ValueError("SmootherConfig(kind='sgs') needs pyamg (pip install pyamg, or simfab's [bench] extra)")
 
 
 class TwoLevelP2:

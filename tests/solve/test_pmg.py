@@ -211,3 +211,13 @@ def test_coarse_factorizations_are_counted_across_free_sets():
     free2 = free[3:]  # one more node held
     s.solve_free(H, free2, np.ones(len(free2)))
     assert s.multigrid_solves == 2 and s.coarse_factorizations == 2 and s.factorizations == 0
+
+
+def test_the_gauss_seidel_smoother_without_pyamg_is_a_clear_error(monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "pyamg" else real(name, *a))
+    with pytest.raises(ValueError, match="needs pyamg"):
+        SmootherConfig(kind="sgs")
+    SmootherConfig(kind="chebyshev")  # the default smoother needs nothing more
