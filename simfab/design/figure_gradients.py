@@ -31,9 +31,10 @@ from simfab.coupling.adjoint import SensitivityRecorder, StressMeasure, smooth_m
 from simfab.coupling.profile import SLIDING_REL, analyze_run, rest_bracket
 from simfab.design import brief as B
 from simfab.design.handles import Handles
-from simfab.design.problem import DesignEvaluation, DesignProblem
+from simfab.design.problem import DesignEvaluation, DesignProblem, linear_mesh
 from simfab.design.stress import averaging_matrix, quadrature_averaging_matrix
 from simfab.errors import ConvergenceError
+from simfab.fem.model import mean_edge_length_gradient
 from simfab.fem.shape_derivative import linear_rest_derivative, point_von_mises
 
 __all__ = ["DeferredRecorder", "FigureGradients", "TEMPERATURE_REL", "TargetModel", "WEIGHT_FLOOR", "design_recorder",
@@ -458,7 +459,8 @@ def gap_gradient(res, index: int, Jh: np.ndarray, temperature_rel: float = 0.1) 
 
     The clearance is min_i d(y_i) - d_hat over A's boundary vertices y_i, d = -psi
     (:func:`simfab.design.problem.seat_clearance`). A part that touches nothing is undeformed: every
-    free vertex sits at its rest position, y_i = X_i, so dd_i/dX_i = -grad psi(y_i). The minimum's
+    free vertex sits at its rest position, y_i = X_i, so dd_i/dX_i = -grad psi(y_i); d_hat is
+    dhat_rel times the linear mesh's mean edge length, whose derivative is subtracted. The minimum's
     gradient is that of a soft minimum over the near vertices at temperature ``temperature_rel`` d_hat:
     a part shaped after O has many vertices within a fraction of d_hat of the nearest (paddleside2d: 39
     within d_hat / 10), and the soft minimum closes the gap over all of them rather than at one
@@ -474,7 +476,10 @@ def gap_gradient(res, index: int, Jh: np.ndarray, temperature_rel: float = 0.1) 
     w = np.exp(-(d - d.min()) / (temperature_rel * float(np.max(cm.dhat))))
     gX = np.zeros(np.asarray(r.x).shape)
     gX[bv[near]] = -(w / w.sum())[:, None] * np.asarray(ev.grad, float)[near]
-    return linear_rest_derivative(cm.fem, gX).ravel() @ Jh  # (P2: edge nodes chained to the corners)
+    # d_hat = dhat_rel * (the linear mesh's mean edge length) moves with the design too
+    lin = linear_mesh(cm.fem)
+    g_dhat = cm.options.dhat_rel * mean_edge_length_gradient(lin.rest, lin.elements)
+    return (linear_rest_derivative(cm.fem, gX) - g_dhat).ravel() @ Jh  # (P2: edge nodes chained to the corners)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -179,6 +179,30 @@ def _mean_edge_length(points: np.ndarray, elements: np.ndarray) -> float:
     return float(np.linalg.norm(points[elements[:, i]] - points[elements[:, j]], axis=-1).mean())
 
 
+def mean_edge_length_gradient(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    """d(mean element edge length)/d(points) (n, dim) [-] of a linear mesh (each element edge counted once
+    per element, as :meth:`FemModel.mean_edge_length`): h = sum_e |X_a - X_b| / N, so each edge adds
+    +-(X_a - X_b) / (|X_a - X_b| N) to its two end points.
+
+    Args:
+        points: (n, dim) vertex positions [m].
+        elements: (m, dim + 1) simplices.
+
+    Returns:
+        The gradient, (n, dim).
+    """
+    X = np.asarray(points, float)
+    el = np.asarray(elements, np.int64)
+    i, j = np.triu_indices(el.shape[1], 1)
+    a, b = el[:, i].ravel(), el[:, j].ravel()
+    u = X[a] - X[b]
+    u /= np.linalg.norm(u, axis=1, keepdims=True) * len(a)
+    g = np.zeros_like(X)
+    np.add.at(g, a, u)
+    np.add.at(g, b, -u)
+    return g
+
+
 def _boundary(elements: np.ndarray, dim: int) -> np.ndarray:
     """Facets that belong to exactly one element, oriented outward (elements positively oriented)."""
     if dim == 2:

@@ -96,3 +96,18 @@ def test_linear_rest_derivative_is_the_midpoint_chain():
     lifted = model.lift(X + dXc) - model.lift(X)
     assert float(np.sum(shape_derivative.linear_rest_derivative(model, g) * dXc)) == pytest.approx(
         float(np.sum(g * lifted)), rel=1e-12)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_mean_edge_length_gradient_matches_finite_differences(dim):
+    # the barrier's d_hat is dhat_rel times this length: the design's clearance gradient carries it
+    from simfab.fem.model import mean_edge_length_gradient
+
+    X, el = _mesh(dim)
+    X = X + np.random.default_rng(dim).uniform(-1e-4, 1e-4, X.shape)  # no edge of a regular grid is special
+    g = mean_edge_length_gradient(X, el)
+    V = np.random.default_rng(7).standard_normal(X.shape)
+    eps = 1e-8  # moves of 1e-8 m against edges of ~1e-3 m: truncation ~1e-10, round-off ~1e-9 relative
+    fd = (make_model(X + eps * V, el, "PLA", thickness=0.005).mean_edge_length()
+          - make_model(X - eps * V, el, "PLA", thickness=0.005).mean_edge_length()) / (2 * eps)
+    assert float(np.sum(g * V)) == pytest.approx(fd, rel=1e-6)  # a wrong sign or count is off by O(1)
