@@ -39,6 +39,7 @@ from simfab.coupling.points import ContactPoints
 from simfab.coupling.state import StepState
 from simfab.fem import shape_derivative
 from simfab.fem.elastic import energy_gradient_hessian
+from simfab.fem.model import mean_edge_length_gradient
 from simfab.solve.linear import NotPositiveDefinite, SPDSolver
 
 
@@ -74,17 +75,6 @@ class StepSensitivity:
     friction_lag_held: bool = False
 
 
-def edge_rest_derivative(X: np.ndarray, a: np.ndarray, c: np.ndarray, coef: np.ndarray) -> np.ndarray:
-    """sum_e coef_e d|X_a - X_c|/dX (n, dim) over edges (a_e, c_e)."""
-    e = X[a] - X[c]
-    L = np.linalg.norm(e, axis=1)
-    g = (coef / L)[:, None] * e
-    out = np.zeros_like(X)
-    np.add.at(out, a, g)
-    np.add.at(out, c, -g)
-    return out
-
-
 def dhat_jacobian(cm: CouplingModel, pts: ContactPoints) -> sp.csr_matrix:
     """(k, n * dim) d dhat_j/dX of the per-point activation distances of
     :func:`simfab.coupling.layout.point_dhat` (dhat_j = dhat_rel sum_a w_ja h_a, h_a the shortest
@@ -114,16 +104,6 @@ def dhat_jacobian(cm: CouplingModel, pts: ContactPoints) -> sp.csr_matrix:
     c = np.concatenate([v[:, None] * dim + np.arange(dim), other[:, None] * dim + np.arange(dim)], axis=1).ravel()
     val = np.concatenate([g, -g], axis=1).ravel()
     return sp.csr_matrix((val, (r, c)), shape=(k, n * dim))
-
-
-def mean_edge_gradient(cm: CouplingModel) -> np.ndarray:
-    """d h_A/dX (n, dim) of A's mean element edge length (:meth:`MeshModel.mean_edge_length`: over the
-    corner mesh, so a P2 model's edge nodes get zero)."""
-    X = np.asarray(cm.fem.rest, float)
-    el = np.asarray(cm.fem.corner_elements)
-    i, j = np.triu_indices(el.shape[1], 1)
-    a, c = el[:, i].ravel(), el[:, j].ravel()
-    return edge_rest_derivative(X, a, c, np.full(len(a), 1.0 / len(a)))
 
 
 class _Barrier:
@@ -344,7 +324,9 @@ class StepLinearization:
                 add_point_blocks(cm, self.fric.lag.points, J, self.fric.rows, self.fric.extra)
                 self.JT = sp.csr_matrix(J.T)
         self.H = H
-        self.kappa_grad = cm.kappa / cm.h * mean_edge_gradient(cm) if dim == 3 else None
+        # 3D: kappa = kappa_rel E h_A follows the mean edge length h_A of the corner mesh
+        self.kappa_grad = (cm.kappa / cm.h * mean_edge_length_gradient(cm.fem.rest, cm.fem.corner_elements)
+                           if dim == 3 else None)
         self.idx = np.flatnonzero(cm.free)
         self.fixed = ~cm.free.reshape(n, dim)
         self.stable = True

@@ -46,6 +46,8 @@ def test_refine_factors_are_parsed_and_checked(peer):
         peer.run(["--scenes", "snapfit2d", "--refine", "1,0"])
     with pytest.raises(InputError, match="--frictions"):
         peer.run(["--scenes", "snapfit2d", "--frictions", "-0.3"])
+    with pytest.raises(InputError, match="--repeat"):
+        peer.run(["--scenes", "snapfit2d", "--repeat", "0"])
 
 
 def test_refine_scales_the_element_count(peer):

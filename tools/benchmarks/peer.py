@@ -1,6 +1,7 @@
 """simfab's insertion beside an IPC reference built on the IPC Toolkit (``ipctk``).
 
-``python tools/bench.py peer [--scenes snapfit2d,cclamp2d] [--frictions 0,0.3] [--refine 1,2] [--plot DIR]``
+``python tools/bench.py peer [--scenes snapfit2d,cclamp2d] [--frictions 0,0.3] [--refine 1,2] [--repeat K]
+[--plot DIR]``
 
 The reference solves the same quasi-static insertion the way the IPC paper (Li et al. 2020) does:
 
@@ -23,10 +24,12 @@ The reference solves the same quasi-static insertion the way the IPC paper (Li e
 
 Reported per case: the profile figures of both runs (the support reaction along O's motion;
 simfab's analysis of each run's records, F_hold's onset of sliding from simfab's), their
-differences, the profiles' largest difference, wall and CPU seconds (both timed warm), Newton
-iterations per step and the speed ratio; ``--plot DIR`` draws both profiles. ``--refine`` factors
-refine each case's mesh by the scene's own rule (:func:`simfab.coupling.converge.level_mesh`; the
-snap-fit: cells through its thickness times the factor's square root).
+differences, the profiles' largest difference, wall and CPU seconds (both timed warm; with
+``--repeat K`` the medians of K timed runs of each, simfab's and the reference's alternating, so both
+share the machine's slow and fast moments), Newton iterations per step and the speed ratio;
+``--plot DIR`` draws both profiles. ``--refine`` factors refine each case's mesh by the scene's own
+rule (:func:`simfab.coupling.converge.level_mesh`; the snap-fit: cells through its thickness times the
+factor's square root).
 """
 
 from __future__ import annotations
@@ -471,7 +474,7 @@ def case_model(scene: str, mu: float, refine: float = 1.0):
     return load_coupling_scene(scene, overrides=over)
 
 
-def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True) -> dict:
+def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True, repeat: int = 1) -> dict:
     """simfab's run and the reference's on one case: figures, differences, seconds, iterations.
 
     Args:
@@ -480,6 +483,9 @@ def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True) ->
         refine: element-count factor of the case's mesh (:func:`case_model`).
         warm: time both solvers after an untimed first run (else the first, simfab's, pays the
             process's one-off costs that the reference then reuses).
+        repeat: timed runs of each solver, alternating (simfab, reference, simfab, ...); the seconds
+            reported are their medians, with the fastest and slowest run beside them. A run of the
+            snap-fit takes ~0.07 s, where one run's timing varies by +-30 % with the machine's load.
 
     Returns:
         The case's row (see :func:`run`).
@@ -492,20 +498,31 @@ def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True) ->
     # loads the Warp kernels (of the elastic energy both use), CHOLMOD and ipctk untimed
     if warm:
         simulate_insertion(case_model(scene, mu, refine))
-    cm = case_model(scene, mu, refine)
-    t0, c0 = time.perf_counter(), time.process_time()
-    res = simulate_insertion(cm)
-    t_s, c_s = time.perf_counter() - t0, time.process_time() - c0
-    poses = [(float(r.s), "insert") for r in res.steps] + [(float(r.s), "remove") for r in res.removal]
-    opts = PeerOptions(dhat=float(cm.dhat), grad_tol=C.NEWTON_GRAD_TOL_REL * float(cm.force_scale), mu=float(mu),
-                       eps_v=float(cm.contact.friction_eps_rel) * float(cm.h), lag_tol=float(cm.contact.lag_tol),
-                       max_lag=int(cm.contact.max_lag_iterations))
-    if warm:
-        IpcReference(cm, opts).run(poses[:2])
-    t0, c0 = time.perf_counter(), time.process_time()
-    ref = IpcReference(cm, opts)
-    steps = ref.run(poses)
-    t_r, c_r = time.perf_counter() - t0, time.process_time() - c0
+    if repeat < 1:
+        raise ValueError(f"repeat must be >= 1, got {repeat}")
+    times_s, times_r, res, steps, ref = [], [], None, None, None
+    for _ in range(repeat):
+        cm = case_model(scene, mu, refine)
+        t0, c0 = time.perf_counter(), time.process_time()
+        run_s = simulate_insertion(cm)
+        times_s.append((time.perf_counter() - t0, time.process_time() - c0))
+        if res is None:
+            res = run_s
+            poses = [(float(r.s), "insert") for r in res.steps] + [(float(r.s), "remove") for r in res.removal]
+            opts = PeerOptions(dhat=float(cm.dhat), grad_tol=C.NEWTON_GRAD_TOL_REL * float(cm.force_scale),
+                               mu=float(mu), eps_v=float(cm.contact.friction_eps_rel) * float(cm.h),
+                               lag_tol=float(cm.contact.lag_tol), max_lag=int(cm.contact.max_lag_iterations))
+            if warm:
+                IpcReference(cm, opts).run(poses[:2])
+        elif _forces(run_s) != _forces(res):
+            raise RuntimeError(f"{scene}: simfab's repeated run gave other records (not reproducible)")
+        t0, c0 = time.perf_counter(), time.process_time()
+        ref_k = IpcReference(cm, opts)
+        steps_k = ref_k.run(poses)
+        times_r.append((time.perf_counter() - t0, time.process_time() - c0))
+        if steps is None:
+            steps, ref = steps_k, ref_k
+    (t_s, c_s), (t_r, c_r) = _medians(times_s), _medians(times_r)
     ins, rem = steps[: len(res.steps)], steps[len(res.steps):]
     peer_res = dataclasses.replace(
         res, steps=[dataclasses.replace(r, force=p.force, energy=p.energy) for r, p in zip(res.steps, ins)],
@@ -525,9 +542,12 @@ def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True) ->
     return {
         "scene": scene, "friction": mu, "refine": refine, "elements": int(cm.fem.n_elements), "element_order": 1,
         "object_collision_vertices": int(ref.k), "dhat": float(cm.dhat), "records": n_s,
+        "repeat": repeat,
         "simfab": {**fs, "category": a.category, "seconds": round(t_s, 3), "cpu_seconds": round(c_s, 3),
+                   "seconds_range": _range(times_s),
                    "newton_iterations": it_s, "iterations_per_step": round(it_s / max(1, n_s), 2)},
         "ipc": {**fr, "category": b.category, "seconds": round(t_r, 3), "cpu_seconds": round(c_r, 3),
+                "seconds_range": _range(times_r),
                 "newton_iterations": it_r, "iterations_per_step": round(it_r / max(1, n_s), 2),
                 "kappa_final": float(ref.kappa), "max_iterations_in_a_step": int(max(p.iterations for p in steps))},
         # relative to E_max for E_max, to the larger of simfab's F_in and F_rm for the forces
@@ -540,6 +560,21 @@ def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True) ->
         "profile": {"s": [p.s for p in steps], "phase": [p.phase for p in steps],
                     "force_simfab": f_s.tolist(), "force_ipc": f_r.tolist()},
     }
+
+
+def _forces(res) -> list:
+    """The records' forces and energies of an insertion run (equal lists: the same run)."""
+    return [(float(r.force), float(r.energy)) for r in [*res.steps, *res.removal]]
+
+
+def _medians(times: list) -> tuple:
+    """(median wall seconds, median CPU seconds) of (wall, cpu) pairs."""
+    return float(np.median([t for t, _ in times])), float(np.median([c for _, c in times]))
+
+
+def _range(times: list) -> list:
+    """[fastest, slowest] wall seconds of (wall, cpu) pairs."""
+    return [round(min(t for t, _ in times), 3), round(max(t for t, _ in times), 3)]
 
 
 def plot(row: dict, path: str) -> None:
@@ -588,7 +623,8 @@ def format_table(rows: list) -> str:
             lines.append(f"{r['scene']:10s} {r['friction']:>4g} {r['elements']:>6d} {k:6s} {r['simfab'][k]:>10.4g} "
                          f"{r['ipc'][k]:>10.4g} {100 * r['relative_difference'][k]:>8.2f}%")
         lines.append(f"{r['scene']:10s} {r['friction']:>4g} {r['elements']:>6d} wall s {r['simfab']['seconds']:>10.2f} "
-                     f"{r['ipc']['seconds']:>10.2f}  ratio {r['speed_ratio']:.1f} (cpu {r['speed_ratio_cpu']:.1f}); "
+                     f"{r['ipc']['seconds']:>10.2f}  ratio {r['speed_ratio']:.1f} (cpu {r['speed_ratio_cpu']:.1f}"
+                     f"{'' if r.get('repeat', 1) == 1 else ', medians of %d' % r['repeat']}); "
                      f"it/step {r['simfab']['iterations_per_step']} vs {r['ipc']['iterations_per_step']}")
     return "\n".join(lines)
 
@@ -613,9 +649,13 @@ def run(argv) -> dict:
                     help=f"comma-separated, from {', '.join(SCENES)} (default all)")
     ap.add_argument("--frictions", default="0,0.3", help="Coulomb friction coefficients (default 0,0.3)")
     ap.add_argument("--refine", default="1", help="element-count factors of each case's mesh, e.g. 1,2,4")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="timed runs of each solver, alternating; the medians are reported (default 1)")
     ap.add_argument("--plot", default=None, help="directory for the force-profile PNGs")
     a = ap.parse_args(argv)
     factors = parse_refine(a.refine)
+    if a.repeat < 1:
+        raise InputError(f"--repeat must be at least 1, got {a.repeat}")
     try:
         frictions = [float(f) for f in a.frictions.split(",")]
     except ValueError:
@@ -630,7 +670,7 @@ def run(argv) -> dict:
     for sc in scenes:
         for mu in frictions:
             for f in factors:
-                row = compare(sc, mu, f)
+                row = compare(sc, mu, f, repeat=a.repeat)
                 if a.plot:
                     os.makedirs(a.plot, exist_ok=True)
                     p = os.path.join(a.plot, f"peer_{sc}_mu{mu:g}" + (f"_r{f:g}" if f != 1.0 else "") + ".png")
