@@ -22,7 +22,7 @@ def peer():
 
 
 def test_snapfit_forces_agree_with_the_ipc_reference(peer):
-    row = peer.compare("snapfit2d", 0.0)
+    row = peer.compare("snapfit2d", 0.0, repeat=2)  # (a repeated run must give the same records, else it raises)
     # both place the contact within d_hat (~1e-2 of the mesh size) of the face: the profiles agree
     # to the barriers' geometric difference, well below 2 % (a wrong reaction sign, direction or
     # energy would be off by 100 %)
@@ -33,6 +33,9 @@ def test_snapfit_forces_agree_with_the_ipc_reference(peer):
     peak = max(abs(v) for v in f_s)
     assert max(abs(a - b) for a, b in zip(f_s, f_i)) < 0.02 * peak  # the whole profile, step by step
     assert row["ipc"]["newton_iterations"] >= row["records"]  # the reference solved every step
+    for who in ("simfab", "ipc"):  # the median of two runs lies between them
+        lo, hi = row[who]["seconds_range"]
+        assert 0 < lo <= row[who]["seconds"] <= hi, (who, row[who]["seconds"], lo, hi)
 
 
 def test_refine_factors_are_parsed_and_checked(peer):
