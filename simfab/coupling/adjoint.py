@@ -134,8 +134,8 @@ class _Barrier:
         """dB/dX at fixed x (n, dim)."""
         db, _ = self.db_ddhat()
         out = ((self.kappa * db) @ self.dhat_jac).reshape(-1, self.cm.dim)
-        if kappa_grad is not None:
-            out += self.energy / self.kappa * kappa_grad
+        if kappa_grad is not None:  # B = kappa sum b, kappa = (kappa / kappa_0) kappa_0(X) (doublings fixed)
+            out += self.energy / self.cm.kappa * kappa_grad
         return out
 
     def mixed_product(self, w: np.ndarray, kappa_grad: np.ndarray | None) -> np.ndarray:
@@ -147,7 +147,7 @@ class _Barrier:
         coef = self.kappa * dbp * np.einsum("kd,bkd->bk", self.gd, wy)
         out = np.asarray(coef @ self.dhat_jac).reshape(W.shape)
         if kappa_grad is not None:
-            out += (np.einsum("bnd,nd->b", W, self.gradient) / self.kappa)[:, None, None] * kappa_grad
+            out += (np.einsum("bnd,nd->b", W, self.gradient) / self.cm.kappa)[:, None, None] * kappa_grad
         return out.reshape(w.shape)
 
 
@@ -324,7 +324,8 @@ class StepLinearization:
                 add_point_blocks(cm, self.fric.lag.points, J, self.fric.rows, self.fric.extra)
                 self.JT = sp.csr_matrix(J.T)
         self.H = H
-        # 3D: kappa = kappa_rel E h_A follows the mean edge length h_A of the corner mesh
+        # 3D: the model's kappa_0 = kappa_rel E h_A follows the mean edge length h_A of the corner mesh (d kappa_0/dX);
+        # a step's kappa is kappa_0 times the run's doublings, fixed on the branch the run took
         self.kappa_grad = (cm.kappa / cm.h * mean_edge_length_gradient(cm.fem.rest, cm.fem.corner_elements)
                            if dim == 3 else None)
         self.idx = np.flatnonzero(cm.free)
