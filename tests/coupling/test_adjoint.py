@@ -89,6 +89,9 @@ def check(cm, seed=0, min_supported=3, figures=("energy", "force", "grip", "stre
     minus = simulate_insertion(with_rest_shape(cm, X - EPS * dX))
     assert [r.s for r in plus.steps] == [r.s for r in base.steps] == [r.s for r in minus.steps]
     assert plus.refined_facets == minus.refined_facets == base.refined_facets  # no refinement event between
+    # nor a barrier-stiffness doubling at another step (each kappa is a fixed multiple of kappa_0 on a branch)
+    doublings = [[r.kappa / run.model.kappa for r in run.steps] for run in (plus, minus, base)]
+    assert doublings[0] == doublings[1] == doublings[2]
     ok = [k for k, sn in enumerate(rec.insert) if sn.supported]
     assert len(ok) >= min_supported and all(sn.stable for sn in rec.insert)
     compare(cm, rec.insert, plus, minus, dX, A, figures, ((plus.steps, minus.steps), ok), tol)
