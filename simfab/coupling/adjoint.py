@@ -58,7 +58,9 @@ class StepSensitivity:
         stress: the averaged von Mises maximum's (smoothed) derivative [Pa/m], None without a :class:`StressMeasure`.
         stress_value: that maximum [Pa] (NaN without one).
         stable: H_ff was positive definite.
-        supported: every dependence of the step is followed (False: solved from an unrecorded state, held fixed).
+        supported: every dependence of the step is followed (False: solved from an unrecorded state, held
+            fixed, or, where steps depend on their start, a later record whose chain back reaches such a step
+            above PRUNE_REL).
         friction_lag_held: the friction's normal forces and normals were held at their values
             (``SensitivityRecorder(held_lag=True)``, an approximation).
     """
@@ -488,7 +490,18 @@ PRUNE_REL = 1e-9
 
 def _depends(link: StepLink, lin: StepLinearization) -> bool:
     """The step's equilibrium depends on the previous record's positions, and that is followed."""
-    return link.followed and not link.from_rest and (link.pin is not None or lin.fric is not None)
+    return link.followed and _on_start(link, lin)
+
+
+def _on_start(link: StepLink, lin: StepLinearization) -> bool:
+    """The step's equilibrium depends on the state it started from (friction anchors, a pin's anchor)."""
+    return not link.from_rest and (link.pin is not None or lin.fric is not None)
+
+
+def _matters(rhs: np.ndarray, sens: StepSensitivity, figure: str) -> bool:
+    """Whether a right-hand side of the backward pass for a record's figure is above PRUNE_REL of the
+    record's own derivative of it (l1 norm against the largest entry)."""
+    return bool(np.abs(rhs).sum() > PRUNE_REL * np.abs(getattr(sens, figure)).max())
 
 
 class SensitivityRecorder:
@@ -533,6 +546,7 @@ class SensitivityRecorder:
         self._finished = True
         figs = [f for f in ("energy", "force", "grip", "stress") if getattr(self._sens[0], f) is not None]
         add: dict = {}
+        cut_off: set = set()  # records whose chain reaches a held start
         incoming = None  # (targets [(record, figure)], right-hand sides (b, n, dim)) to solve at record j
         for j in range(len(self._sens) - 1, -1, -1):
             targets, send = [], []
@@ -547,17 +561,23 @@ class SensitivityRecorder:
                     add[t] = add.get(t, 0.0) + d
                 if _depends(self._links[j], lin):
                     targets, send = list(incoming[0]), [lin.back(lam)]
+                elif _on_start(self._links[j], lin):
+                    # the step started from a state that was not recorded (held): the later records whose
+                    # chain still matters here miss the dependence beyond it, so they are not supported
+                    cut = lin.back(lam)
+                    cut_off |= {k for (k, f), b in zip(incoming[0], cut) if _matters(b, self._sens[k], f)}
             if self._pending[j] is not None:
                 targets += [(j, f) for f in figs]
                 send.append(self._pending[j])
             if targets:  # drop the right-hand sides too small to matter (a chain that has died out)
                 send = np.concatenate(send)
-                keep = [i for i, (k, f) in enumerate(targets)
-                        if np.abs(send[i]).sum() > PRUNE_REL * np.abs(getattr(self._sens[k], f)).max()]
+                keep = [i for i, (k, f) in enumerate(targets) if _matters(send[i], self._sens[k], f)]
                 targets, send = [targets[i] for i in keep], send[keep]
             incoming = (targets, send) if targets else None
         for (k, f), d in add.items():
             self._sens[k] = dataclasses.replace(self._sens[k], **{f: getattr(self._sens[k], f) + d})
+        for k in cut_off:
+            self._sens[k] = dataclasses.replace(self._sens[k], supported=False)
 
     @property
     def insert(self) -> list[StepSensitivity]:
