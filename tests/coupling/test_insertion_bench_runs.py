@@ -5,6 +5,7 @@ import pathlib
 import sys
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 TOOLS = pathlib.Path(__file__).resolve().parents[2] / "tools"
@@ -36,3 +37,28 @@ def test_budget_keeps_running_until_spent_within_the_bounds(wanted):
     assert wanted(a, [1.0] * 9) == 10  # budget left: one more
     assert wanted(a, [1.0] * 10) == 10  # budget spent: done
     assert wanted(a, [0.1] * 15) == 15  # capped
+
+
+def test_scaling_repeats_levels_in_alternating_order_and_keeps_each_fastest(monkeypatch):
+    sys.path.insert(0, str(TOOLS))
+    try:
+        scaling = importlib.import_module("benchmarks._scaling")
+    finally:
+        sys.path.remove(str(TOOLS))
+    calls, wall = [], {(1.0, 0): 2.0, (2.0, 0): 4.5, (1.0, 1): 1.8, (2.0, 1): 4.0}  # (factor, round) -> seconds
+
+    def child(scene, factor, mu, timeout):
+        k = sum(f == factor for f in calls)
+        calls.append(factor)
+        return {"scene": scene, "factor": factor, "friction": mu, "tets": 100, "free_dofs": int(1000 * factor),
+                "seconds": wall[(factor, k)], "cpu_seconds": wall[(factor, k)], "peak_memory_mib": 1.0,
+                "newton_iterations_per_step": 1.0, "factorizations": 1, "ms_per_factorization": 1.0,
+                "factorization_share": 0.1, "assembly_share": 0.1, "fill": 2.0}
+
+    monkeypatch.setattr(scaling, "_run_child", child)
+    out = scaling.run_scaling(["clip3d"], [1.0, 2.0], [0.0], timeout=10.0, repeat=2)
+    assert calls == [1.0, 2.0, 2.0, 1.0]  # the second round in reverse
+    rows = out["groups"][0]["rows"]
+    assert [r["seconds"] for r in rows] == [1.8, 4.0] and rows[1]["seconds_runs"] == [4.5, 4.0]
+    # the exponent of the fastest runs: log(4.0 / 1.8) / log(2)
+    assert out["groups"][0]["time_exponent_vs_dofs"]["overall"] == round(float(np.log(4.0 / 1.8) / np.log(2.0)), 2)

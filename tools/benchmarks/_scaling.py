@@ -177,31 +177,41 @@ def plot_scaling(groups: list, path: str) -> None:
     plt.close(fig)
 
 
-def run_scaling(scenes, factors, frictions, timeout: float, plot: str | None = None) -> dict:
-    """Every level in a child process; rows grouped per (scene, friction) with their exponents."""
-    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+def run_scaling(scenes, factors, frictions, timeout: float, plot: str | None = None, repeat: int = 1) -> dict:
+    """Every level in a child process; rows grouped per (scene, friction) with their exponents. With
+    ``repeat`` > 1 every level runs that many times, the levels' order reversed at each round (1, 2, 4, 8,
+    8, 4, 2, 1, ...: no level always first or last on a machine whose speed drifts), and each row is its
+    level's fastest run (wall), the runs' seconds beside it."""
     groups = []
     print(format_header(), file=sys.stderr, flush=True)  # the rows below as they run
     for scene in scenes:
         for mu in frictions:
+            runs: dict = {f: [] for f in factors}
+            failed = None
+            for k in range(repeat):
+                for f in (factors if k % 2 == 0 else factors[::-1]):
+                    row = _run_child(scene, f, mu, timeout)
+                    print(format_row(row), file=sys.stderr, flush=True)
+                    if "error" in row:
+                        failed = row
+                        break
+                    runs[f].append(row)
+                if failed:
+                    break
             rows = []
             for f in factors:
-                cmd = [sys.executable, os.path.join(here, "bench.py"), "insertion", "--scaling-level",
-                       f"{scene}:{f:g}:{mu:g}"]
-                try:
-                    p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-                except subprocess.TimeoutExpired:
-                    rows.append({"scene": scene, "factor": f, "friction": mu, "error": f"over {timeout:g} s"})
+                if not runs[f]:
                     break
-                if p.returncode != 0:
-                    rows.append({"scene": scene, "factor": f, "friction": mu,
-                                 "error": (p.stderr.strip().splitlines() or ["failed"])[-1]})
-                    break
-                row = json.loads(p.stdout.strip().splitlines()[-1])
-                rows.append(row)
-                print(format_row(row), file=sys.stderr, flush=True)
+                best = dict(min(runs[f], key=lambda r: r["seconds"]))
+                if repeat > 1:
+                    best["seconds_runs"] = [r["seconds"] for r in runs[f]]
+                    best["cpu_seconds_runs"] = [r["cpu_seconds"] for r in runs[f]]
+                rows.append(best)
+            if failed:
+                rows.append(failed)
             ok = [r for r in rows if "error" not in r]
-            groups.append({"scene": scene, "friction": mu, "rows": rows, "time_exponent_vs_dofs": exponents(ok),
+            groups.append({"scene": scene, "friction": mu, "repeat": repeat, "rows": rows,
+                           "time_exponent_vs_dofs": exponents(ok),
                            "cpu_time_exponent_vs_dofs": exponents(ok, "cpu_seconds")})
     if plot:
         plot_scaling(groups, plot)
@@ -209,6 +219,20 @@ def run_scaling(scenes, factors, frictions, timeout: float, plot: str | None = N
     print(table, file=sys.stderr)  # for the reader: every group's rows with its exponents
     return {"benchmark": "insertion --scaling", "targets": "time ~ dof^<=1.25; clip3d 8x <= 300 s; peak <= 8 GiB",
             "groups": groups, "table": table}
+
+
+def _run_child(scene: str, factor: float, mu: float, timeout: float) -> dict:
+    """One level in a child process (its row, or a row with ``error``)."""
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    cmd = [sys.executable, os.path.join(here, "bench.py"), "insertion", "--scaling-level", f"{scene}:{factor:g}:{mu:g}"]
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"scene": scene, "factor": factor, "friction": mu, "error": f"over {timeout:g} s"}
+    if p.returncode != 0:
+        last = (p.stderr.strip().splitlines() or ["failed"])[-1]
+        return {"scene": scene, "factor": factor, "friction": mu, "error": last}
+    return json.loads(p.stdout.strip().splitlines()[-1])
 
 
 def format_row(r: dict) -> str:
@@ -231,6 +255,8 @@ def format_header() -> str:
 def format_table(groups: list) -> str:
     lines = [format_header()]
     for g in groups:
+        if g.get("repeat", 1) > 1:
+            lines.append(f"  {g['scene']} mu={g['friction']:g}: each level's fastest of {g['repeat']} runs")
         lines += [format_row(r) for r in g["rows"]]
         e, c = g["time_exponent_vs_dofs"], g["cpu_time_exponent_vs_dofs"]
         if e["overall"] is None:

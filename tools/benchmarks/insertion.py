@@ -3,7 +3,8 @@ against the factorization floor.
 
 ``python tools/bench.py insertion [--only NAME,...] [--repeat K | --budget SECONDS] [--max-repeat K]
 [--friction MU]``; ``--scaling [--scenes clip3d,claw3d] [--factors 1,2,4,8] [--frictions 0,0.3]
-[--plot PNG]``: the cost's growth with the mesh (tools/benchmarks/_scaling.py).
+[--plot PNG] [--repeat K]``: the cost's growth with the mesh (tools/benchmarks/_scaling.py; K runs per level, the
+fastest counts).
 
 Cases (bundled scenes, closest to the sizes of the thesis' timing table):
   cclamp2d  (450 6-node triangles, 35 steps) vs "stand side (2D)"  450 elements, 35 steps
@@ -114,7 +115,8 @@ def run(argv) -> dict:
     ap = argparse.ArgumentParser(prog="bench insertion")
     ap.add_argument("--only", default=None, help="comma-separated scene names")
     ap.add_argument("--repeat", type=int, default=None,
-                    help="runs per case, the fastest counts (default: as many as fit in --budget)")
+                    help="runs per case, the fastest counts (default: as many as fit in --budget; with --scaling: "
+                         "runs per level, in rounds of alternating order, default 1)")
     ap.add_argument("--budget", type=float, default=BUDGET_SECONDS,
                     help="seconds of runs per case when --repeat is not given (at least 2 runs)")
     ap.add_argument("--max-repeat", type=int, default=MAX_REPEAT, help="at most this many runs per case")
@@ -143,7 +145,9 @@ def run(argv) -> dict:
             raise InputError("--factors and --frictions must be comma-separated numbers") from None
         if not all(f > 0 for f in factors) or not all(f >= 0 for f in frictions):
             raise InputError("--factors must be > 0 and --frictions >= 0")
-        return run_scaling(a.scenes.split(","), factors, frictions, a.level_timeout, a.plot)
+        if a.repeat is not None and a.repeat < 1:
+            raise InputError(f"--repeat must be at least 1, got {a.repeat}")
+        return run_scaling(a.scenes.split(","), factors, frictions, a.level_timeout, a.plot, repeat=a.repeat or 1)
     if a.friction is not None and not a.friction >= 0:
         raise InputError(f"--friction must be >= 0, got {a.friction}")
     only = set(a.only.split(",")) if a.only else None
