@@ -248,7 +248,7 @@ def make_coupling_model(*, name: str, fem, field: ImlsField, path, fixed_vertice
     else:
         free[fixed_vertices, ax] = False
     h = fem.mean_edge_length()
-    E = fem.material.youngs_modulus if fem.material is not None else float(np.mean(fem.mu) * 3)
+    E = fem.youngs_modulus
     width = h if dim == 3 else fem.thickness
     return CouplingModel(
         name=name, fem=fem, field=field, path=path, s_steps=s, fixed_vertices=fixed_vertices, free=free.ravel(),

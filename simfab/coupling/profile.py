@@ -179,8 +179,7 @@ def touched(fem, E_max: float) -> bool:
     """Whether a profile's largest elastic energy E_max [J] is above round-off: above that of a uniform
     strain CONTACT_STRAIN_FLOOR over the whole part ``fem``, 1/2 E V eps^2 (E Young's modulus, or 3 times
     the mean shear modulus without a material; V the part's volume, or area in 2D)."""
-    E = fem.material.youngs_modulus if fem.material is not None else 3.0 * float(np.mean(fem.mu))
-    return E_max > 0.5 * E * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
+    return E_max > 0.5 * fem.youngs_modulus * float(np.sum(fem.volume)) * CONTACT_STRAIN_FLOOR**2
 
 
 def analyze_run(res) -> ProfileSummary:

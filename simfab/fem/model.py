@@ -59,6 +59,12 @@ class MeshModel:
         return self.rest.shape[0]
 
     @property
+    def youngs_modulus(self) -> float:
+        """Young's modulus [Pa]: the material's, or 3 times the mean shear modulus when the Lame
+        parameters were given per element (the incompressible limit, E = 2 mu (1 + nu), nu -> 1/2)."""
+        return self.material.youngs_modulus if self.material is not None else 3.0 * float(np.mean(self.mu))
+
+    @property
     def n_elements(self) -> int:
         return self.elements.shape[0]
 
