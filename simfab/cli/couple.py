@@ -76,11 +76,14 @@ def add_args(p):
     conv = sub.add_parser("converge", help="mesh-convergence study of a coupling scene",
                           description="Run a scene at refined meshes (element count x each factor; an extruded "
                                       "part's layers x factor^(1/3)) and report the profile figures, their "
-                                      "extrapolated values and the error of the scene's own mesh.\n\n--json keys: "
+                                      "extrapolated values and the error of the scene's own mesh. Writes "
+                                      "NAME_converge.json (the report), NAME_converge.csv (one row per level: "
+                                      "each figure's value and relative error) and NAME_converge.png (each "
+                                      "figure's error against the element count) to --out.\n\n--json keys: "
                                       "scene, levels (factor, elements, seconds, category), figures (per "
                                       "figure: values, extrapolated, order, relative_error), error_of_default, "
                                       "warnings (levels that are the same mesh, fits that are no power law), "
-                                      "table.",
+                                      "table, outputs {json, csv, png}.",
                           formatter_class=argparse.RawDescriptionHelpFormatter)
     conv.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")
     conv.add_argument("--factors", default="0.25,0.5,1,1.5",
@@ -127,7 +130,7 @@ def run(args) -> dict:
 
         return couple_design.run_optimize(args) if cmd == "optimize" else couple_design.run_study(args)
     if cmd == "converge":
-        from simfab.coupling.converge import convergence_study, format_table
+        from simfab.coupling.converge import convergence_study, format_table, write_study
 
         try:
             factors = tuple(float(f) for f in args.factors.split(","))
@@ -148,7 +151,8 @@ def run(args) -> dict:
 
         for w in rep["warnings"]:  # warnings show even with --quiet
             log(f"simfab: warning: {w}")
-        return {**rep, "table": "\n" + format_table(rep)}
+        outputs = write_study(rep, args.out)
+        return {**rep, "table": "\n" + format_table(rep), "outputs": outputs}
     if cmd != "simulate":
         raise InputError("choose an action: 'simfab couple simulate SCENE', 'optimize SCENE', 'study handles SCENE' "
                          "or 'scenes'")

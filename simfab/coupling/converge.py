@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -31,8 +32,12 @@ from simfab.coupling.outputs import summarize
 from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
 from simfab.coupling.simulate import simulate_insertion
 from simfab.errors import InputError
+from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json
+from simfab.io.outpaths import safe_name
 
 FIGURES = ("E_max", "E_ss", "F_in", "F_rm", "F_grip")
+#: Each figure's unit (the study's CSV columns and plot).
+UNITS = {"E_max": "J", "E_ss": "J", "F_in": "N", "F_rm": "N", "F_grip": "N"}
 #: A figure below this fraction of its kind's peak (E_max; the larger of F_in, F_rm) is zero up to
 #: the solver's tolerances: its error is reported relative to that peak.
 ZERO_REL = 1e-3
@@ -215,3 +220,72 @@ def format_table(rep: dict) -> str:
     lines.append(f"{'s/run':8s}" + "".join(f"{x['seconds']:12.3f}" for x in lv))
     lines.append(f"{'category':8s}" + "".join(f"{x['category']:>12s}" for x in lv))
     return "\n".join(lines)
+
+
+def write_study(rep: dict, out, *, name: str | None = None) -> dict:
+    """Write a study's report into the folder ``out``, the three files together (none on a failure):
+    ``NAME_converge.json`` (the report as :func:`report` gives it), ``NAME_converge.csv`` (one row per
+    level: factor, elements, seconds, category, each figure's value and relative error) and
+    ``NAME_converge.png`` (:func:`plot_study`).
+
+    Args:
+        rep: :func:`convergence_study`'s report.
+        out: the output folder.
+        name: the files' stem (default: the scene's name).
+
+    Returns:
+        {"json", "csv", "png"}: the paths written, as strings.
+    """
+    stem = safe_name(name or Path(str(rep["scene"])).stem) + "_converge"
+    paths = {k: Path(out) / f"{stem}.{k}" for k in ("json", "csv", "png")}
+    header = ["factor", "elements", "seconds", "category"]
+    for k in FIGURES:
+        header += [f"{k}_{UNITS[k]}", f"{k}_relative_error"]
+    rows = []
+    for i, lv in enumerate(rep["levels"]):
+        row = [lv["factor"], lv["elements"], lv["seconds"], lv["category"]]
+        for k in FIGURES:
+            row += [rep["figures"][k]["values"][i], rep["figures"][k]["relative_error"][i]]
+        rows.append(row)
+    with atomic_paths(paths) as tmp:
+        write_json(tmp["json"], rep)
+        write_csv(tmp["csv"], header, rows)
+        plot_study(rep, tmp["png"])
+    return {k: str(v) for k, v in paths.items()}
+
+
+def plot_study(rep: dict, path):
+    """Each figure's error against its extrapolated value, |f_k - f_inf| / ref [%], against the element
+    count on log-log axes (the legend gives the fitted order p in h), the scene's own mesh marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    N = np.array([lv["elements"] for lv in rep["levels"]], dtype=float)
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
+    for k in FIGURES:
+        v = rep["figures"][k]
+        e = 100.0 * np.abs(np.asarray(v["relative_error"], dtype=float))
+        shown = e > 0  # (a level at the extrapolated value exactly has no place on a log axis)
+        if not shown.any():
+            continue
+        p = v["order"]
+        rel = "" if v.get("relative_of", k) == k else f" of {v['relative_of']}"
+        label = f"{k}{rel} (order {p:.2f} in h)" if np.isfinite(p) else f"{k}{rel} (no fit)"
+        ax.loglog(N[shown], e[shown], "o-", lw=1.5, ms=5, label=label)
+    default = [lv["elements"] for lv in rep["levels"] if lv["factor"] == 1.0]
+    if default:
+        ax.axvline(default[0], color="0.5", ls=":", lw=1.0, label="the scene's mesh")
+    ax.set_xlabel("elements [-]")
+    ax.set_ylabel("error against the extrapolated value [%]")
+    mu = f", friction {rep['friction']:g}" if rep.get("friction") else ""
+    ax.set_title(f"{Path(str(rep['scene'])).stem}: mesh convergence{mu}")
+    ax.grid(True, which="both", color="0.9", lw=0.6)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    try:
+        return save_figure(fig, path)
+    finally:
+        plt.close(fig)
+

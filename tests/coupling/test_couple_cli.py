@@ -51,6 +51,29 @@ def test_simulate_writes_profile_plot_usd_and_mjcf(tmp_path, capsys):
     assert d.qpos[0] == pytest.approx(m.key_qpos[10, 0], abs=1e-6 * abs(m.key_qpos[10, 0]) + 1e-9)
 
 
+def test_converge_writes_its_report_table_and_plot(tmp_path, capsys):
+    # the study's three files hold the figures it prints: the JSON report, one CSV row per level
+    # (values and relative errors), the plot of the errors
+    out = tmp_path / "out"
+    assert main(["couple", "converge", "cclamp2d", "--factors", "0.25,0.5,1", "--out", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    files = summary["outputs"]
+    assert sorted(p.name for p in out.iterdir()) == ["cclamp2d_converge.csv", "cclamp2d_converge.json",
+                                                     "cclamp2d_converge.png"]
+    assert {k: str(out / v.split("/")[-1]) for k, v in files.items()} == files
+    rep = json.loads((out / "cclamp2d_converge.json").read_text())
+    assert rep["figures"] == summary["figures"] and rep["levels"] == summary["levels"]
+    rows = np.genfromtxt(files["csv"], delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert len(rows) == 3 and list(rows["elements"]) == [lv["elements"] for lv in summary["levels"]]
+    for k, unit in (("E_max", "J"), ("F_in", "N"), ("F_grip", "N")):
+        assert np.allclose(rows[f"{k}_{unit}"], summary["figures"][k]["values"], rtol=1e-6)
+        assert np.allclose(rows[f"{k}_relative_error"], summary["figures"][k]["relative_error"], rtol=1e-6,
+                           atol=1e-12)
+    from PIL import Image
+
+    assert Image.open(files["png"]).size[0] > 400
+
+
 @pytest.mark.parametrize("order", [1, 2])
 def test_summary_reports_the_averaged_stress_the_yield_constraint_reads(order):
     # averaged_von_mises is the figure the design's yield constraint and its mesh check read
