@@ -226,7 +226,7 @@ def write_study(rep: dict, out, *, name: str | None = None) -> dict:
     """Write a study's report into the folder ``out``, the three files together (none on a failure):
     ``NAME_converge.json`` (the report as :func:`report` gives it), ``NAME_converge.csv`` (one row per
     level: factor, elements, seconds, category, each figure's value and relative error) and
-    ``NAME_converge.png`` (:func:`plot_study`).
+    ``NAME_converge.png`` (:func:`plot_convergence`).
 
     Args:
         rep: :func:`convergence_study`'s report.
@@ -250,11 +250,11 @@ def write_study(rep: dict, out, *, name: str | None = None) -> dict:
     with atomic_paths(paths) as tmp:
         write_json(tmp["json"], rep)
         write_csv(tmp["csv"], header, rows)
-        plot_study(rep, tmp["png"])
+        plot_convergence(rep, tmp["png"])
     return {k: str(v) for k, v in paths.items()}
 
 
-def plot_study(rep: dict, path):
+def plot_convergence(rep: dict, path):
     """Each figure's error against its extrapolated value, |f_k - f_inf| / ref [%], against the element
     count on log-log axes (the legend gives the fitted order p in h), the scene's own mesh marked."""
     import matplotlib
