@@ -513,7 +513,7 @@ def adapt_kappa(cm: CouplingModel, state: StepState, obj: StepObjective) -> None
 
 
 def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContext, *,
-          floor: float = 0.0) -> tuple[np.ndarray, int]:
+          floor: float = 0.0, converged: bool = False) -> tuple[np.ndarray, int]:
     """Barrier Newton from x0.
 
     Stops when the free-dof force residual is below max(NEWTON_GRAD_TOL_REL * force_scale,
@@ -530,12 +530,14 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
         x0: start positions (n, dim) [m].
         ctx: the run's context (solver, timer, whether the last exact Hessian failed).
         floor: [N] raises the force tolerance of a solve that is not final (a lagging iteration).
+        converged: x0 is expected to be the solution (:func:`simfab.coupling.predictor.resting_start`):
+            its Hessian is not assembled with its gradient.
 
     Returns:
         (x (n, dim) [m], Newton iterations).
     """
     exact_first = not (obj.lazy_exact and ctx.exact_failed)
-    obj.eager_exact = exact_first  # (P2: the start's exact Hessian assembled with its gradient)
+    obj.eager_exact = exact_first and not converged  # (P2: the start's exact Hessian assembled with its gradient)
     try:
         _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     finally:

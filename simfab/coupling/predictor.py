@@ -100,6 +100,23 @@ class WarmStart:
     snapped: np.ndarray | None
 
 
+def resting_start(cm: CouplingModel, state: StepState, obj: StepObjective) -> np.ndarray | None:
+    """A's positions when A rests out of O's reach over the step, else None: A is at its rest shape (the
+    elastic energy's minimum), no constraint point was within its d_hat of O at the step's start, and
+    none is in O's new pose (the objective's lazily bounded distances, exact within its band). The
+    barrier and friction then vanish at x and x is the step's solution: Newton confirms it without an
+    iteration, and the warm start's candidates (each of them A's rest shape here) need no evaluation.
+    O's approach before the first contact is such steps (snap-fit: 5 of 25, knocker3d: 19 of 41)."""
+    ev = state.current_evaluation()
+    if ev is None or not np.array_equal(state.x, cm.fem.rest):
+        return None
+    dhat = point_dhat(cm, state.points)
+    if not (ev.distances >= dhat).all():
+        return None
+    d, _, _ = obj.distances(state.x, False)
+    return state.x if (d >= dhat).all() else None
+
+
 def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjective, ctx: StepContext) -> WarmStart:
     """The warm start: the feasible candidate with the lowest objective among the linear and quadratic
     extrapolations of the last steps, A's rest shape when no point was within d_hat at the last step

@@ -235,6 +235,9 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                     x0 = None if resume is None else predictor.lift_points(cm, state.points, resume, obj, below=0.0,
                                                                            to=C.LIFT_TO * obj.dhat)
                     resumed = x0 is not None
+                resting = None if x0 is not None or refined else predictor.resting_start(cm, state, obj)
+                if resting is not None:  # A rests out of O's reach: its positions are the solution
+                    x0 = resting
                 if x0 is None:
                     if refined:  # starting over from the previous state: make it feasible for the new points
                         predictor.restore_feasibility(cm, state, ctx)
@@ -250,7 +253,8 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                         refined, resume = True, x0
                         continue
             with ctx.phases.timed("newton"):
-                x, it = solve(cm, obj, x0, ctx, floor=0.0 if settled else lag_floor(cm, lagged))
+                x, it = solve(cm, obj, x0, ctx, floor=0.0 if settled else lag_floor(cm, lagged),
+                              converged=resting is not None)
         except ConvergenceError:
             if resumed:  # the resumed solve failed: solve from the previous state instead
                 resume = None
