@@ -288,4 +288,3 @@ def plot_convergence(rep: dict, path):
         return save_figure(fig, path)
     finally:
         plt.close(fig)
-

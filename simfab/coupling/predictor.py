@@ -105,8 +105,8 @@ def resting_start(cm: CouplingModel, state: StepState, obj: StepObjective) -> np
     elastic energy's minimum), no constraint point was within its d_hat of O at the step's start, and
     none is in O's new pose (the objective's lazily bounded distances, exact within its band). The
     barrier and friction then vanish at x and x is the step's solution: Newton confirms it without an
-    iteration, and the warm start's candidates (each of them A's rest shape here) need no evaluation.
-    O's approach before the first contact is such steps (snap-fit: 5 of 25, knocker3d: 19 of 41)."""
+    iteration, and the warm start's candidates (each of them A's rest shape here) need no evaluation:
+    O's approach before the first contact, and a part that O has left."""
     ev = state.current_evaluation()
     if ev is None or not np.array_equal(state.x, cm.fem.rest):
         return None

@@ -221,3 +221,28 @@ def test_a_bisection_trial_starts_from_the_interpolation_of_the_steps_around_it(
     assert predictor.extrapolations(state(lin, 0.5, 1.0, 0.0), 1.5) == []
     # going forward: the extrapolations of the last steps, as before
     np.testing.assert_allclose(predictor.extrapolations(state(quad, 1.0, 0.5, 0.0), 1.5)[1], quad(1.5), atol=1e-13)
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.3])
+def test_steps_out_of_reach_keep_the_rest_shape_without_a_warm_start(mu, monkeypatch):
+    # the snap-fit's box travels a gap before it touches the beam: over those steps A rests at its
+    # rest shape (bit for bit, no Newton iteration) and no warm-start candidate is evaluated; the
+    # first step that reaches A takes the general warm start again, and the profile is the one the
+    # general path gives (the verification's contact law: the force rises after the first touch)
+    from simfab.verification.snapfit import snapfit_model
+
+    calls = []
+    general = predictor.warm_start
+    monkeypatch.setattr(predictor, "warm_start",
+                        lambda cm, state, s, *a: calls.append(s * (state.direction > 0)) or general(cm, state, s, *a))
+    cm = snapfit_model(30.0, mu)
+    res = simulate_insertion(cm)
+    rest = np.asarray(cm.fem.rest)
+    resting = [k for k, r in enumerate(res.steps) if np.array_equal(r.x, rest)]
+    assert len(resting) >= 3 and resting == list(range(len(resting)))  # the approach, then contact
+    assert all(res.steps[k].iterations == 0 and res.steps[k].barrier_energy == 0.0 for k in resting)
+    # the insertion's warm starts (the removal's count as 0) only from the last resting step on
+    inserting = [s for s in calls if s > 0]
+    assert inserting and min(inserting) > res.steps[resting[-1]].s
+    assert len(inserting) <= len(res.steps) - len(resting)
+    assert res.steps[len(resting)].iterations > 0 and abs(res.steps[-1].force) > 0
