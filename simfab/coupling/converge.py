@@ -186,7 +186,7 @@ def report(scene: str, levels: list, dim: int) -> dict:
                             "difference says nothing about convergence; choose factors further apart")
     for k in FIGURES:
         v = figures[k]
-        if v["relative_of"] == k and np.isfinite(v["order"]) and min(abs(v["order"] - e) for e in ORDER_RANGE) < 1e-9:
+        if v["relative_of"] == k and no_rate(v["order"]):
             warnings.append(f"{scene}: {k}'s fitted order is at the end of the range searched ({v['order']:g}): "
                             "the levels do not follow a power law, so its extrapolation and errors are unreliable")
     return {
@@ -198,6 +198,12 @@ def report(scene: str, levels: list, dim: int) -> dict:
         "figures": figures,
         "error_of_default": {k: figures[k]["relative_error"][i_default] for k in FIGURES},
     }
+
+
+def no_rate(order: float) -> bool:
+    """Whether a fitted order lies at an end of ORDER_RANGE (:func:`extrapolate`): the levels do not
+    follow a power law, and the extrapolation and errors are unreliable."""
+    return bool(np.isfinite(order)) and min(abs(order - e) for e in ORDER_RANGE) < 1e-9
 
 
 def _is_2d(scene) -> bool:
@@ -261,9 +267,10 @@ def plot_convergence(rep: dict, path):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     N = np.array([lv["elements"] for lv in rep["levels"]], dtype=float)
-    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
+    fig, ax = plt.subplots(figsize=(8.6, 4.2), dpi=120)
     for k in FIGURES:
         v = rep["figures"][k]
         e = 100.0 * np.abs(np.asarray(v["relative_error"], dtype=float))
@@ -272,17 +279,22 @@ def plot_convergence(rep: dict, path):
             continue
         p = v["order"]
         rel = "" if v.get("relative_of", k) == k else f" of {v['relative_of']}"
-        label = f"{k}{rel} (order {p:.2f} in h)" if np.isfinite(p) else f"{k}{rel} (no fit)"
+        fit = "no fit" if not np.isfinite(p) else f"order {p:.2f} in h" + (": no power law" if no_rate(p) else "")
+        label = f"{k}{rel} ({fit})"
         ax.loglog(N[shown], e[shown], "o-", lw=1.5, ms=5, label=label)
     default = [lv["elements"] for lv in rep["levels"] if lv["factor"] == 1.0]
     if default:
         ax.axvline(default[0], color="0.5", ls=":", lw=1.0, label="the scene's mesh")
     ax.set_xlabel("elements [-]")
     ax.set_ylabel("error against the extrapolated value [%]")
+    ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.set_xticks(N, [f"{n:,.0f}" for n in N])  # (the levels' element counts)
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     mu = f", friction {rep['friction']:g}" if rep.get("friction") else ""
     ax.set_title(f"{Path(str(rep['scene'])).stem}: mesh convergence{mu}")
     ax.grid(True, which="both", color="0.9", lw=0.6)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # (beside the axes: off the lines)
     fig.tight_layout()
     try:
         return save_figure(fig, path)
