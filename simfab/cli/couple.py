@@ -80,9 +80,11 @@ def add_args(p):
                                       "NAME_converge.json (the report), NAME_converge.csv (one row per level: "
                                       "each figure's value and relative error) and NAME_converge.png (each "
                                       "figure's error against the element count) to --out.\n\n--json keys: "
-                                      "scene, levels (factor, elements, seconds, category), figures (per "
-                                      "figure: values, extrapolated, order, relative_error), error_of_default, "
-                                      "warnings (levels that are the same mesh, fits that are no power law), "
+                                      "scene, levels (factor, elements, seconds, category; layers for an "
+                                      "extruded part), figures (per figure: values, extrapolated, order, "
+                                      "relative_error), error_of_default, warnings (levels that are the same "
+                                      "mesh, levels an extrusion's whole layers refine unequally, fits that are "
+                                      "no power law), "
                                       "table, outputs {json, csv, png}.",
                           formatter_class=argparse.RawDescriptionHelpFormatter)
     conv.add_argument("scene", metavar="SCENE", help="NAME.xml (+ NAME.toml) or a bundled scene name")

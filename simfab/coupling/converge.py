@@ -50,14 +50,25 @@ ORDER_RANGE = (0.5, 4.0)
 CLAMP_GENERATORS = ("c_clamp", "extruded_clamp")
 
 
+#: A level's layers more than this fraction off the uniform refinement's (the scene's layers times
+#: factor^(1/3): layers are whole) make the levels no uniform refinement of one another: the report warns.
+LAYERS_OFF_REL = 0.1
+
+
 @dataclass(frozen=True, kw_only=True)
 class Level:
+    """One level of a study: its refinement factor, element count, run time [s], profile figures
+    (FIGURES: J, N), category and friction; an extruded part's layers and the uniform refinement's
+    (the scene's layers times factor^(1/3)), None for other parts."""
+
     factor: float
     elements: int
     seconds: float
     figures: dict
     category: str
     friction: float = 0.0
+    layers: int | None = None
+    layers_uniform: float | None = None
 
 
 def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True) -> list:
@@ -78,7 +89,8 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     out = []
     for f in factors:
         ov = {k: dict(v) for k, v in (overrides or {}).items()}
-        ov.setdefault("compliant", {}).update(level_mesh(comp, f, elements=elements))
+        mesh = level_mesh(comp, f, elements=elements)
+        ov.setdefault("compliant", {}).update(mesh)
         if f == 1.0 and base is not None:
             cm = base
         else:  # (scene flags logged once)
@@ -87,8 +99,11 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
         res = simulate_insertion(cm, quiet=quiet)
         dt = time.perf_counter() - t0
         prof, d = summarize(res)
+        layered = "layers" in mesh
         out.append(Level(factor=float(f), elements=int(cm.fem.n_elements), seconds=dt,
-                         figures={k: float(d[k]) for k in FIGURES}, category=prof.category, friction=prof.friction))
+                         figures={k: float(d[k]) for k in FIGURES}, category=prof.category, friction=prof.friction,
+                         layers=int(mesh["layers"]) if layered else None,
+                         layers_uniform=int(comp.get("layers", 1)) * float(f) ** (1.0 / 3.0) if layered else None))
     return out
 
 
@@ -184,6 +199,16 @@ def report(scene: str, levels: list, dim: int) -> dict:
             warnings.append(f"{scene}: the levels at factors {a.factor:g} and {b.factor:g} have nearly the same mesh "
                             f"({a.elements} and {b.elements} elements: the mesher's floor or cap), so their "
                             "difference says nothing about convergence; choose factors further apart")
+    off = [lv for lv in levels
+           if lv.layers is not None and abs(lv.layers - lv.layers_uniform) > LAYERS_OFF_REL * lv.layers_uniform]
+    if off:
+        base = round(off[0].layers_uniform / off[0].factor ** (1.0 / 3.0))  # the scene's layers
+        whole = ", ".join(f"{(k / base) ** 3:.4g}" for k in range(base, base + 3))
+        warnings.append(f"{scene}: the part is extruded in whole layers, and at factors "
+                        f"{', '.join(f'{lv.factor:g}' for lv in off)} it has {', '.join(str(lv.layers) for lv in off)} "
+                        f"where uniform refinement would give {', '.join(f'{lv.layers_uniform:.2f}' for lv in off)}: "
+                        "those levels refine the section and the height unequally, and the figures need not follow "
+                        f"a power law of the element count; factors {whole} refine uniformly")
     for k in FIGURES:
         v = figures[k]
         if v["relative_of"] == k and no_rate(v["order"]):
@@ -193,8 +218,8 @@ def report(scene: str, levels: list, dim: int) -> dict:
         "scene": scene,
         "friction": levels[0].friction if levels else 0.0,
         "warnings": warnings,
-        "levels": [{"factor": lv.factor, "elements": lv.elements, "seconds": lv.seconds, "category": lv.category}
-                   for lv in levels],
+        "levels": [{"factor": lv.factor, "elements": lv.elements, "seconds": lv.seconds, "category": lv.category,
+                    **({} if lv.layers is None else {"layers": lv.layers})} for lv in levels],
         "figures": figures,
         "error_of_default": {k: figures[k]["relative_error"][i_default] for k in FIGURES},
     }
@@ -223,6 +248,8 @@ def format_table(rep: dict) -> str:
                      + f"{v['extrapolated']:12.4g}{v['order']:6.2f}")
         lines.append(f"{'  err %':8s}" + "".join(f"{100 * e:12.2f}" for e in v["relative_error"])
                      + (f"   (of {v['relative_of']})" if v.get("relative_of", k) != k else ""))
+    if any("layers" in x for x in lv):  # (an extruded part)
+        lines.append(f"{'layers':8s}" + "".join(f"{x.get('layers', ''):>12}" for x in lv))
     lines.append(f"{'s/run':8s}" + "".join(f"{x['seconds']:12.3f}" for x in lv))
     lines.append(f"{'category':8s}" + "".join(f"{x['category']:>12s}" for x in lv))
     return "\n".join(lines)
@@ -231,7 +258,8 @@ def format_table(rep: dict) -> str:
 def write_study(rep: dict, out, *, name: str | None = None) -> dict:
     """Write a study's report into the folder ``out``, the three files together (none on a failure):
     ``NAME_converge.json`` (the report as :func:`report` gives it), ``NAME_converge.csv`` (one row per
-    level: factor, elements, seconds, category, each figure's value and relative error) and
+    level: factor, elements, layers (an extruded part's, else empty), seconds, category, each figure's
+    value and relative error) and
     ``NAME_converge.png`` (:func:`plot_convergence`).
 
     Args:
@@ -244,12 +272,12 @@ def write_study(rep: dict, out, *, name: str | None = None) -> dict:
     """
     stem = safe_name(name or Path(str(rep["scene"])).stem) + "_converge"
     paths = {k: Path(out) / f"{stem}.{k}" for k in ("json", "csv", "png")}
-    header = ["factor", "elements", "seconds", "category"]
+    header = ["factor", "elements", "layers", "seconds", "category"]
     for k in FIGURES:
         header += [f"{k}_{UNITS[k]}", f"{k}_relative_error"]
     rows = []
     for i, lv in enumerate(rep["levels"]):
-        row = [lv["factor"], lv["elements"], lv["seconds"], lv["category"]]
+        row = [lv["factor"], lv["elements"], lv.get("layers", ""), lv["seconds"], lv["category"]]
         for k in FIGURES:
             row += [rep["figures"][k]["values"][i], rep["figures"][k]["relative_error"][i]]
         rows.append(row)

@@ -112,3 +112,24 @@ def test_the_report_warns_of_levels_that_are_the_same_mesh_and_of_fits_that_are_
     rep = report("x", levels(floored, [fig(1.0 / 4668), fig(1.0 / 4668), fig(1.0 / 7389)]), 3)
     assert any("factors 0.5 and 1 have nearly the same mesh" in w for w in rep["warnings"])
     assert any("F_in's fitted order is at the end" in w for w in rep["warnings"])
+
+
+def test_the_report_warns_when_whole_layers_make_the_levels_no_uniform_refinement():
+    # an extrusion of one layer refined 2x and 4x keeps 1 and gets 2 layers (uniform: 1.26, 1.59): the
+    # section and the height are refined unequally, and the report says which factors are uniform;
+    # factors 1 and 8 (1 and 2 layers) are uniform refinements and get no such warning
+    from simfab.coupling.converge import Level, report
+
+    def level(f, n):
+        h2 = n ** (-2.0 / 3.0)
+        return Level(factor=f, elements=n, seconds=1.0, category="tight",
+                     figures=dict(E_max=4.5 + 10 * h2, E_ss=1.0 + 3 * h2, F_in=17.0 + 100 * h2, F_rm=19.0 + 80 * h2,
+                                  F_grip=9.0 + 10 * h2),
+                     layers=max(1, round(f ** (1.0 / 3.0))), layers_uniform=f ** (1.0 / 3.0))
+
+    rep = report("clip", [level(f, int(4700 * f)) for f in (1, 2, 4, 8)], 3)
+    off = [w for w in rep["warnings"] if "whole layers" in w]
+    assert len(off) == 1 and "factors 2, 4 it has 1, 2" in off[0] and "factors 1, 8, 27 refine uniformly" in off[0]
+    assert [lv["layers"] for lv in rep["levels"]] == [1, 1, 2, 2]
+    rep = report("clip", [level(f, int(4700 * f)) for f in (1, 8, 27)], 3)
+    assert not any("whole layers" in w for w in rep["warnings"])
