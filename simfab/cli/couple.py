@@ -132,7 +132,7 @@ def run(args) -> dict:
 
         return couple_design.run_optimize(args) if cmd == "optimize" else couple_design.run_study(args)
     if cmd == "converge":
-        from simfab.coupling.converge import convergence_study, format_table, write_study
+        from simfab.coupling.converge import convergence_study, format_table
 
         try:
             factors = tuple(float(f) for f in args.factors.split(","))
@@ -148,13 +148,15 @@ def run(args) -> dict:
         from simfab.design.scene import check_brief_table
 
         check_brief_table(args.scene)
-        rep = convergence_study(args.scene, factors, overrides=ov, quiet=args.quiet)
+        from simfab._warp import device as check_device
+
+        rep = convergence_study(args.scene, factors, overrides=ov, quiet=args.quiet, out=args.out,
+                                device=check_device(args.device))
         from simfab.progress import log
 
-        for w in rep["warnings"]:  # warnings show even with --quiet
+        for w in rep.warnings:  # warnings show even with --quiet
             log(f"simfab: warning: {w}")
-        outputs = write_study(rep, args.out)
-        return {**rep, "table": "\n" + format_table(rep), "outputs": outputs}
+        return {**rep.to_json(), "table": "\n" + format_table(rep)}
     if cmd != "simulate":
         raise InputError("choose an action: 'simfab couple simulate SCENE', 'optimize SCENE', 'study handles SCENE' "
                          "or 'scenes'")

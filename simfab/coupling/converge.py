@@ -21,6 +21,7 @@ of each level is (f_k - f_inf) / f_inf.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +35,8 @@ from simfab.coupling.simulate import simulate_insertion
 from simfab.errors import InputError
 from simfab.io.atomic import atomic_paths, save_figure, write_csv, write_json
 from simfab.io.outpaths import safe_name
+from simfab.results import Result
+from simfab.results import field as rfield
 
 FIGURES = ("E_max", "E_ss", "F_in", "F_rm", "F_grip")
 #: Each figure's unit (the study's CSV columns and plot).
@@ -57,22 +60,74 @@ LAYERS_OFF_REL = 0.1
 
 @dataclass(frozen=True, kw_only=True)
 class Level:
-    """One level of a study: its refinement factor, element count, run time [s], profile figures
-    (FIGURES: J, N), category and friction; an extruded part's layers and the uniform refinement's
-    (the scene's layers times factor^(1/3)), None for other parts."""
+    """One level of a study.
 
-    factor: float
+    Args:
+        factor: its refinement: element count over the scene's [-].
+        elements: its element count.
+        seconds: the run's wall time [s].
+        category: the profile's category.
+        figures: FIGURES at this level [J for energies, N for forces].
+        friction: the Coulomb coefficient [-].
+        layers: an extruded part's layers (None for other parts).
+        layers_uniform: the uniform refinement's layers, the scene's times factor^(1/3) (None likewise).
+    """
+
+    factor: float = rfield(unit="-")
     elements: int
-    seconds: float
-    figures: dict
+    seconds: float = rfield(unit="s")
     category: str
-    friction: float = 0.0
-    layers: int | None = None
-    layers_uniform: float | None = None
+    figures: dict = rfield(json=False)
+    friction: float = rfield(unit="-", json=False, default=0.0)
+    layers: int | None = rfield(optional=True)
+    layers_uniform: float | None = rfield(json=False, default=None)
 
 
-def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True) -> list:
-    """One :class:`Level` per refinement factor (element count times the factor)."""
+@dataclass(frozen=True, kw_only=True)
+class FigureConvergence:
+    """One profile figure over a study's levels.
+
+    Args:
+        values: the figure at each level [J for energies, N for forces].
+        extrapolated: its mesh-converged value (:func:`extrapolate`) [the same unit].
+        order: the fitted order in h (nan with fewer than three levels or a flat sequence) [-].
+        relative_of: the figure its errors are relative to: itself, or its kind's peak where it is ~0.
+        relative_error: (f_k - f_inf) / ref at each level [-].
+    """
+
+    values: tuple
+    extrapolated: float
+    order: float = rfield(unit="-")
+    relative_of: str
+    relative_error: tuple
+
+
+@dataclass(frozen=True, kw_only=True)
+class ConvergenceResult(Result):
+    """A mesh-convergence study (``simfab couple converge``; :func:`convergence_study`).
+
+    Args:
+        scene: the scene as given.
+        friction: the Coulomb coefficient of its runs [-].
+        warnings: one line each: levels that are the same mesh, levels an extrusion's whole layers refine
+            unequally, fits that are no power law.
+        levels: the :class:`Level` s, coarsest first.
+        figures: FIGURES name -> :class:`FigureConvergence`.
+        error_of_default: FIGURES name -> the relative error of the scene's own mesh (factor 1, else the
+            first level) [-].
+    """
+
+    scene: str
+    friction: float = rfield(unit="-")
+    warnings: tuple = ()
+    levels: tuple = ()
+    figures: dict = rfield(default_factory=dict)
+    error_of_default: dict = rfield(default_factory=dict)
+
+
+def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True,
+               device: str = "cpu") -> list:
+    """One :class:`Level` per refinement factor (element count times the factor), run on Warp's ``device``."""
 
     _, toml = scene_paths(scene)
     cfg = read_scene_toml(toml)
@@ -84,7 +139,7 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
                          "mesh_file", where=str(toml))
     base = None  # the scene's own model (factor 1): for a C-clamp the factors multiply its element count
     if comp.get("generator") in CLAMP_GENERATORS:
-        base = load_coupling_scene(scene, overrides=overrides, quiet=quiet)
+        base = load_coupling_scene(scene, overrides=overrides, quiet=quiet, device=device)
     elements = None if base is None else base.fem.n_elements
     out = []
     for f in factors:
@@ -94,7 +149,8 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
         if f == 1.0 and base is not None:
             cm = base
         else:  # (scene flags logged once)
-            cm = load_coupling_scene(scene, overrides=ov, quiet=quiet or base is not None or f != factors[0])
+            cm = load_coupling_scene(scene, overrides=ov, quiet=quiet or base is not None or f != factors[0],
+                                     device=device)
         t0 = time.perf_counter()
         res = simulate_insertion(cm, quiet=quiet)
         dt = time.perf_counter() - t0
@@ -164,35 +220,52 @@ def extrapolate(N: np.ndarray, f: np.ndarray, dim: int, finest: int = 4) -> tupl
     return best[1], best[2]
 
 
-def convergence_study(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True) -> dict:
-    """Run the levels and summarize them (:func:`report`)."""
-    levels = run_levels(scene, factors, overrides=overrides, quiet=quiet)
-    return report(str(scene), levels, 2 if _is_2d(scene) else 3)
+def convergence_study(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, quiet: bool = True,
+                      out=None, device: str = "cpu") -> ConvergenceResult:
+    """Run the levels and summarize them (:func:`report`); with ``out`` write the study's files there
+    (:func:`write_study`).
+
+    Args:
+        scene: NAME.xml (with NAME.toml) or a bundled scene's name.
+        factors: the levels' refinement factors of the scene's element count.
+        overrides: scene table overrides applied at every level.
+        quiet: no log lines or progress bars.
+        out: folder for the JSON report, CSV and plot; None writes nothing.
+        device: Warp device.
+
+    Returns:
+        The :class:`ConvergenceResult` (``outputs``: the files written).
+    """
+    levels = run_levels(scene, factors, overrides=overrides, quiet=quiet, device=device)
+    rep = report(str(scene), levels, 2 if _is_2d(scene) else 3)
+    return rep if out is None else dataclasses.replace(rep, outputs=write_study(rep, out))
 
 
-def report(scene: str, levels: list, dim: int) -> dict:
+def report(scene: str, levels: list, dim: int) -> ConvergenceResult:
     """Per figure the values, the extrapolated value, the observed order and each level's relative error (a figure
     below ZERO_REL of its kind's peak, e.g. a loose coupling's E_ss, relative to that peak); per level the element
     count and seconds; ``error_of_default``: the errors of the scene's own mesh (factor 1, else the first level);
-    ``warnings``: levels that are the same refinement (element counts within SAME_MESH_REL) and figures whose
-    fitted order is at an end of ORDER_RANGE (the levels do not follow h^p: an unreliable extrapolation)."""
+    ``warnings``: levels that are the same refinement (element counts within SAME_MESH_REL), levels whose whole
+    layers are more than LAYERS_OFF_REL off the uniform refinement's, and figures whose fitted order is at an end
+    of ORDER_RANGE (the levels do not follow h^p: an unreliable extrapolation)."""
     N = np.array([lv.elements for lv in levels])
     i_default = next((i for i, lv in enumerate(levels) if lv.factor == 1.0), 0)  # the scene's own mesh
-    figures = {}
+    fits = {}
     for k in FIGURES:
         f = np.array([lv.figures[k] for lv in levels])
-        f_inf, p = extrapolate(N, f, dim)
-        figures[k] = {"values": f.tolist(), "extrapolated": f_inf, "order": p}
+        fits[k] = (f, *extrapolate(N, f, dim))
     # a figure that is ~0 (a loose coupling's E_ss, an ejecting one's F_rm) is relative to its
     # kind's peak: E_max, or the larger of F_in and F_rm
-    peak_force = max(("F_in", "F_rm"), key=lambda k: abs(figures[k]["extrapolated"]))
+    peak_force = max(("F_in", "F_rm"), key=lambda k: abs(fits[k][1]))
+    figures = {}
     for k in FIGURES:
-        v = figures[k]
+        f, f_inf, p = fits[k]
         peak = "E_max" if k.startswith("E_") else peak_force
-        tiny = abs(v["extrapolated"]) < ZERO_REL * abs(figures[peak]["extrapolated"])
-        v["relative_of"] = peak if tiny else k
-        ref = figures[v["relative_of"]]["extrapolated"]
-        v["relative_error"] = [(x - v["extrapolated"]) / ref if ref else 0.0 for x in v["values"]]
+        of = peak if abs(f_inf) < ZERO_REL * abs(fits[peak][1]) else k
+        ref = fits[of][1]
+        figures[k] = FigureConvergence(values=tuple(float(x) for x in f), extrapolated=float(f_inf), order=float(p),
+                                       relative_of=of,
+                                       relative_error=tuple(float((x - f_inf) / ref) if ref else 0.0 for x in f))
     warnings = []
     for a, b in zip(levels, levels[1:]):
         if abs(b.elements - a.elements) < SAME_MESH_REL * max(a.elements, b.elements):
@@ -209,20 +282,13 @@ def report(scene: str, levels: list, dim: int) -> dict:
                         f"where uniform refinement would give {', '.join(f'{lv.layers_uniform:.2f}' for lv in off)}: "
                         "those levels refine the section and the height unequally, and the figures need not follow "
                         f"a power law of the element count; factors {whole} refine uniformly")
-    for k in FIGURES:
-        v = figures[k]
-        if v["relative_of"] == k and no_rate(v["order"]):
-            warnings.append(f"{scene}: {k}'s fitted order is at the end of the range searched ({v['order']:g}): "
+    for k, v in figures.items():
+        if v.relative_of == k and no_rate(v.order):
+            warnings.append(f"{scene}: {k}'s fitted order is at the end of the range searched ({v.order:g}): "
                             "the levels do not follow a power law, so its extrapolation and errors are unreliable")
-    return {
-        "scene": scene,
-        "friction": levels[0].friction if levels else 0.0,
-        "warnings": warnings,
-        "levels": [{"factor": lv.factor, "elements": lv.elements, "seconds": lv.seconds, "category": lv.category,
-                    **({} if lv.layers is None else {"layers": lv.layers})} for lv in levels],
-        "figures": figures,
-        "error_of_default": {k: figures[k]["relative_error"][i_default] for k in FIGURES},
-    }
+    return ConvergenceResult(scene=scene, friction=levels[0].friction if levels else 0.0, warnings=tuple(warnings),
+                             levels=tuple(levels), figures=figures,
+                             error_of_default={k: v.relative_error[i_default] for k, v in figures.items()})
 
 
 def no_rate(order: float) -> bool:
@@ -237,58 +303,56 @@ def _is_2d(scene) -> bool:
     return read_scene_toml(scene_paths(scene)[1]).get("dim", 2) == 2
 
 
-def format_table(rep: dict) -> str:
-    """A compact text table of :func:`convergence_study`'s report (units: J, N; errors in %)."""
-    lv = rep["levels"]
-    head = f"{'figure':8s}" + "".join(f"{'N=' + str(x['elements']):>12s}" for x in lv) + f"{'extrap.':>12s}{'p':>6s}"
-    lines = [f"convergence study: {rep['scene']}", head]
-    for k, v in rep["figures"].items():
-        unit = "J" if k.startswith("E") else "N"
-        lines.append(f"{k + ' [' + unit + ']':8s}" + "".join(f"{x:12.4g}" for x in v["values"])
-                     + f"{v['extrapolated']:12.4g}{v['order']:6.2f}")
-        lines.append(f"{'  err %':8s}" + "".join(f"{100 * e:12.2f}" for e in v["relative_error"])
-                     + (f"   (of {v['relative_of']})" if v.get("relative_of", k) != k else ""))
-    if any("layers" in x for x in lv):  # (an extruded part)
-        lines.append(f"{'layers':8s}" + "".join(f"{x.get('layers', ''):>12}" for x in lv))
-    lines.append(f"{'s/run':8s}" + "".join(f"{x['seconds']:12.3f}" for x in lv))
-    lines.append(f"{'category':8s}" + "".join(f"{x['category']:>12s}" for x in lv))
+def format_table(rep: ConvergenceResult) -> str:
+    """A compact text table of :func:`convergence_study`'s result (units: J, N; errors in %)."""
+    lv = rep.levels
+    head = f"{'figure':8s}" + "".join(f"{'N=' + str(x.elements):>12s}" for x in lv) + f"{'extrap.':>12s}{'p':>6s}"
+    lines = [f"convergence study: {rep.scene}", head]
+    for k, v in rep.figures.items():
+        lines.append(f"{k + ' [' + UNITS[k] + ']':8s}" + "".join(f"{x:12.4g}" for x in v.values)
+                     + f"{v.extrapolated:12.4g}{v.order:6.2f}")
+        lines.append(f"{'  err %':8s}" + "".join(f"{100 * e:12.2f}" for e in v.relative_error)
+                     + (f"   (of {v.relative_of})" if v.relative_of != k else ""))
+    if any(x.layers is not None for x in lv):  # (an extruded part)
+        lines.append(f"{'layers':8s}" + "".join(f"{x.layers:>12}" for x in lv))
+    lines.append(f"{'s/run':8s}" + "".join(f"{x.seconds:12.3f}" for x in lv))
+    lines.append(f"{'category':8s}" + "".join(f"{x.category:>12s}" for x in lv))
     return "\n".join(lines)
 
 
-def write_study(rep: dict, out, *, name: str | None = None) -> dict:
-    """Write a study's report into the folder ``out``, the three files together (none on a failure):
-    ``NAME_converge.json`` (the report as :func:`report` gives it), ``NAME_converge.csv`` (one row per
-    level: factor, elements, layers (an extruded part's, else empty), seconds, category, each figure's
-    value and relative error) and
-    ``NAME_converge.png`` (:func:`plot_convergence`).
+def write_study(rep: ConvergenceResult, out, *, name: str | None = None) -> dict:
+    """Write a study into the folder ``out``, the three files together (none on a failure):
+    ``NAME_converge.json`` (the result's JSON form, as ``--json`` prints it), ``NAME_converge.csv`` (one row
+    per level: factor, elements, layers (an extruded part's, else empty), seconds, category, each figure's
+    value and relative error) and ``NAME_converge.png`` (:func:`plot_convergence`).
 
     Args:
-        rep: :func:`convergence_study`'s report.
+        rep: :func:`convergence_study`'s result.
         out: the output folder.
         name: the files' stem (default: the scene's name).
 
     Returns:
         {"json", "csv", "png"}: the paths written, as strings.
     """
-    stem = safe_name(name or Path(str(rep["scene"])).stem) + "_converge"
+    stem = safe_name(name or Path(str(rep.scene)).stem) + "_converge"
     paths = {k: Path(out) / f"{stem}.{k}" for k in ("json", "csv", "png")}
     header = ["factor", "elements", "layers", "seconds", "category"]
     for k in FIGURES:
         header += [f"{k}_{UNITS[k]}", f"{k}_relative_error"]
     rows = []
-    for i, lv in enumerate(rep["levels"]):
-        row = [lv["factor"], lv["elements"], lv.get("layers", ""), lv["seconds"], lv["category"]]
+    for i, lv in enumerate(rep.levels):
+        row = [lv.factor, lv.elements, "" if lv.layers is None else lv.layers, lv.seconds, lv.category]
         for k in FIGURES:
-            row += [rep["figures"][k]["values"][i], rep["figures"][k]["relative_error"][i]]
+            row += [rep.figures[k].values[i], rep.figures[k].relative_error[i]]
         rows.append(row)
     with atomic_paths(paths) as tmp:
-        write_json(tmp["json"], rep)
+        write_json(tmp["json"], rep.to_json())
         write_csv(tmp["csv"], header, rows)
         plot_convergence(rep, tmp["png"])
     return {k: str(v) for k, v in paths.items()}
 
 
-def plot_convergence(rep: dict, path):
+def plot_convergence(rep: ConvergenceResult, path):
     """Each figure's error against its extrapolated value, |f_k - f_inf| / ref [%], against the element
     count on log-log axes (the legend gives the fitted order p in h), the scene's own mesh marked."""
     import matplotlib
@@ -297,20 +361,20 @@ def plot_convergence(rep: dict, path):
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
-    N = np.array([lv["elements"] for lv in rep["levels"]], dtype=float)
+    N = np.array([lv.elements for lv in rep.levels], dtype=float)
     fig, ax = plt.subplots(figsize=(8.6, 4.2), dpi=120)
     for k in FIGURES:
-        v = rep["figures"][k]
-        e = 100.0 * np.abs(np.asarray(v["relative_error"], dtype=float))
+        v = rep.figures[k]
+        e = 100.0 * np.abs(np.asarray(v.relative_error, dtype=float))
         shown = e > 0  # (a level at the extrapolated value exactly has no place on a log axis)
         if not shown.any():
             continue
-        p = v["order"]
-        rel = "" if v.get("relative_of", k) == k else f" of {v['relative_of']}"
+        p = v.order
+        rel = "" if v.relative_of == k else f" of {v.relative_of}"
         fit = "no fit" if not np.isfinite(p) else f"order {p:.2f} in h" + (": no power law" if no_rate(p) else "")
         label = f"{k}{rel} ({fit})"
         ax.loglog(N[shown], e[shown], "o-", lw=1.5, ms=5, label=label)
-    default = [lv["elements"] for lv in rep["levels"] if lv["factor"] == 1.0]
+    default = [lv.elements for lv in rep.levels if lv.factor == 1.0]
     if default:
         ax.axvline(default[0], color="0.5", ls=":", lw=1.0, label="the scene's mesh")
     ax.set_xlabel("elements [-]")
@@ -319,8 +383,8 @@ def plot_convergence(rep: dict, path):
     ax.yaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     ax.set_xticks(N, [f"{n:,.0f}" for n in N])  # (the levels' element counts)
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    mu = f", friction {rep['friction']:g}" if rep.get("friction") else ""
-    ax.set_title(f"{Path(str(rep['scene'])).stem}: mesh convergence{mu}")
+    mu = f", friction {rep.friction:g}" if rep.friction else ""
+    ax.set_title(f"{Path(str(rep.scene)).stem}: mesh convergence{mu}")
     ax.grid(True, which="both", color="0.9", lw=0.6)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # (beside the axes: off the lines)
     fig.tight_layout()

@@ -87,3 +87,29 @@ def test_import_simfab_and_its_conveniences_load_no_solver():
             "bad = [m for m in sys.modules if m.split('.')[0] in ('warp', 'mujoco', 'pxr')]; print(bad)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "[]"
+
+
+def test_converge_returns_the_study_typed(tmp_path):
+    # the study of `simfab couple converge` as a typed result: per figure its values, limit, order and errors;
+    # on the 2D clamp from 2,400 to 9,700 triangles the errors fall level by level at an order near 2 (P1
+    # triangles: h^2 in energy; its coarser 1,200-triangle level is not yet asymptotic, order 1.1)
+    from simfab.coupling.converge import ConvergenceResult
+
+    c = simfab.couple.converge("cclamp2d", factors=(0.5, 1, 2))
+    assert isinstance(c, ConvergenceResult) and c.outputs == {} and c.warnings == ()
+    assert [lv.factor for lv in c.levels] == [0.5, 1.0, 2.0] and c.levels[0].elements < c.levels[-1].elements
+    F = c.figures["F_in"]
+    assert 1.5 < F.order < 3.0 and abs(F.relative_error[0]) > abs(F.relative_error[1]) > abs(F.relative_error[2])
+    assert c.error_of_default["F_in"] == F.relative_error[1]  # the scene's own mesh: factor 1
+    assert F.relative_error[1] == pytest.approx((F.values[1] - F.extrapolated) / F.extrapolated, rel=1e-12)
+    j = c.to_json()
+    assert j["figures"]["F_in"]["order"] == F.order and "figures" not in j["levels"][0]
+    assert units(c)["friction"] == "-"
+    with pytest.raises(InputError, match="two positive factors"):
+        simfab.couple.converge("cclamp2d", factors=(1,))
+    with pytest.raises(InputError):
+        simfab.couple.converge("cclamp2d", factors=(0.25, 0.5), frcition=0.2)
+    # out: the CLI's three files
+    w = simfab.couple.converge("cclamp2d", factors=(0.25, 0.5), out=tmp_path)
+    assert sorted(w.outputs) == ["csv", "json", "png"] and all((tmp_path / p.split("/")[-1]).is_file()
+                                                                for p in w.outputs.values())

@@ -49,11 +49,11 @@ def test_figures_that_are_zero_report_errors_relative_to_their_peak():
                  F_rm=[8e-11, 2.4e-8, 2.2e-9, 1.9e-8][i], F_grip=9e3 + 1e4 * h) for i, h in enumerate(h2)]
     rep = report("x", [Level(factor=f, elements=n, seconds=1.0, figures=g, category="ejects")
                        for f, n, g in zip((0.5, 1, 2, 4), N, figs)], 2)
-    F = rep["figures"]
-    assert F["F_rm"]["relative_of"] == "F_in" and F["E_ss"]["relative_of"] == "E_max"
-    assert max(abs(e) for e in F["F_rm"]["relative_error"]) < 1e-11
-    assert F["F_in"]["relative_of"] == "F_in"
-    assert F["F_in"]["relative_error"][0] == pytest.approx(1e5 / 500 / 1.7e4, rel=1e-6)  # exact power law: exact limit
+    F = rep.figures
+    assert F["F_rm"].relative_of == "F_in" and F["E_ss"].relative_of == "E_max"
+    assert max(abs(e) for e in F["F_rm"].relative_error) < 1e-11
+    assert F["F_in"].relative_of == "F_in"
+    assert F["F_in"].relative_error[0] == pytest.approx(1e5 / 500 / 1.7e4, rel=1e-6)  # exact power law: exact limit
 
 
 def test_an_extrusion_is_refined_through_its_height_with_its_section():
@@ -107,11 +107,11 @@ def test_the_report_warns_of_levels_that_are_the_same_mesh_and_of_fits_that_are_
 
     N = [500, 1000, 2000, 4000]
     clean = report("x", levels(N, [fig(1.0 / n) for n in N]), 2)
-    assert clean["warnings"] == []
+    assert clean.warnings == ()
     floored = [4668, 4692, 7389]
     rep = report("x", levels(floored, [fig(1.0 / 4668), fig(1.0 / 4668), fig(1.0 / 7389)]), 3)
-    assert any("factors 0.5 and 1 have nearly the same mesh" in w for w in rep["warnings"])
-    assert any("F_in's fitted order is at the end" in w for w in rep["warnings"])
+    assert any("factors 0.5 and 1 have nearly the same mesh" in w for w in rep.warnings)
+    assert any("F_in's fitted order is at the end" in w for w in rep.warnings)
 
 
 def test_the_report_warns_when_whole_layers_make_the_levels_no_uniform_refinement():
@@ -128,8 +128,8 @@ def test_the_report_warns_when_whole_layers_make_the_levels_no_uniform_refinemen
                      layers=max(1, round(f ** (1.0 / 3.0))), layers_uniform=f ** (1.0 / 3.0))
 
     rep = report("clip", [level(f, int(4700 * f)) for f in (1, 2, 4, 8)], 3)
-    off = [w for w in rep["warnings"] if "whole layers" in w]
+    off = [w for w in rep.warnings if "whole layers" in w]
     assert len(off) == 1 and "factors 2, 4 it has 1, 2" in off[0] and "factors 1, 8, 27 refine uniformly" in off[0]
-    assert [lv["layers"] for lv in rep["levels"]] == [1, 1, 2, 2]
+    assert [lv["layers"] for lv in rep.to_json()["levels"]] == [1, 1, 2, 2]
     rep = report("clip", [level(f, int(4700 * f)) for f in (1, 8, 27)], 3)
-    assert not any("whole layers" in w for w in rep["warnings"])
+    assert not any("whole layers" in w for w in rep.warnings)

@@ -29,7 +29,7 @@ def run(argv) -> dict:
     for scene in a.scenes.split(","):
         rep = convergence_study(scene, factors)
         i = factors.index(1.0) if 1.0 in factors else 0
-        rep["error_at_bundled"] = {k: v["relative_error"][i] for k, v in rep["figures"].items()}
-        rep["table"] = format_table(rep)
-        out["scenes"][scene] = rep
+        out["scenes"][scene] = {**rep.to_json(),
+                                "error_at_bundled": {k: v.relative_error[i] for k, v in rep.figures.items()},
+                                "table": format_table(rep)}
     return out
