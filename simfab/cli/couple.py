@@ -132,28 +132,18 @@ def run(args) -> dict:
 
         return couple_design.run_optimize(args) if cmd == "optimize" else couple_design.run_study(args)
     if cmd == "converge":
-        from simfab.coupling.converge import convergence_study, format_table
+        import simfab.couple
+        from simfab.coupling.converge import format_table
+        from simfab.io.tables import flag_overrides
+        from simfab.progress import log
 
         try:
             factors = tuple(float(f) for f in args.factors.split(","))
         except ValueError:
             raise InputError(f"must be comma-separated numbers, got {args.factors!r}", where="--factors") from None
-        if len(factors) < 2 or min(factors) <= 0:
-            raise InputError("give at least two positive factors", where="--factors")
-        ov = {} if args.element_order is None else {"simulation": {"element_order": args.element_order}}
-        if args.friction is not None:
-            from simfab.io.tables import flag_overrides
-
-            ov["contact"] = flag_overrides({"friction": args.friction})
-        from simfab.design.scene import check_brief_table
-
-        check_brief_table(args.scene)
-        from simfab._warp import device as check_device
-
-        rep = convergence_study(args.scene, factors, overrides=ov, quiet=args.quiet, out=args.out,
-                                device=check_device(args.device))
-        from simfab.progress import log
-
+        flags = flag_overrides({"element_order": args.element_order, "friction": args.friction})
+        rep = simfab.couple.converge(args.scene, factors=factors, out=args.out, device=args.device,
+                                     progress=not args.quiet, **flags)
         for w in rep.warnings:  # warnings show even with --quiet
             log(f"simfab: warning: {w}")
         return {**rep.to_json(), "table": "\n" + format_table(rep)}

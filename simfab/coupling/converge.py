@@ -70,7 +70,8 @@ class Level:
         figures: FIGURES at this level [J for energies, N for forces].
         friction: the Coulomb coefficient [-].
         layers: an extruded part's layers (None for other parts).
-        layers_uniform: the uniform refinement's layers, the scene's times factor^(1/3) (None likewise).
+        scene_layers: the scene's own layers (None likewise): uniform refinement would give
+            scene_layers * factor^(1/3).
     """
 
     factor: float = rfield(unit="-")
@@ -80,7 +81,7 @@ class Level:
     figures: dict = rfield(json=False)
     friction: float = rfield(unit="-", json=False, default=0.0)
     layers: int | None = rfield(optional=True)
-    layers_uniform: float | None = rfield(json=False, default=None)
+    scene_layers: int | None = rfield(json=False, default=None)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -159,7 +160,7 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
         out.append(Level(factor=float(f), elements=int(cm.fem.n_elements), seconds=dt,
                          figures={k: float(d[k]) for k in FIGURES}, category=prof.category, friction=prof.friction,
                          layers=int(mesh["layers"]) if layered else None,
-                         layers_uniform=int(comp.get("layers", 1)) * float(f) ** (1.0 / 3.0) if layered else None))
+                         scene_layers=int(comp.get("layers", 1)) if layered else None))
     return out
 
 
@@ -250,36 +251,37 @@ def report(scene: str, levels: list, dim: int) -> ConvergenceResult:
     of ORDER_RANGE (the levels do not follow h^p: an unreliable extrapolation)."""
     N = np.array([lv.elements for lv in levels])
     i_default = next((i for i, lv in enumerate(levels) if lv.factor == 1.0), 0)  # the scene's own mesh
-    fits = {}
+    values = {k: np.array([lv.figures[k] for lv in levels]) for k in FIGURES}
+    limit, order = {}, {}
     for k in FIGURES:
-        f = np.array([lv.figures[k] for lv in levels])
-        fits[k] = (f, *extrapolate(N, f, dim))
+        limit[k], order[k] = extrapolate(N, values[k], dim)
     # a figure that is ~0 (a loose coupling's E_ss, an ejecting one's F_rm) is relative to its
     # kind's peak: E_max, or the larger of F_in and F_rm
-    peak_force = max(("F_in", "F_rm"), key=lambda k: abs(fits[k][1]))
+    peak_force = max(("F_in", "F_rm"), key=lambda k: abs(limit[k]))
     figures = {}
     for k in FIGURES:
-        f, f_inf, p = fits[k]
         peak = "E_max" if k.startswith("E_") else peak_force
-        of = peak if abs(f_inf) < ZERO_REL * abs(fits[peak][1]) else k
-        ref = fits[of][1]
-        figures[k] = FigureConvergence(values=tuple(float(x) for x in f), extrapolated=float(f_inf), order=float(p),
-                                       relative_of=of,
-                                       relative_error=tuple(float((x - f_inf) / ref) if ref else 0.0 for x in f))
+        of = peak if abs(limit[k]) < ZERO_REL * abs(limit[peak]) else k
+        ref = limit[of]
+        figures[k] = FigureConvergence(values=tuple(float(x) for x in values[k]), extrapolated=float(limit[k]),
+                                       order=float(order[k]), relative_of=of,
+                                       relative_error=tuple(float((x - limit[k]) / ref) if ref else 0.0
+                                                            for x in values[k]))
     warnings = []
     for a, b in zip(levels, levels[1:]):
         if abs(b.elements - a.elements) < SAME_MESH_REL * max(a.elements, b.elements):
             warnings.append(f"{scene}: the levels at factors {a.factor:g} and {b.factor:g} have nearly the same mesh "
                             f"({a.elements} and {b.elements} elements: the mesher's floor or cap), so their "
                             "difference says nothing about convergence; choose factors further apart")
-    off = [lv for lv in levels
-           if lv.layers is not None and abs(lv.layers - lv.layers_uniform) > LAYERS_OFF_REL * lv.layers_uniform]
+    uniform = {i: lv.scene_layers * lv.factor ** (1.0 / 3.0) for i, lv in enumerate(levels) if lv.layers is not None}
+    off = [i for i, u in uniform.items() if abs(levels[i].layers - u) > LAYERS_OFF_REL * u]
     if off:
-        base = round(off[0].layers_uniform / off[0].factor ** (1.0 / 3.0))  # the scene's layers
+        base = levels[off[0]].scene_layers
         whole = ", ".join(f"{(k / base) ** 3:.4g}" for k in range(base, base + 3))
         warnings.append(f"{scene}: the part is extruded in whole layers, and at factors "
-                        f"{', '.join(f'{lv.factor:g}' for lv in off)} it has {', '.join(str(lv.layers) for lv in off)} "
-                        f"where uniform refinement would give {', '.join(f'{lv.layers_uniform:.2f}' for lv in off)}: "
+                        f"{', '.join(f'{levels[i].factor:g}' for i in off)} it has "
+                        f"{', '.join(str(levels[i].layers) for i in off)} "
+                        f"where uniform refinement would give {', '.join(f'{uniform[i]:.2f}' for i in off)}: "
                         "those levels refine the section and the height unequally, and the figures need not follow "
                         f"a power law of the element count; factors {whole} refine uniformly")
     for k, v in figures.items():

@@ -118,14 +118,16 @@ def test_the_report_warns_when_whole_layers_make_the_levels_no_uniform_refinemen
     # an extrusion of one layer refined 2x and 4x keeps 1 and gets 2 layers (uniform: 1.26, 1.59): the
     # section and the height are refined unequally, and the report says which factors are uniform;
     # factors 1 and 8 (1 and 2 layers) are uniform refinements and get no such warning
-    from simfab.coupling.converge import Level, report
+    from simfab.coupling.converge import Level, level_mesh, report
+
+    comp = {"generator": "extruded_clamp", "target_elements": 2700, "layers": 1}  # the study's own layer rule
 
     def level(f, n):
         h2 = n ** (-2.0 / 3.0)
         return Level(factor=f, elements=n, seconds=1.0, category="tight",
                      figures=dict(E_max=4.5 + 10 * h2, E_ss=1.0 + 3 * h2, F_in=17.0 + 100 * h2, F_rm=19.0 + 80 * h2,
                                   F_grip=9.0 + 10 * h2),
-                     layers=max(1, round(f ** (1.0 / 3.0))), layers_uniform=f ** (1.0 / 3.0))
+                     layers=level_mesh(comp, f)["layers"], scene_layers=1)
 
     rep = report("clip", [level(f, int(4700 * f)) for f in (1, 2, 4, 8)], 3)
     off = [w for w in rep.warnings if "whole layers" in w]
