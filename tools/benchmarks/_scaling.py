@@ -143,6 +143,7 @@ def plot_scaling(groups: list, path: str) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
     for g in groups:
@@ -170,8 +171,13 @@ def plot_scaling(groups: list, path: str) -> None:
     bx.set_ylabel("wall ms per CHOLMOD factorization")
     bx.set_title("Cost of one factorization (wall ms)")
     bx.legend(fontsize=7)
+    plain = matplotlib.ticker.FormatStrFormatter("%g")  # (3, 5, 10, not 3x10^0)
     for a in (ax, bx):
         a.grid(alpha=0.3, which="both")
+        a.xaxis.set_major_formatter(plain)
+        a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # (crowded on a decade)
+        a.yaxis.set_major_formatter(plain)
+        a.yaxis.set_minor_formatter(plain)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
