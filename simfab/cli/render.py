@@ -13,7 +13,8 @@ The picture is titled with the file name (and time code), carries a scale bar an
 with a scalar field written by simfab (e.g. von Mises stress), a colour bar.
 
 --json keys: png (path of the image), source (the rendered file), time (USD time code drawn,
-USD only), colorbar {label, cmap, min, max} (USD with a scalar field only)."""
+USD only), colorbar {label, cmap, min, max, clipped} (USD with a scalar field only; clipped: some
+values of the timeline lie above max, and share its colour)."""
 
 
 def add_args(p):

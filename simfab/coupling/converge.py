@@ -53,6 +53,14 @@ ORDER_RANGE = (0.5, 4.0)
 CLAMP_GENERATORS = ("c_clamp", "extruded_clamp")
 
 
+#: A fitted order in h below this (and not at the range's end) is slower than any part without cracks
+#: converges in the asymptotic range: there the energy converges at twice the energy norm's rate,
+#: h^(2 min(k, lambda)) for elements of order k and a corner or contact singularity of exponent
+#: lambda >= 1/2, and the support's reaction (a derivative of the energy) and the contact forces with it.
+#: Slower levels are pre-asymptotic (linear elements locked in bending converge this slowly until the mesh
+#: resolves the bending), and the report warns: their extrapolation is unreliable.
+SLOW_ORDER = 1.0
+
 #: A level's layers more than this fraction off the uniform refinement's (the scene's layers times
 #: factor^(1/3): layers are whole) make the levels no uniform refinement of one another: the report warns.
 LAYERS_OFF_REL = 0.1
@@ -69,6 +77,7 @@ class Level:
         category: the profile's category.
         figures: FIGURES at this level [J for energies, N for forces].
         friction: the Coulomb coefficient [-].
+        element_order: the part's element order (1 linear, 2 quadratic).
         layers: an extruded part's layers (None for other parts).
         scene_layers: the scene's own layers (None likewise): uniform refinement would give
             scene_layers * factor^(1/3).
@@ -80,6 +89,7 @@ class Level:
     category: str
     figures: dict = rfield(json=False)
     friction: float = rfield(unit="-", json=False, default=0.0)
+    element_order: int = 1
     layers: int | None = rfield(optional=True)
     scene_layers: int | None = rfield(json=False, default=None)
 
@@ -159,6 +169,7 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
         layered = "layers" in mesh
         out.append(Level(factor=float(f), elements=int(cm.fem.n_elements), seconds=dt,
                          figures={k: float(d[k]) for k in FIGURES}, category=prof.category, friction=prof.friction,
+                         element_order=int(cm.fem.element_order),
                          layers=int(mesh["layers"]) if layered else None,
                          scene_layers=int(comp.get("layers", 1)) if layered else None))
     return out
@@ -247,8 +258,9 @@ def report(scene: str, levels: list, dim: int) -> ConvergenceResult:
     below ZERO_REL of its kind's peak, e.g. a loose coupling's E_ss, relative to that peak); per level the element
     count and seconds; ``error_of_default``: the errors of the scene's own mesh (factor 1, else the first level);
     ``warnings``: levels that are the same refinement (element counts within SAME_MESH_REL), levels whose whole
-    layers are more than LAYERS_OFF_REL off the uniform refinement's, and figures whose fitted order is at an end
-    of ORDER_RANGE (the levels do not follow h^p: an unreliable extrapolation)."""
+    layers are more than LAYERS_OFF_REL off the uniform refinement's, figures whose fitted order is at an end
+    of ORDER_RANGE (the levels do not follow h^p: an unreliable extrapolation), and figures whose fitted order is
+    below SLOW_ORDER (pre-asymptotic levels: an unreliable extrapolation too)."""
     N = np.array([lv.elements for lv in levels])
     i_default = next((i for i, lv in enumerate(levels) if lv.factor == 1.0), 0)  # the scene's own mesh
     values = {k: np.array([lv.figures[k] for lv in levels]) for k in FIGURES}
@@ -288,6 +300,15 @@ def report(scene: str, levels: list, dim: int) -> ConvergenceResult:
         if v.relative_of == k and no_rate(v.order):
             warnings.append(f"{scene}: {k}'s fitted order is at the end of the range searched ({v.order:g}): "
                             "the levels do not follow a power law, so its extrapolation and errors are unreliable")
+    slow = [k for k, v in figures.items() if v.relative_of == k and slower_than_h(v.order)]
+    if slow:
+        linear = all(lv.element_order == 1 for lv in levels)
+        warnings.append(f"{scene}: {', '.join(slow)} converge slower than h (fitted orders "
+                        f"{', '.join(f'{figures[k].order:.2f}' for k in slow)}), slower than any part without cracks "
+                        "converges once its mesh is fine enough: these levels are pre-asymptotic"
+                        + (" (linear elements locked in bending)" if linear else "")
+                        + ", so the extrapolation and errors are unreliable; refine further"
+                        + (" or study it with element_order = 2 (--element-order 2)" if linear else ""))
     return ConvergenceResult(scene=scene, friction=levels[0].friction if levels else 0.0, warnings=tuple(warnings),
                              levels=tuple(levels), figures=figures,
                              error_of_default={k: v.relative_error[i_default] for k, v in figures.items()})
@@ -297,6 +318,12 @@ def no_rate(order: float) -> bool:
     """Whether a fitted order lies at an end of ORDER_RANGE (:func:`extrapolate`): the levels do not
     follow a power law, and the extrapolation and errors are unreliable."""
     return bool(np.isfinite(order)) and min(abs(order - e) for e in ORDER_RANGE) < 1e-9
+
+
+def slower_than_h(order: float) -> bool:
+    """Whether a fitted order is below SLOW_ORDER (and no end of ORDER_RANGE: :func:`no_rate`): pre-asymptotic
+    levels, whose extrapolation is unreliable."""
+    return bool(np.isfinite(order)) and not no_rate(order) and order < SLOW_ORDER
 
 
 def _is_2d(scene) -> bool:
@@ -356,7 +383,8 @@ def write_study(rep: ConvergenceResult, out, *, name: str | None = None) -> dict
 
 def plot_convergence(rep: ConvergenceResult, path):
     """Each figure's error against its extrapolated value, |f_k - f_inf| / ref [%], against the element
-    count on log-log axes (the legend gives the fitted order p in h), the scene's own mesh marked."""
+    count on log-log axes (the legend gives the fitted order p in h, and says where the report warns of it),
+    the scene's own mesh marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -373,7 +401,8 @@ def plot_convergence(rep: ConvergenceResult, path):
             continue
         p = v.order
         rel = "" if v.relative_of == k else f" of {v.relative_of}"
-        fit = "no fit" if not np.isfinite(p) else f"order {p:.2f} in h" + (": no power law" if no_rate(p) else "")
+        fit = "no fit" if not np.isfinite(p) else f"order {p:.2f} in h" + (
+            ": no power law" if no_rate(p) else ": pre-asymptotic" if slower_than_h(p) else "")
         label = f"{k}{rel} ({fit})"
         ax.loglog(N[shown], e[shown], "o-", lw=1.5, ms=5, label=label)
     default = [lv.elements for lv in rep.levels if lv.factor == 1.0]

@@ -224,6 +224,29 @@ def vertex_von_mises(fem, vm: np.ndarray) -> np.ndarray:
     return s / np.maximum(c, 1)
 
 
+#: The stress colour scale's top: this percentile of the nodes' von Mises stress, the largest over the
+#: records. A single element's peak (a contact edge's, clip3d's 355 MPa) would otherwise set the scale and
+#: leave the rest of the part in its lowest colour at most time codes; nodes above it take the top colour
+#: (the stage marks the scale clipped: ``simfab:clipped``).
+STRESS_COLOUR_PERCENTILE = 99.0
+
+
+def stress_colour_top(values: list) -> float:
+    """The top of a timeline's stress colour scale [Pa]: the largest over its records of
+    STRESS_COLOUR_PERCENTILE of the nodes' values (the largest value where that is 0; 1 where all are 0).
+
+    Args:
+        values: each record's per-node von Mises stress (n,) [Pa] (:func:`vertex_von_mises`).
+
+    Returns:
+        The scale's top [Pa], > 0.
+    """
+    top = max((float(np.percentile(v, STRESS_COLOUR_PERCENTILE)) for v in values if len(v)), default=0.0)
+    if top > 0:
+        return top
+    return max((float(np.max(v)) for v in values if len(v)), default=0.0) or 1.0
+
+
 def display_faces(cm) -> np.ndarray:
     """Triangles over A's nodes to display it: 2D its (sub-)elements, 3D its boundary (sub-)facets."""
     return cm.display_elements if cm.dim == 2 else cm.contact_facets
@@ -242,8 +265,9 @@ def object_display(cm):
 
 
 def write_usd(res: InsertionResult, path) -> Path:
-    """USD stage: A's deforming mesh (``part``) with a per-vertex ``von_mises`` primvar [Pa], O's
-    animated transform (``object``); time code k = record k (the insertion's, then the removal's)."""
+    """USD stage: A's deforming mesh (``part``) with a per-vertex ``von_mises`` primvar [Pa] coloured on one
+    scale for the whole timeline (0 to :func:`stress_colour_top`), O's animated transform (``object``);
+    time code k = record k (the insertion's, then the removal's)."""
 
     cm = res.model
     fem = cm.fem
@@ -253,11 +277,11 @@ def write_usd(res: InsertionResult, path) -> Path:
     ov, of = object_display(cm)
     w.add_rigid("object", points=ov, faces=of, color=[0.55, 0.6, 0.7])
     records = [*res.steps, *res.removal]
-    vmax = float(max(r.max_von_mises for r in records)) or 1.0
-    for k, r in enumerate(records):
+    stress = [vertex_von_mises(fem, r.von_mises) for r in records]
+    vmax = stress_colour_top(stress)
+    for k, (r, vm) in enumerate(zip(records, stress)):
         w.set_points("part", r.x, k)
-        w.set_scalar("part", "von_mises", vertex_von_mises(fem, r.von_mises), k, interpolation="vertex",
-                     vmin=0.0, vmax=vmax, units="Pa")
+        w.set_scalar("part", "von_mises", vm, k, interpolation="vertex", vmin=0.0, vmax=vmax, units="Pa")
         w.set_pose("object", r.pos, r.quat, k)
     return w.save()
 

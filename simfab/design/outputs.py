@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from simfab.coupling.outputs import display_faces, extruded_slab, object_display, vertex_von_mises
+from simfab.coupling.outputs import display_faces, extruded_slab, object_display, stress_colour_top, vertex_von_mises
 from simfab.design import brief as B
 from simfab.design.problem import lift_rest
 from simfab.design.synthesis import boundary_loops
@@ -291,11 +291,11 @@ def write_usd(res, path) -> Path:
         w.set_attribute("part", "iteration", k, t)
         w.set_pose("object", start_pos, start_quat, t)
         t += 1
-    vmax = float(max(r.max_von_mises for r in final.steps)) or 1.0
-    for r in final.steps:
+    stress = [vertex_von_mises(fem, r.von_mises) for r in final.steps]
+    vmax = stress_colour_top(stress)
+    for r, vm in zip(final.steps, stress):
         w.set_points("part", r.x, t)
-        w.set_scalar("part", "von_mises", vertex_von_mises(fem, r.von_mises), t, interpolation="vertex", vmin=0.0,
-                     vmax=vmax, units="Pa")
+        w.set_scalar("part", "von_mises", vm, t, interpolation="vertex", vmin=0.0, vmax=vmax, units="Pa")
         w.set_attribute("part", "objective", res.best.objective, t)
         w.set_pose("object", r.pos, r.quat, t)
         t += 1

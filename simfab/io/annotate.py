@@ -23,7 +23,8 @@ def annotate_png(png, camera: dict, *, title: str = "", legend: list | None = No
                  colorbar: dict | None = None) -> Path:
     """Add a title (top left), a scale bar valid at the look-at depth (bottom left), an
     optional legend ``[(label, rgb), ...]`` (top right) and an optional colour bar
-    ``{"label", "cmap", "min", "max"}`` (right edge) to a PNG rendered with ``camera`` (see
+    ``{"label", "cmap", "min", "max"}`` (right edge; with ``"clipped"`` true its top reads ">= max":
+    larger values share the top colour) to a PNG rendered with ``camera`` (see
     :func:`render_model`). The image is rewritten in place."""
     from PIL import Image, ImageDraw, ImageFont
 
@@ -61,7 +62,7 @@ def annotate_png(png, camera: dict, *, title: str = "", legend: list | None = No
 
         cm = matplotlib.colormaps[colorbar.get("cmap", "viridis")]
         bh, bw = int(0.5 * H), max(10, W // 40)
-        labels = [f"{colorbar['max']:.3g}", f"{colorbar['min']:.3g}"]
+        labels = [(">= " if colorbar.get("clipped") else "") + f"{colorbar['max']:.3g}", f"{colorbar['min']:.3g}"]
         tw = max(int(d.textlength(t, font=font)) for t in labels)
         box_w = max(bw + tw + 14, int(d.textlength(colorbar["label"], font=font)) + 10)
         x1, y1 = W - box_w - 4, int(0.25 * H)

@@ -202,8 +202,8 @@ def render_usd(path, png, *, time: float | None = None, width: int = 640, height
         info["time"] = t
         sc = read_scalar_at(stage, t)
         if sc is not None:
-            name, cmap, (lo, hi), units = sc
-            info["colorbar"] = {"label": name + (f" [{units}]" if units else ""), "cmap": cmap, "min": lo, "max": hi}
+            info["colorbar"] = {"label": sc.name + (f" [{sc.units}]" if sc.units else ""), "cmap": sc.cmap,
+                                "min": sc.range[0], "max": sc.range[1], "clipped": sc.clipped}
     items = [(V, F, rgb) for _, V, F, rgb in read_mesh_at(stage, t)]
     crv, pts = read_curves_at(stage, t)
     if not items and not crv and not pts:

@@ -188,7 +188,8 @@ class StageWriter:
         """A float primvar (per vertex or per face) plus ``displayColor`` from ``cmap``.
 
         values : (n,) for interpolation "vertex", (m,) for "uniform" (per face).
-        vmin, vmax : colormap range (default: this sample's min and max).
+        vmin, vmax : colormap range (default: this sample's min and max); values beyond it take the
+            colormap's end colours, and a sample above vmax marks the primvar ``simfab:clipped``.
         units : the values' unit, kept with the colormap and a fixed range in the primvar's
             customData (``simfab:colormap``, ``simfab:range``, ``simfab:units``) so a renderer can
             draw the colour bar (:func:`read_scalar_at`).
@@ -209,6 +210,8 @@ class StageWriter:
         attr.SetCustomDataByKey("simfab:colormap", cmap)
         if vmin is not None and vmax is not None:
             attr.SetCustomDataByKey("simfab:range", Vt.DoubleArray([float(vmin), float(vmax)]))
+            if np.nanmax(v, initial=-np.inf) > vmax:  # (once set, for the whole timeline)
+                attr.SetCustomDataByKey("simfab:clipped", True)
         if units is not None:
             attr.SetCustomDataByKey("simfab:units", str(units))
         rgb = scalar_colors(v, cmap=cmap, vmin=vmin, vmax=vmax).astype(np.float32)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import re
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from pxr import Usd, UsdGeom
@@ -104,10 +105,27 @@ def read_curves_at(path_or_stage, time: float | None = None):
     return curves, points
 
 
-def read_scalar_at(stage, time: float | None = None):
-    """The first scalar primvar written by :meth:`StageWriter.set_scalar` on a visible prim:
-    ``(primvar name, colormap, (lo, hi) of the colours, units or None)`` at the time code, or None.
-    The range is the fixed one the writer was given, else the values' own at that time."""
+class ScalarField(NamedTuple):
+    """A scalar primvar's colouring (:func:`read_scalar_at`).
+
+    Args:
+        name: the primvar's name.
+        cmap: its matplotlib colormap.
+        range: (lo, hi) of the colours: the fixed range the writer was given, else the values' own at the time.
+        units: the values' unit, or None.
+        clipped: some values of the timeline lie above the fixed range (they take its top colour).
+    """
+
+    name: str
+    cmap: str
+    range: tuple
+    units: str | None
+    clipped: bool
+
+
+def read_scalar_at(stage, time: float | None = None) -> ScalarField | None:
+    """The first scalar primvar written by :meth:`StageWriter.set_scalar` on a visible prim at the time
+    code, or None."""
     tc = Usd.TimeCode(stage_time(stage, time)[0])
     for prim in stage.Traverse():
         if not prim.IsA(UsdGeom.Gprim) or UsdGeom.Imageable(prim).ComputeVisibility(tc) == UsdGeom.Tokens.invisible:
@@ -125,7 +143,9 @@ def read_scalar_at(stage, time: float | None = None):
                 if not len(v):
                     continue
                 lo, hi = float(v.min()), float(v.max())
-            return pv.GetPrimvarName(), str(cmap), (lo, hi), attr.GetCustomDataByKey("simfab:units")
+            return ScalarField(name=str(pv.GetPrimvarName()), cmap=str(cmap), range=(lo, hi),
+                               units=attr.GetCustomDataByKey("simfab:units"),
+                               clipped=bool(attr.GetCustomDataByKey("simfab:clipped")))
     return None
 
 

@@ -114,6 +114,32 @@ def test_the_report_warns_of_levels_that_are_the_same_mesh_and_of_fits_that_are_
     assert any("F_in's fitted order is at the end" in w for w in rep.warnings)
 
 
+def test_the_report_warns_of_levels_that_converge_slower_than_h():
+    # a user's C-clip on linear triangles converged like h^0.8 (errors 17-22 % at its own mesh, the
+    # limit 6 % off the quadratic study's): pre-asymptotic levels, flagged with the way out; figures
+    # converging like h^1.3 (cclamp2d's P2 study) or h^2 are not
+    from simfab.coupling.converge import Level, report
+
+    N = [500, 1000, 2000, 4000]
+
+    def rep(p, order=1, slow=("F_in",)):
+        def fig(n):
+            h = n ** -0.5
+            return {k: (17.0 + 100 * h ** p if k in slow else 17.0 + 100 * h * h) for k in
+                    ("E_max", "E_ss", "F_in", "F_rm", "F_grip")}
+
+        return report("clip", [Level(factor=f, elements=n, seconds=1.0, figures=fig(n), category="tight",
+                                     element_order=order) for f, n in zip((0.5, 1, 2, 4), N)], 2)
+
+    r = rep(0.8)
+    assert r.figures["F_in"].order == pytest.approx(0.8, abs=0.02)
+    (w,) = [w for w in r.warnings if "slower than h" in w]
+    assert "clip: F_in converge slower than h (fitted orders 0.80)" in w and "--element-order 2" in w
+    (w,) = [w for w in rep(0.8, order=2, slow=("E_max", "F_in")).warnings if "slower than h" in w]
+    assert "E_max, F_in" in w and "0.80, 0.80" in w and "element_order" not in w  # (already quadratic)
+    assert rep(1.3).warnings == () and rep(2.0).warnings == ()
+
+
 def test_the_report_warns_when_whole_layers_make_the_levels_no_uniform_refinement():
     # an extrusion of one layer refined 2x and 4x keeps 1 and gets 2 layers (uniform: 1.26, 1.59): the
     # section and the height are refined unequally, and the report says which factors are uniform;

@@ -37,6 +37,20 @@ def test_simulate_writes_profile_plot_usd_and_mjcf(tmp_path, capsys):
 
     meshes = {name: V for name, V, F, rgb in read_mesh_at(summary["usd"], 10)}
     assert any("part" in k for k in meshes) and any("object" in k for k in meshes)
+    # one colour scale for the timeline, its top the largest 99th percentile of the nodes' stress over the
+    # records: below the largest element stress (one element's peak does not set it), above most nodes
+    from pxr import UsdGeom
+
+    from simfab.io.usd_read import open_stage, read_scalar_at
+
+    stage = open_stage(summary["usd"])
+    sc = read_scalar_at(stage, 10)
+    part = next(p for p in stage.Traverse() if p.GetName() == "part")
+    pv = UsdGeom.PrimvarsAPI(part).GetPrimvar("von_mises")
+    nodes = [np.asarray(pv.Get(t), float) for t in range(11)]
+    top = max(float(np.percentile(v, 99.0)) for v in nodes)
+    assert sc.range[0] == 0.0 and sc.range[1] == pytest.approx(top, rel=1e-6)  # (the primvar: float32)
+    assert sc.range[1] < summary["max_von_mises"] and sc.clipped == (max(v.max() for v in nodes) > sc.range[1])
     import mujoco
 
     m = mujoco.MjModel.from_xml_path(summary["mjcf"])

@@ -119,8 +119,8 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
     from simfab.io.usd_read import open_stage, read_scalar_at
 
     # the stress field carries its unit, so a rendered colour bar reads "von_mises [Pa]"
-    name, _, (lo, hi), units = read_scalar_at(open_stage(s["outputs"]["usd"]))
-    assert (name, units) == ("von_mises", "Pa") and 0.0 == lo < hi
+    sc = read_scalar_at(open_stage(s["outputs"]["usd"]))
+    assert (sc.name, sc.units) == ("von_mises", "Pa") and 0.0 == sc.range[0] < sc.range[1]
     import trimesh
 
     for k in ("part_stl", "revolved_stl"):

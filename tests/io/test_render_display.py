@@ -107,8 +107,37 @@ def test_scalar_field_gets_a_colour_bar(tmp_path):
     w.save()
     info: dict = {}
     png = render.render_file(tmp_path / "s.usda", tmp_path / "s.png", width=320, height=240, info=info)
-    assert info["colorbar"] == {"label": "stress [Pa]", "cmap": "viridis", "min": 0.0, "max": 5.0}
+    assert info["colorbar"] == {"label": "stress [Pa]", "cmap": "viridis", "min": 0.0, "max": 5.0, "clipped": False}
     a = np.asarray(Image.open(png).convert("RGB")).astype(int)
     right = a[:, 200:]
     yellow = (right[..., 0] > 200) & (right[..., 1] > 200) & (right[..., 2] < 80)  # the bar's top (viridis max)
     assert yellow.sum() > 20
+
+
+def _unclipped(tmp_path):
+    w = StageWriter(tmp_path / "u.usda")
+    P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.0]])
+    w.add_mesh("m", np.array([[0, 1, 2]]), P)
+    w.set_points("m", P, 0)
+    w.set_scalar("m", "stress", [0.0, 1.0, 5.0], 0, vmin=0.0, vmax=5.0)  # (at the top, not above)
+    return w.save()
+
+
+def test_a_scale_below_some_values_is_marked_clipped(tmp_path):
+    # one sample of the timeline above the fixed range: that vertex takes the top colour, and the
+    # stage says so for the whole timeline (a colour bar then reads ">= max")
+    w = StageWriter(tmp_path / "s.usda")
+    P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
+    w.add_mesh("m", np.array([[0, 1, 2], [0, 2, 3]]), P)
+    for t, top in enumerate((3.0, 9.0, 1.0)):
+        w.set_points("m", P, t)
+        w.set_scalar("m", "stress", [0.0, 1.0, 2.0, top], t, vmin=0.0, vmax=5.0, units="Pa")
+    w.save()
+    from simfab.io.usd_read import open_stage, read_scalar_at
+
+    sc = read_scalar_at(open_stage(tmp_path / "s.usda"), 0)
+    assert sc.range == (0.0, 5.0) and sc.clipped
+    assert not read_scalar_at(open_stage(_unclipped(tmp_path)), 0).clipped
+    info: dict = {}
+    render.render_file(tmp_path / "s.usda", tmp_path / "s.png", width=320, height=240, info=info, time=1)
+    assert info["colorbar"]["clipped"] and info["colorbar"]["max"] == 5.0
