@@ -21,11 +21,13 @@ seat's depth in the message.
 Files under --out: NAME.xml (the mocap body 'object' with keyframes k0, k1, the box site 'fixed',
 the part as a display mesh), NAME.toml, and NAME_outline.csv (2D: the part's section through the
 object's centre, which is the scene's plane z = 0: the scene's frame is the files' moved along z, and
-the notes say so) or NAME_part.npz (3D: the part's tetrahedral mesh, stored so runs are reproducible).
+the notes say so) or NAME_part.npz (3D: the part's tetrahedral mesh, stored so runs are reproducible)
+and NAME_part.ply (3D: the surface it was meshed from, in the scene's frame [m], which 'couple
+converge' meshes again at its other refinement factors).
 
 --json keys: scene, dim, start, end [m] (the object's centre at the path's ends), path_length [m],
   first_contact, seat [m] (along the path from its start; seat null if none), to_rest, notes,
-  next_commands, outputs {scene_xml, scene_toml, outline_csv | part_npz}."""
+  next_commands, outputs {scene_xml, scene_toml, outline_csv | part_npz, part_ply}."""
 
 
 def add_args(p) -> None:

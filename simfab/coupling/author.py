@@ -434,7 +434,11 @@ def _write(spec, out, *, name, A, O, centre, d, p_start, p_end, thickness, outli
         from simfab.fem.meshing import tetrahedralize
 
         V, T = tetrahedralize(np.asarray(A.vertices), np.asarray(A.faces), target_tets=spec.elements or 3000)
-        comp = {"mesh_file": f"{name}_part.npz"}
+        # the stored tets make runs reproducible; the surface they were meshed from, in the scene's frame,
+        # lets a convergence study mesh the part again at multiples of their count (simfab couple converge;
+        # the mesher's count is near the target asked, or above it at its floor)
+        comp = {"generator": "mesh", "mesh": f"{name}_part.ply", "units": "m", "target_elements": int(len(T)),
+                "mesh_file": f"{name}_part.npz"}
         inside = np.all(np.abs(V - fc) <= fh + 1e-12, axis=1)
     if not inside.any():
         raise InputError(f"the fixed region {_fmt_pt(fc - fh, scale, units)} .. {_fmt_pt(fc + fh, scale, units)} "
@@ -473,10 +477,12 @@ def _write(spec, out, *, name, A, O, centre, d, p_start, p_end, thickness, outli
         files["outline_csv"] = str(write_csv(out / comp["outline"], [f"x_{units}", f"y_{units}"], ring.tolist()))
     else:
         from simfab.io.atomic import atomic_path
+        from simfab.io.mesh import save_mesh
 
         with atomic_path(out / comp["mesh_file"]) as tmp, open(tmp, "wb") as fh_:
             np.savez_compressed(fh_, points=V, elements=np.asarray(T, dtype=np.int32))
         files["part_npz"] = str(out / comp["mesh_file"])
+        files["part_ply"] = str(save_mesh(A, out / comp["mesh"]))  # (binary PLY: float64 vertices, as meshed)
     files["scene_xml"] = str(b.save(out / f"{name}.xml"))
     files["scene_toml"] = str(write_text(out / f"{name}.toml", toml_text))
     xml = files["scene_xml"]

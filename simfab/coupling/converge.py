@@ -9,10 +9,10 @@ alike: ``layers`` times factor^(1/3) (rounded, at least 1), the rest of the fact
 docs/validation/coupling.md). A C-clamp's section (``c_clamp``, ``extruded_clamp``) is refined with its
 arcs' default sampling, and the factors multiply the scene mesh's actual element count where the
 triangulation's floor made more than its target (:func:`level_mesh`). A 3D scene that ships its
-part's mesh (``mesh_file``, e.g. claw3d's stored fTetWild mesh) keeps that mesh at factor 1 (the
-error of what users run) and is
-meshed again from its generator at the other factors; a part with no generator (a ready mesh
-only) cannot be refined and raises InputError. With
+part's mesh (``mesh_file``, e.g. claw3d's stored fTetWild mesh, or the tets ``simfab couple new``
+stores beside the part's surface) keeps that mesh at factor 1 (the error of what users run) and is
+meshed again from its generator (or surface mesh) at the other factors; a part with no generator
+and no surface (a ready mesh only) cannot be refined and raises InputError. With
 element counts N_k and a figure f_k, the discretization error of linear elements falls like
 h^p ~ N^(-p/dim); the extrapolated value f_inf and the observed order p come from a
 least-squares fit of f = f_inf + b h^p to the finest four levels (:func:`extrapolate`). The error
@@ -143,11 +143,14 @@ def run_levels(scene, factors=(1, 2, 4, 8), *, overrides: dict | None = None, qu
     _, toml = scene_paths(scene)
     cfg = read_scene_toml(toml)
     comp = cfg.get("compliant", {})
-    if comp.get("target_elements") is None or ("mesh_file" in comp and comp.get("generator") in (None, "mesh")):
+    # a ready mesh_file is the level at factor 1; the other levels need a source to mesh again from: a
+    # parametric generator, an outline or a surface mesh (as simfab couple new writes a 3D part)
+    remeshable = comp.get("generator") not in (None, "mesh") or "mesh" in comp or "outline" in comp
+    if comp.get("target_elements") is None or ("mesh_file" in comp and not remeshable):
         raise InputError("a convergence study needs a scene whose part is meshed from target_elements "
                          "by a generator (not only a ready mesh_file); for a part of your own, give [compliant] "
-                         'generator = "mesh", mesh = its surface file, units and target_elements instead of '
-                         "mesh_file", where=str(toml))
+                         'generator = "mesh", mesh = its surface file, units and target_elements beside (or '
+                         "instead of) mesh_file", where=str(toml))
     base = None  # the scene's own model (factor 1): for a C-clamp the factors multiply its element count
     if comp.get("generator") in CLAMP_GENERATORS:
         base = load_coupling_scene(scene, overrides=overrides, quiet=quiet, device=device)
@@ -303,7 +306,8 @@ def report(scene: str, levels: list, dim: int) -> ConvergenceResult:
     slow = [k for k, v in figures.items() if v.relative_of == k and slower_than_h(v.order)]
     if slow:
         linear = all(lv.element_order == 1 for lv in levels)
-        warnings.append(f"{scene}: {', '.join(slow)} converge slower than h (fitted orders "
+        verb, noun = ("converges", "order") if len(slow) == 1 else ("converge", "orders")
+        warnings.append(f"{scene}: {', '.join(slow)} {verb} slower than h (fitted {noun} "
                         f"{', '.join(f'{figures[k].order:.2f}' for k in slow)}), slower than any part without cracks "
                         "converges once its mesh is fine enough: these levels are pre-asymptotic"
                         + (" (linear elements locked in bending)" if linear else "")

@@ -134,7 +134,7 @@ def test_the_report_warns_of_levels_that_converge_slower_than_h():
     r = rep(0.8)
     assert r.figures["F_in"].order == pytest.approx(0.8, abs=0.02)
     (w,) = [w for w in r.warnings if "slower than h" in w]
-    assert "clip: F_in converge slower than h (fitted orders 0.80)" in w and "--element-order 2" in w
+    assert "clip: F_in converges slower than h (fitted order 0.80)" in w and "--element-order 2" in w
     (w,) = [w for w in rep(0.8, order=2, slow=("E_max", "F_in")).warnings if "slower than h" in w]
     assert "E_max, F_in" in w and "0.80, 0.80" in w and "element_order" not in w  # (already quadratic)
     assert rep(1.3).warnings == () and rep(2.0).warnings == ()

@@ -152,3 +152,29 @@ def test_overlap_profile_of_a_disk_entering_a_block():
     prof = overlap_profile(block, disk, np.array([R + g, 0.0]), np.array([-1.0, 0.0, 0.0]), s)
     # boundary samples every 2 pi R / 400 = 0.16 mm: the depth is resolved to (that spacing)^2 / (8 R)
     assert prof.depth == pytest.approx(np.maximum(0.0, s - g), abs=2e-6)
+
+
+def test_3d_scene_keeps_its_tets_and_can_be_refined(meshes, tmp_path, capsys):
+    # the 3D scene stores its tets (runs are reproducible: the level at factor 1 is that mesh) and the
+    # surface they were meshed from, in the scene's frame, so a convergence study meshes the part again
+    # at its other factors (it refused a scene with only the tets)
+    import trimesh
+
+    from simfab.coupling.converge import run_levels
+    from simfab.coupling.scene import load_coupling_scene
+
+    assert _new(meshes, tmp_path / "s3", "--elements", "600") == 0
+    made = json.loads(capsys.readouterr().out)
+    assert set(made["outputs"]) == {"scene_xml", "scene_toml", "part_npz", "part_ply"}
+    xml = made["outputs"]["scene_xml"]
+    cm = load_coupling_scene(xml)
+    surf = trimesh.load(made["outputs"]["part_ply"])
+    # the tets' surface in the scene's frame [m], up to the tetrahedralizer's envelope (1e-3 of the diagonal)
+    diag = float(np.linalg.norm(np.ptp(cm.fem.rest, axis=0)))
+    assert surf.is_watertight and np.allclose(surf.bounds, [cm.fem.rest.min(axis=0), cm.fem.rest.max(axis=0)],
+                                              atol=2e-3 * diag)
+    # (600 asked: the mesher's floor for this part is ~930 tets, and the scene's target is what it made)
+    levels = run_levels(xml, (1.0, 2.0), overrides={"simulation": {"steps": 4}})
+    assert levels[0].elements == cm.fem.n_elements  # the stored mesh
+    assert 1.5 < levels[1].elements / levels[0].elements < 2.5  # meshed again from the surface
+    assert all(lv.figures["E_max"] > 0 for lv in levels)
