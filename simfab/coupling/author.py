@@ -345,9 +345,10 @@ def new_scene(spec: CouplingAuthorConfig, out) -> AuthoredScene:
         thickness = float(A.bounds[1][2] - A.bounds[0][2])
     else:
         part_shape, obj_shape, c2 = _Shape3D(A), _Shape3D(O), centre
-    # positions: from O entirely before A to O entirely past it
+    # positions: from O entirely before A to O entirely past it (O's points at s project to their
+    # projection in the files plus s: O is in the files' frame at s = 0)
     proj_a = np.asarray(A.vertices) @ d
-    proj_o = np.asarray(O.vertices) @ d - centre @ d
+    proj_o = np.asarray(O.vertices) @ d
     size = float(proj_o.max() - proj_o.min())
     s_lo = float(proj_a.min() - proj_o.max()) - 0.1 * size
     s_hi = float(proj_a.max() - proj_o.min()) + 0.1 * size

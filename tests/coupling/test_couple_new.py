@@ -178,3 +178,33 @@ def test_3d_scene_keeps_its_tets_and_can_be_refined(meshes, tmp_path, capsys):
     assert levels[0].elements == cm.fem.n_elements  # the stored mesh
     assert 1.5 < levels[1].elements / levels[0].elements < 2.5  # meshed again from the surface
     assert all(lv.figures["E_max"] > 0 for lv in levels)
+
+
+@pytest.mark.parametrize("dim", ["2", "3"])
+def test_a_moved_assembly_gives_the_same_path(meshes, tmp_path, capsys, dim):
+    # the same clip and cylinder as a CAD assembly placed elsewhere (turned 30 deg about z and moved):
+    # the path's length, first contact and seat are the same, and O starts outside A (the search for
+    # the path's start began inside A when O's centre did not project to 0 on the direction)
+    import trimesh
+
+    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.simulate import check_start
+
+    T = trimesh.transformations.rotation_matrix(np.radians(30.0), [0, 0, 1])
+    T[:3, 3] = [40.0, -25.0, 3.0]  # mm
+    for name in ("clip", "cylinder"):
+        m = trimesh.load(meshes / f"{name}.stl")
+        m.apply_transform(T)
+        m.export(tmp_path / f"{name}_moved.stl")
+    into = T[:3, :3] @ [-1.0, 0.0, 0.0]
+    point = ",".join(f"{v:.9f}" for v in T[:3, 3] + 30.0 * into)  # (the cylinder's centre is at the origin)
+    runs = []
+    for args in ([str(meshes / "clip.stl"), str(meshes / "cylinder.stl"), "--into=-x"],
+                 [str(tmp_path / "clip_moved.stl"), str(tmp_path / "cylinder_moved.stl"), f"--into={point}"]):
+        out = tmp_path / f"s{len(runs)}"
+        assert main(["couple", "new", *args, "--dim", dim, "--elements", "600", "--out", str(out), "--json"]) == 0
+        runs.append(json.loads(capsys.readouterr().out))
+    for k in ("path_length", "first_contact", "seat"):
+        assert runs[1][k] == pytest.approx(runs[0][k], abs=1e-9), k  # [m]
+    cm = load_coupling_scene(runs[1]["outputs"]["scene_xml"])
+    check_start(cm)  # raises if O starts inside A
