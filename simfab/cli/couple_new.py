@@ -37,8 +37,9 @@ def add_args(p) -> None:
                    help="insertion direction: an axis (--into=-x, +y, z; write a leading minus with =) "
                         "or a point X,Y,Z the object's centre moves towards")
     p.add_argument("--fixed", default="back", metavar="REGION",
-                   help="region of the part held fixed: back (default: the far side along --into), a face (-x, +y, "
-                        "...) or a box X0,Y0,Z0,X1,Y1,Z1")
+                   help="region of the part held fixed: back (default: the part's face farthest along --into, in "
+                        "the part's own axes: the files' axes, or its smallest turned bounding box's where the part is "
+                        "turned in the assembly), a face of the files' axes (-x, +y, ...) or a box X0,Y0,Z0,X1,Y1,Z1")
     end = p.add_mutually_exclusive_group()
     end.add_argument("--depth", type=float, metavar="D", help="insertion depth past the first contact (in --units)")
     end.add_argument("--to-rest", action="store_true",

@@ -26,7 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from simfab.errors import InputError
+from simfab.io.outpaths import name_from_stem
 from simfab.results import Result, field
+from simfab.rotations import matrix_to_quat
 
 __all__ = ["AuthoredScene", "CouplingAuthorConfig", "OverlapProfile", "new_scene", "overlap_profile"]
 
@@ -241,21 +243,85 @@ def parse_brief(items) -> dict:
     return out
 
 
-def _fixed_box(spec: str, lo: np.ndarray, hi: np.ndarray, direction: np.ndarray, scale: float):
-    """(centre, half extents) of the fixed box site [m]."""
+#: The files' axes are the part's own frame when its bounding box along them is at most this much larger
+#: (volume in 3D, area of the section in 2D) than its smallest turned one; else the smallest box's axes are.
+FRAME_SLACK_REL = 0.02
+
+
+@dataclass(frozen=True)
+class FixedBox:
+    """The fixed box site: centre (3,) [m], half extents (3,) [m] along its axes, axes (3, 3) (columns)."""
+
+    centre: np.ndarray
+    half: np.ndarray
+    axes: np.ndarray
+
+    def holds(self, pts: np.ndarray) -> np.ndarray:
+        """(k,) which points (k, dim) [m] lie in the box (2D: its section with z = 0)."""
+        dim = pts.shape[1]
+        q = (pts - self.centre[:dim]) @ self.axes[:dim, :dim]
+        return np.all(np.abs(q) <= self.half[:dim] + 1e-12, axis=1)
+
+
+def part_axes(mesh, section=None) -> np.ndarray:
+    """The part's own axes (3, 3) (columns): the files' axes, unless a turned box bounds the part more
+    tightly (by more than FRAME_SLACK_REL), whose axes then serve: the smallest bounding box (trimesh's
+    oriented one) in 3D, the section's smallest turned rectangle about z in 2D. A part turned in the
+    assembly is then held on its own back face, as the same part unturned would be.
+
+    Args:
+        mesh: the part's mesh (trimesh) [m].
+        section: the 2D section (shapely polygon) [m], or None in 3D.
+
+    Returns:
+        The rotation whose columns are the axes.
+    """
+    if section is not None:
+        x0, y0, x1, y1 = section.bounds
+        rect = section.minimum_rotated_rectangle
+        if (x1 - x0) * (y1 - y0) <= (1.0 + FRAME_SLACK_REL) * rect.area:
+            return np.eye(3)
+        c = np.asarray(rect.exterior.coords)[:2]
+        e = c[1] - c[0]
+        t = float(np.arctan2(e[1], e[0]))
+        R = np.eye(3)
+        R[:2, :2] = [[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]]
+        return R
+    obb = mesh.bounding_box_oriented
+    if float(np.prod(mesh.extents)) <= (1.0 + FRAME_SLACK_REL) * float(obb.volume):
+        return np.eye(3)
+    R = np.asarray(obb.primitive.transform, dtype=np.float64)[:3, :3]
+    return R * np.sign(np.linalg.det(R))  # (a proper rotation)
+
+
+def _fixed_box(spec: str, points: np.ndarray, axes: np.ndarray, direction: np.ndarray, scale: float) -> FixedBox:
+    """The fixed box site [m] for ``--fixed``: ``back`` (the part's face farthest along the insertion, in the
+    part's own axes: :func:`part_axes`), a face of the files' axes (-x, +y, ...) or a box in the files' frame.
+
+    Args:
+        spec: the option's text.
+        points: the part's points (k, 3) [m].
+        axes: the part's own axes (3, 3) (columns).
+        direction: unit insertion direction (3,).
+        scale: the files' unit [m].
+    """
     t = spec.strip().lower()
-    ext = hi - lo
     if t == "back" or t.lstrip("+-") in _AXES:
         if t == "back":
-            ax = int(np.argmax(np.abs(direction)))
-            sign = 1.0 if direction[ax] > 0 else -1.0
+            local = axes.T @ direction
+            ax = int(np.argmax(np.abs(local)))
+            sign = 1.0 if local[ax] > 0 else -1.0
         else:
+            axes = np.eye(3)
             ax, sign = _AXES[t.lstrip("+-")], (-1.0 if t.startswith("-") else 1.0)
+        q = points @ axes  # (the part in the box's axes)
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        ext = hi - lo
         c = 0.5 * (lo + hi)
         c[ax] = hi[ax] if sign > 0 else lo[ax]
         half = 0.5 * ext + 0.05 * ext.max()
         half[ax] = 0.03 * ext[ax]
-        return c, half
+        return FixedBox(centre=axes @ c, half=half, axes=axes)
     try:
         b = np.array([float(v) for v in t.split(",")]) * scale
     except ValueError:
@@ -263,7 +329,7 @@ def _fixed_box(spec: str, lo: np.ndarray, hi: np.ndarray, direction: np.ndarray,
     if b.shape != (6,) or not np.all(np.isfinite(b)) or np.any(b[3:] <= b[:3]):
         raise InputError(f"must be back, a face (-x, +y, ...) or a box X0,Y0,Z0,X1,Y1,Z1 with X0 < X1 ..., "
                          f"got {spec!r}", where="--fixed")
-    return 0.5 * (b[:3] + b[3:]), 0.5 * (b[3:] - b[:3])
+    return FixedBox(centre=0.5 * (b[:3] + b[3:]), half=0.5 * (b[3:] - b[:3]), axes=np.eye(3))
 
 
 def _section(mesh, z: float, what: str, where: str):
@@ -313,7 +379,7 @@ def new_scene(spec: CouplingAuthorConfig, out) -> AuthoredScene:
     scale = 1e-3 if spec.units == "mm" else 1.0
     A = load_mesh(spec.part, units=spec.units, require_watertight=True)
     O = load_mesh(spec.object, units=spec.units, require_watertight=True)
-    name = spec.name or Path(spec.part).stem
+    name = spec.name or name_from_stem(spec.part)
     if not name.replace("_", "").replace("-", "").isalnum():
         raise InputError(f"must be letters, digits, '_' or '-', got {name!r}", where="--name")
     brief = dict(spec.brief or {})
@@ -422,15 +488,14 @@ def _write(spec, out, *, name, A, O, centre, d, p_start, p_end, thickness, outli
 
     out = Path(out)
     dim, scale, units = spec.dim, (1e-3 if spec.units == "mm" else 1.0), spec.units
-    lo, hi = A.bounds
-    fc, fh = _fixed_box(spec.fixed, np.array(lo, float), np.array(hi, float), d, scale)
+    box = _fixed_box(spec.fixed, np.asarray(A.vertices, dtype=np.float64), part_axes(A, outline), d, scale)
     comp: dict = {}
     files: dict[str, str] = {}
     if dim == 2:
         ring = np.asarray(outline.exterior.coords)[:-1] / scale
         comp = {"outline": f"{name}_outline.csv", "units": units, "thickness": thickness,
                 "target_elements": spec.elements or 1500}
-        inside = np.all(np.abs(ring * scale - fc[:2]) <= fh[:2] + 1e-12, axis=1)
+        inside = box.holds(ring * scale)
     else:
         from simfab.fem.meshing import tetrahedralize
 
@@ -440,16 +505,17 @@ def _write(spec, out, *, name, A, O, centre, d, p_start, p_end, thickness, outli
         # the mesher's count is near the target asked, or above it at its floor)
         comp = {"generator": "mesh", "mesh": f"{name}_part.ply", "units": "m", "target_elements": int(len(T)),
                 "mesh_file": f"{name}_part.npz"}
-        inside = np.all(np.abs(V - fc) <= fh + 1e-12, axis=1)
+        inside = box.holds(V)
     if not inside.any():
-        raise InputError(f"the fixed region {_fmt_pt(fc - fh, scale, units)} .. {_fmt_pt(fc + fh, scale, units)} "
-                         "holds no point of the part", where="--fixed")
+        raise InputError(f"the fixed region {_fmt_pt(box.centre - box.half, scale, units)} .. "
+                         f"{_fmt_pt(box.centre + box.half, scale, units)} holds no point of the part", where="--fixed")
     b = MJCFBuilder(name)
     b.mesh_asset("part", A.vertices, A.faces)
     b.mesh_asset("object", np.asarray(O.vertices) - centre, O.faces)
     part = b.body("part")
     b.geom(part, type="mesh", mesh="part", rgba=[0.85, 0.55, 0.25, 1], contype=0, conaffinity=0)
-    b.site(part, "fixed", pos=list(fc), size=list(fh), type="box", rgba=[0.2, 0.2, 0.9, 0.4])
+    turned = {} if np.array_equal(box.axes, np.eye(3)) else {"quat": list(matrix_to_quat(box.axes))}
+    b.site(part, "fixed", pos=list(box.centre), size=list(box.half), type="box", rgba=[0.2, 0.2, 0.9, 0.4], **turned)
     o = b.body("object", pos=p_start, mocap=True)
     b.geom(o, type="mesh", mesh="object", contype=0, conaffinity=0, rgba=[0.5, 0.6, 0.7, 1])
     b.key("k0", mpos=p_start, mquat=[1, 0, 0, 0])

@@ -2,7 +2,9 @@
 
 The **MJCF** (``NAME.xml``, opens in the MuJoCo viewer) holds the rigid object O (a mocap body,
 default ``object``; in 2D its cross-section with z = 0), O's path (keyframes of the mocap body,
-:class:`simfab.io.trajectory.Trajectory`), the fixed region of A (a box site, default ``fixed``)
+:class:`simfab.io.trajectory.Trajectory`), the fixed region of A (a box site, default ``fixed``: its
+half extents ``size`` along its own axes, so a site turned by its ``quat`` holds a turned box; in 2D
+turned about z only)
 and A's rest shape as a display mesh (informational).
 
 The **TOML** (``NAME.toml``) defines A and the run (SI units)::
@@ -277,12 +279,9 @@ def load_coupling_scene(scene, *, overrides: dict | None = None, device: str = "
     site = str(fixed_cfg.get("site", "fixed"))
     if site not in sc.sites:
         raise InputError(f"no site named {site!r} (the fixed region of the compliant part)", where=str(xml))
-    c = sc.sites[site][:dim]
-    half = sc.site_size[site][:dim]
-    if dim == 3 and half[2] == 0:
-        half = np.r_[half[:2], np.inf]
-    inside = np.all(np.abs(fem.rest - c) <= half + 1e-12, axis=1)
-    fixed = np.flatnonzero(inside)
+    if dim == 2:
+        check_turned_about_z(sc, site, where=str(xml))
+    fixed = np.flatnonzero(sc.in_box(site, fem.rest))
     cm = make_coupling_model(name=name, fem=fem, field=fld, path=path, fixed_vertices=fixed, options=options,
                              object_vertices=disp_v, object_faces=disp_f, contact=contact)
     for note in notes:
@@ -417,6 +416,21 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
 #: A 2D scene's keyframes lie in the plane z = 0 within this distance [m] and turn about z within this
 #: sine of the tilt.
 PLANE_TOL = 1e-9
+
+
+def check_turned_about_z(sc, site: str, *, where: str) -> None:
+    """Raise an InputError unless the box site ``site`` of a 2D scene is turned about z only (its section
+    with the plane z = 0 is then a rectangle: the region it holds).
+
+    Args:
+        sc: the loaded MJCF scene.
+        site: the site's name.
+        where: the scene file, for the message.
+    """
+    axes = sc.site_axes.get(site, np.eye(3))
+    if abs(abs(axes[2, 2]) - 1.0) > PLANE_TOL:
+        raise InputError(f"site {site!r} is turned about an axis other than z; a 2D scene's box sites turn "
+                         "about z only (their section with the plane z = 0 is the region)", where=where)
 
 
 def check_planar_path(path: Trajectory, *, where: str) -> None:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from simfab.coupling.model import CouplingModel
-from simfab.coupling.scene import load_coupling_scene, read_scene_toml, scene_paths
+from simfab.coupling.scene import check_turned_about_z, load_coupling_scene, read_scene_toml, scene_paths
 from simfab.design.brief import DesignConfig, TargetProfile, read_target_profile
 from simfab.errors import InputError
 from simfab.io.mjcf import load_mjcf
@@ -74,11 +74,9 @@ def load_design_scene(scene, *, design: dict | None = None, simulation: dict | N
         for name in brief.keep:
             if name not in sc.sites:
                 raise InputError(f"no site named {name!r} (a region to keep unchanged)", where=f"{toml} [design] keep")
-            d = cm.dim
-            c, half = sc.sites[name][:d], np.asarray(sc.site_size[name][:d], float)
-            if d == 3 and half[2] == 0:
-                half = np.r_[half[:2], np.inf]
-            inside = np.flatnonzero(np.all(np.abs(cm.fem.rest - c) <= half + 1e-12, axis=1))
+            if cm.dim == 2:
+                check_turned_about_z(sc, name, where=f"{xml} site {name!r}")
+            inside = np.flatnonzero(sc.in_box(name, cm.fem.rest))
             if inside.size == 0:
                 raise InputError(f"site {name!r} contains no vertex of the part", where=f"{toml} [design] keep")
             regions.append(inside)

@@ -101,6 +101,7 @@ def new_scene(spec: GrowthAuthorConfig, out) -> AuthoredGrowthScene:
     from simfab.io.atomic import write_text
     from simfab.io.mesh import load_mesh
     from simfab.io.mjcf import MJCFBuilder
+    from simfab.io.outpaths import name_from_stem
 
     if spec.units not in ("mm", "m"):
         raise InputError(f"must be mm or m, got {spec.units!r}", where="--units")
@@ -113,7 +114,7 @@ def new_scene(spec: GrowthAuthorConfig, out) -> AuthoredGrowthScene:
         raise InputError("give at least one target point", where="--target")
     meshes = {}
     for f in spec.objects:
-        stem = "".join(c if c.isalnum() or c in "_-" else "_" for c in Path(f).stem)
+        stem = name_from_stem(f)
         if stem in meshes or stem in ("plate", "world"):
             stem = f"{stem}_{len(meshes)}"
         meshes[stem] = load_mesh(f, units=spec.units, require_watertight=True)

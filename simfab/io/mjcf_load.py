@@ -116,6 +116,7 @@ class Scene:
         model: ``mujoco.MjModel``.
         sites: site name -> (3,) world position [m] at ``qpos0`` (mocap bodies at their body pos).
         site_size: site name -> (3,) MuJoCo site size [m] (sphere radius is ``size[0]``).
+        site_axes: site name -> (3, 3) its frame's axes in the world (columns) at ``qpos0``.
         custom_numeric: ``<numeric name data>`` name -> (k,) float array.
         custom_text: ``<text name data>`` name -> str.
         sdf_plugins: plugin instance id -> (plugin name, config dict of strings), e.g. the
@@ -129,6 +130,28 @@ class Scene:
     custom_numeric: dict
     custom_text: dict
     sdf_plugins: dict = dataclasses.field(default_factory=dict)
+    site_axes: dict = dataclasses.field(default_factory=dict)
+
+    def in_box(self, name: str, points: np.ndarray) -> np.ndarray:
+        """Which points lie in the box site ``name``: within its half extents (``size``) along its own axes
+        (a site turned by its ``quat`` or its body is a turned box).
+
+        Args:
+            name: the site's name.
+            points: (k, dim) world points [m]; with dim 2 the box's section with the plane z = 0 (a box
+                turned about z only), with dim 3 a zero z size is unbounded in its z.
+
+        Returns:
+            (k,) bool.
+        """
+        pts = np.asarray(points, dtype=np.float64)
+        dim = pts.shape[1]
+        half = np.asarray(self.site_size[name], dtype=np.float64)[:dim]
+        axes = self.site_axes.get(name, np.eye(3))
+        if dim == 3 and half[2] == 0:
+            half = np.r_[half[:2], np.inf]
+        q = (pts - self.sites[name][:dim]) @ axes[:dim, :dim]  # (the points in the site's frame)
+        return np.all(np.abs(q) <= half + 1e-12, axis=1)
 
     def body_names(self) -> list[str]:
         """The model's body names (``body<i>`` for an unnamed body).
@@ -282,12 +305,13 @@ def load_mjcf(path: str | os.PathLike) -> Scene:
     model = load_model(path)
     data = mj.MjData(model)
     mj.mj_forward(model, data)
-    sites, sizes = {}, {}
+    sites, sizes, axes = {}, {}, {}
     for i in range(model.nsite):
         name = mj.mj_id2name(model, mj.mjtObj.mjOBJ_SITE, i)
         if name:
             sites[name] = np.array(data.site_xpos[i], dtype=np.float64)
             sizes[name] = np.array(model.site_size[i], dtype=np.float64)
+            axes[name] = np.array(data.site_xmat[i], dtype=np.float64).reshape(3, 3)
     numeric = {}
     for i in range(model.nnumeric):
         name = mj.mj_id2name(model, mj.mjtObj.mjOBJ_NUMERIC, i)
@@ -299,7 +323,7 @@ def load_mjcf(path: str | os.PathLike) -> Scene:
         a, n = int(model.text_adr[i]), int(model.text_size[i])
         text[name] = bytes(model.text_data[a:a + n]).split(b"\0", 1)[0].decode()
     return Scene(path=path, model=model, sites=sites, site_size=sizes, custom_numeric=numeric, custom_text=text,
-                 sdf_plugins=_plugin_configs(path, model))
+                 sdf_plugins=_plugin_configs(path, model), site_axes=axes)
 
 
 def _plugin_configs(path: Path, model) -> dict:

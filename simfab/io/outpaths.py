@@ -41,6 +41,12 @@ def safe_name(name, *, default: str = "unnamed") -> str:
     return s or default
 
 
+def name_from_stem(path: str | os.PathLike) -> str:
+    """A scene or body name from a file's stem: characters other than letters, digits, ``_`` and ``-``
+    become ``_`` (``clip_v1.2.stl`` -> ``clip_v1_2``)."""
+    return "".join(c if c.isalnum() or c in "_-" else "_" for c in Path(path).stem)
+
+
 def _resolved(p: str | os.PathLike) -> Path:
     return Path(os.path.abspath(os.path.realpath(p)))
 

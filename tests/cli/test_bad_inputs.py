@@ -68,6 +68,8 @@ def _inputs(d: Path) -> dict:
     f["cc_material"] = _copy_scene(c, d, "cc_material", toml_sub=[('name = "PLA"', 'name = "unobtainium"')])
     f["cc_segments"] = _copy_scene(c, d, "cc_segments", toml_sub=[("segments = 48", "segments = 1000000000")])
     f["cc_dim5"] = _copy_scene(c, d, "cc_dim5", toml_sub=[("dim = 2", "dim = 5")])
+    f["cc_tilted_site"] = _copy_scene(c, d, "cc_tilted_site", xml_sub=[(
+        '<site name="fixed" pos="-0.016 0 0"', '<site name="fixed" pos="-0.016 0 0" quat="0.966 0.259 0 0"')])
     f["cc_badtoml"] = _copy_scene(c, d, "cc_badtoml", toml_sub=[("dim = 2", "dim = = 2")])
     (d / "line.csv").write_text("0,0\n0.01,0\n0.02,0\n")
     (d / "sliver.csv").write_text("0,0\n0.01,1e-13\n0.02,0\n")
@@ -208,6 +210,8 @@ CASES = [
     ("couple-unknown-material", ["couple", "simulate", "{cc_material}"], 2, ["cc_material.toml", "[material] name"]),
     ("couple-huge-segment-count", ["couple", "simulate", "{cc_segments}"], 2, ["cc_segments.toml", "segments"]),
     ("couple-dim-5", ["couple", "simulate", "{cc_dim5}"], 2, ["cc_dim5.toml", "dim"]),
+    ("couple-2d-site-tilted-out-of-plane", ["couple", "simulate", "{cc_tilted_site}"], 2,
+     ["cc_tilted_site.xml", "site 'fixed'", "about z only"]),
     ("couple-invalid-toml", ["couple", "simulate", "{cc_badtoml}"], 2, ["cc_badtoml.toml", "line"]),
     ("couple-missing-toml", ["couple", "simulate", "{cc_notoml}"], 2, ["cc_notoml.toml"]),
     ("couple-nan-in-mjcf", ["couple", "simulate", "{cc_nan}"], 2, ["cc_nan.xml", "size"]),
