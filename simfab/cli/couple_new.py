@@ -27,7 +27,9 @@ converge' meshes again at its other refinement factors).
 
 --json keys: scene, dim, start, end [m] (the object's centre at the path's ends), path_length [m],
   first_contact, seat [m] (along the path from its start; seat null if none), to_rest, notes,
-  next_commands, outputs {scene_xml, scene_toml, outline_csv | part_npz, part_ply}."""
+  warnings (3D: where the tets' surface departs from the part's by more than a tenth of the object's
+  overlap with it at the seat, the forces there depend on the mesh; the line says how many tets
+  resolve it), next_commands, outputs {scene_xml, scene_toml, outline_csv | part_npz, part_ply}."""
 
 
 def add_args(p) -> None:
@@ -79,6 +81,8 @@ def run(args) -> dict:
     res = new_scene(spec, args.out)
     for n in res.notes:
         log(f"couple new: {n}", quiet=args.quiet)
+    for w in res.warnings:
+        log(f"simfab: warning: couple new: {w}")
     log(f"next: {res.next_commands[0]}", quiet=args.quiet)
     from simfab.results import units
 

@@ -209,8 +209,16 @@ def mean_edge_length_gradient(points: np.ndarray, elements: np.ndarray) -> np.nd
     return g
 
 
-def _boundary(elements: np.ndarray, dim: int) -> np.ndarray:
-    """Facets that belong to exactly one element, oriented outward (elements positively oriented)."""
+def boundary_facets(elements: np.ndarray, dim: int) -> np.ndarray:
+    """The facets (edges in 2D, triangles in 3D) that belong to exactly one element, oriented outward.
+
+    Args:
+        elements: (m, dim + 1) vertex indices of positively oriented simplices.
+        dim: 2 or 3.
+
+    Returns:
+        (f, dim) int32 vertex indices, in the order of the elements they belong to.
+    """
     if dim == 2:
         local = np.array([[0, 1], [1, 2], [2, 0]])  # counter-clockwise around a positive triangle
     else:
@@ -297,7 +305,7 @@ def make_model(points, elements, material: Material | str, *, thickness: float =
     mu, lam = material.lame()
     m = el.shape[0]
     el32 = el.astype(np.int32)
-    bfacets = _boundary(el32, dim)
+    bfacets = boundary_facets(el32, dim)
     arrays = dict(rest=pts.copy(), elements=el32, Dm_inv=np.linalg.inv(Dm), volume=volume, mu=np.full(m, mu),
                   lam=np.full(m, lam), boundary_facets=bfacets, boundary_vertices=np.unique(bfacets).astype(np.int32))
     for a in arrays.values():

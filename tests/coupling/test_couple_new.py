@@ -166,6 +166,7 @@ def test_3d_scene_keeps_its_tets_and_can_be_refined(meshes, tmp_path, capsys):
     assert _new(meshes, tmp_path / "s3", "--elements", "600") == 0
     made = json.loads(capsys.readouterr().out)
     assert set(made["outputs"]) == {"scene_xml", "scene_toml", "part_npz", "part_ply"}
+    assert made["warnings"] == []  # (the clip's 0.5 mm interference is resolved: the next test)
     xml = made["outputs"]["scene_xml"]
     cm = load_coupling_scene(xml)
     surf = trimesh.load(made["outputs"]["part_ply"])
@@ -220,3 +221,30 @@ def test_a_moved_assembly_gives_the_same_scene(meshes, tmp_path, capsys, dim, an
     if dim == "2":
         a, b = (analyze_run(simulate_insertion(cm)) for cm in models)
         assert b.F_in == pytest.approx(a.F_in, rel=0.03) and b.E_max == pytest.approx(a.E_max, rel=0.03)
+
+
+def test_an_interference_the_tets_do_not_resolve_is_warned_of(tmp_path, capsys):
+    # a pin 0.15 mm larger than its bore (radius 4.6 in 4.5 mm) in a block meshed at ~1,400 tets: the tets'
+    # surface cuts the bore in chords as deep as a good part of the interference, so the seat's forces depend
+    # on the mesh; couple new says so and how many tets resolve it (the C-clip's 0.5 mm: no warning, above)
+    import trimesh
+
+    block = trimesh.creation.box(extents=(20, 14, 8))
+    block.apply_translation((0, -1, 0))
+    mouth = trimesh.creation.box(extents=(7.0, 8, 10))
+    mouth.apply_translation((0, 6, 0))
+    part = block.difference(trimesh.creation.cylinder(radius=4.5, height=10, sections=96)).difference(mouth)
+    part.export(tmp_path / "block.stl")
+    trimesh.creation.cylinder(radius=4.6, height=12, sections=128).export(tmp_path / "pin.stl")
+    assert main(["couple", "new", str(tmp_path / "block.stl"), str(tmp_path / "pin.stl"), "--into=-y",
+                 "--elements", "1500", "--out", str(tmp_path / "s"), "--json"]) == 0
+    cap = capsys.readouterr()
+    (w,) = json.loads(cap.out)["warnings"]
+    assert "simfab: warning: couple new: near the object" in cap.err
+    import re
+
+    found = re.search(r"by ([0-9.]+) mm \(90th.*?of the object's ([0-9.]+) mm overlap", w)
+    dev, overlap = (float(x) for x in found.groups())
+    assert overlap == pytest.approx(0.15, abs=0.01) and 0.1 * overlap < dev < overlap  # [mm]
+    need = int(re.search(r"--elements (\d+)", w).group(1))
+    assert 5_000 < need < 50_000
