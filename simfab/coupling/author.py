@@ -546,14 +546,14 @@ def _write(spec, out, *, name, A, O, centre, d, p_start, p_end, thickness, outli
                 "target_elements": spec.elements or 1500}
         inside = box.holds(ring * scale)
     else:
+        from simfab.coupling.scene import stored_part_table
         from simfab.fem.meshing import tetrahedralize
 
         V, T = tetrahedralize(np.asarray(A.vertices), np.asarray(A.faces), target_tets=spec.elements or 3000)
         # the stored tets make runs reproducible; the surface they were meshed from, in the scene's frame,
         # lets a convergence study mesh the part again at multiples of their count (simfab couple converge;
         # the mesher's count is near the target asked, or above it at its floor)
-        comp = {"generator": "mesh", "mesh": f"{name}_part.ply", "units": "m", "target_elements": int(len(T)),
-                "mesh_file": f"{name}_part.npz"}
+        comp = stored_part_table(f"{name}_part.npz", f"{name}_part.ply", "m", len(T))
         warnings += _facet_warning(A, V, T, O, d, deepest, scale, units)
         inside = box.holds(V)
     if not inside.any():

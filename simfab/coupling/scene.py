@@ -341,6 +341,24 @@ def object_mesh_body_frame(sc, body: str):
     return m
 
 
+def stored_part_table(mesh_file: str, surface: str, units: str, tets: int) -> dict:
+    """The ``[compliant]`` table of a 3D part stored as tets beside the surface they were meshed from: the
+    tets (``mesh_file``) are what every run meshes, the surface (``generator = "mesh"``) is what a
+    convergence study meshes again at multiples of their count (:mod:`simfab.coupling.converge`).
+
+    Args:
+        mesh_file: the tets' file (.npz: points, elements), relative to the scene.
+        surface: the surface mesh file, relative to the scene.
+        units: the surface file's unit ("m" or "mm").
+        tets: the stored tets' count.
+
+    Returns:
+        The table.
+    """
+    return {"generator": "mesh", "mesh": surface, "units": units, "target_elements": int(tets),
+            "mesh_file": mesh_file}
+
+
 def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
     """A's mesh from the ``[compliant]`` table.
 

@@ -28,6 +28,7 @@ import numpy as np
 import tomli_w
 
 from simfab.coupling.outputs import display_faces, extruded_slab, object_display, stress_colour_top, vertex_von_mises
+from simfab.coupling.scene import stored_part_table
 from simfab.design import brief as B
 from simfab.design.problem import lift_rest
 from simfab.design.synthesis import boundary_loops
@@ -105,15 +106,17 @@ def write_outline_csv(fem, X: np.ndarray, path) -> Path:
 
 def write_optimized_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, tmp: dict, stem: str) -> None:
     """The optimized scene: the original MJCF with the part's display mesh replaced, the TOML with
-    the optimized mesh as ``mesh_file`` (same material, object, path, fixed region, options)."""
+    the optimized mesh as ``mesh_file`` (same material, object, path, fixed region, options; in 3D
+    beside its surface, the printable STL: :func:`simfab.coupling.scene.stored_part_table`)."""
     fem = res.problem.mesh  # (the design's linear mesh: a P2 scene's TOML lifts it again)
     X = res.best.rest
     np.savez(tmp["scene_mesh"], points=X, elements=np.asarray(fem.elements))
     cfg = tomllib.loads(Path(scene_toml).read_text(encoding="utf-8"))
     cfg["name"] = f"{stem}_optimized"
-    comp = {"mesh_file": paths["scene_mesh"].name}
     if fem.dim == 2:
-        comp["thickness"] = float(fem.thickness)
+        comp = {"mesh_file": paths["scene_mesh"].name, "thickness": float(fem.thickness)}
+    else:  # (the printable STL is the tets' surface: a convergence study meshes it again)
+        comp = stored_part_table(paths["scene_mesh"].name, paths["part_stl"].name, "mm", len(fem.elements))
     cfg["compliant"] = comp
     # the insertion options the optimizer simulated with (command-line overrides included)
     opts = res.problem.base.options

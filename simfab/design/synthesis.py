@@ -28,6 +28,7 @@ import manifold3d as m3
 import numpy as np
 import tomli_w
 
+from simfab.coupling.scene import stored_part_table
 from simfab.errors import InputError
 from simfab.fem.meshing import tetrahedralize
 from simfab.io.atomic import atomic_paths
@@ -189,7 +190,7 @@ def revolved_scene(X: np.ndarray, fem, *, kept: np.ndarray, object_start: np.nda
     cfg = tomllib.loads(Path(scene_toml).read_text(encoding="utf-8"))
     cfg.pop("design", None)
     cfg["name"], cfg["dim"] = name, 3
-    cfg["compliant"] = {"mesh_file": paths["mesh"].name}
+    cfg["compliant"] = stored_part_table(paths["mesh"].name, paths["stl"].name, "mm", len(T))
     cfg["simulation"] = dict(cfg.get("simulation", {}), element_order=2)
     tree = ET.parse(scene_xml)
     root = tree.getroot()

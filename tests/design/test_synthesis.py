@@ -1,6 +1,8 @@
 """2D -> 3D synthesis (simfab.design.synthesis): a section's base revolved with its arms replicated
 (the thesis' building blocks), and the 3D scene written from it."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -97,6 +99,14 @@ def check_scene(paths, cm):
     cm3 = load_coupling_scene(paths["scene_xml"])
     assert cm3.dim == 3 and isinstance(cm3.fem, P2Model)
     check_start(cm3)  # the ball starts outside the part
+    # its tets are stored beside the printable STL they were meshed from, so a convergence study takes the
+    # scene (run_levels checks the part's table before its first level: none asked here)
+    from simfab.coupling.converge import run_levels
+    from simfab.coupling.scene import read_scene_toml
+
+    comp = read_scene_toml(paths["scene_toml"])["compliant"]
+    assert comp["mesh"] == Path(paths["stl"]).name and comp["target_elements"] == cm3.fem.n_elements
+    assert run_levels(paths["scene_xml"], ()) == []
     X = cm3.fem.rest[np.asarray(cm3.fixed_vertices)]
     assert X.shape[0] > 10 and np.ptp(X[:, 0]) < 2e-3  # the base's back face only
     r = np.hypot(X[:, 1], X[:, 2])
