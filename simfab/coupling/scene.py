@@ -2,10 +2,8 @@
 
 The **MJCF** (``NAME.xml``, opens in the MuJoCo viewer) holds the rigid object O (a mocap body,
 default ``object``; in 2D its cross-section with z = 0), O's path (keyframes of the mocap body,
-:class:`simfab.io.trajectory.Trajectory`), the fixed region of A (a box site, default ``fixed``: its
-half extents ``size`` along its own axes, so a site turned by its ``quat`` holds a turned box; in 2D
-turned about z only)
-and A's rest shape as a display mesh (informational).
+:class:`simfab.io.trajectory.Trajectory`), the fixed region of A (a box site, default ``fixed``,
+``size`` along its own axes: a ``quat`` turns it, in 2D about z only) and A's rest shape as a display mesh.
 
 The **TOML** (``NAME.toml``) defines A and the run (SI units)::
 
