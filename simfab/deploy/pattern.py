@@ -540,6 +540,17 @@ def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams, cone_ti
         cls[over] = assign_sizes(-need[over], gmax[over], cfg.sizes, cfg.min_gap)
         r_v = np.where(interior, np.asarray(cfg.sizes)[np.maximum(cls, 0)], 0.0)
         req = np.where(interior, r_v + need, 0.0)
+    # every half beam of an insert keeps SHORT_BEAM_MIN x min_beam: the limits above follow the vertex's mean
+    # edge, and on a much shorter edge of the same vertex (a mesh layout's cells clipped by the outline) the
+    # half beam shrank to nothing (64 um on a shallow 180 mm cap: a rod the deployment's Newton could not
+    # factor); there the gap is limited by that edge and the size re-chosen for it
+    g_edge = 0.5 * emin - SHORT_BEAM_MIN * cfg.min_beam
+    short = interior & (np.clip(req, cfg.min_gap, gmax) > g_edge + 1e-12)
+    if short.any():
+        gmax = np.where(short, np.maximum(g_edge, cfg.min_gap), gmax)
+        cls[short] = assign_sizes(-need[short], gmax[short], cfg.sizes, cfg.min_gap)
+        r_v = np.where(interior, np.asarray(cfg.sizes)[np.maximum(cls, 0)], 0.0)
+        req = np.where(interior, r_v + need, 0.0)
     unreachable = np.flatnonzero(interior & ((req < cfg.min_gap) | (req > gmax)))
     gap = np.where(interior, np.clip(req, cfg.min_gap, gmax), 0.0)
     # springs: none in quads with nearly collinear neighbouring edges
