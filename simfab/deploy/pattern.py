@@ -278,6 +278,10 @@ CLASS_LETTERS = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
 #: beam ends of an insert whose gap does not fit otherwise scale with its edges, as the features scale with
 #: the cell below 20 mm, simfab.deploy.auto.FEATURE_SCALE_MIN)
 SHORT_BEAM_MIN = 0.5
+#: the shortest half beam at an insert, relative to the sheet's thickness: shorter, it is no beam (a stub
+#: whose rod segments fall to micrometres, :func:`_pattern_on`); the layout's own short-beam rule
+#: (SHORT_BEAM_MIN) sizes gaps by a vertex's mean edge, and this floor holds on each of its edges
+HALF_BEAM_FLOOR = 0.5
 
 
 def assign_sizes(d: np.ndarray, gmax: np.ndarray, sizes, min_gap: float) -> np.ndarray:
@@ -540,11 +544,12 @@ def _pattern_on(poly, P, quads, uv, faces, u, cfg: PatternConfig, seams, cone_ti
         cls[over] = assign_sizes(-need[over], gmax[over], cfg.sizes, cfg.min_gap)
         r_v = np.where(interior, np.asarray(cfg.sizes)[np.maximum(cls, 0)], 0.0)
         req = np.where(interior, r_v + need, 0.0)
-    # every half beam of an insert keeps SHORT_BEAM_MIN x min_beam: the limits above follow the vertex's mean
-    # edge, and on a much shorter edge of the same vertex (a mesh layout's cells clipped by the outline) the
-    # half beam shrank to nothing (64 um on a shallow 180 mm cap: a rod the deployment's Newton could not
-    # factor); there the gap is limited by that edge and the size re-chosen for it
-    g_edge = 0.5 * emin - SHORT_BEAM_MIN * cfg.min_beam
+    # every half beam of an insert keeps HALF_BEAM_FLOOR x the sheet's thickness: the limits above follow the
+    # vertex's mean edge, and on a much shorter edge of the same vertex (a mesh layout's cells clipped by the
+    # outline) the half beam shrank to nothing (64 um on a shallow 180 mm cap: rod segments of 9 um, whose
+    # bending the deployment's Newton could not factor); there the gap is limited by that edge and the
+    # size re-chosen for it
+    g_edge = 0.5 * emin - HALF_BEAM_FLOOR * cfg.beam_thickness
     short = interior & (np.clip(req, cfg.min_gap, gmax) > g_edge + 1e-12)
     if short.any():
         gmax = np.where(short, np.maximum(g_edge, cfg.min_gap), gmax)

@@ -375,9 +375,9 @@ def test_an_unknown_family_member_is_named_with_the_known_shapes(name):
 def test_every_half_beam_at_an_insert_keeps_its_shortest_length(tmp_path):
     # a shallow cap (22 deg of a 240 mm sphere, 180 mm across) on the defaults: the mesh layout's cells
     # clipped by the outline leave inserts with one edge much shorter than their mean edge, and a gap
-    # sized by the mean edge left a half beam of tens of micrometres there (0.45 mm here; 64 um on a
+    # sized by the mean edge left a half beam of tens of micrometres there (0.45 mm here before; 64 um on a
     # similar cap, whose deployment's Newton then could not factor its Hessian); every half beam keeps
-    # SHORT_BEAM_MIN x min_beam
+    # HALF_BEAM_FLOOR x the sheet's thickness
     import dataclasses
 
     from simfab.deploy import pattern
@@ -390,4 +390,4 @@ def test_every_half_beam_at_an_insert_keeps_its_shortest_length(tmp_path):
     pc = dataclasses.replace(sc.pattern, layout="mesh")  # (the layout the pipeline falls back to here)
     pat = pattern.layout(flat.uv, flat.boundary, sc.target.F, flat.u, pc)
     halves = [np.linalg.norm(end - start) for _, v, start, end in pat.beam_halves() if pat.interior[v]]
-    assert len(halves) > 100 and min(halves) >= pattern.SHORT_BEAM_MIN * pc.min_beam - 1e-12
+    assert len(halves) > 100 and min(halves) >= pattern.HALF_BEAM_FLOOR * pc.beam_thickness - 1e-12
