@@ -27,6 +27,7 @@ import numpy as np
 
 from simfab.errors import InputError
 from simfab.fem.model import boundary_facets
+from simfab.io.mjcf_load import points_in_box
 from simfab.io.outpaths import name_from_stem
 from simfab.results import Result, field
 from simfab.rotations import matrix_to_quat
@@ -271,10 +272,9 @@ class FixedBox:
     axes: np.ndarray
 
     def holds(self, pts: np.ndarray) -> np.ndarray:
-        """(k,) which points (k, dim) [m] lie in the box (2D: its section with z = 0)."""
-        dim = pts.shape[1]
-        q = (pts - self.centre[:dim]) @ self.axes[:dim, :dim]
-        return np.all(np.abs(q) <= self.half[:dim] + 1e-12, axis=1)
+        """(k,) which points (k, dim) [m] lie in the box (2D: its section with z = 0), as the scene's loader
+        will read the site (:func:`simfab.io.mjcf_load.points_in_box`)."""
+        return points_in_box(pts, self.centre, self.half, self.axes)
 
 
 def surface_deviation(surface, points: np.ndarray, elements: np.ndarray, obj, reach: float) -> tuple:

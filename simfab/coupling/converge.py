@@ -121,7 +121,7 @@ class ConvergenceResult(Result):
         scene: the scene as given.
         friction: the Coulomb coefficient of its runs [-].
         warnings: one line each: levels that are the same mesh, levels an extrusion's whole layers refine
-            unequally, fits that are no power law.
+            unequally, fits that are no power law, figures that converge slower than h (pre-asymptotic).
         levels: the :class:`Level` s, coarsest first.
         figures: FIGURES name -> :class:`FigureConvergence`.
         error_of_default: FIGURES name -> the relative error of the scene's own mesh (factor 1, else the

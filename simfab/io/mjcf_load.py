@@ -144,14 +144,10 @@ class Scene:
         Returns:
             (k,) bool.
         """
-        pts = np.asarray(points, dtype=np.float64)
-        dim = pts.shape[1]
-        half = np.asarray(self.site_size[name], dtype=np.float64)[:dim]
-        axes = self.site_axes.get(name, np.eye(3))
-        if dim == 3 and half[2] == 0:
+        half = np.asarray(self.site_size[name], dtype=np.float64)
+        if half[2] == 0:
             half = np.r_[half[:2], np.inf]
-        q = (pts - self.sites[name][:dim]) @ axes[:dim, :dim]  # (the points in the site's frame)
-        return np.all(np.abs(q) <= half + 1e-12, axis=1)
+        return points_in_box(points, self.sites[name], half, self.site_axes.get(name, np.eye(3)))
 
     def body_names(self) -> list[str]:
         """The model's body names (``body<i>`` for an unnamed body).
@@ -289,6 +285,19 @@ def load_model(path: str | os.PathLike):
         raise InputError(f"MuJoCo cannot load this MJCF: {' '.join(str(e).split())}", where=str(path)) from None
     finally:
         _QUIET_LOAD[0] = False
+
+
+def points_in_box(points: np.ndarray, centre: np.ndarray, half: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """Which points lie in a box: within ``half`` (3,) [m] of ``centre`` (3,) [m] along its ``axes`` (3, 3)
+    (columns, in the world); 2D points (k, 2) against the box's section with the plane z = 0.
+
+    Returns:
+        (k,) bool.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    dim = pts.shape[1]
+    q = (pts - np.asarray(centre)[:dim]) @ np.asarray(axes)[:dim, :dim]  # (the points in the box's frame)
+    return np.all(np.abs(q) <= np.asarray(half)[:dim] + 1e-12, axis=1)
 
 
 def load_mjcf(path: str | os.PathLike) -> Scene:
