@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simfab.contact.imls import ImlsEval, body_frame, unrotated
+from simfab.contact.imls import ImlsEval
 from simfab.io.mjcf import torus_radii
 from simfab.rotations import pose_matrix, quat_to_matrix
 
@@ -218,6 +218,21 @@ def _circle_distance(q: np.ndarray, R: float, hessian: bool):
     return d, n, H
 
 
+def _world_sdf(prim: Primitive, M: np.ndarray, off: np.ndarray, x: np.ndarray, hessian: bool):
+    """(psi (k,), grad (k, dim), hess (k, dim, dim) or None) of one primitive at world points x (k, dim)
+    whose local coordinates are q = x M - off (:meth:`PrimitiveField._frames`): the local field's
+    gradient g and Hessian H mapped back as g M^T and M H M^T (products of (k * 3, dim) arrays)."""
+    k, dim = x.shape
+    q = x @ M
+    q -= off
+    psi, g, H = _local_sdf(prim.kind, prim.size, q, hessian)
+    grad = g @ M.T
+    if not hessian:
+        return psi, grad, None
+    A = (H.reshape(-1, 3) @ M.T).reshape(k, 3, dim)  # H M^T; then (H M^T)^T M^T = M H M^T (H symmetric)
+    return psi, grad, (A.transpose(0, 2, 1).reshape(-1, 3) @ M.T).reshape(k, dim, dim)
+
+
 @dataclass(kw_only=True, eq=False)
 class PrimitiveField:
     """Exact signed distance of a union of primitives in O's body frame (see the module docstring).
@@ -245,66 +260,46 @@ class PrimitiveField:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, dim)
         R, p = _rigid_pose(pose)
         k = len(pts)
-        if len(self.primitives) == 1:
-            if self.primitives[0].kind == "sphere":
-                return self._sphere(pts, R, p, hessian, hessian_band)
-            # body_frame's R^T (x - p), its padded copy made in place
-            b = np.zeros((k, 3))
-            b[:, :dim] = pts
-            b -= p
-            if not unrotated(R):
-                b = b @ R
-            if dim == 2:
-                b[:, 2] = 0.0
-            return self._single(b, R, hessian, hessian_band)
-        b = body_frame(pts, (R, p))
-        if dim == 2:
-            b[:, 2] = 0.0
-        psi = np.full(k, -np.inf)
-        grad = np.zeros((k, 3))
-        hess = np.zeros((k, 3, 3)) if hessian else None
-        for prim in self.primitives:
-            Q = prim.rotation
-            q = (b - prim.centre) @ Q
-            ps, g, H = _local_sdf(prim.kind, prim.size, q, hessian)
-            better = ps > psi
-            psi[better] = ps[better]
-            grad[better] = g[better] @ Q.T
-            if hessian:
-                hess[better] = Q @ H[better] @ Q.T
-        grad = grad[:, :dim] @ R[:dim, :dim].T
-        if hessian:
-            hess = R[:dim, :dim] @ hess[:, :dim, :dim] @ R[:dim, :dim].T
-            if hessian_band is not None:
-                hess[psi <= -hessian_band] = 0.0
+        if len(self.primitives) == 1 and self.primitives[0].kind == "sphere":
+            return self._sphere(pts, R, p, hessian, hessian_band)
+        frames = self._frames(R, p)
+        if len(frames) == 1:  # (one primitive: no union's masks)
+            psi, grad, hess = _world_sdf(self.primitives[0], *frames[0], pts, hessian)
         else:
-            hess = np.zeros((k, dim, dim))
-        return ImlsEval(psi=psi, grad=grad, hess=hess, near=_near(k))
-
-    def _single(self, b, R, hessian, hessian_band) -> ImlsEval:
-        """One primitive (no union): :meth:`evaluate`'s loop without its masks, the frames' rotations
-        applied as (k * 3, 3) products."""
-        dim, k = self.dim, len(b)
-        prim = self.primitives[0]
-        Q = prim.rotation
-        psi, g, H = _local_sdf(prim.kind, prim.size, (b - prim.centre) @ Q, hessian)
-        M = R[:dim, :dim]
-        grad = (g @ Q.T)[:, :dim]
-        if not unrotated(R):  # (an unrotated O: the world frame's gradient is the body frame's)
-            grad = grad @ M.T
+            psi = np.full(k, -np.inf)
+            grad = np.zeros((k, dim))
+            hess = np.zeros((k, dim, dim)) if hessian else None
+            for prim, (M, off) in zip(self.primitives, frames):
+                ps, g, H = _world_sdf(prim, M, off, pts, hessian)
+                better = ps > psi
+                psi[better] = ps[better]
+                grad[better] = g[better]
+                if hessian:
+                    hess[better] = H[better]
         if not hessian:
             return ImlsEval(psi=psi, grad=grad, hess=np.zeros((k, dim, dim)), near=_near(k))
-        # Q H Q^T per point: A = H Q^T, then A^T Q^T (H symmetric), as products of (k * 3, 3) arrays
-        A = (H.reshape(-1, 3) @ Q.T).reshape(k, 3, 3)
-        Hq = (A.transpose(0, 2, 1).reshape(-1, 3) @ Q.T).reshape(k, 3, 3)[:, :dim, :dim]
-        if unrotated(R):
-            hess = Hq
-        else:
-            A = (Hq.reshape(-1, dim) @ M.T).reshape(k, dim, dim)
-            hess = (A.transpose(0, 2, 1).reshape(-1, dim) @ M.T).reshape(k, dim, dim)
         if hessian_band is not None:
             hess[psi <= -hessian_band] = 0.0
         return ImlsEval(psi=psi, grad=grad, hess=hess, near=_near(k))
+
+    def _frames(self, R: np.ndarray, p: np.ndarray) -> list:
+        """Per primitive (M (dim, 3), off (3,)) with its local coordinates q = x M - off for world points x
+        (k, dim) when O is at (R, p): q = Q^T (R^T (x - p) - c), so M = R_dd Q_d (R's leading (dim, dim)
+        block, Q's first dim rows: a 2D object turns about z and its points lie at z = 0) and
+        off = p_d M + Q^T c. One product per evaluation instead of a body frame and a local frame.
+        (The last pose's, remembered: Newton's evaluations of a step share O's pose.)"""
+        key = (R.tobytes(), p.tobytes())
+        memo = self._cache.get("frames")
+        if memo is not None and memo[0] == key:
+            return memo[1]
+        dim = self.dim
+        out = []
+        for prim in self.primitives:
+            Q = prim.rotation
+            M = R[:dim, :dim] @ Q[:dim]
+            out.append((M, p[:dim] @ M + prim.centre @ Q))
+        self._cache["frames"] = (key, out)
+        return out
 
     def _sphere(self, pts, R, p, hessian, hessian_band) -> ImlsEval:
         """Fast path of a single sphere (a circle in 2D): psi = r - |x - c|, grad = -u,

@@ -161,6 +161,21 @@ class CouplingModel:
             out = self._cache[key] = (np.asarray(pos, dtype=float), np.asarray(quat, dtype=float))
         return out
 
+    def position(self, s: float) -> np.ndarray:
+        """O's position at a path length (:meth:`pos_quat`'s, without the orientation).
+
+        Args:
+            s: path length [m]; past the last keyframe O goes on along a translating last segment.
+
+        Returns:
+            (3,) position [m].
+        """
+        L = float(self.path.length)
+        u = self.end_direction
+        if s > L and u is not None:
+            return self.path.position_at(L) + (s - L) * u
+        return self.path.position_at(s)
+
     @property
     def end_direction(self) -> np.ndarray | None:
         """(3,) unit translation of the path's last segment when that segment is a pure

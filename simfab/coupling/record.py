@@ -95,10 +95,10 @@ def path_velocity(cm: CouplingModel, s: float, y: np.ndarray) -> np.ndarray:
     h = 1e-6 * max(L, 1e-12)
     s0 = max(0.0, s - h)
     s1 = s + h if cm.end_direction is not None else min(L, s + h)  # straight on past the end
-    (R0, p0), (R1, p1) = cm.pose(s0), cm.pose(s1)
     dim = y.shape[1]
-    if R0 is R1 or R0.tobytes() == R1.tobytes():  # O translates between s0 and s1: every point moves alike
-        return np.repeat(((p1 - p0) / (s1 - s0))[None, :dim], len(y), axis=0)
+    if not cm.path.turns_between(s0, min(s1, L)):  # O translates between s0 and s1: every point moves alike
+        return np.repeat(((cm.position(s1) - cm.position(s0)) / (s1 - s0))[None, :dim], len(y), axis=0)
+    (R0, p0), (R1, p1) = cm.pose(s0), cm.pose(s1)
     # y -> R_b R_s^T (y - p_s) + p_b for b = 0, 1 (cm.carry), differenced
     Rs, ps = cm.pose(s)
     y3 = np.zeros((len(y), 3))

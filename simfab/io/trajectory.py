@@ -136,6 +136,35 @@ class Trajectory:
         i, f = self._locate(s)
         return self.pose_at_key(i + f)
 
+    def position_at(self, s: float) -> np.ndarray:
+        """Position at a path length (:meth:`pose_at`'s, without the orientation's slerp).
+
+        Args:
+            s: path length [m], clamped to [0, length].
+
+        Returns:
+            (3,) position [m].
+        """
+        i, f = self._locate(s)
+        return (1 - f) * self.positions[i] + f * self.positions[i + 1]
+
+    @functools.cached_property
+    def _turning(self) -> np.ndarray:
+        """(k-1,) whether each segment changes the orientation (|q_i . q_(i+1)| below 1 - 1e-12)."""
+        q = self.quats
+        return np.abs(np.abs((q[:-1] * q[1:]).sum(axis=1)) - 1.0) > 1e-12
+
+    def turns_between(self, s0: float, s1: float) -> bool:
+        """Whether the orientation changes anywhere between two path lengths.
+
+        Args:
+            s0, s1: path lengths [m], s0 <= s1 (clamped to the path).
+
+        Returns:
+            True when a segment overlapping [s0, s1] turns.
+        """
+        return bool(self._turning[self._locate(s0)[0]: self._locate(s1)[0] + 1].any())
+
     def direction_at(self, s: float) -> np.ndarray:
         """Translation direction of the segment containing a path length.
 
