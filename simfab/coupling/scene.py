@@ -11,8 +11,8 @@ The **TOML** (``NAME.toml``) defines A and the run (SI units)::
     dim = 2                              # 2 (plane strain) or 3
     [material]  name = "PLA"             # or youngs_modulus [Pa], poisson_ratio, yield_stress [Pa]
     [compliant] generator = "c_clamp", target_elements = 450, thickness = 0.005 (2D), ...
-                # c_clamp | extruded_clamp | cross_claw | outline = "part.csv" | mesh = "part.stl";
-                # mesh_file = "part.npz": a ready mesh (points, elements)
+                # c_clamp | extruded_clamp | cross_claw | outline = "part.csv" (x,y rows, or loop,x,y with
+                # holes) | mesh = "part.stl"; mesh_file = "part.npz": a ready mesh (points, elements)
     [object]    body, samples, sigma, seed, rot_length_scale   (ObjectConfig)
     [fixed]     site = "fixed"
     [simulation] steps = 35 (or h_in [m]), L_max [m], element_order = 1 | 2, ...  (InsertionConfig)
@@ -384,16 +384,15 @@ def build_compliant(comp: dict, dim: int, *, base: Path, where: str):
         raise InputError(f"units must be 'm' or 'mm', got {units!r}", where=where)
     if dim == 2:
         if gen == "c_clamp":
-            outline = _call(geometry.c_clamp_outline, comp, where)
+            outline, holes = _call(geometry.c_clamp_outline, comp, where), []
         elif gen == "outline" or "outline" in comp:
-            outline = read_csv_numbers(base / str(comp.pop("outline")), 2, what="outline CSV (x,y per row)",
-                                       min_rows=3) * scale
+            outline, holes = read_outline(base / str(comp.pop("outline")), scale)
         else:
             raise InputError(f"2D generator must be one of {GENERATORS_2D}, got {gen!r}", where=where)
         if not (np.isfinite(thickness) and thickness > 0):
             raise InputError(f"thickness must be a positive length [m], got {thickness}", where=where)
         try:
-            return _triangulate_to_target(outline, target) + (thickness,)
+            return _triangulate_to_target(outline, target, holes) + (thickness,)
         except InputError as e:
             raise e.in_file(where) from None
     if gen == "extruded_clamp":
@@ -510,15 +509,47 @@ def _call(fn, kw: dict, where: str):
         raise e.in_file(where) from None
 
 
-def _triangulate_to_target(outline: np.ndarray, target: int | None):
-    """Triangle mesh of the outline with about ``target`` triangles (area bound tuned in 3 passes)."""
+def read_outline(path: Path, scale: float) -> tuple[np.ndarray, list]:
+    """A 2D part's outline CSV: rows ``x, y`` (one loop), or ``loop, x, y`` (loops numbered, as
+    ``simfab couple optimize`` writes NAME_optimized_outline.csv): the loop of largest area is the
+    part's outline, the others its holes.
+
+    Args:
+        path: the CSV file.
+        scale: metres per unit of its coordinates.
+
+    Returns:
+        (outline (k, 2) [m], holes: a list of (k_i, 2) [m]); InputError naming the file for a loop
+        number that is not an integer or a loop of fewer than 3 points.
+    """
+    a = read_csv_numbers(path, (2, 3), what="outline CSV (x,y or loop,x,y per row)", min_rows=3)
+    if a.shape[1] == 2:
+        return a * scale, []
+    ids = a[:, 0]
+    if not np.all(ids == np.round(ids)):
+        bad = a[np.flatnonzero(ids != np.round(ids))[0], 0]
+        raise InputError(f"loop numbers must be integers, got {bad:g}", where=str(path))
+    loops = []
+    for k in dict.fromkeys(ids.tolist()):  # (in order of first appearance)
+        loop = a[ids == k, 1:] * scale
+        if len(loop) < 3:
+            raise InputError(f"loop {k:g} has {len(loop)} point(s), a loop needs at least 3", where=str(path))
+        loops.append(loop)
+    outer = int(np.argmax([abs(geometry.signed_area(loop)) for loop in loops]))
+    return loops[outer], loops[:outer] + loops[outer + 1:]
+
+
+def _triangulate_to_target(outline: np.ndarray, target: int | None, holes=()):
+    """Triangle mesh of the outline (less its holes) with about ``target`` triangles (area bound tuned
+    in 3 passes)."""
 
     if target is None:
-        return triangulate_polygon(outline)
-    max_area = abs(geometry.signed_area(outline)) / target
+        return triangulate_polygon(outline, holes=holes)
+    area = abs(geometry.signed_area(outline)) - sum(abs(geometry.signed_area(h)) for h in holes)
+    max_area = area / target
     best = None
     for _ in range(4):
-        V, F = triangulate_polygon(outline, max_area=max_area)
+        V, F = triangulate_polygon(outline, holes=holes, max_area=max_area)
         if best is None or abs(len(F) - target) < abs(len(best[1]) - target):
             best = (V, F)
         if abs(len(F) - target) <= 0.05 * target:

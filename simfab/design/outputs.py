@@ -113,8 +113,9 @@ def write_optimized_scene(res, scene_xml: Path, scene_toml: Path, paths: dict, t
     np.savez(tmp["scene_mesh"], points=X, elements=np.asarray(fem.elements))
     cfg = tomllib.loads(Path(scene_toml).read_text(encoding="utf-8"))
     cfg["name"] = f"{stem}_optimized"
-    if fem.dim == 2:
-        comp = {"mesh_file": paths["scene_mesh"].name, "thickness": float(fem.thickness)}
+    if fem.dim == 2:  # (beside the outline CSV its boundary loops: a convergence study meshes it again)
+        comp = {"outline": paths["outline_csv"].name, "units": "mm", "thickness": float(fem.thickness),
+                "target_elements": len(fem.elements), "mesh_file": paths["scene_mesh"].name}
     else:  # (the printable STL is the tets' surface: a convergence study meshes it again)
         comp = stored_part_table(paths["scene_mesh"].name, paths["part_stl"].name, "mm", len(fem.elements))
     cfg["compliant"] = comp

@@ -55,13 +55,14 @@ def read_npz(path: str | os.PathLike, arrays: tuple[str, ...], *, what: str = "a
             return {a: np.asarray(z[a]) for a in arrays}
 
 
-def read_csv_numbers(path: str | os.PathLike, columns: int, *, what: str = "CSV file",
+def read_csv_numbers(path: str | os.PathLike, columns: int | tuple, *, what: str = "CSV file",
                      min_rows: int = 1) -> np.ndarray:
-    """(k, columns) float array of a comma-separated table of finite numbers.
+    """(k, c) float array of a comma-separated table of finite numbers.
 
     The first data line may be a header (every cell not a number, e.g. ``x,y``); blank lines
-    and lines starting with ``#`` are skipped. Any other line that is not ``columns`` finite
-    numbers is an InputError naming the file and the line."""
+    and lines starting with ``#`` are skipped. ``columns``: the count c of every row, or a tuple of
+    the counts allowed (the first row's count, or the header's, is then every row's). Any other line
+    that is not c finite numbers is an InputError naming the file and the line."""
     with reading(path, what) as p:
         text = p.read_text(encoding="utf-8-sig")  # a spreadsheet's byte-order mark is not a character
     where = str(path)
@@ -73,15 +74,20 @@ def read_csv_numbers(path: str | os.PathLike, columns: int, *, what: str = "CSV 
             continue
         cells = [c.strip() for c in s.split(",")]
         vals = [_number(c) for c in cells]
+        if first and isinstance(columns, tuple) and len(cells) in columns:
+            columns = len(cells)  # (the header's or the first row's count: every row's)
         if first and all(v is None for v in vals):  # a header row
             first = False
             continue
         first = False
-        if len(cells) != columns or any(v is None for v in vals):
-            raise InputError(f"line {lineno}: expected {columns} comma-separated numbers, got {s[:60]!r}", where=where)
+        if isinstance(columns, tuple) or len(cells) != columns or any(v is None for v in vals):
+            want = columns if isinstance(columns, int) else " or ".join(map(str, columns))
+            raise InputError(f"line {lineno}: expected {want} comma-separated numbers, got {s[:60]!r}", where=where)
         if not all(math.isfinite(v) for v in vals):
             raise InputError(f"line {lineno}: {s[:60]!r} is not finite", where=where)
         rows.append(vals)
+    if isinstance(columns, tuple):  # (no data line)
+        columns = columns[0]
     if len(rows) < min_rows:
         raise InputError(f"needs at least {min_rows} row(s) of {columns} numbers, found {len(rows)}", where=where)
     return np.array(rows, dtype=np.float64).reshape(-1, columns)

@@ -75,6 +75,30 @@ def test_an_outline_csv_may_start_with_a_header_row(tmp_path):
     np.testing.assert_array_equal(headed.fem.rest, plain.fem.rest)
 
 
+def test_an_outline_csv_with_numbered_loops_meshes_its_holes(tmp_path):
+    """loop,x,y rows (as couple optimize writes a 2D part's boundary): the largest loop is the outline,
+    the others holes, in any order; a loop of two points or a fractional loop number is refused."""
+    from simfab.coupling.scene import read_outline
+    from simfab.fem.meshing import triangulate_polygon
+
+    square = [(0, 0), (20, 0), (20, 10), (0, 10)]
+    hole = [(5, 3), (9, 3), (9, 7), (5, 7)]
+    rows = [f"1,{x},{y}" for x, y in hole] + [f"0,{x},{y}" for x, y in square]
+    (tmp_path / "o.csv").write_text("loop,x_mm,y_mm\n" + "\n".join(rows) + "\n")
+    outline, holes = read_outline(tmp_path / "o.csv", 1e-3)
+    assert np.allclose(outline, np.array(square) * 1e-3) and len(holes) == 1
+    V, F = triangulate_polygon(outline, holes=holes, max_area=2e-6)
+    area = 0.5 * np.abs(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])).sum()
+    assert np.isclose(area, (200 - 16) * 1e-6, rtol=1e-12)  # 20 x 10 mm less the 4 x 4 mm hole
+    for text, what in (("0,0,0\n0,1,0\n1,0,1\n1,1,1\n1,1,2\n", "loop 0 has 2 point(s)"),
+                       ("0.5,0,0\n0.5,1,0\n0.5,1,1\n", "integers"),
+                       ("0,0,0\n0,1,0,3\n0,1,1\n", "line 2: expected 3")):
+        (tmp_path / "bad.csv").write_text(text)
+        with pytest.raises(InputError) as e:
+            read_outline(tmp_path / "bad.csv", 1e-3)
+        assert what in str(e.value) and "bad.csv" in str(e.value)
+
+
 def test_object_options_are_validated_naming_the_key(tmp_path):
     src = bundled_dir()
     shutil.copy(src / "cclamp2d.xml", tmp_path / "s.xml")

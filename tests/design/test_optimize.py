@@ -143,6 +143,23 @@ def test_cli_optimize_writes_a_scene_that_simulates_to_the_same_profile(tmp_path
     assert np.isclose(d["F_in"], p["F_in_N"], rtol=1e-9)
     assert np.isclose(d["coupling_ratio"], p["coupling_ratio_pct"], rtol=1e-9)
     assert d["category"] == p["category"]
+    # the optimized part is stored beside its boundary loops (the outline CSV), so a convergence study
+    # meshes it again (run_levels checks the part's table before its first level: none asked here), and
+    # the outline meshes to the stored part's area
+    from simfab.coupling.converge import run_levels
+    from simfab.coupling.scene import read_outline, read_scene_toml
+    from simfab.fem.meshing import triangulate_polygon
+
+    comp = read_scene_toml(s["outputs"]["scene_toml"])["compliant"]
+    assert comp["outline"] == Path(s["outputs"]["outline_csv"]).name and comp["units"] == "mm"
+    stored = np.load(s["outputs"]["scene_mesh"])
+    assert comp["target_elements"] == len(stored["elements"])
+    assert run_levels(s["outputs"]["scene_xml"], ()) == []
+    outline, holes = read_outline(Path(s["outputs"]["outline_csv"]), 1e-3)
+    V, F = triangulate_polygon(outline, holes=holes)
+    P, T = stored["points"], stored["elements"]
+    area = lambda P, T: 0.5 * np.abs(np.cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]])).sum()  # noqa: E731
+    assert np.isclose(area(V, F), area(P, T), rtol=1e-9)
 
 
 def test_parallel_workers_make_the_same_decisions_as_one_process():
