@@ -103,7 +103,18 @@ class PatternConfig:
         field = "insert_half_sizes" if self.insert_half_sizes else "insert_half_size"
         if len(set(self.sizes)) != len(self.sizes):
             raise InputError(f"sizes must differ (got {list(self.insert_half_sizes)})", where=f"pattern.{field}")
+
+    def check_plates(self) -> None:
+        """Refuse a catalogue whose largest plates would overlap their neighbours' at the spacing (half-side
+        r + beam_width >= spacing / 2). Checked where the catalogue is final (:func:`layout`, the scene's
+        loader after its defaults are decided), not at construction: a scene that sets only the spacing gets
+        its catalogue decided from the target, and the fixed default size need not fit that spacing.
+
+        Raises:
+            InputError: naming ``pattern.insert_half_size`` or ``pattern.insert_half_sizes``.
+        """
         if not max(self.sizes) + self.beam_width < self.spacing / 2:
+            field = "insert_half_sizes" if self.insert_half_sizes else "insert_half_size"
             raise InputError(f"insert size {max(self.sizes)} m: two neighbouring insert plates (half-side r + "
                              f"beam_width) would overlap at spacing {self.spacing} m (needs r < spacing/2 - "
                              f"beam_width)", where=f"pattern.{field}")
@@ -421,6 +432,7 @@ def layout(uv: np.ndarray, boundary: np.ndarray, faces: np.ndarray, u: np.ndarra
         boundary self-intersects or no quad fits.
     """
 
+    cfg.check_plates()
     poly = shapely.Polygon(uv[boundary])
     if not poly.is_valid:
         raise InputError("the flattened boundary self-intersects; the target needs cuts or cones")

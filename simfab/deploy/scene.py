@@ -178,21 +178,24 @@ def load_deploy_scene(path, *, units: str | None = None, overrides: dict | None 
     dep = dataclasses.replace(cfg["deploy"], **{k: getattr(cfg["material"], k) for k in MATERIAL_KEYS})
     scene = SurfaceScene(target=target, pattern=cfg["pattern"], deploy=dep, mujoco=cfg["mujoco"], path=where,
                          tune=cfg["tune"], cuts=cfg["cuts"])
-    if not auto:
-        return scene
     from simfab.deploy import auto as auto_
 
     given = {t: {k for k in (*(doc.get(t) or {}), *(overrides.get(t) or {}))
                  if _value(overrides.get(t, {}).get(k, True)) is not None} for t in ("pattern", "cuts", "tune")}
     try:
-        scene, decisions = auto_.complete(scene, given)
+        if auto:
+            scene, decisions = auto_.complete(scene, given)
+            scene = dataclasses.replace(scene, decisions=decisions)
+        scene.pattern.check_plates()  # (the catalogue final: decided, or as given)
     except InputError as e:  # a check of the decided values (e.g. the cell count) at a flag's key names the flag
         sources = {f"{t}.{k}": v.source for t, ov in overrides.items() for k, v in ov.items()
                    if isinstance(v, Override)}
         if e.where in sources:
             raise InputError(e.message, where=sources[e.where]) from None
+        if file is not None and e.where and e.where.startswith(("pattern.", "cuts.", "tune.")):
+            raise InputError(e.message, where=f"{file}: {e.where}") from None
         raise
-    return dataclasses.replace(scene, decisions=decisions)
+    return scene
 
 
 def _value(v):

@@ -387,10 +387,33 @@ def test_catalogue_config_errors():
         pattern.PatternConfig(insert_half_sizes=[0.004, -0.002])
     with pytest.raises(InputError, match="insert_half_sizes"):
         pattern.PatternConfig(insert_half_sizes=[0.004, 0.004])
-    with pytest.raises(InputError, match="insert_half_sizes"):
-        pattern.PatternConfig(spacing=0.03, insert_half_sizes=[0.004, 0.013])
+    with pytest.raises(InputError, match="insert_half_sizes"):  # overlapping plates (checked once final)
+        pattern.PatternConfig(spacing=0.03, insert_half_sizes=[0.004, 0.013]).check_plates()
     with pytest.raises(InputError, match="insert_half_sizes"):
         pattern.PatternConfig(insert_half_sizes="0.004")
+
+
+def test_a_spacing_the_default_insert_does_not_fit_gets_a_decided_catalogue(tmp_path):
+    """Setting only the spacing (--spacing 15 mm, where the fixed default 5 mm insert's plates would overlap)
+    is not refused for the insert size the user never set: the catalogue is decided from the target and
+    fits; a size the user sets that does not fit is refused naming its flag, and a cell no insert fits
+    (12 mm with the dome's 3 mm beams) naming the spacing's."""
+    from simfab.deploy.scene import load_deploy_scene
+    from simfab.errors import InputError
+    from simfab.io.tables import Override
+
+    def load(**pattern):
+        flags = {"spacing": "--spacing", "insert_half_size": "--insert-size"}
+        return load_deploy_scene(scene.bundled_path("dome"), overrides={"pattern": {
+            k: Override(v, flags[k]) for k, v in pattern.items()}})
+
+    sc = load(spacing=0.015)
+    assert sc.pattern.spacing == 0.015 and 0 < max(sc.pattern.sizes) < 0.0075 - sc.pattern.beam_width
+    for kw, flag, what in (({"spacing": 0.015, "insert_half_size": 0.005}, "--insert-size", "overlap"),
+                           ({"spacing": 0.012}, "--spacing", "no insert fits a 12 mm cell")):
+        with pytest.raises(InputError) as e:
+            load(**kw)
+        assert e.value.where == flag and what in str(e.value)
 
 
 @pytest.mark.parametrize("name", scene.BUNDLED)
