@@ -538,6 +538,7 @@ def solve(cm: CouplingModel, obj: StepObjective, x0: np.ndarray, ctx: StepContex
     """
     exact_first = not (obj.lazy_exact and ctx.exact_failed)
     obj.eager_exact = exact_first and not converged  # (P2: the start's exact Hessian assembled with its gradient)
+    obj.defer_hessian = converged  # (linear elements: a start expected to be the solution gets its Hessian on demand)
     try:
         _, g0, _ = obj(x0.ravel(), True)  # memoized: minimize's first evaluation reuses it
     finally:
