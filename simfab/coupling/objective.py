@@ -59,6 +59,7 @@ class StepObjective:
         self.last_gd = None
         self.last_H = None
         self.last_fem = None
+        self.last_barrier = None
         self.curv = 1.0 / cm.field.sigma  # curvature bound for max_step until a Hessian evaluation sets it
         # Lazy evaluation: psi is L-Lipschitz, so a point that was at distance d_ref when last
         # evaluated exactly (at y_ref) is still at least d_ref - L |y - y_ref| away. Points whose
@@ -69,8 +70,9 @@ class StepObjective:
         self.y_ref = None
         self.d_ref = None
         self.memo = None  # (x, (f, g, H)) of the last Hessian evaluation, reused once
-        # (x, d, grad d) of the last evaluation without Hessians (e.g. a warm start's value, then its
-        # lift): the same x gives the same distances until the lazy bounds are re-anchored
+        # (x, d, grad d, the points' positions y, the points evaluated exactly) of the last evaluation
+        # without Hessians (e.g. a warm start's value, then its lift, then Newton's start): the same x
+        # gives the same distances until the lazy bounds are re-anchored
         self._distances = None
         self.anchored = None  # see distances
         # Newton's Hessians within a solve are assembled when Newton asks for them (linear elements,
@@ -105,8 +107,15 @@ class StepObjective:
         """
         anchor = hessian if anchor is None else anchor
         memo = self._distances
-        if not anchor and memo is not None and _equal(memo[0], x):
-            return memo[1], memo[2], None
+        if not hessian and memo is not None and _equal(memo[0], x):
+            _, d, gd, y, todo = memo
+            if anchor:  # (the warm start's value, now Newton's start: its exact points anchor the bounds)
+                if len(todo):
+                    self.y_ref[todo] = y[todo]
+                    self.d_ref[todo] = d[todo]
+                    self._distances = None
+                self.anchored = (y[todo], todo)
+            return d, gd, None
         with self.timer.timed("contact_field"):
             y = self.points.positions(x)
             k, dim = len(y), self.dim
@@ -141,7 +150,7 @@ class StepObjective:
             if anchor and not hessian:
                 self.anchored = (y[todo], todo)
             elif not hessian:
-                self._distances = (np.array(x, copy=True), d, gd)
+                self._distances = (np.array(x, copy=True), d, gd, y, todo)
         return d, gd, hd
 
     def known_distances(self, x: np.ndarray):
@@ -200,6 +209,7 @@ class StepObjective:
             return np.inf, g.ravel(), H
         with self.timer.timed("barrier"):
             act, B, gy, Hy = self.contact_barrier(d, gd, hd)
+            barrier = (act, B, gy)
             gc = self.points.scatter(gy, self.n, rows=act)
             Hf = None
             if self.friction is not None:
@@ -217,14 +227,14 @@ class StepObjective:
                     H = LazyHessian(self, x.copy(), contact)
                 else:
                     self.add_contact(H, contact, psd=True)
-                self._remember(xf, d, gd, H, E, g)
+                self._remember(xf, d, gd, H, E, g, barrier)
                 # curvature bound for the step cap: twice the largest |hess d| seen near O, at least
                 # CURVATURE_FLOOR / sigma (a violated bound only costs a rejected line-search trial)
                 self.curv, self._curv_from = self.curvature_bound(act, hd), None
             else:
                 # Newton may stop at a trial evaluated without its Hessian (see solve): this
                 # evaluation may be the final one, with the PSD Hessian deferred
-                self._remember(xf, d, gd, LazyHessian(self, x.copy(), None), E, g)
+                self._remember(xf, d, gd, LazyHessian(self, x.copy(), None), E, g, barrier)
         # exact-first Newton (simfab.solve.newton): the exact Hessian is used whenever it is
         # positive definite (quadratic convergence), the PSD-projected one (built lazily) otherwise
         out = (E + B, (g + gc).ravel(), H if H_exact is None else (H_exact, H))
@@ -258,6 +268,7 @@ class StepObjective:
             return np.inf, g.ravel(), None
         with self.timer.timed("barrier"):
             act, B, gy, _ = self.contact_barrier(d, gd, None)
+            barrier = (act, B, gy)
             gc = self.points.scatter(gy, self.n, rows=act)
             if self.friction is not None:
                 fr = self.friction.evaluate(x, hessian=False)
@@ -266,7 +277,7 @@ class StepObjective:
         deferred = _DeferredHessian(self, x.copy(), d, gd, act, self.anchored)
         self._curv_from = deferred
         H = LazyHessian(self, deferred.x, deferred)
-        self._remember(xf, d, gd, H, E, g)
+        self._remember(xf, d, gd, H, E, g, barrier)
         out = (E + B, (g + gc).ravel(), (deferred, H))
         self.memo = (xf.copy(), out)
         return out
@@ -295,14 +306,16 @@ class StepObjective:
                                   psd=False)
         return act, B, gy, Hy
 
-    def _remember(self, xf, d, gd, H, E, g) -> None:
+    def _remember(self, xf, d, gd, H, E, g, barrier) -> None:
         """Keep the last evaluation's data (x, distances, their gradients, Hessian, elastic energy
-        and gradient): Newton's final evaluation is read from it (see :func:`evaluation`)."""
+        and gradient, the contact barrier's (active points, energy, gradient)): Newton's final
+        evaluation is read from it (see :func:`evaluation`)."""
         self.last_x = xf.copy()
         self.last_d = d
         self.last_gd = gd
         self.last_H = H
         self.last_fem = (E, g)  # elastic energy and gradient at last_x (reused by the step record)
+        self.last_barrier = barrier
 
     def value(self, x: np.ndarray) -> float:
         """The objective's value only (no derivatives); its time books under "line_search".
@@ -590,5 +603,7 @@ def evaluation(obj: StepObjective, x: np.ndarray) -> Evaluation | None:
     if obj.last_x is None or not _equal(obj.last_x, x.ravel()):
         return None
     E, gE = obj.last_fem
+    act, B, gy = obj.last_barrier
     return Evaluation(x=x, kappa=obj.kappa, points=obj.points, elastic_energy=float(E), elastic_gradient=gE,
+                      barrier_points=act, barrier_energy=float(B), barrier_gradient=gy,
                       distances=obj.last_d, distance_gradients=obj.last_gd, hessian=obj.last_H)

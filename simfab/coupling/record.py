@@ -114,20 +114,22 @@ def record_step(cm: CouplingModel, state: StepState, iterations: int) -> StepRes
     R, p = cm.pose(state.s)
     pts = state.points
     ev = state.current_evaluation()
-    if ev is not None and ev.kappa == state.kappa_step:
+    if ev is not None and ev.kappa == state.kappa_step and ev.barrier_gradient is not None:
         # Newton's last evaluation at x: exact distances within the lazy band (which contains the
-        # barrier's support), certified lower bounds beyond it (zero barrier, outside O)
-        E, gE, d, gd = ev.elastic_energy, ev.elastic_gradient, ev.distances, ev.distance_gradients
-        psi_pts = -d
+        # barrier's support), certified lower bounds beyond it (zero barrier, outside O), and the
+        # barrier of the points within their d_hat
+        E, gE, psi_pts = ev.elastic_energy, ev.elastic_gradient, -ev.distances
+        act, B, gy = ev.barrier_points, ev.barrier_energy, ev.barrier_gradient
     else:
         E, gE = energy_gradient(cm.fem, x)
         field = cm.field.evaluate(pts.positions(x), (R, p), hessian=False)
-        d, gd, psi_pts = -field.psi, -field.grad, field.psi
-    B, gy, _ = point_barrier(d, gd, None, point_dhat(cm, pts), state.kappa_step)
-    gc = pts.scatter(gy, n)
+        psi_pts = field.psi
+        act = None  # (every point)
+        B, gy, _ = point_barrier(-field.psi, -field.grad, None, point_dhat(cm, pts), state.kappa_step)
+    gc = pts.scatter(gy, n, rows=act)
     grip = float(np.linalg.norm(0.5 * np.abs(-gc).sum(axis=0)))  # -gc: normal contact force on A's vertices
     velocity = path_velocity(cm, state.s, pts.positions(x))
-    path_force = float(np.einsum("kd,kd->", gy, velocity))
+    path_force = float(np.einsum("kd,kd->", gy, velocity if act is None else velocity[act]))
     g = gE + gc
     fr = None
     if state.friction is not None:

@@ -31,7 +31,9 @@ class Evaluation:
     distances (k,) [m]: d_j = -psi(y_j), exact within the objective's lazy band (which contains the
     barrier's support), certified lower bounds beyond it; distance_gradients (k, dim): grad d_j
     (zero where only a bound is known); hessian: the objective's PSD Hessian at x (CSR, or a
-    callable that assembles it on first use), None when it was not evaluated at x."""
+    callable that assembles it on first use), None when it was not evaluated at x; barrier_points
+    (a,): the points within their d_hat, barrier_energy [J] kappa sum_j b(d_j) and barrier_gradient
+    (a, dim) [N] its gradient with respect to those points' positions (None: not evaluated)."""
 
     x: np.ndarray
     kappa: float
@@ -41,6 +43,9 @@ class Evaluation:
     distances: np.ndarray
     distance_gradients: np.ndarray
     hessian: object = None
+    barrier_points: np.ndarray | None = None
+    barrier_energy: float | None = None
+    barrier_gradient: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
