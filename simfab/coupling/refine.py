@@ -22,7 +22,9 @@ from simfab.errors import ConvergenceError
 class FacetCheck:
     """The facet check at positions x (n, dim) [m], path length s [m] and refinement density
     ``order``: ids (f,) of the boundary facets that could reach into O, psi_max (f,) [m] the largest
-    psi (or a certified upper bound of it) over each one's check points, refined (f,) bool."""
+    psi (or a certified upper bound of it) over each one's check points, refined (f,) bool; points:
+    the constraint points it was made with; margin [m]: the smallest slack min_v d(v) - L cover of
+    the facets not listed (inf: none), by which they are certified outside O."""
 
     x: np.ndarray
     s: float
@@ -30,6 +32,8 @@ class FacetCheck:
     ids: np.ndarray
     psi_max: np.ndarray
     refined: np.ndarray
+    points: object = None
+    margin: float = np.inf
 
 def crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
                     final: Evaluation | None = None) -> list:
@@ -97,16 +101,20 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     from elsewhere, used alike). Lower bounds of the vertices' distances (beyond an objective's lazy
     band) only weaken the bounds of the check points: more of them are evaluated, and psi_max is the
     same wherever it is positive (the only use of it: a positive psi is never bounded away).
+    A check at other positions for the same s and constraint points (the warm start's, before Newton)
+    stands for this one when A's boundary has moved little enough since (:func:`_carried`).
     """
     memo = state.check
-    if memo is not None and memo.x is x and memo.s == s and memo.order == state.order:
-        return memo
+    if memo is not None and memo.s == s and memo.order == state.order:
+        if memo.x is x:
+            return memo
+        carried = _carried(cm, memo, x, state, final)
+        if carried is not None:
+            return carried
     facets = cm.contact_facets
     R, p = cm.pose(s)
     bv = cm.fem.boundary_vertices
-    # an exact field's gradient is a unit vector (to round-off): nothing for grad_peak to watch
-    # while the Lipschitz bound exceeds 1
-    watch = not (getattr(cm.field, "unit_gradient", False) and C.PSI_LIPSCHITZ > 1.0 + 1e-9)
+    watch = _watched(cm)
     dv = np.full(cm.fem.n_vertices, np.inf)
     if final is not None and final.x is x and len(final.distances) >= len(bv):
         distances = (final.distances, final.distance_gradients)
@@ -145,7 +153,9 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
     # vertices are all farther than L * cover from O is certified outside by the vertex bounds.
     cover = np.sqrt(np.maximum.reduce(edges2, axis=1)) * COVER[cm.dim]
     dvf = dv[facets]  # (F, nv)
-    ids = (np.minimum.reduce(dvf, axis=1) <= C.PSI_LIPSCHITZ * cover).nonzero()[0]
+    slack = np.minimum.reduce(dvf, axis=1) - C.PSI_LIPSCHITZ * cover
+    ids = (slack <= 0.0).nonzero()[0]
+    margin = float(np.min(slack, where=slack > 0.0, initial=np.inf))
     if state.refined:
         refined = np.zeros(len(facets), dtype=bool)
         refined[list(state.refined)] = True
@@ -191,9 +201,42 @@ def facet_check(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
                 psi_max = np.maximum.reduce(psi, axis=1)
             else:
                 psi_max[sel] = np.maximum.reduce(psi, axis=1)
-    out = FacetCheck(x, s, state.order, ids, psi_max, refined)
+    out = FacetCheck(x, s, state.order, ids, psi_max, refined, state.points, margin)
     state.check = out
     return out
+
+
+def _carried(cm: CouplingModel, memo: FacetCheck, x: np.ndarray, state: StepState,
+             final: Evaluation | None) -> FacetCheck | None:
+    """The check at x carried over from ``memo`` (the same s and constraint points, other positions), or
+    None when it certifies nothing. Every boundary vertex moved by at most delta since, and so did every
+    check point (a convex combination of its facet's vertices): psi rose by at most L delta at each (the
+    listed facets' bounds become psi_max + L delta), and the slack min_v d(v) - L cover of a facet not
+    listed fell by at most L (1 + 2 COVER) delta (each vertex's distance by L delta, its longest edge by
+    2 delta). When the listed bounds stay negative and the margin positive, the full check at x would
+    find no facet crossing either: it lists the same facets, with those bounds (one vertex displacement
+    instead of the check's lattice; a Newton step is usually far shorter than the gaps it certifies)."""
+    if memo.points is not state.points or (len(memo.psi_max) and memo.psi_max.max() >= 0.0):
+        return None
+    bv = cm.fem.boundary_vertices
+    delta = _max_norm(x[bv] - memo.x[bv])
+    L = C.PSI_LIPSCHITZ
+    fall = L * (1.0 + 2.0 * COVER[cm.dim]) * delta
+    psi_max = memo.psi_max + L * delta
+    if not memo.margin > fall or (len(psi_max) and psi_max.max() >= 0.0):
+        return None
+    if final is not None and final.x is x and _watched(cm):
+        state.grad_peak = max(state.grad_peak, _max_norm(final.distance_gradients))  # (as the full check watches)
+    out = FacetCheck(x, s=memo.s, order=memo.order, ids=memo.ids, psi_max=psi_max, refined=memo.refined,
+                     points=memo.points, margin=memo.margin - fall)
+    state.check = out
+    return out
+
+
+def _watched(cm: CouplingModel) -> bool:
+    """Whether the field's gradient norms are watched (``state.grad_peak``): an exact field's gradient is a
+    unit vector (to round-off), nothing to watch while the Lipschitz bound exceeds 1."""
+    return not (getattr(cm.field, "unit_gradient", False) and C.PSI_LIPSCHITZ > 1.0 + 1e-9)
 
 
 def _body_frame(y: np.ndarray, R: np.ndarray, p: np.ndarray) -> np.ndarray:
