@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from simfab.coupling.fit import fit_warnings
 from simfab.errors import InputError
-from simfab.fem.model import boundary_facets
 from simfab.io.mjcf_load import points_in_box
 from simfab.io.outpaths import name_from_stem
 from simfab.results import Result, field
@@ -113,7 +113,7 @@ class AuthoredScene(Result):
         seat: path length of the seat (the first overlap minimum after the mouth) [m]; None when none was found.
         to_rest: the simulation draws O on to rest past the path's end.
         notes: one line each (what was corrected or assumed).
-        warnings: one line each (what the scene's runs will not resolve: :func:`surface_deviation`).
+        warnings: one line each (what the scene's runs will not resolve: :mod:`simfab.coupling.fit`).
         next_commands: the commands to run next.
         outputs: label -> path of the files written.
     """
@@ -247,17 +247,6 @@ def parse_brief(items) -> dict:
     return out
 
 
-#: couple new warns where the tets' surface departs from the part's own, near the object at the path's
-#: deepest pose, by more than this fraction of the object's overlap with the part there: Gmsh remeshes the
-#: surface at the element size h, cutting curved faces in chords (sagitta ~ h^2 / 8 r), so the interference
-#: the tets see, and the forces there with it, depend on the mesh by about that much.
-SURFACE_DEVIATION_REL = 0.1
-#: The departure quoted is this percentile over the tets' surface near the object: the typical one where the
-#: object presses. (The largest is a spike where a corner too mild for Gmsh's feature detection is cut: on
-#: the C-clip 0.10, 0.071, 0.079 mm at 900, 3,000, 12,000 tets, while the 90th percentile falls as h^2:
-#: 0.038, 0.018, 0.008 mm.)
-SURFACE_DEVIATION_PERCENTILE = 90.0
-
 #: The files' axes are the part's own frame when its bounding box along them is at most this much larger
 #: (volume in 3D, area of the section in 2D) than its smallest turned one; else the smallest box's axes are.
 FRAME_SLACK_REL = 0.02
@@ -275,33 +264,6 @@ class FixedBox:
         """(k,) which points (k, dim) [m] lie in the box (2D: its section with z = 0), as the scene's loader
         will read the site (:func:`simfab.io.mjcf_load.points_in_box`)."""
         return points_in_box(pts, self.centre, self.half, self.axes)
-
-
-def surface_deviation(surface, points: np.ndarray, elements: np.ndarray, obj, reach: float) -> tuple:
-    """How far the tets' boundary departs from the part's surface near the object: over the boundary
-    facets' centroids and edge midpoints (their vertices lie on the surface) that are inside the object or
-    within ``reach`` of it, the distances' SURFACE_DEVIATION_PERCENTILE and largest.
-
-    Args:
-        surface: the part's surface (trimesh) [m].
-        points: (n, 3) the tets' vertices [m].
-        elements: (m, 4) the tets.
-        obj: the object's surface at the pose to check (trimesh) [m].
-        reach: [m] how far from the object a facet still counts.
-
-    Returns:
-        (the percentile [m], the largest [m]); (0, 0) when no facet is that near.
-    """
-    import trimesh
-
-    F = boundary_facets(np.asarray(elements), 3)
-    P = points[F]  # (f, 3, 3)
-    q = np.concatenate([P.mean(axis=1), 0.5 * (P + np.roll(P, -1, axis=1)).reshape(-1, 3)])
-    near = trimesh.proximity.signed_distance(obj, q) > -reach  # (trimesh: positive inside)
-    if not near.any():
-        return 0.0, 0.0
-    _, dist, _ = trimesh.proximity.closest_point(surface, q[near])
-    return float(np.percentile(dist, SURFACE_DEVIATION_PERCENTILE)), float(dist.max())
 
 
 def part_axes(mesh, section=None) -> np.ndarray:
@@ -611,29 +573,14 @@ def _write(spec, out, *, name, A, O, centre, d, p_start, p_end, thickness, outli
 
 
 def _facet_warning(A, V, T, O, d, deepest, scale: float, units: str) -> list:
-    """[the warning line] when the tets' surface departs from the part's, near the object at its deepest pose,
-    by more than SURFACE_DEVIATION_REL of the overlap there (:func:`surface_deviation`), else []."""
+    """[the warning line] when the tets' surface departs from the part's near the object at its deepest
+    pose by more than :data:`simfab.coupling.fit.SURFACE_DEVIATION_REL` of the overlap there, else []."""
+    import trimesh
+
     s, overlap = deepest
-    if not overlap > 0:  # (a clearance at the seat: no interference for the facets to cut into)
-        return []
-    h = float((6.0 * np.sqrt(2.0) * float(np.abs(A.volume)) / len(T)) ** (1.0 / 3.0))  # (the tets' edge length)
-    dev, top = surface_deviation(A, V, T, O.copy().apply_translation(s * np.asarray(d)), 2.0 * h)
-    if dev <= SURFACE_DEVIATION_REL * overlap:
-        return []
-    # the chords' depth goes as h^2 ~ N^(-2/3): the tets that bring it to SURFACE_DEVIATION_REL of the overlap
-    need = len(T) * (dev / (SURFACE_DEVIATION_REL * overlap)) ** 1.5
-    pct = f"{SURFACE_DEVIATION_PERCENTILE:.0f}"
-    return [f"near the object at its deepest pose the tets' surface departs from the part's by {dev / scale:.3g} "
-            f"{units} ({pct}th percentile; at most {top / scale:.3g} {units}; the tets' edges are {h / scale:.3g} "
-            f"{units}), {100 * dev / overlap:.0f} % of the object's {overlap / scale:.3g} {units} overlap with the "
-            f"part there: the forces there depend on the mesh by about as much; about --elements "
-            f"{_round_up(need)} brings it to {100 * SURFACE_DEVIATION_REL:.0f} % (it shrinks as the edges' square)"]
-
-
-def _round_up(n: float) -> int:
-    """n rounded up to two significant digits."""
-    k = 10 ** max(0, int(np.floor(np.log10(max(n, 1.0)))) - 1)
-    return int(np.ceil(n / k) * k)
+    at = O.copy().apply_translation(s * np.asarray(d))
+    return fit_warnings(A, V, T, overlap, lambda q, reach: trimesh.proximity.signed_distance(at, q) > -reach,
+                        scale=scale, units=units)  # (trimesh: positive inside)
 
 
 def _toml(v) -> str:

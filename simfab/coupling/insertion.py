@@ -231,7 +231,8 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool |
     """
     from simfab._warp import device as check_device  # quiet Warp initialization
     from simfab.contact.sdf import PrimitiveField
-    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.fit import scene_fit_warnings
+    from simfab.coupling.scene import load_coupling_scene, part_surface
     from simfab.coupling.simulate import check_start, simulate_insertion
     from simfab.design.scene import check_brief_table
     from simfab.progress import log
@@ -250,6 +251,11 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool |
     mu = f", friction {cm.contact.friction:g}" if cm.contact.friction > 0 else ", frictionless"
     log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {obj}, {len(cm.s_steps) - 1} steps{mu}", quiet=quiet)
     result = result_of(simulate_insertion(cm, quiet=quiet), radius=stress_radius(scene))
+    surface = part_surface(scene) if cm.dim == 3 else None
+    if surface is not None and result.insertion.steps:  # (a part of the user's own: do its tets resolve the
+        # fit where the object ends up? simfab.coupling.fit)
+        fit = scene_fit_warnings(cm, surface, result.insertion.steps[-1].s)
+        result = dataclasses.replace(result, warnings=[*result.warnings, *(f"{cm.name}: {w}" for w in fit)])
     if out is None:
         return result
     from simfab.coupling.outputs import write_all

@@ -339,6 +339,24 @@ def object_mesh_body_frame(sc, body: str):
     return m
 
 
+def part_surface(scene):
+    """The surface a 3D scene's part is meshed from (``[compliant] mesh``, in the scene's frame) [m], or
+    None (a 2D scene, a generator's part).
+
+    Args:
+        scene: NAME.xml, NAME.toml or a bundled scene's name.
+
+    Returns:
+        A trimesh, or None.
+    """
+    toml = scene_paths(scene)[1]
+    doc = read_scene_toml(toml)
+    comp = doc.get("compliant") or {}
+    if doc.get("dim") != 3 or "mesh" not in comp:
+        return None
+    return load_mesh(toml.parent / str(comp["mesh"]), units=comp.get("units", "m"), require_watertight=True)
+
+
 def stored_part_table(mesh_file: str, surface: str, units: str, tets: int) -> dict:
     """The ``[compliant]`` table of a 3D part stored as tets beside the surface they were meshed from: the
     tets (``mesh_file``) are what every run meshes, the surface (``generator = "mesh"``) is what a

@@ -175,6 +175,9 @@ def test_3d_scene_keeps_its_tets_and_can_be_refined(meshes, tmp_path, capsys):
     assert surf.is_watertight and np.allclose(surf.bounds, [cm.fem.rest.min(axis=0), cm.fem.rest.max(axis=0)],
                                               atol=2e-3 * diag)
     # (600 asked: the mesher's floor for this part is ~930 tets, and the scene's target is what it made)
+    from simfab.coupling import run
+
+    assert not [m for m in run(xml, steps=3).warnings if "departs" in m]  # (resolved: couple simulate agrees)
     levels = run_levels(xml, (1.0, 2.0), overrides={"simulation": {"steps": 4}})
     assert levels[0].elements == cm.fem.n_elements  # the stored mesh
     assert 1.5 < levels[1].elements / levels[0].elements < 2.5  # meshed again from the surface
@@ -248,3 +251,15 @@ def test_an_interference_the_tets_do_not_resolve_is_warned_of(tmp_path, capsys):
     assert overlap == pytest.approx(0.15, abs=0.01) and 0.1 * overlap < dev < overlap  # [mm]
     need = int(re.search(r"--elements (\d+)", w).group(1))
     assert 5_000 < need < 50_000
+    # couple simulate checks a scene whose part is stored beside its surface the same way (a user's
+    # hand-written scene, or this one with its target_elements edited), where the object comes to rest
+    # (measured: 0.26 mm short of the bore's centre, its overlap with the bore's wall 0.27 mm, the
+    # departure there 0.035 mm)
+    from simfab.coupling import run
+
+    res = run(str(tmp_path / "s" / "block.xml"), steps=3)
+    (w2,) = [m for m in res.warnings if "departs" in m]
+    found = re.search(r"by ([0-9.]+) mm \(90th.*?of the object's ([0-9.]+) mm overlap", w2)
+    dev2, overlap2 = (float(x) for x in found.groups())
+    assert 0.14 < overlap2 < 0.4 and 0.1 * overlap2 < dev2 < overlap2  # [mm]
+    assert "[compliant] target_elements" in w2
