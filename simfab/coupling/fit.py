@@ -62,7 +62,7 @@ def edge_length(surface, n_tets: int) -> float:
 
 
 def fit_warnings(surface, points: np.ndarray, elements: np.ndarray, overlap: float,
-                 near: Callable[[np.ndarray], np.ndarray], *, scale: float = 1e-3, units: str = "mm",
+                 near: Callable[[np.ndarray, float], np.ndarray], *, scale: float = 1e-3, units: str = "mm",
                  flag: str = "--elements") -> list:
     """[the warning line] when the tets' surface departs from the part's near the object by more than
     SURFACE_DEVIATION_REL of the object's overlap with the part there, else [].
@@ -72,7 +72,8 @@ def fit_warnings(surface, points: np.ndarray, elements: np.ndarray, overlap: flo
         points: (n, 3) the tets' vertices [m]; elements: (m, 4) the tets.
         overlap: how deep the object reaches into the part at the pose checked [m] (<= 0: a clearance,
             nothing to warn of).
-        near: see :func:`surface_deviation` (called with the reach, twice the tets' edge length, applied).
+        near: (q (k, 3) [m], reach [m]) -> (k,) bool: inside the object or within reach of it at the pose
+            checked (reach: twice the tets' edge length).
         scale, units: the lengths' unit in the message (metres per unit).
         flag: what sets the tets' count (``--elements``, ``[compliant] target_elements``).
 

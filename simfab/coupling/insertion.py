@@ -243,6 +243,7 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool |
     cm = load_coupling_scene(scene, overrides=scene_overrides(overrides), device=dev)
     check_brief_table(scene)  # the scene's [design] table, though simulating does not read it
     check_start(cm)  # before the log line: bad input gives exactly one line on stderr
+    surface = part_surface(scene) if cm.dim == 3 else None  # (its surface file too, for the fit's check)
     kind = "quadratic elements" if cm.options.element_order == 2 else "elements"
     exact = isinstance(cm.field, PrimitiveField)  # exact signed distance, not sampled
     section = {"sphere": "circle", "box": "rectangle"} if cm.dim == 2 else {}  # 2D: the primitives' sections
@@ -251,7 +252,6 @@ def run(scene, *, out=None, seed: int = 0, device: str = "cpu", progress: bool |
     mu = f", friction {cm.contact.friction:g}" if cm.contact.friction > 0 else ", frictionless"
     log(f"couple: {cm.name}: {cm.fem.n_elements} {kind}, {obj}, {len(cm.s_steps) - 1} steps{mu}", quiet=quiet)
     result = result_of(simulate_insertion(cm, quiet=quiet), radius=stress_radius(scene))
-    surface = part_surface(scene) if cm.dim == 3 else None
     if surface is not None and result.insertion.steps:  # (a part of the user's own: do its tets resolve the
         # fit where the object ends up? simfab.coupling.fit)
         fit = scene_fit_warnings(cm, surface, result.insertion.steps[-1].s)

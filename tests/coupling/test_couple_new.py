@@ -5,6 +5,7 @@ and a cylinder STL, in assembly position (the cylinder sitting in the clip's sea
 """
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -182,6 +183,12 @@ def test_3d_scene_keeps_its_tets_and_can_be_refined(meshes, tmp_path, capsys):
     assert levels[0].elements == cm.fem.n_elements  # the stored mesh
     assert 1.5 < levels[1].elements / levels[0].elements < 2.5  # meshed again from the surface
     assert all(lv.figures["E_max"] > 0 for lv in levels)
+    # the surface the scene names is part of it: missing, simulate refuses before running, naming the file
+    Path(made["outputs"]["part_ply"]).unlink()
+    capsys.readouterr()
+    assert main(["couple", "simulate", xml, "--steps", "2", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "part.ply" in err[0] and "not found" in err[0] and not (tmp_path / "o").exists()
 
 
 @pytest.mark.parametrize("dim,angle", [("2", 30.0), ("2", 137.0), ("3", 30.0)])
