@@ -35,6 +35,7 @@ class FacetCheck:
     points: object = None
     margin: float = np.inf
 
+
 def crossing_facets(cm: CouplingModel, x: np.ndarray, s: float, state: StepState,
                     final: Evaluation | None = None) -> list:
     """Facets to (re)refine at (x, s): unrefined boundary facets near O whose interior crosses into
