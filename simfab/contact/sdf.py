@@ -152,17 +152,17 @@ def _box_sdf(e: np.ndarray, q: np.ndarray, hessian: bool):
     u = np.abs(q)
     u -= e
     pos = np.maximum(u, 0.0)
-    n = np.sqrt(np.einsum("kd,kd->k", pos, pos))
-    outside = n > 0
-    if np.count_nonzero(outside) == len(n):  # (the usual case: every point outside O)
+    n = np.sqrt(np.add.reduce(pos * pos, axis=1))
+    if not len(n) or np.minimum.reduce(n) > 0:  # (the usual case: every point outside O)
         psi, n_out, ins = -n, n, None
     else:
+        outside = n > 0
         psi = np.where(outside, -n, -u.max(axis=1))
         n_out = np.where(outside, n, 1.0)  # (inside, pos = 0: g's row is set below)
         ins = ~outside
-    # -(pos * sign(q)), sign(0) = 1 (pos = 0 where q = 0: the copied sign only signs a zero)
-    g = np.copysign(pos, np.negative(q))
-    g /= n_out[:, None]
+    # -(pos * sign(q)) / n, sign(0) = 1 (pos = 0 where q = 0: the copied sign only signs a zero)
+    g = np.copysign(pos, q)
+    g /= -n_out[:, None]
     if ins is not None:
         rows = np.flatnonzero(ins)
         j = np.argmax(u[rows], axis=1)
