@@ -63,7 +63,7 @@ def edge_length(surface, n_tets: int) -> float:
 
 def fit_warnings(surface, points: np.ndarray, elements: np.ndarray, overlap: float,
                  near: Callable[[np.ndarray, float], np.ndarray], *, scale: float = 1e-3, units: str = "mm",
-                 flag: str = "--elements") -> list:
+                 flag: str = "--elements", at: str = "at its deepest pose") -> list:
     """[the warning line] when the tets' surface departs from the part's near the object by more than
     SURFACE_DEVIATION_REL of the object's overlap with the part there, else [].
 
@@ -76,6 +76,7 @@ def fit_warnings(surface, points: np.ndarray, elements: np.ndarray, overlap: flo
             checked (reach: twice the tets' edge length).
         scale, units: the lengths' unit in the message (metres per unit).
         flag: what sets the tets' count (``--elements``, ``[compliant] target_elements``).
+        at: where the object is, in the message.
 
     Returns:
         A list of at most one line.
@@ -88,7 +89,7 @@ def fit_warnings(surface, points: np.ndarray, elements: np.ndarray, overlap: flo
         return []
     need = len(elements) * (dev / (SURFACE_DEVIATION_REL * overlap)) ** 1.5
     pct = f"{SURFACE_DEVIATION_PERCENTILE:.0f}"
-    return [f"near the object at its deepest pose the tets' surface departs from the part's by {dev / scale:.3g} "
+    return [f"near the object {at} the tets' surface departs from the part's by {dev / scale:.3g} "
             f"{units} ({pct}th percentile; at most {top / scale:.3g} {units}; the tets' edges are {h / scale:.3g} "
             f"{units}), {100 * dev / overlap:.0f} % of the object's {overlap / scale:.3g} {units} overlap with the "
             f"part there: the forces there depend on the mesh by about as much; about {flag} "
@@ -113,7 +114,7 @@ def scene_fit_warnings(cm, surface, s: float) -> list:
     overlap = float(cm.field.evaluate(np.asarray(surface.vertices, dtype=np.float64), pose, hessian=False).psi.max())
     return fit_warnings(surface, np.asarray(fem.rest), np.asarray(fem.elements), overlap,
                         lambda q, reach: cm.field.evaluate(q, pose, hessian=False).psi > -reach,
-                        flag="[compliant] target_elements")
+                        flag="[compliant] target_elements", at=f"where it comes to rest (s = {1e3 * s:.4g} mm)")
 
 
 def _round_up(n: float) -> int:
