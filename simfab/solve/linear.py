@@ -92,7 +92,11 @@ class LagConfig:
     one simulation change little from one solve to the next), until the residual's 2-norm is at most
     ``rtol`` times the right-hand side's (or a caller's absolute bound is met); only when that takes
     more than ``max_iter`` iterations (or would, at the rate of the first :data:`ABORT_AFTER`) is
-    the matrix factorized (and solved directly). A curvature p^T A p <= 0 met by the iterations
+    the matrix factorized (and solved directly). A solve that converged in more than
+    ``refactor_after`` iterations leaves the factorization stale: the next new matrix is factorized
+    instead of iterated on (each solve on a drifting preconditioner takes more iterations, and a
+    factorization costs about 2 x refactor_after iterations' triangular solves and products on the
+    insertion's P2 systems, 2D and 3D: docs/decisions.md, "Refactorizing a slow preconditioner"). A curvature p^T A p <= 0 met by the iterations
     proves the matrix indefinite and raises :class:`NotPositiveDefinite`, as a failed factorization
     does. Below ``min_unknowns`` (where a factorization costs few triangular solves) every new
     matrix is factorized, unless ``when_shifted`` and the solver's ``shift_hint`` is set: a pinned
@@ -103,11 +107,13 @@ class LagConfig:
     min_unknowns: int = 50_000
     rtol: float = 1e-6
     max_iter: int = 12
+    refactor_after: int = 5
     when_shifted: bool = True
 
     def __post_init__(self):
         bad = [k for k, ok in {"min_unknowns": self.min_unknowns >= 0, "rtol": 0.0 < self.rtol < 1.0,
-                               "max_iter": self.max_iter >= 1}.items() if not ok]
+                               "max_iter": self.max_iter >= 1,
+                               "refactor_after": self.refactor_after >= 1}.items() if not ok]
         if bad:
             raise ValueError(f"invalid LagConfig: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
 
@@ -232,6 +238,7 @@ class SPDSolver:
         self._A = None  # cvxopt spmatrix holding the lower triangle
         self._F = None  # CHOLMOD symbolic (then numeric) factor
         self._factored = None  # the values of the current numeric factorization (None: none)
+        self._stale = False  # a lagged solve on the current factorization was slow or failed (see LagConfig)
         # solve_free: (full pattern key, free indices, value map full -> factor input, the index
         # arrays (indptr, indices) last seen with that key)
         self._full = None
@@ -333,8 +340,8 @@ class SPDSolver:
         is at most ``atol`` [units of b] (None: rtol only; e.g. a fraction of Newton's force target,
         below which the residual cannot matter). Returns x, or None when the solve is not lagged (no lag
         configured, too few unknowns and no shift, no factorization of this pattern and free set yet, b
-        with several columns) or the iterations did not converge: the caller then factorizes. A matrix
-        equal to the factorized one is solved directly.
+        with several columns), the factorization is stale (:attr:`stale`) or the iterations did not
+        converge: the caller then factorizes. A matrix equal to the factorized one is solved directly.
         Raises :class:`NotPositiveDefinite` when the iterations meet negative curvature."""
         lag = self.lag
         free = np.asarray(free)
@@ -357,10 +364,19 @@ class SPDSolver:
                 return self._woodbury(r, U, mu)
         if np.array_equal(values, self._factored):
             return precondition(b)
+        if self._stale:
+            return None
         x = self._pcg(A, free, b, precondition, U, mu, atol, lag.rtol if rtol is None else rtol)
         if x is not None:
             self.lagged_solves += 1
         return x
+
+    @property
+    def stale(self) -> bool:
+        """A lagged solve on the current factorization took more than ``LagConfig.refactor_after``
+        iterations or did not converge: later lagged solves are not tried on it (reset by the next
+        factorization)."""
+        return self._stale
 
     def _pcg(self, A: sp.csr_matrix, free: np.ndarray, b: np.ndarray, precondition, U: np.ndarray | None,
              mu: float, atol: float | None, rtol: float):
@@ -396,7 +412,12 @@ class SPDSolver:
             self.pcg_iterations += 1
             raise
         self.pcg_iterations += res.iterations
+        self._stale = not res.converged or res.iterations > self._refactor_after(n)
         return res.x if res.converged else None
+
+    def _refactor_after(self, n: int) -> int:
+        """Lagged iterations after which an n-unknown system's factorization is stale (see :class:`LagConfig`)."""
+        return self.lag.refactor_after
 
     def _analysed(self, A, free: np.ndarray):
         """(A as canonical CSR, whether its pattern and the free set are those of the analysis)."""
@@ -496,6 +517,7 @@ class SPDSolver:
         import cvxopt
 
         self.factorizations += 1
+        self._stale = False
         cholmod = import_cholmod()
         self._A.V = cvxopt.matrix(values)
         try:

@@ -279,7 +279,6 @@ class MultigridSolver(SPDSolver):
         self.multigrid_solves = 0
         self.multigrid_iterations = 0
         self._mg = None  # (free, value map A.data -> A_ff.data, A_ff, TwoLevelP2, the pattern's index arrays)
-        self._lag_failed = -1  # the factorization count when a lagged solve last failed
         self._direct = False  # within SPDSolver.solve_free's own path
         self._coarse_done = 0  # factorizations of the coarse solvers of earlier free sets
 
@@ -301,18 +300,19 @@ class MultigridSolver(SPDSolver):
     def solve_free_lagged(self, A, free, b, U=None, mu=0.0, atol=None, rtol=None):
         """As :meth:`SPDSolver.solve_free_lagged` (the same arguments), with the p-multigrid solve in
         the order of their cost: a lagged solve on the current factorization first (a triangular
-        solve per iteration), unless the last one on this factorization did not converge; then
+        solve per iteration), unless the factorization is stale (:attr:`SPDSolver.stale`); then
         p-multigrid CG; None when neither converged (the caller then factorizes)."""
         if self._direct:
             return None
-        if self._lag_failed != self.factorizations:
-            tried = self.pcg_iterations
-            x = super().solve_free_lagged(A, free, b, U, mu, atol, rtol)
-            if x is not None:
-                return x
-            if self.pcg_iterations > tried:  # iterated without converging
-                self._lag_failed = self.factorizations  # not tried again on this factorization
+        x = super().solve_free_lagged(A, free, b, U, mu, atol, rtol)  # (None on a stale factorization)
+        if x is not None:
+            return x
         return self._multigrid(A, free, b, U, mu, atol, rtol)
+
+    def _refactor_after(self, n: int) -> int:
+        # where p-multigrid would take over from a slow lagged solve (not a factorization), only a
+        # failed one makes the factorization stale
+        return self.lag.max_iter if n >= self.multigrid.min_unknowns else self.lag.refactor_after
 
     def _multigrid(self, A, free, b, U, mu, atol, rtol):
         """x of (A[free][:, free] + mu U U^T) x = b by p-multigrid CG, or None (not tried or not converged)."""

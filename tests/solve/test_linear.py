@@ -283,6 +283,35 @@ def test_lagging_falls_back_to_a_factorization_and_respects_its_size_threshold()
     assert small.factorizations == 2 and small.pcg_iterations == 0
 
 
+def test_a_slow_lagged_solve_leaves_the_factorization_stale():
+    # LagConfig.refactor_after: a lagged solve that converged in more iterations than it leaves the
+    # factorization stale, and the next new matrix is factorized (solved exactly, no iteration); one
+    # within it keeps the factorization for the next solve
+    A0, A1, free, rng = _free_system(seed=3)
+    D = sp.diags(1.0 + 0.05 * rng.random(A0.shape[0]))
+    A2 = (D @ A0 @ D).tocsr()
+    A2.sort_indices()
+    b = rng.standard_normal(len(free))
+    probe = SPDSolver(lag=LagConfig(min_unknowns=0, rtol=1e-10, max_iter=30))
+    probe.solve_free(A0, free, b)
+    probe.solve_free(A1, free, b)
+    it = probe.pcg_iterations
+    assert probe.lagged_solves == 1 and it >= 2
+    for after, stale in ((it, False), (it - 1, True)):
+        solver = SPDSolver(lag=LagConfig(min_unknowns=0, rtol=1e-10, max_iter=30, refactor_after=after))
+        solver.solve_free(A0, free, b)
+        solver.solve_free(A1, free, b)
+        assert solver.pcg_iterations == it and solver.stale == stale
+        x = solver.solve_free(A2, free, b)
+        exact = np.linalg.solve(A2.toarray()[np.ix_(free, free)], b)
+        assert np.abs(x - exact).max() <= 1e-8 * np.abs(exact).max()
+        assert solver.factorizations == (2 if stale else 1)
+        if stale:  # factorized: no iteration, and the new factorization is fresh
+            assert solver.pcg_iterations == it and solver.lagged_solves == 1 and not solver.stale
+        else:
+            assert solver.pcg_iterations > it and solver.lagged_solves == 2
+
+
 def test_lagging_below_the_size_threshold_once_a_pinned_solve_needed_its_shift():
     # LagConfig.when_shifted: below min_unknowns a solver lags only after a pinned solve has set its
     # shift_hint (every solve is then conjugate gradients on a factorization that is not the matrix's
@@ -347,3 +376,5 @@ def test_lag_config_rejects_bad_fields():
         LagConfig(rtol=0.0)
     with pytest.raises(ValueError, match="max_iter"):
         LagConfig(max_iter=0)
+    with pytest.raises(ValueError, match="refactor_after"):
+        LagConfig(refactor_after=0)
