@@ -12,8 +12,9 @@ public tolerances, raised for these runs), which is what "the derivative of the 
 means; at 1e-4 the difference quotients kept the residual's noise, and agreed only while the
 perturbed runs took the same solver path (the same lagged and direct solves). With friction the
 lag is converged likewise (``lag_tol`` 1e-6): the adjoint differentiates the step at its converged
-lag. Steps solved from an unrecorded state (``supported`` False) are excluded. P2 models are rebuilt from the perturbed linear mesh (``to_p2``), their derivatives
-chained to its vertices (``linear_rest_derivative``).
+lag. Steps solved from an unrecorded state (``supported`` False) are excluded. P2 models are
+rebuilt from the perturbed linear mesh (``to_p2``), their derivatives chained to its vertices
+(``linear_rest_derivative``).
 """
 
 import dataclasses
