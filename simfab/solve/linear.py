@@ -99,10 +99,10 @@ class LagConfig:
     insertion's P2 systems, 2D and 3D: docs/decisions.md, "Refactorizing a slow preconditioner").
     A curvature p^T A p <= 0 met by the iterations proves the matrix indefinite and raises
     :class:`NotPositiveDefinite`, as a failed factorization does. Below ``min_unknowns`` (where a
-    factorization costs few triangular solves) every new matrix is factorized, unless ``when_shifted`` and the solver's ``shift_hint`` is set: a pinned
-    solve (:class:`simfab.coupling.rigid.PinnedSolver`) has needed a diagonal shift, so every solve is
-    already conjugate gradients preconditioned by a factorization that is not the matrix's own, and an
-    older one serves nearly as well."""
+    factorization costs few triangular solves) every new matrix is factorized, unless ``when_shifted``
+    and the solver's ``shift_hint`` is set: a pinned solve (:class:`simfab.coupling.rigid.PinnedSolver`)
+    has needed a diagonal shift, so every solve is already conjugate gradients preconditioned by a
+    factorization that is not the matrix's own, and an older one serves nearly as well."""
 
     min_unknowns: int = 50_000
     rtol: float = 1e-6
