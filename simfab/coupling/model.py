@@ -150,15 +150,9 @@ class CouplingModel:
         """
         key = ("pos_quat", float(s))
         out = self._cache.get(key)
-        if out is None:
-            L = float(self.path.length)
-            u = self.end_direction
-            if s > L and u is not None:  # past the last keyframe: straight on along the last segment
-                pos, quat = self.path.pose_at(L)
-                pos = np.asarray(pos, dtype=float) + (s - L) * u
-            else:
-                pos, quat = self.path.pose_at(s)
-            out = self._cache[key] = (np.asarray(pos, dtype=float), np.asarray(quat, dtype=float))
+        if out is None:  # (past the last keyframe the orientation is the last one: pose_at clamps s)
+            quat = self.path.pose_at(s)[1]
+            out = self._cache[key] = (self.position(s), np.asarray(quat, dtype=float))
         return out
 
     def position(self, s: float) -> np.ndarray:
@@ -172,9 +166,9 @@ class CouplingModel:
         """
         L = float(self.path.length)
         u = self.end_direction
-        if s > L and u is not None:
-            return self.path.position_at(L) + (s - L) * u
-        return self.path.position_at(s)
+        if s > L and u is not None:  # past the last keyframe: straight on along the last segment
+            return np.asarray(self.path.position_at(L), dtype=float) + (s - L) * u
+        return np.asarray(self.path.position_at(s), dtype=float)
 
     @property
     def end_direction(self) -> np.ndarray | None:
@@ -182,11 +176,10 @@ class CouplingModel:
         translation (O may then continue past the last keyframe until it comes to rest), else None."""
         key = "end_direction"
         if key not in self._cache:
-            pos, quat = self.path.positions, self.path.quats
+            pos = self.path.positions
             d = np.asarray(pos[-1] - pos[-2], dtype=float)
-            turn = abs(abs(float(np.dot(quat[-1], quat[-2]))) - 1.0) > 1e-12
             n = float(np.linalg.norm(d))
-            self._cache[key] = None if (turn or n == 0) else d / n
+            self._cache[key] = None if (self.path.segment_turns[-1] or n == 0) else d / n
         return self._cache[key]
 
     def direction(self, s: float) -> np.ndarray:

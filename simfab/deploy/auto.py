@@ -234,7 +234,7 @@ def complete(scene, given: dict):
         if sizes:
             upd["insert_half_sizes"] = tuple(sizes)
             decided.append("pattern.insert_half_sizes")
-        elif max(pc.sizes) + pc.beam_width >= h / 2:  # no size fits the cell, the fixed default neither
+        elif not dataclasses.replace(pc, spacing=h).plates_fit():  # no size fits the cell, the default neither
             raise InputError(f"no insert fits a {1e3 * h:.3g} mm cell: an insert's plates (half-side r >= "
                              f"{1e3 * min_insert:.3g} mm) and their {1e3 * pc.beam_width:.3g} mm beams need r + "
                              "beam_width < spacing / 2 (a larger spacing, or narrower beams: pattern.beam_width)",

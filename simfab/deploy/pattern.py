@@ -100,9 +100,18 @@ class PatternConfig:
                              where="pattern.insert_half_sizes")
         object.__setattr__(self, "insert_half_sizes", tuple(self.insert_half_sizes))
         require_positive(self, "pattern.")
-        field = "insert_half_sizes" if self.insert_half_sizes else "insert_half_size"
         if len(set(self.sizes)) != len(self.sizes):
-            raise InputError(f"sizes must differ (got {list(self.insert_half_sizes)})", where=f"pattern.{field}")
+            raise InputError(f"sizes must differ (got {list(self.insert_half_sizes)})", where=self._sizes_key)
+
+    @property
+    def _sizes_key(self) -> str:
+        """The scene key the insert sizes come from."""
+        return "pattern.insert_half_sizes" if self.insert_half_sizes else "pattern.insert_half_size"
+
+    def plates_fit(self) -> bool:
+        """Whether the largest plates stay clear of their neighbours' at the spacing: half-side r +
+        beam_width < spacing / 2."""
+        return max(self.sizes) + self.beam_width < self.spacing / 2
 
     def check_plates(self) -> None:
         """Refuse a catalogue whose largest plates would overlap their neighbours' at the spacing (half-side
@@ -113,11 +122,10 @@ class PatternConfig:
         Raises:
             InputError: naming ``pattern.insert_half_size`` or ``pattern.insert_half_sizes``.
         """
-        if not max(self.sizes) + self.beam_width < self.spacing / 2:
-            field = "insert_half_sizes" if self.insert_half_sizes else "insert_half_size"
+        if not self.plates_fit():
             raise InputError(f"insert size {max(self.sizes)} m: two neighbouring insert plates (half-side r + "
                              f"beam_width) would overlap at spacing {self.spacing} m (needs r < spacing/2 - "
-                             f"beam_width)", where=f"pattern.{field}")
+                             f"beam_width)", where=self._sizes_key)
 
     @property
     def sizes(self) -> tuple:

@@ -120,9 +120,15 @@ class Trajectory:
         k = len(self.positions)
         u = min(max(float(u), 0.0), float(k - 1))
         i = min(int(np.floor(u)), k - 2)
-        f = u - i
-        pos = (1 - f) * self.positions[i] + f * self.positions[i + 1]
-        return pos, quat_slerp(self.quats[i], self.quats[i + 1], f)
+        return self._pose(i, u - i)
+
+    def _pose(self, i: int, f: float):
+        """(pos, quat) a fraction f of the way along segment i."""
+        return self._position(i, f), quat_slerp(self.quats[i], self.quats[i + 1], f)
+
+    def _position(self, i: int, f: float) -> np.ndarray:
+        """The position a fraction f of the way along segment i."""
+        return (1 - f) * self.positions[i] + f * self.positions[i + 1]
 
     def pose_at(self, s: float):
         """Pose at a path length.
@@ -133,8 +139,7 @@ class Trajectory:
         Returns:
             (pos (3,) [m], quat (4,)).
         """
-        i, f = self._locate(s)
-        return self.pose_at_key(i + f)
+        return self._pose(*self._locate(s))
 
     def position_at(self, s: float) -> np.ndarray:
         """Position at a path length (:meth:`pose_at`'s, without the orientation's slerp).
@@ -145,12 +150,11 @@ class Trajectory:
         Returns:
             (3,) position [m].
         """
-        i, f = self._locate(s)
-        return (1 - f) * self.positions[i] + f * self.positions[i + 1]
+        return self._position(*self._locate(s))
 
     @functools.cached_property
-    def _turning(self) -> np.ndarray:
-        """(k-1,) whether each segment changes the orientation (|q_i . q_(i+1)| below 1 - 1e-12)."""
+    def segment_turns(self) -> np.ndarray:
+        """(k-1,) bool: whether each segment changes the orientation (|q_i . q_(i+1)| below 1 - 1e-12)."""
         q = self.quats
         return np.abs(np.abs((q[:-1] * q[1:]).sum(axis=1)) - 1.0) > 1e-12
 
@@ -163,7 +167,7 @@ class Trajectory:
         Returns:
             True when a segment overlapping [s0, s1] turns.
         """
-        return bool(self._turning[self._locate(s0)[0]: self._locate(s1)[0] + 1].any())
+        return bool(self.segment_turns[self._locate(s0)[0]: self._locate(s1)[0] + 1].any())
 
     def direction_at(self, s: float) -> np.ndarray:
         """Translation direction of the segment containing a path length.
