@@ -145,7 +145,7 @@ def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjec
         if np.isfinite(fc) and fc < best_f:
             best_x, best_f, source = xc, fc, kind
     if best_x is None:
-        best_x = predict(cm, state, s_new, ctx)
+        best_x = predict(cm, state, s_new, obj, ctx)
     xs = snap_contacts(cm, state, best_x, s_new, ctx)
     if xs is not None and not np.isfinite(obj.value(xs)):  # (+inf: infeasible, inside O or inverted)
         # restoring the gaps carried points that were not in contact into O (where the contact spreads):
@@ -230,16 +230,21 @@ def move_points(cm: CouplingModel, pts: ContactPoints, x: np.ndarray, sel: np.nd
 
 
 
-def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext) -> np.ndarray:
+def predict(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjective, ctx: StepContext) -> np.ndarray:
     """Feasible warm start at s_new (see the module docstring, step 1).
 
     Points O can reach during the step (distance below L |O's displacement there| + d_hat) are
-    pushed along O's normal by O's normal displacement (they may slide tangentially, as in
-    frictionless contact); the rest of A follows through one linear solve with the previous
-    tangent stiffness. Points still inside O afterwards are carried fully (rigidly with O) and the
+    pushed along O's normal (they may slide tangentially, as in frictionless contact); the rest of A
+    follows through one linear solve with the previous tangent stiffness. Two pushes, the lower
+    objective of the feasible ones kept: every reachable point by O's normal displacement n . delta
+    (the contact region moves as one: right where O arrives deep into A, a large step), and every
+    point by what that displacement takes out of its gap d beyond LIFT_TO * d_hat,
+    n . delta - max(d - LIFT_TO d_hat, 0) where positive (right where O arrives within the step: the
+    whole push over-deforms A there, cclamp2d's first contact started Newton at 7x the step's energy;
+    but a deep overlap met by a few points alone is a point load, a local dent far above the energy of
+    the pushed region). Points still inside O after a push are carried fully (rigidly with O) and its
     solve is repeated; as a last resort every reachable point is carried rigidly.
     """
-    timer = ctx.timer
     x = state.x
     dim = cm.dim
     Ra, pa = cm.pose(state.s)
@@ -247,7 +252,7 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext)
 
     pts = state.points
     y = pts.positions(x)
-    with timer.timed("contact_field"):
+    with ctx.timer.timed("contact_field"):
         ev_a = cm.field.evaluate(y, (Ra, pa), hessian=False)
     delta = cm.carry(y, state.s, s_new) - y
     reach = (-ev_a.psi < C.PSI_LIPSCHITZ * np.linalg.norm(delta, axis=1) + point_dhat(cm, pts)) & ev_a.near
@@ -258,10 +263,30 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext)
     nrm = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
     nrm = nrm @ M[:dim, :dim].T
     push = np.einsum("kd,kd->k", nrm, delta)
-    normal = reach & (push > 0)
+    need = push - np.maximum(-ev_a.psi - C.LIFT_TO * point_dhat(cm, pts), 0.0)
+    best, best_f = None, np.inf
+    for normal, target in ((reach & (need > 0), nrm * need[:, None]), (reach & (push > 0), delta)):
+        x0 = _pushed(cm, state, pts, s_new, reach, normal, nrm, delta, target, ctx)
+        f0 = np.inf if x0 is None else obj.value(x0)
+        if f0 < best_f:
+            best, best_f = x0, f0
+    if best is not None:
+        return best
+    x0 = penalty_solve(cm, state, x, pts, np.zeros_like(reach), reach, nrm, delta, ctx)
+    d_new = feasible_distances(cm, x0, s_new, pts, ctx)
+    if d_new is not None and np.all(d_new > 0):
+        return x0
+    raise ConvergenceError(f"no feasible warm start for the step to s={s_new:.6g} m")
+
+
+def _pushed(cm, state, pts, s_new, reach, normal, nrm, delta, target, ctx) -> np.ndarray | None:
+    """The penalty solve moving the points ``normal`` along ``nrm`` by n . target (k, dim), with the points
+    still inside O afterwards carried rigidly with O (by ``delta``) and the solve repeated (everything
+    reachable once an element inverts), at most PREDICTOR_RETRIES times; None when no solve is feasible."""
     full = np.zeros(len(pts), dtype=bool)
     for _ in range(C.PREDICTOR_RETRIES + 1):
-        x0 = penalty_solve(cm, state, x, pts, normal & ~full, full, nrm, delta, ctx)
+        x0 = penalty_solve(cm, state, state.x, pts, normal & ~full, full, nrm,
+                           np.where(full[:, None], delta, target), ctx)
         d_new = feasible_distances(cm, x0, s_new, pts, ctx)
         if d_new is not None and np.all(d_new > 0):
             return x0
@@ -270,14 +295,9 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext)
             continue
         bad = (d_new <= 0) & ~full
         if not bad.any():
-            break
+            return None
         full |= bad
-    full = reach
-    x0 = penalty_solve(cm, state, x, pts, np.zeros_like(full), full, nrm, delta, ctx)
-    d_new = feasible_distances(cm, x0, s_new, pts, ctx)
-    if d_new is not None and np.all(d_new > 0):
-        return x0
-    raise ConvergenceError(f"no feasible warm start for the step to s={s_new:.6g} m")
+    return None
 
 
 def restore_feasibility(cm: CouplingModel, state: StepState, ctx: StepContext) -> None:
