@@ -27,7 +27,6 @@ import numpy as np
 from simfab._warp import wp
 from simfab.fem.neohookean import (
     HESSIAN_BOTH,
-    HESSIAN_EXACT,
     HESSIAN_PROJECT,
     HESSIAN_PROJECT_SVD,
     dim_float,
@@ -50,7 +49,10 @@ _vec12d = wp.types.vector(length=12, dtype=wp.float64)
 _vec30d = wp.types.vector(length=30, dtype=wp.float64)
 _mat12d = wp.types.matrix(shape=(12, 12), dtype=wp.float64)
 _mat30d = wp.types.matrix(shape=(30, 30), dtype=wp.float64)
-
+_vec6d = wp.types.vector(length=6, dtype=wp.float64)
+_vec10d = wp.types.vector(length=10, dtype=wp.float64)
+_mat6x2d = wp.types.matrix(shape=(6, 2), dtype=wp.float64)  # a vector per node
+_mat10x3d = wp.types.matrix(shape=(10, 3), dtype=wp.float64)
 
 # ----------------------------------------------------------------------------------------------
 # per-dimension helpers (Warp overloads on the matrix type)
@@ -75,123 +77,159 @@ def _F_at(x: wp.array(dtype=wp.vec2d), elements: wp.array2d(dtype=wp.int32),  # 
 
 
 @wp.func
-def _zero_hess(F: wp.mat33d):
-    return _mat30d()
+def _scratch(g: wp.vec3d):
+    """The Hessian kernel's zeroed locals, chosen by the type of g (a shape gradient): two element matrices
+    (30 x 30), two tables with a vector per node (10 x 3), and a vector whose length, the node count (10),
+    is a compile-time constant in the kernel (10-node tet)."""
+    return _mat30d(), _mat30d(), _mat10x3d(), _mat10x3d(), _vec10d()
 
 
 @wp.func
-def _zero_hess(F: wp.mat22d):  # noqa: F811
-    return _mat12d()
+def _scratch(g: wp.vec2d):  # noqa: F811
+    """6-node triangle: 12 x 12, 6 x 2, length 6."""
+    return _mat12d(), _mat12d(), _mat6x2d(), _mat6x2d(), _vec6d()
 
 
 @wp.func
-def _add_svd_route(K: Any, A: Any, gN: wp.array3d(dtype=Any), e: int, q: int, d: int, w: wp.float64):
-    """K + w G_q^T A G_q for a full stress Hessian A (d^2 x d^2): the rare dPsi/dJ > 0 route."""
-    Kn = K
-    k = gN.shape[2]
-    for a in range(k):
-        ga = gN[e, q, a]
-        for b in range(a, k):
-            gb = gN[e, q, b]
-            for i in range(d):
-                for j in range(d):
-                    acc = wp.float64(0.0)
-                    for kk in range(d):
-                        for l in range(d):
-                            acc += A[d * i + kk, d * j + l] * ga[kk] * gb[l]
-                    Kn[d * a + i, d * b + j] = Kn[d * a + i, d * b + j] + w * acc
-    return Kn
+def _det_factor(wdJ: wp.float64, J: wp.float64, g: wp.vec3d):
+    """The point's factor t of _det_term from wdJ = w dPsi/dJ (g: a shape gradient, for the overload):
+    wdJ / J (10-node tet)."""
+    return wdJ / J
 
 
 @wp.func
-def _add_qp_hessian(K: _mat30d, F: wp.mat33d, J: wp.float64, mu: wp.float64, lam: wp.float64, w: wp.float64,
-                    mode: int, gN: wp.array3d(dtype=wp.vec3d), e: int, q: int):
-    """K + w * (quadrature point q's Hessian) in the blocks b >= a (10-node tet, 3D).
+def _det_factor(wdJ: wp.float64, J: wp.float64, g: wp.vec2d):  # noqa: F811
+    """6-node triangle: wdJ."""
+    return wdJ
 
-    Exact block (a, b): mu (g_a . g_b) I + d2Psi/dJ2 gamma_a gamma_b^T - dPsi/dJ [F (g_a x g_b)]x,
-    gamma_a = cof(F) g_a (from d2J/dF_ik dF_jl = eps_ijm eps_klp F_mp contracted with g_a, g_b).
-    Projection with dPsi/dJ <= 0: minus 1/2 P_a N P_b^T, P_a = R [g_a]x = [R g_a]x R (the twist
-    modes R [e_i]x / sqrt 2 seen at node a; N the negative part of T = mu I + dPsi/dJ S), as
-    in the linear kernel's direct route. With dPsi/dJ > 0 (or HESSIAN_PROJECT_SVD): the SVD eigensystem.
-    """
-    logJ = wp.log(J)
-    dPsi_dJ = (lam * logJ - mu) / J
-    if mode == HESSIAN_PROJECT_SVD or (mode == HESSIAN_PROJECT and dPsi_dJ > wp.float64(0.0)):
-        return _add_svd_route(K, stress_hessian_svd(F, J, mu, lam), gN, e, q, 3, w)
-    d2 = (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)
+
+@wp.func
+def _det_term(ga: wp.vec3d, gb: wp.vec3d, ca: wp.vec3d, cb: wp.vec3d, t: wp.float64):
+    """w dPsi/dJ F (g_a x g_b), the vector of the block's det term -[.]x (10-node tet), as t (gamma_a x
+    gamma_b) with gamma = cof(F) g, t = w dPsi/dJ / J: (A u) x (A v) = cof(A) (u x v) with A = cof F, and
+    cof(cof F) = J F (the gammas are already at hand, F (g_a x g_b) would cost a cross and a product)."""
+    return t * wp.cross(ca, cb)
+
+
+@wp.func
+def _det_term(ga: wp.vec2d, gb: wp.vec2d, ca: wp.vec2d, cb: wp.vec2d, t: wp.float64):  # noqa: F811
+    """2D: w dPsi/dJ (g_a x g_b), t = w dPsi/dJ."""
+    return t * (ga[0] * gb[1] - ga[1] * gb[0])
+
+
+@wp.func
+def _block(X: wp.mat33d, m: wp.float64, v: wp.vec3d):
+    """w times the exact block (a, b) at a point (10-node tet), mu (g_a . g_b) I + d2Psi/dJ2 gamma_a gamma_b^T
+    - dPsi/dJ [F (g_a x g_b)]x (gamma = cof(F) g; d2J/dF_ik dF_jl = eps_ijm eps_klp F_mp contracted with
+    g_a, g_b), from its parts X = w d2Psi/dJ2 gamma_a gamma_b^T, m = w mu (g_a . g_b), v = _det_term:
+    X + m I - [v]x."""
+    return wp.mat33d(X[0, 0] + m, X[0, 1] + v[2], X[0, 2] - v[1],
+                     X[1, 0] - v[2], X[1, 1] + m, X[1, 2] + v[0],
+                     X[2, 0] + v[1], X[2, 1] - v[0], X[2, 2] + m)
+
+
+@wp.func
+def _block(X: wp.mat22d, m: wp.float64, v: wp.float64):  # noqa: F811
+    """6-node triangle: mu (g_a . g_b) I + d2Psi/dJ2 gamma_a gamma_b^T + dPsi/dJ (g_a x g_b) [[0, 1], [-1, 0]]
+    (d2J/dF_ik dF_jl = eps_ij eps_kl), times w: X + m I + v [[0, 1], [-1, 0]], v = _det_term."""
+    return wp.mat22d(X[0, 0] + m, X[0, 1] + v, X[1, 0] - v, X[1, 1] + m)
+
+
+@wp.func
+def _svd_entry(A: Any, ga: Any, gb: Any, d: int, i: int, j: int):
+    """(G_a^T A G_b)[i, j] = sum_{k,l} A[(i,k), (j,l)] g_a[k] g_b[l] for a full stress Hessian A."""
+    acc = wp.float64(0.0)
+    for kk in range(d):
+        for l in range(d):
+            acc += A[d * i + kk, d * j + l] * ga[kk] * gb[l]
+    return acc
+
+
+@wp.func
+def _svd_block(A: mat99d, ga: wp.vec3d, gb: wp.vec3d, w: wp.float64):
+    """w G_a^T A G_b for the SVD-rebuilt stress Hessian A: the rare dPsi/dJ > 0 route."""
+    B = wp.mat33d()
+    for i in range(3):
+        for j in range(3):
+            B[i, j] = w * _svd_entry(A, ga, gb, 3, i, j)
+    return B
+
+
+@wp.func
+def _svd_block(A: mat44d, ga: wp.vec2d, gb: wp.vec2d, w: wp.float64):  # noqa: F811
+    B = wp.mat22d()
+    for i in range(2):
+        for j in range(2):
+            B[i, j] = w * _svd_entry(A, ga, gb, 2, i, j)
+    return B
+
+
+@wp.func
+def _twist_terms(F: wp.mat33d, dPsi_dJ: wp.float64, mu: wp.float64, w: wp.float64):
+    """(R, Nt, active) of the closed-form projection at one point (10-node tet, dPsi/dJ <= 0): R the polar
+    rotation of F, Nt = w/2 R N R^T with N the negative part of the twist block T = mu I + dPsi/dJ S
+    (S = sym(R^T F)); active = 0 when nothing is removed.
+
+    The eigenvalues of T are mu + dPsi/dJ sigma_i (sigma_i the singular values of F), so N = 0 and R is
+    not needed when mu^2 I - dPsi/dJ^2 F^T F is positive definite (leading minors). Near the rest shape
+    T ~ 0 and rounding decides: about half of those points still take the full route, and a point this test
+    skips has at most a rounding-sized N."""
     I = wp.identity(n=3, dtype=wp.float64)
-    cof = J * wp.transpose(wp.inverse(F))
-    project = 0
-    R = I
-    Nt = wp.mat33d()
-    if mode == HESSIAN_PROJECT:
-        R = polar_rotation3(F)
-        S = wp.transpose(R) * F
-        S = wp.float64(0.5) * (S + wp.transpose(S))
-        N = negative_part_sym3(mu * I + dPsi_dJ * S)
-        if wp.ddot(N, N) > wp.float64(0.0):
-            project = 1
-            Nt = wp.float64(0.5) * w * (R * N * wp.transpose(R))
-    Kn = K
-    k = gN.shape[2]
-    wmu = w * mu
-    wdJ = w * dPsi_dJ
-    for a in range(k):
-        ga = gN[e, q, a]
-        ca = (w * d2) * (cof * ga)
-        RaN = wp.skew(R * ga) * Nt
-        for b in range(a, k):
-            gb = gN[e, q, b]
-            B = (wmu * wp.dot(ga, gb)) * I + wp.outer(ca, cof * gb) - wdJ * wp.skew(F * wp.cross(ga, gb))
-            if project != 0:
-                B = B + RaN * wp.skew(R * gb)  # - [R g_a]x Nt [R g_b]x^T, [v]x^T = -[v]x
-            for i in range(3):
-                for j in range(3):
-                    Kn[3 * a + i, 3 * b + j] = Kn[3 * a + i, 3 * b + j] + B[i, j]
-    return Kn
+    M = (mu * mu) * I - (dPsi_dJ * dPsi_dJ) * (wp.transpose(F) * F)
+    if M[0, 0] > wp.float64(0.0) and M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0] > wp.float64(0.0):
+        if wp.determinant(M) > wp.float64(0.0):
+            return I, wp.mat33d(), 0
+    R = polar_rotation3(F)
+    S = wp.transpose(R) * F
+    S = wp.float64(0.5) * (S + wp.transpose(S))
+    N = negative_part_sym3(mu * I + dPsi_dJ * S)
+    active = 0
+    if wp.ddot(N, N) > wp.float64(0.0):
+        active = 1
+    return R, wp.float64(0.5) * w * (R * N * wp.transpose(R)), active
 
 
 @wp.func
-def _add_qp_hessian(K: _mat12d, F: wp.mat22d, J: wp.float64, mu: wp.float64, lam: wp.float64,  # noqa: F811
-                    w: wp.float64, mode: int, gN: wp.array3d(dtype=wp.vec2d), e: int, q: int):
-    """2D (6-node triangle): exact block mu (g_a . g_b) I + d2Psi/dJ2 gamma_a gamma_b^T +
-    dPsi/dJ (g_a x g_b) [[0, 1], [-1, 0]] (d2J/dF_ik dF_jl = eps_ij eps_kl); projection with
-    dPsi/dJ <= 0 removes the twist mode R [[0, -1], [1, 0]] / sqrt 2 when t = mu + dPsi/dJ < 0:
-    minus t/2 (RJ g_a)(RJ g_b)^T."""
-    zero = wp.float64(0.0)
-    one = wp.float64(1.0)
-    logJ = wp.log(J)
-    dPsi_dJ = (lam * logJ - mu) / J
-    if mode == HESSIAN_PROJECT_SVD or (mode == HESSIAN_PROJECT and dPsi_dJ > zero):
-        return _add_svd_route(K, stress_hessian_svd(F, J, mu, lam), gN, e, q, 2, w)
-    d2 = (mu + lam * (one - logJ)) / (J * J)
-    I = wp.identity(n=2, dtype=wp.float64)
-    E2 = wp.mat22d(zero, one, -one, zero)
-    cof = J * wp.transpose(wp.inverse(F))
+def _twist_terms(F: wp.mat22d, dPsi_dJ: wp.float64, mu: wp.float64, w: wp.float64):  # noqa: F811
+    """6-node triangle: (RJ, -w t/2, active) with RJ = R [[0, -1], [1, 0]] (R the polar rotation of
+    F; the twist mode R [[0, -1], [1, 0]] / sqrt 2) and t = mu + dPsi/dJ its eigenvalue, removed when
+    t < 0."""
     t = mu + dPsi_dJ
-    project = 0
     RJ = wp.mat22d()
-    if mode == HESSIAN_PROJECT and t < zero:
-        project = 1
+    active = 0
+    if t < wp.float64(0.0):
+        active = 1
         cr = F[0, 0] + F[1, 1]
         sr = F[1, 0] - F[0, 1]
         RJ = wp.mat22d(-sr, -cr, cr, -sr) / wp.sqrt(cr * cr + sr * sr)
-    Kn = K
-    k = gN.shape[2]
-    for a in range(k):
-        ga = gN[e, q, a]
-        ca = w * (cof * ga)
-        ra = RJ * ga
-        for b in range(a, k):
-            gb = gN[e, q, b]
-            B = (w * mu * wp.dot(ga, gb)) * I + d2 * wp.outer(ca, cof * gb) + (
-                w * dPsi_dJ * (ga[0] * gb[1] - ga[1] * gb[0])) * E2
-            if project != 0:
-                B = B - (wp.float64(0.5) * w * t) * wp.outer(ra, RJ * gb)
-            for i in range(2):
-                for j in range(2):
-                    Kn[2 * a + i, 2 * b + j] = Kn[2 * a + i, 2 * b + j] + B[i, j]
-    return Kn
+    return RJ, wp.float64(-0.5) * w * t, active
+
+
+@wp.func
+def _twist_node(u: wp.vec3d, Nt: wp.mat33d):
+    """Node a's left factor of the removed twist part, u = R g_a: [u]x Nt (10-node tet). The part is
+    1/2 P_a N P_b^T (times w) with P_a = R [g_a]x = [R g_a]x R: the twist modes R [e_i]x / sqrt 2 seen at
+    node a, as in the linear kernel's direct route."""
+    return wp.skew(u) * Nt
+
+
+@wp.func
+def _twist_node(u: wp.vec2d, c: wp.float64):  # noqa: F811
+    """2D, u = RJ g_a: -w t/2 u."""
+    return c * u
+
+
+@wp.func
+def _twist_block(La: wp.mat33d, u: wp.vec3d):
+    """Minus the removed part of block (a, b), u = R g_b: - [R g_a]x Nt [R g_b]x^T = La [u]x
+    ([v]x^T = -[v]x), whose row i is La[i] x u."""
+    return wp.matrix_from_rows(wp.cross(La[0], u), wp.cross(La[1], u), wp.cross(La[2], u))
+
+
+@wp.func
+def _twist_block(La: wp.vec2d, u: wp.vec2d):  # noqa: F811
+    """2D, u = RJ g_b: - w t/2 (RJ g_a)(RJ g_b)^T."""
+    return wp.outer(La, u)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -252,54 +290,103 @@ def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dty
                     energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
                     hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
                     data2: wp.array(dtype=wp.float64)):
+    """Energy, gradient and Hessian blocks (b >= a) of an element. The exact Hessian is added up in K in
+    place, point by point, by one loop over the node pairs for every mode (a helper taking and returning
+    the whole matrix would copy it several times per point). Where a point's projection changes its blocks
+    (the twist part removed, or the SVD route) that change goes into Kc: the projected Hessian is K + Kc,
+    the points' exact blocks plus their changes (the old per-point sum, reassociated)."""
     e = first + wp.tid()  # this launch's part of the elements
     zero = wp.float64(0.0)
     k = elements.shape[1]
     nq = wq.shape[1]
     mu = mu_e[e]
     lam = lam_e[e]
-    # first pass: det F at every quadrature point (an inverted point voids the whole element)
-    Jmin = wp.float64(wp.inf)
-    for q in range(nq):
-        Jmin = wp.min(Jmin, wp.determinant(_F_at(x, elements, gN, e, q)))
-    det_F[e] = Jmin
-    if Jmin <= zero:
-        void_element(e, scatter, energy, grad, hess)
-        return
     mode = project
     both = 0
     if mode == HESSIAN_BOTH:
         mode = HESSIAN_PROJECT
         both = 1
+    g0 = gN[e, 0, 0]
+    d = len(g0)  # a compile-time constant: the loops over range(d) are unrolled
+    K, Kc, C, U, nodes = _scratch(g0)
+    # k again, as a compile-time constant for the 6-node triangle, whose loops over range(kn) (node pairs)
+    # are then unrolled; not for the 10-node tet, whose 55 pairs unrolled run slower (and compile long)
+    kn = len(nodes) if wp.static(len(nodes) <= 6) else k
     E = zero
     g = grad.dtype()
-    F0 = _F_at(x, elements, gN, e, 0)
-    K = _zero_hess(F0)
-    K2 = _zero_hess(F0)
+    Jmin = wp.float64(wp.inf)
     for q in range(nq):
         F = _F_at(x, elements, gN, e, q)
         J = wp.determinant(F)
+        Jmin = wp.min(Jmin, J)
+        if J <= zero:  # the element is voided below
+            continue
         w = wq[e, q]
         E += w * psi(F, J, mu, lam, dim_float(F))
         P = pk1(F, J, mu, lam)
-        d = dim_int(F)
-        for a in range(k):
-            f = w * (P * gN[e, q, a])
+        logJ = wp.log(J)
+        dPsi_dJ = (lam * logJ - mu) / J
+        s = w * (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)  # w d2Psi/dJ2
+        wmu = w * mu
+        t = _det_factor(w * dPsi_dJ, J, g0)
+        cof = J * wp.transpose(wp.inverse(F))
+        for a in range(kn):
+            ga = gN[e, q, a]
+            f = w * (P * ga)
             for i in range(d):
                 g[d * a + i] = g[d * a + i] + f[i]
-        if both != 0:  # exact Hessian into K2
-            K2 = _add_qp_hessian(K2, F, J, mu, lam, w, HESSIAN_EXACT, gN, e, q)
-        K = _add_qp_hessian(K, F, J, mu, lam, w, mode, gN, e, q)
+            C[a] = cof * ga  # gamma_a
+        for a in range(kn):
+            ga = gN[e, q, a]
+            ca = C[a]
+            sa = s * ca
+            for b in range(a, kn):
+                gb = gN[e, q, b]
+                cb = C[b]
+                B = _block(wp.outer(sa, cb), wmu * wp.dot(ga, gb), _det_term(ga, gb, ca, cb, t))
+                for i in range(d):
+                    for j in range(d):
+                        K[d * a + i, d * b + j] += B[i, j]
+        # projection: the SVD route is rare (dPsi/dJ > 0: strong dilation), so its loops stay rolled
+        if mode == HESSIAN_PROJECT_SVD or (mode == HESSIAN_PROJECT and dPsi_dJ > zero):
+            A = stress_hessian_svd(F, J, mu, lam)  # its blocks replace the exact ones
+            for a in range(k):
+                ga = gN[e, q, a]
+                ca = C[a]
+                for b in range(a, k):
+                    gb = gN[e, q, b]
+                    cb = C[b]
+                    D = _svd_block(A, ga, gb, w) - _block(wp.outer(s * ca, cb), wmu * wp.dot(ga, gb),
+                                                          _det_term(ga, gb, ca, cb, t))
+                    for i in range(d):
+                        for j in range(d):
+                            Kc[d * a + i, d * b + j] += D[i, j]
+        elif mode == HESSIAN_PROJECT:
+            R, Nt, twist = _twist_terms(F, dPsi_dJ, mu, w)
+            if twist != 0:  # minus the negative twist part
+                for a in range(kn):
+                    U[a] = R * gN[e, q, a]
+                for a in range(kn):
+                    La = _twist_node(U[a], Nt)
+                    for b in range(a, kn):
+                        D = _twist_block(La, U[b])
+                        for i in range(d):
+                            for j in range(d):
+                                Kc[d * a + i, d * b + j] += D[i, j]
+    det_F[e] = Jmin
+    if Jmin <= zero:
+        void_element(e, scatter, energy, grad, hess)
+        return
     energy[e] = E
     grad[e] = g
-    kd = k * dim_int(F0)
+    kd = len(K)  # unrolled in 2D (12), a loop in 3D (30 > Warp's max_unroll)
     for r in range(kd):
         for c in range(r, kd):
             if both != 0:  # exact into data, projected into data2
-                store_hessian_entry(scatter, slots, hess, data, e, r, c, K2[r, c])
-                store_hessian_entry(scatter, slots, hess, data2, e, r, c, K[r, c])
-            else:
                 store_hessian_entry(scatter, slots, hess, data, e, r, c, K[r, c])
+                store_hessian_entry(scatter, slots, hess, data2, e, r, c, K[r, c] + Kc[r, c])
+            else:  # Kc is zero unless projected
+                store_hessian_entry(scatter, slots, hess, data, e, r, c, K[r, c] + Kc[r, c])
 
 
 @wp.kernel
