@@ -264,14 +264,15 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjectiv
     nrm = nrm @ M[:dim, :dim].T
     push = np.einsum("kd,kd->k", nrm, delta)
     need = push - np.maximum(-ev_a.psi - C.LIFT_TO * point_dhat(cm, pts), 0.0)
-    best, best_f = None, np.inf
-    for normal, target in ((reach & (need > 0), nrm * need[:, None]), (reach & (push > 0), delta)):
-        x0 = _pushed(cm, state, pts, s_new, reach, normal, nrm, delta, target, ctx)
-        f0 = np.inf if x0 is None else obj.value(x0)
-        if f0 < best_f:
-            best, best_f = x0, f0
-    if best is not None:
-        return best
+    x0 = _pushed(cm, state, pts, s_new, reach, reach & (need > 0), nrm, delta, nrm * need[:, None], ctx)
+    with ctx.timer.timed("assembly"):
+        dent = x0 is not None and float(det_F(cm.fem, x0).min()) < C.PREDICTOR_DENT_J
+    if x0 is None or dent:
+        x1 = _pushed(cm, state, pts, s_new, reach, reach & (push > 0), nrm, delta, delta, ctx)
+        if x0 is None or (x1 is not None and obj.value(x1) < obj.value(x0)):
+            x0 = x1
+    if x0 is not None:
+        return x0
     x0 = penalty_solve(cm, state, x, pts, np.zeros_like(reach), reach, nrm, delta, ctx)
     d_new = feasible_distances(cm, x0, s_new, pts, ctx)
     if d_new is not None and np.all(d_new > 0):

@@ -39,7 +39,9 @@ FRICTION = {"friction": 0.3, "lag_tol": 1e-6, "max_lag_iterations": 50}
 def tight_newton(monkeypatch):
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_REL", 1e-12)
     monkeypatch.setattr(C, "NEWTON_GRAD_TOL_START", 1e-12)
-    monkeypatch.setattr(C, "NEWTON_STEP_TOL_REL", 1e-12)
+    # no step-size stop: at round-off it can fire with the residual above it, and a difference quotient of
+    # two references stopped at different residuals is noise (docs/decisions.md, the contact predictor)
+    monkeypatch.setattr(C, "NEWTON_STEP_TOL_REL", 0.0)
 
 
 def linear_mesh(cm):

@@ -252,9 +252,9 @@ def test_steps_out_of_reach_keep_the_rest_shape_without_a_warm_start(mu, monkeyp
 def test_the_contact_predictor_pushes_a_point_by_what_o_takes_out_of_its_gap():
     # Where O arrives within a step, pushing every point O can reach by O's whole normal displacement
     # over-deforms A (Newton then starts far off: cclamp2d's first contact started at 7x the step's
-    # energy); the predictor also offers the push by what O's approach takes out of each point's gap
-    # and keeps the lower objective. The contact onset's two steps, over four step sizes of the P2
-    # clamp: 11, 11, 8, 6 Newton iterations (the whole push alone: 11, 14, 12, 10; 47 in all).
+    # energy); the predictor pushes each point by what O's approach takes out of its gap (the whole
+    # push only after a dent). The contact onset's two steps, over four step sizes of the P2 clamp:
+    # 11, 11, 8, 6 Newton iterations (the whole push alone: 11, 14, 12, 10; 47 in all).
     onset = []
     for steps in (12, 20, 35, 60):
         res = simulate_insertion(load_coupling_scene("cclamp2d", overrides={
