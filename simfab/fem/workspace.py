@@ -26,14 +26,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from simfab._parallel import submit
+from simfab._sparse import csr_matvec
 from simfab._warp import RECORD_LOCK, Replay, wp
-
-try:  # the kernel of scipy's CSR @ vector (csr_matrix._matmul_vector)
-    from scipy.sparse import _sparsetools
-
-    _CSR_MATVEC = _sparsetools.csr_matvec
-except (ImportError, AttributeError):  # pragma: no cover - another scipy: the operator instead
-    _CSR_MATVEC = None
 
 
 class Launch(IntEnum):
@@ -216,15 +210,8 @@ class Workspace:
 
     def gradient(self) -> np.ndarray:
         """The assembled nodal gradient (n, dim) [N] of the last GRADIENT / HESSIAN / BLOCKS launch
-        (scipy's CSR @ vector kernel called directly: the same sums, without the operator's dispatch)."""
-        v = self.outputs()[2].reshape(-1)
-        S = self.scatter
-        if _CSR_MATVEC is None or v.dtype != np.float64 or not v.flags.c_contiguous:
-            return (S @ v).reshape(self.x_np.shape)
-        m, n = S.shape
-        out = np.zeros(m)
-        _CSR_MATVEC(m, n, S.indptr, S.indices, S.data, v, out)
-        return out.reshape(self.x_np.shape)
+        (:func:`simfab._sparse.csr_matvec`: the same sums, without the operator's dispatch)."""
+        return csr_matvec(self.scatter, self.outputs()[2].reshape(-1)).reshape(self.x_np.shape)
 
 
 def launch(model, kernels: ElementKernels, x, what: Launch, mode: Hessian = Hessian.EXACT) -> Workspace:

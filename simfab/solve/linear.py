@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from simfab._sparse import csr_matvec
 from simfab.errors import ConvergenceError
 
 
@@ -388,7 +389,7 @@ class SPDSolver:
 
         def apply(v):
             v_full[free] = v
-            y = (A @ v_full)[free]
+            y = csr_matvec(A, v_full)[free]
             if U is not None:
                 y += mu * (U @ (U.T @ v))
             return y
