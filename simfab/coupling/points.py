@@ -12,25 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-try:  # the kernel of scipy's own CSR @ dense (csr_matrix._matmul_multivector), without its dispatch
-    from scipy.sparse import _sparsetools as _spt
-
-    _CSR_MATVECS = _spt.csr_matvecs
-except (ImportError, AttributeError):  # pragma: no cover - another scipy: the operator instead
-    _CSR_MATVECS = None
-
-
-def csr_times(A, X: np.ndarray) -> np.ndarray:
-    """A @ X for a CSR matrix A (m, n) and a dense X (n, c), the same sums in the same order as
-    scipy's operator (its kernel called directly: the insertion loop forms point positions many
-    times per Newton iteration, where the operator's checks cost more than the product)."""
-    m, n = A.shape  # (scipy's shape is a property: read once)
-    if (_CSR_MATVECS is None or X.ndim != 2 or X.dtype != np.float64 or A.dtype != np.float64
-            or not X.flags.c_contiguous or X.shape[0] != n):
-        return A @ X
-    out = np.zeros((m, X.shape[1]))
-    _CSR_MATVECS(m, n, X.shape[1], A.indptr, A.indices, A.data, X.ravel(), out.ravel())
-    return out
+from simfab._sparse import csr_times
 
 
 def row_norms(v: np.ndarray) -> np.ndarray:
