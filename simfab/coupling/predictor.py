@@ -235,15 +235,15 @@ def predict(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjectiv
 
     Points O can reach during the step (distance below L |O's displacement there| + d_hat) are
     pushed along O's normal (they may slide tangentially, as in frictionless contact); the rest of A
-    follows through one linear solve with the previous tangent stiffness. Two pushes, the lower
-    objective of the feasible ones kept: every reachable point by O's normal displacement n . delta
-    (the contact region moves as one: right where O arrives deep into A, a large step), and every
-    point by what that displacement takes out of its gap d beyond LIFT_TO * d_hat,
-    n . delta - max(d - LIFT_TO d_hat, 0) where positive (right where O arrives within the step: the
-    whole push over-deforms A there, cclamp2d's first contact started Newton at 7x the step's energy;
-    but a deep overlap met by a few points alone is a point load, a local dent far above the energy of
-    the pushed region). Points still inside O after a push are carried fully (rigidly with O) and its
-    solve is repeated; as a last resort every reachable point is carried rigidly.
+    follows through one linear solve with the previous tangent stiffness. Each point moves by what O's
+    normal displacement n . delta takes out of its gap d beyond LIFT_TO * d_hat,
+    n . delta - max(d - LIFT_TO d_hat, 0) where positive (pushing every reachable point by n . delta
+    over-deforms A where O arrives within the step: cclamp2d's first contact started Newton at 7x the
+    step's energy). Where that push leaves an element below PREDICTOR_DENT_J of its volume (a deep
+    overlap met by a few points: a point load's dent) or is infeasible, the push of every reachable
+    point by n . delta (the contact region moves as one) is solved too and the lower objective kept.
+    Points still inside O after a push are carried fully (rigidly with O) and its solve is repeated;
+    as a last resort every reachable point is carried rigidly.
     """
     x = state.x
     dim = cm.dim
