@@ -136,31 +136,18 @@ def _block(X: wp.mat22d, m: wp.float64, v: wp.float64):  # noqa: F811
 
 
 @wp.func
-def _svd_entry(A: Any, ga: Any, gb: Any, d: int, i: int, j: int):
-    """(G_a^T A G_b)[i, j] = sum_{k,l} A[(i,k), (j,l)] g_a[k] g_b[l] for a full stress Hessian A."""
-    acc = wp.float64(0.0)
-    for kk in range(d):
-        for l in range(d):
-            acc += A[d * i + kk, d * j + l] * ga[kk] * gb[l]
-    return acc
-
-
-@wp.func
-def _svd_block(A: mat99d, ga: wp.vec3d, gb: wp.vec3d, w: wp.float64):
-    """w G_a^T A G_b for the SVD-rebuilt stress Hessian A: the rare dPsi/dJ > 0 route."""
-    B = wp.mat33d()
-    for i in range(3):
-        for j in range(3):
-            B[i, j] = w * _svd_entry(A, ga, gb, 3, i, j)
-    return B
-
-
-@wp.func
-def _svd_block(A: mat44d, ga: wp.vec2d, gb: wp.vec2d, w: wp.float64):  # noqa: F811
-    B = wp.mat22d()
-    for i in range(2):
-        for j in range(2):
-            B[i, j] = w * _svd_entry(A, ga, gb, 2, i, j)
+def _svd_block(A: Any, ga: Any, gb: Any, w: wp.float64):
+    """w G_a^T A G_b for the SVD-rebuilt stress Hessian A (d^2 x d^2), entry (i, j) =
+    w sum_{k,l} A[(i,k), (j,l)] g_a[k] g_b[l]: the rare dPsi/dJ > 0 route (every dimension: d = len(g_a))."""
+    d = len(ga)
+    B = wp.float64(0.0) * wp.outer(ga, gb)  # (a zero d x d matrix of g's type)
+    for i in range(d):
+        for j in range(d):
+            acc = wp.float64(0.0)
+            for kk in range(d):
+                for l in range(d):
+                    acc += A[d * i + kk, d * j + l] * ga[kk] * gb[l]
+            B[i, j] = w * acc
     return B
 
 
