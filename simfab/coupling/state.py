@@ -75,7 +75,9 @@ class StepState:
     solved with (:class:`simfab.coupling.friction.FrictionLag`, None without friction), lag_solves: the solves
     its step took (lagging iterations), lag_change: the relative change of the normal forces at its last lagging
     iteration, normal_force (k,) [N]: the normal forces at x (with friction) over the constraint points
-    ``normal_force_points`` (the current ones until a refinement replaces them)."""
+    ``normal_force_points`` (the current ones until a refinement replaces them); start: the source of the warm
+    start the step to x was solved from (:class:`simfab.coupling.predictor.WarmStart`; "" when it had none:
+    A at rest, the first step)."""
 
     x: np.ndarray
     s: float
@@ -98,6 +100,7 @@ class StepState:
     lag_change: float = 0.0
     normal_force: np.ndarray | None = None
     normal_force_points: ContactPoints | None = None
+    start: str = ""
 
     def current_evaluation(self) -> Evaluation | None:
         """Newton's last evaluation when it belongs to the current state (at ``x``, over the current
@@ -141,10 +144,11 @@ class StepContext:
     guided: int = 0
 
 
-def accept(state: StepState, x: np.ndarray, s: float, kappa: float, evaluation: Evaluation | None) -> None:
-    """Make the converged x at path length s (solved with barrier stiffness ``kappa``) the current
-    state, with Newton's last evaluation there."""
-    state.x, state.s, state.kappa_step = x, s, kappa
+def accept(state: StepState, x: np.ndarray, s: float, kappa: float, evaluation: Evaluation | None,
+           start: str = "") -> None:
+    """Make the converged x at path length s (solved with barrier stiffness ``kappa`` from a warm start
+    of source ``start``) the current state, with Newton's last evaluation there."""
+    state.x, state.s, state.kappa_step, state.start = x, s, kappa, start
     state.evaluation = evaluation
     # the objective's last evaluation may be a rejected line-search trial (Newton stopping at the
     # round-off floor): its Hessian belongs to x only when the evaluation does

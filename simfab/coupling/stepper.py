@@ -216,6 +216,7 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
     :func:`lag_floor` only, then once more to Newton's tolerance with the settled lag); a step that
     cannot be solved is bisected up to MAX_BISECTIONS deep. Returns the Newton iterations."""
     total = 0
+    start = ""
     resume = None  # converged positions to resume from after a refinement (see below)
     refined = False  # points were added since the previous state was accepted
     frictional = cm.contact.friction > 0
@@ -242,7 +243,8 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                     if refined:  # starting over from the previous state: make it feasible for the new points
                         predictor.restore_feasibility(cm, state, ctx)
                         refined = False
-                    x0 = predictor.warm_start(cm, state, s_new, obj, ctx).x
+                    ws = predictor.warm_start(cm, state, s_new, obj, ctx)
+                    x0, start = ws.x, ws.source
                     # facets the warm start already pushes into O: refined before the solve (else
                     # Newton converges with them crossing and the step is solved again); frictionless
                     # runs only (with friction the refined set's history is part of the solution's)
@@ -286,7 +288,7 @@ def advance(cm: CouplingModel, state: StepState, s_new: float, ctx: StepContext,
                     continue
             past = PastStep(state.x, state.s, state.normal_force_points, state.normal_force)
             state.prev2, state.prev = state.prev, past
-            accept(state, x, s_new, obj.kappa, final)
+            accept(state, x, s_new, obj.kappa, final, start)
             state.friction, state.lag_solves, state.lag_change = lagged, lag_solves, lag_change
             state.normal_force = fresh.normal_force if frictional else None
             state.normal_force_points = state.points if frictional else None

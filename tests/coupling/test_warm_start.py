@@ -262,3 +262,46 @@ def test_the_contact_predictor_pushes_a_point_by_what_o_takes_out_of_its_gap():
         first = next(i for i, r in enumerate(res.steps) if abs(r.path_force) > 0)
         onset.append(sum(r.iterations for r in res.steps[first:first + 2]))
     assert sum(onset) <= 40, onset
+
+
+def test_a_step_continuing_equal_steps_takes_the_quadratic_extrapolation_after_one_evaluation():
+    # Along cclamp2d's smooth profile the quadratic extrapolation wins the contest of the warm-start
+    # candidates step after step; a step of the last one's length that started from it takes it
+    # again, its contact gaps restored, after one objective evaluation (the contest: three). The
+    # shortcut must pick what the contest picks; where the restored extrapolation is infeasible (the
+    # seat engaging at the last planned step) and at a step of another length (the rest search, a
+    # bisection) the contest is held.
+    cm = load_coupling_scene("cclamp2d")
+    stepper = Stepper(cm)
+    taken = differ = held = 0
+    evaluations = []
+
+    def counted(obj):
+        value = obj.value
+        obj.value = lambda x: evaluations.append(1) or value(x)
+        return obj
+
+    for s in map(float, cm.s_steps):
+        state, ctx = stepper.state, stepper.ctx
+        if stepper.steps and state.start == "quadratic":
+            quadratic = predictor.snap_contacts(cm, state, predictor.extrapolations(state, s)[1], s, ctx)
+            evaluations[:] = []
+            ws = predictor.warm_start(cm, state, s, counted(make_objective(cm, state, s, ctx)), ctx)
+            if not np.isfinite(make_objective(cm, state, s, ctx).value(quadratic)):
+                assert len(evaluations) >= 3
+                held += 1
+                stepper.keep(stepper.step(s).record)
+                continue
+            assert len(evaluations) == 1 and ws.source == "quadratic"
+            np.testing.assert_array_equal(ws.snapped, quadratic)
+            state.start, evaluations[:] = "", []  # the contest, for comparison
+            contest = predictor.warm_start(cm, state, s, counted(make_objective(cm, state, s, ctx)), ctx)
+            assert len(evaluations) >= 3
+            differ += contest.source != "quadratic"
+            taken += 1
+            state.start, evaluations[:] = "quadratic", []  # a step of another length holds the contest
+            h = s - state.s
+            predictor.warm_start(cm, state, s - 0.5 * h, counted(make_objective(cm, state, s - 0.5 * h, ctx)), ctx)
+            assert len(evaluations) >= 3
+        stepper.keep(stepper.step(s).record)
+    assert taken >= 25 and differ <= 1 and held == 1, (taken, differ, held)
