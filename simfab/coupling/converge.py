@@ -415,7 +415,10 @@ def plot_convergence(rep: ConvergenceResult, path):
     ax.set_xlabel("elements [-]")
     ax.set_ylabel("error against the extrapolated value [%]")
     ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
-    ax.yaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    lo, hi = ax.get_ylim()
+    # minor ticks labelled only within a decade (over several their labels run into each other)
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g") if hi <= 10.0 * lo
+                                 else matplotlib.ticker.NullFormatter())
     ax.set_xticks(N, [f"{n:,.0f}" for n in N])  # (the levels' element counts)
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     mu = f", friction {rep.friction:g}" if rep.friction else ""
