@@ -62,3 +62,21 @@ def test_scaling_repeats_levels_in_alternating_order_and_keeps_each_fastest(monk
     assert [r["seconds"] for r in rows] == [1.8, 4.0] and rows[1]["seconds_runs"] == [4.5, 4.0]
     # the exponent of the fastest runs: log(4.0 / 1.8) / log(2)
     assert out["groups"][0]["time_exponent_vs_dofs"]["overall"] == round(float(np.log(4.0 / 1.8) / np.log(2.0)), 2)
+
+
+def test_scaling_peak_memory_after_a_reset_leaves_out_what_was_freed_before_it():
+    """A level's peak memory is its own: the warm-up's memory, freed before the reset, is not in it."""
+    sys.path.insert(0, str(TOOLS))
+    try:
+        scaling = importlib.import_module("benchmarks._scaling")
+    finally:
+        sys.path.remove(str(TOOLS))
+    if not scaling.reset_peak_memory():
+        pytest.skip("this kernel refuses to reset the peak resident memory")
+    base = scaling.peak_memory_mib(True)
+    big = np.ones(40 * 2**20 // 8 * 8)  # 320 MiB, touched
+    during = scaling.peak_memory_mib(True)
+    del big
+    assert scaling.reset_peak_memory()
+    after = scaling.peak_memory_mib(True)
+    assert during > base + 300 and after < during - 300

@@ -1,14 +1,17 @@
 """Cost growth of an insertion with the mesh: ``python tools/bench.py insertion --scaling``.
 
 Each level runs in a child process of its own (``--scaling-level SCENE:FACTOR:MU``), so that its
-peak resident memory (``ru_maxrss``) is that level's alone. A level is the insertion benchmark's case
+peak resident memory is that level's alone. A level is the insertion benchmark's case
 (tools/benchmarks/insertion.py, P2 tets) with its part meshed at FACTOR times the tet count
 (simfab.coupling.converge.level_mesh: an extrusion's layers grow as FACTOR^(1/3); claw3d's
 generator, meshed by :func:`simfab.fem.meshing.tetrahedralize`, is asked for FACTOR x its stored mesh's tets).
 Before its timed run a level runs the scene's 1x case once, untimed (the process's one-time costs:
 loading the Warp modules and the libraries; ~0.9 s on clip3d, a third of a cold 1x run, which lowered
 the fitted exponent when the timed run was the process's first). The timed run's own setup (its
-workspace, its pattern's symbolic analysis) stays in its time; at 1x the peak memory holds both models.
+workspace, its pattern's symbolic analysis) stays in its time. The warm-up's model is released and the
+process's peak reset (Linux: ``/proc/self/clear_refs``) before the timed level's model is built, so
+the peak memory (``VmHWM``) is the level's, not the warm-up's (where the reset is refused:
+``ru_maxrss``, which at 1x holds both models).
 Per level: tets, free dofs, steps, seconds (wall, CPU; scene loading and meshing excluded), peak
 memory, Newton iterations (and per step), sparse factorizations (numeric, the exact-first attempts
 included) and their share of the wall time, the solves lagged on an earlier factorization
@@ -22,6 +25,7 @@ overall and between consecutive levels.
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import resource
@@ -54,6 +58,28 @@ def level_overrides(scene: str, factor: float, base: dict) -> dict:
     return out
 
 
+def reset_peak_memory() -> bool:
+    """Reset this process's peak resident memory (Linux ``clear_refs`` 5: VmHWM := VmRSS); False
+    where the kernel refuses it."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def peak_memory_mib(reset: bool) -> float:
+    """Peak resident memory [MiB] of this process since :func:`reset_peak_memory` (``reset``), else
+    since it started (``ru_maxrss``)."""
+    if reset:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
 def run_level(scene: str, factor: float, mu: float) -> dict:
     """One level in this process (see the module docstring)."""
     from benchmarks.insertion import ORIGINAL_SIZE
@@ -71,6 +97,8 @@ def run_level(scene: str, factor: float, mu: float) -> dict:
         return load_coupling_scene(scene, overrides=over)
 
     simulate_insertion(model(1.0))  # the process's one-time costs, untimed (see the module docstring)
+    gc.collect()  # the warm-up's model and run, released before the peak is reset
+    reset = reset_peak_memory()
     cm = model(factor)
     solvers = []
     orig = linear.SPDSolver.__init__
@@ -90,7 +118,7 @@ def run_level(scene: str, factor: float, mu: float) -> dict:
              for k in ("factorizations", "lagged_solves", "pcg_iterations", "multigrid_solves", "multigrid_iterations",
                        "coarse_factorizations")}
     count["factorizations"] -= count["coarse_factorizations"]  # the coarse solvers are SPDSolvers too
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    rss = peak_memory_mib(reset)
     _, summ = summarize(res)
     records = list(res.steps[1:]) + list(res.removal)
     iters = int(sum(r.iterations for r in records) + res.steps[0].iterations)
