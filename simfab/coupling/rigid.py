@@ -21,6 +21,7 @@ point y by u(y) = t + w x (y - c) (2D: w is a scalar, w x r = w (-r_y, r_x)).
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dsygvd as _sygvd
 
 from simfab.fem.elastic import energy_gradient_hessian
 from simfab.solve.linear import NotPositiveDefinite, conjugate_gradients
@@ -320,11 +321,15 @@ def _generalized(Q, c, y, normals, weights):
     nJ = np.einsum("pd,pdk->pk", normals, J)
     K = np.einsum("p,pk,pl->kl", weights, nJ, nJ)
     M = np.einsum("p,pdk,pdl->kl", weights, J, J)
-    from scipy.linalg import eigh
-
     # a motion that moves no contact point (M singular along it: few contact points, or all on its
     # axis) is not resisted either: K <= M, so regularizing M gives it the ratio 0
-    return eigh(K, M + (1e-12 * max(float(np.trace(M)), 1e-300) / len(M)) * np.eye(len(M)))
+    M = M + (1e-12 * max(float(np.trace(M)), 1e-300) / len(M)) * np.eye(len(M))
+    # LAPACK's sygvd, which scipy.linalg.eigh(K, M) calls, without its wrapper's checks (50 of its
+    # 58 us on these 3x3 / 6x6 systems, once per step); the same eigenpairs, bit for bit
+    w, V, info = _sygvd(K, M, itype=1, jobz="V", uplo="L")
+    if info != 0:
+        raise np.linalg.LinAlgError(f"contact modes: sygvd failed (info {info})")
+    return w, V
 
 
 def describe(q: np.ndarray, dim: int, radius: float) -> str:
