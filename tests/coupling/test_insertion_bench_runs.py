@@ -74,7 +74,7 @@ def test_scaling_peak_memory_after_a_reset_leaves_out_what_was_freed_before_it()
     if not scaling.reset_peak_memory():
         pytest.skip("this kernel refuses to reset the peak resident memory")
     base = scaling.peak_memory_mib(True)
-    big = np.ones(40 * 2**20 // 8 * 8)  # 320 MiB, touched
+    big = np.ones(40 * 2**20)  # 320 MiB of float64, touched
     during = scaling.peak_memory_mib(True)
     del big
     assert scaling.reset_peak_memory()
