@@ -89,13 +89,6 @@ def _lagrange(past, t: float) -> np.ndarray:
 #: Two steps are of equal length within this fraction (a planned path's steps are, to round-off; the
 #: rest search's and a bisection's are not): see :func:`_continued`.
 UNIFORM_STEP_REL = 1e-6
-#: Where no extrapolation is feasible, the extrapolations with their contact gaps restored are tried
-#: before the contact predictor when at least this many points were in contact at the last step: they
-#: continue the equilibrium branch the last steps followed, where the predictor's push can land A on
-#: another one before the branch ends; with fewer (a point contact just begun) the last steps carry no
-#: sign of how the contact spreads, and the predictor's push by the gaps is the better start
-#: (docs/decisions.md, "restored extrapolations before the contact predictor").
-CONTINUE_MIN_CONTACTS = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,17 +135,12 @@ def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjec
 
     A step that continues a run of equal steps whose last one started from the quadratic extrapolation
     (``state.start``) takes it again, its gaps restored, after one evaluation that finds it feasible
-    (:func:`_continued`): the candidates' contest is held again otherwise. Where no candidate is
-    feasible and at least CONTINUE_MIN_CONTACTS points were in contact at the last step, the lowest of
-    the extrapolations restored that way comes before the contact predictor (which runs when none is
-    feasible): a start that continues the last steps' branch, where the predictor's push can make A
-    snap before the branch ends.
+    (:func:`_continued`): the candidates' contest is held again otherwise.
     Raises ConvergenceError when no candidate is feasible."""
     best_x, best_f, source = None, np.inf, "predictor"
     cands = list(zip(extrapolations(state, s_new), ("linear", "quadratic")))
     ev = state.current_evaluation()
-    contacts = 0 if ev is None else int(np.count_nonzero(ev.distances < point_dhat(cm, state.points)))
-    in_contact = ev is None or contacts > 0
+    in_contact = ev is None or (ev.distances < point_dhat(cm, state.points)).any()
     if not in_contact:
         # out of contact A relaxes toward its rest shape (its only equilibrium without O): where contact
         # ends, an extrapolation carries the last steps' release of the deformation past it
@@ -171,10 +159,6 @@ def warm_start(cm: CouplingModel, state: StepState, s_new: float, obj: StepObjec
         fc = obj.value(xc)
         if np.isfinite(fc) and fc < best_f:
             best_x, best_f, source = xc, fc, kind
-    if best_x is None and contacts >= CONTINUE_MIN_CONTACTS:
-        xr, kind = _restored(cm, state, cands, s_new, obj, ctx)
-        if xr is not None:
-            return _lifted(cm, state, obj, xr, kind, xr)
     if best_x is None:
         best_x = predict(cm, state, s_new, obj, ctx)
     xs = snap_contacts(cm, state, best_x, s_new, ctx)
