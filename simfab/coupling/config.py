@@ -59,7 +59,8 @@ NEWTON_MAX_ITER = 100
 #: likely the converged point, which needs no Hessian). On quadratic ones never: a rejected trial's
 #: Hessian is wasted and the accepted one's costs more than the gradient it replaces (the P2 Hessian
 #: launch ~2-3 gradient launches, the contact blocks and the pin on top): eager on cclamp2d's P2 run,
-#: 220 -> 240 ms (medians of 30 alternating runs); the linear ones' costs about one objective evaluation.
+#: 220 -> 240 ms (medians of 30 alternating runs). A linear element's Hessian costs about one
+#: objective evaluation.
 NEWTON_EAGER_ABOVE_TOL = 10.0
 #: A Newton iterate within this factor of the force target takes a chord step (the solve's last
 #: factorization reused: no Hessian, no factorization) before a fresh Newton step
