@@ -91,7 +91,7 @@ def run_level(scene: str, factor: float, mu: float) -> dict:
     base = {k: dict(v) for k, v in ORIGINAL_SIZE.get(scene, {}).items()}
 
     def model(f: float):
-        over = dict(base)
+        over = {k: dict(v) for k, v in base.items()}  # (its tables copied: base serves both models)
         over["compliant"] = level_overrides(scene, f, base)
         over.setdefault("contact", {})["friction"] = mu
         return load_coupling_scene(scene, overrides=over)
