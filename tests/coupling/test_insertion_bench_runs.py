@@ -80,3 +80,13 @@ def test_scaling_peak_memory_after_a_reset_leaves_out_what_was_freed_before_it()
     assert scaling.reset_peak_memory()
     after = scaling.peak_memory_mib(True)
     assert during > base + 300 and after < during - 300
+
+
+def test_scaling_rejects_an_unknown_scene_before_any_level_runs():
+    import subprocess
+
+    argv = ["insertion", "--scaling", "--scenes", "clip3d,knocker9", "--factors", "1", "--frictions", "0"]
+    out = subprocess.run([sys.executable, str(TOOLS / "bench.py"), *argv], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert out.stderr.strip().count("\n") == 0 and "'knocker9'" in out.stderr  # one line, no level's table
+    assert out.stdout == ""

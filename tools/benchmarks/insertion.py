@@ -108,7 +108,7 @@ def run(argv) -> dict:
     from benchmarks._reference import figures
     from simfab.contact.sdf import PrimitiveField
     from simfab.coupling.outputs import summarize
-    from simfab.coupling.scene import load_coupling_scene
+    from simfab.coupling.scene import load_coupling_scene, scene_paths
     from simfab.coupling.simulate import simulate_insertion
     from simfab.errors import InputError
 
@@ -147,7 +147,12 @@ def run(argv) -> dict:
             raise InputError("--factors must be > 0 and --frictions >= 0")
         if a.repeat is not None and a.repeat < 1:
             raise InputError(f"--repeat must be at least 1, got {a.repeat}")
-        return run_scaling(a.scenes.split(","), factors, frictions, a.level_timeout, a.plot, repeat=a.repeat or 1)
+        scenes = a.scenes.split(",")
+        for scene in scenes:  # checked before any level's child process starts
+            if not all(p.is_file() for p in scene_paths(scene)):
+                raise InputError(f"--scenes: no coupling scene {scene!r} (a bundled name, or NAME.xml with NAME.toml "
+                                 "beside it)")
+        return run_scaling(scenes, factors, frictions, a.level_timeout, a.plot, repeat=a.repeat or 1)
     if a.friction is not None and not a.friction >= 0:
         raise InputError(f"--friction must be >= 0, got {a.friction}")
     only = set(a.only.split(",")) if a.only else None
