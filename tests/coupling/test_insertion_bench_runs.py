@@ -90,3 +90,12 @@ def test_scaling_rejects_an_unknown_scene_before_any_level_runs():
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "'knocker9'" in out.stderr  # one line, no level's table
     assert out.stdout == ""
+
+
+def test_insertion_rejects_an_unknown_case():
+    import subprocess
+
+    out = subprocess.run([sys.executable, str(TOOLS / "bench.py"), "insertion", "--only", "cclamp2d,nope"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and out.stdout == ""
+    assert out.stderr.strip().count("\n") == 0 and "'nope'" in out.stderr
