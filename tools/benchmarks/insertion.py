@@ -156,9 +156,9 @@ def run(argv) -> dict:
     if a.friction is not None and not a.friction >= 0:
         raise InputError(f"--friction must be >= 0, got {a.friction}")
     only = set(a.only.split(",")) if a.only else None
-    if only and not only <= {scene for scene, _ in CASES}:
-        raise InputError(f"--only: no case {sorted(only - {scene for scene, _ in CASES})[0]!r} (the cases: "
-                         f"{', '.join(scene for scene, _ in CASES)})")
+    cases = [scene for scene, _ in CASES]
+    if only and not only <= set(cases):
+        raise InputError(f"--only: no case {sorted(only - set(cases))[0]!r} (the cases: {', '.join(cases)})")
     ref_rows = {r["model"]: r for r in figures().get("insertion_simulation_seconds_original", {}).get("rows", [])}
     rows = []
     for scene, ref_name in CASES:
