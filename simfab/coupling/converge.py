@@ -385,6 +385,28 @@ def write_study(rep: ConvergenceResult, out, *, name: str | None = None) -> dict
     return {k: str(v) for k, v in paths.items()}
 
 
+def plain_log_ticks(axis) -> None:
+    """Label the ticks of a logarithmic matplotlib ``axis`` (``ax.xaxis`` / ``ax.yaxis``, its data
+    plotted) as plain numbers (3, 5, 10, not 3x10^0): every minor tick where the axis spans at most a
+    decade, those at 2 and 5 x 10^k up to three decades (one or two labelled decades are too few to
+    read a value from), none beyond (their labels would run into each other)."""
+    import matplotlib.ticker
+
+    axis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    lo, hi = sorted(axis.get_view_interval())
+    decades = np.log10(hi / lo) if lo > 0 else np.inf
+    shown = (lambda m: True) if decades <= 1.0 else (lambda m: m in (2, 5)) if decades <= 3.0 else None
+    if shown is None:
+        axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        return
+
+    def label(v, _pos):
+        m = int(round(v / 10.0 ** np.floor(np.log10(v) + 1e-9)))  # the tick's leading digit
+        return f"{v:g}" if shown(m) else ""
+
+    axis.set_minor_formatter(matplotlib.ticker.FuncFormatter(label))
+
+
 def plot_convergence(rep: ConvergenceResult, path):
     """Each figure's error against its extrapolated value, |f_k - f_inf| / ref [%], against the element
     count on log-log axes (the legend gives the fitted order p in h, and says where the report warns of it),
@@ -414,11 +436,7 @@ def plot_convergence(rep: ConvergenceResult, path):
         ax.axvline(default[0], color="0.5", ls=":", lw=1.0, label="the scene's mesh")
     ax.set_xlabel("elements [-]")
     ax.set_ylabel("error against the extrapolated value [%]")
-    ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
-    lo, hi = ax.get_ylim()
-    # minor ticks labelled only within a decade (over several their labels run into each other)
-    ax.yaxis.set_minor_formatter(matplotlib.ticker.FormatStrFormatter("%g") if hi <= 10.0 * lo
-                                 else matplotlib.ticker.NullFormatter())
+    plain_log_ticks(ax.yaxis)
     ax.set_xticks(N, [f"{n:,.0f}" for n in N])  # (the levels' element counts)
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     mu = f", friction {rep.friction:g}" if rep.friction else ""

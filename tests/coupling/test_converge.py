@@ -4,7 +4,7 @@ order, and the study refuses scenes whose part is only a ready mesh file."""
 import numpy as np
 import pytest
 
-from simfab.coupling.converge import extrapolate, run_levels
+from simfab.coupling.converge import extrapolate, plain_log_ticks, run_levels
 from simfab.errors import InputError
 
 
@@ -161,3 +161,30 @@ def test_the_report_warns_when_whole_layers_make_the_levels_no_uniform_refinemen
     assert [lv["layers"] for lv in rep.to_json()["levels"]] == [1, 1, 2, 2]
     rep = report("clip", [level(f, int(4700 * f)) for f in (1, 8, 27)], 3)
     assert not any("whole layers" in w for w in rep.warnings)
+
+
+@pytest.mark.parametrize("span, labelled", [
+    ((1.5, 9.5), {"2", "3", "4", "5", "6", "7", "8", "9"}),  # within a decade: every minor tick
+    ((2.0, 300.0), {"2", "5", "20", "50", "200"}),  # two to three decades: 2 and 5 x 10^k
+    ((1e-3, 10.0), set()),  # beyond: none (their labels would run into each other)
+])
+def test_log_axis_minor_labels_follow_the_span(span, labelled):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ax.loglog([1.0, 2.0], span)
+    ax.set_ylim(*span)
+    plain_log_ticks(ax.yaxis)
+    fig.canvas.draw()
+
+    def shown(which):  # the labels of the ticks inside the axis's span
+        ticks = getattr(ax.yaxis, f"get_{which}_ticks")()
+        return {t.label1.get_text() for t in ticks if span[0] <= t.get_loc() <= span[1]} - {""}
+
+    minor, major = shown("minor"), shown("major")
+    plt.close(fig)
+    assert minor == labelled, minor
+    assert all("10^" not in t and "times" not in t for t in major | minor)  # plain numbers

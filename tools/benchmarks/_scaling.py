@@ -182,6 +182,8 @@ def plot_scaling(groups: list, path: str) -> None:
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
+    from simfab.coupling.converge import plain_log_ticks
+
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
     for g in groups:
         ok = [r for r in g["rows"] if "error" not in r]
@@ -208,13 +210,11 @@ def plot_scaling(groups: list, path: str) -> None:
     bx.set_ylabel("wall ms per CHOLMOD factorization")
     bx.set_title("Cost of one factorization (wall ms)")
     bx.legend(fontsize=7)
-    plain = matplotlib.ticker.FormatStrFormatter("%g")  # (3, 5, 10, not 3x10^0)
     for a in (ax, bx):
         a.grid(alpha=0.3, which="both")
-        a.xaxis.set_major_formatter(plain)
+        a.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))  # (3, 5, 10, not 3x10^0)
         a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # (crowded on a decade)
-        a.yaxis.set_major_formatter(plain)
-        a.yaxis.set_minor_formatter(plain)
+        plain_log_ticks(a.yaxis)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
