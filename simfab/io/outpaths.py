@@ -23,6 +23,7 @@ import contextvars
 import os
 import re
 import shutil
+import tempfile
 from pathlib import Path
 from typing import Iterator
 
@@ -71,7 +72,19 @@ def check_out_dir(out: str | os.PathLike, *, where: str = "--out") -> Path:
         raise InputError(f"{out}: {q} is a file, not a folder", where=where)
     if not os.access(q, os.W_OK | os.X_OK):
         raise InputError(f"{out}: no permission to write in {q}", where=where)
+    _probe(q, out, where)
     return p
+
+
+def _probe(folder: Path, out, where: str) -> None:
+    """InputError unless a folder can be created (and is removed again) in ``folder``: ``os.access``
+    answers yes to root everywhere, also where nothing can be created (``/proc``, a read-only
+    mount), and the run would fail only when it writes its first output."""
+    try:
+        tmp = tempfile.mkdtemp(prefix=".simfab-probe-", dir=folder)
+    except OSError as e:
+        raise InputError(f"{out}: cannot create anything in {folder}: {e.strerror}", where=where) from None
+    os.rmdir(tmp)
 
 
 def require_nonempty(path, where: str) -> None:

@@ -164,3 +164,18 @@ def test_demo_outputs_stay_in_out(tmp_path):
     r = _run(["demo", "--only", "deploy", "--out", str(out)], tmp_path)
     assert r.returncode == 0, r.stderr
     assert _files(tmp_path) and all(out in p.parents for p in _files(tmp_path))
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc, where nothing can be created")
+def test_a_folder_where_nothing_can_be_created_is_refused_before_computing(capsys):
+    # os.access says yes to root everywhere (the suite runs as root): /proc takes no new folder, and
+    # the run would otherwise fail only at its first output, after the whole simulation (an internal
+    # error, exit 1)
+    from simfab.cli import main
+
+    with pytest.raises(InputError, match="cannot create anything in /proc"):
+        check_out_dir("/proc/simfab-out-test/sub")
+    code = main(["couple", "simulate", "clip3d", "--out", "/proc/simfab-out-test"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("simfab: error: --out") and "cannot create" in err[0], err
+    assert not os.path.exists("/proc/simfab-out-test")

@@ -99,3 +99,23 @@ def test_insertion_rejects_an_unknown_case():
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2 and out.stdout == ""
     assert out.stderr.strip().count("\n") == 0 and "'nope'" in out.stderr
+
+
+@pytest.mark.parametrize("argv, names", [
+    (["--repeat", "0"], "--repeat"),  # ran one run per case and exited 0
+    (["--budget", "0"], "--budget"),
+    (["--scaling", "--factors", "inf"], "--factors"),
+    (["--scaling", "--level-timeout", "0"], "--level-timeout"),
+    (["--scaling", "--plot", "scaling.txt"], ".png"),
+    # a folder where nothing can be created: refused before any level runs, not after the last (a
+    # traceback, exit 1); /proc takes no new folder, also for root, for whom os.access says yes
+    (["--scaling", "--scenes", "clip3d", "--factors", "1", "--frictions", "0", "--plot", "/proc/simfab-x/s.png"],
+     "--plot"),
+])
+def test_insertion_rejects_bad_options_before_running(argv, names):
+    import subprocess
+
+    out = subprocess.run([sys.executable, str(TOOLS / "bench.py"), "insertion", *argv],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and out.stdout == ""
+    assert out.stderr.strip().count("\n") == 0 and names in out.stderr, out.stderr

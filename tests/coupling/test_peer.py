@@ -2,6 +2,7 @@
 two barrier methods with the same d_hat on the same linear mesh must give the same profile."""
 
 import importlib
+import os
 import pathlib
 import sys
 
@@ -70,3 +71,14 @@ def test_bench_cli_rejects_a_bad_refine_factor():
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "--refine" in out.stderr
     assert out.stdout == ""
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc, where nothing can be created")
+def test_bench_cli_rejects_a_plot_folder_that_cannot_be_made_before_any_case_runs():
+    # the plots are drawn after each case: a bad folder was a traceback (exit 1) after the first case
+    import subprocess
+
+    out = subprocess.run([sys.executable, str(TOOLS / "bench.py"), "peer", "--scenes", "snapfit2d", "--frictions", "0",
+                          "--plot", "/proc/simfab-x"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and out.stdout == ""
+    assert out.stderr.strip().count("\n") == 0 and "--plot" in out.stderr, out.stderr

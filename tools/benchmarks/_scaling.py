@@ -329,6 +329,14 @@ def main(argv=None) -> int:
     ap.add_argument("--plot", required=True, help="PNG path")
     ap.add_argument("runs", nargs="+", help="JSON outputs of bench.py insertion --scaling, each optionally :LABEL")
     a = ap.parse_args(argv)
+    from simfab.errors import InputError
+    from simfab.io.outpaths import check_out_file
+
+    try:
+        check_out_file(a.plot, where="--plot", suffixes=(".png",))
+    except InputError as e:
+        print(f"_scaling.py: error: {e}", file=sys.stderr)
+        return 2
     groups = []
     for spec in a.runs:
         path, _, label = spec.partition(":")

@@ -41,6 +41,7 @@ def run(argv) -> dict:
     from simfab.design import run as optimize_design
     from simfab.design.scene import load_design_scene
     from simfab.design.study import iterations_per_handle_budget
+    from simfab.io.outpaths import check_out_dir
 
     ap = argparse.ArgumentParser(prog="bench.py design_methods")
     ap.add_argument("--scenes", default=",".join(SCENES[:6]))
@@ -54,7 +55,7 @@ def run(argv) -> dict:
     a = ap.parse_args(argv)
     orders = [None] if a.element_orders is None else [int(o) for o in a.element_orders.split(",")]
     contact = {} if a.friction is None else {"friction": a.friction}
-    out = Path(a.out) if a.out else Path(tempfile.mkdtemp(prefix="design_methods_"))
+    out = check_out_dir(a.out) if a.out else Path(tempfile.mkdtemp(prefix="design_methods_"))
     rows = []
     runs = []
     for scene in a.scenes.split(","):

@@ -102,8 +102,9 @@ def run(argv) -> dict:
     a = ap.parse_args(argv)
 
     from simfab.design import run as optimize_design
+    from simfab.io.outpaths import check_out_dir
 
-    out = Path(a.out)
+    out = check_out_dir(a.out)
     report = {}
     for name in a.scenes.split(","):
         t0 = time.perf_counter()

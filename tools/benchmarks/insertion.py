@@ -111,6 +111,7 @@ def run(argv) -> dict:
     from simfab.coupling.scene import load_coupling_scene, scene_paths
     from simfab.coupling.simulate import simulate_insertion
     from simfab.errors import InputError
+    from simfab.io.outpaths import check_out_file
 
     ap = argparse.ArgumentParser(prog="bench insertion")
     ap.add_argument("--only", default=None, help="comma-separated scene names")
@@ -131,6 +132,12 @@ def run(argv) -> dict:
     ap.add_argument("--level-timeout", type=float, default=1800.0, help="--scaling: seconds per level at most")
     ap.add_argument("--scaling-level", default=None, help=argparse.SUPPRESS)  # SCENE:FACTOR:MU, one child
     a = ap.parse_args(argv)
+    if a.repeat is not None and a.repeat < 1:
+        raise InputError(f"--repeat must be at least 1, got {a.repeat}")
+    if not a.budget > 0 or a.max_repeat < 1:
+        raise InputError(f"--budget must be > 0 seconds and --max-repeat at least 1, got {a.budget} and {a.max_repeat}")
+    if a.plot is not None:  # before any level runs (the plot is drawn after the last)
+        check_out_file(a.plot, where="--plot", suffixes=(".png",))
     if a.scaling_level:
         from benchmarks._scaling import parse_level, run_level
 
@@ -143,10 +150,11 @@ def run(argv) -> dict:
             frictions = [float(f) for f in a.frictions.split(",")]
         except ValueError:
             raise InputError("--factors and --frictions must be comma-separated numbers") from None
-        if not all(f > 0 for f in factors) or not all(f >= 0 for f in frictions):
-            raise InputError("--factors must be > 0 and --frictions >= 0")
-        if a.repeat is not None and a.repeat < 1:
-            raise InputError(f"--repeat must be at least 1, got {a.repeat}")
+        if not all(0 < f <= 64 for f in factors) or not all(0 <= f < 10 for f in frictions):
+            raise InputError(f"--factors must lie in (0, 64] and --frictions in [0, 10), got {a.factors!r} and "
+                             f"{a.frictions!r}")
+        if not a.level_timeout > 0:
+            raise InputError(f"--level-timeout must be > 0 seconds, got {a.level_timeout}")
         scenes = a.scenes.split(",")
         for scene in scenes:  # checked before any level's child process starts
             if not all(p.is_file() for p in scene_paths(scene)):

@@ -247,6 +247,10 @@ def run(argv) -> dict:
     ap.add_argument("--knocker-reference", action="store_true", help="add P2 on the refined knocker mesh (minutes)")
     a = ap.parse_args(argv)
     from simfab.fem.p2 import DEFAULT_DEGREE
+    from simfab.io.outpaths import check_out_file
+
+    if a.plot:  # before the study runs (the plot is drawn after it)
+        check_out_file(a.plot, where="--plot", suffixes=(".png",))
 
     out = {"benchmark": "p2", "target_error": TARGET}
     for dim in (int(d) for d in a.dims.split(",")):

@@ -640,6 +640,7 @@ def run(argv) -> dict:
         factor, "table": the printed table}. Raises InputError on a bad option before any case runs.
     """
     from simfab.errors import InputError
+    from simfab.io.outpaths import check_out_dir
 
     ap = argparse.ArgumentParser(prog="bench peer", description="The same quasi-static insertions solved by simfab "
                                  "and by an IPC reference on ipctk: both force profiles, F_in / F_rm / F_hold / E_max "
@@ -666,6 +667,8 @@ def run(argv) -> dict:
     for sc in scenes:
         if sc not in SCENES:
             raise InputError(f"--scenes: unknown peer scene {sc!r} (choose from {', '.join(SCENES)})")
+    if a.plot is not None:  # before any case runs (each case's plot is drawn after it)
+        check_out_dir(a.plot, where="--plot")
     rows = []
     for sc in scenes:
         for mu in frictions:
