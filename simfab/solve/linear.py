@@ -184,6 +184,28 @@ def canonical_csr(A) -> sp.csr_matrix:
     return A
 
 
+def free_block_map(A: sp.csr_matrix, free: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the block ``A[free][:, free]`` of a CSR matrix A (n, n) takes its entries from, without
+    building it, for ascending unique ``free`` (m,) indices.
+
+    Renumbering rows and columns by an ascending subset keeps the order of A's entries, so the
+    block's entries are A's entries with both indices free, in A's order (row by row; within a row in
+    A's column order, sorted when A's are).
+
+    Returns:
+        (sel (k,) int64 positions of the block's entries in ``A.data``, the block's indptr (m + 1,)
+        and indices (k,), both int32).
+    """
+    new = np.full(A.shape[0], -1, dtype=np.int32)
+    new[free] = np.arange(len(free), dtype=np.int32)
+    rows = np.repeat(new, np.diff(A.indptr))  # each entry's block row (-1: not free)
+    cols = new[A.indices]
+    sel = np.flatnonzero((rows >= 0) & (cols >= 0))
+    counts = np.bincount(rows[sel], minlength=len(free))
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+    return sel, indptr, cols[sel]
+
+
 def same_pattern(key, A: sp.csr_matrix) -> bool:
     """Whether CSR ``A`` has the pattern ``key = (indptr, indices)`` (None: no pattern yet)."""
     if key is None:
@@ -239,6 +261,7 @@ class SPDSolver:
         self._A = None  # cvxopt spmatrix holding the lower triangle
         self._F = None  # CHOLMOD symbolic (then numeric) factor
         self._factored = None  # the values of the current numeric factorization (None: none)
+        self._spare = None  # an array of _factored's size, reused for the next gather (see _values)
         self._stale = False  # a lagged solve on the current factorization was slow or failed (see LagConfig)
         # solve_free: (full pattern key, free indices, value map full -> factor input, the index
         # arrays (indptr, indices) last seen with that key)
@@ -354,7 +377,7 @@ class SPDSolver:
         A, known = self._analysed(A, free)
         if not known:
             return None
-        values = A.data[self._full[2]]
+        values = self._values(A)
         if U is None:
             def precondition(r):
                 return self._solve_factored(r)
@@ -462,18 +485,33 @@ class SPDSolver:
         A, known = self._analysed(A, free)
         full = self._full
         if not known:
-            # positions (+1, so that no entry is an explicit zero) of A's values in the submatrix
-            pos = sp.csr_matrix((np.arange(1.0, A.nnz + 1.0), A.indices, A.indptr), shape=A.shape)[free][:, free]
-            pos = canonical_csr(pos)
-            self._analyse(pos)
-            composed = pos.data.astype(np.int64)[self._perm] - 1
+            if len(free) < 2 or (free[1:] > free[:-1]).all():  # (A canonical: so is the block's pattern)
+                sel, indptr, indices = free_block_map(A, free)
+                self._analyse(sp.csr_matrix((A.data[sel], indices, indptr), shape=(len(free),) * 2))
+                composed = sel[self._perm]
+            else:  # positions (+1, so that no entry is an explicit zero) of A's values in the submatrix
+                pos = sp.csr_matrix((np.arange(1.0, A.nnz + 1.0), A.indices, A.indptr), shape=A.shape)[free][:, free]
+                pos = canonical_csr(pos)
+                self._analyse(pos)
+                composed = pos.data.astype(np.int64)[self._perm] - 1
             full = self._full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed, (A.indptr, A.indices))
         elif A.indices is not full[3][1] or A.indptr is not full[3][0]:  # the same pattern in new arrays
             full = self._full = full[:3] + ((A.indptr, A.indices),)
-        values = A.data[full[2]]
+        values = self._values(A)
         if shift:
             values[self._diag] += shift
         self._ensure_factor(values)
+
+    def _values(self, A) -> np.ndarray:
+        """A's values gathered into the factor's input order (the value map of :meth:`_factor_free`), in
+        the solver's spare array: a lagged solve only compares them with the factorized ones, and a
+        factorization keeps them and hands back its previous array as the spare (:meth:`_ensure_factor`).
+        A new array of a large factor's size costs its page faults at every gather (docs/benchmarks.md, 3m)."""
+        idx = self._full[2]
+        spare = self._spare
+        if spare is None or spare.shape != idx.shape:
+            spare = self._spare = np.empty(idx.shape)
+        return np.take(A.data, idx, out=spare, mode="clip")  # (valid indices; "raise" would buffer the output)
 
     def _solve_cholmod(self, A, b):
         A = canonical_csr(A)  # the value map gathers one value per entry
@@ -483,16 +521,19 @@ class SPDSolver:
         return self._solve_factored(b)
 
     def _ensure_factor(self, values: np.ndarray) -> None:
-        """Numeric factorization of the analysed pattern with ``values`` (CHOLMOD's input order, a
-        fresh array the solver keeps), unless they are those of the current factorization."""
+        """Numeric factorization of the analysed pattern with ``values`` (CHOLMOD's input order; the
+        solver keeps the array, which the caller must not modify afterwards), unless they are those of
+        the current factorization."""
         if self._factored is None or not np.array_equal(values, self._factored):
-            self._factored = None
+            old, self._factored, self._update = self._factored, None, None
             if self.timer is None:
                 self._factor(values)
             else:
                 with self.timer.timed("factorization"):
                     self._factor(values)
             self._factored = values
+            if values is self._spare:  # the previous values are the next gather's array
+                self._spare = old if old is not None and old.shape == values.shape else None
 
     def _solve_factored(self, b: np.ndarray) -> np.ndarray:
         """x = A^-1 b with the current factorization, b (n,) or (n, k)."""

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from simfab.errors import ConvergenceError
-from simfab.solve.linear import NotPositiveDefinite, SPDSolver
+from simfab.solve.linear import NotPositiveDefinite, SPDSolver, free_block_map
 
 Objective = Callable[[np.ndarray, bool], tuple]
 
@@ -156,15 +156,7 @@ class _FreeBlock:
         return sp.csr_matrix((H.data[self._sel], self._indices, self._indptr), shape=(m, m))
 
     def _build(self, H: sp.csr_matrix) -> None:
-        new_index = np.full(self.n, -1, dtype=np.int64)
-        new_index[self.free_idx] = np.arange(len(self.free_idx))
-        rows = np.repeat(np.arange(self.n), np.diff(H.indptr))
-        keep = (new_index[rows] >= 0) & (new_index[H.indices] >= 0)
-        self._sel = np.flatnonzero(keep)
-        r = new_index[rows[keep]]
-        self._indices = new_index[H.indices[keep]].astype(np.int32)
-        counts = np.bincount(r, minlength=len(self.free_idx))
-        self._indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+        self._sel, self._indptr, self._indices = free_block_map(H, self.free_idx)
         self._key = (H.indptr.copy(), H.indices.copy())
 
 

@@ -378,3 +378,31 @@ def test_lag_config_rejects_bad_fields():
         LagConfig(max_iter=0)
     with pytest.raises(ValueError, match="refactor_after"):
         LagConfig(refactor_after=0)
+
+
+def test_alternating_matrices_solve_right_while_the_solver_recycles_its_value_arrays():
+    # the solver gathers a matrix's values into a spare array and, on factorizing them, keeps them and
+    # recycles its previous values as the next spare: three matrices of one pattern, in turn, with the
+    # Woodbury update (cached per factorization: a recycled array must not revive an old cache) and
+    # lagged solves between the factorizations; every solve against a dense one
+    rng = np.random.default_rng(11)
+    base = _laplacian_2d(8)
+    free = np.arange(4, base.shape[0])
+    U, mu = _woodbury_case(base, free, rng)
+    mats = [base.copy() for _ in range(3)]
+    for k, A in enumerate(mats):
+        A.data *= 1.0 + 0.3 * k
+        A.setdiag(A.diagonal() + 0.2 * k)
+    # (one lagged iteration at most: the solve between two updates factorizes too, so each update's
+    # factorization gets the array of the update before it back)
+    solver = SPDSolver("cholmod", lag=LagConfig(min_unknowns=0, rtol=1e-12, max_iter=1))
+    for i in range(9):
+        A = mats[i % 3]
+        dense = A.toarray()[np.ix_(free, free)]
+        b = rng.standard_normal(len(free))
+        x = solver.solve_free_update(A, free, b, U, mu)
+        np.testing.assert_allclose(x, np.linalg.solve(dense + mu * U @ U.T, b), rtol=1e-9, atol=1e-12)
+        B = mats[(i + 2) % 3]  # (neither this update's matrix nor the next one's)
+        x = solver.solve_free(B, free, b)
+        np.testing.assert_allclose(x, np.linalg.solve(B.toarray()[np.ix_(free, free)], b), rtol=1e-8, atol=1e-11)
+    assert solver.factorizations == 18
