@@ -385,17 +385,20 @@ def write_study(rep: ConvergenceResult, out, *, name: str | None = None) -> dict
     return {k: str(v) for k, v in paths.items()}
 
 
-def plain_log_ticks(axis) -> None:
+def plain_log_ticks(axis, *, wide: bool = False) -> None:
     """Label the ticks of a logarithmic matplotlib ``axis`` (``ax.xaxis`` / ``ax.yaxis``, its data
     plotted) as plain numbers (3, 5, 10, not 3x10^0): every minor tick where the axis spans at most a
     decade, those at 2 and 5 x 10^k up to three decades (one or two labelled decades are too few to
-    read a value from), none beyond (their labels would run into each other)."""
+    read a value from), none beyond (their labels would run into each other). ``wide``: labels too
+    wide for every minor tick (five-digit numbers along an x axis) get the 2 and 5 x 10^k rule within a
+    decade too."""
     import matplotlib.ticker
 
     axis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     lo, hi = sorted(axis.get_view_interval())
     decades = np.log10(hi / lo) if lo > 0 else np.inf
-    shown = (lambda m: True) if decades <= 1.0 else (lambda m: m in (2, 5)) if decades <= 3.0 else None
+    every = decades <= 1.0 and not wide
+    shown = (lambda m: True) if every else (lambda m: m in (2, 5)) if decades <= 3.0 else None
     if shown is None:
         axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         return

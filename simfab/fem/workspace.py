@@ -172,11 +172,12 @@ class Workspace:
         (CPython's reference count: the pool's list, the loop variable and the call's argument), else
         a new one, kept in the pool while it holds fewer than POOL arrays.
 
-        A new array of a large mesh's Hessian (tens of MB) is paid for page by page when it is first
-        written, and a huge page's first touch can cost milliseconds (a virtual machine's host
-        backs it then): clip3d 8x spent ~1.5 s of a 21 s run in these writes (docs/benchmarks.md, 3m).
-        Reusing released arrays keeps the pages the process already has; an array still held by a
-        caller (a kept tangent, a matrix in use) is never handed out again."""
+        A new array of a large mesh's Hessian (26 MB at clip3d 8x) is paid for page by page when it is
+        first written, and on a virtual machine whose host takes back freed memory a huge page's first
+        touch can cost milliseconds: a new array per assembly took 1.5 s of a 24 s clip3d 8x run (73
+        assemblies, seven of them 0.1-0.3 s each; docs/benchmarks.md, 3m). Reusing released arrays keeps
+        the pages the process already has; an array still held by a caller (a kept tangent, a matrix in
+        use) is never handed out again."""
         for a in self.pool:
             if sys.getrefcount(a) <= 3 and a.shape == (n,):
                 return a

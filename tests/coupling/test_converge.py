@@ -163,12 +163,13 @@ def test_the_report_warns_when_whole_layers_make_the_levels_no_uniform_refinemen
     assert not any("whole layers" in w for w in rep.warnings)
 
 
-@pytest.mark.parametrize("span, labelled", [
-    ((1.5, 9.5), {"2", "3", "4", "5", "6", "7", "8", "9"}),  # within a decade: every minor tick
-    ((2.0, 300.0), {"2", "5", "20", "50", "200"}),  # two to three decades: 2 and 5 x 10^k
-    ((1e-3, 10.0), set()),  # beyond: none (their labels would run into each other)
+@pytest.mark.parametrize("span, labelled, wide", [
+    ((1.5, 9.5), {"2", "3", "4", "5", "6", "7", "8", "9"}, False),  # within a decade: every minor tick
+    ((2.0, 300.0), {"2", "5", "20", "50", "200"}, False),  # two to three decades: 2 and 5 x 10^k
+    ((1e-3, 10.0), set(), False),  # beyond: none (their labels would run into each other)
+    ((7425.0, 43725.0), {"20000"}, True),  # wide labels (dofs): 2 and 5 x 10^k within a decade too
 ])
-def test_log_axis_minor_labels_follow_the_span(span, labelled):
+def test_log_axis_minor_labels_follow_the_span(span, labelled, wide):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -177,7 +178,7 @@ def test_log_axis_minor_labels_follow_the_span(span, labelled):
     fig, ax = plt.subplots()
     ax.loglog([1.0, 2.0], span)
     ax.set_ylim(*span)
-    plain_log_ticks(ax.yaxis)
+    plain_log_ticks(ax.yaxis, wide=wide)
     fig.canvas.draw()
 
     def shown(which):  # the labels of the ticks inside the axis's span
