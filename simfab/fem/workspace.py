@@ -75,6 +75,19 @@ class ElementKernels:
 POOL = 6
 
 
+def _refcounts(arrays: list) -> list:
+    """The reference count of each of ``arrays``, as ``sys.getrefcount`` reads it from this loop."""
+    out = []
+    for a in arrays:
+        out.append(sys.getrefcount(a))
+    return out
+
+
+#: What :func:`_refcounts` reads for an array that only its list references (measured rather than
+#: assumed: the references the interpreter itself holds while reading differ between versions)
+_ALONE = _refcounts([np.empty(0)])[0]
+
+
 class Workspace:
     """Device copies of one model's arrays, persistent output buffers and recorded launches."""
 
@@ -169,8 +182,8 @@ class Workspace:
 
     def _released(self, n: int) -> np.ndarray:
         """An array (n,) from the pool of returned value arrays that only the pool still references
-        (CPython's reference count: the pool's list, the loop variable and the call's argument), else
-        a new one, kept in the pool while it holds fewer than POOL arrays.
+        (by CPython's reference count, read as :data:`_ALONE` was), else a new one, kept in the pool
+        while it holds fewer than POOL arrays.
 
         A new array of a large mesh's Hessian (26 MB at clip3d 8x) is paid for page by page when it is
         first written, and on a virtual machine whose host takes back freed memory a huge page's first
@@ -178,8 +191,8 @@ class Workspace:
         assemblies, seven of them 0.1-0.3 s each; docs/benchmarks.md, 3m). Reusing released arrays keeps
         the pages the process already has; an array still held by a caller (a kept tangent, a matrix in
         use) is never handed out again."""
-        for a in self.pool:
-            if sys.getrefcount(a) <= 3 and a.shape == (n,):
+        for a, count in zip(self.pool, _refcounts(self.pool)):
+            if count <= _ALONE and a.shape == (n,):
                 return a
         a = np.empty(n)
         if len(self.pool) < POOL:
