@@ -87,9 +87,8 @@ def energy_gradient_hessian(model, x, *, project_psd: bool = True,
 
     With ``project_psd`` the negative eigenvalues of d2Psi/dF2 are clamped to zero at every element
     (P2: every quadrature point), so the assembled Hessian is PSD; otherwise it is the exact Hessian.
-    The CSR has the model's fixed pattern (``model.pattern``); its ``data`` is an array no one else
-    references (a released one reused, :meth:`simfab.fem.workspace.Workspace.csr_values`), which the
-    caller may keep and modify (e.g. add contact blocks via ``pattern.block_slots``).
+    The CSR has the model's fixed pattern (``model.pattern``); its ``data`` is a fresh array the caller
+    may modify (e.g. add contact blocks via ``pattern.block_slots``).
 
     Args:
         model: the FEM model (:class:`~simfab.fem.model.FemModel`, linear or P2).

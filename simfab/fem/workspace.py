@@ -18,7 +18,6 @@ own CSR buffer. Details: docs/methods.md, "simfab.fem.workspace".
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
@@ -70,24 +69,6 @@ class ElementKernels:
     split_elements: dict | None = None
 
 
-#: Value arrays a workspace keeps for reuse (:meth:`Workspace.csr_values`): a Newton step holds a
-#: few at once (the exact and projected Hessians, the predictor's tangent, the lagged solve's matrix).
-POOL = 6
-
-
-def _refcounts(arrays: list) -> list:
-    """The reference count of each of ``arrays``, as ``sys.getrefcount`` reads it from this loop."""
-    out = []
-    for a in arrays:
-        out.append(sys.getrefcount(a))
-    return out
-
-
-#: What :func:`_refcounts` reads for an array that only its list references (measured rather than
-#: assumed: the references the interpreter itself holds while reading differ between versions)
-_ALONE = _refcounts([np.empty(0)])[0]
-
-
 class Workspace:
     """Device copies of one model's arrays, persistent output buffers and recorded launches."""
 
@@ -127,7 +108,6 @@ class Workspace:
         self.scatter = sp.csr_matrix((np.ones(dofs.size), (dofs, np.arange(dofs.size))),
                                      shape=(model.n_dofs, dofs.size))
         self.commands: dict = {}
-        self.pool: list = []  # CSR value arrays handed out by csr_values, reused once released
 
     def _wrap(self, arr: np.ndarray, dtype):
         """Warp view of a numpy array (alias on the CPU, a device copy elsewhere)."""
@@ -163,41 +143,15 @@ class Workspace:
                     arr.zero_()
 
     def csr_values(self, second: bool = False) -> np.ndarray:
-        """An array (nnz,) of the CSR values of the last Hessian launch (``data2`` with ``second``),
-        the parts' buffers summed, that nothing else references (callers keep and modify the
-        matrices built on it): one of the workspace's earlier arrays that its callers have all
-        released (:meth:`_released`), else a new one."""
+        """A fresh array (nnz,) of the CSR values of the last Hessian launch (``data2`` with
+        ``second``), the parts' buffers summed (callers keep and modify the matrices built on it)."""
         vals = []
         for part in range(len(self.parts)):
             arr, arr_np = self.csr[(int(second), part)]
             vals.append(arr_np if arr_np is not None else arr.numpy())
-        out = self._released(len(vals[0]))
         if len(vals) == 1:
-            np.copyto(out, vals[0])
-        elif len(vals) == 2:
-            np.add(vals[0], vals[1], out=out)
-        else:
-            np.sum(vals, axis=0, out=out)
-        return out
-
-    def _released(self, n: int) -> np.ndarray:
-        """An array (n,) from the pool of returned value arrays that only the pool still references
-        (by CPython's reference count, read as :data:`_ALONE` was), else a new one, kept in the pool
-        while it holds fewer than POOL arrays.
-
-        A new array of a large mesh's Hessian (26 MB at clip3d 8x) is paid for page by page when it is
-        first written, and on a virtual machine whose host takes back freed memory a huge page's first
-        touch can cost milliseconds: a new array per assembly took 1.5 s of a 24 s clip3d 8x run (73
-        assemblies, seven of them 0.1-0.3 s each; docs/benchmarks.md, 3m). Reusing released arrays keeps
-        the pages the process already has; an array still held by a caller (a kept tangent, a matrix in
-        use) is never handed out again."""
-        for a, count in zip(self.pool, _refcounts(self.pool)):
-            if count <= _ALONE and a.shape == (n,):
-                return a
-        a = np.empty(n)
-        if len(self.pool) < POOL:
-            self.pool.append(a)
-        return a
+            return vals[0].copy()
+        return np.add(vals[0], vals[1]) if len(vals) == 2 else np.sum(vals, axis=0)  # one pass, one new array
 
     def command(self, what: Launch, mode: Hessian) -> tuple:
         """The recorded launches (one per part) for ``what`` and ``mode``, created on first use."""
