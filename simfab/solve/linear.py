@@ -186,11 +186,12 @@ def canonical_csr(A) -> sp.csr_matrix:
 
 def free_block_map(A: sp.csr_matrix, free: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where the block ``A[free][:, free]`` of a CSR matrix A (n, n) takes its entries from, without
-    building it, for ascending unique ``free`` (m,) indices.
+    building it, for unique ``free`` (m,) indices.
 
-    Renumbering rows and columns by an ascending subset keeps the order of A's entries, so the
-    block's entries are A's entries with both indices free, in A's order (row by row; within a row in
-    A's column order, sorted when A's are).
+    Renumbering rows and columns by an ascending subset keeps the order of A's entries, so for
+    ascending ``free`` the block's entries are A's entries with both indices free, in A's order (row by
+    row; within a row in A's column order, sorted when A's are); in any other order they are sorted by
+    block row, then block column.
 
     Returns:
         (sel (k,) int64 positions of the block's entries in ``A.data``, the block's indptr (m + 1,)
@@ -201,6 +202,8 @@ def free_block_map(A: sp.csr_matrix, free: np.ndarray) -> tuple[np.ndarray, np.n
     rows = np.repeat(new, np.diff(A.indptr))  # each entry's block row (-1: not free)
     cols = new[A.indices]
     sel = np.flatnonzero((rows >= 0) & (cols >= 0))
+    if len(free) > 1 and not (free[1:] > free[:-1]).all():
+        sel = sel[np.lexsort((cols[sel], rows[sel]))]
     counts = np.bincount(rows[sel], minlength=len(free))
     indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
     return sel, indptr, cols[sel]
@@ -485,15 +488,9 @@ class SPDSolver:
         A, known = self._analysed(A, free)
         full = self._full
         if not known:
-            if len(free) < 2 or (free[1:] > free[:-1]).all():  # (A canonical: so is the block's pattern)
-                sel, indptr, indices = free_block_map(A, free)
-                self._analyse(sp.csr_matrix((A.data[sel], indices, indptr), shape=(len(free),) * 2))
-                composed = sel[self._perm]
-            else:  # positions (+1, so that no entry is an explicit zero) of A's values in the submatrix
-                pos = sp.csr_matrix((np.arange(1.0, A.nnz + 1.0), A.indices, A.indptr), shape=A.shape)[free][:, free]
-                pos = canonical_csr(pos)
-                self._analyse(pos)
-                composed = pos.data.astype(np.int64)[self._perm] - 1
+            sel, indptr, indices = free_block_map(A, free)  # (A canonical: so is the block's pattern)
+            self._analyse(sp.csr_matrix((A.data[sel], indices, indptr), shape=(len(free),) * 2))
+            composed = sel[self._perm]
             full = self._full = ((A.indptr.copy(), A.indices.copy()), free.copy(), composed, (A.indptr, A.indices))
         elif A.indices is not full[3][1] or A.indptr is not full[3][0]:  # the same pattern in new arrays
             full = self._full = full[:3] + ((A.indptr, A.indices),)

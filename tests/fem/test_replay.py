@@ -58,4 +58,3 @@ def test_workspace_hessians_share_the_pattern_and_match_a_fresh_model():
     assert not np.array_equal(H1.toarray(), H2.toarray())
     Eg, gg = energy_gradient(model, x1)
     assert Eg == E1 and np.array_equal(gg, g1)
-

@@ -65,7 +65,8 @@ def test_solve_free_equals_the_solve_of_the_extracted_block(backend):
     n = A.shape[0]
     solver, ref = SPDSolver(backend), SPDSolver(backend)
     for free, scale, extra in ((np.arange(5, n), 1.0, 0.0), (np.arange(5, n), 2.5, 0.0),
-                               (np.arange(0, n - 7), 2.5, 0.0), (np.arange(0, n - 7), 1.0, 0.3)):
+                               (np.arange(0, n - 7), 2.5, 0.0), (np.arange(0, n - 7), 1.0, 0.3),
+                               (rng.permutation(np.arange(3, n)), 1.0, 0.3)):  # (free in any order)
         R = sp.random(n, n, density=0.02, random_state=1)  # extra > 0: a new pattern (A + R R^T + I is SPD)
         M = (scale * A + extra * (R @ R.T + sp.eye(n))).tocsr() if extra else (scale * A).tocsr()
         b = rng.standard_normal(len(free))
