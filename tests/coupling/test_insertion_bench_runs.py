@@ -1,4 +1,4 @@
-"""How many runs the insertion benchmark takes per case (its timings are not asserted)."""
+"""How many runs the insertion and peer benchmarks take per case (their timings are not asserted)."""
 
 import importlib
 import pathlib
@@ -12,31 +12,47 @@ TOOLS = pathlib.Path(__file__).resolve().parents[2] / "tools"
 
 
 @pytest.fixture(scope="module")
-def wanted():
+def rule():
+    """The rule of a bench's parsed --repeat / --budget / --max-repeat and its least count of runs."""
     sys.path.insert(0, str(TOOLS))
     try:
-        return importlib.import_module("benchmarks.insertion")._runs_wanted
+        repeat = importlib.import_module("benchmarks._repeat")
     finally:
         sys.path.remove(str(TOOLS))
 
+    def make(repeat_=None, budget=10.0, max_repeat=15, min_runs=2):
+        a = SimpleNamespace(repeat=repeat_, budget=budget, max_repeat=max_repeat)
+        return repeat.repeat_rule(a, min_runs=min_runs)
 
-def _args(repeat=None, budget=10.0, max_repeat=15):
-    return SimpleNamespace(repeat=repeat, budget=budget, max_repeat=max_repeat)
-
-
-def test_fixed_repeat_takes_exactly_that_many_runs(wanted):
-    assert wanted(_args(repeat=3), [0.1]) == 3
-    assert wanted(_args(repeat=3), [0.1] * 3) == 3  # done
-    assert wanted(_args(repeat=1), []) == 1
+    return make
 
 
-def test_budget_keeps_running_until_spent_within_the_bounds(wanted):
-    a = _args()
-    assert wanted(a, []) == 2 and wanted(a, [30.0]) == 2  # at least two, however slow
-    assert wanted(a, [30.0] * 2) == 2  # over budget after two: done
-    assert wanted(a, [1.0] * 9) == 10  # budget left: one more
-    assert wanted(a, [1.0] * 10) == 10  # budget spent: done
-    assert wanted(a, [0.1] * 15) == 15  # capped
+def test_fixed_repeat_takes_exactly_that_many_runs(rule):
+    assert rule(3).wanted([0.1]) == 3
+    assert rule(3).wanted([0.1] * 3) == 3  # done
+    assert rule(1).wanted([]) == 1
+
+
+def test_budget_keeps_running_until_spent_within_the_bounds(rule):
+    r = rule()
+    assert r.wanted([]) == 2 and r.wanted([30.0]) == 2  # at least two, however slow
+    assert r.wanted([30.0] * 2) == 2  # over budget after two: done
+    assert r.wanted([1.0] * 9) == 10  # budget left: one more
+    assert r.wanted([1.0] * 10) == 10  # budget spent: done
+    assert r.wanted([0.1] * 15) == 15  # capped
+    # the peer's rule (at least one pair): a case of minutes runs once, a sub-second one to the cap
+    p = rule(min_runs=1)
+    assert p.wanted([]) == 1 and p.wanted([120.0]) == 1
+    assert p.wanted([0.35] * 14) == 15 and p.wanted([0.35] * 15) == 15
+    assert rule(max_repeat=1).wanted([0.1]) == 1  # the cap wins over the least count
+
+
+def test_bad_repeat_options_are_refused(rule):
+    from simfab.errors import InputError
+
+    for kw in ({"repeat_": 0}, {"budget": 0.0}, {"budget": float("nan")}, {"max_repeat": 0}):
+        with pytest.raises(InputError, match="--repeat|--budget"):
+            rule(**kw)
 
 
 def test_scaling_repeats_levels_in_alternating_order_and_keeps_each_fastest(monkeypatch):

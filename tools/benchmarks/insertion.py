@@ -55,6 +55,7 @@ import time
 import numpy as np
 
 from benchmarks._machine import machine_reference_ms
+from benchmarks._repeat import add_repeat_options, repeat_rule
 
 CASES = [
     ("cclamp2d", "stand side (2D)"),
@@ -87,21 +88,11 @@ ACCURACY = {
 }
 STAGES = ("assembly", "factorization", "solves", "contact_field", "barrier", "line_search", "predictor")
 PHASE_STAGES = ("facet_check", "record", "rigid_check")
-#: Without --repeat, each case runs until BUDGET_SECONDS of runs are spent (at least MIN_REPEAT,
-#: at most MAX_REPEAT runs) and the fastest run counts, as timeit and pyperf advise: on a shared
-#: machine interference only ever adds time, so the minimum is the best estimate of the cost.
-BUDGET_SECONDS = 10.0
+#: Without --repeat, each case runs until --budget seconds of runs are spent (at least MIN_REPEAT,
+#: at most --max-repeat runs: benchmarks._repeat) and the fastest run counts, as timeit and pyperf
+#: advise: on a shared machine interference only ever adds time, so the minimum is the best estimate
+#: of the cost.
 MIN_REPEAT = 2
-MAX_REPEAT = 15
-
-
-def _runs_wanted(a, runs: list) -> int:
-    """How many runs the case should have, given the seconds of those done so far."""
-    if a.repeat is not None:
-        return max(1, a.repeat)
-    if len(runs) < MIN_REPEAT:
-        return MIN_REPEAT
-    return len(runs) + 1 if sum(runs) < a.budget and len(runs) < a.max_repeat else len(runs)
 
 
 def run(argv) -> dict:
@@ -115,12 +106,9 @@ def run(argv) -> dict:
 
     ap = argparse.ArgumentParser(prog="bench insertion")
     ap.add_argument("--only", default=None, help="comma-separated scene names")
-    ap.add_argument("--repeat", type=int, default=None,
-                    help="runs per case, the fastest counts (default: as many as fit in --budget; with --scaling: "
-                         "runs per level, in rounds of alternating order, default 1)")
-    ap.add_argument("--budget", type=float, default=BUDGET_SECONDS,
-                    help="seconds of runs per case when --repeat is not given (at least 2 runs)")
-    ap.add_argument("--max-repeat", type=int, default=MAX_REPEAT, help="at most this many runs per case")
+    add_repeat_options(ap, what="runs", repeat_help="runs per case, the fastest counts (default: as many as fit in "
+                       f"--budget, at least {MIN_REPEAT}; with --scaling: runs per level, in rounds of alternating "
+                       "order, default 1)")
     ap.add_argument("--friction", type=float, default=None,
                     help="Coulomb friction coefficient mu for every case (default: the scene's)")
     ap.add_argument("--scaling", action="store_true",
@@ -132,10 +120,7 @@ def run(argv) -> dict:
     ap.add_argument("--level-timeout", type=float, default=1800.0, help="--scaling: seconds per level at most")
     ap.add_argument("--scaling-level", default=None, help=argparse.SUPPRESS)  # SCENE:FACTOR:MU, one child
     a = ap.parse_args(argv)
-    if a.repeat is not None and a.repeat < 1:
-        raise InputError(f"--repeat must be at least 1, got {a.repeat}")
-    if not a.budget > 0 or a.max_repeat < 1:
-        raise InputError(f"--budget must be > 0 seconds and --max-repeat at least 1, got {a.budget} and {a.max_repeat}")
+    rule = repeat_rule(a, min_runs=MIN_REPEAT)
     if a.plot is not None:  # before any level runs (the plot is drawn after the last)
         check_out_file(a.plot, where="--plot", suffixes=(".png",))
     if a.scaling_level:
@@ -179,7 +164,7 @@ def run(argv) -> dict:
         best = None
         runs = []
         floor_timer = None
-        while len(runs) < _runs_wanted(a, runs):
+        while len(runs) < rule.wanted(runs):
             t0, c0 = time.perf_counter(), time.process_time()
             res = simulate_insertion(cm)
             dt, dc = time.perf_counter() - t0, time.process_time() - c0

@@ -1,7 +1,7 @@
 """simfab's insertion beside an IPC reference built on the IPC Toolkit (``ipctk``).
 
-``python tools/bench.py peer [--scenes snapfit2d,cclamp2d] [--frictions 0,0.3] [--refine 1,2] [--repeat K]
-[--plot DIR]``
+``python tools/bench.py peer [--scenes snapfit2d,cclamp2d] [--frictions 0,0.3] [--refine 1,2]
+[--repeat K | --budget SECONDS] [--max-repeat K] [--plot DIR]``
 
 The reference solves the same quasi-static insertion the way the IPC paper (Li et al. 2020) does:
 
@@ -24,9 +24,11 @@ The reference solves the same quasi-static insertion the way the IPC paper (Li e
 
 Reported per case: the profile figures of both runs (the support reaction along O's motion;
 simfab's analysis of each run's records, F_hold's onset of sliding from simfab's), their
-differences, the profiles' largest difference, wall and CPU seconds (both timed warm; with
-``--repeat K`` the medians of K timed runs of each, simfab's and the reference's alternating, so both
-share the machine's slow and fast moments), Newton iterations per step and the speed ratio;
+differences, the profiles' largest difference, wall and CPU seconds (both timed warm; the medians of
+the timed runs of each, simfab's and the reference's alternating, so both share the machine's slow
+and fast moments: K pairs with ``--repeat K``, else pairs until ``--budget`` seconds are spent, at
+least one, at most ``--max-repeat``: a sub-second case runs ~15 times, a case of minutes once),
+Newton iterations per step and the speed ratio;
 ``--plot DIR`` draws both profiles. ``--refine`` factors refine each case's mesh by the scene's own
 rule (:func:`simfab.coupling.converge.level_mesh`; the snap-fit: cells through its thickness times the
 factor's square root).
@@ -43,6 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+
+from benchmarks._repeat import RepeatRule, add_repeat_options, repeat_rule
 
 FIGURES = ("E_max", "F_in", "F_rm", "F_hold")
 #: The object's polygonal error (sagitta of its boundary segments) below this fraction of d_hat.
@@ -474,7 +478,7 @@ def case_model(scene: str, mu: float, refine: float = 1.0):
     return load_coupling_scene(scene, overrides=over)
 
 
-def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True, repeat: int = 1) -> dict:
+def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True, repeat: int | RepeatRule = 1) -> dict:
     """simfab's run and the reference's on one case: figures, differences, seconds, iterations.
 
     Args:
@@ -483,9 +487,10 @@ def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True, re
         refine: element-count factor of the case's mesh (:func:`case_model`).
         warm: time both solvers after an untimed first run (else the first, simfab's, pays the
             process's one-off costs that the reference then reuses).
-        repeat: timed runs of each solver, alternating (simfab, reference, simfab, ...); the seconds
+        repeat: timed runs of each solver, alternating (simfab, reference, simfab, ...): a count, or
+            a rule (pairs until its budget of both solvers' wall seconds is spent); the seconds
             reported are their medians, with the fastest and slowest run beside them. A run of the
-            snap-fit takes ~0.07 s, where one run's timing varies by +-30 % with the machine's load.
+            snap-fit takes ~0.05 s, where one run's timing varies by +-30 % with the machine's load.
 
     Returns:
         The case's row (see :func:`run`).
@@ -498,10 +503,11 @@ def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True, re
     # loads the Warp kernels (of the elastic energy both use), CHOLMOD and ipctk untimed
     if warm:
         simulate_insertion(case_model(scene, mu, refine))
-    if repeat < 1:
-        raise ValueError(f"repeat must be >= 1, got {repeat}")
-    times_s, times_r, res, steps, ref = [], [], None, None, None
-    for _ in range(repeat):
+    rule = repeat if isinstance(repeat, RepeatRule) else RepeatRule(repeat=repeat)
+    if rule.repeat is not None and rule.repeat < 1:
+        raise ValueError(f"repeat must be >= 1, got {rule.repeat}")
+    times_s, times_r, pairs, res, steps, ref = [], [], [], None, None, None
+    while len(pairs) < rule.wanted(pairs):
         cm = case_model(scene, mu, refine)
         t0, c0 = time.perf_counter(), time.process_time()
         run_s = simulate_insertion(cm)
@@ -520,6 +526,7 @@ def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True, re
         ref_k = IpcReference(cm, opts)
         steps_k = ref_k.run(poses)
         times_r.append((time.perf_counter() - t0, time.process_time() - c0))
+        pairs.append(times_s[-1][0] + times_r[-1][0])
         if steps is None:
             steps, ref = steps_k, ref_k
     (t_s, c_s), (t_r, c_r) = _medians(times_s), _medians(times_r)
@@ -542,7 +549,7 @@ def compare(scene: str, mu: float, refine: float = 1.0, *, warm: bool = True, re
     return {
         "scene": scene, "friction": mu, "refine": refine, "elements": int(cm.fem.n_elements), "element_order": 1,
         "object_collision_vertices": int(ref.k), "dhat": float(cm.dhat), "records": n_s,
-        "repeat": repeat,
+        "repeat": len(pairs),
         "simfab": {**fs, "category": a.category, "seconds": round(t_s, 3), "cpu_seconds": round(c_s, 3),
                    "seconds_range": _range(times_s),
                    "newton_iterations": it_s, "iterations_per_step": round(it_s / max(1, n_s), 2)},
@@ -650,13 +657,12 @@ def run(argv) -> dict:
                     help=f"comma-separated, from {', '.join(SCENES)} (default all)")
     ap.add_argument("--frictions", default="0,0.3", help="Coulomb friction coefficients (default 0,0.3)")
     ap.add_argument("--refine", default="1", help="element-count factors of each case's mesh, e.g. 1,2,4")
-    ap.add_argument("--repeat", type=int, default=1,
-                    help="timed runs of each solver, alternating; the medians are reported (default 1)")
+    add_repeat_options(ap, what="both solvers' runs", repeat_help="timed runs of each solver, alternating; the "
+                       "medians are reported (default: pairs until --budget seconds are spent, at least one)")
     ap.add_argument("--plot", default=None, help="directory for the force-profile PNGs")
     a = ap.parse_args(argv)
     factors = parse_refine(a.refine)
-    if a.repeat < 1:
-        raise InputError(f"--repeat must be at least 1, got {a.repeat}")
+    rule = repeat_rule(a, min_runs=1)
     try:
         frictions = [float(f) for f in a.frictions.split(",")]
     except ValueError:
@@ -673,7 +679,7 @@ def run(argv) -> dict:
     for sc in scenes:
         for mu in frictions:
             for f in factors:
-                row = compare(sc, mu, f, repeat=a.repeat)
+                row = compare(sc, mu, f, repeat=rule)
                 if a.plot:
                     os.makedirs(a.plot, exist_ok=True)
                     p = os.path.join(a.plot, f"peer_{sc}_mu{mu:g}" + (f"_r{f:g}" if f != 1.0 else "") + ".png")
