@@ -724,6 +724,6 @@ _declare_overloads()
 #: Linear simplices: F = Ds Dm^-1 is constant over the element (the one-quadrature-point case:
 #: ``model.element_geometry()`` is (Dm^-1 (m, d, d), volume (m,))). One launch at every size: two
 #: halves on two threads gained nothing on the insertion models (see docs/decisions.md).
-LINEAR = ElementKernels(energy=_energy_kernel, gradient=_gradient_kernel, hessian=_hessian_kernel,
-                        stress=_stress_kernel, grad_dtype={2: _vec6d, 3: _vec12d},
-                        geometry_dtype={2: wp.mat22d, 3: wp.mat33d})
+LINEAR = ElementKernels(energy=_energy_kernel, gradient=_gradient_kernel,
+                        hessian={2: _hessian_kernel, 3: _hessian_kernel}, stress=_stress_kernel,
+                        grad_dtype={2: _vec6d, 3: _vec12d}, geometry_dtype={2: wp.mat22d, 3: wp.mat33d})

@@ -270,110 +270,125 @@ def _gradient_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dt
         grad[e] = g
 
 
-@wp.kernel
-def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32), gN: wp.array3d(dtype=Any),
-                    wq: wp.array2d(dtype=wp.float64), mu_e: wp.array(dtype=wp.float64),
-                    lam_e: wp.array(dtype=wp.float64), project: int, scatter: int, slots: wp.array3d(dtype=wp.int32),
-                    energy: wp.array(dtype=wp.float64), det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
-                    hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
-                    data2: wp.array(dtype=wp.float64)):
-    """Energy, gradient and Hessian blocks (b >= a) of an element. The exact Hessian is added up in K in
-    place, point by point, by one loop over the node pairs for every mode (a helper taking and returning
-    the whole matrix would copy it several times per point). Where a point's projection changes its blocks
-    (the twist part removed, or the SVD route) that change goes into Kc: the projected Hessian is K + Kc,
-    the points' exact blocks plus their changes (the old per-point sum, reassociated)."""
-    e = first + wp.tid()  # this launch's part of the elements
-    zero = wp.float64(0.0)
-    k = elements.shape[1]
-    nq = wq.shape[1]
-    mu = mu_e[e]
-    lam = lam_e[e]
-    mode = project
-    both = 0
-    if mode == HESSIAN_BOTH:
-        mode = HESSIAN_PROJECT
-        both = 1
-    g0 = gN[e, 0, 0]
-    d = len(g0)  # a compile-time constant: the loops over range(d) are unrolled
-    K, Kc, C, U, nodes = _scratch(g0)
-    # k again, as a compile-time constant for the 6-node triangle, whose loops over range(kn) (node pairs)
-    # are then unrolled; not for the 10-node tet, whose 55 pairs unrolled run slower (and compile long)
-    kn = len(nodes) if wp.static(len(nodes) <= 6) else k
-    E = zero
-    g = grad.dtype()
-    Jmin = wp.float64(wp.inf)
-    for q in range(nq):
-        F = _F_at(x, elements, gN, e, q)
-        J = wp.determinant(F)
-        Jmin = wp.min(Jmin, J)
-        if J <= zero:  # the element is voided below
-            continue
-        w = wq[e, q]
-        E += w * psi(F, J, mu, lam, dim_float(F))
-        P = pk1(F, J, mu, lam)
-        logJ = wp.log(J)
-        dPsi_dJ = (lam * logJ - mu) / J
-        s = w * (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)  # w d2Psi/dJ2
-        wmu = w * mu
-        t = _det_factor(w * dPsi_dJ, J, g0)
-        cof = J * wp.transpose(wp.inverse(F))
-        for a in range(kn):
-            ga = gN[e, q, a]
-            f = w * (P * ga)
-            for i in range(d):
-                g[d * a + i] = g[d * a + i] + f[i]
-            C[a] = cof * ga  # gamma_a
-        for a in range(kn):
-            ga = gN[e, q, a]
-            ca = C[a]
-            sa = s * ca
-            for b in range(a, kn):
-                gb = gN[e, q, b]
-                cb = C[b]
-                B = _block(wp.outer(sa, cb), wmu * wp.dot(ga, gb), _det_term(ga, gb, ca, cb, t))
+def _hessian_kernel_of(dim: int):
+    """The Hessian kernel of the elements of one dimension (overloaded for it below).
+
+    One kernel per dimension, made by this closure, so that the choice of unrolled loops reads a
+    captured constant: a ``wp.static`` that reads the element's types instead cannot be evaluated at
+    declaration, and Warp then regenerates the whole module's code in every process before it can look
+    up its cached binary (~1.3 s at the first P2 launch, measured).
+    """
+
+    @wp.kernel(name=f"_hessian_kernel_{dim}d")
+    def _hessian_kernel(first: int, x: wp.array(dtype=Any), elements: wp.array2d(dtype=wp.int32),
+                        gN: wp.array3d(dtype=Any), wq: wp.array2d(dtype=wp.float64),
+                        mu_e: wp.array(dtype=wp.float64), lam_e: wp.array(dtype=wp.float64), project: int,
+                        scatter: int, slots: wp.array3d(dtype=wp.int32), energy: wp.array(dtype=wp.float64),
+                        det_F: wp.array(dtype=wp.float64), grad: wp.array(dtype=Any),
+                        hess: wp.array3d(dtype=wp.float64), data: wp.array(dtype=wp.float64),
+                        data2: wp.array(dtype=wp.float64)):
+        """Energy, gradient and Hessian blocks (b >= a) of an element. The exact Hessian is added up in K in
+        place, point by point, by one loop over the node pairs for every mode (a helper taking and returning
+        the whole matrix would copy it several times per point). Where a point's projection changes its blocks
+        (the twist part removed, or the SVD route) that change goes into Kc: the projected Hessian is K + Kc,
+        the points' exact blocks plus their changes (the old per-point sum, reassociated)."""
+        e = first + wp.tid()  # this launch's part of the elements
+        zero = wp.float64(0.0)
+        k = elements.shape[1]
+        nq = wq.shape[1]
+        mu = mu_e[e]
+        lam = lam_e[e]
+        mode = project
+        both = 0
+        if mode == HESSIAN_BOTH:
+            mode = HESSIAN_PROJECT
+            both = 1
+        g0 = gN[e, 0, 0]
+        d = len(g0)  # a compile-time constant: the loops over range(d) are unrolled
+        K, Kc, C, U, nodes = _scratch(g0)
+        # k again, as a compile-time constant for the 6-node triangle, whose loops over range(kn) (node pairs)
+        # are then unrolled; not for the 10-node tet, whose 55 pairs unrolled run slower (and compile long)
+        kn = len(nodes) if wp.static(dim == 2) else k
+        E = zero
+        g = grad.dtype()
+        Jmin = wp.float64(wp.inf)
+        for q in range(nq):
+            F = _F_at(x, elements, gN, e, q)
+            J = wp.determinant(F)
+            Jmin = wp.min(Jmin, J)
+            if J <= zero:  # the element is voided below
+                continue
+            w = wq[e, q]
+            E += w * psi(F, J, mu, lam, dim_float(F))
+            P = pk1(F, J, mu, lam)
+            logJ = wp.log(J)
+            dPsi_dJ = (lam * logJ - mu) / J
+            s = w * (mu + lam * (wp.float64(1.0) - logJ)) / (J * J)  # w d2Psi/dJ2
+            wmu = w * mu
+            t = _det_factor(w * dPsi_dJ, J, g0)
+            cof = J * wp.transpose(wp.inverse(F))
+            for a in range(kn):
+                ga = gN[e, q, a]
+                f = w * (P * ga)
                 for i in range(d):
-                    for j in range(d):
-                        K[d * a + i, d * b + j] += B[i, j]
-        # projection: the SVD route is rare (dPsi/dJ > 0: strong dilation), so its loops stay rolled
-        if mode == HESSIAN_PROJECT_SVD or (mode == HESSIAN_PROJECT and dPsi_dJ > zero):
-            A = stress_hessian_svd(F, J, mu, lam)  # its blocks replace the exact ones
-            for a in range(k):
+                    g[d * a + i] = g[d * a + i] + f[i]
+                C[a] = cof * ga  # gamma_a
+            for a in range(kn):
                 ga = gN[e, q, a]
                 ca = C[a]
-                for b in range(a, k):
+                sa = s * ca
+                for b in range(a, kn):
                     gb = gN[e, q, b]
                     cb = C[b]
-                    D = _svd_block(A, ga, gb, w) - _block(wp.outer(s * ca, cb), wmu * wp.dot(ga, gb),
-                                                          _det_term(ga, gb, ca, cb, t))
+                    B = _block(wp.outer(sa, cb), wmu * wp.dot(ga, gb), _det_term(ga, gb, ca, cb, t))
                     for i in range(d):
                         for j in range(d):
-                            Kc[d * a + i, d * b + j] += D[i, j]
-        elif mode == HESSIAN_PROJECT:
-            R, Nt, twist = _twist_terms(F, dPsi_dJ, mu, w)
-            if twist != 0:  # minus the negative twist part
-                for a in range(kn):
-                    U[a] = R * gN[e, q, a]
-                for a in range(kn):
-                    La = _twist_node(U[a], Nt)
-                    for b in range(a, kn):
-                        D = _twist_block(La, U[b])
+                            K[d * a + i, d * b + j] += B[i, j]
+            # projection: the SVD route is rare (dPsi/dJ > 0: strong dilation), so its loops stay rolled
+            if mode == HESSIAN_PROJECT_SVD or (mode == HESSIAN_PROJECT and dPsi_dJ > zero):
+                A = stress_hessian_svd(F, J, mu, lam)  # its blocks replace the exact ones
+                for a in range(k):
+                    ga = gN[e, q, a]
+                    ca = C[a]
+                    for b in range(a, k):
+                        gb = gN[e, q, b]
+                        cb = C[b]
+                        D = _svd_block(A, ga, gb, w) - _block(wp.outer(s * ca, cb), wmu * wp.dot(ga, gb),
+                                                              _det_term(ga, gb, ca, cb, t))
                         for i in range(d):
                             for j in range(d):
                                 Kc[d * a + i, d * b + j] += D[i, j]
-    det_F[e] = Jmin
-    if Jmin <= zero:
-        void_element(e, scatter, energy, grad, hess)
-        return
-    energy[e] = E
-    grad[e] = g
-    kd = len(K)  # unrolled in 2D (12), a loop in 3D (30 > Warp's max_unroll)
-    for r in range(kd):
-        for c in range(r, kd):
-            if both != 0:  # exact into data, projected into data2
-                store_hessian_entry(scatter, slots, hess, data, e, r, c, K[r, c])
-                store_hessian_entry(scatter, slots, hess, data2, e, r, c, K[r, c] + Kc[r, c])
-            else:  # Kc is zero unless projected
-                store_hessian_entry(scatter, slots, hess, data, e, r, c, K[r, c] + Kc[r, c])
+            elif mode == HESSIAN_PROJECT:
+                R, Nt, twist = _twist_terms(F, dPsi_dJ, mu, w)
+                if twist != 0:  # minus the negative twist part
+                    for a in range(kn):
+                        U[a] = R * gN[e, q, a]
+                    for a in range(kn):
+                        La = _twist_node(U[a], Nt)
+                        for b in range(a, kn):
+                            D = _twist_block(La, U[b])
+                            for i in range(d):
+                                for j in range(d):
+                                    Kc[d * a + i, d * b + j] += D[i, j]
+        det_F[e] = Jmin
+        if Jmin <= zero:
+            void_element(e, scatter, energy, grad, hess)
+            return
+        energy[e] = E
+        grad[e] = g
+        kd = len(K)  # unrolled in 2D (12), a loop in 3D (30 > Warp's max_unroll)
+        for r in range(kd):
+            for c in range(r, kd):
+                if both != 0:  # exact into data, projected into data2
+                    store_hessian_entry(scatter, slots, hess, data, e, r, c, K[r, c])
+                    store_hessian_entry(scatter, slots, hess, data2, e, r, c, K[r, c] + Kc[r, c])
+                else:  # Kc is zero unless projected
+                    store_hessian_entry(scatter, slots, hess, data, e, r, c, K[r, c] + Kc[r, c])
+
+    return _hessian_kernel
+
+
+_hessian_kernels = {2: _hessian_kernel_of(2), 3: _hessian_kernel_of(3)}
 
 
 @wp.kernel
@@ -415,7 +430,7 @@ def _declare_overloads():
         wp.overload(_energy_kernel, types)
         wp.overload(_stress_kernel, types)
         wp.overload(_gradient_kernel, {**types, "grad": wp.array(dtype=gvec)})
-        wp.overload(_hessian_kernel, {**types, "grad": wp.array(dtype=gvec)})
+        wp.overload(_hessian_kernels[2 if vec is wp.vec2d else 3], {**types, "grad": wp.array(dtype=gvec)})
         wp.overload(_stress_hessian_kernel, {"F": wp.array(dtype=mat), "out": wp.array(dtype=amat)})
 
 
@@ -431,7 +446,7 @@ _declare_overloads()
 SPLIT_ELEMENTS = {2: 2048, 3: 256}
 
 #: Quadratic simplices: ``model.element_geometry()`` is (grad_N (m, nq, k, d), qp_weight (m, nq)).
-QUADRATIC = ElementKernels(energy=_energy_kernel, gradient=_gradient_kernel, hessian=_hessian_kernel,
+QUADRATIC = ElementKernels(energy=_energy_kernel, gradient=_gradient_kernel, hessian=_hessian_kernels,
                            stress=_stress_kernel, grad_dtype={2: _vec12d, 3: _vec30d},
                            geometry_dtype={2: wp.vec2d, 3: wp.vec3d}, split_elements=SPLIT_ELEMENTS)
 

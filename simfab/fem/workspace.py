@@ -54,6 +54,7 @@ class ElementKernels:
     """The Warp kernels of one element order (argument lists in the module docstring).
 
     Args:
+        hessian: dim -> the Hessian kernel of that dimension's elements (one generic kernel may serve both)
         grad_dtype: dim -> Warp vector type of one element's nodal gradient (length k d)
         geometry_dtype: dim -> Warp type of the entries of ``model.element_geometry()[0]``
         split_elements: dim -> CPU meshes of that dimension with at least this many elements run their
@@ -62,7 +63,7 @@ class ElementKernels:
 
     energy: Any
     gradient: Any
-    hessian: Any
+    hessian: dict
     stress: Any
     grad_dtype: dict
     geometry_dtype: dict
@@ -74,6 +75,7 @@ class Workspace:
 
     def __init__(self, model, kernels: ElementKernels):
         d, m, k = model.dim, model.n_elements, model.elements.shape[1]
+        self.dim = d
         dev = self.device = model.device
         self.kernels = kernels
         self.cpu = wp.get_device(dev).is_cpu
@@ -172,12 +174,12 @@ class Workspace:
             elif what == Launch.HESSIAN:  # added straight into this part's CSR values
                 data = self._buffer(0, part)
                 data2 = self._buffer(1, part) if mode == Hessian.BOTH else self.dummy_data
-                kernel, inputs = kern.hessian, inputs + [int(mode), 1, self.slots]
+                kernel, inputs = kern.hessian[self.dim], inputs + [int(mode), 1, self.slots]
                 outputs = [self.energy, self.det_F, self.grad, self.dummy3, data, data2]
             elif what == Launch.BLOCKS:
                 if self.hess is None:
                     self.hess = wp.zeros((self.m, self.kd, self.kd), dtype=wp.float64, device=self.device)
-                kernel, inputs = kern.hessian, inputs + [int(mode), 0, self.dummy_slots]
+                kernel, inputs = kern.hessian[self.dim], inputs + [int(mode), 0, self.dummy_slots]
                 outputs = [self.energy, self.det_F, self.grad, self.hess, self.dummy_data, self.dummy_data]
             else:
                 kernel, outputs = kern.stress, [self.det_F, self.von_mises]
