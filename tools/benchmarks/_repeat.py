@@ -25,12 +25,15 @@ class RepeatRule:
         budget: seconds of runs per case (the sum of the runs' wall seconds).
         min_runs: at least this many runs under the budget, however slow.
         max_runs: at most this many runs under the budget.
+        first_outside_budget: leave the first run's seconds out of the budget (it pays the process's
+            one-off costs: compiling or loading kernels, a first factorization's library load).
     """
 
     repeat: int | None = None
     budget: float = BUDGET_SECONDS
     min_runs: int = 1
     max_runs: int = MAX_RUNS
+    first_outside_budget: bool = False
 
     def wanted(self, seconds: list) -> int:
         """How many runs the case should have, given the wall seconds of those done so far."""
@@ -38,7 +41,8 @@ class RepeatRule:
             return max(1, self.repeat)
         if len(seconds) < self.min_runs:
             return self.min_runs
-        return len(seconds) + 1 if sum(seconds) < self.budget and len(seconds) < self.max_runs else len(seconds)
+        spent = sum(seconds[1:] if self.first_outside_budget else seconds)
+        return len(seconds) + 1 if spent < self.budget and len(seconds) < self.max_runs else len(seconds)
 
 
 def add_repeat_options(ap: argparse.ArgumentParser, *, what: str, repeat_help: str) -> None:
@@ -50,7 +54,7 @@ def add_repeat_options(ap: argparse.ArgumentParser, *, what: str, repeat_help: s
                     help=f"at most this many {what} per case under --budget (default {MAX_RUNS})")
 
 
-def repeat_rule(a: argparse.Namespace, *, min_runs: int) -> RepeatRule:
+def repeat_rule(a: argparse.Namespace, *, min_runs: int, first_outside_budget: bool = False) -> RepeatRule:
     """The rule of the parsed options of :func:`add_repeat_options`; raises InputError on a bad one."""
     from simfab.errors import InputError
 
@@ -58,4 +62,5 @@ def repeat_rule(a: argparse.Namespace, *, min_runs: int) -> RepeatRule:
         raise InputError(f"--repeat must be at least 1, got {a.repeat}")
     if not a.budget > 0 or a.max_repeat < 1:
         raise InputError(f"--budget must be > 0 seconds and --max-repeat at least 1, got {a.budget} and {a.max_repeat}")
-    return RepeatRule(repeat=a.repeat, budget=a.budget, min_runs=min(min_runs, a.max_repeat), max_runs=a.max_repeat)
+    return RepeatRule(repeat=a.repeat, budget=a.budget, min_runs=min(min_runs, a.max_repeat), max_runs=a.max_repeat,
+                      first_outside_budget=first_outside_budget)
