@@ -41,7 +41,7 @@ class MeshModel:
     pattern: HessianPattern
     material: Material | None = None
     device: str = "cpu"
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)  # fresh on replace
 
     def __getstate__(self):
         return {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "_cache"}

@@ -195,13 +195,17 @@ class P2Model(MeshModel):
 
 def corner_gradients(model: P2Model, x) -> np.ndarray:
     """F at the corners of every element (m, dim+1, dim, dim) [-]: F is affine over a P2 element,
-    F(L) = sum_i L_i F_i, so these determine it everywhere."""
+    F(L) = sum_i L_i F_i, so these determine it everywhere. F_c = sum_a x_a (x) grad N_a(corner c):
+    per element and corner the (dim, k) @ (k, dim) product of the nodes' positions and the shape
+    functions' rest gradients there (those depend on the rest shape only: kept on the model)."""
     x = model.check_positions(x)
-    dim = model.dim
-    _, dNdL = shape_functions(np.eye(dim + 1), dim)  # (dim+1 corners, k, dim+1)
-    gradL = np.concatenate([-model.Dm_inv.sum(axis=1, keepdims=True), model.Dm_inv], axis=1)  # (m, dim+1, dim)
-    grad_N = np.einsum("cal,mld->mcad", dNdL, gradL)
-    return np.einsum("mai,mcad->mcid", x[model.elements], grad_N)
+    grad_N = model._cache.get("corner_grad_N")
+    if grad_N is None:
+        dim = model.dim
+        _, dNdL = shape_functions(np.eye(dim + 1), dim)  # (dim+1 corners, k, dim+1)
+        gradL = np.concatenate([-model.Dm_inv.sum(axis=1, keepdims=True), model.Dm_inv], axis=1)  # (m, dim+1, dim)
+        grad_N = model._cache["corner_grad_N"] = np.einsum("cal,mld->mcad", dNdL, gradL)  # (m, dim+1, k, dim)
+    return np.matmul(np.swapaxes(x[model.elements], 1, 2)[:, None], grad_N)
 
 
 def det_F_lower_bound(model: P2Model, x) -> np.ndarray:
