@@ -63,12 +63,25 @@ def quadrature_von_mises(fem, x) -> np.ndarray:
     """von Mises stress (m, nq) [Pa] at a P2 model's quadrature points, deformed positions x (n, dim)
     [m]: F(L) = sum_i L_i F_i from the corner gradients (F is affine over an element), sigma_vm =
     sqrt(3/2) mu |dev(F F^T - I)| / J (:func:`simfab.fem.elastic.det_and_von_mises`; plane strain in
-    2D: the out-of-plane entry of F F^T - I is 0); +inf where det F <= 0."""
-    F = np.einsum("qc,mcij->mqij", fem.qp_bary, corner_gradients(fem, x))
-    J = np.linalg.det(F)
-    C = F @ np.swapaxes(F, -1, -2) - np.eye(fem.dim)
-    tr = np.einsum("mqii->mq", C)
-    dev = np.sqrt(1.5 * np.maximum(np.einsum("mqij,mqij->mq", C, C) - tr * tr / 3.0, 0.0))
+    2D: the out-of-plane entry of F F^T - I is 0); +inf where det F <= 0. J, tr C and |C|^2 of the
+    small matrices are written out entry by entry (one array operation over all points each, where
+    batched 2x2 / 3x3 determinants and products cost a call per matrix)."""
+    Fc = corner_gradients(fem, x)
+    m, c, d, _ = Fc.shape
+    F = np.matmul(fem.qp_bary, Fc.reshape(m, c, d * d)).reshape(m, -1, d, d)
+    f = [[F[..., i, j] for j in range(d)] for i in range(d)]
+    if d == 2:
+        J = f[0][0] * f[1][1] - f[0][1] * f[1][0]
+    else:
+        J = (f[0][0] * (f[1][1] * f[2][2] - f[1][2] * f[2][1]) - f[0][1] * (f[1][0] * f[2][2] - f[1][2] * f[2][0])
+             + f[0][2] * (f[1][0] * f[2][1] - f[1][1] * f[2][0]))
+    tr, sq = 0.0, 0.0  # of C = F F^T - I (symmetric: each off-diagonal entry twice in |C|^2)
+    for i in range(d):
+        for k in range(i, d):
+            cik = sum(f[i][j] * f[k][j] for j in range(d)) - (1.0 if i == k else 0.0)
+            sq = sq + (1.0 if i == k else 2.0) * cik * cik
+            tr = tr + cik if i == k else tr
+    dev = np.sqrt(1.5 * np.maximum(sq - tr * tr / 3.0, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(J > 0, dev * np.asarray(fem.mu)[:, None] / J, np.inf)
 
