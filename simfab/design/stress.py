@@ -79,8 +79,11 @@ def quadrature_von_mises(fem, x) -> np.ndarray:
     for i in range(d):
         for k in range(i, d):
             cik = sum(f[i][j] * f[k][j] for j in range(d)) - (1.0 if i == k else 0.0)
-            sq = sq + (1.0 if i == k else 2.0) * cik * cik
-            tr = tr + cik if i == k else tr
+            if i == k:
+                tr = tr + cik
+                sq = sq + cik * cik
+            else:
+                sq = sq + 2.0 * cik * cik
     dev = np.sqrt(1.5 * np.maximum(sq - tr * tr / 3.0, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(J > 0, dev * np.asarray(fem.mu)[:, None] / J, np.inf)
