@@ -657,8 +657,9 @@ def run(argv) -> dict:
                     help=f"comma-separated, from {', '.join(SCENES)} (default all)")
     ap.add_argument("--frictions", default="0,0.3", help="Coulomb friction coefficients (default 0,0.3)")
     ap.add_argument("--refine", default="1", help="element-count factors of each case's mesh, e.g. 1,2,4")
-    add_repeat_options(ap, what="both solvers' runs", repeat_help="timed runs of each solver, alternating; the "
-                       "medians are reported (default: pairs until --budget seconds are spent, at least one)")
+    add_repeat_options(ap, what="pairs of runs (one of each solver)",
+                       repeat_help="timed runs of each solver, alternating; the medians are reported (default: "
+                                   "pairs until --budget seconds are spent, at least one)")
     ap.add_argument("--plot", default=None, help="directory for the force-profile PNGs")
     a = ap.parse_args(argv)
     factors = parse_refine(a.refine)
